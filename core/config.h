@@ -1,0 +1,151 @@
+// The resolved run description: every section of a scene file, converted to SI units, every default
+// explicit. scenes/ parses and validates the JSON into this; render/, sensor/ and writers/ read it.
+// Scene-file key names (with their units) are given beside each field; docs/scene-file.md documents them.
+#pragma once
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "tile.h"
+
+namespace spadgen {
+
+using Vec3d = std::array<double, 3>;
+
+struct CameraConfig {
+  std::string gltf_camera;          // camera.gltf_camera: name of a glTF camera node; "" = defined here
+  Vec3d position_m{0, 0, 0};        // camera.position_m
+  Vec3d look_at_m{0, 0, -1};        // camera.look_at_m
+  Vec3d up{0, 1, 0};                // camera.up
+  int width_px = 1024;              // camera.width_px
+  int height_px = 500;              // camera.height_px
+  double pixel_pitch_m = 9.4e-6;    // camera.pixel_pitch_um
+  double focal_length_m = 12e-3;    // camera.focal_length_mm (ignored when vertical_fov_deg is set)
+  std::optional<double> vertical_fov_rad;  // camera.vertical_fov_deg (null: from focal length)
+  double f_number = 1.4;            // camera.f_number
+  double optics_transmission = 1.0; // camera.optics_transmission, fraction of light the lens passes
+  std::optional<PixelRect> crop;    // camera.crop [x0, y0, width, height]: render only this region
+};
+
+struct LaserConfig {
+  double average_power_W = 2e-3;        // laser.average_power_mW
+  double repetition_rate_Hz = 40e6;     // laser.repetition_rate_MHz
+  double wavelength_m = 637e-9;         // laser.wavelength_nm
+  double pulse_fwhm_s = 80e-12;         // laser.pulse_fwhm_ps (Gaussian)
+  std::string pulse_shape_csv;          // laser.pulse_shape_csv: table (time_ps, relative power); "" = Gaussian
+  double emission_delay_s = 0.0;        // laser.emission_delay_ns: trigger to pulse emission
+  std::string beam = "flood";           // laser.beam: "flood" (cone covering the field of view),
+                                        //   "cone" (half_angle_deg), "gltf_light" (a KHR_lights_punctual light)
+  double half_angle_rad = 0.0;          // laser.half_angle_deg (beam "cone")
+  Vec3d offset_m{0, 0, 0};              // laser.offset_m, in camera coordinates (x right, y up, -z forward)
+  std::string gltf_light;               // laser.gltf_light: light name (beam "gltf_light")
+};
+
+struct AmbientConfig {
+  double illuminance_lux = 0.0;         // ambient.illuminance_lux: uniform environment, equal-energy spectrum
+  double wavelength_m = 550e-9;         // ambient.wavelength_nm: centre of the band the camera sees
+  double bandwidth_m = 300e-9;          // ambient.bandwidth_nm: width of that band (filter or sensor)
+  bool gltf_lights = true;              // ambient.gltf_lights: glTF punctual lights also light the scene
+};
+
+// One pixel design of the chip (the paper's pixel A or B).
+struct PixelTypeConfig {
+  double fill_factor = 0.07;            // fill_factor
+  double pdp_peak = 0.105;              // pdp_peak, at pdp_peak_wavelength_nm
+  double pdp_peak_wavelength_m = 520e-9;
+  std::string pdp_csv;                  // pdp_csv: table (wavelength_nm, PDP); "" = built-in curve scaled to pdp_peak
+  double pdp_nonuniformity = 0.014;     // pdp_nonuniformity: relative spread (sigma) of PDP across pixels
+  double dcr_median_cps = 0.4;          // dcr_median_cps at room temperature
+  double dcr_log_sigma = 1.0;           // dcr_log_sigma: spread of log(DCR) of the main population
+  double hot_pixel_fraction = 0.05;     // hot_pixel_fraction
+  double hot_pixel_factor = 100.0;      // hot_pixel_factor: median hot-pixel DCR / median DCR
+  double crosstalk_probability = 0.0017;  // crosstalk_probability: per detection, per neighbour
+  bool single_avalanche_per_frame = false; // pixel B's feedback stops further avalanches in a frame
+};
+
+struct GateConfig {
+  double length_s = 3.8e-9;             // sensor.gate.length_ns (50 % to 50 %)
+  double rise_s = 400e-12;              // sensor.gate.rise_ps (10 % to 90 %)
+  double fall_s = 400e-12;              // sensor.gate.fall_ps (90 % to 10 %)
+  std::string edge_shape = "smooth";    // sensor.gate.edge_shape: "linear" or "smooth"
+  std::string profile_csv;              // sensor.gate.profile_csv: measured (time_ps, response) table
+  double delay_s = 0.0;                 // sensor.gate.delay_ns: trigger to gate opening at position 0
+  double skew_fwhm_s = 410e-12;         // sensor.gate.skew_fwhm_ps
+  double length_fwhm_s = 120e-12;       // sensor.gate.length_fwhm_ps
+  std::string maps_exr;                 // sensor.gate.maps_exr: EXR with channels skew_ps, length_ps
+  double jitter_fwhm_s = 60e-12;        // sensor.jitter_fwhm_ps: SPAD timing jitter (Gaussian)
+};
+
+struct SensorConfig {
+  std::string preset = "pixel_A";       // sensor.preset: "pixel_A", "pixel_B", "full_chip" (A top half, B bottom)
+  PixelTypeConfig pixel_A;              // sensor.pixel_A
+  PixelTypeConfig pixel_B;              // sensor.pixel_B
+  GateConfig gate;                      // sensor.gate
+  double temperature_C = 25.0;          // sensor.temperature_C
+  bool dark_counts = true;              // sensor.dark_counts
+  bool crosstalk = true;                // sensor.crosstalk
+  bool skew = true;                     // sensor.gate_skew: per-pixel gate position and length maps
+  bool pdp_nonuniformity = true;        // sensor.pdp_nonuniformity
+};
+
+struct GateSweepConfig {
+  double start_s = 0.6e-9;              // acquisition.gate_sweep.start_ns
+  double stop_s = 13.2e-9;              // acquisition.gate_sweep.stop_ns (inclusive when on the grid)
+  double step_s = 36e-12;               // acquisition.gate_sweep.step_ps
+};
+
+struct IntensityConfig {
+  std::string exposure = "single";      // acquisition.intensity.exposure: "single" or "dual"
+  double exposure_s = 10e-6;            // acquisition.intensity.exposure_us: single exposure, or tau_S in dual
+  double dual_ratio = 8.0;              // acquisition.intensity.dual_ratio: tau_L / tau_S
+  bool laser_on = false;                // acquisition.intensity.laser_on: add the laser's mean photon rate
+};
+
+struct AcquisitionConfig {
+  std::string mode = "gate_sweep";      // acquisition.mode: "gate_sweep" (3D) or "intensity" (2D)
+  int frames = 255;                     // acquisition.frames: per gate position (sweep) or per image (2D)
+  double frame_rate_Hz = 24000.0;       // acquisition.frame_rate_fps, for time stamps
+  int64_t cycles_per_frame = 1000;      // acquisition.cycles_per_frame: laser cycles in one binary frame
+  GateSweepConfig gate_sweep;
+  IntensityConfig intensity;
+};
+
+struct RenderConfig {
+  int samples_per_pixel = 16;           // render.samples_per_pixel
+  int max_bounces = 4;                  // render.max_bounces (1 = direct light only)
+  int russian_roulette_from = 3;        // render.russian_roulette_from: bounce after which paths may stop
+  double time_bin_s = 9e-12;            // render.time_bin_ps
+  std::optional<double> window_start_s; // render.window_start_ns (null: derived from the acquisition)
+  std::optional<double> window_stop_s;  // render.window_stop_ns
+  int tile_size = 32;                   // render.tile_size_px (multiple of 8)
+  int max_layers = 8;                   // render.max_layers in the ground truth
+  bool split_direct_indirect = false;   // render.split_direct_indirect
+};
+
+struct OutputsConfig {
+  bool ground_truth = true;             // outputs.ground_truth
+  bool transient = false;               // outputs.transient
+  std::optional<PixelRect> transient_crop;  // outputs.transient_crop [x0, y0, w, h] (image coordinates)
+  bool expected_counts = true;          // outputs.expected_counts
+  bool counts = true;                   // outputs.counts
+  bool frames = false;                  // outputs.frames
+  bool previews = true;                 // outputs.previews
+};
+
+struct RunConfig {
+  std::string scene_file;               // absolute path of the scene file ("" when built in code)
+  std::string gltf_path;                // gltf: resolved absolute path
+  std::string gltf_scene;               // gltf_scene: name of the glTF scene; "" = the file's default
+  uint64_t seed = 1;                    // seed
+  CameraConfig camera;
+  LaserConfig laser;
+  AmbientConfig ambient;
+  SensorConfig sensor;
+  AcquisitionConfig acquisition;
+  RenderConfig render;
+  OutputsConfig outputs;
+};
+
+}  // namespace spadgen

@@ -1,0 +1,90 @@
+// Tile buffers that stream from the renderer through the sensor to the writers. Memory is bounded by
+// tiles, never by image size times time bins. Each pixel is owned by exactly one tile, so buffers are
+// filled without atomics and results do not depend on which thread ran which tile.
+#pragma once
+#include <algorithm>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "time_axis.h"
+
+namespace spadgen {
+
+// A rectangle of pixels in image coordinates (x to the right, y down, row 0 at the top of the image).
+struct PixelRect {
+  int x0 = 0, y0 = 0, width = 0, height = 0;
+  int x1() const { return x0 + width; }
+  int y1() const { return y0 + height; }
+  int64_t count() const { return int64_t(width) * height; }
+  bool contains(int x, int y) const { return x >= x0 && x < x1() && y >= y0 && y < y1(); }
+  // Index of pixel (x, y) inside this rectangle, row-major.
+  int64_t index(int x, int y) const { return int64_t(y - y0) * width + (x - x0); }
+  bool operator==(const PixelRect&) const = default;
+};
+
+// The rectangle grown by `margin` pixels on every side and clipped to the image.
+inline PixelRect grow_clipped(const PixelRect& r, int margin, int image_width, int image_height) {
+  const int x0 = std::max(0, r.x0 - margin), y0 = std::max(0, r.y0 - margin);
+  const int x1 = std::min(image_width, r.x1() + margin), y1 = std::min(image_height, r.y1() + margin);
+  return {x0, y0, x1 - x0, y1 - y0};
+}
+
+// Splits a width x height image into tiles of tile_size x tile_size (the last row and column smaller),
+// in row-major order. tile_size must be a positive multiple of 8 so that bit-packed frames of a tile
+// start on a byte boundary.
+std::vector<PixelRect> make_tiles(int width, int height, int tile_size);
+
+// Light transport output for one tile: photons per laser pulse arriving at each pixel's SPAD (after the
+// optics and fill factor, before PDP), binned in time, plus time-integrated totals.
+struct TransientTile {
+  PixelRect rect;       // pixels this tile owns
+  PixelRect data_rect;  // pixels with data: rect grown by the sensor's halo (crosstalk), clipped to the image
+  TimeAxis axis;        // axis.bins == 0: no transient was rendered (time-integrated quantities only)
+
+  // photons per pulse in bin t of pixel (x, y): transient[data_rect.index(x, y) * axis.bins + t]
+  std::vector<float> transient;
+  // per data pixel, photons per pulse integrated over all time (in and out of the window)
+  std::vector<double> laser_total;
+  // per data pixel, photons per pulse whose arrival (after folding by the laser period) fell outside the window
+  std::vector<double> out_of_window;
+  // per data pixel, steady ambient photon rate arriving at the SPAD, photons per second
+  std::vector<float> ambient_rate;
+
+  const float* pixel_transient(int x, int y) const {
+    return transient.data() + data_rect.index(x, y) * axis.bins;
+  }
+};
+
+// Exact ground truth along each pixel's primary ray (through the pixel centre).
+struct GroundTruthTile {
+  PixelRect rect;
+  int max_layers = 0;
+  std::vector<float> range;   // m, camera centre to first hit along the ray; +inf on a miss
+  std::vector<float> z;       // m, along the optical axis; +inf on a miss
+  std::vector<float> normal;  // 3 per pixel, world space, facing the camera; 0 on a miss
+  std::vector<int32_t> mesh_id;      // -1 on a miss
+  std::vector<int32_t> material_id;  // -1 on a miss or a mesh without material
+  std::vector<int32_t> layer_count;  // surfaces along the ray up to and including the first opaque one
+  // per pixel, max_layers entries each: [index(x, y) * max_layers + i]; +inf / 0 beyond layer_count
+  std::vector<float> layer_range;
+  std::vector<float> layer_transmittance;  // fraction of light reaching that surface along the ray
+};
+
+// What the sensor makes of a tile. K is the number of gate positions (gate sweep) or exposures (2D).
+struct SensorTile {
+  PixelRect rect;
+  int K = 0;
+  // [k * rect.count() + rect.index(x, y)]
+  std::vector<float> expected;     // noise-free expected counts N * p
+  std::vector<uint16_t> counts;    // sampled counts
+  // optional binary frames, [((k * N + n) * rect.height + row) * bytes_per_row + byte], bits packed
+  // along x least significant bit first, bytes_per_row = ceil(rect.width / 8)
+  int frames_per_k = 0;
+  std::vector<uint8_t> frames;
+  // 2D intensity mode only, per pixel: summed counts and the linearised photon estimate
+  std::vector<float> intensity_counts;
+  std::vector<float> intensity_photons;
+};
+
+}  // namespace spadgen

@@ -1,0 +1,109 @@
+// The immutable scene: every triangle mesh in world space (metres), its materials, the glTF cameras and
+// lights. Built once from a glTF file by load_gltf(); render/ turns it into an Embree scene.
+#pragma once
+#include <glm/glm.hpp>
+
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <vector>
+
+namespace spadgen::scenes {
+
+// An RGBA8 image from the glTF, as decoded by tinygltf (sRGB-encoded for base colour).
+struct Texture {
+  std::string name;
+  int width = 0, height = 0;
+  std::vector<uint8_t> rgba;  // width * height * 4, row 0 at the top (glTF uv (0,0) is the top-left)
+  // Sampler wrap modes (glTF codes: 10497 repeat, 33071 clamp, 33648 mirrored repeat).
+  int wrap_s = 10497, wrap_t = 10497;
+};
+
+struct Material {
+  std::string name;
+  glm::vec4 base_color{1, 1, 1, 1};  // pbrMetallicRoughness.baseColorFactor (linear)
+  int base_color_texture = -1;       // index into Scene::textures, -1 none
+  int base_color_texcoord = 0;       // TEXCOORD_n set used by it
+  float metallic = 1.0f;             // glTF defaults: metallic 1, roughness 1
+  float roughness = 1.0f;
+  glm::vec3 emissive{0, 0, 0};       // emissiveFactor times KHR_materials_emissive_strength
+  bool double_sided = false;
+  float transmission = 0.0f;         // KHR_materials_transmission.transmissionFactor
+  float ior = 1.5f;                  // KHR_materials_ior.ior
+  float thickness_m = 0.0f;          // KHR_materials_volume.thicknessFactor (0: thin-walled)
+  float attenuation_distance_m = std::numeric_limits<float>::infinity();  // KHR_materials_volume
+  glm::vec3 attenuation_color{1, 1, 1};                                   // KHR_materials_volume
+  bool transmissive() const { return transmission > 0.0f; }
+};
+
+// One glTF primitive instanced by one node, flattened into world space.
+struct Mesh {
+  std::string name;        // "<node name>/<mesh name>/<primitive index>"
+  int gltf_node = -1, gltf_mesh = -1, gltf_primitive = -1;
+  std::vector<glm::vec3> positions;  // world space, metres
+  std::vector<glm::vec3> normals;    // world space, unit; empty when the primitive has none
+  std::vector<glm::vec2> texcoords0, texcoords1;  // empty when absent
+  std::vector<uint32_t> indices;     // 3 per triangle (non-indexed primitives get 0, 1, 2, ...)
+  int material = -1;                 // index into Scene::materials, -1: the glTF default material
+  size_t triangle_count() const { return indices.size() / 3; }
+};
+
+struct Camera {
+  std::string name;                  // the node's name (or the camera's when the node has none)
+  glm::dmat4 world_from_camera{1.0}; // the node's world transform; the camera looks down its local -Z, +Y up
+  double yfov_rad = 0.0;
+  double aspect_ratio = 0.0;         // 0 when the glTF does not give one
+};
+
+struct Light {
+  enum class Type { Point, Spot, Directional };
+  std::string name;
+  Type type = Type::Point;
+  glm::vec3 color{1, 1, 1};
+  double intensity = 1.0;            // KHR_lights_punctual: candela (point, spot) or lux (directional)
+  double range = 0.0;                // 0: infinite
+  double inner_cone_rad = 0.0, outer_cone_rad = 0.7853981633974483;
+  glm::dvec3 position{0, 0, 0};      // world
+  glm::dvec3 direction{0, 0, -1};    // world, unit: the node's local -Z
+};
+
+struct Scene {
+  std::string source;                // path of the glTF file
+  std::vector<Mesh> meshes;
+  std::vector<Material> materials;
+  std::vector<Texture> textures;
+  std::vector<Camera> cameras;
+  std::vector<Light> lights;
+  std::vector<std::string> warnings; // what spadgen does not use, once per element (also printed)
+
+  bool has_transmission() const {
+    for (const Material& m : materials)
+      if (m.transmissive()) return true;
+    return false;
+  }
+  size_t triangle_count() const {
+    size_t n = 0;
+    for (const Mesh& m : meshes) n += m.triangle_count();
+    return n;
+  }
+  const Camera* find_camera(const std::string& name) const {
+    for (const Camera& c : cameras)
+      if (c.name == name) return &c;
+    return nullptr;
+  }
+  const Light* find_light(const std::string& name) const {
+    for (const Light& l : lights)
+      if (l.name == name) return &l;
+    return nullptr;
+  }
+};
+
+// Loads a .gltf (external or embedded buffers) or .glb file. scene_name "" picks the file's default scene
+// (or scene 0). Throws spadgen::Error naming the file and the glTF element on any broken input.
+Scene load_gltf(const std::string& path, const std::string& scene_name = "");
+
+// A human-readable summary for `spadgen info`: meshes, triangles, materials with their extensions,
+// cameras, lights, warnings.
+std::string summarize(const Scene& scene);
+
+}  // namespace spadgen::scenes

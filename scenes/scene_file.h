@@ -1,0 +1,31 @@
+// Scene files: JSON (comments allowed) naming a glTF file and the camera, laser, ambient, sensor,
+// acquisition, render and outputs sections. Every key is declared once in a schema with its type, unit,
+// default and valid range; unknown keys, wrong types and out-of-range values are errors that name the
+// file, the key path (/camera/f_number), what was found and what was expected.
+#pragma once
+#include <nlohmann/json.hpp>
+
+#include <string>
+#include <vector>
+
+#include "core/config.h"
+
+namespace spadgen::scenes {
+
+struct ResolvedRun {
+  RunConfig config;         // SI units, every default explicit
+  nlohmann::json resolved;  // the scene file as the user would write it, with every default explicit
+};
+
+// Reads, validates and resolves a scene file. overrides are "key.path=value" strings (as `--set`),
+// applied before validation so that a wrong key or value fails exactly as it would inside the file.
+ResolvedRun load_scene_file(const std::string& path, const std::vector<std::string>& overrides = {});
+
+// The same from JSON text; `path` names the file in messages and resolves the relative glTF path.
+ResolvedRun parse_scene_text(const std::string& text, const std::string& path,
+                             const std::vector<std::string>& overrides = {});
+
+// The reference of every key (path, type, unit, default, range, meaning) as Markdown.
+std::string schema_reference_markdown();
+
+}  // namespace spadgen::scenes
