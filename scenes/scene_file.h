@@ -14,7 +14,9 @@ namespace spadgen::scenes {
 
 struct ResolvedRun {
   RunConfig config;         // SI units, every default explicit
-  nlohmann::json resolved;  // the scene file as the user would write it, with every default explicit
+  // The scene file as the user would write it, every default explicit, keys in schema order.
+  nlohmann::ordered_json resolved;
+  std::vector<std::string> warnings;  // consistent but suspicious settings, e.g. exposure longer than a frame
 };
 
 // Reads, validates and resolves a scene file. overrides are "key.path=value" strings (as `--set`),

@@ -1,1 +1,219 @@
+// Scene-file schema: defaults, unit conversion, and the message a user sees for every kind of mistake.
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "core/error.h"
+#include "scenes/scene_file.h"
+
+namespace spadgen::scenes {
+namespace {
+
+using ::testing::HasSubstr;
+using ::testing::Not;
+
+// A folder with an (empty) glTF file, so that the existence check of "gltf" passes.
+class SceneFileTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = std::filesystem::temp_directory_path() /
+           ("spadgen_scene_file_" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    std::filesystem::create_directories(dir_);
+    std::ofstream(dir_ / "s.gltf") << "{}";
+  }
+  void TearDown() override { std::filesystem::remove_all(dir_); }
+  std::string path() const { return (dir_ / "scene.json").string(); }
+
+  ResolvedRun parse(const std::string& text, const std::vector<std::string>& overrides = {}) {
+    return parse_scene_text(text, path(), overrides);
+  }
+  // The message of the Error that parsing throws ("" when it does not throw).
+  std::string error_of(const std::string& text, const std::vector<std::string>& overrides = {}) {
+    try {
+      parse(text, overrides);
+    } catch (const Error& e) {
+      return e.what();
+    }
+    return "";
+  }
+  std::filesystem::path dir_;
+};
+
+TEST_F(SceneFileTest, MinimalFileResolvesEveryDefaultInSiUnits) {
+  const ResolvedRun r = parse(R"({"gltf": "s.gltf"})");
+  const RunConfig& c = r.config;
+  EXPECT_EQ(c.gltf_path, (dir_ / "s.gltf").lexically_normal().string());
+  EXPECT_DOUBLE_EQ(c.camera.pixel_pitch_m, 9.4e-6);
+  EXPECT_EQ(c.camera.width_px, 1024);
+  EXPECT_EQ(c.camera.height_px, 500);
+  EXPECT_DOUBLE_EQ(c.laser.repetition_rate_Hz, 40e6);
+  EXPECT_DOUBLE_EQ(c.laser.wavelength_m, 637e-9);
+  EXPECT_DOUBLE_EQ(c.sensor.gate.length_s, 3.8e-9);
+  EXPECT_DOUBLE_EQ(c.acquisition.gate_sweep.step_s, 36e-12);
+  EXPECT_EQ(c.acquisition.frames, 255);
+  // The paper's Table 1, pixel A and pixel B.
+  EXPECT_DOUBLE_EQ(c.sensor.pixel_A.fill_factor, 0.07);
+  EXPECT_DOUBLE_EQ(c.sensor.pixel_B.fill_factor, 0.134);
+  EXPECT_DOUBLE_EQ(c.sensor.pixel_A.pdp_peak, 0.105);
+  EXPECT_DOUBLE_EQ(c.sensor.pixel_B.pdp_peak, 0.267);
+  EXPECT_DOUBLE_EQ(c.sensor.pixel_A.dcr_median_cps, 0.4);
+  EXPECT_DOUBLE_EQ(c.sensor.pixel_B.dcr_median_cps, 2.0);
+  EXPECT_DOUBLE_EQ(c.sensor.pixel_A.crosstalk_probability, 0.0017);
+  EXPECT_DOUBLE_EQ(c.sensor.pixel_B.crosstalk_probability, 0.0039);
+  EXPECT_FALSE(c.camera.crop.has_value());
+  EXPECT_FALSE(c.camera.vertical_fov_rad.has_value());
+  // Every default explicit in the resolved file, nullable ones as null.
+  EXPECT_EQ(r.resolved["camera"]["f_number"], 1.4);
+  EXPECT_TRUE(r.resolved["camera"]["crop"].is_null());
+  EXPECT_EQ(r.resolved["sensor"]["gate"]["skew_fwhm_ps"], 410.0);
+  EXPECT_EQ(r.resolved["acquisition"]["gate_sweep"]["step_ps"], 36.0);
+}
+
+TEST_F(SceneFileTest, ValuesAreConvertedFromTheUnitInTheirName) {
+  const ResolvedRun r = parse(R"({"gltf": "s.gltf",
+      // comments are allowed
+      "camera": {"pixel_pitch_um": 10, "focal_length_mm": 25, "vertical_fov_deg": 90, "crop": [8, 16, 32, 40]},
+      "laser": {"average_power_mW": 5, "repetition_rate_MHz": 25, "wavelength_nm": 785, "pulse_fwhm_ps": 130,
+                "emission_delay_ns": 2.5},
+      "sensor": {"gate": {"length_ns": 5, "rise_ps": 300}, "jitter_fwhm_ps": 40},
+      "acquisition": {"gate_sweep": {"start_ns": -1, "stop_ns": 2, "step_ps": 72}},
+      "render": {"time_bin_ps": 4.5, "window_start_ns": 1, "window_stop_ns": 3}})");
+  const RunConfig& c = r.config;
+  EXPECT_DOUBLE_EQ(c.camera.pixel_pitch_m, 10e-6);
+  EXPECT_DOUBLE_EQ(c.camera.focal_length_m, 25e-3);
+  EXPECT_NEAR(*c.camera.vertical_fov_rad, 1.5707963267948966, 1e-15);
+  EXPECT_EQ(*c.camera.crop, (PixelRect{8, 16, 32, 40}));
+  EXPECT_DOUBLE_EQ(c.laser.average_power_W, 5e-3);
+  EXPECT_DOUBLE_EQ(c.laser.repetition_rate_Hz, 25e6);
+  EXPECT_DOUBLE_EQ(c.laser.wavelength_m, 785e-9);
+  EXPECT_DOUBLE_EQ(c.laser.pulse_fwhm_s, 130e-12);
+  EXPECT_DOUBLE_EQ(c.laser.emission_delay_s, 2.5e-9);
+  EXPECT_DOUBLE_EQ(c.sensor.gate.length_s, 5e-9);
+  EXPECT_DOUBLE_EQ(c.sensor.gate.rise_s, 300e-12);
+  EXPECT_DOUBLE_EQ(c.sensor.gate.jitter_fwhm_s, 40e-12);
+  EXPECT_DOUBLE_EQ(c.acquisition.gate_sweep.start_s, -1e-9);
+  EXPECT_DOUBLE_EQ(c.acquisition.gate_sweep.step_s, 72e-12);
+  EXPECT_DOUBLE_EQ(c.render.time_bin_s, 4.5e-12);
+  EXPECT_DOUBLE_EQ(*c.render.window_start_s, 1e-9);
+  EXPECT_DOUBLE_EQ(*c.render.window_stop_s, 3e-9);
+}
+
+TEST_F(SceneFileTest, MisspeltKeyNamesFileKeyAndSuggestion) {
+  const std::string msg = error_of(R"({"gltf": "s.gltf", "camera": {"f_numbr": 2}})");
+  EXPECT_THAT(msg, HasSubstr(path()));
+  EXPECT_THAT(msg, HasSubstr("/camera/f_numbr: unknown key; did you mean /camera/f_number?"));
+}
+
+TEST_F(SceneFileTest, KeyInTheWrongSectionPointsToTheRightOne) {
+  const std::string msg = error_of(R"({"gltf": "s.gltf", "camera": {"wavelength_nm": 510}})");
+  EXPECT_THAT(msg, HasSubstr("/camera/wavelength_nm: unknown key; did you mean /laser/wavelength_nm?"));
+}
+
+TEST_F(SceneFileTest, UnknownSectionListsNothingMisleading) {
+  const std::string msg = error_of(R"({"gltf": "s.gltf", "lazer": {"wavelength_nm": 510}})");
+  EXPECT_THAT(msg, HasSubstr("/lazer: unknown key; did you mean /laser?"));
+}
+
+TEST_F(SceneFileTest, WrongTypeSaysWhatWasFoundAndExpected) {
+  const std::string msg = error_of(R"({"gltf": "s.gltf", "camera": {"width_px": "1024"}})");
+  EXPECT_THAT(msg, HasSubstr("/camera/width_px: found \"1024\" (a string), expected an integer in [1, 16384] px"));
+}
+
+TEST_F(SceneFileTest, OutOfRangeValueSaysTheRange) {
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"f_number": -2}})"),
+              HasSubstr("/camera/f_number: found -2 (an integer), expected a number in [0.5, 64]"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "sensor": {"pixel_A": {"fill_factor": 0}}})"),
+              HasSubstr("/sensor/pixel_A/fill_factor: found 0 (an integer), expected a number in (0, 1]"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"width_px": 10.5}})"),
+              HasSubstr("/camera/width_px: found 10.5 (a number), expected an integer"));
+}
+
+TEST_F(SceneFileTest, WrongChoiceListsTheChoices) {
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "acquisition": {"mode": "sweep"}})"),
+              HasSubstr("/acquisition/mode: found \"sweep\" (a string), expected one of \"gate_sweep\", \"intensity\""));
+}
+
+TEST_F(SceneFileTest, SectionGivenAsValueIsAnError) {
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": 3})"),
+              HasSubstr("/camera: found 3 (an integer), expected an object"));
+}
+
+TEST_F(SceneFileTest, MissingGltfAndMissingFile) {
+  EXPECT_THAT(error_of(R"({"camera": {}})"), HasSubstr("/gltf: missing; expected a string"));
+  EXPECT_THAT(error_of(R"({"gltf": "nope.gltf"})"),
+              HasSubstr("/gltf: the glTF file " + (dir_ / "nope.gltf").string() + " does not exist"));
+}
+
+TEST_F(SceneFileTest, SyntaxErrorGivesLineAndColumn) {
+  const std::string msg = error_of("{\n  \"gltf\": \"s.gltf\",\n  \"camera\": {\"f_number\": 2,}\n}");
+  EXPECT_THAT(msg, HasSubstr(path() + ":3:"));
+  EXPECT_THAT(msg, HasSubstr("not valid JSON"));
+}
+
+TEST_F(SceneFileTest, EveryErrorIsReportedAtOnce) {
+  const std::string msg = error_of(R"({"gltf": "s.gltf", "camera": {"f_numbr": 2, "width_px": 0}, "laser": {"beam": "x"}})");
+  EXPECT_THAT(msg, HasSubstr("3 errors"));
+  EXPECT_THAT(msg, HasSubstr("/camera/f_numbr"));
+  EXPECT_THAT(msg, HasSubstr("/camera/width_px"));
+  EXPECT_THAT(msg, HasSubstr("/laser/beam"));
+}
+
+TEST_F(SceneFileTest, OverridesGoThroughTheSameChecks) {
+  const ResolvedRun r = parse(R"({"gltf": "s.gltf", "laser": {"average_power_mW": 2}})",
+                              {"laser.average_power_mW=5", "camera.gltf_camera=Camera.001", "camera.crop=[0,0,64,64]",
+                               "acquisition.intensity.exposure=dual"});
+  EXPECT_DOUBLE_EQ(r.config.laser.average_power_W, 5e-3);
+  EXPECT_EQ(r.config.camera.gltf_camera, "Camera.001");
+  EXPECT_EQ(*r.config.camera.crop, (PixelRect{0, 0, 64, 64}));
+  EXPECT_EQ(r.config.acquisition.intensity.exposure, "dual");
+  EXPECT_EQ(r.resolved["laser"]["average_power_mW"], 5);
+
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"laser.average_powr_mW=5"}),
+              HasSubstr("--set laser.average_powr_mW: /laser/average_powr_mW: unknown key; did you mean /laser/average_power_mW?"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"camera.f_number=-1"}),
+              HasSubstr("/camera/f_number: found -1 (an integer), expected a number in [0.5, 64]"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"camera"}), HasSubstr("--set camera: expected KEY=VALUE"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"camera=3"}), HasSubstr("/camera: is a section, not a key"));
+}
+
+TEST_F(SceneFileTest, CrossKeyChecks) {
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"crop": [1000, 0, 100, 10]}})"),
+              HasSubstr("/camera/crop: found [1000, 0, 100, 10], expected a rectangle inside the 1024 x 500 sensor"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "render": {"tile_size_px": 20}})"),
+              HasSubstr("/render/tile_size_px: found 20, expected a multiple of 8"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "acquisition": {"gate_sweep": {"start_ns": 5, "stop_ns": 1}}})"),
+              HasSubstr("/acquisition/gate_sweep/stop_ns: is before"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"look_at_m": [0, 0, 0]}})"),
+              HasSubstr("/camera/look_at_m: equals /camera/position_m"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"up": [0, 0, 1]}})"), HasSubstr("/camera/up: is parallel"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "render": {"window_start_ns": 1}})"),
+              HasSubstr("both set or both null"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "laser": {"beam": "gltf_light"}})"), HasSubstr("/laser/gltf_light: is empty"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "sensor": {"gate": {"profile_csv": "gate.csv"}}})"),
+              HasSubstr("/sensor/gate/profile_csv: the file " + (dir_ / "gate.csv").string() + " does not exist"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "outputs": {"transient_crop": [0, 0, 8, 8]}, "camera": {"crop": [8, 8, 8, 8]}})"),
+              HasSubstr("/outputs/transient_crop"));
+}
+
+TEST_F(SceneFileTest, ExposureLongerThanAFrameIsAWarning) {
+  const ResolvedRun r = parse(R"({"gltf": "s.gltf", "acquisition": {"cycles_per_frame": 2000}})");
+  ASSERT_EQ(r.warnings.size(), 1u);
+  EXPECT_THAT(r.warnings[0], HasSubstr("longer than one frame"));
+  EXPECT_TRUE(parse(R"({"gltf": "s.gltf"})").warnings.empty());
+}
+
+TEST(SceneFileReference, DocsListEveryKeyAsTheSchemaDeclaresIt) {
+  std::ifstream in(std::string(SPADGEN_SOURCE_DIR) + "/docs/scene-file.md");
+  ASSERT_TRUE(in) << "docs/scene-file.md is missing";
+  std::stringstream ss;
+  ss << in.rdbuf();
+  EXPECT_THAT(ss.str(), HasSubstr(schema_reference_markdown()))
+      << "docs/scene-file.md is out of date: regenerate its key table with `spadgen schema`";
+}
+
+}  // namespace
+}  // namespace spadgen::scenes
