@@ -1,0 +1,91 @@
+// Shared value types: the time axis edge rule, tiling, units, and the counter-based RNG.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <set>
+
+#include "core/error.h"
+#include "core/rng.h"
+#include "core/tile.h"
+#include "core/time_axis.h"
+#include "core/units.h"
+
+namespace spadgen {
+namespace {
+
+TEST(TimeAxis, ATimeOnABinEdgeBelongsToTheLaterBin) {
+  TimeAxis a{1e-9, 9e-12, 1000, 25e-9};
+  for (int64_t i = 0; i < a.bins; ++i) {
+    EXPECT_EQ(a.bin_of(a.bin_start_s(i)), i) << "edge of bin " << i;
+    EXPECT_EQ(a.bin_of(a.bin_centre_s(i)), i);
+    EXPECT_EQ(a.bin_of(std::nextafter(a.bin_start_s(i), -1.0)), i - 1) << "just before bin " << i;
+  }
+  EXPECT_EQ(a.bin_of(a.end_s()), -1);  // the window is half-open
+  EXPECT_EQ(a.bin_of(std::nextafter(a.end_s(), 0.0)), a.bins - 1);
+  EXPECT_EQ(a.bin_of(std::nan("")), -1);
+  EXPECT_EQ(TimeAxis{}.bin_of(0.0), -1);  // no bins: nothing is binned
+}
+
+TEST(Tiles, CoverTheImageOnceInRowMajorOrder) {
+  const std::vector<PixelRect> tiles = make_tiles(100, 37, 16);
+  std::vector<int> covered(100 * 37, 0);
+  for (const PixelRect& t : tiles) {
+    EXPECT_EQ(t.x0 % 8, 0);
+    for (int y = t.y0; y < t.y1(); ++y)
+      for (int x = t.x0; x < t.x1(); ++x) ++covered[size_t(y * 100 + x)];
+  }
+  for (int c : covered) ASSERT_EQ(c, 1);
+  EXPECT_EQ(tiles.size(), 7u * 3u);
+  EXPECT_EQ(tiles[1].x0, 16);
+  EXPECT_THROW(make_tiles(10, 10, 12), Error);
+  EXPECT_EQ(grow_clipped({0, 0, 8, 8}, 1, 10, 10), (PixelRect{0, 0, 9, 9}));
+  EXPECT_EQ(grow_clipped({8, 8, 2, 2}, 1, 10, 10), (PixelRect{7, 7, 3, 3}));
+}
+
+TEST(Units, PhotonsPerPulseOfThePapersLaser) {
+  // 2 mW at 40 MHz and 637 nm: E = hc/lambda = 3.118439e-19 J, N_p = 2e-3 / (4e7 * E) = 1.603366e8.
+  EXPECT_NEAR(photons_per_pulse(2e-3, 40e6, 637e-9), 1.603366e8, 1e2);
+  EXPECT_NEAR(photon_energy_J(637e-9), 3.118439e-19, 1e-25);
+}
+
+TEST(Rng, SameKeySameNumbersAndRandomAccessAgrees) {
+  Rng a(42, RngKind::Test, 7, 3), b(42, RngKind::Test, 7, 3);
+  std::vector<uint32_t> seq;
+  for (int i = 0; i < 64; ++i) {
+    const uint32_t v = a.next_u32();
+    EXPECT_EQ(v, b.next_u32());
+    seq.push_back(v);
+  }
+  for (uint32_t blk = 0; blk < 16; ++blk)
+    for (int j = 0; j < 4; ++j) EXPECT_EQ(a.block(blk)[size_t(j)], seq[blk * 4 + size_t(j)]);
+}
+
+TEST(Rng, DistinctKeysGiveDistinctStreams) {
+  std::set<uint64_t> firsts;
+  for (uint64_t seed : {1ull, 2ull})
+    for (RngKind kind : {RngKind::CameraPath, RngKind::Frames})
+      for (uint64_t a : {0ull, 1ull, 1ull << 32})
+        for (uint64_t b : {0ull, 1ull, 1ull << 33}) firsts.insert(Rng(seed, kind, a, b).next_u64());
+  EXPECT_EQ(firsts.size(), 2u * 2u * 3u * 3u);
+}
+
+// Chi-square of 64 equal bins of next_double() over 2^20 draws; 63 degrees of freedom, critical value
+// 119.0 for a false-alarm rate of 1e-5.
+TEST(Rng, UniformDoublesPassChiSquare) {
+  Rng r(2026, RngKind::Test, 1, 1);
+  std::vector<double> bins(64, 0.0);
+  const int n = 1 << 20;
+  for (int i = 0; i < n; ++i) {
+    const double u = r.next_double();
+    ASSERT_GE(u, 0.0);
+    ASSERT_LT(u, 1.0);
+    bins[size_t(u * 64)] += 1;
+  }
+  const double e = n / 64.0;
+  double chi2 = 0;
+  for (double o : bins) chi2 += (o - e) * (o - e) / e;
+  EXPECT_LT(chi2, 119.0);
+}
+
+}  // namespace
+}  // namespace spadgen
