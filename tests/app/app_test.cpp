@@ -1,0 +1,212 @@
+// The spadgen program as a user runs it: commands, the output folder, determinism across threads and
+// tiles, one-pixel replay through a crop, and what bad input does (and does not) write.
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "writers/writers.h"
+
+namespace {
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+const std::string kBin = std::string(SPADGEN_BINARY_DIR) + "/app/spadgen";
+const std::string kScenes = std::string(SPADGEN_SOURCE_DIR) + "/scenes/paper/";
+
+struct Result {
+  int code;
+  std::string output;  // stdout and stderr
+};
+Result sh(const std::string& args) {
+  const std::string cmd = kBin + " " + args + " 2>&1";
+  FILE* p = popen(cmd.c_str(), "r");
+  std::string out;
+  std::array<char, 4096> buf{};
+  while (size_t n = fread(buf.data(), 1, buf.size(), p)) out.append(buf.data(), n);
+  const int status = pclose(p);
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+}
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+// A small NPY reader, independent of the writer: header dict and raw data.
+struct Npy {
+  std::string descr;
+  std::vector<int64_t> shape;
+  std::string data;
+};
+Npy read_npy(const fs::path& p) {
+  const std::string b = slurp(p);
+  EXPECT_EQ(b.substr(0, 6), "\x93NUMPY");
+  const size_t hlen = size_t(uint8_t(b[8])) | (size_t(uint8_t(b[9])) << 8);
+  const std::string h = b.substr(10, hlen);
+  Npy n;
+  const size_t d = h.find("'descr': '") + 10;
+  n.descr = h.substr(d, h.find('\'', d) - d);
+  std::string s = h.substr(h.find('(') + 1, h.find(')') - h.find('(') - 1);
+  std::stringstream ss(s);
+  for (std::string tok; std::getline(ss, tok, ',');)
+    if (tok.find_first_not_of(' ') != std::string::npos) n.shape.push_back(std::stoll(tok));
+  n.data = b.substr(10 + hlen);
+  return n;
+}
+
+class App : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("spadgen_app_" + std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  fs::path dir_;
+};
+
+// A quick version of the multi-object experiment: a crop where the plate covers the sphere's edge.
+const std::string kSmall =
+    kScenes + "multi_object.json -q --set render.samples_per_pixel=2 --set acquisition.gate_sweep.stop_ns=4.2 "
+              "--set camera.crop=[496,232,24,20] --set outputs.frames=true --set outputs.transient=true";
+
+TEST(AppCommands, HelpListsTheCommands) {
+  const Result r = sh("--help");
+  EXPECT_EQ(r.code, 0);
+  EXPECT_THAT(r.output, HasSubstr("run"));
+  EXPECT_THAT(r.output, HasSubstr("info"));
+  EXPECT_THAT(r.output, HasSubstr("schema"));
+  EXPECT_EQ(sh("run --help").code, 0);
+  EXPECT_NE(sh("").code, 0);
+}
+
+TEST(AppCommands, InfoPrintsTheResolvedSceneAndTheGltf) {
+  const Result r = sh("info " + kScenes + "multi_object.json --set laser.average_power_mW=5");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("\"average_power_mW\": 5"));
+  EXPECT_THAT(r.output, HasSubstr("KHR_materials_transmission"));
+  EXPECT_THAT(r.output, HasSubstr("time axis:"));
+}
+
+TEST(AppCommands, SchemaMatchesTheDocs) {
+  const Result r = sh("schema");
+  ASSERT_EQ(r.code, 0);
+  EXPECT_THAT(slurp(std::string(SPADGEN_SOURCE_DIR) + "/docs/scene-file.md"), HasSubstr(r.output));
+}
+
+TEST_F(App, RunWritesEveryFileItListsWithConsistentShapes) {
+  const Result r = sh("run " + kSmall + " -o " + (dir_ / "out").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  const auto meta = nlohmann::json::parse(slurp(dir_ / "out/metadata.json"));
+  for (const auto& f : meta["files"]) EXPECT_TRUE(fs::exists(dir_ / "out" / f.get<std::string>())) << f;
+  for (const char* f : {"ground_truth.exr", "laser.exr", "ambient.exr", "sensor_maps.exr", "counts.npy",
+                        "expected_counts.npy", "frames.npy", "transient.npy", "previews/depth.png"})
+    EXPECT_TRUE(fs::exists(dir_ / "out" / f)) << f;
+  // No staging folder or temporary file is left behind.
+  for (const auto& e : fs::recursive_directory_iterator(dir_ / "out"))
+    EXPECT_THAT(e.path().filename().string(), ::testing::Not(HasSubstr("staging"))) << e.path();
+
+  const int64_t K = meta["acquisition"]["K"];
+  const Npy counts = read_npy(dir_ / "out/counts.npy");
+  EXPECT_EQ(counts.descr, "|u1");
+  EXPECT_EQ(counts.shape, (std::vector<int64_t>{K, 20, 24}));
+  const Npy expected = read_npy(dir_ / "out/expected_counts.npy");
+  EXPECT_EQ(expected.descr, "<f4");
+  EXPECT_EQ(expected.shape, counts.shape);
+  const Npy frames = read_npy(dir_ / "out/frames.npy");
+  EXPECT_EQ(frames.shape, (std::vector<int64_t>{K, 255, 20, 3}));
+  const Npy transient = read_npy(dir_ / "out/transient.npy");
+  EXPECT_EQ(transient.shape, (std::vector<int64_t>{20, 24, meta["time_axis"]["bins"].get<int64_t>()}));
+
+  // Summed frames are the counts, pixel by pixel.
+  for (int64_t k = 0; k < K; ++k)
+    for (int y = 0; y < 20; ++y)
+      for (int x = 0; x < 24; ++x) {
+        int sum = 0;
+        for (int n = 0; n < 255; ++n) sum += (uint8_t(frames.data[size_t(((k * 255 + n) * 20 + y) * 3 + x / 8)]) >> (x % 8)) & 1;
+        ASSERT_EQ(sum, uint8_t(counts.data[size_t((k * 20 + y) * 24 + x)])) << k << " " << x << " " << y;
+      }
+
+  const spadgen::writers::ExrData gt = spadgen::writers::read_exr((dir_ / "out/ground_truth.exr").string());
+  EXPECT_EQ(gt.width, 24);
+  EXPECT_EQ(gt.height, 20);
+  for (const char* c : {"range", "z", "normal.X", "normal.Y", "normal.Z", "mesh_id", "material_id", "layer_count", "layer0.range",
+                        "layer0.transmittance"})
+    EXPECT_TRUE(gt.channels.count(c)) << c;
+  EXPECT_EQ(gt.attributes.at("spadgen_seed"), std::to_string(meta["seed"].get<uint64_t>()));
+  EXPECT_EQ(gt.attributes.at("spadgen_scene_hash"), meta["scene_hash_fnv1a64"].get<std::string>());
+}
+
+// Every output file byte for byte, except metadata.json's "run" section (time taken, threads).
+void expect_same_outputs(const fs::path& a, const fs::path& b) {
+  size_t compared = 0;
+  for (const auto& e : fs::recursive_directory_iterator(a)) {
+    if (!e.is_regular_file()) continue;
+    const fs::path rel = fs::relative(e.path(), a);
+    if (rel == "metadata.json") {
+      auto ma = nlohmann::json::parse(slurp(e.path())), mb = nlohmann::json::parse(slurp(b / rel));
+      ma.erase("run"), mb.erase("run");
+      EXPECT_EQ(ma, mb);
+    } else {
+      EXPECT_TRUE(slurp(e.path()) == slurp(b / rel)) << rel << " differs";
+    }
+    ++compared;
+  }
+  EXPECT_GE(compared, 10u);
+}
+
+TEST_F(App, OutputsAreBitIdenticalForAnyThreadCountAndTileSize) {
+  ASSERT_EQ(sh("run " + kSmall + " --threads 1 --set render.tile_size_px=8 -o " + (dir_ / "a").string()).code, 0);
+  ASSERT_EQ(sh("run " + kSmall + " --threads 2 --set render.tile_size_px=16 -o " + (dir_ / "b").string()).code, 0);
+  expect_same_outputs(dir_ / "a", dir_ / "b");
+}
+
+TEST_F(App, AOnePixelCropReplaysThatPixelOfALargerRun) {
+  ASSERT_EQ(sh("run " + kSmall + " -o " + (dir_ / "full").string()).code, 0);
+  const std::string one = kScenes +
+                          "multi_object.json -q --set render.samples_per_pixel=2 --set acquisition.gate_sweep.stop_ns=4.2 "
+                          "--set camera.crop=[509,241,1,1]";
+  ASSERT_EQ(sh("run " + one + " -o " + (dir_ / "one").string()).code, 0);
+  const Npy full = read_npy(dir_ / "full/counts.npy"), single = read_npy(dir_ / "one/counts.npy");
+  const auto lf = spadgen::writers::read_exr((dir_ / "full/laser.exr").string());
+  const auto ls = spadgen::writers::read_exr((dir_ / "one/laser.exr").string());
+  EXPECT_EQ(lf.channels.at("photons_per_pulse")[size_t((241 - 232) * 24 + (509 - 496))], ls.channels.at("photons_per_pulse")[0]);
+  const int64_t K = full.shape[0];
+  for (int64_t k = 0; k < K; ++k)
+    EXPECT_EQ(full.data[size_t((k * 20 + (241 - 232)) * 24 + (509 - 496))], single.data[size_t(k)]) << "gate " << k;
+}
+
+TEST_F(App, BadInputStopsBeforeWritingAndKeepsEarlierFiles) {
+  fs::create_directories(dir_ / "out");
+  std::ofstream(dir_ / "out/metadata.json") << "{\"earlier\": true}";
+  const Result r = sh("run " + kScenes + "multi_object.json --set camera.f_numbr=2 -o " + (dir_ / "out").string());
+  EXPECT_EQ(r.code, 2);
+  EXPECT_THAT(r.output, HasSubstr("multi_object.json: /camera/f_numbr: unknown key; did you mean /camera/f_number?"));
+  EXPECT_EQ(slurp(dir_ / "out/metadata.json"), "{\"earlier\": true}");
+  size_t entries = 0;
+  for ([[maybe_unused]] const auto& e : fs::directory_iterator(dir_ / "out")) ++entries;
+  EXPECT_EQ(entries, 1u);
+
+  const Result missing = sh("run " + (dir_ / "nope.json").string());
+  EXPECT_NE(missing.code, 0);
+  EXPECT_THAT(missing.output, HasSubstr("nope.json"));
+}
+
+TEST_F(App, ABrokenGltfIsReportedWithItsElement) {
+  std::ofstream(dir_ / "broken.gltf") << R"({"asset": {"version": "2.0"}, "buffers": [{"uri": "missing.bin", "byteLength": 12}]})";
+  std::ofstream(dir_ / "scene.json") << R"({"gltf": "broken.gltf"})";
+  const Result r = sh("run " + (dir_ / "scene.json").string() + " -o " + (dir_ / "out").string());
+  EXPECT_EQ(r.code, 2);
+  EXPECT_THAT(r.output, HasSubstr("broken.gltf"));
+  EXPECT_FALSE(fs::exists(dir_ / "out/metadata.json"));
+}
+
+}  // namespace
