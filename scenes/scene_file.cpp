@@ -666,8 +666,6 @@ void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string
     err("/render/window_stop_ns", "expected render.window_start_ns and render.window_stop_ns both set or both null");
   else if (c.render.window_start_s && *c.render.window_stop_s <= *c.render.window_start_s)
     err("/render/window_stop_ns", "expected a window end after render.window_start_ns");
-  if (c.render.russian_roulette_from > c.render.max_bounces && c.render.max_bounces > 1)
-    warnings.push_back("render.russian_roulette_from is beyond render.max_bounces: Russian roulette never acts");
   if (!std::filesystem::exists(c.gltf_path))
     err("/gltf", "the glTF file " + c.gltf_path + " does not exist; expected a path relative to the scene file");
   for (const auto& [key, file] : {std::pair<std::string, std::string>{"/laser/pulse_shape_csv", c.laser.pulse_shape_csv},
