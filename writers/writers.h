@@ -29,8 +29,25 @@ class NpyWriter {
   // For a (K, H, W) stack: writes tile values [k * rect.count() + rect.index(x, y)] where the stack's
   // pixel (x, y) is (x - origin_x, y - origin_y).
   void write_khw(const PixelRect& rect, int origin_x, int origin_y, const void* data);
+  // For an (H, W, T) stack (transients): writes the pixels of `rect`, whose T values each lie in `data`
+  // at [data_rect.index(x, y) * T + t] (data_rect contains rect: a TransientTile's halo is skipped).
+  void write_hwt(const PixelRect& rect, const PixelRect& data_rect, int origin_x, int origin_y, const void* data);
+  // For a (K, N, H, ceil(W / 8)) uint8 stack of bit-packed frames: writes a SensorTile's frames
+  // [((k * N + n) * rect.height + row) * bytes_per_row + byte], bytes_per_row = ceil(rect.width / 8).
+  // The tile's bytes land at byte column (rect.x0 - origin_x) / 8, so that must be a multiple of 8, and
+  // only the tile at the right edge of the stack may have a width that is not a multiple of 8.
+  void write_frames(const PixelRect& rect, int origin_x, int origin_y, const void* data);
+  // fsync, rename onto path(). Writes after commit() throw.
   void commit();
   const std::string& path() const;
+  Dtype dtype() const;
+  const std::vector<int64_t>& shape() const;
+  // Bytes before the first element (a multiple of 64) and the total file size.
+  int64_t header_bytes() const;
+  int64_t file_bytes() const;
+  static int64_t element_bytes(Dtype dtype);
+  // The complete header ("\x93NUMPY", version 1.0, length, dict, padding) for a C-order array.
+  static std::string header(Dtype dtype, const std::vector<int64_t>& shape);
 
  private:
   struct Impl;
@@ -54,7 +71,9 @@ class ExrImage {
   std::map<std::string, std::string> attributes_;
 };
 
-// Reads every float channel of an EXR (for tests and for user-supplied maps).
+// Reads every channel of an EXR as float (HALF and UINT are converted) and its string attributes (for
+// tests and for user-supplied maps). A data window that does not start at (0, 0) is read as if it did.
+// Throws spadgen::Error naming the file.
 struct ExrData {
   int width = 0, height = 0;
   std::map<std::string, std::vector<float>> channels;
@@ -63,6 +82,7 @@ struct ExrData {
 ExrData read_exr(const std::string& path);
 
 // 8-bit PNG (gray, RGB or RGBA), written atomically.
+// `pixels` is row-major, top row first, `channels` bytes per pixel (1 gray, 3 RGB, 4 RGBA).
 void write_png(const std::string& path, int width, int height, int channels, const std::vector<uint8_t>& pixels);
 // JSON, pretty-printed, written atomically.
 void write_json(const std::string& path, const nlohmann::json& value);

@@ -1,0 +1,326 @@
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <thread>
+
+#include "core/error.h"
+#include "core/tile.h"
+#include "test_util.h"
+#include "writers/writers.h"
+
+namespace spadgen::writers {
+namespace {
+
+using test::read_bytes;
+using test::TempDir;
+using Dtype = NpyWriter::Dtype;
+
+struct ParsedHeader {
+  int major = 0, minor = 0;
+  size_t data_offset = 0;
+  std::string dict;
+};
+
+// Parses the fixed part of an .npy header the way NumPy's format.read_magic / read_array_header_1_0 do.
+ParsedHeader parse(const std::string& bytes) {
+  ParsedHeader h;
+  EXPECT_GE(bytes.size(), 10u);
+  EXPECT_EQ(bytes.substr(0, 6), std::string("\x93NUMPY"));
+  h.major = static_cast<unsigned char>(bytes[6]);
+  h.minor = static_cast<unsigned char>(bytes[7]);
+  const size_t len = static_cast<unsigned char>(bytes[8]) | (size_t(static_cast<unsigned char>(bytes[9])) << 8);
+  h.data_offset = 10 + len;
+  h.dict = bytes.substr(10, len);
+  return h;
+}
+
+void expect_header(Dtype dtype, const std::vector<int64_t>& shape, const std::string& descr,
+                   const std::string& shape_text) {
+  const std::string bytes = NpyWriter::header(dtype, shape);
+  const ParsedHeader h = parse(bytes);
+  EXPECT_EQ(h.major, 1);
+  EXPECT_EQ(h.minor, 0);
+  EXPECT_EQ(h.data_offset, bytes.size());
+  EXPECT_EQ(bytes.size() % 64, 0u);
+  const std::string dict = "{'descr': '" + descr + "', 'fortran_order': False, 'shape': " + shape_text + ", }";
+  ASSERT_GE(h.dict.size(), dict.size() + 1);
+  EXPECT_EQ(h.dict.substr(0, dict.size()), dict);
+  EXPECT_EQ(h.dict.back(), '\n');
+  // Padding is spaces only, and no more than needed to reach the next multiple of 64.
+  const std::string pad = h.dict.substr(dict.size(), h.dict.size() - dict.size() - 1);
+  EXPECT_EQ(pad.find_first_not_of(' '), std::string::npos);
+  EXPECT_LT(pad.size(), 64u);
+}
+
+TEST(NpyHeader, MatchesTheFormatSpecification) {
+  expect_header(Dtype::F32, {2, 3, 4}, "<f4", "(2, 3, 4)");
+  expect_header(Dtype::U8, {7}, "|u1", "(7,)");
+  expect_header(Dtype::U16, {}, "<u2", "()");
+  expect_header(Dtype::U16, {0, 5}, "<u2", "(0, 5)");
+  expect_header(Dtype::U8, {4080, 255, 1000, 128}, "|u1", "(4080, 255, 1000, 128)");
+  expect_header(Dtype::F32, {int64_t(1) << 40, 3}, "<f4", "(1099511627776, 3)");
+}
+
+TEST(NpyWriter, ValuesRoundTripAndFileHasExactSize) {
+  TempDir dir;
+  const std::string path = dir.file("a.npy");
+  std::vector<float> v(24);
+  for (size_t i = 0; i < v.size(); ++i) v[i] = 0.5f * float(i) - 3.0f;
+  {
+    NpyWriter w(path, Dtype::F32, {2, 3, 4});
+    w.write(0, v.data(), 10);
+    w.write(10, v.data() + 10, 14);
+    EXPECT_EQ(w.file_bytes(), w.header_bytes() + 96);
+    w.commit();
+  }
+  const std::string bytes = read_bytes(path);
+  const ParsedHeader h = parse(bytes);
+  ASSERT_EQ(bytes.size(), h.data_offset + 96);
+  std::vector<float> back(24);
+  std::memcpy(back.data(), bytes.data() + h.data_offset, 96);
+  EXPECT_EQ(back, v);
+}
+
+TEST(NpyWriter, ZeroSizedDimensions) {
+  TempDir dir;
+  {
+    NpyWriter w(dir.file("z.npy"), Dtype::U16, {0, 4, 5});
+    w.write(0, nullptr, 0);
+    w.write_khw(PixelRect{0, 0, 5, 4}, 0, 0, nullptr);
+    w.commit();
+  }
+  const std::string bytes = read_bytes(dir.file("z.npy"));
+  EXPECT_EQ(bytes.size(), parse(bytes).data_offset);
+  EXPECT_NE(bytes.find("'shape': (0, 4, 5)"), std::string::npos);
+}
+
+TEST(NpyWriter, RejectsWritesOutsideTheArrayAndAfterCommit) {
+  TempDir dir;
+  NpyWriter w(dir.file("e.npy"), Dtype::U8, {2, 4, 8});
+  const std::vector<uint8_t> buf(64, 1);
+  EXPECT_THROW(w.write(60, buf.data(), 5), Error);
+  EXPECT_THROW(w.write(-1, buf.data(), 1), Error);
+  EXPECT_THROW(w.write_khw(PixelRect{4, 0, 8, 4}, 0, 0, buf.data()), Error);  // sticks out on the right
+  // As (H, W, T) = (2, 4, 8): the tile's data must cover the pixels written.
+  EXPECT_THROW(w.write_hwt(PixelRect{0, 0, 2, 1}, PixelRect{0, 0, 1, 1}, 0, 0, buf.data()), Error);
+  EXPECT_NO_THROW(w.write_hwt(PixelRect{1, 1, 1, 1}, PixelRect{0, 0, 2, 2}, 0, 0, buf.data()));
+  NpyWriter four(dir.file("f.npy"), Dtype::U8, {1, 1, 2, 2});
+  EXPECT_THROW(four.write_khw(PixelRect{0, 0, 1, 1}, 0, 0, buf.data()), Error);
+  w.commit();
+  EXPECT_THROW(w.write(0, buf.data(), 1), Error);
+  EXPECT_THROW(w.commit(), Error);
+}
+
+float khw_value(int64_t k, int x, int y) { return float(k * 100000 + y * 1000 + x); }
+
+// Tiles placed by write_khw must land at (k * H + y) * W + x, computed here independently.
+TEST(NpyWriter, WriteKhwPlacesTilesAtTheirPixels) {
+  TempDir dir;
+  const int W = 37, H = 21, K = 3;
+  // The stack covers a window of a larger image starting at (5, 2).
+  const int ox = 5, oy = 2;
+  {
+    NpyWriter w(dir.file("khw.npy"), Dtype::F32, {K, H, W});
+    for (PixelRect t : make_tiles(W, H, 8)) {
+      t.x0 += ox;
+      t.y0 += oy;
+      std::vector<float> data(size_t(K * t.count()));
+      for (int k = 0; k < K; ++k)
+        for (int y = t.y0; y < t.y1(); ++y)
+          for (int x = t.x0; x < t.x1(); ++x) data[size_t(k * t.count() + t.index(x, y))] = khw_value(k, x - ox, y - oy);
+      w.write_khw(t, ox, oy, data.data());
+    }
+    w.commit();
+  }
+  const std::string bytes = read_bytes(dir.file("khw.npy"));
+  const size_t off = parse(bytes).data_offset;
+  ASSERT_EQ(bytes.size(), off + size_t(K * H * W) * 4);
+  for (int k = 0; k < K; ++k)
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) {
+        float v;
+        std::memcpy(&v, bytes.data() + off + 4 * ((size_t(k) * H + y) * W + x), 4);
+        ASSERT_EQ(v, khw_value(k, x, y)) << k << " " << x << " " << y;
+      }
+}
+
+TEST(NpyWriter, WriteHwtSkipsTheHaloAndKeepsTimeInnermost) {
+  TempDir dir;
+  const int W = 20, H = 10, T = 5;
+  {
+    NpyWriter w(dir.file("t.npy"), Dtype::F32, {H, W, T});
+    for (const PixelRect& r : make_tiles(W, H, 8)) {
+      const PixelRect data_rect = grow_clipped(r, 1, W, H);
+      std::vector<float> data(size_t(data_rect.count() * T));
+      for (int y = data_rect.y0; y < data_rect.y1(); ++y)
+        for (int x = data_rect.x0; x < data_rect.x1(); ++x)
+          for (int t = 0; t < T; ++t)
+            // Halo pixels carry a marker that must never reach the file.
+            data[size_t(data_rect.index(x, y) * T + t)] = r.contains(x, y) ? float(y * 1000 + x * 10 + t) : -1.0f;
+      w.write_hwt(r, data_rect, 0, 0, data.data());
+    }
+    w.commit();
+  }
+  const std::string bytes = read_bytes(dir.file("t.npy"));
+  const size_t off = parse(bytes).data_offset;
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x)
+      for (int t = 0; t < T; ++t) {
+        float v;
+        std::memcpy(&v, bytes.data() + off + 4 * ((size_t(y) * W + x) * T + t), 4);
+        ASSERT_EQ(v, float(y * 1000 + x * 10 + t));
+      }
+}
+
+bool frame_bit(int k, int n, int y, int x) { return ((k * 7919 + n * 104729 + y * 31 + x * 17) % 5) < 2; }
+
+TEST(NpyWriter, WriteFramesPacksBitsLeastSignificantFirst) {
+  TempDir dir;
+  const int W = 21, H = 9, K = 2, N = 3, WB = (W + 7) / 8;
+  {
+    NpyWriter w(dir.file("frames.npy"), Dtype::U8, {K, N, H, WB});
+    for (const PixelRect& r : make_tiles(W, H, 8)) {
+      const int bpr = (r.width + 7) / 8;
+      std::vector<uint8_t> data(size_t(K * N * r.height * bpr), 0);
+      for (int k = 0; k < K; ++k)
+        for (int n = 0; n < N; ++n)
+          for (int row = 0; row < r.height; ++row)
+            for (int i = 0; i < r.width; ++i)
+              if (frame_bit(k, n, r.y0 + row, r.x0 + i))
+                data[size_t(((k * N + n) * r.height + row) * bpr + i / 8)] |= uint8_t(1u << (i % 8));
+      w.write_frames(r, 0, 0, data.data());
+    }
+    w.commit();
+  }
+  const std::string bytes = read_bytes(dir.file("frames.npy"));
+  const size_t off = parse(bytes).data_offset;
+  ASSERT_EQ(bytes.size(), off + size_t(K * N * H * WB));
+  for (int k = 0; k < K; ++k)
+    for (int n = 0; n < N; ++n)
+      for (int y = 0; y < H; ++y)
+        for (int x = 0; x < WB * 8; ++x) {
+          const auto byte = static_cast<unsigned char>(bytes[off + ((size_t(k) * N + n) * H + y) * WB + x / 8]);
+          const bool bit = (byte >> (x % 8)) & 1u;
+          ASSERT_EQ(bit, x < W && frame_bit(k, n, y, x)) << k << " " << n << " " << y << " " << x;
+        }
+}
+
+TEST(NpyWriter, WriteFramesRejectsMisalignedTiles) {
+  TempDir dir;
+  NpyWriter w(dir.file("frames.npy"), Dtype::U8, {1, 1, 4, 3});
+  const std::vector<uint8_t> buf(64, 0);
+  EXPECT_THROW(w.write_frames(PixelRect{4, 0, 8, 4}, 0, 0, buf.data()), Error);  // x not a multiple of 8
+  EXPECT_THROW(w.write_frames(PixelRect{0, 0, 5, 4}, 0, 0, buf.data()), Error);  // partial byte mid-row
+  EXPECT_NO_THROW(w.write_frames(PixelRect{16, 0, 5, 4}, 0, 0, buf.data()));    // partial byte at the edge
+}
+
+// pwrite from several threads at once must give exactly the bytes of a serial write.
+TEST(NpyWriter, ConcurrentTilesEqualSerialWrite) {
+  TempDir dir;
+  const int W = 203, H = 77, K = 4;
+  const auto tiles = make_tiles(W, H, 16);
+  std::vector<std::vector<uint16_t>> data(tiles.size());
+  std::mt19937 rng(42);
+  for (size_t i = 0; i < tiles.size(); ++i) {
+    data[i].resize(size_t(K * tiles[i].count()));
+    for (auto& v : data[i]) v = uint16_t(rng());
+  }
+  {
+    NpyWriter serial(dir.file("serial.npy"), Dtype::U16, {K, H, W});
+    for (size_t i = 0; i < tiles.size(); ++i) serial.write_khw(tiles[i], 0, 0, data[i].data());
+    serial.commit();
+  }
+  {
+    NpyWriter par(dir.file("parallel.npy"), Dtype::U16, {K, H, W});
+    std::vector<std::thread> threads;
+    const size_t n_threads = 4;
+    for (size_t t = 0; t < n_threads; ++t)
+      threads.emplace_back([&, t] {
+        // Each thread walks its share backwards so neighbouring tiles are in flight together.
+        for (size_t i = tiles.size(); i-- > 0;)
+          if (i % n_threads == t) par.write_khw(tiles[i], 0, 0, data[i].data());
+      });
+    for (auto& th : threads) th.join();
+    par.commit();
+  }
+  EXPECT_EQ(read_bytes(dir.file("serial.npy")), read_bytes(dir.file("parallel.npy")));
+}
+
+// Offsets beyond 4 GiB must not wrap: the file is sparse, so this costs no disk.
+TEST(NpyWriter, LargerThanFourGiB) {
+  TempDir dir;
+  const int64_t n = (int64_t(5) << 30) + 3;
+  const std::string path = dir.file("big.npy");
+  int64_t header = 0;
+  {
+    NpyWriter w(path, Dtype::U8, {n});
+    header = w.header_bytes();
+    const uint8_t a = 0xab, b = 0xcd;
+    w.write(int64_t(9) << 29, &a, 1);  // 4.5 GiB
+    w.write(n - 1, &b, 1);
+    w.commit();
+  }
+  EXPECT_EQ(std::filesystem::file_size(path), uint64_t(header + n));
+  const int fd = ::open(path.c_str(), O_RDONLY);
+  ASSERT_GE(fd, 0);
+  uint8_t a = 0, b = 0, z = 1;
+  EXPECT_EQ(::pread(fd, &a, 1, off_t(header + (int64_t(9) << 29))), 1);
+  EXPECT_EQ(::pread(fd, &b, 1, off_t(header + n - 1)), 1);
+  EXPECT_EQ(::pread(fd, &z, 1, off_t(header + (int64_t(1) << 32))), 1);
+  ::close(fd);
+  EXPECT_EQ(a, 0xab);
+  EXPECT_EQ(b, 0xcd);
+  EXPECT_EQ(z, 0);
+}
+
+bool have_numpy() { return std::system("python3 -c 'import numpy' >/dev/null 2>&1") == 0; }
+
+TEST(NpyWriter, NumpyLoadsItWithMmap) {
+  if (!have_numpy()) GTEST_SKIP() << "python3 with numpy is not available";
+  TempDir dir;
+  {
+    NpyWriter f(dir.file("f.npy"), Dtype::F32, {2, 3, 4});
+    std::vector<float> v(24);
+    for (size_t i = 0; i < v.size(); ++i) v[i] = float(i) * 0.25f;
+    f.write(0, v.data(), 24);
+    f.commit();
+    NpyWriter u(dir.file("u.npy"), Dtype::U16, {3, 2});
+    const uint16_t uv[6] = {0, 1, 255, 256, 4080, 65535};
+    u.write(0, uv, 6);
+    u.commit();
+    NpyWriter b(dir.file("b.npy"), Dtype::U8, {1, 2, 3, 1});
+    const uint8_t bv[6] = {0b00000101, 0, 0, 0, 0, 0x80};
+    b.write(0, bv, 6);
+    b.commit();
+    NpyWriter e(dir.file("e.npy"), Dtype::F32, {0, 7});
+    e.commit();
+  }
+  const std::string script = dir.file("check.py");
+  std::ofstream(script) << R"(import sys, numpy as np
+d = sys.argv[1]
+f = np.load(d + '/f.npy', mmap_mode='r')
+assert f.shape == (2, 3, 4) and f.dtype == np.float32, (f.shape, f.dtype)
+assert f[1, 2, 3] == 23 * 0.25 and f[0, 1, 0] == 1.0
+u = np.load(d + '/u.npy', mmap_mode='r')
+assert u.shape == (3, 2) and u.dtype == np.uint16 and u[2, 0] == 4080 and u[2, 1] == 65535
+b = np.load(d + '/b.npy', mmap_mode='r')
+assert b.shape == (1, 2, 3, 1) and b.dtype == np.uint8
+bits = np.unpackbits(b, axis=-1, bitorder='little')
+assert list(bits[0, 0, 0, :3]) == [1, 0, 1] and bits[0, 1, 2, 7] == 1
+e = np.load(d + '/e.npy')
+assert e.shape == (0, 7)
+print('ok')
+)";
+  const std::string cmd = "python3 " + script + " " + dir.path().string();
+  EXPECT_EQ(std::system(cmd.c_str()), 0);
+}
+
+}  // namespace
+}  // namespace spadgen::writers

@@ -1,0 +1,130 @@
+#include "writers/atomic_file.h"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cerrno>
+#include <cstring>
+
+#include "core/error.h"
+#include "writers/writers.h"
+
+namespace spadgen::writers {
+namespace detail {
+namespace {
+
+std::atomic<uint64_t> g_temp_counter{0};
+
+struct PathParts {
+  std::string folder, name;
+};
+
+// Splits "dir/name" into ("dir", "name"); a bare name lives in ".".
+PathParts split_path(const std::string& path) {
+  const auto slash = path.find_last_of('/');
+  if (slash == std::string::npos) return {std::string("."), path};
+  return {slash == 0 ? std::string("/") : path.substr(0, slash), path.substr(slash + 1)};
+}
+
+// The rename is only durable once the folder entry is on disk too. Some file systems refuse fsync on
+// a folder (EINVAL); the file itself is already safe then, so that is not an error.
+void fsync_folder(const std::string& folder) {
+  const int dfd = ::open(folder.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (dfd < 0) return;
+  (void)::fsync(dfd);
+  ::close(dfd);
+}
+
+}  // namespace
+
+void throw_errno(const std::string& what, const std::string& path, int err) {
+  throw Error(what + " '" + path + "': " + std::strerror(err));
+}
+
+void pwrite_all(int fd, const void* data, uint64_t size, uint64_t offset, const std::string& path) {
+  const char* p = static_cast<const char*>(data);
+  // Linux moves at most about 2 GiB per call; larger blocks need several.
+  constexpr uint64_t kMaxChunk = uint64_t(1) << 30;
+  while (size > 0) {
+    const size_t chunk = static_cast<size_t>(std::min(size, kMaxChunk));
+    const ssize_t n = ::pwrite(fd, p, chunk, static_cast<off_t>(offset));
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      throw_errno("cannot write", path, errno);
+    }
+    if (n == 0) throw_errno("cannot write", path, EIO);
+    p += n;
+    size -= static_cast<uint64_t>(n);
+    offset += static_cast<uint64_t>(n);
+  }
+}
+
+TempFile::TempFile(const std::string& destination) : destination_(destination) {
+  const std::string name = split_path(destination).name;
+  if (name.empty() || name == "." || name == "..") throw Error("cannot write '" + destination + "': not a file name");
+  // Refuse early: otherwise the whole file would be written and only the final rename would fail.
+  struct stat st{};
+  if (::stat(destination.c_str(), &st) == 0 && S_ISDIR(st.st_mode)) throw_errno("cannot write", destination, EISDIR);
+
+  // The temporary lives in the destination's folder so that rename() is atomic (same file system).
+  const auto slash = destination.find_last_of('/');
+  const std::string prefix = slash == std::string::npos ? std::string() : destination.substr(0, slash + 1);
+  for (int attempt = 0; attempt < 100; ++attempt) {
+    temp_path_ = prefix + "." + name + ".tmp-" + std::to_string(::getpid()) + "-" +
+                 std::to_string(g_temp_counter.fetch_add(1));
+    fd_ = ::open(temp_path_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+    if (fd_ >= 0) return;
+    // EEXIST: a stale temporary of an earlier process with our pid; take the next number.
+    if (errno != EEXIST) throw_errno("cannot create a temporary file for", destination, errno);
+  }
+  throw_errno("cannot create a temporary file for", destination, EEXIST);
+}
+
+TempFile::~TempFile() { discard(); }
+
+void TempFile::discard() noexcept {
+  if (fd_ >= 0) {
+    ::close(fd_);
+    fd_ = -1;
+  }
+  if (!committed_ && !temp_path_.empty()) {
+    ::unlink(temp_path_.c_str());
+    temp_path_.clear();
+  }
+}
+
+void TempFile::commit() {
+  if (committed_) throw Error("'" + destination_ + "' was already committed");
+  if (fd_ < 0) throw Error("cannot commit '" + destination_ + "': the temporary file was discarded");
+  if (::fsync(fd_) != 0) {
+    const int err = errno;
+    discard();
+    throw_errno("cannot flush", destination_, err);
+  }
+  const int fd = fd_;
+  fd_ = -1;
+  if (::close(fd) != 0) {
+    const int err = errno;
+    discard();
+    throw_errno("cannot close", destination_, err);
+  }
+  if (::rename(temp_path_.c_str(), destination_.c_str()) != 0) {
+    const int err = errno;
+    discard();
+    throw_errno("cannot rename the temporary file onto", destination_, err);
+  }
+  committed_ = true;
+  fsync_folder(split_path(destination_).folder);
+}
+
+}  // namespace detail
+
+void write_file_atomic(const std::string& path, const std::string& bytes) {
+  detail::TempFile file(path);
+  detail::pwrite_all(file.fd(), bytes.data(), bytes.size(), 0, path);
+  file.commit();
+}
+
+}  // namespace spadgen::writers

@@ -1,1 +1,0 @@
-// Placeholder until this file is written; see the header beside it.
