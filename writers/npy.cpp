@@ -4,6 +4,7 @@
 // 65535 bytes, far beyond any shape we write.
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <limits>
 
@@ -193,10 +194,21 @@ void NpyWriter::write_frames(const PixelRect& rect, int origin_x, int origin_y, 
     throw Error("write_frames to '" + impl_->path + "': a tile of width " + std::to_string(rect.width) +
                 " (not a multiple of 8) must end at the right edge of the stack");
   const auto* src = static_cast<const uint8_t*>(data);
+  // Bits past the image's right edge are cleared whatever the tile holds there, so that summing
+  // unpacked frames never counts pixels that do not exist.
+  const int tail_bits = rect.width % 8;
+  const auto tail_mask = static_cast<uint8_t>((1u << tail_bits) - 1u);
+  std::vector<uint8_t> row_buf(tail_bits ? size_t(bpr) : 0);
   for (int64_t kn = 0; kn < K * N; ++kn)
     for (int64_t row = 0; row < rect.height; ++row) {
       const int64_t dst = (kn * H + (rect.y0 - origin_y) + row) * WB + first_byte;
-      write(dst, src + (kn * rect.height + row) * bpr, bpr);
+      const uint8_t* from = src + (kn * rect.height + row) * bpr;
+      if (tail_bits) {
+        std::copy(from, from + bpr, row_buf.begin());
+        row_buf.back() &= tail_mask;
+        from = row_buf.data();
+      }
+      write(dst, from, bpr);
     }
 }
 

@@ -35,7 +35,8 @@ class NpyWriter {
   // For a (K, N, H, ceil(W / 8)) uint8 stack of bit-packed frames: writes a SensorTile's frames
   // [((k * N + n) * rect.height + row) * bytes_per_row + byte], bytes_per_row = ceil(rect.width / 8).
   // The tile's bytes land at byte column (rect.x0 - origin_x) / 8, so that must be a multiple of 8, and
-  // only the tile at the right edge of the stack may have a width that is not a multiple of 8.
+  // only the tile at the right edge of the stack may have a width that is not a multiple of 8 (the
+  // bits of its last byte beyond rect.width are written as 0).
   void write_frames(const PixelRect& rect, int origin_x, int origin_y, const void* data);
   // fsync, rename onto path(). Writes after commit() throw.
   void commit();

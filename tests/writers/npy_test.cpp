@@ -221,6 +221,22 @@ TEST(NpyWriter, WriteFramesRejectsMisalignedTiles) {
   EXPECT_NO_THROW(w.write_frames(PixelRect{16, 0, 5, 4}, 0, 0, buf.data()));    // partial byte at the edge
 }
 
+TEST(NpyWriter, WriteFramesClearsBitsBeyondTheRightEdge) {
+  TempDir dir;
+  {
+    NpyWriter w(dir.file("frames.npy"), Dtype::U8, {1, 2, 3, 2});  // W = 13: 3 padding bits per row
+    const std::vector<uint8_t> ones(size_t(2 * 3 * 1), 0xff);
+    w.write_frames(PixelRect{8, 0, 5, 3}, 0, 0, ones.data());
+    w.commit();
+  }
+  const std::string bytes = read_bytes(dir.file("frames.npy"));
+  const size_t off = parse(bytes).data_offset;
+  for (size_t r = 0; r < 6; ++r) {
+    EXPECT_EQ(static_cast<unsigned char>(bytes[off + 2 * r]), 0u);  // untouched left tile
+    EXPECT_EQ(static_cast<unsigned char>(bytes[off + 2 * r + 1]), 0x1fu);
+  }
+}
+
 // pwrite from several threads at once must give exactly the bytes of a serial write.
 TEST(NpyWriter, ConcurrentTilesEqualSerialWrite) {
   TempDir dir;
@@ -280,10 +296,19 @@ TEST(NpyWriter, LargerThanFourGiB) {
   EXPECT_EQ(z, 0);
 }
 
-bool have_numpy() { return std::system("python3 -c 'import numpy' >/dev/null 2>&1") == 0; }
+// The first interpreter that can import numpy: PATH's python3 may be a pyenv or venv without it while
+// the system one (python3-numpy) has it. Empty if none.
+std::string python_with_numpy() {
+  for (const char* py : {"python3", "/usr/bin/python3"}) {
+    const std::string cmd = std::string(py) + " -c 'import numpy' >/dev/null 2>&1";
+    if (std::system(cmd.c_str()) == 0) return py;
+  }
+  return {};
+}
 
 TEST(NpyWriter, NumpyLoadsItWithMmap) {
-  if (!have_numpy()) GTEST_SKIP() << "python3 with numpy is not available";
+  const std::string python = python_with_numpy();
+  if (python.empty()) GTEST_SKIP() << "python3 with numpy is not available";
   TempDir dir;
   {
     NpyWriter f(dir.file("f.npy"), Dtype::F32, {2, 3, 4});
@@ -316,9 +341,18 @@ bits = np.unpackbits(b, axis=-1, bitorder='little')
 assert list(bits[0, 0, 0, :3]) == [1, 0, 1] and bits[0, 1, 2, 7] == 1
 e = np.load(d + '/e.npy')
 assert e.shape == (0, 7)
+# Byte-identical header to what NumPy itself writes for the same array.
+import io
+for name, arr in (('f', np.zeros((2, 3, 4), np.float32)), ('u', np.zeros((3, 2), np.uint16)),
+                  ('b', np.zeros((1, 2, 3, 1), np.uint8)), ('e', np.zeros((0, 7), np.float32))):
+    buf = io.BytesIO()
+    np.save(buf, arr)
+    ref = buf.getvalue()[:len(buf.getvalue()) - arr.nbytes]
+    ours = open(d + '/' + name + '.npy', 'rb').read()[:len(ref)]
+    assert ours == ref, (name, ours, ref)
 print('ok')
 )";
-  const std::string cmd = "python3 " + script + " " + dir.path().string();
+  const std::string cmd = python + " " + script + " " + dir.path().string();
   EXPECT_EQ(std::system(cmd.c_str()), 0);
 }
 
