@@ -11,56 +11,12 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "run_util.h"
 #include "writers/writers.h"
 
 namespace {
-namespace fs = std::filesystem;
+using namespace spadgen::testing;
 using ::testing::HasSubstr;
-
-const std::string kBin = std::string(SPADGEN_BINARY_DIR) + "/app/spadgen";
-const std::string kScenes = std::string(SPADGEN_SOURCE_DIR) + "/scenes/paper/";
-
-struct Result {
-  int code;
-  std::string output;  // stdout and stderr
-};
-Result sh(const std::string& args) {
-  const std::string cmd = kBin + " " + args + " 2>&1";
-  FILE* p = popen(cmd.c_str(), "r");
-  std::string out;
-  std::array<char, 4096> buf{};
-  while (size_t n = fread(buf.data(), 1, buf.size(), p)) out.append(buf.data(), n);
-  const int status = pclose(p);
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
-}
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
-// A small NPY reader, independent of the writer: header dict and raw data.
-struct Npy {
-  std::string descr;
-  std::vector<int64_t> shape;
-  std::string data;
-};
-Npy read_npy(const fs::path& p) {
-  const std::string b = slurp(p);
-  EXPECT_EQ(b.substr(0, 6), "\x93NUMPY");
-  const size_t hlen = size_t(uint8_t(b[8])) | (size_t(uint8_t(b[9])) << 8);
-  const std::string h = b.substr(10, hlen);
-  Npy n;
-  const size_t d = h.find("'descr': '") + 10;
-  n.descr = h.substr(d, h.find('\'', d) - d);
-  std::string s = h.substr(h.find('(') + 1, h.find(')') - h.find('(') - 1);
-  std::stringstream ss(s);
-  for (std::string tok; std::getline(ss, tok, ',');)
-    if (tok.find_first_not_of(' ') != std::string::npos) n.shape.push_back(std::stoll(tok));
-  n.data = b.substr(10 + hlen);
-  return n;
-}
 
 class App : public ::testing::Test {
  protected:
