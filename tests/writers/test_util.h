@@ -2,6 +2,7 @@
 #pragma once
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -13,8 +14,10 @@ class TempDir {
  public:
   TempDir() {
     const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    path_ = std::filesystem::path(SPADGEN_BINARY_DIR) / "test_writers_tmp" /
-            (std::string(info->test_suite_name()) + "." + info->name());
+    // Parameterised tests have '/' in their names; keep one flat folder per test.
+    std::string name = std::string(info->test_suite_name()) + "." + info->name();
+    std::replace(name.begin(), name.end(), '/', '_');
+    path_ = std::filesystem::path(SPADGEN_BINARY_DIR) / "test_writers_tmp" / name;
     std::filesystem::remove_all(path_);
     std::filesystem::create_directories(path_);
   }
