@@ -19,7 +19,7 @@ namespace {
 using namespace spadgen::testing;
 constexpr double kC = 299792458.0;
 
-struct Run {
+struct SceneRun {
   nlohmann::json meta;
   std::vector<double> counts, expected;  // [k][y][x]
   int64_t K = 0, H = 0, W = 0;
@@ -30,10 +30,10 @@ struct Run {
   size_t pixel(int64_t x, int64_t y) const { return size_t(y * W + x); }
 };
 
-Run run_scene(const std::string& args, const fs::path& out) {
+SceneRun run_scene(const std::string& args, const fs::path& out) {
   const Result r = sh("run " + args + " -q -o " + out.string());
   EXPECT_EQ(r.code, 0) << r.output;
-  Run run;
+  SceneRun run;
   run.meta = nlohmann::json::parse(slurp(out / "metadata.json"));
   const Npy c = read_npy(out / "counts.npy"), e = read_npy(out / "expected_counts.npy");
   run.K = c.shape[0], run.H = c.shape[1], run.W = c.shape[2];
@@ -71,11 +71,11 @@ double half_rise_index(const std::vector<double>& p) {
 
 // The time a rising edge at fractional gate index k means: the gate closes (its end reaches the
 // return) at tau + gate delay + the pixel's skew + the pixel's length.
-double edge_time_ns(const Run& r, double k, size_t px) {
+double edge_time_ns(const SceneRun& r, double k, size_t px) {
   return r.start_ns + k * r.step_ns + r.gate_delay_ns + r.maps.channels.at("gate_skew_ps")[px] / 1000.0 +
          r.maps.channels.at("gate_length_ps")[px] / 1000.0;
 }
-double edge_index_for_range(const Run& r, double range_m, size_t px) {
+double edge_index_for_range(const SceneRun& r, double range_m, size_t px) {
   const double t = r.emission_delay_ns + 2.0 * range_m / kC * 1e9;
   return (t - r.gate_delay_ns - r.maps.channels.at("gate_skew_ps")[px] / 1000.0 -
           r.maps.channels.at("gate_length_ps")[px] / 1000.0 - r.start_ns) / r.step_ns;
@@ -96,7 +96,7 @@ class FlatTarget : public Paper, public ::testing::WithParamInterface<double> {}
 TEST_P(FlatTarget, RisingEdgeDepthMeetsThePapersAccuracyAndPrecision) {
   const double d = GetParam();
   // The central 20 x 20 pixels of the pixel-A half.
-  const Run r = run_scene(kScenes + "flat_target.json --set camera.position_m=[0,0," + std::to_string(d) +
+  const SceneRun r = run_scene(kScenes + "flat_target.json --set camera.position_m=[0,0," + std::to_string(d) +
                               "] --set camera.crop=[502,240,20,20] --set render.samples_per_pixel=4",
                           dir_);
   std::vector<double> err_expected, err_sampled;
@@ -130,7 +130,7 @@ INSTANTIATE_TEST_SUITE_P(PaperDistances, FlatTarget, ::testing::Values(0.2, 0.8,
 
 TEST_F(Paper, MultiObjectProfilesRiseAtThePlateAndAtTheSphere) {
   // A band across the image centre: left of column 512 the plate covers the sphere.
-  const Run r = run_scene(kScenes + "multi_object.json --set camera.crop=[448,242,128,16] --set render.samples_per_pixel=8 "
+  const SceneRun r = run_scene(kScenes + "multi_object.json --set camera.crop=[448,242,128,16] --set render.samples_per_pixel=8 "
                                     "--set acquisition.gate_sweep.stop_ns=9",
                           dir_);
   const auto& layers = r.gt.channels.at("layer_count");
