@@ -1,1 +1,1005 @@
-// Placeholder until this file is written; see the header beside it.
+// glTF 2.0 -> Scene. tinygltf parses the JSON, buffers and images; everything it leaves unchecked
+// (accessor and buffer-view bounds, index ranges, node cycles, camera and light parameters) is
+// validated here before a byte is read, so a broken file ends in a spadgen::Error naming the file and
+// the glTF element, never in a crash or a silently wrong scene.
+#include <nlohmann/json.hpp>
+#include <tiny_gltf.h>
+
+#include <glm/gtc/matrix_transform.hpp>
+#include <glm/gtc/quaternion.hpp>
+#include <glm/gtc/type_ptr.hpp>
+
+#include <algorithm>
+#include <array>
+#include <cctype>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <map>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "core/error.h"
+#include "scenes/scene.h"
+
+namespace spadgen::scenes {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// Extensions whose content spadgen reads. Any other extension is reported once as unused, and is an
+// error when the file lists it in extensionsRequired.
+const std::set<std::string> kSupportedExtensions = {
+    "KHR_materials_transmission", "KHR_materials_ior",      "KHR_materials_volume",
+    "KHR_materials_emissive_strength", "KHR_lights_punctual", "KHR_mesh_quantization",
+};
+
+std::string quoted(const std::string& s) { return "'" + s + "'"; }
+
+// "mesh 2 'Cube'": the index always (names need not be unique), the name when there is one.
+std::string label(const char* kind, size_t index, const std::string& name) {
+  std::string s = std::string(kind) + " " + std::to_string(index);
+  if (!name.empty()) s += " " + quoted(name);
+  return s;
+}
+
+const char* mode_name(int mode) {
+  switch (mode) {
+    case TINYGLTF_MODE_POINTS: return "POINTS";
+    case TINYGLTF_MODE_LINE: return "LINES";
+    case TINYGLTF_MODE_LINE_LOOP: return "LINE_LOOP";
+    case TINYGLTF_MODE_LINE_STRIP: return "LINE_STRIP";
+    case TINYGLTF_MODE_TRIANGLES: return "TRIANGLES";
+    case TINYGLTF_MODE_TRIANGLE_STRIP: return "TRIANGLE_STRIP";
+    case TINYGLTF_MODE_TRIANGLE_FAN: return "TRIANGLE_FAN";
+    default: return "unknown";
+  }
+}
+
+size_t component_size(int component_type) {
+  switch (component_type) {
+    case TINYGLTF_COMPONENT_TYPE_BYTE:
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: return 1;
+    case TINYGLTF_COMPONENT_TYPE_SHORT:
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: return 2;
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT:
+    case TINYGLTF_COMPONENT_TYPE_FLOAT: return 4;
+    default: return 0;  // not a glTF 2.0 accessor component type
+  }
+}
+
+const char* component_name(int component_type) {
+  switch (component_type) {
+    case TINYGLTF_COMPONENT_TYPE_BYTE: return "BYTE";
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: return "UNSIGNED_BYTE";
+    case TINYGLTF_COMPONENT_TYPE_SHORT: return "SHORT";
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: return "UNSIGNED_SHORT";
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: return "UNSIGNED_INT";
+    case TINYGLTF_COMPONENT_TYPE_FLOAT: return "FLOAT";
+    default: return "invalid";
+  }
+}
+
+int type_components(int type) {
+  switch (type) {
+    case TINYGLTF_TYPE_SCALAR: return 1;
+    case TINYGLTF_TYPE_VEC2: return 2;
+    case TINYGLTF_TYPE_VEC3: return 3;
+    case TINYGLTF_TYPE_VEC4: return 4;
+    case TINYGLTF_TYPE_MAT2: return 4;
+    case TINYGLTF_TYPE_MAT3: return 9;
+    case TINYGLTF_TYPE_MAT4: return 16;
+    default: return 0;
+  }
+}
+
+const char* type_name(int type) {
+  switch (type) {
+    case TINYGLTF_TYPE_SCALAR: return "SCALAR";
+    case TINYGLTF_TYPE_VEC2: return "VEC2";
+    case TINYGLTF_TYPE_VEC3: return "VEC3";
+    case TINYGLTF_TYPE_VEC4: return "VEC4";
+    case TINYGLTF_TYPE_MAT2: return "MAT2";
+    case TINYGLTF_TYPE_MAT3: return "MAT3";
+    case TINYGLTF_TYPE_MAT4: return "MAT4";
+    default: return "invalid";
+  }
+}
+
+// Reads one component at p (which need not be aligned) as a double, with the glTF normalisation rules.
+double read_component(const unsigned char* p, int component_type, bool normalized) {
+  switch (component_type) {
+    case TINYGLTF_COMPONENT_TYPE_BYTE: {
+      int8_t v;
+      std::memcpy(&v, p, 1);
+      return normalized ? std::max(v / 127.0, -1.0) : v;
+    }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: {
+      uint8_t v;
+      std::memcpy(&v, p, 1);
+      return normalized ? v / 255.0 : v;
+    }
+    case TINYGLTF_COMPONENT_TYPE_SHORT: {
+      int16_t v;
+      std::memcpy(&v, p, 2);
+      return normalized ? std::max(v / 32767.0, -1.0) : v;
+    }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
+      uint16_t v;
+      std::memcpy(&v, p, 2);
+      return normalized ? v / 65535.0 : v;
+    }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: {
+      uint32_t v;
+      std::memcpy(&v, p, 4);
+      return normalized ? v / 4294967295.0 : v;
+    }
+    case TINYGLTF_COMPONENT_TYPE_FLOAT: {
+      float v;
+      std::memcpy(&v, p, 4);
+      return v;
+    }
+    default: return 0.0;
+  }
+}
+
+// image/bufferView bounds are not checked by tinygltf 2.7 before it hands the bytes to the image
+// decoder; this loader checks them first, against the model tinygltf is filling.
+bool load_image_checked(tinygltf::Image* image, const int image_index, std::string* err, std::string* warn,
+                        int req_width, int req_height, const unsigned char* bytes, int size, void* user) {
+  const auto* model = static_cast<const tinygltf::Model*>(user);
+  if (image->bufferView >= 0) {
+    const auto v = static_cast<size_t>(image->bufferView);
+    bool ok = v < model->bufferViews.size();
+    if (ok) {
+      const tinygltf::BufferView& view = model->bufferViews[v];
+      ok = view.buffer >= 0 && static_cast<size_t>(view.buffer) < model->buffers.size() &&
+           view.byteOffset <= model->buffers[static_cast<size_t>(view.buffer)].data.size() &&
+           view.byteLength <= model->buffers[static_cast<size_t>(view.buffer)].data.size() - view.byteOffset;
+    }
+    if (!ok) {
+      if (err)
+        *err += "image " + std::to_string(image_index) + ": bufferView " + std::to_string(image->bufferView) +
+                " does not exist or lies past the end of its buffer\n";
+      return false;
+    }
+  }
+  return tinygltf::LoadImageData(image, image_index, err, warn, req_width, req_height, bytes, size, nullptr);
+}
+
+class Loader {
+ public:
+  Loader(std::string path, const tinygltf::Model& model, Scene& scene)
+      : path_(std::move(path)), m_(model), scene_(scene) {}
+
+  void load(const std::string& scene_name);
+
+ private:
+  [[noreturn]] void fail(const std::string& element, const std::string& what) const {
+    throw Error(path_ + ": " + element + ": " + what);
+  }
+  void warn(const std::string& message) {
+    if (warned_.insert(message).second) scene_.warnings.push_back(message);
+  }
+
+  void check_extensions();
+  void check_unused_features();
+  std::vector<int> pick_roots(const std::string& scene_name);
+  void check_hierarchy();
+  void visit(int node, const glm::dmat4& parent_world);
+  glm::dmat4 local_transform(size_t node) const;
+
+  void load_materials();
+  int texture(int gltf_texture, const std::string& user);
+  void load_primitive(size_t node, size_t mesh, size_t prim, const glm::dmat4& world);
+  void load_camera(size_t node, const glm::dmat4& world);
+  void load_light(size_t node, const glm::dmat4& world);
+
+  // Reads accessor `index` for `user` (the element that references it, for messages) as doubles,
+  // count * components, after checking every byte it touches lies inside its view and buffer.
+  std::vector<double> read_accessor(int index, const std::string& user, std::initializer_list<int> types,
+                                    size_t* count, int* components);
+  void check_view_range(int view_index, size_t offset, size_t bytes, const std::string& who);
+
+  double number(const tinygltf::Value& object, const char* key, double fallback, const std::string& who) const;
+  glm::dvec3 vec3(const std::vector<double>& v, glm::dvec3 fallback, const std::string& who, const char* what) const;
+
+  std::string path_;
+  const tinygltf::Model& m_;
+  Scene& scene_;
+  std::set<std::string> warned_;
+  std::map<int, int> texture_of_gltf_;   // glTF texture index -> Scene::textures index
+  std::vector<int> parent_;              // per node, -1 for roots
+};
+
+std::string node_label(const tinygltf::Model& m, size_t i) { return label("node", i, m.nodes[i].name); }
+
+// Buffers are named by their file when they have no name; a data: URI would only be noise.
+std::string buffer_label(size_t i, const tinygltf::Buffer& b) {
+  if (!b.name.empty() || b.uri.rfind("data:", 0) == 0) return label("buffer", i, b.name);
+  return label("buffer", i, b.uri);
+}
+
+void Loader::check_extensions() {
+  std::set<std::string> unused;
+  for (const std::string& e : m_.extensionsUsed)
+    if (!kSupportedExtensions.count(e)) unused.insert(e);
+  // Extensions present on elements but missing from extensionsUsed are still reported.
+  for (const tinygltf::Material& mat : m_.materials)
+    for (const auto& e : mat.extensions)
+      if (!kSupportedExtensions.count(e.first)) unused.insert(e.first);
+  for (const tinygltf::Node& n : m_.nodes)
+    for (const auto& e : n.extensions)
+      if (!kSupportedExtensions.count(e.first)) unused.insert(e.first);
+  for (const std::string& e : m_.extensionsRequired)
+    if (!kSupportedExtensions.count(e))
+      throw Error(path_ + ": extension " + quoted(e) +
+                  " is listed in extensionsRequired but spadgen does not support it");
+  for (const std::string& e : unused)
+    warn("extension " + quoted(e) + " is not used by spadgen; ignored");
+}
+
+void Loader::check_unused_features() {
+  for (size_t i = 0; i < m_.animations.size(); ++i)
+    warn(label("animation", i, m_.animations[i].name) +
+         ": animations are not used by spadgen; the scene is loaded in its rest pose");
+  for (size_t i = 0; i < m_.skins.size(); ++i)
+    warn(label("skin", i, m_.skins[i].name) +
+         ": skins are not used by spadgen; skinned meshes are loaded in their bind pose");
+}
+
+std::vector<int> Loader::pick_roots(const std::string& scene_name) {
+  if (m_.scenes.empty()) {
+    if (!scene_name.empty()) throw Error(path_ + ": no scene named " + quoted(scene_name) + ": the file has no scenes");
+    // Without scenes the specification leaves the file's content unspecified: load every root node
+    // rather than nothing, and say so.
+    if (!m_.nodes.empty()) warn("the file has no scenes; every root node is loaded");
+    std::vector<int> roots;
+    for (size_t i = 0; i < m_.nodes.size(); ++i)
+      if (parent_[i] < 0) roots.push_back(static_cast<int>(i));
+    return roots;
+  }
+  size_t chosen = 0;
+  if (!scene_name.empty()) {
+    auto it = std::find_if(m_.scenes.begin(), m_.scenes.end(),
+                           [&](const tinygltf::Scene& s) { return s.name == scene_name; });
+    if (it == m_.scenes.end()) {
+      std::string names;
+      for (size_t i = 0; i < m_.scenes.size(); ++i)
+        names += (i ? ", " : "") + (m_.scenes[i].name.empty() ? "(unnamed scene " + std::to_string(i) + ")"
+                                                              : quoted(m_.scenes[i].name));
+      throw Error(path_ + ": no scene named " + quoted(scene_name) + "; the file's scenes are: " + names);
+    }
+    chosen = static_cast<size_t>(it - m_.scenes.begin());
+  } else if (m_.defaultScene >= 0) {
+    if (static_cast<size_t>(m_.defaultScene) >= m_.scenes.size())
+      throw Error(path_ + ": scene " + std::to_string(m_.defaultScene) + " (the default scene) does not exist; the file has " +
+                  std::to_string(m_.scenes.size()) + " scenes");
+    chosen = static_cast<size_t>(m_.defaultScene);
+  }
+  const tinygltf::Scene& s = m_.scenes[chosen];
+  for (int n : s.nodes)
+    if (n < 0 || static_cast<size_t>(n) >= m_.nodes.size())
+      fail(label("scene", chosen, s.name), "node " + std::to_string(n) + " does not exist (the file has " +
+                                               std::to_string(m_.nodes.size()) + " nodes)");
+  return s.nodes;
+}
+
+void Loader::check_hierarchy() {
+  parent_.assign(m_.nodes.size(), -1);
+  for (size_t i = 0; i < m_.nodes.size(); ++i) {
+    for (int c : m_.nodes[i].children) {
+      if (c < 0 || static_cast<size_t>(c) >= m_.nodes.size())
+        fail(node_label(m_, i), "child node " + std::to_string(c) + " does not exist (the file has " +
+                                    std::to_string(m_.nodes.size()) + " nodes)");
+      const auto ci = static_cast<size_t>(c);
+      if (ci == i) fail(node_label(m_, i), "cycle in the node hierarchy: the node is its own child");
+      if (parent_[ci] >= 0)
+        fail(node_label(m_, ci), "has two parents (" + node_label(m_, static_cast<size_t>(parent_[ci])) + " and " +
+                                     node_label(m_, i) + "); glTF nodes form trees");
+      parent_[ci] = static_cast<int>(i);
+    }
+  }
+  // With one parent each, a cycle is a chain of parents that comes back to where it started.
+  std::vector<int> state(m_.nodes.size(), 0);  // 0 unseen, 1 on the current chain, 2 known to end at a root
+  for (size_t i = 0; i < m_.nodes.size(); ++i) {
+    std::vector<size_t> chain;
+    size_t n = i;
+    while (state[n] == 0) {
+      state[n] = 1;
+      chain.push_back(n);
+      if (parent_[n] < 0) break;
+      n = static_cast<size_t>(parent_[n]);
+    }
+    if (state[n] == 1 && parent_[n] >= 0) {
+      std::string cycle;
+      const auto start = std::find(chain.begin(), chain.end(), n);
+      for (auto it = start; it != chain.end(); ++it) cycle += node_label(m_, *it) + " -> ";
+      fail(node_label(m_, n), "cycle in the node hierarchy (" + cycle + node_label(m_, n) + ", following parents)");
+    }
+    for (size_t c : chain) state[c] = 2;
+  }
+}
+
+glm::dmat4 Loader::local_transform(size_t i) const {
+  const tinygltf::Node& n = m_.nodes[i];
+  const auto finite = [&](const std::vector<double>& v, const char* what) {
+    for (double x : v)
+      if (!std::isfinite(x)) fail(node_label(m_, i), std::string(what) + " has a value that is not finite");
+  };
+  if (!n.matrix.empty()) {
+    if (n.matrix.size() != 16)
+      fail(node_label(m_, i), "matrix has " + std::to_string(n.matrix.size()) + " values, expected 16");
+    finite(n.matrix, "matrix");
+    return glm::make_mat4(n.matrix.data());  // glTF matrices are column-major, as glm's
+  }
+  glm::dmat4 t(1.0), r(1.0), s(1.0);
+  if (!n.translation.empty()) {
+    if (n.translation.size() != 3)
+      fail(node_label(m_, i), "translation has " + std::to_string(n.translation.size()) + " values, expected 3");
+    finite(n.translation, "translation");
+    t[3] = glm::dvec4(n.translation[0], n.translation[1], n.translation[2], 1.0);
+  }
+  if (!n.rotation.empty()) {
+    if (n.rotation.size() != 4)
+      fail(node_label(m_, i), "rotation has " + std::to_string(n.rotation.size()) + " values, expected 4 (x, y, z, w)");
+    finite(n.rotation, "rotation");
+    glm::dquat q(n.rotation[3], n.rotation[0], n.rotation[1], n.rotation[2]);
+    const double len = glm::length(q);
+    if (!(len > 1e-12)) fail(node_label(m_, i), "rotation is a zero quaternion");
+    // Exporters write unit quaternions rounded to float: normalise so rounding never scales.
+    r = glm::mat4_cast(q / len);
+  }
+  if (!n.scale.empty()) {
+    if (n.scale.size() != 3)
+      fail(node_label(m_, i), "scale has " + std::to_string(n.scale.size()) + " values, expected 3");
+    finite(n.scale, "scale");
+    s = glm::scale(glm::dmat4(1.0), glm::dvec3(n.scale[0], n.scale[1], n.scale[2]));
+  }
+  return t * r * s;
+}
+
+void Loader::visit(int node, const glm::dmat4& parent_world) {
+  const auto i = static_cast<size_t>(node);
+  const glm::dmat4 world = parent_world * local_transform(i);
+  const tinygltf::Node& n = m_.nodes[i];
+  if (n.mesh >= 0) {
+    if (static_cast<size_t>(n.mesh) >= m_.meshes.size())
+      fail(node_label(m_, i), "mesh " + std::to_string(n.mesh) + " does not exist (the file has " +
+                                  std::to_string(m_.meshes.size()) + " meshes)");
+    const double det = glm::determinant(glm::dmat3(world));
+    if (!(std::abs(det) > 1e-300) || !std::isfinite(det)) {
+      warn(node_label(m_, i) + ": its world transform is singular (a zero scale); its mesh is skipped");
+    } else {
+      const tinygltf::Mesh& mesh = m_.meshes[static_cast<size_t>(n.mesh)];
+      for (size_t p = 0; p < mesh.primitives.size(); ++p) load_primitive(i, static_cast<size_t>(n.mesh), p, world);
+    }
+  }
+  if (n.camera >= 0) load_camera(i, world);
+  if (n.extensions.count("KHR_lights_punctual")) load_light(i, world);
+  for (int c : n.children) visit(c, world);
+}
+
+void Loader::check_view_range(int view_index, size_t offset, size_t bytes, const std::string& who) {
+  if (view_index < 0 || static_cast<size_t>(view_index) >= m_.bufferViews.size())
+    fail(who, "bufferView " + std::to_string(view_index) + " does not exist (the file has " +
+                  std::to_string(m_.bufferViews.size()) + " bufferViews)");
+  const tinygltf::BufferView& view = m_.bufferViews[static_cast<size_t>(view_index)];
+  const std::string view_name = label("bufferView", static_cast<size_t>(view_index), view.name);
+  if (view.buffer < 0 || static_cast<size_t>(view.buffer) >= m_.buffers.size())
+    fail(view_name, "buffer " + std::to_string(view.buffer) + " does not exist (the file has " +
+                        std::to_string(m_.buffers.size()) + " buffers)");
+  const tinygltf::Buffer& buffer = m_.buffers[static_cast<size_t>(view.buffer)];
+  const size_t size = buffer.data.size();
+  if (view.byteOffset > size || view.byteLength > size - view.byteOffset)
+    fail(view_name, "bytes " + std::to_string(view.byteOffset) + " to " +
+                        std::to_string(view.byteOffset + view.byteLength) + " lie past the end of " +
+                        buffer_label(static_cast<size_t>(view.buffer), buffer) +
+                        " (" + std::to_string(size) + " bytes)");
+  if (offset > view.byteLength || bytes > view.byteLength - offset)
+    fail(who, "reads bytes " + std::to_string(offset) + " to " + std::to_string(offset + bytes) +
+                  " of its bufferView " + std::to_string(view_index) + ", past its end (" +
+                  std::to_string(view.byteLength) + " bytes)");
+}
+
+std::vector<double> Loader::read_accessor(int index, const std::string& user, std::initializer_list<int> types,
+                                          size_t* count_out, int* components_out) {
+  if (index < 0 || static_cast<size_t>(index) >= m_.accessors.size())
+    fail(user, "accessor " + std::to_string(index) + " does not exist (the file has " +
+                   std::to_string(m_.accessors.size()) + " accessors)");
+  const tinygltf::Accessor& a = m_.accessors[static_cast<size_t>(index)];
+  const std::string who = label("accessor", static_cast<size_t>(index), a.name) + " (" + user + ")";
+  if (std::find(types.begin(), types.end(), a.type) == types.end()) {
+    std::string expected;
+    for (int t : types) expected += std::string(expected.empty() ? "" : " or ") + type_name(t);
+    fail(who, std::string("type ") + type_name(a.type) + ", expected " + expected);
+  }
+  const size_t csize = component_size(a.componentType);
+  if (csize == 0) fail(who, "componentType " + std::to_string(a.componentType) + " is not a glTF 2.0 component type");
+  const int comps = type_components(a.type);
+  const size_t elem = csize * static_cast<size_t>(comps);
+  const size_t count = a.count;
+  // Guard the multiplications below: no real accessor comes near this.
+  if (count > (size_t{1} << 34)) fail(who, "count " + std::to_string(count) + " is implausibly large");
+
+  std::vector<double> out(count * static_cast<size_t>(comps), 0.0);
+  if (a.bufferView >= 0) {
+    const tinygltf::BufferView& view = [&]() -> const tinygltf::BufferView& {
+      check_view_range(a.bufferView, 0, 0, who);
+      return m_.bufferViews[static_cast<size_t>(a.bufferView)];
+    }();
+    const size_t stride = view.byteStride ? view.byteStride : elem;
+    if (view.byteStride != 0 && view.byteStride < elem)
+      fail(label("bufferView", static_cast<size_t>(a.bufferView), view.name),
+           "byteStride " + std::to_string(view.byteStride) + " is smaller than the " + std::to_string(elem) +
+               "-byte elements of " + who);
+    if (count > 0) check_view_range(a.bufferView, a.byteOffset, (count - 1) * stride + elem, who);
+    const unsigned char* base =
+        m_.buffers[static_cast<size_t>(view.buffer)].data.data() + view.byteOffset + a.byteOffset;
+    for (size_t e = 0; e < count; ++e)
+      for (int c = 0; c < comps; ++c)
+        out[e * static_cast<size_t>(comps) + static_cast<size_t>(c)] =
+            read_component(base + e * stride + static_cast<size_t>(c) * csize, a.componentType, a.normalized);
+  }
+  // Without a bufferView the accessor is zeros, possibly with sparse values on top (glTF 3.6.2.3).
+  if (a.sparse.isSparse) {
+    const int n = a.sparse.count;
+    if (n < 1 || static_cast<size_t>(n) > count)
+      fail(who, "sparse.count " + std::to_string(n) + " is outside [1, " + std::to_string(count) + "]");
+    const int itype = a.sparse.indices.componentType;
+    const size_t isize = component_size(itype);
+    if (itype != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE && itype != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+        itype != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
+      fail(who, "sparse.indices.componentType " + std::to_string(itype) + " is not an unsigned integer type");
+    if (a.sparse.indices.byteOffset < 0 || a.sparse.values.byteOffset < 0) fail(who, "sparse byteOffset is negative");
+    const auto un = static_cast<size_t>(n);
+    check_view_range(a.sparse.indices.bufferView, static_cast<size_t>(a.sparse.indices.byteOffset), un * isize,
+                     who + " sparse.indices");
+    check_view_range(a.sparse.values.bufferView, static_cast<size_t>(a.sparse.values.byteOffset), un * elem,
+                     who + " sparse.values");
+    const auto bytes_of = [&](int view_index, int offset) {
+      const tinygltf::BufferView& v = m_.bufferViews[static_cast<size_t>(view_index)];
+      return m_.buffers[static_cast<size_t>(v.buffer)].data.data() + v.byteOffset + static_cast<size_t>(offset);
+    };
+    const unsigned char* idx = bytes_of(a.sparse.indices.bufferView, a.sparse.indices.byteOffset);
+    const unsigned char* val = bytes_of(a.sparse.values.bufferView, a.sparse.values.byteOffset);
+    for (size_t k = 0; k < un; ++k) {
+      const auto target = static_cast<size_t>(read_component(idx + k * isize, itype, false));
+      if (target >= count)
+        fail(who, "sparse index " + std::to_string(target) + " is out of range of its " + std::to_string(count) +
+                      " elements");
+      for (int c = 0; c < comps; ++c)
+        out[target * static_cast<size_t>(comps) + static_cast<size_t>(c)] =
+            read_component(val + k * elem + static_cast<size_t>(c) * csize, a.componentType, a.normalized);
+    }
+  }
+  for (double v : out)
+    if (!std::isfinite(v)) fail(who, "holds a value that is not finite");
+  *count_out = count;
+  *components_out = comps;
+  return out;
+}
+
+double Loader::number(const tinygltf::Value& object, const char* key, double fallback, const std::string& who) const {
+  if (!object.IsObject() || !object.Has(key)) return fallback;
+  const tinygltf::Value& v = object.Get(key);
+  if (!v.IsNumber()) fail(who, std::string(key) + " is not a number");
+  const double d = v.GetNumberAsDouble();
+  if (!std::isfinite(d)) fail(who, std::string(key) + " is not finite");
+  return d;
+}
+
+glm::dvec3 Loader::vec3(const std::vector<double>& v, glm::dvec3 fallback, const std::string& who, const char* what) const {
+  if (v.empty()) return fallback;
+  if (v.size() != 3) fail(who, std::string(what) + " has " + std::to_string(v.size()) + " values, expected 3");
+  for (double x : v)
+    if (!std::isfinite(x)) fail(who, std::string(what) + " has a value that is not finite");
+  return {v[0], v[1], v[2]};
+}
+
+int Loader::texture(int gltf_texture, const std::string& user) {
+  if (auto it = texture_of_gltf_.find(gltf_texture); it != texture_of_gltf_.end()) return it->second;
+  if (gltf_texture < 0 || static_cast<size_t>(gltf_texture) >= m_.textures.size())
+    fail(user, "texture " + std::to_string(gltf_texture) + " does not exist (the file has " +
+                   std::to_string(m_.textures.size()) + " textures)");
+  const tinygltf::Texture& t = m_.textures[static_cast<size_t>(gltf_texture)];
+  const std::string tname = label("texture", static_cast<size_t>(gltf_texture), t.name);
+  int result = -1;
+  if (t.source < 0) {
+    // KHR_texture_basisu and EXT_texture_webp put their image in an extension: unsupported here.
+    warn(tname + ": has no image spadgen can read; " + user + " uses its factor only");
+  } else if (static_cast<size_t>(t.source) >= m_.images.size()) {
+    fail(tname, "image " + std::to_string(t.source) + " does not exist (the file has " +
+                    std::to_string(m_.images.size()) + " images)");
+  } else {
+    const tinygltf::Image& img = m_.images[static_cast<size_t>(t.source)];
+    const std::string iname = label("image", static_cast<size_t>(t.source), img.name.empty() ? img.uri : img.name);
+    const size_t w = img.width > 0 ? static_cast<size_t>(img.width) : 0;
+    const size_t h = img.height > 0 ? static_cast<size_t>(img.height) : 0;
+    const size_t comps = img.component > 0 ? static_cast<size_t>(img.component) : 0;
+    const size_t bytes = img.bits == 16 ? 2 : 1;
+    if (img.image.empty() || w == 0 || h == 0 || comps == 0 || comps > 4 || (img.bits != 8 && img.bits != 16) ||
+        img.image.size() != w * h * comps * bytes) {
+      warn(iname + ": could not be read or decoded; " + user + " uses its factor only");
+    } else {
+      Texture tex;
+      tex.name = t.name.empty() ? img.name : t.name;
+      tex.width = img.width;
+      tex.height = img.height;
+      tex.rgba.resize(w * h * 4);
+      for (size_t p = 0; p < w * h; ++p) {
+        uint8_t c[4] = {0, 0, 0, 255};
+        for (size_t k = 0; k < comps; ++k) {
+          // 16-bit channels keep their high byte (the value rounded down to 8 bits).
+          c[k] = img.image[(p * comps + k) * bytes + (bytes == 2 ? 1 : 0)];
+        }
+        if (comps == 1 || comps == 2) {  // grey (+ alpha)
+          const uint8_t a = comps == 2 ? c[1] : 255;
+          c[1] = c[2] = c[0];
+          c[3] = a;
+        }
+        std::memcpy(&tex.rgba[p * 4], c, 4);
+      }
+      if (t.sampler >= 0) {
+        if (static_cast<size_t>(t.sampler) >= m_.samplers.size())
+          fail(tname, "sampler " + std::to_string(t.sampler) + " does not exist (the file has " +
+                          std::to_string(m_.samplers.size()) + " samplers)");
+        const tinygltf::Sampler& s = m_.samplers[static_cast<size_t>(t.sampler)];
+        for (int wrap : {s.wrapS, s.wrapT})
+          if (wrap != TINYGLTF_TEXTURE_WRAP_REPEAT && wrap != TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE &&
+              wrap != TINYGLTF_TEXTURE_WRAP_MIRRORED_REPEAT)
+            fail(label("sampler", static_cast<size_t>(t.sampler), s.name), "wrap mode " + std::to_string(wrap) + " is not a glTF wrap mode");
+        tex.wrap_s = s.wrapS;
+        tex.wrap_t = s.wrapT;
+      }
+      scene_.textures.push_back(std::move(tex));
+      result = static_cast<int>(scene_.textures.size()) - 1;
+    }
+  }
+  texture_of_gltf_[gltf_texture] = result;
+  return result;
+}
+
+void Loader::load_materials() {
+  for (size_t i = 0; i < m_.materials.size(); ++i) {
+    const tinygltf::Material& g = m_.materials[i];
+    const std::string who = label("material", i, g.name);
+    Material mat;
+    mat.name = g.name;
+    const tinygltf::PbrMetallicRoughness& pbr = g.pbrMetallicRoughness;
+    if (pbr.baseColorFactor.size() != 4)
+      fail(who, "baseColorFactor has " + std::to_string(pbr.baseColorFactor.size()) + " values, expected 4");
+    for (double c : pbr.baseColorFactor)
+      if (!(c >= 0.0 && c <= 1.0)) fail(who, "baseColorFactor value " + std::to_string(c) + " is outside [0, 1]");
+    mat.base_color = glm::vec4(glm::dvec4(pbr.baseColorFactor[0], pbr.baseColorFactor[1], pbr.baseColorFactor[2],
+                                          pbr.baseColorFactor[3]));
+    if (!(pbr.metallicFactor >= 0 && pbr.metallicFactor <= 1))
+      fail(who, "metallicFactor " + std::to_string(pbr.metallicFactor) + " is outside [0, 1]");
+    if (!(pbr.roughnessFactor >= 0 && pbr.roughnessFactor <= 1))
+      fail(who, "roughnessFactor " + std::to_string(pbr.roughnessFactor) + " is outside [0, 1]");
+    mat.metallic = static_cast<float>(pbr.metallicFactor);
+    mat.roughness = static_cast<float>(pbr.roughnessFactor);
+    if (pbr.baseColorTexture.index >= 0) {
+      const int set = pbr.baseColorTexture.texCoord;
+      if (set < 0 || set > 1) {
+        warn(who + ": baseColorTexture uses TEXCOORD_" + std::to_string(set) +
+             "; spadgen reads TEXCOORD_0 and TEXCOORD_1 only, so the texture is not used");
+      } else {
+        mat.base_color_texture = texture(pbr.baseColorTexture.index, who + " baseColorTexture");
+        mat.base_color_texcoord = set;
+      }
+      if (pbr.baseColorTexture.extensions.count("KHR_texture_transform"))
+        warn(who + ": KHR_texture_transform on baseColorTexture is not used by spadgen; the texture is untransformed");
+    }
+    const auto unused_texture = [&](int index, const char* what) {
+      if (index >= 0)
+        warn(who + ": " + what + " is not used by spadgen; ignored");
+    };
+    unused_texture(pbr.metallicRoughnessTexture.index, "metallicRoughnessTexture (the factors are used)");
+    unused_texture(g.normalTexture.index, "normalTexture");
+    unused_texture(g.occlusionTexture.index, "occlusionTexture");
+    unused_texture(g.emissiveTexture.index, "emissiveTexture (emissiveFactor is used)");
+    if (g.alphaMode != "OPAQUE" && !g.alphaMode.empty())
+      warn(who + ": alphaMode " + g.alphaMode + " is not used by spadgen; the surface is opaque");
+    mat.double_sided = g.doubleSided;
+
+    glm::dvec3 emissive = vec3(g.emissiveFactor, {0, 0, 0}, who, "emissiveFactor");
+    const auto ext = [&](const char* name) -> const tinygltf::Value* {
+      auto it = g.extensions.find(name);
+      if (it == g.extensions.end()) return nullptr;
+      if (!it->second.IsObject()) fail(who, std::string(name) + " is not a JSON object");
+      return &it->second;
+    };
+    const auto ext_texture = [&](const tinygltf::Value* e, const char* ext_name, const char* key) {
+      if (e && e->Has(key)) warn(who + ": " + ext_name + "." + key + " is not used by spadgen; the factor is used");
+    };
+    if (const tinygltf::Value* e = ext("KHR_materials_emissive_strength")) {
+      const double s = number(*e, "emissiveStrength", 1.0, who + " KHR_materials_emissive_strength");
+      if (s < 0) fail(who, "KHR_materials_emissive_strength.emissiveStrength " + std::to_string(s) + " is negative");
+      emissive *= s;
+    }
+    mat.emissive = glm::vec3(emissive);
+    if (const tinygltf::Value* e = ext("KHR_materials_transmission")) {
+      const double t = number(*e, "transmissionFactor", 0.0, who + " KHR_materials_transmission");
+      if (t < 0 || t > 1) fail(who, "KHR_materials_transmission.transmissionFactor " + std::to_string(t) + " is outside [0, 1]");
+      mat.transmission = static_cast<float>(t);
+      ext_texture(e, "KHR_materials_transmission", "transmissionTexture");
+    }
+    if (const tinygltf::Value* e = ext("KHR_materials_ior")) {
+      const double n = number(*e, "ior", 1.5, who + " KHR_materials_ior");
+      if (n < 1.0) fail(who, "KHR_materials_ior.ior " + std::to_string(n) + " is below 1");
+      mat.ior = static_cast<float>(n);
+    }
+    if (const tinygltf::Value* e = ext("KHR_materials_volume")) {
+      const std::string vw = who + " KHR_materials_volume";
+      const double thickness = number(*e, "thicknessFactor", 0.0, vw);
+      if (thickness < 0) fail(who, "KHR_materials_volume.thicknessFactor " + std::to_string(thickness) + " is negative");
+      mat.thickness_m = static_cast<float>(thickness);
+      const double dist = number(*e, "attenuationDistance", std::numeric_limits<double>::infinity(), vw);
+      if (!(dist > 0)) fail(who, "KHR_materials_volume.attenuationDistance " + std::to_string(dist) + " must be > 0");
+      mat.attenuation_distance_m = static_cast<float>(dist);
+      if (e->Has("attenuationColor")) {
+        const tinygltf::Value& c = e->Get("attenuationColor");
+        if (!c.IsArray() || c.ArrayLen() != 3) fail(who, "KHR_materials_volume.attenuationColor is not an array of 3 numbers");
+        for (int k = 0; k < 3; ++k) {
+          if (!c.Get(k).IsNumber()) fail(who, "KHR_materials_volume.attenuationColor is not an array of 3 numbers");
+          const double v = c.Get(k).GetNumberAsDouble();
+          if (!(v >= 0 && v <= 1)) fail(who, "KHR_materials_volume.attenuationColor value " + std::to_string(v) + " is outside [0, 1]");
+          mat.attenuation_color[k] = static_cast<float>(v);
+        }
+      }
+      ext_texture(e, "KHR_materials_volume", "thicknessTexture");
+    }
+    scene_.materials.push_back(std::move(mat));
+  }
+}
+
+void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, const glm::dmat4& world) {
+  const tinygltf::Mesh& gm = m_.meshes[mesh_index];
+  const tinygltf::Primitive& p = gm.primitives[prim_index];
+  const std::string who = label("mesh", mesh_index, gm.name) + " primitive " + std::to_string(prim_index);
+  if (p.mode != TINYGLTF_MODE_TRIANGLES && p.mode != TINYGLTF_MODE_TRIANGLE_STRIP &&
+      p.mode != TINYGLTF_MODE_TRIANGLE_FAN) {
+    if (p.mode >= 0 && p.mode <= 3)
+      warn(who + ": mode " + mode_name(p.mode) + " is not used by spadgen; skipped");
+    else
+      fail(who, "mode " + std::to_string(p.mode) + " is not a glTF primitive mode");
+    return;
+  }
+  if (!p.targets.empty())
+    warn(who + ": " + std::to_string(p.targets.size()) +
+         " morph targets are not used by spadgen; the base shape is loaded");
+  if (p.material >= 0 && static_cast<size_t>(p.material) >= m_.materials.size())
+    fail(who, "material " + std::to_string(p.material) + " does not exist (the file has " +
+                  std::to_string(m_.materials.size()) + " materials)");
+  const auto pos_it = p.attributes.find("POSITION");
+  if (pos_it == p.attributes.end()) fail(who, "has no POSITION attribute");
+
+  Mesh out;
+  const tinygltf::Node& gn = m_.nodes[node];
+  out.name = (gn.name.empty() ? "node" + std::to_string(node) : gn.name) + "/" +
+             (gm.name.empty() ? "mesh" + std::to_string(mesh_index) : gm.name) + "/" + std::to_string(prim_index);
+  out.gltf_node = static_cast<int>(node);
+  out.gltf_mesh = static_cast<int>(mesh_index);
+  out.gltf_primitive = static_cast<int>(prim_index);
+  out.material = p.material;
+
+  size_t n = 0, k = 0;
+  int comps = 0;
+  const std::vector<double> pos = read_accessor(pos_it->second, who + " POSITION", {TINYGLTF_TYPE_VEC3}, &n, &comps);
+  out.positions.resize(n);
+  for (size_t v = 0; v < n; ++v) {
+    const glm::dvec4 w = world * glm::dvec4(pos[3 * v], pos[3 * v + 1], pos[3 * v + 2], 1.0);
+    out.positions[v] = glm::vec3(w);
+  }
+  const glm::dmat3 normal_matrix = glm::transpose(glm::inverse(glm::dmat3(world)));
+  if (auto it = p.attributes.find("NORMAL"); it != p.attributes.end()) {
+    const std::vector<double> nor = read_accessor(it->second, who + " NORMAL", {TINYGLTF_TYPE_VEC3}, &k, &comps);
+    if (k != n) fail(who, "NORMAL has " + std::to_string(k) + " elements but POSITION has " + std::to_string(n));
+    out.normals.resize(n);
+    for (size_t v = 0; v < n; ++v) {
+      const glm::dvec3 wn = normal_matrix * glm::dvec3(nor[3 * v], nor[3 * v + 1], nor[3 * v + 2]);
+      const double len = glm::length(wn);
+      // A zero normal in the file stays zero: the renderer falls back to the geometric normal.
+      out.normals[v] = len > 0 ? glm::vec3(wn / len) : glm::vec3(0.0f);
+    }
+  }
+  for (int set = 0; set < 2; ++set) {
+    const std::string key = "TEXCOORD_" + std::to_string(set);
+    auto it = p.attributes.find(key);
+    if (it == p.attributes.end()) continue;
+    const std::vector<double> uv = read_accessor(it->second, who + " " + key, {TINYGLTF_TYPE_VEC2}, &k, &comps);
+    if (k != n) fail(who, key + " has " + std::to_string(k) + " elements but POSITION has " + std::to_string(n));
+    std::vector<glm::vec2>& dst = set == 0 ? out.texcoords0 : out.texcoords1;
+    dst.resize(n);
+    for (size_t v = 0; v < n; ++v) dst[v] = glm::vec2(glm::dvec2(uv[2 * v], uv[2 * v + 1]));
+  }
+
+  std::vector<uint32_t> idx;
+  if (p.indices >= 0) {
+    if (static_cast<size_t>(p.indices) < m_.accessors.size()) {
+      const int ct = m_.accessors[static_cast<size_t>(p.indices)].componentType;
+      if (ct != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE && ct != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+          ct != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
+        fail(who, std::string("indices accessor ") + std::to_string(p.indices) + " has componentType " +
+                      component_name(ct) + "; indices must be UNSIGNED_BYTE, UNSIGNED_SHORT or UNSIGNED_INT");
+    }
+    const std::vector<double> raw = read_accessor(p.indices, who + " indices", {TINYGLTF_TYPE_SCALAR}, &k, &comps);
+    idx.resize(k);
+    for (size_t j = 0; j < k; ++j) {
+      if (raw[j] >= static_cast<double>(n))
+        fail(who, "index " + std::to_string(static_cast<uint64_t>(raw[j])) + " at position " + std::to_string(j) +
+                      " of accessor " + std::to_string(p.indices) + " is out of range of the " + std::to_string(n) +
+                      " vertices");
+      idx[j] = static_cast<uint32_t>(raw[j]);
+    }
+  } else {
+    if (n > std::numeric_limits<uint32_t>::max()) fail(who, "too many vertices");
+    idx.resize(n);
+    for (size_t j = 0; j < n; ++j) idx[j] = static_cast<uint32_t>(j);
+  }
+
+  if (p.mode == TINYGLTF_MODE_TRIANGLES) {
+    if (idx.size() % 3 != 0)
+      warn(who + ": " + std::to_string(idx.size()) + " indices are not a multiple of 3; the last " +
+           std::to_string(idx.size() % 3) + " are ignored");
+    out.indices.assign(idx.begin(), idx.end() - static_cast<std::ptrdiff_t>(idx.size() % 3));
+  } else {
+    // Strips and fans become triangle lists with the glTF winding (specification 3.7.2.1);
+    // degenerate triangles (used to join strips) are dropped.
+    for (size_t t = 0; t + 2 < idx.size(); ++t) {
+      uint32_t a, b, c;
+      if (p.mode == TINYGLTF_MODE_TRIANGLE_STRIP) {
+        a = idx[t];
+        b = idx[t + 1 + t % 2];
+        c = idx[t + 2 - t % 2];
+      } else {
+        a = idx[t + 1];
+        b = idx[t + 2];
+        c = idx[0];
+      }
+      if (a == b || b == c || a == c) continue;
+      out.indices.insert(out.indices.end(), {a, b, c});
+    }
+  }
+  // A mirroring transform turns counter-clockwise triangles clockwise: swap to keep the front side.
+  if (glm::determinant(glm::dmat3(world)) < 0)
+    for (size_t t = 0; t + 2 < out.indices.size(); t += 3) std::swap(out.indices[t + 1], out.indices[t + 2]);
+  if (out.indices.empty()) {
+    warn(who + ": has no triangles; skipped");
+    return;
+  }
+  scene_.meshes.push_back(std::move(out));
+}
+
+void Loader::load_camera(size_t node, const glm::dmat4& world) {
+  const tinygltf::Node& n = m_.nodes[node];
+  if (static_cast<size_t>(n.camera) >= m_.cameras.size())
+    fail(node_label(m_, node), "camera " + std::to_string(n.camera) + " does not exist (the file has " +
+                                   std::to_string(m_.cameras.size()) + " cameras)");
+  const tinygltf::Camera& c = m_.cameras[static_cast<size_t>(n.camera)];
+  const std::string who = label("camera", static_cast<size_t>(n.camera), c.name) + " (" + node_label(m_, node) + ")";
+  if (c.type == "orthographic") {
+    warn(who + ": orthographic cameras are not used by spadgen; skipped");
+    return;
+  }
+  if (c.type != "perspective") fail(who, "type " + quoted(c.type) + " is neither perspective nor orthographic");
+  const double yfov = c.perspective.yfov;
+  if (!(yfov > 0 && yfov < kPi)) fail(who, "yfov " + std::to_string(yfov) + " must lie in (0, pi) radians");
+  const double aspect = c.perspective.aspectRatio;
+  if (!(aspect >= 0) || !std::isfinite(aspect))
+    fail(who, "aspectRatio " + std::to_string(aspect) + " must be > 0");
+  Camera cam;
+  cam.name = !n.name.empty() ? n.name : c.name;
+  cam.yfov_rad = yfov;
+  cam.aspect_ratio = aspect;
+  // Cameras take position and orientation from their node; a scale there (allowed, but meaningless
+  // for a pinhole) is removed so the renderer gets a rigid transform.
+  glm::dmat4 rigid = world;
+  for (int k = 0; k < 3; ++k) {
+    const double len = glm::length(glm::dvec3(world[k]));
+    if (!(len > 1e-12)) fail(who, "its node's world transform has a zero scale");
+    rigid[k] = glm::dvec4(glm::dvec3(world[k]) / len, 0.0);
+  }
+  if (glm::determinant(glm::dmat3(rigid)) < 0) {
+    warn(who + ": its node's transform mirrors; the camera's x axis is flipped back");
+    rigid[0] = -rigid[0];
+  }
+  cam.world_from_camera = rigid;
+  scene_.cameras.push_back(std::move(cam));
+}
+
+void Loader::load_light(size_t node, const glm::dmat4& world) {
+  const tinygltf::Node& n = m_.nodes[node];
+  const tinygltf::Value& ext = n.extensions.at("KHR_lights_punctual");
+  const std::string nwho = node_label(m_, node);
+  if (!ext.IsObject() || !ext.Has("light") || !ext.Get("light").IsInt())
+    fail(nwho, "KHR_lights_punctual has no integer 'light'");
+  const int li = ext.Get("light").GetNumberAsInt();
+  if (li < 0 || static_cast<size_t>(li) >= m_.lights.size())
+    fail(nwho, "KHR_lights_punctual light " + std::to_string(li) + " does not exist (the file has " +
+                   std::to_string(m_.lights.size()) + " lights)");
+  const tinygltf::Light& g = m_.lights[static_cast<size_t>(li)];
+  const std::string who = label("light", static_cast<size_t>(li), g.name) + " (" + nwho + ")";
+  Light l;
+  l.name = !n.name.empty() ? n.name : g.name;
+  if (g.type == "point")
+    l.type = Light::Type::Point;
+  else if (g.type == "spot")
+    l.type = Light::Type::Spot;
+  else if (g.type == "directional")
+    l.type = Light::Type::Directional;
+  else
+    fail(who, "type " + quoted(g.type) + " is not point, spot or directional");
+  const glm::dvec3 color = vec3(g.color, {1, 1, 1}, who, "color");
+  if (color.x < 0 || color.y < 0 || color.z < 0) fail(who, "color has a negative value");
+  l.color = glm::vec3(color);
+  if (!(g.intensity >= 0) || !std::isfinite(g.intensity)) fail(who, "intensity " + std::to_string(g.intensity) + " must be >= 0");
+  l.intensity = g.intensity;
+  if (!(g.range >= 0) || !std::isfinite(g.range)) fail(who, "range " + std::to_string(g.range) + " must be > 0");
+  l.range = g.range;
+  if (l.type == Light::Type::Spot) {
+    const double inner = g.spot.innerConeAngle, outer = g.spot.outerConeAngle;
+    if (!(inner >= 0 && inner < outer && outer <= kPi / 2 + 1e-9))
+      fail(who, "spot cone angles inner " + std::to_string(inner) + " and outer " + std::to_string(outer) +
+                    " must satisfy 0 <= inner < outer <= pi/2");
+    l.inner_cone_rad = inner;
+    l.outer_cone_rad = outer;
+  }
+  l.position = glm::dvec3(world[3]);
+  const glm::dvec3 dir = glm::dmat3(world) * glm::dvec3(0, 0, -1);
+  const double len = glm::length(dir);
+  if (!(len > 1e-12)) fail(who, "its node's world transform has a zero scale");
+  l.direction = dir / len;
+  scene_.lights.push_back(std::move(l));
+}
+
+void Loader::load(const std::string& scene_name) {
+  check_extensions();
+  check_unused_features();
+  check_hierarchy();
+  const std::vector<int> roots = pick_roots(scene_name);
+  load_materials();
+  for (int r : roots) visit(r, glm::dmat4(1.0));
+}
+
+// glTF URIs are percent-encoded ("my%20scene.bin").
+std::string uri_decode(const std::string& uri) {
+  std::string out;
+  for (size_t i = 0; i < uri.size(); ++i) {
+    if (uri[i] == '%' && i + 2 < uri.size() && std::isxdigit(static_cast<unsigned char>(uri[i + 1])) &&
+        std::isxdigit(static_cast<unsigned char>(uri[i + 2]))) {
+      out += static_cast<char>(std::stoi(uri.substr(i + 1, 2), nullptr, 16));
+      i += 2;
+    } else {
+      out += uri[i];
+    }
+  }
+  return out;
+}
+
+// tinygltf reports a missing buffer file as "File not found : x.bin", without the element; check the
+// external buffers first so the message names the buffer. Malformed JSON is left for tinygltf to report.
+void check_buffer_files(const std::string& path, bool binary) {
+  std::ifstream f(path, std::ios::binary);
+  std::string text((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  if (binary) {
+    // GLB: 12-byte header, then the JSON chunk's length, type and content.
+    if (text.size() < 20) return;
+    uint32_t length = 0;
+    std::memcpy(&length, text.data() + 12, 4);
+    if (length > text.size() - 20) return;
+    text = text.substr(20, length);
+  }
+  const nlohmann::json doc = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
+  if (!doc.is_object() || !doc.contains("buffers") || !doc["buffers"].is_array()) return;
+  const std::filesystem::path dir = std::filesystem::path(path).parent_path();
+  const nlohmann::json& buffers = doc["buffers"];
+  for (size_t i = 0; i < buffers.size(); ++i) {
+    const nlohmann::json& b = buffers[i];
+    if (!b.is_object() || !b.contains("uri") || !b["uri"].is_string()) continue;
+    const std::string uri = b["uri"].get<std::string>();
+    if (uri.rfind("data:", 0) == 0) continue;
+    const std::string name = b.contains("name") && b["name"].is_string() ? b["name"].get<std::string>() : "";
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(dir / uri_decode(uri), ec) && !std::filesystem::is_regular_file(dir / uri, ec))
+      throw Error(path + ": " + label("buffer", i, name) + ": its file " + quoted(uri) + " was not found in " +
+                  (dir.empty() ? std::string(".") : dir.string()));
+  }
+}
+
+}  // namespace
+
+Scene load_gltf(const std::string& path, const std::string& scene_name) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) throw Error(path + ": glTF file not found");
+  // .glb and .gltf are told apart by content: exporters and users both mislabel them.
+  char magic[4] = {0, 0, 0, 0};
+  {
+    std::ifstream f(path, std::ios::binary);
+    if (!f) throw Error(path + ": cannot open the glTF file");
+    f.read(magic, 4);
+  }
+  const bool binary = std::memcmp(magic, "glTF", 4) == 0;
+  check_buffer_files(path, binary);
+
+  tinygltf::Model model;
+  tinygltf::TinyGLTF io;
+  io.SetImageLoader(load_image_checked, &model);
+  std::string err, warn;
+  const bool ok = binary ? io.LoadBinaryFromFile(&model, &err, &warn, path)
+                         : io.LoadASCIIFromFile(&model, &err, &warn, path);
+  while (!err.empty() && (err.back() == '\n' || err.back() == ' ')) err.pop_back();
+  if (!ok) throw Error(path + ": " + (err.empty() ? std::string("tinygltf could not load the file") : err));
+
+  Scene scene;
+  scene.source = path;
+  std::istringstream lines(warn);
+  for (std::string line; std::getline(lines, line);)
+    if (!line.empty()) scene.warnings.push_back("tinygltf: " + line);
+  if (!err.empty()) scene.warnings.push_back("tinygltf: " + err);
+  Loader(path, model, scene).load(scene_name);
+  return scene;
+}
+
+std::string summarize(const Scene& scene) {
+  std::ostringstream s;
+  s << "glTF: " << scene.source << "\n";
+  s << "meshes: " << scene.meshes.size() << " (" << scene.triangle_count() << " triangles)\n";
+  for (const Mesh& m : scene.meshes)
+    s << "  " << m.name << ": " << m.triangle_count() << " triangles, material "
+      << (m.material >= 0 && static_cast<size_t>(m.material) < scene.materials.size()
+              ? "'" + scene.materials[static_cast<size_t>(m.material)].name + "'"
+              : std::string("(default)"))
+      << "\n";
+  s << "materials: " << scene.materials.size() << "\n";
+  for (size_t i = 0; i < scene.materials.size(); ++i) {
+    const Material& m = scene.materials[i];
+    s << "  " << i << " '" << m.name << "': base colour (" << m.base_color.r << ", " << m.base_color.g << ", "
+      << m.base_color.b << "), metallic " << m.metallic << ", roughness " << m.roughness;
+    if (m.base_color_texture >= 0)
+      s << ", baseColorTexture '" << scene.textures[static_cast<size_t>(m.base_color_texture)].name << "' ("
+        << scene.textures[static_cast<size_t>(m.base_color_texture)].width << "x"
+        << scene.textures[static_cast<size_t>(m.base_color_texture)].height << ", TEXCOORD_" << m.base_color_texcoord
+        << ")";
+    if (m.double_sided) s << ", double-sided";
+    std::vector<std::string> ext;
+    if (m.emissive != glm::vec3(0.0f))
+      ext.push_back("emissive (" + std::to_string(m.emissive.r) + ", " + std::to_string(m.emissive.g) + ", " +
+                    std::to_string(m.emissive.b) + ")");
+    if (m.transmission > 0) ext.push_back("KHR_materials_transmission " + std::to_string(m.transmission));
+    if (m.ior != 1.5f || m.transmission > 0) ext.push_back("KHR_materials_ior " + std::to_string(m.ior));
+    if (m.thickness_m > 0 || std::isfinite(m.attenuation_distance_m))
+      ext.push_back("KHR_materials_volume thickness " + std::to_string(m.thickness_m) + " m, attenuation distance " +
+                    (std::isfinite(m.attenuation_distance_m) ? std::to_string(m.attenuation_distance_m) + " m"
+                                                             : std::string("inf")));
+    for (const std::string& e : ext) s << "; " << e;
+    s << "\n";
+  }
+  s << "cameras: " << scene.cameras.size() << "\n";
+  for (const Camera& c : scene.cameras) {
+    const glm::dvec3 p(c.world_from_camera[3]);
+    s << "  '" << c.name << "': yfov " << c.yfov_rad * 180.0 / kPi << " deg";
+    if (c.aspect_ratio > 0) s << ", aspect ratio " << c.aspect_ratio;
+    s << ", at (" << p.x << ", " << p.y << ", " << p.z << ")\n";
+  }
+  s << "lights: " << scene.lights.size() << "\n";
+  for (const Light& l : scene.lights) {
+    const char* type = l.type == Light::Type::Point ? "point" : l.type == Light::Type::Spot ? "spot" : "directional";
+    s << "  '" << l.name << "': " << type << ", intensity " << l.intensity
+      << (l.type == Light::Type::Directional ? " lx" : " cd");
+    if (l.type == Light::Type::Spot)
+      s << ", cone " << l.inner_cone_rad * 180.0 / kPi << " to " << l.outer_cone_rad * 180.0 / kPi << " deg";
+    s << "\n";
+  }
+  s << "warnings: " << scene.warnings.size() << "\n";
+  for (const std::string& w : scene.warnings) s << "  " << w << "\n";
+  return s.str();
+}
+
+}  // namespace spadgen::scenes

@@ -1,1 +1,1047 @@
+// glTF loading: hand-built files (written by the tests into a temporary folder), the Blender-like
+// fixture under tests/data/gltf/, broken files with their messages, and the shipped paper scenes.
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
+
+#include <nlohmann/json.hpp>
+
+#include <glm/glm.hpp>
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "core/error.h"
+#include "scenes/scene.h"
+
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+using spadgen::Error;
+using spadgen::scenes::Light;
+using spadgen::scenes::load_gltf;
+using spadgen::scenes::Scene;
+using testing::HasSubstr;
+
+constexpr int kByte = 5120, kUByte = 5121, kShort = 5122, kUShort = 5123, kUInt = 5125, kFloat = 5126;
+constexpr double kPi = 3.14159265358979323846;
+
+// A 2x2 RGBA PNG: red, green / blue, white at alpha 128.
+const char* kPng2x2 =
+    "iVBORw0KGgoAAAANSUhEUgAAAAIAAAACCAYAAABytg0kAAAAE0lEQVR4nGP4z8DwHwyBNAg0AABJSQl4KKDbdwAAAABJRU5ErkJggg==";
+
+std::string base64(const std::vector<uint8_t>& data) {
+  static const char* t = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out;
+  for (size_t i = 0; i < data.size(); i += 3) {
+    const uint32_t b = (uint32_t{data[i]} << 16) | (i + 1 < data.size() ? uint32_t{data[i + 1]} << 8 : 0u) |
+                       (i + 2 < data.size() ? uint32_t{data[i + 2]} : 0u);
+    out += t[(b >> 18) & 63];
+    out += t[(b >> 12) & 63];
+    out += i + 1 < data.size() ? t[(b >> 6) & 63] : '=';
+    out += i + 2 < data.size() ? t[b & 63] : '=';
+  }
+  return out;
+}
+
+std::vector<uint8_t> unbase64(const std::string& s) {
+  std::vector<uint8_t> out;
+  uint32_t acc = 0;
+  int bits = 0;
+  for (char c : s) {
+    int v;
+    if (c >= 'A' && c <= 'Z') v = c - 'A';
+    else if (c >= 'a' && c <= 'z') v = c - 'a' + 26;
+    else if (c >= '0' && c <= '9') v = c - '0' + 52;
+    else if (c == '+') v = 62;
+    else if (c == '/') v = 63;
+    else continue;
+    acc = (acc << 6) | static_cast<uint32_t>(v);
+    bits += 6;
+    if (bits >= 8) {
+      bits -= 8;
+      out.push_back(static_cast<uint8_t>((acc >> bits) & 0xff));
+    }
+  }
+  return out;
+}
+
+// A temporary folder per test, removed when the test ends.
+class TempDir {
+ public:
+  TempDir() {
+    const auto* info = testing::UnitTest::GetInstance()->current_test_info();
+    path_ = fs::temp_directory_path() /
+            ("spadgen_gltf_" + std::string(info->test_suite_name()) + "_" + info->name() + "_" +
+             std::to_string(::getpid()));
+    fs::remove_all(path_);
+    fs::create_directories(path_);
+  }
+  ~TempDir() {
+    std::error_code ec;
+    fs::remove_all(path_, ec);
+  }
+  const fs::path& path() const { return path_; }
+
+ private:
+  fs::path path_;
+};
+
+void write_file(const fs::path& p, const std::string& bytes) {
+  std::ofstream f(p, std::ios::binary);
+  f << bytes;
+}
+
+// Builds a glTF document and its binary buffer by hand, so each test states exactly the bytes it tests.
+class Gltf {
+ public:
+  enum class Form { External, Embedded, Glb };
+
+  Gltf() {
+    doc = {{"asset", {{"version", "2.0"}, {"generator", "spadgen test"}}},
+           {"scene", 0},
+           {"scenes", json::array({{{"name", "main"}, {"nodes", json::array()}}})},
+           {"nodes", json::array()},
+           {"meshes", json::array()},
+           {"accessors", json::array()},
+           {"bufferViews", json::array()}};
+  }
+
+  template <class T>
+  size_t append(const std::vector<T>& v) {
+    while (bin.size() % 4) bin.push_back(0);
+    const size_t offset = bin.size();
+    const auto* p = reinterpret_cast<const uint8_t*>(v.data());
+    bin.insert(bin.end(), p, p + v.size() * sizeof(T));
+    return offset;
+  }
+  int view(size_t offset, size_t length, size_t stride = 0) {
+    json v = {{"buffer", 0}, {"byteOffset", offset}, {"byteLength", length}};
+    if (stride) v["byteStride"] = stride;
+    doc["bufferViews"].push_back(v);
+    return static_cast<int>(doc["bufferViews"].size()) - 1;
+  }
+  template <class T>
+  int view_of(const std::vector<T>& v, size_t stride = 0) {
+    const size_t offset = append(v);
+    return view(offset, v.size() * sizeof(T), stride);
+  }
+  int accessor(int view_index, int component_type, const char* type, size_t count, size_t offset = 0,
+               bool normalized = false) {
+    json a = {{"componentType", component_type}, {"type", type}, {"count", count}};
+    if (view_index >= 0) a["bufferView"] = view_index;
+    if (offset) a["byteOffset"] = offset;
+    if (normalized) a["normalized"] = true;
+    doc["accessors"].push_back(a);
+    return static_cast<int>(doc["accessors"].size()) - 1;
+  }
+  int positions(const std::vector<float>& xyz) {
+    return accessor(view_of(xyz), kFloat, "VEC3", xyz.size() / 3);
+  }
+  template <class T>
+  int indices(const std::vector<T>& idx, int component_type) {
+    return accessor(view_of(idx), component_type, "SCALAR", idx.size());
+  }
+  int mesh(const json& primitives, const std::string& name = "") {
+    json m = {{"primitives", primitives}};
+    if (!name.empty()) m["name"] = name;
+    doc["meshes"].push_back(m);
+    return static_cast<int>(doc["meshes"].size()) - 1;
+  }
+  // Adds a node; a root of scene 0 unless `root` is false.
+  int node(const json& n, bool root = true) {
+    doc["nodes"].push_back(n);
+    const int i = static_cast<int>(doc["nodes"].size()) - 1;
+    if (root) doc["scenes"][0]["nodes"].push_back(i);
+    return i;
+  }
+  // One triangle in the z = 0 plane facing +Z, with normals: the simplest mesh.
+  int triangle_mesh(const std::string& name = "Tri") {
+    const int pos = positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+    const int nor = accessor(view_of(std::vector<float>{0, 0, 1, 0, 0, 1, 0, 0, 1}), kFloat, "VEC3", 3);
+    const int idx = indices(std::vector<uint16_t>{0, 1, 2}, kUShort);
+    return mesh(json::array({{{"attributes", {{"POSITION", pos}, {"NORMAL", nor}}}, {"indices", idx}}}), name);
+  }
+
+  std::string write(const fs::path& dir, const std::string& stem, Form form = Form::External) const {
+    json d = doc;
+    if (!bin.empty()) {
+      json b = {{"byteLength", bin.size()}};
+      if (form == Form::External) {
+        b["uri"] = stem + ".bin";
+        write_file(dir / (stem + ".bin"), std::string(bin.begin(), bin.end()));
+      } else if (form == Form::Embedded) {
+        b["uri"] = "data:application/octet-stream;base64," + base64(bin);
+      }
+      d["buffers"] = json::array({b});
+    }
+    if (form != Form::Glb) {
+      const fs::path p = dir / (stem + ".gltf");
+      write_file(p, d.dump(2));
+      return p.string();
+    }
+    std::string js = d.dump();
+    while (js.size() % 4) js += ' ';
+    std::vector<uint8_t> b = bin;
+    while (b.size() % 4) b.push_back(0);
+    const auto u32 = [](uint32_t v) { return std::string(reinterpret_cast<const char*>(&v), 4); };
+    std::string glb = "glTF" + u32(2) +
+                      u32(static_cast<uint32_t>(12 + 8 + js.size() + (b.empty() ? 0 : 8 + b.size())));
+    glb += u32(static_cast<uint32_t>(js.size())) + u32(0x4E4F534A) + js;
+    if (!b.empty()) glb += u32(static_cast<uint32_t>(b.size())) + u32(0x004E4942) + std::string(b.begin(), b.end());
+    const fs::path p = dir / (stem + ".glb");
+    write_file(p, glb);
+    return p.string();
+  }
+
+  json doc;
+  std::vector<uint8_t> bin;
+};
+
+void expect_vec(const glm::vec3& got, const glm::dvec3& want, double tol = 1e-6) {
+  EXPECT_NEAR(got.x, want.x, tol);
+  EXPECT_NEAR(got.y, want.y, tol);
+  EXPECT_NEAR(got.z, want.z, tol);
+}
+
+glm::dvec3 face_normal(const spadgen::scenes::Mesh& m, size_t t) {
+  const glm::dvec3 a(m.positions[m.indices[3 * t]]), b(m.positions[m.indices[3 * t + 1]]),
+      c(m.positions[m.indices[3 * t + 2]]);
+  return glm::normalize(glm::cross(b - a, c - a));
+}
+
+std::string load_error(const std::string& path, const std::string& scene = "") {
+  try {
+    load_gltf(path, scene);
+  } catch (const Error& e) {
+    return e.what();
+  }
+  ADD_FAILURE() << "no spadgen::Error for " << path;
+  return "";
+}
+
+bool has_warning(const Scene& s, const std::string& part) {
+  for (const std::string& w : s.warnings)
+    if (w.find(part) != std::string::npos) return true;
+  return false;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Transforms
+
+TEST(GltfLoader, TrsTransformAndInverseTransposeNormals) {
+  TempDir dir;
+  Gltf g;
+  const int pos = g.positions({1, 0, 0, 0, 1, 0, 0, 0, 1});
+  const float r = static_cast<float>(1 / std::sqrt(2.0));
+  const int nor = g.accessor(g.view_of(std::vector<float>{r, r, 0, r, r, 0, r, r, 0}), kFloat, "VEC3", 3);
+  const int m = g.mesh(json::array({{{"attributes", {{"POSITION", pos}, {"NORMAL", nor}}}}}), "Wedge");
+  const double s45 = std::sin(kPi / 4);
+  g.node({{"name", "N"}, {"mesh", m}, {"translation", {1, 2, 3}}, {"rotation", {0, 0, s45, s45}}, {"scale", {2, 1, 1}}});
+  const Scene s = load_gltf(g.write(dir.path(), "trs"));
+  ASSERT_EQ(s.meshes.size(), 1u);
+  const auto& mesh = s.meshes[0];
+  EXPECT_EQ(mesh.name, "N/Wedge/0");
+  EXPECT_EQ(mesh.gltf_node, 0);
+  // (1,0,0) scaled to (2,0,0), turned 90 deg about Z to (0,2,0), moved by (1,2,3).
+  expect_vec(mesh.positions[0], {1, 4, 3});
+  expect_vec(mesh.positions[1], {0, 2, 3});
+  expect_vec(mesh.positions[2], {1, 2, 4});
+  // Normals take the inverse transpose: (1,1,0) under scale (2,1,1) becomes (0.5,1,0), then turns.
+  const glm::dvec3 n = glm::normalize(glm::dvec3(-1, 0.5, 0));
+  expect_vec(mesh.normals[0], n);
+  EXPECT_EQ(mesh.indices, (std::vector<uint32_t>{0, 1, 2}));
+  EXPECT_TRUE(s.warnings.empty());
+}
+
+TEST(GltfLoader, MatrixAndHierarchy) {
+  TempDir dir;
+  Gltf g;
+  const int m = g.triangle_mesh();
+  // Parent: column-major matrix, uniform scale 2 and translation (10, 0, 0).
+  const int child = g.node({{"name", "child"}, {"mesh", m}, {"translation", {0, 1, 0}}}, false);
+  g.node({{"name", "parent"},
+          {"matrix", {2, 0, 0, 0, 0, 2, 0, 0, 0, 0, 2, 0, 10, 0, 0, 1}},
+          {"children", {child}}});
+  const Scene s = load_gltf(g.write(dir.path(), "hier"));
+  ASSERT_EQ(s.meshes.size(), 1u);
+  expect_vec(s.meshes[0].positions[0], {10, 2, 0});
+  expect_vec(s.meshes[0].positions[1], {12, 2, 0});
+  expect_vec(s.meshes[0].positions[2], {10, 4, 0});
+  expect_vec(s.meshes[0].normals[0], {0, 0, 1});
+  EXPECT_EQ(s.meshes[0].name, "child/Tri/0");
+}
+
+TEST(GltfLoader, MirroringTransformFlipsWinding) {
+  TempDir dir;
+  Gltf g;
+  const int m = g.triangle_mesh();
+  g.node({{"mesh", m}, {"scale", {-1, 1, 1}}});
+  g.node({{"mesh", m}});
+  const Scene s = load_gltf(g.write(dir.path(), "mirror"));
+  ASSERT_EQ(s.meshes.size(), 2u);
+  // Both keep their front side towards +Z: the mirrored one has its winding swapped.
+  for (const auto& mesh : s.meshes) {
+    const glm::dvec3 fn = face_normal(mesh, 0);
+    EXPECT_NEAR(fn.z, 1.0, 1e-9) << mesh.name;
+    expect_vec(mesh.normals[0], {0, 0, 1});
+  }
+  EXPECT_EQ(s.meshes[0].name, "node0/Tri/0");
+  EXPECT_EQ(s.meshes[0].indices, (std::vector<uint32_t>{0, 2, 1}));
+}
+
+TEST(GltfLoader, SingularTransformIsWarnedAndSkipped) {
+  TempDir dir;
+  Gltf g;
+  const int m = g.triangle_mesh();
+  g.node({{"name", "flat"}, {"mesh", m}, {"scale", {1, 0, 1}}});
+  const Scene s = load_gltf(g.write(dir.path(), "singular"));
+  EXPECT_TRUE(s.meshes.empty());
+  EXPECT_TRUE(has_warning(s, "node 0 'flat'"));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Accessors
+
+TEST(GltfLoader, EveryIndexComponentTypeAndNonIndexed) {
+  TempDir dir;
+  Gltf g;
+  const int pos = g.positions({0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, 0});
+  const std::vector<uint32_t> want = {0, 1, 2, 2, 1, 3};
+  const int i8 = g.indices(std::vector<uint8_t>(want.begin(), want.end()), kUByte);
+  const int i16 = g.indices(std::vector<uint16_t>(want.begin(), want.end()), kUShort);
+  const int i32 = g.indices(want, kUInt);
+  json prims = json::array();
+  for (int idx : {i8, i16, i32}) prims.push_back({{"attributes", {{"POSITION", pos}}}, {"indices", idx}, {"mode", 4}});
+  prims.push_back({{"attributes", {{"POSITION", pos}}}});  // non-indexed, mode defaulted
+  g.node({{"mesh", g.mesh(prims, "Quad")}});
+  const Scene s = load_gltf(g.write(dir.path(), "indices"));
+  ASSERT_EQ(s.meshes.size(), 4u);
+  for (int k = 0; k < 3; ++k) EXPECT_EQ(s.meshes[static_cast<size_t>(k)].indices, want) << k;
+  EXPECT_EQ(s.meshes[3].indices, (std::vector<uint32_t>{0, 1, 2}));  // 4 vertices: one triangle, one left over
+  EXPECT_TRUE(has_warning(s, "mesh 0 'Quad' primitive 3: 4 indices are not a multiple of 3"));
+  EXPECT_TRUE(s.meshes[3].normals.empty());
+  EXPECT_EQ(s.triangle_count(), 7u);
+}
+
+TEST(GltfLoader, QuantizedPositionsAndByteStrides) {
+  TempDir dir;
+  Gltf g;
+  g.doc["extensionsUsed"] = {"KHR_mesh_quantization"};
+  g.doc["extensionsRequired"] = {"KHR_mesh_quantization"};
+  // BYTE normalized, each VEC3 padded to the 4-byte stride vertex attributes need.
+  const int b = g.accessor(g.view_of(std::vector<int8_t>{127, -127, 0, 0, 0, 127, 0, 0, -128, 64, 0, 0}, 4), kByte,
+                           "VEC3", 3, 0, true);
+  // UNSIGNED_BYTE unnormalized.
+  const int ub = g.accessor(g.view_of(std::vector<uint8_t>{1, 2, 3, 0, 4, 5, 6, 0, 7, 8, 9, 0}, 4), kUByte, "VEC3", 3);
+  // SHORT normalized, stride 8.
+  const int sh = g.accessor(g.view_of(std::vector<int16_t>{32767, 0, -32768, 0, 0, 16384, 0, 0, 0, 0, 32767, 0}, 8),
+                            kShort, "VEC3", 3, 0, true);
+  // UNSIGNED_SHORT unnormalized.
+  const int us = g.accessor(g.view_of(std::vector<uint16_t>{1000, 0, 0, 0, 0, 2000, 0, 0, 0, 0, 3000, 0}, 8),
+                            kUShort, "VEC3", 3);
+  // FLOAT positions interleaved with normals, stride 24, the normals at byte offset 12.
+  const int iv = g.view_of(std::vector<float>{0, 0, 0, 0, 0, 1, 1, 0, 0, 0, 0, 1, 0, 1, 0, 0, 0, 1}, 24);
+  const int ip = g.accessor(iv, kFloat, "VEC3", 3, 0);
+  const int in = g.accessor(iv, kFloat, "VEC3", 3, 12);
+  json prims = json::array();
+  for (int a : {b, ub, sh, us}) prims.push_back({{"attributes", {{"POSITION", a}}}});
+  prims.push_back({{"attributes", {{"POSITION", ip}, {"NORMAL", in}}}});
+  g.node({{"mesh", g.mesh(prims)}});
+  const Scene s = load_gltf(g.write(dir.path(), "quant"));
+  ASSERT_EQ(s.meshes.size(), 5u);
+  expect_vec(s.meshes[0].positions[0], {1, -1, 0});
+  expect_vec(s.meshes[0].positions[2], {-1, 64 / 127.0, 0});  // -128 clamps to -1
+  expect_vec(s.meshes[1].positions[2], {7, 8, 9});
+  expect_vec(s.meshes[2].positions[0], {1, 0, -1});
+  expect_vec(s.meshes[2].positions[1], {0, 16384 / 32767.0, 0});
+  expect_vec(s.meshes[3].positions[1], {0, 2000, 0});
+  expect_vec(s.meshes[3].positions[2], {0, 0, 3000});
+  expect_vec(s.meshes[4].positions[1], {1, 0, 0});
+  expect_vec(s.meshes[4].positions[2], {0, 1, 0});
+  expect_vec(s.meshes[4].normals[1], {0, 0, 1});
+  EXPECT_TRUE(s.warnings.empty());
+}
+
+TEST(GltfLoader, SparseAccessors) {
+  TempDir dir;
+  Gltf g;
+  const int base = g.view_of(std::vector<float>{0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const int sidx = g.view_of(std::vector<uint8_t>{1, 0, 0, 0});
+  const int sval = g.view_of(std::vector<float>{5, 5, 5});
+  int a = g.accessor(base, kFloat, "VEC3", 3);
+  g.doc["accessors"][static_cast<size_t>(a)]["sparse"] = {
+      {"count", 1}, {"indices", {{"bufferView", sidx}, {"componentType", kUByte}}}, {"values", {{"bufferView", sval}}}};
+  // No bufferView: zeros with sparse values on top.
+  const int sidx2 = g.view_of(std::vector<uint16_t>{0, 2});
+  const int sval2 = g.view_of(std::vector<float>{1, 1, 1, 2, 2, 2});
+  int z = g.accessor(-1, kFloat, "VEC3", 3);
+  g.doc["accessors"][static_cast<size_t>(z)]["sparse"] = {
+      {"count", 2}, {"indices", {{"bufferView", sidx2}, {"componentType", kUShort}}}, {"values", {{"bufferView", sval2}}}};
+  g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", a}}}}, {{"attributes", {{"POSITION", z}}}}}))}});
+  const Scene s = load_gltf(g.write(dir.path(), "sparse"));
+  ASSERT_EQ(s.meshes.size(), 2u);
+  expect_vec(s.meshes[0].positions[0], {0, 0, 0});
+  expect_vec(s.meshes[0].positions[1], {5, 5, 5});
+  expect_vec(s.meshes[0].positions[2], {0, 1, 0});
+  expect_vec(s.meshes[1].positions[0], {1, 1, 1});
+  expect_vec(s.meshes[1].positions[1], {0, 0, 0});
+  expect_vec(s.meshes[1].positions[2], {2, 2, 2});
+}
+
+TEST(GltfLoader, StripsAndFansBecomeTriangleLists) {
+  TempDir dir;
+  Gltf g;
+  const int pos = g.positions({0, 0, 0, 0, 1, 0, 1, 0, 0, 1, 1, 0, 2, 0, 0});
+  g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}}}, {"mode", 5}},
+                                       {{"attributes", {{"POSITION", pos}}}, {"mode", 6}}}))}});
+  const Scene s = load_gltf(g.write(dir.path(), "strips"));
+  ASSERT_EQ(s.meshes.size(), 2u);
+  EXPECT_EQ(s.meshes[0].indices, (std::vector<uint32_t>{0, 1, 2, 1, 3, 2, 2, 3, 4}));
+  EXPECT_EQ(s.meshes[1].indices, (std::vector<uint32_t>{1, 2, 0, 2, 3, 0, 3, 4, 0}));
+}
+
+TEST(GltfLoader, TexcoordSets) {
+  TempDir dir;
+  Gltf g;
+  const int pos = g.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const int uv0 = g.accessor(g.view_of(std::vector<float>{0, 0, 1, 0, 0, 1}), kFloat, "VEC2", 3);
+  // TEXCOORD_1 as normalized UNSIGNED_SHORT, as exporters quantize it.
+  const int uv1 = g.accessor(g.view_of(std::vector<uint16_t>{65535, 0, 0, 65535, 0, 0}), kUShort, "VEC2", 3, 0, true);
+  g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}, {"TEXCOORD_0", uv0}, {"TEXCOORD_1", uv1}}}}}))}});
+  const Scene s = load_gltf(g.write(dir.path(), "uv"));
+  ASSERT_EQ(s.meshes.size(), 1u);
+  ASSERT_EQ(s.meshes[0].texcoords0.size(), 3u);
+  ASSERT_EQ(s.meshes[0].texcoords1.size(), 3u);
+  EXPECT_FLOAT_EQ(s.meshes[0].texcoords0[1].x, 1.0f);
+  EXPECT_FLOAT_EQ(s.meshes[0].texcoords1[0].x, 1.0f);
+  EXPECT_FLOAT_EQ(s.meshes[0].texcoords1[1].y, 1.0f);
+}
+
+// ---------------------------------------------------------------------------------------------
+// What spadgen does not use: one warning per element
+
+TEST(GltfLoader, UnusedFeaturesWarnOncePerElement) {
+  TempDir dir;
+  Gltf g;
+  g.doc["extensionsUsed"] = {"KHR_materials_sheen", "KHR_materials_transmission"};
+  const int pos = g.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const int tgt = g.positions({0, 0, 1, 0, 0, 1, 0, 0, 1});
+  const int m = g.mesh(json::array({{{"attributes", {{"POSITION", pos}}}, {"targets", {{{"POSITION", tgt}}}}},
+                                    {{"attributes", {{"POSITION", pos}}}, {"mode", 0}},
+                                    {{"attributes", {{"POSITION", pos}}}, {"mode", 1}}}),
+                       "Cube");
+  // The mesh is instanced twice: its warnings still appear once.
+  g.node({{"name", "a"}, {"mesh", m}});
+  g.node({{"name", "b"}, {"mesh", m}});
+  const int times = g.accessor(g.view_of(std::vector<float>{0, 1}), kFloat, "SCALAR", 2);
+  const int values = g.positions({0, 0, 0, 1, 0, 0});
+  const json sampler = {{"input", times}, {"output", values}};
+  const json channel = {{"sampler", 0}, {"target", {{"node", 0}, {"path", "translation"}}}};
+  g.doc["animations"] = json::array({{{"name", "Move"}, {"samplers", json::array({sampler})},
+                                      {"channels", json::array({channel})}}});
+  std::vector<float> identity(16, 0.0f);
+  for (size_t k = 0; k < 16; k += 5) identity[k] = 1.0f;
+  const int ibm = g.accessor(g.view_of(identity), kFloat, "MAT4", 1);
+  g.doc["skins"] = {{{"name", "Armature"}, {"joints", {1}}, {"inverseBindMatrices", ibm}}};
+  const Scene s = load_gltf(g.write(dir.path(), "unused"));
+  EXPECT_EQ(s.meshes.size(), 2u);  // primitive 0 twice; points and lines skipped
+  const std::vector<std::string> expected = {
+      "mesh 0 'Cube' primitive 1: mode POINTS is not used by spadgen; skipped",
+      "mesh 0 'Cube' primitive 2: mode LINES is not used by spadgen; skipped",
+      "mesh 0 'Cube' primitive 0: 1 morph targets are not used by spadgen; the base shape is loaded",
+      "animation 0 'Move': animations are not used by spadgen; the scene is loaded in its rest pose",
+      "skin 0 'Armature': skins are not used by spadgen; skinned meshes are loaded in their bind pose",
+      "extension 'KHR_materials_sheen' is not used by spadgen; ignored",
+  };
+  for (const std::string& w : expected) EXPECT_EQ(std::count(s.warnings.begin(), s.warnings.end(), w), 1) << w;
+  EXPECT_EQ(s.warnings.size(), expected.size()) << testing::PrintToString(s.warnings);
+}
+
+TEST(GltfLoader, UnknownRequiredExtensionIsAnError) {
+  TempDir dir;
+  Gltf g;
+  g.node({{"mesh", g.triangle_mesh()}});
+  g.doc["extensionsUsed"] = {"EXT_meshopt_compression"};
+  g.doc["extensionsRequired"] = {"EXT_meshopt_compression"};
+  const std::string path = g.write(dir.path(), "required");
+  const std::string msg = load_error(path);
+  EXPECT_THAT(msg, HasSubstr(path));
+  EXPECT_THAT(msg, HasSubstr("'EXT_meshopt_compression' is listed in extensionsRequired"));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Materials and textures
+
+TEST(GltfLoader, MaterialsAndExtensions) {
+  TempDir dir;
+  Gltf g;
+  g.doc["extensionsUsed"] = {"KHR_materials_transmission", "KHR_materials_ior", "KHR_materials_volume",
+                             "KHR_materials_emissive_strength"};
+  g.doc["materials"] = {
+      {{"name", "Glass"},
+       {"pbrMetallicRoughness", {{"baseColorFactor", {0.9, 0.8, 0.7, 0.5}}, {"metallicFactor", 0.25}, {"roughnessFactor", 0.1}}},
+       {"doubleSided", true},
+       {"emissiveFactor", {1, 0.5, 0}},
+       {"extensions",
+        {{"KHR_materials_emissive_strength", {{"emissiveStrength", 4}}},
+         {"KHR_materials_transmission", {{"transmissionFactor", 0.75}}},
+         {"KHR_materials_ior", {{"ior", 1.33}}},
+         {"KHR_materials_volume",
+          {{"thicknessFactor", 0.002}, {"attenuationDistance", 0.5}, {"attenuationColor", {0.9, 0.95, 1.0}}}}}}},
+      {{"name", "Defaults"}}};
+  const int pos = g.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}}}, {"material", 0}},
+                                       {{"attributes", {{"POSITION", pos}}}, {"material", 1}},
+                                       {{"attributes", {{"POSITION", pos}}}}}))}});
+  const Scene s = load_gltf(g.write(dir.path(), "materials"));
+  ASSERT_EQ(s.materials.size(), 2u);
+  const auto& glass = s.materials[0];
+  EXPECT_EQ(glass.name, "Glass");
+  EXPECT_FLOAT_EQ(glass.base_color.g, 0.8f);
+  EXPECT_FLOAT_EQ(glass.base_color.a, 0.5f);
+  EXPECT_FLOAT_EQ(glass.metallic, 0.25f);
+  EXPECT_FLOAT_EQ(glass.roughness, 0.1f);
+  EXPECT_TRUE(glass.double_sided);
+  expect_vec(glass.emissive, {4, 2, 0});
+  EXPECT_FLOAT_EQ(glass.transmission, 0.75f);
+  EXPECT_TRUE(glass.transmissive());
+  EXPECT_FLOAT_EQ(glass.ior, 1.33f);
+  EXPECT_FLOAT_EQ(glass.thickness_m, 0.002f);
+  EXPECT_FLOAT_EQ(glass.attenuation_distance_m, 0.5f);
+  expect_vec(glass.attenuation_color, {0.9, 0.95, 1.0});
+  const auto& d = s.materials[1];
+  EXPECT_FLOAT_EQ(d.metallic, 1.0f);
+  EXPECT_FLOAT_EQ(d.roughness, 1.0f);
+  EXPECT_FLOAT_EQ(d.ior, 1.5f);
+  EXPECT_FALSE(d.double_sided);
+  EXPECT_FALSE(d.transmissive());
+  EXPECT_TRUE(std::isinf(d.attenuation_distance_m));
+  EXPECT_EQ(d.base_color_texture, -1);
+  EXPECT_TRUE(s.has_transmission());
+  ASSERT_EQ(s.meshes.size(), 3u);
+  EXPECT_EQ(s.meshes[0].material, 0);
+  EXPECT_EQ(s.meshes[1].material, 1);
+  EXPECT_EQ(s.meshes[2].material, -1);
+  EXPECT_TRUE(s.warnings.empty()) << testing::PrintToString(s.warnings);
+  const std::string summary = spadgen::scenes::summarize(s);
+  EXPECT_THAT(summary, HasSubstr("KHR_materials_transmission"));
+  EXPECT_THAT(summary, HasSubstr("KHR_materials_volume"));
+  EXPECT_THAT(summary, HasSubstr("meshes: 3 (3 triangles)"));
+}
+
+void expect_pixel(const spadgen::scenes::Texture& t, int x, int y, std::array<int, 4> rgba) {
+  const size_t o = (static_cast<size_t>(y) * static_cast<size_t>(t.width) + static_cast<size_t>(x)) * 4;
+  for (size_t k = 0; k < 4; ++k) EXPECT_EQ(t.rgba[o + k], rgba[k]) << "pixel " << x << "," << y << " channel " << k;
+}
+
+TEST(GltfLoader, BaseColorTexturesFromDataUriFileAndBufferView) {
+  TempDir dir;
+  const std::vector<uint8_t> png = unbase64(kPng2x2);
+  write_file(dir.path() / "checker.png", std::string(png.begin(), png.end()));
+  Gltf g;
+  const int png_view = g.view_of(png);
+  g.doc["images"] = {{{"uri", std::string("data:image/png;base64,") + kPng2x2}},
+                     {{"uri", "checker.png"}},
+                     {{"bufferView", png_view}, {"mimeType", "image/png"}, {"name", "in_buffer"}}};
+  g.doc["samplers"] = {{{"wrapS", 33071}, {"wrapT", 33648}}};
+  g.doc["textures"] = {{{"source", 0}, {"sampler", 0}, {"name", "uri_tex"}}, {{"source", 1}}, {{"source", 2}}};
+  g.doc["materials"] = {{{"name", "A"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}, {"texCoord", 1}}}}}},
+                        {{"name", "B"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 1}}}}}},
+                        {{"name", "C"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 2}}}}}},
+                        {{"name", "D"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}}};
+  g.node({{"mesh", g.triangle_mesh()}});
+  for (auto form : {Gltf::Form::External, Gltf::Form::Glb}) {
+    const Scene s = load_gltf(g.write(dir.path(), "textures", form));
+    ASSERT_EQ(s.materials.size(), 4u);
+    ASSERT_EQ(s.textures.size(), 3u);  // material D shares texture 0
+    EXPECT_EQ(s.materials[0].base_color_texture, 0);
+    EXPECT_EQ(s.materials[3].base_color_texture, 0);
+    EXPECT_EQ(s.materials[0].base_color_texcoord, 1);
+    EXPECT_EQ(s.materials[1].base_color_texcoord, 0);
+    const auto& t = s.textures[0];
+    EXPECT_EQ(t.name, "uri_tex");
+    EXPECT_EQ(t.width, 2);
+    EXPECT_EQ(t.height, 2);
+    EXPECT_EQ(t.wrap_s, 33071);
+    EXPECT_EQ(t.wrap_t, 33648);
+    EXPECT_EQ(s.textures[1].wrap_s, 10497);
+    for (const auto& tex : s.textures) {
+      ASSERT_EQ(tex.rgba.size(), 16u);
+      expect_pixel(tex, 0, 0, {255, 0, 0, 255});
+      expect_pixel(tex, 1, 0, {0, 255, 0, 255});
+      expect_pixel(tex, 0, 1, {0, 0, 255, 255});
+      expect_pixel(tex, 1, 1, {255, 255, 255, 128});
+    }
+    EXPECT_EQ(s.textures[2].name, "in_buffer");
+  }
+}
+
+TEST(GltfLoader, MissingImageFileIsWarnedNotFatal) {
+  TempDir dir;
+  Gltf g;
+  g.doc["images"] = {{{"uri", "nowhere.png"}}};
+  g.doc["textures"] = {{{"source", 0}}};
+  g.doc["materials"] = {{{"name", "Paper"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}}};
+  g.node({{"mesh", g.triangle_mesh()}});
+  const Scene s = load_gltf(g.write(dir.path(), "noimage"));
+  EXPECT_EQ(s.materials[0].base_color_texture, -1);
+  EXPECT_TRUE(has_warning(s, "image 0 'nowhere.png': could not be read or decoded; material 0 'Paper'"))
+      << testing::PrintToString(s.warnings);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Cameras and lights
+
+TEST(GltfLoader, CamerasWithNodeTransforms) {
+  TempDir dir;
+  Gltf g;
+  g.doc["cameras"] = {{{"name", "lens"}, {"type", "perspective"}, {"perspective", {{"yfov", 0.5}, {"aspectRatio", 1.5}, {"znear", 0.01}}}},
+                      {{"name", "ortho"}, {"type", "orthographic"},
+                       {"orthographic", {{"xmag", 1}, {"ymag", 1}, {"znear", 0.01}, {"zfar", 10}}}},
+                      {{"name", "bare"}, {"type", "perspective"}, {"perspective", {{"yfov", 1.0}, {"znear", 0.01}}}}};
+  const double s45 = std::sin(kPi / 4);
+  g.node({{"name", "Cam"}, {"camera", 0}, {"translation", {0, 0, 5}}, {"rotation", {0, s45, 0, s45}}});
+  g.node({{"name", "Top"}, {"camera", 1}});
+  g.node({{"camera", 2}, {"scale", {3, 3, 3}}});
+  const Scene s = load_gltf(g.write(dir.path(), "cams"));
+  ASSERT_EQ(s.cameras.size(), 2u);
+  const auto* c = s.find_camera("Cam");
+  ASSERT_NE(c, nullptr);
+  EXPECT_DOUBLE_EQ(c->yfov_rad, 0.5);
+  EXPECT_DOUBLE_EQ(c->aspect_ratio, 1.5);
+  EXPECT_NEAR(c->world_from_camera[3].z, 5.0, 1e-12);
+  // Turned 90 deg about +Y: the camera's -Z (view direction) points along -X.
+  const glm::dvec3 view = glm::dmat3(c->world_from_camera) * glm::dvec3(0, 0, -1);
+  EXPECT_NEAR(view.x, -1.0, 1e-9);
+  const auto* b = s.find_camera("bare");  // the camera's name when the node has none
+  ASSERT_NE(b, nullptr);
+  EXPECT_DOUBLE_EQ(b->aspect_ratio, 0.0);
+  EXPECT_NEAR(glm::length(glm::dvec3(b->world_from_camera[0])), 1.0, 1e-12);  // scale removed
+  EXPECT_TRUE(has_warning(s, "camera 1 'ortho' (node 1 'Top'): orthographic cameras are not used by spadgen; skipped"));
+  EXPECT_THAT(spadgen::scenes::summarize(s), HasSubstr("'Cam': yfov 28.6479"));
+}
+
+TEST(GltfLoader, PunctualLights) {
+  TempDir dir;
+  Gltf g;
+  g.doc["extensionsUsed"] = {"KHR_lights_punctual"};
+  g.doc["extensions"] = {{"KHR_lights_punctual",
+                          {{"lights",
+                            {{{"name", "bulb"}, {"type", "point"}, {"intensity", 10}, {"color", {1, 0.5, 0.25}}, {"range", 3}},
+                             {{"type", "spot"}, {"intensity", 100}, {"spot", {{"innerConeAngle", 0.1}, {"outerConeAngle", 0.5}}}},
+                             {{"name", "sun"}, {"type", "directional"}, {"intensity", 2}}}}}}};
+  const double s45 = std::sin(kPi / 4);
+  const auto light = [](int i) { return json{{"KHR_lights_punctual", {{"light", i}}}}; };
+  g.node({{"name", "Bulb"}, {"extensions", light(0)}, {"translation", {1, 2, 3}}});
+  g.node({{"name", "Spot"}, {"extensions", light(1)}, {"rotation", {-s45, 0, 0, s45}}, {"translation", {0, 2, 0}}});
+  g.node({{"extensions", light(2)}, {"rotation", {0, s45, 0, s45}}});
+  const Scene s = load_gltf(g.write(dir.path(), "lights"));
+  ASSERT_EQ(s.lights.size(), 3u);
+  const Light* p = s.find_light("Bulb");
+  ASSERT_NE(p, nullptr);
+  EXPECT_EQ(p->type, Light::Type::Point);
+  EXPECT_DOUBLE_EQ(p->intensity, 10);
+  EXPECT_DOUBLE_EQ(p->range, 3);
+  EXPECT_FLOAT_EQ(p->color.y, 0.5f);
+  EXPECT_NEAR(p->position.z, 3.0, 1e-12);
+  const Light* sp = s.find_light("Spot");
+  ASSERT_NE(sp, nullptr);
+  EXPECT_EQ(sp->type, Light::Type::Spot);
+  EXPECT_DOUBLE_EQ(sp->inner_cone_rad, 0.1);
+  EXPECT_DOUBLE_EQ(sp->outer_cone_rad, 0.5);
+  EXPECT_NEAR(sp->direction.y, -1.0, 1e-9);  // -90 deg about X turns -Z downwards
+  EXPECT_NEAR(sp->position.y, 2.0, 1e-12);
+  const Light* sun = s.find_light("sun");
+  ASSERT_NE(sun, nullptr);
+  EXPECT_EQ(sun->type, Light::Type::Directional);
+  EXPECT_NEAR(sun->direction.x, -1.0, 1e-9);
+  EXPECT_THAT(spadgen::scenes::summarize(s), HasSubstr("'Spot': spot, intensity 100 cd"));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Containers and scenes
+
+TEST(GltfLoader, ExternalEmbeddedAndGlbLoadTheSame) {
+  TempDir dir;
+  Gltf g;
+  const int m = g.triangle_mesh();
+  g.node({{"mesh", m}, {"translation", {0, 0, -2}}});
+  std::vector<std::vector<glm::vec3>> got;
+  for (auto form : {Gltf::Form::External, Gltf::Form::Embedded, Gltf::Form::Glb}) {
+    const Scene s = load_gltf(g.write(dir.path(), "forms" + std::to_string(static_cast<int>(form)), form));
+    ASSERT_EQ(s.meshes.size(), 1u);
+    got.push_back(s.meshes[0].positions);
+  }
+  EXPECT_EQ(got[0], got[1]);
+  EXPECT_EQ(got[0], got[2]);
+  EXPECT_FLOAT_EQ(got[0][0].z, -2.0f);
+}
+
+TEST(GltfLoader, DefaultAndNamedScenes) {
+  TempDir dir;
+  Gltf g;
+  const int m = g.triangle_mesh();
+  g.node({{"name", "first_node"}, {"mesh", m}}, false);
+  g.node({{"name", "second_node"}, {"mesh", m}}, false);
+  g.doc["scenes"] = {{{"name", "first"}, {"nodes", {0}}}, {{"name", "second"}, {"nodes", {1}}}};
+  g.doc["scene"] = 1;
+  const std::string path = g.write(dir.path(), "scenes");
+  EXPECT_EQ(load_gltf(path).meshes.at(0).gltf_node, 1);
+  EXPECT_EQ(load_gltf(path, "first").meshes.at(0).gltf_node, 0);
+  const std::string msg = load_error(path, "third");
+  EXPECT_THAT(msg, HasSubstr("no scene named 'third'"));
+  EXPECT_THAT(msg, HasSubstr("'first', 'second'"));
+}
+
+// ---------------------------------------------------------------------------------------------
+// The Blender-like fixture: laid out as Blender's glTF exporter writes it
+
+TEST(GltfLoader, BlenderExportLoadsAsIs) {
+  const std::string path = std::string(SPADGEN_SOURCE_DIR) + "/tests/data/gltf/blender_like/scene.gltf";
+  const Scene s = load_gltf(path);
+  ASSERT_EQ(s.meshes.size(), 1u);
+  EXPECT_EQ(s.meshes[0].name, "Cube/Cube/0");
+  EXPECT_EQ(s.meshes[0].triangle_count(), 12u);
+  float zmax = -1e9f;
+  for (const auto& p : s.meshes[0].positions) zmax = std::max(zmax, p.z);
+  EXPECT_NEAR(zmax, -1.75, 1e-6);  // a 0.5 m cube centred 2 m in front
+  ASSERT_EQ(s.materials.size(), 1u);
+  const auto& glass = s.materials[0];
+  EXPECT_EQ(glass.name, "Glass");
+  EXPECT_FLOAT_EQ(glass.transmission, 1.0f);
+  EXPECT_NEAR(glass.ior, 1.45, 1e-6);
+  EXPECT_NEAR(glass.roughness, 0.1, 1e-6);
+  EXPECT_TRUE(glass.double_sided);
+  // Blender's camera: the object node holds the placement, a child "_Orientation" node turns -90
+  // deg about X; together they look down -Z from (0, 0.1, 1.5).
+  ASSERT_EQ(s.cameras.size(), 1u);
+  const auto& cam = s.cameras[0];
+  EXPECT_EQ(cam.name, "Camera_Orientation");
+  EXPECT_NEAR(cam.yfov_rad, 0.39959652046304894, 1e-12);
+  EXPECT_NEAR(cam.aspect_ratio, 16.0 / 9.0, 1e-12);
+  const glm::dvec3 view = glm::dmat3(cam.world_from_camera) * glm::dvec3(0, 0, -1);
+  const glm::dvec3 up = glm::dmat3(cam.world_from_camera) * glm::dvec3(0, 1, 0);
+  EXPECT_NEAR(view.z, -1.0, 1e-6);
+  EXPECT_NEAR(up.y, 1.0, 1e-6);
+  EXPECT_NEAR(cam.world_from_camera[3].y, 0.1, 1e-7);
+  EXPECT_NEAR(cam.world_from_camera[3].z, 1.5, 1e-12);
+  ASSERT_EQ(s.lights.size(), 1u);
+  EXPECT_EQ(s.lights[0].type, Light::Type::Spot);
+  EXPECT_NEAR(s.lights[0].direction.y, -1.0, 1e-6);
+  EXPECT_NEAR(s.lights[0].position.x, 0.5, 1e-12);
+  // Blender adds KHR_materials_specular, which spadgen does not use: said once, not fatal.
+  EXPECT_EQ(s.warnings, (std::vector<std::string>{"extension 'KHR_materials_specular' is not used by spadgen; ignored"}));
+  const std::string summary = spadgen::scenes::summarize(s);
+  EXPECT_THAT(summary, HasSubstr("scene.gltf"));
+  EXPECT_THAT(summary, HasSubstr("meshes: 1 (12 triangles)"));
+  EXPECT_THAT(summary, HasSubstr("'Glass'"));
+  EXPECT_THAT(summary, HasSubstr("KHR_materials_ior 1.45"));
+  EXPECT_THAT(summary, HasSubstr("cameras: 1"));
+  EXPECT_THAT(summary, HasSubstr("lights: 1"));
+  EXPECT_THAT(summary, HasSubstr("KHR_materials_specular"));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Broken files: an Error naming the file and the element
+
+class BrokenGltf : public testing::Test {
+ protected:
+  std::string error_of(const Gltf& g, Gltf::Form form = Gltf::Form::External) {
+    path_ = g.write(dir_.path(), "broken", form);
+    return load_error(path_);
+  }
+  void expect_names_file(const std::string& msg) { EXPECT_THAT(msg, HasSubstr(path_)); }
+  TempDir dir_;
+  std::string path_;
+};
+
+TEST_F(BrokenGltf, MissingFile) {
+  const std::string msg = load_error((dir_.path() / "nothing.gltf").string());
+  EXPECT_THAT(msg, HasSubstr("nothing.gltf: glTF file not found"));
+}
+
+TEST_F(BrokenGltf, NotJson) {
+  write_file(dir_.path() / "junk.gltf", "{ this is not json");
+  EXPECT_THAT(load_error((dir_.path() / "junk.gltf").string()), HasSubstr("junk.gltf"));
+}
+
+TEST_F(BrokenGltf, MissingBufferFile) {
+  Gltf g;
+  g.node({{"mesh", g.triangle_mesh()}});
+  g.doc["buffers"] = {{{"byteLength", 12}, {"uri", "gone.bin"}}};
+  g.bin.clear();
+  path_ = (dir_.path() / "nobuf.gltf").string();
+  write_file(path_, g.doc.dump());
+  const std::string msg = load_error(path_);
+  expect_names_file(msg);
+  EXPECT_THAT(msg, HasSubstr("buffer 0: its file 'gone.bin' was not found"));
+}
+
+TEST_F(BrokenGltf, IndexOutOfRange) {
+  Gltf g;
+  const int pos = g.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const int idx = g.indices(std::vector<uint16_t>{0, 1, 7}, kUShort);
+  g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}}}, {"indices", idx}}}), "Tri")}});
+  const std::string msg = error_of(g);
+  expect_names_file(msg);
+  EXPECT_THAT(msg, HasSubstr("mesh 0 'Tri' primitive 0: index 7 at position 2 of accessor 1 is out of range of the 3 vertices"));
+}
+
+TEST_F(BrokenGltf, AccessorPastItsBufferView) {
+  Gltf g;
+  const int pos = g.accessor(g.view_of(std::vector<float>{0, 0, 0, 1, 0, 0, 0, 1, 0}), kFloat, "VEC3", 10);
+  g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}}}}}), "Tri")}});
+  const std::string msg = error_of(g);
+  expect_names_file(msg);
+  EXPECT_THAT(msg, HasSubstr("accessor 0 (mesh 0 'Tri' primitive 0 POSITION): reads bytes 0 to 120 of its bufferView 0, past its end (36 bytes)"));
+}
+
+TEST_F(BrokenGltf, AccessorOffsetWithStridePastItsBufferView) {
+  Gltf g;
+  // Three interleaved vertices of 24 bytes: the accessor at offset 16 would read past the view.
+  const int v = g.view_of(std::vector<float>(18, 0.0f), 24);
+  const int pos = g.accessor(v, kFloat, "VEC3", 3, 16);
+  g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}}}}}))}});
+  EXPECT_THAT(error_of(g), HasSubstr("reads bytes 16 to 76 of its bufferView 0, past its end (72 bytes)"));
+}
+
+TEST_F(BrokenGltf, BufferViewPastItsBuffer) {
+  Gltf g;
+  const int pos = g.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  g.doc["bufferViews"][0]["byteLength"] = 400;
+  g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}}}}}))}});
+  const std::string msg = error_of(g, Gltf::Form::Embedded);
+  expect_names_file(msg);
+  EXPECT_THAT(msg, HasSubstr("bufferView 0: bytes 0 to 400 lie past the end of buffer 0 (36 bytes)"));
+}
+
+TEST_F(BrokenGltf, StrideSmallerThanElement) {
+  Gltf g;
+  const int pos = g.accessor(g.view_of(std::vector<float>{0, 0, 0, 1, 0, 0, 0, 1, 0}, 8), kFloat, "VEC3", 3);
+  g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}}}}}))}});
+  EXPECT_THAT(error_of(g), HasSubstr("bufferView 0: byteStride 8 is smaller than the 12-byte elements of accessor 0"));
+}
+
+TEST_F(BrokenGltf, MissingAccessorMaterialAndMesh) {
+  {
+    Gltf g;
+    g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", 9}}}}}), "Tri")}});
+    EXPECT_THAT(error_of(g), HasSubstr("mesh 0 'Tri' primitive 0 POSITION: accessor 9 does not exist (the file has 0 accessors)"));
+  }
+  {
+    Gltf g;
+    const int pos = g.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+    g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}}}, {"material", 3}}}))}});
+    EXPECT_THAT(error_of(g), HasSubstr("mesh 0 primitive 0: material 3 does not exist (the file has 0 materials)"));
+  }
+  {
+    Gltf g;
+    g.node({{"name", "lost"}, {"mesh", 4}});
+    EXPECT_THAT(error_of(g), HasSubstr("node 0 'lost': mesh 4 does not exist"));
+  }
+}
+
+TEST_F(BrokenGltf, MissingPosition) {
+  Gltf g;
+  const int nor = g.positions({0, 0, 1, 0, 0, 1, 0, 0, 1});
+  g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"NORMAL", nor}}}}}), "NoPos")}});
+  const std::string msg = error_of(g);
+  expect_names_file(msg);
+  EXPECT_THAT(msg, HasSubstr("mesh 0 'NoPos' primitive 0: has no POSITION attribute"));
+}
+
+TEST_F(BrokenGltf, BadCameraYfov) {
+  for (double yfov : {0.0, -0.5, 3.5}) {
+    Gltf g;
+    g.doc["cameras"] = {{{"name", "Cam"}, {"type", "perspective"}, {"perspective", {{"yfov", yfov}, {"znear", 0.1}}}}};
+    g.node({{"name", "CamNode"}, {"camera", 0}});
+    const std::string msg = error_of(g);
+    expect_names_file(msg);
+    EXPECT_THAT(msg, HasSubstr("camera 0 'Cam' (node 0 'CamNode'): yfov"));
+    EXPECT_THAT(msg, HasSubstr("must lie in (0, pi) radians"));
+  }
+}
+
+TEST_F(BrokenGltf, NodeCycle) {
+  {
+    Gltf g;
+    g.node({{"name", "A"}, {"children", {1}}});
+    g.node({{"name", "B"}, {"children", {0}}}, false);
+    const std::string msg = error_of(g);
+    expect_names_file(msg);
+    EXPECT_THAT(msg, HasSubstr("cycle in the node hierarchy"));
+    EXPECT_THAT(msg, HasSubstr("node 0 'A'"));
+    EXPECT_THAT(msg, HasSubstr("node 1 'B'"));
+  }
+  {
+    Gltf g;
+    g.node({{"name", "Self"}, {"children", {0}}});
+    EXPECT_THAT(error_of(g), HasSubstr("node 0 'Self': cycle in the node hierarchy: the node is its own child"));
+  }
+  {
+    Gltf g;
+    g.node({{"name", "P1"}, {"children", {2}}});
+    g.node({{"name", "P2"}, {"children", {2}}});
+    g.node({{"name", "Kid"}}, false);
+    EXPECT_THAT(error_of(g), HasSubstr("node 2 'Kid': has two parents"));
+  }
+}
+
+TEST_F(BrokenGltf, SparseIndexOutOfRange) {
+  Gltf g;
+  const int sidx = g.view_of(std::vector<uint8_t>{9, 0, 0, 0});
+  const int sval = g.view_of(std::vector<float>{5, 5, 5});
+  const int a = g.accessor(-1, kFloat, "VEC3", 3);
+  g.doc["accessors"][0]["sparse"] = {
+      {"count", 1}, {"indices", {{"bufferView", sidx}, {"componentType", kUByte}}}, {"values", {{"bufferView", sval}}}};
+  g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", a}}}}}))}});
+  EXPECT_THAT(error_of(g), HasSubstr("accessor 0 (mesh 0 primitive 0 POSITION): sparse index 9 is out of range of its 3 elements"));
+}
+
+TEST_F(BrokenGltf, ImageBufferViewPastItsBuffer) {
+  Gltf g;
+  const std::vector<uint8_t> png = unbase64(kPng2x2);
+  const int v = g.view_of(png);
+  g.doc["bufferViews"][static_cast<size_t>(v)]["byteLength"] = 4000;
+  g.doc["images"] = {{{"bufferView", v}, {"mimeType", "image/png"}}};
+  g.node({{"mesh", g.triangle_mesh()}});
+  const std::string msg = error_of(g, Gltf::Form::Glb);
+  expect_names_file(msg);
+  EXPECT_THAT(msg, HasSubstr("image 0: bufferView 0 does not exist or lies past the end of its buffer"));
+}
+
+TEST_F(BrokenGltf, BadTextureAndSpotCone) {
+  {
+    Gltf g;
+    g.doc["materials"] = {{{"name", "M"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 5}}}}}}};
+    g.node({{"mesh", g.triangle_mesh()}});
+    EXPECT_THAT(error_of(g), HasSubstr("material 0 'M' baseColorTexture: texture 5 does not exist"));
+  }
+  {
+    Gltf g;
+    g.doc["extensions"] = {{"KHR_lights_punctual",
+                            {{"lights", {{{"type", "spot"}, {"spot", {{"innerConeAngle", 0.6}, {"outerConeAngle", 0.5}}}}}}}}};
+    g.node({{"name", "S"}, {"extensions", {{"KHR_lights_punctual", {{"light", 0}}}}}});
+    EXPECT_THAT(error_of(g), HasSubstr("light 0 (node 0 'S'): spot cone angles"));
+  }
+  {
+    Gltf g;
+    g.node({{"name", "S"}, {"extensions", {{"KHR_lights_punctual", {{"light", 2}}}}}});
+    EXPECT_THAT(error_of(g), HasSubstr("node 0 'S': KHR_lights_punctual light 2 does not exist"));
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The shipped paper scenes (scenes/paper/, written by scenes_gen)
+
+std::string paper(const std::string& name) { return std::string(SPADGEN_SOURCE_DIR) + "/scenes/paper/" + name; }
+
+const spadgen::scenes::Mesh& mesh_named(const Scene& s, const std::string& name) {
+  for (const auto& m : s.meshes)
+    if (m.name == name) return m;
+  throw std::runtime_error("no mesh " + name);
+}
+
+TEST(PaperScenes, FlatTarget) {
+  const Scene s = load_gltf(paper("flat_target.gltf"));
+  EXPECT_TRUE(s.warnings.empty()) << testing::PrintToString(s.warnings);
+  const auto& target = mesh_named(s, "target/target/0");
+  ASSERT_GE(target.material, 0);
+  const auto& m = s.materials[static_cast<size_t>(target.material)];
+  EXPECT_FLOAT_EQ(m.base_color.r, 0.6f);
+  EXPECT_FLOAT_EQ(m.base_color.g, 0.6f);
+  EXPECT_FLOAT_EQ(m.base_color.b, 0.6f);
+  EXPECT_FLOAT_EQ(m.metallic, 0.0f);
+  EXPECT_FLOAT_EQ(m.roughness, 1.0f);
+  EXPECT_FALSE(m.transmissive());
+  glm::vec3 lo(1e9f), hi(-1e9f);
+  for (const auto& p : target.positions) {
+    lo = glm::min(lo, p);
+    hi = glm::max(hi, p);
+  }
+  EXPECT_EQ(lo.z, 0.0f);
+  EXPECT_EQ(hi.z, 0.0f);
+  // Fills the full chip's view (tan of the half angles 0.401 by 0.392) from 1.6 m: 0.64 m each side.
+  EXPECT_LE(lo.x, -0.7f);
+  EXPECT_GE(hi.x, 0.7f);
+  EXPECT_LE(lo.y, -0.7f);
+  EXPECT_GE(hi.y, 0.7f);
+  expect_vec(target.normals[0], {0, 0, 1});
+  EXPECT_NEAR(face_normal(target, 0).z, 1.0, 1e-9);
+}
+
+TEST(PaperScenes, MultiObject) {
+  const Scene s = load_gltf(paper("multi_object.gltf"));
+  EXPECT_TRUE(s.warnings.empty()) << testing::PrintToString(s.warnings);
+  const auto& plate = mesh_named(s, "plate/plate/0");
+  float zmin = 1e9f, zmax = -1e9f, xmax = -1e9f;
+  for (const auto& p : plate.positions) {
+    zmin = std::min(zmin, p.z);
+    zmax = std::max(zmax, p.z);
+    xmax = std::max(xmax, p.x);
+  }
+  EXPECT_NEAR(zmax, -0.45, 1e-6);   // front face
+  EXPECT_NEAR(zmin, -0.452, 1e-6);  // 2 mm thick
+  EXPECT_NEAR(xmax, 0.0, 1e-6);     // covers the left half of the view
+  EXPECT_EQ(plate.triangle_count(), 12u);  // a closed box
+  const auto& pm = s.materials[static_cast<size_t>(plate.material)];
+  EXPECT_FLOAT_EQ(pm.transmission, 1.0f);
+  EXPECT_FLOAT_EQ(pm.ior, 1.5f);
+  EXPECT_FLOAT_EQ(pm.thickness_m, 0.002f);
+  EXPECT_NEAR(pm.roughness, 0.1, 1e-7);
+  EXPECT_FLOAT_EQ(pm.metallic, 0.0f);
+  EXPECT_EQ(pm.base_color, glm::vec4(1.0f));
+
+  const auto& sphere = mesh_named(s, "sphere/sphere/0");
+  const glm::dvec3 centre(0, 0, -0.85);
+  double nearest = 1e9, rmin = 1e9, rmax = 0;
+  for (const auto& p : sphere.positions) {
+    nearest = std::min(nearest, glm::length(glm::dvec3(p)));
+    const double r = glm::length(glm::dvec3(p) - centre);
+    rmin = std::min(rmin, r);
+    rmax = std::max(rmax, r);
+  }
+  EXPECT_NEAR(nearest, 0.75, 1e-6);
+  EXPECT_NEAR(rmin, 0.1, 1e-6);
+  EXPECT_NEAR(rmax, 0.1, 1e-6);
+  EXPECT_EQ(sphere.triangle_count(), 81920u);
+  // Every triangle faces outwards.
+  for (size_t t = 0; t < sphere.triangle_count(); t += 997) {
+    const glm::dvec3 c = (glm::dvec3(sphere.positions[sphere.indices[3 * t]]) - centre);
+    EXPECT_GT(glm::dot(face_normal(sphere, t), c), 0.0) << t;
+  }
+  const auto& sm = s.materials[static_cast<size_t>(sphere.material)];
+  EXPECT_FLOAT_EQ(sm.base_color.r, 0.8f);
+  EXPECT_FALSE(sm.transmissive());
+}
+
+TEST(PaperScenes, TestChart) {
+  const Scene s = load_gltf(paper("test_chart.gltf"));
+  EXPECT_TRUE(s.warnings.empty()) << testing::PrintToString(s.warnings);
+  const auto& chart = mesh_named(s, "chart/chart/0");
+  for (const auto& p : chart.positions) EXPECT_NEAR(p.z, -1.0, 1e-6);
+  const auto& m = s.materials[static_cast<size_t>(chart.material)];
+  ASSERT_GE(m.base_color_texture, 0);
+  const auto& tex = s.textures[static_cast<size_t>(m.base_color_texture)];
+  EXPECT_EQ(tex.width, 2048);
+  EXPECT_EQ(tex.height, 2048);
+  EXPECT_EQ(tex.wrap_s, 33071);
+  // The frame is black ink (reflectance 0.04, sRGB 56), the paper white (0.8, sRGB 231).
+  EXPECT_EQ(tex.rgba[0], 56);
+  const size_t centre_left = (static_cast<size_t>(1100) * 2048 + 40) * 4;
+  EXPECT_EQ(tex.rgba[centre_left], 231);
+  ASSERT_EQ(chart.texcoords0.size(), 4u);
+}
+
+}  // namespace
