@@ -1,1 +1,102 @@
-// Placeholder until this file is written; see the header beside it.
+#include "renderer.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <atomic>
+#include <string>
+#include <vector>
+
+#include "core/error.h"
+#include "core/units.h"
+#include "renderer_impl.h"
+
+namespace spadgen::render {
+namespace {
+
+std::string rect_str(const PixelRect& r) {
+  return "[" + std::to_string(r.x0) + ", " + std::to_string(r.y0) + ", " + std::to_string(r.width) + ", " +
+         std::to_string(r.height) + "]";
+}
+
+}  // namespace
+
+Renderer::Impl::Impl(const scenes::Scene& s, const RunConfig& c)
+    : scene(s),
+      config(c),
+      camera(config.camera, scene),
+      laser(make_laser(config, camera, scene, &laser_light)),
+      ambient_weights(rgb_weights_over(config.ambient.wavelength_m, config.ambient.bandwidth_m)),
+      ambient(make_ambient(config, scene, ambient_weights, laser_light)),
+      embree(scene),
+      shading(scene, config.laser.wavelength_m, ambient_weights,
+              photons_per_second_per_photometric_unit(config.ambient.wavelength_m, config.ambient.bandwidth_m)),
+      integrator(config, scene, embree, shading, camera, laser, ambient) {
+  if (config.render.max_layers < 1)
+    throw Error("render.max_layers must be >= 1, found " + std::to_string(config.render.max_layers));
+}
+
+void Renderer::Impl::check_rect(const PixelRect& r, const char* what) const {
+  if (r.width <= 0 || r.height <= 0 || r.x0 < 0 || r.y0 < 0 || r.x1() > camera.width() || r.y1() > camera.height())
+    throw Error(std::string(what) + " " + rect_str(r) + " is empty or outside the " +
+                std::to_string(camera.width()) + " x " + std::to_string(camera.height()) + " sensor");
+}
+
+Renderer::Renderer(const scenes::Scene& scene, const RunConfig& config)
+    : impl_(std::make_unique<Impl>(scene, config)) {}
+
+Renderer::~Renderer() = default;
+
+double Renderer::photons_per_pulse() const {
+  const LaserConfig& l = impl_->config.laser;
+  return spadgen::photons_per_pulse(l.average_power_W, l.repetition_rate_Hz, l.wavelength_m);
+}
+
+TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_rect, const TimeAxis& axis,
+                                  RenderStats* stats) const {
+  const Impl& im = *impl_;
+  im.check_rect(data_rect, "transient data_rect");
+  if (rect.x0 < data_rect.x0 || rect.y0 < data_rect.y0 || rect.x1() > data_rect.x1() || rect.y1() > data_rect.y1())
+    throw Error("transient rect " + rect_str(rect) + " is not inside its data_rect " + rect_str(data_rect));
+  if (axis.bins < 0 || (axis.bins > 0 && !(axis.bin_width_s > 0.0)) || !(axis.period_s >= 0.0))
+    throw Error("transient time axis: expected bins >= 0, a positive bin width and a period >= 0");
+
+  TransientTile tile;
+  tile.rect = rect;
+  tile.data_rect = data_rect;
+  tile.axis = axis;
+  const auto n = static_cast<size_t>(data_rect.count());
+  const auto bins = static_cast<size_t>(axis.bins);
+  tile.transient.assign(n * bins, 0.0f);
+  tile.laser_total.assign(n, 0.0);
+  tile.out_of_window.assign(n, 0.0);
+  tile.ambient_rate.assign(n, 0.0f);
+
+  std::atomic<uint64_t> camera_rays{0}, shadow_rays{0};
+  tbb::parallel_for(tbb::blocked_range<int>(data_rect.y0, data_rect.y1()), [&](const tbb::blocked_range<int>& rows) {
+    // Accumulated in double per pixel; stored as float. Pixels are independent, so the split into tasks
+    // does not change any result.
+    std::vector<double> acc(bins);
+    RayCounts rays;
+    for (int y = rows.begin(); y < rows.end(); ++y)
+      for (int x = data_rect.x0; x < data_rect.x1(); ++x) {
+        std::fill(acc.begin(), acc.end(), 0.0);
+        const PixelTotals t = im.integrator.render_pixel(x, y, axis, acc.data(), &rays);
+        const auto i = static_cast<size_t>(data_rect.index(x, y));
+        float* out = tile.transient.data() + i * bins;
+        for (size_t b = 0; b < bins; ++b) out[b] = static_cast<float>(acc[b]);
+        tile.laser_total[i] = t.laser_total;
+        tile.out_of_window[i] = t.out_of_window;
+        tile.ambient_rate[i] = static_cast<float>(t.ambient_rate);
+      }
+    camera_rays += rays.camera;
+    shadow_rays += rays.shadow;
+  });
+  if (stats) {
+    stats->camera_rays += camera_rays.load();
+    stats->shadow_rays += shadow_rays.load();
+  }
+  return tile;
+}
+
+}  // namespace spadgen::render

@@ -1,7 +1,26 @@
 // The renderer: an Embree scene over the immutable Scene, camera rays, exact ground truth along primary
-// rays, and a transient path tracer in absolute units (photons per laser pulse reaching each pixel's
-// SPAD, after optics and fill factor, before PDP). Pixel coordinates are full-sensor coordinates
-// (camera.width_px x camera.height_px); a crop only selects which pixels are asked for.
+// rays, and a transient path tracer in absolute units. Pixel coordinates are full-sensor coordinates
+// (camera.width_px x camera.height_px, row 0 at the top); a crop only selects which pixels are asked for.
+//
+// What a pixel receives (the camera measurement): photons per laser pulse arriving at the pixel's
+// photosensitive area,
+//   Phi = FF * optics_transmission * p^2 * pi / (4 N^2) * E_x[ L(omega_x) cos^4(theta_x) ]
+// with x uniform over the pixel (jittered per sample), L the photon radiance along the ray through x and
+// theta its angle to the optical axis. The output INCLUDES the fill factor (pixel_A, pixel_B, or per half
+// for the full_chip preset: rows >= H/2 are pixel B) and the optics transmission; it EXCLUDES the PDP,
+// which the sensor stage applies. A Lambertian plane of albedo rho at distance d on the axis, lit by
+// radiant intensity I from the camera, gives rho I p^2 FF / (4 N^2 d^2) (DESIGN.md). The ambient rate
+// uses the same measurement, in photons per second.
+//
+// Time: a path arrives at emission_delay + (optical path length) / c, the camera segment counted from the
+// camera centre. Its contribution goes to the bin of every periodic image t + m * period inside the
+// window (returns later than a period fold into the next one); with no image inside, to out_of_window.
+// laser_total holds every contribution. The transient is rendered for a delta pulse: the pulse shape and
+// the SPAD jitter are the sensor's convolution.
+//
+// The Renderer copies the Scene (Embree shares the copy's buffers), so the caller's Scene may go away.
+// transient() and ground_truth() are const and may be called concurrently from TBB workers.
+// See docs/render.md for the materials, lights, units and what is approximated.
 #pragma once
 #include <cstdint>
 #include <memory>

@@ -1,0 +1,217 @@
+#include "bsdf.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace spadgen::render {
+namespace {
+
+constexpr float kPiF = 3.14159265358979f;
+
+float ggx_d(float alpha, float cos_h) {
+  if (cos_h <= 0.0f) return 0.0f;
+  const float a2 = alpha * alpha;
+  const float c2 = cos_h * cos_h;
+  const float d = c2 * (a2 - 1.0f) + 1.0f;
+  return a2 / (kPiF * d * d);
+}
+
+float ggx_g1(float alpha, float cos_w) {
+  const float c2 = std::max(cos_w * cos_w, 1e-12f);
+  const float tan2 = std::max(0.0f, (1.0f - c2) / c2);
+  return 2.0f / (1.0f + std::sqrt(1.0f + alpha * alpha * tan2));
+}
+
+// Microfacet normal drawn with density D(h) cos(theta_h).
+glm::vec3 sample_ggx(float alpha, float u, float v) {
+  const float tan2 = alpha * alpha * u / std::max(1.0f - u, 1e-7f);
+  const float cos_t = 1.0f / std::sqrt(1.0f + tan2);
+  const float sin_t = std::sqrt(std::max(0.0f, 1.0f - cos_t * cos_t));
+  const float phi = 2.0f * kPiF * v;
+  return {sin_t * std::cos(phi), sin_t * std::sin(phi), cos_t};
+}
+
+Spec schlick(const Spec& f0, float c) {
+  const float m = 1.0f - std::clamp(c, 0.0f, 1.0f);
+  const float m5 = m * m * m * m * m;
+  return f0 + (Spec(1.0f) - f0) * m5;
+}
+
+float max_of(const Spec& s) { return std::max(s.x, s.y); }
+
+}  // namespace
+
+float fresnel_dielectric(float cos_i, float eta) {
+  cos_i = std::clamp(cos_i, 0.0f, 1.0f);
+  const float sin2_t = (1.0f - cos_i * cos_i) / (eta * eta);
+  if (sin2_t >= 1.0f) return 1.0f;
+  const float cos_t = std::sqrt(1.0f - sin2_t);
+  const float rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+  const float rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+  return 0.5f * (rs * rs + rp * rp);
+}
+
+Bsdf::Bsdf(const MaterialPoint& m, const glm::vec3& n_shading, const glm::vec3& n_geometric,
+           const glm::vec3& wo_world, bool entering)
+    : m_(m) {
+  ng_ = glm::dot(wo_world, n_geometric) < 0.0f ? -n_geometric : n_geometric;
+  glm::vec3 ns = glm::dot(n_shading, ng_) < 0.0f ? -n_shading : n_shading;
+  // A shading normal that puts wo below the surface would make the frame meaningless.
+  if (glm::dot(wo_world, ns) <= 1e-4f) ns = ng_;
+  n_ = ns;
+  make_basis(n_, &t_, &b_);
+  wo_ = to_local(wo_world);
+  wo_.z = std::max(wo_.z, 1e-6f);
+
+  const bool volume = m_.transmission > 0.0f && !m_.thin_walled;
+  eta_ = volume ? (entering ? m_.ior : 1.0f / m_.ior) : 1.0f;
+  const float eta_fresnel = volume ? eta_ : m_.ior;
+  fresnel_o_ = fresnel_dielectric(wo_.z, eta_fresnel);
+  if (m_.lambertian) {
+    diffuse_weight_ = max_of(m_.base);
+    return;
+  }
+  const float dielectric = 1.0f - m_.metallic;
+  specular_weight_ = dielectric * fresnel_o_ + m_.metallic * max_of(schlick(m_.base, wo_.z));
+  transmission_weight_ = dielectric * m_.transmission * (1.0f - fresnel_o_) * max_of(m_.base);
+  diffuse_weight_ = dielectric * (1.0f - m_.transmission) * (1.0f - fresnel_o_) * max_of(m_.base);
+}
+
+Spec Bsdf::specular_f(const glm::vec3& wo, const glm::vec3& wi) const {
+  const glm::vec3 h = glm::normalize(wo + wi);
+  const float c = glm::dot(wo, h);
+  const bool volume = m_.transmission > 0.0f && !m_.thin_walled;
+  const float f_d = fresnel_dielectric(c, volume ? eta_ : m_.ior);
+  const Spec f = (1.0f - m_.metallic) * Spec(f_d) + m_.metallic * schlick(m_.base, c);
+  const float dg = ggx_d(m_.alpha, h.z) * ggx_g1(m_.alpha, wo.z) * ggx_g1(m_.alpha, wi.z);
+  return f * (dg / (4.0f * wo.z * wi.z));
+}
+
+Spec Bsdf::transmission_f(const glm::vec3& wo, const glm::vec3& wi) const {
+  const Spec tint = (1.0f - m_.metallic) * m_.transmission * m_.base;
+  if (m_.thin_walled) {
+    // Thin-walled rough transmission: the reflection lobe mirrored through the surface.
+    const glm::vec3 wr(wi.x, wi.y, -wi.z);
+    const glm::vec3 h = glm::normalize(wo + wr);
+    const float f_d = fresnel_dielectric(glm::dot(wo, h), m_.ior);
+    const float dg = ggx_d(m_.alpha, h.z) * ggx_g1(m_.alpha, wo.z) * ggx_g1(m_.alpha, wr.z);
+    return tint * ((1.0f - f_d) * dg / (4.0f * wo.z * wr.z));
+  }
+  // Walter et al. 2007 in radiance mode (pbrt-v3 MicrofacetTransmission with the 1/eta^2 factor folded in).
+  glm::vec3 h = glm::normalize(wo + eta_ * wi);
+  if (h.z < 0.0f) h = -h;
+  const float co = glm::dot(wo, h), ci = glm::dot(wi, h);
+  if (co <= 0.0f || ci >= 0.0f) return Spec(0.0f);
+  const float f_d = fresnel_dielectric(co, eta_);
+  const float denom = co + eta_ * ci;
+  const float dg = ggx_d(m_.alpha, h.z) * ggx_g1(m_.alpha, wo.z) * ggx_g1(m_.alpha, wi.z);
+  return tint * ((1.0f - f_d) * dg * std::fabs(ci) * co / (std::fabs(wi.z) * wo.z * denom * denom));
+}
+
+Spec Bsdf::eval_cos(const glm::vec3& wi_world) const {
+  const glm::vec3 wi = to_local(wi_world);
+  const float g = glm::dot(wi_world, ng_);
+  if (g > 0.0f && wi.z > 0.0f) {
+    if (m_.lambertian) return m_.base * (wi.z / kPiF);
+    Spec f = m_.base * ((1.0f - m_.metallic) * (1.0f - m_.transmission) * (1.0f - fresnel_o_) / kPiF);
+    if (!m_.smooth()) f += specular_f(wo_, wi);
+    return f * wi.z;
+  }
+  if (g < 0.0f && wi.z < 0.0f && !m_.smooth() && m_.transmission > 0.0f && m_.metallic < 1.0f)
+    return transmission_f(wo_, wi) * std::fabs(wi.z);
+  return Spec(0.0f);
+}
+
+BsdfSample Bsdf::sample(Uniform3 u) const {
+  BsdfSample s;
+  const float total = diffuse_weight_ + specular_weight_ + transmission_weight_;
+  if (!(total > 0.0f)) return s;
+  const float pick = u.a * total;
+
+  if (pick < diffuse_weight_) {
+    const float p = diffuse_weight_ / total;
+    const float r = std::sqrt(u.b), phi = 2.0f * kPiF * u.c;
+    const glm::vec3 wi(r * std::cos(phi), r * std::sin(phi), std::sqrt(std::max(0.0f, 1.0f - u.b)));
+    s.wi = to_world(wi);
+    if (glm::dot(s.wi, ng_) <= 0.0f) return s;
+    const float k = m_.lambertian ? 1.0f : (1.0f - m_.metallic) * (1.0f - m_.transmission) * (1.0f - fresnel_o_);
+    s.weight = m_.base * (k / p);
+    return s;
+  }
+
+  if (pick < diffuse_weight_ + specular_weight_) {
+    const float p = specular_weight_ / total;
+    if (m_.smooth()) {
+      s.delta = true;
+      s.wi = to_world(glm::vec3(-wo_.x, -wo_.y, wo_.z));
+      if (glm::dot(s.wi, ng_) <= 0.0f) return s;
+      const Spec f = (1.0f - m_.metallic) * Spec(fresnel_o_) + m_.metallic * schlick(m_.base, wo_.z);
+      s.weight = f / p;
+      return s;
+    }
+    const glm::vec3 h = sample_ggx(m_.alpha, u.b, u.c);
+    const float c = glm::dot(wo_, h);
+    if (c <= 0.0f) return s;
+    const glm::vec3 wi = 2.0f * c * h - wo_;
+    if (wi.z <= 0.0f) return s;
+    s.wi = to_world(wi);
+    if (glm::dot(s.wi, ng_) <= 0.0f) return s;
+    const float pdf = ggx_d(m_.alpha, h.z) * h.z / (4.0f * c);
+    if (!(pdf > 0.0f)) return s;
+    s.weight = specular_f(wo_, wi) * (wi.z / (p * pdf));
+    return s;
+  }
+
+  const float p = transmission_weight_ / total;
+  s.transmitted = true;
+  const Spec tint = (1.0f - m_.metallic) * m_.transmission * m_.base;
+  if (m_.smooth()) {
+    s.delta = true;
+    if (m_.thin_walled) {
+      s.wi = -to_world(wo_);
+      s.weight = tint * ((1.0f - fresnel_o_) / p);
+    } else {
+      const float sin2_t = (1.0f - wo_.z * wo_.z) / (eta_ * eta_);
+      if (sin2_t >= 1.0f) return s;
+      const float cos_t = std::sqrt(1.0f - sin2_t);
+      s.wi = to_world(glm::vec3(-wo_.x / eta_, -wo_.y / eta_, -cos_t));
+      // Radiance is n^2-compressed across the interface; a round trip air-glass-air cancels it.
+      s.weight = tint * ((1.0f - fresnel_o_) / (eta_ * eta_ * p));
+    }
+    if (glm::dot(s.wi, ng_) >= 0.0f) s.weight = Spec(0.0f);
+    return s;
+  }
+  const glm::vec3 h = sample_ggx(m_.alpha, u.b, u.c);
+  const float c = glm::dot(wo_, h);
+  if (c <= 0.0f) return s;
+  glm::vec3 wi;
+  float pdf;
+  if (m_.thin_walled) {
+    const glm::vec3 wr = 2.0f * c * h - wo_;
+    if (wr.z <= 0.0f) return s;
+    wi = glm::vec3(wr.x, wr.y, -wr.z);
+    pdf = ggx_d(m_.alpha, h.z) * h.z / (4.0f * c);
+  } else {
+    const float sin2_t = (1.0f - c * c) / (eta_ * eta_);
+    if (sin2_t >= 1.0f) return s;
+    const float cos_t = std::sqrt(1.0f - sin2_t);
+    wi = -wo_ / eta_ + (c / eta_ - cos_t) * h;
+    if (wi.z >= 0.0f) return s;
+    const float ci = glm::dot(wi, h);
+    const float denom = c + eta_ * ci;
+    pdf = ggx_d(m_.alpha, h.z) * h.z * std::fabs(eta_ * eta_ * ci) / (denom * denom);
+  }
+  s.wi = to_world(wi);
+  if (glm::dot(s.wi, ng_) >= 0.0f || !(pdf > 0.0f)) return s;
+  s.weight = transmission_f(wo_, wi) * (std::fabs(wi.z) / (p * pdf));
+  return s;
+}
+
+Spec straight_transmittance(const MaterialPoint& m, float cos_theta, bool entering) {
+  if (!(m.transmission > 0.0f)) return Spec(0.0f);
+  const float eta = m.thin_walled ? m.ior : (entering ? m.ior : 1.0f / m.ior);
+  const float f = fresnel_dielectric(std::fabs(cos_theta), eta);
+  return (1.0f - m.metallic) * m.transmission * (1.0f - f) * m.base;
+}
+
+}  // namespace spadgen::render

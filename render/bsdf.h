@@ -1,0 +1,80 @@
+// Materials at a surface point: the glTF metallic-roughness model (Lambertian diffuse, GGX specular with
+// Fresnel, metals with Schlick Fresnel) and dielectric interfaces (KHR_materials_transmission / ior /
+// volume), smooth or rough, thin-walled or bounding a volume.
+//
+// Conventions: directions point away from the surface; `wo` towards where the path came from (the
+// camera side), `wi` towards the light. Values are for radiance (photon radiance) transport.
+// A material with metallic 0, roughness 1 and no transmission is pure Lambertian of albedo = base colour
+// (no 4 % specular layer), so that the closed-form camera equation holds exactly for diffuse targets.
+#pragma once
+#include <glm/glm.hpp>
+
+#include "rng_util.h"
+#include "scenes/scene.h"
+#include "spectrum.h"
+
+namespace spadgen::render {
+
+// Unpolarised Fresnel reflectance of a smooth dielectric interface; eta = n_transmitted / n_incident.
+// Returns 1 under total internal reflection.
+float fresnel_dielectric(float cos_incident, float eta);
+
+// A material resolved at one point, in the two channels (laser, ambient).
+struct MaterialPoint {
+  Spec base{1.0f};        // base colour (texture times factor), linear
+  float metallic = 0.0f;
+  float alpha = 1.0f;      // GGX alpha = roughness^2
+  float transmission = 0.0f;
+  float ior = 1.5f;
+  bool thin_walled = true; // KHR_materials_volume thickness 0
+  bool lambertian = false;
+  Spec emission{0.0f};     // ambient only: photon radiance, photons/s/m^2/sr (channel 1)
+
+  bool smooth() const { return alpha < 1e-3f; }
+};
+
+struct BsdfSample {
+  glm::vec3 wi{0.0f};
+  Spec weight{0.0f};      // f cos / pdf (divided by the lobe's selection probability)
+  bool delta = false;     // from a smooth (Dirac) lobe: no next-event estimation possible there
+  bool transmitted = false;
+};
+
+// The BSDF in a local frame around the shading normal, oriented to wo's side.
+class Bsdf {
+ public:
+  // n_shading and n_geometric are world unit normals (any side); wo_world unit.
+  // entering: whether a transmitted ray would go into the volume (wo on the front side); only matters for
+  // volumes (thin-walled surfaces have air on both sides).
+  Bsdf(const MaterialPoint& m, const glm::vec3& n_shading, const glm::vec3& n_geometric,
+       const glm::vec3& wo_world, bool entering);
+
+  bool has_non_delta() const { return m_.lambertian || !m_.smooth() || diffuse_weight_ > 0.0f; }
+  // f(wo, wi) |cos(wi)| over the non-Dirac lobes.
+  Spec eval_cos(const glm::vec3& wi_world) const;
+  // Draws 3 numbers from u (lobe choice and direction).
+  BsdfSample sample(Uniform3 u) const;
+
+  // Ratio n(wi side) / n(wo side) for a transmitted direction.
+  float eta() const { return eta_; }
+
+ private:
+  glm::vec3 to_local(const glm::vec3& v) const { return {glm::dot(v, t_), glm::dot(v, b_), glm::dot(v, n_)}; }
+  glm::vec3 to_world(const glm::vec3& v) const { return v.x * t_ + v.y * b_ + v.z * n_; }
+  Spec specular_f(const glm::vec3& wo, const glm::vec3& wi) const;
+  Spec transmission_f(const glm::vec3& wo, const glm::vec3& wi) const;
+
+  MaterialPoint m_;
+  glm::vec3 n_, t_, b_, ng_;  // ng_: geometric normal on wo's side
+  glm::vec3 wo_;              // local
+  float eta_ = 1.0f;          // n_other / n_wo for volumes, 1 for thin walls
+  float fresnel_o_ = 0.0f;    // dielectric Fresnel at wo (macro normal), for lobe selection
+  float diffuse_weight_ = 0.0f, specular_weight_ = 0.0f, transmission_weight_ = 0.0f;
+};
+
+// Fraction of light a transmissive surface passes straight through along direction d (used by shadow
+// rays and ground-truth layers, which ignore refraction bending): (1 - F(cos, ior)) times transmission,
+// base colour and (1 - metallic). cos is |d . n|; entering tells which side the ray comes from.
+Spec straight_transmittance(const MaterialPoint& m, float cos_theta, bool entering);
+
+}  // namespace spadgen::render

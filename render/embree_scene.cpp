@@ -1,0 +1,164 @@
+#include "embree_scene.h"
+
+#include <bit>
+#include <cmath>
+#include <mutex>
+#include <string>
+
+#include "core/error.h"
+
+namespace spadgen::render {
+namespace {
+
+// Embree reports errors through a C callback; throwing through Embree's frames is undefined, so the
+// callback records the first message and the caller turns it into spadgen::Error after the call.
+struct ErrorSink {
+  std::mutex mutex;
+  std::string message;
+};
+
+void on_embree_error(void* user, RTCError code, const char* str) {
+  auto* sink = static_cast<ErrorSink*>(user);
+  std::lock_guard<std::mutex> lock(sink->mutex);
+  if (sink->message.empty())
+    sink->message = "Embree error " + std::to_string(static_cast<int>(code)) + ": " + (str ? str : "");
+}
+
+ErrorSink& error_sink() {
+  static ErrorSink sink;
+  return sink;
+}
+
+void check(RTCDevice device, const char* what) {
+  ErrorSink& sink = error_sink();
+  std::string message;
+  {
+    std::lock_guard<std::mutex> lock(sink.mutex);
+    message.swap(sink.message);
+  }
+  const RTCError code = device ? rtcGetDeviceError(device) : RTC_ERROR_UNKNOWN;
+  if (message.empty() && code != RTC_ERROR_NONE) message = "Embree error " + std::to_string(static_cast<int>(code));
+  if (!message.empty()) throw Error(std::string("while ") + what + ": " + message);
+}
+
+// glTF's doubleSided = false means back-face culling: a single-sided, non-transmissive surface does not
+// exist seen from behind, for camera, bounce and shadow rays alike. Embree's Ng = (v1 - v0) x (v2 - v0),
+// the glTF front side for counter-clockwise triangles.
+void cull_back_faces(const RTCFilterFunctionNArguments* args) {
+  for (unsigned i = 0; i < args->N; ++i) {
+    if (args->valid[i] == 0) continue;
+    const float d = RTCRayN_dir_x(args->ray, args->N, i) * RTCHitN_Ng_x(args->hit, args->N, i) +
+                    RTCRayN_dir_y(args->ray, args->N, i) * RTCHitN_Ng_y(args->hit, args->N, i) +
+                    RTCRayN_dir_z(args->ray, args->N, i) * RTCHitN_Ng_z(args->hit, args->N, i);
+    if (d > 0.0f) args->valid[i] = 0;
+  }
+}
+
+}  // namespace
+
+EmbreeScene::EmbreeScene(const scenes::Scene& scene) {
+  device_ = rtcNewDevice(nullptr);
+  if (!device_) throw Error("could not create the Embree device (error " +
+                            std::to_string(static_cast<int>(rtcGetDeviceError(nullptr))) + ")");
+  rtcSetDeviceErrorFunction(device_, on_embree_error, &error_sink());
+  scene_ = rtcNewScene(device_);
+  rtcSetSceneBuildQuality(scene_, RTC_BUILD_QUALITY_HIGH);
+  rtcSetSceneFlags(scene_, RTC_SCENE_FLAG_ROBUST);
+  check(device_, "creating the Embree scene");
+
+  vertices_.resize(scene.meshes.size());
+  for (size_t m = 0; m < scene.meshes.size(); ++m) {
+    const scenes::Mesh& mesh = scene.meshes[m];
+    if (mesh.triangle_count() == 0 || mesh.positions.empty()) continue;
+    for (uint32_t index : mesh.indices)
+      if (index >= mesh.positions.size())
+        throw Error("mesh '" + mesh.name + "': index " + std::to_string(index) + " is past its " +
+                    std::to_string(mesh.positions.size()) + " vertices");
+    std::vector<float>& v = vertices_[m];
+    v.resize(mesh.positions.size() * 3 + 1, 0.0f);
+    for (size_t i = 0; i < mesh.positions.size(); ++i)
+      for (int c = 0; c < 3; ++c) v[3 * i + c] = mesh.positions[i][c];
+
+    RTCGeometry geom = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
+    rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, v.data(), 0,
+                               3 * sizeof(float), mesh.positions.size());
+    rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, mesh.indices.data(), 0,
+                               3 * sizeof(uint32_t), mesh.triangle_count());
+    const scenes::Material* mat =
+        (mesh.material >= 0 && static_cast<size_t>(mesh.material) < scene.materials.size())
+            ? &scene.materials[static_cast<size_t>(mesh.material)]
+            : nullptr;
+    // The glTF default material is single-sided.
+    const bool single_sided = mat ? (!mat->double_sided && !mat->transmissive()) : true;
+    if (single_sided) {
+      rtcSetGeometryIntersectFilterFunction(geom, cull_back_faces);
+      rtcSetGeometryOccludedFilterFunction(geom, cull_back_faces);
+    }
+    rtcCommitGeometry(geom);
+    rtcAttachGeometryByID(scene_, geom, static_cast<unsigned>(m));
+    rtcReleaseGeometry(geom);
+    check(device_, ("adding mesh '" + mesh.name + "' to the Embree scene").c_str());
+  }
+  rtcCommitScene(scene_);
+  check(device_, "building the Embree BVH");
+}
+
+EmbreeScene::~EmbreeScene() {
+  if (scene_) rtcReleaseScene(scene_);
+  if (device_) rtcReleaseDevice(device_);
+}
+
+bool EmbreeScene::intersect(const glm::vec3& o, const glm::vec3& d, float tnear, float tfar, RayHit* hit) const {
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  RTCRayHit rh;
+  rh.ray.org_x = o.x, rh.ray.org_y = o.y, rh.ray.org_z = o.z;
+  rh.ray.dir_x = d.x, rh.ray.dir_y = d.y, rh.ray.dir_z = d.z;
+  rh.ray.tnear = tnear;
+  rh.ray.tfar = tfar;
+  rh.ray.time = 0.0f;
+  rh.ray.mask = 0xFFFFFFFFu;
+  rh.ray.id = 0;
+  rh.ray.flags = 0;
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  rtcIntersect1(scene_, &context, &rh);
+  if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
+  hit->t = rh.ray.tfar;
+  hit->mesh = rh.hit.geomID;
+  hit->triangle = rh.hit.primID;
+  hit->u = rh.hit.u;
+  hit->v = rh.hit.v;
+  return true;
+}
+
+bool EmbreeScene::occluded(const glm::vec3& o, const glm::vec3& d, float tnear, float tfar) const {
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  RTCRay ray;
+  ray.org_x = o.x, ray.org_y = o.y, ray.org_z = o.z;
+  ray.dir_x = d.x, ray.dir_y = d.y, ray.dir_z = d.z;
+  ray.tnear = tnear;
+  ray.tfar = tfar;
+  ray.time = 0.0f;
+  ray.mask = 0xFFFFFFFFu;
+  ray.id = 0;
+  ray.flags = 0;
+  rtcOccluded1(scene_, &context, &ray);
+  return ray.tfar < 0.0f;  // Embree sets tfar to -inf when something was hit
+}
+
+glm::vec3 offset_ray_origin(const glm::vec3& p, const glm::vec3& n_in, const glm::vec3& dir) {
+  constexpr float kOrigin = 1.0f / 32.0f, kFloatScale = 1.0f / 65536.0f, kIntScale = 256.0f;
+  const glm::vec3 n = glm::dot(n_in, dir) < 0.0f ? -n_in : n_in;
+  glm::vec3 out;
+  for (int c = 0; c < 3; ++c) {
+    const auto of = static_cast<int32_t>(kIntScale * n[c]);
+    const auto bits = std::bit_cast<int32_t>(p[c]);
+    const float moved = std::bit_cast<float>(bits + (p[c] < 0.0f ? -of : of));
+    out[c] = std::fabs(p[c]) < kOrigin ? p[c] + kFloatScale * n[c] : moved;
+  }
+  return out;
+}
+
+}  // namespace spadgen::render

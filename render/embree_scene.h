@@ -1,0 +1,50 @@
+// Every Embree call of spadgen lives in embree_scene.cpp, so that a port to Embree 4 touches one file.
+// One Embree scene over all meshes of a scenes::Scene, in world space, with geometry ID = mesh index.
+#pragma once
+#include <embree3/rtcore.h>
+
+#include <glm/glm.hpp>
+
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include "scenes/scene.h"
+
+namespace spadgen::render {
+
+struct RayHit {
+  float t = std::numeric_limits<float>::infinity();
+  uint32_t mesh = 0, triangle = 0;
+  float u = 0, v = 0;  // barycentrics of vertices 1 and 2
+};
+
+class EmbreeScene {
+ public:
+  // Keeps pointers into `scene`'s index buffers (shared with Embree): `scene` must outlive this object.
+  explicit EmbreeScene(const scenes::Scene& scene);
+  ~EmbreeScene();
+  EmbreeScene(const EmbreeScene&) = delete;
+  EmbreeScene& operator=(const EmbreeScene&) = delete;
+
+  // Closest hit on (tnear, tfar) along origin + t dir (dir need not be unit; t is in units of |dir|).
+  bool intersect(const glm::vec3& origin, const glm::vec3& dir, float tnear, float tfar, RayHit* hit) const;
+  // Whether anything lies on (tnear, tfar).
+  bool occluded(const glm::vec3& origin, const glm::vec3& dir, float tnear, float tfar) const;
+
+  // For the benchmark, which compares the integrator against raw rtcIntersect1/rtcOccluded1.
+  RTCScene handle() const { return scene_; }
+
+ private:
+  RTCDevice device_ = nullptr;
+  RTCScene scene_ = nullptr;
+  // Embree reads vertex buffers 16 bytes at a time, so each mesh's positions are copied with padding.
+  std::vector<std::vector<float>> vertices_;
+};
+
+// Moves a point off the surface it lies on, along the geometric normal n towards the side the next ray
+// leaves to, by a few ulps of its own coordinates (Waechter and Binder, Ray Tracing Gems ch. 6), so that
+// the next ray neither re-hits that surface nor skips a nearby one (a 2 mm plate, a contact).
+glm::vec3 offset_ray_origin(const glm::vec3& p, const glm::vec3& n, const glm::vec3& dir);
+
+}  // namespace spadgen::render

@@ -1,0 +1,79 @@
+// Exact ground truth along the ray through each pixel centre. Layers follow the primary ray in a straight
+// line through transmissive surfaces (refraction bending is ignored, as a depth camera's geometry would
+// report them), so layer ranges are distances from the camera centre along that one line.
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <cmath>
+#include <limits>
+
+#include "core/error.h"
+#include "renderer_impl.h"
+
+namespace spadgen::render {
+
+GroundTruthTile Renderer::ground_truth(const PixelRect& rect) const {
+  const Impl& im = *impl_;
+  im.check_rect(rect, "ground_truth rect");
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  GroundTruthTile gt;
+  gt.rect = rect;
+  gt.max_layers = im.config.render.max_layers;
+  const auto n = static_cast<size_t>(rect.count());
+  const auto layers = static_cast<size_t>(gt.max_layers);
+  gt.range.assign(n, kInf);
+  gt.z.assign(n, kInf);
+  gt.normal.assign(3 * n, 0.0f);
+  gt.mesh_id.assign(n, -1);
+  gt.material_id.assign(n, -1);
+  gt.layer_count.assign(n, 0);
+  gt.layer_range.assign(n * layers, kInf);
+  gt.layer_transmittance.assign(n * layers, 0.0f);
+
+  const glm::vec3 cam(im.camera.position());
+  tbb::parallel_for(tbb::blocked_range<int>(rect.y0, rect.y1()), [&](const tbb::blocked_range<int>& rows) {
+    for (int y = rows.begin(); y < rows.end(); ++y)
+      for (int x = rect.x0; x < rect.x1(); ++x) {
+        const auto i = static_cast<size_t>(rect.index(x, y));
+        const glm::dvec3 dd = im.camera.direction(x + 0.5, y + 0.5);
+        const glm::vec3 d(dd);
+        glm::vec3 o = cam;
+        glm::dvec3 previous = im.camera.position();
+        double distance = 0.0, transmittance = 1.0;
+        int medium = -1, count = 0;
+        while (count < gt.max_layers) {
+          RayHit hit;
+          if (!im.embree.intersect(o, d, 0.0f, kInf, &hit)) break;
+          const Surface sf = im.shading.surface(hit);
+          // Measured from the surface point itself, not the offset origin, which sits a few ulps away.
+          const glm::dvec3 p(sf.p);
+          const double seg = glm::length(p - previous);
+          previous = p;
+          distance += seg;
+          if (medium >= 0) transmittance *= std::exp(-double(im.shading.material(medium).sigma.x) * seg);
+          if (count == 0) {
+            gt.range[i] = static_cast<float>(distance);
+            gt.z[i] = static_cast<float>(distance * glm::dot(dd, im.camera.forward()));
+            const glm::vec3 nn = glm::dot(sf.ns, d) > 0.0f ? -sf.ns : sf.ns;
+            for (int c = 0; c < 3; ++c) gt.normal[3 * i + size_t(c)] = nn[c];
+            gt.mesh_id[i] = sf.mesh;
+            gt.material_id[i] = sf.material;
+          }
+          gt.layer_range[i * layers + size_t(count)] = static_cast<float>(distance);
+          gt.layer_transmittance[i * layers + size_t(count)] = static_cast<float>(transmittance);
+          ++count;
+          const ResolvedMaterial& rm = im.shading.material(sf.material);
+          if (!(rm.point.transmission > 0.0f)) break;
+          const float c = glm::dot(d, sf.ng);
+          const bool entering = c < 0.0f;
+          transmittance *= straight_transmittance(im.shading.material_at(sf, hit), c, entering).x;
+          if (rm.volume) medium = entering ? sf.material : -1;
+          o = offset_ray_origin(sf.p, sf.ng, d);
+        }
+        gt.layer_count[i] = count;
+      }
+  });
+  return gt;
+}
+
+}  // namespace spadgen::render

@@ -1,0 +1,249 @@
+#include "integrator.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "core/error.h"
+#include "core/rng.h"
+#include "core/units.h"
+
+namespace spadgen::render {
+namespace {
+
+constexpr float kInf = std::numeric_limits<float>::infinity();
+// Smooth interfaces do not count as bounces (a plate in front of a wall must not use up a direct-light
+// render); this bounds the specular chains instead (total internal reflection inside a slab).
+constexpr int kMaxDeltaEvents = 64;
+constexpr int kMaxShadowCrossings = 64;
+
+}  // namespace
+
+// In steady state the returns of earlier and later pulses overlap the window the same way, so every
+// periodic image inside the window receives the contribution.
+void deposit(double v, double t, const TimeAxis& axis, double* bins, PixelTotals* out) {
+  out->laser_total += v;
+  if (axis.bins <= 0) return;
+  bool landed = false;
+  if (axis.period_s > 0.0) {
+    const double m0 = std::ceil((axis.start_s - t) / axis.period_s) - 1.0;
+    for (double m = m0;; m += 1.0) {
+      const double ti = t + m * axis.period_s;
+      if (ti >= axis.end_s()) break;
+      const int64_t b = axis.bin_of(ti);
+      if (b >= 0) {
+        bins[b] += v;
+        landed = true;
+      }
+    }
+  } else {
+    const int64_t b = axis.bin_of(t);
+    if (b >= 0) {
+      bins[b] += v;
+      landed = true;
+    }
+  }
+  if (!landed) out->out_of_window += v;
+}
+
+namespace {
+
+// The medium a shadow ray from this vertex starts in: the path's own, unless it crosses the surface of
+// a volume (then inside below the front face, air above it).
+int shadow_medium(const Surface& sf, bool volume, bool wo_front, const glm::vec3& wi, int medium) {
+  if (!volume) return medium;
+  const bool wi_front = glm::dot(wi, sf.ng) > 0.0f;
+  if (wi_front == wo_front) return medium;
+  return wi_front ? -1 : sf.material;
+}
+
+double fill_factor_of(const SensorConfig& s, bool bottom) {
+  if (s.preset == "pixel_A") return s.pixel_A.fill_factor;
+  if (s.preset == "pixel_B") return s.pixel_B.fill_factor;
+  if (s.preset == "full_chip") return bottom ? s.pixel_B.fill_factor : s.pixel_A.fill_factor;
+  throw Error("sensor.preset: expected \"pixel_A\", \"pixel_B\" or \"full_chip\", found \"" + s.preset + "\"");
+}
+
+}  // namespace
+
+Integrator::Integrator(const RunConfig& config, const scenes::Scene& scene, const EmbreeScene& embree,
+                       const Shading& shading, const Camera& camera, const Laser& laser, const Ambient& ambient)
+    : config_(config), embree_(embree), shading_(shading), camera_(camera), laser_(laser), ambient_(ambient) {
+  transmission_ = scene.has_transmission();
+  ambient_on_ = ambient.any() || shading.has_emission();
+  ff_top_ = fill_factor_of(config.sensor, false);
+  ff_bottom_ = fill_factor_of(config.sensor, true);
+  for (double ff : {ff_top_, ff_bottom_})
+    if (!(ff > 0.0 && ff <= 1.0)) throw Error("sensor fill_factor must lie in (0, 1], found " + std::to_string(ff));
+  optics_ = config.camera.optics_transmission;
+  if (!(optics_ >= 0.0 && optics_ <= 1.0))
+    throw Error("camera.optics_transmission must lie in [0, 1], found " + std::to_string(optics_));
+  const RenderConfig& r = config.render;
+  if (r.samples_per_pixel < 1)
+    throw Error("render.samples_per_pixel must be >= 1, found " + std::to_string(r.samples_per_pixel));
+  if (r.max_bounces < 1) throw Error("render.max_bounces must be >= 1, found " + std::to_string(r.max_bounces));
+  if (r.russian_roulette_from < 1)
+    throw Error("render.russian_roulette_from must be >= 1, found " + std::to_string(r.russian_roulette_from));
+}
+
+double Integrator::measurement_constant(int y) const {
+  const double ff = 2 * y >= camera_.height() ? ff_bottom_ : ff_top_;
+  const double p = camera_.pitch_m(), n = config_.camera.f_number;
+  return ff * optics_ * p * p * kPi / (4.0 * n * n);
+}
+
+Spec Integrator::shadow_transmittance(const glm::vec3& origin, const glm::vec3& dir, float dist, int medium,
+                                      double* extra_opl, RayCounts* rays) const {
+  *extra_opl = 0.0;
+  ++rays->shadow;
+  if (!transmission_) return embree_.occluded(origin, dir, 0.0f, dist) ? Spec(0.0f) : Spec(1.0f);
+  Spec t(1.0f);
+  glm::vec3 o = origin;
+  float remaining = dist;
+  for (int crossing = 0;; ++crossing) {
+    if (crossing > 0) ++rays->shadow;
+    RayHit hit;
+    const bool found = embree_.intersect(o, dir, 0.0f, remaining, &hit);
+    const float seg = found ? hit.t : remaining;
+    if (medium >= 0 && std::isfinite(seg)) {
+      const ResolvedMaterial& rm = shading_.material(medium);
+      t *= glm::exp(-rm.sigma * seg);
+      *extra_opl += (static_cast<double>(rm.point.ior) - 1.0) * seg;
+    }
+    if (!found) return t;
+    if (crossing >= kMaxShadowCrossings) return Spec(0.0f);
+    const Surface sf = shading_.surface(hit);
+    const ResolvedMaterial& rm = shading_.material(sf.material);
+    if (!(rm.point.transmission > 0.0f)) return Spec(0.0f);
+    const MaterialPoint mp = shading_.material_at(sf, hit);
+    const float c = glm::dot(dir, sf.ng);
+    const bool entering = c < 0.0f;
+    t *= straight_transmittance(mp, c, entering);
+    if (!(t.x > 0.0f || t.y > 0.0f)) return Spec(0.0f);
+    if (rm.volume) medium = entering ? sf.material : -1;
+    o = offset_ray_origin(sf.p, sf.ng, dir);
+    remaining -= seg;
+    if (!(remaining > 0.0f)) return t;
+  }
+}
+
+PixelTotals Integrator::render_pixel(int x, int y, const TimeAxis& axis, double* bins, RayCounts* rays) const {
+  PixelTotals out;
+  const RenderConfig& rc = config_.render;
+  const uint64_t pixel = static_cast<uint64_t>(y) * static_cast<uint64_t>(camera_.width()) + static_cast<uint64_t>(x);
+  const double inv_spp = 1.0 / rc.samples_per_pixel;
+  const double k = measurement_constant(y) * inv_spp;
+  const glm::vec3 cam(camera_.position());
+  const double delay = config_.laser.emission_delay_s;
+
+  for (int s = 0; s < rc.samples_per_pixel; ++s) {
+    Rng rng(config_.seed, RngKind::CameraPath, pixel, static_cast<uint64_t>(s));
+    const double jx = rng.next_double(), jy = rng.next_double();
+    const glm::dvec3 dd = camera_.direction(x + jx, y + jy);
+    const double ct = glm::dot(dd, camera_.forward());
+    const double w = k * ct * ct * ct * ct;  // the camera's cos^4 falloff
+
+    glm::vec3 o = cam, d(dd);
+    Spec beta(1.0f);
+    double opl = 0.0;  // optical path from the camera centre, metres
+    glm::dvec3 previous = camera_.position();
+    int medium = -1, vertices = 0, deltas = 0;
+    bool last_segment = false;  // after the last NEE vertex: only the environment or emission is left
+    double ambient = 0.0;
+    while (true) {
+      RayHit hit;
+      ++rays->camera;
+      if (!embree_.intersect(o, d, 0.0f, kInf, &hit)) {
+        if (ambient_on_) ambient += double(beta.y) * ambient_.environment_radiance;
+        break;
+      }
+      const Surface sf = shading_.surface(hit);
+      // From the previous surface point itself, not from the offset origin a few hundred ulps away.
+      const double seg = glm::length(glm::dvec3(sf.p) - previous);
+      previous = glm::dvec3(sf.p);
+      if (medium >= 0) {
+        const ResolvedMaterial& rm = shading_.material(medium);
+        beta *= glm::exp(-rm.sigma * static_cast<float>(seg));
+        opl += rm.point.ior * seg;
+      } else {
+        opl += seg;
+      }
+      const MaterialPoint mp = shading_.material_at(sf, hit);
+      if (ambient_on_ && mp.emission.y > 0.0f) ambient += double(beta.y) * mp.emission.y;
+      if (last_segment) break;
+
+      const glm::vec3 wo = -d;
+      const bool wo_front = glm::dot(wo, sf.ng) > 0.0f;
+      const Bsdf bsdf(mp, sf.ns, sf.ng, wo, wo_front);
+      const bool volume = shading_.material(sf.material).volume;
+
+      if (bsdf.has_non_delta()) {
+        if (beta.x > 0.0f) {
+          const glm::dvec3 to = laser_.position - glm::dvec3(sf.p);
+          const double r = glm::length(to);
+          const glm::dvec3 wid = to / r;
+          const double intensity = laser_.intensity_towards(-wid);
+          if (intensity > 0.0) {
+            const glm::vec3 wi(wid);
+            const Spec f = bsdf.eval_cos(wi);
+            if (f.x > 0.0f) {
+              double extra = 0.0;
+              const Spec tr = shadow_transmittance(offset_ray_origin(sf.p, sf.ng, wi), wi, float(r),
+                                                   shadow_medium(sf, volume, wo_front, wi, medium), &extra, rays);
+              if (tr.x > 0.0f) {
+                const double v = double(beta.x) * f.x * tr.x * intensity / (r * r) * w;
+                deposit(v, delay + (opl + r + extra) / kSpeedOfLight, axis, bins, &out);
+              }
+            }
+          }
+        }
+        if (beta.y > 0.0f) {
+          for (const PunctualLight& l : ambient_.lights) {
+            glm::dvec3 wid;
+            double r, e;
+            if (l.type == PunctualLight::Type::Directional) {
+              wid = -l.direction;
+              r = std::numeric_limits<double>::infinity();
+              e = l.power;
+            } else {
+              const glm::dvec3 to = l.position - glm::dvec3(sf.p);
+              r = glm::length(to);
+              wid = to / r;
+              e = l.intensity_towards(-wid) / (r * r);
+            }
+            if (!(e > 0.0)) continue;
+            const glm::vec3 wi(wid);
+            const Spec f = bsdf.eval_cos(wi);
+            if (!(f.y > 0.0f)) continue;
+            double extra = 0.0;
+            const Spec tr = shadow_transmittance(offset_ray_origin(sf.p, sf.ng, wi), wi, float(r),
+                                                 shadow_medium(sf, volume, wo_front, wi, medium), &extra, rays);
+            ambient += double(beta.y) * f.y * tr.y * e;
+          }
+        }
+        ++vertices;
+        if (vertices >= rc.max_bounces) {
+          if (!ambient_on_) break;
+          last_segment = true;
+        }
+      }
+
+      const BsdfSample bs = bsdf.sample(uniform3(rng));
+      if (!(bs.weight.x > 0.0f || bs.weight.y > 0.0f)) break;
+      if (bs.delta && ++deltas > kMaxDeltaEvents) break;
+      beta *= bs.weight;
+      if (bs.transmitted && volume) medium = wo_front ? sf.material : -1;
+      if (!last_segment && vertices >= rc.russian_roulette_from) {
+        const float q = std::min(0.95f, ambient_on_ ? std::max(beta.x, beta.y) : beta.x);
+        if (!(q > 0.0f) || uniform(rng) >= q) break;
+        beta /= q;
+      }
+      o = offset_ray_origin(sf.p, sf.ng, bs.wi);
+      d = bs.wi;
+    }
+    out.ambient_rate += ambient * w;
+  }
+  return out;
+}
+
+}  // namespace spadgen::render

@@ -1,0 +1,64 @@
+// The transient path tracer: camera paths with next-event estimation to the laser (a point emitter, so
+// NEE is its only strategy) and to the ambient punctual lights, BSDF sampling for the environment and
+// emissive surfaces (their only strategy, so no MIS weights are needed), Russian roulette.
+#pragma once
+#include <cstdint>
+
+#include "camera.h"
+#include "core/config.h"
+#include "core/time_axis.h"
+#include "embree_scene.h"
+#include "lights.h"
+#include "renderer.h"
+#include "surface.h"
+
+namespace spadgen::render {
+
+struct PixelTotals {
+  double laser_total = 0.0;    // photons per pulse, every contribution
+  double out_of_window = 0.0;  // photons per pulse with no periodic image inside the window
+  double ambient_rate = 0.0;   // photons per second
+};
+
+struct RayCounts {
+  uint64_t camera = 0, shadow = 0;
+};
+
+// Adds a contribution v arriving at time t: to laser_total, and to the bin of every periodic image
+// t + m * period (m any integer) inside [axis.start_s, axis.end_s()), or to out_of_window when there is
+// none. A time exactly on a bin edge belongs to the later bin (TimeAxis::bin_of).
+void deposit(double v, double t, const TimeAxis& axis, double* bins, PixelTotals* out);
+
+class Integrator {
+ public:
+  Integrator(const RunConfig& config, const scenes::Scene& scene, const EmbreeScene& embree,
+             const Shading& shading, const Camera& camera, const Laser& laser, const Ambient& ambient);
+
+  // All samples of pixel (x, y) (full-sensor coordinates). bins: axis.bins doubles, zeroed by the caller,
+  // receive photons per pulse per bin (unused when axis.bins == 0).
+  PixelTotals render_pixel(int x, int y, const TimeAxis& axis, double* bins, RayCounts* rays) const;
+
+  // FF * optics transmission * p^2 * pi / (4 N^2) for a pixel of row y: photons at the SPAD per unit of
+  // photon radiance (cos^4 excluded).
+  double measurement_constant(int y) const;
+
+  // Fraction of light (two channels) that reaches distance `dist` along unit `dir` from `origin`, through
+  // transmissive surfaces (straight, ignoring refraction) starting inside volume `medium` (-1: air);
+  // *extra_opl receives the optical path added by the media crossed, (n - 1) * length.
+  Spec shadow_transmittance(const glm::vec3& origin, const glm::vec3& dir, float dist, int medium,
+                            double* extra_opl, RayCounts* rays) const;
+
+ private:
+  const RunConfig& config_;
+  const EmbreeScene& embree_;
+  const Shading& shading_;
+  const Camera& camera_;
+  const Laser& laser_;
+  const Ambient& ambient_;
+  bool transmission_ = false;
+  bool ambient_on_ = false;
+  double ff_top_ = 0.0, ff_bottom_ = 0.0;  // fill factor of rows < H/2 and rows >= H/2
+  double optics_ = 1.0;
+};
+
+}  // namespace spadgen::render

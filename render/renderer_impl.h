@@ -1,0 +1,35 @@
+// The renderer's state, shared by renderer.cpp and ground_truth.cpp. Member order is construction order.
+#pragma once
+#include <string>
+
+#include "camera.h"
+#include "core/config.h"
+#include "embree_scene.h"
+#include "integrator.h"
+#include "lights.h"
+#include "renderer.h"
+#include "scenes/scene.h"
+#include "spectrum.h"
+#include "surface.h"
+
+namespace spadgen::render {
+
+struct Renderer::Impl {
+  Impl(const scenes::Scene& s, const RunConfig& c);
+
+  // Throws spadgen::Error unless rect is non-empty and inside the full sensor.
+  void check_rect(const PixelRect& rect, const char* what) const;
+
+  scenes::Scene scene;  // a copy: the renderer owns what Embree's shared buffers point into
+  RunConfig config;
+  Camera camera;
+  int laser_light = -1;
+  Laser laser;
+  glm::vec3 ambient_weights;
+  Ambient ambient;
+  EmbreeScene embree;
+  Shading shading;
+  Integrator integrator;
+};
+
+}  // namespace spadgen::render

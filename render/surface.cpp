@@ -1,0 +1,124 @@
+#include "surface.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace spadgen::render {
+namespace {
+
+Spec to_spec(const glm::vec3& rgb, const glm::vec3& w_laser, const glm::vec3& w_ambient) {
+  return {glm::dot(rgb, w_laser), glm::dot(rgb, w_ambient)};
+}
+
+int wrap(int i, int n, int mode) {
+  switch (mode) {
+    case 33071:  // clamp to edge
+      return std::clamp(i, 0, n - 1);
+    case 33648: {  // mirrored repeat
+      const int period = 2 * n;
+      int k = i % period;
+      if (k < 0) k += period;
+      return k < n ? k : period - 1 - k;
+    }
+    default: {  // repeat
+      int k = i % n;
+      return k < 0 ? k + n : k;
+    }
+  }
+}
+
+}  // namespace
+
+Shading::Shading(const scenes::Scene& scene, double laser_wavelength_m, const glm::vec3& ambient_rgb_weights,
+                 double ambient_photometric)
+    : scene_(scene), w_laser_(rgb_weights_at(laser_wavelength_m)), w_ambient_(ambient_rgb_weights) {
+  for (int i = 0; i < 256; ++i) {
+    const double c = i / 255.0;
+    srgb_[i] = static_cast<float>(c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4));
+  }
+  auto resolve = [&](const scenes::Material& m) {
+    ResolvedMaterial r;
+    MaterialPoint& p = r.point;
+    p.base = to_spec(glm::vec3(m.base_color), w_laser_, w_ambient_);
+    p.metallic = std::clamp(m.metallic, 0.0f, 1.0f);
+    const float roughness = std::clamp(m.roughness, 0.0f, 1.0f);
+    p.alpha = roughness * roughness;
+    p.transmission = std::clamp(m.transmission, 0.0f, 1.0f);
+    p.ior = m.ior > 0.0f ? m.ior : 1.5f;
+    p.thin_walled = !(m.thickness_m > 0.0f);
+    p.lambertian = p.metallic == 0.0f && roughness == 1.0f && p.transmission == 0.0f;
+    p.emission = to_spec(m.emissive, w_laser_, w_ambient_) * static_cast<float>(ambient_photometric);
+    p.emission.x = 0.0f;  // emissive surfaces are ambient light; the laser is the only pulsed source
+    if (p.emission.y > 0.0f) has_emission_ = true;
+    r.texture = (m.base_color_texture >= 0 && size_t(m.base_color_texture) < scene.textures.size() &&
+                 scene.textures[size_t(m.base_color_texture)].width > 0)
+                    ? m.base_color_texture
+                    : -1;
+    r.texcoord = m.base_color_texcoord;
+    r.volume = p.transmission > 0.0f && !p.thin_walled;
+    // glTF: attenuationColor is the colour white light becomes after attenuationDistance inside.
+    if (r.volume && std::isfinite(m.attenuation_distance_m) && m.attenuation_distance_m > 0.0f) {
+      const Spec c = glm::clamp(to_spec(m.attenuation_color, w_laser_, w_ambient_), Spec(1e-30f), Spec(1.0f));
+      r.sigma = -glm::log(c) / m.attenuation_distance_m;
+    }
+    return r;
+  };
+  materials_.reserve(scene.materials.size());
+  for (const scenes::Material& m : scene.materials) materials_.push_back(resolve(m));
+  default_ = resolve(scenes::Material{});
+}
+
+Surface Shading::surface(const RayHit& hit) const {
+  const scenes::Mesh& mesh = scene_.meshes[hit.mesh];
+  const uint32_t* idx = &mesh.indices[3 * size_t(hit.triangle)];
+  const glm::vec3 &p0 = mesh.positions[idx[0]], &p1 = mesh.positions[idx[1]], &p2 = mesh.positions[idx[2]];
+  const float w = 1.0f - hit.u - hit.v;
+  Surface s;
+  s.p = w * p0 + hit.u * p1 + hit.v * p2;
+  const glm::vec3 n = glm::cross(p1 - p0, p2 - p0);
+  const float len = glm::length(n);
+  s.ng = len > 0.0f ? n / len : glm::vec3(0, 0, 1);
+  s.ns = s.ng;
+  if (mesh.normals.size() == mesh.positions.size()) {
+    const glm::vec3 ns = w * mesh.normals[idx[0]] + hit.u * mesh.normals[idx[1]] + hit.v * mesh.normals[idx[2]];
+    const float l = glm::length(ns);
+    if (l > 1e-6f) s.ns = ns / l;
+  }
+  s.mesh = static_cast<int>(hit.mesh);
+  s.material = (mesh.material >= 0 && size_t(mesh.material) < materials_.size()) ? mesh.material : -1;
+  return s;
+}
+
+MaterialPoint Shading::material_at(const Surface& s, const RayHit& hit) const {
+  const ResolvedMaterial& r = material(s.material);
+  MaterialPoint p = r.point;
+  if (r.texture >= 0) {
+    const scenes::Mesh& mesh = scene_.meshes[size_t(s.mesh)];
+    const std::vector<glm::vec2>& tc = r.texcoord == 1 ? mesh.texcoords1 : mesh.texcoords0;
+    if (tc.size() == mesh.positions.size()) {
+      const uint32_t* idx = &mesh.indices[3 * size_t(hit.triangle)];
+      const glm::vec2 uv = (1.0f - hit.u - hit.v) * tc[idx[0]] + hit.u * tc[idx[1]] + hit.v * tc[idx[2]];
+      p.base *= to_spec(texture_rgb(r.texture, uv), w_laser_, w_ambient_);
+    }
+  }
+  return p;
+}
+
+// Bilinear filtering of the decoded (linear) texels: decoding after filtering would darken edges.
+glm::vec3 Shading::texture_rgb(int texture, const glm::vec2& uv) const {
+  const scenes::Texture& t = scene_.textures[size_t(texture)];
+  const float x = uv.x * static_cast<float>(t.width) - 0.5f;
+  const float y = uv.y * static_cast<float>(t.height) - 0.5f;
+  const float fx = std::floor(x), fy = std::floor(y);
+  const float ax = x - fx, ay = y - fy;
+  const int x0 = static_cast<int>(fx), y0 = static_cast<int>(fy);
+  auto texel = [&](int i, int j) {
+    const int xi = wrap(i, t.width, t.wrap_s), yj = wrap(j, t.height, t.wrap_t);
+    const uint8_t* px = &t.rgba[(size_t(yj) * size_t(t.width) + size_t(xi)) * 4];
+    return glm::vec3(srgb_[px[0]], srgb_[px[1]], srgb_[px[2]]);
+  };
+  return (1 - ay) * ((1 - ax) * texel(x0, y0) + ax * texel(x0 + 1, y0)) +
+         ay * ((1 - ax) * texel(x0, y0 + 1) + ax * texel(x0 + 1, y0 + 1));
+}
+
+}  // namespace spadgen::render

@@ -1,0 +1,53 @@
+// What the integrator and the ground truth need to know about a ray hit: position, normals and the
+// material resolved there (texture lookups, spectral channels).
+#pragma once
+#include <glm/glm.hpp>
+
+#include <vector>
+
+#include "bsdf.h"
+#include "core/config.h"
+#include "embree_scene.h"
+#include "scenes/scene.h"
+
+namespace spadgen::render {
+
+struct Surface {
+  glm::vec3 p{0.0f};   // on the triangle (from barycentrics, not origin + t dir)
+  glm::vec3 ng{0.0f};  // unit geometric normal on the glTF front side (counter-clockwise)
+  glm::vec3 ns{0.0f};  // unit shading normal (interpolated vertex normals, else ng)
+  int mesh = -1;
+  int material = -1;   // index into Scene::materials, -1: the glTF default material
+};
+
+// Per-material constants in the two channels (laser, ambient).
+struct ResolvedMaterial {
+  MaterialPoint point;          // factors (the base colour texture multiplies point.base)
+  int texture = -1, texcoord = 0;
+  Spec sigma{0.0f};             // absorption coefficient inside the volume, 1/m
+  bool volume = false;          // transmissive with thickness > 0: bounds a medium of index ior
+};
+
+class Shading {
+ public:
+  // ambient_photometric: photons per second per nit (cd/m^2) in the ambient band, for emissive surfaces.
+  Shading(const scenes::Scene& scene, double laser_wavelength_m, const glm::vec3& ambient_rgb_weights,
+          double ambient_photometric);
+
+  Surface surface(const RayHit& hit) const;
+  MaterialPoint material_at(const Surface& s, const RayHit& hit) const;
+  const ResolvedMaterial& material(int id) const { return id < 0 ? default_ : materials_[size_t(id)]; }
+  bool has_emission() const { return has_emission_; }
+
+ private:
+  glm::vec3 texture_rgb(int texture, const glm::vec2& uv) const;
+
+  const scenes::Scene& scene_;
+  glm::vec3 w_laser_, w_ambient_;
+  std::vector<ResolvedMaterial> materials_;
+  ResolvedMaterial default_;
+  float srgb_[256];
+  bool has_emission_ = false;
+};
+
+}  // namespace spadgen::render

@@ -1,0 +1,457 @@
+// The transient path tracer against closed forms. Tolerances are z-scores of the Monte Carlo error
+// (5 or 6 sigma, false-alarm rates 6e-7 and 2e-9 per comparison) with fixed seeds, plus float rounding.
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+
+#include <cmath>
+#include <cstring>
+#include <numeric>
+#include <vector>
+
+#include "core/units.h"
+#include "render/integrator.h"
+#include "render/renderer.h"
+#include "scene_builders.h"
+
+namespace spadgen::render {
+namespace {
+
+using test::add_box;
+using test::add_material;
+using test::add_quad;
+using test::add_sphere;
+using test::test_config;
+
+constexpr double kC = kSpeedOfLight;
+
+// Mean and standard deviation over pixel (x, y)'s area of g(direction), on a 16 x 16 midpoint grid.
+template <class G>
+std::pair<double, double> over_pixel(const RunConfig& c, int x, int y, G g) {
+  const double p = c.camera.pixel_pitch_m;
+  double s = 0, s2 = 0;
+  const int n = 16;
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const glm::dvec3 d = glm::normalize(glm::dvec3((x + (i + 0.5) / n - c.camera.width_px / 2.0) * p,
+                                                     (c.camera.height_px / 2.0 - y - (j + 0.5) / n) * p,
+                                                     -c.camera.focal_length_m));
+      const double v = g(d);
+      s += v;
+      s2 += v * v;
+    }
+  s /= n * n;
+  return {s, std::sqrt(std::max(0.0, s2 / (n * n) - s * s))};
+}
+
+double flood_intensity(const RunConfig& c) {
+  const double half_diag = 0.5 * c.camera.pixel_pitch_m * std::hypot(c.camera.width_px, c.camera.height_px);
+  const double alpha = std::atan2(half_diag, c.camera.focal_length_m);
+  const double np = photons_per_pulse(c.laser.average_power_W, c.laser.repetition_rate_Hz, c.laser.wavelength_m);
+  return np / (2 * kPi * (1 - std::cos(alpha)));
+}
+
+// FF p^2 / (4 N^2) pi: photons at the SPAD per unit photon radiance.
+double camera_constant(const RunConfig& c) {
+  const double p = c.camera.pixel_pitch_m, n = c.camera.f_number;
+  return c.sensor.pixel_A.fill_factor * c.camera.optics_transmission * p * p * kPi / (4 * n * n);
+}
+
+double sum(const float* v, int64_t n) { return std::accumulate(v, v + n, 0.0); }
+
+scenes::Scene plane_scene(float d, float rho) {
+  scenes::Scene s;
+  add_quad(s, {0, 0, -d}, {5, 0, 0}, {0, 5, 0}, add_material(s, test::lambertian(rho)));
+  return s;
+}
+
+TEST(Transport, PhotonsPerPulse) {
+  RunConfig c = test_config(8, 8, 12e-3);
+  Renderer r(plane_scene(1, 0.5f), c);
+  // 2 mW at 40 MHz and 637 nm: 5e-11 J per pulse over 3.1185e-19 J per photon.
+  EXPECT_NEAR(r.photons_per_pulse(), 5e-11 / (kPlanck * kC / 637e-9), 1.0);
+  EXPECT_NEAR(r.photons_per_pulse(), 1.6033e8, 1e4);
+}
+
+TEST(Transport, LambertianPlaneMatchesTheCameraEquationWithOffAxisFalloff) {
+  const float d = 1.0f, rho = 0.6f;
+  // 45 degrees half field of view: falloff of cos^4 (camera) times cos^3 (the flood's irradiance).
+  RunConfig c = test_config(32, 32, 150e-6);
+  c.render.samples_per_pixel = 16;
+  c.laser.emission_delay_s = 1e-9;
+  Renderer r(plane_scene(d, rho), c);
+  const TimeAxis axis{0.0, 10e-12, 2000, 25e-9};
+  const TransientTile t = r.transient({0, 0, 32, 32}, {0, 0, 32, 32}, axis);
+  const double on_axis = rho * flood_intensity(c) * std::pow(c.camera.pixel_pitch_m, 2) *
+                         c.sensor.pixel_A.fill_factor / (4 * std::pow(c.camera.f_number, 2) * d * d);
+  double worst_z = 0;
+  for (int y = 0; y < 32; ++y)
+    for (int x = 0; x < 32; ++x) {
+      const auto [mean, sd] = over_pixel(c, x, y, [](const glm::dvec3& v) { return std::pow(-v.z, 7); });
+      const auto i = static_cast<size_t>(t.data_rect.index(x, y));
+      const double expected = on_axis * mean;
+      const double sigma = on_axis * sd / std::sqrt(c.render.samples_per_pixel);
+      const double err = std::fabs(t.laser_total[i] - expected);
+      EXPECT_LE(err, 6 * sigma + 1e-5 * expected) << x << "," << y;
+      worst_z = std::max(worst_z, err / (sigma + 1e-30));
+      EXPECT_EQ(t.out_of_window[i], 0.0);
+      EXPECT_NEAR(sum(t.pixel_transient(x, y), axis.bins), t.laser_total[i], 1e-5 * t.laser_total[i]);
+      EXPECT_EQ(t.ambient_rate[i], 0.0f);
+    }
+  // The corners see cos^7 of about 55 degrees: the falloff is really exercised.
+  EXPECT_LT(t.laser_total[0], 0.03 * t.laser_total[size_t(t.data_rect.index(16, 16))]);
+}
+
+TEST(Transport, ReturnPeaksInTheBinOfTwiceTheDistance) {
+  for (float d : {0.3f, 0.75f, 1.6f}) {
+    RunConfig c = test_config(8, 8, 12e-3);
+    c.render.samples_per_pixel = 4;
+    c.laser.emission_delay_s = 2.5e-9;
+    Renderer r(plane_scene(d, 0.6f), c);
+    const TimeAxis axis{0.0, 9e-12, 2500, 25e-9};
+    const TransientTile t = r.transient({3, 3, 2, 2}, {3, 3, 2, 2}, axis);
+    const int64_t expected_bin = axis.bin_of(c.laser.emission_delay_s + 2.0 * d / kC);
+    for (int y = 3; y < 5; ++y)
+      for (int x = 3; x < 5; ++x) {
+        const float* g = t.pixel_transient(x, y);
+        EXPECT_EQ(std::max_element(g, g + axis.bins) - g, expected_bin) << "d = " << d;
+        // The pixel spans 0.8 mrad: its ranges differ from d by < 1e-6 relative, all in one bin.
+        EXPECT_NEAR(g[expected_bin], t.laser_total[size_t(t.data_rect.index(x, y))], 1e-6 * g[expected_bin]);
+      }
+  }
+}
+
+TEST(Transport, AmbientEnvironmentGivesTheCosFourthFalloff) {
+  const float rho = 0.5f;
+  RunConfig c = test_config(24, 24, 110e-6);
+  c.render.samples_per_pixel = 8;
+  c.ambient.illuminance_lux = 50.0;
+  c.ambient.wavelength_m = 550e-9;
+  c.ambient.bandwidth_m = 100e-9;
+  Renderer r(plane_scene(1.0f, rho), c);
+  const TransientTile t = r.transient({0, 0, 24, 24}, {0, 0, 24, 24}, TimeAxis{});
+  EXPECT_TRUE(t.transient.empty());
+  // Equal-energy spectrum: s = E_v / (683 lm/W * 106.857 nm) W/m^2/nm; photon radiance of the sky
+  // L = s * 100 nm * lambda / (h c) / pi.
+  const double s = 50.0 / (683.0 * 106.857);
+  const double l_env = s * 100.0 * 550e-9 / (kPlanck * kC) / kPi;
+  for (int y = 0; y < 24; ++y)
+    for (int x = 0; x < 24; ++x) {
+      const auto [mean, sd] = over_pixel(c, x, y, [](const glm::dvec3& v) { return std::pow(v.z, 4); });
+      const double expected = camera_constant(c) * rho * l_env * mean;
+      const double sigma = camera_constant(c) * rho * l_env * sd / std::sqrt(c.render.samples_per_pixel);
+      EXPECT_NEAR(t.ambient_rate[size_t(t.data_rect.index(x, y))], expected, 6 * sigma + 1e-5 * expected);
+    }
+}
+
+TEST(Transport, TiltedPlaneArrivalTimesFollowItsGeometry) {
+  scenes::Scene s;
+  const double tilt = 40.0 * kPi / 180.0;
+  const glm::dvec3 n(std::sin(tilt), 0, std::cos(tilt)), p0(0, 0, -1);
+  const glm::dvec3 a = glm::normalize(glm::cross(glm::dvec3(0, 1, 0), n));
+  add_quad(s, glm::vec3(p0), glm::vec3(3.0 * a), glm::vec3(0, 3, 0), add_material(s, test::lambertian(0.7f)));
+  RunConfig c = test_config(16, 16, 4e-3);
+  c.render.samples_per_pixel = 64;
+  Renderer r(s, c);
+  const TimeAxis axis{5e-9, 1e-12, 2000, 25e-9};
+  const TransientTile t = r.transient({0, 0, 16, 16}, {0, 0, 16, 16}, axis);
+  for (int y = 0; y < 16; ++y)
+    for (int x = 0; x < 16; ++x) {
+      // Range of the plane along v, and the weight of that sub-pixel in the measured sum:
+      // irradiance cos(incidence) / r^2 from the flood at the camera, times the camera's cos^4.
+      auto range = [&](const glm::dvec3& v) { return glm::dot(p0, n) / glm::dot(v, n); };
+      auto weight = [&](const glm::dvec3& v) {
+        const double rr = range(v);
+        return std::fabs(glm::dot(v, n)) / (rr * rr) * std::pow(v.z, 4);
+      };
+      const double w = over_pixel(c, x, y, weight).first;
+      const auto [wt, sd_t] = over_pixel(c, x, y, [&](const glm::dvec3& v) { return weight(v) * 2 * range(v) / kC; });
+      const double expected_t = wt / w;
+      const float* g = t.pixel_transient(x, y);
+      double m0 = 0, m1 = 0;
+      for (int64_t b = 0; b < axis.bins; ++b) {
+        m0 += g[b];
+        m1 += g[b] * axis.bin_centre_s(b);
+      }
+      const double spread = over_pixel(c, x, y, [&](const glm::dvec3& v) { return 2 * range(v) / kC; }).second;
+      // Binning moves the mean by at most half a bin; the sampling error is spread / sqrt(spp).
+      EXPECT_NEAR(m1 / m0, expected_t, 0.5e-12 + 6 * spread / std::sqrt(64.0) + 1e-15) << x << "," << y;
+    }
+  // Across the image the arrival time really changes (the plane is tilted).
+  const float* left = t.pixel_transient(0, 8);
+  const float* right = t.pixel_transient(15, 8);
+  EXPECT_GT(std::abs((std::max_element(left, left + axis.bins) - left) - (std::max_element(right, right + axis.bins) - right)),
+            20);
+}
+
+TEST(Transport, DepositRulesBinEdgesFoldingAndOutOfWindow) {
+  const TimeAxis axis{1e-9, 0.1e-9, 10, 25e-9};
+  std::vector<double> bins(10, 0.0);
+  PixelTotals t;
+  deposit(1.0, axis.bin_start_s(2), axis, bins.data(), &t);  // exactly on the edge of bins 1 and 2
+  EXPECT_EQ(bins[2], 1.0);
+  EXPECT_EQ(bins[1], 0.0);
+  deposit(2.0, 25e-9 + 1.45e-9, axis, bins.data(), &t);  // one period late: folds to 1.45 ns
+  EXPECT_EQ(bins[4], 2.0);
+  deposit(4.0, 0.5e-9, axis, bins.data(), &t);  // before the window, and 25.5 ns is after it
+  EXPECT_EQ(t.out_of_window, 4.0);
+  deposit(8.0, axis.end_s(), axis, bins.data(), &t);  // the window is half-open
+  EXPECT_EQ(t.out_of_window, 12.0);
+  EXPECT_EQ(t.laser_total, 15.0);
+  EXPECT_EQ(std::accumulate(bins.begin(), bins.end(), 0.0) + t.out_of_window, t.laser_total);
+
+  // A window longer than the period holds every contribution more than once.
+  const TimeAxis wide{0.0, 0.1e-9, 25, 1e-9};
+  std::vector<double> b2(25, 0.0);
+  PixelTotals t2;
+  deposit(1.0, 0.25e-9, wide, b2.data(), &t2);
+  EXPECT_EQ(b2[2], 1.0);
+  EXPECT_EQ(b2[12], 1.0);
+  EXPECT_EQ(b2[22], 1.0);
+  EXPECT_EQ(t2.out_of_window, 0.0);
+
+  PixelTotals t3;  // no transient at all
+  deposit(1.0, 3e-9, TimeAxis{}, nullptr, &t3);
+  EXPECT_EQ(t3.laser_total, 1.0);
+  EXPECT_EQ(t3.out_of_window, 0.0);
+}
+
+TEST(Transport, NarrowWindowAccountsForEverythingAndLateReturnsFold) {
+  RunConfig c = test_config(16, 16, 3e-3);  // ranges from 1.0 to 1.0006 / cos(2.5 deg)
+  c.render.samples_per_pixel = 4;
+  scenes::Scene s = plane_scene(1.5f, 0.6f);  // round trip 10 ns
+  Renderer r(s, c);
+  // Half of the return's duration lies in the window.
+  const TimeAxis narrow{2.0 * 1.5 / kC + 1e-12, 1e-12, 10, 0.0};
+  const TransientTile t = r.transient({0, 0, 16, 16}, {0, 0, 16, 16}, narrow);
+  int partial = 0;
+  for (int y = 0; y < 16; ++y)
+    for (int x = 0; x < 16; ++x) {
+      const auto i = static_cast<size_t>(t.data_rect.index(x, y));
+      const double in = sum(t.pixel_transient(x, y), narrow.bins);
+      EXPECT_NEAR(in + t.out_of_window[i], t.laser_total[i], 1e-6 * t.laser_total[i]);
+      if (in > 0 && t.out_of_window[i] > 0) ++partial;
+    }
+  EXPECT_GT(partial, 0);
+
+  // A 4 ns period: the 10 ns return arrives 2 ns after a later trigger.
+  const TimeAxis folded{0.0, 5e-12, 800, 4e-9};
+  const TransientTile f = r.transient({8, 8, 1, 1}, {8, 8, 1, 1}, folded);
+  const float* g = f.pixel_transient(8, 8);
+  const int64_t peak = std::max_element(g, g + folded.bins) - g;
+  const double range = 1.5 / std::cos(std::atan(std::hypot(0.5, 0.5) * 9.4e-6 / 3e-3));
+  EXPECT_EQ(peak, folded.bin_of(2.0 * range / kC - 8e-9));
+  EXPECT_EQ(f.out_of_window[0], 0.0);
+}
+
+// A plate of ior 1.5 and thickness 2 mm at normal incidence, in front of a Lambertian wall.
+scenes::Scene wall_behind_plate(bool with_plate, float roughness = 0.0f) {
+  scenes::Scene s;
+  add_quad(s, {0, 0, -1}, {2, 0, 0}, {0, 2, 0}, add_material(s, test::lambertian(0.5f)));
+  if (with_plate) add_box(s, {-1, -1, -0.452f}, {1, 1, -0.45f}, add_material(s, test::glass(1.5f, 0.002f, roughness)));
+  return s;
+}
+
+TEST(Transport, SmoothPlateTransmitsOneMinusRSquaredEachWayAndDelaysTheReturn) {
+  RunConfig c = test_config(8, 8, 12e-3);
+  c.render.samples_per_pixel = 1024;
+  c.render.max_bounces = 1;
+  const TimeAxis axis{6.6e-9, 0.5e-12, 300, 25e-9};
+  Renderer bare(wall_behind_plate(false), c), plate(wall_behind_plate(true), c);
+  const TransientTile a = bare.transient({0, 0, 8, 8}, {0, 0, 8, 8}, axis);
+  const TransientTile b = plate.transient({0, 0, 8, 8}, {0, 0, 8, 8}, axis);
+  const double R = 0.04, delay = 2 * 0.5 * 0.002 / kC, echo = 2 * 1.5 * 0.002 / kC;
+  double total_a = 0, main_b = 0, total_b = 0, t_a = 0, t_b = 0;
+  for (int y = 0; y < 8; ++y)
+    for (int x = 0; x < 8; ++x) {
+      const float* ga = a.pixel_transient(x, y);
+      const float* gb = b.pixel_transient(x, y);
+      const size_t i = size_t(a.data_rect.index(x, y));
+      total_a += a.laser_total[i];
+      total_b += b.laser_total[i];
+      for (int64_t k = 0; k < axis.bins; ++k) {
+        t_a += ga[k] * axis.bin_centre_s(k);
+        // The direct return, before the first internal echo 20 ps later.
+        if (axis.bin_centre_s(k) < 2.0 / kC + delay + echo / 2) {
+          main_b += gb[k];
+          t_b += gb[k] * axis.bin_centre_s(k);
+        }
+      }
+    }
+  // Each camera path reaches the wall straight through with probability (1-R)^2 (a Bernoulli draw at
+  // each face), the shadow ray passes (1-R)^2: the estimate is (1-R)^2 p_hat.
+  const double n = 64.0 * 1024, p = (1 - R) * (1 - R);
+  const double sigma = p * std::sqrt(p * (1 - p) / n);
+  EXPECT_NEAR(main_b / total_a, std::pow(1 - R, 4), 5 * sigma);
+  // With the internal echoes: sum over k of (1-R)^2 R^2k = (1-R) / (1+R) for the camera side.
+  EXPECT_NEAR(total_b / total_a, (1 - R) / (1 + R) * p, 5 * sigma);
+  // The return is delayed by the extra optical path 2 (n - 1) t; binning moves each mean < 0.25 ps.
+  EXPECT_NEAR(t_b / main_b - t_a / total_a, delay, 0.5e-12);
+}
+
+TEST(Transport, EachFaceOfASmoothPlateReflectsR) {
+  // Camera and an isotropic laser at the origin; the plate 0.45 m ahead reflects the camera's view back
+  // onto a wall 0.3 m behind the camera, which the laser lights directly.
+  scenes::Scene s;
+  const float a = 0.45f, b = 0.3f, t = 0.002f;
+  add_box(s, {-1, -1, -a - t}, {1, 1, -a}, add_material(s, test::glass(1.5f, t)));
+  add_quad(s, {0, 0, b}, {0, 2, 0}, {2, 0, 0}, add_material(s, test::lambertian(0.5f)));  // faces -z
+  RunConfig c = test_config(16, 16, 12e-3);
+  c.laser.beam = "cone";
+  c.laser.half_angle_rad = kPi;
+  c.render.samples_per_pixel = 131072;
+  c.render.max_bounces = 1;
+  Renderer r(s, c);
+  const TimeAxis axis{4e-9, 2e-12, 1000, 25e-9};
+  const TransientTile tile = r.transient({7, 7, 2, 2}, {7, 7, 2, 2}, axis);
+  const double R = 0.04;
+  const double intensity = r.photons_per_pulse() / (4 * kPi);
+  const double wall = camera_constant(c) * 0.5 * intensity / (kPi * b * b);  // per unit reflectance
+  const double t_front = 2.0 * (a + b) / kC, t_back = t_front + 2 * 1.5 * t / kC;
+  double front = 0, back = 0;
+  for (int y = 7; y < 9; ++y)
+    for (int x = 7; x < 9; ++x) {
+      const float* g = tile.pixel_transient(x, y);
+      for (int64_t k = 0; k < axis.bins; ++k) {
+        const double tc = axis.bin_centre_s(k);
+        if (std::fabs(tc - t_front) < 5e-12) front += g[k] / 4.0;
+        if (std::fabs(tc - t_back) < 5e-12) back += g[k] / 4.0;
+      }
+    }
+  // Bernoulli selection of the reflected lobe with probability R (front) or (1-R)^2 R... (back).
+  const double n = 4.0 * 131072;
+  EXPECT_NEAR(front / wall, R, 5 * std::sqrt(R * (1 - R) / n));
+  const double pb = (1 - R) * R;  // reaches the back face and reflects there
+  EXPECT_NEAR(back / wall, (1 - R) * (1 - R) * R, 5 * (1 - R) * std::sqrt(pb * (1 - pb) / n));
+}
+
+// A closed Lambertian sphere around the camera and an isotropic laser (an integrating sphere): every
+// bounce spreads the flux uniformly, so the radiance is rho I / (pi r^2) * (1 + rho + rho^2 + ...).
+TEST(Transport, IntegratingSphereFurnace) {
+  const float rho = 0.5f, radius = 0.5f;
+  scenes::Scene s;
+  add_sphere(s, {0, 0, 0}, radius, 64, 128, add_material(s, test::lambertian(rho)), /*inward=*/true);
+  RunConfig c = test_config(16, 16, 0.4e-3);
+  c.laser.beam = "cone";
+  c.laser.half_angle_rad = kPi;
+  c.render.max_bounces = 40;
+  c.render.russian_roulette_from = 3;
+  const PixelRect all{0, 0, 16, 16};
+  auto render = [&](int spp, int bounces) {
+    RunConfig cc = c;
+    cc.render.samples_per_pixel = spp;
+    cc.render.max_bounces = bounces;
+    Renderer r(s, cc);
+    return r.transient(all, all, TimeAxis{});
+  };
+  Renderer r(s, c);
+  const double l_direct = rho * r.photons_per_pulse() / (4 * kPi) / (kPi * radius * radius);
+  // The same sample count gives the same jittered camera rays (they are drawn first), so the ratio of
+  // the two renders is free of the cos^4 variation inside each pixel.
+  const TransientTile direct = render(64, 1);
+  const TransientTile full = render(64, 40);
+  std::vector<double> ratio;
+  for (int y = 0; y < 16; ++y)
+    for (int x = 0; x < 16; ++x) {
+      const size_t i = size_t(all.index(x, y));
+      const double cos4 = over_pixel(c, x, y, [](const glm::dvec3& v) { return std::pow(v.z, 4); }).first;
+      const double sd4 = over_pixel(c, x, y, [](const glm::dvec3& v) { return std::pow(v.z, 4); }).second;
+      // Jitter inside the pixel (5 sigma) and the facets, closer than r by at most their sagitta (2e-3).
+      EXPECT_NEAR(direct.laser_total[i] / (camera_constant(c) * l_direct), cos4, 5 * sd4 / 8 + 2e-3 * cos4);
+      ratio.push_back(full.laser_total[i] / direct.laser_total[i]);
+    }
+  const double mean = std::accumulate(ratio.begin(), ratio.end(), 0.0) / double(ratio.size());
+  double var = 0;
+  for (double v : ratio) var += (v - mean) * (v - mean);
+  const double sigma = std::sqrt(var / double(ratio.size() - 1) / double(ratio.size()));
+  EXPECT_NEAR(mean, 1.0 / (1.0 - rho), 5 * sigma + 3e-3);
+
+  // The error of the full render falls as 1/sqrt(samples): 4 vs 64 samples, expected ratio 4.
+  const TransientTile few = render(4, 40), few_direct = render(4, 1);
+  double e_few = 0, e_many = 0;
+  for (size_t i = 0; i < ratio.size(); ++i) {
+    e_few += std::pow(few.laser_total[i] / few_direct.laser_total[i] - 2.0, 2);
+    e_many += std::pow(ratio[i] - 2.0, 2);
+  }
+  const double falls = std::sqrt(e_few / e_many);
+  // Each RMS over 256 pixels has a relative spread of 1/sqrt(512) = 4.4 %; the ratio about 6 %.
+  EXPECT_GT(falls, 4.0 * 0.75);
+  EXPECT_LT(falls, 4.0 * 1.25);
+}
+
+TEST(Transport, FillFactorOfTheFullChipPreset) {
+  RunConfig c = test_config(8, 8, 50e-3);
+  c.sensor.preset = "full_chip";
+  c.sensor.pixel_B.fill_factor = 0.134;
+  c.render.samples_per_pixel = 1;
+  Renderer r(plane_scene(1.0f, 0.5f), c);
+  const TransientTile t = r.transient({0, 0, 8, 8}, {0, 0, 8, 8}, TimeAxis{});
+  // Rows 3 and 4 straddle the axis symmetrically; 50 mm focal length keeps cos^7 within 1e-7.
+  EXPECT_NEAR(t.laser_total[size_t(t.data_rect.index(3, 4))] / t.laser_total[size_t(t.data_rect.index(3, 3))],
+              0.134 / 0.07, 1e-5);
+}
+
+scenes::Scene busy_scene() {
+  scenes::Scene s;
+  add_quad(s, {0, 0, -1.2f}, {1, 0, 0}, {0, 1, 0}, add_material(s, test::lambertian(0.6f)));
+  add_box(s, {-0.2f, -0.2f, -0.452f}, {0.2f, 0.2f, -0.45f}, add_material(s, test::glass(1.5f, 0.002f, 0.1f)));
+  scenes::Material metal;
+  metal.base_color = {0.9f, 0.7f, 0.5f, 1};
+  metal.roughness = 0.3f;
+  add_sphere(s, {0.05f, 0, -0.85f}, 0.1f, 24, 48, add_material(s, metal));
+  scenes::Light light;
+  light.name = "bulb";
+  light.position = {0.3, 0.3, 0};
+  light.intensity = 5;
+  s.lights.push_back(light);
+  return s;
+}
+
+TEST(Transport, DeterministicForAnyThreadCountAndTileSplit) {
+  scenes::Scene s = busy_scene();
+  RunConfig c = test_config(16, 16, 4e-3);
+  c.render.samples_per_pixel = 4;
+  c.ambient.illuminance_lux = 20;
+  Renderer r(s, c);
+  const TimeAxis axis{5e-9, 20e-12, 200, 25e-9};
+  const PixelRect all{0, 0, 16, 16};
+  TransientTile one;
+  {
+    tbb::global_control single(tbb::global_control::max_allowed_parallelism, 1);
+    one = r.transient(all, all, axis);
+  }
+  tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
+  for (int tile : {8, 5}) {
+    for (int y0 = 0; y0 < 16; y0 += tile)
+      for (int x0 = 0; x0 < 16; x0 += tile) {
+        const PixelRect rect{x0, y0, std::min(tile, 16 - x0), std::min(tile, 16 - y0)};
+        const PixelRect data = grow_clipped(rect, 1, 16, 16);
+        const TransientTile t = r.transient(rect, data, axis);
+        for (int y = data.y0; y < data.y1(); ++y)
+          for (int x = data.x0; x < data.x1(); ++x) {
+            const size_t i = size_t(data.index(x, y)), j = size_t(all.index(x, y));
+            ASSERT_EQ(std::memcmp(t.pixel_transient(x, y), one.pixel_transient(x, y), sizeof(float) * size_t(axis.bins)), 0);
+            ASSERT_EQ(t.laser_total[i], one.laser_total[j]);
+            ASSERT_EQ(t.out_of_window[i], one.out_of_window[j]);
+            ASSERT_EQ(t.ambient_rate[i], one.ambient_rate[j]);
+          }
+      }
+  }
+  // Something was actually rendered: light, ambient and transmission.
+  double laser = std::accumulate(one.laser_total.begin(), one.laser_total.end(), 0.0);
+  EXPECT_GT(laser, 0.0);
+  EXPECT_GT(one.ambient_rate[0], 0.0f);
+}
+
+TEST(Transport, StatsCountCameraAndShadowRays) {
+  RunConfig c = test_config(8, 8, 12e-3);
+  c.render.samples_per_pixel = 2;
+  c.render.max_bounces = 1;
+  Renderer r(plane_scene(1.0f, 0.5f), c);
+  RenderStats stats;
+  r.transient({0, 0, 8, 8}, {0, 0, 8, 8}, TimeAxis{}, &stats);
+  EXPECT_EQ(stats.camera_rays, 128u);  // one per sample: direct light only, no ambient
+  EXPECT_EQ(stats.shadow_rays, 128u);
+}
+
+}  // namespace
+}  // namespace spadgen::render
