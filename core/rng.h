@@ -57,6 +57,11 @@ class Rng {
     const uint64_t hi = next_u32();
     return (hi << 32) | next_u32();
   }
+  // The Philox key and the counter of block 0 (block(i) sets its word 0 to i), for vectorised generators
+  // that must reproduce block(i) exactly.
+  const Philox::key_type& key() const { return key_; }
+  const Philox::ctr_type& counter() const { return ctr_; }
+
   // Uniform in [0, 1) with 53 random bits.
   double next_double() { return static_cast<double>(next_u64() >> 11) * 0x1.0p-53; }
   // Uniform in [0, 1) with 24 random bits.

@@ -1,1 +1,479 @@
-// Placeholder until this file is written; see the header beside it.
+#include "sensor.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <sstream>
+
+#include "core/error.h"
+#include "core/rng.h"
+#include "core/units.h"
+#include "gate.h"
+#include "pdp.h"
+#include "pixel_maps.h"
+#include "frames_kernel.h"
+#include "sampling.h"
+
+namespace spadgen::sensor {
+namespace {
+
+constexpr int kMaxFrames = 65535;  // counts are uint16
+
+struct TypeInfo {
+  std::string name;
+  double pdp_laser = 0, pdp_ambient = 0, fill_factor = 0, crosstalk = 0;
+  bool single_avalanche = false;
+};
+
+// Neighbour offsets; the index is the direction used to key a crosstalk draw.
+constexpr int kNbDx[4] = {-1, 1, 0, 0};
+constexpr int kNbDy[4] = {0, 0, -1, 1};
+
+// Inverse of eq. (5) / (6): incident (detectable) photons per N-frame image from summed counts. A count at
+// saturation is taken as N - 0.5 so the estimate stays finite.
+double linearise(double counts, double N, bool dual, double ratio) {
+  const double c = std::min(counts, N - 0.5);
+  if (c <= 0.0) return 0.0;
+  if (!dual) return -N * std::log1p(-c / N);
+  const double aL = 2.0 * ratio / (ratio + 1.0), aS = 2.0 / (ratio + 1.0);
+  const double y = 2.0 * c / N;
+  double x = 0.0;  // Newton from below on a concave increasing function converges monotonically
+  for (int it = 0; it < 500; ++it) {
+    const double eL = std::exp(-aL * x), eS = std::exp(-aS * x);
+    const double f = (2.0 - eL - eS) - y;
+    const double step = -f / (aL * eL + aS * eS);
+    x += step;
+    if (!(step > 1e-13 * x)) break;
+  }
+  return x * N;
+}
+
+}  // namespace
+
+struct SensorModel::Impl {
+  RunConfig cfg;
+  SensorOptions opt;
+  bool sweep = true;
+  int K = 0;
+  uint32_t frames_per_k = 0;
+  std::vector<double> positions, exposures;
+  GateShape gate;
+  std::unique_ptr<PixelMaps> maps;
+  std::unique_ptr<BinomialSampler> binom;
+  TypeInfo types[2];
+  int halo = 0;
+
+  Impl(const RunConfig& c, const SensorOptions& o);
+  std::vector<TypeInfo> used_types() const;
+
+  // lambda of every k for one pixel (no crosstalk); edges in bins of the axis when sweeping.
+  void lambda(const PixelParams& px, const float* g, const TimeAxis& axis, const EdgeBins* rise,
+              const EdgeBins* fall, double ambient, double laser_total, TransientPrefix& prefix,
+              double* out) const;
+};
+
+SensorModel::Impl::Impl(const RunConfig& c, const SensorOptions& o) : cfg(c), opt(o) {
+  const AcquisitionConfig& a = cfg.acquisition;
+  if (a.frames < 1 || a.frames > kMaxFrames)
+    throw Error("acquisition.frames: expected 1 to " + std::to_string(kMaxFrames) +
+                " frames (counts are 16-bit), found " + std::to_string(a.frames));
+  if (!(cfg.laser.repetition_rate_Hz > 0.0)) throw Error("laser.repetition_rate_MHz: expected a positive rate");
+  if (a.mode == "gate_sweep") {
+    sweep = true;
+    const GateSweepConfig& s = a.gate_sweep;
+    if (!(s.step_s > 0.0)) throw Error("acquisition.gate_sweep.step_ps: expected a positive step");
+    if (!(s.stop_s >= s.start_s))
+      throw Error("acquisition.gate_sweep.stop_ns: expected stop >= start");
+    if (a.cycles_per_frame < 1) throw Error("acquisition.cycles_per_frame: expected at least 1 laser cycle");
+    K = static_cast<int>(std::floor((s.stop_s - s.start_s) / s.step_s + 1e-9)) + 1;
+    for (int k = 0; k < K; ++k) positions.push_back(s.start_s + k * s.step_s);
+    frames_per_k = static_cast<uint32_t>(a.frames);
+    gate = build_gate_shape(cfg.sensor.gate, cfg.laser, opt.edge_knots);
+  } else if (a.mode == "intensity") {
+    sweep = false;
+    const IntensityConfig& in = a.intensity;
+    if (!(in.exposure_s > 0.0)) throw Error("acquisition.intensity.exposure_us: expected a positive exposure");
+    if (in.exposure == "single") {
+      K = 1;
+      exposures = {in.exposure_s};
+      frames_per_k = static_cast<uint32_t>(a.frames);
+    } else if (in.exposure == "dual") {
+      if (!(in.dual_ratio > 0.0)) throw Error("acquisition.intensity.dual_ratio: expected a positive ratio");
+      if (a.frames % 2 != 0)
+        throw Error("acquisition.frames: dual exposure interleaves short and long frames, expected an even "
+                    "number, found " + std::to_string(a.frames));
+      K = 2;
+      exposures = {in.exposure_s, in.exposure_s * in.dual_ratio};
+      frames_per_k = static_cast<uint32_t>(a.frames / 2);
+    } else {
+      throw Error("acquisition.intensity.exposure: expected \"single\" or \"dual\", found \"" + in.exposure + "\"");
+    }
+    gate.nominal_length_s = cfg.sensor.gate.length_s;
+  } else {
+    throw Error("acquisition.mode: expected \"gate_sweep\" or \"intensity\", found \"" + a.mode + "\"");
+  }
+  maps = std::make_unique<PixelMaps>(cfg, gate.nominal_length_s);
+  binom = std::make_unique<BinomialSampler>(frames_per_k);
+  const PixelTypeConfig* tc[2] = {&cfg.sensor.pixel_A, &cfg.sensor.pixel_B};
+  const char* names[2] = {"pixel_A", "pixel_B"};
+  for (int t = 0; t < 2; ++t) {
+    const std::string key = std::string("sensor.") + names[t];
+    const PdpCurve curve = PdpCurve::from_config(*tc[t], key);
+    types[t].name = names[t];
+    types[t].pdp_laser = curve.at(cfg.laser.wavelength_m);
+    types[t].pdp_ambient = curve.band_average(cfg.ambient.wavelength_m, cfg.ambient.bandwidth_m);
+    types[t].fill_factor = tc[t]->fill_factor;
+    types[t].crosstalk = cfg.sensor.crosstalk ? tc[t]->crosstalk_probability : 0.0;
+    types[t].single_avalanche = tc[t]->single_avalanche_per_frame;
+    if (!(types[t].crosstalk >= 0.0 && types[t].crosstalk <= 1.0))
+      throw Error(key + ".crosstalk_probability: expected a probability in [0, 1]");
+  }
+  for (const TypeInfo& t : used_types())
+    if (t.crosstalk > 0.0) halo = 1;
+}
+
+std::vector<TypeInfo> SensorModel::Impl::used_types() const {
+  const std::string& p = cfg.sensor.preset;
+  if (p == "pixel_A") return {types[0]};
+  if (p == "pixel_B") return {types[1]};
+  return {types[0], types[1]};
+}
+
+void SensorModel::Impl::lambda(const PixelParams& px, const float* g, const TimeAxis& axis, const EdgeBins* rise,
+                               const EdgeBins* fall, double ambient, double laser_total, TransientPrefix& prefix,
+                               double* out) const {
+  const TypeInfo& t = types[px.type];
+  const double pdp_l = t.pdp_laser * px.pdp_scale, pdp_a = t.pdp_ambient * px.pdp_scale;
+  if (!sweep) {
+    const bool laser = cfg.acquisition.intensity.laser_on;
+    const double rate = pdp_a * ambient + (laser ? pdp_l * laser_total * cfg.laser.repetition_rate_Hz : 0.0) + px.dcr_cps;
+    for (int k = 0; k < K; ++k) out[k] = rate * exposures[static_cast<size_t>(k)];
+    return;
+  }
+  const double C = static_cast<double>(cfg.acquisition.cycles_per_frame);
+  const double B = (pdp_a * ambient + px.dcr_cps) * gate.open_time(px.dL_s);
+  std::fill(out, out + K, 0.0);
+  if (g != nullptr && axis.bins > 0 && prefix.build(g, axis.bins)) {
+    const double dt = axis.bin_width_s;
+    const double b0 = (positions[0] + cfg.sensor.gate.delay_s + px.skew_s - axis.start_s) / dt;
+    const double step = cfg.acquisition.gate_sweep.step_s / dt;
+    accumulate_edge_response(prefix, *rise, b0, step, K, 1.0, out);
+    accumulate_edge_response(prefix, *fall, b0 + px.dL_s / dt, step, K, -1.0, out);
+  }
+  for (int k = 0; k < K; ++k) out[k] = C * (pdp_l * std::max(out[k], 0.0) + B);
+}
+
+SensorModel::SensorModel(const RunConfig& config) : SensorModel(config, SensorOptions{}) {}
+SensorModel::SensorModel(const RunConfig& config, const SensorOptions& options)
+    : impl_(std::make_unique<Impl>(config, options)) {}
+SensorModel::~SensorModel() = default;
+
+int SensorModel::K() const { return impl_->K; }
+const std::vector<double>& SensorModel::gate_positions_s() const { return impl_->positions; }
+const std::vector<double>& SensorModel::exposures_s() const { return impl_->exposures; }
+int SensorModel::halo() const { return impl_->halo; }
+int SensorModel::frames_per_k() const { return static_cast<int>(impl_->frames_per_k); }
+const GateShape& SensorModel::gate() const { return impl_->gate; }
+PixelParams SensorModel::pixel(int x, int y) const { return impl_->maps->at(x, y); }
+double SensorModel::pdp_laser(int type) const { return impl_->types[type].pdp_laser; }
+double SensorModel::pdp_ambient(int type) const { return impl_->types[type].pdp_ambient; }
+
+void SensorModel::set_gate_maps(std::vector<float> skew_ps, std::vector<float> length_ps) {
+  impl_->maps->set_gate_maps(std::move(skew_ps), std::move(length_ps));
+}
+
+TimeAxis SensorModel::required_window(double bin_width_s) const {
+  const Impl& m = *impl_;
+  if (!(bin_width_s > 0.0)) throw Error("render.time_bin_ps: expected a positive bin width");
+  TimeAxis axis;
+  axis.bin_width_s = bin_width_s;
+  axis.period_s = 1.0 / m.cfg.laser.repetition_rate_Hz;
+  if (!m.sweep) return axis;
+  const double delay = m.cfg.sensor.gate.delay_s;
+  // The knots span the whole effective gate including the instrument response (to 1e-15 of Gaussian
+  // tails), so no further margin is needed beyond rounding outward to whole bins.
+  const double lo = m.positions.front() + delay + m.maps->min_skew_s() + m.gate.support_begin();
+  const double hi = m.positions.back() + delay + m.maps->max_skew_s() + m.gate.support_end(m.maps->max_dL_s());
+  axis.start_s = std::floor(lo / bin_width_s) * bin_width_s;
+  axis.bins = static_cast<int64_t>(std::ceil((hi - axis.start_s) / bin_width_s));
+  return axis;
+}
+
+std::vector<double> SensorModel::pixel_lambda(int x, int y, const float* g, const TimeAxis& axis,
+                                              double ambient_rate, double laser_total) const {
+  const Impl& m = *impl_;
+  std::vector<double> out(static_cast<size_t>(m.K));
+  TransientPrefix prefix;
+  EdgeBins rise, fall;
+  if (m.sweep && axis.bins > 0) {
+    rise = edge_in_bins(m.gate.rise, axis.bin_width_s);
+    fall = edge_in_bins(m.gate.fall, axis.bin_width_s);
+  }
+  m.lambda(m.maps->at(x, y), g, axis, &rise, &fall, ambient_rate, laser_total, prefix, out.data());
+  return out;
+}
+
+SensorTile SensorModel::process(const TransientTile& t) const {
+  const Impl& m = *impl_;
+  const int W = m.cfg.camera.width_px, H = m.cfg.camera.height_px;
+  const PixelRect& rect = t.rect;
+  if (rect.x0 < 0 || rect.y0 < 0 || rect.x1() > W || rect.y1() > H)
+    throw Error("sensor: tile outside the sensor's " + std::to_string(W) + " x " + std::to_string(H) + " pixels");
+  // With crosstalk the 4 neighbours' rates are needed; without, only the tile's own pixels.
+  const PixelRect region = grow_clipped(rect, m.halo, W, H);
+  const PixelRect& dr = t.data_rect;
+  if (region.x0 < dr.x0 || region.y0 < dr.y0 || region.x1() > dr.x1() || region.y1() > dr.y1())
+    throw Error("sensor: a tile's data must cover its pixels grown by the sensor's halo of " +
+                std::to_string(m.halo) + " pixel(s)");
+  const size_t ndata = static_cast<size_t>(dr.count());
+  if (t.ambient_rate.size() != ndata) throw Error("sensor: TransientTile::ambient_rate must hold one value per data pixel");
+  if (m.sweep) {
+    if (t.axis.bins <= 0) throw Error("sensor: gate-sweep mode needs a rendered transient (time axis with bins)");
+    if (t.transient.size() != ndata * static_cast<size_t>(t.axis.bins))
+      throw Error("sensor: TransientTile::transient must hold data_rect pixels x axis.bins values");
+  } else if (m.cfg.acquisition.intensity.laser_on && t.laser_total.size() != ndata) {
+    throw Error("sensor: TransientTile::laser_total must hold one value per data pixel");
+  }
+
+  const int K = m.K;
+  const size_t Ks = static_cast<size_t>(K);
+  EdgeBins rise, fall;
+  if (m.sweep) {
+    rise = edge_in_bins(m.gate.rise, t.axis.bin_width_s);
+    fall = edge_in_bins(m.gate.fall, t.axis.bin_width_s);
+  }
+  // lambda of every k for the region's pixels, indexed like data_rect
+  std::vector<double> lam(static_cast<size_t>(region.count()) * Ks);
+  std::vector<PixelParams> params(static_cast<size_t>(region.count()));
+  tbb::parallel_for(tbb::blocked_range<int>(region.y0, region.y1()), [&](const tbb::blocked_range<int>& rows) {
+    TransientPrefix prefix;
+    for (int y = rows.begin(); y < rows.end(); ++y)
+      for (int x = region.x0; x < region.x1(); ++x) {
+        const size_t ri = static_cast<size_t>(region.index(x, y));
+        const auto di = static_cast<size_t>(dr.index(x, y));
+        params[ri] = m.maps->at(x, y);
+        const float* g = m.sweep ? t.transient.data() + di * static_cast<size_t>(t.axis.bins) : nullptr;
+        const double laser_total = t.laser_total.size() == ndata ? t.laser_total[di] : 0.0;
+        m.lambda(params[ri], g, t.axis, &rise, &fall, t.ambient_rate[di], laser_total, prefix, lam.data() + ri * Ks);
+      }
+  });
+
+  SensorTile out;
+  out.rect = rect;
+  out.K = K;
+  const size_t n = static_cast<size_t>(rect.count());
+  const uint32_t N = m.frames_per_k;
+  out.expected.assign(n * Ks, 0.0f);
+  out.counts.assign(n * Ks, 0);
+  const bool frames = m.cfg.outputs.frames;
+  const size_t bpr = static_cast<size_t>((rect.width + 7) / 8);
+  if (frames) {
+    out.frames_per_k = static_cast<int>(N);
+    out.frames.assign(Ks * N * static_cast<size_t>(rect.height) * bpr, 0);
+  }
+  const size_t wpp = (N + 63) / 64;
+  const uint64_t seed = m.cfg.seed;
+  auto pixel_index = [W](int x, int y) { return static_cast<uint64_t>(y) * static_cast<uint64_t>(W) + static_cast<uint64_t>(x); };
+
+  // For pixel (x, y) at k: the neighbours that can fire it (same section, inside the image).
+  auto neighbours = [&](int x, int y, int* list) {
+    int c = 0;
+    const int sec = m.maps->section_of_row(y);
+    for (int d = 0; d < 4; ++d) {
+      const int nx = x + kNbDx[d], ny = y + kNbDy[d];
+      if (nx < 0 || ny < 0 || nx >= W || ny >= H || m.maps->section_of_row(ny) != sec) continue;
+      list[c++] = d;
+    }
+    return c;
+  };
+
+  tbb::parallel_for(tbb::blocked_range<int>(0, K, 1), [&](const tbb::blocked_range<int>& ks) {
+    std::vector<uint64_t> own, row;
+    for (int k = ks.begin(); k < ks.end(); ++k) {
+      const auto kk = static_cast<size_t>(k);
+      if (frames) {
+        // Every region pixel's own avalanches (its keyed stream, identical in whichever tile owns it).
+        own.assign(static_cast<size_t>(region.count()) * wpp, 0);
+        for (int y = region.y0; y < region.y1(); ++y)
+          for (int x = region.x0; x < region.x1(); ++x) {
+            const auto ri = static_cast<size_t>(region.index(x, y));
+            const Rng stream(seed, RngKind::Frames, pixel_index(x, y), kk);
+            sample_bits(stream, *m.binom, prob_from_lambda(lam[ri * Ks + kk]), own.data() + ri * wpp);
+          }
+        row.assign(static_cast<size_t>(rect.width) * wpp, 0);
+      }
+      for (int y = rect.y0; y < rect.y1(); ++y) {
+        for (int x = rect.x0; x < rect.x1(); ++x) {
+          const auto ri = static_cast<size_t>(region.index(x, y));
+          const auto oi = static_cast<size_t>(rect.index(x, y));
+          const PixelParams& px = params[ri];
+          const TypeInfo& ty = m.types[px.type];
+          const double lam_own = lam[ri * Ks + kk];
+          double lam_eff = lam_own;
+          int nb[4];
+          const int nnb = ty.crosstalk > 0.0 ? neighbours(x, y, nb) : 0;
+          for (int i = 0; i < nnb; ++i) {
+            const auto ni = static_cast<size_t>(region.index(x + kNbDx[nb[i]], y + kNbDy[nb[i]]));
+            const double li = lam[ni * Ks + kk];
+            // Pixel A: every neighbour avalanche may fire this pixel, a thinned Poisson process. Pixel B:
+            // a neighbour avalanches at most once per frame, firing this pixel with probability q.
+            lam_eff += ty.single_avalanche ? -std::log1p(-ty.crosstalk * prob_from_lambda(li).p) : ty.crosstalk * li;
+          }
+          const Prob pr = prob_from_lambda(lam_eff);
+          out.expected[kk * n + oi] = static_cast<float>(static_cast<double>(N) * pr.p);
+          if (!frames) {
+            Rng rng(seed, RngKind::Counts, pixel_index(x, y), kk);
+            out.counts[kk * n + oi] = static_cast<uint16_t>(m.binom->sample(rng, pr));
+            continue;
+          }
+          uint64_t* mine = row.data() + static_cast<size_t>(x - rect.x0) * wpp;
+          std::copy_n(own.data() + ri * wpp, wpp, mine);
+          if (nnb > 0) {
+            const Rng xt(seed, RngKind::Crosstalk, pixel_index(x, y), kk);
+            for (int i = 0; i < nnb; ++i) {
+              const int d = nb[i];
+              const auto ni = static_cast<size_t>(region.index(x + kNbDx[d], y + kNbDy[d]));
+              const double li = lam[ni * Ks + kk];
+              const Prob pi = prob_from_lambda(li);
+              if (!(pi.p > 0.0)) continue;
+              // Given that the neighbour avalanched at least once, the chance it fires this pixel: q for
+              // pixel B; for pixel A (1 - exp(-q lambda_i)) / p_i, so that the marginal matches the
+              // thinned Poisson process of the counts path.
+              const double r = ty.single_avalanche ? ty.crosstalk : std::min(1.0, -std::expm1(-ty.crosstalk * li) / pi.p);
+              const uint64_t thr = probability_threshold(r);
+              const uint64_t* theirs = own.data() + ni * wpp;
+              for (size_t w = 0; w < wpp; ++w) {
+                uint64_t bits = theirs[w] & ~mine[w];
+                while (bits != 0) {
+                  const int b = std::countr_zero(bits);
+                  bits &= bits - 1;
+                  const auto f = static_cast<uint32_t>(w * 64 + static_cast<size_t>(b));
+                  const auto blk = xt.block(f * 4 + static_cast<uint32_t>(d));
+                  if (((uint64_t{blk[0]} << 32) | blk[1]) < thr) mine[w] |= uint64_t{1} << b;
+                }
+              }
+            }
+          }
+          int c = 0;
+          for (size_t w = 0; w < wpp; ++w) c += std::popcount(mine[w]);
+          out.counts[kk * n + oi] = static_cast<uint16_t>(c);
+        }
+        if (frames) {
+          const size_t H_t = static_cast<size_t>(rect.height);
+          uint8_t* dst = out.frames.data() + ((kk * N) * H_t + static_cast<size_t>(y - rect.y0)) * bpr;
+          pack_frames_row(row.data(), rect.width, N, wpp, dst, H_t * bpr);
+        }
+      }
+    }
+  });
+
+  if (!m.sweep) {
+    const bool dual = K == 2;
+    out.intensity_counts.assign(n, 0.0f);
+    out.intensity_photons.assign(n, 0.0f);
+    const double Ntot = static_cast<double>(m.cfg.acquisition.frames);
+    for (size_t i = 0; i < n; ++i) {
+      double c = 0.0;
+      for (size_t k = 0; k < Ks; ++k) c += out.counts[k * n + i];
+      out.intensity_counts[i] = static_cast<float>(c);
+      out.intensity_photons[i] = static_cast<float>(linearise(c, Ntot, dual, m.cfg.acquisition.intensity.dual_ratio));
+    }
+  }
+  return out;
+}
+
+SensorMapsTile SensorModel::maps(const PixelRect& rect) const {
+  const Impl& m = *impl_;
+  SensorMapsTile t;
+  t.rect = rect;
+  const auto n = static_cast<size_t>(rect.count());
+  t.gate_skew_ps.resize(n);
+  t.gate_length_ps.resize(n);
+  t.dcr_cps.resize(n);
+  t.pde.resize(n);
+  for (int y = rect.y0; y < rect.y1(); ++y)
+    for (int x = rect.x0; x < rect.x1(); ++x) {
+      const auto i = static_cast<size_t>(rect.index(x, y));
+      const PixelParams p = m.maps->at(x, y);
+      const TypeInfo& ty = m.types[p.type];
+      t.gate_skew_ps[i] = static_cast<float>(p.skew_s / kPs);
+      t.gate_length_ps[i] = static_cast<float>((m.gate.nominal_length_s + p.dL_s) / kPs);
+      t.dcr_cps[i] = static_cast<float>(p.dcr_cps);
+      t.pde[i] = static_cast<float>(ty.pdp_laser * p.pdp_scale * ty.fill_factor * m.cfg.camera.optics_transmission);
+    }
+  return t;
+}
+
+double linearise_counts(double counts, int frames, bool dual, double ratio) {
+  return linearise(counts, static_cast<double>(frames), dual, ratio);
+}
+
+nlohmann::json SensorModel::describe() const {
+  const Impl& m = *impl_;
+  const AcquisitionConfig& a = m.cfg.acquisition;
+  nlohmann::json j;
+  j["mode"] = a.mode;
+  j["K"] = m.K;
+  j["frames"] = a.frames;
+  j["frames_per_k"] = m.frames_per_k;
+  j["N_sat"] = a.frames;
+  j["frame_rate_fps"] = a.frame_rate_Hz;
+  j["photon_convention"] =
+      "transient and ambient inputs are photons on the photosensitive area (fill factor and optics already "
+      "applied); detections = PDP x photons";
+  if (m.sweep) {
+    j["cycles_per_frame"] = a.cycles_per_frame;
+    std::vector<double> ns;
+    for (double p : m.positions) ns.push_back(p / kNs);
+    j["gate_positions_ns"] = ns;
+    j["gate_step_ps"] = a.gate_sweep.step_s / kPs;
+    const GateConfig& g = m.cfg.sensor.gate;
+    nlohmann::json gj;
+    gj["profile"] = g.profile_csv.empty() ? g.edge_shape : "table:" + g.profile_csv;
+    gj["nominal_length_ns"] = m.gate.nominal_length_s / kNs;
+    gj["effective_length_ns"] = m.gate.open_time_s / kNs;
+    gj["plateau"] = m.gate.plateau;
+    gj["rise_ps"] = g.rise_s / kPs;
+    gj["fall_ps"] = g.fall_s / kPs;
+    gj["delay_ns"] = g.delay_s / kNs;
+    gj["irf_fwhm_ps"] = m.gate.irf_fwhm_s / kPs;
+    gj["knots_per_edge"] = m.gate.knots_per_edge;
+    gj["knots_exact"] = m.gate.exact;
+    gj["knot_max_error"] = m.gate.max_knot_error;
+    gj["skew_spread_fwhm_ps"] = m.cfg.sensor.skew ? g.skew_fwhm_s / kPs : 0.0;
+    gj["length_spread_fwhm_ps"] = m.cfg.sensor.skew ? g.length_fwhm_s / kPs : 0.0;
+    gj["user_maps"] = m.maps->has_user_maps();
+    j["gate"] = gj;
+  } else {
+    std::vector<double> us;
+    for (double e : m.exposures) us.push_back(e / kUs);
+    j["exposures_us"] = us;
+    j["laser_on"] = a.intensity.laser_on;
+  }
+  nlohmann::json types = nlohmann::json::array();
+  const double tf = PixelMaps::temperature_factor(m.cfg.sensor.temperature_C);
+  for (const TypeInfo& t : m.used_types()) {
+    const PixelTypeConfig& c = t.name == "pixel_A" ? m.cfg.sensor.pixel_A : m.cfg.sensor.pixel_B;
+    types.push_back({{"name", t.name},
+                     {"pdp_laser", t.pdp_laser},
+                     {"pdp_ambient_band", t.pdp_ambient},
+                     {"fill_factor", t.fill_factor},
+                     {"pde_laser", t.pdp_laser * t.fill_factor * m.cfg.camera.optics_transmission},
+                     {"crosstalk_probability", t.crosstalk},
+                     {"single_avalanche_per_frame", t.single_avalanche},
+                     {"dcr_median_cps", m.cfg.sensor.dark_counts ? c.dcr_median_cps * tf : 0.0}});
+  }
+  j["pixel_types"] = types;
+  j["temperature_C"] = m.cfg.sensor.temperature_C;
+  j["dcr_temperature_factor"] = tf;
+  j["crosstalk"] = {{"enabled", m.halo > 0}, {"neighbours", "4 nearest, not across array sections"}};
+  j["sampling"] = {{"counts", m.cfg.outputs.frames ? "popcount of the sampled frames" : "Binomial(N, p) by exact inversion"},
+                   {"bernoulli", "64-bit threshold, top byte first (dense) or binomial + uniform subset (p or 1-p <= 1/16)"},
+                   {"simd_target", dense_bits_target()}};
+  return j;
+}
+
+}  // namespace spadgen::sensor

@@ -2,6 +2,17 @@
 // camera streams out. Depends on core/ only, never on the renderer. Pixel coordinates are full-sensor
 // coordinates (camera.width_px x camera.height_px), so per-pixel maps and random streams do not change
 // with the crop, the tile size or the thread count.
+//
+// Photon convention (one place, never applied twice): TransientTile holds photons per laser pulse that
+// land on the pixel's photosensitive area, i.e. the renderer has already applied the optics transmission,
+// the fill factor and cos^4. The sensor multiplies by the PDP only: detections = PDP(lambda) x photons.
+// The same holds for TransientTile::ambient_rate. SensorMapsTile::pde (PDP x FF x optics) is informative:
+// it relates detections to photons on the whole pixel pitch, and is not used in the computation.
+//
+// Crosstalk needs the 4 nearest neighbours' detection rates: when halo() is 1, every TransientTile must
+// carry data for rect grown by 1 pixel, clipped to the image (data_rect); process() checks this.
+//
+// Details and measured accuracies: docs/sensor.md.
 #pragma once
 #include <nlohmann/json.hpp>
 
@@ -13,6 +24,9 @@
 
 namespace spadgen::sensor {
 
+struct GateShape;
+struct PixelParams;
+
 // The per-pixel maps actually used, for sensor_maps.exr: [rect.index(x, y)].
 struct SensorMapsTile {
   PixelRect rect;
@@ -22,9 +36,17 @@ struct SensorMapsTile {
   std::vector<float> pde;             // photon detection efficiency at the laser wavelength (PDP x FF x optics)
 };
 
+// Settings of the numerical method that are not part of the physics (not in the scene file).
+struct SensorOptions {
+  // Knots per gate edge when the edge is tabulated (smooth edges, or any edge convolved with the
+  // instrument response). 64 keeps the gate within about 1e-4 of its fine reference; see docs/sensor.md.
+  int edge_knots = 64;
+};
+
 class SensorModel {
  public:
   explicit SensorModel(const RunConfig& config);
+  SensorModel(const RunConfig& config, const SensorOptions& options);
   ~SensorModel();
   SensorModel(const SensorModel&) = delete;
   SensorModel& operator=(const SensorModel&) = delete;
@@ -45,9 +67,38 @@ class SensorModel {
   // What metadata.json records about the acquisition: gate positions, cycles per frame, N_sat, PDE, ...
   nlohmann::json describe() const;
 
+  // Measured gate maps (the app reads sensor.gate.maps_exr and passes its channels here): full-sensor
+  // row-major arrays of width_px * height_px, gate skew in ps and absolute gate length (50 %-50 %) in ps.
+  // Replaces the generated skew and length maps (still switched off by sensor.gate_skew = false). Call
+  // before required_window() and process(). Throws spadgen::Error on a size mismatch or bad values.
+  void set_gate_maps(std::vector<float> skew_ps, std::vector<float> length_ps);
+
+  // Frames per gate position or exposure (N; N / 2 per exposure in dual mode).
+  int frames_per_k() const;
+  // Exposure time of each k in 2D intensity mode, seconds (empty in gate-sweep mode).
+  const std::vector<double>& exposures_s() const;
+  // The effective gate (profile convolved with the instrument response); gate-sweep mode.
+  const GateShape& gate() const;
+  // The parameters of pixel (x, y): type, skew, length deviation, DCR, PDP scale.
+  PixelParams pixel(int x, int y) const;
+  // Mean detections per laser cycle per photon at the laser (or ambient) wavelength for a pixel type
+  // (0: pixel A settings, 1: pixel B), before the per-pixel non-uniformity.
+  double pdp_laser(int type) const;
+  double pdp_ambient(int type) const;
+  // The binary-frame detection rate lambda (mean avalanches per frame) of every k for one pixel, without
+  // crosstalk: g = its transient on `axis` (ignored in 2D mode), ambient in photons per second,
+  // laser_total in photons per pulse. Used by process() and by tests as the reference.
+  std::vector<double> pixel_lambda(int x, int y, const float* g, const TimeAxis& axis, double ambient_rate,
+                                   double laser_total) const;
+
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
+
+// Inverse of the paper's eq. (5) (single exposure) or eq. (6) (dual, ratio = tau_L / tau_S) with
+// N_sat = frames: the incident (detectable) photons per N-frame image that give `counts` on average.
+// Counts at or above frames - 0.5 are taken as frames - 0.5, so saturation gives a large finite value.
+double linearise_counts(double counts, int frames, bool dual, double ratio);
 
 }  // namespace spadgen::sensor

@@ -1,0 +1,69 @@
+#include "csv.h"
+
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+
+#include "core/error.h"
+
+namespace spadgen::sensor {
+namespace {
+
+// Parses exactly two finite numbers separated by commas, semicolons or white space.
+bool parse_row(const std::string& line, double& a, double& b) {
+  std::string s = line;
+  for (char& ch : s)
+    if (ch == ',' || ch == ';' || ch == '\t') ch = ' ';
+  const char* p = s.c_str();
+  char* end = nullptr;
+  errno = 0;
+  a = std::strtod(p, &end);
+  if (end == p || errno != 0) return false;
+  p = end;
+  b = std::strtod(p, &end);
+  if (end == p || errno != 0) return false;
+  for (p = end; *p != '\0'; ++p)
+    if (*p != ' ' && *p != '\r') return false;
+  return std::isfinite(a) && std::isfinite(b);
+}
+
+}  // namespace
+
+Table2 read_table_csv(const std::string& path, const std::string& key) {
+  std::ifstream in(path);
+  if (!in) throw Error(key + ": cannot read the table file '" + path + "'");
+  Table2 t;
+  std::string line;
+  int line_no = 0;
+  bool first_data_row = true;
+  while (std::getline(in, line)) {
+    ++line_no;
+    const auto first = line.find_first_not_of(" \t\r");
+    if (first == std::string::npos || line[first] == '#') continue;
+    double a = 0, b = 0;
+    if (!parse_row(line, a, b)) {
+      if (first_data_row) {  // a header such as "time_ps,response"
+        first_data_row = false;
+        continue;
+      }
+      throw Error(key + ": '" + path + "' line " + std::to_string(line_no) +
+                  ": expected two numbers separated by a comma, found '" + line + "'");
+    }
+    first_data_row = false;
+    if (!t.x.empty() && !(a > t.x.back())) {
+      std::ostringstream m;
+      m << key << ": '" << path << "' line " << line_no << ": the first column must be strictly increasing, found "
+        << a << " after " << t.x.back();
+      throw Error(m.str());
+    }
+    t.x.push_back(a);
+    t.y.push_back(b);
+  }
+  if (t.x.size() < 2)
+    throw Error(key + ": '" + path + "' must hold at least two rows of numbers, found " + std::to_string(t.x.size()));
+  return t;
+}
+
+}  // namespace spadgen::sensor

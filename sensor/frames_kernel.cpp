@@ -1,0 +1,137 @@
+// Compiled once per target by Highway's foreach_target; the code between HWY_BEFORE_NAMESPACE and
+// HWY_AFTER_NAMESPACE carries that target's attributes, so the plain loops of the Philox rounds are
+// auto-vectorised for it and the byte comparisons use its widest vectors.
+#undef HWY_TARGET_INCLUDE
+#define HWY_TARGET_INCLUDE "sensor/frames_kernel.cpp"
+#include <hwy/foreach_target.h>  // IWYU pragma: keep
+#include <hwy/highway.h>
+
+#include <cstring>
+
+#include "sensor/frames_kernel.h"
+
+HWY_BEFORE_NAMESPACE();
+namespace spadgen::sensor {
+namespace HWY_NAMESPACE {
+namespace hn = hwy::HWY_NAMESPACE;
+
+// Philox4x32-10 of 16 consecutive counters, structure of arrays: out holds word 0 of the 16 blocks, then
+// word 1, word 2, word 3 (little endian), exactly as r123::Philox4x32 computes each block.
+HWY_INLINE void Philox16(const uint32_t key[2], const uint32_t ctr[4], uint32_t first, uint32_t* HWY_RESTRICT out) {
+  uint32_t x0[16], x1[16], x2[16], x3[16];
+  for (uint32_t i = 0; i < 16; ++i) {
+    x0[i] = first + i;
+    x1[i] = ctr[1];
+    x2[i] = ctr[2];
+    x3[i] = ctr[3];
+  }
+  uint32_t ka = key[0], kb = key[1];
+  for (int round = 0; round < 10; ++round) {
+    for (int i = 0; i < 16; ++i) {
+      const uint64_t p0 = uint64_t{0xD2511F53u} * x0[i];
+      const uint64_t p1 = uint64_t{0xCD9E8D57u} * x2[i];
+      const uint32_t n0 = static_cast<uint32_t>(p1 >> 32) ^ x1[i] ^ ka;
+      const uint32_t n2 = static_cast<uint32_t>(p0 >> 32) ^ x3[i] ^ kb;
+      x1[i] = static_cast<uint32_t>(p1);
+      x3[i] = static_cast<uint32_t>(p0);
+      x0[i] = n0;
+      x2[i] = n2;
+    }
+    ka += 0x9E3779B9u;
+    kb += 0xBB67AE85u;
+  }
+  std::memcpy(out, x0, sizeof x0);
+  std::memcpy(out + 16, x1, sizeof x1);
+  std::memcpy(out + 32, x2, sizeof x2);
+  std::memcpy(out + 48, x3, sizeof x3);
+}
+
+// The bit of one frame given its top byte; refines a tie with the block `refine_block`.
+HWY_INLINE bool dense_bit_from(const Rng& stream, uint8_t top, uint64_t T, uint32_t refine_block) {
+  const auto tb = static_cast<uint8_t>(T >> 56);
+  if (top != tb) return top < tb;
+  const auto b = stream.block(refine_block);
+  const uint64_t u = ((uint64_t{b[0]} << 32) | b[1]) & ((uint64_t{1} << 56) - 1);
+  return u < (T & ((uint64_t{1} << 56) - 1));
+}
+
+void DenseBits(const Rng& stream, uint32_t n, uint64_t T, uint64_t* HWY_RESTRICT words) {
+  const hn::ScalableTag<uint8_t> d8;
+  const size_t L = hn::Lanes(d8);
+  const auto tb = hn::Set(d8, static_cast<uint8_t>(T >> 56));
+  const uint64_t t_rest = T & ((uint64_t{1} << 56) - 1);
+  const uint32_t chunks = (n + 255) / 256;
+  const uint32_t refine_base = chunks * 16;
+  const auto& key = stream.key();
+  const auto& ctr = stream.counter();
+  const uint32_t k[2] = {key.v[0], key.v[1]};
+  const uint32_t c[4] = {ctr.v[0], ctr.v[1], ctr.v[2], ctr.v[3]};
+  alignas(64) uint32_t buf32[64];
+  alignas(64) uint8_t mask[32 + 64];  // 256 bits, plus room for the last vector's store
+  auto* dst = reinterpret_cast<uint8_t*>(words);
+  const size_t total_bytes = (static_cast<size_t>(n) + 63) / 64 * 8;
+  for (uint32_t ch = 0; ch < chunks; ++ch) {
+    Philox16(k, c, 16 * ch, buf32);
+    const auto* bytes = reinterpret_cast<const uint8_t*>(buf32);
+    if (L < 8) {  // a target narrower than one mask byte: plain comparisons
+      std::memset(mask, 0, 32);
+      for (size_t i = 0; i < 256; ++i)
+        if (dense_bit_from(stream, bytes[i], T, refine_base + ch * 256 + static_cast<uint32_t>(i)))
+          mask[i / 8] = static_cast<uint8_t>(mask[i / 8] | (1u << (i % 8)));
+      const size_t begin = static_cast<size_t>(ch) * 32;
+      std::memcpy(dst + begin, mask, std::min<size_t>(32, total_bytes - begin));
+      continue;
+    }
+    for (size_t off = 0; off < 256; off += L) {
+      const auto v = hn::LoadU(d8, bytes + off);
+      hn::StoreMaskBits(d8, hn::Lt(v, tb), mask + off / 8);
+      const auto eq = hn::Eq(v, tb);
+      if (HWY_UNLIKELY(!hn::AllFalse(d8, eq))) {
+        for (size_t i = 0; i < L; ++i) {
+          if (bytes[off + i] != static_cast<uint8_t>(T >> 56)) continue;
+          const uint32_t f = ch * 256 + static_cast<uint32_t>(off + i);
+          if (f >= n) continue;
+          const auto b = stream.block(refine_base + f);
+          const uint64_t u = ((uint64_t{b[0]} << 32) | b[1]) & ((uint64_t{1} << 56) - 1);
+          if (u < t_rest) mask[(off + i) / 8] = static_cast<uint8_t>(mask[(off + i) / 8] | (1u << ((off + i) % 8)));
+        }
+      }
+    }
+    const size_t begin = static_cast<size_t>(ch) * 32;
+    std::memcpy(dst + begin, mask, std::min<size_t>(32, total_bytes - begin));
+  }
+  if (n % 64 != 0) words[(n - 1) / 64] &= (uint64_t{1} << (n % 64)) - 1;
+}
+
+const char* TargetName() { return hwy::TargetName(HWY_TARGET); }
+
+}  // namespace HWY_NAMESPACE
+}  // namespace spadgen::sensor
+HWY_AFTER_NAMESPACE();
+
+#if HWY_ONCE
+namespace spadgen::sensor {
+
+HWY_EXPORT(DenseBits);
+HWY_EXPORT(TargetName);
+
+void dense_bits(const Rng& stream, uint32_t n, uint64_t T, uint64_t* words) {
+  HWY_DYNAMIC_DISPATCH(DenseBits)(stream, n, T, words);
+}
+
+const char* dense_bits_target() { return HWY_DYNAMIC_DISPATCH(TargetName)(); }
+
+bool dense_bit_reference(const Rng& stream, uint32_t n, uint64_t T, uint32_t frame) {
+  const uint32_t chunks = (n + 255) / 256;
+  const uint32_t ch = frame / 256, r = frame % 256;
+  const auto blk = stream.block(16 * ch + (r % 64) / 4);
+  const auto top = static_cast<uint8_t>(blk[r / 64] >> (8 * (r % 4)));
+  const auto tb = static_cast<uint8_t>(T >> 56);
+  if (top != tb) return top < tb;
+  const auto b = stream.block(chunks * 16 + frame);
+  const uint64_t u = ((uint64_t{b[0]} << 32) | b[1]) & ((uint64_t{1} << 56) - 1);
+  return u < (T & ((uint64_t{1} << 56) - 1));
+}
+
+}  // namespace spadgen::sensor
+#endif

@@ -1,0 +1,155 @@
+#include "sampling.h"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+
+#include "frames_kernel.h"
+
+namespace spadgen::sensor {
+namespace {
+
+constexpr double kTwo64 = 18446744073709551616.0;  // 2^64
+constexpr double kSparseBelow = 1.0 / 16.0;
+constexpr double kModeSearchFrom = 16.0;
+
+// Unbiased integer in [0, range) from 32-bit draws (Lemire's multiply-and-reject); range <= 2^32.
+uint32_t uniform_below(Rng& rng, uint64_t range) {
+  for (;;) {
+    const uint64_t m = static_cast<uint64_t>(rng.next_u32()) * range;
+    const auto low = static_cast<uint32_t>(m);
+    if (low >= static_cast<uint32_t>(range)) return static_cast<uint32_t>(m >> 32);
+    const auto reject_below = static_cast<uint32_t>((uint64_t{1} << 32) % range);
+    if (low >= reject_below) return static_cast<uint32_t>(m >> 32);
+  }
+}
+
+}  // namespace
+
+uint64_t probability_threshold(double a) {
+  if (!(a > 0.0)) return 0;
+  const double t = a * kTwo64;  // exact: scaling by a power of two
+  if (t >= kTwo64) return ~uint64_t{0};
+  return static_cast<uint64_t>(t);  // truncation = floor; exact for t >= 2^53, as t is then an integer
+}
+
+Prob prob_from_lambda(double lambda) {
+  if (!(lambda > 0.0)) return {0.0, 1.0};
+  if (std::isinf(lambda)) return {1.0, 0.0};
+  return {-std::expm1(-lambda), std::exp(-lambda)};
+}
+
+bool bits_are_sparse(const Prob& pr) { return std::min(pr.p, pr.q) <= kSparseBelow; }
+
+BinomialSampler::BinomialSampler(uint32_t n) : n_(n), log_fact_(n + 1) {
+  for (uint32_t i = 0; i <= n; ++i) log_fact_[i] = std::lgamma(static_cast<double>(i) + 1.0);
+}
+
+uint32_t BinomialSampler::small_side(Rng& rng, double a, double b) const {
+  // a <= b: the probability of the rarer outcome; X counts it.
+  const double N = n_;
+  const double mean = N * a;
+  const double log_b = std::log1p(-a);  // not log(b): b near 1 has lost a's digits
+  if (mean < kModeSearchFrom) {
+    const uint64_t U = rng.next_u64();
+    // P(X >= 1) = 1 - b^N <= N a: most draws end here without a transcendental function.
+    if (mean < 1.0 && U >= probability_threshold(mean)) return 0;
+    double S = -std::expm1(N * log_b);  // P(X > 0)
+    double pmf = std::exp(N * log_b);   // P(X = 0)
+    const double r = a / b;
+    uint32_t x = 0;
+    while (x < n_ && U < probability_threshold(S)) {
+      ++x;
+      pmf *= r * static_cast<double>(n_ - x + 1) / x;
+      S -= pmf;  // P(X > x)
+      if (!(S > 0.0)) break;
+    }
+    return x;
+  }
+  const double log_a = std::log(a);
+  const auto m = static_cast<uint32_t>(std::min(N, std::floor((N + 1.0) * a)));
+  const double pm = std::exp(log_fact_[n_] - log_fact_[m] - log_fact_[n_ - m] + m * log_a + (N - m) * log_b);
+  double U = static_cast<double>(rng.next_u64() >> 11) * 0x1.0p-53;
+  U -= pm;
+  if (U < 0.0) return m;
+  const double r = a / b;
+  uint32_t lo = m, hi = m;
+  double p_lo = pm, p_hi = pm;
+  for (;;) {
+    bool moved = false;
+    if (lo > 0) {
+      p_lo *= static_cast<double>(lo) / (static_cast<double>(n_ - lo + 1) * r);
+      --lo;
+      U -= p_lo;
+      if (U < 0.0) return lo;
+      moved = true;
+    }
+    if (hi < n_) {
+      p_hi *= r * static_cast<double>(n_ - hi) / static_cast<double>(hi + 1);
+      ++hi;
+      U -= p_hi;
+      if (U < 0.0) return hi;
+      moved = true;
+    }
+    if (!moved) return m;  // U beyond the rounded total probability
+  }
+}
+
+uint32_t BinomialSampler::sample(Rng& rng, const Prob& pr) const {
+  if (!(pr.p > 0.0) || n_ == 0) return 0;
+  if (!(pr.q > 0.0)) return n_;
+  if (pr.p <= pr.q) return small_side(rng, pr.p, pr.q);
+  return n_ - small_side(rng, pr.q, pr.p);
+}
+
+void sample_bits(const Rng& stream, const BinomialSampler& sampler, const Prob& pr, uint64_t* words) {
+  const uint32_t n = sampler.n();
+  const size_t nw = (n + 63) / 64;
+  std::fill(words, words + nw, uint64_t{0});
+  const bool invert = pr.p > pr.q;
+  const double a = invert ? pr.q : pr.p;
+  if (a > 0.0) {
+    if (a <= kSparseBelow) {
+      Rng rng = stream;
+      const uint32_t c = invert ? n - sampler.sample(rng, {pr.p, pr.q}) : sampler.sample(rng, pr);
+      // Floyd: a uniformly random c-subset of [0, n)
+      for (uint32_t j = n - c; j < n; ++j) {
+        const uint32_t t = uniform_below(rng, uint64_t{j} + 1);
+        const uint64_t bit_t = uint64_t{1} << (t % 64);
+        if (words[t / 64] & bit_t)
+          words[j / 64] |= uint64_t{1} << (j % 64);
+        else
+          words[t / 64] |= bit_t;
+      }
+    } else {
+      dense_bits(stream, n, probability_threshold(a), words);
+    }
+  }
+  if (invert) {
+    for (size_t w = 0; w < nw; ++w) words[w] = ~words[w];
+    if (n % 64 != 0) words[nw - 1] &= (uint64_t{1} << (n % 64)) - 1;
+  }
+}
+
+void pack_frames_row(const uint64_t* masks, int width, uint32_t n, size_t words_per_pixel, uint8_t* out,
+                     size_t frame_stride) {
+  for (int bx = 0; bx * 8 < width; ++bx) {
+    const int npx = std::min(8, width - bx * 8);
+    for (size_t w = 0; w < words_per_pixel; ++w) {
+      uint64_t m[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+      for (int b = 0; b < npx; ++b) m[b] = masks[static_cast<size_t>(bx * 8 + b) * words_per_pixel + w];
+      for (uint32_t j = 0; j < 8; ++j) {
+        const uint32_t frame0 = static_cast<uint32_t>(w) * 64 + j * 8;
+        if (frame0 >= n) break;
+        uint64_t x = 0;
+        for (int b = 0; b < 8; ++b) x |= ((m[b] >> (8 * j)) & 0xFFu) << (8 * b);
+        x = transpose8x8(x);
+        const uint32_t count = std::min<uint32_t>(8, n - frame0);
+        for (uint32_t i = 0; i < count; ++i)
+          out[(frame0 + i) * frame_stride + static_cast<size_t>(bx)] = static_cast<uint8_t>(x >> (8 * i));
+      }
+    }
+  }
+}
+
+}  // namespace spadgen::sensor

@@ -1,0 +1,70 @@
+// Exact photon-count sampling: Bernoulli bits for binary frames and Binomial counts.
+//
+// Probabilities come in pairs (p, q = 1 - p), each computed accurately on its own (p = -expm1(-lambda),
+// q = exp(-lambda)), and every draw works on the smaller of the two, so probabilities near 1 are as exact
+// as probabilities near 0.
+//
+// Bernoulli: a bit is set when a 64-bit uniform integer U is below T = floor(a * 2^64) (a = min(p, q);
+// the bit is inverted when a = q). U is built lazily: its top byte comes from the pixel's byte stream and
+// decides the comparison unless it equals T's top byte (probability 1/256); only then are 56 more bits
+// drawn. Expected random bytes per bit: 1 + 7/256 = 1.027 (1.004 blocks of 128 bits per 16 bits).
+// When a <= 1/16 the bits are drawn sparsely instead: the number of set bits ~ Binomial(N, a), then their
+// positions as a uniformly random subset (Floyd's algorithm); the joint law is the same i.i.d. Bernoulli.
+//
+// Binomial: inversion. Mean below 16: sequential search from 0 on the survival function, computed from
+// -expm1 so that P(X >= 1) is exact even for a = 1e-15, compared with U as exact 64-bit thresholds.
+// Otherwise: inversion in the order m, m-1, m+1, m-2, ... from the mode m, with the mode's probability
+// from log-factorials; expected steps about 1.6 standard deviations.
+#pragma once
+#include <cstdint>
+#include <vector>
+
+#include "core/rng.h"
+
+namespace spadgen::sensor {
+
+// floor(a * 2^64) for a in [0, 1); saturates at 2^64 - 1.
+uint64_t probability_threshold(double a);
+
+struct Prob {
+  double p = 0.0, q = 1.0;
+};
+// p = 1 - exp(-lambda) and q = exp(-lambda), each to full relative precision.
+Prob prob_from_lambda(double lambda);
+
+class BinomialSampler {
+ public:
+  explicit BinomialSampler(uint32_t n);
+  uint32_t n() const { return n_; }
+  // Binomial(n, p); p = 0 gives 0 and q = 0 gives n exactly.
+  uint32_t sample(Rng& rng, const Prob& pr) const;
+
+ private:
+  uint32_t small_side(Rng& rng, double a, double b) const;
+  uint32_t n_;
+  std::vector<double> log_fact_;
+};
+
+// n = sampler.n() independent Bernoulli(p) bits: bit i of words[i / 64] is frame i; bits from n up to the
+// end of the last word are zero. Draws from `stream` (copied; random access to its blocks).
+void sample_bits(const Rng& stream, const BinomialSampler& sampler, const Prob& pr, uint64_t* words);
+
+// Which path sample_bits takes (for tests).
+bool bits_are_sparse(const Prob& pr);
+
+// The 8 x 8 bit matrix transpose: bit c of byte r of the result is bit r of byte c of x.
+inline uint64_t transpose8x8(uint64_t x) {
+  uint64_t t = (x ^ (x >> 7)) & 0x00AA00AA00AA00AAull;
+  x = x ^ t ^ (t << 7);
+  t = (x ^ (x >> 14)) & 0x0000CCCC0000CCCCull;
+  x = x ^ t ^ (t << 14);
+  t = (x ^ (x >> 28)) & 0x00000000F0F0F0F0ull;
+  return x ^ t ^ (t << 28);
+}
+
+// Writes the frames of one row of `width` pixels: masks[x * words_per_pixel ...] hold pixel x's n bits;
+// out[i * frame_stride + x / 8] bit (x % 8) receives frame i of pixel x (bytes are overwritten).
+void pack_frames_row(const uint64_t* masks, int width, uint32_t n, size_t words_per_pixel, uint8_t* out,
+                     size_t frame_stride);
+
+}  // namespace spadgen::sensor

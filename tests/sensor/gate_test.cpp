@@ -1,0 +1,282 @@
+// Gate profile, instrument response and the O(T + K) gate response.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include "core/error.h"
+#include "core/rng.h"
+#include "core/units.h"
+#include "sensor/gate.h"
+#include "sensor/pixel_maps.h"
+#include "sensor/sensor.h"
+#include "test_util.h"
+
+namespace spadgen::sensor {
+namespace {
+
+using testing::sweep_config;
+
+double Phi(double z) { return 0.5 * std::erfc(-z / std::sqrt(2.0)); }
+
+// The closed form of a smooth (normal-CDF) gate convolved with a Gaussian instrument response.
+double smooth_gate_closed_form(const GateConfig& g, const LaserConfig& l, double t, double dL) {
+  const double s_irf2 = std::pow(l.pulse_fwhm_s / kFwhmPerSigma, 2) + std::pow(g.jitter_fwhm_s / kFwhmPerSigma, 2);
+  const double sr = std::sqrt(std::pow(g.rise_s / 2.563103131, 2) + s_irf2);
+  const double sf = std::sqrt(std::pow(g.fall_s / 2.563103131, 2) + s_irf2);
+  return Phi(t / sr) - Phi((t - g.length_s - dL) / sf);
+}
+
+// Brute force O(T K): h(tau) = sum_i g_i / dt * integral over bin i of f(t - tau) dt, with f the piecewise-
+// linear knot function integrated exactly (trapezoids between the knots that fall inside each bin).
+std::vector<double> brute_force(const GateShape& gs, const std::vector<float>& g, const TimeAxis& ax,
+                                const std::vector<double>& taus, double dL) {
+  std::vector<double> h;
+  for (double tau : taus) {
+    double acc = 0.0;
+    for (int64_t i = 0; i < ax.bins; ++i) {
+      if (g[static_cast<size_t>(i)] == 0.0f) continue;
+      const double a = ax.bin_start_s(i) - tau, b = a + ax.bin_width_s;
+      std::vector<double> pts{a, b};
+      for (double u : gs.rise.u)
+        if (u > a && u < b) pts.push_back(u);
+      for (double u : gs.fall.u)
+        if (u + dL > a && u + dL < b) pts.push_back(u + dL);
+      std::sort(pts.begin(), pts.end());
+      double integral = 0.0;
+      for (size_t j = 1; j < pts.size(); ++j)
+        integral += 0.5 * (gs.value(pts[j - 1], dL) + gs.value(pts[j], dL)) * (pts[j] - pts[j - 1]);
+      acc += g[static_cast<size_t>(i)] * integral / ax.bin_width_s;
+    }
+    h.push_back(acc);
+  }
+  return h;
+}
+
+std::vector<double> fast(const GateShape& gs, const std::vector<float>& g, const TimeAxis& ax,
+                         const std::vector<double>& taus, double dL) {
+  TransientPrefix p;
+  std::vector<double> h(taus.size(), 0.0);
+  if (!p.build(g.data(), ax.bins)) return h;
+  const EdgeBins r = edge_in_bins(gs.rise, ax.bin_width_s), f = edge_in_bins(gs.fall, ax.bin_width_s);
+  const double b0 = (taus[0] - ax.start_s) / ax.bin_width_s, step = (taus[1] - taus[0]) / ax.bin_width_s;
+  const int K = static_cast<int>(taus.size());
+  accumulate_edge_response(p, r, b0, step, K, 1.0, h.data());
+  accumulate_edge_response(p, f, b0 + dL / ax.bin_width_s, step, K, -1.0, h.data());
+  return h;
+}
+
+TEST(Gate, LinearEdgesWithoutInstrumentResponseAreExact) {
+  GateConfig g;
+  g.edge_shape = "linear";
+  g.jitter_fwhm_s = 0.0;
+  LaserConfig l;
+  l.pulse_fwhm_s = 0.0;
+  const GateShape s = build_gate_shape(g, l, 64);
+  EXPECT_TRUE(s.exact);
+  EXPECT_EQ(s.knots_per_edge, 2);
+  const double w = g.rise_s / 0.8;
+  EXPECT_DOUBLE_EQ(s.value(0.0, 0.0), 0.5);
+  EXPECT_NEAR(s.value(g.length_s, 0.0), 0.5, 1e-12);
+  EXPECT_NEAR(s.value(0.25 * w, 0.0), 0.75, 1e-12);
+  EXPECT_NEAR(s.value(-0.5 * g.rise_s, 0.0), 0.1, 1e-12);  // 10 % to 90 % takes rise_s
+  EXPECT_NEAR(s.value(0.5 * g.rise_s, 0.0), 0.9, 1e-12);
+  EXPECT_NEAR(s.open_time_s, g.length_s, 1e-18);
+  EXPECT_NEAR(s.open_time(50e-12), g.length_s + 50e-12, 1e-18);
+}
+
+// The response engine is exact for any knot function; a linear-edge gate without IRF is exact itself.
+TEST(Gate, FastResponseEqualsBruteForce) {
+  for (const char* shape : {"linear", "smooth"}) {
+    GateConfig g;
+    g.edge_shape = shape;
+    g.jitter_fwhm_s = std::string(shape) == "linear" ? 0.0 : 60e-12;
+    LaserConfig l;
+    l.pulse_fwhm_s = std::string(shape) == "linear" ? 0.0 : 80e-12;
+    const GateShape gs = build_gate_shape(g, l, 48);
+    TimeAxis ax{-1e-9, 9e-12, 2400, 25e-9};
+    std::vector<float> tr(static_cast<size_t>(ax.bins), 0.0f);
+    Rng rng(3, RngKind::Test, 1);
+    // two narrow returns, a run with internal gaps, and a long dense low stretch (indirect light)
+    tr[400] = 0.8f;
+    tr[401] = 0.3f;
+    tr[1100] = 0.5f;
+    for (int i = 1500; i < 1530; i += 3) tr[static_cast<size_t>(i)] = 0.1f * rng.next_float();
+    for (int i = 1800; i < 2300; ++i) tr[static_cast<size_t>(i)] = 0.01f * rng.next_float();
+    std::vector<double> taus;
+    for (int k = 0; k < 350; ++k) taus.push_back(-0.5e-9 + k * 36e-12);
+    for (double dL : {0.0, 73e-12, -41e-12}) {
+      const auto ref = brute_force(gs, tr, ax, taus, dL);
+      const auto got = fast(gs, tr, ax, taus, dL);
+      double peak = 0.0;
+      for (double v : ref) peak = std::max(peak, std::abs(v));
+      ASSERT_GT(peak, 0.5);
+      for (size_t k = 0; k < taus.size(); ++k)
+        ASSERT_NEAR(got[k], ref[k], 1e-9 * peak) << shape << " k=" << k << " dL=" << dL;
+    }
+  }
+}
+
+// A fine-grid edge with its constant tails.
+double fine_value(const Sampled& s, double t, double v_end) {
+  if (t <= s.x0) return 0.0;
+  if (t >= s.x0 + s.dx * static_cast<double>(s.y.size() - 1)) return v_end;
+  return s.at(t);
+}
+
+// Measured: the knot approximation of smooth edges against the closed form of a normal-CDF gate
+// convolved with the Gaussian IRF. The fine grid is itself checked against the closed form.
+TEST(Gate, SmoothKnotErrorAgainstClosedForm) {
+  GateConfig g;  // defaults: smooth, 400 ps edges, 60 ps jitter
+  LaserConfig l;  // 80 ps pulse
+  double previous = 1.0;
+  for (int m : {16, 32, 64, 128}) {
+    const GateShape gs = build_gate_shape(g, l, m);
+    double err = 0.0, fine_err = 0.0;
+    for (double t = -1.5e-9; t < g.length_s + 1.5e-9; t += 0.5e-12) {
+      const double ref = smooth_gate_closed_form(g, l, t, 0.0);
+      err = std::max(err, std::abs(gs.value(t, 0.0) - ref));
+      const double fine = fine_value(gs.rise_fine, t, gs.plateau) - fine_value(gs.fall_fine, t, gs.plateau);
+      fine_err = std::max(fine_err, std::abs(fine - ref));
+    }
+    std::printf("knots per edge %3d: max error vs closed form %.3g (recorded max_knot_error %.3g), fine grid %.3g\n",
+                m, err, gs.max_knot_error, fine_err);
+    EXPECT_LT(fine_err, 1e-7);
+    EXPECT_LT(err, gs.max_knot_error + 1e-7);
+    EXPECT_LT(err, previous);
+    previous = err;
+    if (m == 64) {
+      EXPECT_LT(err, 3e-4);
+    }
+    if (m == 128) {
+      EXPECT_LT(err, 6e-5);
+    }
+  }
+}
+
+// A delta transient seen through the sweep reproduces the effective gate, shifted by the pixel's skew
+// and stretched by its length deviation.
+TEST(Gate, DeltaTransientReproducesGateShiftedBySkew) {
+  RunConfig c = sweep_config(64, 32);
+  c.sensor.dark_counts = false;
+  c.sensor.crosstalk = false;
+  c.sensor.gate.delay_s = 0.7e-9;
+  c.acquisition.gate_sweep = {-4e-9, 6e-9, 20e-12};
+  SensorModel model(c);
+  const double dt = 4e-12;
+  const TimeAxis ax = model.required_window(dt);
+  std::vector<float> g(static_cast<size_t>(ax.bins), 0.0f);
+  const int64_t bin = ax.bin_of(3.0e-9);
+  g[static_cast<size_t>(bin)] = 1.0f;
+  const double t0 = ax.bin_start_s(bin);
+  int tested = 0;
+  for (auto [x, y] : {std::pair{3, 1}, std::pair{60, 2}, std::pair{30, 30}}) {
+    const PixelParams px = model.pixel(x, y);
+    const auto lam = model.pixel_lambda(x, y, g.data(), ax, 0.0, 0.0);
+    const double scale = static_cast<double>(c.acquisition.cycles_per_frame) * model.pdp_laser(px.type) * px.pdp_scale;
+    for (size_t k = 0; k < lam.size(); ++k) {
+      const double tau = model.gate_positions_s()[k] + c.sensor.gate.delay_s + px.skew_s;
+      double ref = 0.0;  // Simpson over the bin
+      const int n = 64;
+      for (int i = 0; i <= n; ++i) {
+        const double w = (i == 0 || i == n) ? 1.0 : (i % 2 ? 4.0 : 2.0);
+        ref += w * smooth_gate_closed_form(c.sensor.gate, c.laser, t0 + dt * i / n - tau, px.dL_s);
+      }
+      ref /= 3.0 * n;
+      ASSERT_NEAR(lam[k] / scale, ref, model.gate().max_knot_error + 1e-6) << "pixel " << x << "," << y << " k " << k;
+    }
+    ++tested;
+  }
+  EXPECT_EQ(tested, 3);
+  // the three pixels' skews differ, so the comparison above really tests the shift
+  EXPECT_GT(std::abs(model.pixel(3, 1).skew_s - model.pixel(30, 30).skew_s), 50e-12);
+}
+
+std::string write_temp(const std::string& name, const std::string& text) {
+  const auto p = std::filesystem::temp_directory_path() / ("spadgen_sensor_" + name);
+  std::ofstream(p) << text;
+  return p.string();
+}
+
+TEST(Gate, MeasuredTableProfile) {
+  // a trapezoid: 0 at 0 ps, 1 from 400 to 4200 ps, 0 at 4600 ps -> 50 % points at 200 and 4400 ps
+  const std::string path = write_temp("profile.csv", "time_ps,response\n0,0\n400,2\n4200,2\n4600,0\n");
+  GateConfig g;
+  g.profile_csv = path;
+  g.jitter_fwhm_s = 0.0;
+  LaserConfig l;
+  l.pulse_fwhm_s = 0.0;
+  const GateShape s = build_gate_shape(g, l, 64);
+  EXPECT_TRUE(s.exact);
+  EXPECT_NEAR(s.nominal_length_s, 4.2e-9, 1e-18);
+  EXPECT_NEAR(s.value(200e-12, 0.0), 0.5, 1e-12);
+  EXPECT_NEAR(s.value(2000e-12, 0.0), 1.0, 1e-12);
+  EXPECT_NEAR(s.value(4400e-12, 0.0), 0.5, 1e-12);
+  // a longer pixel gate moves only the falling edge
+  EXPECT_NEAR(s.value(4500e-12, 100e-12), 0.5, 1e-12);
+  EXPECT_NEAR(s.value(200e-12, 100e-12), 0.5, 1e-12);
+  EXPECT_NEAR(s.open_time_s, 4.2e-9, 1e-18);
+}
+
+TEST(Gate, BadTablesNameTheFileAndKey) {
+  GateConfig g;
+  LaserConfig l;
+  g.profile_csv = write_temp("bad_order.csv", "0,0\n400,1\n300,1\n");
+  try {
+    build_gate_shape(g, l, 64);
+    FAIL() << "expected an error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("sensor.gate.profile_csv"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("bad_order.csv"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("strictly increasing"), std::string::npos) << e.what();
+  }
+  g.profile_csv = "/nonexistent/profile.csv";
+  EXPECT_THROW(build_gate_shape(g, l, 64), Error);
+  g.profile_csv = write_temp("bad_row.csv", "0,0\n400,abc\n");
+  EXPECT_THROW(build_gate_shape(g, l, 64), Error);
+  g.profile_csv.clear();
+  l.pulse_shape_csv = write_temp("bad_pulse.csv", "0,1\n10,-1\n20,0\n");
+  EXPECT_THROW(build_gate_shape(g, l, 64), Error);
+}
+
+// A pulse table sampled from the Gaussian gives the same effective gate as the Gaussian pulse.
+TEST(Gate, PulseTableMatchesGaussianPulse) {
+  std::string csv = "time_ps,power\n";
+  const double sigma_ps = 80.0 / kFwhmPerSigma;
+  for (double t = -400; t <= 400; t += 2) csv += std::to_string(t + 1000.0) + "," + std::to_string(std::exp(-0.5 * t * t / (sigma_ps * sigma_ps))) + "\n";
+  GateConfig g;
+  LaserConfig gauss, table;
+  table.pulse_shape_csv = write_temp("pulse.csv", csv);
+  const GateShape a = build_gate_shape(g, gauss, 64), b = build_gate_shape(g, table, 64);
+  EXPECT_NEAR(b.irf_fwhm_s, a.irf_fwhm_s, 1e-12);
+  for (double t = -1e-9; t < 5e-9; t += 7e-12) ASSERT_NEAR(a.value(t, 0.0), b.value(t, 0.0), 2e-4) << t;
+}
+
+TEST(Gate, RequiredWindowCoversEveryPixelGate) {
+  RunConfig c = sweep_config(96, 40);
+  SensorModel model(c);
+  const TimeAxis ax = model.required_window(9e-12);
+  EXPECT_GT(ax.bins, 0);
+  EXPECT_DOUBLE_EQ(ax.period_s, 25e-9);
+  EXPECT_NEAR(std::remainder(ax.start_s, 9e-12), 0.0, 1e-18);
+  const auto& taus = model.gate_positions_s();
+  for (int y = 0; y < c.camera.height_px; ++y)
+    for (int x = 0; x < c.camera.width_px; ++x) {
+      const PixelParams p = model.pixel(x, y);
+      const double open = taus.front() + p.skew_s + model.gate().support_begin();
+      const double close = taus.back() + p.skew_s + model.gate().support_end(p.dL_s);
+      ASSERT_GE(open, ax.start_s);
+      ASSERT_LE(close, ax.end_s());
+    }
+  // and it is not much wider than needed: the paper's sweep (0.6 to 13.2 ns) plus a 3.8 ns gate
+  EXPECT_LT(ax.end_s() - ax.start_s, (13.2 - 0.6 + 3.8 + 5.0) * 1e-9);
+  // the sweep has K = 351 positions, 0.6 to 13.2 ns inclusive
+  EXPECT_EQ(model.K(), 351);
+  c.acquisition.mode = "intensity";
+  EXPECT_EQ(SensorModel(c).required_window(9e-12).bins, 0);
+}
+
+}  // namespace
+}  // namespace spadgen::sensor

@@ -1,0 +1,365 @@
+// The sensor stage end to end: eq. (5)/(6), dark counts, saturation, crosstalk, maps, determinism.
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+
+#include "core/error.h"
+#include "core/rng.h"
+#include "core/units.h"
+#include "sensor/gate.h"
+#include "sensor/pixel_maps.h"
+#include "sensor/sampling.h"
+#include "sensor/sensor.h"
+#include "test_util.h"
+
+namespace spadgen::sensor {
+namespace {
+
+using testing::Image;
+using testing::kZ;
+using testing::sweep_config;
+
+RunConfig quiet(RunConfig c) {
+  c.sensor.dark_counts = false;
+  c.sensor.crosstalk = false;
+  c.sensor.pdp_nonuniformity = false;
+  c.sensor.skew = false;
+  return c;
+}
+
+RunConfig intensity_config(int w, int h, const std::string& exposure, int frames) {
+  RunConfig c = quiet(sweep_config(w, h));
+  c.acquisition.mode = "intensity";
+  c.acquisition.intensity.exposure = exposure;
+  c.acquisition.frames = frames;
+  return c;
+}
+
+// Eq. (5) and (6): mean sampled output against the formulas, incident photons 1 to 1e6 per 4080 frames.
+TEST(Sensor, Equations5And6) {
+  const int levels = 25, per_level = 64;
+  for (const std::string mode : {"single", "dual"}) {
+    RunConfig c = intensity_config(per_level, levels, mode, 4080);
+    SensorModel model(c);
+    const double N = 4080.0, pdp = model.pdp_ambient(0);
+    const double tS = c.acquisition.intensity.exposure_s, tL = tS * c.acquisition.intensity.dual_ratio;
+    Image img(per_level, levels, TimeAxis{});
+    std::vector<double> n_in(levels);
+    for (int l = 0; l < levels; ++l) {
+      n_in[static_cast<size_t>(l)] = std::pow(10.0, 6.0 * l / (levels - 1));
+      // N_in = detectable photons per N-frame image = N * PDP * rate * tau (single), (N/2) PDP rate (tS + tL) (dual)
+      const double rate = mode == "single" ? n_in[static_cast<size_t>(l)] / (N * pdp * tS)
+                                           : n_in[static_cast<size_t>(l)] / (0.5 * N * pdp * (tS + tL));
+      for (int x = 0; x < per_level; ++x) img.ambient[static_cast<size_t>(l * per_level + x)] = static_cast<float>(rate);
+    }
+    const SensorTile out = model.process(img.tile({0, 0, per_level, levels}, 0));
+    ASSERT_EQ(out.intensity_counts.size(), static_cast<size_t>(levels * per_level));
+    for (int l = 0; l < levels; ++l) {
+      const double x = n_in[static_cast<size_t>(l)] / N;
+      double want = 0.0, var = 0.0;
+      if (mode == "single") {
+        want = N * (1.0 - std::exp(-x));  // eq. (5)
+        var = want * std::exp(-x);
+      } else {
+        const double pL = 1.0 - std::exp(-2.0 * tL / (tL + tS) * x), pS = 1.0 - std::exp(-2.0 * tS / (tL + tS) * x);
+        want = N / 2 * (pL + pS);  // eq. (6)
+        var = N / 2 * (pL * (1 - pL) + pS * (1 - pS));
+      }
+      double mean = 0.0, mean_expected = 0.0;
+      for (int px = 0; px < per_level; ++px) {
+        const size_t i = static_cast<size_t>(l * per_level + px);
+        mean += out.intensity_counts[i];
+        mean_expected += out.expected[i] + (mode == "dual" ? out.expected[out.intensity_counts.size() + i] : 0.0f);
+      }
+      mean /= per_level;
+      mean_expected /= per_level;
+      EXPECT_NEAR(mean_expected, want, 2e-6 * want + 1e-9) << mode << " N_in=" << n_in[static_cast<size_t>(l)];
+      const double sd = std::sqrt(var / per_level);
+      if (sd > 0.0) {
+        EXPECT_LT(std::abs(mean - want), kZ * sd) << mode << " N_in=" << n_in[static_cast<size_t>(l)];
+      } else {
+        EXPECT_EQ(mean, want);
+      }
+      // the linearised estimate inverts the formula
+      if (want < N - 1.0) {
+        EXPECT_NEAR(linearise_counts(want, 4080, mode == "dual", 8.0), n_in[static_cast<size_t>(l)], 1e-6 * n_in[static_cast<size_t>(l)]);
+      }
+    }
+    // saturation is clamped to a finite estimate
+    EXPECT_TRUE(std::isfinite(linearise_counts(N, 4080, mode == "dual", 8.0)));
+  }
+}
+
+// Dark pixels count at their own DCR (z-test per pixel), in the counts path and in the frames path.
+TEST(Sensor, DarkPixelCountsAtItsDcr) {
+  RunConfig c = sweep_config(16, 8);
+  c.sensor.crosstalk = false;
+  c.sensor.pixel_A.dcr_median_cps = 3e4;  // enough counts per pixel for a sharp test
+  c.acquisition.gate_sweep = {0.6e-9, 4.2e-9, 36e-12};
+  for (bool frames : {false, true}) {
+    c.outputs.frames = frames;
+    SensorModel model(c);
+    const TimeAxis ax = model.required_window(20e-12);
+    Image img(16, 8, ax);
+    const SensorTile out = model.process(img.tile({0, 0, 16, 8}, model.halo()));
+    const size_t n = 16 * 8;
+    for (int y = 0; y < 8; ++y)
+      for (int x = 0; x < 16; ++x) {
+        const PixelParams p = model.pixel(x, y);
+        const double lambda = static_cast<double>(c.acquisition.cycles_per_frame) * p.dcr_cps * model.gate().open_time(p.dL_s);
+        const double pr = -std::expm1(-lambda), N = 255.0;
+        double sum = 0.0;
+        for (int k = 0; k < model.K(); ++k) {
+          sum += out.counts[static_cast<size_t>(k) * n + static_cast<size_t>(y * 16 + x)];
+          ASSERT_NEAR(out.expected[static_cast<size_t>(k) * n + static_cast<size_t>(y * 16 + x)], N * pr, 1e-5 * N * pr);
+        }
+        const double mean = model.K() * N * pr, sd = std::sqrt(mean * (1 - pr));
+        EXPECT_LE(std::abs(sum - mean), kZ * sd) << x << "," << y << " frames=" << frames;  // sd 0: saturated hot pixel
+      }
+  }
+}
+
+TEST(Sensor, DcrMapsAndTemperature) {
+  RunConfig c = sweep_config(256, 200);
+  SensorModel model(c);
+  int below = 0, hot = 0;
+  for (int y = 0; y < 200; ++y)
+    for (int x = 0; x < 256; ++x) {
+      const double d = model.pixel(x, y).dcr_cps;
+      below += d < 0.4;
+      hot += d > 0.4 * 10.0;  // hot pixels (x100) are above 10 x median unless 2.3 sigma low; main ones rarely
+    }
+  const double n = 256.0 * 200.0;
+  // P(below median) = 0.95 * 0.5 + 0.05 * Phi(-ln(100)) = 0.4750; P(> 10 median) = 0.95 * Phi(-ln 10) + 0.05 * Phi(ln 10)
+  const double pb = 0.95 * 0.5 + 0.05 * 0.5 * std::erfc(std::log(100.0) / std::sqrt(2.0));
+  const double ph = 0.95 * 0.5 * std::erfc(std::log(10.0) / std::sqrt(2.0)) + 0.05 * (1 - 0.5 * std::erfc(std::log(10.0) / std::sqrt(2.0)));
+  EXPECT_LT(std::abs(below - n * pb), kZ * std::sqrt(n * pb * (1 - pb)));
+  EXPECT_LT(std::abs(hot - n * ph), kZ * std::sqrt(n * ph * (1 - ph)));
+  EXPECT_DOUBLE_EQ(PixelMaps::temperature_factor(25.0), 1.0);
+  EXPECT_NEAR(PixelMaps::temperature_factor(0.0) / PixelMaps::temperature_factor(10.0), 1.0, 0.1);  // flat below 10 C
+  const double arrhenius = std::exp(1.1 / kBoltzmannEv * (1 / 323.15 - 1 / 333.15));
+  EXPECT_NEAR(PixelMaps::temperature_factor(60.0) / PixelMaps::temperature_factor(50.0), arrhenius, 0.05 * arrhenius);
+  c.sensor.temperature_C = 50.0;
+  EXPECT_NEAR(SensorModel(c).pixel(5, 5).dcr_cps / model.pixel(5, 5).dcr_cps, PixelMaps::temperature_factor(50.0), 1e-9);
+  c.sensor.dark_counts = false;
+  EXPECT_EQ(SensorModel(c).pixel(5, 5).dcr_cps, 0.0);
+}
+
+TEST(Sensor, SaturationGivesExactlyN) {
+  RunConfig c = quiet(sweep_config(16, 8));
+  c.acquisition.gate_sweep = {2e-9, 3e-9, 100e-12};
+  for (bool frames : {false, true}) {
+    c.outputs.frames = frames;
+    SensorModel model(c);
+    const TimeAxis ax = model.required_window(10e-12);
+    Image img(16, 8, ax);
+    for (int y = 0; y < 8; ++y)
+      for (int x = 0; x < 16; ++x) img.pixel(x, y)[ax.bin_of(5e-9)] = 1e6f;  // inside every gate
+    const SensorTile out = model.process(img.tile({0, 0, 16, 8}, 0));
+    for (size_t i = 0; i < out.counts.size(); ++i) {
+      ASSERT_EQ(out.counts[i], 255);
+      ASSERT_EQ(out.expected[i], 255.0f);
+    }
+    if (frames) {
+      for (uint8_t b : out.frames) ASSERT_EQ(b, 0xFF);
+    }
+  }
+}
+
+// Bright pixels on a 4-pixel lattice, dark elsewhere: each dark 4-neighbour of a bright pixel fires by
+// crosstalk only, at the marginal rate; counts and frames paths both match it.
+TEST(Sensor, CrosstalkRates) {
+  for (int type = 0; type < 2; ++type) {
+    RunConfig c = intensity_config(64, 64, "single", 2000);
+    c.sensor.crosstalk = true;
+    c.sensor.preset = type == 0 ? "pixel_A" : "pixel_B";
+    PixelTypeConfig& tc = type == 0 ? c.sensor.pixel_A : c.sensor.pixel_B;
+    tc.crosstalk_probability = 0.02;  // large, for statistical power
+    const double lam_bright = 1.5;
+    for (bool frames : {false, true}) {
+      c.outputs.frames = frames;
+      SensorModel model(c);
+      ASSERT_EQ(model.halo(), 1);
+      Image img(64, 64, TimeAxis{});
+      const double rate = lam_bright / (model.pdp_ambient(type) * c.acquisition.intensity.exposure_s);
+      for (int y = 1; y < 64; y += 4)
+        for (int x = 1; x < 64; x += 4) img.ambient[static_cast<size_t>(y * 64 + x)] = static_cast<float>(rate);
+      const SensorTile out = model.process(img.tile({0, 0, 64, 64}, 1));
+      const double q = 0.02;
+      const double p_x = type == 0 ? -std::expm1(-q * lam_bright) : q * -std::expm1(-lam_bright);
+      double sum = 0.0, far = 0.0;
+      int nx = 0;
+      for (int y = 0; y < 64; ++y)
+        for (int x = 0; x < 64; ++x) {
+          const int dx = (x + 3) % 4, dy = (y + 3) % 4;  // position relative to the bright lattice
+          const bool neighbour = (dx == 0 && (dy == 1 || dy == 3)) || (dy == 0 && (dx == 1 || dx == 3));
+          const size_t i = static_cast<size_t>(y * 64 + x);
+          if (neighbour) {
+            sum += out.counts[i];
+            ASSERT_NEAR(out.expected[i], 2000.0 * p_x, 1e-4 * 2000.0 * p_x);
+            ++nx;
+          } else if (dx != 0 || dy != 0) {
+            far += out.counts[i];
+          }
+        }
+      const double mean = nx * 2000.0 * p_x, sd = std::sqrt(mean * (1 - p_x));
+      EXPECT_LT(std::abs(sum - mean), kZ * sd) << "type " << type << " frames " << frames;
+      EXPECT_EQ(far, 0.0);
+    }
+  }
+}
+
+TEST(Sensor, CrosstalkOffCostsNoHalo) {
+  RunConfig c = sweep_config();
+  c.sensor.crosstalk = false;
+  EXPECT_EQ(SensorModel(c).halo(), 0);
+  c.sensor.crosstalk = true;
+  EXPECT_EQ(SensorModel(c).halo(), 1);
+}
+
+// The paper's spreads and Fig. 5 pattern on the full 1024 x 500 pixel-A array.
+TEST(Sensor, GateMapsSpreadAndPattern) {
+  RunConfig c = sweep_config(1024, 500);
+  SensorModel model(c);
+  const SensorMapsTile m = model.maps({0, 0, 1024, 500});
+  double s1 = 0, s2 = 0, l1 = 0, l2 = 0, top = 0, bottom = 0, top_left = 0, top_right = 0;
+  for (int y = 0; y < 500; ++y)
+    for (int x = 0; x < 1024; ++x) {
+      const size_t i = static_cast<size_t>(y * 1024 + x);
+      const double s = m.gate_skew_ps[i], l = m.gate_length_ps[i];
+      s1 += s;
+      s2 += s * s;
+      l1 += l;
+      l2 += l * l;
+      if (y < 50) top += s;
+      if (y >= 450) bottom += s;
+      if (y < 50 && x < 200) top_left += s;
+      if (y < 50 && x >= 824) top_right += s;
+    }
+  const double n = 1024.0 * 500.0;
+  const double skew_fwhm = kFwhmPerSigma * std::sqrt(s2 / n - (s1 / n) * (s1 / n));
+  const double len_fwhm = kFwhmPerSigma * std::sqrt(l2 / n - (l1 / n) * (l1 / n));
+  EXPECT_NEAR(skew_fwhm, 410.0, 0.01 * 410.0);
+  EXPECT_NEAR(len_fwhm, 120.0, 0.01 * 120.0);
+  EXPECT_NEAR(l1 / n, 3800.0, 1.0);
+  EXPECT_NEAR(s1 / n, 0.0, 1.0);
+  EXPECT_GT(top / (50 * 1024) - bottom / (50 * 1024), 200.0);  // later at the top
+  EXPECT_GT(top_right / (50 * 200) - top_left / (50 * 200), 50.0);  // asymmetric across the top
+  // user maps replace them
+  std::vector<float> skew(1024 * 500, 12.5f), len(1024 * 500, 3900.0f);
+  model.set_gate_maps(skew, len);
+  EXPECT_NEAR(model.pixel(7, 9).skew_s, 12.5e-12, 1e-18);
+  EXPECT_NEAR(model.pixel(7, 9).dL_s, 100e-12, 1e-16);
+  EXPECT_THROW(model.set_gate_maps(std::vector<float>(10), std::vector<float>(10)), Error);
+}
+
+TEST(Sensor, FullChipPresetUsesBothPixels) {
+  RunConfig c = sweep_config(32, 20);
+  c.sensor.preset = "full_chip";
+  SensorModel model(c);
+  EXPECT_EQ(model.pixel(3, 9).type, 0);
+  EXPECT_EQ(model.pixel(3, 10).type, 1);
+  EXPECT_NEAR(model.pdp_laser(1) / model.pdp_laser(0), 0.267 / 0.105, 1e-9);
+  EXPECT_NEAR(model.pdp_laser(0), 0.105 * 0.45, 1e-12);  // 637 nm: 0.45 of the peak
+  const auto j = model.describe();
+  EXPECT_EQ(j["pixel_types"].size(), 2u);
+  EXPECT_EQ(j["K"], model.K());
+  EXPECT_TRUE(j["gate"].contains("knot_max_error"));
+  c.sensor.preset = "pixel_C";
+  EXPECT_THROW(SensorModel{c}, Error);
+}
+
+TEST(Sensor, BadSettingsThrow) {
+  RunConfig c = sweep_config();
+  c.acquisition.frames = 70000;
+  EXPECT_THROW(SensorModel{c}, Error);
+  c = intensity_config(8, 8, "dual", 4081);
+  EXPECT_THROW(SensorModel{c}, Error);
+  c = sweep_config();
+  c.acquisition.gate_sweep.step_s = 0.0;
+  EXPECT_THROW(SensorModel{c}, Error);
+}
+
+// Bit-identical results for one tile or tiles of 8, 16, 32, with 1 or 2 threads, counts and frames.
+TEST(Sensor, DeterministicAcrossTilesAndThreads) {
+  const int W = 40, H = 24;
+  RunConfig c = sweep_config(W, H);
+  c.acquisition.gate_sweep = {0.6e-9, 6e-9, 72e-12};
+  c.ambient.illuminance_lux = 0;
+  for (bool frames : {false, true}) {
+    c.outputs.frames = frames;
+    c.sensor.pixel_A.crosstalk_probability = 0.05;
+    SensorModel model(c);
+    const TimeAxis ax = model.required_window(9e-12);
+    Image img(W, H, ax);
+    Rng rng(99, RngKind::Test, 0);
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) {
+        float* g = img.pixel(x, y);
+        const auto b = static_cast<int64_t>(rng.next_double() * static_cast<double>(ax.bins - 20));
+        g[b] = 0.05f * rng.next_float();
+        g[b + 3] = 0.02f * rng.next_float();
+        if (x % 3 == 0) g[ax.bins / 2] = 0.5f;
+        img.ambient[static_cast<size_t>(y * W + x)] = 1e4f * rng.next_float();
+      }
+    auto run = [&](int tile, int threads) {
+      tbb::global_control gc(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
+      const std::vector<PixelRect> tiles = tile > 0 ? make_tiles(W, H, tile) : std::vector<PixelRect>{{0, 0, W, H}};
+      const auto K = static_cast<size_t>(model.K());
+      const uint32_t N = static_cast<uint32_t>(model.frames_per_k());
+      const size_t bpr = (W + 7) / 8;
+      std::vector<uint16_t> counts(K * W * H);
+      std::vector<float> expected(K * W * H);
+      std::vector<uint8_t> fr(frames ? K * N * H * bpr : 0);
+      for (const PixelRect& r : tiles) {
+        const SensorTile t = model.process(img.tile(r, model.halo()));
+        const size_t tb = static_cast<size_t>((r.width + 7) / 8);
+        for (size_t k = 0; k < K; ++k)
+          for (int y = r.y0; y < r.y1(); ++y)
+            for (int x = r.x0; x < r.x1(); ++x) {
+              const size_t i = k * static_cast<size_t>(r.count()) + static_cast<size_t>(r.index(x, y));
+              counts[k * W * H + static_cast<size_t>(y * W + x)] = t.counts[i];
+              expected[k * W * H + static_cast<size_t>(y * W + x)] = t.expected[i];
+              if (frames) {
+                int c_bits = 0;
+                for (uint32_t f = 0; f < N; ++f) {
+                  const size_t src = ((k * N + f) * static_cast<size_t>(r.height) + static_cast<size_t>(y - r.y0)) * tb + static_cast<size_t>((x - r.x0) / 8);
+                  const bool bit = (t.frames[src] >> ((x - r.x0) % 8)) & 1u;
+                  c_bits += bit;
+                  const size_t dst = ((k * N + f) * H + static_cast<size_t>(y)) * bpr + static_cast<size_t>(x / 8);
+                  if (bit) fr[dst] = static_cast<uint8_t>(fr[dst] | (1u << (x % 8)));
+                }
+                EXPECT_EQ(c_bits, t.counts[i]);
+              }
+            }
+      }
+      return std::tuple{counts, expected, fr};
+    };
+    const auto ref = run(0, 2);
+    double total = 0;
+    for (uint16_t v : std::get<0>(ref)) total += v;
+    EXPECT_GT(total, 1000.0);
+    for (int tile : {8, 16, 32})
+      for (int threads : {1, 2}) {
+        const auto got = run(tile, threads);
+        EXPECT_TRUE(std::get<0>(got) == std::get<0>(ref)) << "counts tile " << tile << " threads " << threads;
+        EXPECT_TRUE(std::get<1>(got) == std::get<1>(ref)) << "expected tile " << tile << " threads " << threads;
+        EXPECT_TRUE(std::get<2>(got) == std::get<2>(ref)) << "frames tile " << tile << " threads " << threads;
+      }
+  }
+}
+
+TEST(Sensor, TileWithoutHaloIsRejected) {
+  RunConfig c = sweep_config(16, 16);
+  SensorModel model(c);
+  const TimeAxis ax = model.required_window(20e-12);
+  Image img(16, 16, ax);
+  EXPECT_THROW(model.process(img.tile({0, 0, 8, 8}, 0)), Error);
+  EXPECT_NO_THROW(model.process(img.tile({0, 0, 8, 8}, 1)));
+}
+
+}  // namespace
+}  // namespace spadgen::sensor
