@@ -40,6 +40,13 @@ const std::set<std::string> kSupportedExtensions = {
 
 std::string quoted(const std::string& s) { return "'" + s + "'"; }
 
+// Numbers in messages as a person writes them ("0.5", "1e+308"), not std::to_string's "0.500000".
+std::string num(double v) {
+  std::ostringstream s;
+  s << v;
+  return s.str();
+}
+
 // "mesh 2 'Cube'": the index always (names need not be unique), the name when there is one.
 std::string label(const char* kind, size_t index, const std::string& name) {
   std::string s = std::string(kind) + " " + std::to_string(index);
@@ -423,21 +430,28 @@ std::vector<double> Loader::read_accessor(int index, const std::string& user, st
   const int comps = type_components(a.type);
   const size_t elem = csize * static_cast<size_t>(comps);
   const size_t count = a.count;
-  // Guard the multiplications below: no real accessor comes near this.
-  if (count > (size_t{1} << 34)) fail(who, "count " + std::to_string(count) + " is implausibly large");
+  // With a bufferView the count is bounded by the bytes behind it (checked before allocating); an
+  // accessor without one is zeros (plus sparse values), which no real file makes this large.
+  if (a.bufferView < 0 && count > (size_t{1} << 24))
+    fail(who, "count " + std::to_string(count) + " without a bufferView is implausibly large");
+  if (count > (size_t{1} << 40)) fail(who, "count " + std::to_string(count) + " is implausibly large");
 
-  std::vector<double> out(count * static_cast<size_t>(comps), 0.0);
+  size_t stride = elem;
   if (a.bufferView >= 0) {
-    const tinygltf::BufferView& view = [&]() -> const tinygltf::BufferView& {
-      check_view_range(a.bufferView, 0, 0, who);
-      return m_.bufferViews[static_cast<size_t>(a.bufferView)];
-    }();
-    const size_t stride = view.byteStride ? view.byteStride : elem;
+    check_view_range(a.bufferView, 0, 0, who);
+    const tinygltf::BufferView& view = m_.bufferViews[static_cast<size_t>(a.bufferView)];
     if (view.byteStride != 0 && view.byteStride < elem)
       fail(label("bufferView", static_cast<size_t>(a.bufferView), view.name),
            "byteStride " + std::to_string(view.byteStride) + " is smaller than the " + std::to_string(elem) +
                "-byte elements of " + who);
+    if (view.byteStride != 0) stride = view.byteStride;
+    if (count > 1 && count - 1 > (std::numeric_limits<size_t>::max() - elem) / stride)
+      fail(who, "count " + std::to_string(count) + " times byteStride " + std::to_string(stride) + " overflows");
     if (count > 0) check_view_range(a.bufferView, a.byteOffset, (count - 1) * stride + elem, who);
+  }
+  std::vector<double> out(count * static_cast<size_t>(comps), 0.0);
+  if (a.bufferView >= 0) {
+    const tinygltf::BufferView& view = m_.bufferViews[static_cast<size_t>(a.bufferView)];
     const unsigned char* base =
         m_.buffers[static_cast<size_t>(view.buffer)].data.data() + view.byteOffset + a.byteOffset;
     for (size_t e = 0; e < count; ++e)
@@ -574,13 +588,13 @@ void Loader::load_materials() {
     if (pbr.baseColorFactor.size() != 4)
       fail(who, "baseColorFactor has " + std::to_string(pbr.baseColorFactor.size()) + " values, expected 4");
     for (double c : pbr.baseColorFactor)
-      if (!(c >= 0.0 && c <= 1.0)) fail(who, "baseColorFactor value " + std::to_string(c) + " is outside [0, 1]");
+      if (!(c >= 0.0 && c <= 1.0)) fail(who, "baseColorFactor value " + num(c) + " is outside [0, 1]");
     mat.base_color = glm::vec4(glm::dvec4(pbr.baseColorFactor[0], pbr.baseColorFactor[1], pbr.baseColorFactor[2],
                                           pbr.baseColorFactor[3]));
     if (!(pbr.metallicFactor >= 0 && pbr.metallicFactor <= 1))
-      fail(who, "metallicFactor " + std::to_string(pbr.metallicFactor) + " is outside [0, 1]");
+      fail(who, "metallicFactor " + num(pbr.metallicFactor) + " is outside [0, 1]");
     if (!(pbr.roughnessFactor >= 0 && pbr.roughnessFactor <= 1))
-      fail(who, "roughnessFactor " + std::to_string(pbr.roughnessFactor) + " is outside [0, 1]");
+      fail(who, "roughnessFactor " + num(pbr.roughnessFactor) + " is outside [0, 1]");
     mat.metallic = static_cast<float>(pbr.metallicFactor);
     mat.roughness = static_cast<float>(pbr.roughnessFactor);
     if (pbr.baseColorTexture.index >= 0) {
@@ -619,28 +633,28 @@ void Loader::load_materials() {
     };
     if (const tinygltf::Value* e = ext("KHR_materials_emissive_strength")) {
       const double s = number(*e, "emissiveStrength", 1.0, who + " KHR_materials_emissive_strength");
-      if (s < 0) fail(who, "KHR_materials_emissive_strength.emissiveStrength " + std::to_string(s) + " is negative");
+      if (s < 0) fail(who, "KHR_materials_emissive_strength.emissiveStrength " + num(s) + " is negative");
       emissive *= s;
     }
     mat.emissive = glm::vec3(emissive);
     if (const tinygltf::Value* e = ext("KHR_materials_transmission")) {
       const double t = number(*e, "transmissionFactor", 0.0, who + " KHR_materials_transmission");
-      if (t < 0 || t > 1) fail(who, "KHR_materials_transmission.transmissionFactor " + std::to_string(t) + " is outside [0, 1]");
+      if (t < 0 || t > 1) fail(who, "KHR_materials_transmission.transmissionFactor " + num(t) + " is outside [0, 1]");
       mat.transmission = static_cast<float>(t);
       ext_texture(e, "KHR_materials_transmission", "transmissionTexture");
     }
     if (const tinygltf::Value* e = ext("KHR_materials_ior")) {
       const double n = number(*e, "ior", 1.5, who + " KHR_materials_ior");
-      if (n < 1.0) fail(who, "KHR_materials_ior.ior " + std::to_string(n) + " is below 1");
+      if (n < 1.0) fail(who, "KHR_materials_ior.ior " + num(n) + " is below 1");
       mat.ior = static_cast<float>(n);
     }
     if (const tinygltf::Value* e = ext("KHR_materials_volume")) {
       const std::string vw = who + " KHR_materials_volume";
       const double thickness = number(*e, "thicknessFactor", 0.0, vw);
-      if (thickness < 0) fail(who, "KHR_materials_volume.thicknessFactor " + std::to_string(thickness) + " is negative");
+      if (thickness < 0) fail(who, "KHR_materials_volume.thicknessFactor " + num(thickness) + " is negative");
       mat.thickness_m = static_cast<float>(thickness);
       const double dist = number(*e, "attenuationDistance", std::numeric_limits<double>::infinity(), vw);
-      if (!(dist > 0)) fail(who, "KHR_materials_volume.attenuationDistance " + std::to_string(dist) + " must be > 0");
+      if (!(dist > 0)) fail(who, "KHR_materials_volume.attenuationDistance " + num(dist) + " must be > 0");
       mat.attenuation_distance_m = static_cast<float>(dist);
       if (e->Has("attenuationColor")) {
         const tinygltf::Value& c = e->Get("attenuationColor");
@@ -648,7 +662,7 @@ void Loader::load_materials() {
         for (int k = 0; k < 3; ++k) {
           if (!c.Get(k).IsNumber()) fail(who, "KHR_materials_volume.attenuationColor is not an array of 3 numbers");
           const double v = c.Get(k).GetNumberAsDouble();
-          if (!(v >= 0 && v <= 1)) fail(who, "KHR_materials_volume.attenuationColor value " + std::to_string(v) + " is outside [0, 1]");
+          if (!(v >= 0 && v <= 1)) fail(who, "KHR_materials_volume.attenuationColor value " + num(v) + " is outside [0, 1]");
           mat.attenuation_color[k] = static_cast<float>(v);
         }
       }
@@ -789,10 +803,10 @@ void Loader::load_camera(size_t node, const glm::dmat4& world) {
   }
   if (c.type != "perspective") fail(who, "type " + quoted(c.type) + " is neither perspective nor orthographic");
   const double yfov = c.perspective.yfov;
-  if (!(yfov > 0 && yfov < kPi)) fail(who, "yfov " + std::to_string(yfov) + " must lie in (0, pi) radians");
+  if (!(yfov > 0 && yfov < kPi)) fail(who, "yfov " + num(yfov) + " must lie in (0, pi) radians");
   const double aspect = c.perspective.aspectRatio;
   if (!(aspect >= 0) || !std::isfinite(aspect))
-    fail(who, "aspectRatio " + std::to_string(aspect) + " must be > 0");
+    fail(who, "aspectRatio " + num(aspect) + " must be > 0");
   Camera cam;
   cam.name = !n.name.empty() ? n.name : c.name;
   cam.yfov_rad = yfov;
@@ -838,14 +852,14 @@ void Loader::load_light(size_t node, const glm::dmat4& world) {
   const glm::dvec3 color = vec3(g.color, {1, 1, 1}, who, "color");
   if (color.x < 0 || color.y < 0 || color.z < 0) fail(who, "color has a negative value");
   l.color = glm::vec3(color);
-  if (!(g.intensity >= 0) || !std::isfinite(g.intensity)) fail(who, "intensity " + std::to_string(g.intensity) + " must be >= 0");
+  if (!(g.intensity >= 0) || !std::isfinite(g.intensity)) fail(who, "intensity " + num(g.intensity) + " must be >= 0");
   l.intensity = g.intensity;
-  if (!(g.range >= 0) || !std::isfinite(g.range)) fail(who, "range " + std::to_string(g.range) + " must be > 0");
+  if (!(g.range >= 0) || !std::isfinite(g.range)) fail(who, "range " + num(g.range) + " must be > 0");
   l.range = g.range;
   if (l.type == Light::Type::Spot) {
     const double inner = g.spot.innerConeAngle, outer = g.spot.outerConeAngle;
     if (!(inner >= 0 && inner < outer && outer <= kPi / 2 + 1e-9))
-      fail(who, "spot cone angles inner " + std::to_string(inner) + " and outer " + std::to_string(outer) +
+      fail(who, "spot cone angles inner " + num(inner) + " and outer " + num(outer) +
                     " must satisfy 0 <= inner < outer <= pi/2");
     l.inner_cone_rad = inner;
     l.outer_cone_rad = outer;
@@ -932,9 +946,16 @@ Scene load_gltf(const std::string& path, const std::string& scene_name) {
   tinygltf::TinyGLTF io;
   io.SetImageLoader(load_image_checked, &model);
   std::string err, warn;
-  const bool ok = binary ? io.LoadBinaryFromFile(&model, &err, &warn, path)
-                         : io.LoadASCIIFromFile(&model, &err, &warn, path);
+  bool ok = false;
+  try {
+    ok = binary ? io.LoadBinaryFromFile(&model, &err, &warn, path) : io.LoadASCIIFromFile(&model, &err, &warn, path);
+  } catch (const std::exception& e) {
+    // tinygltf 2.7 throws std::out_of_range on some malformed files (a GLB buffer of byteLength 0).
+    throw Error(path + ": malformed glTF (tinygltf: " + e.what() + ")");
+  }
+  // tinygltf ends each of its messages with a newline; one line reads better in a terminal and a log.
   while (!err.empty() && (err.back() == '\n' || err.back() == ' ')) err.pop_back();
+  for (size_t pos; (pos = err.find('\n')) != std::string::npos;) err.replace(pos, 1, "; ");
   if (!ok) throw Error(path + ": " + (err.empty() ? std::string("tinygltf could not load the file") : err));
 
   Scene scene;
@@ -970,13 +991,13 @@ std::string summarize(const Scene& scene) {
     if (m.double_sided) s << ", double-sided";
     std::vector<std::string> ext;
     if (m.emissive != glm::vec3(0.0f))
-      ext.push_back("emissive (" + std::to_string(m.emissive.r) + ", " + std::to_string(m.emissive.g) + ", " +
-                    std::to_string(m.emissive.b) + ")");
-    if (m.transmission > 0) ext.push_back("KHR_materials_transmission " + std::to_string(m.transmission));
-    if (m.ior != 1.5f || m.transmission > 0) ext.push_back("KHR_materials_ior " + std::to_string(m.ior));
+      ext.push_back("emissive (" + num(m.emissive.r) + ", " + num(m.emissive.g) + ", " +
+                    num(m.emissive.b) + ")");
+    if (m.transmission > 0) ext.push_back("KHR_materials_transmission " + num(m.transmission));
+    if (m.ior != 1.5f || m.transmission > 0) ext.push_back("KHR_materials_ior " + num(m.ior));
     if (m.thickness_m > 0 || std::isfinite(m.attenuation_distance_m))
-      ext.push_back("KHR_materials_volume thickness " + std::to_string(m.thickness_m) + " m, attenuation distance " +
-                    (std::isfinite(m.attenuation_distance_m) ? std::to_string(m.attenuation_distance_m) + " m"
+      ext.push_back("KHR_materials_volume thickness " + num(m.thickness_m) + " m, attenuation distance " +
+                    (std::isfinite(m.attenuation_distance_m) ? num(m.attenuation_distance_m) + " m"
                                                              : std::string("inf")));
     for (const std::string& e : ext) s << "; " << e;
     s << "\n";
