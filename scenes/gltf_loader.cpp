@@ -205,6 +205,7 @@ class Loader {
   void load_primitive(size_t node, size_t mesh, size_t prim, const glm::dmat4& world);
   void load_camera(size_t node, const glm::dmat4& world);
   void load_light(size_t node, const glm::dmat4& world);
+  std::string object_name(size_t node) const;
 
   // Reads accessor `index` for `user` (the element that references it, for messages) as doubles,
   // count * components, after checking every byte it touches lies inside its view and buffer.
@@ -790,6 +791,18 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
   scene_.meshes.push_back(std::move(out));
 }
 
+// Blender's exporter puts each camera and light on an extra child node "<object>_Orientation"; users
+// know the object's name from the outliner, so that is the name the scene file refers to.
+std::string Loader::object_name(size_t node) const {
+  static const std::string suffix = "_Orientation";
+  const std::string& n = m_.nodes[node].name;
+  if (n.size() > suffix.size() && n.compare(n.size() - suffix.size(), suffix.size(), suffix) == 0 && parent_[node] >= 0) {
+    const std::string& parent = m_.nodes[static_cast<size_t>(parent_[node])].name;
+    if (parent == n.substr(0, n.size() - suffix.size())) return parent;
+  }
+  return n;
+}
+
 void Loader::load_camera(size_t node, const glm::dmat4& world) {
   const tinygltf::Node& n = m_.nodes[node];
   if (static_cast<size_t>(n.camera) >= m_.cameras.size())
@@ -808,7 +821,7 @@ void Loader::load_camera(size_t node, const glm::dmat4& world) {
   if (!(aspect >= 0) || !std::isfinite(aspect))
     fail(who, "aspectRatio " + num(aspect) + " must be > 0");
   Camera cam;
-  cam.name = !n.name.empty() ? n.name : c.name;
+  cam.name = !n.name.empty() ? object_name(node) : c.name;
   cam.yfov_rad = yfov;
   cam.aspect_ratio = aspect;
   // Cameras take position and orientation from their node; a scale there (allowed, but meaningless
@@ -840,7 +853,7 @@ void Loader::load_light(size_t node, const glm::dmat4& world) {
   const tinygltf::Light& g = m_.lights[static_cast<size_t>(li)];
   const std::string who = label("light", static_cast<size_t>(li), g.name) + " (" + nwho + ")";
   Light l;
-  l.name = !n.name.empty() ? n.name : g.name;
+  l.name = !n.name.empty() ? object_name(node) : g.name;
   if (g.type == "point")
     l.type = Light::Type::Point;
   else if (g.type == "spot")

@@ -727,7 +727,7 @@ TEST(GltfLoader, BlenderExportLoadsAsIs) {
   // deg about X; together they look down -Z from (0, 0.1, 1.5).
   ASSERT_EQ(s.cameras.size(), 1u);
   const auto& cam = s.cameras[0];
-  EXPECT_EQ(cam.name, "Camera_Orientation");
+  EXPECT_EQ(cam.name, "Camera");  // the Blender object, not its "_Orientation" helper node
   EXPECT_NEAR(cam.yfov_rad, 0.39959652046304894, 1e-12);
   EXPECT_NEAR(cam.aspect_ratio, 16.0 / 9.0, 1e-12);
   const glm::dvec3 view = glm::dmat3(cam.world_from_camera) * glm::dvec3(0, 0, -1);
@@ -737,6 +737,7 @@ TEST(GltfLoader, BlenderExportLoadsAsIs) {
   EXPECT_NEAR(cam.world_from_camera[3].y, 0.1, 1e-7);
   EXPECT_NEAR(cam.world_from_camera[3].z, 1.5, 1e-12);
   ASSERT_EQ(s.lights.size(), 1u);
+  EXPECT_EQ(s.lights[0].name, "Spot");
   EXPECT_EQ(s.lights[0].type, Light::Type::Spot);
   EXPECT_NEAR(s.lights[0].direction.y, -1.0, 1e-6);
   EXPECT_NEAR(s.lights[0].position.x, 0.5, 1e-12);
