@@ -1,6 +1,6 @@
 // Compiled once per target by Highway's foreach_target; the code between HWY_BEFORE_NAMESPACE and
-// HWY_AFTER_NAMESPACE carries that target's attributes, so the plain loops of the Philox rounds are
-// auto-vectorised for it and the byte comparisons use its widest vectors.
+// HWY_AFTER_NAMESPACE carries that target's attributes: Philox runs on 16 counters in its widest vectors
+// (up to 16 u32 lanes), and the byte comparisons use them too.
 #undef HWY_TARGET_INCLUDE
 #define HWY_TARGET_INCLUDE "sensor/frames_kernel.cpp"
 #include <hwy/foreach_target.h>  // IWYU pragma: keep
@@ -15,35 +15,66 @@ namespace spadgen::sensor {
 namespace HWY_NAMESPACE {
 namespace hn = hwy::HWY_NAMESPACE;
 
+// 32 x 32 -> 64-bit products of every lane: high and low halves. MulEven (vpmuludq) on the even lanes and
+// on the odd lanes shifted down, recombined with OddEven; cheaper than widening to 64-bit multiplies.
+#if HWY_TARGET != HWY_SCALAR
+template <class D>
+HWY_INLINE void MulHiLo(D d, hn::Vec<D> a, hn::Vec<D> b, hn::Vec<D>& hi, hn::Vec<D>& lo) {
+  const hn::Repartition<uint64_t, D> d64;
+  const auto pe = hn::MulEven(a, b);
+  const auto po = hn::MulEven(hn::BitCast(d, hn::ShiftRight<32>(hn::BitCast(d64, a))),
+                              hn::BitCast(d, hn::ShiftRight<32>(hn::BitCast(d64, b))));
+  hi = hn::OddEven(hn::BitCast(d, po), hn::BitCast(d, hn::ShiftRight<32>(pe)));
+  lo = hn::OddEven(hn::BitCast(d, hn::ShiftLeft<32>(po)), hn::BitCast(d, pe));
+}
+#endif
+
 // Philox4x32-10 of 16 consecutive counters, structure of arrays: out holds word 0 of the 16 blocks, then
 // word 1, word 2, word 3 (little endian), exactly as r123::Philox4x32 computes each block.
 HWY_INLINE void Philox16(const uint32_t key[2], const uint32_t ctr[4], uint32_t first, uint32_t* HWY_RESTRICT out) {
-  uint32_t x0[16], x1[16], x2[16], x3[16];
+#if HWY_TARGET == HWY_SCALAR
   for (uint32_t i = 0; i < 16; ++i) {
-    x0[i] = first + i;
-    x1[i] = ctr[1];
-    x2[i] = ctr[2];
-    x3[i] = ctr[3];
-  }
-  uint32_t ka = key[0], kb = key[1];
-  for (int round = 0; round < 10; ++round) {
-    for (int i = 0; i < 16; ++i) {
-      const uint64_t p0 = uint64_t{0xD2511F53u} * x0[i];
-      const uint64_t p1 = uint64_t{0xCD9E8D57u} * x2[i];
-      const uint32_t n0 = static_cast<uint32_t>(p1 >> 32) ^ x1[i] ^ ka;
-      const uint32_t n2 = static_cast<uint32_t>(p0 >> 32) ^ x3[i] ^ kb;
-      x1[i] = static_cast<uint32_t>(p1);
-      x3[i] = static_cast<uint32_t>(p0);
-      x0[i] = n0;
-      x2[i] = n2;
+    uint32_t x0 = first + i, x1 = ctr[1], x2 = ctr[2], x3 = ctr[3], ka = key[0], kb = key[1];
+    for (int round = 0; round < 10; ++round) {
+      const uint64_t p0 = uint64_t{0xD2511F53u} * x0, p1 = uint64_t{0xCD9E8D57u} * x2;
+      x0 = static_cast<uint32_t>(p1 >> 32) ^ x1 ^ ka;
+      x2 = static_cast<uint32_t>(p0 >> 32) ^ x3 ^ kb;
+      x1 = static_cast<uint32_t>(p1);
+      x3 = static_cast<uint32_t>(p0);
+      ka += 0x9E3779B9u;
+      kb += 0xBB67AE85u;
     }
-    ka += 0x9E3779B9u;
-    kb += 0xBB67AE85u;
+    out[i] = x0;
+    out[16 + i] = x1;
+    out[32 + i] = x2;
+    out[48 + i] = x3;
   }
-  std::memcpy(out, x0, sizeof x0);
-  std::memcpy(out + 16, x1, sizeof x1);
-  std::memcpy(out + 32, x2, sizeof x2);
-  std::memcpy(out + 48, x3, sizeof x3);
+#else
+  const hn::CappedTag<uint32_t, 16> d;
+  const size_t L = hn::Lanes(d);
+  const auto m0 = hn::Set(d, 0xD2511F53u), m1 = hn::Set(d, 0xCD9E8D57u);
+  const auto w0 = hn::Set(d, 0x9E3779B9u), w1 = hn::Set(d, 0xBB67AE85u);
+  for (size_t g = 0; g < 16; g += L) {
+    auto x0 = hn::Iota(d, first + static_cast<uint32_t>(g));
+    auto x1 = hn::Set(d, ctr[1]), x2 = hn::Set(d, ctr[2]), x3 = hn::Set(d, ctr[3]);
+    auto ka = hn::Set(d, key[0]), kb = hn::Set(d, key[1]);
+    for (int round = 0; round < 10; ++round) {
+      hn::Vec<decltype(d)> hi0, lo0, hi1, lo1;
+      MulHiLo(d, x0, m0, hi0, lo0);
+      MulHiLo(d, x2, m1, hi1, lo1);
+      x0 = hn::Xor(hn::Xor(hi1, x1), ka);
+      x2 = hn::Xor(hn::Xor(hi0, x3), kb);
+      x1 = lo1;
+      x3 = lo0;
+      ka = hn::Add(ka, w0);
+      kb = hn::Add(kb, w1);
+    }
+    hn::StoreU(x0, d, out + g);
+    hn::StoreU(x1, d, out + 16 + g);
+    hn::StoreU(x2, d, out + 32 + g);
+    hn::StoreU(x3, d, out + 48 + g);
+  }
+#endif
 }
 
 // The bit of one frame given its top byte; refines a tie with the block `refine_block`.

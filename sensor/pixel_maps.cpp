@@ -94,7 +94,7 @@ PixelMaps::PixelMaps(const RunConfig& config, double nominal_length_s)
     s.len_scale = lsd > 1e-12 ? len_sigma * std::sqrt(kLengthPatternShare) / lsd : 0.0;
     if (s.skew_scale == 0.0) skew_sigma_r_ = skew_sigma;
     if (s.len_scale == 0.0) len_sigma_r_ = len_sigma;
-    // The patterns are monotonic in u and v on [0, 1]^2 corners and edges; bound them by a fine scan.
+    // Bounds of the patterns over [0, 1]^2 from a 65 x 65 scan (they are smooth; 1 % slack is added below).
     double pmin = 1e300, pmax = -1e300, qmax = -1e300;
     for (int i = 0; i <= 64; ++i)
       for (int j = 0; j <= 64; ++j) {
@@ -121,7 +121,6 @@ int PixelMaps::type_of_row(int y) const {
   return y < height_ / 2 ? 0 : 1;
 }
 
-int PixelMaps::section_of_row(int y) const { return full_chip_ && y >= height_ / 2 ? 1 : 0; }
 
 void PixelMaps::set_gate_maps(std::vector<float> skew_ps, std::vector<float> length_ps) {
   const size_t n = static_cast<size_t>(width_) * static_cast<size_t>(height_);

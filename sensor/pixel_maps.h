@@ -37,7 +37,7 @@ class PixelMaps {
 
   PixelParams at(int x, int y) const;
   int type_of_row(int y) const;
-  int section_of_row(int y) const;
+  int section_of_row(int y) const { return full_chip_ && y >= height_ / 2 ? 1 : 0; }
 
   // Measured maps, full-sensor row-major arrays (width * height): gate skew in ps and absolute gate length
   // (50 %-50 %) in ps. Replace the generated skew and length maps. Throws spadgen::Error on a size mismatch

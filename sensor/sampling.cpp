@@ -13,6 +13,8 @@ constexpr double kTwo64 = 18446744073709551616.0;  // 2^64
 constexpr double kSparseBelow = 1.0 / 16.0;
 constexpr double kModeSearchFrom = 16.0;
 
+}  // namespace
+
 // Unbiased integer in [0, range) from 32-bit draws (Lemire's multiply-and-reject); range <= 2^32.
 uint32_t uniform_below(Rng& rng, uint64_t range) {
   for (;;) {
@@ -24,8 +26,6 @@ uint32_t uniform_below(Rng& rng, uint64_t range) {
   }
 }
 
-}  // namespace
-
 uint64_t probability_threshold(double a) {
   if (!(a > 0.0)) return 0;
   const double t = a * kTwo64;  // exact: scaling by a power of two
@@ -34,58 +34,76 @@ uint64_t probability_threshold(double a) {
 }
 
 Prob prob_from_lambda(double lambda) {
-  if (!(lambda > 0.0)) return {0.0, 1.0};
-  if (std::isinf(lambda)) return {1.0, 0.0};
-  return {-std::expm1(-lambda), std::exp(-lambda)};
+  if (!(lambda > 0.0)) return {0.0, 1.0, 0.0};
+  // Below 1e-3 the Taylor series of 1 - exp(-lambda) to degree 5 is exact to double precision (next term
+  // lambda^6 / 720 < 1.4e-18 lambda); most pixels at most gate positions are here, where expm1 would
+  // dominate the cost. q = 1 - p is then exact to an absolute 1e-16 (q is near 1).
+  if (lambda < 1e-3) {
+    const double l = lambda;
+    const double p = l * (1.0 - l * (0.5 - l * (1.0 / 6.0 - l * (1.0 / 24.0 - l * (1.0 / 120.0)))));
+    return {p, 1.0 - p, -lambda};
+  }
+  if (std::isinf(lambda)) return {1.0, 0.0, -lambda};
+  return {-std::expm1(-lambda), std::exp(-lambda), -lambda};
+}
+
+double neg_log1p_minus(double x) {
+  if (x < 1e-5) return x * (1.0 + x * (0.5 + x * (1.0 / 3.0 + x * 0.25)));  // next term below 2e-21 x
+  return -std::log1p(-x);
 }
 
 bool bits_are_sparse(const Prob& pr) { return std::min(pr.p, pr.q) <= kSparseBelow; }
 
-BinomialSampler::BinomialSampler(uint32_t n) : n_(n), log_fact_(n + 1) {
-  for (uint32_t i = 0; i <= n; ++i) log_fact_[i] = std::lgamma(static_cast<double>(i) + 1.0);
+BinomialSampler::BinomialSampler(uint32_t n) : n_(n), log_fact_(n + 1), up_(n + 1), down_(n + 1) {
+  for (uint32_t i = 0; i <= n; ++i) {
+    log_fact_[i] = std::lgamma(static_cast<double>(i) + 1.0);
+    up_[i] = static_cast<double>(n - i) / static_cast<double>(i + 1);
+    down_[i] = static_cast<double>(i) / static_cast<double>(n - i + 1);
+  }
 }
 
-uint32_t BinomialSampler::small_side(Rng& rng, double a, double b) const {
+uint32_t BinomialSampler::small_side(Rng& rng, double a, double b, double log_b) const {
   // a <= b: the probability of the rarer outcome; X counts it.
   const double N = n_;
   const double mean = N * a;
-  const double log_b = std::log1p(-a);  // not log(b): b near 1 has lost a's digits
   if (mean < kModeSearchFrom) {
     const uint64_t U = rng.next_u64();
     // P(X >= 1) = 1 - b^N <= N a: most draws end here without a transcendental function.
     if (mean < 1.0 && U >= probability_threshold(mean)) return 0;
-    double S = -std::expm1(N * log_b);  // P(X > 0)
-    double pmf = std::exp(N * log_b);   // P(X = 0)
+    if (log_b > 0.0) log_b = std::log1p(-a);  // not log(b): b near 1 has lost a's digits
+    double S = -std::expm1(N * log_b);                // P(X > 0)
+    double pmf = S < 0.5 ? 1.0 - S : std::exp(N * log_b);  // P(X = 0), to an absolute 1e-16
     const double r = a / b;
     uint32_t x = 0;
     while (x < n_ && U < probability_threshold(S)) {
+      pmf *= r * up_[x];
       ++x;
-      pmf *= r * static_cast<double>(n_ - x + 1) / x;
       S -= pmf;  // P(X > x)
       if (!(S > 0.0)) break;
     }
     return x;
   }
+  if (log_b > 0.0) log_b = std::log1p(-a);
   const double log_a = std::log(a);
   const auto m = static_cast<uint32_t>(std::min(N, std::floor((N + 1.0) * a)));
   const double pm = std::exp(log_fact_[n_] - log_fact_[m] - log_fact_[n_ - m] + m * log_a + (N - m) * log_b);
   double U = static_cast<double>(rng.next_u64() >> 11) * 0x1.0p-53;
   U -= pm;
   if (U < 0.0) return m;
-  const double r = a / b;
+  const double r = a / b, r_inv = b / a;
   uint32_t lo = m, hi = m;
   double p_lo = pm, p_hi = pm;
   for (;;) {
     bool moved = false;
     if (lo > 0) {
-      p_lo *= static_cast<double>(lo) / (static_cast<double>(n_ - lo + 1) * r);
+      p_lo *= down_[lo] * r_inv;
       --lo;
       U -= p_lo;
       if (U < 0.0) return lo;
       moved = true;
     }
     if (hi < n_) {
-      p_hi *= r * static_cast<double>(n_ - hi) / static_cast<double>(hi + 1);
+      p_hi *= r * up_[hi];
       ++hi;
       U -= p_hi;
       if (U < 0.0) return hi;
@@ -98,8 +116,9 @@ uint32_t BinomialSampler::small_side(Rng& rng, double a, double b) const {
 uint32_t BinomialSampler::sample(Rng& rng, const Prob& pr) const {
   if (!(pr.p > 0.0) || n_ == 0) return 0;
   if (!(pr.q > 0.0)) return n_;
-  if (pr.p <= pr.q) return small_side(rng, pr.p, pr.q);
-  return n_ - small_side(rng, pr.q, pr.p);
+  // log of the likelier outcome's probability: log q is -lambda when known; log p is computed when needed
+  if (pr.p <= pr.q) return small_side(rng, pr.p, pr.q, pr.log_q <= 0.0 ? pr.log_q : 1.0);
+  return n_ - small_side(rng, pr.q, pr.p, 1.0);
 }
 
 void sample_bits(const Rng& stream, const BinomialSampler& sampler, const Prob& pr, uint64_t* words) {
@@ -111,7 +130,8 @@ void sample_bits(const Rng& stream, const BinomialSampler& sampler, const Prob& 
   if (a > 0.0) {
     if (a <= kSparseBelow) {
       Rng rng = stream;
-      const uint32_t c = invert ? n - sampler.sample(rng, {pr.p, pr.q}) : sampler.sample(rng, pr);
+      const uint32_t hits = sampler.sample(rng, pr);
+      const uint32_t c = invert ? n - hits : hits;  // the rarer outcome's count
       // Floyd: a uniformly random c-subset of [0, n)
       for (uint32_t j = n - c; j < n; ++j) {
         const uint32_t t = uniform_below(rng, uint64_t{j} + 1);

@@ -23,14 +23,20 @@
 
 namespace spadgen::sensor {
 
+// An unbiased integer in [0, range) from 32-bit draws (Lemire's multiply-and-reject); range <= 2^32.
+uint32_t uniform_below(Rng& rng, uint64_t range);
+
 // floor(a * 2^64) for a in [0, 1); saturates at 2^64 - 1.
 uint64_t probability_threshold(double a);
 
 struct Prob {
   double p = 0.0, q = 1.0;
+  double log_q = 1.0;  // log(q) when known exactly (-lambda); positive means "not known"
 };
 // p = 1 - exp(-lambda) and q = exp(-lambda), each to full relative precision.
 Prob prob_from_lambda(double lambda);
+// -log(1 - x) for x in [0, 1), with a series for small x.
+double neg_log1p_minus(double x);
 
 class BinomialSampler {
  public:
@@ -40,9 +46,11 @@ class BinomialSampler {
   uint32_t sample(Rng& rng, const Prob& pr) const;
 
  private:
-  uint32_t small_side(Rng& rng, double a, double b) const;
+  uint32_t small_side(Rng& rng, double a, double b, double log_b) const;
   uint32_t n_;
   std::vector<double> log_fact_;
+  // up_[x] = (n - x) / (x + 1), down_[x] = x / (n - x + 1): pmf ratios without a division per step
+  std::vector<double> up_, down_;
 };
 
 // n = sampler.n() independent Bernoulli(p) bits: bit i of words[i / 64] is frame i; bits from n up to the

@@ -32,6 +32,61 @@ struct TypeInfo {
 constexpr int kNbDx[4] = {-1, 1, 0, 0};
 constexpr int kNbDy[4] = {0, 0, -1, 1};
 
+// Frames where the neighbour avalanched and this pixel did not are candidates; each becomes a crosstalk
+// detection with probability r, independently. Drawn sparsely: the number of hits ~ Binomial(candidates, r)
+// by sequential inversion, then which candidates as a uniformly random subset (Floyd), from the pixel's
+// crosstalk stream in neighbour order. With r n >= 16 (a saturated neighbour and large r) each candidate
+// is drawn on its own instead.
+void crosstalk_into(Rng& rng, const uint64_t* theirs, uint64_t* mine, size_t wpp, double r) {
+  uint32_t n = 0;
+  for (size_t w = 0; w < wpp; ++w) n += static_cast<uint32_t>(std::popcount(theirs[w] & ~mine[w]));
+  if (n == 0 || !(r > 0.0)) return;
+  auto nth_candidate = [&](uint32_t t) {  // set bit t of the candidates in mine
+    for (size_t w = 0; w < wpp; ++w) {
+      uint64_t bits = theirs[w] & ~mine[w];
+      const auto c = static_cast<uint32_t>(std::popcount(bits));
+      if (t >= c) {
+        t -= c;
+        continue;
+      }
+      for (; t > 0; --t) bits &= bits - 1;
+      return std::pair{w, std::countr_zero(bits)};
+    }
+    return std::pair{wpp, 0};
+  };
+  const double mean = n * r;
+  if (mean >= 16.0 || r >= 0.5) {
+    const uint64_t thr = probability_threshold(r);
+    std::vector<std::pair<size_t, int>> hits;
+    for (size_t w = 0; w < wpp; ++w)
+      for (uint64_t bits = theirs[w] & ~mine[w]; bits != 0; bits &= bits - 1)
+        if (rng.next_u64() < thr) hits.emplace_back(w, std::countr_zero(bits));
+    for (const auto& [w, b] : hits) mine[w] |= uint64_t{1} << b;
+    return;
+  }
+  // P(H > h) by the recurrence of the binomial pmf, as in BinomialSampler's sequential search
+  const uint64_t U = rng.next_u64();
+  if (mean < 1.0 && U >= probability_threshold(mean)) return;
+  const double log_b = std::log1p(-r);
+  double S = -std::expm1(n * log_b), pmf = S < 0.5 ? 1.0 - S : std::exp(n * log_b);
+  uint32_t h = 0;
+  while (h < n && U < probability_threshold(S)) {
+    pmf *= r / (1.0 - r) * static_cast<double>(n - h) / static_cast<double>(h + 1);
+    ++h;
+    S -= pmf;
+    if (!(S > 0.0)) break;
+  }
+  // Floyd's subset of h candidate indices; mark them in a scratch copy so indices stay stable
+  std::vector<uint32_t> chosen;
+  for (uint32_t j = n - h; j < n; ++j) {
+    const uint32_t t = uniform_below(rng, uint64_t{j} + 1);
+    chosen.push_back(std::find(chosen.begin(), chosen.end(), t) == chosen.end() ? t : j);
+  }
+  std::vector<std::pair<size_t, int>> pos;
+  for (uint32_t t : chosen) pos.push_back(nth_candidate(t));
+  for (const auto& [w, b] : pos) mine[w] |= uint64_t{1} << b;
+}
+
 // Inverse of eq. (5) / (6): incident (detectable) photons per N-frame image from summed counts. A count at
 // saturation is taken as N - 0.5 so the estimate stays finite.
 double linearise(double counts, double N, bool dual, double ratio) {
@@ -247,6 +302,7 @@ SensorTile SensorModel::process(const TransientTile& t) const {
   }
   // lambda of every k for the region's pixels, indexed like data_rect
   std::vector<double> lam(static_cast<size_t>(region.count()) * Ks);
+  std::vector<Prob> prob(lam.size());  // p and q of the pixel's own avalanches, used by its neighbours too
   std::vector<PixelParams> params(static_cast<size_t>(region.count()));
   tbb::parallel_for(tbb::blocked_range<int>(region.y0, region.y1()), [&](const tbb::blocked_range<int>& rows) {
     TransientPrefix prefix;
@@ -258,6 +314,7 @@ SensorTile SensorModel::process(const TransientTile& t) const {
         const float* g = m.sweep ? t.transient.data() + di * static_cast<size_t>(t.axis.bins) : nullptr;
         const double laser_total = t.laser_total.size() == ndata ? t.laser_total[di] : 0.0;
         m.lambda(params[ri], g, t.axis, &rise, &fall, t.ambient_rate[di], laser_total, prefix, lam.data() + ri * Ks);
+        for (size_t k = 0; k < Ks; ++k) prob[ri * Ks + k] = prob_from_lambda(lam[ri * Ks + k]);
       }
   });
 
@@ -301,7 +358,7 @@ SensorTile SensorModel::process(const TransientTile& t) const {
           for (int x = region.x0; x < region.x1(); ++x) {
             const auto ri = static_cast<size_t>(region.index(x, y));
             const Rng stream(seed, RngKind::Frames, pixel_index(x, y), kk);
-            sample_bits(stream, *m.binom, prob_from_lambda(lam[ri * Ks + kk]), own.data() + ri * wpp);
+            sample_bits(stream, *m.binom, prob[ri * Ks + kk], own.data() + ri * wpp);
           }
         row.assign(static_cast<size_t>(rect.width) * wpp, 0);
       }
@@ -320,9 +377,9 @@ SensorTile SensorModel::process(const TransientTile& t) const {
             const double li = lam[ni * Ks + kk];
             // Pixel A: every neighbour avalanche may fire this pixel, a thinned Poisson process. Pixel B:
             // a neighbour avalanches at most once per frame, firing this pixel with probability q.
-            lam_eff += ty.single_avalanche ? -std::log1p(-ty.crosstalk * prob_from_lambda(li).p) : ty.crosstalk * li;
+            lam_eff += ty.single_avalanche ? neg_log1p_minus(ty.crosstalk * prob[ni * Ks + kk].p) : ty.crosstalk * li;
           }
-          const Prob pr = prob_from_lambda(lam_eff);
+          const Prob pr = nnb > 0 ? prob_from_lambda(lam_eff) : prob[ri * Ks + kk];
           out.expected[kk * n + oi] = static_cast<float>(static_cast<double>(N) * pr.p);
           if (!frames) {
             Rng rng(seed, RngKind::Counts, pixel_index(x, y), kk);
@@ -332,29 +389,18 @@ SensorTile SensorModel::process(const TransientTile& t) const {
           uint64_t* mine = row.data() + static_cast<size_t>(x - rect.x0) * wpp;
           std::copy_n(own.data() + ri * wpp, wpp, mine);
           if (nnb > 0) {
-            const Rng xt(seed, RngKind::Crosstalk, pixel_index(x, y), kk);
+            Rng xt(seed, RngKind::Crosstalk, pixel_index(x, y), kk);
             for (int i = 0; i < nnb; ++i) {
               const int d = nb[i];
               const auto ni = static_cast<size_t>(region.index(x + kNbDx[d], y + kNbDy[d]));
               const double li = lam[ni * Ks + kk];
-              const Prob pi = prob_from_lambda(li);
+              const Prob& pi = prob[ni * Ks + kk];
               if (!(pi.p > 0.0)) continue;
               // Given that the neighbour avalanched at least once, the chance it fires this pixel: q for
               // pixel B; for pixel A (1 - exp(-q lambda_i)) / p_i, so that the marginal matches the
               // thinned Poisson process of the counts path.
               const double r = ty.single_avalanche ? ty.crosstalk : std::min(1.0, -std::expm1(-ty.crosstalk * li) / pi.p);
-              const uint64_t thr = probability_threshold(r);
-              const uint64_t* theirs = own.data() + ni * wpp;
-              for (size_t w = 0; w < wpp; ++w) {
-                uint64_t bits = theirs[w] & ~mine[w];
-                while (bits != 0) {
-                  const int b = std::countr_zero(bits);
-                  bits &= bits - 1;
-                  const auto f = static_cast<uint32_t>(w * 64 + static_cast<size_t>(b));
-                  const auto blk = xt.block(f * 4 + static_cast<uint32_t>(d));
-                  if (((uint64_t{blk[0]} << 32) | blk[1]) < thr) mine[w] |= uint64_t{1} << b;
-                }
-              }
+              crosstalk_into(xt, own.data() + ni * wpp, mine, wpp, r);
             }
           }
           int c = 0;

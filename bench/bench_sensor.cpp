@@ -1,0 +1,165 @@
+// Sensor throughput against the real camera (paper Table 1 / section 3):
+//   binary frames: 1024 x 1000 pixels x 24,000 fps = 24.576 Gbit/s;
+//   counts for a full sweep: 1024 x 1000 pixels, 350 gate positions, 255 frames each, acquired in 3.7 s.
+// Both measured on a sub-image and scaled to the full array (the work is per pixel, so it scales
+// linearly); all threads TBB is allowed to use. Results and the command: bench/README.md ("## sensor").
+#include <benchmark/benchmark.h>
+#include <tbb/parallel_for.h>
+
+#include <cmath>
+#include <vector>
+
+#include "core/rng.h"
+#include "core/tile.h"
+#include "sensor/frames_kernel.h"
+#include "sensor/sampling.h"
+#include "sensor/sensor.h"
+
+namespace {
+
+using namespace spadgen;
+
+constexpr double kCameraBitRate = 1024.0 * 1000.0 * 24000.0;  // bit/s
+constexpr double kCameraSweepSeconds = 3.7;
+
+// A realistic mix of per-frame detection probabilities for one gate position: most pixels see only
+// background (p ~ 1e-6 .. 1e-3), some see a return in the gate (p 0.05 .. 0.95).
+std::vector<double> realistic_lambdas(size_t n) {
+  Rng rng(5, RngKind::Test, 1);
+  std::vector<double> lam(n);
+  for (double& l : lam) {
+    const double u = rng.next_double();
+    if (u < 0.7) l = std::pow(10.0, -6.0 + 3.0 * rng.next_double());  // background only
+    else if (u < 0.8) l = std::pow(10.0, -3.0 + 2.0 * rng.next_double());  // a weak return
+    else l = 0.05 + 3.0 * rng.next_double();  // a return in the gate: p from 0.05 to 0.95
+  }
+  return lam;
+}
+
+// The sampler alone: N = 255 Bernoulli bits per pixel and gate position, keyed streams, all threads.
+void BM_FrameBits(benchmark::State& state) {
+  const uint32_t N = 255;
+  const size_t pixels = 1 << 16;
+  const std::vector<double> lam = realistic_lambdas(pixels);
+  const sensor::BinomialSampler sampler(N);
+  std::vector<uint64_t> words(pixels * 4);
+  uint64_t k = 0;
+  for (auto _ : state) {
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, pixels, 1024), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t i = r.begin(); i < r.end(); ++i)
+        sensor::sample_bits(Rng(1, RngKind::Frames, i, k), sampler, sensor::prob_from_lambda(lam[i]), words.data() + 4 * i);
+    });
+    benchmark::DoNotOptimize(words.data());
+    ++k;
+  }
+  const double bits = static_cast<double>(state.iterations()) * pixels * N;
+  state.counters["Gbit_per_s"] = benchmark::Counter(bits * 1e-9, benchmark::Counter::kIsRate);
+  state.counters["x_camera"] = benchmark::Counter(bits / kCameraBitRate, benchmark::Counter::kIsRate);
+  state.SetLabel(sensor::dense_bits_target());
+}
+BENCHMARK(BM_FrameBits)->UseRealTime()->Unit(benchmark::kMillisecond);
+
+// A synthetic transient: one return per pixel, a second one for 30 % of them (a semi-transparent
+// layer), photons per pulse log-uniform in [1e-4, 1e-2] (the paper's flat target at 0.2-1.6 m sees
+// about 1e-3), ambient 1e5 to 1e6 photons/s.
+struct Scene {
+  RunConfig cfg;
+  int width = 64, height = 64;
+  TimeAxis axis;
+  std::vector<float> transient, ambient;
+};
+
+Scene make_scene(bool frames, int width, int height) {
+  Scene s;
+  s.width = width;
+  s.height = height;
+  s.cfg.camera.width_px = 1024;
+  s.cfg.camera.height_px = 1000;
+  s.cfg.sensor.preset = "full_chip";
+  s.cfg.sensor.pixel_B.fill_factor = 0.134;
+  s.cfg.sensor.pixel_B.pdp_peak = 0.267;
+  s.cfg.sensor.pixel_B.dcr_median_cps = 2.0;
+  s.cfg.sensor.pixel_B.crosstalk_probability = 0.0039;
+  s.cfg.sensor.pixel_B.single_avalanche_per_frame = true;
+  s.cfg.acquisition.gate_sweep = {0.6e-9, 0.6e-9 + 349 * 36e-12, 36e-12};  // 350 positions
+  s.cfg.outputs.frames = frames;
+  sensor::SensorModel model(s.cfg);
+  s.axis = model.required_window(9e-12);
+  const auto bins = static_cast<size_t>(s.axis.bins);
+  s.transient.assign(static_cast<size_t>(width * height) * bins, 0.0f);
+  s.ambient.resize(static_cast<size_t>(width * height));
+  Rng rng(8, RngKind::Test, 2);
+  for (size_t i = 0; i < s.ambient.size(); ++i) {
+    float* g = s.transient.data() + i * bins;
+    const int returns = rng.next_double() < 0.3 ? 2 : 1;
+    for (int r = 0; r < returns; ++r) {
+      const double t = 1.5e-9 + 10e-9 * rng.next_double();  // 0.2 to 1.7 m
+      const auto b = static_cast<size_t>(s.axis.bin_of(t));
+      const double photons = std::pow(10.0, -4.0 + 2.0 * rng.next_double());
+      const double f = rng.next_double();  // the return straddles two bins
+      g[b] += static_cast<float>(photons * f);
+      g[b + 1] += static_cast<float>(photons * (1 - f));
+    }
+    s.ambient[i] = static_cast<float>(std::pow(10.0, 5.0 + rng.next_double()));
+  }
+  return s;
+}
+
+TransientTile cut(const Scene& s, const PixelRect& r, int halo) {
+  TransientTile t;
+  t.rect = r;
+  t.data_rect = grow_clipped(r, halo, s.width, s.height);
+  t.axis = s.axis;
+  const auto bins = static_cast<size_t>(s.axis.bins);
+  for (int y = t.data_rect.y0; y < t.data_rect.y1(); ++y)
+    for (int x = t.data_rect.x0; x < t.data_rect.x1(); ++x) {
+      const auto i = static_cast<size_t>(y * s.width + x);
+      t.transient.insert(t.transient.end(), s.transient.begin() + static_cast<std::ptrdiff_t>(i * bins),
+                         s.transient.begin() + static_cast<std::ptrdiff_t>((i + 1) * bins));
+      t.ambient_rate.push_back(s.ambient[i]);
+      t.laser_total.push_back(0.0);
+      t.out_of_window.push_back(0.0);
+    }
+  return t;
+}
+
+// The whole sensor stage (gate response of 350 positions + crosstalk + sampling) on a sub-image of the
+// top-left corner, tiles of 32 with their halo, as the program streams them.
+void run_sweep(benchmark::State& state, bool frames) {
+  const int w = 64, h = frames ? 32 : 64;
+  const Scene s = make_scene(frames, w, h);
+  RunConfig cfg = s.cfg;
+  cfg.camera.width_px = w;  // the sub-image is the sensor here; per-pixel work is the same
+  cfg.camera.height_px = h;
+  sensor::SensorModel model(cfg);
+  std::vector<TransientTile> tiles;
+  for (const PixelRect& r : make_tiles(w, h, 32)) tiles.push_back(cut(s, r, model.halo()));
+  double checksum = 0;
+  for (auto _ : state) {
+    for (const TransientTile& t : tiles) {
+      const SensorTile out = model.process(t);
+      checksum += out.counts[out.counts.size() / 2];
+    }
+  }
+  benchmark::DoNotOptimize(checksum);
+  const double pixels = static_cast<double>(w * h) * static_cast<double>(state.iterations());
+  const double scale = 1024.0 * 1000.0 / pixels;  // per second of benchmark: full arrays processed = 1/scale
+  if (frames) {
+    const double bits = pixels * model.K() * 255.0;
+    state.counters["Gbit_per_s"] = benchmark::Counter(bits * 1e-9, benchmark::Counter::kIsRate);
+    state.counters["x_camera"] = benchmark::Counter(bits / kCameraBitRate, benchmark::Counter::kIsRate);
+  } else {
+    // seconds for a full 1024 x 1000 sweep = elapsed * scale; ratio = 3.7 s / that
+    state.counters["full_sweep_s"] = benchmark::Counter(1.0 / scale, benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+    state.counters["x_camera"] = benchmark::Counter(kCameraSweepSeconds / scale, benchmark::Counter::kIsRate);
+  }
+}
+
+void BM_CountsSweep(benchmark::State& state) { run_sweep(state, false); }
+void BM_FramesSweep(benchmark::State& state) { run_sweep(state, true); }
+BENCHMARK(BM_CountsSweep)->UseRealTime()->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_FramesSweep)->UseRealTime()->Unit(benchmark::kMillisecond);
+
+}  // namespace
+
+BENCHMARK_MAIN();
