@@ -240,6 +240,21 @@ void SensorModel::set_gate_maps(std::vector<float> skew_ps, std::vector<float> l
   impl_->maps->set_gate_maps(std::move(skew_ps), std::move(length_ps));
 }
 
+void SensorModel::set_maps(int width, int height, const std::map<std::string, std::vector<float>>& channels,
+                           const std::string& source) {
+  const CameraConfig& cam = impl_->cfg.camera;
+  const std::string key = "sensor.gate.maps_exr ('" + source + "')";
+  if (width != cam.width_px || height != cam.height_px)
+    throw Error(key + ": expected the full sensor, " + std::to_string(cam.width_px) + " x " +
+                std::to_string(cam.height_px) + " pixels, found " + std::to_string(width) + " x " + std::to_string(height));
+  auto find = [&](const char* a, const char* b) -> const std::vector<float>& {
+    for (const char* name : {a, b})
+      if (auto it = channels.find(name); it != channels.end()) return it->second;
+    throw Error(key + ": expected a channel named " + a + " (or " + b + ")");
+  };
+  set_gate_maps(find("skew_ps", "gate_skew_ps"), find("length_ps", "gate_length_ps"));
+}
+
 TimeAxis SensorModel::required_window(double bin_width_s) const {
   const Impl& m = *impl_;
   if (!(bin_width_s > 0.0)) throw Error("render.time_bin_ps: expected a positive bin width");

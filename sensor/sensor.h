@@ -16,7 +16,9 @@
 #pragma once
 #include <nlohmann/json.hpp>
 
+#include <map>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "core/config.h"
@@ -72,6 +74,10 @@ class SensorModel {
   // Replaces the generated skew and length maps (still switched off by sensor.gate_skew = false). Call
   // before required_window() and process(). Throws spadgen::Error on a size mismatch or bad values.
   void set_gate_maps(std::vector<float> skew_ps, std::vector<float> length_ps);
+  // The same from the channels of an EXR (sensor.gate.maps_exr, named `source` in errors): "skew_ps" and
+  // "length_ps", or "gate_skew_ps" and "gate_length_ps" as written to sensor_maps.exr, full-sensor size.
+  void set_maps(int width, int height, const std::map<std::string, std::vector<float>>& channels,
+                const std::string& source);
 
   // Frames per gate position or exposure (N; N / 2 per exposure in dual mode).
   int frames_per_k() const;

@@ -254,6 +254,11 @@ TEST(Sensor, GateMapsSpreadAndPattern) {
   EXPECT_NEAR(model.pixel(7, 9).skew_s, 12.5e-12, 1e-18);
   EXPECT_NEAR(model.pixel(7, 9).dL_s, 100e-12, 1e-16);
   EXPECT_THROW(model.set_gate_maps(std::vector<float>(10), std::vector<float>(10)), Error);
+  // from EXR channels, e.g. a previous run's sensor_maps.exr
+  model.set_maps(1024, 500, {{"gate_skew_ps", std::vector<float>(1024 * 500, -3.0f)}, {"gate_length_ps", len}}, "maps.exr");
+  EXPECT_NEAR(model.pixel(1, 2).skew_s, -3e-12, 1e-18);
+  EXPECT_THROW(model.set_maps(1024, 500, {{"skew_ps", skew}}, "maps.exr"), Error);
+  EXPECT_THROW(model.set_maps(512, 500, {{"skew_ps", skew}, {"length_ps", len}}, "maps.exr"), Error);
 }
 
 TEST(Sensor, FullChipPresetUsesBothPixels) {
