@@ -65,14 +65,15 @@ Bsdf::Bsdf(const MaterialPoint& m, const glm::vec3& n_shading, const glm::vec3& 
 
   const bool volume = m_.transmission > 0.0f && !m_.thin_walled;
   eta_ = volume ? (entering ? m_.ior : 1.0f / m_.ior) : 1.0f;
-  const float eta_fresnel = volume ? eta_ : m_.ior;
-  fresnel_o_ = fresnel_dielectric(wo_.z, eta_fresnel);
+  eta_fresnel_ = volume ? eta_ : m_.ior;
+  fresnel_o_ = fresnel_dielectric(wo_.z, eta_fresnel_);
   if (m_.lambertian) {
     diffuse_weight_ = max_of(m_.base);
     return;
   }
+  if (!m_.smooth()) g1_o_ = ggx_g1(m_.alpha, wo_.z);
   const float dielectric = 1.0f - m_.metallic;
-  specular_weight_ = dielectric * fresnel_o_ + m_.metallic * max_of(schlick(m_.base, wo_.z));
+  specular_weight_ = dielectric * fresnel_o_ + (m_.metallic > 0.0f ? m_.metallic * max_of(schlick(m_.base, wo_.z)) : 0.0f);
   transmission_weight_ = dielectric * m_.transmission * (1.0f - fresnel_o_) * max_of(m_.base);
   diffuse_weight_ = dielectric * (1.0f - m_.transmission) * (1.0f - fresnel_o_) * max_of(m_.base);
 }
@@ -80,10 +81,9 @@ Bsdf::Bsdf(const MaterialPoint& m, const glm::vec3& n_shading, const glm::vec3& 
 Spec Bsdf::specular_f(const glm::vec3& wo, const glm::vec3& wi) const {
   const glm::vec3 h = glm::normalize(wo + wi);
   const float c = glm::dot(wo, h);
-  const bool volume = m_.transmission > 0.0f && !m_.thin_walled;
-  const float f_d = fresnel_dielectric(c, volume ? eta_ : m_.ior);
-  const Spec f = (1.0f - m_.metallic) * Spec(f_d) + m_.metallic * schlick(m_.base, c);
-  const float dg = ggx_d(m_.alpha, h.z) * ggx_g1(m_.alpha, wo.z) * ggx_g1(m_.alpha, wi.z);
+  Spec f((1.0f - m_.metallic) * fresnel_dielectric(c, eta_fresnel_));
+  if (m_.metallic > 0.0f) f += m_.metallic * schlick(m_.base, c);
+  const float dg = ggx_d(m_.alpha, h.z) * g1_o_ * ggx_g1(m_.alpha, wi.z);
   return f * (dg / (4.0f * wo.z * wi.z));
 }
 
@@ -94,7 +94,7 @@ Spec Bsdf::transmission_f(const glm::vec3& wo, const glm::vec3& wi) const {
     const glm::vec3 wr(wi.x, wi.y, -wi.z);
     const glm::vec3 h = glm::normalize(wo + wr);
     const float f_d = fresnel_dielectric(glm::dot(wo, h), m_.ior);
-    const float dg = ggx_d(m_.alpha, h.z) * ggx_g1(m_.alpha, wo.z) * ggx_g1(m_.alpha, wr.z);
+    const float dg = ggx_d(m_.alpha, h.z) * g1_o_ * ggx_g1(m_.alpha, wr.z);
     return tint * ((1.0f - f_d) * dg / (4.0f * wo.z * wr.z));
   }
   // Walter et al. 2007 in radiance mode (pbrt-v3 MicrofacetTransmission with the 1/eta^2 factor folded in).
@@ -104,7 +104,7 @@ Spec Bsdf::transmission_f(const glm::vec3& wo, const glm::vec3& wi) const {
   if (co <= 0.0f || ci >= 0.0f) return Spec(0.0f);
   const float f_d = fresnel_dielectric(co, eta_);
   const float denom = co + eta_ * ci;
-  const float dg = ggx_d(m_.alpha, h.z) * ggx_g1(m_.alpha, wo.z) * ggx_g1(m_.alpha, wi.z);
+  const float dg = ggx_d(m_.alpha, h.z) * g1_o_ * ggx_g1(m_.alpha, wi.z);
   return tint * ((1.0f - f_d) * dg * std::fabs(ci) * co / (std::fabs(wi.z) * wo.z * denom * denom));
 }
 

@@ -69,6 +69,8 @@ class Bsdf {
   glm::vec3 wo_;              // local
   float eta_ = 1.0f;          // n_other / n_wo for volumes, 1 for thin walls
   float fresnel_o_ = 0.0f;    // dielectric Fresnel at wo (macro normal), for lobe selection
+  float eta_fresnel_ = 1.5f;  // relative index the dielectric Fresnel terms use
+  float g1_o_ = 1.0f;         // Smith G1(wo), shared by every evaluation
   float diffuse_weight_ = 0.0f, specular_weight_ = 0.0f, transmission_weight_ = 0.0f;
 };
 

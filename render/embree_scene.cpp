@@ -54,7 +54,11 @@ void cull_back_faces(const RTCFilterFunctionNArguments* args) {
   }
 }
 
+thread_local std::vector<RayRecord>* t_ray_sink = nullptr;
+
 }  // namespace
+
+void EmbreeScene::record_rays_on_this_thread(std::vector<RayRecord>* sink) { t_ray_sink = sink; }
 
 EmbreeScene::EmbreeScene(const scenes::Scene& scene) {
   device_ = rtcNewDevice(nullptr);
@@ -109,6 +113,7 @@ EmbreeScene::~EmbreeScene() {
 }
 
 bool EmbreeScene::intersect(const glm::vec3& o, const glm::vec3& d, float tnear, float tfar, RayHit* hit) const {
+  if (t_ray_sink) [[unlikely]] t_ray_sink->push_back({o, d, tnear, tfar, false});
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
   RTCRayHit rh;
@@ -133,6 +138,7 @@ bool EmbreeScene::intersect(const glm::vec3& o, const glm::vec3& d, float tnear,
 }
 
 bool EmbreeScene::occluded(const glm::vec3& o, const glm::vec3& d, float tnear, float tfar) const {
+  if (t_ray_sink) [[unlikely]] t_ray_sink->push_back({o, d, tnear, tfar, true});
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
   RTCRay ray;

@@ -19,6 +19,13 @@ struct RayHit {
   float u = 0, v = 0;  // barycentrics of vertices 1 and 2
 };
 
+// One ray as traced, for the benchmark's replay through raw Embree calls.
+struct RayRecord {
+  glm::vec3 origin, dir;
+  float tnear, tfar;
+  bool occlusion;  // rtcOccluded1 (else rtcIntersect1)
+};
+
 class EmbreeScene {
  public:
   // Keeps pointers into `scene`'s index buffers (shared with Embree): `scene` must outlive this object.
@@ -34,6 +41,8 @@ class EmbreeScene {
 
   // For the benchmark, which compares the integrator against raw rtcIntersect1/rtcOccluded1.
   RTCScene handle() const { return scene_; }
+  // While set (non-null), every ray the calling thread traces is appended to *sink.
+  static void record_rays_on_this_thread(std::vector<RayRecord>* sink);
 
  private:
   RTCDevice device_ = nullptr;

@@ -33,6 +33,8 @@ void deposit(double v, double t, const TimeAxis& axis, double* bins, PixelTotals
       const int64_t b = axis.bin_of(ti);
       if (b >= 0) {
         bins[b] += v;
+        out->bin_lo = std::min(out->bin_lo, b);
+        out->bin_hi = std::max(out->bin_hi, b + 1);
         landed = true;
       }
     }
@@ -40,6 +42,8 @@ void deposit(double v, double t, const TimeAxis& axis, double* bins, PixelTotals
     const int64_t b = axis.bin_of(t);
     if (b >= 0) {
       bins[b] += v;
+      out->bin_lo = std::min(out->bin_lo, b);
+      out->bin_hi = std::max(out->bin_hi, b + 1);
       landed = true;
     }
   }
@@ -107,12 +111,12 @@ Spec Integrator::shadow_transmittance(const glm::vec3& origin, const glm::vec3& 
     const float seg = found ? hit.t : remaining;
     if (medium >= 0 && std::isfinite(seg)) {
       const ResolvedMaterial& rm = shading_.material(medium);
-      t *= glm::exp(-rm.sigma * seg);
+      if (rm.absorbing) t *= glm::exp(-rm.sigma * seg);
       *extra_opl += (static_cast<double>(rm.point.ior) - 1.0) * seg;
     }
     if (!found) return t;
     if (crossing >= kMaxShadowCrossings) return Spec(0.0f);
-    const Surface sf = shading_.surface(hit);
+    const Surface sf = shading_.geometric(hit);
     const ResolvedMaterial& rm = shading_.material(sf.material);
     if (!(rm.point.transmission > 0.0f)) return Spec(0.0f);
     const MaterialPoint mp = shading_.material_at(sf, hit);
@@ -163,7 +167,7 @@ PixelTotals Integrator::render_pixel(int x, int y, const TimeAxis& axis, double*
       previous = glm::dvec3(sf.p);
       if (medium >= 0) {
         const ResolvedMaterial& rm = shading_.material(medium);
-        beta *= glm::exp(-rm.sigma * static_cast<float>(seg));
+        if (rm.absorbing) beta *= glm::exp(-rm.sigma * static_cast<float>(seg));
         opl += rm.point.ior * seg;
       } else {
         opl += seg;
@@ -178,12 +182,19 @@ PixelTotals Integrator::render_pixel(int x, int y, const TimeAxis& axis, double*
       const bool volume = shading_.material(sf.material).volume;
 
       if (bsdf.has_non_delta()) {
+        // Shadow rays pass straight through transmissive surfaces, so an earlier non-delta vertex has
+        // already counted the light that reaches it through this surface; lighting it again through
+        // this vertex's transmission lobe would count that light twice.
+        const bool transmission_nee = !(mp.transmission > 0.0f && vertices > 0);
+        auto counted = [&](const glm::vec3& wi) {
+          return transmission_nee || (glm::dot(wi, sf.ng) > 0.0f) == wo_front;
+        };
         if (beta.x > 0.0f) {
           const glm::dvec3 to = laser_.position - glm::dvec3(sf.p);
           const double r = glm::length(to);
           const glm::dvec3 wid = to / r;
           const double intensity = laser_.intensity_towards(-wid);
-          if (intensity > 0.0) {
+          if (intensity > 0.0 && counted(glm::vec3(wid))) {
             const glm::vec3 wi(wid);
             const Spec f = bsdf.eval_cos(wi);
             if (f.x > 0.0f) {
@@ -211,7 +222,7 @@ PixelTotals Integrator::render_pixel(int x, int y, const TimeAxis& axis, double*
               wid = to / r;
               e = l.intensity_towards(-wid) / (r * r);
             }
-            if (!(e > 0.0)) continue;
+            if (!(e > 0.0) || !counted(glm::vec3(wid))) continue;
             const glm::vec3 wi(wid);
             const Spec f = bsdf.eval_cos(wi);
             if (!(f.y > 0.0f)) continue;

@@ -3,6 +3,7 @@
 // emissive surfaces (their only strategy, so no MIS weights are needed), Russian roulette.
 #pragma once
 #include <cstdint>
+#include <climits>
 
 #include "camera.h"
 #include "core/config.h"
@@ -18,6 +19,9 @@ struct PixelTotals {
   double laser_total = 0.0;    // photons per pulse, every contribution
   double out_of_window = 0.0;  // photons per pulse with no periodic image inside the window
   double ambient_rate = 0.0;   // photons per second
+  // Range of bins written, [bin_lo, bin_hi) (empty when bin_lo >= bin_hi): a pixel's returns usually span
+  // a small part of a long window, so only this range is converted and cleared afterwards.
+  int64_t bin_lo = INT64_MAX, bin_hi = 0;
 };
 
 struct RayCounts {

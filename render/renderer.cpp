@@ -75,16 +75,18 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
   std::atomic<uint64_t> camera_rays{0}, shadow_rays{0};
   tbb::parallel_for(tbb::blocked_range<int>(data_rect.y0, data_rect.y1()), [&](const tbb::blocked_range<int>& rows) {
     // Accumulated in double per pixel; stored as float. Pixels are independent, so the split into tasks
-    // does not change any result.
-    std::vector<double> acc(bins);
+    // does not change any result. Only the bins a pixel touched are copied out and cleared again.
+    std::vector<double> acc(bins, 0.0);
     RayCounts rays;
     for (int y = rows.begin(); y < rows.end(); ++y)
       for (int x = data_rect.x0; x < data_rect.x1(); ++x) {
-        std::fill(acc.begin(), acc.end(), 0.0);
         const PixelTotals t = im.integrator.render_pixel(x, y, axis, acc.data(), &rays);
         const auto i = static_cast<size_t>(data_rect.index(x, y));
         float* out = tile.transient.data() + i * bins;
-        for (size_t b = 0; b < bins; ++b) out[b] = static_cast<float>(acc[b]);
+        for (int64_t b = t.bin_lo; b < t.bin_hi; ++b) {
+          out[b] = static_cast<float>(acc[size_t(b)]);
+          acc[size_t(b)] = 0.0;
+        }
         tile.laser_total[i] = t.laser_total;
         tile.out_of_window[i] = t.out_of_window;
         tile.ambient_rate[i] = static_cast<float>(t.ambient_rate);

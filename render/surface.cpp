@@ -60,12 +60,28 @@ Shading::Shading(const scenes::Scene& scene, double laser_wavelength_m, const gl
     if (r.volume && std::isfinite(m.attenuation_distance_m) && m.attenuation_distance_m > 0.0f) {
       const Spec c = glm::clamp(to_spec(m.attenuation_color, w_laser_, w_ambient_), Spec(1e-30f), Spec(1.0f));
       r.sigma = -glm::log(c) / m.attenuation_distance_m;
+      r.absorbing = r.sigma.x > 0.0f || r.sigma.y > 0.0f;
     }
     return r;
   };
   materials_.reserve(scene.materials.size());
   for (const scenes::Material& m : scene.materials) materials_.push_back(resolve(m));
   default_ = resolve(scenes::Material{});
+}
+
+Surface Shading::geometric(const RayHit& hit) const {
+  const scenes::Mesh& mesh = scene_.meshes[hit.mesh];
+  const uint32_t* idx = &mesh.indices[3 * size_t(hit.triangle)];
+  const glm::vec3 &p0 = mesh.positions[idx[0]], &p1 = mesh.positions[idx[1]], &p2 = mesh.positions[idx[2]];
+  Surface s;
+  s.p = (1.0f - hit.u - hit.v) * p0 + hit.u * p1 + hit.v * p2;
+  const glm::vec3 n = glm::cross(p1 - p0, p2 - p0);
+  const float len = glm::length(n);
+  s.ng = len > 0.0f ? n / len : glm::vec3(0, 0, 1);
+  s.ns = s.ng;
+  s.mesh = static_cast<int>(hit.mesh);
+  s.material = (mesh.material >= 0 && size_t(mesh.material) < materials_.size()) ? mesh.material : -1;
+  return s;
 }
 
 Surface Shading::surface(const RayHit& hit) const {

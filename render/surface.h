@@ -25,6 +25,7 @@ struct ResolvedMaterial {
   MaterialPoint point;          // factors (the base colour texture multiplies point.base)
   int texture = -1, texcoord = 0;
   Spec sigma{0.0f};             // absorption coefficient inside the volume, 1/m
+  bool absorbing = false;       // sigma > 0
   bool volume = false;          // transmissive with thickness > 0: bounds a medium of index ior
 };
 
@@ -35,6 +36,8 @@ class Shading {
           double ambient_photometric);
 
   Surface surface(const RayHit& hit) const;
+  // Position, geometric normal and material only (no shading normal): enough for shadow rays.
+  Surface geometric(const RayHit& hit) const;
   MaterialPoint material_at(const Surface& s, const RayHit& hit) const;
   const ResolvedMaterial& material(int id) const { return id < 0 ? default_ : materials_[size_t(id)]; }
   bool has_emission() const { return has_emission_; }
