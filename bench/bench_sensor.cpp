@@ -11,6 +11,7 @@
 
 #include "core/rng.h"
 #include "core/tile.h"
+#include "sensor/batch_kernels.h"
 #include "sensor/frames_kernel.h"
 #include "sensor/sampling.h"
 #include "sensor/sensor.h"
@@ -37,17 +38,24 @@ std::vector<double> realistic_lambdas(size_t n) {
 }
 
 // The sampler alone: N = 255 Bernoulli bits per pixel and gate position, keyed streams, all threads.
+// Per block of 1024 pixels: p, q from lambda (vectorised), then sample_bits_batch (what process() calls
+// for a row of pixels at one gate position).
 void BM_FrameBits(benchmark::State& state) {
   const uint32_t N = 255;
-  const size_t pixels = 1 << 16;
+  const size_t pixels = 1 << 16, block = 1024;
   const std::vector<double> lam = realistic_lambdas(pixels);
+  std::vector<uint64_t> ids(pixels);
+  for (size_t i = 0; i < pixels; ++i) ids[i] = i;
   const sensor::BinomialSampler sampler(N);
   std::vector<uint64_t> words(pixels * 4);
   uint64_t k = 0;
   for (auto _ : state) {
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, pixels, 1024), [&](const tbb::blocked_range<size_t>& r) {
-      for (size_t i = r.begin(); i < r.end(); ++i)
-        sensor::sample_bits(Rng(1, RngKind::Frames, i, k), sampler, sensor::prob_from_lambda(lam[i]), words.data() + 4 * i);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, pixels, block), [&](const tbb::blocked_range<size_t>& r) {
+      std::vector<double> p(r.size()), q(r.size());
+      std::vector<sensor::Prob> pr(r.size());
+      sensor::probabilities(lam.data() + r.begin(), r.size(), p.data(), q.data());
+      for (size_t i = 0; i < r.size(); ++i) pr[i] = {p[i], q[i], -lam[r.begin() + i]};
+      sensor::sample_bits_batch(1, k, ids.data() + r.begin(), r.size(), sampler, pr.data(), words.data() + 4 * r.begin());
     });
     benchmark::DoNotOptimize(words.data());
     ++k;

@@ -9,72 +9,27 @@
 #include <cstring>
 
 #include "sensor/frames_kernel.h"
+#include "sensor/philox-inl.h"
 
 HWY_BEFORE_NAMESPACE();
 namespace spadgen::sensor {
 namespace HWY_NAMESPACE {
 namespace hn = hwy::HWY_NAMESPACE;
 
-// 32 x 32 -> 64-bit products of every lane: high and low halves. MulEven (vpmuludq) on the even lanes and
-// on the odd lanes shifted down, recombined with OddEven; cheaper than widening to 64-bit multiplies.
-#if HWY_TARGET != HWY_SCALAR
-template <class D>
-HWY_INLINE void MulHiLo(D d, hn::Vec<D> a, hn::Vec<D> b, hn::Vec<D>& hi, hn::Vec<D>& lo) {
-  const hn::Repartition<uint64_t, D> d64;
-  const auto pe = hn::MulEven(a, b);
-  const auto po = hn::MulEven(hn::BitCast(d, hn::ShiftRight<32>(hn::BitCast(d64, a))),
-                              hn::BitCast(d, hn::ShiftRight<32>(hn::BitCast(d64, b))));
-  hi = hn::OddEven(hn::BitCast(d, po), hn::BitCast(d, hn::ShiftRight<32>(pe)));
-  lo = hn::OddEven(hn::BitCast(d, hn::ShiftLeft<32>(po)), hn::BitCast(d, pe));
-}
-#endif
-
 // Philox4x32-10 of 16 consecutive counters, structure of arrays: out holds word 0 of the 16 blocks, then
 // word 1, word 2, word 3 (little endian), exactly as r123::Philox4x32 computes each block.
 HWY_INLINE void Philox16(const uint32_t key[2], const uint32_t ctr[4], uint32_t first, uint32_t* HWY_RESTRICT out) {
-#if HWY_TARGET == HWY_SCALAR
-  for (uint32_t i = 0; i < 16; ++i) {
-    uint32_t x0 = first + i, x1 = ctr[1], x2 = ctr[2], x3 = ctr[3], ka = key[0], kb = key[1];
-    for (int round = 0; round < 10; ++round) {
-      const uint64_t p0 = uint64_t{0xD2511F53u} * x0, p1 = uint64_t{0xCD9E8D57u} * x2;
-      x0 = static_cast<uint32_t>(p1 >> 32) ^ x1 ^ ka;
-      x2 = static_cast<uint32_t>(p0 >> 32) ^ x3 ^ kb;
-      x1 = static_cast<uint32_t>(p1);
-      x3 = static_cast<uint32_t>(p0);
-      ka += 0x9E3779B9u;
-      kb += 0xBB67AE85u;
-    }
-    out[i] = x0;
-    out[16 + i] = x1;
-    out[32 + i] = x2;
-    out[48 + i] = x3;
-  }
-#else
   const hn::CappedTag<uint32_t, 16> d;
   const size_t L = hn::Lanes(d);
-  const auto m0 = hn::Set(d, 0xD2511F53u), m1 = hn::Set(d, 0xCD9E8D57u);
-  const auto w0 = hn::Set(d, 0x9E3779B9u), w1 = hn::Set(d, 0xBB67AE85u);
   for (size_t g = 0; g < 16; g += L) {
     auto x0 = hn::Iota(d, first + static_cast<uint32_t>(g));
     auto x1 = hn::Set(d, ctr[1]), x2 = hn::Set(d, ctr[2]), x3 = hn::Set(d, ctr[3]);
-    auto ka = hn::Set(d, key[0]), kb = hn::Set(d, key[1]);
-    for (int round = 0; round < 10; ++round) {
-      hn::Vec<decltype(d)> hi0, lo0, hi1, lo1;
-      MulHiLo(d, x0, m0, hi0, lo0);
-      MulHiLo(d, x2, m1, hi1, lo1);
-      x0 = hn::Xor(hn::Xor(hi1, x1), ka);
-      x2 = hn::Xor(hn::Xor(hi0, x3), kb);
-      x1 = lo1;
-      x3 = lo0;
-      ka = hn::Add(ka, w0);
-      kb = hn::Add(kb, w1);
-    }
+    Philox10(d, key[0], key[1], x0, x1, x2, x3);
     hn::StoreU(x0, d, out + g);
     hn::StoreU(x1, d, out + 16 + g);
     hn::StoreU(x2, d, out + 32 + g);
     hn::StoreU(x3, d, out + 48 + g);
   }
-#endif
 }
 
 // The bit of one frame given its top byte; refines a tie with the block `refine_block`.

@@ -4,6 +4,7 @@
 #include <bit>
 #include <cmath>
 
+#include "batch_kernels.h"
 #include "frames_kernel.h"
 
 namespace spadgen::sensor {
@@ -11,20 +12,9 @@ namespace {
 
 constexpr double kTwo64 = 18446744073709551616.0;  // 2^64
 constexpr double kSparseBelow = 1.0 / 16.0;
-constexpr double kModeSearchFrom = 16.0;
+constexpr double kModeSearchFrom = BinomialSampler::mode_search_from();
 
 }  // namespace
-
-// Unbiased integer in [0, range) from 32-bit draws (Lemire's multiply-and-reject); range <= 2^32.
-uint32_t uniform_below(Rng& rng, uint64_t range) {
-  for (;;) {
-    const uint64_t m = static_cast<uint64_t>(rng.next_u32()) * range;
-    const auto low = static_cast<uint32_t>(m);
-    if (low >= static_cast<uint32_t>(range)) return static_cast<uint32_t>(m >> 32);
-    const auto reject_below = static_cast<uint32_t>((uint64_t{1} << 32) % range);
-    if (low >= reject_below) return static_cast<uint32_t>(m >> 32);
-  }
-}
 
 uint64_t probability_threshold(double a) {
   if (!(a > 0.0)) return 0;
@@ -62,32 +52,21 @@ BinomialSampler::BinomialSampler(uint32_t n) : n_(n), log_fact_(n + 1), up_(n + 
   }
 }
 
-uint32_t BinomialSampler::small_side(Rng& rng, double a, double b, double log_b) const {
-  // a <= b: the probability of the rarer outcome; X counts it.
-  const double N = n_;
-  const double mean = N * a;
-  if (mean < kModeSearchFrom) {
-    const uint64_t U = rng.next_u64();
-    // P(X >= 1) = 1 - b^N <= N a: most draws end here without a transcendental function.
-    if (mean < 1.0 && U >= probability_threshold(mean)) return 0;
-    if (log_b > 0.0) log_b = std::log1p(-a);  // not log(b): b near 1 has lost a's digits
-    double S = -std::expm1(N * log_b);                // P(X > 0)
-    double pmf = S < 0.5 ? 1.0 - S : std::exp(N * log_b);  // P(X = 0), to an absolute 1e-16
-    const double r = a / b;
-    uint32_t x = 0;
-    while (x < n_ && U < probability_threshold(S)) {
-      pmf *= r * up_[x];
-      ++x;
-      S -= pmf;  // P(X > x)
-      if (!(S > 0.0)) break;
-    }
-    return x;
+uint32_t BinomialSampler::search_from_zero(uint64_t U, double a, double b, double S0, double P0) const {
+  double S = S0, pmf = P0;
+  const double r = a / b;
+  uint32_t x = 0;
+  while (x < n_ && U < probability_threshold(S)) {
+    pmf *= r * up_[x];
+    ++x;
+    S -= pmf;  // P(X > x)
+    if (!(S > 0.0)) break;
   }
-  if (log_b > 0.0) log_b = std::log1p(-a);
-  const double log_a = std::log(a);
-  const auto m = static_cast<uint32_t>(std::min(N, std::floor((N + 1.0) * a)));
-  const double pm = std::exp(log_fact_[n_] - log_fact_[m] - log_fact_[n_ - m] + m * log_a + (N - m) * log_b);
-  double U = static_cast<double>(rng.next_u64() >> 11) * 0x1.0p-53;
+  return x;
+}
+
+uint32_t BinomialSampler::search_from_mode(uint64_t U64, double a, double b, uint32_t m, double pm) const {
+  double U = static_cast<double>(U64 >> 11) * 0x1.0p-53;
   U -= pm;
   if (U < 0.0) return m;
   const double r = a / b, r_inv = b / a;
@@ -113,15 +92,38 @@ uint32_t BinomialSampler::small_side(Rng& rng, double a, double b, double log_b)
   }
 }
 
-uint32_t BinomialSampler::sample(Rng& rng, const Prob& pr) const {
+uint32_t BinomialSampler::small_side(uint64_t U, double a, double b, double log_b) const {
+  // a <= b: the probability of the rarer outcome; X counts it.
+  const double N = n_;
+  const double mean = N * a;
+  if (mean < kModeSearchFrom) {
+    // P(X >= 1) = 1 - b^N <= N a: most draws end here without a transcendental function.
+    if (mean < 1.0 && U >= probability_threshold(mean)) return 0;
+    if (log_b > 0.0) log_b = std::log1p(-a);  // not log(b): b near 1 has lost a's digits
+    const double S = -std::expm1(N * log_b);               // P(X > 0)
+    const double P0 = S < 0.5 ? 1.0 - S : std::exp(N * log_b);  // P(X = 0), to an absolute 1e-16
+    return search_from_zero(U, a, b, S, P0);
+  }
+  if (log_b > 0.0) log_b = std::log1p(-a);
+  const double log_a = std::log(a);
+  const auto m = static_cast<uint32_t>(std::min(N, std::floor((N + 1.0) * a)));
+  const double pm = std::exp(log_fact_[n_] - log_fact_[m] - log_fact_[n_ - m] + m * log_a + (N - m) * log_b);
+  return search_from_mode(U, a, b, m, pm);
+}
+
+uint32_t BinomialSampler::sample_u(uint64_t U, const Prob& pr) const {
   if (!(pr.p > 0.0) || n_ == 0) return 0;
   if (!(pr.q > 0.0)) return n_;
   // log of the likelier outcome's probability: log q is -lambda when known; log p is computed when needed
-  if (pr.p <= pr.q) return small_side(rng, pr.p, pr.q, pr.log_q <= 0.0 ? pr.log_q : 1.0);
-  return n_ - small_side(rng, pr.q, pr.p, 1.0);
+  if (pr.p <= pr.q) return small_side(U, pr.p, pr.q, pr.log_q <= 0.0 ? pr.log_q : 1.0);
+  return n_ - small_side(U, pr.q, pr.p, 1.0);
 }
 
-void sample_bits(const Rng& stream, const BinomialSampler& sampler, const Prob& pr, uint64_t* words) {
+namespace {
+
+// The bits of one stream; rng draws the sparse path's numbers in the stream's order.
+template <class G>
+void bits_of_stream(const Rng& stream, G& rng, const BinomialSampler& sampler, const Prob& pr, uint64_t* words) {
   const uint32_t n = sampler.n();
   const size_t nw = (n + 63) / 64;
   std::fill(words, words + nw, uint64_t{0});
@@ -129,7 +131,6 @@ void sample_bits(const Rng& stream, const BinomialSampler& sampler, const Prob& 
   const double a = invert ? pr.q : pr.p;
   if (a > 0.0) {
     if (a <= kSparseBelow) {
-      Rng rng = stream;
       const uint32_t hits = sampler.sample(rng, pr);
       const uint32_t c = invert ? n - hits : hits;  // the rarer outcome's count
       // Floyd: a uniformly random c-subset of [0, n)
@@ -148,6 +149,50 @@ void sample_bits(const Rng& stream, const BinomialSampler& sampler, const Prob& 
   if (invert) {
     for (size_t w = 0; w < nw; ++w) words[w] = ~words[w];
     if (n % 64 != 0) words[nw - 1] &= (uint64_t{1} << (n % 64)) - 1;
+  }
+}
+
+}  // namespace
+
+void sample_bits(const Rng& stream, const BinomialSampler& sampler, const Prob& pr, uint64_t* words) {
+  Rng rng = stream;
+  bits_of_stream(stream, rng, sampler, pr, words);
+}
+
+void sample_bits_batch(uint64_t seed, uint64_t k, const uint64_t* pixels, size_t count,
+                       const BinomialSampler& sampler, const Prob* pr, uint64_t* words) {
+  constexpr size_t kGroup = 64;
+  const size_t nw = (sampler.n() + 63) / 64;
+  const Rng base(seed, RngKind::Frames, 0, k);
+  const uint32_t key[2] = {base.key().v[0], base.key().v[1]};
+  uint32_t c1[kGroup], c2[kGroup], c3[kGroup], blocks[4 * kGroup];
+  for (size_t g = 0; g < count; g += kGroup) {
+    const size_t c = std::min(kGroup, count - g);
+    for (size_t i = 0; i < c; ++i) {
+      c1[i] = static_cast<uint32_t>(k);
+      c2[i] = static_cast<uint32_t>(pixels[g + i]);
+      c3[i] = static_cast<uint32_t>(pixels[g + i] >> 32);
+    }
+    philox_block0(key, c1, c2, c3, c, blocks);
+    for (size_t i = 0; i < c; ++i) {
+      const Prob& p = pr[g + i];
+      uint64_t* w = words + (g + i) * nw;
+      const double a = std::min(p.p, p.q);
+      if (a > kSparseBelow || !(a > 0.0)) {  // dense, or all bits equal: block 0 is not drawn from
+        if (!(a > 0.0)) {
+          const uint64_t fill = p.p > p.q ? ~uint64_t{0} : 0;
+          std::fill(w, w + nw, fill);
+          if (fill != 0 && sampler.n() % 64 != 0) w[nw - 1] &= (uint64_t{1} << (sampler.n() % 64)) - 1;
+          continue;
+        }
+        const Rng stream(seed, RngKind::Frames, pixels[g + i], k);
+        sample_bits(stream, sampler, p, w);
+        continue;
+      }
+      const Rng stream(seed, RngKind::Frames, pixels[g + i], k);
+      StreamReader rng(stream, {blocks[4 * i], blocks[4 * i + 1], blocks[4 * i + 2], blocks[4 * i + 3]});
+      bits_of_stream(stream, rng, sampler, p, w);
+    }
   }
 }
 

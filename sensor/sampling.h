@@ -16,6 +16,7 @@
 // Otherwise: inversion in the order m, m-1, m+1, m-2, ... from the mode m, with the mode's probability
 // from log-factorials; expected steps about 1.6 standard deviations.
 #pragma once
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -23,8 +24,41 @@
 
 namespace spadgen::sensor {
 
+// The sequential draws of an Rng stream (next_u32 / next_u64 in the same order as Rng's) when its block 0
+// has already been computed, e.g. by a vectorised Philox for many streams at once.
+class StreamReader {
+ public:
+  StreamReader(const Rng& stream, const std::array<uint32_t, 4>& block0) : stream_(stream), buf_(block0) {}
+  uint32_t next_u32() {
+    if (used_ == 4) {
+      buf_ = stream_.block(next_block_++);
+      used_ = 0;
+    }
+    return buf_[used_++];
+  }
+  uint64_t next_u64() {
+    const uint64_t hi = next_u32();
+    return (hi << 32) | next_u32();
+  }
+
+ private:
+  const Rng& stream_;
+  std::array<uint32_t, 4> buf_;
+  uint32_t next_block_ = 1;
+  unsigned used_ = 0;
+};
+
 // An unbiased integer in [0, range) from 32-bit draws (Lemire's multiply-and-reject); range <= 2^32.
-uint32_t uniform_below(Rng& rng, uint64_t range);
+template <class G>
+uint32_t uniform_below(G& rng, uint64_t range) {
+  for (;;) {
+    const uint64_t m = static_cast<uint64_t>(rng.next_u32()) * range;
+    const auto low = static_cast<uint32_t>(m);
+    if (low >= static_cast<uint32_t>(range)) return static_cast<uint32_t>(m >> 32);
+    const auto reject_below = static_cast<uint32_t>((uint64_t{1} << 32) % range);
+    if (low >= reject_below) return static_cast<uint32_t>(m >> 32);
+  }
+}
 
 // floor(a * 2^64) for a in [0, 1); saturates at 2^64 - 1.
 uint64_t probability_threshold(double a);
@@ -42,11 +76,24 @@ class BinomialSampler {
  public:
   explicit BinomialSampler(uint32_t n);
   uint32_t n() const { return n_; }
-  // Binomial(n, p); p = 0 gives 0 and q = 0 gives n exactly.
-  uint32_t sample(Rng& rng, const Prob& pr) const;
+  // Binomial(n, p); p = 0 gives 0 and q = 0 gives n exactly. Uses the stream's next 64-bit draw only.
+  uint32_t sample(Rng& rng, const Prob& pr) const { return sample_u(rng.next_u64(), pr); }
+  uint32_t sample(StreamReader& rng, const Prob& pr) const { return sample_u(rng.next_u64(), pr); }
+  // The same from the 64-bit uniform U that sample() draws.
+  uint32_t sample_u(uint64_t U, const Prob& pr) const;
+
+  // The two halves of the inversion, for callers that computed the probabilities themselves (the
+  // vectorised counts kernel). X counts the rarer outcome of probability a <= b = 1 - a.
+  // Sequential search from 0 (used when n a < mode_search_from()): S0 = P(X > 0) = -expm1(n log b),
+  // P0 = P(X = 0) (1 - S0 when S0 < 0.5, else exp(n log b)). X = 0 exactly when U >= floor(S0 2^64).
+  uint32_t search_from_zero(uint64_t U, double a, double b, double S0, double P0) const;
+  // Inversion from the mode m = min(n, floor((n + 1) a)) with pm = P(X = m), in the order m, m-1, m+1, ...
+  uint32_t search_from_mode(uint64_t U, double a, double b, uint32_t m, double pm) const;
+  static constexpr double mode_search_from() { return 16.0; }
+  const std::vector<double>& log_factorials() const { return log_fact_; }
 
  private:
-  uint32_t small_side(Rng& rng, double a, double b, double log_b) const;
+  uint32_t small_side(uint64_t U, double a, double b, double log_b) const;
   uint32_t n_;
   std::vector<double> log_fact_;
   // up_[x] = (n - x) / (x + 1), down_[x] = x / (n - x + 1): pmf ratios without a division per step
@@ -56,6 +103,13 @@ class BinomialSampler {
 // n = sampler.n() independent Bernoulli(p) bits: bit i of words[i / 64] is frame i; bits from n up to the
 // end of the last word are zero. Draws from `stream` (copied; random access to its blocks).
 void sample_bits(const Rng& stream, const BinomialSampler& sampler, const Prob& pr, uint64_t* words);
+
+// The same for many streams at once: pixel i's bits come from the stream Rng(seed, Frames, pixels[i], k)
+// and go to words[i * ceil(n / 64) ...], bit-identical to sample_bits. Block 0 of every stream is computed
+// by a vectorised Philox, so a pixel whose bits are all equal (the common case at low p) costs no scalar
+// Philox block.
+void sample_bits_batch(uint64_t seed, uint64_t k, const uint64_t* pixels, size_t count,
+                       const BinomialSampler& sampler, const Prob* pr, uint64_t* words);
 
 // Which path sample_bits takes (for tests).
 bool bits_are_sparse(const Prob& pr);

@@ -14,6 +14,7 @@
 #include "gate.h"
 #include "pdp.h"
 #include "pixel_maps.h"
+#include "batch_kernels.h"
 #include "frames_kernel.h"
 #include "sampling.h"
 
@@ -37,10 +38,13 @@ constexpr int kNbDy[4] = {0, 0, -1, 1};
 // by sequential inversion, then which candidates as a uniformly random subset (Floyd), from the pixel's
 // crosstalk stream in neighbour order. With r n >= 16 (a saturated neighbour and large r) each candidate
 // is drawn on its own instead.
-void crosstalk_into(Rng& rng, const uint64_t* theirs, uint64_t* mine, size_t wpp, double r) {
+template <class R>
+void crosstalk_into(Rng& rng, const uint64_t* theirs, uint64_t* mine, size_t wpp, R rate) {
   uint32_t n = 0;
   for (size_t w = 0; w < wpp; ++w) n += static_cast<uint32_t>(std::popcount(theirs[w] & ~mine[w]));
-  if (n == 0 || !(r > 0.0)) return;
+  if (n == 0) return;
+  const double r = rate();
+  if (!(r > 0.0)) return;
   auto nth_candidate = [&](uint32_t t) {  // set bit t of the candidates in mine
     for (size_t w = 0; w < wpp; ++w) {
       uint64_t bits = theirs[w] & ~mine[w];
@@ -315,10 +319,16 @@ SensorTile SensorModel::process(const TransientTile& t) const {
     rise = edge_in_bins(m.gate.rise, t.axis.bin_width_s);
     fall = edge_in_bins(m.gate.fall, t.axis.bin_width_s);
   }
-  // lambda of every k for the region's pixels, indexed like data_rect
-  std::vector<double> lam(static_cast<size_t>(region.count()) * Ks);
-  std::vector<Prob> prob(lam.size());  // p and q of the pixel's own avalanches, used by its neighbours too
-  std::vector<PixelParams> params(static_cast<size_t>(region.count()));
+  const bool frames = m.cfg.outputs.frames;
+  const uint64_t seed = m.cfg.seed;
+  auto pixel_index = [W](int x, int y) { return static_cast<uint64_t>(y) * static_cast<uint64_t>(W) + static_cast<uint64_t>(x); };
+  // lambda of every k for the region's pixels (the tile and its halo), [region.index(x, y) * K + k]; and
+  // p, q of each pixel's own avalanches where its neighbours (crosstalk of pixel B) or its frames need them.
+  const size_t nreg = static_cast<size_t>(region.count());
+  std::vector<double> lam(nreg * Ks);
+  const bool own_probs = frames || m.halo > 0;
+  std::vector<double> own_p(own_probs ? nreg * Ks : 0), own_q(own_probs ? nreg * Ks : 0);
+  std::vector<PixelParams> params(nreg);
   tbb::parallel_for(tbb::blocked_range<int>(region.y0, region.y1()), [&](const tbb::blocked_range<int>& rows) {
     TransientPrefix prefix;
     for (int y = rows.begin(); y < rows.end(); ++y)
@@ -329,7 +339,7 @@ SensorTile SensorModel::process(const TransientTile& t) const {
         const float* g = m.sweep ? t.transient.data() + di * static_cast<size_t>(t.axis.bins) : nullptr;
         const double laser_total = t.laser_total.size() == ndata ? t.laser_total[di] : 0.0;
         m.lambda(params[ri], g, t.axis, &rise, &fall, t.ambient_rate[di], laser_total, prefix, lam.data() + ri * Ks);
-        for (size_t k = 0; k < Ks; ++k) prob[ri * Ks + k] = prob_from_lambda(lam[ri * Ks + k]);
+        if (own_probs) probabilities(lam.data() + ri * Ks, Ks, own_p.data() + ri * Ks, own_q.data() + ri * Ks);
       }
   });
 
@@ -340,17 +350,14 @@ SensorTile SensorModel::process(const TransientTile& t) const {
   const uint32_t N = m.frames_per_k;
   out.expected.assign(n * Ks, 0.0f);
   out.counts.assign(n * Ks, 0);
-  const bool frames = m.cfg.outputs.frames;
   const size_t bpr = static_cast<size_t>((rect.width + 7) / 8);
   if (frames) {
     out.frames_per_k = static_cast<int>(N);
     out.frames.assign(Ks * N * static_cast<size_t>(rect.height) * bpr, 0);
   }
   const size_t wpp = (N + 63) / 64;
-  const uint64_t seed = m.cfg.seed;
-  auto pixel_index = [W](int x, int y) { return static_cast<uint64_t>(y) * static_cast<uint64_t>(W) + static_cast<uint64_t>(x); };
 
-  // For pixel (x, y) at k: the neighbours that can fire it (same section, inside the image).
+  // For pixel (x, y): the neighbours that can fire it (same section, inside the image).
   auto neighbours = [&](int x, int y, int* list) {
     int c = 0;
     const int sec = m.maps->section_of_row(y);
@@ -361,75 +368,103 @@ SensorTile SensorModel::process(const TransientTile& t) const {
     }
     return c;
   };
+  auto nb_index = [&](int x, int y, int d) {
+    return static_cast<size_t>(region.index(x + kNbDx[d], y + kNbDy[d]));
+  };
 
-  tbb::parallel_for(tbb::blocked_range<int>(0, K, 1), [&](const tbb::blocked_range<int>& ks) {
-    std::vector<uint64_t> own, row;
-    for (int k = ks.begin(); k < ks.end(); ++k) {
-      const auto kk = static_cast<size_t>(k);
-      if (frames) {
-        // Every region pixel's own avalanches (its keyed stream, identical in whichever tile owns it).
-        own.assign(static_cast<size_t>(region.count()) * wpp, 0);
-        for (int y = region.y0; y < region.y1(); ++y)
+  // Per pixel of the tile, all K at once: the rate with crosstalk (pixel A: every neighbour avalanche may
+  // fire this pixel, a thinned Poisson process; pixel B: a neighbour avalanches at most once per frame,
+  // firing this pixel with probability xt), its expected counts N p and, without frames, the counts.
+  const Rng counts_base(seed, RngKind::Counts, 0, 0);
+  const uint32_t counts_key[2] = {counts_base.key().v[0], counts_base.key().v[1]};
+  tbb::parallel_for(tbb::blocked_range<int>(rect.y0, rect.y1()), [&](const tbb::blocked_range<int>& rows) {
+    KernelScratch s;
+    s.reserve(Ks);
+    std::vector<double> eff(Ks), pe(Ks), qe(Ks);
+    for (int y = rows.begin(); y < rows.end(); ++y)
+      for (int x = rect.x0; x < rect.x1(); ++x) {
+        const auto ri = static_cast<size_t>(region.index(x, y));
+        const auto oi = static_cast<size_t>(rect.index(x, y));
+        const TypeInfo& ty = m.types[params[ri].type];
+        int nb[4];
+        const int nnb = ty.crosstalk > 0.0 ? neighbours(x, y, nb) : 0;
+        const double* l = lam.data() + ri * Ks;
+        if (nnb > 0) {
+          const double* nbv[4];
+          for (int i = 0; i < nnb; ++i)
+            nbv[i] = (ty.single_avalanche ? own_p.data() : lam.data()) + nb_index(x, y, nb[i]) * Ks;
+          crosstalk_rates(l, Ks, nbv, nnb, ty.crosstalk, ty.single_avalanche, eff.data());
+          l = eff.data();
+        }
+        if (!frames) {
+          binomial_counts(l, Ks, counts_key, pixel_index(x, y), *m.binom, s);
+          for (size_t k = 0; k < Ks; ++k) {
+            out.expected[k * n + oi] = static_cast<float>(static_cast<double>(N) * s.p[k]);
+            out.counts[k * n + oi] = static_cast<uint16_t>(s.x[k]);
+          }
+        } else {
+          const double* p = own_p.data() + ri * Ks;
+          if (nnb > 0) {
+            probabilities(l, Ks, pe.data(), qe.data());
+            p = pe.data();
+          }
+          for (size_t k = 0; k < Ks; ++k) out.expected[k * n + oi] = static_cast<float>(static_cast<double>(N) * p[k]);
+        }
+      }
+  });
+
+  if (frames) {
+    // Per gate position: every region pixel's own avalanches (its keyed stream, identical in whichever tile
+    // owns it), then crosstalk simulated from the neighbours' bits, counts as popcounts, packed frames.
+    tbb::parallel_for(tbb::blocked_range<int>(0, K, 1), [&](const tbb::blocked_range<int>& ks) {
+      std::vector<uint64_t> own(nreg * wpp), row(static_cast<size_t>(rect.width) * wpp), ids(static_cast<size_t>(region.width));
+      std::vector<Prob> prs(static_cast<size_t>(region.width));
+      for (int k = ks.begin(); k < ks.end(); ++k) {
+        const auto kk = static_cast<size_t>(k);
+        for (int y = region.y0; y < region.y1(); ++y) {
           for (int x = region.x0; x < region.x1(); ++x) {
             const auto ri = static_cast<size_t>(region.index(x, y));
-            const Rng stream(seed, RngKind::Frames, pixel_index(x, y), kk);
-            sample_bits(stream, *m.binom, prob[ri * Ks + kk], own.data() + ri * wpp);
+            const auto i = static_cast<size_t>(x - region.x0);
+            ids[i] = pixel_index(x, y);
+            prs[i] = {own_p[ri * Ks + kk], own_q[ri * Ks + kk], -lam[ri * Ks + kk]};
           }
-        row.assign(static_cast<size_t>(rect.width) * wpp, 0);
-      }
-      for (int y = rect.y0; y < rect.y1(); ++y) {
-        for (int x = rect.x0; x < rect.x1(); ++x) {
-          const auto ri = static_cast<size_t>(region.index(x, y));
-          const auto oi = static_cast<size_t>(rect.index(x, y));
-          const PixelParams& px = params[ri];
-          const TypeInfo& ty = m.types[px.type];
-          const double lam_own = lam[ri * Ks + kk];
-          double lam_eff = lam_own;
-          int nb[4];
-          const int nnb = ty.crosstalk > 0.0 ? neighbours(x, y, nb) : 0;
-          for (int i = 0; i < nnb; ++i) {
-            const auto ni = static_cast<size_t>(region.index(x + kNbDx[nb[i]], y + kNbDy[nb[i]]));
-            const double li = lam[ni * Ks + kk];
-            // Pixel A: every neighbour avalanche may fire this pixel, a thinned Poisson process. Pixel B:
-            // a neighbour avalanches at most once per frame, firing this pixel with probability q.
-            lam_eff += ty.single_avalanche ? neg_log1p_minus(ty.crosstalk * prob[ni * Ks + kk].p) : ty.crosstalk * li;
-          }
-          const Prob pr = nnb > 0 ? prob_from_lambda(lam_eff) : prob[ri * Ks + kk];
-          out.expected[kk * n + oi] = static_cast<float>(static_cast<double>(N) * pr.p);
-          if (!frames) {
-            Rng rng(seed, RngKind::Counts, pixel_index(x, y), kk);
-            out.counts[kk * n + oi] = static_cast<uint16_t>(m.binom->sample(rng, pr));
-            continue;
-          }
-          uint64_t* mine = row.data() + static_cast<size_t>(x - rect.x0) * wpp;
-          std::copy_n(own.data() + ri * wpp, wpp, mine);
-          if (nnb > 0) {
-            Rng xt(seed, RngKind::Crosstalk, pixel_index(x, y), kk);
-            for (int i = 0; i < nnb; ++i) {
-              const int d = nb[i];
-              const auto ni = static_cast<size_t>(region.index(x + kNbDx[d], y + kNbDy[d]));
-              const double li = lam[ni * Ks + kk];
-              const Prob& pi = prob[ni * Ks + kk];
-              if (!(pi.p > 0.0)) continue;
-              // Given that the neighbour avalanched at least once, the chance it fires this pixel: q for
-              // pixel B; for pixel A (1 - exp(-q lambda_i)) / p_i, so that the marginal matches the
-              // thinned Poisson process of the counts path.
-              const double r = ty.single_avalanche ? ty.crosstalk : std::min(1.0, -std::expm1(-ty.crosstalk * li) / pi.p);
-              crosstalk_into(xt, own.data() + ni * wpp, mine, wpp, r);
-            }
-          }
-          int c = 0;
-          for (size_t w = 0; w < wpp; ++w) c += std::popcount(mine[w]);
-          out.counts[kk * n + oi] = static_cast<uint16_t>(c);
+          const auto r0 = static_cast<size_t>(region.index(region.x0, y));
+          sample_bits_batch(seed, kk, ids.data(), ids.size(), *m.binom, prs.data(), own.data() + r0 * wpp);
         }
-        if (frames) {
+        for (int y = rect.y0; y < rect.y1(); ++y) {
+          for (int x = rect.x0; x < rect.x1(); ++x) {
+            const auto ri = static_cast<size_t>(region.index(x, y));
+            const auto oi = static_cast<size_t>(rect.index(x, y));
+            const TypeInfo& ty = m.types[params[ri].type];
+            uint64_t* mine = row.data() + static_cast<size_t>(x - rect.x0) * wpp;
+            std::copy_n(own.data() + ri * wpp, wpp, mine);
+            int nb[4];
+            const int nnb = ty.crosstalk > 0.0 ? neighbours(x, y, nb) : 0;
+            if (nnb > 0) {
+              Rng xt(seed, RngKind::Crosstalk, pixel_index(x, y), kk);
+              for (int i = 0; i < nnb; ++i) {
+                const size_t ni = nb_index(x, y, nb[i]);
+                const double li = lam[ni * Ks + kk], pi = own_p[ni * Ks + kk];
+                if (!(pi > 0.0)) continue;
+                // Given that the neighbour avalanched at least once, the chance it fires this pixel: xt for
+                // pixel B; for pixel A (1 - exp(-xt lambda_i)) / p_i, so that the marginal matches the
+                // thinned Poisson process of the counts path.
+                crosstalk_into(xt, own.data() + ni * wpp, mine, wpp, [&] {
+                  return ty.single_avalanche ? ty.crosstalk : std::min(1.0, -std::expm1(-ty.crosstalk * li) / pi);
+                });
+              }
+            }
+            int c = 0;
+            for (size_t w = 0; w < wpp; ++w) c += std::popcount(mine[w]);
+            out.counts[kk * n + oi] = static_cast<uint16_t>(c);
+          }
           const size_t H_t = static_cast<size_t>(rect.height);
           uint8_t* dst = out.frames.data() + ((kk * N) * H_t + static_cast<size_t>(y - rect.y0)) * bpr;
           pack_frames_row(row.data(), rect.width, N, wpp, dst, H_t * bpr);
         }
       }
-    }
-  });
+    });
+  }
 
   if (!m.sweep) {
     const bool dual = K == 2;

@@ -1,0 +1,230 @@
+// Compiled once per target by Highway's foreach_target; see batch_kernels.h.
+#undef HWY_TARGET_INCLUDE
+#define HWY_TARGET_INCLUDE "sensor/batch_kernels.cpp"
+#include <hwy/foreach_target.h>  // IWYU pragma: keep
+#include <hwy/highway.h>
+#include <hwy/contrib/math/math-inl.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+#include "sensor/batch_kernels.h"
+#include "sensor/philox-inl.h"
+
+HWY_BEFORE_NAMESPACE();
+namespace spadgen::sensor {
+namespace HWY_NAMESPACE {
+namespace hn = hwy::HWY_NAMESPACE;
+
+// Above this rate exp(-lambda) is 0 in double (e^-745 is below the smallest subnormal); clamping keeps
+// the vector exp in its documented range.
+constexpr double kMaxLambda = 800.0;
+
+template <class D>
+HWY_INLINE hn::Vec<D> ClampRate(D d, hn::Vec<D> lam) {
+  return hn::Min(hn::Max(lam, hn::Zero(d)), hn::Set(d, kMaxLambda));
+}
+
+void Probabilities(const double* HWY_RESTRICT lam, size_t K, double* HWY_RESTRICT p, double* HWY_RESTRICT q) {
+  const hn::ScalableTag<double> d;
+  const size_t L = hn::Lanes(d);
+  size_t k = 0;
+  for (; k + L <= K; k += L) {
+    const auto nl = hn::Neg(ClampRate(d, hn::LoadU(d, lam + k)));
+    hn::StoreU(hn::Neg(hn::Expm1(d, nl)), d, p + k);
+    hn::StoreU(hn::Exp(d, nl), d, q + k);
+  }
+  if (k < K) {  // the tail through a padded copy
+    alignas(64) double t[64] = {}, tp[64], tq[64];
+    std::copy(lam + k, lam + K, t);
+    Probabilities(t, L, tp, tq);
+    std::copy(tp, tp + (K - k), p + k);
+    std::copy(tq, tq + (K - k), q + k);
+  }
+}
+
+void CrosstalkRates(const double* HWY_RESTRICT lam, size_t K, const double* const* nb, int nnb, double xt,
+                    bool single_avalanche, double* HWY_RESTRICT out) {
+  const hn::ScalableTag<double> d;
+  const size_t L = hn::Lanes(d);
+  const auto vxt = hn::Set(d, xt), one = hn::Set(d, 1.0), inf = hn::Set(d, HUGE_VAL);
+  auto rate = [&](const double* l, const double* const* n, double* o, size_t count) {
+    for (size_t k = 0; k < count; k += L) {
+      auto v = hn::LoadU(d, l + k);
+      for (int i = 0; i < nnb; ++i) {
+        const auto x = hn::LoadU(d, n[i] + k);
+        if (!single_avalanche) {
+          v = hn::MulAdd(vxt, x, v);
+        } else {
+          // -log1p(-xt p): a neighbour that avalanches at most once per frame fires this pixel with xt
+          const auto y = hn::Mul(vxt, x);
+          const auto t = hn::Neg(hn::Log1p(d, hn::Neg(y)));
+          v = hn::Add(v, hn::IfThenElse(hn::Ge(y, one), inf, t));
+        }
+      }
+      hn::StoreU(v, d, o + k);
+    }
+  };
+  const size_t full = K / L * L;
+  rate(lam, nb, out, full);
+  if (full < K) {
+    alignas(64) double tl[64] = {}, tn[4][64] = {}, to[64];
+    const double* pn[4];
+    std::copy(lam + full, lam + K, tl);
+    for (int i = 0; i < nnb; ++i) {
+      std::copy(nb[i] + full, nb[i] + K, tn[i]);
+      pn[i] = tn[i];
+    }
+    rate(tl, pn, to, L);
+    std::copy(to, to + (K - full), out + full);
+  }
+}
+
+void PhiloxBlock0(const uint32_t key[2], const uint32_t* c1, const uint32_t* c2, const uint32_t* c3, size_t count,
+                  uint32_t* HWY_RESTRICT out) {
+  const hn::ScalableTag<uint32_t> du;
+  const size_t L = hn::Lanes(du);
+  alignas(64) uint32_t w[4][64];
+  for (size_t i = 0; i < count; i += L) {
+    const size_t c = std::min(L, count - i);
+    alignas(64) uint32_t a1[64] = {}, a2[64] = {}, a3[64] = {};
+    std::copy(c1 + i, c1 + i + c, a1);
+    std::copy(c2 + i, c2 + i + c, a2);
+    std::copy(c3 + i, c3 + i + c, a3);
+    auto x0 = hn::Zero(du), x1 = hn::Load(du, a1), x2 = hn::Load(du, a2), x3 = hn::Load(du, a3);
+    Philox10(du, key[0], key[1], x0, x1, x2, x3);
+    hn::Store(x0, du, w[0]);
+    hn::Store(x1, du, w[1]);
+    hn::Store(x2, du, w[2]);
+    hn::Store(x3, du, w[3]);
+    for (size_t j = 0; j < c; ++j)
+      for (size_t v = 0; v < 4; ++v) out[4 * (i + j) + v] = w[v][j];
+  }
+}
+
+void BinomialCounts(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t key[2], uint64_t pixel,
+                    const BinomialSampler& sampler, KernelScratch& s) {
+  const hn::ScalableTag<uint32_t> du;
+  const size_t Lu = hn::Lanes(du);
+  const uint32_t N = sampler.n();
+  // Philox block 0 of every k: counter (0, k, pixel low, pixel high); U = word 0 << 32 | word 1.
+  const auto plo = hn::Set(du, static_cast<uint32_t>(pixel)), phi = hn::Set(du, static_cast<uint32_t>(pixel >> 32));
+  for (size_t k = 0; k < K; k += Lu) {
+    auto x0 = hn::Zero(du), x1 = hn::Iota(du, static_cast<uint32_t>(k)), x2 = plo, x3 = phi;
+    Philox10(du, key[0], key[1], x0, x1, x2, x3);
+    hn::StoreU(x0, du, s.hi.data() + k);
+    hn::StoreU(x1, du, s.lo.data() + k);
+  }
+  std::copy(lam_in, lam_in + K, s.lam.data());
+  const hn::ScalableTag<double> d;
+  const size_t L = hn::Lanes(d);
+  std::fill(s.lam.begin() + static_cast<std::ptrdiff_t>(K),
+            s.lam.begin() + static_cast<std::ptrdiff_t>((K + L - 1) / L * L), 0.0);
+  const hn::RebindToUnsigned<decltype(d)> d64;
+  const hn::RebindToSigned<decltype(d)> di64;
+  const hn::Rebind<uint32_t, decltype(d)> d32;
+  const auto vN = hn::Set(d, static_cast<double>(N)), one = hn::Set(d, 1.0), half = hn::Set(d, 0.5);
+  const auto two63 = hn::Set(d, 0x1p63), two64 = hn::Set(d, 0x1p64), mode_from = hn::Set(d, BinomialSampler::mode_search_from());
+  const double* lf = sampler.log_factorials().data();
+  const auto lfN = hn::Set(d, lf[N]);
+  for (size_t k = 0; k < K; k += L) {
+    const auto lam = ClampRate(d, hn::LoadU(d, s.lam.data() + k));
+    const auto nl = hn::Neg(lam);
+    const auto p = hn::Neg(hn::Expm1(d, nl)), q = hn::Exp(d, nl);
+    hn::StoreU(p, d, s.p.data() + k);
+    const auto small = hn::Le(p, q);  // X counts detections (else misses, and the count is N - X)
+    const auto a = hn::IfThenElse(small, p, q), b = hn::IfThenElse(small, q, p);
+    // log b: -lambda exactly when b = q; log1p(-q) when b = p (log(p) would lose q's digits)
+    const auto log_b = hn::IfThenElse(small, nl, hn::Log1p(d, hn::Neg(a)));
+    const auto nlb = hn::Mul(vN, log_b);
+    const auto S0 = hn::Neg(hn::Expm1(d, nlb));
+    const auto mean = hn::Mul(vN, a);
+    // floor(S0 2^64) exactly (probability_threshold): above 2^63 the product is an integer
+    const auto x = hn::Mul(S0, two64);
+    const auto big = hn::Ge(x, two63);
+    auto thr = hn::BitCast(d64, hn::ConvertTo(di64, hn::IfThenElse(big, hn::Sub(x, two63), hn::Min(x, two63))));
+    thr = hn::IfThenElse(hn::RebindMask(d64, big), hn::Add(thr, hn::Set(d64, uint64_t{1} << 63)), thr);
+    const auto U = hn::Or(hn::ShiftLeft<32>(hn::PromoteTo(d64, hn::LoadU(d32, s.hi.data() + k))),
+                          hn::PromoteTo(d64, hn::LoadU(d32, s.lo.data() + k)));
+    const auto mode = hn::Ge(mean, mode_from);
+    // S0 = 1 (saturated in double) is left to the scalar search, which uses the same threshold rule
+    const auto need = hn::Or(hn::Or(hn::RebindMask(d, hn::Lt(U, thr)), mode), hn::Ge(x, two64));
+    // X = 0: no detection (small) or no miss
+    const hn::Rebind<int32_t, decltype(d)> di32;
+    hn::StoreU(hn::BitCast(d32, hn::DemoteTo(di32, hn::IfThenZeroElse(small, vN))), d32, s.x.data() + k);
+    if (HWY_LIKELY(hn::AllFalse(d, need))) continue;
+    const auto P0 = hn::IfThenElse(hn::Lt(S0, half), hn::Sub(one, S0), hn::Exp(d, nlb));
+    hn::StoreU(a, d, s.a.data() + k);
+    hn::StoreU(b, d, s.b.data() + k);
+    hn::StoreU(S0, d, s.S0.data() + k);
+    hn::StoreU(P0, d, s.P0.data() + k);
+    hn::StoreU(U, d64, s.U.data() + k);
+    if (!hn::AllFalse(d, mode)) {
+      const auto m = hn::Min(hn::Floor(hn::Mul(hn::Add(vN, one), a)), vN);
+      const auto mi = hn::ConvertTo(di64, m);
+      const auto lfm = hn::GatherIndex(d, lf, mi), lfnm = hn::GatherIndex(d, lf, hn::Sub(hn::Set(di64, N), mi));
+      // lanes with a = 0 are never in mode; their log is masked away
+      const auto log_a = hn::Log(d, hn::IfThenElse(mode, a, one));
+      const auto pm = hn::Exp(d, hn::Add(hn::Sub(hn::Sub(lfN, lfm), lfnm),
+                                         hn::MulAdd(m, log_a, hn::Mul(hn::Sub(vN, m), log_b))));
+      hn::StoreU(pm, d, s.pm.data() + k);
+      hn::StoreU(hn::BitCast(d32, hn::DemoteTo(di32, m)), d32, s.m.data() + k);
+    }
+    hn::StoreU(q, d, s.q.data() + k);
+    uint8_t bits[8] = {};
+    hn::StoreMaskBits(d, need, bits);
+    for (size_t i = 0; i < L && k + i < K; ++i) {
+      if (!((bits[i / 8] >> (i % 8)) & 1u)) continue;
+      const size_t j = k + i;
+      const uint32_t xs = static_cast<double>(N) * s.a[j] >= BinomialSampler::mode_search_from()
+                              ? sampler.search_from_mode(s.U[j], s.a[j], s.b[j], s.m[j], s.pm[j])
+                              : sampler.search_from_zero(s.U[j], s.a[j], s.b[j], s.S0[j], s.P0[j]);
+      s.x[j] = s.p[j] <= s.q[j] ? xs : N - xs;
+    }
+  }
+}
+
+const char* KernelTarget() { return hwy::TargetName(HWY_TARGET); }
+
+}  // namespace HWY_NAMESPACE
+}  // namespace spadgen::sensor
+HWY_AFTER_NAMESPACE();
+
+#if HWY_ONCE
+namespace spadgen::sensor {
+
+HWY_EXPORT(Probabilities);
+HWY_EXPORT(CrosstalkRates);
+HWY_EXPORT(PhiloxBlock0);
+HWY_EXPORT(BinomialCounts);
+
+void KernelScratch::reserve(size_t K) {
+  const size_t n = (K + 15) / 16 * 16 + 16;
+  for (auto* v : {&lam, &p, &q, &a, &b, &S0, &P0, &pm}) v->resize(n);
+  U.resize(n);
+  for (auto* v : {&hi, &lo, &x, &m}) v->resize(n);
+}
+
+void probabilities(const double* lam, size_t K, double* p, double* q) {
+  HWY_DYNAMIC_DISPATCH(Probabilities)(lam, K, p, q);
+}
+
+void crosstalk_rates(const double* lam, size_t K, const double* const* nb, int nnb, double xt,
+                     bool single_avalanche, double* out) {
+  HWY_DYNAMIC_DISPATCH(CrosstalkRates)(lam, K, nb, nnb, xt, single_avalanche, out);
+}
+
+void binomial_counts(const double* lam, size_t K, const uint32_t key[2], uint64_t pixel,
+                     const BinomialSampler& sampler, KernelScratch& s) {
+  s.reserve(K);
+  HWY_DYNAMIC_DISPATCH(BinomialCounts)(lam, K, key, pixel, sampler, s);
+}
+
+void philox_block0(const uint32_t key[2], const uint32_t* c1, const uint32_t* c2, const uint32_t* c3,
+                   size_t count, uint32_t* out) {
+  HWY_DYNAMIC_DISPATCH(PhiloxBlock0)(key, c1, c2, c3, count, out);
+}
+
+}  // namespace spadgen::sensor
+#endif

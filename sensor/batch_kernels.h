@@ -1,0 +1,49 @@
+// Vectorised per-pixel kernels of the sensor, compiled for several instruction sets (Highway
+// foreach_target) and chosen at run time (HWY_DYNAMIC_DISPATCH):
+//  - probabilities p = -expm1(-lambda), q = exp(-lambda) and crosstalk-corrected rates for all K gates of
+//    a pixel, with Highway's Expm1 / Exp / Log1p (measured against long double: at most 2 ulp);
+//  - Binomial(N, p) counts of all K gates of a pixel: block 0 of the K streams Rng(seed, Counts, pixel, k)
+//    on 16 lanes of Philox, the decision X = 0 as one comparison of U (the stream's first 64-bit uniform)
+//    with floor(P(X > 0) 2^64), and only the other lanes through BinomialSampler's scalar search;
+//  - block 0 of many streams at once (the frames path's per-pixel streams).
+// Every result depends on the pixel and k only: bit-identical for any tile size or thread count.
+#pragma once
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "core/rng.h"
+#include "sampling.h"
+
+namespace spadgen::sensor {
+
+// Working arrays of one thread (K rounded up to 16).
+struct KernelScratch {
+  std::vector<double> lam, p, q, a, b, S0, P0, pm;
+  std::vector<uint64_t> U;
+  std::vector<uint32_t> hi, lo, x, m;
+  void reserve(size_t K);
+};
+
+// p[k] = -expm1(-lam[k]), q[k] = exp(-lam[k]) for k < K (lam >= 0; +inf gives p = 1, q = 0).
+void probabilities(const double* lam, size_t K, double* p, double* q);
+
+// Rates with crosstalk from nnb neighbours (arrays of K): pixel A (single_avalanche false)
+// out = lam + xt * sum_i nb[i] with nb the neighbours' lambda; pixel B out = lam - sum_i log1p(-xt nb[i])
+// with nb the neighbours' p.
+void crosstalk_rates(const double* lam, size_t K, const double* const* nb, int nnb, double xt,
+                     bool single_avalanche, double* out);
+
+// Counts of every k < K for one pixel: X_k ~ Binomial(N, p_k), p_k = -expm1(-lam[k]), from the stream
+// Rng(seed, Counts, pixel, k) (key: Rng(seed, Counts, 0, 0).key(); k < 2^32). Results in s.x[0..K) and
+// p_k in s.p[0..K). Equal to sampler.sample(Rng(seed, Counts, pixel, k), {p_k, q_k, -lam[k]}) up to the
+// rounding of the vectorised exp / expm1 / log1p (a few ulp of the probabilities).
+void binomial_counts(const double* lam, size_t K, const uint32_t key[2], uint64_t pixel,
+                     const BinomialSampler& sampler, KernelScratch& s);
+
+// Block 0 of `count` streams with counters (0, c1[i], c2[i], c3[i]) and one key: out[4 i + w] = word w,
+// as Rng::block(0).
+void philox_block0(const uint32_t key[2], const uint32_t* c1, const uint32_t* c2, const uint32_t* c3,
+                   size_t count, uint32_t* out);
+
+}  // namespace spadgen::sensor
