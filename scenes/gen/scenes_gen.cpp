@@ -37,7 +37,14 @@ constexpr double kSweepStep_ns = 0.036;
 constexpr double kGateLength_ns = 3.8;
 // The camera of the paper: 9.4 um pitch, 12 mm lens (the default of core/config.h).
 constexpr double kPixelPitch_m = 9.4e-6;
-constexpr double kFocalLength_m = 12e-3;
+// Lenses. The 2 mW flood spreads over the field of view, so the photons a pixel receives scale with
+// the inverse of that solid angle: the 3D scenes use longer lenses than the test chart (which must
+// fill the whole chip) so that their gate profiles rise well above shot noise in 255 frames.
+constexpr double kChartFocal_mm = 12;
+constexpr double kFlatTargetFocal_mm = 50;
+constexpr double kMultiObjectFocal_mm = 25;
+// 1600 cycles at 40 MHz are 40 us, most of the 41.7 us frame at 24,000 fps.
+constexpr int kCyclesPerFrame = 1600;
 
 struct Options {
   std::string out_dir = SPADGEN_PAPER_SCENES_DIR;
@@ -50,8 +57,11 @@ struct Options {
   double plate_distance = 0.45;  // camera to the plate's front face, m
   double plate_thickness = 0.002;
   double plate_ior = 1.5;
-  double plate_roughness = 0.1;
-  double plate_transmission = 1.0;
+  // A real plastic plate is not optically clean: 5 % of the light that enters it scatters diffusely
+  // (glTF: the diffuse lobe weighs 1 - transmission), so the plate returns light across the whole
+  // view as in the paper's Fig. 10c and 11a, not only a specular hotspot at the laser's mirror image.
+  double plate_roughness = 0.3;
+  double plate_transmission = 0.95;
   double plate_right_edge = 0.0;  // x of the plate's right edge, m (the plate covers x < this)
   double sphere_distance = 0.75;  // camera to the sphere's nearest point, m
   double sphere_radius = 0.1;
@@ -76,8 +86,8 @@ Writes flat_target, multi_object and test_chart (.gltf, .bin, .json) into OUTDIR
   --plate-distance M        camera to the plate's front face (0.45)
   --plate-thickness M       (0.002)
   --plate-ior N             (1.5)
-  --plate-roughness R       (0.1)
-  --plate-transmission T    (1.0)
+  --plate-roughness R       (0.3)
+  --plate-transmission T    (0.95)
   --plate-right-edge X      the plate covers x < X in metres (0.0: the left half of the view)
   --sphere-distance M       camera to the sphere's nearest point (0.75)
   --sphere-radius M         (0.1)
@@ -170,8 +180,8 @@ Options parse_options(int argc, char** argv) {
 // Shortest text that reads back as the same double ("0.45", not "0.45000000000000001").
 std::string num(double v) { return nlohmann::json(v).dump(); }
 
-double vertical_fov_rad(int height_px) {
-  return 2.0 * std::atan(0.5 * height_px * kPixelPitch_m / kFocalLength_m);
+double vertical_fov_rad(int height_px, double focal_mm) {
+  return 2.0 * std::atan(0.5 * height_px * kPixelPitch_m / (focal_mm * 1e-3));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -318,10 +328,10 @@ double rising_edge_index(double delay_ns, double distance_m) {
 
 void node_translation(tinygltf::Node& n, double x, double y, double z) { n.translation = {x, y, z}; }
 
-void add_spad_camera(GltfBuilder& b, int width_px, int height_px, glm::dvec3 position) {
+void add_spad_camera(GltfBuilder& b, int width_px, int height_px, double focal_mm, glm::dvec3 position) {
   // Not used by the scene files (they define the camera themselves so --set can move it); it is
   // here so the view can be checked in Blender or any glTF viewer.
-  const int cam = b.add_perspective_camera("spad_camera", vertical_fov_rad(height_px),
+  const int cam = b.add_perspective_camera("spad_camera", vertical_fov_rad(height_px, focal_mm),
                                            static_cast<double>(width_px) / height_px);
   tinygltf::Node node;
   node.name = "spad_camera";
@@ -341,7 +351,7 @@ void write_flat_target(const Options& o) {
   node.name = "target";
   node.mesh = mesh;
   b.add_node(node);
-  add_spad_camera(b, 1024, 500, {0, 0, o.distance});
+  add_spad_camera(b, 1024, 500, kFlatTargetFocal_mm, {0, 0, o.distance});
   const auto dir = std::filesystem::path(o.out_dir);
   b.write((dir / "flat_target.gltf").string(), "flat_target", "");
 
@@ -364,7 +374,7 @@ void write_flat_target(const Options& o) {
     // Pixel A half of the chip, as in the paper's Fig. 9.
     "width_px": 1024,
     "height_px": 500,
-    "focal_length_mm": 12,
+    "focal_length_mm": )" << num(kFlatTargetFocal_mm) << R"(,
     "f_number": 1.4
   },
   "laser": {
@@ -394,7 +404,8 @@ void write_flat_target(const Options& o) {
     // image) per position.
     "mode": "gate_sweep",
     "frames": 255,
-    "cycles_per_frame": 1000,
+    // Laser cycles per binary frame: 40 us at 40 MHz, most of a 24 kfps frame.
+    "cycles_per_frame": )" << kCyclesPerFrame << R"(,
     "gate_sweep": )" << sweep_json() << R"(
   },
   "render": {
@@ -444,7 +455,7 @@ void write_multi_object(const Options& o) {
   sphere_node.mesh = sphere_mesh;
   node_translation(sphere_node, 0.0, 0.0, -(o.sphere_distance + o.sphere_radius));
   b.add_node(sphere_node);
-  add_spad_camera(b, 1024, 500, {0, 0, 0});
+  add_spad_camera(b, 1024, 500, kMultiObjectFocal_mm, {0, 0, 0});
 
   const auto dir = std::filesystem::path(o.out_dir);
   b.write((dir / "multi_object.gltf").string(), "multi_object", "multi_object.bin");
@@ -477,7 +488,7 @@ void write_multi_object(const Options& o) {
     "up": [0, 1, 0],
     "width_px": 1024,
     "height_px": 500,
-    "focal_length_mm": 12,
+    "focal_length_mm": )" << num(kMultiObjectFocal_mm) << R"(,
     "f_number": 1.4
   },
   "laser": {
@@ -494,7 +505,13 @@ void write_multi_object(const Options& o) {
     << R"( (the paper: "around gate
     // positions 40 and 100").
     "emission_delay_ns": )" << num(delay_ns) << R"(,
-    "beam": "flood"
+    // The diffused beam leaves 3 cm to the right of the lens, as a laser beside a camera does: a laser
+    // exactly at the camera would see its own mirror image in the plate as a saturated spot; from here
+    // that image falls just right of the plate's edge. A 16 degree cone covers the whole view from
+    // this offset down to the plate (a flood cone is sized for directions from the camera centre).
+    "beam": "cone",
+    "half_angle_deg": 16,
+    "offset_m": [0.03, 0, 0]
   },
   "ambient": {
     // The lab is dark and has no background: rays that miss both objects return nothing.
@@ -506,7 +523,8 @@ void write_multi_object(const Options& o) {
   "acquisition": {
     "mode": "gate_sweep",
     "frames": 255,
-    "cycles_per_frame": 1000,
+    // Laser cycles per binary frame: 40 us at 40 MHz, most of a 24 kfps frame.
+    "cycles_per_frame": )" << kCyclesPerFrame << R"(,
     "gate_sweep": )" << sweep_json() << R"(
   },
   "render": {
@@ -614,7 +632,7 @@ std::string chart_scene_text(const Options& o, bool dual) {
     "up": [0, 1, 0],
     "width_px": 1024,
     "height_px": 1000,
-    "focal_length_mm": 12,
+    "focal_length_mm": )" << num(kChartFocal_mm) << R"(,
     "f_number": 1.4
   },
   "ambient": {
@@ -659,7 +677,7 @@ void write_test_chart(const Options& o) {
   node.mesh = mesh;
   node_translation(node, 0, 0, -o.chart_distance);
   b.add_node(node);
-  add_spad_camera(b, 1024, 1000, {0, 0, 0});
+  add_spad_camera(b, 1024, 1000, kChartFocal_mm, {0, 0, 0});
   const auto dir = std::filesystem::path(o.out_dir);
   b.write((dir / "test_chart.gltf").string(), "test_chart", "");
   write_text(dir / "test_chart.json", chart_scene_text(o, false));
