@@ -103,6 +103,20 @@ void PhiloxBlock0(const uint32_t key[2], const uint32_t* c1, const uint32_t* c2,
   }
 }
 
+// floor(x 2^64) for x in [0, 1] as probability_threshold computes it (saturating at 2^64 - 1): above
+// 2^63 the product is an integer, so subtracting 2^63 before the signed conversion is exact.
+template <class D>
+HWY_INLINE hn::Vec<hn::RebindToUnsigned<D>> Threshold(D d, hn::Vec<D> x) {
+  const hn::RebindToUnsigned<D> du;
+  const hn::RebindToSigned<D> di;
+  const auto two63 = hn::Set(d, 0x1p63);
+  const auto t = hn::Mul(x, hn::Set(d, 0x1p64));
+  const auto big = hn::Ge(t, two63);
+  auto r = hn::BitCast(du, hn::ConvertTo(di, hn::IfThenElse(big, hn::Min(hn::Sub(t, two63), hn::Set(d, 0x1.fffffffffffffp62)), t)));
+  r = hn::IfThenElse(hn::RebindMask(du, big), hn::Add(r, hn::Set(du, uint64_t{1} << 63)), r);
+  return hn::IfThenElse(hn::RebindMask(du, hn::Ge(t, hn::Set(d, 0x1p64))), hn::Set(du, ~uint64_t{0}), r);
+}
+
 void BinomialCounts(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t key[2], uint64_t pixel,
                     const BinomialSampler& sampler, KernelScratch& s) {
   const hn::ScalableTag<uint32_t> du;
@@ -125,41 +139,59 @@ void BinomialCounts(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t 
   const hn::RebindToSigned<decltype(d)> di64;
   const hn::Rebind<uint32_t, decltype(d)> d32;
   const auto vN = hn::Set(d, static_cast<double>(N)), one = hn::Set(d, 1.0), half = hn::Set(d, 0.5);
-  const auto two63 = hn::Set(d, 0x1p63), two64 = hn::Set(d, 0x1p64), mode_from = hn::Set(d, BinomialSampler::mode_search_from());
+  const hn::Rebind<int32_t, decltype(d)> di32;
+  const auto two64 = hn::Set(d, 0x1p64), mode_from = hn::Set(d, BinomialSampler::mode_search_from());
   const double* lf = sampler.log_factorials().data();
   const auto lfN = hn::Set(d, lf[N]);
+  const double* up = sampler.up().data();
+  const double* down = sampler.down().data();
   for (size_t k = 0; k < K; k += L) {
     const auto lam = ClampRate(d, hn::LoadU(d, s.lam.data() + k));
     const auto nl = hn::Neg(lam);
-    const auto p = hn::Neg(hn::Expm1(d, nl)), q = hn::Exp(d, nl);
+    const auto p = hn::Neg(hn::Expm1(d, nl));
     hn::StoreU(p, d, s.p.data() + k);
+    // q = 1 - p is exact to 1 ulp while p < 3/8; beyond, exp(-lambda) keeps q's relative precision
+    const auto low_p = hn::Lt(p, hn::Set(d, 0.375));
+    const auto q = hn::AllTrue(d, low_p) ? hn::Sub(one, p) : hn::IfThenElse(low_p, hn::Sub(one, p), hn::Exp(d, nl));
     const auto small = hn::Le(p, q);  // X counts detections (else misses, and the count is N - X)
     const auto a = hn::IfThenElse(small, p, q), b = hn::IfThenElse(small, q, p);
-    // log b: -lambda exactly when b = q; log1p(-q) when b = p (log(p) would lose q's digits)
-    const auto log_b = hn::IfThenElse(small, nl, hn::Log1p(d, hn::Neg(a)));
-    const auto nlb = hn::Mul(vN, log_b);
-    const auto S0 = hn::Neg(hn::Expm1(d, nlb));
     const auto mean = hn::Mul(vN, a);
-    // floor(S0 2^64) exactly (probability_threshold): above 2^63 the product is an integer
-    const auto x = hn::Mul(S0, two64);
-    const auto big = hn::Ge(x, two63);
-    auto thr = hn::BitCast(d64, hn::ConvertTo(di64, hn::IfThenElse(big, hn::Sub(x, two63), hn::Min(x, two63))));
-    thr = hn::IfThenElse(hn::RebindMask(d64, big), hn::Add(thr, hn::Set(d64, uint64_t{1} << 63)), thr);
     const auto U = hn::Or(hn::ShiftLeft<32>(hn::PromoteTo(d64, hn::LoadU(d32, s.hi.data() + k))),
                           hn::PromoteTo(d64, hn::LoadU(d32, s.lo.data() + k)));
+    // X = 0: no detection (small) or no miss
+    hn::StoreU(hn::BitCast(d32, hn::DemoteTo(di32, hn::IfThenZeroElse(small, vN))), d32, s.x.data() + k);
+    // P(X > 0) <= n a: where U >= floor(n a 2^64) (and n a < 1) X = 0 without computing P(X > 0)
+    const auto below_one = hn::Lt(mean, one);
+    const auto thr_mean = Threshold(d, hn::IfThenElseZero(below_one, mean));
     const auto mode = hn::Ge(mean, mode_from);
+    const auto undecided = hn::Or(hn::Not(below_one), hn::RebindMask(d, hn::Lt(U, thr_mean)));
+    if (hn::AllFalse(d, undecided)) continue;
+    // log b: -lambda exactly when b = q; log1p(-q) when b = p (log(p) would lose q's digits)
+    const auto log_b = hn::AllTrue(d, small) ? nl : hn::IfThenElse(small, nl, hn::Log1p(d, hn::Neg(a)));
+    const auto nlb = hn::Mul(vN, log_b);
+    const auto S0 = hn::Neg(hn::Expm1(d, nlb));
+    const auto x = hn::Mul(S0, two64);
+    const auto thr = Threshold(d, S0);
     // S0 = 1 (saturated in double) is left to the scalar search, which uses the same threshold rule
     const auto need = hn::Or(hn::Or(hn::RebindMask(d, hn::Lt(U, thr)), mode), hn::Ge(x, two64));
-    // X = 0: no detection (small) or no miss
-    const hn::Rebind<int32_t, decltype(d)> di32;
-    hn::StoreU(hn::BitCast(d32, hn::DemoteTo(di32, hn::IfThenZeroElse(small, vN))), d32, s.x.data() + k);
     if (HWY_LIKELY(hn::AllFalse(d, need))) continue;
     const auto P0 = hn::IfThenElse(hn::Lt(S0, half), hn::Sub(one, S0), hn::Exp(d, nlb));
-    hn::StoreU(a, d, s.a.data() + k);
-    hn::StoreU(b, d, s.b.data() + k);
-    hn::StoreU(S0, d, s.S0.data() + k);
-    hn::StoreU(P0, d, s.P0.data() + k);
-    hn::StoreU(U, d64, s.U.data() + k);
+    const auto r = hn::Div(a, b);
+    auto xs = hn::Zero(d);  // the count of the rarer outcome, as BinomialSampler's searches find it
+    // Sequential search from 0 (n a < 16), as BinomialSampler::search_from_zero, on all lanes at once.
+    {
+      auto active = hn::AndNot(mode, need);
+      auto S = S0, pmf = P0;
+      while (!hn::AllFalse(d, active)) {
+        active = hn::And(active, hn::And(hn::Lt(xs, vN), hn::RebindMask(d, hn::Lt(U, Threshold(d, S)))));
+        const auto upx = hn::GatherIndex(d, up, hn::ConvertTo(di64, hn::IfThenElseZero(active, xs)));
+        pmf = hn::IfThenElse(active, hn::Mul(pmf, hn::Mul(r, upx)), pmf);
+        xs = hn::IfThenElse(active, hn::Add(xs, one), xs);
+        S = hn::IfThenElse(active, hn::Sub(S, pmf), S);
+        active = hn::And(active, hn::Gt(S, hn::Zero(d)));
+      }
+    }
+    // Inversion from the mode (n a >= 16) in the order m, m-1, m+1, ..., as search_from_mode.
     if (!hn::AllFalse(d, mode)) {
       const auto m = hn::Min(hn::Floor(hn::Mul(hn::Add(vN, one), a)), vN);
       const auto mi = hn::ConvertTo(di64, m);
@@ -168,20 +200,35 @@ void BinomialCounts(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t 
       const auto log_a = hn::Log(d, hn::IfThenElse(mode, a, one));
       const auto pm = hn::Exp(d, hn::Add(hn::Sub(hn::Sub(lfN, lfm), lfnm),
                                          hn::MulAdd(m, log_a, hn::Mul(hn::Sub(vN, m), log_b))));
-      hn::StoreU(pm, d, s.pm.data() + k);
-      hn::StoreU(hn::BitCast(d32, hn::DemoteTo(di32, m)), d32, s.m.data() + k);
+      const auto r_inv = hn::Div(b, a);
+      auto u = hn::Sub(hn::Mul(hn::ConvertTo(d, hn::BitCast(di64, hn::ShiftRight<11>(U))), hn::Set(d, 0x1p-53)), pm);
+      auto res = m, lo = m, hi = m, p_lo = pm, p_hi = pm;
+      auto active = hn::And(mode, hn::Ge(u, hn::Zero(d)));
+      const auto zero = hn::Zero(d);
+      while (!hn::AllFalse(d, active)) {
+        const auto can_lo = hn::And(active, hn::Gt(lo, zero));
+        const auto dn = hn::GatherIndex(d, down, hn::ConvertTo(di64, hn::IfThenElseZero(can_lo, lo)));
+        p_lo = hn::IfThenElse(can_lo, hn::Mul(p_lo, hn::Mul(dn, r_inv)), p_lo);
+        lo = hn::IfThenElse(can_lo, hn::Sub(lo, one), lo);
+        u = hn::IfThenElse(can_lo, hn::Sub(u, p_lo), u);
+        const auto hit_lo = hn::And(can_lo, hn::Lt(u, zero));
+        res = hn::IfThenElse(hit_lo, lo, res);
+        active = hn::AndNot(hit_lo, active);
+        const auto can_hi = hn::And(active, hn::Lt(hi, vN));
+        const auto upx = hn::GatherIndex(d, up, hn::ConvertTo(di64, hn::IfThenElseZero(can_hi, hi)));
+        p_hi = hn::IfThenElse(can_hi, hn::Mul(p_hi, hn::Mul(r, upx)), p_hi);
+        hi = hn::IfThenElse(can_hi, hn::Add(hi, one), hi);
+        u = hn::IfThenElse(can_hi, hn::Sub(u, p_hi), u);
+        const auto hit_hi = hn::And(can_hi, hn::Lt(u, zero));
+        res = hn::IfThenElse(hit_hi, hi, res);
+        active = hn::AndNot(hit_hi, active);
+        // neither side can move: U beyond the rounded total probability, the mode
+        active = hn::And(active, hn::Or(can_lo, can_hi));
+      }
+      xs = hn::IfThenElse(mode, res, xs);
     }
-    hn::StoreU(q, d, s.q.data() + k);
-    uint8_t bits[8] = {};
-    hn::StoreMaskBits(d, need, bits);
-    for (size_t i = 0; i < L && k + i < K; ++i) {
-      if (!((bits[i / 8] >> (i % 8)) & 1u)) continue;
-      const size_t j = k + i;
-      const uint32_t xs = static_cast<double>(N) * s.a[j] >= BinomialSampler::mode_search_from()
-                              ? sampler.search_from_mode(s.U[j], s.a[j], s.b[j], s.m[j], s.pm[j])
-                              : sampler.search_from_zero(s.U[j], s.a[j], s.b[j], s.S0[j], s.P0[j]);
-      s.x[j] = s.p[j] <= s.q[j] ? xs : N - xs;
-    }
+    const auto count = hn::IfThenElse(small, xs, hn::Sub(vN, xs));
+    hn::StoreU(hn::BitCast(d32, hn::DemoteTo(di32, count)), d32, s.x.data() + k);
   }
 }
 

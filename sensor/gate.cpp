@@ -1,6 +1,7 @@
 #include "gate.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <sstream>
 
@@ -374,6 +375,13 @@ bool TransientPrefix::build(const float* g, int64_t T) {
   int64_t cur = 0;
   int64_t i = 0;
   while (i < T) {
+    // skip empty stretches 16 bins at a time (the reduction vectorises); -0.0f counts as empty
+    while (i + 16 <= T) {
+      uint32_t any = 0;
+      for (int64_t j = 0; j < 16; ++j) any |= std::bit_cast<uint32_t>(g[i + j]) & 0x7FFFFFFFu;
+      if (any != 0) break;
+      i += 16;
+    }
     while (i < T && g[i] == 0.0f) ++i;
     if (i == T) break;
     int64_t e = i + 1, last_nz = i;
@@ -425,8 +433,18 @@ void accumulate_edge_response(const TransientPrefix& p, const EdgeBins& e, doubl
     ptr_s[r] = static_cast<size_t>(std::lower_bound(e.u.begin(), e.u.end(), static_cast<double>(runs[r].s) - b0) - e.u.begin());
     ptr_e[r] = static_cast<size_t>(std::lower_bound(e.u.begin(), e.u.end(), static_cast<double>(runs[r].e) - b0) - e.u.begin());
   }
+  // Fast path: when no run overlaps the edge's support [b + u_0, b + u_M], every knot lies in one empty
+  // stretch where G2 is linear with slope G1 (the mass before the stretch), and sum_j c_j G2(b + u_j) =
+  // G1 sum_j c_j u_j (sum_j c_j = 0). rb: the first run that ends after b + u_0 (moves up with k).
+  const double u_first = e.u.front(), u_last = e.u.back(), cu = e.C1[M];
+  size_t rb = 0;
   for (int k = 0; k < K; ++k) {
     const double b = b0 + step * k;
+    while (rb < R && static_cast<double>(runs[rb].e) <= b + u_first) ++rb;
+    if (rb == R || static_cast<double>(runs[rb].s) >= b + u_last) {
+      out[k] += sign * (rb > 0 ? runs[rb - 1].G1e * cu : 0.0);
+      continue;
+    }
     double H = 0.0;
     size_t jprev = 0;
     const TransientPrefix::Run* prev = nullptr;

@@ -91,6 +91,9 @@ class BinomialSampler {
   uint32_t search_from_mode(uint64_t U, double a, double b, uint32_t m, double pm) const;
   static constexpr double mode_search_from() { return 16.0; }
   const std::vector<double>& log_factorials() const { return log_fact_; }
+  // pmf ratios: up()[x] = (n - x) / (x + 1), down()[x] = x / (n - x + 1)
+  const std::vector<double>& up() const { return up_; }
+  const std::vector<double>& down() const { return down_; }
 
  private:
   uint32_t small_side(uint64_t U, double a, double b, double log_b) const;

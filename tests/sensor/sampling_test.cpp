@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "core/rng.h"
+#include "sensor/batch_kernels.h"
 #include "sensor/frames_kernel.h"
 #include "sensor/sampling.h"
 #include "test_util.h"
@@ -158,6 +159,129 @@ TEST(Sampling, BinomialChiSquare) {
   check_binomial(255, 0.9, 0.1, 200000, 35);          // mirrored
   check_binomial(255, 1.0 - 1e-6, 1e-6, 400000, 36);  // p near 1: misses are Poisson
   check_binomial(65535, 0.3, 0.7, 20000, 37);         // large n
+}
+
+// The vectorised counts kernel against the scalar sampler on the same streams: identical except where a
+// 64-bit uniform falls within the last few ulp of a probability (vector exp/expm1/log vs libm), i.e. never
+// in practice. Rates cover both searches, the mirrored side, the X = 0 fast path, 0, saturation and tails
+// (K = 37: a partial vector at the end).
+TEST(Sampling, CountsKernelMatchesScalarSampler) {
+  const std::vector<double> rates = {0.0, 1e-15, 1e-9, 1e-6, 1e-4, 2e-3, 0.004, 0.02, 0.062, 0.07, 0.3, 0.6931,
+                                     0.6932, 1.0, 2.5, 5.0, 9.0, 20.0, 40.0, 745.0, 900.0, HUGE_VAL};
+  const uint64_t seed = 99;
+  const Rng base(seed, RngKind::Counts, 0, 0);
+  const uint32_t key[2] = {base.key().v[0], base.key().v[1]};
+  for (uint32_t n : {1u, 255u, 4080u}) {
+    const BinomialSampler sampler(n);
+    KernelScratch s;
+    size_t mismatches = 0, draws = 0;
+    for (uint64_t pixel = 0; pixel < 400; ++pixel) {
+      std::vector<double> lam(37);
+      for (size_t k = 0; k < lam.size(); ++k) lam[k] = rates[(pixel * 7 + k) % rates.size()];
+      std::vector<double> p(lam.size()), q(lam.size());
+      probabilities(lam.data(), lam.size(), p.data(), q.data());
+      binomial_counts(lam.data(), lam.size(), key, pixel * 1000003, sampler, s);
+      for (size_t k = 0; k < lam.size(); ++k) {
+        ASSERT_EQ(s.p[k], p[k]);
+        Rng rng(seed, RngKind::Counts, pixel * 1000003, k);
+        const uint32_t want = sampler.sample(rng, {p[k], q[k], -lam[k]});
+        ++draws;
+        if (s.x[k] != want) ++mismatches;
+        if (lam[k] == 0.0) {
+          ASSERT_EQ(s.x[k], 0u);
+        }
+        if (lam[k] >= 745.0) {
+          ASSERT_EQ(s.x[k], n);
+        }
+        ASSERT_LE(s.x[k], n);
+      }
+    }
+    EXPECT_LE(mismatches, draws / 100000) << "n=" << n;
+    std::printf("n = %u: %zu of %zu draws differ from the scalar sampler\n", n, mismatches, draws);
+  }
+}
+
+// The kernel's counts are Binomial(n, p): chi-square where the X = 0 decision (one comparison of U with
+// floor(P(X > 0) 2^64)) carries the distribution (n p from 0.05 to 3), through both searches and mirrored.
+TEST(Sampling, CountsKernelChiSquare) {
+  const Rng base(123, RngKind::Counts, 0, 0);
+  const uint32_t key[2] = {base.key().v[0], base.key().v[1]};
+  for (const auto& [n, lambda] : std::vector<std::pair<uint32_t, double>>{
+           {255, 2e-4}, {255, 2e-3}, {255, 1.2e-2}, {255, 0.05}, {255, 0.5}, {255, 2.3}, {4080, 0.01}}) {
+    const BinomialSampler sampler(n);
+    KernelScratch s;
+    const size_t K = 350;
+    const std::vector<double> lam(K, lambda);
+    std::vector<double> hist(n + 1, 0.0);
+    const int pixels = 600;
+    for (int px = 0; px < pixels; ++px) {
+      binomial_counts(lam.data(), K, key, static_cast<uint64_t>(px), sampler, s);
+      for (size_t k = 0; k < K; ++k) hist[s.x[k]] += 1.0;
+    }
+    const double p = -std::expm1(-lambda);
+    EXPECT_GT(chi_square_p(hist, binomial_pmf(static_cast<int>(n), p), static_cast<double>(pixels) * K), kAlpha)
+        << "n=" << n << " lambda=" << lambda;
+  }
+}
+
+// Exactness at the X = 0 threshold: U just below floor(P(X > 0) 2^64) gives X >= 1, U at it gives 0.
+TEST(Sampling, ZeroDecisionAtTheThreshold) {
+  const uint32_t n = 255;
+  const BinomialSampler sampler(n);
+  for (double lambda : {1e-15, 1e-9, 1e-4, 3e-3, 0.02}) {
+    const double S0 = -std::expm1(-static_cast<double>(n) * lambda);
+    const double P0 = S0 < 0.5 ? 1.0 - S0 : std::exp(-static_cast<double>(n) * lambda);
+    const double p = -std::expm1(-lambda), q = std::exp(-lambda);
+    const uint64_t T = probability_threshold(S0);
+    ASSERT_GT(T, 0u);
+    EXPECT_EQ(sampler.search_from_zero(T, p, q, S0, P0), 0u);
+    EXPECT_GE(sampler.search_from_zero(T - 1, p, q, S0, P0), 1u);
+    EXPECT_EQ(sampler.sample_u(T, {p, q, -lambda}), 0u);
+    EXPECT_GE(sampler.sample_u(T - 1, {p, q, -lambda}), 1u);
+    EXPECT_EQ(sampler.sample_u(~uint64_t{0}, {p, q, -lambda}), 0u);
+    EXPECT_GE(sampler.sample_u(0, {p, q, -lambda}), 1u);
+  }
+}
+
+// sample_bits_batch (block 0 of every stream from the vectorised Philox) equals sample_bits per stream.
+TEST(Sampling, BatchBitsEqualPerStreamBits) {
+  const uint32_t n = 255;
+  const BinomialSampler sampler(n);
+  const size_t count = 203;
+  std::vector<uint64_t> ids(count);
+  std::vector<Prob> pr(count);
+  const std::vector<double> rates = {0.0, 1e-7, 1e-4, 3e-3, 0.03, 0.07, 0.5, 1.0, 3.0, 8.0, 30.0, HUGE_VAL};
+  for (size_t i = 0; i < count; ++i) {
+    ids[i] = (uint64_t{1} << 32) - 50 + i * 3;  // crosses 2^32: both counter words vary
+    const double l = rates[i % rates.size()];
+    pr[i] = prob_from_lambda(l);
+  }
+  std::vector<uint64_t> batch(count * 4), one(4);
+  sample_bits_batch(7, 11, ids.data(), count, sampler, pr.data(), batch.data());
+  for (size_t i = 0; i < count; ++i) {
+    sample_bits(Rng(7, RngKind::Frames, ids[i], 11), sampler, pr[i], one.data());
+    for (size_t w = 0; w < 4; ++w) ASSERT_EQ(batch[4 * i + w], one[w]) << i;
+  }
+}
+
+// Vector exp / expm1 / log1p are within a few ulp: p and q from probabilities() against long double.
+TEST(Sampling, VectorProbabilitiesAreAccurate) {
+  std::vector<double> lam;
+  for (double e = -17.0; e < 2.8; e += 0.013) lam.push_back(std::pow(10.0, e));
+  std::vector<double> p(lam.size()), q(lam.size());
+  probabilities(lam.data(), lam.size(), p.data(), q.data());
+  auto ulps = [](double v, long double ref) {
+    const double r = static_cast<double>(ref);
+    return static_cast<double>(std::fabs(static_cast<long double>(v) - ref)) / (std::nextafter(r, HUGE_VAL) - r);
+  };
+  double worst_p = 0, worst_q = 0;
+  for (size_t i = 0; i < lam.size(); ++i) {
+    worst_p = std::max(worst_p, ulps(p[i], -std::expm1(-static_cast<long double>(lam[i]))));
+    worst_q = std::max(worst_q, ulps(q[i], std::exp(-static_cast<long double>(lam[i]))));
+  }
+  EXPECT_LE(worst_p, 4.0);
+  EXPECT_LE(worst_q, 4.0);
+  std::printf("vector probabilities: p within %.2f ulp, q within %.2f ulp\n", worst_p, worst_q);
 }
 
 TEST(Sampling, FramePackingTransposes) {
