@@ -263,7 +263,9 @@ RunResult run(const RunOptions& options) {
   }
 
   const std::vector<PixelRect> local_tiles = make_tiles(W, H, cfg.render.tile_size);
-  std::vector<double> tile_laser(local_tiles.size(), 0.0), tile_oow(local_tiles.size(), 0.0);
+  // Per-pixel totals in double, summed in image order at the end, so the totals in metadata.json do
+  // not depend on the tile size (a per-tile sum would change the order of the additions).
+  std::vector<double> pixel_laser(size_t(W) * size_t(H), 0.0), pixel_oow(size_t(W) * size_t(H), 0.0);
   std::vector<render::RenderStats> tile_stats(local_tiles.size());
   const auto plot_pixels = profile_pixels(img);
   std::vector<std::vector<float>> profiles(plot_pixels.size(), std::vector<float>(size_t(K), 0.0f));
@@ -300,15 +302,13 @@ RunResult run(const RunOptions& options) {
     const TransientTile t = renderer.transient(rect, data_rect, axis, &tile_stats[ti]);
     const SensorTile s = sensor.process(t);
 
-    double laser_sum = 0, oow_sum = 0;
     for (int y = rect.y0; y < rect.y1(); ++y)
       for (int x = rect.x0; x < rect.x1(); ++x) {
         const auto d = size_t(t.data_rect.index(x, y));
         const size_t o = out_index(x, y);
         lz[o] = float(t.laser_total[d]), oow[o] = float(t.out_of_window[d]), amb[o] = t.ambient_rate[d];
-        laser_sum += t.laser_total[d], oow_sum += t.out_of_window[d];
+        pixel_laser[o] = t.laser_total[d], pixel_oow[o] = t.out_of_window[d];
       }
-    tile_laser[ti] = laser_sum, tile_oow[ti] = oow_sum;
 
     const sensor::SensorMapsTile m = sensor.maps(rect);
     for (int y = rect.y0; y < rect.y1(); ++y)
@@ -355,13 +355,13 @@ RunResult run(const RunOptions& options) {
 
   // Provenance travels with every image.
   const std::string hash = scene_hash(cfg);
+  const std::string crop_text = json::array({img.x0, img.y0, img.width, img.height}).dump();
   const auto provenance = [&](writers::ExrImage& e) {
     e.set_attribute("spadgen_version", SPADGEN_VERSION);
     e.set_attribute("spadgen_seed", std::to_string(cfg.seed));
     e.set_attribute("spadgen_scene_file", cfg.scene_file);
     e.set_attribute("spadgen_scene_hash", hash);
-    e.set_attribute("spadgen_crop", "[" + std::to_string(img.x0) + ", " + std::to_string(img.y0) + ", " +
-                                        std::to_string(img.width) + ", " + std::to_string(img.height) + "]");
+    e.set_attribute("spadgen_crop", crop_text);
   };
   // Layers beyond the deepest one any pixel has are not written.
   int deepest = 0;
@@ -416,8 +416,8 @@ RunResult run(const RunOptions& options) {
     }
   }
 
-  const double laser_total = std::accumulate(tile_laser.begin(), tile_laser.end(), 0.0);
-  const double oow_total = std::accumulate(tile_oow.begin(), tile_oow.end(), 0.0);
+  const double laser_total = std::accumulate(pixel_laser.begin(), pixel_laser.end(), 0.0);
+  const double oow_total = std::accumulate(pixel_oow.begin(), pixel_oow.end(), 0.0);
   render::RenderStats rays;
   for (const auto& st : tile_stats) rays.camera_rays += st.camera_rays, rays.shadow_rays += st.shadow_rays;
   files.push_back("metadata.json");

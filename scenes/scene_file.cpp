@@ -414,7 +414,7 @@ std::string read_text_file(const std::string& path) {
 void apply_override(json& doc, const std::string& assignment, Checker& chk) {
   const size_t eq = assignment.find('=');
   if (eq == std::string::npos || eq == 0) {
-    chk.errors.push_back("--set " + assignment + ": expected KEY=VALUE, e.g. laser.average_power_mW=5");
+    chk.errors.push_back(chk.file + ": --set " + assignment + ": expected KEY=VALUE, e.g. laser.average_power_mW=5");
     return;
   }
   std::string key = assignment.substr(0, eq);
@@ -423,7 +423,8 @@ void apply_override(json& doc, const std::string& assignment, Checker& chk) {
   std::replace(path.begin(), path.end(), '.', '/');
   const Key* k = find_key(path);
   if (!k) {
-    chk.errors.push_back("--set " + key + ": " + path + ": " + (is_section(path) ? "is a section, not a key" : "unknown key" + suggestion(path)));
+    chk.errors.push_back(chk.file + ": --set " + key + ": " + path + ": " +
+                         (is_section(path) ? "is a section, not a key" : "unknown key" + suggestion(path)));
     return;
   }
   json value;
@@ -447,7 +448,7 @@ void apply_override(json& doc, const std::string& assignment, Checker& chk) {
     }
     if (!node->contains(part)) (*node)[part] = json::object();
     if (!(*node)[part].is_object()) {
-      chk.errors.push_back("--set " + key + ": " + at + " is not a section in the scene file");
+      chk.errors.push_back(chk.file + ": --set " + key + ": " + at + " is not a section in the scene file");
       return;
     }
     node = &(*node)[part];

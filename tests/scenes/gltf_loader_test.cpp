@@ -997,10 +997,10 @@ TEST(PaperScenes, MultiObject) {
   EXPECT_NEAR(xmax, 0.0, 1e-6);     // covers the left half of the view
   EXPECT_EQ(plate.triangle_count(), 12u);  // a closed box
   const auto& pm = s.materials[static_cast<size_t>(plate.material)];
-  EXPECT_FLOAT_EQ(pm.transmission, 1.0f);
+  EXPECT_FLOAT_EQ(pm.transmission, 0.95f);
   EXPECT_FLOAT_EQ(pm.ior, 1.5f);
   EXPECT_FLOAT_EQ(pm.thickness_m, 0.002f);
-  EXPECT_NEAR(pm.roughness, 0.1, 1e-7);
+  EXPECT_NEAR(pm.roughness, 0.3, 1e-7);
   EXPECT_FLOAT_EQ(pm.metallic, 0.0f);
   EXPECT_EQ(pm.base_color, glm::vec4(1.0f));
 
