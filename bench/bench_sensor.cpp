@@ -132,7 +132,7 @@ TransientTile cut(const Scene& s, const PixelRect& r, int halo) {
 }
 
 // The whole sensor stage (gate response of 350 positions + crosstalk + sampling) on a sub-image of the
-// top-left corner, tiles of 32 with their halo, as the program streams them.
+// top-left corner, tiles of 32 with their halo processed in parallel, as the program streams them.
 void run_sweep(benchmark::State& state, bool frames) {
   const int w = 64, h = frames ? 32 : 64;
   const Scene s = make_scene(frames, w, h);
@@ -142,12 +142,13 @@ void run_sweep(benchmark::State& state, bool frames) {
   sensor::SensorModel model(cfg);
   std::vector<TransientTile> tiles;
   for (const PixelRect& r : make_tiles(w, h, 32)) tiles.push_back(cut(s, r, model.halo()));
-  double checksum = 0;
+  std::vector<double> checksum(tiles.size(), 0.0);
   for (auto _ : state) {
-    for (const TransientTile& t : tiles) {
-      const SensorTile out = model.process(t);
-      checksum += out.counts[out.counts.size() / 2];
-    }
+    // tiles in parallel, as app/pipeline.cpp runs them (process() itself nests parallel loops)
+    tbb::parallel_for(size_t{0}, tiles.size(), [&](size_t i) {
+      const SensorTile out = model.process(tiles[i]);
+      checksum[i] += out.counts[out.counts.size() / 2];
+    });
   }
   benchmark::DoNotOptimize(checksum);
   const double pixels = static_cast<double>(w * h) * static_cast<double>(state.iterations());

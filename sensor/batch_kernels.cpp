@@ -178,20 +178,23 @@ void BinomialCounts(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t 
     const auto P0 = hn::IfThenElse(hn::Lt(S0, half), hn::Sub(one, S0), hn::Exp(d, nlb));
     const auto r = hn::Div(a, b);
     auto xs = hn::Zero(d);  // the count of the rarer outcome, as BinomialSampler's searches find it
-    // Sequential search from 0 (n a < 16), as BinomialSampler::search_from_zero, on all lanes at once.
+    // Sequential search from 0 (n a < 16), as BinomialSampler::search_from_zero, on all lanes at once. The
+    // sums are updated on every lane (a finished lane's values are no longer read), so the only loop-carried
+    // chains are pmf and S; `done` records where each lane's scalar loop would have stopped.
     {
-      auto active = hn::AndNot(mode, need);
+      auto done = hn::Not(hn::AndNot(mode, need));
       auto S = S0, pmf = P0;
-      while (!hn::AllFalse(d, active)) {
-        active = hn::And(active, hn::And(hn::Lt(xs, vN), hn::RebindMask(d, hn::Lt(U, Threshold(d, S)))));
-        const auto upx = hn::GatherIndex(d, up, hn::ConvertTo(di64, hn::IfThenElseZero(active, xs)));
-        pmf = hn::IfThenElse(active, hn::Mul(pmf, hn::Mul(r, upx)), pmf);
-        xs = hn::IfThenElse(active, hn::Add(xs, one), xs);
-        S = hn::IfThenElse(active, hn::Sub(S, pmf), S);
-        active = hn::And(active, hn::Gt(S, hn::Zero(d)));
+      for (uint32_t it = 0; !hn::AllTrue(d, done); ++it) {
+        // every lane still searching is at x = it
+        const auto cont = hn::AndNot(done, hn::And(hn::Lt(xs, vN), hn::RebindMask(d, hn::Lt(U, Threshold(d, S)))));
+        pmf = hn::Mul(pmf, hn::Mul(r, hn::Set(d, up[std::min(it, N)])));
+        S = hn::Sub(S, pmf);
+        xs = hn::IfThenElse(cont, hn::Add(xs, one), xs);
+        done = hn::Or(hn::Not(cont), hn::Or(done, hn::Not(hn::Gt(S, hn::Zero(d)))));
       }
     }
-    // Inversion from the mode (n a >= 16) in the order m, m-1, m+1, ..., as search_from_mode.
+    // Inversion from the mode (n a >= 16) in the order m, m-1, m+1, ..., as search_from_mode. u decreases
+    // step by step; a lane's result is where u first falls below 0 (or m when both sides are exhausted).
     if (!hn::AllFalse(d, mode)) {
       const auto m = hn::Min(hn::Floor(hn::Mul(hn::Add(vN, one), a)), vN);
       const auto mi = hn::ConvertTo(di64, m);
@@ -201,29 +204,33 @@ void BinomialCounts(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t 
       const auto pm = hn::Exp(d, hn::Add(hn::Sub(hn::Sub(lfN, lfm), lfnm),
                                          hn::MulAdd(m, log_a, hn::Mul(hn::Sub(vN, m), log_b))));
       const auto r_inv = hn::Div(b, a);
+      const auto zero = hn::Zero(d);
       auto u = hn::Sub(hn::Mul(hn::ConvertTo(d, hn::BitCast(di64, hn::ShiftRight<11>(U))), hn::Set(d, 0x1p-53)), pm);
       auto res = m, lo = m, hi = m, p_lo = pm, p_hi = pm;
-      auto active = hn::And(mode, hn::Ge(u, hn::Zero(d)));
-      const auto zero = hn::Zero(d);
-      while (!hn::AllFalse(d, active)) {
-        const auto can_lo = hn::And(active, hn::Gt(lo, zero));
-        const auto dn = hn::GatherIndex(d, down, hn::ConvertTo(di64, hn::IfThenElseZero(can_lo, lo)));
+      // indices max(m - i, 0) and min(m + i, n) at step i
+      auto lo_i = mi, hi_i = mi;
+      const auto i_one = hn::Set(di64, 1), i_zero = hn::Zero(di64), i_n = hn::Set(di64, N);
+      auto open = hn::And(mode, hn::Ge(u, zero));  // lanes whose u has not fallen below 0 yet
+      while (!hn::AllFalse(d, open)) {
+        const auto can_lo = hn::Gt(lo, zero), can_hi = hn::Lt(hi, vN);
+        const auto dn = hn::GatherIndex(d, down, lo_i);
+        const auto upx = hn::GatherIndex(d, up, hi_i);
+        lo_i = hn::Max(hn::Sub(lo_i, i_one), i_zero);
+        hi_i = hn::Min(hn::Add(hi_i, i_one), i_n);
         p_lo = hn::IfThenElse(can_lo, hn::Mul(p_lo, hn::Mul(dn, r_inv)), p_lo);
         lo = hn::IfThenElse(can_lo, hn::Sub(lo, one), lo);
         u = hn::IfThenElse(can_lo, hn::Sub(u, p_lo), u);
-        const auto hit_lo = hn::And(can_lo, hn::Lt(u, zero));
+        const auto hit_lo = hn::And(open, hn::Lt(u, zero));
         res = hn::IfThenElse(hit_lo, lo, res);
-        active = hn::AndNot(hit_lo, active);
-        const auto can_hi = hn::And(active, hn::Lt(hi, vN));
-        const auto upx = hn::GatherIndex(d, up, hn::ConvertTo(di64, hn::IfThenElseZero(can_hi, hi)));
+        open = hn::AndNot(hit_lo, open);
         p_hi = hn::IfThenElse(can_hi, hn::Mul(p_hi, hn::Mul(r, upx)), p_hi);
         hi = hn::IfThenElse(can_hi, hn::Add(hi, one), hi);
         u = hn::IfThenElse(can_hi, hn::Sub(u, p_hi), u);
-        const auto hit_hi = hn::And(can_hi, hn::Lt(u, zero));
+        const auto hit_hi = hn::And(open, hn::Lt(u, zero));
         res = hn::IfThenElse(hit_hi, hi, res);
-        active = hn::AndNot(hit_hi, active);
+        open = hn::AndNot(hit_hi, open);
         // neither side can move: U beyond the rounded total probability, the mode
-        active = hn::And(active, hn::Or(can_lo, can_hi));
+        open = hn::And(open, hn::Or(can_lo, can_hi));
       }
       xs = hn::IfThenElse(mode, res, xs);
     }
