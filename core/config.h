@@ -45,6 +45,9 @@ struct LaserConfig {
 
 struct AmbientConfig {
   double illuminance_lux = 0.0;         // ambient.illuminance_lux: uniform environment, equal-energy spectrum
+  // ambient.spectral_irradiance_W_m2_nm: the same environment given radiometrically (irradiance on a
+  // surface facing it, per nm, flat over the band); when set it replaces illuminance_lux.
+  std::optional<double> spectral_irradiance_W_m2_nm;
   double wavelength_m = 550e-9;         // ambient.wavelength_nm: centre of the band the camera sees
   double bandwidth_m = 300e-9;          // ambient.bandwidth_nm: width of that band (filter or sensor)
   bool gltf_lights = true;              // ambient.gltf_lights: glTF punctual lights also light the scene

@@ -152,6 +152,7 @@ const std::vector<Key>& schema() {
 
     const AmbientConfig& a = d.ambient;
     k.push_back(number("/ambient/illuminance_lux", a.illuminance_lux, 0, 1e6, "lux", "uniform environment illuminance (equal-energy spectrum); see docs/scene-file.md for the conversion"));
+    k.push_back(optional_number("/ambient/spectral_irradiance_W_m2_nm", 0, 1e3, "W/m^2/nm", "the uniform environment in radiometric units (irradiance per nm on a surface facing it, flat over the band); null = from illuminance_lux"));
     k.push_back(number("/ambient/wavelength_nm", a.wavelength_m / kNm, 200, 2000, "nm", "centre of the ambient band the camera sees"));
     k.push_back(number("/ambient/bandwidth_nm", a.bandwidth_m / kNm, 0, 2000, "nm", "width of that band (optical filter or sensor response)", true));
     k.push_back(boolean("/ambient/gltf_lights", a.gltf_lights, "the glTF punctual lights add to the ambient light"));
@@ -552,6 +553,7 @@ RunConfig to_config(const ojson& r, const std::string& scene_path) {
 
   const ojson& am = r["ambient"];
   c.ambient.illuminance_lux = am["illuminance_lux"];
+  c.ambient.spectral_irradiance_W_m2_nm = opt_scaled(am["spectral_irradiance_W_m2_nm"], 1.0);
   c.ambient.wavelength_m = am["wavelength_nm"].get<double>() * kNm;
   c.ambient.bandwidth_m = am["bandwidth_nm"].get<double>() * kNm;
   c.ambient.gltf_lights = am["gltf_lights"];

@@ -100,6 +100,9 @@ TEST_F(SceneFileTest, ValuesAreConvertedFromTheUnitInTheirName) {
   EXPECT_DOUBLE_EQ(c.render.time_bin_s, 4.5e-12);
   EXPECT_DOUBLE_EQ(*c.render.window_start_s, 1e-9);
   EXPECT_DOUBLE_EQ(*c.render.window_stop_s, 3e-9);
+  EXPECT_FALSE(c.ambient.spectral_irradiance_W_m2_nm.has_value());
+  EXPECT_DOUBLE_EQ(*parse(R"({"gltf": "s.gltf", "ambient": {"spectral_irradiance_W_m2_nm": 0.002}})")
+                        .config.ambient.spectral_irradiance_W_m2_nm, 0.002);
 }
 
 TEST_F(SceneFileTest, MisspeltKeyNamesFileKeyAndSuggestion) {
