@@ -53,7 +53,8 @@ struct AmbientConfig {
   bool gltf_lights = true;              // ambient.gltf_lights: glTF punctual lights also light the scene
 };
 
-// One pixel design of the chip (the paper's pixel A or B).
+// One pixel design of the chip. The defaults are the paper's pixel A; paper_pixel_B() is its pixel B
+// (Table 1, section 4.A and supplementary note S2).
 struct PixelTypeConfig {
   double fill_factor = 0.07;            // fill_factor
   double pdp_peak = 0.105;              // pdp_peak, at pdp_peak_wavelength_nm
@@ -66,6 +67,18 @@ struct PixelTypeConfig {
   double hot_pixel_factor = 100.0;      // hot_pixel_factor: median hot-pixel DCR / median DCR
   double crosstalk_probability = 0.0017;  // crosstalk_probability: per detection, per neighbour
   bool single_avalanche_per_frame = false; // pixel B's feedback stops further avalanches in a frame
+
+  static PixelTypeConfig paper_pixel_A() { return {}; }
+  static PixelTypeConfig paper_pixel_B() {
+    PixelTypeConfig b;
+    b.fill_factor = 0.134;
+    b.pdp_peak = 0.267;
+    b.pdp_nonuniformity = 0.032;
+    b.dcr_median_cps = 2.0;
+    b.crosstalk_probability = 0.0039;
+    b.single_avalanche_per_frame = true;
+    return b;
+  }
 };
 
 struct GateConfig {
@@ -83,8 +96,8 @@ struct GateConfig {
 
 struct SensorConfig {
   std::string preset = "pixel_A";       // sensor.preset: "pixel_A", "pixel_B", "full_chip" (A top half, B bottom)
-  PixelTypeConfig pixel_A;              // sensor.pixel_A
-  PixelTypeConfig pixel_B;              // sensor.pixel_B
+  PixelTypeConfig pixel_A = PixelTypeConfig::paper_pixel_A();  // sensor.pixel_A
+  PixelTypeConfig pixel_B = PixelTypeConfig::paper_pixel_B();  // sensor.pixel_B
   GateConfig gate;                      // sensor.gate
   double temperature_C = 25.0;          // sensor.temperature_C
   bool dark_counts = true;              // sensor.dark_counts

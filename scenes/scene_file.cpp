@@ -100,18 +100,6 @@ void add_pixel_type(std::vector<Key>& s, const std::string& name, const PixelTyp
   s.push_back(boolean(p + "single_avalanche_per_frame", d.single_avalanche_per_frame, "the pixel stops after its first avalanche in a frame (the paper's pixel B feedback)"));
 }
 
-PixelTypeConfig paper_pixel_A() { return PixelTypeConfig{}; }
-PixelTypeConfig paper_pixel_B() {
-  PixelTypeConfig b;
-  b.fill_factor = 0.134;
-  b.pdp_peak = 0.267;
-  b.pdp_nonuniformity = 0.032;
-  b.dcr_median_cps = 2.0;
-  b.crosstalk_probability = 0.0039;
-  b.single_avalanche_per_frame = true;
-  return b;
-}
-
 // Every key of a scene file. Defaults are the paper's camera and its 3D experiment.
 const std::vector<Key>& schema() {
   static const std::vector<Key> s = [] {
@@ -159,8 +147,8 @@ const std::vector<Key>& schema() {
 
     const SensorConfig& se = d.sensor;
     k.push_back(choice("/sensor/preset", se.preset, {"pixel_A", "pixel_B", "full_chip"}, "pixel design of every row: pixel_A, pixel_B, or full_chip (pixel A in the top half, pixel B in the bottom half)"));
-    add_pixel_type(k, "pixel_A", paper_pixel_A());
-    add_pixel_type(k, "pixel_B", paper_pixel_B());
+    add_pixel_type(k, "pixel_A", se.pixel_A);
+    add_pixel_type(k, "pixel_B", se.pixel_B);
     const GateConfig& g = se.gate;
     k.push_back(number("/sensor/gate/length_ns", g.length_s / kNs, 0, 1e6, "ns", "gate length, 50 % to 50 %", true));
     k.push_back(number("/sensor/gate/rise_ps", g.rise_s / kPs, 0, 1e6, "ps", "rise time, 10 % to 90 %"));
