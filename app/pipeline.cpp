@@ -5,6 +5,9 @@
 #include <tbb/parallel_for.h>
 #include <unistd.h>
 
+#include <cerrno>
+#include <csignal>
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -36,6 +39,31 @@ using json = nlohmann::json;
 using ojson = nlohmann::ordered_json;
 
 namespace {
+
+// Set by SIGINT/SIGTERM: the tiles stop, the staging folder is removed, nothing is published.
+std::atomic<bool> g_interrupted{false};
+extern "C" void on_interrupt(int) { g_interrupted.store(true); }
+
+// Installs the handlers for the duration of a run and restores the previous ones after.
+class InterruptGuard {
+ public:
+  InterruptGuard() {
+    g_interrupted.store(false);
+    previous_int_ = std::signal(SIGINT, on_interrupt);
+    previous_term_ = std::signal(SIGTERM, on_interrupt);
+  }
+  ~InterruptGuard() {
+    std::signal(SIGINT, previous_int_);
+    std::signal(SIGTERM, previous_term_);
+  }
+  static void check() {
+    if (g_interrupted.load()) throw Error("interrupted by a signal: the run stopped and wrote nothing");
+  }
+
+ private:
+  void (*previous_int_)(int) = SIG_DFL;
+  void (*previous_term_)(int) = SIG_DFL;
+};
 
 // FNV-1a over bytes: a stable content hash for provenance (not for security).
 uint64_t fnv1a(const std::string& bytes, uint64_t h = 0xcbf29ce484222325ull) {
@@ -117,6 +145,7 @@ class Staging {
  public:
   explicit Staging(const fs::path& out) : out_(out) {
     fs::create_directories(out_);
+    remove_abandoned();
     dir_ = out_ / (".spadgen-staging-" + std::to_string(::getpid()));
     fs::remove_all(dir_);
     fs::create_directories(dir_ / "previews");
@@ -126,6 +155,19 @@ class Staging {
     fs::remove_all(dir_, ec);
   }
   std::string path(const std::string& rel) const { return (dir_ / rel).string(); }
+  // Staging folders of runs that were killed outright (SIGKILL, power loss) hold only temporary files.
+  void remove_abandoned() const {
+    const std::string prefix = ".spadgen-staging-";
+    for (const auto& e : fs::directory_iterator(out_)) {
+      const std::string name = e.path().filename().string();
+      if (name.rfind(prefix, 0) != 0) continue;
+      const long pid = std::strtol(name.c_str() + prefix.size(), nullptr, 10);
+      if (pid > 0 && pid != ::getpid() && ::kill(pid_t(pid), 0) != 0 && errno == ESRCH) {
+        std::error_code ec;
+        fs::remove_all(e.path(), ec);
+      }
+    }
+  }
   // Moves every listed file into the output folder; metadata.json comes last so that it never lists a
   // file that is not there yet.
   void publish(const std::vector<std::string>& files) {
@@ -191,6 +233,7 @@ RunResult run(const RunOptions& options) {
   const RunConfig& cfg = resolved.config;
   for (const std::string& w : resolved.warnings) std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
 
+  InterruptGuard interrupt_guard;
   std::unique_ptr<tbb::global_control> threads;
   if (options.threads > 0)
     threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, size_t(options.threads));
@@ -277,6 +320,7 @@ RunResult run(const RunOptions& options) {
   Progress progress(local_tiles.size(), options.progress);
 
   tbb::parallel_for(size_t(0), local_tiles.size(), [&](size_t ti) {
+    InterruptGuard::check();
     // Tiles are laid over the output image; the renderer and sensor see full-sensor coordinates.
     const PixelRect& lt = local_tiles[ti];
     const PixelRect rect{lt.x0 + img.x0, lt.y0 + img.y0, lt.width, lt.height};
@@ -454,6 +498,7 @@ RunResult run(const RunOptions& options) {
                  {"shadow_rays", rays.shadow_rays}};
   writers::write_json(staging.path("metadata.json"), json::parse(meta.dump()));
 
+  InterruptGuard::check();
   if (expected_npy) expected_npy->commit();
   if (counts_npy) counts_npy->commit();
   if (frames_npy) frames_npy->commit();

@@ -157,6 +157,21 @@ TEST_F(App, BadInputStopsBeforeWritingAndKeepsEarlierFiles) {
   EXPECT_THAT(missing.output, HasSubstr("nope.json"));
 }
 
+TEST_F(App, AnInterruptedRunLeavesNothingBehind) {
+  fs::create_directories(dir_ / "out");
+  std::ofstream(dir_ / "out/metadata.json") << "{\"earlier\": true}";
+  // The staging folder of a process that no longer exists (pids never reach 999999999) is removed.
+  fs::create_directories(dir_ / "out/.spadgen-staging-999999999");
+  std::ofstream(dir_ / "out/.spadgen-staging-999999999/counts.npy") << "partial";
+  // The full default run takes far longer than 3 s; SIGINT arrives while tiles are rendering.
+  const Result r = shell("timeout -s INT 3 " + kBin + " run " + kScenes + "multi_object.json -o " + (dir_ / "out").string());
+  EXPECT_THAT(r.output, HasSubstr("interrupted by a signal"));
+  EXPECT_EQ(slurp(dir_ / "out/metadata.json"), "{\"earlier\": true}");
+  size_t entries = 0;
+  for ([[maybe_unused]] const auto& e : fs::directory_iterator(dir_ / "out")) ++entries;
+  EXPECT_EQ(entries, 1u) << "only the earlier metadata.json may remain";
+}
+
 TEST_F(App, ABrokenGltfIsReportedWithItsElement) {
   std::ofstream(dir_ / "broken.gltf") << R"({"asset": {"version": "2.0"}, "buffers": [{"uri": "missing.bin", "byteLength": 12}]})";
   std::ofstream(dir_ / "scene.json") << R"({"gltf": "broken.gltf"})";

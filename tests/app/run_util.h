@@ -24,8 +24,9 @@ struct Result {
   int code;
   std::string output;  // stdout and stderr
 };
-inline Result sh(const std::string& args) {
-  const std::string cmd = kBin + " " + args + " 2>&1";
+// Runs a shell command line; stdout and stderr together.
+inline Result shell(const std::string& command_line) {
+  const std::string cmd = command_line + " 2>&1";
   FILE* p = popen(cmd.c_str(), "r");
   std::string out;
   std::array<char, 4096> buf{};
@@ -33,6 +34,7 @@ inline Result sh(const std::string& args) {
   const int status = pclose(p);
   return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
 }
+inline Result sh(const std::string& args) { return shell(kBin + " " + args); }
 inline std::string slurp(const fs::path& p) {
   std::ifstream in(p, std::ios::binary);
   std::ostringstream ss;
