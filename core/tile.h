@@ -44,6 +44,11 @@ struct TransientTile {
 
   // photons per pulse in bin t of pixel (x, y): transient[data_rect.index(x, y) * axis.bins + t]
   std::vector<float> transient;
+  // render.split_direct_indirect only (else empty): the part of `transient` carried by indirect paths,
+  // same layout. Direct: camera -> smooth interfaces -> ONE non-delta surface vertex -> laser (the shadow
+  // ray may cross transmissive surfaces in a straight line); indirect: two or more non-delta vertices.
+  // The direct transient is transient - transient_indirect (docs/render.md).
+  std::vector<float> transient_indirect;
   // per data pixel, photons per pulse integrated over all time (in and out of the window)
   std::vector<double> laser_total;
   // per data pixel, photons per pulse whose arrival (after folding by the laser period) fell outside the window

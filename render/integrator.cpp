@@ -21,7 +21,7 @@ constexpr int kMaxShadowCrossings = 64;
 
 // In steady state the returns of earlier and later pulses overlap the window the same way, so every
 // periodic image inside the window receives the contribution.
-void deposit(double v, double t, const TimeAxis& axis, double* bins, PixelTotals* out) {
+void deposit(double v, double t, const TimeAxis& axis, double* bins, PixelTotals* out, double* indirect_bins) {
   out->laser_total += v;
   if (axis.bins <= 0) return;
   bool landed = false;
@@ -33,6 +33,7 @@ void deposit(double v, double t, const TimeAxis& axis, double* bins, PixelTotals
       const int64_t b = axis.bin_of(ti);
       if (b >= 0) {
         bins[b] += v;
+        if (indirect_bins) indirect_bins[b] += v;
         out->bin_lo = std::min(out->bin_lo, b);
         out->bin_hi = std::max(out->bin_hi, b + 1);
         landed = true;
@@ -42,6 +43,7 @@ void deposit(double v, double t, const TimeAxis& axis, double* bins, PixelTotals
     const int64_t b = axis.bin_of(t);
     if (b >= 0) {
       bins[b] += v;
+      if (indirect_bins) indirect_bins[b] += v;
       out->bin_lo = std::min(out->bin_lo, b);
       out->bin_hi = std::max(out->bin_hi, b + 1);
       landed = true;
@@ -131,7 +133,8 @@ Spec Integrator::shadow_transmittance(const glm::vec3& origin, const glm::vec3& 
   }
 }
 
-PixelTotals Integrator::render_pixel(int x, int y, const TimeAxis& axis, double* bins, RayCounts* rays) const {
+PixelTotals Integrator::render_pixel(int x, int y, const TimeAxis& axis, double* bins, RayCounts* rays,
+                                     double* indirect_bins) const {
   PixelTotals out;
   const RenderConfig& rc = config_.render;
   const uint64_t pixel = static_cast<uint64_t>(y) * static_cast<uint64_t>(camera_.width()) + static_cast<uint64_t>(x);
@@ -203,7 +206,9 @@ PixelTotals Integrator::render_pixel(int x, int y, const TimeAxis& axis, double*
                                                    shadow_medium(sf, volume, wo_front, wi, medium), &extra, rays);
               if (tr.x > 0.0f) {
                 const double v = double(beta.x) * f.x * tr.x * intensity / (r * r) * w;
-                deposit(v, delay + (opl + r + extra) / kSpeedOfLight, axis, bins, &out);
+                // `vertices` non-delta vertices lie before this one: 0 makes the path direct.
+                deposit(v, delay + (opl + r + extra) / kSpeedOfLight, axis, bins, &out,
+                        vertices > 0 ? indirect_bins : nullptr);
               }
             }
           }

@@ -31,7 +31,10 @@ struct RayCounts {
 // Adds a contribution v arriving at time t: to laser_total, and to the bin of every periodic image
 // t + m * period (m any integer) inside [axis.start_s, axis.end_s()), or to out_of_window when there is
 // none. A time exactly on a bin edge belongs to the later bin (TimeAxis::bin_of).
-void deposit(double v, double t, const TimeAxis& axis, double* bins, PixelTotals* out);
+// When indirect_bins is not null (an indirect contribution of a split render), the same bins of
+// indirect_bins receive v as well.
+void deposit(double v, double t, const TimeAxis& axis, double* bins, PixelTotals* out,
+             double* indirect_bins = nullptr);
 
 class Integrator {
  public:
@@ -39,8 +42,10 @@ class Integrator {
              const Shading& shading, const Camera& camera, const Laser& laser, const Ambient& ambient);
 
   // All samples of pixel (x, y) (full-sensor coordinates). bins: axis.bins doubles, zeroed by the caller,
-  // receive photons per pulse per bin (unused when axis.bins == 0).
-  PixelTotals render_pixel(int x, int y, const TimeAxis& axis, double* bins, RayCounts* rays) const;
+  // receive photons per pulse per bin (unused when axis.bins == 0). indirect_bins (null: no split) receive
+  // the part of bins carried by paths with two or more non-delta vertices, over the same bin range.
+  PixelTotals render_pixel(int x, int y, const TimeAxis& axis, double* bins, RayCounts* rays,
+                           double* indirect_bins = nullptr) const;
 
   // FF * optics transmission * p^2 * pi / (4 N^2) for a pixel of row y: photons at the SPAD per unit of
   // photon radiance (cos^4 excluded).

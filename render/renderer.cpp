@@ -68,6 +68,8 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
   const auto n = static_cast<size_t>(data_rect.count());
   const auto bins = static_cast<size_t>(axis.bins);
   tile.transient.assign(n * bins, 0.0f);
+  const bool split = im.config.render.split_direct_indirect && bins > 0;
+  if (split) tile.transient_indirect.assign(n * bins, 0.0f);
   tile.laser_total.assign(n, 0.0);
   tile.out_of_window.assign(n, 0.0);
   tile.ambient_rate.assign(n, 0.0f);
@@ -76,16 +78,24 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
   tbb::parallel_for(tbb::blocked_range<int>(data_rect.y0, data_rect.y1()), [&](const tbb::blocked_range<int>& rows) {
     // Accumulated in double per pixel; stored as float. Pixels are independent, so the split into tasks
     // does not change any result. Only the bins a pixel touched are copied out and cleared again.
-    std::vector<double> acc(bins, 0.0);
+    std::vector<double> acc(bins, 0.0), acc_indirect(split ? bins : 0, 0.0);
     RayCounts rays;
     for (int y = rows.begin(); y < rows.end(); ++y)
       for (int x = data_rect.x0; x < data_rect.x1(); ++x) {
-        const PixelTotals t = im.integrator.render_pixel(x, y, axis, acc.data(), &rays);
+        const PixelTotals t =
+            im.integrator.render_pixel(x, y, axis, acc.data(), &rays, split ? acc_indirect.data() : nullptr);
         const auto i = static_cast<size_t>(data_rect.index(x, y));
         float* out = tile.transient.data() + i * bins;
         for (int64_t b = t.bin_lo; b < t.bin_hi; ++b) {
           out[b] = static_cast<float>(acc[size_t(b)]);
           acc[size_t(b)] = 0.0;
+        }
+        if (split) {
+          float* ind = tile.transient_indirect.data() + i * bins;
+          for (int64_t b = t.bin_lo; b < t.bin_hi; ++b) {
+            ind[b] = static_cast<float>(acc_indirect[size_t(b)]);
+            acc_indirect[size_t(b)] = 0.0;
+          }
         }
         tile.laser_total[i] = t.laser_total;
         tile.out_of_window[i] = t.out_of_window;

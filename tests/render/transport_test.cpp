@@ -411,6 +411,7 @@ TEST(Transport, DeterministicForAnyThreadCountAndTileSplit) {
   RunConfig c = test_config(16, 16, 4e-3);
   c.render.samples_per_pixel = 4;
   c.ambient.illuminance_lux = 20;
+  c.render.split_direct_indirect = true;
   Renderer r(s, c);
   const TimeAxis axis{5e-9, 20e-12, 200, 25e-9};
   const PixelRect all{0, 0, 16, 16};
@@ -430,6 +431,9 @@ TEST(Transport, DeterministicForAnyThreadCountAndTileSplit) {
           for (int x = data.x0; x < data.x1(); ++x) {
             const size_t i = size_t(data.index(x, y)), j = size_t(all.index(x, y));
             ASSERT_EQ(std::memcmp(t.pixel_transient(x, y), one.pixel_transient(x, y), sizeof(float) * size_t(axis.bins)), 0);
+            ASSERT_EQ(std::memcmp(t.transient_indirect.data() + i * size_t(axis.bins),
+                                  one.transient_indirect.data() + j * size_t(axis.bins), sizeof(float) * size_t(axis.bins)),
+                      0);
             ASSERT_EQ(t.laser_total[i], one.laser_total[j]);
             ASSERT_EQ(t.out_of_window[i], one.out_of_window[j]);
             ASSERT_EQ(t.ambient_rate[i], one.ambient_rate[j]);
@@ -440,6 +444,7 @@ TEST(Transport, DeterministicForAnyThreadCountAndTileSplit) {
   double laser = std::accumulate(one.laser_total.begin(), one.laser_total.end(), 0.0);
   EXPECT_GT(laser, 0.0);
   EXPECT_GT(one.ambient_rate[0], 0.0f);
+  EXPECT_GT(std::accumulate(one.transient_indirect.begin(), one.transient_indirect.end(), 0.0), 0.0);
 }
 
 TEST(Transport, StatsCountCameraAndShadowRays) {
