@@ -1,7 +1,7 @@
 // Renderer benchmark on the paper's multi-object scene (plate + sphere) at 1024 x 1000:
 //  - the integrator's rays per second (camera + shadow rays, counted by RenderStats) against raw Embree
 //    rtcIntersect1 / rtcOccluded1 replaying exactly the rays the integrator traced, on the same scene;
-//  - cost against error for samples per pixel and for the time-bin width.
+//  - cost against error for samples per pixel, for the time-bin width and for max_bounces.
 // Usage: bench_render [--benchmark_filter=...]; the summary (ratio, error tables) is printed at the end.
 #include <benchmark/benchmark.h>
 #include <embree3/rtcore.h>
@@ -274,6 +274,44 @@ void bin_width_vs_error() {
   }
 }
 
+// Cost against truncation error for render.max_bounces: render time of the same crop (16 spp) and the
+// change of its laser total (summed over the crop, and RMS over pixels) against max_bounces 16. The
+// random draws of a path do not depend on max_bounces, so the differences are the truncated light itself.
+void bounces_vs_error() {
+  Setup& s = setup();
+  const PixelRect crop{s.config.camera.width_px / 2 - 192, s.config.camera.height_px / 2 - 64, 128, 128};
+  auto totals = [&](int bounces, double* seconds) {
+    RunConfig c = s.config;
+    c.render.samples_per_pixel = 16;
+    c.render.max_bounces = bounces;
+    const render::Renderer r(s.scene, c);
+    const auto t0 = std::chrono::steady_clock::now();
+    const TransientTile t = r.transient(crop, crop, TimeAxis{});
+    *seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    return t.laser_total;
+  };
+  double ref_s = 0;
+  const std::vector<double> ref = totals(16, &ref_s);
+  double ref_sum = 0;
+  for (double v : ref) ref_sum += v;
+  std::printf("\nmax_bounces vs error (same crop, 16 spp; reference max_bounces 16 in %.3f s)\n", ref_s);
+  std::printf("%8s %10s %16s %16s\n", "bounces", "time_s", "total_change", "rms_pixel_change");
+  for (int b : {1, 2, 3, 4, 6, 8, 12}) {
+    double sec = 0;
+    const std::vector<double> v = totals(b, &sec);
+    double sum = 0, e = 0;
+    size_t n = 0;
+    for (size_t i = 0; i < v.size(); ++i) {
+      sum += v[i];
+      if (ref[i] > 0) {
+        e += std::pow(v[i] / ref[i] - 1, 2);
+        ++n;
+      }
+    }
+    std::printf("%8d %10.3f %16.3e %16.3e\n", b, sec, sum / ref_sum - 1, std::sqrt(e / double(n)));
+  }
+}
+
 }  // namespace
 
 BENCHMARK(BM_Integrator)->Arg(0)->Arg(9)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
@@ -299,6 +337,7 @@ int main(int argc, char** argv) {
   if (studies) {
     samples_vs_error();
     bin_width_vs_error();
+    bounces_vs_error();
   }
   return 0;
 }
