@@ -81,18 +81,30 @@ void CrosstalkRates(const double* HWY_RESTRICT lam, size_t K, const double* cons
   }
 }
 
-void PhiloxBlock0(const uint32_t key[2], const uint32_t* c1, const uint32_t* c2, const uint32_t* c3, size_t count,
-                  uint32_t* HWY_RESTRICT out) {
+void PhiloxBlocks(const uint32_t key[2], const uint32_t* c0, const uint32_t* c1, const uint32_t* c2,
+                  const uint32_t* c3, size_t count, uint32_t* HWY_RESTRICT out) {
   const hn::ScalableTag<uint32_t> du;
   const size_t L = hn::Lanes(du);
   alignas(64) uint32_t w[4][64];
   for (size_t i = 0; i < count; i += L) {
     const size_t c = std::min(L, count - i);
-    alignas(64) uint32_t a1[64] = {}, a2[64] = {}, a3[64] = {};
-    std::copy(c1 + i, c1 + i + c, a1);
-    std::copy(c2 + i, c2 + i + c, a2);
-    std::copy(c3 + i, c3 + i + c, a3);
-    auto x0 = hn::Zero(du), x1 = hn::Load(du, a1), x2 = hn::Load(du, a2), x3 = hn::Load(du, a3);
+    hn::Vec<decltype(du)> x0, x1, x2, x3;
+    if (c == L) {  // whole vectors straight from the counter arrays
+      x0 = c0 != nullptr ? hn::LoadU(du, c0 + i) : hn::Zero(du);
+      x1 = hn::LoadU(du, c1 + i);
+      x2 = hn::LoadU(du, c2 + i);
+      x3 = hn::LoadU(du, c3 + i);
+    } else {  // the tail through padded copies
+      alignas(64) uint32_t a0[64] = {}, a1[64] = {}, a2[64] = {}, a3[64] = {};
+      if (c0 != nullptr) std::copy(c0 + i, c0 + i + c, a0);
+      std::copy(c1 + i, c1 + i + c, a1);
+      std::copy(c2 + i, c2 + i + c, a2);
+      std::copy(c3 + i, c3 + i + c, a3);
+      x0 = hn::Load(du, a0);
+      x1 = hn::Load(du, a1);
+      x2 = hn::Load(du, a2);
+      x3 = hn::Load(du, a3);
+    }
     Philox10(du, key[0], key[1], x0, x1, x2, x3);
     hn::Store(x0, du, w[0]);
     hn::Store(x1, du, w[1]);
@@ -250,7 +262,7 @@ namespace spadgen::sensor {
 
 HWY_EXPORT(Probabilities);
 HWY_EXPORT(CrosstalkRates);
-HWY_EXPORT(PhiloxBlock0);
+HWY_EXPORT(PhiloxBlocks);
 HWY_EXPORT(BinomialCounts);
 
 void KernelScratch::reserve(size_t K) {
@@ -277,7 +289,12 @@ void binomial_counts(const double* lam, size_t K, const uint32_t key[2], uint64_
 
 void philox_block0(const uint32_t key[2], const uint32_t* c1, const uint32_t* c2, const uint32_t* c3,
                    size_t count, uint32_t* out) {
-  HWY_DYNAMIC_DISPATCH(PhiloxBlock0)(key, c1, c2, c3, count, out);
+  HWY_DYNAMIC_DISPATCH(PhiloxBlocks)(key, nullptr, c1, c2, c3, count, out);
+}
+
+void philox_blocks(const uint32_t key[2], const uint32_t* c0, const uint32_t* c1, const uint32_t* c2,
+                   const uint32_t* c3, size_t count, uint32_t* out) {
+  HWY_DYNAMIC_DISPATCH(PhiloxBlocks)(key, c0, c1, c2, c3, count, out);
 }
 
 }  // namespace spadgen::sensor

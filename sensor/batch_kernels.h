@@ -46,4 +46,9 @@ void binomial_counts(const double* lam, size_t K, const uint32_t key[2], uint64_
 void philox_block0(const uint32_t key[2], const uint32_t* c1, const uint32_t* c2, const uint32_t* c3,
                    size_t count, uint32_t* out);
 
+// Blocks with counters (c0[i], c1[i], c2[i], c3[i]) and one key: out[4 i + w] = word w, as
+// Rng::block(c0[i]) of the stream whose block-0 counter is (0, c1[i], c2[i], c3[i]).
+void philox_blocks(const uint32_t key[2], const uint32_t* c0, const uint32_t* c1, const uint32_t* c2,
+                   const uint32_t* c3, size_t count, uint32_t* out);
+
 }  // namespace spadgen::sensor

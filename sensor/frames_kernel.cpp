@@ -6,7 +6,9 @@
 #include <hwy/foreach_target.h>  // IWYU pragma: keep
 #include <hwy/highway.h>
 
+#include <bit>
 #include <cstring>
+#include <vector>
 
 #include "sensor/frames_kernel.h"
 #include "sensor/philox-inl.h"
@@ -41,9 +43,13 @@ HWY_INLINE bool dense_bit_from(const Rng& stream, uint8_t top, uint64_t T, uint3
   return u < (T & ((uint64_t{1} << 56) - 1));
 }
 
-void DenseBits(const Rng& stream, uint32_t n, uint64_t T, uint64_t* HWY_RESTRICT words) {
+// ties == nullptr: a tie is settled at once with a scalar Philox block. Otherwise its frame is appended to
+// *ties and its bit left 0 (the caller settles many ties with one vectorised Philox).
+HWY_INLINE void DenseBitsImpl(const Rng& stream, uint32_t n, uint64_t T, uint64_t* HWY_RESTRICT words,
+                              std::vector<uint32_t>* ties) {
   const hn::ScalableTag<uint8_t> d8;
   const size_t L = hn::Lanes(d8);
+  constexpr size_t kMaxEqBytes = (hn::MaxLanes(d8) + 63) / 64 * 8;
   const auto tb = hn::Set(d8, static_cast<uint8_t>(T >> 56));
   const uint64_t t_rest = T & ((uint64_t{1} << 56) - 1);
   const uint32_t chunks = (n + 255) / 256;
@@ -73,13 +79,24 @@ void DenseBits(const Rng& stream, uint32_t n, uint64_t T, uint64_t* HWY_RESTRICT
       hn::StoreMaskBits(d8, hn::Lt(v, tb), mask + off / 8);
       const auto eq = hn::Eq(v, tb);
       if (HWY_UNLIKELY(!hn::AllFalse(d8, eq))) {
-        for (size_t i = 0; i < L; ++i) {
-          if (bytes[off + i] != static_cast<uint8_t>(T >> 56)) continue;
-          const uint32_t f = ch * 256 + static_cast<uint32_t>(off + i);
-          if (f >= n) continue;
-          const auto b = stream.block(refine_base + f);
-          const uint64_t u = ((uint64_t{b[0]} << 32) | b[1]) & ((uint64_t{1} << 56) - 1);
-          if (u < t_rest) mask[(off + i) / 8] = static_cast<uint8_t>(mask[(off + i) / 8] | (1u << ((off + i) % 8)));
+        // visit the tied lanes only: the mask bits, 64 lanes per word
+        alignas(8) uint8_t eq_bits[kMaxEqBytes] = {};
+        hn::StoreMaskBits(d8, eq, eq_bits);
+        for (size_t wb = 0; wb < (L + 63) / 64; ++wb) {
+          uint64_t m;
+          std::memcpy(&m, eq_bits + 8 * wb, 8);
+          for (; m != 0; m &= m - 1) {
+            const size_t i = 64 * wb + static_cast<size_t>(std::countr_zero(m));
+            const uint32_t f = ch * 256 + static_cast<uint32_t>(off + i);
+            if (f >= n) continue;
+            if (ties != nullptr) {
+              ties->push_back(f);
+              continue;
+            }
+            const auto b = stream.block(refine_base + f);
+            const uint64_t u = ((uint64_t{b[0]} << 32) | b[1]) & ((uint64_t{1} << 56) - 1);
+            if (u < t_rest) mask[(off + i) / 8] = static_cast<uint8_t>(mask[(off + i) / 8] | (1u << ((off + i) % 8)));
+          }
         }
       }
     }
@@ -87,6 +104,15 @@ void DenseBits(const Rng& stream, uint32_t n, uint64_t T, uint64_t* HWY_RESTRICT
     std::memcpy(dst + begin, mask, std::min<size_t>(32, total_bytes - begin));
   }
   if (n % 64 != 0) words[(n - 1) / 64] &= (uint64_t{1} << (n % 64)) - 1;
+}
+
+void DenseBits(const Rng& stream, uint32_t n, uint64_t T, uint64_t* HWY_RESTRICT words) {
+  DenseBitsImpl(stream, n, T, words, nullptr);
+}
+
+void DenseBitsDeferred(const Rng& stream, uint32_t n, uint64_t T, uint64_t* HWY_RESTRICT words,
+                       std::vector<uint32_t>& ties) {
+  DenseBitsImpl(stream, n, T, words, &ties);
 }
 
 const char* TargetName() { return hwy::TargetName(HWY_TARGET); }
@@ -99,10 +125,15 @@ HWY_AFTER_NAMESPACE();
 namespace spadgen::sensor {
 
 HWY_EXPORT(DenseBits);
+HWY_EXPORT(DenseBitsDeferred);
 HWY_EXPORT(TargetName);
 
 void dense_bits(const Rng& stream, uint32_t n, uint64_t T, uint64_t* words) {
   HWY_DYNAMIC_DISPATCH(DenseBits)(stream, n, T, words);
+}
+
+void dense_bits_deferred(const Rng& stream, uint32_t n, uint64_t T, uint64_t* words, std::vector<uint32_t>& ties) {
+  HWY_DYNAMIC_DISPATCH(DenseBitsDeferred)(stream, n, T, words, ties);
 }
 
 const char* dense_bits_target() { return HWY_DYNAMIC_DISPATCH(TargetName)(); }

@@ -7,6 +7,7 @@
 // with the first 56 bits (word 0 high, word 1 low, masked) of block 16 * chunks + f.
 #pragma once
 #include <cstdint>
+#include <vector>
 
 #include "core/rng.h"
 
@@ -14,6 +15,11 @@ namespace spadgen::sensor {
 
 // words[0 .. ceil(n / 64)): bit f set when U_f < T, U_f the frame's 64-bit uniform as described above.
 void dense_bits(const Rng& stream, uint32_t n, uint64_t T, uint64_t* words);
+
+// As dense_bits, but a frame whose top byte ties with T's top byte is left 0 and its index appended to
+// `ties`; its bit is (the first 56 bits of block 16 * ceil(n / 256) + frame) < (T mod 2^56), which the
+// caller settles for many streams at once (sample_bits_batch: one vectorised Philox per row).
+void dense_bits_deferred(const Rng& stream, uint32_t n, uint64_t T, uint64_t* words, std::vector<uint32_t>& ties);
 
 // The same, one frame at a time with Rng::block (the reference the tests compare the kernel with).
 bool dense_bit_reference(const Rng& stream, uint32_t n, uint64_t T, uint32_t frame);

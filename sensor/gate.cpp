@@ -445,10 +445,14 @@ void accumulate_edge_response(const TransientPrefix& p, const EdgeBins& e, doubl
       out[k] += sign * (rb > 0 ? runs[rb - 1].G1e * cu : 0.0);
       continue;
     }
+    // Runs before rb end before b + u_0: all their knot pointers are 0 and they add nothing, so the walk
+    // starts at rb with the run before it as `prev` (the same sums in the same order as from run 0). It
+    // stops after the first run that starts beyond b + u_M (every knot is then accounted for); the runs
+    // it skips keep stale pointers, which only move down and are walked to the right place when read.
     double H = 0.0;
     size_t jprev = 0;
-    const TransientPrefix::Run* prev = nullptr;
-    for (size_t r = 0; r < R; ++r) {
+    const TransientPrefix::Run* prev = rb > 0 ? &runs[rb - 1] : nullptr;
+    for (size_t r = rb; r < R; ++r) {
       const auto& run = runs[r];
       size_t& js = ptr_s[r];
       size_t& je = ptr_e[r];
@@ -462,6 +466,7 @@ void accumulate_edge_response(const TransientPrefix& p, const EdgeBins& e, doubl
       for (size_t j = js; j < je; ++j) H += e.c[j] * p.G2_in_run(run, b + e.u[j]);
       jprev = std::max(jprev, je);
       prev = &run;
+      if (jprev == M) break;
     }
     if (jprev < M) {
       const double sc = e.C0[M] - e.C0[jprev], scu = e.C1[M] - e.C1[jprev];

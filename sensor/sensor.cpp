@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <memory>
 #include <sstream>
 
 #include "core/error.h"
@@ -325,12 +326,16 @@ SensorTile SensorModel::process(const TransientTile& t) const {
   // lambda of every k for the region's pixels (the tile and its halo), [region.index(x, y) * K + k]; and
   // p, q of each pixel's own avalanches where its neighbours (crosstalk of pixel B) or its frames need them.
   const size_t nreg = static_cast<size_t>(region.count());
-  std::vector<double> lam(nreg * Ks);
+  // Not value-initialised (every entry read is written first): zeroing megabytes per tile cost page faults
+  // and memset time. q is kept only for frames; without frames only pixel B's neighbours read p.
+  const auto uninit = [](size_t count) { return std::make_unique_for_overwrite<double[]>(count); };
+  const auto lam = uninit(nreg * Ks);
   const bool own_probs = frames || m.halo > 0;
-  std::vector<double> own_p(own_probs ? nreg * Ks : 0), own_q(own_probs ? nreg * Ks : 0);
+  const auto own_p = uninit(own_probs ? nreg * Ks : 0), own_q = uninit(frames ? nreg * Ks : 0);
   std::vector<PixelParams> params(nreg);
   tbb::parallel_for(tbb::blocked_range<int>(region.y0, region.y1()), [&](const tbb::blocked_range<int>& rows) {
     TransientPrefix prefix;
+    std::vector<double> q_unused(frames ? 0 : Ks);
     for (int y = rows.begin(); y < rows.end(); ++y)
       for (int x = region.x0; x < region.x1(); ++x) {
         const size_t ri = static_cast<size_t>(region.index(x, y));
@@ -338,8 +343,10 @@ SensorTile SensorModel::process(const TransientTile& t) const {
         params[ri] = m.maps->at(x, y);
         const float* g = m.sweep ? t.transient.data() + di * static_cast<size_t>(t.axis.bins) : nullptr;
         const double laser_total = t.laser_total.size() == ndata ? t.laser_total[di] : 0.0;
-        m.lambda(params[ri], g, t.axis, &rise, &fall, t.ambient_rate[di], laser_total, prefix, lam.data() + ri * Ks);
-        if (own_probs) probabilities(lam.data() + ri * Ks, Ks, own_p.data() + ri * Ks, own_q.data() + ri * Ks);
+        m.lambda(params[ri], g, t.axis, &rise, &fall, t.ambient_rate[di], laser_total, prefix, lam.get() + ri * Ks);
+        // without frames only pixel B's neighbours read p (pixel A's read lambda); sections keep one type
+        if (own_probs && (frames || m.types[params[ri].type].single_avalanche))
+          probabilities(lam.get() + ri * Ks, Ks, own_p.get() + ri * Ks, frames ? own_q.get() + ri * Ks : q_unused.data());
       }
   });
 
@@ -381,36 +388,54 @@ SensorTile SensorModel::process(const TransientTile& t) const {
     KernelScratch s;
     s.reserve(Ks);
     std::vector<double> eff(Ks), pe(Ks), qe(Ks);
-    for (int y = rows.begin(); y < rows.end(); ++y)
+    // One row's results pixel-major ([x K + k]), written to the k-major outputs after the row in blocks of
+    // kKB positions: contiguous runs along x instead of K strided stores per pixel.
+    const size_t rw = static_cast<size_t>(rect.width);
+    std::vector<float> row_exp(rw * Ks);
+    std::vector<uint16_t> row_cnt(frames ? 0 : rw * Ks);
+    for (int y = rows.begin(); y < rows.end(); ++y) {
       for (int x = rect.x0; x < rect.x1(); ++x) {
         const auto ri = static_cast<size_t>(region.index(x, y));
-        const auto oi = static_cast<size_t>(rect.index(x, y));
+        const auto xi = static_cast<size_t>(x - rect.x0);
+        float* ex = row_exp.data() + xi * Ks;
         const TypeInfo& ty = m.types[params[ri].type];
         int nb[4];
         const int nnb = ty.crosstalk > 0.0 ? neighbours(x, y, nb) : 0;
-        const double* l = lam.data() + ri * Ks;
+        const double* l = lam.get() + ri * Ks;
         if (nnb > 0) {
           const double* nbv[4];
           for (int i = 0; i < nnb; ++i)
-            nbv[i] = (ty.single_avalanche ? own_p.data() : lam.data()) + nb_index(x, y, nb[i]) * Ks;
+            nbv[i] = (ty.single_avalanche ? own_p.get() : lam.get()) + nb_index(x, y, nb[i]) * Ks;
           crosstalk_rates(l, Ks, nbv, nnb, ty.crosstalk, ty.single_avalanche, eff.data());
           l = eff.data();
         }
         if (!frames) {
           binomial_counts(l, Ks, counts_key, pixel_index(x, y), *m.binom, s);
+          uint16_t* cn = row_cnt.data() + xi * Ks;
           for (size_t k = 0; k < Ks; ++k) {
-            out.expected[k * n + oi] = static_cast<float>(static_cast<double>(N) * s.p[k]);
-            out.counts[k * n + oi] = static_cast<uint16_t>(s.x[k]);
+            ex[k] = static_cast<float>(static_cast<double>(N) * s.p[k]);
+            cn[k] = static_cast<uint16_t>(s.x[k]);
           }
         } else {
-          const double* p = own_p.data() + ri * Ks;
+          const double* p = own_p.get() + ri * Ks;
           if (nnb > 0) {
             probabilities(l, Ks, pe.data(), qe.data());
             p = pe.data();
           }
-          for (size_t k = 0; k < Ks; ++k) out.expected[k * n + oi] = static_cast<float>(static_cast<double>(N) * p[k]);
+          for (size_t k = 0; k < Ks; ++k) ex[k] = static_cast<float>(static_cast<double>(N) * p[k]);
         }
       }
+      const size_t o0 = static_cast<size_t>(rect.index(rect.x0, y));
+      constexpr size_t kKB = 16;
+      for (size_t k0 = 0; k0 < Ks; k0 += kKB) {
+        const size_t k1 = std::min(Ks, k0 + kKB);
+        for (size_t xi = 0; xi < rw; ++xi)
+          for (size_t k = k0; k < k1; ++k) out.expected[k * n + o0 + xi] = row_exp[xi * Ks + k];
+        if (!frames)
+          for (size_t xi = 0; xi < rw; ++xi)
+            for (size_t k = k0; k < k1; ++k) out.counts[k * n + o0 + xi] = row_cnt[xi * Ks + k];
+      }
+    }
   });
 
   if (frames) {

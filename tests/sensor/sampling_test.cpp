@@ -264,6 +264,40 @@ TEST(Sampling, BatchBitsEqualPerStreamBits) {
   }
 }
 
+// The batch settles the dense pixels' top-byte ties with one vectorised Philox per group: every frame
+// equals dense_bit_reference (one Rng::block per tie), for frame counts that are not multiples of 64 or 256
+// (several chunks) and both sides (a = p and a = q); the test counts the ties it covered.
+TEST(Sampling, BatchSettlesTiesLikeTheReference) {
+  for (const uint32_t n : {100u, 300u, 1000u}) {
+    const BinomialSampler sampler(n);
+    const size_t nw = (n + 63) / 64, count = 150;
+    std::vector<uint64_t> ids(count);
+    std::vector<Prob> pr(count);
+    for (size_t i = 0; i < count; ++i) {
+      ids[i] = 1000003 * i + 17;
+      pr[i] = prob_from_lambda(0.07 + 0.0175 * static_cast<double>(i));  // p from 0.068 to 0.93: dense
+    }
+    std::vector<uint64_t> batch(count * nw);
+    sample_bits_batch(9, 5, ids.data(), count, sampler, pr.data(), batch.data());
+    size_t ties = 0;
+    for (size_t i = 0; i < count; ++i) {
+      ASSERT_FALSE(bits_are_sparse(pr[i]));
+      const Rng stream(9, RngKind::Frames, ids[i], 5);
+      const bool invert = pr[i].p > pr[i].q;
+      const uint64_t T = probability_threshold(invert ? pr[i].q : pr[i].p);
+      for (uint32_t f = 0; f < n; ++f) {
+        const bool bit = dense_bit_reference(stream, n, T, f) != invert;
+        ASSERT_EQ(((batch[i * nw + f / 64] >> (f % 64)) & 1) != 0, bit) << "n " << n << " pixel " << i << " frame " << f;
+        const uint32_t r = f % 256;
+        const auto blk = stream.block(16 * (f / 256) + (r % 64) / 4);
+        ties += static_cast<uint8_t>(blk[r / 64] >> (8 * (r % 4))) == static_cast<uint8_t>(T >> 56);
+      }
+      for (uint32_t f = n; f < nw * 64; ++f) ASSERT_EQ((batch[i * nw + f / 64] >> (f % 64)) & 1, 0u);
+    }
+    EXPECT_GT(ties, count * n / 512);  // about count n / 256 ties were settled
+  }
+}
+
 // Vector exp / expm1 / log1p are within a few ulp: p and q from probabilities() against long double.
 TEST(Sampling, VectorProbabilitiesAreAccurate) {
   std::vector<double> lam;
