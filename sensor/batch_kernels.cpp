@@ -49,20 +49,32 @@ void CrosstalkRates(const double* HWY_RESTRICT lam, size_t K, const double* cons
   const hn::ScalableTag<double> d;
   const size_t L = hn::Lanes(d);
   const auto vxt = hn::Set(d, xt), one = hn::Set(d, 1.0), inf = hn::Set(d, HUGE_VAL);
+  const auto half = hn::Set(d, 0.5);
   auto rate = [&](const double* l, const double* const* n, double* o, size_t count) {
     for (size_t k = 0; k < count; k += L) {
       auto v = hn::LoadU(d, l + k);
-      for (int i = 0; i < nnb; ++i) {
-        const auto x = hn::LoadU(d, n[i] + k);
-        if (!single_avalanche) {
-          v = hn::MulAdd(vxt, x, v);
-        } else {
-          // -log1p(-xt p): a neighbour that avalanches at most once per frame fires this pixel with xt
-          const auto y = hn::Mul(vxt, x);
-          const auto t = hn::Neg(hn::Log1p(d, hn::Neg(y)));
-          v = hn::Add(v, hn::IfThenElse(hn::Ge(y, one), inf, t));
-        }
+      if (!single_avalanche) {
+        for (int i = 0; i < nnb; ++i) v = hn::MulAdd(vxt, hn::LoadU(d, n[i] + k), v);
+        hn::StoreU(v, d, o + k);
+        continue;
       }
+      // Pixel B: a neighbour that avalanches at most once per frame fires this pixel with y_i = xt p_i, so
+      // the rate gains -log prod_i (1 - y_i), with one logarithm for all neighbours: s = 1 - prod (1 - y_i)
+      // by s <- s + y (1 - s) (all terms >= 0, a few ulp relative to s) and P = prod (1 - y_i) (1 - y is
+      // exact for y >= 1/2). -log1p(-s) while s < 1/2, else -log(P) (P <= 1/2 then, so its relative error
+      // is a small absolute error of the logarithm). Any y >= 1 gives infinity.
+      auto sv = hn::Zero(d), P = one;
+      auto sure = hn::Lt(one, hn::Zero(d));  // all false
+      for (int i = 0; i < nnb; ++i) {
+        const auto y = hn::Mul(vxt, hn::LoadU(d, n[i] + k));
+        sure = hn::Or(sure, hn::Ge(y, one));
+        sv = hn::MulAdd(y, hn::Sub(one, sv), sv);
+        P = hn::Mul(P, hn::Sub(one, y));
+      }
+      const auto low = hn::Lt(sv, half);
+      auto t = hn::Neg(hn::Log1p(d, hn::Neg(hn::IfThenElse(low, sv, hn::Zero(d)))));
+      if (!hn::AllTrue(d, low)) t = hn::IfThenElse(low, t, hn::Neg(hn::Log(d, hn::IfThenElse(low, one, P))));
+      v = hn::Add(v, hn::IfThenElse(sure, inf, t));
       hn::StoreU(v, d, o + k);
     }
   };
@@ -180,20 +192,27 @@ void BinomialCounts(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t 
     if (hn::AllFalse(d, undecided)) continue;
     // log b: -lambda exactly when b = q; log1p(-q) when b = p (log(p) would lose q's digits)
     const auto log_b = hn::AllTrue(d, small) ? nl : hn::IfThenElse(small, nl, hn::Log1p(d, hn::Neg(a)));
-    const auto nlb = hn::Mul(vN, log_b);
-    const auto S0 = hn::Neg(hn::Expm1(d, nlb));
-    const auto x = hn::Mul(S0, two64);
-    const auto thr = Threshold(d, S0);
-    // S0 = 1 (saturated in double) is left to the scalar search, which uses the same threshold rule
-    const auto need = hn::Or(hn::Or(hn::RebindMask(d, hn::Lt(U, thr)), mode), hn::Ge(x, two64));
-    if (HWY_LIKELY(hn::AllFalse(d, need))) continue;
-    const auto P0 = hn::IfThenElse(hn::Lt(S0, half), hn::Sub(one, S0), hn::Exp(d, nlb));
+    // P(X > 0) and P(X = 0) for the lanes that search from 0; not computed when every lane searches from
+    // the mode.
+    const bool all_mode = hn::AllTrue(d, mode);
+    auto need = mode;
+    auto S0 = hn::Zero(d), P0 = hn::Zero(d);
+    if (!all_mode) {
+      const auto nlb = hn::Mul(vN, log_b);
+      S0 = hn::Neg(hn::Expm1(d, nlb));
+      const auto x = hn::Mul(S0, two64);
+      const auto thr = Threshold(d, S0);
+      // S0 = 1 (saturated in double) is left to the scalar search, which uses the same threshold rule
+      need = hn::Or(hn::Or(hn::RebindMask(d, hn::Lt(U, thr)), mode), hn::Ge(x, two64));
+      if (HWY_LIKELY(hn::AllFalse(d, need))) continue;
+      P0 = hn::IfThenElse(hn::Lt(S0, half), hn::Sub(one, S0), hn::Exp(d, nlb));
+    }
     const auto r = hn::Div(a, b);
     auto xs = hn::Zero(d);  // the count of the rarer outcome, as BinomialSampler's searches find it
     // Sequential search from 0 (n a < 16), as BinomialSampler::search_from_zero, on all lanes at once. The
     // sums are updated on every lane (a finished lane's values are no longer read), so the only loop-carried
     // chains are pmf and S; `done` records where each lane's scalar loop would have stopped.
-    {
+    if (!all_mode) {
       auto done = hn::Not(hn::AndNot(mode, need));
       auto S = S0, pmf = P0;
       for (uint32_t it = 0; !hn::AllTrue(d, done); ++it) {

@@ -203,6 +203,31 @@ TEST(Sampling, CountsKernelMatchesScalarSampler) {
 
 // The kernel's counts are Binomial(n, p): chi-square where the X = 0 decision (one comparison of U with
 // floor(P(X > 0) 2^64)) carries the distribution (n p from 0.05 to 3), through both searches and mirrored.
+// Whole vectors of gates that all search from the mode (the kernel then skips P(X > 0) and P(X = 0)), and
+// vectors that mix both searches: the kernel equals the scalar sampler draw for draw.
+TEST(Sampling, CountsKernelAllModeVectorsMatchScalarSampler) {
+  const uint64_t seed = 41;
+  const Rng base(seed, RngKind::Counts, 0, 0);
+  const uint32_t key[2] = {base.key().v[0], base.key().v[1]};
+  const BinomialSampler sampler(255);
+  KernelScratch s;
+  size_t mismatches = 0, draws = 0;
+  for (uint64_t pixel = 0; pixel < 300; ++pixel) {
+    std::vector<double> lam(64);
+    for (size_t k = 0; k < lam.size(); ++k)  // N p from 17 to 230 for k < 48, then down to N p ~ 1
+      lam[k] = k < 48 ? 0.07 + 0.05 * static_cast<double>((k + pixel) % 48) : 0.004 * static_cast<double>(k - 47);
+    std::vector<double> p(lam.size()), q(lam.size());
+    probabilities(lam.data(), lam.size(), p.data(), q.data());
+    binomial_counts(lam.data(), lam.size(), key, pixel, sampler, s);
+    for (size_t k = 0; k < lam.size(); ++k) {
+      Rng rng(seed, RngKind::Counts, pixel, k);
+      mismatches += s.x[k] != sampler.sample(rng, {p[k], q[k], -lam[k]});
+      ++draws;
+    }
+  }
+  EXPECT_EQ(mismatches, 0u) << draws;
+}
+
 TEST(Sampling, CountsKernelChiSquare) {
   const Rng base(123, RngKind::Counts, 0, 0);
   const uint32_t key[2] = {base.key().v[0], base.key().v[1]};
@@ -296,6 +321,54 @@ TEST(Sampling, BatchSettlesTiesLikeTheReference) {
     }
     EXPECT_GT(ties, count * n / 512);  // about count n / 256 ties were settled
   }
+}
+
+// Pixel B's crosstalk-corrected rate takes one logarithm for all neighbours (-log of prod (1 - xt p_i));
+// against the sum of the four -log1p(-xt p_i) in long double it stays within 8 ulp, from p = 1e-17 to
+// p = 1 and xt up to 1 (xt p = 1 gives infinity); pixel A's is lam + xt sum_i lambda_i.
+TEST(Sampling, CrosstalkRatesAreAccurate) {
+  std::vector<double> ps;
+  for (double e = -17.0; e <= 0.0; e += 0.37) ps.push_back(std::pow(10.0, e));
+  ps.push_back(0.5);
+  ps.push_back(0.999);
+  ps.push_back(1.0);
+  const size_t K = ps.size() * 3;  // not a multiple of the vector length: the tail path as well
+  double worst = 0.0;
+  for (const double xt : {0.0039, 0.3, 1.0})
+    for (int nnb = 1; nnb <= 4; ++nnb) {
+      std::vector<double> lam(K), out(K), nb[4];
+      for (int i = 0; i < 4; ++i) {
+        nb[i].resize(K);
+        for (size_t k = 0; k < K; ++k) nb[i][k] = ps[(k * (2 * i + 1) + static_cast<size_t>(i)) % ps.size()];
+      }
+      for (size_t k = 0; k < K; ++k) lam[k] = 1e-3 * static_cast<double>(k % 5);
+      const double* nbp[4] = {nb[0].data(), nb[1].data(), nb[2].data(), nb[3].data()};
+      crosstalk_rates(lam.data(), K, nbp, nnb, xt, true, out.data());
+      for (size_t k = 0; k < K; ++k) {
+        long double ref = lam[k];
+        bool infinite = false;
+        for (int i = 0; i < nnb; ++i) {
+          const double y = xt * nb[i][k];  // the product as the kernel forms it
+          if (y >= 1.0) infinite = true;
+          else ref -= std::log1p(-static_cast<long double>(y));
+        }
+        if (infinite) {
+          ASSERT_TRUE(std::isinf(out[k])) << k;
+          continue;
+        }
+        const double r = static_cast<double>(ref);
+        const double ulp = std::nextafter(r, HUGE_VAL) - r;
+        worst = std::max(worst, static_cast<double>(std::fabs(static_cast<long double>(out[k]) - ref)) / ulp);
+      }
+      crosstalk_rates(lam.data(), K, nbp, nnb, xt, false, out.data());
+      for (size_t k = 0; k < K; ++k) {
+        double ref = lam[k];
+        for (int i = 0; i < nnb; ++i) ref = std::fma(xt, nb[i][k], ref);
+        ASSERT_LE(std::fabs(out[k] - ref), 2.0 * (std::nextafter(ref, HUGE_VAL) - ref)) << k;  // FMA or not
+      }
+    }
+  EXPECT_LE(worst, 8.0);
+  std::printf("pixel B crosstalk rates: within %.2f ulp\n", worst);
 }
 
 // Vector exp / expm1 / log1p are within a few ulp: p and q from probabilities() against long double.
