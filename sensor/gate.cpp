@@ -442,7 +442,23 @@ void accumulate_edge_response(const TransientPrefix& p, const EdgeBins& e, doubl
     const double b = b0 + step * k;
     while (rb < R && static_cast<double>(runs[rb].e) <= b + u_first) ++rb;
     if (rb == R || static_cast<double>(runs[rb].s) >= b + u_last) {
-      out[k] += sign * (rb > 0 ? runs[rb - 1].G1e * cu : 0.0);
+      // The fast path holds, with the same rb, up to the first k' whose b' + u_M passes the start of run rb
+      // (the same test, monotone in k'; before that b' + u_0 <= b' + u_M <= s < e, so rb stays): found by
+      // bisection, then one constant added over the whole range.
+      int k_end = K;
+      if (rb < R) {
+        const double s = static_cast<double>(runs[rb].s);
+        int lo = k + 1, hi = K;  // every k' < lo passes; the first failing k' lies in [lo, hi]
+        while (lo < hi) {
+          const int mid = lo + (hi - lo) / 2;
+          if (s >= b0 + step * mid + u_last) lo = mid + 1;
+          else hi = mid;
+        }
+        k_end = lo;
+      }
+      const double v = sign * (rb > 0 ? runs[rb - 1].G1e * cu : 0.0);
+      for (int j = k; j < k_end; ++j) out[j] += v;
+      k = k_end - 1;
       continue;
     }
     // Runs before rb end before b + u_0: all their knot pointers are 0 and they add nothing, so the walk

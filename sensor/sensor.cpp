@@ -429,11 +429,15 @@ SensorTile SensorModel::process(const TransientTile& t) const {
       constexpr size_t kKB = 16;
       for (size_t k0 = 0; k0 < Ks; k0 += kKB) {
         const size_t k1 = std::min(Ks, k0 + kKB);
-        for (size_t xi = 0; xi < rw; ++xi)
-          for (size_t k = k0; k < k1; ++k) out.expected[k * n + o0 + xi] = row_exp[xi * Ks + k];
+        for (size_t k = k0; k < k1; ++k) {
+          float* e = out.expected.data() + k * n + o0;
+          for (size_t xi = 0; xi < rw; ++xi) e[xi] = row_exp[xi * Ks + k];
+        }
         if (!frames)
-          for (size_t xi = 0; xi < rw; ++xi)
-            for (size_t k = k0; k < k1; ++k) out.counts[k * n + o0 + xi] = row_cnt[xi * Ks + k];
+          for (size_t k = k0; k < k1; ++k) {
+            uint16_t* c = out.counts.data() + k * n + o0;
+            for (size_t xi = 0; xi < rw; ++xi) c[xi] = row_cnt[xi * Ks + k];
+          }
       }
     }
   });
