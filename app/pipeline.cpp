@@ -283,7 +283,7 @@ RunResult run(const RunOptions& options) {
   // Dual exposure splits the frames between its two exposures.
   const int frames_per_k = sweep ? frames : (cfg.acquisition.intensity.exposure == "dual" ? frames / 2 : frames);
   const bool counts_u8 = frames_per_k <= 255;
-  std::unique_ptr<NpyWriter> expected_npy, counts_npy, frames_npy, transient_npy;
+  std::unique_ptr<NpyWriter> expected_npy, counts_npy, frames_npy, transient_npy, indirect_npy;
   if (cfg.outputs.expected_counts) {
     expected_npy = std::make_unique<NpyWriter>(staging.path("expected_counts.npy"), NpyWriter::Dtype::F32, std::vector<int64_t>{K64, H64, W64});
     files.push_back("expected_counts.npy");
@@ -303,6 +303,11 @@ RunResult run(const RunOptions& options) {
     transient_npy = std::make_unique<NpyWriter>(staging.path("transient.npy"), NpyWriter::Dtype::F32,
                                                 std::vector<int64_t>{int64_t(tcrop.height), int64_t(tcrop.width), axis.bins});
     files.push_back("transient.npy");
+    if (cfg.render.split_direct_indirect) {
+      indirect_npy = std::make_unique<NpyWriter>(staging.path("transient_indirect.npy"), NpyWriter::Dtype::F32,
+                                                 std::vector<int64_t>{int64_t(tcrop.height), int64_t(tcrop.width), axis.bins});
+      files.push_back("transient_indirect.npy");
+    }
   }
 
   const std::vector<PixelRect> local_tiles = make_tiles(W, H, cfg.render.tile_size);
@@ -378,6 +383,8 @@ RunResult run(const RunOptions& options) {
       const int y0 = std::max(rect.y0, tcrop.y0), y1 = std::min(rect.y1(), tcrop.y1());
       if (x1 > x0 && y1 > y0)
         transient_npy->write_hwt({x0, y0, x1 - x0, y1 - y0}, t.data_rect, tcrop.x0, tcrop.y0, t.transient.data());
+      if (indirect_npy && x1 > x0 && y1 > y0)
+        indirect_npy->write_hwt({x0, y0, x1 - x0, y1 - y0}, t.data_rect, tcrop.x0, tcrop.y0, t.transient_indirect.data());
     }
     if (!sweep) {
       for (int y = rect.y0; y < rect.y1(); ++y)
@@ -481,7 +488,12 @@ RunResult run(const RunOptions& options) {
   meta["photons_per_pulse_emitted"] = renderer.photons_per_pulse();
   meta["time_axis"] = ojson::parse(axis_json(axis).dump());
   if (cfg.outputs.transient)
-    meta["transient"] = {{"crop_in_sensor", {tcrop.x0, tcrop.y0, tcrop.width, tcrop.height}}, {"shape", {tcrop.height, tcrop.width, axis.bins}}};
+    meta["transient"] = {{"crop_in_sensor", {tcrop.x0, tcrop.y0, tcrop.width, tcrop.height}},
+                         {"shape", {tcrop.height, tcrop.width, axis.bins}},
+                         {"indirect", cfg.render.split_direct_indirect
+                                          ? "transient_indirect.npy: the part of transient.npy from paths with two or more "
+                                            "scattering vertices (docs/render.md); direct = transient - transient_indirect"
+                                          : "not split (render.split_direct_indirect is false)"}};
   meta["laser_photons_per_pulse"] = {{"total_all_pixels", laser_total},
                                      {"outside_time_window", oow_total},
                                      {"outside_fraction", laser_total > 0 ? oow_total / laser_total : 0.0}};
@@ -503,6 +515,7 @@ RunResult run(const RunOptions& options) {
   if (counts_npy) counts_npy->commit();
   if (frames_npy) frames_npy->commit();
   if (transient_npy) transient_npy->commit();
+  if (indirect_npy) indirect_npy->commit();
   staging.publish(files);
   std::fprintf(stderr, "spadgen: wrote %zu files to %s in %.1f s\n", files.size(), out.string().c_str(), progress.seconds());
   return {out.string(), files};

@@ -122,6 +122,23 @@ void expect_same_outputs(const fs::path& a, const fs::path& b) {
   EXPECT_GE(compared, 10u);
 }
 
+TEST_F(App, IndirectTransientIsANonEmptyPartOfTheTotalInEveryBin) {
+  ASSERT_EQ(sh("run " + kSmall + " --set render.split_direct_indirect=true --set outputs.transient_crop=[500,236,8,8] -o " +
+               (dir_ / "out").string()).code, 0);
+  const Npy total = read_npy(dir_ / "out/transient.npy"), indirect = read_npy(dir_ / "out/transient_indirect.npy");
+  ASSERT_EQ(total.shape, indirect.shape);
+  EXPECT_EQ(total.shape, (std::vector<int64_t>{8, 8, total.shape[2]}));
+  const std::vector<double> t = values(total), i = values(indirect);
+  double sum_t = 0, sum_i = 0;
+  for (size_t k = 0; k < t.size(); ++k) {
+    ASSERT_GE(i[k], 0.0);
+    ASSERT_LE(i[k], t[k] * (1 + 1e-6) + 1e-30) << "the indirect part exceeds the total in bin " << k;
+    sum_t += t[k], sum_i += i[k];
+  }
+  EXPECT_GT(sum_i, 0.0);
+  EXPECT_LT(sum_i, sum_t);
+}
+
 TEST_F(App, OutputsAreBitIdenticalForAnyThreadCountAndTileSize) {
   ASSERT_EQ(sh("run " + kSmall + " --threads 1 --set render.tile_size_px=8 -o " + (dir_ / "a").string()).code, 0);
   ASSERT_EQ(sh("run " + kSmall + " --threads 2 --set render.tile_size_px=16 -o " + (dir_ / "b").string()).code, 0);
