@@ -9,6 +9,7 @@
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -168,35 +169,69 @@ const std::vector<render::RayRecord>& recorded_rays() {
   return rays;
 }
 
+// One pass of raw Embree over the recorded rays, on all threads.
+void replay(RTCScene scene, const std::vector<render::RayRecord>& rays) {
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, rays.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
+    unsigned hits = 0;
+    for (size_t i = r.begin(); i < r.end(); ++i) {
+      const render::RayRecord& q = rays[i];
+      RTCIntersectContext ctx;
+      rtcInitIntersectContext(&ctx);
+      if (q.occlusion) {
+        RTCRay ray{q.origin.x, q.origin.y, q.origin.z, q.tnear, q.dir.x, q.dir.y, q.dir.z, 0.0f, q.tfar, ~0u, 0, 0};
+        rtcOccluded1(scene, &ctx, &ray);
+        hits += ray.tfar < 0.0f;
+      } else {
+        RTCRayHit rh{};
+        rh.ray = {q.origin.x, q.origin.y, q.origin.z, q.tnear, q.dir.x, q.dir.y, q.dir.z, 0.0f, q.tfar, ~0u, 0, 0};
+        rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+        rtcIntersect1(scene, &ctx, &rh);
+        hits += rh.hit.geomID != RTC_INVALID_GEOMETRY_ID;
+      }
+    }
+    benchmark::DoNotOptimize(hits);
+  });
+}
+
 void BM_RawEmbreeReplay(benchmark::State& state) {
   const std::vector<render::RayRecord>& rays = recorded_rays();
   const render::EmbreeScene embree(setup().scene);  // the same geometry, built the same way
-  const RTCScene scene = embree.handle();
-  for (auto _ : state) {
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, rays.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
-      unsigned hits = 0;
-      for (size_t i = r.begin(); i < r.end(); ++i) {
-        const render::RayRecord& q = rays[i];
-        RTCIntersectContext ctx;
-        rtcInitIntersectContext(&ctx);
-        if (q.occlusion) {
-          RTCRay ray{q.origin.x, q.origin.y, q.origin.z, q.tnear, q.dir.x, q.dir.y, q.dir.z, 0.0f, q.tfar, ~0u, 0, 0};
-          rtcOccluded1(scene, &ctx, &ray);
-          hits += ray.tfar < 0.0f;
-        } else {
-          RTCRayHit rh{};
-          rh.ray = {q.origin.x, q.origin.y, q.origin.z, q.tnear, q.dir.x, q.dir.y, q.dir.z, 0.0f, q.tfar, ~0u, 0, 0};
-          rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-          rtcIntersect1(scene, &ctx, &rh);
-          hits += rh.hit.geomID != RTC_INVALID_GEOMETRY_ID;
-        }
-      }
-      benchmark::DoNotOptimize(hits);
-    });
-  }
+  for (auto _ : state) replay(embree.handle(), rays);
   state.counters["rays_per_s"] =
       benchmark::Counter(double(rays.size()) * double(state.iterations()), benchmark::Counter::kIsRate);
   state.counters["rays_per_image"] = double(rays.size());
+}
+
+// The ratio under a changing machine load: integrator images (no transient) and raw replays alternate,
+// and each adjacent pair gives one ratio of rays per second; the median of the pairs is printed.
+void paired_ratio(int pairs) {
+  Setup& s = setup();
+  RunConfig c = s.config;
+  c.render.samples_per_pixel = 1;
+  const render::Renderer r(s.scene, c);
+  const render::EmbreeScene embree(s.scene);
+  const std::vector<render::RayRecord>& rays = recorded_rays();
+  const PixelRect all{0, 0, c.camera.width_px, c.camera.height_px};
+  std::vector<double> ratios;
+  double t_int_min = 1e30, t_raw_min = 1e30;
+  uint64_t int_rays = 0;
+  for (int i = 0; i < pairs; ++i) {
+    auto t0 = std::chrono::steady_clock::now();
+    const render::RenderStats st = render_image(r, c, TimeAxis{}, all);
+    auto t1 = std::chrono::steady_clock::now();
+    replay(embree.handle(), rays);
+    auto t2 = std::chrono::steady_clock::now();
+    int_rays = st.camera_rays + st.shadow_rays;
+    const double ti = std::chrono::duration<double>(t1 - t0).count(), tr = std::chrono::duration<double>(t2 - t1).count();
+    t_int_min = std::min(t_int_min, ti);
+    t_raw_min = std::min(t_raw_min, tr);
+    ratios.push_back((double(int_rays) / ti) / (double(rays.size()) / tr));
+  }
+  std::sort(ratios.begin(), ratios.end());
+  std::printf("\npaired integrator/raw ratio over %d alternating pairs: median %.3f (min %.3f, max %.3f); "
+              "fastest integrator %.0f ms (%.2f Mrays/s), fastest raw replay %.0f ms (%.2f Mrays/s)\n",
+              pairs, ratios[ratios.size() / 2], ratios.front(), ratios.back(), t_int_min * 1e3,
+              double(int_rays) / t_int_min * 1e-6, t_raw_min * 1e3, double(rays.size()) / t_raw_min * 1e-6);
 }
 
 // Cost against error on a 128 x 128 crop where the plate covers the sphere: render time and the RMS
@@ -334,6 +369,7 @@ int main(int argc, char** argv) {
   std::printf("integrator rays recorded for the replay: %zu\n", recorded_rays().size());
   benchmark::RunSpecifiedBenchmarks();
   benchmark::Shutdown();
+  paired_ratio(9);
   if (studies) {
     samples_vs_error();
     bin_width_vs_error();

@@ -46,9 +46,11 @@ float fresnel_dielectric(float cos_i, float eta) {
   const float sin2_t = (1.0f - cos_i * cos_i) / (eta * eta);
   if (sin2_t >= 1.0f) return 1.0f;
   const float cos_t = std::sqrt(1.0f - sin2_t);
-  const float rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
-  const float rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
-  return 0.5f * (rs * rs + rp * rp);
+  // rs = (ci - eta ct) / (ci + eta ct), rp = (eta ci - ct) / (eta ci + ct), over one division.
+  const float a = cos_i - eta * cos_t, b = cos_i + eta * cos_t;
+  const float c = eta * cos_i - cos_t, d = eta * cos_i + cos_t;
+  const float bd = b * d;
+  return bd > 0.0f ? 0.5f * (a * a * d * d + c * c * b * b) / (bd * bd) : 1.0f;
 }
 
 Bsdf::Bsdf(const MaterialPoint& m, const glm::vec3& n_shading, const glm::vec3& n_geometric,
@@ -66,11 +68,11 @@ Bsdf::Bsdf(const MaterialPoint& m, const glm::vec3& n_shading, const glm::vec3& 
   const bool volume = m_.transmission > 0.0f && !m_.thin_walled;
   eta_ = volume ? (entering ? m_.ior : 1.0f / m_.ior) : 1.0f;
   eta_fresnel_ = volume ? eta_ : m_.ior;
-  fresnel_o_ = fresnel_dielectric(wo_.z, eta_fresnel_);
-  if (m_.lambertian) {
+  if (m_.lambertian) {  // no Fresnel layer (fresnel_o_ is not used)
     diffuse_weight_ = max_of(m_.base);
     return;
   }
+  fresnel_o_ = fresnel_dielectric(wo_.z, eta_fresnel_);
   if (!m_.smooth()) g1_o_ = ggx_g1(m_.alpha, wo_.z);
   const float dielectric = 1.0f - m_.metallic;
   specular_weight_ = dielectric * fresnel_o_ + (m_.metallic > 0.0f ? m_.metallic * max_of(schlick(m_.base, wo_.z)) : 0.0f);
@@ -156,9 +158,11 @@ BsdfSample Bsdf::sample(Uniform3 u) const {
     if (wi.z <= 0.0f) return s;
     s.wi = to_world(wi);
     if (glm::dot(s.wi, ng_) <= 0.0f) return s;
-    const float pdf = ggx_d(m_.alpha, h.z) * h.z / (4.0f * c);
-    if (!(pdf > 0.0f)) return s;
-    s.weight = specular_f(wo_, wi) * (wi.z / (p * pdf));
+    if (!(h.z > 0.0f)) return s;
+    // f cos / pdf with pdf = D h.z / (4 c): the D cancels, F G1(wo) G1(wi) c / (wo.z h.z).
+    Spec f((1.0f - m_.metallic) * fresnel_dielectric(c, eta_fresnel_));
+    if (m_.metallic > 0.0f) f += m_.metallic * schlick(m_.base, c);
+    s.weight = f * (g1_o_ * ggx_g1(m_.alpha, wi.z) * c / (wo_.z * h.z * p));
     return s;
   }
 
@@ -184,26 +188,29 @@ BsdfSample Bsdf::sample(Uniform3 u) const {
   const glm::vec3 h = sample_ggx(m_.alpha, u.b, u.c);
   const float c = glm::dot(wo_, h);
   if (c <= 0.0f) return s;
+  if (!(h.z > 0.0f)) return s;
+  // f |cos| / pdf in closed form (D and the Jacobian cancel), as transmission_f over the pdf:
+  //  thin-walled (the reflection lobe mirrored; pdf D h.z / (4 c)): (1 - F(c)) G1(wo) G1(wr) c / (wo.z h.z);
+  //  volume (Walter et al.; pdf D h.z eta^2 |wi.h| / (c + eta wi.h)^2): (1 - F(c)) G1(wo) G1(wi) c /
+  //  (wo.z h.z eta^2), the 1 / eta^2 being the radiance's compression across the interface.
   glm::vec3 wi;
-  float pdf;
+  float g;
   if (m_.thin_walled) {
     const glm::vec3 wr = 2.0f * c * h - wo_;
     if (wr.z <= 0.0f) return s;
     wi = glm::vec3(wr.x, wr.y, -wr.z);
-    pdf = ggx_d(m_.alpha, h.z) * h.z / (4.0f * c);
+    g = (1.0f - fresnel_dielectric(c, m_.ior)) * ggx_g1(m_.alpha, wr.z);
   } else {
     const float sin2_t = (1.0f - c * c) / (eta_ * eta_);
     if (sin2_t >= 1.0f) return s;
     const float cos_t = std::sqrt(1.0f - sin2_t);
     wi = -wo_ / eta_ + (c / eta_ - cos_t) * h;
-    if (wi.z >= 0.0f) return s;
-    const float ci = glm::dot(wi, h);
-    const float denom = c + eta_ * ci;
-    pdf = ggx_d(m_.alpha, h.z) * h.z * std::fabs(eta_ * eta_ * ci) / (denom * denom);
+    if (wi.z >= 0.0f || glm::dot(wi, h) >= 0.0f) return s;
+    g = (1.0f - fresnel_dielectric(c, eta_)) * ggx_g1(m_.alpha, wi.z) / (eta_ * eta_);
   }
   s.wi = to_world(wi);
-  if (glm::dot(s.wi, ng_) >= 0.0f || !(pdf > 0.0f)) return s;
-  s.weight = transmission_f(wo_, wi) * (std::fabs(wi.z) / (p * pdf));
+  if (glm::dot(s.wi, ng_) >= 0.0f) return s;
+  s.weight = tint * (g * g1_o_ * c / (wo_.z * h.z * p));
   return s;
 }
 

@@ -137,6 +137,40 @@ bool EmbreeScene::intersect(const glm::vec3& o, const glm::vec3& d, float tnear,
   return true;
 }
 
+void EmbreeScene::intersect_packet(const bool* valid, const glm::vec3& o, const glm::vec3* dirs, float tnear,
+                                   float tfar, RayHit* hit, bool* found) const {
+  alignas(64) int lanes[kPacket];
+  alignas(64) RTCRayHit16 rh;
+  for (int i = 0; i < kPacket; ++i) {
+    lanes[i] = valid[i] ? -1 : 0;
+    rh.ray.org_x[i] = o.x, rh.ray.org_y[i] = o.y, rh.ray.org_z[i] = o.z;
+    rh.ray.dir_x[i] = dirs[i].x, rh.ray.dir_y[i] = dirs[i].y, rh.ray.dir_z[i] = dirs[i].z;
+    rh.ray.tnear[i] = tnear;
+    rh.ray.tfar[i] = tfar;
+    rh.ray.time[i] = 0.0f;
+    rh.ray.mask[i] = 0xFFFFFFFFu;
+    rh.ray.id[i] = static_cast<unsigned>(i);
+    rh.ray.flags[i] = 0;
+    rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
+    // The replay compares against rtcIntersect1 on exactly these rays.
+    if (t_ray_sink && valid[i]) [[unlikely]] t_ray_sink->push_back({o, dirs[i], tnear, tfar, false});
+  }
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  rtcIntersect16(lanes, scene_, &context, &rh);
+  for (int i = 0; i < kPacket; ++i) {
+    found[i] = valid[i] && rh.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID;
+    if (!found[i]) continue;
+    hit[i].t = rh.ray.tfar[i];
+    hit[i].mesh = rh.hit.geomID[i];
+    hit[i].triangle = rh.hit.primID[i];
+    hit[i].u = rh.hit.u[i];
+    hit[i].v = rh.hit.v[i];
+  }
+}
+
 bool EmbreeScene::occluded(const glm::vec3& o, const glm::vec3& d, float tnear, float tfar) const {
   if (t_ray_sink) [[unlikely]] t_ray_sink->push_back({o, d, tnear, tfar, true});
   RTCIntersectContext context;

@@ -133,24 +133,63 @@ Spec Integrator::shadow_transmittance(const glm::vec3& origin, const glm::vec3& 
   }
 }
 
-PixelTotals Integrator::render_pixel(int x, int y, const TimeAxis& axis, double* bins, RayCounts* rays,
-                                     double* indirect_bins) const {
+void Integrator::trace_camera_block(int x, int y, CameraBlock* block, RayCounts* rays) const {
+  constexpr int kPacket = EmbreeScene::kPacket;
+  const int spp = config_.render.samples_per_pixel;
+  block->x0 = x - x % kPacket;
+  block->y = y;
+  block->lanes = std::min(kPacket, camera_.width() - block->x0);
+  block->spp = spp;
+  const size_t n = static_cast<size_t>(spp) * kPacket;
+  block->rng.clear();
+  block->rng.reserve(n);
+  block->dir.resize(n);
+  block->hit.resize(n);
+  block->found.resize(n);
+  const glm::vec3 cam(camera_.position());
+  bool valid[kPacket], found[kPacket];
+  glm::vec3 dirs[kPacket];
+  for (int s = 0; s < spp; ++s) {
+    for (int i = 0; i < kPacket; ++i) {
+      const size_t j = static_cast<size_t>(s) * kPacket + static_cast<size_t>(i);
+      valid[i] = i < block->lanes;
+      const int px = block->x0 + std::min(i, block->lanes - 1);
+      const uint64_t pixel =
+          static_cast<uint64_t>(y) * static_cast<uint64_t>(camera_.width()) + static_cast<uint64_t>(px);
+      block->rng.emplace_back(config_.seed, RngKind::CameraPath, pixel, static_cast<uint64_t>(s));
+      Rng& rng = block->rng.back();
+      const double jx = rng.next_double(), jy = rng.next_double();
+      block->dir[j] = camera_.direction(px + jx, y + jy);
+      dirs[i] = glm::vec3(block->dir[j]);
+    }
+    RayHit* hits = block->hit.data() + static_cast<size_t>(s) * kPacket;
+    embree_.intersect_packet(valid, cam, dirs, 0.0f, kInf, hits, found);
+    for (int i = 0; i < kPacket; ++i) block->found[static_cast<size_t>(s) * kPacket + static_cast<size_t>(i)] = found[i];
+    rays->camera += static_cast<uint64_t>(block->lanes);
+  }
+}
+
+PixelTotals Integrator::render_pixel(int x, int y, const CameraBlock& block, const TimeAxis& axis, double* bins,
+                                     RayCounts* rays, double* indirect_bins) const {
   PixelTotals out;
   const RenderConfig& rc = config_.render;
-  const uint64_t pixel = static_cast<uint64_t>(y) * static_cast<uint64_t>(camera_.width()) + static_cast<uint64_t>(x);
   const double inv_spp = 1.0 / rc.samples_per_pixel;
   const double k = measurement_constant(y) * inv_spp;
   const glm::vec3 cam(camera_.position());
   const double delay = config_.laser.emission_delay_s;
+  const int lane = x - block.x0;
+  if (block.y != y || lane < 0 || lane >= block.lanes || block.spp != rc.samples_per_pixel)
+    throw Error("render_pixel: pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") is not in its camera block");
 
   for (int s = 0; s < rc.samples_per_pixel; ++s) {
-    Rng rng(config_.seed, RngKind::CameraPath, pixel, static_cast<uint64_t>(s));
-    const double jx = rng.next_double(), jy = rng.next_double();
-    const glm::dvec3 dd = camera_.direction(x + jx, y + jy);
+    const size_t j = static_cast<size_t>(s) * EmbreeScene::kPacket + static_cast<size_t>(lane);
+    Rng rng = block.rng[j];
+    const glm::dvec3 dd = block.dir[j];
     const double ct = glm::dot(dd, camera_.forward());
     const double w = k * ct * ct * ct * ct;  // the camera's cos^4 falloff
 
     glm::vec3 o = cam, d(dd);
+    bool first = true;  // the camera ray's hit is already in the block
     Spec beta(1.0f);
     double opl = 0.0;  // optical path from the camera centre, metres
     glm::dvec3 previous = camera_.position();
@@ -159,8 +198,16 @@ PixelTotals Integrator::render_pixel(int x, int y, const TimeAxis& axis, double*
     double ambient = 0.0;
     while (true) {
       RayHit hit;
-      ++rays->camera;
-      if (!embree_.intersect(o, d, 0.0f, kInf, &hit)) {
+      bool found;
+      if (first) {
+        first = false;
+        hit = block.hit[j];
+        found = block.found[j] != 0;
+      } else {
+        ++rays->camera;
+        found = embree_.intersect(o, d, 0.0f, kInf, &hit);
+      }
+      if (!found) {
         if (ambient_on_) ambient += double(beta.y) * ambient_.environment_radiance;
         break;
       }

@@ -4,6 +4,9 @@
 #pragma once
 #include <cstdint>
 #include <climits>
+#include <vector>
+
+#include "core/rng.h"
 
 #include "camera.h"
 #include "core/config.h"
@@ -36,16 +39,31 @@ struct RayCounts {
 void deposit(double v, double t, const TimeAxis& axis, double* bins, PixelTotals* out,
              double* indirect_bins = nullptr);
 
+// The camera rays of one block of pixels, traced ahead as packets: row y, pixels [x0, x0 + lanes) where
+// x0 is a multiple of EmbreeScene::kPacket (lanes < kPacket only at the sensor's right edge), one packet
+// per sample. The blocks are fixed by the sensor, not by tiles, so a pixel's camera rays always travel in
+// the same packet: results do not depend on the tile split or the thread count.
+struct CameraBlock {
+  int x0 = 0, y = 0, lanes = 0, spp = 0;
+  std::vector<Rng> rng;  // [s * kPacket + lane]: the path's stream, after the two jitter draws
+  std::vector<glm::dvec3> dir;
+  std::vector<RayHit> hit;
+  std::vector<uint8_t> found;
+};
+
 class Integrator {
  public:
   Integrator(const RunConfig& config, const scenes::Scene& scene, const EmbreeScene& embree,
              const Shading& shading, const Camera& camera, const Laser& laser, const Ambient& ambient);
 
-  // All samples of pixel (x, y) (full-sensor coordinates). bins: axis.bins doubles, zeroed by the caller,
+  // Traces the camera rays of every sample of the block that contains pixel (x, y) (full-sensor coordinates).
+  void trace_camera_block(int x, int y, CameraBlock* block, RayCounts* rays) const;
+
+  // All samples of pixel (x, y), whose block `block` holds. bins: axis.bins doubles, zeroed by the caller,
   // receive photons per pulse per bin (unused when axis.bins == 0). indirect_bins (null: no split) receive
   // the part of bins carried by paths with two or more non-delta vertices, over the same bin range.
-  PixelTotals render_pixel(int x, int y, const TimeAxis& axis, double* bins, RayCounts* rays,
-                           double* indirect_bins = nullptr) const;
+  PixelTotals render_pixel(int x, int y, const CameraBlock& block, const TimeAxis& axis, double* bins,
+                           RayCounts* rays, double* indirect_bins = nullptr) const;
 
   // FF * optics transmission * p^2 * pi / (4 N^2) for a pixel of row y: photons at the SPAD per unit of
   // photon radiance (cos^4 excluded).

@@ -80,10 +80,14 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
     // does not change any result. Only the bins a pixel touched are copied out and cleared again.
     std::vector<double> acc(bins, 0.0), acc_indirect(split ? bins : 0, 0.0);
     RayCounts rays;
+    CameraBlock block;
     for (int y = rows.begin(); y < rows.end(); ++y)
       for (int x = data_rect.x0; x < data_rect.x1(); ++x) {
-        const PixelTotals t =
-            im.integrator.render_pixel(x, y, axis, acc.data(), &rays, split ? acc_indirect.data() : nullptr);
+        // Camera rays travel in packets fixed by the sensor (EmbreeScene::kPacket pixels of a row), so a
+        // tile edge inside a block traces the whole block (and shades only its own pixels).
+        if (x == data_rect.x0 || x % EmbreeScene::kPacket == 0) im.integrator.trace_camera_block(x, y, &block, &rays);
+        const PixelTotals t = im.integrator.render_pixel(x, y, block, axis, acc.data(), &rays,
+                                                         split ? acc_indirect.data() : nullptr);
         const auto i = static_cast<size_t>(data_rect.index(x, y));
         float* out = tile.transient.data() + i * bins;
         for (int64_t b = t.bin_lo; b < t.bin_hi; ++b) {

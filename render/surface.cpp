@@ -67,41 +67,49 @@ Shading::Shading(const scenes::Scene& scene, double laser_wavelength_m, const gl
   materials_.reserve(scene.materials.size());
   for (const scenes::Material& m : scene.materials) materials_.push_back(resolve(m));
   default_ = resolve(scenes::Material{});
+  triangles_.resize(scene.meshes.size());
+  triangle_normals_.resize(scene.meshes.size());
+  for (size_t m = 0; m < scene.meshes.size(); ++m) {
+    const scenes::Mesh& mesh = scene.meshes[m];
+    const size_t nv = mesh.positions.size();
+    const bool normals = mesh.normals.size() == nv;
+    std::vector<TriangleGeometry>& tg = triangles_[m];
+    tg.resize(mesh.indices.size() / 3);
+    if (normals) triangle_normals_[m].resize(tg.size());
+    for (size_t t = 0; t < tg.size(); ++t) {
+      const uint32_t* idx = &mesh.indices[3 * t];
+      if (idx[0] >= nv || idx[1] >= nv || idx[2] >= nv) continue;  // EmbreeScene rejects such a mesh
+      TriangleGeometry& g = tg[t];
+      g.p0 = mesh.positions[idx[0]], g.p1 = mesh.positions[idx[1]], g.p2 = mesh.positions[idx[2]];
+      const glm::vec3 n = glm::cross(g.p1 - g.p0, g.p2 - g.p0);
+      const float len = glm::length(n);
+      g.ng = len > 0.0f ? n / len : glm::vec3(0, 0, 1);
+      if (normals) triangle_normals_[m][t] = {mesh.normals[idx[0]], mesh.normals[idx[1]], mesh.normals[idx[2]]};
+    }
+  }
 }
 
 Surface Shading::geometric(const RayHit& hit) const {
-  const scenes::Mesh& mesh = scene_.meshes[hit.mesh];
-  const uint32_t* idx = &mesh.indices[3 * size_t(hit.triangle)];
-  const glm::vec3 &p0 = mesh.positions[idx[0]], &p1 = mesh.positions[idx[1]], &p2 = mesh.positions[idx[2]];
+  const TriangleGeometry& g = triangles_[hit.mesh][hit.triangle];
   Surface s;
-  s.p = (1.0f - hit.u - hit.v) * p0 + hit.u * p1 + hit.v * p2;
-  const glm::vec3 n = glm::cross(p1 - p0, p2 - p0);
-  const float len = glm::length(n);
-  s.ng = len > 0.0f ? n / len : glm::vec3(0, 0, 1);
+  s.p = (1.0f - hit.u - hit.v) * g.p0 + hit.u * g.p1 + hit.v * g.p2;
+  s.ng = g.ng;
   s.ns = s.ng;
   s.mesh = static_cast<int>(hit.mesh);
-  s.material = (mesh.material >= 0 && size_t(mesh.material) < materials_.size()) ? mesh.material : -1;
+  const int material = scene_.meshes[hit.mesh].material;
+  s.material = (material >= 0 && size_t(material) < materials_.size()) ? material : -1;
   return s;
 }
 
 Surface Shading::surface(const RayHit& hit) const {
-  const scenes::Mesh& mesh = scene_.meshes[hit.mesh];
-  const uint32_t* idx = &mesh.indices[3 * size_t(hit.triangle)];
-  const glm::vec3 &p0 = mesh.positions[idx[0]], &p1 = mesh.positions[idx[1]], &p2 = mesh.positions[idx[2]];
-  const float w = 1.0f - hit.u - hit.v;
-  Surface s;
-  s.p = w * p0 + hit.u * p1 + hit.v * p2;
-  const glm::vec3 n = glm::cross(p1 - p0, p2 - p0);
-  const float len = glm::length(n);
-  s.ng = len > 0.0f ? n / len : glm::vec3(0, 0, 1);
-  s.ns = s.ng;
-  if (mesh.normals.size() == mesh.positions.size()) {
-    const glm::vec3 ns = w * mesh.normals[idx[0]] + hit.u * mesh.normals[idx[1]] + hit.v * mesh.normals[idx[2]];
+  Surface s = geometric(hit);
+  const std::vector<TriangleNormals>& tn = triangle_normals_[hit.mesh];
+  if (!tn.empty()) {
+    const TriangleNormals& n = tn[hit.triangle];
+    const glm::vec3 ns = (1.0f - hit.u - hit.v) * n.n0 + hit.u * n.n1 + hit.v * n.n2;
     const float l = glm::length(ns);
     if (l > 1e-6f) s.ns = ns / l;
   }
-  s.mesh = static_cast<int>(hit.mesh);
-  s.material = (mesh.material >= 0 && size_t(mesh.material) < materials_.size()) ? mesh.material : -1;
   return s;
 }
 
