@@ -43,14 +43,17 @@ float max_of(const Spec& s) { return std::max(s.x, s.y); }
 
 float fresnel_dielectric(float cos_i, float eta) {
   cos_i = std::clamp(cos_i, 0.0f, 1.0f);
-  const float sin2_t = (1.0f - cos_i * cos_i) / (eta * eta);
-  if (sin2_t >= 1.0f) return 1.0f;
-  const float cos_t = std::sqrt(1.0f - sin2_t);
-  // rs = (ci - eta ct) / (ci + eta ct), rp = (eta ci - ct) / (eta ci + ct), over one division.
-  const float a = cos_i - eta * cos_t, b = cos_i + eta * cos_t;
-  const float c = eta * cos_i - cos_t, d = eta * cos_i + cos_t;
+  // g = eta cos_t, from g^2 = eta^2 - sin_i^2 (no division); g^2 <= 0 is total internal reflection.
+  const float e2 = eta * eta;
+  const float g2 = e2 - 1.0f + cos_i * cos_i;
+  if (g2 <= 0.0f) return 1.0f;
+  const float g = std::sqrt(g2);
+  // rs = (ci - eta ct) / (ci + eta ct) = (ci - g) / (ci + g); rp = (eta ci - ct) / (eta ci + ct) =
+  // (e2 ci - g) / (e2 ci + g); both squares over one division.
+  const float a = cos_i - g, b = cos_i + g;
+  const float c = e2 * cos_i - g, d = e2 * cos_i + g;
   const float bd = b * d;
-  return bd > 0.0f ? 0.5f * (a * a * d * d + c * c * b * b) / (bd * bd) : 1.0f;
+  return bd > 0.0f ? std::min(1.0f, 0.5f * (a * a * d * d + c * c * b * b) / (bd * bd)) : 1.0f;
 }
 
 Bsdf::Bsdf(const MaterialPoint& m, const glm::vec3& n_shading, const glm::vec3& n_geometric,

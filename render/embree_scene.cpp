@@ -139,14 +139,22 @@ bool EmbreeScene::intersect(const glm::vec3& o, const glm::vec3& d, float tnear,
 
 void EmbreeScene::intersect_packet(const bool* valid, const glm::vec3& o, const glm::vec3* dirs, float tnear,
                                    float tfar, RayHit* hit, bool* found) const {
+  glm::vec3 origins[kPacket];
+  float tfars[kPacket];
+  for (int i = 0; i < kPacket; ++i) origins[i] = o, tfars[i] = tfar;
+  intersect_packet(valid, origins, dirs, tnear, tfars, hit, found);
+}
+
+void EmbreeScene::intersect_packet(const bool* valid, const glm::vec3* o, const glm::vec3* dirs, float tnear,
+                                   const float* tfar, RayHit* hit, bool* found) const {
   alignas(64) int lanes[kPacket];
   alignas(64) RTCRayHit16 rh;
   for (int i = 0; i < kPacket; ++i) {
     lanes[i] = valid[i] ? -1 : 0;
-    rh.ray.org_x[i] = o.x, rh.ray.org_y[i] = o.y, rh.ray.org_z[i] = o.z;
+    rh.ray.org_x[i] = o[i].x, rh.ray.org_y[i] = o[i].y, rh.ray.org_z[i] = o[i].z;
     rh.ray.dir_x[i] = dirs[i].x, rh.ray.dir_y[i] = dirs[i].y, rh.ray.dir_z[i] = dirs[i].z;
     rh.ray.tnear[i] = tnear;
-    rh.ray.tfar[i] = tfar;
+    rh.ray.tfar[i] = tfar[i];
     rh.ray.time[i] = 0.0f;
     rh.ray.mask[i] = 0xFFFFFFFFu;
     rh.ray.id[i] = static_cast<unsigned>(i);
@@ -154,7 +162,7 @@ void EmbreeScene::intersect_packet(const bool* valid, const glm::vec3& o, const 
     rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
     rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
     // The replay compares against rtcIntersect1 on exactly these rays.
-    if (t_ray_sink && valid[i]) [[unlikely]] t_ray_sink->push_back({o, dirs[i], tnear, tfar, false});
+    if (t_ray_sink && valid[i]) [[unlikely]] t_ray_sink->push_back({o[i], dirs[i], tnear, tfar[i], false});
   }
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
@@ -169,6 +177,29 @@ void EmbreeScene::intersect_packet(const bool* valid, const glm::vec3& o, const 
     hit[i].u = rh.hit.u[i];
     hit[i].v = rh.hit.v[i];
   }
+}
+
+void EmbreeScene::occluded_packet(const bool* valid, const glm::vec3* o, const glm::vec3* dirs, float tnear,
+                                  const float* tfar, bool* blocked) const {
+  alignas(64) int lanes[kPacket];
+  alignas(64) RTCRay16 ray;
+  for (int i = 0; i < kPacket; ++i) {
+    lanes[i] = valid[i] ? -1 : 0;
+    ray.org_x[i] = o[i].x, ray.org_y[i] = o[i].y, ray.org_z[i] = o[i].z;
+    ray.dir_x[i] = dirs[i].x, ray.dir_y[i] = dirs[i].y, ray.dir_z[i] = dirs[i].z;
+    ray.tnear[i] = tnear;
+    ray.tfar[i] = tfar[i];
+    ray.time[i] = 0.0f;
+    ray.mask[i] = 0xFFFFFFFFu;
+    ray.id[i] = static_cast<unsigned>(i);
+    ray.flags[i] = 0;
+    if (t_ray_sink && valid[i]) [[unlikely]] t_ray_sink->push_back({o[i], dirs[i], tnear, tfar[i], true});
+  }
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  rtcOccluded16(lanes, scene_, &context, &ray);
+  for (int i = 0; i < kPacket; ++i) blocked[i] = valid[i] && ray.tfar[i] < 0.0f;
 }
 
 bool EmbreeScene::occluded(const glm::vec3& o, const glm::vec3& d, float tnear, float tfar) const {

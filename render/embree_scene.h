@@ -41,6 +41,12 @@ class EmbreeScene {
   static constexpr int kPacket = 16;
   void intersect_packet(const bool* valid, const glm::vec3& origin, const glm::vec3* dirs, float tnear, float tfar,
                         RayHit* hit, bool* found) const;
+  // The same with one origin and tfar per lane (the shadow rays of 16 first hits towards the laser);
+  // occluded_packet sets blocked[i] when anything lies on lane i's (tnear, tfar[i]).
+  void intersect_packet(const bool* valid, const glm::vec3* origins, const glm::vec3* dirs, float tnear,
+                        const float* tfar, RayHit* hit, bool* found) const;
+  void occluded_packet(const bool* valid, const glm::vec3* origins, const glm::vec3* dirs, float tnear,
+                       const float* tfar, bool* blocked) const;
   // Whether anything lies on (tnear, tfar).
   bool occluded(const glm::vec3& origin, const glm::vec3& dir, float tnear, float tfar) const;
 

@@ -98,18 +98,38 @@ double Integrator::measurement_constant(int y) const {
   return ff * optics_ * p * p * kPi / (4.0 * n * n);
 }
 
+bool Integrator::laser_ray(const Surface& sf, LaserRay* out) const {
+  const glm::dvec3 to = laser_.position - glm::dvec3(sf.p);
+  out->r = glm::length(to);
+  out->wid = to / out->r;
+  out->intensity = laser_.intensity_towards(-out->wid);
+  if (!(out->intensity > 0.0)) return false;
+  out->wi = glm::vec3(out->wid);
+  out->origin = offset_ray_origin(sf.p, sf.ng, out->wi);
+  return true;
+}
+
 Spec Integrator::shadow_transmittance(const glm::vec3& origin, const glm::vec3& dir, float dist, int medium,
-                                      double* extra_opl, RayCounts* rays) const {
+                                      double* extra_opl, RayCounts* rays, const FirstSegment* first) const {
   *extra_opl = 0.0;
-  ++rays->shadow;
-  if (!transmission_) return embree_.occluded(origin, dir, 0.0f, dist) ? Spec(0.0f) : Spec(1.0f);
+  if (!first) ++rays->shadow;
+  if (!transmission_) {
+    const bool blocked = first ? first->found : embree_.occluded(origin, dir, 0.0f, dist);
+    return blocked ? Spec(0.0f) : Spec(1.0f);
+  }
   Spec t(1.0f);
   glm::vec3 o = origin;
   float remaining = dist;
   for (int crossing = 0;; ++crossing) {
     if (crossing > 0) ++rays->shadow;
     RayHit hit;
-    const bool found = embree_.intersect(o, dir, 0.0f, remaining, &hit);
+    bool found;
+    if (crossing == 0 && first) {
+      found = first->found;
+      hit = first->hit;
+    } else {
+      found = embree_.intersect(o, dir, 0.0f, remaining, &hit);
+    }
     const float seg = found ? hit.t : remaining;
     if (medium >= 0 && std::isfinite(seg)) {
       const ResolvedMaterial& rm = shading_.material(medium);
@@ -146,6 +166,10 @@ void Integrator::trace_camera_block(int x, int y, CameraBlock* block, RayCounts*
   block->dir.resize(n);
   block->hit.resize(n);
   block->found.resize(n);
+  block->surface.resize(n);
+  block->shadow_traced.resize(n);
+  block->shadow_found.resize(n);
+  block->shadow_hit.resize(n);
   const glm::vec3 cam(camera_.position());
   bool valid[kPacket], found[kPacket];
   glm::vec3 dirs[kPacket];
@@ -164,8 +188,39 @@ void Integrator::trace_camera_block(int x, int y, CameraBlock* block, RayCounts*
     }
     RayHit* hits = block->hit.data() + static_cast<size_t>(s) * kPacket;
     embree_.intersect_packet(valid, cam, dirs, 0.0f, kInf, hits, found);
-    for (int i = 0; i < kPacket; ++i) block->found[static_cast<size_t>(s) * kPacket + static_cast<size_t>(i)] = found[i];
     rays->camera += static_cast<uint64_t>(block->lanes);
+    // The laser's shadow rays from these hits, as one coherent packet.
+    bool shadow[kPacket];
+    glm::vec3 origins[kPacket];
+    float tfar[kPacket];
+    int traced = 0;
+    for (int i = 0; i < kPacket; ++i) {
+      const size_t j = static_cast<size_t>(s) * kPacket + static_cast<size_t>(i);
+      block->found[j] = found[i];
+      shadow[i] = false;
+      origins[i] = cam, dirs[i] = glm::vec3(0, 0, 1), tfar[i] = 0.0f;
+      if (!found[i]) continue;
+      block->surface[j] = shading_.surface(hits[i]);
+      LaserRay lr;
+      if (!laser_ray(block->surface[j], &lr)) continue;
+      shadow[i] = true;
+      origins[i] = lr.origin, dirs[i] = lr.wi, tfar[i] = float(lr.r);
+      ++traced;
+    }
+    RayHit* shadow_hits = block->shadow_hit.data() + static_cast<size_t>(s) * kPacket;
+    bool shadow_found[kPacket];
+    if (traced > 0) {
+      if (transmission_)
+        embree_.intersect_packet(shadow, origins, dirs, 0.0f, tfar, shadow_hits, shadow_found);
+      else
+        embree_.occluded_packet(shadow, origins, dirs, 0.0f, tfar, shadow_found);
+    }
+    for (int i = 0; i < kPacket; ++i) {
+      const size_t j = static_cast<size_t>(s) * kPacket + static_cast<size_t>(i);
+      block->shadow_traced[j] = shadow[i] && traced > 0;
+      block->shadow_found[j] = shadow[i] && traced > 0 && shadow_found[i];
+    }
+    rays->shadow += static_cast<uint64_t>(traced);
   }
 }
 
@@ -189,7 +244,8 @@ PixelTotals Integrator::render_pixel(int x, int y, const CameraBlock& block, con
     const double w = k * ct * ct * ct * ct;  // the camera's cos^4 falloff
 
     glm::vec3 o = cam, d(dd);
-    bool first = true;  // the camera ray's hit is already in the block
+    bool first = true;         // the camera ray's hit is already in the block
+    bool first_vertex = true;  // and so are its surface and the first segment of its laser shadow ray
     Spec beta(1.0f);
     double opl = 0.0;  // optical path from the camera centre, metres
     glm::dvec3 previous = camera_.position();
@@ -211,7 +267,9 @@ PixelTotals Integrator::render_pixel(int x, int y, const CameraBlock& block, con
         if (ambient_on_) ambient += double(beta.y) * ambient_.environment_radiance;
         break;
       }
-      const Surface sf = shading_.surface(hit);
+      const bool camera_hit = first_vertex;
+      first_vertex = false;
+      const Surface sf = camera_hit ? block.surface[j] : shading_.surface(hit);
       // From the previous surface point itself, not from the offset origin a few hundred ulps away.
       const double seg = glm::length(glm::dvec3(sf.p) - previous);
       previous = glm::dvec3(sf.p);
@@ -239,18 +297,21 @@ PixelTotals Integrator::render_pixel(int x, int y, const CameraBlock& block, con
         auto counted = [&](const glm::vec3& wi) {
           return transmission_nee || (glm::dot(wi, sf.ng) > 0.0f) == wo_front;
         };
-        if (beta.x > 0.0f) {
-          const glm::dvec3 to = laser_.position - glm::dvec3(sf.p);
-          const double r = glm::length(to);
-          const glm::dvec3 wid = to / r;
-          const double intensity = laser_.intensity_towards(-wid);
-          if (intensity > 0.0 && counted(glm::vec3(wid))) {
-            const glm::vec3 wi(wid);
+        LaserRay lr;
+        if (beta.x > 0.0f && laser_ray(sf, &lr)) {
+          const double r = lr.r, intensity = lr.intensity;
+          const glm::vec3 wi = lr.wi;
+          if (counted(wi)) {
             const Spec f = bsdf.eval_cos(wi);
             if (f.x > 0.0f) {
               double extra = 0.0;
-              const Spec tr = shadow_transmittance(offset_ray_origin(sf.p, sf.ng, wi), wi, float(r),
-                                                   shadow_medium(sf, volume, wo_front, wi, medium), &extra, rays);
+              FirstSegment ahead;
+              if (camera_hit && block.shadow_traced[j]) {
+                ahead.found = block.shadow_found[j] != 0;
+                ahead.hit = block.shadow_hit[j];
+              }
+              const Spec tr = shadow_transmittance(lr.origin, wi, float(r), shadow_medium(sf, volume, wo_front, wi, medium),
+                                                   &extra, rays, camera_hit && block.shadow_traced[j] ? &ahead : nullptr);
               if (tr.x > 0.0f) {
                 const double v = double(beta.x) * f.x * tr.x * intensity / (r * r) * w;
                 // `vertices` non-delta vertices lie before this one: 0 makes the path direct.

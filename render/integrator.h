@@ -49,6 +49,28 @@ struct CameraBlock {
   std::vector<glm::dvec3> dir;
   std::vector<RayHit> hit;
   std::vector<uint8_t> found;
+  std::vector<Surface> surface;  // at the camera ray's hit
+  // The first segment of the laser's shadow ray from that hit, traced ahead as a coherent packet (the
+  // rays of neighbouring pixels converge on the laser) whenever the laser shines towards the hit, whether
+  // or not the BSDF then uses it: shadow_found is the segment's hit (scenes with transmissive surfaces,
+  // shadow_hit) or whether it is blocked (other scenes).
+  std::vector<uint8_t> shadow_traced, shadow_found;
+  std::vector<RayHit> shadow_hit;
+};
+
+// The first segment of a shadow ray, when it was traced ahead (CameraBlock).
+struct FirstSegment {
+  bool found = false;  // hit something (or, without transmissive surfaces, blocked)
+  RayHit hit;
+};
+
+// The next-event ray from a surface point to the laser.
+struct LaserRay {
+  glm::dvec3 wid{0.0};   // unit direction, double
+  double r = 0.0;        // distance
+  double intensity = 0;  // photons per pulse per sr the laser sends back along -wid
+  glm::vec3 wi{0.0f};    // float direction of the shadow ray
+  glm::vec3 origin{0.0f};
 };
 
 class Integrator {
@@ -72,8 +94,12 @@ class Integrator {
   // Fraction of light (two channels) that reaches distance `dist` along unit `dir` from `origin`, through
   // transmissive surfaces (straight, ignoring refraction) starting inside volume `medium` (-1: air);
   // *extra_opl receives the optical path added by the media crossed, (n - 1) * length.
+  // first: the first segment's result when it was traced ahead (its ray is not counted again).
   Spec shadow_transmittance(const glm::vec3& origin, const glm::vec3& dir, float dist, int medium,
-                            double* extra_opl, RayCounts* rays) const;
+                            double* extra_opl, RayCounts* rays, const FirstSegment* first = nullptr) const;
+
+  // The shadow ray from sf to the laser; false when the laser sends nothing towards sf.
+  bool laser_ray(const Surface& sf, LaserRay* out) const;
 
  private:
   const RunConfig& config_;

@@ -148,6 +148,39 @@ TEST(Split, CornerIndirectLightArrivesAfterTheDirectReturnAndDirectIsTheOneBounc
   EXPECT_LT(ind_total, total);
 }
 
+// Camera rays travel in packets of 16 pixels fixed by the sensor: a 37-pixel row has blocks of 16, 16 and
+// 5, and tiles of 8 or 13 cut them anywhere; every pixel must come out bit-identical to the whole image.
+TEST(Split, PacketBlocksDoNotDependOnTheTiling) {
+  RunConfig c = test_config(37, 9, 4e-4);
+  c.camera.position_m = {0.2, 0.2, 0};
+  c.camera.look_at_m = {0.2, 0.2, -1};
+  c.render.samples_per_pixel = 3;
+  c.render.split_direct_indirect = true;
+  Renderer r(open_corner(), c);
+  const TimeAxis axis{0.0, 20e-12, 2000, 25e-9};
+  const PixelRect all{0, 0, 37, 9};
+  const TransientTile whole = r.transient(all, all, axis);
+  for (int tile : {8, 13}) {
+    for (int y0 = 0; y0 < 9; y0 += tile)
+      for (int x0 = 0; x0 < 37; x0 += tile) {
+        const PixelRect rect{x0, y0, std::min(tile, 37 - x0), std::min(tile, 9 - y0)};
+        const PixelRect data = grow_clipped(rect, 1, 37, 9);
+        const TransientTile t = r.transient(rect, data, axis);
+        for (int y = data.y0; y < data.y1(); ++y)
+          for (int x = data.x0; x < data.x1(); ++x) {
+            const size_t i = size_t(data.index(x, y)), j = size_t(all.index(x, y));
+            ASSERT_EQ(t.laser_total[i], whole.laser_total[j]) << x << "," << y;
+            for (int64_t b = 0; b < axis.bins; ++b) {
+              ASSERT_EQ(t.transient[i * size_t(axis.bins) + size_t(b)], whole.transient[j * size_t(axis.bins) + size_t(b)]);
+              ASSERT_EQ(t.transient_indirect[i * size_t(axis.bins) + size_t(b)],
+                        whole.transient_indirect[j * size_t(axis.bins) + size_t(b)]);
+            }
+          }
+      }
+  }
+  EXPECT_GT(std::accumulate(whole.laser_total.begin(), whole.laser_total.end(), 0.0), 0.0);
+}
+
 // ---------------------------------------------------------------------------------------------------
 // Extremes of scale.
 
