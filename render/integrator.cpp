@@ -170,6 +170,7 @@ void Integrator::trace_camera_block(int x, int y, CameraBlock* block, RayCounts*
   block->shadow_traced.resize(n);
   block->shadow_found.resize(n);
   block->shadow_hit.resize(n);
+  block->laser.resize(n);
   const glm::vec3 cam(camera_.position());
   bool valid[kPacket], found[kPacket];
   glm::vec3 dirs[kPacket];
@@ -201,7 +202,7 @@ void Integrator::trace_camera_block(int x, int y, CameraBlock* block, RayCounts*
       origins[i] = cam, dirs[i] = glm::vec3(0, 0, 1), tfar[i] = 0.0f;
       if (!found[i]) continue;
       block->surface[j] = shading_.surface(hits[i]);
-      LaserRay lr;
+      LaserRay& lr = block->laser[j];
       if (!laser_ray(block->surface[j], &lr)) continue;
       shadow[i] = true;
       origins[i] = lr.origin, dirs[i] = lr.wi, tfar[i] = float(lr.r);
@@ -298,7 +299,9 @@ PixelTotals Integrator::render_pixel(int x, int y, const CameraBlock& block, con
           return transmission_nee || (glm::dot(wi, sf.ng) > 0.0f) == wo_front;
         };
         LaserRay lr;
-        if (beta.x > 0.0f && laser_ray(sf, &lr)) {
+        const bool ahead_traced = camera_hit && block.shadow_traced[j];
+        if (ahead_traced) lr = block.laser[j];  // the same computation, done in the block pass
+        if (beta.x > 0.0f && (ahead_traced || laser_ray(sf, &lr))) {
           const double r = lr.r, intensity = lr.intensity;
           const glm::vec3 wi = lr.wi;
           if (counted(wi)) {
@@ -306,12 +309,12 @@ PixelTotals Integrator::render_pixel(int x, int y, const CameraBlock& block, con
             if (f.x > 0.0f) {
               double extra = 0.0;
               FirstSegment ahead;
-              if (camera_hit && block.shadow_traced[j]) {
+              if (ahead_traced) {
                 ahead.found = block.shadow_found[j] != 0;
                 ahead.hit = block.shadow_hit[j];
               }
               const Spec tr = shadow_transmittance(lr.origin, wi, float(r), shadow_medium(sf, volume, wo_front, wi, medium),
-                                                   &extra, rays, camera_hit && block.shadow_traced[j] ? &ahead : nullptr);
+                                                   &extra, rays, ahead_traced ? &ahead : nullptr);
               if (tr.x > 0.0f) {
                 const double v = double(beta.x) * f.x * tr.x * intensity / (r * r) * w;
                 // `vertices` non-delta vertices lie before this one: 0 makes the path direct.

@@ -39,6 +39,15 @@ struct RayCounts {
 void deposit(double v, double t, const TimeAxis& axis, double* bins, PixelTotals* out,
              double* indirect_bins = nullptr);
 
+// The next-event ray from a surface point to the laser.
+struct LaserRay {
+  glm::dvec3 wid{0.0};   // unit direction, double
+  double r = 0.0;        // distance
+  double intensity = 0;  // photons per pulse per sr the laser sends back along -wid
+  glm::vec3 wi{0.0f};    // float direction of the shadow ray
+  glm::vec3 origin{0.0f};
+};
+
 // The camera rays of one block of pixels, traced ahead as packets: row y, pixels [x0, x0 + lanes) where
 // x0 is a multiple of EmbreeScene::kPacket (lanes < kPacket only at the sensor's right edge), one packet
 // per sample. The blocks are fixed by the sensor, not by tiles, so a pixel's camera rays always travel in
@@ -56,21 +65,13 @@ struct CameraBlock {
   // shadow_hit) or whether it is blocked (other scenes).
   std::vector<uint8_t> shadow_traced, shadow_found;
   std::vector<RayHit> shadow_hit;
+  std::vector<LaserRay> laser;  // that shadow ray (where shadow_traced)
 };
 
 // The first segment of a shadow ray, when it was traced ahead (CameraBlock).
 struct FirstSegment {
   bool found = false;  // hit something (or, without transmissive surfaces, blocked)
   RayHit hit;
-};
-
-// The next-event ray from a surface point to the laser.
-struct LaserRay {
-  glm::dvec3 wid{0.0};   // unit direction, double
-  double r = 0.0;        // distance
-  double intensity = 0;  // photons per pulse per sr the laser sends back along -wid
-  glm::vec3 wi{0.0f};    // float direction of the shadow ray
-  glm::vec3 origin{0.0f};
 };
 
 class Integrator {
