@@ -249,6 +249,93 @@ TEST(Sampling, CountsKernelChiSquare) {
   }
 }
 
+// BTRS rejection (n min(p, q) >= 16): chi-square against the exact pmf (false-alarm rate 1e-6 each) and the
+// sample mean against n p within the z bound of 1e-6, for the scalar sampler (one stream, trials drawn in
+// order) and for the vectorised counts kernel (a stream per gate), at n p from the threshold 16 to n / 2,
+// mirrored (p > 1/2: X counts misses), and at n = 4080.
+TEST(Sampling, RejectionChiSquareAndMean) {
+  const Rng base(77, RngKind::Counts, 0, 0);
+  const uint32_t key[2] = {base.key().v[0], base.key().v[1]};
+  for (const auto& [n, p] : std::vector<std::pair<uint32_t, double>>{
+           {255, 16.0 / 255.0}, {255, 0.07}, {255, 0.2}, {255, 0.5}, {255, 0.8}, {255, 0.93}, {4080, 0.01}}) {
+    const BinomialSampler sampler(n);
+    const double q = 1.0 - p, lambda = -std::log1p(-p);
+    const Prob pr = prob_from_lambda(lambda);
+    ASSERT_TRUE(sampler.uses_rejection(pr)) << n << " " << p;
+    const std::vector<double> pmf = binomial_pmf(static_cast<int>(n), pr.p);
+    const double mean = static_cast<double>(n) * pr.p;
+    // scalar: one stream
+    {
+      std::vector<double> hist(n + 1, 0.0);
+      Rng rng(78, RngKind::Counts, n, static_cast<uint64_t>(p * 1e6));
+      const int draws = 200000;
+      double sum = 0.0;
+      for (int i = 0; i < draws; ++i) {
+        const uint32_t x = sampler.sample(rng, pr);
+        ASSERT_LE(x, n);
+        hist[x] += 1.0;
+        sum += x;
+      }
+      EXPECT_GT(chi_square_p(hist, pmf, draws), kAlpha) << "scalar n=" << n << " p=" << p;
+      EXPECT_LE(std::abs(sum / draws - mean), testing::kZ * std::sqrt(mean * q / draws)) << "scalar n=" << n << " p=" << p;
+    }
+    // kernel: 600 pixels x 350 gates
+    {
+      KernelScratch s;
+      const size_t K = 350;
+      const std::vector<double> lam(K, lambda);
+      std::vector<double> hist(n + 1, 0.0);
+      const int pixels = 600;
+      double sum = 0.0;
+      for (int px = 0; px < pixels; ++px) {
+        binomial_counts(lam.data(), K, key, static_cast<uint64_t>(px), sampler, s);
+        for (size_t k = 0; k < K; ++k) {
+          ASSERT_LE(s.x[k], n);
+          hist[s.x[k]] += 1.0;
+          sum += s.x[k];
+        }
+      }
+      const double draws = static_cast<double>(pixels) * K;
+      EXPECT_GT(chi_square_p(hist, pmf, draws), kAlpha) << "kernel n=" << n << " p=" << p;
+      EXPECT_LE(std::abs(sum / draws - mean), testing::kZ * std::sqrt(mean * q / draws)) << "kernel n=" << n << " p=" << p;
+    }
+  }
+}
+
+// BTRS consumes whole Philox blocks: trial j is block j (U = words 0, 1, V = words 2, 3), so the kernel's
+// vectorised blocks reproduce the scalar stream; the acceptance rate is high (few trials per draw), and
+// sample_u keeps the one-uniform inversion from the mode with the same law.
+TEST(Sampling, RejectionTrialsAndOneUniformInversion) {
+  const uint32_t n = 255;
+  const BinomialSampler sampler(n);
+  for (double p : {16.0 / 255.0, 0.2, 0.5}) {
+    const Prob pr = prob_from_lambda(-std::log1p(-p));
+    const BinomialSampler::Btrs h = sampler.btrs_setup(pr.p, pr.q);
+    size_t trials = 0, accepted = 0;
+    std::vector<double> hist(n + 1, 0.0);
+    for (uint64_t i = 0; i < 100000; ++i) {
+      const Rng stream(5, RngKind::Counts, i, 0);
+      Rng rng = stream;
+      const uint32_t want = sampler.sample(rng, pr);
+      for (uint32_t j = 0;; ++j) {  // the same draw from the blocks, trial by trial
+        const auto blk = stream.block(j);
+        uint32_t x = 0;
+        ++trials;
+        if (sampler.btrs_trial(h, (uint64_t{blk[0]} << 32) | blk[1], (uint64_t{blk[2]} << 32) | blk[3], x)) {
+          ASSERT_EQ(x, want);
+          ++accepted;
+          break;
+        }
+      }
+      hist[sampler.sample_u(Rng(6, RngKind::Counts, i, 0).next_u64(), pr)] += 1.0;
+    }
+    const double rate = static_cast<double>(accepted) / static_cast<double>(trials);
+    std::printf("BTRS n p = %.1f: acceptance %.3f per trial\n", n * p, rate);
+    EXPECT_GT(rate, 0.7);
+    EXPECT_GT(chi_square_p(hist, binomial_pmf(static_cast<int>(n), pr.p), 100000.0), kAlpha) << "sample_u p=" << p;
+  }
+}
+
 // Exactness at the X = 0 threshold: U just below floor(P(X > 0) 2^64) gives X >= 1, U at it gives 0.
 TEST(Sampling, ZeroDecisionAtTheThreshold) {
   const uint32_t n = 255;
