@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <functional>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -224,6 +225,200 @@ std::vector<std::pair<int, int>> profile_pixels(const PixelRect& img) {
   return p;
 }
 
+// Frames summed per gate position or exposure: dual exposure splits the frames between its two exposures.
+int frames_per_k(const RunConfig& c) {
+  const bool dual = c.acquisition.mode == "intensity" && c.acquisition.intensity.exposure == "dual";
+  return dual ? c.acquisition.frames / 2 : c.acquisition.frames;
+}
+
+// The per-pixel EXR images, filled tile by tile. Every channel is created here, up front: tiles fill
+// them from several threads, and ExrImage::channel creates a channel on first use.
+class Images {
+ public:
+  Images(const RunConfig& cfg, const PixelRect& img)
+      : img_(img), layers_(cfg.render.max_layers), gt_on_(cfg.outputs.ground_truth),
+        sweep_(cfg.acquisition.mode == "gate_sweep"), gt_(img.width, img.height), laser_(img.width, img.height),
+        ambient_(img.width, img.height), maps_(img.width, img.height), intensity_(img.width, img.height) {
+    if (gt_on_) {
+      for (const char* n : kGroundTruthChannels) gt_ch_.push_back(gt_.channel(n));
+      for (int l = 0; l < layers_; ++l) {
+        layer_range_.push_back(gt_.channel(layer_name(l, ".range")));
+        layer_trans_.push_back(gt_.channel(layer_name(l, ".transmittance")));
+      }
+    }
+    laser_ch_ = {laser_.channel("photons_per_pulse"), laser_.channel("out_of_window")};
+    ambient_ch_ = ambient_.channel("photons_per_second");
+    maps_ch_ = {maps_.channel("gate_skew_ps"), maps_.channel("gate_length_ps"), maps_.channel("dcr_cps"), maps_.channel("pde")};
+    if (!sweep_) intensity_ch_ = {intensity_.channel("counts"), intensity_.channel("photons")};
+    pixel_laser_.assign(size_t(img.count()), 0.0);
+    pixel_oow_.assign(size_t(img.count()), 0.0);
+  }
+
+  void put_ground_truth(const GroundTruthTile& g) {
+    for_pixels(g.rect, [&](int, int, size_t i, size_t o) {
+      const float v[] = {g.range[i], g.z[i], g.normal[3 * i], g.normal[3 * i + 1], g.normal[3 * i + 2],
+                         float(g.mesh_id[i]), float(g.material_id[i]), float(g.layer_count[i])};
+      for (size_t c = 0; c < gt_ch_.size(); ++c) gt_ch_[c][o] = v[c];
+      for (size_t l = 0; l < size_t(layers_); ++l) {
+        layer_range_[l][o] = g.layer_range[i * size_t(g.max_layers) + l];
+        layer_trans_[l][o] = g.layer_transmittance[i * size_t(g.max_layers) + l];
+      }
+    });
+  }
+
+  void put(const TransientTile& t, const sensor::SensorMapsTile& m, const SensorTile& s) {
+    for_pixels(t.rect, [&](int x, int y, size_t i, size_t o) {
+      const auto d = size_t(t.data_rect.index(x, y));  // the transient tile carries a halo
+      laser_ch_[0][o] = float(t.laser_total[d]), laser_ch_[1][o] = float(t.out_of_window[d]);
+      ambient_ch_[o] = t.ambient_rate[d];
+      pixel_laser_[o] = t.laser_total[d], pixel_oow_[o] = t.out_of_window[d];
+      maps_ch_[0][o] = m.gate_skew_ps[i], maps_ch_[1][o] = m.gate_length_ps[i];
+      maps_ch_[2][o] = m.dcr_cps[i], maps_ch_[3][o] = m.pde[i];
+      if (!sweep_) intensity_ch_[0][o] = s.intensity_counts[i], intensity_ch_[1][o] = s.intensity_photons[i];
+    });
+  }
+
+  // Per-pixel sums in image order, so they do not depend on the tile size.
+  double laser_total() const { return std::accumulate(pixel_laser_.begin(), pixel_laser_.end(), 0.0); }
+  double out_of_window_total() const { return std::accumulate(pixel_oow_.begin(), pixel_oow_.end(), 0.0); }
+  // The deepest layer any pixel has; layer channels beyond it are not written.
+  int deepest_layer() const {
+    if (!gt_on_) return 0;
+    const float* lc = gt_ch_.back();
+    return int(*std::max_element(lc, lc + size_t(img_.count())));
+  }
+
+  // Writes the EXRs with their provenance and the previews into the staging folder.
+  void write(const Staging& staging, const std::function<void(writers::ExrImage&)>& provenance, const TimeAxis& axis,
+             bool previews, std::vector<std::string>& files) {
+    const auto put_file = [&](writers::ExrImage& e, const std::string& name, const std::string& units) {
+      provenance(e);
+      e.set_attribute("spadgen_units", units);
+      e.write(staging.path(name));
+      files.push_back(name);
+    };
+    if (gt_on_) {
+      for (int l = deepest_layer(); l < layers_; ++l) {
+        gt_.remove_channel(layer_name(l, ".range"));
+        gt_.remove_channel(layer_name(l, ".transmittance"));
+      }
+      put_file(gt_, "ground_truth.exr", "range, z, layer<i>.range: metres (+inf where the ray hits nothing); transmittance: fraction");
+    }
+    laser_.set_attribute("spadgen_time_axis", axis_json(axis).dump());
+    put_file(laser_, "laser.exr", "photons per laser pulse reaching the pixel's SPAD (before PDP)");
+    put_file(ambient_, "ambient.exr", "ambient photons per second reaching the pixel's SPAD (before PDP)");
+    put_file(maps_, "sensor_maps.exr", "gate_skew_ps, gate_length_ps: ps; dcr_cps: counts/s; pde: fraction");
+    if (!sweep_)
+      put_file(intensity_, "intensity.exr", "counts: summed binary frames; photons: linearised incident photons per image");
+    if (!previews) return;
+    if (gt_on_) {
+      writers::write_png(staging.path("previews/depth.png"), writers::depth_preview(gt_ch_[0], img_.width, img_.height, 0.0f, 0.0f));
+      files.push_back("previews/depth.png");
+    }
+    const float* bright = sweep_ ? laser_ch_[0] : intensity_ch_[1];
+    writers::write_png(staging.path("previews/intensity.png"), writers::gray_preview(bright, img_.width, img_.height));
+    files.push_back("previews/intensity.png");
+  }
+
+ private:
+  static constexpr const char* kGroundTruthChannels[] = {"range", "z", "normal.X", "normal.Y", "normal.Z",
+                                                         "mesh_id", "material_id", "layer_count"};
+  static std::string layer_name(int l, const char* what) { return "layer" + std::to_string(l) + what; }
+  // Calls f(x, y, index in rect, index in the image) for every pixel (x, y) of rect.
+  template <class F>
+  void for_pixels(const PixelRect& r, F&& f) const {
+    for (int y = r.y0; y < r.y1(); ++y)
+      for (int x = r.x0; x < r.x1(); ++x)
+        f(x, y, size_t(r.index(x, y)), size_t(y - img_.y0) * size_t(img_.width) + size_t(x - img_.x0));
+  }
+
+  PixelRect img_;
+  int layers_;
+  bool gt_on_, sweep_;
+  writers::ExrImage gt_, laser_, ambient_, maps_, intensity_;
+  std::vector<float*> gt_ch_, layer_range_, layer_trans_, laser_ch_, maps_ch_, intensity_ch_;
+  float* ambient_ch_ = nullptr;
+  std::vector<double> pixel_laser_, pixel_oow_;
+};
+
+// The NumPy stacks, streamed to disk tile by tile.
+class Stacks {
+ public:
+  Stacks(const RunConfig& cfg, const PixelRect& img, int K, const TimeAxis& axis, const Staging& staging,
+         std::vector<std::string>& files)
+      : img_(img), tcrop_(cfg.outputs.transient_crop.value_or(img)), counts_u8_(frames_per_k(cfg) <= 255) {
+    using writers::NpyWriter;
+    const auto open = [&](std::unique_ptr<NpyWriter>& w, const std::string& name, NpyWriter::Dtype type, std::vector<int64_t> shape) {
+      w = std::make_unique<NpyWriter>(staging.path(name), type, std::move(shape));
+      files.push_back(name);
+    };
+    const std::vector<int64_t> khw{K, img.height, img.width};
+    if (cfg.outputs.expected_counts) open(expected_, "expected_counts.npy", NpyWriter::Dtype::F32, khw);
+    if (cfg.outputs.counts) open(counts_, "counts.npy", counts_u8_ ? NpyWriter::Dtype::U8 : NpyWriter::Dtype::U16, khw);
+    if (cfg.outputs.frames)
+      open(frames_, "frames.npy", NpyWriter::Dtype::U8, {K, frames_per_k(cfg), img.height, (img.width + 7) / 8});
+    const std::vector<int64_t> hwt{tcrop_.height, tcrop_.width, axis.bins};
+    if (cfg.outputs.transient) open(transient_, "transient.npy", NpyWriter::Dtype::F32, hwt);
+    if (cfg.outputs.transient && cfg.render.split_direct_indirect)
+      open(indirect_, "transient_indirect.npy", NpyWriter::Dtype::F32, hwt);
+  }
+
+  void put(const TransientTile& t, const SensorTile& s) {
+    const PixelRect& r = t.rect;
+    if (expected_) expected_->write_khw(r, img_.x0, img_.y0, s.expected.data());
+    if (counts_ && counts_u8_) {
+      std::vector<uint8_t> c8(s.counts.size());
+      std::transform(s.counts.begin(), s.counts.end(), c8.begin(), [](uint16_t v) { return uint8_t(v); });
+      counts_->write_khw(r, img_.x0, img_.y0, c8.data());
+    } else if (counts_) {
+      counts_->write_khw(r, img_.x0, img_.y0, s.counts.data());
+    }
+    if (frames_) frames_->write_frames(r, img_.x0, img_.y0, s.frames.data());
+    const int x0 = std::max(r.x0, tcrop_.x0), x1 = std::min(r.x1(), tcrop_.x1());
+    const int y0 = std::max(r.y0, tcrop_.y0), y1 = std::min(r.y1(), tcrop_.y1());
+    if (t.axis.bins == 0 || x1 <= x0 || y1 <= y0) return;
+    const PixelRect part{x0, y0, x1 - x0, y1 - y0};
+    if (transient_) transient_->write_hwt(part, t.data_rect, tcrop_.x0, tcrop_.y0, t.transient.data());
+    if (indirect_) indirect_->write_hwt(part, t.data_rect, tcrop_.x0, tcrop_.y0, t.transient_indirect.data());
+  }
+
+  void commit() {
+    for (auto* w : {&expected_, &counts_, &frames_, &transient_, &indirect_})
+      if (*w) (*w)->commit();
+  }
+  bool counts_u8() const { return counts_u8_; }
+  const PixelRect& transient_crop() const { return tcrop_; }
+
+ private:
+  PixelRect img_, tcrop_;
+  bool counts_u8_;
+  std::unique_ptr<writers::NpyWriter> expected_, counts_, frames_, transient_, indirect_;
+};
+
+// The sampled gate profiles of a few pixels, for previews/gate_profiles.png.
+class ProfileProbe {
+ public:
+  ProfileProbe(const PixelRect& img, int K) : pixels_(profile_pixels(img)), curves_(pixels_.size(), std::vector<float>(size_t(K))) {}
+  void put(const SensorTile& s) {
+    for (size_t p = 0; p < pixels_.size(); ++p)
+      if (s.rect.contains(pixels_[p].first, pixels_[p].second))
+        for (int k = 0; k < s.K; ++k)
+          curves_[p][size_t(k)] = float(s.counts[size_t(k) * size_t(s.rect.count()) + size_t(s.rect.index(pixels_[p].first, pixels_[p].second))]);
+  }
+  void write(const Staging& staging, const std::vector<double>& gate_positions_s, std::vector<std::string>& files) const {
+    std::vector<double> x(gate_positions_s.size());
+    std::transform(gate_positions_s.begin(), gate_positions_s.end(), x.begin(), [](double t) { return t / kNs; });
+    writers::write_png(staging.path("previews/gate_profiles.png"),
+                       writers::profile_plot(curves_, x, 800, 450, "gate position (ns)", "counts"));
+    files.push_back("previews/gate_profiles.png");
+  }
+  const std::vector<std::pair<int, int>>& pixels() const { return pixels_; }
+
+ private:
+  std::vector<std::pair<int, int>> pixels_;
+  std::vector<std::vector<float>> curves_;
+};
+
 }  // namespace
 
 RunResult run(const RunOptions& options) {
@@ -249,157 +444,35 @@ RunResult run(const RunOptions& options) {
 
   const TimeAxis axis = time_axis(cfg, sensor);
   const PixelRect img = image_rect(cfg);
-  const int W = img.width, H = img.height, K = sensor.K();
-  const int halo = sensor.halo();
+  const int K = sensor.K();
   const bool sweep = cfg.acquisition.mode == "gate_sweep";
-  const int frames = cfg.acquisition.frames;
 
-  fs::path out = options.out_dir.empty() ? fs::path("out") / fs::path(options.scene_file).stem() : fs::path(options.out_dir);
+  const fs::path out = options.out_dir.empty() ? fs::path("out") / fs::path(options.scene_file).stem() : fs::path(options.out_dir);
   Staging staging(out);
   std::vector<std::string> files;
+  Images images(cfg, img);
+  Stacks stacks(cfg, img, K, axis, staging, files);
+  ProfileProbe probe(img, K);
 
-  // Full-image float images are small (tens of MB); the large stacks stream to disk tile by tile.
-  writers::ExrImage gt(W, H), laser(W, H), ambient(W, H), maps(W, H), intensity(W, H);
-  const int L = cfg.render.max_layers;
-  std::vector<float*> layer_range(static_cast<size_t>(L)), layer_trans(static_cast<size_t>(L));
-  if (cfg.outputs.ground_truth)
-    for (int i = 0; i < L; ++i) {
-      layer_range[size_t(i)] = gt.channel("layer" + std::to_string(i) + ".range");
-      layer_trans[size_t(i)] = gt.channel("layer" + std::to_string(i) + ".transmittance");
-    }
-
-  // ExrImage::channel creates on first use, so every channel is created here, before the tiles run.
-  float *range = gt.channel("range"), *zc = gt.channel("z"), *nx = gt.channel("normal.X"), *ny = gt.channel("normal.Y"),
-        *nz = gt.channel("normal.Z"), *mesh = gt.channel("mesh_id"), *mat = gt.channel("material_id"),
-        *lc = gt.channel("layer_count");
-  float *lz = laser.channel("photons_per_pulse"), *oow = laser.channel("out_of_window"),
-        *amb = ambient.channel("photons_per_second");
-  float *skew = maps.channel("gate_skew_ps"), *glen = maps.channel("gate_length_ps"), *dcr = maps.channel("dcr_cps"),
-        *pde = maps.channel("pde");
-  float *ic = intensity.channel("counts"), *ip = intensity.channel("photons");
-
-  using writers::NpyWriter;
-  const auto K64 = int64_t(K), H64 = int64_t(H), W64 = int64_t(W);
-  // Dual exposure splits the frames between its two exposures.
-  const int frames_per_k = sweep ? frames : (cfg.acquisition.intensity.exposure == "dual" ? frames / 2 : frames);
-  const bool counts_u8 = frames_per_k <= 255;
-  std::unique_ptr<NpyWriter> expected_npy, counts_npy, frames_npy, transient_npy, indirect_npy;
-  if (cfg.outputs.expected_counts) {
-    expected_npy = std::make_unique<NpyWriter>(staging.path("expected_counts.npy"), NpyWriter::Dtype::F32, std::vector<int64_t>{K64, H64, W64});
-    files.push_back("expected_counts.npy");
-  }
-  if (cfg.outputs.counts) {
-    counts_npy = std::make_unique<NpyWriter>(staging.path("counts.npy"), counts_u8 ? NpyWriter::Dtype::U8 : NpyWriter::Dtype::U16,
-                                             std::vector<int64_t>{K64, H64, W64});
-    files.push_back("counts.npy");
-  }
-  if (cfg.outputs.frames) {
-    frames_npy = std::make_unique<NpyWriter>(staging.path("frames.npy"), NpyWriter::Dtype::U8,
-                                             std::vector<int64_t>{K64, int64_t(frames_per_k), H64, (W64 + 7) / 8});
-    files.push_back("frames.npy");
-  }
-  const PixelRect tcrop = cfg.outputs.transient_crop.value_or(img);
-  if (cfg.outputs.transient) {
-    transient_npy = std::make_unique<NpyWriter>(staging.path("transient.npy"), NpyWriter::Dtype::F32,
-                                                std::vector<int64_t>{int64_t(tcrop.height), int64_t(tcrop.width), axis.bins});
-    files.push_back("transient.npy");
-    if (cfg.render.split_direct_indirect) {
-      indirect_npy = std::make_unique<NpyWriter>(staging.path("transient_indirect.npy"), NpyWriter::Dtype::F32,
-                                                 std::vector<int64_t>{int64_t(tcrop.height), int64_t(tcrop.width), axis.bins});
-      files.push_back("transient_indirect.npy");
-    }
-  }
-
-  const std::vector<PixelRect> local_tiles = make_tiles(W, H, cfg.render.tile_size);
-  // Per-pixel totals in double, summed in image order at the end, so the totals in metadata.json do
-  // not depend on the tile size (a per-tile sum would change the order of the additions).
-  std::vector<double> pixel_laser(size_t(W) * size_t(H), 0.0), pixel_oow(size_t(W) * size_t(H), 0.0);
-  std::vector<render::RenderStats> tile_stats(local_tiles.size());
-  const auto plot_pixels = profile_pixels(img);
-  std::vector<std::vector<float>> profiles(plot_pixels.size(), std::vector<float>(size_t(K), 0.0f));
-  std::vector<std::vector<float>> profiles_expected = profiles;
-
+  // Tiles are laid over the output image; the renderer and the sensor see full-sensor coordinates.
+  std::vector<PixelRect> tiles = make_tiles(img.width, img.height, cfg.render.tile_size);
+  for (PixelRect& t : tiles) t.x0 += img.x0, t.y0 += img.y0;
+  std::vector<render::RenderStats> tile_stats(tiles.size());
   std::fprintf(stderr, "spadgen: %s: %d x %d pixels, %zu tiles, %lld time bins of %s ps, K = %d\n",
-               options.scene_file.c_str(), W, H, local_tiles.size(), static_cast<long long>(axis.bins),
+               options.scene_file.c_str(), img.width, img.height, tiles.size(), static_cast<long long>(axis.bins),
                seconds_text(axis.bin_width_s / kPs).c_str(), K);
-  Progress progress(local_tiles.size(), options.progress);
+  Progress progress(tiles.size(), options.progress);
 
-  tbb::parallel_for(size_t(0), local_tiles.size(), [&](size_t ti) {
+  tbb::parallel_for(size_t(0), tiles.size(), [&](size_t ti) {
     InterruptGuard::check();
-    // Tiles are laid over the output image; the renderer and sensor see full-sensor coordinates.
-    const PixelRect& lt = local_tiles[ti];
-    const PixelRect rect{lt.x0 + img.x0, lt.y0 + img.y0, lt.width, lt.height};
-    const auto out_index = [&](int x, int y) { return size_t(y - img.y0) * size_t(W) + size_t(x - img.x0); };
-
-    if (cfg.outputs.ground_truth) {
-      const GroundTruthTile g = renderer.ground_truth(rect);
-      for (int y = rect.y0; y < rect.y1(); ++y)
-        for (int x = rect.x0; x < rect.x1(); ++x) {
-          const auto i = size_t(rect.index(x, y));
-          const size_t o = out_index(x, y);
-          range[o] = g.range[i], zc[o] = g.z[i];
-          nx[o] = g.normal[3 * i], ny[o] = g.normal[3 * i + 1], nz[o] = g.normal[3 * i + 2];
-          mesh[o] = float(g.mesh_id[i]), mat[o] = float(g.material_id[i]), lc[o] = float(g.layer_count[i]);
-          for (int l = 0; l < L; ++l) {
-            layer_range[size_t(l)][o] = g.layer_range[i * size_t(g.max_layers) + size_t(l)];
-            layer_trans[size_t(l)][o] = g.layer_transmittance[i * size_t(g.max_layers) + size_t(l)];
-          }
-        }
-    }
-
-    const PixelRect data_rect = grow_clipped(rect, halo, cfg.camera.width_px, cfg.camera.height_px);
+    const PixelRect& rect = tiles[ti];
+    if (cfg.outputs.ground_truth) images.put_ground_truth(renderer.ground_truth(rect));
+    const PixelRect data_rect = grow_clipped(rect, sensor.halo(), cfg.camera.width_px, cfg.camera.height_px);
     const TransientTile t = renderer.transient(rect, data_rect, axis, &tile_stats[ti]);
     const SensorTile s = sensor.process(t);
-
-    for (int y = rect.y0; y < rect.y1(); ++y)
-      for (int x = rect.x0; x < rect.x1(); ++x) {
-        const auto d = size_t(t.data_rect.index(x, y));
-        const size_t o = out_index(x, y);
-        lz[o] = float(t.laser_total[d]), oow[o] = float(t.out_of_window[d]), amb[o] = t.ambient_rate[d];
-        pixel_laser[o] = t.laser_total[d], pixel_oow[o] = t.out_of_window[d];
-      }
-
-    const sensor::SensorMapsTile m = sensor.maps(rect);
-    for (int y = rect.y0; y < rect.y1(); ++y)
-      for (int x = rect.x0; x < rect.x1(); ++x) {
-        const auto i = size_t(rect.index(x, y));
-        const size_t o = out_index(x, y);
-        skew[o] = m.gate_skew_ps[i], glen[o] = m.gate_length_ps[i], dcr[o] = m.dcr_cps[i], pde[o] = m.pde[i];
-      }
-
-    if (expected_npy) expected_npy->write_khw(rect, img.x0, img.y0, s.expected.data());
-    if (counts_npy) {
-      if (counts_u8) {
-        std::vector<uint8_t> c8(s.counts.size());
-        std::transform(s.counts.begin(), s.counts.end(), c8.begin(), [](uint16_t v) { return uint8_t(v); });
-        counts_npy->write_khw(rect, img.x0, img.y0, c8.data());
-      } else {
-        counts_npy->write_khw(rect, img.x0, img.y0, s.counts.data());
-      }
-    }
-    if (frames_npy) frames_npy->write_frames(rect, img.x0, img.y0, s.frames.data());
-    if (transient_npy && axis.bins > 0) {
-      const int x0 = std::max(rect.x0, tcrop.x0), x1 = std::min(rect.x1(), tcrop.x1());
-      const int y0 = std::max(rect.y0, tcrop.y0), y1 = std::min(rect.y1(), tcrop.y1());
-      if (x1 > x0 && y1 > y0)
-        transient_npy->write_hwt({x0, y0, x1 - x0, y1 - y0}, t.data_rect, tcrop.x0, tcrop.y0, t.transient.data());
-      if (indirect_npy && x1 > x0 && y1 > y0)
-        indirect_npy->write_hwt({x0, y0, x1 - x0, y1 - y0}, t.data_rect, tcrop.x0, tcrop.y0, t.transient_indirect.data());
-    }
-    if (!sweep) {
-      for (int y = rect.y0; y < rect.y1(); ++y)
-        for (int x = rect.x0; x < rect.x1(); ++x) {
-          const auto i = size_t(rect.index(x, y));
-          ic[out_index(x, y)] = s.intensity_counts[i], ip[out_index(x, y)] = s.intensity_photons[i];
-        }
-    }
-    for (size_t p = 0; p < plot_pixels.size(); ++p)
-      if (rect.contains(plot_pixels[p].first, plot_pixels[p].second))
-        for (int k = 0; k < K; ++k) {
-          const size_t i = size_t(k) * size_t(rect.count()) + size_t(rect.index(plot_pixels[p].first, plot_pixels[p].second));
-          profiles[p][size_t(k)] = float(s.counts[i]);
-          profiles_expected[p][size_t(k)] = s.expected[i];
-        }
+    images.put(t, sensor.maps(rect), s);
+    stacks.put(t, s);
+    probe.put(s);
     progress.tick();
   });
   const double render_seconds = progress.seconds();
@@ -407,68 +480,16 @@ RunResult run(const RunOptions& options) {
   // Provenance travels with every image.
   const std::string hash = scene_hash(cfg);
   const std::string crop_text = json::array({img.x0, img.y0, img.width, img.height}).dump();
-  const auto provenance = [&](writers::ExrImage& e) {
+  images.write(staging, [&](writers::ExrImage& e) {
     e.set_attribute("spadgen_version", SPADGEN_VERSION);
     e.set_attribute("spadgen_seed", std::to_string(cfg.seed));
     e.set_attribute("spadgen_scene_file", cfg.scene_file);
     e.set_attribute("spadgen_scene_hash", hash);
     e.set_attribute("spadgen_crop", crop_text);
-  };
-  // Layers beyond the deepest one any pixel has are not written.
-  int deepest = 0;
-  if (cfg.outputs.ground_truth) {
-    deepest = int(*std::max_element(lc, lc + size_t(W) * size_t(H)));
-    writers::ExrImage g2(W, H);
-    for (const char* name : {"range", "z", "normal.X", "normal.Y", "normal.Z", "mesh_id", "material_id", "layer_count"})
-      std::copy_n(gt.channel(name), size_t(W) * size_t(H), g2.channel(name));
-    for (int l = 0; l < deepest; ++l)
-      for (const char* what : {".range", ".transmittance"}) {
-        const std::string n = "layer" + std::to_string(l) + what;
-        std::copy_n(gt.channel(n), size_t(W) * size_t(H), g2.channel(n));
-      }
-    provenance(g2);
-    g2.set_attribute("spadgen_units", "range, z, layer<i>.range: metres (+inf where the ray hits nothing); transmittance: fraction");
-    g2.write(staging.path("ground_truth.exr"));
-    files.push_back("ground_truth.exr");
-  }
-  provenance(laser);
-  laser.set_attribute("spadgen_units", "photons per laser pulse reaching the pixel's SPAD (before PDP)");
-  laser.set_attribute("spadgen_time_axis", axis_json(axis).dump());
-  laser.write(staging.path("laser.exr"));
-  files.push_back("laser.exr");
-  provenance(ambient);
-  ambient.set_attribute("spadgen_units", "ambient photons per second reaching the pixel's SPAD (before PDP)");
-  ambient.write(staging.path("ambient.exr"));
-  files.push_back("ambient.exr");
-  provenance(maps);
-  maps.write(staging.path("sensor_maps.exr"));
-  files.push_back("sensor_maps.exr");
-  if (!sweep) {
-    provenance(intensity);
-    intensity.set_attribute("spadgen_units", "counts: summed binary frames; photons: linearised incident photons per image");
-    intensity.write(staging.path("intensity.exr"));
-    files.push_back("intensity.exr");
-  }
+  }, axis, cfg.outputs.previews, files);
+  if (cfg.outputs.previews && sweep && K > 1) probe.write(staging, sensor.gate_positions_s(), files);
 
-  if (cfg.outputs.previews) {
-    if (cfg.outputs.ground_truth) {
-      writers::write_png(staging.path("previews/depth.png"), writers::depth_preview(gt.channel("range"), W, H, 0.0f, 0.0f));
-      files.push_back("previews/depth.png");
-    }
-    const float* bright = sweep ? laser.channel("photons_per_pulse") : intensity.channel("photons");
-    writers::write_png(staging.path("previews/intensity.png"), writers::gray_preview(bright, W, H));
-    files.push_back("previews/intensity.png");
-    if (sweep && K > 1) {
-      std::vector<double> x(sensor.gate_positions_s().size());
-      std::transform(sensor.gate_positions_s().begin(), sensor.gate_positions_s().end(), x.begin(), [](double t) { return t / kNs; });
-      writers::write_png(staging.path("previews/gate_profiles.png"),
-                         writers::profile_plot(profiles, x, 800, 450, "gate position (ns)", "counts"));
-      files.push_back("previews/gate_profiles.png");
-    }
-  }
-
-  const double laser_total = std::accumulate(pixel_laser.begin(), pixel_laser.end(), 0.0);
-  const double oow_total = std::accumulate(pixel_oow.begin(), pixel_oow.end(), 0.0);
+  const double laser_total = images.laser_total(), oow_total = images.out_of_window_total();
   render::RenderStats rays;
   for (const auto& st : tile_stats) rays.camera_rays += st.camera_rays, rays.shadow_rays += st.shadow_rays;
   files.push_back("metadata.json");
@@ -482,25 +503,27 @@ RunResult run(const RunOptions& options) {
                       {"embree", std::to_string(RTC_VERSION_MAJOR) + "." + std::to_string(RTC_VERSION_MINOR) + "." + std::to_string(RTC_VERSION_PATCH)}};
   meta["units"] = {{"length", "m"}, {"time", "s unless the key says ns or ps"}, {"laser", "photons per laser pulse at the SPAD, before PDP"},
                    {"ambient", "photons per second at the SPAD, before PDP"}, {"counts", "summed binary frames"}};
-  meta["image"] = {{"width", W}, {"height", H}, {"crop_in_sensor", {img.x0, img.y0, img.width, img.height}},
+  meta["image"] = {{"width", img.width}, {"height", img.height}, {"crop_in_sensor", {img.x0, img.y0, img.width, img.height}},
                    {"sensor_width", cfg.camera.width_px}, {"sensor_height", cfg.camera.height_px},
                    {"pixel_order", "row 0 is the top of the image; (K, H, W) stacks index [k, y, x]"}};
   meta["photons_per_pulse_emitted"] = renderer.photons_per_pulse();
   meta["time_axis"] = ojson::parse(axis_json(axis).dump());
-  if (cfg.outputs.transient)
-    meta["transient"] = {{"crop_in_sensor", {tcrop.x0, tcrop.y0, tcrop.width, tcrop.height}},
-                         {"shape", {tcrop.height, tcrop.width, axis.bins}},
+  if (cfg.outputs.transient) {
+    const PixelRect& tc = stacks.transient_crop();
+    meta["transient"] = {{"crop_in_sensor", {tc.x0, tc.y0, tc.width, tc.height}},
+                         {"shape", {tc.height, tc.width, axis.bins}},
                          {"indirect", cfg.render.split_direct_indirect
                                           ? "transient_indirect.npy: the part of transient.npy from paths with two or more "
                                             "scattering vertices (docs/render.md); direct = transient - transient_indirect"
                                           : "not split (render.split_direct_indirect is false)"}};
+  }
   meta["laser_photons_per_pulse"] = {{"total_all_pixels", laser_total},
                                      {"outside_time_window", oow_total},
                                      {"outside_fraction", laser_total > 0 ? oow_total / laser_total : 0.0}};
   meta["acquisition"] = ojson::parse(sensor.describe().dump());
-  meta["ground_truth_layers"] = deepest;
-  meta["counts_dtype"] = counts_u8 ? "uint8" : "uint16";
-  meta["preview_profile_pixels"] = plot_pixels;
+  meta["ground_truth_layers"] = images.deepest_layer();
+  meta["counts_dtype"] = stacks.counts_u8() ? "uint8" : "uint16";
+  meta["preview_profile_pixels"] = probe.pixels();
   meta["warnings"] = resolved.warnings;
   for (const std::string& w : scene.warnings) meta["warnings"].push_back(w);
   meta["resolved_scene"] = resolved.resolved;
@@ -511,11 +534,7 @@ RunResult run(const RunOptions& options) {
   writers::write_json(staging.path("metadata.json"), json::parse(meta.dump()));
 
   InterruptGuard::check();
-  if (expected_npy) expected_npy->commit();
-  if (counts_npy) counts_npy->commit();
-  if (frames_npy) frames_npy->commit();
-  if (transient_npy) transient_npy->commit();
-  if (indirect_npy) indirect_npy->commit();
+  stacks.commit();
   staging.publish(files);
   std::fprintf(stderr, "spadgen: wrote %zu files to %s in %.1f s\n", files.size(), out.string().c_str(), progress.seconds());
   return {out.string(), files};
@@ -539,8 +558,8 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
     << axis.end_s() / kNs << " ns\n";
   const auto mb = [](double bytes) { return std::to_string(int64_t(std::ceil(bytes / 1e6))) + " MB"; };
   o << "output sizes: expected_counts.npy " << mb(4.0 * px * sensor.K()) << ", counts.npy "
-    << mb((c.acquisition.frames <= 255 ? 1.0 : 2.0) * px * sensor.K());
-  if (c.outputs.frames) o << ", frames.npy " << mb(double(sensor.K()) * c.acquisition.frames * img.height * ((img.width + 7) / 8));
+    << mb((frames_per_k(c) <= 255 ? 1.0 : 2.0) * px * sensor.K());
+  if (c.outputs.frames) o << ", frames.npy " << mb(double(sensor.K()) * frames_per_k(c) * img.height * ((img.width + 7) / 8));
   if (c.outputs.transient) {
     const PixelRect t = c.outputs.transient_crop.value_or(img);
     o << ", transient.npy " << mb(4.0 * double(t.width) * t.height * double(axis.bins));

@@ -50,6 +50,8 @@ float* ExrImage::channel(const std::string& name) {
   return it->second.data();
 }
 
+void ExrImage::remove_channel(const std::string& name) { channels_.erase(name); }
+
 void ExrImage::set_attribute(const std::string& key, const std::string& value) {
   if (key.empty()) throw Error("an EXR attribute needs a name");
   // The standard attributes (channels, compression, dataWindow, ...) have fixed types; a string under

@@ -60,6 +60,7 @@ class ExrImage {
  public:
   ExrImage(int width, int height);
   float* channel(const std::string& name);  // created zero-filled on first use; row-major
+  void remove_channel(const std::string& name);  // no-op when absent
   void set_attribute(const std::string& key, const std::string& value);
   // Writes the image (ZIP compression) to path atomically.
   void write(const std::string& path) const;
