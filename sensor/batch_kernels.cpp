@@ -153,8 +153,6 @@ void BinomialCounts(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t 
     Philox10(du, key[0], key[1], x0, x1, x2, x3);
     hn::StoreU(x0, du, s.hi.data() + k);
     hn::StoreU(x1, du, s.lo.data() + k);
-    hn::StoreU(x2, du, s.w2.data() + k);
-    hn::StoreU(x3, du, s.w3.data() + k);
   }
   std::copy(lam_in, lam_in + K, s.lam.data());
   const hn::ScalableTag<double> d;
@@ -167,8 +165,10 @@ void BinomialCounts(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t 
   const auto vN = hn::Set(d, static_cast<double>(N)), one = hn::Set(d, 1.0), half = hn::Set(d, 0.5);
   const hn::Rebind<int32_t, decltype(d)> di32;
   const auto two64 = hn::Set(d, 0x1p64), mode_from = hn::Set(d, BinomialSampler::mode_search_from());
-  const double* lb = sampler.log_binom().data();
+  const double* lf = sampler.log_factorials().data();
+  const auto lfN = hn::Set(d, lf[N]);
   const double* up = sampler.up().data();
+  const double* down = sampler.down().data();
   for (size_t k = 0; k < K; k += L) {
     const auto lam = ClampRate(d, hn::LoadU(d, s.lam.data() + k));
     const auto nl = hn::Neg(lam);
@@ -224,62 +224,44 @@ void BinomialCounts(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t 
         done = hn::Or(hn::Not(cont), hn::Or(done, hn::Not(hn::Gt(S, hn::Zero(d)))));
       }
     }
-    // n a >= 16: BTRS rejection as BinomialSampler::btrs_setup / btrs_trial, the same operations in the same
-    // order (explicit MulAdd where the scalar code calls std::fma). Trial j of gate k takes block j of the
-    // stream Rng(seed, Counts, pixel, k): U = words 0, 1 and V = words 2, 3 (block 0 is already computed).
-    // The loop runs until every lane has accepted; accepted lanes keep their result.
+    // Inversion from the mode (n a >= 16) in the order m, m-1, m+1, ..., as search_from_mode. u decreases
+    // step by step; a lane's result is where u first falls below 0 (or m when both sides are exhausted).
     if (!hn::AllFalse(d, mode)) {
-      const auto am = hn::IfThenElse(mode, a, hn::Set(d, 0.25)), bm = hn::IfThenElse(mode, b, hn::Set(d, 0.75));
-      const auto m = hn::Min(hn::Floor(hn::Mul(hn::Add(vN, one), am)), vN);
-      const auto spq = hn::Sqrt(hn::Mul(hn::Mul(vN, am), bm));
-      const auto bb = hn::MulAdd(hn::Set(d, 2.53), spq, hn::Set(d, 1.15));
-      const auto aa = hn::MulAdd(hn::Set(d, 0.01), am, hn::MulAdd(hn::Set(d, 0.0248), bb, hn::Set(d, -0.0873)));
-      const auto c = hn::MulAdd(vN, am, half);
-      const auto vr = hn::Sub(hn::Set(d, 0.92), hn::Div(hn::Set(d, 4.2), bb));
-      const auto alpha = hn::Mul(hn::Add(hn::Set(d, 2.83), hn::Div(hn::Set(d, 5.1), bb)), spq);
-      const auto aa2 = hn::Mul(hn::Set(d, 2.0), aa);
-      const auto zero = hn::Zero(d), min_us = hn::Set(d, 0.07), scale = hn::Set(d, 0x1p-52);
-      bool have_lr = false;
-      auto lr = zero, lbm = zero;
-      auto uU = U;
-      auto uV = hn::Or(hn::ShiftLeft<32>(hn::PromoteTo(d64, hn::LoadU(d32, s.w2.data() + k))),
-                       hn::PromoteTo(d64, hn::LoadU(d32, s.w3.data() + k)));
-      auto mid = [&](hn::Vec<decltype(d64)> w) {
-        return hn::Mul(hn::Add(hn::ConvertTo(d, hn::BitCast(di64, hn::ShiftRight<12>(w))), half), scale);
-      };
-      auto res = zero;
-      auto open = mode;
-      for (uint32_t j = 1;; ++j) {
-        const auto u = hn::Sub(mid(uU), half), v = mid(uV);
-        const auto us = hn::Sub(half, hn::Abs(u));
-        const auto kf = hn::Floor(hn::MulAdd(hn::Add(hn::Div(aa2, us), bb), u, c));
-        const auto in = hn::And(open, hn::And(hn::Ge(kf, zero), hn::Le(kf, vN)));
-        const auto quick = hn::And(hn::Ge(us, min_us), hn::Le(v, vr));
-        auto acc = hn::And(in, quick);
-        const auto slow = hn::AndNot(quick, in);
-        if (!hn::AllFalse(d, slow)) {
-          if (!have_lr) {
-            lr = hn::Log(d, hn::Div(am, bm));
-            lbm = hn::GatherIndex(d, lb, hn::ConvertTo(di64, m));
-            have_lr = true;
-          }
-          const auto lbk = hn::GatherIndex(d, lb, hn::ConvertTo(di64, hn::IfThenElse(slow, kf, zero)));
-          const auto lv = hn::Log(d, hn::Div(hn::Mul(v, alpha), hn::Add(hn::Div(aa, hn::Mul(us, us)), bb)));
-          acc = hn::Or(acc, hn::And(slow, hn::Le(lv, hn::MulAdd(hn::Sub(kf, m), lr, hn::Sub(lbk, lbm)))));
-        }
-        res = hn::IfThenElse(acc, kf, res);
-        open = hn::AndNot(acc, open);
-        if (hn::AllFalse(d, open)) break;
-        // block j of the lanes' streams (Lu >= L lanes of 32 bits; the first L are used)
-        auto y0 = hn::Set(du, j), y1 = hn::Iota(du, static_cast<uint32_t>(k)), y2 = plo, y3 = phi;
-        Philox10(du, key[0], key[1], y0, y1, y2, y3);
-        alignas(64) uint32_t w[4][64];
-        hn::Store(y0, du, w[0]);
-        hn::Store(y1, du, w[1]);
-        hn::Store(y2, du, w[2]);
-        hn::Store(y3, du, w[3]);
-        uU = hn::Or(hn::ShiftLeft<32>(hn::PromoteTo(d64, hn::LoadU(d32, w[0]))), hn::PromoteTo(d64, hn::LoadU(d32, w[1])));
-        uV = hn::Or(hn::ShiftLeft<32>(hn::PromoteTo(d64, hn::LoadU(d32, w[2]))), hn::PromoteTo(d64, hn::LoadU(d32, w[3])));
+      const auto m = hn::Min(hn::Floor(hn::Mul(hn::Add(vN, one), a)), vN);
+      const auto mi = hn::ConvertTo(di64, m);
+      const auto lfm = hn::GatherIndex(d, lf, mi), lfnm = hn::GatherIndex(d, lf, hn::Sub(hn::Set(di64, N), mi));
+      // lanes with a = 0 are never in mode; their log is masked away
+      const auto log_a = hn::Log(d, hn::IfThenElse(mode, a, one));
+      const auto pm = hn::Exp(d, hn::Add(hn::Sub(hn::Sub(lfN, lfm), lfnm),
+                                         hn::MulAdd(m, log_a, hn::Mul(hn::Sub(vN, m), log_b))));
+      const auto r_inv = hn::Div(b, a);
+      const auto zero = hn::Zero(d);
+      auto u = hn::Sub(hn::Mul(hn::ConvertTo(d, hn::BitCast(di64, hn::ShiftRight<11>(U))), hn::Set(d, 0x1p-53)), pm);
+      auto res = m, lo = m, hi = m, p_lo = pm, p_hi = pm;
+      // indices max(m - i, 0) and min(m + i, n) at step i
+      auto lo_i = mi, hi_i = mi;
+      const auto i_one = hn::Set(di64, 1), i_zero = hn::Zero(di64), i_n = hn::Set(di64, N);
+      auto open = hn::And(mode, hn::Ge(u, zero));  // lanes whose u has not fallen below 0 yet
+      while (!hn::AllFalse(d, open)) {
+        const auto can_lo = hn::Gt(lo, zero), can_hi = hn::Lt(hi, vN);
+        const auto dn = hn::GatherIndex(d, down, lo_i);
+        const auto upx = hn::GatherIndex(d, up, hi_i);
+        lo_i = hn::Max(hn::Sub(lo_i, i_one), i_zero);
+        hi_i = hn::Min(hn::Add(hi_i, i_one), i_n);
+        p_lo = hn::IfThenElse(can_lo, hn::Mul(p_lo, hn::Mul(dn, r_inv)), p_lo);
+        lo = hn::IfThenElse(can_lo, hn::Sub(lo, one), lo);
+        u = hn::IfThenElse(can_lo, hn::Sub(u, p_lo), u);
+        const auto hit_lo = hn::And(open, hn::Lt(u, zero));
+        res = hn::IfThenElse(hit_lo, lo, res);
+        open = hn::AndNot(hit_lo, open);
+        p_hi = hn::IfThenElse(can_hi, hn::Mul(p_hi, hn::Mul(r, upx)), p_hi);
+        hi = hn::IfThenElse(can_hi, hn::Add(hi, one), hi);
+        u = hn::IfThenElse(can_hi, hn::Sub(u, p_hi), u);
+        const auto hit_hi = hn::And(open, hn::Lt(u, zero));
+        res = hn::IfThenElse(hit_hi, hi, res);
+        open = hn::AndNot(hit_hi, open);
+        // neither side can move: U beyond the rounded total probability, the mode
+        open = hn::And(open, hn::Or(can_lo, can_hi));
       }
       xs = hn::IfThenElse(mode, res, xs);
     }
@@ -306,7 +288,7 @@ void KernelScratch::reserve(size_t K) {
   const size_t n = (K + 15) / 16 * 16 + 16;
   for (auto* v : {&lam, &p, &q, &a, &b, &S0, &P0, &pm}) v->resize(n);
   U.resize(n);
-  for (auto* v : {&hi, &lo, &w2, &w3, &x, &m}) v->resize(n);
+  for (auto* v : {&hi, &lo, &x, &m}) v->resize(n);
 }
 
 void probabilities(const double* lam, size_t K, double* p, double* q) {

@@ -4,7 +4,7 @@
 //    a pixel, with Highway's Expm1 / Exp / Log1p (measured against long double: at most 2 ulp);
 //  - Binomial(N, p) counts of all K gates of a pixel: block 0 of the K streams Rng(seed, Counts, pixel, k)
 //    on 16 lanes of Philox, the decision X = 0 as one comparison of U (the stream's first 64-bit uniform)
-//    with floor(P(X > 0) 2^64), the search from 0 (N a < 16) and BTRS rejection (N a >= 16) on all lanes;
+//    with floor(P(X > 0) 2^64), and only the other lanes through BinomialSampler's scalar search;
 //  - block 0 of many streams at once (the frames path's per-pixel streams).
 // Every result depends on the pixel and k only: bit-identical for any tile size or thread count.
 #pragma once
@@ -21,7 +21,7 @@ namespace spadgen::sensor {
 struct KernelScratch {
   std::vector<double> lam, p, q, a, b, S0, P0, pm;
   std::vector<uint64_t> U;
-  std::vector<uint32_t> hi, lo, w2, w3, x, m;  // hi, lo, w2, w3: words 0..3 of block 0
+  std::vector<uint32_t> hi, lo, x, m;
   void reserve(size_t K);
 };
 

@@ -44,45 +44,12 @@ double neg_log1p_minus(double x) {
 
 bool bits_are_sparse(const Prob& pr) { return std::min(pr.p, pr.q) <= kSparseBelow; }
 
-BinomialSampler::BinomialSampler(uint32_t n)
-    : n_(n), log_fact_(n + 1), log_binom_(n + 1), up_(n + 1), down_(n + 1) {
-  const long double lgn = std::lgamma(static_cast<long double>(n) + 1.0L);
+BinomialSampler::BinomialSampler(uint32_t n) : n_(n), log_fact_(n + 1), up_(n + 1), down_(n + 1) {
   for (uint32_t i = 0; i <= n; ++i) {
     log_fact_[i] = std::lgamma(static_cast<double>(i) + 1.0);
-    log_binom_[i] = static_cast<double>(lgn - std::lgamma(static_cast<long double>(i) + 1.0L) -
-                                        std::lgamma(static_cast<long double>(n - i) + 1.0L));
     up_[i] = static_cast<double>(n - i) / static_cast<double>(i + 1);
     down_[i] = static_cast<double>(i) / static_cast<double>(n - i + 1);
   }
-}
-
-BinomialSampler::Btrs BinomialSampler::btrs_setup(double a, double b) const {
-  Btrs h{};
-  const double N = n_;
-  h.a = a;
-  h.b = b;
-  h.m = std::min(N, std::floor((N + 1.0) * a));
-  h.spq = std::sqrt(N * a * b);
-  h.bb = std::fma(2.53, h.spq, 1.15);
-  h.aa = std::fma(0.01, a, std::fma(0.0248, h.bb, -0.0873));
-  h.c = std::fma(N, a, 0.5);
-  h.vr = 0.92 - 4.2 / h.bb;
-  h.alpha = (2.83 + 5.1 / h.bb) * h.spq;
-  h.lr = std::log(a / b);
-  h.log_binom_m = log_binom_[static_cast<size_t>(h.m)];
-  return h;
-}
-
-bool BinomialSampler::btrs_trial(const Btrs& h, uint64_t U, uint64_t V, uint32_t& x) const {
-  const double u = uniform_mid(U) - 0.5, v = uniform_mid(V);
-  const double us = 0.5 - std::abs(u);  // > 0: u is never +-1/2
-  const double kf = std::floor(std::fma(2.0 * h.aa / us + h.bb, u, h.c));
-  if (!(kf >= 0.0 && kf <= static_cast<double>(n_))) return false;  // outside the support: reject
-  x = static_cast<uint32_t>(kf);
-  if (us >= 0.07 && v <= h.vr) return true;  // the squeeze: below the pmf for n a >= 10 (Hormann)
-  // log V' <= log(f(x) / f(m)) = log C(n, x) - log C(n, m) + (x - m) log(a / b)
-  const double lv = std::log(v * h.alpha / (h.aa / (us * us) + h.bb));
-  return lv <= std::fma(kf - h.m, h.lr, log_binom_[x] - h.log_binom_m);
 }
 
 uint32_t BinomialSampler::search_from_zero(uint64_t U, double a, double b, double S0, double P0) const {

@@ -13,9 +13,8 @@
 //
 // Binomial: inversion. Mean below 16: sequential search from 0 on the survival function, computed from
 // -expm1 so that P(X >= 1) is exact even for a = 1e-15, compared with U as exact 64-bit thresholds.
-// Otherwise (n a >= 16) sample() uses BTRS rejection (Hormann 1993) with the exact pmf ratio in its
-// acceptance test: expected trials bounded in n a (one Philox block each). sample_u(), which has only one
-// uniform, inverts from the mode instead (order m, m-1, m+1, ...).
+// Otherwise: inversion in the order m, m-1, m+1, m-2, ... from the mode m, with the mode's probability
+// from log-factorials; expected steps about 1.6 standard deviations.
 #pragma once
 #include <array>
 #include <cstdint>
@@ -77,40 +76,11 @@ class BinomialSampler {
  public:
   explicit BinomialSampler(uint32_t n);
   uint32_t n() const { return n_; }
-  // Binomial(n, p); p = 0 gives 0 and q = 0 gives n exactly. G: Rng or StreamReader. Mean of the rarer
-  // outcome below mode_search_from(): inversion of the stream's next 64-bit draw (one draw). Otherwise
-  // BTRS rejection (uses_rejection): trial j takes two 64-bit draws (U, V), i.e. one Philox block.
-  template <class G>
-  uint32_t sample(G& rng, const Prob& pr) const {
-    uint64_t U = rng.next_u64();
-    if (!uses_rejection(pr)) return sample_u(U, pr);
-    const bool small = pr.p <= pr.q;
-    const Btrs h = btrs_setup(small ? pr.p : pr.q, small ? pr.q : pr.p);
-    for (uint32_t x = 0;; U = rng.next_u64()) {
-      if (btrs_trial(h, U, rng.next_u64(), x)) return small ? x : n_ - x;
-    }
-  }
-  // Inversion of one 64-bit uniform U (what sample() does when !uses_rejection(pr)); with a mean of at
-  // least mode_search_from() it inverts from the mode (search_from_mode), which sample() no longer uses.
+  // Binomial(n, p); p = 0 gives 0 and q = 0 gives n exactly. Uses the stream's next 64-bit draw only.
+  uint32_t sample(Rng& rng, const Prob& pr) const { return sample_u(rng.next_u64(), pr); }
+  uint32_t sample(StreamReader& rng, const Prob& pr) const { return sample_u(rng.next_u64(), pr); }
+  // The same from the 64-bit uniform U that sample() draws.
   uint32_t sample_u(uint64_t U, const Prob& pr) const;
-  // sample() draws by rejection: 0 < p < 1 and n min(p, q) >= mode_search_from().
-  bool uses_rejection(const Prob& pr) const {
-    return pr.p > 0.0 && pr.q > 0.0 && static_cast<double>(n_) * (pr.p <= pr.q ? pr.p : pr.q) >= mode_search_from();
-  }
-
-  // BTRS (Hormann 1993, transformed rejection with squeeze) for the rarer outcome a <= 1/2 <= b = 1 - a,
-  // n a >= 16, with the exact log pmf ratio from log_binom() in the acceptance test. The vectorised counts
-  // kernel performs the same operations (explicit fused multiply-adds) in the same order.
-  struct Btrs {
-    double a, b, m, spq, bb, aa, c, vr, alpha, lr, log_binom_m;
-  };
-  Btrs btrs_setup(double a, double b) const;
-  // One trial from two 64-bit uniforms: true and x when accepted.
-  bool btrs_trial(const Btrs& h, uint64_t U, uint64_t V, uint32_t& x) const;
-  // (floor(U / 2^12) + 1/2) 2^-52: a uniform on (0, 1), never 0 or 1, symmetric about 1/2.
-  static double uniform_mid(uint64_t U) { return (static_cast<double>(U >> 12) + 0.5) * 0x1p-52; }
-  // log C(n, x), computed in long double and rounded once.
-  const std::vector<double>& log_binom() const { return log_binom_; }
 
   // The two halves of the inversion, for callers that computed the probabilities themselves (the
   // vectorised counts kernel). X counts the rarer outcome of probability a <= b = 1 - a.
@@ -128,7 +98,7 @@ class BinomialSampler {
  private:
   uint32_t small_side(uint64_t U, double a, double b, double log_b) const;
   uint32_t n_;
-  std::vector<double> log_fact_, log_binom_;
+  std::vector<double> log_fact_;
   // up_[x] = (n - x) / (x + 1), down_[x] = x / (n - x + 1): pmf ratios without a division per step
   std::vector<double> up_, down_;
 };

@@ -249,11 +249,11 @@ TEST(Sampling, CountsKernelChiSquare) {
   }
 }
 
-// BTRS rejection (n min(p, q) >= 16): chi-square against the exact pmf (false-alarm rate 1e-6 each) and the
-// sample mean against n p within the z bound of 1e-6, for the scalar sampler (one stream, trials drawn in
-// order) and for the vectorised counts kernel (a stream per gate), at n p from the threshold 16 to n / 2,
-// mirrored (p > 1/2: X counts misses), and at n = 4080.
-TEST(Sampling, RejectionChiSquareAndMean) {
+// Inversion from the mode (n min(p, q) >= 16): chi-square against the exact pmf (false-alarm rate 1e-6 each)
+// and the sample mean against n p within the z bound of 1e-6, for the scalar sampler (one stream) and for
+// the vectorised counts kernel (a stream per gate), at n p from the threshold 16 to n / 2, mirrored
+// (p > 1/2: X counts misses), and at n = 4080.
+TEST(Sampling, ModeSearchChiSquareAndMean) {
   const Rng base(77, RngKind::Counts, 0, 0);
   const uint32_t key[2] = {base.key().v[0], base.key().v[1]};
   for (const auto& [n, p] : std::vector<std::pair<uint32_t, double>>{
@@ -261,7 +261,7 @@ TEST(Sampling, RejectionChiSquareAndMean) {
     const BinomialSampler sampler(n);
     const double q = 1.0 - p, lambda = -std::log1p(-p);
     const Prob pr = prob_from_lambda(lambda);
-    ASSERT_TRUE(sampler.uses_rejection(pr)) << n << " " << p;
+    ASSERT_GE(static_cast<double>(n) * std::min(pr.p, pr.q), BinomialSampler::mode_search_from()) << n << " " << p;
     const std::vector<double> pmf = binomial_pmf(static_cast<int>(n), pr.p);
     const double mean = static_cast<double>(n) * pr.p;
     // scalar: one stream
@@ -299,40 +299,6 @@ TEST(Sampling, RejectionChiSquareAndMean) {
       EXPECT_GT(chi_square_p(hist, pmf, draws), kAlpha) << "kernel n=" << n << " p=" << p;
       EXPECT_LE(std::abs(sum / draws - mean), testing::kZ * std::sqrt(mean * q / draws)) << "kernel n=" << n << " p=" << p;
     }
-  }
-}
-
-// BTRS consumes whole Philox blocks: trial j is block j (U = words 0, 1, V = words 2, 3), so the kernel's
-// vectorised blocks reproduce the scalar stream; the acceptance rate is high (few trials per draw), and
-// sample_u keeps the one-uniform inversion from the mode with the same law.
-TEST(Sampling, RejectionTrialsAndOneUniformInversion) {
-  const uint32_t n = 255;
-  const BinomialSampler sampler(n);
-  for (double p : {16.0 / 255.0, 0.2, 0.5}) {
-    const Prob pr = prob_from_lambda(-std::log1p(-p));
-    const BinomialSampler::Btrs h = sampler.btrs_setup(pr.p, pr.q);
-    size_t trials = 0, accepted = 0;
-    std::vector<double> hist(n + 1, 0.0);
-    for (uint64_t i = 0; i < 100000; ++i) {
-      const Rng stream(5, RngKind::Counts, i, 0);
-      Rng rng = stream;
-      const uint32_t want = sampler.sample(rng, pr);
-      for (uint32_t j = 0;; ++j) {  // the same draw from the blocks, trial by trial
-        const auto blk = stream.block(j);
-        uint32_t x = 0;
-        ++trials;
-        if (sampler.btrs_trial(h, (uint64_t{blk[0]} << 32) | blk[1], (uint64_t{blk[2]} << 32) | blk[3], x)) {
-          ASSERT_EQ(x, want);
-          ++accepted;
-          break;
-        }
-      }
-      hist[sampler.sample_u(Rng(6, RngKind::Counts, i, 0).next_u64(), pr)] += 1.0;
-    }
-    const double rate = static_cast<double>(accepted) / static_cast<double>(trials);
-    std::printf("BTRS n p = %.1f: acceptance %.3f per trial\n", n * p, rate);
-    EXPECT_GT(rate, 0.7);
-    EXPECT_GT(chi_square_p(hist, binomial_pmf(static_cast<int>(n), pr.p), 100000.0), kAlpha) << "sample_u p=" << p;
   }
 }
 
