@@ -7,6 +7,7 @@
 #include <bit>
 #include <cmath>
 #include <memory>
+#include <optional>
 #include <sstream>
 
 #include "core/error.h"
@@ -30,6 +31,15 @@ struct TypeInfo {
   bool single_avalanche = false;
 };
 
+// Population count inline (baseline x86-64 has no POPCNT, so std::popcount is a call to libgcc's
+// __popcountdi2): the usual SWAR sum of bit fields.
+inline uint32_t popcount64(uint64_t x) {
+  x -= (x >> 1) & 0x5555555555555555ull;
+  x = (x & 0x3333333333333333ull) + ((x >> 2) & 0x3333333333333333ull);
+  x = (x + (x >> 4)) & 0x0F0F0F0F0F0F0F0Full;
+  return static_cast<uint32_t>((x * 0x0101010101010101ull) >> 56);
+}
+
 // Neighbour offsets; the index is the direction used to key a crosstalk draw.
 constexpr int kNbDx[4] = {-1, 1, 0, 0};
 constexpr int kNbDy[4] = {0, 0, -1, 1};
@@ -39,17 +49,24 @@ constexpr int kNbDy[4] = {0, 0, -1, 1};
 // by sequential inversion, then which candidates as a uniformly random subset (Floyd), from the pixel's
 // crosstalk stream in neighbour order. With r n >= 16 (a saturated neighbour and large r) each candidate
 // is drawn on its own instead.
-template <class R>
-void crosstalk_into(Rng& rng, const uint64_t* theirs, uint64_t* mine, size_t wpp, R rate) {
+//
+// `rng` is the pixel's crosstalk stream, created on first use (mk()): a pixel with no candidate frame
+// costs no stream set-up and draws nothing, so the draws are the same as with the stream made up front.
+template <class R, class M>
+void crosstalk_into(std::optional<Rng>& stream, M mk, const uint64_t* theirs, uint64_t* mine, size_t wpp, R rate) {
+  uint64_t any = 0;
+  for (size_t w = 0; w < wpp; ++w) any |= theirs[w] & ~mine[w];
+  if (any == 0) return;  // the common case: no popcount at all
   uint32_t n = 0;
-  for (size_t w = 0; w < wpp; ++w) n += static_cast<uint32_t>(std::popcount(theirs[w] & ~mine[w]));
-  if (n == 0) return;
+  for (size_t w = 0; w < wpp; ++w) n += popcount64(theirs[w] & ~mine[w]);
   const double r = rate();
   if (!(r > 0.0)) return;
+  if (!stream) stream.emplace(mk());
+  Rng& rng = *stream;
   auto nth_candidate = [&](uint32_t t) {  // set bit t of the candidates in mine
     for (size_t w = 0; w < wpp; ++w) {
       uint64_t bits = theirs[w] & ~mine[w];
-      const auto c = static_cast<uint32_t>(std::popcount(bits));
+      const auto c = popcount64(bits);
       if (t >= c) {
         t -= c;
         continue;
@@ -470,7 +487,8 @@ SensorTile SensorModel::process(const TransientTile& t) const {
             int nb[4];
             const int nnb = ty.crosstalk > 0.0 ? neighbours(x, y, nb) : 0;
             if (nnb > 0) {
-              Rng xt(seed, RngKind::Crosstalk, pixel_index(x, y), kk);
+              std::optional<Rng> xt;
+              const auto make_xt = [&] { return Rng(seed, RngKind::Crosstalk, pixel_index(x, y), kk); };
               for (int i = 0; i < nnb; ++i) {
                 const size_t ni = nb_index(x, y, nb[i]);
                 const double li = lam[ni * Ks + kk], pi = own_p[ni * Ks + kk];
@@ -478,13 +496,13 @@ SensorTile SensorModel::process(const TransientTile& t) const {
                 // Given that the neighbour avalanched at least once, the chance it fires this pixel: xt for
                 // pixel B; for pixel A (1 - exp(-xt lambda_i)) / p_i, so that the marginal matches the
                 // thinned Poisson process of the counts path.
-                crosstalk_into(xt, own.data() + ni * wpp, mine, wpp, [&] {
+                crosstalk_into(xt, make_xt, own.data() + ni * wpp, mine, wpp, [&] {
                   return ty.single_avalanche ? ty.crosstalk : std::min(1.0, -std::expm1(-ty.crosstalk * li) / pi);
                 });
               }
             }
-            int c = 0;
-            for (size_t w = 0; w < wpp; ++w) c += std::popcount(mine[w]);
+            uint32_t c = 0;
+            for (size_t w = 0; w < wpp; ++w) c += popcount64(mine[w]);
             out.counts[kk * n + oi] = static_cast<uint16_t>(c);
           }
           const size_t H_t = static_cast<size_t>(rect.height);
