@@ -236,7 +236,49 @@ void BinomialCounts(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t 
                                          hn::MulAdd(m, log_a, hn::Mul(hn::Sub(vN, m), log_b))));
       const auto r_inv = hn::Div(b, a);
       const auto zero = hn::Zero(d);
-      auto u = hn::Sub(hn::Mul(hn::ConvertTo(d, hn::BitCast(di64, hn::ShiftRight<11>(U))), hn::Set(d, 0x1p-53)), pm);
+      const auto u0 = hn::Sub(hn::Mul(hn::ConvertTo(d, hn::BitCast(di64, hn::ShiftRight<11>(U))), hn::Set(d, 0x1p-53)), pm);
+      // Fast walk while no lane can reach 0 or n (iteration i <= min(m, n - m) over the lanes; other lanes
+      // index from n / 2): both sides move at every iteration, so the order of the terms is fixed and, as u
+      // only decreases, the result follows from C = the number of terms after which u is still >= 0
+      // (counting u0 = U - pm): C = 0 gives m, C odd m - (C + 1) / 2 (a lo step), C even m + C / 2 (a hi
+      // step). The same products and differences as the exact walk below, without its per-step masks and
+      // blends; a vector that runs past the bound is redone by the exact walk.
+      bool fast_done = false;
+      {
+        const auto mm = hn::IfThenElse(mode, m, hn::Set(d, static_cast<double>(N / 2)));
+        alignas(64) double bound[hn::MaxLanes(d)];
+        hn::Store(hn::Min(mm, hn::Sub(vN, mm)), d, bound);
+        double i_max = bound[0];
+        for (size_t j = 1; j < L; ++j) i_max = std::min(i_max, bound[j]);
+        auto fu = hn::IfThenElse(mode, u0, hn::Set(d, -1.0));
+        const auto i_one = hn::Set(di64, 1);
+        auto ge = hn::Ge(fu, zero);
+        // C as 64-bit integers (a masked integer add per term: a short loop-carried chain)
+        auto fc = hn::IfThenElseZero(hn::RebindMask(di64, ge), i_one);
+        auto f_lo = pm, f_hi = pm;
+        auto flo_i = hn::ConvertTo(di64, mm), fhi_i = flo_i;
+        for (double i = 0.0; !hn::AllFalse(d, ge) && i < i_max; i += 1.0) {
+          const auto dn = hn::GatherIndex(d, down, flo_i);
+          const auto upx = hn::GatherIndex(d, up, fhi_i);
+          flo_i = hn::Sub(flo_i, i_one);
+          fhi_i = hn::Add(fhi_i, i_one);
+          f_lo = hn::Mul(f_lo, hn::Mul(dn, r_inv));
+          fu = hn::Sub(fu, f_lo);
+          fc = hn::IfThenElse(hn::RebindMask(di64, hn::Ge(fu, zero)), hn::Add(fc, i_one), fc);
+          f_hi = hn::Mul(f_hi, hn::Mul(r, upx));
+          fu = hn::Sub(fu, f_hi);
+          ge = hn::Ge(fu, zero);
+          fc = hn::IfThenElse(hn::RebindMask(di64, ge), hn::Add(fc, i_one), fc);
+        }
+        if (hn::AllFalse(d, ge)) {
+          const auto h = hn::ConvertTo(d, hn::ShiftRight<1>(hn::Add(fc, i_one)));  // floor((C + 1) / 2)
+          const auto odd = hn::RebindMask(d, hn::Eq(hn::And(fc, i_one), i_one));
+          xs = hn::IfThenElse(mode, hn::IfThenElse(odd, hn::Sub(m, h), hn::Add(m, h)), xs);
+          fast_done = true;
+        }
+      }
+      if (!fast_done) {
+      auto u = u0;
       auto res = m, lo = m, hi = m, p_lo = pm, p_hi = pm;
       // indices max(m - i, 0) and min(m + i, n) at step i
       auto lo_i = mi, hi_i = mi;
@@ -264,6 +306,7 @@ void BinomialCounts(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t 
         open = hn::And(open, hn::Or(can_lo, can_hi));
       }
       xs = hn::IfThenElse(mode, res, xs);
+      }
     }
     const auto count = hn::IfThenElse(small, xs, hn::Sub(vN, xs));
     hn::StoreU(hn::BitCast(d32, hn::DemoteTo(di32, count)), d32, s.x.data() + k);
