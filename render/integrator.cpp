@@ -25,29 +25,24 @@ void deposit(double v, double t, const TimeAxis& axis, double* bins, PixelTotals
   out->laser_total += v;
   if (axis.bins <= 0) return;
   bool landed = false;
+  const auto put = [&](double ti) {
+    const int64_t b = axis.bin_of(ti);
+    if (b < 0) return;
+    bins[b] += v;
+    if (indirect_bins) indirect_bins[b] += v;
+    out->bin_lo = std::min(out->bin_lo, b);
+    out->bin_hi = std::max(out->bin_hi, b + 1);
+    landed = true;
+  };
   if (axis.period_s > 0.0) {
     const double m0 = std::ceil((axis.start_s - t) / axis.period_s) - 1.0;
     for (double m = m0;; m += 1.0) {
       const double ti = t + m * axis.period_s;
       if (ti >= axis.end_s()) break;
-      const int64_t b = axis.bin_of(ti);
-      if (b >= 0) {
-        bins[b] += v;
-        if (indirect_bins) indirect_bins[b] += v;
-        out->bin_lo = std::min(out->bin_lo, b);
-        out->bin_hi = std::max(out->bin_hi, b + 1);
-        landed = true;
-      }
+      put(ti);
     }
   } else {
-    const int64_t b = axis.bin_of(t);
-    if (b >= 0) {
-      bins[b] += v;
-      if (indirect_bins) indirect_bins[b] += v;
-      out->bin_lo = std::min(out->bin_lo, b);
-      out->bin_hi = std::max(out->bin_hi, b + 1);
-      landed = true;
-    }
+    put(t);
   }
   if (!landed) out->out_of_window += v;
 }

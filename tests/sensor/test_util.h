@@ -14,16 +14,7 @@ namespace spadgen::sensor::testing {
 // Two-sided z bound for a false-alarm rate of 1e-6 per check.
 inline constexpr double kZ = 4.892;
 
-inline PixelTypeConfig paper_pixel_B() {
-  PixelTypeConfig b;
-  b.fill_factor = 0.134;
-  b.pdp_peak = 0.267;
-  b.pdp_nonuniformity = 0.032;
-  b.dcr_median_cps = 2.0;
-  b.crosstalk_probability = 0.0039;
-  b.single_avalanche_per_frame = true;
-  return b;
-}
+inline PixelTypeConfig paper_pixel_B() { return PixelTypeConfig::paper_pixel_B(); }
 
 inline RunConfig sweep_config(int width = 48, int height = 24) {
   RunConfig c;
