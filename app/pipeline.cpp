@@ -145,11 +145,16 @@ class Progress {
 class Staging {
  public:
   explicit Staging(const fs::path& out) : out_(out) {
-    fs::create_directories(out_);
-    remove_abandoned();
-    dir_ = out_ / (".spadgen-staging-" + std::to_string(::getpid()));
-    fs::remove_all(dir_);
-    fs::create_directories(dir_ / "previews");
+    try {
+      fs::create_directories(out_);
+      remove_abandoned();
+      dir_ = out_ / (".spadgen-staging-" + std::to_string(::getpid()));
+      fs::remove_all(dir_);
+      fs::create_directories(dir_ / "previews");
+    } catch (const fs::filesystem_error& e) {
+      throw Error("cannot use " + out_.string() + " as the output folder (-o): " + e.code().message() +
+                  "; expected a folder that exists or can be created");
+    }
   }
   ~Staging() {
     std::error_code ec;

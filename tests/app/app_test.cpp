@@ -189,6 +189,16 @@ TEST_F(App, AnInterruptedRunLeavesNothingBehind) {
   EXPECT_EQ(entries, 1u) << "only the earlier metadata.json may remain";
 }
 
+TEST_F(App, AnOutputPathThatCannotBeAFolderIsReported) {
+  std::ofstream(dir_ / "a_file") << "x";
+  for (const fs::path& out : {dir_ / "a_file", dir_ / "a_file" / "sub"}) {
+    const Result r = sh("run " + kSmall + " -o " + out.string());
+    EXPECT_EQ(r.code, 2) << r.output;
+    EXPECT_THAT(r.output, HasSubstr("cannot use " + out.string() + " as the output folder (-o)"));
+  }
+  EXPECT_EQ(slurp(dir_ / "a_file"), "x");
+}
+
 TEST_F(App, ABrokenGltfIsReportedWithItsElement) {
   std::ofstream(dir_ / "broken.gltf") << R"({"asset": {"version": "2.0"}, "buffers": [{"uri": "missing.bin", "byteLength": 12}]})";
   std::ofstream(dir_ / "scene.json") << R"({"gltf": "broken.gltf"})";
