@@ -6,6 +6,7 @@
 #include <hwy/foreach_target.h>  // IWYU pragma: keep
 #include <hwy/highway.h>
 
+#include <algorithm>
 #include <bit>
 #include <cstring>
 #include <vector>
@@ -115,6 +116,71 @@ void DenseBitsDeferred(const Rng& stream, uint32_t n, uint64_t T, uint64_t* HWY_
   DenseBitsImpl(stream, n, T, words, &ties);
 }
 
+// Many dense pixels of one key in one call (see dense_bits_batch): no per-pixel dispatch, Rng set-up,
+// zero fill or tie copy, and the inversion folded into the store.
+void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint32_t* HWY_RESTRICT c2,
+                    const uint32_t* HWY_RESTRICT c3, const uint64_t* HWY_RESTRICT T,
+                    const bool* HWY_RESTRICT invert, const uint32_t* HWY_RESTRICT slots, size_t count, uint32_t n,
+                    uint64_t* HWY_RESTRICT words, std::vector<uint32_t>* tie_slot,
+                    std::vector<uint32_t>* tie_frame) {
+  const hn::ScalableTag<uint8_t> d8;
+  const size_t L = hn::Lanes(d8);
+  constexpr size_t kMaxEqBytes = (hn::MaxLanes(d8) + 63) / 64 * 8;
+  const uint32_t chunks = (n + 255) / 256;
+  const size_t nw = (static_cast<size_t>(n) + 63) / 64;
+  const size_t total_bytes = nw * 8;
+  const uint64_t tail = n % 64 != 0 ? (uint64_t{1} << (n % 64)) - 1 : ~uint64_t{0};
+  alignas(64) uint32_t buf32[64];
+  alignas(64) uint8_t mask[32 + 64];
+  for (size_t j = 0; j < count; ++j) {
+    const uint32_t slot = slots[j];
+    const uint32_t c[4] = {0, c1, c2[slot], c3[slot]};
+    const auto tbs = static_cast<uint8_t>(T[slot] >> 56);
+    const auto tb = hn::Set(d8, tbs);
+    uint64_t* w = words + static_cast<size_t>(slot) * nw;
+    auto* dst = reinterpret_cast<uint8_t*>(w);
+    for (uint32_t ch = 0; ch < chunks; ++ch) {
+      Philox16(key, c, 16 * ch, buf32);
+      const auto* bytes = reinterpret_cast<const uint8_t*>(buf32);
+      if (L < 8) {  // a target narrower than one mask byte: plain comparisons
+        std::memset(mask, 0, 32);
+        for (uint32_t i = 0; i < 256; ++i) {
+          if (bytes[i] < tbs) mask[i / 8] = static_cast<uint8_t>(mask[i / 8] | (1u << (i % 8)));
+          if (bytes[i] == tbs && ch * 256 + i < n) {
+            tie_slot->push_back(slot);
+            tie_frame->push_back(ch * 256 + i);
+          }
+        }
+      } else {
+        for (size_t off = 0; off < 256; off += L) {
+          const auto v = hn::LoadU(d8, bytes + off);
+          hn::StoreMaskBits(d8, hn::Lt(v, tb), mask + off / 8);
+          const auto eq = hn::Eq(v, tb);
+          if (HWY_UNLIKELY(!hn::AllFalse(d8, eq))) {
+            alignas(8) uint8_t eq_bits[kMaxEqBytes] = {};
+            hn::StoreMaskBits(d8, eq, eq_bits);
+            for (size_t wb = 0; wb < (L + 63) / 64; ++wb) {
+              uint64_t m;
+              std::memcpy(&m, eq_bits + 8 * wb, 8);
+              for (; m != 0; m &= m - 1) {
+                const uint32_t f = ch * 256 + static_cast<uint32_t>(off + 64 * wb) + static_cast<uint32_t>(std::countr_zero(m));
+                if (f >= n) continue;
+                tie_slot->push_back(slot);
+                tie_frame->push_back(f);
+              }
+            }
+          }
+        }
+      }
+      const size_t begin = static_cast<size_t>(ch) * 32;
+      std::memcpy(dst + begin, mask, std::min<size_t>(32, total_bytes - begin));
+    }
+    const uint64_t flip = invert[slot] ? ~uint64_t{0} : 0;
+    for (size_t i = 0; i < nw; ++i) w[i] ^= flip;
+    w[nw - 1] &= tail;
+  }
+}
+
 const char* TargetName() { return hwy::TargetName(HWY_TARGET); }
 
 }  // namespace HWY_NAMESPACE
@@ -127,6 +193,13 @@ namespace spadgen::sensor {
 HWY_EXPORT(DenseBits);
 HWY_EXPORT(DenseBitsDeferred);
 HWY_EXPORT(TargetName);
+HWY_EXPORT(DenseBitsBatch);
+
+void dense_bits_batch(const uint32_t key[2], uint32_t c1, const uint32_t* c2, const uint32_t* c3, const uint64_t* T,
+                      const bool* invert, const uint32_t* slots, size_t count, uint32_t n, uint64_t* words,
+                      std::vector<uint32_t>& tie_slot, std::vector<uint32_t>& tie_frame) {
+  HWY_DYNAMIC_DISPATCH(DenseBitsBatch)(key, c1, c2, c3, T, invert, slots, count, n, words, &tie_slot, &tie_frame);
+}
 
 void dense_bits(const Rng& stream, uint32_t n, uint64_t T, uint64_t* words) {
   HWY_DYNAMIC_DISPATCH(DenseBits)(stream, n, T, words);

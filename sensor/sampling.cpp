@@ -171,10 +171,11 @@ void sample_bits_batch(uint64_t seed, uint64_t k, const uint64_t* pixels, size_t
   uint32_t c1[kGroup], c2[kGroup], c3[kGroup], blocks[4 * kGroup];
   // Dense pixels' top-byte ties of one group, settled together by one vectorised Philox: the tie of frame f
   // of pixel slot i takes the first 56 bits of block refine_base + f of that pixel's stream, exactly as
-  // dense_bits does one at a time. Dense pixels that count misses (a = q) are inverted afterwards.
-  std::vector<uint32_t> frames_of_pixel, t_slot, t_frame, t0, t1, t2, t3, tb;
-  uint64_t t_rest[kGroup];
+  // dense_bits does one at a time. Dense pixels that count misses (a = q) are inverted by the kernel.
+  std::vector<uint32_t> t_slot, t_frame, t0, t1, t2, t3, tb;
+  uint64_t T_of[kGroup], t_rest[kGroup];
   bool inverted[kGroup];
+  uint32_t dense[kGroup];
   for (size_t g = 0; g < count; g += kGroup) {
     const size_t c = std::min(kGroup, count - g);
     for (size_t i = 0; i < c; ++i) {
@@ -185,10 +186,10 @@ void sample_bits_batch(uint64_t seed, uint64_t k, const uint64_t* pixels, size_t
     philox_block0(key, c1, c2, c3, c, blocks);
     t_slot.clear();
     t_frame.clear();
+    size_t nd = 0;
     for (size_t i = 0; i < c; ++i) {
       const Prob& p = pr[g + i];
       uint64_t* w = words + (g + i) * nw;
-      inverted[i] = false;
       const double a = std::min(p.p, p.q);
       if (!(a > 0.0)) {  // all bits equal: block 0 is not drawn from
         const uint64_t fill = p.p > p.q ? ~uint64_t{0} : 0;
@@ -197,35 +198,30 @@ void sample_bits_batch(uint64_t seed, uint64_t k, const uint64_t* pixels, size_t
         continue;
       }
       const bool invert = p.p > p.q;
-      if (a <= kSparseBelow) {
-        // Sparse and no rare outcome at all: the binomial draw's first test (BinomialSampler::small_side,
-        // U >= floor(n a 2^64) with n a < 1) on block 0's U, without setting up the stream. The common case
-        // for background pixels; the same bits as bits_of_stream.
-        const double mean = static_cast<double>(n) * a;
-        const uint64_t U = (uint64_t{blocks[4 * i]} << 32) | blocks[4 * i + 1];
-        if (mean < 1.0 && U >= probability_threshold(mean)) {
-          std::fill(w, w + nw, invert ? ~uint64_t{0} : uint64_t{0});
-          if (invert && n % 64 != 0) w[nw - 1] &= (uint64_t{1} << (n % 64)) - 1;
-          continue;
-        }
-      }
-      const Rng stream(seed, RngKind::Frames, pixels[g + i], k);
-      if (a > kSparseBelow) {  // dense, as bits_of_stream with the ties deferred
-        std::fill(w, w + nw, uint64_t{0});
-        const uint64_t T = probability_threshold(a);
-        t_rest[i] = T & kLow56;
+      if (a > kSparseBelow) {  // dense: all of the group's at once below, as bits_of_stream
+        T_of[i] = probability_threshold(a);
+        t_rest[i] = T_of[i] & kLow56;
         inverted[i] = invert;
-        frames_of_pixel.clear();
-        dense_bits_deferred(stream, n, T, w, frames_of_pixel);
-        for (uint32_t f : frames_of_pixel) {
-          t_slot.push_back(static_cast<uint32_t>(i));
-          t_frame.push_back(f);
-        }
+        dense[nd++] = static_cast<uint32_t>(i);
         continue;
       }
+      // Sparse and no rare outcome at all: the binomial draw's first test (BinomialSampler::small_side,
+      // U >= floor(n a 2^64) with n a < 1) on block 0's U, without setting up the stream. The common case
+      // for background pixels; the same bits as bits_of_stream.
+      const double mean = static_cast<double>(n) * a;
+      const uint64_t U = (uint64_t{blocks[4 * i]} << 32) | blocks[4 * i + 1];
+      if (mean < 1.0 && U >= probability_threshold(mean)) {
+        std::fill(w, w + nw, invert ? ~uint64_t{0} : uint64_t{0});
+        if (invert && n % 64 != 0) w[nw - 1] &= (uint64_t{1} << (n % 64)) - 1;
+        continue;
+      }
+      const Rng stream(seed, RngKind::Frames, pixels[g + i], k);
       StreamReader rng(stream, {blocks[4 * i], blocks[4 * i + 1], blocks[4 * i + 2], blocks[4 * i + 3]});
       bits_of_stream(stream, rng, sampler, p, w);
     }
+    // The dense pixels' bits, inverted where they count misses, with their top-byte ties listed; each
+    // tie's bit is then toggled when its refinement says U < T (0 -> 1, or 1 -> 0 when inverted).
+    if (nd > 0) dense_bits_batch(key, c1[0], c2, c3, T_of, inverted, dense, nd, n, words + g * nw, t_slot, t_frame);
     if (!t_slot.empty()) {
       const size_t nt = t_slot.size();
       t0.resize(nt);
@@ -241,14 +237,8 @@ void sample_bits_batch(uint64_t seed, uint64_t k, const uint64_t* pixels, size_t
       philox_blocks(key, t0.data(), t1.data(), t2.data(), t3.data(), nt, tb.data());
       for (size_t j = 0; j < nt; ++j) {
         const uint64_t u = ((uint64_t{tb[4 * j]} << 32) | tb[4 * j + 1]) & kLow56;
-        if (u < t_rest[t_slot[j]]) words[(g + t_slot[j]) * nw + t_frame[j] / 64] |= uint64_t{1} << (t_frame[j] % 64);
+        if (u < t_rest[t_slot[j]]) words[(g + t_slot[j]) * nw + t_frame[j] / 64] ^= uint64_t{1} << (t_frame[j] % 64);
       }
-    }
-    for (size_t i = 0; i < c; ++i) {
-      if (!inverted[i]) continue;
-      uint64_t* w = words + (g + i) * nw;
-      for (size_t j = 0; j < nw; ++j) w[j] = ~w[j];
-      if (n % 64 != 0) w[nw - 1] &= (uint64_t{1} << (n % 64)) - 1;
     }
   }
 }

@@ -1,6 +1,7 @@
 // Exactness and distribution of the Bernoulli and binomial samplers. Every statistical check uses a fixed
 // seed and a false-alarm rate of 1e-6 (p-value or z bound), so a failure means a real defect.
 #include <gtest/gtest.h>
+#include <hwy/targets.h>
 
 #include <bit>
 #include <cmath>
@@ -374,6 +375,41 @@ TEST(Sampling, BatchSettlesTiesLikeTheReference) {
     }
     EXPECT_GT(ties, count * n / 512);  // about count n / 256 ties were settled
   }
+}
+
+// Every instruction set compiled into the dense kernels (the dispatcher's choice forced in turn) gives the
+// bits of dense_bit_reference in sample_bits_batch, both sides and two chunks.
+TEST(Sampling, BatchBitsEqualReferenceOnEveryTarget) {
+  const uint32_t n = 300;
+  const BinomialSampler sampler(n);
+  const size_t nw = (n + 63) / 64, count = 70;
+  std::vector<uint64_t> ids(count);
+  std::vector<Prob> pr(count);
+  for (size_t i = 0; i < count; ++i) {
+    ids[i] = 7919 * i + 3;
+    pr[i] = prob_from_lambda(0.07 + 0.038 * static_cast<double>(i));  // p from 0.068 to 0.93: dense
+  }
+  int targets = 0;
+  for (const int64_t target : hwy::SupportedAndGeneratedTargets()) {
+    hwy::SetSupportedTargetsForTest(target);
+    ++targets;
+    std::vector<uint64_t> batch(count * nw);
+    sample_bits_batch(4, 2, ids.data(), count, sampler, pr.data(), batch.data());
+    for (size_t i = 0; i < count; ++i) {
+      ASSERT_FALSE(bits_are_sparse(pr[i]));
+      const Rng stream(4, RngKind::Frames, ids[i], 2);
+      const bool invert = pr[i].p > pr[i].q;
+      const uint64_t T = probability_threshold(invert ? pr[i].q : pr[i].p);
+      for (uint32_t f = 0; f < n; ++f) {
+        const bool bit = dense_bit_reference(stream, n, T, f) != invert;
+        ASSERT_EQ(((batch[i * nw + f / 64] >> (f % 64)) & 1) != 0, bit)
+            << hwy::TargetName(target) << " pixel " << i << " frame " << f;
+      }
+    }
+  }
+  hwy::SetSupportedTargetsForTest(0);
+  std::printf("dense batch checked on %d targets\n", targets);
+  EXPECT_GE(targets, 1);
 }
 
 // Pixel B's crosstalk-corrected rate takes one logarithm for all neighbours (-log of prod (1 - xt p_i));
