@@ -132,6 +132,51 @@ void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint32_t* HWY_REST
   const uint64_t tail = n % 64 != 0 ? (uint64_t{1} << (n % 64)) - 1 : ~uint64_t{0};
   alignas(64) uint32_t buf32[64];
   alignas(64) uint8_t mask[32 + 64];
+  // Vectors of 16 u32 (AVX-512): Philox word v of a chunk's 16 blocks is one vector, i.e. the chunk's
+  // bytes 64 v .. 64 v + 63 (frames 256 ch + 64 v + i), compared in registers and stored as whole words
+  // (no round trip through memory, whose narrow mask stores and wide reload stall store forwarding).
+#if HWY_TARGET != HWY_SCALAR && HWY_MAX_BYTES >= 64
+  const hn::CappedTag<uint32_t, 16> d32;
+  const hn::Repartition<uint8_t, decltype(d32)> d8w;
+  if (hn::Lanes(d32) == 16 && hn::Lanes(d8w) == 64) {
+    for (size_t j = 0; j < count; ++j) {
+      const uint32_t slot = slots[j];
+      const auto tb = hn::Set(d8w, static_cast<uint8_t>(T[slot] >> 56));
+      uint64_t* w = words + static_cast<size_t>(slot) * nw;
+      const uint64_t flip = invert[slot] ? ~uint64_t{0} : 0;
+      const auto vc1 = hn::Set(d32, c1), vc2 = hn::Set(d32, c2[slot]), vc3 = hn::Set(d32, c3[slot]);
+      for (uint32_t ch = 0; ch < chunks; ++ch) {
+        auto x0 = hn::Iota(d32, 16 * ch), x1 = vc1, x2 = vc2, x3 = vc3;
+        Philox10(d32, key[0], key[1], x0, x1, x2, x3);
+        const hn::Vec<decltype(d32)> xs[4] = {x0, x1, x2, x3};
+        for (uint32_t v = 0; v < 4; ++v) {
+          const size_t wi = static_cast<size_t>(ch) * 4 + v;
+          if (wi >= nw) break;
+          const auto bytes = hn::BitCast(d8w, xs[v]);
+          alignas(8) uint8_t lt[8], eqb[8];
+          hn::StoreMaskBits(d8w, hn::Lt(bytes, tb), lt);
+          uint64_t bits;
+          std::memcpy(&bits, lt, 8);
+          w[wi] = bits ^ flip;
+          const auto eq = hn::Eq(bytes, tb);
+          if (HWY_UNLIKELY(!hn::AllFalse(d8w, eq))) {
+            hn::StoreMaskBits(d8w, eq, eqb);
+            uint64_t m;
+            std::memcpy(&m, eqb, 8);
+            for (; m != 0; m &= m - 1) {
+              const uint32_t f = 64 * static_cast<uint32_t>(wi) + static_cast<uint32_t>(std::countr_zero(m));
+              if (f >= n) continue;
+              tie_slot->push_back(slot);
+              tie_frame->push_back(f);
+            }
+          }
+        }
+      }
+      w[nw - 1] &= tail;
+    }
+    return;
+  }
+#endif
   for (size_t j = 0; j < count; ++j) {
     const uint32_t slot = slots[j];
     const uint32_t c[4] = {0, c1, c2[slot], c3[slot]};
