@@ -116,6 +116,46 @@ void DenseBitsDeferred(const Rng& stream, uint32_t n, uint64_t T, uint64_t* HWY_
   DenseBitsImpl(stream, n, T, words, &ties);
 }
 
+// Philox4x32-10 of the 16 counters (i, c1, c2, c3), i = 0..15, as Philox10 gives them, with rounds 0 and 1
+// partly in scalars: words 1..3 are equal in every lane, so round 0's second product is one scalar product
+// and its word 0 output is uniform, as is round 1's first product. (hi0, lo0) = round 0's products of the
+// lanes' word 0 (i * 0xD2511F53).
+template <class D>
+HWY_INLINE void Philox10From2(D d, const uint32_t key[2], uint32_t c1, uint32_t c2, uint32_t c3, hn::Vec<D> hi0,
+                              hn::Vec<D> lo0, hn::Vec<D>& x0, hn::Vec<D>& x1, hn::Vec<D>& x2, hn::Vec<D>& x3) {
+  constexpr uint32_t kM0 = 0xD2511F53u, kM1 = 0xCD9E8D57u;
+  uint32_t ka = key[0], kb = key[1];
+  // round 0
+  const uint64_t p1 = uint64_t{kM1} * c2;
+  const uint32_t s0 = static_cast<uint32_t>(p1 >> 32) ^ c1 ^ ka, s1 = static_cast<uint32_t>(p1);
+  x2 = hn::Xor(hi0, hn::Set(d, c3 ^ kb));
+  x3 = lo0;
+  ka += 0x9E3779B9u;
+  kb += 0xBB67AE85u;
+  // round 1: word 0 = s0 and word 1 = s1 in every lane
+  const uint64_t p0 = uint64_t{kM0} * s0;
+  hn::Vec<D> hi1, lo1;
+  MulHiLo(d, x2, hn::Set(d, kM1), hi1, lo1);
+  x0 = hn::Xor(hi1, hn::Set(d, s1 ^ ka));
+  x2 = hn::Xor(x3, hn::Set(d, static_cast<uint32_t>(p0 >> 32) ^ kb));
+  x1 = lo1;
+  x3 = hn::Set(d, static_cast<uint32_t>(p0));
+  ka += 0x9E3779B9u;
+  kb += 0xBB67AE85u;
+  const auto m0 = hn::Set(d, kM0), m1 = hn::Set(d, kM1);
+  for (int round = 2; round < 10; ++round) {
+    hn::Vec<D> h0, l0, h1, l1;
+    MulHiLo(d, x0, m0, h0, l0);
+    MulHiLo(d, x2, m1, h1, l1);
+    x0 = hn::Xor(hn::Xor(h1, x1), hn::Set(d, ka));
+    x2 = hn::Xor(hn::Xor(h0, x3), hn::Set(d, kb));
+    x1 = l1;
+    x3 = l0;
+    ka += 0x9E3779B9u;
+    kb += 0xBB67AE85u;
+  }
+}
+
 // Many dense pixels of one key in one call (see dense_bits_batch): no per-pixel dispatch, Rng set-up,
 // zero fill or tie copy, and the inversion folded into the store.
 void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint32_t* HWY_RESTRICT c2,
@@ -139,6 +179,11 @@ void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint32_t* HWY_REST
   const hn::CappedTag<uint32_t, 16> d32;
   const hn::Repartition<uint8_t, decltype(d32)> d8w;
   if (hn::Lanes(d32) == 16 && hn::Lanes(d8w) == 64) {
+    // Chunk 0's counters (i, c1, c2, c3), i = 0..15: round 0's product of word 0 is the same for every
+    // pixel, computed once here.
+    const auto y0 = hn::Iota(d32, 0u);
+    hn::Vec<decltype(d32)> hi0_iota, lo0_iota;
+    MulHiLo(d32, y0, hn::Set(d32, 0xD2511F53u), hi0_iota, lo0_iota);
     for (size_t j = 0; j < count; ++j) {
       const uint32_t slot = slots[j];
       const auto tb = hn::Set(d8w, static_cast<uint8_t>(T[slot] >> 56));
@@ -146,8 +191,14 @@ void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint32_t* HWY_REST
       const uint64_t flip = invert[slot] ? ~uint64_t{0} : 0;
       const auto vc1 = hn::Set(d32, c1), vc2 = hn::Set(d32, c2[slot]), vc3 = hn::Set(d32, c3[slot]);
       for (uint32_t ch = 0; ch < chunks; ++ch) {
-        auto x0 = hn::Iota(d32, 16 * ch), x1 = vc1, x2 = vc2, x3 = vc3;
-        Philox10(d32, key[0], key[1], x0, x1, x2, x3);
+        hn::Vec<decltype(d32)> x0, x1, x2, x3;
+        if (ch == 0) {
+          x0 = y0, x1 = vc1, x2 = vc2, x3 = vc3;
+          Philox10From2(d32, key, c1, c2[slot], c3[slot], hi0_iota, lo0_iota, x0, x1, x2, x3);
+        } else {
+          x0 = hn::Iota(d32, 16 * ch), x1 = vc1, x2 = vc2, x3 = vc3;
+          Philox10(d32, key[0], key[1], x0, x1, x2, x3);
+        }
         const hn::Vec<decltype(d32)> xs[4] = {x0, x1, x2, x3};
         for (uint32_t v = 0; v < 4; ++v) {
           const size_t wi = static_cast<size_t>(ch) * 4 + v;
