@@ -24,6 +24,22 @@ HWY_INLINE void MulHiLo(D d, hn::Vec<D> a, hn::Vec<D> b, hn::Vec<D>& hi, hn::Vec
   const uint64_t p = uint64_t{hn::GetLane(a)} * hn::GetLane(b);
   hi = hn::Set(d, static_cast<uint32_t>(p >> 32));
   lo = hn::Set(d, static_cast<uint32_t>(p));
+#elif HWY_TARGET <= HWY_AVX3
+  if constexpr (sizeof(hn::Vec<D>) == 64) {
+    // AVX-512: the odd lanes' product from a dword swap (vpshufd, not a shift on the multiplier's port),
+    // and the halves recombined by masked dword swaps (one instruction each instead of shift + blend).
+    const __m512i pe = hn::BitCast(d, hn::MulEven(a, b)).raw;
+    const __m512i po = hn::BitCast(d, hn::MulEven(hn::Shuffle2301(a), hn::Shuffle2301(b))).raw;
+    hi = hn::Vec<D>{_mm512_mask_shuffle_epi32(po, 0x5555, pe, _MM_PERM_CDAB)};
+    lo = hn::Vec<D>{_mm512_mask_shuffle_epi32(pe, 0xAAAA, po, _MM_PERM_CDAB)};
+  } else {
+    const hn::Repartition<uint64_t, D> d64;
+    const auto pe = hn::MulEven(a, b);
+    const auto po = hn::MulEven(hn::BitCast(d, hn::ShiftRight<32>(hn::BitCast(d64, a))),
+                                hn::BitCast(d, hn::ShiftRight<32>(hn::BitCast(d64, b))));
+    hi = hn::OddEven(hn::BitCast(d, po), hn::BitCast(d, hn::ShiftRight<32>(pe)));
+    lo = hn::OddEven(hn::BitCast(d, hn::ShiftLeft<32>(po)), hn::BitCast(d, pe));
+  }
 #else
   const hn::Repartition<uint64_t, D> d64;
   const auto pe = hn::MulEven(a, b);
