@@ -111,10 +111,6 @@ void DenseBits(const Rng& stream, uint32_t n, uint64_t T, uint64_t* HWY_RESTRICT
   DenseBitsImpl(stream, n, T, words, nullptr);
 }
 
-void DenseBitsDeferred(const Rng& stream, uint32_t n, uint64_t T, uint64_t* HWY_RESTRICT words,
-                       std::vector<uint32_t>& ties) {
-  DenseBitsImpl(stream, n, T, words, &ties);
-}
 
 // Philox4x32-10 of the 16 counters (i, c1, c2, c3), i = 0..15, as Philox10 gives them, with rounds 0 and 1
 // partly in scalars: words 1..3 are equal in every lane, so round 0's second product is one scalar product
@@ -287,7 +283,6 @@ HWY_AFTER_NAMESPACE();
 namespace spadgen::sensor {
 
 HWY_EXPORT(DenseBits);
-HWY_EXPORT(DenseBitsDeferred);
 HWY_EXPORT(TargetName);
 HWY_EXPORT(DenseBitsBatch);
 
@@ -301,9 +296,6 @@ void dense_bits(const Rng& stream, uint32_t n, uint64_t T, uint64_t* words) {
   HWY_DYNAMIC_DISPATCH(DenseBits)(stream, n, T, words);
 }
 
-void dense_bits_deferred(const Rng& stream, uint32_t n, uint64_t T, uint64_t* words, std::vector<uint32_t>& ties) {
-  HWY_DYNAMIC_DISPATCH(DenseBitsDeferred)(stream, n, T, words, ties);
-}
 
 const char* dense_bits_target() { return HWY_DYNAMIC_DISPATCH(TargetName)(); }
 
