@@ -119,37 +119,25 @@ void DenseBits(const Rng& stream, uint32_t n, uint64_t T, uint64_t* HWY_RESTRICT
 template <class D>
 HWY_INLINE void Philox10From2(D d, const uint32_t key[2], uint32_t c1, uint32_t c2, uint32_t c3, hn::Vec<D> hi0,
                               hn::Vec<D> lo0, hn::Vec<D>& x0, hn::Vec<D>& x1, hn::Vec<D>& x2, hn::Vec<D>& x3) {
-  constexpr uint32_t kM0 = 0xD2511F53u, kM1 = 0xCD9E8D57u;
   uint32_t ka = key[0], kb = key[1];
   // round 0
-  const uint64_t p1 = uint64_t{kM1} * c2;
+  const uint64_t p1 = uint64_t{kPhiloxM1} * c2;
   const uint32_t s0 = static_cast<uint32_t>(p1 >> 32) ^ c1 ^ ka, s1 = static_cast<uint32_t>(p1);
   x2 = hn::Xor(hi0, hn::Set(d, c3 ^ kb));
   x3 = lo0;
-  ka += 0x9E3779B9u;
-  kb += 0xBB67AE85u;
+  ka += kPhiloxW0;
+  kb += kPhiloxW1;
   // round 1: word 0 = s0 and word 1 = s1 in every lane
-  const uint64_t p0 = uint64_t{kM0} * s0;
+  const uint64_t p0 = uint64_t{kPhiloxM0} * s0;
   hn::Vec<D> hi1, lo1;
-  MulHiLo(d, x2, hn::Set(d, kM1), hi1, lo1);
+  MulHiLo(d, x2, hn::Set(d, kPhiloxM1), hi1, lo1);
   x0 = hn::Xor(hi1, hn::Set(d, s1 ^ ka));
   x2 = hn::Xor(x3, hn::Set(d, static_cast<uint32_t>(p0 >> 32) ^ kb));
   x1 = lo1;
   x3 = hn::Set(d, static_cast<uint32_t>(p0));
-  ka += 0x9E3779B9u;
-  kb += 0xBB67AE85u;
-  const auto m0 = hn::Set(d, kM0), m1 = hn::Set(d, kM1);
-  for (int round = 2; round < 10; ++round) {
-    hn::Vec<D> h0, l0, h1, l1;
-    MulHiLo(d, x0, m0, h0, l0);
-    MulHiLo(d, x2, m1, h1, l1);
-    x0 = hn::Xor(hn::Xor(h1, x1), hn::Set(d, ka));
-    x2 = hn::Xor(hn::Xor(h0, x3), hn::Set(d, kb));
-    x1 = l1;
-    x3 = l0;
-    ka += 0x9E3779B9u;
-    kb += 0xBB67AE85u;
-  }
+  ka += kPhiloxW0;
+  kb += kPhiloxW1;
+  PhiloxRounds(d, 8, ka, kb, x0, x1, x2, x3);
 }
 
 // Many dense pixels of one key in one call (see dense_bits_batch): no per-pixel dispatch, Rng set-up,

@@ -15,8 +15,23 @@ namespace spadgen::sensor {
 namespace HWY_NAMESPACE {
 namespace hn = hwy::HWY_NAMESPACE;
 
-// 32 x 32 -> 64-bit products of every lane: high and low halves. MulEven (vpmuludq) on the even lanes and
-// on the odd lanes shifted down, recombined with OddEven; cheaper than widening to 64-bit multiplies.
+// Philox4x32's multipliers and Weyl key increments (Random123).
+inline constexpr uint32_t kPhiloxM0 = 0xD2511F53u, kPhiloxM1 = 0xCD9E8D57u;
+inline constexpr uint32_t kPhiloxW0 = 0x9E3779B9u, kPhiloxW1 = 0xBB67AE85u;
+
+// 32 x 32 -> 64-bit products of every lane: MulEven (vpmuludq) on the even lanes and on the odd lanes
+// shifted down, recombined with OddEven; cheaper than widening to 64-bit multiplies.
+template <class D>
+HWY_INLINE void MulHiLoGeneric(D d, hn::Vec<D> a, hn::Vec<D> b, hn::Vec<D>& hi, hn::Vec<D>& lo) {
+  const hn::Repartition<uint64_t, D> d64;
+  const auto pe = hn::MulEven(a, b);
+  const auto po = hn::MulEven(hn::BitCast(d, hn::ShiftRight<32>(hn::BitCast(d64, a))),
+                              hn::BitCast(d, hn::ShiftRight<32>(hn::BitCast(d64, b))));
+  hi = hn::OddEven(hn::BitCast(d, po), hn::BitCast(d, hn::ShiftRight<32>(pe)));
+  lo = hn::OddEven(hn::BitCast(d, hn::ShiftLeft<32>(po)), hn::BitCast(d, pe));
+}
+
+// 32 x 32 -> 64-bit products of every lane: high and low halves.
 template <class D>
 HWY_INLINE void MulHiLo(D d, hn::Vec<D> a, hn::Vec<D> b, hn::Vec<D>& hi, hn::Vec<D>& lo) {
 #if HWY_TARGET == HWY_SCALAR
@@ -33,30 +48,19 @@ HWY_INLINE void MulHiLo(D d, hn::Vec<D> a, hn::Vec<D> b, hn::Vec<D>& hi, hn::Vec
     hi = hn::Vec<D>{_mm512_mask_shuffle_epi32(po, 0x5555, pe, _MM_PERM_CDAB)};
     lo = hn::Vec<D>{_mm512_mask_shuffle_epi32(pe, 0xAAAA, po, _MM_PERM_CDAB)};
   } else {
-    const hn::Repartition<uint64_t, D> d64;
-    const auto pe = hn::MulEven(a, b);
-    const auto po = hn::MulEven(hn::BitCast(d, hn::ShiftRight<32>(hn::BitCast(d64, a))),
-                                hn::BitCast(d, hn::ShiftRight<32>(hn::BitCast(d64, b))));
-    hi = hn::OddEven(hn::BitCast(d, po), hn::BitCast(d, hn::ShiftRight<32>(pe)));
-    lo = hn::OddEven(hn::BitCast(d, hn::ShiftLeft<32>(po)), hn::BitCast(d, pe));
+    MulHiLoGeneric(d, a, b, hi, lo);
   }
 #else
-  const hn::Repartition<uint64_t, D> d64;
-  const auto pe = hn::MulEven(a, b);
-  const auto po = hn::MulEven(hn::BitCast(d, hn::ShiftRight<32>(hn::BitCast(d64, a))),
-                              hn::BitCast(d, hn::ShiftRight<32>(hn::BitCast(d64, b))));
-  hi = hn::OddEven(hn::BitCast(d, po), hn::BitCast(d, hn::ShiftRight<32>(pe)));
-  lo = hn::OddEven(hn::BitCast(d, hn::ShiftLeft<32>(po)), hn::BitCast(d, pe));
+  MulHiLoGeneric(d, a, b, hi, lo);
 #endif
 }
 
-// Ten Philox rounds on (x0, x1, x2, x3) with key (k0, k1): afterwards x0..x3 are the block's words.
+// `rounds` Philox rounds on (x0, x1, x2, x3), the first with round key (ka, kb).
 template <class D>
-HWY_INLINE void Philox10(D d, uint32_t k0, uint32_t k1, hn::Vec<D>& x0, hn::Vec<D>& x1, hn::Vec<D>& x2,
-                         hn::Vec<D>& x3) {
-  const auto m0 = hn::Set(d, 0xD2511F53u), m1 = hn::Set(d, 0xCD9E8D57u);
-  uint32_t ka = k0, kb = k1;
-  for (int round = 0; round < 10; ++round) {
+HWY_INLINE void PhiloxRounds(D d, int rounds, uint32_t ka, uint32_t kb, hn::Vec<D>& x0, hn::Vec<D>& x1,
+                             hn::Vec<D>& x2, hn::Vec<D>& x3) {
+  const auto m0 = hn::Set(d, kPhiloxM0), m1 = hn::Set(d, kPhiloxM1);
+  for (int round = 0; round < rounds; ++round) {
     hn::Vec<D> hi0, lo0, hi1, lo1;
     MulHiLo(d, x0, m0, hi0, lo0);
     MulHiLo(d, x2, m1, hi1, lo1);
@@ -64,9 +68,16 @@ HWY_INLINE void Philox10(D d, uint32_t k0, uint32_t k1, hn::Vec<D>& x0, hn::Vec<
     x2 = hn::Xor(hn::Xor(hi0, x3), hn::Set(d, kb));
     x1 = lo1;
     x3 = lo0;
-    ka += 0x9E3779B9u;
-    kb += 0xBB67AE85u;
+    ka += kPhiloxW0;
+    kb += kPhiloxW1;
   }
+}
+
+// Ten Philox rounds on (x0, x1, x2, x3) with key (k0, k1): afterwards x0..x3 are the block's words.
+template <class D>
+HWY_INLINE void Philox10(D d, uint32_t k0, uint32_t k1, hn::Vec<D>& x0, hn::Vec<D>& x1, hn::Vec<D>& x2,
+                         hn::Vec<D>& x3) {
+  PhiloxRounds(d, 10, k0, k1, x0, x1, x2, x3);
 }
 
 }  // namespace HWY_NAMESPACE
