@@ -313,6 +313,145 @@ void BinomialCounts(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t 
   }
 }
 
+// Counts by the tables of BinomialTable (see binomial_table.h), all K gates of one pixel: block 0 of the
+// stream Rng(seed, Counts, pixel, k) gives U1 (words 0, 1) and U2 (words 2, 3). Per vector of gates: the
+// grid row g = floor(a G); X1 from the guide and a step or two up the row, comparing the top 16 bits of T
+// and U1 (gathers from tables that stay in cache); Y = 0 where U2 >= floor((n - X1) delta 2^64). Lanes with
+// equal top bits take BinomialTable::first_round, lanes with a possible Y > 0 second_round.
+void BinomialCountsTable(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t key[2], uint64_t pixel,
+                         const BinomialTable& table, KernelScratch& s) {
+  const hn::ScalableTag<uint32_t> du;
+  const size_t Lu = hn::Lanes(du);
+  const uint32_t N = table.n();
+  const auto plo = hn::Set(du, static_cast<uint32_t>(pixel)), phi = hn::Set(du, static_cast<uint32_t>(pixel >> 32));
+  for (size_t k = 0; k < K; k += Lu) {
+    auto x0 = hn::Zero(du), x1 = hn::Iota(du, static_cast<uint32_t>(k)), x2 = plo, x3 = phi;
+    Philox10(du, key[0], key[1], x0, x1, x2, x3);
+    hn::StoreU(x0, du, s.hi.data() + k);
+    hn::StoreU(x1, du, s.lo.data() + k);
+    hn::StoreU(x2, du, s.hi2.data() + k);
+    hn::StoreU(x3, du, s.lo2.data() + k);
+  }
+  const hn::ScalableTag<double> d;
+  const size_t L = hn::Lanes(d);
+  const size_t Kv = (K + L - 1) / L * L;
+  std::copy(lam_in, lam_in + K, s.lam.data());
+  std::fill(s.lam.begin() + static_cast<std::ptrdiff_t>(K), s.lam.begin() + static_cast<std::ptrdiff_t>(Kv), 0.0);
+  const hn::RebindToUnsigned<decltype(d)> d64;
+  const hn::RebindToSigned<decltype(d)> di64;
+  const hn::Rebind<uint32_t, decltype(d)> d32;
+  const hn::Rebind<int32_t, decltype(d)> di32;
+  const auto vN = hn::Set(d, static_cast<double>(N)), one = hn::Set(d, 1.0);
+  const auto grid = hn::Set(d, static_cast<double>(BinomialTable::kGrid));
+  const auto inv_grid = hn::Set(d, 1.0 / BinomialTable::kGrid);
+  const auto u_cap = hn::Set(d64, ~uint64_t{0} - 1);
+  const auto low32 = hn::Set(di64, 0xFFFFFFFF);
+  const auto byte_mask = hn::Set(di64, 0xFF), u16_mask = hn::Set(di64, 0xFFFF);
+  const int64_t* rows = table.row();
+  const auto* t16 = reinterpret_cast<const int64_t*>(table.thresholds16());
+  const auto* guide = reinterpret_cast<const int64_t*>(table.guide());
+  // The gathers of one vector depend on each other (guide -> row entry -> next entry), so the vectors go
+  // through each stage together: every stage's gathers are independent and their latencies overlap.
+  double* delta_a = s.a.data();  // per k: delta, the grid index g, U1 (capped), the row, the entry, ties
+  double* g_a = s.b.data();
+  uint64_t* U1_a = s.U.data();
+  int64_t* row_a = s.row.data();
+  int64_t* i_a = s.idx.data();
+  int64_t* tie_a = s.tie.data();
+  for (size_t k = 0; k < K; k += L) {  // stage 1: probabilities, grid row, guide
+    const auto nl = hn::Neg(ClampRate(d, hn::LoadU(d, s.lam.data() + k)));
+    const auto p = hn::Neg(hn::Expm1(d, nl));
+    hn::StoreU(p, d, s.p.data() + k);
+    // q = 1 - p is exact to 1 ulp while p < 3/8; beyond, exp(-lambda) keeps q's relative precision
+    const auto low_p = hn::Lt(p, hn::Set(d, 0.375));
+    const auto q = hn::AllTrue(d, low_p) ? hn::Sub(one, p) : hn::IfThenElse(low_p, hn::Sub(one, p), hn::Exp(d, nl));
+    hn::StoreU(q, d, s.q.data() + k);
+    const auto a = hn::Min(p, q);  // X counts the rarer outcome
+    const auto g = hn::Floor(hn::Mul(a, grid));
+    const auto pg = hn::Mul(g, inv_grid);
+    hn::StoreU(hn::Div(hn::Sub(a, pg), hn::Sub(one, pg)), d, delta_a + k);
+    hn::StoreU(g, d, g_a + k);
+    const auto U1 = hn::Min(hn::Or(hn::ShiftLeft<32>(hn::PromoteTo(d64, hn::LoadU(d32, s.hi.data() + k))),
+                                   hn::PromoteTo(d64, hn::LoadU(d32, s.lo.data() + k))), u_cap);
+    hn::StoreU(U1, d64, U1_a + k);
+    const auto gi = hn::ConvertTo(di64, g);
+    hn::StoreU(hn::GatherIndex(di64, rows, gi), di64, row_a + k);
+    const auto bucket = hn::BitCast(di64, hn::ShiftRight<64 - BinomialTable::kGuideBits>(U1));
+    hn::StoreU(hn::And(hn::GatherOffset(di64, guide, hn::Add(hn::ShiftLeft<BinomialTable::kGuideBits>(gi), bucket)), byte_mask),
+               di64, i_a + k);
+  }
+  // stages 2 and 3: one step up the row each, where T(x) < U1 in the top 16 bits (equal bits: a tie)
+  for (int stage = 0; stage < 2; ++stage)
+    for (size_t k = 0; k < K; k += L) {
+      const auto i = hn::LoadU(di64, i_a + k);
+      const auto u_top = hn::BitCast(di64, hn::ShiftRight<48>(hn::LoadU(d64, U1_a + k)));
+      const auto t = hn::And(hn::GatherOffset(di64, t16, hn::ShiftLeft<1>(hn::Add(hn::And(hn::LoadU(di64, row_a + k), low32), i))), u16_mask);
+      auto tie = hn::VecFromMask(di64, hn::Eq(t, u_top));
+      if (stage == 1) tie = hn::Or(tie, hn::LoadU(di64, tie_a + k));
+      hn::StoreU(tie, di64, tie_a + k);
+      hn::StoreU(hn::Sub(i, hn::VecFromMask(di64, hn::Lt(t, u_top))), di64, i_a + k);  // + 1 where T(x) < U1
+    }
+  for (size_t k = 0; k < K; k += L) {  // stage 4: the rest, and the second round
+    const auto row = hn::LoadU(di64, row_a + k);
+    auto i = hn::LoadU(di64, i_a + k);
+    const auto U1 = hn::LoadU(d64, U1_a + k);
+    const auto u_top = hn::BitCast(di64, hn::ShiftRight<48>(U1));
+    // a lane still below its U1 after two steps (U1 in a tail bucket, where many outcomes share a guide
+    // bucket) or with equal top bits takes the scalar search
+    const auto t = hn::And(hn::GatherOffset(di64, t16, hn::ShiftLeft<1>(hn::Add(hn::And(row, low32), i))), u16_mask);
+    const auto scalar = hn::Or(hn::MaskFromVec(hn::LoadU(di64, tie_a + k)), hn::Not(hn::Lt(u_top, t)));
+    auto x1 = hn::ConvertTo(d, hn::Add(hn::ShiftRight<32>(row), i));
+    if (HWY_UNLIKELY(!hn::AllFalse(di64, scalar))) {
+      alignas(64) double xa[hn::MaxLanes(d)];
+      alignas(64) int64_t sa[hn::MaxLanes(d)];
+      hn::Store(x1, d, xa);
+      hn::Store(hn::VecFromMask(di64, scalar), di64, sa);
+      for (size_t j = 0; j < L; ++j)
+        if (sa[j] != 0) xa[j] = table.first_round(U1_a[k + j], static_cast<uint32_t>(g_a[k + j]));
+      x1 = hn::Load(d, xa);
+    }
+    // second round: Y = 0 where U2 >= floor((N - X1) delta 2^64) ((N - X1) delta < 0.2 always)
+    const auto delta = hn::LoadU(d, delta_a + k);
+    const auto n2 = hn::Sub(vN, x1);
+    const auto mean2 = hn::Mul(n2, delta);
+    const auto U2 = hn::Or(hn::ShiftLeft<32>(hn::PromoteTo(d64, hn::LoadU(d32, s.hi2.data() + k))),
+                           hn::PromoteTo(d64, hn::LoadU(d32, s.lo2.data() + k)));
+    auto x = x1;
+    const auto search = hn::RebindMask(d, hn::Lt(U2, Threshold(d, mean2)));
+    if (HWY_UNLIKELY(!hn::AllFalse(d, search))) {
+      // Y = 0 or 1 as second_round decides them: S0 = P(Y > 0) by the series, S1 = S0 - P(Y = 1)
+      auto lp = hn::Set(d, BinomialTable::kLog1pCoeff[0]);
+      for (int j = 1; j < 6; ++j) lp = hn::MulAdd(lp, delta, hn::Set(d, BinomialTable::kLog1pCoeff[j]));
+      const auto lx = hn::Mul(n2, hn::Mul(hn::Neg(delta), lp));
+      auto e = hn::Set(d, BinomialTable::kExpm1Coeff[0]);
+      for (int j = 1; j < 14; ++j) e = hn::MulAdd(e, lx, hn::Set(d, BinomialTable::kExpm1Coeff[j]));
+      e = hn::MulAdd(e, lx, one);
+      const auto S0 = hn::Neg(hn::Mul(lx, e));
+      const auto r = hn::Div(delta, hn::Sub(one, delta));
+      const auto S1 = hn::Sub(S0, hn::Mul(hn::Sub(one, S0), hn::Mul(r, n2)));
+      const auto y1 = hn::And(search, hn::RebindMask(d, hn::Lt(U2, Threshold(d, S0))));  // Y >= 1
+      const auto y2 = hn::And(y1, hn::And(hn::Gt(n2, one), hn::And(hn::Gt(S1, hn::Zero(d)),
+                                                                    hn::RebindMask(d, hn::Lt(U2, Threshold(d, S1))))));
+      x = hn::IfThenElse(y1, hn::Add(x1, one), x1);
+      if (HWY_UNLIKELY(!hn::AllFalse(d, y2))) {  // Y >= 2: the whole search, lane by lane
+        alignas(64) double xa[hn::MaxLanes(d)], n2a[hn::MaxLanes(d)];
+        alignas(64) uint64_t u2a[hn::MaxLanes(d)];
+        alignas(64) int64_t need[hn::MaxLanes(d)];
+        hn::Store(x, d, xa);
+        hn::Store(n2, d, n2a);
+        hn::Store(U2, d64, u2a);
+        hn::Store(hn::VecFromMask(di64, hn::RebindMask(di64, y2)), di64, need);
+        for (size_t j = 0; j < L; ++j)
+          if (need[j] != 0) xa[j] = (xa[j] - 1.0) + table.second_round(u2a[j], static_cast<uint32_t>(n2a[j]), delta_a[k + j]);
+        x = hn::Load(d, xa);
+      }
+    }
+    const auto p = hn::LoadU(d, s.p.data() + k), q = hn::LoadU(d, s.q.data() + k);
+    const auto count = hn::IfThenElse(hn::Le(p, q), x, hn::Sub(vN, x));  // detections, or N - misses
+    hn::StoreU(hn::BitCast(d32, hn::DemoteTo(di32, count)), d32, s.x.data() + k);
+  }
+}
+
 const char* KernelTarget() { return hwy::TargetName(HWY_TARGET); }
 
 }  // namespace HWY_NAMESPACE
@@ -326,12 +465,14 @@ HWY_EXPORT(Probabilities);
 HWY_EXPORT(CrosstalkRates);
 HWY_EXPORT(PhiloxBlocks);
 HWY_EXPORT(BinomialCounts);
+HWY_EXPORT(BinomialCountsTable);
 
 void KernelScratch::reserve(size_t K) {
   const size_t n = (K + 15) / 16 * 16 + 16;
   for (auto* v : {&lam, &p, &q, &a, &b, &S0, &P0, &pm}) v->resize(n);
   U.resize(n);
-  for (auto* v : {&hi, &lo, &x, &m}) v->resize(n);
+  for (auto* v : {&hi, &lo, &hi2, &lo2, &x, &m}) v->resize(n);
+  for (auto* v : {&row, &idx, &tie}) v->resize(n);
 }
 
 void probabilities(const double* lam, size_t K, double* p, double* q) {
@@ -347,6 +488,12 @@ void binomial_counts(const double* lam, size_t K, const uint32_t key[2], uint64_
                      const BinomialSampler& sampler, KernelScratch& s) {
   s.reserve(K);
   HWY_DYNAMIC_DISPATCH(BinomialCounts)(lam, K, key, pixel, sampler, s);
+}
+
+void binomial_counts(const double* lam, size_t K, const uint32_t key[2], uint64_t pixel, const BinomialTable& table,
+                     KernelScratch& s) {
+  s.reserve(K);
+  HWY_DYNAMIC_DISPATCH(BinomialCountsTable)(lam, K, key, pixel, table, s);
 }
 
 void philox_block0(const uint32_t key[2], const uint32_t* c1, const uint32_t* c2, const uint32_t* c3,

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "core/rng.h"
+#include "binomial_table.h"
 #include "sampling.h"
 
 namespace spadgen::sensor {
@@ -21,7 +22,8 @@ namespace spadgen::sensor {
 struct KernelScratch {
   std::vector<double> lam, p, q, a, b, S0, P0, pm;
   std::vector<uint64_t> U;
-  std::vector<uint32_t> hi, lo, x, m;
+  std::vector<uint32_t> hi, lo, hi2, lo2, x, m;
+  std::vector<int64_t> row, idx, tie;
   void reserve(size_t K);
 };
 
@@ -41,6 +43,12 @@ void crosstalk_rates(const double* lam, size_t K, const double* const* nb, int n
 // rounding of the vectorised exp / expm1 / log1p (a few ulp of the probabilities).
 void binomial_counts(const double* lam, size_t K, const uint32_t key[2], uint64_t pixel,
                      const BinomialSampler& sampler, KernelScratch& s);
+
+// The same counts by BinomialTable (table.n() = N): X_k = table.sample(U1, U2, min(p_k, q_k)) (or N minus
+// that when q_k < p_k), U1 and U2 the first two 64-bit draws of Rng(seed, Counts, pixel, k). p_k and q_k
+// are left in s.p and s.q.
+void binomial_counts(const double* lam, size_t K, const uint32_t key[2], uint64_t pixel, const BinomialTable& table,
+                     KernelScratch& s);
 
 // Block 0 of `count` streams with counters (0, c1[i], c2[i], c3[i]) and one key: out[4 i + w] = word w,
 // as Rng::block(0).

@@ -140,6 +140,7 @@ struct SensorModel::Impl {
   GateShape gate;
   std::unique_ptr<PixelMaps> maps;
   std::unique_ptr<BinomialSampler> binom;
+  std::shared_ptr<const BinomialTable> table;  // counts by tables (sampled counts, frames_per_k <= kMaxN)
   TypeInfo types[2];
   int halo = 0;
 
@@ -194,6 +195,8 @@ SensorModel::Impl::Impl(const RunConfig& c, const SensorOptions& o) : cfg(c), op
   }
   maps = std::make_unique<PixelMaps>(cfg, gate.nominal_length_s);
   binom = std::make_unique<BinomialSampler>(frames_per_k);
+  if (!cfg.outputs.frames && sweep)
+    table = BinomialTable::get(frames_per_k);
   const PixelTypeConfig* tc[2] = {&cfg.sensor.pixel_A, &cfg.sensor.pixel_B};
   const char* names[2] = {"pixel_A", "pixel_B"};
   for (int t = 0; t < 2; ++t) {
@@ -427,7 +430,8 @@ SensorTile SensorModel::process(const TransientTile& t) const {
           l = eff.data();
         }
         if (!frames) {
-          binomial_counts(l, Ks, counts_key, pixel_index(x, y), *m.binom, s);
+          if (m.table) binomial_counts(l, Ks, counts_key, pixel_index(x, y), *m.table, s);
+          else binomial_counts(l, Ks, counts_key, pixel_index(x, y), *m.binom, s);
           uint16_t* cn = row_cnt.data() + xi * Ks;
           for (size_t k = 0; k < Ks; ++k) {
             ex[k] = static_cast<float>(static_cast<double>(N) * s.p[k]);
