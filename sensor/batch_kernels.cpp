@@ -26,21 +26,21 @@ HWY_INLINE hn::Vec<D> ClampRate(D d, hn::Vec<D> lam) {
   return hn::Min(hn::Max(lam, hn::Zero(d)), hn::Set(d, kMaxLambda));
 }
 
-void Probabilities(const double* HWY_RESTRICT lam, size_t K, double* HWY_RESTRICT p, double* HWY_RESTRICT q) {
+void Probabilities(const double* HWY_RESTRICT lam, size_t K, double* HWY_RESTRICT p, double* q) {
   const hn::ScalableTag<double> d;
   const size_t L = hn::Lanes(d);
   size_t k = 0;
   for (; k + L <= K; k += L) {
     const auto nl = hn::Neg(ClampRate(d, hn::LoadU(d, lam + k)));
     hn::StoreU(hn::Neg(hn::Expm1(d, nl)), d, p + k);
-    hn::StoreU(hn::Exp(d, nl), d, q + k);
+    if (q != nullptr) hn::StoreU(hn::Exp(d, nl), d, q + k);
   }
   if (k < K) {  // the tail through a padded copy
     alignas(64) double t[64] = {}, tp[64], tq[64];
     std::copy(lam + k, lam + K, t);
-    Probabilities(t, L, tp, tq);
+    Probabilities(t, L, tp, q != nullptr ? tq : nullptr);
     std::copy(tp, tp + (K - k), p + k);
-    std::copy(tq, tq + (K - k), q + k);
+    if (q != nullptr) std::copy(tq, tq + (K - k), q + k);
   }
 }
 
@@ -71,9 +71,18 @@ void CrosstalkRates(const double* HWY_RESTRICT lam, size_t K, const double* cons
         sv = hn::MulAdd(y, hn::Sub(one, sv), sv);
         P = hn::Mul(P, hn::Sub(one, y));
       }
-      const auto low = hn::Lt(sv, half);
-      auto t = hn::Neg(hn::Log1p(d, hn::Neg(hn::IfThenElse(low, sv, hn::Zero(d)))));
-      if (!hn::AllTrue(d, low)) t = hn::IfThenElse(low, t, hn::Neg(hn::Log(d, hn::IfThenElse(low, one, P))));
+      hn::Vec<decltype(d)> t;
+      if (hn::AllTrue(d, hn::Lt(sv, hn::Set(d, 1.0 / 32)))) {
+        // the common case (xt p small for every neighbour): -log1p(-s) = s + s^2 / 2 + ... + s^13 / 13,
+        // truncated below s^13 / 13 < 1e-19 s
+        auto c = hn::Set(d, 1.0 / 13);
+        for (int j = 12; j >= 1; --j) c = hn::MulAdd(c, sv, hn::Set(d, 1.0 / j));
+        t = hn::Mul(c, sv);
+      } else {
+        const auto low = hn::Lt(sv, half);
+        t = hn::Neg(hn::Log1p(d, hn::Neg(hn::IfThenElse(low, sv, hn::Zero(d)))));
+        if (!hn::AllTrue(d, low)) t = hn::IfThenElse(low, t, hn::Neg(hn::Log(d, hn::IfThenElse(low, one, P))));
+      }
       v = hn::Add(v, hn::IfThenElse(sure, inf, t));
       hn::StoreU(v, d, o + k);
     }
@@ -358,6 +367,7 @@ void BinomialCountsTable(const double* HWY_RESTRICT lam_in, size_t K, const uint
   int64_t* row_a = s.row.data();
   int64_t* i_a = s.idx.data();
   int64_t* tie_a = s.tie.data();
+  int64_t* bound_a = s.bound.data();
   for (size_t k = 0; k < K; k += L) {  // stage 1: probabilities, grid row, guide
     const auto nl = hn::Neg(ClampRate(d, hn::LoadU(d, s.lam.data() + k)));
     const auto p = hn::Neg(hn::Expm1(d, nl));
@@ -376,30 +386,33 @@ void BinomialCountsTable(const double* HWY_RESTRICT lam_in, size_t K, const uint
     hn::StoreU(U1, d64, U1_a + k);
     const auto gi = hn::ConvertTo(di64, g);
     hn::StoreU(hn::GatherIndex(di64, rows, gi), di64, row_a + k);
+    // bytes b and b + 1 of the row's guide: X1 - lo lies between them (bucket 255: below 256)
     const auto bucket = hn::BitCast(di64, hn::ShiftRight<64 - BinomialTable::kGuideBits>(U1));
-    hn::StoreU(hn::And(hn::GatherOffset(di64, guide, hn::Add(hn::ShiftLeft<BinomialTable::kGuideBits>(gi), bucket)), byte_mask),
-               di64, i_a + k);
+    const auto gv = hn::GatherOffset(di64, guide, hn::Add(hn::ShiftLeft<BinomialTable::kGuideBits>(gi), bucket));
+    hn::StoreU(hn::And(gv, byte_mask), di64, i_a + k);
+    hn::StoreU(hn::IfThenElse(hn::Eq(bucket, byte_mask), byte_mask, hn::And(hn::ShiftRight<8>(gv), byte_mask)), di64, bound_a + k);
   }
-  // stages 2 and 3: one step up the row each, where T(x) < U1 in the top 16 bits (equal bits: a tie)
+  // stages 2 and 3: one step up the row each, where T(x) < U1 in the top 16 bits. After them a lane is
+  // settled unless its top bits were equal to T's (a tie) or it stepped in stage 3 and is still below the
+  // guide's bound (U1 in a bucket that several outcomes share: the tails); those take the scalar search.
   for (int stage = 0; stage < 2; ++stage)
     for (size_t k = 0; k < K; k += L) {
       const auto i = hn::LoadU(di64, i_a + k);
       const auto u_top = hn::BitCast(di64, hn::ShiftRight<48>(hn::LoadU(d64, U1_a + k)));
       const auto t = hn::And(hn::GatherOffset(di64, t16, hn::ShiftLeft<1>(hn::Add(hn::And(hn::LoadU(di64, row_a + k), low32), i))), u16_mask);
-      auto tie = hn::VecFromMask(di64, hn::Eq(t, u_top));
-      if (stage == 1) tie = hn::Or(tie, hn::LoadU(di64, tie_a + k));
-      hn::StoreU(tie, di64, tie_a + k);
-      hn::StoreU(hn::Sub(i, hn::VecFromMask(di64, hn::Lt(t, u_top))), di64, i_a + k);  // + 1 where T(x) < U1
+      const auto step = hn::VecFromMask(di64, hn::Lt(t, u_top));
+      const auto i_next = hn::Sub(i, step);  // + 1 where T(x) < U1
+      auto scalar = hn::VecFromMask(di64, hn::Eq(t, u_top));
+      if (stage == 1)
+        scalar = hn::Or(hn::Or(scalar, hn::LoadU(di64, tie_a + k)),
+                        hn::And(step, hn::VecFromMask(di64, hn::Lt(i_next, hn::LoadU(di64, bound_a + k)))));
+      hn::StoreU(scalar, di64, tie_a + k);
+      hn::StoreU(i_next, di64, i_a + k);
     }
   for (size_t k = 0; k < K; k += L) {  // stage 4: the rest, and the second round
     const auto row = hn::LoadU(di64, row_a + k);
     auto i = hn::LoadU(di64, i_a + k);
-    const auto U1 = hn::LoadU(d64, U1_a + k);
-    const auto u_top = hn::BitCast(di64, hn::ShiftRight<48>(U1));
-    // a lane still below its U1 after two steps (U1 in a tail bucket, where many outcomes share a guide
-    // bucket) or with equal top bits takes the scalar search
-    const auto t = hn::And(hn::GatherOffset(di64, t16, hn::ShiftLeft<1>(hn::Add(hn::And(row, low32), i))), u16_mask);
-    const auto scalar = hn::Or(hn::MaskFromVec(hn::LoadU(di64, tie_a + k)), hn::Not(hn::Lt(u_top, t)));
+    const auto scalar = hn::MaskFromVec(hn::LoadU(di64, tie_a + k));
     auto x1 = hn::ConvertTo(d, hn::Add(hn::ShiftRight<32>(row), i));
     if (HWY_UNLIKELY(!hn::AllFalse(di64, scalar))) {
       alignas(64) double xa[hn::MaxLanes(d)];
@@ -452,6 +465,39 @@ void BinomialCountsTable(const double* HWY_RESTRICT lam_in, size_t K, const uint
   }
 }
 
+// dst[k * dst_stride + x] = src[x * K + k]: one gather of a vector of pixels per k.
+template <typename T>
+void TransposeRowsImpl(const T* HWY_RESTRICT src, size_t width, size_t K, T* HWY_RESTRICT dst, size_t dst_stride) {
+  const hn::ScalableTag<int32_t> di;
+  const size_t L = hn::Lanes(di);
+  size_t x0 = 0;
+  if (K * width < (size_t{1} << 30)) {
+    const auto stride = hn::Set(di, static_cast<int32_t>(K * sizeof(T)));
+    const auto offs = hn::Mul(hn::Iota(di, 0), stride);
+    for (; x0 + L <= width; x0 += L) {
+      const auto* base = reinterpret_cast<const int32_t*>(src + x0 * K);
+      for (size_t k = 0; k < K; ++k) {
+        const auto v = hn::GatherOffset(di, reinterpret_cast<const int32_t*>(reinterpret_cast<const T*>(base) + k), offs);
+        if constexpr (sizeof(T) == 4) {
+          hn::StoreU(hn::BitCast(hn::Rebind<T, decltype(di)>(), v), hn::Rebind<T, decltype(di)>(), dst + k * dst_stride + x0);
+        } else {  // 16-bit: the low half of each 4-byte read (src holds one more element)
+          const hn::Rebind<uint16_t, decltype(di)> d16;
+          hn::StoreU(hn::DemoteTo(d16, hn::And(v, hn::Set(di, 0xFFFF))), d16, reinterpret_cast<uint16_t*>(dst) + k * dst_stride + x0);
+        }
+      }
+    }
+  }
+  for (size_t k = 0; k < K; ++k)
+    for (size_t x = x0; x < width; ++x) dst[k * dst_stride + x] = src[x * K + k];
+}
+
+void TransposeRowsF(const float* src, size_t width, size_t K, float* dst, size_t dst_stride) {
+  TransposeRowsImpl(src, width, K, dst, dst_stride);
+}
+void TransposeRowsU16(const uint16_t* src, size_t width, size_t K, uint16_t* dst, size_t dst_stride) {
+  TransposeRowsImpl(src, width, K, dst, dst_stride);
+}
+
 const char* KernelTarget() { return hwy::TargetName(HWY_TARGET); }
 
 }  // namespace HWY_NAMESPACE
@@ -466,13 +512,15 @@ HWY_EXPORT(CrosstalkRates);
 HWY_EXPORT(PhiloxBlocks);
 HWY_EXPORT(BinomialCounts);
 HWY_EXPORT(BinomialCountsTable);
+HWY_EXPORT(TransposeRowsF);
+HWY_EXPORT(TransposeRowsU16);
 
 void KernelScratch::reserve(size_t K) {
   const size_t n = (K + 15) / 16 * 16 + 16;
   for (auto* v : {&lam, &p, &q, &a, &b, &S0, &P0, &pm}) v->resize(n);
   U.resize(n);
   for (auto* v : {&hi, &lo, &hi2, &lo2, &x, &m}) v->resize(n);
-  for (auto* v : {&row, &idx, &tie}) v->resize(n);
+  for (auto* v : {&row, &idx, &tie, &bound}) v->resize(n);
 }
 
 void probabilities(const double* lam, size_t K, double* p, double* q) {
@@ -494,6 +542,13 @@ void binomial_counts(const double* lam, size_t K, const uint32_t key[2], uint64_
                      KernelScratch& s) {
   s.reserve(K);
   HWY_DYNAMIC_DISPATCH(BinomialCountsTable)(lam, K, key, pixel, table, s);
+}
+
+void transpose_rows(const float* src, size_t width, size_t K, float* dst, size_t dst_stride) {
+  HWY_DYNAMIC_DISPATCH(TransposeRowsF)(src, width, K, dst, dst_stride);
+}
+void transpose_rows(const uint16_t* src, size_t width, size_t K, uint16_t* dst, size_t dst_stride) {
+  HWY_DYNAMIC_DISPATCH(TransposeRowsU16)(src, width, K, dst, dst_stride);
 }
 
 void philox_block0(const uint32_t key[2], const uint32_t* c1, const uint32_t* c2, const uint32_t* c3,

@@ -23,11 +23,12 @@ struct KernelScratch {
   std::vector<double> lam, p, q, a, b, S0, P0, pm;
   std::vector<uint64_t> U;
   std::vector<uint32_t> hi, lo, hi2, lo2, x, m;
-  std::vector<int64_t> row, idx, tie;
+  std::vector<int64_t> row, idx, tie, bound;
   void reserve(size_t K);
 };
 
-// p[k] = -expm1(-lam[k]), q[k] = exp(-lam[k]) for k < K (lam >= 0; +inf gives p = 1, q = 0).
+// p[k] = -expm1(-lam[k]), q[k] = exp(-lam[k]) for k < K (lam >= 0; +inf gives p = 1, q = 0); q may be
+// nullptr when only p is needed.
 void probabilities(const double* lam, size_t K, double* p, double* q);
 
 // Rates with crosstalk from nnb neighbours (arrays of K): pixel A (single_avalanche false)
@@ -49,6 +50,11 @@ void binomial_counts(const double* lam, size_t K, const uint32_t key[2], uint64_
 // are left in s.p and s.q.
 void binomial_counts(const double* lam, size_t K, const uint32_t key[2], uint64_t pixel, const BinomialTable& table,
                      KernelScratch& s);
+
+// dst[k * dst_stride + x] = src[x * K + k] for x < width, k < K: a row of pixel-major results written
+// k-major. The 16-bit version reads one element beyond src[width * K - 1] (it must be allocated).
+void transpose_rows(const float* src, size_t width, size_t K, float* dst, size_t dst_stride);
+void transpose_rows(const uint16_t* src, size_t width, size_t K, uint16_t* dst, size_t dst_stride);
 
 // Block 0 of `count` streams with counters (0, c1[i], c2[i], c3[i]) and one key: out[4 i + w] = word w,
 // as Rng::block(0).

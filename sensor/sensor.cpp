@@ -355,7 +355,6 @@ SensorTile SensorModel::process(const TransientTile& t) const {
   std::vector<PixelParams> params(nreg);
   tbb::parallel_for(tbb::blocked_range<int>(region.y0, region.y1()), [&](const tbb::blocked_range<int>& rows) {
     TransientPrefix prefix;
-    std::vector<double> q_unused(frames ? 0 : Ks);
     for (int y = rows.begin(); y < rows.end(); ++y)
       for (int x = region.x0; x < region.x1(); ++x) {
         const size_t ri = static_cast<size_t>(region.index(x, y));
@@ -366,7 +365,7 @@ SensorTile SensorModel::process(const TransientTile& t) const {
         m.lambda(params[ri], g, t.axis, &rise, &fall, t.ambient_rate[di], laser_total, prefix, lam.get() + ri * Ks);
         // without frames only pixel B's neighbours read p (pixel A's read lambda); sections keep one type
         if (own_probs && (frames || m.types[params[ri].type].single_avalanche))
-          probabilities(lam.get() + ri * Ks, Ks, own_p.get() + ri * Ks, frames ? own_q.get() + ri * Ks : q_unused.data());
+          probabilities(lam.get() + ri * Ks, Ks, own_p.get() + ri * Ks, frames ? own_q.get() + ri * Ks : nullptr);
       }
   });
 
@@ -408,11 +407,11 @@ SensorTile SensorModel::process(const TransientTile& t) const {
     KernelScratch s;
     s.reserve(Ks);
     std::vector<double> eff(Ks), pe(Ks), qe(Ks);
-    // One row's results pixel-major ([x K + k]), written to the k-major outputs after the row in blocks of
-    // kKB positions: contiguous runs along x instead of K strided stores per pixel.
+    // One row's results pixel-major ([x K + k]), written to the k-major outputs after the row by
+    // transpose_rows (a gather of a vector of pixels per k) instead of K strided stores per pixel.
     const size_t rw = static_cast<size_t>(rect.width);
     std::vector<float> row_exp(rw * Ks);
-    std::vector<uint16_t> row_cnt(frames ? 0 : rw * Ks);
+    std::vector<uint16_t> row_cnt(frames ? 0 : rw * Ks + 1);  // + 1: transpose_rows reads one beyond
     for (int y = rows.begin(); y < rows.end(); ++y) {
       for (int x = rect.x0; x < rect.x1(); ++x) {
         const auto ri = static_cast<size_t>(region.index(x, y));
@@ -447,19 +446,8 @@ SensorTile SensorModel::process(const TransientTile& t) const {
         }
       }
       const size_t o0 = static_cast<size_t>(rect.index(rect.x0, y));
-      constexpr size_t kKB = 16;
-      for (size_t k0 = 0; k0 < Ks; k0 += kKB) {
-        const size_t k1 = std::min(Ks, k0 + kKB);
-        for (size_t k = k0; k < k1; ++k) {
-          float* e = out.expected.data() + k * n + o0;
-          for (size_t xi = 0; xi < rw; ++xi) e[xi] = row_exp[xi * Ks + k];
-        }
-        if (!frames)
-          for (size_t k = k0; k < k1; ++k) {
-            uint16_t* c = out.counts.data() + k * n + o0;
-            for (size_t xi = 0; xi < rw; ++xi) c[xi] = row_cnt[xi * Ks + k];
-          }
-      }
+      transpose_rows(row_exp.data(), rw, Ks, out.expected.data() + o0, n);
+      if (!frames) transpose_rows(row_cnt.data(), rw, Ks, out.counts.data() + o0, n);
     }
   });
 

@@ -177,5 +177,30 @@ TEST(BinomialTable, KernelChiSquare) {
   }
 }
 
+// transpose_rows: pixel-major rows to k-major outputs, for widths below, at and above a vector's pixels.
+TEST(CountsKernel, TransposeRows) {
+  for (size_t width : {1u, 7u, 8u, 16u, 17u, 32u, 41u}) {
+    const size_t K = 351, stride = width + 5;
+    std::vector<float> f(width * K);
+    std::vector<uint16_t> u(width * K + 1);
+    for (size_t i = 0; i < width * K; ++i) {
+      f[i] = static_cast<float>(i) * 0.5f;
+      u[i] = static_cast<uint16_t>(i * 7919u);
+    }
+    std::vector<float> fo(K * stride, -1.0f);
+    std::vector<uint16_t> uo(K * stride, 1);
+    transpose_rows(f.data(), width, K, fo.data(), stride);
+    transpose_rows(u.data(), width, K, uo.data(), stride);
+    size_t bad = 0;
+    for (size_t k = 0; k < K; ++k)
+      for (size_t x = 0; x < stride; ++x) {
+        const bool in = x < width;
+        bad += fo[k * stride + x] != (in ? f[x * K + k] : -1.0f);
+        bad += uo[k * stride + x] != (in ? u[x * K + k] : 1);
+      }
+    EXPECT_EQ(bad, 0u) << "width " << width;
+  }
+}
+
 }  // namespace
 }  // namespace spadgen::sensor
