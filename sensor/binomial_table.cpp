@@ -3,6 +3,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <cmath>
@@ -117,9 +118,14 @@ uint32_t BinomialTable::first_round(uint64_t U1, uint32_t g) const {
   const uint64_t u = U1 == kMax ? kMax - 1 : U1;
   const auto off = static_cast<size_t>(row_[g] & 0xFFFFFFFF);
   const auto lo = static_cast<uint32_t>(row_[g] >> 32);
+  const uint64_t* T = T64_.data() + off;
   uint32_t i = guide_[static_cast<size_t>(g) * kGuide + (u >> (64 - kGuideBits))];
-  while (T64_[off + i] <= u) ++i;  // stops at the row's last entry (T = 2^64 - 1) at the latest
-  return lo + i;
+  // the first entry above u: a few steps from the guide, else a binary search up to the row's end (its
+  // last entry is 2^64 - 1, above every u)
+  for (int step = 0; step < 4; ++step, ++i)
+    if (T[i] > u) return lo + i;
+  const size_t end = g + 1 < row_.size() ? static_cast<size_t>(row_[g + 1] & 0xFFFFFFFF) - off : T64_.size() - off;
+  return lo + static_cast<uint32_t>(std::upper_bound(T + i, T + end, u) - T);
 }
 
 double BinomialTable::survival0(double n2, double delta) {
