@@ -360,6 +360,49 @@ EdgeBins edge_in_bins(const Edge& e, double bin_width_s) {
     b.C0[j + 1] = b.C0[j] + b.c[j];
     b.C1[j + 1] = b.C1[j] + b.c[j] * b.u[j];
   }
+  // Integer-step tables. Knot j with n_j = floor(u_j), r_j = u_j - n_j and f + r_j < 1 has argument
+  // y + u_j = (d + n_j) + (f + r_j): Q is c_j (f + r_j)^2 / 2 at d = -n_j (entry t_j), 0 before,
+  // c_j (d + u_j - 1/2 + f) after. The linear parts are summed from t_j + 1 on as t S0 + S1 with
+  // S1 = sum c_j (u_j + d_lo - 1/2) (d + u_j = t + u_j + d_lo: small near the window's start, where W is).
+  const int64_t n_first = static_cast<int64_t>(std::floor(b.u.front())), n_last = static_cast<int64_t>(std::floor(b.u.back()));
+  b.d_lo = -(n_last + 1);
+  b.L = n_last - n_first + 2;
+  const auto L = static_cast<size_t>(b.L);
+  std::vector<double> l0(L, 0.0), l1(L, 0.0);
+  b.wa.assign(L, 0.0);
+  b.wb.assign(L, 0.0);
+  b.wc.assign(L, 0.0);
+  std::vector<size_t> order(m);
+  std::vector<double> r(m);
+  std::vector<int64_t> t(m);
+  for (size_t j = 0; j < m; ++j) {
+    const double n = std::floor(b.u[j]);
+    r[j] = b.u[j] - n;
+    t[j] = n_last + 1 - static_cast<int64_t>(n);
+    const auto tj = static_cast<size_t>(t[j]);
+    const double c = b.c[j];
+    b.wa[tj] += 0.5 * c * r[j] * r[j];
+    b.wb[tj] += c * r[j];
+    b.wc[tj] += 0.5 * c;
+    if (tj + 1 < L) {
+      l0[tj + 1] += c;
+      l1[tj + 1] += c * (b.u[j] + static_cast<double>(b.d_lo) - 0.5);
+    }
+    order[j] = j;
+  }
+  double S0 = 0.0, S1 = 0.0;
+  for (size_t k = 0; k < L; ++k) {
+    S0 += l0[k];
+    S1 += l1[k];
+    b.wa[k] += static_cast<double>(k) * S0 + S1;
+    b.wb[k] += S0;
+  }
+  std::stable_sort(order.begin(), order.end(), [&](size_t x, size_t y) { return r[x] > r[y]; });
+  for (size_t j : order) {
+    b.xr.push_back(r[j]);
+    b.xc.push_back(b.c[j]);
+    b.xt.push_back(t[j]);
+  }
   return b;
 }
 
@@ -411,6 +454,31 @@ bool TransientPrefix::build(const float* g, int64_t T) {
   }
   total_ = G1;
   return !runs_.empty();
+}
+
+bool TransientPrefix::build_bins(const float* g, int64_t T) {
+  runs_.clear();
+  nz_i_.clear();
+  nz_v_.clear();
+  double G1 = 0.0;
+  auto take = [&](int64_t b) {
+    if (g[b] == 0.0f) return;
+    const double v = g[b];
+    nz_i_.push_back(b);
+    nz_v_.push_back(v);
+    G1 += v;
+  };
+  int64_t i = 0;
+  // 16 bins at a time (the reduction vectorises); -0.0f counts as empty, as in build()
+  for (; i + 16 <= T; i += 16) {
+    uint32_t any = 0;
+    for (int64_t j = 0; j < 16; ++j) any |= std::bit_cast<uint32_t>(g[i + j]) & 0x7FFFFFFFu;
+    if (any == 0) continue;
+    for (int64_t j = 0; j < 16; ++j) take(i + j);
+  }
+  for (; i < T; ++i) take(i);
+  total_ = G1;
+  return !nz_i_.empty();
 }
 
 double TransientPrefix::G2_in_run(const Run& r, double a) const {
@@ -489,6 +557,85 @@ void accumulate_edge_response(const TransientPrefix& p, const EdgeBins& e, doubl
       H += prev->G2e * sc + prev->G1e * ((b - static_cast<double>(prev->e)) * sc + scu);
     }
     out[k] += sign * H;
+  }
+}
+
+int64_t integer_step(double step) {
+  const double s = std::round(step);
+  if (!(s >= 1.0 && s < 1e15)) return 0;
+  return std::abs(step - s) <= 1e-14 * s ? static_cast<int64_t>(s) : 0;
+}
+
+namespace {
+int64_t floor_div(int64_t a, int64_t b) {  // b > 0
+  const int64_t q = a / b;
+  return (a % b != 0 && a < 0) ? q - 1 : q;
+}
+int64_t ceil_div(int64_t a, int64_t b) { return -floor_div(-a, b); }
+}  // namespace
+
+void accumulate_edge_response_int(TransientPrefix& p, const EdgeBins& e, double b0, int64_t s, int K, double sign,
+                                  double* out) {
+  const std::vector<int64_t>& idx = p.bin_index();
+  const std::vector<double>& val = p.bin_value();
+  if (idx.empty() || K <= 0 || s < 1) return;
+  const double Fd = std::floor(b0), f = b0 - Fd;  // exact
+  const auto F = static_cast<int64_t>(Fd);
+  const int64_t L = e.L, d_lo = e.d_lo;
+  const auto Ls = static_cast<size_t>(L);
+  // W at y = f + d, t = d - d_lo, then split by phase t mod s: phase ph holds W[ph + s q] for
+  // q < n_ph = a + (ph < b), L = a s + b, starting at ph a + min(ph, b).
+  std::vector<double>& work = p.scratch();
+  if (work.size() < 2 * Ls) work.resize(2 * Ls);
+  double* W = work.data();
+  for (size_t t = 0; t < Ls; ++t) W[t] = e.wa[t] + f * (e.wb[t] + f * e.wc[t]);
+  for (size_t q = 0; q < e.xr.size(); ++q) {
+    const double z = f + e.xr[q];
+    if (z < 1.0) break;  // r descending: no later knot crosses either
+    const double w = z - 1.0, v = 0.5 * e.xc[q] * w * w;
+    const auto t = static_cast<size_t>(e.xt[q]);
+    W[t] -= v;
+    W[t - 1] += v;
+  }
+  const int64_t qa = L / s, qb = L % s;
+  const double* P = W;
+  if (s > 1) {
+    double* Pw = W + Ls;
+    for (int64_t ph = 0; ph < std::min(s, L); ++ph) {
+      double* dst = Pw + ph * qa + std::min(ph, qb);
+      const int64_t n = qa + (ph < qb ? 1 : 0);
+      for (int64_t q = 0; q < n; ++q) dst[q] = W[ph + s * q];
+    }
+    P = Pw;
+  }
+  // Bin i reaches gate k at t = s k - (i - F + d_lo): the window for k in [ka, kb), W = cu from kb on.
+  const double cu = e.C1[e.u.size()];
+  double mass = 0.0;  // the content of the bins whose plateau has started at gate kc
+  int64_t kc = 0;
+  const auto Kl = static_cast<int64_t>(K);
+  for (size_t n = 0; n < idx.size(); ++n) {
+    const int64_t base = idx[n] - F + d_lo;
+    const int64_t ka = ceil_div(base, s), kb = ceil_div(base + L, s);
+    const int64_t ke = std::min(kb, Kl);
+    if (ke > kc) {
+      if (mass != 0.0) {
+        const double v = sign * (mass * cu);
+        for (int64_t k = kc; k < ke; ++k) out[k] += v;
+      }
+      kc = ke;
+    }
+    mass += val[n];
+    const int64_t ph = s * ka - base;
+    const double* Pp = P + (ph * qa + std::min(ph, qb));
+    const double v = sign * val[n];
+    const int64_t k0 = std::max<int64_t>(ka, 0);
+    double* o = out + k0;
+    Pp += k0 - ka;
+    for (int64_t k = 0; k < ke - k0; ++k) o[k] += v * Pp[k];
+  }
+  if (kc < Kl && mass != 0.0) {
+    const double v = sign * (mass * cu);
+    for (int64_t k = kc; k < Kl; ++k) out[k] += v;
   }
 }
 
