@@ -88,6 +88,7 @@ struct EdgeBins {
   int64_t d_lo = 0, L = 0;
   std::vector<double> wa, wb, wc, xr, xc;
   std::vector<int64_t> xt;
+  uint64_t id = 0;  // distinct for every edge_in_bins() result (keys TransientPrefix's per-step copies)
 };
 EdgeBins edge_in_bins(const Edge& e, double bin_width_s);
 
@@ -102,7 +103,16 @@ class TransientPrefix {
   double total() const { return total_; }
   const std::vector<int64_t>& bin_index() const { return nz_i_; }
   const std::vector<double>& bin_value() const { return nz_v_; }
-  // Scratch for accumulate_edge_response_int (W of one edge and its phase tables).
+  // Scratch for accumulate_edge_response_int: W of one edge, and per edge and step the tables wa, wb, wc
+  // split by phase (entry t at pos[t] = (t mod s) a + min(t mod s, b) + t / s, L = a s + b), so that each
+  // phase is contiguous. Built on first use for an edge's id and step; two edges are kept.
+  struct StepTables {
+    uint64_t id = 0;
+    int64_t s = 0;
+    std::vector<double> a, b, c;
+    std::vector<int64_t> pos;
+  };
+  const StepTables& step_tables(const EdgeBins& e, int64_t s);
   std::vector<double>& scratch() { return work_; }
 
   struct Run {
@@ -120,6 +130,8 @@ class TransientPrefix {
   std::vector<int64_t> nz_i_;        // build_bins: the non-zero bins and their contents
   std::vector<double> nz_v_;
   std::vector<double> work_;
+  StepTables step_[2];
+  int step_next_ = 0;
   double total_ = 0.0;
 };
 
