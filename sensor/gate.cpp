@@ -477,6 +477,8 @@ bool TransientPrefix::build_bins(const float* g, int64_t T) {
   // 16 scalar ORs per 16 bins); -0.0f counts as empty, as in build()
   using U4 = uint32_t __attribute__((vector_size(16)));
   for (; i + 32 <= T; i += 32) {
+    __builtin_prefetch(g + i + 512);  // 2 KB ahead (a row's transients are one stream; 4 KB measured the same)
+    __builtin_prefetch(g + i + 528);
     U4 acc{0, 0, 0, 0};
     for (int64_t j = 0; j < 8; ++j) {
       U4 x;
