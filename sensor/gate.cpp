@@ -608,6 +608,22 @@ const TransientPrefix::StepTables& TransientPrefix::step_tables(const EdgeBins& 
     t.c[i] = e.wc[ks];
     t.pos[ks] = at;
   }
+  t.a1 = t.a;
+  t.b1 = t.b;
+  t.c1 = t.c;
+  t.crossing = 0;
+  for (size_t q = 0; q < e.xr.size() && e.xr[q] > 0.0; ++q) {
+    // + (-c w^2 / 2 at t_j, +c w^2 / 2 at t_j - 1), w = f + r_j - 1, as coefficients of 1, f, f^2
+    const double c = e.xc[q], d = e.xr[q] - 1.0;
+    const auto t0 = static_cast<size_t>(e.xt[q]);
+    for (const auto& [at, sg] : {std::pair{t.pos[t0], -1.0}, std::pair{t.pos[t0 - 1], 1.0}}) {
+      const auto i = static_cast<size_t>(at);
+      t.a1[i] += sg * (0.5 * c * d * d);
+      t.b1[i] += sg * (c * d);
+      t.c1[i] += sg * (0.5 * c);
+    }
+    ++t.crossing;
+  }
   t.id = e.id;
   t.s = s;
   return t;
@@ -635,22 +651,32 @@ void accumulate_edge_response_int(TransientPrefix& p, const EdgeBins& e, double 
   std::vector<double>& work = p.scratch();
   const auto Ls = static_cast<size_t>(L);
   if (work.size() < Ls) work.resize(Ls);
-  double* W = work.data();  // W by phase, laid out as st.a
+  // The knots with r_j + f >= 1 come first in xr (descending): [0, nc) need the correction. With fewer of
+  // them than the others (nc <= crossing - nc) the tables without corrections are used and those knots
+  // corrected, else the tables with every correction and the knots [nc, crossing) have theirs taken out.
+  const double* xr = e.xr.data();
+  const size_t nc = static_cast<size_t>(std::partition_point(xr, xr + st.crossing, [f](double r) { return f + r >= 1.0; }) - xr);
+  const bool all = nc > st.crossing - nc;
+  const double *ta = all ? st.a1.data() : st.a.data(), *tb = all ? st.b1.data() : st.b.data(),
+               *tc = all ? st.c1.data() : st.c.data();
+  double* W = work.data();  // W by phase, laid out as the tables
   for (int64_t ph = 0; ph < std::min(s, L); ++ph) {
     if (ph < 64 && !(phases >> ph & 1)) continue;
     const auto o = static_cast<size_t>(ph * qa + std::min(ph, qb)), n = static_cast<size_t>(qa + (ph < qb ? 1 : 0));
-    const double *a = st.a.data() + o, *b = st.b.data() + o, *c = st.c.data() + o;
+    const double *a = ta + o, *b = tb + o, *c = tc + o;
     double* w = W + o;
     for (size_t q = 0; q < n; ++q) w[q] = a[q] + f * (b[q] + f * c[q]);
   }
-  // knots with r_j + f >= 1 (r descending: they come first); entries of unused phases get junk, never read
-  for (size_t q = 0; q < e.xr.size(); ++q) {
-    const double z = f + e.xr[q];
-    if (z < 1.0) break;
-    const double w = z - 1.0, v = 0.5 * e.xc[q] * w * w;
-    const auto t = static_cast<size_t>(e.xt[q]);
-    W[st.pos[t]] -= v;
-    W[st.pos[t - 1]] += v;
+  // entries of unused phases get junk, never read
+  const double* xc = e.xc.data();
+  const int64_t *xt = e.xt.data(), *pos = st.pos.data();
+  const size_t q0 = all ? nc : 0, q1 = all ? st.crossing : nc;
+  const double sg = all ? -1.0 : 1.0;
+  for (size_t q = q0; q < q1; ++q) {
+    const double w = (f + xr[q]) - 1.0, v = sg * (0.5 * xc[q] * w * w);
+    const int64_t t = xt[q];
+    W[pos[t]] -= v;
+    W[pos[t - 1]] += v;
   }
   const double cu = e.C1[e.u.size()];
   double mass = 0.0;  // the content of the bins whose plateau has started at gate kc

@@ -105,12 +105,15 @@ class TransientPrefix {
   const std::vector<double>& bin_value() const { return nz_v_; }
   // Scratch for accumulate_edge_response_int: W of one edge, and per edge and step the tables wa, wb, wc
   // split by phase (entry t at pos[t] = (t mod s) a + min(t mod s, b) + t / s, L = a s + b), so that each
-  // phase is contiguous. Built on first use for an edge's id and step; two edges are kept.
+  // phase is contiguous; a1, b1, c1 the same with every knot's correction (r_j > 0: the first `crossing`
+  // knots of xr) included as a polynomial in f, so that a pixel corrects whichever set of knots is smaller.
+  // Built on first use for an edge's id and step; two edges are kept.
   struct StepTables {
     uint64_t id = 0;
     int64_t s = 0;
-    std::vector<double> a, b, c;
+    std::vector<double> a, b, c, a1, b1, c1;
     std::vector<int64_t> pos;
+    size_t crossing = 0;
   };
   const StepTables& step_tables(const EdgeBins& e, int64_t s);
   std::vector<double>& scratch() { return work_; }
