@@ -641,12 +641,34 @@ void accumulate_edge_response_int(TransientPrefix& p, const EdgeBins& e, double 
   // Bin i reaches gate k at entry t = s k - (i - F + d_lo) of W: the window for k in [ka, kb), always in
   // phase t mod s = s ka - (i - F + d_lo); W = cu from kb on. Only the phases some bin uses are evaluated
   // (all of them when s > 64).
-  uint64_t phases = s > 64 ? ~uint64_t{0} : 0;
-  if (s <= 64)
-    for (const int64_t i : idx) {
-      const int64_t base = i - F + d_lo;
-      phases |= uint64_t{1} << static_cast<unsigned>(s * ceil_div(base, s) - base);
+  // (ka, ph) for ascending bins: one division, then steps (a division again only after a long gap).
+  struct Phase {
+    int64_t s, base = 0, ka = 0, ph = 0;
+    void to(int64_t b) {
+      const int64_t delta = b - base;
+      base = b;
+      if (delta <= 8 * s) {
+        ph -= delta;
+        while (ph < 0) {
+          ph += s;
+          ++ka;
+        }
+      } else {
+        ka = ceil_div(b, s);
+        ph = s * ka - b;
+      }
     }
+  };
+  const int64_t base0 = idx.front() - F + d_lo;
+  const int64_t ka0 = ceil_div(base0, s);
+  uint64_t phases = s > 64 ? ~uint64_t{0} : 0;
+  if (s <= 64) {
+    Phase walk{s, base0, ka0, s * ka0 - base0};
+    for (const int64_t i : idx) {
+      walk.to(i - F + d_lo);
+      phases |= uint64_t{1} << static_cast<unsigned>(walk.ph);
+    }
+  }
   const TransientPrefix::StepTables& st = p.step_tables(e, s);
   std::vector<double>& work = p.scratch();
   const auto Ls = static_cast<size_t>(L);
@@ -681,9 +703,10 @@ void accumulate_edge_response_int(TransientPrefix& p, const EdgeBins& e, double 
   const double cu = e.C1[e.u.size()];
   double mass = 0.0;  // the content of the bins whose plateau has started at gate kc
   int64_t kc = 0;
+  Phase walk{s, base0, ka0, s * ka0 - base0};
   for (size_t n = 0; n < idx.size(); ++n) {
-    const int64_t base = idx[n] - F + d_lo;
-    const int64_t ka = ceil_div(base, s), kb = ceil_div(base + L, s);
+    walk.to(idx[n] - F + d_lo);
+    const int64_t ka = walk.ka, ph = walk.ph, kb = ka + qa + (ph < qb ? 1 : 0);  // ceil((base + L) / s)
     const int64_t ke = std::min(kb, Kl);
     if (ke > kc) {
       if (mass != 0.0) {
@@ -693,7 +716,6 @@ void accumulate_edge_response_int(TransientPrefix& p, const EdgeBins& e, double 
       kc = ke;
     }
     mass += val[n];
-    const int64_t ph = s * ka - base;
     const int64_t k0 = std::max<int64_t>(ka, 0);
     const double* Pp = W + (ph * qa + std::min(ph, qb)) + (k0 - ka);
     const double v = sign * val[n];

@@ -121,7 +121,8 @@ TEST(Gate, FastResponseEqualsBruteForce) {
 
 // The integer-step path against the general one (the reference), edge by edge: random transients (sparse,
 // dense, single bins at the array ends, huge and tiny contents), skews anywhere in a bin, length deviations,
-// steps of 1 to 6 bins, the default gate (smooth edges and instrument response) and an exact linear gate.
+// steps of 1 to 6 and 70 bins, the default gate (smooth edges and instrument response) and exact linear gates
+// (one with edges of about a bin, shorter than the step).
 // Both compute sum_i g_i W(b_k - i) exactly in real arithmetic, so they agree to rounding: 1e-12 of the
 // plateau response |cu| x total (the old algorithm's own rounding, of G2 ~ total x T, is the larger part).
 struct IntStepCase {
@@ -195,9 +196,12 @@ TEST(Gate, IntegerStepPathEqualsGeneralPath) {
   linear.jitter_fwhm_s = 0.0;
   linear.rise_s = 150e-12;
   linear.fall_s = 250e-12;
+  GateConfig steep = linear;  // edges of about one bin: the window is shorter than most steps
+  steep.rise_s = steep.fall_s = 8e-12;
   LaserConfig with_irf, no_irf;
   no_irf.pulse_fwhm_s = 0.0;
-  const GateShape shapes[2] = {build_gate_shape(smooth, with_irf, 64), build_gate_shape(linear, no_irf, 64)};
+  const GateShape shapes[3] = {build_gate_shape(smooth, with_irf, 64), build_gate_shape(linear, no_irf, 64),
+                               build_gate_shape(steep, no_irf, 64)};
   ASSERT_FALSE(shapes[0].exact);
   ASSERT_TRUE(shapes[1].exact);
   Rng rng(11, RngKind::Test, 4);
@@ -209,7 +213,7 @@ TEST(Gate, IntegerStepPathEqualsGeneralPath) {
       const EdgeBins edges[2] = {edge_in_bins(gs.rise, dt), edge_in_bins(gs.fall, dt)};
       const int64_t T = 1500;
       for (const IntStepCase& tc : int_step_transients(T, rng))
-        for (int64_t s = 1; s <= 6; ++s)
+        for (const int64_t s : {1, 2, 3, 4, 5, 6, 70})  // 70: more phases than the evaluated-phase mask holds
           for (int rep = 0; rep < 3; ++rep)
             for (int which = 0; which < 2; ++which) {
               const EdgeBins& e = edges[which];
