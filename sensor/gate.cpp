@@ -650,8 +650,8 @@ void accumulate_edge_response_int(TransientPrefix& p, const EdgeBins& e, double 
   const auto Kl = static_cast<int64_t>(K);
   // Bin i reaches gate k at entry t = s k - (i - F + d_lo) of W: the window for k in [ka, kb), always in
   // phase t mod s = s ka - (i - F + d_lo); W = cu from kb on. Only the phases some bin uses are evaluated
-  // (all of them when s > 64).
-  // (ka, ph) for ascending bins: one division, then steps (a division again only after a long gap).
+  // (all of them when s > 64). (ka, ph) for ascending bins: one division, then steps (a division again
+  // only after a long gap).
   struct Phase {
     int64_t s, base = 0, ka = 0, ph = 0;
     void to(int64_t b) {
@@ -727,6 +727,7 @@ void accumulate_edge_response_int(TransientPrefix& p, const EdgeBins& e, double 
     }
     mass += val[n];
     const int64_t k0 = std::max<int64_t>(ka, 0);
+    if (ke <= k0) continue;
     const double* Pp = W + (ph * qa + std::min(ph, qb)) + (k0 - ka);
     const double v = sign * val[n];
     double* o = out + k0;
