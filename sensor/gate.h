@@ -22,10 +22,12 @@
 // y + u_j >= 1, varying only over a window of about u_M - u_0 + 2 bins. When the step is a whole number
 // s of bins, b_k - i = f + d with f = b_0 - floor(b_0) fixed for the pixel and d an integer: W is
 // tabulated once per pixel and edge at y = f + d over the window (a quadratic in f per entry, tabulated per
-// edge, plus a correction at two entries for each knot with frac(u_j) + f >= 1), every non-zero bin adds
-// g_i W to the gates whose window holds it (about (u_M - u_0) / s of them, contiguous per phase of d mod s)
-// and g_i cu to every later gate. Cost per pixel and edge O(T / 16 + window + M + nnz * window / s + K);
-// no running integrals.
+// edge, plus a correction at two entries for each knot with frac(u_j) + f >= 1, or the reverse from a
+// table with every correction when most knots are past that point), every non-zero bin adds g_i W to the
+// gates whose window holds it (about (u_M - u_0) / s of them, contiguous per phase of d mod s; only the
+// phases in use are evaluated) and g_i cu to every later gate. Cost per pixel and edge
+// O(T / 32 + window + M + nnz * window / s + K); no running integrals. Equal to the general algorithm to
+// rounding (both compute the same sum exactly in real arithmetic).
 #pragma once
 #include <cstdint>
 #include <string>
