@@ -236,12 +236,19 @@ void SensorModel::Impl::lambda(const PixelParams& px, const float* g, const Time
   const double C = static_cast<double>(cfg.acquisition.cycles_per_frame);
   const double B = (pdp_a * ambient + px.dcr_cps) * gate.open_time(px.dL_s);
   std::fill(out, out + K, 0.0);
-  if (g != nullptr && axis.bins > 0 && prefix.build(g, axis.bins)) {
+  if (g != nullptr && axis.bins > 0) {
     const double dt = axis.bin_width_s;
     const double b0 = (positions[0] + cfg.sensor.gate.delay_s + px.skew_s - axis.start_s) / dt;
     const double step = cfg.acquisition.gate_sweep.step_s / dt;
-    accumulate_edge_response(prefix, *rise, b0, step, K, 1.0, out);
-    accumulate_edge_response(prefix, *fall, b0 + px.dL_s / dt, step, K, -1.0, out);
+    if (const int64_t s = integer_step(step); s > 0) {  // the step is a whole number of bins
+      if (prefix.build_bins(g, axis.bins)) {
+        accumulate_edge_response_int(prefix, *rise, b0, s, K, 1.0, out);
+        accumulate_edge_response_int(prefix, *fall, b0 + px.dL_s / dt, s, K, -1.0, out);
+      }
+    } else if (prefix.build(g, axis.bins)) {
+      accumulate_edge_response(prefix, *rise, b0, step, K, 1.0, out);
+      accumulate_edge_response(prefix, *fall, b0 + px.dL_s / dt, step, K, -1.0, out);
+    }
   }
   for (int k = 0; k < K; ++k) out[k] = C * (pdp_l * std::max(out[k], 0.0) + B);
 }
