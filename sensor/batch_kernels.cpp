@@ -357,6 +357,7 @@ void BinomialCountsTable(const double* HWY_RESTRICT lam_in, size_t K, const uint
   const auto low32 = hn::Set(di64, 0xFFFFFFFF);
   const auto byte_mask = hn::Set(di64, 0xFF), u16_mask = hn::Set(di64, 0xFFFF);
   const int64_t* rows = table.row();
+  const double* inv1m = table.inv_one_minus_p();
   const auto* t16 = reinterpret_cast<const int64_t*>(table.thresholds16());
   const auto* guide = reinterpret_cast<const int64_t*>(table.guide());
   // The gathers of one vector depend on each other (guide -> row entry -> next entry), so the vectors go
@@ -379,12 +380,12 @@ void BinomialCountsTable(const double* HWY_RESTRICT lam_in, size_t K, const uint
     const auto a = hn::Min(p, q);  // X counts the rarer outcome
     const auto g = hn::Floor(hn::Mul(a, grid));
     const auto pg = hn::Mul(g, inv_grid);
-    hn::StoreU(hn::Div(hn::Sub(a, pg), hn::Sub(one, pg)), d, delta_a + k);
+    const auto gi = hn::ConvertTo(di64, g);
+    hn::StoreU(hn::Mul(hn::Sub(a, pg), hn::GatherIndex(d, inv1m, gi)), d, delta_a + k);
     hn::StoreU(g, d, g_a + k);
     const auto U1 = hn::Min(hn::Or(hn::ShiftLeft<32>(hn::PromoteTo(d64, hn::LoadU(d32, s.hi.data() + k))),
                                    hn::PromoteTo(d64, hn::LoadU(d32, s.lo.data() + k))), u_cap);
     hn::StoreU(U1, d64, U1_a + k);
-    const auto gi = hn::ConvertTo(di64, g);
     hn::StoreU(hn::GatherIndex(di64, rows, gi), di64, row_a + k);
     // bytes b and b + 1 of the row's guide: X1 - lo lies between them (bucket 255: below 256)
     const auto bucket = hn::BitCast(di64, hn::ShiftRight<64 - BinomialTable::kGuideBits>(U1));
@@ -440,7 +441,9 @@ void BinomialCountsTable(const double* HWY_RESTRICT lam_in, size_t K, const uint
       for (int j = 1; j < 14; ++j) e = hn::MulAdd(e, lx, hn::Set(d, BinomialTable::kExpm1Coeff[j]));
       e = hn::MulAdd(e, lx, one);
       const auto S0 = hn::Neg(hn::Mul(lx, e));
-      const auto r = hn::Div(delta, hn::Sub(one, delta));
+      auto r = hn::Add(one, delta);  // BinomialTable::odds: delta (1 + delta + ... + delta^4)
+      for (int j = 0; j < 3; ++j) r = hn::MulAdd(r, delta, one);
+      r = hn::Mul(delta, r);
       const auto S1 = hn::Sub(S0, hn::Mul(hn::Sub(one, S0), hn::Mul(r, n2)));
       const auto y1 = hn::And(search, hn::RebindMask(d, hn::Lt(U2, Threshold(d, S0))));  // Y >= 1
       const auto y2 = hn::And(y1, hn::And(hn::Gt(n2, one), hn::And(hn::Gt(S1, hn::Zero(d)),

@@ -96,6 +96,8 @@ std::unique_ptr<BinomialTable> BinomialTable::build(uint32_t n) {
   if (too_long) return nullptr;
   std::unique_ptr<BinomialTable> t(new BinomialTable(n));
   t->row_.resize(rows);
+  t->inv_one_minus_p_.resize(rows);
+  for (uint32_t g = 0; g < rows; ++g) t->inv_one_minus_p_[g] = 1.0 / (1.0 - grid_p(g));
   t->guide_.reserve(static_cast<size_t>(rows) * kGuide + 8);
   for (uint32_t g = 0; g < rows; ++g) {
     t->row_[g] = static_cast<int64_t>(t->T64_.size()) | (static_cast<int64_t>(R[g].lo) << 32);
@@ -146,7 +148,7 @@ uint32_t BinomialTable::second_round(uint64_t U2, uint32_t n2, double delta) con
   // the sequential search from 0, as BinomialSampler::search_from_zero
   const double S0 = survival0(N, delta);  // P(Y > 0) < 0.2
   double S = S0, pmf = 1.0 - S0;
-  const double r = delta / (1.0 - delta);
+  const double r = odds(delta);
   uint32_t y = 0;
   while (y < n2 && U2 < probability_threshold(S)) {
     pmf *= r * (static_cast<double>(n2 - y) / static_cast<double>(y + 1));

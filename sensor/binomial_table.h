@@ -1,7 +1,8 @@
 // Exact Binomial(n, a) draws from precomputed tables, for the counts of a gate sweep: n = frames per gate
 // position (a few hundred), hundreds of millions of draws per run, a = min(p, 1 - p) <= 1/2.
 //
-// Thinning. With the grid point p_g = g / G <= a below a (g = floor(a G)) and delta = (a - p_g) / (1 - p_g):
+// Thinning. With the grid point p_g = g / G <= a below a (g = floor(a G)) and delta = (a - p_g) / (1 - p_g)
+// (formed as (a - p_g) times the rounded 1 / (1 - p_g): within 1.5 ulp, like p itself):
 //   X = X1 + Y,   X1 ~ Binomial(n, p_g),   Y | X1 ~ Binomial(n - X1, delta)
 // is exactly Binomial(n, a): each of the n frames fires in a first round with probability p_g, and a frame
 // that did not gets a second chance with probability delta, so it fires with 1 - (1 - p_g)(1 - delta) = a,
@@ -26,6 +27,7 @@
 // The vectorised kernel (batch_kernels.cpp) takes the same steps with the same floating-point operations
 // and calls first_round / second_round for the lanes it does not settle, so it equals sample() draw for draw.
 #pragma once
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -52,9 +54,15 @@ class BinomialTable {
 
   static uint32_t grid_index(double a) { return static_cast<uint32_t>(a * kGrid); }  // floor, a >= 0
   static double grid_p(uint32_t g) { return static_cast<double>(g) * (1.0 / kGrid); }
-  static double delta(double a, uint32_t g) {
-    const double pg = grid_p(g);
-    return (a - pg) / (1.0 - pg);
+  // (a - p_g) / (1 - p_g) as (a - p_g) times the rounded 1 / (1 - p_g) of row g (no division per draw; the
+  // kernel gathers the same factor)
+  double delta(double a, uint32_t g) const { return (a - grid_p(g)) * inv_one_minus_p_[g]; }
+  const double* inv_one_minus_p() const { return inv_one_minus_p_.data(); }
+  // r = delta / (1 - delta) = delta (1 + delta + ... + delta^4) for delta < 1/G (truncation below 1e-18)
+  static double odds(double delta) {
+    double t = 1.0 + delta;
+    for (int i = 0; i < 3; ++i) t = std::fma(t, delta, 1.0);
+    return delta * t;
   }
   uint32_t first_round(uint64_t U1, uint32_t g) const;
   uint32_t second_round(uint64_t U2, uint32_t n2, double delta) const;
@@ -82,6 +90,7 @@ class BinomialTable {
   static std::unique_ptr<BinomialTable> build(uint32_t n);
   uint32_t n_;
   std::vector<int64_t> row_;
+  std::vector<double> inv_one_minus_p_;
   std::vector<uint64_t> T64_;
   std::vector<uint16_t> T16_;
   std::vector<uint8_t> guide_;

@@ -141,7 +141,7 @@ TEST(BinomialTable, KernelEqualsScalarSampler) {
       const uint32_t x = t.sample(U1, U2, a);
       // the second round's outcome: Y = 1 and Y >= 2 take different paths in the kernel
       const uint32_t g = BinomialTable::grid_index(a), x1 = t.first_round(U1, g);
-      const uint32_t y = t.second_round(U2, 255 - x1, BinomialTable::delta(a, g));
+      const uint32_t y = t.second_round(U2, 255 - x1, t.delta(a, g));
       y1 += y == 1;
       y2 += y >= 2;
       const uint32_t expect = p <= q ? x : 255 - x;
