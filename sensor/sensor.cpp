@@ -612,7 +612,9 @@ nlohmann::json SensorModel::describe() const {
   j["temperature_C"] = m.cfg.sensor.temperature_C;
   j["dcr_temperature_factor"] = tf;
   j["crosstalk"] = {{"enabled", m.halo > 0}, {"neighbours", "4 nearest, not across array sections"}};
-  j["sampling"] = {{"counts", m.cfg.outputs.frames ? "popcount of the sampled frames" : "Binomial(N, p) by exact inversion"},
+  j["sampling"] = {{"counts", m.cfg.outputs.frames ? "popcount of the sampled frames"
+                              : m.table ? "Binomial(N, p) exactly: thinning at a 1/4096 grid, 64-bit CDF tables, then a second round"
+                                        : "Binomial(N, p) by exact inversion"},
                    {"bernoulli", "64-bit threshold, top byte first (dense) or binomial + uniform subset (p or 1-p <= 1/16)"},
                    {"simd_target", dense_bits_target()}};
   return j;
