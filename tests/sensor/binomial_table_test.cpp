@@ -3,7 +3,10 @@
 // vectorised kernel against the scalar sampler, draw for draw.
 #include <gtest/gtest.h>
 
+#include <hwy/targets.h>
+
 #include <cmath>
+#include <cstdio>
 #include <vector>
 
 #include "core/rng.h"
@@ -155,6 +158,42 @@ TEST(BinomialTable, KernelEqualsScalarSampler) {
   EXPECT_GT(scalar_first, 1000u);
   EXPECT_GT(y1, 1000u);
   EXPECT_GT(y2, 20u);
+}
+
+// The same on every compiled target (the dispatcher's choice forced in turn), with the transposition.
+TEST(BinomialTable, KernelEqualsScalarSamplerOnEveryTarget) {
+  const BinomialTable& t = table255();
+  const Rng base(45, RngKind::Counts, 0, 0);
+  const uint32_t key[2] = {base.key().v[0], base.key().v[1]};
+  int targets = 0;
+  for (const int64_t target : hwy::SupportedAndGeneratedTargets()) {
+    hwy::SetSupportedTargetsForTest(target);
+    ++targets;
+    KernelScratch s;
+    Rng pick(10, RngKind::Test, 6);
+    size_t mismatches = 0;
+    for (uint64_t pixel = 0; pixel < 200; ++pixel) {
+      const size_t K = 101 + pixel % 9;
+      std::vector<double> lam(K);
+      for (double& l : lam) l = pick.next_double() < 0.2 ? 1e-6 * pick.next_double() : 2.0 * pick.next_double();
+      binomial_counts(lam.data(), K, key, pixel, t, s);
+      for (size_t k = 0; k < K; ++k) {
+        Rng rng(45, RngKind::Counts, pixel, k);
+        const uint64_t U1 = rng.next_u64(), U2 = rng.next_u64();
+        const uint32_t x = t.sample(U1, U2, std::min(s.p[k], s.q[k]));
+        mismatches += s.x[k] != (s.p[k] <= s.q[k] ? x : 255 - x);
+      }
+    }
+    EXPECT_EQ(mismatches, 0u) << hwy::TargetName(target);
+    std::vector<uint16_t> src(9 * 13 + 1), dst(13 * 9);
+    for (size_t i = 0; i < src.size(); ++i) src[i] = static_cast<uint16_t>(i);
+    transpose_rows(src.data(), 9, 13, dst.data(), 9);
+    for (size_t k = 0; k < 13; ++k)
+      for (size_t x = 0; x < 9; ++x) ASSERT_EQ(dst[k * 9 + x], src[x * 13 + k]) << hwy::TargetName(target);
+  }
+  hwy::SetSupportedTargetsForTest(0);
+  std::printf("counts kernel checked on %d targets\n", targets);
+  EXPECT_GE(targets, 1);
 }
 
 // Through the kernel, on constant lambda: chi-square of the counts (mirrored too) against the pmf.
