@@ -111,10 +111,13 @@ TEST(Sampling, BernoulliBitsChiSquare) {
   check_bits(1e-3, 1.0 - 1e-3, 255, 200000, 11);   // sparse path
   check_bits(0.5, 0.5, 255, 20000, 12);            // dense path
   check_bits(0.2, 0.8, 300, 20000, 13);            // dense, n not a multiple of 64
-  check_bits(0.97, 0.03, 255, 50000, 14);          // sparse on the zeros
+  check_bits(0.997, 0.003, 255, 50000, 14);        // sparse on the zeros
+  check_bits(0.03, 0.97, 255, 50000, 16);          // dense, a just above the sparse bound
   check_bits(1.0 - 1e-6, 1e-6, 255, 200000, 15);   // p near 1
   EXPECT_TRUE(bits_are_sparse({1e-3, 1.0 - 1e-3}));
+  EXPECT_TRUE(bits_are_sparse({0.997, 0.003}));
   EXPECT_FALSE(bits_are_sparse({0.5, 0.5}));
+  EXPECT_FALSE(bits_are_sparse({0.03, 0.97}));
 }
 
 // p = 1e-9: 2^20 streams of 65535 frames (6.9e10 Bernoulli trials, 68.7 expected ones).
