@@ -140,22 +140,81 @@ HWY_INLINE void Philox10From2(D d, const uint32_t key[2], uint32_t c1, uint32_t 
   PhiloxRounds(d, 8, ka, kb, x0, x1, x2, x3);
 }
 
-// Many dense pixels of one key in one call (see dense_bits_batch): no per-pixel dispatch, Rng set-up,
-// zero fill or tie copy, and the inversion folded into the store.
+// Top-byte ties of DenseBitsBatch waiting to be settled: (slot, frame) pairs. A word appends at most 64, so
+// the buffer is settled whenever it holds more than kCap.
+struct TieBuffer {
+  static constexpr size_t kCap = 512;
+  uint32_t slot[kCap + 64];
+  uint32_t frame[kCap + 64];
+  size_t count = 0;
+};
+
+// Appends the ties of one output word (bit i of m: frame f0 + i is tied). Most words have none and few more
+// than one, so the first two are written without a branch (a tie-dependent branch mispredicts about once
+// per dense pixel); countr_zero(0) = 64 is written but not counted.
+HWY_INLINE void AppendTies(TieBuffer& tb, uint32_t slot, uint32_t f0, uint64_t m) {
+  size_t c = tb.count;
+  tb.slot[c] = slot;
+  tb.frame[c] = f0 + static_cast<uint32_t>(std::countr_zero(m));
+  c += m != 0;
+  m &= m - 1;
+  tb.slot[c] = slot;
+  tb.frame[c] = f0 + static_cast<uint32_t>(std::countr_zero(m));
+  c += m != 0;
+  m &= m - 1;
+  for (; HWY_UNLIKELY(m != 0); m &= m - 1) {
+    tb.slot[c] = slot;
+    tb.frame[c++] = f0 + static_cast<uint32_t>(std::countr_zero(m));
+  }
+  tb.count = c;
+}
+
+// Settles the buffered ties, 16 per vectorised Philox: tie (slot s, frame f) takes the first 56 bits (word 0
+// high, word 1 low) of block refine_base + f of stream s, as dense_bits does, and its bit (left as the top
+// byte's comparison gave it: 0, or 1 when inverted) is toggled when they are below T[s] mod 2^56, i.e. when
+// U < T.
+HWY_INLINE void SettleTies(const uint32_t key[2], uint32_t c1, const uint32_t* HWY_RESTRICT c2,
+                           const uint32_t* HWY_RESTRICT c3, const uint64_t* HWY_RESTRICT T, uint32_t refine_base,
+                           size_t nw, uint64_t* HWY_RESTRICT words, TieBuffer& tb) {
+  const hn::CappedTag<uint32_t, 16> d;
+  const size_t L = hn::Lanes(d);
+  constexpr uint64_t kLow56 = (uint64_t{1} << 56) - 1;
+  alignas(64) uint32_t a0[16], a2[16], a3[16], o0[16], o1[16];
+  for (size_t t = 0; t < tb.count; t += L) {
+    const size_t c = std::min(L, tb.count - t);
+    for (size_t j = 0; j < L; ++j) {  // lanes beyond the last tie repeat it
+      const size_t e = t + std::min(j, c - 1);
+      const uint32_t s = tb.slot[e];
+      a0[j] = refine_base + tb.frame[e];
+      a2[j] = c2[s];
+      a3[j] = c3[s];
+    }
+    auto x0 = hn::Load(d, a0), x1 = hn::Set(d, c1), x2 = hn::Load(d, a2), x3 = hn::Load(d, a3);
+    Philox10(d, key[0], key[1], x0, x1, x2, x3);
+    hn::Store(x0, d, o0);
+    hn::Store(x1, d, o1);
+    for (size_t j = 0; j < c; ++j) {
+      const uint32_t s = tb.slot[t + j], f = tb.frame[t + j];
+      const uint64_t u = ((uint64_t{o0[j]} << 32) | o1[j]) & kLow56;
+      words[s * nw + f / 64] ^= static_cast<uint64_t>(u < (T[s] & kLow56)) << (f % 64);
+    }
+  }
+  tb.count = 0;
+}
+
+// Many dense pixels of one key in one call (see dense_bits_batch): no per-pixel dispatch, Rng set-up or
+// zero fill, the inversion folded into the store, the ties collected without branches and settled together.
 void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint32_t* HWY_RESTRICT c2,
                     const uint32_t* HWY_RESTRICT c3, const uint64_t* HWY_RESTRICT T,
                     const bool* HWY_RESTRICT invert, const uint32_t* HWY_RESTRICT slots, size_t count, uint32_t n,
-                    uint64_t* HWY_RESTRICT words, std::vector<uint32_t>* tie_slot,
-                    std::vector<uint32_t>* tie_frame) {
+                    uint64_t* HWY_RESTRICT words) {
   const hn::ScalableTag<uint8_t> d8;
   const size_t L = hn::Lanes(d8);
-  constexpr size_t kMaxEqBytes = (hn::MaxLanes(d8) + 63) / 64 * 8;
   const uint32_t chunks = (n + 255) / 256;
+  const uint32_t refine_base = chunks * 16;
   const size_t nw = (static_cast<size_t>(n) + 63) / 64;
-  const size_t total_bytes = nw * 8;
   const uint64_t tail = n % 64 != 0 ? (uint64_t{1} << (n % 64)) - 1 : ~uint64_t{0};
-  alignas(64) uint32_t buf32[64];
-  alignas(64) uint8_t mask[32 + 64];
+  TieBuffer tb;
   // Vectors of 16 u32 (AVX-512): Philox word v of a chunk's 16 blocks is one vector, i.e. the chunk's
   // bytes 64 v .. 64 v + 63 (frames 256 ch + 64 v + i), compared in registers and stored as whole words
   // (no round trip through memory, whose narrow mask stores and wide reload stall store forwarding).
@@ -170,7 +229,7 @@ void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint32_t* HWY_REST
     MulHiLo(d32, y0, hn::Set(d32, 0xD2511F53u), hi0_iota, lo0_iota);
     for (size_t j = 0; j < count; ++j) {
       const uint32_t slot = slots[j];
-      const auto tb = hn::Set(d8w, static_cast<uint8_t>(T[slot] >> 56));
+      const auto tb8 = hn::Set(d8w, static_cast<uint8_t>(T[slot] >> 56));
       uint64_t* w = words + static_cast<size_t>(slot) * nw;
       const uint64_t flip = invert[slot] ? ~uint64_t{0} : 0;
       const auto vc1 = hn::Set(d32, c1), vc2 = hn::Set(d32, c2[slot]), vc3 = hn::Set(d32, c3[slot]);
@@ -189,76 +248,62 @@ void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint32_t* HWY_REST
           if (wi >= nw) break;
           const auto bytes = hn::BitCast(d8w, xs[v]);
           alignas(8) uint8_t lt[8], eqb[8];
-          hn::StoreMaskBits(d8w, hn::Lt(bytes, tb), lt);
-          uint64_t bits;
+          hn::StoreMaskBits(d8w, hn::Lt(bytes, tb8), lt);
+          hn::StoreMaskBits(d8w, hn::Eq(bytes, tb8), eqb);
+          uint64_t bits, m;
           std::memcpy(&bits, lt, 8);
+          std::memcpy(&m, eqb, 8);
           w[wi] = bits ^ flip;
-          const auto eq = hn::Eq(bytes, tb);
-          if (HWY_UNLIKELY(!hn::AllFalse(d8w, eq))) {
-            hn::StoreMaskBits(d8w, eq, eqb);
-            uint64_t m;
-            std::memcpy(&m, eqb, 8);
-            for (; m != 0; m &= m - 1) {
-              const uint32_t f = 64 * static_cast<uint32_t>(wi) + static_cast<uint32_t>(std::countr_zero(m));
-              if (f >= n) continue;
-              tie_slot->push_back(slot);
-              tie_frame->push_back(f);
-            }
-          }
+          AppendTies(tb, slot, 64 * static_cast<uint32_t>(wi), wi + 1 == nw ? m & tail : m);
+          if (HWY_UNLIKELY(tb.count > TieBuffer::kCap)) SettleTies(key, c1, c2, c3, T, refine_base, nw, words, tb);
         }
       }
       w[nw - 1] &= tail;
     }
+    SettleTies(key, c1, c2, c3, T, refine_base, nw, words, tb);
     return;
   }
 #endif
+  alignas(64) uint32_t buf32[64];
+  alignas(8) uint8_t lt[32 + 8], eq[32 + 8];  // a chunk's 256 comparisons each, as bits
   for (size_t j = 0; j < count; ++j) {
     const uint32_t slot = slots[j];
     const uint32_t c[4] = {0, c1, c2[slot], c3[slot]};
     const auto tbs = static_cast<uint8_t>(T[slot] >> 56);
-    const auto tb = hn::Set(d8, tbs);
+    const auto tbv = hn::Set(d8, tbs);
     uint64_t* w = words + static_cast<size_t>(slot) * nw;
-    auto* dst = reinterpret_cast<uint8_t*>(w);
+    const uint64_t flip = invert[slot] ? ~uint64_t{0} : 0;
     for (uint32_t ch = 0; ch < chunks; ++ch) {
       Philox16(key, c, 16 * ch, buf32);
       const auto* bytes = reinterpret_cast<const uint8_t*>(buf32);
       if (L < 8) {  // a target narrower than one mask byte: plain comparisons
-        std::memset(mask, 0, 32);
+        std::memset(lt, 0, 32);
+        std::memset(eq, 0, 32);
         for (uint32_t i = 0; i < 256; ++i) {
-          if (bytes[i] < tbs) mask[i / 8] = static_cast<uint8_t>(mask[i / 8] | (1u << (i % 8)));
-          if (bytes[i] == tbs && ch * 256 + i < n) {
-            tie_slot->push_back(slot);
-            tie_frame->push_back(ch * 256 + i);
-          }
+          lt[i / 8] = static_cast<uint8_t>(lt[i / 8] | (bytes[i] < tbs) << (i % 8));
+          eq[i / 8] = static_cast<uint8_t>(eq[i / 8] | (bytes[i] == tbs) << (i % 8));
         }
       } else {
         for (size_t off = 0; off < 256; off += L) {
           const auto v = hn::LoadU(d8, bytes + off);
-          hn::StoreMaskBits(d8, hn::Lt(v, tb), mask + off / 8);
-          const auto eq = hn::Eq(v, tb);
-          if (HWY_UNLIKELY(!hn::AllFalse(d8, eq))) {
-            alignas(8) uint8_t eq_bits[kMaxEqBytes] = {};
-            hn::StoreMaskBits(d8, eq, eq_bits);
-            for (size_t wb = 0; wb < (L + 63) / 64; ++wb) {
-              uint64_t m;
-              std::memcpy(&m, eq_bits + 8 * wb, 8);
-              for (; m != 0; m &= m - 1) {
-                const uint32_t f = ch * 256 + static_cast<uint32_t>(off + 64 * wb) + static_cast<uint32_t>(std::countr_zero(m));
-                if (f >= n) continue;
-                tie_slot->push_back(slot);
-                tie_frame->push_back(f);
-              }
-            }
-          }
+          hn::StoreMaskBits(d8, hn::Lt(v, tbv), lt + off / 8);
+          hn::StoreMaskBits(d8, hn::Eq(v, tbv), eq + off / 8);
         }
       }
-      const size_t begin = static_cast<size_t>(ch) * 32;
-      std::memcpy(dst + begin, mask, std::min<size_t>(32, total_bytes - begin));
+      for (uint32_t v = 0; v < 4; ++v) {
+        const size_t wi = static_cast<size_t>(ch) * 4 + v;
+        if (wi >= nw) break;
+        uint64_t bits, m;
+        std::memcpy(&bits, lt + 8 * v, 8);
+        std::memcpy(&m, eq + 8 * v, 8);
+        w[wi] = bits ^ flip;
+        AppendTies(tb, slot, 64 * static_cast<uint32_t>(wi), wi + 1 == nw ? m & tail : m);
+        if (HWY_UNLIKELY(tb.count > TieBuffer::kCap)) SettleTies(key, c1, c2, c3, T, refine_base, nw, words, tb);
+      }
     }
-    const uint64_t flip = invert[slot] ? ~uint64_t{0} : 0;
-    for (size_t i = 0; i < nw; ++i) w[i] ^= flip;
     w[nw - 1] &= tail;
   }
+  SettleTies(key, c1, c2, c3, T, refine_base, nw, words, tb);
 }
 
 const char* TargetName() { return hwy::TargetName(HWY_TARGET); }
@@ -275,9 +320,8 @@ HWY_EXPORT(TargetName);
 HWY_EXPORT(DenseBitsBatch);
 
 void dense_bits_batch(const uint32_t key[2], uint32_t c1, const uint32_t* c2, const uint32_t* c3, const uint64_t* T,
-                      const bool* invert, const uint32_t* slots, size_t count, uint32_t n, uint64_t* words,
-                      std::vector<uint32_t>& tie_slot, std::vector<uint32_t>& tie_frame) {
-  HWY_DYNAMIC_DISPATCH(DenseBitsBatch)(key, c1, c2, c3, T, invert, slots, count, n, words, &tie_slot, &tie_frame);
+                      const bool* invert, const uint32_t* slots, size_t count, uint32_t n, uint64_t* words) {
+  HWY_DYNAMIC_DISPATCH(DenseBitsBatch)(key, c1, c2, c3, T, invert, slots, count, n, words);
 }
 
 void dense_bits(const Rng& stream, uint32_t n, uint64_t T, uint64_t* words) {

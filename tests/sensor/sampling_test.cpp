@@ -325,24 +325,26 @@ TEST(Sampling, ZeroDecisionAtTheThreshold) {
   }
 }
 
-// sample_bits_batch (block 0 of every stream from the vectorised Philox) equals sample_bits per stream.
+// sample_bits_batch (block 0 of the sparse streams from the vectorised Philox, branch-free classification,
+// groups of 256) equals sample_bits per stream; n = 2000 also has sparse pixels with n a >= 1.
 TEST(Sampling, BatchBitsEqualPerStreamBits) {
-  const uint32_t n = 255;
-  const BinomialSampler sampler(n);
-  const size_t count = 203;
-  std::vector<uint64_t> ids(count);
-  std::vector<Prob> pr(count);
-  const std::vector<double> rates = {0.0, 1e-7, 1e-4, 3e-3, 0.03, 0.07, 0.5, 1.0, 3.0, 8.0, 30.0, HUGE_VAL};
-  for (size_t i = 0; i < count; ++i) {
-    ids[i] = (uint64_t{1} << 32) - 50 + i * 3;  // crosses 2^32: both counter words vary
-    const double l = rates[i % rates.size()];
-    pr[i] = prob_from_lambda(l);
-  }
-  std::vector<uint64_t> batch(count * 4), one(4);
-  sample_bits_batch(7, 11, ids.data(), count, sampler, pr.data(), batch.data());
-  for (size_t i = 0; i < count; ++i) {
-    sample_bits(Rng(7, RngKind::Frames, ids[i], 11), sampler, pr[i], one.data());
-    for (size_t w = 0; w < 4; ++w) ASSERT_EQ(batch[4 * i + w], one[w]) << i;
+  for (const uint32_t n : {255u, 2000u}) {
+    const BinomialSampler sampler(n);
+    const size_t count = 603, nw = (n + 63) / 64;
+    std::vector<uint64_t> ids(count);
+    std::vector<Prob> pr(count);
+    const std::vector<double> rates = {0.0, 1e-7, 1e-4, 1e-3, 3e-3, 0.03, 0.07, 0.5, 1.0, 3.0, 5.4, 8.0, 30.0, HUGE_VAL};
+    for (size_t i = 0; i < count; ++i) {
+      ids[i] = (uint64_t{1} << 32) - 50 + i * 3;  // crosses 2^32: both counter words vary
+      const double l = rates[i % rates.size()];
+      pr[i] = prob_from_lambda(l);
+    }
+    std::vector<uint64_t> batch(count * nw), one(nw);
+    sample_bits_batch(7, 11, ids.data(), count, sampler, pr.data(), batch.data());
+    for (size_t i = 0; i < count; ++i) {
+      sample_bits(Rng(7, RngKind::Frames, ids[i], 11), sampler, pr[i], one.data());
+      for (size_t w = 0; w < nw; ++w) ASSERT_EQ(batch[nw * i + w], one[w]) << "n " << n << " pixel " << i;
+    }
   }
 }
 
