@@ -112,34 +112,58 @@ void DenseBits(const Rng& stream, uint32_t n, uint64_t T, uint64_t* HWY_RESTRICT
 }
 
 
-// Philox4x32-10 of the 16 counters (i, c1, c2, c3), i = 0..15, as Philox10 gives them, with rounds 0 and 1
-// partly in scalars: words 1..3 are equal in every lane, so round 0's second product is one scalar product
-// and its word 0 output is uniform, as is round 1's first product. (hi0, lo0) = round 0's products of the
-// lanes' word 0 (i * 0xD2511F53).
-template <class D>
-HWY_INLINE void Philox10From2(D d, const uint32_t key[2], uint32_t c1, uint32_t c2, uint32_t c3, hn::Vec<D> hi0,
-                              hn::Vec<D> lo0, hn::Vec<D>& x0, hn::Vec<D>& x1, hn::Vec<D>& x2, hn::Vec<D>& x3) {
-  uint32_t ka = key[0], kb = key[1];
-  // round 0
-  const uint64_t p1 = uint64_t{kPhiloxM1} * c2;
-  const uint32_t s0 = static_cast<uint32_t>(p1 >> 32) ^ c1 ^ ka, s1 = static_cast<uint32_t>(p1);
-  x2 = hn::Xor(hi0, hn::Set(d, c3 ^ kb));
-  x3 = lo0;
-  ka += kPhiloxW0;
-  kb += kPhiloxW1;
-  // round 1: word 0 = s0 and word 1 = s1 in every lane
-  const uint64_t p0 = uint64_t{kPhiloxM0} * s0;
-  hn::Vec<D> hi1, lo1;
-  MulHiLo(d, x2, hn::Set(d, kPhiloxM1), hi1, lo1);
-  x0 = hn::Xor(hi1, hn::Set(d, s1 ^ ka));
-  x2 = hn::Xor(x3, hn::Set(d, static_cast<uint32_t>(p0 >> 32) ^ kb));
-  x1 = lo1;
-  x3 = hn::Set(d, static_cast<uint32_t>(p0));
-  ka += kPhiloxW0;
-  kb += kPhiloxW1;
-  PhiloxRounds(d, 8, ka, kb, x0, x1, x2, x3);
+// K independent Philox computations interleaved round by round: a round's products wait for the previous
+// round's (multiply, swap, XOR: about 8 cycles), longer than one computation takes to issue, so a single
+// chain leaves the vector ports idle. x[s] = (x0, x1, x2, x3) of computation s.
+template <size_t K, class D>
+HWY_INLINE void PhiloxRoundsK(D d, int rounds, uint32_t ka, uint32_t kb, hn::Vec<D> (&x)[K][4]) {
+  const auto m0 = hn::Set(d, kPhiloxM0), m1 = hn::Set(d, kPhiloxM1);
+  for (int round = 0; round < rounds; ++round) {
+    const auto vka = hn::Set(d, ka), vkb = hn::Set(d, kb);
+    for (size_t s = 0; s < K; ++s) {
+      hn::Vec<D> hi0, lo0, hi1, lo1;
+      MulHiLo(d, x[s][0], m0, hi0, lo0);
+      MulHiLo(d, x[s][2], m1, hi1, lo1);
+      x[s][0] = hn::Xor(hn::Xor(hi1, x[s][1]), vka);
+      x[s][2] = hn::Xor(hn::Xor(hi0, x[s][3]), vkb);
+      x[s][1] = lo1;
+      x[s][3] = lo0;
+    }
+    ka += kPhiloxW0;
+    kb += kPhiloxW1;
+  }
 }
 
+// Philox4x32-10 of the 16 counters (i, c1, c2[s], c3[s]), i = 0..15, for K streams s of one key, as
+// Philox10 gives them, with rounds 0 and 1 partly in scalars: words 1..3 are equal in every lane, so round
+// 0's second product is one scalar product and its word 0 output is uniform, as is round 1's first
+// product. (hi0, lo0) = round 0's products of the lanes' word 0 (i * 0xD2511F53).
+template <size_t K, class D>
+HWY_INLINE void Philox10From2K(D d, const uint32_t key[2], uint32_t c1, const uint32_t (&c2)[K],
+                               const uint32_t (&c3)[K], hn::Vec<D> hi0, hn::Vec<D> lo0, hn::Vec<D> (&x)[K][4]) {
+  const uint32_t ka0 = key[0], kb0 = key[1];
+  const uint32_t ka1 = ka0 + kPhiloxW0, kb1 = kb0 + kPhiloxW1;
+  for (size_t s = 0; s < K; ++s) {
+    // round 0
+    const uint64_t p1 = uint64_t{kPhiloxM1} * c2[s];
+    const uint32_t s0 = static_cast<uint32_t>(p1 >> 32) ^ c1 ^ ka0, s1 = static_cast<uint32_t>(p1);
+    const auto x2 = hn::Xor(hi0, hn::Set(d, c3[s] ^ kb0));
+    // round 1: word 0 = s0 and word 1 = s1 in every lane
+    const uint64_t p0 = uint64_t{kPhiloxM0} * s0;
+    hn::Vec<D> hi1, lo1;
+    MulHiLo(d, x2, hn::Set(d, kPhiloxM1), hi1, lo1);
+    x[s][0] = hn::Xor(hi1, hn::Set(d, s1 ^ ka1));
+    x[s][2] = hn::Xor(lo0, hn::Set(d, static_cast<uint32_t>(p0 >> 32) ^ kb1));
+    x[s][1] = lo1;
+    x[s][3] = hn::Set(d, static_cast<uint32_t>(p0));
+  }
+  PhiloxRoundsK<K>(d, 8, ka1 + kPhiloxW0, kb1 + kPhiloxW1, x);
+}
+
+// Philox on 64-bit lanes: each lane carries one block's 32-bit word in its low half; the high half is
+// ignored (MulEven reads only the low halves, and the outputs take the low halves), so a 32 x 32 product is
+// one MulEven (vpmuludq) whose high word is moved down by one shift: no lane swaps or masked merges, which
+// MulHiLo on 32-bit lanes needs (and which all compete for the one shuffle port). K chains interleaved.
 // Top-byte ties of DenseBitsBatch waiting to be settled: (slot, frame) pairs. A word appends at most 64, so
 // the buffer is settled whenever it holds more than kCap.
 struct TieBuffer {
@@ -227,38 +251,57 @@ void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint32_t* HWY_REST
     const auto y0 = hn::Iota(d32, 0u);
     hn::Vec<decltype(d32)> hi0_iota, lo0_iota;
     MulHiLo(d32, y0, hn::Set(d32, 0xD2511F53u), hi0_iota, lo0_iota);
-    for (size_t j = 0; j < count; ++j) {
-      const uint32_t slot = slots[j];
+    using V32 = hn::Vec<decltype(d32)>;
+    // One pixel's output words of chunk ch from its chunk's four Philox word vectors.
+    const auto emit = [&](uint32_t slot, uint32_t ch, const V32 (&xs)[4]) HWY_ATTR {
       const auto tb8 = hn::Set(d8w, static_cast<uint8_t>(T[slot] >> 56));
       uint64_t* w = words + static_cast<size_t>(slot) * nw;
       const uint64_t flip = invert[slot] ? ~uint64_t{0} : 0;
-      const auto vc1 = hn::Set(d32, c1), vc2 = hn::Set(d32, c2[slot]), vc3 = hn::Set(d32, c3[slot]);
-      for (uint32_t ch = 0; ch < chunks; ++ch) {
-        hn::Vec<decltype(d32)> x0, x1, x2, x3;
-        if (ch == 0) {
-          x0 = y0, x1 = vc1, x2 = vc2, x3 = vc3;
-          Philox10From2(d32, key, c1, c2[slot], c3[slot], hi0_iota, lo0_iota, x0, x1, x2, x3);
-        } else {
-          x0 = hn::Iota(d32, 16 * ch), x1 = vc1, x2 = vc2, x3 = vc3;
-          Philox10(d32, key[0], key[1], x0, x1, x2, x3);
-        }
-        const hn::Vec<decltype(d32)> xs[4] = {x0, x1, x2, x3};
-        for (uint32_t v = 0; v < 4; ++v) {
-          const size_t wi = static_cast<size_t>(ch) * 4 + v;
-          if (wi >= nw) break;
-          const auto bytes = hn::BitCast(d8w, xs[v]);
-          alignas(8) uint8_t lt[8], eqb[8];
-          hn::StoreMaskBits(d8w, hn::Lt(bytes, tb8), lt);
-          hn::StoreMaskBits(d8w, hn::Eq(bytes, tb8), eqb);
-          uint64_t bits, m;
-          std::memcpy(&bits, lt, 8);
-          std::memcpy(&m, eqb, 8);
-          w[wi] = bits ^ flip;
-          AppendTies(tb, slot, 64 * static_cast<uint32_t>(wi), wi + 1 == nw ? m & tail : m);
-          if (HWY_UNLIKELY(tb.count > TieBuffer::kCap)) SettleTies(key, c1, c2, c3, T, refine_base, nw, words, tb);
-        }
+      for (uint32_t v = 0; v < 4; ++v) {
+        const size_t wi = static_cast<size_t>(ch) * 4 + v;
+        if (wi >= nw) break;
+        const auto bytes = hn::BitCast(d8w, xs[v]);
+        alignas(8) uint8_t lt[8], eqb[8];
+        hn::StoreMaskBits(d8w, hn::Lt(bytes, tb8), lt);
+        hn::StoreMaskBits(d8w, hn::Eq(bytes, tb8), eqb);
+        uint64_t bits, m;
+        std::memcpy(&bits, lt, 8);
+        std::memcpy(&m, eqb, 8);
+        w[wi] = bits ^ flip;
+        AppendTies(tb, slot, 64 * static_cast<uint32_t>(wi), wi + 1 == nw ? m & tail : m);
+        if (HWY_UNLIKELY(tb.count > TieBuffer::kCap)) SettleTies(key, c1, c2, c3, T, refine_base, nw, words, tb);
       }
-      w[nw - 1] &= tail;
+    };
+    // Pixels in fours: their Philox chains interleaved (the last pixel is repeated to fill the four).
+    constexpr size_t K = 4;
+    for (size_t j = 0; j < count; j += K) {
+      uint32_t sl[K], cc2[K], cc3[K];
+      for (size_t s = 0; s < K; ++s) {
+        sl[s] = slots[std::min(j + s, count - 1)];
+        cc2[s] = c2[sl[s]];
+        cc3[s] = c3[sl[s]];
+      }
+      const size_t live = std::min(K, count - j);
+      for (uint32_t ch = 0; ch < chunks; ++ch) {
+        V32 x[K][4];
+        if (ch == 0) {
+          Philox10From2K<K>(d32, key, c1, cc2, cc3, hi0_iota, lo0_iota, x);
+        } else {
+          for (size_t s = 0; s < K; ++s) {
+            x[s][0] = hn::Iota(d32, 16 * ch);
+            x[s][1] = hn::Set(d32, c1);
+            x[s][2] = hn::Set(d32, cc2[s]);
+            x[s][3] = hn::Set(d32, cc3[s]);
+          }
+          PhiloxRoundsK<K>(d32, 10, key[0], key[1], x);
+        }
+        // constant indices into x only (a runtime index would keep the chains in memory)
+        emit(sl[0], ch, x[0]);
+        if (live > 1) emit(sl[1], ch, x[1]);
+        if (live > 2) emit(sl[2], ch, x[2]);
+        if (live > 3) emit(sl[3], ch, x[3]);
+      }
+      for (size_t s = 0; s < live; ++s) words[static_cast<size_t>(sl[s]) * nw + nw - 1] &= tail;
     }
     SettleTies(key, c1, c2, c3, T, refine_base, nw, words, tb);
     return;
