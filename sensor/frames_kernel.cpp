@@ -13,6 +13,7 @@
 
 #include "sensor/frames_kernel.h"
 #include "sensor/philox-inl.h"
+#include "sensor/sampling.h"
 
 HWY_BEFORE_NAMESPACE();
 namespace spadgen::sensor {
@@ -197,8 +198,8 @@ HWY_INLINE void AppendTies(TieBuffer& tb, uint32_t slot, uint32_t f0, uint64_t m
 // high, word 1 low) of block refine_base + f of stream s, as dense_bits does, and its bit (left as the top
 // byte's comparison gave it: 0, or 1 when inverted) is toggled when they are below T[s] mod 2^56, i.e. when
 // U < T.
-HWY_INLINE void SettleTies(const uint32_t key[2], uint32_t c1, const uint32_t* HWY_RESTRICT c2,
-                           const uint32_t* HWY_RESTRICT c3, const uint64_t* HWY_RESTRICT T, uint32_t refine_base,
+HWY_INLINE void SettleTies(const uint32_t key[2], uint32_t c1, const uint64_t* HWY_RESTRICT pixels,
+                           const uint64_t* HWY_RESTRICT T, uint32_t refine_base,
                            size_t nw, uint64_t* HWY_RESTRICT words, TieBuffer& tb) {
   const hn::CappedTag<uint32_t, 16> d;
   const size_t L = hn::Lanes(d);
@@ -210,8 +211,8 @@ HWY_INLINE void SettleTies(const uint32_t key[2], uint32_t c1, const uint32_t* H
       const size_t e = t + std::min(j, c - 1);
       const uint32_t s = tb.slot[e];
       a0[j] = refine_base + tb.frame[e];
-      a2[j] = c2[s];
-      a3[j] = c3[s];
+      a2[j] = static_cast<uint32_t>(pixels[s]);
+      a3[j] = static_cast<uint32_t>(pixels[s] >> 32);
     }
     auto x0 = hn::Load(d, a0), x1 = hn::Set(d, c1), x2 = hn::Load(d, a2), x3 = hn::Load(d, a3);
     Philox10(d, key[0], key[1], x0, x1, x2, x3);
@@ -228,10 +229,10 @@ HWY_INLINE void SettleTies(const uint32_t key[2], uint32_t c1, const uint32_t* H
 
 // Many dense pixels of one key in one call (see dense_bits_batch): no per-pixel dispatch, Rng set-up or
 // zero fill, the inversion folded into the store, the ties collected without branches and settled together.
-void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint32_t* HWY_RESTRICT c2,
-                    const uint32_t* HWY_RESTRICT c3, const uint64_t* HWY_RESTRICT T,
-                    const bool* HWY_RESTRICT invert, const uint32_t* HWY_RESTRICT slots, size_t count, uint32_t n,
-                    uint64_t* HWY_RESTRICT words) {
+HWY_INLINE void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint64_t* HWY_RESTRICT pixels,
+                               const uint64_t* HWY_RESTRICT T, const uint64_t* HWY_RESTRICT flips,
+                               const uint64_t* HWY_RESTRICT slots, size_t count, uint32_t n,
+                               uint64_t* HWY_RESTRICT words) {
   const hn::ScalableTag<uint8_t> d8;
   const size_t L = hn::Lanes(d8);
   const uint32_t chunks = (n + 255) / 256;
@@ -256,7 +257,7 @@ void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint32_t* HWY_REST
     const auto emit = [&](uint32_t slot, uint32_t ch, const V32 (&xs)[4]) HWY_ATTR {
       const auto tb8 = hn::Set(d8w, static_cast<uint8_t>(T[slot] >> 56));
       uint64_t* w = words + static_cast<size_t>(slot) * nw;
-      const uint64_t flip = invert[slot] ? ~uint64_t{0} : 0;
+      const uint64_t flip = flips[slot];
       for (uint32_t v = 0; v < 4; ++v) {
         const size_t wi = static_cast<size_t>(ch) * 4 + v;
         if (wi >= nw) break;
@@ -269,7 +270,7 @@ void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint32_t* HWY_REST
         std::memcpy(&m, eqb, 8);
         w[wi] = bits ^ flip;
         AppendTies(tb, slot, 64 * static_cast<uint32_t>(wi), wi + 1 == nw ? m & tail : m);
-        if (HWY_UNLIKELY(tb.count > TieBuffer::kCap)) SettleTies(key, c1, c2, c3, T, refine_base, nw, words, tb);
+        if (HWY_UNLIKELY(tb.count > TieBuffer::kCap)) SettleTies(key, c1, pixels, T, refine_base, nw, words, tb);
       }
     };
     // Pixels in fours: their Philox chains interleaved (the last pixel is repeated to fill the four).
@@ -277,9 +278,9 @@ void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint32_t* HWY_REST
     for (size_t j = 0; j < count; j += K) {
       uint32_t sl[K], cc2[K], cc3[K];
       for (size_t s = 0; s < K; ++s) {
-        sl[s] = slots[std::min(j + s, count - 1)];
-        cc2[s] = c2[sl[s]];
-        cc3[s] = c3[sl[s]];
+        sl[s] = static_cast<uint32_t>(slots[std::min(j + s, count - 1)]);
+        cc2[s] = static_cast<uint32_t>(pixels[sl[s]]);
+        cc3[s] = static_cast<uint32_t>(pixels[sl[s]] >> 32);
       }
       const size_t live = std::min(K, count - j);
       for (uint32_t ch = 0; ch < chunks; ++ch) {
@@ -303,19 +304,19 @@ void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint32_t* HWY_REST
       }
       for (size_t s = 0; s < live; ++s) words[static_cast<size_t>(sl[s]) * nw + nw - 1] &= tail;
     }
-    SettleTies(key, c1, c2, c3, T, refine_base, nw, words, tb);
+    SettleTies(key, c1, pixels, T, refine_base, nw, words, tb);
     return;
   }
 #endif
   alignas(64) uint32_t buf32[64];
   alignas(8) uint8_t lt[32 + 8], eq[32 + 8];  // a chunk's 256 comparisons each, as bits
   for (size_t j = 0; j < count; ++j) {
-    const uint32_t slot = slots[j];
-    const uint32_t c[4] = {0, c1, c2[slot], c3[slot]};
+    const auto slot = static_cast<uint32_t>(slots[j]);
+    const uint32_t c[4] = {0, c1, static_cast<uint32_t>(pixels[slot]), static_cast<uint32_t>(pixels[slot] >> 32)};
     const auto tbs = static_cast<uint8_t>(T[slot] >> 56);
     const auto tbv = hn::Set(d8, tbs);
     uint64_t* w = words + static_cast<size_t>(slot) * nw;
-    const uint64_t flip = invert[slot] ? ~uint64_t{0} : 0;
+    const uint64_t flip = flips[slot];
     for (uint32_t ch = 0; ch < chunks; ++ch) {
       Philox16(key, c, 16 * ch, buf32);
       const auto* bytes = reinterpret_cast<const uint8_t*>(buf32);
@@ -341,12 +342,134 @@ void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint32_t* HWY_REST
         std::memcpy(&m, eq + 8 * v, 8);
         w[wi] = bits ^ flip;
         AppendTies(tb, slot, 64 * static_cast<uint32_t>(wi), wi + 1 == nw ? m & tail : m);
-        if (HWY_UNLIKELY(tb.count > TieBuffer::kCap)) SettleTies(key, c1, c2, c3, T, refine_base, nw, words, tb);
+        if (HWY_UNLIKELY(tb.count > TieBuffer::kCap)) SettleTies(key, c1, pixels, T, refine_base, nw, words, tb);
       }
     }
     w[nw - 1] &= tail;
   }
-  SettleTies(key, c1, c2, c3, T, refine_base, nw, words, tb);
+  SettleTies(key, c1, pixels, T, refine_base, nw, words, tb);
+}
+
+// Philox on 64-bit lanes: each lane carries one block's 32-bit word in its low half; the high half is
+// ignored (MulEven reads only the low halves; the outputs are the low halves), so the lanes line up with
+// 64-bit data (doubles, thresholds). Bit-identical to Philox10 per block.
+// The 64-bit products of the lanes' low halves with m.
+template <class D64>
+HWY_INLINE hn::Vec<D64> MulLow32(D64 d, hn::Vec<D64> a, uint32_t m) {
+#if HWY_TARGET == HWY_SCALAR
+  return hn::Set(d, (hn::GetLane(a) & 0xFFFFFFFFu) * m);
+#else
+  const hn::Repartition<uint32_t, D64> d32;
+  return hn::MulEven(hn::BitCast(d32, a), hn::BitCast(d32, hn::Set(d, uint64_t{m})));
+#endif
+}
+
+template <class D64>
+HWY_INLINE void Philox10x64(D64 d, uint32_t ka, uint32_t kb, hn::Vec<D64>& x0, hn::Vec<D64>& x1, hn::Vec<D64>& x2,
+                            hn::Vec<D64>& x3) {
+  for (int round = 0; round < 10; ++round) {
+    const auto p0 = MulLow32(d, x0, kPhiloxM0);  // (hi0, lo0) of x0 * M0
+    const auto p1 = MulLow32(d, x2, kPhiloxM1);  // (hi1, lo1) of x2 * M1
+    x0 = hn::Xor(hn::Xor(hn::ShiftRight<32>(p1), x1), hn::Set(d, uint64_t{ka}));
+    x2 = hn::Xor(hn::Xor(hn::ShiftRight<32>(p0), x3), hn::Set(d, uint64_t{kb}));
+    x1 = p1;
+    x3 = p0;
+    ka += kPhiloxW0;
+    kb += kPhiloxW1;
+  }
+}
+
+// probability_threshold lane by lane: floor(x 2^64), 0 unless x > 0, saturated at 2^64 - 1. t = x 2^64 is
+// exact; below 2^63 the signed truncation is the floor; in [2^63, 2^64) t is a multiple of 2^11, so t / 2
+// converts exactly and doubles back.
+template <class D>
+HWY_INLINE hn::Vec<hn::RebindToUnsigned<D>> Threshold64(D d, hn::Vec<D> x) {
+  const hn::RebindToSigned<D> di;
+  const hn::RebindToUnsigned<D> du;
+  const auto t = hn::Mul(x, hn::Set(d, 18446744073709551616.0));
+  const auto below63 = hn::Lt(t, hn::Set(d, 9223372036854775808.0));
+  const auto lo = hn::BitCast(du, hn::ConvertTo(di, hn::IfThenElseZero(below63, t)));
+  const auto hi = hn::ShiftLeft<1>(hn::BitCast(du, hn::ConvertTo(di, hn::IfThenZeroElse(below63, hn::Mul(t, hn::Set(d, 0.5))))));
+  auto r = hn::IfThenElse(hn::RebindMask(du, below63), lo, hi);
+  r = hn::IfThenElse(hn::RebindMask(du, hn::Ge(t, hn::Set(d, 18446744073709551616.0))), hn::Set(du, ~uint64_t{0}), r);
+  return hn::IfThenElseZero(hn::RebindMask(du, hn::Gt(x, hn::Zero(d))), r);
+}
+
+// One group of sample_bits_batch (see frame_bits_group), vectorised over pixels: a = min(p, q) as
+// std::min gives it, the fills, the classes, the thresholds, block 0 of every stream (Philox on 64-bit
+// lanes, aligned with the doubles) and the sparse pixels' first binomial test, with the lists compressed
+// from masks (no branch on a pixel's class).
+size_t FrameBitsGroup(const uint32_t key[2], uint32_t c1, const uint64_t* HWY_RESTRICT pixels,
+                      const Prob* HWY_RESTRICT pr, size_t count, uint32_t n, double sparse_below,
+                      uint64_t* HWY_RESTRICT words, uint32_t* HWY_RESTRICT slow, uint32_t* HWY_RESTRICT block0) {
+  static_assert(sizeof(Prob) == 3 * sizeof(double), "Prob is read as interleaved doubles");
+  const hn::ScalableTag<double> d;
+  const hn::RebindToUnsigned<decltype(d)> du;
+  const size_t L = hn::Lanes(d);
+  constexpr size_t kMaxL = hn::MaxLanes(hn::ScalableTag<double>());
+  const size_t nw = (static_cast<size_t>(n) + 63) / 64;
+  const uint64_t tail = n % 64 != 0 ? (uint64_t{1} << (n % 64)) - 1 : ~uint64_t{0};
+  alignas(64) uint64_t T[kFrameGroup + kMaxL], fill[kFrameGroup + kMaxL], b[4][kFrameGroup + kMaxL];
+  alignas(64) uint64_t dense[kFrameGroup + kMaxL], slow_list[kFrameGroup + kMaxL];
+  size_t nd = 0, ns = 0;
+  const auto vn = hn::Set(d, static_cast<double>(n));
+  const auto below = hn::Set(d, sparse_below);
+  const auto low32 = hn::Set(du, uint64_t{0xFFFFFFFFu});
+  for (size_t i = 0; i < count; i += L) {
+    hn::Vec<decltype(d)> vp, vq, vl;
+    hn::Vec<decltype(du)> pix;
+    if (i + L <= count) {
+      hn::LoadInterleaved3(d, &pr[i].p, vp, vq, vl);
+      pix = hn::LoadU(du, pixels + i);
+    } else {  // the tail through padded copies: p = 0, q = 1 (a = 0: no list) beyond count
+      alignas(64) double tp[3 * kMaxL];
+      alignas(64) uint64_t tx[kMaxL] = {};
+      for (size_t j = 0; j < L; ++j) {
+        const Prob q = i + j < count ? pr[i + j] : Prob{0.0, 1.0, 0.0};
+        tp[3 * j] = q.p;
+        tp[3 * j + 1] = q.q;
+        tp[3 * j + 2] = q.log_q;
+        tx[j] = i + j < count ? pixels[i + j] : 0;
+      }
+      hn::LoadInterleaved3(d, tp, vp, vq, vl);
+      pix = hn::Load(du, tx);
+    }
+    const auto a = hn::IfThenElse(hn::Lt(vq, vp), vq, vp);  // std::min(p, q)
+    const auto inv = hn::Gt(vp, vq);
+    const auto is_dense = hn::Gt(a, below);
+    const auto is_sparse = hn::AndNot(is_dense, hn::Gt(a, hn::Zero(d)));
+    hn::Store(Threshold64(d, a), du, T + i);
+    hn::Store(hn::BitCast(du, hn::VecFromMask(d, inv)), du, fill + i);
+    // block 0 of the streams: counter (0, c1, pixel low, pixel high)
+    auto x0 = hn::Zero(du), x1 = hn::Set(du, uint64_t{c1}), x2 = pix, x3 = hn::ShiftRight<32>(pix);
+    Philox10x64(du, key[0], key[1], x0, x1, x2, x3);
+    hn::Store(x0, du, b[0] + i);
+    hn::Store(x1, du, b[1] + i);
+    hn::Store(x2, du, b[2] + i);
+    hn::Store(x3, du, b[3] + i);
+    // BinomialSampler::small_side's first test on U = (word 0, word 1): no rare outcome when n a < 1 and
+    // U >= floor(n a 2^64)
+    const auto U = hn::Or(hn::ShiftLeft<32>(x0), hn::And(x1, low32));
+    const auto mean = hn::Mul(vn, a);
+    const auto none = hn::And(hn::Lt(mean, hn::Set(d, 1.0)), hn::RebindMask(d, hn::Not(hn::Lt(U, Threshold64(d, mean)))));
+    const auto go_slow = hn::AndNot(none, is_sparse);
+    const auto idx = hn::Iota(du, uint64_t{i});
+    nd += hn::CompressStore(idx, hn::RebindMask(du, is_dense), du, dense + nd);
+    ns += hn::CompressStore(idx, hn::RebindMask(du, go_slow), du, slow_list + ns);
+  }
+  // every pixel's words all equal first (final for a = 0 and for sparse pixels without a rare outcome)
+  for (size_t i = 0; i < count; ++i) {
+    uint64_t* w = words + i * nw;
+    for (size_t j = 0; j + 1 < nw; ++j) w[j] = fill[i];
+    w[nw - 1] = fill[i] & tail;
+  }
+  if (nd > 0) DenseBitsBatch(key, c1, pixels, T, fill, dense, nd, n, words);
+  for (size_t j = 0; j < ns; ++j) {
+    const size_t i = slow_list[j];
+    slow[j] = static_cast<uint32_t>(i);
+    for (size_t v = 0; v < 4; ++v) block0[4 * j + v] = static_cast<uint32_t>(b[v][i]);
+  }
+  return ns;
 }
 
 const char* TargetName() { return hwy::TargetName(HWY_TARGET); }
@@ -360,11 +483,11 @@ namespace spadgen::sensor {
 
 HWY_EXPORT(DenseBits);
 HWY_EXPORT(TargetName);
-HWY_EXPORT(DenseBitsBatch);
+HWY_EXPORT(FrameBitsGroup);
 
-void dense_bits_batch(const uint32_t key[2], uint32_t c1, const uint32_t* c2, const uint32_t* c3, const uint64_t* T,
-                      const bool* invert, const uint32_t* slots, size_t count, uint32_t n, uint64_t* words) {
-  HWY_DYNAMIC_DISPATCH(DenseBitsBatch)(key, c1, c2, c3, T, invert, slots, count, n, words);
+size_t frame_bits_group(const uint32_t key[2], uint32_t c1, const uint64_t* pixels, const Prob* pr, size_t count,
+                        uint32_t n, double sparse_below, uint64_t* words, uint32_t* slow, uint32_t* block0) {
+  return HWY_DYNAMIC_DISPATCH(FrameBitsGroup)(key, c1, pixels, pr, count, n, sparse_below, words, slow, block0);
 }
 
 void dense_bits(const Rng& stream, uint32_t n, uint64_t T, uint64_t* words) {

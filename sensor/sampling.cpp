@@ -161,72 +161,23 @@ void sample_bits(const Rng& stream, const BinomialSampler& sampler, const Prob& 
 
 void sample_bits_batch(uint64_t seed, uint64_t k, const uint64_t* pixels, size_t count,
                        const BinomialSampler& sampler, const Prob* pr, uint64_t* words) {
-  constexpr size_t kGroup = 256;
   const uint32_t n = sampler.n();
   const size_t nw = (n + 63) / 64;
-  const uint64_t tail = n % 64 != 0 ? (uint64_t{1} << (n % 64)) - 1 : ~uint64_t{0};
-  const double N = n;
   const Rng base(seed, RngKind::Frames, 0, k);
   const uint32_t key[2] = {base.key().v[0], base.key().v[1]};
-  const auto k32 = static_cast<uint32_t>(k);
-  uint32_t c1[kGroup], c2[kGroup], c3[kGroup], sc2[kGroup], sc3[kGroup], blocks[4 * kGroup];
-  uint32_t dense[kGroup], sparse[kGroup], slow[kGroup];
-  uint64_t T[kGroup];
-  bool inverted[kGroup];
-  std::fill(c1, c1 + kGroup, k32);
-  for (size_t g = 0; g < count; g += kGroup) {
-    const size_t c = std::min(kGroup, count - g);
-    uint64_t* gw = words + g * nw;
-    // Classification without branches (the mix of p is random, so branches on it mispredict): every pixel
-    // first gets all its bits equal - 0, or 1 where it counts misses (a = q) - which is the answer for
-    // a = 0 and for a sparse pixel without a rare outcome; the dense and the other sparse pixels are listed
-    // and overwrite their words below.
-    size_t nd = 0, ns = 0;
-    for (size_t i = 0; i < c; ++i) {
-      const Prob& p = pr[g + i];
-      const double a = std::min(p.p, p.q);
-      const bool inv = p.p > p.q;
-      const bool is_dense = a > kSparseBelow;
-      c2[i] = static_cast<uint32_t>(pixels[g + i]);
-      c3[i] = static_cast<uint32_t>(pixels[g + i] >> 32);
-      inverted[i] = inv;
-      dense[nd] = static_cast<uint32_t>(i);
-      nd += is_dense;
-      sparse[ns] = static_cast<uint32_t>(i);
-      ns += (a > 0.0) & !is_dense;
-      const uint64_t fill = inv ? ~uint64_t{0} : 0;
-      uint64_t* w = gw + i * nw;
-      for (size_t j = 0; j + 1 < nw; ++j) w[j] = fill;
-      w[nw - 1] = fill & tail;
-    }
-    // Sparse pixels: block 0 of their streams from one vectorised Philox, then the binomial draw's first
-    // test (BinomialSampler::small_side: no rare outcome when U >= floor(n a 2^64), n a < 1) on block 0's
-    // first 64 bits - the common case for background pixels, whose all-equal words are then final, the
-    // same bits as bits_of_stream. The others take the whole sparse path with their stream.
+  uint32_t slow[kFrameGroup], block0[4 * kFrameGroup];
+  for (size_t g = 0; g < count; g += kFrameGroup) {
+    // Fills, dense pixels and the sparse pixels without a rare outcome, vectorised (frame_bits_group); the
+    // remaining sparse pixels take bits_of_stream with their block 0 from there.
+    const size_t c = std::min(kFrameGroup, count - g);
+    const size_t ns = frame_bits_group(key, static_cast<uint32_t>(k), pixels + g, pr + g, c, n, kSparseBelow,
+                                       words + g * nw, slow, block0);
     for (size_t j = 0; j < ns; ++j) {
-      sc2[j] = c2[sparse[j]];
-      sc3[j] = c3[sparse[j]];
+      const size_t i = g + slow[j];
+      const Rng stream(seed, RngKind::Frames, pixels[i], k);
+      StreamReader rng(stream, {block0[4 * j], block0[4 * j + 1], block0[4 * j + 2], block0[4 * j + 3]});
+      bits_of_stream(stream, rng, sampler, pr[i], words + i * nw);
     }
-    if (ns > 0) philox_block0(key, c1, sc2, sc3, ns, blocks);
-    size_t nslow = 0;
-    for (size_t j = 0; j < ns; ++j) {
-      const Prob& p = pr[g + sparse[j]];
-      const double mean = N * std::min(p.p, p.q);
-      const uint64_t U = (uint64_t{blocks[4 * j]} << 32) | blocks[4 * j + 1];
-      const bool none = (mean < 1.0) & (U >= probability_threshold(mean));
-      slow[nslow] = static_cast<uint32_t>(j);
-      nslow += !none;
-    }
-    for (size_t s = 0; s < nslow; ++s) {
-      const size_t j = slow[s], i = sparse[j];
-      const Rng stream(seed, RngKind::Frames, pixels[g + i], k);
-      StreamReader rng(stream, {blocks[4 * j], blocks[4 * j + 1], blocks[4 * j + 2], blocks[4 * j + 3]});
-      bits_of_stream(stream, rng, sampler, pr[g + i], gw + i * nw);
-    }
-    // Dense pixels: all of the group's in one dispatched call, inverted where they count misses, their
-    // top-byte ties settled inside (as bits_of_stream's dense_bits).
-    for (size_t j = 0; j < nd; ++j) T[dense[j]] = probability_threshold(std::min(pr[g + dense[j]].p, pr[g + dense[j]].q));
-    if (nd > 0) dense_bits_batch(key, k32, c2, c3, T, inverted, dense, nd, n, gw);
   }
 }
 
