@@ -165,12 +165,12 @@ HWY_INLINE void Philox10From2K(D d, const uint32_t key[2], uint32_t c1, const ui
 // ignored (MulEven reads only the low halves, and the outputs take the low halves), so a 32 x 32 product is
 // one MulEven (vpmuludq) whose high word is moved down by one shift: no lane swaps or masked merges, which
 // MulHiLo on 32-bit lanes needs (and which all compete for the one shuffle port). K chains interleaved.
-// Top-byte ties of DenseBitsBatch waiting to be settled: (slot, frame) pairs. A word appends at most 64, so
-// the buffer is settled whenever it holds more than kCap.
+// Top-byte ties of DenseBitsBatch waiting to be settled: (slot, frame) pairs. A chunk appends at most 256,
+// so the buffer is settled whenever it holds more than kCap.
 struct TieBuffer {
   static constexpr size_t kCap = 512;
-  uint32_t slot[kCap + 64];
-  uint32_t frame[kCap + 64];
+  uint32_t slot[kCap + 256];
+  uint32_t frame[kCap + 256];
   size_t count = 0;
 };
 
@@ -253,25 +253,39 @@ HWY_INLINE void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint64_
     hn::Vec<decltype(d32)> hi0_iota, lo0_iota;
     MulHiLo(d32, y0, hn::Set(d32, 0xD2511F53u), hi0_iota, lo0_iota);
     using V32 = hn::Vec<decltype(d32)>;
-    // One pixel's output words of chunk ch from its chunk's four Philox word vectors.
-    const auto emit = [&](uint32_t slot, uint32_t ch, const V32 (&xs)[4]) HWY_ATTR {
+    // One output word (frames f0 .. f0 + 63) from one Philox word vector: below the threshold's top byte
+    // (inverted by flip), and the ties (masked by keep) appended.
+    const auto word = [&tb, d8w](V32 x, hn::Vec<decltype(d8w)> tb8, uint64_t flip, uint64_t keep, uint64_t* out,
+                                 uint32_t slot, uint32_t f0) HWY_ATTR {
+      const auto bytes = hn::BitCast(d8w, x);
+      alignas(8) uint8_t lt[8], eqb[8];
+      hn::StoreMaskBits(d8w, hn::Lt(bytes, tb8), lt);
+      hn::StoreMaskBits(d8w, hn::Eq(bytes, tb8), eqb);
+      uint64_t bits, m;
+      std::memcpy(&bits, lt, 8);
+      std::memcpy(&m, eqb, 8);
+      *out = bits ^ flip;
+      AppendTies(tb, slot, f0, m & keep);
+    };
+    // One pixel's words of chunk ch from the chunk's four Philox word vectors (by value: the chains stay
+    // in registers).
+    const auto emit = [&](uint32_t slot, uint32_t ch, V32 x0, V32 x1, V32 x2, V32 x3) HWY_ATTR {
       const auto tb8 = hn::Set(d8w, static_cast<uint8_t>(T[slot] >> 56));
-      uint64_t* w = words + static_cast<size_t>(slot) * nw;
+      uint64_t* w = words + static_cast<size_t>(slot) * nw + 4 * static_cast<size_t>(ch);
       const uint64_t flip = flips[slot];
-      for (uint32_t v = 0; v < 4; ++v) {
-        const size_t wi = static_cast<size_t>(ch) * 4 + v;
-        if (wi >= nw) break;
-        const auto bytes = hn::BitCast(d8w, xs[v]);
-        alignas(8) uint8_t lt[8], eqb[8];
-        hn::StoreMaskBits(d8w, hn::Lt(bytes, tb8), lt);
-        hn::StoreMaskBits(d8w, hn::Eq(bytes, tb8), eqb);
-        uint64_t bits, m;
-        std::memcpy(&bits, lt, 8);
-        std::memcpy(&m, eqb, 8);
-        w[wi] = bits ^ flip;
-        AppendTies(tb, slot, 64 * static_cast<uint32_t>(wi), wi + 1 == nw ? m & tail : m);
-        if (HWY_UNLIKELY(tb.count > TieBuffer::kCap)) SettleTies(key, c1, pixels, T, refine_base, nw, words, tb);
+      const uint32_t f0 = 256 * ch;
+      const size_t left = nw - 4 * static_cast<size_t>(ch);  // words of this chunk still inside the pixel
+      if (HWY_LIKELY(left >= 4)) {  // whole chunk; the tail mask only on the pixel's last word
+        word(x0, tb8, flip, ~uint64_t{0}, w, slot, f0);
+        word(x1, tb8, flip, ~uint64_t{0}, w + 1, slot, f0 + 64);
+        word(x2, tb8, flip, ~uint64_t{0}, w + 2, slot, f0 + 128);
+        word(x3, tb8, flip, left == 4 ? tail : ~uint64_t{0}, w + 3, slot, f0 + 192);
+      } else {
+        word(x0, tb8, flip, left == 1 ? tail : ~uint64_t{0}, w, slot, f0);
+        if (left > 1) word(x1, tb8, flip, left == 2 ? tail : ~uint64_t{0}, w + 1, slot, f0 + 64);
+        if (left > 2) word(x2, tb8, flip, tail, w + 2, slot, f0 + 128);
       }
+      if (HWY_UNLIKELY(tb.count > TieBuffer::kCap)) SettleTies(key, c1, pixels, T, refine_base, nw, words, tb);
     };
     // Pixels in fours: their Philox chains interleaved (the last pixel is repeated to fill the four).
     constexpr size_t K = 4;
@@ -297,10 +311,10 @@ HWY_INLINE void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint64_
           PhiloxRoundsK<K>(d32, 10, key[0], key[1], x);
         }
         // constant indices into x only (a runtime index would keep the chains in memory)
-        emit(sl[0], ch, x[0]);
-        if (live > 1) emit(sl[1], ch, x[1]);
-        if (live > 2) emit(sl[2], ch, x[2]);
-        if (live > 3) emit(sl[3], ch, x[3]);
+        emit(sl[0], ch, x[0][0], x[0][1], x[0][2], x[0][3]);
+        if (live > 1) emit(sl[1], ch, x[1][0], x[1][1], x[1][2], x[1][3]);
+        if (live > 2) emit(sl[2], ch, x[2][0], x[2][1], x[2][2], x[2][3]);
+        if (live > 3) emit(sl[3], ch, x[3][0], x[3][1], x[3][2], x[3][3]);
       }
       for (size_t s = 0; s < live; ++s) words[static_cast<size_t>(sl[s]) * nw + nw - 1] &= tail;
     }
