@@ -11,7 +11,7 @@ namespace spadgen::sensor {
 namespace {
 
 constexpr double kTwo64 = 18446744073709551616.0;  // 2^64
-constexpr double kSparseBelow = 1.0 / 256.0;
+constexpr double kSparseBelow = 1.0 / 512.0;
 constexpr double kModeSearchFrom = BinomialSampler::mode_search_from();
 
 }  // namespace

@@ -111,13 +111,13 @@ TEST(Sampling, BernoulliBitsChiSquare) {
   check_bits(1e-3, 1.0 - 1e-3, 255, 200000, 11);   // sparse path
   check_bits(0.5, 0.5, 255, 20000, 12);            // dense path
   check_bits(0.2, 0.8, 300, 20000, 13);            // dense, n not a multiple of 64
-  check_bits(0.997, 0.003, 255, 50000, 14);        // sparse on the zeros
-  check_bits(0.03, 0.97, 255, 50000, 16);          // dense, a just above the sparse bound
+  check_bits(0.9985, 0.0015, 255, 50000, 14);      // sparse on the zeros
+  check_bits(0.003, 0.997, 255, 50000, 16);        // dense, a just above the sparse bound
   check_bits(1.0 - 1e-6, 1e-6, 255, 200000, 15);   // p near 1
   EXPECT_TRUE(bits_are_sparse({1e-3, 1.0 - 1e-3}));
-  EXPECT_TRUE(bits_are_sparse({0.997, 0.003}));
+  EXPECT_TRUE(bits_are_sparse({0.9985, 0.0015}));
   EXPECT_FALSE(bits_are_sparse({0.5, 0.5}));
-  EXPECT_FALSE(bits_are_sparse({0.03, 0.97}));
+  EXPECT_FALSE(bits_are_sparse({0.003, 0.997}));
 }
 
 // p = 1e-9: 2^20 streams of 65535 frames (6.9e10 Bernoulli trials, 68.7 expected ones).
@@ -333,7 +333,7 @@ TEST(Sampling, BatchBitsEqualPerStreamBits) {
     const size_t count = 603, nw = (n + 63) / 64;
     std::vector<uint64_t> ids(count);
     std::vector<Prob> pr(count);
-    const std::vector<double> rates = {0.0, 1e-7, 1e-4, 1e-3, 3e-3, 0.03, 0.07, 0.5, 1.0, 3.0, 5.4, 8.0, 30.0, HUGE_VAL};
+    const std::vector<double> rates = {0.0, 1e-7, 1e-4, 1e-3, 1.9e-3, 3e-3, 0.03, 0.07, 0.5, 1.0, 3.0, 5.4, 8.0, 30.0, HUGE_VAL};
     for (size_t i = 0; i < count; ++i) {
       ids[i] = (uint64_t{1} << 32) - 50 + i * 3;  // crosses 2^32: both counter words vary
       const double l = rates[i % rates.size()];
