@@ -169,8 +169,8 @@ HWY_INLINE void Philox10From2K(D d, const uint32_t key[2], uint32_t c1, const ui
 // so the buffer is settled whenever it holds more than kCap.
 struct TieBuffer {
   static constexpr size_t kCap = 512;
-  uint32_t slot[kCap + 256];
-  uint32_t frame[kCap + 256];
+  uint32_t slot[kCap + 256 + 16];  // + 16: SettleTies pads the last vector
+  uint32_t frame[kCap + 256 + 16];
   size_t count = 0;
 };
 
@@ -205,6 +205,50 @@ HWY_INLINE void SettleTies(const uint32_t key[2], uint32_t c1, const uint64_t* H
   const size_t L = hn::Lanes(d);
   constexpr uint64_t kLow56 = (uint64_t{1} << 56) - 1;
   alignas(64) uint32_t a0[16], a2[16], a3[16], o0[16], o1[16];
+#if HWY_TARGET != HWY_SCALAR && HWY_MAX_BYTES >= 64
+  if (L == 16 && tb.count > 0) {
+    // AVX-512: counters by vector loads and gathers (a slot's pixel id as two u32), the comparison with
+    // T mod 2^56 on 64-bit lanes with T gathered, only the toggles in scalars; the last vector is padded
+    // with copies of tie 0 (computed, not applied).
+    const hn::RebindToSigned<decltype(d)> di;
+    const hn::Half<decltype(d)> dh;
+    const hn::Repartition<uint64_t, decltype(d)> d64;
+    const hn::Repartition<int64_t, decltype(d)> di64;
+    const hn::Half<decltype(di)> dih;
+    const auto* px32 = reinterpret_cast<const uint32_t*>(pixels);  // little endian: low word first
+    const auto low56 = hn::Set(d64, kLow56);
+    for (size_t j = tb.count; j < tb.count + 16; ++j) {
+      tb.slot[j] = tb.slot[0];
+      tb.frame[j] = tb.frame[0];
+    }
+    for (size_t t = 0; t < tb.count; t += 16) {
+      const auto sl = hn::LoadU(d, tb.slot + t);
+      const auto fr = hn::LoadU(d, tb.frame + t);
+      const auto i2 = hn::BitCast(di, hn::Add(sl, sl));
+      auto x0 = hn::Add(fr, hn::Set(d, refine_base)), x1 = hn::Set(d, c1);
+      auto x2 = hn::GatherIndex(d, px32, i2), x3 = hn::GatherIndex(d, px32 + 1, i2);
+      Philox10(d, key[0], key[1], x0, x1, x2, x3);
+      uint32_t below = 0;
+      for (int h = 0; h < 2; ++h) {
+        const auto w0 = hn::PromoteTo(d64, h == 0 ? hn::LowerHalf(dh, x0) : hn::UpperHalf(dh, x0));
+        const auto w1 = hn::PromoteTo(d64, h == 0 ? hn::LowerHalf(dh, x1) : hn::UpperHalf(dh, x1));
+        const auto si = hn::PromoteTo(di64, hn::BitCast(dih, h == 0 ? hn::LowerHalf(dh, sl) : hn::UpperHalf(dh, sl)));
+        const auto u = hn::And(hn::Or(hn::ShiftLeft<32>(w0), w1), low56);
+        const auto tr = hn::And(hn::GatherIndex(d64, T, si), low56);
+        uint8_t mb[8] = {};
+        hn::StoreMaskBits(d64, hn::Lt(u, tr), mb);
+        below |= uint32_t{mb[0]} << (8 * h);
+      }
+      const size_t c = std::min<size_t>(16, tb.count - t);
+      for (size_t j = 0; j < c; ++j) {
+        const uint32_t s = tb.slot[t + j], f = tb.frame[t + j];
+        words[s * nw + f / 64] ^= static_cast<uint64_t>((below >> j) & 1u) << (f % 64);
+      }
+    }
+    tb.count = 0;
+    return;
+  }
+#endif
   for (size_t t = 0; t < tb.count; t += L) {
     const size_t c = std::min(L, tb.count - t);
     for (size_t j = 0; j < L; ++j) {  // lanes beyond the last tie repeat it
