@@ -162,6 +162,7 @@ void sample_bits(const Rng& stream, const BinomialSampler& sampler, const Prob& 
 void sample_bits_batch(uint64_t seed, uint64_t k, const uint64_t* pixels, size_t count,
                        const BinomialSampler& sampler, const Prob* pr, uint64_t* words) {
   const uint32_t n = sampler.n();
+  if (n == 0) return;  // no words (frame_bits_group writes each pixel's last word)
   const size_t nw = (n + 63) / 64;
   const Rng base(seed, RngKind::Frames, 0, k);
   const uint32_t key[2] = {base.key().v[0], base.key().v[1]};

@@ -348,6 +348,16 @@ TEST(Sampling, BatchBitsEqualPerStreamBits) {
   }
 }
 
+// n = 0 frames: no words, nothing written (the batch's kernel writes each pixel's last word otherwise).
+TEST(Sampling, BatchBitsWithNoFramesWriteNothing) {
+  const BinomialSampler sampler(0);
+  const std::vector<uint64_t> ids = {1, 2, 3};
+  const std::vector<Prob> pr = {prob_from_lambda(0.0), prob_from_lambda(1e-4), prob_from_lambda(1.0)};
+  std::vector<uint64_t> guard(4, 0x5555555555555555ull);
+  sample_bits_batch(3, 1, ids.data(), ids.size(), sampler, pr.data(), guard.data() + 2);
+  for (uint64_t g : guard) EXPECT_EQ(g, 0x5555555555555555ull);
+}
+
 // The batch settles the dense pixels' top-byte ties with one vectorised Philox per group: every frame
 // equals dense_bit_reference (one Rng::block per tie), for frame counts that are not multiples of 64 or 256
 // (several chunks) and both sides (a = p and a = q); the test counts the ties it covered.
