@@ -13,6 +13,7 @@
 
 #include "sensor/frames_kernel.h"
 #include "sensor/philox-inl.h"
+#include "sensor/sampling.h"
 
 HWY_BEFORE_NAMESPACE();
 namespace spadgen::sensor {
@@ -112,50 +113,177 @@ void DenseBits(const Rng& stream, uint32_t n, uint64_t T, uint64_t* HWY_RESTRICT
 }
 
 
-// Philox4x32-10 of the 16 counters (i, c1, c2, c3), i = 0..15, as Philox10 gives them, with rounds 0 and 1
-// partly in scalars: words 1..3 are equal in every lane, so round 0's second product is one scalar product
-// and its word 0 output is uniform, as is round 1's first product. (hi0, lo0) = round 0's products of the
-// lanes' word 0 (i * 0xD2511F53).
-template <class D>
-HWY_INLINE void Philox10From2(D d, const uint32_t key[2], uint32_t c1, uint32_t c2, uint32_t c3, hn::Vec<D> hi0,
-                              hn::Vec<D> lo0, hn::Vec<D>& x0, hn::Vec<D>& x1, hn::Vec<D>& x2, hn::Vec<D>& x3) {
-  uint32_t ka = key[0], kb = key[1];
-  // round 0
-  const uint64_t p1 = uint64_t{kPhiloxM1} * c2;
-  const uint32_t s0 = static_cast<uint32_t>(p1 >> 32) ^ c1 ^ ka, s1 = static_cast<uint32_t>(p1);
-  x2 = hn::Xor(hi0, hn::Set(d, c3 ^ kb));
-  x3 = lo0;
-  ka += kPhiloxW0;
-  kb += kPhiloxW1;
-  // round 1: word 0 = s0 and word 1 = s1 in every lane
-  const uint64_t p0 = uint64_t{kPhiloxM0} * s0;
-  hn::Vec<D> hi1, lo1;
-  MulHiLo(d, x2, hn::Set(d, kPhiloxM1), hi1, lo1);
-  x0 = hn::Xor(hi1, hn::Set(d, s1 ^ ka));
-  x2 = hn::Xor(x3, hn::Set(d, static_cast<uint32_t>(p0 >> 32) ^ kb));
-  x1 = lo1;
-  x3 = hn::Set(d, static_cast<uint32_t>(p0));
-  ka += kPhiloxW0;
-  kb += kPhiloxW1;
-  PhiloxRounds(d, 8, ka, kb, x0, x1, x2, x3);
+// K independent Philox computations interleaved round by round: a round's products wait for the previous
+// round's (multiply, swap, XOR: about 8 cycles), longer than one computation takes to issue, so a single
+// chain leaves the vector ports idle. x[s] = (x0, x1, x2, x3) of computation s.
+template <size_t K, class D>
+HWY_INLINE void PhiloxRoundsK(D d, int rounds, uint32_t ka, uint32_t kb, hn::Vec<D> (&x)[K][4]) {
+  const auto m0 = hn::Set(d, kPhiloxM0), m1 = hn::Set(d, kPhiloxM1);
+  for (int round = 0; round < rounds; ++round) {
+    const auto vka = hn::Set(d, ka), vkb = hn::Set(d, kb);
+    for (size_t s = 0; s < K; ++s) {
+      hn::Vec<D> hi0, lo0, hi1, lo1;
+      MulHiLo(d, x[s][0], m0, hi0, lo0);
+      MulHiLo(d, x[s][2], m1, hi1, lo1);
+      x[s][0] = hn::Xor(hn::Xor(hi1, x[s][1]), vka);
+      x[s][2] = hn::Xor(hn::Xor(hi0, x[s][3]), vkb);
+      x[s][1] = lo1;
+      x[s][3] = lo0;
+    }
+    ka += kPhiloxW0;
+    kb += kPhiloxW1;
+  }
 }
 
-// Many dense pixels of one key in one call (see dense_bits_batch): no per-pixel dispatch, Rng set-up,
-// zero fill or tie copy, and the inversion folded into the store.
-void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint32_t* HWY_RESTRICT c2,
-                    const uint32_t* HWY_RESTRICT c3, const uint64_t* HWY_RESTRICT T,
-                    const bool* HWY_RESTRICT invert, const uint32_t* HWY_RESTRICT slots, size_t count, uint32_t n,
-                    uint64_t* HWY_RESTRICT words, std::vector<uint32_t>* tie_slot,
-                    std::vector<uint32_t>* tie_frame) {
+// Philox4x32-10 of the 16 counters (i, c1, c2[s], c3[s]), i = 0..15, for K streams s of one key, as
+// Philox10 gives them, with rounds 0 and 1 partly in scalars: words 1..3 are equal in every lane, so round
+// 0's second product is one scalar product and its word 0 output is uniform, as is round 1's first
+// product. (hi0, lo0) = round 0's products of the lanes' word 0 (i * 0xD2511F53).
+template <size_t K, class D>
+HWY_INLINE void Philox10From2K(D d, const uint32_t key[2], uint32_t c1, const uint32_t (&c2)[K],
+                               const uint32_t (&c3)[K], hn::Vec<D> hi0, hn::Vec<D> lo0, hn::Vec<D> (&x)[K][4]) {
+  const uint32_t ka0 = key[0], kb0 = key[1];
+  const uint32_t ka1 = ka0 + kPhiloxW0, kb1 = kb0 + kPhiloxW1;
+  for (size_t s = 0; s < K; ++s) {
+    // round 0
+    const uint64_t p1 = uint64_t{kPhiloxM1} * c2[s];
+    const uint32_t s0 = static_cast<uint32_t>(p1 >> 32) ^ c1 ^ ka0, s1 = static_cast<uint32_t>(p1);
+    const auto x2 = hn::Xor(hi0, hn::Set(d, c3[s] ^ kb0));
+    // round 1: word 0 = s0 and word 1 = s1 in every lane
+    const uint64_t p0 = uint64_t{kPhiloxM0} * s0;
+    hn::Vec<D> hi1, lo1;
+    MulHiLo(d, x2, hn::Set(d, kPhiloxM1), hi1, lo1);
+    x[s][0] = hn::Xor(hi1, hn::Set(d, s1 ^ ka1));
+    x[s][2] = hn::Xor(lo0, hn::Set(d, static_cast<uint32_t>(p0 >> 32) ^ kb1));
+    x[s][1] = lo1;
+    x[s][3] = hn::Set(d, static_cast<uint32_t>(p0));
+  }
+  PhiloxRoundsK<K>(d, 8, ka1 + kPhiloxW0, kb1 + kPhiloxW1, x);
+}
+
+// Philox on 64-bit lanes: each lane carries one block's 32-bit word in its low half; the high half is
+// ignored (MulEven reads only the low halves, and the outputs take the low halves), so a 32 x 32 product is
+// one MulEven (vpmuludq) whose high word is moved down by one shift: no lane swaps or masked merges, which
+// MulHiLo on 32-bit lanes needs (and which all compete for the one shuffle port). K chains interleaved.
+// Top-byte ties of DenseBitsBatch waiting to be settled: (slot, frame) pairs. A chunk appends at most 256,
+// so the buffer is settled whenever it holds more than kCap.
+struct TieBuffer {
+  static constexpr size_t kCap = 512;
+  uint32_t slot[kCap + 256 + 16];  // + 16: SettleTies pads the last vector
+  uint32_t frame[kCap + 256 + 16];
+  size_t count = 0;
+};
+
+// Appends the ties of one output word (bit i of m: frame f0 + i is tied). Most words have none and few more
+// than one, so the first two are written without a branch (a tie-dependent branch mispredicts about once
+// per dense pixel); countr_zero(0) = 64 is written but not counted.
+HWY_INLINE void AppendTies(TieBuffer& tb, uint32_t slot, uint32_t f0, uint64_t m) {
+  size_t c = tb.count;
+  tb.slot[c] = slot;
+  tb.frame[c] = f0 + static_cast<uint32_t>(std::countr_zero(m));
+  c += m != 0;
+  m &= m - 1;
+  tb.slot[c] = slot;
+  tb.frame[c] = f0 + static_cast<uint32_t>(std::countr_zero(m));
+  c += m != 0;
+  m &= m - 1;
+  for (; HWY_UNLIKELY(m != 0); m &= m - 1) {
+    tb.slot[c] = slot;
+    tb.frame[c++] = f0 + static_cast<uint32_t>(std::countr_zero(m));
+  }
+  tb.count = c;
+}
+
+// Settles the buffered ties, 16 per vectorised Philox: tie (slot s, frame f) takes the first 56 bits (word 0
+// high, word 1 low) of block refine_base + f of stream s, as dense_bits does, and its bit (left as the top
+// byte's comparison gave it: 0, or 1 when inverted) is toggled when they are below T[s] mod 2^56, i.e. when
+// U < T.
+HWY_INLINE void SettleTies(const uint32_t key[2], uint32_t c1, const uint64_t* HWY_RESTRICT pixels,
+                           const uint64_t* HWY_RESTRICT T, uint32_t refine_base,
+                           size_t nw, uint64_t* HWY_RESTRICT words, TieBuffer& tb) {
+  const hn::CappedTag<uint32_t, 16> d;
+  const size_t L = hn::Lanes(d);
+  constexpr uint64_t kLow56 = (uint64_t{1} << 56) - 1;
+  alignas(64) uint32_t a0[16], a2[16], a3[16], o0[16], o1[16];
+#if HWY_TARGET != HWY_SCALAR && HWY_MAX_BYTES >= 64
+  if (L == 16 && tb.count > 0) {
+    // AVX-512: counters by vector loads and gathers (a slot's pixel id as two u32), the comparison with
+    // T mod 2^56 on 64-bit lanes with T gathered, only the toggles in scalars; the last vector is padded
+    // with copies of tie 0 (computed, not applied).
+    const hn::RebindToSigned<decltype(d)> di;
+    const hn::Half<decltype(d)> dh;
+    const hn::Repartition<uint64_t, decltype(d)> d64;
+    const hn::Repartition<int64_t, decltype(d)> di64;
+    const hn::Half<decltype(di)> dih;
+    const auto* px32 = reinterpret_cast<const uint32_t*>(pixels);  // little endian: low word first
+    const auto low56 = hn::Set(d64, kLow56);
+    for (size_t j = tb.count; j < tb.count + 16; ++j) {
+      tb.slot[j] = tb.slot[0];
+      tb.frame[j] = tb.frame[0];
+    }
+    for (size_t t = 0; t < tb.count; t += 16) {
+      const auto sl = hn::LoadU(d, tb.slot + t);
+      const auto fr = hn::LoadU(d, tb.frame + t);
+      const auto i2 = hn::BitCast(di, hn::Add(sl, sl));
+      auto x0 = hn::Add(fr, hn::Set(d, refine_base)), x1 = hn::Set(d, c1);
+      auto x2 = hn::GatherIndex(d, px32, i2), x3 = hn::GatherIndex(d, px32 + 1, i2);
+      Philox10(d, key[0], key[1], x0, x1, x2, x3);
+      uint32_t below = 0;
+      for (int h = 0; h < 2; ++h) {
+        const auto w0 = hn::PromoteTo(d64, h == 0 ? hn::LowerHalf(dh, x0) : hn::UpperHalf(dh, x0));
+        const auto w1 = hn::PromoteTo(d64, h == 0 ? hn::LowerHalf(dh, x1) : hn::UpperHalf(dh, x1));
+        const auto si = hn::PromoteTo(di64, hn::BitCast(dih, h == 0 ? hn::LowerHalf(dh, sl) : hn::UpperHalf(dh, sl)));
+        const auto u = hn::And(hn::Or(hn::ShiftLeft<32>(w0), w1), low56);
+        const auto tr = hn::And(hn::GatherIndex(d64, T, si), low56);
+        uint8_t mb[8] = {};
+        hn::StoreMaskBits(d64, hn::Lt(u, tr), mb);
+        below |= uint32_t{mb[0]} << (8 * h);
+      }
+      const size_t c = std::min<size_t>(16, tb.count - t);
+      for (size_t j = 0; j < c; ++j) {
+        const uint32_t s = tb.slot[t + j], f = tb.frame[t + j];
+        words[s * nw + f / 64] ^= static_cast<uint64_t>((below >> j) & 1u) << (f % 64);
+      }
+    }
+    tb.count = 0;
+    return;
+  }
+#endif
+  for (size_t t = 0; t < tb.count; t += L) {
+    const size_t c = std::min(L, tb.count - t);
+    for (size_t j = 0; j < L; ++j) {  // lanes beyond the last tie repeat it
+      const size_t e = t + std::min(j, c - 1);
+      const uint32_t s = tb.slot[e];
+      a0[j] = refine_base + tb.frame[e];
+      a2[j] = static_cast<uint32_t>(pixels[s]);
+      a3[j] = static_cast<uint32_t>(pixels[s] >> 32);
+    }
+    auto x0 = hn::Load(d, a0), x1 = hn::Set(d, c1), x2 = hn::Load(d, a2), x3 = hn::Load(d, a3);
+    Philox10(d, key[0], key[1], x0, x1, x2, x3);
+    hn::Store(x0, d, o0);
+    hn::Store(x1, d, o1);
+    for (size_t j = 0; j < c; ++j) {
+      const uint32_t s = tb.slot[t + j], f = tb.frame[t + j];
+      const uint64_t u = ((uint64_t{o0[j]} << 32) | o1[j]) & kLow56;
+      words[s * nw + f / 64] ^= static_cast<uint64_t>(u < (T[s] & kLow56)) << (f % 64);
+    }
+  }
+  tb.count = 0;
+}
+
+// Many dense pixels of one key in one call (see dense_bits_batch): no per-pixel dispatch, Rng set-up or
+// zero fill, the inversion folded into the store, the ties collected without branches and settled together.
+HWY_INLINE void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint64_t* HWY_RESTRICT pixels,
+                               const uint64_t* HWY_RESTRICT T, const uint64_t* HWY_RESTRICT flips,
+                               const uint64_t* HWY_RESTRICT slots, size_t count, uint32_t n,
+                               uint64_t* HWY_RESTRICT words) {
   const hn::ScalableTag<uint8_t> d8;
   const size_t L = hn::Lanes(d8);
-  constexpr size_t kMaxEqBytes = (hn::MaxLanes(d8) + 63) / 64 * 8;
   const uint32_t chunks = (n + 255) / 256;
+  const uint32_t refine_base = chunks * 16;
   const size_t nw = (static_cast<size_t>(n) + 63) / 64;
-  const size_t total_bytes = nw * 8;
   const uint64_t tail = n % 64 != 0 ? (uint64_t{1} << (n % 64)) - 1 : ~uint64_t{0};
-  alignas(64) uint32_t buf32[64];
-  alignas(64) uint8_t mask[32 + 64];
+  TieBuffer tb;
   // Vectors of 16 u32 (AVX-512): Philox word v of a chunk's 16 blocks is one vector, i.e. the chunk's
   // bytes 64 v .. 64 v + 63 (frames 256 ch + 64 v + i), compared in registers and stored as whole words
   // (no round trip through memory, whose narrow mask stores and wide reload stall store forwarding).
@@ -168,97 +296,238 @@ void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint32_t* HWY_REST
     const auto y0 = hn::Iota(d32, 0u);
     hn::Vec<decltype(d32)> hi0_iota, lo0_iota;
     MulHiLo(d32, y0, hn::Set(d32, 0xD2511F53u), hi0_iota, lo0_iota);
-    for (size_t j = 0; j < count; ++j) {
-      const uint32_t slot = slots[j];
-      const auto tb = hn::Set(d8w, static_cast<uint8_t>(T[slot] >> 56));
-      uint64_t* w = words + static_cast<size_t>(slot) * nw;
-      const uint64_t flip = invert[slot] ? ~uint64_t{0} : 0;
-      const auto vc1 = hn::Set(d32, c1), vc2 = hn::Set(d32, c2[slot]), vc3 = hn::Set(d32, c3[slot]);
-      for (uint32_t ch = 0; ch < chunks; ++ch) {
-        hn::Vec<decltype(d32)> x0, x1, x2, x3;
-        if (ch == 0) {
-          x0 = y0, x1 = vc1, x2 = vc2, x3 = vc3;
-          Philox10From2(d32, key, c1, c2[slot], c3[slot], hi0_iota, lo0_iota, x0, x1, x2, x3);
-        } else {
-          x0 = hn::Iota(d32, 16 * ch), x1 = vc1, x2 = vc2, x3 = vc3;
-          Philox10(d32, key[0], key[1], x0, x1, x2, x3);
-        }
-        const hn::Vec<decltype(d32)> xs[4] = {x0, x1, x2, x3};
-        for (uint32_t v = 0; v < 4; ++v) {
-          const size_t wi = static_cast<size_t>(ch) * 4 + v;
-          if (wi >= nw) break;
-          const auto bytes = hn::BitCast(d8w, xs[v]);
-          alignas(8) uint8_t lt[8], eqb[8];
-          hn::StoreMaskBits(d8w, hn::Lt(bytes, tb), lt);
-          uint64_t bits;
-          std::memcpy(&bits, lt, 8);
-          w[wi] = bits ^ flip;
-          const auto eq = hn::Eq(bytes, tb);
-          if (HWY_UNLIKELY(!hn::AllFalse(d8w, eq))) {
-            hn::StoreMaskBits(d8w, eq, eqb);
-            uint64_t m;
-            std::memcpy(&m, eqb, 8);
-            for (; m != 0; m &= m - 1) {
-              const uint32_t f = 64 * static_cast<uint32_t>(wi) + static_cast<uint32_t>(std::countr_zero(m));
-              if (f >= n) continue;
-              tie_slot->push_back(slot);
-              tie_frame->push_back(f);
-            }
-          }
-        }
+    using V32 = hn::Vec<decltype(d32)>;
+    // One output word (frames f0 .. f0 + 63) from one Philox word vector: below the threshold's top byte
+    // (inverted by flip), and the ties (masked by keep) appended.
+    const auto word = [&tb, d8w](V32 x, hn::Vec<decltype(d8w)> tb8, uint64_t flip, uint64_t keep, uint64_t* out,
+                                 uint32_t slot, uint32_t f0) HWY_ATTR {
+      const auto bytes = hn::BitCast(d8w, x);
+      alignas(8) uint8_t lt[8], eqb[8];
+      hn::StoreMaskBits(d8w, hn::Lt(bytes, tb8), lt);
+      hn::StoreMaskBits(d8w, hn::Eq(bytes, tb8), eqb);
+      uint64_t bits, m;
+      std::memcpy(&bits, lt, 8);
+      std::memcpy(&m, eqb, 8);
+      *out = bits ^ flip;
+      AppendTies(tb, slot, f0, m & keep);
+    };
+    // One pixel's words of chunk ch from the chunk's four Philox word vectors (by value: the chains stay
+    // in registers).
+    const auto emit = [&](uint32_t slot, uint32_t ch, V32 x0, V32 x1, V32 x2, V32 x3) HWY_ATTR {
+      const auto tb8 = hn::Set(d8w, static_cast<uint8_t>(T[slot] >> 56));
+      uint64_t* w = words + static_cast<size_t>(slot) * nw + 4 * static_cast<size_t>(ch);
+      const uint64_t flip = flips[slot];
+      const uint32_t f0 = 256 * ch;
+      const size_t left = nw - 4 * static_cast<size_t>(ch);  // words of this chunk still inside the pixel
+      if (HWY_LIKELY(left >= 4)) {  // whole chunk; the tail mask only on the pixel's last word
+        word(x0, tb8, flip, ~uint64_t{0}, w, slot, f0);
+        word(x1, tb8, flip, ~uint64_t{0}, w + 1, slot, f0 + 64);
+        word(x2, tb8, flip, ~uint64_t{0}, w + 2, slot, f0 + 128);
+        word(x3, tb8, flip, left == 4 ? tail : ~uint64_t{0}, w + 3, slot, f0 + 192);
+      } else {
+        word(x0, tb8, flip, left == 1 ? tail : ~uint64_t{0}, w, slot, f0);
+        if (left > 1) word(x1, tb8, flip, left == 2 ? tail : ~uint64_t{0}, w + 1, slot, f0 + 64);
+        if (left > 2) word(x2, tb8, flip, tail, w + 2, slot, f0 + 128);
       }
-      w[nw - 1] &= tail;
+      if (HWY_UNLIKELY(tb.count > TieBuffer::kCap)) SettleTies(key, c1, pixels, T, refine_base, nw, words, tb);
+    };
+    // Pixels in fours: their Philox chains interleaved (the last pixel is repeated to fill the four).
+    constexpr size_t K = 4;
+    for (size_t j = 0; j < count; j += K) {
+      uint32_t sl[K], cc2[K], cc3[K];
+      for (size_t s = 0; s < K; ++s) {
+        sl[s] = static_cast<uint32_t>(slots[std::min(j + s, count - 1)]);
+        cc2[s] = static_cast<uint32_t>(pixels[sl[s]]);
+        cc3[s] = static_cast<uint32_t>(pixels[sl[s]] >> 32);
+      }
+      const size_t live = std::min(K, count - j);
+      for (uint32_t ch = 0; ch < chunks; ++ch) {
+        V32 x[K][4];
+        if (ch == 0) {
+          Philox10From2K<K>(d32, key, c1, cc2, cc3, hi0_iota, lo0_iota, x);
+        } else {
+          for (size_t s = 0; s < K; ++s) {
+            x[s][0] = hn::Iota(d32, 16 * ch);
+            x[s][1] = hn::Set(d32, c1);
+            x[s][2] = hn::Set(d32, cc2[s]);
+            x[s][3] = hn::Set(d32, cc3[s]);
+          }
+          PhiloxRoundsK<K>(d32, 10, key[0], key[1], x);
+        }
+        // constant indices into x only (a runtime index would keep the chains in memory)
+        emit(sl[0], ch, x[0][0], x[0][1], x[0][2], x[0][3]);
+        if (live > 1) emit(sl[1], ch, x[1][0], x[1][1], x[1][2], x[1][3]);
+        if (live > 2) emit(sl[2], ch, x[2][0], x[2][1], x[2][2], x[2][3]);
+        if (live > 3) emit(sl[3], ch, x[3][0], x[3][1], x[3][2], x[3][3]);
+      }
+      for (size_t s = 0; s < live; ++s) words[static_cast<size_t>(sl[s]) * nw + nw - 1] &= tail;
     }
+    SettleTies(key, c1, pixels, T, refine_base, nw, words, tb);
     return;
   }
 #endif
+  alignas(64) uint32_t buf32[64];
+  alignas(8) uint8_t lt[32 + 8], eq[32 + 8];  // a chunk's 256 comparisons each, as bits
   for (size_t j = 0; j < count; ++j) {
-    const uint32_t slot = slots[j];
-    const uint32_t c[4] = {0, c1, c2[slot], c3[slot]};
+    const auto slot = static_cast<uint32_t>(slots[j]);
+    const uint32_t c[4] = {0, c1, static_cast<uint32_t>(pixels[slot]), static_cast<uint32_t>(pixels[slot] >> 32)};
     const auto tbs = static_cast<uint8_t>(T[slot] >> 56);
-    const auto tb = hn::Set(d8, tbs);
+    const auto tbv = hn::Set(d8, tbs);
     uint64_t* w = words + static_cast<size_t>(slot) * nw;
-    auto* dst = reinterpret_cast<uint8_t*>(w);
+    const uint64_t flip = flips[slot];
     for (uint32_t ch = 0; ch < chunks; ++ch) {
       Philox16(key, c, 16 * ch, buf32);
       const auto* bytes = reinterpret_cast<const uint8_t*>(buf32);
       if (L < 8) {  // a target narrower than one mask byte: plain comparisons
-        std::memset(mask, 0, 32);
+        std::memset(lt, 0, 32);
+        std::memset(eq, 0, 32);
         for (uint32_t i = 0; i < 256; ++i) {
-          if (bytes[i] < tbs) mask[i / 8] = static_cast<uint8_t>(mask[i / 8] | (1u << (i % 8)));
-          if (bytes[i] == tbs && ch * 256 + i < n) {
-            tie_slot->push_back(slot);
-            tie_frame->push_back(ch * 256 + i);
-          }
+          lt[i / 8] = static_cast<uint8_t>(lt[i / 8] | (bytes[i] < tbs) << (i % 8));
+          eq[i / 8] = static_cast<uint8_t>(eq[i / 8] | (bytes[i] == tbs) << (i % 8));
         }
       } else {
         for (size_t off = 0; off < 256; off += L) {
           const auto v = hn::LoadU(d8, bytes + off);
-          hn::StoreMaskBits(d8, hn::Lt(v, tb), mask + off / 8);
-          const auto eq = hn::Eq(v, tb);
-          if (HWY_UNLIKELY(!hn::AllFalse(d8, eq))) {
-            alignas(8) uint8_t eq_bits[kMaxEqBytes] = {};
-            hn::StoreMaskBits(d8, eq, eq_bits);
-            for (size_t wb = 0; wb < (L + 63) / 64; ++wb) {
-              uint64_t m;
-              std::memcpy(&m, eq_bits + 8 * wb, 8);
-              for (; m != 0; m &= m - 1) {
-                const uint32_t f = ch * 256 + static_cast<uint32_t>(off + 64 * wb) + static_cast<uint32_t>(std::countr_zero(m));
-                if (f >= n) continue;
-                tie_slot->push_back(slot);
-                tie_frame->push_back(f);
-              }
-            }
-          }
+          hn::StoreMaskBits(d8, hn::Lt(v, tbv), lt + off / 8);
+          hn::StoreMaskBits(d8, hn::Eq(v, tbv), eq + off / 8);
         }
       }
-      const size_t begin = static_cast<size_t>(ch) * 32;
-      std::memcpy(dst + begin, mask, std::min<size_t>(32, total_bytes - begin));
+      for (uint32_t v = 0; v < 4; ++v) {
+        const size_t wi = static_cast<size_t>(ch) * 4 + v;
+        if (wi >= nw) break;
+        uint64_t bits, m;
+        std::memcpy(&bits, lt + 8 * v, 8);
+        std::memcpy(&m, eq + 8 * v, 8);
+        w[wi] = bits ^ flip;
+        AppendTies(tb, slot, 64 * static_cast<uint32_t>(wi), wi + 1 == nw ? m & tail : m);
+        if (HWY_UNLIKELY(tb.count > TieBuffer::kCap)) SettleTies(key, c1, pixels, T, refine_base, nw, words, tb);
+      }
     }
-    const uint64_t flip = invert[slot] ? ~uint64_t{0} : 0;
-    for (size_t i = 0; i < nw; ++i) w[i] ^= flip;
     w[nw - 1] &= tail;
   }
+  SettleTies(key, c1, pixels, T, refine_base, nw, words, tb);
+}
+
+// Philox on 64-bit lanes: each lane carries one block's 32-bit word in its low half; the high half is
+// ignored (MulEven reads only the low halves; the outputs are the low halves), so the lanes line up with
+// 64-bit data (doubles, thresholds). Bit-identical to Philox10 per block.
+// The 64-bit products of the lanes' low halves with m.
+template <class D64>
+HWY_INLINE hn::Vec<D64> MulLow32(D64 d, hn::Vec<D64> a, uint32_t m) {
+#if HWY_TARGET == HWY_SCALAR
+  return hn::Set(d, (hn::GetLane(a) & 0xFFFFFFFFu) * m);
+#else
+  const hn::Repartition<uint32_t, D64> d32;
+  return hn::MulEven(hn::BitCast(d32, a), hn::BitCast(d32, hn::Set(d, uint64_t{m})));
+#endif
+}
+
+template <class D64>
+HWY_INLINE void Philox10x64(D64 d, uint32_t ka, uint32_t kb, hn::Vec<D64>& x0, hn::Vec<D64>& x1, hn::Vec<D64>& x2,
+                            hn::Vec<D64>& x3) {
+  for (int round = 0; round < 10; ++round) {
+    const auto p0 = MulLow32(d, x0, kPhiloxM0);  // (hi0, lo0) of x0 * M0
+    const auto p1 = MulLow32(d, x2, kPhiloxM1);  // (hi1, lo1) of x2 * M1
+    x0 = hn::Xor(hn::Xor(hn::ShiftRight<32>(p1), x1), hn::Set(d, uint64_t{ka}));
+    x2 = hn::Xor(hn::Xor(hn::ShiftRight<32>(p0), x3), hn::Set(d, uint64_t{kb}));
+    x1 = p1;
+    x3 = p0;
+    ka += kPhiloxW0;
+    kb += kPhiloxW1;
+  }
+}
+
+// probability_threshold lane by lane: floor(x 2^64), 0 unless x > 0, saturated at 2^64 - 1. t = x 2^64 is
+// exact; below 2^63 the signed truncation is the floor; in [2^63, 2^64) t is a multiple of 2^11, so t / 2
+// converts exactly and doubles back.
+template <class D>
+HWY_INLINE hn::Vec<hn::RebindToUnsigned<D>> Threshold64(D d, hn::Vec<D> x) {
+  const hn::RebindToSigned<D> di;
+  const hn::RebindToUnsigned<D> du;
+  const auto t = hn::Mul(x, hn::Set(d, 18446744073709551616.0));
+  const auto below63 = hn::Lt(t, hn::Set(d, 9223372036854775808.0));
+  const auto lo = hn::BitCast(du, hn::ConvertTo(di, hn::IfThenElseZero(below63, t)));
+  const auto hi = hn::ShiftLeft<1>(hn::BitCast(du, hn::ConvertTo(di, hn::IfThenZeroElse(below63, hn::Mul(t, hn::Set(d, 0.5))))));
+  auto r = hn::IfThenElse(hn::RebindMask(du, below63), lo, hi);
+  r = hn::IfThenElse(hn::RebindMask(du, hn::Ge(t, hn::Set(d, 18446744073709551616.0))), hn::Set(du, ~uint64_t{0}), r);
+  return hn::IfThenElseZero(hn::RebindMask(du, hn::Gt(x, hn::Zero(d))), r);
+}
+
+// One group of sample_bits_batch (see frame_bits_group), vectorised over pixels: a = min(p, q) as
+// std::min gives it, the fills, the classes, the thresholds, block 0 of every stream (Philox on 64-bit
+// lanes, aligned with the doubles) and the sparse pixels' first binomial test, with the lists compressed
+// from masks (no branch on a pixel's class).
+size_t FrameBitsGroup(const uint32_t key[2], uint32_t c1, const uint64_t* HWY_RESTRICT pixels,
+                      const Prob* HWY_RESTRICT pr, size_t count, uint32_t n, double sparse_below,
+                      uint64_t* HWY_RESTRICT words, uint32_t* HWY_RESTRICT slow, uint32_t* HWY_RESTRICT block0) {
+  static_assert(sizeof(Prob) == 3 * sizeof(double), "Prob is read as interleaved doubles");
+  const hn::ScalableTag<double> d;
+  const hn::RebindToUnsigned<decltype(d)> du;
+  const size_t L = hn::Lanes(d);
+  constexpr size_t kMaxL = hn::MaxLanes(hn::ScalableTag<double>());
+  const size_t nw = (static_cast<size_t>(n) + 63) / 64;
+  const uint64_t tail = n % 64 != 0 ? (uint64_t{1} << (n % 64)) - 1 : ~uint64_t{0};
+  alignas(64) uint64_t T[kFrameGroup + kMaxL], fill[kFrameGroup + kMaxL], b[4][kFrameGroup + kMaxL];
+  alignas(64) uint64_t dense[kFrameGroup + kMaxL], slow_list[kFrameGroup + kMaxL];
+  size_t nd = 0, ns = 0;
+  const auto vn = hn::Set(d, static_cast<double>(n));
+  const auto below = hn::Set(d, sparse_below);
+  const auto low32 = hn::Set(du, uint64_t{0xFFFFFFFFu});
+  for (size_t i = 0; i < count; i += L) {
+    hn::Vec<decltype(d)> vp, vq, vl;
+    hn::Vec<decltype(du)> pix;
+    if (i + L <= count) {
+      hn::LoadInterleaved3(d, &pr[i].p, vp, vq, vl);
+      pix = hn::LoadU(du, pixels + i);
+    } else {  // the tail through padded copies: p = 0, q = 1 (a = 0: no list) beyond count
+      alignas(64) double tp[3 * kMaxL];
+      alignas(64) uint64_t tx[kMaxL] = {};
+      for (size_t j = 0; j < L; ++j) {
+        const Prob q = i + j < count ? pr[i + j] : Prob{0.0, 1.0, 0.0};
+        tp[3 * j] = q.p;
+        tp[3 * j + 1] = q.q;
+        tp[3 * j + 2] = q.log_q;
+        tx[j] = i + j < count ? pixels[i + j] : 0;
+      }
+      hn::LoadInterleaved3(d, tp, vp, vq, vl);
+      pix = hn::Load(du, tx);
+    }
+    const auto a = hn::IfThenElse(hn::Lt(vq, vp), vq, vp);  // std::min(p, q)
+    const auto inv = hn::Gt(vp, vq);
+    const auto is_dense = hn::Gt(a, below);
+    const auto is_sparse = hn::AndNot(is_dense, hn::Gt(a, hn::Zero(d)));
+    hn::Store(Threshold64(d, a), du, T + i);
+    hn::Store(hn::BitCast(du, hn::VecFromMask(d, inv)), du, fill + i);
+    // block 0 of the streams: counter (0, c1, pixel low, pixel high)
+    auto x0 = hn::Zero(du), x1 = hn::Set(du, uint64_t{c1}), x2 = pix, x3 = hn::ShiftRight<32>(pix);
+    Philox10x64(du, key[0], key[1], x0, x1, x2, x3);
+    hn::Store(x0, du, b[0] + i);
+    hn::Store(x1, du, b[1] + i);
+    hn::Store(x2, du, b[2] + i);
+    hn::Store(x3, du, b[3] + i);
+    // BinomialSampler::small_side's first test on U = (word 0, word 1): no rare outcome when n a < 1 and
+    // U >= floor(n a 2^64)
+    const auto U = hn::Or(hn::ShiftLeft<32>(x0), hn::And(x1, low32));
+    const auto mean = hn::Mul(vn, a);
+    const auto none = hn::And(hn::Lt(mean, hn::Set(d, 1.0)), hn::RebindMask(d, hn::Not(hn::Lt(U, Threshold64(d, mean)))));
+    const auto go_slow = hn::AndNot(none, is_sparse);
+    const auto idx = hn::Iota(du, uint64_t{i});
+    nd += hn::CompressStore(idx, hn::RebindMask(du, is_dense), du, dense + nd);
+    ns += hn::CompressStore(idx, hn::RebindMask(du, go_slow), du, slow_list + ns);
+  }
+  // every pixel's words all equal first (final for a = 0 and for sparse pixels without a rare outcome)
+  for (size_t i = 0; i < count; ++i) {
+    uint64_t* w = words + i * nw;
+    for (size_t j = 0; j + 1 < nw; ++j) w[j] = fill[i];
+    w[nw - 1] = fill[i] & tail;
+  }
+  if (nd > 0) DenseBitsBatch(key, c1, pixels, T, fill, dense, nd, n, words);
+  for (size_t j = 0; j < ns; ++j) {
+    const size_t i = slow_list[j];
+    slow[j] = static_cast<uint32_t>(i);
+    for (size_t v = 0; v < 4; ++v) block0[4 * j + v] = static_cast<uint32_t>(b[v][i]);
+  }
+  return ns;
 }
 
 const char* TargetName() { return hwy::TargetName(HWY_TARGET); }
@@ -272,12 +541,11 @@ namespace spadgen::sensor {
 
 HWY_EXPORT(DenseBits);
 HWY_EXPORT(TargetName);
-HWY_EXPORT(DenseBitsBatch);
+HWY_EXPORT(FrameBitsGroup);
 
-void dense_bits_batch(const uint32_t key[2], uint32_t c1, const uint32_t* c2, const uint32_t* c3, const uint64_t* T,
-                      const bool* invert, const uint32_t* slots, size_t count, uint32_t n, uint64_t* words,
-                      std::vector<uint32_t>& tie_slot, std::vector<uint32_t>& tie_frame) {
-  HWY_DYNAMIC_DISPATCH(DenseBitsBatch)(key, c1, c2, c3, T, invert, slots, count, n, words, &tie_slot, &tie_frame);
+size_t frame_bits_group(const uint32_t key[2], uint32_t c1, const uint64_t* pixels, const Prob* pr, size_t count,
+                        uint32_t n, double sparse_below, uint64_t* words, uint32_t* slow, uint32_t* block0) {
+  return HWY_DYNAMIC_DISPATCH(FrameBitsGroup)(key, c1, pixels, pr, count, n, sparse_below, words, slow, block0);
 }
 
 void dense_bits(const Rng& stream, uint32_t n, uint64_t T, uint64_t* words) {

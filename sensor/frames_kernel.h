@@ -8,25 +8,26 @@
 #pragma once
 #include <cstddef>
 #include <cstdint>
-#include <vector>
 
 #include "core/rng.h"
+#include "sensor/sampling.h"
 
 namespace spadgen::sensor {
 
 // words[0 .. ceil(n / 64)): bit f set when U_f < T, U_f the frame's 64-bit uniform as described above.
 void dense_bits(const Rng& stream, uint32_t n, uint64_t T, uint64_t* words);
 
-// dense_bits for many streams of one key in one call (sample_bits_batch's dense pixels of a group), with
-// the top-byte ties left open: for each slot i in slots[0 .. count), the stream with counter
-// (0, c1, c2[i], c3[i]) and threshold T[i] writes words[i * ceil(n / 64) ...] (all of them), bitwise inverted when invert[i] (the
-// pixel counts misses); a tie is appended to tie_slot / tie_frame and its bit left as the comparison gave
-// it (0, or 1 when inverted), so the caller settles it by toggling the bit when the tie block's 56 bits
-// are < (T[i] mod 2^56): the first 56 bits (word 0 high, word 1 low) of block 16 * ceil(n / 256) + frame.
-// Bit-identical to dense_bits followed by the inversion.
-void dense_bits_batch(const uint32_t key[2], uint32_t c1, const uint32_t* c2, const uint32_t* c3, const uint64_t* T,
-                      const bool* invert, const uint32_t* slots, size_t count, uint32_t n, uint64_t* words,
-                      std::vector<uint32_t>& tie_slot, std::vector<uint32_t>& tie_frame);
+// One group of sample_bits_batch: count <= kFrameGroup pixels, stream i = (0, c1, pixels[i]) under one key
+// (the Frames streams of one gate position), probabilities pr[i], n frames, words[i * ceil(n / 64) ...].
+// Every pixel's words get their all-equal fill (0, or 1 where the pixel counts misses, p > q); the dense
+// pixels (min(p, q) > sparse_below) their bits as dense_bits gives them, inverted where they count misses
+// (top-byte ties collected without branches, settled by one vectorised Philox per 16); the sparse pixels
+// whose binomial draw's first test says "no rare outcome" are final with the fill. The other sparse pixels
+// are returned: slow[0 .. return value) (indices into the group) with block 0 of their streams in
+// block0[4 j ...], for the caller's sparse path.
+inline constexpr size_t kFrameGroup = 256;
+size_t frame_bits_group(const uint32_t key[2], uint32_t c1, const uint64_t* pixels, const Prob* pr, size_t count,
+                        uint32_t n, double sparse_below, uint64_t* words, uint32_t* slow, uint32_t* block0);
 
 // dense_bits' bit of one frame, with Rng::block (the reference the tests compare the kernel with).
 bool dense_bit_reference(const Rng& stream, uint32_t n, uint64_t T, uint32_t frame);

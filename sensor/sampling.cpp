@@ -11,7 +11,7 @@ namespace spadgen::sensor {
 namespace {
 
 constexpr double kTwo64 = 18446744073709551616.0;  // 2^64
-constexpr double kSparseBelow = 1.0 / 16.0;
+constexpr double kSparseBelow = 1.0 / 512.0;
 constexpr double kModeSearchFrom = BinomialSampler::mode_search_from();
 
 }  // namespace
@@ -161,84 +161,23 @@ void sample_bits(const Rng& stream, const BinomialSampler& sampler, const Prob& 
 
 void sample_bits_batch(uint64_t seed, uint64_t k, const uint64_t* pixels, size_t count,
                        const BinomialSampler& sampler, const Prob* pr, uint64_t* words) {
-  constexpr size_t kGroup = 64;
   const uint32_t n = sampler.n();
+  if (n == 0) return;  // no words (frame_bits_group writes each pixel's last word)
   const size_t nw = (n + 63) / 64;
-  const uint32_t refine_base = (n + 255) / 256 * 16;  // dense_bits' tie block of frame f: refine_base + f
-  constexpr uint64_t kLow56 = (uint64_t{1} << 56) - 1;
   const Rng base(seed, RngKind::Frames, 0, k);
   const uint32_t key[2] = {base.key().v[0], base.key().v[1]};
-  uint32_t c1[kGroup], c2[kGroup], c3[kGroup], blocks[4 * kGroup];
-  // Dense pixels' top-byte ties of one group, settled together by one vectorised Philox: the tie of frame f
-  // of pixel slot i takes the first 56 bits of block refine_base + f of that pixel's stream, exactly as
-  // dense_bits does one at a time. Dense pixels that count misses (a = q) are inverted by the kernel.
-  std::vector<uint32_t> t_slot, t_frame, t0, t1, t2, t3, tb;
-  uint64_t T_of[kGroup], t_rest[kGroup];
-  bool inverted[kGroup];
-  uint32_t dense[kGroup];
-  for (size_t g = 0; g < count; g += kGroup) {
-    const size_t c = std::min(kGroup, count - g);
-    for (size_t i = 0; i < c; ++i) {
-      c1[i] = static_cast<uint32_t>(k);
-      c2[i] = static_cast<uint32_t>(pixels[g + i]);
-      c3[i] = static_cast<uint32_t>(pixels[g + i] >> 32);
-    }
-    philox_block0(key, c1, c2, c3, c, blocks);
-    t_slot.clear();
-    t_frame.clear();
-    size_t nd = 0;
-    for (size_t i = 0; i < c; ++i) {
-      const Prob& p = pr[g + i];
-      uint64_t* w = words + (g + i) * nw;
-      const double a = std::min(p.p, p.q);
-      if (!(a > 0.0)) {  // all bits equal: block 0 is not drawn from
-        const uint64_t fill = p.p > p.q ? ~uint64_t{0} : 0;
-        std::fill(w, w + nw, fill);
-        if (fill != 0 && n % 64 != 0) w[nw - 1] &= (uint64_t{1} << (n % 64)) - 1;
-        continue;
-      }
-      const bool invert = p.p > p.q;
-      if (a > kSparseBelow) {  // dense: all of the group's at once below, as bits_of_stream
-        T_of[i] = probability_threshold(a);
-        t_rest[i] = T_of[i] & kLow56;
-        inverted[i] = invert;
-        dense[nd++] = static_cast<uint32_t>(i);
-        continue;
-      }
-      // Sparse and no rare outcome at all: the binomial draw's first test (BinomialSampler::small_side,
-      // U >= floor(n a 2^64) with n a < 1) on block 0's U, without setting up the stream. The common case
-      // for background pixels; the same bits as bits_of_stream.
-      const double mean = static_cast<double>(n) * a;
-      const uint64_t U = (uint64_t{blocks[4 * i]} << 32) | blocks[4 * i + 1];
-      if (mean < 1.0 && U >= probability_threshold(mean)) {
-        std::fill(w, w + nw, invert ? ~uint64_t{0} : uint64_t{0});
-        if (invert && n % 64 != 0) w[nw - 1] &= (uint64_t{1} << (n % 64)) - 1;
-        continue;
-      }
-      const Rng stream(seed, RngKind::Frames, pixels[g + i], k);
-      StreamReader rng(stream, {blocks[4 * i], blocks[4 * i + 1], blocks[4 * i + 2], blocks[4 * i + 3]});
-      bits_of_stream(stream, rng, sampler, p, w);
-    }
-    // The dense pixels' bits, inverted where they count misses, with their top-byte ties listed; each
-    // tie's bit is then toggled when its refinement says U < T (0 -> 1, or 1 -> 0 when inverted).
-    if (nd > 0) dense_bits_batch(key, c1[0], c2, c3, T_of, inverted, dense, nd, n, words + g * nw, t_slot, t_frame);
-    if (!t_slot.empty()) {
-      const size_t nt = t_slot.size();
-      t0.resize(nt);
-      t1.assign(nt, static_cast<uint32_t>(k));
-      t2.resize(nt);
-      t3.resize(nt);
-      tb.resize(4 * nt);
-      for (size_t j = 0; j < nt; ++j) {
-        t0[j] = refine_base + t_frame[j];
-        t2[j] = c2[t_slot[j]];
-        t3[j] = c3[t_slot[j]];
-      }
-      philox_blocks(key, t0.data(), t1.data(), t2.data(), t3.data(), nt, tb.data());
-      for (size_t j = 0; j < nt; ++j) {
-        const uint64_t u = ((uint64_t{tb[4 * j]} << 32) | tb[4 * j + 1]) & kLow56;
-        if (u < t_rest[t_slot[j]]) words[(g + t_slot[j]) * nw + t_frame[j] / 64] ^= uint64_t{1} << (t_frame[j] % 64);
-      }
+  uint32_t slow[kFrameGroup], block0[4 * kFrameGroup];
+  for (size_t g = 0; g < count; g += kFrameGroup) {
+    // Fills, dense pixels and the sparse pixels without a rare outcome, vectorised (frame_bits_group); the
+    // remaining sparse pixels take bits_of_stream with their block 0 from there.
+    const size_t c = std::min(kFrameGroup, count - g);
+    const size_t ns = frame_bits_group(key, static_cast<uint32_t>(k), pixels + g, pr + g, c, n, kSparseBelow,
+                                       words + g * nw, slow, block0);
+    for (size_t j = 0; j < ns; ++j) {
+      const size_t i = g + slow[j];
+      const Rng stream(seed, RngKind::Frames, pixels[i], k);
+      StreamReader rng(stream, {block0[4 * j], block0[4 * j + 1], block0[4 * j + 2], block0[4 * j + 3]});
+      bits_of_stream(stream, rng, sampler, pr[i], words + i * nw);
     }
   }
 }

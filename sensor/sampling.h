@@ -8,8 +8,9 @@
 // the bit is inverted when a = q). U is built lazily: its top byte comes from the pixel's byte stream and
 // decides the comparison unless it equals T's top byte (probability 1/256); only then are 56 more bits
 // drawn. Expected random bytes per bit: 1 + 7/256 = 1.027 (1.004 blocks of 128 bits per 16 bits).
-// When a <= 1/16 the bits are drawn sparsely instead: the number of set bits ~ Binomial(N, a), then their
+// When a <= 1/512 the bits are drawn sparsely instead: the number of set bits ~ Binomial(N, a), then their
 // positions as a uniformly random subset (Floyd's algorithm); the joint law is the same i.i.d. Bernoulli.
+// (Both ways are exact for any a; the bound picks the cheaper: see docs/sensor.md.)
 //
 // Binomial: inversion. Mean below 16: sequential search from 0 on the survival function, computed from
 // -expm1 so that P(X >= 1) is exact even for a = 1e-15, compared with U as exact 64-bit thresholds.
@@ -108,9 +109,9 @@ class BinomialSampler {
 void sample_bits(const Rng& stream, const BinomialSampler& sampler, const Prob& pr, uint64_t* words);
 
 // The same for many streams at once: pixel i's bits come from the stream Rng(seed, Frames, pixels[i], k)
-// and go to words[i * ceil(n / 64) ...], bit-identical to sample_bits. Block 0 of every stream is computed
-// by a vectorised Philox, so a pixel whose bits are all equal (the common case at low p) costs no scalar
-// Philox block.
+// and go to words[i * ceil(n / 64) ...], bit-identical to sample_bits. Groups of 256 pixels go through one
+// vectorised kernel (frame_bits_group: classes, fills, block 0, the sparse first test, the dense pixels);
+// only the sparse pixels with a rare outcome take the scalar sparse path here.
 void sample_bits_batch(uint64_t seed, uint64_t k, const uint64_t* pixels, size_t count,
                        const BinomialSampler& sampler, const Prob* pr, uint64_t* words);
 

@@ -615,7 +615,7 @@ nlohmann::json SensorModel::describe() const {
   j["sampling"] = {{"counts", m.cfg.outputs.frames ? "popcount of the sampled frames"
                               : m.table ? "Binomial(N, p) exactly: thinning at a 1/4096 grid, 64-bit CDF tables, then a second round"
                                         : "Binomial(N, p) by exact inversion"},
-                   {"bernoulli", "64-bit threshold, top byte first (dense) or binomial + uniform subset (p or 1-p <= 1/16)"},
+                   {"bernoulli", "64-bit threshold, top byte first (dense) or binomial + uniform subset (p or 1-p <= 1/512)"},
                    {"simd_target", dense_bits_target()}};
   return j;
 }

@@ -111,10 +111,13 @@ TEST(Sampling, BernoulliBitsChiSquare) {
   check_bits(1e-3, 1.0 - 1e-3, 255, 200000, 11);   // sparse path
   check_bits(0.5, 0.5, 255, 20000, 12);            // dense path
   check_bits(0.2, 0.8, 300, 20000, 13);            // dense, n not a multiple of 64
-  check_bits(0.97, 0.03, 255, 50000, 14);          // sparse on the zeros
+  check_bits(0.9985, 0.0015, 255, 50000, 14);      // sparse on the zeros
+  check_bits(0.003, 0.997, 255, 50000, 16);        // dense, a just above the sparse bound
   check_bits(1.0 - 1e-6, 1e-6, 255, 200000, 15);   // p near 1
   EXPECT_TRUE(bits_are_sparse({1e-3, 1.0 - 1e-3}));
+  EXPECT_TRUE(bits_are_sparse({0.9985, 0.0015}));
   EXPECT_FALSE(bits_are_sparse({0.5, 0.5}));
+  EXPECT_FALSE(bits_are_sparse({0.003, 0.997}));
 }
 
 // p = 1e-9: 2^20 streams of 65535 frames (6.9e10 Bernoulli trials, 68.7 expected ones).
@@ -322,25 +325,37 @@ TEST(Sampling, ZeroDecisionAtTheThreshold) {
   }
 }
 
-// sample_bits_batch (block 0 of every stream from the vectorised Philox) equals sample_bits per stream.
+// sample_bits_batch (block 0 of the sparse streams from the vectorised Philox, branch-free classification,
+// groups of 256) equals sample_bits per stream; n = 2000 also has sparse pixels with n a >= 1.
 TEST(Sampling, BatchBitsEqualPerStreamBits) {
-  const uint32_t n = 255;
-  const BinomialSampler sampler(n);
-  const size_t count = 203;
-  std::vector<uint64_t> ids(count);
-  std::vector<Prob> pr(count);
-  const std::vector<double> rates = {0.0, 1e-7, 1e-4, 3e-3, 0.03, 0.07, 0.5, 1.0, 3.0, 8.0, 30.0, HUGE_VAL};
-  for (size_t i = 0; i < count; ++i) {
-    ids[i] = (uint64_t{1} << 32) - 50 + i * 3;  // crosses 2^32: both counter words vary
-    const double l = rates[i % rates.size()];
-    pr[i] = prob_from_lambda(l);
+  for (const uint32_t n : {255u, 2000u}) {
+    const BinomialSampler sampler(n);
+    const size_t count = 603, nw = (n + 63) / 64;
+    std::vector<uint64_t> ids(count);
+    std::vector<Prob> pr(count);
+    const std::vector<double> rates = {0.0, 1e-7, 1e-4, 1e-3, 1.9e-3, 3e-3, 0.03, 0.07, 0.5, 1.0, 3.0, 5.4, 8.0, 30.0, HUGE_VAL};
+    for (size_t i = 0; i < count; ++i) {
+      ids[i] = (uint64_t{1} << 32) - 50 + i * 3;  // crosses 2^32: both counter words vary
+      const double l = rates[i % rates.size()];
+      pr[i] = prob_from_lambda(l);
+    }
+    std::vector<uint64_t> batch(count * nw), one(nw);
+    sample_bits_batch(7, 11, ids.data(), count, sampler, pr.data(), batch.data());
+    for (size_t i = 0; i < count; ++i) {
+      sample_bits(Rng(7, RngKind::Frames, ids[i], 11), sampler, pr[i], one.data());
+      for (size_t w = 0; w < nw; ++w) ASSERT_EQ(batch[nw * i + w], one[w]) << "n " << n << " pixel " << i;
+    }
   }
-  std::vector<uint64_t> batch(count * 4), one(4);
-  sample_bits_batch(7, 11, ids.data(), count, sampler, pr.data(), batch.data());
-  for (size_t i = 0; i < count; ++i) {
-    sample_bits(Rng(7, RngKind::Frames, ids[i], 11), sampler, pr[i], one.data());
-    for (size_t w = 0; w < 4; ++w) ASSERT_EQ(batch[4 * i + w], one[w]) << i;
-  }
+}
+
+// n = 0 frames: no words, nothing written (the batch's kernel writes each pixel's last word otherwise).
+TEST(Sampling, BatchBitsWithNoFramesWriteNothing) {
+  const BinomialSampler sampler(0);
+  const std::vector<uint64_t> ids = {1, 2, 3};
+  const std::vector<Prob> pr = {prob_from_lambda(0.0), prob_from_lambda(1e-4), prob_from_lambda(1.0)};
+  std::vector<uint64_t> guard(4, 0x5555555555555555ull);
+  sample_bits_batch(3, 1, ids.data(), ids.size(), sampler, pr.data(), guard.data() + 2);
+  for (uint64_t g : guard) EXPECT_EQ(g, 0x5555555555555555ull);
 }
 
 // The batch settles the dense pixels' top-byte ties with one vectorised Philox per group: every frame
