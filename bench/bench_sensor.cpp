@@ -38,8 +38,8 @@ std::vector<double> realistic_lambdas(size_t n) {
 }
 
 // The sampler alone: N = 255 Bernoulli bits per pixel and gate position, keyed streams, all threads.
-// Per block of 1024 pixels: p, q from lambda (vectorised), then sample_bits_batch (what process() calls
-// for a row of pixels at one gate position).
+// Per block of 1024 pixels: Prob {p, q, -lambda} from lambda (vectorised, as process() forms them for a
+// tile), then sample_bits_batch (what process() calls for a row of pixels at one gate position).
 void BM_FrameBits(benchmark::State& state) {
   const uint32_t N = 255;
   const size_t pixels = 1 << 16, block = 1024;
@@ -49,13 +49,13 @@ void BM_FrameBits(benchmark::State& state) {
   const sensor::BinomialSampler sampler(N);
   std::vector<uint64_t> words(pixels * 4);
   uint64_t k = 0;
+  // Prob of every pixel, as process() forms them for a tile (all gates of a pixel in one pass), into a buffer
+  // per block that lives as long as the run, as process()'s does
+  std::vector<sensor::Prob> prob(pixels);
   for (auto _ : state) {
     tbb::parallel_for(tbb::blocked_range<size_t>(0, pixels, block), [&](const tbb::blocked_range<size_t>& r) {
-      std::vector<double> p(r.size()), q(r.size());
-      std::vector<sensor::Prob> pr(r.size());
-      sensor::probabilities(lam.data() + r.begin(), r.size(), p.data(), q.data());
-      for (size_t i = 0; i < r.size(); ++i) pr[i] = {p[i], q[i], -lam[r.begin() + i]};
-      sensor::sample_bits_batch(1, k, ids.data() + r.begin(), r.size(), sampler, pr.data(), words.data() + 4 * r.begin());
+      sensor::probabilities(lam.data() + r.begin(), r.size(), prob.data() + r.begin(), 1);
+      sensor::sample_bits_batch(1, k, ids.data() + r.begin(), r.size(), sampler, prob.data() + r.begin(), words.data() + 4 * r.begin());
     });
     benchmark::DoNotOptimize(words.data());
     ++k;

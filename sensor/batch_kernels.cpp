@@ -501,6 +501,38 @@ void TransposeRowsU16(const uint16_t* src, size_t width, size_t K, uint16_t* dst
   TransposeRowsImpl(src, width, K, dst, dst_stride);
 }
 
+// Prob {p, q, -lambda} of K rates: out[k * stride] (stride 1: one interleaved store per vector), and p
+// alone into p_out[k] when p_out is not null. The same p and q as Probabilities.
+void ProbsOfRates(const double* HWY_RESTRICT lam, size_t K, double* HWY_RESTRICT p_out, Prob* out, size_t stride) {
+  const hn::ScalableTag<double> d;
+  const size_t L = hn::Lanes(d);
+  alignas(64) double tl[hn::MaxLanes(d)], tp[hn::MaxLanes(d)], tq[hn::MaxLanes(d)];
+  for (size_t k = 0; k < K; k += L) {
+    const size_t c = std::min(L, K - k);
+    hn::Vec<decltype(d)> l;
+    if (c == L) {
+      l = hn::LoadU(d, lam + k);
+    } else {
+      std::fill(tl, tl + L, 0.0);
+      std::copy(lam + k, lam + K, tl);
+      l = hn::Load(d, tl);
+    }
+    const auto nl = hn::Neg(ClampRate(d, l));
+    const auto p = hn::Neg(hn::Expm1(d, nl)), q = hn::Exp(d, nl);
+    if (c == L && stride == 1) {
+      hn::StoreInterleaved3(p, q, hn::Neg(l), d, reinterpret_cast<double*>(out + k));
+      if (p_out != nullptr) hn::StoreU(p, d, p_out + k);
+      continue;
+    }
+    hn::Store(p, d, tp);
+    hn::Store(q, d, tq);
+    for (size_t j = 0; j < c; ++j) {
+      out[(k + j) * stride] = Prob{tp[j], tq[j], -lam[k + j]};
+      if (p_out != nullptr) p_out[k + j] = tp[j];
+    }
+  }
+}
+
 const char* KernelTarget() { return hwy::TargetName(HWY_TARGET); }
 
 }  // namespace HWY_NAMESPACE
@@ -511,6 +543,7 @@ HWY_AFTER_NAMESPACE();
 namespace spadgen::sensor {
 
 HWY_EXPORT(Probabilities);
+HWY_EXPORT(ProbsOfRates);
 HWY_EXPORT(CrosstalkRates);
 HWY_EXPORT(PhiloxBlocks);
 HWY_EXPORT(BinomialCounts);
@@ -528,6 +561,11 @@ void KernelScratch::reserve(size_t K) {
 
 void probabilities(const double* lam, size_t K, double* p, double* q) {
   HWY_DYNAMIC_DISPATCH(Probabilities)(lam, K, p, q);
+}
+
+void probabilities(const double* lam, size_t K, Prob* out, size_t stride, double* p) {
+  static_assert(sizeof(Prob) == 3 * sizeof(double), "Prob is three doubles, stored interleaved");
+  HWY_DYNAMIC_DISPATCH(ProbsOfRates)(lam, K, p, out, stride);
 }
 
 void crosstalk_rates(const double* lam, size_t K, const double* const* nb, int nnb, double xt,

@@ -31,6 +31,10 @@ struct KernelScratch {
 // nullptr when only p is needed.
 void probabilities(const double* lam, size_t K, double* p, double* q);
 
+// The same as Prob {p, q, -lam[k]} into out[k * stride] (the frames' per-gate input), and p alone into
+// p[k] when p is not null.
+void probabilities(const double* lam, size_t K, Prob* out, size_t stride, double* p = nullptr);
+
 // Rates with crosstalk from nnb neighbours (arrays of K): pixel A (single_avalanche false)
 // out = lam + xt * sum_i nb[i] with nb the neighbours' lambda; pixel B out = lam - sum_i log1p(-xt nb[i])
 // with nb the neighbours' p (computed as -log of prod_i (1 - xt nb[i]) with one logarithm; within 8 ulp of

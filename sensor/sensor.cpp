@@ -358,7 +358,10 @@ SensorTile SensorModel::process(const TransientTile& t) const {
   const auto uninit = [](size_t count) { return std::make_unique_for_overwrite<double[]>(count); };
   const auto lam = uninit(nreg * Ks);
   const bool own_probs = frames || m.halo > 0;
-  const auto own_p = uninit(own_probs ? nreg * Ks : 0), own_q = uninit(frames ? nreg * Ks : 0);
+  const auto own_p = uninit(own_probs ? nreg * Ks : 0);
+  // With frames: every region pixel's Prob {p, q, -lambda} gate-major ([k * nreg + region index]), so a
+  // row at one gate position is the contiguous input of sample_bits_batch.
+  const auto own_prob = std::make_unique_for_overwrite<Prob[]>(frames ? nreg * Ks : 0);
   std::vector<PixelParams> params(nreg);
   tbb::parallel_for(tbb::blocked_range<int>(region.y0, region.y1()), [&](const tbb::blocked_range<int>& rows) {
     TransientPrefix prefix;
@@ -371,8 +374,10 @@ SensorTile SensorModel::process(const TransientTile& t) const {
         const double laser_total = t.laser_total.size() == ndata ? t.laser_total[di] : 0.0;
         m.lambda(params[ri], g, t.axis, &rise, &fall, t.ambient_rate[di], laser_total, prefix, lam.get() + ri * Ks);
         // without frames only pixel B's neighbours read p (pixel A's read lambda); sections keep one type
-        if (own_probs && (frames || m.types[params[ri].type].single_avalanche))
-          probabilities(lam.get() + ri * Ks, Ks, own_p.get() + ri * Ks, frames ? own_q.get() + ri * Ks : nullptr);
+        if (frames)
+          probabilities(lam.get() + ri * Ks, Ks, own_prob.get() + ri, nreg, own_p.get() + ri * Ks);
+        else if (own_probs && m.types[params[ri].type].single_avalanche)
+          probabilities(lam.get() + ri * Ks, Ks, own_p.get() + ri * Ks, nullptr);
       }
   });
 
@@ -463,18 +468,12 @@ SensorTile SensorModel::process(const TransientTile& t) const {
     // owns it), then crosstalk simulated from the neighbours' bits, counts as popcounts, packed frames.
     tbb::parallel_for(tbb::blocked_range<int>(0, K, 1), [&](const tbb::blocked_range<int>& ks) {
       std::vector<uint64_t> own(nreg * wpp), row(static_cast<size_t>(rect.width) * wpp), ids(static_cast<size_t>(region.width));
-      std::vector<Prob> prs(static_cast<size_t>(region.width));
       for (int k = ks.begin(); k < ks.end(); ++k) {
         const auto kk = static_cast<size_t>(k);
         for (int y = region.y0; y < region.y1(); ++y) {
-          for (int x = region.x0; x < region.x1(); ++x) {
-            const auto ri = static_cast<size_t>(region.index(x, y));
-            const auto i = static_cast<size_t>(x - region.x0);
-            ids[i] = pixel_index(x, y);
-            prs[i] = {own_p[ri * Ks + kk], own_q[ri * Ks + kk], -lam[ri * Ks + kk]};
-          }
+          for (int x = region.x0; x < region.x1(); ++x) ids[static_cast<size_t>(x - region.x0)] = pixel_index(x, y);
           const auto r0 = static_cast<size_t>(region.index(region.x0, y));
-          sample_bits_batch(seed, kk, ids.data(), ids.size(), *m.binom, prs.data(), own.data() + r0 * wpp);
+          sample_bits_batch(seed, kk, ids.data(), ids.size(), *m.binom, own_prob.get() + kk * nreg + r0, own.data() + r0 * wpp);
         }
         for (int y = rect.y0; y < rect.y1(); ++y) {
           for (int x = rect.x0; x < rect.x1(); ++x) {
