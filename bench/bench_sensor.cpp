@@ -7,11 +7,13 @@
 #include <tbb/parallel_for.h>
 
 #include <cmath>
+#include <memory>
 #include <vector>
 
 #include "core/rng.h"
 #include "core/tile.h"
 #include "sensor/batch_kernels.h"
+#include "sensor/binomial_table.h"
 #include "sensor/frames_kernel.h"
 #include "sensor/sampling.h"
 #include "sensor/sensor.h"
@@ -191,6 +193,49 @@ void run_sweep(benchmark::State& state, bool frames) {
     state.counters["x_camera"] = benchmark::Counter(kCameraSweepSeconds / scale, benchmark::Counter::kIsRate);
   }
 }
+
+// The counts sampler alone, for comparison with BM_CountsSweep: the rates of the same 64 x 64 sub-image
+// (gate response, no crosstalk) computed once, then per iteration Binomial(255, p) counts of every pixel's
+// 350 gates, pixels in parallel; scaled to 1024 x 1000. Argument 0: the table kernel (what process() calls
+// per pixel); 1: the walk from the mode (BinomialSampler's kernel, used before round 5 and for 2D modes).
+void BM_CountsSampling(benchmark::State& state) {
+  const int w = 64, h = 64;
+  const Scene s = make_scene(false, w, h);
+  RunConfig cfg = s.cfg;
+  cfg.camera.width_px = w;
+  cfg.camera.height_px = h;
+  const sensor::SensorModel model(cfg);
+  const auto K = static_cast<size_t>(model.K());
+  const auto bins = static_cast<size_t>(s.axis.bins);
+  std::vector<double> lam(static_cast<size_t>(w * h) * K);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const auto i = static_cast<size_t>(y * w + x);
+      const std::vector<double> l = model.pixel_lambda(x, y, s.transient.data() + i * bins, s.axis, s.ambient[i], 0.0);
+      std::copy(l.begin(), l.end(), lam.begin() + static_cast<std::ptrdiff_t>(i * K));
+    }
+  const std::shared_ptr<const sensor::BinomialTable> table = sensor::BinomialTable::get(255);
+  const sensor::BinomialSampler sampler(255);
+  const bool walk = state.range(0) == 1;
+  const Rng base(cfg.seed, RngKind::Counts, 0, 0);
+  const uint32_t key[2] = {base.key().v[0], base.key().v[1]};
+  std::vector<uint16_t> counts(lam.size());
+  for (auto _ : state) {
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, static_cast<size_t>(w * h), 32), [&](const tbb::blocked_range<size_t>& r) {
+      sensor::KernelScratch scratch;
+      for (size_t i = r.begin(); i < r.end(); ++i) {
+        if (walk) sensor::binomial_counts(lam.data() + i * K, K, key, i, sampler, scratch);
+        else sensor::binomial_counts(lam.data() + i * K, K, key, i, *table, scratch);
+        for (size_t k = 0; k < K; ++k) counts[i * K + k] = static_cast<uint16_t>(scratch.x[k]);
+      }
+    });
+    benchmark::DoNotOptimize(counts.data());
+  }
+  const double scale = 1024.0 * 1000.0 / (static_cast<double>(w * h) * static_cast<double>(state.iterations()));
+  state.counters["full_sweep_s"] = benchmark::Counter(1.0 / scale, benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+  state.counters["x_camera"] = benchmark::Counter(kCameraSweepSeconds / scale, benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_CountsSampling)->Arg(0)->Arg(1)->UseRealTime()->Unit(benchmark::kMillisecond);
 
 void BM_CountsSweep(benchmark::State& state) { run_sweep(state, false); }
 void BM_FramesSweep(benchmark::State& state) { run_sweep(state, true); }
