@@ -150,24 +150,35 @@ HWY_INLINE hn::Vec<hn::RebindToUnsigned<D>> Threshold(D d, hn::Vec<D> x) {
   return hn::IfThenElse(hn::RebindMask(du, hn::Ge(t, hn::Set(d, 0x1p64))), hn::Set(du, ~uint64_t{0}), r);
 }
 
-void BinomialCounts(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t key[2], uint64_t pixel,
-                    const BinomialSampler& sampler, KernelScratch& s) {
+// Block 0 of the streams Rng(seed, Counts, pixel, k) of every k < K (counter (0, k, pixel low, pixel
+// high)) on the widest vectors: words 0 and 1 into s.hi, s.lo, and with all_words words 2 and 3 into
+// s.hi2, s.lo2; then the rates copied into s.lam, padded with zeros to whole vectors of doubles.
+void CountsBlock0AndRates(const uint32_t key[2], size_t K, uint64_t pixel, bool all_words, const double* lam_in,
+                          KernelScratch& s) {
   const hn::ScalableTag<uint32_t> du;
   const size_t Lu = hn::Lanes(du);
-  const uint32_t N = sampler.n();
-  // Philox block 0 of every k: counter (0, k, pixel low, pixel high); U = word 0 << 32 | word 1.
   const auto plo = hn::Set(du, static_cast<uint32_t>(pixel)), phi = hn::Set(du, static_cast<uint32_t>(pixel >> 32));
   for (size_t k = 0; k < K; k += Lu) {
     auto x0 = hn::Zero(du), x1 = hn::Iota(du, static_cast<uint32_t>(k)), x2 = plo, x3 = phi;
     Philox10(du, key[0], key[1], x0, x1, x2, x3);
     hn::StoreU(x0, du, s.hi.data() + k);
     hn::StoreU(x1, du, s.lo.data() + k);
+    if (all_words) {
+      hn::StoreU(x2, du, s.hi2.data() + k);
+      hn::StoreU(x3, du, s.lo2.data() + k);
+    }
   }
+  const size_t L = hn::Lanes(hn::ScalableTag<double>());
   std::copy(lam_in, lam_in + K, s.lam.data());
+  std::fill(s.lam.begin() + static_cast<std::ptrdiff_t>(K), s.lam.begin() + static_cast<std::ptrdiff_t>((K + L - 1) / L * L), 0.0);
+}
+
+void BinomialCounts(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t key[2], uint64_t pixel,
+                    const BinomialSampler& sampler, KernelScratch& s) {
+  const uint32_t N = sampler.n();
+  CountsBlock0AndRates(key, K, pixel, false, lam_in, s);  // U = word 0 << 32 | word 1
   const hn::ScalableTag<double> d;
   const size_t L = hn::Lanes(d);
-  std::fill(s.lam.begin() + static_cast<std::ptrdiff_t>(K),
-            s.lam.begin() + static_cast<std::ptrdiff_t>((K + L - 1) / L * L), 0.0);
   const hn::RebindToUnsigned<decltype(d)> d64;
   const hn::RebindToSigned<decltype(d)> di64;
   const hn::Rebind<uint32_t, decltype(d)> d32;
@@ -329,23 +340,10 @@ void BinomialCounts(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t 
 // equal top bits take BinomialTable::first_round, lanes with a possible Y > 0 second_round.
 void BinomialCountsTable(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t key[2], uint64_t pixel,
                          const BinomialTable& table, KernelScratch& s) {
-  const hn::ScalableTag<uint32_t> du;
-  const size_t Lu = hn::Lanes(du);
   const uint32_t N = table.n();
-  const auto plo = hn::Set(du, static_cast<uint32_t>(pixel)), phi = hn::Set(du, static_cast<uint32_t>(pixel >> 32));
-  for (size_t k = 0; k < K; k += Lu) {
-    auto x0 = hn::Zero(du), x1 = hn::Iota(du, static_cast<uint32_t>(k)), x2 = plo, x3 = phi;
-    Philox10(du, key[0], key[1], x0, x1, x2, x3);
-    hn::StoreU(x0, du, s.hi.data() + k);
-    hn::StoreU(x1, du, s.lo.data() + k);
-    hn::StoreU(x2, du, s.hi2.data() + k);
-    hn::StoreU(x3, du, s.lo2.data() + k);
-  }
+  CountsBlock0AndRates(key, K, pixel, true, lam_in, s);
   const hn::ScalableTag<double> d;
   const size_t L = hn::Lanes(d);
-  const size_t Kv = (K + L - 1) / L * L;
-  std::copy(lam_in, lam_in + K, s.lam.data());
-  std::fill(s.lam.begin() + static_cast<std::ptrdiff_t>(K), s.lam.begin() + static_cast<std::ptrdiff_t>(Kv), 0.0);
   const hn::RebindToUnsigned<decltype(d)> d64;
   const hn::RebindToSigned<decltype(d)> di64;
   const hn::Rebind<uint32_t, decltype(d)> d32;
