@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <unistd.h>
 
 #include "core/error.h"
 #include "core/rng.h"
@@ -374,7 +375,7 @@ TEST(Gate, DeltaTransientReproducesGateShiftedBySkew) {
 }
 
 std::string write_temp(const std::string& name, const std::string& text) {
-  const auto p = std::filesystem::temp_directory_path() / ("spadgen_sensor_" + name);
+  const auto p = std::filesystem::temp_directory_path() / ("spadgen_sensor_" + std::to_string(::getpid()) + "_" + name);
   std::ofstream(p) << text;
   return p.string();
 }
