@@ -489,7 +489,8 @@ SensorTile SensorModel::process(const TransientTile& t) const {
               const auto make_xt = [&] { return Rng(seed, RngKind::Crosstalk, pixel_index(x, y), kk); };
               for (int i = 0; i < nnb; ++i) {
                 const size_t ni = nb_index(x, y, nb[i]);
-                const double li = lam[ni * Ks + kk], pi = own_p[ni * Ks + kk];
+                const Prob& pn = own_prob[kk * nreg + ni];  // gate-major: neighbours' values are close by
+                const double li = -pn.log_q, pi = pn.p;
                 if (!(pi > 0.0)) continue;
                 // Given that the neighbour avalanched at least once, the chance it fires this pixel: xt for
                 // pixel B; for pixel A (1 - exp(-xt lambda_i)) / p_i, so that the marginal matches the
