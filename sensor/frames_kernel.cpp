@@ -1,6 +1,12 @@
 // Compiled once per target by Highway's foreach_target; the code between HWY_BEFORE_NAMESPACE and
-// HWY_AFTER_NAMESPACE carries that target's attributes: Philox runs on 16 counters in its widest vectors
-// (up to 16 u32 lanes), and the byte comparisons use them too.
+// HWY_AFTER_NAMESPACE carries that target's attributes: ARS-7 runs on 16 counters in its widest vectors
+// (up to four 128-bit blocks per vector), and the byte comparisons use them too.
+//
+// AVX3_DL (AVX-512 with VAES: four AES rounds per instruction) is compiled here as well: Highway 1.0
+// leaves it out unless asked, and on plain AVX3 its AESRound is four 128-bit AESENC.
+#ifndef HWY_WANT_AVX3_DL
+#define HWY_WANT_AVX3_DL
+#endif
 #undef HWY_TARGET_INCLUDE
 #define HWY_TARGET_INCLUDE "sensor/frames_kernel.cpp"
 #include <hwy/foreach_target.h>  // IWYU pragma: keep
@@ -12,6 +18,7 @@
 #include <vector>
 
 #include "sensor/frames_kernel.h"
+#include "sensor/ars-inl.h"
 #include "sensor/philox-inl.h"
 #include "sensor/sampling.h"
 
@@ -20,15 +27,15 @@ namespace spadgen::sensor {
 namespace HWY_NAMESPACE {
 namespace hn = hwy::HWY_NAMESPACE;
 
-// Philox4x32-10 of 16 consecutive counters, structure of arrays: out holds word 0 of the 16 blocks, then
-// word 1, word 2, word 3 (little endian), exactly as r123::Philox4x32 computes each block.
-HWY_INLINE void Philox16(const uint32_t key[2], const uint32_t ctr[4], uint32_t first, uint32_t* HWY_RESTRICT out) {
+// ARS-7 of 16 consecutive counters, structure of arrays: out holds word 0 of the 16 blocks, then word 1,
+// word 2, word 3 (little endian), exactly as ars7 computes each block.
+HWY_INLINE void Ars16(const ArsKeys& keys, const uint32_t ctr[4], uint32_t first, uint32_t* HWY_RESTRICT out) {
   const hn::CappedTag<uint32_t, 16> d;
   const size_t L = hn::Lanes(d);
   for (size_t g = 0; g < 16; g += L) {
     auto x0 = hn::Iota(d, first + static_cast<uint32_t>(g));
     auto x1 = hn::Set(d, ctr[1]), x2 = hn::Set(d, ctr[2]), x3 = hn::Set(d, ctr[3]);
-    Philox10(d, key[0], key[1], x0, x1, x2, x3);
+    Ars7Words(d, keys, x0, x1, x2, x3);
     hn::StoreU(x0, d, out + g);
     hn::StoreU(x1, d, out + 16 + g);
     hn::StoreU(x2, d, out + 32 + g);
@@ -37,16 +44,17 @@ HWY_INLINE void Philox16(const uint32_t key[2], const uint32_t ctr[4], uint32_t 
 }
 
 // The bit of one frame given its top byte; refines a tie with the block `refine_block`.
-HWY_INLINE bool dense_bit_from(const Rng& stream, uint8_t top, uint64_t T, uint32_t refine_block) {
+HWY_INLINE bool dense_bit_from(const Rng& stream, const ArsKeys& keys, uint8_t top, uint64_t T,
+                               uint32_t refine_block) {
   const auto tb = static_cast<uint8_t>(T >> 56);
   if (top != tb) return top < tb;
-  const auto b = stream.block(refine_block);
+  const auto b = ars_block(stream, keys, refine_block);
   const uint64_t u = ((uint64_t{b[0]} << 32) | b[1]) & ((uint64_t{1} << 56) - 1);
   return u < (T & ((uint64_t{1} << 56) - 1));
 }
 
-// ties == nullptr: a tie is settled at once with a scalar Philox block. Otherwise its frame is appended to
-// *ties and its bit left 0 (the caller settles many ties with one vectorised Philox).
+// ties == nullptr: a tie is settled at once with a scalar ARS block. Otherwise its frame is appended to
+// *ties and its bit left 0 (the caller settles many ties with one vectorised ARS).
 HWY_INLINE void DenseBitsImpl(const Rng& stream, uint32_t n, uint64_t T, uint64_t* HWY_RESTRICT words,
                               std::vector<uint32_t>* ties) {
   const hn::ScalableTag<uint8_t> d8;
@@ -56,21 +64,20 @@ HWY_INLINE void DenseBitsImpl(const Rng& stream, uint32_t n, uint64_t T, uint64_
   const uint64_t t_rest = T & ((uint64_t{1} << 56) - 1);
   const uint32_t chunks = (n + 255) / 256;
   const uint32_t refine_base = chunks * 16;
-  const auto& key = stream.key();
+  const ArsKeys keys = ars_keys_of(stream);
   const auto& ctr = stream.counter();
-  const uint32_t k[2] = {key.v[0], key.v[1]};
   const uint32_t c[4] = {ctr.v[0], ctr.v[1], ctr.v[2], ctr.v[3]};
   alignas(64) uint32_t buf32[64];
   alignas(64) uint8_t mask[32 + 64];  // 256 bits, plus room for the last vector's store
   auto* dst = reinterpret_cast<uint8_t*>(words);
   const size_t total_bytes = (static_cast<size_t>(n) + 63) / 64 * 8;
   for (uint32_t ch = 0; ch < chunks; ++ch) {
-    Philox16(k, c, 16 * ch, buf32);
+    Ars16(keys, c, 16 * ch, buf32);
     const auto* bytes = reinterpret_cast<const uint8_t*>(buf32);
     if (L < 8) {  // a target narrower than one mask byte: plain comparisons
       std::memset(mask, 0, 32);
       for (size_t i = 0; i < 256; ++i)
-        if (dense_bit_from(stream, bytes[i], T, refine_base + ch * 256 + static_cast<uint32_t>(i)))
+        if (dense_bit_from(stream, keys, bytes[i], T, refine_base + ch * 256 + static_cast<uint32_t>(i)))
           mask[i / 8] = static_cast<uint8_t>(mask[i / 8] | (1u << (i % 8)));
       const size_t begin = static_cast<size_t>(ch) * 32;
       std::memcpy(dst + begin, mask, std::min<size_t>(32, total_bytes - begin));
@@ -95,7 +102,7 @@ HWY_INLINE void DenseBitsImpl(const Rng& stream, uint32_t n, uint64_t T, uint64_
               ties->push_back(f);
               continue;
             }
-            const auto b = stream.block(refine_base + f);
+            const auto b = ars_block(stream, keys, refine_base + f);
             const uint64_t u = ((uint64_t{b[0]} << 32) | b[1]) & ((uint64_t{1} << 56) - 1);
             if (u < t_rest) mask[(off + i) / 8] = static_cast<uint8_t>(mask[(off + i) / 8] | (1u << ((off + i) % 8)));
           }
@@ -113,58 +120,6 @@ void DenseBits(const Rng& stream, uint32_t n, uint64_t T, uint64_t* HWY_RESTRICT
 }
 
 
-// K independent Philox computations interleaved round by round: a round's products wait for the previous
-// round's (multiply, swap, XOR: about 8 cycles), longer than one computation takes to issue, so a single
-// chain leaves the vector ports idle. x[s] = (x0, x1, x2, x3) of computation s.
-template <size_t K, class D>
-HWY_INLINE void PhiloxRoundsK(D d, int rounds, uint32_t ka, uint32_t kb, hn::Vec<D> (&x)[K][4]) {
-  const auto m0 = hn::Set(d, kPhiloxM0), m1 = hn::Set(d, kPhiloxM1);
-  for (int round = 0; round < rounds; ++round) {
-    const auto vka = hn::Set(d, ka), vkb = hn::Set(d, kb);
-    for (size_t s = 0; s < K; ++s) {
-      hn::Vec<D> hi0, lo0, hi1, lo1;
-      MulHiLo(d, x[s][0], m0, hi0, lo0);
-      MulHiLo(d, x[s][2], m1, hi1, lo1);
-      x[s][0] = hn::Xor(hn::Xor(hi1, x[s][1]), vka);
-      x[s][2] = hn::Xor(hn::Xor(hi0, x[s][3]), vkb);
-      x[s][1] = lo1;
-      x[s][3] = lo0;
-    }
-    ka += kPhiloxW0;
-    kb += kPhiloxW1;
-  }
-}
-
-// Philox4x32-10 of the 16 counters (i, c1, c2[s], c3[s]), i = 0..15, for K streams s of one key, as
-// Philox10 gives them, with rounds 0 and 1 partly in scalars: words 1..3 are equal in every lane, so round
-// 0's second product is one scalar product and its word 0 output is uniform, as is round 1's first
-// product. (hi0, lo0) = round 0's products of the lanes' word 0 (i * 0xD2511F53).
-template <size_t K, class D>
-HWY_INLINE void Philox10From2K(D d, const uint32_t key[2], uint32_t c1, const uint32_t (&c2)[K],
-                               const uint32_t (&c3)[K], hn::Vec<D> hi0, hn::Vec<D> lo0, hn::Vec<D> (&x)[K][4]) {
-  const uint32_t ka0 = key[0], kb0 = key[1];
-  const uint32_t ka1 = ka0 + kPhiloxW0, kb1 = kb0 + kPhiloxW1;
-  for (size_t s = 0; s < K; ++s) {
-    // round 0
-    const uint64_t p1 = uint64_t{kPhiloxM1} * c2[s];
-    const uint32_t s0 = static_cast<uint32_t>(p1 >> 32) ^ c1 ^ ka0, s1 = static_cast<uint32_t>(p1);
-    const auto x2 = hn::Xor(hi0, hn::Set(d, c3[s] ^ kb0));
-    // round 1: word 0 = s0 and word 1 = s1 in every lane
-    const uint64_t p0 = uint64_t{kPhiloxM0} * s0;
-    hn::Vec<D> hi1, lo1;
-    MulHiLo(d, x2, hn::Set(d, kPhiloxM1), hi1, lo1);
-    x[s][0] = hn::Xor(hi1, hn::Set(d, s1 ^ ka1));
-    x[s][2] = hn::Xor(lo0, hn::Set(d, static_cast<uint32_t>(p0 >> 32) ^ kb1));
-    x[s][1] = lo1;
-    x[s][3] = hn::Set(d, static_cast<uint32_t>(p0));
-  }
-  PhiloxRoundsK<K>(d, 8, ka1 + kPhiloxW0, kb1 + kPhiloxW1, x);
-}
-
-// Philox on 64-bit lanes: each lane carries one block's 32-bit word in its low half; the high half is
-// ignored (MulEven reads only the low halves, and the outputs take the low halves), so a 32 x 32 product is
-// one MulEven (vpmuludq) whose high word is moved down by one shift: no lane swaps or masked merges, which
-// MulHiLo on 32-bit lanes needs (and which all compete for the one shuffle port). K chains interleaved.
 // Top-byte ties of DenseBitsBatch waiting to be settled: (slot, frame) pairs. A chunk appends at most 256,
 // so the buffer is settled whenever it holds more than kCap.
 struct TieBuffer {
@@ -194,11 +149,11 @@ HWY_INLINE void AppendTies(TieBuffer& tb, uint32_t slot, uint32_t f0, uint64_t m
   tb.count = c;
 }
 
-// Settles the buffered ties, 16 per vectorised Philox: tie (slot s, frame f) takes the first 56 bits (word 0
-// high, word 1 low) of block refine_base + f of stream s, as dense_bits does, and its bit (left as the top
+// Settles the buffered ties, 16 per vectorised ARS-7: tie (slot s, frame f) takes the first 56 bits (word 0
+// high, word 1 low) of ARS block refine_base + f of stream s, as dense_bits does, and its bit (left as the top
 // byte's comparison gave it: 0, or 1 when inverted) is toggled when they are below T[s] mod 2^56, i.e. when
 // U < T.
-HWY_INLINE void SettleTies(const uint32_t key[2], uint32_t c1, const uint64_t* HWY_RESTRICT pixels,
+HWY_INLINE void SettleTies(const ArsKeys& keys, uint32_t c1, const uint64_t* HWY_RESTRICT pixels,
                            const uint64_t* HWY_RESTRICT T, uint32_t refine_base,
                            size_t nw, uint64_t* HWY_RESTRICT words, TieBuffer& tb) {
   const hn::CappedTag<uint32_t, 16> d;
@@ -227,7 +182,7 @@ HWY_INLINE void SettleTies(const uint32_t key[2], uint32_t c1, const uint64_t* H
       const auto i2 = hn::BitCast(di, hn::Add(sl, sl));
       auto x0 = hn::Add(fr, hn::Set(d, refine_base)), x1 = hn::Set(d, c1);
       auto x2 = hn::GatherIndex(d, px32, i2), x3 = hn::GatherIndex(d, px32 + 1, i2);
-      Philox10(d, key[0], key[1], x0, x1, x2, x3);
+      Ars7Words(d, keys, x0, x1, x2, x3);
       uint32_t below = 0;
       for (int h = 0; h < 2; ++h) {
         const auto w0 = hn::PromoteTo(d64, h == 0 ? hn::LowerHalf(dh, x0) : hn::UpperHalf(dh, x0));
@@ -259,7 +214,7 @@ HWY_INLINE void SettleTies(const uint32_t key[2], uint32_t c1, const uint64_t* H
       a3[j] = static_cast<uint32_t>(pixels[s] >> 32);
     }
     auto x0 = hn::Load(d, a0), x1 = hn::Set(d, c1), x2 = hn::Load(d, a2), x3 = hn::Load(d, a3);
-    Philox10(d, key[0], key[1], x0, x1, x2, x3);
+    Ars7Words(d, keys, x0, x1, x2, x3);
     hn::Store(x0, d, o0);
     hn::Store(x1, d, o1);
     for (size_t j = 0; j < c; ++j) {
@@ -273,7 +228,7 @@ HWY_INLINE void SettleTies(const uint32_t key[2], uint32_t c1, const uint64_t* H
 
 // Many dense pixels of one key in one call (see dense_bits_batch): no per-pixel dispatch, Rng set-up or
 // zero fill, the inversion folded into the store, the ties collected without branches and settled together.
-HWY_INLINE void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint64_t* HWY_RESTRICT pixels,
+HWY_INLINE void DenseBitsBatch(const ArsKeys& keys, uint32_t c1, const uint64_t* HWY_RESTRICT pixels,
                                const uint64_t* HWY_RESTRICT T, const uint64_t* HWY_RESTRICT flips,
                                const uint64_t* HWY_RESTRICT slots, size_t count, uint32_t n,
                                uint64_t* HWY_RESTRICT words) {
@@ -284,20 +239,19 @@ HWY_INLINE void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint64_
   const size_t nw = (static_cast<size_t>(n) + 63) / 64;
   const uint64_t tail = n % 64 != 0 ? (uint64_t{1} << (n % 64)) - 1 : ~uint64_t{0};
   TieBuffer tb;
-  // Vectors of 16 u32 (AVX-512): Philox word v of a chunk's 16 blocks is one vector, i.e. the chunk's
+  // Vectors of 16 u32 (AVX-512): ARS word v of a chunk's 16 blocks is one vector, i.e. the chunk's
   // bytes 64 v .. 64 v + 63 (frames 256 ch + 64 v + i), compared in registers and stored as whole words
   // (no round trip through memory, whose narrow mask stores and wide reload stall store forwarding).
 #if HWY_TARGET != HWY_SCALAR && HWY_MAX_BYTES >= 64
   const hn::CappedTag<uint32_t, 16> d32;
   const hn::Repartition<uint8_t, decltype(d32)> d8w;
   if (hn::Lanes(d32) == 16 && hn::Lanes(d8w) == 64) {
-    // Chunk 0's counters (i, c1, c2, c3), i = 0..15: round 0's product of word 0 is the same for every
-    // pixel, computed once here.
-    const auto y0 = hn::Iota(d32, 0u);
-    hn::Vec<decltype(d32)> hi0_iota, lo0_iota;
-    MulHiLo(d32, y0, hn::Set(d32, 0xD2511F53u), hi0_iota, lo0_iota);
+    // ARS on four blocks per vector: round keys in registers; words 1..3 of the counters XOR k_0 per pixel.
+    const ArsKeysV<decltype(d32)> kv(d32, keys);
+    alignas(16) static constexpr uint32_t kWord0[4] = {~0u, 0u, 0u, 0u};
+    const auto word0 = hn::LoadDup128(d32, kWord0);
     using V32 = hn::Vec<decltype(d32)>;
-    // One output word (frames f0 .. f0 + 63) from one Philox word vector: below the threshold's top byte
+    // One output word (frames f0 .. f0 + 63) from one ARS word vector: below the threshold's top byte
     // (inverted by flip), and the ties (masked by keep) appended.
     const auto word = [&tb, d8w](V32 x, hn::Vec<decltype(d8w)> tb8, uint64_t flip, uint64_t keep, uint64_t* out,
                                  uint32_t slot, uint32_t f0) HWY_ATTR {
@@ -311,7 +265,7 @@ HWY_INLINE void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint64_
       *out = bits ^ flip;
       AppendTies(tb, slot, f0, m & keep);
     };
-    // One pixel's words of chunk ch from the chunk's four Philox word vectors (by value: the chains stay
+    // One pixel's words of chunk ch from the chunk's four ARS word vectors (by value: the chains stay
     // in registers).
     const auto emit = [&](uint32_t slot, uint32_t ch, V32 x0, V32 x1, V32 x2, V32 x3) HWY_ATTR {
       const auto tb8 = hn::Set(d8w, static_cast<uint8_t>(T[slot] >> 56));
@@ -329,31 +283,47 @@ HWY_INLINE void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint64_
         if (left > 1) word(x1, tb8, flip, left == 2 ? tail : ~uint64_t{0}, w + 1, slot, f0 + 64);
         if (left > 2) word(x2, tb8, flip, tail, w + 2, slot, f0 + 128);
       }
-      if (HWY_UNLIKELY(tb.count > TieBuffer::kCap)) SettleTies(key, c1, pixels, T, refine_base, nw, words, tb);
+      if (HWY_UNLIKELY(tb.count > TieBuffer::kCap)) SettleTies(keys, c1, pixels, T, refine_base, nw, words, tb);
     };
-    // Pixels in fours: their Philox chains interleaved (the last pixel is repeated to fill the four).
+    // Pixels in fours: their ARS chains interleaved (the last pixel is repeated to fill the four); four
+    // vectors of blocks per pixel, v_j holding blocks 16 ch + j + 4 l in its 128-bit parts l, so that one
+    // 4 x 4 transpose inside the parts gives the word vectors (lane i: block 16 ch + i).
     constexpr size_t K = 4;
     for (size_t j = 0; j < count; j += K) {
-      uint32_t sl[K], cc2[K], cc3[K];
+      uint32_t sl[K];
+      V32 ck[K];  // (0, c1, c2, c3) XOR k_0 in every part
       for (size_t s = 0; s < K; ++s) {
         sl[s] = static_cast<uint32_t>(slots[std::min(j + s, count - 1)]);
-        cc2[s] = static_cast<uint32_t>(pixels[sl[s]]);
-        cc3[s] = static_cast<uint32_t>(pixels[sl[s]] >> 32);
+        alignas(16) const uint32_t c[4] = {0u, c1, static_cast<uint32_t>(pixels[sl[s]]),
+                                           static_cast<uint32_t>(pixels[sl[s]] >> 32)};
+        ck[s] = hn::Xor(hn::LoadDup128(d32, c), kv.k[0]);
       }
       const size_t live = std::min(K, count - j);
       for (uint32_t ch = 0; ch < chunks; ++ch) {
         V32 x[K][4];
-        if (ch == 0) {
-          Philox10From2K<K>(d32, key, c1, cc2, cc3, hi0_iota, lo0_iota, x);
-        } else {
-          for (size_t s = 0; s < K; ++s) {
-            x[s][0] = hn::Iota(d32, 16 * ch);
-            x[s][1] = hn::Set(d32, c1);
-            x[s][2] = hn::Set(d32, cc2[s]);
-            x[s][3] = hn::Set(d32, cc3[s]);
-          }
-          PhiloxRoundsK<K>(d32, 10, key[0], key[1], x);
+#pragma GCC unroll 4
+        for (size_t v = 0; v < 4; ++v) {
+          const auto idx = hn::And(hn::Iota(d32, 16 * ch + static_cast<uint32_t>(v)), word0);
+#pragma GCC unroll 4
+          for (size_t s = 0; s < K; ++s) x[s][v] = hn::Xor(ck[s], idx);
         }
+        // fully unrolled (the chains must stay in registers)
+        const hn::Repartition<uint8_t, decltype(d32)> d8k;
+#pragma GCC unroll 8
+        for (int r = 1; r < kArsRounds; ++r) {
+          const auto rk = hn::BitCast(d8k, kv.k[r]);
+#pragma GCC unroll 4
+          for (size_t s = 0; s < K; ++s)
+#pragma GCC unroll 4
+            for (size_t v = 0; v < 4; ++v) x[s][v] = hn::BitCast(d32, hn::AESRound(hn::BitCast(d8k, x[s][v]), rk));
+        }
+        const auto rk_last = hn::BitCast(d8k, kv.k[kArsRounds]);
+#pragma GCC unroll 4
+        for (size_t s = 0; s < K; ++s)
+#pragma GCC unroll 4
+          for (size_t v = 0; v < 4; ++v) x[s][v] = hn::BitCast(d32, hn::AESLastRound(hn::BitCast(d8k, x[s][v]), rk_last));
+#pragma GCC unroll 4
+        for (size_t s = 0; s < K; ++s) Transpose4x4(d32, x[s][0], x[s][1], x[s][2], x[s][3]);
         // constant indices into x only (a runtime index would keep the chains in memory)
         emit(sl[0], ch, x[0][0], x[0][1], x[0][2], x[0][3]);
         if (live > 1) emit(sl[1], ch, x[1][0], x[1][1], x[1][2], x[1][3]);
@@ -362,7 +332,7 @@ HWY_INLINE void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint64_
       }
       for (size_t s = 0; s < live; ++s) words[static_cast<size_t>(sl[s]) * nw + nw - 1] &= tail;
     }
-    SettleTies(key, c1, pixels, T, refine_base, nw, words, tb);
+    SettleTies(keys, c1, pixels, T, refine_base, nw, words, tb);
     return;
   }
 #endif
@@ -376,7 +346,7 @@ HWY_INLINE void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint64_
     uint64_t* w = words + static_cast<size_t>(slot) * nw;
     const uint64_t flip = flips[slot];
     for (uint32_t ch = 0; ch < chunks; ++ch) {
-      Philox16(key, c, 16 * ch, buf32);
+      Ars16(keys, c, 16 * ch, buf32);
       const auto* bytes = reinterpret_cast<const uint8_t*>(buf32);
       if (L < 8) {  // a target narrower than one mask byte: plain comparisons
         std::memset(lt, 0, 32);
@@ -400,12 +370,12 @@ HWY_INLINE void DenseBitsBatch(const uint32_t key[2], uint32_t c1, const uint64_
         std::memcpy(&m, eq + 8 * v, 8);
         w[wi] = bits ^ flip;
         AppendTies(tb, slot, 64 * static_cast<uint32_t>(wi), wi + 1 == nw ? m & tail : m);
-        if (HWY_UNLIKELY(tb.count > TieBuffer::kCap)) SettleTies(key, c1, pixels, T, refine_base, nw, words, tb);
+        if (HWY_UNLIKELY(tb.count > TieBuffer::kCap)) SettleTies(keys, c1, pixels, T, refine_base, nw, words, tb);
       }
     }
     w[nw - 1] &= tail;
   }
-  SettleTies(key, c1, pixels, T, refine_base, nw, words, tb);
+  SettleTies(keys, c1, pixels, T, refine_base, nw, words, tb);
 }
 
 // Philox on 64-bit lanes: each lane carries one block's 32-bit word in its low half; the high half is
@@ -521,13 +491,32 @@ size_t FrameBitsGroup(const uint32_t key[2], uint32_t c1, const uint64_t* HWY_RE
     for (size_t j = 0; j + 1 < nw; ++j) w[j] = fill[i];
     w[nw - 1] = fill[i] & tail;
   }
-  if (nd > 0) DenseBitsBatch(key, c1, pixels, T, fill, dense, nd, n, words);
+  if (nd > 0) DenseBitsBatch(ars_round_keys(ars_key(key)), c1, pixels, T, fill, dense, nd, n, words);
   for (size_t j = 0; j < ns; ++j) {
     const size_t i = slow_list[j];
     slow[j] = static_cast<uint32_t>(i);
     for (size_t v = 0; v < 4; ++v) block0[4 * j + v] = static_cast<uint32_t>(b[v][i]);
   }
   return ns;
+}
+
+void Ars7Blocks(const ArsKeys& keys, const uint32_t* HWY_RESTRICT ctr, size_t count, uint32_t* HWY_RESTRICT out) {
+  const hn::CappedTag<uint32_t, 16> d;
+  const size_t L = hn::Lanes(d);
+  alignas(64) uint32_t x[4][16];
+  for (size_t i = 0; i < count; i += L) {
+    const size_t c = std::min(L, count - i);
+    for (size_t j = 0; j < L; ++j)
+      for (size_t w = 0; w < 4; ++w) x[w][j] = ctr[4 * (i + std::min(j, c - 1)) + w];
+    auto x0 = hn::Load(d, x[0]), x1 = hn::Load(d, x[1]), x2 = hn::Load(d, x[2]), x3 = hn::Load(d, x[3]);
+    Ars7Words(d, keys, x0, x1, x2, x3);
+    hn::Store(x0, d, x[0]);
+    hn::Store(x1, d, x[1]);
+    hn::Store(x2, d, x[2]);
+    hn::Store(x3, d, x[3]);
+    for (size_t j = 0; j < c; ++j)
+      for (size_t w = 0; w < 4; ++w) out[4 * (i + j) + w] = x[w][j];
+  }
 }
 
 const char* TargetName() { return hwy::TargetName(HWY_TARGET); }
@@ -542,6 +531,11 @@ namespace spadgen::sensor {
 HWY_EXPORT(DenseBits);
 HWY_EXPORT(TargetName);
 HWY_EXPORT(FrameBitsGroup);
+HWY_EXPORT(Ars7Blocks);
+
+void ars7_blocks(const ArsKeys& keys, const uint32_t* ctr, size_t count, uint32_t* out) {
+  HWY_DYNAMIC_DISPATCH(Ars7Blocks)(keys, ctr, count, out);
+}
 
 size_t frame_bits_group(const uint32_t key[2], uint32_t c1, const uint64_t* pixels, const Prob* pr, size_t count,
                         uint32_t n, double sparse_below, uint64_t* words, uint32_t* slow, uint32_t* block0) {
@@ -558,11 +552,12 @@ const char* dense_bits_target() { return HWY_DYNAMIC_DISPATCH(TargetName)(); }
 bool dense_bit_reference(const Rng& stream, uint32_t n, uint64_t T, uint32_t frame) {
   const uint32_t chunks = (n + 255) / 256;
   const uint32_t ch = frame / 256, r = frame % 256;
-  const auto blk = stream.block(16 * ch + (r % 64) / 4);
+  const ArsKeys keys = ars_keys_of(stream);
+  const auto blk = ars_block(stream, keys, 16 * ch + (r % 64) / 4);
   const auto top = static_cast<uint8_t>(blk[r / 64] >> (8 * (r % 4)));
   const auto tb = static_cast<uint8_t>(T >> 56);
   if (top != tb) return top < tb;
-  const auto b = stream.block(chunks * 16 + frame);
+  const auto b = ars_block(stream, keys, chunks * 16 + frame);
   const uint64_t u = ((uint64_t{b[0]} << 32) | b[1]) & ((uint64_t{1} << 56) - 1);
   return u < (T & ((uint64_t{1} << 56) - 1));
 }

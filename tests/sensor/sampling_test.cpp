@@ -1,5 +1,8 @@
 // Exactness and distribution of the Bernoulli and binomial samplers. Every statistical check uses a fixed
 // seed and a false-alarm rate of 1e-6 (p-value or z bound), so a failure means a real defect.
+#ifndef HWY_WANT_AVX3_DL
+#define HWY_WANT_AVX3_DL  // the frames kernel has it (VAES); its every-target tests cover it
+#endif
 #include <gtest/gtest.h>
 #include <hwy/targets.h>
 
@@ -325,7 +328,7 @@ TEST(Sampling, ZeroDecisionAtTheThreshold) {
   }
 }
 
-// sample_bits_batch (block 0 of the sparse streams from the vectorised Philox, branch-free classification,
+// sample_bits_batch (block 0 of the sparse streams from the vectorised Philox, the dense bytes from ARS-7, branch-free classification,
 // groups of 256) equals sample_bits per stream; n = 2000 also has sparse pixels with n a >= 1.
 TEST(Sampling, BatchBitsEqualPerStreamBits) {
   for (const uint32_t n : {255u, 2000u}) {
@@ -358,8 +361,8 @@ TEST(Sampling, BatchBitsWithNoFramesWriteNothing) {
   for (uint64_t g : guard) EXPECT_EQ(g, 0x5555555555555555ull);
 }
 
-// The batch settles the dense pixels' top-byte ties with one vectorised Philox per group: every frame
-// equals dense_bit_reference (one Rng::block per tie), for frame counts that are not multiples of 64 or 256
+// The batch settles the dense pixels' top-byte ties with one vectorised ARS-7 per 16: every frame equals
+// dense_bit_reference (one scalar ars_block per tie), for frame counts that are not multiples of 64 or 256
 // (several chunks) and both sides (a = p and a = q); the test counts the ties it covered.
 TEST(Sampling, BatchSettlesTiesLikeTheReference) {
   for (const uint32_t n : {100u, 300u, 1000u}) {
@@ -383,7 +386,7 @@ TEST(Sampling, BatchSettlesTiesLikeTheReference) {
         const bool bit = dense_bit_reference(stream, n, T, f) != invert;
         ASSERT_EQ(((batch[i * nw + f / 64] >> (f % 64)) & 1) != 0, bit) << "n " << n << " pixel " << i << " frame " << f;
         const uint32_t r = f % 256;
-        const auto blk = stream.block(16 * (f / 256) + (r % 64) / 4);
+        const auto blk = ars_block(stream, ars_keys_of(stream), 16 * (f / 256) + (r % 64) / 4);
         ties += static_cast<uint8_t>(blk[r / 64] >> (8 * (r % 4))) == static_cast<uint8_t>(T >> 56);
       }
       for (uint32_t f = n; f < nw * 64; ++f) ASSERT_EQ((batch[i * nw + f / 64] >> (f % 64)) & 1, 0u);

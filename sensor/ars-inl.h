@@ -1,0 +1,86 @@
+// ARS-7 (sensor/ars.h) on whole Highway vectors: one 128-bit block per 128-bit part of a vector (four on
+// AVX-512 with VAES), with Highway's AESRound / AESLastRound (AES-NI / VAES where the target has them, a
+// software round otherwise), bit-identical to the scalar ars7. Included once per target from the
+// translation units that use Highway's foreach_target (the per-target include guard below).
+#if defined(SPADGEN_SENSOR_ARS_INL_H_) == defined(HWY_TARGET_TOGGLE)
+#ifdef SPADGEN_SENSOR_ARS_INL_H_
+#undef SPADGEN_SENSOR_ARS_INL_H_
+#else
+#define SPADGEN_SENSOR_ARS_INL_H_
+#endif
+
+#include <hwy/highway.h>
+
+#include "sensor/ars.h"
+
+HWY_BEFORE_NAMESPACE();
+namespace spadgen::sensor {
+namespace HWY_NAMESPACE {
+namespace hn = hwy::HWY_NAMESPACE;
+
+#if HWY_TARGET != HWY_SCALAR
+
+// The round keys, each repeated in every 128-bit part of a u32 vector.
+template <class D>
+struct ArsKeysV {
+  hn::Vec<D> k[kArsRounds + 1];
+  ArsKeysV(D d, const ArsKeys& keys) {
+    for (int r = 0; r <= kArsRounds; ++r) k[r] = hn::LoadDup128(d, keys.rk[r]);
+  }
+};
+
+// Rounds 1..7 of ARS-7 on v = counter XOR k_0 (one block per 128-bit part).
+template <class D>
+HWY_INLINE hn::Vec<D> ArsRounds(D d, const ArsKeysV<D>& k, hn::Vec<D> v) {
+  const hn::Repartition<uint8_t, D> d8;
+  auto b = hn::BitCast(d8, v);
+#pragma GCC unroll 8
+  for (int r = 1; r < kArsRounds; ++r) b = hn::AESRound(b, hn::BitCast(d8, k.k[r]));
+  return hn::BitCast(d, hn::AESLastRound(b, hn::BitCast(d8, k.k[kArsRounds])));
+}
+
+// 4 x 4 transpose of u32 inside every 128-bit part: afterwards word j of part l of a_i is what word i of
+// part l of a_j was. Turns four vectors of blocks (part l of a_j: one block) into four vectors of words and
+// back.
+template <class D>
+HWY_INLINE void Transpose4x4(D d, hn::Vec<D>& a0, hn::Vec<D>& a1, hn::Vec<D>& a2, hn::Vec<D>& a3) {
+  const hn::Repartition<uint64_t, D> d64;
+  const auto t0 = hn::BitCast(d64, hn::InterleaveLower(d, a0, a1));
+  const auto t1 = hn::BitCast(d64, hn::InterleaveUpper(d, a0, a1));
+  const auto t2 = hn::BitCast(d64, hn::InterleaveLower(d, a2, a3));
+  const auto t3 = hn::BitCast(d64, hn::InterleaveUpper(d, a2, a3));
+  a0 = hn::BitCast(d, hn::InterleaveLower(d64, t0, t2));
+  a1 = hn::BitCast(d, hn::InterleaveUpper(d64, t0, t2));
+  a2 = hn::BitCast(d, hn::InterleaveLower(d64, t1, t3));
+  a3 = hn::BitCast(d, hn::InterleaveUpper(d64, t1, t3));
+}
+
+#endif  // HWY_TARGET != HWY_SCALAR
+
+// ARS-7 with the counters and outputs as words, like Philox10: lane i's block has counter
+// (x0[i], x1[i], x2[i], x3[i]) and afterwards x0..x3 are its output words.
+template <class D>
+HWY_INLINE void Ars7Words(D d, const ArsKeys& keys, hn::Vec<D>& x0, hn::Vec<D>& x1, hn::Vec<D>& x2,
+                          hn::Vec<D>& x3) {
+#if HWY_TARGET == HWY_SCALAR
+  const Block128 o = ars7({hn::GetLane(x0), hn::GetLane(x1), hn::GetLane(x2), hn::GetLane(x3)}, keys);
+  x0 = hn::Set(d, o[0]);
+  x1 = hn::Set(d, o[1]);
+  x2 = hn::Set(d, o[2]);
+  x3 = hn::Set(d, o[3]);
+#else
+  const ArsKeysV<D> k(d, keys);
+  Transpose4x4(d, x0, x1, x2, x3);  // part l of x_j: the block of lane 4 l + j
+  x0 = ArsRounds(d, k, hn::Xor(x0, k.k[0]));
+  x1 = ArsRounds(d, k, hn::Xor(x1, k.k[0]));
+  x2 = ArsRounds(d, k, hn::Xor(x2, k.k[0]));
+  x3 = ArsRounds(d, k, hn::Xor(x3, k.k[0]));
+  Transpose4x4(d, x0, x1, x2, x3);
+#endif
+}
+
+}  // namespace HWY_NAMESPACE
+}  // namespace spadgen::sensor
+HWY_AFTER_NAMESPACE();
+
+#endif  // per-target include guard
