@@ -250,6 +250,7 @@ HWY_INLINE void DenseBitsBatch(const ArsKeys& keys, uint32_t c1, const uint64_t*
     const ArsKeysV<decltype(d32)> kv(d32, keys);
     alignas(16) static constexpr uint32_t kWord0[4] = {~0u, 0u, 0u, 0u};
     const auto word0 = hn::LoadDup128(d32, kWord0);
+    const hn::Repartition<uint64_t, decltype(d32)> d64c;
     using V32 = hn::Vec<decltype(d32)>;
     // One output word (frames f0 .. f0 + 63) from one ARS word vector: below the threshold's top byte
     // (inverted by flip), and the ties (masked by keep) appended.
@@ -288,15 +289,14 @@ HWY_INLINE void DenseBitsBatch(const ArsKeys& keys, uint32_t c1, const uint64_t*
     // Pixels in fours: their ARS chains interleaved (the last pixel is repeated to fill the four); four
     // vectors of blocks per pixel, v_j holding blocks 16 ch + j + 4 l in its 128-bit parts l, so that one
     // 4 x 4 transpose inside the parts gives the word vectors (lane i: block 16 ch + i).
-    constexpr size_t K = 4;
+    constexpr size_t K = 2;
     for (size_t j = 0; j < count; j += K) {
       uint32_t sl[K];
-      V32 ck[K];  // (0, c1, c2, c3) XOR k_0 in every part
+      V32 ck[K];  // (0, c1, c2, c3) XOR k_0 in every part, from two 64-bit broadcasts (not through memory)
       for (size_t s = 0; s < K; ++s) {
         sl[s] = static_cast<uint32_t>(slots[std::min(j + s, count - 1)]);
-        alignas(16) const uint32_t c[4] = {0u, c1, static_cast<uint32_t>(pixels[sl[s]]),
-                                           static_cast<uint32_t>(pixels[sl[s]] >> 32)};
-        ck[s] = hn::Xor(hn::LoadDup128(d32, c), kv.k[0]);
+        const auto c = hn::OddEven(hn::Set(d64c, pixels[sl[s]]), hn::Set(d64c, uint64_t{c1} << 32));
+        ck[s] = hn::Xor(hn::BitCast(d32, c), kv.k[0]);
       }
       const size_t live = std::min(K, count - j);
       for (uint32_t ch = 0; ch < chunks; ++ch) {
@@ -327,8 +327,10 @@ HWY_INLINE void DenseBitsBatch(const ArsKeys& keys, uint32_t c1, const uint64_t*
         // constant indices into x only (a runtime index would keep the chains in memory)
         emit(sl[0], ch, x[0][0], x[0][1], x[0][2], x[0][3]);
         if (live > 1) emit(sl[1], ch, x[1][0], x[1][1], x[1][2], x[1][3]);
-        if (live > 2) emit(sl[2], ch, x[2][0], x[2][1], x[2][2], x[2][3]);
-        if (live > 3) emit(sl[3], ch, x[3][0], x[3][1], x[3][2], x[3][3]);
+        if constexpr (K > 2) {
+          if (live > 2) emit(sl[2], ch, x[2][0], x[2][1], x[2][2], x[2][3]);
+          if (live > 3) emit(sl[3], ch, x[3][0], x[3][1], x[3][2], x[3][3]);
+        }
       }
       for (size_t s = 0; s < live; ++s) words[static_cast<size_t>(sl[s]) * nw + nw - 1] &= tail;
     }
