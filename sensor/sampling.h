@@ -5,7 +5,8 @@
 // as probabilities near 0.
 //
 // Bernoulli: a bit is set when a 64-bit uniform integer U is below T = floor(a * 2^64) (a = min(p, q);
-// the bit is inverted when a = q). U is built lazily: its top byte comes from the pixel's byte stream and
+// the bit is inverted when a = q). U is built lazily: its top byte comes from the pixel's byte stream (ARS-7
+// blocks, sensor/ars.h and sensor/frames_kernel.h) and
 // decides the comparison unless it equals T's top byte (probability 1/256); only then are 56 more bits
 // drawn. Expected random bytes per bit: 1 + 7/256 = 1.027 (1.004 blocks of 128 bits per 16 bits).
 // When a <= 1/512 the bits are drawn sparsely instead: the number of set bits ~ Binomial(N, a), then their
