@@ -10,6 +10,7 @@
 #include <cmath>
 
 #include "sensor/batch_kernels.h"
+#include "sensor/ars-inl.h"
 #include "sensor/philox-inl.h"
 
 HWY_BEFORE_NAMESPACE();
@@ -150,22 +151,35 @@ HWY_INLINE hn::Vec<hn::RebindToUnsigned<D>> Threshold(D d, hn::Vec<D> x) {
   return hn::IfThenElse(hn::RebindMask(du, hn::Ge(t, hn::Set(d, 0x1p64))), hn::Set(du, ~uint64_t{0}), r);
 }
 
-// Block 0 of the streams Rng(seed, Counts, pixel, k) of every k < K (counter (0, k, pixel low, pixel
-// high)) on the widest vectors: words 0 and 1 into s.hi, s.lo, and with all_words words 2 and 3 into
-// s.hi2, s.lo2; then the rates copied into s.lam, padded with zeros to whole vectors of doubles.
+// The counts' random words of every k < K, counter (0, k, pixel low, pixel high), on the widest vectors:
+// without all_words (the walk from the mode) words 0 and 1 of Philox block 0 of the stream
+// Rng(seed, Counts, pixel, k) into s.hi, s.lo; with all_words (the tables) the four words of ARS-7 with the
+// key ars_key(key) (sensor/ars.h) into s.hi, s.lo, s.hi2, s.lo2. Then the rates copied into s.lam, padded
+// with zeros to whole vectors of doubles.
 void CountsBlock0AndRates(const uint32_t key[2], size_t K, uint64_t pixel, bool all_words, const double* lam_in,
                           KernelScratch& s) {
   const hn::ScalableTag<uint32_t> du;
   const size_t Lu = hn::Lanes(du);
   const auto plo = hn::Set(du, static_cast<uint32_t>(pixel)), phi = hn::Set(du, static_cast<uint32_t>(pixel >> 32));
-  for (size_t k = 0; k < K; k += Lu) {
-    auto x0 = hn::Zero(du), x1 = hn::Iota(du, static_cast<uint32_t>(k)), x2 = plo, x3 = phi;
-    Philox10(du, key[0], key[1], x0, x1, x2, x3);
-    hn::StoreU(x0, du, s.hi.data() + k);
-    hn::StoreU(x1, du, s.lo.data() + k);
-    if (all_words) {
+  // Iota once: Highway 1.0's Iota stores the lanes one by one and reloads them as a vector (a stalled
+  // store forwarding per call)
+  const auto iota = hn::Iota(du, 0u);
+  if (all_words) {  // ARS-7 (the tables' draws), key ars_key(key)
+    const ArsKeys keys = ars_round_keys(ars_key(key));
+    for (size_t k = 0; k < K; k += Lu) {
+      auto x0 = hn::Zero(du), x1 = hn::Add(iota, hn::Set(du, static_cast<uint32_t>(k))), x2 = plo, x3 = phi;
+      Ars7Words(du, keys, x0, x1, x2, x3);
+      hn::StoreU(x0, du, s.hi.data() + k);
+      hn::StoreU(x1, du, s.lo.data() + k);
       hn::StoreU(x2, du, s.hi2.data() + k);
       hn::StoreU(x3, du, s.lo2.data() + k);
+    }
+  } else {  // Philox4x32-10: block 0 of the stream Rng(seed, Counts, pixel, k)
+    for (size_t k = 0; k < K; k += Lu) {
+      auto x0 = hn::Zero(du), x1 = hn::Add(iota, hn::Set(du, static_cast<uint32_t>(k))), x2 = plo, x3 = phi;
+      Philox10(du, key[0], key[1], x0, x1, x2, x3);
+      hn::StoreU(x0, du, s.hi.data() + k);
+      hn::StoreU(x1, du, s.lo.data() + k);
     }
   }
   const size_t L = hn::Lanes(hn::ScalableTag<double>());
@@ -333,8 +347,8 @@ void BinomialCounts(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t 
   }
 }
 
-// Counts by the tables of BinomialTable (see binomial_table.h), all K gates of one pixel: block 0 of the
-// stream Rng(seed, Counts, pixel, k) gives U1 (words 0, 1) and U2 (words 2, 3). Per vector of gates: the
+// Counts by the tables of BinomialTable (see binomial_table.h), all K gates of one pixel: the ARS-7 block
+// with counter (0, k, pixel) gives U1 (words 0, 1) and U2 (words 2, 3). Per vector of gates: the
 // grid row g = floor(a G); X1 from the guide and a step or two up the row, comparing the top 16 bits of T
 // and U1 (gathers from tables that stay in cache); Y = 0 where U2 >= floor((n - X1) delta 2^64). Lanes with
 // equal top bits take BinomialTable::first_round, lanes with a possible Y > 0 second_round.

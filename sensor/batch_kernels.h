@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "core/rng.h"
+#include "ars.h"
 #include "binomial_table.h"
 #include "sampling.h"
 
@@ -50,8 +51,9 @@ void binomial_counts(const double* lam, size_t K, const uint32_t key[2], uint64_
                      const BinomialSampler& sampler, KernelScratch& s);
 
 // The same counts by BinomialTable (table.n() = N): X_k = table.sample(U1, U2, min(p_k, q_k)) (or N minus
-// that when q_k < p_k), U1 and U2 the first two 64-bit draws of Rng(seed, Counts, pixel, k). p_k and q_k
-// are left in s.p and s.q.
+// that when q_k < p_k), U1 = words 0-1 and U2 = words 2-3 (high word first) of counts_block(key, pixel, k),
+// the ARS-7 block of counter (0, k, pixel low, pixel high) with the key ars_key(key) (sensor/ars.h; key =
+// Rng(seed, Counts, 0, 0).key()). p_k and q_k are left in s.p and s.q.
 void binomial_counts(const double* lam, size_t K, const uint32_t key[2], uint64_t pixel, const BinomialTable& table,
                      KernelScratch& s);
 
@@ -59,6 +61,11 @@ void binomial_counts(const double* lam, size_t K, const uint32_t key[2], uint64_
 // k-major. The 16-bit version reads one element beyond src[width * K - 1] (it must be allocated).
 void transpose_rows(const float* src, size_t width, size_t K, float* dst, size_t dst_stride);
 void transpose_rows(const uint16_t* src, size_t width, size_t K, uint16_t* dst, size_t dst_stride);
+
+// The tables' random block for (pixel, k): ARS-7, counter (0, k, pixel low, pixel high), key ars_key(key).
+inline Block128 counts_block(const uint32_t key[2], uint64_t pixel, uint32_t k) {
+  return ars7({0u, k, static_cast<uint32_t>(pixel), static_cast<uint32_t>(pixel >> 32)}, ars_round_keys(ars_key(key)));
+}
 
 // Block 0 of `count` streams with counters (0, c1[i], c2[i], c3[i]) and one key: out[4 i + w] = word w,
 // as Rng::block(0).

@@ -2,11 +2,8 @@
 // HWY_AFTER_NAMESPACE carries that target's attributes: ARS-7 runs on 16 counters in its widest vectors
 // (up to four 128-bit blocks per vector), and the byte comparisons use them too.
 //
-// AVX3_DL (AVX-512 with VAES: four AES rounds per instruction) is compiled here as well: Highway 1.0
-// leaves it out unless asked, and on plain AVX3 its AESRound is four 128-bit AESENC.
-#ifndef HWY_WANT_AVX3_DL
-#define HWY_WANT_AVX3_DL
-#endif
+// AVX3_DL (AVX-512 with VAES: four AES rounds per instruction) is compiled too (HWY_WANT_AVX3_DL, set for
+// the whole sensor library in sensor/CMakeLists.txt): on plain AVX3 an AESRound is four 128-bit AESENC.
 #undef HWY_TARGET_INCLUDE
 #define HWY_TARGET_INCLUDE "sensor/frames_kernel.cpp"
 #include <hwy/foreach_target.h>  // IWYU pragma: keep
@@ -290,6 +287,8 @@ HWY_INLINE void DenseBitsBatch(const ArsKeys& keys, uint32_t c1, const uint64_t*
     // vectors of blocks per pixel, v_j holding blocks 16 ch + j + 4 l in its 128-bit parts l, so that one
     // 4 x 4 transpose inside the parts gives the word vectors (lane i: block 16 ch + i).
     constexpr size_t K = 2;
+    // Iota once: Highway 1.0's Iota stores the lanes one by one and reloads them (a stalled store forwarding)
+    const auto iota32 = hn::Iota(d32, 0u);
     for (size_t j = 0; j < count; j += K) {
       uint32_t sl[K];
       V32 ck[K];  // (0, c1, c2, c3) XOR k_0 in every part, from two 64-bit broadcasts (not through memory)
@@ -303,7 +302,7 @@ HWY_INLINE void DenseBitsBatch(const ArsKeys& keys, uint32_t c1, const uint64_t*
         V32 x[K][4];
 #pragma GCC unroll 4
         for (size_t v = 0; v < 4; ++v) {
-          const auto idx = hn::And(hn::Iota(d32, 16 * ch + static_cast<uint32_t>(v)), word0);
+          const auto idx = hn::And(hn::Add(iota32, hn::Set(d32, 16 * ch + static_cast<uint32_t>(v))), word0);
 #pragma GCC unroll 4
           for (size_t s = 0; s < K; ++s) x[s][v] = hn::Xor(ck[s], idx);
         }
@@ -445,6 +444,7 @@ size_t FrameBitsGroup(const uint32_t key[2], uint32_t c1, const uint64_t* HWY_RE
   const auto vn = hn::Set(d, static_cast<double>(n));
   const auto below = hn::Set(d, sparse_below);
   const auto low32 = hn::Set(du, uint64_t{0xFFFFFFFFu});
+  const auto iota64 = hn::Iota(du, uint64_t{0});  // once: Highway 1.0's Iota goes through memory
   for (size_t i = 0; i < count; i += L) {
     hn::Vec<decltype(d)> vp, vq, vl;
     hn::Vec<decltype(du)> pix;
@@ -483,7 +483,7 @@ size_t FrameBitsGroup(const uint32_t key[2], uint32_t c1, const uint64_t* HWY_RE
     const auto mean = hn::Mul(vn, a);
     const auto none = hn::And(hn::Lt(mean, hn::Set(d, 1.0)), hn::RebindMask(d, hn::Not(hn::Lt(U, Threshold64(d, mean)))));
     const auto go_slow = hn::AndNot(none, is_sparse);
-    const auto idx = hn::Iota(du, uint64_t{i});
+    const auto idx = hn::Add(iota64, hn::Set(du, uint64_t{i}));
     nd += hn::CompressStore(idx, hn::RebindMask(du, is_dense), du, dense + nd);
     ns += hn::CompressStore(idx, hn::RebindMask(du, go_slow), du, slow_list + ns);
   }

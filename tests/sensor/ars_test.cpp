@@ -1,9 +1,6 @@
 // ARS-7 (sensor/ars.h, sensor/ars-inl.h): the software AES round against FIPS-197, the scalar ARS-7 against
 // Random123's, and the vector ARS-7 and the dense frame kernels against the scalar reference on every
-// compiled instruction set (AVX3_DL, VAES, included: asked for here as in sensor/frames_kernel.cpp).
-#ifndef HWY_WANT_AVX3_DL
-#define HWY_WANT_AVX3_DL
-#endif
+// compiled instruction set (AVX3_DL, VAES, included: HWY_WANT_AVX3_DL comes with the sensor library).
 #include <gtest/gtest.h>
 #include <hwy/targets.h>
 

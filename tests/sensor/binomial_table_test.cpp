@@ -112,8 +112,8 @@ TEST(BinomialTable, OtherFrameCounts) {
   EXPECT_EQ(BinomialTable::get(255).get(), &table255());  // built once and shared
 }
 
-// The kernel equals the scalar sampler draw for draw: U1, U2 = the first two 64-bit draws of
-// Rng(seed, Counts, pixel, k), a = min(p, q) with the kernel's own p and q. Lambdas cover zero, background,
+// The kernel equals the scalar sampler draw for draw: U1, U2 = the words of counts_block(key, pixel, k)
+// (ARS-7 in software), a = min(p, q) with the kernel's own p and q. Lambdas cover zero, background,
 // edges, plateaus, p = 1/2, p near 1 and infinity, in vectors that mix them; K not a multiple of 8.
 TEST(BinomialTable, KernelEqualsScalarSampler) {
   const BinomialTable& t = table255();
@@ -137,8 +137,8 @@ TEST(BinomialTable, KernelEqualsScalarSampler) {
     }
     binomial_counts(lam.data(), K, key, pixel, t, s);
     for (size_t k = 0; k < K; ++k) {
-      Rng rng(seed, RngKind::Counts, pixel, k);
-      const uint64_t U1 = rng.next_u64(), U2 = rng.next_u64();
+      const Block128 b = counts_block(key, pixel, static_cast<uint32_t>(k));
+      const uint64_t U1 = (uint64_t{b[0]} << 32) | b[1], U2 = (uint64_t{b[2]} << 32) | b[3];
       const double p = s.p[k], q = s.q[k];
       const double a = std::min(p, q);
       const uint32_t x = t.sample(U1, U2, a);
@@ -178,8 +178,8 @@ TEST(BinomialTable, KernelEqualsScalarSamplerOnEveryTarget) {
       for (double& l : lam) l = pick.next_double() < 0.2 ? 1e-6 * pick.next_double() : 2.0 * pick.next_double();
       binomial_counts(lam.data(), K, key, pixel, t, s);
       for (size_t k = 0; k < K; ++k) {
-        Rng rng(45, RngKind::Counts, pixel, k);
-        const uint64_t U1 = rng.next_u64(), U2 = rng.next_u64();
+        const Block128 b = counts_block(key, pixel, static_cast<uint32_t>(k));
+        const uint64_t U1 = (uint64_t{b[0]} << 32) | b[1], U2 = (uint64_t{b[2]} << 32) | b[3];
         const uint32_t x = t.sample(U1, U2, std::min(s.p[k], s.q[k]));
         mismatches += s.x[k] != (s.p[k] <= s.q[k] ? x : 255 - x);
       }

@@ -1,8 +1,5 @@
 // Exactness and distribution of the Bernoulli and binomial samplers. Every statistical check uses a fixed
 // seed and a false-alarm rate of 1e-6 (p-value or z bound), so a failure means a real defect.
-#ifndef HWY_WANT_AVX3_DL
-#define HWY_WANT_AVX3_DL  // the frames kernel has it (VAES); its every-target tests cover it
-#endif
 #include <gtest/gtest.h>
 #include <hwy/targets.h>
 
