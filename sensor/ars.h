@@ -11,7 +11,8 @@
 //
 // The dense frames (sensor/frames_kernel.h) use it for their random bytes: stream Rng(seed, Frames, a, b)
 // has the ARS key ars_key(its Philox key) and block i the counter (i, b, a low, a high), the counter of
-// its Philox block i.
+// its Philox block i. The counts tables (sensor/batch_kernels.h, counts_block) take block 0 of the same
+// construction for Rng(seed, Counts, pixel, k).
 #pragma once
 #include <array>
 #include <cstdint>
