@@ -55,6 +55,10 @@ struct TransientTile {
   std::vector<double> out_of_window;
   // per data pixel, steady ambient photon rate arriving at the SPAD, photons per second
   std::vector<float> ambient_rate;
+  // Optional, per data pixel: every non-zero bin of the pixel (in transient and transient_indirect) lies in
+  // [bin_lo, bin_hi). The renderer fills them with the bins it wrote; empty means unknown (the sensor then
+  // scans every bin). bin_lo >= bin_hi: no light in the window.
+  std::vector<int32_t> bin_lo, bin_hi;
 
   const float* pixel_transient(int x, int y) const {
     return transient.data() + data_rect.index(x, y) * axis.bins;

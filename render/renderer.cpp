@@ -73,6 +73,10 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
   tile.laser_total.assign(n, 0.0);
   tile.out_of_window.assign(n, 0.0);
   tile.ambient_rate.assign(n, 0.0f);
+  if (bins > 0) {
+    tile.bin_lo.assign(n, 0);
+    tile.bin_hi.assign(n, 0);
+  }
 
   std::atomic<uint64_t> camera_rays{0}, shadow_rays{0};
   tbb::parallel_for(tbb::blocked_range<int>(data_rect.y0, data_rect.y1()), [&](const tbb::blocked_range<int>& rows) {
@@ -100,6 +104,10 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
             ind[b] = static_cast<float>(acc_indirect[size_t(b)]);
             acc_indirect[size_t(b)] = 0.0;
           }
+        }
+        if (bins > 0 && t.bin_lo < t.bin_hi) {
+          tile.bin_lo[i] = static_cast<int32_t>(t.bin_lo);
+          tile.bin_hi[i] = static_cast<int32_t>(t.bin_hi);
         }
         tile.laser_total[i] = t.laser_total;
         tile.out_of_window[i] = t.out_of_window;

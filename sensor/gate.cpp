@@ -460,7 +460,9 @@ bool TransientPrefix::build(const float* g, int64_t T) {
   return !runs_.empty();
 }
 
-bool TransientPrefix::build_bins(const float* g, int64_t T) {
+bool TransientPrefix::build_bins(const float* g, int64_t T) { return build_bins(g, 0, T); }
+
+bool TransientPrefix::build_bins(const float* g, int64_t lo, int64_t T) {
   runs_.clear();
   nz_i_.clear();
   nz_v_.clear();
@@ -472,7 +474,7 @@ bool TransientPrefix::build_bins(const float* g, int64_t T) {
     nz_v_.push_back(v);
     G1 += v;
   };
-  int64_t i = 0;
+  int64_t i = lo;
   // 32 bins at a time, OR-ed as four-lane vectors (GCC/Clang vector extension; the scalar loop compiled to
   // 16 scalar ORs per 16 bins); -0.0f counts as empty, as in build()
   using U4 = uint32_t __attribute__((vector_size(16)));

@@ -102,6 +102,9 @@ class TransientPrefix {
   // For the integer-step path: only the non-zero bins (index, content), ascending; no running integrals
   // (runs() is left empty). Returns false when every bin is zero.
   bool build_bins(const float* g, int64_t T);
+  // The same when every non-zero bin lies in [lo, hi) (0 <= lo, hi <= the transient's length): only those
+  // bins are read.
+  bool build_bins(const float* g, int64_t lo, int64_t hi);
   double total() const { return total_; }
   const std::vector<int64_t>& bin_index() const { return nz_i_; }
   const std::vector<double>& bin_value() const { return nz_v_; }

@@ -148,7 +148,8 @@ struct SensorModel::Impl {
   std::vector<TypeInfo> used_types() const;
 
   // lambda of every k for one pixel (no crosstalk); edges in bins of the axis when sweeping.
-  void lambda(const PixelParams& px, const float* g, const TimeAxis& axis, const EdgeBins* rise,
+  // g's non-zero bins lie in [lo, hi) (the renderer's range, or the whole axis).
+  void lambda(const PixelParams& px, const float* g, const TimeAxis& axis, int64_t lo, int64_t hi, const EdgeBins* rise,
               const EdgeBins* fall, double ambient, double laser_total, TransientPrefix& prefix,
               double* out) const;
 };
@@ -222,7 +223,8 @@ std::vector<TypeInfo> SensorModel::Impl::used_types() const {
   return {types[0], types[1]};
 }
 
-void SensorModel::Impl::lambda(const PixelParams& px, const float* g, const TimeAxis& axis, const EdgeBins* rise,
+void SensorModel::Impl::lambda(const PixelParams& px, const float* g, const TimeAxis& axis, int64_t lo, int64_t hi,
+                               const EdgeBins* rise,
                                const EdgeBins* fall, double ambient, double laser_total, TransientPrefix& prefix,
                                double* out) const {
   const TypeInfo& t = types[px.type];
@@ -241,7 +243,7 @@ void SensorModel::Impl::lambda(const PixelParams& px, const float* g, const Time
     const double b0 = (positions[0] + cfg.sensor.gate.delay_s + px.skew_s - axis.start_s) / dt;
     const double step = cfg.acquisition.gate_sweep.step_s / dt;
     if (const int64_t s = integer_step(step); s > 0) {  // the step is a whole number of bins
-      if (prefix.build_bins(g, axis.bins)) {
+      if (prefix.build_bins(g, lo, hi)) {
         accumulate_edge_response_int(prefix, *rise, b0, s, K, 1.0, out);
         accumulate_edge_response_int(prefix, *fall, b0 + px.dL_s / dt, s, K, -1.0, out);
       }
@@ -314,7 +316,7 @@ std::vector<double> SensorModel::pixel_lambda(int x, int y, const float* g, cons
     rise = edge_in_bins(m.gate.rise, axis.bin_width_s);
     fall = edge_in_bins(m.gate.fall, axis.bin_width_s);
   }
-  m.lambda(m.maps->at(x, y), g, axis, &rise, &fall, ambient_rate, laser_total, prefix, out.data());
+  m.lambda(m.maps->at(x, y), g, axis, 0, axis.bins, &rise, &fall, ambient_rate, laser_total, prefix, out.data());
   return out;
 }
 
@@ -336,6 +338,8 @@ SensorTile SensorModel::process(const TransientTile& t) const {
     if (t.axis.bins <= 0) throw Error("sensor: gate-sweep mode needs a rendered transient (time axis with bins)");
     if (t.transient.size() != ndata * static_cast<size_t>(t.axis.bins))
       throw Error("sensor: TransientTile::transient must hold data_rect pixels x axis.bins values");
+    if ((!t.bin_lo.empty() || !t.bin_hi.empty()) && (t.bin_lo.size() != ndata || t.bin_hi.size() != ndata))
+      throw Error("sensor: TransientTile::bin_lo / bin_hi must be empty or hold one value per data pixel");
   } else if (m.cfg.acquisition.intensity.laser_on && t.laser_total.size() != ndata) {
     throw Error("sensor: TransientTile::laser_total must hold one value per data pixel");
   }
@@ -357,6 +361,7 @@ SensorTile SensorModel::process(const TransientTile& t) const {
   // and memset time. q is kept only for frames; without frames only pixel B's neighbours read p.
   const auto uninit = [](size_t count) { return std::make_unique_for_overwrite<double[]>(count); };
   const auto lam = uninit(nreg * Ks);
+  const bool ranges = m.sweep && t.bin_lo.size() == ndata;
   const bool own_probs = frames || m.halo > 0;
   const auto own_p = uninit(own_probs ? nreg * Ks : 0);
   // With frames: every region pixel's Prob {p, q, -lambda} gate-major ([k * nreg + region index]), so a
@@ -372,7 +377,12 @@ SensorTile SensorModel::process(const TransientTile& t) const {
         params[ri] = m.maps->at(x, y);
         const float* g = m.sweep ? t.transient.data() + di * static_cast<size_t>(t.axis.bins) : nullptr;
         const double laser_total = t.laser_total.size() == ndata ? t.laser_total[di] : 0.0;
-        m.lambda(params[ri], g, t.axis, &rise, &fall, t.ambient_rate[di], laser_total, prefix, lam.get() + ri * Ks);
+        int64_t lo = 0, hi = t.axis.bins;  // the renderer's range of non-zero bins, when it gave one
+        if (ranges) {
+          lo = std::clamp<int64_t>(t.bin_lo[di], 0, t.axis.bins);
+          hi = std::clamp<int64_t>(t.bin_hi[di], lo, t.axis.bins);
+        }
+        m.lambda(params[ri], g, t.axis, lo, hi, &rise, &fall, t.ambient_rate[di], laser_total, prefix, lam.get() + ri * Ks);
         // without frames only pixel B's neighbours read p (pixel A's read lambda); sections keep one type
         if (frames)
           probabilities(lam.get() + ri * Ks, Ks, own_prob.get() + ri, nreg, own_p.get() + ri * Ks);

@@ -406,6 +406,35 @@ scenes::Scene busy_scene() {
   return s;
 }
 
+// TransientTile::bin_lo / bin_hi bound every non-zero bin of the transient and of its indirect part (the
+// sensor reads only that range).
+TEST(Transport, BinRangesBoundTheLight) {
+  scenes::Scene s = busy_scene();
+  RunConfig c = test_config(16, 16, 4e-3);
+  c.render.samples_per_pixel = 4;
+  c.render.split_direct_indirect = true;
+  Renderer r(s, c);
+  const TimeAxis axis{5e-9, 20e-12, 200, 25e-9};
+  const PixelRect all{0, 0, 16, 16};
+  const TransientTile t = r.transient(all, all, axis);
+  ASSERT_EQ(t.bin_lo.size(), size_t(256));
+  ASSERT_EQ(t.bin_hi.size(), size_t(256));
+  size_t lit = 0, narrow = 0;
+  for (size_t i = 0; i < 256; ++i) {
+    const float* g = t.transient.data() + i * 200;
+    const float* h = t.transient_indirect.data() + i * 200;
+    for (int b = 0; b < 200; ++b)
+      if (g[b] != 0.0f || h[b] != 0.0f) {
+        ASSERT_GE(b, t.bin_lo[i]) << i;
+        ASSERT_LT(b, t.bin_hi[i]) << i;
+      }
+    lit += t.bin_lo[i] < t.bin_hi[i];
+    narrow += t.bin_hi[i] - t.bin_lo[i] < 200;
+  }
+  EXPECT_GT(lit, size_t(100));
+  EXPECT_GT(narrow, size_t(0));  // the ranges say something
+}
+
 TEST(Transport, DeterministicForAnyThreadCountAndTileSplit) {
   scenes::Scene s = busy_scene();
   RunConfig c = test_config(16, 16, 4e-3);

@@ -357,6 +357,55 @@ TEST(Sensor, DeterministicAcrossTilesAndThreads) {
   }
 }
 
+// The renderer's range of non-zero bins (TransientTile::bin_lo / bin_hi) only saves reading empty bins:
+// with exact ranges, with wider ones and without any, counts and expectations are bit-identical; a range
+// of the wrong size is an error.
+TEST(Sensor, BinRangesChangeNothing) {
+  const int W = 24, H = 16;
+  RunConfig c = sweep_config(W, H);
+  c.acquisition.gate_sweep = {0.6e-9, 6e-9, 36e-12};
+  SensorModel model(c);
+  const TimeAxis ax = model.required_window(9e-12);
+  Image img(W, H, ax);
+  Rng rng(77, RngKind::Test, 0);
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      float* g = img.pixel(x, y);
+      if ((x + y) % 5 == 0) continue;  // no light in the window
+      const auto b = static_cast<int64_t>(rng.next_double() * static_cast<double>(ax.bins - 40));
+      for (int i = 0; i < 1 + (x % 4) * 10; ++i) g[b + i] = 0.01f * rng.next_float();
+      if (x % 7 == 0) g[ax.bins - 1] = 0.2f;  // the window's last bin
+      if (y % 6 == 0) g[0] = 0.3f;            // and its first
+      img.ambient[static_cast<size_t>(y * W + x)] = 1e5f * rng.next_float();
+    }
+  const PixelRect r{8, 0, 8, 16};
+  const TransientTile plain = img.tile(r, model.halo());
+  ASSERT_TRUE(plain.bin_lo.empty());
+  TransientTile exact = plain, wide = plain;
+  const auto n = static_cast<size_t>(plain.data_rect.count()), T = static_cast<size_t>(ax.bins);
+  for (size_t i = 0; i < n; ++i) {
+    int32_t lo = 0, hi = 0;
+    for (size_t b = 0; b < T; ++b)
+      if (plain.transient[i * T + b] != 0.0f) {
+        if (hi == 0) lo = static_cast<int32_t>(b);
+        hi = static_cast<int32_t>(b + 1);
+      }
+    exact.bin_lo.push_back(lo);
+    exact.bin_hi.push_back(hi);
+    wide.bin_lo.push_back(std::max(0, lo - 37));
+    wide.bin_hi.push_back(std::min(static_cast<int32_t>(T), hi + 100));
+  }
+  const SensorTile a = model.process(plain), b = model.process(exact), w = model.process(wide);
+  EXPECT_TRUE(a.counts == b.counts && a.expected == b.expected);
+  EXPECT_TRUE(a.counts == w.counts && a.expected == w.expected);
+  double total = 0;
+  for (uint16_t v : a.counts) total += v;
+  EXPECT_GT(total, 1000.0);
+  TransientTile bad = exact;
+  bad.bin_hi.pop_back();
+  EXPECT_THROW(model.process(bad), Error);
+}
+
 TEST(Sensor, TileWithoutHaloIsRejected) {
   RunConfig c = sweep_config(16, 16);
   SensorModel model(c);
