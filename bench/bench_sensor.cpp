@@ -143,16 +143,8 @@ TransientTile cut(const Scene& s, const PixelRect& r, int halo) {
       t.ambient_rate.push_back(s.ambient[i]);
       t.laser_total.push_back(0.0);
       t.out_of_window.push_back(0.0);
-      // the range of non-zero bins, as the renderer reports the bins it wrote
-      int32_t lo = 0, hi = 0;
-      for (size_t b = 0; b < bins; ++b)
-        if (s.transient[i * bins + b] != 0.0f) {
-          if (hi == 0) lo = static_cast<int32_t>(b);
-          hi = static_cast<int32_t>(b + 1);
-        }
-      t.bin_lo.push_back(lo);
-      t.bin_hi.push_back(hi);
     }
+  t.set_bin_ranges_from_data();  // the ranges of non-zero bins, as the renderer reports the bins it wrote
   return t;
 }
 

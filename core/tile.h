@@ -63,6 +63,21 @@ struct TransientTile {
   const float* pixel_transient(int x, int y) const {
     return transient.data() + data_rect.index(x, y) * axis.bins;
   }
+
+  // bin_lo / bin_hi from the data: the first and one past the last non-zero bin of each pixel (0, 0 for a
+  // pixel without light), for tiles not made by the renderer. Reads transient only.
+  void set_bin_ranges_from_data() {
+    const auto T = static_cast<size_t>(axis.bins);
+    const size_t n = T > 0 ? transient.size() / T : 0;
+    bin_lo.assign(n, 0);
+    bin_hi.assign(n, 0);
+    for (size_t i = 0; i < n; ++i)
+      for (size_t b = 0; b < T; ++b)
+        if (transient[i * T + b] != 0.0f) {
+          if (bin_hi[i] == 0) bin_lo[i] = static_cast<int32_t>(b);
+          bin_hi[i] = static_cast<int32_t>(b + 1);
+        }
+  }
 };
 
 // Exact ground truth along each pixel's primary ray (through the pixel centre).
