@@ -12,6 +12,7 @@
 #include "sensor/batch_kernels.h"
 #include "sensor/ars-inl.h"
 #include "sensor/philox-inl.h"
+#include "sensor/threshold-inl.h"
 
 HWY_BEFORE_NAMESPACE();
 namespace spadgen::sensor {
@@ -137,26 +138,12 @@ void PhiloxBlocks(const uint32_t key[2], const uint32_t* c0, const uint32_t* c1,
   }
 }
 
-// floor(x 2^64) for x in [0, 1] as probability_threshold computes it (saturating at 2^64 - 1): above
-// 2^63 the product is an integer, so subtracting 2^63 before the signed conversion is exact.
-template <class D>
-HWY_INLINE hn::Vec<hn::RebindToUnsigned<D>> Threshold(D d, hn::Vec<D> x) {
-  const hn::RebindToUnsigned<D> du;
-  const hn::RebindToSigned<D> di;
-  const auto two63 = hn::Set(d, 0x1p63);
-  const auto t = hn::Mul(x, hn::Set(d, 0x1p64));
-  const auto big = hn::Ge(t, two63);
-  auto r = hn::BitCast(du, hn::ConvertTo(di, hn::IfThenElse(big, hn::Min(hn::Sub(t, two63), hn::Set(d, 0x1.fffffffffffffp62)), t)));
-  r = hn::IfThenElse(hn::RebindMask(du, big), hn::Add(r, hn::Set(du, uint64_t{1} << 63)), r);
-  return hn::IfThenElse(hn::RebindMask(du, hn::Ge(t, hn::Set(d, 0x1p64))), hn::Set(du, ~uint64_t{0}), r);
-}
-
 // The counts' random words of every k < K, counter (0, k, pixel low, pixel high), on the widest vectors:
-// without all_words (the walk from the mode) words 0 and 1 of Philox block 0 of the stream
-// Rng(seed, Counts, pixel, k) into s.hi, s.lo; with all_words (the tables) the four words of ARS-7 with the
+// without ars (the walk from the mode) words 0 and 1 of Philox block 0 of the stream
+// Rng(seed, Counts, pixel, k) into s.hi, s.lo; with ars (the tables) the four words of ARS-7 with the
 // key ars_key(key) (sensor/ars.h) into s.hi, s.lo, s.hi2, s.lo2. Then the rates copied into s.lam, padded
 // with zeros to whole vectors of doubles.
-void CountsBlock0AndRates(const uint32_t key[2], size_t K, uint64_t pixel, bool all_words, const double* lam_in,
+void CountsBlock0AndRates(const uint32_t key[2], size_t K, uint64_t pixel, bool ars, const double* lam_in,
                           KernelScratch& s) {
   const hn::ScalableTag<uint32_t> du;
   const size_t Lu = hn::Lanes(du);
@@ -164,7 +151,7 @@ void CountsBlock0AndRates(const uint32_t key[2], size_t K, uint64_t pixel, bool 
   // Iota once: Highway 1.0's Iota stores the lanes one by one and reloads them as a vector (a stalled
   // store forwarding per call)
   const auto iota = hn::Iota(du, 0u);
-  if (all_words) {  // ARS-7 (the tables' draws), key ars_key(key)
+  if (ars) {  // ARS-7 (the tables' draws), key ars_key(key)
     const ArsKeys keys = ars_round_keys(ars_key(key));
     for (size_t k = 0; k < K; k += Lu) {
       auto x0 = hn::Zero(du), x1 = hn::Add(iota, hn::Set(du, static_cast<uint32_t>(k))), x2 = plo, x3 = phi;
@@ -190,7 +177,7 @@ void CountsBlock0AndRates(const uint32_t key[2], size_t K, uint64_t pixel, bool 
 void BinomialCounts(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t key[2], uint64_t pixel,
                     const BinomialSampler& sampler, KernelScratch& s) {
   const uint32_t N = sampler.n();
-  CountsBlock0AndRates(key, K, pixel, false, lam_in, s);  // U = word 0 << 32 | word 1
+  CountsBlock0AndRates(key, K, pixel, /*ars=*/false, lam_in, s);  // U = word 0 << 32 | word 1
   const hn::ScalableTag<double> d;
   const size_t L = hn::Lanes(d);
   const hn::RebindToUnsigned<decltype(d)> d64;
@@ -220,7 +207,7 @@ void BinomialCounts(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t 
     hn::StoreU(hn::BitCast(d32, hn::DemoteTo(di32, hn::IfThenZeroElse(small, vN))), d32, s.x.data() + k);
     // P(X > 0) <= n a: where U >= floor(n a 2^64) (and n a < 1) X = 0 without computing P(X > 0)
     const auto below_one = hn::Lt(mean, one);
-    const auto thr_mean = Threshold(d, hn::IfThenElseZero(below_one, mean));
+    const auto thr_mean = ProbabilityThreshold(d, hn::IfThenElseZero(below_one, mean));
     const auto mode = hn::Ge(mean, mode_from);
     const auto undecided = hn::Or(hn::Not(below_one), hn::RebindMask(d, hn::Lt(U, thr_mean)));
     if (hn::AllFalse(d, undecided)) continue;
@@ -235,7 +222,7 @@ void BinomialCounts(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t 
       const auto nlb = hn::Mul(vN, log_b);
       S0 = hn::Neg(hn::Expm1(d, nlb));
       const auto x = hn::Mul(S0, two64);
-      const auto thr = Threshold(d, S0);
+      const auto thr = ProbabilityThreshold(d, S0);
       // S0 = 1 (saturated in double) is left to the scalar search, which uses the same threshold rule
       need = hn::Or(hn::Or(hn::RebindMask(d, hn::Lt(U, thr)), mode), hn::Ge(x, two64));
       if (HWY_LIKELY(hn::AllFalse(d, need))) continue;
@@ -251,7 +238,7 @@ void BinomialCounts(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t 
       auto S = S0, pmf = P0;
       for (uint32_t it = 0; !hn::AllTrue(d, done); ++it) {
         // every lane still searching is at x = it
-        const auto cont = hn::AndNot(done, hn::And(hn::Lt(xs, vN), hn::RebindMask(d, hn::Lt(U, Threshold(d, S)))));
+        const auto cont = hn::AndNot(done, hn::And(hn::Lt(xs, vN), hn::RebindMask(d, hn::Lt(U, ProbabilityThreshold(d, S)))));
         pmf = hn::Mul(pmf, hn::Mul(r, hn::Set(d, up[std::min(it, N)])));
         S = hn::Sub(S, pmf);
         xs = hn::IfThenElse(cont, hn::Add(xs, one), xs);
@@ -355,7 +342,7 @@ void BinomialCounts(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t 
 void BinomialCountsTable(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t key[2], uint64_t pixel,
                          const BinomialTable& table, KernelScratch& s) {
   const uint32_t N = table.n();
-  CountsBlock0AndRates(key, K, pixel, true, lam_in, s);
+  CountsBlock0AndRates(key, K, pixel, /*ars=*/true, lam_in, s);
   const hn::ScalableTag<double> d;
   const size_t L = hn::Lanes(d);
   const hn::RebindToUnsigned<decltype(d)> d64;
@@ -374,12 +361,12 @@ void BinomialCountsTable(const double* HWY_RESTRICT lam_in, size_t K, const uint
   const auto* guide = reinterpret_cast<const int64_t*>(table.guide());
   // The gathers of one vector depend on each other (guide -> row entry -> next entry), so the vectors go
   // through each stage together: every stage's gathers are independent and their latencies overlap.
-  double* delta_a = s.a.data();  // per k: delta, the grid index g, U1 (capped), the row, the entry, ties
-  double* g_a = s.b.data();
-  uint64_t* U1_a = s.U.data();
+  double* delta_a = s.delta.data();  // per k: delta, the grid index g, U1 (capped), the row, the entry
+  double* g_a = s.grid.data();
+  uint64_t* U1_a = s.U1.data();
   int64_t* row_a = s.row.data();
   int64_t* i_a = s.idx.data();
-  int64_t* tie_a = s.tie.data();
+  int64_t* scalar_a = s.scalar.data();  // lanes left to the scalar search
   int64_t* bound_a = s.bound.data();
   for (size_t k = 0; k < K; k += L) {  // stage 1: probabilities, grid row, guide
     const auto nl = hn::Neg(ClampRate(d, hn::LoadU(d, s.lam.data() + k)));
@@ -417,15 +404,15 @@ void BinomialCountsTable(const double* HWY_RESTRICT lam_in, size_t K, const uint
       const auto i_next = hn::Sub(i, step);  // + 1 where T(x) < U1
       auto scalar = hn::VecFromMask(di64, hn::Eq(t, u_top));
       if (stage == 1)
-        scalar = hn::Or(hn::Or(scalar, hn::LoadU(di64, tie_a + k)),
+        scalar = hn::Or(hn::Or(scalar, hn::LoadU(di64, scalar_a + k)),
                         hn::And(step, hn::VecFromMask(di64, hn::Lt(i_next, hn::LoadU(di64, bound_a + k)))));
-      hn::StoreU(scalar, di64, tie_a + k);
+      hn::StoreU(scalar, di64, scalar_a + k);
       hn::StoreU(i_next, di64, i_a + k);
     }
   for (size_t k = 0; k < K; k += L) {  // stage 4: the rest, and the second round
     const auto row = hn::LoadU(di64, row_a + k);
     auto i = hn::LoadU(di64, i_a + k);
-    const auto scalar = hn::MaskFromVec(hn::LoadU(di64, tie_a + k));
+    const auto scalar = hn::MaskFromVec(hn::LoadU(di64, scalar_a + k));
     auto x1 = hn::ConvertTo(d, hn::Add(hn::ShiftRight<32>(row), i));
     if (HWY_UNLIKELY(!hn::AllFalse(di64, scalar))) {
       alignas(64) double xa[hn::MaxLanes(d)];
@@ -443,7 +430,7 @@ void BinomialCountsTable(const double* HWY_RESTRICT lam_in, size_t K, const uint
     const auto U2 = hn::Or(hn::ShiftLeft<32>(hn::PromoteTo(d64, hn::LoadU(d32, s.hi2.data() + k))),
                            hn::PromoteTo(d64, hn::LoadU(d32, s.lo2.data() + k)));
     auto x = x1;
-    const auto search = hn::RebindMask(d, hn::Lt(U2, Threshold(d, mean2)));
+    const auto search = hn::RebindMask(d, hn::Lt(U2, ProbabilityThreshold(d, mean2)));
     if (HWY_UNLIKELY(!hn::AllFalse(d, search))) {
       // Y = 0 or 1 as second_round decides them: S0 = P(Y > 0) by the series, S1 = S0 - P(Y = 1)
       auto lp = hn::Set(d, BinomialTable::kLog1pCoeff[0]);
@@ -457,9 +444,9 @@ void BinomialCountsTable(const double* HWY_RESTRICT lam_in, size_t K, const uint
       for (int j = 0; j < 3; ++j) r = hn::MulAdd(r, delta, one);
       r = hn::Mul(delta, r);
       const auto S1 = hn::Sub(S0, hn::Mul(hn::Sub(one, S0), hn::Mul(r, n2)));
-      const auto y1 = hn::And(search, hn::RebindMask(d, hn::Lt(U2, Threshold(d, S0))));  // Y >= 1
+      const auto y1 = hn::And(search, hn::RebindMask(d, hn::Lt(U2, ProbabilityThreshold(d, S0))));  // Y >= 1
       const auto y2 = hn::And(y1, hn::And(hn::Gt(n2, one), hn::And(hn::Gt(S1, hn::Zero(d)),
-                                                                    hn::RebindMask(d, hn::Lt(U2, Threshold(d, S1))))));
+                                                                    hn::RebindMask(d, hn::Lt(U2, ProbabilityThreshold(d, S1))))));
       x = hn::IfThenElse(y1, hn::Add(x1, one), x1);
       if (HWY_UNLIKELY(!hn::AllFalse(d, y2))) {  // Y >= 2: the whole search, lane by lane
         alignas(64) double xa[hn::MaxLanes(d)], n2a[hn::MaxLanes(d)];
@@ -565,10 +552,10 @@ HWY_EXPORT(TransposeRowsU16);
 
 void KernelScratch::reserve(size_t K) {
   const size_t n = (K + 15) / 16 * 16 + 16;
-  for (auto* v : {&lam, &p, &q, &a, &b, &S0, &P0, &pm}) v->resize(n);
-  U.resize(n);
-  for (auto* v : {&hi, &lo, &hi2, &lo2, &x, &m}) v->resize(n);
-  for (auto* v : {&row, &idx, &tie, &bound}) v->resize(n);
+  for (auto* v : {&lam, &p, &q, &delta, &grid}) v->resize(n);
+  U1.resize(n);
+  for (auto* v : {&hi, &lo, &hi2, &lo2, &x}) v->resize(n);
+  for (auto* v : {&row, &idx, &bound, &scalar}) v->resize(n);
 }
 
 void probabilities(const double* lam, size_t K, double* p, double* q) {

@@ -19,12 +19,13 @@
 
 namespace spadgen::sensor {
 
-// Working arrays of one thread (K rounded up to 16).
+// Working arrays of one thread (K rounded up to 16): the rates, p, q and counts of every k; the random
+// words; and the table kernel's per-k stages (delta, grid row, U1, row entry, guide bound, scalar lanes).
 struct KernelScratch {
-  std::vector<double> lam, p, q, a, b, S0, P0, pm;
-  std::vector<uint64_t> U;
-  std::vector<uint32_t> hi, lo, hi2, lo2, x, m;
-  std::vector<int64_t> row, idx, tie, bound;
+  std::vector<double> lam, p, q, delta, grid;
+  std::vector<uint64_t> U1;
+  std::vector<uint32_t> hi, lo, hi2, lo2, x;
+  std::vector<int64_t> row, idx, bound, scalar;
   void reserve(size_t K);
 };
 

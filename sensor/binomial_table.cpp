@@ -112,10 +112,6 @@ std::unique_ptr<BinomialTable> BinomialTable::build(uint32_t n) {
   return t;
 }
 
-size_t BinomialTable::bytes() const {
-  return row_.size() * sizeof(int64_t) + T64_.size() * sizeof(uint64_t) + T16_.size() * sizeof(uint16_t) + guide_.size();
-}
-
 uint32_t BinomialTable::first_round(uint64_t U1, uint32_t g) const {
   const uint64_t u = U1 == kMax ? kMax - 1 : U1;
   const auto off = static_cast<size_t>(row_[g] & 0xFFFFFFFF);
@@ -147,16 +143,8 @@ uint32_t BinomialTable::second_round(uint64_t U2, uint32_t n2, double delta) con
   if (U2 >= probability_threshold(mean)) return 0;  // mean < 1 here
   // the sequential search from 0, as BinomialSampler::search_from_zero
   const double S0 = survival0(N, delta);  // P(Y > 0) < 0.2
-  double S = S0, pmf = 1.0 - S0;
-  const double r = odds(delta);
-  uint32_t y = 0;
-  while (y < n2 && U2 < probability_threshold(S)) {
-    pmf *= r * (static_cast<double>(n2 - y) / static_cast<double>(y + 1));
-    ++y;
-    S -= pmf;  // P(Y > y)
-    if (!(S > 0.0)) break;
-  }
-  return y;
+  return sequential_search(U2, n2, odds(delta), S0, 1.0 - S0,
+                           [n2](uint32_t y) { return static_cast<double>(n2 - y) / static_cast<double>(y + 1); });
 }
 
 }  // namespace spadgen::sensor

@@ -83,7 +83,6 @@ class BinomialTable {
   const uint64_t* thresholds64() const { return T64_.data(); }
   const uint16_t* thresholds16() const { return T16_.data(); }  // padded: 8-byte reads at any entry are valid
   const uint8_t* guide() const { return guide_.data(); }         // padded likewise
-  size_t bytes() const;
 
  private:
   explicit BinomialTable(uint32_t n) : n_(n) {}

@@ -17,6 +17,7 @@
 #include "sensor/frames_kernel.h"
 #include "sensor/ars-inl.h"
 #include "sensor/philox-inl.h"
+#include "sensor/threshold-inl.h"
 #include "sensor/sampling.h"
 
 HWY_BEFORE_NAMESPACE();
@@ -408,22 +409,6 @@ HWY_INLINE void Philox10x64(D64 d, uint32_t ka, uint32_t kb, hn::Vec<D64>& x0, h
   }
 }
 
-// probability_threshold lane by lane: floor(x 2^64), 0 unless x > 0, saturated at 2^64 - 1. t = x 2^64 is
-// exact; below 2^63 the signed truncation is the floor; in [2^63, 2^64) t is a multiple of 2^11, so t / 2
-// converts exactly and doubles back.
-template <class D>
-HWY_INLINE hn::Vec<hn::RebindToUnsigned<D>> Threshold64(D d, hn::Vec<D> x) {
-  const hn::RebindToSigned<D> di;
-  const hn::RebindToUnsigned<D> du;
-  const auto t = hn::Mul(x, hn::Set(d, 18446744073709551616.0));
-  const auto below63 = hn::Lt(t, hn::Set(d, 9223372036854775808.0));
-  const auto lo = hn::BitCast(du, hn::ConvertTo(di, hn::IfThenElseZero(below63, t)));
-  const auto hi = hn::ShiftLeft<1>(hn::BitCast(du, hn::ConvertTo(di, hn::IfThenZeroElse(below63, hn::Mul(t, hn::Set(d, 0.5))))));
-  auto r = hn::IfThenElse(hn::RebindMask(du, below63), lo, hi);
-  r = hn::IfThenElse(hn::RebindMask(du, hn::Ge(t, hn::Set(d, 18446744073709551616.0))), hn::Set(du, ~uint64_t{0}), r);
-  return hn::IfThenElseZero(hn::RebindMask(du, hn::Gt(x, hn::Zero(d))), r);
-}
-
 // One group of sample_bits_batch (see frame_bits_group), vectorised over pixels: a = min(p, q) as
 // std::min gives it, the fills, the classes, the thresholds, block 0 of every stream (Philox on 64-bit
 // lanes, aligned with the doubles) and the sparse pixels' first binomial test, with the lists compressed
@@ -468,7 +453,7 @@ size_t FrameBitsGroup(const uint32_t key[2], uint32_t c1, const uint64_t* HWY_RE
     const auto inv = hn::Gt(vp, vq);
     const auto is_dense = hn::Gt(a, below);
     const auto is_sparse = hn::AndNot(is_dense, hn::Gt(a, hn::Zero(d)));
-    hn::Store(Threshold64(d, a), du, T + i);
+    hn::Store(ProbabilityThreshold(d, a), du, T + i);
     hn::Store(hn::BitCast(du, hn::VecFromMask(d, inv)), du, fill + i);
     // block 0 of the streams: counter (0, c1, pixel low, pixel high)
     auto x0 = hn::Zero(du), x1 = hn::Set(du, uint64_t{c1}), x2 = pix, x3 = hn::ShiftRight<32>(pix);
@@ -481,7 +466,7 @@ size_t FrameBitsGroup(const uint32_t key[2], uint32_t c1, const uint64_t* HWY_RE
     // U >= floor(n a 2^64)
     const auto U = hn::Or(hn::ShiftLeft<32>(x0), hn::And(x1, low32));
     const auto mean = hn::Mul(vn, a);
-    const auto none = hn::And(hn::Lt(mean, hn::Set(d, 1.0)), hn::RebindMask(d, hn::Not(hn::Lt(U, Threshold64(d, mean)))));
+    const auto none = hn::And(hn::Lt(mean, hn::Set(d, 1.0)), hn::RebindMask(d, hn::Not(hn::Lt(U, ProbabilityThreshold(d, mean)))));
     const auto go_slow = hn::AndNot(none, is_sparse);
     const auto idx = hn::Add(iota64, hn::Set(du, uint64_t{i}));
     nd += hn::CompressStore(idx, hn::RebindMask(du, is_dense), du, dense + nd);

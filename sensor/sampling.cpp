@@ -53,16 +53,7 @@ BinomialSampler::BinomialSampler(uint32_t n) : n_(n), log_fact_(n + 1), up_(n + 
 }
 
 uint32_t BinomialSampler::search_from_zero(uint64_t U, double a, double b, double S0, double P0) const {
-  double S = S0, pmf = P0;
-  const double r = a / b;
-  uint32_t x = 0;
-  while (x < n_ && U < probability_threshold(S)) {
-    pmf *= r * up_[x];
-    ++x;
-    S -= pmf;  // P(X > x)
-    if (!(S > 0.0)) break;
-  }
-  return x;
+  return sequential_search(U, n_, a / b, S0, P0, [this](uint32_t x) { return up_[x]; });
 }
 
 uint32_t BinomialSampler::search_from_mode(uint64_t U64, double a, double b, uint32_t m, double pm) const {

@@ -65,6 +65,21 @@ uint32_t uniform_below(G& rng, uint64_t range) {
 // floor(a * 2^64) for a in [0, 1); saturates at 2^64 - 1.
 uint64_t probability_threshold(double a);
 
+// The sequential search of inversion from 0 for Binomial(n, a): X = the first x at which U >= floor(P(X > x)
+// 2^64) (or n), with P(X > x) walked down from S = P(X > 0), pmf = P(X = 0) by the pmf recurrence
+// pmf(x + 1) = pmf(x) (r ratio(x)), r = a / (1 - a), ratio(x) = (n - x) / (x + 1).
+template <class Ratio>
+uint32_t sequential_search(uint64_t U, uint32_t n, double r, double S, double pmf, Ratio ratio) {
+  uint32_t x = 0;
+  while (x < n && U < probability_threshold(S)) {
+    pmf *= r * ratio(x);
+    ++x;
+    S -= pmf;  // P(X > x)
+    if (!(S > 0.0)) break;
+  }
+  return x;
+}
+
 struct Prob {
   double p = 0.0, q = 1.0;
   double log_q = 1.0;  // log(q) when known exactly (-lambda); positive means "not known"

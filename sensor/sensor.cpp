@@ -140,7 +140,7 @@ struct SensorModel::Impl {
   GateShape gate;
   std::unique_ptr<PixelMaps> maps;
   std::unique_ptr<BinomialSampler> binom;
-  std::shared_ptr<const BinomialTable> table;  // counts by tables (sampled counts, frames_per_k <= kMaxN)
+  std::shared_ptr<const BinomialTable> table;  // counts by tables (sweeps without frames; null when N is too large)
   TypeInfo types[2];
   int halo = 0;
 
