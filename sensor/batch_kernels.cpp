@@ -104,40 +104,6 @@ void CrosstalkRates(const double* HWY_RESTRICT lam, size_t K, const double* cons
   }
 }
 
-void PhiloxBlocks(const uint32_t key[2], const uint32_t* c0, const uint32_t* c1, const uint32_t* c2,
-                  const uint32_t* c3, size_t count, uint32_t* HWY_RESTRICT out) {
-  const hn::ScalableTag<uint32_t> du;
-  const size_t L = hn::Lanes(du);
-  alignas(64) uint32_t w[4][64];
-  for (size_t i = 0; i < count; i += L) {
-    const size_t c = std::min(L, count - i);
-    hn::Vec<decltype(du)> x0, x1, x2, x3;
-    if (c == L) {  // whole vectors straight from the counter arrays
-      x0 = c0 != nullptr ? hn::LoadU(du, c0 + i) : hn::Zero(du);
-      x1 = hn::LoadU(du, c1 + i);
-      x2 = hn::LoadU(du, c2 + i);
-      x3 = hn::LoadU(du, c3 + i);
-    } else {  // the tail through padded copies
-      alignas(64) uint32_t a0[64] = {}, a1[64] = {}, a2[64] = {}, a3[64] = {};
-      if (c0 != nullptr) std::copy(c0 + i, c0 + i + c, a0);
-      std::copy(c1 + i, c1 + i + c, a1);
-      std::copy(c2 + i, c2 + i + c, a2);
-      std::copy(c3 + i, c3 + i + c, a3);
-      x0 = hn::Load(du, a0);
-      x1 = hn::Load(du, a1);
-      x2 = hn::Load(du, a2);
-      x3 = hn::Load(du, a3);
-    }
-    Philox10(du, key[0], key[1], x0, x1, x2, x3);
-    hn::Store(x0, du, w[0]);
-    hn::Store(x1, du, w[1]);
-    hn::Store(x2, du, w[2]);
-    hn::Store(x3, du, w[3]);
-    for (size_t j = 0; j < c; ++j)
-      for (size_t v = 0; v < 4; ++v) out[4 * (i + j) + v] = w[v][j];
-  }
-}
-
 // The counts' random words of every k < K, counter (0, k, pixel low, pixel high), on the widest vectors:
 // without ars (the walk from the mode) words 0 and 1 of Philox block 0 of the stream
 // Rng(seed, Counts, pixel, k) into s.hi, s.lo; with ars (the tables) the four words of ARS-7 with the
@@ -544,7 +510,6 @@ namespace spadgen::sensor {
 HWY_EXPORT(Probabilities);
 HWY_EXPORT(ProbsOfRates);
 HWY_EXPORT(CrosstalkRates);
-HWY_EXPORT(PhiloxBlocks);
 HWY_EXPORT(BinomialCounts);
 HWY_EXPORT(BinomialCountsTable);
 HWY_EXPORT(TransposeRowsF);
@@ -589,16 +554,6 @@ void transpose_rows(const float* src, size_t width, size_t K, float* dst, size_t
 }
 void transpose_rows(const uint16_t* src, size_t width, size_t K, uint16_t* dst, size_t dst_stride) {
   HWY_DYNAMIC_DISPATCH(TransposeRowsU16)(src, width, K, dst, dst_stride);
-}
-
-void philox_block0(const uint32_t key[2], const uint32_t* c1, const uint32_t* c2, const uint32_t* c3,
-                   size_t count, uint32_t* out) {
-  HWY_DYNAMIC_DISPATCH(PhiloxBlocks)(key, nullptr, c1, c2, c3, count, out);
-}
-
-void philox_blocks(const uint32_t key[2], const uint32_t* c0, const uint32_t* c1, const uint32_t* c2,
-                   const uint32_t* c3, size_t count, uint32_t* out) {
-  HWY_DYNAMIC_DISPATCH(PhiloxBlocks)(key, c0, c1, c2, c3, count, out);
 }
 
 }  // namespace spadgen::sensor

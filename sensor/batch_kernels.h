@@ -2,10 +2,10 @@
 // foreach_target) and chosen at run time (HWY_DYNAMIC_DISPATCH):
 //  - probabilities p = -expm1(-lambda), q = exp(-lambda) and crosstalk-corrected rates for all K gates of
 //    a pixel, with Highway's Expm1 / Exp / Log1p (measured against long double: at most 2 ulp);
-//  - Binomial(N, p) counts of all K gates of a pixel: block 0 of the K streams Rng(seed, Counts, pixel, k)
-//    on 16 lanes of Philox, the decision X = 0 as one comparison of U (the stream's first 64-bit uniform)
-//    with floor(P(X > 0) 2^64), and only the other lanes through BinomialSampler's scalar search;
-//  - block 0 of many streams at once (the frames path's per-pixel streams).
+//  - Binomial(N, p) counts of all K gates of a pixel: by BinomialTable (gate sweeps, random words from
+//    ARS-7), or by BinomialSampler's inversion (block 0 of the K streams Rng(seed, Counts, pixel, k) on 16
+//    lanes of Philox, the decision X = 0 as one comparison of U with floor(P(X > 0) 2^64));
+//  - a row of pixel-major results written k-major (transpose_rows).
 // Every result depends on the pixel and k only: bit-identical for any tile size or thread count.
 #pragma once
 #include <cstddef>
@@ -67,15 +67,5 @@ void transpose_rows(const uint16_t* src, size_t width, size_t K, uint16_t* dst, 
 inline Block128 counts_block(const uint32_t key[2], uint64_t pixel, uint32_t k) {
   return ars7({0u, k, static_cast<uint32_t>(pixel), static_cast<uint32_t>(pixel >> 32)}, ars_round_keys(ars_key(key)));
 }
-
-// Block 0 of `count` streams with counters (0, c1[i], c2[i], c3[i]) and one key: out[4 i + w] = word w,
-// as Rng::block(0).
-void philox_block0(const uint32_t key[2], const uint32_t* c1, const uint32_t* c2, const uint32_t* c3,
-                   size_t count, uint32_t* out);
-
-// Blocks with counters (c0[i], c1[i], c2[i], c3[i]) and one key: out[4 i + w] = word w, as
-// Rng::block(c0[i]) of the stream whose block-0 counter is (0, c1[i], c2[i], c3[i]).
-void philox_blocks(const uint32_t key[2], const uint32_t* c0, const uint32_t* c1, const uint32_t* c2,
-                   const uint32_t* c3, size_t count, uint32_t* out);
 
 }  // namespace spadgen::sensor

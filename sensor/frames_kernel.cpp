@@ -224,7 +224,7 @@ HWY_INLINE void SettleTies(const ArsKeys& keys, uint32_t c1, const uint64_t* HWY
   tb.count = 0;
 }
 
-// Many dense pixels of one key in one call (see dense_bits_batch): no per-pixel dispatch, Rng set-up or
+// Many dense pixels of one key in one call (from frame_bits_group): no per-pixel dispatch, Rng set-up or
 // zero fill, the inversion folded into the store, the ties collected without branches and settled together.
 HWY_INLINE void DenseBitsBatch(const ArsKeys& keys, uint32_t c1, const uint64_t* HWY_RESTRICT pixels,
                                const uint64_t* HWY_RESTRICT T, const uint64_t* HWY_RESTRICT flips,

@@ -37,11 +37,6 @@ Prob prob_from_lambda(double lambda) {
   return {-std::expm1(-lambda), std::exp(-lambda), -lambda};
 }
 
-double neg_log1p_minus(double x) {
-  if (x < 1e-5) return x * (1.0 + x * (0.5 + x * (1.0 / 3.0 + x * 0.25)));  // next term below 2e-21 x
-  return -std::log1p(-x);
-}
-
 bool bits_are_sparse(const Prob& pr) { return std::min(pr.p, pr.q) <= kSparseBelow; }
 
 BinomialSampler::BinomialSampler(uint32_t n) : n_(n), log_fact_(n + 1), up_(n + 1), down_(n + 1) {

@@ -86,8 +86,6 @@ struct Prob {
 };
 // p = 1 - exp(-lambda) and q = exp(-lambda), each to full relative precision.
 Prob prob_from_lambda(double lambda);
-// -log(1 - x) for x in [0, 1), with a series for small x.
-double neg_log1p_minus(double x);
 
 class BinomialSampler {
  public:
