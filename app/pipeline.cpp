@@ -26,6 +26,7 @@
 #include "render/renderer.h"
 #include "scenes/scene.h"
 #include "scenes/scene_file.h"
+#include "sensor/acquisition/acquisition.h"
 #include "sensor/sensor.h"
 #include "writers/previews.h"
 #include "writers/writers.h"
@@ -230,19 +231,13 @@ std::vector<std::pair<int, int>> profile_pixels(const PixelRect& img) {
   return p;
 }
 
-// Frames summed per gate position or exposure: dual exposure splits the frames between its two exposures.
-int frames_per_k(const RunConfig& c) {
-  const bool dual = c.acquisition.mode == "intensity" && c.acquisition.intensity.exposure == "dual";
-  return dual ? c.acquisition.frames / 2 : c.acquisition.frames;
-}
-
 // The per-pixel EXR images, filled tile by tile. Every channel is created here, up front: tiles fill
 // them from several threads, and ExrImage::channel creates a channel on first use.
 class Images {
  public:
-  Images(const RunConfig& cfg, const PixelRect& img)
+  Images(const RunConfig& cfg, const PixelRect& img, bool intensity_image)
       : img_(img), layers_(cfg.render.max_layers), gt_on_(cfg.outputs.ground_truth),
-        sweep_(cfg.acquisition.mode == "gate_sweep"), gt_(img.width, img.height), laser_(img.width, img.height),
+        sweep_(!intensity_image), gt_(img.width, img.height), laser_(img.width, img.height),
         ambient_(img.width, img.height), maps_(img.width, img.height), intensity_(img.width, img.height) {
     if (gt_on_) {
       for (const char* n : kGroundTruthChannels) gt_ch_.push_back(gt_.channel(n));
@@ -349,9 +344,9 @@ class Images {
 // The NumPy stacks, streamed to disk tile by tile.
 class Stacks {
  public:
-  Stacks(const RunConfig& cfg, const PixelRect& img, int K, const TimeAxis& axis, const Staging& staging,
-         std::vector<std::string>& files)
-      : img_(img), tcrop_(cfg.outputs.transient_crop.value_or(img)), counts_u8_(frames_per_k(cfg) <= 255) {
+  Stacks(const RunConfig& cfg, const PixelRect& img, int K, int frames_per_k, const TimeAxis& axis,
+         const Staging& staging, std::vector<std::string>& files)
+      : img_(img), tcrop_(cfg.outputs.transient_crop.value_or(img)), counts_u8_(frames_per_k <= 255) {
     using writers::NpyWriter;
     const auto open = [&](std::unique_ptr<NpyWriter>& w, const std::string& name, NpyWriter::Dtype type, std::vector<int64_t> shape) {
       w = std::make_unique<NpyWriter>(staging.path(name), type, std::move(shape));
@@ -361,7 +356,7 @@ class Stacks {
     if (cfg.outputs.expected_counts) open(expected_, "expected_counts.npy", NpyWriter::Dtype::F32, khw);
     if (cfg.outputs.counts) open(counts_, "counts.npy", counts_u8_ ? NpyWriter::Dtype::U8 : NpyWriter::Dtype::U16, khw);
     if (cfg.outputs.frames)
-      open(frames_, "frames.npy", NpyWriter::Dtype::U8, {K, frames_per_k(cfg), img.height, (img.width + 7) / 8});
+      open(frames_, "frames.npy", NpyWriter::Dtype::U8, {K, frames_per_k, img.height, (img.width + 7) / 8});
     const std::vector<int64_t> hwt{tcrop_.height, tcrop_.width, axis.bins};
     if (cfg.outputs.transient) open(transient_, "transient.npy", NpyWriter::Dtype::F32, hwt);
     if (cfg.outputs.transient && cfg.render.split_direct_indirect)
@@ -440,23 +435,27 @@ RunResult run(const RunOptions& options) {
 
   const scenes::Scene scene = scenes::load_gltf(cfg.gltf_path, cfg.gltf_scene);
   for (const std::string& w : scene.warnings) std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
-  sensor::SensorModel sensor(cfg);
+  sensor::SensorModel sensor(sensor_stage(cfg));
   if (!cfg.sensor.gate.maps_exr.empty()) {
     const writers::ExrData maps = writers::read_exr(cfg.sensor.gate.maps_exr);
     sensor.set_maps(maps.width, maps.height, maps.channels, cfg.sensor.gate.maps_exr);
   }
-  const render::Renderer renderer(scene, cfg);
+  const render::Renderer renderer(scene, render_stage(cfg, sensor.row_fill_factor()));
 
   const TimeAxis axis = time_axis(cfg, sensor);
   const PixelRect img = image_rect(cfg);
   const int K = sensor.K();
-  const bool sweep = cfg.acquisition.mode == "gate_sweep";
+  const auto declared = [&](const std::string& file) {
+    for (const sensor::DeclaredOutput& d : sensor.acquisition().outputs())
+      if (d.file == file) return true;
+    return false;
+  };
 
   const fs::path out = options.out_dir.empty() ? fs::path("out") / fs::path(options.scene_file).stem() : fs::path(options.out_dir);
   Staging staging(out);
   std::vector<std::string> files;
-  Images images(cfg, img);
-  Stacks stacks(cfg, img, K, axis, staging, files);
+  Images images(cfg, img, declared("intensity.exr"));
+  Stacks stacks(cfg, img, K, sensor.frames_per_k(), axis, staging, files);
   ProfileProbe probe(img, K);
 
   // Tiles are laid over the output image; the renderer and the sensor see full-sensor coordinates.
@@ -492,7 +491,7 @@ RunResult run(const RunOptions& options) {
     e.set_attribute("spadgen_scene_hash", hash);
     e.set_attribute("spadgen_crop", crop_text);
   }, axis, cfg.outputs.previews, files);
-  if (cfg.outputs.previews && sweep && K > 1) probe.write(staging, sensor.gate_positions_s(), files);
+  if (cfg.outputs.previews && declared("previews/gate_profiles.png") && K > 1) probe.write(staging, sensor.gate_positions_s(), files);
 
   const double laser_total = images.laser_total(), oow_total = images.out_of_window_total();
   render::RenderStats rays;
@@ -549,7 +548,7 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
   const scenes::ResolvedRun r = scenes::load_scene_file(scene_file, overrides);
   const RunConfig& c = r.config;
   const scenes::Scene scene = scenes::load_gltf(c.gltf_path, c.gltf_scene);
-  sensor::SensorModel sensor(c);
+  sensor::SensorModel sensor(sensor_stage(c));
   std::ostringstream o;
   o << "# resolved scene file " << c.scene_file << "\n" << r.resolved.dump(2) << "\n\n";
   o << "# glTF\n" << scenes::summarize(scene) << "\n";
@@ -563,8 +562,8 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
     << axis.end_s() / kNs << " ns\n";
   const auto mb = [](double bytes) { return std::to_string(int64_t(std::ceil(bytes / 1e6))) + " MB"; };
   o << "output sizes: expected_counts.npy " << mb(4.0 * px * sensor.K()) << ", counts.npy "
-    << mb((frames_per_k(c) <= 255 ? 1.0 : 2.0) * px * sensor.K());
-  if (c.outputs.frames) o << ", frames.npy " << mb(double(sensor.K()) * frames_per_k(c) * img.height * ((img.width + 7) / 8));
+    << mb((sensor.frames_per_k() <= 255 ? 1.0 : 2.0) * px * sensor.K());
+  if (c.outputs.frames) o << ", frames.npy " << mb(double(sensor.K()) * sensor.frames_per_k() * img.height * ((img.width + 7) / 8));
   if (c.outputs.transient) {
     const PixelRect t = c.outputs.transient_crop.value_or(img);
     o << ", transient.npy " << mb(4.0 * double(t.width) * t.height * double(axis.bins));

@@ -20,6 +20,7 @@
 #include "core/units.h"
 #include "render/embree_scene.h"
 #include "render/renderer.h"
+#include "sensor/pixel_layout.h"
 #include "scenes/scene.h"
 #include "scenes/scene_file.h"
 
@@ -32,6 +33,11 @@ struct Setup {
   RunConfig config;
   std::string source;
 };
+
+// The renderer's part of the run, with the fill factor of every row as the sensor lays them out.
+RenderStageConfig stage(const RunConfig& c) {
+  return render_stage(c, sensor::PixelLayout(c.sensor.preset, c.camera.height_px).row_fill_factor(c.sensor));
+}
 
 // The equivalent of scenes/paper/multi_object.json when the shipped file is not there: a 2 mm plate of
 // ior 1.5, front face at 0.45 m, covering the left half, in front of a sphere whose nearest point is 0.75 m.
@@ -138,7 +144,7 @@ void BM_Integrator(benchmark::State& state) {
   Setup& s = setup();
   RunConfig c = s.config;
   c.render.samples_per_pixel = 1;
-  const render::Renderer r(s.scene, c);
+  const render::Renderer r(s.scene, stage(c));
   const TimeAxis axis = state.range(0) > 0 ? sweep_axis(double(state.range(0)) * 1e-12) : TimeAxis{};
   const PixelRect all{0, 0, c.camera.width_px, c.camera.height_px};
   uint64_t rays = 0;
@@ -156,7 +162,7 @@ const std::vector<render::RayRecord>& recorded_rays() {
     Setup& s = setup();
     RunConfig c = s.config;
     c.render.samples_per_pixel = 1;
-    const render::Renderer r(s.scene, c);
+    const render::Renderer r(s.scene, stage(c));
     std::vector<render::RayRecord> out;
     out.reserve(8u << 20);
     tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
@@ -208,7 +214,7 @@ void paired_ratio(int pairs) {
   Setup& s = setup();
   RunConfig c = s.config;
   c.render.samples_per_pixel = 1;
-  const render::Renderer r(s.scene, c);
+  const render::Renderer r(s.scene, stage(c));
   const render::EmbreeScene embree(s.scene);
   const std::vector<render::RayRecord>& rays = recorded_rays();
   const PixelRect all{0, 0, c.camera.width_px, c.camera.height_px};
@@ -243,7 +249,7 @@ void samples_vs_error() {
   auto totals = [&](int spp, double* seconds) {
     RunConfig c = s.config;
     c.render.samples_per_pixel = spp;
-    const render::Renderer r(s.scene, c);
+    const render::Renderer r(s.scene, stage(c));
     const auto t0 = std::chrono::steady_clock::now();
     const TransientTile t = r.transient(crop, crop, none);
     *seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -274,7 +280,7 @@ void bin_width_vs_error() {
   Setup& s = setup();
   RunConfig c = s.config;
   c.render.samples_per_pixel = 16;
-  const render::Renderer r(s.scene, c);
+  const render::Renderer r(s.scene, stage(c));
   const PixelRect crop{c.camera.width_px / 2 - 192, c.camera.height_px / 2 - 64, 128, 128};
   auto mean_times = [&](double bin, double* seconds, int64_t* bins) {
     const TimeAxis axis = sweep_axis(bin);
@@ -319,7 +325,7 @@ void bounces_vs_error() {
     RunConfig c = s.config;
     c.render.samples_per_pixel = 16;
     c.render.max_bounces = bounces;
-    const render::Renderer r(s.scene, c);
+    const render::Renderer r(s.scene, stage(c));
     const auto t0 = std::chrono::steady_clock::now();
     const TransientTile t = r.transient(crop, crop, TimeAxis{});
     *seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

@@ -87,7 +87,7 @@ BENCHMARK(BM_FrameBits)->UseRealTime()->Unit(benchmark::kMillisecond);
 // layer), photons per pulse log-uniform in [1e-4, 1e-2] (the paper's flat target at 0.2-1.6 m sees
 // about 1e-3), ambient 1e5 to 1e6 photons/s.
 struct Scene {
-  RunConfig cfg;
+  SensorStageConfig cfg;
   int width = 64, height = 64;
   TimeAxis axis;
   std::vector<float> transient, ambient;
@@ -99,7 +99,7 @@ Scene make_scene(bool frames, int width, int height) {
   s.height = height;
   s.cfg.camera.width_px = 1024;
   s.cfg.camera.height_px = 1000;
-  s.cfg.sensor.preset = "full_chip";
+  s.cfg.sensor.preset = PixelPreset::FullChip;
   s.cfg.sensor.pixel_B.fill_factor = 0.134;
   s.cfg.sensor.pixel_B.pdp_peak = 0.267;
   s.cfg.sensor.pixel_B.dcr_median_cps = 2.0;
@@ -153,7 +153,7 @@ TransientTile cut(const Scene& s, const PixelRect& r, int halo) {
 void run_sweep(benchmark::State& state, bool frames) {
   const int w = 64, h = frames ? 32 : 64;
   const Scene s = make_scene(frames, w, h);
-  RunConfig cfg = s.cfg;
+  SensorStageConfig cfg = s.cfg;
   cfg.camera.width_px = w;  // the sub-image is the sensor here; per-pixel work is the same
   cfg.camera.height_px = h;
   sensor::SensorModel model(cfg);
@@ -202,7 +202,7 @@ void run_sweep(benchmark::State& state, bool frames) {
 void BM_CountsSampling(benchmark::State& state) {
   const int w = 64, h = 64;
   const Scene s = make_scene(false, w, h);
-  RunConfig cfg = s.cfg;
+  SensorStageConfig cfg = s.cfg;
   cfg.camera.width_px = w;
   cfg.camera.height_px = h;
   const sensor::SensorModel model(cfg);

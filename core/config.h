@@ -6,13 +6,70 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <string_view>
+#include <utility>
 #include <vector>
 
 #include "tile.h"
+#include "units.h"
 
 namespace spadgen {
 
 using Vec3d = std::array<double, 3>;
+
+// The choices a scene file spells as strings are enums inside the code. Each enum's spellings are listed
+// once, in EnumNames<E>::values (scene-file spelling, value); the schema, the error messages, the docs
+// and metadata.json all read them from there.
+template <class E>
+struct EnumNames;
+
+enum class Beam { Flood, Cone, GltfLight };
+template <>
+struct EnumNames<Beam> {
+  static constexpr std::array<std::pair<std::string_view, Beam>, 3> values{
+      {{"flood", Beam::Flood}, {"cone", Beam::Cone}, {"gltf_light", Beam::GltfLight}}};
+};
+
+enum class GateEdge { Linear, Smooth };
+template <>
+struct EnumNames<GateEdge> {
+  static constexpr std::array<std::pair<std::string_view, GateEdge>, 2> values{
+      {{"linear", GateEdge::Linear}, {"smooth", GateEdge::Smooth}}};
+};
+
+// Which pixel design the rows have; sensor/pixel_layout.h decides row by row.
+enum class PixelPreset { PixelA, PixelB, FullChip };
+template <>
+struct EnumNames<PixelPreset> {
+  static constexpr std::array<std::pair<std::string_view, PixelPreset>, 3> values{
+      {{"pixel_A", PixelPreset::PixelA}, {"pixel_B", PixelPreset::PixelB}, {"full_chip", PixelPreset::FullChip}}};
+};
+
+enum class AcquisitionMode { GateSweep, Intensity };
+template <>
+struct EnumNames<AcquisitionMode> {
+  static constexpr std::array<std::pair<std::string_view, AcquisitionMode>, 2> values{
+      {{"gate_sweep", AcquisitionMode::GateSweep}, {"intensity", AcquisitionMode::Intensity}}};
+};
+
+enum class Exposure { Single, Dual };
+template <>
+struct EnumNames<Exposure> {
+  static constexpr std::array<std::pair<std::string_view, Exposure>, 2> values{
+      {{"single", Exposure::Single}, {"dual", Exposure::Dual}}};
+};
+
+// The scene-file spelling of an enum value.
+template <class E>
+constexpr std::string_view name_of(E e) {
+  for (const auto& [name, value] : EnumNames<E>::values)
+    if (value == e) return name;
+  return "?";
+}
+template <class E>
+std::string to_string(E e) {
+  return std::string(name_of(e));
+}
 
 struct CameraConfig {
   std::string gltf_camera;          // camera.gltf_camera: name of a glTF camera node; "" = defined here
@@ -27,6 +84,8 @@ struct CameraConfig {
   double f_number = 1.4;            // camera.f_number
   double optics_transmission = 1.0; // camera.optics_transmission, fraction of light the lens passes
   std::optional<PixelRect> crop;    // camera.crop [x0, y0, width, height]: render only this region
+
+  bool operator==(const CameraConfig&) const = default;
 };
 
 struct LaserConfig {
@@ -36,11 +95,13 @@ struct LaserConfig {
   double pulse_fwhm_s = 80e-12;         // laser.pulse_fwhm_ps (Gaussian)
   std::string pulse_shape_csv;          // laser.pulse_shape_csv: table (time_ps, relative power); "" = Gaussian
   double emission_delay_s = 0.0;        // laser.emission_delay_ns: trigger to pulse emission
-  std::string beam = "flood";           // laser.beam: "flood" (cone covering the field of view),
-                                        //   "cone" (half_angle_deg), "gltf_light" (a KHR_lights_punctual light)
-  double half_angle_rad = 0.0;          // laser.half_angle_deg (beam "cone")
+  Beam beam = Beam::Flood;              // laser.beam: flood (cone covering the field of view),
+                                        //   cone (half_angle_deg), gltf_light (a KHR_lights_punctual light)
+  double half_angle_rad = 10.0 * kPi / 180.0;  // laser.half_angle_deg (beam cone)
   Vec3d offset_m{0, 0, 0};              // laser.offset_m, in camera coordinates (x right, y up, -z forward)
   std::string gltf_light;               // laser.gltf_light: light name (beam "gltf_light")
+
+  bool operator==(const LaserConfig&) const = default;
 };
 
 struct AmbientConfig {
@@ -51,6 +112,8 @@ struct AmbientConfig {
   double wavelength_m = 550e-9;         // ambient.wavelength_nm: centre of the band the camera sees
   double bandwidth_m = 300e-9;          // ambient.bandwidth_nm: width of that band (filter or sensor)
   bool gltf_lights = true;              // ambient.gltf_lights: glTF punctual lights also light the scene
+
+  bool operator==(const AmbientConfig&) const = default;
 };
 
 // One pixel design of the chip. The defaults are the paper's pixel A; paper_pixel_B() is its pixel B
@@ -79,23 +142,27 @@ struct PixelTypeConfig {
     b.single_avalanche_per_frame = true;
     return b;
   }
+
+  bool operator==(const PixelTypeConfig&) const = default;
 };
 
 struct GateConfig {
   double length_s = 3.8e-9;             // sensor.gate.length_ns (50 % to 50 %)
   double rise_s = 400e-12;              // sensor.gate.rise_ps (10 % to 90 %)
   double fall_s = 400e-12;              // sensor.gate.fall_ps (90 % to 10 %)
-  std::string edge_shape = "smooth";    // sensor.gate.edge_shape: "linear" or "smooth"
+  GateEdge edge_shape = GateEdge::Smooth;  // sensor.gate.edge_shape
   std::string profile_csv;              // sensor.gate.profile_csv: measured (time_ps, response) table
   double delay_s = 0.0;                 // sensor.gate.delay_ns: trigger to gate opening at position 0
   double skew_fwhm_s = 410e-12;         // sensor.gate.skew_fwhm_ps
   double length_fwhm_s = 120e-12;       // sensor.gate.length_fwhm_ps
   std::string maps_exr;                 // sensor.gate.maps_exr: EXR with channels skew_ps, length_ps
   double jitter_fwhm_s = 60e-12;        // sensor.jitter_fwhm_ps: SPAD timing jitter (Gaussian)
+
+  bool operator==(const GateConfig&) const = default;
 };
 
 struct SensorConfig {
-  std::string preset = "pixel_A";       // sensor.preset: "pixel_A", "pixel_B", "full_chip" (A top half, B bottom)
+  PixelPreset preset = PixelPreset::PixelA;  // sensor.preset (full_chip: A top half, B bottom; sensor/pixel_layout.h)
   PixelTypeConfig pixel_A = PixelTypeConfig::paper_pixel_A();  // sensor.pixel_A
   PixelTypeConfig pixel_B = PixelTypeConfig::paper_pixel_B();  // sensor.pixel_B
   GateConfig gate;                      // sensor.gate
@@ -104,28 +171,36 @@ struct SensorConfig {
   bool crosstalk = true;                // sensor.crosstalk
   bool skew = true;                     // sensor.gate_skew: per-pixel gate position and length maps
   bool pdp_nonuniformity = true;        // sensor.pdp_nonuniformity
+
+  bool operator==(const SensorConfig&) const = default;
 };
 
 struct GateSweepConfig {
   double start_s = 0.6e-9;              // acquisition.gate_sweep.start_ns
   double stop_s = 13.2e-9;              // acquisition.gate_sweep.stop_ns (inclusive when on the grid)
   double step_s = 36e-12;               // acquisition.gate_sweep.step_ps
+
+  bool operator==(const GateSweepConfig&) const = default;
 };
 
 struct IntensityConfig {
-  std::string exposure = "single";      // acquisition.intensity.exposure: "single" or "dual"
+  Exposure exposure = Exposure::Single;  // acquisition.intensity.exposure
   double exposure_s = 10e-6;            // acquisition.intensity.exposure_us: single exposure, or tau_S in dual
   double dual_ratio = 8.0;              // acquisition.intensity.dual_ratio: tau_L / tau_S
   bool laser_on = false;                // acquisition.intensity.laser_on: add the laser's mean photon rate
+
+  bool operator==(const IntensityConfig&) const = default;
 };
 
 struct AcquisitionConfig {
-  std::string mode = "gate_sweep";      // acquisition.mode: "gate_sweep" (3D) or "intensity" (2D)
+  AcquisitionMode mode = AcquisitionMode::GateSweep;  // acquisition.mode: gate_sweep (3D) or intensity (2D)
   int frames = 255;                     // acquisition.frames: per gate position (sweep) or per image (2D)
   double frame_rate_Hz = 24000.0;       // acquisition.frame_rate_fps, for time stamps
   int64_t cycles_per_frame = 1000;      // acquisition.cycles_per_frame: laser cycles in one binary frame
   GateSweepConfig gate_sweep;
   IntensityConfig intensity;
+
+  bool operator==(const AcquisitionConfig&) const = default;
 };
 
 struct RenderConfig {
@@ -138,6 +213,8 @@ struct RenderConfig {
   int tile_size = 32;                   // render.tile_size_px (multiple of 8)
   int max_layers = 8;                   // render.max_layers in the ground truth
   bool split_direct_indirect = false;   // render.split_direct_indirect
+
+  bool operator==(const RenderConfig&) const = default;
 };
 
 struct OutputsConfig {
@@ -148,6 +225,8 @@ struct OutputsConfig {
   bool counts = true;                   // outputs.counts
   bool frames = false;                  // outputs.frames
   bool previews = true;                 // outputs.previews
+
+  bool operator==(const OutputsConfig&) const = default;
 };
 
 struct RunConfig {
@@ -162,6 +241,47 @@ struct RunConfig {
   AcquisitionConfig acquisition;
   RenderConfig render;
   OutputsConfig outputs;
+
+  bool operator==(const RunConfig&) const = default;
 };
+
+// What each stage receives: its own part of the run description, already validated (scenes/ checks every
+// key and every rule that spans keys once, when the scene file is read; the stages do not check again).
+
+// The sensor stage (sensor/): the chip and the acquisition, and the few facts about the camera and the
+// light it needs: the sensor's size, the optics transmission (for the informative PDE), the laser's
+// wavelength, period and pulse, and the ambient band.
+struct SensorStageConfig {
+  struct Geometry {
+    int width_px = CameraConfig{}.width_px;    // the full sensor
+    int height_px = CameraConfig{}.height_px;
+    double optics_transmission = CameraConfig{}.optics_transmission;
+  } camera;
+  LaserConfig laser;
+  struct Band {
+    double wavelength_m = AmbientConfig{}.wavelength_m;
+    double bandwidth_m = AmbientConfig{}.bandwidth_m;
+  } ambient;
+  SensorConfig sensor;
+  AcquisitionConfig acquisition;
+  struct Outputs {
+    bool frames = OutputsConfig{}.frames;  // sample binary frames (else counts directly)
+  } outputs;
+  uint64_t seed = RunConfig{}.seed;
+};
+
+// The renderer (render/): the camera, the laser, the ambient light, its numerical settings and seed, and
+// the fill factor of every sensor row, which the sensor's pixel layout decides (sensor/pixel_layout.h).
+struct RenderStageConfig {
+  CameraConfig camera;
+  LaserConfig laser;
+  AmbientConfig ambient;
+  RenderConfig render;
+  uint64_t seed = RunConfig{}.seed;
+  std::vector<double> row_fill_factor;  // camera.height_px values, row 0 at the top
+};
+
+SensorStageConfig sensor_stage(const RunConfig& c);
+RenderStageConfig render_stage(const RunConfig& c, std::vector<double> row_fill_factor);
 
 }  // namespace spadgen

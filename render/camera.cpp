@@ -17,13 +17,6 @@ std::string vec_str(const glm::dvec3& v) {
 
 Camera::Camera(const CameraConfig& c, const scenes::Scene& scene)
     : width_(c.width_px), height_(c.height_px), pitch_(c.pixel_pitch_m) {
-  if (width_ <= 0 || height_ <= 0)
-    throw Error("camera.width_px and camera.height_px must be positive, found " + std::to_string(width_) +
-                " x " + std::to_string(height_));
-  if (!(pitch_ > 0.0) || !std::isfinite(pitch_))
-    throw Error("camera.pixel_pitch_um must be positive, found " + std::to_string(pitch_ * 1e6));
-  if (!(c.f_number > 0.0))
-    throw Error("camera.f_number must be positive, found " + std::to_string(c.f_number));
   const double sensor_height = height_ * pitch_;
 
   std::optional<double> fov = c.vertical_fov_rad;

@@ -58,37 +58,22 @@ int shadow_medium(const Surface& sf, bool volume, bool wo_front, const glm::vec3
   return wi_front ? -1 : sf.material;
 }
 
-double fill_factor_of(const SensorConfig& s, bool bottom) {
-  if (s.preset == "pixel_A") return s.pixel_A.fill_factor;
-  if (s.preset == "pixel_B") return s.pixel_B.fill_factor;
-  if (s.preset == "full_chip") return bottom ? s.pixel_B.fill_factor : s.pixel_A.fill_factor;
-  throw Error("sensor.preset: expected \"pixel_A\", \"pixel_B\" or \"full_chip\", found \"" + s.preset + "\"");
-}
-
 }  // namespace
 
-Integrator::Integrator(const RunConfig& config, const scenes::Scene& scene, const EmbreeScene& embree,
+Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& scene, const EmbreeScene& embree,
                        const Shading& shading, const Camera& camera, const Laser& laser, const Ambient& ambient)
     : config_(config), embree_(embree), shading_(shading), camera_(camera), laser_(laser), ambient_(ambient) {
   transmission_ = scene.has_transmission();
   ambient_on_ = ambient.any() || shading.has_emission();
-  ff_top_ = fill_factor_of(config.sensor, false);
-  ff_bottom_ = fill_factor_of(config.sensor, true);
-  for (double ff : {ff_top_, ff_bottom_})
-    if (!(ff > 0.0 && ff <= 1.0)) throw Error("sensor fill_factor must lie in (0, 1], found " + std::to_string(ff));
   optics_ = config.camera.optics_transmission;
-  if (!(optics_ >= 0.0 && optics_ <= 1.0))
-    throw Error("camera.optics_transmission must lie in [0, 1], found " + std::to_string(optics_));
-  const RenderConfig& r = config.render;
-  if (r.samples_per_pixel < 1)
-    throw Error("render.samples_per_pixel must be >= 1, found " + std::to_string(r.samples_per_pixel));
-  if (r.max_bounces < 1) throw Error("render.max_bounces must be >= 1, found " + std::to_string(r.max_bounces));
-  if (r.russian_roulette_from < 1)
-    throw Error("render.russian_roulette_from must be >= 1, found " + std::to_string(r.russian_roulette_from));
+  // The one check left here is of the interface, not of the scene file: the rows the caller describes.
+  if (config.row_fill_factor.size() != static_cast<size_t>(camera.height()))
+    throw Error("renderer: RenderStageConfig::row_fill_factor holds " + std::to_string(config.row_fill_factor.size()) +
+                " rows, expected camera.height_px = " + std::to_string(camera.height()));
 }
 
 double Integrator::measurement_constant(int y) const {
-  const double ff = 2 * y >= camera_.height() ? ff_bottom_ : ff_top_;
+  const double ff = config_.row_fill_factor[static_cast<size_t>(y)];
   const double p = camera_.pitch_m(), n = config_.camera.f_number;
   return ff * optics_ * p * p * kPi / (4.0 * n * n);
 }

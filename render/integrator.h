@@ -76,7 +76,7 @@ struct FirstSegment {
 
 class Integrator {
  public:
-  Integrator(const RunConfig& config, const scenes::Scene& scene, const EmbreeScene& embree,
+  Integrator(const RenderStageConfig& config, const scenes::Scene& scene, const EmbreeScene& embree,
              const Shading& shading, const Camera& camera, const Laser& laser, const Ambient& ambient);
 
   // Traces the camera rays of every sample of the block that contains pixel (x, y) (full-sensor coordinates).
@@ -103,7 +103,7 @@ class Integrator {
   bool laser_ray(const Surface& sf, LaserRay* out) const;
 
  private:
-  const RunConfig& config_;
+  const RenderStageConfig& config_;
   const EmbreeScene& embree_;
   const Shading& shading_;
   const Camera& camera_;
@@ -111,7 +111,6 @@ class Integrator {
   const Ambient& ambient_;
   bool transmission_ = false;
   bool ambient_on_ = false;
-  double ff_top_ = 0.0, ff_bottom_ = 0.0;  // fill factor of rows < H/2 and rows >= H/2
   double optics_ = 1.0;
 };
 

@@ -10,26 +10,19 @@
 
 namespace spadgen::render {
 
-Laser make_laser(const RunConfig& config, const Camera& camera, const scenes::Scene& scene, int* laser_light) {
+Laser make_laser(const RenderStageConfig& config, const Camera& camera, const scenes::Scene& scene, int* laser_light) {
   const LaserConfig& c = config.laser;
   *laser_light = -1;
-  if (!(c.average_power_W >= 0.0) || !(c.repetition_rate_Hz > 0.0) || !(c.wavelength_m > 0.0))
-    throw Error("laser: average_power_mW must be >= 0, repetition_rate_MHz and wavelength_nm > 0");
   const double n_p = photons_per_pulse(c.average_power_W, c.repetition_rate_Hz, c.wavelength_m);
   Laser laser;
-  if (c.beam == "flood" || c.beam == "cone") {
+  if (c.beam == Beam::Flood || c.beam == Beam::Cone) {
     laser.position = camera.position() + c.offset_m[0] * camera.right() + c.offset_m[1] * camera.up() -
                      c.offset_m[2] * camera.forward();
     laser.axis = camera.forward();
     double half = camera.corner_half_angle();
-    if (c.beam == "cone") {
-      half = c.half_angle_rad;
-      if (!(half > 0.0 && half <= kPi))
-        throw Error("laser.half_angle_deg must lie in (0, 180] for beam \"cone\", found " +
-                    std::to_string(half * 180.0 / kPi));
-    }
+    if (c.beam == Beam::Cone) half = c.half_angle_rad;
     laser.cos_half_angle = std::cos(half);
-  } else if (c.beam == "gltf_light") {
+  } else {  // Beam::GltfLight
     const scenes::Light* l = scene.find_light(c.gltf_light);
     if (!l) {
       std::string names;
@@ -45,8 +38,6 @@ Laser make_laser(const RunConfig& config, const Camera& camera, const scenes::Sc
     laser.axis = glm::normalize(l->direction);
     laser.cos_half_angle = l->type == scenes::Light::Type::Spot ? std::cos(std::clamp(l->outer_cone_rad, 1e-6, kPi))
                                                                 : -1.0;
-  } else {
-    throw Error("laser.beam: expected \"flood\", \"cone\" or \"gltf_light\", found \"" + c.beam + "\"");
   }
   // N_p spread uniformly over the cone's solid angle 2 pi (1 - cos alpha).
   laser.intensity = n_p / (2.0 * kPi * (1.0 - laser.cos_half_angle));
@@ -62,12 +53,8 @@ double PunctualLight::intensity_towards(const glm::dvec3& d) const {
   return power * a * a;
 }
 
-Ambient make_ambient(const RunConfig& config, const scenes::Scene& scene, const glm::vec3& w, int laser_light) {
+Ambient make_ambient(const RenderStageConfig& config, const scenes::Scene& scene, const glm::vec3& w, int laser_light) {
   const AmbientConfig& a = config.ambient;
-  if (!(a.illuminance_lux >= 0.0))
-    throw Error("ambient.illuminance_lux must be >= 0, found " + std::to_string(a.illuminance_lux));
-  if (!(a.wavelength_m > 0.0) || !(a.bandwidth_m > 0.0))
-    throw Error("ambient.wavelength_nm and ambient.bandwidth_nm must be positive");
   const double k = photons_per_second_per_photometric_unit(a.wavelength_m, a.bandwidth_m);
   Ambient amb;
   // A uniform sky of radiance L gives illuminance pi L on any plane it fully covers.

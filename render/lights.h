@@ -23,9 +23,10 @@ struct Laser {
   }
 };
 
-// laser.beam "flood", "cone" or "gltf_light". Throws spadgen::Error naming the key on bad input.
+// laser.beam flood, cone or gltf_light. Throws spadgen::Error naming the key when the glTF light is missing
+// or unusable (the scene file's values themselves were checked when it was read).
 // *laser_light receives the index of the glTF light used as the laser (-1 if none).
-Laser make_laser(const RunConfig& config, const Camera& camera, const scenes::Scene& scene, int* laser_light);
+Laser make_laser(const RenderStageConfig& config, const Camera& camera, const scenes::Scene& scene, int* laser_light);
 
 struct PunctualLight {
   enum class Type { Point, Spot, Directional } type = Type::Point;
@@ -44,7 +45,7 @@ struct Ambient {
 };
 
 // ambient.illuminance_lux and (when ambient.gltf_lights) the glTF lights other than the laser.
-Ambient make_ambient(const RunConfig& config, const scenes::Scene& scene, const glm::vec3& ambient_rgb_weights,
+Ambient make_ambient(const RenderStageConfig& config, const scenes::Scene& scene, const glm::vec3& ambient_rgb_weights,
                      int laser_light);
 
 }  // namespace spadgen::render

@@ -21,7 +21,7 @@ std::string rect_str(const PixelRect& r) {
 
 }  // namespace
 
-Renderer::Impl::Impl(const scenes::Scene& s, const RunConfig& c)
+Renderer::Impl::Impl(const scenes::Scene& s, const RenderStageConfig& c)
     : scene(s),
       config(c),
       camera(config.camera, scene),
@@ -31,10 +31,7 @@ Renderer::Impl::Impl(const scenes::Scene& s, const RunConfig& c)
       embree(scene),
       shading(scene, config.laser.wavelength_m, ambient_weights,
               photons_per_second_per_photometric_unit(config.ambient.wavelength_m, config.ambient.bandwidth_m)),
-      integrator(config, scene, embree, shading, camera, laser, ambient) {
-  if (config.render.max_layers < 1)
-    throw Error("render.max_layers must be >= 1, found " + std::to_string(config.render.max_layers));
-}
+      integrator(config, scene, embree, shading, camera, laser, ambient) {}
 
 void Renderer::Impl::check_rect(const PixelRect& r, const char* what) const {
   if (r.width <= 0 || r.height <= 0 || r.x0 < 0 || r.y0 < 0 || r.x1() > camera.width() || r.y1() > camera.height())
@@ -42,7 +39,7 @@ void Renderer::Impl::check_rect(const PixelRect& r, const char* what) const {
                 std::to_string(camera.width()) + " x " + std::to_string(camera.height()) + " sensor");
 }
 
-Renderer::Renderer(const scenes::Scene& scene, const RunConfig& config)
+Renderer::Renderer(const scenes::Scene& scene, const RenderStageConfig& config)
     : impl_(std::make_unique<Impl>(scene, config)) {}
 
 Renderer::~Renderer() = default;

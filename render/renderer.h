@@ -6,8 +6,8 @@
 // photosensitive area,
 //   Phi = FF * optics_transmission * p^2 * pi / (4 N^2) * E_x[ L(omega_x) cos^4(theta_x) ]
 // with x uniform over the pixel (jittered per sample), L the photon radiance along the ray through x and
-// theta its angle to the optical axis. The output INCLUDES the fill factor (pixel_A, pixel_B, or per half
-// for the full_chip preset: rows >= H/2 are pixel B) and the optics transmission; it EXCLUDES the PDP,
+// theta its angle to the optical axis. The output INCLUDES the fill factor (of the pixel's row, as
+// RenderStageConfig::row_fill_factor gives it: the sensor's pixel layout decides) and the optics transmission; it EXCLUDES the PDP,
 // which the sensor stage applies. A Lambertian plane of albedo rho at distance d on the axis, lit by
 // radiant intensity I from the camera, gives rho I p^2 FF / (4 N^2 d^2) (DESIGN.md). The ambient rate
 // uses the same measurement, in photons per second.
@@ -37,7 +37,9 @@ struct RenderStats {
 
 class Renderer {
  public:
-  Renderer(const scenes::Scene& scene, const RunConfig& config);
+  // config: the renderer's part of the run (core/config.h), with the fill factor of every row from the
+  // sensor's pixel layout.
+  Renderer(const scenes::Scene& scene, const RenderStageConfig& config);
   ~Renderer();
   Renderer(const Renderer&) = delete;
   Renderer& operator=(const Renderer&) = delete;

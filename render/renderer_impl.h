@@ -15,13 +15,13 @@
 namespace spadgen::render {
 
 struct Renderer::Impl {
-  Impl(const scenes::Scene& s, const RunConfig& c);
+  Impl(const scenes::Scene& s, const RenderStageConfig& c);
 
   // Throws spadgen::Error unless rect is non-empty and inside the full sensor.
   void check_rect(const PixelRect& rect, const char* what) const;
 
   scenes::Scene scene;  // a copy: the renderer owns what Embree's shared buffers point into
-  RunConfig config;
+  RenderStageConfig config;
   Camera camera;
   int laser_light = -1;
   Laser laser;

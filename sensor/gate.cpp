@@ -27,7 +27,7 @@ constexpr double kTenNinetySigmas = 2.563103131;
 
 double normal_cdf(double z) { return 0.5 * std::erfc(-z / std::sqrt(2.0)); }
 
-// One edge of the gate before the instrument response: a normal CDF ("smooth"), or piecewise linear.
+// One edge of the gate before the instrument response: a normal CDF (smooth), or piecewise linear.
 struct BaseEdge {
   bool smooth = false;
   double centre = 0.0, sigma = 0.0;  // smooth
@@ -38,9 +38,9 @@ struct BaseEdge {
   double eval(double t) const { return smooth ? normal_cdf((t - centre) / sigma) : pwl.value(t); }
 };
 
-BaseEdge parametric_edge(const std::string& shape, double centre, double ten_ninety_s) {
+BaseEdge parametric_edge(GateEdge shape, double centre, double ten_ninety_s) {
   BaseEdge e;
-  if (shape == "smooth" && ten_ninety_s > 0.0) {
+  if (shape == GateEdge::Smooth && ten_ninety_s > 0.0) {
     e.smooth = true;
     e.centre = centre;
     e.sigma = ten_ninety_s / kTenNinetySigmas;
@@ -309,8 +309,6 @@ GateShape build_gate_shape(const GateConfig& gate, const LaserConfig& laser, int
     fall = tg.fall;
     g.nominal_length_s = tg.length_s;
   } else {
-    if (gate.edge_shape != "linear" && gate.edge_shape != "smooth")
-      throw Error("sensor.gate.edge_shape: expected \"linear\" or \"smooth\", found \"" + gate.edge_shape + "\"");
     rise = parametric_edge(gate.edge_shape, 0.0, gate.rise_s);
     fall = parametric_edge(gate.edge_shape, gate.length_s, gate.fall_s);
     g.nominal_length_s = gate.length_s;

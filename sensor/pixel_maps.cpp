@@ -45,22 +45,13 @@ double PixelMaps::temperature_factor(double temperature_C) {
   return (1.0 - kDiffusionShareAtRoom) + kDiffusionShareAtRoom * arrhenius;
 }
 
-PixelMaps::PixelMaps(const RunConfig& config, double nominal_length_s)
+PixelMaps::PixelMaps(const SensorStageConfig& config, double nominal_length_s)
     : cfg_(config),
       nominal_length_s_(nominal_length_s),
       width_(config.camera.width_px),
-      height_(config.camera.height_px) {
-  const std::string& preset = config.sensor.preset;
-  if (preset != "pixel_A" && preset != "pixel_B" && preset != "full_chip")
-    throw Error("sensor.preset: expected \"pixel_A\", \"pixel_B\" or \"full_chip\", found \"" + preset + "\"");
-  if (width_ <= 0 || height_ <= 0) throw Error("camera.width_px / camera.height_px must be positive");
-  full_chip_ = preset == "full_chip" && height_ >= 2;
-  if (full_chip_) {
-    sections_.push_back({0, height_ / 2});
-    sections_.push_back({height_ / 2, height_ - height_ / 2});
-  } else {
-    sections_.push_back({0, height_});
-  }
+      height_(config.camera.height_px),
+      layout_(config.sensor.preset, config.camera.height_px) {
+  for (int s = 0; s < layout_.sections(); ++s) sections_.push_back({layout_.section_begin(s), layout_.section_rows(s)});
   temp_factor_ = temperature_factor(config.sensor.temperature_C);
   if (!config.sensor.skew) return;
 
@@ -115,12 +106,6 @@ PixelMaps::PixelMaps(const RunConfig& config, double nominal_length_s)
   max_dL_ = std::max(0.0, lmax + kTruncate * len_sigma_r_ + 0.01 * len_sigma);
 }
 
-int PixelMaps::type_of_row(int y) const {
-  if (cfg_.sensor.preset == "pixel_A") return 0;
-  if (cfg_.sensor.preset == "pixel_B") return 1;
-  return y < height_ / 2 ? 0 : 1;
-}
-
 
 void PixelMaps::set_gate_maps(std::vector<float> skew_ps, std::vector<float> length_ps) {
   const size_t n = static_cast<size_t>(width_) * static_cast<size_t>(height_);
@@ -148,7 +133,7 @@ void PixelMaps::set_gate_maps(std::vector<float> skew_ps, std::vector<float> len
 
 PixelParams PixelMaps::at(int x, int y) const {
   PixelParams p;
-  p.type = type_of_row(y);
+  p.type = layout_.type_of_row(y);
   p.section = section_of_row(y);
   const PixelTypeConfig& tc = p.type == 0 ? cfg_.sensor.pixel_A : cfg_.sensor.pixel_B;
   const uint64_t idx = static_cast<uint64_t>(y) * static_cast<uint64_t>(width_) + static_cast<uint64_t>(x);

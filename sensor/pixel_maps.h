@@ -9,7 +9,7 @@
 // section so that pattern and random part together have the standard deviation of a Gaussian with the
 // requested FWHM (FWHM = 2.3548 sigma); the skew pattern carries 80 % of the variance, the length pattern
 // 50 %. Both have zero mean over the section. With preset full_chip each half (pixel A rows, pixel B rows)
-// is a separate section with its own gate tree, so each half gets the pattern.
+// is a separate section with its own gate tree, so each half gets the pattern (sections: pixel_layout.h).
 //
 // DCR: log-normal main population (median dcr_median_cps, log sigma dcr_log_sigma) and a hot-pixel tail
 // (hot_pixel_fraction of pixels, hot_pixel_factor times the median, same log sigma), times the
@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "core/config.h"
+#include "pixel_layout.h"
 
 namespace spadgen::sensor {
 
@@ -33,11 +34,11 @@ struct PixelParams {
 
 class PixelMaps {
  public:
-  PixelMaps(const RunConfig& config, double nominal_length_s);
+  PixelMaps(const SensorStageConfig& config, double nominal_length_s);
 
   PixelParams at(int x, int y) const;
-  int type_of_row(int y) const;
-  int section_of_row(int y) const { return full_chip_ && y >= height_ / 2 ? 1 : 0; }
+  const PixelLayout& layout() const { return layout_; }
+  int section_of_row(int y) const { return layout_.section_of_row(y); }
 
   // Measured maps, full-sensor row-major arrays (width * height): gate skew in ps and absolute gate length
   // (50 %-50 %) in ps. Replace the generated skew and length maps. Throws spadgen::Error on a size mismatch
@@ -68,10 +69,10 @@ class PixelMaps {
   };
   const SectionStats& section(int y) const { return sections_[static_cast<size_t>(section_of_row(y))]; }
 
-  const RunConfig& cfg_;
+  const SensorStageConfig& cfg_;
   double nominal_length_s_;
   int width_, height_;
-  bool full_chip_;
+  PixelLayout layout_;
   std::vector<SectionStats> sections_;
   double skew_sigma_r_ = 0, len_sigma_r_ = 0;  // random parts, seconds
   double temp_factor_ = 1.0;

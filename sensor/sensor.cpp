@@ -19,11 +19,11 @@
 #include "batch_kernels.h"
 #include "frames_kernel.h"
 #include "sampling.h"
+#include "sensor/acquisition/acquisition.h"
+#include "sensor/acquisition/intensity.h"
 
 namespace spadgen::sensor {
 namespace {
-
-constexpr int kMaxFrames = 65535;  // counts are uint16
 
 struct TypeInfo {
   std::string name;
@@ -109,163 +109,77 @@ void crosstalk_into(std::optional<Rng>& stream, M mk, const uint64_t* theirs, ui
   for (const auto& [w, b] : pos) mine[w] |= uint64_t{1} << b;
 }
 
-// Inverse of eq. (5) / (6): incident (detectable) photons per N-frame image from summed counts. A count at
-// saturation is taken as N - 0.5 so the estimate stays finite.
-double linearise(double counts, double N, bool dual, double ratio) {
-  const double c = std::min(counts, N - 0.5);
-  if (c <= 0.0) return 0.0;
-  if (!dual) return -N * std::log1p(-c / N);
-  const double aL = 2.0 * ratio / (ratio + 1.0), aS = 2.0 / (ratio + 1.0);
-  const double y = 2.0 * c / N;
-  double x = 0.0;  // Newton from below on a concave increasing function converges monotonically
-  for (int it = 0; it < 500; ++it) {
-    const double eL = std::exp(-aL * x), eS = std::exp(-aS * x);
-    const double f = (2.0 - eL - eS) - y;
-    const double step = -f / (aL * eL + aS * eS);
-    x += step;
-    if (!(step > 1e-13 * x)) break;
-  }
-  return x * N;
-}
-
 }  // namespace
 
 struct SensorModel::Impl {
-  RunConfig cfg;
+  SensorStageConfig cfg;
   SensorOptions opt;
-  bool sweep = true;
+  std::unique_ptr<Acquisition> acq;
   int K = 0;
   uint32_t frames_per_k = 0;
-  std::vector<double> positions, exposures;
-  GateShape gate;
   std::unique_ptr<PixelMaps> maps;
   std::unique_ptr<BinomialSampler> binom;
-  std::shared_ptr<const BinomialTable> table;  // counts by tables (sweeps without frames; null when N is too large)
+  std::shared_ptr<const BinomialTable> table;  // counts by tables (modes that ask for them, without frames)
   TypeInfo types[2];
   int halo = 0;
 
-  Impl(const RunConfig& c, const SensorOptions& o);
+  Impl(const SensorStageConfig& c, const SensorOptions& o);
   std::vector<TypeInfo> used_types() const;
 
-  // lambda of every k for one pixel (no crosstalk); edges in bins of the axis when sweeping.
-  // g's non-zero bins lie in [lo, hi) (the renderer's range, or the whole axis).
-  void lambda(const PixelParams& px, const float* g, const TimeAxis& axis, int64_t lo, int64_t hi, const EdgeBins* rise,
-              const EdgeBins* fall, double ambient, double laser_total, TransientPrefix& prefix,
-              double* out) const;
+  // lambda of every k for one pixel (no crosstalk).
+  void lambda(const PixelParams& px, const PixelLight& in, const Acquisition::TileSetup* setup,
+              Acquisition::Scratch* scratch, double* out) const {
+    const TypeInfo& t = types[px.type];
+    acq->rates({&px, t.pdp_laser * px.pdp_scale, t.pdp_ambient * px.pdp_scale}, in, setup, scratch, out);
+  }
 };
 
-SensorModel::Impl::Impl(const RunConfig& c, const SensorOptions& o) : cfg(c), opt(o) {
-  const AcquisitionConfig& a = cfg.acquisition;
-  if (a.frames < 1 || a.frames > kMaxFrames)
-    throw Error("acquisition.frames: expected 1 to " + std::to_string(kMaxFrames) +
-                " frames (counts are 16-bit), found " + std::to_string(a.frames));
-  if (!(cfg.laser.repetition_rate_Hz > 0.0)) throw Error("laser.repetition_rate_MHz: expected a positive rate");
-  if (a.mode == "gate_sweep") {
-    sweep = true;
-    const GateSweepConfig& s = a.gate_sweep;
-    if (!(s.step_s > 0.0)) throw Error("acquisition.gate_sweep.step_ps: expected a positive step");
-    if (!(s.stop_s >= s.start_s))
-      throw Error("acquisition.gate_sweep.stop_ns: expected stop >= start");
-    if (a.cycles_per_frame < 1) throw Error("acquisition.cycles_per_frame: expected at least 1 laser cycle");
-    K = static_cast<int>(std::floor((s.stop_s - s.start_s) / s.step_s + 1e-9)) + 1;
-    for (int k = 0; k < K; ++k) positions.push_back(s.start_s + k * s.step_s);
-    frames_per_k = static_cast<uint32_t>(a.frames);
-    gate = build_gate_shape(cfg.sensor.gate, cfg.laser, opt.edge_knots);
-  } else if (a.mode == "intensity") {
-    sweep = false;
-    const IntensityConfig& in = a.intensity;
-    if (!(in.exposure_s > 0.0)) throw Error("acquisition.intensity.exposure_us: expected a positive exposure");
-    if (in.exposure == "single") {
-      K = 1;
-      exposures = {in.exposure_s};
-      frames_per_k = static_cast<uint32_t>(a.frames);
-    } else if (in.exposure == "dual") {
-      if (!(in.dual_ratio > 0.0)) throw Error("acquisition.intensity.dual_ratio: expected a positive ratio");
-      if (a.frames % 2 != 0)
-        throw Error("acquisition.frames: dual exposure interleaves short and long frames, expected an even "
-                    "number, found " + std::to_string(a.frames));
-      K = 2;
-      exposures = {in.exposure_s, in.exposure_s * in.dual_ratio};
-      frames_per_k = static_cast<uint32_t>(a.frames / 2);
-    } else {
-      throw Error("acquisition.intensity.exposure: expected \"single\" or \"dual\", found \"" + in.exposure + "\"");
-    }
-    gate.nominal_length_s = cfg.sensor.gate.length_s;
-  } else {
-    throw Error("acquisition.mode: expected \"gate_sweep\" or \"intensity\", found \"" + a.mode + "\"");
-  }
-  maps = std::make_unique<PixelMaps>(cfg, gate.nominal_length_s);
+SensorModel::Impl::Impl(const SensorStageConfig& c, const SensorOptions& o) : cfg(c), opt(o) {
+  acq = make_acquisition(cfg, opt.edge_knots);
+  K = acq->K();
+  frames_per_k = acq->frames_per_k();
+  maps = std::make_unique<PixelMaps>(cfg, acq->nominal_gate_length_s());
   binom = std::make_unique<BinomialSampler>(frames_per_k);
-  if (!cfg.outputs.frames && sweep)
+  if (!cfg.outputs.frames && acq->tabulated_counts())
     table = BinomialTable::get(frames_per_k);
   const PixelTypeConfig* tc[2] = {&cfg.sensor.pixel_A, &cfg.sensor.pixel_B};
-  const char* names[2] = {"pixel_A", "pixel_B"};
   for (int t = 0; t < 2; ++t) {
-    const std::string key = std::string("sensor.") + names[t];
+    const std::string key = "sensor." + to_string(t == 0 ? PixelPreset::PixelA : PixelPreset::PixelB);
     const PdpCurve curve = PdpCurve::from_config(*tc[t], key);
-    types[t].name = names[t];
+    types[t].name = to_string(t == 0 ? PixelPreset::PixelA : PixelPreset::PixelB);
     types[t].pdp_laser = curve.at(cfg.laser.wavelength_m);
     types[t].pdp_ambient = curve.band_average(cfg.ambient.wavelength_m, cfg.ambient.bandwidth_m);
     types[t].fill_factor = tc[t]->fill_factor;
     types[t].crosstalk = cfg.sensor.crosstalk ? tc[t]->crosstalk_probability : 0.0;
     types[t].single_avalanche = tc[t]->single_avalanche_per_frame;
-    if (!(types[t].crosstalk >= 0.0 && types[t].crosstalk <= 1.0))
-      throw Error(key + ".crosstalk_probability: expected a probability in [0, 1]");
   }
   for (const TypeInfo& t : used_types())
     if (t.crosstalk > 0.0) halo = 1;
 }
 
 std::vector<TypeInfo> SensorModel::Impl::used_types() const {
-  const std::string& p = cfg.sensor.preset;
-  if (p == "pixel_A") return {types[0]};
-  if (p == "pixel_B") return {types[1]};
-  return {types[0], types[1]};
+  std::vector<TypeInfo> out;
+  for (int t : maps->layout().types()) out.push_back(types[t]);
+  return out;
 }
 
-void SensorModel::Impl::lambda(const PixelParams& px, const float* g, const TimeAxis& axis, int64_t lo, int64_t hi,
-                               const EdgeBins* rise,
-                               const EdgeBins* fall, double ambient, double laser_total, TransientPrefix& prefix,
-                               double* out) const {
-  const TypeInfo& t = types[px.type];
-  const double pdp_l = t.pdp_laser * px.pdp_scale, pdp_a = t.pdp_ambient * px.pdp_scale;
-  if (!sweep) {
-    const bool laser = cfg.acquisition.intensity.laser_on;
-    const double rate = pdp_a * ambient + (laser ? pdp_l * laser_total * cfg.laser.repetition_rate_Hz : 0.0) + px.dcr_cps;
-    for (int k = 0; k < K; ++k) out[k] = rate * exposures[static_cast<size_t>(k)];
-    return;
-  }
-  const double C = static_cast<double>(cfg.acquisition.cycles_per_frame);
-  const double B = (pdp_a * ambient + px.dcr_cps) * gate.open_time(px.dL_s);
-  std::fill(out, out + K, 0.0);
-  if (g != nullptr && axis.bins > 0) {
-    const double dt = axis.bin_width_s;
-    const double b0 = (positions[0] + cfg.sensor.gate.delay_s + px.skew_s - axis.start_s) / dt;
-    const double step = cfg.acquisition.gate_sweep.step_s / dt;
-    if (const int64_t s = integer_step(step); s > 0) {  // the step is a whole number of bins
-      if (prefix.build_bins(g, lo, hi)) {
-        accumulate_edge_response_int(prefix, *rise, b0, s, K, 1.0, out);
-        accumulate_edge_response_int(prefix, *fall, b0 + px.dL_s / dt, s, K, -1.0, out);
-      }
-    } else if (prefix.build(g, axis.bins)) {
-      accumulate_edge_response(prefix, *rise, b0, step, K, 1.0, out);
-      accumulate_edge_response(prefix, *fall, b0 + px.dL_s / dt, step, K, -1.0, out);
-    }
-  }
-  for (int k = 0; k < K; ++k) out[k] = C * (pdp_l * std::max(out[k], 0.0) + B);
-}
-
-SensorModel::SensorModel(const RunConfig& config) : SensorModel(config, SensorOptions{}) {}
-SensorModel::SensorModel(const RunConfig& config, const SensorOptions& options)
+SensorModel::SensorModel(const SensorStageConfig& config) : SensorModel(config, SensorOptions{}) {}
+SensorModel::SensorModel(const SensorStageConfig& config, const SensorOptions& options)
     : impl_(std::make_unique<Impl>(config, options)) {}
 SensorModel::~SensorModel() = default;
 
 int SensorModel::K() const { return impl_->K; }
-const std::vector<double>& SensorModel::gate_positions_s() const { return impl_->positions; }
-const std::vector<double>& SensorModel::exposures_s() const { return impl_->exposures; }
+const std::vector<double>& SensorModel::gate_positions_s() const { return impl_->acq->gate_positions_s(); }
+const std::vector<double>& SensorModel::exposures_s() const { return impl_->acq->exposures_s(); }
+const Acquisition& SensorModel::acquisition() const { return *impl_->acq; }
+const PixelLayout& SensorModel::layout() const { return impl_->maps->layout(); }
+std::vector<double> SensorModel::row_fill_factor() const { return layout().row_fill_factor(impl_->cfg.sensor); }
 int SensorModel::halo() const { return impl_->halo; }
 int SensorModel::frames_per_k() const { return static_cast<int>(impl_->frames_per_k); }
-const GateShape& SensorModel::gate() const { return impl_->gate; }
+const GateShape& SensorModel::gate() const {
+  if (const GateShape* g = impl_->acq->gate()) return *g;
+  throw Error("sensor: the " + impl_->acq->name() + " acquisition has no gate profile");
+}
 PixelParams SensorModel::pixel(int x, int y) const { return impl_->maps->at(x, y); }
 double SensorModel::pdp_laser(int type) const { return impl_->types[type].pdp_laser; }
 double SensorModel::pdp_ambient(int type) const { return impl_->types[type].pdp_ambient; }
@@ -276,7 +190,7 @@ void SensorModel::set_gate_maps(std::vector<float> skew_ps, std::vector<float> l
 
 void SensorModel::set_maps(int width, int height, const std::map<std::string, std::vector<float>>& channels,
                            const std::string& source) {
-  const CameraConfig& cam = impl_->cfg.camera;
+  const auto& cam = impl_->cfg.camera;
   const std::string key = "sensor.gate.maps_exr ('" + source + "')";
   if (width != cam.width_px || height != cam.height_px)
     throw Error(key + ": expected the full sensor, " + std::to_string(cam.width_px) + " x " +
@@ -291,32 +205,17 @@ void SensorModel::set_maps(int width, int height, const std::map<std::string, st
 
 TimeAxis SensorModel::required_window(double bin_width_s) const {
   const Impl& m = *impl_;
-  if (!(bin_width_s > 0.0)) throw Error("render.time_bin_ps: expected a positive bin width");
-  TimeAxis axis;
-  axis.bin_width_s = bin_width_s;
-  axis.period_s = 1.0 / m.cfg.laser.repetition_rate_Hz;
-  if (!m.sweep) return axis;
-  const double delay = m.cfg.sensor.gate.delay_s;
-  // The knots span the whole effective gate including the instrument response (to 1e-15 of Gaussian
-  // tails), so no further margin is needed beyond rounding outward to whole bins.
-  const double lo = m.positions.front() + delay + m.maps->min_skew_s() + m.gate.support_begin();
-  const double hi = m.positions.back() + delay + m.maps->max_skew_s() + m.gate.support_end(m.maps->max_dL_s());
-  axis.start_s = std::floor(lo / bin_width_s) * bin_width_s;
-  axis.bins = static_cast<int64_t>(std::ceil((hi - axis.start_s) / bin_width_s));
-  return axis;
+  return m.acq->required_window(*m.maps, bin_width_s, 1.0 / m.cfg.laser.repetition_rate_Hz);
 }
 
 std::vector<double> SensorModel::pixel_lambda(int x, int y, const float* g, const TimeAxis& axis,
                                               double ambient_rate, double laser_total) const {
   const Impl& m = *impl_;
   std::vector<double> out(static_cast<size_t>(m.K));
-  TransientPrefix prefix;
-  EdgeBins rise, fall;
-  if (m.sweep && axis.bins > 0) {
-    rise = edge_in_bins(m.gate.rise, axis.bin_width_s);
-    fall = edge_in_bins(m.gate.fall, axis.bin_width_s);
-  }
-  m.lambda(m.maps->at(x, y), g, axis, 0, axis.bins, &rise, &fall, ambient_rate, laser_total, prefix, out.data());
+  const auto setup = m.acq->setup(axis);
+  const auto scratch = m.acq->scratch();
+  const PixelLight in{m.acq->needs_transient() ? g : nullptr, &axis, 0, axis.bins, ambient_rate, laser_total};
+  m.lambda(m.maps->at(x, y), in, setup.get(), scratch.get(), out.data());
   return out;
 }
 
@@ -334,8 +233,9 @@ SensorTile SensorModel::process(const TransientTile& t) const {
                 std::to_string(m.halo) + " pixel(s)");
   const size_t ndata = static_cast<size_t>(dr.count());
   if (t.ambient_rate.size() != ndata) throw Error("sensor: TransientTile::ambient_rate must hold one value per data pixel");
-  if (m.sweep) {
-    if (t.axis.bins <= 0) throw Error("sensor: gate-sweep mode needs a rendered transient (time axis with bins)");
+  const bool transient = m.acq->needs_transient();
+  if (transient) {
+    if (t.axis.bins <= 0) throw Error("sensor: the " + m.acq->name() + " acquisition needs a rendered transient (time axis with bins)");
     if (t.transient.size() != ndata * static_cast<size_t>(t.axis.bins))
       throw Error("sensor: TransientTile::transient must hold data_rect pixels x axis.bins values");
     if ((!t.bin_lo.empty() || !t.bin_hi.empty()) && (t.bin_lo.size() != ndata || t.bin_hi.size() != ndata))
@@ -346,11 +246,7 @@ SensorTile SensorModel::process(const TransientTile& t) const {
 
   const int K = m.K;
   const size_t Ks = static_cast<size_t>(K);
-  EdgeBins rise, fall;
-  if (m.sweep) {
-    rise = edge_in_bins(m.gate.rise, t.axis.bin_width_s);
-    fall = edge_in_bins(m.gate.fall, t.axis.bin_width_s);
-  }
+  const auto setup = m.acq->setup(t.axis);
   const bool frames = m.cfg.outputs.frames;
   const uint64_t seed = m.cfg.seed;
   auto pixel_index = [W](int x, int y) { return static_cast<uint64_t>(y) * static_cast<uint64_t>(W) + static_cast<uint64_t>(x); };
@@ -361,7 +257,7 @@ SensorTile SensorModel::process(const TransientTile& t) const {
   // and memset time. q is kept only for frames; without frames only pixel B's neighbours read p.
   const auto uninit = [](size_t count) { return std::make_unique_for_overwrite<double[]>(count); };
   const auto lam = uninit(nreg * Ks);
-  const bool ranges = m.sweep && t.bin_lo.size() == ndata;
+  const bool ranges = transient && t.bin_lo.size() == ndata;
   const bool own_probs = frames || m.halo > 0;
   const auto own_p = uninit(own_probs ? nreg * Ks : 0);
   // With frames: every region pixel's Prob {p, q, -lambda} gate-major ([k * nreg + region index]), so a
@@ -369,20 +265,20 @@ SensorTile SensorModel::process(const TransientTile& t) const {
   const auto own_prob = std::make_unique_for_overwrite<Prob[]>(frames ? nreg * Ks : 0);
   std::vector<PixelParams> params(nreg);
   tbb::parallel_for(tbb::blocked_range<int>(region.y0, region.y1()), [&](const tbb::blocked_range<int>& rows) {
-    TransientPrefix prefix;
+    const auto scratch = m.acq->scratch();
     for (int y = rows.begin(); y < rows.end(); ++y)
       for (int x = region.x0; x < region.x1(); ++x) {
         const size_t ri = static_cast<size_t>(region.index(x, y));
         const auto di = static_cast<size_t>(dr.index(x, y));
         params[ri] = m.maps->at(x, y);
-        const float* g = m.sweep ? t.transient.data() + di * static_cast<size_t>(t.axis.bins) : nullptr;
+        const float* g = transient ? t.transient.data() + di * static_cast<size_t>(t.axis.bins) : nullptr;
         const double laser_total = t.laser_total.size() == ndata ? t.laser_total[di] : 0.0;
         int64_t lo = 0, hi = t.axis.bins;  // the renderer's range of non-zero bins, when it gave one
         if (ranges) {
           lo = std::clamp<int64_t>(t.bin_lo[di], 0, t.axis.bins);
           hi = std::clamp<int64_t>(t.bin_hi[di], lo, t.axis.bins);
         }
-        m.lambda(params[ri], g, t.axis, lo, hi, &rise, &fall, t.ambient_rate[di], laser_total, prefix, lam.get() + ri * Ks);
+        m.lambda(params[ri], {g, &t.axis, lo, hi, t.ambient_rate[di], laser_total}, setup.get(), scratch.get(), lam.get() + ri * Ks);
         // without frames only pixel B's neighbours read p (pixel A's read lambda); sections keep one type
         if (frames)
           probabilities(lam.get() + ri * Ks, Ks, own_prob.get() + ri, nreg, own_p.get() + ri * Ks);
@@ -522,18 +418,7 @@ SensorTile SensorModel::process(const TransientTile& t) const {
     });
   }
 
-  if (!m.sweep) {
-    const bool dual = K == 2;
-    out.intensity_counts.assign(n, 0.0f);
-    out.intensity_photons.assign(n, 0.0f);
-    const double Ntot = static_cast<double>(m.cfg.acquisition.frames);
-    for (size_t i = 0; i < n; ++i) {
-      double c = 0.0;
-      for (size_t k = 0; k < Ks; ++k) c += out.counts[k * n + i];
-      out.intensity_counts[i] = static_cast<float>(c);
-      out.intensity_photons[i] = static_cast<float>(linearise(c, Ntot, dual, m.cfg.acquisition.intensity.dual_ratio));
-    }
-  }
+  m.acq->finish_tile(out);
   return out;
 }
 
@@ -552,7 +437,7 @@ SensorMapsTile SensorModel::maps(const PixelRect& rect) const {
       const PixelParams p = m.maps->at(x, y);
       const TypeInfo& ty = m.types[p.type];
       t.gate_skew_ps[i] = static_cast<float>(p.skew_s / kPs);
-      t.gate_length_ps[i] = static_cast<float>((m.gate.nominal_length_s + p.dL_s) / kPs);
+      t.gate_length_ps[i] = static_cast<float>((m.acq->nominal_gate_length_s() + p.dL_s) / kPs);
       t.dcr_cps[i] = static_cast<float>(p.dcr_cps);
       t.pde[i] = static_cast<float>(ty.pdp_laser * p.pdp_scale * ty.fill_factor * m.cfg.camera.optics_transmission);
     }
@@ -566,8 +451,8 @@ double linearise_counts(double counts, int frames, bool dual, double ratio) {
 nlohmann::json SensorModel::describe() const {
   const Impl& m = *impl_;
   const AcquisitionConfig& a = m.cfg.acquisition;
-  nlohmann::json j;
-  j["mode"] = a.mode;
+  nlohmann::json j = m.acq->describe();
+  j["mode"] = to_string(a.mode);
   j["K"] = m.K;
   j["frames"] = a.frames;
   j["frames_per_k"] = m.frames_per_k;
@@ -576,39 +461,11 @@ nlohmann::json SensorModel::describe() const {
   j["photon_convention"] =
       "transient and ambient inputs are photons on the photosensitive area (fill factor and optics already "
       "applied); detections = PDP x photons";
-  if (m.sweep) {
-    j["cycles_per_frame"] = a.cycles_per_frame;
-    std::vector<double> ns;
-    for (double p : m.positions) ns.push_back(p / kNs);
-    j["gate_positions_ns"] = ns;
-    j["gate_step_ps"] = a.gate_sweep.step_s / kPs;
-    const GateConfig& g = m.cfg.sensor.gate;
-    nlohmann::json gj;
-    gj["profile"] = g.profile_csv.empty() ? g.edge_shape : "table:" + g.profile_csv;
-    gj["nominal_length_ns"] = m.gate.nominal_length_s / kNs;
-    gj["effective_length_ns"] = m.gate.open_time_s / kNs;
-    gj["plateau"] = m.gate.plateau;
-    gj["rise_ps"] = g.rise_s / kPs;
-    gj["fall_ps"] = g.fall_s / kPs;
-    gj["delay_ns"] = g.delay_s / kNs;
-    gj["irf_fwhm_ps"] = m.gate.irf_fwhm_s / kPs;
-    gj["knots_per_edge"] = m.gate.knots_per_edge;
-    gj["knots_exact"] = m.gate.exact;
-    gj["knot_max_error"] = m.gate.max_knot_error;
-    gj["skew_spread_fwhm_ps"] = m.cfg.sensor.skew ? g.skew_fwhm_s / kPs : 0.0;
-    gj["length_spread_fwhm_ps"] = m.cfg.sensor.skew ? g.length_fwhm_s / kPs : 0.0;
-    gj["user_maps"] = m.maps->has_user_maps();
-    j["gate"] = gj;
-  } else {
-    std::vector<double> us;
-    for (double e : m.exposures) us.push_back(e / kUs);
-    j["exposures_us"] = us;
-    j["laser_on"] = a.intensity.laser_on;
-  }
+  if (j.contains("gate")) j["gate"]["user_maps"] = m.maps->has_user_maps();
   nlohmann::json types = nlohmann::json::array();
   const double tf = PixelMaps::temperature_factor(m.cfg.sensor.temperature_C);
   for (const TypeInfo& t : m.used_types()) {
-    const PixelTypeConfig& c = t.name == "pixel_A" ? m.cfg.sensor.pixel_A : m.cfg.sensor.pixel_B;
+    const PixelTypeConfig& c = t.name == to_string(PixelPreset::PixelA) ? m.cfg.sensor.pixel_A : m.cfg.sensor.pixel_B;
     types.push_back({{"name", t.name},
                      {"pdp_laser", t.pdp_laser},
                      {"pdp_ambient_band", t.pdp_ambient},

@@ -26,7 +26,9 @@
 
 namespace spadgen::sensor {
 
+class Acquisition;
 struct GateShape;
+class PixelLayout;
 struct PixelParams;
 
 // The per-pixel maps actually used, for sensor_maps.exr: [rect.index(x, y)].
@@ -47,11 +49,18 @@ struct SensorOptions {
 
 class SensorModel {
  public:
-  explicit SensorModel(const RunConfig& config);
-  SensorModel(const RunConfig& config, const SensorOptions& options);
+  explicit SensorModel(const SensorStageConfig& config);
+  SensorModel(const SensorStageConfig& config, const SensorOptions& options);
   ~SensorModel();
   SensorModel(const SensorModel&) = delete;
   SensorModel& operator=(const SensorModel&) = delete;
+
+  // The acquisition mode (sensor/acquisition/): K, frames, the window, the outputs it declares.
+  const Acquisition& acquisition() const;
+  // Which pixel design each row has (sensor/pixel_layout.h), and the fill factor of every row, which the
+  // renderer applies (RenderStageConfig::row_fill_factor).
+  const PixelLayout& layout() const;
+  std::vector<double> row_fill_factor() const;
 
   // K: gate positions (gate sweep) or exposures (2D intensity: 1 single, 2 dual).
   int K() const;
@@ -83,7 +92,7 @@ class SensorModel {
   int frames_per_k() const;
   // Exposure time of each k in 2D intensity mode, seconds (empty in gate-sweep mode).
   const std::vector<double>& exposures_s() const;
-  // The effective gate (profile convolved with the instrument response); gate-sweep mode.
+  // The effective gate (profile convolved with the instrument response); gate-sweep mode (throws otherwise).
   const GateShape& gate() const;
   // The parameters of pixel (x, y): type, skew, length deviation, DCR, PDP scale.
   PixelParams pixel(int x, int y) const;

@@ -159,6 +159,51 @@ TEST_F(App, AOnePixelCropReplaysThatPixelOfALargerRun) {
     EXPECT_EQ(full.data[size_t((k * 20 + (241 - 232)) * 24 + (509 - 496))], single.data[size_t(k)]) << "gate " << k;
 }
 
+// The renderer (fill factor, in laser.exr) and the sensor (PDE, in sensor_maps.exr) must agree on which
+// pixel design every row has, for odd heights, crops and full_chip. The same run with preset pixel_A gives
+// the reference: the light transport is identical, so laser.exr's ratio per row is ff(row) / ff_A, and the
+// PDE's ratio is pdp(row) ff(row) / (pdp_A ff_A). A row is pixel B for both, or for neither.
+TEST_F(App, RendererAndSensorAgreeOnEveryRowsPixelDesign) {
+  const double ff_a = 0.07, ff_b = 0.134, pdp_ratio = 0.267 / 0.105;  // the paper's pixels (Table 1)
+  struct Case {
+    int height;
+    std::string crop;  // "" = the whole sensor
+  };
+  for (const Case& c : {Case{5, ""}, Case{7, ""}, Case{2, ""}, Case{1, ""}, Case{1000, "[0,496,8,7]"}, Case{9, "[0,3,8,4]"}}) {
+    const std::string h = std::to_string(c.height);
+    std::string base = kScenes;
+    base += "flat_target.json -q --set camera.width_px=8 --set render.samples_per_pixel=2 --set outputs.previews=false"
+            " --set sensor.pdp_nonuniformity=false";
+    base += " --set camera.height_px=";
+    base += h;
+    if (!c.crop.empty()) base += " --set camera.crop=" + c.crop;
+    const fs::path a = dir_ / "a" / h, f = dir_ / "f" / h;
+    ASSERT_EQ(sh("run " + base + " --set sensor.preset=pixel_A -o " + a.string()).code, 0);
+    ASSERT_EQ(sh("run " + base + " --set sensor.preset=full_chip -o " + f.string()).code, 0);
+    const auto la = spadgen::writers::read_exr((a / "laser.exr").string()), lf = spadgen::writers::read_exr((f / "laser.exr").string());
+    const auto ma = spadgen::writers::read_exr((a / "sensor_maps.exr").string()), mf = spadgen::writers::read_exr((f / "sensor_maps.exr").string());
+    const int y0 = c.crop.empty() ? 0 : std::stoi(c.crop.substr(c.crop.find(',') + 1));
+    int b_rows = 0;
+    for (int y = 0; y < lf.height; ++y)
+      for (int x = 0; x < lf.width; ++x) {
+        const size_t i = size_t(y * lf.width + x);
+        const double pa = la.channels.at("photons_per_pulse")[i], pf = lf.channels.at("photons_per_pulse")[i];
+        ASSERT_GT(pa, 0.0) << "height " << c.height << " row " << y0 + y;
+        const bool renderer_b = std::abs(pf / pa - ff_b / ff_a) < 1e-5 * ff_b / ff_a;
+        ASSERT_TRUE(renderer_b || std::abs(pf / pa - 1.0) < 1e-5) << "height " << c.height << " row " << y0 + y << ": " << pf / pa;
+        const double qa = ma.channels.at("pde")[i], qf = mf.channels.at("pde")[i];
+        const bool sensor_b = std::abs(qf / qa - pdp_ratio * ff_b / ff_a) < 1e-5 * pdp_ratio * ff_b / ff_a;
+        ASSERT_TRUE(sensor_b || std::abs(qf / qa - 1.0) < 1e-5) << "height " << c.height << " row " << y0 + y << ": " << qf / qa;
+        EXPECT_EQ(renderer_b, sensor_b) << "height " << c.height << " row " << y0 + y << ": the renderer says pixel "
+                                        << (renderer_b ? "B" : "A") << ", the sensor pixel " << (sensor_b ? "B" : "A");
+        // Rows [H/2, H) are pixel B (docs/sensor.md): the middle row of an odd height is pixel B.
+        EXPECT_EQ(sensor_b, y0 + y >= c.height / 2) << "height " << c.height << " row " << y0 + y;
+        b_rows += sensor_b && x == 0;
+      }
+    EXPECT_EQ(b_rows, std::max(0, y0 + lf.height - std::max(y0, c.height / 2))) << "height " << c.height;
+  }
+}
+
 TEST_F(App, BadInputStopsBeforeWritingAndKeepsEarlierFiles) {
   fs::create_directories(dir_ / "out");
   std::ofstream(dir_ / "out/metadata.json") << "{\"earlier\": true}";

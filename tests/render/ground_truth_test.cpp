@@ -18,7 +18,7 @@ using test::add_sphere;
 using test::test_config;
 
 // Unit direction through the centre of pixel (x, y) of a camera at the origin looking down -z.
-glm::dvec3 pixel_dir(const RunConfig& c, int x, int y) {
+glm::dvec3 pixel_dir(const RenderStageConfig& c, int x, int y) {
   const double p = c.camera.pixel_pitch_m;
   return glm::normalize(glm::dvec3((x + 0.5 - c.camera.width_px / 2.0) * p, (c.camera.height_px / 2.0 - y - 0.5) * p,
                                    -c.camera.focal_length_m));
@@ -28,7 +28,7 @@ TEST(GroundTruth, PlaneRangeIsDistanceOverCosine) {
   scenes::Scene s;
   const int mat = add_material(s, test::lambertian(0.6f));
   add_quad(s, {0.2f, -0.1f, -1.3f}, {5, 0, 0}, {0, 5, 0}, mat);
-  RunConfig c = test_config(48, 40, 4e-3);  // wide: up to 5 degrees off axis
+  RenderStageConfig c = test_config(48, 40, 4e-3);  // wide: up to 5 degrees off axis
   Renderer r(s, c);
   const GroundTruthTile gt = r.ground_truth({0, 0, 48, 40});
   for (int y = 0; y < 40; ++y)
@@ -51,7 +51,7 @@ TEST(GroundTruth, NormalFacesTheCameraAndMissesAreInfinite) {
   scenes::Scene s;
   // Back side towards the camera, double-sided: seen, normal flipped towards the camera.
   add_quad(s, {0, 0, -2}, {0, 0.001f, 0}, {0.001f, 0, 0}, add_material(s, test::lambertian(0.5f)));
-  RunConfig c = test_config(16, 16, 12e-3);
+  RenderStageConfig c = test_config(16, 16, 12e-3);
   Renderer r(s, c);
   const GroundTruthTile gt = r.ground_truth({0, 0, 16, 16});
   // The quad is 2 mm wide at 2 m: it covers only the central pixels (the footprint is 1.6 mm).
@@ -84,7 +84,7 @@ TEST(GroundTruth, SphereMatchesRaySphereIntersection) {
   const glm::dvec3 centre(0.02, -0.01, -0.6);
   const int rings = 128, segments = 256;
   add_sphere(s, glm::vec3(centre), radius, rings, segments, add_material(s, test::lambertian(0.5f)));
-  RunConfig c = test_config(64, 64, 2e-3);  // the sphere spans about 40 of the 64 pixels
+  RenderStageConfig c = test_config(64, 64, 2e-3);  // the sphere spans about 40 of the 64 pixels
   Renderer r(s, c);
   const GroundTruthTile gt = r.ground_truth({0, 0, 64, 64});
   // An inscribed polyhedron lies inside the sphere by at most the sagitta over half a cell diagonal.
@@ -137,7 +137,7 @@ PlateScene plate_and_sphere(float thickness_m, float attenuation_distance_m = st
 TEST(GroundTruth, PlateAndSphereLayersAtAnalyticDistancesAndTransmittances) {
   for (float thickness_attr : {0.002f, 0.0f}) {  // a volume, and a thin-walled box
     PlateScene p = plate_and_sphere(thickness_attr);
-    RunConfig c = test_config(16, 16, 12e-3);
+    RenderStageConfig c = test_config(16, 16, 12e-3);
     Renderer r(p.scene, c);
     const GroundTruthTile gt = r.ground_truth({7, 7, 2, 2});  // near the axis: normal incidence within 1e-3 rad
     const double rf = std::pow((p.ior - 1.0) / (p.ior + 1.0), 2.0);
@@ -163,7 +163,7 @@ TEST(GroundTruth, PlateAndSphereLayersAtAnalyticDistancesAndTransmittances) {
 TEST(GroundTruth, BeerLambertInsideTheVolumeAndLayerLimit) {
   // glTF: attenuationColor 0.5 after attenuationDistance 4 mm, so 2 mm of glass passes sqrt(0.5).
   PlateScene p = plate_and_sphere(0.002f, 0.004f, 0.5f);
-  RunConfig c = test_config(16, 16, 12e-3);
+  RenderStageConfig c = test_config(16, 16, 12e-3);
   c.render.max_layers = 2;
   Renderer r(p.scene, c);
   const GroundTruthTile gt = r.ground_truth({8, 8, 1, 1});
@@ -183,7 +183,7 @@ TEST(GroundTruth, BeerLambertInsideTheVolumeAndLayerLimit) {
 TEST(GroundTruth, BadInputNamesTheKey) {
   scenes::Scene s;
   add_quad(s, {0, 0, -1}, {1, 0, 0}, {0, 1, 0}, add_material(s, test::lambertian(0.5f)));
-  RunConfig c = test_config(8, 8, 12e-3);
+  RenderStageConfig c = test_config(8, 8, 12e-3);
   c.camera.look_at_m = {0, 0, 0};
   try {
     Renderer r(s, c);
@@ -203,7 +203,7 @@ TEST(GroundTruth, BadInputNamesTheKey) {
     EXPECT_NE(std::string(e.what()).find("camera.gltf_camera"), std::string::npos) << e.what();
   }
   c = test_config(8, 8, 12e-3);
-  c.laser.beam = "gltf_light";
+  c.laser.beam = Beam::GltfLight;
   c.laser.gltf_light = "spot";
   try {
     Renderer r(s, c);
@@ -225,7 +225,7 @@ TEST(GroundTruth, GltfCameraLooksDownItsLocalMinusZ) {
                                      glm::dvec4(1, 0, 0, 1));
   cam.yfov_rad = 0.5;
   s.cameras.push_back(cam);
-  RunConfig c = test_config(10, 10, 12e-3);
+  RenderStageConfig c = test_config(10, 10, 12e-3);
   c.camera.gltf_camera = "cam";
   Renderer r(s, c);
   const GroundTruthTile gt = r.ground_truth({0, 0, 10, 10});

@@ -87,9 +87,12 @@ inline int add_sphere(scenes::Scene& s, glm::vec3 centre, float radius, int ring
   return static_cast<int>(s.meshes.size()) - 1;
 }
 
+// The paper's pixel A fill factor, which test_config gives every row.
+inline constexpr double kTestFillFactor = 0.07;
+
 // A small camera at the origin looking down -z, the paper's pixel, one fill factor.
-inline RunConfig test_config(int width, int height, double focal_length_m) {
-  RunConfig c;
+inline RenderStageConfig test_config(int width, int height, double focal_length_m) {
+  RenderStageConfig c;
   c.camera.width_px = width;
   c.camera.height_px = height;
   c.camera.position_m = {0, 0, 0};
@@ -97,8 +100,7 @@ inline RunConfig test_config(int width, int height, double focal_length_m) {
   c.camera.up = {0, 1, 0};
   c.camera.focal_length_m = focal_length_m;
   c.camera.f_number = 1.4;
-  c.sensor.preset = "pixel_A";
-  c.sensor.pixel_A.fill_factor = 0.07;
+  c.row_fill_factor.assign(static_cast<size_t>(height), kTestFillFactor);
   c.laser.average_power_W = 2e-3;
   c.laser.repetition_rate_Hz = 40e6;
   c.laser.wavelength_m = 637e-9;

@@ -20,7 +20,7 @@ using test::test_config;
 
 constexpr double kC = kSpeedOfLight;
 
-double flood_intensity(const RunConfig& c) {
+double flood_intensity(const RenderStageConfig& c) {
   const double half_diag = 0.5 * c.camera.pixel_pitch_m * std::hypot(c.camera.width_px, c.camera.height_px);
   const double alpha = std::atan2(half_diag, c.camera.focal_length_m);
   const double np = photons_per_pulse(c.laser.average_power_W, c.laser.repetition_rate_Hz, c.laser.wavelength_m);
@@ -28,14 +28,14 @@ double flood_intensity(const RunConfig& c) {
 }
 
 // rho I p^2 FF / (4 N^2 d^2): a Lambertian plane at distance d on the axis, lit from the camera.
-double on_axis_photons(const RunConfig& c, double rho, double d) {
-  return rho * flood_intensity(c) * std::pow(c.camera.pixel_pitch_m, 2) * c.sensor.pixel_A.fill_factor /
+double on_axis_photons(const RenderStageConfig& c, double rho, double d) {
+  return rho * flood_intensity(c) * std::pow(c.camera.pixel_pitch_m, 2) * c.row_fill_factor[0] /
          (4 * std::pow(c.camera.f_number, 2) * d * d);
 }
 
 // Mean over pixel (x, y) (16 x 16 midpoint grid) of g(unit ray direction).
 template <class G>
-double pixel_mean(const RunConfig& c, int x, int y, G g) {
+double pixel_mean(const RenderStageConfig& c, int x, int y, G g) {
   const double p = c.camera.pixel_pitch_m;
   double s = 0;
   for (int j = 0; j < 16; ++j)
@@ -64,7 +64,7 @@ scenes::Scene plane_at(double d, float rho, float half_size) {
 // Direct and indirect transients.
 
 TEST(Split, OffByDefaultAndALonePlaneHasNoIndirectLight) {
-  RunConfig c = test_config(8, 8, 12e-3);
+  RenderStageConfig c = test_config(8, 8, 12e-3);
   c.render.samples_per_pixel = 4;
   const TimeAxis axis{6e-9, 5e-12, 200, 25e-9};
   {
@@ -93,7 +93,7 @@ scenes::Scene open_corner() {
 }
 
 TEST(Split, CornerIndirectLightArrivesAfterTheDirectReturnAndDirectIsTheOneBounceRender) {
-  RunConfig c = test_config(16, 16, 2e-4);  // 20.6 degrees half field: the walls fill the view
+  RenderStageConfig c = test_config(16, 16, 2e-4);  // 20.6 degrees half field: the walls fill the view
   c.camera.position_m = {0.2, 0.2, 0};
   c.camera.look_at_m = {0.2, 0.2, -1};
   c.render.samples_per_pixel = 16;
@@ -104,7 +104,7 @@ TEST(Split, CornerIndirectLightArrivesAfterTheDirectReturnAndDirectIsTheOneBounc
   const PixelRect all{0, 0, 16, 16};
   Renderer r(open_corner(), c);
   const TransientTile t = r.transient(all, all, axis);
-  RunConfig c1 = c;
+  RenderStageConfig c1 = c;
   c1.render.max_bounces = 1;
   Renderer r1(open_corner(), c1);
   const TransientTile one = r1.transient(all, all, axis);
@@ -151,7 +151,7 @@ TEST(Split, CornerIndirectLightArrivesAfterTheDirectReturnAndDirectIsTheOneBounc
 // Camera rays travel in packets of 16 pixels fixed by the sensor: a 37-pixel row has blocks of 16, 16 and
 // 5, and tiles of 8 or 13 cut them anywhere; every pixel must come out bit-identical to the whole image.
 TEST(Split, PacketBlocksDoNotDependOnTheTiling) {
-  RunConfig c = test_config(37, 9, 4e-4);
+  RenderStageConfig c = test_config(37, 9, 4e-4);
   c.camera.position_m = {0.2, 0.2, 0};
   c.camera.look_at_m = {0.2, 0.2, -1};
   c.render.samples_per_pixel = 3;
@@ -186,7 +186,7 @@ TEST(Split, PacketBlocksDoNotDependOnTheTiling) {
 
 TEST(Extremes, PlaneAtOneKilometreFoldsToTimeModuloThePeriod) {
   const double d = 1000.0;
-  RunConfig c = test_config(8, 8, 0.1);  // 94 urad pixels: ranges in a pixel differ by < 2e-5 m
+  RenderStageConfig c = test_config(8, 8, 0.1);  // 94 urad pixels: ranges in a pixel differ by < 2e-5 m
   c.render.samples_per_pixel = 16;
   c.laser.emission_delay_s = 3e-9;
   Renderer r(plane_at(d, 0.5f, 10.0f), c);
@@ -219,7 +219,7 @@ TEST(Extremes, PlaneAtOneKilometreFoldsToTimeModuloThePeriod) {
 
 TEST(Extremes, PlaneAtFiveMillimetres) {
   const double d = 0.005;
-  RunConfig c = test_config(8, 8, 12e-3);  // the 8 x 8 pixels see 25 um of the plane
+  RenderStageConfig c = test_config(8, 8, 12e-3);  // the 8 x 8 pixels see 25 um of the plane
   c.render.samples_per_pixel = 16;
   c.laser.emission_delay_s = 1e-9;
   Renderer r(plane_at(d, 0.6f, 0.01f), c);
@@ -238,7 +238,7 @@ TEST(Extremes, PlaneAtFiveMillimetres) {
 }
 
 TEST(Extremes, ABillionthOfAPhotonPerPulseIsBinnedWithoutLoss) {
-  RunConfig c = test_config(8, 8, 12e-3);
+  RenderStageConfig c = test_config(8, 8, 12e-3);
   c.render.samples_per_pixel = 4;
   const double scale = 1e-9 / on_axis_photons(c, 0.5, 1.0);
   c.laser.average_power_W *= scale;  // 1e-9 photons per pulse on the axis

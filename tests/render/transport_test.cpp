@@ -26,7 +26,7 @@ constexpr double kC = kSpeedOfLight;
 
 // Mean and standard deviation over pixel (x, y)'s area of g(direction), on a 16 x 16 midpoint grid.
 template <class G>
-std::pair<double, double> over_pixel(const RunConfig& c, int x, int y, G g) {
+std::pair<double, double> over_pixel(const RenderStageConfig& c, int x, int y, G g) {
   const double p = c.camera.pixel_pitch_m;
   double s = 0, s2 = 0;
   const int n = 16;
@@ -43,7 +43,7 @@ std::pair<double, double> over_pixel(const RunConfig& c, int x, int y, G g) {
   return {s, std::sqrt(std::max(0.0, s2 / (n * n) - s * s))};
 }
 
-double flood_intensity(const RunConfig& c) {
+double flood_intensity(const RenderStageConfig& c) {
   const double half_diag = 0.5 * c.camera.pixel_pitch_m * std::hypot(c.camera.width_px, c.camera.height_px);
   const double alpha = std::atan2(half_diag, c.camera.focal_length_m);
   const double np = photons_per_pulse(c.laser.average_power_W, c.laser.repetition_rate_Hz, c.laser.wavelength_m);
@@ -51,9 +51,9 @@ double flood_intensity(const RunConfig& c) {
 }
 
 // FF p^2 / (4 N^2) pi: photons at the SPAD per unit photon radiance.
-double camera_constant(const RunConfig& c) {
+double camera_constant(const RenderStageConfig& c) {
   const double p = c.camera.pixel_pitch_m, n = c.camera.f_number;
-  return c.sensor.pixel_A.fill_factor * c.camera.optics_transmission * p * p * kPi / (4 * n * n);
+  return c.row_fill_factor[0] * c.camera.optics_transmission * p * p * kPi / (4 * n * n);
 }
 
 double sum(const float* v, int64_t n) { return std::accumulate(v, v + n, 0.0); }
@@ -65,7 +65,7 @@ scenes::Scene plane_scene(float d, float rho) {
 }
 
 TEST(Transport, PhotonsPerPulse) {
-  RunConfig c = test_config(8, 8, 12e-3);
+  RenderStageConfig c = test_config(8, 8, 12e-3);
   Renderer r(plane_scene(1, 0.5f), c);
   // 2 mW at 40 MHz and 637 nm: 5e-11 J per pulse over 3.1185e-19 J per photon.
   EXPECT_NEAR(r.photons_per_pulse(), 5e-11 / (kPlanck * kC / 637e-9), 1.0);
@@ -75,14 +75,14 @@ TEST(Transport, PhotonsPerPulse) {
 TEST(Transport, LambertianPlaneMatchesTheCameraEquationWithOffAxisFalloff) {
   const float d = 1.0f, rho = 0.6f;
   // 45 degrees half field of view: falloff of cos^4 (camera) times cos^3 (the flood's irradiance).
-  RunConfig c = test_config(32, 32, 150e-6);
+  RenderStageConfig c = test_config(32, 32, 150e-6);
   c.render.samples_per_pixel = 16;
   c.laser.emission_delay_s = 1e-9;
   Renderer r(plane_scene(d, rho), c);
   const TimeAxis axis{0.0, 10e-12, 2000, 25e-9};
   const TransientTile t = r.transient({0, 0, 32, 32}, {0, 0, 32, 32}, axis);
   const double on_axis = rho * flood_intensity(c) * std::pow(c.camera.pixel_pitch_m, 2) *
-                         c.sensor.pixel_A.fill_factor / (4 * std::pow(c.camera.f_number, 2) * d * d);
+                         c.row_fill_factor[0] / (4 * std::pow(c.camera.f_number, 2) * d * d);
   double worst_z = 0;
   for (int y = 0; y < 32; ++y)
     for (int x = 0; x < 32; ++x) {
@@ -103,7 +103,7 @@ TEST(Transport, LambertianPlaneMatchesTheCameraEquationWithOffAxisFalloff) {
 
 TEST(Transport, ReturnPeaksInTheBinOfTwiceTheDistance) {
   for (float d : {0.3f, 0.75f, 1.6f}) {
-    RunConfig c = test_config(8, 8, 12e-3);
+    RenderStageConfig c = test_config(8, 8, 12e-3);
     c.render.samples_per_pixel = 4;
     c.laser.emission_delay_s = 2.5e-9;
     Renderer r(plane_scene(d, 0.6f), c);
@@ -122,7 +122,7 @@ TEST(Transport, ReturnPeaksInTheBinOfTwiceTheDistance) {
 
 TEST(Transport, AmbientEnvironmentGivesTheCosFourthFalloff) {
   const float rho = 0.5f;
-  RunConfig c = test_config(24, 24, 110e-6);
+  RenderStageConfig c = test_config(24, 24, 110e-6);
   c.render.samples_per_pixel = 8;
   c.ambient.illuminance_lux = 50.0;
   c.ambient.wavelength_m = 550e-9;
@@ -149,7 +149,7 @@ TEST(Transport, TiltedPlaneArrivalTimesFollowItsGeometry) {
   const glm::dvec3 n(std::sin(tilt), 0, std::cos(tilt)), p0(0, 0, -1);
   const glm::dvec3 a = glm::normalize(glm::cross(glm::dvec3(0, 1, 0), n));
   add_quad(s, glm::vec3(p0), glm::vec3(3.0 * a), glm::vec3(0, 3, 0), add_material(s, test::lambertian(0.7f)));
-  RunConfig c = test_config(16, 16, 4e-3);
+  RenderStageConfig c = test_config(16, 16, 4e-3);
   c.render.samples_per_pixel = 64;
   Renderer r(s, c);
   const TimeAxis axis{5e-9, 1e-12, 2000, 25e-9};
@@ -216,7 +216,7 @@ TEST(Transport, DepositRulesBinEdgesFoldingAndOutOfWindow) {
 }
 
 TEST(Transport, NarrowWindowAccountsForEverythingAndLateReturnsFold) {
-  RunConfig c = test_config(16, 16, 3e-3);  // ranges from 1.0 to 1.0006 / cos(2.5 deg)
+  RenderStageConfig c = test_config(16, 16, 3e-3);  // ranges from 1.0 to 1.0006 / cos(2.5 deg)
   c.render.samples_per_pixel = 4;
   scenes::Scene s = plane_scene(1.5f, 0.6f);  // round trip 10 ns
   Renderer r(s, c);
@@ -252,7 +252,7 @@ scenes::Scene wall_behind_plate(bool with_plate, float roughness = 0.0f) {
 }
 
 TEST(Transport, SmoothPlateTransmitsOneMinusRSquaredEachWayAndDelaysTheReturn) {
-  RunConfig c = test_config(8, 8, 12e-3);
+  RenderStageConfig c = test_config(8, 8, 12e-3);
   c.render.samples_per_pixel = 1024;
   c.render.max_bounces = 1;
   const TimeAxis axis{6.6e-9, 0.5e-12, 300, 25e-9};
@@ -295,8 +295,8 @@ TEST(Transport, EachFaceOfASmoothPlateReflectsR) {
   const float a = 0.45f, b = 0.3f, t = 0.002f;
   add_box(s, {-1, -1, -a - t}, {1, 1, -a}, add_material(s, test::glass(1.5f, t)));
   add_quad(s, {0, 0, b}, {0, 2, 0}, {2, 0, 0}, add_material(s, test::lambertian(0.5f)));  // faces -z
-  RunConfig c = test_config(16, 16, 12e-3);
-  c.laser.beam = "cone";
+  RenderStageConfig c = test_config(16, 16, 12e-3);
+  c.laser.beam = Beam::Cone;
   c.laser.half_angle_rad = kPi;
   c.render.samples_per_pixel = 131072;
   c.render.max_bounces = 1;
@@ -330,14 +330,14 @@ TEST(Transport, IntegratingSphereFurnace) {
   const float rho = 0.5f, radius = 0.5f;
   scenes::Scene s;
   add_sphere(s, {0, 0, 0}, radius, 64, 128, add_material(s, test::lambertian(rho)), /*inward=*/true);
-  RunConfig c = test_config(16, 16, 0.4e-3);
-  c.laser.beam = "cone";
+  RenderStageConfig c = test_config(16, 16, 0.4e-3);
+  c.laser.beam = Beam::Cone;
   c.laser.half_angle_rad = kPi;
   c.render.max_bounces = 40;
   c.render.russian_roulette_from = 3;
   const PixelRect all{0, 0, 16, 16};
   auto render = [&](int spp, int bounces) {
-    RunConfig cc = c;
+    RenderStageConfig cc = c;
     cc.render.samples_per_pixel = spp;
     cc.render.max_bounces = bounces;
     Renderer r(s, cc);
@@ -378,10 +378,11 @@ TEST(Transport, IntegratingSphereFurnace) {
   EXPECT_LT(falls, 4.0 * 1.25);
 }
 
-TEST(Transport, FillFactorOfTheFullChipPreset) {
-  RunConfig c = test_config(8, 8, 50e-3);
-  c.sensor.preset = "full_chip";
-  c.sensor.pixel_B.fill_factor = 0.134;
+// The renderer applies the fill factor of each pixel's row as given (the sensor's layout decides it: the
+// full_chip preset gives the bottom half pixel B's 0.134).
+TEST(Transport, FillFactorOfEachRow) {
+  RenderStageConfig c = test_config(8, 8, 50e-3);
+  for (size_t y = 4; y < 8; ++y) c.row_fill_factor[y] = 0.134;
   c.render.samples_per_pixel = 1;
   Renderer r(plane_scene(1.0f, 0.5f), c);
   const TransientTile t = r.transient({0, 0, 8, 8}, {0, 0, 8, 8}, TimeAxis{});
@@ -410,7 +411,7 @@ scenes::Scene busy_scene() {
 // sensor reads only that range).
 TEST(Transport, BinRangesBoundTheLight) {
   scenes::Scene s = busy_scene();
-  RunConfig c = test_config(16, 16, 4e-3);
+  RenderStageConfig c = test_config(16, 16, 4e-3);
   c.render.samples_per_pixel = 4;
   c.render.split_direct_indirect = true;
   Renderer r(s, c);
@@ -437,7 +438,7 @@ TEST(Transport, BinRangesBoundTheLight) {
 
 TEST(Transport, DeterministicForAnyThreadCountAndTileSplit) {
   scenes::Scene s = busy_scene();
-  RunConfig c = test_config(16, 16, 4e-3);
+  RenderStageConfig c = test_config(16, 16, 4e-3);
   c.render.samples_per_pixel = 4;
   c.ambient.illuminance_lux = 20;
   c.render.split_direct_indirect = true;
@@ -477,7 +478,7 @@ TEST(Transport, DeterministicForAnyThreadCountAndTileSplit) {
 }
 
 TEST(Transport, StatsCountCameraAndShadowRays) {
-  RunConfig c = test_config(8, 8, 12e-3);
+  RenderStageConfig c = test_config(8, 8, 12e-3);
   c.render.samples_per_pixel = 2;
   c.render.max_bounces = 1;
   Renderer r(plane_scene(1.0f, 0.5f), c);

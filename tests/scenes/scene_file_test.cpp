@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include "core/error.h"
+#include "core/units.h"
 #include "scenes/scene_file.h"
 
 namespace spadgen::scenes {
@@ -72,6 +73,40 @@ TEST_F(SceneFileTest, MinimalFileResolvesEveryDefaultInSiUnits) {
   EXPECT_TRUE(r.resolved["camera"]["crop"].is_null());
   EXPECT_EQ(r.resolved["sensor"]["gate"]["skew_fwhm_ps"], 410.0);
   EXPECT_EQ(r.resolved["acquisition"]["gate_sweep"]["step_ps"], 36.0);
+}
+
+// Each default is declared once, as the field's initializer in core/config.h: a configuration built in
+// code is exactly what a minimal scene file resolves to, bit for bit (the half-angle of a "cone" beam
+// once defaulted to 10 degrees in the file and to 0 in code).
+TEST_F(SceneFileTest, CodeDefaultsAreTheSceneFileDefaults) {
+  const ResolvedRun r = parse(R"({"gltf": "s.gltf"})");
+  RunConfig d;
+  d.scene_file = r.config.scene_file;
+  d.gltf_path = r.config.gltf_path;
+  EXPECT_TRUE(r.config == d);
+  EXPECT_TRUE(r.config.camera == d.camera && r.config.laser == d.laser && r.config.ambient == d.ambient);
+  EXPECT_TRUE(r.config.sensor == d.sensor && r.config.acquisition == d.acquisition);
+  EXPECT_TRUE(r.config.render == d.render && r.config.outputs == d.outputs);
+  EXPECT_EQ(d.laser.half_angle_rad, 10.0 * kPi / 180.0);
+  EXPECT_EQ(r.resolved["laser"]["half_angle_deg"], 10.0);
+  // Enum keys resolve to their spelling.
+  EXPECT_EQ(r.resolved["laser"]["beam"], "flood");
+  EXPECT_EQ(r.resolved["sensor"]["preset"], "pixel_A");
+  EXPECT_EQ(r.resolved["acquisition"]["mode"], "gate_sweep");
+}
+
+// Every choice's spelling maps to its enum value and back.
+TEST_F(SceneFileTest, ChoicesParseToTheirEnums) {
+  const ResolvedRun r = parse(R"({"gltf": "s.gltf", "laser": {"beam": "gltf_light", "gltf_light": "L"},
+      "sensor": {"preset": "full_chip", "gate": {"edge_shape": "linear"}},
+      "acquisition": {"mode": "intensity", "frames": 8, "intensity": {"exposure": "dual"}}})");
+  EXPECT_EQ(r.config.laser.beam, Beam::GltfLight);
+  EXPECT_EQ(r.config.sensor.preset, PixelPreset::FullChip);
+  EXPECT_EQ(r.config.sensor.gate.edge_shape, GateEdge::Linear);
+  EXPECT_EQ(r.config.acquisition.mode, AcquisitionMode::Intensity);
+  EXPECT_EQ(r.config.acquisition.intensity.exposure, Exposure::Dual);
+  EXPECT_EQ(to_string(Beam::Cone), "cone");
+  EXPECT_EQ(to_string(PixelPreset::PixelB), "pixel_B");
 }
 
 TEST_F(SceneFileTest, ValuesAreConvertedFromTheUnitInTheirName) {
@@ -173,7 +208,7 @@ TEST_F(SceneFileTest, OverridesGoThroughTheSameChecks) {
   EXPECT_DOUBLE_EQ(r.config.laser.average_power_W, 5e-3);
   EXPECT_EQ(r.config.camera.gltf_camera, "Camera.001");
   EXPECT_EQ(*r.config.camera.crop, (PixelRect{0, 0, 64, 64}));
-  EXPECT_EQ(r.config.acquisition.intensity.exposure, "dual");
+  EXPECT_EQ(r.config.acquisition.intensity.exposure, Exposure::Dual);
   EXPECT_EQ(r.resolved["laser"]["average_power_mW"], 5);
 
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"laser.average_powr_mW=5"}),
@@ -197,6 +232,9 @@ TEST_F(SceneFileTest, CrossKeyChecks) {
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "render": {"window_start_ns": 1}})"),
               HasSubstr("both set or both null"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "laser": {"beam": "gltf_light"}})"), HasSubstr("/laser/gltf_light: is empty"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "acquisition": {"mode": "intensity", "frames": 4081, "intensity": {"exposure": "dual"}}})"),
+              HasSubstr("/acquisition/frames: found 4081, expected an even number: dual exposure"));
+  EXPECT_EQ(error_of(R"({"gltf": "s.gltf", "acquisition": {"mode": "intensity", "frames": 4081}})"), "");
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "sensor": {"gate": {"profile_csv": "gate.csv"}}})"),
               HasSubstr("/sensor/gate/profile_csv: the file " + (dir_ / "gate.csv").string() + " does not exist"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "outputs": {"transient_crop": [0, 0, 8, 8]}, "camera": {"crop": [8, 8, 8, 8]}})"),

@@ -71,7 +71,7 @@ std::vector<double> fast(const GateShape& gs, const std::vector<float>& g, const
 
 TEST(Gate, LinearEdgesWithoutInstrumentResponseAreExact) {
   GateConfig g;
-  g.edge_shape = "linear";
+  g.edge_shape = GateEdge::Linear;
   g.jitter_fwhm_s = 0.0;
   LaserConfig l;
   l.pulse_fwhm_s = 0.0;
@@ -90,12 +90,12 @@ TEST(Gate, LinearEdgesWithoutInstrumentResponseAreExact) {
 
 // The response engine is exact for any knot function; a linear-edge gate without IRF is exact itself.
 TEST(Gate, FastResponseEqualsBruteForce) {
-  for (const char* shape : {"linear", "smooth"}) {
+  for (const GateEdge shape : {GateEdge::Linear, GateEdge::Smooth}) {
     GateConfig g;
     g.edge_shape = shape;
-    g.jitter_fwhm_s = std::string(shape) == "linear" ? 0.0 : 60e-12;
+    g.jitter_fwhm_s = shape == GateEdge::Linear ? 0.0 : 60e-12;
     LaserConfig l;
-    l.pulse_fwhm_s = std::string(shape) == "linear" ? 0.0 : 80e-12;
+    l.pulse_fwhm_s = shape == GateEdge::Linear ? 0.0 : 80e-12;
     const GateShape gs = build_gate_shape(g, l, 48);
     TimeAxis ax{-1e-9, 9e-12, 2400, 25e-9};
     std::vector<float> tr(static_cast<size_t>(ax.bins), 0.0f);
@@ -115,7 +115,7 @@ TEST(Gate, FastResponseEqualsBruteForce) {
       for (double v : ref) peak = std::max(peak, std::abs(v));
       ASSERT_GT(peak, 0.5);
       for (size_t k = 0; k < taus.size(); ++k)
-        ASSERT_NEAR(got[k], ref[k], 1e-9 * peak) << shape << " k=" << k << " dL=" << dL;
+        ASSERT_NEAR(got[k], ref[k], 1e-9 * peak) << to_string(shape) << " k=" << k << " dL=" << dL;
     }
   }
 }
@@ -193,7 +193,7 @@ std::vector<IntStepCase> int_step_transients(int64_t T, Rng& rng) {
 TEST(Gate, IntegerStepPathEqualsGeneralPath) {
   GateConfig smooth;  // defaults: smooth 400 ps edges, 60 ps jitter, 80 ps pulse
   GateConfig linear;
-  linear.edge_shape = "linear";
+  linear.edge_shape = GateEdge::Linear;
   linear.jitter_fwhm_s = 0.0;
   linear.rise_s = 150e-12;
   linear.fall_s = 250e-12;
@@ -263,7 +263,7 @@ TEST(Gate, IntegerStepDetection) {
 // integer step (36 ps over 9 ps bins) takes the integer-step path and equals the general one to rounding.
 TEST(Gate, SensorTakesTheGeneralPathForNonIntegerSteps) {
   for (double dt : {7e-12, 9e-12}) {
-    RunConfig c = sweep_config(16, 8);
+    SensorStageConfig c = sweep_config(16, 8);
     c.sensor.dark_counts = false;
     c.sensor.crosstalk = false;
     c.acquisition.gate_sweep = {0.6e-9, 0.6e-9 + 99 * 36e-12, 36e-12};
@@ -339,7 +339,7 @@ TEST(Gate, SmoothKnotErrorAgainstClosedForm) {
 // A delta transient seen through the sweep reproduces the effective gate, shifted by the pixel's skew
 // and stretched by its length deviation.
 TEST(Gate, DeltaTransientReproducesGateShiftedBySkew) {
-  RunConfig c = sweep_config(64, 32);
+  SensorStageConfig c = sweep_config(64, 32);
   c.sensor.dark_counts = false;
   c.sensor.crosstalk = false;
   c.sensor.gate.delay_s = 0.7e-9;
@@ -435,7 +435,7 @@ TEST(Gate, PulseTableMatchesGaussianPulse) {
 }
 
 TEST(Gate, RequiredWindowCoversEveryPixelGate) {
-  RunConfig c = sweep_config(96, 40);
+  SensorStageConfig c = sweep_config(96, 40);
   SensorModel model(c);
   const TimeAxis ax = model.required_window(9e-12);
   EXPECT_GT(ax.bins, 0);
@@ -454,7 +454,7 @@ TEST(Gate, RequiredWindowCoversEveryPixelGate) {
   EXPECT_LT(ax.end_s() - ax.start_s, (13.2 - 0.6 + 3.8 + 5.0) * 1e-9);
   // the sweep has K = 351 positions, 0.6 to 13.2 ns inclusive
   EXPECT_EQ(model.K(), 351);
-  c.acquisition.mode = "intensity";
+  c.acquisition.mode = AcquisitionMode::Intensity;
   EXPECT_EQ(SensorModel(c).required_window(9e-12).bins, 0);
 }
 

@@ -22,7 +22,7 @@ using testing::Image;
 using testing::kZ;
 using testing::sweep_config;
 
-RunConfig quiet(RunConfig c) {
+SensorStageConfig quiet(SensorStageConfig c) {
   c.sensor.dark_counts = false;
   c.sensor.crosstalk = false;
   c.sensor.pdp_nonuniformity = false;
@@ -30,9 +30,9 @@ RunConfig quiet(RunConfig c) {
   return c;
 }
 
-RunConfig intensity_config(int w, int h, const std::string& exposure, int frames) {
-  RunConfig c = quiet(sweep_config(w, h));
-  c.acquisition.mode = "intensity";
+SensorStageConfig intensity_config(int w, int h, Exposure exposure, int frames) {
+  SensorStageConfig c = quiet(sweep_config(w, h));
+  c.acquisition.mode = AcquisitionMode::Intensity;
   c.acquisition.intensity.exposure = exposure;
   c.acquisition.frames = frames;
   return c;
@@ -41,8 +41,8 @@ RunConfig intensity_config(int w, int h, const std::string& exposure, int frames
 // Eq. (5) and (6): mean sampled output against the formulas, incident photons 1 to 1e6 per 4080 frames.
 TEST(Sensor, Equations5And6) {
   const int levels = 25, per_level = 64;
-  for (const std::string mode : {"single", "dual"}) {
-    RunConfig c = intensity_config(per_level, levels, mode, 4080);
+  for (const Exposure mode : {Exposure::Single, Exposure::Dual}) {
+    SensorStageConfig c = intensity_config(per_level, levels, mode, 4080);
     SensorModel model(c);
     const double N = 4080.0, pdp = model.pdp_ambient(0);
     const double tS = c.acquisition.intensity.exposure_s, tL = tS * c.acquisition.intensity.dual_ratio;
@@ -51,7 +51,7 @@ TEST(Sensor, Equations5And6) {
     for (int l = 0; l < levels; ++l) {
       n_in[static_cast<size_t>(l)] = std::pow(10.0, 6.0 * l / (levels - 1));
       // N_in = detectable photons per N-frame image = N * PDP * rate * tau (single), (N/2) PDP rate (tS + tL) (dual)
-      const double rate = mode == "single" ? n_in[static_cast<size_t>(l)] / (N * pdp * tS)
+      const double rate = mode == Exposure::Single ? n_in[static_cast<size_t>(l)] / (N * pdp * tS)
                                            : n_in[static_cast<size_t>(l)] / (0.5 * N * pdp * (tS + tL));
       for (int x = 0; x < per_level; ++x) img.ambient[static_cast<size_t>(l * per_level + x)] = static_cast<float>(rate);
     }
@@ -60,7 +60,7 @@ TEST(Sensor, Equations5And6) {
     for (int l = 0; l < levels; ++l) {
       const double x = n_in[static_cast<size_t>(l)] / N;
       double want = 0.0, var = 0.0;
-      if (mode == "single") {
+      if (mode == Exposure::Single) {
         want = N * (1.0 - std::exp(-x));  // eq. (5)
         var = want * std::exp(-x);
       } else {
@@ -72,30 +72,30 @@ TEST(Sensor, Equations5And6) {
       for (int px = 0; px < per_level; ++px) {
         const size_t i = static_cast<size_t>(l * per_level + px);
         mean += out.intensity_counts[i];
-        mean_expected += out.expected[i] + (mode == "dual" ? out.expected[out.intensity_counts.size() + i] : 0.0f);
+        mean_expected += out.expected[i] + (mode == Exposure::Dual ? out.expected[out.intensity_counts.size() + i] : 0.0f);
       }
       mean /= per_level;
       mean_expected /= per_level;
-      EXPECT_NEAR(mean_expected, want, 2e-6 * want + 1e-9) << mode << " N_in=" << n_in[static_cast<size_t>(l)];
+      EXPECT_NEAR(mean_expected, want, 2e-6 * want + 1e-9) << to_string(mode) << " N_in=" << n_in[static_cast<size_t>(l)];
       const double sd = std::sqrt(var / per_level);
       if (sd > 0.0) {
-        EXPECT_LT(std::abs(mean - want), kZ * sd) << mode << " N_in=" << n_in[static_cast<size_t>(l)];
+        EXPECT_LT(std::abs(mean - want), kZ * sd) << to_string(mode) << " N_in=" << n_in[static_cast<size_t>(l)];
       } else {
         EXPECT_EQ(mean, want);
       }
       // the linearised estimate inverts the formula
       if (want < N - 1.0) {
-        EXPECT_NEAR(linearise_counts(want, 4080, mode == "dual", 8.0), n_in[static_cast<size_t>(l)], 1e-6 * n_in[static_cast<size_t>(l)]);
+        EXPECT_NEAR(linearise_counts(want, 4080, mode == Exposure::Dual, 8.0), n_in[static_cast<size_t>(l)], 1e-6 * n_in[static_cast<size_t>(l)]);
       }
     }
     // saturation is clamped to a finite estimate
-    EXPECT_TRUE(std::isfinite(linearise_counts(N, 4080, mode == "dual", 8.0)));
+    EXPECT_TRUE(std::isfinite(linearise_counts(N, 4080, mode == Exposure::Dual, 8.0)));
   }
 }
 
 // Dark pixels count at their own DCR (z-test per pixel), in the counts path and in the frames path.
 TEST(Sensor, DarkPixelCountsAtItsDcr) {
-  RunConfig c = sweep_config(16, 8);
+  SensorStageConfig c = sweep_config(16, 8);
   c.sensor.crosstalk = false;
   c.sensor.pixel_A.dcr_median_cps = 3e4;  // enough counts per pixel for a sharp test
   c.acquisition.gate_sweep = {0.6e-9, 4.2e-9, 36e-12};
@@ -123,7 +123,7 @@ TEST(Sensor, DarkPixelCountsAtItsDcr) {
 }
 
 TEST(Sensor, DcrMapsAndTemperature) {
-  RunConfig c = sweep_config(256, 200);
+  SensorStageConfig c = sweep_config(256, 200);
   SensorModel model(c);
   int below = 0, hot = 0;
   for (int y = 0; y < 200; ++y)
@@ -149,7 +149,7 @@ TEST(Sensor, DcrMapsAndTemperature) {
 }
 
 TEST(Sensor, SaturationGivesExactlyN) {
-  RunConfig c = quiet(sweep_config(16, 8));
+  SensorStageConfig c = quiet(sweep_config(16, 8));
   c.acquisition.gate_sweep = {2e-9, 3e-9, 100e-12};
   for (bool frames : {false, true}) {
     c.outputs.frames = frames;
@@ -173,9 +173,9 @@ TEST(Sensor, SaturationGivesExactlyN) {
 // crosstalk only, at the marginal rate; counts and frames paths both match it.
 TEST(Sensor, CrosstalkRates) {
   for (int type = 0; type < 2; ++type) {
-    RunConfig c = intensity_config(64, 64, "single", 2000);
+    SensorStageConfig c = intensity_config(64, 64, Exposure::Single, 2000);
     c.sensor.crosstalk = true;
-    c.sensor.preset = type == 0 ? "pixel_A" : "pixel_B";
+    c.sensor.preset = type == 0 ? PixelPreset::PixelA : PixelPreset::PixelB;
     PixelTypeConfig& tc = type == 0 ? c.sensor.pixel_A : c.sensor.pixel_B;
     tc.crosstalk_probability = 0.02;  // large, for statistical power
     const double lam_bright = 1.5;
@@ -213,7 +213,7 @@ TEST(Sensor, CrosstalkRates) {
 }
 
 TEST(Sensor, CrosstalkOffCostsNoHalo) {
-  RunConfig c = sweep_config();
+  SensorStageConfig c = sweep_config();
   c.sensor.crosstalk = false;
   EXPECT_EQ(SensorModel(c).halo(), 0);
   c.sensor.crosstalk = true;
@@ -222,7 +222,7 @@ TEST(Sensor, CrosstalkOffCostsNoHalo) {
 
 // The paper's spreads and Fig. 5 pattern on the full 1024 x 500 pixel-A array.
 TEST(Sensor, GateMapsSpreadAndPattern) {
-  RunConfig c = sweep_config(1024, 500);
+  SensorStageConfig c = sweep_config(1024, 500);
   SensorModel model(c);
   const SensorMapsTile m = model.maps({0, 0, 1024, 500});
   double s1 = 0, s2 = 0, l1 = 0, l2 = 0, top = 0, bottom = 0, top_left = 0, top_right = 0;
@@ -262,8 +262,8 @@ TEST(Sensor, GateMapsSpreadAndPattern) {
 }
 
 TEST(Sensor, FullChipPresetUsesBothPixels) {
-  RunConfig c = sweep_config(32, 20);
-  c.sensor.preset = "full_chip";
+  SensorStageConfig c = sweep_config(32, 20);
+  c.sensor.preset = PixelPreset::FullChip;
   SensorModel model(c);
   EXPECT_EQ(model.pixel(3, 9).type, 0);
   EXPECT_EQ(model.pixel(3, 10).type, 1);
@@ -273,27 +273,13 @@ TEST(Sensor, FullChipPresetUsesBothPixels) {
   EXPECT_EQ(j["pixel_types"].size(), 2u);
   EXPECT_EQ(j["K"], model.K());
   EXPECT_TRUE(j["gate"].contains("knot_max_error"));
-  c.sensor.preset = "pixel_C";
-  EXPECT_THROW(SensorModel{c}, Error);
-}
-
-TEST(Sensor, BadSettingsThrow) {
-  RunConfig c = sweep_config();
-  c.acquisition.frames = 70000;
-  EXPECT_THROW(SensorModel{c}, Error);
-  c = intensity_config(8, 8, "dual", 4081);
-  EXPECT_THROW(SensorModel{c}, Error);
-  c = sweep_config();
-  c.acquisition.gate_sweep.step_s = 0.0;
-  EXPECT_THROW(SensorModel{c}, Error);
 }
 
 // Bit-identical results for one tile or tiles of 8, 16, 32, with 1 or 2 threads, counts and frames.
 TEST(Sensor, DeterministicAcrossTilesAndThreads) {
   const int W = 40, H = 24;
-  RunConfig c = sweep_config(W, H);
+  SensorStageConfig c = sweep_config(W, H);
   c.acquisition.gate_sweep = {0.6e-9, 6e-9, 72e-12};
-  c.ambient.illuminance_lux = 0;
   for (bool frames : {false, true}) {
     c.outputs.frames = frames;
     c.sensor.pixel_A.crosstalk_probability = 0.05;
@@ -362,7 +348,7 @@ TEST(Sensor, DeterministicAcrossTilesAndThreads) {
 // of the wrong size is an error.
 TEST(Sensor, BinRangesChangeNothing) {
   const int W = 24, H = 16;
-  RunConfig c = sweep_config(W, H);
+  SensorStageConfig c = sweep_config(W, H);
   c.acquisition.gate_sweep = {0.6e-9, 6e-9, 36e-12};
   SensorModel model(c);
   const TimeAxis ax = model.required_window(9e-12);
@@ -410,7 +396,7 @@ TEST(Sensor, BinRangesChangeNothing) {
 }
 
 TEST(Sensor, TileWithoutHaloIsRejected) {
-  RunConfig c = sweep_config(16, 16);
+  SensorStageConfig c = sweep_config(16, 16);
   SensorModel model(c);
   const TimeAxis ax = model.required_window(20e-12);
   Image img(16, 16, ax);

@@ -16,13 +16,13 @@ inline constexpr double kZ = 4.892;
 
 inline PixelTypeConfig paper_pixel_B() { return PixelTypeConfig::paper_pixel_B(); }
 
-inline RunConfig sweep_config(int width = 48, int height = 24) {
-  RunConfig c;
+inline SensorStageConfig sweep_config(int width = 48, int height = 24) {
+  SensorStageConfig c;
   c.seed = 12345;
   c.camera.width_px = width;
   c.camera.height_px = height;
   c.sensor.pixel_B = paper_pixel_B();
-  c.acquisition.mode = "gate_sweep";
+  c.acquisition.mode = AcquisitionMode::GateSweep;
   return c;
 }
 

@@ -1,0 +1,21 @@
+#include "config.h"
+
+namespace spadgen {
+
+SensorStageConfig sensor_stage(const RunConfig& c) {
+  SensorStageConfig s;
+  s.camera = {c.camera.width_px, c.camera.height_px, c.camera.optics_transmission};
+  s.laser = c.laser;
+  s.ambient = {c.ambient.wavelength_m, c.ambient.bandwidth_m};
+  s.sensor = c.sensor;
+  s.acquisition = c.acquisition;
+  s.outputs.frames = c.outputs.frames;
+  s.seed = c.seed;
+  return s;
+}
+
+RenderStageConfig render_stage(const RunConfig& c, std::vector<double> row_fill_factor) {
+  return {c.camera, c.laser, c.ambient, c.render, c.seed, std::move(row_fill_factor)};
+}
+
+}  // namespace spadgen

@@ -1,0 +1,284 @@
+#include "schema.h"
+
+#include <filesystem>
+#include <type_traits>
+
+#include "core/units.h"
+
+namespace spadgen::scenes {
+namespace {
+
+using json = nlohmann::json;
+using ojson = nlohmann::ordered_json;
+
+// Units as the scene file writes them. A value v in the file is to_si(v) inside; a default is shown as
+// from_si of the field's initializer.
+template <double S>
+double times(double v) {
+  return v * S;
+}
+template <double S>
+double over(double v) {
+  return v / S;
+}
+double deg_to_rad(double v) { return v * kPi / 180.0; }
+double rad_to_deg(double v) { return v * 180.0 / kPi; }
+
+constexpr Unit plain(const char* name) { return {name, times<1.0>, over<1.0>}; }
+constexpr Unit kNone = plain("");
+constexpr Unit kMetre = plain("m");
+constexpr Unit kPixel = plain("px");
+constexpr Unit kUmUnit{"um", times<kUm>, over<kUm>};
+constexpr Unit kMmUnit{"mm", times<kMm>, over<kMm>};
+constexpr Unit kNmUnit{"nm", times<kNm>, over<kNm>};
+constexpr Unit kNsUnit{"ns", times<kNs>, over<kNs>};
+constexpr Unit kPsUnit{"ps", times<kPs>, over<kPs>};
+constexpr Unit kUsUnit{"us", times<kUs>, over<kUs>};
+constexpr Unit kMilliwatt{"mW", times<kMm>, over<kMm>};
+constexpr Unit kMegahertz{"MHz", times<1e6>, over<1e6>};
+constexpr Unit kDegree{"deg", deg_to_rad, rad_to_deg};
+
+const RunConfig& defaults() {
+  static const RunConfig d;
+  return d;
+}
+
+// A path relative to the scene file, made absolute; "" stays "".
+std::string relative_to(const std::string& dir, const std::string& p) {
+  if (p.empty()) return p;
+  std::filesystem::path q(p);
+  if (q.is_relative()) q = std::filesystem::path(dir) / q;
+  return q.lexically_normal().string();
+}
+
+struct Range {
+  double lo = -std::numeric_limits<double>::infinity();
+  double hi = std::numeric_limits<double>::infinity();
+  bool lo_open = false;  // lo itself is not allowed
+};
+constexpr Range closed(double lo, double hi) { return {lo, hi, false}; }
+constexpr Range open_closed(double lo, double hi) { return {lo, hi, true}; }  // (lo, hi]
+
+Key make(std::string path, Type type, std::string unit, std::string doc) {
+  Key k;
+  k.path = std::move(path), k.type = type, k.unit = std::move(unit), k.doc = std::move(doc);
+  return k;
+}
+
+// The builders take the field as an accessor, F(RunConfig&) -> T&, usually written with FIELD below.
+template <class F>
+Key number(std::string path, F field, Unit u, Range r, std::string doc) {
+  Key k = make(std::move(path), Type::Number, u.name, std::move(doc));
+  k.lo = r.lo, k.hi = r.hi, k.lo_open = r.lo_open;
+  using T = std::remove_cvref_t<decltype(field(defaults()))>;
+  if constexpr (std::is_same_v<T, std::optional<double>>) {
+    const std::optional<double>& d = field(defaults());
+    k.nullable = true;
+    k.def = d ? json(u.from_si(*d)) : json(nullptr);
+    k.set = [field, u](RunConfig& c, const ojson& v, const std::string&) {
+      field(c) = v.is_null() ? std::nullopt : std::optional<double>(u.to_si(v.get<double>()));
+    };
+  } else {
+    static_assert(std::is_same_v<T, double>);
+    k.def = u.from_si(field(defaults()));
+    k.set = [field, u](RunConfig& c, const ojson& v, const std::string&) { field(c) = u.to_si(v.get<double>()); };
+  }
+  return k;
+}
+
+template <class F>
+Key integer(std::string path, F field, Unit u, Range r, std::string doc) {
+  Key k = make(std::move(path), Type::Integer, u.name, std::move(doc));
+  k.lo = r.lo, k.hi = r.hi;
+  using T = std::remove_cvref_t<decltype(field(defaults()))>;
+  k.def = field(defaults());
+  k.set = [field](RunConfig& c, const ojson& v, const std::string&) { field(c) = v.get<T>(); };
+  return k;
+}
+
+template <class F>
+Key boolean(std::string path, F field, std::string doc) {
+  Key k = make(std::move(path), Type::Bool, "", std::move(doc));
+  k.def = field(defaults());
+  k.set = [field](RunConfig& c, const ojson& v, const std::string&) { field(c) = v.get<bool>(); };
+  return k;
+}
+
+template <class F>
+Key string(std::string path, F field, std::string doc) {
+  Key k = make(std::move(path), Type::String, "", std::move(doc));
+  k.def = field(defaults());
+  k.set = [field](RunConfig& c, const ojson& v, const std::string&) { field(c) = v.get<std::string>(); };
+  return k;
+}
+
+// A file named relative to the scene file; stored as an absolute path ("" stays "").
+template <class F>
+Key file(std::string path, F field, std::string doc) {
+  Key k = make(std::move(path), Type::Path, "", std::move(doc));
+  k.def = field(defaults());
+  k.set = [field](RunConfig& c, const ojson& v, const std::string& dir) { field(c) = relative_to(dir, v.get<std::string>()); };
+  return k;
+}
+
+template <class F>
+Key choice(std::string path, F field, std::string doc) {
+  using E = std::remove_cvref_t<decltype(field(defaults()))>;
+  Key k = make(std::move(path), Type::Enum, "", std::move(doc));
+  for (const auto& [name, value] : EnumNames<E>::values) k.choices.emplace_back(name);
+  k.def = to_string(field(defaults()));
+  k.set = [field](RunConfig& c, const ojson& v, const std::string&) {
+    const std::string s = v.get<std::string>();
+    for (const auto& [name, value] : EnumNames<E>::values)
+      if (name == s) field(c) = value;
+  };
+  return k;
+}
+
+template <class F>
+Key vec3(std::string path, F field, Unit u, std::string doc) {
+  Key k = make(std::move(path), Type::Vec3, u.name, std::move(doc));
+  const Vec3d& d = field(defaults());
+  k.def = json::array({u.from_si(d[0]), u.from_si(d[1]), u.from_si(d[2])});
+  k.set = [field, u](RunConfig& c, const ojson& v, const std::string&) {
+    field(c) = {u.to_si(v[0].get<double>()), u.to_si(v[1].get<double>()), u.to_si(v[2].get<double>())};
+  };
+  return k;
+}
+
+// [x0, y0, width, height] in pixels, or null.
+template <class F>
+Key rect(std::string path, F field, std::string doc) {
+  Key k = make(std::move(path), Type::Rect, kPixel.name, std::move(doc));
+  k.nullable = true;
+  k.def = nullptr;
+  k.set = [field](RunConfig& c, const ojson& v, const std::string&) {
+    if (v.is_null()) field(c) = std::nullopt;
+    else field(c) = PixelRect{v[0].get<int>(), v[1].get<int>(), v[2].get<int>(), v[3].get<int>()};
+  };
+  return k;
+}
+
+// The accessor of a RunConfig field, for the builders: FIELD(camera.f_number).
+#define FIELD(member) [](auto& c) -> auto& { return c.member; }
+
+template <class P>
+void add_pixel_type(std::vector<Key>& s, const std::string& name, P type) {
+  const std::string p = "/sensor/" + name + "/";
+  // The pixel design's field: its accessor composed with the design's.
+#define PIXEL(member) [type](auto& c) -> auto& { return type(c).member; }
+  s.push_back(number(p + "fill_factor", PIXEL(fill_factor), kNone, open_closed(0, 1), "fraction of the pixel area that is photosensitive"));
+  s.push_back(number(p + "pdp_peak", PIXEL(pdp_peak), kNone, open_closed(0, 1), "peak photon detection probability"));
+  s.push_back(number(p + "pdp_peak_wavelength_nm", PIXEL(pdp_peak_wavelength_m), kNmUnit, closed(200, 2000), "wavelength of the PDP peak"));
+  s.push_back(file(p + "pdp_csv", PIXEL(pdp_csv), "table of (wavelength_nm, PDP) replacing the built-in curve; relative to the scene file; \"\" = built-in curve scaled to pdp_peak"));
+  s.push_back(number(p + "pdp_nonuniformity", PIXEL(pdp_nonuniformity), kNone, closed(0, 0.5), "relative spread (sigma) of PDP across pixels"));
+  s.push_back(number(p + "dcr_median_cps", PIXEL(dcr_median_cps), plain("counts/s"), closed(0, 1e7), "median dark count rate at room temperature (25 C)"));
+  s.push_back(number(p + "dcr_log_sigma", PIXEL(dcr_log_sigma), kNone, closed(0, 5), "spread (sigma of the natural log) of the main DCR population"));
+  s.push_back(number(p + "hot_pixel_fraction", PIXEL(hot_pixel_fraction), kNone, closed(0, 1), "fraction of hot pixels (the DCR tail)"));
+  s.push_back(number(p + "hot_pixel_factor", PIXEL(hot_pixel_factor), kNone, closed(1, 1e6), "median hot-pixel DCR divided by the median DCR"));
+  s.push_back(number(p + "crosstalk_probability", PIXEL(crosstalk_probability), kNone, closed(0, 0.5), "probability that a detection fires a given neighbour"));
+  s.push_back(boolean(p + "single_avalanche_per_frame", PIXEL(single_avalanche_per_frame), "the pixel stops after its first avalanche in a frame (the paper's pixel B feedback)"));
+#undef PIXEL
+}
+
+std::vector<Key> build() {
+  std::vector<Key> k;
+  Key gltf = file("/gltf", FIELD(gltf_path), "the glTF 2.0 file (.gltf or .glb) of the scene, relative to the scene file");
+  gltf.required = true, gltf.def = nullptr;
+  k.push_back(gltf);
+  k.push_back(string("/gltf_scene", FIELD(gltf_scene), "name of the glTF scene to use; \"\" = the file's default scene"));
+  Key description = make("/description", Type::String, "", "free text, copied into metadata.json");
+  description.def = "";
+  k.push_back(description);
+  k.push_back(integer("/seed", FIELD(seed), kNone, closed(0, 9.007199254740992e15), "seed of every random stream (overridden by --seed)"));
+
+  k.push_back(string("/camera/gltf_camera", FIELD(camera.gltf_camera), "name of a glTF camera node to use instead of position/look_at/up and the field of view; \"\" = defined here"));
+  k.push_back(vec3("/camera/position_m", FIELD(camera.position_m), kMetre, "camera centre (world, glTF frame: +Y up)"));
+  k.push_back(vec3("/camera/look_at_m", FIELD(camera.look_at_m), kMetre, "point the optical axis passes through"));
+  k.push_back(vec3("/camera/up", FIELD(camera.up), kNone, "up direction (world); need not be orthogonal to the axis"));
+  k.push_back(integer("/camera/width_px", FIELD(camera.width_px), kPixel, closed(1, 16384), "sensor columns"));
+  k.push_back(integer("/camera/height_px", FIELD(camera.height_px), kPixel, closed(1, 16384), "sensor rows (500: one half of the paper's chip; 1000: the full chip)"));
+  k.push_back(number("/camera/pixel_pitch_um", FIELD(camera.pixel_pitch_m), kUmUnit, open_closed(0, 1000), "pixel pitch"));
+  k.push_back(number("/camera/focal_length_mm", FIELD(camera.focal_length_m), kMmUnit, open_closed(0, 10000), "lens focal length (ignored when vertical_fov_deg is set)"));
+  k.push_back(number("/camera/vertical_fov_deg", FIELD(camera.vertical_fov_rad), kDegree, open_closed(0, 179), "vertical field of view; null = from focal_length_mm"));
+  k.push_back(number("/camera/f_number", FIELD(camera.f_number), kNone, closed(0.5, 64), "lens f-number N (aperture diameter = f / N)"));
+  k.push_back(number("/camera/optics_transmission", FIELD(camera.optics_transmission), kNone, open_closed(0, 1), "fraction of the light the lens (and any filter) passes"));
+  k.push_back(rect("/camera/crop", FIELD(camera.crop), "[x0, y0, width, height] region of interest; null = the whole sensor"));
+
+  k.push_back(number("/laser/average_power_mW", FIELD(laser.average_power_W), kMilliwatt, closed(0, 1e9), "average optical power"));
+  k.push_back(number("/laser/repetition_rate_MHz", FIELD(laser.repetition_rate_Hz), kMegahertz, open_closed(0, 1e5), "pulse repetition rate"));
+  k.push_back(number("/laser/wavelength_nm", FIELD(laser.wavelength_m), kNmUnit, closed(200, 2000), "vacuum wavelength"));
+  k.push_back(number("/laser/pulse_fwhm_ps", FIELD(laser.pulse_fwhm_s), kPsUnit, open_closed(0, 1e6), "Gaussian pulse width (full width at half maximum)"));
+  k.push_back(file("/laser/pulse_shape_csv", FIELD(laser.pulse_shape_csv), "table of (time_ps, relative power) replacing the Gaussian; relative to the scene file"));
+  k.push_back(number("/laser/emission_delay_ns", FIELD(laser.emission_delay_s), kNsUnit, closed(-1e6, 1e6), "fixed delay from the laser trigger to the pulse's emission (cables, driver)"));
+  k.push_back(choice("/laser/beam", FIELD(laser.beam), "flood: uniform over a cone just covering the field of view; cone: uniform over half_angle_deg; gltf_light: a KHR_lights_punctual light of the scene"));
+  k.push_back(number("/laser/half_angle_deg", FIELD(laser.half_angle_rad), kDegree, open_closed(0, 180), "half-angle of the beam when beam is \"cone\""));
+  k.push_back(vec3("/laser/offset_m", FIELD(laser.offset_m), kMetre, "emitter position relative to the camera centre, in camera coordinates (x right, y up, -z forward)"));
+  k.push_back(string("/laser/gltf_light", FIELD(laser.gltf_light), "name of the glTF light used as the laser when beam is \"gltf_light\""));
+
+  k.push_back(number("/ambient/illuminance_lux", FIELD(ambient.illuminance_lux), plain("lux"), closed(0, 1e6), "uniform environment illuminance (equal-energy spectrum); see docs/scene-file.md for the conversion"));
+  k.push_back(number("/ambient/spectral_irradiance_W_m2_nm", FIELD(ambient.spectral_irradiance_W_m2_nm), plain("W/m^2/nm"), closed(0, 1e3), "the uniform environment in radiometric units (irradiance per nm on a surface facing it, flat over the band); null = from illuminance_lux"));
+  k.push_back(number("/ambient/wavelength_nm", FIELD(ambient.wavelength_m), kNmUnit, closed(200, 2000), "centre of the ambient band the camera sees"));
+  k.push_back(number("/ambient/bandwidth_nm", FIELD(ambient.bandwidth_m), kNmUnit, open_closed(0, 2000), "width of that band (optical filter or sensor response)"));
+  k.push_back(boolean("/ambient/gltf_lights", FIELD(ambient.gltf_lights), "the glTF punctual lights add to the ambient light"));
+
+  k.push_back(choice("/sensor/preset", FIELD(sensor.preset), "pixel design of every row: pixel_A, pixel_B, or full_chip (pixel A in the top half, pixel B in the bottom half)"));
+  add_pixel_type(k, "pixel_A", FIELD(sensor.pixel_A));
+  add_pixel_type(k, "pixel_B", FIELD(sensor.pixel_B));
+  k.push_back(number("/sensor/gate/length_ns", FIELD(sensor.gate.length_s), kNsUnit, open_closed(0, 1e6), "gate length, 50 % to 50 %"));
+  k.push_back(number("/sensor/gate/rise_ps", FIELD(sensor.gate.rise_s), kPsUnit, closed(0, 1e6), "rise time, 10 % to 90 %"));
+  k.push_back(number("/sensor/gate/fall_ps", FIELD(sensor.gate.fall_s), kPsUnit, closed(0, 1e6), "fall time, 90 % to 10 %"));
+  k.push_back(choice("/sensor/gate/edge_shape", FIELD(sensor.gate.edge_shape), "shape of the parametric edges"));
+  k.push_back(file("/sensor/gate/profile_csv", FIELD(sensor.gate.profile_csv), "measured gate profile, table of (time_ps, response), replacing the parametric one; relative to the scene file"));
+  k.push_back(number("/sensor/gate/delay_ns", FIELD(sensor.gate.delay_s), kNsUnit, closed(-1e6, 1e6), "fixed delay from the laser trigger to the gate opening at position 0"));
+  k.push_back(number("/sensor/gate/skew_fwhm_ps", FIELD(sensor.gate.skew_fwhm_s), kPsUnit, closed(0, 1e6), "spread of the gate position across the array (FWHM)"));
+  k.push_back(number("/sensor/gate/length_fwhm_ps", FIELD(sensor.gate.length_fwhm_s), kPsUnit, closed(0, 1e6), "spread of the gate length across the array (FWHM)"));
+  k.push_back(file("/sensor/gate/maps_exr", FIELD(sensor.gate.maps_exr), "EXR with channels skew_ps and length_ps (full sensor size) replacing the generated maps; relative to the scene file"));
+  k.push_back(number("/sensor/jitter_fwhm_ps", FIELD(sensor.gate.jitter_fwhm_s), kPsUnit, closed(0, 1e6), "SPAD timing jitter (Gaussian FWHM)"));
+  k.push_back(number("/sensor/temperature_C", FIELD(sensor.temperature_C), plain("C"), closed(-100, 150), "sensor temperature (dark counts rise above about 30 C)"));
+  k.push_back(boolean("/sensor/dark_counts", FIELD(sensor.dark_counts), "model dark counts"));
+  k.push_back(boolean("/sensor/crosstalk", FIELD(sensor.crosstalk), "model optical/electrical crosstalk between neighbours"));
+  k.push_back(boolean("/sensor/gate_skew", FIELD(sensor.skew), "per-pixel gate position and length variation"));
+  k.push_back(boolean("/sensor/pdp_nonuniformity", FIELD(sensor.pdp_nonuniformity), "per-pixel PDP variation"));
+
+  k.push_back(choice("/acquisition/mode", FIELD(acquisition.mode), "gate_sweep: 3D time-gated sweep; intensity: 2D intensity imaging"));
+  k.push_back(integer("/acquisition/frames", FIELD(acquisition.frames), kNone, closed(1, 65535), "binary frames summed per gate position (gate_sweep) or per image (intensity)"));
+  k.push_back(number("/acquisition/frame_rate_fps", FIELD(acquisition.frame_rate_Hz), plain("frames/s"), open_closed(0, 1e7), "binary frame rate, for time stamps and exposure checks"));
+  k.push_back(integer("/acquisition/cycles_per_frame", FIELD(acquisition.cycles_per_frame), kNone, closed(1, 1e12), "laser cycles (gate openings) integrated in one binary frame (gate_sweep)"));
+  k.push_back(number("/acquisition/gate_sweep/start_ns", FIELD(acquisition.gate_sweep.start_s), kNsUnit, closed(-1e6, 1e6), "first gate position, relative to the laser trigger"));
+  k.push_back(number("/acquisition/gate_sweep/stop_ns", FIELD(acquisition.gate_sweep.stop_s), kNsUnit, closed(-1e6, 1e6), "last gate position (included when on the step grid)"));
+  k.push_back(number("/acquisition/gate_sweep/step_ps", FIELD(acquisition.gate_sweep.step_s), kPsUnit, open_closed(0, 1e9), "gate position step (36 ps: the paper's LSB, 5.4 mm)"));
+  k.push_back(choice("/acquisition/intensity/exposure", FIELD(acquisition.intensity.exposure), "single exposure, or dual exposure interleaving tau_S and tau_L"));
+  k.push_back(number("/acquisition/intensity/exposure_us", FIELD(acquisition.intensity.exposure_s), kUsUnit, open_closed(0, 1e9), "global exposure per frame (single), or the short exposure tau_S (dual)"));
+  k.push_back(number("/acquisition/intensity/dual_ratio", FIELD(acquisition.intensity.dual_ratio), kNone, closed(1, 1e6), "tau_L / tau_S in dual exposure"));
+  k.push_back(boolean("/acquisition/intensity/laser_on", FIELD(acquisition.intensity.laser_on), "add the laser's mean photon rate to the ambient light in intensity mode"));
+
+  k.push_back(integer("/render/samples_per_pixel", FIELD(render.samples_per_pixel), kNone, closed(1, 1e7), "paths per pixel"));
+  k.push_back(integer("/render/max_bounces", FIELD(render.max_bounces), kNone, closed(1, 64), "surface interactions per path (1 = direct light only)"));
+  k.push_back(integer("/render/russian_roulette_from", FIELD(render.russian_roulette_from), kNone, closed(1, 64), "bounce from which paths may be stopped by Russian roulette"));
+  k.push_back(number("/render/time_bin_ps", FIELD(render.time_bin_s), kPsUnit, open_closed(0, 1e6), "transient bin width"));
+  k.push_back(number("/render/window_start_ns", FIELD(render.window_start_s), kNsUnit, closed(-1e6, 1e6), "start of the transient window; null = derived from the acquisition"));
+  k.push_back(number("/render/window_stop_ns", FIELD(render.window_stop_s), kNsUnit, closed(-1e6, 1e6), "end of the transient window; null = derived from the acquisition"));
+  k.push_back(integer("/render/tile_size_px", FIELD(render.tile_size), kPixel, closed(8, 4096), "tile edge (a multiple of 8); outputs do not depend on it"));
+  k.push_back(integer("/render/max_layers", FIELD(render.max_layers), kNone, closed(1, 64), "surfaces recorded per pixel in the ground truth"));
+  k.push_back(boolean("/render/split_direct_indirect", FIELD(render.split_direct_indirect), "also keep the indirect part of the transient separately"));
+
+  k.push_back(boolean("/outputs/ground_truth", FIELD(outputs.ground_truth), "write ground_truth.exr"));
+  k.push_back(boolean("/outputs/transient", FIELD(outputs.transient), "write transient.npy (H, W, T) float32 photons per pulse per bin"));
+  k.push_back(rect("/outputs/transient_crop", FIELD(outputs.transient_crop), "[x0, y0, width, height] (sensor pixels) of transient.npy; null = the whole image"));
+  k.push_back(boolean("/outputs/expected_counts", FIELD(outputs.expected_counts), "write expected_counts.npy (noise-free)"));
+  k.push_back(boolean("/outputs/counts", FIELD(outputs.counts), "write counts.npy (sampled)"));
+  k.push_back(boolean("/outputs/frames", FIELD(outputs.frames), "write frames.npy (binary frames, bit-packed); large"));
+  k.push_back(boolean("/outputs/previews", FIELD(outputs.previews), "write previews/*.png"));
+  return k;
+}
+#undef FIELD
+
+}  // namespace
+
+const std::vector<Key>& schema() {
+  static const std::vector<Key> s = build();
+  return s;
+}
+
+}  // namespace spadgen::scenes
