@@ -20,7 +20,7 @@
 #include "core/units.h"
 #include "render/embree_scene.h"
 #include "render/renderer.h"
-#include "sensor/pixel_layout.h"
+#include "sensor/model/pixel_layout.h"
 #include "scenes/scene.h"
 #include "scenes/scene_file.h"
 

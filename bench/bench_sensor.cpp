@@ -12,10 +12,10 @@
 
 #include "core/rng.h"
 #include "core/tile.h"
-#include "sensor/batch_kernels.h"
-#include "sensor/binomial_table.h"
-#include "sensor/frames_kernel.h"
-#include "sensor/sampling.h"
+#include "sensor/sampling/batch_kernels.h"
+#include "sensor/sampling/binomial_table.h"
+#include "sensor/sampling/frames_kernel.h"
+#include "sensor/sampling/sampling.h"
 #include "sensor/sensor.h"
 
 namespace {

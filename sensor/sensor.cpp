@@ -13,14 +13,15 @@
 #include "core/error.h"
 #include "core/rng.h"
 #include "core/units.h"
-#include "gate.h"
-#include "pdp.h"
-#include "pixel_maps.h"
-#include "batch_kernels.h"
-#include "frames_kernel.h"
-#include "sampling.h"
+#include "sensor/model/gate.h"
+#include "sensor/model/pdp.h"
+#include "sensor/model/pixel_maps.h"
+#include "sensor/sampling/batch_kernels.h"
+#include "sensor/sampling/frames_kernel.h"
+#include "sensor/sampling/sampling.h"
 #include "sensor/acquisition/acquisition.h"
 #include "sensor/acquisition/intensity.h"
+#include "sensor/streams.h"
 
 namespace spadgen::sensor {
 namespace {
@@ -249,7 +250,7 @@ SensorTile SensorModel::process(const TransientTile& t) const {
   const auto setup = m.acq->setup(t.axis);
   const bool frames = m.cfg.outputs.frames;
   const uint64_t seed = m.cfg.seed;
-  auto pixel_index = [W](int x, int y) { return static_cast<uint64_t>(y) * static_cast<uint64_t>(W) + static_cast<uint64_t>(x); };
+  auto pixel_index = [W](int x, int y) { return streams::pixel_index(x, y, W); };
   // lambda of every k for the region's pixels (the tile and its halo), [region.index(x, y) * K + k]; and
   // p, q of each pixel's own avalanches where its neighbours (crosstalk of pixel B) or its frames need them.
   const size_t nreg = static_cast<size_t>(region.count());
@@ -319,7 +320,7 @@ SensorTile SensorModel::process(const TransientTile& t) const {
   // Per pixel of the tile, all K at once: the rate with crosstalk (pixel A: every neighbour avalanche may
   // fire this pixel, a thinned Poisson process; pixel B: a neighbour avalanches at most once per frame,
   // firing this pixel with probability xt), its expected counts N p and, without frames, the counts.
-  const Rng counts_base(seed, RngKind::Counts, 0, 0);
+  const Rng counts_base = streams::counts(seed, 0, 0);
   const uint32_t counts_key[2] = {counts_base.key().v[0], counts_base.key().v[1]};
   tbb::parallel_for(tbb::blocked_range<int>(rect.y0, rect.y1()), [&](const tbb::blocked_range<int>& rows) {
     KernelScratch s;
@@ -392,7 +393,7 @@ SensorTile SensorModel::process(const TransientTile& t) const {
             const int nnb = ty.crosstalk > 0.0 ? neighbours(x, y, nb) : 0;
             if (nnb > 0) {
               std::optional<Rng> xt;
-              const auto make_xt = [&] { return Rng(seed, RngKind::Crosstalk, pixel_index(x, y), kk); };
+              const auto make_xt = [&] { return streams::crosstalk(seed, pixel_index(x, y), kk); };
               for (int i = 0; i < nnb; ++i) {
                 const size_t ni = nb_index(x, y, nb[i]);
                 const Prob& pn = own_prob[kk * nreg + ni];  // gate-major: neighbours' values are close by

@@ -7,8 +7,9 @@
 
 #include "core/units.h"
 #include "sensor/acquisition/acquisition.h"
-#include "sensor/gate.h"
-#include "sensor/pixel_maps.h"
+#include "sensor/model/gate.h"
+#include "sensor/response/gate_response.h"
+#include "sensor/model/pixel_maps.h"
 
 namespace spadgen::sensor {
 namespace {

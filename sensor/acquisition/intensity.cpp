@@ -4,7 +4,7 @@
 #include <cmath>
 
 #include "core/units.h"
-#include "sensor/pixel_maps.h"
+#include "sensor/model/pixel_maps.h"
 
 namespace spadgen::sensor {
 

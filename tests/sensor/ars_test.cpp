@@ -9,9 +9,9 @@
 #include <vector>
 
 #include "core/rng.h"
-#include "sensor/ars.h"
-#include "sensor/frames_kernel.h"
-#include "sensor/sampling.h"
+#include "sensor/sampling/ars.h"
+#include "sensor/sampling/frames_kernel.h"
+#include "sensor/sampling/sampling.h"
 
 namespace spadgen::sensor {
 namespace {

@@ -10,8 +10,8 @@
 #include <vector>
 
 #include "core/rng.h"
-#include "sensor/batch_kernels.h"
-#include "sensor/binomial_table.h"
+#include "sensor/sampling/batch_kernels.h"
+#include "sensor/sampling/binomial_table.h"
 #include "test_util.h"
 
 namespace spadgen::sensor {

@@ -10,8 +10,9 @@
 #include "core/error.h"
 #include "core/rng.h"
 #include "core/units.h"
-#include "sensor/gate.h"
-#include "sensor/pixel_maps.h"
+#include "sensor/model/gate.h"
+#include "sensor/response/gate_response.h"
+#include "sensor/model/pixel_maps.h"
 #include "sensor/sensor.h"
 #include "test_util.h"
 

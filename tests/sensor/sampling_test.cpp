@@ -7,9 +7,9 @@
 #include <cmath>
 
 #include "core/rng.h"
-#include "sensor/batch_kernels.h"
-#include "sensor/frames_kernel.h"
-#include "sensor/sampling.h"
+#include "sensor/sampling/batch_kernels.h"
+#include "sensor/sampling/frames_kernel.h"
+#include "sensor/sampling/sampling.h"
 #include "test_util.h"
 
 namespace spadgen::sensor {

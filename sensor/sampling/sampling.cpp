@@ -1,11 +1,12 @@
-#include "sampling.h"
+#include "sensor/sampling/sampling.h"
 
 #include <algorithm>
 #include <bit>
 #include <cmath>
 
-#include "batch_kernels.h"
-#include "frames_kernel.h"
+#include "sensor/sampling/batch_kernels.h"
+#include "sensor/sampling/frames_kernel.h"
+#include "sensor/streams.h"
 
 namespace spadgen::sensor {
 namespace {
@@ -150,7 +151,7 @@ void sample_bits_batch(uint64_t seed, uint64_t k, const uint64_t* pixels, size_t
   const uint32_t n = sampler.n();
   if (n == 0) return;  // no words (frame_bits_group writes each pixel's last word)
   const size_t nw = (n + 63) / 64;
-  const Rng base(seed, RngKind::Frames, 0, k);
+  const Rng base = streams::frames(seed, 0, k);
   const uint32_t key[2] = {base.key().v[0], base.key().v[1]};
   uint32_t slow[kFrameGroup], block0[4 * kFrameGroup];
   for (size_t g = 0; g < count; g += kFrameGroup) {
@@ -161,7 +162,7 @@ void sample_bits_batch(uint64_t seed, uint64_t k, const uint64_t* pixels, size_t
                                        words + g * nw, slow, block0);
     for (size_t j = 0; j < ns; ++j) {
       const size_t i = g + slow[j];
-      const Rng stream(seed, RngKind::Frames, pixels[i], k);
+      const Rng stream = streams::frames(seed, pixels[i], k);
       StreamReader rng(stream, {block0[4 * j], block0[4 * j + 1], block0[4 * j + 2], block0[4 * j + 3]});
       bits_of_stream(stream, rng, sampler, pr[i], words + i * nw);
     }

@@ -11,7 +11,7 @@
 
 #include <hwy/highway.h>
 
-#include "sensor/ars.h"
+#include "sensor/sampling/ars.h"
 
 HWY_BEFORE_NAMESPACE();
 namespace spadgen::sensor {

@@ -1,6 +1,6 @@
 // Compiled once per target by Highway's foreach_target; see batch_kernels.h.
 #undef HWY_TARGET_INCLUDE
-#define HWY_TARGET_INCLUDE "sensor/batch_kernels.cpp"
+#define HWY_TARGET_INCLUDE "sensor/sampling/batch_kernels.cpp"
 #include <hwy/foreach_target.h>  // IWYU pragma: keep
 #include <hwy/highway.h>
 #include <hwy/contrib/math/math-inl.h>
@@ -9,10 +9,10 @@
 #include <array>
 #include <cmath>
 
-#include "sensor/batch_kernels.h"
-#include "sensor/ars-inl.h"
-#include "sensor/philox-inl.h"
-#include "sensor/threshold-inl.h"
+#include "sensor/sampling/batch_kernels.h"
+#include "sensor/sampling/ars-inl.h"
+#include "sensor/sampling/philox-inl.h"
+#include "sensor/sampling/threshold-inl.h"
 
 HWY_BEFORE_NAMESPACE();
 namespace spadgen::sensor {

@@ -19,7 +19,7 @@
 #include <vector>
 
 #include "core/config.h"
-#include "pixel_layout.h"
+#include "sensor/model/pixel_layout.h"
 
 namespace spadgen::sensor {
 

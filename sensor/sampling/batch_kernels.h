@@ -13,9 +13,9 @@
 #include <vector>
 
 #include "core/rng.h"
-#include "ars.h"
-#include "binomial_table.h"
-#include "sampling.h"
+#include "sensor/sampling/ars.h"
+#include "sensor/sampling/binomial_table.h"
+#include "sensor/sampling/sampling.h"
 
 namespace spadgen::sensor {
 

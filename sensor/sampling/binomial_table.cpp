@@ -1,4 +1,4 @@
-#include "binomial_table.h"
+#include "sensor/sampling/binomial_table.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -10,7 +10,7 @@
 #include <map>
 #include <mutex>
 
-#include "sampling.h"
+#include "sensor/sampling/sampling.h"
 
 namespace spadgen::sensor {
 namespace {

@@ -1,4 +1,4 @@
-#include "pixel_maps.h"
+#include "sensor/model/pixel_maps.h"
 
 #include <algorithm>
 #include <cmath>
@@ -7,11 +7,10 @@
 #include "core/error.h"
 #include "core/rng.h"
 #include "core/units.h"
+#include "sensor/streams.h"
 
 namespace spadgen::sensor {
 namespace {
-
-enum MapId : uint64_t { kSkew = 0, kLength = 1, kDcr = 2, kPdp = 3 };
 
 constexpr double kTruncate = 5.0;
 constexpr double kSkewPatternShare = 0.8;    // share of the skew variance in the smooth pattern
@@ -136,7 +135,7 @@ PixelParams PixelMaps::at(int x, int y) const {
   p.type = layout_.type_of_row(y);
   p.section = section_of_row(y);
   const PixelTypeConfig& tc = p.type == 0 ? cfg_.sensor.pixel_A : cfg_.sensor.pixel_B;
-  const uint64_t idx = static_cast<uint64_t>(y) * static_cast<uint64_t>(width_) + static_cast<uint64_t>(x);
+  const uint64_t idx = streams::pixel_index(x, y, width_);
   const uint64_t seed = cfg_.seed;
   if (cfg_.sensor.skew) {
     if (!user_skew_ps_.empty()) {
@@ -145,19 +144,19 @@ PixelParams PixelMaps::at(int x, int y) const {
     } else {
       const SectionStats& s = section(y);
       const double u = coord(x, width_), v = 1.0 - coord(y - s.y0, s.height);
-      Rng rs(seed, RngKind::SensorMaps, idx, kSkew), rl(seed, RngKind::SensorMaps, idx, kLength);
+      Rng rs = streams::chip_map(seed, idx, streams::Map::Skew), rl = streams::chip_map(seed, idx, streams::Map::Length);
       p.skew_s = (skew_pattern(u, v) - s.skew_mean) * s.skew_scale + skew_sigma_r_ * truncated_normal(rs);
       p.dL_s = (length_pattern(u, v) - s.len_mean) * s.len_scale + len_sigma_r_ * truncated_normal(rl);
     }
   }
   if (cfg_.sensor.dark_counts) {
-    Rng rd(seed, RngKind::SensorMaps, idx, kDcr);
+    Rng rd = streams::chip_map(seed, idx, streams::Map::Dcr);
     const bool hot = rd.next_double() < tc.hot_pixel_fraction;
     const double z = truncated_normal(rd);
     p.dcr_cps = tc.dcr_median_cps * (hot ? tc.hot_pixel_factor : 1.0) * std::exp(tc.dcr_log_sigma * z) * temp_factor_;
   }
   if (cfg_.sensor.pdp_nonuniformity) {
-    Rng rp(seed, RngKind::SensorMaps, idx, kPdp);
+    Rng rp = streams::chip_map(seed, idx, streams::Map::Pdp);
     p.pdp_scale = std::max(0.0, 1.0 + tc.pdp_nonuniformity * truncated_normal(rp));
   }
   return p;

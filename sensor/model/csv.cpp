@@ -1,4 +1,4 @@
-#include "csv.h"
+#include "sensor/model/csv.h"
 
 #include <cerrno>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "pixel_layout.h"
+#include "sensor/model/pixel_layout.h"
 
 namespace spadgen::sensor {
 

@@ -11,8 +11,8 @@
 #include <cstdint>
 
 #include "core/rng.h"
-#include "sensor/ars.h"
-#include "sensor/sampling.h"
+#include "sensor/sampling/ars.h"
+#include "sensor/sampling/sampling.h"
 
 namespace spadgen::sensor {
 

@@ -1,4 +1,4 @@
-#include "pdp.h"
+#include "sensor/model/pdp.h"
 
 #include <algorithm>
 #include <cmath>
@@ -6,7 +6,7 @@
 
 #include "core/error.h"
 #include "core/units.h"
-#include "csv.h"
+#include "sensor/model/csv.h"
 
 namespace spadgen::sensor {
 

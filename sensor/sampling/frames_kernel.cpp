@@ -5,7 +5,7 @@
 // AVX3_DL (AVX-512 with VAES: four AES rounds per instruction) is compiled too (HWY_WANT_AVX3_DL, set for
 // the whole sensor library in sensor/CMakeLists.txt): on plain AVX3 an AESRound is four 128-bit AESENC.
 #undef HWY_TARGET_INCLUDE
-#define HWY_TARGET_INCLUDE "sensor/frames_kernel.cpp"
+#define HWY_TARGET_INCLUDE "sensor/sampling/frames_kernel.cpp"
 #include <hwy/foreach_target.h>  // IWYU pragma: keep
 #include <hwy/highway.h>
 
@@ -14,11 +14,11 @@
 #include <cstring>
 #include <vector>
 
-#include "sensor/frames_kernel.h"
-#include "sensor/ars-inl.h"
-#include "sensor/philox-inl.h"
-#include "sensor/threshold-inl.h"
-#include "sensor/sampling.h"
+#include "sensor/sampling/frames_kernel.h"
+#include "sensor/sampling/ars-inl.h"
+#include "sensor/sampling/philox-inl.h"
+#include "sensor/sampling/threshold-inl.h"
+#include "sensor/sampling/sampling.h"
 
 HWY_BEFORE_NAMESPACE();
 namespace spadgen::sensor {

@@ -1,0 +1,63 @@
+// The gate: its time profile f(t) and the instrument response (laser pulse, SPAD jitter) it is convolved
+// with, as two piecewise-linear edges. The gate response engine (sensor/response/gate_response.h) turns
+// them into h(tau) for every gate position of a sweep.
+//
+// Representation. f_eff = f convolved with the instrument response is written as the difference of two
+// edges, f_eff(t) = rise(t - s) - fall(t - s - dL), where s is the pixel's gate skew, dL its gate length
+// minus the nominal length, and both edges are piecewise-linear functions that are 0 before their first
+// knot and `v_end` after their last. For a piecewise-linear gate (linear edges or a measured table) with no
+// instrument response the knots are exact; otherwise the edges are tabulated on a fine grid (about 0.4 ps,
+// a direct discrete convolution) and `knots_per_edge` knots are placed where the curvature is, and the
+// largest difference between the knots' interpolation and the fine grid is recorded in max_knot_error.
+//
+#pragma once
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "core/config.h"
+
+namespace spadgen::sensor {
+
+// A piecewise-linear function of time: 0 before u.front(), v_end after u.back(), linear between knots.
+struct Edge {
+  std::vector<double> u;  // knot times, seconds, relative to the gate opening of a pixel with no skew
+  std::vector<double> y;  // values at the knots (y.front() = 0, y.back() = v_end)
+  double v_end = 1.0;
+  double value(double t) const;
+  double integral() const;  // over [u.front(), u.back()]
+};
+
+// A function sampled on a uniform grid x0 + i * dx.
+struct Sampled {
+  double x0 = 0.0, dx = 0.0;
+  std::vector<double> y;
+  double at(double x) const;  // linear interpolation; 0 outside
+};
+
+struct GateShape {
+  Edge rise, fall;  // f_eff(t) = rise(t - s) - fall(t - s - dL)
+  double nominal_length_s = 0.0;  // 50 %-50 % length of the parametric gate or of the measured table
+  double plateau = 1.0;           // the open-gate response (1, or the table's value at its middle)
+  double open_time_s = 0.0;       // integral of f over time for dL = 0 (the effective gate length)
+  int knots_per_edge = 0;         // knots actually used, per edge
+  bool exact = false;             // the knots are the exact response (piecewise-linear gate, no IRF)
+  double max_knot_error = 0.0;    // max |knots - fine grid| over both edges, in units of the plateau
+  double irf_fwhm_s = 0.0;        // FWHM of the instrument response (0: none)
+  Sampled rise_fine, fall_fine;   // the fine reference of each edge (empty when exact)
+
+  double value(double t, double dL) const { return rise.value(t) - fall.value(t - dL); }
+  double open_time(double dL) const { return open_time_s + plateau * dL; }
+  double support_begin() const { return rise.u.front(); }
+  double support_end(double dL) const { return fall.u.back() + dL; }
+};
+
+// Builds the effective gate (profile convolved with laser pulse and SPAD jitter). Reads
+// gate.profile_csv and laser.pulse_shape_csv when given; throws spadgen::Error on bad tables.
+GateShape build_gate_shape(const GateConfig& gate, const LaserConfig& laser, int knots_per_edge);
+
+// The instrument response as weights on a grid of spacing dx (sum 1): a photon the renderer places at t is
+// detected at t + u with probability weight at u. Empty y: a delta (no pulse width, no jitter).
+Sampled build_irf(const GateConfig& gate, const LaserConfig& laser, double dx);
+
+}  // namespace spadgen::sensor
