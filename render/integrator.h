@@ -111,28 +111,24 @@ class Integrator {
     double* indirect_bins;
     PixelTotals* totals;
   };
-  // The camera vertex's shadow ray to the laser and its first segment, traced in the block pass because
-  // the shadow rays of neighbouring pixels converge on the laser and travel well as a packet.
-  struct AheadShadow {
-    LaserRay ray;
-    FirstSegment first;
-  };
   struct NeeVertex;  // integrator.cpp
 
   // One camera path, sample j of `block` (pbrt's Li): deposits its laser light, weighted by the pixel's
   // measurement w, and returns the ambient photon radiance it gathered, which render_pixel weights by w.
   double trace_path(const CameraBlock& block, size_t j, double w, const PixelFilm& film, RayCounts* rays) const;
 
-  // Packet plumbing: the camera ray's hit and surface, and the laser shadow ray from that hit, come from
-  // trace_camera_block; every later ray is traced one at a time.
-  bool next_surface(const CameraBlock& block, size_t j, bool camera_ray, const glm::vec3& o, const glm::vec3& d,
-                    RayHit* hit, Surface* sf, RayCounts* rays) const;
-  bool ahead_shadow(const CameraBlock& block, size_t j, AheadShadow* out) const;
+  // Packet plumbing: the camera ray's hit and surface, and the laser shadow ray from that hit with its
+  // first segment, come from trace_camera_block, which traces them as packets (neighbouring pixels' rays
+  // are coherent, and their shadow rays converge on the laser); every later ray is traced one at a time.
+  bool next_hit(const CameraBlock& block, size_t j, bool camera_ray, const glm::vec3& o, const glm::vec3& d,
+                RayHit* hit, RayCounts* rays) const;
+  Surface surface_at(const CameraBlock& block, size_t j, bool camera_ray, const RayHit& hit) const;
+  bool ahead_shadow(const CameraBlock& block, size_t j, LaserRay* lr, FirstSegment* first) const;
 
-  // Next-event estimation to the laser at v (ahead: v is the camera vertex and its shadow ray was traced
-  // in the block pass; null otherwise).
-  void connect_laser(const NeeVertex& v, const AheadShadow* ahead, double w, const PixelFilm& film,
-                     RayCounts* rays) const;
+  // Next-event estimation to the laser from v along lr (first: the shadow ray's first segment when it was
+  // traced ahead, else null).
+  void connect_laser(const NeeVertex& v, const LaserRay& lr, const FirstSegment* first, double w,
+                     const PixelFilm& film, RayCounts* rays) const;
 
   // The ambient estimate, in the ambient channel (beta.y): light from the environment where the path
   // escapes, from emissive surfaces it hits, and from punctual ambient lights by next-event estimation.
