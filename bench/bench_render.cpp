@@ -1,108 +1,35 @@
 // Renderer benchmark on the paper's multi-object scene (plate + sphere) at 1024 x 1000:
 //  - the integrator's rays per second (camera + shadow rays, counted by RenderStats) against raw Embree
-//    rtcIntersect1 / rtcOccluded1 replaying exactly the rays the integrator traced, on the same scene;
+//    rtcIntersect1 / rtcOccluded1 replaying exactly the rays the integrator traced, on the same scene
+//    (recorded by bench_render_rays, which this program runs);
 //  - cost against error for samples per pixel, for the time-bin width and for max_bounces.
 // Usage: bench_render [--benchmark_filter=...]; the summary (ratio, error tables) is printed at the end.
 #include <benchmark/benchmark.h>
 #include <embree3/rtcore.h>
 #include <tbb/blocked_range.h>
-#include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
-#include <filesystem>
-#include <memory>
+#include <cstdlib>
 #include <vector>
 
 #include "core/units.h"
+#include "ray_record.h"
 #include "render/embree_scene.h"
 #include "render/renderer.h"
-#include "sensor/model/pixel_layout.h"
+#include "render_setup.h"
 #include "scenes/scene.h"
-#include "scenes/scene_file.h"
 
 namespace {
 
 using namespace spadgen;
-
-struct Setup {
-  scenes::Scene scene;
-  RunConfig config;
-  std::string source;
-};
-
-// The renderer's part of the run, with the fill factor of every row as the sensor lays them out.
-RenderStageConfig stage(const RunConfig& c) {
-  return render_stage(c, sensor::PixelLayout(c.sensor.preset, c.camera.height_px).row_fill_factor(c.sensor));
-}
-
-// The equivalent of scenes/paper/multi_object.json when the shipped file is not there: a 2 mm plate of
-// ior 1.5, front face at 0.45 m, covering the left half, in front of a sphere whose nearest point is 0.75 m.
-Setup build_in_code() {
-  Setup s;
-  s.source = "built in code";
-  scenes::Material plate;
-  plate.name = "plastic_plate";
-  plate.metallic = 0;
-  plate.roughness = 0.1f;
-  plate.transmission = 1;
-  plate.ior = 1.5f;
-  plate.thickness_m = 0.002f;
-  s.scene.materials.push_back(plate);
-  scenes::Material white;
-  white.base_color = {0.8f, 0.8f, 0.8f, 1};
-  white.metallic = 0;
-  s.scene.materials.push_back(white);
-  scenes::Mesh box;
-  const glm::vec3 lo(-0.35f, -0.2f, -0.452f), hi(0.0f, 0.2f, -0.45f);
-  for (int i = 0; i < 8; ++i) box.positions.push_back({(i & 1) ? hi.x : lo.x, (i & 2) ? hi.y : lo.y, (i & 4) ? hi.z : lo.z});
-  const uint32_t f[6][4] = {{0, 4, 6, 2}, {1, 3, 7, 5}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 2, 3, 1}, {4, 5, 7, 6}};
-  for (const auto& q : f) box.indices.insert(box.indices.end(), {q[0], q[1], q[2], q[0], q[2], q[3]});
-  box.material = 0;
-  s.scene.meshes.push_back(box);
-  scenes::Mesh sphere;
-  const int rings = 128, segs = 256;
-  for (int i = 0; i <= rings; ++i)
-    for (int j = 0; j <= segs; ++j) {
-      const double th = kPi * i / rings, ph = 2 * kPi * j / segs;
-      const glm::vec3 n(float(std::sin(th) * std::cos(ph)), float(std::cos(th)), float(-std::sin(th) * std::sin(ph)));
-      sphere.positions.push_back(glm::vec3(0, 0, -0.85f) + 0.1f * n);
-      sphere.normals.push_back(n);
-    }
-  for (int i = 0; i < rings; ++i)
-    for (int j = 0; j < segs; ++j) {
-      const auto a = uint32_t(i * (segs + 1) + j), b = a + uint32_t(segs + 1);
-      sphere.indices.insert(sphere.indices.end(), {a, b, b + 1, a, b + 1, a + 1});
-    }
-  sphere.material = 1;
-  s.scene.meshes.push_back(sphere);
-  s.config.camera.height_px = 1000;
-  s.config.laser.wavelength_m = 510e-9;
-  s.config.render.max_bounces = 8;
-  return s;
-}
-
-Setup& setup() {
-  static Setup s = [] {
-    const std::string json = std::string(SPADGEN_SOURCE_DIR) + "/scenes/paper/multi_object.json";
-    if (std::filesystem::exists(json)) {
-      try {
-        Setup r;
-        r.config = scenes::load_scene_file(json, {"camera.height_px=1000"}).config;
-        r.scene = scenes::load_gltf(r.config.gltf_path, r.config.gltf_scene);
-        r.source = json;
-        return r;
-      } catch (const std::exception& e) {
-        std::fprintf(stderr, "could not load %s (%s); building the scene in code\n", json.c_str(), e.what());
-      }
-    }
-    return build_in_code();
-  }();
-  return s;
-}
+using bench::render_image;
+using bench::Setup;
+using bench::setup;
 
 // The window of the paper's gate sweep (0.6 to 13.2 ns plus the 3.8 ns gate) in bins of bin_s.
 TimeAxis sweep_axis(double bin_s) {
@@ -118,33 +45,12 @@ struct Result {
   double integrator_rays_per_s = 0, raw_rays_per_s = 0;
 } g_result;
 
-// Renders the whole image tile by tile, as the app does (TBB over tiles).
-render::RenderStats render_image(const render::Renderer& r, const RunConfig& c, const TimeAxis& axis,
-                                 const PixelRect& region) {
-  std::vector<PixelRect> tiles;
-  for (int y = region.y0; y < region.y1(); y += 32)
-    for (int x = region.x0; x < region.x1(); x += 32)
-      tiles.push_back({x, y, std::min(32, region.x1() - x), std::min(32, region.y1() - y)});
-  std::vector<render::RenderStats> stats(tiles.size());
-  tbb::parallel_for(size_t(0), tiles.size(), [&](size_t i) {
-    const TransientTile t = r.transient(tiles[i], tiles[i], axis, &stats[i]);
-    benchmark::DoNotOptimize(t.laser_total.data());
-  });
-  (void)c;
-  render::RenderStats total;
-  for (const auto& s : stats) {
-    total.camera_rays += s.camera_rays;
-    total.shadow_rays += s.shadow_rays;
-  }
-  return total;
-}
-
 // state.range(0): time-bin width in ps, 0 for no transient (the time-integrated render only).
 void BM_Integrator(benchmark::State& state) {
   Setup& s = setup();
   RunConfig c = s.config;
   c.render.samples_per_pixel = 1;
-  const render::Renderer r(s.scene, stage(c));
+  const render::Renderer r(s.scene, bench::stage(c));
   const TimeAxis axis = state.range(0) > 0 ? sweep_axis(double(state.range(0)) * 1e-12) : TimeAxis{};
   const PixelRect all{0, 0, c.camera.width_px, c.camera.height_px};
   uint64_t rays = 0;
@@ -156,40 +62,42 @@ void BM_Integrator(benchmark::State& state) {
   state.counters["rays_per_image"] = double(rays) / double(state.iterations());
 }
 
-// The integrator's rays for the whole image at 1 sample per pixel, recorded on one thread.
-const std::vector<render::RayRecord>& recorded_rays() {
-  static std::vector<render::RayRecord> rays = [] {
-    Setup& s = setup();
-    RunConfig c = s.config;
-    c.render.samples_per_pixel = 1;
-    const render::Renderer r(s.scene, stage(c));
-    std::vector<render::RayRecord> out;
-    out.reserve(8u << 20);
-    tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
-    render::EmbreeScene::record_rays_on_this_thread(&out);
-    // The rays do not depend on the time axis, so none is kept while recording.
-    render_image(r, c, TimeAxis{}, {0, 0, c.camera.width_px, c.camera.height_px});
-    render::EmbreeScene::record_rays_on_this_thread(nullptr);
+// The integrator's rays for the whole image at 1 sample per pixel, as bench_render_rays records them (in
+// another process, so that no recording hook lies on the path this program times).
+const std::vector<bench::RayRecord>& recorded_rays() {
+  static std::vector<bench::RayRecord> rays = [] {
+    std::vector<bench::RayRecord> out;
+    FILE* pipe = popen("'" SPADGEN_BENCH_RENDER_RAYS "'", "r");
+    uint64_t n = 0;
+    bool ok = pipe && std::fread(&n, sizeof n, 1, pipe) == 1;
+    if (ok) {
+      out.resize(n);
+      ok = std::fread(out.data(), sizeof(bench::RayRecord), n, pipe) == n;
+    }
+    if (!pipe || pclose(pipe) != 0 || !ok) {
+      std::fprintf(stderr, "could not record the integrator's rays with %s\n", SPADGEN_BENCH_RENDER_RAYS);
+      std::exit(1);
+    }
     return out;
   }();
   return rays;
 }
 
 // One pass of raw Embree over the recorded rays, on all threads.
-void replay(RTCScene scene, const std::vector<render::RayRecord>& rays) {
+void replay(RTCScene scene, const std::vector<bench::RayRecord>& rays) {
   tbb::parallel_for(tbb::blocked_range<size_t>(0, rays.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
     unsigned hits = 0;
     for (size_t i = r.begin(); i < r.end(); ++i) {
-      const render::RayRecord& q = rays[i];
+      const bench::RayRecord& q = rays[i];
       RTCIntersectContext ctx;
       rtcInitIntersectContext(&ctx);
       if (q.occlusion) {
-        RTCRay ray{q.origin.x, q.origin.y, q.origin.z, q.tnear, q.dir.x, q.dir.y, q.dir.z, 0.0f, q.tfar, ~0u, 0, 0};
+        RTCRay ray{q.origin[0], q.origin[1], q.origin[2], q.tnear, q.dir[0], q.dir[1], q.dir[2], 0.0f, q.tfar, ~0u, 0, 0};
         rtcOccluded1(scene, &ctx, &ray);
         hits += ray.tfar < 0.0f;
       } else {
         RTCRayHit rh{};
-        rh.ray = {q.origin.x, q.origin.y, q.origin.z, q.tnear, q.dir.x, q.dir.y, q.dir.z, 0.0f, q.tfar, ~0u, 0, 0};
+        rh.ray = {q.origin[0], q.origin[1], q.origin[2], q.tnear, q.dir[0], q.dir[1], q.dir[2], 0.0f, q.tfar, ~0u, 0, 0};
         rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
         rtcIntersect1(scene, &ctx, &rh);
         hits += rh.hit.geomID != RTC_INVALID_GEOMETRY_ID;
@@ -200,7 +108,7 @@ void replay(RTCScene scene, const std::vector<render::RayRecord>& rays) {
 }
 
 void BM_RawEmbreeReplay(benchmark::State& state) {
-  const std::vector<render::RayRecord>& rays = recorded_rays();
+  const std::vector<bench::RayRecord>& rays = recorded_rays();
   const render::EmbreeScene embree(setup().scene);  // the same geometry, built the same way
   for (auto _ : state) replay(embree.handle(), rays);
   state.counters["rays_per_s"] =
@@ -214,9 +122,9 @@ void paired_ratio(int pairs) {
   Setup& s = setup();
   RunConfig c = s.config;
   c.render.samples_per_pixel = 1;
-  const render::Renderer r(s.scene, stage(c));
+  const render::Renderer r(s.scene, bench::stage(c));
   const render::EmbreeScene embree(s.scene);
-  const std::vector<render::RayRecord>& rays = recorded_rays();
+  const std::vector<bench::RayRecord>& rays = recorded_rays();
   const PixelRect all{0, 0, c.camera.width_px, c.camera.height_px};
   std::vector<double> ratios;
   double t_int_min = 1e30, t_raw_min = 1e30;
@@ -249,7 +157,7 @@ void samples_vs_error() {
   auto totals = [&](int spp, double* seconds) {
     RunConfig c = s.config;
     c.render.samples_per_pixel = spp;
-    const render::Renderer r(s.scene, stage(c));
+    const render::Renderer r(s.scene, bench::stage(c));
     const auto t0 = std::chrono::steady_clock::now();
     const TransientTile t = r.transient(crop, crop, none);
     *seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -280,7 +188,7 @@ void bin_width_vs_error() {
   Setup& s = setup();
   RunConfig c = s.config;
   c.render.samples_per_pixel = 16;
-  const render::Renderer r(s.scene, stage(c));
+  const render::Renderer r(s.scene, bench::stage(c));
   const PixelRect crop{c.camera.width_px / 2 - 192, c.camera.height_px / 2 - 64, 128, 128};
   auto mean_times = [&](double bin, double* seconds, int64_t* bins) {
     const TimeAxis axis = sweep_axis(bin);
@@ -325,7 +233,7 @@ void bounces_vs_error() {
     RunConfig c = s.config;
     c.render.samples_per_pixel = 16;
     c.render.max_bounces = bounces;
-    const render::Renderer r(s.scene, stage(c));
+    const render::Renderer r(s.scene, bench::stage(c));
     const auto t0 = std::chrono::steady_clock::now();
     const TransientTile t = r.transient(crop, crop, TimeAxis{});
     *seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

@@ -54,11 +54,7 @@ void cull_back_faces(const RTCFilterFunctionNArguments* args) {
   }
 }
 
-thread_local std::vector<RayRecord>* t_ray_sink = nullptr;
-
 }  // namespace
-
-void EmbreeScene::record_rays_on_this_thread(std::vector<RayRecord>* sink) { t_ray_sink = sink; }
 
 EmbreeScene::EmbreeScene(const scenes::Scene& scene) {
   device_ = rtcNewDevice(nullptr);
@@ -113,7 +109,6 @@ EmbreeScene::~EmbreeScene() {
 }
 
 bool EmbreeScene::intersect(const glm::vec3& o, const glm::vec3& d, float tnear, float tfar, RayHit* hit) const {
-  if (t_ray_sink) [[unlikely]] t_ray_sink->push_back({o, d, tnear, tfar, false});
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
   RTCRayHit rh;
@@ -161,8 +156,6 @@ void EmbreeScene::intersect_packet(const bool* valid, const glm::vec3* o, const 
     rh.ray.flags[i] = 0;
     rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
     rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
-    // The replay compares against rtcIntersect1 on exactly these rays.
-    if (t_ray_sink && valid[i]) [[unlikely]] t_ray_sink->push_back({o[i], dirs[i], tnear, tfar[i], false});
   }
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
@@ -193,7 +186,6 @@ void EmbreeScene::occluded_packet(const bool* valid, const glm::vec3* o, const g
     ray.mask[i] = 0xFFFFFFFFu;
     ray.id[i] = static_cast<unsigned>(i);
     ray.flags[i] = 0;
-    if (t_ray_sink && valid[i]) [[unlikely]] t_ray_sink->push_back({o[i], dirs[i], tnear, tfar[i], true});
   }
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
@@ -203,7 +195,6 @@ void EmbreeScene::occluded_packet(const bool* valid, const glm::vec3* o, const g
 }
 
 bool EmbreeScene::occluded(const glm::vec3& o, const glm::vec3& d, float tnear, float tfar) const {
-  if (t_ray_sink) [[unlikely]] t_ray_sink->push_back({o, d, tnear, tfar, true});
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
   RTCRay ray;

@@ -19,13 +19,6 @@ struct RayHit {
   float u = 0, v = 0;  // barycentrics of vertices 1 and 2
 };
 
-// One ray as traced, for the benchmark's replay through raw Embree calls.
-struct RayRecord {
-  glm::vec3 origin, dir;
-  float tnear, tfar;
-  bool occlusion;  // rtcOccluded1 (else rtcIntersect1)
-};
-
 class EmbreeScene {
  public:
   // Keeps pointers into `scene`'s index buffers (shared with Embree): `scene` must outlive this object.
@@ -50,10 +43,9 @@ class EmbreeScene {
   // Whether anything lies on (tnear, tfar).
   bool occluded(const glm::vec3& origin, const glm::vec3& dir, float tnear, float tfar) const;
 
-  // For the benchmark, which compares the integrator against raw rtcIntersect1/rtcOccluded1.
+  // For the benchmark, which replays the integrator's rays through raw rtcIntersect1/rtcOccluded1 on the
+  // same BVH and back-face filters.
   RTCScene handle() const { return scene_; }
-  // While set (non-null), every ray the calling thread traces is appended to *sink.
-  static void record_rays_on_this_thread(std::vector<RayRecord>* sink);
 
  private:
   RTCDevice device_ = nullptr;

@@ -2,8 +2,9 @@
 // NEE is its only strategy) and to the ambient punctual lights, BSDF sampling for the environment and
 // emissive surfaces (their only strategy, so no MIS weights are needed), Russian roulette.
 #pragma once
-#include <cstdint>
 #include <climits>
+#include <cstddef>
+#include <cstdint>
 #include <vector>
 
 #include "core/rng.h"
@@ -103,6 +104,38 @@ class Integrator {
   bool laser_ray(const Surface& sf, LaserRay* out) const;
 
  private:
+  // render_pixel's outputs, handed as one to each laser connection of the pixel's paths.
+  struct PixelFilm {
+    const TimeAxis& axis;
+    double* bins;
+    double* indirect_bins;
+    PixelTotals* totals;
+  };
+  struct NeeVertex;  // integrator.cpp
+
+  // One camera path, sample j of `block` (pbrt's Li): deposits its laser light, weighted by the pixel's
+  // measurement w, and returns the ambient photon radiance it gathered, which render_pixel weights by w.
+  double trace_path(const CameraBlock& block, size_t j, double w, const PixelFilm& film, RayCounts* rays) const;
+
+  // Packet plumbing: the camera ray's hit and surface, and the laser shadow ray from that hit with its
+  // first segment, come from trace_camera_block, which traces them as packets (neighbouring pixels' rays
+  // are coherent, and their shadow rays converge on the laser); every later ray is traced one at a time.
+  bool next_hit(const CameraBlock& block, size_t j, bool camera_ray, const glm::vec3& o, const glm::vec3& d,
+                RayHit* hit, RayCounts* rays) const;
+  Surface surface_at(const CameraBlock& block, size_t j, bool camera_ray, const RayHit& hit) const;
+  bool ahead_shadow(const CameraBlock& block, size_t j, LaserRay* lr, FirstSegment* first) const;
+
+  // Next-event estimation to the laser from v along lr (first: the shadow ray's first segment when it was
+  // traced ahead, else null).
+  void connect_laser(const NeeVertex& v, const LaserRay& lr, const FirstSegment* first, double w,
+                     const PixelFilm& film, RayCounts* rays) const;
+
+  // The ambient estimate, in the ambient channel (beta.y): light from the environment where the path
+  // escapes, from emissive surfaces it hits, and from punctual ambient lights by next-event estimation.
+  void gather_environment(const Spec& beta, double* ambient) const;
+  void gather_emission(const Spec& beta, const MaterialPoint& mp, double* ambient) const;
+  void connect_ambient_lights(const NeeVertex& v, double* ambient, RayCounts* rays) const;
+
   const RenderStageConfig& config_;
   const EmbreeScene& embree_;
   const Shading& shading_;
