@@ -6,7 +6,6 @@
 #include <unistd.h>
 
 #include <cerrno>
-#include <csignal>
 
 #include <algorithm>
 #include <atomic>
@@ -21,6 +20,7 @@
 #include <numeric>
 #include <sstream>
 
+#include "app/interrupt.h"
 #include "core/error.h"
 #include "core/units.h"
 #include "render/renderer.h"
@@ -41,31 +41,6 @@ using json = nlohmann::json;
 using ojson = nlohmann::ordered_json;
 
 namespace {
-
-// Set by SIGINT/SIGTERM: the tiles stop, the staging folder is removed, nothing is published.
-std::atomic<bool> g_interrupted{false};
-extern "C" void on_interrupt(int) { g_interrupted.store(true); }
-
-// Installs the handlers for the duration of a run and restores the previous ones after.
-class InterruptGuard {
- public:
-  InterruptGuard() {
-    g_interrupted.store(false);
-    previous_int_ = std::signal(SIGINT, on_interrupt);
-    previous_term_ = std::signal(SIGTERM, on_interrupt);
-  }
-  ~InterruptGuard() {
-    std::signal(SIGINT, previous_int_);
-    std::signal(SIGTERM, previous_term_);
-  }
-  static void check() {
-    if (g_interrupted.load()) throw Error("interrupted by a signal: the run stopped and wrote nothing");
-  }
-
- private:
-  void (*previous_int_)(int) = SIG_DFL;
-  void (*previous_term_)(int) = SIG_DFL;
-};
 
 // FNV-1a over bytes: a stable content hash for provenance (not for security).
 uint64_t fnv1a(const std::string& bytes, uint64_t h = 0xcbf29ce484222325ull) {
