@@ -21,6 +21,7 @@
 #include <sstream>
 
 #include "app/interrupt.h"
+#include "app/progress.h"
 #include "core/error.h"
 #include "core/units.h"
 #include "render/renderer.h"
@@ -74,47 +75,6 @@ std::string scene_hash(const RunConfig& c) {
   for (const std::string& f : side) h = fnv1a(read_bytes(f), h);
   return hex64(h);
 }
-
-// Progress on stderr: a bar on a terminal, a line every 10 % otherwise, with an estimate of the time left.
-class Progress {
- public:
-  Progress(size_t total, bool enabled) : total_(total), enabled_(enabled), tty_(isatty(2) != 0) {}
-  void tick() {
-    const size_t done = ++done_;
-    if (!enabled_) return;
-    std::lock_guard<std::mutex> lock(mutex_);
-    const double elapsed = seconds();
-    const double left = done ? elapsed * double(total_ - done) / double(done) : 0.0;
-    if (tty_) {
-      if (elapsed - last_print_ < 0.1 && done != total_) return;
-      last_print_ = elapsed;
-      const int width = 30, filled = int(double(width) * double(done) / double(total_));
-      std::fprintf(stderr, "\r[%s%s] %3d%%  %zu/%zu tiles  %.1f s, ~%.0f s left ", std::string(size_t(filled), '#').c_str(),
-                   std::string(size_t(width - filled), '.').c_str(), int(100.0 * double(done) / double(total_)), done,
-                   total_, elapsed, left);
-      if (done == total_) std::fprintf(stderr, "\n");
-    } else {
-      const size_t decile = 10 * done / total_;
-      if (decile > last_decile_ || done == total_) {
-        last_decile_ = decile;
-        std::fprintf(stderr, "spadgen: %3d%% (%zu/%zu tiles) %.1f s elapsed, ~%.0f s left\n",
-                     int(100.0 * double(done) / double(total_)), done, total_, elapsed, left);
-      }
-    }
-  }
-  double seconds() const {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
-  }
-
- private:
-  size_t total_;
-  bool enabled_, tty_;
-  std::atomic<size_t> done_{0};
-  std::mutex mutex_;
-  double last_print_ = -1.0;
-  size_t last_decile_ = 0;
-  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
-};
 
 // A folder inside the output folder that holds this run's files until they are all complete; removed
 // (with whatever is in it) unless released.
