@@ -22,6 +22,7 @@
 
 #include "app/interrupt.h"
 #include "app/progress.h"
+#include "app/staging.h"
 #include "core/error.h"
 #include "core/units.h"
 #include "render/renderer.h"
@@ -75,53 +76,6 @@ std::string scene_hash(const RunConfig& c) {
   for (const std::string& f : side) h = fnv1a(read_bytes(f), h);
   return hex64(h);
 }
-
-// A folder inside the output folder that holds this run's files until they are all complete; removed
-// (with whatever is in it) unless released.
-class Staging {
- public:
-  explicit Staging(const fs::path& out) : out_(out) {
-    try {
-      fs::create_directories(out_);
-      remove_abandoned();
-      dir_ = out_ / (".spadgen-staging-" + std::to_string(::getpid()));
-      fs::remove_all(dir_);
-      fs::create_directories(dir_ / "previews");
-    } catch (const fs::filesystem_error& e) {
-      throw Error("cannot use " + out_.string() + " as the output folder (-o): " + e.code().message() +
-                  "; expected a folder that exists or can be created");
-    }
-  }
-  ~Staging() {
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
-  }
-  std::string path(const std::string& rel) const { return (dir_ / rel).string(); }
-  // Staging folders of runs that were killed outright (SIGKILL, power loss) hold only temporary files.
-  void remove_abandoned() const {
-    const std::string prefix = ".spadgen-staging-";
-    for (const auto& e : fs::directory_iterator(out_)) {
-      const std::string name = e.path().filename().string();
-      if (name.rfind(prefix, 0) != 0) continue;
-      const long pid = std::strtol(name.c_str() + prefix.size(), nullptr, 10);
-      if (pid > 0 && pid != ::getpid() && ::kill(pid_t(pid), 0) != 0 && errno == ESRCH) {
-        std::error_code ec;
-        fs::remove_all(e.path(), ec);
-      }
-    }
-  }
-  // Moves every listed file into the output folder; metadata.json comes last so that it never lists a
-  // file that is not there yet.
-  void publish(const std::vector<std::string>& files) {
-    fs::create_directories(out_ / "previews");
-    for (const std::string& f : files)
-      if (f != "metadata.json") fs::rename(dir_ / f, out_ / f);
-    fs::rename(dir_ / "metadata.json", out_ / "metadata.json");
-  }
-
- private:
-  fs::path out_, dir_;
-};
 
 // The pixel rectangle the run renders (the crop, or the whole sensor).
 PixelRect image_rect(const RunConfig& c) {
