@@ -21,6 +21,7 @@
 #include <sstream>
 
 #include "app/interrupt.h"
+#include "app/metadata.h"
 #include "app/progress.h"
 #include "app/staging.h"
 #include "core/error.h"
@@ -43,39 +44,6 @@ using json = nlohmann::json;
 using ojson = nlohmann::ordered_json;
 
 namespace {
-
-// FNV-1a over bytes: a stable content hash for provenance (not for security).
-uint64_t fnv1a(const std::string& bytes, uint64_t h = 0xcbf29ce484222325ull) {
-  for (unsigned char c : bytes) h = (h ^ c) * 0x100000001b3ull;
-  return h;
-}
-std::string read_bytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-std::string hex64(uint64_t v) {
-  char buf[17];
-  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(v));
-  return buf;
-}
-
-// The scene hash covers the scene file, the glTF and every buffer and image beside it, so that the
-// provenance changes whenever anything that shapes the data changes.
-std::string scene_hash(const RunConfig& c) {
-  uint64_t h = fnv1a(read_bytes(c.scene_file));
-  h = fnv1a(read_bytes(c.gltf_path), h);
-  const fs::path dir = fs::path(c.gltf_path).parent_path();
-  std::vector<std::string> side;
-  for (const auto& e : fs::directory_iterator(dir))
-    if (e.is_regular_file() && e.path() != fs::path(c.gltf_path) &&
-        (e.path().extension() == ".bin" || e.path().extension() == ".png" || e.path().extension() == ".jpg"))
-      side.push_back(e.path().string());
-  std::sort(side.begin(), side.end());
-  for (const std::string& f : side) h = fnv1a(read_bytes(f), h);
-  return hex64(h);
-}
 
 // The pixel rectangle the run renders (the crop, or the whole sensor).
 PixelRect image_rect(const RunConfig& c) {
@@ -102,11 +70,6 @@ std::string seconds_text(double s) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.3g", s);
   return buf;
-}
-
-json axis_json(const TimeAxis& a) {
-  return {{"start_ns", a.start_s / kNs}, {"bin_width_ps", a.bin_width_s / kPs}, {"bins", a.bins},
-          {"end_ns", a.end_s() / kNs}, {"laser_period_ns", a.period_s / kNs}};
 }
 
 // A few pixels whose gate profiles the preview plots: the centre and points on the diagonals.
@@ -370,61 +333,23 @@ RunResult run(const RunOptions& options) {
   });
   const double render_seconds = progress.seconds();
 
-  // Provenance travels with every image.
-  const std::string hash = scene_hash(cfg);
-  const std::string crop_text = json::array({img.x0, img.y0, img.width, img.height}).dump();
-  images.write(staging, [&](writers::ExrImage& e) {
-    e.set_attribute("spadgen_version", SPADGEN_VERSION);
-    e.set_attribute("spadgen_seed", std::to_string(cfg.seed));
-    e.set_attribute("spadgen_scene_file", cfg.scene_file);
-    e.set_attribute("spadgen_scene_hash", hash);
-    e.set_attribute("spadgen_crop", crop_text);
-  }, axis, cfg.outputs.previews, files);
+  const Provenance prov = provenance(cfg, img);
+  images.write(staging, [&](writers::ExrImage& e) { stamp(e, prov); }, axis, cfg.outputs.previews, files);
   if (cfg.outputs.previews && declared("previews/gate_profiles.png") && K > 1) probe.write(staging, sensor.gate_positions_s(), files);
 
-  const double laser_total = images.laser_total(), oow_total = images.out_of_window_total();
-  render::RenderStats rays;
-  for (const auto& st : tile_stats) rays.camera_rays += st.camera_rays, rays.shadow_rays += st.shadow_rays;
+  RunRecord record;
+  record.photons_per_pulse_emitted = renderer.photons_per_pulse();
+  record.laser_total = images.laser_total(), record.out_of_window_total = images.out_of_window_total();
+  record.ground_truth_layers = images.deepest_layer();
+  record.counts_u8 = stacks.counts_u8();
+  record.transient_crop = stacks.transient_crop();
+  record.profile_pixels = probe.pixels();
+  record.threads = options.threads;
+  record.seconds = render_seconds;
+  for (const auto& st : tile_stats) record.rays.camera_rays += st.camera_rays, record.rays.shadow_rays += st.shadow_rays;
   files.push_back("metadata.json");
-
-  ojson meta;
-  meta["spadgen_version"] = SPADGEN_VERSION;
-  meta["scene_file"] = cfg.scene_file;
-  meta["scene_hash_fnv1a64"] = hash;
-  meta["seed"] = cfg.seed;
-  meta["versions"] = {{"spadgen", SPADGEN_VERSION},
-                      {"embree", std::to_string(RTC_VERSION_MAJOR) + "." + std::to_string(RTC_VERSION_MINOR) + "." + std::to_string(RTC_VERSION_PATCH)}};
-  meta["units"] = {{"length", "m"}, {"time", "s unless the key says ns or ps"}, {"laser", "photons per laser pulse at the SPAD, before PDP"},
-                   {"ambient", "photons per second at the SPAD, before PDP"}, {"counts", "summed binary frames"}};
-  meta["image"] = {{"width", img.width}, {"height", img.height}, {"crop_in_sensor", {img.x0, img.y0, img.width, img.height}},
-                   {"sensor_width", cfg.camera.width_px}, {"sensor_height", cfg.camera.height_px},
-                   {"pixel_order", "row 0 is the top of the image; (K, H, W) stacks index [k, y, x]"}};
-  meta["photons_per_pulse_emitted"] = renderer.photons_per_pulse();
-  meta["time_axis"] = ojson::parse(axis_json(axis).dump());
-  if (cfg.outputs.transient) {
-    const PixelRect& tc = stacks.transient_crop();
-    meta["transient"] = {{"crop_in_sensor", {tc.x0, tc.y0, tc.width, tc.height}},
-                         {"shape", {tc.height, tc.width, axis.bins}},
-                         {"indirect", cfg.render.split_direct_indirect
-                                          ? "transient_indirect.npy: the part of transient.npy from paths with two or more "
-                                            "scattering vertices (docs/render.md); direct = transient - transient_indirect"
-                                          : "not split (render.split_direct_indirect is false)"}};
-  }
-  meta["laser_photons_per_pulse"] = {{"total_all_pixels", laser_total},
-                                     {"outside_time_window", oow_total},
-                                     {"outside_fraction", laser_total > 0 ? oow_total / laser_total : 0.0}};
-  meta["acquisition"] = ojson::parse(sensor.describe().dump());
-  meta["ground_truth_layers"] = images.deepest_layer();
-  meta["counts_dtype"] = stacks.counts_u8() ? "uint8" : "uint16";
-  meta["preview_profile_pixels"] = probe.pixels();
-  meta["warnings"] = resolved.warnings;
-  for (const std::string& w : scene.warnings) meta["warnings"].push_back(w);
-  meta["resolved_scene"] = resolved.resolved;
-  meta["files"] = files;
-  // Everything above depends only on the scene and the seed; "run" is how this run went.
-  meta["run"] = {{"threads", options.threads}, {"seconds", render_seconds}, {"camera_rays", rays.camera_rays},
-                 {"shadow_rays", rays.shadow_rays}};
-  writers::write_json(staging.path("metadata.json"), json::parse(meta.dump()));
+  record.files = files;
+  writers::write_json(staging.path("metadata.json"), metadata(resolved, scene, sensor, prov, axis, record));
 
   InterruptGuard::check();
   stacks.commit();
