@@ -1,6 +1,7 @@
 #include "app/outputs.h"
 
 #include <algorithm>
+#include <array>
 #include <functional>
 #include <numeric>
 
@@ -24,6 +25,8 @@ std::vector<std::pair<int, int>> profile_pixels(const PixelRect& img) {
   return p;
 }
 
+PixelRect transient_crop(const RunConfig& c, const PixelRect& img) { return c.outputs.transient_crop.value_or(img); }
+
 const sensor::DeclaredOutput* find_declared(const std::vector<sensor::DeclaredOutput>& declared, const std::string& file) {
   for (const sensor::DeclaredOutput& d : declared)
     if (d.file == file) return &d;
@@ -39,7 +42,7 @@ int64_t StackLayout::bytes() const {
 std::vector<StackLayout> stack_layout(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img,
                                       const TimeAxis& axis) {
   const int64_t K = sensor.K(), frames = sensor.frames_per_k();
-  const PixelRect tc = c.outputs.transient_crop.value_or(img);
+  const PixelRect tc = transient_crop(c, img);
   const std::vector<int64_t> khw{K, img.height, img.width}, hwt{tc.height, tc.width, axis.bins};
   std::vector<StackLayout> s(kStackCount);
   s[kExpectedCounts] = {"expected_counts.npy", NpyWriter::Dtype::F32, khw, c.outputs.expected_counts};
@@ -173,48 +176,43 @@ class Outputs::Stacks {
          const Staging& staging, std::vector<std::string>& files)
       : img_(img), tcrop_(transient_crop), counts_u8_(layout[kCounts].dtype == NpyWriter::Dtype::U8) {
     for (size_t k = 0; k < kStackCount; ++k) {
-      const StackLayout& s = layout[k];
-      if (!s.written) continue;
-      *writer(k) = std::make_unique<NpyWriter>(staging.path(s.file), s.dtype, s.shape);
-      files.push_back(s.file);
+      if (!layout[k].written) continue;
+      w_[k] = std::make_unique<NpyWriter>(staging.path(layout[k].file), layout[k].dtype, layout[k].shape);
+      files.push_back(layout[k].file);
     }
   }
 
   void put(const TransientTile& t, const SensorTile& s) {
     const PixelRect& r = t.rect;
-    if (expected_) expected_->write_khw(r, img_.x0, img_.y0, s.expected.data());
-    if (counts_ && counts_u8_) {
+    if (w_[kExpectedCounts]) w_[kExpectedCounts]->write_khw(r, img_.x0, img_.y0, s.expected.data());
+    if (w_[kCounts] && counts_u8_) {
       std::vector<uint8_t> c8(s.counts.size());
       std::transform(s.counts.begin(), s.counts.end(), c8.begin(), [](uint16_t v) { return uint8_t(v); });
-      counts_->write_khw(r, img_.x0, img_.y0, c8.data());
-    } else if (counts_) {
-      counts_->write_khw(r, img_.x0, img_.y0, s.counts.data());
+      w_[kCounts]->write_khw(r, img_.x0, img_.y0, c8.data());
+    } else if (w_[kCounts]) {
+      w_[kCounts]->write_khw(r, img_.x0, img_.y0, s.counts.data());
     }
-    if (frames_) frames_->write_frames(r, img_.x0, img_.y0, s.frames.data());
+    if (w_[kFrames]) w_[kFrames]->write_frames(r, img_.x0, img_.y0, s.frames.data());
     const int x0 = std::max(r.x0, tcrop_.x0), x1 = std::min(r.x1(), tcrop_.x1());
     const int y0 = std::max(r.y0, tcrop_.y0), y1 = std::min(r.y1(), tcrop_.y1());
     if (t.axis.bins == 0 || x1 <= x0 || y1 <= y0) return;
     const PixelRect part{x0, y0, x1 - x0, y1 - y0};
-    if (transient_) transient_->write_hwt(part, t.data_rect, tcrop_.x0, tcrop_.y0, t.transient.data());
-    if (indirect_) indirect_->write_hwt(part, t.data_rect, tcrop_.x0, tcrop_.y0, t.transient_indirect.data());
+    if (w_[kTransient]) w_[kTransient]->write_hwt(part, t.data_rect, tcrop_.x0, tcrop_.y0, t.transient.data());
+    if (w_[kTransientIndirect])
+      w_[kTransientIndirect]->write_hwt(part, t.data_rect, tcrop_.x0, tcrop_.y0, t.transient_indirect.data());
   }
 
   void commit() {
-    for (size_t k = 0; k < kStackCount; ++k)
-      if (*writer(k)) (*writer(k))->commit();
+    for (auto& w : w_)
+      if (w) w->commit();
   }
   bool counts_u8() const { return counts_u8_; }
   const PixelRect& transient_crop() const { return tcrop_; }
 
  private:
-  std::unique_ptr<NpyWriter>* writer(size_t stack) {
-    std::unique_ptr<NpyWriter>* w[kStackCount] = {&expected_, &counts_, &frames_, &transient_, &indirect_};
-    return w[stack];
-  }
-
   PixelRect img_, tcrop_;
   bool counts_u8_;
-  std::unique_ptr<NpyWriter> expected_, counts_, frames_, transient_, indirect_;
+  std::array<std::unique_ptr<NpyWriter>, kStackCount> w_;  // null: not written
 };
 
 // The sampled gate profiles of a few pixels, for previews/gate_profiles.png.
@@ -246,8 +244,7 @@ Outputs::Outputs(const RunConfig& c, const sensor::SensorModel& sensor, const Pi
     : cfg_(c), axis_(axis), gate_positions_s_(sensor.gate_positions_s()), declared_(sensor.acquisition().outputs()),
       staging_(staging) {
   images_ = std::make_unique<Images>(c, img, find_declared(declared_, "intensity.exr"));
-  stacks_ = std::make_unique<Stacks>(stack_layout(c, sensor, img, axis), img, c.outputs.transient_crop.value_or(img),
-                                     staging, files_);
+  stacks_ = std::make_unique<Stacks>(stack_layout(c, sensor, img, axis), img, transient_crop(c, img), staging, files_);
   probe_ = std::make_unique<ProfileProbe>(img, sensor.K());
 }
 
