@@ -51,16 +51,15 @@ PixelRect image_rect(const RunConfig& c) {
   return c.camera.crop.value_or(PixelRect{0, 0, c.camera.width_px, c.camera.height_px});
 }
 
+// The arrival times the renderer covers. The sensor knows the window its acquisition needs and the laser
+// period that folds late arrivals; a window set in the scene file replaces only the start and the length.
 TimeAxis time_axis(const RunConfig& c, const sensor::SensorModel& s) {
+  TimeAxis a = s.required_window(c.render.time_bin_s);
   if (c.render.window_start_s) {
-    TimeAxis a;
     a.start_s = *c.render.window_start_s;
-    a.bin_width_s = c.render.time_bin_s;
     a.bins = static_cast<int64_t>(std::ceil((*c.render.window_stop_s - a.start_s) / a.bin_width_s - 1e-9));
-    a.period_s = 1.0 / c.laser.repetition_rate_Hz;
     return a;
   }
-  TimeAxis a = s.required_window(c.render.time_bin_s);
   if (a.bins == 0 && c.outputs.transient)
     throw Error(c.scene_file + ": /outputs/transient: intensity mode needs no time bins; set /render/window_start_ns "
                 "and /render/window_stop_ns to say which window transient.npy should cover");
