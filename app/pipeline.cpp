@@ -1,23 +1,12 @@
-#include "pipeline.h"
+#include "app/pipeline.h"
 
-#include <embree3/rtcore.h>
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
-#include <unistd.h>
 
-#include <cerrno>
-
-#include <algorithm>
-#include <atomic>
-#include <chrono>
-#include <functional>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
-#include <iostream>
-#include <mutex>
-#include <numeric>
+#include <memory>
 #include <sstream>
 
 #include "app/interrupt.h"
@@ -30,19 +19,11 @@
 #include "render/renderer.h"
 #include "scenes/scene.h"
 #include "scenes/scene_file.h"
-#include "sensor/acquisition/acquisition.h"
 #include "sensor/sensor.h"
-#include "writers/previews.h"
 #include "writers/writers.h"
-
-#ifndef SPADGEN_VERSION
-#define SPADGEN_VERSION "dev"
-#endif
 
 namespace spadgen::app {
 namespace fs = std::filesystem;
-using json = nlohmann::json;
-using ojson = nlohmann::ordered_json;
 
 namespace {
 
