@@ -1,208 +1,46 @@
-#include "pipeline.h"
+#include "app/pipeline.h"
 
-#include <embree3/rtcore.h>
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
-#include <unistd.h>
 
-#include <cerrno>
-#include <csignal>
-
-#include <algorithm>
-#include <atomic>
-#include <chrono>
-#include <functional>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
-#include <iostream>
-#include <mutex>
-#include <numeric>
+#include <memory>
 #include <sstream>
 
+#include "app/interrupt.h"
+#include "app/metadata.h"
+#include "app/outputs.h"
+#include "app/progress.h"
+#include "app/staging.h"
 #include "core/error.h"
 #include "core/units.h"
 #include "render/renderer.h"
 #include "scenes/scene.h"
 #include "scenes/scene_file.h"
-#include "sensor/acquisition/acquisition.h"
 #include "sensor/sensor.h"
-#include "writers/previews.h"
 #include "writers/writers.h"
-
-#ifndef SPADGEN_VERSION
-#define SPADGEN_VERSION "dev"
-#endif
 
 namespace spadgen::app {
 namespace fs = std::filesystem;
-using json = nlohmann::json;
-using ojson = nlohmann::ordered_json;
 
 namespace {
-
-// Set by SIGINT/SIGTERM: the tiles stop, the staging folder is removed, nothing is published.
-std::atomic<bool> g_interrupted{false};
-extern "C" void on_interrupt(int) { g_interrupted.store(true); }
-
-// Installs the handlers for the duration of a run and restores the previous ones after.
-class InterruptGuard {
- public:
-  InterruptGuard() {
-    g_interrupted.store(false);
-    previous_int_ = std::signal(SIGINT, on_interrupt);
-    previous_term_ = std::signal(SIGTERM, on_interrupt);
-  }
-  ~InterruptGuard() {
-    std::signal(SIGINT, previous_int_);
-    std::signal(SIGTERM, previous_term_);
-  }
-  static void check() {
-    if (g_interrupted.load()) throw Error("interrupted by a signal: the run stopped and wrote nothing");
-  }
-
- private:
-  void (*previous_int_)(int) = SIG_DFL;
-  void (*previous_term_)(int) = SIG_DFL;
-};
-
-// FNV-1a over bytes: a stable content hash for provenance (not for security).
-uint64_t fnv1a(const std::string& bytes, uint64_t h = 0xcbf29ce484222325ull) {
-  for (unsigned char c : bytes) h = (h ^ c) * 0x100000001b3ull;
-  return h;
-}
-std::string read_bytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-std::string hex64(uint64_t v) {
-  char buf[17];
-  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(v));
-  return buf;
-}
-
-// The scene hash covers the scene file, the glTF and every buffer and image beside it, so that the
-// provenance changes whenever anything that shapes the data changes.
-std::string scene_hash(const RunConfig& c) {
-  uint64_t h = fnv1a(read_bytes(c.scene_file));
-  h = fnv1a(read_bytes(c.gltf_path), h);
-  const fs::path dir = fs::path(c.gltf_path).parent_path();
-  std::vector<std::string> side;
-  for (const auto& e : fs::directory_iterator(dir))
-    if (e.is_regular_file() && e.path() != fs::path(c.gltf_path) &&
-        (e.path().extension() == ".bin" || e.path().extension() == ".png" || e.path().extension() == ".jpg"))
-      side.push_back(e.path().string());
-  std::sort(side.begin(), side.end());
-  for (const std::string& f : side) h = fnv1a(read_bytes(f), h);
-  return hex64(h);
-}
-
-// Progress on stderr: a bar on a terminal, a line every 10 % otherwise, with an estimate of the time left.
-class Progress {
- public:
-  Progress(size_t total, bool enabled) : total_(total), enabled_(enabled), tty_(isatty(2) != 0) {}
-  void tick() {
-    const size_t done = ++done_;
-    if (!enabled_) return;
-    std::lock_guard<std::mutex> lock(mutex_);
-    const double elapsed = seconds();
-    const double left = done ? elapsed * double(total_ - done) / double(done) : 0.0;
-    if (tty_) {
-      if (elapsed - last_print_ < 0.1 && done != total_) return;
-      last_print_ = elapsed;
-      const int width = 30, filled = int(double(width) * double(done) / double(total_));
-      std::fprintf(stderr, "\r[%s%s] %3d%%  %zu/%zu tiles  %.1f s, ~%.0f s left ", std::string(size_t(filled), '#').c_str(),
-                   std::string(size_t(width - filled), '.').c_str(), int(100.0 * double(done) / double(total_)), done,
-                   total_, elapsed, left);
-      if (done == total_) std::fprintf(stderr, "\n");
-    } else {
-      const size_t decile = 10 * done / total_;
-      if (decile > last_decile_ || done == total_) {
-        last_decile_ = decile;
-        std::fprintf(stderr, "spadgen: %3d%% (%zu/%zu tiles) %.1f s elapsed, ~%.0f s left\n",
-                     int(100.0 * double(done) / double(total_)), done, total_, elapsed, left);
-      }
-    }
-  }
-  double seconds() const {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
-  }
-
- private:
-  size_t total_;
-  bool enabled_, tty_;
-  std::atomic<size_t> done_{0};
-  std::mutex mutex_;
-  double last_print_ = -1.0;
-  size_t last_decile_ = 0;
-  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
-};
-
-// A folder inside the output folder that holds this run's files until they are all complete; removed
-// (with whatever is in it) unless released.
-class Staging {
- public:
-  explicit Staging(const fs::path& out) : out_(out) {
-    try {
-      fs::create_directories(out_);
-      remove_abandoned();
-      dir_ = out_ / (".spadgen-staging-" + std::to_string(::getpid()));
-      fs::remove_all(dir_);
-      fs::create_directories(dir_ / "previews");
-    } catch (const fs::filesystem_error& e) {
-      throw Error("cannot use " + out_.string() + " as the output folder (-o): " + e.code().message() +
-                  "; expected a folder that exists or can be created");
-    }
-  }
-  ~Staging() {
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
-  }
-  std::string path(const std::string& rel) const { return (dir_ / rel).string(); }
-  // Staging folders of runs that were killed outright (SIGKILL, power loss) hold only temporary files.
-  void remove_abandoned() const {
-    const std::string prefix = ".spadgen-staging-";
-    for (const auto& e : fs::directory_iterator(out_)) {
-      const std::string name = e.path().filename().string();
-      if (name.rfind(prefix, 0) != 0) continue;
-      const long pid = std::strtol(name.c_str() + prefix.size(), nullptr, 10);
-      if (pid > 0 && pid != ::getpid() && ::kill(pid_t(pid), 0) != 0 && errno == ESRCH) {
-        std::error_code ec;
-        fs::remove_all(e.path(), ec);
-      }
-    }
-  }
-  // Moves every listed file into the output folder; metadata.json comes last so that it never lists a
-  // file that is not there yet.
-  void publish(const std::vector<std::string>& files) {
-    fs::create_directories(out_ / "previews");
-    for (const std::string& f : files)
-      if (f != "metadata.json") fs::rename(dir_ / f, out_ / f);
-    fs::rename(dir_ / "metadata.json", out_ / "metadata.json");
-  }
-
- private:
-  fs::path out_, dir_;
-};
 
 // The pixel rectangle the run renders (the crop, or the whole sensor).
 PixelRect image_rect(const RunConfig& c) {
   return c.camera.crop.value_or(PixelRect{0, 0, c.camera.width_px, c.camera.height_px});
 }
 
+// The arrival times the renderer covers. The sensor knows the window its acquisition needs and the laser
+// period that folds late arrivals; a window set in the scene file replaces only the start and the length.
 TimeAxis time_axis(const RunConfig& c, const sensor::SensorModel& s) {
+  TimeAxis a = s.required_window(c.render.time_bin_s);
   if (c.render.window_start_s) {
-    TimeAxis a;
     a.start_s = *c.render.window_start_s;
-    a.bin_width_s = c.render.time_bin_s;
     a.bins = static_cast<int64_t>(std::ceil((*c.render.window_stop_s - a.start_s) / a.bin_width_s - 1e-9));
-    a.period_s = 1.0 / c.laser.repetition_rate_Hz;
     return a;
   }
-  TimeAxis a = s.required_window(c.render.time_bin_s);
   if (a.bins == 0 && c.outputs.transient)
     throw Error(c.scene_file + ": /outputs/transient: intensity mode needs no time bins; set /render/window_start_ns "
                 "and /render/window_stop_ns to say which window transient.npy should cover");
@@ -214,210 +52,6 @@ std::string seconds_text(double s) {
   std::snprintf(buf, sizeof buf, "%.3g", s);
   return buf;
 }
-
-json axis_json(const TimeAxis& a) {
-  return {{"start_ns", a.start_s / kNs}, {"bin_width_ps", a.bin_width_s / kPs}, {"bins", a.bins},
-          {"end_ns", a.end_s() / kNs}, {"laser_period_ns", a.period_s / kNs}};
-}
-
-// A few pixels whose gate profiles the preview plots: the centre and points on the diagonals.
-std::vector<std::pair<int, int>> profile_pixels(const PixelRect& img) {
-  std::vector<std::pair<int, int>> p;
-  for (const auto& [fx, fy] : std::vector<std::pair<double, double>>{{0.5, 0.5}, {0.25, 0.5}, {0.75, 0.5}, {0.5, 0.25}, {0.5, 0.75}}) {
-    const int x = img.x0 + std::min(img.width - 1, int(fx * img.width));
-    const int y = img.y0 + std::min(img.height - 1, int(fy * img.height));
-    if (std::find(p.begin(), p.end(), std::pair{x, y}) == p.end()) p.push_back({x, y});
-  }
-  return p;
-}
-
-// The per-pixel EXR images, filled tile by tile. Every channel is created here, up front: tiles fill
-// them from several threads, and ExrImage::channel creates a channel on first use.
-class Images {
- public:
-  Images(const RunConfig& cfg, const PixelRect& img, bool intensity_image)
-      : img_(img), layers_(cfg.render.max_layers), gt_on_(cfg.outputs.ground_truth),
-        sweep_(!intensity_image), gt_(img.width, img.height), laser_(img.width, img.height),
-        ambient_(img.width, img.height), maps_(img.width, img.height), intensity_(img.width, img.height) {
-    if (gt_on_) {
-      for (const char* n : kGroundTruthChannels) gt_ch_.push_back(gt_.channel(n));
-      for (int l = 0; l < layers_; ++l) {
-        layer_range_.push_back(gt_.channel(layer_name(l, ".range")));
-        layer_trans_.push_back(gt_.channel(layer_name(l, ".transmittance")));
-      }
-    }
-    laser_ch_ = {laser_.channel("photons_per_pulse"), laser_.channel("out_of_window")};
-    ambient_ch_ = ambient_.channel("photons_per_second");
-    maps_ch_ = {maps_.channel("gate_skew_ps"), maps_.channel("gate_length_ps"), maps_.channel("dcr_cps"), maps_.channel("pde")};
-    if (!sweep_) intensity_ch_ = {intensity_.channel("counts"), intensity_.channel("photons")};
-    pixel_laser_.assign(size_t(img.count()), 0.0);
-    pixel_oow_.assign(size_t(img.count()), 0.0);
-  }
-
-  void put_ground_truth(const GroundTruthTile& g) {
-    for_pixels(g.rect, [&](int, int, size_t i, size_t o) {
-      const float v[] = {g.range[i], g.z[i], g.normal[3 * i], g.normal[3 * i + 1], g.normal[3 * i + 2],
-                         float(g.mesh_id[i]), float(g.material_id[i]), float(g.layer_count[i])};
-      for (size_t c = 0; c < gt_ch_.size(); ++c) gt_ch_[c][o] = v[c];
-      for (size_t l = 0; l < size_t(layers_); ++l) {
-        layer_range_[l][o] = g.layer_range[i * size_t(g.max_layers) + l];
-        layer_trans_[l][o] = g.layer_transmittance[i * size_t(g.max_layers) + l];
-      }
-    });
-  }
-
-  void put(const TransientTile& t, const sensor::SensorMapsTile& m, const SensorTile& s) {
-    for_pixels(t.rect, [&](int x, int y, size_t i, size_t o) {
-      const auto d = size_t(t.data_rect.index(x, y));  // the transient tile carries a halo
-      laser_ch_[0][o] = float(t.laser_total[d]), laser_ch_[1][o] = float(t.out_of_window[d]);
-      ambient_ch_[o] = t.ambient_rate[d];
-      pixel_laser_[o] = t.laser_total[d], pixel_oow_[o] = t.out_of_window[d];
-      maps_ch_[0][o] = m.gate_skew_ps[i], maps_ch_[1][o] = m.gate_length_ps[i];
-      maps_ch_[2][o] = m.dcr_cps[i], maps_ch_[3][o] = m.pde[i];
-      if (!sweep_) intensity_ch_[0][o] = s.intensity_counts[i], intensity_ch_[1][o] = s.intensity_photons[i];
-    });
-  }
-
-  // Per-pixel sums in image order, so they do not depend on the tile size.
-  double laser_total() const { return std::accumulate(pixel_laser_.begin(), pixel_laser_.end(), 0.0); }
-  double out_of_window_total() const { return std::accumulate(pixel_oow_.begin(), pixel_oow_.end(), 0.0); }
-  // The deepest layer any pixel has; layer channels beyond it are not written.
-  int deepest_layer() const {
-    if (!gt_on_) return 0;
-    const float* lc = gt_ch_.back();
-    return int(*std::max_element(lc, lc + size_t(img_.count())));
-  }
-
-  // Writes the EXRs with their provenance and the previews into the staging folder.
-  void write(const Staging& staging, const std::function<void(writers::ExrImage&)>& provenance, const TimeAxis& axis,
-             bool previews, std::vector<std::string>& files) {
-    const auto put_file = [&](writers::ExrImage& e, const std::string& name, const std::string& units) {
-      provenance(e);
-      e.set_attribute("spadgen_units", units);
-      e.write(staging.path(name));
-      files.push_back(name);
-    };
-    if (gt_on_) {
-      for (int l = deepest_layer(); l < layers_; ++l) {
-        gt_.remove_channel(layer_name(l, ".range"));
-        gt_.remove_channel(layer_name(l, ".transmittance"));
-      }
-      put_file(gt_, "ground_truth.exr", "range, z, layer<i>.range: metres (+inf where the ray hits nothing); transmittance: fraction");
-    }
-    laser_.set_attribute("spadgen_time_axis", axis_json(axis).dump());
-    put_file(laser_, "laser.exr", "photons per laser pulse reaching the pixel's SPAD (before PDP)");
-    put_file(ambient_, "ambient.exr", "ambient photons per second reaching the pixel's SPAD (before PDP)");
-    put_file(maps_, "sensor_maps.exr", "gate_skew_ps, gate_length_ps: ps; dcr_cps: counts/s; pde: fraction");
-    if (!sweep_)
-      put_file(intensity_, "intensity.exr", "counts: summed binary frames; photons: linearised incident photons per image");
-    if (!previews) return;
-    if (gt_on_) {
-      writers::write_png(staging.path("previews/depth.png"), writers::depth_preview(gt_ch_[0], img_.width, img_.height, 0.0f, 0.0f));
-      files.push_back("previews/depth.png");
-    }
-    const float* bright = sweep_ ? laser_ch_[0] : intensity_ch_[1];
-    writers::write_png(staging.path("previews/intensity.png"), writers::gray_preview(bright, img_.width, img_.height));
-    files.push_back("previews/intensity.png");
-  }
-
- private:
-  static constexpr const char* kGroundTruthChannels[] = {"range", "z", "normal.X", "normal.Y", "normal.Z",
-                                                         "mesh_id", "material_id", "layer_count"};
-  static std::string layer_name(int l, const char* what) { return "layer" + std::to_string(l) + what; }
-  // Calls f(x, y, index in rect, index in the image) for every pixel (x, y) of rect.
-  template <class F>
-  void for_pixels(const PixelRect& r, F&& f) const {
-    for (int y = r.y0; y < r.y1(); ++y)
-      for (int x = r.x0; x < r.x1(); ++x)
-        f(x, y, size_t(r.index(x, y)), size_t(y - img_.y0) * size_t(img_.width) + size_t(x - img_.x0));
-  }
-
-  PixelRect img_;
-  int layers_;
-  bool gt_on_, sweep_;
-  writers::ExrImage gt_, laser_, ambient_, maps_, intensity_;
-  std::vector<float*> gt_ch_, layer_range_, layer_trans_, laser_ch_, maps_ch_, intensity_ch_;
-  float* ambient_ch_ = nullptr;
-  std::vector<double> pixel_laser_, pixel_oow_;
-};
-
-// The NumPy stacks, streamed to disk tile by tile.
-class Stacks {
- public:
-  Stacks(const RunConfig& cfg, const PixelRect& img, int K, int frames_per_k, const TimeAxis& axis,
-         const Staging& staging, std::vector<std::string>& files)
-      : img_(img), tcrop_(cfg.outputs.transient_crop.value_or(img)), counts_u8_(frames_per_k <= 255) {
-    using writers::NpyWriter;
-    const auto open = [&](std::unique_ptr<NpyWriter>& w, const std::string& name, NpyWriter::Dtype type, std::vector<int64_t> shape) {
-      w = std::make_unique<NpyWriter>(staging.path(name), type, std::move(shape));
-      files.push_back(name);
-    };
-    const std::vector<int64_t> khw{K, img.height, img.width};
-    if (cfg.outputs.expected_counts) open(expected_, "expected_counts.npy", NpyWriter::Dtype::F32, khw);
-    if (cfg.outputs.counts) open(counts_, "counts.npy", counts_u8_ ? NpyWriter::Dtype::U8 : NpyWriter::Dtype::U16, khw);
-    if (cfg.outputs.frames)
-      open(frames_, "frames.npy", NpyWriter::Dtype::U8, {K, frames_per_k, img.height, (img.width + 7) / 8});
-    const std::vector<int64_t> hwt{tcrop_.height, tcrop_.width, axis.bins};
-    if (cfg.outputs.transient) open(transient_, "transient.npy", NpyWriter::Dtype::F32, hwt);
-    if (cfg.outputs.transient && cfg.render.split_direct_indirect)
-      open(indirect_, "transient_indirect.npy", NpyWriter::Dtype::F32, hwt);
-  }
-
-  void put(const TransientTile& t, const SensorTile& s) {
-    const PixelRect& r = t.rect;
-    if (expected_) expected_->write_khw(r, img_.x0, img_.y0, s.expected.data());
-    if (counts_ && counts_u8_) {
-      std::vector<uint8_t> c8(s.counts.size());
-      std::transform(s.counts.begin(), s.counts.end(), c8.begin(), [](uint16_t v) { return uint8_t(v); });
-      counts_->write_khw(r, img_.x0, img_.y0, c8.data());
-    } else if (counts_) {
-      counts_->write_khw(r, img_.x0, img_.y0, s.counts.data());
-    }
-    if (frames_) frames_->write_frames(r, img_.x0, img_.y0, s.frames.data());
-    const int x0 = std::max(r.x0, tcrop_.x0), x1 = std::min(r.x1(), tcrop_.x1());
-    const int y0 = std::max(r.y0, tcrop_.y0), y1 = std::min(r.y1(), tcrop_.y1());
-    if (t.axis.bins == 0 || x1 <= x0 || y1 <= y0) return;
-    const PixelRect part{x0, y0, x1 - x0, y1 - y0};
-    if (transient_) transient_->write_hwt(part, t.data_rect, tcrop_.x0, tcrop_.y0, t.transient.data());
-    if (indirect_) indirect_->write_hwt(part, t.data_rect, tcrop_.x0, tcrop_.y0, t.transient_indirect.data());
-  }
-
-  void commit() {
-    for (auto* w : {&expected_, &counts_, &frames_, &transient_, &indirect_})
-      if (*w) (*w)->commit();
-  }
-  bool counts_u8() const { return counts_u8_; }
-  const PixelRect& transient_crop() const { return tcrop_; }
-
- private:
-  PixelRect img_, tcrop_;
-  bool counts_u8_;
-  std::unique_ptr<writers::NpyWriter> expected_, counts_, frames_, transient_, indirect_;
-};
-
-// The sampled gate profiles of a few pixels, for previews/gate_profiles.png.
-class ProfileProbe {
- public:
-  ProfileProbe(const PixelRect& img, int K) : pixels_(profile_pixels(img)), curves_(pixels_.size(), std::vector<float>(size_t(K))) {}
-  void put(const SensorTile& s) {
-    for (size_t p = 0; p < pixels_.size(); ++p)
-      if (s.rect.contains(pixels_[p].first, pixels_[p].second))
-        for (int k = 0; k < s.K; ++k)
-          curves_[p][size_t(k)] = float(s.counts[size_t(k) * size_t(s.rect.count()) + size_t(s.rect.index(pixels_[p].first, pixels_[p].second))]);
-  }
-  void write(const Staging& staging, const std::vector<double>& gate_positions_s, std::vector<std::string>& files) const {
-    std::vector<double> x(gate_positions_s.size());
-    std::transform(gate_positions_s.begin(), gate_positions_s.end(), x.begin(), [](double t) { return t / kNs; });
-    writers::write_png(staging.path("previews/gate_profiles.png"),
-                       writers::profile_plot(curves_, x, 800, 450, "gate position (ns)", "counts"));
-    files.push_back("previews/gate_profiles.png");
-  }
-  const std::vector<std::pair<int, int>>& pixels() const { return pixels_; }
-
- private:
-  std::vector<std::pair<int, int>> pixels_;
-  std::vector<std::vector<float>> curves_;
-};
 
 }  // namespace
 
@@ -444,19 +78,10 @@ RunResult run(const RunOptions& options) {
 
   const TimeAxis axis = time_axis(cfg, sensor);
   const PixelRect img = image_rect(cfg);
-  const int K = sensor.K();
-  const auto declared = [&](const std::string& file) {
-    for (const sensor::DeclaredOutput& d : sensor.acquisition().outputs())
-      if (d.file == file) return true;
-    return false;
-  };
 
   const fs::path out = options.out_dir.empty() ? fs::path("out") / fs::path(options.scene_file).stem() : fs::path(options.out_dir);
   Staging staging(out);
-  std::vector<std::string> files;
-  Images images(cfg, img, declared("intensity.exr"));
-  Stacks stacks(cfg, img, K, sensor.frames_per_k(), axis, staging, files);
-  ProfileProbe probe(img, K);
+  Outputs outputs(cfg, sensor, img, axis, staging);
 
   // Tiles are laid over the output image; the renderer and the sensor see full-sensor coordinates.
   std::vector<PixelRect> tiles = make_tiles(img.width, img.height, cfg.render.tile_size);
@@ -464,81 +89,37 @@ RunResult run(const RunOptions& options) {
   std::vector<render::RenderStats> tile_stats(tiles.size());
   std::fprintf(stderr, "spadgen: %s: %d x %d pixels, %zu tiles, %lld time bins of %s ps, K = %d\n",
                options.scene_file.c_str(), img.width, img.height, tiles.size(), static_cast<long long>(axis.bins),
-               seconds_text(axis.bin_width_s / kPs).c_str(), K);
+               seconds_text(axis.bin_width_s / kPs).c_str(), sensor.K());
   Progress progress(tiles.size(), options.progress);
 
   tbb::parallel_for(size_t(0), tiles.size(), [&](size_t ti) {
     InterruptGuard::check();
     const PixelRect& rect = tiles[ti];
-    if (cfg.outputs.ground_truth) images.put_ground_truth(renderer.ground_truth(rect));
+    if (cfg.outputs.ground_truth) outputs.put_ground_truth(renderer.ground_truth(rect));
     const PixelRect data_rect = grow_clipped(rect, sensor.halo(), cfg.camera.width_px, cfg.camera.height_px);
     const TransientTile t = renderer.transient(rect, data_rect, axis, &tile_stats[ti]);
     const SensorTile s = sensor.process(t);
-    images.put(t, sensor.maps(rect), s);
-    stacks.put(t, s);
-    probe.put(s);
+    outputs.put(t, sensor.maps(rect), s);
     progress.tick();
   });
   const double render_seconds = progress.seconds();
 
-  // Provenance travels with every image.
-  const std::string hash = scene_hash(cfg);
-  const std::string crop_text = json::array({img.x0, img.y0, img.width, img.height}).dump();
-  images.write(staging, [&](writers::ExrImage& e) {
-    e.set_attribute("spadgen_version", SPADGEN_VERSION);
-    e.set_attribute("spadgen_seed", std::to_string(cfg.seed));
-    e.set_attribute("spadgen_scene_file", cfg.scene_file);
-    e.set_attribute("spadgen_scene_hash", hash);
-    e.set_attribute("spadgen_crop", crop_text);
-  }, axis, cfg.outputs.previews, files);
-  if (cfg.outputs.previews && declared("previews/gate_profiles.png") && K > 1) probe.write(staging, sensor.gate_positions_s(), files);
-
-  const double laser_total = images.laser_total(), oow_total = images.out_of_window_total();
-  render::RenderStats rays;
-  for (const auto& st : tile_stats) rays.camera_rays += st.camera_rays, rays.shadow_rays += st.shadow_rays;
+  const Provenance prov = provenance(cfg, img);
+  outputs.write(prov);
+  std::vector<std::string> files = outputs.files();
   files.push_back("metadata.json");
 
-  ojson meta;
-  meta["spadgen_version"] = SPADGEN_VERSION;
-  meta["scene_file"] = cfg.scene_file;
-  meta["scene_hash_fnv1a64"] = hash;
-  meta["seed"] = cfg.seed;
-  meta["versions"] = {{"spadgen", SPADGEN_VERSION},
-                      {"embree", std::to_string(RTC_VERSION_MAJOR) + "." + std::to_string(RTC_VERSION_MINOR) + "." + std::to_string(RTC_VERSION_PATCH)}};
-  meta["units"] = {{"length", "m"}, {"time", "s unless the key says ns or ps"}, {"laser", "photons per laser pulse at the SPAD, before PDP"},
-                   {"ambient", "photons per second at the SPAD, before PDP"}, {"counts", "summed binary frames"}};
-  meta["image"] = {{"width", img.width}, {"height", img.height}, {"crop_in_sensor", {img.x0, img.y0, img.width, img.height}},
-                   {"sensor_width", cfg.camera.width_px}, {"sensor_height", cfg.camera.height_px},
-                   {"pixel_order", "row 0 is the top of the image; (K, H, W) stacks index [k, y, x]"}};
-  meta["photons_per_pulse_emitted"] = renderer.photons_per_pulse();
-  meta["time_axis"] = ojson::parse(axis_json(axis).dump());
-  if (cfg.outputs.transient) {
-    const PixelRect& tc = stacks.transient_crop();
-    meta["transient"] = {{"crop_in_sensor", {tc.x0, tc.y0, tc.width, tc.height}},
-                         {"shape", {tc.height, tc.width, axis.bins}},
-                         {"indirect", cfg.render.split_direct_indirect
-                                          ? "transient_indirect.npy: the part of transient.npy from paths with two or more "
-                                            "scattering vertices (docs/render.md); direct = transient - transient_indirect"
-                                          : "not split (render.split_direct_indirect is false)"}};
-  }
-  meta["laser_photons_per_pulse"] = {{"total_all_pixels", laser_total},
-                                     {"outside_time_window", oow_total},
-                                     {"outside_fraction", laser_total > 0 ? oow_total / laser_total : 0.0}};
-  meta["acquisition"] = ojson::parse(sensor.describe().dump());
-  meta["ground_truth_layers"] = images.deepest_layer();
-  meta["counts_dtype"] = stacks.counts_u8() ? "uint8" : "uint16";
-  meta["preview_profile_pixels"] = probe.pixels();
-  meta["warnings"] = resolved.warnings;
-  for (const std::string& w : scene.warnings) meta["warnings"].push_back(w);
-  meta["resolved_scene"] = resolved.resolved;
-  meta["files"] = files;
-  // Everything above depends only on the scene and the seed; "run" is how this run went.
-  meta["run"] = {{"threads", options.threads}, {"seconds", render_seconds}, {"camera_rays", rays.camera_rays},
-                 {"shadow_rays", rays.shadow_rays}};
-  writers::write_json(staging.path("metadata.json"), json::parse(meta.dump()));
+  RunRecord record;
+  outputs.report(record);
+  record.files = files;
+  record.photons_per_pulse_emitted = renderer.photons_per_pulse();
+  record.threads = options.threads;
+  record.seconds = render_seconds;
+  for (const auto& st : tile_stats) record.rays.camera_rays += st.camera_rays, record.rays.shadow_rays += st.shadow_rays;
+  writers::write_json(staging.path("metadata.json"), metadata(resolved, scene, sensor, prov, axis, record));
 
   InterruptGuard::check();
-  stacks.commit();
+  outputs.commit();
   staging.publish(files);
   std::fprintf(stderr, "spadgen: wrote %zu files to %s in %.1f s\n", files.size(), out.string().c_str(), progress.seconds());
   return {out.string(), files};
@@ -554,20 +135,18 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
   o << "# glTF\n" << scenes::summarize(scene) << "\n";
   const TimeAxis axis = time_axis(c, sensor);
   const PixelRect img = image_rect(c);
-  const double px = double(img.width) * img.height;
   o << "# run\n";
   o << "photons per pulse emitted: " << photons_per_pulse(c.laser.average_power_W, c.laser.repetition_rate_Hz, c.laser.wavelength_m) << "\n";
   o << "image: " << img.width << " x " << img.height << " pixels; K = " << sensor.K() << "\n";
   o << "time axis: " << axis.bins << " bins of " << axis.bin_width_s / kPs << " ps from " << axis.start_s / kNs << " ns to "
     << axis.end_s() / kNs << " ns\n";
-  const auto mb = [](double bytes) { return std::to_string(int64_t(std::ceil(bytes / 1e6))) + " MB"; };
-  o << "output sizes: expected_counts.npy " << mb(4.0 * px * sensor.K()) << ", counts.npy "
-    << mb((sensor.frames_per_k() <= 255 ? 1.0 : 2.0) * px * sensor.K());
-  if (c.outputs.frames) o << ", frames.npy " << mb(double(sensor.K()) * sensor.frames_per_k() * img.height * ((img.width + 7) / 8));
-  if (c.outputs.transient) {
-    const PixelRect t = c.outputs.transient_crop.value_or(img);
-    o << ", transient.npy " << mb(4.0 * double(t.width) * t.height * double(axis.bins));
-  }
+  const std::vector<StackLayout> stacks = stack_layout(c, sensor, img, axis);
+  const auto size = [&](Stack k) {
+    return stacks[k].file + " " + std::to_string(int64_t(std::ceil(double(stacks[k].bytes()) / 1e6))) + " MB";
+  };
+  o << "output sizes: " << size(kExpectedCounts) << ", " << size(kCounts);
+  if (c.outputs.frames) o << ", " << size(kFrames);
+  if (c.outputs.transient) o << ", " << size(kTransient);
   o << "\n";
   for (const std::string& w : r.warnings) o << "warning: " << w << "\n";
   return o.str();

@@ -1,0 +1,119 @@
+#include "app/metadata.h"
+
+#include <embree3/rtcore.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "core/units.h"
+
+#ifndef SPADGEN_VERSION
+#define SPADGEN_VERSION "dev"
+#endif
+
+namespace spadgen::app {
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+using ojson = nlohmann::ordered_json;
+
+namespace {
+
+// FNV-1a over bytes: a stable content hash for provenance (not for security).
+uint64_t fnv1a(const std::string& bytes, uint64_t h = 0xcbf29ce484222325ull) {
+  for (unsigned char c : bytes) h = (h ^ c) * 0x100000001b3ull;
+  return h;
+}
+std::string read_bytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+std::string hex64(uint64_t v) {
+  char buf[17];
+  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(v));
+  return buf;
+}
+
+// The hash covers everything that shapes the data, so that the provenance changes whenever any of it does.
+std::string scene_hash(const RunConfig& c) {
+  uint64_t h = fnv1a(read_bytes(c.scene_file));
+  h = fnv1a(read_bytes(c.gltf_path), h);
+  const fs::path dir = fs::path(c.gltf_path).parent_path();
+  std::vector<std::string> side;
+  for (const auto& e : fs::directory_iterator(dir))
+    if (e.is_regular_file() && e.path() != fs::path(c.gltf_path) &&
+        (e.path().extension() == ".bin" || e.path().extension() == ".png" || e.path().extension() == ".jpg"))
+      side.push_back(e.path().string());
+  std::sort(side.begin(), side.end());
+  for (const std::string& f : side) h = fnv1a(read_bytes(f), h);
+  return hex64(h);
+}
+
+json crop_json(const PixelRect& r) { return json::array({r.x0, r.y0, r.width, r.height}); }
+
+}  // namespace
+
+Provenance provenance(const RunConfig& c, const PixelRect& img) { return {c.scene_file, scene_hash(c), c.seed, img}; }
+
+void stamp(writers::ExrImage& e, const Provenance& p) {
+  e.set_attribute("spadgen_version", SPADGEN_VERSION);
+  e.set_attribute("spadgen_seed", std::to_string(p.seed));
+  e.set_attribute("spadgen_scene_file", p.scene_file);
+  e.set_attribute("spadgen_scene_hash", p.scene_hash);
+  e.set_attribute("spadgen_crop", crop_json(p.crop).dump());
+}
+
+json axis_json(const TimeAxis& a) {
+  return {{"start_ns", a.start_s / kNs}, {"bin_width_ps", a.bin_width_s / kPs}, {"bins", a.bins},
+          {"end_ns", a.end_s() / kNs}, {"laser_period_ns", a.period_s / kNs}};
+}
+
+json metadata(const scenes::ResolvedRun& resolved, const scenes::Scene& scene, const sensor::SensorModel& sensor,
+              const Provenance& p, const TimeAxis& axis, const RunRecord& r) {
+  const RunConfig& cfg = resolved.config;
+  const PixelRect& img = p.crop;
+  ojson meta;
+  meta["spadgen_version"] = SPADGEN_VERSION;
+  meta["scene_file"] = p.scene_file;
+  meta["scene_hash_fnv1a64"] = p.scene_hash;
+  meta["seed"] = p.seed;
+  meta["versions"] = {{"spadgen", SPADGEN_VERSION},
+                      {"embree", std::to_string(RTC_VERSION_MAJOR) + "." + std::to_string(RTC_VERSION_MINOR) + "." + std::to_string(RTC_VERSION_PATCH)}};
+  meta["units"] = {{"length", "m"}, {"time", "s unless the key says ns or ps"}, {"laser", "photons per laser pulse at the SPAD, before PDP"},
+                   {"ambient", "photons per second at the SPAD, before PDP"}, {"counts", "summed binary frames"}};
+  meta["image"] = {{"width", img.width}, {"height", img.height}, {"crop_in_sensor", {img.x0, img.y0, img.width, img.height}},
+                   {"sensor_width", cfg.camera.width_px}, {"sensor_height", cfg.camera.height_px},
+                   {"pixel_order", "row 0 is the top of the image; (K, H, W) stacks index [k, y, x]"}};
+  meta["photons_per_pulse_emitted"] = r.photons_per_pulse_emitted;
+  meta["time_axis"] = ojson::parse(axis_json(axis).dump());
+  if (cfg.outputs.transient) {
+    const PixelRect& tc = r.transient_crop;
+    meta["transient"] = {{"crop_in_sensor", {tc.x0, tc.y0, tc.width, tc.height}},
+                         {"shape", {tc.height, tc.width, axis.bins}},
+                         {"indirect", cfg.render.split_direct_indirect
+                                          ? "transient_indirect.npy: the part of transient.npy from paths with two or more "
+                                            "scattering vertices (docs/render.md); direct = transient - transient_indirect"
+                                          : "not split (render.split_direct_indirect is false)"}};
+  }
+  meta["laser_photons_per_pulse"] = {{"total_all_pixels", r.laser_total},
+                                     {"outside_time_window", r.out_of_window_total},
+                                     {"outside_fraction", r.laser_total > 0 ? r.out_of_window_total / r.laser_total : 0.0}};
+  meta["acquisition"] = ojson::parse(sensor.describe().dump());
+  meta["ground_truth_layers"] = r.ground_truth_layers;
+  meta["counts_dtype"] = r.counts_u8 ? "uint8" : "uint16";
+  meta["preview_profile_pixels"] = r.profile_pixels;
+  meta["warnings"] = resolved.warnings;
+  for (const std::string& w : scene.warnings) meta["warnings"].push_back(w);
+  meta["resolved_scene"] = resolved.resolved;
+  meta["files"] = r.files;
+  // Everything above depends only on the scene and the seed; "run" is how this run went.
+  meta["run"] = {{"threads", r.threads}, {"seconds", r.seconds}, {"camera_rays", r.rays.camera_rays},
+                 {"shadow_rays", r.rays.shadow_rays}};
+  return json::parse(meta.dump());
+}
+
+}  // namespace spadgen::app

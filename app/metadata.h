@@ -1,0 +1,57 @@
+// Provenance and metadata.json. Provenance (scene file and content hash, seed, crop, version) travels
+// with every EXR as attributes, so that an image separated from its folder still says where it came from;
+// metadata.json records it with the resolved scene file, the sensor's acquisition and what the run produced.
+#pragma once
+#include <nlohmann/json.hpp>
+
+#include <cstdint>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "core/config.h"
+#include "core/tile.h"
+#include "core/time_axis.h"
+#include "render/renderer.h"
+#include "scenes/scene.h"
+#include "scenes/scene_file.h"
+#include "sensor/sensor.h"
+#include "writers/writers.h"
+
+namespace spadgen::app {
+
+struct Provenance {
+  std::string scene_file;
+  // FNV-1a 64 (hex) of the scene file, the glTF and every buffer and image beside it.
+  std::string scene_hash;
+  uint64_t seed = 0;
+  PixelRect crop;  // the rendered pixels, in sensor coordinates
+};
+// Reads and hashes the scene's files.
+Provenance provenance(const RunConfig& c, const PixelRect& img);
+// Sets the provenance attributes (spadgen_version, _seed, _scene_file, _scene_hash, _crop) of an EXR.
+void stamp(writers::ExrImage& e, const Provenance& p);
+
+// The time axis as laser.exr (attribute spadgen_time_axis) and metadata.json record it.
+nlohmann::json axis_json(const TimeAxis& a);
+
+// What metadata.json reports that only the finished run knows.
+struct RunRecord {
+  std::vector<std::string> files;  // as published, metadata.json last
+  double photons_per_pulse_emitted = 0.0;
+  double laser_total = 0.0, out_of_window_total = 0.0;  // photons per pulse, summed over the image
+  int ground_truth_layers = 0;
+  bool counts_u8 = true;
+  PixelRect transient_crop;
+  std::vector<std::pair<int, int>> profile_pixels;
+  // How the run went: not a function of the scene and the seed.
+  int threads = 0;
+  double seconds = 0.0;
+  render::RenderStats rays;
+};
+
+// The content of metadata.json.
+nlohmann::json metadata(const scenes::ResolvedRun& resolved, const scenes::Scene& scene, const sensor::SensorModel& sensor,
+                        const Provenance& p, const TimeAxis& axis, const RunRecord& r);
+
+}  // namespace spadgen::app

@@ -1,0 +1,279 @@
+#include "app/outputs.h"
+
+#include <algorithm>
+#include <array>
+#include <functional>
+#include <numeric>
+
+#include "app/staging.h"
+#include "core/units.h"
+#include "writers/previews.h"
+
+namespace spadgen::app {
+using writers::NpyWriter;
+
+namespace {
+
+// A few pixels whose gate profiles the preview plots: the centre and points on the diagonals.
+std::vector<std::pair<int, int>> profile_pixels(const PixelRect& img) {
+  std::vector<std::pair<int, int>> p;
+  for (const auto& [fx, fy] : std::vector<std::pair<double, double>>{{0.5, 0.5}, {0.25, 0.5}, {0.75, 0.5}, {0.5, 0.25}, {0.5, 0.75}}) {
+    const int x = img.x0 + std::min(img.width - 1, int(fx * img.width));
+    const int y = img.y0 + std::min(img.height - 1, int(fy * img.height));
+    if (std::find(p.begin(), p.end(), std::pair{x, y}) == p.end()) p.push_back({x, y});
+  }
+  return p;
+}
+
+PixelRect transient_crop(const RunConfig& c, const PixelRect& img) { return c.outputs.transient_crop.value_or(img); }
+
+const sensor::DeclaredOutput* find_declared(const std::vector<sensor::DeclaredOutput>& declared, const std::string& file) {
+  for (const sensor::DeclaredOutput& d : declared)
+    if (d.file == file) return &d;
+  return nullptr;
+}
+
+}  // namespace
+
+int64_t StackLayout::bytes() const {
+  return std::accumulate(shape.begin(), shape.end(), NpyWriter::element_bytes(dtype), std::multiplies<int64_t>());
+}
+
+std::vector<StackLayout> stack_layout(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img,
+                                      const TimeAxis& axis) {
+  const int64_t K = sensor.K(), frames = sensor.frames_per_k();
+  const PixelRect tc = transient_crop(c, img);
+  const std::vector<int64_t> khw{K, img.height, img.width}, hwt{tc.height, tc.width, axis.bins};
+  std::vector<StackLayout> s(kStackCount);
+  s[kExpectedCounts] = {"expected_counts.npy", NpyWriter::Dtype::F32, khw, c.outputs.expected_counts};
+  // Counts never exceed the frames summed into them.
+  s[kCounts] = {"counts.npy", frames <= 255 ? NpyWriter::Dtype::U8 : NpyWriter::Dtype::U16, khw, c.outputs.counts};
+  // One bit per frame and pixel, 8 pixels of a row to a byte.
+  s[kFrames] = {"frames.npy", NpyWriter::Dtype::U8, {K, frames, img.height, (img.width + 7) / 8}, c.outputs.frames};
+  s[kTransient] = {"transient.npy", NpyWriter::Dtype::F32, hwt, c.outputs.transient};
+  s[kTransientIndirect] = {"transient_indirect.npy", NpyWriter::Dtype::F32, hwt,
+                           c.outputs.transient && c.render.split_direct_indirect};
+  return s;
+}
+
+// The per-pixel EXR images, filled tile by tile. Every channel is created here, up front: tiles fill
+// them from several threads, and ExrImage::channel creates a channel on first use.
+class Outputs::Images {
+ public:
+  // intensity: the mode's declaration of intensity.exr, null when the mode has none.
+  Images(const RunConfig& cfg, const PixelRect& img, const sensor::DeclaredOutput* intensity)
+      : img_(img), layers_(cfg.render.max_layers), gt_on_(cfg.outputs.ground_truth), intensity_decl_(intensity),
+        gt_(img.width, img.height), laser_(img.width, img.height), ambient_(img.width, img.height),
+        maps_(img.width, img.height), intensity_(img.width, img.height) {
+    if (gt_on_) {
+      for (const char* n : kGroundTruthChannels) gt_ch_.push_back(gt_.channel(n));
+      for (int l = 0; l < layers_; ++l) {
+        layer_range_.push_back(gt_.channel(layer_name(l, ".range")));
+        layer_trans_.push_back(gt_.channel(layer_name(l, ".transmittance")));
+      }
+    }
+    laser_ch_ = {laser_.channel("photons_per_pulse"), laser_.channel("out_of_window")};
+    ambient_ch_ = ambient_.channel("photons_per_second");
+    maps_ch_ = {maps_.channel("gate_skew_ps"), maps_.channel("gate_length_ps"), maps_.channel("dcr_cps"), maps_.channel("pde")};
+    if (intensity_decl_) intensity_ch_ = {intensity_.channel("counts"), intensity_.channel("photons")};
+    pixel_laser_.assign(size_t(img.count()), 0.0);
+    pixel_oow_.assign(size_t(img.count()), 0.0);
+  }
+
+  void put_ground_truth(const GroundTruthTile& g) {
+    for_pixels(g.rect, [&](int, int, size_t i, size_t o) {
+      const float v[] = {g.range[i], g.z[i], g.normal[3 * i], g.normal[3 * i + 1], g.normal[3 * i + 2],
+                         float(g.mesh_id[i]), float(g.material_id[i]), float(g.layer_count[i])};
+      for (size_t c = 0; c < gt_ch_.size(); ++c) gt_ch_[c][o] = v[c];
+      for (size_t l = 0; l < size_t(layers_); ++l) {
+        layer_range_[l][o] = g.layer_range[i * size_t(g.max_layers) + l];
+        layer_trans_[l][o] = g.layer_transmittance[i * size_t(g.max_layers) + l];
+      }
+    });
+  }
+
+  void put(const TransientTile& t, const sensor::SensorMapsTile& m, const SensorTile& s) {
+    for_pixels(t.rect, [&](int x, int y, size_t i, size_t o) {
+      const auto d = size_t(t.data_rect.index(x, y));  // the transient tile carries a halo
+      laser_ch_[0][o] = float(t.laser_total[d]), laser_ch_[1][o] = float(t.out_of_window[d]);
+      ambient_ch_[o] = t.ambient_rate[d];
+      pixel_laser_[o] = t.laser_total[d], pixel_oow_[o] = t.out_of_window[d];
+      maps_ch_[0][o] = m.gate_skew_ps[i], maps_ch_[1][o] = m.gate_length_ps[i];
+      maps_ch_[2][o] = m.dcr_cps[i], maps_ch_[3][o] = m.pde[i];
+      if (intensity_decl_) intensity_ch_[0][o] = s.intensity_counts[i], intensity_ch_[1][o] = s.intensity_photons[i];
+    });
+  }
+
+  // Per-pixel sums in image order, so they do not depend on the tile size.
+  double laser_total() const { return std::accumulate(pixel_laser_.begin(), pixel_laser_.end(), 0.0); }
+  double out_of_window_total() const { return std::accumulate(pixel_oow_.begin(), pixel_oow_.end(), 0.0); }
+  // The deepest layer any pixel has; layer channels beyond it are not written.
+  int deepest_layer() const {
+    if (!gt_on_) return 0;
+    const float* lc = gt_ch_.back();
+    return int(*std::max_element(lc, lc + size_t(img_.count())));
+  }
+
+  // Writes the EXRs with their provenance and the previews into the staging folder.
+  void write(const Staging& staging, const Provenance& p, const TimeAxis& axis, bool previews, std::vector<std::string>& files) {
+    const auto put_file = [&](writers::ExrImage& e, const std::string& name, const std::string& units) {
+      stamp(e, p);
+      e.set_attribute("spadgen_units", units);
+      e.write(staging.path(name));
+      files.push_back(name);
+    };
+    if (gt_on_) {
+      for (int l = deepest_layer(); l < layers_; ++l) {
+        gt_.remove_channel(layer_name(l, ".range"));
+        gt_.remove_channel(layer_name(l, ".transmittance"));
+      }
+      put_file(gt_, "ground_truth.exr", "range, z, layer<i>.range: metres (+inf where the ray hits nothing); transmittance: fraction");
+    }
+    laser_.set_attribute("spadgen_time_axis", axis_json(axis).dump());
+    put_file(laser_, "laser.exr", "photons per laser pulse reaching the pixel's SPAD (before PDP)");
+    put_file(ambient_, "ambient.exr", "ambient photons per second reaching the pixel's SPAD (before PDP)");
+    put_file(maps_, "sensor_maps.exr", "gate_skew_ps, gate_length_ps: ps; dcr_cps: counts/s; pde: fraction");
+    // The mode that declares the image knows what its channels mean.
+    if (intensity_decl_) put_file(intensity_, intensity_decl_->file, intensity_decl_->what);
+    if (!previews) return;
+    if (gt_on_) {
+      writers::write_png(staging.path("previews/depth.png"), writers::depth_preview(gt_ch_[0], img_.width, img_.height, 0.0f, 0.0f));
+      files.push_back("previews/depth.png");
+    }
+    // What the camera saw when it takes an intensity image; a gate sweep has no single image, so the
+    // laser light reaching each pixel stands in.
+    const float* bright = intensity_decl_ ? intensity_ch_[1] : laser_ch_[0];
+    writers::write_png(staging.path("previews/intensity.png"), writers::gray_preview(bright, img_.width, img_.height));
+    files.push_back("previews/intensity.png");
+  }
+
+ private:
+  static constexpr const char* kGroundTruthChannels[] = {"range", "z", "normal.X", "normal.Y", "normal.Z",
+                                                         "mesh_id", "material_id", "layer_count"};
+  static std::string layer_name(int l, const char* what) { return "layer" + std::to_string(l) + what; }
+  // Calls f(x, y, index in rect, index in the image) for every pixel (x, y) of rect.
+  template <class F>
+  void for_pixels(const PixelRect& r, F&& f) const {
+    for (int y = r.y0; y < r.y1(); ++y)
+      for (int x = r.x0; x < r.x1(); ++x)
+        f(x, y, size_t(r.index(x, y)), size_t(y - img_.y0) * size_t(img_.width) + size_t(x - img_.x0));
+  }
+
+  PixelRect img_;
+  int layers_;
+  bool gt_on_;
+  const sensor::DeclaredOutput* intensity_decl_;
+  writers::ExrImage gt_, laser_, ambient_, maps_, intensity_;
+  std::vector<float*> gt_ch_, layer_range_, layer_trans_, laser_ch_, maps_ch_, intensity_ch_;
+  float* ambient_ch_ = nullptr;
+  std::vector<double> pixel_laser_, pixel_oow_;
+};
+
+// The NumPy stacks, streamed to disk tile by tile.
+class Outputs::Stacks {
+ public:
+  Stacks(const std::vector<StackLayout>& layout, const PixelRect& img, const PixelRect& transient_crop,
+         const Staging& staging, std::vector<std::string>& files)
+      : img_(img), tcrop_(transient_crop), counts_u8_(layout[kCounts].dtype == NpyWriter::Dtype::U8) {
+    for (size_t k = 0; k < kStackCount; ++k) {
+      if (!layout[k].written) continue;
+      w_[k] = std::make_unique<NpyWriter>(staging.path(layout[k].file), layout[k].dtype, layout[k].shape);
+      files.push_back(layout[k].file);
+    }
+  }
+
+  void put(const TransientTile& t, const SensorTile& s) {
+    const PixelRect& r = t.rect;
+    if (w_[kExpectedCounts]) w_[kExpectedCounts]->write_khw(r, img_.x0, img_.y0, s.expected.data());
+    if (w_[kCounts] && counts_u8_) {
+      std::vector<uint8_t> c8(s.counts.size());
+      std::transform(s.counts.begin(), s.counts.end(), c8.begin(), [](uint16_t v) { return uint8_t(v); });
+      w_[kCounts]->write_khw(r, img_.x0, img_.y0, c8.data());
+    } else if (w_[kCounts]) {
+      w_[kCounts]->write_khw(r, img_.x0, img_.y0, s.counts.data());
+    }
+    if (w_[kFrames]) w_[kFrames]->write_frames(r, img_.x0, img_.y0, s.frames.data());
+    const int x0 = std::max(r.x0, tcrop_.x0), x1 = std::min(r.x1(), tcrop_.x1());
+    const int y0 = std::max(r.y0, tcrop_.y0), y1 = std::min(r.y1(), tcrop_.y1());
+    if (t.axis.bins == 0 || x1 <= x0 || y1 <= y0) return;
+    const PixelRect part{x0, y0, x1 - x0, y1 - y0};
+    if (w_[kTransient]) w_[kTransient]->write_hwt(part, t.data_rect, tcrop_.x0, tcrop_.y0, t.transient.data());
+    if (w_[kTransientIndirect])
+      w_[kTransientIndirect]->write_hwt(part, t.data_rect, tcrop_.x0, tcrop_.y0, t.transient_indirect.data());
+  }
+
+  void commit() {
+    for (auto& w : w_)
+      if (w) w->commit();
+  }
+  bool counts_u8() const { return counts_u8_; }
+  const PixelRect& transient_crop() const { return tcrop_; }
+
+ private:
+  PixelRect img_, tcrop_;
+  bool counts_u8_;
+  std::array<std::unique_ptr<NpyWriter>, kStackCount> w_;  // null: not written
+};
+
+// The sampled gate profiles of a few pixels, for previews/gate_profiles.png.
+class Outputs::ProfileProbe {
+ public:
+  ProfileProbe(const PixelRect& img, int K) : pixels_(profile_pixels(img)), curves_(pixels_.size(), std::vector<float>(size_t(K))) {}
+  void put(const SensorTile& s) {
+    for (size_t p = 0; p < pixels_.size(); ++p)
+      if (s.rect.contains(pixels_[p].first, pixels_[p].second))
+        for (int k = 0; k < s.K; ++k)
+          curves_[p][size_t(k)] = float(s.counts[size_t(k) * size_t(s.rect.count()) + size_t(s.rect.index(pixels_[p].first, pixels_[p].second))]);
+  }
+  void write(const Staging& staging, const std::string& file, const std::vector<double>& gate_positions_s,
+             std::vector<std::string>& files) const {
+    std::vector<double> x(gate_positions_s.size());
+    std::transform(gate_positions_s.begin(), gate_positions_s.end(), x.begin(), [](double t) { return t / kNs; });
+    writers::write_png(staging.path(file), writers::profile_plot(curves_, x, 800, 450, "gate position (ns)", "counts"));
+    files.push_back(file);
+  }
+  const std::vector<std::pair<int, int>>& pixels() const { return pixels_; }
+
+ private:
+  std::vector<std::pair<int, int>> pixels_;
+  std::vector<std::vector<float>> curves_;
+};
+
+Outputs::Outputs(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img, const TimeAxis& axis,
+                 const Staging& staging)
+    : cfg_(c), axis_(axis), gate_positions_s_(sensor.gate_positions_s()), declared_(sensor.acquisition().outputs()),
+      staging_(staging) {
+  images_ = std::make_unique<Images>(c, img, find_declared(declared_, "intensity.exr"));
+  stacks_ = std::make_unique<Stacks>(stack_layout(c, sensor, img, axis), img, transient_crop(c, img), staging, files_);
+  probe_ = std::make_unique<ProfileProbe>(img, sensor.K());
+}
+
+Outputs::~Outputs() = default;
+
+void Outputs::put_ground_truth(const GroundTruthTile& g) { images_->put_ground_truth(g); }
+
+void Outputs::put(const TransientTile& t, const sensor::SensorMapsTile& m, const SensorTile& s) {
+  images_->put(t, m, s);
+  stacks_->put(t, s);
+  probe_->put(s);
+}
+
+void Outputs::write(const Provenance& p) {
+  images_->write(staging_, p, axis_, cfg_.outputs.previews, files_);
+  // One gate position makes no curve.
+  if (const sensor::DeclaredOutput* d = find_declared(declared_, "previews/gate_profiles.png");
+      d && cfg_.outputs.previews && gate_positions_s_.size() > 1)
+    probe_->write(staging_, d->file, gate_positions_s_, files_);
+}
+
+void Outputs::commit() { stacks_->commit(); }
+
+void Outputs::report(RunRecord& r) const {
+  r.laser_total = images_->laser_total(), r.out_of_window_total = images_->out_of_window_total();
+  r.ground_truth_layers = images_->deepest_layer();
+  r.counts_u8 = stacks_->counts_u8();
+  r.transient_crop = stacks_->transient_crop();
+  r.profile_pixels = probe_->pixels();
+}
+
+}  // namespace spadgen::app

@@ -1,0 +1,78 @@
+// The output layout: every file a run writes (EXR images, NumPy stacks, previews), when it is written,
+// its type, shape and units, and how the tiles fill it. Adding an output file is a change here only:
+// metadata.json lists, and the staging folder publishes, whatever files() holds. Files that only one
+// acquisition mode has are those the mode declares (sensor::Acquisition::outputs()).
+#pragma once
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "app/metadata.h"
+#include "core/config.h"
+#include "core/tile.h"
+#include "core/time_axis.h"
+#include "sensor/acquisition/acquisition.h"
+#include "sensor/sensor.h"
+#include "writers/writers.h"
+
+namespace spadgen::app {
+
+class Staging;
+
+// The NumPy stacks, in the order metadata.json lists them; they index stack_layout().
+enum Stack : size_t { kExpectedCounts, kCounts, kFrames, kTransient, kTransientIndirect, kStackCount };
+
+struct StackLayout {
+  std::string file;
+  writers::NpyWriter::Dtype dtype;
+  std::vector<int64_t> shape;
+  bool written = false;  // the scene file's outputs ask for it
+  // Bytes of data, without the header.
+  int64_t bytes() const;
+};
+
+// Every stack a run of this scene can write, written or not, indexed by Stack.
+std::vector<StackLayout> stack_layout(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img,
+                                      const TimeAxis& axis);
+
+class Outputs {
+ public:
+  // Opens the stacks in the staging folder (the tiles stream into them) and allocates the images.
+  Outputs(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img, const TimeAxis& axis,
+          const Staging& staging);
+  ~Outputs();
+  Outputs(const Outputs&) = delete;
+  Outputs& operator=(const Outputs&) = delete;
+
+  // One tile's data; called from several threads at once, for disjoint tiles.
+  void put_ground_truth(const GroundTruthTile& g);
+  void put(const TransientTile& t, const sensor::SensorMapsTile& m, const SensorTile& s);
+
+  // After the last tile: the images, stamped with their provenance, and the previews into the staging folder.
+  void write(const Provenance& p);
+  // Completes the stacks; the last step before publishing.
+  void commit();
+
+  // Written so far, relative to the output folder, in the order metadata.json lists them.
+  const std::vector<std::string>& files() const { return files_; }
+  // What metadata.json reports about the outputs (totals, layers, dtypes, crops, probed pixels).
+  void report(RunRecord& r) const;
+
+ private:
+  class Images;
+  class Stacks;
+  class ProfileProbe;
+
+  const RunConfig& cfg_;
+  TimeAxis axis_;
+  std::vector<double> gate_positions_s_;
+  std::vector<sensor::DeclaredOutput> declared_;
+  const Staging& staging_;
+  std::vector<std::string> files_;
+  std::unique_ptr<Images> images_;
+  std::unique_ptr<Stacks> stacks_;
+  std::unique_ptr<ProfileProbe> probe_;
+};
+
+}  // namespace spadgen::app
