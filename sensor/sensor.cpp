@@ -145,9 +145,8 @@ SensorModel::Impl::Impl(const SensorStageConfig& c, const SensorOptions& o) : cf
     table = BinomialTable::get(frames_per_k);
   const PixelTypeConfig* tc[2] = {&cfg.sensor.pixel_A, &cfg.sensor.pixel_B};
   for (int t = 0; t < 2; ++t) {
-    const std::string key = "sensor." + to_string(t == 0 ? PixelPreset::PixelA : PixelPreset::PixelB);
-    const PdpCurve curve = PdpCurve::from_config(*tc[t], key);
     types[t].name = to_string(t == 0 ? PixelPreset::PixelA : PixelPreset::PixelB);
+    const PdpCurve curve = PdpCurve::from_config(*tc[t], "sensor." + types[t].name);
     types[t].pdp_laser = curve.at(cfg.laser.wavelength_m);
     types[t].pdp_ambient = curve.band_average(cfg.ambient.wavelength_m, cfg.ambient.bandwidth_m);
     types[t].fill_factor = tc[t]->fill_factor;

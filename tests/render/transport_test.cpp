@@ -1,6 +1,8 @@
 // The transient path tracer against closed forms. Tolerances are z-scores of the Monte Carlo error
 // (5 or 6 sigma, false-alarm rates 6e-7 and 2e-9 per comparison) with fixed seeds, plus float rounding.
 #include <gtest/gtest.h>
+
+#include "core/error.h"
 #include <tbb/global_control.h>
 
 #include <cmath>
@@ -389,6 +391,19 @@ TEST(Transport, FillFactorOfEachRow) {
   // Rows 3 and 4 straddle the axis symmetrically; 50 mm focal length keeps cos^7 within 1e-7.
   EXPECT_NEAR(t.laser_total[size_t(t.data_rect.index(3, 4))] / t.laser_total[size_t(t.data_rect.index(3, 3))],
               0.134 / 0.07, 1e-5);
+}
+
+// The renderer takes one fill factor per sensor row; a caller that describes other rows is told so.
+TEST(Transport, RowFillFactorsMustCoverTheSensor) {
+  RenderStageConfig c = test_config(8, 8, 50e-3);
+  c.row_fill_factor.pop_back();
+  try {
+    Renderer r(plane_scene(1.0f, 0.5f), c);
+    FAIL() << "expected an error";
+  } catch (const spadgen::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("row_fill_factor holds 7 rows, expected camera.height_px = 8"), std::string::npos)
+        << e.what();
+  }
 }
 
 scenes::Scene busy_scene() {
