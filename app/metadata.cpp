@@ -81,6 +81,8 @@ json metadata(const scenes::ResolvedRun& resolved, const scenes::Scene& scene, c
   meta["scene_file"] = p.scene_file;
   meta["scene_hash_fnv1a64"] = p.scene_hash;
   meta["seed"] = p.seed;
+  // The seed each random stream used (seeds.* when set, else seed).
+  meta["seeds"] = {{"light", cfg.light_seed()}, {"chip", cfg.chip_seed()}, {"noise", cfg.noise_seed()}};
   meta["versions"] = {{"spadgen", SPADGEN_VERSION},
                       {"embree", std::to_string(RTC_VERSION_MAJOR) + "." + std::to_string(RTC_VERSION_MINOR) + "." + std::to_string(RTC_VERSION_PATCH)}};
   meta["units"] = {{"length", "m"}, {"time", "s unless the key says ns or ps"}, {"laser", "photons per laser pulse at the SPAD, before PDP"},

@@ -218,7 +218,7 @@ void BM_CountsSampling(benchmark::State& state) {
   const std::shared_ptr<const sensor::BinomialTable> table = sensor::BinomialTable::get(255);
   const sensor::BinomialSampler sampler(255);
   const bool walk = state.range(0) == 1;
-  const Rng base(cfg.seed, RngKind::Counts, 0, 0);
+  const Rng base(cfg.noise_seed, RngKind::Counts, 0, 0);
   const uint32_t key[2] = {base.key().v[0], base.key().v[1]};
   std::vector<uint16_t> counts(lam.size());
   for (auto _ : state) {

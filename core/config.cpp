@@ -10,12 +10,13 @@ SensorStageConfig sensor_stage(const RunConfig& c) {
   s.sensor = c.sensor;
   s.acquisition = c.acquisition;
   s.outputs.frames = c.outputs.frames;
-  s.seed = c.seed;
+  s.chip_seed = c.chip_seed();
+  s.noise_seed = c.noise_seed();
   return s;
 }
 
 RenderStageConfig render_stage(const RunConfig& c, std::vector<double> row_fill_factor) {
-  return {c.camera, c.laser, c.ambient, c.render, c.seed, std::move(row_fill_factor)};
+  return {c.camera, c.laser, c.ambient, c.render, c.light_seed(), std::move(row_fill_factor)};
 }
 
 }  // namespace spadgen

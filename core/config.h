@@ -229,11 +229,22 @@ struct OutputsConfig {
   bool operator==(const OutputsConfig&) const = default;
 };
 
+// The seeds of the three random streams that are independent of each other (sensor/streams.h and
+// render/ say which draws each drives). Null: the run's `seed`.
+struct SeedsConfig {
+  std::optional<uint64_t> light;  // seeds.light: Monte Carlo light transport (camera paths, BSDF sampling)
+  std::optional<uint64_t> chip;   // seeds.chip: the chip's fixed pattern (gate skew and length, DCR, PDP maps)
+  std::optional<uint64_t> noise;  // seeds.noise: temporal noise (binary frames, counts, crosstalk draws)
+
+  bool operator==(const SeedsConfig&) const = default;
+};
+
 struct RunConfig {
   std::string scene_file;               // absolute path of the scene file ("" when built in code)
   std::string gltf_path;                // gltf: resolved absolute path
   std::string gltf_scene;               // gltf_scene: name of the glTF scene; "" = the file's default
   uint64_t seed = 1;                    // seed
+  SeedsConfig seeds;                    // seeds.*: each stream's own seed (null: seed)
   CameraConfig camera;
   LaserConfig laser;
   AmbientConfig ambient;
@@ -241,6 +252,11 @@ struct RunConfig {
   AcquisitionConfig acquisition;
   RenderConfig render;
   OutputsConfig outputs;
+
+  // The seed each stream uses: its own when set, else `seed`.
+  uint64_t light_seed() const { return seeds.light.value_or(seed); }
+  uint64_t chip_seed() const { return seeds.chip.value_or(seed); }
+  uint64_t noise_seed() const { return seeds.noise.value_or(seed); }
 
   bool operator==(const RunConfig&) const = default;
 };
@@ -267,7 +283,8 @@ struct SensorStageConfig {
   struct Outputs {
     bool frames = OutputsConfig{}.frames;  // sample binary frames (else counts directly)
   } outputs;
-  uint64_t seed = RunConfig{}.seed;
+  uint64_t chip_seed = RunConfig{}.seed;   // the chip's fixed pattern (RunConfig::chip_seed())
+  uint64_t noise_seed = RunConfig{}.seed;  // temporal noise (RunConfig::noise_seed())
 };
 
 // The renderer (render/): the camera, the laser, the ambient light, its numerical settings and seed, and
@@ -277,7 +294,7 @@ struct RenderStageConfig {
   LaserConfig laser;
   AmbientConfig ambient;
   RenderConfig render;
-  uint64_t seed = RunConfig{}.seed;
+  uint64_t light_seed = RunConfig{}.seed;  // light transport (RunConfig::light_seed())
   std::vector<double> row_fill_factor;  // camera.height_px values, row 0 at the top
 };
 

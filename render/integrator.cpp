@@ -161,7 +161,7 @@ void Integrator::trace_camera_block(int x, int y, CameraBlock* block, RayCounts*
       const int px = block->x0 + std::min(i, block->lanes - 1);
       const uint64_t pixel =
           static_cast<uint64_t>(y) * static_cast<uint64_t>(camera_.width()) + static_cast<uint64_t>(px);
-      block->rng.emplace_back(config_.seed, RngKind::CameraPath, pixel, static_cast<uint64_t>(s));
+      block->rng.emplace_back(config_.light_seed, RngKind::CameraPath, pixel, static_cast<uint64_t>(s));
       Rng& rng = block->rng.back();
       const double jx = rng.next_double(), jy = rng.next_double();
       block->dir[j] = camera_.direction(px + jx, y + jy);

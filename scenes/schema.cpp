@@ -86,13 +86,27 @@ Key number(std::string path, F field, Unit u, Range r, std::string doc) {
   return k;
 }
 
+template <class T>
+struct is_optional : std::false_type {};
+template <class T>
+struct is_optional<std::optional<T>> : std::true_type {};
+
 template <class F>
 Key integer(std::string path, F field, Unit u, Range r, std::string doc) {
   Key k = make(std::move(path), Type::Integer, u.name, std::move(doc));
   k.lo = r.lo, k.hi = r.hi;
   using T = std::remove_cvref_t<decltype(field(defaults()))>;
-  k.def = field(defaults());
-  k.set = [field](RunConfig& c, const ojson& v, const std::string&) { field(c) = v.get<T>(); };
+  if constexpr (is_optional<T>::value) {
+    k.nullable = true;
+    const T& d = field(defaults());
+    k.def = d ? json(*d) : json(nullptr);
+    k.set = [field](RunConfig& c, const ojson& v, const std::string&) {
+      field(c) = v.is_null() ? T() : T(v.get<typename T::value_type>());
+    };
+  } else {
+    k.def = field(defaults());
+    k.set = [field](RunConfig& c, const ojson& v, const std::string&) { field(c) = v.get<T>(); };
+  }
   return k;
 }
 
@@ -190,7 +204,10 @@ std::vector<Key> build() {
   Key description = make("/description", Type::String, "", "free text, copied into metadata.json");
   description.def = "";
   k.push_back(description);
-  k.push_back(integer("/seed", FIELD(seed), kNone, closed(0, 9.007199254740992e15), "seed of every random stream (overridden by --seed)"));
+  k.push_back(integer("/seed", FIELD(seed), kNone, closed(0, 9.007199254740992e15), "seed of every random stream that seeds.* does not set (overridden by --seed)"));
+  k.push_back(integer("/seeds/light", FIELD(seeds.light), kNone, closed(0, 9.007199254740992e15), "seed of the Monte Carlo light transport (laser.exr, ambient.exr, transients); null = seed"));
+  k.push_back(integer("/seeds/chip", FIELD(seeds.chip), kNone, closed(0, 9.007199254740992e15), "seed of the chip's fixed pattern (gate skew and length maps, DCR population, PDP non-uniformity: sensor_maps.exr); null = seed"));
+  k.push_back(integer("/seeds/noise", FIELD(seeds.noise), kNone, closed(0, 9.007199254740992e15), "seed of the temporal noise (binary frames, counts, crosstalk draws); null = seed"));
 
   k.push_back(string("/camera/gltf_camera", FIELD(camera.gltf_camera), "name of a glTF camera node to use instead of position/look_at/up and the field of view; \"\" = defined here"));
   k.push_back(vec3("/camera/position_m", FIELD(camera.position_m), kMetre, "camera centre (world, glTF frame: +Y up)"));

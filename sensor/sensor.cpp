@@ -248,7 +248,7 @@ SensorTile SensorModel::process(const TransientTile& t) const {
   const size_t Ks = static_cast<size_t>(K);
   const auto setup = m.acq->setup(t.axis);
   const bool frames = m.cfg.outputs.frames;
-  const uint64_t seed = m.cfg.seed;
+  const uint64_t seed = m.cfg.noise_seed;
   auto pixel_index = [W](int x, int y) { return streams::pixel_index(x, y, W); };
   // lambda of every k for the region's pixels (the tile and its halo), [region.index(x, y) * K + k]; and
   // p, q of each pixel's own avalanches where its neighbours (crosstalk of pixel B) or its frames need them.

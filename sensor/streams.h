@@ -15,7 +15,10 @@
 // |           | by Philox block 0 of (seed, Counts, pixel, k)                 | (seed, Counts, pixel, k)      |
 // | crosstalk | which of a neighbour's avalanches fire the pixel, image k     | (seed, Crosstalk, pixel, k)   |
 //
-// pixel = y * camera.width_px + x in full-sensor coordinates. Every stream takes RunConfig::seed today.
+// pixel = y * camera.width_px + x in full-sensor coordinates. chip_map takes the chip's seed
+// (SensorStageConfig::chip_seed, scene-file seeds.chip), the others the temporal noise's
+// (SensorStageConfig::noise_seed, seeds.noise); both default to the run's seed. The renderer's paths take
+// the light-transport seed (seeds.light).
 #pragma once
 #include <cstdint>
 

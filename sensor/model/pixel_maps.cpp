@@ -136,7 +136,7 @@ PixelParams PixelMaps::at(int x, int y) const {
   p.section = section_of_row(y);
   const PixelTypeConfig& tc = p.type == 0 ? cfg_.sensor.pixel_A : cfg_.sensor.pixel_B;
   const uint64_t idx = streams::pixel_index(x, y, width_);
-  const uint64_t seed = cfg_.seed;
+  const uint64_t seed = cfg_.chip_seed;
   if (cfg_.sensor.skew) {
     if (!user_skew_ps_.empty()) {
       p.skew_s = static_cast<double>(user_skew_ps_[idx]) * kPs;

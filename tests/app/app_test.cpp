@@ -146,6 +146,38 @@ TEST_F(App, OutputsAreBitIdenticalForAnyThreadCountAndTileSize) {
   expect_same_outputs(dir_ / "a", dir_ / "b");
 }
 
+// Each random stream changes only what it drives: seeds.noise the sampled counts and frames, seeds.chip
+// the chip's maps (and so the expectations and the samples), seeds.light the rendered light (and all that
+// follows from it). Setting every stream's seed to `seed` is the default, bit for bit.
+TEST_F(App, EachSeedChangesOnlyWhatItDrives) {
+  const std::string run = "run " + kSmall + " --seed 5 -o ";
+  ASSERT_EQ(sh(run + (dir_ / "base").string()).code, 0);
+  ASSERT_EQ(sh(run + (dir_ / "same").string() + " --set seeds.light=5 --set seeds.chip=5 --set seeds.noise=5").code, 0);
+  ASSERT_EQ(sh(run + (dir_ / "noise").string() + " --set seeds.noise=6").code, 0);
+  ASSERT_EQ(sh(run + (dir_ / "chip").string() + " --set seeds.chip=6").code, 0);
+  ASSERT_EQ(sh(run + (dir_ / "light").string() + " --set seeds.light=6").code, 0);
+  const auto same = [&](const std::string& variant, const std::string& file) {
+    return slurp(dir_ / "base" / file) == slurp(dir_ / variant / file);
+  };
+  for (const char* f : {"laser.exr", "ambient.exr", "sensor_maps.exr", "ground_truth.exr", "transient.npy",
+                        "expected_counts.npy", "counts.npy", "frames.npy"})
+    EXPECT_TRUE(same("same", f)) << f;
+  // The temporal noise: only the samples change.
+  for (const char* f : {"laser.exr", "ambient.exr", "sensor_maps.exr", "transient.npy", "expected_counts.npy"})
+    EXPECT_TRUE(same("noise", f)) << "seeds.noise changed " << f;
+  EXPECT_FALSE(same("noise", "counts.npy"));
+  EXPECT_FALSE(same("noise", "frames.npy"));
+  // The chip: its maps, hence the expectations and the samples; not the light.
+  for (const char* f : {"laser.exr", "ambient.exr", "transient.npy", "ground_truth.exr"})
+    EXPECT_TRUE(same("chip", f)) << "seeds.chip changed " << f;
+  for (const char* f : {"sensor_maps.exr", "expected_counts.npy", "counts.npy"}) EXPECT_FALSE(same("chip", f)) << f;
+  // The light: the rendered light and what follows; not the chip, not the exact ground truth.
+  for (const char* f : {"sensor_maps.exr", "ground_truth.exr"}) EXPECT_TRUE(same("light", f)) << "seeds.light changed " << f;
+  for (const char* f : {"laser.exr", "transient.npy", "expected_counts.npy"}) EXPECT_FALSE(same("light", f)) << f;
+  const auto meta = nlohmann::json::parse(slurp(dir_ / "noise/metadata.json"));
+  EXPECT_EQ(meta["seeds"], nlohmann::json({{"light", 5}, {"chip", 5}, {"noise", 6}}));
+}
+
 TEST_F(App, AOnePixelCropReplaysThatPixelOfALargerRun) {
   ASSERT_EQ(sh("run " + kSmall + " -o " + (dir_ / "full").string()).code, 0);
   const std::string one = kSmallSettings + " --set camera.crop=[509,241,1,1]";

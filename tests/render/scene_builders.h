@@ -107,7 +107,7 @@ inline RenderStageConfig test_config(int width, int height, double focal_length_
   c.ambient.illuminance_lux = 0.0;
   c.render.samples_per_pixel = 16;
   c.render.max_bounces = 4;
-  c.seed = 7;
+  c.light_seed = 7;
   return c;
 }
 

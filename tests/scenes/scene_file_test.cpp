@@ -95,6 +95,20 @@ TEST_F(SceneFileTest, CodeDefaultsAreTheSceneFileDefaults) {
   EXPECT_EQ(r.resolved["acquisition"]["mode"], "gate_sweep");
 }
 
+// Each stream's seed defaults to `seed`; one set alone changes only that stream's.
+TEST_F(SceneFileTest, StreamSeedsDefaultToTheSeed) {
+  const ResolvedRun r = parse(R"({"gltf": "s.gltf", "seed": 9, "seeds": {"noise": 4}})");
+  EXPECT_EQ(r.config.light_seed(), 9u);
+  EXPECT_EQ(r.config.chip_seed(), 9u);
+  EXPECT_EQ(r.config.noise_seed(), 4u);
+  EXPECT_TRUE(r.resolved["seeds"]["light"].is_null());
+  EXPECT_EQ(sensor_stage(r.config).chip_seed, 9u);
+  EXPECT_EQ(sensor_stage(r.config).noise_seed, 4u);
+  EXPECT_EQ(render_stage(r.config, {}).light_seed, 9u);
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "seeds": {"chip": -1}})"),
+              HasSubstr("/seeds/chip: found -1 (an integer), expected an integer in [0, 9.0072e+15], or null"));
+}
+
 // Every choice's spelling maps to its enum value and back.
 TEST_F(SceneFileTest, ChoicesParseToTheirEnums) {
   const ResolvedRun r = parse(R"({"gltf": "s.gltf", "laser": {"beam": "gltf_light", "gltf_light": "L"},

@@ -18,7 +18,8 @@ inline PixelTypeConfig paper_pixel_B() { return PixelTypeConfig::paper_pixel_B()
 
 inline SensorStageConfig sweep_config(int width = 48, int height = 24) {
   SensorStageConfig c;
-  c.seed = 12345;
+  c.chip_seed = 12345;
+  c.noise_seed = 12345;
   c.camera.width_px = width;
   c.camera.height_px = height;
   c.sensor.pixel_B = paper_pixel_B();
