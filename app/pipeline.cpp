@@ -140,13 +140,14 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
   o << "image: " << img.width << " x " << img.height << " pixels; K = " << sensor.K() << "\n";
   o << "time axis: " << axis.bins << " bins of " << axis.bin_width_s / kPs << " ps from " << axis.start_s / kNs << " ns to "
     << axis.end_s() / kNs << " ns\n";
-  const std::vector<StackLayout> stacks = stack_layout(c, sensor, img, axis);
-  const auto size = [&](Stack k) {
-    return stacks[k].file + " " + std::to_string(int64_t(std::ceil(double(stacks[k].bytes()) / 1e6))) + " MB";
-  };
-  o << "output sizes: " << size(kExpectedCounts) << ", " << size(kCounts);
-  if (c.outputs.frames) o << ", " << size(kFrames);
-  if (c.outputs.transient) o << ", " << size(kTransient);
+  // Every stack the run will write, from the same layout the run uses.
+  o << "output sizes:";
+  const char* sep = " ";
+  for (const StackLayout& st : stack_layout(c, sensor, img, axis)) {
+    if (!st.written) continue;
+    o << sep << st.file << " " << int64_t(std::ceil(double(st.bytes()) / 1e6)) << " MB";
+    sep = ", ";
+  }
   o << "\n";
   for (const std::string& w : r.warnings) o << "warning: " << w << "\n";
   return o.str();

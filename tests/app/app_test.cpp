@@ -52,6 +52,17 @@ TEST(AppCommands, InfoPrintsTheResolvedSceneAndTheGltf) {
   EXPECT_THAT(r.output, HasSubstr("\"average_power_mW\": 5"));
   EXPECT_THAT(r.output, HasSubstr("KHR_materials_transmission"));
   EXPECT_THAT(r.output, HasSubstr("time axis:"));
+  // 1024 x 500 pixels x 351 gates: float32 expectations 719 MB, uint8 counts 180 MB (rounded up).
+  EXPECT_THAT(r.output, HasSubstr("output sizes: expected_counts.npy 719 MB, counts.npy 180 MB\n"));
+}
+
+// The sizes list exactly the stacks the run writes.
+TEST(AppCommands, InfoSizesTheStacksTheRunWrites) {
+  const Result r = sh("info " + kScenes + "multi_object.json --set outputs.counts=false --set outputs.transient=true "
+                      "--set render.split_direct_indirect=true --set camera.crop=[0,0,64,64]");
+  ASSERT_EQ(r.code, 0) << r.output;
+  // 64 x 64 x 351 float32: 5.75 MB; 64 x 64 x 2394 bins float32: 39.2 MB each.
+  EXPECT_THAT(r.output, HasSubstr("output sizes: expected_counts.npy 6 MB, transient.npy 40 MB, transient_indirect.npy 40 MB\n"));
 }
 
 TEST(AppCommands, SchemaMatchesTheDocs) {
