@@ -43,6 +43,8 @@ int main(int argc, char** argv) {
   info_cmd->add_option("--set", info_overrides, "override one scene-file key")->type_name("KEY=VALUE");
 
   CLI::App* schema_cmd = cli.add_subcommand("schema", "print the reference of every scene-file key (Markdown)");
+  bool json_schema = false;
+  schema_cmd->add_flag("--json-schema", json_schema, "print it as a JSON Schema (for editors) instead");
 
   CLI11_PARSE(cli, argc, argv);
   try {
@@ -53,7 +55,7 @@ int main(int argc, char** argv) {
     } else if (*info_cmd) {
       std::cout << spadgen::app::info(info_scene, info_overrides);
     } else if (*schema_cmd) {
-      std::cout << spadgen::scenes::schema_reference_markdown();
+      std::cout << (json_schema ? spadgen::scenes::schema_json() : spadgen::scenes::schema_reference_markdown());
     }
   } catch (const spadgen::Error& e) {
     std::fprintf(stderr, "spadgen: error: %s\n", e.what());

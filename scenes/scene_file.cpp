@@ -426,4 +426,65 @@ std::string schema_reference_markdown() {
   return o.str();
 }
 
+std::string schema_json() {
+  ojson root = {{"$schema", "https://json-schema.org/draft/2020-12/schema"},
+                {"title", "spadgen scene file"},
+                {"description", "A spadgen run: the glTF scene, camera, laser, ambient light, sensor, acquisition, "
+                                "rendering and outputs (docs/scene-file.md)"},
+                {"type", "object"},
+                {"additionalProperties", false},
+                {"properties", ojson::object()}};
+  for (const Key& k : schema()) {
+    // The sections on the way to the key, created as they first appear (in schema order).
+    ojson* node = &root;
+    size_t start = 1;
+    for (size_t slash; (slash = k.path.find('/', start)) != std::string::npos; start = slash + 1) {
+      ojson& sec = (*node)["properties"][k.path.substr(start, slash - start)];
+      if (sec.is_null()) sec = {{"type", "object"}, {"additionalProperties", false}, {"properties", ojson::object()}};
+      node = &sec;
+    }
+    const std::string name = k.path.substr(start);
+    ojson p = ojson::object();
+    const auto typed = [&](const char* type) {
+      p["type"] = k.nullable ? ojson::array({type, "null"}) : ojson(type);
+    };
+    switch (k.type) {
+      case Type::Number:
+      case Type::Integer:
+        typed(k.type == Type::Number ? "number" : "integer");
+        if (std::isfinite(k.lo)) p[k.lo_open ? "exclusiveMinimum" : "minimum"] = k.lo;
+        if (std::isfinite(k.hi)) p["maximum"] = k.hi;
+        break;
+      case Type::Bool: typed("boolean"); break;
+      case Type::String:
+      case Type::Path: typed("string"); break;
+      case Type::Enum: {
+        ojson choices = ojson::array();
+        for (const std::string& c : k.choices) choices.push_back(c);
+        if (k.nullable) choices.push_back(nullptr);
+        p["enum"] = choices;
+        break;
+      }
+      case Type::Vec3:
+        typed("array");
+        p["items"] = {{"type", "number"}};
+        p["minItems"] = 3, p["maxItems"] = 3;
+        break;
+      case Type::Rect:
+        typed("array");
+        p["prefixItems"] = ojson::array({{{"type", "integer"}, {"minimum", 0}, {"maximum", 1000000}},
+                                         {{"type", "integer"}, {"minimum", 0}, {"maximum", 1000000}},
+                                         {{"type", "integer"}, {"minimum", 1}, {"maximum", 1000000}},
+                                         {{"type", "integer"}, {"minimum", 1}, {"maximum", 1000000}}});
+        p["minItems"] = 4, p["maxItems"] = 4;
+        break;
+    }
+    p["description"] = k.doc + (k.unit.empty() ? "" : " [" + k.unit + "]");
+    if (!k.required) p["default"] = ojson::parse(k.def.dump());
+    else (*node)["required"].push_back(name);
+    (*node)["properties"][name] = p;
+  }
+  return root.dump(2) + "\n";
+}
+
 }  // namespace spadgen::scenes

@@ -30,4 +30,8 @@ ResolvedRun parse_scene_text(const std::string& text, const std::string& path,
 // The reference of every key (path, type, unit, default, range, meaning) as Markdown.
 std::string schema_reference_markdown();
 
+// The same as a JSON Schema (draft 2020-12), for editors: types, units and meanings, ranges, choices,
+// defaults, and no keys but these. Scene files may hold comments, so editors should read them as JSONC.
+std::string schema_json();
+
 }  // namespace spadgen::scenes

@@ -271,5 +271,30 @@ TEST(SceneFileReference, DocsListEveryKeyAsTheSchemaDeclaresIt) {
       << "docs/scene-file.md is out of date: regenerate its key table with `spadgen schema`";
 }
 
+// The shipped JSON Schema (for editors that do not run spadgen) is the program's, and it lists every key
+// with its type, range and choices as the schema declares them.
+TEST(SceneFileReference, JsonSchemaIsShippedAndListsEveryKey) {
+  std::ifstream in(std::string(SPADGEN_SOURCE_DIR) + "/docs/scene-file.schema.json");
+  ASSERT_TRUE(in) << "docs/scene-file.schema.json is missing";
+  std::stringstream ss;
+  ss << in.rdbuf();
+  EXPECT_EQ(ss.str(), schema_json())
+      << "docs/scene-file.schema.json is out of date: regenerate it with `spadgen schema --json-schema`";
+  const auto j = nlohmann::json::parse(schema_json());
+  EXPECT_EQ(j["required"], nlohmann::json::array({"gltf"}));
+  EXPECT_FALSE(j["additionalProperties"].get<bool>());
+  const auto& f = j["properties"]["camera"]["properties"]["f_number"];
+  EXPECT_EQ(f["type"], "number");
+  EXPECT_EQ(f["minimum"], 0.5);
+  EXPECT_EQ(f["maximum"], 64.0);
+  EXPECT_EQ(f["default"], 1.4);
+  const auto& fill = j["properties"]["sensor"]["properties"]["pixel_B"]["properties"]["fill_factor"];
+  EXPECT_EQ(fill["exclusiveMinimum"], 0.0);
+  EXPECT_EQ(j["properties"]["laser"]["properties"]["beam"]["enum"], nlohmann::json::array({"flood", "cone", "gltf_light"}));
+  EXPECT_EQ(j["properties"]["camera"]["properties"]["crop"]["type"], nlohmann::json::array({"array", "null"}));
+  EXPECT_EQ(j["properties"]["seeds"]["properties"]["noise"]["default"], nullptr);
+  EXPECT_FALSE(j["properties"]["sensor"]["properties"]["gate"]["additionalProperties"].get<bool>());
+}
+
 }  // namespace
 }  // namespace spadgen::scenes
