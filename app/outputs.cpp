@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <functional>
+#include <mutex>
 #include <numeric>
 
 #include "app/staging.h"
@@ -174,7 +176,8 @@ class Outputs::Stacks {
  public:
   Stacks(const std::vector<StackLayout>& layout, const PixelRect& img, const PixelRect& transient_crop,
          const Staging& staging, std::vector<std::string>& files)
-      : img_(img), tcrop_(transient_crop), counts_u8_(layout[kCounts].dtype == NpyWriter::Dtype::U8) {
+      : img_(img), tcrop_(transient_crop), counts_u8_(layout[kCounts].dtype == NpyWriter::Dtype::U8),
+        band_width_(size_t(img.height)), complete_(size_t(img.height), 0) {
     for (size_t k = 0; k < kStackCount; ++k) {
       if (!layout[k].written) continue;
       w_[k] = std::make_unique<NpyWriter>(staging.path(layout[k].file), layout[k].dtype, layout[k].shape);
@@ -195,11 +198,13 @@ class Outputs::Stacks {
     if (w_[kFrames]) w_[kFrames]->write_frames(r, img_.x0, img_.y0, s.frames.data());
     const int x0 = std::max(r.x0, tcrop_.x0), x1 = std::min(r.x1(), tcrop_.x1());
     const int y0 = std::max(r.y0, tcrop_.y0), y1 = std::min(r.y1(), tcrop_.y1());
-    if (t.axis.bins == 0 || x1 <= x0 || y1 <= y0) return;
-    const PixelRect part{x0, y0, x1 - x0, y1 - y0};
-    if (w_[kTransient]) w_[kTransient]->write_hwt(part, t.data_rect, tcrop_.x0, tcrop_.y0, t.transient.data());
-    if (w_[kTransientIndirect])
-      w_[kTransientIndirect]->write_hwt(part, t.data_rect, tcrop_.x0, tcrop_.y0, t.transient_indirect.data());
+    if (t.axis.bins != 0 && x1 > x0 && y1 > y0) {
+      const PixelRect part{x0, y0, x1 - x0, y1 - y0};
+      if (w_[kTransient]) w_[kTransient]->write_hwt(part, t.data_rect, tcrop_.x0, tcrop_.y0, t.transient.data());
+      if (w_[kTransientIndirect])
+        w_[kTransientIndirect]->write_hwt(part, t.data_rect, tcrop_.x0, tcrop_.y0, t.transient_indirect.data());
+    }
+    tile_done(r);
   }
 
   void commit() {
@@ -210,9 +215,36 @@ class Outputs::Stacks {
   const PixelRect& transient_crop() const { return tcrop_; }
 
  private:
+  // The stacks are mapped for writing (NpyWriter), so every page a tile touched stays in the run's
+  // resident set until released. Tiles come in bands (rows of tiles sharing y0 and height): when a band
+  // is complete, the rows of the complete bands around it leave the resident set. Only whole pages
+  // inside complete rows are released, so no page another tile still writes is touched; a page at a band
+  // boundary goes when the band beyond it completes.
+  void tile_done(const PixelRect& r) {
+    const auto row = size_t(r.y0 - img_.y0);
+    if (band_width_[row].fetch_add(r.width) + r.width != img_.width) return;
+    std::lock_guard<std::mutex> lock(release_mutex_);
+    std::fill(complete_.begin() + ptrdiff_t(row), complete_.begin() + ptrdiff_t(row) + r.height, 1);
+    size_t lo = row, hi = row + size_t(r.height);
+    while (lo > 0 && complete_[lo - 1]) --lo;
+    while (hi < complete_.size() && complete_[hi]) ++hi;
+    const int64_t a = int64_t(lo), b = int64_t(hi);
+    for (Stack k : {kExpectedCounts, kCounts})
+      if (w_[k]) w_[k]->release_rows(1, a, b);
+    if (w_[kFrames]) w_[kFrames]->release_rows(2, a, b);
+    // The transient stacks cover the transient crop: its rows inside the complete run.
+    const int64_t ta = std::max<int64_t>(a + img_.y0, tcrop_.y0) - tcrop_.y0;
+    const int64_t tb = std::min<int64_t>(b + img_.y0, tcrop_.y1()) - tcrop_.y0;
+    for (Stack k : {kTransient, kTransientIndirect})
+      if (w_[k] && tb > ta) w_[k]->release_rows(0, ta, tb);
+  }
+
   PixelRect img_, tcrop_;
   bool counts_u8_;
   std::array<std::unique_ptr<NpyWriter>, kStackCount> w_;  // null: not written
+  std::vector<std::atomic<int>> band_width_;  // [row - img.y0]: pixels written in the band starting there
+  std::vector<char> complete_;                // [row - img.y0]: the row is complete
+  std::mutex release_mutex_;
 };
 
 // The sampled gate profiles of a few pixels, for previews/gate_profiles.png.

@@ -74,7 +74,7 @@ TempFile::TempFile(const std::string& destination) : destination_(destination) {
   for (int attempt = 0; attempt < 100; ++attempt) {
     temp_path_ = prefix + "." + name + ".tmp-" + std::to_string(::getpid()) + "-" +
                  std::to_string(g_temp_counter.fetch_add(1));
-    fd_ = ::open(temp_path_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+    fd_ = ::open(temp_path_.c_str(), O_RDWR | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
     if (fd_ >= 0) return;
     // EEXIST: a stale temporary of an earlier process with our pid; take the next number.
     if (errno != EEXIST) throw_errno("cannot create a temporary file for", destination, errno);

@@ -2,7 +2,12 @@
 // Python dict literal padded with spaces and ending in '\n' so the data starts on a 64-byte boundary
 // (what NumPy itself writes, so memory maps of the data are aligned). Format 1.0 caps the header at
 // 65535 bytes, far beyond any shape we write.
+#include <fcntl.h>
+#include <sys/mman.h>
 #include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
 
 #include <algorithm>
 #include <atomic>
@@ -23,8 +28,16 @@ struct NpyWriter::Impl {
   int64_t header_bytes = 0;
   detail::TempFile file;
   std::atomic<bool> committed{false};
+  // The whole file mapped for writing (null when the mapping failed: writes then go through pwrite).
+  char* map = nullptr;
+  size_t map_bytes = 0;
 
   Impl(const std::string& p, Dtype d, std::vector<int64_t> s) : path(p), dtype(d), shape(std::move(s)), file(p) {}
+  ~Impl() { unmap(); }
+  void unmap() {
+    if (map) ::munmap(map, map_bytes);
+    map = nullptr;
+  }
 };
 
 namespace {
@@ -99,10 +112,25 @@ NpyWriter::NpyWriter(const std::string& path, Dtype dtype, std::vector<int64_t> 
   impl_->elem_bytes = eb;
   impl_->header_bytes = static_cast<int64_t>(head.size());
   detail::pwrite_all(impl_->file.fd(), head.data(), head.size(), 0, path);
-  // Pre-sizing makes the file sparse: untouched blocks cost no disk and read back as zeros, and tiles
-  // can then land anywhere in any order.
-  if (::ftruncate(impl_->file.fd(), static_cast<off_t>(file_bytes())) != 0)
-    detail::throw_errno("cannot allocate", path, errno);
+  // The file gets its full size up front, so tiles can land anywhere in any order. Its blocks are
+  // reserved (fallocate): a full disk is an error here, naming the file, and never a SIGBUS later when a
+  // write through the mapping finds no block. File systems without fallocate get a sparse file.
+  const int fd = impl_->file.fd();
+  const auto bytes = static_cast<off_t>(file_bytes());
+  if (::fallocate(fd, 0, 0, bytes) != 0) {
+    const int err = errno;
+    if (err != EOPNOTSUPP && err != ENOSYS) detail::throw_errno("cannot allocate", path, err);
+    if (::ftruncate(fd, bytes) != 0) detail::throw_errno("cannot allocate", path, errno);
+  }
+  // Tiles write short runs (a tile's row of one gate position: 128 bytes; of one binary frame: 4 bytes),
+  // one system call each through pwrite; through a shared mapping each is a memcpy into the page cache.
+  if (bytes > 0) {
+    void* m = ::mmap(nullptr, static_cast<size_t>(bytes), PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
+    if (m != MAP_FAILED) {
+      impl_->map = static_cast<char*>(m);
+      impl_->map_bytes = static_cast<size_t>(bytes);
+    }
+  }
 }
 
 NpyWriter::~NpyWriter() = default;
@@ -120,8 +148,26 @@ void NpyWriter::write(int64_t offset, const void* data, int64_t count) {
     throw Error("write outside '" + impl_->path + "': elements [" + std::to_string(offset) + ", " +
                 std::to_string(offset + count) + ") of " + std::to_string(impl_->elements));
   if (count == 0) return;
-  detail::pwrite_all(impl_->file.fd(), data, static_cast<uint64_t>(count * impl_->elem_bytes),
-                     static_cast<uint64_t>(impl_->header_bytes + offset * impl_->elem_bytes), impl_->path);
+  const int64_t at = impl_->header_bytes + offset * impl_->elem_bytes, n = count * impl_->elem_bytes;
+  if (impl_->map) std::memcpy(impl_->map + at, data, static_cast<size_t>(n));
+  else detail::pwrite_all(impl_->file.fd(), data, static_cast<uint64_t>(n), static_cast<uint64_t>(at), impl_->path);
+}
+
+void NpyWriter::release_rows(int axis, int64_t row_begin, int64_t row_end) {
+  const auto& s = impl_->shape;
+  if (!impl_->map || axis < 0 || size_t(axis) >= s.size() || row_begin >= row_end) return;
+  row_begin = std::max<int64_t>(row_begin, 0), row_end = std::min(row_end, s[size_t(axis)]);
+  int64_t outer = 1, inner = impl_->elem_bytes;
+  for (int a = 0; a < axis; ++a) outer *= s[size_t(a)];
+  for (size_t a = size_t(axis) + 1; a < s.size(); ++a) inner *= s[a];
+  const auto page = static_cast<int64_t>(::sysconf(_SC_PAGESIZE));
+  for (int64_t o = 0; o < outer; ++o) {
+    const int64_t first = impl_->header_bytes + (o * s[size_t(axis)] + row_begin) * inner;
+    const int64_t last = first + (row_end - row_begin) * inner;
+    // Whole pages inside the range only: a page it shares with rows still being written stays mapped.
+    const int64_t a = (first + page - 1) / page * page, b = last / page * page;
+    if (b > a) ::madvise(impl_->map + a, static_cast<size_t>(b - a), MADV_DONTNEED);
+  }
 }
 
 namespace {
@@ -214,6 +260,8 @@ void NpyWriter::write_frames(const PixelRect& rect, int origin_x, int origin_y, 
 
 void NpyWriter::commit() {
   if (impl_->committed.exchange(true)) throw Error("'" + impl_->path + "' was already committed");
+  // Unmapping hands the mapping's dirty pages to the page cache; commit's fsync writes them.
+  impl_->unmap();
   impl_->file.commit();
 }
 

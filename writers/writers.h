@@ -38,6 +38,11 @@ class NpyWriter {
   // only the tile at the right edge of the stack may have a width that is not a multiple of 8 (the
   // bits of its last byte beyond rect.width are written as 0).
   void write_frames(const PixelRect& rect, int origin_x, int origin_y, const void* data);
+  // A hint that rows [row_begin, row_end) along `axis` (H: 1 for (K, H, W), 2 for (K, N, H, W/8), 0 for
+  // (H, W, T)) are complete: their pages leave this process's resident set (the data stays in the page
+  // cache on its way to the file; writing there again only costs a page fault). Keeps a run's resident
+  // memory bounded by the rows in flight although the whole file is mapped for writing.
+  void release_rows(int axis, int64_t row_begin, int64_t row_end);
   // fsync, rename onto path(). Writes after commit() throw.
   void commit();
   const std::string& path() const;

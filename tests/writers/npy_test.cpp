@@ -151,6 +151,39 @@ TEST(NpyWriter, WriteKhwPlacesTilesAtTheirPixels) {
       }
 }
 
+// Rows released from the resident set (release_rows) keep their data, and rows written after a release,
+// on pages shared with released ones, land too: a (K, H, W) stack with rows of 1000 floats, so pages
+// straddle rows, released band by band in an arbitrary order and once more over everything.
+TEST(NpyWriter, ReleasedRowsKeepTheirData) {
+  TempDir dir;
+  const int W = 1000, H = 40, K = 3;
+  {
+    NpyWriter w(dir.file("released.npy"), Dtype::F32, {K, H, W});
+    for (int band : {2, 0, 3, 1}) {
+      const PixelRect t{0, band * 10, W, 10};
+      std::vector<float> data(size_t(K * t.count()));
+      for (int k = 0; k < K; ++k)
+        for (int y = t.y0; y < t.y1(); ++y)
+          for (int x = 0; x < W; ++x) data[size_t(k * t.count() + t.index(x, y))] = khw_value(k, x, y);
+      w.write_khw(t, 0, 0, data.data());
+      w.release_rows(1, t.y0, t.y1());
+    }
+    w.release_rows(1, 0, H);
+    w.release_rows(1, -5, H + 5);  // out-of-range rows are clipped
+    w.commit();
+  }
+  const std::string bytes = read_bytes(dir.file("released.npy"));
+  const size_t off = parse(bytes).data_offset;
+  ASSERT_EQ(bytes.size(), off + size_t(K * H * W) * 4);
+  for (int k = 0; k < K; ++k)
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) {
+        float v;
+        std::memcpy(&v, bytes.data() + off + 4 * ((size_t(k) * H + y) * W + x), 4);
+        ASSERT_EQ(v, khw_value(k, x, y)) << k << " " << x << " " << y;
+      }
+}
+
 TEST(NpyWriter, WriteHwtSkipsTheHaloAndKeepsTimeInnermost) {
   TempDir dir;
   const int W = 20, H = 10, T = 5;
