@@ -120,6 +120,30 @@ TEST(NpyWriter, RejectsWritesOutsideTheArrayAndAfterCommit) {
 
 float khw_value(int64_t k, int x, int y) { return float(k * 100000 + y * 1000 + x); }
 
+// A tile's values [k * t.count() + t.index(x, y)] = khw_value(k, x - ox, y - oy).
+std::vector<float> khw_tile(const PixelRect& t, int K, int ox, int oy) {
+  std::vector<float> data(size_t(K * t.count()));
+  for (int k = 0; k < K; ++k)
+    for (int y = t.y0; y < t.y1(); ++y)
+      for (int x = t.x0; x < t.x1(); ++x) data[size_t(k * t.count() + t.index(x, y))] = khw_value(k, x - ox, y - oy);
+  return data;
+}
+
+// The file holds a (K, H, W) float32 stack whose element (k, y, x), at (k * H + y) * W + x computed here
+// independently, is khw_value(k, x, y).
+void expect_khw_file(const std::string& path, int K, int H, int W) {
+  const std::string bytes = read_bytes(path);
+  const size_t off = parse(bytes).data_offset;
+  ASSERT_EQ(bytes.size(), off + size_t(K * H * W) * 4);
+  for (int k = 0; k < K; ++k)
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) {
+        float v;
+        std::memcpy(&v, bytes.data() + off + 4 * ((size_t(k) * H + y) * W + x), 4);
+        ASSERT_EQ(v, khw_value(k, x, y)) << k << " " << x << " " << y;
+      }
+}
+
 // Tiles placed by write_khw must land at (k * H + y) * W + x, computed here independently.
 TEST(NpyWriter, WriteKhwPlacesTilesAtTheirPixels) {
   TempDir dir;
@@ -131,24 +155,11 @@ TEST(NpyWriter, WriteKhwPlacesTilesAtTheirPixels) {
     for (PixelRect t : make_tiles(W, H, 8)) {
       t.x0 += ox;
       t.y0 += oy;
-      std::vector<float> data(size_t(K * t.count()));
-      for (int k = 0; k < K; ++k)
-        for (int y = t.y0; y < t.y1(); ++y)
-          for (int x = t.x0; x < t.x1(); ++x) data[size_t(k * t.count() + t.index(x, y))] = khw_value(k, x - ox, y - oy);
-      w.write_khw(t, ox, oy, data.data());
+      w.write_khw(t, ox, oy, khw_tile(t, K, ox, oy).data());
     }
     w.commit();
   }
-  const std::string bytes = read_bytes(dir.file("khw.npy"));
-  const size_t off = parse(bytes).data_offset;
-  ASSERT_EQ(bytes.size(), off + size_t(K * H * W) * 4);
-  for (int k = 0; k < K; ++k)
-    for (int y = 0; y < H; ++y)
-      for (int x = 0; x < W; ++x) {
-        float v;
-        std::memcpy(&v, bytes.data() + off + 4 * ((size_t(k) * H + y) * W + x), 4);
-        ASSERT_EQ(v, khw_value(k, x, y)) << k << " " << x << " " << y;
-      }
+  expect_khw_file(dir.file("khw.npy"), K, H, W);
 }
 
 // Rows released from the resident set (release_rows) keep their data, and rows written after a release,
@@ -161,27 +172,14 @@ TEST(NpyWriter, ReleasedRowsKeepTheirData) {
     NpyWriter w(dir.file("released.npy"), Dtype::F32, {K, H, W});
     for (int band : {2, 0, 3, 1}) {
       const PixelRect t{0, band * 10, W, 10};
-      std::vector<float> data(size_t(K * t.count()));
-      for (int k = 0; k < K; ++k)
-        for (int y = t.y0; y < t.y1(); ++y)
-          for (int x = 0; x < W; ++x) data[size_t(k * t.count() + t.index(x, y))] = khw_value(k, x, y);
-      w.write_khw(t, 0, 0, data.data());
+      w.write_khw(t, 0, 0, khw_tile(t, K, 0, 0).data());
       w.release_rows(1, t.y0, t.y1());
     }
     w.release_rows(1, 0, H);
     w.release_rows(1, -5, H + 5);  // out-of-range rows are clipped
     w.commit();
   }
-  const std::string bytes = read_bytes(dir.file("released.npy"));
-  const size_t off = parse(bytes).data_offset;
-  ASSERT_EQ(bytes.size(), off + size_t(K * H * W) * 4);
-  for (int k = 0; k < K; ++k)
-    for (int y = 0; y < H; ++y)
-      for (int x = 0; x < W; ++x) {
-        float v;
-        std::memcpy(&v, bytes.data() + off + 4 * ((size_t(k) * H + y) * W + x), 4);
-        ASSERT_EQ(v, khw_value(k, x, y)) << k << " " << x << " " << y;
-      }
+  expect_khw_file(dir.file("released.npy"), K, H, W);
 }
 
 TEST(NpyWriter, WriteHwtSkipsTheHaloAndKeepsTimeInnermost) {
