@@ -293,6 +293,8 @@ SensorTile SensorModel::process(const TransientTile& t) const {
   const size_t n = static_cast<size_t>(rect.count());
   const uint32_t N = m.frames_per_k;
   out.expected.assign(n * Ks, 0.0f);
+  const bool keep_rate = m.cfg.outputs.detection_rate;
+  if (keep_rate) out.rate.assign(n * Ks, 0.0f);
   out.counts.assign(n * Ks, 0);
   const size_t bpr = static_cast<size_t>((rect.width + 7) / 8);
   if (frames) {
@@ -328,7 +330,7 @@ SensorTile SensorModel::process(const TransientTile& t) const {
     // One row's results pixel-major ([x K + k]), written to the k-major outputs after the row by
     // transpose_rows (a gather of a vector of pixels per k) instead of K strided stores per pixel.
     const size_t rw = static_cast<size_t>(rect.width);
-    std::vector<float> row_exp(rw * Ks);
+    std::vector<float> row_exp(rw * Ks), row_rate(keep_rate ? rw * Ks : 0);
     std::vector<uint16_t> row_cnt(frames ? 0 : rw * Ks + 1);  // + 1: transpose_rows reads one beyond
     for (int y = rows.begin(); y < rows.end(); ++y) {
       for (int x = rect.x0; x < rect.x1(); ++x) {
@@ -346,6 +348,7 @@ SensorTile SensorModel::process(const TransientTile& t) const {
           crosstalk_rates(l, Ks, nbv, nnb, ty.crosstalk, ty.single_avalanche, eff.data());
           l = eff.data();
         }
+        if (keep_rate) std::transform(l, l + Ks, row_rate.data() + xi * Ks, [](double v) { return static_cast<float>(v); });
         if (!frames) {
           if (m.table) binomial_counts(l, Ks, counts_key, pixel_index(x, y), *m.table, s);
           else binomial_counts(l, Ks, counts_key, pixel_index(x, y), *m.binom, s);
@@ -365,6 +368,7 @@ SensorTile SensorModel::process(const TransientTile& t) const {
       }
       const size_t o0 = static_cast<size_t>(rect.index(rect.x0, y));
       transpose_rows(row_exp.data(), rw, Ks, out.expected.data() + o0, n);
+      if (keep_rate) transpose_rows(row_rate.data(), rw, Ks, out.rate.data() + o0, n);
       if (!frames) transpose_rows(row_cnt.data(), rw, Ks, out.counts.data() + o0, n);
     }
   });
