@@ -1,5 +1,6 @@
 // spadgen: synthetic datasets for time-gated SPAD cameras.
 //   spadgen run SCENE.json [-o DIR] [--set KEY=VALUE]... [--seed S] [--threads N]
+//   spadgen sense RUN_DIR [-o DIR] [--set KEY=VALUE]... [--noise-seed S] [--chip-seed S] [--repeats R]
 //   spadgen info SCENE.json [--set KEY=VALUE]...
 //   spadgen schema                 # the reference of every scene-file key (Markdown)
 #include <CLI/CLI.hpp>
@@ -36,6 +37,25 @@ int main(int argc, char** argv) {
   bool quiet = false;
   run_cmd->add_flag("-q,--quiet", quiet, "no progress on stderr");
 
+  spadgen::app::SenseOptions sense;
+  uint64_t noise_seed = 0, chip_seed = 0;
+  CLI::App* sense_cmd = cli.add_subcommand(
+      "sense", "re-sample the sensor from a run's saved light (outputs.light) without rendering: other sensor or acquisition "
+               "settings, another chip, other noise");
+  sense_cmd->add_option("run_dir", sense.run_dir, "folder of a run written with outputs.light=true")->required()->check(CLI::ExistingDirectory);
+  sense_cmd->add_option("-o,--out", sense.out_dir, "output folder (default: RUN_DIR-sense)");
+  sense_cmd->add_option("--set", sense.overrides, "override a sensor.*, acquisition.*, seeds.chip, seeds.noise or outputs.* key")
+      ->type_name("KEY=VALUE");
+  CLI::Option* noise_opt = sense_cmd->add_option("--noise-seed", noise_seed, "seed of the temporal noise (seeds.noise)");
+  CLI::Option* chip_opt = sense_cmd->add_option("--chip-seed", chip_seed, "seed of the chip's fixed pattern (seeds.chip)");
+  sense_cmd->add_option("--repeats", sense.repeats, "realisations of the temporal noise, noise seeds S, S + 1, ...: one folder "
+                                                    "each, OUT/repeat_000, ... (rates computed once)")
+      ->check(CLI::Range(1, 100000));
+  sense_cmd->add_option("--threads", sense.threads, "worker threads (default: all cores); outputs do not depend on it")
+      ->check(CLI::NonNegativeNumber);
+  bool sense_quiet = false;
+  sense_cmd->add_flag("-q,--quiet", sense_quiet, "no progress on stderr");
+
   std::string info_scene;
   std::vector<std::string> info_overrides;
   CLI::App* info_cmd = cli.add_subcommand("info", "print the resolved scene file, a summary of the glTF and the run's size");
@@ -52,6 +72,11 @@ int main(int argc, char** argv) {
       if (*seed_opt) run.seed = seed;
       run.progress = !quiet;
       spadgen::app::run(run);
+    } else if (*sense_cmd) {
+      if (*noise_opt) sense.noise_seed = noise_seed;
+      if (*chip_opt) sense.chip_seed = chip_seed;
+      sense.progress = !sense_quiet;
+      spadgen::app::sense(sense);
     } else if (*info_cmd) {
       std::cout << spadgen::app::info(info_scene, info_overrides);
     } else if (*schema_cmd) {

@@ -72,8 +72,8 @@ json axis_json(const TimeAxis& a) {
           {"end_ns", a.end_s() / kNs}, {"laser_period_ns", a.period_s / kNs}};
 }
 
-json metadata(const scenes::ResolvedRun& resolved, const scenes::Scene& scene, const sensor::SensorModel& sensor,
-              const Provenance& p, const TimeAxis& axis, const RunRecord& r) {
+json metadata(const scenes::ResolvedRun& resolved, const std::vector<std::string>& scene_warnings,
+              const sensor::SensorModel& sensor, const Provenance& p, const TimeAxis& axis, const RunRecord& r) {
   const RunConfig& cfg = resolved.config;
   const PixelRect& img = p.crop;
   ojson meta;
@@ -101,6 +101,15 @@ json metadata(const scenes::ResolvedRun& resolved, const scenes::Scene& scene, c
                                             "scattering vertices (docs/render.md); direct = transient - transient_indirect"
                                           : "not split (render.split_direct_indirect is false)"}};
   }
+  if (r.light_region) {
+    const PixelRect& lr = *r.light_region;
+    // The axis in seconds as the sensor used it (time_axis above is in ns, rounded by the conversion).
+    meta["light"] = {{"crop_in_sensor", {lr.x0, lr.y0, lr.width, lr.height}},
+                     {"time_axis_s", {{"start", axis.start_s}, {"bin_width", axis.bin_width_s}, {"bins", axis.bins},
+                                      {"laser_period", axis.period_s}}},
+                     {"values_bytes", r.light_values_bytes},
+                     {"layout", "docs/outputs.md, section Saved light"}};
+  }
   meta["laser_photons_per_pulse"] = {{"total_all_pixels", r.laser_total},
                                      {"outside_time_window", r.out_of_window_total},
                                      {"outside_fraction", r.laser_total > 0 ? r.out_of_window_total / r.laser_total : 0.0}};
@@ -109,9 +118,10 @@ json metadata(const scenes::ResolvedRun& resolved, const scenes::Scene& scene, c
   meta["counts_dtype"] = r.counts_u8 ? "uint8" : "uint16";
   meta["preview_profile_pixels"] = r.profile_pixels;
   meta["warnings"] = resolved.warnings;
-  for (const std::string& w : scene.warnings) meta["warnings"].push_back(w);
+  for (const std::string& w : scene_warnings) meta["warnings"].push_back(w);
   meta["resolved_scene"] = resolved.resolved;
   meta["files"] = r.files;
+  if (r.sense) meta["sense"] = ojson::parse(r.sense->dump());
   // Everything above depends only on the scene and the seed; "run" is how this run went.
   meta["run"] = {{"threads", r.threads}, {"seconds", r.seconds}, {"camera_rays", r.rays.camera_rays},
                  {"shadow_rays", r.rays.shadow_rays}};

@@ -5,6 +5,7 @@
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -44,6 +45,11 @@ struct RunRecord {
   bool counts_u8 = true;
   PixelRect transient_crop;
   std::vector<std::pair<int, int>> profile_pixels;
+  // outputs.light: the pixels it covers (sensor coordinates) and the size of its values.
+  std::optional<PixelRect> light_region;
+  int64_t light_values_bytes = 0;
+  // spadgen sense: the run folder it read and which realisation of the temporal noise this is.
+  std::optional<nlohmann::json> sense;
   // How the run went: not a function of the scene and the seed.
   int threads = 0;
   double seconds = 0.0;
@@ -51,7 +57,8 @@ struct RunRecord {
 };
 
 // The content of metadata.json.
-nlohmann::json metadata(const scenes::ResolvedRun& resolved, const scenes::Scene& scene, const sensor::SensorModel& sensor,
-                        const Provenance& p, const TimeAxis& axis, const RunRecord& r);
+// scene_warnings: what loading the glTF warned about.
+nlohmann::json metadata(const scenes::ResolvedRun& resolved, const std::vector<std::string>& scene_warnings,
+                        const sensor::SensorModel& sensor, const Provenance& p, const TimeAxis& axis, const RunRecord& r);
 
 }  // namespace spadgen::app

@@ -22,6 +22,7 @@ Staging::Staging(const fs::path& out) : out_(out) {
     dir_ = out_ / (kPrefix + std::to_string(::getpid()));
     fs::remove_all(dir_);
     fs::create_directories(dir_ / "previews");
+    fs::create_directories(dir_ / "light");
   } catch (const fs::filesystem_error& e) {
     throw Error("cannot use " + out_.string() + " as the output folder (-o): " + e.code().message() +
                 "; expected a folder that exists or can be created");
@@ -49,9 +50,11 @@ void Staging::remove_abandoned() const {
 }
 
 void Staging::publish(const std::vector<std::string>& files) {
-  fs::create_directories(out_ / "previews");
   for (const std::string& f : files)
-    if (f != "metadata.json") fs::rename(dir_ / f, out_ / f);
+    if (f != "metadata.json") {
+      fs::create_directories((out_ / f).parent_path());
+      fs::rename(dir_ / f, out_ / f);
+    }
   fs::rename(dir_ / "metadata.json", out_ / "metadata.json");
 }
 

@@ -221,6 +221,7 @@ struct OutputsConfig {
   bool ground_truth = true;             // outputs.ground_truth
   bool transient = false;               // outputs.transient
   std::optional<PixelRect> transient_crop;  // outputs.transient_crop [x0, y0, w, h] (image coordinates)
+  bool light = false;                   // outputs.light
   bool expected_counts = false;         // outputs.expected_counts
   bool detection_rate = true;           // outputs.detection_rate
   bool counts = true;                   // outputs.counts
