@@ -26,7 +26,7 @@ def test_installs_offline_with_pip(tmp_path):
     shutil.copytree(SOURCE / "python", src, ignore=shutil.ignore_patterns("build", "*.egg-info", "__pycache__"))
     target = tmp_path / "site"
     r = subprocess.run([sys.executable, "-m", "pip", "install", "--no-build-isolation", "--no-deps", "--no-index",
-                        "--disable-pip-version-check", "--target", str(target), str(src)], capture_output=True, text=True)
+                        "--disable-pip-version-check", "--no-cache-dir", "--target", str(target), str(src)], capture_output=True, text=True)
     assert r.returncode == 0, r.stdout + r.stderr
     assert (target / f"spadgen-{spadgen.__version__}.dist-info").is_dir()
     code = ("import spadgen, spadgen.exr, spadgen.camera, spadgen.estimate, spadgen.plot, spadgen.run; "
