@@ -55,11 +55,13 @@ def rising_edge_range(run, expected=False, smooth=2, min_signal_sigma=5.0):
     if run.mode != "gate_sweep":
         raise ValueError(f"{run.path}: depth from gate profiles needs a gate_sweep run, this is {run.mode}")
     stack = run.expected_counts if expected else run.counts
-    p = smooth_profiles(np.asarray(stack, np.float64), smooth)
     frames = run.frames_per_k
-    idx = half_rise_index(p, frames)
-    top, floor = p.max(axis=0), p.min(axis=0)
-    idx = np.where(top - floor >= min_signal_sigma * np.sqrt(floor + 1.0), idx, np.nan)
+    idx = np.empty((run.height, run.width))
+    for y0 in range(0, run.height, 32):  # bands of rows: a megapixel sweep in float64 would take gigabytes
+        p = smooth_profiles(np.asarray(stack[:, y0:y0 + 32], np.float64), smooth)
+        band = half_rise_index(p, frames)
+        top, floor = p.max(axis=0), p.min(axis=0)
+        idx[y0:y0 + 32] = np.where(top - floor >= min_signal_sigma * np.sqrt(floor + 1.0), band, np.nan)
     gates = run.gate_positions_ns
     tau = np.interp(idx, np.arange(len(gates)), gates, left=np.nan, right=np.nan)
     scene = run.metadata["resolved_scene"]

@@ -45,8 +45,9 @@ def plot_intensity(run, ax=None):
         img, label = run.intensity["photons"], "photons (linearised estimate)"
     else:
         img, label = run.laser["photons_per_pulse"], "laser photons per pulse at the SPAD"
-    im = ax.imshow(img, cmap="gray", interpolation="nearest")
-    ax.figure.colorbar(im, ax=ax, label=label)
+    # As previews/intensity.png: white at the 99.5th percentile, so a few bright outliers do not darken the rest.
+    im = ax.imshow(img, cmap="gray", vmin=0, vmax=max(float(np.percentile(img, 99.5)), 1e-30), interpolation="nearest")
+    ax.figure.colorbar(im, ax=ax, label=label, extend="max")
     ax.set_title("intensity")
     return ax
 
@@ -133,10 +134,15 @@ def overview(run, pixels=None):
     cols = 2 if len(panels) > 1 else 1
     rows = -(-len(panels) // cols)
     fig, axes = plt.subplots(rows, cols, figsize=(6.5 * cols, 4.2 * rows), squeeze=False)
+    estimate = None
+    if "detection" in panels:
+        from .estimate import rising_edge_range
+        estimate = rising_edge_range(run)
     for ax, name in zip(axes.flat, panels):
         {"depth": lambda: plot_depth(run, ax), "intensity": lambda: plot_intensity(run, ax),
-         "profiles": lambda: plot_gate_profiles(run, pixels, ax), "detection": lambda: plot_detection_map(run, ax=ax),
-         "error": lambda: plot_error_map(run, ax=ax)}[name]()
+         "profiles": lambda: plot_gate_profiles(run, pixels, ax),
+         "detection": lambda: plot_detection_map(run, estimate, ax=ax),
+         "error": lambda: plot_error_map(run, estimate, ax=ax)}[name]()
     for ax in list(axes.flat)[len(panels):]:
         ax.set_axis_off()
     fig.suptitle(f"{os.path.basename(os.path.abspath(run.path))}: {run.width} x {run.height}, {run.mode}, K = {run.K}")
