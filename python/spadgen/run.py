@@ -78,8 +78,8 @@ class Layers:
 
 
 class Run:
-    """A run folder. Every output is an attribute (None-free: asking for a file the run did not write raises
-    FileNotFoundError naming the scene-file key that writes it)."""
+    """A run folder. Every output is an attribute; asking for a file the run did not write raises
+    FileNotFoundError naming the scene-file key that writes it (never None)."""
 
     # The scene-file key that makes a run write an optional file, for the error message.
     _WRITTEN_BY = {"transient.npy": "outputs.transient", "transient_indirect.npy": "render.split_direct_indirect "

@@ -25,7 +25,7 @@ positions (or exposures), N the frames per k, L = ``max_layers``:
 | origin | (2,) | int64 | (x, y) of the sample's top-left pixel in its run's image |
 | run | () | int64 | index of the sample's run in ``runs`` |
 
-``fields`` chooses the first nine (default: counts, expected_counts, depth, mask, layer_count); the last four
+``fields`` chooses among the first eight (default: counts, expected_counts, depth, mask, layer_count); the last four
 come always (gate_positions_ns only for gate sweeps). Runs that share a DataLoader batch must agree on K
 (and N with frames); the constructor checks that every run has what ``fields`` asks for.
 """
