@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "core/units.h"
+#include "render/camera.h"
 
 #ifndef SPADGEN_VERSION
 #define SPADGEN_VERSION "dev"
@@ -55,6 +56,28 @@ std::string scene_hash(const RunConfig& c) {
 
 json crop_json(const PixelRect& r) { return json::array({r.x0, r.y0, r.width, r.height}); }
 
+// The images' pinhole camera in the convention of OpenCV and most vision code: camera frame x right,
+// y down, z forward (the viewing direction); pixel (u, v) of an image centred at the integer point (u, v).
+// render::Camera centres sensor pixel x at x + 0.5 with the optical axis through the sensor's centre
+// (width / 2, height / 2), and an image's pixel (0, 0) is the crop's corner (x0, y0): hence c = size / 2
+// - 0.5 - crop corner. A camera-frame point (X, Y, Z) lands at u = f X / Z + cx, v = f Y / Z + cy.
+json camera_json(const render::Camera& cam, const PixelRect& img) {
+  const double f = cam.focal_length_m() / cam.pitch_m();
+  const double cx = 0.5 * cam.width() - 0.5 - img.x0, cy = 0.5 * cam.height() - 0.5 - img.y0;
+  // + 0.0 turns the -0.0 of a negated zero into 0.0, which reads better in the JSON.
+  const glm::dvec3 x = cam.right() + 0.0, up = cam.up() + 0.0, y = -cam.up() + 0.0, z = cam.forward() + 0.0;
+  const glm::dvec3 t = cam.position() + 0.0;
+  return {{"convention", "OpenCV: camera x right, y down, z forward; pixel (u, v) centred at integers (u, v), "
+                         "(0, 0) the image's top-left pixel (the crop's corner); world: the glTF scene's frame"},
+          {"intrinsics", {{f, 0.0, cx}, {0.0, f, cy}, {0.0, 0.0, 1.0}}},
+          {"camera_to_world", {{x.x, y.x, z.x, t.x}, {x.y, y.y, z.y, t.y}, {x.z, y.z, z.z, t.z}, {0.0, 0.0, 0.0, 1.0}}},
+          {"focal_length_m", cam.focal_length_m()},
+          {"pixel_pitch_m", cam.pitch_m()},
+          {"position_m", {t.x, t.y, t.z}},
+          {"forward", {z.x, z.y, z.z}},
+          {"up", {up.x, up.y, up.z}}};
+}
+
 }  // namespace
 
 Provenance provenance(const RunConfig& c, const PixelRect& img) { return {c.scene_file, scene_hash(c), c.seed, img}; }
@@ -90,6 +113,7 @@ json metadata(const scenes::ResolvedRun& resolved, const std::vector<std::string
   meta["image"] = {{"width", img.width}, {"height", img.height}, {"crop_in_sensor", {img.x0, img.y0, img.width, img.height}},
                    {"sensor_width", cfg.camera.width_px}, {"sensor_height", cfg.camera.height_px},
                    {"pixel_order", "row 0 is the top of the image; (K, H, W) stacks index [k, y, x]"}};
+  meta["camera"] = camera_json(render::Camera(cfg.camera, scene), img);
   meta["photons_per_pulse_emitted"] = r.photons_per_pulse_emitted;
   meta["time_axis"] = ojson::parse(axis_json(axis).dump());
   if (cfg.outputs.transient) {
