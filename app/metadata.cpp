@@ -56,6 +56,8 @@ std::string scene_hash(const RunConfig& c) {
 
 json crop_json(const PixelRect& r) { return json::array({r.x0, r.y0, r.width, r.height}); }
 
+}  // namespace
+
 // The images' pinhole camera in the convention of OpenCV and most vision code: camera frame x right,
 // y down, z forward (the viewing direction); pixel (u, v) of an image centred at the integer point (u, v).
 // render::Camera centres sensor pixel x at x + 0.5 with the optical axis through the sensor's centre
@@ -78,7 +80,6 @@ json camera_json(const render::Camera& cam, const PixelRect& img) {
           {"up", {up.x, up.y, up.z}}};
 }
 
-}  // namespace
 
 Provenance provenance(const RunConfig& c, const PixelRect& img) { return {c.scene_file, scene_hash(c), c.seed, img}; }
 
@@ -113,7 +114,7 @@ json metadata(const scenes::ResolvedRun& resolved, const std::vector<std::string
   meta["image"] = {{"width", img.width}, {"height", img.height}, {"crop_in_sensor", {img.x0, img.y0, img.width, img.height}},
                    {"sensor_width", cfg.camera.width_px}, {"sensor_height", cfg.camera.height_px},
                    {"pixel_order", "row 0 is the top of the image; (K, H, W) stacks index [k, y, x]"}};
-  meta["camera"] = camera_json(render::Camera(cfg.camera, scene), img);
+  meta["camera"] = r.camera;
   meta["photons_per_pulse_emitted"] = r.photons_per_pulse_emitted;
   meta["time_axis"] = ojson::parse(axis_json(axis).dump());
   if (cfg.outputs.transient) {

@@ -13,6 +13,7 @@
 #include "core/config.h"
 #include "core/tile.h"
 #include "core/time_axis.h"
+#include "render/camera.h"
 #include "render/renderer.h"
 #include "scenes/scene.h"
 #include "scenes/scene_file.h"
@@ -36,9 +37,14 @@ void stamp(writers::ExrImage& e, const Provenance& p);
 // The time axis as laser.exr (attribute spadgen_time_axis) and metadata.json record it.
 nlohmann::json axis_json(const TimeAxis& a);
 
+// The images' pinhole camera for metadata.json: OpenCV intrinsics (with the crop's offset), the
+// camera-to-world pose, focal length and pitch.
+nlohmann::json camera_json(const render::Camera& cam, const PixelRect& img);
+
 // What metadata.json reports that only the finished run knows.
 struct RunRecord {
   std::vector<std::string> files;  // as published, metadata.json last
+  nlohmann::json camera;           // camera_json()
   double photons_per_pulse_emitted = 0.0;
   double laser_total = 0.0, out_of_window_total = 0.0;  // photons per pulse, summed over the image
   int ground_truth_layers = 0;

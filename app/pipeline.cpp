@@ -18,6 +18,7 @@
 #include "app/staging.h"
 #include "core/error.h"
 #include "core/units.h"
+#include "render/camera.h"
 #include "render/renderer.h"
 #include "scenes/scene.h"
 #include "scenes/scene_file.h"
@@ -117,6 +118,7 @@ RunResult run(const RunOptions& options) {
   outputs.report(record);
   record.files = files;
   record.photons_per_pulse_emitted = renderer.photons_per_pulse();
+  record.camera = camera_json(render::Camera(cfg.camera, scene), img);
   record.threads = options.threads;
   record.seconds = render_seconds;
   for (const auto& st : tile_stats) record.rays.camera_rays += st.camera_rays, record.rays.shadow_rays += st.shadow_rays;

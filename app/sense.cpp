@@ -222,6 +222,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     outputs[r]->report(record);
     record.files = files;
     record.photons_per_pulse_emitted = meta.at("photons_per_pulse_emitted").get<double>();
+    record.camera = meta.at("camera");
     record.ground_truth_layers = meta.at("ground_truth_layers").get<int>();
     if (meta.contains("transient")) record.transient_crop = rect_of(meta.at("transient").at("crop_in_sensor"));
     record.light_region = region;

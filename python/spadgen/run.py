@@ -85,6 +85,7 @@ class Run:
     _WRITTEN_BY = {"transient.npy": "outputs.transient", "transient_indirect.npy": "render.split_direct_indirect "
                    "with outputs.transient", "frames.npy": "outputs.frames", "ground_truth.exr": "outputs.ground_truth",
                    "expected_counts.npy": "outputs.expected_counts", "counts.npy": "outputs.counts",
+                   "detection_rate.npy": "outputs.detection_rate",
                    "intensity.exr": "acquisition.mode = intensity"}
 
     def __init__(self, path):
@@ -177,7 +178,7 @@ class Run:
 
     def _require(self, name):
         if name not in self.files:
-            why = self._WRITTEN_BY.get(name)
+            why = self._WRITTEN_BY.get(name, "outputs.light" if name.startswith("light/") else None)
             raise FileNotFoundError(f"{self.path}: this run did not write {name}" + (f" (written with {why})" if why else "")
                                     + f"; it wrote {', '.join(self.files)}")
         return os.path.join(self.path, name)
@@ -205,9 +206,21 @@ class Run:
         return self.array(name)
 
     @property
+    def detection_rate(self):
+        """(K, H, W) float32 lambda: mean avalanches per binary frame, noise-free (detection_rate.npy). Unlike
+        expected counts it never saturates: expected counts = N (1 - exp(-lambda))."""
+        return self.array("detection_rate.npy")
+
+    @property
     def expected_counts(self):
-        """(K, H, W) float32 noise-free expected counts."""
-        return self.array("expected_counts.npy")
+        """(K, H, W) float32 noise-free expected counts N (1 - exp(-lambda)): expected_counts.npy when the run
+        wrote it (outputs.expected_counts), else computed from detection_rate.npy (in memory, once)."""
+        if "expected_counts.npy" in self.files or "detection_rate.npy" not in self.files:
+            return self.array("expected_counts.npy")
+        if "expected_counts (from detection_rate.npy)" not in self._cache:
+            lam = np.asarray(self.detection_rate, np.float64)
+            self._cache["expected_counts (from detection_rate.npy)"] = (self.frames_per_k * -np.expm1(-lam)).astype(np.float32)
+        return self._cache["expected_counts (from detection_rate.npy)"]
 
     @property
     def counts(self):

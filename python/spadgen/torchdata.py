@@ -13,7 +13,8 @@ positions (or exposures), N the frames per k, L = ``max_layers``:
 | key | shape | dtype | what |
 |---|---|---|---|
 | counts | (K, H, W) | float32 | sampled counts (integers, exact in float32) |
-| expected_counts | (K, H, W) | float32 | noise-free expected counts |
+| expected_counts | (K, H, W) | float32 | noise-free expected counts N (1 - exp(-lambda)) (from detection_rate.npy when the run did not write expected_counts.npy) |
+| detection_rate | (K, H, W) | float32 | noise-free lambda, mean avalanches per binary frame (never saturates) |
 | depth | (1, H, W) | float32 | ground-truth range (m) of the nearest surface, 0 where there is none |
 | mask | (1, H, W) | bool | the pixel's ray hits a surface |
 | layer_count | (H, W) | int64 | surfaces along the pixel's ray |
@@ -25,7 +26,7 @@ positions (or exposures), N the frames per k, L = ``max_layers``:
 | origin | (2,) | int64 | (x, y) of the sample's top-left pixel in its run's image |
 | run | () | int64 | index of the sample's run in ``runs`` |
 
-``fields`` chooses among the first eight (default: counts, expected_counts, depth, mask, layer_count); the last four
+``fields`` chooses among the first nine (default: counts, expected_counts, depth, mask, layer_count); the last four
 come always (gate_positions_ns only for gate sweeps). Runs that share a DataLoader batch must agree on K
 (and N with frames); the constructor checks that every run has what ``fields`` asks for.
 """
@@ -42,9 +43,11 @@ from .run import open_run, unpack_frames
 
 __all__ = ["RunDataset", "FIELDS", "DEFAULT_FIELDS"]
 
-FIELDS = ("counts", "expected_counts", "depth", "mask", "layer_count", "layer_depth", "layer_mask", "frames")
+FIELDS = ("counts", "expected_counts", "detection_rate", "depth", "mask", "layer_count", "layer_depth", "layer_mask", "frames")
 DEFAULT_FIELDS = ("counts", "expected_counts", "depth", "mask", "layer_count")
-_NEEDS = {"counts": "counts.npy", "expected_counts": "expected_counts.npy", "frames": "frames.npy",
+# The file each field reads; a tuple: any one of them.
+_NEEDS = {"counts": "counts.npy", "expected_counts": ("expected_counts.npy", "detection_rate.npy"),
+          "detection_rate": "detection_rate.npy", "frames": "frames.npy",
           "depth": "ground_truth.exr", "mask": "ground_truth.exr", "layer_count": "ground_truth.exr",
           "layer_depth": "ground_truth.exr", "layer_mask": "ground_truth.exr"}
 
@@ -64,8 +67,9 @@ class RunDataset(torch.utils.data.Dataset):
         runs_ = [self._run(i) for i in range(len(self.paths))]
         for r in runs_:
             for f in self.fields:
-                if not r.has(_NEEDS[f]):
-                    raise ValueError(f"{r.path}: field '{f}' needs {_NEEDS[f]}, which this run did not write")
+                need = _NEEDS[f] if isinstance(_NEEDS[f], tuple) else (_NEEDS[f],)
+                if not any(r.has(n) for n in need):
+                    raise ValueError(f"{r.path}: field '{f}' needs {' or '.join(need)}, which this run did not write")
         ks = {r.K for r in runs_}
         if len(ks) > 1:
             raise ValueError(f"the runs have different K ({sorted(ks)}): their samples cannot share a batch")
@@ -110,7 +114,14 @@ class RunDataset(torch.utils.data.Dataset):
         if "counts" in self.fields:
             out["counts"] = torch.from_numpy(np.asarray(run.counts[:, ys, xs], np.float32))
         if "expected_counts" in self.fields:
-            out["expected_counts"] = torch.from_numpy(np.array(run.expected_counts[:, ys, xs], np.float32))
+            if run.has("expected_counts.npy"):
+                e = np.array(run.expected_counts[:, ys, xs], np.float32)
+            else:  # only the sample's part of lambda, not the whole run's expectation
+                lam = np.asarray(run.detection_rate[:, ys, xs], np.float64)
+                e = (run.frames_per_k * -np.expm1(-lam)).astype(np.float32)
+            out["expected_counts"] = torch.from_numpy(e)
+        if "detection_rate" in self.fields:
+            out["detection_rate"] = torch.from_numpy(np.array(run.detection_rate[:, ys, xs], np.float32))
         if {"depth", "mask"} & set(self.fields):
             d = np.asarray(run.depth()[ys, xs], np.float32)
             hit = np.isfinite(d)

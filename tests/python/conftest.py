@@ -18,7 +18,7 @@ RUNS = {
     "sweep": ("multi_object.json", ["camera.crop=[490,236,347,10]", "render.samples_per_pixel=2",
                                     "acquisition.gate_sweep.step_ps=360", "outputs.transient=true",
                                     "outputs.transient_crop=[500,238,24,6]", "render.split_direct_indirect=true",
-                                    "outputs.frames=true"]),
+                                    "outputs.frames=true", "outputs.expected_counts=true", "outputs.light=true"]),
     # Dual-exposure intensity images of the test chart (uint16 counts, intensity.exr), with frames.
     "intensity": ("test_chart_dual.json", ["camera.crop=[400,300,40,24]", "outputs.frames=true"]),
     # The camera moved, turned and rolled in front of the multi-object scene: the plate's front face

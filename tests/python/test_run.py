@@ -26,11 +26,12 @@ def test_metadata_and_shapes(sweep, intensity):
         K, H, W = run.K, run.height, run.width
         assert (W, H) == tuple(run.crop[2:])
         assert run.expected_counts.shape == (K, H, W) and run.expected_counts.dtype == np.dtype("<f4")
+        assert run.detection_rate.shape == (K, H, W) and run.detection_rate.dtype == np.dtype("<f4")
         assert run.counts.shape == (K, H, W)
         assert run.counts.dtype == np.dtype(run.metadata["counts_dtype"])
         assert run.frames_packed.shape == (K, run.frames_per_k, H, (W + 7) // 8)
         assert run.frames_packed.dtype == np.uint8
-        for stack in (run.expected_counts, run.counts, run.frames_packed):
+        for stack in (run.detection_rate, run.counts, run.frames_packed):
             assert isinstance(stack, np.memmap) and not stack.flags.writeable  # lazily loaded
         assert run.ground_truth["range"].shape == (H, W)
         assert run["counts"] is run.counts and run["laser.exr"] is run.laser
@@ -134,6 +135,36 @@ def test_ground_truth_layers_and_labels(sweep):
     assert (sweep.depth("z") <= sweep.depth() + 1e-7)[hit].all()
     with pytest.raises(ValueError):
         sweep.depth("distance")
+
+
+def test_expected_counts_from_the_detection_rate(sweep, intensity):
+    # The sweep wrote both files: the expectation computed from lambda is the C++ side's to float32 rounding.
+    assert sweep.has("expected_counts.npy") and not intensity.has("expected_counts.npy")
+    N = sweep.frames_per_k
+    derived = (N * -np.expm1(-np.asarray(sweep.detection_rate, np.float64)))
+    np.testing.assert_allclose(derived, sweep.expected_counts, rtol=2e-6, atol=2e-6 * N)
+    # Without the file, Run computes it; summed over the frames, counts scatter around it.
+    e = intensity.expected_counts
+    assert e.dtype == np.float32 and e.shape == intensity.counts.shape
+    assert np.all((e >= 0) & (e <= intensity.frames_per_k))
+    assert abs(float(intensity.counts.astype(np.float64).sum() - e.astype(np.float64).sum())) < 5 * np.sqrt(e.sum() + 1)
+
+
+def test_saved_light_rebuilds_the_transient(sweep):
+    # light/ keeps each pixel's transient over its lit bins (docs/outputs.md, section Saved light); inside
+    # the transient crop it rebuilds transient.npy exactly.
+    lx0, ly0, lw, lh = sweep.metadata["light"]["crop_in_sensor"]
+    r, o, v = sweep["light/ranges"], sweep["light/offsets"], sweep["light/values"]
+    assert r.shape == (lh, lw, 2) and o.shape == (lh * lw + 1,) and o[-1] == v.size
+    tx0, ty0, tw, th = sweep.metadata["transient"]["crop_in_sensor"]
+    T = sweep.transient.shape[2]
+    for y in range(th):
+        for x in range(tw):
+            ly, lx = ty0 + y - ly0, tx0 + x - lx0
+            i = ly * lw + lx
+            g = np.zeros(T, np.float32)
+            g[r[ly, lx, 0]:r[ly, lx, 1]] = v[o[i]:o[i + 1]]
+            np.testing.assert_array_equal(g, sweep.transient[y, x])
 
 
 def test_gate_profile(sweep):

@@ -22,6 +22,7 @@ def sweep(sweep_run):
 def expected_layout(K, N, L, H, W):
     """The module docstring's table."""
     return {"counts": ((K, H, W), torch.float32), "expected_counts": ((K, H, W), torch.float32),
+            "detection_rate": ((K, H, W), torch.float32),
             "depth": ((1, H, W), torch.float32), "mask": ((1, H, W), torch.bool), "layer_count": ((H, W), torch.int64),
             "layer_depth": ((L, H, W), torch.float32), "layer_mask": ((L, H, W), torch.bool),
             "frames": ((K, N, H, W), torch.uint8), "gate_positions_ns": ((K,), torch.float32),
@@ -38,6 +39,7 @@ def test_whole_image_sample_has_the_documented_layout_and_values(sweep_run, swee
         assert tuple(s[key].shape) == shape and s[key].dtype == dtype, key
     np.testing.assert_array_equal(s["counts"].numpy(), sweep.counts)
     np.testing.assert_array_equal(s["expected_counts"].numpy(), sweep.expected_counts)
+    np.testing.assert_array_equal(s["detection_rate"].numpy(), sweep.detection_rate)
     hit = sweep.hit()
     np.testing.assert_array_equal(s["mask"][0].numpy(), hit)
     np.testing.assert_array_equal(s["depth"][0].numpy(), np.where(hit, sweep.depth(), 0))
