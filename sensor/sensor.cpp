@@ -291,17 +291,27 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
   });
 
   // Everything above is the same for every realisation of the temporal noise; what follows draws it.
+  // So are the rates with crosstalk and the expectations: the first realisation computes them, the others
+  // reuse them (without frames, the counts' rates are kept per pixel for that).
   std::vector<SensorTile> outs;
   outs.reserve(noise_seeds.size());
+  const bool keep_eff = noise_seeds.size() > 1 && !frames;
+  std::vector<double> eff_tile(keep_eff ? static_cast<size_t>(rect.count()) * Ks : 0);
   for (const uint64_t seed : noise_seeds) {
+    const bool first = outs.empty();
     SensorTile out;
     out.rect = rect;
     out.K = K;
     const size_t n = static_cast<size_t>(rect.count());
     const uint32_t N = m.frames_per_k;
-    out.expected.assign(n * Ks, 0.0f);
     const bool keep_rate = m.cfg.outputs.detection_rate;
-    if (keep_rate) out.rate.assign(n * Ks, 0.0f);
+    if (first) {
+      out.expected.assign(n * Ks, 0.0f);
+      if (keep_rate) out.rate.assign(n * Ks, 0.0f);
+    } else {
+      out.expected = outs.front().expected;
+      out.rate = outs.front().rate;
+    }
     out.counts.assign(n * Ks, 0);
     const size_t bpr = static_cast<size_t>((rect.width + 7) / 8);
     if (frames) {
@@ -330,7 +340,7 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
     // firing this pixel with probability xt), its expected counts N p and, without frames, the counts.
     const Rng counts_base = streams::counts(seed, 0, 0);
     const uint32_t counts_key[2] = {counts_base.key().v[0], counts_base.key().v[1]};
-    tbb::parallel_for(tbb::blocked_range<int>(rect.y0, rect.y1()), [&](const tbb::blocked_range<int>& rows) {
+    if (first || !frames) tbb::parallel_for(tbb::blocked_range<int>(rect.y0, rect.y1()), [&](const tbb::blocked_range<int>& rows) {
       KernelScratch s;
       s.reserve(Ks);
       std::vector<double> eff(Ks), pe(Ks), qe(Ks);
@@ -343,6 +353,14 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
         for (int x = rect.x0; x < rect.x1(); ++x) {
           const auto ri = static_cast<size_t>(region.index(x, y));
           const auto xi = static_cast<size_t>(x - rect.x0);
+          double* cached = keep_eff ? eff_tile.data() + static_cast<size_t>(rect.index(x, y)) * Ks : nullptr;
+          if (!first) {  // another realisation of the counts: only the draws are new
+            if (m.table) binomial_counts(cached, Ks, counts_key, pixel_index(x, y), *m.table, s);
+            else binomial_counts(cached, Ks, counts_key, pixel_index(x, y), *m.binom, s);
+            std::transform(s.x.begin(), s.x.begin() + static_cast<ptrdiff_t>(Ks), row_cnt.data() + xi * Ks,
+                           [](auto v) { return static_cast<uint16_t>(v); });
+            continue;
+          }
           float* ex = row_exp.data() + xi * Ks;
           const TypeInfo& ty = m.types[params[ri].type];
           int nb[4];
@@ -356,6 +374,7 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
             l = eff.data();
           }
           if (keep_rate) std::transform(l, l + Ks, row_rate.data() + xi * Ks, [](double v) { return static_cast<float>(v); });
+          if (cached) std::copy(l, l + Ks, cached);
           if (!frames) {
             if (m.table) binomial_counts(l, Ks, counts_key, pixel_index(x, y), *m.table, s);
             else binomial_counts(l, Ks, counts_key, pixel_index(x, y), *m.binom, s);
@@ -374,8 +393,8 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
           }
         }
         const size_t o0 = static_cast<size_t>(rect.index(rect.x0, y));
-        transpose_rows(row_exp.data(), rw, Ks, out.expected.data() + o0, n);
-        if (keep_rate) transpose_rows(row_rate.data(), rw, Ks, out.rate.data() + o0, n);
+        if (first) transpose_rows(row_exp.data(), rw, Ks, out.expected.data() + o0, n);
+        if (first && keep_rate) transpose_rows(row_rate.data(), rw, Ks, out.rate.data() + o0, n);
         if (!frames) transpose_rows(row_cnt.data(), rw, Ks, out.counts.data() + o0, n);
       }
     });
