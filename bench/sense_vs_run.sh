@@ -1,0 +1,48 @@
+#!/usr/bin/env bash
+# Render once, sample many: the wall time of `spadgen sense` (the sensor stage alone, from a run's saved
+# light) against `spadgen run` (render + sensor) on the same scene, alternated in one session, and the cost
+# of extra noise realisations (--repeats). Prints one line per measurement and the ratios.
+#
+#   bench/sense_vs_run.sh [SPADGEN] [WORK_DIR] [PASSES] [-- EXTRA --set ARGUMENTS]
+#
+# Default: build/app/spadgen, a temporary folder, 2 passes, the multi-object scene at 1024 x 1000 (the full
+# chip), 16 spp. Each pass: run (with outputs.light), sense, sense --repeats 2; then the same with the
+# counts only (outputs.detection_rate=false), which separates the sensor's computation from writing the
+# 1.4 GB float32 detection rates.
+set -euo pipefail
+bin=$(realpath "${1:-build/app/spadgen}")
+work=${2:-$(mktemp -d)}
+passes=${3:-2}
+shift $(( $# < 3 ? $# : 3 )) || true
+[ "${1:-}" = "--" ] && shift
+extra=("$@")
+cd "$(dirname "$0")/.."
+scene=scenes/paper/multi_object.json
+base=(--set camera.height_px=1000 "${extra[@]}")
+
+seconds() {  # wall seconds of a command
+  local t0 t1
+  t0=$(date +%s.%N)
+  "$@" > /dev/null 2>&1
+  t1=$(date +%s.%N)
+  awk -v a="$t0" -v b="$t1" 'BEGIN { printf "%.2f", b - a }'
+}
+
+declare -A sum
+for ((p = 1; p <= passes; ++p)); do
+  rm -rf "$work/run" "$work/s1" "$work/s2" "$work/c1" "$work/c2"
+  r=$(seconds "$bin" run "$scene" -q "${base[@]}" --set outputs.light=true -o "$work/run")
+  s1=$(seconds "$bin" sense "$work/run" -q -o "$work/s1")
+  s2=$(seconds "$bin" sense "$work/run" -q --repeats 2 -o "$work/s2")
+  c1=$(seconds "$bin" sense "$work/run" -q --set outputs.detection_rate=false -o "$work/c1")
+  c2=$(seconds "$bin" sense "$work/run" -q --set outputs.detection_rate=false --repeats 2 -o "$work/c2")
+  echo "pass $p: run $r s | sense $s1 s, --repeats 2 $s2 s | counts only: sense $c1 s, --repeats 2 $c2 s"
+  for k in r s1 s2 c1 c2; do sum[$k]=$(awk -v a="${sum[$k]:-0}" -v b="${!k}" 'BEGIN { print a + b }'); done
+done
+ratio() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%.3f", a / b }'; }
+diff() { awk -v a="$1" -v b="$2" 'BEGIN { print a - b }'; }
+echo "sense / run: $(ratio "${sum[s1]}" "${sum[r]}")"
+echo "extra realisation / sense: $(ratio "$(diff "${sum[s2]}" "${sum[s1]}")" "${sum[s1]}")"
+echo "counts only: sense / run: $(ratio "${sum[c1]}" "${sum[r]}"), extra realisation / sense: $(ratio "$(diff "${sum[c2]}" "${sum[c1]}")" "${sum[c1]}")"
+du -sh "$work/run/light" | awk '{print "saved light: " $1}'
+rm -rf "$work/run" "$work/s1" "$work/s2" "$work/c1" "$work/c2"
