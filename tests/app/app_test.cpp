@@ -251,7 +251,7 @@ TEST_F(App, BadInputStopsBeforeWritingAndKeepsEarlierFiles) {
   fs::create_directories(dir_ / "out");
   std::ofstream(dir_ / "out/metadata.json") << "{\"earlier\": true}";
   const Result r = sh("run " + kScenes + "multi_object.json --set camera.f_numbr=2 -o " + (dir_ / "out").string());
-  EXPECT_EQ(r.code, 2);
+  EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("multi_object.json: --set camera.f_numbr: /camera/f_numbr: unknown key; did you mean /camera/f_number?"));
   EXPECT_EQ(slurp(dir_ / "out/metadata.json"), "{\"earlier\": true}");
   size_t entries = 0;
@@ -282,7 +282,7 @@ TEST_F(App, AnOutputPathThatCannotBeAFolderIsReported) {
   std::ofstream(dir_ / "a_file") << "x";
   for (const fs::path& out : {dir_ / "a_file", dir_ / "a_file" / "sub"}) {
     const Result r = sh("run " + kSmall + " -o " + out.string());
-    EXPECT_EQ(r.code, 2) << r.output;
+    EXPECT_EQ(r.code, 1) << r.output;
     EXPECT_THAT(r.output, HasSubstr("cannot use " + out.string() + " as the output folder (-o)"));
   }
   EXPECT_EQ(slurp(dir_ / "a_file"), "x");
@@ -292,7 +292,7 @@ TEST_F(App, ABrokenGltfIsReportedWithItsElement) {
   std::ofstream(dir_ / "broken.gltf") << R"({"asset": {"version": "2.0"}, "buffers": [{"uri": "missing.bin", "byteLength": 12}]})";
   std::ofstream(dir_ / "scene.json") << R"({"gltf": "broken.gltf"})";
   const Result r = sh("run " + (dir_ / "scene.json").string() + " -o " + (dir_ / "out").string());
-  EXPECT_EQ(r.code, 2);
+  EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("broken.gltf"));
   EXPECT_FALSE(fs::exists(dir_ / "out/metadata.json"));
 }
