@@ -15,7 +15,7 @@ struct RunOptions {
   std::vector<std::string> overrides;   // "key.path=value"
   std::optional<uint64_t> seed;         // replaces the scene file's seed
   int threads = 0;                      // 0 = all cores
-  bool progress = true;                 // progress on stderr
+  bool progress = true;                 // progress and the summary lines on stderr (-q: off)
 };
 
 struct RunResult {
