@@ -270,7 +270,9 @@ TEST_F(App, AnInterruptedRunLeavesNothingBehind) {
   fs::create_directories(dir_ / "out/.spadgen-staging-999999999");
   std::ofstream(dir_ / "out/.spadgen-staging-999999999/counts.npy") << "partial";
   // The full default run takes far longer than 3 s; SIGINT arrives while tiles are rendering.
-  const Result r = shell("timeout -s INT 3 " + kBin + " run " + kScenes + "multi_object.json -o " + (dir_ / "out").string());
+  const Result r = shell("timeout --preserve-status -s INT 3 " + kBin + " run " + kScenes + "multi_object.json -o " +
+                         (dir_ / "out").string());
+  EXPECT_EQ(r.code, 2) << r.output;  // the documented exit code of an interrupted run
   EXPECT_THAT(r.output, HasSubstr("interrupted by a signal"));
   EXPECT_EQ(slurp(dir_ / "out/metadata.json"), "{\"earlier\": true}");
   size_t entries = 0;
