@@ -14,6 +14,7 @@
 #include "app/outputs.h"
 #include "app/preflight.h"
 #include "app/progress.h"
+#include "app/resources.h"
 #include "app/staging.h"
 #include "core/error.h"
 #include "core/units.h"
@@ -82,6 +83,7 @@ RunResult run(const RunOptions& options) {
   check_derived(cfg, sensor, img, axis);
 
   const fs::path out = options.out_dir.empty() ? fs::path("out") / fs::path(options.scene_file).stem() : fs::path(options.out_dir);
+  check_resources(cfg, sensor, img, axis, options.threads, out);
   Staging staging(out);
   Outputs outputs(cfg, sensor, img, axis, staging);
 
@@ -154,6 +156,7 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
     sep = ", ";
   }
   o << "\n";
+  o << "resources: " << resource_summary(plan_resources(c, sensor, img, axis, 0, ""));
   for (const std::string& w : r.warnings) o << "warning: " << w << "\n";
   return o.str();
 }

@@ -7,7 +7,7 @@
 #include "core/error.h"
 #include "core/units.h"
 #include "scenes/scene_file.h"
-#include "sensor/model/gate.h"
+#include "sensor/acquisition/acquisition.h"
 #include "sensor/model/pixel_maps.h"
 
 namespace spadgen::app {
@@ -45,8 +45,9 @@ void check_derived(const RunConfig& c, const sensor::SensorModel& sensor, const 
   // A gate cannot be open for a negative time: with a length spread large against the gate length, the
   // Gaussian model of the spread stops being physical. Refused rather than clamped, so that the maps in
   // sensor_maps.exr are the ones the counts were computed with.
-  if (c.acquisition.mode != AcquisitionMode::GateSweep || !c.sensor.skew) return;
-  const double nominal = sensor.gate().nominal_length_s;
+  // (In the intensity mode the gate does not shape the counts, but sensor_maps.exr still shows it.)
+  if (!c.sensor.skew) return;
+  const double nominal = sensor.acquisition().nominal_gate_length_s();
   // The generated deviations stay within a few FWHM of the nominal length (5 sigma of the random part plus
   // the smooth pattern's extremes): far inside that, no pixel needs looking at. Measured maps
   // (sensor.gate.maps_exr) are checked for positive lengths where they are read.

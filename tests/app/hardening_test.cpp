@@ -177,6 +177,35 @@ TEST_F(Hardening, DepositFoldsAnyArrivalTimeInBoundedSteps) {
 }
 
 // ------------------------------------------------------------------------------------------------
+// The resource plan: a run the machine cannot hold is refused at once, with the figures and the keys
+
+TEST_F(Hardening, ARunTheMachineCannotHoldIsRefusedWithItsFigures) {
+  // 10^7 paths per pixel are traced ahead for 16 pixels at a time: about 36 GB per thread, 2.3 TB for 64.
+  const Outcome memory = spadgen("run " + kTiny + " -q --threads 64 --set render.samples_per_pixel=10000000 -o " +
+                                 (dir_ / "out").string());
+  expect_exit(memory, 1, "memory");
+  EXPECT_THAT(memory.err, HasSubstr("the run needs about 2"));
+  EXPECT_THAT(memory.err, HasSubstr("GB of memory"));
+  EXPECT_THAT(memory.err, HasSubstr("camera paths (render.samples_per_pixel = 10000000 traced ahead for 16 pixels, 64 threads)"));
+  EXPECT_LT(memory.seconds, 10.0);
+  // 100,000 gate positions of 1024 x 16384 pixels: 6.7 TB of expected counts (the images stay in memory).
+  const Outcome disk = spadgen("run " + kFlat + " -q --set camera.height_px=16384 --set outputs.ground_truth=false "
+                               "--set outputs.expected_counts=true --set acquisition.gate_sweep.start_ns=0 "
+                               "--set acquisition.gate_sweep.stop_ns=99.999 --set acquisition.gate_sweep.step_ps=1 -o " +
+                               (dir_ / "out").string());
+  expect_exit(disk, 1, "disk");
+  EXPECT_THAT(disk.err, HasSubstr("the run writes about"));
+  EXPECT_THAT(disk.err, HasSubstr("into " + (dir_ / "out").string()));
+  EXPECT_THAT(disk.err, HasSubstr("expected_counts.npy 6710.9 GB"));
+  EXPECT_FALSE(fs::exists(dir_ / "out"));
+  // info shows the plan.
+  const Outcome info = spadgen("info " + kFlat);
+  expect_exit(info, 0, "info");
+  EXPECT_THAT(info.output, HasSubstr("\nresources: memory: about "));
+  EXPECT_THAT(info.output, HasSubstr("disk: expected_counts.npy"));
+}
+
+// ------------------------------------------------------------------------------------------------
 // Signals inside long loops
 
 TEST_F(Hardening, ASignalStopsARunInsideItsOnlyTileAndExitsWithCode2) {
