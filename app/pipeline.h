@@ -1,6 +1,7 @@
 // The run: scene file -> Scene -> renderer -> sensor -> writers, streamed tile by tile. Everything is
-// written into a staging folder inside the output folder and moved into place only when the whole run
-// has succeeded, so a failed or interrupted run never leaves a half-written or wrong file behind.
+// written into a staging folder beside the output folder, which replaces the output folder as one unit
+// only when the whole run has succeeded (app/staging.h): a failed or interrupted run never leaves a
+// half-written, mixed or wrong file behind.
 #pragma once
 #include <cstdint>
 #include <optional>
