@@ -42,7 +42,7 @@ int run_command(const std::function<void()>& command) {
   }
 }
 
-uint64_t parse_seed(const std::string& text) {
+uint64_t parse_seed(const std::string& text, const std::string& option) {
   constexpr uint64_t kMax = uint64_t{1} << 53;  // seeds are exact in metadata.json's JSON numbers
   uint64_t v = 0;
   bool ok = !text.empty() && text.size() <= 16;
@@ -51,7 +51,7 @@ uint64_t parse_seed(const std::string& text) {
     if (ok) v = v * 10 + static_cast<uint64_t>(c - '0');
   }
   if (!ok || v > kMax)
-    throw Error("--seed: found '" + text + "', expected an integer in [0, " + std::to_string(kMax) + "]");
+    throw Error(option + ": found '" + text + "', expected an integer in [0, " + std::to_string(kMax) + "]");
   return v;
 }
 

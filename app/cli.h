@@ -22,7 +22,8 @@ std::optional<int> parse_command_line(CLI::App& cli, int argc, char** argv);
 // Runs a command and returns its exit code, printing what went wrong on stderr.
 int run_command(const std::function<void()>& command);
 
-// `--seed S`: an integer in [0, 2^53] written as digits; throws spadgen::Error naming --seed otherwise.
-uint64_t parse_seed(const std::string& text);
+// `--seed S` (or --noise-seed, --chip-seed: `option`): an integer in [0, 2^53] written as digits; throws
+// spadgen::Error naming the option otherwise (CLI11 read "-1" as 18446744073709551615).
+uint64_t parse_seed(const std::string& text, const std::string& option = "--seed");
 
 }  // namespace spadgen::app

@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "core/units.h"
+#include "render/camera.h"
 
 #ifndef SPADGEN_VERSION
 #define SPADGEN_VERSION "dev"
@@ -57,6 +58,29 @@ json crop_json(const PixelRect& r) { return json::array({r.x0, r.y0, r.width, r.
 
 }  // namespace
 
+// The images' pinhole camera in the convention of OpenCV and most vision code: camera frame x right,
+// y down, z forward (the viewing direction); pixel (u, v) of an image centred at the integer point (u, v).
+// render::Camera centres sensor pixel x at x + 0.5 with the optical axis through the sensor's centre
+// (width / 2, height / 2), and an image's pixel (0, 0) is the crop's corner (x0, y0): hence c = size / 2
+// - 0.5 - crop corner. A camera-frame point (X, Y, Z) lands at u = f X / Z + cx, v = f Y / Z + cy.
+json camera_json(const render::Camera& cam, const PixelRect& img) {
+  const double f = cam.focal_length_m() / cam.pitch_m();
+  const double cx = 0.5 * cam.width() - 0.5 - img.x0, cy = 0.5 * cam.height() - 0.5 - img.y0;
+  // + 0.0 turns the -0.0 of a negated zero into 0.0, which reads better in the JSON.
+  const glm::dvec3 x = cam.right() + 0.0, up = cam.up() + 0.0, y = -cam.up() + 0.0, z = cam.forward() + 0.0;
+  const glm::dvec3 t = cam.position() + 0.0;
+  return {{"convention", "OpenCV: camera x right, y down, z forward; pixel (u, v) centred at integers (u, v), "
+                         "(0, 0) the image's top-left pixel (the crop's corner); world: the glTF scene's frame"},
+          {"intrinsics", {{f, 0.0, cx}, {0.0, f, cy}, {0.0, 0.0, 1.0}}},
+          {"camera_to_world", {{x.x, y.x, z.x, t.x}, {x.y, y.y, z.y, t.y}, {x.z, y.z, z.z, t.z}, {0.0, 0.0, 0.0, 1.0}}},
+          {"focal_length_m", cam.focal_length_m()},
+          {"pixel_pitch_m", cam.pitch_m()},
+          {"position_m", {t.x, t.y, t.z}},
+          {"forward", {z.x, z.y, z.z}},
+          {"up", {up.x, up.y, up.z}}};
+}
+
+
 Provenance provenance(const RunConfig& c, const PixelRect& img) { return {c.scene_file, scene_hash(c), c.seed, img}; }
 
 void stamp(writers::ExrImage& e, const Provenance& p) {
@@ -72,8 +96,8 @@ json axis_json(const TimeAxis& a) {
           {"end_ns", a.end_s() / kNs}, {"laser_period_ns", a.period_s / kNs}};
 }
 
-json metadata(const scenes::ResolvedRun& resolved, const scenes::Scene& scene, const sensor::SensorModel& sensor,
-              const Provenance& p, const TimeAxis& axis, const RunRecord& r) {
+json metadata(const scenes::ResolvedRun& resolved, const std::vector<std::string>& scene_warnings,
+              const sensor::SensorModel& sensor, const Provenance& p, const TimeAxis& axis, const RunRecord& r) {
   const RunConfig& cfg = resolved.config;
   const PixelRect& img = p.crop;
   ojson meta;
@@ -90,6 +114,7 @@ json metadata(const scenes::ResolvedRun& resolved, const scenes::Scene& scene, c
   meta["image"] = {{"width", img.width}, {"height", img.height}, {"crop_in_sensor", {img.x0, img.y0, img.width, img.height}},
                    {"sensor_width", cfg.camera.width_px}, {"sensor_height", cfg.camera.height_px},
                    {"pixel_order", "row 0 is the top of the image; (K, H, W) stacks index [k, y, x]"}};
+  meta["camera"] = r.camera;
   meta["photons_per_pulse_emitted"] = r.photons_per_pulse_emitted;
   meta["time_axis"] = ojson::parse(axis_json(axis).dump());
   if (cfg.outputs.transient) {
@@ -101,6 +126,15 @@ json metadata(const scenes::ResolvedRun& resolved, const scenes::Scene& scene, c
                                             "scattering vertices (docs/render.md); direct = transient - transient_indirect"
                                           : "not split (render.split_direct_indirect is false)"}};
   }
+  if (r.light_region) {
+    const PixelRect& lr = *r.light_region;
+    // The axis in seconds as the sensor used it (time_axis above is in ns, rounded by the conversion).
+    meta["light"] = {{"crop_in_sensor", {lr.x0, lr.y0, lr.width, lr.height}},
+                     {"time_axis_s", {{"start", axis.start_s}, {"bin_width", axis.bin_width_s}, {"bins", axis.bins},
+                                      {"laser_period", axis.period_s}}},
+                     {"values_bytes", r.light_values_bytes},
+                     {"layout", "docs/outputs.md, section Saved light"}};
+  }
   meta["laser_photons_per_pulse"] = {{"total_all_pixels", r.laser_total},
                                      {"outside_time_window", r.out_of_window_total},
                                      {"outside_fraction", r.laser_total > 0 ? r.out_of_window_total / r.laser_total : 0.0}};
@@ -109,9 +143,10 @@ json metadata(const scenes::ResolvedRun& resolved, const scenes::Scene& scene, c
   meta["counts_dtype"] = r.counts_u8 ? "uint8" : "uint16";
   meta["preview_profile_pixels"] = r.profile_pixels;
   meta["warnings"] = resolved.warnings;
-  for (const std::string& w : scene.warnings) meta["warnings"].push_back(w);
+  for (const std::string& w : scene_warnings) meta["warnings"].push_back(w);
   meta["resolved_scene"] = resolved.resolved;
   meta["files"] = r.files;
+  if (r.sense) meta["sense"] = ojson::parse(r.sense->dump());
   // Everything above depends only on the scene and the seed; "run" is how this run went.
   meta["run"] = {{"threads", r.threads}, {"seconds", r.seconds}, {"camera_rays", r.rays.camera_rays},
                  {"shadow_rays", r.rays.shadow_rays}};

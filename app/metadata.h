@@ -5,6 +5,7 @@
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -12,6 +13,7 @@
 #include "core/config.h"
 #include "core/tile.h"
 #include "core/time_axis.h"
+#include "render/camera.h"
 #include "render/renderer.h"
 #include "scenes/scene.h"
 #include "scenes/scene_file.h"
@@ -35,15 +37,25 @@ void stamp(writers::ExrImage& e, const Provenance& p);
 // The time axis as laser.exr (attribute spadgen_time_axis) and metadata.json record it.
 nlohmann::json axis_json(const TimeAxis& a);
 
+// The images' pinhole camera for metadata.json: OpenCV intrinsics (with the crop's offset), the
+// camera-to-world pose, focal length and pitch.
+nlohmann::json camera_json(const render::Camera& cam, const PixelRect& img);
+
 // What metadata.json reports that only the finished run knows.
 struct RunRecord {
   std::vector<std::string> files;  // as published, metadata.json last
+  nlohmann::json camera;           // camera_json()
   double photons_per_pulse_emitted = 0.0;
   double laser_total = 0.0, out_of_window_total = 0.0;  // photons per pulse, summed over the image
   int ground_truth_layers = 0;
   bool counts_u8 = true;
   PixelRect transient_crop;
   std::vector<std::pair<int, int>> profile_pixels;
+  // outputs.light: the pixels it covers (sensor coordinates) and the size of its values.
+  std::optional<PixelRect> light_region;
+  int64_t light_values_bytes = 0;
+  // spadgen sense: the run folder it read and which realisation of the temporal noise this is.
+  std::optional<nlohmann::json> sense;
   // How the run went: not a function of the scene and the seed.
   int threads = 0;
   double seconds = 0.0;
@@ -51,7 +63,8 @@ struct RunRecord {
 };
 
 // The content of metadata.json.
-nlohmann::json metadata(const scenes::ResolvedRun& resolved, const scenes::Scene& scene, const sensor::SensorModel& sensor,
-                        const Provenance& p, const TimeAxis& axis, const RunRecord& r);
+// scene_warnings: what loading the glTF warned about.
+nlohmann::json metadata(const scenes::ResolvedRun& resolved, const std::vector<std::string>& scene_warnings,
+                        const sensor::SensorModel& sensor, const Provenance& p, const TimeAxis& axis, const RunRecord& r);
 
 }  // namespace spadgen::app

@@ -48,6 +48,7 @@ std::vector<StackLayout> stack_layout(const RunConfig& c, const sensor::SensorMo
   const std::vector<int64_t> khw{K, img.height, img.width}, hwt{tc.height, tc.width, axis.bins};
   std::vector<StackLayout> s(kStackCount);
   s[kExpectedCounts] = {"expected_counts.npy", NpyWriter::Dtype::F32, khw, c.outputs.expected_counts};
+  s[kDetectionRate] = {"detection_rate.npy", NpyWriter::Dtype::F32, khw, c.outputs.detection_rate};
   // Counts never exceed the frames summed into them.
   s[kCounts] = {"counts.npy", frames <= 255 ? NpyWriter::Dtype::U8 : NpyWriter::Dtype::U16, khw, c.outputs.counts};
   // One bit per frame and pixel, 8 pixels of a row to a byte.
@@ -188,6 +189,7 @@ class Outputs::Stacks {
   void put(const TransientTile& t, const SensorTile& s) {
     const PixelRect& r = t.rect;
     if (w_[kExpectedCounts]) w_[kExpectedCounts]->write_khw(r, img_.x0, img_.y0, s.expected.data());
+    if (w_[kDetectionRate]) w_[kDetectionRate]->write_khw(r, img_.x0, img_.y0, s.rate.data());
     if (w_[kCounts] && counts_u8_) {
       std::vector<uint8_t> c8(s.counts.size());
       std::transform(s.counts.begin(), s.counts.end(), c8.begin(), [](uint16_t v) { return uint8_t(v); });
@@ -229,7 +231,7 @@ class Outputs::Stacks {
     while (lo > 0 && complete_[lo - 1]) --lo;
     while (hi < complete_.size() && complete_[hi]) ++hi;
     const int64_t a = int64_t(lo), b = int64_t(hi);
-    for (Stack k : {kExpectedCounts, kCounts})
+    for (Stack k : {kExpectedCounts, kDetectionRate, kCounts})
       if (w_[k]) w_[k]->release_rows(1, a, b);
     if (w_[kFrames]) w_[kFrames]->release_rows(2, a, b);
     // The transient stacks cover the transient crop: its rows inside the complete run.

@@ -21,7 +21,7 @@ namespace spadgen::app {
 class Staging;
 
 // The NumPy stacks, in the order metadata.json lists them; they index stack_layout().
-enum Stack : size_t { kExpectedCounts, kCounts, kFrames, kTransient, kTransientIndirect, kStackCount };
+enum Stack : size_t { kExpectedCounts, kDetectionRate, kCounts, kFrames, kTransient, kTransientIndirect, kStackCount };
 
 struct StackLayout {
   std::string file;

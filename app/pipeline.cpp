@@ -12,12 +12,15 @@
 #include "app/interrupt.h"
 #include "app/metadata.h"
 #include "app/outputs.h"
+#include "app/light.h"
 #include "app/preflight.h"
 #include "app/progress.h"
 #include "app/resources.h"
+#include "app/run_parts.h"
 #include "app/staging.h"
 #include "core/error.h"
 #include "core/units.h"
+#include "render/camera.h"
 #include "render/renderer.h"
 #include "scenes/scene.h"
 #include "scenes/scene_file.h"
@@ -28,26 +31,6 @@ namespace spadgen::app {
 namespace fs = std::filesystem;
 
 namespace {
-
-// The pixel rectangle the run renders (the crop, or the whole sensor).
-PixelRect image_rect(const RunConfig& c) {
-  return c.camera.crop.value_or(PixelRect{0, 0, c.camera.width_px, c.camera.height_px});
-}
-
-// The arrival times the renderer covers. The sensor knows the window its acquisition needs and the laser
-// period that folds late arrivals; a window set in the scene file replaces only the start and the length.
-TimeAxis time_axis(const RunConfig& c, const sensor::SensorModel& s) {
-  TimeAxis a = s.required_window(c.render.time_bin_s);
-  if (c.render.window_start_s) {
-    a.start_s = *c.render.window_start_s;
-    a.bins = static_cast<int64_t>(std::ceil((*c.render.window_stop_s - a.start_s) / a.bin_width_s - 1e-9));
-    return a;
-  }
-  if (a.bins == 0 && c.outputs.transient)
-    throw Error(c.scene_file + ": /outputs/transient: intensity mode needs no time bins; set /render/window_start_ns "
-                "and /render/window_stop_ns to say which window transient.npy should cover");
-  return a;
-}
 
 std::string seconds_text(double s) {
   char buf[32];
@@ -86,6 +69,9 @@ RunResult run(const RunOptions& options) {
   check_resources(cfg, sensor, img, axis, options.threads, out);
   Staging staging(out);
   Outputs outputs(cfg, sensor, img, axis, staging);
+  const PixelRect light_rect = light_region(img, cfg.camera.width_px, cfg.camera.height_px);
+  std::unique_ptr<LightWriter> light;
+  if (cfg.outputs.light) light = std::make_unique<LightWriter>(light_rect, axis, staging);
 
   // Tiles are laid over the output image; the renderer and the sensor see full-sensor coordinates.
   std::vector<PixelRect> tiles = make_tiles(img.width, img.height, cfg.render.tile_size);
@@ -105,23 +91,43 @@ RunResult run(const RunOptions& options) {
     const TransientTile t = renderer.transient(rect, data_rect, axis, &tile_stats[ti]);
     const SensorTile s = sensor.process(t);
     outputs.put(t, sensor.maps(rect), s);
+    if (light) light->put(t);
     progress.tick();
   });
+  // The saved light also covers the ring of pixels around a crop, which crosstalk reads: rendered here
+  // when the tiles' halo did not already cover it (a pixel's light does not depend on its tile).
+  if (light && sensor.halo() == 0) {
+    const std::vector<PixelRect> ring = {
+        {light_rect.x0, light_rect.y0, light_rect.width, img.y0 - light_rect.y0},
+        {light_rect.x0, img.y1(), light_rect.width, light_rect.y1() - img.y1()},
+        {light_rect.x0, img.y0, img.x0 - light_rect.x0, img.height},
+        {img.x1(), img.y0, light_rect.x1() - img.x1(), img.height}};
+    tbb::parallel_for(size_t(0), ring.size(), [&](size_t i) {
+      if (ring[i].count() > 0) light->put(renderer.transient(ring[i], ring[i], axis, nullptr));
+    });
+  }
   const double render_seconds = progress.seconds();
 
   const Provenance prov = provenance(cfg, img);
   outputs.write(prov);
   std::vector<std::string> files = outputs.files();
-  files.push_back("metadata.json");
-
   RunRecord record;
+  if (light) {
+    light->write(files);
+    record.light_region = light_rect;
+    record.light_values_bytes = light->values_bytes();
+  }
+  files.push_back("metadata.json");
+  order_files(files);
+
   outputs.report(record);
   record.files = files;
   record.photons_per_pulse_emitted = renderer.photons_per_pulse();
+  record.camera = camera_json(render::Camera(cfg.camera, scene), img);
   record.threads = options.threads;
   record.seconds = render_seconds;
   for (const auto& st : tile_stats) record.rays.camera_rays += st.camera_rays, record.rays.shadow_rays += st.shadow_rays;
-  writers::write_json(staging.path("metadata.json"), metadata(resolved, scene, sensor, prov, axis, record));
+  writers::write_json(staging.path("metadata.json"), metadata(resolved, scene.warnings, sensor, prov, axis, record));
 
   InterruptGuard::check();
   outputs.commit();

@@ -27,6 +27,22 @@ struct RunResult {
 // Runs the whole pipeline; throws spadgen::Error with a message for the user on bad input.
 RunResult run(const RunOptions& options);
 
+struct SenseOptions {
+  std::string run_dir;                  // a run folder written with outputs.light
+  std::string out_dir;                  // "" = <run_dir>-sense
+  std::vector<std::string> overrides;   // "key.path=value": sensor.*, acquisition.*, seeds.chip, seeds.noise, outputs.*
+  std::optional<uint64_t> noise_seed;   // replaces seeds.noise
+  std::optional<uint64_t> chip_seed;    // replaces seeds.chip
+  int repeats = 1;                      // realisations of the temporal noise: noise seeds S, S + 1, ...
+  int threads = 0;
+  bool progress = true;
+};
+
+// `spadgen sense`: the sensor stage alone, from the light a run saved (light/). With the run's settings
+// and seeds it writes the same files as the run, bit for bit. With repeats > 1, realisation r (noise
+// seed S + r) goes to <out_dir>/repeat_<r>. Returns the folders written.
+std::vector<RunResult> sense(const SenseOptions& options);
+
 // `spadgen info`: the resolved scene file, a summary of the glTF and what a run would produce.
 std::string info(const std::string& scene_file, const std::vector<std::string>& overrides);
 

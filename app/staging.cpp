@@ -94,6 +94,7 @@ Staging::Staging(const fs::path& out, Hook hook) : hook_(std::move(hook)) {
     dir_ = parent_ / ("." + name_ + ".spadgen-staging-" + pid_text());
     fs::remove_all(dir_);
     fs::create_directories(dir_ / "previews");
+    fs::create_directories(dir_ / "light");
   } catch (const fs::filesystem_error& e) {
     unlock();
     throw cannot(e.code().message() + " (" + e.path1().string() + ")");
@@ -222,8 +223,10 @@ void Staging::check_owned() const {
 void Staging::publish(const std::vector<std::string>& files) {
   for (const std::string& f : files)
     if (!fs::is_regular_file(dir_ / f)) throw std::logic_error("publish: " + f + " was not written to the staging folder");
-  ::rmdir((dir_ / "previews").c_str());  // when no preview was written (fails, as it should, otherwise)
-  sync_dir(dir_ / "previews");
+  // Subfolders nothing was written into (no previews, no light/) do not go out; rmdir fails, as it should,
+  // on the others, which are made durable.
+  for (const auto& e : fs::directory_iterator(dir_))
+    if (e.is_directory() && ::rmdir(e.path().c_str()) != 0) sync_dir(e.path());
   sync_dir(dir_);
   const auto fail = [&](const std::string& what, int err) {
     return Error("cannot publish the run into " + out_.string() + ": " + what + ": " + std::strerror(err) +

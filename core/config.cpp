@@ -10,6 +10,7 @@ SensorStageConfig sensor_stage(const RunConfig& c) {
   s.sensor = c.sensor;
   s.acquisition = c.acquisition;
   s.outputs.frames = c.outputs.frames;
+  s.outputs.detection_rate = c.outputs.detection_rate;
   s.chip_seed = c.chip_seed();
   s.noise_seed = c.noise_seed();
   return s;

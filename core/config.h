@@ -221,7 +221,9 @@ struct OutputsConfig {
   bool ground_truth = true;             // outputs.ground_truth
   bool transient = false;               // outputs.transient
   std::optional<PixelRect> transient_crop;  // outputs.transient_crop [x0, y0, w, h] (image coordinates)
-  bool expected_counts = true;          // outputs.expected_counts
+  bool light = false;                   // outputs.light
+  bool expected_counts = false;         // outputs.expected_counts
+  bool detection_rate = true;           // outputs.detection_rate
   bool counts = true;                   // outputs.counts
   bool frames = false;                  // outputs.frames
   bool previews = true;                 // outputs.previews
@@ -282,6 +284,7 @@ struct SensorStageConfig {
   AcquisitionConfig acquisition;
   struct Outputs {
     bool frames = OutputsConfig{}.frames;  // sample binary frames (else counts directly)
+    bool detection_rate = OutputsConfig{}.detection_rate;  // keep lambda per image (SensorTile::rate)
   } outputs;
   uint64_t chip_seed = RunConfig{}.seed;   // the chip's fixed pattern (RunConfig::chip_seed())
   uint64_t noise_seed = RunConfig{}.seed;  // temporal noise (RunConfig::noise_seed())

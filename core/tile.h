@@ -101,6 +101,9 @@ struct SensorTile {
   int K = 0;
   // [k * rect.count() + rect.index(x, y)]
   std::vector<float> expected;     // noise-free expected counts N * p
+  // noise-free detection rate lambda: mean avalanches per binary frame, crosstalk included, so that
+  // p = 1 - exp(-lambda) and expected = N p; empty unless the sensor was asked for it
+  std::vector<float> rate;
   std::vector<uint16_t> counts;    // sampled counts
   // optional binary frames, [((k * N + n) * rect.height + row) * bytes_per_row + byte], bits packed
   // along x least significant bit first, bytes_per_row = ceil(rect.width / 8)

@@ -287,7 +287,9 @@ std::vector<Key> build() {
   k.push_back(boolean("/outputs/ground_truth", FIELD(outputs.ground_truth), "write ground_truth.exr"));
   k.push_back(boolean("/outputs/transient", FIELD(outputs.transient), "write transient.npy (H, W, T) float32 photons per pulse per bin"));
   k.push_back(rect("/outputs/transient_crop", FIELD(outputs.transient_crop), "[x0, y0, width, height] (sensor pixels) of transient.npy; null = the whole image"));
-  k.push_back(boolean("/outputs/expected_counts", FIELD(outputs.expected_counts), "write expected_counts.npy (noise-free)"));
+  k.push_back(boolean("/outputs/light", FIELD(outputs.light), "write light/: each pixel's transient over its lit bins and its totals, compactly, so that `spadgen sense` can re-sample the sensor without rendering"));
+  k.push_back(boolean("/outputs/expected_counts", FIELD(outputs.expected_counts), "write expected_counts.npy: N p = N (1 - exp(-lambda)) as float32 (noise-free; saturates where p rounds to 1, unlike detection_rate.npy)"));
+  k.push_back(boolean("/outputs/detection_rate", FIELD(outputs.detection_rate), "write detection_rate.npy: lambda, the mean avalanches per binary frame (noise-free, lossless: expected counts = N (1 - exp(-lambda)))"));
   k.push_back(boolean("/outputs/counts", FIELD(outputs.counts), "write counts.npy (sampled)"));
   k.push_back(boolean("/outputs/frames", FIELD(outputs.frames), "write frames.npy (binary frames, bit-packed); large"));
   k.push_back(boolean("/outputs/previews", FIELD(outputs.previews), "write previews/*.png"));

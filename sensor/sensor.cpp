@@ -220,6 +220,10 @@ std::vector<double> SensorModel::pixel_lambda(int x, int y, const float* g, cons
 }
 
 SensorTile SensorModel::process(const TransientTile& t) const {
+  return std::move(process(t, {impl_->cfg.noise_seed}).front());
+}
+
+std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::vector<uint64_t>& noise_seeds) const {
   const Impl& m = *impl_;
   const int W = m.cfg.camera.width_px, H = m.cfg.camera.height_px;
   const PixelRect& rect = t.rect;
@@ -248,7 +252,6 @@ SensorTile SensorModel::process(const TransientTile& t) const {
   const size_t Ks = static_cast<size_t>(K);
   const auto setup = m.acq->setup(t.axis);
   const bool frames = m.cfg.outputs.frames;
-  const uint64_t seed = m.cfg.noise_seed;
   auto pixel_index = [W](int x, int y) { return streams::pixel_index(x, y, W); };
   // lambda of every k for the region's pixels (the tile and its halo), [region.index(x, y) * K + k]; and
   // p, q of each pixel's own avalanches where its neighbours (crosstalk of pixel B) or its frames need them.
@@ -287,139 +290,168 @@ SensorTile SensorModel::process(const TransientTile& t) const {
       }
   });
 
-  SensorTile out;
-  out.rect = rect;
-  out.K = K;
-  const size_t n = static_cast<size_t>(rect.count());
-  const uint32_t N = m.frames_per_k;
-  out.expected.assign(n * Ks, 0.0f);
-  out.counts.assign(n * Ks, 0);
-  const size_t bpr = static_cast<size_t>((rect.width + 7) / 8);
-  if (frames) {
-    out.frames_per_k = static_cast<int>(N);
-    out.frames.assign(Ks * N * static_cast<size_t>(rect.height) * bpr, 0);
-  }
-  const size_t wpp = (N + 63) / 64;
-
-  // For pixel (x, y): the neighbours that can fire it (same section, inside the image).
-  auto neighbours = [&](int x, int y, int* list) {
-    int c = 0;
-    const int sec = m.maps->section_of_row(y);
-    for (int d = 0; d < 4; ++d) {
-      const int nx = x + kNbDx[d], ny = y + kNbDy[d];
-      if (nx < 0 || ny < 0 || nx >= W || ny >= H || m.maps->section_of_row(ny) != sec) continue;
-      list[c++] = d;
+  // Everything above is the same for every realisation of the temporal noise; what follows draws it.
+  // So are the rates with crosstalk and the expectations: the first realisation computes them, the others
+  // reuse them (without frames, the counts' rates are kept per pixel for that).
+  std::vector<SensorTile> outs;
+  outs.reserve(noise_seeds.size());
+  const bool keep_eff = noise_seeds.size() > 1 && !frames;
+  std::vector<double> eff_tile(keep_eff ? static_cast<size_t>(rect.count()) * Ks : 0);
+  for (const uint64_t seed : noise_seeds) {
+    const bool first = outs.empty();
+    SensorTile out;
+    out.rect = rect;
+    out.K = K;
+    const size_t n = static_cast<size_t>(rect.count());
+    const uint32_t N = m.frames_per_k;
+    const bool keep_rate = m.cfg.outputs.detection_rate;
+    if (first) {
+      out.expected.assign(n * Ks, 0.0f);
+      if (keep_rate) out.rate.assign(n * Ks, 0.0f);
+    } else {
+      out.expected = outs.front().expected;
+      out.rate = outs.front().rate;
     }
-    return c;
-  };
-  auto nb_index = [&](int x, int y, int d) {
-    return static_cast<size_t>(region.index(x + kNbDx[d], y + kNbDy[d]));
-  };
+    out.counts.assign(n * Ks, 0);
+    const size_t bpr = static_cast<size_t>((rect.width + 7) / 8);
+    if (frames) {
+      out.frames_per_k = static_cast<int>(N);
+      out.frames.assign(Ks * N * static_cast<size_t>(rect.height) * bpr, 0);
+    }
+    const size_t wpp = (N + 63) / 64;
 
-  // Per pixel of the tile, all K at once: the rate with crosstalk (pixel A: every neighbour avalanche may
-  // fire this pixel, a thinned Poisson process; pixel B: a neighbour avalanches at most once per frame,
-  // firing this pixel with probability xt), its expected counts N p and, without frames, the counts.
-  const Rng counts_base = streams::counts(seed, 0, 0);
-  const uint32_t counts_key[2] = {counts_base.key().v[0], counts_base.key().v[1]};
-  tbb::parallel_for(tbb::blocked_range<int>(rect.y0, rect.y1()), [&](const tbb::blocked_range<int>& rows) {
-    KernelScratch s;
-    s.reserve(Ks);
-    std::vector<double> eff(Ks), pe(Ks), qe(Ks);
-    // One row's results pixel-major ([x K + k]), written to the k-major outputs after the row by
-    // transpose_rows (a gather of a vector of pixels per k) instead of K strided stores per pixel.
-    const size_t rw = static_cast<size_t>(rect.width);
-    std::vector<float> row_exp(rw * Ks);
-    std::vector<uint16_t> row_cnt(frames ? 0 : rw * Ks + 1);  // + 1: transpose_rows reads one beyond
-    for (int y = rows.begin(); y < rows.end(); ++y) {
-      for (int x = rect.x0; x < rect.x1(); ++x) {
-        const auto ri = static_cast<size_t>(region.index(x, y));
-        const auto xi = static_cast<size_t>(x - rect.x0);
-        float* ex = row_exp.data() + xi * Ks;
-        const TypeInfo& ty = m.types[params[ri].type];
-        int nb[4];
-        const int nnb = ty.crosstalk > 0.0 ? neighbours(x, y, nb) : 0;
-        const double* l = lam.get() + ri * Ks;
-        if (nnb > 0) {
-          const double* nbv[4];
-          for (int i = 0; i < nnb; ++i)
-            nbv[i] = (ty.single_avalanche ? own_p.get() : lam.get()) + nb_index(x, y, nb[i]) * Ks;
-          crosstalk_rates(l, Ks, nbv, nnb, ty.crosstalk, ty.single_avalanche, eff.data());
-          l = eff.data();
-        }
-        if (!frames) {
-          if (m.table) binomial_counts(l, Ks, counts_key, pixel_index(x, y), *m.table, s);
-          else binomial_counts(l, Ks, counts_key, pixel_index(x, y), *m.binom, s);
-          uint16_t* cn = row_cnt.data() + xi * Ks;
-          for (size_t k = 0; k < Ks; ++k) {
-            ex[k] = static_cast<float>(static_cast<double>(N) * s.p[k]);
-            cn[k] = static_cast<uint16_t>(s.x[k]);
-          }
-        } else {
-          const double* p = own_p.get() + ri * Ks;
-          if (nnb > 0) {
-            probabilities(l, Ks, pe.data(), qe.data());
-            p = pe.data();
-          }
-          for (size_t k = 0; k < Ks; ++k) ex[k] = static_cast<float>(static_cast<double>(N) * p[k]);
-        }
+    // For pixel (x, y): the neighbours that can fire it (same section, inside the image).
+    auto neighbours = [&](int x, int y, int* list) {
+      int c = 0;
+      const int sec = m.maps->section_of_row(y);
+      for (int d = 0; d < 4; ++d) {
+        const int nx = x + kNbDx[d], ny = y + kNbDy[d];
+        if (nx < 0 || ny < 0 || nx >= W || ny >= H || m.maps->section_of_row(ny) != sec) continue;
+        list[c++] = d;
       }
-      const size_t o0 = static_cast<size_t>(rect.index(rect.x0, y));
-      transpose_rows(row_exp.data(), rw, Ks, out.expected.data() + o0, n);
-      if (!frames) transpose_rows(row_cnt.data(), rw, Ks, out.counts.data() + o0, n);
-    }
-  });
+      return c;
+    };
+    auto nb_index = [&](int x, int y, int d) {
+      return static_cast<size_t>(region.index(x + kNbDx[d], y + kNbDy[d]));
+    };
 
-  if (frames) {
-    // Per gate position: every region pixel's own avalanches (its keyed stream, identical in whichever tile
-    // owns it), then crosstalk simulated from the neighbours' bits, counts as popcounts, packed frames.
-    tbb::parallel_for(tbb::blocked_range<int>(0, K, 1), [&](const tbb::blocked_range<int>& ks) {
-      std::vector<uint64_t> own(nreg * wpp), row(static_cast<size_t>(rect.width) * wpp), ids(static_cast<size_t>(region.width));
-      for (int k = ks.begin(); k < ks.end(); ++k) {
-        const auto kk = static_cast<size_t>(k);
-        for (int y = region.y0; y < region.y1(); ++y) {
-          for (int x = region.x0; x < region.x1(); ++x) ids[static_cast<size_t>(x - region.x0)] = pixel_index(x, y);
-          const auto r0 = static_cast<size_t>(region.index(region.x0, y));
-          sample_bits_batch(seed, kk, ids.data(), ids.size(), *m.binom, own_prob.get() + kk * nreg + r0, own.data() + r0 * wpp);
-        }
-        for (int y = rect.y0; y < rect.y1(); ++y) {
-          for (int x = rect.x0; x < rect.x1(); ++x) {
-            const auto ri = static_cast<size_t>(region.index(x, y));
-            const auto oi = static_cast<size_t>(rect.index(x, y));
-            const TypeInfo& ty = m.types[params[ri].type];
-            uint64_t* mine = row.data() + static_cast<size_t>(x - rect.x0) * wpp;
-            std::copy_n(own.data() + ri * wpp, wpp, mine);
-            int nb[4];
-            const int nnb = ty.crosstalk > 0.0 ? neighbours(x, y, nb) : 0;
-            if (nnb > 0) {
-              std::optional<Rng> xt;
-              const auto make_xt = [&] { return streams::crosstalk(seed, pixel_index(x, y), kk); };
-              for (int i = 0; i < nnb; ++i) {
-                const size_t ni = nb_index(x, y, nb[i]);
-                const Prob& pn = own_prob[kk * nreg + ni];  // gate-major: neighbours' values are close by
-                const double li = -pn.log_q, pi = pn.p;
-                if (!(pi > 0.0)) continue;
-                // Given that the neighbour avalanched at least once, the chance it fires this pixel: xt for
-                // pixel B; for pixel A (1 - exp(-xt lambda_i)) / p_i, so that the marginal matches the
-                // thinned Poisson process of the counts path.
-                crosstalk_into(xt, make_xt, own.data() + ni * wpp, mine, wpp, [&] {
-                  return ty.single_avalanche ? ty.crosstalk : std::min(1.0, -std::expm1(-ty.crosstalk * li) / pi);
-                });
-              }
-            }
-            uint32_t c = 0;
-            for (size_t w = 0; w < wpp; ++w) c += popcount64(mine[w]);
-            out.counts[kk * n + oi] = static_cast<uint16_t>(c);
+    // Per pixel of the tile, all K at once: the rate with crosstalk (pixel A: every neighbour avalanche may
+    // fire this pixel, a thinned Poisson process; pixel B: a neighbour avalanches at most once per frame,
+    // firing this pixel with probability xt), its expected counts N p and, without frames, the counts.
+    const Rng counts_base = streams::counts(seed, 0, 0);
+    const uint32_t counts_key[2] = {counts_base.key().v[0], counts_base.key().v[1]};
+    if (first || !frames) tbb::parallel_for(tbb::blocked_range<int>(rect.y0, rect.y1()), [&](const tbb::blocked_range<int>& rows) {
+      KernelScratch s;
+      s.reserve(Ks);
+      std::vector<double> eff(Ks), pe(Ks), qe(Ks);
+      // One row's results pixel-major ([x K + k]), written to the k-major outputs after the row by
+      // transpose_rows (a gather of a vector of pixels per k) instead of K strided stores per pixel.
+      const size_t rw = static_cast<size_t>(rect.width);
+      std::vector<float> row_exp(rw * Ks), row_rate(keep_rate ? rw * Ks : 0);
+      std::vector<uint16_t> row_cnt(frames ? 0 : rw * Ks + 1);  // + 1: transpose_rows reads one beyond
+      for (int y = rows.begin(); y < rows.end(); ++y) {
+        for (int x = rect.x0; x < rect.x1(); ++x) {
+          const auto ri = static_cast<size_t>(region.index(x, y));
+          const auto xi = static_cast<size_t>(x - rect.x0);
+          double* cached = keep_eff ? eff_tile.data() + static_cast<size_t>(rect.index(x, y)) * Ks : nullptr;
+          if (!first) {  // another realisation of the counts: only the draws are new
+            if (m.table) binomial_counts(cached, Ks, counts_key, pixel_index(x, y), *m.table, s);
+            else binomial_counts(cached, Ks, counts_key, pixel_index(x, y), *m.binom, s);
+            std::transform(s.x.begin(), s.x.begin() + static_cast<ptrdiff_t>(Ks), row_cnt.data() + xi * Ks,
+                           [](auto v) { return static_cast<uint16_t>(v); });
+            continue;
           }
-          const size_t H_t = static_cast<size_t>(rect.height);
-          uint8_t* dst = out.frames.data() + ((kk * N) * H_t + static_cast<size_t>(y - rect.y0)) * bpr;
-          pack_frames_row(row.data(), rect.width, N, wpp, dst, H_t * bpr);
+          float* ex = row_exp.data() + xi * Ks;
+          const TypeInfo& ty = m.types[params[ri].type];
+          int nb[4];
+          const int nnb = ty.crosstalk > 0.0 ? neighbours(x, y, nb) : 0;
+          const double* l = lam.get() + ri * Ks;
+          if (nnb > 0) {
+            const double* nbv[4];
+            for (int i = 0; i < nnb; ++i)
+              nbv[i] = (ty.single_avalanche ? own_p.get() : lam.get()) + nb_index(x, y, nb[i]) * Ks;
+            crosstalk_rates(l, Ks, nbv, nnb, ty.crosstalk, ty.single_avalanche, eff.data());
+            l = eff.data();
+          }
+          if (keep_rate) std::transform(l, l + Ks, row_rate.data() + xi * Ks, [](double v) { return static_cast<float>(v); });
+          if (cached) std::copy(l, l + Ks, cached);
+          if (!frames) {
+            if (m.table) binomial_counts(l, Ks, counts_key, pixel_index(x, y), *m.table, s);
+            else binomial_counts(l, Ks, counts_key, pixel_index(x, y), *m.binom, s);
+            uint16_t* cn = row_cnt.data() + xi * Ks;
+            for (size_t k = 0; k < Ks; ++k) {
+              ex[k] = static_cast<float>(static_cast<double>(N) * s.p[k]);
+              cn[k] = static_cast<uint16_t>(s.x[k]);
+            }
+          } else {
+            const double* p = own_p.get() + ri * Ks;
+            if (nnb > 0) {
+              probabilities(l, Ks, pe.data(), qe.data());
+              p = pe.data();
+            }
+            for (size_t k = 0; k < Ks; ++k) ex[k] = static_cast<float>(static_cast<double>(N) * p[k]);
+          }
         }
+        const size_t o0 = static_cast<size_t>(rect.index(rect.x0, y));
+        if (first) transpose_rows(row_exp.data(), rw, Ks, out.expected.data() + o0, n);
+        if (first && keep_rate) transpose_rows(row_rate.data(), rw, Ks, out.rate.data() + o0, n);
+        if (!frames) transpose_rows(row_cnt.data(), rw, Ks, out.counts.data() + o0, n);
       }
     });
-  }
 
-  m.acq->finish_tile(out);
-  return out;
+    if (frames) {
+      // Per gate position: every region pixel's own avalanches (its keyed stream, identical in whichever tile
+      // owns it), then crosstalk simulated from the neighbours' bits, counts as popcounts, packed frames.
+      tbb::parallel_for(tbb::blocked_range<int>(0, K, 1), [&](const tbb::blocked_range<int>& ks) {
+        std::vector<uint64_t> own(nreg * wpp), row(static_cast<size_t>(rect.width) * wpp), ids(static_cast<size_t>(region.width));
+        for (int k = ks.begin(); k < ks.end(); ++k) {
+          const auto kk = static_cast<size_t>(k);
+          for (int y = region.y0; y < region.y1(); ++y) {
+            for (int x = region.x0; x < region.x1(); ++x) ids[static_cast<size_t>(x - region.x0)] = pixel_index(x, y);
+            const auto r0 = static_cast<size_t>(region.index(region.x0, y));
+            sample_bits_batch(seed, kk, ids.data(), ids.size(), *m.binom, own_prob.get() + kk * nreg + r0, own.data() + r0 * wpp);
+          }
+          for (int y = rect.y0; y < rect.y1(); ++y) {
+            for (int x = rect.x0; x < rect.x1(); ++x) {
+              const auto ri = static_cast<size_t>(region.index(x, y));
+              const auto oi = static_cast<size_t>(rect.index(x, y));
+              const TypeInfo& ty = m.types[params[ri].type];
+              uint64_t* mine = row.data() + static_cast<size_t>(x - rect.x0) * wpp;
+              std::copy_n(own.data() + ri * wpp, wpp, mine);
+              int nb[4];
+              const int nnb = ty.crosstalk > 0.0 ? neighbours(x, y, nb) : 0;
+              if (nnb > 0) {
+                std::optional<Rng> xt;
+                const auto make_xt = [&] { return streams::crosstalk(seed, pixel_index(x, y), kk); };
+                for (int i = 0; i < nnb; ++i) {
+                  const size_t ni = nb_index(x, y, nb[i]);
+                  const Prob& pn = own_prob[kk * nreg + ni];  // gate-major: neighbours' values are close by
+                  const double li = -pn.log_q, pi = pn.p;
+                  if (!(pi > 0.0)) continue;
+                  // Given that the neighbour avalanched at least once, the chance it fires this pixel: xt for
+                  // pixel B; for pixel A (1 - exp(-xt lambda_i)) / p_i, so that the marginal matches the
+                  // thinned Poisson process of the counts path.
+                  crosstalk_into(xt, make_xt, own.data() + ni * wpp, mine, wpp, [&] {
+                    return ty.single_avalanche ? ty.crosstalk : std::min(1.0, -std::expm1(-ty.crosstalk * li) / pi);
+                  });
+                }
+              }
+              uint32_t c = 0;
+              for (size_t w = 0; w < wpp; ++w) c += popcount64(mine[w]);
+              out.counts[kk * n + oi] = static_cast<uint16_t>(c);
+            }
+            const size_t H_t = static_cast<size_t>(rect.height);
+            uint8_t* dst = out.frames.data() + ((kk * N) * H_t + static_cast<size_t>(y - rect.y0)) * bpr;
+            pack_frames_row(row.data(), rect.width, N, wpp, dst, H_t * bpr);
+          }
+        }
+      });
+    }
+
+    m.acq->finish_tile(out);
+    outs.push_back(std::move(out));
+  }
+  return outs;
 }
 
 SensorMapsTile SensorModel::maps(const PixelRect& rect) const {

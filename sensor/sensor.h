@@ -74,6 +74,9 @@ class SensorModel {
 
   // Expected and sampled counts (and frames when asked) for the pixels of t.rect.
   SensorTile process(const TransientTile& t) const;
+  // The same for several realisations of the temporal noise, one per seed (SensorStageConfig::noise_seed
+  // is ignored): the rates are computed once. Element i equals process(t) with noise_seed = noise_seeds[i].
+  std::vector<SensorTile> process(const TransientTile& t, const std::vector<uint64_t>& noise_seeds) const;
   SensorMapsTile maps(const PixelRect& rect) const;
   // What metadata.json records about the acquisition: gate positions, cycles per frame, N_sat, PDE, ...
   nlohmann::json describe() const;

@@ -12,6 +12,8 @@
 #include <algorithm>
 #include <atomic>
 #include <limits>
+#include <type_traits>
+#include <utility>
 
 #include "core/error.h"
 #include "writers/atomic_file.h"
@@ -47,6 +49,9 @@ const char* descr(NpyWriter::Dtype dtype) {
     case NpyWriter::Dtype::F32: return "<f4";
     case NpyWriter::Dtype::U8: return "|u1";
     case NpyWriter::Dtype::U16: return "<u2";
+    case NpyWriter::Dtype::I32: return "<i4";
+    case NpyWriter::Dtype::I64: return "<i8";
+    case NpyWriter::Dtype::F64: return "<f8";
   }
   return "";
 }
@@ -81,6 +86,9 @@ int64_t NpyWriter::element_bytes(Dtype dtype) {
     case Dtype::F32: return 4;
     case Dtype::U8: return 1;
     case Dtype::U16: return 2;
+    case Dtype::I32: return 4;
+    case Dtype::I64: return 8;
+    case Dtype::F64: return 8;
   }
   return 0;
 }
@@ -264,5 +272,127 @@ void NpyWriter::commit() {
   impl_->unmap();
   impl_->file.commit();
 }
+
+}  // namespace spadgen::writers
+
+namespace spadgen::writers {
+
+namespace {
+
+std::string read_error(const std::string& path, const std::string& what) {
+  return "cannot read '" + path + "' as a NumPy array: " + what;
+}
+
+// The value of `key` in the header's Python dict literal, as its raw text (a quoted string, False/True or a tuple).
+std::string dict_value(const std::string& dict, const std::string& key, const std::string& path) {
+  const size_t k = dict.find("'" + key + "'");
+  if (k == std::string::npos) throw Error(read_error(path, "the header has no '" + key + "'"));
+  size_t v = dict.find(':', k);
+  if (v == std::string::npos) throw Error(read_error(path, "malformed header"));
+  ++v;
+  while (v < dict.size() && dict[v] == ' ') ++v;
+  if (v < dict.size() && dict[v] == '(') return dict.substr(v, dict.find(')', v) - v + 1);
+  size_t e = v;
+  if (v < dict.size() && dict[v] == '\'') e = dict.find('\'', v + 1) + 1;
+  else
+    while (e < dict.size() && dict[e] != ',' && dict[e] != '}') ++e;
+  return dict.substr(v, e - v);
+}
+
+}  // namespace
+
+NpyReader::NpyReader(const std::string& path) : path_(path) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) detail::throw_errno("cannot open", path, errno);
+  struct Closer {
+    int fd;
+    ~Closer() { ::close(fd); }
+  } closer{fd};
+  const off_t size = ::lseek(fd, 0, SEEK_END);
+  if (size < 0) detail::throw_errno("cannot read", path, errno);
+  if (size < 12) throw Error(read_error(path, "too short for a .npy header"));
+  map_bytes_ = static_cast<size_t>(size);
+  void* m = ::mmap(nullptr, map_bytes_, PROT_READ, MAP_SHARED, fd, 0);
+  if (m == MAP_FAILED) detail::throw_errno("cannot map", path, errno);
+  map_ = static_cast<const char*>(m);
+  const auto* u = reinterpret_cast<const unsigned char*>(map_);
+  if (std::memcmp(map_, "\x93NUMPY", 6) != 0) throw Error(read_error(path, "no \\x93NUMPY magic"));
+  const int major = u[6];
+  int64_t header_len = 0, prefix = 0;
+  if (major == 1) header_len = u[8] | (u[9] << 8), prefix = 10;
+  else if (major == 2 || major == 3) header_len = int64_t(u[8]) | int64_t(u[9]) << 8 | int64_t(u[10]) << 16 | int64_t(u[11]) << 24, prefix = 12;
+  else throw Error(read_error(path, "format version " + std::to_string(major) + " is not 1, 2 or 3"));
+  data_offset_ = prefix + header_len;
+  if (data_offset_ > size) throw Error(read_error(path, "the header runs past the end of the file"));
+  const std::string dict(map_ + prefix, static_cast<size_t>(header_len));
+  const std::string d = dict_value(dict, "descr", path);
+  const std::pair<const char*, NpyWriter::Dtype> known[] = {
+      {"'<f4'", NpyWriter::Dtype::F32}, {"'|u1'", NpyWriter::Dtype::U8},  {"'<u2'", NpyWriter::Dtype::U16},
+      {"'<i4'", NpyWriter::Dtype::I32}, {"'<i8'", NpyWriter::Dtype::I64}, {"'<f8'", NpyWriter::Dtype::F64}};
+  bool found = false;
+  for (const auto& [text, dt] : known)
+    if (d == text) dtype_ = dt, found = true;
+  if (!found) throw Error(read_error(path, "dtype " + d + " is not one spadgen writes (<f4, <f8, |u1, <u2, <i4, <i8)"));
+  if (dict_value(dict, "fortran_order", path) != "False") throw Error(read_error(path, "Fortran order is not supported"));
+  const std::string s = dict_value(dict, "shape", path);
+  int64_t n = 1;
+  for (size_t i = 1; i + 1 < s.size();) {
+    while (i + 1 < s.size() && (s[i] == ' ' || s[i] == ',')) ++i;
+    if (i + 1 >= s.size()) break;
+    size_t used = 0;
+    const long long v = std::stoll(s.substr(i), &used);
+    if (used == 0 || v < 0) throw Error(read_error(path, "malformed shape " + s));
+    shape_.push_back(v);
+    if (v != 0 && n > std::numeric_limits<int64_t>::max() / v) throw Error(read_error(path, "shape " + s + " too large"));
+    n *= v;
+    i += used;
+  }
+  elements_ = n;
+  const int64_t eb = NpyWriter::element_bytes(dtype_);
+  if (elements_ > (size - data_offset_) / eb)
+    throw Error(read_error(path, "the file holds " + std::to_string(size - data_offset_) + " bytes of data, shape " + s +
+                                 " needs " + std::to_string(elements_ * eb)));
+}
+
+NpyReader::~NpyReader() {
+  if (map_) ::munmap(const_cast<char*>(map_), map_bytes_);
+}
+NpyReader::NpyReader(NpyReader&& o) noexcept { *this = std::move(o); }
+NpyReader& NpyReader::operator=(NpyReader&& o) noexcept {
+  if (this != &o) {
+    if (map_) ::munmap(const_cast<char*>(map_), map_bytes_);
+    path_ = std::move(o.path_), dtype_ = o.dtype_, shape_ = std::move(o.shape_), elements_ = o.elements_;
+    map_ = std::exchange(o.map_, nullptr), map_bytes_ = o.map_bytes_, data_offset_ = o.data_offset_;
+  }
+  return *this;
+}
+
+void NpyReader::expect_shape(const std::vector<int64_t>& expected, const std::string& what) const {
+  if (shape_ == expected) return;
+  const auto text = [](const std::vector<int64_t>& v) {
+    std::string t = "(";
+    for (size_t i = 0; i < v.size(); ++i) t += (i ? ", " : "") + std::to_string(v[i]);
+    return t + ")";
+  };
+  throw Error("'" + path_ + "': " + what + ": expected shape " + text(expected) + ", found " + text(shape_));
+}
+
+template <class T>
+const T* NpyReader::data() const {
+  constexpr NpyWriter::Dtype want = std::is_same_v<T, float>      ? NpyWriter::Dtype::F32
+                                    : std::is_same_v<T, double>   ? NpyWriter::Dtype::F64
+                                    : std::is_same_v<T, int32_t>  ? NpyWriter::Dtype::I32
+                                    : std::is_same_v<T, int64_t>  ? NpyWriter::Dtype::I64
+                                    : std::is_same_v<T, uint16_t> ? NpyWriter::Dtype::U16
+                                                                  : NpyWriter::Dtype::U8;
+  if (dtype_ != want) throw Error(read_error(path_, "its dtype is not the one expected here"));
+  return reinterpret_cast<const T*>(map_ + data_offset_);
+}
+template const float* NpyReader::data<float>() const;
+template const double* NpyReader::data<double>() const;
+template const int32_t* NpyReader::data<int32_t>() const;
+template const int64_t* NpyReader::data<int64_t>() const;
+template const uint8_t* NpyReader::data<uint8_t>() const;
+template const uint16_t* NpyReader::data<uint16_t>() const;
 
 }  // namespace spadgen::writers

@@ -18,7 +18,7 @@ namespace spadgen::writers {
 // from any thread (pwrite), so tiles stream straight to disk and memory stays bounded.
 class NpyWriter {
  public:
-  enum class Dtype { F32, U8, U16 };
+  enum class Dtype { F32, U8, U16, I32, I64, F64 };
   NpyWriter(const std::string& path, Dtype dtype, std::vector<int64_t> shape);
   ~NpyWriter();
   NpyWriter(const NpyWriter&) = delete;
@@ -58,6 +58,37 @@ class NpyWriter {
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
+};
+
+// A .npy file (format 1.0 or 2.0, C order, little-endian or byte-sized dtype) mapped read-only: nothing is
+// read until it is indexed. Throws spadgen::Error naming the file when it is not such a file, or, from
+// data<T>(), when its dtype is not the one asked for.
+class NpyReader {
+ public:
+  explicit NpyReader(const std::string& path);
+  ~NpyReader();
+  NpyReader(NpyReader&&) noexcept;
+  NpyReader& operator=(NpyReader&&) noexcept;
+
+  const std::string& path() const { return path_; }
+  NpyWriter::Dtype dtype() const { return dtype_; }
+  const std::vector<int64_t>& shape() const { return shape_; }
+  int64_t elements() const { return elements_; }
+  // The elements, checked against dtype (float: F32, double: F64, int32_t: I32, int64_t: I64, uint8_t: U8,
+  // uint16_t: U16).
+  template <class T>
+  const T* data() const;
+  // Throws unless the shape is `expected` (named `what` in the message).
+  void expect_shape(const std::vector<int64_t>& expected, const std::string& what) const;
+
+ private:
+  std::string path_;
+  NpyWriter::Dtype dtype_ = NpyWriter::Dtype::U8;
+  std::vector<int64_t> shape_;
+  int64_t elements_ = 0;
+  const char* map_ = nullptr;
+  size_t map_bytes_ = 0;
+  int64_t data_offset_ = 0;
 };
 
 // A scanline OpenEXR image with named float channels and string attributes (provenance) in its header.

@@ -36,9 +36,12 @@ SceneRun run_scene(const std::string& args, const fs::path& out) {
   EXPECT_EQ(r.code, 0) << r.output;
   SceneRun run;
   run.meta = nlohmann::json::parse(slurp(out / "metadata.json"));
-  const Npy c = read_npy(out / "counts.npy"), e = read_npy(out / "expected_counts.npy");
+  const Npy c = read_npy(out / "counts.npy"), rate = read_npy(out / "detection_rate.npy");
   run.K = c.shape[0], run.H = c.shape[1], run.W = c.shape[2];
-  run.counts = values(c), run.expected = values(e);
+  run.counts = values(c), run.expected = values(rate);
+  // expected counts N (1 - exp(-lambda)) from the detection rate lambda
+  const double N = run.meta["acquisition"]["frames_per_k"];
+  for (double& v : run.expected) v = N * -std::expm1(-v);
   run.gt = spadgen::writers::read_exr((out / "ground_truth.exr").string());
   run.maps = spadgen::writers::read_exr((out / "sensor_maps.exr").string());
   const auto& s = run.meta["resolved_scene"];

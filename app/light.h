@@ -1,0 +1,88 @@
+// The saved light (`light/` in a run folder, outputs.light): everything the sensor stage reads from the
+// renderer, kept so that `spadgen sense` can re-sample the sensor without rendering again. Each pixel's
+// transient is kept over its written bin range only (TransientTile::bin_lo / bin_hi), in pixel order:
+//
+//   light/ranges.npy         (H, W, 2) int32    [bin_lo, bin_hi) of each pixel on metadata.json's time axis
+//   light/offsets.npy        (H * W + 1,) int64 where each pixel's bins start in values.npy (row-major pixels)
+//   light/values.npy         (n,) float32       photons per pulse of bins bin_lo .. bin_hi - 1, pixel after pixel
+//   light/laser_total.npy    (H, W) float64     laser photons per pulse, time-integrated (in and out of the window)
+//   light/out_of_window.npy  (H, W) float64     the part of it outside the time window
+//   light/ambient_rate.npy   (H, W) float32     ambient photons per second
+//
+// H x W is the rendered image grown by one pixel on every side, clipped to the sensor (the ring the
+// sensor's crosstalk reads around a crop), metadata.json's light.crop_in_sensor. Pixel (x, y) of the
+// sensor has bins values[offsets[i] : offsets[i + 1]] for bins ranges[i][0] .. ranges[i][1] - 1,
+// i = (y - y0) * W + (x - x0). Every file is a plain .npy, so the whole set is memory-mappable.
+#pragma once
+#include <atomic>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "core/tile.h"
+#include "core/time_axis.h"
+#include "writers/writers.h"
+
+namespace spadgen::app {
+
+class Staging;
+
+// The saved light's files, relative to the output folder, in the order metadata.json lists them.
+const std::vector<std::string>& light_files();
+
+// The pixels whose light a run keeps: the image grown by one pixel, clipped to the sensor.
+PixelRect light_region(const PixelRect& img, int sensor_width, int sensor_height);
+
+// Collects the light of a run's tiles (from several threads at once) and writes the files at the end.
+class LightWriter {
+ public:
+  LightWriter(const PixelRect& region, const TimeAxis& axis, const Staging& staging);
+  ~LightWriter();
+  LightWriter(const LightWriter&) = delete;
+  LightWriter& operator=(const LightWriter&) = delete;
+
+  // Keeps every pixel of t.data_rect inside the region that no tile has delivered yet (a pixel's light
+  // does not depend on the tile that rendered it, so any copy will do).
+  void put(const TransientTile& t);
+  // Writes the files into the staging folder and adds them to `files`. Every pixel must have been put.
+  void write(std::vector<std::string>& files);
+  // Bytes of values.npy so far (for the report).
+  int64_t values_bytes() const { return int64_t(spill_elements_.load()) * 4; }
+
+ private:
+  PixelRect region_;
+  TimeAxis axis_;
+  const Staging& staging_;
+  std::string spill_path_;
+  int spill_fd_ = -1;
+  std::atomic<int64_t> spill_elements_{0};
+  std::vector<std::atomic<char>> claimed_;
+  std::vector<int64_t> spill_at_;  // per region pixel: where its bins start in the spill file
+  std::vector<int32_t> ranges_;    // per region pixel: bin_lo, bin_hi
+  std::vector<double> laser_total_, out_of_window_;
+  std::vector<float> ambient_;
+};
+
+// A run folder's saved light, mapped read-only.
+class SavedLight {
+ public:
+  // Opens `dir`/light/*.npy and checks them against the region and the axis metadata.json records.
+  SavedLight(const std::string& dir, const PixelRect& region, const TimeAxis& axis);
+  const PixelRect& region() const { return region_; }
+  const TimeAxis& axis() const { return axis_; }
+  // The renderer's tile for `rect` with data over `data_rect` (which must lie inside the region), as
+  // the renderer delivered it: the dense transient, the ranges, the totals and the ambient rates.
+  TransientTile tile(const PixelRect& rect, const PixelRect& data_rect) const;
+  // Light per sensor row times row_scale[y] (photons on the photosensitive area scale with the fill
+  // factor: a new pixel design rescales the light the run saved). Empty or 1: as saved, bit for bit.
+  void set_row_scale(std::vector<double> row_scale) { row_scale_ = std::move(row_scale); }
+
+ private:
+  PixelRect region_;
+  TimeAxis axis_;
+  writers::NpyReader ranges_, offsets_, values_, laser_total_, out_of_window_, ambient_;
+  std::vector<double> row_scale_;
+};
+
+}  // namespace spadgen::app

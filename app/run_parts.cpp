@@ -1,0 +1,34 @@
+#include "app/run_parts.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/error.h"
+
+namespace spadgen::app {
+
+PixelRect image_rect(const RunConfig& c) {
+  return c.camera.crop.value_or(PixelRect{0, 0, c.camera.width_px, c.camera.height_px});
+}
+
+TimeAxis time_axis(const RunConfig& c, const sensor::SensorModel& s) {
+  TimeAxis a = s.required_window(c.render.time_bin_s);
+  if (c.render.window_start_s) {
+    a.start_s = *c.render.window_start_s;
+    a.bins = static_cast<int64_t>(std::ceil((*c.render.window_stop_s - a.start_s) / a.bin_width_s - 1e-9));
+    return a;
+  }
+  if (a.bins == 0 && c.outputs.transient)
+    throw Error(c.scene_file + ": /outputs/transient: intensity mode needs no time bins; set /render/window_start_ns "
+                "and /render/window_stop_ns to say which window transient.npy should cover");
+  return a;
+}
+
+void order_files(std::vector<std::string>& files) {
+  std::sort(files.begin(), files.end(), [](const std::string& a, const std::string& b) {
+    const bool ma = a == "metadata.json", mb = b == "metadata.json";
+    return ma != mb ? mb : a < b;
+  });
+}
+
+}  // namespace spadgen::app

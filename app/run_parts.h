@@ -1,0 +1,25 @@
+// What `run` and `sense` share: the image they cover, the time axis the sensor needs, the order of the
+// files metadata.json lists. Internal to app/.
+#pragma once
+#include <string>
+#include <vector>
+
+#include "core/config.h"
+#include "core/tile.h"
+#include "core/time_axis.h"
+#include "sensor/sensor.h"
+
+namespace spadgen::app {
+
+// The pixel rectangle the run renders (the crop, or the whole sensor).
+PixelRect image_rect(const RunConfig& c);
+
+// The arrival times the renderer covers. The sensor knows the window its acquisition needs and the laser
+// period that folds late arrivals; a window set in the scene file replaces only the start and the length.
+TimeAxis time_axis(const RunConfig& c, const sensor::SensorModel& s);
+
+// The files in the order metadata.json lists them and the staging folder publishes them: by name,
+// metadata.json last.
+void order_files(std::vector<std::string>& files);
+
+}  // namespace spadgen::app

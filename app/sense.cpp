@@ -1,0 +1,244 @@
+// spadgen sense: the sensor stage alone, from the light a run saved. The scene is not loaded and nothing
+// is rendered: the run folder's metadata.json holds the resolved scene file, light/ what the renderer
+// delivered to the sensor. The sensor settings may change (--set sensor.*, acquisition.*, seeds), the
+// light may not.
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <sstream>
+
+#include "app/interrupt.h"
+#include "app/light.h"
+#include "app/metadata.h"
+#include "app/outputs.h"
+#include "app/pipeline.h"
+#include "app/progress.h"
+#include "app/run_parts.h"
+#include "app/staging.h"
+#include "core/error.h"
+#include "scenes/scene_file.h"
+#include "sensor/model/pixel_layout.h"
+#include "sensor/sensor.h"
+#include "writers/writers.h"
+
+namespace spadgen::app {
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+namespace {
+
+// Keys sense may change: the sensor's, the acquisition's, the chip's and the noise's seeds, and the files
+// the sensor writes. Everything else shaped the light, which sense cannot change.
+bool sense_may_set(const std::string& key) {
+  for (const char* prefix : {"sensor.", "acquisition.", "seeds.chip", "seeds.noise", "outputs.expected_counts",
+                             "outputs.detection_rate", "outputs.counts", "outputs.frames", "outputs.previews"})
+    if (key.rfind(prefix, 0) == 0) return true;
+  return false;
+}
+
+json read_metadata(const fs::path& dir) {
+  const fs::path file = dir / "metadata.json";
+  std::ifstream in(file);
+  if (!in) throw Error(dir.string() + ": no metadata.json; expected the folder of a finished `spadgen run`");
+  try {
+    return json::parse(in);
+  } catch (const json::exception& e) {
+    throw Error(file.string() + ": not valid JSON (" + e.what() + ")");
+  }
+}
+
+template <class T>
+T field(const json& meta, const json::json_pointer& p, const fs::path& dir) {
+  if (!meta.contains(p)) throw Error((dir / "metadata.json").string() + ": no " + p.to_string() + "; was it written by this spadgen?");
+  return meta.at(p).get<T>();
+}
+
+PixelRect rect_of(const json& a) { return {a.at(0).get<int>(), a.at(1).get<int>(), a.at(2).get<int>(), a.at(3).get<int>()}; }
+
+// The run's file `rel` into the staging folder: a hard link (the run's files are never modified in place;
+// a later run replaces them with a new file), or a copy across file systems.
+void link_into(const fs::path& from, const Staging& staging, const std::string& rel) {
+  const fs::path to = staging.path(rel);
+  fs::create_directories(to.parent_path());
+  std::error_code ec;
+  fs::create_hard_link(from, to, ec);
+  if (ec) fs::copy_file(from, to, fs::copy_options::overwrite_existing);
+}
+
+std::string text(uint64_t v) { return std::to_string(v); }
+
+}  // namespace
+
+std::vector<RunResult> sense(const SenseOptions& options) {
+  const fs::path src = options.run_dir;
+  const json meta = read_metadata(src);
+  if (!meta.contains("light"))
+    throw Error(src.string() + ": the run saved no light; run it again with --set outputs.light=true to re-sample its sensor");
+  for (const std::string& o : options.overrides) {
+    const std::string key = o.substr(0, o.find('='));
+    if (!sense_may_set(key))
+      throw Error("--set " + key + ": sense re-samples the sensor only, so it takes sensor.*, acquisition.*, seeds.chip, "
+                  "seeds.noise and outputs.{expected_counts,detection_rate,counts,frames,previews}; " + key +
+                  " shapes the rendered light: use spadgen run");
+  }
+  if (options.repeats < 1) throw Error("--repeats: expected at least 1, found " + std::to_string(options.repeats));
+
+  // The run's scene file as it resolved, with this call's changes.
+  const std::string scene_text = meta.at("resolved_scene").dump();
+  const std::string scene_file = field<std::string>(meta, "/scene_file"_json_pointer, src);
+  std::vector<std::string> overrides = options.overrides;
+  if (options.chip_seed) overrides.push_back("seeds.chip=" + text(*options.chip_seed));
+  if (options.noise_seed) overrides.push_back("seeds.noise=" + text(*options.noise_seed));
+  const scenes::ResolvedRun first = scenes::parse_scene_text(scene_text, scene_file, overrides);
+  // One resolved scene per realisation: noise seeds S, S + 1, ... (S itself when there is one).
+  std::vector<scenes::ResolvedRun> runs;
+  const uint64_t noise0 = first.config.noise_seed();
+  for (int r = 0; r < options.repeats; ++r) {
+    if (options.repeats == 1) {
+      runs.push_back(first);
+      break;
+    }
+    std::vector<std::string> o = overrides;
+    o.push_back("seeds.noise=" + text(noise0 + uint64_t(r)));
+    runs.push_back(scenes::parse_scene_text(scene_text, scene_file, o));
+  }
+  const RunConfig& cfg = first.config;
+  for (const std::string& w : first.warnings) std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
+  // What the glTF warned about when the run loaded it: the run's warnings less the scene file's.
+  std::vector<std::string> scene_warnings;
+  const scenes::ResolvedRun source = scenes::parse_scene_text(scene_text, scene_file);
+  {
+    const std::vector<std::string>& file_warnings = source.warnings;
+    for (const auto& w : meta.at("warnings"))
+      if (std::find(file_warnings.begin(), file_warnings.end(), w.get<std::string>()) == file_warnings.end())
+        scene_warnings.push_back(w.get<std::string>());
+  }
+
+  InterruptGuard interrupt_guard;
+  std::unique_ptr<tbb::global_control> threads;
+  if (options.threads > 0)
+    threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, size_t(options.threads));
+
+  sensor::SensorModel sensor(sensor_stage(cfg));
+  if (!cfg.sensor.gate.maps_exr.empty()) {
+    const writers::ExrData maps = writers::read_exr(cfg.sensor.gate.maps_exr);
+    sensor.set_maps(maps.width, maps.height, maps.channels, cfg.sensor.gate.maps_exr);
+  }
+
+  // The light's time axis, exactly as the run used it; the sensor's window must lie inside it.
+  const json& la = meta.at("light").at("time_axis_s");
+  TimeAxis axis{la.at("start").get<double>(), la.at("bin_width").get<double>(), la.at("bins").get<int64_t>(),
+                la.at("laser_period").get<double>()};
+  const TimeAxis need = time_axis(cfg, sensor);
+  if (need.bins > 0 && (axis.bins == 0 || need.start_s < axis.start_s - 1e-3 * axis.bin_width_s ||
+                        need.end_s() > axis.end_s() + 1e-3 * axis.bin_width_s)) {
+    char buf[400];
+    std::snprintf(buf, sizeof buf,
+                  "the acquisition needs arrival times from %.6g to %.6g ns, but the run saved light from %.6g to %.6g ns%s; "
+                  "run the scene again with these settings (or with render.window_start_ns / window_stop_ns covering them)",
+                  need.start_s * 1e9, need.end_s() * 1e9, axis.start_s * 1e9, axis.end_s() * 1e9,
+                  axis.bins == 0 ? " (none: a 2D run)" : "");
+    throw Error(src.string() + ": " + buf);
+  }
+
+  const PixelRect img = image_rect(cfg);
+  const PixelRect region = rect_of(meta.at("light").at("crop_in_sensor"));
+  if (region != light_region(img, cfg.camera.width_px, cfg.camera.height_px))
+    throw Error((src / "metadata.json").string() + ": light.crop_in_sensor does not match the run's image");
+  SavedLight light(src.string(), region, axis);
+  // The renderer applied the run's fill factor of each row; another pixel design rescales the light.
+  {
+    const std::vector<double> was = sensor::PixelLayout(source.config.sensor.preset, cfg.camera.height_px).row_fill_factor(source.config.sensor);
+    const std::vector<double> now = sensor.row_fill_factor();
+    if (was != now) {
+      std::vector<double> scale(now.size());
+      for (size_t y = 0; y < now.size(); ++y) scale[y] = now[y] / was[y];
+      light.set_row_scale(std::move(scale));
+    }
+  }
+
+  // The files the sensor does not write come from the run: the exact ground truth, the transients, the light.
+  std::vector<std::string> linked;
+  for (const auto& f : meta.at("files")) {
+    const std::string name = f.get<std::string>();
+    if (name == "ground_truth.exr" || name == "previews/depth.png" || name == "transient.npy" ||
+        name == "transient_indirect.npy" || name.rfind("light/", 0) == 0)
+      linked.push_back(name);
+  }
+  RunConfig write_cfg = cfg;  // what the sensor stage writes itself
+  write_cfg.outputs.ground_truth = false, write_cfg.outputs.transient = false, write_cfg.outputs.light = false;
+
+  const fs::path out = options.out_dir.empty() ? fs::path(src.string() + "-sense") : fs::path(options.out_dir);
+  if (fs::exists(out) && fs::exists(src) && fs::equivalent(out, src))
+    throw Error("-o " + out.string() + ": sense writes a new folder beside the run, not into it");
+  std::vector<fs::path> dirs;
+  std::vector<std::unique_ptr<Staging>> staging;
+  std::vector<std::unique_ptr<Outputs>> outputs;
+  std::vector<uint64_t> seeds;
+  for (size_t r = 0; r < runs.size(); ++r) {
+    char name[32];
+    std::snprintf(name, sizeof name, "repeat_%03zu", r);
+    dirs.push_back(runs.size() == 1 ? out : out / name);
+    staging.push_back(std::make_unique<Staging>(dirs.back()));
+    outputs.push_back(std::make_unique<Outputs>(write_cfg, sensor, img, axis, *staging.back()));
+    seeds.push_back(runs[r].config.noise_seed());
+  }
+
+  std::vector<PixelRect> tiles = make_tiles(img.width, img.height, cfg.render.tile_size);
+  for (PixelRect& t : tiles) t.x0 += img.x0, t.y0 += img.y0;
+  if (options.progress)
+    std::fprintf(stderr, "spadgen: sense %s: %d x %d pixels, K = %d, %zu realisation(s)\n", src.string().c_str(), img.width,
+                 img.height, sensor.K(), runs.size());
+  Progress progress(tiles.size(), options.progress);
+  tbb::parallel_for(size_t(0), tiles.size(), [&](size_t ti) {
+    InterruptGuard::check();
+    const PixelRect& rect = tiles[ti];
+    const TransientTile t = light.tile(rect, grow_clipped(rect, sensor.halo(), cfg.camera.width_px, cfg.camera.height_px));
+    const std::vector<SensorTile> s = sensor.process(t, seeds);
+    const sensor::SensorMapsTile maps = sensor.maps(rect);
+    for (size_t r = 0; r < s.size(); ++r) outputs[r]->put(t, maps, s[r]);
+    progress.tick();
+  });
+
+  const Provenance prov{scene_file, field<std::string>(meta, "/scene_hash_fnv1a64"_json_pointer, src), cfg.seed, img};
+  std::vector<RunResult> results;
+  for (size_t r = 0; r < runs.size(); ++r) {
+    outputs[r]->write(prov);
+    std::vector<std::string> files = outputs[r]->files();
+    for (const std::string& f : linked) {
+      link_into(src / f, *staging[r], f);
+      files.push_back(f);
+    }
+    files.push_back("metadata.json");
+    order_files(files);
+
+    RunRecord record;
+    outputs[r]->report(record);
+    record.files = files;
+    record.photons_per_pulse_emitted = meta.at("photons_per_pulse_emitted").get<double>();
+    record.camera = meta.at("camera");
+    record.ground_truth_layers = meta.at("ground_truth_layers").get<int>();
+    if (meta.contains("transient")) record.transient_crop = rect_of(meta.at("transient").at("crop_in_sensor"));
+    record.light_region = region;
+    record.light_values_bytes = meta.at("light").at("values_bytes").get<int64_t>();
+    record.threads = options.threads;
+    record.seconds = progress.seconds();
+    record.sense = json{{"from", src.string()}, {"repeat", r}, {"repeats", runs.size()}};
+    writers::write_json(staging[r]->path("metadata.json"), metadata(runs[r], scene_warnings, sensor, prov, axis, record));
+    InterruptGuard::check();
+    outputs[r]->commit();
+    staging[r]->publish(files);
+    results.push_back({dirs[r].string(), files});
+  }
+  if (options.progress)
+    std::fprintf(stderr, "spadgen: wrote %zu folder(s) to %s in %.1f s\n", results.size(), out.string().c_str(), progress.seconds());
+  return results;
+}
+
+}  // namespace spadgen::app

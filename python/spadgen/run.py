@@ -1,0 +1,352 @@
+"""One run folder (what ``spadgen run SCENE.json -o DIR`` writes), read lazily.
+
+    run = spadgen.open_run("out/multi_object")
+    run.counts                      # (K, H, W) uint8/uint16 memory map of counts.npy
+    run.ground_truth["range"]       # (H, W) float32 channel of ground_truth.exr
+    run.gate_profile(300, 120)      # (gate positions in ns, counts) of pixel x=300, y=120
+    run.points(frame="world")       # (H, W, 3) ground-truth surface points
+
+Nothing is read until it is used: metadata.json on opening, a stack when first indexed (a NumPy memory
+map), an EXR image when its first channel is asked for. The folder's layout is docs/outputs.md.
+"""
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from . import camera as _camera
+from .exr import ExrFile
+
+__all__ = ["Run", "open_run", "unpack_frames", "TimeAxis", "Profile", "Layers"]
+
+C = 299792458.0  # speed of light in vacuum, m/s
+
+
+def unpack_frames(packed, width):
+    """Binary frames (..., H, ceil(W / 8)) uint8, as frames.npy stores them, to (..., H, W) uint8 of 0 and 1.
+
+    Pixel x of a row is bit x % 8 of byte x // 8, least significant bit first (NumPy's default bit order,
+    "big", would mirror every group of 8 pixels); the bits beyond W in the last byte are dropped."""
+    packed = np.asarray(packed)
+    if packed.dtype != np.uint8:
+        raise TypeError(f"packed frames must be uint8, got {packed.dtype}")
+    if packed.shape[-1] != (width + 7) // 8:
+        raise ValueError(f"a row of {width} pixels takes {(width + 7) // 8} bytes, the array's rows have {packed.shape[-1]}")
+    return np.unpackbits(packed, axis=-1, count=width, bitorder="little")
+
+
+@dataclass(frozen=True)
+class TimeAxis:
+    """The rendered time window of transient.npy: bin i covers [start_s + i w, start_s + (i + 1) w)."""
+    start_s: float
+    bin_width_s: float
+    bins: int
+    period_s: float  # the laser period: later returns fold into the next period
+
+    @property
+    def end_s(self):
+        return self.start_s + self.bins * self.bin_width_s
+
+    def bin_starts_s(self):
+        return self.start_s + np.arange(self.bins) * self.bin_width_s
+
+    def bin_centres_s(self):
+        return self.start_s + (np.arange(self.bins) + 0.5) * self.bin_width_s
+
+
+@dataclass(frozen=True)
+class Profile:
+    """A pixel's gate profile: ``values[k]`` counts (or expected counts) at gate position ``gate_ns[k]``."""
+    gate_ns: np.ndarray
+    values: np.ndarray
+    x: int
+    y: int
+
+
+@dataclass(frozen=True)
+class Layers:
+    """Every surface along each pixel's primary ray (ground_truth.exr), nearest first.
+    ``count`` (H, W) int32; ``range`` (L, H, W) float32 metres (+inf beyond a pixel's count);
+    ``transmittance`` (L, H, W) float32, the fraction of light that reaches that surface."""
+    count: np.ndarray
+    range: np.ndarray
+    transmittance: np.ndarray
+
+
+class Run:
+    """A run folder. Every output is an attribute; asking for a file the run did not write raises
+    FileNotFoundError naming the scene-file key that writes it (never None)."""
+
+    # The scene-file key that makes a run write an optional file, for the error message.
+    _WRITTEN_BY = {"transient.npy": "outputs.transient", "transient_indirect.npy": "render.split_direct_indirect "
+                   "with outputs.transient", "frames.npy": "outputs.frames", "ground_truth.exr": "outputs.ground_truth",
+                   "expected_counts.npy": "outputs.expected_counts", "counts.npy": "outputs.counts",
+                   "detection_rate.npy": "outputs.detection_rate",
+                   "intensity.exr": "acquisition.mode = intensity"}
+
+    def __init__(self, path):
+        self.path = os.fspath(path)
+        meta = os.path.join(self.path, "metadata.json")
+        if not os.path.isfile(meta):
+            raise FileNotFoundError(f"{self.path}: not a spadgen run folder (no metadata.json; a run writes it last, "
+                                    "so a folder without it is incomplete)")
+        with open(meta, encoding="utf-8") as f:
+            self.metadata = json.load(f)
+        self.files = list(self.metadata["files"])
+        self._cache = {}
+
+    def __repr__(self):
+        return f"Run({self.path!r}, {self.width} x {self.height}, {self.mode}, K = {self.K})"
+
+    # ---- what the run is --------------------------------------------------------------------------------
+
+    @property
+    def width(self):
+        return int(self.metadata["image"]["width"])
+
+    @property
+    def height(self):
+        return int(self.metadata["image"]["height"])
+
+    @property
+    def crop(self):
+        """(x0, y0, width, height) of the images in sensor pixels."""
+        return tuple(int(v) for v in self.metadata["image"]["crop_in_sensor"])
+
+    @property
+    def units(self):
+        return dict(self.metadata["units"])
+
+    @property
+    def seed(self):
+        return self.metadata["seed"]
+
+    @property
+    def spadgen_version(self):
+        return self.metadata["spadgen_version"]
+
+    @property
+    def acquisition(self):
+        return self.metadata["acquisition"]
+
+    @property
+    def mode(self):
+        """The acquisition mode: "gate_sweep" or "intensity"."""
+        return self.acquisition["mode"]
+
+    @property
+    def K(self):
+        """Gate positions (gate sweep) or exposures (intensity mode): the first axis of the (K, H, W) stacks."""
+        return int(self.acquisition["K"])
+
+    @property
+    def frames_per_k(self):
+        return int(self.acquisition["frames_per_k"])
+
+    @property
+    def gate_positions_s(self):
+        """(K,) float64 gate positions in seconds after the laser trigger (gate sweep only)."""
+        if "gate_positions_ns" not in self.acquisition:
+            raise ValueError(f"{self.path}: a {self.mode} run has no gate positions (exposures_s has its exposures)")
+        return np.asarray(self.acquisition["gate_positions_ns"], np.float64) * 1e-9
+
+    @property
+    def gate_positions_ns(self):
+        return self.gate_positions_s * 1e9
+
+    @property
+    def exposures_s(self):
+        """(K,) float64 exposure times in seconds (intensity mode only)."""
+        if "exposures_us" not in self.acquisition:
+            raise ValueError(f"{self.path}: a {self.mode} run has no exposures (gate_positions_s has its gate positions)")
+        return np.asarray(self.acquisition["exposures_us"], np.float64) * 1e-6
+
+    @property
+    def time_axis(self):
+        a = self.metadata["time_axis"]
+        return TimeAxis(a["start_ns"] * 1e-9, a["bin_width_ps"] * 1e-12, int(a["bins"]), a["laser_period_ns"] * 1e-9)
+
+    # ---- files ------------------------------------------------------------------------------------------
+
+    def has(self, name):
+        """Whether the run wrote the file (a name from metadata.json's files, e.g. "frames.npy")."""
+        return name in self.files
+
+    def _require(self, name):
+        if name not in self.files:
+            why = self._WRITTEN_BY.get(name, "outputs.light" if name.startswith("light/") else None)
+            raise FileNotFoundError(f"{self.path}: this run did not write {name}" + (f" (written with {why})" if why else "")
+                                    + f"; it wrote {', '.join(self.files)}")
+        return os.path.join(self.path, name)
+
+    def array(self, name):
+        """A .npy file of the run as a read-only memory map (nothing is read until it is indexed)."""
+        if not name.endswith(".npy"):
+            name += ".npy"
+        if name not in self._cache:
+            self._cache[name] = np.load(self._require(name), mmap_mode="r")
+        return self._cache[name]
+
+    def exr(self, name):
+        """An .exr file of the run: channels by name, decoded on first access (spadgen.exr.ExrFile)."""
+        if not name.endswith(".exr"):
+            name += ".exr"
+        if name not in self._cache:
+            self._cache[name] = ExrFile(self._require(name))
+        return self._cache[name]
+
+    def __getitem__(self, name):
+        """run["counts"], run["counts.npy"], run["ground_truth.exr"]: any stack or image by file name."""
+        if name.endswith(".exr") or name + ".exr" in self.files:
+            return self.exr(name)
+        return self.array(name)
+
+    @property
+    def detection_rate(self):
+        """(K, H, W) float32 lambda: mean avalanches per binary frame, noise-free (detection_rate.npy). Unlike
+        expected counts it never saturates: expected counts = N (1 - exp(-lambda))."""
+        return self.array("detection_rate.npy")
+
+    @property
+    def expected_counts(self):
+        """(K, H, W) float32 noise-free expected counts N (1 - exp(-lambda)): expected_counts.npy when the run
+        wrote it (outputs.expected_counts), else computed from detection_rate.npy (in memory, once)."""
+        if "expected_counts.npy" in self.files or "detection_rate.npy" not in self.files:
+            return self.array("expected_counts.npy")
+        if "expected_counts (from detection_rate.npy)" not in self._cache:
+            lam = np.asarray(self.detection_rate, np.float64)
+            self._cache["expected_counts (from detection_rate.npy)"] = (self.frames_per_k * -np.expm1(-lam)).astype(np.float32)
+        return self._cache["expected_counts (from detection_rate.npy)"]
+
+    @property
+    def counts(self):
+        """(K, H, W) uint8 (up to 255 frames per k) or uint16 sampled counts."""
+        return self.array("counts.npy")
+
+    @property
+    def frames_packed(self):
+        """(K, N, H, ceil(W / 8)) uint8 bit-packed binary frames, as stored; frames() unpacks them."""
+        return self.array("frames.npy")
+
+    @property
+    def transient(self):
+        """(H, W, T) float32 photons per laser pulse per time bin (over metadata.json's transient crop)."""
+        return self.array("transient.npy")
+
+    @property
+    def transient_indirect(self):
+        return self.array("transient_indirect.npy")
+
+    @property
+    def ground_truth(self):
+        return self.exr("ground_truth.exr")
+
+    @property
+    def laser(self):
+        return self.exr("laser.exr")
+
+    @property
+    def ambient(self):
+        return self.exr("ambient.exr")
+
+    @property
+    def sensor_maps(self):
+        return self.exr("sensor_maps.exr")
+
+    @property
+    def intensity(self):
+        return self.exr("intensity.exr")
+
+    # ---- helpers ----------------------------------------------------------------------------------------
+
+    def frames(self, k=slice(None), n=slice(None)):
+        """Binary frames unpacked to 0 / 1 uint8: frames(k, n) is one (H, W) frame, frames(k) the (N, H, W)
+        frames of gate position k, frames() all of them (K, N, H, W) (8 times the file's size in memory)."""
+        return unpack_frames(self.frames_packed[k, n], self.width)
+
+    def gate_profile(self, x, y, expected=False, sensor_coordinates=False):
+        """The gate profile of pixel (x, y): counts (or, with expected=True, expected counts) against the gate
+        positions in ns. x, y are image coordinates, or sensor coordinates (as metadata.json's
+        preview_profile_pixels) with sensor_coordinates=True."""
+        if sensor_coordinates:
+            x, y = x - self.crop[0], y - self.crop[1]
+        if not (0 <= x < self.width and 0 <= y < self.height):
+            raise IndexError(f"pixel ({x}, {y}) lies outside the {self.width} x {self.height} image")
+        stack = self.expected_counts if expected else self.counts
+        return Profile(self.gate_positions_ns, np.asarray(stack[:, y, x]), int(x), int(y))
+
+    def depth(self, kind="range"):
+        """(H, W) float32 ground-truth depth in metres: "range" (along the pixel's ray, what time of flight
+        measures) or "z" (along the optical axis); +inf where the ray hits nothing."""
+        if kind not in ("range", "z"):
+            raise ValueError(f"kind must be 'range' or 'z', got {kind!r}")
+        return self.ground_truth[kind]
+
+    def hit(self):
+        """(H, W) bool: the pixel's ray hits a surface."""
+        return np.isfinite(self.ground_truth["range"])
+
+    def layers(self):
+        """Every surface along each pixel's ray (Layers: count, range, transmittance)."""
+        gt = self.ground_truth
+        n = int(self.metadata["ground_truth_layers"])
+        shape = (n, self.height, self.width)
+        rng = np.stack([gt[f"layer{i}.range"] for i in range(n)]) if n else np.empty(shape, np.float32)
+        tr = np.stack([gt[f"layer{i}.transmittance"] for i in range(n)]) if n else np.empty(shape, np.float32)
+        return Layers(gt["layer_count"].astype(np.int32), rng, tr)
+
+    def layer_count(self):
+        """(H, W) int32: the number of surfaces along each pixel's ray."""
+        return self.ground_truth["layer_count"].astype(np.int32)
+
+    def labels(self):
+        """(mesh_id, material_id), each (H, W) int32, of the first surface each ray hits; -1 for none."""
+        gt = self.ground_truth
+        return gt["mesh_id"].astype(np.int32), gt["material_id"].astype(np.int32)
+
+    # ---- camera -----------------------------------------------------------------------------------------
+
+    @property
+    def _camera(self):
+        if "camera" not in self.metadata:
+            raise KeyError(f"{self.path}: metadata.json has no camera section (written by a spadgen before "
+                           "version 0.1.0 had it): run the scene again")
+        return self.metadata["camera"]
+
+    @property
+    def intrinsics(self):
+        """(3, 3) float64 intrinsic matrix of the images (OpenCV convention, crop included; spadgen.camera)."""
+        return np.asarray(self._camera["intrinsics"], np.float64)
+
+    @property
+    def camera_to_world(self):
+        """(4, 4) float64 pose: camera frame (x right, y down, z forward) to the glTF world frame."""
+        return np.asarray(self._camera["camera_to_world"], np.float64)
+
+    @property
+    def world_to_camera(self):
+        return _camera.invert_pose(self.camera_to_world)
+
+    def points(self, frame="camera", depth=None, kind="range"):
+        """(H, W, 3) float64 points of a depth image (the ground truth's by default) in the "camera" or
+        "world" frame; NaN where the depth is not finite."""
+        if depth is None:
+            depth = self.depth(kind)
+        if frame not in ("camera", "world"):
+            raise ValueError(f"frame must be 'camera' or 'world', got {frame!r}")
+        return _camera.depth_to_points(depth, self.intrinsics, kind,
+                                       self.camera_to_world if frame == "world" else None)
+
+    def point_cloud(self, frame="camera", depth=None, kind="range"):
+        """(P, 3) float64: points() of the pixels with a finite depth, in row-major pixel order."""
+        p = self.points(frame, depth, kind).reshape(-1, 3)
+        return p[np.isfinite(p).all(axis=1)]
+
+
+def open_run(path):
+    """Opens a run folder (reads metadata.json only)."""
+    return Run(path)

@@ -1,0 +1,157 @@
+"""A PyTorch Dataset over run folders (imported only when PyTorch is present: ``import spadgen`` never
+imports torch).
+
+    from spadgen.torchdata import RunDataset
+    ds = RunDataset(["out/a", "out/b"], patch_size=(64, 64))
+    loader = torch.utils.data.DataLoader(ds, batch_size=8, shuffle=True)
+
+One sample is a whole run's image, or with ``patch_size=(h, w)`` one patch of a run: the images are cut into
+non-overlapping h x w patches from the top-left corner, and a remainder narrower than a patch at the right or
+bottom edge is left out. A sample is a dict of tensors; with H, W the image's (or patch's) size, K the gate
+positions (or exposures), N the frames per k, L = ``max_layers``:
+
+| key | shape | dtype | what |
+|---|---|---|---|
+| counts | (K, H, W) | float32 | sampled counts (integers, exact in float32) |
+| expected_counts | (K, H, W) | float32 | noise-free expected counts N (1 - exp(-lambda)) (from detection_rate.npy when the run did not write expected_counts.npy) |
+| detection_rate | (K, H, W) | float32 | noise-free lambda, mean avalanches per binary frame (never saturates) |
+| depth | (1, H, W) | float32 | ground-truth range (m) of the nearest surface, 0 where there is none |
+| mask | (1, H, W) | bool | the pixel's ray hits a surface |
+| layer_count | (H, W) | int64 | surfaces along the pixel's ray |
+| layer_depth | (L, H, W) | float32 | range (m) of every surface along the ray, nearest first, 0 beyond layer_count |
+| layer_mask | (L, H, W) | bool | layer l exists at the pixel (l < layer_count) |
+| frames | (K, N, H, W) | uint8 | binary frames, 0 / 1 (large: only when asked for) |
+| gate_positions_ns | (K,) | float32 | gate positions (gate-sweep runs only) |
+| intrinsics | (3, 3) | float32 | the sample's pinhole intrinsics (OpenCV convention, shifted to the patch) |
+| origin | (2,) | int64 | (x, y) of the sample's top-left pixel in its run's image |
+| run | () | int64 | index of the sample's run in ``runs`` |
+
+``fields`` chooses among the first nine (default: counts, expected_counts, depth, mask, layer_count); the last four
+come always (gate_positions_ns only for gate sweeps). Runs that share a DataLoader batch must agree on K
+(and N with frames); the constructor checks that every run has what ``fields`` asks for.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+try:
+    import torch
+except ImportError as e:  # pragma: no cover - exercised only where torch is missing
+    raise ImportError("spadgen.torchdata needs PyTorch (Debian 12: apt-get install python3-torch)") from e
+
+from .run import open_run, unpack_frames
+
+__all__ = ["RunDataset", "FIELDS", "DEFAULT_FIELDS"]
+
+FIELDS = ("counts", "expected_counts", "detection_rate", "depth", "mask", "layer_count", "layer_depth", "layer_mask", "frames")
+DEFAULT_FIELDS = ("counts", "expected_counts", "depth", "mask", "layer_count")
+# The file each field reads; a tuple: any one of them.
+_NEEDS = {"counts": "counts.npy", "expected_counts": ("expected_counts.npy", "detection_rate.npy"),
+          "detection_rate": "detection_rate.npy", "frames": "frames.npy",
+          "depth": "ground_truth.exr", "mask": "ground_truth.exr", "layer_count": "ground_truth.exr",
+          "layer_depth": "ground_truth.exr", "layer_mask": "ground_truth.exr"}
+
+
+class RunDataset(torch.utils.data.Dataset):
+    """Samples (whole images or patches) of a list of run folders; see the module's table for each key."""
+
+    def __init__(self, runs, patch_size=None, fields=DEFAULT_FIELDS, max_layers=None):
+        self.paths = [str(r) for r in runs]
+        if not self.paths:
+            raise ValueError("RunDataset needs at least one run folder")
+        unknown = [f for f in fields if f not in FIELDS]
+        if unknown:
+            raise ValueError(f"unknown field(s) {unknown}; known: {', '.join(FIELDS)}")
+        self.fields = tuple(fields)
+        self._runs = {}
+        runs_ = [self._run(i) for i in range(len(self.paths))]
+        for r in runs_:
+            for f in self.fields:
+                need = _NEEDS[f] if isinstance(_NEEDS[f], tuple) else (_NEEDS[f],)
+                if not any(r.has(n) for n in need):
+                    raise ValueError(f"{r.path}: field '{f}' needs {' or '.join(need)}, which this run did not write")
+        ks = {r.K for r in runs_}
+        if len(ks) > 1:
+            raise ValueError(f"the runs have different K ({sorted(ks)}): their samples cannot share a batch")
+        if "frames" in self.fields and len({r.frames_per_k for r in runs_}) > 1:
+            raise ValueError("the runs have different frames per k: their frames cannot share a batch")
+        self.max_layers = int(max_layers if max_layers is not None else
+                              max(int(r.metadata["ground_truth_layers"]) for r in runs_))
+        if patch_size is None:
+            sizes = {(r.height, r.width) for r in runs_}
+            if len(sizes) > 1:
+                raise ValueError(f"the runs have different image sizes {sorted(sizes)}: give patch_size")
+            self.index = [(i, 0, 0, r.height, r.width) for i, r in enumerate(runs_)]
+        else:
+            ph, pw = (int(patch_size), int(patch_size)) if np.isscalar(patch_size) else map(int, patch_size)
+            if ph < 1 or pw < 1:
+                raise ValueError(f"patch_size must be positive, got {patch_size}")
+            self.index = [(i, x, y, ph, pw) for i, r in enumerate(runs_)
+                          for y in range(0, r.height - ph + 1, ph) for x in range(0, r.width - pw + 1, pw)]
+            if not self.index:
+                raise ValueError(f"no run is as large as a {ph} x {pw} patch")
+        self.patch_size = patch_size
+
+    def _run(self, i):
+        # Each DataLoader worker opens its own memory maps (the cache is not pickled).
+        if i not in self._runs:
+            self._runs[i] = open_run(self.paths[i])
+        return self._runs[i]
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state["_runs"] = {}
+        return state
+
+    def __len__(self):
+        return len(self.index)
+
+    def __getitem__(self, j):
+        i, x, y, h, w = self.index[j]
+        run = self._run(i)
+        ys, xs = slice(y, y + h), slice(x, x + w)
+        out = {}
+        if "counts" in self.fields:
+            out["counts"] = torch.from_numpy(np.asarray(run.counts[:, ys, xs], np.float32))
+        if "expected_counts" in self.fields:
+            if run.has("expected_counts.npy"):
+                e = np.array(run.expected_counts[:, ys, xs], np.float32)
+            else:  # only the sample's part of lambda, not the whole run's expectation
+                lam = np.asarray(run.detection_rate[:, ys, xs], np.float64)
+                e = (run.frames_per_k * -np.expm1(-lam)).astype(np.float32)
+            out["expected_counts"] = torch.from_numpy(e)
+        if "detection_rate" in self.fields:
+            out["detection_rate"] = torch.from_numpy(np.array(run.detection_rate[:, ys, xs], np.float32))
+        if {"depth", "mask"} & set(self.fields):
+            d = np.asarray(run.depth()[ys, xs], np.float32)
+            hit = np.isfinite(d)
+            if "depth" in self.fields:
+                out["depth"] = torch.from_numpy(np.where(hit, d, 0).astype(np.float32)[None])
+            if "mask" in self.fields:
+                out["mask"] = torch.from_numpy(hit[None].copy())
+        if {"layer_count", "layer_depth", "layer_mask"} & set(self.fields):
+            layers = run.layers()
+            count = layers.count[ys, xs].astype(np.int64)
+            if "layer_count" in self.fields:
+                out["layer_count"] = torch.from_numpy(count)
+            L = self.max_layers
+            exists = np.arange(L)[:, None, None] < count[None]
+            if "layer_depth" in self.fields:
+                depth = np.zeros((L, h, w), np.float32)
+                n = min(L, layers.range.shape[0])
+                depth[:n] = layers.range[:n, ys, xs]
+                out["layer_depth"] = torch.from_numpy(np.where(exists, depth, 0).astype(np.float32))
+            if "layer_mask" in self.fields:
+                out["layer_mask"] = torch.from_numpy(exists)
+        if "frames" in self.fields:
+            packed = run.frames_packed[:, :, ys]
+            out["frames"] = torch.from_numpy(np.ascontiguousarray(unpack_frames(packed, run.width)[..., xs]))
+        if run.mode == "gate_sweep":
+            out["gate_positions_ns"] = torch.from_numpy(run.gate_positions_ns.astype(np.float32))
+        K = run.intrinsics.copy()
+        K[0, 2] -= x
+        K[1, 2] -= y
+        out["intrinsics"] = torch.from_numpy(K.astype(np.float32))
+        out["origin"] = torch.tensor([x, y], dtype=torch.int64)
+        out["run"] = torch.tensor(i, dtype=torch.int64)
+        return out

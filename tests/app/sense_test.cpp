@@ -1,0 +1,141 @@
+// spadgen sense: the sensor stage alone from a run's saved light, as a user runs it.
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <nlohmann/json.hpp>
+
+#include "app_fixture.h"
+#include "writers/writers.h"
+
+namespace {
+using namespace spadgen::testing;
+using ::testing::HasSubstr;
+
+// kSmall with the light saved, and an 8-pixel-wide crop at the sensor's left edge with crosstalk's ring.
+const std::string kLit = kSmall + " --set outputs.light=true";
+
+TEST_F(App, SenseWritesWhatTheRunWroteBitForBit) {
+  ASSERT_EQ(sh("run " + kLit + " -o " + (dir_ / "run").string()).code, 0);
+  const Result r = sh("sense " + (dir_ / "run").string() + " -q -o " + (dir_ / "sense").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  expect_same_outputs(dir_ / "run", dir_ / "sense");
+  const auto meta = nlohmann::json::parse(slurp(dir_ / "sense/metadata.json"));
+  EXPECT_EQ(meta["sense"]["from"], (dir_ / "run").string());
+}
+
+// The light's ring around a crop lets sense switch crosstalk on although the run had it off, and the
+// result is what a run with crosstalk writes; the same for another gate step and frame count.
+TEST_F(App, SenseWithOtherSensorSettingsWritesWhatARunWithThemWrites) {
+  const std::string base = kLit + " --set sensor.crosstalk=false";
+  ASSERT_EQ(sh("run " + base + " -o " + (dir_ / "run").string()).code, 0);
+  for (const std::string& change : {std::string("--set sensor.crosstalk=true"),
+                                    std::string("--set acquisition.gate_sweep.step_ps=72 --set acquisition.frames=100 "
+                                                "--set seeds.chip=4")}) {
+    SCOPED_TRACE(change);
+    fs::remove_all(dir_ / "other"), fs::remove_all(dir_ / "sensed");
+    ASSERT_EQ(sh("run " + base + " " + change + " -o " + (dir_ / "other").string()).code, 0);
+    const Result r = sh("sense " + (dir_ / "run").string() + " -q " + change + " -o " + (dir_ / "sensed").string());
+    ASSERT_EQ(r.code, 0) << r.output;
+    expect_same_outputs(dir_ / "other", dir_ / "sensed");
+  }
+}
+
+// Another pixel design has another fill factor, which the renderer applied: sense rescales the saved
+// light row by row. The result is a run with that design up to the float32 rounding of the rescaling.
+TEST_F(App, SenseWithAnotherPixelDesignRescalesTheLight) {
+  ASSERT_EQ(sh("run " + kLit + " -o " + (dir_ / "run").string()).code, 0);
+  const std::string change = " --set sensor.preset=pixel_B";
+  ASSERT_EQ(sh("run " + kLit + change + " -o " + (dir_ / "other").string()).code, 0);
+  const Result r = sh("sense " + (dir_ / "run").string() + " -q" + change + " -o " + (dir_ / "sensed").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::vector<double> want = values(read_npy(dir_ / "other/detection_rate.npy"));
+  const std::vector<double> got = values(read_npy(dir_ / "sensed/detection_rate.npy"));
+  ASSERT_EQ(want.size(), got.size());
+  for (size_t i = 0; i < want.size(); ++i) ASSERT_NEAR(got[i], want[i], 1e-6 * want[i] + 1e-30) << i;
+  const std::vector<double> cw = values(read_npy(dir_ / "other/counts.npy")), cg = values(read_npy(dir_ / "sensed/counts.npy"));
+  size_t same = 0;
+  for (size_t i = 0; i < cw.size(); ++i) same += cw[i] == cg[i];
+  // The same noise draws against probabilities 1e-7 apart: a count differs when a draw falls between.
+  EXPECT_GE(double(same), 0.999 * double(cw.size()));
+  const auto lw = spadgen::writers::read_exr((dir_ / "other/laser.exr").string());
+  const auto lg = spadgen::writers::read_exr((dir_ / "sensed/laser.exr").string());
+  const auto& a = lw.channels.at("photons_per_pulse");
+  const auto& b = lg.channels.at("photons_per_pulse");
+  for (size_t i = 0; i < a.size(); ++i) ASSERT_NEAR(b[i], a[i], 1e-6 * a[i]) << i;
+}
+
+// Realisation r of --repeats R with --noise-seed S is the run with seeds.noise = S + r: same files (the
+// counts and frames differ from one realisation to the next, the rates do not).
+TEST_F(App, SenseRepeatsAreTheRunsWithConsecutiveNoiseSeeds) {
+  ASSERT_EQ(sh("run " + kLit + " -o " + (dir_ / "run").string()).code, 0);
+  const Result r = sh("sense " + (dir_ / "run").string() + " -q --noise-seed 7 --repeats 3 -o " + (dir_ / "rep").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  ASSERT_EQ(sh("run " + kLit + " --set seeds.noise=9 -o " + (dir_ / "seed9").string()).code, 0);
+  expect_same_outputs(dir_ / "seed9", dir_ / "rep/repeat_002");
+  EXPECT_EQ(slurp(dir_ / "rep/repeat_000/detection_rate.npy"), slurp(dir_ / "rep/repeat_001/detection_rate.npy"));
+  EXPECT_NE(slurp(dir_ / "rep/repeat_000/counts.npy"), slurp(dir_ / "rep/repeat_001/counts.npy"));
+  EXPECT_NE(slurp(dir_ / "rep/repeat_000/frames.npy"), slurp(dir_ / "rep/repeat_001/frames.npy"));
+  const auto meta = nlohmann::json::parse(slurp(dir_ / "rep/repeat_001/metadata.json"));
+  EXPECT_EQ(meta["seeds"]["noise"], 8);
+  EXPECT_EQ(meta["sense"]["repeat"], 1);
+}
+
+TEST_F(App, SenseRefusesWhatItCannotDo) {
+  ASSERT_EQ(sh("run " + kSmall + " -o " + (dir_ / "dark").string()).code, 0);
+  Result r = sh("sense " + (dir_ / "dark").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("saved no light; run it again with --set outputs.light=true"));
+
+  ASSERT_EQ(sh("run " + kLit + " -o " + (dir_ / "run").string()).code, 0);
+  r = sh("sense " + (dir_ / "run").string() + " --set laser.average_power_mW=5");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("--set laser.average_power_mW: sense re-samples the sensor only"));
+  // A sweep beyond the rendered window (the run stopped at 4.2 ns).
+  r = sh("sense " + (dir_ / "run").string() + " --set acquisition.gate_sweep.stop_ns=9");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("but the run saved light from"));
+  r = sh("sense " + dir_.string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("no metadata.json"));
+  EXPECT_FALSE(fs::exists(dir_ / "run-sense")) << "a refused sense leaves nothing behind";
+}
+
+// The saved light holds every rendered bin of every pixel (the transient, compactly), and its own
+// description (metadata.json's light section) agrees with its files.
+TEST_F(App, SavedLightIsTheTransientOverEachPixelsLitBins) {
+  ASSERT_EQ(sh("run " + kLit + " -o " + (dir_ / "run").string()).code, 0);
+  const fs::path d = dir_ / "run";
+  const auto meta = nlohmann::json::parse(slurp(d / "metadata.json"));
+  EXPECT_EQ(meta["light"]["crop_in_sensor"], nlohmann::json({495, 231, 26, 22}));  // the crop and its ring
+  const Npy ranges = read_npy(d / "light/ranges.npy"), offsets = read_npy(d / "light/offsets.npy");
+  const Npy vals = read_npy(d / "light/values.npy"), transient = read_npy(d / "transient.npy");
+  const Npy laser = read_npy(d / "light/laser_total.npy");
+  ASSERT_EQ(ranges.shape, (std::vector<int64_t>{22, 26, 2}));
+  ASSERT_EQ(offsets.shape, (std::vector<int64_t>{22 * 26 + 1}));
+  EXPECT_EQ(laser.descr, "<f8");
+  const int64_t T = transient.shape[2];
+  const auto i32 = [&](const Npy& n, size_t i) { int32_t v; std::memcpy(&v, n.data.data() + 4 * i, 4); return v; };
+  const auto i64 = [&](const Npy& n, size_t i) { int64_t v; std::memcpy(&v, n.data.data() + 8 * i, 8); return v; };
+  const std::vector<double> v = values(vals), t = values(transient);
+  EXPECT_EQ(int64_t(v.size()), i64(offsets, 22 * 26));
+  EXPECT_EQ(meta["light"]["values_bytes"], 4 * v.size());
+  // Inside the crop, the transient rebuilt from the light is transient.npy, bin for bin.
+  size_t lit_bins = 0;
+  for (int y = 0; y < 20; ++y)
+    for (int x = 0; x < 24; ++x) {
+      const size_t i = size_t((y + 1) * 26 + (x + 1));
+      const int32_t lo = i32(ranges, 2 * i), hi = i32(ranges, 2 * i + 1);
+      ASSERT_EQ(i64(offsets, i + 1) - i64(offsets, i), hi - lo);
+      for (int64_t b = 0; b < T; ++b) {
+        const double expect = t[size_t((y * 24 + x) * T + b)];
+        const double got = b >= lo && b < hi ? v[size_t(i64(offsets, i) + b - lo)] : 0.0;
+        ASSERT_EQ(got, expect) << x << " " << y << " " << b;
+      }
+      lit_bins += size_t(hi - lo);
+    }
+  // Compact: the multi-object transient spans a small part of the window.
+  EXPECT_LT(lit_bins, size_t(24 * 20 * T) / 4);
+}
+
+}  // namespace

@@ -1,0 +1,78 @@
+"""Shared fixtures of the Python package's tests: the spadgen program and exr_tool (paths from CTest through
+SPADGEN_BIN and SPADGEN_EXR_TOOL, else the README's build folder), and small real runs of shipped scenes,
+made once per test process."""
+import os
+import pathlib
+import subprocess
+
+import pytest
+
+SOURCE = pathlib.Path(os.environ.get("SPADGEN_SOURCE_DIR", pathlib.Path(__file__).resolve().parents[2]))
+SCENES = SOURCE / "scenes" / "paper"
+
+# Each run: scene file and --set overrides. Small crops of shipped scenes, well under a second each.
+RUNS = {
+    # The multi-object scene across the plate's edge (x < 512: plate in front of the sphere, 3 layers), the
+    # bare sphere, and past the sphere's edge (x > 826: nothing hit); 347 pixels across, not a multiple of 8.
+    # Every optional stack: transients (on a smaller crop), their indirect part, binary frames.
+    "sweep": ("multi_object.json", ["camera.crop=[490,236,347,10]", "render.samples_per_pixel=2",
+                                    "acquisition.gate_sweep.step_ps=360", "outputs.transient=true",
+                                    "outputs.transient_crop=[500,238,24,6]", "render.split_direct_indirect=true",
+                                    "outputs.frames=true", "outputs.expected_counts=true", "outputs.light=true"]),
+    # Dual-exposure intensity images of the test chart (uint16 counts, intensity.exr), with frames.
+    "intensity": ("test_chart_dual.json", ["camera.crop=[400,300,40,24]", "outputs.frames=true"]),
+    # The camera moved, turned and rolled in front of the multi-object scene: the plate's front face
+    # (world z = -0.45 m) and the pose must agree.
+    "posed": ("multi_object.json", ["camera.position_m=[0.05,0.03,0.1]", "camera.look_at_m=[-0.05,0,-0.75]",
+                                    "camera.up=[0.3,1,0]", "camera.crop=[540,160,64,48]", "render.samples_per_pixel=1",
+                                    "acquisition.gate_sweep.step_ps=3600", "outputs.previews=false"]),
+    # The paper's flat target at 0.8 m, central pixels, every 36 ps gate step (as tests/app/paper_test.cpp).
+    "flat": ("flat_target.json", ["camera.position_m=[0,0,0.8]", "camera.crop=[507,245,10,10]",
+                                  "render.samples_per_pixel=4", "outputs.previews=false"]),
+}
+
+
+def _tool(env, default):
+    path = pathlib.Path(os.environ.get(env, SOURCE / "build" / default))
+    if not path.is_file():
+        pytest.fail(f"{path} does not exist: build spadgen first, or set {env} (ctest sets it)")
+    return str(path)
+
+
+@pytest.fixture(scope="session")
+def spadgen_bin():
+    return _tool("SPADGEN_BIN", "app/spadgen")
+
+
+@pytest.fixture(scope="session")
+def exr_tool():
+    return _tool("SPADGEN_EXR_TOOL", "tests/python/exr_tool")
+
+
+@pytest.fixture(scope="session")
+def make_run(spadgen_bin, tmp_path_factory):
+    """make_run(name) -> the folder of run RUNS[name], run on first use."""
+    done = {}
+
+    def make(name):
+        if name not in done:
+            scene, sets = RUNS[name]
+            out = tmp_path_factory.mktemp(name)
+            cmd = [spadgen_bin, "run", str(SCENES / scene), "-o", str(out), "-q"]
+            for s in sets:
+                cmd += ["--set", s]
+            subprocess.run(cmd, check=True)
+            done[name] = out
+        return done[name]
+
+    return make
+
+
+@pytest.fixture(scope="session")
+def sweep_run(make_run):
+    return make_run("sweep")
+
+
+@pytest.fixture(scope="session")
+def intensity_run(make_run):
+    return make_run("intensity")

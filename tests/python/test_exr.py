@@ -1,0 +1,118 @@
+"""The pure-Python EXR reader against the OpenEXR library: fixtures written by OpenEXR in every layout the
+reader takes (NONE, RLE, ZIPS, ZIP; HALF, FLOAT, UINT; a data window off the origin; decreasing line order)
+and every image of real spadgen runs, each compared bit for bit with what OpenEXR reads (exr_tool dump);
+and the layouts it refuses, refused with a message that names them."""
+import pathlib
+import subprocess
+
+import numpy as np
+import pytest
+
+from spadgen.exr import ExrError, ExrFile, read_exr
+
+WIDTH, HEIGHT, X0, Y0 = 37, 41, 3, -2  # exr_tool's fixture
+
+
+def fixture_value(channel, x, y):
+    """exr_tool.cpp's fixture_value, repeated."""
+    i = y * WIDTH + x
+    if channel == "half":
+        return 65504.0 if (x, y) == (0, 0) else -np.inf if (x, y) == (1, 0) else (i - 700.0) / 8.0
+    if channel == "float":
+        return np.inf if (x, y) == (0, 1) else np.sin(i) * 1e3 + i * 1e-3
+    if channel == "layer0.range":
+        return 0.45 + 1e-4 * i
+    return 4294967295.0 - i * 104729.0
+
+
+def dump(exr_tool, path, tmp_path):
+    """What OpenEXR reads: {channel: array in its stored type}, {string attribute: value}."""
+    out = tmp_path / (pathlib.Path(path).name + ".dump")
+    out.mkdir()
+    subprocess.run([exr_tool, "dump", str(path), str(out)], check=True)
+    dtypes = {"HALF": "<f2", "FLOAT": "<f4", "UINT": "<u4"}
+    channels = {}
+    for line in (out / "channels.txt").read_text().splitlines():
+        name, kind, w, h = line.split(" ")
+        channels[name] = np.fromfile(out / f"{name}.bin", dtypes[kind]).reshape(int(h), int(w))
+    attributes = dict(line.split("\t", 1) for line in (out / "attributes.txt").read_text().splitlines())
+    return channels, attributes
+
+
+def assert_same_bits(ours, theirs):
+    assert ours.dtype == theirs.dtype and ours.shape == theirs.shape
+    # Bit for bit: NaN, infinities and -0.0 included.
+    assert np.array_equal(ours.view(f"u{ours.dtype.itemsize}"), theirs.view(f"u{theirs.dtype.itemsize}"))
+
+
+@pytest.mark.parametrize("compression,options", [("NONE", []), ("RLE", []), ("ZIPS", []), ("ZIP", []),
+                                                 ("ZIP", ["decreasing"])])
+def test_fixture_equals_openexr_and_the_values_written(exr_tool, tmp_path, compression, options):
+    path = tmp_path / f"fixture_{compression}.exr"
+    subprocess.run([exr_tool, "write", str(path), compression] + options, check=True)
+    f = ExrFile(path)
+    assert f.compression == compression
+    assert f.data_window == (X0, Y0, X0 + WIDTH - 1, Y0 + HEIGHT - 1)
+    assert (f.width, f.height) == (WIDTH, HEIGHT)
+    assert f.channel_names == ["float", "half", "layer0.range", "uint"]  # the file's (sorted) order
+    assert f.attributes["spadgen_fixture"] == "written by exr_tool"
+    assert f.header["lineOrder"] == ("DECREASING_Y" if options else "INCREASING_Y")
+    theirs, attributes = dump(exr_tool, path, tmp_path)
+    assert attributes == f.attributes
+    dtypes = {"half": np.float16, "float": np.float32, "layer0.range": np.float32, "uint": np.uint32}
+    for name, dtype in dtypes.items():
+        assert_same_bits(f[name], theirs[name])
+        expected = np.array([[fixture_value(name, x, y) for x in range(WIDTH)] for y in range(HEIGHT)]).astype(dtype)
+        assert_same_bits(f[name], expected)
+        assert not f[name].flags.writeable
+    assert f["uint"].max() == 4294967295  # beyond float32's exact integers
+
+
+@pytest.mark.parametrize("compression", ["PIZ", "PXR24", "B44", "DWAA"])
+def test_other_compressions_are_refused_by_name(exr_tool, tmp_path, compression):
+    path = tmp_path / f"fixture_{compression}.exr"
+    subprocess.run([exr_tool, "write", str(path), compression], check=True)
+    f = ExrFile(path)  # the header still reads
+    assert f.channel_names == ["float", "half", "layer0.range", "uint"]
+    with pytest.raises(ExrError, match=f"{compression} compression is not supported"):
+        f["float"]
+
+
+def test_tiled_files_are_refused(exr_tool, tmp_path):
+    path = tmp_path / "tiled.exr"
+    subprocess.run([exr_tool, "write", str(path), "ZIP", "tiled"], check=True)
+    with pytest.raises(ExrError, match="tiled EXR files are not supported"):
+        ExrFile(path)
+
+
+def test_not_an_exr_and_truncated_files_are_errors(exr_tool, tmp_path):
+    bad = tmp_path / "bad.exr"
+    bad.write_bytes(b"P6\n1 1\n255\n\0\0\0")
+    with pytest.raises(ExrError, match="not an OpenEXR file"):
+        ExrFile(bad)
+    path = tmp_path / "whole.exr"
+    subprocess.run([exr_tool, "write", str(path), "ZIP"], check=True)
+    data = path.read_bytes()
+    cut = tmp_path / "cut.exr"
+    cut.write_bytes(data[:len(data) - 200])
+    with pytest.raises(ExrError, match="cut.exr"):
+        ExrFile(cut)["float"]
+    cut.write_bytes(data[:40])
+    with pytest.raises(ExrError, match="truncated header"):
+        ExrFile(cut)
+
+
+@pytest.mark.parametrize("run_name", ["sweep", "intensity"])
+def test_every_image_of_a_run_equals_openexr(make_run, exr_tool, tmp_path, run_name):
+    run = make_run(run_name)
+    images = sorted(run.glob("*.exr"))
+    assert {p.name for p in images} >= {"ground_truth.exr", "laser.exr", "ambient.exr", "sensor_maps.exr"}
+    for path in images:
+        channels, attributes = read_exr(path)
+        theirs, their_attributes = dump(exr_tool, path, tmp_path)
+        assert sorted(channels) == sorted(theirs), path.name
+        for name in theirs:
+            assert channels[name].dtype == np.float32  # spadgen writes FLOAT channels
+            assert_same_bits(channels[name], theirs[name])
+        assert attributes == their_attributes
+        assert attributes["spadgen_crop"].startswith("[")

@@ -1,0 +1,204 @@
+"""open_run on real runs: every stack and image as docs/outputs.md describes it, checked against what the
+C++ side wrote by independent routes (metadata.json's totals, the transients against laser.exr, summed frames
+against counts.npy, intensity.exr against counts.npy), and the helpers (profiles, depth, layers, labels,
+errors for what a run did not write)."""
+import json
+
+import numpy as np
+import pytest
+
+import spadgen
+from spadgen.estimate import rising_edge_range
+
+
+@pytest.fixture(scope="module")
+def sweep(sweep_run):
+    return spadgen.open_run(sweep_run)
+
+
+@pytest.fixture(scope="module")
+def intensity(intensity_run):
+    return spadgen.open_run(intensity_run)
+
+
+def test_metadata_and_shapes(sweep, intensity):
+    for run in (sweep, intensity):
+        K, H, W = run.K, run.height, run.width
+        assert (W, H) == tuple(run.crop[2:])
+        assert run.expected_counts.shape == (K, H, W) and run.expected_counts.dtype == np.dtype("<f4")
+        assert run.detection_rate.shape == (K, H, W) and run.detection_rate.dtype == np.dtype("<f4")
+        assert run.counts.shape == (K, H, W)
+        assert run.counts.dtype == np.dtype(run.metadata["counts_dtype"])
+        assert run.frames_packed.shape == (K, run.frames_per_k, H, (W + 7) // 8)
+        assert run.frames_packed.dtype == np.uint8
+        for stack in (run.detection_rate, run.counts, run.frames_packed):
+            assert isinstance(stack, np.memmap) and not stack.flags.writeable  # lazily loaded
+        assert run.ground_truth["range"].shape == (H, W)
+        assert run["counts"] is run.counts and run["laser.exr"] is run.laser
+    assert sweep.counts.dtype == np.uint8 and intensity.counts.dtype == np.uint16  # 255 and 2040 frames per k
+    assert (sweep.width, sweep.height, sweep.K) == (347, 10, 36)
+    assert sweep.crop == (490, 236, 347, 10)
+    assert sweep.mode == "gate_sweep" and intensity.mode == "intensity"
+    assert sweep.units["length"] == "m"
+    assert sweep.spadgen_version == spadgen.__version__
+
+
+def test_time_axis_and_gate_positions(sweep, intensity):
+    scene = sweep.metadata["resolved_scene"]["acquisition"]["gate_sweep"]
+    expected = scene["start_ns"] + np.arange(sweep.K) * scene["step_ps"] / 1000.0
+    np.testing.assert_allclose(sweep.gate_positions_ns, expected, rtol=0, atol=1e-9)
+    assert sweep.gate_positions_ns[-1] == pytest.approx(scene["stop_ns"])
+    axis = sweep.time_axis
+    meta = sweep.metadata["time_axis"]
+    assert axis.bins == meta["bins"] == sweep.transient.shape[-1]
+    assert axis.end_s == pytest.approx(meta["end_ns"] * 1e-9)
+    assert axis.bin_centres_s()[0] == pytest.approx(axis.start_s + axis.bin_width_s / 2)
+    np.testing.assert_allclose(intensity.exposures_s, np.array(intensity.acquisition["exposures_us"]) * 1e-6)
+    with pytest.raises(ValueError, match="no gate positions"):
+        intensity.gate_positions_s
+
+
+def test_frames_unpacked_and_summed_equal_counts(sweep, intensity):
+    for run in (sweep, intensity):
+        frames = run.frames()
+        assert frames.shape == (run.K, run.frames_per_k, run.height, run.width) and frames.dtype == np.uint8
+        assert set(np.unique(frames)) <= {0, 1}
+        np.testing.assert_array_equal(frames.sum(axis=1, dtype=np.int64), run.counts)
+        # The bits beyond W in each row's last byte are zero.
+        pad = run.width % 8
+        if pad:
+            assert not (np.asarray(run.frames_packed[..., -1]) >> pad).any()
+        np.testing.assert_array_equal(run.frames(3 % run.K, 5), frames[3 % run.K, 5])
+    # The bit order matters: NumPy's default (most significant bit first) mirrors groups of 8 pixels.
+    wrong = np.unpackbits(np.asarray(sweep.frames_packed), axis=-1)[..., :sweep.width].sum(axis=1)
+    assert not np.array_equal(wrong, sweep.counts)
+
+
+def test_unpack_frames_bit_layout():
+    packed = np.array([[0b00000001, 0b10000010]], np.uint8)  # one row of 13 pixels (2 bytes)
+    row = spadgen.unpack_frames(packed, 13)[0]
+    assert row.tolist() == [1, 0, 0, 0, 0, 0, 0, 0, 0, 1, 0, 0, 0]
+    with pytest.raises(ValueError, match="takes 3 bytes, the array's rows have 2"):
+        spadgen.unpack_frames(packed, 17)
+
+
+def test_laser_image_equals_metadata_totals_and_transients(sweep):
+    laser = sweep.laser
+    totals = sweep.metadata["laser_photons_per_pulse"]
+    assert laser["photons_per_pulse"].sum(dtype=np.float64) == pytest.approx(totals["total_all_pixels"], rel=1e-6)
+    assert laser["out_of_window"].sum(dtype=np.float64) == pytest.approx(totals["outside_time_window"], abs=1e-12)
+    # transient.npy covers metadata.json's transient crop: summed over time it is the laser image there,
+    # less what fell outside the window.
+    tx, ty, tw, th = sweep.metadata["transient"]["crop_in_sensor"]
+    assert sweep.transient.shape == tuple(sweep.metadata["transient"]["shape"]) == (th, tw, sweep.time_axis.bins)
+    x0, y0 = tx - sweep.crop[0], ty - sweep.crop[1]
+    window = (slice(y0, y0 + th), slice(x0, x0 + tw))
+    in_window = laser["photons_per_pulse"][window] - laser["out_of_window"][window]
+    summed = np.asarray(sweep.transient, np.float64).sum(axis=-1)
+    assert in_window.max() > 0
+    np.testing.assert_allclose(summed, in_window, rtol=1e-5, atol=1e-12)
+    indirect = np.asarray(sweep.transient_indirect)
+    assert indirect.shape == sweep.transient.shape
+    assert (indirect <= np.asarray(sweep.transient) + 1e-12).all() and indirect.sum() > 0
+
+
+def test_intensity_image_equals_summed_counts(intensity):
+    np.testing.assert_array_equal(intensity.intensity["counts"], np.asarray(intensity.counts, np.int64).sum(axis=0))
+    assert (intensity.intensity["photons"] >= 0).all()
+
+
+def test_ground_truth_layers_and_labels(sweep):
+    gt = sweep.ground_truth
+    n = sweep.metadata["ground_truth_layers"]
+    assert n == 3  # plate front, plate back, sphere
+    assert sorted(c for c in gt if c.startswith("layer") and c != "layer_count") == \
+        sorted(f"layer{i}.{q}" for i in range(n) for q in ("range", "transmittance"))
+    layers = sweep.layers()
+    H, W = sweep.height, sweep.width
+    assert layers.count.shape == (H, W) and layers.count.dtype == np.int32
+    assert layers.range.shape == layers.transmittance.shape == (n, H, W)
+    assert layers.count.max() == n
+    exists = np.arange(n)[:, None, None] < layers.count
+    np.testing.assert_array_equal(np.isfinite(layers.range), exists)
+    assert (layers.range[1:][exists[1:]] > layers.range[:-1][exists[1:]]).all()  # nearest first
+    hit = sweep.hit()
+    np.testing.assert_array_equal(hit, layers.count > 0)
+    np.testing.assert_array_equal(np.where(hit, layers.range[0], np.inf), sweep.depth())
+    mesh, material = sweep.labels()
+    assert mesh.dtype == np.int32
+    np.testing.assert_array_equal(mesh == -1, ~hit)
+    # The scene: the plate (mesh 0) left of sensor x = 512 with the sphere behind it; the bare sphere (mesh 1);
+    # nothing beyond the sphere's edge (sensor x > 826).
+    x = np.arange(W) + sweep.crop[0]
+    assert (mesh[:, x < 512] == 0).all() and (layers.count[:, x < 512] == 3).all()
+    assert (mesh[:, (x >= 512) & (x < 800)] == 1).all() and (mesh[:, x > 830] == -1).all()
+    assert (sweep.depth("z") <= sweep.depth() + 1e-7)[hit].all()
+    with pytest.raises(ValueError):
+        sweep.depth("distance")
+
+
+def test_expected_counts_from_the_detection_rate(sweep, intensity):
+    # The sweep wrote both files: the expectation computed from lambda is the C++ side's to float32 rounding.
+    assert sweep.has("expected_counts.npy") and not intensity.has("expected_counts.npy")
+    N = sweep.frames_per_k
+    derived = (N * -np.expm1(-np.asarray(sweep.detection_rate, np.float64)))
+    np.testing.assert_allclose(derived, sweep.expected_counts, rtol=2e-6, atol=2e-6 * N)
+    # Without the file, Run computes it; summed over the frames, counts scatter around it.
+    e = intensity.expected_counts
+    assert e.dtype == np.float32 and e.shape == intensity.counts.shape
+    assert np.all((e >= 0) & (e <= intensity.frames_per_k))
+    assert abs(float(intensity.counts.astype(np.float64).sum() - e.astype(np.float64).sum())) < 5 * np.sqrt(e.sum() + 1)
+
+
+def test_saved_light_rebuilds_the_transient(sweep):
+    # light/ keeps each pixel's transient over its lit bins (docs/outputs.md, section Saved light); inside
+    # the transient crop it rebuilds transient.npy exactly.
+    lx0, ly0, lw, lh = sweep.metadata["light"]["crop_in_sensor"]
+    r, o, v = sweep["light/ranges"], sweep["light/offsets"], sweep["light/values"]
+    assert r.shape == (lh, lw, 2) and o.shape == (lh * lw + 1,) and o[-1] == v.size
+    tx0, ty0, tw, th = sweep.metadata["transient"]["crop_in_sensor"]
+    T = sweep.transient.shape[2]
+    for y in range(th):
+        for x in range(tw):
+            ly, lx = ty0 + y - ly0, tx0 + x - lx0
+            i = ly * lw + lx
+            g = np.zeros(T, np.float32)
+            g[r[ly, lx, 0]:r[ly, lx, 1]] = v[o[i]:o[i + 1]]
+            np.testing.assert_array_equal(g, sweep.transient[y, x])
+
+
+def test_gate_profile(sweep):
+    p = sweep.gate_profile(30, 4)
+    np.testing.assert_array_equal(p.values, sweep.counts[:, 4, 30])
+    np.testing.assert_array_equal(p.gate_ns, sweep.gate_positions_ns)
+    e = sweep.gate_profile(30, 4, expected=True)
+    np.testing.assert_array_equal(e.values, sweep.expected_counts[:, 4, 30])
+    sx, sy = sweep.metadata["preview_profile_pixels"][0]
+    q = sweep.gate_profile(sx, sy, sensor_coordinates=True)
+    assert (q.x, q.y) == (sx - sweep.crop[0], sy - sweep.crop[1])
+    with pytest.raises(IndexError, match="outside"):
+        sweep.gate_profile(sweep.width, 0)
+
+
+def test_what_a_run_did_not_write_is_named(make_run, tmp_path):
+    posed = spadgen.open_run(make_run("posed"))
+    with pytest.raises(FileNotFoundError, match="outputs.frames"):
+        posed.frames_packed
+    with pytest.raises(FileNotFoundError, match="outputs.transient"):
+        posed.transient
+    with pytest.raises(FileNotFoundError, match="no metadata.json"):
+        spadgen.open_run(tmp_path)
+    (tmp_path / "metadata.json").write_text(json.dumps({"files": []}))
+    with pytest.raises(KeyError, match="no camera section"):
+        spadgen.open_run(tmp_path).intrinsics
+
+
+def test_rising_edge_baseline_on_the_flat_target(make_run):
+    run = spadgen.open_run(make_run("flat"))
+    truth = run.depth()
+    # Noise-free profiles: the timing chain agrees with the geometry within 3 mm (as tests/app/paper_test.cpp).
+    err = rising_edge_range(run, expected=True) - truth
+    assert np.isfinite(err).all() and np.abs(err).max() < 3e-3
+    # Sampled counts at 0.8 m: the paper's figures (accuracy 1.9 mm, precision 2.7 mm) with margin.
+    err = rising_edge_range(run) - truth
+    assert np.isfinite(err).all() and abs(err.mean()) < 5e-3 and err.std() < 8e-3

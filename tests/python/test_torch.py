@@ -1,0 +1,111 @@
+"""spadgen.torchdata.RunDataset: the documented keys, shapes and dtypes, values equal to the run's arrays,
+patches with their intrinsics, batching with a DataLoader, a few steps of training, and the checks that
+refuse runs that cannot share a batch. Skipped only where PyTorch is not installed (CI installs it)."""
+import pickle
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+import spadgen  # noqa: E402
+from spadgen.torchdata import FIELDS, RunDataset  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def sweep(sweep_run):
+    return spadgen.open_run(sweep_run)
+
+
+def expected_layout(K, N, L, H, W):
+    """The module docstring's table."""
+    return {"counts": ((K, H, W), torch.float32), "expected_counts": ((K, H, W), torch.float32),
+            "detection_rate": ((K, H, W), torch.float32),
+            "depth": ((1, H, W), torch.float32), "mask": ((1, H, W), torch.bool), "layer_count": ((H, W), torch.int64),
+            "layer_depth": ((L, H, W), torch.float32), "layer_mask": ((L, H, W), torch.bool),
+            "frames": ((K, N, H, W), torch.uint8), "gate_positions_ns": ((K,), torch.float32),
+            "intrinsics": ((3, 3), torch.float32), "origin": ((2,), torch.int64), "run": ((), torch.int64)}
+
+
+def test_whole_image_sample_has_the_documented_layout_and_values(sweep_run, sweep):
+    ds = RunDataset([sweep_run], fields=FIELDS)
+    assert len(ds) == 1
+    s = ds[0]
+    layout = expected_layout(sweep.K, sweep.frames_per_k, 3, sweep.height, sweep.width)
+    assert set(s) == set(layout)
+    for key, (shape, dtype) in layout.items():
+        assert tuple(s[key].shape) == shape and s[key].dtype == dtype, key
+    np.testing.assert_array_equal(s["counts"].numpy(), sweep.counts)
+    np.testing.assert_array_equal(s["expected_counts"].numpy(), sweep.expected_counts)
+    np.testing.assert_array_equal(s["detection_rate"].numpy(), sweep.detection_rate)
+    hit = sweep.hit()
+    np.testing.assert_array_equal(s["mask"][0].numpy(), hit)
+    np.testing.assert_array_equal(s["depth"][0].numpy(), np.where(hit, sweep.depth(), 0))
+    layers = sweep.layers()
+    np.testing.assert_array_equal(s["layer_count"].numpy(), layers.count)
+    np.testing.assert_array_equal(s["layer_depth"].numpy(), np.where(np.isfinite(layers.range), layers.range, 0))
+    np.testing.assert_array_equal(s["layer_mask"].numpy().sum(0), layers.count)
+    np.testing.assert_array_equal(s["frames"].sum(1).numpy(), sweep.counts)
+    np.testing.assert_allclose(s["intrinsics"].numpy(), sweep.intrinsics, rtol=1e-7)
+    assert s["origin"].tolist() == [0, 0] and int(s["run"]) == 0
+
+
+def test_patches_cover_the_image_and_shift_the_intrinsics(sweep_run, sweep):
+    ds = RunDataset([sweep_run, sweep_run], patch_size=(5, 16), fields=("counts", "depth", "mask", "layer_count"),
+                    max_layers=4)
+    per_run = (10 // 5) * (347 // 16)
+    assert len(ds) == 2 * per_run
+    s = ds[per_run + 3]  # the second run's fourth patch: row 0, column 3
+    assert int(s["run"]) == 1 and s["origin"].tolist() == [48, 0]
+    assert tuple(s["counts"].shape) == (sweep.K, 5, 16)
+    np.testing.assert_array_equal(s["counts"].numpy(), sweep.counts[:, 0:5, 48:64])
+    # A patch pixel's ground-truth point projects onto that pixel with the patch's intrinsics.
+    point = sweep.points()[2, 50]
+    u, v = spadgen.project(point, s["intrinsics"].double().numpy())
+    assert (u, v) == pytest.approx((50 - 48, 2), abs=1e-3)
+    full = RunDataset([sweep_run], patch_size=(5, 16), fields=("layer_depth",), max_layers=4)[0]
+    assert tuple(full["layer_depth"].shape) == (4, 5, 16) and not full["layer_depth"][3].any()
+
+
+def test_data_loader_batches_and_a_training_step(sweep_run, sweep):
+    ds = RunDataset([sweep_run], patch_size=8)
+    loader = torch.utils.data.DataLoader(ds, batch_size=4, shuffle=True, generator=torch.Generator().manual_seed(0))
+    batch = next(iter(loader))
+    assert tuple(batch["counts"].shape) == (4, sweep.K, 8, 8) and tuple(batch["mask"].shape) == (4, 1, 8, 8)
+    # docs/python.md's loop, shortened: counts -> depth with a 1 x 1 convolution, masked L1 loss.
+    torch.manual_seed(0)
+    net = torch.nn.Conv2d(sweep.K, 1, 1)
+    opt = torch.optim.Adam(net.parameters(), lr=5e-2)
+    losses = []
+    for _ in range(3):
+        for b in loader:
+            pred = net(b["counts"] / sweep.frames_per_k)
+            loss = ((pred - b["depth"]).abs() * b["mask"]).sum() / b["mask"].sum().clamp(min=1)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            losses.append(loss.item())
+    assert np.isfinite(losses).all() and np.mean(losses[-5:]) < 0.5 * np.mean(losses[:5])
+    # The dataset pickles without its open memory maps (DataLoader workers open their own).
+    again = pickle.loads(pickle.dumps(ds))
+    np.testing.assert_array_equal(again[1]["counts"].numpy(), ds[1]["counts"].numpy())
+
+
+def test_runs_that_cannot_share_a_batch_are_refused(sweep_run, make_run):
+    posed = make_run("posed")
+    with pytest.raises(ValueError, match="different K"):
+        RunDataset([sweep_run, posed])
+    with pytest.raises(ValueError, match="needs frames.npy"):
+        RunDataset([posed], fields=("frames",))
+    with pytest.raises(ValueError, match="unknown field"):
+        RunDataset([sweep_run], fields=("count",))
+    with pytest.raises(ValueError, match="no run is as large"):
+        RunDataset([sweep_run], patch_size=(11, 8))
+
+
+def test_import_spadgen_does_not_import_torch():
+    code = "import sys, spadgen; print('torch' in sys.modules); spadgen.RunDataset; print('torch' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True).stdout.split()
+    assert out == ["False", "True"]
