@@ -1,4 +1,5 @@
-// SIGINT / SIGTERM during a run: the tiles stop, the staging folder is removed, nothing is published.
+// SIGINT / SIGTERM during a run: every long loop stops (it polls spadgen::interrupt_flag), the staging
+// folder is removed, nothing is published, and the program exits with code 2.
 #pragma once
 #include <csignal>
 
@@ -11,7 +12,8 @@ class InterruptGuard {
   ~InterruptGuard();
   InterruptGuard(const InterruptGuard&) = delete;
   InterruptGuard& operator=(const InterruptGuard&) = delete;
-  // Throws spadgen::Error once a signal has arrived; the tiles call it so that the run stops early.
+  // Throws spadgen::Interrupted once a signal has arrived (spadgen::throw_if_interrupted, which the
+  // renderer polls per pixel, says the same).
   static void check();
 
  private:

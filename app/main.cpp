@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <iostream>
 
+#include "app/cli.h"
 #include "app/pipeline.h"
 #include "core/error.h"
 #include "scenes/scene_file.h"
@@ -33,7 +34,7 @@ int main(int argc, char** argv) {
   cli.set_version_flag("--version", SPADGEN_VERSION);
 
   spadgen::app::RunOptions run;
-  uint64_t seed = 0;
+  std::string seed;
   CLI::App* run_cmd = cli.add_subcommand("run", "render and sample a scene file into an output folder");
   run_cmd->add_option("scene", run.scene_file, "scene file (.json)")->required()->check(CLI::ExistingFile);
   run_cmd->add_option("-o,--out", run.out_dir, "output folder (default: out/<scene file name>)");
@@ -43,10 +44,10 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--threads", run.threads, "worker threads (default: all cores); outputs do not depend on it")
       ->check(CLI::NonNegativeNumber);
   bool quiet = false;
-  run_cmd->add_flag("-q,--quiet", quiet, "no progress on stderr");
+  run_cmd->add_flag("-q,--quiet", quiet, "nothing on stderr but warnings and errors");
 
   spadgen::app::SenseOptions sense;
-  uint64_t noise_seed = 0, chip_seed = 0;
+  std::string noise_seed, chip_seed;
   CLI::App* sense_cmd = cli.add_subcommand(
       "sense", "re-sample the sensor from a run's saved light (outputs.light) without rendering: other sensor or acquisition "
                "settings, another chip, other noise");
@@ -62,7 +63,7 @@ int main(int argc, char** argv) {
   sense_cmd->add_option("--threads", sense.threads, "worker threads (default: all cores); outputs do not depend on it")
       ->check(CLI::NonNegativeNumber);
   bool sense_quiet = false;
-  sense_cmd->add_flag("-q,--quiet", sense_quiet, "no progress on stderr");
+  sense_cmd->add_flag("-q,--quiet", sense_quiet, "nothing on stderr but warnings and errors");
 
   std::string info_scene;
   std::vector<std::string> info_overrides;
@@ -74,15 +75,15 @@ int main(int argc, char** argv) {
   bool json_schema = false;
   schema_cmd->add_flag("--json-schema", json_schema, "print it as a JSON Schema (for editors) instead");
 
-  CLI11_PARSE(cli, argc, argv);
-  try {
+  if (const std::optional<int> code = spadgen::app::parse_command_line(cli, argc, argv)) return *code;
+  return spadgen::app::run_command([&] {
     if (*run_cmd) {
-      if (*seed_opt) run.seed = seed;
+      if (*seed_opt) run.seed = spadgen::app::parse_seed(seed);
       run.progress = !quiet;
       spadgen::app::run(run);
     } else if (*sense_cmd) {
-      if (*noise_opt) sense.noise_seed = noise_seed;
-      if (*chip_opt) sense.chip_seed = chip_seed;
+      if (*noise_opt) sense.noise_seed = spadgen::app::parse_seed(noise_seed, "--noise-seed");
+      if (*chip_opt) sense.chip_seed = spadgen::app::parse_seed(chip_seed, "--chip-seed");
       sense.progress = !sense_quiet;
       spadgen::app::sense(sense);
     } else if (*info_cmd) {
@@ -90,12 +91,5 @@ int main(int argc, char** argv) {
     } else if (*schema_cmd) {
       std::cout << (json_schema ? spadgen::scenes::schema_json() : spadgen::scenes::schema_reference_markdown());
     }
-  } catch (const spadgen::Error& e) {
-    std::fprintf(stderr, "spadgen: error: %s\n", e.what());
-    return 2;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "spadgen: internal error: %s\n", e.what());
-    return 3;
-  }
-  return 0;
+  });
 }

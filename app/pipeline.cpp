@@ -13,7 +13,9 @@
 #include "app/metadata.h"
 #include "app/outputs.h"
 #include "app/light.h"
+#include "app/preflight.h"
 #include "app/progress.h"
+#include "app/resources.h"
 #include "app/run_parts.h"
 #include "app/staging.h"
 #include "core/error.h"
@@ -61,8 +63,10 @@ RunResult run(const RunOptions& options) {
 
   const TimeAxis axis = time_axis(cfg, sensor);
   const PixelRect img = image_rect(cfg);
+  check_derived(cfg, sensor, img, axis);
 
   const fs::path out = options.out_dir.empty() ? fs::path("out") / fs::path(options.scene_file).stem() : fs::path(options.out_dir);
+  check_resources(cfg, sensor, img, axis, options.threads, out);
   Staging staging(out);
   Outputs outputs(cfg, sensor, img, axis, staging);
   const PixelRect light_rect = light_region(img, cfg.camera.width_px, cfg.camera.height_px);
@@ -73,9 +77,10 @@ RunResult run(const RunOptions& options) {
   std::vector<PixelRect> tiles = make_tiles(img.width, img.height, cfg.render.tile_size);
   for (PixelRect& t : tiles) t.x0 += img.x0, t.y0 += img.y0;
   std::vector<render::RenderStats> tile_stats(tiles.size());
-  std::fprintf(stderr, "spadgen: %s: %d x %d pixels, %zu tiles, %lld time bins of %s ps, K = %d\n",
-               options.scene_file.c_str(), img.width, img.height, tiles.size(), static_cast<long long>(axis.bins),
-               seconds_text(axis.bin_width_s / kPs).c_str(), sensor.K());
+  if (options.progress)
+    std::fprintf(stderr, "spadgen: %s: %d x %d pixels, %zu tiles, %lld time bins of %s ps, K = %d\n",
+                 options.scene_file.c_str(), img.width, img.height, tiles.size(), static_cast<long long>(axis.bins),
+                 seconds_text(axis.bin_width_s / kPs).c_str(), sensor.K());
   Progress progress(tiles.size(), options.progress);
 
   tbb::parallel_for(size_t(0), tiles.size(), [&](size_t ti) {
@@ -127,7 +132,8 @@ RunResult run(const RunOptions& options) {
   InterruptGuard::check();
   outputs.commit();
   staging.publish(files);
-  std::fprintf(stderr, "spadgen: wrote %zu files to %s in %.1f s\n", files.size(), out.string().c_str(), progress.seconds());
+  if (options.progress)
+    std::fprintf(stderr, "spadgen: wrote %zu files to %s in %.1f s\n", files.size(), out.string().c_str(), progress.seconds());
   return {out.string(), files};
 }
 
@@ -141,6 +147,7 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
   o << "# glTF\n" << scenes::summarize(scene) << "\n";
   const TimeAxis axis = time_axis(c, sensor);
   const PixelRect img = image_rect(c);
+  check_derived(c, sensor, img, axis);
   o << "# run\n";
   o << "photons per pulse emitted: " << photons_per_pulse(c.laser.average_power_W, c.laser.repetition_rate_Hz, c.laser.wavelength_m) << "\n";
   o << "image: " << img.width << " x " << img.height << " pixels; K = " << sensor.K() << "\n";
@@ -155,6 +162,7 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
     sep = ", ";
   }
   o << "\n";
+  o << "resources: " << resource_summary(plan_resources(c, sensor, img, axis, 0, ""));
   for (const std::string& w : r.warnings) o << "warning: " << w << "\n";
   return o.str();
 }

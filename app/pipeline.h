@@ -1,6 +1,7 @@
 // The run: scene file -> Scene -> renderer -> sensor -> writers, streamed tile by tile. Everything is
-// written into a staging folder inside the output folder and moved into place only when the whole run
-// has succeeded, so a failed or interrupted run never leaves a half-written or wrong file behind.
+// written into a staging folder beside the output folder, which replaces the output folder as one unit
+// only when the whole run has succeeded (app/staging.h): a failed or interrupted run never leaves a
+// half-written, mixed or wrong file behind.
 #pragma once
 #include <cstdint>
 #include <optional>
@@ -15,7 +16,7 @@ struct RunOptions {
   std::vector<std::string> overrides;   // "key.path=value"
   std::optional<uint64_t> seed;         // replaces the scene file's seed
   int threads = 0;                      // 0 = all cores
-  bool progress = true;                 // progress on stderr
+  bool progress = true;                 // progress and the summary lines on stderr (-q: off)
 };
 
 struct RunResult {

@@ -18,6 +18,7 @@
 #include "app/metadata.h"
 #include "app/outputs.h"
 #include "app/pipeline.h"
+#include "app/preflight.h"
 #include "app/progress.h"
 #include "app/run_parts.h"
 #include "app/staging.h"
@@ -148,6 +149,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   }
 
   const PixelRect img = image_rect(cfg);
+  check_derived(cfg, sensor, img, need);  // the sensor's own overrides may give negative gate lengths
   const PixelRect region = rect_of(meta.at("light").at("crop_in_sensor"));
   if (region != light_region(img, cfg.camera.width_px, cfg.camera.height_px))
     throw Error((src / "metadata.json").string() + ": light.crop_in_sensor does not match the run's image");

@@ -1,61 +1,274 @@
 #include "app/staging.h"
 
+#include <fcntl.h>
+#include <sys/file.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
 #include <cerrno>
 #include <csignal>
+#include <cstdio>
 #include <cstdlib>
+#include <cstring>
+#include <set>
+#include <stdexcept>
 
 #include "core/error.h"
+#include "scenes/input.h"
 
 namespace spadgen::app {
 namespace fs = std::filesystem;
 
 namespace {
-const std::string kPrefix = ".spadgen-staging-";
+
+const std::string kOldStylePrefix = ".spadgen-staging-";  // staging folders inside OUT (spadgen before the swap)
+
+std::string pid_text() { return std::to_string(::getpid()); }
+
+bool starts_with(const std::string& s, const std::string& prefix) { return s.compare(0, prefix.size(), prefix) == 0; }
+
+// Makes renames in `dir` durable; best effort (some file systems refuse to fsync a folder).
+void sync_dir(const fs::path& dir) {
+  const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) return;
+  ::fsync(fd);
+  ::close(fd);
+}
+
+// The files metadata.json lists, with the folders they lie in ("previews"), relative to `out`.
+std::set<std::string> listed_files(const fs::path& out) {
+  std::set<std::string> owned = {"metadata.json"};
+  std::string text;
+  try {
+    text = scenes::read_file_bounded((out / "metadata.json").string(), uint64_t{64} << 20, "metadata");
+  } catch (const Error&) {
+    return owned;
+  }
+  const nlohmann::json meta = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
+  if (!meta.is_object() || !meta.contains("files") || !meta["files"].is_array()) return owned;
+  for (const nlohmann::json& f : meta["files"]) {
+    if (!f.is_string()) continue;
+    for (fs::path p = fs::path(f.get<std::string>()).lexically_normal(); !p.empty() && p != "." && p != "/";
+         p = p.parent_path())
+      owned.insert(p.string());
+  }
+  return owned;
+}
+
 }  // namespace
 
-Staging::Staging(const fs::path& out) : out_(out) {
+Staging::Staging(const fs::path& out, Hook hook) : hook_(std::move(hook)) {
+  const auto cannot = [&](const std::string& why) {
+    return Error("cannot use " + out.string() + " as the output folder (-o): " + why);
+  };
+  std::error_code ec;
+  fs::path abs = fs::absolute(out, ec).lexically_normal();
+  if (!abs.has_filename()) abs = abs.parent_path();  // "out/" names "out"
+  out_ = fs::weakly_canonical(abs, ec);              // a symbolic link to a folder: the folder
+  if (ec) out_ = abs;
+  if (!out_.has_filename() || out_ == out_.root_path()) throw cannot("expected a folder below the root");
+  parent_ = out_.parent_path();
+  name_ = out_.filename().string();
+  // The swap replaces OUT as a whole: a shell standing in it would be left in a removed folder.
+  const fs::path cwd = fs::current_path(ec);
+  if (!ec) {
+    const fs::path rel = cwd.lexically_relative(out_);
+    if (!rel.empty() && *rel.begin() != "..")
+      throw cannot("it is the current folder or holds it; a run replaces the output folder as a whole, so name a "
+                   "folder below the current one");
+  }
   try {
-    fs::create_directories(out_);
-    remove_abandoned();
-    dir_ = out_ / (kPrefix + std::to_string(::getpid()));
+    fs::create_directories(parent_);
+  } catch (const fs::filesystem_error& e) {
+    throw cannot(e.code().message() + "; expected a folder that exists or can be created");
+  }
+  if (fs::exists(out_, ec) && !fs::is_directory(out_, ec))
+    throw cannot("it exists and is not a folder; expected a folder that exists or can be created");
+  lock();
+  try {
+    recover();
+    check_owned();
+    dir_ = parent_ / ("." + name_ + ".spadgen-staging-" + pid_text());
     fs::remove_all(dir_);
     fs::create_directories(dir_ / "previews");
     fs::create_directories(dir_ / "light");
   } catch (const fs::filesystem_error& e) {
-    throw Error("cannot use " + out_.string() + " as the output folder (-o): " + e.code().message() +
-                "; expected a folder that exists or can be created");
+    unlock();
+    throw cannot(e.code().message() + " (" + e.path1().string() + ")");
+  } catch (...) {
+    unlock();  // no destructor runs for an object whose constructor throws
+    throw;
   }
 }
 
 Staging::~Staging() {
   std::error_code ec;
-  fs::remove_all(dir_, ec);
+  if (!dir_.empty()) fs::remove_all(dir_, ec);  // unpublished files, or the earlier set after an exchange
+  unlock();
+}
+
+void Staging::unlock() {
+  if (lock_fd_ < 0) return;
+  // Unlinked while still locked: a run that opened it meanwhile sees the file gone and locks a new one.
+  ::unlink(lock_path_.c_str());
+  ::close(lock_fd_);
+  lock_fd_ = -1;
 }
 
 std::string Staging::path(const std::string& rel) const { return (dir_ / rel).string(); }
 
-// Staging folders of runs that were killed outright (SIGKILL, power loss) hold only temporary files.
-void Staging::remove_abandoned() const {
-  for (const auto& e : fs::directory_iterator(out_)) {
-    const std::string name = e.path().filename().string();
-    if (name.rfind(kPrefix, 0) != 0) continue;
-    const long pid = std::strtol(name.c_str() + kPrefix.size(), nullptr, 10);
-    if (pid > 0 && pid != ::getpid() && ::kill(pid_t(pid), 0) != 0 && errno == ESRCH) {
-      std::error_code ec;
-      fs::remove_all(e.path(), ec);
+void Staging::lock() {
+  lock_path_ = parent_ / ("." + name_ + ".spadgen-lock");
+  for (int attempt = 0; attempt < 16; ++attempt) {
+    const int fd = ::open(lock_path_.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+    if (fd < 0)
+      throw Error("cannot use " + out_.string() + " as the output folder (-o): cannot create its lock file " +
+                  lock_path_.string() + ": " + std::strerror(errno));
+    if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+      const int err = errno;
+      char holder[64] = {0};
+      const ssize_t n = ::pread(fd, holder, sizeof holder - 1, 0);
+      ::close(fd);
+      std::string who = n > 0 ? std::string(holder, static_cast<size_t>(n)) : std::string();
+      while (!who.empty() && (who.back() == '\n' || who.back() == ' ')) who.pop_back();
+      if (err == EWOULDBLOCK)
+        throw Error("the output folder " + out_.string() + " is being written by another spadgen run" +
+                    (who.empty() ? std::string() : " (" + who + ")") + ", which holds " + lock_path_.string() +
+                    "; wait for it to finish, or choose another folder (-o)");
+      throw Error("cannot lock the output folder " + out_.string() + " (" + lock_path_.string() + "): " + std::strerror(err));
+    }
+    // The run that held the lock may have removed the file between our open and our flock.
+    struct stat locked {}, now {};
+    if (::fstat(fd, &locked) == 0 && ::stat(lock_path_.c_str(), &now) == 0 && locked.st_ino == now.st_ino &&
+        locked.st_dev == now.st_dev) {
+      lock_fd_ = fd;
+      const std::string me = "pid " + pid_text() + "\n";
+      if (::ftruncate(fd, 0) == 0 && ::pwrite(fd, me.data(), me.size(), 0) < 0) {
+      }  // the pid is only for the message of a second run
+      return;
+    }
+    ::close(fd);
+  }
+  throw Error("cannot lock the output folder " + out_.string() + ": its lock file " + lock_path_.string() +
+              " keeps being replaced");
+}
+
+// Under the lock every staging or old folder of OUT belongs to a run that is gone.
+void Staging::recover() {
+  const std::string staging_prefix = "." + name_ + ".spadgen-staging-", old_prefix = "." + name_ + ".spadgen-old-";
+  std::vector<fs::path> leftovers, olds;
+  for (const auto& e : fs::directory_iterator(parent_)) {
+    const std::string n = e.path().filename().string();
+    if (starts_with(n, staging_prefix)) leftovers.push_back(e.path());
+    if (starts_with(n, old_prefix)) olds.push_back(e.path());
+  }
+  std::error_code ec;
+  if (!olds.empty() && !fs::exists(out_, ec)) {
+    // A run was killed between renaming the earlier set aside and renaming its own in: the earlier set
+    // is complete, so it goes back.
+    fs::path latest = olds.front();
+    for (const fs::path& o : olds)
+      if (fs::last_write_time(o, ec) > fs::last_write_time(latest, ec)) latest = o;
+    int err = step("restore old");
+    if (!err && ::rename(latest.c_str(), out_.c_str()) != 0) err = errno;
+    if (err)
+      throw Error("cannot use " + out_.string() + " as the output folder (-o): a killed run left its earlier files in " +
+                  latest.string() + ", and renaming them back failed: " + std::strerror(err));
+    sync_dir(parent_);
+    olds.erase(std::find(olds.begin(), olds.end(), latest));
+  }
+  for (const std::vector<fs::path>* list : {&leftovers, &olds})
+    for (const fs::path& p : *list) fs::remove_all(p, ec);
+  // Staging folders inside OUT, left by spadgen versions before this scheme, of processes that are gone.
+  if (fs::is_directory(out_, ec))
+    for (const auto& e : fs::directory_iterator(out_)) {
+      const std::string n = e.path().filename().string();
+      if (!starts_with(n, kOldStylePrefix)) continue;
+      const long pid = std::strtol(n.c_str() + kOldStylePrefix.size(), nullptr, 10);
+      if (pid > 0 && ::kill(pid_t(pid), 0) != 0 && errno == ESRCH) fs::remove_all(e.path(), ec);
+    }
+}
+
+// A run replaces OUT as a whole, so OUT may hold only what an earlier run wrote there.
+void Staging::check_owned() const {
+  std::error_code ec;
+  if (!fs::is_directory(out_, ec)) return;
+  const std::set<std::string> owned = listed_files(out_);
+  std::vector<std::string> foreign;
+  std::vector<fs::path> folders{out_};
+  while (!folders.empty() && foreign.size() < 6) {
+    const fs::path folder = folders.back();
+    folders.pop_back();
+    for (const auto& e : fs::directory_iterator(folder)) {
+      const std::string rel = e.path().lexically_relative(out_).string();
+      if (folder == out_ && starts_with(rel, kOldStylePrefix)) continue;
+      const bool dir = e.is_directory(ec) && !e.is_symlink(ec);
+      if (dir && fs::is_empty(e.path(), ec)) continue;  // nothing to lose
+      if (!owned.count(rel)) foreign.push_back(rel + (dir ? "/" : ""));
+      else if (dir) folders.push_back(e.path());
     }
   }
+  if (foreign.empty()) return;
+  std::string list;
+  for (size_t i = 0; i < foreign.size() && i < 5; ++i) list += (i ? ", " : "") + foreign[i];
+  if (foreign.size() > 5) list += ", ...";
+  throw Error("the output folder " + out_.string() + " holds files that spadgen did not write there (" + list +
+              "; not listed in its metadata.json); a run replaces the whole folder, so it does not run into one "
+              "with other files: move them, or choose another folder (-o)");
 }
 
 void Staging::publish(const std::vector<std::string>& files) {
   for (const std::string& f : files)
-    if (f != "metadata.json") {
-      fs::create_directories((out_ / f).parent_path());
-      fs::rename(dir_ / f, out_ / f);
+    if (!fs::is_regular_file(dir_ / f)) throw std::logic_error("publish: " + f + " was not written to the staging folder");
+  // Subfolders nothing was written into (no previews, no light/) do not go out; rmdir fails, as it should,
+  // on the others, which are made durable.
+  for (const auto& e : fs::directory_iterator(dir_))
+    if (e.is_directory() && ::rmdir(e.path().c_str()) != 0) sync_dir(e.path());
+  sync_dir(dir_);
+  const auto fail = [&](const std::string& what, int err) {
+    return Error("cannot publish the run into " + out_.string() + ": " + what + ": " + std::strerror(err) +
+                 "; the output folder holds its earlier files");
+  };
+  std::error_code ec;
+  fs::path earlier;  // where the earlier set is once the new one is in place
+  if (!fs::exists(out_, ec)) {
+    int err = step("rename staging");
+    if (!err && ::rename(dir_.c_str(), out_.c_str()) != 0) err = errno;
+    if (err) throw fail("renaming " + dir_.string() + " to " + out_.string(), err);
+  } else {
+    int err = step("exchange");
+    if (!err && ::renameat2(AT_FDCWD, dir_.c_str(), AT_FDCWD, out_.c_str(), RENAME_EXCHANGE) != 0) err = errno;
+    if (err == 0) {
+      earlier = dir_;
+    } else if (err == EINVAL || err == ENOSYS || err == EOPNOTSUPP) {
+      // No atomic exchange on this file system: two renames, the earlier set kept aside until the second
+      // one has succeeded.
+      const fs::path old = parent_ / ("." + name_ + ".spadgen-old-" + pid_text());
+      err = step("rename out to old");
+      if (!err && ::rename(out_.c_str(), old.c_str()) != 0) err = errno;
+      if (err) throw fail("renaming " + out_.string() + " aside to " + old.string(), err);
+      err = step("rename staging to out");
+      if (!err && ::rename(dir_.c_str(), out_.c_str()) != 0) err = errno;
+      if (err) {
+        int back = step("restore old");
+        if (!back && ::rename(old.c_str(), out_.c_str()) != 0) back = errno;
+        if (back)
+          throw Error("cannot publish the run into " + out_.string() + ": renaming " + dir_.string() + " to it: " +
+                      std::strerror(err) + "; and renaming its earlier files back from " + old.string() +
+                      " failed too (" + std::strerror(back) + "): the next run into this folder renames them back");
+        throw fail("renaming " + dir_.string() + " to " + out_.string(), err);
+      }
+      earlier = old;
+    } else {
+      throw fail("exchanging " + dir_.string() + " with " + out_.string(), err);
     }
-  fs::rename(dir_ / "metadata.json", out_ / "metadata.json");
+  }
+  sync_dir(parent_);
+  // The new set is in place; the earlier one goes. If that fails, the next run removes it.
+  if (!earlier.empty() && step("remove old") == 0) fs::remove_all(earlier, ec);
 }
 
 }  // namespace spadgen::app

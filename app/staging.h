@@ -1,33 +1,61 @@
-// Atomic output: a run writes every file into a staging folder inside the output folder and moves them
-// into place only when the whole run has succeeded, so a failed or interrupted run never leaves a
-// half-written or wrong file behind.
+// Atomic output: a run writes every file into a staging folder beside the output folder and, only when
+// the whole run has succeeded, swaps that folder in for the output folder as one unit. The folder
+// therefore holds either the complete earlier set of files or the complete new one, never a mix, never
+// a stale file of an earlier run; a failed or interrupted run leaves the earlier set as it was.
+//
+// How (docs/outputs.md, "The output folder"), for an output folder OUT in folder P:
+// - P/.OUT.spadgen-lock is locked (flock) for the whole run: a second run into OUT refuses at once.
+// - The run writes into P/.OUT.spadgen-staging-<pid>.
+// - Publishing exchanges the staging folder and OUT in one renameat2(RENAME_EXCHANGE), then removes the
+//   earlier set. Where the file system cannot exchange, OUT is renamed to P/.OUT.spadgen-old-<pid> and the
+//   staging folder to OUT (the earlier set is renamed back if that fails); between the two renames OUT
+//   is briefly absent, never mixed.
+// - Under the lock, leftovers of killed runs are removed, and an OUT that a killed run left renamed away
+//   is renamed back.
+// - OUT must hold only what spadgen wrote there (metadata.json and the files it lists): a folder with
+//   other files in it is refused rather than replaced.
 #pragma once
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <vector>
 
 namespace spadgen::app {
 
-// The staging folder of this run (.spadgen-staging-<pid>), removed with whatever is in it unless published.
 class Staging {
  public:
-  // Creates the output folder if needed and removes staging folders that killed runs left behind.
-  // Throws spadgen::Error when the output folder cannot be used.
-  explicit Staging(const std::filesystem::path& out);
-  ~Staging();
+  // Fault injection for tests: called before each file-system step of publishing and recovery with the
+  // step's name ("exchange", "rename out to old", "rename staging to out", "restore old", "remove old",
+  // "rename staging"); a non-zero return is taken as the errno of that step's failure.
+  using Hook = std::function<int(const std::string& step)>;
+
+  // Creates the output folder's parent if needed, takes the lock, cleans up after killed runs and
+  // creates the staging folder. Throws spadgen::Error when the output folder cannot be used, is locked
+  // by another run, or holds files spadgen did not write.
+  explicit Staging(const std::filesystem::path& out, Hook hook = nullptr);
+  ~Staging();  // removes the staging folder unless published, and releases the lock
   Staging(const Staging&) = delete;
   Staging& operator=(const Staging&) = delete;
 
   // Where the file `rel` (relative to the output folder) is written until it is published.
   std::string path(const std::string& rel) const;
-  // Moves every listed file into the output folder; metadata.json comes last so that it never lists a
-  // file that is not there yet.
+  // Replaces the output folder with the staging folder, which must hold every listed file. Throws
+  // spadgen::Error when the swap fails; the output folder then holds the earlier set.
   void publish(const std::vector<std::string>& files);
+  // The output folder, absolute, with symbolic links resolved.
+  const std::filesystem::path& out() const { return out_; }
 
  private:
-  void remove_abandoned() const;
+  int step(const std::string& name) const { return hook_ ? hook_(name) : 0; }
+  void lock();
+  void unlock();
+  void recover();
+  void check_owned() const;
 
-  std::filesystem::path out_, dir_;
+  std::filesystem::path out_, parent_, dir_, lock_path_;
+  std::string name_;
+  Hook hook_;
+  int lock_fd_ = -1;
 };
 
 }  // namespace spadgen::app

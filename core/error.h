@@ -1,6 +1,11 @@
-// The one exception type spadgen throws for bad input or failed I/O. Its message is what the user
-// sees: it names the file, the key or the glTF element, what was found and what was expected.
+// The exceptions spadgen throws for what the user can act on. Their message is what the user sees: it
+// names the file, the key or the glTF element, what was found and what was expected.
+//
+// Exit codes of the spadgen program (README.md, "Exit codes"): 0 success; 1 spadgen::Error (bad input, a
+// file that cannot be read or written, an output folder in use, a run the machine cannot hold);
+// 2 spadgen::Interrupted (SIGINT or SIGTERM; nothing was published); 3 an internal error (a bug).
 #pragma once
+#include <atomic>
 #include <stdexcept>
 #include <string>
 
@@ -10,5 +15,23 @@ class Error : public std::runtime_error {
  public:
   explicit Error(const std::string& message) : std::runtime_error(message) {}
 };
+
+// The run was asked to stop (SIGINT, SIGTERM) and stopped without publishing anything.
+class Interrupted : public Error {
+ public:
+  explicit Interrupted(const std::string& message) : Error(message) {}
+};
+
+// Set from a signal handler (app/interrupt.h) and polled by every long loop, so that no tile, pixel or
+// table runs unbounded after a signal. A lock-free atomic is all a handler may touch.
+inline std::atomic<bool> g_interrupt_flag{false};
+inline std::atomic<bool>& interrupt_flag() { return g_interrupt_flag; }
+static_assert(std::atomic<bool>::is_always_lock_free);
+
+// Throws spadgen::Interrupted once a signal has arrived. Cheap (one relaxed load): call it per pixel.
+inline void throw_if_interrupted() {
+  if (interrupt_flag().load(std::memory_order_relaxed))
+    throw Interrupted("interrupted by a signal: the run stopped and wrote nothing");
+}
 
 }  // namespace spadgen

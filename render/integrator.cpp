@@ -35,10 +35,15 @@ void deposit(double v, double t, const TimeAxis& axis, double* bins, PixelTotals
     landed = true;
   };
   if (axis.period_s > 0.0) {
+    // At most window / period + 2 images land in the window; the count bounds the loop even where
+    // m += 1.0 would stop changing m (t / period past 2^53) or t is not finite.
     const double m0 = std::ceil((axis.start_s - t) / axis.period_s) - 1.0;
-    for (double m = m0;; m += 1.0) {
+    const double end = axis.end_s();
+    const auto images = static_cast<int64_t>(std::min((end - axis.start_s) / axis.period_s, 1e15)) + 3;
+    double m = m0;
+    for (int64_t i = 0; i < images; ++i, m += 1.0) {
       const double ti = t + m * axis.period_s;
-      if (ti >= axis.end_s()) break;
+      if (ti >= end) break;
       put(ti);
     }
   } else {
@@ -155,6 +160,7 @@ void Integrator::trace_camera_block(int x, int y, CameraBlock* block, RayCounts*
   bool valid[kPacket], found[kPacket];
   glm::vec3 dirs[kPacket];
   for (int s = 0; s < spp; ++s) {
+    throw_if_interrupted();  // a block of many samples per pixel can take seconds
     for (int i = 0; i < kPacket; ++i) {
       const size_t j = static_cast<size_t>(s) * kPacket + static_cast<size_t>(i);
       valid[i] = i < block->lanes;
@@ -383,6 +389,7 @@ PixelTotals Integrator::render_pixel(int x, int y, const CameraBlock& block, con
   const PixelFilm film{axis, bins, indirect_bins, &out};
 
   for (int s = 0; s < rc.samples_per_pixel; ++s) {
+    throw_if_interrupted();  // one relaxed load per path: a signal stops even a pixel of 10^7 paths
     const size_t j = static_cast<size_t>(s) * EmbreeScene::kPacket + static_cast<size_t>(lane);
     const double ct = glm::dot(block.dir[j], camera_.forward());
     const double w = k * ct * ct * ct * ct;  // the camera's cos^4 falloff

@@ -49,6 +49,12 @@ double Renderer::photons_per_pulse() const {
   return spadgen::photons_per_pulse(l.average_power_W, l.repetition_rate_Hz, l.wavelength_m);
 }
 
+size_t Renderer::bytes_per_thread(int samples_per_pixel) {
+  constexpr size_t per_sample = sizeof(Rng) + sizeof(glm::dvec3) + 2 * sizeof(RayHit) + 3 * sizeof(uint8_t) +
+                                sizeof(Surface) + sizeof(LaserRay);
+  return static_cast<size_t>(samples_per_pixel) * EmbreeScene::kPacket * per_sample;
+}
+
 TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_rect, const TimeAxis& axis,
                                   RenderStats* stats) const {
   const Impl& im = *impl_;

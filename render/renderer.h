@@ -56,6 +56,11 @@ class Renderer {
   // Photons per laser pulse emitted (N_p = P / (f_rep h c / lambda)).
   double photons_per_pulse() const;
 
+  // Bytes each rendering thread holds while it renders: the camera rays of all samples of a block of
+  // pixels are traced ahead as packets, so this grows with render.samples_per_pixel (for the resource
+  // plan of a run, app/resources.h).
+  static size_t bytes_per_thread(int samples_per_pixel);
+
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;

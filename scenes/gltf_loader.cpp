@@ -24,12 +24,25 @@
 #include <vector>
 
 #include "core/error.h"
+#include "scenes/input.h"
 #include "scenes/scene.h"
 
 namespace spadgen::scenes {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
+
+// Limits that keep every derived quantity finite and meaningful in the renderer (docs/scenes.md, "Limits").
+// World coordinates of vertices, cameras and lights: Embree traces in float and asserts on ray origins
+// beyond about 1.8e18; at 1e9 m a float is already 64 m coarse.
+constexpr double kMaxWorldCoordinate = 1e9;
+// Texture coordinates: beyond 4096 a float no longer resolves a texel of a 4096-wide texture, and the
+// texel index (coordinate times width) must stay an int.
+constexpr double kMaxTexcoord = 4096.0;
+constexpr int kMaxTextureSize = 65536;
+// Emitted luminance, emissiveFactor times KHR_materials_emissive_strength, in nits: 600 times the sun's
+// disc (1.6e9 nits). Photon radiances from it stay finite in float.
+constexpr double kMaxEmissiveNits = 1e12;
 
 // Extensions whose content spadgen reads. Any other extension is reported once as unused, and is an
 // error when the file lists it in extensionsRequired.
@@ -197,7 +210,9 @@ class Loader {
   void check_unused_features();
   std::vector<int> pick_roots(const std::string& scene_name);
   void check_hierarchy();
-  void visit(int node, const glm::dmat4& parent_world);
+  void visit(int root, const glm::dmat4& root_world);
+  void visit_one(int node, const glm::dmat4& parent_world, std::vector<std::pair<int, glm::dmat4>>& stack);
+  void check_world(const glm::dvec3& p, const std::string& who, const std::string& what) const;
   glm::dmat4 local_transform(size_t node) const;
 
   void load_materials();
@@ -371,7 +386,18 @@ glm::dmat4 Loader::local_transform(size_t i) const {
   return t * r * s;
 }
 
-void Loader::visit(int node, const glm::dmat4& parent_world) {
+// Depth first, children in order (the order of Scene::meshes), with an explicit stack: a parent chain
+// as deep as the file is long must not exhaust the call stack.
+void Loader::visit(int root, const glm::dmat4& root_world) {
+  std::vector<std::pair<int, glm::dmat4>> stack{{root, root_world}};
+  while (!stack.empty()) {
+    const auto [node, parent_world] = stack.back();
+    stack.pop_back();
+    visit_one(node, parent_world, stack);
+  }
+}
+
+void Loader::visit_one(int node, const glm::dmat4& parent_world, std::vector<std::pair<int, glm::dmat4>>& stack) {
   const auto i = static_cast<size_t>(node);
   const glm::dmat4 world = parent_world * local_transform(i);
   const tinygltf::Node& n = m_.nodes[i];
@@ -389,7 +415,7 @@ void Loader::visit(int node, const glm::dmat4& parent_world) {
   }
   if (n.camera >= 0) load_camera(i, world);
   if (n.extensions.count("KHR_lights_punctual")) load_light(i, world);
-  for (int c : n.children) visit(c, world);
+  for (auto c = n.children.rbegin(); c != n.children.rend(); ++c) stack.emplace_back(*c, world);
 }
 
 void Loader::check_view_range(int view_index, size_t offset, size_t bytes, const std::string& who) {
@@ -516,6 +542,13 @@ glm::dvec3 Loader::vec3(const std::vector<double>& v, glm::dvec3 fallback, const
   return {v[0], v[1], v[2]};
 }
 
+void Loader::check_world(const glm::dvec3& p, const std::string& who, const std::string& what) const {
+  for (int k = 0; k < 3; ++k)
+    if (!(std::abs(p[k]) <= kMaxWorldCoordinate))
+      fail(who, what + " lies at (" + num(p.x) + ", " + num(p.y) + ", " + num(p.z) + ") m in the world, beyond +-" +
+                    num(kMaxWorldCoordinate) + " m, which spadgen traces");
+}
+
 int Loader::texture(int gltf_texture, const std::string& user) {
   if (auto it = texture_of_gltf_.find(gltf_texture); it != texture_of_gltf_.end()) return it->second;
   if (gltf_texture < 0 || static_cast<size_t>(gltf_texture) >= m_.textures.size())
@@ -540,6 +573,9 @@ int Loader::texture(int gltf_texture, const std::string& user) {
     if (img.image.empty() || w == 0 || h == 0 || comps == 0 || comps > 4 || (img.bits != 8 && img.bits != 16) ||
         img.image.size() != w * h * comps * bytes) {
       warn(iname + ": could not be read or decoded; " + user + " uses its factor only");
+    } else if (img.width > kMaxTextureSize || img.height > kMaxTextureSize) {
+      fail(iname, std::to_string(img.width) + " x " + std::to_string(img.height) + " texels, expected at most " +
+                      std::to_string(kMaxTextureSize) + " on a side");
     } else {
       Texture tex;
       tex.name = t.name.empty() ? img.name : t.name;
@@ -623,6 +659,8 @@ void Loader::load_materials() {
     mat.double_sided = g.doubleSided;
 
     glm::dvec3 emissive = vec3(g.emissiveFactor, {0, 0, 0}, who, "emissiveFactor");
+    for (int k = 0; k < 3; ++k)
+      if (!(emissive[k] >= 0.0 && emissive[k] <= 1.0)) fail(who, "emissiveFactor value " + num(emissive[k]) + " is outside [0, 1]");
     const auto ext = [&](const char* name) -> const tinygltf::Value* {
       auto it = g.extensions.find(name);
       if (it == g.extensions.end()) return nullptr;
@@ -637,6 +675,9 @@ void Loader::load_materials() {
       if (s < 0) fail(who, "KHR_materials_emissive_strength.emissiveStrength " + num(s) + " is negative");
       emissive *= s;
     }
+    if (const double peak = std::max({emissive.x, emissive.y, emissive.z}); peak > kMaxEmissiveNits)
+      fail(who, "emits " + num(peak) + " nits (emissiveFactor times KHR_materials_emissive_strength.emissiveStrength), "
+                "expected at most " + num(kMaxEmissiveNits) + " (600 times the sun's disc)");
     mat.emissive = glm::vec3(emissive);
     if (const tinygltf::Value* e = ext("KHR_materials_transmission")) {
       const double t = number(*e, "transmissionFactor", 0.0, who + " KHR_materials_transmission");
@@ -709,6 +750,7 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
   out.positions.resize(n);
   for (size_t v = 0; v < n; ++v) {
     const glm::dvec4 w = world * glm::dvec4(pos[3 * v], pos[3 * v + 1], pos[3 * v + 2], 1.0);
+    check_world(glm::dvec3(w), who, "POSITION element " + std::to_string(v));
     out.positions[v] = glm::vec3(w);
   }
   const glm::dmat3 normal_matrix = glm::transpose(glm::inverse(glm::dmat3(world)));
@@ -729,6 +771,10 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
     if (it == p.attributes.end()) continue;
     const std::vector<double> uv = read_accessor(it->second, who + " " + key, {TINYGLTF_TYPE_VEC2}, &k, &comps);
     if (k != n) fail(who, key + " has " + std::to_string(k) + " elements but POSITION has " + std::to_string(n));
+    for (size_t v = 0; v < uv.size(); ++v)
+      if (!(std::abs(uv[v]) <= kMaxTexcoord))
+        fail(who, key + " element " + std::to_string(v / 2) + " has the value " + num(uv[v]) + ", expected texture "
+                  "coordinates within +-" + num(kMaxTexcoord) + " (beyond, a float no longer resolves a texel)");
     std::vector<glm::vec2>& dst = set == 0 ? out.texcoords0 : out.texcoords1;
     dst.resize(n);
     for (size_t v = 0; v < n; ++v) dst[v] = glm::vec2(glm::dvec2(uv[2 * v], uv[2 * v + 1]));
@@ -836,6 +882,7 @@ void Loader::load_camera(size_t node, const glm::dmat4& world) {
     warn(who + ": its node's transform mirrors; the camera's x axis is flipped back");
     rigid[0] = -rigid[0];
   }
+  check_world(glm::dvec3(rigid[3]), who, "the camera");
   cam.world_from_camera = rigid;
   scene_.cameras.push_back(std::move(cam));
 }
@@ -878,6 +925,7 @@ void Loader::load_light(size_t node, const glm::dmat4& world) {
     l.outer_cone_rad = outer;
   }
   l.position = glm::dvec3(world[3]);
+  if (l.type != Light::Type::Directional) check_world(l.position, who, "the light");
   const glm::dvec3 dir = glm::dmat3(world) * glm::dvec3(0, 0, -1);
   const double len = glm::length(dir);
   if (!(len > 1e-12)) fail(who, "its node's world transform has a zero scale");
@@ -909,59 +957,140 @@ std::string uri_decode(const std::string& uri) {
   return out;
 }
 
-// tinygltf reports a missing buffer file as "File not found : x.bin", without the element; check the
-// external buffers first so the message names the buffer. Malformed JSON is left for tinygltf to report.
-void check_buffer_files(const std::string& path, bool binary) {
-  std::ifstream f(path, std::ios::binary);
-  std::string text((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
-  if (binary) {
-    // GLB: 12-byte header, then the JSON chunk's length, type and content.
-    if (text.size() < 20) return;
-    uint32_t length = 0;
-    std::memcpy(&length, text.data() + 12, 4);
-    if (length > text.size() - 20) return;
-    text = text.substr(20, length);
+// "3c 21 44 4f ..." of what a file starts with, shown as text where it is printable.
+std::string start_of(const std::string& bytes) {
+  std::string shown;
+  for (size_t i = 0; i < bytes.size() && i < 24; ++i) {
+    const auto c = static_cast<unsigned char>(bytes[i]);
+    if (c == '\n' || c == '\r' || c == '\t') shown += ' ';
+    else if (c >= 32 && c < 127) shown += static_cast<char>(c);
+    else {
+      char hex[8];
+      std::snprintf(hex, sizeof hex, "\\x%02x", c);
+      shown += hex;
+    }
   }
-  const nlohmann::json doc = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
-  if (!doc.is_object() || !doc.contains("buffers") || !doc["buffers"].is_array()) return;
+  return "'" + shown + (bytes.size() > 24 ? "...'" : "'");
+}
+
+// The JSON of a .gltf or .glb, after recognising which it is; anything else is named for what it looks
+// like, before tinygltf sees it.
+std::string gltf_json(const std::string& path, const std::string& bytes, bool* binary) {
+  *binary = bytes.size() >= 4 && std::memcmp(bytes.data(), "glTF", 4) == 0;
+  if (*binary) {
+    // GLB: magic, version, length, then the JSON chunk's length, type ("JSON") and content.
+    uint32_t version = 0, length = 0, chunk = 0, type = 0;
+    if (bytes.size() >= 20) {
+      std::memcpy(&version, bytes.data() + 4, 4);
+      std::memcpy(&length, bytes.data() + 8, 4);
+      std::memcpy(&chunk, bytes.data() + 12, 4);
+      std::memcpy(&type, bytes.data() + 16, 4);
+    }
+    if (bytes.size() < 20 || version != 2 || length > bytes.size() || chunk > bytes.size() - 20 || type != 0x4E4F534Au)
+      throw Error(path + ": not a valid binary glTF (.glb): expected a 12-byte header of version 2 and a JSON chunk "
+                  "within the file's " + std::to_string(bytes.size()) + " bytes");
+    return bytes.substr(20, chunk);
+  }
+  size_t i = bytes.compare(0, 3, "\xEF\xBB\xBF") == 0 ? 3 : 0;  // a UTF-8 byte order mark
+  while (i < bytes.size() && std::isspace(static_cast<unsigned char>(bytes[i]))) ++i;
+  if (i == bytes.size()) throw Error(path + ": the glTF file is empty");
+  if (bytes[i] != '{') {
+    std::string lower;
+    for (size_t k = i; k < bytes.size() && k < i + 512; ++k) lower += static_cast<char>(std::tolower(static_cast<unsigned char>(bytes[k])));
+    const bool html = lower.rfind("<!doctype html", 0) == 0 || lower.find("<html") != std::string::npos;
+    throw Error(path + ": not a glTF file: it starts with " + start_of(bytes.substr(i)) +
+                (html ? ", an HTML page (a web page saved instead of the file it links to?)" : "") +
+                "; expected JSON starting with '{' (.gltf) or the bytes 'glTF' (.glb)");
+  }
+  return bytes;
+}
+
+// What tinygltf would otherwise meet unprepared, checked on the file's JSON first: extensions it cannot
+// decode (Draco and meshopt compression leave accessors without data, which tinygltf reports as a broken
+// bufferView), and external buffers and images that are missing, not regular files or too large.
+void check_before_tinygltf(const std::string& path, const nlohmann::json& doc) {
+  if (!doc.is_object()) throw Error(path + ": expected a JSON object at the top of the glTF file");
+  if (const auto it = doc.find("extensionsRequired"); it != doc.end() && it->is_array())
+    for (const nlohmann::json& e : *it)
+      if (e.is_string() && !kSupportedExtensions.count(e.get<std::string>())) {
+        const std::string name = e.get<std::string>();
+        std::string hint;
+        if (name == "KHR_draco_mesh_compression" || name == "EXT_meshopt_compression" || name == "KHR_meshopt_compression")
+          hint = " (compressed meshes: export the file without mesh compression)";
+        else if (name == "KHR_texture_basisu" || name == "EXT_texture_webp")
+          hint = " (export the textures as PNG or JPEG)";
+        throw Error(path + ": extension " + quoted(name) + " is listed in extensionsRequired but spadgen does not support it" + hint);
+      }
   const std::filesystem::path dir = std::filesystem::path(path).parent_path();
-  const nlohmann::json& buffers = doc["buffers"];
-  for (size_t i = 0; i < buffers.size(); ++i) {
-    const nlohmann::json& b = buffers[i];
-    if (!b.is_object() || !b.contains("uri") || !b["uri"].is_string()) continue;
-    const std::string uri = b["uri"].get<std::string>();
-    if (uri.rfind("data:", 0) == 0) continue;
-    const std::string name = b.contains("name") && b["name"].is_string() ? b["name"].get<std::string>() : "";
-    std::error_code ec;
-    if (!std::filesystem::is_regular_file(dir / uri_decode(uri), ec) && !std::filesystem::is_regular_file(dir / uri, ec))
-      throw Error(path + ": " + label("buffer", i, name) + ": its file " + quoted(uri) + " was not found in " +
-                  (dir.empty() ? std::string(".") : dir.string()));
+  for (const char* kind : {"buffers", "images"}) {
+    const auto list = doc.find(kind);
+    if (list == doc.end() || !list->is_array()) continue;
+    const bool buffer = std::strcmp(kind, "buffers") == 0;
+    for (size_t i = 0; i < list->size(); ++i) {
+      const nlohmann::json& b = (*list)[i];
+      if (!b.is_object() || !b.contains("uri") || !b["uri"].is_string()) continue;
+      const std::string uri = b["uri"].get<std::string>();
+      if (uri.rfind("data:", 0) == 0) continue;
+      const std::string name = b.contains("name") && b["name"].is_string() ? b["name"].get<std::string>() : "";
+      const std::string who = label(buffer ? "buffer" : "image", i, name);
+      std::string file = (dir / uri_decode(uri)).string();
+      std::string problem = file_problem(file, buffer ? kMaxGltfFileBytes : kMaxImageFileBytes);
+      if (problem == "does not exist" && uri_decode(uri) != uri) {
+        file = (dir / uri).string();
+        problem = file_problem(file, buffer ? kMaxGltfFileBytes : kMaxImageFileBytes);
+      }
+      if (problem == "does not exist") {
+        // A missing image leaves its material with the factor (a warning, from the loader); a missing
+        // buffer leaves nothing to load.
+        if (buffer)
+          throw Error(path + ": " + who + ": its file " + quoted(uri) + " was not found in " +
+                      (dir.empty() ? std::string(".") : dir.string()));
+      } else if (!problem.empty()) {
+        throw Error(path + ": " + who + ": its file " + quoted(uri) + " " + problem);
+      }
+    }
+  }
+}
+
+// tinygltf reads buffer and image files whole: through this reader, never more than the stated limit.
+bool read_whole_file_bounded(std::vector<unsigned char>* out, std::string* err, const std::string& file, void*) {
+  try {
+    const std::string bytes = read_file_bounded(file, kMaxGltfFileBytes, "file");
+    out->assign(bytes.begin(), bytes.end());
+    return true;
+  } catch (const Error& e) {
+    if (err) *err = e.what();
+    return false;
   }
 }
 
 }  // namespace
 
 Scene load_gltf(const std::string& path, const std::string& scene_name) {
-  namespace fs = std::filesystem;
-  std::error_code ec;
-  if (!fs::is_regular_file(path, ec)) throw Error(path + ": glTF file not found");
+  const std::string problem = file_problem(path, kMaxGltfFileBytes);
+  if (problem == "does not exist") throw Error(path + ": glTF file not found");
+  if (!problem.empty()) throw Error(path + ": the glTF file " + problem);
+  const std::string bytes = read_file_bounded(path, kMaxGltfFileBytes, "glTF file");
   // .glb and .gltf are told apart by content: exporters and users both mislabel them.
-  char magic[4] = {0, 0, 0, 0};
-  {
-    std::ifstream f(path, std::ios::binary);
-    if (!f) throw Error(path + ": cannot open the glTF file");
-    f.read(magic, 4);
-  }
-  const bool binary = std::memcmp(magic, "glTF", 4) == 0;
-  check_buffer_files(path, binary);
+  bool binary = false;
+  const std::string json_text = gltf_json(path, bytes, &binary);
+  // Parsed here first, without recursion and to a bounded depth: tinygltf turns extras into its own
+  // values recursively, and a file nested 15,000 deep would exhaust the stack there.
+  check_before_tinygltf(path, parse_json(json_text, binary ? path + " (its JSON chunk)" : path,
+                                         {/*comments=*/false, /*reject_duplicates=*/false}));
 
   tinygltf::Model model;
   tinygltf::TinyGLTF io;
   io.SetImageLoader(load_image_checked, &model);
+  io.SetFsCallbacks({&tinygltf::FileExists, &tinygltf::ExpandFilePath, &read_whole_file_bounded,
+                     &tinygltf::WriteWholeFile, nullptr});
   std::string err, warn;
+  const std::string base_dir = std::filesystem::path(path).parent_path().string();
   bool ok = false;
   try {
-    ok = binary ? io.LoadBinaryFromFile(&model, &err, &warn, path) : io.LoadASCIIFromFile(&model, &err, &warn, path);
+    ok = binary ? io.LoadBinaryFromMemory(&model, &err, &warn, reinterpret_cast<const unsigned char*>(bytes.data()),
+                                          static_cast<unsigned int>(bytes.size()), base_dir)
+                : io.LoadASCIIFromString(&model, &err, &warn, bytes.data(), static_cast<unsigned int>(bytes.size()), base_dir);
   } catch (const std::exception& e) {
     // tinygltf 2.7 throws std::out_of_range on some malformed files (a GLB buffer of byteLength 0).
     throw Error(path + ": malformed glTF (tinygltf: " + e.what() + ")");

@@ -14,6 +14,7 @@
 
 #include "core/error.h"
 #include "core/units.h"
+#include "scenes/input.h"
 #include "schema.h"
 
 namespace spadgen::scenes {
@@ -87,8 +88,22 @@ std::string suggestion(const std::string& path) {
   return "; did you mean " + best + "?";
 }
 
+// A value as a message shows it: at most 60 characters. Containers are cut before they are dumped, so
+// neither the time nor the depth of the dump depends on what the user wrote.
+std::string short_dump(const json& v) {
+  if (!v.is_structured()) return v.dump();
+  std::string s = v.is_array() ? "[" : "{";
+  size_t i = 0;
+  for (auto it = v.begin(); it != v.end() && s.size() <= 60; ++it, ++i) {
+    if (i) s += ",";
+    if (v.is_object()) s += json(it.key()).dump() + ":";
+    s += it.value().is_structured() ? (it.value().is_array() ? "[...]" : "{...}") : it.value().dump();
+  }
+  return s + (v.is_array() ? "]" : "}");
+}
+
 std::string describe_json(const json& v) {
-  std::string s = v.dump();
+  std::string s = short_dump(v);
   if (s.size() > 60) s = s.substr(0, 57) + "...";
   switch (v.type()) {
     case json::value_t::string: return s + " (a string)";
@@ -129,7 +144,7 @@ std::string expected_text(const Key& k) {
       for (size_t i = 0; i < k.choices.size(); ++i) e += (i ? ", \"" : " \"") + k.choices[i] + "\"";
       break;
     }
-    case Type::Vec3: e = "an array of 3 numbers" + unit; break;
+    case Type::Vec3: e = "an array of 3 numbers" + (has_lo && has_hi ? " each in [" + format_bound(k.lo) + ", " + format_bound(k.hi) + "]" : std::string()) + unit; break;
     case Type::Rect: e = "[x0, y0, width, height] (integers >= 0, width and height > 0)"; break;
   }
   if (k.nullable) e += ", or null";
@@ -159,7 +174,7 @@ bool value_fits(const Key& k, const json& v) {
       return v.is_string() && std::find(k.choices.begin(), k.choices.end(), v.get<std::string>()) != k.choices.end();
     case Type::Vec3:
       return v.is_array() && v.size() == 3 &&
-             std::all_of(v.begin(), v.end(), [](const json& e) { return e.is_number() && std::isfinite(e.get<double>()); });
+             std::all_of(v.begin(), v.end(), [&](const json& e) { return e.is_number() && in_range(k, e.get<double>()); });
     case Type::Rect: {
       if (!v.is_array() || v.size() != 4) return false;
       for (size_t i = 0; i < 4; ++i) {
@@ -181,6 +196,14 @@ struct Checker {
   void walk(const json& node, const std::string& path) {
     for (auto it = node.begin(); it != node.end(); ++it) {
       const std::string p = path + "/" + it.key();
+      // "camera/f_number" would read as the path /camera/f_number and be checked as that key, yet the
+      // section "camera" never sees it: a key name is one level.
+      if (it.key().empty() || it.key().find_first_of("/~") != std::string::npos) {
+        error(path.empty() ? "/" : path, "found the key " + json(it.key()).dump() +
+                                              ", expected a key name without '/' or '~' (write sections as nested objects: "
+                                              "{\"camera\": {\"f_number\": 2}})");
+        continue;
+      }
       if (const Key* k = find_key(p)) {
         if (!value_fits(*k, it.value()))
           error(p, "found " + describe_json(it.value()) + ", expected " + expected_text(*k) + " (" + k->doc + ")");
@@ -195,30 +218,6 @@ struct Checker {
     }
   }
 };
-
-json parse_json_text(const std::string& text, const std::string& file) {
-  try {
-    return json::parse(text, nullptr, /*allow_exceptions=*/true, /*ignore_comments=*/true);
-  } catch (const json::parse_error& e) {
-    // Turn the byte offset into line:column, which is what an editor shows.
-    size_t line = 1, col = 1;
-    for (size_t i = 0; i + 1 < e.byte && i < text.size(); ++i) {
-      if (text[i] == '\n') ++line, col = 1;
-      else ++col;
-    }
-    std::string what = e.what();
-    if (const size_t pos = what.find("syntax error"); pos != std::string::npos) what = what.substr(pos);
-    throw Error(file + ":" + std::to_string(line) + ":" + std::to_string(col) + ": not valid JSON: " + what);
-  }
-}
-
-std::string read_text_file(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw Error("cannot read scene file " + path + ": " + std::strerror(errno));
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
 
 // "camera.f_number=2.8" -> (/camera/f_number, 2.8). A value that is not JSON is taken as a string.
 void apply_override(json& doc, const std::string& assignment, Checker& chk) {
@@ -239,8 +238,15 @@ void apply_override(json& doc, const std::string& assignment, Checker& chk) {
   }
   json value;
   try {
-    value = json::parse(text, nullptr, true, true);
-  } catch (const json::parse_error&) {
+    value = parse_json(text, chk.file + ": --set " + key);
+  } catch (const Error& e) {
+    // Not JSON: a string, unless it was meant as JSON and only went wrong in a way a string never does.
+    const std::string what = e.what();
+    if (what.find("nested deeper") != std::string::npos || what.find("beyond the range") != std::string::npos ||
+        what.find("appears twice") != std::string::npos) {
+      chk.errors.push_back(what);
+      return;
+    }
     value = text;
   }
   if ((k->type == Type::String || k->type == Type::Path) && !value.is_string() && !value.is_null()) value = text;  // names that look like numbers
@@ -335,8 +341,16 @@ void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string
   if (c.laser.beam == Beam::GltfLight && c.laser.gltf_light.empty())
     err("/laser/gltf_light", "is empty, expected the name of a glTF light because /laser/beam is \"gltf_light\"");
   if (c.acquisition.mode == AcquisitionMode::GateSweep) {
-    if (c.acquisition.gate_sweep.stop_s < c.acquisition.gate_sweep.start_s)
+    const GateSweepConfig& g = c.acquisition.gate_sweep;
+    const double positions = std::floor((g.stop_s - g.start_s) / g.step_s + 1e-9) + 1.0;  // as the sweep counts them
+    if (g.stop_s < g.start_s)
       err("/acquisition/gate_sweep/stop_ns", "is before /acquisition/gate_sweep/start_ns; expected stop >= start");
+    else if (!(positions <= static_cast<double>(kMaxGatePositions)))
+      err("/acquisition/gate_sweep/step_ps",
+          "found " + format_bound(g.step_s / kPs) + " ps, which makes " + format_bound(positions) + " gate positions from " +
+              format_bound(g.start_s / kNs) + " to " + format_bound(g.stop_s / kNs) +
+              " ns (/acquisition/gate_sweep/start_ns, stop_ns); expected at most " + std::to_string(kMaxGatePositions) +
+              " positions: a larger step or a shorter sweep");
     const double exposure = static_cast<double>(c.acquisition.cycles_per_frame) / c.laser.repetition_rate_Hz;
     if (exposure > 1.0 / c.acquisition.frame_rate_Hz)
       warnings.push_back("acquisition.cycles_per_frame: " + std::to_string(c.acquisition.cycles_per_frame) +
@@ -356,15 +370,34 @@ void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string
     err("/render/window_stop_ns", "expected render.window_start_ns and render.window_stop_ns both set or both null");
   else if (c.render.window_start_s && *c.render.window_stop_s <= *c.render.window_start_s)
     err("/render/window_stop_ns", "expected a window end after render.window_start_ns");
-  if (!std::filesystem::exists(c.gltf_path))
-    err("/gltf", "the glTF file " + c.gltf_path + " does not exist; expected a path relative to the scene file");
-  for (const auto& [key, file] : {std::pair<std::string, std::string>{"/laser/pulse_shape_csv", c.laser.pulse_shape_csv},
-                                  {"/sensor/gate/profile_csv", c.sensor.gate.profile_csv},
-                                  {"/sensor/gate/maps_exr", c.sensor.gate.maps_exr},
-                                  {"/sensor/pixel_A/pdp_csv", c.sensor.pixel_A.pdp_csv},
-                                  {"/sensor/pixel_B/pdp_csv", c.sensor.pixel_B.pdp_csv}})
-    if (!file.empty() && !std::filesystem::exists(file))
-      err(key, "the file " + file + " does not exist; expected a path relative to the scene file");
+  else if (c.render.window_start_s) {
+    const double bins = std::ceil((*c.render.window_stop_s - *c.render.window_start_s) / c.render.time_bin_s - 1e-9);
+    if (!(bins <= static_cast<double>(kMaxTimeBins)))
+      err("/render/time_bin_ps", "found " + format_bound(c.render.time_bin_s / kPs) + " ps, which makes " + format_bound(bins) +
+                                     " time bins over the window /render/window_start_ns to window_stop_ns; expected at most " +
+                                     std::to_string(kMaxTimeBins) + " bins: wider bins or a shorter window");
+  }
+  // Every file is read whole, so it must be a regular file of bounded size (a FIFO or /dev/zero would
+  // block or never end).
+  struct FileKey {
+    const char* key;
+    const std::string& file;
+    uint64_t max_bytes;
+  };
+  for (const FileKey& f : {FileKey{"/gltf", c.gltf_path, kMaxGltfFileBytes},
+                           FileKey{"/laser/pulse_shape_csv", c.laser.pulse_shape_csv, kMaxTableFileBytes},
+                           FileKey{"/sensor/gate/profile_csv", c.sensor.gate.profile_csv, kMaxTableFileBytes},
+                           FileKey{"/sensor/gate/maps_exr", c.sensor.gate.maps_exr, kMaxImageFileBytes},
+                           FileKey{"/sensor/pixel_A/pdp_csv", c.sensor.pixel_A.pdp_csv, kMaxTableFileBytes},
+                           FileKey{"/sensor/pixel_B/pdp_csv", c.sensor.pixel_B.pdp_csv, kMaxTableFileBytes}}) {
+    if (f.file.empty()) continue;
+    const std::string problem = file_problem(f.file, f.max_bytes);
+    const std::string what = std::string(f.key) == "/gltf" ? "the glTF file " : "the file ";
+    if (problem == "does not exist")
+      err(f.key, what + f.file + " does not exist; expected a path relative to the scene file");
+    else if (!problem.empty())
+      err(f.key, what + f.file + " " + problem);
+  }
 }
 
 std::string join_errors(const std::vector<std::string>& errors) {
@@ -377,7 +410,7 @@ std::string join_errors(const std::vector<std::string>& errors) {
 
 ResolvedRun parse_scene_text(const std::string& text, const std::string& path, const std::vector<std::string>& overrides) {
   const std::string file = path.empty() ? "<scene>" : path;
-  json doc = parse_json_text(text, file);
+  json doc = parse_json(text, file);
   if (!doc.is_object()) throw Error(file + ": expected a JSON object at the top, found " + describe_json(doc));
   Checker chk{file, {}};
   for (const std::string& o : overrides) apply_override(doc, o, chk);
@@ -396,7 +429,7 @@ ResolvedRun parse_scene_text(const std::string& text, const std::string& path, c
 }
 
 ResolvedRun load_scene_file(const std::string& path, const std::vector<std::string>& overrides) {
-  return parse_scene_text(read_text_file(path), path, overrides);
+  return parse_scene_text(read_file_bounded(path, kMaxSceneFileBytes, "scene file"), path, overrides);
 }
 
 std::string schema_reference_markdown() {
@@ -415,7 +448,7 @@ std::string schema_reference_markdown() {
       case Type::Rect: type = "[x0, y0, w, h]"; break;
     }
     if (k.nullable) type += " or null";
-    std::string valid = k.type == Type::Number || k.type == Type::Integer || k.type == Type::Enum ? expected_text(k) : "";
+    std::string valid = k.type == Type::Number || k.type == Type::Integer || k.type == Type::Enum || k.type == Type::Vec3 ? expected_text(k) : "";
     if (const size_t u = valid.rfind(" " + k.unit); !k.unit.empty() && u != std::string::npos && u + k.unit.size() + 1 == valid.size())
       valid = valid.substr(0, u);
     std::string dotted = k.path.substr(1);
@@ -468,6 +501,8 @@ std::string schema_json() {
       case Type::Vec3:
         typed("array");
         p["items"] = {{"type", "number"}};
+        if (std::isfinite(k.lo)) p["items"]["minimum"] = k.lo;
+        if (std::isfinite(k.hi)) p["items"]["maximum"] = k.hi;
         p["minItems"] = 3, p["maxItems"] = 3;
         break;
       case Type::Rect:

@@ -5,12 +5,18 @@
 #pragma once
 #include <nlohmann/json.hpp>
 
+#include <cstdint>
 #include <string>
 #include <vector>
 
 #include "core/config.h"
 
 namespace spadgen::scenes {
+
+// Counts that every later stage must be able to hold, checked when the scene file is read (the time
+// axis a gate sweep derives is checked against kMaxTimeBins by the program, app/preflight.h).
+inline constexpr int64_t kMaxGatePositions = 100'000;  // acquisition.gate_sweep: (stop - start) / step + 1
+inline constexpr int64_t kMaxTimeBins = 1'000'000;     // transient bins: window / render.time_bin_ps
 
 struct ResolvedRun {
   RunConfig config;         // SI units, every default explicit

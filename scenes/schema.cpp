@@ -58,6 +58,9 @@ struct Range {
 };
 constexpr Range closed(double lo, double hi) { return {lo, hi, false}; }
 constexpr Range open_closed(double lo, double hi) { return {lo, hi, true}; }  // (lo, hi]
+// Coordinates and offsets in the world: 1000 km either way. Embree traces in float and asserts on ray
+// origins beyond about 1.8e18; far inside that, float positions past 1e6 m are already coarser than 6 cm.
+constexpr Range kWorld = closed(-1e6, 1e6);
 
 Key make(std::string path, Type type, std::string unit, std::string doc) {
   Key k;
@@ -150,8 +153,9 @@ Key choice(std::string path, F field, std::string doc) {
 }
 
 template <class F>
-Key vec3(std::string path, F field, Unit u, std::string doc) {
+Key vec3(std::string path, F field, Unit u, Range r, std::string doc) {
   Key k = make(std::move(path), Type::Vec3, u.name, std::move(doc));
+  k.lo = r.lo, k.hi = r.hi;  // of each component
   const Vec3d& d = field(defaults());
   k.def = json::array({u.from_si(d[0]), u.from_si(d[1]), u.from_si(d[2])});
   k.set = [field, u](RunConfig& c, const ojson& v, const std::string&) {
@@ -210,12 +214,12 @@ std::vector<Key> build() {
   k.push_back(integer("/seeds/noise", FIELD(seeds.noise), kNone, closed(0, 9.007199254740992e15), "seed of the temporal noise (binary frames, counts, crosstalk draws); null = seed"));
 
   k.push_back(string("/camera/gltf_camera", FIELD(camera.gltf_camera), "name of a glTF camera node to use instead of position/look_at/up and the field of view; \"\" = defined here"));
-  k.push_back(vec3("/camera/position_m", FIELD(camera.position_m), kMetre, "camera centre (world, glTF frame: +Y up)"));
-  k.push_back(vec3("/camera/look_at_m", FIELD(camera.look_at_m), kMetre, "point the optical axis passes through"));
-  k.push_back(vec3("/camera/up", FIELD(camera.up), kNone, "up direction (world); need not be orthogonal to the axis"));
+  k.push_back(vec3("/camera/position_m", FIELD(camera.position_m), kMetre, kWorld, "camera centre (world, glTF frame: +Y up)"));
+  k.push_back(vec3("/camera/look_at_m", FIELD(camera.look_at_m), kMetre, kWorld, "point the optical axis passes through"));
+  k.push_back(vec3("/camera/up", FIELD(camera.up), kNone, kWorld, "up direction (world); need not be orthogonal to the axis"));
   k.push_back(integer("/camera/width_px", FIELD(camera.width_px), kPixel, closed(1, 16384), "sensor columns"));
   k.push_back(integer("/camera/height_px", FIELD(camera.height_px), kPixel, closed(1, 16384), "sensor rows (500: one half of the paper's chip; 1000: the full chip)"));
-  k.push_back(number("/camera/pixel_pitch_um", FIELD(camera.pixel_pitch_m), kUmUnit, open_closed(0, 1000), "pixel pitch"));
+  k.push_back(number("/camera/pixel_pitch_um", FIELD(camera.pixel_pitch_m), kUmUnit, closed(0.1, 1000), "pixel pitch"));
   k.push_back(number("/camera/focal_length_mm", FIELD(camera.focal_length_m), kMmUnit, open_closed(0, 10000), "lens focal length (ignored when vertical_fov_deg is set)"));
   k.push_back(number("/camera/vertical_fov_deg", FIELD(camera.vertical_fov_rad), kDegree, open_closed(0, 179), "vertical field of view; null = from focal_length_mm"));
   k.push_back(number("/camera/f_number", FIELD(camera.f_number), kNone, closed(0.5, 64), "lens f-number N (aperture diameter = f / N)"));
@@ -223,14 +227,14 @@ std::vector<Key> build() {
   k.push_back(rect("/camera/crop", FIELD(camera.crop), "[x0, y0, width, height] region of interest; null = the whole sensor"));
 
   k.push_back(number("/laser/average_power_mW", FIELD(laser.average_power_W), kMilliwatt, closed(0, 1e9), "average optical power"));
-  k.push_back(number("/laser/repetition_rate_MHz", FIELD(laser.repetition_rate_Hz), kMegahertz, open_closed(0, 1e5), "pulse repetition rate"));
+  k.push_back(number("/laser/repetition_rate_MHz", FIELD(laser.repetition_rate_Hz), kMegahertz, closed(1e-6, 1e5), "pulse repetition rate (1e-6 MHz: one pulse per second)"));
   k.push_back(number("/laser/wavelength_nm", FIELD(laser.wavelength_m), kNmUnit, closed(200, 2000), "vacuum wavelength"));
   k.push_back(number("/laser/pulse_fwhm_ps", FIELD(laser.pulse_fwhm_s), kPsUnit, open_closed(0, 1e6), "Gaussian pulse width (full width at half maximum)"));
   k.push_back(file("/laser/pulse_shape_csv", FIELD(laser.pulse_shape_csv), "table of (time_ps, relative power) replacing the Gaussian; relative to the scene file"));
   k.push_back(number("/laser/emission_delay_ns", FIELD(laser.emission_delay_s), kNsUnit, closed(-1e6, 1e6), "fixed delay from the laser trigger to the pulse's emission (cables, driver)"));
   k.push_back(choice("/laser/beam", FIELD(laser.beam), "flood: uniform over a cone just covering the field of view; cone: uniform over half_angle_deg; gltf_light: a KHR_lights_punctual light of the scene"));
   k.push_back(number("/laser/half_angle_deg", FIELD(laser.half_angle_rad), kDegree, open_closed(0, 180), "half-angle of the beam when beam is \"cone\""));
-  k.push_back(vec3("/laser/offset_m", FIELD(laser.offset_m), kMetre, "emitter position relative to the camera centre, in camera coordinates (x right, y up, -z forward)"));
+  k.push_back(vec3("/laser/offset_m", FIELD(laser.offset_m), kMetre, kWorld, "emitter position relative to the camera centre, in camera coordinates (x right, y up, -z forward)"));
   k.push_back(string("/laser/gltf_light", FIELD(laser.gltf_light), "name of the glTF light used as the laser when beam is \"gltf_light\""));
 
   k.push_back(number("/ambient/illuminance_lux", FIELD(ambient.illuminance_lux), plain("lux"), closed(0, 1e6), "uniform environment illuminance (equal-energy spectrum); see docs/scene-file.md for the conversion"));

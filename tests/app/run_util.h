@@ -28,6 +28,7 @@ struct Result {
 inline Result shell(const std::string& command_line) {
   const std::string cmd = command_line + " 2>&1";
   FILE* p = popen(cmd.c_str(), "r");
+  if (!p) return {-1, "popen failed for: " + command_line.substr(0, 200)};
   std::string out;
   std::array<char, 4096> buf{};
   while (size_t n = fread(buf.data(), 1, buf.size(), p)) out.append(buf.data(), n);

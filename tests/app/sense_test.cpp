@@ -84,19 +84,19 @@ TEST_F(App, SenseRepeatsAreTheRunsWithConsecutiveNoiseSeeds) {
 TEST_F(App, SenseRefusesWhatItCannotDo) {
   ASSERT_EQ(sh("run " + kSmall + " -o " + (dir_ / "dark").string()).code, 0);
   Result r = sh("sense " + (dir_ / "dark").string());
-  EXPECT_EQ(r.code, 2);
+  EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("saved no light; run it again with --set outputs.light=true"));
 
   ASSERT_EQ(sh("run " + kLit + " -o " + (dir_ / "run").string()).code, 0);
   r = sh("sense " + (dir_ / "run").string() + " --set laser.average_power_mW=5");
-  EXPECT_EQ(r.code, 2);
+  EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("--set laser.average_power_mW: sense re-samples the sensor only"));
   // A sweep beyond the rendered window (the run stopped at 4.2 ns).
   r = sh("sense " + (dir_ / "run").string() + " --set acquisition.gate_sweep.stop_ns=9");
-  EXPECT_EQ(r.code, 2);
+  EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("but the run saved light from"));
   r = sh("sense " + dir_.string());
-  EXPECT_EQ(r.code, 2);
+  EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("no metadata.json"));
   EXPECT_FALSE(fs::exists(dir_ / "run-sense")) << "a refused sense leaves nothing behind";
 }

@@ -7,6 +7,7 @@
 
 #include <glm/glm.hpp>
 
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -940,6 +941,110 @@ TEST_F(BrokenGltf, BadTextureAndSpotCone) {
     Gltf g;
     g.node({{"name", "S"}, {"extensions", {{"KHR_lights_punctual", {{"light", 2}}}}}});
     EXPECT_THAT(error_of(g), HasSubstr("node 0 'S': KHR_lights_punctual light 2 does not exist"));
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Issue 14: files that crashed the loader, hung it, or passed with nonsense in them
+
+// A parent chain as deep as the file is long: the hierarchy is walked without recursion.
+TEST(GltfLoader, ADeepNodeChainLoadsWithoutExhaustingTheStack) {
+  TempDir dir;
+  Gltf g;
+  const int m = g.triangle_mesh();
+  constexpr int kDepth = 50000;
+  for (int i = 0; i < kDepth; ++i) {
+    json n = {{"translation", {0, 0, 1e-4}}};
+    if (i + 1 < kDepth) n["children"] = {i + 1};
+    else n["mesh"] = m;
+    g.node(n, i == 0);
+  }
+  const Scene s = load_gltf(g.write(dir.path(), "chain"));
+  ASSERT_EQ(s.meshes.size(), 1u);
+  EXPECT_EQ(s.meshes[0].gltf_node, kDepth - 1);
+  expect_vec(s.meshes[0].positions[1], {1, 0, kDepth * 1e-4}, 1e-6);
+}
+
+TEST_F(BrokenGltf, ExtrasNestedDeeperThanTheLimitAreRefusedBeforeTinygltf) {
+  // 15,000 levels of extras overflowed the stack inside tinygltf.
+  Gltf g;
+  g.node({{"mesh", g.triangle_mesh()}});
+  std::string text = g.doc.dump();
+  text.insert(text.size() - 1, ", \"extras\": " + std::string(15000, '[') + std::string(15000, ']'));
+  path_ = (dir_.path() / "deep.gltf").string();
+  write_file(path_, text);
+  const std::string msg = load_error(path_);
+  EXPECT_THAT(msg, HasSubstr(path_ + ":1:"));
+  EXPECT_THAT(msg, HasSubstr("nested deeper than 64 levels"));
+}
+
+TEST_F(BrokenGltf, DracoIsNamedBeforeTinygltfParsesTheAccessors) {
+  // A Draco primitive: its accessors have no bufferView; the data is in the extension's bufferView.
+  Gltf g;
+  const int view = g.view_of(std::vector<uint8_t>(16, 0));
+  g.doc["accessors"] = {{{"componentType", kFloat}, {"type", "VEC3"}, {"count", 3}}};
+  g.doc["meshes"] = {{{"primitives", {{{"attributes", {{"POSITION", 0}}},
+                                       {"extensions", {{"KHR_draco_mesh_compression",
+                                                        {{"bufferView", view}, {"attributes", {{"POSITION", 0}}}}}}}}}}}};
+  g.node({{"mesh", 0}});
+  g.doc["extensionsUsed"] = {"KHR_draco_mesh_compression"};
+  g.doc["extensionsRequired"] = {"KHR_draco_mesh_compression"};
+  const std::string msg = error_of(g);
+  EXPECT_THAT(msg, HasSubstr(path_ + ": extension 'KHR_draco_mesh_compression' is listed in extensionsRequired but "
+                                     "spadgen does not support it (compressed meshes: export the file without mesh compression)"));
+}
+
+TEST_F(BrokenGltf, AWebPageSavedAsAGlbIsRecognised) {
+  path_ = (dir_.path() / "model.glb").string();
+  write_file(path_, "<!DOCTYPE html>\n<html><head><title>Download model</title></head><body></body></html>");
+  const std::string msg = load_error(path_);
+  EXPECT_THAT(msg, HasSubstr(path_ + ": not a glTF file: it starts with '<!DOCTYPE html> <html><h...', an HTML page"));
+  write_file(path_, "\x89PNG\r\n\x1a\n");
+  EXPECT_THAT(load_error(path_), HasSubstr("not a glTF file: it starts with '\\x89PNG  \\x1a '; expected JSON"));
+  write_file(path_, std::string("glTF\x01\0\0\0", 8) + std::string(12, '\0'));
+  EXPECT_THAT(load_error(path_), HasSubstr("not a valid binary glTF (.glb): expected a 12-byte header of version 2"));
+}
+
+TEST_F(BrokenGltf, APathThatIsNotARegularFileIsNamedForWhatItIs) {
+  fs::create_directories(dir_.path() / "folder.gltf");
+  EXPECT_THAT(load_error((dir_.path() / "folder.gltf").string()), HasSubstr("folder.gltf: the glTF file is a directory"));
+  const fs::path fifo = dir_.path() / "pipe.glb";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  EXPECT_THAT(load_error(fifo.string()), HasSubstr("pipe.glb: the glTF file is a FIFO (named pipe), expected a regular file"));
+  EXPECT_THAT(load_error("/dev/zero"), HasSubstr("/dev/zero: the glTF file is a character device, expected a regular file"));
+  // A buffer file that is a FIFO would block tinygltf's read for ever.
+  Gltf g;
+  g.node({{"mesh", g.triangle_mesh()}});
+  g.doc["buffers"] = {{{"byteLength", g.bin.size()}, {"uri", "pipe.glb"}}};
+  path_ = (dir_.path() / "fifo_buffer.gltf").string();
+  write_file(path_, g.doc.dump());
+  EXPECT_THAT(load_error(path_), HasSubstr("buffer 0: its file 'pipe.glb' is a FIFO (named pipe)"));
+}
+
+TEST_F(BrokenGltf, ValuesThatWouldBecomeNonFiniteInTheRendererAreRefused) {
+  {  // texture coordinates of 3e38 once read a white texture as black
+    Gltf g;
+    const int pos = g.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+    const int uv = g.accessor(g.view_of(std::vector<float>{0, 0, 3e38f, 0, 0, 1}), kFloat, "VEC2", 3);
+    g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}, {"TEXCOORD_0", uv}}}}}), "Tri")}});
+    EXPECT_THAT(error_of(g), HasSubstr("mesh 0 'Tri' primitive 0: TEXCOORD_0 element 1 has the value 3e+38, expected "
+                                       "texture coordinates within +-4096"));
+  }
+  {  // an emissive strength of 1e25 once made the ambient light +Inf everywhere
+    Gltf g;
+    g.node({{"mesh", g.triangle_mesh()}});
+    g.doc["materials"] = {{{"name", "Lamp"}, {"emissiveFactor", {1, 1, 1}},
+                           {"extensions", {{"KHR_materials_emissive_strength", {{"emissiveStrength", 1e25}}}}}}};
+    g.doc["extensionsUsed"] = {"KHR_materials_emissive_strength"};
+    EXPECT_THAT(error_of(g), HasSubstr("material 0 'Lamp': emits 1e+25 nits"));
+    g.doc["materials"][0]["emissiveFactor"] = {2, 0, 0};
+    EXPECT_THAT(error_of(g), HasSubstr("material 0 'Lamp': emissiveFactor value 2 is outside [0, 1]"));
+  }
+  {  // vertices beyond what Embree traces in float
+    Gltf g;
+    g.node({{"name", "Far"}, {"mesh", g.triangle_mesh()}, {"scale", {1e20, 1, 1}}});
+    EXPECT_THAT(error_of(g), HasSubstr("mesh 0 'Tri' primitive 0: POSITION element 1 lies at (1e+20, 0, 0) m in the "
+                                       "world, beyond +-1e+09 m"));
   }
 }
 

@@ -81,7 +81,7 @@ def main():
             r = subprocess.run([spadgen, "info", str(probe)], capture_output=True, text=True)
         finally:
             probe.unlink()
-        check("spadgen rejects: " + name, r.returncode == 2, r.stderr.strip()[:200])
+        check("spadgen rejects: " + name, r.returncode == 1, r.stderr.strip()[:200])
     # A nullable key given null, a key given its default explicitly: both accepted by both.
     good = copy.deepcopy(doc)
     good["camera"]["crop"] = None

@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "core/error.h"
@@ -260,6 +261,88 @@ TEST_F(SceneFileTest, ExposureLongerThanAFrameIsAWarning) {
   ASSERT_EQ(r.warnings.size(), 1u);
   EXPECT_THAT(r.warnings[0], HasSubstr("longer than one frame"));
   EXPECT_TRUE(parse(R"({"gltf": "s.gltf"})").warnings.empty());
+}
+
+// Issue 14: what used to crash, hang or pass silently is refused at the boundary, naming the key.
+
+TEST_F(SceneFileTest, ANumberBeyondTheDoubleRangeNamesItsKeyAndPlace) {
+  const std::string msg = error_of("{\"gltf\": \"s.gltf\",\n \"laser\": {\"average_power_mW\": 1e309}}");
+  EXPECT_THAT(msg, HasSubstr(path() + ":2:32: /laser/average_power_mW: the number 1e309 is beyond the range of a double"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"position_m": [0, -1e400, 0]}})"),
+              HasSubstr("/camera/position_m/1: the number -1e400 is beyond the range"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"laser.average_power_mW=1e309"}),
+              HasSubstr("--set laser.average_power_mW:1:1: the number 1e309 is beyond the range"));
+}
+
+TEST_F(SceneFileTest, DeepNestingIsRefusedBeforeItIsBuilt) {
+  // 100,000 levels once overflowed the stack in the message's dump of the value.
+  const std::string deep = std::string(100000, '[') + std::string(100000, ']');
+  const std::string msg = error_of("{\"gltf\": \"s.gltf\", \"description\": " + deep + "}");
+  EXPECT_THAT(msg, HasSubstr(path() + ":1:"));
+  EXPECT_THAT(msg, HasSubstr("nested deeper than 64 levels"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"camera.crop=" + deep}), HasSubstr("nested deeper than 64 levels"));
+  // 60 levels parse, and the message shows the value without dumping all of it.
+  const std::string fine = std::string(60, '[') + std::string(60, ']');
+  EXPECT_THAT(error_of("{\"gltf\": \"s.gltf\", \"description\": " + fine + "}"),
+              HasSubstr("/description: found [[...]] (an array), expected a string"));
+}
+
+TEST_F(SceneFileTest, ADuplicateKeyIsAnError) {
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"f_number": 2}, "camera": {"f_number": 4}})"),
+              HasSubstr("/camera: appears twice in one object"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"f_number": 2, "f_number": 4}})"),
+              HasSubstr("/camera/f_number: appears twice"));
+}
+
+TEST_F(SceneFileTest, AKeyWithASlashIsNotTakenForAPath) {
+  // "camera/f_number" used to be validated as /camera/f_number and then ignored.
+  const std::string msg = error_of(R"({"gltf": "s.gltf", "camera/f_number": 64})");
+  EXPECT_THAT(msg, HasSubstr("/: found the key \"camera/f_number\", expected a key name without '/' or '~'"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"a~1b": 1}})"), HasSubstr("/camera: found the key \"a~1b\""));
+}
+
+TEST_F(SceneFileTest, ValuesThatMakeDerivedQuantitiesNonFiniteAreOutOfRange) {
+  // Embree asserts on ray origins beyond about 1.8e18; the deposit loop never ended for huge offsets.
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"position_m": [1e20, 0, 1]}})"),
+              HasSubstr("/camera/position_m: found [1e+20,0,1] (an array), expected an array of 3 numbers each in [-1e+06, 1e+06] m"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"laser.offset_m=[0,0,1e17]"}), HasSubstr("/laser/offset_m: found"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"camera.look_at_m=[0,0,-1e7]"}), HasSubstr("/camera/look_at_m: found"));
+  // NaN and +Inf in laser.exr.
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"pixel_pitch_um": 1e-200}})"),
+              HasSubstr("/camera/pixel_pitch_um: found 1e-200 (a number), expected a number in [0.1, 1000]"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "laser": {"repetition_rate_MHz": 1e-100}})"),
+              HasSubstr("/laser/repetition_rate_MHz: found 1e-100 (a number), expected a number in [1e-06, 100000]"));
+}
+
+TEST_F(SceneFileTest, TooManyGatePositionsOrBinsAreRefusedBeforeAnythingIsAllocated) {
+  // step 1e-6 ps: 1.26e10 positions, which overflowed int; 2e9 positions allocated until killed.
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "acquisition": {"gate_sweep": {"step_ps": 1e-6}}})"),
+              HasSubstr("/acquisition/gate_sweep/step_ps: found 1e-06 ps, which makes 1.26e+10 gate positions"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "acquisition": {"gate_sweep": {"start_ns": -1e6, "stop_ns": 1e6, "step_ps": 1}}})"),
+              HasSubstr("expected at most 100000 positions"));
+  EXPECT_EQ(error_of(R"({"gltf": "s.gltf", "acquisition": {"gate_sweep": {"start_ns": 0, "stop_ns": 99.999, "step_ps": 1}}})"), "");
+  // The intensity mode has no gate sweep: its keys do not count there.
+  EXPECT_EQ(error_of(R"({"gltf": "s.gltf", "acquisition": {"mode": "intensity", "gate_sweep": {"step_ps": 1e-6}}})"), "");
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "render": {"time_bin_ps": 1e-3, "window_start_ns": 0, "window_stop_ns": 10}})"),
+              HasSubstr("/render/time_bin_ps: found 0.001 ps, which makes 1e+07 time bins"));
+}
+
+TEST_F(SceneFileTest, FilesThatCannotBeReadWholeAreNamedForWhatTheyAre) {
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "laser": {"pulse_shape_csv": "/dev/zero"}})"),
+              HasSubstr("/laser/pulse_shape_csv: the file /dev/zero is a character device, expected a regular file"));
+  std::filesystem::create_directories(dir_ / "folder.gltf");
+  EXPECT_THAT(error_of(R"({"gltf": "folder.gltf"})"), HasSubstr("/gltf: the glTF file " + (dir_ / "folder.gltf").string() +
+                                                                   " is a directory, expected a regular file"));
+  ASSERT_EQ(::mkfifo((dir_ / "pipe.csv").c_str(), 0600), 0);
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "sensor": {"pixel_B": {"pdp_csv": "pipe.csv"}}})"),
+              HasSubstr("/sensor/pixel_B/pdp_csv: the file " + (dir_ / "pipe.csv").string() + " is a FIFO (named pipe)"));
+  // The scene file itself: /dev/zero would be read without end.
+  try {
+    load_scene_file("/dev/zero");
+    ADD_FAILURE() << "reading /dev/zero as a scene file did not fail";
+  } catch (const Error& e) {
+    EXPECT_THAT(std::string(e.what()), HasSubstr("scene file /dev/zero: is a character device, expected a regular file"));
+  }
 }
 
 TEST(SceneFileReference, DocsListEveryKeyAsTheSchemaDeclaresIt) {

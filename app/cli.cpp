@@ -1,0 +1,58 @@
+#include "app/cli.h"
+
+#include <cstdio>
+#include <iostream>
+#include <new>
+
+#include "core/error.h"
+
+namespace spadgen::app {
+
+std::optional<int> parse_command_line(CLI::App& cli, int argc, char** argv) {
+  try {
+    cli.parse(argc, argv);
+    return std::nullopt;
+  } catch (const CLI::Success& e) {
+    return cli.exit(e);  // --help, --version: printed on stdout, exit 0
+  } catch (const CLI::ParseError& e) {
+    std::string command = "spadgen";
+    for (const CLI::App* sub : cli.get_subcommands()) command += " " + sub->get_name();
+    std::fprintf(stderr, "spadgen: error: %s (see %s --help)\n", e.what(), command.c_str());
+    return kExitBadInput;
+  }
+}
+
+int run_command(const std::function<void()>& command) {
+  try {
+    command();
+    return kExitOk;
+  } catch (const Interrupted& e) {
+    std::fprintf(stderr, "spadgen: %s\n", e.what());
+    return kExitInterrupted;
+  } catch (const Error& e) {
+    std::fprintf(stderr, "spadgen: error: %s\n", e.what());
+    return kExitBadInput;
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr, "spadgen: error: out of memory: the run needs more memory than the machine gives it "
+                         "(spadgen info shows the sizes of a run)\n");
+    return kExitBadInput;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "spadgen: internal error: %s (a bug in spadgen; please report it with the command line)\n", e.what());
+    return kExitInternal;
+  }
+}
+
+uint64_t parse_seed(const std::string& text, const std::string& option) {
+  constexpr uint64_t kMax = uint64_t{1} << 53;  // seeds are exact in metadata.json's JSON numbers
+  uint64_t v = 0;
+  bool ok = !text.empty() && text.size() <= 16;
+  for (char c : text) {
+    if (c < '0' || c > '9') ok = false;
+    if (ok) v = v * 10 + static_cast<uint64_t>(c - '0');
+  }
+  if (!ok || v > kMax)
+    throw Error(option + ": found '" + text + "', expected an integer in [0, " + std::to_string(kMax) + "]");
+  return v;
+}
+
+}  // namespace spadgen::app

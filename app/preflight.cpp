@@ -1,0 +1,67 @@
+#include "app/preflight.h"
+
+#include <cmath>
+#include <sstream>
+#include <string>
+
+#include "core/error.h"
+#include "core/units.h"
+#include "scenes/scene_file.h"
+#include "sensor/acquisition/acquisition.h"
+#include "sensor/model/pixel_maps.h"
+
+namespace spadgen::app {
+namespace {
+
+std::string g(double v) {
+  std::ostringstream o;
+  o << v;
+  return o.str();
+}
+
+// The keys a derived time window depends on, for messages.
+std::string window_keys(const RunConfig& c) {
+  if (c.render.window_start_s) return "render.window_start_ns and render.window_stop_ns";
+  return "the gate sweep (acquisition.gate_sweep.start_ns, stop_ns), the gate (sensor.gate.length_ns, rise_ps, "
+         "fall_ps, delay_ns, skew_fwhm_ps, length_fwhm_ps) and the instrument response (laser.pulse_fwhm_ps, "
+         "sensor.jitter_fwhm_ps)";
+}
+
+}  // namespace
+
+void check_derived(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img, const TimeAxis& axis) {
+  const std::string file = c.scene_file.empty() ? std::string("<scene>") : c.scene_file;
+  const double span = static_cast<double>(axis.bins) * axis.bin_width_s;
+  if (axis.bins < 0 || axis.bins > scenes::kMaxTimeBins || !std::isfinite(span))
+    throw Error(file + ": /render/time_bin_ps: the time window that " + window_keys(c) + " set, from " +
+                g(axis.start_s / kNs) + " ns on, needs " + (axis.bins < 0 ? std::string("more than 2^63") : g(double(axis.bins))) +
+                " bins of " + g(axis.bin_width_s / kPs) + " ps; expected at most " + std::to_string(scenes::kMaxTimeBins) +
+                " bins: wider bins (render.time_bin_ps) or a shorter window");
+  if (axis.bins > 0 && axis.period_s > 0 && span / axis.period_s > kMaxWindowPeriods)
+    throw Error(file + ": /laser/repetition_rate_MHz: the time window of " + g(span / kNs) + " ns spans " +
+                g(span / axis.period_s) + " laser periods of " + g(axis.period_s / kPs) + " ps; expected at most " +
+                g(kMaxWindowPeriods) + " (a lower repetition rate or a shorter window: " + window_keys(c) + ")");
+
+  // A gate cannot be open for a negative time: with a length spread large against the gate length, the
+  // Gaussian model of the spread stops being physical. Refused rather than clamped, so that the maps in
+  // sensor_maps.exr are the ones the counts were computed with.
+  // (In the intensity mode the gate does not shape the counts, but sensor_maps.exr still shows it.)
+  if (!c.sensor.skew) return;
+  const double nominal = sensor.acquisition().nominal_gate_length_s();
+  // The generated deviations stay within a few FWHM of the nominal length (5 sigma of the random part plus
+  // the smooth pattern's extremes): far inside that, no pixel needs looking at. Measured maps
+  // (sensor.gate.maps_exr) are checked for positive lengths where they are read.
+  if (!c.sensor.gate.maps_exr.empty() || nominal > 10.0 * c.sensor.gate.length_fwhm_s) return;
+  for (int y = img.y0; y < img.y1(); ++y)
+    for (int x = img.x0; x < img.x1(); ++x) {
+      const double length = nominal + sensor.pixel(x, y).dL_s;
+      if (length > 0.0) continue;
+      throw Error(file + ": /sensor/gate/length_fwhm_ps: a spread of " + g(c.sensor.gate.length_fwhm_s / kPs) +
+                  " ps (FWHM) about a gate of " + g(nominal / kNs) +
+                  " ns (sensor.gate.length_ns, or the gate profile's) gives pixel (" + std::to_string(x) + ", " +
+                  std::to_string(y) + ") a gate " + g(length / kPs) +
+                  " ps long; expected every gate length > 0: a spread below about half the gate length");
+    }
+}
+
+}  // namespace spadgen::app

@@ -1,0 +1,162 @@
+#include "app/resources.h"
+
+#include <sys/statvfs.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <fstream>
+#include <string>
+#include <thread>
+
+#include "app/outputs.h"
+#include "core/error.h"
+#include "render/renderer.h"
+
+namespace spadgen::app {
+namespace fs = std::filesystem;
+
+namespace {
+
+// MemAvailable of /proc/meminfo, lowered to what the cgroup (container, systemd slice) still allows.
+int64_t available_memory() {
+  int64_t available = -1;
+  std::ifstream meminfo("/proc/meminfo");
+  for (std::string key; meminfo >> key;) {
+    int64_t kb = 0;
+    meminfo >> kb;
+    if (key == "MemAvailable:") available = kb * 1024;
+    meminfo.ignore(256, '\n');
+  }
+  std::ifstream max_file("/sys/fs/cgroup/memory.max"), current_file("/sys/fs/cgroup/memory.current");
+  std::string max_text;
+  int64_t current = 0;
+  if (max_file >> max_text && max_text != "max" && current_file >> current) {
+    const int64_t left = std::max<int64_t>(0, std::stoll(max_text) - current);
+    available = available < 0 ? left : std::min(available, left);
+  }
+  return available;
+}
+
+// Free bytes for an unprivileged writer on the file system the output folder is (or will be) on.
+int64_t free_disk(fs::path p) {
+  std::error_code ec;
+  p = fs::absolute(p, ec);
+  while (!p.empty() && !fs::exists(p, ec) && p != p.parent_path()) p = p.parent_path();
+  struct statvfs s {};
+  if (p.empty() || ::statvfs(p.c_str(), &s) != 0) return -1;
+  return static_cast<int64_t>(s.f_bavail) * static_cast<int64_t>(s.f_frsize);
+}
+
+std::string join_parts(std::vector<ResourcePlan::Part> parts) {
+  std::sort(parts.begin(), parts.end(), [](const auto& a, const auto& b) { return a.bytes > b.bytes; });
+  std::string s;
+  for (const ResourcePlan::Part& p : parts)
+    if (p.bytes > 0) s += (s.empty() ? "" : "; ") + p.what + " " + bytes_text(p.bytes);
+  return s;
+}
+
+std::vector<ResourcePlan::Part> required(const std::vector<ResourcePlan::Part>& parts) {
+  std::vector<ResourcePlan::Part> r;
+  for (const ResourcePlan::Part& p : parts)
+    if (!p.file_backed) r.push_back(p);
+  return r;
+}
+
+}  // namespace
+
+int64_t ResourcePlan::memory_needed() const {
+  int64_t n = 0;
+  for (const Part& p : memory)
+    if (!p.file_backed) n += p.bytes;
+  return n;
+}
+
+int64_t ResourcePlan::disk_needed() const {
+  int64_t n = 0;
+  for (const Part& p : disk) n += p.bytes;
+  return n;
+}
+
+std::string bytes_text(int64_t bytes) {
+  char buf[32];
+  const double b = static_cast<double>(bytes);
+  if (b >= 1e9) std::snprintf(buf, sizeof buf, "%.1f GB", b / 1e9);
+  else if (b >= 1e6) std::snprintf(buf, sizeof buf, "%.0f MB", b / 1e6);
+  else std::snprintf(buf, sizeof buf, "%.0f kB", b / 1e3);
+  return buf;
+}
+
+ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img,
+                            const TimeAxis& axis, int threads, const fs::path& out) {
+  ResourcePlan plan;
+  const int64_t T = threads > 0 ? threads : std::max(1u, std::thread::hardware_concurrency());
+  // Tiles in flight: one per thread, and one more that a thread waiting inside a tile may start.
+  const int64_t in_flight = T + 1;
+  const int64_t tile = std::min(c.render.tile_size, std::max(img.width, img.height));
+  const int64_t halo = sensor.halo();
+  const int64_t tile_pixels = std::min<int64_t>(tile * tile, img.count());
+  const int64_t data_pixels = (tile + 2 * halo) * (tile + 2 * halo);
+  const int64_t bins = axis.bins, pixels = img.count();
+  const std::string th = std::to_string(T) + " threads";
+
+  plan.memory.push_back({"camera paths (render.samples_per_pixel = " + std::to_string(c.render.samples_per_pixel) +
+                             " traced ahead for 16 pixels, " + th + ")",
+                         static_cast<int64_t>(render::Renderer::bytes_per_thread(c.render.samples_per_pixel)) * T});
+  const int64_t split = c.render.split_direct_indirect ? 2 : 1;
+  plan.memory.push_back({"transient tiles (render.tile_size_px = " + std::to_string(c.render.tile_size) + ", " +
+                             std::to_string(bins) + " time bins of render.time_bin_ps, " + th + ")",
+                         in_flight * data_pixels * bins * 4 * split + T * bins * 8 * split});
+  // The sensor's tile: its share of every (K, ...) stack, written or not (the sensor computes them all).
+  const std::vector<StackLayout> stacks = stack_layout(c, sensor, img, axis);
+  int64_t sensor_tile = 0, resident = 0;
+  for (const StackLayout& s : stacks) {
+    const bool per_k = s.file.find("transient") == std::string::npos;  // (H, W, T) stacks: the transient tile above
+    if (per_k && (s.written || s.file != "frames.npy")) sensor_tile += s.bytes() / std::max<int64_t>(1, pixels) * tile_pixels;
+    // Stacks are written through a memory map whose completed bands leave the resident set.
+    if (s.written) resident += std::min(s.bytes(), s.bytes() / std::max(1, img.height) * tile * in_flight);
+  }
+  plan.memory.push_back({"sensor tiles (K = " + std::to_string(sensor.K()) + " gate positions or exposures, " + th + ")",
+                         in_flight * sensor_tile});
+  plan.memory.push_back({"output stacks in flight, file-backed (camera.width_px, render.tile_size_px)", resident, true});
+  // EXR images held whole until the end: ground truth (8 channels and 2 per layer), laser, ambient, maps,
+  // intensity.
+  const int64_t channels = (c.outputs.ground_truth ? 8 + 2 * c.render.max_layers : 0) + 2 + 1 + 4 +
+                           (c.acquisition.mode == AcquisitionMode::Intensity ? 2 : 0);
+  plan.memory.push_back({"images (" + std::to_string(img.width) + " x " + std::to_string(img.height) +
+                             " pixels: camera.crop or width_px x height_px; " + std::to_string(channels) +
+                             " channels with render.max_layers)",
+                         pixels * channels * 4});
+  plan.memory_available = available_memory();
+
+  for (const StackLayout& s : stacks)
+    if (s.written) plan.disk.push_back({s.file, s.bytes()});
+  plan.disk.push_back({"images", pixels * channels * 4});
+  plan.disk_available = out.empty() ? -1 : free_disk(out);
+  return plan;
+}
+
+void check_resources(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img, const TimeAxis& axis,
+                     int threads, const fs::path& out) {
+  const ResourcePlan plan = plan_resources(c, sensor, img, axis, threads, out);
+  const std::string file = c.scene_file.empty() ? std::string("<scene>") : c.scene_file;
+  if (plan.memory_available >= 0 && plan.memory_needed() > plan.memory_available)
+    throw Error(file + ": the run needs about " + bytes_text(plan.memory_needed()) + " of memory, and " +
+                bytes_text(plan.memory_available) + " is available: " + join_parts(required(plan.memory)) +
+                "; lower the keys of the largest parts, or run with fewer --threads");
+  // The earlier set in the output folder stays until the new one is complete: the new one needs its
+  // whole size free.
+  if (plan.disk_available >= 0 && plan.disk_needed() > plan.disk_available)
+    throw Error(file + ": the run writes about " + bytes_text(plan.disk_needed()) + " into " + out.string() + ", and " +
+                bytes_text(plan.disk_available) + " is free there: " + join_parts(plan.disk) +
+                "; switch outputs off (outputs.*), crop (camera.crop), or choose another folder (-o)");
+}
+
+std::string resource_summary(const ResourcePlan& plan) {
+  std::string s = "memory: about " + bytes_text(plan.memory_needed());
+  if (plan.memory_available >= 0) s += " (available: " + bytes_text(plan.memory_available) + ")";
+  s += "; disk: about " + bytes_text(plan.disk_needed());
+  if (plan.disk_available >= 0) s += " (free: " + bytes_text(plan.disk_available) + ")";
+  return s + "\n  memory: " + join_parts(plan.memory) + "\n  disk: " + join_parts(plan.disk) + "\n";
+}
+
+}  // namespace spadgen::app

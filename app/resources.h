@@ -1,0 +1,47 @@
+// The resource plan of a run: the memory and the disk it will need, worked out from the scene file's keys
+// before any work, against what the machine has (available memory, the cgroup's limit, free disk at the
+// output folder). A run that cannot fit is refused with the figures and the keys that drive them, instead
+// of failing with std::bad_alloc or a full disk after minutes of work. The figures are estimates of the
+// largest parts, not a bound on every byte.
+#pragma once
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "core/config.h"
+#include "core/tile.h"
+#include "core/time_axis.h"
+#include "sensor/sensor.h"
+
+namespace spadgen::app {
+
+struct ResourcePlan {
+  struct Part {
+    std::string what;  // "camera paths of 2 threads", with the keys that drive it
+    int64_t bytes = 0;
+    bool file_backed = false;  // memory-mapped output pages the kernel can write out: shown, not required
+  };
+  std::vector<Part> memory, disk;
+  int64_t memory_available = -1;  // bytes; -1 unknown
+  int64_t disk_available = -1;    // bytes free at the output folder; -1 unknown
+  int64_t memory_needed() const;
+  int64_t disk_needed() const;
+};
+
+// threads: as --threads (0 = all cores). out: the output folder ("" = no disk check).
+ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img,
+                            const TimeAxis& axis, int threads, const std::filesystem::path& out);
+
+// Throws spadgen::Error, with the figures and the keys of the largest parts, when the run needs more
+// memory or disk than there is.
+void check_resources(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img, const TimeAxis& axis,
+                     int threads, const std::filesystem::path& out);
+
+// "memory: about 270 MB (available: 5.1 GB); disk: about 0.9 GB" for spadgen info.
+std::string resource_summary(const ResourcePlan& plan);
+
+// "1.2 GB", "870 MB", "12 kB" (powers of 1000, as `spadgen info` gives sizes).
+std::string bytes_text(int64_t bytes);
+
+}  // namespace spadgen::app

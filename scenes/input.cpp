@@ -1,0 +1,226 @@
+#include "scenes/input.h"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+#include <set>
+#include <vector>
+
+#include "core/error.h"
+
+namespace spadgen::scenes {
+namespace {
+
+using json = nlohmann::json;
+
+std::string kind_of(mode_t mode) {
+  if (S_ISDIR(mode)) return "is a directory";
+  if (S_ISFIFO(mode)) return "is a FIFO (named pipe)";
+  if (S_ISCHR(mode)) return "is a character device";
+  if (S_ISBLK(mode)) return "is a block device";
+  if (S_ISSOCK(mode)) return "is a socket";
+  return "is not a regular file";
+}
+
+std::string stat_problem(const struct stat& st, uint64_t max_bytes) {
+  if (!S_ISREG(st.st_mode)) return kind_of(st.st_mode) + ", expected a regular file";
+  if (static_cast<uint64_t>(st.st_size) > max_bytes)
+    return "is " + size_text(static_cast<uint64_t>(st.st_size)) + ", larger than the " + size_text(max_bytes) +
+           " spadgen reads";
+  return "";
+}
+
+// The offset at which arrays and objects nest deeper than `limit`, or npos. Strings and comments are
+// skipped, so a brace inside them does not count; anything malformed is left to the parser.
+size_t depth_exceeded_at(const std::string& text, int limit) {
+  int depth = 0;
+  for (size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (c == '"') {
+      for (++i; i < text.size() && text[i] != '"'; ++i)
+        if (text[i] == '\\') ++i;
+    } else if (c == '/' && i + 1 < text.size() && text[i + 1] == '/') {
+      while (i < text.size() && text[i] != '\n') ++i;
+    } else if (c == '/' && i + 1 < text.size() && text[i + 1] == '*') {
+      const size_t end = text.find("*/", i + 2);
+      if (end == std::string::npos) return std::string::npos;
+      i = end + 1;
+    } else if (c == '[' || c == '{') {
+      if (++depth > limit) return i;
+    } else if (c == ']' || c == '}') {
+      --depth;
+    }
+  }
+  return std::string::npos;
+}
+
+// Builds the document through nlohmann's own DOM builder, keeping the path of the value being read so
+// that an error can name it, and refusing duplicate keys and excessive nesting as they are met.
+class CheckedSax {
+ public:
+  CheckedSax(json& root, const JsonOptions& options) : dom_(root, /*allow_exceptions=*/false), options_(options) {}
+
+  bool null() { return value() && dom_.null(); }
+  bool boolean(bool v) { return value() && dom_.boolean(v); }
+  bool number_integer(json::number_integer_t v) { return value() && dom_.number_integer(v); }
+  bool number_unsigned(json::number_unsigned_t v) { return value() && dom_.number_unsigned(v); }
+  bool number_float(json::number_float_t v, const json::string_t& s) { return value() && dom_.number_float(v, s); }
+  bool string(json::string_t& v) { return value() && dom_.string(v); }
+  bool binary(json::binary_t& v) { return value() && dom_.binary(v); }
+  bool start_object(std::size_t n) {
+    if (!value() || !open()) return false;
+    levels_.push_back({true, "", 0, {}});
+    return dom_.start_object(n);
+  }
+  bool key(json::string_t& k) {
+    Level& l = levels_.back();
+    if (options_.reject_duplicates && !l.keys.insert(k).second) {
+      l.key = k;
+      problem = path() + ": appears twice in one object; expected each key once (JSON readers keep one of them "
+                         "silently)";
+      return false;
+    }
+    l.key = k;
+    return dom_.key(k);
+  }
+  bool end_object() {
+    levels_.pop_back();
+    return dom_.end_object();
+  }
+  bool start_array(std::size_t n) {
+    if (!value() || !open()) return false;
+    levels_.push_back({false, "", 0, {}});
+    return dom_.start_array(n);
+  }
+  bool end_array() {
+    levels_.pop_back();
+    return dom_.end_array();
+  }
+  bool parse_error(std::size_t position, const std::string& token, const nlohmann::detail::exception& e) {
+    offset = position;
+    if (e.id == 406) {  // out_of_range.406: a number beyond the range of a double, reported at its end
+      if (position >= token.size()) offset = position - token.size() + 1;
+      problem = (levels_.empty() ? std::string() : path(/*pending=*/true) + ": ") + "the number " + token +
+                " is beyond the range of a double (about 1.8e308)";
+    } else {
+      std::string what = e.what();
+      if (const size_t pos = what.find("syntax error"); pos != std::string::npos) what = what.substr(pos);
+      problem = "not valid JSON: " + what;
+    }
+    syntax = true;
+    return false;
+  }
+
+  std::string problem;  // why the parse stopped ("" = it did not)
+  size_t offset = 0;    // where, for syntax errors and overflowing numbers
+  bool syntax = false;  // the problem has an offset
+
+ private:
+  struct Level {
+    bool object;
+    std::string key;    // the key being read (objects)
+    size_t count;       // elements started so far (arrays)
+    std::set<std::string> keys;
+  };
+  // A value starts: in an array it is the next element.
+  bool value() {
+    if (!levels_.empty() && !levels_.back().object) ++levels_.back().count;
+    return true;
+  }
+  bool open() {
+    if (static_cast<int>(levels_.size()) >= kMaxJsonDepth) {
+      problem = "arrays and objects nested deeper than " + std::to_string(kMaxJsonDepth) + " levels";
+      return false;
+    }
+    return true;
+  }
+  // The JSON pointer of the value being read; `pending` when its own value() has not run yet.
+  std::string path(bool pending = false) const {
+    std::string p;
+    for (const Level& l : levels_)
+      p += "/" + (l.object ? l.key : std::to_string(pending && &l == &levels_.back() ? l.count : l.count - 1));
+    return p.empty() ? "/" : p;
+  }
+
+  nlohmann::detail::json_sax_dom_parser<json> dom_;
+  JsonOptions options_;
+  std::vector<Level> levels_;
+};
+
+}  // namespace
+
+std::string size_text(uint64_t bytes) {
+  const char* units[] = {"bytes", "KiB", "MiB", "GiB", "TiB"};
+  double v = static_cast<double>(bytes);
+  int u = 0;
+  while (v >= 1024.0 && u < 4) v /= 1024.0, ++u;
+  char buf[32];
+  std::snprintf(buf, sizeof buf, v == static_cast<double>(static_cast<uint64_t>(v)) ? "%.0f %s" : "%.1f %s", v, units[u]);
+  return buf;
+}
+
+std::string file_problem(const std::string& path, uint64_t max_bytes) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0)
+    return errno == ENOENT ? std::string("does not exist") : std::string("cannot be read: ") + std::strerror(errno);
+  return stat_problem(st, max_bytes);
+}
+
+std::string read_file_bounded(const std::string& path, uint64_t max_bytes, const std::string& what) {
+  const auto fail = [&](const std::string& problem) { return Error(what + " " + path + ": " + problem); };
+  // O_NONBLOCK: a FIFO put in place after a check must not block the open; fstat then decides.
+  const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+  if (fd < 0) throw fail(errno == ENOENT ? std::string("does not exist") : std::string("cannot be opened: ") + std::strerror(errno));
+  struct stat st {};
+  std::string problem = ::fstat(fd, &st) != 0 ? std::string("cannot be read: ") + std::strerror(errno) : stat_problem(st, max_bytes);
+  std::string out;
+  if (problem.empty()) {
+    out.resize(static_cast<size_t>(st.st_size));
+    size_t got = 0;
+    // A file that grows while it is read is cut at the size it had: the read never runs unbounded.
+    while (got < out.size()) {
+      const ssize_t n = ::read(fd, out.data() + got, out.size() - got);
+      if (n < 0 && errno == EINTR) continue;
+      if (n < 0) {
+        problem = std::string("cannot be read: ") + std::strerror(errno);
+        break;
+      }
+      if (n == 0) break;
+      got += static_cast<size_t>(n);
+    }
+    out.resize(got);
+  }
+  ::close(fd);
+  if (!problem.empty()) throw fail(problem);
+  return out;
+}
+
+std::string line_column(const std::string& text, size_t offset) {
+  size_t line = 1, col = 1;
+  for (size_t i = 0; i < offset && i < text.size(); ++i) {
+    if (text[i] == '\n') ++line, col = 1;
+    else ++col;
+  }
+  return std::to_string(line) + ":" + std::to_string(col);
+}
+
+json parse_json(const std::string& text, const std::string& where, const JsonOptions& options) {
+  if (const size_t at = depth_exceeded_at(text, kMaxJsonDepth); at != std::string::npos)
+    throw Error(where + ":" + line_column(text, at) + ": arrays and objects nested deeper than " +
+                std::to_string(kMaxJsonDepth) + " levels; spadgen reads at most " + std::to_string(kMaxJsonDepth));
+  json root;
+  CheckedSax sax(root, options);
+  const bool ok = json::sax_parse(text, &sax, json::input_format_t::json, /*strict=*/true, options.comments);
+  if (!ok || !sax.problem.empty()) {
+    const std::string problem = sax.problem.empty() ? std::string("not valid JSON") : sax.problem;
+    // nlohmann reports the offset one past the character it stopped at.
+    throw Error(where + (sax.syntax ? ":" + line_column(text, sax.offset > 0 ? sax.offset - 1 : 0) : std::string()) +
+                ": " + problem);
+  }
+  return root;
+}
+
+}  // namespace spadgen::scenes

@@ -1,0 +1,46 @@
+// Reading what the user hands spadgen, within stated limits: files are read only when they are regular
+// files no larger than a stated size (a directory, FIFO or /dev/zero is named as what it is, never read
+// without bound), and JSON is parsed without recursion, to a stated nesting depth, with duplicate keys and
+// numbers beyond the range of a double reported at their key and line:column.
+#pragma once
+#include <nlohmann/json.hpp>
+
+#include <cstdint>
+#include <string>
+
+namespace spadgen::scenes {
+
+// Size limits of the files a scene names (docs/scene-file.md, "Limits").
+inline constexpr uint64_t kMaxSceneFileBytes = uint64_t{4} << 20;    // a scene file
+inline constexpr uint64_t kMaxTableFileBytes = uint64_t{64} << 20;   // a CSV table
+inline constexpr uint64_t kMaxImageFileBytes = uint64_t{1} << 30;    // sensor.gate.maps_exr, a glTF image
+inline constexpr uint64_t kMaxGltfFileBytes = uint64_t{2} << 30;     // a .gltf / .glb and each buffer file
+// Arrays and objects inside one another, in a scene file, a --set value and a glTF file's JSON (its
+// extras included). A scene file needs 4; glTF exporters write fewer than 20.
+inline constexpr int kMaxJsonDepth = 64;
+
+// "" when `path` names a regular file of at most max_bytes; else why not, e.g. "is a directory",
+// "is a FIFO (named pipe)", "is a character device (/dev/zero?)", "does not exist",
+// "is 3.1 GB, larger than the 2 GB spadgen reads".
+std::string file_problem(const std::string& path, uint64_t max_bytes);
+
+// The whole file, after file_problem; throws spadgen::Error "<what> <path>: <problem>".
+std::string read_file_bounded(const std::string& path, uint64_t max_bytes, const std::string& what);
+
+// "4 MB", "2 GB": a limit as the messages and the docs state it.
+std::string size_text(uint64_t bytes);
+
+struct JsonOptions {
+  bool comments = true;         // // and /* */ comments (scene files are JSONC)
+  bool reject_duplicates = true;  // the same key twice in one object is an error
+};
+
+// Parses JSON without recursion. Throws spadgen::Error naming `where` (a file, or "--set key") with
+// line:column for a syntax error, a number beyond the double range (with its key path), nesting deeper
+// than kMaxJsonDepth, and (when asked) a key that appears twice in one object (with its path).
+nlohmann::json parse_json(const std::string& text, const std::string& where, const JsonOptions& options = {});
+
+// "line:column" (both from 1) of byte `offset` of `text`.
+std::string line_column(const std::string& text, size_t offset);
+
+}  // namespace spadgen::scenes

@@ -1,0 +1,373 @@
+// Issue 14 (hardening), as a user meets it: inputs that crashed spadgen, hung it or passed with nonsense
+// in the outputs end in a clean error naming the key, or in correct output; signals stop long loops;
+// errors and exit codes are spadgen's own; the output folder is never mixed. Every case runs the program
+// under a time limit (timeout -s KILL) and checks that it ended by itself, without a signal.
+//
+// SPADGEN_BIN=/path/to/spadgen runs the cases against another binary (e.g. an older build, to see them fail).
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <string>
+#include <sys/stat.h>
+#include <vector>
+
+#include "app/staging.h"
+#include "render/integrator.h"
+#include "run_util.h"
+#include "writers/writers.h"
+
+namespace {
+using namespace spadgen::testing;
+using ::testing::HasSubstr;
+using ::testing::Not;
+
+std::string bin() {
+  const char* b = std::getenv("SPADGEN_BIN");
+  return b ? b : kBin;
+}
+
+struct Outcome {
+  int code;            // the program's exit code; 124: killed by the time limit; 128 + n: killed by signal n
+  std::string output;  // stdout and stderr
+  std::string err;     // stderr alone
+  double seconds;
+};
+
+// Runs `spadgen ARGS` with a time limit; stderr is also kept apart.
+Outcome spadgen(const std::string& args, int limit_s = 30) {
+  const fs::path err = fs::temp_directory_path() / ("spadgen_hardening_err_" + std::to_string(::getpid()));
+  const auto t0 = std::chrono::steady_clock::now();
+  const Result r = shell("(timeout -s KILL " + std::to_string(limit_s) + " " + bin() + " " + args + " 2> " + err.string() + ")");
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  Outcome o{r.code, r.output, slurp(err), s};
+  o.output += o.err;
+  fs::remove(err);
+  return o;
+}
+
+// Exit code `code`, reached by the program itself (not a signal, not the time limit).
+void expect_exit(const Outcome& o, int code, const std::string& what) {
+  EXPECT_NE(o.code, 124) << what << ": did not finish within the time limit\n" << o.output;
+  EXPECT_FALSE(o.code > 128 && o.code < 160) << what << ": killed by signal " << o.code - 128 << "\n" << o.output;
+  EXPECT_EQ(o.code, code) << what << "\n" << o.output;
+}
+
+const std::string kFlat = kScenes + "flat_target.json";
+// A run of a few milliseconds: 8 x 8 pixels, 1 path each, 29 gate positions.
+const std::string kTiny = kFlat + " --set camera.crop=[508,246,8,8] --set render.samples_per_pixel=1 "
+                                  "--set acquisition.gate_sweep.stop_ns=1.6 --set outputs.previews=false";
+
+class Hardening : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("spadgen_hardening_" + std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()) + "_" +
+            std::to_string(::getpid()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  fs::path dir_;
+};
+
+// ------------------------------------------------------------------------------------------------
+// Crashes, hangs, allocation without end: a clean error with the key, before any work
+
+TEST_F(Hardening, ValuesThatCrashedOrHungSpadgenEndInAnErrorNamingTheKey) {
+  struct Case {
+    std::string set, expect;
+  };
+  const Case cases[] = {
+      // SIGSEGV: the gate count overflowed int, then front() of an empty vector
+      {"acquisition.gate_sweep.step_ps=1e-6", "/acquisition/gate_sweep/step_ps: found 1e-06 ps, which makes 1.26e+10 gate positions"},
+      // allocated until killed
+      {"acquisition.gate_sweep.start_ns=-1e6' --set 'acquisition.gate_sweep.step_ps=1", "expected at most 100000 positions"},
+      // SIGABRT in Embree (ray.valid()); info accepted it
+      {"camera.position_m=[1e20,0,1]", "/camera/position_m: found [1e+20,0,1]"},
+      // looped for ever in render::deposit
+      {"laser.offset_m=[0,0,1e17]", "/laser/offset_m: found [0,0,1e+17]"},
+      // NaN and Inf in laser.exr
+      {"camera.pixel_pitch_um=1e-200", "/camera/pixel_pitch_um: found 1e-200"},
+      {"laser.repetition_rate_MHz=1e-100", "/laser/repetition_rate_MHz: found 1e-100"},
+      // negative gate_length_ps in sensor_maps.exr
+      {"sensor.gate.length_fwhm_ps=1e6", "/sensor/gate/length_fwhm_ps: a spread of 1e+06 ps (FWHM) about a gate of 3.8 ns"},
+      {"sensor.gate.length_ns=1e-6", "/sensor/gate/length_fwhm_ps: a spread of 120 ps (FWHM) about a gate of 1e-06 ns"},
+      // info printed -9223372036854775808 bins and exited 0; run said "transient time axis: expected bins >= 0"
+      {"render.time_bin_ps=1e-300", "/render/time_bin_ps: the time window that the gate sweep"},
+      {"sensor.gate.length_ns=1e6", "expected at most 1000000 bins"},
+      // "internal error: [json.exception.out_of_range.406] number overflow parsing '1e309'"
+      {"laser.average_power_mW=1e309", "--set laser.average_power_mW:1:1: the number 1e309 is beyond the range of a double"},
+      // nesting overflowed the stack in the message's dump (a file with 100,000 levels: below)
+      {"description=" + std::string(20000, '[') + std::string(20000, ']'), "nested deeper than 64 levels"},
+  };
+  for (const Case& c : cases) {
+    for (const char* command : {"info ", "run -q -o /nonexistent/never "}) {
+      const Outcome o = spadgen(std::string(command) + kFlat + " --set '" + c.set + "'");
+      expect_exit(o, 1, c.set.substr(0, 60));
+      EXPECT_THAT(o.output, HasSubstr(c.expect)) << c.set.substr(0, 60);
+      EXPECT_THAT(o.output, HasSubstr("spadgen: error: " + kFlat)) << c.set.substr(0, 60);
+      EXPECT_LT(o.seconds, 10.0) << c.set.substr(0, 60) << ": refused only after work";
+    }
+  }
+}
+
+TEST_F(Hardening, SceneFilesThatCrashedOrWereIgnoredAreRefused) {
+  std::ofstream(dir_ / "t.gltf") << slurp(kScenes + "flat_target.gltf");
+  const std::pair<std::string, std::string> cases[] = {
+      {"{\"gltf\": \"t.gltf\", \"description\": " + std::string(100000, '[') + std::string(100000, ']') + "}",
+       "s.json:1:98: arrays and objects nested deeper than 64 levels"},
+      {R"({"gltf": "t.gltf", "camera/f_number": 64})", "found the key \"camera/f_number\", expected a key name without '/'"},
+      {R"({"gltf": "t.gltf", "camera": {"f_number": 2}, "camera": {"f_number": 4}})", "/camera: appears twice in one object"},
+  };
+  for (const auto& [text, expect] : cases) {
+    std::ofstream(dir_ / "s.json") << text;
+    const Outcome o = spadgen("info " + (dir_ / "s.json").string());
+    expect_exit(o, 1, text.substr(0, 60));
+    EXPECT_THAT(o.output, HasSubstr(expect));
+  }
+}
+
+// Values at the new limits run, and every output value is finite.
+TEST_F(Hardening, ValuesAtTheLimitsGiveFiniteOutputs) {
+  for (const std::string set : {"camera.pixel_pitch_um=0.1", "laser.repetition_rate_MHz=1e-6", "camera.position_m=[0,0,1e6]",
+                                "sensor.gate.length_fwhm_ps=1500"}) {
+    const fs::path out = dir_ / "out";
+    const Outcome o = spadgen("run " + kTiny + " -q --set " + set + " -o " + out.string());
+    expect_exit(o, 0, set);
+    for (const char* f : {"laser.exr", "ambient.exr", "sensor_maps.exr"}) {
+      const spadgen::writers::ExrData e = spadgen::writers::read_exr((out / f).string());
+      for (const auto& [name, values] : e.channels)
+        for (float v : values) ASSERT_TRUE(std::isfinite(v)) << set << ": " << f << " " << name;
+    }
+    const spadgen::writers::ExrData maps = spadgen::writers::read_exr((out / "sensor_maps.exr").string());
+    for (float v : maps.channels.at("gate_length_ps")) ASSERT_GT(v, 0.0f) << set;
+    for (const char* f : {"expected_counts.npy", "detection_rate.npy"})
+      if (fs::exists(out / f)) {
+        for (double v : values(read_npy(out / f))) ASSERT_TRUE(std::isfinite(v)) << set << ": " << f;
+      }
+  }
+}
+
+// The periodic images of a return a laser kilometres away, folded into the window: bounded, and exact
+// for an ordinary return.
+TEST_F(Hardening, DepositFoldsAnyArrivalTimeInBoundedSteps) {
+  spadgen::TimeAxis axis;
+  axis.start_s = 1e-9, axis.bin_width_s = 1e-10, axis.bins = 100, axis.period_s = 25e-9;
+  std::vector<double> bins(100, 0.0);
+  for (double t : {3.3e8, 1e300, -1e300, std::nan(""), std::numeric_limits<double>::infinity()}) {
+    spadgen::render::PixelTotals totals;
+    spadgen::render::deposit(1.0, t, axis, bins.data(), &totals, nullptr);  // once looped for ever at 3.3e8 s
+    EXPECT_EQ(totals.laser_total, 1.0) << t;
+  }
+  std::fill(bins.begin(), bins.end(), 0.0);
+  spadgen::render::PixelTotals totals;
+  spadgen::render::deposit(2.0, 1.05e-9 + 3 * 25e-9, axis, bins.data(), &totals, nullptr);  // three periods late
+  EXPECT_EQ(bins[0], 2.0);
+  EXPECT_EQ(totals.out_of_window, 0.0);
+}
+
+// ------------------------------------------------------------------------------------------------
+// The resource plan: a run the machine cannot hold is refused at once, with the figures and the keys
+
+TEST_F(Hardening, ARunTheMachineCannotHoldIsRefusedWithItsFigures) {
+  // 10^7 paths per pixel are traced ahead for 16 pixels at a time: about 36 GB per thread, 2.3 TB for 64.
+  const Outcome memory = spadgen("run " + kTiny + " -q --threads 64 --set render.samples_per_pixel=10000000 -o " +
+                                 (dir_ / "out").string());
+  expect_exit(memory, 1, "memory");
+  EXPECT_THAT(memory.err, HasSubstr("the run needs about 2"));
+  EXPECT_THAT(memory.err, HasSubstr("GB of memory"));
+  EXPECT_THAT(memory.err, HasSubstr("camera paths (render.samples_per_pixel = 10000000 traced ahead for 16 pixels, 64 threads)"));
+  EXPECT_LT(memory.seconds, 10.0);
+  // 100,000 gate positions of 1024 x 16384 pixels: 6.7 TB of expected counts (the images stay in memory).
+  const Outcome disk = spadgen("run " + kFlat + " -q --set camera.height_px=16384 --set outputs.ground_truth=false "
+                               "--set outputs.expected_counts=true --set acquisition.gate_sweep.start_ns=0 "
+                               "--set acquisition.gate_sweep.stop_ns=99.999 --set acquisition.gate_sweep.step_ps=1 -o " +
+                               (dir_ / "out").string());
+  expect_exit(disk, 1, "disk");
+  EXPECT_THAT(disk.err, HasSubstr("the run writes about"));
+  EXPECT_THAT(disk.err, HasSubstr("into " + (dir_ / "out").string()));
+  EXPECT_THAT(disk.err, HasSubstr("expected_counts.npy 6710.9 GB"));
+  EXPECT_FALSE(fs::exists(dir_ / "out"));
+  // info shows the plan.
+  const Outcome info = spadgen("info " + kFlat);
+  expect_exit(info, 0, "info");
+  EXPECT_THAT(info.output, HasSubstr("\nresources: memory: about "));
+  EXPECT_THAT(info.output, HasSubstr("  disk: "));
+  EXPECT_THAT(info.output, HasSubstr(" counts.npy 180 MB"));
+}
+
+// ------------------------------------------------------------------------------------------------
+// Signals inside long loops
+
+TEST_F(Hardening, ASignalStopsARunInsideItsOnlyTileAndExitsWithCode2) {
+  // One tile of 128 x 128 pixels and 512 paths each takes about 9 s; the interrupt flag used to be read
+  // only between tiles. SIGTERM arrives after 1 s (timeout --preserve-status passes spadgen's code on).
+  const auto t0 = std::chrono::steady_clock::now();
+  const Result r = shell("timeout -s KILL 30 timeout --preserve-status -s TERM 1 " + bin() + " run " + kScenes +
+                         "multi_object.json -q --set camera.crop=[448,186,128,128] --set render.tile_size_px=128 "
+                         "--set render.samples_per_pixel=512 --set render.time_bin_ps=36 --set acquisition.gate_sweep.stop_ns=1.6 -o " + (dir_ / "out").string());
+  const Outcome t{r.code, r.output, "", std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()};
+  expect_exit(t, 2, "SIGTERM after 1 s");
+  EXPECT_THAT(t.output, HasSubstr("spadgen: interrupted by a signal: the run stopped and wrote nothing"));
+  EXPECT_LT(t.seconds, 3.0);
+  EXPECT_FALSE(fs::exists(dir_ / "out"));
+}
+
+// ------------------------------------------------------------------------------------------------
+// Errors in spadgen's own words, documented exit codes, -q
+
+TEST_F(Hardening, CommandLineErrorsAreSpadgensWithExitCode1) {
+  const struct {
+    std::string args, expect;
+  } cases[] = {
+      {"run", "spadgen: error: scene is required (see spadgen run --help)"},
+      {"frob", "spadgen: error: "},
+      {"", "spadgen: error: A subcommand is required (see spadgen --help)"},
+      {"run " + kTiny + " --seed -1", "spadgen: error: --seed: found '-1', expected an integer in [0, 9007199254740992]"},
+      {"run " + kTiny + " --seed 9007199254740993", "--seed: found '9007199254740993'"},
+      {"info /dev/zero", "scene file /dev/zero: is a character device, expected a regular file"},
+  };
+  for (const auto& c : cases) {
+    const Outcome o = spadgen(c.args);
+    expect_exit(o, 1, c.args.substr(0, 60));
+    EXPECT_THAT(o.err, HasSubstr(c.expect)) << c.args;
+    EXPECT_THAT(o.err, Not(HasSubstr("Run with --help"))) << c.args;
+  }
+  expect_exit(spadgen("--help"), 0, "--help");
+  expect_exit(spadgen("--version"), 0, "--version");
+}
+
+TEST_F(Hardening, GltfPathsThatAreNotGltfFilesAreNamed) {
+  fs::create_directories(dir_ / "folder.gltf");
+  ASSERT_EQ(::mkfifo((dir_ / "pipe.glb").c_str(), 0600), 0);
+  std::ofstream(dir_ / "page.glb") << "<!DOCTYPE html>\n<html><body>Not found</body></html>\n";
+  const std::pair<std::string, std::string> cases[] = {
+      {"folder.gltf", "is a directory, expected a regular file"},
+      {"pipe.glb", "is a FIFO (named pipe), expected a regular file"},
+      {"/dev/zero", "is a character device, expected a regular file"},
+      {"page.glb", "not a glTF file: it starts with '<!DOCTYPE html> <html><b...', an HTML page"},
+  };
+  for (const auto& [gltf, expect] : cases) {
+    std::ofstream(dir_ / "s.json") << nlohmann::json({{"gltf", gltf}}).dump();
+    const Outcome o = spadgen("info " + (dir_ / "s.json").string());
+    expect_exit(o, 1, gltf);
+    EXPECT_THAT(o.err, HasSubstr(expect)) << gltf;
+  }
+}
+
+TEST_F(Hardening, QuietRunsPrintNothingOnSuccess) {
+  const Outcome o = spadgen("run " + kTiny + " -q -o " + (dir_ / "out").string());
+  expect_exit(o, 0, "-q");
+  EXPECT_EQ(o.err, "");
+  EXPECT_EQ(o.output, "");
+  const Outcome loud = spadgen("run " + kTiny + " -o " + (dir_ / "out").string());
+  expect_exit(loud, 0, "without -q");
+  EXPECT_THAT(loud.err, HasSubstr("spadgen: wrote"));
+}
+
+// ------------------------------------------------------------------------------------------------
+// The output folder: the complete old set or the complete new set, nothing else
+
+// Every file metadata.json lists exists, nothing else is there, and every EXR carries metadata.json's seed.
+void expect_one_complete_set(const fs::path& out, uint64_t seed) {
+  const auto meta = nlohmann::json::parse(slurp(out / "metadata.json"));
+  EXPECT_EQ(meta["seed"].get<uint64_t>(), seed);
+  std::set<std::string> listed;
+  for (const auto& f : meta["files"]) listed.insert(f.get<std::string>());
+  for (const auto& e : fs::recursive_directory_iterator(out)) {
+    if (e.is_directory()) continue;
+    const std::string rel = fs::relative(e.path(), out).string();
+    EXPECT_TRUE(listed.count(rel)) << rel << " is not listed in metadata.json (a stale or foreign file)";
+    if (rel.size() > 4 && rel.substr(rel.size() - 4) == ".exr") {
+      EXPECT_EQ(spadgen::writers::read_exr(e.path().string()).attributes.at("spadgen_seed"), std::to_string(seed)) << rel;
+    }
+  }
+  for (const std::string& f : listed) EXPECT_TRUE(fs::is_regular_file(out / f)) << f;
+}
+
+TEST_F(Hardening, ALaterRunWithFewerOutputsLeavesNoStaleFiles) {
+  const fs::path out = dir_ / "out";
+  expect_exit(spadgen("run " + kTiny + " -q --seed 1 --set outputs.transient=true --set outputs.frames=true -o " + out.string()), 0, "first");
+  ASSERT_TRUE(fs::exists(out / "frames.npy"));
+  expect_exit(spadgen("run " + kTiny + " -q --seed 2 --set camera.crop=[508,246,8,1] -o " + out.string()), 0, "second");
+  EXPECT_FALSE(fs::exists(out / "frames.npy"));
+  EXPECT_FALSE(fs::exists(out / "transient.npy"));
+  expect_one_complete_set(out, 2);
+  // Nothing of the runs is left beside the folder either (staging folder, lock file).
+  for (const auto& e : fs::directory_iterator(dir_)) EXPECT_EQ(e.path().filename(), "out");
+}
+
+TEST_F(Hardening, AFolderInTheWayOfAFileDoesNotMixTheSets) {
+  const fs::path out = dir_ / "out";
+  expect_exit(spadgen("run " + kTiny + " -q --seed 1 -o " + out.string()), 0, "first");
+  // An empty folder named laser.exr: the earlier set's laser.exr is gone, the new set replaces it whole
+  // (the publish used to stop at it with counts.npy new and metadata.json old).
+  fs::remove(out / "laser.exr");
+  fs::create_directories(out / "laser.exr");
+  expect_exit(spadgen("run " + kTiny + " -q --seed 2 -o " + out.string()), 0, "over an empty folder");
+  expect_one_complete_set(out, 2);
+  // A folder that holds something spadgen did not write: refused, and the earlier set stays as it was.
+  fs::remove(out / "laser.exr");
+  fs::create_directories(out / "laser.exr");
+  std::ofstream(out / "laser.exr/notes.txt") << "mine";
+  const std::string counts = slurp(out / "counts.npy");
+  const Outcome o = spadgen("run " + kTiny + " -q --seed 3 -o " + out.string());
+  expect_exit(o, 1, "over a folder with a file in it");
+  EXPECT_THAT(o.err, HasSubstr("holds files that spadgen did not write there (laser.exr/notes.txt;"));
+  EXPECT_EQ(slurp(out / "counts.npy"), counts);
+  EXPECT_EQ(slurp(out / "laser.exr/notes.txt"), "mine");
+  EXPECT_EQ(nlohmann::json::parse(slurp(out / "metadata.json"))["seed"], 2);
+}
+
+TEST_F(Hardening, ASecondRunIntoAFolderInUseRefuses) {
+  const fs::path out = dir_ / "out";
+  expect_exit(spadgen("run " + kTiny + " -q --seed 1 -o " + out.string()), 0, "first");
+  {
+    spadgen::app::Staging busy(out);  // another run writing the folder (this process holds its lock)
+    const Outcome o = spadgen("run " + kTiny + " -q --seed 2 -o " + out.string());
+    expect_exit(o, 1, "while locked");
+    EXPECT_THAT(o.err, HasSubstr("the output folder " + out.string() + " is being written by another spadgen run (pid " +
+                                 std::to_string(::getpid()) + ")"));
+  }
+  expect_one_complete_set(out, 1);
+  // Two runs started together: each either publishes a complete set or refuses; the folder holds one set.
+  const Result r = shell("for s in 3 4; do " + bin() + " run " + kTiny + " -q --seed $s -o " + out.string() +
+                         " > " + (dir_ / "log").string() + "$s 2>&1 & done; wait");
+  ASSERT_EQ(r.code, 0);
+  int published = 0;
+  for (int s : {3, 4}) {
+    const std::string log = slurp(dir_ / ("log" + std::to_string(s)));
+    if (log.empty()) ++published;
+    else EXPECT_THAT(log, HasSubstr("is being written by another spadgen run")) << log;
+  }
+  EXPECT_GE(published, 1);
+  const uint64_t seed = nlohmann::json::parse(slurp(out / "metadata.json"))["seed"];
+  EXPECT_TRUE(seed == 3 || seed == 4);
+  expect_one_complete_set(out, seed);
+}
+
+TEST_F(Hardening, LeftoversOfKilledRunsAreCleaned) {
+  const fs::path out = dir_ / "out";
+  expect_exit(spadgen("run " + kTiny + " -q --seed 1 -o " + out.string()), 0, "first");
+  // A run killed while writing, and one killed after renaming the earlier set aside (no exchange).
+  fs::create_directories(dir_ / ".out.spadgen-staging-999999999");
+  std::ofstream(dir_ / ".out.spadgen-staging-999999999/counts.npy") << "partial";
+  fs::rename(out, dir_ / ".out.spadgen-old-999999998");
+  // The next run into the folder repairs it before it writes (the earlier set comes back, the partial one
+  // goes; tests/app/staging_test.cpp looks at the repair alone), then publishes its own set.
+  expect_exit(spadgen("run " + kTiny + " -q --seed 2 -o " + out.string()), 0, "second");
+  expect_one_complete_set(out, 2);
+  for (const auto& e : fs::directory_iterator(dir_)) EXPECT_EQ(e.path().filename(), "out");
+}
+
+}  // namespace

@@ -1,0 +1,290 @@
+// The publish step under fault injection (app/staging.h): a failure at every file-system step, a crash
+// at every step (a child process that dies there), with and without the atomic exchange, a second run,
+// files in the way. After each, the output folder holds the complete earlier set or the complete new set.
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdio>
+#include <filesystem>
+#include <functional>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "app/staging.h"
+#include "core/error.h"
+
+namespace {
+namespace fs = std::filesystem;
+using spadgen::app::Staging;
+using ::testing::HasSubstr;
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+// A set of files as a run writes them: each file's content names the set, and metadata.json lists them.
+// The two sets differ in their files (the new one has fewer), so that a mix shows.
+const std::vector<std::string> kOldFiles = {"counts.npy", "frames.npy", "laser.exr", "previews/depth.png"};
+const std::vector<std::string> kNewFiles = {"counts.npy", "laser.exr", "previews/intensity.png"};
+
+std::vector<std::string> write_set(const std::function<std::string(const std::string&)>& path_of, const std::string& tag,
+                                   const std::vector<std::string>& files) {
+  std::vector<std::string> listed = files;
+  listed.push_back("metadata.json");
+  for (const std::string& f : files) {
+    fs::create_directories(fs::path(path_of(f)).parent_path());
+    std::ofstream(path_of(f)) << tag << ":" << f;
+  }
+  std::ofstream(path_of("metadata.json")) << nlohmann::json({{"set", tag}, {"files", listed}}).dump();
+  return listed;
+}
+
+// "old" or "new" when `out` holds exactly that set, complete; else a description of the mix.
+std::string which_set(const fs::path& out) {
+  if (!fs::is_directory(out)) return "no folder";
+  const auto meta = nlohmann::json::parse(slurp(out / "metadata.json"), nullptr, false);
+  if (!meta.is_object()) return "no metadata.json";
+  const std::string tag = meta["set"];
+  std::set<std::string> listed;
+  for (const auto& f : meta["files"]) listed.insert(f.get<std::string>());
+  for (const auto& e : fs::recursive_directory_iterator(out)) {
+    if (e.is_directory()) continue;
+    const std::string rel = fs::relative(e.path(), out).string();
+    if (!listed.count(rel)) return "stray " + rel + " beside the " + tag + " set";
+    if (rel != "metadata.json" && slurp(e.path()) != tag + ":" + rel) return rel + " is not of the " + tag + " set";
+  }
+  for (const std::string& f : listed)
+    if (!fs::exists(out / f)) return f + " of the " + tag + " set is missing";
+  return tag;
+}
+
+class StagingTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("spadgen_staging_" + std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()) + "_" +
+            std::to_string(::getpid()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+    out_ = dir_ / "out";
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  void write_old() {
+    fs::create_directories(out_);
+    write_set([&](const std::string& f) { return (out_ / f).string(); }, "old", kOldFiles);
+  }
+  // One run that writes the new set and publishes it; failures are swallowed (the folder is what counts).
+  void run(const Staging::Hook& hook, std::string* error = nullptr) {
+    try {
+      Staging s(out_, hook);
+      const auto files = write_set([&](const std::string& f) { return s.path(f); }, "new", kNewFiles);
+      s.publish(files);
+    } catch (const spadgen::Error& e) {
+      if (error) *error = e.what();
+    }
+  }
+  // Nothing of a run is left beside the output folder.
+  void expect_no_leftovers() {
+    for (const auto& e : fs::directory_iterator(dir_)) EXPECT_EQ(e.path().filename(), "out") << e.path();
+  }
+  fs::path dir_, out_;
+};
+
+// The steps one publish goes through, in order, with the exchange available or not.
+std::vector<std::string> steps_of(const fs::path& dir, bool exchange) {
+  const fs::path out = dir / "probe";
+  fs::create_directories(out);
+  write_set([&](const std::string& f) { return (out / f).string(); }, "old", kOldFiles);
+  std::vector<std::string> steps;
+  {
+    Staging s(out, [&](const std::string& step) {
+      steps.push_back(step);
+      return !exchange && step == "exchange" ? EINVAL : 0;
+    });
+    s.publish(write_set([&](const std::string& f) { return s.path(f); }, "new", kNewFiles));
+  }
+  fs::remove_all(out);
+  return steps;
+}
+
+TEST_F(StagingTest, PublishingReplacesTheWholeSet) {
+  write_old();
+  run(nullptr);
+  EXPECT_EQ(which_set(out_), "new");
+  EXPECT_FALSE(fs::exists(out_ / "frames.npy"));  // not in the new set: gone, not stale
+  expect_no_leftovers();
+  // Into a folder that does not exist yet.
+  fs::remove_all(out_);
+  run(nullptr);
+  EXPECT_EQ(which_set(out_), "new");
+  expect_no_leftovers();
+}
+
+TEST_F(StagingTest, AFailureAtEveryStepLeavesTheOldOrTheNewSet) {
+  for (const bool exchange : {true, false}) {
+    const std::vector<std::string> steps = steps_of(dir_, exchange);
+    const std::vector<std::string> expected =
+        exchange ? std::vector<std::string>{"exchange", "remove old"}
+                 : std::vector<std::string>{"exchange", "rename out to old", "rename staging to out", "remove old"};
+    ASSERT_EQ(steps, expected);
+    for (size_t k = 0; k < steps.size(); ++k) {
+      // Fail at step k (EIO), and in the fallback also the renaming back when the new set's rename fails.
+      for (const bool restore_fails : {false, true}) {
+        fs::remove_all(out_);
+        write_old();
+        size_t at = 0;
+        std::string error;
+        run([&](const std::string& step) {
+          if (!exchange && step == "exchange") {
+            ++at;  // the fallback's first step, as steps_of() counts it
+            return EINVAL;
+          }
+          if (step == "restore old") return restore_fails ? EIO : 0;
+          return at++ == k ? EIO : 0;
+        }, &error);
+        const std::string where = std::string(exchange ? "exchange" : "two renames") + ", failure at " + steps[k] +
+                                  (restore_fails ? " and at restore old" : "");
+        std::string set = which_set(out_);
+        if (restore_fails && set == "no folder") {
+          // Both renames failed: the earlier set lies aside, and the next run puts it back.
+          EXPECT_THAT(error, HasSubstr("the next run into this folder renames them back")) << where;
+          Staging repair(out_);
+          set = which_set(out_);
+          EXPECT_EQ(set, "old") << where;
+        }
+        EXPECT_TRUE(set == "old" || set == "new") << where << ": " << set;
+        // A failure before the new set is in place keeps the old one, and says so.
+        if (set == "old" && !restore_fails) {
+          EXPECT_THAT(error, HasSubstr("the output folder holds its earlier files")) << where;
+        }
+        Staging next(out_);  // leftovers of the failed publish go with the next run
+        EXPECT_EQ(which_set(out_), set) << where;
+      }
+    }
+  }
+}
+
+// A crash (the process dies) at every step: the folder is the old or the new set, or, between the two
+// renames of the fallback, absent with the old set aside; the next run puts the old set back.
+TEST_F(StagingTest, ACrashAtEveryStepIsRepairedByTheNextRun) {
+  for (const bool exchange : {true, false}) {
+    const std::vector<std::string> steps = steps_of(dir_, exchange);
+    for (const std::string& crash_at : steps) {
+      fs::remove_all(out_);
+      write_old();
+      const pid_t child = ::fork();
+      ASSERT_GE(child, 0);
+      if (child == 0) {
+        std::string error;
+        run([&](const std::string& step) {
+          if (step == crash_at) ::_exit(9);  // killed: no destructor, no clean-up, the lock released by the kernel
+          return !exchange && step == "exchange" ? EINVAL : 0;
+        }, &error);
+        std::fprintf(stderr, "the child did not crash: %s\n", error.c_str());
+        ::_exit(0);
+      }
+      int status = 0;
+      ASSERT_EQ(::waitpid(child, &status, 0), child);
+      ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 9) << crash_at;
+      const std::string where = std::string(exchange ? "exchange" : "two renames") + ", crash at " + crash_at;
+      const std::string before = which_set(out_);
+      EXPECT_TRUE(before == "old" || before == "new" || (!exchange && crash_at == "rename staging to out" && before == "no folder"))
+          << where << ": " << before;
+      { Staging next(out_); }  // takes the lock, repairs, cleans; publishes nothing
+      const std::string after = which_set(out_);
+      EXPECT_TRUE(after == "old" || after == "new") << where << ": " << after;
+      if (before != "no folder") {
+        EXPECT_EQ(after, before) << where;
+      }
+      expect_no_leftovers();
+    }
+  }
+}
+
+TEST_F(StagingTest, OneRunAtATimePerFolder) {
+  write_old();
+  std::string error;
+  {
+    Staging first(out_);
+    run(nullptr, &error);
+    EXPECT_THAT(error, HasSubstr("the output folder " + out_.string() + " is being written by another spadgen run (pid " +
+                                 std::to_string(::getpid()) + ")"));
+    EXPECT_EQ(which_set(out_), "old");
+    // Another folder in the same parent is not affected.
+    Staging other(dir_ / "other");
+  }
+  run(nullptr);
+  EXPECT_EQ(which_set(out_), "new");
+  expect_no_leftovers();  // the lock file went with the run that held it
+}
+
+TEST_F(StagingTest, AFolderWithFilesSpadgenDidNotWriteIsNotReplaced) {
+  write_old();
+  std::ofstream(out_ / "notes.txt") << "mine";
+  fs::create_directories(out_ / "analysis");
+  std::ofstream(out_ / "analysis/fit.csv") << "1,2";
+  std::string error;
+  run(nullptr, &error);
+  EXPECT_THAT(error, HasSubstr("holds files that spadgen did not write there ("));
+  EXPECT_THAT(error, HasSubstr("notes.txt"));
+  EXPECT_THAT(error, HasSubstr("analysis/"));
+  EXPECT_EQ(slurp(out_ / "notes.txt"), "mine");
+  EXPECT_EQ(slurp(out_ / "counts.npy"), "old:counts.npy");
+  // An empty folder is nobody's data: it is replaced.
+  fs::remove_all(out_);
+  fs::create_directories(out_);
+  error.clear();
+  run(nullptr, &error);
+  EXPECT_EQ(error, "");
+  EXPECT_EQ(which_set(out_), "new");
+}
+
+TEST_F(StagingTest, PathsThatCannotBeTheOutputFolder) {
+  std::ofstream(dir_ / "a_file") << "x";
+  for (const fs::path& p : {dir_ / "a_file", dir_ / "a_file" / "sub", fs::path("/")}) {
+    try {
+      Staging s(p);
+      ADD_FAILURE() << p;
+    } catch (const spadgen::Error& e) {
+      EXPECT_THAT(std::string(e.what()), HasSubstr("cannot use " + p.string() + " as the output folder (-o)"));
+    }
+  }
+  EXPECT_EQ(slurp(dir_ / "a_file"), "x");
+  // The current folder: replacing it would leave the shell in a removed folder.
+  fs::create_directories(out_);
+  const fs::path cwd = fs::current_path();
+  fs::current_path(out_);
+  try {
+    Staging s(".");
+    ADD_FAILURE() << "the current folder was accepted";
+  } catch (const spadgen::Error& e) {
+    EXPECT_THAT(std::string(e.what()), HasSubstr("it is the current folder or holds it"));
+  }
+  fs::current_path(cwd);
+}
+
+TEST_F(StagingTest, ALinkToAFolderPublishesIntoTheFolder) {
+  write_old();
+  fs::create_symlink(out_, dir_ / "link");
+  {
+    Staging s(dir_ / "link");
+    EXPECT_EQ(s.out(), fs::canonical(out_));
+    s.publish(write_set([&](const std::string& f) { return s.path(f); }, "new", kNewFiles));
+  }
+  EXPECT_TRUE(fs::is_symlink(dir_ / "link"));
+  EXPECT_EQ(which_set(dir_ / "link"), "new");
+}
+
+}  // namespace
