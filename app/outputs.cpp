@@ -64,8 +64,9 @@ std::vector<StackLayout> stack_layout(const RunConfig& c, const sensor::SensorMo
 class Outputs::Images {
  public:
   // intensity: the mode's declaration of intensity.exr, null when the mode has none.
-  Images(const RunConfig& cfg, const PixelRect& img, const sensor::DeclaredOutput* intensity)
-      : img_(img), layers_(cfg.render.max_layers), gt_on_(cfg.outputs.ground_truth), intensity_decl_(intensity),
+  Images(const RunConfig& cfg, const PixelRect& img, const sensor::DeclaredOutput* intensity,
+         const std::set<std::string>& provided)
+      : provided_(provided), img_(img), layers_(cfg.render.max_layers), gt_on_(cfg.outputs.ground_truth), intensity_decl_(intensity),
         gt_(img.width, img.height), laser_(img.width, img.height), ambient_(img.width, img.height),
         maps_(img.width, img.height), intensity_(img.width, img.height) {
     if (gt_on_) {
@@ -120,6 +121,7 @@ class Outputs::Images {
   // Writes the EXRs with their provenance and the previews into the staging folder.
   void write(const Staging& staging, const Provenance& p, const TimeAxis& axis, bool previews, std::vector<std::string>& files) {
     const auto put_file = [&](writers::ExrImage& e, const std::string& name, const std::string& units) {
+      if (provided_.count(name)) return;
       stamp(e, p);
       e.set_attribute("spadgen_units", units);
       e.write(staging.path(name));
@@ -146,6 +148,7 @@ class Outputs::Images {
     // What the camera saw when it takes an intensity image; a gate sweep has no single image, so the
     // laser light reaching each pixel stands in.
     const float* bright = intensity_decl_ ? intensity_ch_[1] : laser_ch_[0];
+    if (provided_.count("previews/intensity.png")) return;
     writers::write_png(staging.path("previews/intensity.png"), writers::gray_preview(bright, img_.width, img_.height));
     files.push_back("previews/intensity.png");
   }
@@ -162,6 +165,7 @@ class Outputs::Images {
         f(x, y, size_t(r.index(x, y)), size_t(y - img_.y0) * size_t(img_.width) + size_t(x - img_.x0));
   }
 
+  std::set<std::string> provided_;
   PixelRect img_;
   int layers_;
   bool gt_on_;
@@ -274,11 +278,14 @@ class Outputs::ProfileProbe {
 };
 
 Outputs::Outputs(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img, const TimeAxis& axis,
-                 const Staging& staging)
+                 const Staging& staging, const std::set<std::string>& provided)
     : cfg_(c), axis_(axis), gate_positions_s_(sensor.gate_positions_s()), declared_(sensor.acquisition().outputs()),
       staging_(staging) {
-  images_ = std::make_unique<Images>(c, img, find_declared(declared_, "intensity.exr"));
-  stacks_ = std::make_unique<Stacks>(stack_layout(c, sensor, img, axis), img, transient_crop(c, img), staging, files_);
+  images_ = std::make_unique<Images>(c, img, find_declared(declared_, "intensity.exr"), provided);
+  std::vector<StackLayout> layout = stack_layout(c, sensor, img, axis);
+  for (StackLayout& s : layout)
+    if (provided.count(s.file)) s.written = false;
+  stacks_ = std::make_unique<Stacks>(layout, img, transient_crop(c, img), staging, files_);
   probe_ = std::make_unique<ProfileProbe>(img, sensor.K());
 }
 

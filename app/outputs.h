@@ -5,6 +5,7 @@
 #pragma once
 #include <cstdint>
 #include <memory>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -39,8 +40,9 @@ std::vector<StackLayout> stack_layout(const RunConfig& c, const sensor::SensorMo
 class Outputs {
  public:
   // Opens the stacks in the staging folder (the tiles stream into them) and allocates the images.
+  // provided: files another folder already holds (spadgen sense --repeats links them): not written here.
   Outputs(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img, const TimeAxis& axis,
-          const Staging& staging);
+          const Staging& staging, const std::set<std::string>& provided = {});
   ~Outputs();
   Outputs(const Outputs&) = delete;
   Outputs& operator=(const Outputs&) = delete;

@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <set>
 #include <sstream>
 
 #include "app/interrupt.h"
@@ -27,6 +28,10 @@
 #include "sensor/model/pixel_layout.h"
 #include "sensor/sensor.h"
 #include "writers/writers.h"
+
+#ifndef SPADGEN_VERSION
+#define SPADGEN_VERSION "dev"
+#endif
 
 namespace spadgen::app {
 namespace fs = std::filesystem;
@@ -81,6 +86,14 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   const json meta = read_metadata(src);
   if (!meta.contains("light"))
     throw Error(src.string() + ": the run saved no light; run it again with --set outputs.light=true to re-sample its sensor");
+  // Everything sense reads from metadata.json, checked once: a folder of another spadgen version is named.
+  for (const char* key : {"/resolved_scene", "/scene_file", "/scene_hash_fnv1a64", "/warnings", "/files", "/camera",
+                          "/photons_per_pulse_emitted", "/ground_truth_layers", "/light/crop_in_sensor", "/light/values_bytes",
+                          "/light/time_axis_s/start", "/light/time_axis_s/bin_width", "/light/time_axis_s/bins",
+                          "/light/time_axis_s/laser_period"})
+    if (!meta.contains(json::json_pointer(key)))
+      throw Error((src / "metadata.json").string() + ": no " + key + "; expected a run folder written by spadgen " SPADGEN_VERSION
+                  " with outputs.light (run the scene again)");
   for (const std::string& o : options.overrides) {
     const std::string key = o.substr(0, o.find('='));
     if (!sense_may_set(key))
@@ -183,12 +196,18 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   std::vector<std::unique_ptr<Staging>> staging;
   std::vector<std::unique_ptr<Outputs>> outputs;
   std::vector<uint64_t> seeds;
+  // Realisations differ in their counts and frames only: the others link the files of the first.
+  std::set<std::string> shared = {"laser.exr", "ambient.exr", "sensor_maps.exr", "detection_rate.npy", "expected_counts.npy"};
+  bool two_d = false;
+  for (const sensor::DeclaredOutput& d : sensor.acquisition().outputs()) two_d |= d.file == "intensity.exr";
+  if (!two_d) shared.insert("previews/intensity.png");  // the laser light, in a gate sweep
   for (size_t r = 0; r < runs.size(); ++r) {
     char name[32];
     std::snprintf(name, sizeof name, "repeat_%03zu", r);
     dirs.push_back(runs.size() == 1 ? out : out / name);
     staging.push_back(std::make_unique<Staging>(dirs.back()));
-    outputs.push_back(std::make_unique<Outputs>(write_cfg, sensor, img, axis, *staging.back()));
+    outputs.push_back(std::make_unique<Outputs>(write_cfg, sensor, img, axis, *staging.back(),
+                                                r == 0 ? std::set<std::string>{} : shared));
     seeds.push_back(runs[r].config.noise_seed());
   }
 
@@ -217,6 +236,12 @@ std::vector<RunResult> sense(const SenseOptions& options) {
       link_into(src / f, *staging[r], f);
       files.push_back(f);
     }
+    if (r > 0)
+      for (const std::string& f : results.front().files)
+        if (shared.count(f)) {
+          link_into(dirs.front() / f, *staging[r], f);
+          files.push_back(f);
+        }
     files.push_back("metadata.json");
     order_files(files);
 
