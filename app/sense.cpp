@@ -20,6 +20,7 @@
 #include "app/outputs.h"
 #include "app/pipeline.h"
 #include "app/preflight.h"
+#include "app/resources.h"
 #include "app/progress.h"
 #include "app/run_parts.h"
 #include "app/staging.h"
@@ -192,6 +193,9 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   const fs::path out = options.out_dir.empty() ? fs::path(src.string() + "-sense") : fs::path(options.out_dir);
   if (fs::exists(out) && fs::exists(src) && fs::equivalent(out, src))
     throw Error("-o " + out.string() + ": sense writes a new folder beside the run, not into it");
+  // Memory and disk of one realisation (the estimate includes the renderer's paths, which sense does not
+  // trace: an upper bound); the others add their counts and frames.
+  check_resources(write_cfg, sensor, img, axis, options.threads, out.parent_path().empty() ? fs::path(".") : out.parent_path());
   std::vector<fs::path> dirs;
   std::vector<std::unique_ptr<Staging>> staging;
   std::vector<std::unique_ptr<Outputs>> outputs;
