@@ -169,6 +169,89 @@ void sample_bits_batch(uint64_t seed, uint64_t k, const uint64_t* pixels, size_t
   }
 }
 
+double crosstalk_rate(const CrosstalkLaw& law, const Prob& pr) {
+  if (law.single_avalanche) return law.xt;
+  return std::min(1.0, -std::expm1(-law.xt * -pr.log_q) / pr.p);
+}
+
+void crosstalk_no_hit(uint32_t c, double lr, double& S, double& P0) {
+  S = -std::expm1(static_cast<double>(c) * lr);
+  P0 = S < 0.5 ? 1.0 - S : std::exp(static_cast<double>(c) * lr);
+}
+
+uint32_t crosstalk_hits(uint64_t U, uint32_t c, double r, double S, double P0) {
+  if (U >= probability_threshold(S)) return 0;
+  return sequential_search(U, c, r / (1.0 - r), S, P0,
+                           [c](uint32_t x) { return static_cast<double>(c - x) / static_cast<double>(x + 1); });
+}
+
+namespace {
+
+uint32_t popcount_words(const uint64_t* w, size_t nw) {
+  uint32_t c = 0;
+  for (size_t i = 0; i < nw; ++i) c += static_cast<uint32_t>(std::popcount(w[i]));
+  return c;
+}
+
+// The frame of set bit t (counted from frame 0) of words.
+uint32_t select_bit(const uint64_t* words, size_t nw, uint32_t t) {
+  for (size_t i = 0; i < nw; ++i) {
+    uint64_t b = words[i];
+    const auto c = static_cast<uint32_t>(std::popcount(b));
+    if (t >= c) {
+      t -= c;
+      continue;
+    }
+    for (; t > 0; --t) b &= b - 1;
+    return static_cast<uint32_t>(64 * i) + static_cast<uint32_t>(std::countr_zero(b));
+  }
+  return ~0u;
+}
+
+}  // namespace
+
+uint32_t crosstalk_reference(const Rng& stream, uint32_t n, const uint64_t* own, const CrosstalkNeighbour nb[4],
+                             const CrosstalkLaw& law, uint64_t* extra) {
+  const size_t nw = (n + 63) / 64;
+  Rng rng = stream;
+  uint32_t w[4];
+  for (uint32_t& x : w) x = rng.next_u32();
+  std::vector<uint64_t> cand(nw), hits(nw);
+  for (int d = 0; d < 4; ++d) {
+    if (nb[d].bits == nullptr) continue;
+    const uint32_t ni = popcount_words(nb[d].bits, nw);
+    const double rho = crosstalk_rate_bound(law, nb[d].prob);
+    const uint32_t lim = crosstalk_limit(ni, rho);
+    if (!(w[d] < lim || lim == UINT32_MAX)) continue;
+    for (size_t i = 0; i < nw; ++i) cand[i] = nb[d].bits[i] & ~own[i];
+    const uint32_t c = popcount_words(cand.data(), nw);
+    if (c == 0) continue;
+    const double r = crosstalk_rate(law, nb[d].prob);
+    if (crosstalk_per_candidate(ni, rho)) {
+      const uint64_t thr = probability_threshold(r);
+      for (size_t i = 0; i < nw; ++i)
+        for (uint64_t b = cand[i]; b != 0; b &= b - 1)
+          if (rng.next_u64() < thr) extra[i] |= b & (~b + 1);
+      continue;
+    }
+    if (!(w[d] < crosstalk_limit(c, rho))) continue;
+    const uint64_t U = (uint64_t{w[d]} << 32) | rng.next_u32();
+    double S = 0.0, P0 = 1.0;
+    crosstalk_no_hit(c, std::log1p(-r), S, P0);
+    const uint32_t h = crosstalk_hits(U, c, r, S, P0);
+    std::fill(hits.begin(), hits.end(), uint64_t{0});
+    for (uint32_t j = c - h; j < c; ++j) {  // Floyd: a uniformly random h-subset of the candidates
+      uint32_t f = select_bit(cand.data(), nw, uniform_below(rng, uint64_t{j} + 1));
+      if ((hits[f / 64] >> (f % 64)) & 1u) f = select_bit(cand.data(), nw, j);
+      hits[f / 64] |= uint64_t{1} << (f % 64);
+    }
+    for (size_t i = 0; i < nw; ++i) extra[i] |= hits[i];
+  }
+  uint32_t added = 0;
+  for (size_t i = 0; i < nw; ++i) added += static_cast<uint32_t>(std::popcount(extra[i] & ~own[i]));
+  return added;
+}
+
 void pack_frames_row(const uint64_t* masks, int width, uint32_t n, size_t words_per_pixel, uint8_t* out,
                      size_t frame_stride) {
   for (int bx = 0; bx * 8 < width; ++bx) {

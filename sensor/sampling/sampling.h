@@ -19,6 +19,7 @@
 // from log-factorials; expected steps about 1.6 standard deviations.
 #pragma once
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -131,6 +132,70 @@ void sample_bits_batch(uint64_t seed, uint64_t k, const uint64_t* pixels, size_t
 
 // Which path sample_bits takes (for tests).
 bool bits_are_sparse(const Prob& pr);
+
+// Crosstalk between sampled binary frames (docs/sensor.md, "Crosstalk"). Every frame in which a neighbour
+// avalanched and this pixel did not (a candidate) becomes a crosstalk detection of this pixel with
+// probability r, independently: r = xt for pixel B (one avalanche per frame), r = (1 - exp(-xt lambda)) / p
+// for pixel A (lambda, p: the neighbour's), so that the marginal matches the thinned Poisson process of
+// the counts path. Only the neighbours' own avalanches fire (second-order crosstalk is neglected).
+struct CrosstalkLaw {
+  double xt = 0.0;                // crosstalk probability per avalanche (A) or per avalanche frame (B)
+  bool single_avalanche = false;  // pixel B
+};
+
+// r of a neighbour with probabilities pr (pr.log_q must be -lambda, as probabilities() gives it).
+double crosstalk_rate(const CrosstalkLaw& law, const Prob& pr);
+
+// rho >= r without a transcendental function: xt (B), xt lambda / p (A; 1 - exp(-x) <= x).
+inline double crosstalk_rate_bound(const CrosstalkLaw& law, const Prob& pr) {
+  return law.single_avalanche ? law.xt : law.xt * -pr.log_q / pr.p;
+}
+
+// A neighbour with n avalanche frames and bound rho: each candidate is drawn on its own (one 64-bit
+// uniform each) when rho >= 1/2 or n rho >= 16 (then the binomial inversion would be long or underflow).
+inline bool crosstalk_per_candidate(uint32_t n, double rho) {
+  return !(rho < 0.5) || !(static_cast<double>(n) * rho < 16.0);
+}
+
+// The limit L of the draw's top 32 bits w for a neighbour with n avalanche frames: when w >= L (and
+// L != UINT32_MAX) no hit is possible, because U >= w 2^32 >= n rho 2^64 >= c r 2^64 >= P(hits > 0) 2^64
+// (c <= n candidates). L = ceil(n rho 2^32 (1 + 2^-40)), saturated at UINT32_MAX; 0 when n = 0, UINT32_MAX
+// when per candidate. Only products: the vector kernel forms the same bits.
+inline uint32_t crosstalk_limit(uint32_t n, double rho) {
+  if (n == 0) return 0;
+  if (crosstalk_per_candidate(n, rho)) return UINT32_MAX;
+  const double x = static_cast<double>(n) * rho * 0x1p32 * (1.0 + 0x1p-40);
+  return x >= 4294967295.0 ? UINT32_MAX : static_cast<uint32_t>(std::ceil(x));
+}
+
+// For c candidates each hit with probability r (< 1/2), lr = log1p(-r): S = P(H > 0) = -expm1(c lr) and
+// P0 = P(H = 0) (1 - S while S < 1/2, else exp(c lr)).
+void crosstalk_no_hit(uint32_t c, double lr, double& S, double& P0);
+
+// The number of hits H ~ Binomial(c, r) by inversion of the 64-bit uniform U: sequential search from 0 on
+// P(H > h) from S and P0 above (r < 1/2, c r < 16).
+uint32_t crosstalk_hits(uint64_t U, uint32_t c, double r, double S, double P0);
+
+// One neighbour of a pixel in crosstalk_reference: its own avalanche frames (nullptr: no neighbour in
+// that direction: outside the image or in another array section) and probabilities.
+struct CrosstalkNeighbour {
+  const uint64_t* bits = nullptr;
+  Prob prob;
+};
+
+// The scalar reference of the frames' crosstalk (the kernel, frames_tile, gives the same bits): the frames
+// in which this pixel (own bits `own`, n frames) is fired by its neighbours nb[0..3] (left, right, up,
+// down), ORed into extra[0 .. ceil(n / 64)), from the pixel's stream Rng(seed, Crosstalk, pixel, k):
+//  - block 0: word d is the top 32 bits w_d of direction d's uniform U_d;
+//  - then, in direction order, for each direction with a neighbour whose n_i avalanche frames allow a hit
+//    (w_d < crosstalk_limit(n_i, rho) or that limit is UINT32_MAX) and c > 0 candidates: per candidate
+//    (crosstalk_per_candidate(n_i, rho)) one 64-bit uniform each, a hit when below floor(r 2^64);
+//    otherwise, unless w_d >= crosstalk_limit(c, rho) (no hit possible either), the low 32 bits of U_d,
+//    H = crosstalk_hits(U_d, c, r, ...) and H of the c candidates as a uniformly random subset (Floyd: for
+//    j = c - H .. c - 1, t = uniform_below(j + 1), candidate t, or candidate j if t is taken).
+// Returns the number of frames added (extra's bits; extra must be zero on entry).
+uint32_t crosstalk_reference(const Rng& stream, uint32_t n, const uint64_t* own, const CrosstalkNeighbour nb[4],
+                             const CrosstalkLaw& law, uint64_t* extra);
 
 // The 8 x 8 bit matrix transpose: bit c of byte r of the result is bit r of byte c of x.
 inline uint64_t transpose8x8(uint64_t x) {
