@@ -42,20 +42,33 @@ struct FramesTileShape {
   // [slot % 64][group] with the groups padded to a multiple of 8; padding slots point at the zero word.
   std::vector<int64_t> slot_word;
   size_t groups = 0, groups_padded = 0;
+  // Also set by finish(): every tile pixel's region index and grid index (the tile grown by one pixel,
+  // row-major), every region row's law as xt and single_avalanche (0 / 1).
+  std::vector<uint32_t> tile_region, tile_grid;
+  std::vector<double> row_xt;
+  std::vector<uint64_t> row_single;
   void finish();
 };
 
 // Working memory of one thread, reused across gate positions and tiles.
 struct FramesTileScratch {
-  std::vector<uint32_t> n, lim, flagged, code, blocks;
-  std::vector<uint64_t> extra, work;
+  // per region pixel: avalanche frames (all, and per word as bytes), limit, rho; the limits on the grid
+  std::vector<uint32_t> n, pop, lim_r, lim, n_row, pop_row;
   std::vector<double> rho;
-  // Pixel A: each region pixel's r and log1p(-r), computed when a draw first needs them (stamp == gen).
-  std::vector<double> r, lr;
-  std::vector<uint32_t> stamp;
-  uint32_t gen = 0;
-  // Pixel B (r = xt for every neighbour): log1p(-xt) and S, P0 of crosstalk_no_hit for c = 0 .. N.
-  double b_xt = -1.0, b_lr = 0.0;
+  // The (pixel, direction) pairs that draw: tile index, direction, top word, stream index (low, high), region
+  // row; the first block of the direction's words.
+  std::vector<uint32_t> p_t, p_d, p_w, p_lo, p_hi, p_row, p_b[4];
+  // Decided in vectors: one hit each (tile index, frame); the rest, one by one, hits as (tile index, word, bits).
+  std::vector<uint64_t> hit_t, hit_frame, fallback;
+  size_t nhits = 0, nfallback = 0;
+  struct Bits {
+    uint32_t t, word;
+    uint64_t bits;
+  };
+  std::vector<Bits> fb_bits;
+  std::vector<uint64_t> work;
+  // Pixel B's S and P0 (crosstalk_no_hit) for c = 0 .. N, for b_xt and b_frames.
+  double b_xt = -1.0;
   uint32_t b_frames = 0;
   std::vector<double> b_S, b_P0;
 };

@@ -168,13 +168,24 @@ inline uint32_t crosstalk_limit(uint32_t n, double rho) {
   return x >= 4294967295.0 ? UINT32_MAX : static_cast<uint32_t>(std::ceil(x));
 }
 
-// For c candidates each hit with probability r (< 1/2), lr = log1p(-r): S = P(H > 0) = -expm1(c lr) and
-// P0 = P(H = 0) (1 - S while S < 1/2, else exp(c lr)).
-void crosstalk_no_hit(uint32_t c, double lr, double& S, double& P0);
+// The number of hits H ~ Binomial(c, r) among the c avalanche frames of a neighbour (r of a neighbour with
+// probabilities nb and bound rho = crosstalk_rate_bound; rho < 1/2, c rho < 16) by inversion of the 64-bit
+// uniform U: H = the first h with U >= floor(P(H > h) 2^64).
+uint32_t crosstalk_hits(uint64_t U, uint32_t c, const CrosstalkLaw& law, const Prob& nb, double rho);
 
-// The number of hits H ~ Binomial(c, r) by inversion of the 64-bit uniform U: sequential search from 0 on
-// P(H > h) from S and P0 above (r < 1/2, c r < 16).
-uint32_t crosstalk_hits(uint64_t U, uint32_t c, double r, double S, double P0);
+// crosstalk_hits' first part: most draws are decided from bounds, without a transcendental function. With
+// r_lo <= r <= r_hi (r itself for pixel B; rho (1 - xt lambda / 2) and rho for pixel A): H = 0 when U >=
+// floor(c r_hi 2^64) or U >= floor(S_hi 2^64); H = 1 when U < floor(S_lo 2^64) and U >= floor(P2_hi 2^64),
+// where S_lo = c r_lo - C(c, 2) r_hi^2 <= P(H > 0) <= S_hi = c r_hi - C(c, 2) r_lo^2 + C(c, 3) r_hi^3
+// (Bonferroni) and P2_hi = C(c, 2) r_hi^2 >= P(H > 1); relative margins of 2^-40 and absolute ones of
+// 2^-45 c r_hi cover the rounding. Otherwise kCrosstalkUndecided.
+inline constexpr uint32_t kCrosstalkUndecided = ~0u;
+uint32_t crosstalk_hits_bounded(uint64_t U, uint32_t c, const CrosstalkLaw& law, const Prob& nb, double rho);
+
+// The rest: S = P(H > 0) = -expm1(c lr) and P0 = P(H = 0) (1 - S while S < 1/2, else exp(c lr)) for lr =
+// log1p(-r), then the sequential search from 0 on P(H > h).
+void crosstalk_no_hit(uint32_t c, double lr, double& S, double& P0);
+uint32_t crosstalk_hits_exact(uint64_t U, uint32_t c, double r, double S, double P0);
 
 // One neighbour of a pixel in crosstalk_reference: its own avalanche frames (nullptr: no neighbour in
 // that direction: outside the image or in another array section) and probabilities.
@@ -185,15 +196,19 @@ struct CrosstalkNeighbour {
 
 // The scalar reference of the frames' crosstalk (the kernel, frames_tile, gives the same bits): the frames
 // in which this pixel (own bits `own`, n frames) is fired by its neighbours nb[0..3] (left, right, up,
-// down), ORed into extra[0 .. ceil(n / 64)), from the pixel's stream Rng(seed, Crosstalk, pixel, k):
+// down), from the pixel's stream Rng(seed, Crosstalk, pixel, k). Each of the n_i avalanche frames of a
+// neighbour fires the pixel with probability r, independently (a frame where the pixel avalanched itself
+// stays as it was: the same law as drawing only in the frames where it did not):
 //  - block 0: word d is the top 32 bits w_d of direction d's uniform U_d;
-//  - then, in direction order, for each direction with a neighbour whose n_i avalanche frames allow a hit
-//    (w_d < crosstalk_limit(n_i, rho) or that limit is UINT32_MAX) and c > 0 candidates: per candidate
-//    (crosstalk_per_candidate(n_i, rho)) one 64-bit uniform each, a hit when below floor(r 2^64);
-//    otherwise, unless w_d >= crosstalk_limit(c, rho) (no hit possible either), the low 32 bits of U_d,
-//    H = crosstalk_hits(U_d, c, r, ...) and H of the c candidates as a uniformly random subset (Floyd: for
-//    j = c - H .. c - 1, t = uniform_below(j + 1), candidate t, or candidate j if t is taken).
-// Returns the number of frames added (extra's bits; extra must be zero on entry).
+//  - direction d reads its other words from its own blocks 1 + d, 5 + d, 9 + d, ... (word 0 first), so
+//    that the directions are independent of each other's draws;
+//  - a direction whose neighbour allows a hit (n_i > 0 and w_d < crosstalk_limit(n_i, rho), or that limit
+//    is UINT32_MAX) draws: per avalanche frame (crosstalk_per_candidate(n_i, rho)) one 64-bit uniform each
+//    (high word first), a hit when below floor(r 2^64); otherwise U_d's low 32 bits, H =
+//    crosstalk_hits(U_d, n_i, ...) and H of the n_i frames as a uniformly random subset (Floyd: for j = n_i
+//    - H .. n_i - 1, t = uniform_below(j + 1), frame t, or frame j if t is taken; frames counted in order).
+// The hits in frames where the pixel did not avalanche are ORed into extra[0 .. ceil(n / 64)) (zero on
+// entry); returns their number.
 uint32_t crosstalk_reference(const Rng& stream, uint32_t n, const uint64_t* own, const CrosstalkNeighbour nb[4],
                              const CrosstalkLaw& law, uint64_t* extra);
 

@@ -154,14 +154,16 @@ void reference_tile(const Scene& s, const PixelRect& rect, uint64_t seed, uint32
 // frames_tile equals the reference (per-pixel draws, popcounts, row packing) on tiles at the image's corners,
 // edges and inside, across a section boundary, for several frame counts, on every compiled target.
 TEST(Frames, TileKernelEqualsReference) {
-  const CrosstalkLaw pixel_a{0.01, false}, pixel_b{0.03, true};
+  // the paper's crosstalk probabilities, and large ones (more draws with several hits)
+  const CrosstalkLaw laws[2][2] = {{{0.0017, false}, {0.0039, true}}, {{0.01, false}, {0.03, true}}};
   int targets = 0;
-  size_t hit_pixels = 0, per_candidate = 0;
+  size_t hit_pixels = 0, per_candidate = 0, vector_hits = 0, one_by_one = 0;
   for (const int64_t target : hwy::SupportedAndGeneratedTargets()) {
     hwy::SetSupportedTargetsForTest(target);
     ++targets;
-    for (const uint32_t N : {255u, 64u, 70u, 300u, 1000u}) {
-      const Scene s = make_scene(37, 21, 9, N, pixel_a, pixel_b, 100 + N);
+    for (const uint32_t N : {255u, 64u, 70u, 300u, 1000u})
+      for (const auto& law : laws) {
+      const Scene s = make_scene(37, 21, 9, N, law[0], law[1], 100 + N);
       const std::vector<PixelRect> rects = {{0, 0, 16, 8}, {16, 5, 21, 11}, {8, 8, 13, 13}, {0, 0, 37, 21},
                                             {36, 20, 1, 1}, {3, 9, 1, 7}, {5, 2, 32, 10}};
       for (const PixelRect& rect : rects)
@@ -175,6 +177,8 @@ TEST(Frames, TileKernelEqualsReference) {
           const Rng base = streams::crosstalk(seed, 0, 0);
           const uint32_t key[2] = {base.key().v[0], base.key().v[1]};
           frames_tile(in.shape, key, k, in.prob.data(), in.own.data(), counts.data(), frames.data(), scratch);
+          vector_hits += scratch.nhits;
+          one_by_one += scratch.nfallback;
           std::vector<uint64_t> want_bits;
           std::vector<uint16_t> want_counts;
           std::vector<uint8_t> want_frames;
@@ -197,10 +201,13 @@ TEST(Frames, TileKernelEqualsReference) {
     }
   }
   hwy::SetSupportedTargetsForTest(0);
-  std::printf("frames_tile checked on %d targets; %zu pixel-tiles received crosstalk\n", targets, hit_pixels);
+  std::printf("frames_tile checked on %d targets; %zu pixel-tiles received crosstalk; %zu hits decided in vectors, "
+              "%zu draws one by one\n", targets, hit_pixels, vector_hits, one_by_one);
   EXPECT_GE(targets, 1);
   EXPECT_GT(hit_pixels, 1000u);
   EXPECT_GT(per_candidate, 10u);  // saturated pixel-A neighbours: the per-candidate draws are exercised
+  EXPECT_GT(vector_hits, 1000u);  // both ways of deciding are exercised
+  EXPECT_GT(one_by_one, 1000u);
 }
 
 // pack_frames_tile equals pack_frames_row row by row, for widths that are and are not multiples of 8 and
