@@ -91,10 +91,26 @@ HWY_INLINE void PixelBTable(const CrosstalkLaw& law, uint32_t N, FramesTileScrat
   if (law.xt == s.b_xt && N == s.b_frames) return;
   s.b_xt = law.xt;
   s.b_frames = N;
-  const double lr = std::log1p(-law.xt);
+  const double lr = std::log1p(-law.xt), rr = law.xt / (1.0 - law.xt);
   s.b_S.resize(N + 1);
   s.b_P0.resize(N + 1);
-  for (uint32_t c = 0; c <= N; ++c) crosstalk_no_hit(c, lr, s.b_S[c], s.b_P0[c]);
+  for (auto* t : {&s.b_T0, &s.b_T1, &s.b_T2}) t->assign(N + 1, 0);
+  for (uint32_t c = 0; c <= N; ++c) {
+    crosstalk_no_hit(c, lr, s.b_S[c], s.b_P0[c]);
+    // crosstalk_hits_exact's thresholds floor(P(H > h) 2^64), h < 3, with sequential_search's operations
+    // (0 where its search stops: h >= c, or P(H > h) <= 0)
+    const auto ratio = [c](uint32_t x) { return static_cast<double>(c - x) / static_cast<double>(x + 1); };
+    double S = s.b_S[c], pmf = s.b_P0[c];
+    uint64_t* T[3] = {&s.b_T0[c], &s.b_T1[c], &s.b_T2[c]};
+    for (uint32_t h = 0; h < 3 && h < c; ++h) {
+      if (h > 0) {
+        pmf *= rr * ratio(h - 1);
+        S -= pmf;
+        if (!(S > 0.0)) break;
+      }
+      *T[h] = probability_threshold(S);
+    }
+  }
 }
 
 // One direction's draws as crosstalk_reference makes them, once its limit let it through: neighbour
@@ -372,30 +388,64 @@ HWY_INLINE void DecidePairs(const FramesTileShape& sh, size_t np, const uint64_t
     const auto below_s = hn::And(hn::RebindMask(du, hn::Gt(s_lo, hn::Zero(dd))),
                                  hn::Lt(U, ProbabilityThreshold(dd, hn::Max(s_lo, hn::Zero(dd)))));
     const auto one = hn::AndNot(none, hn::And(below_s, hn::Not(hn::Lt(U, ProbabilityThreshold(dd, p2_hi)))));
-    // H = 1: frame uniform_below(n_i) from the next word (Lemire: decided when the low half is >= n_i)
-    const auto m = hn::Mul(hn::PromoteTo(du, hn::LoadU(d32, s.p_b[1].data() + j0)), n_u);  // < 2^41: exact
-    const auto accept = hn::Not(hn::Lt(hn::And(m, hn::Set(du, 0xFFFFFFFFull)), n_u));
     const auto regular = hn::AndNot(per_candidate, live);
-    const auto hit = hn::And(hn::And(regular, one), accept);
-    const auto fb = hn::And(live, hn::Or(per_candidate, hn::Not(hn::Or(none, hit))));
+    // Pixel B, undecided by the bounds: crosstalk_hits_exact's thresholds from the table (H < 3)
+    auto h = hn::IfThenElseZero(one, hn::Set(du, 1));
+    auto decided = hn::And(regular, hn::Or(none, one));
+    const auto table = hn::AndNot(hn::Or(none, one), hn::And(regular, hn::RebindMask(du, single)));
+    if (!hn::AllFalse(du, table) && s.b_frames == sh.frames) {
+      const auto ci = hn::IfThenElseZero(hn::RebindMask(di, table), hn::BitCast(di, n_u));
+      const auto below0 = hn::Lt(U, hn::GatherIndex(du, s.b_T0.data(), ci));
+      const auto below1 = hn::Lt(U, hn::GatherIndex(du, s.b_T1.data(), ci));
+      const auto below2 = hn::Lt(U, hn::GatherIndex(du, s.b_T2.data(), ci));
+      const auto ht = hn::Add(hn::IfThenElseZero(below0, hn::Set(du, 1)), hn::IfThenElseZero(below1, hn::Set(du, 1)));
+      h = hn::IfThenElse(table, ht, h);
+      decided = hn::Or(decided, hn::AndNot(below2, table));
+    }
+    // Floyd for H = 1 (frame uniform_below(n_i) from the direction's next word) and H = 2 (uniform_below(n_i -
+    // 1), then uniform_below(n_i), taken to be n_i - 1 when it repeats the first): decided when every
+    // multiply's low half is at least its range (Lemire)
+    const auto two = hn::Eq(h, hn::Set(du, 2));
+    const auto range1 = hn::Sub(n_u, hn::IfThenElseZero(two, hn::Set(du, 1)));
+    const auto m1 = hn::Mul(hn::PromoteTo(du, hn::LoadU(d32, s.p_b[1].data() + j0)), range1);  // < 2^41: exact
+    const auto m2 = hn::Mul(hn::PromoteTo(du, hn::LoadU(d32, s.p_b[2].data() + j0)), n_u);
+    const auto low = hn::Set(du, 0xFFFFFFFFull);
+    const auto some_hit = hn::Ne(h, hn::Zero(du));
+    const auto accept = hn::And(hn::Or(hn::Not(some_hit), hn::Not(hn::Lt(hn::And(m1, low), range1))),
+                                hn::Or(hn::Not(two), hn::Not(hn::Lt(hn::And(m2, low), n_u))));
+    const auto ok = hn::And(decided, accept);
+    const auto hit = hn::And(ok, some_hit), hit2 = hn::And(ok, two);
+    const auto fb = hn::And(live, hn::Or(per_candidate, hn::Not(ok)));
     if (!hn::AllFalse(du, hit)) {
-      const auto k = hn::ShiftRight<32>(m);  // the frame's rank among the neighbour's
+      // the frame of rank k among the neighbour's, from its four words' popcounts
       const auto pop = hn::PromoteTo(du, hn::BitCast(d32, hn::GatherIndex(di32, pop_all, i32)));
       const auto byte = hn::Set(du, 0xFF);
       const auto p1 = hn::And(pop, byte);
       const auto p2 = hn::Add(p1, hn::And(hn::ShiftRight<8>(pop), byte));
       const auto p3 = hn::Add(p2, hn::And(hn::ShiftRight<16>(pop), byte));
-      const auto ge1 = hn::Not(hn::Lt(k, p1)), ge2 = hn::Not(hn::Lt(k, p2)), ge3 = hn::Not(hn::Lt(k, p3));
-      const auto q = hn::Add(hn::Add(hn::IfThenElseZero(ge1, hn::Set(du, 1)), hn::IfThenElseZero(ge2, hn::Set(du, 1))),
-                             hn::IfThenElseZero(ge3, hn::Set(du, 1)));
-      const auto base = hn::IfThenElse(ge3, p3, hn::IfThenElse(ge2, p2, hn::IfThenElseZero(ge1, p1)));
-      const auto word_index = hn::IfThenElseZero(hn::RebindMask(di, hit), hn::Add(hn::Mul(i, hn::Set(di, 4)), hn::BitCast(di, q)));
-      const auto word = hn::GatherIndex(du, own, word_index);
-      const auto frame = hn::Add(hn::ShiftLeft<6>(q), SelectInWord(du, word, hn::Sub(k, base)));
-      const size_t nh = s.nhits;
-      hn::StoreU(Compress64(du, hn::PromoteTo(du, hn::BitCast(d32, t)), hit), du, s.hit_t.data() + nh);
-      hn::StoreU(Compress64(du, frame, hit), du, s.hit_frame.data() + nh);
-      s.nhits = nh + hn::CountTrue(du, hit);
+      const auto frame_of = [&](hn::Vec<decltype(du)> k, hn::Mask<decltype(du)> lanes) HWY_ATTR {
+        const auto ge1 = hn::Not(hn::Lt(k, p1)), ge2 = hn::Not(hn::Lt(k, p2)), ge3 = hn::Not(hn::Lt(k, p3));
+        const auto q = hn::Add(hn::Add(hn::IfThenElseZero(ge1, hn::Set(du, 1)), hn::IfThenElseZero(ge2, hn::Set(du, 1))),
+                               hn::IfThenElseZero(ge3, hn::Set(du, 1)));
+        const auto base = hn::IfThenElse(ge3, p3, hn::IfThenElse(ge2, p2, hn::IfThenElseZero(ge1, p1)));
+        const auto word_index = hn::IfThenElseZero(hn::RebindMask(di, lanes), hn::Add(hn::Mul(i, hn::Set(di, 4)), hn::BitCast(di, q)));
+        const auto word = hn::GatherIndex(du, own, word_index);
+        return hn::Add(hn::ShiftLeft<6>(q), SelectInWord(du, word, hn::Sub(k, base)));
+      };
+      const auto tv = hn::PromoteTo(du, hn::BitCast(d32, t));
+      const auto t1 = hn::ShiftRight<32>(m1);
+      size_t nh = s.nhits;
+      hn::StoreU(Compress64(du, tv, hit), du, s.hit_t.data() + nh);
+      hn::StoreU(Compress64(du, frame_of(t1, hit), hit), du, s.hit_frame.data() + nh);
+      nh += hn::CountTrue(du, hit);
+      if (!hn::AllFalse(du, hit2)) {
+        auto t2 = hn::ShiftRight<32>(m2);
+        t2 = hn::IfThenElse(hn::Eq(t2, t1), hn::Sub(n_u, hn::Set(du, 1)), t2);
+        hn::StoreU(Compress64(du, tv, hit2), du, s.hit_t.data() + nh);
+        hn::StoreU(Compress64(du, frame_of(t2, hit2), hit2), du, s.hit_frame.data() + nh);
+        nh += hn::CountTrue(du, hit2);
+      }
+      s.nhits = nh;
     }
     if (!hn::AllFalse(du, fb)) {
       hn::StoreU(Compress64(du, hn::Add(iota, hn::Set(du, j0)), fb), du, s.fallback.data() + s.nfallback);
@@ -507,9 +557,11 @@ void FramesTile(const FramesTileShape& sh, const uint32_t key[2], uint32_t k, co
       hn::StoreU(x2, d32, s.p_b[2].data() + j);
       hn::StoreU(x3, d32, s.p_b[3].data() + j);
     }
-    s.hit_t.resize(np + 16);
-    s.hit_frame.resize(np + 16);
+    s.hit_t.resize(2 * np + 16);
+    s.hit_frame.resize(2 * np + 16);
     s.fallback.resize(np + 16);
+    for (const CrosstalkLaw& law : sh.region_row_law)
+      if (law.single_avalanche && law.xt > 0.0) PixelBTable(law, sh.frames, s);
     if (nw == 4) {
       DecidePairs(sh, np, own, prob, s);
     } else {

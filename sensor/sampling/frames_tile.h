@@ -67,10 +67,12 @@ struct FramesTileScratch {
   };
   std::vector<Bits> fb_bits;
   std::vector<uint64_t> work;
-  // Pixel B's S and P0 (crosstalk_no_hit) for c = 0 .. N, for b_xt and b_frames.
+  // Pixel B's S and P0 (crosstalk_no_hit) and crosstalk_hits_exact's thresholds of H > 0, 1, 2 for c = 0 ..
+  // N, for b_xt and b_frames.
   double b_xt = -1.0;
   uint32_t b_frames = 0;
   std::vector<double> b_S, b_P0;
+  std::vector<uint64_t> b_T0, b_T1, b_T2;
 };
 
 // Region bits own[region index * ceil(N / 64) ...] (the region's own avalanches at gate position k, one zero
