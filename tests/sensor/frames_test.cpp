@@ -235,5 +235,194 @@ TEST(Frames, TilePackingEqualsRowPacking) {
   hwy::SetSupportedTargetsForTest(0);
 }
 
+// The 2D single-exposure sensor of `type` (0: pixel A, 1: pixel B, crosstalk xt), no dark counts or other
+// noise, N frames, frames on.
+SensorStageConfig lattice_config(int type, double xt, int w, int h, int frames) {
+  SensorStageConfig c = testing::sweep_config(w, h);
+  c.sensor.dark_counts = false;
+  c.sensor.pdp_nonuniformity = false;
+  c.sensor.skew = false;
+  c.sensor.crosstalk = true;
+  c.sensor.preset = type == 0 ? PixelPreset::PixelA : PixelPreset::PixelB;
+  (type == 0 ? c.sensor.pixel_A : c.sensor.pixel_B).crosstalk_probability = xt;
+  c.acquisition.mode = AcquisitionMode::Intensity;
+  c.acquisition.intensity.exposure = Exposure::Single;
+  c.acquisition.frames = frames;
+  c.outputs.frames = true;
+  return c;
+}
+
+bool frame_bit(const SensorTile& t, int f, int x, int y) {
+  const size_t bpr = static_cast<size_t>((t.rect.width + 7) / 8);
+  return (t.frames[(static_cast<size_t>(f) * static_cast<size_t>(t.rect.height) + static_cast<size_t>(y)) * bpr +
+                   static_cast<size_t>(x / 8)] >> (x % 8)) & 1u;
+}
+
+// Bright pixels on a lattice of spacing 4 in a dark image (no dark counts): each of their 4 neighbours sees
+// exactly one bright pixel, and the bright pixels receive nothing (their neighbours never avalanche). So
+// every frame of a neighbour is crosstalk, and:
+//  - it lies in a frame where its bright pixel avalanched (checked exactly, every frame);
+//  - the hits of a neighbour over its bright pixel's m avalanche frames are Binomial(m, r), r = xt (pixel B)
+//    or (1 - exp(-xt lambda)) / p (pixel A): the total against its mean (z-test) and the distribution of
+//    the hits per neighbour and realisation (chi-square against the pooled binomial pmfs);
+//  - the hits are spread over the avalanche frames uniformly: hits per eighth of the frames against r times
+//    the avalanche frames there (chi-square).
+// For both pixel types at the paper's crosstalk and at 0.05 (more frames with two hits), and for pixel A
+// at lambda = 500 (r = 0.57: the draws per avalanche frame). N = 255 frames, 12 noise realisations.
+TEST(Frames, CrosstalkFiresInNeighbourAvalanchesAtItsRate) {
+  struct Case {
+    int type;
+    double xt, lambda;
+  };
+  const Case cases[] = {{0, 0.0017, 1.5}, {1, 0.0039, 1.5}, {0, 0.05, 1.0}, {1, 0.05, 1.0}, {0, 0.0017, 500.0}};
+  const int W = 64, H = 64, N = 255;
+  std::vector<uint64_t> seeds;
+  for (uint64_t s = 0; s < 12; ++s) seeds.push_back(100 + s);
+  for (const Case& cs : cases) {
+    SensorModel model(lattice_config(cs.type, cs.xt, W, H, N));
+    ASSERT_EQ(model.halo(), 1);
+    const SensorStageConfig c = lattice_config(cs.type, cs.xt, W, H, N);
+    Image img(W, H, TimeAxis{});
+    const double rate = cs.lambda / (model.pdp_ambient(cs.type) * c.acquisition.intensity.exposure_s);
+    for (int y = 1; y < H; y += 4)
+      for (int x = 1; x < W; x += 4) img.ambient[static_cast<size_t>(y * W + x)] = static_cast<float>(rate);
+    const std::vector<SensorTile> outs = model.process(img.tile({0, 0, W, H}, 1), seeds);
+    const double p = -std::expm1(-cs.lambda);
+    const double r = cs.type == 1 ? cs.xt : -std::expm1(-cs.xt * cs.lambda) / p;
+    constexpr int kBins = 8;
+    double trials = 0.0, hits = 0.0, outside = 0.0;
+    std::vector<double> per_bin_trials(kBins, 0.0), per_bin_hits(kBins, 0.0);
+    std::vector<double> hist(N + 1, 0.0), expect(N + 1, 0.0);
+    double pairs = 0.0;
+    constexpr int dx[4] = {-1, 1, 0, 0}, dy[4] = {0, 0, -1, 1};
+    for (const SensorTile& t : outs)
+      for (int by = 1; by < H; by += 4)
+        for (int bx = 1; bx < W; bx += 4) {
+          std::vector<int> fired;
+          for (int f = 0; f < N; ++f)
+            if (frame_bit(t, f, bx, by)) fired.push_back(f);
+          for (int d = 0; d < 4; ++d) {
+            const int x = bx + dx[d], y = by + dy[d];
+            int h = 0;
+            for (int f = 0; f < N; ++f) {
+              if (!frame_bit(t, f, x, y)) continue;
+              if (!frame_bit(t, f, bx, by)) ++outside;
+              ++h;
+              ++per_bin_hits[static_cast<size_t>(f * kBins / N)];
+            }
+            for (int f : fired) per_bin_trials[static_cast<size_t>(f * kBins / N)] += 1.0;
+            trials += static_cast<double>(fired.size());
+            hits += h;
+            hist[static_cast<size_t>(h)] += 1.0;
+            const std::vector<double> pmf = binomial_pmf(static_cast<int>(fired.size()), r);
+            for (size_t k = 0; k < pmf.size(); ++k) expect[k] += pmf[k];
+            pairs += 1.0;
+          }
+        }
+    const std::string what = std::string(cs.type == 0 ? "pixel A" : "pixel B") + " xt " + std::to_string(cs.xt) +
+                             " lambda " + std::to_string(cs.lambda);
+    EXPECT_EQ(outside, 0.0) << what;  // crosstalk only in frames where the neighbour avalanched
+    const double mean = trials * r, sd = std::sqrt(trials * r * (1.0 - r));
+    EXPECT_LT(std::abs(hits - mean), kZ * sd) << what << ": " << hits << " hits, expected " << mean;
+    for (double& e : expect) e /= pairs;
+    const double p_count = chi_square_p(hist, expect, pairs);
+    EXPECT_GT(p_count, kAlpha) << what << ": hits per neighbour and realisation";
+    std::vector<double> bin_prob(kBins);
+    double bin_total = 0.0;
+    for (size_t b = 0; b < kBins; ++b) bin_total += per_bin_trials[b];
+    for (size_t b = 0; b < kBins; ++b) bin_prob[b] = per_bin_trials[b] / bin_total;
+    const double p_pos = chi_square_p(per_bin_hits, bin_prob, hits);
+    EXPECT_GT(p_pos, kAlpha) << what << ": hits over the frames";
+    std::printf("%s: %.0f hits / %.0f avalanche frames (r = %.5f, expected %.0f), chi-square p %.3g (counts), %.3g (frames)\n",
+                what.c_str(), hits, trials, r, mean, p_count, p_pos);
+  }
+}
+
+// Pixel B between two bright neighbours (pairs of bright pixels two apart): a frame where both avalanched
+// fires it with 1 - (1 - xt)^2, a frame where one did with xt, else never (z-tests, exact zero).
+TEST(Frames, CrosstalkFromTwoNeighbours) {
+  const int W = 64, H = 16, N = 255;
+  const double xt = 0.05, lambda = 1.0;
+  const SensorStageConfig c = lattice_config(1, xt, W, H, N);
+  SensorModel model(c);
+  Image img(W, H, TimeAxis{});
+  const double rate = lambda / (model.pdp_ambient(1) * c.acquisition.intensity.exposure_s);
+  for (int y = 1; y < H; y += 3)
+    for (int x = 1; x + 2 < W; x += 5) {  // bright at x and x + 2, the receiver at x + 1
+      img.ambient[static_cast<size_t>(y * W + x)] = static_cast<float>(rate);
+      img.ambient[static_cast<size_t>(y * W + x + 2)] = static_cast<float>(rate);
+    }
+  std::vector<uint64_t> seeds;
+  for (uint64_t s = 0; s < 10; ++s) seeds.push_back(7 + s);
+  const std::vector<SensorTile> outs = model.process(img.tile({0, 0, W, H}, 1), seeds);
+  double both = 0, both_hits = 0, one = 0, one_hits = 0, none_hits = 0;
+  for (const SensorTile& t : outs)
+    for (int y = 1; y < H; y += 3)
+      for (int x = 1; x + 2 < W; x += 5)
+        for (int f = 0; f < N; ++f) {
+          const int fired = frame_bit(t, f, x, y) + frame_bit(t, f, x + 2, y);
+          const bool hit = frame_bit(t, f, x + 1, y);
+          if (fired == 2) {
+            ++both;
+            both_hits += hit;
+          } else if (fired == 1) {
+            ++one;
+            one_hits += hit;
+          } else {
+            none_hits += hit;
+          }
+        }
+  const double r2 = 1.0 - (1.0 - xt) * (1.0 - xt);
+  EXPECT_LT(std::abs(both_hits - both * r2), kZ * std::sqrt(both * r2 * (1 - r2))) << both_hits << " of " << both;
+  EXPECT_LT(std::abs(one_hits - one * xt), kZ * std::sqrt(one * xt * (1 - xt))) << one_hits << " of " << one;
+  EXPECT_EQ(none_hits, 0.0);
+}
+
+// The frames' per-frame marginal with crosstalk is the counts path's: in a gate sweep of random transients
+// (full chip: pixel A and B halves, crosstalk 0.02), every pixel's summed counts over the gate positions
+// against the sum of its expected counts N p (the rate with crosstalk, as the counts path computes it; a
+// z-test per pixel, frames independent across gate positions), and the expectations are the counts path's.
+TEST(Frames, MarginalIsTheCountsPathsExpectation) {
+  const int W = 40, H = 24;
+  SensorStageConfig c = testing::sweep_config(W, H);
+  c.sensor.preset = PixelPreset::FullChip;
+  c.sensor.pixel_A.crosstalk_probability = 0.02;
+  c.sensor.pixel_B.crosstalk_probability = 0.02;
+  c.acquisition.gate_sweep = {0.6e-9, 9e-9, 36e-12};
+  c.outputs.frames = true;
+  SensorModel model(c);
+  const TimeAxis ax = model.required_window(9e-12);
+  Image img(W, H, ax);
+  Rng rng(31, RngKind::Test, 0);
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      float* g = img.pixel(x, y);
+      const auto b = static_cast<int64_t>(rng.next_double() * static_cast<double>(ax.bins - 20));
+      g[b] = 0.02f * rng.next_float();
+      img.ambient[static_cast<size_t>(y * W + x)] = 2e5f * rng.next_float();
+    }
+  const SensorTile fr = model.process(img.tile({0, 0, W, H}, 1));
+  c.outputs.frames = false;
+  const SensorTile co = SensorModel(c).process(img.tile({0, 0, W, H}, 1));
+  ASSERT_EQ(fr.expected, co.expected);
+  const auto K = static_cast<size_t>(model.K());
+  const double N = model.frames_per_k();
+  int tested = 0;
+  for (size_t i = 0; i < static_cast<size_t>(W * H); ++i) {
+    double sum = 0.0, mean = 0.0, var = 0.0;
+    for (size_t k = 0; k < K; ++k) {
+      sum += fr.counts[k * W * H + i];
+      const double e = fr.expected[k * W * H + i], p = e / N;
+      mean += e;
+      var += N * p * (1.0 - p);
+    }
+    if (var > 0.0) {
+      EXPECT_LT(std::abs(sum - mean), kZ * std::sqrt(var)) << "pixel " << i;
+      ++tested;
+    }
+  }
+  EXPECT_EQ(tested, W * H);
+}
+
 }  // namespace
 }  // namespace spadgen::sensor
