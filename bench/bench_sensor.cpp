@@ -4,6 +4,7 @@
 // Both measured on a sub-image and scaled to the full array (the work is per pixel, so it scales
 // linearly); all threads TBB is allowed to use. Results and the command: bench/README.md ("## sensor").
 #include <benchmark/benchmark.h>
+#include <malloc.h>
 #include <tbb/parallel_for.h>
 
 #include <chrono>
@@ -356,4 +357,14 @@ BENCHMARK(BM_FramesStage)->Arg(0)->Arg(1)->UseManualTime()->Unit(benchmark::kMil
 
 }  // namespace
 
-BENCHMARK_MAIN();
+// As the program does (app/main.cpp): large buffers (a tile's frames are megabytes) stay in the heap, so
+// that each tile does not pay page faults and the kernel's zeroing for fresh mappings.
+int main(int argc, char** argv) {
+  mallopt(M_MMAP_THRESHOLD, 64 << 20);
+  mallopt(M_TRIM_THRESHOLD, 256 << 20);
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}

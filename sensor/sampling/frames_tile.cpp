@@ -181,8 +181,12 @@ HWY_INLINE void LimitsOfRow(const CrosstalkLaw& law, const uint32_t* HWY_RESTRIC
     const auto v = hn::IfThenElse(max, hn::Set(d, 4294967295.0), hn::Ceil(x));
     hn::Store(hn::IfThenZeroElse(hn::Eq(nv, hn::Zero(d)), v), d, tl);
     for (size_t j = 0; j < c; ++j) lim[i + j] = static_cast<uint32_t>(tl[j]);
-    hn::Store(r, d, tl);
-    std::memcpy(rho + i, tl, c * sizeof(double));
+    if (c == L) {
+      hn::StoreU(r, d, rho + i);
+    } else {  // (a variable-length memcpy here compiled to a slow rep movs)
+      hn::Store(r, d, tl);
+      for (size_t j = 0; j < c; ++j) rho[i + j] = tl[j];
+    }
   }
 }
 
@@ -349,8 +353,10 @@ HWY_INLINE void DecidePairs(const FramesTileShape& sh, size_t np, const uint64_t
   const auto* pop_all = reinterpret_cast<const int32_t*>(s.pop.data());
   for (size_t j0 = 0; j0 < np; j0 += L) {
     const auto live = hn::RebindMask(du, hn::FirstN(di, np - j0));
-    const auto t = hn::BitCast(di32, hn::LoadU(d32, s.p_t.data() + j0));
-    const auto dir = hn::BitCast(di32, hn::LoadU(d32, s.p_d.data() + j0));
+    // lanes beyond the list: pair 0's pixel and direction (stale values would gather out of bounds)
+    const auto live32 = hn::FirstN(di32, np - j0);
+    const auto t = hn::IfThenElse(live32, hn::BitCast(di32, hn::LoadU(d32, s.p_t.data() + j0)), hn::Set(di32, static_cast<int32_t>(s.p_t[0])));
+    const auto dir = hn::IfThenElse(live32, hn::BitCast(di32, hn::LoadU(d32, s.p_d.data() + j0)), hn::Set(di32, static_cast<int32_t>(s.p_d[0])));
     const auto ri = hn::GatherIndex(di32, t_region, t);
     const auto is = [&](int32_t v) { return hn::Eq(dir, hn::Set(di32, v)); };
     const auto off_r = hn::IfThenElse(is(0), hn::Set(di32, -1), hn::IfThenElse(is(1), hn::Set(di32, 1),
@@ -361,7 +367,8 @@ HWY_INLINE void DecidePairs(const FramesTileShape& sh, size_t np, const uint64_t
     const auto n_u = hn::PromoteTo(du, hn::BitCast(d32, n_i32));
     const auto cd = hn::PromoteTo(dd, n_i32);
     const auto rho = hn::GatherIndex(dd, s.rho.data(), i);
-    const auto row = hn::PromoteTo(di, hn::BitCast(di32, hn::LoadU(d32, s.p_row.data() + j0)));
+    const auto row = hn::PromoteTo(di, hn::IfThenElse(live32, hn::BitCast(di32, hn::LoadU(d32, s.p_row.data() + j0)),
+                                                      hn::Set(di32, static_cast<int32_t>(s.p_row[0]))));
     const auto xt = hn::GatherIndex(dd, sh.row_xt.data(), row);
     const auto single = hn::RebindMask(dd, hn::Ne(hn::GatherIndex(du, sh.row_single.data(), row), hn::Zero(du)));
     const auto per_candidate = hn::RebindMask(du, hn::Or(hn::Not(hn::Lt(rho, hn::Set(dd, 0.5))),
