@@ -253,7 +253,7 @@ HWY_INLINE void DenseBitsBatch(const ArsKeys& keys, uint32_t c1, const uint64_t*
     // One output word (frames f0 .. f0 + 63) from one ARS word vector: below the threshold's top byte
     // (inverted by flip), and the ties (masked by keep) appended.
     const auto word = [&tb, d8w](V32 x, hn::Vec<decltype(d8w)> tb8, uint64_t flip, uint64_t keep, uint64_t* out,
-                                 uint32_t slot, uint32_t f0) HWY_ATTR {
+                                 uint32_t slot, uint32_t f0) HWY_ATTR __attribute__((always_inline)) {
       const auto bytes = hn::BitCast(d8w, x);
       alignas(8) uint8_t lt[8], eqb[8];
       hn::StoreMaskBits(d8w, hn::Lt(bytes, tb8), lt);
@@ -266,7 +266,7 @@ HWY_INLINE void DenseBitsBatch(const ArsKeys& keys, uint32_t c1, const uint64_t*
     };
     // One pixel's words of chunk ch from the chunk's four ARS word vectors (by value: the chains stay
     // in registers).
-    const auto emit = [&](uint32_t slot, uint32_t ch, V32 x0, V32 x1, V32 x2, V32 x3) HWY_ATTR {
+    const auto emit = [&](uint32_t slot, uint32_t ch, V32 x0, V32 x1, V32 x2, V32 x3) HWY_ATTR __attribute__((always_inline)) {
       const auto tb8 = hn::Set(d8w, static_cast<uint8_t>(T[slot] >> 56));
       uint64_t* w = words + static_cast<size_t>(slot) * nw + 4 * static_cast<size_t>(ch);
       const uint64_t flip = flips[slot];
