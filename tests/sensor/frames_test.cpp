@@ -161,43 +161,45 @@ TEST(Frames, TileKernelEqualsReference) {
   for (const int64_t target : hwy::SupportedAndGeneratedTargets()) {
     hwy::SetSupportedTargetsForTest(target);
     ++targets;
-    for (const uint32_t N : {255u, 64u, 70u, 300u, 1000u})
+    for (const uint32_t N : {255u, 64u, 70u, 300u, 1000u}) {
       for (const auto& law : laws) {
-      const Scene s = make_scene(37, 21, 9, N, law[0], law[1], 100 + N);
-      const std::vector<PixelRect> rects = {{0, 0, 16, 8}, {16, 5, 21, 11}, {8, 8, 13, 13}, {0, 0, 37, 21},
-                                            {36, 20, 1, 1}, {3, 9, 1, 7}, {5, 2, 32, 10}};
-      for (const PixelRect& rect : rects)
-        for (const uint32_t k : {0u, 7u}) {
-          const uint64_t seed = 5 + k;
-          TileInput in = tile_input(s, rect);
-          const size_t nw = s.nw, bpr = static_cast<size_t>((rect.width + 7) / 8);
-          std::vector<uint16_t> counts(static_cast<size_t>(rect.count()), 0xFFFF);
-          std::vector<uint8_t> frames(static_cast<size_t>(N) * static_cast<size_t>(rect.height) * bpr, 0xCD);
-          FramesTileScratch scratch;
-          const Rng base = streams::crosstalk(seed, 0, 0);
-          const uint32_t key[2] = {base.key().v[0], base.key().v[1]};
-          frames_tile(in.shape, key, k, in.prob.data(), in.own.data(), counts.data(), frames.data(), scratch);
-          vector_hits += scratch.nhits;
-          one_by_one += scratch.nfallback;
-          std::vector<uint64_t> want_bits;
-          std::vector<uint16_t> want_counts;
-          std::vector<uint8_t> want_frames;
-          reference_tile(s, rect, seed, k, want_bits, want_counts, want_frames);
-          const std::string where = std::string(hwy::TargetName(target)) + " N=" + std::to_string(N) + " tile " +
-                                    std::to_string(rect.x0) + "," + std::to_string(rect.y0) + " " +
-                                    std::to_string(rect.width) + "x" + std::to_string(rect.height) + " k=" + std::to_string(k);
-          ASSERT_EQ(counts, want_counts) << where;
-          ASSERT_EQ(frames, want_frames) << where;
-          const PixelRect region = grow_clipped(rect, 1, s.W, s.H);
-          for (int y = rect.y0; y < rect.y1(); ++y)
-            for (int x = rect.x0; x < rect.x1(); ++x) {
-              const size_t ri = static_cast<size_t>(region.index(x, y)), o = static_cast<size_t>(rect.index(x, y));
-              for (size_t q = 0; q < nw; ++q) ASSERT_EQ(in.own[ri * nw + q], want_bits[o * nw + q]) << where;
-              const size_t i = static_cast<size_t>(y * s.W + x);
-              hit_pixels += want_counts[o] != popcount_words(s.bits.data() + i * nw, nw);
-              per_candidate += s.prob[i].p > 0.999 && y < s.split;
-            }
-        }
+        const Scene s = make_scene(37, 21, 9, N, law[0], law[1], 100 + N);
+        const std::vector<PixelRect> rects = {{0, 0, 16, 8}, {16, 5, 21, 11}, {8, 8, 13, 13}, {0, 0, 37, 21},
+                                              {36, 20, 1, 1}, {3, 9, 1, 7}, {5, 2, 32, 10}};
+        for (const PixelRect& rect : rects)
+          for (const uint32_t k : {0u, 7u}) {
+            const uint64_t seed = 5 + k;
+            TileInput in = tile_input(s, rect);
+            const size_t nw = s.nw, bpr = static_cast<size_t>((rect.width + 7) / 8);
+            std::vector<uint16_t> counts(static_cast<size_t>(rect.count()), 0xFFFF);
+            std::vector<uint8_t> frames(static_cast<size_t>(N) * static_cast<size_t>(rect.height) * bpr, 0xCD);
+            FramesTileScratch scratch;
+            const Rng base = streams::crosstalk(seed, 0, 0);
+            const uint32_t key[2] = {base.key().v[0], base.key().v[1]};
+            frames_tile(in.shape, key, k, in.prob.data(), in.own.data(), counts.data(), frames.data(), scratch);
+            vector_hits += scratch.nhits;
+            one_by_one += scratch.nfallback;
+            std::vector<uint64_t> want_bits;
+            std::vector<uint16_t> want_counts;
+            std::vector<uint8_t> want_frames;
+            reference_tile(s, rect, seed, k, want_bits, want_counts, want_frames);
+            const std::string where = std::string(hwy::TargetName(target)) + " N=" + std::to_string(N) + " xt=" +
+                                      std::to_string(law[1].xt) + " tile " +
+                                      std::to_string(rect.x0) + "," + std::to_string(rect.y0) + " " +
+                                      std::to_string(rect.width) + "x" + std::to_string(rect.height) + " k=" + std::to_string(k);
+            ASSERT_EQ(counts, want_counts) << where;
+            ASSERT_EQ(frames, want_frames) << where;
+            const PixelRect region = grow_clipped(rect, 1, s.W, s.H);
+            for (int y = rect.y0; y < rect.y1(); ++y)
+              for (int x = rect.x0; x < rect.x1(); ++x) {
+                const size_t ri = static_cast<size_t>(region.index(x, y)), o = static_cast<size_t>(rect.index(x, y));
+                for (size_t q = 0; q < nw; ++q) ASSERT_EQ(in.own[ri * nw + q], want_bits[o * nw + q]) << where;
+                const size_t i = static_cast<size_t>(y * s.W + x);
+                hit_pixels += want_counts[o] != popcount_words(s.bits.data() + i * nw, nw);
+                per_candidate += s.prob[i].p > 0.999 && y < s.split;
+              }
+          }
+      }
     }
   }
   hwy::SetSupportedTargetsForTest(0);
