@@ -440,16 +440,16 @@ HWY_INLINE void DecidePairs(const FramesTileShape& sh, size_t np, const uint64_t
         return hn::Add(hn::ShiftLeft<6>(q), SelectInWord(du, word, hn::Sub(k, base)));
       };
       const auto tv = hn::PromoteTo(du, hn::BitCast(d32, t));
-      const auto t1 = hn::ShiftRight<32>(m1);
+      const auto rank1 = hn::ShiftRight<32>(m1);
       size_t nh = s.nhits;
       hn::StoreU(Compress64(du, tv, hit), du, s.hit_t.data() + nh);
-      hn::StoreU(Compress64(du, frame_of(t1, hit), hit), du, s.hit_frame.data() + nh);
+      hn::StoreU(Compress64(du, frame_of(rank1, hit), hit), du, s.hit_frame.data() + nh);
       nh += hn::CountTrue(du, hit);
       if (!hn::AllFalse(du, hit2)) {
-        auto t2 = hn::ShiftRight<32>(m2);
-        t2 = hn::IfThenElse(hn::Eq(t2, t1), hn::Sub(n_u, hn::Set(du, 1)), t2);
+        auto rank2 = hn::ShiftRight<32>(m2);
+        rank2 = hn::IfThenElse(hn::Eq(rank2, rank1), hn::Sub(n_u, hn::Set(du, 1)), rank2);
         hn::StoreU(Compress64(du, tv, hit2), du, s.hit_t.data() + nh);
-        hn::StoreU(Compress64(du, frame_of(t2, hit2), hit2), du, s.hit_frame.data() + nh);
+        hn::StoreU(Compress64(du, frame_of(rank2, hit2), hit2), du, s.hit_frame.data() + nh);
         nh += hn::CountTrue(du, hit2);
       }
       s.nhits = nh;
