@@ -4,9 +4,13 @@
 // Both measured on a sub-image and scaled to the full array (the work is per pixel, so it scales
 // linearly); all threads TBB is allowed to use. Results and the command: bench/README.md ("## sensor").
 #include <benchmark/benchmark.h>
+#include <malloc.h>
 #include <tbb/parallel_for.h>
 
+#include <chrono>
 #include <cmath>
+#include <cstdlib>
+#include <filesystem>
 #include <memory>
 #include <vector>
 
@@ -17,6 +21,7 @@
 #include "sensor/sampling/frames_kernel.h"
 #include "sensor/sampling/sampling.h"
 #include "sensor/sensor.h"
+#include "writers/writers.h"
 
 namespace {
 
@@ -85,7 +90,8 @@ BENCHMARK(BM_FrameBits)->UseRealTime()->Unit(benchmark::kMillisecond);
 
 // A synthetic transient: one return per pixel, a second one for 30 % of them (a semi-transparent
 // layer), photons per pulse log-uniform in [1e-4, 1e-2] (the paper's flat target at 0.2-1.6 m sees
-// about 1e-3), ambient 1e5 to 1e6 photons/s.
+// about 1e-3), ambient 1e5 to 1e6 photons/s, or none (`dark`: the paper's dark lab, as in
+// scenes/paper/multi_object.json; the same returns).
 struct Scene {
   SensorStageConfig cfg;
   int width = 64, height = 64;
@@ -93,7 +99,7 @@ struct Scene {
   std::vector<float> transient, ambient;
 };
 
-Scene make_scene(bool frames, int width, int height) {
+Scene make_scene(bool frames, int width, int height, bool dark = false) {
   Scene s;
   s.width = width;
   s.height = height;
@@ -124,7 +130,8 @@ Scene make_scene(bool frames, int width, int height) {
       g[b] += static_cast<float>(photons * f);
       g[b + 1] += static_cast<float>(photons * (1 - f));
     }
-    s.ambient[i] = static_cast<float>(std::pow(10.0, 5.0 + rng.next_double()));
+    const double ambient = std::pow(10.0, 5.0 + rng.next_double());  // drawn either way: the same returns
+    s.ambient[i] = dark ? 0.0f : static_cast<float>(ambient);
   }
   return s;
 }
@@ -148,28 +155,9 @@ TransientTile cut(const Scene& s, const PixelRect& r, int halo) {
   return t;
 }
 
-// The whole sensor stage (gate response of 350 positions + crosstalk + sampling) on a sub-image of the
-// top-left corner, tiles of 32 with their halo processed in parallel, as the program streams them.
-void run_sweep(benchmark::State& state, bool frames) {
-  const int w = 64, h = frames ? 32 : 64;
-  const Scene s = make_scene(frames, w, h);
-  SensorStageConfig cfg = s.cfg;
-  cfg.camera.width_px = w;  // the sub-image is the sensor here; per-pixel work is the same
-  cfg.camera.height_px = h;
-  sensor::SensorModel model(cfg);
-  std::vector<TransientTile> tiles;
-  for (const PixelRect& r : make_tiles(w, h, 32)) tiles.push_back(cut(s, r, model.halo()));
-  std::vector<double> checksum(tiles.size(), 0.0);
-  for (auto _ : state) {
-    // tiles in parallel, as app/pipeline.cpp runs them (process() itself nests parallel loops)
-    tbb::parallel_for(size_t{0}, tiles.size(), [&](size_t i) {
-      const SensorTile out = model.process(tiles[i]);
-      checksum[i] += out.counts[out.counts.size() / 2];
-    });
-  }
-  benchmark::DoNotOptimize(checksum);
-  // A hash of every output of one more pass (counts, expected values, frames), to check that two versions
-  // give bit-identical results: the counter shows it modulo 10^6.
+// FNV-1a of every output of one more pass (counts, expected values, frames), to check that two versions give
+// bit-identical results: shown modulo 10^6.
+uint64_t outputs_hash(const sensor::SensorModel& model, const std::vector<TransientTile>& tiles) {
   uint64_t hash = 1469598103934665603ull;
   auto mix = [&hash](const void* data, size_t bytes) {
     const auto* b = static_cast<const unsigned char*>(data);
@@ -181,18 +169,89 @@ void run_sweep(benchmark::State& state, bool frames) {
     mix(out.expected.data(), out.expected.size() * sizeof(out.expected[0]));
     mix(out.frames.data(), out.frames.size() * sizeof(out.frames[0]));
   }
-  state.counters["outputs_hash"] = static_cast<double>(hash % 1000000);
+  return hash % 1000000;
+}
+
+// The sweeps' sub-image (the top-left corner of the full_chip sensor: pixel A in its top half, pixel B in its
+// bottom half) with its model and tiles of 32 with their halo, as the program cuts them.
+struct Sweep {
+  Scene scene;
+  std::unique_ptr<sensor::SensorModel> model;
+  std::vector<TransientTile> tiles;
+  Sweep(bool frames, bool dark, int w, int h) : scene(make_scene(frames, w, h, dark)) {
+    SensorStageConfig cfg = scene.cfg;
+    cfg.camera.width_px = w;  // the sub-image is the sensor here; per-pixel work is the same
+    cfg.camera.height_px = h;
+    model = std::make_unique<sensor::SensorModel>(cfg);
+    for (const PixelRect& r : make_tiles(w, h, 32)) tiles.push_back(cut(scene, r, model->halo()));
+  }
+};
+
+// The whole sensor stage (gate response of 350 positions + crosstalk + sampling, and with frames the
+// frames' crosstalk, counts and packing) on a 64 x 64 sub-image, tiles of 32 with their halo processed in
+// parallel, as the program streams them.
+void run_sweep(benchmark::State& state, bool frames, bool dark) {
+  const int w = 64, h = 64;
+  const Sweep sw(frames, dark, w, h);
+  std::vector<double> checksum(sw.tiles.size(), 0.0);
+  for (auto _ : state) {
+    // tiles in parallel, as app/pipeline.cpp runs them (process() itself nests parallel loops)
+    tbb::parallel_for(size_t{0}, sw.tiles.size(), [&](size_t i) {
+      const SensorTile out = sw.model->process(sw.tiles[i]);
+      checksum[i] += out.counts[out.counts.size() / 2];
+    });
+  }
+  benchmark::DoNotOptimize(checksum);
+  state.counters["outputs_hash"] = static_cast<double>(outputs_hash(*sw.model, sw.tiles));
   const double pixels = static_cast<double>(w * h) * static_cast<double>(state.iterations());
   const double scale = 1024.0 * 1000.0 / pixels;  // per second of benchmark: full arrays processed = 1/scale
   if (frames) {
-    const double bits = pixels * model.K() * 255.0;
+    const double bits = pixels * sw.model->K() * 255.0;
     state.counters["Gbit_per_s"] = benchmark::Counter(bits * 1e-9, benchmark::Counter::kIsRate);
     state.counters["x_camera"] = benchmark::Counter(bits / kCameraBitRate, benchmark::Counter::kIsRate);
+    state.SetLabel(dark ? "dark" : "ambient");
   } else {
     // seconds for a full 1024 x 1000 sweep = elapsed * scale; ratio = 3.7 s / that
     state.counters["full_sweep_s"] = benchmark::Counter(1.0 / scale, benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
     state.counters["x_camera"] = benchmark::Counter(kCameraSweepSeconds / scale, benchmark::Counter::kIsRate);
   }
+}
+
+// The frames stage alone: what one more realisation of the temporal noise costs in process() (own
+// avalanches of the tile and its halo, crosstalk between the sampled frames, counts, packing, the tile's
+// output buffers), i.e. everything after the rates. Each iteration times process(tile, 1 seed) and
+// process(tile, 1 + R seeds) on every tile, alternately; the frames stage is the difference, R realisations
+// (manual time). Also reported: the whole stage of the same run (rates + one realisation) as
+// whole_Gbit_per_s.
+void BM_FramesStage(benchmark::State& state) {
+  const bool dark = state.range(0) == 1;
+  const int w = 64, h = 64;
+  constexpr size_t R = 4;
+  const Sweep sw(true, dark, w, h);
+  std::vector<uint64_t> one = {1}, many;
+  for (uint64_t i = 0; i <= R; ++i) many.push_back(1 + i);
+  std::vector<double> checksum(sw.tiles.size(), 0.0);
+  auto run = [&](const std::vector<uint64_t>& seeds) {
+    const auto t0 = std::chrono::steady_clock::now();
+    tbb::parallel_for(size_t{0}, sw.tiles.size(), [&](size_t i) {
+      const std::vector<SensorTile> out = sw.model->process(sw.tiles[i], seeds);
+      checksum[i] += out.back().counts[out.back().counts.size() / 2];
+    });
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  };
+  double whole = 0.0;
+  for (auto _ : state) {
+    const double t1 = run(one), tm = run(many);
+    whole += t1;
+    state.SetIterationTime(std::max(tm - t1, 1e-9));
+  }
+  benchmark::DoNotOptimize(checksum);
+  const double bits = static_cast<double>(w * h) * sw.model->K() * 255.0;  // one realisation
+  const double stage_bits = bits * R * static_cast<double>(state.iterations());
+  state.counters["Gbit_per_s"] = benchmark::Counter(stage_bits * 1e-9, benchmark::Counter::kIsRate);
+  state.counters["x_camera"] = benchmark::Counter(stage_bits / kCameraBitRate, benchmark::Counter::kIsRate);
+  state.counters["whole_Gbit_per_s"] = bits * static_cast<double>(state.iterations()) / whole * 1e-9;
+  state.SetLabel(dark ? "dark" : "ambient");
 }
 
 // The counts sampler alone, for comparison with BM_CountsSweep: the rates of the same 64 x 64 sub-image
@@ -238,11 +297,81 @@ void BM_CountsSampling(benchmark::State& state) {
 }
 BENCHMARK(BM_CountsSampling)->Arg(0)->Arg(1)->UseRealTime()->Unit(benchmark::kMillisecond);
 
-void BM_CountsSweep(benchmark::State& state) { run_sweep(state, false); }
-void BM_FramesSweep(benchmark::State& state) { run_sweep(state, true); }
+// Frames to disk: the frames of a 1024 x 32 strip (issue 9's crop: 32 tiles of 32 x 32, 350 gate positions x
+// 255 frames, 367 MB; BM_CountsSweep's scene, computed once outside the timing) written as the program
+// writes them (writers::NpyWriter: the file allocated and mapped, write_frames per tile from parallel tasks,
+// the band's rows released, commit: unmap, fsync, rename), alternated with `dd if=/dev/zero bs=1M
+// conv=fsync` of the same size into the same folder, $SPADGEN_BENCH_DIR (unset: skipped, so that a run of
+// every benchmark does not write gigabytes). Manual time: the writer's; counters: both bandwidths and
+// writer / dd over the whole run.
+void BM_FramesToDisk(benchmark::State& state) {
+  const char* dir_env = std::getenv("SPADGEN_BENCH_DIR");
+  if (dir_env == nullptr) {
+    state.SkipWithError("set SPADGEN_BENCH_DIR to a folder on the disk to measure (writes 2 x 366 MB per iteration)");
+    for (auto _ : state) {
+    }
+    return;
+  }
+  const int w = 1024, h = 32;
+  const Sweep sw(true, false, w, h);
+  std::vector<SensorTile> out(sw.tiles.size());
+  tbb::parallel_for(size_t{0}, sw.tiles.size(), [&](size_t i) { out[i] = sw.model->process(sw.tiles[i]); });
+  const int64_t K = sw.model->K(), N = sw.model->frames_per_k();
+  const std::filesystem::path dir(dir_env);
+  const std::string npy = (dir / "bench_frames_to_disk.npy").string(), raw = (dir / "bench_frames_to_disk.dd").string();
+  int64_t bytes = 0;
+  double t_writer = 0.0, t_dd = 0.0;
+  for (auto _ : state) {
+    const auto t0 = std::chrono::steady_clock::now();
+    {
+      writers::NpyWriter wr(npy, writers::NpyWriter::Dtype::U8, {K, N, h, w / 8});
+      bytes = wr.file_bytes();
+      tbb::parallel_for(size_t{0}, sw.tiles.size(), [&](size_t i) { wr.write_frames(out[i].rect, 0, 0, out[i].frames.data()); });
+      wr.release_rows(2, 0, h);  // the strip is one band of tiles
+      wr.commit();
+    }
+    const auto t1 = std::chrono::steady_clock::now();
+    const double tw = std::chrono::duration<double>(t1 - t0).count();
+    std::filesystem::remove(npy);
+    const int64_t mb = (bytes + (1 << 20) - 1) >> 20;
+    const std::string cmd = "dd if=/dev/zero of='" + raw + "' bs=1M count=" + std::to_string(mb) + " conv=fsync status=none";
+    const auto t2 = std::chrono::steady_clock::now();
+    if (std::system(cmd.c_str()) != 0) {
+      state.SkipWithError("dd failed");
+      break;
+    }
+    const double td = std::chrono::duration<double>(std::chrono::steady_clock::now() - t2).count() * static_cast<double>(bytes) /
+                      static_cast<double>(mb << 20);  // dd's time for the npy's size
+    std::filesystem::remove(raw);
+    t_writer += tw;
+    t_dd += td;
+    state.SetIterationTime(tw);
+  }
+  const double total = static_cast<double>(bytes) * static_cast<double>(state.iterations());
+  state.counters["writer_MB_per_s"] = total / t_writer * 1e-6;
+  state.counters["dd_MB_per_s"] = total / t_dd * 1e-6;
+  state.counters["writer_over_dd"] = t_dd / t_writer;
+  state.counters["MB"] = static_cast<double>(bytes) * 1e-6;
+}
+BENCHMARK(BM_FramesToDisk)->UseManualTime()->Iterations(4)->Unit(benchmark::kMillisecond);
+
+void BM_CountsSweep(benchmark::State& state) { run_sweep(state, false, false); }
+// Argument 0: ambient light (BM_CountsSweep's scene); 1: dark (the same returns, no ambient light).
+void BM_FramesSweep(benchmark::State& state) { run_sweep(state, true, state.range(0) == 1); }
 BENCHMARK(BM_CountsSweep)->UseRealTime()->Unit(benchmark::kMillisecond);
-BENCHMARK(BM_FramesSweep)->UseRealTime()->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_FramesSweep)->Arg(0)->Arg(1)->UseRealTime()->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_FramesStage)->Arg(0)->Arg(1)->UseManualTime()->Unit(benchmark::kMillisecond);
 
 }  // namespace
 
-BENCHMARK_MAIN();
+// As the program does (app/main.cpp): large buffers (a tile's frames are megabytes) stay in the heap, so
+// that each tile does not pay page faults and the kernel's zeroing for fresh mappings.
+int main(int argc, char** argv) {
+  mallopt(M_MMAP_THRESHOLD, 64 << 20);
+  mallopt(M_TRIM_THRESHOLD, 256 << 20);
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}

@@ -18,6 +18,7 @@
 #include "sensor/model/pixel_maps.h"
 #include "sensor/sampling/batch_kernels.h"
 #include "sensor/sampling/frames_kernel.h"
+#include "sensor/sampling/frames_tile.h"
 #include "sensor/sampling/sampling.h"
 #include "sensor/acquisition/acquisition.h"
 #include "sensor/acquisition/intensity.h"
@@ -32,83 +33,9 @@ struct TypeInfo {
   bool single_avalanche = false;
 };
 
-// Population count inline (baseline x86-64 has no POPCNT, so std::popcount is a call to libgcc's
-// __popcountdi2): the usual SWAR sum of bit fields.
-inline uint32_t popcount64(uint64_t x) {
-  x -= (x >> 1) & 0x5555555555555555ull;
-  x = (x & 0x3333333333333333ull) + ((x >> 2) & 0x3333333333333333ull);
-  x = (x + (x >> 4)) & 0x0F0F0F0F0F0F0F0Full;
-  return static_cast<uint32_t>((x * 0x0101010101010101ull) >> 56);
-}
-
 // Neighbour offsets; the index is the direction used to key a crosstalk draw.
 constexpr int kNbDx[4] = {-1, 1, 0, 0};
 constexpr int kNbDy[4] = {0, 0, -1, 1};
-
-// Frames where the neighbour avalanched and this pixel did not are candidates; each becomes a crosstalk
-// detection with probability r, independently. Drawn sparsely: the number of hits ~ Binomial(candidates, r)
-// by sequential inversion, then which candidates as a uniformly random subset (Floyd), from the pixel's
-// crosstalk stream in neighbour order. With r n >= 16 (a saturated neighbour and large r) each candidate
-// is drawn on its own instead.
-//
-// `rng` is the pixel's crosstalk stream, created on first use (mk()): a pixel with no candidate frame
-// costs no stream set-up and draws nothing, so the draws are the same as with the stream made up front.
-template <class R, class M>
-void crosstalk_into(std::optional<Rng>& stream, M mk, const uint64_t* theirs, uint64_t* mine, size_t wpp, R rate) {
-  uint64_t any = 0;
-  for (size_t w = 0; w < wpp; ++w) any |= theirs[w] & ~mine[w];
-  if (any == 0) return;  // the common case: no popcount at all
-  uint32_t n = 0;
-  for (size_t w = 0; w < wpp; ++w) n += popcount64(theirs[w] & ~mine[w]);
-  const double r = rate();
-  if (!(r > 0.0)) return;
-  if (!stream) stream.emplace(mk());
-  Rng& rng = *stream;
-  auto nth_candidate = [&](uint32_t t) {  // set bit t of the candidates in mine
-    for (size_t w = 0; w < wpp; ++w) {
-      uint64_t bits = theirs[w] & ~mine[w];
-      const auto c = popcount64(bits);
-      if (t >= c) {
-        t -= c;
-        continue;
-      }
-      for (; t > 0; --t) bits &= bits - 1;
-      return std::pair{w, std::countr_zero(bits)};
-    }
-    return std::pair{wpp, 0};
-  };
-  const double mean = n * r;
-  if (mean >= 16.0 || r >= 0.5) {
-    const uint64_t thr = probability_threshold(r);
-    std::vector<std::pair<size_t, int>> hits;
-    for (size_t w = 0; w < wpp; ++w)
-      for (uint64_t bits = theirs[w] & ~mine[w]; bits != 0; bits &= bits - 1)
-        if (rng.next_u64() < thr) hits.emplace_back(w, std::countr_zero(bits));
-    for (const auto& [w, b] : hits) mine[w] |= uint64_t{1} << b;
-    return;
-  }
-  // P(H > h) by the recurrence of the binomial pmf, as in BinomialSampler's sequential search
-  const uint64_t U = rng.next_u64();
-  if (mean < 1.0 && U >= probability_threshold(mean)) return;
-  const double log_b = std::log1p(-r);
-  double S = -std::expm1(n * log_b), pmf = S < 0.5 ? 1.0 - S : std::exp(n * log_b);
-  uint32_t h = 0;
-  while (h < n && U < probability_threshold(S)) {
-    pmf *= r / (1.0 - r) * static_cast<double>(n - h) / static_cast<double>(h + 1);
-    ++h;
-    S -= pmf;
-    if (!(S > 0.0)) break;
-  }
-  // Floyd's subset of h candidate indices; mark them in a scratch copy so indices stay stable
-  std::vector<uint32_t> chosen;
-  for (uint32_t j = n - h; j < n; ++j) {
-    const uint32_t t = uniform_below(rng, uint64_t{j} + 1);
-    chosen.push_back(std::find(chosen.begin(), chosen.end(), t) == chosen.end() ? t : j);
-  }
-  std::vector<std::pair<size_t, int>> pos;
-  for (uint32_t t : chosen) pos.push_back(nth_candidate(t));
-  for (const auto& [w, b] : pos) mine[w] |= uint64_t{1} << b;
-}
 
 }  // namespace
 
@@ -290,6 +217,44 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
       }
   });
 
+  // The frames' layout of this tile (frames_tile), the same for every gate position and noise seed: the
+  // crosstalk law of every region row, each tile row's neighbour directions (not across sections or the
+  // image's edges), the streams' pixel indices.
+  FramesTileShape shape;
+  std::vector<uint64_t> region_ids;
+  if (frames) {
+    shape.width = rect.width;
+    shape.height = rect.height;
+    shape.region_width = region.width;
+    shape.region_height = region.height;
+    shape.tile_x = rect.x0 - region.x0;
+    shape.tile_y = rect.y0 - region.y0;
+    shape.frames = m.frames_per_k;
+    const PixelLayout& lay = m.maps->layout();
+    for (int y = region.y0; y < region.y1(); ++y) {
+      const TypeInfo& ty = m.types[lay.type_of_row(y)];
+      shape.region_row_law.push_back({ty.crosstalk, ty.single_avalanche});
+      for (int x = region.x0; x < region.x1(); ++x) region_ids.push_back(pixel_index(x, y));
+    }
+    for (int y = rect.y0; y < rect.y1(); ++y) {
+      unsigned dirs = 0;
+      if (m.types[lay.type_of_row(y)].crosstalk > 0.0) {
+        const int sec = lay.section_of_row(y);
+        dirs = 1u | 2u;
+        if (y > 0 && lay.section_of_row(y - 1) == sec) dirs |= 4u;
+        if (y + 1 < H && lay.section_of_row(y + 1) == sec) dirs |= 8u;
+      }
+      shape.row_dirs.push_back(static_cast<uint8_t>(dirs));
+      for (int x = rect.x0; x < rect.x1(); ++x) {
+        shape.pixel_lo.push_back(static_cast<uint32_t>(pixel_index(x, y)));
+        shape.pixel_hi.push_back(static_cast<uint32_t>(pixel_index(x, y) >> 32));
+      }
+    }
+    shape.left_edge = rect.x0 == 0;
+    shape.right_edge = rect.x1() == W;
+    shape.finish();
+  }
+
   // Everything above is the same for every realisation of the temporal noise; what follows draws it.
   // So are the rates with crosstalk and the expectations: the first realisation computes them, the others
   // reuse them (without frames, the counts' rates are kept per pixel for that).
@@ -401,49 +366,19 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
 
     if (frames) {
       // Per gate position: every region pixel's own avalanches (its keyed stream, identical in whichever tile
-      // owns it), then crosstalk simulated from the neighbours' bits, counts as popcounts, packed frames.
+      // owns it), then crosstalk simulated from the neighbours' bits, counts as popcounts, packed frames
+      // (frames_tile). The same buffers serve every gate position a task takes.
+      const Rng xt_base = streams::crosstalk(seed, 0, 0);
+      const uint32_t xt_key[2] = {xt_base.key().v[0], xt_base.key().v[1]};
+      const size_t frame_bytes = static_cast<size_t>(N) * static_cast<size_t>(rect.height) * bpr;
       tbb::parallel_for(tbb::blocked_range<int>(0, K, 1), [&](const tbb::blocked_range<int>& ks) {
-        std::vector<uint64_t> own(nreg * wpp), row(static_cast<size_t>(rect.width) * wpp), ids(static_cast<size_t>(region.width));
+        std::vector<uint64_t> own(nreg * wpp + wpp, 0);  // + wpp: the zero words frames_tile packs padding from
+        FramesTileScratch scratch;
         for (int k = ks.begin(); k < ks.end(); ++k) {
           const auto kk = static_cast<size_t>(k);
-          for (int y = region.y0; y < region.y1(); ++y) {
-            for (int x = region.x0; x < region.x1(); ++x) ids[static_cast<size_t>(x - region.x0)] = pixel_index(x, y);
-            const auto r0 = static_cast<size_t>(region.index(region.x0, y));
-            sample_bits_batch(seed, kk, ids.data(), ids.size(), *m.binom, own_prob.get() + kk * nreg + r0, own.data() + r0 * wpp);
-          }
-          for (int y = rect.y0; y < rect.y1(); ++y) {
-            for (int x = rect.x0; x < rect.x1(); ++x) {
-              const auto ri = static_cast<size_t>(region.index(x, y));
-              const auto oi = static_cast<size_t>(rect.index(x, y));
-              const TypeInfo& ty = m.types[params[ri].type];
-              uint64_t* mine = row.data() + static_cast<size_t>(x - rect.x0) * wpp;
-              std::copy_n(own.data() + ri * wpp, wpp, mine);
-              int nb[4];
-              const int nnb = ty.crosstalk > 0.0 ? neighbours(x, y, nb) : 0;
-              if (nnb > 0) {
-                std::optional<Rng> xt;
-                const auto make_xt = [&] { return streams::crosstalk(seed, pixel_index(x, y), kk); };
-                for (int i = 0; i < nnb; ++i) {
-                  const size_t ni = nb_index(x, y, nb[i]);
-                  const Prob& pn = own_prob[kk * nreg + ni];  // gate-major: neighbours' values are close by
-                  const double li = -pn.log_q, pi = pn.p;
-                  if (!(pi > 0.0)) continue;
-                  // Given that the neighbour avalanched at least once, the chance it fires this pixel: xt for
-                  // pixel B; for pixel A (1 - exp(-xt lambda_i)) / p_i, so that the marginal matches the
-                  // thinned Poisson process of the counts path.
-                  crosstalk_into(xt, make_xt, own.data() + ni * wpp, mine, wpp, [&] {
-                    return ty.single_avalanche ? ty.crosstalk : std::min(1.0, -std::expm1(-ty.crosstalk * li) / pi);
-                  });
-                }
-              }
-              uint32_t c = 0;
-              for (size_t w = 0; w < wpp; ++w) c += popcount64(mine[w]);
-              out.counts[kk * n + oi] = static_cast<uint16_t>(c);
-            }
-            const size_t H_t = static_cast<size_t>(rect.height);
-            uint8_t* dst = out.frames.data() + ((kk * N) * H_t + static_cast<size_t>(y - rect.y0)) * bpr;
-            pack_frames_row(row.data(), rect.width, N, wpp, dst, H_t * bpr);
-          }
+          sample_bits_batch(seed, kk, region_ids.data(), nreg, *m.binom, own_prob.get() + kk * nreg, own.data());
+          frames_tile(shape, xt_key, static_cast<uint32_t>(k), own_prob.get() + kk * nreg, own.data(),
+                      out.counts.data() + kk * n, out.frames.data() + kk * frame_bytes, scratch);
         }
       });
     }

@@ -14,6 +14,8 @@
 // |           | (sweeps) by ARS-7 with counter (0, k, pixel), the walk (2D)   | ARS-7 (0, k, pixel), walk     |
 // |           | by Philox block 0 of (seed, Counts, pixel, k)                 | (seed, Counts, pixel, k)      |
 // | crosstalk | which of a neighbour's avalanches fire the pixel, image k     | (seed, Crosstalk, pixel, k)   |
+// |           | (frames): block 0 one word per direction, then direction d's  |                               |
+// |           | own blocks 1 + d, 5 + d, ... (sampling.h crosstalk_reference) |                               |
 //
 // pixel = y * camera.width_px + x in full-sensor coordinates. chip_map takes the chip's seed
 // (SensorStageConfig::chip_seed, scene-file seeds.chip), the others the temporal noise's

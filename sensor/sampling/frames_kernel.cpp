@@ -253,7 +253,7 @@ HWY_INLINE void DenseBitsBatch(const ArsKeys& keys, uint32_t c1, const uint64_t*
     // One output word (frames f0 .. f0 + 63) from one ARS word vector: below the threshold's top byte
     // (inverted by flip), and the ties (masked by keep) appended.
     const auto word = [&tb, d8w](V32 x, hn::Vec<decltype(d8w)> tb8, uint64_t flip, uint64_t keep, uint64_t* out,
-                                 uint32_t slot, uint32_t f0) HWY_ATTR {
+                                 uint32_t slot, uint32_t f0) HWY_ATTR __attribute__((always_inline)) {
       const auto bytes = hn::BitCast(d8w, x);
       alignas(8) uint8_t lt[8], eqb[8];
       hn::StoreMaskBits(d8w, hn::Lt(bytes, tb8), lt);
@@ -266,7 +266,7 @@ HWY_INLINE void DenseBitsBatch(const ArsKeys& keys, uint32_t c1, const uint64_t*
     };
     // One pixel's words of chunk ch from the chunk's four ARS word vectors (by value: the chains stay
     // in registers).
-    const auto emit = [&](uint32_t slot, uint32_t ch, V32 x0, V32 x1, V32 x2, V32 x3) HWY_ATTR {
+    const auto emit = [&](uint32_t slot, uint32_t ch, V32 x0, V32 x1, V32 x2, V32 x3) HWY_ATTR __attribute__((always_inline)) {
       const auto tb8 = hn::Set(d8w, static_cast<uint8_t>(T[slot] >> 56));
       uint64_t* w = words + static_cast<size_t>(slot) * nw + 4 * static_cast<size_t>(ch);
       const uint64_t flip = flips[slot];
@@ -380,6 +380,16 @@ HWY_INLINE void DenseBitsBatch(const ArsKeys& keys, uint32_t c1, const uint64_t*
   SettleTies(keys, c1, pixels, T, refine_base, nw, words, tb);
 }
 
+// Compress of 64-bit lanes: on AVX-512, vpcompressq in registers (Highway 1.0's Compress looks the lanes up
+// in a constant table that GCC copies onto the stack, 2 KB per call).
+template <class D>
+HWY_INLINE hn::Vec<D> Compress64(D /*d*/, hn::Vec<D> v, hn::Mask<D> m) {
+#if HWY_ARCH_X86 && HWY_TARGET <= HWY_AVX3
+  if constexpr (sizeof(hn::Vec<D>) == 64) return hn::Vec<D>{_mm512_maskz_compress_epi64(m.raw, v.raw)};
+#endif
+  return hn::Compress(v, m);
+}
+
 // Philox on 64-bit lanes: each lane carries one block's 32-bit word in its low half; the high half is
 // ignored (MulEven reads only the low halves; the outputs are the low halves), so the lanes line up with
 // 64-bit data (doubles, thresholds). Bit-identical to Philox10 per block.
@@ -430,6 +440,7 @@ size_t FrameBitsGroup(const uint32_t key[2], uint32_t c1, const uint64_t* HWY_RE
   const auto below = hn::Set(d, sparse_below);
   const auto low32 = hn::Set(du, uint64_t{0xFFFFFFFFu});
   const auto iota64 = hn::Iota(du, uint64_t{0});  // once: Highway 1.0's Iota goes through memory
+  size_t filled = 0;  // pixels whose words were filled in the loop
   for (size_t i = 0; i < count; i += L) {
     hn::Vec<decltype(d)> vp, vq, vl;
     hn::Vec<decltype(du)> pix;
@@ -454,26 +465,37 @@ size_t FrameBitsGroup(const uint32_t key[2], uint32_t c1, const uint64_t* HWY_RE
     const auto is_dense = hn::Gt(a, below);
     const auto is_sparse = hn::AndNot(is_dense, hn::Gt(a, hn::Zero(d)));
     hn::Store(ProbabilityThreshold(d, a), du, T + i);
-    hn::Store(hn::BitCast(du, hn::VecFromMask(d, inv)), du, fill + i);
-    // block 0 of the streams: counter (0, c1, pixel low, pixel high)
-    auto x0 = hn::Zero(du), x1 = hn::Set(du, uint64_t{c1}), x2 = pix, x3 = hn::ShiftRight<32>(pix);
-    Philox10x64(du, key[0], key[1], x0, x1, x2, x3);
-    hn::Store(x0, du, b[0] + i);
-    hn::Store(x1, du, b[1] + i);
-    hn::Store(x2, du, b[2] + i);
-    hn::Store(x3, du, b[3] + i);
-    // BinomialSampler::small_side's first test on U = (word 0, word 1): no rare outcome when n a < 1 and
-    // U >= floor(n a 2^64)
-    const auto U = hn::Or(hn::ShiftLeft<32>(x0), hn::And(x1, low32));
-    const auto mean = hn::Mul(vn, a);
-    const auto none = hn::And(hn::Lt(mean, hn::Set(d, 1.0)), hn::RebindMask(d, hn::Not(hn::Lt(U, ProbabilityThreshold(d, mean)))));
-    const auto go_slow = hn::AndNot(none, is_sparse);
+    const auto fill_v = hn::BitCast(du, hn::VecFromMask(d, inv));
+    hn::Store(fill_v, du, fill + i);
+    if (nw == 4 && i + L <= count) {  // every pixel's words all equal first (see below), four at a time
+      hn::StoreInterleaved4(fill_v, fill_v, fill_v, hn::And(fill_v, hn::Set(du, tail)), du, words + 4 * i);
+      filled = i + L;
+    }
+    // block 0 of the streams (counter (0, c1, pixel low, pixel high)) for the sparse pixels' first binomial
+    // test (BinomialSampler::small_side's, on U = (word 0, word 1)): no rare outcome when n a < 1 and
+    // U >= floor(n a 2^64). Not computed for a vector without a sparse pixel.
+    auto go_slow = hn::RebindMask(d, hn::Zero(du) != hn::Zero(du));
+    if (!hn::AllFalse(d, is_sparse)) {
+      auto x0 = hn::Zero(du), x1 = hn::Set(du, uint64_t{c1}), x2 = pix, x3 = hn::ShiftRight<32>(pix);
+      Philox10x64(du, key[0], key[1], x0, x1, x2, x3);
+      hn::Store(x0, du, b[0] + i);
+      hn::Store(x1, du, b[1] + i);
+      hn::Store(x2, du, b[2] + i);
+      hn::Store(x3, du, b[3] + i);
+      const auto U = hn::Or(hn::ShiftLeft<32>(x0), hn::And(x1, low32));
+      const auto mean = hn::Mul(vn, a);
+      const auto none = hn::And(hn::Lt(mean, hn::Set(d, 1.0)), hn::RebindMask(d, hn::Not(hn::Lt(U, ProbabilityThreshold(d, mean)))));
+      go_slow = hn::AndNot(none, is_sparse);
+    }
     const auto idx = hn::Add(iota64, hn::Set(du, uint64_t{i}));
-    nd += hn::CompressStore(idx, hn::RebindMask(du, is_dense), du, dense + nd);
-    ns += hn::CompressStore(idx, hn::RebindMask(du, go_slow), du, slow_list + ns);
+    // compressed in registers and stored whole (a compressing store to memory is slow on AVX-512)
+    hn::StoreU(Compress64(du, idx, hn::RebindMask(du, is_dense)), du, dense + nd);
+    nd += hn::CountTrue(du, hn::RebindMask(du, is_dense));
+    hn::StoreU(Compress64(du, idx, hn::RebindMask(du, go_slow)), du, slow_list + ns);
+    ns += hn::CountTrue(du, hn::RebindMask(du, go_slow));
   }
   // every pixel's words all equal first (final for a = 0 and for sparse pixels without a rare outcome)
-  for (size_t i = 0; i < count; ++i) {
+  for (size_t i = filled; i < count; ++i) {
     uint64_t* w = words + i * nw;
     for (size_t j = 0; j + 1 < nw; ++j) w[j] = fill[i];
     w[nw - 1] = fill[i] & tail;

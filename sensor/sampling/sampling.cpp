@@ -169,6 +169,141 @@ void sample_bits_batch(uint64_t seed, uint64_t k, const uint64_t* pixels, size_t
   }
 }
 
+double crosstalk_rate(const CrosstalkLaw& law, const Prob& pr) {
+  if (law.single_avalanche) return law.xt;
+  return std::min(1.0, -std::expm1(-law.xt * -pr.log_q) / pr.p);
+}
+
+uint32_t crosstalk_hits_bounded(uint64_t U, uint32_t c, const CrosstalkLaw& law, const Prob& nb, double rho) {
+  constexpr double up = 1.0 + 0x1p-40, down = 1.0 - 0x1p-40;
+  double r_hi = law.xt, r_lo = law.xt;
+  if (!law.single_avalanche) {
+    r_hi = rho * up;
+    const double y = law.xt * -nb.log_q;  // xt lambda: 1 - exp(-y) >= y - y^2 / 2
+    r_lo = rho * (1.0 - 0.5 * y) * down;
+  }
+  const double cd = c;
+  const double t1 = cd * r_hi * up;  // >= c r >= P(H > 0)
+  if (U >= probability_threshold(t1)) return 0;
+  const double pairs = 0.5 * cd * (cd - 1.0), triples = pairs * (cd - 2.0) / 3.0;
+  const double p2_hi = pairs * r_hi * r_hi * up;                  // >= C(c, 2) r^2 >= P(H > 1)
+  const double p2_lo = pairs * r_lo * r_lo * down;                // <= C(c, 2) r^2
+  const double p3_hi = triples * r_hi * r_hi * r_hi * up * up;    // >= C(c, 3) r^3
+  const double slack = t1 * 0x1p-45;
+  const double s_hi = (t1 - p2_lo + p3_hi) * up + slack;          // >= P(H > 0)
+  if (U >= probability_threshold(s_hi)) return 0;
+  const double s_lo = (cd * r_lo * down - p2_hi) * down - slack;  // <= P(H > 0)
+  if (U < probability_threshold(s_lo) && U >= probability_threshold(p2_hi)) return 1;
+  return kCrosstalkUndecided;
+}
+
+void crosstalk_no_hit(uint32_t c, double lr, double& S, double& P0) {
+  S = -std::expm1(static_cast<double>(c) * lr);
+  P0 = S < 0.5 ? 1.0 - S : std::exp(static_cast<double>(c) * lr);
+}
+
+uint32_t crosstalk_hits_exact(uint64_t U, uint32_t c, double r, double S, double P0) {
+  return sequential_search(U, c, r / (1.0 - r), S, P0,
+                           [c](uint32_t x) { return static_cast<double>(c - x) / static_cast<double>(x + 1); });
+}
+
+uint32_t crosstalk_hits(uint64_t U, uint32_t c, const CrosstalkLaw& law, const Prob& nb, double rho) {
+  const uint32_t h = crosstalk_hits_bounded(U, c, law, nb, rho);
+  if (h != kCrosstalkUndecided) return h;
+  const double r = crosstalk_rate(law, nb);
+  double S, P0;
+  crosstalk_no_hit(c, std::log1p(-r), S, P0);
+  return crosstalk_hits_exact(U, c, r, S, P0);
+}
+
+namespace {
+
+uint32_t popcount_words(const uint64_t* w, size_t nw) {
+  uint32_t c = 0;
+  for (size_t i = 0; i < nw; ++i) c += static_cast<uint32_t>(std::popcount(w[i]));
+  return c;
+}
+
+// The frame of set bit t (counted from frame 0) of words.
+uint32_t select_bit(const uint64_t* words, size_t nw, uint32_t t) {
+  for (size_t i = 0; i < nw; ++i) {
+    uint64_t b = words[i];
+    const auto c = static_cast<uint32_t>(std::popcount(b));
+    if (t >= c) {
+      t -= c;
+      continue;
+    }
+    for (; t > 0; --t) b &= b - 1;
+    return static_cast<uint32_t>(64 * i) + static_cast<uint32_t>(std::countr_zero(b));
+  }
+  return ~0u;
+}
+
+}  // namespace
+
+namespace {
+
+// Direction d's words of a crosstalk stream: blocks 1 + d, 5 + d, 9 + d, ..., word 0 first.
+class DirectionReader {
+ public:
+  DirectionReader(const Rng& stream, uint32_t d) : stream_(stream), next_block_(1 + d) {}
+  uint32_t next_u32() {
+    if (used_ == 4) {
+      buf_ = stream_.block(next_block_);
+      next_block_ += 4;
+      used_ = 0;
+    }
+    return buf_[used_++];
+  }
+  uint64_t next_u64() {
+    const uint64_t hi = next_u32();
+    return (hi << 32) | next_u32();
+  }
+
+ private:
+  const Rng& stream_;
+  std::array<uint32_t, 4> buf_{};
+  uint32_t next_block_;
+  unsigned used_ = 4;
+};
+
+}  // namespace
+
+uint32_t crosstalk_reference(const Rng& stream, uint32_t n, const uint64_t* own, const CrosstalkNeighbour nb[4],
+                             const CrosstalkLaw& law, uint64_t* extra) {
+  const size_t nw = (n + 63) / 64;
+  const std::array<uint32_t, 4> w = stream.block(0);
+  std::vector<uint64_t> hits(nw);
+  for (int d = 0; d < 4; ++d) {
+    if (nb[d].bits == nullptr) continue;
+    const uint64_t* theirs = nb[d].bits;
+    const uint32_t ni = popcount_words(theirs, nw);
+    const double rho = crosstalk_rate_bound(law, nb[d].prob);
+    const uint32_t lim = crosstalk_limit(ni, rho);
+    if (!(w[d] < lim || lim == UINT32_MAX)) continue;
+    DirectionReader rng(stream, static_cast<uint32_t>(d));
+    std::fill(hits.begin(), hits.end(), uint64_t{0});
+    if (crosstalk_per_candidate(ni, rho)) {
+      const uint64_t thr = probability_threshold(crosstalk_rate(law, nb[d].prob));
+      for (size_t i = 0; i < nw; ++i)
+        for (uint64_t b = theirs[i]; b != 0; b &= b - 1)
+          if (rng.next_u64() < thr) hits[i] |= b & (~b + 1);
+    } else {
+      const uint64_t U = (uint64_t{w[d]} << 32) | rng.next_u32();
+      const uint32_t h = crosstalk_hits(U, ni, law, nb[d].prob, rho);
+      for (uint32_t j = ni - h; j < ni; ++j) {  // Floyd: a uniformly random h-subset of the neighbour's frames
+        uint32_t f = select_bit(theirs, nw, uniform_below(rng, uint64_t{j} + 1));
+        if ((hits[f / 64] >> (f % 64)) & 1u) f = select_bit(theirs, nw, j);
+        hits[f / 64] |= uint64_t{1} << (f % 64);
+      }
+    }
+    for (size_t i = 0; i < nw; ++i) extra[i] |= hits[i] & ~own[i];
+  }
+  uint32_t added = 0;
+  for (size_t i = 0; i < nw; ++i) added += static_cast<uint32_t>(std::popcount(extra[i]));
+  return added;
+}
+
 void pack_frames_row(const uint64_t* masks, int width, uint32_t n, size_t words_per_pixel, uint8_t* out,
                      size_t frame_stride) {
   for (int bx = 0; bx * 8 < width; ++bx) {

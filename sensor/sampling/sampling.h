@@ -19,6 +19,7 @@
 // from log-factorials; expected steps about 1.6 standard deviations.
 #pragma once
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -131,6 +132,85 @@ void sample_bits_batch(uint64_t seed, uint64_t k, const uint64_t* pixels, size_t
 
 // Which path sample_bits takes (for tests).
 bool bits_are_sparse(const Prob& pr);
+
+// Crosstalk between sampled binary frames (docs/sensor.md, "Crosstalk"). Every frame in which a neighbour
+// avalanched and this pixel did not (a candidate) becomes a crosstalk detection of this pixel with
+// probability r, independently: r = xt for pixel B (one avalanche per frame), r = (1 - exp(-xt lambda)) / p
+// for pixel A (lambda, p: the neighbour's), so that the marginal matches the thinned Poisson process of
+// the counts path. Only the neighbours' own avalanches fire (second-order crosstalk is neglected).
+struct CrosstalkLaw {
+  double xt = 0.0;                // crosstalk probability per avalanche (A) or per avalanche frame (B)
+  bool single_avalanche = false;  // pixel B
+};
+
+// r of a neighbour with probabilities pr (pr.log_q must be -lambda, as probabilities() gives it).
+double crosstalk_rate(const CrosstalkLaw& law, const Prob& pr);
+
+// rho >= r without a transcendental function: xt (B), xt lambda / p (A; 1 - exp(-x) <= x).
+inline double crosstalk_rate_bound(const CrosstalkLaw& law, const Prob& pr) {
+  return law.single_avalanche ? law.xt : law.xt * -pr.log_q / pr.p;
+}
+
+// A neighbour with n avalanche frames and bound rho: each candidate is drawn on its own (one 64-bit
+// uniform each) when rho >= 1/2 or n rho >= 16 (then the binomial inversion would be long or underflow).
+inline bool crosstalk_per_candidate(uint32_t n, double rho) {
+  return !(rho < 0.5) || !(static_cast<double>(n) * rho < 16.0);
+}
+
+// The limit L of the draw's top 32 bits w for a neighbour with n avalanche frames: when w >= L (and
+// L != UINT32_MAX) no hit is possible, because U >= w 2^32 >= n rho 2^64 >= c r 2^64 >= P(hits > 0) 2^64
+// (c <= n candidates). L = ceil(n rho 2^32 (1 + 2^-40)), saturated at UINT32_MAX; 0 when n = 0, UINT32_MAX
+// when per candidate. Only products: the vector kernel forms the same bits.
+inline uint32_t crosstalk_limit(uint32_t n, double rho) {
+  if (n == 0) return 0;
+  if (crosstalk_per_candidate(n, rho)) return UINT32_MAX;
+  const double x = static_cast<double>(n) * rho * 0x1p32 * (1.0 + 0x1p-40);
+  return x >= 4294967295.0 ? UINT32_MAX : static_cast<uint32_t>(std::ceil(x));
+}
+
+// The number of hits H ~ Binomial(c, r) among the c avalanche frames of a neighbour (r of a neighbour with
+// probabilities nb and bound rho = crosstalk_rate_bound; rho < 1/2, c rho < 16) by inversion of the 64-bit
+// uniform U: H = the first h with U >= floor(P(H > h) 2^64).
+uint32_t crosstalk_hits(uint64_t U, uint32_t c, const CrosstalkLaw& law, const Prob& nb, double rho);
+
+// crosstalk_hits' first part: most draws are decided from bounds, without a transcendental function. With
+// r_lo <= r <= r_hi (r itself for pixel B; rho (1 - xt lambda / 2) and rho for pixel A): H = 0 when U >=
+// floor(c r_hi 2^64) or U >= floor(S_hi 2^64); H = 1 when U < floor(S_lo 2^64) and U >= floor(P2_hi 2^64),
+// where S_lo = c r_lo - C(c, 2) r_hi^2 <= P(H > 0) <= S_hi = c r_hi - C(c, 2) r_lo^2 + C(c, 3) r_hi^3
+// (Bonferroni) and P2_hi = C(c, 2) r_hi^2 >= P(H > 1); relative margins of 2^-40 and absolute ones of
+// 2^-45 c r_hi cover the rounding. Otherwise kCrosstalkUndecided.
+inline constexpr uint32_t kCrosstalkUndecided = ~0u;
+uint32_t crosstalk_hits_bounded(uint64_t U, uint32_t c, const CrosstalkLaw& law, const Prob& nb, double rho);
+
+// The rest: S = P(H > 0) = -expm1(c lr) and P0 = P(H = 0) (1 - S while S < 1/2, else exp(c lr)) for lr =
+// log1p(-r), then the sequential search from 0 on P(H > h).
+void crosstalk_no_hit(uint32_t c, double lr, double& S, double& P0);
+uint32_t crosstalk_hits_exact(uint64_t U, uint32_t c, double r, double S, double P0);
+
+// One neighbour of a pixel in crosstalk_reference: its own avalanche frames (nullptr: no neighbour in
+// that direction: outside the image or in another array section) and probabilities.
+struct CrosstalkNeighbour {
+  const uint64_t* bits = nullptr;
+  Prob prob;
+};
+
+// The scalar reference of the frames' crosstalk (the kernel, frames_tile, gives the same bits): the frames
+// in which this pixel (own bits `own`, n frames) is fired by its neighbours nb[0..3] (left, right, up,
+// down), from the pixel's stream Rng(seed, Crosstalk, pixel, k). Each of the n_i avalanche frames of a
+// neighbour fires the pixel with probability r, independently (a frame where the pixel avalanched itself
+// stays as it was: the same law as drawing only in the frames where it did not):
+//  - block 0: word d is the top 32 bits w_d of direction d's uniform U_d;
+//  - direction d reads its other words from its own blocks 1 + d, 5 + d, 9 + d, ... (word 0 first), so
+//    that the directions are independent of each other's draws;
+//  - a direction whose neighbour allows a hit (n_i > 0 and w_d < crosstalk_limit(n_i, rho), or that limit
+//    is UINT32_MAX) draws: per avalanche frame (crosstalk_per_candidate(n_i, rho)) one 64-bit uniform each
+//    (high word first), a hit when below floor(r 2^64); otherwise U_d's low 32 bits, H =
+//    crosstalk_hits(U_d, n_i, ...) and H of the n_i frames as a uniformly random subset (Floyd: for j = n_i
+//    - H .. n_i - 1, t = uniform_below(j + 1), frame t, or frame j if t is taken; frames counted in order).
+// The hits in frames where the pixel did not avalanche are ORed into extra[0 .. ceil(n / 64)) (zero on
+// entry); returns their number.
+uint32_t crosstalk_reference(const Rng& stream, uint32_t n, const uint64_t* own, const CrosstalkNeighbour nb[4],
+                             const CrosstalkLaw& law, uint64_t* extra);
 
 // The 8 x 8 bit matrix transpose: bit c of byte r of the result is bit r of byte c of x.
 inline uint64_t transpose8x8(uint64_t x) {
