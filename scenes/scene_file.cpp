@@ -221,6 +221,11 @@ struct Checker {
 
 // "camera.f_number=2.8" -> (/camera/f_number, 2.8). A value that is not JSON is taken as a string.
 void apply_override(json& doc, const std::string& assignment, Checker& chk) {
+  if (const size_t bad = invalid_utf8_at(assignment); bad != std::string::npos) {
+    chk.errors.push_back(chk.file + ": --set " + printable(assignment) + ": not valid UTF-8 text (byte " +
+                         printable(assignment.substr(bad, 1)) + " at offset " + std::to_string(bad) + ")");
+    return;
+  }
   const size_t eq = assignment.find('=');
   if (eq == std::string::npos || eq == 0) {
     chk.errors.push_back(chk.file + ": --set " + assignment + ": expected KEY=VALUE, e.g. laser.average_power_mW=5");
@@ -272,6 +277,28 @@ void apply_override(json& doc, const std::string& assignment, Checker& chk) {
   }
 }
 
+// A checked value (a scalar, or an array of scalars) as an ordered_json, as ojson::parse(v.dump()) gives it
+// (a non-negative integer becomes unsigned) without the text in between.
+ojson to_ordered(const json& v) {
+  switch (v.type()) {
+    case json::value_t::null: return nullptr;
+    case json::value_t::boolean: return v.get<bool>();
+    case json::value_t::string: return v.get_ref<const std::string&>();
+    case json::value_t::number_float: return v.get<double>();
+    case json::value_t::number_unsigned: return v.get<uint64_t>();
+    case json::value_t::number_integer: {
+      const int64_t i = v.get<int64_t>();
+      return i >= 0 ? ojson(static_cast<uint64_t>(i)) : ojson(i);
+    }
+    case json::value_t::array: {
+      ojson out = ojson::array();
+      for (const json& e : v) out.push_back(e.is_structured() ? ojson::parse(e.dump()) : to_ordered(e));
+      return out;
+    }
+    default: return ojson::parse(v.dump());
+  }
+}
+
 // Defaults filled, in schema order.
 ojson resolve(const json& doc) {
   ojson out = ojson::object();
@@ -285,7 +312,7 @@ ojson resolve(const json& doc) {
       const size_t slash = k.path.find('/', start);
       const std::string part = k.path.substr(start, slash == std::string::npos ? std::string::npos : slash - start);
       if (slash == std::string::npos) {
-        (*node)[part] = ojson::parse(v.dump());
+        (*node)[part] = to_ordered(v);
         break;
       }
       if (!node->contains(part)) (*node)[part] = ojson::object();
@@ -429,6 +456,9 @@ ResolvedRun parse_scene_text(const std::string& text, const std::string& path, c
 }
 
 ResolvedRun load_scene_file(const std::string& path, const std::vector<std::string>& overrides) {
+  // metadata.json records the path as JSON text, which must be UTF-8: refused now, not after the run.
+  if (invalid_utf8_at(path) != std::string::npos)
+    throw Error("scene file " + printable(path) + ": its name is not valid UTF-8 text, which metadata.json needs; rename it");
   return parse_scene_text(read_file_bounded(path, kMaxSceneFileBytes, "scene file"), path, overrides);
 }
 

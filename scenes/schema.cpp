@@ -12,31 +12,27 @@ using json = nlohmann::json;
 using ojson = nlohmann::ordered_json;
 
 // Units as the scene file writes them. A value v in the file is to_si(v) inside; a default is shown as
-// from_si of the field's initializer.
-template <double S>
-double times(double v) {
-  return v * S;
-}
-template <double S>
-double over(double v) {
-  return v / S;
-}
+// from_si of the field's initializer. (Lambdas, not a template on the scale: clang 14, which builds the
+// fuzzing harnesses, has no floating-point template parameters.)
+#define SCALED_UNIT(name, scale) \
+  Unit { name, [](double v) { return v * (scale); }, [](double v) { return v / (scale); } }
 double deg_to_rad(double v) { return v * kPi / 180.0; }
 double rad_to_deg(double v) { return v * 180.0 / kPi; }
 
-constexpr Unit plain(const char* name) { return {name, times<1.0>, over<1.0>}; }
+constexpr Unit plain(const char* name) { return SCALED_UNIT(name, 1.0); }
 constexpr Unit kNone = plain("");
 constexpr Unit kMetre = plain("m");
 constexpr Unit kPixel = plain("px");
-constexpr Unit kUmUnit{"um", times<kUm>, over<kUm>};
-constexpr Unit kMmUnit{"mm", times<kMm>, over<kMm>};
-constexpr Unit kNmUnit{"nm", times<kNm>, over<kNm>};
-constexpr Unit kNsUnit{"ns", times<kNs>, over<kNs>};
-constexpr Unit kPsUnit{"ps", times<kPs>, over<kPs>};
-constexpr Unit kUsUnit{"us", times<kUs>, over<kUs>};
-constexpr Unit kMilliwatt{"mW", times<kMm>, over<kMm>};
-constexpr Unit kMegahertz{"MHz", times<1e6>, over<1e6>};
+constexpr Unit kUmUnit = SCALED_UNIT("um", kUm);
+constexpr Unit kMmUnit = SCALED_UNIT("mm", kMm);
+constexpr Unit kNmUnit = SCALED_UNIT("nm", kNm);
+constexpr Unit kNsUnit = SCALED_UNIT("ns", kNs);
+constexpr Unit kPsUnit = SCALED_UNIT("ps", kPs);
+constexpr Unit kUsUnit = SCALED_UNIT("us", kUs);
+constexpr Unit kMilliwatt = SCALED_UNIT("mW", kMm);
+constexpr Unit kMegahertz = SCALED_UNIT("MHz", 1e6);
 constexpr Unit kDegree{"deg", deg_to_rad, rad_to_deg};
+#undef SCALED_UNIT
 
 const RunConfig& defaults() {
   static const RunConfig d;

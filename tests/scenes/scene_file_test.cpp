@@ -10,6 +10,7 @@
 
 #include "core/error.h"
 #include "core/units.h"
+#include "scenes/input.h"
 #include "scenes/scene_file.h"
 
 namespace spadgen::scenes {
@@ -264,6 +265,42 @@ TEST_F(SceneFileTest, ExposureLongerThanAFrameIsAWarning) {
 }
 
 // Issue 14: what used to crash, hang or pass silently is refused at the boundary, naming the key.
+
+// Found by fuzz/fuzz_set (fuzz/regressions/set/): a --set value that is not UTF-8 reached nlohmann's dump
+// in a message or in the resolved scene file and ended as an internal error (std::terminate in a harness).
+TEST_F(SceneFileTest, OverridesThatAreNotUtf8AreRefusedAsSuch) {
+  const std::string file = R"({"gltf": "s.gltf"})";
+  EXPECT_THAT(error_of(file, {"acquisition.mode=\"gate_\xff\xffsweep\""}),
+              HasSubstr(": --set acquisition.mode=\"gate_\\xFF\\xFFsweep\": not valid UTF-8 text (byte \\xFF at offset 23)"));
+  EXPECT_THAT(error_of(file, {"description=caf\xe9"}), HasSubstr("not valid UTF-8 text (byte \\xE9 at offset 15)"));
+  EXPECT_THAT(error_of(file, {"camera.f_n\xc3umber=2"}), HasSubstr("not valid UTF-8"));
+  // Well-formed UTF-8 is text like any other.
+  EXPECT_EQ(parse(file, {"description=caf\xc3\xa9 \xe2\x82\xac \xf0\x9f\x93\xb7"}).resolved["description"], "caf\xc3\xa9 \xe2\x82\xac \xf0\x9f\x93\xb7");
+}
+
+TEST(Utf8, MalformedSequencesAreFoundAtTheirFirstByte) {
+  EXPECT_EQ(invalid_utf8_at("plain ascii"), std::string::npos);
+  EXPECT_EQ(invalid_utf8_at("\xc3\xa9\xe2\x82\xac\xf0\x9f\x93\xb7\xf4\x8f\xbf\xbf"), std::string::npos);
+  EXPECT_EQ(invalid_utf8_at("ab\x80"), 2u);               // a continuation byte alone
+  EXPECT_EQ(invalid_utf8_at("ab\xc3"), 2u);               // cut short
+  EXPECT_EQ(invalid_utf8_at("\xc0\xaf"), 0u);             // overlong '/'
+  EXPECT_EQ(invalid_utf8_at("\xe0\x80\xaf"), 0u);         // overlong
+  EXPECT_EQ(invalid_utf8_at("x\xed\xa0\x80"), 1u);        // a UTF-16 surrogate
+  EXPECT_EQ(invalid_utf8_at("\xf4\x90\x80\x80"), 0u);     // past U+10FFFF
+  EXPECT_EQ(invalid_utf8_at("\xff"), 0u);
+  EXPECT_EQ(printable("a\xff\n"), "a\\xFF\\x0A");
+}
+
+TEST_F(SceneFileTest, ASceneFileWhoseNameIsNotUtf8IsRefusedBeforeTheRun) {
+  const std::string name = (dir_ / "sc\xe9ne.json").string();
+  std::ofstream(name) << R"({"gltf": "s.gltf"})";
+  try {
+    load_scene_file(name);
+    ADD_FAILURE() << "no error";
+  } catch (const Error& e) {
+    EXPECT_THAT(std::string(e.what()), HasSubstr("sc\\xE9ne.json: its name is not valid UTF-8 text"));
+  }
+}
 
 TEST_F(SceneFileTest, ANumberBeyondTheDoubleRangeNamesItsKeyAndPlace) {
   const std::string msg = error_of("{\"gltf\": \"s.gltf\",\n \"laser\": {\"average_power_mW\": 1e309}}");
