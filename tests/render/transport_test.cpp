@@ -145,6 +145,25 @@ TEST(Transport, AmbientEnvironmentGivesTheCosFourthFalloff) {
     }
 }
 
+// ambient.spectral_irradiance_W_m2_nm replaces illuminance_lux (it was once read by nothing): s W/m^2/nm is
+// s * 683 * 106.857 lux, and the lux figure is then ignored.
+TEST(Transport, SpectralIrradianceReplacesIlluminance) {
+  RenderStageConfig lux = test_config(8, 8, 110e-6);
+  lux.render.samples_per_pixel = 4;
+  lux.ambient.illuminance_lux = 50.0;
+  RenderStageConfig spectral = lux;
+  spectral.ambient.illuminance_lux = 3.0;  // ignored
+  spectral.ambient.spectral_irradiance_W_m2_nm = 50.0 / (683.0 * 106.857);
+  const scenes::Scene scene = plane_scene(1.0f, 0.5f);
+  const TransientTile a = Renderer(scene, lux).transient({0, 0, 8, 8}, {0, 0, 8, 8}, TimeAxis{});
+  const TransientTile b = Renderer(scene, spectral).transient({0, 0, 8, 8}, {0, 0, 8, 8}, TimeAxis{});
+  ASSERT_EQ(a.ambient_rate.size(), b.ambient_rate.size());
+  for (size_t i = 0; i < a.ambient_rate.size(); ++i) {
+    EXPECT_GT(a.ambient_rate[i], 0.0f);
+    EXPECT_NEAR(b.ambient_rate[i], a.ambient_rate[i], 1e-6 * a.ambient_rate[i]);
+  }
+}
+
 TEST(Transport, TiltedPlaneArrivalTimesFollowItsGeometry) {
   scenes::Scene s;
   const double tilt = 40.0 * kPi / 180.0;
