@@ -427,6 +427,21 @@ void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string
   }
 }
 
+// Keys the scene file or --set gives a value other than their default although the other settings make
+// them do nothing (Key::ignored): a gate sweep's step in the intensity mode is a mistake about the mode.
+void ignored_keys(const json& doc, const RunConfig& c, std::vector<std::string>& warnings) {
+  for (const Key& k : schema()) {
+    if (!k.ignored) continue;
+    const json::json_pointer ptr(k.path);
+    if (!doc.contains(ptr) || doc.at(ptr) == k.def) continue;
+    const std::string why = k.ignored(c);
+    if (why.empty()) continue;
+    std::string dotted = k.path.substr(1);
+    std::replace(dotted.begin(), dotted.end(), '/', '.');
+    warnings.push_back(dotted + ": set to " + short_dump(doc.at(ptr)) + " but does nothing: " + why);
+  }
+}
+
 std::string join_errors(const std::vector<std::string>& errors) {
   std::string out = errors.size() == 1 ? "" : std::to_string(errors.size()) + " errors in the scene file:\n";
   for (size_t i = 0; i < errors.size(); ++i) out += (i ? "\n" : "") + errors[i];
@@ -452,6 +467,7 @@ ResolvedRun parse_scene_text(const std::string& text, const std::string& path, c
   run.config = to_config(run.resolved, path);
   check_consistency(run.config, chk, run.warnings);
   if (!chk.errors.empty()) throw Error(join_errors(chk.errors));
+  ignored_keys(doc, run.config, run.warnings);
   return run;
 }
 

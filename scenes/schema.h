@@ -40,6 +40,10 @@ struct Key {
   // Stores a valid value (in the key's unit, as resolved) into its RunConfig field, in SI. Paths are made
   // absolute against `dir`, the scene file's folder. Null for keys that fill no field (description).
   std::function<void(RunConfig&, const nlohmann::ordered_json&, const std::string& dir)> set;
+  // Why the key does nothing under the other settings (e.g. "acquisition.mode is \"intensity\""), or "" when
+  // it takes effect; null for keys that always do. A scene file or --set giving such a key a value other than
+  // its default gets a warning (the default changes nothing either way).
+  std::function<std::string(const RunConfig&)> ignored;
 };
 
 // Every key of a scene file, in the order the resolved scene file lists them.

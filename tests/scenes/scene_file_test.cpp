@@ -264,6 +264,63 @@ TEST_F(SceneFileTest, ExposureLongerThanAFrameIsAWarning) {
   EXPECT_TRUE(parse(R"({"gltf": "s.gltf"})").warnings.empty());
 }
 
+// A key that the other settings make do nothing, given a value other than its default, is a warning naming
+// the key, its value and the setting that ignores it; at its default, or where it takes effect, it is not.
+TEST_F(SceneFileTest, KeysThatDoNothingInTheChosenModeAreWarnings) {
+  struct Case {
+    std::vector<std::string> set;
+    std::string warning;  // "" = none
+  };
+  const std::vector<Case> cases = {
+      {{"acquisition.mode=intensity", "acquisition.gate_sweep.step_ps=50"},
+       "acquisition.gate_sweep.step_ps: set to 50 but does nothing: acquisition.mode is \"intensity\""},
+      {{"acquisition.mode=intensity", "acquisition.cycles_per_frame=10"}, "acquisition.cycles_per_frame: set to 10"},
+      {{"acquisition.intensity.exposure_us=2"}, "acquisition.intensity.exposure_us: set to 2 but does nothing: acquisition.mode is \"gate_sweep\""},
+      {{"acquisition.mode=intensity", "acquisition.intensity.dual_ratio=4"},
+       "acquisition.intensity.dual_ratio: set to 4 but does nothing: acquisition.intensity.exposure is \"single\""},
+      {{"laser.half_angle_deg=5"}, "laser.half_angle_deg: set to 5 but does nothing: laser.beam is \"flood\""},
+      {{"laser.gltf_light=Spot"}, "laser.gltf_light: set to \"Spot\" but does nothing: laser.beam is \"flood\""},
+      {{"camera.gltf_camera=Camera", "camera.position_m=[0,0,2]"}, "camera.position_m: set to [0,0,2] but does nothing: camera.gltf_camera is \"Camera\""},
+      {{"camera.vertical_fov_deg=30", "camera.focal_length_mm=8"}, "camera.focal_length_mm: set to 8 but does nothing: camera.vertical_fov_deg is set"},
+      {{"outputs.transient_crop=[0,0,8,8]"}, "outputs.transient_crop: set to [0,0,8,8] but does nothing: outputs.transient is false"},
+      {{"render.split_direct_indirect=true"}, "render.split_direct_indirect: set to true but does nothing: outputs.transient is false"},
+      {{"ambient.spectral_irradiance_W_m2_nm=0.001", "ambient.illuminance_lux=20"},
+       "ambient.illuminance_lux: set to 20 but does nothing: ambient.spectral_irradiance_W_m2_nm is set"},
+      {{"sensor.preset=pixel_A", "sensor.pixel_B.fill_factor=0.5"}, "sensor.pixel_B.fill_factor: set to 0.5 but does nothing: sensor.preset is \"pixel_A\""},
+      {{"sensor.preset=pixel_B", "sensor.pixel_A.pdp_peak=0.5"}, "sensor.pixel_A.pdp_peak: set to 0.5 but does nothing: sensor.preset is \"pixel_B\""},
+      {{"sensor.preset=full_chip", "camera.height_px=1", "sensor.pixel_A.pdp_peak=0.5"}, "sensor.pixel_A.pdp_peak: set to 0.5 but does nothing: camera.height_px is 1"},
+      {{"sensor.dark_counts=false", "sensor.pixel_A.dcr_median_cps=100"}, "sensor.pixel_A.dcr_median_cps: set to 100 but does nothing: sensor.dark_counts is false"},
+      {{"sensor.crosstalk=false", "sensor.pixel_A.crosstalk_probability=0.1"}, "but does nothing: sensor.crosstalk is false"},
+      {{"sensor.pdp_nonuniformity=false", "sensor.pixel_A.pdp_nonuniformity=0.1"}, "but does nothing: sensor.pdp_nonuniformity is false"},
+      {{"sensor.gate_skew=false", "sensor.gate.skew_fwhm_ps=100"}, "sensor.gate.skew_fwhm_ps: set to 100 but does nothing: sensor.gate_skew is false"},
+      // Where the keys take effect, or hold their default, nothing is said.
+      {{"acquisition.gate_sweep.step_ps=50", "acquisition.cycles_per_frame=10"}, ""},
+      {{"acquisition.mode=intensity", "acquisition.gate_sweep.step_ps=36", "acquisition.intensity.exposure_us=2"}, ""},
+      {{"acquisition.mode=intensity", "acquisition.frames=256", "acquisition.intensity.exposure=dual", "acquisition.intensity.dual_ratio=4"}, ""},
+      {{"laser.beam=cone", "laser.half_angle_deg=5"}, ""},
+      {{"camera.position_m=[0,0,2]", "camera.focal_length_mm=8"}, ""},
+      {{"outputs.transient=true", "render.split_direct_indirect=true", "outputs.transient_crop=[0,0,8,8]"}, ""},
+      {{"sensor.preset=full_chip", "sensor.pixel_A.pdp_peak=0.5", "sensor.pixel_B.pdp_peak=0.5"}, ""},
+      {{"sensor.gate.skew_fwhm_ps=100", "sensor.pixel_A.dcr_median_cps=100"}, ""},
+  };
+  for (const Case& c : cases) {
+    std::string set;
+    for (const std::string& o : c.set) set += " --set " + o;
+    const std::vector<std::string> warnings = parse(R"({"gltf": "s.gltf"})", c.set).warnings;
+    if (c.warning.empty()) {
+      EXPECT_TRUE(warnings.empty()) << set << ": " << (warnings.empty() ? "" : warnings[0]);
+    } else {
+      ASSERT_EQ(warnings.size(), 1u) << set;
+      EXPECT_THAT(warnings[0], HasSubstr(c.warning)) << set;
+    }
+  }
+  // The same from the file itself; the resolved file (sense reads it) says the same, and no more.
+  const ResolvedRun r = parse(R"({"gltf": "s.gltf", "acquisition": {"mode": "intensity", "gate_sweep": {"step_ps": 50, "start_ns": 0.6}}})");
+  ASSERT_EQ(r.warnings.size(), 1u);
+  EXPECT_THAT(r.warnings[0], HasSubstr("acquisition.gate_sweep.step_ps: set to 50 but does nothing"));
+  EXPECT_EQ(parse(r.resolved.dump()).warnings, r.warnings);
+}
+
 // Issue 14: what used to crash, hang or pass silently is refused at the boundary, naming the key.
 
 // Found by fuzz/fuzz_set (fuzz/regressions/set/): a --set value that is not UTF-8 reached nlohmann's dump
