@@ -303,7 +303,7 @@ ojson to_ordered(const json& v) {
 ojson resolve(const json& doc) {
   ojson out = ojson::object();
   for (const Key& k : schema()) {
-    const json::json_pointer ptr(k.path);
+    const json::json_pointer& ptr = k.pointer;
     json v = doc.contains(ptr) ? doc.at(ptr) : k.def;
     // Nested sections are created in schema order as their first key appears.
     ojson* node = &out;
@@ -329,7 +329,7 @@ RunConfig to_config(const ojson& r, const std::string& scene_path) {
                                              : std::filesystem::absolute(scene_path).parent_path().string();
   c.scene_file = scene_path.empty() ? "" : std::filesystem::absolute(scene_path).lexically_normal().string();
   for (const Key& k : schema())
-    if (k.set) k.set(c, r.at(ojson::json_pointer(k.path)), dir);
+    if (k.set) k.set(c, r.at(k.pointer), dir);
   return c;
 }
 
@@ -432,7 +432,7 @@ void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string
 void ignored_keys(const json& doc, const RunConfig& c, std::vector<std::string>& warnings) {
   for (const Key& k : schema()) {
     if (!k.ignored) continue;
-    const json::json_pointer ptr(k.path);
+    const json::json_pointer& ptr = k.pointer;
     if (!doc.contains(ptr) || doc.at(ptr) == k.def) continue;
     const std::string why = k.ignored(c);
     if (why.empty()) continue;
@@ -458,7 +458,7 @@ ResolvedRun parse_scene_text(const std::string& text, const std::string& path, c
   for (const std::string& o : overrides) apply_override(doc, o, chk);
   chk.walk(doc, "");
   for (const Key& k : schema())
-    if (k.required && !doc.contains(json::json_pointer(k.path)))
+    if (k.required && !doc.contains(k.pointer))
       chk.error(k.path, "missing; expected " + expected_text(k) + " (" + k.doc + ")");
   if (!chk.errors.empty()) throw Error(join_errors(chk.errors));
 

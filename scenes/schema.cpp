@@ -63,6 +63,7 @@ constexpr Range kWorld = closed(-1e6, 1e6);
 Key make(std::string path, Type type, std::string unit, std::string doc) {
   Key k;
   k.path = std::move(path), k.type = type, k.unit = std::move(unit), k.doc = std::move(doc);
+  k.pointer = nlohmann::json::json_pointer(k.path);
   return k;
 }
 

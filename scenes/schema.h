@@ -27,6 +27,7 @@ struct Unit {
 
 struct Key {
   std::string path;  // JSON pointer, e.g. "/camera/f_number"
+  nlohmann::json::json_pointer pointer;  // the same, parsed once (json and ordered_json share the type)
   Type type = Type::Number;
   nlohmann::json def;  // in the key's unit; null for nullable keys without one; required keys have none
   double lo = -std::numeric_limits<double>::infinity();
