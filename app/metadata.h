@@ -47,6 +47,7 @@ struct RunRecord {
   nlohmann::json camera;           // camera_json()
   double photons_per_pulse_emitted = 0.0;
   double laser_total = 0.0, out_of_window_total = 0.0;  // photons per pulse, summed over the image
+  double beyond_period_total = 0.0;  // of laser_total, from beyond the unambiguous range (run only: app/warnings.h)
   int ground_truth_layers = 0;
   bool counts_u8 = true;
   PixelRect transient_crop;

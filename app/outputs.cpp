@@ -82,6 +82,7 @@ class Outputs::Images {
     if (intensity_decl_) intensity_ch_ = {intensity_.channel("counts"), intensity_.channel("photons")};
     pixel_laser_.assign(size_t(img.count()), 0.0);
     pixel_oow_.assign(size_t(img.count()), 0.0);
+    pixel_beyond_.assign(size_t(img.count()), 0.0);
   }
 
   void put_ground_truth(const GroundTruthTile& g) {
@@ -102,6 +103,7 @@ class Outputs::Images {
       laser_ch_[0][o] = float(t.laser_total[d]), laser_ch_[1][o] = float(t.out_of_window[d]);
       ambient_ch_[o] = t.ambient_rate[d];
       pixel_laser_[o] = t.laser_total[d], pixel_oow_[o] = t.out_of_window[d];
+      if (!t.beyond_period.empty()) pixel_beyond_[o] = t.beyond_period[d];
       maps_ch_[0][o] = m.gate_skew_ps[i], maps_ch_[1][o] = m.gate_length_ps[i];
       maps_ch_[2][o] = m.dcr_cps[i], maps_ch_[3][o] = m.pde[i];
       if (intensity_decl_) intensity_ch_[0][o] = s.intensity_counts[i], intensity_ch_[1][o] = s.intensity_photons[i];
@@ -111,6 +113,7 @@ class Outputs::Images {
   // Per-pixel sums in image order, so they do not depend on the tile size.
   double laser_total() const { return std::accumulate(pixel_laser_.begin(), pixel_laser_.end(), 0.0); }
   double out_of_window_total() const { return std::accumulate(pixel_oow_.begin(), pixel_oow_.end(), 0.0); }
+  double beyond_period_total() const { return std::accumulate(pixel_beyond_.begin(), pixel_beyond_.end(), 0.0); }
   // The deepest layer any pixel has; layer channels beyond it are not written.
   int deepest_layer() const {
     if (!gt_on_) return 0;
@@ -173,7 +176,7 @@ class Outputs::Images {
   writers::ExrImage gt_, laser_, ambient_, maps_, intensity_;
   std::vector<float*> gt_ch_, layer_range_, layer_trans_, laser_ch_, maps_ch_, intensity_ch_;
   float* ambient_ch_ = nullptr;
-  std::vector<double> pixel_laser_, pixel_oow_;
+  std::vector<double> pixel_laser_, pixel_oow_, pixel_beyond_;
 };
 
 // The NumPy stacks, streamed to disk tile by tile.
@@ -311,6 +314,7 @@ void Outputs::commit() { stacks_->commit(); }
 
 void Outputs::report(RunRecord& r) const {
   r.laser_total = images_->laser_total(), r.out_of_window_total = images_->out_of_window_total();
+  r.beyond_period_total = images_->beyond_period_total();
   r.ground_truth_layers = images_->deepest_layer();
   r.counts_u8 = stacks_->counts_u8();
   r.transient_crop = stacks_->transient_crop();

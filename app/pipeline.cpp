@@ -18,6 +18,7 @@
 #include "app/resources.h"
 #include "app/run_parts.h"
 #include "app/staging.h"
+#include "app/warnings.h"
 #include "core/error.h"
 #include "core/units.h"
 #include "render/camera.h"
@@ -54,6 +55,11 @@ RunResult run(const RunOptions& options) {
 
   const scenes::Scene scene = scenes::load_gltf(cfg.gltf_path, cfg.gltf_scene);
   for (const std::string& w : scene.warnings) std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
+  std::vector<std::string> warnings = scene.warnings;  // for metadata.json, with those of the run (app/warnings.h)
+  const auto warn = [&](const std::vector<std::string>& ws) {
+    for (const std::string& w : ws) std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str()), warnings.push_back(w);
+  };
+  warn(camera_warnings(cfg, scene));
   sensor::SensorModel sensor(sensor_stage(cfg));
   if (!cfg.sensor.gate.maps_exr.empty()) {
     const writers::ExrData maps = writers::read_exr(cfg.sensor.gate.maps_exr);
@@ -126,8 +132,12 @@ RunResult run(const RunOptions& options) {
   record.camera = camera_json(render::Camera(cfg.camera, scene), img);
   record.threads = options.threads;
   record.seconds = render_seconds;
-  for (const auto& st : tile_stats) record.rays.camera_rays += st.camera_rays, record.rays.shadow_rays += st.shadow_rays;
-  writers::write_json(staging.path("metadata.json"), metadata(resolved, scene.warnings, sensor, prov, axis, record));
+  for (const auto& st : tile_stats) {
+    record.rays.camera_rays += st.camera_rays, record.rays.shadow_rays += st.shadow_rays;
+    record.rays.camera_hits += st.camera_hits;
+  }
+  warn(light_warnings(cfg, img, record));
+  writers::write_json(staging.path("metadata.json"), metadata(resolved, warnings, sensor, prov, axis, record));
 
   InterruptGuard::check();
   outputs.commit();
@@ -145,6 +155,7 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
   std::ostringstream o;
   o << "# resolved scene file " << c.scene_file << "\n" << r.resolved.dump(2) << "\n\n";
   o << "# glTF\n" << scenes::summarize(scene) << "\n";
+  const std::vector<std::string> camera = camera_warnings(c, scene);
   const TimeAxis axis = time_axis(c, sensor);
   const PixelRect img = image_rect(c);
   check_derived(c, sensor, img, axis);
@@ -164,6 +175,7 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
   o << "\n";
   o << "resources: " << resource_summary(plan_resources(c, sensor, img, axis, 0, ""));
   for (const std::string& w : r.warnings) o << "warning: " << w << "\n";
+  for (const std::string& w : camera) o << "warning: " << w << "\n";
   return o.str();
 }
 

@@ -25,6 +25,7 @@
 #include "app/run_parts.h"
 #include "app/staging.h"
 #include "core/error.h"
+#include "scenes/input.h"
 #include "scenes/scene_file.h"
 #include "sensor/model/pixel_layout.h"
 #include "sensor/sensor.h"
@@ -83,6 +84,8 @@ std::string text(uint64_t v) { return std::to_string(v); }
 }  // namespace
 
 std::vector<RunResult> sense(const SenseOptions& options) {
+  if (scenes::invalid_utf8_at(options.run_dir) != std::string::npos)  // metadata.json records it
+    throw Error(scenes::printable(options.run_dir) + ": the run folder's name is not valid UTF-8 text, which metadata.json needs; rename it");
   const fs::path src = options.run_dir;
   const json meta = read_metadata(src);
   if (!meta.contains("light"))

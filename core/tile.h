@@ -55,6 +55,10 @@ struct TransientTile {
   std::vector<double> out_of_window;
   // per data pixel, steady ambient photon rate arriving at the SPAD, photons per second
   std::vector<float> ambient_rate;
+  // Optional (the renderer fills it; empty for light read back by `spadgen sense`), per data pixel: photons
+  // per pulse whose time of flight is one laser period or more (from beyond the unambiguous range, folded
+  // onto the next pulse's returns), part of laser_total.
+  std::vector<double> beyond_period;
   // Optional, per data pixel: every non-zero bin of the pixel (in transient and transient_indirect) lies in
   // [bin_lo, bin_hi). The renderer fills them with the bins it wrote; empty means unknown (the sensor then
   // scans every bin). bin_lo >= bin_hi: no light in the window.

@@ -71,6 +71,7 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
   transmission_ = scene.has_transmission();
   ambient_on_ = ambient.any() || shading.has_emission();
   optics_ = config.camera.optics_transmission;
+  period_opl_ = kSpeedOfLight / config.laser.repetition_rate_Hz;
   // The one check left here is of the interface, not of the scene file: the rows the caller describes.
   if (config.row_fill_factor.size() != static_cast<size_t>(camera.height()))
     throw Error("renderer: RenderStageConfig::row_fill_factor holds " + std::to_string(config.row_fill_factor.size()) +
@@ -269,8 +270,10 @@ inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, co
   const Spec tr = shadow_transmittance(lr.origin, wi, float(r), v.shadow_medium_towards(wi), &extra, rays, first);
   if (!(tr.x > 0.0f)) return;
   const double value = double(v.beta.x) * f.x * tr.x * intensity / (r * r) * w;
-  deposit(value, config_.laser.emission_delay_s + (v.opl + r + extra) / kSpeedOfLight, film.axis, film.bins,
-          film.totals, v.vertices > 0 ? film.indirect_bins : nullptr);
+  const double opl = v.opl + r + extra;
+  if (opl >= period_opl_) film.totals->beyond_period += value;
+  deposit(value, config_.laser.emission_delay_s + opl / kSpeedOfLight, film.axis, film.bins, film.totals,
+          v.vertices > 0 ? film.indirect_bins : nullptr);
 }
 
 // Without an ambient source (ambient_on_ false) a laser-only render skips the ambient sums altogether.
@@ -395,6 +398,7 @@ PixelTotals Integrator::render_pixel(int x, int y, const CameraBlock& block, con
     const double w = k * ct * ct * ct * ct;  // the camera's cos^4 falloff
     const double ambient = trace_path(block, j, w, film, rays);
     out.ambient_rate += ambient * w;
+    out.camera_hits += block.found[j] != 0;
   }
   return out;
 }

@@ -22,6 +22,10 @@ namespace spadgen::render {
 struct PixelTotals {
   double laser_total = 0.0;    // photons per pulse, every contribution
   double out_of_window = 0.0;  // photons per pulse with no periodic image inside the window
+  // Photons per pulse whose time of flight (optical path / c) is one laser period or more: returns from
+  // beyond the unambiguous range c / (2 f_rep), which fold onto the earlier ones of the next pulse.
+  double beyond_period = 0.0;
+  int camera_hits = 0;         // samples whose camera ray hit a surface
   double ambient_rate = 0.0;   // photons per second
   // Range of bins written, [bin_lo, bin_hi) (empty when bin_lo >= bin_hi): a pixel's returns usually span
   // a small part of a long window, so only this range is converted and cleared afterwards.
@@ -145,6 +149,7 @@ class Integrator {
   bool transmission_ = false;
   bool ambient_on_ = false;
   double optics_ = 1.0;
+  double period_opl_ = 0.0;  // c / f_rep: the optical path of one laser period, metres
 };
 
 }  // namespace spadgen::render

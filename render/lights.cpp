@@ -57,8 +57,12 @@ Ambient make_ambient(const RenderStageConfig& config, const scenes::Scene& scene
   const AmbientConfig& a = config.ambient;
   const double k = photons_per_second_per_photometric_unit(a.wavelength_m, a.bandwidth_m);
   Ambient amb;
+  // ambient.spectral_irradiance_W_m2_nm, when set, replaces illuminance_lux: s W/m^2/nm of an equal-energy
+  // spectrum is s * 683 lm/W * 106.857 nm lux (render/spectrum.h).
+  const double lux = a.spectral_irradiance_W_m2_nm ? *a.spectral_irradiance_W_m2_nm * kLuminousEfficacy * kIntegralVLambdaNm
+                                                   : a.illuminance_lux;
   // A uniform sky of radiance L gives illuminance pi L on any plane it fully covers.
-  amb.environment_radiance = a.illuminance_lux * k / kPi;
+  amb.environment_radiance = lux * k / kPi;
   if (!a.gltf_lights) return amb;
   for (size_t i = 0; i < scene.lights.size(); ++i) {
     if (static_cast<int>(i) == laser_light) continue;

@@ -76,12 +76,14 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
   tile.laser_total.assign(n, 0.0);
   tile.out_of_window.assign(n, 0.0);
   tile.ambient_rate.assign(n, 0.0f);
+  tile.beyond_period.assign(n, 0.0);
   if (bins > 0) {
     tile.bin_lo.assign(n, 0);
     tile.bin_hi.assign(n, 0);
   }
 
   std::atomic<uint64_t> camera_rays{0}, shadow_rays{0};
+  std::vector<int> camera_hits(n, 0);
   tbb::parallel_for(tbb::blocked_range<int>(data_rect.y0, data_rect.y1()), [&](const tbb::blocked_range<int>& rows) {
     // Accumulated in double per pixel; stored as float. Pixels are independent, so the split into tasks
     // does not change any result. Only the bins a pixel touched are copied out and cleared again.
@@ -114,6 +116,8 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
         }
         tile.laser_total[i] = t.laser_total;
         tile.out_of_window[i] = t.out_of_window;
+        tile.beyond_period[i] = t.beyond_period;
+        camera_hits[i] = t.camera_hits;
         tile.ambient_rate[i] = static_cast<float>(t.ambient_rate);
       }
     camera_rays += rays.camera;
@@ -122,6 +126,8 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
   if (stats) {
     stats->camera_rays += camera_rays.load();
     stats->shadow_rays += shadow_rays.load();
+    for (int y = rect.y0; y < rect.y1(); ++y)
+      for (int x = rect.x0; x < rect.x1(); ++x) stats->camera_hits += static_cast<uint64_t>(camera_hits[size_t(data_rect.index(x, y))]);
   }
   return tile;
 }

@@ -33,6 +33,7 @@ namespace spadgen::render {
 
 struct RenderStats {
   uint64_t camera_rays = 0, shadow_rays = 0;
+  uint64_t camera_hits = 0;  // samples of the pixels of rect (the halo left out) whose camera ray hit a surface
 };
 
 class Renderer {

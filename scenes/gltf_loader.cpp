@@ -1070,7 +1070,13 @@ Scene load_gltf(const std::string& path, const std::string& scene_name) {
   const std::string problem = file_problem(path, kMaxGltfFileBytes);
   if (problem == "does not exist") throw Error(path + ": glTF file not found");
   if (!problem.empty()) throw Error(path + ": the glTF file " + problem);
-  const std::string bytes = read_file_bounded(path, kMaxGltfFileBytes, "glTF file");
+  return parse_gltf(read_file_bounded(path, kMaxGltfFileBytes, "glTF file"), path, scene_name);
+}
+
+Scene parse_gltf(const std::string& bytes, const std::string& path, const std::string& scene_name) {
+  if (bytes.size() > kMaxGltfFileBytes)
+    throw Error(path + ": the glTF file is " + size_text(bytes.size()) + ", larger than the " + size_text(kMaxGltfFileBytes) +
+                " spadgen reads");
   // .glb and .gltf are told apart by content: exporters and users both mislabel them.
   bool binary = false;
   const std::string json_text = gltf_json(path, bytes, &binary);

@@ -40,6 +40,14 @@ struct JsonOptions {
 // than kMaxJsonDepth, and (when asked) a key that appears twice in one object (with its path).
 nlohmann::json parse_json(const std::string& text, const std::string& where, const JsonOptions& options = {});
 
+// The offset of the first byte of `text` that is not part of well-formed UTF-8 (overlong forms, surrogates
+// and code points past U+10FFFF included), or std::string::npos. JSON holds UTF-8 text only: a --set value
+// or a path that is not would make writing metadata.json fail after the whole run.
+size_t invalid_utf8_at(const std::string& text);
+
+// `text` for a message: bytes outside printable ASCII shown as \xHH.
+std::string printable(const std::string& text);
+
 // "line:column" (both from 1) of byte `offset` of `text`.
 std::string line_column(const std::string& text, size_t offset);
 

@@ -102,6 +102,10 @@ struct Scene {
 // (or scene 0). Throws spadgen::Error naming the file and the glTF element on any broken input.
 Scene load_gltf(const std::string& path, const std::string& scene_name = "");
 
+// The same from the file's bytes (.gltf or .glb, told apart by content): `path` names the file in messages
+// and its folder is where external buffers and images are looked for. The fuzzing harnesses call it.
+Scene parse_gltf(const std::string& bytes, const std::string& path, const std::string& scene_name = "");
+
 // A human-readable summary for `spadgen info`: meshes, triangles, materials with their extensions,
 // cameras, lights, warnings.
 std::string summarize(const Scene& scene);

@@ -221,6 +221,11 @@ struct Checker {
 
 // "camera.f_number=2.8" -> (/camera/f_number, 2.8). A value that is not JSON is taken as a string.
 void apply_override(json& doc, const std::string& assignment, Checker& chk) {
+  if (const size_t bad = invalid_utf8_at(assignment); bad != std::string::npos) {
+    chk.errors.push_back(chk.file + ": --set " + printable(assignment) + ": not valid UTF-8 text (byte " +
+                         printable(assignment.substr(bad, 1)) + " at offset " + std::to_string(bad) + ")");
+    return;
+  }
   const size_t eq = assignment.find('=');
   if (eq == std::string::npos || eq == 0) {
     chk.errors.push_back(chk.file + ": --set " + assignment + ": expected KEY=VALUE, e.g. laser.average_power_mW=5");
@@ -272,11 +277,33 @@ void apply_override(json& doc, const std::string& assignment, Checker& chk) {
   }
 }
 
+// A checked value (a scalar, or an array of scalars) as an ordered_json, as ojson::parse(v.dump()) gives it
+// (a non-negative integer becomes unsigned) without the text in between.
+ojson to_ordered(const json& v) {
+  switch (v.type()) {
+    case json::value_t::null: return nullptr;
+    case json::value_t::boolean: return v.get<bool>();
+    case json::value_t::string: return v.get_ref<const std::string&>();
+    case json::value_t::number_float: return v.get<double>();
+    case json::value_t::number_unsigned: return v.get<uint64_t>();
+    case json::value_t::number_integer: {
+      const int64_t i = v.get<int64_t>();
+      return i >= 0 ? ojson(static_cast<uint64_t>(i)) : ojson(i);
+    }
+    case json::value_t::array: {
+      ojson out = ojson::array();
+      for (const json& e : v) out.push_back(e.is_structured() ? ojson::parse(e.dump()) : to_ordered(e));
+      return out;
+    }
+    default: return ojson::parse(v.dump());
+  }
+}
+
 // Defaults filled, in schema order.
 ojson resolve(const json& doc) {
   ojson out = ojson::object();
   for (const Key& k : schema()) {
-    const json::json_pointer ptr(k.path);
+    const json::json_pointer& ptr = k.pointer;
     json v = doc.contains(ptr) ? doc.at(ptr) : k.def;
     // Nested sections are created in schema order as their first key appears.
     ojson* node = &out;
@@ -285,7 +312,7 @@ ojson resolve(const json& doc) {
       const size_t slash = k.path.find('/', start);
       const std::string part = k.path.substr(start, slash == std::string::npos ? std::string::npos : slash - start);
       if (slash == std::string::npos) {
-        (*node)[part] = ojson::parse(v.dump());
+        (*node)[part] = to_ordered(v);
         break;
       }
       if (!node->contains(part)) (*node)[part] = ojson::object();
@@ -302,7 +329,7 @@ RunConfig to_config(const ojson& r, const std::string& scene_path) {
                                              : std::filesystem::absolute(scene_path).parent_path().string();
   c.scene_file = scene_path.empty() ? "" : std::filesystem::absolute(scene_path).lexically_normal().string();
   for (const Key& k : schema())
-    if (k.set) k.set(c, r.at(ojson::json_pointer(k.path)), dir);
+    if (k.set) k.set(c, r.at(k.pointer), dir);
   return c;
 }
 
@@ -400,6 +427,21 @@ void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string
   }
 }
 
+// Keys the scene file or --set gives a value other than their default although the other settings make
+// them do nothing (Key::ignored): a gate sweep's step in the intensity mode is a mistake about the mode.
+void ignored_keys(const json& doc, const RunConfig& c, std::vector<std::string>& warnings) {
+  for (const Key& k : schema()) {
+    if (!k.ignored) continue;
+    const json::json_pointer& ptr = k.pointer;
+    if (!doc.contains(ptr) || doc.at(ptr) == k.def) continue;
+    const std::string why = k.ignored(c);
+    if (why.empty()) continue;
+    std::string dotted = k.path.substr(1);
+    std::replace(dotted.begin(), dotted.end(), '/', '.');
+    warnings.push_back(dotted + ": set to " + short_dump(doc.at(ptr)) + " but does nothing: " + why);
+  }
+}
+
 std::string join_errors(const std::vector<std::string>& errors) {
   std::string out = errors.size() == 1 ? "" : std::to_string(errors.size()) + " errors in the scene file:\n";
   for (size_t i = 0; i < errors.size(); ++i) out += (i ? "\n" : "") + errors[i];
@@ -416,7 +458,7 @@ ResolvedRun parse_scene_text(const std::string& text, const std::string& path, c
   for (const std::string& o : overrides) apply_override(doc, o, chk);
   chk.walk(doc, "");
   for (const Key& k : schema())
-    if (k.required && !doc.contains(json::json_pointer(k.path)))
+    if (k.required && !doc.contains(k.pointer))
       chk.error(k.path, "missing; expected " + expected_text(k) + " (" + k.doc + ")");
   if (!chk.errors.empty()) throw Error(join_errors(chk.errors));
 
@@ -425,10 +467,14 @@ ResolvedRun parse_scene_text(const std::string& text, const std::string& path, c
   run.config = to_config(run.resolved, path);
   check_consistency(run.config, chk, run.warnings);
   if (!chk.errors.empty()) throw Error(join_errors(chk.errors));
+  ignored_keys(doc, run.config, run.warnings);
   return run;
 }
 
 ResolvedRun load_scene_file(const std::string& path, const std::vector<std::string>& overrides) {
+  // metadata.json records the path as JSON text, which must be UTF-8: refused now, not after the run.
+  if (invalid_utf8_at(path) != std::string::npos)
+    throw Error("scene file " + printable(path) + ": its name is not valid UTF-8 text, which metadata.json needs; rename it");
   return parse_scene_text(read_file_bounded(path, kMaxSceneFileBytes, "scene file"), path, overrides);
 }
 

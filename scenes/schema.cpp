@@ -1,6 +1,8 @@
 #include "schema.h"
 
 #include <filesystem>
+#include <functional>
+#include <stdexcept>
 #include <type_traits>
 
 #include "core/units.h"
@@ -12,31 +14,27 @@ using json = nlohmann::json;
 using ojson = nlohmann::ordered_json;
 
 // Units as the scene file writes them. A value v in the file is to_si(v) inside; a default is shown as
-// from_si of the field's initializer.
-template <double S>
-double times(double v) {
-  return v * S;
-}
-template <double S>
-double over(double v) {
-  return v / S;
-}
+// from_si of the field's initializer. (Lambdas, not a template on the scale: clang 14, which builds the
+// fuzzing harnesses, has no floating-point template parameters.)
+#define SCALED_UNIT(name, scale) \
+  Unit { name, [](double v) { return v * (scale); }, [](double v) { return v / (scale); } }
 double deg_to_rad(double v) { return v * kPi / 180.0; }
 double rad_to_deg(double v) { return v * 180.0 / kPi; }
 
-constexpr Unit plain(const char* name) { return {name, times<1.0>, over<1.0>}; }
+constexpr Unit plain(const char* name) { return SCALED_UNIT(name, 1.0); }
 constexpr Unit kNone = plain("");
 constexpr Unit kMetre = plain("m");
 constexpr Unit kPixel = plain("px");
-constexpr Unit kUmUnit{"um", times<kUm>, over<kUm>};
-constexpr Unit kMmUnit{"mm", times<kMm>, over<kMm>};
-constexpr Unit kNmUnit{"nm", times<kNm>, over<kNm>};
-constexpr Unit kNsUnit{"ns", times<kNs>, over<kNs>};
-constexpr Unit kPsUnit{"ps", times<kPs>, over<kPs>};
-constexpr Unit kUsUnit{"us", times<kUs>, over<kUs>};
-constexpr Unit kMilliwatt{"mW", times<kMm>, over<kMm>};
-constexpr Unit kMegahertz{"MHz", times<1e6>, over<1e6>};
+constexpr Unit kUmUnit = SCALED_UNIT("um", kUm);
+constexpr Unit kMmUnit = SCALED_UNIT("mm", kMm);
+constexpr Unit kNmUnit = SCALED_UNIT("nm", kNm);
+constexpr Unit kNsUnit = SCALED_UNIT("ns", kNs);
+constexpr Unit kPsUnit = SCALED_UNIT("ps", kPs);
+constexpr Unit kUsUnit = SCALED_UNIT("us", kUs);
+constexpr Unit kMilliwatt = SCALED_UNIT("mW", kMm);
+constexpr Unit kMegahertz = SCALED_UNIT("MHz", 1e6);
 constexpr Unit kDegree{"deg", deg_to_rad, rad_to_deg};
+#undef SCALED_UNIT
 
 const RunConfig& defaults() {
   static const RunConfig d;
@@ -65,6 +63,7 @@ constexpr Range kWorld = closed(-1e6, 1e6);
 Key make(std::string path, Type type, std::string unit, std::string doc) {
   Key k;
   k.path = std::move(path), k.type = type, k.unit = std::move(unit), k.doc = std::move(doc);
+  k.pointer = nlohmann::json::json_pointer(k.path);
   return k;
 }
 
@@ -199,6 +198,86 @@ void add_pixel_type(std::vector<Key>& s, const std::string& name, P type) {
 #undef PIXEL
 }
 
+// Keys that do nothing under some settings, and why (Key::ignored). Each rule names the keys it covers by
+// path or by section prefix ("/acquisition/gate_sweep/").
+void add_ignored_when(std::vector<Key>& keys) {
+  using Reason = std::function<std::string(const RunConfig&)>;
+  const auto when = [&](std::initializer_list<const char*> paths, Reason reason) {
+    for (const char* p : paths) {
+      const std::string path = p;
+      bool found = false;
+      for (Key& k : keys) {
+        if (path.back() == '/' ? k.path.rfind(path, 0) != 0 : k.path != path) continue;
+        found = true;
+        // Rules for one key combine: the first that applies is the reason.
+        k.ignored = k.ignored ? Reason([first = k.ignored, reason](const RunConfig& c) {
+          const std::string r = first(c);
+          return r.empty() ? reason(c) : r;
+        })
+                              : reason;
+      }
+      if (!found) throw std::logic_error("schema: no key " + path);
+    }
+  };
+  const auto quoted = [](auto value) {
+    std::string q(1, '"');  // built up, not "\"" + ...: GCC 12 warns falsely (-Wrestrict) on that
+    q += to_string(value);
+    q += '"';
+    return q;
+  };
+  when({"/acquisition/gate_sweep/", "/acquisition/cycles_per_frame"}, [=](const RunConfig& c) {
+    return c.acquisition.mode != AcquisitionMode::GateSweep ? "acquisition.mode is " + quoted(c.acquisition.mode) : "";
+  });
+  when({"/acquisition/intensity/"}, [=](const RunConfig& c) {
+    return c.acquisition.mode != AcquisitionMode::Intensity ? "acquisition.mode is " + quoted(c.acquisition.mode) : "";
+  });
+  when({"/acquisition/intensity/dual_ratio"}, [=](const RunConfig& c) {
+    return c.acquisition.intensity.exposure != Exposure::Dual
+               ? "acquisition.intensity.exposure is " + quoted(c.acquisition.intensity.exposure) : "";
+  });
+  when({"/laser/half_angle_deg"}, [=](const RunConfig& c) {
+    return c.laser.beam != Beam::Cone ? "laser.beam is " + quoted(c.laser.beam) : "";
+  });
+  when({"/laser/gltf_light"}, [=](const RunConfig& c) {
+    return c.laser.beam != Beam::GltfLight ? "laser.beam is " + quoted(c.laser.beam) : "";
+  });
+  when({"/camera/position_m", "/camera/look_at_m", "/camera/up", "/camera/focal_length_mm"}, [](const RunConfig& c) {
+    return c.camera.gltf_camera.empty() ? std::string()
+                                        : "camera.gltf_camera is \"" + c.camera.gltf_camera + "\" (the glTF camera's pose and field of view)";
+  });
+  when({"/camera/focal_length_mm"}, [](const RunConfig& c) {
+    return c.camera.vertical_fov_rad ? "camera.vertical_fov_deg is set" : "";
+  });
+  when({"/outputs/transient_crop", "/render/split_direct_indirect"}, [](const RunConfig& c) {
+    return c.outputs.transient ? "" : "outputs.transient is false";
+  });
+  when({"/ambient/illuminance_lux"}, [](const RunConfig& c) {
+    return c.ambient.spectral_irradiance_W_m2_nm ? "ambient.spectral_irradiance_W_m2_nm is set" : "";
+  });
+  // sensor/model/pixel_layout.h: full_chip is pixel A above pixel B, and pixel B alone on a 1-row sensor.
+  when({"/sensor/pixel_A/"}, [=](const RunConfig& c) {
+    if (c.sensor.preset == PixelPreset::PixelB) return "sensor.preset is " + quoted(c.sensor.preset);
+    if (c.sensor.preset == PixelPreset::FullChip && c.camera.height_px < 2)
+      return std::string("camera.height_px is 1 (full_chip gives a single row pixel B)");
+    return std::string();
+  });
+  when({"/sensor/pixel_B/"}, [=](const RunConfig& c) {
+    return c.sensor.preset == PixelPreset::PixelA ? "sensor.preset is " + quoted(c.sensor.preset) : "";
+  });
+  for (const char* pixel : {"/sensor/pixel_A/", "/sensor/pixel_B/"}) {
+    const std::string p = pixel;
+    const std::string dcr[] = {p + "dcr_median_cps", p + "dcr_log_sigma", p + "hot_pixel_fraction", p + "hot_pixel_factor"};
+    for (const std::string& key : dcr)
+      when({key.c_str()}, [](const RunConfig& c) { return c.sensor.dark_counts ? "" : "sensor.dark_counts is false"; });
+    when({(p + "crosstalk_probability").c_str()},
+         [](const RunConfig& c) { return c.sensor.crosstalk ? "" : "sensor.crosstalk is false"; });
+    when({(p + "pdp_nonuniformity").c_str()},
+         [](const RunConfig& c) { return c.sensor.pdp_nonuniformity ? "" : "sensor.pdp_nonuniformity is false"; });
+  }
+  when({"/sensor/gate/skew_fwhm_ps", "/sensor/gate/length_fwhm_ps"},
+       [](const RunConfig& c) { return c.sensor.skew ? "" : "sensor.gate_skew is false"; });
+}
+
 std::vector<Key> build() {
   std::vector<Key> k;
   Key gltf = file("/gltf", FIELD(gltf_path), "the glTF 2.0 file (.gltf or .glb) of the scene, relative to the scene file");
@@ -293,6 +372,7 @@ std::vector<Key> build() {
   k.push_back(boolean("/outputs/counts", FIELD(outputs.counts), "write counts.npy (sampled)"));
   k.push_back(boolean("/outputs/frames", FIELD(outputs.frames), "write frames.npy (binary frames, bit-packed); large"));
   k.push_back(boolean("/outputs/previews", FIELD(outputs.previews), "write previews/*.png"));
+  add_ignored_when(k);
   return k;
 }
 #undef FIELD

@@ -27,6 +27,7 @@ struct Unit {
 
 struct Key {
   std::string path;  // JSON pointer, e.g. "/camera/f_number"
+  nlohmann::json::json_pointer pointer;  // the same, parsed once (json and ordered_json share the type)
   Type type = Type::Number;
   nlohmann::json def;  // in the key's unit; null for nullable keys without one; required keys have none
   double lo = -std::numeric_limits<double>::infinity();
@@ -40,6 +41,10 @@ struct Key {
   // Stores a valid value (in the key's unit, as resolved) into its RunConfig field, in SI. Paths are made
   // absolute against `dir`, the scene file's folder. Null for keys that fill no field (description).
   std::function<void(RunConfig&, const nlohmann::ordered_json&, const std::string& dir)> set;
+  // Why the key does nothing under the other settings (e.g. "acquisition.mode is \"intensity\""), or "" when
+  // it takes effect; null for keys that always do. A scene file or --set giving such a key a value other than
+  // its default gets a warning (the default changes nothing either way).
+  std::function<std::string(const RunConfig&)> ignored;
 };
 
 // Every key of a scene file, in the order the resolved scene file lists them.

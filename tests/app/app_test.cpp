@@ -270,6 +270,61 @@ TEST_F(App, ABrokenGltfIsReportedWithItsElement) {
   EXPECT_FALSE(fs::exists(dir_ / "out/metadata.json"));
 }
 
+// Runs whose data would be useless say so, on stderr (even with -q) and in metadata.json's "warnings"
+// (app/warnings.h); a sound run of the same scene says nothing.
+TEST_F(App, UselessRunsAreWarnedAboutOnStderrAndInTheMetadata) {
+  const std::string run = "run " + kScenes + "flat_target.json -q --set camera.crop=[500,240,16,16] "
+                          "--set render.samples_per_pixel=1 --set outputs.previews=false -o " + (dir_ / "out").string();
+  struct Case {
+    std::string set, warning;
+  };
+  const std::vector<Case> cases = {
+      {"", ""},
+      {"--set camera.look_at_m=[0,0,5]", "nothing in view: no camera ray of the 16 x 16 image hits a surface"},
+      {"--set laser.beam=cone --set laser.half_angle_deg=0.01 --set laser.offset_m=[0.5,0,0]",
+       "no laser light reaches the 16 x 16 image"},
+      // 40 MHz: 3.747 m; the target 5 m away folds into the window, so none of it is outside.
+      {"--set camera.position_m=[0,0,5] --set camera.focal_length_mm=12",
+       "100 % of the laser light comes from beyond the unambiguous range of 3.747 m"},
+      // The return of the target 1 m away arrives at 4 + 6.7 ns, after the window the gates up to 1 ns need.
+      {"--set acquisition.gate_sweep.stop_ns=1", "100 % of the laser light arrives outside the time window"},
+      {"--set camera.gltf_camera=spad_camera --set camera.height_px=1000 --set camera.crop=[500,490,16,16]",
+       "camera.gltf_camera: the glTF camera 'spad_camera' has the aspect ratio 2.048, the 1024 x 1000 sensor 1.024: the "
+       "vertical field of view (5.382 deg) is kept and the horizontal one is 5.511 deg instead of 11"},
+      {"--set camera.gltf_camera=spad_camera", "camera.position_m: set to [0,0,1.0] but does nothing: camera.gltf_camera is \"spad_camera\""},
+      {"--set acquisition.mode=intensity --set acquisition.gate_sweep.step_ps=50",
+       "acquisition.gate_sweep.step_ps: set to 50 but does nothing: acquisition.mode is \"intensity\""},
+  };
+  for (const Case& c : cases) {
+    const Result r = sh(run + " " + c.set);
+    ASSERT_EQ(r.code, 0) << c.set << ": " << r.output;
+    const nlohmann::json warnings = nlohmann::json::parse(slurp(dir_ / "out/metadata.json"))["warnings"];
+    if (c.warning.empty()) {
+      EXPECT_EQ(r.output, "") << c.set;
+      EXPECT_EQ(warnings, nlohmann::json::array()) << c.set;
+      continue;
+    }
+    EXPECT_THAT(r.output, HasSubstr("spadgen: warning: " + c.warning)) << c.set;
+    bool recorded = false;
+    for (const auto& w : warnings) recorded |= w.get<std::string>().find(c.warning) == 0;
+    EXPECT_TRUE(recorded) << c.set << ": " << warnings.dump();
+  }
+  // sense re-samples the same light: it records the run's warnings, once each.
+  ASSERT_EQ(sh(run + " --set camera.look_at_m=[0,0,5] --set outputs.light=true").code, 0);
+  const Result sensed = sh("sense " + (dir_ / "out").string() + " -q -o " + (dir_ / "sensed").string());
+  ASSERT_EQ(sensed.code, 0) << sensed.output;
+  EXPECT_EQ(nlohmann::json::parse(slurp(dir_ / "sensed/metadata.json"))["warnings"],
+            nlohmann::json::parse(slurp(dir_ / "out/metadata.json"))["warnings"]);
+}
+
+TEST(AppCommands, InfoWarnsAboutAGltfCameraOfAnotherAspectRatio) {
+  const Result r = sh("info " + kScenes + "flat_target.json --set camera.gltf_camera=spad_camera --set camera.height_px=1000");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("warning: camera.gltf_camera: the glTF camera 'spad_camera' has the aspect ratio 2.048"));
+  EXPECT_THAT(sh("info " + kScenes + "flat_target.json --set camera.gltf_camera=spad_camera").output,
+              ::testing::Not(HasSubstr("warning: camera.gltf_camera")));
+}
+
 }  // namespace
 
 // detection_rate.npy keeps the flux where expected counts saturate: at 1000 times the power, lambda is

@@ -145,6 +145,52 @@ TEST(Transport, AmbientEnvironmentGivesTheCosFourthFalloff) {
     }
 }
 
+// beyond_period holds the light whose time of flight is a laser period or more: all of it for a plane
+// beyond the unambiguous range c / (2 f_rep), none of it in front; the camera rays' hits are counted for
+// the tile's own pixels.
+TEST(Transport, LightFromBeyondTheUnambiguousRangeIsCounted) {
+  for (const double rate : {40e6, 200e6}) {  // unambiguous range 3.75 m and 0.75 m
+    RenderStageConfig c = test_config(8, 8, 12e-3);
+    c.render.samples_per_pixel = 2;
+    c.render.max_bounces = 1;
+    c.laser.repetition_rate_Hz = rate;
+    Renderer r(plane_scene(1.0f, 0.6f), c);
+    RenderStats stats;
+    const TransientTile t = r.transient({2, 2, 4, 4}, {0, 0, 8, 8}, TimeAxis{0.0, 9e-12, 500, 1.0 / rate}, &stats);
+    EXPECT_EQ(stats.camera_hits, 4u * 4u * 2u);
+    ASSERT_EQ(t.beyond_period.size(), t.laser_total.size());
+    for (size_t i = 0; i < t.laser_total.size(); ++i) {
+      EXPECT_GT(t.laser_total[i], 0.0);
+      EXPECT_EQ(t.beyond_period[i], rate > 1e8 ? t.laser_total[i] : 0.0) << rate;
+    }
+  }
+  // Nothing in view: no hits.
+  RenderStageConfig c = test_config(8, 8, 12e-3);
+  c.camera.look_at_m = {0, 0, 1};
+  RenderStats stats;
+  Renderer(plane_scene(1.0f, 0.6f), c).transient({0, 0, 8, 8}, {0, 0, 8, 8}, TimeAxis{}, &stats);
+  EXPECT_EQ(stats.camera_hits, 0u);
+}
+
+// ambient.spectral_irradiance_W_m2_nm replaces illuminance_lux (it was once read by nothing): s W/m^2/nm is
+// s * 683 * 106.857 lux, and the lux figure is then ignored.
+TEST(Transport, SpectralIrradianceReplacesIlluminance) {
+  RenderStageConfig lux = test_config(8, 8, 110e-6);
+  lux.render.samples_per_pixel = 4;
+  lux.ambient.illuminance_lux = 50.0;
+  RenderStageConfig spectral = lux;
+  spectral.ambient.illuminance_lux = 3.0;  // ignored
+  spectral.ambient.spectral_irradiance_W_m2_nm = 50.0 / (683.0 * 106.857);
+  const scenes::Scene scene = plane_scene(1.0f, 0.5f);
+  const TransientTile a = Renderer(scene, lux).transient({0, 0, 8, 8}, {0, 0, 8, 8}, TimeAxis{});
+  const TransientTile b = Renderer(scene, spectral).transient({0, 0, 8, 8}, {0, 0, 8, 8}, TimeAxis{});
+  ASSERT_EQ(a.ambient_rate.size(), b.ambient_rate.size());
+  for (size_t i = 0; i < a.ambient_rate.size(); ++i) {
+    EXPECT_GT(a.ambient_rate[i], 0.0f);
+    EXPECT_NEAR(b.ambient_rate[i], a.ambient_rate[i], 1e-6 * a.ambient_rate[i]);
+  }
+}
+
 TEST(Transport, TiltedPlaneArrivalTimesFollowItsGeometry) {
   scenes::Scene s;
   const double tilt = 40.0 * kPi / 180.0;

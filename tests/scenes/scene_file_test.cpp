@@ -10,6 +10,7 @@
 
 #include "core/error.h"
 #include "core/units.h"
+#include "scenes/input.h"
 #include "scenes/scene_file.h"
 
 namespace spadgen::scenes {
@@ -263,7 +264,100 @@ TEST_F(SceneFileTest, ExposureLongerThanAFrameIsAWarning) {
   EXPECT_TRUE(parse(R"({"gltf": "s.gltf"})").warnings.empty());
 }
 
+// A key that the other settings make do nothing, given a value other than its default, is a warning naming
+// the key, its value and the setting that ignores it; at its default, or where it takes effect, it is not.
+TEST_F(SceneFileTest, KeysThatDoNothingInTheChosenModeAreWarnings) {
+  struct Case {
+    std::vector<std::string> set;
+    std::string warning;  // "" = none
+  };
+  const std::vector<Case> cases = {
+      {{"acquisition.mode=intensity", "acquisition.gate_sweep.step_ps=50"},
+       "acquisition.gate_sweep.step_ps: set to 50 but does nothing: acquisition.mode is \"intensity\""},
+      {{"acquisition.mode=intensity", "acquisition.cycles_per_frame=10"}, "acquisition.cycles_per_frame: set to 10"},
+      {{"acquisition.intensity.exposure_us=2"}, "acquisition.intensity.exposure_us: set to 2 but does nothing: acquisition.mode is \"gate_sweep\""},
+      {{"acquisition.mode=intensity", "acquisition.intensity.dual_ratio=4"},
+       "acquisition.intensity.dual_ratio: set to 4 but does nothing: acquisition.intensity.exposure is \"single\""},
+      {{"laser.half_angle_deg=5"}, "laser.half_angle_deg: set to 5 but does nothing: laser.beam is \"flood\""},
+      {{"laser.gltf_light=Spot"}, "laser.gltf_light: set to \"Spot\" but does nothing: laser.beam is \"flood\""},
+      {{"camera.gltf_camera=Camera", "camera.position_m=[0,0,2]"}, "camera.position_m: set to [0,0,2] but does nothing: camera.gltf_camera is \"Camera\""},
+      {{"camera.vertical_fov_deg=30", "camera.focal_length_mm=8"}, "camera.focal_length_mm: set to 8 but does nothing: camera.vertical_fov_deg is set"},
+      {{"outputs.transient_crop=[0,0,8,8]"}, "outputs.transient_crop: set to [0,0,8,8] but does nothing: outputs.transient is false"},
+      {{"render.split_direct_indirect=true"}, "render.split_direct_indirect: set to true but does nothing: outputs.transient is false"},
+      {{"ambient.spectral_irradiance_W_m2_nm=0.001", "ambient.illuminance_lux=20"},
+       "ambient.illuminance_lux: set to 20 but does nothing: ambient.spectral_irradiance_W_m2_nm is set"},
+      {{"sensor.preset=pixel_A", "sensor.pixel_B.fill_factor=0.5"}, "sensor.pixel_B.fill_factor: set to 0.5 but does nothing: sensor.preset is \"pixel_A\""},
+      {{"sensor.preset=pixel_B", "sensor.pixel_A.pdp_peak=0.5"}, "sensor.pixel_A.pdp_peak: set to 0.5 but does nothing: sensor.preset is \"pixel_B\""},
+      {{"sensor.preset=full_chip", "camera.height_px=1", "sensor.pixel_A.pdp_peak=0.5"}, "sensor.pixel_A.pdp_peak: set to 0.5 but does nothing: camera.height_px is 1"},
+      {{"sensor.dark_counts=false", "sensor.pixel_A.dcr_median_cps=100"}, "sensor.pixel_A.dcr_median_cps: set to 100 but does nothing: sensor.dark_counts is false"},
+      {{"sensor.crosstalk=false", "sensor.pixel_A.crosstalk_probability=0.1"}, "but does nothing: sensor.crosstalk is false"},
+      {{"sensor.pdp_nonuniformity=false", "sensor.pixel_A.pdp_nonuniformity=0.1"}, "but does nothing: sensor.pdp_nonuniformity is false"},
+      {{"sensor.gate_skew=false", "sensor.gate.skew_fwhm_ps=100"}, "sensor.gate.skew_fwhm_ps: set to 100 but does nothing: sensor.gate_skew is false"},
+      // Where the keys take effect, or hold their default, nothing is said.
+      {{"acquisition.gate_sweep.step_ps=50", "acquisition.cycles_per_frame=10"}, ""},
+      {{"acquisition.mode=intensity", "acquisition.gate_sweep.step_ps=36", "acquisition.intensity.exposure_us=2"}, ""},
+      {{"acquisition.mode=intensity", "acquisition.frames=256", "acquisition.intensity.exposure=dual", "acquisition.intensity.dual_ratio=4"}, ""},
+      {{"laser.beam=cone", "laser.half_angle_deg=5"}, ""},
+      {{"camera.position_m=[0,0,2]", "camera.focal_length_mm=8"}, ""},
+      {{"outputs.transient=true", "render.split_direct_indirect=true", "outputs.transient_crop=[0,0,8,8]"}, ""},
+      {{"sensor.preset=full_chip", "sensor.pixel_A.pdp_peak=0.5", "sensor.pixel_B.pdp_peak=0.5"}, ""},
+      {{"sensor.gate.skew_fwhm_ps=100", "sensor.pixel_A.dcr_median_cps=100"}, ""},
+  };
+  for (const Case& c : cases) {
+    std::string set;
+    for (const std::string& o : c.set) set += " --set " + o;
+    const std::vector<std::string> warnings = parse(R"({"gltf": "s.gltf"})", c.set).warnings;
+    if (c.warning.empty()) {
+      EXPECT_TRUE(warnings.empty()) << set << ": " << (warnings.empty() ? "" : warnings[0]);
+    } else {
+      ASSERT_EQ(warnings.size(), 1u) << set;
+      EXPECT_THAT(warnings[0], HasSubstr(c.warning)) << set;
+    }
+  }
+  // The same from the file itself; the resolved file (sense reads it) says the same, and no more.
+  const ResolvedRun r = parse(R"({"gltf": "s.gltf", "acquisition": {"mode": "intensity", "gate_sweep": {"step_ps": 50, "start_ns": 0.6}}})");
+  ASSERT_EQ(r.warnings.size(), 1u);
+  EXPECT_THAT(r.warnings[0], HasSubstr("acquisition.gate_sweep.step_ps: set to 50 but does nothing"));
+  EXPECT_EQ(parse(r.resolved.dump()).warnings, r.warnings);
+}
+
 // Issue 14: what used to crash, hang or pass silently is refused at the boundary, naming the key.
+
+// Found by fuzz/fuzz_set (fuzz/regressions/set/): a --set value that is not UTF-8 reached nlohmann's dump
+// in a message or in the resolved scene file and ended as an internal error (std::terminate in a harness).
+TEST_F(SceneFileTest, OverridesThatAreNotUtf8AreRefusedAsSuch) {
+  const std::string file = R"({"gltf": "s.gltf"})";
+  EXPECT_THAT(error_of(file, {"acquisition.mode=\"gate_\xff\xffsweep\""}),
+              HasSubstr(": --set acquisition.mode=\"gate_\\xFF\\xFFsweep\": not valid UTF-8 text (byte \\xFF at offset 23)"));
+  EXPECT_THAT(error_of(file, {"description=caf\xe9"}), HasSubstr("not valid UTF-8 text (byte \\xE9 at offset 15)"));
+  EXPECT_THAT(error_of(file, {"camera.f_n\xc3umber=2"}), HasSubstr("not valid UTF-8"));
+  // Well-formed UTF-8 is text like any other.
+  EXPECT_EQ(parse(file, {"description=caf\xc3\xa9 \xe2\x82\xac \xf0\x9f\x93\xb7"}).resolved["description"], "caf\xc3\xa9 \xe2\x82\xac \xf0\x9f\x93\xb7");
+}
+
+TEST(Utf8, MalformedSequencesAreFoundAtTheirFirstByte) {
+  EXPECT_EQ(invalid_utf8_at("plain ascii"), std::string::npos);
+  EXPECT_EQ(invalid_utf8_at("\xc3\xa9\xe2\x82\xac\xf0\x9f\x93\xb7\xf4\x8f\xbf\xbf"), std::string::npos);
+  EXPECT_EQ(invalid_utf8_at("ab\x80"), 2u);               // a continuation byte alone
+  EXPECT_EQ(invalid_utf8_at("ab\xc3"), 2u);               // cut short
+  EXPECT_EQ(invalid_utf8_at("\xc0\xaf"), 0u);             // overlong '/'
+  EXPECT_EQ(invalid_utf8_at("\xe0\x80\xaf"), 0u);         // overlong
+  EXPECT_EQ(invalid_utf8_at("x\xed\xa0\x80"), 1u);        // a UTF-16 surrogate
+  EXPECT_EQ(invalid_utf8_at("\xf4\x90\x80\x80"), 0u);     // past U+10FFFF
+  EXPECT_EQ(invalid_utf8_at("\xff"), 0u);
+  EXPECT_EQ(printable("a\xff\n"), "a\\xFF\\x0A");
+}
+
+TEST_F(SceneFileTest, ASceneFileWhoseNameIsNotUtf8IsRefusedBeforeTheRun) {
+  const std::string name = (dir_ / "sc\xe9ne.json").string();
+  std::ofstream(name) << R"({"gltf": "s.gltf"})";
+  try {
+    load_scene_file(name);
+    ADD_FAILURE() << "no error";
+  } catch (const Error& e) {
+    EXPECT_THAT(std::string(e.what()), HasSubstr("sc\\xE9ne.json: its name is not valid UTF-8 text"));
+  }
+}
 
 TEST_F(SceneFileTest, ANumberBeyondTheDoubleRangeNamesItsKeyAndPlace) {
   const std::string msg = error_of("{\"gltf\": \"s.gltf\",\n \"laser\": {\"average_power_mW\": 1e309}}");

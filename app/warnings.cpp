@@ -1,0 +1,78 @@
+#include "app/warnings.h"
+
+#include <cmath>
+#include <cstdio>
+
+#include "core/units.h"
+
+namespace spadgen::app {
+namespace {
+
+std::string g(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.4g", v);
+  return buf;
+}
+
+std::string percent(double fraction) { return g(100.0 * fraction) + " %"; }
+
+double degrees(double rad) { return rad * 180.0 / kPi; }
+
+}  // namespace
+
+std::vector<std::string> camera_warnings(const RunConfig& c, const scenes::Scene& scene) {
+  std::vector<std::string> w;
+  if (c.camera.gltf_camera.empty()) return w;
+  const scenes::Camera* gc = scene.find_camera(c.camera.gltf_camera);
+  if (!gc || !(gc->aspect_ratio > 0.0)) return w;  // no camera: the renderer's error; no aspect ratio: nothing to differ
+  const double sensor = static_cast<double>(c.camera.width_px) / c.camera.height_px;
+  if (std::fabs(gc->aspect_ratio / sensor - 1.0) <= kWarnAspectMismatch) return w;
+  // The renderer keeps the vertical field of view (the glTF camera's, or camera.vertical_fov_deg).
+  const double yfov = c.camera.vertical_fov_rad.value_or(gc->yfov_rad);
+  const double meant = 2.0 * std::atan(gc->aspect_ratio * std::tan(0.5 * yfov));
+  const double got = 2.0 * std::atan(sensor * std::tan(0.5 * yfov));
+  w.push_back("camera.gltf_camera: the glTF camera '" + c.camera.gltf_camera + "' has the aspect ratio " +
+              g(gc->aspect_ratio) + ", the " + std::to_string(c.camera.width_px) + " x " +
+              std::to_string(c.camera.height_px) + " sensor " + g(sensor) + ": the vertical field of view (" +
+              g(degrees(yfov)) + " deg) is kept and the horizontal one is " + g(degrees(got)) + " deg instead of " +
+              g(degrees(meant)) + " (camera.width_px, camera.height_px)");
+  return w;
+}
+
+std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img, const RunRecord& r) {
+  const double laser_total = r.laser_total;
+  std::vector<std::string> w;
+  const std::string image = std::to_string(img.width) + " x " + std::to_string(img.height) + " image";
+  if (r.rays.camera_hits == 0) {
+    w.push_back("nothing in view: no camera ray of the " + image +
+                " hits a surface of the scene (camera.position_m, look_at_m, gltf_camera, crop): the outputs hold "
+                "ambient light and dark counts only");
+    return w;
+  }
+  // The laser matters to a gate sweep, to transients, and to the intensity mode with laser_on; its timing
+  // only to the first two.
+  const bool timed = c.acquisition.mode == AcquisitionMode::GateSweep || c.outputs.transient;
+  if (!timed && !c.acquisition.intensity.laser_on) return w;
+  if (!(laser_total > 0.0)) {
+    if (c.laser.average_power_W > 0.0)
+      w.push_back("no laser light reaches the " + image + " (laser.beam, half_angle_deg, offset_m, gltf_light): the "
+                  "outputs hold ambient light and dark counts only");
+    return w;
+  }
+  if (!timed) return w;
+  const double beyond = r.beyond_period_total / laser_total;
+  if (beyond > kWarnLightFraction)
+    w.push_back(percent(beyond) + " of the laser light comes from beyond the unambiguous range of " +
+                g(kSpeedOfLight / (2.0 * c.laser.repetition_rate_Hz)) + " m (c / 2 / laser.repetition_rate_MHz): its time of "
+                "flight exceeds the laser period of " + g(1e9 / c.laser.repetition_rate_Hz) +
+                " ns, so it folds onto the next pulse and looks nearer than it is");
+  const double outside = r.out_of_window_total / laser_total;
+  if (outside > kWarnLightFraction)
+    w.push_back(percent(outside) + " of the laser light arrives outside the time window (metadata.json "
+                "laser_photons_per_pulse.outside_fraction; acquisition.gate_sweep.start_ns, stop_ns, "
+                "laser.emission_delay_ns, sensor.gate.delay_ns, or render.window_start_ns, window_stop_ns): "
+                "the counts miss it");
+  return w;
+}
+
+}  // namespace spadgen::app

@@ -1,0 +1,31 @@
+// Warnings about runs whose data would be useless although every key is valid: printed on stderr (even
+// with -q) and recorded in metadata.json ("warnings"), with what the scene file's own checks warn about
+// (settings that do nothing, scenes::ResolvedRun::warnings) and what loading the glTF warned about.
+// docs/outputs.md, section metadata.json, lists them.
+#pragma once
+#include <string>
+#include <vector>
+
+#include "core/config.h"
+#include "core/tile.h"
+#include "app/metadata.h"
+#include "scenes/scene.h"
+
+namespace spadgen::app {
+
+// Laser light that arrives outside the time window, or from beyond the unambiguous range, above this
+// fraction of all the laser light the image receives is warned about.
+inline constexpr double kWarnLightFraction = 0.01;
+// A glTF camera whose aspect ratio differs from the sensor's by more than this (relative) is warned about.
+inline constexpr double kWarnAspectMismatch = 0.01;
+
+// Before rendering (run and info): a glTF camera (camera.gltf_camera) whose aspect ratio is not the
+// sensor's, which keeps the vertical field of view and changes the horizontal one.
+std::vector<std::string> camera_warnings(const RunConfig& c, const scenes::Scene& scene);
+
+// After rendering, from the image's totals (r.rays summed over the tiles, r.laser_total, out_of_window_total,
+// beyond_period_total): nothing in view (no camera ray hits a surface), no laser light returning, laser
+// light from beyond the unambiguous range, laser light outside the time window.
+std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img, const RunRecord& r);
+
+}  // namespace spadgen::app
