@@ -31,10 +31,6 @@
 #include "sensor/sensor.h"
 #include "writers/writers.h"
 
-#ifndef SPADGEN_VERSION
-#define SPADGEN_VERSION "dev"
-#endif
-
 namespace spadgen::app {
 namespace fs = std::filesystem;
 using json = nlohmann::json;

@@ -241,34 +241,6 @@ uint32_t select_bit(const uint64_t* words, size_t nw, uint32_t t) {
 
 }  // namespace
 
-namespace {
-
-// Direction d's words of a crosstalk stream: blocks 1 + d, 5 + d, 9 + d, ..., word 0 first.
-class DirectionReader {
- public:
-  DirectionReader(const Rng& stream, uint32_t d) : stream_(stream), next_block_(1 + d) {}
-  uint32_t next_u32() {
-    if (used_ == 4) {
-      buf_ = stream_.block(next_block_);
-      next_block_ += 4;
-      used_ = 0;
-    }
-    return buf_[used_++];
-  }
-  uint64_t next_u64() {
-    const uint64_t hi = next_u32();
-    return (hi << 32) | next_u32();
-  }
-
- private:
-  const Rng& stream_;
-  std::array<uint32_t, 4> buf_{};
-  uint32_t next_block_;
-  unsigned used_ = 4;
-};
-
-}  // namespace
-
 uint32_t crosstalk_reference(const Rng& stream, uint32_t n, const uint64_t* own, const CrosstalkNeighbour nb[4],
                              const CrosstalkLaw& law, uint64_t* extra) {
   const size_t nw = (n + 63) / 64;
@@ -281,7 +253,8 @@ uint32_t crosstalk_reference(const Rng& stream, uint32_t n, const uint64_t* own,
     const double rho = crosstalk_rate_bound(law, nb[d].prob);
     const uint32_t lim = crosstalk_limit(ni, rho);
     if (!(w[d] < lim || lim == UINT32_MAX)) continue;
-    DirectionReader rng(stream, static_cast<uint32_t>(d));
+    // Direction d's words of the crosstalk stream: blocks 1 + d, 5 + d, 9 + d, ...
+    StreamReader rng(stream, 1 + static_cast<uint32_t>(d), 4);
     std::fill(hits.begin(), hits.end(), uint64_t{0});
     if (crosstalk_per_candidate(ni, rho)) {
       const uint64_t thr = probability_threshold(crosstalk_rate(law, nb[d].prob));

@@ -27,14 +27,18 @@
 
 namespace spadgen::sensor {
 
-// The sequential draws of an Rng stream (next_u32 / next_u64 in the same order as Rng's) when its block 0
-// has already been computed, e.g. by a vectorised Philox for many streams at once.
+// Sequential draws (next_u32 / next_u64, word 0 of a block first) from blocks first, first + stride,
+// first + 2 stride, ... of an Rng stream. With block 0 given (computed already, e.g. by a vectorised
+// Philox for many streams at once), the draws of the whole stream in Rng's own order.
 class StreamReader {
  public:
+  StreamReader(const Rng& stream, uint32_t first_block, uint32_t stride)
+      : stream_(stream), next_block_(first_block), stride_(stride), used_(4) {}
   StreamReader(const Rng& stream, const std::array<uint32_t, 4>& block0) : stream_(stream), buf_(block0) {}
   uint32_t next_u32() {
     if (used_ == 4) {
-      buf_ = stream_.block(next_block_++);
+      buf_ = stream_.block(next_block_);
+      next_block_ += stride_;
       used_ = 0;
     }
     return buf_[used_++];
@@ -46,8 +50,9 @@ class StreamReader {
 
  private:
   const Rng& stream_;
-  std::array<uint32_t, 4> buf_;
+  std::array<uint32_t, 4> buf_{};
   uint32_t next_block_ = 1;
+  uint32_t stride_ = 1;
   unsigned used_ = 0;
 };
 
