@@ -3,6 +3,10 @@
 //   spadgen sense RUN_DIR [-o DIR] [--set KEY=VALUE]... [--noise-seed S] [--chip-seed S] [--repeats R]
 //   spadgen info SCENE.json [--set KEY=VALUE]...
 //   spadgen schema                 # the reference of every scene-file key (Markdown)
+//   spadgen dataset plan FILE [-o DIR] [--shard I/N] [--all]
+//   spadgen dataset run FILE -o DIR [--shard I/N] [--threads N] [-q]
+//   spadgen dataset status DIR
+//   spadgen dataset schema         # the reference of the dataset file (Markdown)
 #include <CLI/CLI.hpp>
 
 #include <malloc.h>
@@ -11,6 +15,7 @@
 #include <iostream>
 
 #include "app/cli.h"
+#include "app/dataset.h"
 #include "app/pipeline.h"
 #include "core/error.h"
 #include "scenes/scene_file.h"
@@ -75,6 +80,31 @@ int main(int argc, char** argv) {
   bool json_schema = false;
   schema_cmd->add_flag("--json-schema", json_schema, "print it as a JSON Schema (for editors) instead");
 
+  spadgen::app::DatasetOptions dataset;
+  std::string dataset_shard, status_dir;
+  bool dataset_quiet = false;
+  CLI::App* dataset_cmd = cli.add_subcommand("dataset", "benchmark datasets: variations of scene files, one run folder per sample");
+  dataset_cmd->require_subcommand(1);
+  CLI::App* plan_cmd = dataset_cmd->add_subcommand("plan", "list the samples with their parameters, and estimate disk, memory and time");
+  plan_cmd->add_option("file", dataset.file, "dataset file (.json)")->required()->check(CLI::ExistingFile);
+  plan_cmd->add_option("-o,--out", dataset.out_dir, "dataset folder: also show which samples are done there and the free disk");
+  CLI::Option* plan_shard = plan_cmd->add_option("--shard", dataset_shard, "only shard I of N (samples i with i mod N = I)")->type_name("I/N");
+  plan_cmd->add_flag("--all", dataset.all, "list every sample (default: the first and the last 10)");
+  plan_cmd->add_option("--threads", dataset.threads, "worker threads per sample, for the time estimate")->check(CLI::NonNegativeNumber);
+  CLI::App* drun_cmd = dataset_cmd->add_subcommand("run", "generate the samples that are not done, each into its own folder, as one unit");
+  drun_cmd->add_option("file", dataset.file, "dataset file (.json)")->required()->check(CLI::ExistingFile);
+  drun_cmd->add_option("-o,--out", dataset.out_dir, "dataset folder")->required();
+  CLI::Option* run_shard = drun_cmd->add_option("--shard", dataset_shard,
+                                                "only shard I of N (samples i with i mod N = I); default: from SLURM_ARRAY_TASK_ID / "
+                                                "SLURM_ARRAY_TASK_COUNT or JOB_COMPLETION_INDEX / JOB_COMPLETIONS, else 0/1")
+                                 ->type_name("I/N");
+  drun_cmd->add_option("--threads", dataset.threads, "worker threads per sample (default: all cores); outputs do not depend on it")
+      ->check(CLI::NonNegativeNumber);
+  drun_cmd->add_flag("-q,--quiet", dataset_quiet, "nothing on stderr but warnings and errors");
+  CLI::App* status_cmd = dataset_cmd->add_subcommand("status", "done, failed, stale and missing samples of a dataset folder");
+  status_cmd->add_option("dir", status_dir, "dataset folder")->required()->check(CLI::ExistingDirectory);
+  CLI::App* dschema_cmd = dataset_cmd->add_subcommand("schema", "print the reference of the dataset file's keys (Markdown)");
+
   if (const std::optional<int> code = spadgen::app::parse_command_line(cli, argc, argv)) return *code;
   return spadgen::app::run_command([&] {
     if (*run_cmd) {
@@ -88,6 +118,13 @@ int main(int argc, char** argv) {
       spadgen::app::sense(sense);
     } else if (*info_cmd) {
       std::cout << spadgen::app::info(info_scene, info_overrides);
+    } else if (*dataset_cmd) {
+      if ((*plan_shard && *plan_cmd) || (*run_shard && *drun_cmd)) dataset.shard = dataset_shard;
+      dataset.progress = !dataset_quiet;
+      if (*plan_cmd) std::cout << spadgen::app::dataset_plan(dataset);
+      else if (*drun_cmd) spadgen::app::dataset_run(dataset);
+      else if (*status_cmd) std::cout << spadgen::app::dataset_status(status_dir);
+      else if (*dschema_cmd) std::cout << spadgen::app::dataset_schema();
     } else if (*schema_cmd) {
       std::cout << (json_schema ? spadgen::scenes::schema_json() : spadgen::scenes::schema_reference_markdown());
     }

@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "core/units.h"
+#include "scenes/input.h"
 #include "render/camera.h"
 
 #ifndef SPADGEN_VERSION
@@ -21,38 +22,6 @@ using json = nlohmann::json;
 using ojson = nlohmann::ordered_json;
 
 namespace {
-
-// FNV-1a over bytes: a stable content hash for provenance (not for security).
-uint64_t fnv1a(const std::string& bytes, uint64_t h = 0xcbf29ce484222325ull) {
-  for (unsigned char c : bytes) h = (h ^ c) * 0x100000001b3ull;
-  return h;
-}
-std::string read_bytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-std::string hex64(uint64_t v) {
-  char buf[17];
-  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(v));
-  return buf;
-}
-
-// The hash covers everything that shapes the data, so that the provenance changes whenever any of it does.
-std::string scene_hash(const RunConfig& c) {
-  uint64_t h = fnv1a(read_bytes(c.scene_file));
-  h = fnv1a(read_bytes(c.gltf_path), h);
-  const fs::path dir = fs::path(c.gltf_path).parent_path();
-  std::vector<std::string> side;
-  for (const auto& e : fs::directory_iterator(dir))
-    if (e.is_regular_file() && e.path() != fs::path(c.gltf_path) &&
-        (e.path().extension() == ".bin" || e.path().extension() == ".png" || e.path().extension() == ".jpg"))
-      side.push_back(e.path().string());
-  std::sort(side.begin(), side.end());
-  for (const std::string& f : side) h = fnv1a(read_bytes(f), h);
-  return hex64(h);
-}
 
 json crop_json(const PixelRect& r) { return json::array({r.x0, r.y0, r.width, r.height}); }
 
@@ -81,7 +50,9 @@ json camera_json(const render::Camera& cam, const PixelRect& img) {
 }
 
 
-Provenance provenance(const RunConfig& c, const PixelRect& img) { return {c.scene_file, scene_hash(c), c.seed, img}; }
+Provenance provenance(const RunConfig& c, const PixelRect& img) {
+  return {c.scene_file, scenes::content_hash(c.scene_file, c.gltf_path), c.seed, img};
+}
 
 void stamp(writers::ExrImage& e, const Provenance& p) {
   e.set_attribute("spadgen_version", SPADGEN_VERSION);
@@ -140,6 +111,8 @@ json metadata(const scenes::ResolvedRun& resolved, const std::vector<std::string
                                      {"outside_fraction", r.laser_total > 0 ? r.out_of_window_total / r.laser_total : 0.0}};
   meta["acquisition"] = ojson::parse(sensor.describe().dump());
   meta["ground_truth_layers"] = r.ground_truth_layers;
+  if (!r.ground_truth_summary.is_null()) meta["ground_truth_summary"] = ojson::parse(r.ground_truth_summary.dump());
+  if (r.dataset) meta["dataset"] = ojson::parse(r.dataset->dump());
   meta["counts_dtype"] = r.counts_u8 ? "uint8" : "uint16";
   meta["preview_profile_pixels"] = r.profile_pixels;
   meta["warnings"] = resolved.warnings;

@@ -49,6 +49,7 @@ struct RunRecord {
   double laser_total = 0.0, out_of_window_total = 0.0;  // photons per pulse, summed over the image
   double beyond_period_total = 0.0;  // of laser_total, from beyond the unambiguous range (run only: app/warnings.h)
   int ground_truth_layers = 0;
+  nlohmann::json ground_truth_summary;  // Outputs: hit fraction, range span, meshes in view, deepest layer
   bool counts_u8 = true;
   PixelRect transient_crop;
   std::vector<std::pair<int, int>> profile_pixels;
@@ -57,6 +58,8 @@ struct RunRecord {
   int64_t light_values_bytes = 0;
   // spadgen sense: the run folder it read and which realisation of the temporal noise this is.
   std::optional<nlohmann::json> sense;
+  // spadgen dataset: the dataset, the sample's index, parameters and hash (app/dataset.h).
+  std::optional<nlohmann::json> dataset;
   // How the run went: not a function of the scene and the seed.
   int threads = 0;
   double seconds = 0.0;

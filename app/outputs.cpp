@@ -3,9 +3,12 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <cmath>
 #include <functional>
+#include <limits>
 #include <mutex>
 #include <numeric>
+#include <set>
 
 #include "app/staging.h"
 #include "core/units.h"
@@ -119,6 +122,30 @@ class Outputs::Images {
     if (!gt_on_) return 0;
     const float* lc = gt_ch_.back();
     return int(*std::max_element(lc, lc + size_t(img_.count())));
+  }
+
+  // A summary of the ground truth for dataset indices: the share of pixels whose ray hits something, the
+  // span of their first-surface ranges, the meshes seen first and the most surfaces along one ray.
+  nlohmann::json ground_truth_summary() const {
+    if (!gt_on_) return nullptr;
+    const size_t n = size_t(img_.count());
+    const float* range = gt_ch_[0];
+    const float* mesh = gt_ch_[5];
+    size_t hits = 0;
+    float lo = std::numeric_limits<float>::infinity(), hi = -lo;
+    std::set<int> meshes;
+    for (size_t i = 0; i < n; ++i) {
+      if (!std::isfinite(range[i])) continue;
+      ++hits;
+      lo = std::min(lo, range[i]), hi = std::max(hi, range[i]);
+      meshes.insert(int(mesh[i]));
+    }
+    const nlohmann::json none = nullptr;
+    return {{"hit_fraction", double(hits) / double(n)},
+            {"range_min_m", hits ? nlohmann::json(double(lo)) : none},
+            {"range_max_m", hits ? nlohmann::json(double(hi)) : none},
+            {"meshes_in_view", meshes.size()},
+            {"max_layer_count", deepest_layer()}};
   }
 
   // Writes the EXRs with their provenance and the previews into the staging folder.
@@ -316,6 +343,7 @@ void Outputs::report(RunRecord& r) const {
   r.laser_total = images_->laser_total(), r.out_of_window_total = images_->out_of_window_total();
   r.beyond_period_total = images_->beyond_period_total();
   r.ground_truth_layers = images_->deepest_layer();
+  r.ground_truth_summary = images_->ground_truth_summary();
   r.counts_u8 = stacks_->counts_u8();
   r.transient_crop = stacks_->transient_crop();
   r.profile_pixels = probe_->pixels();

@@ -131,6 +131,7 @@ RunResult run(const RunOptions& options) {
   record.photons_per_pulse_emitted = renderer.photons_per_pulse();
   record.camera = camera_json(render::Camera(cfg.camera, scene), img);
   record.threads = options.threads;
+  record.dataset = options.dataset;
   record.seconds = render_seconds;
   for (const auto& st : tile_stats) {
     record.rays.camera_rays += st.camera_rays, record.rays.shadow_rays += st.shadow_rays;

@@ -3,6 +3,8 @@
 // only when the whole run has succeeded (app/staging.h): a failed or interrupted run never leaves a
 // half-written, mixed or wrong file behind.
 #pragma once
+#include <nlohmann/json.hpp>
+
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -17,6 +19,7 @@ struct RunOptions {
   std::optional<uint64_t> seed;         // replaces the scene file's seed
   int threads = 0;                      // 0 = all cores
   bool progress = true;                 // progress and the summary lines on stderr (-q: off)
+  std::optional<nlohmann::json> dataset;  // spadgen dataset: recorded as metadata.json's "dataset"
 };
 
 struct RunResult {
@@ -36,6 +39,7 @@ struct SenseOptions {
   int repeats = 1;                      // realisations of the temporal noise: noise seeds S, S + 1, ...
   int threads = 0;
   bool progress = true;
+  std::optional<nlohmann::json> dataset;  // spadgen dataset: recorded as metadata.json's "dataset"
 };
 
 // `spadgen sense`: the sensor stage alone, from the light a run saved (light/). With the run's settings

@@ -131,6 +131,12 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
   for (const StackLayout& s : stacks)
     if (s.written) plan.disk.push_back({s.file, s.bytes()});
   plan.disk.push_back({"images", pixels * channels * 4});
+  if (c.outputs.light) {
+    // light/: per pixel of the image grown by one, its bin range, offset and totals, and the values of its lit
+    // bins, which the scene decides: 113 bins per pixel on the default multi-object scene (docs/outputs.md).
+    const int64_t ring = (img.width + 2) * (img.height + 2);
+    plan.disk.push_back({"light/ (outputs.light; about 128 lit bins per pixel)", ring * (8 + 8 + 8 + 8 + 4 + std::min<int64_t>(bins, 128) * 4)});
+  }
   plan.disk_available = out.empty() ? -1 : free_disk(out);
   return plan;
 }

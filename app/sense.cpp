@@ -254,6 +254,8 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     record.photons_per_pulse_emitted = meta.at("photons_per_pulse_emitted").get<double>();
     record.camera = meta.at("camera");
     record.ground_truth_layers = meta.at("ground_truth_layers").get<int>();
+    if (meta.contains("ground_truth_summary")) record.ground_truth_summary = meta.at("ground_truth_summary");
+    record.dataset = options.dataset;
     if (meta.contains("transient")) record.transient_crop = rect_of(meta.at("transient").at("crop_in_sensor"));
     record.light_region = region;
     record.light_values_bytes = meta.at("light").at("values_bytes").get<int64_t>();

@@ -19,6 +19,7 @@ enum class RngKind : uint32_t {
   Counts = 4,        // a = pixel index, b = gate / exposure index
   Crosstalk = 5,     // a = pixel index, b = gate / exposure index
   GroundTruth = 6,
+  Dataset = 7,       // a = sample index, b = 0 for the sample's seed, else the FNV-1a 64 hash of an axis key
   Test = 1000,       // tests and benchmarks
 };
 

@@ -4,8 +4,13 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <set>
 #include <vector>
 
@@ -256,6 +261,56 @@ json parse_json(const std::string& text, const std::string& where, const JsonOpt
                 ": " + problem);
   }
   return root;
+}
+
+std::string closest(const std::string& word, const std::vector<std::string>& candidates) {
+  const auto distance = [](const std::string& a, const std::string& b) {
+    std::vector<size_t> row(b.size() + 1);
+    for (size_t j = 0; j <= b.size(); ++j) row[j] = j;
+    for (size_t i = 1; i <= a.size(); ++i) {
+      size_t diag = row[0];
+      row[0] = i;
+      for (size_t j = 1; j <= b.size(); ++j) {
+        const size_t up = row[j];
+        row[j] = std::min({row[j] + 1, row[j - 1] + 1, diag + (a[i - 1] == b[j - 1] ? 0 : 1)});
+        diag = up;
+      }
+    }
+    return row[b.size()];
+  };
+  std::string best;
+  size_t best_d = std::max<size_t>(2, word.size() / 3) + 1;
+  for (const std::string& c : candidates)
+    if (const size_t d = distance(word, c); d < best_d) best_d = d, best = c;
+  return best;
+}
+
+uint64_t fnv1a64(const std::string& bytes, uint64_t h) {
+  for (unsigned char c : bytes) h = (h ^ c) * 0x100000001b3ull;
+  return h;
+}
+
+std::string content_hash(const std::string& scene_file, const std::string& gltf_path) {
+  namespace fs = std::filesystem;
+  const auto bytes = [](const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    std::ostringstream ss;
+    ss << in.rdbuf();
+    return ss.str();
+  };
+  uint64_t h = fnv1a64(bytes(scene_file));
+  h = fnv1a64(bytes(gltf_path), h);
+  std::vector<std::string> side;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(fs::path(gltf_path).parent_path(), ec))
+    if (e.is_regular_file() && e.path() != fs::path(gltf_path) &&
+        (e.path().extension() == ".bin" || e.path().extension() == ".png" || e.path().extension() == ".jpg"))
+      side.push_back(e.path().string());
+  std::sort(side.begin(), side.end());
+  for (const std::string& f : side) h = fnv1a64(bytes(f), h);
+  char buf[17];
+  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(h));
+  return buf;
 }
 
 }  // namespace spadgen::scenes

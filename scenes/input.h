@@ -7,6 +7,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 namespace spadgen::scenes {
 
@@ -47,6 +48,18 @@ size_t invalid_utf8_at(const std::string& text);
 
 // `text` for a message: bytes outside printable ASCII shown as \xHH.
 std::string printable(const std::string& text);
+
+// The candidate closest to `word` by edit distance when it is close enough to be a likely typo (at most a
+// third of the word's length, and at least 2 edits allowed), else "": for "did you mean" messages.
+std::string closest(const std::string& word, const std::vector<std::string>& candidates);
+
+// FNV-1a 64 (16 hex digits) of a scene file, its glTF file and every .bin, .png and .jpg beside the glTF
+// (sorted by name): a stable content hash for provenance, not for security. Files that cannot be read
+// count as empty.
+std::string content_hash(const std::string& scene_file, const std::string& gltf_path);
+
+// FNV-1a 64 of bytes, continuing from `h`.
+uint64_t fnv1a64(const std::string& bytes, uint64_t h = 0xcbf29ce484222325ull);
 
 // "line:column" (both from 1) of byte `offset` of `text`.
 std::string line_column(const std::string& text, size_t offset);

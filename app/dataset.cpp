@@ -1,0 +1,369 @@
+#include "app/dataset.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <thread>
+
+#include "app/pipeline.h"
+#include "app/resources.h"
+#include "app/run_parts.h"
+#include "core/error.h"
+#include "datasets/dataset.h"
+#include "datasets/folder.h"
+#include "scenes/input.h"
+#include "scenes/scene_file.h"
+#include "sensor/sensor.h"
+
+namespace spadgen::app {
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+using ojson = nlohmann::ordered_json;
+using datasets::DatasetFolder;
+using datasets::DatasetSpec;
+using datasets::Sample;
+using datasets::SampleRecord;
+using datasets::Status;
+
+namespace {
+
+// The cost model of a run's time on this machine kind (2 cores, AVX-512), fitted to runs of the shipped
+// scenes (docs/datasets.md, "Estimates"): camera paths, the sensor stage per pixel and gate position, and
+// the bytes written. An estimate to plan with, within a factor of about 2; `dataset run` reports the
+// measured times.
+constexpr double kSecondsPerPathBounce = 0.12e-6;   // per camera path and allowed bounce (paths end early)
+constexpr double kSecondsPerPixelGate = 6e-9;       // sensor stage, per pixel and gate position (or exposure)
+constexpr double kSecondsPerByte = 1.0 / 1.0e9;     // writing the outputs
+constexpr double kSecondsPerRun = 0.3;              // loading the scene, building the BVH, publishing
+
+struct Estimate {
+  int64_t disk = 0, memory = 0;
+  double seconds = 0.0;
+};
+
+Estimate estimate(const RunConfig& c, int repeats, int threads) {
+  sensor::SensorModel sensor(sensor_stage(c));
+  const TimeAxis axis = time_axis(c, sensor);
+  const PixelRect img = image_rect(c);
+  const ResourcePlan plan = plan_resources(c, sensor, img, axis, threads, "");
+  Estimate e;
+  e.memory = plan.memory_needed();
+  const int64_t run_disk = plan.disk_needed();
+  const double pixels = double(img.count());
+  const double bounces = std::min(c.render.max_bounces, 4);
+  const double sensor_seconds = pixels * sensor.K() * kSecondsPerPixelGate;
+  e.seconds = kSecondsPerRun + pixels * double(c.render.samples_per_pixel) * bounces * kSecondsPerPathBounce + sensor_seconds +
+              double(run_disk) * kSecondsPerByte;
+  // Repeats: the sensor stage again from the saved light, and its noise-dependent files (about the run's
+  // files less the ground truth and the light, which are linked).
+  e.disk = run_disk * repeats;
+  e.seconds += (repeats - 1) * (kSecondsPerRun + sensor_seconds + double(run_disk) * kSecondsPerByte);
+  const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
+  const double used = threads > 0 ? std::min<double>(threads, cores) : cores;
+  e.seconds *= 2.0 / used;  // the model is of 2 cores; the work is parallel
+  return e;
+}
+
+// Estimates of many samples: the sensor's gate response (tens of milliseconds) is built once per distinct
+// shape of run. The estimate does not depend on the seeds, the light's strength or the scene's content.
+class Estimator {
+ public:
+  Estimator(int repeats, int threads) : repeats_(repeats), threads_(threads) {}
+  Estimate operator()(const scenes::ResolvedRun& r) {
+    ojson key = r.resolved;
+    for (const char* k : {"seed", "seeds", "description", "ambient", "nodes", "materials"}) key.erase(k);
+    if (key.contains("laser")) key["laser"].erase("average_power_mW");
+    const std::string text = key.dump();
+    auto it = cache_.find(text);
+    if (it == cache_.end()) it = cache_.emplace(text, estimate(r.config, repeats_, threads_)).first;
+    return it->second;
+  }
+
+ private:
+  int repeats_, threads_;
+  std::map<std::string, Estimate> cache_;
+};
+
+std::string duration_text(double s) {
+  char buf[64];
+  if (s < 90) std::snprintf(buf, sizeof buf, "%.0f s", s);
+  else if (s < 5400) std::snprintf(buf, sizeof buf, "%.0f min", s / 60);
+  else if (s < 3 * 86400) std::snprintf(buf, sizeof buf, "%.1f h", s / 3600);
+  else std::snprintf(buf, sizeof buf, "%.1f days", s / 86400);
+  return buf;
+}
+
+datasets::Shard choose_shard(const DatasetOptions& o) {
+  if (o.shard) return datasets::parse_shard(*o.shard);
+  if (const auto s = datasets::shard_from_environment()) return *s;
+  return {};
+}
+
+// The dataset file a dataset folder was generated from (dataset.json records it and its resolved form).
+DatasetSpec spec_of_folder(const fs::path& dir) {
+  const fs::path own = dir / "dataset.json";
+  const std::string problem = scenes::file_problem(own.string(), scenes::kMaxSceneFileBytes);
+  if (!problem.empty()) throw Error(own.string() + " " + problem + "; expected a dataset folder written by spadgen dataset run");
+  const std::string text = scenes::read_file_bounded(own.string(), scenes::kMaxSceneFileBytes, "dataset.json");
+  (void)scenes::parse_json(text, own.string());  // checked
+  const ojson j = ojson::parse(text);             // in its order, which orders the axes
+  if (!j.contains("dataset_file") || !j["dataset_file"].is_string())
+    throw Error(own.string() + ": no \"dataset_file\"; expected a dataset folder written by spadgen dataset run");
+  const std::string file = j["dataset_file"].get<std::string>();
+  ojson body = j;
+  body.erase("dataset_file");
+  // The scene files are relative to the dataset file: parsed as if from there.
+  return datasets::parse_dataset_text(body.dump(), file);
+}
+
+std::vector<SampleRecord> inspect_all(const DatasetFolder& folder) {
+  std::vector<SampleRecord> records;
+  const int64_t n = folder.spec().count();
+  records.reserve(size_t(n));
+  for (int64_t i = 0; i < n; ++i) records.push_back(folder.inspect(datasets::make_sample(folder.spec(), i)));
+  return records;
+}
+
+std::string status_counts(const std::vector<SampleRecord>& records) {
+  int64_t c[4] = {0, 0, 0, 0};
+  for (const SampleRecord& r : records) ++c[int(r.status)];
+  return std::to_string(c[0]) + " done, " + std::to_string(c[1]) + " failed, " + std::to_string(c[2]) + " stale, " +
+         std::to_string(c[3]) + " missing";
+}
+
+}  // namespace
+
+std::string dataset_schema() { return datasets::dataset_reference_markdown(); }
+
+std::string dataset_plan(const DatasetOptions& options) {
+  const DatasetSpec spec = datasets::load_dataset_file(options.file);
+  const datasets::Shard shard = choose_shard(options);
+  std::optional<DatasetFolder> folder;
+  if (!options.out_dir.empty()) folder.emplace(spec, options.out_dir);
+  std::ostringstream o;
+  const int64_t n = spec.count();
+  o << "# dataset " << spec.file << ": " << n << " samples (" << spec.grid_cells() << " grid cells";
+  if (!spec.random.empty()) o << ", " << spec.random.size() << " random keys";
+  o << "), dataset seed " << spec.seed << ", " << spec.repeats << (spec.repeats == 1 ? " realisation" : " realisations")
+    << " of the noise per sample\n";
+  if (shard.count > 1) o << "# shard " << shard.text() << "\n";
+
+  std::vector<std::string> columns = {"scene"};
+  for (const datasets::GridAxis& g : spec.grid) columns.push_back(g.key);
+  for (const datasets::RandomAxis& r : spec.random) columns.push_back(r.key);
+  o << "index";
+  for (const std::string& c : columns) o << "\t" << c;
+  o << "\tseed\tdisk\tmemory\ttime";
+  if (folder) o << "\tstatus";
+  o << "\n";
+
+  Estimate total;
+  int64_t max_memory = 0, samples = 0, left = 0;
+  Estimate left_total;
+  std::vector<std::string> errors;
+  Estimator estimator(spec.repeats, options.threads);
+  for (int64_t i = 0; i < n; ++i) {
+    if (!shard.owns(i)) continue;
+    const Sample s = datasets::make_sample(spec, i);
+    ++samples;
+    Estimate e;
+    std::string status;
+    try {
+      const scenes::ResolvedRun r = scenes::load_scene_file(spec.scenes[size_t(s.scene)], s.overrides);
+      e = estimator(r);
+    } catch (const Error& err) {
+      errors.push_back("sample " + std::to_string(i) + ": " + err.what());
+      status = "invalid";
+    }
+    if (folder) {
+      const SampleRecord rec = folder->inspect(s);
+      if (status.empty()) status = datasets::status_name(rec.status);
+      if (rec.status != Status::Done) ++left, left_total.disk += e.disk, left_total.seconds += e.seconds;
+    }
+    total.disk += e.disk, total.seconds += e.seconds;
+    max_memory = std::max(max_memory, e.memory);
+    const bool show = options.all || samples <= 10 || i >= n - 10 * shard.count;
+    if (!show) {
+      if (samples == 11) o << "...\t(" << "--all lists every sample)\n";
+      continue;
+    }
+    o << i;
+    for (const std::string& c : columns) {
+      const ojson& v = s.parameters.value(c, ojson());
+      o << "\t" << (v.is_string() ? v.get<std::string>() : v.dump());
+    }
+    o << "\t" << s.seed << "\t" << bytes_text(e.disk) << "\t" << bytes_text(e.memory) << "\t" << duration_text(e.seconds);
+    if (folder) o << "\t" << status;
+    o << "\n";
+  }
+  o << "# per sample: disk about " << bytes_text(samples ? total.disk / samples : 0) << ", memory up to "
+    << bytes_text(max_memory) << ", time about " << duration_text(samples ? total.seconds / double(samples) : 0.0) << "\n";
+  o << "# " << (shard.count > 1 ? "this shard" : "total") << ": " << samples << " samples, disk about " << bytes_text(total.disk)
+    << ", time about " << duration_text(total.seconds) << " (estimates for 2 cores: docs/datasets.md, \"Estimates\")\n";
+  if (folder) {
+    int64_t free = -1;
+    {
+      std::error_code ec;
+      fs::path p = fs::absolute(options.out_dir, ec);
+      while (!p.empty() && !fs::exists(p, ec) && p != p.parent_path()) p = p.parent_path();
+      const fs::space_info sp = fs::space(p, ec);
+      if (!ec) free = int64_t(sp.available);
+    }
+    o << "# left to generate in " << options.out_dir << ": " << left << " samples, disk about " << bytes_text(left_total.disk)
+      << " (free: " << (free >= 0 ? bytes_text(free) : std::string("unknown")) << "), time about "
+      << duration_text(left_total.seconds) << "\n";
+  }
+  for (const std::string& e : errors) o << "error: " << e << "\n";
+  return o.str();
+}
+
+void dataset_run(const DatasetOptions& options) {
+  const DatasetSpec spec = datasets::load_dataset_file(options.file);
+  const datasets::Shard shard = choose_shard(options);
+  if (options.out_dir.empty()) throw Error("dataset run: expected the dataset folder (-o DIR)");
+  const DatasetFolder folder(spec, options.out_dir);
+  folder.claim();
+  const fs::path dir = folder.dir();
+
+  // What this shard has to do: every sample it owns that is not done, checked before any work.
+  struct Todo {
+    SampleRecord record;
+    Estimate estimate;
+  };
+  std::vector<Todo> todo;
+  int64_t owned = 0, skipped = 0;
+  Estimator estimator(spec.repeats, options.threads);
+  for (int64_t i = 0; i < spec.count(); ++i) {
+    if (!shard.owns(i)) continue;
+    ++owned;
+    SampleRecord rec = folder.inspect(datasets::make_sample(spec, i));
+    if (rec.status == Status::Done) {
+      ++skipped;
+      continue;
+    }
+    Estimate e;
+    if (!rec.hash.empty()) e = estimator(scenes::load_scene_file(spec.scenes[size_t(rec.sample.scene)], rec.sample.overrides));
+    todo.push_back({std::move(rec), e});
+  }
+  int64_t disk = 0;
+  double seconds = 0.0;
+  for (const Todo& t : todo) disk += t.estimate.disk, seconds += t.estimate.seconds;
+  {
+    std::error_code ec;
+    const fs::space_info sp = fs::space(dir, ec);
+    if (!ec && int64_t(sp.available) < disk)
+      throw Error("dataset run: the " + std::to_string(todo.size()) + " samples left to generate in " + dir.string() +
+                  (shard.count > 1 ? " (shard " + shard.text() + ")" : std::string()) + " need about " + bytes_text(disk) +
+                  ", and " + bytes_text(int64_t(sp.available)) + " is free there (about " +
+                  bytes_text(todo.empty() ? 0 : disk / int64_t(todo.size())) +
+                  " per sample: `spadgen dataset plan` lists them); free some space, write fewer outputs (outputs.*), or "
+                  "use another folder (-o)");
+  }
+  if (options.progress)
+    std::fprintf(stderr, "spadgen: dataset %s: %lld of %lld samples%s to generate (%lld done already), about %s, %s on disk\n",
+                 dir.string().c_str(), static_cast<long long>(todo.size()), static_cast<long long>(owned),
+                 shard.count > 1 ? (" of shard " + shard.text()).c_str() : "", static_cast<long long>(skipped),
+                 duration_text(seconds).c_str(), bytes_text(disk).c_str());
+
+  const auto start = std::chrono::steady_clock::now();
+  std::vector<int64_t> failed;
+  int64_t generated = 0;
+  for (size_t t = 0; t < todo.size(); ++t) {
+    const SampleRecord& rec = todo[t].record;
+    const Sample& s = rec.sample;
+    const auto sample_start = std::chrono::steady_clock::now();
+    try {
+      if (rec.hash.empty()) throw Error(rec.error);  // the sample's parameters make an invalid scene
+      const std::optional<json> meta = [&]() -> std::optional<json> {
+        std::ifstream in(dir / s.folder() / "metadata.json");
+        if (!in) return std::nullopt;
+        try {
+          return json::parse(in);
+        } catch (const json::exception&) {
+          return std::nullopt;
+        }
+      }();
+      const bool rendered = meta && meta->contains("/dataset/sample_hash"_json_pointer) &&
+                            (*meta)["dataset"]["sample_hash"] == rec.hash;
+      if (!rendered) {
+        RunOptions r;
+        r.scene_file = spec.scenes[size_t(s.scene)];
+        r.out_dir = (dir / s.folder()).string();
+        r.overrides = s.overrides;
+        r.threads = options.threads;
+        r.progress = false;
+        r.dataset = datasets::dataset_section(folder, s, rec.hash, 0);
+        run(r);
+      }
+      for (int k = 1; k < spec.repeats; ++k) {
+        const SampleRecord now = folder.inspect(s);
+        if (now.status == Status::Done) break;
+        const fs::path rf = dir / s.repeat_folder(k);
+        std::ifstream in(rf / "metadata.json");
+        if (in) {
+          try {
+            if (json::parse(in).value("/dataset/sample_hash"_json_pointer, std::string()) == rec.hash) continue;
+          } catch (const json::exception&) {
+          }
+        }
+        SenseOptions so;
+        so.run_dir = (dir / s.folder()).string();
+        so.out_dir = rf.string();
+        so.noise_seed = s.noise_seed + uint64_t(k);
+        so.threads = options.threads;
+        so.progress = false;
+        so.dataset = datasets::dataset_section(folder, s, rec.hash, k);
+        sense(so);
+      }
+      folder.clear_failure(s);
+      ++generated;
+    } catch (const Interrupted&) {
+      throw;
+    } catch (const std::exception& e) {
+      folder.record_failure(s, rec.hash, e.what());
+      failed.push_back(s.index);
+      std::fprintf(stderr, "spadgen: dataset: sample %lld failed: %s\n", static_cast<long long>(s.index), e.what());
+    }
+    if (options.progress) {
+      const auto now = std::chrono::steady_clock::now();
+      const double took = std::chrono::duration<double>(now - sample_start).count();
+      const double mean = std::chrono::duration<double>(now - start).count() / double(t + 1);
+      std::fprintf(stderr, "spadgen: dataset: sample %lld %s in %.1f s; %zu/%zu of this run, %lld failed; about %s left\n",
+                   static_cast<long long>(s.index), failed.empty() || failed.back() != s.index ? "done" : "failed", took, t + 1,
+                   todo.size(), static_cast<long long>(failed.size()), duration_text(mean * double(todo.size() - t - 1)).c_str());
+    }
+  }
+
+  const std::vector<SampleRecord> records = inspect_all(folder);
+  folder.write_index(records);
+  if (options.progress)
+    std::fprintf(stderr, "spadgen: dataset %s: %s (this run: %lld generated, %lld skipped, %zu failed)\n", dir.string().c_str(),
+                 status_counts(records).c_str(), static_cast<long long>(generated), static_cast<long long>(skipped), failed.size());
+  if (!failed.empty())
+    throw Error("dataset run: " + std::to_string(failed.size()) + " samples failed (" + datasets::ranges_text(failed) +
+                "); their errors are in " + (dir / "failed").string() + " and `spadgen dataset status " + dir.string() + "`");
+}
+
+std::string dataset_status(const std::string& dir) {
+  const DatasetSpec spec = spec_of_folder(dir);
+  const DatasetFolder folder(spec, dir);
+  const std::vector<SampleRecord> records = inspect_all(folder);
+  std::ostringstream o;
+  o << dir << ": dataset " << spec.file << ", " << records.size() << " samples: " << status_counts(records) << "\n";
+  for (Status st : {Status::Failed, Status::Stale, Status::Missing}) {
+    std::vector<int64_t> which;
+    for (const SampleRecord& r : records)
+      if (r.status == st) which.push_back(r.sample.index);
+    if (!which.empty()) o << datasets::status_name(st) << ": " << datasets::ranges_text(which) << "\n";
+  }
+  for (const SampleRecord& r : records)
+    if (r.status == Status::Failed) o << "sample " << r.sample.index << " failed: " << r.error << "\n";
+  return o.str();
+}
+
+}  // namespace spadgen::app

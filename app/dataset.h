@@ -1,0 +1,41 @@
+// `spadgen dataset plan|run|status`: a benchmark dataset from a dataset file (datasets/dataset.h), one
+// run folder per sample (datasets/folder.h), sharded over Slurm job arrays or Kubernetes Indexed Jobs.
+#pragma once
+#include <cstdint>
+#include <optional>
+#include <string>
+
+namespace spadgen::app {
+
+struct DatasetOptions {
+  std::string file;                  // the dataset file (plan, run)
+  std::string out_dir;               // the dataset folder (run: required; plan: optional, to show what is done)
+  std::optional<std::string> shard;  // "I/N"; absent: from the environment (Slurm, Kubernetes), else 0/1
+  int threads = 0;                   // per sample run, as `spadgen run --threads`
+  bool all = false;                  // plan: list every sample, not the first and last 10
+  bool progress = true;
+};
+
+// The samples with their parameters and seeds, and estimates of disk, memory and time per sample and in
+// total; with out_dir, which samples are done there and the free disk.
+std::string dataset_plan(const DatasetOptions& options);
+
+// Generates the shard's samples that are not done, each published as one unit; skips done ones; refuses
+// to start when the free disk is below the estimate. Rewrites the index and the card at the end. Throws
+// spadgen::Error after the index is written when samples failed (their errors are in DIR/failed/).
+void dataset_run(const DatasetOptions& options);
+
+// Done, failed, stale and missing samples of a dataset folder.
+std::string dataset_status(const std::string& dir);
+
+// The dataset file reference (Markdown), for docs/datasets.md.
+std::string dataset_schema();
+
+// Seconds a run of `c` is expected to take on this machine kind (2 cores), from a cost model measured on
+// the shipped scenes (docs/datasets.md, "Estimates"). threads: as --threads (0 = all cores).
+struct RunEstimate {
+  int64_t disk_bytes = 0, memory_bytes = 0;
+  double seconds = 0.0;
+};
+
+}  // namespace spadgen::app

@@ -1,0 +1,476 @@
+#include "datasets/dataset.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <set>
+
+#include "core/error.h"
+#include "core/rng.h"
+#include "scenes/input.h"
+#include "scenes/scene_file.h"
+
+namespace spadgen::datasets {
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+using ojson = nlohmann::ordered_json;
+
+namespace {
+
+constexpr uint64_t kMaxSeed = (uint64_t{1} << 53);  // seeds are JSON integers, exact in a double
+
+// A uniform double in [0, 1) with 53 random bits.
+double uniform01(Rng& r) { return static_cast<double>(r.next_u64() >> 11) * 0x1p-53; }
+
+double normal_cdf(double x) { return 0.5 * std::erfc(-x / std::sqrt(2.0)); }
+
+std::string describe(const json& v) {
+  std::string s = v.dump();
+  if (s.size() > 60) s = s.substr(0, 57) + "...";
+  return s;
+}
+
+struct Reader {
+  std::string file;
+  [[noreturn]] void fail(const std::string& where, const std::string& what) const {
+    throw Error(file + ": " + where + ": " + what);
+  }
+  double number(const json& v, const std::string& where, const std::string& expected) const {
+    if (!v.is_number() || !std::isfinite(v.get<double>())) fail(where, "found " + describe(v) + ", expected " + expected);
+    return v.get<double>();
+  }
+  uint64_t seed(const json& v, const std::string& where) const {
+    if (!v.is_number_unsigned() && !(v.is_number_integer() && v.get<int64_t>() >= 0))
+      fail(where, "found " + describe(v) + ", expected an integer in [0, 2^53]");
+    const uint64_t s = v.get<uint64_t>();
+    if (s > kMaxSeed) fail(where, "found " + describe(v) + ", expected an integer in [0, 2^53]");
+    return s;
+  }
+};
+
+// Keys a dataset controls itself.
+bool is_seed_key(const std::string& key) { return key == "seed" || key.rfind("seeds.", 0) == 0; }
+
+Distribution read_distribution(const Reader& rd, const json& v, const std::string& where) {
+  if (!v.is_object() || v.size() < 1)
+    rd.fail(where, "found " + describe(v) + ", expected a distribution: {\"uniform\": [a, b]}, {\"log_uniform\": [a, b]}, "
+                   "{\"normal\": [mean, sigma], \"min\": lo, \"max\": hi}, {\"uniform_int\": [a, b]} or {\"choice\": [v1, v2, ...]}");
+  static const std::vector<std::string> kinds = {"uniform", "log_uniform", "normal", "uniform_int", "choice"};
+  std::string kind;
+  for (auto it = v.begin(); it != v.end(); ++it) {
+    if (std::find(kinds.begin(), kinds.end(), it.key()) != kinds.end()) {
+      if (!kind.empty()) rd.fail(where, "has both \"" + kind + "\" and \"" + it.key() + "\"; expected one distribution");
+      kind = it.key();
+    } else if (it.key() != "min" && it.key() != "max") {
+      const std::string near = scenes::closest(it.key(), {"uniform", "log_uniform", "normal", "uniform_int", "choice", "min", "max"});
+      rd.fail(where + "/" + it.key(), "unknown key" + (near.empty() ? "; expected one of uniform, log_uniform, normal, uniform_int, choice (and min, max with normal)"
+                                                                   : "; did you mean " + near + "?"));
+    }
+  }
+  if (kind.empty()) rd.fail(where, "expected one of uniform, log_uniform, normal, uniform_int, choice");
+  Distribution d;
+  const json& p = v.at(kind);
+  const std::string at = where + "/" + kind;
+  if (kind == "choice") {
+    if (!p.is_array() || p.empty()) rd.fail(at, "found " + describe(p) + ", expected a non-empty array of values");
+    d.kind = Distribution::Kind::Choice;
+    d.choices = p;
+  } else {
+    if (!p.is_array() || p.size() != 2)
+      rd.fail(at, "found " + describe(p) + ", expected " + (kind == "normal" ? "[mean, sigma]" : "[a, b]"));
+    d.a = rd.number(p[0], at + "/0", "a number");
+    d.b = rd.number(p[1], at + "/1", "a number");
+    if (kind == "uniform") {
+      d.kind = Distribution::Kind::Uniform;
+      if (!(d.b > d.a)) rd.fail(at, "found [" + describe(p[0]) + ", " + describe(p[1]) + "], expected a < b");
+    } else if (kind == "log_uniform") {
+      d.kind = Distribution::Kind::LogUniform;
+      if (!(d.a > 0 && d.b > d.a)) rd.fail(at, "found " + describe(p) + ", expected 0 < a < b");
+    } else if (kind == "uniform_int") {
+      d.kind = Distribution::Kind::UniformInt;
+      if (d.a != std::floor(d.a) || d.b != std::floor(d.b) || !(d.b >= d.a) || std::fabs(d.a) > 9e15 || std::fabs(d.b) > 9e15)
+        rd.fail(at, "found " + describe(p) + ", expected integers a <= b (both included)");
+    } else {
+      d.kind = Distribution::Kind::Normal;
+      if (!(d.b > 0)) rd.fail(at, "found sigma " + describe(p[1]) + ", expected sigma > 0");
+    }
+  }
+  for (const char* bound : {"min", "max"}) {
+    if (!v.contains(bound)) continue;
+    if (d.kind != Distribution::Kind::Normal)
+      rd.fail(where + "/" + bound, "is only for \"normal\" (a truncated normal); the " + kind + " distribution has its bounds already");
+    (std::string(bound) == "min" ? d.min : d.max) = rd.number(v.at(bound), where + "/" + bound, "a number");
+  }
+  if (d.kind == Distribution::Kind::Normal) {
+    const double lo = d.min ? (*d.min - d.a) / d.b : -INFINITY, hi = d.max ? (*d.max - d.a) / d.b : INFINITY;
+    const double mass = normal_cdf(hi) - normal_cdf(lo);
+    if (!(mass >= 1e-3))
+      rd.fail(where, "keeps a fraction " + std::to_string(mass) +
+                         " of the normal distribution between min and max; expected at least 0.001 (widen min and max, or move the mean)");
+  }
+  return d;
+}
+
+json draw(const Distribution& d, Rng& r, const std::string& where) {
+  switch (d.kind) {
+    case Distribution::Kind::Uniform: return d.a + (d.b - d.a) * uniform01(r);
+    case Distribution::Kind::LogUniform: return std::exp(std::log(d.a) + (std::log(d.b) - std::log(d.a)) * uniform01(r));
+    case Distribution::Kind::UniformInt: {
+      const double n = d.b - d.a + 1.0;
+      const auto k = static_cast<int64_t>(std::min(std::floor(uniform01(r) * n), n - 1.0));
+      return static_cast<int64_t>(d.a) + k;
+    }
+    case Distribution::Kind::Choice: {
+      const double n = static_cast<double>(d.choices.size());
+      const auto k = static_cast<size_t>(std::min(std::floor(uniform01(r) * n), n - 1.0));
+      return d.choices[k];
+    }
+    case Distribution::Kind::Normal:
+      // Box-Muller, one value per pair; rejection for the truncation (its mass was checked to be >= 0.001).
+      for (int attempt = 0; attempt < 100000; ++attempt) {
+        const double u1 = 1.0 - uniform01(r), u2 = uniform01(r);
+        const double x = d.a + d.b * std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * 3.141592653589793 * u2);
+        if ((!d.min || x >= *d.min) && (!d.max || x <= *d.max)) return x;
+      }
+      throw Error(where + ": no draw fell between min and max in 100000 attempts");
+  }
+  return nullptr;
+}
+
+std::string folder_of(int64_t index) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "samples/%06lld", static_cast<long long>(index));
+  return buf;
+}
+
+}  // namespace
+
+const std::vector<DatasetKey>& dataset_keys() {
+  static const std::vector<DatasetKey> keys = {
+      {"description", "string", "\"\"", "free text, copied into the dataset card (dataset.md)"},
+      {"seed", "integer in [0, 2^53]", "0", "the dataset seed: every sample's random draws and seeds derive from it and the sample's index"},
+      {"scenes", "array of files", "required", "base scene files, relative to the dataset file; with several, the scene is the outermost grid axis (parameter `scene`)"},
+      {"samples", "integer in [1, 1e8] or null", "null", "number of samples; sample i takes grid cell i mod (number of cells) and its own random draws; null = one sample per grid cell"},
+      {"set", "object: key -> value", "{}", "scene-file keys (dotted, as --set writes them) set for every sample"},
+      {"grid", "object: key -> array of values", "{}", "scene-file keys and their values, combined as a grid (the last key varies fastest)"},
+      {"random", "object: key -> distribution", "{}", "scene-file keys drawn per sample (distributions below), from the dataset seed, the sample index and the key"},
+      {"seeds.light", "integer or \"per_sample\"", "\"per_sample\"", "seed of the light transport for every sample; \"per_sample\": the sample's seed"},
+      {"seeds.chip", "integer or \"per_sample\"", "\"per_sample\"", "seed of the chip's fixed pattern; an integer gives every sample the same chip (one camera)"},
+      {"seeds.noise", "integer or \"per_sample\"", "\"per_sample\"", "seed of the temporal noise; realisation r of a sample uses noise seed + r"},
+      {"repeats", "integer in [1, 1000]", "1", "realisations of the temporal noise per rendered sample (`spadgen sense` on the saved light: the light is rendered once)"},
+  };
+  return keys;
+}
+
+int64_t DatasetSpec::grid_cells() const {
+  int64_t n = static_cast<int64_t>(scenes.size());
+  for (const GridAxis& g : grid) n *= static_cast<int64_t>(g.values.size());
+  return n;
+}
+
+int64_t DatasetSpec::count() const { return samples.value_or(grid_cells()); }
+
+DatasetSpec parse_dataset_text(const std::string& text, const std::string& path) {
+  const Reader rd{path.empty() ? "<dataset>" : path};
+  const json doc = scenes::parse_json(text, rd.file);  // checked: depth, duplicate keys, numbers
+  // The same text with the keys in the file's order, which orders the axes.
+  const ojson ordered = ojson::parse(text, nullptr, true, /*ignore_comments=*/true);
+  const auto keys_of = [&](const char* section) {
+    std::vector<std::string> k;
+    if (ordered.contains(section) && ordered[section].is_object())
+      for (auto it = ordered[section].begin(); it != ordered[section].end(); ++it) k.push_back(it.key());
+    return k;
+  };
+  if (!doc.is_object()) throw Error(rd.file + ": expected a JSON object at the top, found " + describe(doc));
+  std::vector<std::string> known;
+  for (const DatasetKey& k : dataset_keys())
+    if (k.key.find('.') == std::string::npos) known.push_back(k.key);
+  known.push_back("seeds");
+  for (auto it = doc.begin(); it != doc.end(); ++it)
+    if (std::find(known.begin(), known.end(), it.key()) == known.end()) {
+      const std::string near = scenes::closest(it.key(), known);
+      rd.fail("/" + it.key(), "unknown key" + (near.empty() ? "; the keys of a dataset file are: description, seed, scenes, "
+                                                              "samples, set, grid, random, seeds, repeats"
+                                                            : "; did you mean " + near + "?"));
+    }
+
+  DatasetSpec s;
+  s.file = path.empty() ? "" : fs::absolute(path).lexically_normal().string();
+  const std::string dir = path.empty() ? "." : fs::absolute(path).parent_path().string();
+  if (doc.contains("description")) {
+    if (!doc["description"].is_string()) rd.fail("/description", "found " + describe(doc["description"]) + ", expected a string");
+    s.description = doc["description"].get<std::string>();
+  }
+  if (doc.contains("seed")) s.seed = rd.seed(doc["seed"], "/seed");
+  if (!doc.contains("scenes")) rd.fail("/scenes", "missing; expected an array of scene files (relative to the dataset file)");
+  const json& sc = doc["scenes"];
+  if (!sc.is_array() || sc.empty()) rd.fail("/scenes", "found " + describe(sc) + ", expected a non-empty array of scene files");
+  for (size_t i = 0; i < sc.size(); ++i) {
+    const std::string at = "/scenes/" + std::to_string(i);
+    if (!sc[i].is_string() || sc[i].get<std::string>().empty()) rd.fail(at, "found " + describe(sc[i]) + ", expected a file name");
+    const std::string name = sc[i].get<std::string>();
+    fs::path p(name);
+    if (p.is_relative()) p = fs::path(dir) / p;
+    const std::string full = p.lexically_normal().string();
+    const std::string problem = scenes::file_problem(full, scenes::kMaxSceneFileBytes);
+    if (!problem.empty()) rd.fail(at, "the scene file " + full + " " + problem + "; expected a path relative to the dataset file");
+    if (std::find(s.scene_names.begin(), s.scene_names.end(), name) != s.scene_names.end())
+      rd.fail(at, "lists " + name + " twice; expected each scene file once");
+    s.scenes.push_back(full);
+    s.scene_names.push_back(name);
+  }
+  if (doc.contains("samples") && !doc["samples"].is_null()) {
+    const json& n = doc["samples"];
+    if (!n.is_number_integer() && !n.is_number_unsigned()) rd.fail("/samples", "found " + describe(n) + ", expected an integer in [1, 1e8] or null");
+    const int64_t v = n.get<int64_t>();
+    if (v < 1 || v > kMaxSamples) rd.fail("/samples", "found " + describe(n) + ", expected an integer in [1, 1e8] or null");
+    s.samples = v;
+  }
+  if (doc.contains("repeats")) {
+    const json& r = doc["repeats"];
+    if (!r.is_number_integer() && !r.is_number_unsigned()) rd.fail("/repeats", "found " + describe(r) + ", expected an integer in [1, 1000]");
+    const int64_t v = r.get<int64_t>();
+    if (v < 1 || v > 1000) rd.fail("/repeats", "found " + describe(r) + ", expected an integer in [1, 1000]");
+    s.repeats = static_cast<int>(v);
+  }
+  if (doc.contains("seeds")) {
+    const json& sd = doc["seeds"];
+    if (!sd.is_object()) rd.fail("/seeds", "found " + describe(sd) + ", expected an object {\"light\": ..., \"chip\": ..., \"noise\": ...}");
+    for (auto it = sd.begin(); it != sd.end(); ++it) {
+      const std::string at = "/seeds/" + it.key();
+      std::optional<uint64_t>* slot = it.key() == "light" ? &s.light_seed : it.key() == "chip" ? &s.chip_seed
+                                                                        : it.key() == "noise" ? &s.noise_seed : nullptr;
+      if (!slot) {
+        const std::string near = scenes::closest(it.key(), {"light", "chip", "noise"});
+        rd.fail(at, "unknown key" + (near.empty() ? "; the seeds are light, chip and noise" : "; did you mean " + near + "?"));
+      }
+      if (it.value().is_string() && it.value().get<std::string>() == "per_sample") continue;
+      if (it.value().is_string()) rd.fail(at, "found " + describe(it.value()) + ", expected an integer in [0, 2^53] or \"per_sample\"");
+      *slot = rd.seed(it.value(), at);
+    }
+  }
+
+  // The scene-file keys: dotted as --set writes them; the dataset owns the seeds.
+  const auto check_key = [&](const std::string& section, const std::string& key) {
+    const std::string at = "/" + section + "/" + key;
+    if (key.empty()) rd.fail(at, "expected a scene-file key such as laser.average_power_mW");
+    if (is_seed_key(key))
+      rd.fail(at, "the dataset sets every sample's seeds: use the dataset file's \"seed\" and \"seeds\" keys instead");
+    return at;
+  };
+  // Checks `key=value` overrides against the first scene file, with the scene file's own checks.
+  const auto check_values = [&](const std::string& at, const std::vector<std::string>& overrides) {
+    try {
+      (void)scenes::load_scene_file(s.scenes.front(), overrides);
+    } catch (const Error& e) {
+      rd.fail(at, std::string("with the scene file ") + s.scene_names.front() + ":\n  " + e.what());
+    }
+  };
+  std::set<std::string> seen;
+  const auto once = [&](const std::string& at, const std::string& key) {
+    if (!seen.insert(key).second) rd.fail(at, "varies " + key + " a second time; expected each key in one of set, grid and random");
+  };
+  if (doc.contains("set")) {
+    const json& st = doc["set"];
+    if (!st.is_object()) rd.fail("/set", "found " + describe(st) + ", expected an object of scene-file keys and values");
+    std::vector<std::string> all;
+    for (const std::string& key : keys_of("set")) {
+      const auto it = st.find(key);
+      const std::string at = check_key("set", it.key());
+      once(at, it.key());
+      s.set.emplace_back(it.key(), it.value());
+      all.push_back(it.key() + "=" + it.value().dump());
+      check_values(at, {all.back()});
+    }
+  }
+  if (doc.contains("grid")) {
+    const json& g = doc["grid"];
+    if (!g.is_object()) rd.fail("/grid", "found " + describe(g) + ", expected an object of scene-file keys and arrays of values");
+    for (const std::string& key : keys_of("grid")) {
+      const auto it = g.find(key);
+      const std::string at = check_key("grid", it.key());
+      once(at, it.key());
+      if (!it.value().is_array() || it.value().empty())
+        rd.fail(at, "found " + describe(it.value()) + ", expected a non-empty array of values");
+      for (size_t i = 0; i < it.value().size(); ++i)
+        check_values(at + "/" + std::to_string(i), {it.key() + "=" + it.value()[i].dump()});
+      s.grid.push_back({it.key(), it.value()});
+    }
+  }
+  if (doc.contains("random")) {
+    const json& r = doc["random"];
+    if (!r.is_object()) rd.fail("/random", "found " + describe(r) + ", expected an object of scene-file keys and distributions");
+    for (const std::string& key : keys_of("random")) {
+      const auto it = r.find(key);
+      const std::string at = check_key("random", it.key());
+      once(at, it.key());
+      const Distribution d = read_distribution(rd, it.value(), at);
+      // The ends of the range must be valid values (a key's range check catches most mistakes here).
+      std::vector<json> probes;
+      if (d.kind == Distribution::Kind::Choice) probes.assign(d.choices.begin(), d.choices.end());
+      else if (d.kind == Distribution::Kind::UniformInt) probes = {static_cast<int64_t>(d.a), static_cast<int64_t>(d.b)};
+      else if (d.kind == Distribution::Kind::Normal) probes = {d.min.value_or(d.a), d.max.value_or(d.a)};
+      else probes = {d.a, d.b};
+      for (const json& p : probes) check_values(at, {it.key() + "=" + p.dump()});
+      s.random.push_back({it.key(), d, it.value()});
+    }
+  }
+  if (s.repeats > 1)
+    for (const std::string& key : seen)
+      if (key == "outputs.light")
+        rd.fail("/repeats", "is " + std::to_string(s.repeats) + ", which needs the saved light: remove outputs.light from set, grid and random");
+  if (s.grid_cells() > kMaxSamples) rd.fail("/grid", "has " + std::to_string(s.grid_cells()) + " cells; expected at most 1e8");
+
+  // The resolved file, every default explicit.
+  ojson& o = s.resolved;
+  o["description"] = s.description;
+  o["seed"] = s.seed;
+  o["scenes"] = s.scene_names;
+  o["samples"] = s.samples ? ojson(*s.samples) : ojson(nullptr);
+  o["set"] = ojson::object();
+  for (const auto& [k, v] : s.set) o["set"][k] = ojson::parse(v.dump());
+  o["grid"] = ojson::object();
+  for (const GridAxis& g : s.grid) o["grid"][g.key] = ojson::parse(g.values.dump());
+  o["random"] = ojson::object();
+  for (const RandomAxis& r : s.random) o["random"][r.key] = ojson::parse(r.spec.dump());
+  const auto seed_json = [](const std::optional<uint64_t>& v) { return v ? ojson(*v) : ojson("per_sample"); };
+  o["seeds"] = {{"light", seed_json(s.light_seed)}, {"chip", seed_json(s.chip_seed)}, {"noise", seed_json(s.noise_seed)}};
+  o["repeats"] = s.repeats;
+  return s;
+}
+
+DatasetSpec load_dataset_file(const std::string& path) {
+  if (scenes::invalid_utf8_at(path) != std::string::npos)
+    throw Error("dataset file " + scenes::printable(path) + ": its name is not valid UTF-8 text; rename it");
+  return parse_dataset_text(scenes::read_file_bounded(path, scenes::kMaxSceneFileBytes, "dataset file"), path);
+}
+
+std::string Sample::folder() const { return folder_of(index); }
+
+std::string Sample::repeat_folder(int r) const {
+  char buf[16];
+  std::snprintf(buf, sizeof buf, "_r%02d", r);
+  return folder_of(index) + buf;
+}
+
+Sample make_sample(const DatasetSpec& spec, int64_t index) {
+  if (index < 0 || index >= spec.count())
+    throw Error("sample " + std::to_string(index) + " is not in the dataset (it has " + std::to_string(spec.count()) + " samples)");
+  Sample s;
+  s.index = index;
+  // Grid cell: the scene outermost, the last grid key fastest.
+  int64_t cell = index % spec.grid_cells();
+  std::vector<size_t> pick(spec.grid.size());
+  for (size_t a = spec.grid.size(); a-- > 0;) {
+    const auto n = static_cast<int64_t>(spec.grid[a].values.size());
+    pick[a] = static_cast<size_t>(cell % n);
+    cell /= n;
+  }
+  s.scene = static_cast<int>(cell);
+  s.parameters["scene"] = spec.scene_names[size_t(s.scene)];
+  for (const auto& [k, v] : spec.set) s.overrides.push_back(k + "=" + v.dump());
+  for (size_t a = 0; a < spec.grid.size(); ++a) {
+    const json& v = spec.grid[a].values[pick[a]];
+    s.overrides.push_back(spec.grid[a].key + "=" + v.dump());
+    s.parameters[spec.grid[a].key] = ojson::parse(v.dump());
+  }
+  for (const RandomAxis& r : spec.random) {
+    Rng rng(spec.seed, RngKind::Dataset, static_cast<uint64_t>(index), scenes::fnv1a64(r.key) | 1u);
+    const json v = draw(r.dist, rng, spec.file + ": /random/" + r.key);
+    s.overrides.push_back(r.key + "=" + v.dump());
+    s.parameters[r.key] = ojson::parse(v.dump());
+  }
+  // Realisations 1, 2, ... re-sample the sensor from the light the run saves.
+  if (spec.repeats > 1) s.overrides.push_back("outputs.light=true");
+  Rng rng(spec.seed, RngKind::Dataset, static_cast<uint64_t>(index), 0);
+  s.seed = rng.next_u64() >> 11;  // 53 bits: exact in JSON
+  s.overrides.push_back("seed=" + std::to_string(s.seed));
+  s.light_seed = spec.light_seed.value_or(s.seed);
+  s.chip_seed = spec.chip_seed.value_or(s.seed);
+  s.noise_seed = spec.noise_seed.value_or(s.seed);
+  if (spec.light_seed) s.overrides.push_back("seeds.light=" + std::to_string(*spec.light_seed));
+  if (spec.chip_seed) s.overrides.push_back("seeds.chip=" + std::to_string(*spec.chip_seed));
+  if (spec.noise_seed) s.overrides.push_back("seeds.noise=" + std::to_string(*spec.noise_seed));
+  return s;
+}
+
+std::string Shard::text() const { return std::to_string(index) + "/" + std::to_string(count); }
+
+Shard parse_shard(const std::string& text, const std::string& where) {
+  const size_t slash = text.find('/');
+  const auto number = [&](const std::string& t, int64_t& out) {
+    if (t.empty() || t.size() > 9 || t.find_first_not_of("0123456789") != std::string::npos) return false;
+    out = std::stoll(t);
+    return true;
+  };
+  Shard s;
+  if (slash == std::string::npos || !number(text.substr(0, slash), s.index) || !number(text.substr(slash + 1), s.count) ||
+      s.count < 1 || s.index >= s.count)
+    throw Error(where + ": found \"" + scenes::printable(text) + "\", expected I/N with 0 <= I < N (shard I of N, e.g. 0/4)");
+  return s;
+}
+
+std::optional<Shard> shard_from_environment() {
+  const auto env = [](const char* name) -> std::optional<std::string> {
+    const char* v = std::getenv(name);
+    return v && *v ? std::optional<std::string>(v) : std::nullopt;
+  };
+  const auto integer = [](const std::string& name, const std::string& v) {
+    if (v.empty() || v.size() > 9 || v.find_first_not_of("0123456789") != std::string::npos)
+      throw Error("environment variable " + name + "=\"" + scenes::printable(v) + "\": expected a non-negative integer");
+    return std::stoll(v);
+  };
+  if (const auto id = env("SLURM_ARRAY_TASK_ID")) {
+    const auto count = env("SLURM_ARRAY_TASK_COUNT");
+    if (!count) throw Error("SLURM_ARRAY_TASK_ID is set but SLURM_ARRAY_TASK_COUNT is not: run as a Slurm job array (sbatch --array=0-N)");
+    const int64_t min = env("SLURM_ARRAY_TASK_MIN") ? integer("SLURM_ARRAY_TASK_MIN", *env("SLURM_ARRAY_TASK_MIN")) : 0;
+    const int64_t step = env("SLURM_ARRAY_TASK_STEP") ? integer("SLURM_ARRAY_TASK_STEP", *env("SLURM_ARRAY_TASK_STEP")) : 1;
+    const int64_t i = integer("SLURM_ARRAY_TASK_ID", *id), n = integer("SLURM_ARRAY_TASK_COUNT", *count);
+    if (step < 1 || i < min || (i - min) % step != 0 || (i - min) / step >= n || n < 1)
+      throw Error("Slurm job array: SLURM_ARRAY_TASK_ID=" + std::to_string(i) + ", MIN=" + std::to_string(min) + ", STEP=" +
+                  std::to_string(step) + ", COUNT=" + std::to_string(n) +
+                  " do not make a task index in [0, COUNT): use a contiguous array such as --array=0-" + std::to_string(n - 1));
+    return Shard{(i - min) / step, n};
+  }
+  if (const auto id = env("JOB_COMPLETION_INDEX")) {
+    const auto count = env("JOB_COMPLETIONS");
+    if (!count)
+      throw Error("JOB_COMPLETION_INDEX is set (a Kubernetes Indexed Job) but JOB_COMPLETIONS is not: set it in the Job's "
+                  "container env to the Job's completions (examples/kubernetes/)");
+    const int64_t i = integer("JOB_COMPLETION_INDEX", *id), n = integer("JOB_COMPLETIONS", *count);
+    if (n < 1 || i >= n)
+      throw Error("Kubernetes Indexed Job: JOB_COMPLETION_INDEX=" + std::to_string(i) + " is not below JOB_COMPLETIONS=" + std::to_string(n));
+    return Shard{i, n};
+  }
+  return std::nullopt;
+}
+
+std::string ranges_text(const std::vector<int64_t>& indices) {
+  std::string out;
+  for (size_t i = 0; i < indices.size();) {
+    size_t j = i;
+    while (j + 1 < indices.size() && indices[j + 1] == indices[j] + 1) ++j;
+    if (!out.empty()) out += ", ";
+    out += std::to_string(indices[i]);
+    if (j > i) out.append("-").append(std::to_string(indices[j]));
+    i = j + 1;
+  }
+  return out;
+}
+
+std::string dataset_reference_markdown() {
+  std::string o = "| key | type | default | meaning |\n|---|---|---|---|\n";
+  for (const DatasetKey& k : dataset_keys())
+    o += "| `" + k.key + "` | " + k.type + " | " + (k.def == "required" ? "required" : "`" + k.def + "`") + " | " + k.doc + " |\n";
+  o += "\n| distribution | written | draws |\n|---|---|---|\n"
+       "| uniform | `{\"uniform\": [a, b]}` | a number in [a, b) |\n"
+       "| log-uniform | `{\"log_uniform\": [a, b]}` | a number in [a, b) whose logarithm is uniform (0 < a < b) |\n"
+       "| normal | `{\"normal\": [mean, sigma], \"min\": lo, \"max\": hi}` | a normal number; with min and/or max, truncated to [min, max] by rejection (which must keep at least 0.1 % of the mass) |\n"
+       "| uniform integer | `{\"uniform_int\": [a, b]}` | an integer in [a, b], both included |\n"
+       "| choice | `{\"choice\": [v1, v2, ...]}` | one of the values (any JSON: numbers, strings, arrays), with equal probability |\n";
+  return o;
+}
+
+}  // namespace spadgen::datasets

@@ -1,0 +1,405 @@
+#include "datasets/folder.h"
+
+#include <fcntl.h>
+#include <sys/file.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+#include "core/error.h"
+#include "scenes/input.h"
+#include "scenes/scene_file.h"
+#include "writers/writers.h"
+
+#ifndef SPADGEN_VERSION
+#define SPADGEN_VERSION "dev"
+#endif
+
+namespace spadgen::datasets {
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+using ojson = nlohmann::ordered_json;
+
+namespace {
+
+// What a dataset folder may hold besides the samples' folders.
+const std::set<std::string> kOwnEntries = {"dataset.json", "samples", "failed", "index.jsonl", "index.csv", "dataset.md",
+                                           ".dataset.lock"};
+
+std::optional<json> read_json(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  if (!in) return std::nullopt;
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  try {
+    return json::parse(ss.str());
+  } catch (const json::exception&) {
+    return std::nullopt;  // a file spadgen wrote whole is never cut short; anything else is not a sample
+  }
+}
+
+std::string slurp_text(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+std::string failure_path(const Sample& s) {
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "failed/%06lld.json", static_cast<long long>(s.index));
+  return buf;
+}
+
+// A CSV field (RFC 4180): quoted when it holds a comma, a quote or a line break.
+std::string csv_field(const std::string& v) {
+  if (v.find_first_of(",\"\n\r") == std::string::npos) return v;
+  std::string q = "\"";
+  for (char c : v) q += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return q + "\"";
+}
+std::string csv_value(const ojson& v) {
+  if (v.is_null()) return "";
+  if (v.is_string()) return csv_field(v.get<std::string>());
+  return csv_field(v.dump());
+}
+
+std::string bytes_text(double b) {
+  char buf[32];
+  if (b >= 1e9) std::snprintf(buf, sizeof buf, "%.2f GB", b / 1e9);
+  else if (b >= 1e6) std::snprintf(buf, sizeof buf, "%.1f MB", b / 1e6);
+  else std::snprintf(buf, sizeof buf, "%.1f kB", b / 1e3);
+  return buf;
+}
+
+// Holds DIR/.dataset.lock for the scope.
+class FolderLock {
+ public:
+  explicit FolderLock(const fs::path& dir) {
+    const std::string p = (dir / ".dataset.lock").string();
+    fd_ = ::open(p.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+    if (fd_ < 0) throw Error("cannot open the dataset folder's lock " + p + ": " + std::strerror(errno));
+    while (::flock(fd_, LOCK_EX) != 0)
+      if (errno != EINTR) throw Error("cannot lock " + p + ": " + std::strerror(errno));
+  }
+  ~FolderLock() { ::close(fd_); }
+  FolderLock(const FolderLock&) = delete;
+  FolderLock& operator=(const FolderLock&) = delete;
+
+ private:
+  int fd_ = -1;
+};
+
+}  // namespace
+
+const char* status_name(Status s) {
+  switch (s) {
+    case Status::Done: return "done";
+    case Status::Failed: return "failed";
+    case Status::Stale: return "stale";
+    case Status::Missing: return "missing";
+  }
+  return "?";
+}
+
+DatasetFolder::DatasetFolder(const DatasetSpec& spec, fs::path dir) : spec_(spec), dir_(std::move(dir)) {}
+
+void DatasetFolder::claim() const {
+  std::error_code ec;
+  fs::create_directories(dir_, ec);
+  if (ec) throw Error("cannot create the dataset folder " + dir_.string() + ": " + ec.message());
+  if (!fs::is_directory(dir_)) throw Error(dir_.string() + " is not a folder; expected the dataset folder (-o)");
+  const fs::path own = dir_ / "dataset.json";
+  // dataset.json: where the dataset file is (for `dataset status`) and its resolved form.
+  ojson record = {{"dataset_file", spec_.file}};
+  for (auto it = spec_.resolved.begin(); it != spec_.resolved.end(); ++it) record[it.key()] = it.value();
+  // Compared in order: the order of the grid's keys decides which cell a sample takes.
+  const ojson wanted = record;
+  std::optional<ojson> prev;
+  if (const std::optional<json> any = read_json(own)) prev = ojson::parse(slurp_text(own));
+  if (prev) {
+    ojson a = *prev, b = wanted;
+    for (const char* free_key : {"samples", "dataset_file"}) a.erase(free_key), b.erase(free_key);
+    if (a != b) {
+      std::string key = "?";
+      for (auto it = b.begin(); it != b.end(); ++it)
+        if (!a.contains(it.key()) || a[it.key()] != it.value()) {
+          key = it.key();
+          break;
+        }
+      throw Error(dir_.string() + " holds another dataset: its dataset.json differs from " + spec_.file + " at \"" + key +
+                  "\" (only \"samples\" may change, to add samples); use another folder (-o) or remove " + dir_.string());
+    }
+  } else {
+    for (const auto& e : fs::directory_iterator(dir_)) {
+      const std::string name = e.path().filename().string();
+      if (kOwnEntries.count(name) || name.rfind(".dataset.json.tmp", 0) == 0) continue;
+      throw Error(dir_.string() + " holds " + name + ", which spadgen did not write there; expected an empty folder or a "
+                  "dataset folder (with its dataset.json): use another folder (-o)");
+    }
+  }
+  if (prev != wanted) writers::write_file_atomic(own.string(), record.dump(2) + "\n");
+  fs::create_directories(dir_ / "samples", ec);
+  if (ec) throw Error("cannot create " + (dir_ / "samples").string() + ": " + ec.message());
+}
+
+const std::string& DatasetFolder::scene_content_hash(int scene) const {
+  auto it = content_hashes_.find(scene);
+  if (it == content_hashes_.end()) {
+    const scenes::ResolvedRun base = scenes::load_scene_file(spec_.scenes[size_t(scene)]);
+    it = content_hashes_.emplace(scene, scenes::content_hash(base.config.scene_file, base.config.gltf_path)).first;
+  }
+  return it->second;
+}
+
+DatasetFolder::Resolved DatasetFolder::resolve(const Sample& s) const {
+  scenes::ResolvedRun r;
+  try {
+    r = scenes::load_scene_file(spec_.scenes[size_t(s.scene)], s.overrides);
+  } catch (const Error& e) {
+    throw Error("sample " + std::to_string(s.index) + " (" + s.parameters.dump() + ") makes an invalid scene:\n  " + e.what());
+  }
+  Resolved out;
+  out.scene = r.resolved;
+  // The hash covers what shapes the sample's data: its resolved scene, the content of its files and the
+  // program's version; the same function of the sample on every machine and shard.
+  const std::string text = r.resolved.dump() + "\n" + scene_content_hash(s.scene) + "\n" + SPADGEN_VERSION;
+  char buf[17];
+  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(scenes::fnv1a64(text)));
+  out.hash = buf;
+  return out;
+}
+
+SampleRecord DatasetFolder::inspect(const Sample& s) const {
+  SampleRecord rec;
+  rec.sample = s;
+  try {
+    rec.hash = resolve(s).hash;
+  } catch (const Error& e) {
+    rec.status = Status::Failed;
+    rec.error = e.what();
+    return rec;
+  }
+  bool done = true, stale = false;
+  std::set<std::pair<dev_t, ino_t>> inodes;
+  std::vector<std::string> folders = {s.folder()};
+  for (int r = 1; r < spec_.repeats; ++r) folders.push_back(s.repeat_folder(r));
+  for (size_t f = 0; f < folders.size(); ++f) {
+    const std::optional<json> meta = read_json(dir_ / folders[f] / "metadata.json");
+    if (!meta || !meta->contains("dataset") || !meta->contains("files")) {
+      done = false;
+      continue;
+    }
+    if ((*meta)["dataset"].value("sample_hash", "") != rec.hash) {
+      stale = true;
+      continue;
+    }
+    const std::string prefix = f == 0 ? "" : folders[f].substr(s.folder().size()) + "/";
+    for (const json& name : (*meta)["files"]) {
+      // metadata.json's size varies with its timing fields; the index and the card must not.
+      if (name == "metadata.json") continue;
+      // A repeat links the files that do not depend on the noise (ground truth, light): counted once.
+      struct stat st {};
+      if (::stat((dir_ / folders[f] / name.get<std::string>()).c_str(), &st) != 0) continue;
+      if (!inodes.insert({st.st_dev, st.st_ino}).second) continue;
+      rec.files.emplace_back(prefix + name.get<std::string>(), int64_t(st.st_size));
+      rec.bytes += int64_t(st.st_size);
+    }
+    if (f == 0) {
+      if (meta->contains("ground_truth_summary")) rec.summary = ojson::parse((*meta)["ground_truth_summary"].dump());
+      if (meta->contains("/laser_photons_per_pulse/total_all_pixels"_json_pointer))
+        rec.summary["laser_photons_per_pulse"] = (*meta)["laser_photons_per_pulse"]["total_all_pixels"].get<double>();
+    }
+  }
+  if (done && !stale) {
+    rec.status = Status::Done;
+    rec.folders = folders;
+    return rec;
+  }
+  rec.files.clear(), rec.bytes = 0, rec.summary = nullptr;
+  if (stale) {
+    rec.status = Status::Stale;
+    return rec;
+  }
+  if (const std::optional<json> f = read_json(dir_ / failure_path(s)); f && f->value("sample_hash", "") == rec.hash) {
+    rec.status = Status::Failed;
+    rec.error = f->value("error", "");
+  }
+  return rec;
+}
+
+void DatasetFolder::record_failure(const Sample& s, const std::string& hash, const std::string& error) const {
+  fs::create_directories(dir_ / "failed");
+  const ojson j = {{"index", s.index}, {"sample_hash", hash}, {"parameters", s.parameters}, {"error", error}};
+  writers::write_file_atomic((dir_ / failure_path(s)).string(), j.dump(2) + "\n");
+}
+
+void DatasetFolder::clear_failure(const Sample& s) const {
+  std::error_code ec;
+  fs::remove(dir_ / failure_path(s), ec);
+}
+
+void DatasetFolder::write_index(const std::vector<SampleRecord>& records) const {
+  const FolderLock lock(dir_);
+  writers::write_file_atomic((dir_ / "index.jsonl").string(), index_jsonl(spec_, records));
+  writers::write_file_atomic((dir_ / "index.csv").string(), index_csv(spec_, records));
+  writers::write_file_atomic((dir_ / "dataset.md").string(), dataset_card(*this, records));
+}
+
+json dataset_section(const DatasetFolder& folder, const Sample& s, const std::string& hash, int repeat) {
+  const DatasetSpec& spec = folder.spec();
+  return {{"dataset_file", spec.file},
+          {"index", s.index},
+          {"repeat", repeat},
+          {"parameters", json::parse(s.parameters.dump())},
+          {"seeds", {{"seed", s.seed}, {"light", s.light_seed}, {"chip", s.chip_seed}, {"noise", s.noise_seed + uint64_t(repeat)}}},
+          {"sample_hash", hash}};
+}
+
+std::string index_jsonl(const DatasetSpec& spec, const std::vector<SampleRecord>& records) {
+  std::string out;
+  for (const SampleRecord& r : records) {
+    ojson row;
+    row["index"] = r.sample.index;
+    row["status"] = status_name(r.status);
+    row["folder"] = r.sample.folder();
+    row["parameters"] = r.sample.parameters;
+    row["seeds"] = {{"seed", r.sample.seed}, {"light", r.sample.light_seed}, {"chip", r.sample.chip_seed}, {"noise", r.sample.noise_seed}};
+    if (spec.repeats > 1) {
+      row["repeats"] = ojson::array();
+      for (int k = 1; k < spec.repeats; ++k) row["repeats"].push_back(r.sample.repeat_folder(k));
+    }
+    row["sample_hash"] = r.hash;
+    if (r.status == Status::Done) {
+      row["bytes"] = r.bytes;
+      row["files"] = ojson::array();
+      for (const auto& [name, size] : r.files) row["files"].push_back(name);
+      row["ground_truth"] = r.summary;
+    }
+    if (r.status == Status::Failed) row["error"] = r.error;
+    out += row.dump() + "\n";
+  }
+  return out;
+}
+
+std::string index_csv(const DatasetSpec& spec, const std::vector<SampleRecord>& records) {
+  std::vector<std::string> params = {"scene"};
+  for (const GridAxis& g : spec.grid) params.push_back(g.key);
+  for (const RandomAxis& r : spec.random) params.push_back(r.key);
+  const std::vector<std::string> summary = {"hit_fraction", "range_min_m", "range_max_m", "meshes_in_view", "max_layer_count",
+                                            "laser_photons_per_pulse"};
+  std::string out = "index,status,folder";
+  for (const std::string& p : params) out.append(",").append(csv_field(p));
+  out += ",seed,seed_light,seed_chip,seed_noise,sample_hash,bytes";
+  for (const std::string& k : summary) out.append(",").append(k);
+  out += ",error\n";
+  for (const SampleRecord& r : records) {
+    out += std::to_string(r.sample.index) + "," + status_name(r.status) + "," + r.sample.folder();
+    for (const std::string& p : params) out.append(",").append(csv_value(r.sample.parameters.value(p, ojson())));
+    out += "," + std::to_string(r.sample.seed) + "," + std::to_string(r.sample.light_seed) + "," + std::to_string(r.sample.chip_seed) +
+           "," + std::to_string(r.sample.noise_seed) + "," + r.hash + ",";
+    if (r.status == Status::Done) out += std::to_string(r.bytes);
+    for (const std::string& k : summary)
+      out.append(",").append(r.summary.is_object() ? csv_value(r.summary.value(k, ojson())) : std::string());
+    out.append(",").append(csv_field(r.error)).append("\n");
+  }
+  return out;
+}
+
+std::string dataset_card(const DatasetFolder& folder, const std::vector<SampleRecord>& records) {
+  const DatasetSpec& spec = folder.spec();
+  std::map<Status, int64_t> count;
+  for (const SampleRecord& r : records) ++count[r.status];
+  std::ostringstream o;
+  const std::string title = spec.description.empty() ? fs::path(spec.file).filename().string() : spec.description;
+  o << "# " << title << "\n\n";
+  o << "A synthetic time-gated SPAD dataset generated by spadgen " << SPADGEN_VERSION << " from the dataset file `"
+    << fs::path(spec.file).filename().string() << "` (its resolved form: `dataset.json`):\n\n"
+    << "```sh\nspadgen dataset run " << fs::path(spec.file).filename().string() << " -o DIR   # DIR: this folder\n```\n\n";
+  o << "## Samples\n\n"
+    << "| samples | done | failed | stale | missing |\n|---|---|---|---|---|\n"
+    << "| " << records.size() << " | " << count[Status::Done] << " | " << count[Status::Failed] << " | " << count[Status::Stale]
+    << " | " << count[Status::Missing] << " |\n\n";
+  o << "Sample i is the folder `samples/<i, 6 digits>/` (a complete spadgen run folder: `metadata.json` lists its files, "
+       "units and settings, and its `dataset` section the sample's parameters and seeds)";
+  if (spec.repeats > 1)
+    o << "; its realisations 1 to " << spec.repeats - 1 << " of the temporal noise are `samples/<i>_r01/`, ... (the same "
+      << "light, noise seeds S + 1, ...)";
+  o << ". `index.jsonl` and `index.csv` have one row per sample: parameters, seeds, status, files, bytes and a summary of "
+       "its ground truth.\n\n";
+  o << "## Scenes\n\n| scene file | description |\n|---|---|\n";
+  for (size_t i = 0; i < spec.scenes.size(); ++i) {
+    std::string description;
+    try {
+      description = scenes::load_scene_file(spec.scenes[i]).resolved.value("description", "");
+    } catch (const Error&) {
+    }
+    o << "| `" << spec.scene_names[i] << "` | " << description << " |\n";
+  }
+  o << "\n## Parameters\n\n";
+  o << "Sample i takes grid cell i mod " << spec.grid_cells() << " (the scene outermost, the last grid key fastest) and its "
+    << "own random draws, from the dataset seed " << spec.seed << " and i only: adding samples leaves the existing ones "
+    << "unchanged.\n\n";
+  o << "| key | varied by | values | range over the done samples |\n|---|---|---|---|\n";
+  const auto observed = [&](const std::string& key) {
+    double lo = INFINITY, hi = -INFINITY;
+    std::set<std::string> distinct;
+    for (const SampleRecord& r : records) {
+      if (r.status != Status::Done || !r.sample.parameters.contains(key)) continue;
+      const ojson& v = r.sample.parameters[key];
+      if (v.is_number()) lo = std::min(lo, v.get<double>()), hi = std::max(hi, v.get<double>());
+      else distinct.insert(v.dump());
+    }
+    std::ostringstream t;
+    if (lo <= hi) t << lo << " to " << hi;
+    else if (!distinct.empty()) t << distinct.size() << " distinct values";
+    return t.str();
+  };
+  if (spec.scenes.size() > 1) o << "| `scene` | grid | " << ojson(spec.scene_names).dump() << " | " << observed("scene") << " |\n";
+  for (const GridAxis& g : spec.grid) o << "| `" << g.key << "` | grid | `" << g.values.dump() << "` | " << observed(g.key) << " |\n";
+  for (const RandomAxis& r : spec.random) o << "| `" << r.key << "` | random | `" << r.spec.dump() << "` | " << observed(r.key) << " |\n";
+  if (!spec.set.empty()) {
+    o << "\nSet for every sample:";
+    for (const auto& [k, v] : spec.set) o << " `" << k << "=" << v.dump() << "`";
+    o << "\n";
+  }
+  const auto seed_text = [](const std::optional<uint64_t>& v) { return v ? std::to_string(*v) + " for every sample" : std::string("per sample"); };
+  o << "\nSeeds: light " << seed_text(spec.light_seed) << ", chip " << seed_text(spec.chip_seed) << ", noise "
+    << seed_text(spec.noise_seed) << " (per sample: derived from the dataset seed and the index; each row of the index "
+    << "lists them).\n";
+  // Sizes per output file, over the done samples.
+  std::map<std::string, std::pair<int64_t, int64_t>> sizes;  // file -> (samples holding it, bytes)
+  int64_t total = 0;
+  for (const SampleRecord& r : records) {
+    if (r.status != Status::Done) continue;
+    for (const auto& [name, size] : r.files) {
+      std::string key = name;
+      if (key.rfind("_r", 0) == 0) key = "_rNN" + key.substr(key.find('/'));  // repeats together
+      auto& e = sizes[key];
+      ++e.first, e.second += size;
+    }
+    total += r.bytes;
+  }
+  o << "\n## Files and sizes\n\n";
+  if (count[Status::Done] == 0) {
+    o << "No sample is done yet.\n";
+  } else {
+    o << "| file | mean bytes per sample | total |\n|---|---|---|\n";
+    for (const auto& [name, e] : sizes)
+      o << "| `" << name << "` | " << bytes_text(double(e.second) / double(e.first)) << " | " << bytes_text(double(e.second)) << " |\n";
+    o << "| all | " << bytes_text(double(total) / double(count[Status::Done])) << " | " << bytes_text(double(total)) << " |\n";
+  }
+  o << "\n## Reading it\n\n```python\nimport json\nrows = [json.loads(l) for l in open(\"index.jsonl\")]\n"
+       "import spadgen                                   # python/ in the spadgen repository\nrun = spadgen.open_run(rows[0][\"folder\"])"
+       "          # one sample: metadata, ground truth, counts, ...\n```\n\n"
+       "docs/datasets.md in the spadgen repository documents the folder, the index and the card.\n";
+  return o.str();
+}
+
+}  // namespace spadgen::datasets

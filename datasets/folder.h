@@ -1,0 +1,92 @@
+// A dataset folder: what `spadgen dataset run` writes and `status` reads.
+//
+//   DIR/dataset.json         the resolved dataset file (every default explicit); decides whether DIR holds
+//                            this dataset (only "samples" may differ: a dataset grows by adding samples)
+//   DIR/samples/000042/      sample 42: a complete run folder (metadata.json's "dataset" section holds the
+//                            sample's index, parameters and hash), published as one unit
+//   DIR/samples/000042_r01/  its realisation 1 of the temporal noise (repeats > 1), a `spadgen sense` folder
+//   DIR/failed/000042.json   why sample 42 failed (removed when it succeeds)
+//   DIR/index.jsonl, index.csv, dataset.md   the index (one row per sample) and the dataset card
+//
+// A sample is done when its folders' metadata.json carry the hash of the sample as it resolves now (the
+// resolved scene file, the content of the scene's files and the spadgen version): a changed scene, glTF or
+// version makes it stale, and it is generated again.
+#pragma once
+#include <nlohmann/json.hpp>
+
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "datasets/dataset.h"
+
+namespace spadgen::datasets {
+
+enum class Status { Done, Failed, Stale, Missing };
+const char* status_name(Status s);
+
+// One row of the index.
+struct SampleRecord {
+  Sample sample;
+  Status status = Status::Missing;
+  std::string hash;     // of the sample as it resolves now; "" when it does not resolve
+  std::string error;    // failed: why
+  std::vector<std::string> folders;  // done: the sample's folder and its repeats'
+  // done: every file of its folders but metadata.json (whose size varies with its timing fields), relative to
+  // the sample's folder (a repeat's as "_r01/counts.npy"), and its size; a file linked into a repeat counts once
+  std::vector<std::pair<std::string, int64_t>> files;
+  int64_t bytes = 0;                 // done: their sum
+  nlohmann::ordered_json summary;    // done: metadata.json's ground_truth_summary and laser totals
+};
+
+class DatasetFolder {
+ public:
+  DatasetFolder(const DatasetSpec& spec, std::filesystem::path dir);
+
+  const std::filesystem::path& dir() const { return dir_; }
+  const DatasetSpec& spec() const { return spec_; }
+
+  // Takes DIR for this dataset: creates it, refuses a folder that holds another dataset (naming the key
+  // that differs) or files spadgen did not write, and writes dataset.json. Safe to call from every shard
+  // at once (the same bytes are written atomically).
+  void claim() const;
+
+  // The sample's scene file with its overrides, resolved and checked; throws spadgen::Error naming the
+  // sample and its parameters when they make an invalid scene.
+  struct Resolved {
+    nlohmann::ordered_json scene;  // the resolved scene file
+    std::string hash;
+  };
+  Resolved resolve(const Sample& s) const;
+
+  // The sample's state on disk (reads its metadata.json files and the failure record).
+  SampleRecord inspect(const Sample& s) const;
+
+  // Failure records (DIR/failed/000042.json), written atomically.
+  void record_failure(const Sample& s, const std::string& hash, const std::string& error) const;
+  void clear_failure(const Sample& s) const;
+
+  // Rewrites index.jsonl, index.csv and dataset.md from the records of every sample (in index order),
+  // under the folder's lock so that the last shard to finish writes the complete index.
+  void write_index(const std::vector<SampleRecord>& records) const;
+
+ private:
+  const std::string& scene_content_hash(int scene) const;
+
+  DatasetSpec spec_;
+  std::filesystem::path dir_;
+  mutable std::map<int, std::string> content_hashes_;
+};
+
+// The metadata.json "dataset" section of sample s.
+nlohmann::json dataset_section(const DatasetFolder& folder, const Sample& s, const std::string& hash, int repeat);
+
+// The index rows as JSON Lines and CSV, and the dataset card (Markdown): pure functions of the records,
+// so that any set of shards writes the same bytes as one serial run.
+std::string index_jsonl(const DatasetSpec& spec, const std::vector<SampleRecord>& records);
+std::string index_csv(const DatasetSpec& spec, const std::vector<SampleRecord>& records);
+std::string dataset_card(const DatasetFolder& folder, const std::vector<SampleRecord>& records);
+
+}  // namespace spadgen::datasets

@@ -1,0 +1,252 @@
+// `spadgen dataset`: shards equal the serial run, a run killed with SIGKILL resumes to the same bytes, done
+// samples are skipped, stale ones replaced whole, samples added without touching the existing ones, a full
+// disk and a folder of another dataset refused, a failing sample recorded while the others go on.
+#include <gmock/gmock.h>
+#include <signal.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <set>
+#include <thread>
+
+#include "app_fixture.h"
+
+namespace spadgen::testing {
+namespace {
+
+using ::testing::HasSubstr;
+using json = nlohmann::json;
+
+// Six samples of a 24 x 20 crop of the multi-object scene: a grid over the laser power, random ambient
+// light and pixel design, two realisations of the noise each, one chip for all.
+std::string small_dataset(int samples, uint64_t seed = 3, const std::string& scene = kScenes + "multi_object.json",
+                          const std::string& extra_grid = "") {
+  return "{\n  \"description\": \"test dataset\", \"seed\": " + std::to_string(seed) + ",\n  \"scenes\": [\"" + scene +
+         "\"],\n  \"samples\": " + std::to_string(samples) +
+         ",\n  \"set\": {\"render.samples_per_pixel\": 2, \"acquisition.gate_sweep.stop_ns\": 4.2, \"camera.crop\": [496, 232, 24, 20]},"
+         "\n  \"grid\": {\"laser.average_power_mW\": [1, 2]" + extra_grid + "},"
+         "\n  \"random\": {\"ambient.illuminance_lux\": {\"log_uniform\": [1, 1000]}, \"sensor.preset\": {\"choice\": [\"pixel_A\", \"pixel_B\"]}},"
+         "\n  \"seeds\": {\"chip\": 1}, \"repeats\": 2\n}\n";
+}
+
+void write(const fs::path& p, const std::string& text) {
+  std::ofstream(p) << text;
+}
+
+// Every file of two dataset folders byte for byte, except the "run" (timing) and "sense" (the folder read)
+// sections of the samples' metadata.json.
+void expect_same_dataset(const fs::path& a, const fs::path& b) {
+  std::set<std::string> in_a, in_b;
+  for (const auto& e : fs::recursive_directory_iterator(a))
+    if (e.is_regular_file() && e.path().filename().string()[0] != '.') in_a.insert(fs::relative(e.path(), a).string());
+  for (const auto& e : fs::recursive_directory_iterator(b))
+    if (e.is_regular_file() && e.path().filename().string()[0] != '.') in_b.insert(fs::relative(e.path(), b).string());
+  EXPECT_EQ(in_a, in_b);
+  EXPECT_GE(in_a.size(), 50u);
+  for (const std::string& rel : in_a) {
+    if (!in_b.count(rel)) continue;
+    if (fs::path(rel).filename() == "metadata.json") {
+      json ma = json::parse(slurp(a / rel)), mb = json::parse(slurp(b / rel));
+      for (const char* k : {"run", "sense"}) ma.erase(k), mb.erase(k);
+      EXPECT_EQ(ma, mb) << rel;
+    } else {
+      EXPECT_TRUE(slurp(a / rel) == slurp(b / rel)) << rel << " differs";
+    }
+  }
+}
+
+// Files and folders a run leaves behind when it is killed (staging folders, temporary files).
+std::vector<std::string> leftovers(const fs::path& dir) {
+  std::vector<std::string> out;
+  for (const auto& e : fs::recursive_directory_iterator(dir)) {
+    const std::string n = e.path().filename().string();
+    if (n.find("spadgen-staging") != std::string::npos || n.find("spadgen-old") != std::string::npos || n.find(".tmp-") != std::string::npos)
+      out.push_back(n);
+  }
+  return out;
+}
+
+ino_t inode(const fs::path& p) {
+  struct stat st {};
+  return ::stat(p.c_str(), &st) == 0 ? st.st_ino : 0;
+}
+
+using Dataset = App;
+
+TEST_F(Dataset, ShardsOnTheCommandLineSlurmAndKubernetesEqualTheSerialRun) {
+  write(dir_ / "d.json", small_dataset(6));
+  const Result serial = sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "serial").string() + " -q");
+  ASSERT_EQ(serial.code, 0) << serial.output;
+  const std::string out = (dir_ / "sharded").string();
+  // Shard 2 first: the order the shards finish in must not matter.
+  const Result s2 = sh("dataset run " + (dir_ / "d.json").string() + " -o " + out + " -q --shard 2/3");
+  const Result s1 = shell("SLURM_ARRAY_TASK_ID=11 SLURM_ARRAY_TASK_MIN=10 SLURM_ARRAY_TASK_COUNT=3 " + kBin + " dataset run " +
+                          (dir_ / "d.json").string() + " -o " + out + " -q");
+  ASSERT_EQ(s2.code, 0) << s2.output;
+  ASSERT_EQ(s1.code, 0) << s1.output;
+  EXPECT_THAT(slurp(dir_ / "sharded" / "index.csv"), HasSubstr(",missing,"));  // shard 0 has not run
+  const Result s0 = shell("JOB_COMPLETION_INDEX=0 JOB_COMPLETIONS=3 " + kBin + " dataset run " + (dir_ / "d.json").string() + " -o " + out + " -q");
+  ASSERT_EQ(s0.code, 0) << s0.output;
+  // Shard 1 ran samples 1 and 4 only.
+  EXPECT_EQ(json::parse(slurp(dir_ / "sharded/samples/000004/metadata.json"))["dataset"]["index"], 4);
+  expect_same_dataset(dir_ / "serial", dir_ / "sharded");
+  const Result st = sh("dataset status " + out);
+  EXPECT_THAT(st.output, HasSubstr("6 samples: 6 done, 0 failed, 0 stale, 0 missing"));
+  // The index: one row per sample, in order, with its parameters and the summary of its ground truth.
+  std::istringstream rows(slurp(dir_ / "serial/index.jsonl"));
+  int n = 0;
+  for (std::string line; std::getline(rows, line); ++n) {
+    const json row = json::parse(line);
+    EXPECT_EQ(row["index"], n);
+    EXPECT_EQ(row["status"], "done");
+    EXPECT_EQ(row["repeats"], json::array({"samples/00000" + std::to_string(n) + "_r01"}));
+    EXPECT_EQ(row["parameters"]["laser.average_power_mW"], n % 2 ? 2 : 1);
+    EXPECT_EQ(row["ground_truth"]["hit_fraction"], 1.0);  // the crop sees the plate and the sphere everywhere
+    EXPECT_NEAR(row["ground_truth"]["range_min_m"].get<double>(), 0.45, 1e-3);
+    const json meta = json::parse(slurp(dir_ / "serial" / row["folder"].get<std::string>() / "metadata.json"));
+    EXPECT_EQ(meta["dataset"]["parameters"], row["parameters"]);
+    EXPECT_EQ(meta["seeds"]["chip"], 1);
+    EXPECT_EQ(meta["seeds"]["noise"], row["seeds"]["noise"]);
+    const json rep = json::parse(slurp(dir_ / "serial" / row["repeats"][0].get<std::string>() / "metadata.json"));
+    EXPECT_EQ(rep["seeds"]["noise"], row["seeds"]["noise"].get<uint64_t>() + 1);
+    EXPECT_NE(slurp(dir_ / "serial" / row["folder"].get<std::string>() / "counts.npy"),
+              slurp(dir_ / "serial" / row["repeats"][0].get<std::string>() / "counts.npy"));
+  }
+  EXPECT_EQ(n, 6);
+}
+
+TEST_F(Dataset, ARunKilledWithSigkillResumesToTheSameBytesAndSkipsWhatIsDone) {
+  write(dir_ / "d.json", small_dataset(6));
+  ASSERT_EQ(sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "whole").string() + " -q").code, 0);
+  const fs::path out = dir_ / "killed";
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    ::execl(kBin.c_str(), kBin.c_str(), "dataset", "run", (dir_ / "d.json").c_str(), "-o", out.c_str(), "-q", nullptr);
+    ::_exit(127);
+  }
+  // Killed while sample 2 is being written (its staging folder exists), or as near to it as the polling sees.
+  bool seen = false;
+  for (int i = 0; i < 3000 && !seen; ++i) {
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(out / "samples", ec))
+      if (e.path().filename().string().find(".000002.spadgen-staging") == 0) seen = true;
+    if (!seen) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ::kill(pid, SIGKILL);
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  EXPECT_TRUE(seen) << "the run was not caught inside sample 2";
+  EXPECT_TRUE(WIFSIGNALED(status));
+  EXPECT_FALSE(fs::exists(out / "samples/000002/metadata.json"));
+  EXPECT_THAT(sh("dataset status " + out.string()).output, HasSubstr("missing: 2-5"));
+  const ino_t first = inode(out / "samples/000000/counts.npy");
+  const Result again = sh("dataset run " + (dir_ / "d.json").string() + " -o " + out.string());
+  ASSERT_EQ(again.code, 0) << again.output;
+  EXPECT_THAT(again.output, HasSubstr("4 of 6 samples to generate (2 done already)"));
+  EXPECT_EQ(inode(out / "samples/000000/counts.npy"), first);  // skipped, not rewritten
+  EXPECT_EQ(leftovers(out), std::vector<std::string>{});
+  expect_same_dataset(dir_ / "whole", out);
+  // Nothing left to do: a third run writes no sample.
+  const Result third = sh("dataset run " + (dir_ / "d.json").string() + " -o " + out.string());
+  EXPECT_THAT(third.output, HasSubstr("0 of 6 samples to generate (6 done already)"));
+  EXPECT_EQ(inode(out / "samples/000000/counts.npy"), first);
+}
+
+TEST_F(Dataset, AddingSamplesLeavesTheExistingOnesAndEqualsTheLargerRun) {
+  write(dir_ / "d3.json", small_dataset(3));
+  write(dir_ / "d5.json", small_dataset(5));
+  ASSERT_EQ(sh("dataset run " + (dir_ / "d3.json").string() + " -o " + (dir_ / "grown").string() + " -q").code, 0);
+  const ino_t kept = inode(dir_ / "grown/samples/000002/counts.npy");
+  const Result grow = sh("dataset run " + (dir_ / "d5.json").string() + " -o " + (dir_ / "grown").string());
+  ASSERT_EQ(grow.code, 0) << grow.output;
+  EXPECT_THAT(grow.output, HasSubstr("2 of 5 samples to generate (3 done already)"));
+  EXPECT_EQ(inode(dir_ / "grown/samples/000002/counts.npy"), kept);
+  ASSERT_EQ(sh("dataset run " + (dir_ / "d5.json").string() + " -o " + (dir_ / "fresh").string() + " -q").code, 0);
+  // The dataset file's path differs (d3 and d5): dataset.json and the card name it; the samples do not.
+  for (const char* f : {"dataset.json", "dataset.md", "index.jsonl"}) fs::remove(dir_ / "grown" / f), fs::remove(dir_ / "fresh" / f);
+  for (const char* f : {"samples/000000", "samples/000001", "samples/000002", "samples/000004_r01"})
+    for (const auto& e : fs::directory_iterator(dir_ / "grown" / f))
+      if (e.path().filename() == "metadata.json") {
+        json a = json::parse(slurp(e.path())), b = json::parse(slurp(dir_ / "fresh" / f / "metadata.json"));
+        for (json* m : {&a, &b}) m->erase("run"), m->erase("sense"), (*m)["dataset"].erase("dataset_file");
+        EXPECT_EQ(a, b) << f;
+      } else {
+        EXPECT_TRUE(slurp(e.path()) == slurp(dir_ / "fresh" / f / e.path().filename())) << f << "/" << e.path().filename();
+      }
+  EXPECT_EQ(slurp(dir_ / "grown/index.csv"), slurp(dir_ / "fresh/index.csv"));
+}
+
+TEST_F(Dataset, AChangedSceneMakesSamplesStaleAndReplacesThemWhole) {
+  // A copy of the scene whose outputs change: with transients, then without.
+  fs::copy(kScenes + "multi_object.gltf", dir_ / "multi_object.gltf");
+  fs::copy(kScenes + "multi_object.bin", dir_ / "multi_object.bin");
+  std::string scene = slurp(kScenes + "multi_object.json");
+  const std::string with = scene.replace(scene.find("\"render\": {"), 11, "\"outputs\": {\"transient\": true},\n  \"render\": {");
+  write(dir_ / "scene.json", with);
+  write(dir_ / "d.json", small_dataset(2, 3, (dir_ / "scene.json").string()));
+  ASSERT_EQ(sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q").code, 0);
+  ASSERT_TRUE(fs::exists(dir_ / "out/samples/000001/transient.npy"));
+  write(dir_ / "scene.json", slurp(kScenes + "multi_object.json"));
+  EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output, HasSubstr("stale: 0-1"));
+  const Result again = sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string());
+  ASSERT_EQ(again.code, 0) << again.output;
+  EXPECT_THAT(again.output, HasSubstr("2 of 2 samples to generate"));
+  EXPECT_FALSE(fs::exists(dir_ / "out/samples/000001/transient.npy"));  // no stale file beside the new set
+  const json meta = json::parse(slurp(dir_ / "out/samples/000001/metadata.json"));
+  for (const json& f : meta["files"]) EXPECT_NE(f, "transient.npy");
+  EXPECT_EQ(leftovers(dir_ / "out"), std::vector<std::string>{});
+}
+
+TEST_F(Dataset, RefusesAnotherDatasetsFolderForeignFilesAndTooLittleDisk) {
+  write(dir_ / "a.json", small_dataset(2, 3));
+  write(dir_ / "b.json", small_dataset(2, 4));
+  ASSERT_EQ(sh("dataset run " + (dir_ / "a.json").string() + " -o " + (dir_ / "out").string() + " -q").code, 0);
+  const Result other = sh("dataset run " + (dir_ / "b.json").string() + " -o " + (dir_ / "out").string() + " -q");
+  EXPECT_EQ(other.code, 1);
+  EXPECT_THAT(other.output, HasSubstr("holds another dataset: its dataset.json differs from " + (dir_ / "b.json").string() + " at \"seed\""));
+  // The same keys in another order: the grid's order decides which cell a sample takes.
+  const std::string ordered = small_dataset(2, 3, kScenes + "multi_object.json", ", \"camera.f_number\": [1.4]");
+  std::string swapped = ordered;
+  swapped.replace(swapped.find("\"laser.average_power_mW\": [1, 2], \"camera.f_number\": [1.4]"), 58,
+                  "\"camera.f_number\": [1.4], \"laser.average_power_mW\": [1, 2]");
+  write(dir_ / "ordered.json", ordered);
+  write(dir_ / "swapped.json", swapped);
+  ASSERT_EQ(sh("dataset run " + (dir_ / "ordered.json").string() + " -o " + (dir_ / "ord").string() + " -q").code, 0);
+  EXPECT_THAT(sh("dataset run " + (dir_ / "swapped.json").string() + " -o " + (dir_ / "ord").string() + " -q").output,
+              HasSubstr("differs from " + (dir_ / "swapped.json").string() + " at \"grid\""));
+  fs::create_directories(dir_ / "mine");
+  write(dir_ / "mine/notes.txt", "mine");
+  const Result foreign = sh("dataset run " + (dir_ / "a.json").string() + " -o " + (dir_ / "mine").string() + " -q");
+  EXPECT_EQ(foreign.code, 1);
+  EXPECT_THAT(foreign.output, HasSubstr("holds notes.txt, which spadgen did not write there"));
+  EXPECT_EQ(slurp(dir_ / "mine/notes.txt"), "mine");
+  // 200 full-sensor samples with their transients need terabytes.
+  write(dir_ / "big.json", "{\"scenes\": [\"" + kScenes + "multi_object.json\"], \"samples\": 200, \"set\": {\"outputs.transient\": true}}");
+  const Result disk = sh("dataset run " + (dir_ / "big.json").string() + " -o " + (dir_ / "big").string() + " -q");
+  EXPECT_EQ(disk.code, 1);
+  EXPECT_THAT(disk.output, HasSubstr("the 200 samples left to generate in"));
+  EXPECT_THAT(disk.output, HasSubstr("is free there"));
+  EXPECT_FALSE(fs::exists(dir_ / "big/samples/000000"));
+  const Result plan = sh("dataset plan " + (dir_ / "big.json").string());
+  EXPECT_EQ(plan.code, 0) << plan.output;
+  EXPECT_THAT(plan.output, HasSubstr("# total: 200 samples, disk about"));
+}
+
+TEST_F(Dataset, AFailingSampleIsRecordedAndTheOthersGoOn) {
+  // camera.width_px 16 leaves the crop outside the sensor: cells with it fail, the others do not.
+  write(dir_ / "d.json", small_dataset(4, 3, kScenes + "multi_object.json", ", \"camera.width_px\": [1024, 16]"));
+  const Result r = sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("2 samples failed (1, 3)"));
+  EXPECT_TRUE(fs::exists(dir_ / "out/samples/000002/metadata.json"));
+  EXPECT_FALSE(fs::exists(dir_ / "out/samples/000001"));
+  const Result st = sh("dataset status " + (dir_ / "out").string());
+  EXPECT_THAT(st.output, HasSubstr("failed: 1, 3"));
+  EXPECT_THAT(st.output, HasSubstr("/camera/crop"));
+  EXPECT_THAT(slurp(dir_ / "out/index.csv"), HasSubstr(",failed,"));
+}
+
+}  // namespace
+}  // namespace spadgen::testing

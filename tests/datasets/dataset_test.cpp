@@ -1,0 +1,228 @@
+// The dataset file: its checks, the samples it describes (grid order, random draws against their
+// distributions, independence of the index), and shards from the command line and the environment.
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "core/error.h"
+#include "datasets/dataset.h"
+
+namespace spadgen::datasets {
+namespace {
+
+using ::testing::HasSubstr;
+
+const std::string kScenes = std::string(SPADGEN_SOURCE_DIR) + "/scenes/paper/";
+
+// A dataset file over the flat target with the given body (after "scenes").
+DatasetSpec parse(const std::string& body) {
+  return parse_dataset_text("{\"scenes\": [\"" + kScenes + "flat_target.json\"]" + (body.empty() ? "" : ", " + body) + "}",
+                            "test_dataset.json");
+}
+
+std::string error_of(const std::string& body) {
+  try {
+    parse(body);
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "no error";
+}
+
+TEST(DatasetFile, ErrorsNameTheKeyAndWhatWasExpected) {
+  EXPECT_THAT(error_of("\"sampels\": 3"), HasSubstr("test_dataset.json: /sampels: unknown key; did you mean samples?"));
+  EXPECT_THAT(error_of("\"samples\": 0"), HasSubstr("/samples: found 0, expected an integer in [1, 1e8] or null"));
+  EXPECT_THAT(error_of("\"repeats\": 1.5"), HasSubstr("/repeats: found 1.5, expected an integer in [1, 1000]"));
+  // Scene-file keys get the scene file's own checks, named at their place in the dataset file.
+  const std::string typo = error_of("\"grid\": {\"laser.averge_power_mW\": [1, 2]}");
+  EXPECT_THAT(typo, HasSubstr("/grid/laser.averge_power_mW/0"));
+  EXPECT_THAT(typo, HasSubstr("did you mean /laser/average_power_mW?"));
+  EXPECT_THAT(error_of("\"grid\": {\"laser.average_power_mW\": [1, -2]}"), HasSubstr("/grid/laser.average_power_mW/1"));
+  EXPECT_THAT(error_of("\"grid\": {\"laser.average_power_mW\": []}"), HasSubstr("expected a non-empty array of values"));
+  EXPECT_THAT(error_of("\"random\": {\"ambient.illuminance_lux\": {\"log_uniform\": [0, 10]}}"),
+              HasSubstr("/random/ambient.illuminance_lux/log_uniform: found [0,10], expected 0 < a < b"));
+  EXPECT_THAT(error_of("\"random\": {\"ambient.illuminance_lux\": {\"uniform\": [1, 2e6]}}"),
+              HasSubstr("/random/ambient.illuminance_lux"));  // 2e6 lux is beyond the key's range
+  EXPECT_THAT(error_of("\"random\": {\"ambient.illuminance_lux\": {\"gauss\": [1, 2]}}"),
+              HasSubstr("/random/ambient.illuminance_lux/gauss: unknown key"));
+  EXPECT_THAT(error_of("\"random\": {\"camera.f_number\": {\"normal\": [2, 0.1], \"min\": 5}}"),
+              HasSubstr("of the normal distribution between min and max; expected at least 0.001"));
+  EXPECT_THAT(error_of("\"random\": {\"camera.f_number\": {\"uniform\": [2, 3], \"min\": 2.5}}"),
+              HasSubstr("is only for \"normal\""));
+  EXPECT_THAT(error_of("\"set\": {\"seed\": 4}"), HasSubstr("/set/seed: the dataset sets every sample's seeds"));
+  EXPECT_THAT(error_of("\"grid\": {\"seeds.noise\": [1, 2]}"), HasSubstr("/grid/seeds.noise"));
+  EXPECT_THAT(error_of("\"set\": {\"camera.f_number\": 2}, \"grid\": {\"camera.f_number\": [2, 4]}"),
+              HasSubstr("varies camera.f_number a second time"));
+  EXPECT_THAT(error_of("\"seeds\": {\"chips\": 3}"), HasSubstr("/seeds/chips: unknown key; did you mean chip?"));
+  EXPECT_THAT(error_of("\"repeats\": 2, \"set\": {\"outputs.light\": false}"), HasSubstr("needs the saved light"));
+}
+
+TEST(DatasetFile, MissingSceneFilesAreNamed) {
+  try {
+    parse_dataset_text("{\"scenes\": [\"nowhere.json\"]}", "/tmp/d.json");
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_THAT(std::string(e.what()), HasSubstr("/tmp/d.json: /scenes/0: the scene file /tmp/nowhere.json does not exist"));
+  }
+}
+
+TEST(DatasetFile, TheGridIsEnumeratedWithTheLastKeyFastestAndRepeatsPastItsEnd) {
+  const DatasetSpec s = parse(
+      "\"samples\": 14, \"grid\": {\"laser.average_power_mW\": [1, 2], \"camera.f_number\": [1.4, 2, 2.8]}");
+  EXPECT_EQ(s.grid_cells(), 6);
+  EXPECT_EQ(s.count(), 14);
+  for (int64_t i = 0; i < 14; ++i) {
+    const Sample x = make_sample(s, i);
+    const int64_t cell = i % 6;
+    EXPECT_EQ(x.parameters["laser.average_power_mW"].get<double>(), std::vector<double>({1, 2})[size_t(cell / 3)]);
+    EXPECT_EQ(x.parameters["camera.f_number"].get<double>(), std::vector<double>({1.4, 2, 2.8})[size_t(cell % 3)]);
+  }
+  EXPECT_EQ(parse("\"grid\": {\"camera.f_number\": [1.4, 2, 2.8]}").count(), 3);  // samples null: one per cell
+}
+
+TEST(DatasetFile, AddingSamplesOrAxesOrderLeavesEachSampleItsOwnDraws) {
+  const std::string random = "\"random\": {\"laser.average_power_mW\": {\"uniform\": [1, 5]}, "
+                             "\"camera.f_number\": {\"log_uniform\": [1, 8]}}";
+  const DatasetSpec small = parse("\"seed\": 9, \"samples\": 10, " + random);
+  const DatasetSpec large = parse("\"seed\": 9, \"samples\": 1000, " + random);
+  const DatasetSpec other = parse("\"seed\": 10, \"samples\": 10, " + random);
+  for (int64_t i = 0; i < 10; ++i) {
+    const Sample a = make_sample(small, i), b = make_sample(large, i), c = make_sample(other, i);
+    EXPECT_EQ(a.overrides, b.overrides);
+    EXPECT_EQ(a.seed, b.seed);
+    EXPECT_NE(a.parameters["laser.average_power_mW"], c.parameters["laser.average_power_mW"]);
+    EXPECT_NE(a.seed, c.seed);
+    EXPECT_LT(a.seed, uint64_t{1} << 53);
+  }
+  // A key's draws are keyed by its name: removing another key does not change them.
+  const DatasetSpec one = parse("\"seed\": 9, \"samples\": 10, \"random\": {\"camera.f_number\": {\"log_uniform\": [1, 8]}}");
+  for (int64_t i = 0; i < 10; ++i)
+    EXPECT_EQ(make_sample(one, i).parameters["camera.f_number"], make_sample(small, i).parameters["camera.f_number"]);
+  EXPECT_THROW(make_sample(small, 10), Error);
+}
+
+// Kolmogorov-Smirnov distance of sorted values from a CDF.
+double ks_distance(std::vector<double> v, const std::function<double(double)>& cdf) {
+  std::sort(v.begin(), v.end());
+  double d = 0.0;
+  const double n = double(v.size());
+  for (size_t i = 0; i < v.size(); ++i) d = std::max({d, std::fabs(cdf(v[i]) - double(i) / n), std::fabs(cdf(v[i]) - double(i + 1) / n)});
+  return d;
+}
+
+TEST(DatasetFile, DrawsFollowTheirDistributions) {
+  constexpr int n = 4000;
+  const DatasetSpec s = parse(
+      "\"seed\": 2, \"samples\": 4000, \"random\": {"
+      "\"laser.average_power_mW\": {\"uniform\": [1, 5]},"
+      "\"ambient.illuminance_lux\": {\"log_uniform\": [1, 1000]},"
+      "\"camera.f_number\": {\"normal\": [2, 0.5], \"min\": 1.5, \"max\": 3.5},"
+      "\"render.samples_per_pixel\": {\"uniform_int\": [1, 8]},"
+      "\"sensor.preset\": {\"choice\": [\"pixel_A\", \"pixel_B\", \"full_chip\"]}}");
+  std::vector<double> power, lux, fnum;
+  std::map<int64_t, int> spp;
+  std::map<std::string, int> preset;
+  for (int i = 0; i < n; ++i) {
+    const Sample x = make_sample(s, i);
+    power.push_back(x.parameters["laser.average_power_mW"].get<double>());
+    lux.push_back(x.parameters["ambient.illuminance_lux"].get<double>());
+    fnum.push_back(x.parameters["camera.f_number"].get<double>());
+    ASSERT_TRUE(x.parameters["render.samples_per_pixel"].is_number_integer());
+    ++spp[x.parameters["render.samples_per_pixel"].get<int64_t>()];
+    ++preset[x.parameters["sensor.preset"].get<std::string>()];
+  }
+  // KS at a false-alarm rate of 0.001 per test: D > 1.95 / sqrt(n).
+  const double crit = 1.95 / std::sqrt(double(n));
+  EXPECT_LT(ks_distance(power, [](double x) { return std::clamp((x - 1) / 4, 0.0, 1.0); }), crit);
+  EXPECT_LT(ks_distance(lux, [](double x) { return std::clamp(std::log(x) / std::log(1000.0), 0.0, 1.0); }), crit);
+  const auto phi = [](double z) { return 0.5 * std::erfc(-z / std::sqrt(2.0)); };
+  const double lo = phi((1.5 - 2) / 0.5), hi = phi((3.5 - 2) / 0.5);
+  EXPECT_LT(ks_distance(fnum, [&](double x) { return std::clamp((phi((x - 2) / 0.5) - lo) / (hi - lo), 0.0, 1.0); }), crit);
+  EXPECT_GE(*std::min_element(fnum.begin(), fnum.end()), 1.5);
+  EXPECT_LE(*std::max_element(fnum.begin(), fnum.end()), 3.5);
+  // Chi-square at a false-alarm rate of 0.001: 24.32 for 7 degrees of freedom, 13.82 for 2.
+  double chi = 0.0;
+  ASSERT_EQ(spp.size(), 8u);
+  for (const auto& [k, c] : spp) {
+    EXPECT_TRUE(k >= 1 && k <= 8);
+    chi += (c - n / 8.0) * (c - n / 8.0) / (n / 8.0);
+  }
+  EXPECT_LT(chi, 24.32);
+  chi = 0.0;
+  ASSERT_EQ(preset.size(), 3u);
+  for (const auto& [k, c] : preset) chi += (c - n / 3.0) * (c - n / 3.0) / (n / 3.0);
+  EXPECT_LT(chi, 13.82);
+  // Two keys drawn independently: |correlation| < 3.29 / sqrt(n) (false-alarm rate 0.001).
+  double mp = 0, ml = 0;
+  for (int i = 0; i < n; ++i) mp += power[i] / n, ml += std::log(lux[i]) / n;
+  double cov = 0, vp = 0, vl = 0;
+  for (int i = 0; i < n; ++i) {
+    const double a = power[i] - mp, b = std::log(lux[i]) - ml;
+    cov += a * b, vp += a * a, vl += b * b;
+  }
+  EXPECT_LT(std::fabs(cov / std::sqrt(vp * vl)), 3.29 / std::sqrt(double(n)));
+}
+
+TEST(DatasetFile, SeedsArePerSampleOrFixed) {
+  const DatasetSpec per = parse("\"samples\": 3");
+  const DatasetSpec fixed = parse("\"samples\": 3, \"seeds\": {\"chip\": 7, \"noise\": \"per_sample\"}");
+  const Sample a = make_sample(per, 1), b = make_sample(fixed, 1);
+  EXPECT_EQ(a.seed, b.seed);
+  EXPECT_EQ(a.chip_seed, a.seed);
+  EXPECT_EQ(b.chip_seed, 7u);
+  EXPECT_EQ(b.noise_seed, b.seed);
+  EXPECT_THAT(b.overrides, ::testing::Contains("seeds.chip=7"));
+  EXPECT_EQ(fixed.resolved["seeds"].dump(), "{\"light\":\"per_sample\",\"chip\":7,\"noise\":\"per_sample\"}");
+  EXPECT_EQ(b.folder(), "samples/000001");
+  EXPECT_EQ(b.repeat_folder(2), "samples/000001_r02");
+  // Repeats need the saved light.
+  EXPECT_THAT(make_sample(parse("\"samples\": 3, \"repeats\": 2"), 0).overrides, ::testing::Contains("outputs.light=true"));
+}
+
+TEST(Shards, FromTheCommandLine) {
+  EXPECT_EQ(parse_shard("2/4").index, 2);
+  EXPECT_EQ(parse_shard("2/4").count, 4);
+  EXPECT_TRUE(parse_shard("0/3").owns(6));
+  EXPECT_FALSE(parse_shard("1/3").owns(6));
+  for (const char* bad : {"4/4", "1", "-1/2", "a/b", "1/0", "", "1/2/3"})
+    EXPECT_THROW(parse_shard(bad), Error) << bad;
+}
+
+TEST(Shards, FromSlurmJobArraysAndKubernetesIndexedJobs) {
+  const auto clear = [] {
+    for (const char* v : {"SLURM_ARRAY_TASK_ID", "SLURM_ARRAY_TASK_COUNT", "SLURM_ARRAY_TASK_MIN", "SLURM_ARRAY_TASK_STEP",
+                          "JOB_COMPLETION_INDEX", "JOB_COMPLETIONS"})
+      ::unsetenv(v);
+  };
+  clear();
+  EXPECT_FALSE(shard_from_environment().has_value());
+  ::setenv("SLURM_ARRAY_TASK_ID", "5", 1), ::setenv("SLURM_ARRAY_TASK_MIN", "2", 1), ::setenv("SLURM_ARRAY_TASK_COUNT", "4", 1);
+  EXPECT_EQ(shard_from_environment()->text(), "3/4");
+  ::setenv("SLURM_ARRAY_TASK_ID", "6", 1);
+  EXPECT_THROW(shard_from_environment(), Error);  // beyond MIN + COUNT - 1
+  ::unsetenv("SLURM_ARRAY_TASK_COUNT");
+  EXPECT_THROW(shard_from_environment(), Error);
+  clear();
+  ::setenv("JOB_COMPLETION_INDEX", "1", 1);
+  EXPECT_THROW(shard_from_environment(), Error);  // the Job's completions must be given
+  ::setenv("JOB_COMPLETIONS", "3", 1);
+  EXPECT_EQ(shard_from_environment()->text(), "1/3");
+  ::setenv("JOB_COMPLETIONS", "x", 1);
+  EXPECT_THROW(shard_from_environment(), Error);
+  clear();
+}
+
+TEST(DatasetFile, RangesText) {
+  EXPECT_EQ(ranges_text({}), "");
+  EXPECT_EQ(ranges_text({3}), "3");
+  EXPECT_EQ(ranges_text({1, 2, 3, 7, 9, 10}), "1-3, 7, 9-10");
+}
+
+}  // namespace
+}  // namespace spadgen::datasets
