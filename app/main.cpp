@@ -16,6 +16,7 @@
 
 #include "app/cli.h"
 #include "app/dataset.h"
+#include "datasets/dataset.h"
 #include "app/pipeline.h"
 #include "core/error.h"
 #include "scenes/scene_file.h"
@@ -104,6 +105,8 @@ int main(int argc, char** argv) {
   CLI::App* status_cmd = dataset_cmd->add_subcommand("status", "done, failed, stale and missing samples of a dataset folder");
   status_cmd->add_option("dir", status_dir, "dataset folder")->required()->check(CLI::ExistingDirectory);
   CLI::App* dschema_cmd = dataset_cmd->add_subcommand("schema", "print the reference of the dataset file's keys (Markdown)");
+  bool dataset_json_schema = false;
+  dschema_cmd->add_flag("--json-schema", dataset_json_schema, "print it as a JSON Schema (for editors) instead");
 
   if (const std::optional<int> code = spadgen::app::parse_command_line(cli, argc, argv)) return *code;
   return spadgen::app::run_command([&] {
@@ -124,7 +127,7 @@ int main(int argc, char** argv) {
       if (*plan_cmd) std::cout << spadgen::app::dataset_plan(dataset);
       else if (*drun_cmd) spadgen::app::dataset_run(dataset);
       else if (*status_cmd) std::cout << spadgen::app::dataset_status(status_dir);
-      else if (*dschema_cmd) std::cout << spadgen::app::dataset_schema();
+      else if (*dschema_cmd) std::cout << (dataset_json_schema ? spadgen::datasets::dataset_schema_json() : spadgen::app::dataset_schema());
     } else if (*schema_cmd) {
       std::cout << (json_schema ? spadgen::scenes::schema_json() : spadgen::scenes::schema_reference_markdown());
     }

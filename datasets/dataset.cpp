@@ -473,4 +473,51 @@ std::string dataset_reference_markdown() {
   return o;
 }
 
+std::string dataset_schema_json() {
+  const ojson seed = {{"type", "integer"}, {"minimum", 0}, {"maximum", 9007199254740992.0}};
+  const ojson pair = {{"type", "array"}, {"items", {{"type", "number"}}}, {"minItems", 2}, {"maxItems", 2}};
+  const auto dist = [&](const char* name, const char* doc, bool bounds) {
+    ojson d = {{"type", "object"}, {"description", doc}, {"required", {name}}, {"additionalProperties", false},
+               {"properties", {{name, pair}}}};
+    if (bounds) d["properties"]["min"] = {{"type", "number"}}, d["properties"]["max"] = {{"type", "number"}};
+    return d;
+  };
+  ojson choice = {{"type", "object"}, {"description", "one of the values, with equal probability"}, {"required", {"choice"}},
+                  {"additionalProperties", false}, {"properties", {{"choice", {{"type", "array"}, {"minItems", 1}}}}}};
+  ojson root = {
+      {"$schema", "https://json-schema.org/draft/2020-12/schema"},
+      {"title", "spadgen dataset file"},
+      {"description", "A benchmark dataset as variations of scene files (docs/datasets.md). Keys of set, grid and random are "
+                      "scene-file keys written as --set writes them (docs/scene-file.md)."},
+      {"type", "object"},
+      {"additionalProperties", false},
+      {"required", {"scenes"}},
+      {"properties",
+       {{"description", {{"type", "string"}, {"default", ""}}},
+        {"seed", seed},
+        {"scenes", {{"type", "array"}, {"minItems", 1}, {"items", {{"type", "string"}, {"minLength", 1}}}}},
+        {"samples", {{"type", {"integer", "null"}}, {"minimum", 1}, {"maximum", 1e8}, {"default", nullptr}}},
+        {"set", {{"type", "object"}}},
+        {"grid", {{"type", "object"}, {"additionalProperties", {{"type", "array"}, {"minItems", 1}}}}},
+        {"random",
+         {{"type", "object"},
+          {"additionalProperties",
+           {{"oneOf", {dist("uniform", "a number in [a, b)", false), dist("log_uniform", "a number in [a, b) with a uniform logarithm", false),
+                       dist("normal", "[mean, sigma], truncated to [min, max] when given", true),
+                       dist("uniform_int", "an integer in [a, b], both included", false), choice}}}}}},
+        {"seeds",
+         {{"type", "object"},
+          {"additionalProperties", false},
+          {"properties",
+           {{"light", {{"oneOf", {seed, {{"const", "per_sample"}}}}}},
+            {"chip", {{"oneOf", {seed, {{"const", "per_sample"}}}}}},
+            {"noise", {{"oneOf", {seed, {{"const", "per_sample"}}}}}}}}}},
+        {"repeats", {{"type", "integer"}, {"minimum", 1}, {"maximum", 1000}, {"default", 1}}}}}};
+  root["properties"]["seed"]["default"] = 0;
+  // The descriptions of the reference table.
+  for (const DatasetKey& k : dataset_keys())
+    if (k.key.find('.') == std::string::npos) root["properties"][k.key]["description"] = k.doc;
+  return root.dump(2) + "\n";
+}
+
 }  // namespace spadgen::datasets

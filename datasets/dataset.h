@@ -126,4 +126,7 @@ std::string ranges_text(const std::vector<int64_t>& indices);
 // The reference of the dataset file's keys and distributions, as Markdown (docs/datasets.md).
 std::string dataset_reference_markdown();
 
+// The same as a JSON Schema (draft 2020-12), for editors (docs/dataset-file.schema.json).
+std::string dataset_schema_json();
+
 }  // namespace spadgen::datasets
