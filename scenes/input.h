@@ -48,6 +48,9 @@ size_t invalid_utf8_at(const std::string& text);
 // `text` for a message: bytes outside printable ASCII shown as \xHH.
 std::string printable(const std::string& text);
 
+// Levenshtein distance (insertions, deletions, substitutions), for the "did you mean" of messages.
+size_t edit_distance(const std::string& a, const std::string& b);
+
 // "line:column" (both from 1) of byte `offset` of `text`.
 std::string line_column(const std::string& text, size_t offset);
 
