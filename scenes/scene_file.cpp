@@ -396,6 +396,16 @@ void apply_override(json& doc, const std::string& assignment, Checker& chk) {
     return;
   }
   const size_t eq = assignment_split(assignment);
+  if (eq == std::string::npos && assignment.find('=') != std::string::npos) {
+    // A stray quote hides the '=': the key's own syntax error says more than "expected KEY=VALUE".
+    const std::string key = assignment.substr(0, assignment.find('='));
+    try {
+      parse_key_path(key);
+    } catch (const Error& e) {
+      chk.override_error(key, e.what());
+      return;
+    }
+  }
   if (eq == std::string::npos || eq == 0) {
     chk.override_error(assignment, "expected KEY=VALUE, e.g. laser.average_power_mW=5");
     return;
