@@ -446,7 +446,7 @@ std::vector<NamedSection> build_named() {
                                               "the node's translation, in its parent's frame"));
   nodes.keys.push_back(element_vec3<NodeEdit>("/rotation_deg", EDIT(rotation_rad), kDegree, closed(-360, 360),
                                               "the node's rotation as XYZ Euler angles: R = Rz(z) Ry(y) Rx(x) on column vectors "
-                                              "(Blender's XYZ Euler); a null angle is the glTF rotation's angle in that convention"));
+                                              "(about X, then Y, then Z); a null angle is the glTF rotation's angle in that convention"));
   nodes.keys.push_back(element_vec3<NodeEdit>("/scale", EDIT(scale), kNone, closed(-1e6, 1e6),
                                               "the node's scale along its local axes"));
   out.push_back(std::move(nodes));

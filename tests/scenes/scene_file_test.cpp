@@ -612,7 +612,7 @@ TEST(CheckOverride, ReportsWhatSetReportsWithoutASceneFile) {
   EXPECT_EQ(one("nodes.Sphere.rotation_deg[1]", 720),
             "/nodes/Sphere/rotation_deg: found [null,720,null] (an array), expected an array of 3 numbers each in [-360, 360] deg "
             "or null (keeps the glTF's) (the node's rotation as XYZ Euler angles: R = Rz(z) Ry(y) Rx(x) on column vectors "
-            "(Blender's XYZ Euler); a null angle is the glTF rotation's angle in that convention)");
+            "(about X, then Y, then Z); a null angle is the glTF rotation's angle in that convention)");
   EXPECT_THAT(one("nodes.Cube.001.scale", 1), HasSubstr("a name that holds a dot is written in double quotes"));
   EXPECT_THAT(one("nodes.\"Cube.001.scale", 1), HasSubstr("is not closed"));
   EXPECT_THAT(one("camera.gltf_camera", 5), HasSubstr("/camera/gltf_camera: found 5 (an integer), expected a string"));
