@@ -53,7 +53,7 @@ RunResult run(const RunOptions& options) {
   if (options.threads > 0)
     threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, size_t(options.threads));
 
-  const scenes::Scene scene = scenes::load_gltf(cfg.gltf_path, cfg.gltf_scene);
+  const scenes::Scene scene = scenes::load_gltf(cfg.gltf_path, cfg.gltf_scene, cfg.edits);
   for (const std::string& w : scene.warnings) std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
   std::vector<std::string> warnings = scene.warnings;  // for metadata.json, with those of the run (app/warnings.h)
   const auto warn = [&](const std::vector<std::string>& ws) {
@@ -151,7 +151,7 @@ RunResult run(const RunOptions& options) {
 std::string info(const std::string& scene_file, const std::vector<std::string>& overrides) {
   const scenes::ResolvedRun r = scenes::load_scene_file(scene_file, overrides);
   const RunConfig& c = r.config;
-  const scenes::Scene scene = scenes::load_gltf(c.gltf_path, c.gltf_scene);
+  const scenes::Scene scene = scenes::load_gltf(c.gltf_path, c.gltf_scene, c.edits);
   sensor::SensorModel sensor(sensor_stage(c));
   std::ostringstream o;
   o << "# resolved scene file " << c.scene_file << "\n" << r.resolved.dump(2) << "\n\n";

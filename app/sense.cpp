@@ -26,6 +26,7 @@
 #include "app/staging.h"
 #include "core/error.h"
 #include "scenes/input.h"
+#include "scenes/key_path.h"
 #include "scenes/scene_file.h"
 #include "sensor/model/pixel_layout.h"
 #include "sensor/sensor.h"
@@ -39,7 +40,13 @@ namespace {
 
 // Keys sense may change: the sensor's, the acquisition's, the chip's and the noise's seeds, and the files
 // the sensor writes. Everything else shaped the light, which sense cannot change.
-bool sense_may_set(const std::string& key) {
+bool sense_may_set(const std::string& written) {
+  std::string key = written;
+  try {
+    key = scenes::parse_key_path(written).text();  // "sensor"."gate".length_ns is sensor.gate.length_ns
+  } catch (const Error&) {
+    // A malformed key is reported as such when the scene file is parsed.
+  }
   for (const char* prefix : {"sensor.", "acquisition.", "seeds.chip", "seeds.noise", "outputs.expected_counts",
                              "outputs.detection_rate", "outputs.counts", "outputs.frames", "outputs.previews"})
     if (key.rfind(prefix, 0) == 0) return true;
@@ -95,7 +102,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
       throw Error((src / "metadata.json").string() + ": no " + key + "; expected a run folder written by spadgen " SPADGEN_VERSION
                   " with outputs.light (run the scene again)");
   for (const std::string& o : options.overrides) {
-    const std::string key = o.substr(0, o.find('='));
+    const std::string key = o.substr(0, scenes::assignment_split(o));
     if (!sense_may_set(key))
       throw Error("--set " + key + ": sense re-samples the sensor only, so it takes sensor.*, acquisition.*, seeds.chip, "
                   "seeds.noise and outputs.{expected_counts,detection_rate,counts,frames,previews}; " + key +

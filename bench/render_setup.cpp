@@ -72,7 +72,7 @@ Setup& setup() {
       try {
         Setup r;
         r.config = scenes::load_scene_file(json, {"camera.height_px=1000"}).config;
-        r.scene = scenes::load_gltf(r.config.gltf_path, r.config.gltf_scene);
+        r.scene = scenes::load_gltf(r.config.gltf_path, r.config.gltf_scene, r.config.edits);
         r.source = json;
         return r;
       } catch (const std::exception& e) {

@@ -241,10 +241,45 @@ struct SeedsConfig {
   bool operator==(const SeedsConfig&) const = default;
 };
 
+// Edits of the glTF scene, applied by the loader (scenes::load_gltf) before world transforms are composed:
+// the scene file's `nodes` and `materials` sections (docs/scene-file.md, "Varying the glTF scene"). Each
+// given value replaces the glTF's; a component left empty (std::nullopt) keeps the glTF's.
+using OptionalVec3 = std::array<std::optional<double>, 3>;
+
+struct NodeEdit {
+  std::string name;                     // nodes.<name>: the glTF node's name
+  OptionalVec3 translation_m;           // translation_m: local translation, in the parent's frame
+  OptionalVec3 rotation_rad;            // rotation_deg: XYZ Euler angles, R = Rz * Ry * Rx on column vectors
+  OptionalVec3 scale;                   // scale: per local axis
+
+  bool operator==(const NodeEdit&) const = default;
+};
+
+struct MaterialEdit {
+  std::string name;                     // materials.<name>: the glTF material's name
+  OptionalVec3 base_color;              // base_color: linear RGB (baseColorFactor; its alpha is kept)
+  std::optional<double> roughness;      // roughness: roughnessFactor
+  std::optional<double> metallic;       // metallic: metallicFactor
+  std::optional<double> transmission;   // transmission: KHR_materials_transmission transmissionFactor
+  std::optional<double> ior;            // ior: KHR_materials_ior
+  std::optional<double> thickness_m;    // thickness_mm: KHR_materials_volume thicknessFactor
+
+  bool operator==(const MaterialEdit&) const = default;
+};
+
+struct SceneEdits {
+  std::vector<NodeEdit> nodes;          // sorted by name (byte order), names unique
+  std::vector<MaterialEdit> materials;  // the same
+
+  bool empty() const { return nodes.empty() && materials.empty(); }
+  bool operator==(const SceneEdits&) const = default;
+};
+
 struct RunConfig {
   std::string scene_file;               // absolute path of the scene file ("" when built in code)
   std::string gltf_path;                // gltf: resolved absolute path
   std::string gltf_scene;               // gltf_scene: name of the glTF scene; "" = the file's default
+  SceneEdits edits;                     // nodes, materials: changes to the glTF's nodes and materials
   uint64_t seed = 1;                    // seed
   SeedsConfig seeds;                    // seeds.*: each stream's own seed (null: seed)
   CameraConfig camera;

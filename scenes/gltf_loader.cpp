@@ -25,6 +25,7 @@
 
 #include "core/error.h"
 #include "scenes/input.h"
+#include "scenes/key_path.h"
 #include "scenes/scene.h"
 
 namespace spadgen::scenes {
@@ -43,6 +44,11 @@ constexpr int kMaxTextureSize = 65536;
 // Emitted luminance, emissiveFactor times KHR_materials_emissive_strength, in nits: 600 times the sun's
 // disc (1.6e9 nits). Photon radiances from it stay finite in float.
 constexpr double kMaxEmissiveNits = 1e12;
+// A node given as a matrix is decomposed into translation, rotation and scale when the scene file edits it.
+// Recomposed, its 3 x 3 part must come back to this fraction of its largest entry, or it shears (which
+// glTF does not allow). Exporters write matrices in float, whose rotations are orthonormal to about 1e-7:
+// those decompose; a shear large enough to see does not.
+constexpr double kDecomposeTolerance = 1e-6;
 
 // Extensions whose content spadgen reads. Any other extension is reported once as unused, and is an
 // error when the file lists it in extensionsRequired.
@@ -191,10 +197,38 @@ bool load_image_checked(tinygltf::Image* image, const int image_index, std::stri
   return tinygltf::LoadImageData(image, image_index, err, warn, req_width, req_height, bytes, size, nullptr);
 }
 
+// A node's local transform as glTF's translation, rotation and scale.
+struct Trs {
+  glm::dvec3 translation{0.0};
+  glm::dquat rotation{1.0, 0.0, 0.0, 0.0};  // w, x, y, z
+  glm::dvec3 scale{1.0};
+};
+
+// R = Rz(a.z) * Ry(a.y) * Rx(a.x), acting on column vectors: about X first, then Y, then Z, all about the
+// parent's fixed axes (Blender's XYZ Euler mode).
+glm::dmat3 euler_xyz(const glm::dvec3& a) {
+  const double cx = std::cos(a.x), sx = std::sin(a.x), cy = std::cos(a.y), sy = std::sin(a.y);
+  const double cz = std::cos(a.z), sz = std::sin(a.z);
+  glm::dmat3 r;  // glm: r[column][row]
+  r[0] = {cy * cz, cy * sz, -sy};
+  r[1] = {sx * sy * cz - cx * sz, sx * sy * sz + cx * cz, sx * cy};
+  r[2] = {cx * sy * cz + sx * sz, cx * sy * sz - sx * cz, cx * cy};
+  return r;
+}
+
+// The angles of euler_xyz that give the rotation r: y in [-pi/2, pi/2], x and z in (-pi, pi]. In gimbal
+// lock (y = +-pi/2, where x and z turn about the same axis) z is 0.
+glm::dvec3 euler_xyz_of(const glm::dmat3& r) {
+  const double cy = std::hypot(r[0][0], r[0][1]);
+  const double y = std::atan2(-r[0][2], cy);
+  if (cy > 1e-12) return {std::atan2(r[1][2], r[2][2]), y, std::atan2(r[0][1], r[0][0])};
+  return {std::atan2(-r[2][1], r[1][1]), y, 0.0};
+}
+
 class Loader {
  public:
-  Loader(std::string path, const tinygltf::Model& model, Scene& scene)
-      : path_(std::move(path)), m_(model), scene_(scene) {}
+  Loader(std::string path, const tinygltf::Model& model, const SceneEdits& edits, Scene& scene)
+      : path_(std::move(path)), m_(model), edits_(edits), scene_(scene) {}
 
   void load(const std::string& scene_name);
 
@@ -214,6 +248,11 @@ class Loader {
   void visit_one(int node, const glm::dmat4& parent_world, std::vector<std::pair<int, glm::dmat4>>& stack);
   void check_world(const glm::dvec3& p, const std::string& who, const std::string& what) const;
   glm::dmat4 local_transform(size_t node) const;
+  void resolve_edits();
+  size_t named(const char* kind, const char* section, const std::vector<std::string>& names, const std::string& name) const;
+  Trs decompose(size_t node, const glm::dmat4& m) const;
+  glm::dmat4 edited(const NodeEdit& e, const Trs& base) const;
+  void warn_unused_edits();
 
   void load_materials();
   int texture(int gltf_texture, const std::string& user);
@@ -233,7 +272,10 @@ class Loader {
 
   std::string path_;
   const tinygltf::Model& m_;
+  const SceneEdits& edits_;
   Scene& scene_;
+  std::vector<const NodeEdit*> node_edit_;          // per glTF node: the scene file's edit, or null
+  std::vector<const MaterialEdit*> material_edit_;  // per glTF material
   std::set<std::string> warned_;
   std::map<int, int> texture_of_gltf_;   // glTF texture index -> Scene::textures index
   std::vector<int> parent_;              // per node, -1 for roots
@@ -358,14 +400,17 @@ glm::dmat4 Loader::local_transform(size_t i) const {
     if (n.matrix.size() != 16)
       fail(node_label(m_, i), "matrix has " + std::to_string(n.matrix.size()) + " values, expected 16");
     finite(n.matrix, "matrix");
-    return glm::make_mat4(n.matrix.data());  // glTF matrices are column-major, as glm's
+    const glm::dmat4 m = glm::make_mat4(n.matrix.data());  // glTF matrices are column-major, as glm's
+    return node_edit_[i] ? edited(*node_edit_[i], decompose(i, m)) : m;
   }
+  Trs base;
   glm::dmat4 t(1.0), r(1.0), s(1.0);
   if (!n.translation.empty()) {
     if (n.translation.size() != 3)
       fail(node_label(m_, i), "translation has " + std::to_string(n.translation.size()) + " values, expected 3");
     finite(n.translation, "translation");
-    t[3] = glm::dvec4(n.translation[0], n.translation[1], n.translation[2], 1.0);
+    base.translation = {n.translation[0], n.translation[1], n.translation[2]};
+    t[3] = glm::dvec4(base.translation, 1.0);
   }
   if (!n.rotation.empty()) {
     if (n.rotation.size() != 4)
@@ -375,15 +420,136 @@ glm::dmat4 Loader::local_transform(size_t i) const {
     const double len = glm::length(q);
     if (!(len > 1e-12)) fail(node_label(m_, i), "rotation is a zero quaternion");
     // Exporters write unit quaternions rounded to float: normalise so rounding never scales.
-    r = glm::mat4_cast(q / len);
+    base.rotation = q / len;
+    r = glm::mat4_cast(base.rotation);
   }
   if (!n.scale.empty()) {
     if (n.scale.size() != 3)
       fail(node_label(m_, i), "scale has " + std::to_string(n.scale.size()) + " values, expected 3");
     finite(n.scale, "scale");
-    s = glm::scale(glm::dmat4(1.0), glm::dvec3(n.scale[0], n.scale[1], n.scale[2]));
+    base.scale = {n.scale[0], n.scale[1], n.scale[2]};
+    s = glm::scale(glm::dmat4(1.0), base.scale);
   }
-  return t * r * s;
+  return node_edit_[i] ? edited(*node_edit_[i], base) : t * r * s;
+}
+
+// The scene file's edit of a node: each given component replaces the glTF's. The matrix is composed as an
+// unedited node's is (T R S), so that an edit giving the glTF's own values changes no bit.
+glm::dmat4 Loader::edited(const NodeEdit& e, const Trs& base) const {
+  glm::dvec3 translation = base.translation, scale = base.scale;
+  for (int k = 0; k < 3; ++k) {
+    if (e.translation_m[k]) translation[k] = *e.translation_m[k];
+    if (e.scale[k]) scale[k] = *e.scale[k];
+  }
+  glm::dmat4 t(1.0), r = glm::mat4_cast(base.rotation);
+  t[3] = glm::dvec4(translation, 1.0);
+  if (e.rotation_rad[0] || e.rotation_rad[1] || e.rotation_rad[2]) {
+    // The angles not given are the glTF rotation's, in the same convention.
+    glm::dvec3 angles = e.rotation_rad[0] && e.rotation_rad[1] && e.rotation_rad[2] ? glm::dvec3(0.0)
+                                                                                     : euler_xyz_of(glm::mat3_cast(base.rotation));
+    for (int k = 0; k < 3; ++k)
+      if (e.rotation_rad[k]) angles[k] = *e.rotation_rad[k];
+    r = glm::dmat4(euler_xyz(angles));
+  }
+  return t * r * glm::scale(glm::dmat4(1.0), scale);
+}
+
+// A node's matrix as translation, rotation and scale, for an edit to replace some of them; an error naming
+// the node when the matrix is not one (a shear, a last row other than (0, 0, 0, 1), a zero scale).
+Trs Loader::decompose(size_t i, const glm::dmat4& m) const {
+  const std::string who = node_label(m_, i);
+  const std::string cannot = ", so the scene file's /nodes/" + pointer_token(m_.nodes[i].name) +
+                             " cannot replace its translation, rotation or scale; give the node translation, rotation and "
+                             "scale in the glTF file instead of a matrix";
+  if (m[0][3] != 0.0 || m[1][3] != 0.0 || m[2][3] != 0.0 || m[3][3] != 1.0)
+    fail(who, "its matrix's last row is not (0, 0, 0, 1)" + cannot);
+  Trs out;
+  out.translation = glm::dvec3(m[3]);
+  const glm::dmat3 a(m);
+  for (int k = 0; k < 3; ++k) {
+    out.scale[k] = glm::length(a[k]);
+    if (!(out.scale[k] > 0.0)) fail(who, "its matrix has a zero scale" + cannot);
+  }
+  if (glm::determinant(a) < 0.0) out.scale.x = -out.scale.x;  // a mirror: one negative scale
+  out.rotation = glm::normalize(glm::quat_cast(glm::dmat3(a[0] / out.scale.x, a[1] / out.scale.y, a[2] / out.scale.z)));
+  const glm::dmat3 back = glm::mat3_cast(out.rotation) * glm::dmat3(glm::scale(glm::dmat4(1.0), out.scale));
+  double err = 0.0, size = 0.0;
+  for (int c = 0; c < 3; ++c)
+    for (int r = 0; r < 3; ++r) err = std::max(err, std::abs(back[c][r] - a[c][r])), size = std::max(size, std::abs(a[c][r]));
+  if (!(err <= kDecomposeTolerance * size))
+    fail(who, "its matrix is not a translation, rotation and scale (it shears: recomposed from them it differs by " +
+                  num(err / size) + " of its largest entry, more than " + num(kDecomposeTolerance) + ")" + cannot);
+  return out;
+}
+
+// The glTF element carrying `name` in `names` (kind "node", section "/nodes/"): exactly one must.
+size_t Loader::named(const char* kind, const char* section, const std::vector<std::string>& names, const std::string& name) const {
+  std::string key = section;  // built up: GCC 12 warns falsely (-Wrestrict) on const char* + std::string
+  key += pointer_token(name);
+  const std::string shown = nlohmann::json(name).dump();
+  std::vector<size_t> hits;
+  for (size_t i = 0; i < names.size(); ++i)
+    if (names[i] == name) hits.push_back(i);
+  if (hits.size() == 1) return hits[0];
+  if (hits.size() > 1) {
+    std::string list;
+    for (size_t h : hits) list += (list.empty() ? "" : ", ") + std::to_string(h);
+    throw Error(key + ": " + std::to_string(hits.size()) + " " + kind + "s of the glTF file " + path_ + " are named " + shown +
+                " (" + kind + "s " + list + "); give them distinct names in the glTF file to edit one");
+  }
+  const auto lower = [](std::string v) {
+    for (char& c : v) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    return v;
+  };
+  std::set<std::string> distinct;
+  for (const std::string& n : names)
+    if (!n.empty()) distinct.insert(n);
+  std::string best;
+  size_t best_d = std::max<size_t>(2, name.size() / 3) + 1;
+  for (const std::string& n : distinct)
+    if (const size_t d = edit_distance(lower(name), lower(n)); d < best_d) best_d = d, best = n;
+  std::string msg = key + ": the glTF file " + path_ + " has no " + kind + " named " + shown;
+  if (!best.empty()) msg += "; did you mean " + nlohmann::json(best).dump() + "?";
+  if (distinct.empty()) {
+    msg += std::string(" (none of its ") + kind + "s has a name)";
+  } else if (distinct.size() <= 12) {
+    msg += std::string(" (its ") + kind + "s:";
+    for (const std::string& n : distinct) {
+      msg += n == *distinct.begin() ? " " : ", ";
+      msg += nlohmann::json(n).dump();
+    }
+    msg += ')';
+  } else {
+    msg += " (it has " + std::to_string(distinct.size()) + " named " + kind + "s; spadgen info lists them)";
+  }
+  throw Error(msg);
+}
+
+void Loader::resolve_edits() {
+  node_edit_.assign(m_.nodes.size(), nullptr);
+  material_edit_.assign(m_.materials.size(), nullptr);
+  std::vector<std::string> names;
+  for (const tinygltf::Node& n : m_.nodes) names.push_back(n.name);
+  for (const NodeEdit& e : edits_.nodes) node_edit_[named("node", "/nodes/", names, e.name)] = &e;
+  names.clear();
+  for (const tinygltf::Material& m : m_.materials) names.push_back(m.name);
+  for (const MaterialEdit& e : edits_.materials) material_edit_[named("material", "/materials/", names, e.name)] = &e;
+}
+
+// Edits that change nothing: of a material no loaded mesh uses, of a node outside the loaded glTF scene.
+void Loader::warn_unused_edits() {
+  for (size_t i = 0; i < material_edit_.size(); ++i) {
+    if (!material_edit_[i]) continue;
+    const bool used = std::any_of(scene_.meshes.begin(), scene_.meshes.end(),
+                                  [&](const Mesh& mesh) { return mesh.material == static_cast<int>(i); });
+    if (!used)
+      warn("/materials/" + pointer_token(m_.materials[i].name) + ": " + label("material", i, m_.materials[i].name) +
+           " is used by no mesh of the loaded scene; the edit changes nothing");
+  }
+  for (size_t i = 0; i < node_edit_.size(); ++i)
+    if (node_edit_[i] && !scene_.nodes[i].loaded)
+      warn("/nodes/" + pointer_token(m_.nodes[i].name) + ": " + node_label(m_, i) +
+           " is not part of the loaded glTF scene; the edit changes nothing");
 }
 
 // Depth first, children in order (the order of Scene::meshes), with an explicit stack: a parent chain
@@ -400,6 +566,8 @@ void Loader::visit(int root, const glm::dmat4& root_world) {
 void Loader::visit_one(int node, const glm::dmat4& parent_world, std::vector<std::pair<int, glm::dmat4>>& stack) {
   const auto i = static_cast<size_t>(node);
   const glm::dmat4 world = parent_world * local_transform(i);
+  scene_.nodes[i].loaded = true;
+  scene_.nodes[i].world = world;
   const tinygltf::Node& n = m_.nodes[i];
   if (n.mesh >= 0) {
     if (static_cast<size_t>(n.mesh) >= m_.meshes.size())
@@ -710,6 +878,17 @@ void Loader::load_materials() {
       }
       ext_texture(e, "KHR_materials_volume", "thicknessTexture");
     }
+    if (const MaterialEdit* e = material_edit_[i]) {
+      // The scene file's values replace the factors, as if the glTF file had given them (a transmission
+      // above 0 makes the material transmissive whether or not it declared KHR_materials_transmission).
+      for (int k = 0; k < 3; ++k)
+        if (e->base_color[k]) mat.base_color[k] = static_cast<float>(*e->base_color[k]);
+      if (e->roughness) mat.roughness = static_cast<float>(*e->roughness);
+      if (e->metallic) mat.metallic = static_cast<float>(*e->metallic);
+      if (e->transmission) mat.transmission = static_cast<float>(*e->transmission);
+      if (e->ior) mat.ior = static_cast<float>(*e->ior);
+      if (e->thickness_m) mat.thickness_m = static_cast<float>(*e->thickness_m);
+    }
     scene_.materials.push_back(std::move(mat));
   }
 }
@@ -938,8 +1117,12 @@ void Loader::load(const std::string& scene_name) {
   check_unused_features();
   check_hierarchy();
   const std::vector<int> roots = pick_roots(scene_name);
+  resolve_edits();
+  scene_.nodes.resize(m_.nodes.size());
+  for (size_t i = 0; i < m_.nodes.size(); ++i) scene_.nodes[i].name = m_.nodes[i].name, scene_.nodes[i].parent = parent_[i];
   load_materials();
   for (int r : roots) visit(r, glm::dmat4(1.0));
+  warn_unused_edits();
 }
 
 // glTF URIs are percent-encoded ("my%20scene.bin").
@@ -1066,14 +1249,14 @@ bool read_whole_file_bounded(std::vector<unsigned char>* out, std::string* err, 
 
 }  // namespace
 
-Scene load_gltf(const std::string& path, const std::string& scene_name) {
+Scene load_gltf(const std::string& path, const std::string& scene_name, const SceneEdits& edits) {
   const std::string problem = file_problem(path, kMaxGltfFileBytes);
   if (problem == "does not exist") throw Error(path + ": glTF file not found");
   if (!problem.empty()) throw Error(path + ": the glTF file " + problem);
-  return parse_gltf(read_file_bounded(path, kMaxGltfFileBytes, "glTF file"), path, scene_name);
+  return parse_gltf(read_file_bounded(path, kMaxGltfFileBytes, "glTF file"), path, scene_name, edits);
 }
 
-Scene parse_gltf(const std::string& bytes, const std::string& path, const std::string& scene_name) {
+Scene parse_gltf(const std::string& bytes, const std::string& path, const std::string& scene_name, const SceneEdits& edits) {
   if (bytes.size() > kMaxGltfFileBytes)
     throw Error(path + ": the glTF file is " + size_text(bytes.size()) + ", larger than the " + size_text(kMaxGltfFileBytes) +
                 " spadgen reads");
@@ -1112,13 +1295,27 @@ Scene parse_gltf(const std::string& bytes, const std::string& path, const std::s
   for (std::string line; std::getline(lines, line);)
     if (!line.empty()) scene.warnings.push_back("tinygltf: " + line);
   if (!err.empty()) scene.warnings.push_back("tinygltf: " + err);
-  Loader(path, model, scene).load(scene_name);
+  Loader(path, model, edits, scene).load(scene_name);
   return scene;
 }
 
 std::string summarize(const Scene& scene) {
   std::ostringstream s;
   s << "glTF: " << scene.source << "\n";
+  // Every node by name: the scene file's nodes section refers to them so.
+  s << "nodes: " << scene.nodes.size() << "\n";
+  for (size_t i = 0; i < scene.nodes.size(); ++i) {
+    const Node& n = scene.nodes[i];
+    s << "  " << i << " " << (n.name.empty() ? std::string("(no name)") : "'" + n.name + "'");
+    if (n.parent >= 0) s << " in " << n.parent;
+    if (n.loaded) {
+      const glm::dvec3 p(n.world[3]);
+      s << ", at (" << p.x << ", " << p.y << ", " << p.z << ")";
+    } else {
+      s << ", not in the loaded scene";
+    }
+    s << "\n";
+  }
   s << "meshes: " << scene.meshes.size() << " (" << scene.triangle_count() << " triangles)\n";
   for (const Mesh& m : scene.meshes)
     s << "  " << m.name << ": " << m.triangle_count() << " triangles, material "

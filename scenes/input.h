@@ -61,6 +61,9 @@ std::string content_hash(const std::string& scene_file, const std::string& gltf_
 // FNV-1a 64 of bytes, continuing from `h`.
 uint64_t fnv1a64(const std::string& bytes, uint64_t h = 0xcbf29ce484222325ull);
 
+// Levenshtein distance (insertions, deletions, substitutions), for the "did you mean" of messages.
+size_t edit_distance(const std::string& a, const std::string& b);
+
 // "line:column" (both from 1) of byte `offset` of `text`.
 std::string line_column(const std::string& text, size_t offset);
 

@@ -1,5 +1,6 @@
 // The immutable scene: every triangle mesh in world space (metres), its materials, the glTF cameras and
-// lights. Built once from a glTF file by load_gltf(); render/ turns it into an Embree scene.
+// lights. Built once from a glTF file by load_gltf(), with the scene file's edits of its nodes and
+// materials applied; render/ turns it into an Embree scene.
 #pragma once
 #include <glm/glm.hpp>
 
@@ -7,6 +8,8 @@
 #include <limits>
 #include <string>
 #include <vector>
+
+#include "core/config.h"
 
 namespace spadgen::scenes {
 
@@ -67,8 +70,17 @@ struct Light {
   glm::dvec3 direction{0, 0, -1};    // world, unit: the node's local -Z
 };
 
+// A glTF node, as `spadgen info` lists them (the scene file's `nodes` section names them).
+struct Node {
+  std::string name;
+  int parent = -1;                   // glTF index of the parent node, -1 for a root
+  bool loaded = false;               // part of the loaded glTF scene (a node of another glTF scene is not)
+  glm::dmat4 world{1.0};             // world transform, edits applied (identity when not loaded)
+};
+
 struct Scene {
   std::string source;                // path of the glTF file
+  std::vector<Node> nodes;           // every glTF node, by glTF index
   std::vector<Mesh> meshes;
   std::vector<Material> materials;
   std::vector<Texture> textures;
@@ -100,14 +112,23 @@ struct Scene {
 
 // Loads a .gltf (external or embedded buffers) or .glb file. scene_name "" picks the file's default scene
 // (or scene 0). Throws spadgen::Error naming the file and the glTF element on any broken input.
-Scene load_gltf(const std::string& path, const std::string& scene_name = "");
+//
+// `edits` (the scene file's nodes and materials sections, RunConfig::edits) name glTF nodes and materials;
+// a name that no element or several elements carry is an error naming the scene-file key (/nodes/Sphre),
+// the glTF file and the names it has. A node's edit replaces components of its local transform before world
+// transforms are composed, so that its subtree (meshes, cameras, lights) follows; a node given as a matrix
+// is decomposed into translation, rotation and scale first (an error when it has shear). A material's edit
+// replaces its factors. An edit of a material no loaded mesh uses, or of a node outside the loaded glTF
+// scene, is a warning (it changes nothing). docs/scene-file.md, "Varying the glTF scene".
+Scene load_gltf(const std::string& path, const std::string& scene_name = "", const SceneEdits& edits = {});
 
 // The same from the file's bytes (.gltf or .glb, told apart by content): `path` names the file in messages
 // and its folder is where external buffers and images are looked for. The fuzzing harnesses call it.
-Scene parse_gltf(const std::string& bytes, const std::string& path, const std::string& scene_name = "");
+Scene parse_gltf(const std::string& bytes, const std::string& path, const std::string& scene_name = "",
+                 const SceneEdits& edits = {});
 
-// A human-readable summary for `spadgen info`: meshes, triangles, materials with their extensions,
-// cameras, lights, warnings.
+// A human-readable summary for `spadgen info`: nodes (the names the scene file's nodes section takes),
+// meshes, triangles, materials with their extensions, cameras, lights, warnings.
 std::string summarize(const Scene& scene);
 
 }  // namespace spadgen::scenes

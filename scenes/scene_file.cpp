@@ -10,11 +10,14 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <optional>
 #include <sstream>
+#include <utility>
 
 #include "core/error.h"
 #include "core/units.h"
 #include "scenes/input.h"
+#include "scenes/key_path.h"
 #include "schema.h"
 
 namespace spadgen::scenes {
@@ -37,19 +40,23 @@ bool is_section(const std::string& path) {
   return false;
 }
 
-size_t edit_distance(const std::string& a, const std::string& b) {
-  std::vector<size_t> row(b.size() + 1);
-  for (size_t j = 0; j <= b.size(); ++j) row[j] = j;
-  for (size_t i = 1; i <= a.size(); ++i) {
-    size_t diag = row[0];
-    row[0] = i;
-    for (size_t j = 1; j <= b.size(); ++j) {
-      const size_t up = row[j];
-      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diag + (a[i - 1] == b[j - 1] ? 0 : 1)});
-      diag = up;
-    }
-  }
-  return row[b.size()];
+const NamedSection* find_named(const std::string& path) {
+  for (const NamedSection& s : named_sections())
+    if (s.path == path) return &s;
+  return nullptr;
+}
+
+// The key `name` of a named section's elements.
+const Key* find_element_key(const NamedSection& s, const std::string& name) {
+  for (const Key& k : s.keys)
+    if (k.path.compare(1, std::string::npos, name) == 0) return &k;
+  return nullptr;
+}
+
+std::string element_keys_text(const NamedSection& s) {
+  std::string list;
+  for (const Key& k : s.keys) list += (list.empty() ? "" : ", ") + k.path.substr(1);
+  return list;
 }
 
 std::string parent_of(const std::string& path) { return path.substr(0, path.rfind('/')); }
@@ -65,6 +72,8 @@ std::vector<std::string> children_of(const std::string& parent) {
     const std::string child = prefix + rest.substr(0, rest.find('/'));
     if (std::find(out.begin(), out.end(), child) == out.end()) out.push_back(child);
   }
+  for (const NamedSection& s : named_sections())
+    if (parent_of(s.path) == parent) out.push_back(s.path);
   return out;
 }
 
@@ -86,6 +95,18 @@ std::string suggestion(const std::string& path) {
     return list.empty() ? std::string() : "; the keys here are: " + list;
   }
   return "; did you mean " + best + "?";
+}
+
+// "did you mean" for an unknown key `leaf` of the element at `element_pointer` (/nodes/Sphere), else the list.
+std::string element_suggestion(const NamedSection& s, const std::string& leaf, const std::string& element_pointer) {
+  std::string best;
+  size_t best_d = std::max<size_t>(2, leaf.size() / 3) + 1;
+  for (const Key& k : s.keys) {
+    const size_t dist = edit_distance(leaf, k.path.substr(1));
+    if (dist < best_d) best_d = dist, best = k.path.substr(1);
+  }
+  if (!best.empty()) return "; did you mean " + element_pointer + "/" + pointer_token(best) + "?";
+  return "; the keys of a " + s.element + " are: " + element_keys_text(s);
 }
 
 // A value as a message shows it: at most 60 characters. Containers are cut before they are dumped, so
@@ -144,7 +165,10 @@ std::string expected_text(const Key& k) {
       for (size_t i = 0; i < k.choices.size(); ++i) e += (i ? ", \"" : " \"") + k.choices[i] + "\"";
       break;
     }
-    case Type::Vec3: e = "an array of 3 numbers" + (has_lo && has_hi ? " each in [" + format_bound(k.lo) + ", " + format_bound(k.hi) + "]" : std::string()) + unit; break;
+    case Type::Vec3:
+      e = "an array of 3 numbers" + (has_lo && has_hi ? " each in [" + format_bound(k.lo) + ", " + format_bound(k.hi) + "]" : std::string()) + unit;
+      if (k.null_components) e += " or null (keeps the glTF's)";
+      break;
     case Type::Rect: e = "[x0, y0, width, height] (integers >= 0, width and height > 0)"; break;
   }
   if (k.nullable) e += ", or null";
@@ -173,8 +197,9 @@ bool value_fits(const Key& k, const json& v) {
     case Type::Enum:
       return v.is_string() && std::find(k.choices.begin(), k.choices.end(), v.get<std::string>()) != k.choices.end();
     case Type::Vec3:
-      return v.is_array() && v.size() == 3 &&
-             std::all_of(v.begin(), v.end(), [&](const json& e) { return e.is_number() && in_range(k, e.get<double>()); });
+      return v.is_array() && v.size() == 3 && std::all_of(v.begin(), v.end(), [&](const json& e) {
+               return (e.is_number() && in_range(k, e.get<double>())) || (e.is_null() && k.null_components);
+             });
     case Type::Rect: {
       if (!v.is_array() || v.size() != 4) return false;
       for (size_t i = 0; i < 4; ++i) {
@@ -187,15 +212,66 @@ bool value_fits(const Key& k, const json& v) {
   return false;
 }
 
+// A type as the reference and the messages name it.
+std::string type_text(const Key& k) {
+  switch (k.type) {
+    case Type::Number: return "number";
+    case Type::Integer: return "integer";
+    case Type::Bool: return "bool";
+    case Type::String: return "string";
+    case Type::Path: return "file";
+    case Type::Enum: return "choice";
+    case Type::Vec3: return "[x, y, z]";
+    case Type::Rect: return "[x0, y0, w, h]";
+  }
+  return "";
+}
+
 struct Checker {
-  std::string file;
+  std::string file;            // "" : messages name no file (check_override)
+  std::string set = "--set ";  // how messages name an override: "--set KEY: ..."
   std::vector<std::string> errors;
 
-  void error(const std::string& where, const std::string& what) { errors.push_back(file + ": " + where + ": " + what); }
+  std::string prefix() const { return file.empty() ? std::string() : file + ": "; }
+  void error(const std::string& where, const std::string& what) { errors.push_back(prefix() + where + ": " + what); }
+  void override_error(const std::string& key, const std::string& what) { errors.push_back(prefix() + set + key + ": " + what); }
+
+  // A section of named elements: any non-empty name, each an object of the section's keys.
+  void walk_named(const json& node, const NamedSection& s) {
+    if (!node.is_object()) {
+      error(s.path, "found " + describe_json(node) + ", expected an object of glTF " + s.element + " names (" + s.doc + ")");
+      return;
+    }
+    for (auto it = node.begin(); it != node.end(); ++it) {
+      const std::string ep = s.path + "/" + pointer_token(it.key());
+      if (it.key().empty()) {
+        error(s.path, "found the key \"\", expected the name of a glTF " + s.element);
+        continue;
+      }
+      if (!it.value().is_object()) {
+        error(ep, "found " + describe_json(it.value()) + ", expected an object of a " + s.element + "'s keys (" +
+                      element_keys_text(s) + ")");
+        continue;
+      }
+      for (auto kv = it.value().begin(); kv != it.value().end(); ++kv) {
+        const std::string kp = ep + "/" + pointer_token(kv.key());
+        if (const Key* k = find_element_key(s, kv.key())) {
+          if (!value_fits(*k, kv.value()))
+            error(kp, "found " + describe_json(kv.value()) + ", expected " + expected_text(*k) + " (" + k->doc + ")");
+        } else {
+          error(kp, "unknown key" + element_suggestion(s, kv.key(), ep));
+        }
+      }
+    }
+  }
 
   void walk(const json& node, const std::string& path) {
     for (auto it = node.begin(); it != node.end(); ++it) {
       const std::string p = path + "/" + it.key();
+      if (const NamedSection* s = path.empty() ? find_named(p) : nullptr) {
+        walk_named(it.value(), *s);
+        continue;
+      }
       // "camera/f_number" would read as the path /camera/f_number and be checked as that key, yet the
       // section "camera" never sees it: a key name is one level.
       if (it.key().empty() || it.key().find_first_of("/~") != std::string::npos) {
@@ -219,6 +295,99 @@ struct Checker {
   }
 };
 
+// What a key names in the schema: a key (of a named section's element, or not), or why nothing.
+struct Target {
+  const Key* key = nullptr;
+  const NamedSection* section = nullptr;  // the section whose element the key belongs to
+  std::string problem;                    // when key is null: "unknown key; did you mean ...?"
+};
+
+Target find_target(const KeyPath& p) {
+  Target t;
+  const std::string ptr = p.pointer();
+  if (const NamedSection* s = find_named("/" + pointer_token(p.names[0]))) {
+    t.section = s;
+    const std::string example = s->path.substr(1) + ".NAME." + s->keys.front().path.substr(1);
+    if (p.names.size() == 1)
+      t.problem = "is a section of glTF " + s->element + " names, not a key; e.g. " + example;
+    else if (p.names.size() == 2)
+      t.problem = "names a " + s->element + ", not a key; its keys are: " + element_keys_text(*s) + " (e.g. " +
+                  s->path.substr(1) + "." + key_name(p.names[1]) + "." + s->keys.front().path.substr(1) + ")";
+    else if (p.names.size() > 3)
+      t.problem = "unknown key; a " + s->element + "'s keys are: " + element_keys_text(*s) +
+                  " (a name that holds a dot is written in double quotes: " + s->path.substr(1) + ".\"Cube.001\"." +
+                  s->keys.front().path.substr(1) + ")";
+    else if (!(t.key = find_element_key(*s, p.names[2])))
+      t.problem = "unknown key" + element_suggestion(*s, p.names[2], parent_of(ptr));
+  } else if (!(t.key = find_key(ptr))) {
+    const std::string first = "/" + pointer_token(p.names[0]);
+    if (is_section(ptr))
+      t.problem = "is a section, not a key";
+    else if (p.names.size() > 1 && !is_section(first))
+      t.problem = "unknown key: there is no section " + first + suggestion(first);
+    else
+      t.problem = "unknown key" + suggestion(ptr);
+  }
+  if (t.key && p.component) {
+    const std::string i = "[" + std::to_string(*p.component) + "]";
+    if (t.key->type != Type::Vec3)
+      t.problem = i + " selects a component of an [x, y, z] key; this key is of type " + type_text(*t.key);
+    else if (*p.component > 2)
+      t.problem = "has no component " + i + "; expected [0], [1] or [2]";
+    if (!t.problem.empty()) t.key = nullptr;
+  }
+  return t;
+}
+
+// Puts `value` where the key `p` names it in `doc`, creating the sections and elements on the way. A
+// component [i] replaces one entry of the array the scene file gives, or of the default when it gives
+// none ([null, null, null] for a named element's key: the other components stay the glTF's).
+void put(json& doc, const KeyPath& p, const Target& t, const json& value, Checker& chk, const std::string& key) {
+  json* node = &doc;
+  std::string at;
+  for (size_t i = 0; i + 1 < p.names.size(); ++i) {
+    const std::string& part = p.names[i];
+    at += '/';
+    at += pointer_token(part);
+    if (!node->contains(part)) (*node)[part] = json::object();
+    if (!(*node)[part].is_object()) {
+      chk.override_error(key, at + " is not " + (i == 0 ? "a section" : "an object") + " in the scene file");
+      return;
+    }
+    node = &(*node)[part];
+  }
+  const std::string& leaf = p.names.back();
+  if (!p.component) {
+    (*node)[leaf] = value;
+    return;
+  }
+  json whole = node->contains(leaf) ? (*node)[leaf] : t.section ? json::array({nullptr, nullptr, nullptr}) : t.key->def;
+  if (!whole.is_array() || whole.size() != 3) {
+    chk.override_error(key, p.pointer() + ": found " + describe_json(whole) + " in the scene file, expected an array of 3 " +
+                                "to replace component [" + std::to_string(*p.component) + "] of");
+    return;
+  }
+  whole[static_cast<size_t>(*p.component)] = value;
+  (*node)[leaf] = whole;
+}
+
+// The key of an override, parsed and looked up; null (with the error recorded) when it names no key.
+std::optional<std::pair<KeyPath, Target>> override_target(const std::string& key, Checker& chk) {
+  KeyPath p;
+  try {
+    p = parse_key_path(key);
+  } catch (const Error& e) {
+    chk.override_error(key, e.what());
+    return std::nullopt;
+  }
+  Target t = find_target(p);
+  if (!t.key) {
+    chk.override_error(key, p.pointer() + ": " + t.problem);
+    return std::nullopt;
+  }
+  return std::pair{std::move(p), std::move(t)};
+}
+
 // "camera.f_number=2.8" -> (/camera/f_number, 2.8). A value that is not JSON is taken as a string.
 void apply_override(json& doc, const std::string& assignment, Checker& chk) {
   if (const size_t bad = invalid_utf8_at(assignment); bad != std::string::npos) {
@@ -226,21 +395,26 @@ void apply_override(json& doc, const std::string& assignment, Checker& chk) {
                          printable(assignment.substr(bad, 1)) + " at offset " + std::to_string(bad) + ")");
     return;
   }
-  const size_t eq = assignment.find('=');
+  const size_t eq = assignment_split(assignment);
+  if (eq == std::string::npos && assignment.find('=') != std::string::npos) {
+    // A stray quote hides the '=': the key's own syntax error says more than "expected KEY=VALUE".
+    const std::string key = assignment.substr(0, assignment.find('='));
+    try {
+      parse_key_path(key);
+    } catch (const Error& e) {
+      chk.override_error(key, e.what());
+      return;
+    }
+  }
   if (eq == std::string::npos || eq == 0) {
-    chk.errors.push_back(chk.file + ": --set " + assignment + ": expected KEY=VALUE, e.g. laser.average_power_mW=5");
+    chk.override_error(assignment, "expected KEY=VALUE, e.g. laser.average_power_mW=5");
     return;
   }
-  std::string key = assignment.substr(0, eq);
+  const std::string key = assignment.substr(0, eq);
   const std::string text = assignment.substr(eq + 1);
-  std::string path = "/" + key;
-  std::replace(path.begin(), path.end(), '.', '/');
-  const Key* k = find_key(path);
-  if (!k) {
-    chk.errors.push_back(chk.file + ": --set " + key + ": " + path + ": " +
-                         (is_section(path) ? "is a section, not a key" : "unknown key" + suggestion(path)));
-    return;
-  }
+  const auto target = override_target(key, chk);
+  if (!target) return;
+  const Key& k = *target->second.key;
   json value;
   try {
     value = parse_json(text, chk.file + ": --set " + key);
@@ -254,27 +428,8 @@ void apply_override(json& doc, const std::string& assignment, Checker& chk) {
     }
     value = text;
   }
-  if ((k->type == Type::String || k->type == Type::Path) && !value.is_string() && !value.is_null()) value = text;  // names that look like numbers
-  // Create intermediate sections; a non-object in the way is reported by the walk.
-  json* node = &doc;
-  std::string at;
-  size_t start = 1;
-  while (true) {
-    const size_t slash = path.find('/', start);
-    const std::string part = path.substr(start, slash == std::string::npos ? std::string::npos : slash - start);
-    at += "/" + part;
-    if (slash == std::string::npos) {
-      (*node)[part] = value;
-      break;
-    }
-    if (!node->contains(part)) (*node)[part] = json::object();
-    if (!(*node)[part].is_object()) {
-      chk.errors.push_back(chk.file + ": --set " + key + ": " + at + " is not a section in the scene file");
-      return;
-    }
-    node = &(*node)[part];
-    start = slash + 1;
-  }
+  if ((k.type == Type::String || k.type == Type::Path) && !value.is_string() && !value.is_null()) value = text;  // names that look like numbers
+  put(doc, target->first, target->second, value, chk, key);
 }
 
 // A checked value (a scalar, or an array of scalars) as an ordered_json, as ojson::parse(v.dump()) gives it
@@ -320,6 +475,18 @@ ojson resolve(const json& doc) {
       start = slash + 1;
     }
   }
+  // Named sections as given: elements in the order of their names (JSON objects here are sorted by
+  // name, byte for byte), each element's keys in the schema's order.
+  for (const NamedSection& s : named_sections()) {
+    const json::json_pointer ptr(s.path);
+    if (!doc.contains(ptr)) continue;
+    ojson& section = out[s.path.substr(1)] = ojson::object();
+    for (auto it = doc.at(ptr).begin(); it != doc.at(ptr).end(); ++it) {
+      ojson& element = section[it.key()] = ojson::object();
+      for (const Key& k : s.keys)
+        if (const auto v = it.value().find(k.path.substr(1)); v != it.value().end()) element[k.path.substr(1)] = to_ordered(*v);
+    }
+  }
   return out;
 }
 
@@ -330,6 +497,14 @@ RunConfig to_config(const ojson& r, const std::string& scene_path) {
   c.scene_file = scene_path.empty() ? "" : std::filesystem::absolute(scene_path).lexically_normal().string();
   for (const Key& k : schema())
     if (k.set) k.set(c, r.at(k.pointer), dir);
+  for (const NamedSection& s : named_sections()) {
+    const auto section = r.find(s.path.substr(1));
+    if (section == r.end()) continue;
+    for (auto it = section->begin(); it != section->end(); ++it) {
+      s.add(c, it.key());
+      for (auto v = it.value().begin(); v != it.value().end(); ++v) find_element_key(s, v.key())->set_element(c, it.key(), v.value());
+    }
+  }
   return c;
 }
 
@@ -454,7 +629,7 @@ ResolvedRun parse_scene_text(const std::string& text, const std::string& path, c
   const std::string file = path.empty() ? "<scene>" : path;
   json doc = parse_json(text, file);
   if (!doc.is_object()) throw Error(file + ": expected a JSON object at the top, found " + describe_json(doc));
-  Checker chk{file, {}};
+  Checker chk{file, "--set ", {}};
   for (const std::string& o : overrides) apply_override(doc, o, chk);
   chk.walk(doc, "");
   for (const Key& k : schema())
@@ -478,29 +653,90 @@ ResolvedRun load_scene_file(const std::string& path, const std::vector<std::stri
   return parse_scene_text(read_file_bounded(path, kMaxSceneFileBytes, "scene file"), path, overrides);
 }
 
+std::vector<std::string> check_override(const std::string& key, const nlohmann::json& value) {
+  Checker chk{"", "", {}};
+  if (const size_t bad = invalid_utf8_at(key); bad != std::string::npos) {
+    chk.override_error(printable(key), "not valid UTF-8 text (byte " + printable(key.substr(bad, 1)) + " at offset " +
+                                           std::to_string(bad) + ")");
+    return chk.errors;
+  }
+  const auto target = override_target(key, chk);
+  if (!target) return chk.errors;
+  json doc = json::object();
+  put(doc, target->first, target->second, value, chk, key);
+  if (chk.errors.empty()) chk.walk(doc, "");
+  return chk.errors;
+}
+
+namespace {
+
+// One row of the reference table.
+std::string markdown_row(const Key& k, const std::string& dotted, const std::string& def) {
+  std::string type = type_text(k);
+  if (k.nullable) type += " or null";
+  std::string valid = k.type == Type::Number || k.type == Type::Integer || k.type == Type::Enum || k.type == Type::Vec3 ? expected_text(k) : "";
+  if (const size_t u = valid.rfind(" " + k.unit); !k.unit.empty() && u != std::string::npos && u + k.unit.size() + 1 == valid.size())
+    valid = valid.substr(0, u);
+  return "| `" + dotted + "` | " + type + " | " + k.unit + " | " + def + " | " + valid + " | " + k.doc + " |\n";
+}
+
+// One key as a JSON Schema property.
+ojson key_schema(const Key& k) {
+  ojson p = ojson::object();
+  const auto typed = [&](const char* type) {
+    p["type"] = k.nullable ? ojson::array({type, "null"}) : ojson(type);
+  };
+  switch (k.type) {
+    case Type::Number:
+    case Type::Integer:
+      typed(k.type == Type::Number ? "number" : "integer");
+      if (std::isfinite(k.lo)) p[k.lo_open ? "exclusiveMinimum" : "minimum"] = k.lo;
+      if (std::isfinite(k.hi)) p["maximum"] = k.hi;
+      break;
+    case Type::Bool: typed("boolean"); break;
+    case Type::String:
+    case Type::Path: typed("string"); break;
+    case Type::Enum: {
+      ojson choices = ojson::array();
+      for (const std::string& c : k.choices) choices.push_back(c);
+      if (k.nullable) choices.push_back(nullptr);
+      p["enum"] = choices;
+      break;
+    }
+    case Type::Vec3:
+      typed("array");
+      p["items"] = {{"type", k.null_components ? ojson::array({"number", "null"}) : ojson("number")}};
+      if (std::isfinite(k.lo)) p["items"]["minimum"] = k.lo;
+      if (std::isfinite(k.hi)) p["items"]["maximum"] = k.hi;
+      p["minItems"] = 3, p["maxItems"] = 3;
+      break;
+    case Type::Rect:
+      typed("array");
+      p["prefixItems"] = ojson::array({{{"type", "integer"}, {"minimum", 0}, {"maximum", 1000000}},
+                                       {{"type", "integer"}, {"minimum", 0}, {"maximum", 1000000}},
+                                       {{"type", "integer"}, {"minimum", 1}, {"maximum", 1000000}},
+                                       {{"type", "integer"}, {"minimum", 1}, {"maximum", 1000000}}});
+      p["minItems"] = 4, p["maxItems"] = 4;
+      break;
+  }
+  p["description"] = k.doc + (k.unit.empty() ? "" : " [" + k.unit + "]");
+  return p;
+}
+
+}  // namespace
+
 std::string schema_reference_markdown() {
   std::ostringstream o;
   o << "| key | type | unit | default | valid | meaning |\n|---|---|---|---|---|---|\n";
   for (const Key& k : schema()) {
-    std::string type;
-    switch (k.type) {
-      case Type::Number: type = "number"; break;
-      case Type::Integer: type = "integer"; break;
-      case Type::Bool: type = "bool"; break;
-      case Type::String: type = "string"; break;
-      case Type::Path: type = "file"; break;
-      case Type::Enum: type = "choice"; break;
-      case Type::Vec3: type = "[x, y, z]"; break;
-      case Type::Rect: type = "[x0, y0, w, h]"; break;
-    }
-    if (k.nullable) type += " or null";
-    std::string valid = k.type == Type::Number || k.type == Type::Integer || k.type == Type::Enum || k.type == Type::Vec3 ? expected_text(k) : "";
-    if (const size_t u = valid.rfind(" " + k.unit); !k.unit.empty() && u != std::string::npos && u + k.unit.size() + 1 == valid.size())
-      valid = valid.substr(0, u);
     std::string dotted = k.path.substr(1);
     std::replace(dotted.begin(), dotted.end(), '/', '.');
-    o << "| `" << dotted << "` | " << type << " | " << k.unit << " | "
-      << (k.required ? std::string("required") : "`" + k.def.dump() + "`") << " | " << valid << " | " << k.doc << " |\n";
+    o << markdown_row(k, dotted, k.required ? std::string("required") : "`" + k.def.dump() + "`");
+  }
+  for (const NamedSection& s : named_sections()) {
+    const std::string name = s.path.substr(1);
+    o << "| `" << name << "` | object by " << s.element << " name |  | `{}` | names of the glTF's " << s.element << "s | " << s.doc << " |\n";
+    for (const Key& k : s.keys) o << markdown_row(k, name + ".NAME." + k.path.substr(1), "the glTF's");
   }
   return o.str();
 }
@@ -523,47 +759,19 @@ std::string schema_json() {
       node = &sec;
     }
     const std::string name = k.path.substr(start);
-    ojson p = ojson::object();
-    const auto typed = [&](const char* type) {
-      p["type"] = k.nullable ? ojson::array({type, "null"}) : ojson(type);
-    };
-    switch (k.type) {
-      case Type::Number:
-      case Type::Integer:
-        typed(k.type == Type::Number ? "number" : "integer");
-        if (std::isfinite(k.lo)) p[k.lo_open ? "exclusiveMinimum" : "minimum"] = k.lo;
-        if (std::isfinite(k.hi)) p["maximum"] = k.hi;
-        break;
-      case Type::Bool: typed("boolean"); break;
-      case Type::String:
-      case Type::Path: typed("string"); break;
-      case Type::Enum: {
-        ojson choices = ojson::array();
-        for (const std::string& c : k.choices) choices.push_back(c);
-        if (k.nullable) choices.push_back(nullptr);
-        p["enum"] = choices;
-        break;
-      }
-      case Type::Vec3:
-        typed("array");
-        p["items"] = {{"type", "number"}};
-        if (std::isfinite(k.lo)) p["items"]["minimum"] = k.lo;
-        if (std::isfinite(k.hi)) p["items"]["maximum"] = k.hi;
-        p["minItems"] = 3, p["maxItems"] = 3;
-        break;
-      case Type::Rect:
-        typed("array");
-        p["prefixItems"] = ojson::array({{{"type", "integer"}, {"minimum", 0}, {"maximum", 1000000}},
-                                         {{"type", "integer"}, {"minimum", 0}, {"maximum", 1000000}},
-                                         {{"type", "integer"}, {"minimum", 1}, {"maximum", 1000000}},
-                                         {{"type", "integer"}, {"minimum", 1}, {"maximum", 1000000}}});
-        p["minItems"] = 4, p["maxItems"] = 4;
-        break;
-    }
-    p["description"] = k.doc + (k.unit.empty() ? "" : " [" + k.unit + "]");
+    ojson p = key_schema(k);
     if (!k.required) p["default"] = ojson::parse(k.def.dump());
     else (*node)["required"].push_back(name);
     (*node)["properties"][name] = p;
+  }
+  // A named section: any non-empty name, each name an object of the element's keys and no others.
+  for (const NamedSection& s : named_sections()) {
+    ojson element = {{"type", "object"}, {"additionalProperties", false}, {"properties", ojson::object()}};
+    for (const Key& k : s.keys) element["properties"][k.path.substr(1)] = key_schema(k);
+    root["properties"][s.path.substr(1)] = {{"type", "object"},
+                                           {"description", s.doc},
+                                           {"propertyNames", {{"minLength", 1}}},
+                                           {"additionalProperties", element}};
   }
   return root.dump(2) + "\n";
 }

@@ -33,6 +33,19 @@ ResolvedRun load_scene_file(const std::string& path, const std::vector<std::stri
 ResolvedRun parse_scene_text(const std::string& text, const std::string& path,
                              const std::vector<std::string>& overrides = {});
 
+// Checks one override as `--set KEY=VALUE` does, without a scene file: the key's syntax (dots, quoted
+// names, a final [i]; scenes/key_path.h), that the schema has the key (a named element's key for
+// nodes.NAME.* and materials.NAME.*), that [i] selects a component of an [x, y, z] key, and that the value
+// fits the key's type and range. Returns the errors `--set` would report, one line each, without the scene
+// file's name and without "--set " ("camera.f_numbr: /camera/f_numbr: unknown key; did you mean
+// /camera/f_number?", "/camera/f_number: found 100 (an integer), expected a number in [0.5, 64] (...)"); none
+// when the override is valid. `value` is JSON as it would stand in the scene file (for a component [i], the
+// component alone): `--set`'s reading of text that is not JSON as a string is not applied.
+// Not checked, for want of a scene: whether a glTF node or material of that name exists (the loader's
+// check), and the rules that span keys (a crop inside the sensor, ...).
+// A dataset file's axes (datasets/) are checked with it before any run.
+std::vector<std::string> check_override(const std::string& key, const nlohmann::json& value);
+
 // The reference of every key (path, type, unit, default, range, meaning) as Markdown.
 std::string schema_reference_markdown();
 

@@ -176,6 +176,54 @@ Key rect(std::string path, F field, std::string doc) {
   return k;
 }
 
+// Keys of named elements (NamedSection): the field is an accessor of the element, F(E&) -> T&, with E a
+// NodeEdit or a MaterialEdit; the element is found by its name in the run's edits (the section's `add`
+// created it).
+template <class E>
+std::vector<E>& elements(RunConfig& c) {
+  if constexpr (std::is_same_v<E, NodeEdit>) return c.edits.nodes;
+  else return c.edits.materials;
+}
+
+template <class E>
+E& element(RunConfig& c, const std::string& name) {
+  for (E& e : elements<E>(c))
+    if (e.name == name) return e;
+  throw std::logic_error("schema: no element " + name);  // the section's add() runs first
+}
+
+template <class E>
+void add_element(RunConfig& c, const std::string& name) {
+  std::vector<E>& v = elements<E>(c);
+  for (const E& e : v)
+    if (e.name == name) return;
+  v.push_back(E{});
+  v.back().name = name;
+}
+
+template <class E, class F>
+Key element_number(std::string path, F field, Unit u, Range r, std::string doc) {
+  Key k = make(std::move(path), Type::Number, u.name, std::move(doc));
+  k.lo = r.lo, k.hi = r.hi, k.lo_open = r.lo_open;
+  k.set_element = [field, u](RunConfig& c, const std::string& name, const ojson& v) {
+    field(element<E>(c, name)) = u.to_si(v.get<double>());
+  };
+  return k;
+}
+
+// [x, y, z] whose components may each be null: that component keeps the glTF's value.
+template <class E, class F>
+Key element_vec3(std::string path, F field, Unit u, Range r, std::string doc) {
+  Key k = make(std::move(path), Type::Vec3, u.name, std::move(doc));
+  k.lo = r.lo, k.hi = r.hi;
+  k.null_components = true;
+  k.set_element = [field, u](RunConfig& c, const std::string& name, const ojson& v) {
+    OptionalVec3& out = field(element<E>(c, name));
+    for (size_t i = 0; i < 3; ++i) out[i] = v[i].is_null() ? std::nullopt : std::optional<double>(u.to_si(v[i].get<double>()));
+  };
+  return k;
+}
+
 // The accessor of a RunConfig field, for the builders: FIELD(camera.f_number).
 #define FIELD(member) [](auto& c) -> auto& { return c.member; }
 
@@ -381,6 +429,52 @@ std::vector<Key> build() {
 
 const std::vector<Key>& schema() {
   static const std::vector<Key> s = build();
+  return s;
+}
+
+namespace {
+
+#define EDIT(member) [](auto& e) -> auto& { return e.member; }
+std::vector<NamedSection> build_named() {
+  std::vector<NamedSection> out;
+  NamedSection nodes;
+  nodes.path = "/nodes", nodes.element = "node";
+  nodes.doc = "glTF nodes by name: each given value replaces the node's own (its local transform, before world "
+              "transforms are composed, so that its children, cameras and lights follow)";
+  nodes.add = add_element<NodeEdit>;
+  nodes.keys.push_back(element_vec3<NodeEdit>("/translation_m", EDIT(translation_m), kMetre, kWorld,
+                                              "the node's translation, in its parent's frame"));
+  nodes.keys.push_back(element_vec3<NodeEdit>("/rotation_deg", EDIT(rotation_rad), kDegree, closed(-360, 360),
+                                              "the node's rotation as XYZ Euler angles: R = Rz(z) Ry(y) Rx(x) on column vectors "
+                                              "(about X, then Y, then Z); a null angle is the glTF rotation's angle in that convention"));
+  nodes.keys.push_back(element_vec3<NodeEdit>("/scale", EDIT(scale), kNone, closed(-1e6, 1e6),
+                                              "the node's scale along its local axes"));
+  out.push_back(std::move(nodes));
+
+  NamedSection materials;
+  materials.path = "/materials", materials.element = "material";
+  materials.doc = "glTF materials by name: each given value replaces the material's own";
+  materials.add = add_element<MaterialEdit>;
+  materials.keys.push_back(element_vec3<MaterialEdit>("/base_color", EDIT(base_color), kNone, closed(0, 1),
+                                                      "linear RGB base colour (baseColorFactor; its alpha is kept)"));
+  materials.keys.push_back(element_number<MaterialEdit>("/roughness", EDIT(roughness), kNone, closed(0, 1), "roughness (roughnessFactor)"));
+  materials.keys.push_back(element_number<MaterialEdit>("/metallic", EDIT(metallic), kNone, closed(0, 1), "metalness (metallicFactor)"));
+  materials.keys.push_back(element_number<MaterialEdit>("/transmission", EDIT(transmission), kNone, closed(0, 1),
+                                                        "transmitted fraction (KHR_materials_transmission transmissionFactor); "
+                                                        "> 0 makes the surface transmissive as the extension does"));
+  materials.keys.push_back(element_number<MaterialEdit>("/ior", EDIT(ior), kNone, closed(1, 4), "index of refraction (KHR_materials_ior)"));
+  materials.keys.push_back(element_number<MaterialEdit>("/thickness_mm", EDIT(thickness_m), kMmUnit, closed(0, 1e6),
+                                                        "thickness of the volume behind the surface (KHR_materials_volume "
+                                                        "thicknessFactor); 0 = thin-walled"));
+  out.push_back(std::move(materials));
+  return out;
+}
+#undef EDIT
+
+}  // namespace
+
+const std::vector<NamedSection>& named_sections() {
+  static const std::vector<NamedSection> s = build_named();
   return s;
 }
 

@@ -3,7 +3,9 @@
 // key's unit); nothing else declares a key. Parsing (scene_file.cpp), `spadgen schema`, the JSON
 // Schema and docs/scene-file.md are all generated from this list.
 //
-// Adding a key: one field in core/config.h (with its SI default), one line in schema.cpp.
+// Adding a key: one field in core/config.h (with its SI default), one line in schema.cpp. A key of the
+// glTF's nodes or materials (the named sections below): one optional field in NodeEdit or MaterialEdit,
+// one line in schema.cpp, and where the loader applies it (gltf_loader.cpp).
 #pragma once
 #include <nlohmann/json.hpp>
 
@@ -35,6 +37,7 @@ struct Key {
   bool lo_open = false;  // lo is exclusive
   std::vector<std::string> choices;
   bool nullable = false;
+  bool null_components = false;  // Vec3: each component may be null instead (a named element's: the glTF's)
   bool required = false;
   std::string unit;
   std::string doc;
@@ -45,9 +48,28 @@ struct Key {
   // it takes effect; null for keys that always do. A scene file or --set giving such a key a value other than
   // its default gets a warning (the default changes nothing either way).
   std::function<std::string(const RunConfig&)> ignored;
+  // A key of a named section's elements: stores a valid value into the element named `name` (in SI). Null
+  // for every other key.
+  std::function<void(RunConfig&, const std::string& name, const nlohmann::ordered_json&)> set_element;
+};
+
+// A section whose keys are names the glTF file chooses (its nodes, its materials), each holding an object
+// of the same few keys, e.g. "nodes": {"Sphere": {"translation_m": [0, 0, -0.75]}}. A name is any non-empty
+// string; which names exist is the glTF's to say (the loader checks them). The element keys have no
+// default: a key left out keeps the glTF's value.
+struct NamedSection {
+  std::string path;         // "/nodes": a top-level section
+  std::string element;      // "node": what each name names, in messages and docs
+  std::string doc;
+  std::vector<Key> keys;    // Key::path relative to the element ("/translation_m"), in resolved order
+  // Adds the element named `name` (no value replaced yet) to the run description.
+  std::function<void(RunConfig&, const std::string& name)> add;
 };
 
 // Every key of a scene file, in the order the resolved scene file lists them.
 const std::vector<Key>& schema();
+
+// The sections of named elements, listed after every key of schema() in the resolved scene file.
+const std::vector<NamedSection>& named_sections();
 
 }  // namespace spadgen::scenes

@@ -94,6 +94,13 @@ TEST_F(App, SenseRefusesWhatItCannotDo) {
   r = sh("sense " + (dir_ / "run").string() + " --set laser.average_power_mW=5");
   EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("--set laser.average_power_mW: sense re-samples the sensor only"));
+  // The glTF's nodes and materials shape the light too.
+  r = sh("sense " + (dir_ / "run").string() + " --set nodes.sphere.scale=[1,1,1]");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("--set nodes.sphere.scale: sense re-samples the sensor only"));
+  r = sh("sense " + (dir_ / "run").string() + " --set 'materials.\"a=b\".ior=1.2'");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("--set materials.\"a=b\".ior: sense re-samples the sensor only"));
   // A sweep beyond the rendered window (the run stopped at 4.2 ns).
   r = sh("sense " + (dir_ / "run").string() + " --set acquisition.gate_sweep.stop_ns=9");
   EXPECT_EQ(r.code, 1);

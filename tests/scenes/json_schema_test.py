@@ -1,6 +1,7 @@
 """The JSON Schema that `spadgen schema --json-schema` prints, checked with a real validator (python3-jsonschema):
 every shipped scene file validates, and the mistakes spadgen rejects (unknown key, wrong choice, value out of
-range, wrong type, key in the wrong section) fail the schema too, while spadgen accepts what the schema accepts.
+range, wrong type, key in the wrong section, the same of the glTF's nodes and materials) fail the schema too, while
+spadgen accepts what the schema accepts.
 
 Usage: json_schema_test.py SPADGEN SOURCE_DIR. Prints one line per case and "N passed, N failed"."""
 import copy
@@ -69,6 +70,14 @@ def main():
         "not an integer": lambda d: d["camera"].__setitem__("width_px", 10.5),
         "vector of two": lambda d: d["camera"].__setitem__("position_m", [0, 0]),
         "missing gltf": lambda d: d.pop("gltf"),
+        "unknown key of a node": lambda d: d.setdefault("nodes", {}).__setitem__("target", {"translaton_m": [0, 0, 1]}),
+        "node rotation out of range": lambda d: d.setdefault("nodes", {}).__setitem__("target", {"rotation_deg": [0, 400, 0]}),
+        "node scale of two": lambda d: d.setdefault("nodes", {}).__setitem__("target", {"scale": [1, 1]}),
+        "node given as a vector": lambda d: d.setdefault("nodes", {}).__setitem__("target", [0, 0, 1]),
+        "empty node name": lambda d: d.setdefault("nodes", {}).__setitem__("", {}),
+        "material colour above 1": lambda d: d.setdefault("materials", {}).__setitem__("white_paper", {"base_color": [1.2, 0, 0]}),
+        "material ior below 1": lambda d: d.setdefault("materials", {}).__setitem__("white_paper", {"ior": 0.9}),
+        "material key of a node": lambda d: d.setdefault("materials", {}).__setitem__("white_paper", {"scale": [1, 1, 1]}),
     }
     path, doc = base
     for name, mutate in mutations.items():
@@ -87,6 +96,21 @@ def main():
     good["camera"]["crop"] = None
     good.setdefault("seeds", {})["noise"] = 3
     check("schema accepts null and explicit keys", validator.is_valid(good))
+    # The glTF's nodes and materials by name (flat_target.gltf: node "target", material "white_paper"), a null
+    # component keeping the glTF's: accepted by both.
+    edited = copy.deepcopy(doc)
+    edited["nodes"] = {"target": {"translation_m": [None, None, 0.1], "rotation_deg": [10, 0, 0], "scale": [1, 1, 1]}}
+    edited["materials"] = {"white_paper": {"base_color": [0.3, 0.3, 0.3], "roughness": 1, "metallic": 0,
+                                           "transmission": 0, "ior": 1.5, "thickness_mm": 0}}
+    errors = [e.message for e in validator.iter_errors(edited)]
+    check("schema accepts nodes and materials", not errors, "; ".join(errors))
+    probe = path.parent / ".json_schema_probe_edited.json"
+    try:
+        probe.write_text(json.dumps(edited))
+        r = subprocess.run([spadgen, "info", str(probe)], capture_output=True, text=True)
+    finally:
+        probe.unlink()
+    check("spadgen accepts nodes and materials", r.returncode == 0, r.stderr.strip()[:200])
     print(f"{passed} passed, {failed} failed")
     return 0 if failed == 0 else 1
 

@@ -439,6 +439,185 @@ TEST_F(SceneFileTest, FilesThatCannotBeReadWholeAreNamedForWhatTheyAre) {
   }
 }
 
+// ---------------------------------------------------------------------------------------------
+// The glTF's nodes and materials by name (docs/scene-file.md, "Varying the glTF scene")
+
+TEST_F(SceneFileTest, NodesAndMaterialsResolveToEditsInSiUnits) {
+  const ResolvedRun r = parse(R"({"gltf": "s.gltf",
+      "nodes": {"Sphere": {"scale": [1, 2, 3], "translation_m": [0, 0, -0.75]},
+                "Plate": {"rotation_deg": [10, null, -90]}, "Empty": {}},
+      "materials": {"PlateMaterial": {"thickness_mm": 2, "base_color": [0.9, 0.9, 0.9], "ior": 1.49, "roughness": 0.05,
+                                      "metallic": 0, "transmission": 0.95}}})");
+  const SceneEdits& e = r.config.edits;
+  // Elements in the byte order of their names.
+  ASSERT_EQ(e.nodes.size(), 3u);
+  EXPECT_EQ(e.nodes[0].name, "Empty");
+  EXPECT_EQ(e.nodes[1].name, "Plate");
+  EXPECT_EQ(e.nodes[2].name, "Sphere");
+  NodeEdit empty;
+  empty.name = "Empty";
+  EXPECT_EQ(e.nodes[0], empty) << "an element with no keys is still checked against the glTF's names";
+  EXPECT_DOUBLE_EQ(*e.nodes[1].rotation_rad[0], 10 * kPi / 180);
+  EXPECT_FALSE(e.nodes[1].rotation_rad[1].has_value());
+  EXPECT_DOUBLE_EQ(*e.nodes[1].rotation_rad[2], -kPi / 2);
+  EXPECT_FALSE(e.nodes[1].translation_m[0].has_value());
+  EXPECT_EQ(e.nodes[2].translation_m, (OptionalVec3{0.0, 0.0, -0.75}));
+  EXPECT_EQ(e.nodes[2].scale, (OptionalVec3{1.0, 2.0, 3.0}));
+  ASSERT_EQ(e.materials.size(), 1u);
+  const MaterialEdit& m = e.materials[0];
+  EXPECT_EQ(m.name, "PlateMaterial");
+  EXPECT_EQ(m.base_color, (OptionalVec3{0.9, 0.9, 0.9}));
+  EXPECT_DOUBLE_EQ(*m.thickness_m, 2e-3);
+  EXPECT_EQ(*m.ior, 1.49);
+  EXPECT_EQ(*m.roughness, 0.05);
+  EXPECT_EQ(*m.metallic, 0.0);
+  EXPECT_EQ(*m.transmission, 0.95);
+  // The resolved file lists what was given: elements by name, each element's keys in the schema's order,
+  // null components kept; after every other key.
+  EXPECT_EQ(r.resolved["nodes"].dump(),
+            R"({"Empty":{},"Plate":{"rotation_deg":[10,null,-90]},"Sphere":{"translation_m":[0,0,-0.75],"scale":[1,2,3]}})");
+  EXPECT_EQ(r.resolved["materials"]["PlateMaterial"].dump(),
+            R"({"base_color":[0.9,0.9,0.9],"roughness":0.05,"metallic":0,"transmission":0.95,"ior":1.49,"thickness_mm":2})");
+  EXPECT_EQ(std::prev(r.resolved.end()).key(), "materials");
+  // It resolves to itself, and a file without the sections resolves without them.
+  const ResolvedRun again = parse(r.resolved.dump());
+  EXPECT_EQ(again.resolved, r.resolved);
+  EXPECT_TRUE(again.config == r.config);
+  EXPECT_FALSE(parse(R"({"gltf": "s.gltf"})").resolved.contains("nodes"));
+  EXPECT_TRUE(parse(R"({"gltf": "s.gltf"})").config.edits.empty());
+}
+
+TEST_F(SceneFileTest, NodeAndMaterialKeysAreCheckedAsEveryKeyIs) {
+  const auto expect_error = [&](const std::string& section, const std::string& message) {
+    EXPECT_THAT(error_of(R"({"gltf": "s.gltf", )" + section + "}"), HasSubstr(message)) << section;
+  };
+  expect_error(R"("nodes": {"Sphere": {"translaton_m": [0, 0, 1]}})",
+               "/nodes/Sphere/translaton_m: unknown key; did you mean /nodes/Sphere/translation_m?");
+  expect_error(R"("nodes": {"Sphere": {"roughness": 1}})",
+               "/nodes/Sphere/roughness: unknown key; the keys of a node are: translation_m, rotation_deg, scale");
+  expect_error(R"("nodes": {"Sphere": {"translation_m": [0, 0, 2e6]}})",
+               "/nodes/Sphere/translation_m: found [0,0,2000000.0] (an array), expected an array of 3 numbers each in "
+               "[-1e+06, 1e+06] m or null (keeps the glTF's) (the node's translation, in its parent's frame)");
+  expect_error(R"("nodes": {"Sphere": {"rotation_deg": [0, 400, 0]}})",
+               "/nodes/Sphere/rotation_deg: found [0,400,0] (an array), expected an array of 3 numbers each in [-360, 360] deg");
+  expect_error(R"("nodes": {"Sphere": {"scale": 2}})", "/nodes/Sphere/scale: found 2 (an integer), expected an array of 3 numbers");
+  expect_error(R"("nodes": {"Sphere": {"scale": [1, 1]}})", "/nodes/Sphere/scale: found [1,1] (an array), expected an array of 3");
+  expect_error(R"("nodes": {"Sphere": {"scale": [1, "1", 1]}})", "/nodes/Sphere/scale: found [1,\"1\",1] (an array)");
+  expect_error(R"("materials": {"M": {"base_color": [1.5, 0, 0]}})",
+               "/materials/M/base_color: found [1.5,0,0] (an array), expected an array of 3 numbers each in [0, 1] or null");
+  expect_error(R"("materials": {"M": {"roughness": -0.1}})",
+               "/materials/M/roughness: found -0.1 (a number), expected a number in [0, 1] (roughness (roughnessFactor))");
+  expect_error(R"("materials": {"M": {"metallic": "0"}})", "/materials/M/metallic: found \"0\" (a string), expected a number in [0, 1]");
+  expect_error(R"("materials": {"M": {"transmission": 2}})", "/materials/M/transmission: found 2 (an integer), expected a number in [0, 1]");
+  expect_error(R"("materials": {"M": {"ior": 0.5}})", "/materials/M/ior: found 0.5 (a number), expected a number in [1, 4]");
+  expect_error(R"("materials": {"M": {"thickness_mm": -1}})", "/materials/M/thickness_mm: found -1 (an integer), expected a number in [0, 1e+06] mm");
+  expect_error(R"("materials": {"M": {"ior": null}})", "/materials/M/ior: found null, expected a number in [1, 4]");
+  expect_error(R"("nodes": [1])", "/nodes: found [1] (an array), expected an object of glTF node names");
+  expect_error(R"("nodes": {"Sphere": [0, 0, 1]})",
+               "/nodes/Sphere: found [0,0,1] (an array), expected an object of a node's keys (translation_m, rotation_deg, scale)");
+  expect_error(R"("nodes": {"": {}})", "/nodes: found the key \"\", expected the name of a glTF node");
+  expect_error(R"("node": {"Sphere": {}})", "/node: unknown key; did you mean /nodes?");
+  // Any name a glTF may hold, '/' and '~' included: the messages write it as a JSON pointer does.
+  expect_error(R"("nodes": {"a/b~c.001": {"scal": [1, 1, 1]}})", "/nodes/a~1b~0c.001/scal: unknown key; did you mean /nodes/a~1b~0c.001/scale?");
+  EXPECT_EQ(parse(R"({"gltf": "s.gltf", "nodes": {"a/b~c.001 x": {}}})").config.edits.nodes.at(0).name, "a/b~c.001 x");
+}
+
+TEST_F(SceneFileTest, OverridesOfNodesAndMaterialsQuoteNamesWithDots) {
+  const ResolvedRun r = parse(R"({"gltf": "s.gltf"})",
+                              {"nodes.\"Cube.001\".translation_m=[0,1,0]", "nodes.\"a=b \\\"c\\\"\".scale[0]=2",
+                               "materials.Glass.ior=1.33", "nodes.Sphere.rotation_deg=[0,0,45]"});
+  const SceneEdits& e = r.config.edits;
+  ASSERT_EQ(e.nodes.size(), 3u);
+  EXPECT_EQ(e.nodes[0].name, "Cube.001");
+  EXPECT_EQ(e.nodes[0].translation_m, (OptionalVec3{0.0, 1.0, 0.0}));
+  EXPECT_EQ(e.nodes[2].name, "a=b \"c\"");
+  EXPECT_EQ(e.nodes[2].scale, (OptionalVec3{2.0, std::nullopt, std::nullopt}));
+  EXPECT_DOUBLE_EQ(*e.nodes[1].rotation_rad[2], kPi / 4);
+  EXPECT_EQ(*e.materials.at(0).ior, 1.33);
+  // Unquoted, the dot separates: Cube and 001 are two names.
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"nodes.Cube.001.translation_m=[0,1,0]"}),
+              HasSubstr("--set nodes.Cube.001.translation_m: /nodes/Cube/001/translation_m: unknown key; a node's keys are: "
+                        "translation_m, rotation_deg, scale (a name that holds a dot is written in double quotes: "
+                        "nodes.\"Cube.001\".translation_m)"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"nodes.Cube=1"}),
+              HasSubstr("--set nodes.Cube: /nodes/Cube: names a node, not a key; its keys are: translation_m, rotation_deg, scale"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"materials=1"}), HasSubstr("/materials: is a section of glTF material names, not a key"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"materials.Glass.iorr=1.3"}),
+              HasSubstr("/materials/Glass/iorr: unknown key; did you mean /materials/Glass/ior?"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"materials.Glass.ior=5"}),
+              HasSubstr("/materials/Glass/ior: found 5 (an integer), expected a number in [1, 4]"));
+  // Key syntax.
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"nodes.\"Cube.001.scale=[1,1,1]"}), HasSubstr("the quote at character 7 is not closed"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"camera..f_number=2"}), HasSubstr("--set camera..f_number: an empty name at character 8"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"nodes.\"\".scale=[1,1,1]"}), HasSubstr("an empty name in quotes at character 7"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"nodes.\"a\"b.scale=[1,1,1]"}), HasSubstr("'b' at character 10 after a quoted name"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"nodes.a\"b.scale=[1,1,1]"}),
+              HasSubstr("'\"' at character 8 inside a name; a name that holds . \" [ ] = or \\ is written in double quotes"));
+}
+
+// [i] sets one component of an [x, y, z] key: the others come from the file, else the default, else (for a
+// node's or material's key) stay null, the glTF's.
+TEST_F(SceneFileTest, AComponentOfAVectorKeyIsSetAlone) {
+  ResolvedRun r = parse(R"({"gltf": "s.gltf", "camera": {"position_m": [1, 2, 3]}})",
+                        {"camera.position_m[2]=-0.8", "camera.look_at_m[0]=5", "laser.offset_m[1]=0.03",
+                         "nodes.Sphere.translation_m[2]=-0.8", "materials.M.base_color[1]=0.5"});
+  EXPECT_EQ(r.config.camera.position_m, (Vec3d{1, 2, -0.8}));
+  EXPECT_EQ(r.config.camera.look_at_m, (Vec3d{5, 0, -1}));
+  EXPECT_EQ(r.config.laser.offset_m, (Vec3d{0, 0.03, 0}));
+  EXPECT_EQ(r.config.edits.nodes.at(0).translation_m, (OptionalVec3{std::nullopt, std::nullopt, -0.8}));
+  EXPECT_EQ(r.config.edits.materials.at(0).base_color, (OptionalVec3{std::nullopt, 0.5, std::nullopt}));
+  EXPECT_EQ(r.resolved["nodes"]["Sphere"]["translation_m"].dump(), "[null,null,-0.8]");
+  EXPECT_EQ(r.resolved["camera"]["position_m"].dump(), "[1,2,-0.8]");
+  // Given by the file, a node's other components stay the file's.
+  r = parse(R"({"gltf": "s.gltf", "nodes": {"Sphere": {"translation_m": [1, null, 3]}}})", {"nodes.Sphere.translation_m[0]=7"});
+  EXPECT_EQ(r.config.edits.nodes.at(0).translation_m, (OptionalVec3{7.0, std::nullopt, 3.0}));
+  // Overrides apply in order: a whole vector, then one component of it.
+  r = parse(R"({"gltf": "s.gltf"})", {"camera.up=[1,0,0]", "camera.up[1]=1"});
+  EXPECT_EQ(r.config.camera.up, (Vec3d{1, 1, 0}));
+
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"camera.position_m[3]=1"}),
+              HasSubstr("--set camera.position_m[3]: /camera/position_m: has no component [3]; expected [0], [1] or [2]"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"camera.f_number[0]=2"}),
+              HasSubstr("--set camera.f_number[0]: /camera/f_number: [0] selects a component of an [x, y, z] key; this key is of type number"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"camera.crop[0]=2"}), HasSubstr("this key is of type [x0, y0, w, h]"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"materials.M.roughness[0]=0.5"}), HasSubstr("this key is of type number"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"camera.position_m[x]=1"}), HasSubstr("the bracket at character 18 is not a final [i]"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"camera.position_m[1].x=1"}), HasSubstr("is not a final [i]"));
+  // A component out of range, or of the wrong type, fails as the whole vector would.
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"camera.position_m[2]=2e6"}),
+              HasSubstr("/camera/position_m: found [0.0,0.0,2000000.0] (an array), expected an array of 3 numbers each in [-1e+06, 1e+06] m"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"camera.position_m[2]=null"}), HasSubstr("/camera/position_m: found [0.0,0.0,null]"));
+  EXPECT_EQ(parse(R"({"gltf": "s.gltf"})", {"nodes.N.scale[1]=null"}).resolved["nodes"]["N"]["scale"].dump(), "[null,null,null]");
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"position_m": 5}})", {"camera.position_m[2]=1"}),
+              HasSubstr("--set camera.position_m[2]: /camera/position_m: found 5 (an integer) in the scene file, expected an array of 3"));
+}
+
+// check_override: what --set reports, without a scene file (a dataset file's axes are checked with it).
+TEST(CheckOverride, ReportsWhatSetReportsWithoutASceneFile) {
+  EXPECT_TRUE(check_override("camera.position_m[2]", -0.8).empty());
+  EXPECT_TRUE(check_override("nodes.\"Cube.001\".translation_m", nlohmann::json::array({0, 1, 0})).empty());
+  EXPECT_TRUE(check_override("materials.Glass.base_color[0]", 0.5).empty());
+  EXPECT_TRUE(check_override("laser.beam", "cone").empty());
+  const auto one = [](const std::string& key, const nlohmann::json& v) {
+    const std::vector<std::string> e = check_override(key, v);
+    EXPECT_EQ(e.size(), 1u) << key;
+    return e.empty() ? std::string() : e[0];
+  };
+  EXPECT_EQ(one("camera.f_numbr", 2), "camera.f_numbr: /camera/f_numbr: unknown key; did you mean /camera/f_number?");
+  EXPECT_EQ(one("camera.f_number", 100), "/camera/f_number: found 100 (an integer), expected a number in [0.5, 64] "
+                                         "(lens f-number N (aperture diameter = f / N))");
+  EXPECT_EQ(one("camera.position_m[3]", 1), "camera.position_m[3]: /camera/position_m: has no component [3]; expected [0], [1] or [2]");
+  EXPECT_EQ(one("camera.f_number[0]", 1),
+            "camera.f_number[0]: /camera/f_number: [0] selects a component of an [x, y, z] key; this key is of type number");
+  EXPECT_EQ(one("nodes.Sphere.rotation_deg[1]", 720),
+            "/nodes/Sphere/rotation_deg: found [null,720,null] (an array), expected an array of 3 numbers each in [-360, 360] deg "
+            "or null (keeps the glTF's) (the node's rotation as XYZ Euler angles: R = Rz(z) Ry(y) Rx(x) on column vectors "
+            "(about X, then Y, then Z); a null angle is the glTF rotation's angle in that convention)");
+  EXPECT_THAT(one("nodes.Cube.001.scale", 1), HasSubstr("a name that holds a dot is written in double quotes"));
+  EXPECT_THAT(one("nodes.\"Cube.001.scale", 1), HasSubstr("is not closed"));
+  EXPECT_THAT(one("camera.gltf_camera", 5), HasSubstr("/camera/gltf_camera: found 5 (an integer), expected a string"));
+}
+
 TEST(SceneFileReference, DocsListEveryKeyAsTheSchemaDeclaresIt) {
   std::ifstream in(std::string(SPADGEN_SOURCE_DIR) + "/docs/scene-file.md");
   ASSERT_TRUE(in) << "docs/scene-file.md is missing";
