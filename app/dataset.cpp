@@ -195,7 +195,14 @@ std::string dataset_plan(const DatasetOptions& options) {
     o << i;
     for (const std::string& c : columns) {
       const ojson& v = s.parameters.value(c, ojson());
-      o << "\t" << (v.is_string() ? v.get<std::string>() : v.dump());
+      o << "\t";
+      if (v.is_number_float()) {
+        char buf[32];
+        std::snprintf(buf, sizeof buf, "%.6g", v.get<double>());  // the index holds every digit
+        o << buf;
+      } else {
+        o << (v.is_string() ? v.get<std::string>() : v.dump());
+      }
     }
     o << "\t" << s.seed << "\t" << bytes_text(e.disk) << "\t" << bytes_text(e.memory) << "\t" << duration_text(e.seconds);
     if (folder) o << "\t" << status;

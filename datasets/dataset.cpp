@@ -10,6 +10,7 @@
 #include "core/error.h"
 #include "core/rng.h"
 #include "scenes/input.h"
+#include "scenes/scene.h"
 #include "scenes/scene_file.h"
 
 namespace spadgen::datasets {
@@ -321,6 +322,24 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
     for (const std::string& key : seen)
       if (key == "outputs.light")
         rd.fail("/repeats", "is " + std::to_string(s.repeats) + ", which needs the saved light: remove outputs.light from set, grid and random");
+  // Names of glTF nodes and materials are known only to the glTF: each scene is loaded once with the
+  // edits of its first sample, so that a misspelt name fails here rather than in every sample.
+  for (size_t k = 0; k < s.scenes.size(); ++k) {
+    const int64_t first = static_cast<int64_t>(k) * (s.grid_cells() / static_cast<int64_t>(s.scenes.size()));
+    if (first >= s.count()) break;
+    scenes::ResolvedRun r;
+    try {
+      r = scenes::load_scene_file(s.scenes[k], make_sample(s, first).overrides);
+    } catch (const Error& e) {
+      rd.fail("sample " + std::to_string(first), std::string("with the scene file ") + s.scene_names[k] + ":\n  " + e.what());
+    }
+    if (r.config.edits.nodes.empty() && r.config.edits.materials.empty()) continue;
+    try {
+      (void)scenes::load_gltf(r.config.gltf_path, r.config.gltf_scene, r.config.edits);
+    } catch (const Error& e) {
+      rd.fail("scenes/" + std::to_string(k), "the nodes and materials the dataset varies, in " + s.scene_names[k] + ":\n  " + e.what());
+    }
+  }
   if (s.grid_cells() > kMaxSamples) rd.fail("/grid", "has " + std::to_string(s.grid_cells()) + " cells; expected at most 1e8");
 
   // The resolved file, every default explicit.

@@ -63,6 +63,32 @@ TEST(DatasetFile, ErrorsNameTheKeyAndWhatWasExpected) {
   EXPECT_THAT(error_of("\"repeats\": 2, \"set\": {\"outputs.light\": false}"), HasSubstr("needs the saved light"));
 }
 
+TEST(DatasetFile, GltfNodesAndMaterialsAreCheckedAgainstTheGltf) {
+  const auto multi = [](const std::string& body) {
+    return parse_dataset_text("{\"scenes\": [\"" + kScenes + "multi_object.json\"], " + body + "}", "test_dataset.json");
+  };
+  const DatasetSpec ok = multi("\"samples\": 4, \"random\": {\"nodes.sphere.translation_m[2]\": {\"uniform\": [-1.2, -0.8]}, "
+                               "\"materials.plastic_plate.roughness\": {\"uniform\": [0.05, 0.3]}}");
+  const Sample s = make_sample(ok, 3);
+  const double z = s.parameters["nodes.sphere.translation_m[2]"].get<double>();
+  EXPECT_TRUE(z >= -1.2 && z < -0.8);
+  EXPECT_THAT(s.overrides, ::testing::Contains("nodes.sphere.translation_m[2]=" + nlohmann::json(z).dump()));
+  try {
+    multi("\"random\": {\"nodes.sphre.translation_m[2]\": {\"uniform\": [-1.2, -0.8]}}");
+    FAIL() << "a node the glTF does not have";
+  } catch (const Error& e) {
+    EXPECT_THAT(std::string(e.what()), HasSubstr("test_dataset.json: scenes/0: the nodes and materials the dataset varies"));
+    EXPECT_THAT(std::string(e.what()), HasSubstr("sphre"));
+    EXPECT_THAT(std::string(e.what()), HasSubstr("did you mean"));
+  }
+  try {
+    multi("\"grid\": {\"materials.plastic_plate.roughness\": [0.1, 2]}");
+    FAIL() << "a roughness above 1";
+  } catch (const Error& e) {
+    EXPECT_THAT(std::string(e.what()), HasSubstr("/grid/materials.plastic_plate.roughness/1"));
+  }
+}
+
 TEST(DatasetFile, MissingSceneFilesAreNamed) {
   try {
     parse_dataset_text("{\"scenes\": [\"nowhere.json\"]}", "/tmp/d.json");
