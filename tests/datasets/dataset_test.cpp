@@ -6,6 +6,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <fstream>
+#include <functional>
+#include <sstream>
 #include <map>
 #include <string>
 #include <vector>
@@ -242,6 +245,15 @@ TEST(Shards, FromSlurmJobArraysAndKubernetesIndexedJobs) {
   ::setenv("JOB_COMPLETIONS", "x", 1);
   EXPECT_THROW(shard_from_environment(), Error);
   clear();
+}
+
+TEST(DatasetFile, TheDocsHoldTheGeneratedReference) {
+  std::ifstream in(std::string(SPADGEN_SOURCE_DIR) + "/docs/datasets.md");
+  ASSERT_TRUE(in) << "docs/datasets.md is missing";
+  std::ostringstream text;
+  text << in.rdbuf();
+  EXPECT_THAT(text.str(), HasSubstr(dataset_reference_markdown()))
+      << "docs/datasets.md is out of date: regenerate its key table with `spadgen dataset schema`";
 }
 
 TEST(DatasetFile, RangesText) {
