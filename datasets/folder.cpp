@@ -342,6 +342,38 @@ std::string dataset_card(const DatasetFolder& folder, const std::vector<SampleRe
     }
     o << "| `" << spec.scene_names[i] << "` | " << description << " |\n";
   }
+  // The camera each scene's first sample resolves to; the parameters below say which of it varies.
+  o << "\n## Sensor and acquisition\n\n| scene file | image | sensor | acquisition | laser | render |\n|---|---|---|---|---|---|\n";
+  for (size_t i = 0; i < spec.scenes.size(); ++i) {
+    const int64_t first = static_cast<int64_t>(i) * (spec.grid_cells() / static_cast<int64_t>(spec.scenes.size()));
+    if (first >= spec.count()) break;
+    ojson r;
+    try {
+      r = folder.resolve(make_sample(spec, first)).scene;
+    } catch (const Error&) {
+      continue;
+    }
+    const auto num = [](const ojson& v) {
+      std::ostringstream t;
+      if (v.is_number()) t << v.get<double>();
+      else t << v.dump();
+      return t.str();
+    };
+    const ojson& cam = r["camera"];
+    const ojson& acq = r["acquisition"];
+    std::string acquisition = acq["mode"].get<std::string>() + ", " + num(acq["frames"]) + " frames";
+    if (acq["mode"] == "gate_sweep")
+      acquisition += ", gates " + num(acq["gate_sweep"]["start_ns"]) + " to " + num(acq["gate_sweep"]["stop_ns"]) + " ns in " +
+                     num(acq["gate_sweep"]["step_ps"]) + " ps steps";
+    else
+      acquisition += ", " + acq["intensity"]["exposure"].get<std::string>() + " exposure of " + num(acq["intensity"]["exposure_us"]) + " us";
+    o << "| `" << spec.scene_names[i] << "` | " << num(cam["width_px"]) << " x " << num(cam["height_px"])
+      << (cam["crop"].is_null() ? std::string() : ", crop " + cam["crop"].dump()) << " | " << r["sensor"]["preset"].get<std::string>()
+      << " | " << acquisition << " | " << num(r["laser"]["wavelength_nm"]) << " nm, " << num(r["laser"]["repetition_rate_MHz"])
+      << " MHz, " << num(r["laser"]["average_power_mW"]) << " mW | " << num(r["render"]["samples_per_pixel"]) << " paths per pixel |\n";
+  }
+  o << "\nAs each scene's first sample resolves; the keys under Parameters vary per sample. Every sample's full settings "
+       "are its `metadata.json`'s `resolved_scene`.\n";
   o << "\n## Parameters\n\n";
   o << "Sample i takes grid cell i mod " << spec.grid_cells() << " (the scene outermost, the last grid key fastest) and its "
     << "own random draws, from the dataset seed " << spec.seed << " and i only: adding samples leaves the existing ones "
