@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
@@ -82,7 +83,9 @@ class CheckedSax {
   }
   bool key(json::string_t& k) {
     Level& l = levels_.back();
+    ++keys_seen;
     if (options_.reject_duplicates && !l.keys.insert(k).second) {
+      duplicate_key = keys_seen;
       l.key = k;
       problem = path() + ": appears twice in one object; expected each key once (JSON readers keep one of them "
                          "silently)";
@@ -122,6 +125,8 @@ class CheckedSax {
   std::string problem;  // why the parse stopped ("" = it did not)
   size_t offset = 0;    // where, for syntax errors and overflowing numbers
   bool syntax = false;  // the problem has an offset
+  size_t keys_seen = 0;      // object keys read so far
+  size_t duplicate_key = 0;  // which of them (from 1) repeated a key of its object; 0 = none
 
  private:
   struct Level {
@@ -247,6 +252,37 @@ std::string line_column(const std::string& text, size_t offset) {
   return std::to_string(line) + ":" + std::to_string(col);
 }
 
+namespace {
+
+// The offset of the opening quote of the n-th object key (from 1) of well-formed JSON text up to that key:
+// a string followed, after blanks and comments, by ':'. npos when there is no such key.
+size_t nth_key_offset(const std::string& text, size_t n) {
+  size_t i = 0, count = 0;
+  const auto skip_blank = [&](size_t j) {
+    while (j < text.size()) {
+      if (std::isspace(static_cast<unsigned char>(text[j]))) ++j;
+      else if (text.compare(j, 2, "//") == 0) j = std::min(text.size(), text.find('\n', j) == std::string::npos ? text.size() : text.find('\n', j));
+      else if (text.compare(j, 2, "/*") == 0) j = text.find("*/", j + 2) == std::string::npos ? text.size() : text.find("*/", j + 2) + 2;
+      else break;
+    }
+    return j;
+  };
+  while ((i = skip_blank(i)) < text.size()) {
+    if (text[i] != '"') {
+      ++i;
+      continue;
+    }
+    const size_t start = i++;
+    while (i < text.size() && text[i] != '"') i += text[i] == '\\' ? 2 : 1;
+    ++i;
+    const size_t after = skip_blank(i);
+    if (after < text.size() && text[after] == ':' && ++count == n) return start;
+  }
+  return std::string::npos;
+}
+
+}  // namespace
+
 json parse_json(const std::string& text, const std::string& where, const JsonOptions& options) {
   if (const size_t at = depth_exceeded_at(text, kMaxJsonDepth); at != std::string::npos)
     throw Error(where + ":" + line_column(text, at) + ": arrays and objects nested deeper than " +
@@ -254,6 +290,11 @@ json parse_json(const std::string& text, const std::string& where, const JsonOpt
   json root;
   CheckedSax sax(root, options);
   const bool ok = json::sax_parse(text, &sax, json::input_format_t::json, /*strict=*/true, options.comments);
+  if (sax.duplicate_key > 0) {
+    // The SAX interface gives no positions: the repeated key is found again by counting keys in the text.
+    const size_t at = nth_key_offset(text, sax.duplicate_key);
+    throw Error(where + (at == std::string::npos ? std::string() : ":" + line_column(text, at)) + ": " + sax.problem);
+  }
   if (!ok || !sax.problem.empty()) {
     const std::string problem = sax.problem.empty() ? std::string("not valid JSON") : sax.problem;
     // nlohmann reports the offset one past the character it stopped at.

@@ -386,6 +386,10 @@ TEST_F(SceneFileTest, ADuplicateKeyIsAnError) {
               HasSubstr("/camera: appears twice in one object"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"f_number": 2, "f_number": 4}})"),
               HasSubstr("/camera/f_number: appears twice"));
+  // At the line and column of the second one, past strings, escapes and comments that look like keys.
+  EXPECT_THAT(error_of("{\"gltf\": \"s.gltf\", // \"camera\": {\n  \"description\": \"a \\\"b\\\": c\",\n"
+                       "  /* \"x\": */ \"camera\": {\"f_number\": 2,\n     \"f_number\": 4}}"),
+              HasSubstr(":4:6: /camera/f_number: appears twice"));
 }
 
 TEST_F(SceneFileTest, AKeyWithASlashIsNotTakenForAPath) {
