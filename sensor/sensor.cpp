@@ -196,7 +196,8 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
   std::vector<PixelParams> params(nreg);
   tbb::parallel_for(tbb::blocked_range<int>(region.y0, region.y1()), [&](const tbb::blocked_range<int>& rows) {
     const auto scratch = m.acq->scratch();
-    for (int y = rows.begin(); y < rows.end(); ++y)
+    for (int y = rows.begin(); y < rows.end(); ++y) {
+      throw_if_interrupted();  // a row of K gate responses; with long sweeps a tile takes seconds
       for (int x = region.x0; x < region.x1(); ++x) {
         const size_t ri = static_cast<size_t>(region.index(x, y));
         const auto di = static_cast<size_t>(dr.index(x, y));
@@ -215,6 +216,7 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
         else if (own_probs && m.types[params[ri].type].single_avalanche)
           probabilities(lam.get() + ri * Ks, Ks, own_p.get() + ri * Ks, nullptr);
       }
+    }
   });
 
   // The frames' layout of this tile (frames_tile), the same for every gate position and noise seed: the
@@ -315,6 +317,7 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
       std::vector<float> row_exp(rw * Ks), row_rate(keep_rate ? rw * Ks : 0);
       std::vector<uint16_t> row_cnt(frames ? 0 : rw * Ks + 1);  // + 1: transpose_rows reads one beyond
       for (int y = rows.begin(); y < rows.end(); ++y) {
+        throw_if_interrupted();
         for (int x = rect.x0; x < rect.x1(); ++x) {
           const auto ri = static_cast<size_t>(region.index(x, y));
           const auto xi = static_cast<size_t>(x - rect.x0);
@@ -375,6 +378,7 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
         std::vector<uint64_t> own(nreg * wpp + wpp, 0);  // + wpp: the zero words frames_tile packs padding from
         FramesTileScratch scratch;
         for (int k = ks.begin(); k < ks.end(); ++k) {
+          throw_if_interrupted();  // one gate position's frames of the tile: N x pixels bits
           const auto kk = static_cast<size_t>(k);
           sample_bits_batch(seed, kk, region_ids.data(), nreg, *m.binom, own_prob.get() + kk * nreg, own.data());
           frames_tile(shape, xt_key, static_cast<uint32_t>(k), own_prob.get() + kk * nreg, own.data(),

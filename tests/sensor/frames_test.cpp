@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdio>
 
+#include "core/error.h"
 #include "core/rng.h"
 #include "sensor/sampling/frames_tile.h"
 #include "sensor/sampling/sampling.h"
@@ -424,6 +425,29 @@ TEST(Frames, MarginalIsTheCountsPathsExpectation) {
     }
   }
   EXPECT_EQ(tested, W * H);
+}
+
+}  // namespace
+}  // namespace spadgen::sensor
+
+namespace spadgen::sensor {
+namespace {
+
+// A signal stops the sensor inside a tile (per row of gate responses, per row of counts, per gate position of
+// frames), not only between tiles: with the interrupt flag raised, process() throws before finishing.
+TEST(SensorInterrupt, ARaisedFlagStopsProcessInsideTheTile) {
+  const int W = 16, H = 8;
+  for (const bool with_frames : {false, true}) {
+    SensorStageConfig c = testing::sweep_config(W, H);
+    c.acquisition.gate_sweep = {0.6e-9, 4e-9, 36e-12};
+    c.outputs.frames = with_frames;
+    SensorModel model(c);
+    testing::Image img(W, H, model.required_window(9e-12));
+    interrupt_flag().store(true);
+    EXPECT_THROW(model.process(img.tile({0, 0, W, H}, 1)), Interrupted) << (with_frames ? "frames" : "counts");
+    interrupt_flag().store(false);
+    EXPECT_NO_THROW(model.process(img.tile({0, 0, W, H}, 1)));
+  }
 }
 
 }  // namespace
