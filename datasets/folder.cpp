@@ -205,11 +205,24 @@ SampleRecord DatasetFolder::inspect(const Sample& s) const {
       // metadata.json's size varies with its timing fields; the index and the card must not.
       if (name == "metadata.json") continue;
       // A repeat links the files that do not depend on the noise (ground truth, light): counted once.
-      struct stat st {};
-      if (::stat((dir_ / folders[f] / name.get<std::string>()).c_str(), &st) != 0) continue;
-      if (!inodes.insert({st.st_dev, st.st_ino}).second) continue;
-      rec.files.emplace_back(prefix + name.get<std::string>(), int64_t(st.st_size));
-      rec.bytes += int64_t(st.st_size);
+      // A listed folder (a Zarr store) counts with every file in it.
+      const fs::path path = dir_ / folders[f] / name.get<std::string>();
+      std::vector<fs::path> parts = {path};
+      std::error_code ec;
+      if (fs::is_directory(path, ec))
+        for (const auto& e : fs::recursive_directory_iterator(path, ec))
+          if (e.is_regular_file(ec)) parts.push_back(e.path());
+      int64_t size = 0;
+      bool any = false;
+      for (const fs::path& q : parts) {
+        struct stat st {};
+        if (::stat(q.c_str(), &st) != 0 || !S_ISREG(st.st_mode)) continue;
+        if (!inodes.insert({st.st_dev, st.st_ino}).second) continue;
+        size += int64_t(st.st_size), any = true;
+      }
+      if (!any) continue;
+      rec.files.emplace_back(prefix + name.get<std::string>(), size);
+      rec.bytes += size;
     }
     if (f == 0) {
       if (meta->contains("ground_truth_summary")) rec.summary = ojson::parse((*meta)["ground_truth_summary"].dump());
