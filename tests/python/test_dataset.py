@@ -252,3 +252,13 @@ def test_dataset_samples_in_a_data_loader(dataset_dir, workers):
     assert order == [pair for pair in samples.realisations for _ in range(4)]
     np.testing.assert_array_equal(torch.cat([b["counts"] for b in batches]).numpy(),
                                   np.stack([samples[j]["counts"].numpy() for j in range(len(samples))]))
+
+
+def test_the_cards_snippet_runs_in_the_folder(ds, dataset_dir, monkeypatch):
+    # dataset.md's "Reading it" (written by the C++ side) must stay true to this package.
+    code = ds.card.split("## Reading it", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
+    monkeypatch.chdir(dataset_dir)
+    namespace = {}
+    exec(compile(code, "dataset.md", "exec"), namespace)
+    assert namespace["rows"] == ds.index and namespace["ds"].indices.tolist() == [0, 1, 2, 3]
+    assert namespace["run"].metadata["dataset"]["index"] == 0 and namespace["run"].counts.shape == (101, 20, 24)
