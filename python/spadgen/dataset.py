@@ -95,11 +95,12 @@ class Sample:
             folder = self.folder if r == 0 else self.repeat_folders[r - 1]
             run = open_run(folder)
             section = run.metadata.get("dataset", {})
-            if section.get("index") != self.index or section.get("sample_hash") != self.sample_hash:
+            found = (section.get("index"), section.get("repeat"), section.get("sample_hash"))
+            if found != (self.index, r, self.sample_hash):
                 raise SampleNotDoneError(
-                    f"{folder}: its metadata.json's dataset section (sample {section.get('index')}, hash "
-                    f"{section.get('sample_hash')!r}) is not sample {self.index} as index.jsonl has it (hash {self.sample_hash!r}): "
-                    "the index is out of date (a `spadgen dataset run` into the folder has not finished): run it again")
+                    f"{folder}: its metadata.json's dataset section (sample, realisation, hash {found}) is not realisation {r} "
+                    f"of sample {self.index} as index.jsonl has it (hash {self.sample_hash!r}): the index is out of date "
+                    "(a `spadgen dataset run` into the folder has not finished): run it again")
             self._runs[r] = run
         return self._runs[r]
 

@@ -6,10 +6,10 @@
     ds = DatasetSamples("out/plates", patch_size=(64, 64))      # every realisation of every done sample
     loader = torch.utils.data.DataLoader(ds, batch_size=8, shuffle=True)
 
-Both load their samples the same way. One sample is a whole run's image, or with ``patch_size=(h, w)`` one patch of a run: the images are cut into
-non-overlapping h x w patches from the top-left corner, and a remainder narrower than a patch at the right or
-bottom edge is left out. A sample is a dict of tensors; with H, W the image's (or patch's) size, K the gate
-positions (or exposures), N the frames per k, L = ``max_layers``:
+Both load their samples the same way. One sample is a whole run's image, or with ``patch_size=(h, w)`` one
+patch of a run: the images are cut into non-overlapping h x w patches from the top-left corner, and a
+remainder narrower than a patch at the right or bottom edge is left out. A sample is a dict of tensors; with
+H, W the image's (or patch's) size, K the gate positions (or exposures), N the frames per k, L = ``max_layers``:
 
 | key | shape | dtype | what |
 |---|---|---|---|
