@@ -440,9 +440,10 @@ std::string dataset_card(const DatasetFolder& folder, const std::vector<SampleRe
       o << "| `" << name << "` | " << bytes_text(double(e.second) / double(e.first)) << " | " << bytes_text(double(e.second)) << " |\n";
     o << "| all | " << bytes_text(double(total) / double(count[Status::Done])) << " | " << bytes_text(double(total)) << " |\n";
   }
-  o << "\n## Reading it\n\n```python\nimport json\nrows = [json.loads(l) for l in open(\"index.jsonl\")]\n"
-       "import spadgen                                   # python/ in the spadgen repository\nrun = spadgen.open_run(rows[0][\"folder\"])"
-       "          # one sample: metadata, ground truth, counts, ...\n```\n\n"
+  o << "\n## Reading it\n\nFrom this folder:\n\n```python\nimport json\nrows = [json.loads(l) for l in open(\"index.jsonl\")]\n"
+       "import spadgen                                   # python/ in the spadgen repository (docs/python.md, Datasets)\n"
+       "ds = spadgen.open_dataset(\".\")                   # the index: ds.table(), ds.select(status=\"done\", ...)\n"
+       "run = ds.select(status=\"done\")[0].run            # one sample: metadata, ground truth, counts, ...\n```\n\n"
        "docs/datasets.md in the spadgen repository documents the folder, the index and the card.\n";
   return o.str();
 }

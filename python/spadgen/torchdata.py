@@ -1,14 +1,15 @@
-"""A PyTorch Dataset over run folders (imported only when PyTorch is present: ``import spadgen`` never
-imports torch).
+"""PyTorch Datasets over run folders and over a dataset folder (imported only when PyTorch is present:
+``import spadgen`` never imports torch).
 
-    from spadgen.torchdata import RunDataset
+    from spadgen.torchdata import DatasetSamples, RunDataset
     ds = RunDataset(["out/a", "out/b"], patch_size=(64, 64))
+    ds = DatasetSamples("out/plates", patch_size=(64, 64))      # every realisation of every done sample
     loader = torch.utils.data.DataLoader(ds, batch_size=8, shuffle=True)
 
-One sample is a whole run's image, or with ``patch_size=(h, w)`` one patch of a run: the images are cut into
-non-overlapping h x w patches from the top-left corner, and a remainder narrower than a patch at the right or
-bottom edge is left out. A sample is a dict of tensors; with H, W the image's (or patch's) size, K the gate
-positions (or exposures), N the frames per k, L = ``max_layers``:
+Both load their samples the same way. One sample is a whole run's image, or with ``patch_size=(h, w)`` one
+patch of a run: the images are cut into non-overlapping h x w patches from the top-left corner, and a
+remainder narrower than a patch at the right or bottom edge is left out. A sample is a dict of tensors; with
+H, W the image's (or patch's) size, K the gate positions (or exposures), N the frames per k, L = ``max_layers``:
 
 | key | shape | dtype | what |
 |---|---|---|---|
@@ -24,13 +25,19 @@ positions (or exposures), N the frames per k, L = ``max_layers``:
 | gate_positions_ns | (K,) | float32 | gate positions (gate-sweep runs only) |
 | intrinsics | (3, 3) | float32 | the sample's pinhole intrinsics (OpenCV convention, shifted to the patch) |
 | origin | (2,) | int64 | (x, y) of the sample's top-left pixel in its run's image |
-| run | () | int64 | index of the sample's run in ``runs`` |
+| run | () | int64 | index of the sample's run in ``paths`` (RunDataset: in ``runs``) |
+| sample | () | int64 | DatasetSamples only: the sample's dataset index |
+| repeat | () | int64 | DatasetSamples only: the realisation of the temporal noise (0: the sample's own folder) |
+| parameters | (P,) | float32 | DatasetSamples only: the sample's numeric parameters, in the order of ``parameter_names`` |
 
-``fields`` chooses among the first nine (default: counts, expected_counts, depth, mask, layer_count); the last four
-come always (gate_positions_ns only for gate sweeps). Runs that share a DataLoader batch must agree on K
-(and N with frames); the constructor checks that every run has what ``fields`` asks for.
+``fields`` chooses among the first nine (default: counts, expected_counts, depth, mask, layer_count);
+gate_positions_ns (gate sweeps only), intrinsics, origin and run come always, and with DatasetSamples sample,
+repeat and parameters. Runs that share a DataLoader batch must agree on K (and N with frames); the constructor
+checks that every run has what ``fields`` asks for.
 """
 from __future__ import annotations
+
+import os
 
 import numpy as np
 
@@ -39,9 +46,10 @@ try:
 except ImportError as e:  # pragma: no cover - exercised only where torch is missing
     raise ImportError("spadgen.torchdata needs PyTorch (Debian 12: apt-get install python3-torch)") from e
 
-from .run import open_run, unpack_frames
+from .dataset import Dataset, open_dataset
+from .run import Run, open_run, unpack_frames
 
-__all__ = ["RunDataset", "FIELDS", "DEFAULT_FIELDS"]
+__all__ = ["RunDataset", "DatasetSamples", "FIELDS", "DEFAULT_FIELDS"]
 
 FIELDS = ("counts", "expected_counts", "detection_rate", "depth", "mask", "layer_count", "layer_depth", "layer_mask", "frames")
 DEFAULT_FIELDS = ("counts", "expected_counts", "depth", "mask", "layer_count")
@@ -52,18 +60,20 @@ _NEEDS = {"counts": "counts.npy", "expected_counts": ("expected_counts.npy", "de
           "layer_depth": "ground_truth.exr", "layer_mask": "ground_truth.exr"}
 
 
-class RunDataset(torch.utils.data.Dataset):
-    """Samples (whole images or patches) of a list of run folders; see the module's table for each key."""
+class _RunSamples(torch.utils.data.Dataset):
+    """What RunDataset and DatasetSamples share: run folders cut into samples (whole images or patches),
+    checked once, and a sample loaded as a dict of tensors (the keys of the module's table but "run")."""
 
     def __init__(self, runs, patch_size=None, fields=DEFAULT_FIELDS, max_layers=None):
-        self.paths = [str(r) for r in runs]
+        runs = list(runs)
+        self.paths = [r.path if isinstance(r, Run) else os.fspath(r) for r in runs]
         if not self.paths:
-            raise ValueError("RunDataset needs at least one run folder")
+            raise ValueError(f"{type(self).__name__} needs at least one run folder")
         unknown = [f for f in fields if f not in FIELDS]
         if unknown:
             raise ValueError(f"unknown field(s) {unknown}; known: {', '.join(FIELDS)}")
         self.fields = tuple(fields)
-        self._runs = {}
+        self._runs = {i: r for i, r in enumerate(runs) if isinstance(r, Run)}
         runs_ = [self._run(i) for i in range(len(self.paths))]
         for r in runs_:
             for f in self.fields:
@@ -106,7 +116,8 @@ class RunDataset(torch.utils.data.Dataset):
     def __len__(self):
         return len(self.index)
 
-    def __getitem__(self, j):
+    def _load(self, j):
+        """(index of the sample's run in paths, the sample's tensors)."""
         i, x, y, h, w = self.index[j]
         run = self._run(i)
         ys, xs = slice(y, y + h), slice(x, x + w)
@@ -153,5 +164,75 @@ class RunDataset(torch.utils.data.Dataset):
         K[1, 2] -= y
         out["intrinsics"] = torch.from_numpy(K.astype(np.float32))
         out["origin"] = torch.tensor([x, y], dtype=torch.int64)
+        return i, out
+
+
+class RunDataset(_RunSamples):
+    """Samples (whole images or patches) of a list of run folders (paths or spadgen.Run objects); see the module's
+    table for each key."""
+
+    def __getitem__(self, j):
+        i, out = self._load(j)
         out["run"] = torch.tensor(i, dtype=torch.int64)
+        return out
+
+
+
+class DatasetSamples(_RunSamples):
+    """Samples of a dataset folder (``spadgen dataset run``): every realisation of every selected sample, whole or
+    cut into patches, in dataset index order, then realisation, then patch (row-major). Each item has RunDataset's
+    keys and:
+
+    | key | shape | dtype | what |
+    |---|---|---|---|
+    | sample | () | int64 | the sample's dataset index |
+    | repeat | () | int64 | the realisation of the temporal noise (0: the sample's folder, r: samples/<i>_rNN) |
+    | parameters | (P,) | float32 | the sample's numeric parameters, in the order of ``parameter_names`` |
+
+    ("run" indexes ``paths``, one per realisation.) ``parameter_names`` are the dataset's parameters that are
+    numbers or booleans (as 0 / 1) in every sample of the dataset, in index.csv's column order (the grid keys, then
+    the random keys, as the dataset file lists them); string and array parameters (the scene, a sensor preset, a
+    crop) are not among them: ``dataset.index`` has every parameter of every sample.
+
+    dataset     a spadgen.Dataset (or a selection of one: ds.select(...)) or a dataset folder's path;
+    repeats     "all": every realisation; "first": realisation 0 only;
+    status      the samples to take ("done", or several in a list; None: all): every one taken must be done,
+                so the default leaves out failed, stale and missing samples, and status=None refuses a dataset
+                that has any.
+    """
+
+    def __init__(self, dataset, fields=DEFAULT_FIELDS, patch_size=None, repeats="all", status="done", max_layers=None):
+        ds = dataset if isinstance(dataset, Dataset) else open_dataset(dataset)
+        if repeats not in ("all", "first"):
+            raise ValueError(f"repeats must be 'all' or 'first', got {repeats!r}")
+        view = ds.select(status=status) if status is not None else ds
+        not_done = [r["index"] for r in view.index if r["status"] != "done"]
+        if not_done:
+            raise ValueError(f"{ds.path}: samples {not_done} are not done (their status: "
+                             f"{sorted({r['status'] for r in view.index if r['status'] != 'done'})}): only done samples "
+                             "have runs; status='done' leaves the others out")
+        if not len(view):
+            counts = ", ".join(f"{n} {s}" for s, n in ds.status_counts().items() if n)
+            raise ValueError(f"{ds.path}: no sample to load with status={status!r} (the {len(ds)} samples: {counts})")
+        self.dataset = view
+        self.repeats = repeats
+        self.parameter_names = tuple(ds.numeric_parameter_keys)
+        runs, self.realisations = [], []
+        params = []
+        for s in view:
+            vector = [float(s.parameters[k]) for k in self.parameter_names]
+            for r, run in enumerate(s.realisations if repeats == "all" else [s.run]):
+                runs.append(run)
+                self.realisations.append((s.index, r))
+                params.append(vector)
+        self._parameters = np.array(params, np.float32).reshape(len(runs), len(self.parameter_names))
+        super().__init__(runs, patch_size=patch_size, fields=fields, max_layers=max_layers)
+
+    def __getitem__(self, j):
+        i, out = self._load(j)
+        sample, repeat = self.realisations[i]
+        out["run"] = torch.tensor(i, dtype=torch.int64)
+        out["sample"] = torch.tensor(sample, dtype=torch.int64)
+        out["repeat"] = torch.tensor(repeat, dtype=torch.int64)
+        out["parameters"] = torch.from_numpy(self._parameters[i].copy())
         return out

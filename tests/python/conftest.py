@@ -76,3 +76,33 @@ def sweep_run(make_run):
 @pytest.fixture(scope="session")
 def intensity_run(make_run):
     return make_run("intensity")
+
+
+# A small dataset (spadgen dataset run): 3 grid cells of camera.width_px x random keys, 4 samples, 2 realisations of
+# the temporal noise. Sample 2 (width 16: the crop leaves the sensor) fails; samples 0 and 3 (width 1024) and 1
+# (1000) are done. Scene paths are relative to the dataset file (as the docs write them).
+DATASET = """{
+  "description": "python test dataset", "seed": 3,
+  "scenes": ["scenes/multi_object.json"],
+  "samples": 4,
+  "set": {"render.samples_per_pixel": 2, "acquisition.gate_sweep.stop_ns": 4.2, "camera.crop": [496, 232, 24, 20]},
+  "grid": {"camera.width_px": [1024, 1000, 16]},
+  "random": {"laser.average_power_mW": {"uniform": [1, 3]}, "ambient.illuminance_lux": {"log_uniform": [1, 1000]},
+             "sensor.preset": {"choice": ["pixel_A", "pixel_B"]}},
+  "seeds": {"chip": 1}, "repeats": 2
+}
+"""
+
+
+@pytest.fixture(scope="session")
+def dataset_dir(spadgen_bin, tmp_path_factory):
+    """The folder of DATASET, generated once per test process (about 2 s)."""
+    root = tmp_path_factory.mktemp("dataset")
+    (root / "scenes").symlink_to(SCENES)
+    (root / "d.json").write_text(DATASET)
+    out = root / "out"
+    r = subprocess.run([spadgen_bin, "dataset", "run", str(root / "d.json"), "-o", str(out), "-q"],
+                       capture_output=True, text=True)
+    # The failing sample makes the run exit 1 after generating the others.
+    assert r.returncode == 1 and "1 samples failed (2)" in r.stderr, r.stderr
+    return out

@@ -29,7 +29,7 @@ def test_installs_offline_with_pip(tmp_path):
                         "--disable-pip-version-check", "--no-cache-dir", "--target", str(target), str(src)], capture_output=True, text=True)
     assert r.returncode == 0, r.stdout + r.stderr
     assert (target / f"spadgen-{spadgen.__version__}.dist-info").is_dir()
-    code = ("import spadgen, spadgen.exr, spadgen.camera, spadgen.estimate, spadgen.plot, spadgen.run; "
+    code = ("import spadgen, spadgen.exr, spadgen.camera, spadgen.estimate, spadgen.plot, spadgen.run, spadgen.dataset; "
             "print(spadgen.__version__); print(spadgen.__file__)")
     out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True,
                          env={"PYTHONPATH": str(target), "PATH": "/usr/bin:/bin"}, cwd=tmp_path).stdout.split("\n")

@@ -1,0 +1,308 @@
+"""A dataset folder (what ``spadgen dataset run FILE -o DIR`` writes): its index as a table, filtering, and its
+samples as runs.
+
+    ds = spadgen.open_dataset("out/plates")
+    ds.table()["hit_fraction"]                       # (S,) float64, one entry per sample
+    done = ds.select(status="done", laser__average_power_mW=2)
+    for sample in done:
+        sample.index, sample.parameters, sample.run.counts, [r.counts for r in sample.repeats]
+
+Opening reads dataset.json and index.jsonl only; a sample's run folder is opened when ``sample.run`` is first
+used. Everything comes from the index as the last ``spadgen dataset run`` into the folder wrote it
+(``spadgen dataset status DIR`` tells what is on disk now).
+"""
+from __future__ import annotations
+
+import json
+import math
+import numbers
+import os
+
+import numpy as np
+
+from .run import open_run
+
+__all__ = ["Dataset", "Sample", "SampleNotDoneError", "open_dataset", "STATUSES", "SUMMARY_COLUMNS"]
+
+STATUSES = ("done", "failed", "stale", "missing")
+# The ground-truth summary of a done sample (index.jsonl "ground_truth"), in index.csv's order.
+SUMMARY_COLUMNS = ("hit_fraction", "range_min_m", "range_max_m", "meshes_in_view", "max_layer_count",
+                   "laser_photons_per_pulse")
+_SEEDS = (("seed", "seed"), ("seed_light", "light"), ("seed_chip", "chip"), ("seed_noise", "noise"))
+
+
+class SampleNotDoneError(RuntimeError):
+    """A sample's run was asked for, but the sample is not done (failed, stale or missing)."""
+
+
+def _is_number(v):
+    return isinstance(v, numbers.Real) and not isinstance(v, bool)
+
+
+def _kind(values):
+    """The column type of a parameter's values: "bool", "int", "float", "str" or "object"."""
+    if values and all(isinstance(v, bool) for v in values):
+        return "bool"
+    if values and all(isinstance(v, numbers.Integral) and not isinstance(v, bool) for v in values):
+        return "int"
+    if values and all(_is_number(v) for v in values):
+        return "float"
+    if all(isinstance(v, str) for v in values):
+        return "str"
+    return "object"
+
+
+def _same(a, b):
+    """Parameter equality, a JSON array equal to a list or tuple of the same values."""
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    if isinstance(a, (list, tuple)) or isinstance(b, (list, tuple)):
+        return False
+    return a == b
+
+
+class Sample:
+    """One sample of a dataset: its row of the index, and its run folders opened on first use."""
+
+    def __init__(self, dataset, row):
+        self._dataset_path = dataset.path
+        self.row = row
+        self.index = int(row["index"])
+        self.status = row["status"]
+        self.folder = os.path.join(dataset.path, row["folder"])
+        self.parameters = dict(row["parameters"])
+        self.seeds = dict(row["seeds"])
+        self.sample_hash = row.get("sample_hash", "")
+        self.ground_truth = dict(row.get("ground_truth") or {})
+        self.error = row.get("error")
+        # Realisations 1, 2, ... of the temporal noise (realisation 0 is the sample's own folder).
+        self.repeat_folders = [os.path.join(dataset.path, f) for f in row.get("repeats", [])]
+        self._runs = {}
+
+    def __repr__(self):
+        return f"Sample({self.index}, {self.status}, {self.parameters})"
+
+    def _open(self, r):
+        if self.status != "done":
+            where = f"{self._dataset_path}: sample {self.index} ({os.path.relpath(self.folder, self._dataset_path)})"
+            raise SampleNotDoneError(where + {
+                "failed": f" failed, so it has no run: {(self.error or '').strip()}",
+                "stale": " is stale: its folder holds an earlier version of it (the scene file, a glTF file or spadgen "
+                         "changed since); `spadgen dataset run` generates it again, spadgen.open_run(folder) reads the old one",
+                "missing": " is missing: it has not been generated yet (`spadgen dataset run` generates it)",
+            }.get(self.status, f" is {self.status}, not done"))
+        if r not in self._runs:
+            folder = self.folder if r == 0 else self.repeat_folders[r - 1]
+            run = open_run(folder)
+            section = run.metadata.get("dataset", {})
+            found = (section.get("index"), section.get("repeat"), section.get("sample_hash"))
+            if found != (self.index, r, self.sample_hash):
+                raise SampleNotDoneError(
+                    f"{folder}: its metadata.json's dataset section (sample, realisation, hash {found}) is not realisation {r} "
+                    f"of sample {self.index} as index.jsonl has it (hash {self.sample_hash!r}): the index is out of date "
+                    "(a `spadgen dataset run` into the folder has not finished): run it again")
+            self._runs[r] = run
+        return self._runs[r]
+
+    @property
+    def run(self):
+        """The sample's run folder (realisation 0) as a spadgen.Run; SampleNotDoneError unless done."""
+        return self._open(0)
+
+    @property
+    def repeats(self):
+        """The runs of realisations 1, 2, ... of the temporal noise (the dataset file's "repeats" - 1 of them:
+        the same light and ground truth, counts from noise seeds S + 1, ...); [] without repeats."""
+        return [self._open(r) for r in range(1, len(self.repeat_folders) + 1)]
+
+    @property
+    def realisations(self):
+        """Every realisation's run, realisation r at position r: [run] + repeats."""
+        return [self.run] + self.repeats
+
+
+class Dataset:
+    """A dataset folder's index, or a selection of it (select(), slicing): rows in index order."""
+
+    def __init__(self, path, _spec=None, _rows=None, _all=None):
+        self.path = os.fspath(path)
+        if _spec is not None:  # a view of another Dataset
+            self.spec, self.index, self._all = _spec, _rows, _all
+            return
+        spec_path = os.path.join(self.path, "dataset.json")
+        if not os.path.isfile(spec_path):
+            hint = ""
+            if os.path.isfile(os.path.join(self.path, "metadata.json")):
+                hint = " it is a run folder: spadgen.open_run reads it;"
+            elif not os.path.isdir(self.path):
+                hint = " no such folder;"
+            raise FileNotFoundError(f"{self.path}: not a spadgen dataset folder (no dataset.json;{hint} "
+                                    "`spadgen dataset run FILE -o DIR` writes one)")
+        with open(spec_path, encoding="utf-8") as f:
+            self.spec = json.load(f)
+        index_path = os.path.join(self.path, "index.jsonl")
+        if not os.path.isfile(index_path):
+            raise FileNotFoundError(f"{self.path}: a dataset folder without index.jsonl: the first `spadgen dataset run` "
+                                    "into it has not finished (the index is written last); run it again to finish")
+        with open(index_path, encoding="utf-8") as f:
+            self.index = [json.loads(line) for line in f if line.strip()]
+        self._all = self.index
+
+    def _view(self, rows):
+        return Dataset(self.path, _spec=self.spec, _rows=list(rows), _all=self._all)
+
+    def __repr__(self):
+        counts = self.status_counts()
+        parts = ", ".join(f"{n} {s}" for s, n in counts.items() if n)
+        return f"Dataset({self.path!r}, {len(self)} samples" + (f": {parts})" if parts else ")")
+
+    # ---- what the dataset is ----------------------------------------------------------------------------
+
+    @property
+    def card(self):
+        """dataset.md, the dataset card (Markdown)."""
+        with open(os.path.join(self.path, "dataset.md"), encoding="utf-8") as f:
+            return f.read()
+
+    @property
+    def parameter_keys(self):
+        """What varies between samples, in index.csv's column order: "scene", the grid keys, the random keys."""
+        return ["scene"] + list(self.spec.get("grid", {})) + list(self.spec.get("random", {}))
+
+    def parameter_kind(self, key):
+        """The type of a parameter over every sample of the dataset (not only this selection): "bool", "int",
+        "float", "str" or "object" (arrays, mixed types); it decides the column's dtype in table()."""
+        if key not in self.parameter_keys:
+            raise KeyError(f"{self.path}: no parameter {key!r}; the parameters are {', '.join(self.parameter_keys)}")
+        return _kind([r["parameters"].get(key) for r in self._all])
+
+    @property
+    def numeric_parameter_keys(self):
+        """The parameters whose values are numbers (or booleans) in every sample, in parameter_keys' order."""
+        return [k for k in self.parameter_keys if self.parameter_kind(k) in ("bool", "int", "float")]
+
+    @property
+    def indices(self):
+        """(S,) int64: the dataset index of each sample of this selection."""
+        return np.array([r["index"] for r in self.index], np.int64)
+
+    def status_counts(self):
+        """{"done": n, "failed": n, "stale": n, "missing": n} over this selection."""
+        out = dict.fromkeys(STATUSES, 0)
+        for r in self.index:
+            out[r["status"]] = out.get(r["status"], 0) + 1
+        return out
+
+    # ---- samples ----------------------------------------------------------------------------------------
+
+    def __len__(self):
+        return len(self.index)
+
+    def __iter__(self):
+        return (Sample(self, r) for r in self.index)
+
+    def __getitem__(self, i):
+        """ds[i]: the i-th sample of this selection (not dataset index i: sample(i) is that); ds[a:b] a selection."""
+        if isinstance(i, slice):
+            return self._view(self.index[i])
+        return Sample(self, self.index[i])
+
+    def sample(self, index):
+        """The sample of dataset index ``index`` (KeyError when this selection does not hold it)."""
+        for r in self.index:
+            if r["index"] == index:
+                return Sample(self, r)
+        raise KeyError(f"{self.path}: sample {index} is not in this selection of {len(self)} samples")
+
+    def select(self, status=None, where=None, **parameters):
+        """The samples of this selection that match everything given:
+
+        status      "done", "failed", "stale", "missing", or several of them in a list or tuple;
+        where       a function of the index row (a dict as index.jsonl has it) returning true to keep it;
+        **parameters  parameter key = value, equal by ==, a JSON array equal to a list or tuple; a dotted key
+                    as select(**{"laser.average_power_mW": 2}), or with "__" for each dot: laser__average_power_mW=2.
+        """
+        keep = list(self.index)
+        if status is not None:
+            wanted = (status,) if isinstance(status, str) else tuple(status)
+            unknown = [s for s in wanted if s not in STATUSES]
+            if unknown:
+                raise ValueError(f"unknown status {unknown}; a sample is one of {', '.join(STATUSES)}")
+            keep = [r for r in keep if r["status"] in wanted]
+        for name, value in parameters.items():
+            key = name
+            if key not in self.parameter_keys and name.replace("__", ".") in self.parameter_keys:
+                key = name.replace("__", ".")
+            if key not in self.parameter_keys:
+                raise ValueError(f"{self.path}: no parameter {name!r}; the parameters are {', '.join(self.parameter_keys)} "
+                                 "(a dot may be written __)")
+            keep = [r for r in keep if _same(r["parameters"].get(key), value)]
+        if where is not None:
+            keep = [r for r in keep if where(r)]
+        return self._view(keep)
+
+    # ---- the table --------------------------------------------------------------------------------------
+
+    @property
+    def columns(self):
+        """The table's columns: index.csv's."""
+        return (["index", "status", "folder"] + self.parameter_keys + [c for c, _ in _SEEDS] + ["sample_hash", "bytes"]
+                + list(self._summary_keys()) + ["error"])
+
+    def _summary_keys(self):
+        keys = list(SUMMARY_COLUMNS)
+        for r in self._all:
+            keys += [k for k in (r.get("ground_truth") or {}) if k not in keys]
+        return keys
+
+    def table(self, columns=None):
+        """The index as a dict of (S,) NumPy arrays, one per column (index.csv's columns, in its order):
+
+        index, seed, seed_light, seed_chip, seed_noise   int64
+        status, folder, sample_hash, error               str ("" where the row has none)
+        each parameter   by its kind over the whole dataset: bool, int64, float64, str, or object (arrays)
+        bytes and the ground-truth summary (hit_fraction, range_min_m, range_max_m, meshes_in_view,
+                         max_layer_count, laser_photons_per_pulse)   float64, NaN where the sample is not done
+        """
+        names = self.columns if columns is None else list(columns)
+        params = set(self.parameter_keys)
+        summary = set(self._summary_keys())
+        seeds = dict(_SEEDS)
+        out = {}
+        for c in names:
+            if c == "index":
+                out[c] = self.indices
+            elif c in ("status", "folder", "sample_hash", "error"):
+                out[c] = np.array([r.get(c) or "" for r in self.index], dtype=str)
+            elif c in seeds:
+                out[c] = np.array([r["seeds"][seeds[c]] for r in self.index], np.int64)
+            elif c == "bytes":
+                out[c] = np.array([r.get("bytes", math.nan) for r in self.index], np.float64)
+            elif c in summary:
+                out[c] = np.array([(r.get("ground_truth") or {}).get(c, math.nan) for r in self.index], np.float64)
+            elif c in params:
+                values = [r["parameters"].get(c) for r in self.index]
+                kind = self.parameter_kind(c)
+                if kind in ("bool", "int", "float", "str"):
+                    out[c] = np.array(values, dtype={"bool": bool, "int": np.int64, "float": np.float64, "str": str}[kind])
+                else:
+                    out[c] = np.empty(len(values), object)
+                    for i, v in enumerate(values):  # an array parameter stays one list per row
+                        out[c][i] = v
+            else:
+                raise KeyError(f"{self.path}: no column {c!r}; the columns are {', '.join(self.columns)}")
+        return out
+
+    def to_pandas(self, columns=None):
+        """table() as a pandas DataFrame (pandas is not a dependency of spadgen: ImportError without it)."""
+        try:
+            import pandas
+        except ImportError as e:
+            raise ImportError("Dataset.to_pandas needs pandas (Debian 12: apt-get install python3-pandas); "
+                              "Dataset.table() gives the same columns as NumPy arrays") from e
+        return pandas.DataFrame(self.table(columns))
+
+
+def open_dataset(path):
+    """Opens a dataset folder (reads dataset.json and index.jsonl)."""
+    return Dataset(path)

@@ -1,0 +1,264 @@
+"""spadgen.open_dataset and spadgen.torchdata.DatasetSamples on a real small dataset (conftest.DATASET: 4
+samples, sample 2 failed, 2 realisations each): the table against index.jsonl and index.csv read on their own,
+selections, each sample's runs against open_run of its folders, realisations that differ in counts only, the
+errors, and DatasetSamples' layout, length, values and DataLoader batches."""
+import csv
+import json
+import math
+
+import numpy as np
+import pytest
+
+import spadgen
+from spadgen.dataset import STATUSES, SUMMARY_COLUMNS
+
+WIDTHS = [1024, 1000, 16, 1024]  # the grid cell of sample i is i mod 3
+DONE = [0, 1, 3]
+NUMERIC = ("camera.width_px", "laser.average_power_mW", "ambient.illuminance_lux")
+
+
+@pytest.fixture(scope="module")
+def ds(dataset_dir):
+    return spadgen.open_dataset(dataset_dir)
+
+
+def jsonl_rows(dataset_dir):
+    return [json.loads(line) for line in (dataset_dir / "index.jsonl").read_text().splitlines()]
+
+
+def test_opening_reads_the_index_spec_and_card(ds, dataset_dir):
+    assert len(ds) == 4 and [r["index"] for r in ds.index] == [0, 1, 2, 3]
+    assert ds.index == jsonl_rows(dataset_dir)
+    assert ds.spec == json.loads((dataset_dir / "dataset.json").read_text())
+    assert ds.spec["repeats"] == 2 and ds.spec["dataset_file"].endswith("d.json")
+    assert ds.card == (dataset_dir / "dataset.md").read_text() and ds.card.startswith("# python test dataset\n")
+    assert ds.parameter_keys == ["scene", "camera.width_px", "laser.average_power_mW", "ambient.illuminance_lux",
+                                 "sensor.preset"]
+    assert ds.numeric_parameter_keys == list(NUMERIC)
+    assert ds.status_counts() == {"done": 3, "failed": 1, "stale": 0, "missing": 0}
+    assert repr(ds) == f"Dataset({str(dataset_dir)!r}, 4 samples: 3 done, 1 failed)"
+
+
+def test_table_equals_index_jsonl_and_index_csv(ds, dataset_dir):
+    rows = jsonl_rows(dataset_dir)
+    with open(dataset_dir / "index.csv", newline="") as f:
+        reader = csv.DictReader(f)
+        header, records = reader.fieldnames, list(reader)
+    t = ds.table()
+    assert list(t) == ds.columns == header
+    assert all(len(a) == 4 for a in t.values())
+    for name in ("index", "seed", "seed_light", "seed_chip", "seed_noise"):
+        assert t[name].dtype == np.int64, name
+    for name in ("status", "folder", "sample_hash", "error", "scene", "sensor.preset"):
+        assert t[name].dtype.kind == "U", name
+    for name in ("bytes", "laser.average_power_mW", "ambient.illuminance_lux") + SUMMARY_COLUMNS:
+        assert t[name].dtype == np.float64, name
+    assert t["camera.width_px"].dtype == np.int64
+    seeds = {"seed": "seed", "seed_light": "light", "seed_chip": "chip", "seed_noise": "noise"}
+    for i, (row, rec) in enumerate(zip(rows, records)):
+        for name in header:
+            value, text = t[name][i], rec[name]
+            if name in ds.parameter_keys:
+                assert value == row["parameters"][name], name
+                assert value == (text if isinstance(row["parameters"][name], str) else json.loads(text)), name
+            elif name in seeds:
+                assert value == row["seeds"][seeds[name]] == int(text), name
+            elif name == "bytes" or name in SUMMARY_COLUMNS:
+                known = row.get(name) if name == "bytes" else row.get("ground_truth", {}).get(name)
+                if known is None:
+                    assert math.isnan(value) and text == "" and row["status"] != "done", name
+                else:
+                    assert value == known == float(text), name
+            elif name == "index":
+                assert value == row["index"] == int(text) == i
+            else:
+                assert value == row.get(name, "") == text, name
+    assert t["status"].tolist() == ["done", "done", "failed", "done"]
+    assert t["camera.width_px"].tolist() == WIDTHS
+    assert "invalid scene" in t["error"][2] and "16 x 500 sensor" in t["error"][2]
+    part = ds.table(columns=["index", "hit_fraction"])
+    assert list(part) == ["index", "hit_fraction"] and part["hit_fraction"][0] == 1.0
+    with pytest.raises(KeyError, match="no column 'hit'"):
+        ds.table(columns=["hit"])
+
+
+def test_to_pandas(ds):
+    pandas = pytest.importorskip("pandas")
+    frame = ds.select(status="done").to_pandas()
+    assert isinstance(frame, pandas.DataFrame) and list(frame.columns) == ds.columns
+    assert frame["index"].tolist() == DONE and frame["camera.width_px"].tolist() == [1024, 1000, 1024]
+
+
+def test_select_by_status_parameters_and_rows(ds):
+    assert ds.select(status="done").indices.tolist() == DONE
+    assert ds.select(status="failed").indices.tolist() == [2]
+    assert ds.select(status=("failed", "stale")).indices.tolist() == [2]
+    assert len(ds.select(status="missing")) == 0 and ds.select().indices.tolist() == [0, 1, 2, 3]
+    assert ds.select(camera__width_px=1024).indices.tolist() == [0, 3]
+    assert ds.select(**{"camera.width_px": 1000}).indices.tolist() == [1]
+    assert ds.select(status="done", camera__width_px=16).indices.tolist() == []
+    preset = ds.index[0]["parameters"]["sensor.preset"]
+    expected = [r["index"] for r in ds.index if r["parameters"]["sensor.preset"] == preset]
+    assert ds.select(sensor__preset=preset).indices.tolist() == expected
+    power = ds.index[3]["parameters"]["laser.average_power_mW"]
+    assert ds.select(**{"laser.average_power_mW": power}).indices.tolist() == [3]
+    bright = ds.select(status="done", where=lambda r: r["ground_truth"]["laser_photons_per_pulse"] > 1.0)
+    assert bright.indices.tolist() == [r["index"] for r in ds.index
+                                       if r["status"] == "done" and r["ground_truth"]["laser_photons_per_pulse"] > 1.0]
+    # Selections of selections, slices, positions and dataset indices.
+    view = ds.select(status="done").select(camera__width_px=1024)
+    assert view.indices.tolist() == [0, 3] and view[1].index == 3 and view.sample(3).index == 3
+    assert ds[1:3].indices.tolist() == [1, 2] and [s.index for s in ds] == [0, 1, 2, 3]
+    # The kinds of a selection's columns are the whole dataset's.
+    assert view.table()["camera.width_px"].dtype == np.int64 and len(ds.select(status="missing").table()["scene"]) == 0
+    with pytest.raises(KeyError, match="sample 1 is not in"):
+        view.sample(1)
+    with pytest.raises(ValueError, match="unknown status"):
+        ds.select(status="ok")
+    with pytest.raises(ValueError, match="no parameter 'laser_power'"):
+        ds.select(laser_power=1)
+    assert set(STATUSES) == {"done", "failed", "stale", "missing"}
+
+
+def test_samples_are_their_folders_runs(ds, dataset_dir):
+    for sample in ds.select(status="done"):
+        row = ds.index[sample.index]
+        assert sample.folder == str(dataset_dir / row["folder"]) and sample.status == "done"
+        assert sample.parameters == row["parameters"] and sample.seeds == row["seeds"]
+        assert sample.ground_truth == row["ground_truth"] and sample.error is None
+        assert sample.parameters["camera.width_px"] == WIDTHS[sample.index]
+        reference = spadgen.open_run(dataset_dir / row["folder"])
+        run = sample.run
+        assert run is sample.run  # opened once
+        assert run.metadata == reference.metadata and run.metadata["dataset"]["index"] == sample.index
+        assert run.metadata["dataset"]["parameters"] == sample.parameters
+        np.testing.assert_array_equal(run.counts, reference.counts)
+        np.testing.assert_array_equal(run.detection_rate, reference.detection_rate)
+        np.testing.assert_array_equal(run.depth(), reference.depth())
+        assert len(sample.repeats) == 1 and sample.repeat_folders == [str(dataset_dir / row["repeats"][0])]
+        again = spadgen.open_run(dataset_dir / row["repeats"][0])
+        np.testing.assert_array_equal(sample.repeats[0].counts, again.counts)
+        assert [r.path for r in sample.realisations] == [sample.folder] + sample.repeat_folders
+        assert sample.ground_truth["hit_fraction"] == float(run.hit().mean())
+
+
+def test_realisations_differ_in_counts_and_share_the_ground_truth(ds):
+    for sample in ds.select(status="done"):
+        first, second = sample.realisations
+        assert second.metadata["seeds"]["noise"] == first.metadata["seeds"]["noise"] + 1 == sample.seeds["noise"] + 1
+        assert second.metadata["dataset"]["repeat"] == 1 and first.metadata["dataset"]["repeat"] == 0
+        assert not np.array_equal(first.counts, second.counts)
+        np.testing.assert_array_equal(first.detection_rate, second.detection_rate)
+        np.testing.assert_array_equal(first.laser["photons_per_pulse"], second.laser["photons_per_pulse"])
+        np.testing.assert_array_equal(first.layers().range, second.layers().range)
+        np.testing.assert_array_equal(first.depth(), second.depth())
+
+
+def test_errors_name_the_folder(ds, dataset_dir, tmp_path, sweep_run):
+    failed = ds.sample(2)
+    assert failed.status == "failed" and "16 x 500 sensor" in failed.error
+    with pytest.raises(spadgen.SampleNotDoneError, match=r"(?s)sample 2 \(samples/000002\) failed.*16 x 500 sensor"):
+        failed.run
+    with pytest.raises(spadgen.SampleNotDoneError, match="sample 2"):
+        failed.repeats
+    missing = spadgen.Sample(ds, dict(ds.index[0], status="missing"))
+    with pytest.raises(spadgen.SampleNotDoneError, match=f"{dataset_dir}: sample 0 .* is missing"):
+        missing.run
+    # An index that does not describe the folder any more (another run into it has not finished).
+    moved = spadgen.Sample(ds, dict(ds.index[0], sample_hash="0123456789abcdef"))
+    with pytest.raises(spadgen.SampleNotDoneError, match="index is out of date"):
+        moved.run
+    with pytest.raises(FileNotFoundError, match=f"{tmp_path / 'nothing'}: not a spadgen dataset folder.*no such folder"):
+        spadgen.open_dataset(tmp_path / "nothing")
+    with pytest.raises(FileNotFoundError, match="it is a run folder: spadgen.open_run reads it"):
+        spadgen.open_dataset(sweep_run)
+    (tmp_path / "unfinished").mkdir()
+    (tmp_path / "unfinished" / "dataset.json").write_text((dataset_dir / "dataset.json").read_text())
+    with pytest.raises(FileNotFoundError, match="without index.jsonl"):
+        spadgen.open_dataset(tmp_path / "unfinished")
+
+
+# ---- spadgen.torchdata.DatasetSamples --------------------------------------------------------------------------
+
+def test_dataset_samples_layout_values_and_length(ds, dataset_dir):
+    torch = pytest.importorskip("torch")
+    from spadgen.torchdata import FIELDS, DatasetSamples, RunDataset
+
+    run = ds.sample(0).run
+    K, N, H, W = run.K, run.frames_per_k, run.height, run.width
+    from test_torch import expected_layout
+    layout = expected_layout(K, N, 3, H, W)
+    del layout["frames"]  # the dataset's runs did not write frames.npy
+    layout.update({"sample": ((), torch.int64), "repeat": ((), torch.int64), "parameters": ((3,), torch.float32)})
+    with pytest.raises(ValueError, match="needs frames.npy"):
+        DatasetSamples(dataset_dir, fields=FIELDS)
+    fields = tuple(f for f in FIELDS if f != "frames")
+    samples = DatasetSamples(dataset_dir, fields=fields)
+    assert len(samples) == 3 * 2  # done samples x realisations
+    assert samples.parameter_names == NUMERIC
+    assert samples.realisations == [(0, 0), (0, 1), (1, 0), (1, 1), (3, 0), (3, 1)]
+    plain = RunDataset(samples.paths, fields=fields)  # the same loading: the same tensors
+    table = ds.table()
+    for j in range(len(samples)):
+        item = samples[j]
+        assert set(item) == set(layout)
+        for key, (shape, dtype) in layout.items():
+            assert tuple(item[key].shape) == shape and item[key].dtype == dtype, key
+        index, repeat = samples.realisations[j]
+        assert (int(item["sample"]), int(item["repeat"]), int(item["run"])) == (index, repeat, j)
+        realisation = ds.sample(index).realisations[repeat]
+        np.testing.assert_array_equal(item["counts"].numpy(), realisation.counts)
+        np.testing.assert_array_equal(item["depth"][0].numpy(), realisation.depth())
+        expected = np.array([table[k][index] for k in NUMERIC], np.float32)
+        np.testing.assert_array_equal(item["parameters"].numpy(), expected)
+        for key, value in plain[j].items():
+            assert torch.equal(item[key], value), key
+
+    patches = DatasetSamples(ds, patch_size=(10, 12), repeats="first")
+    assert len(patches) == 3 * (20 // 10) * (24 // 12)
+    item = patches[5]  # sample 1, its second patch: row 0, column 1
+    assert (int(item["sample"]), int(item["repeat"])) == (1, 0) and item["origin"].tolist() == [12, 0]
+    np.testing.assert_array_equal(item["counts"].numpy(), ds.sample(1).run.counts[:, 0:10, 12:24])
+    assert len(DatasetSamples(ds, patch_size=10)) == 3 * 2 * 4
+    assert [s for s, _ in DatasetSamples(ds.select(camera__width_px=1024)).realisations] == [0, 0, 3, 3]
+
+
+def test_dataset_samples_refuse_what_has_no_run(ds, dataset_dir):
+    pytest.importorskip("torch")
+    from spadgen.torchdata import DatasetSamples
+
+    with pytest.raises(ValueError, match=r"samples \[2\] are not done"):
+        DatasetSamples(dataset_dir, status=None)
+    with pytest.raises(ValueError, match="no sample to load with status='missing'"):
+        DatasetSamples(dataset_dir, status="missing")
+    with pytest.raises(ValueError, match="repeats must be"):
+        DatasetSamples(dataset_dir, repeats=2)
+
+
+@pytest.mark.parametrize("workers", [0, 2])
+def test_dataset_samples_in_a_data_loader(dataset_dir, workers):
+    torch = pytest.importorskip("torch")
+    from spadgen.torchdata import DatasetSamples
+
+    samples = DatasetSamples(dataset_dir, patch_size=10)
+    loader = torch.utils.data.DataLoader(samples, batch_size=2, num_workers=workers)
+    batches = list(loader)
+    assert len(batches) == len(samples) // 2 == 12
+    K = samples[0]["counts"].shape[0]
+    for b in batches:
+        assert tuple(b["counts"].shape) == (2, K, 10, 10) and tuple(b["parameters"].shape) == (2, 3)
+        assert b["sample"].dtype == torch.int64 and b["parameters"].dtype == torch.float32
+    order = [(s, r) for b in batches for s, r in zip(b["sample"].tolist(), b["repeat"].tolist())]
+    assert order == [pair for pair in samples.realisations for _ in range(4)]
+    np.testing.assert_array_equal(torch.cat([b["counts"] for b in batches]).numpy(),
+                                  np.stack([samples[j]["counts"].numpy() for j in range(len(samples))]))
+
+
+def test_the_cards_snippet_runs_in_the_folder(ds, dataset_dir, monkeypatch):
+    # dataset.md's "Reading it" (written by the C++ side) must stay true to this package.
+    code = ds.card.split("## Reading it", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
+    monkeypatch.chdir(dataset_dir)
+    namespace = {}
+    exec(compile(code, "dataset.md", "exec"), namespace)
+    assert namespace["rows"] == ds.index and namespace["ds"].indices.tolist() == [0, 1, 2, 3]
+    assert namespace["run"].metadata["dataset"]["index"] == 0 and namespace["run"].counts.shape == (101, 20, 24)
