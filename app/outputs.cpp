@@ -41,11 +41,12 @@ int64_t StackLayout::bytes() const {
   return std::accumulate(shape.begin(), shape.end(), writers::element_bytes(dtype), std::multiplies<int64_t>());
 }
 
-// Zarr chunks (docs/outputs.md, "Storage"): a (K, H, W) stack in 64 x 64 pixel columns holding every k, so
-// that a pixel's profile or a training patch decompresses one chunk and a chunk is complete as soon as the
-// tiles over its pixels are; a transient in 8 x 64 pixel blocks of every bin (mostly zeros: they compress
-// to little whatever their size, and a band of them stays small in memory).
-constexpr int64_t kChunkPixels = 64;
+// Zarr chunks (docs/outputs.md, "Storage"): a (K, H, W) stack in blocks of 32 rows x 64 columns holding
+// every k, so that a pixel's profile decompresses one chunk, and a chunk is complete (compressed, written,
+// freed) once the tiles over its pixels are: the chunks in memory are a band of 32 rows per thread. A
+// transient in blocks of 8 x 64 pixels holding every bin (mostly zeros: they compress to little whatever
+// their size, and a band of them stays small).
+constexpr int64_t kChunkRows = 32, kChunkColumns = 64;
 constexpr int64_t kTransientChunkRows = 8;
 
 std::vector<StackLayout> stack_layout(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img,
@@ -54,7 +55,7 @@ std::vector<StackLayout> stack_layout(const RunConfig& c, const sensor::SensorMo
   const PixelRect tc = transient_crop(c, img);
   const std::vector<int64_t> khw{K, img.height, img.width}, hwt{tc.height, tc.width, axis.bins};
   const bool zarr = c.outputs.storage == Storage::Zarr;
-  const std::vector<int64_t> khw_chunks{K, kChunkPixels, kChunkPixels}, hwt_chunks{kTransientChunkRows, kChunkPixels, axis.bins};
+  const std::vector<int64_t> khw_chunks{K, kChunkRows, kChunkColumns}, hwt_chunks{kTransientChunkRows, kChunkColumns, axis.bins};
   const std::vector<std::string> khw_dims{"k", "y", "x"}, hwt_dims{"y_transient", "x_transient", "t"};
   using writers::Dtype;
   const auto stack = [&](const std::string& name, Dtype dtype, const std::vector<int64_t>& shape, bool written,

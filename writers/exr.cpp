@@ -70,7 +70,6 @@ Imf::Compression exr_compression(ExrCompression c) {
     case ExrCompression::Rle: return Imf::RLE_COMPRESSION;
     case ExrCompression::Zips: return Imf::ZIPS_COMPRESSION;
     case ExrCompression::Zip: return Imf::ZIP_COMPRESSION;
-    case ExrCompression::Piz: return Imf::PIZ_COMPRESSION;
   }
   return Imf::ZIP_COMPRESSION;
 }
