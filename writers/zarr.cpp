@@ -210,8 +210,10 @@ ZarrWriter::ZarrWriter(const std::string& path, Dtype dtype, std::vector<int64_t
     : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
   m.path = path, m.dtype = dtype, m.eb = element_bytes(dtype), m.codec = codec(dtype), m.attributes = attributes;
+  // Chunks larger than the array are clipped to it (at least 1: an empty dimension still has a chunk extent).
   if (chunks.size() == shape.size())
-    for (size_t d = 0; d < shape.size(); ++d) chunks[d] = std::max<int64_t>(1, std::min(chunks[d], shape[d]));
+    for (size_t d = 0; d < shape.size(); ++d)
+      if (chunks[d] >= 1) chunks[d] = std::max<int64_t>(1, std::min(chunks[d], shape[d]));
   m.grid = Grid(std::move(shape), std::move(chunks), m.eb, "cannot write '" + path + "'");
   if (!m.attributes.is_object()) throw Error("cannot write '" + path + "': its attributes must be a JSON object");
   struct stat st {};
