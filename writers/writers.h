@@ -28,11 +28,11 @@ class StackWriter {
   // Writes `count` elements (raw bytes of this stack's dtype) starting at flat element index `offset`.
   virtual void write(int64_t offset, const void* data, int64_t count) = 0;
   // For a (K, H, W) stack: writes tile values [k * rect.count() + rect.index(x, y)] where the stack's
-  // pixel (x, y) is (x - origin_x, y - origin_y).
-  void write_khw(const PixelRect& rect, int origin_x, int origin_y, const void* data);
+  // pixel (x, y) is (x - origin_x, y - origin_y). (Row by row through write(), unless overridden.)
+  virtual void write_khw(const PixelRect& rect, int origin_x, int origin_y, const void* data);
   // For an (H, W, T) stack (transients): writes the pixels of `rect`, whose T values each lie in `data`
   // at [data_rect.index(x, y) * T + t] (data_rect contains rect: a TransientTile's halo is skipped).
-  void write_hwt(const PixelRect& rect, const PixelRect& data_rect, int origin_x, int origin_y, const void* data);
+  virtual void write_hwt(const PixelRect& rect, const PixelRect& data_rect, int origin_x, int origin_y, const void* data);
   // A hint that rows [row_begin, row_end) along `axis` are complete (NpyWriter: their pages leave the
   // resident set). A ZarrWriter needs no hint: a chunk leaves memory when its last element is written.
   virtual void release_rows(int axis, int64_t row_begin, int64_t row_end) {
@@ -109,6 +109,9 @@ class ZarrWriter : public StackWriter {
   ZarrWriter& operator=(const ZarrWriter&) = delete;
 
   void write(int64_t offset, const void* data, int64_t count) override;
+  // A tile chunk by chunk (one count per chunk, not per row).
+  void write_khw(const PixelRect& rect, int origin_x, int origin_y, const void* data) override;
+  void write_hwt(const PixelRect& rect, const PixelRect& data_rect, int origin_x, int origin_y, const void* data) override;
   // Compresses the chunks still partly written (their missing elements are 0), writes .zarray and
   // .zattrs, fsyncs every file and renames the store onto path().
   void commit() override;

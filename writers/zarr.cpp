@@ -188,6 +188,45 @@ struct ZarrWriter::Impl {
     return p;
   }
 
+  // Elements of chunk c delivered: the thread that delivers its last one stores it. Every other thread's
+  // copy into the chunk happened before its own count, which this acquire-release sees.
+  void delivered(int64_t c, int64_t n) {
+    const int64_t inside = grid.inside(c);
+    const int64_t written = chunks[c].written.fetch_add(n, std::memory_order_acq_rel) + n;
+    if (written > inside) throw Error("internal: elements of chunk " + grid.key(c) + " of '" + path + "' written more than once");
+    if (written == inside) store(c);
+  }
+
+  // The box [lo, hi) of a 3-dimensional array from `src`, whose element (a, b, c) of the box lies at
+  // a * stride[0] + b * stride[1] + c: chunk by chunk, a run along the last dimension per copy.
+  void write_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& hi, const char* src,
+                 const std::array<int64_t, 2>& stride) {
+    if (committed.load(std::memory_order_relaxed)) throw Error("cannot write to '" + path + "': already committed");
+    if (grid.rank() != 3) throw Error("a tile needs a 3-dimensional stack, but '" + path + "' has shape " + tuple_text(grid.shape));
+    for (size_t d = 0; d < 3; ++d)
+      if (lo[d] < 0 || hi[d] > grid.shape[d] || lo[d] > hi[d])
+        throw Error("a tile lies outside '" + path + "' (shape " + tuple_text(grid.shape) + ")");
+    if (lo[0] == hi[0] || lo[1] == hi[1] || lo[2] == hi[2]) return;
+    const std::vector<int64_t>& ch = grid.chunks;
+    for (int64_t ca = lo[0] / ch[0]; ca <= (hi[0] - 1) / ch[0]; ++ca)
+      for (int64_t cb = lo[1] / ch[1]; cb <= (hi[1] - 1) / ch[1]; ++cb)
+        for (int64_t cc = lo[2] / ch[2]; cc <= (hi[2] - 1) / ch[2]; ++cc) {
+          const int64_t c = (ca * grid.counts[1] + cb) * grid.counts[2] + cc;
+          const int64_t a0 = std::max(lo[0], ca * ch[0]), a1 = std::min(hi[0], (ca + 1) * ch[0]);
+          const int64_t b0 = std::max(lo[1], cb * ch[1]), b1 = std::min(hi[1], (cb + 1) * ch[1]);
+          const int64_t c0 = std::max(lo[2], cc * ch[2]), c1 = std::min(hi[2], (cc + 1) * ch[2]);
+          char* buf = buffer(c);
+          const auto run = size_t((c1 - c0) * eb);
+          for (int64_t a = a0; a < a1; ++a)
+            for (int64_t b = b0; b < b1; ++b) {
+              const int64_t to = ((a - ca * ch[0]) * ch[1] + (b - cb * ch[1])) * ch[2] + (c0 - cc * ch[2]);
+              const int64_t from = (a - lo[0]) * stride[0] + (b - lo[1]) * stride[1] + (c0 - lo[2]);
+              std::memcpy(buf + to * eb, src + from * eb, run);
+            }
+          delivered(c, (a1 - a0) * (b1 - b0) * (c1 - c0));
+        }
+  }
+
   void store(int64_t c) {
     Chunk& ch = chunks[c];
     char* data = ch.data.load(std::memory_order_acquire);
@@ -260,15 +299,27 @@ void ZarrWriter::write(int64_t offset, const void* data, int64_t count) {
     const Grid::Piece p = m.grid.piece(offset);
     const int64_t n = std::min(count, p.run);
     std::memcpy(m.buffer(p.chunk) + p.at * m.eb, src, size_t(n * m.eb));
-    // The thread that writes a chunk's last element stores it: every other thread's copy into the chunk
-    // happened before its own count, which this acquire-release sees.
-    const int64_t inside = m.grid.inside(p.chunk);
-    const int64_t written = m.chunks[p.chunk].written.fetch_add(n, std::memory_order_acq_rel) + n;
-    if (written > inside)
-      throw Error("internal: elements of chunk " + m.grid.key(p.chunk) + " of '" + m.path + "' written more than once");
-    if (written == inside) m.store(p.chunk);
+    m.delivered(p.chunk, n);
     offset += n, src += n * m.eb, count -= n;
   }
+}
+
+void ZarrWriter::write_khw(const PixelRect& rect, int origin_x, int origin_y, const void* data) {
+  Impl& m = *impl_;
+  const int64_t K = m.grid.rank() == 3 ? m.grid.shape[0] : 0;
+  const int64_t y0 = int64_t(rect.y0) - origin_y, x0 = int64_t(rect.x0) - origin_x;
+  m.write_box({0, y0, x0}, {K, y0 + rect.height, x0 + rect.width}, static_cast<const char*>(data), {rect.count(), rect.width});
+}
+
+void ZarrWriter::write_hwt(const PixelRect& rect, const PixelRect& data_rect, int origin_x, int origin_y, const void* data) {
+  Impl& m = *impl_;
+  if (rect.count() > 0 && !(data_rect.contains(rect.x0, rect.y0) && data_rect.contains(rect.x1() - 1, rect.y1() - 1)))
+    throw Error("write_hwt to '" + m.path + "': the tile's data does not cover the pixels to write");
+  if (rect.count() == 0) return;
+  const int64_t T = m.grid.rank() == 3 ? m.grid.shape[2] : 0;
+  const int64_t y0 = int64_t(rect.y0) - origin_y, x0 = int64_t(rect.x0) - origin_x;
+  const char* src = static_cast<const char*>(data) + data_rect.index(rect.x0, rect.y0) * T * m.eb;
+  m.write_box({y0, x0, 0}, {y0 + rect.height, x0 + rect.width, T}, src, {int64_t(data_rect.width) * T, T});
 }
 
 void ZarrWriter::commit() {
