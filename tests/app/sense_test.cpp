@@ -43,6 +43,20 @@ TEST_F(App, SenseReadsAZarrRunsLightAndWritesEitherStorage) {
   EXPECT_TRUE(slurp(dir_ / "run/transient.zarr/0.0.0") == slurp(dir_ / "sense_npy/transient.zarr/0.0.0"));
 }
 
+// The dataset sample docs/outputs.md recommends (Zarr, the saved light, no detection rate) gives the
+// detection rate back through sense, bit for bit the one a run writes.
+TEST_F(App, TheRecommendedSampleGivesTheDetectionRateBackBitForBit) {
+  ASSERT_EQ(sh("run " + kSmall + " -o " + (dir_ / "run").string()).code, 0);
+  ASSERT_EQ(sh("run " + kSmall + " --set outputs.storage=zarr --set outputs.light=true --set outputs.detection_rate=false -o " +
+               (dir_ / "sample").string()).code, 0);
+  EXPECT_FALSE(fs::exists(dir_ / "sample/detection_rate.zarr"));
+  const Result r = sh("sense " + (dir_ / "sample").string() + " -q --set outputs.detection_rate=true --set outputs.counts=false "
+                      "--set outputs.storage=npy -o " + (dir_ / "rates").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_TRUE(slurp(dir_ / "run/detection_rate.npy") == slurp(dir_ / "rates/detection_rate.npy"));
+  EXPECT_FALSE(fs::exists(dir_ / "rates/counts.npy"));
+}
+
 // The light's ring around a crop lets sense switch crosstalk on although the run had it off, and the
 // result is what a run with crosstalk writes; the same for another gate step and frame count.
 TEST_F(App, SenseWithOtherSensorSettingsWritesWhatARunWithThemWrites) {
