@@ -181,6 +181,7 @@ void LightWriter::write(std::vector<std::string>& files) {
   write_stack(layout(kAmbient), staging_.path(layout(kAmbient).file), ambient_, storage_json_);
   const std::vector<std::string> f = light_files(storage_);
   files.insert(files.end(), f.begin(), f.end());
+  if (storage_ == Storage::Zarr) write_zarr_group(staging_, "light", files);
 }
 
 SavedLight::SavedLight(const std::string& dir, const PixelRect& region, const TimeAxis& axis, Storage storage)

@@ -105,6 +105,12 @@ nlohmann::json storage_json(const StackLayout& s) {
           {"compressor", {{"id", "blosc"}, {"cname", "zstd"}, {"clevel", z.clevel}, {"shuffle", z.shuffle}, {"blocksize", z.blocksize}}}};
 }
 
+void write_zarr_group(const Staging& staging, const std::string& folder, std::vector<std::string>& files) {
+  const std::string file = folder.empty() ? ".zgroup" : folder + "/.zgroup";
+  writers::write_file_atomic(staging.path(file), nlohmann::json{{"zarr_format", 2}}.dump(4) + "\n");
+  files.push_back(file);
+}
+
 // The per-pixel EXR images, filled tile by tile. Every channel is created here, up front: tiles fill
 // them from several threads, and ExrImage::channel creates a channel on first use.
 class Outputs::Images {
@@ -245,6 +251,11 @@ class Outputs::Stacks {
       }
       files.push_back(layout[k].file);
     }
+    for (size_t k = 0; k < kStackCount; ++k)
+      if (layout[k].written && !layout[k].chunks.empty()) {
+        write_zarr_group(staging, "", files);
+        break;
+      }
   }
 
   void put(const TransientTile& t, const SensorTile& s) {

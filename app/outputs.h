@@ -45,6 +45,9 @@ std::vector<StackLayout> stack_layout(const RunConfig& c, const sensor::SensorMo
 std::unique_ptr<writers::StackWriter> open_stack(const StackLayout& s, const std::string& path);
 // What metadata.json records of a stack's container: its format, and a Zarr store's chunks and compressor.
 nlohmann::json storage_json(const StackLayout& s);
+// Makes `folder` (relative to the output folder, "" for it) a Zarr group holding the stores in it: writes
+// its .zgroup and lists it in `files`. Then zarr.open(run folder) and xarray.open_zarr open them together.
+void write_zarr_group(const Staging& staging, const std::string& folder, std::vector<std::string>& files);
 
 class Outputs {
  public:

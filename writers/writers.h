@@ -94,11 +94,12 @@ struct ZarrCodec {
 
 // A Zarr v2 array store: the folder `path` (e.g. "counts.zarr") holding .zarray, .zattrs and one file
 // per chunk named by its grid indices joined by '.' ("0.3.1"), each chunk C-order, full size (edge
-// chunks padded with the fill value 0) and compressed by Blosc (ZarrCodec). Writes land in chunk
+// chunks padded with 0) and compressed by Blosc (ZarrCodec); every chunk is stored, so .zarray names no
+// fill value. Writes land in chunk
 // buffers; a chunk is compressed and written by the thread that writes its last element, and then leaves
 // memory, so memory is bounded by the chunks being filled, not by the array. The store is built in a
 // hidden folder beside `path` and renamed onto it by commit() (files fsynced first); a writer destroyed
-// without commit() removes it. Chunks never written are not stored (readers see 0, as in a .npy).
+// without commit() removes it. Elements never written are 0, as in a .npy.
 class ZarrWriter : public StackWriter {
  public:
   // chunks: one extent per dimension (each at least 1), clipped to the shape. attributes: .zattrs.
@@ -112,8 +113,8 @@ class ZarrWriter : public StackWriter {
   // A tile chunk by chunk (one count per chunk, not per row).
   void write_khw(const PixelRect& rect, int origin_x, int origin_y, const void* data) override;
   void write_hwt(const PixelRect& rect, const PixelRect& data_rect, int origin_x, int origin_y, const void* data) override;
-  // Compresses the chunks still partly written (their missing elements are 0), writes .zarray and
-  // .zattrs, fsyncs every file and renames the store onto path().
+  // Compresses the chunks not yet stored (their missing elements are 0), writes .zarray and .zattrs,
+  // fsyncs every file and renames the store onto path().
   void commit() override;
   const std::string& path() const override;
   Dtype dtype() const override;
@@ -133,7 +134,7 @@ class ZarrWriter : public StackWriter {
 
 // A Zarr v2 array as ZarrWriter writes it (C order, '.' separated chunk keys, Blosc or no compressor, no
 // filters), read chunk by chunk. Throws spadgen::Error naming the store when it is not such an array or
-// a chunk does not decompress to its size. A missing chunk reads as the fill value.
+// a chunk does not decompress to its size. A missing chunk reads as the fill value (0 when there is none).
 class ZarrReader {
  public:
   // cache_chunks: decompressed chunks kept for read() (least recently used ones go first).

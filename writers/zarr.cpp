@@ -181,7 +181,7 @@ struct ZarrWriter::Impl {
     std::lock_guard<std::mutex> lock(alloc_mutex);
     if (char* p = ch.data.load(std::memory_order_acquire)) return p;
     if (ch.stored.load()) throw Error("internal: chunk " + grid.key(c) + " of '" + path + "' written after it was complete");
-    // Zeroed: the padding of edge chunks and elements never written are the fill value 0.
+    // Zeroed: the padding of edge chunks and elements never written are 0.
     char* p = static_cast<char*>(std::calloc(size_t(grid.chunk_elements), size_t(eb)));
     if (!p) throw Error("cannot write '" + path + "': out of memory for a chunk of " + tuple_text(grid.chunks));
     ch.data.store(p, std::memory_order_release);
@@ -282,7 +282,9 @@ json ZarrWriter::zarray() const {
           {"dtype", numpy_descr(m.dtype)},
           {"compressor", {{"id", "blosc"}, {"cname", kCompressor}, {"clevel", m.codec.clevel}, {"shuffle", m.codec.shuffle},
                           {"blocksize", m.codec.blocksize}}},
-          {"fill_value", 0},
+          // No fill value: every chunk is stored (commit() stores those never written, as zeros), and readers
+          // that take the fill value for "missing" (xarray masks it as NaN) see the values as they are.
+          {"fill_value", nullptr},
           {"order", "C"},
           {"filters", nullptr},
           {"dimension_separator", "."}};
@@ -325,8 +327,9 @@ void ZarrWriter::write_hwt(const PixelRect& rect, const PixelRect& data_rect, in
 void ZarrWriter::commit() {
   Impl& m = *impl_;
   if (m.committed.exchange(true)) throw Error("'" + m.path + "' was already committed");
+  // Chunks partly written, and chunks never written (zeros, as a .npy holds where nothing was written).
   for (int64_t c = 0; c < m.grid.n_chunks; ++c)
-    if (m.chunks[c].data.load()) m.store(c);
+    if (!m.chunks[c].stored.load()) m.buffer(c), m.store(c);
   write_file_atomic(m.temp + "/.zarray", zarray().dump(4) + "\n");
   write_file_atomic(m.temp + "/.zattrs", m.attributes.dump(4) + "\n");
   for (int64_t c = 0; c < m.grid.n_chunks; ++c)

@@ -43,9 +43,9 @@ def test_zarr_python_reads_what_numpy_reads(written, name):
     if expected.ndim == 3 and expected.size:
         assert same_bytes(z[:, 3:40, 17:66], expected[:, 3:40, 17:66])
         assert same_bytes(z[-1, :, -1], expected[-1, :, -1])
-    # The metadata: chunks clipped to the shape, Blosc zstd, C order, fill value 0, the attributes given.
+    # The metadata: chunks clipped to the shape, Blosc zstd, C order, no fill value, the attributes given.
     meta = json.loads((written / f"{name}.zarr" / ".zarray").read_text())
-    assert meta["zarr_format"] == 2 and meta["order"] == "C" and meta["filters"] is None and meta["fill_value"] == 0
+    assert meta["zarr_format"] == 2 and meta["order"] == "C" and meta["filters"] is None and meta["fill_value"] is None
     assert tuple(meta["chunks"]) == tuple(max(1, min(c, s)) for c, s in zip(CASES[name], expected.shape))
     assert meta["compressor"]["id"] == "blosc" and meta["compressor"]["cname"] == "zstd"
     assert meta["compressor"]["shuffle"] == (0 if expected.dtype == np.uint8 else 1)
@@ -102,3 +102,18 @@ def test_a_missing_zarr_stack_is_named(make_run):
     with pytest.raises(FileNotFoundError, match="outputs.light"):
         open_run(make_run("intensity"))["light/values"]
     assert not run.has("nothing.npy")
+
+
+def test_xarray_opens_a_zarr_run_as_a_dataset(make_run):
+    """The run folder and light/ are Zarr groups: xarray opens their stores lazily, with named dimensions
+    and the values as stored (no fill value for it to mask)."""
+    xr = pytest.importorskip("xarray")
+    npy, path = open_run(make_run("sweep")), make_run("sweep_zarr")
+    ds = xr.open_zarr(str(path), consolidated=False)
+    assert ds["counts.zarr"].dims == ("k", "y", "x") and ds["counts.zarr"].dtype == np.uint8
+    assert same_bytes(ds["counts.zarr"].values, npy.counts[...])
+    assert same_bytes(ds["detection_rate.zarr"].values, npy.detection_rate[...])
+    assert ds["transient.zarr"].dims == ("y_transient", "x_transient", "t")
+    light = xr.open_zarr(str(path), group="light", consolidated=False)
+    assert same_bytes(light["values.zarr"].values, npy["light/values"][...])
+    assert set(zarr.open_group(str(path), mode="r").array_keys()) >= {"counts.zarr", "detection_rate.zarr"}

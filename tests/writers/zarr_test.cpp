@@ -106,7 +106,7 @@ TEST(ZarrWriter, ChunksDecompressWithBloscToTheArrayCutIntoChunks) {
   EXPECT_EQ(zarray["chunks"], nlohmann::json({5, 32, 64}));
   EXPECT_EQ(zarray["dtype"], "<f4");
   EXPECT_EQ(zarray["order"], "C");
-  EXPECT_EQ(zarray["fill_value"], 0);
+  EXPECT_TRUE(zarray["fill_value"].is_null());
   EXPECT_TRUE(zarray["filters"].is_null());
   EXPECT_EQ(zarray["compressor"], nlohmann::json({{"id", "blosc"}, {"cname", "zstd"}, {"clevel", 1}, {"shuffle", 1},
                                                   {"blocksize", 8 << 20}}));
@@ -200,8 +200,8 @@ TEST(ZarrReader, ReadsEveryDtypeBackWholeAndInParts) {
   round_trip(int64_t(0), Dtype::I64);
 }
 
-// As in a .npy, what is never written is 0: a partly written chunk is stored with zeros at commit, a chunk
-// never touched is not stored at all (Zarr reads a missing chunk as the fill value).
+// As in a .npy, what is never written is 0: at commit a partly written chunk is stored with zeros, and so
+// is a chunk never touched (every chunk is stored: .zarray has no fill value to stand in for one).
 TEST(ZarrWriter, UnwrittenElementsAreZero) {
   TempDir dir;
   const float v[3] = {1.5f, 2.5f, 3.5f};
@@ -210,10 +210,17 @@ TEST(ZarrWriter, UnwrittenElementsAreZero) {
     w.write(42, v, 3);
     w.commit();
   }
-  EXPECT_TRUE(fs::exists(dir.file("p.zarr/4")));
-  EXPECT_FALSE(fs::exists(dir.file("p.zarr/0")));
   std::vector<float> expected(100, 0.0f);
   std::copy(v, v + 3, expected.begin() + 42);
+  for (int c = 0; c < 10; ++c) {
+    ASSERT_TRUE(fs::is_regular_file(dir.file("p.zarr/" + std::to_string(c)))) << c;
+    EXPECT_EQ(decompress<float>(dir.file("p.zarr/" + std::to_string(c)), 10),
+              std::vector<float>(expected.begin() + 10 * c, expected.begin() + 10 * c + 10)) << c;
+  }
+  EXPECT_EQ(ZarrReader(dir.file("p.zarr")).read_all<float>(), expected);
+  // A reader takes a missing chunk for zeros (the fill value, or 0 without one).
+  fs::remove(dir.file("p.zarr/4"));
+  std::fill(expected.begin() + 40, expected.begin() + 50, 0.0f);
   EXPECT_EQ(ZarrReader(dir.file("p.zarr")).read_all<float>(), expected);
 }
 
