@@ -1,5 +1,5 @@
 // Zarr v2 array stores (the Zarr storage specification, version 2), the subset spadgen writes: a folder
-// holding .zarray (JSON: shape, chunks, dtype, compressor, fill value, C order, no filters), .zattrs (JSON
+// holding .zarray (JSON: shape, chunks, dtype, compressor, C order, no filters, no fill value), .zattrs (JSON
 // attributes) and one file per chunk named by its grid indices joined by '.', each chunk a full-size
 // C-order block (edge chunks padded) compressed as one Blosc buffer. Blosc frames carry their own sizes,
 // shuffle and block size, so any Blosc reader (numcodecs, hence zarr-python) decodes them.
@@ -145,7 +145,7 @@ ZarrCodec ZarrWriter::codec(Dtype dtype) {
   // zstd at Blosc's clevel 1 (zstd level 1). Wider types byte-shuffled in blocks of 8 MiB, so that a
   // chunk of the app's is one block: float32 rates then compress 30 % better than in Blosc's default
   // blocks at this level, and faster. Bytes (counts) unshuffled in 64 kiB blocks: bit shuffle made them
-  // 12 % larger, 8 MiB blocks 5 %. Measured on the multi-object scene at 1024 x 1000 (docs/outputs.md, "Storage").
+  // 12 % larger, 8 MiB blocks 4 %. Measured on the multi-object scene at 1024 x 1000 (docs/outputs.md, "Storage").
   if (dtype == Dtype::U8) return {1, BLOSC_NOSHUFFLE, int64_t(64) << 10};
   return {1, BLOSC_SHUFFLE, int64_t(8) << 20};
 }
