@@ -10,17 +10,69 @@
 #include <cerrno>
 #include <cstring>
 
+#include "app/outputs.h"
 #include "app/staging.h"
 #include "core/error.h"
 #include "writers/atomic_file.h"
 
 namespace spadgen::app {
-using writers::NpyReader;
-using writers::NpyWriter;
 
-const std::vector<std::string>& light_files() {
-  static const std::vector<std::string> f = {"light/ranges.npy",      "light/offsets.npy",       "light/values.npy",
-                                             "light/laser_total.npy", "light/out_of_window.npy", "light/ambient_rate.npy"};
+namespace {
+
+// The saved light's arrays, in light_files() order, as stacks: their Zarr chunks and attributes.
+enum LightFile : size_t { kRanges, kOffsets, kValues, kLaserTotal, kOutOfWindow, kAmbient, kLightFiles };
+
+StackLayout light_layout(LightFile f, Storage storage, int64_t H, int64_t W, int64_t values) {
+  using writers::Dtype;
+  // Per pixel: 256 x 256 pixel blocks; the values: 2^20 of them (4 MiB) a chunk.
+  constexpr int64_t kBlock = 256, kValuesChunk = int64_t(1) << 20;
+  const std::vector<std::string> yx{"y_light", "x_light"};
+  StackLayout l;
+  switch (f) {
+    case kRanges:
+      l = {"light/ranges", Dtype::I32, {H, W, 2}, true, {kBlock, kBlock, 2},
+           "[bin_lo, bin_hi): the pixel's bins on metadata.json light.time_axis_s that may be non-zero", "bins",
+           {"y_light", "x_light", "lo_hi"}};
+      break;
+    case kOffsets:
+      l = {"light/offsets", Dtype::I64, {H * W + 1}, true, {kValuesChunk},
+           "where each pixel's bins start in values, pixels in row-major order", "elements", {"light_pixel_edge"}};
+      break;
+    case kValues:
+      l = {"light/values", Dtype::F32, {values}, true, {kValuesChunk},
+           "photons per laser pulse of bins bin_lo .. bin_hi - 1, pixel after pixel", "photons per pulse", {"light_value"}};
+      break;
+    case kLaserTotal:
+      l = {"light/laser_total", Dtype::F64, {H, W}, true, {kBlock, kBlock},
+           "laser photons per pulse, time-integrated (in and out of the window)", "photons per pulse", yx};
+      break;
+    case kOutOfWindow:
+      l = {"light/out_of_window", Dtype::F64, {H, W}, true, {kBlock, kBlock},
+           "the part of laser_total that arrived outside the time window", "photons per pulse", yx};
+      break;
+    default:
+      l = {"light/ambient_rate", Dtype::F32, {H, W}, true, {kBlock, kBlock}, "ambient photons per second",
+           "photons per second", yx};
+      break;
+  }
+  l.file += storage == Storage::Zarr ? ".zarr" : ".npy";
+  if (storage != Storage::Zarr) l.chunks.clear();
+  return l;
+}
+
+template <class T>
+void write_stack(const StackLayout& l, const std::string& path, const std::vector<T>& v, nlohmann::json& storage) {
+  const std::unique_ptr<writers::StackWriter> w = open_stack(l, path);
+  w->write(0, v.data(), int64_t(v.size()));
+  w->commit();
+  storage[l.file] = storage_json(l);
+}
+
+}  // namespace
+
+std::vector<std::string> light_files(Storage storage) {
+  std::vector<std::string> f;
+  for (size_t i = 0; i < kLightFiles; ++i) f.push_back(light_layout(LightFile(i), storage, 0, 0, 0).file);
   return f;
 }
 
@@ -28,19 +80,8 @@ PixelRect light_region(const PixelRect& img, int sensor_width, int sensor_height
   return grow_clipped(img, 1, sensor_width, sensor_height);
 }
 
-namespace {
-
-template <class T>
-void write_npy(const std::string& path, NpyWriter::Dtype dtype, const std::vector<int64_t>& shape, const std::vector<T>& v) {
-  NpyWriter w(path, dtype, shape);
-  w.write(0, v.data(), int64_t(v.size()));
-  w.commit();
-}
-
-}  // namespace
-
-LightWriter::LightWriter(const PixelRect& region, const TimeAxis& axis, const Staging& staging)
-    : region_(region), axis_(axis), staging_(staging), claimed_(size_t(region.count())) {
+LightWriter::LightWriter(const PixelRect& region, const TimeAxis& axis, const Staging& staging, Storage storage)
+    : region_(region), axis_(axis), staging_(staging), storage_(storage), claimed_(size_t(region.count())) {
   const auto n = size_t(region.count());
   spill_at_.assign(n, 0);
   ranges_.assign(2 * n, 0);
@@ -106,10 +147,11 @@ void LightWriter::write(std::vector<std::string>& files) {
     if (!claimed_[i].load()) throw Error("internal: the saved light misses a pixel of its region");
   std::vector<int64_t> offsets(n + 1, 0);
   for (size_t i = 0; i < n; ++i) offsets[i + 1] = offsets[i] + (ranges_[2 * i + 1] - ranges_[2 * i]);
-  const std::vector<std::string>& f = light_files();
   const int64_t H = region_.height, W = region_.width, total = offsets[n];
+  const auto layout = [&](LightFile f) { return light_layout(f, storage_, H, W, total); };
   {
-    NpyWriter values(staging_.path(f[2]), NpyWriter::Dtype::F32, {total});
+    const StackLayout l = layout(kValues);
+    const std::unique_ptr<writers::StackWriter> values = open_stack(l, staging_.path(l.file));
     if (total > 0) {
       const size_t bytes = size_t(spill_elements_.load()) * sizeof(float);
       void* m = ::mmap(nullptr, bytes, PROT_READ, MAP_PRIVATE, spill_fd_, 0);
@@ -122,45 +164,85 @@ void LightWriter::write(std::vector<std::string>& files) {
         const size_t y1 = std::min(size_t(H), y0 + kBand);
         tbb::parallel_for(y0, y1, [&](size_t y) {
           for (size_t i = y * size_t(W); i < (y + 1) * size_t(W); ++i)
-            values.write(offsets[i], spill + spill_at_[i], offsets[i + 1] - offsets[i]);
+            values->write(offsets[i], spill + spill_at_[i], offsets[i + 1] - offsets[i]);
         });
-        values.release_rows(0, offsets[y0 * size_t(W)], offsets[y1 * size_t(W)]);
+        values->release_rows(0, offsets[y0 * size_t(W)], offsets[y1 * size_t(W)]);
         ::madvise(m, bytes, MADV_DONTNEED);
       }
       ::munmap(m, bytes);
     }
-    values.commit();
+    values->commit();
+    storage_json_[l.file] = storage_json(l);
   }
-  write_npy(staging_.path(f[0]), NpyWriter::Dtype::I32, {H, W, 2}, ranges_);
-  write_npy(staging_.path(f[1]), NpyWriter::Dtype::I64, {int64_t(n) + 1}, offsets);
-  write_npy(staging_.path(f[3]), NpyWriter::Dtype::F64, {H, W}, laser_total_);
-  write_npy(staging_.path(f[4]), NpyWriter::Dtype::F64, {H, W}, out_of_window_);
-  write_npy(staging_.path(f[5]), NpyWriter::Dtype::F32, {H, W}, ambient_);
+  write_stack(layout(kRanges), staging_.path(layout(kRanges).file), ranges_, storage_json_);
+  write_stack(layout(kOffsets), staging_.path(layout(kOffsets).file), offsets, storage_json_);
+  write_stack(layout(kLaserTotal), staging_.path(layout(kLaserTotal).file), laser_total_, storage_json_);
+  write_stack(layout(kOutOfWindow), staging_.path(layout(kOutOfWindow).file), out_of_window_, storage_json_);
+  write_stack(layout(kAmbient), staging_.path(layout(kAmbient).file), ambient_, storage_json_);
+  const std::vector<std::string> f = light_files(storage_);
   files.insert(files.end(), f.begin(), f.end());
+  if (storage_ == Storage::Zarr) write_zarr_group(staging_, "light", files);
 }
 
-SavedLight::SavedLight(const std::string& dir, const PixelRect& region, const TimeAxis& axis)
-    : region_(region), axis_(axis), ranges_(dir + "/" + light_files()[0]), offsets_(dir + "/" + light_files()[1]),
-      values_(dir + "/" + light_files()[2]), laser_total_(dir + "/" + light_files()[3]),
-      out_of_window_(dir + "/" + light_files()[4]), ambient_(dir + "/" + light_files()[5]) {
+SavedLight::SavedLight(const std::string& dir, const PixelRect& region, const TimeAxis& axis, Storage storage)
+    : region_(region), axis_(axis) {
   const int64_t H = region.height, W = region.width, n = H * W;
-  ranges_.expect_shape({H, W, 2}, "the light's bin ranges");
-  offsets_.expect_shape({n + 1}, "the light's offsets");
-  laser_total_.expect_shape({H, W}, "the light's laser totals");
-  out_of_window_.expect_shape({H, W}, "the light's out-of-window totals");
-  ambient_.expect_shape({H, W}, "the light's ambient rates");
-  // Every pixel's range must lie on the axis and match its slice of values.npy, so tile() reads nothing
+  const std::vector<std::string> f = light_files(storage);
+  const auto path = [&](LightFile i) { return dir + "/" + f[i]; };
+  const auto expect_shape = [](const std::string& p, const std::vector<int64_t>& shape, const std::vector<int64_t>& want,
+                               const std::string& what) {
+    if (shape == want) return;
+    const auto text = [](const std::vector<int64_t>& v) {
+      std::string t = "(";
+      for (size_t i = 0; i < v.size(); ++i) t += (i ? ", " : "") + std::to_string(v[i]);
+      return t + ")";
+    };
+    throw Error("'" + p + "': " + what + ": expected shape " + text(want) + ", found " + text(shape));
+  };
+  const std::vector<std::pair<std::vector<int64_t>, std::string>> want = {
+      {{H, W, 2}, "the light's bin ranges"}, {{n + 1}, "the light's offsets"}, {{}, ""},
+      {{H, W}, "the light's laser totals"},  {{H, W}, "the light's out-of-window totals"}, {{H, W}, "the light's ambient rates"}};
+  if (storage == Storage::Zarr) {
+    std::vector<writers::ZarrReader> z;
+    for (size_t i = 0; i < kLightFiles; ++i) {
+      z.emplace_back(path(LightFile(i)));
+      if (i != kValues) expect_shape(z.back().path(), z.back().shape(), want[i].first, want[i].second);
+    }
+    ranges_z_ = z[kRanges].read_all<int32_t>(), offsets_z_ = z[kOffsets].read_all<int64_t>();
+    laser_total_z_ = z[kLaserTotal].read_all<double>(), out_of_window_z_ = z[kOutOfWindow].read_all<double>();
+    ambient_z_ = z[kAmbient].read_all<float>();
+    if (z[kValues].dtype() != writers::Dtype::F32 || z[kValues].shape().size() != 1)
+      throw Error("'" + z[kValues].path() + "': the light's values: expected a 1-dimensional float32 array");
+    values_elements_ = z[kValues].elements();
+    // Tiles in flight each read a few chunks of 4 MiB.
+    values_z_ = std::make_unique<writers::ZarrReader>(path(kValues), 32);
+    ranges_ = ranges_z_.data(), offsets_ = offsets_z_.data(), laser_total_ = laser_total_z_.data();
+    out_of_window_ = out_of_window_z_.data(), ambient_ = ambient_z_.data();
+  } else {
+    for (size_t i = 0; i < kLightFiles; ++i) {
+      npy_.emplace_back(path(LightFile(i)));
+      if (i != kValues) npy_.back().expect_shape(want[i].first, want[i].second);
+    }
+    ranges_ = npy_[kRanges].data<int32_t>(), offsets_ = npy_[kOffsets].data<int64_t>(), values_ = npy_[kValues].data<float>();
+    laser_total_ = npy_[kLaserTotal].data<double>(), out_of_window_ = npy_[kOutOfWindow].data<double>();
+    ambient_ = npy_[kAmbient].data<float>();
+    values_elements_ = npy_[kValues].elements();
+  }
+  // Every pixel's range must lie on the axis and match its slice of the values, so tile() reads nothing
   // out of bounds whatever the files hold.
-  const int32_t* r = ranges_.data<int32_t>();
-  const int64_t* o = offsets_.data<int64_t>();
-  values_.data<float>();
-  laser_total_.data<double>(), out_of_window_.data<double>(), ambient_.data<float>();
-  if (o[0] != 0 || o[n] != values_.elements())
-    throw Error("'" + offsets_.path() + "': the offsets do not span values.npy");
+  const int32_t* r = ranges_;
+  const int64_t* o = offsets_;
+  if (o[0] != 0 || o[n] != values_elements_)
+    throw Error("'" + path(kOffsets) + "': the offsets do not span the values");
   for (int64_t i = 0; i < n; ++i)
     if (r[2 * i] < 0 || r[2 * i + 1] < r[2 * i] || r[2 * i + 1] > axis.bins || o[i + 1] - o[i] != r[2 * i + 1] - r[2 * i])
-      throw Error("'" + ranges_.path() + "': pixel " + std::to_string(i) + " has a bin range that does not fit the time axis (" +
+      throw Error("'" + path(kRanges) + "': pixel " + std::to_string(i) + " has a bin range that does not fit the time axis (" +
                   std::to_string(axis.bins) + " bins) or its offsets");
+}
+
+void SavedLight::values(int64_t offset, int64_t count, float* dest) const {
+  if (values_) std::copy(values_ + offset, values_ + offset + count, dest);
+  else values_z_->read(offset, count, dest);
 }
 
 TransientTile SavedLight::tile(const PixelRect& rect, const PixelRect& data_rect) const {
@@ -174,19 +256,25 @@ TransientTile SavedLight::tile(const PixelRect& rect, const PixelRect& data_rect
   t.transient.assign(nd * T, 0.0f);
   t.laser_total.resize(nd), t.out_of_window.resize(nd), t.ambient_rate.resize(nd);
   if (T > 0) t.bin_lo.resize(nd), t.bin_hi.resize(nd);
-  const int32_t* r = ranges_.data<int32_t>();
-  const int64_t* o = offsets_.data<int64_t>();
-  const float* v = values_.data<float>();
-  for (int y = dr.y0; y < dr.y1(); ++y)
+  const int32_t* r = ranges_;
+  const int64_t* o = offsets_;
+  std::vector<float> row;  // a row's values: its pixels are contiguous in the values
+  for (int y = dr.y0; y < dr.y1(); ++y) {
+    const auto first = size_t(region_.index(dr.x0, y)), last = size_t(region_.index(dr.x1() - 1, y));
+    if (T > 0) {
+      row.resize(size_t(o[last + 1] - o[first]));
+      values(o[first], int64_t(row.size()), row.data());
+    }
     for (int x = dr.x0; x < dr.x1(); ++x) {
       const auto di = size_t(dr.index(x, y)), ri = size_t(region_.index(x, y));
-      t.laser_total[di] = laser_total_.data<double>()[ri];
-      t.out_of_window[di] = out_of_window_.data<double>()[ri];
-      t.ambient_rate[di] = ambient_.data<float>()[ri];
+      t.laser_total[di] = laser_total_[ri];
+      t.out_of_window[di] = out_of_window_[ri];
+      t.ambient_rate[di] = ambient_[ri];
       if (T == 0) continue;
       t.bin_lo[di] = r[2 * ri], t.bin_hi[di] = r[2 * ri + 1];
-      std::copy(v + o[ri], v + o[ri + 1], t.transient.data() + di * T + size_t(r[2 * ri]));
+      std::copy(row.begin() + (o[ri] - o[first]), row.begin() + (o[ri + 1] - o[first]), t.transient.data() + di * T + size_t(r[2 * ri]));
     }
+  }
   if (row_scale_.empty()) return t;
   for (int y = dr.y0; y < dr.y1(); ++y) {
     const double s = row_scale_.at(size_t(y));

@@ -114,6 +114,9 @@ json metadata(const scenes::ResolvedRun& resolved, const std::vector<std::string
   if (!r.ground_truth_summary.is_null()) meta["ground_truth_summary"] = ojson::parse(r.ground_truth_summary.dump());
   if (r.dataset) meta["dataset"] = ojson::parse(r.dataset->dump());
   meta["counts_dtype"] = r.counts_u8 ? "uint8" : "uint16";
+  meta["storage"] = {{"stacks", to_string(cfg.outputs.storage)},
+                     {"exr_compression", to_string(cfg.outputs.exr_compression)},
+                     {"files", ojson::parse(r.storage.dump())}};
   meta["preview_profile_pixels"] = r.profile_pixels;
   meta["warnings"] = resolved.warnings;
   for (const std::string& w : scene_warnings) meta["warnings"].push_back(w);

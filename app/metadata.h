@@ -53,6 +53,8 @@ struct RunRecord {
   bool counts_u8 = true;
   PixelRect transient_crop;
   std::vector<std::pair<int, int>> profile_pixels;
+  // Per stack written (relative path): its container, and a Zarr store's chunks and compressor.
+  nlohmann::json storage = nlohmann::json::object();
   // outputs.light: the pixels it covers (sensor coordinates) and the size of its values.
   std::optional<PixelRect> light_region;
   int64_t light_values_bytes = 0;

@@ -41,25 +41,77 @@ const sensor::DeclaredOutput* find_declared(const std::vector<sensor::DeclaredOu
 }  // namespace
 
 int64_t StackLayout::bytes() const {
-  return std::accumulate(shape.begin(), shape.end(), NpyWriter::element_bytes(dtype), std::multiplies<int64_t>());
+  return std::accumulate(shape.begin(), shape.end(), writers::element_bytes(dtype), std::multiplies<int64_t>());
 }
+
+// Zarr chunks (docs/outputs.md, "Storage"): a (K, H, W) stack in blocks of 32 rows x 64 columns holding
+// every k, so that a pixel's profile decompresses one chunk, and a chunk is complete (compressed, written,
+// freed) once the tiles over its pixels are: the chunks in memory are a band of 32 rows per thread. A
+// transient in blocks of 8 x 64 pixels holding every bin (mostly zeros: they compress to little whatever
+// their size, and a band of them stays small).
+constexpr int64_t kChunkRows = 32, kChunkColumns = 64;
+constexpr int64_t kTransientChunkRows = 8;
 
 std::vector<StackLayout> stack_layout(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img,
                                       const TimeAxis& axis) {
   const int64_t K = sensor.K(), frames = sensor.frames_per_k();
   const PixelRect tc = transient_crop(c, img);
   const std::vector<int64_t> khw{K, img.height, img.width}, hwt{tc.height, tc.width, axis.bins};
+  const bool zarr = c.outputs.storage == Storage::Zarr;
+  const std::vector<int64_t> khw_chunks{K, kChunkRows, kChunkColumns}, hwt_chunks{kTransientChunkRows, kChunkColumns, axis.bins};
+  const std::vector<std::string> khw_dims{"k", "y", "x"}, hwt_dims{"y_transient", "x_transient", "t"};
+  using writers::Dtype;
+  const auto stack = [&](const std::string& name, Dtype dtype, const std::vector<int64_t>& shape, bool written,
+                         bool per_k, std::string what, std::string unit) {
+    StackLayout l{name + (zarr ? ".zarr" : ".npy"), dtype, shape, written, {}, std::move(what), std::move(unit),
+                  per_k ? khw_dims : hwt_dims};
+    if (zarr) l.chunks = per_k ? khw_chunks : hwt_chunks;
+    return l;
+  };
   std::vector<StackLayout> s(kStackCount);
-  s[kExpectedCounts] = {"expected_counts.npy", NpyWriter::Dtype::F32, khw, c.outputs.expected_counts};
-  s[kDetectionRate] = {"detection_rate.npy", NpyWriter::Dtype::F32, khw, c.outputs.detection_rate};
+  s[kExpectedCounts] = stack("expected_counts", Dtype::F32, khw, c.outputs.expected_counts, true,
+                             "noise-free expected counts N (1 - exp(-lambda_k)), N = acquisition.frames_per_k", "counts");
+  s[kDetectionRate] = stack("detection_rate", Dtype::F32, khw, c.outputs.detection_rate, true,
+                            "lambda_k: mean avalanches per binary frame at gate position (or exposure) k, noise-free, "
+                            "crosstalk, dark counts and ambient light included", "avalanches per frame");
   // Counts never exceed the frames summed into them.
-  s[kCounts] = {"counts.npy", frames <= 255 ? NpyWriter::Dtype::U8 : NpyWriter::Dtype::U16, khw, c.outputs.counts};
-  // One bit per frame and pixel, 8 pixels of a row to a byte.
-  s[kFrames] = {"frames.npy", NpyWriter::Dtype::U8, {K, frames, img.height, (img.width + 7) / 8}, c.outputs.frames};
-  s[kTransient] = {"transient.npy", NpyWriter::Dtype::F32, hwt, c.outputs.transient};
-  s[kTransientIndirect] = {"transient_indirect.npy", NpyWriter::Dtype::F32, hwt,
-                           c.outputs.transient && c.render.split_direct_indirect};
+  s[kCounts] = stack("counts", frames <= 255 ? Dtype::U8 : Dtype::U16, khw, c.outputs.counts, true,
+                     "sampled counts: the binary frames of gate position (or exposure) k with an avalanche", "counts");
+  // One bit per frame and pixel, 8 pixels of a row to a byte: random bits, which no compressor shrinks,
+  // so a .npy whatever the storage.
+  s[kFrames] = {"frames.npy", Dtype::U8, {K, frames, img.height, (img.width + 7) / 8}, c.outputs.frames, {},
+                "binary frames, 8 pixels per byte along x, least significant bit first", "", {"k", "n", "y", "x_byte"}};
+  s[kTransient] = stack("transient", Dtype::F32, hwt, c.outputs.transient, false,
+                        "photons per laser pulse arriving in time bin t (metadata.json time_axis) on the pixel's "
+                        "photosensitive area, before PDP", "photons per pulse");
+  s[kTransientIndirect] = stack("transient_indirect", Dtype::F32, hwt, c.outputs.transient && c.render.split_direct_indirect,
+                                false, "the part of transient carried by paths with two or more scattering vertices "
+                                "(direct = transient - transient_indirect)", "photons per pulse");
   return s;
+}
+
+std::unique_ptr<writers::StackWriter> open_stack(const StackLayout& s, const std::string& path) {
+  if (s.chunks.empty()) return std::make_unique<NpyWriter>(path, s.dtype, s.shape);
+  // _ARRAY_DIMENSIONS names the dimensions for xarray.
+  const nlohmann::json attributes = {{"_ARRAY_DIMENSIONS", s.dims}, {"description", s.what}, {"units", s.unit},
+                                     {"spadgen_version", SPADGEN_VERSION}};
+  return std::make_unique<writers::ZarrWriter>(path, s.dtype, s.shape, s.chunks, attributes);
+}
+
+nlohmann::json storage_json(const StackLayout& s) {
+  if (s.chunks.empty()) return {{"format", "npy"}};
+  const writers::ZarrCodec z = writers::ZarrWriter::codec(s.dtype);
+  std::vector<int64_t> chunks = s.chunks;  // as the writer clips them to the shape
+  for (size_t d = 0; d < chunks.size(); ++d) chunks[d] = std::max<int64_t>(1, std::min(chunks[d], s.shape[d]));
+  return {{"format", "zarr"},
+          {"chunks", chunks},
+          {"compressor", {{"id", "blosc"}, {"cname", "zstd"}, {"clevel", z.clevel}, {"shuffle", z.shuffle}, {"blocksize", z.blocksize}}}};
+}
+
+void write_zarr_group(const Staging& staging, const std::string& folder, std::vector<std::string>& files) {
+  const std::string file = folder.empty() ? ".zgroup" : folder + "/.zgroup";
+  writers::write_file_atomic(staging.path(file), nlohmann::json{{"zarr_format", 2}}.dump(4) + "\n");
+  files.push_back(file);
 }
 
 // The per-pixel EXR images, filled tile by tile. Every channel is created here, up front: tiles fill
@@ -69,7 +121,8 @@ class Outputs::Images {
   // intensity: the mode's declaration of intensity.exr, null when the mode has none.
   Images(const RunConfig& cfg, const PixelRect& img, const sensor::DeclaredOutput* intensity,
          const std::set<std::string>& provided)
-      : provided_(provided), img_(img), layers_(cfg.render.max_layers), gt_on_(cfg.outputs.ground_truth), intensity_decl_(intensity),
+      : provided_(provided), img_(img), layers_(cfg.render.max_layers), gt_on_(cfg.outputs.ground_truth),
+        compression_(cfg.outputs.exr_compression), intensity_decl_(intensity),
         gt_(img.width, img.height), laser_(img.width, img.height), ambient_(img.width, img.height),
         maps_(img.width, img.height), intensity_(img.width, img.height) {
     if (gt_on_) {
@@ -154,7 +207,7 @@ class Outputs::Images {
       if (provided_.count(name)) return;
       stamp(e, p);
       e.set_attribute("spadgen_units", units);
-      e.write(staging.path(name));
+      e.write(staging.path(name), compression_);
       files.push_back(name);
     };
     if (gt_on_) {
@@ -199,6 +252,7 @@ class Outputs::Images {
   PixelRect img_;
   int layers_;
   bool gt_on_;
+  ExrCompression compression_;
   const sensor::DeclaredOutput* intensity_decl_;
   writers::ExrImage gt_, laser_, ambient_, maps_, intensity_;
   std::vector<float*> gt_ch_, layer_range_, layer_trans_, laser_ch_, maps_ch_, intensity_ch_;
@@ -206,18 +260,29 @@ class Outputs::Images {
   std::vector<double> pixel_laser_, pixel_oow_, pixel_beyond_;
 };
 
-// The NumPy stacks, streamed to disk tile by tile.
+// The stacks, streamed to disk tile by tile (.npy files or Zarr stores).
 class Outputs::Stacks {
  public:
   Stacks(const std::vector<StackLayout>& layout, const PixelRect& img, const PixelRect& transient_crop,
          const Staging& staging, std::vector<std::string>& files)
-      : img_(img), tcrop_(transient_crop), counts_u8_(layout[kCounts].dtype == NpyWriter::Dtype::U8),
+      : layout_(layout), img_(img), tcrop_(transient_crop), counts_u8_(layout[kCounts].dtype == writers::Dtype::U8),
         band_width_(size_t(img.height)), complete_(size_t(img.height), 0) {
     for (size_t k = 0; k < kStackCount; ++k) {
       if (!layout[k].written) continue;
-      w_[k] = std::make_unique<NpyWriter>(staging.path(layout[k].file), layout[k].dtype, layout[k].shape);
+      if (k == kFrames) {
+        auto frames = std::make_unique<NpyWriter>(staging.path(layout[k].file), layout[k].dtype, layout[k].shape);
+        frames_ = frames.get();
+        w_[k] = std::move(frames);
+      } else {
+        w_[k] = open_stack(layout[k], staging.path(layout[k].file));
+      }
       files.push_back(layout[k].file);
     }
+    for (size_t k = 0; k < kStackCount; ++k)
+      if (layout[k].written && !layout[k].chunks.empty()) {
+        write_zarr_group(staging, "", files);
+        break;
+      }
   }
 
   void put(const TransientTile& t, const SensorTile& s) {
@@ -231,7 +296,7 @@ class Outputs::Stacks {
     } else if (w_[kCounts]) {
       w_[kCounts]->write_khw(r, img_.x0, img_.y0, s.counts.data());
     }
-    if (w_[kFrames]) w_[kFrames]->write_frames(r, img_.x0, img_.y0, s.frames.data());
+    if (frames_) frames_->write_frames(r, img_.x0, img_.y0, s.frames.data());
     const int x0 = std::max(r.x0, tcrop_.x0), x1 = std::min(r.x1(), tcrop_.x1());
     const int y0 = std::max(r.y0, tcrop_.y0), y1 = std::min(r.y1(), tcrop_.y1());
     if (t.axis.bins != 0 && x1 > x0 && y1 > y0) {
@@ -249,13 +314,20 @@ class Outputs::Stacks {
   }
   bool counts_u8() const { return counts_u8_; }
   const PixelRect& transient_crop() const { return tcrop_; }
+  // metadata.json's storage record of every stack written.
+  nlohmann::json storage() const {
+    nlohmann::json j = nlohmann::json::object();
+    for (size_t k = 0; k < kStackCount; ++k)
+      if (w_[k]) j[layout_[k].file] = storage_json(layout_[k]);
+    return j;
+  }
 
  private:
-  // The stacks are mapped for writing (NpyWriter), so every page a tile touched stays in the run's
+  // A .npy stack is mapped for writing (NpyWriter), so every page a tile touched stays in the run's
   // resident set until released. Tiles come in bands (rows of tiles sharing y0 and height): when a band
   // is complete, the rows of the complete bands around it leave the resident set. Only whole pages
   // inside complete rows are released, so no page another tile still writes is touched; a page at a band
-  // boundary goes when the band beyond it completes.
+  // boundary goes when the band beyond it completes. (A Zarr store frees each chunk once it is complete.)
   void tile_done(const PixelRect& r) {
     const auto row = size_t(r.y0 - img_.y0);
     if (band_width_[row].fetch_add(r.width) + r.width != img_.width) return;
@@ -275,9 +347,11 @@ class Outputs::Stacks {
       if (w_[k] && tb > ta) w_[k]->release_rows(0, ta, tb);
   }
 
+  std::vector<StackLayout> layout_;
   PixelRect img_, tcrop_;
   bool counts_u8_;
-  std::array<std::unique_ptr<NpyWriter>, kStackCount> w_;  // null: not written
+  std::array<std::unique_ptr<writers::StackWriter>, kStackCount> w_;  // null: not written
+  NpyWriter* frames_ = nullptr;                                       // w_[kFrames], always a .npy
   std::vector<std::atomic<int>> band_width_;  // [row - img.y0]: pixels written in the band starting there
   std::vector<char> complete_;                // [row - img.y0]: the row is complete
   std::mutex release_mutex_;
@@ -347,6 +421,7 @@ void Outputs::report(RunRecord& r) const {
   r.counts_u8 = stacks_->counts_u8();
   r.transient_crop = stacks_->transient_crop();
   r.profile_pixels = probe_->pixels();
+  r.storage = stacks_->storage();
 }
 
 }  // namespace spadgen::app

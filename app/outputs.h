@@ -21,21 +21,33 @@ namespace spadgen::app {
 
 class Staging;
 
-// The NumPy stacks, in the order metadata.json lists them; they index stack_layout().
+// The stacks, in the order metadata.json lists them; they index stack_layout().
 enum Stack : size_t { kExpectedCounts, kDetectionRate, kCounts, kFrames, kTransient, kTransientIndirect, kStackCount };
 
 struct StackLayout {
-  std::string file;
-  writers::NpyWriter::Dtype dtype;
+  std::string file;  // relative to the output folder: "counts.npy", or "counts.zarr" with outputs.storage = zarr
+  writers::Dtype dtype;
   std::vector<int64_t> shape;
   bool written = false;  // the scene file's outputs ask for it
-  // Bytes of data, without the header.
+  // A Zarr store's chunks (fixed per stack, whatever the tiles and threads); empty: a .npy file.
+  std::vector<int64_t> chunks;
+  // What an element is, its unit and the names of the dimensions (a Zarr store's .zattrs).
+  std::string what, unit;
+  std::vector<std::string> dims;
+  // Bytes of data, without the header (uncompressed).
   int64_t bytes() const;
 };
 
 // Every stack a run of this scene can write, written or not, indexed by Stack.
 std::vector<StackLayout> stack_layout(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img,
                                       const TimeAxis& axis);
+// Opens a stack for writing at `path`: a .npy file, or a Zarr store with its attributes.
+std::unique_ptr<writers::StackWriter> open_stack(const StackLayout& s, const std::string& path);
+// What metadata.json records of a stack's container: its format, and a Zarr store's chunks and compressor.
+nlohmann::json storage_json(const StackLayout& s);
+// Makes `folder` (relative to the output folder, "" for it) a Zarr group holding the stores in it: writes
+// its .zgroup and lists it in `files`. Then zarr.open(run folder) and xarray.open_zarr open them together.
+void write_zarr_group(const Staging& staging, const std::string& folder, std::vector<std::string>& files);
 
 class Outputs {
  public:

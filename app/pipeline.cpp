@@ -77,7 +77,7 @@ RunResult run(const RunOptions& options) {
   Outputs outputs(cfg, sensor, img, axis, staging);
   const PixelRect light_rect = light_region(img, cfg.camera.width_px, cfg.camera.height_px);
   std::unique_ptr<LightWriter> light;
-  if (cfg.outputs.light) light = std::make_unique<LightWriter>(light_rect, axis, staging);
+  if (cfg.outputs.light) light = std::make_unique<LightWriter>(light_rect, axis, staging, cfg.outputs.storage);
 
   // Tiles are laid over the output image; the renderer and the sensor see full-sensor coordinates.
   std::vector<PixelRect> tiles = make_tiles(img.width, img.height, cfg.render.tile_size);
@@ -127,6 +127,7 @@ RunResult run(const RunOptions& options) {
   order_files(files);
 
   outputs.report(record);
+  if (light) record.storage.update(light->storage());
   record.files = files;
   record.photons_per_pulse_emitted = renderer.photons_per_pulse();
   record.camera = camera_json(render::Camera(cfg.camera, scene), img);
@@ -165,12 +166,12 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
   o << "image: " << img.width << " x " << img.height << " pixels; K = " << sensor.K() << "\n";
   o << "time axis: " << axis.bins << " bins of " << axis.bin_width_s / kPs << " ps from " << axis.start_s / kNs << " ns to "
     << axis.end_s() / kNs << " ns\n";
-  // Every stack the run will write, from the same layout the run uses.
+  // Every stack the run will write, from the same layout the run uses (a Zarr store: uncompressed, at most).
   o << "output sizes:";
   const char* sep = " ";
   for (const StackLayout& st : stack_layout(c, sensor, img, axis)) {
     if (!st.written) continue;
-    o << sep << st.file << " " << int64_t(std::ceil(double(st.bytes()) / 1e6)) << " MB";
+    o << sep << st.file << (st.chunks.empty() ? " " : " at most ") << int64_t(std::ceil(double(st.bytes()) / 1e6)) << " MB";
     sep = ", ";
   }
   o << "\n";

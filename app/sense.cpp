@@ -48,7 +48,8 @@ bool sense_may_set(const std::string& written) {
     // A malformed key is reported as such when the scene file is parsed.
   }
   for (const char* prefix : {"sensor.", "acquisition.", "seeds.chip", "seeds.noise", "outputs.expected_counts",
-                             "outputs.detection_rate", "outputs.counts", "outputs.frames", "outputs.previews"})
+                             "outputs.detection_rate", "outputs.counts", "outputs.frames", "outputs.previews",
+                             "outputs.storage", "outputs.exr_compression"})
     if (key.rfind(prefix, 0) == 0) return true;
   return false;
 }
@@ -73,13 +74,19 @@ T field(const json& meta, const json::json_pointer& p, const fs::path& dir) {
 PixelRect rect_of(const json& a) { return {a.at(0).get<int>(), a.at(1).get<int>(), a.at(2).get<int>(), a.at(3).get<int>()}; }
 
 // The run's file `rel` into the staging folder: a hard link (the run's files are never modified in place;
-// a later run replaces them with a new file), or a copy across file systems.
+// a later run replaces them with a new file), or a copy across file systems. A Zarr store's folder is
+// made anew and its files linked.
 void link_into(const fs::path& from, const Staging& staging, const std::string& rel) {
   const fs::path to = staging.path(rel);
   fs::create_directories(to.parent_path());
-  std::error_code ec;
-  fs::create_hard_link(from, to, ec);
-  if (ec) fs::copy_file(from, to, fs::copy_options::overwrite_existing);
+  const auto link = [](const fs::path& a, const fs::path& b) {
+    std::error_code ec;
+    fs::create_hard_link(a, b, ec);
+    if (ec) fs::copy_file(a, b, fs::copy_options::overwrite_existing);
+  };
+  if (!fs::is_directory(from)) return link(from, to);
+  fs::create_directories(to);
+  for (const auto& e : fs::directory_iterator(from)) link(e.path(), to / e.path().filename());
 }
 
 std::string text(uint64_t v) { return std::to_string(v); }
@@ -105,7 +112,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     const std::string key = o.substr(0, scenes::assignment_split(o));
     if (!sense_may_set(key))
       throw Error("--set " + key + ": sense re-samples the sensor only, so it takes sensor.*, acquisition.*, seeds.chip, "
-                  "seeds.noise and outputs.{expected_counts,detection_rate,counts,frames,previews}; " + key +
+                  "seeds.noise and outputs.{expected_counts,detection_rate,counts,frames,previews,storage,exr_compression}; " + key +
                   " shapes the rendered light: use spadgen run");
   }
   if (options.repeats < 1) throw Error("--repeats: expected at least 1, found " + std::to_string(options.repeats));
@@ -173,7 +180,8 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   const PixelRect region = rect_of(meta.at("light").at("crop_in_sensor"));
   if (region != light_region(img, cfg.camera.width_px, cfg.camera.height_px))
     throw Error((src / "metadata.json").string() + ": light.crop_in_sensor does not match the run's image");
-  SavedLight light(src.string(), region, axis);
+  // The light as the run stored it (its outputs.storage), whatever this call's storage is.
+  SavedLight light(src.string(), region, axis, source.config.outputs.storage);
   // The renderer applied the run's fill factor of each row; another pixel design rescales the light.
   {
     const std::vector<double> was = sensor::PixelLayout(source.config.sensor.preset, cfg.camera.height_px).row_fill_factor(source.config.sensor);
@@ -189,8 +197,9 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   std::vector<std::string> linked;
   for (const auto& f : meta.at("files")) {
     const std::string name = f.get<std::string>();
-    if (name == "ground_truth.exr" || name == "previews/depth.png" || name == "transient.npy" ||
-        name == "transient_indirect.npy" || name.rfind("light/", 0) == 0)
+    const std::string stem = name.substr(0, name.rfind('.'));
+    if (name == "ground_truth.exr" || name == "previews/depth.png" || stem == "transient" || stem == "transient_indirect" ||
+        name.rfind("light/", 0) == 0)
       linked.push_back(name);
   }
   RunConfig write_cfg = cfg;  // what the sensor stage writes itself
@@ -207,7 +216,9 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   std::vector<std::unique_ptr<Outputs>> outputs;
   std::vector<uint64_t> seeds;
   // Realisations differ in their counts and frames only: the others link the files of the first.
-  std::set<std::string> shared = {"laser.exr", "ambient.exr", "sensor_maps.exr", "detection_rate.npy", "expected_counts.npy"};
+  std::set<std::string> shared = {"laser.exr", "ambient.exr", "sensor_maps.exr"};
+  for (const StackLayout& l : stack_layout(write_cfg, sensor, img, axis))
+    if (l.file.starts_with("detection_rate.") || l.file.starts_with("expected_counts.")) shared.insert(l.file);
   bool two_d = false;
   for (const sensor::DeclaredOutput& d : sensor.acquisition().outputs()) two_d |= d.file == "intensity.exr";
   if (!two_d) shared.insert("previews/intensity.png");  // the laser light, in a gate sweep
@@ -239,6 +250,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
 
   const Provenance prov{scene_file, field<std::string>(meta, "/scene_hash_fnv1a64"_json_pointer, src), cfg.seed, img};
   std::vector<RunResult> results;
+  json first_storage = json::object();
   for (size_t r = 0; r < runs.size(); ++r) {
     outputs[r]->write(prov);
     std::vector<std::string> files = outputs[r]->files();
@@ -257,6 +269,14 @@ std::vector<RunResult> sense(const SenseOptions& options) {
 
     RunRecord record;
     outputs[r]->report(record);
+    // The containers of the files linked from the run or from the first realisation, as recorded there.
+    const json& run_storage = meta.contains("/storage/files"_json_pointer) ? meta.at("/storage/files"_json_pointer) : json::object();
+    for (const std::string& f : files) {
+      if (record.storage.contains(f)) continue;
+      if (run_storage.contains(f)) record.storage[f] = run_storage.at(f);
+      else if (r > 0 && first_storage.contains(f)) record.storage[f] = first_storage.at(f);
+    }
+    if (r == 0) first_storage = record.storage;
     record.files = files;
     record.photons_per_pulse_emitted = meta.at("photons_per_pulse_emitted").get<double>();
     record.camera = meta.at("camera");

@@ -38,24 +38,29 @@ void sync_dir(const fs::path& dir) {
   ::close(fd);
 }
 
-// The files metadata.json lists, with the folders they lie in ("previews"), relative to `out`.
-std::set<std::string> listed_files(const fs::path& out) {
-  std::set<std::string> owned = {"metadata.json"};
+// What metadata.json lists, relative to `out`: the files and folders it names (a Zarr store, "counts.zarr",
+// is a folder, the run's with everything in it), and the folders they lie in ("previews", "light").
+struct Listed {
+  std::set<std::string> entries = {"metadata.json"}, parents;
+};
+Listed listed_files(const fs::path& out) {
+  Listed listed;
   std::string text;
   try {
     text = scenes::read_file_bounded((out / "metadata.json").string(), uint64_t{64} << 20, "metadata");
   } catch (const Error&) {
-    return owned;
+    return listed;
   }
   const nlohmann::json meta = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
-  if (!meta.is_object() || !meta.contains("files") || !meta["files"].is_array()) return owned;
+  if (!meta.is_object() || !meta.contains("files") || !meta["files"].is_array()) return listed;
   for (const nlohmann::json& f : meta["files"]) {
     if (!f.is_string()) continue;
-    for (fs::path p = fs::path(f.get<std::string>()).lexically_normal(); !p.empty() && p != "." && p != "/";
-         p = p.parent_path())
-      owned.insert(p.string());
+    const fs::path p = fs::path(f.get<std::string>()).lexically_normal();
+    if (p.empty() || p == "." || p == "/" || *p.begin() == "..") continue;
+    listed.entries.insert(p.string());
+    for (fs::path q = p.parent_path(); !q.empty() && q != "." && q != "/"; q = q.parent_path()) listed.parents.insert(q.string());
   }
-  return owned;
+  return listed;
 }
 
 }  // namespace
@@ -196,7 +201,7 @@ void Staging::recover() {
 void Staging::check_owned() const {
   std::error_code ec;
   if (!fs::is_directory(out_, ec)) return;
-  const std::set<std::string> owned = listed_files(out_);
+  const Listed listed = listed_files(out_);
   std::vector<std::string> foreign;
   std::vector<fs::path> folders{out_};
   while (!folders.empty() && foreign.size() < 6) {
@@ -207,8 +212,10 @@ void Staging::check_owned() const {
       if (folder == out_ && starts_with(rel, kOldStylePrefix)) continue;
       const bool dir = e.is_directory(ec) && !e.is_symlink(ec);
       if (dir && fs::is_empty(e.path(), ec)) continue;  // nothing to lose
-      if (!owned.count(rel)) foreign.push_back(rel + (dir ? "/" : ""));
-      else if (dir) folders.push_back(e.path());
+      const bool entry = listed.entries.count(rel) > 0;
+      if (entry && (!dir || rel.ends_with(".zarr"))) continue;  // a listed file, or a Zarr store with all in it
+      if (dir && (entry || listed.parents.count(rel))) folders.push_back(e.path());
+      else foreign.push_back(rel + (dir ? "/" : ""));
     }
   }
   if (foreign.empty()) return;
@@ -221,8 +228,9 @@ void Staging::check_owned() const {
 }
 
 void Staging::publish(const std::vector<std::string>& files) {
-  for (const std::string& f : files)
-    if (!fs::is_regular_file(dir_ / f)) throw std::logic_error("publish: " + f + " was not written to the staging folder");
+  for (const std::string& f : files)  // files, and the folders of Zarr stores
+    if (!fs::is_regular_file(dir_ / f) && !fs::is_directory(dir_ / f))
+      throw std::logic_error("publish: " + f + " was not written to the staging folder");
   // Subfolders nothing was written into (no previews, no light/) do not go out; rmdir fails, as it should,
   // on the others, which are made durable.
   for (const auto& e : fs::directory_iterator(dir_))

@@ -59,6 +59,22 @@ struct EnumNames<Exposure> {
       {{"single", Exposure::Single}, {"dual", Exposure::Dual}}};
 };
 
+// The container of the output stacks (docs/outputs.md, "Storage").
+enum class Storage { Npy, Zarr };
+template <>
+struct EnumNames<Storage> {
+  static constexpr std::array<std::pair<std::string_view, Storage>, 2> values{{{"npy", Storage::Npy}, {"zarr", Storage::Zarr}}};
+};
+
+// OpenEXR's lossless compressions of 32-bit float channels that the Python package's reader reads too (PIZ,
+// the other one, made the images 5 % larger than ZIP: docs/outputs.md, "Storage").
+enum class ExrCompression { None, Rle, Zips, Zip };
+template <>
+struct EnumNames<ExrCompression> {
+  static constexpr std::array<std::pair<std::string_view, ExrCompression>, 4> values{
+      {{"none", ExrCompression::None}, {"rle", ExrCompression::Rle}, {"zips", ExrCompression::Zips}, {"zip", ExrCompression::Zip}}};
+};
+
 // The scene-file spelling of an enum value.
 template <class E>
 constexpr std::string_view name_of(E e) {
@@ -227,6 +243,8 @@ struct OutputsConfig {
   bool counts = true;                   // outputs.counts
   bool frames = false;                  // outputs.frames
   bool previews = true;                 // outputs.previews
+  Storage storage = Storage::Npy;       // outputs.storage
+  ExrCompression exr_compression = ExrCompression::Zip;  // outputs.exr_compression
 
   bool operator==(const OutputsConfig&) const = default;
 };

@@ -420,6 +420,8 @@ std::vector<Key> build() {
   k.push_back(boolean("/outputs/counts", FIELD(outputs.counts), "write counts.npy (sampled)"));
   k.push_back(boolean("/outputs/frames", FIELD(outputs.frames), "write frames.npy (binary frames, bit-packed); large"));
   k.push_back(boolean("/outputs/previews", FIELD(outputs.previews), "write previews/*.png"));
+  k.push_back(choice("/outputs/storage", FIELD(outputs.storage), "container of the stacks: npy (one .npy file each) or zarr (a Zarr v2 folder each, Blosc zstd chunks, lossless; frames.npy stays .npy); docs/outputs.md, Storage"));
+  k.push_back(choice("/outputs/exr_compression", FIELD(outputs.exr_compression), "lossless compression of the EXR images: zip (the smallest here), zips (one scanline a block), rle, none"));
   add_ignored_when(k);
   return k;
 }

@@ -28,6 +28,8 @@ PathParts split_path(const std::string& path) {
   return {slash == 0 ? std::string("/") : path.substr(0, slash), path.substr(slash + 1)};
 }
 
+}  // namespace
+
 // The rename is only durable once the folder entry is on disk too. Some file systems refuse fsync on
 // a folder (EINVAL); the file itself is already safe then, so that is not an error.
 void fsync_folder(const std::string& folder) {
@@ -37,7 +39,12 @@ void fsync_folder(const std::string& folder) {
   ::close(dfd);
 }
 
-}  // namespace
+std::string temp_name(const std::string& destination) {
+  const std::string name = split_path(destination).name;
+  const auto slash = destination.find_last_of('/');
+  const std::string prefix = slash == std::string::npos ? std::string() : destination.substr(0, slash + 1);
+  return prefix + "." + name + ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(g_temp_counter.fetch_add(1));
+}
 
 void throw_errno(const std::string& what, const std::string& path, int err) {
   throw Error(what + " '" + path + "': " + std::strerror(err));
@@ -69,11 +76,8 @@ TempFile::TempFile(const std::string& destination) : destination_(destination) {
   if (::stat(destination.c_str(), &st) == 0 && S_ISDIR(st.st_mode)) throw_errno("cannot write", destination, EISDIR);
 
   // The temporary lives in the destination's folder so that rename() is atomic (same file system).
-  const auto slash = destination.find_last_of('/');
-  const std::string prefix = slash == std::string::npos ? std::string() : destination.substr(0, slash + 1);
   for (int attempt = 0; attempt < 100; ++attempt) {
-    temp_path_ = prefix + "." + name + ".tmp-" + std::to_string(::getpid()) + "-" +
-                 std::to_string(g_temp_counter.fetch_add(1));
+    temp_path_ = temp_name(destination);
     fd_ = ::open(temp_path_.c_str(), O_RDWR | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
     if (fd_ >= 0) return;
     // EEXIST: a stale temporary of an earlier process with our pid; take the next number.

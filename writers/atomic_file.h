@@ -13,6 +13,12 @@ namespace spadgen::writers::detail {
 // threads at once on one descriptor (pwrite does not move a shared file position).
 void pwrite_all(int fd, const void* data, uint64_t size, uint64_t offset, const std::string& path);
 
+// A fresh temporary name beside `destination`: ".<name>.tmp-<pid>-<counter>" in its folder.
+std::string temp_name(const std::string& destination);
+
+// Makes renames in `folder` durable; best effort (some file systems refuse fsync on a folder).
+void fsync_folder(const std::string& folder);
+
 class TempFile {
  public:
   // Creates ".<name>.tmp-<pid>-<counter>" in the destination's folder, exclusively and empty.

@@ -62,9 +62,23 @@ void ExrImage::set_attribute(const std::string& key, const std::string& value) {
   attributes_[key] = value;
 }
 
-void ExrImage::write(const std::string& path) const {
+namespace {
+
+Imf::Compression exr_compression(ExrCompression c) {
+  switch (c) {
+    case ExrCompression::None: return Imf::NO_COMPRESSION;
+    case ExrCompression::Rle: return Imf::RLE_COMPRESSION;
+    case ExrCompression::Zips: return Imf::ZIPS_COMPRESSION;
+    case ExrCompression::Zip: return Imf::ZIP_COMPRESSION;
+  }
+  return Imf::ZIP_COMPRESSION;
+}
+
+}  // namespace
+
+void ExrImage::write(const std::string& path, ExrCompression compression) const {
   Imf::Header header(width_, height_);
-  header.compression() = Imf::ZIP_COMPRESSION;
+  header.compression() = exr_compression(compression);
   for (const auto& [key, value] : attributes_) header.insert(key, Imf::StringAttribute(value));
   Imf::FrameBuffer fb;
   const size_t xs = sizeof(float), ys = sizeof(float) * size_t(width_);

@@ -1,7 +1,8 @@
 // NumPy .npy format 1.0: "\x93NUMPY", major 1, minor 0, little-endian uint16 header length, then an ASCII
 // Python dict literal padded with spaces and ending in '\n' so the data starts on a 64-byte boundary
 // (what NumPy itself writes, so memory maps of the data are aligned). Format 1.0 caps the header at
-// 65535 bytes, far beyond any shape we write.
+// 65535 bytes, far beyond any shape we write. Also the tile helpers every StackWriter shares
+// (write_khw, write_hwt), which reach the file through write().
 #include <fcntl.h>
 #include <sys/mman.h>
 #include <unistd.h>
@@ -44,18 +45,6 @@ struct NpyWriter::Impl {
 
 namespace {
 
-const char* descr(NpyWriter::Dtype dtype) {
-  switch (dtype) {
-    case NpyWriter::Dtype::F32: return "<f4";
-    case NpyWriter::Dtype::U8: return "|u1";
-    case NpyWriter::Dtype::U16: return "<u2";
-    case NpyWriter::Dtype::I32: return "<i4";
-    case NpyWriter::Dtype::I64: return "<i8";
-    case NpyWriter::Dtype::F64: return "<f8";
-  }
-  return "";
-}
-
 std::string shape_tuple(const std::vector<int64_t>& shape) {
   std::string s = "(";
   for (size_t i = 0; i < shape.size(); ++i) {
@@ -81,7 +70,19 @@ int64_t checked_elements(const std::vector<int64_t>& shape, int64_t elem_bytes, 
 
 }  // namespace
 
-int64_t NpyWriter::element_bytes(Dtype dtype) {
+const char* numpy_descr(Dtype dtype) {
+  switch (dtype) {
+    case Dtype::F32: return "<f4";
+    case Dtype::U8: return "|u1";
+    case Dtype::U16: return "<u2";
+    case Dtype::I32: return "<i4";
+    case Dtype::I64: return "<i8";
+    case Dtype::F64: return "<f8";
+  }
+  return "";
+}
+
+int64_t element_bytes(Dtype dtype) {
   switch (dtype) {
     case Dtype::F32: return 4;
     case Dtype::U8: return 1;
@@ -94,7 +95,7 @@ int64_t NpyWriter::element_bytes(Dtype dtype) {
 }
 
 std::string NpyWriter::header(Dtype dtype, const std::vector<int64_t>& shape) {
-  std::string dict = std::string("{'descr': '") + descr(dtype) + "', 'fortran_order': False, 'shape': " +
+  std::string dict = std::string("{'descr': '") + numpy_descr(dtype) + "', 'fortran_order': False, 'shape': " +
                      shape_tuple(shape) + ", }";
   constexpr size_t kPrefix = 10;  // magic (6) + version (2) + header length (2)
   const size_t unpadded = kPrefix + dict.size() + 1;  // + the final '\n'
@@ -199,13 +200,13 @@ void check_inside(const PixelRect& rect, int origin_x, int origin_y, int64_t hei
 
 }  // namespace
 
-void NpyWriter::write_khw(const PixelRect& rect, int origin_x, int origin_y, const void* data) {
-  const auto& s = impl_->shape;
-  check_rank(s, 3, "write_khw", impl_->path);
+void StackWriter::write_khw(const PixelRect& rect, int origin_x, int origin_y, const void* data) {
+  const auto& s = shape();
+  check_rank(s, 3, "write_khw", path());
   const int64_t K = s[0], H = s[1], W = s[2];
-  check_inside(rect, origin_x, origin_y, H, W, impl_->path);
+  check_inside(rect, origin_x, origin_y, H, W, path());
   const auto* src = static_cast<const char*>(data);
-  const int64_t eb = impl_->elem_bytes;
+  const int64_t eb = element_bytes(dtype());
   for (int64_t k = 0; k < K; ++k)
     for (int y = rect.y0; y < rect.y1(); ++y) {
       const int64_t dst = (k * H + (y - origin_y)) * W + (rect.x0 - origin_x);
@@ -214,16 +215,16 @@ void NpyWriter::write_khw(const PixelRect& rect, int origin_x, int origin_y, con
     }
 }
 
-void NpyWriter::write_hwt(const PixelRect& rect, const PixelRect& data_rect, int origin_x, int origin_y,
-                          const void* data) {
-  const auto& s = impl_->shape;
-  check_rank(s, 3, "write_hwt", impl_->path);
+void StackWriter::write_hwt(const PixelRect& rect, const PixelRect& data_rect, int origin_x, int origin_y,
+                            const void* data) {
+  const auto& s = shape();
+  check_rank(s, 3, "write_hwt", path());
   const int64_t H = s[0], W = s[1], T = s[2];
-  check_inside(rect, origin_x, origin_y, H, W, impl_->path);
+  check_inside(rect, origin_x, origin_y, H, W, path());
   if (rect.count() > 0 && !(data_rect.contains(rect.x0, rect.y0) && data_rect.contains(rect.x1() - 1, rect.y1() - 1)))
-    throw Error("write_hwt to '" + impl_->path + "': the tile's data does not cover the pixels to write");
+    throw Error("write_hwt to '" + path() + "': the tile's data does not cover the pixels to write");
   const auto* src = static_cast<const char*>(data);
-  const int64_t eb = impl_->elem_bytes;
+  const int64_t eb = element_bytes(dtype());
   // One row of the tile is contiguous both in the tile (pixel-major, time-minor) and in the file.
   for (int y = rect.y0; y < rect.y1(); ++y) {
     const int64_t dst = ((y - origin_y) * W + (rect.x0 - origin_x)) * T;

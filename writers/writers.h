@@ -10,50 +10,149 @@
 #include <string>
 #include <vector>
 
+#include "core/config.h"
 #include "core/tile.h"
 
 namespace spadgen::writers {
 
+// The element types of the stacks, spelled in files as NumPy's descr ("<f4", "|u1", "<u2", "<i4", "<i8", "<f8").
+enum class Dtype { F32, U8, U16, I32, I64, F64 };
+int64_t element_bytes(Dtype dtype);
+const char* numpy_descr(Dtype dtype);
+
+// A C-order array written in parts from several threads at once (each element once), completed by
+// commit(): a .npy file (NpyWriter) or a Zarr store (ZarrWriter). The app streams its tiles through this.
+class StackWriter {
+ public:
+  virtual ~StackWriter() = default;
+  // Writes `count` elements (raw bytes of this stack's dtype) starting at flat element index `offset`.
+  virtual void write(int64_t offset, const void* data, int64_t count) = 0;
+  // For a (K, H, W) stack: writes tile values [k * rect.count() + rect.index(x, y)] where the stack's
+  // pixel (x, y) is (x - origin_x, y - origin_y). (Row by row through write(), unless overridden.)
+  virtual void write_khw(const PixelRect& rect, int origin_x, int origin_y, const void* data);
+  // For an (H, W, T) stack (transients): writes the pixels of `rect`, whose T values each lie in `data`
+  // at [data_rect.index(x, y) * T + t] (data_rect contains rect: a TransientTile's halo is skipped).
+  virtual void write_hwt(const PixelRect& rect, const PixelRect& data_rect, int origin_x, int origin_y, const void* data);
+  // A hint that rows [row_begin, row_end) along `axis` are complete (NpyWriter: their pages leave the
+  // resident set). A ZarrWriter needs no hint: a chunk leaves memory when its last element is written.
+  virtual void release_rows(int axis, int64_t row_begin, int64_t row_end) {
+    (void)axis, (void)row_begin, (void)row_end;
+  }
+  // Makes the stack durable under path(). Writes after commit() throw.
+  virtual void commit() = 0;
+  virtual const std::string& path() const = 0;
+  virtual Dtype dtype() const = 0;
+  virtual const std::vector<int64_t>& shape() const = 0;
+};
+
 // A .npy file (format 1.0, C order) whose shape is known up front; blocks are written at any offset
 // from any thread (pwrite), so tiles stream straight to disk and memory stays bounded.
-class NpyWriter {
+class NpyWriter : public StackWriter {
  public:
-  enum class Dtype { F32, U8, U16, I32, I64, F64 };
+  using Dtype = writers::Dtype;
   NpyWriter(const std::string& path, Dtype dtype, std::vector<int64_t> shape);
-  ~NpyWriter();
+  ~NpyWriter() override;
   NpyWriter(const NpyWriter&) = delete;
   NpyWriter& operator=(const NpyWriter&) = delete;
 
-  // Writes `count` elements (raw bytes of this file's dtype) starting at flat element index `offset`.
-  void write(int64_t offset, const void* data, int64_t count);
-  // For a (K, H, W) stack: writes tile values [k * rect.count() + rect.index(x, y)] where the stack's
-  // pixel (x, y) is (x - origin_x, y - origin_y).
-  void write_khw(const PixelRect& rect, int origin_x, int origin_y, const void* data);
-  // For an (H, W, T) stack (transients): writes the pixels of `rect`, whose T values each lie in `data`
-  // at [data_rect.index(x, y) * T + t] (data_rect contains rect: a TransientTile's halo is skipped).
-  void write_hwt(const PixelRect& rect, const PixelRect& data_rect, int origin_x, int origin_y, const void* data);
+  void write(int64_t offset, const void* data, int64_t count) override;
   // For a (K, N, H, ceil(W / 8)) uint8 stack of bit-packed frames: writes a SensorTile's frames
   // [((k * N + n) * rect.height + row) * bytes_per_row + byte], bytes_per_row = ceil(rect.width / 8).
   // The tile's bytes land at byte column (rect.x0 - origin_x) / 8, so that must be a multiple of 8, and
   // only the tile at the right edge of the stack may have a width that is not a multiple of 8 (the
   // bits of its last byte beyond rect.width are written as 0).
   void write_frames(const PixelRect& rect, int origin_x, int origin_y, const void* data);
-  // A hint that rows [row_begin, row_end) along `axis` (H: 1 for (K, H, W), 2 for (K, N, H, W/8), 0 for
-  // (H, W, T)) are complete: their pages leave this process's resident set (the data stays in the page
-  // cache on its way to the file; writing there again only costs a page fault). Keeps a run's resident
-  // memory bounded by the rows in flight although the whole file is mapped for writing.
-  void release_rows(int axis, int64_t row_begin, int64_t row_end);
+  // Rows [row_begin, row_end) along `axis` (H: 1 for (K, H, W), 2 for (K, N, H, W/8), 0 for (H, W, T))
+  // are complete: their pages leave this process's resident set (the data stays in the page cache on
+  // its way to the file; writing there again only costs a page fault). Keeps a run's resident memory
+  // bounded by the rows in flight although the whole file is mapped for writing.
+  void release_rows(int axis, int64_t row_begin, int64_t row_end) override;
   // fsync, rename onto path(). Writes after commit() throw.
-  void commit();
-  const std::string& path() const;
-  Dtype dtype() const;
-  const std::vector<int64_t>& shape() const;
+  void commit() override;
+  const std::string& path() const override;
+  Dtype dtype() const override;
+  const std::vector<int64_t>& shape() const override;
   // Bytes before the first element (a multiple of 64) and the total file size.
   int64_t header_bytes() const;
   int64_t file_bytes() const;
-  static int64_t element_bytes(Dtype dtype);
+  static int64_t element_bytes(Dtype dtype) { return writers::element_bytes(dtype); }
   // The complete header ("\x93NUMPY", version 1.0, length, dict, padding) for a C-order array.
   static std::string header(Dtype dtype, const std::vector<int64_t>& shape);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// The compressor of every chunk of a Zarr store: Blosc with zstd at clevel, the given shuffle
+// (0 none, 1 byte, 2 bit) and blocksize (bytes), one thread, so that the bytes depend on the data only.
+struct ZarrCodec {
+  int clevel = 1;
+  int shuffle = 1;
+  int64_t blocksize = 0;
+};
+
+// A Zarr v2 array store: the folder `path` (e.g. "counts.zarr") holding .zarray, .zattrs and one file
+// per chunk named by its grid indices joined by '.' ("0.3.1"), each chunk C-order, full size (edge
+// chunks padded with 0) and compressed by Blosc (ZarrCodec); every chunk is stored, so .zarray names no
+// fill value. Writes land in chunk
+// buffers; a chunk is compressed and written by the thread that writes its last element, and then leaves
+// memory, so memory is bounded by the chunks being filled, not by the array. The store is built in a
+// hidden folder beside `path` and renamed onto it by commit() (files fsynced first); a writer destroyed
+// without commit() removes it. Elements never written are 0, as in a .npy.
+class ZarrWriter : public StackWriter {
+ public:
+  // chunks: one extent per dimension (each at least 1), clipped to the shape. attributes: .zattrs.
+  ZarrWriter(const std::string& path, Dtype dtype, std::vector<int64_t> shape, std::vector<int64_t> chunks,
+             const nlohmann::json& attributes = nlohmann::json::object());
+  ~ZarrWriter() override;
+  ZarrWriter(const ZarrWriter&) = delete;
+  ZarrWriter& operator=(const ZarrWriter&) = delete;
+
+  void write(int64_t offset, const void* data, int64_t count) override;
+  // A tile chunk by chunk (one count per chunk, not per row).
+  void write_khw(const PixelRect& rect, int origin_x, int origin_y, const void* data) override;
+  void write_hwt(const PixelRect& rect, const PixelRect& data_rect, int origin_x, int origin_y, const void* data) override;
+  // Compresses the chunks not yet stored (their missing elements are 0), writes .zarray and .zattrs,
+  // fsyncs every file and renames the store onto path().
+  void commit() override;
+  const std::string& path() const override;
+  Dtype dtype() const override;
+  const std::vector<int64_t>& shape() const override;
+  const std::vector<int64_t>& chunks() const;  // as clipped to the shape
+  // The content of .zarray.
+  nlohmann::json zarray() const;
+  // Compressed bytes of the chunks stored so far.
+  int64_t stored_bytes() const;
+  // The codec for a dtype (measured on the multi-object scene; docs/outputs.md, "Storage").
+  static ZarrCodec codec(Dtype dtype);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// A Zarr v2 array as ZarrWriter writes it (C order, '.' separated chunk keys, Blosc or no compressor, no
+// filters), read chunk by chunk. Throws spadgen::Error naming the store when it is not such an array or
+// a chunk does not decompress to its size. A missing chunk reads as the fill value (0 when there is none).
+class ZarrReader {
+ public:
+  // cache_chunks: decompressed chunks kept for read() (least recently used ones go first).
+  explicit ZarrReader(const std::string& path, size_t cache_chunks = 16);
+  ~ZarrReader();
+  ZarrReader(ZarrReader&&) noexcept;
+  ZarrReader& operator=(ZarrReader&&) noexcept;
+
+  const std::string& path() const;
+  Dtype dtype() const;
+  const std::vector<int64_t>& shape() const;
+  const std::vector<int64_t>& chunks() const;
+  int64_t elements() const;
+  // Copies `count` elements from flat C-order index `offset` into dest; safe from several threads.
+  void read(int64_t offset, int64_t count, void* dest) const;
+  // The whole array, checked against dtype as NpyReader::data<T>() is.
+  template <class T>
+  std::vector<T> read_all() const;
 
  private:
   struct Impl;
@@ -71,7 +170,7 @@ class NpyReader {
   NpyReader& operator=(NpyReader&&) noexcept;
 
   const std::string& path() const { return path_; }
-  NpyWriter::Dtype dtype() const { return dtype_; }
+  Dtype dtype() const { return dtype_; }
   const std::vector<int64_t>& shape() const { return shape_; }
   int64_t elements() const { return elements_; }
   // The elements, checked against dtype (float: F32, double: F64, int32_t: I32, int64_t: I64, uint8_t: U8,
@@ -83,7 +182,7 @@ class NpyReader {
 
  private:
   std::string path_;
-  NpyWriter::Dtype dtype_ = NpyWriter::Dtype::U8;
+  Dtype dtype_ = Dtype::U8;
   std::vector<int64_t> shape_;
   int64_t elements_ = 0;
   const char* map_ = nullptr;
@@ -98,8 +197,8 @@ class ExrImage {
   float* channel(const std::string& name);  // created zero-filled on first use; row-major
   void remove_channel(const std::string& name);  // no-op when absent
   void set_attribute(const std::string& key, const std::string& value);
-  // Writes the image (ZIP compression) to path atomically.
-  void write(const std::string& path) const;
+  // Writes the image to path atomically, with a lossless compression.
+  void write(const std::string& path, ExrCompression compression = ExrCompression::Zip) const;
   int width() const { return width_; }
   int height() const { return height_; }
 

@@ -1,13 +1,14 @@
 """One run folder (what ``spadgen run SCENE.json -o DIR`` writes), read lazily.
 
     run = spadgen.open_run("out/multi_object")
-    run.counts                      # (K, H, W) uint8/uint16 memory map of counts.npy
+    run.counts                      # (K, H, W) uint8/uint16 memory map of counts.npy (zarr.Array of counts.zarr)
     run.ground_truth["range"]       # (H, W) float32 channel of ground_truth.exr
     run.gate_profile(300, 120)      # (gate positions in ns, counts) of pixel x=300, y=120
     run.points(frame="world")       # (H, W, 3) ground-truth surface points
 
 Nothing is read until it is used: metadata.json on opening, a stack when first indexed (a NumPy memory
-map), an EXR image when its first channel is asked for. The folder's layout is docs/outputs.md.
+map, or a zarr.Array for a run with outputs.storage = zarr: the same indexing, the same values), an EXR
+image when its first channel is asked for. The folder's layout is docs/outputs.md.
 """
 from __future__ import annotations
 
@@ -172,24 +173,50 @@ class Run:
 
     # ---- files ------------------------------------------------------------------------------------------
 
+    def _file(self, name):
+        """The file the run wrote for `name`: itself, or for a stack the same stack in the other container
+        ("counts.npy" or "counts" names "counts.zarr" in a run with outputs.storage = zarr); None if none."""
+        if name in self.files:
+            return name
+        stem = name[:-4] if name.endswith(".npy") else name[:-5] if name.endswith(".zarr") else name
+        for ext in (".npy", ".zarr"):
+            if stem + ext in self.files:
+                return stem + ext
+        return None
+
     def has(self, name):
-        """Whether the run wrote the file (a name from metadata.json's files, e.g. "frames.npy")."""
-        return name in self.files
+        """Whether the run wrote the file (a name from metadata.json's files, e.g. "frames.npy"). A stack may
+        be named in either container: has("counts.npy") is true for a run that wrote counts.zarr."""
+        return self._file(name) is not None
 
     def _require(self, name):
-        if name not in self.files:
-            why = self._WRITTEN_BY.get(name, "outputs.light" if name.startswith("light/") else None)
+        found = self._file(name)
+        if found is None:
+            stem = name[:-4] if name.endswith(".npy") else name[:-5] if name.endswith(".zarr") else name
+            why = self._WRITTEN_BY.get(stem + ".npy", self._WRITTEN_BY.get(name,
+                                       "outputs.light" if name.startswith("light/") else None))
             raise FileNotFoundError(f"{self.path}: this run did not write {name}" + (f" (written with {why})" if why else "")
                                     + f"; it wrote {', '.join(self.files)}")
-        return os.path.join(self.path, name)
+        return os.path.join(self.path, found)
 
     def array(self, name):
-        """A .npy file of the run as a read-only memory map (nothing is read until it is indexed)."""
-        if not name.endswith(".npy"):
+        """A stack of the run, read lazily: a .npy file as a read-only NumPy memory map, a Zarr store
+        (outputs.storage = zarr) as a read-only zarr.Array (python3-zarr). Both index like NumPy arrays and
+        return NumPy arrays (nothing is read until indexed); name it with or without its extension."""
+        if not name.endswith((".npy", ".zarr")):
             name += ".npy"
-        if name not in self._cache:
-            self._cache[name] = np.load(self._require(name), mmap_mode="r")
-        return self._cache[name]
+        path = self._require(name)
+        if path not in self._cache:
+            if path.endswith(".zarr"):
+                try:
+                    import zarr
+                except ImportError as e:
+                    raise ImportError(f"{path} is a Zarr store (outputs.storage = zarr): reading it needs zarr-python "
+                                      "(Debian: python3-zarr)") from e
+                self._cache[path] = zarr.open_array(path, mode="r")
+            else:
+                self._cache[path] = np.load(path, mmap_mode="r")
+        return self._cache[path]
 
     def exr(self, name):
         """An .exr file of the run: channels by name, decoded on first access (spadgen.exr.ExrFile)."""
@@ -200,7 +227,8 @@ class Run:
         return self._cache[name]
 
     def __getitem__(self, name):
-        """run["counts"], run["counts.npy"], run["ground_truth.exr"]: any stack or image by file name."""
+        """run["counts"], run["counts.npy"], run["ground_truth.exr"]: any stack or image by file name (a stack
+        in either container)."""
         if name.endswith(".exr") or name + ".exr" in self.files:
             return self.exr(name)
         return self.array(name)
@@ -215,7 +243,7 @@ class Run:
     def expected_counts(self):
         """(K, H, W) float32 noise-free expected counts N (1 - exp(-lambda)): expected_counts.npy when the run
         wrote it (outputs.expected_counts), else computed from detection_rate.npy (in memory, once)."""
-        if "expected_counts.npy" in self.files or "detection_rate.npy" not in self.files:
+        if self.has("expected_counts.npy") or not self.has("detection_rate.npy"):
             return self.array("expected_counts.npy")
         if "expected_counts (from detection_rate.npy)" not in self._cache:
             lam = np.asarray(self.detection_rate, np.float64)

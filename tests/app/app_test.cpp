@@ -3,6 +3,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -126,6 +127,76 @@ TEST_F(App, OutputsAreBitIdenticalForAnyThreadCountAndTileSize) {
   ASSERT_EQ(sh("run " + kSmall + " --threads 1 --set render.tile_size_px=8 -o " + (dir_ / "a").string()).code, 0);
   ASSERT_EQ(sh("run " + kSmall + " --threads 2 --set render.tile_size_px=16 -o " + (dir_ / "b").string()).code, 0);
   expect_same_outputs(dir_ / "a", dir_ / "b");
+}
+
+// outputs.storage = zarr changes the container only: every stack of a Zarr run holds the .npy run's values
+// element for element (the saved light, the transients and their indirect part included), frames stay a
+// .npy, and every other file is the same bytes. Zarr stores are read here with writers::ZarrReader (itself
+// checked against Blosc and zarr-python in tests/writers and tests/python).
+TEST_F(App, ZarrRunHoldsTheNpyRunsValues) {
+  const std::string run = "run " + kSmall + " --set render.split_direct_indirect=true --set outputs.expected_counts=true "
+                          "--set outputs.light=true -o ";
+  ASSERT_EQ(sh(run + (dir_ / "npy").string()).code, 0);
+  const Result z = sh(run + (dir_ / "zarr").string() + " --set outputs.storage=zarr");
+  ASSERT_EQ(z.code, 0) << z.output;
+  auto mn = nlohmann::json::parse(slurp(dir_ / "npy/metadata.json")), mz = nlohmann::json::parse(slurp(dir_ / "zarr/metadata.json"));
+  size_t stacks = 0;
+  for (const auto& f : mn["files"]) {
+    const std::string name = f.get<std::string>();
+    if (name == "metadata.json") continue;
+    if (!name.ends_with(".npy") || name == "frames.npy") {
+      EXPECT_TRUE(slurp(dir_ / "npy" / name) == slurp(dir_ / "zarr" / name)) << name << " differs";
+      continue;
+    }
+    const std::string zname = name.substr(0, name.size() - 4) + ".zarr";
+    EXPECT_TRUE(std::find(mz["files"].begin(), mz["files"].end(), zname) != mz["files"].end()) << zname;
+    const Npy n = read_npy(dir_ / "npy" / name);
+    const spadgen::writers::ZarrReader r((dir_ / "zarr" / zname).string());
+    EXPECT_EQ(n.descr, spadgen::writers::numpy_descr(r.dtype())) << name;
+    EXPECT_EQ(n.shape, r.shape()) << name;
+    std::string bytes(n.data.size(), '\0');
+    ASSERT_EQ(r.elements() * spadgen::writers::element_bytes(r.dtype()), int64_t(bytes.size())) << name;
+    r.read(0, r.elements(), bytes.data());
+    EXPECT_TRUE(bytes == n.data) << name << " holds other values than " << zname;
+    EXPECT_EQ(mz["storage"]["files"][zname]["format"], "zarr") << zname;
+    EXPECT_EQ(mz["storage"]["files"][zname]["chunks"].size(), r.chunks().size()) << zname;
+    ++stacks;
+  }
+  EXPECT_EQ(stacks, 11u);  // counts, detection rate, expected counts, transient and its indirect part, 6 of light
+  EXPECT_EQ(mz["storage"]["stacks"], "zarr");
+  EXPECT_EQ(mz["storage"]["files"]["frames.npy"]["format"], "npy");
+  EXPECT_EQ(mn["storage"]["files"]["counts.npy"]["format"], "npy");
+  for (auto* m : {&mn, &mz}) {
+    for (const char* k : {"run", "storage", "files"}) m->erase(k);
+    (*m)["resolved_scene"]["outputs"].erase("storage");
+  }
+  EXPECT_EQ(mn, mz);
+}
+
+TEST_F(App, ZarrOutputsAreBitIdenticalForAnyThreadCountAndTileSize) {
+  const std::string zarr = " --set outputs.storage=zarr --set outputs.light=true --set outputs.expected_counts=true";
+  ASSERT_EQ(sh("run " + kSmall + zarr + " --threads 1 --set render.tile_size_px=8 -o " + (dir_ / "a").string()).code, 0);
+  ASSERT_EQ(sh("run " + kSmall + zarr + " --threads 2 --set render.tile_size_px=16 -o " + (dir_ / "b").string()).code, 0);
+  expect_same_outputs(dir_ / "a", dir_ / "b");
+  EXPECT_TRUE(fs::is_regular_file(dir_ / "a/counts.zarr/0.0.0"));
+}
+
+// Every lossless EXR compression gives the same channels; metadata.json records the one used.
+TEST_F(App, ExrCompressionKeepsEveryImageBitForBit) {
+  ASSERT_EQ(sh("run " + kSmall + " -o " + (dir_ / "zip").string()).code, 0);
+  for (const char* c : {"none", "rle", "zips"}) {
+    const fs::path out = dir_ / c;
+    ASSERT_EQ(sh("run " + kSmall + " --set outputs.exr_compression=" + c + " -o " + out.string()).code, 0) << c;
+    EXPECT_EQ(nlohmann::json::parse(slurp(out / "metadata.json"))["storage"]["exr_compression"], c);
+    for (const char* image : {"ground_truth.exr", "laser.exr", "ambient.exr", "sensor_maps.exr"}) {
+      const auto a = spadgen::writers::read_exr((dir_ / "zip" / image).string()), b = spadgen::writers::read_exr((out / image).string());
+      EXPECT_EQ(a.attributes, b.attributes) << c << " " << image;
+      ASSERT_EQ(a.channels.size(), b.channels.size()) << c << " " << image;
+      for (const auto& [name, v] : a.channels)
+        EXPECT_EQ(std::memcmp(v.data(), b.channels.at(name).data(), v.size() * sizeof(float)), 0) << c << " " << image << " " << name;
+    }
+  }
+  EXPECT_GT(fs::file_size(dir_ / "none/ground_truth.exr"), fs::file_size(dir_ / "zip/ground_truth.exr"));
 }
 
 // Each random stream changes only what it drives: seeds.noise the sampled counts and frames, seeds.chip

@@ -24,6 +24,39 @@ TEST_F(App, SenseWritesWhatTheRunWroteBitForBit) {
   EXPECT_EQ(meta["sense"]["from"], (dir_ / "run").string());
 }
 
+// A run stored as Zarr: sense reads its light from the Zarr stores and writes what the run wrote, bit for
+// bit; asked for .npy stacks, it writes the .npy run's files.
+TEST_F(App, SenseReadsAZarrRunsLightAndWritesEitherStorage) {
+  ASSERT_EQ(sh("run " + kLit + " --set outputs.storage=zarr -o " + (dir_ / "run").string()).code, 0);
+  ASSERT_EQ(sh("run " + kLit + " -o " + (dir_ / "npy").string()).code, 0);
+  Result r = sh("sense " + (dir_ / "run").string() + " -q -o " + (dir_ / "sense").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  expect_same_outputs(dir_ / "run", dir_ / "sense");
+  r = sh("sense " + (dir_ / "run").string() + " -q --set outputs.storage=npy -o " + (dir_ / "sense_npy").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  for (const char* f : {"counts.npy", "detection_rate.npy", "frames.npy", "laser.exr", "sensor_maps.exr"})
+    EXPECT_TRUE(slurp(dir_ / "npy" / f) == slurp(dir_ / "sense_npy" / f)) << f;
+  // The light and the transients are the run's Zarr stores, linked.
+  const auto meta = nlohmann::json::parse(slurp(dir_ / "sense_npy/metadata.json"));
+  EXPECT_EQ(meta["storage"]["files"]["light/values.zarr"]["format"], "zarr");
+  EXPECT_EQ(meta["storage"]["files"]["counts.npy"]["format"], "npy");
+  EXPECT_TRUE(slurp(dir_ / "run/transient.zarr/0.0.0") == slurp(dir_ / "sense_npy/transient.zarr/0.0.0"));
+}
+
+// The dataset sample docs/outputs.md recommends (Zarr, the saved light, no detection rate) gives the
+// detection rate back through sense, bit for bit the one a run writes.
+TEST_F(App, TheRecommendedSampleGivesTheDetectionRateBackBitForBit) {
+  ASSERT_EQ(sh("run " + kSmall + " -o " + (dir_ / "run").string()).code, 0);
+  ASSERT_EQ(sh("run " + kSmall + " --set outputs.storage=zarr --set outputs.light=true --set outputs.detection_rate=false -o " +
+               (dir_ / "sample").string()).code, 0);
+  EXPECT_FALSE(fs::exists(dir_ / "sample/detection_rate.zarr"));
+  const Result r = sh("sense " + (dir_ / "sample").string() + " -q --set outputs.detection_rate=true --set outputs.counts=false "
+                      "--set outputs.storage=npy -o " + (dir_ / "rates").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_TRUE(slurp(dir_ / "run/detection_rate.npy") == slurp(dir_ / "rates/detection_rate.npy"));
+  EXPECT_FALSE(fs::exists(dir_ / "rates/counts.npy"));
+}
+
 // The light's ring around a crop lets sense switch crosstalk on although the run had it off, and the
 // result is what a run with crosstalk writes; the same for another gate step and frame count.
 TEST_F(App, SenseWithOtherSensorSettingsWritesWhatARunWithThemWrites) {

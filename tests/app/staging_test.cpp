@@ -251,6 +251,36 @@ TEST_F(StagingTest, AFolderWithFilesSpadgenDidNotWriteIsNotReplaced) {
   EXPECT_EQ(which_set(out_), "new");
 }
 
+// A Zarr store (a folder ending .zarr that metadata.json lists) is the run's with everything in it, so a
+// new run replaces it; a listed folder of another name is looked into, and files beside a store are not
+// the run's.
+TEST_F(StagingTest, AListedZarrStoreIsTheRunsWhole) {
+  write_old();
+  fs::create_directories(out_ / "counts.zarr");
+  std::ofstream(out_ / "counts.zarr/0.0.0") << "chunk";
+  std::ofstream(out_ / "counts.zarr/.zarray") << "{}";
+  fs::create_directories(out_ / "previews/notes");
+  std::ofstream(out_ / "previews/notes/mine.txt") << "mine";
+  auto meta = nlohmann::json::parse(slurp(out_ / "metadata.json"));
+  meta["files"].push_back("counts.zarr");
+  meta["files"].push_back("previews/notes");
+  std::ofstream(out_ / "metadata.json") << meta.dump();
+  std::string error;
+  run(nullptr, &error);
+  EXPECT_THAT(error, HasSubstr("previews/notes/mine.txt"));
+  EXPECT_THAT(error, ::testing::Not(HasSubstr("counts.zarr")));
+  fs::remove_all(out_ / "previews/notes");
+  std::ofstream(out_ / "counts.zarr.txt") << "mine";
+  error.clear();
+  run(nullptr, &error);
+  EXPECT_THAT(error, HasSubstr("counts.zarr.txt"));
+  fs::remove(out_ / "counts.zarr.txt");
+  error.clear();
+  run(nullptr, &error);
+  EXPECT_EQ(error, "");
+  EXPECT_EQ(which_set(out_), "new");
+}
+
 TEST_F(StagingTest, PathsThatCannotBeTheOutputFolder) {
   std::ofstream(dir_ / "a_file") << "x";
   for (const fs::path& p : {dir_ / "a_file", dir_ / "a_file" / "sub", fs::path("/")}) {

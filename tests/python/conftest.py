@@ -1,5 +1,5 @@
 """Shared fixtures of the Python package's tests: the spadgen program and exr_tool (paths from CTest through
-SPADGEN_BIN and SPADGEN_EXR_TOOL, else the README's build folder), and small real runs of shipped scenes,
+SPADGEN_BIN, SPADGEN_EXR_TOOL and SPADGEN_ZARR_TOOL, else the README's build folder), and small real runs of shipped scenes,
 made once per test process."""
 import os
 import pathlib
@@ -19,6 +19,12 @@ RUNS = {
                                     "acquisition.gate_sweep.step_ps=360", "outputs.transient=true",
                                     "outputs.transient_crop=[500,238,24,6]", "render.split_direct_indirect=true",
                                     "outputs.frames=true", "outputs.expected_counts=true", "outputs.light=true"]),
+    # The same as Zarr stores (outputs.storage = zarr): every stack, the saved light and the transients.
+    "sweep_zarr": ("multi_object.json", ["camera.crop=[490,236,347,10]", "render.samples_per_pixel=2",
+                                         "acquisition.gate_sweep.step_ps=360", "outputs.transient=true",
+                                         "outputs.transient_crop=[500,238,24,6]", "render.split_direct_indirect=true",
+                                         "outputs.frames=true", "outputs.expected_counts=true", "outputs.light=true",
+                                         "outputs.storage=zarr"]),
     # Dual-exposure intensity images of the test chart (uint16 counts, intensity.exr), with frames.
     "intensity": ("test_chart_dual.json", ["camera.crop=[400,300,40,24]", "outputs.frames=true"]),
     # The camera moved, turned and rolled in front of the multi-object scene: the plate's front face
@@ -47,6 +53,11 @@ def spadgen_bin():
 @pytest.fixture(scope="session")
 def exr_tool():
     return _tool("SPADGEN_EXR_TOOL", "tests/python/exr_tool")
+
+
+@pytest.fixture(scope="session")
+def zarr_tool():
+    return _tool("SPADGEN_ZARR_TOOL", "tests/python/zarr_tool")
 
 
 @pytest.fixture(scope="session")

@@ -1,0 +1,119 @@
+"""Zarr stores (outputs.storage = zarr) read by an independent reader, zarr-python: the writer's arrays
+against the same arrays written as .npy (uint8, uint16, float32 and the saved light's types, shapes that are
+not multiples of the chunks, tiles written in any order), and the Python package on a run stored as Zarr
+against the same run stored as .npy, through the same API."""
+import json
+import math
+import subprocess
+
+import numpy as np
+import pytest
+
+from spadgen import open_run
+
+zarr = pytest.importorskip("zarr")
+
+CASES = {  # name: chunks as written (before clipping to the shape)
+    "khw_u8": (37, 32, 64), "khw_u16": (2, 32, 64), "khw_f32": (4, 16, 32), "khw_f32_one_chunk": (3, 32, 64),
+    "hwt_f32": (8, 64, 50), "values_f32": (4096,), "offsets_i64": (1024,), "image_f64": (256, 256),
+    "ranges_i32": (16, 16, 2), "empty_u8": (4, 4),
+}
+
+
+@pytest.fixture(scope="module")
+def written(zarr_tool, tmp_path_factory):
+    out = tmp_path_factory.mktemp("zarr")
+    subprocess.run([zarr_tool, "write", str(out)], check=True)
+    return out
+
+
+def same_bytes(a, b):
+    """Equal dtype, shape and bytes (NaN payloads, -0.0 and subnormals included)."""
+    a, b = np.ascontiguousarray(a), np.ascontiguousarray(b)
+    return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_zarr_python_reads_what_numpy_reads(written, name):
+    expected = np.load(written / f"{name}.npy")
+    z = zarr.open_array(str(written / f"{name}.zarr"), mode="r")
+    assert z.dtype == expected.dtype and z.shape == expected.shape
+    assert same_bytes(z[...], expected)
+    # Parts crossing chunk boundaries, as a reader takes them.
+    if expected.ndim == 3 and expected.size:
+        assert same_bytes(z[:, 3:40, 17:66], expected[:, 3:40, 17:66])
+        assert same_bytes(z[-1, :, -1], expected[-1, :, -1])
+    # The metadata: chunks clipped to the shape, Blosc zstd, C order, no fill value, the attributes given.
+    meta = json.loads((written / f"{name}.zarr" / ".zarray").read_text())
+    assert meta["zarr_format"] == 2 and meta["order"] == "C" and meta["filters"] is None and meta["fill_value"] is None
+    assert tuple(meta["chunks"]) == tuple(max(1, min(c, s)) for c, s in zip(CASES[name], expected.shape))
+    assert meta["compressor"]["id"] == "blosc" and meta["compressor"]["cname"] == "zstd"
+    assert meta["compressor"]["shuffle"] == (0 if expected.dtype == np.uint8 else 1)
+    assert z.attrs["case"] == name
+    # Every chunk stored, one file each, named by its grid indices.
+    grid = [math.ceil(s / c) for s, c in zip(expected.shape, meta["chunks"])]
+    chunk_files = {p.name for p in (written / f"{name}.zarr").iterdir() if not p.name.startswith(".")}
+    assert chunk_files == {".".join(map(str, i)) for i in np.ndindex(*grid)}
+
+
+def test_a_zarr_run_reads_as_its_npy_run_through_the_package(make_run):
+    npy, zr = open_run(make_run("sweep")), open_run(make_run("sweep_zarr"))
+    assert any(f.endswith(".zarr") for f in zr.files) and not any(f.endswith(".zarr") for f in npy.files)
+    assert zr.metadata["storage"]["stacks"] == "zarr" and npy.metadata["storage"]["stacks"] == "npy"
+    stacks = ["counts", "detection_rate", "expected_counts", "transient", "transient_indirect", "light/values",
+              "light/ranges", "light/offsets", "light/laser_total", "light/out_of_window", "light/ambient_rate"]
+    for name in stacks:
+        assert zr.has(name + ".npy") and zr.has(name) and zr.has(name + ".zarr"), name
+        assert f"{name}.zarr" in zr.files and f"{name}.npy" in npy.files, name
+        assert same_bytes(zr[name][...], npy[name][...]), name
+        assert zr.metadata["storage"]["files"][f"{name}.zarr"]["format"] == "zarr"
+    # The frames stay a .npy (random bits do not compress).
+    assert "frames.npy" in zr.files and same_bytes(zr.frames(3), npy.frames(3))
+    for prop in ("counts", "detection_rate", "expected_counts", "transient", "transient_indirect"):
+        assert same_bytes(np.asarray(getattr(zr, prop)), np.asarray(getattr(npy, prop))), prop
+    p, q = zr.gate_profile(200, 4), npy.gate_profile(200, 4)
+    assert np.array_equal(p.gate_ns, q.gate_ns) and same_bytes(p.values, q.values)
+    assert same_bytes(zr.gate_profile(200, 4, expected=True).values, npy.gate_profile(200, 4, expected=True).values)
+    assert np.array_equal(zr.depth(), npy.depth(), equal_nan=True)
+    # The metadata differs in the storage record only (and how the run went).
+    a, b = dict(zr.metadata), dict(npy.metadata)
+    for m in (a, b):
+        for key in ("run", "storage", "files", "scene_hash_fnv1a64"):
+            m.pop(key)
+        m["resolved_scene"]["outputs"].pop("storage")
+    assert a == b
+
+
+def test_the_dataset_gives_the_same_samples(make_run):
+    torch = pytest.importorskip("torch")
+    from spadgen.torchdata import RunDataset
+    fields = ("counts", "expected_counts", "detection_rate", "depth", "mask")
+    a = RunDataset([make_run("sweep")], fields=fields, patch_size=8)
+    b = RunDataset([make_run("sweep_zarr")], fields=fields, patch_size=8)
+    assert len(a) == len(b)
+    for i in (0, len(a) // 2, len(a) - 1):
+        for key, value in a[i].items():
+            if key != "run":
+                assert torch.equal(value, b[i][key]), key
+
+
+def test_a_missing_zarr_stack_is_named(make_run):
+    run = open_run(make_run("sweep_zarr"))
+    with pytest.raises(FileNotFoundError, match="outputs.light"):
+        open_run(make_run("intensity"))["light/values"]
+    assert not run.has("nothing.npy")
+
+
+def test_xarray_opens_a_zarr_run_as_a_dataset(make_run):
+    """The run folder and light/ are Zarr groups: xarray opens their stores lazily, with named dimensions
+    and the values as stored (no fill value for it to mask)."""
+    xr = pytest.importorskip("xarray")
+    npy, path = open_run(make_run("sweep")), make_run("sweep_zarr")
+    ds = xr.open_zarr(str(path), consolidated=False)
+    assert ds["counts.zarr"].dims == ("k", "y", "x") and ds["counts.zarr"].dtype == np.uint8
+    assert same_bytes(ds["counts.zarr"].values, npy.counts[...])
+    assert same_bytes(ds["detection_rate.zarr"].values, npy.detection_rate[...])
+    assert ds["transient.zarr"].dims == ("y_transient", "x_transient", "t")
+    light = xr.open_zarr(str(path), group="light", consolidated=False)
+    assert same_bytes(light["values.zarr"].values, npy["light/values"][...])
+    assert set(zarr.open_group(str(path), mode="r").array_keys()) >= {"counts.zarr", "detection_rate.zarr"}
