@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Datasets: samples per hour and bytes per sample of the shipped example dataset
 # (examples/datasets/multi_object_variations.json: 1024 x 500, 4 paths per pixel, 351 gates x 255 frames),
-# for each storage of the stacks (outputs.storage), and the plan's estimate against the measured time.
+# for each storage of the stacks (outputs.storage: npy, zarr; and zarr with the saved light instead of the
+# detection rates, the example's own), and the plan's estimate against the measured time.
 #
 #   bench/dataset.sh [SPADGEN] [WORK_DIR] [SAMPLES]
 #
@@ -15,11 +16,18 @@ samples=${3:-8}
 cd "$(dirname "$0")/.."
 example=$(realpath examples/datasets/multi_object_variations.json)
 mkdir -p "$work"
-for storage in npy zarr; do
+# Each variant: its name and the outputs it writes (the example's own: zarr_light).
+declare -A variants=(
+  [npy]='"outputs.storage": "npy", "outputs.light": false, "outputs.detection_rate": true,'
+  [zarr]='"outputs.storage": "zarr", "outputs.light": false, "outputs.detection_rate": true,'
+  [zarr_light]='"outputs.storage": "zarr", "outputs.light": true, "outputs.detection_rate": false,'
+)
+for storage in npy zarr zarr_light; do
   file="$work/variations_$storage.json"
-  # The example with its scene path made absolute, the storage set and fewer samples.
+  # The example with its scene path made absolute, its outputs replaced by the variant's, fewer samples.
   sed -e "s|\"../../scenes/|\"$(dirname "$(dirname "$example")")/../scenes/|" \
-      -e "s|\"set\": {|\"set\": {\"outputs.storage\": \"$storage\",|" \
+      -e '/^ *"outputs\./d' \
+      -e "s|\"set\": {|\"set\": {${variants[$storage]}|" \
       -e "s|\"samples\": [0-9]*|\"samples\": $samples|" "$example" > "$file"
   out="$work/out_$storage"
   rm -rf "$out"
