@@ -254,6 +254,12 @@ TEST(DatasetFile, TheDocsHoldTheGeneratedReference) {
   text << in.rdbuf();
   EXPECT_THAT(text.str(), HasSubstr(dataset_reference_markdown()))
       << "docs/datasets.md is out of date: regenerate its key table with `spadgen dataset schema`";
+  std::ifstream schema(std::string(SPADGEN_SOURCE_DIR) + "/docs/dataset-file.schema.json");
+  ASSERT_TRUE(schema) << "docs/dataset-file.schema.json is missing";
+  std::ostringstream json_text;
+  json_text << schema.rdbuf();
+  EXPECT_EQ(json_text.str(), dataset_schema_json())
+      << "docs/dataset-file.schema.json is out of date: regenerate it with `spadgen dataset schema --json-schema`";
 }
 
 TEST(DatasetFile, RangesText) {
