@@ -213,14 +213,7 @@ std::string dataset_plan(const DatasetOptions& options) {
   o << "# " << (shard.count > 1 ? "this shard" : "total") << ": " << samples << " samples, disk about " << bytes_text(total.disk)
     << ", time about " << duration_text(total.seconds) << " (estimates for 2 cores: docs/datasets.md, \"Estimates\")\n";
   if (folder) {
-    int64_t free = -1;
-    {
-      std::error_code ec;
-      fs::path p = fs::absolute(options.out_dir, ec);
-      while (!p.empty() && !fs::exists(p, ec) && p != p.parent_path()) p = p.parent_path();
-      const fs::space_info sp = fs::space(p, ec);
-      if (!ec) free = int64_t(sp.available);
-    }
+    const int64_t free = free_disk(options.out_dir);
     o << "# left to generate in " << options.out_dir << ": " << left << " samples, disk about " << bytes_text(left_total.disk)
       << " (free: " << (free >= 0 ? bytes_text(free) : std::string("unknown")) << "), time about "
       << duration_text(left_total.seconds) << "\n";
@@ -260,16 +253,13 @@ void dataset_run(const DatasetOptions& options) {
   int64_t disk = 0;
   double seconds = 0.0;
   for (const Todo& t : todo) disk += t.estimate.disk, seconds += t.estimate.seconds;
-  {
-    std::error_code ec;
-    const fs::space_info sp = fs::space(dir, ec);
-    if (!ec && int64_t(sp.available) < disk)
-      throw Error("dataset run: the " + std::to_string(todo.size()) + " samples left to generate in " + dir.string() +
-                  (shard.count > 1 ? " (shard " + shard.text() + ")" : std::string()) + " need about " + bytes_text(disk) +
-                  ", and " + bytes_text(int64_t(sp.available)) + " is free there (about " +
-                  bytes_text(todo.empty() ? 0 : disk / int64_t(todo.size())) +
-                  " per sample: `spadgen dataset plan` lists them); free some space, write fewer outputs (outputs.*), or "
-                  "use another folder (-o)");
+  if (const int64_t free = free_disk(dir); free >= 0 && free < disk) {
+    throw Error("dataset run: the " + std::to_string(todo.size()) + " samples left to generate in " + dir.string() +
+                (shard.count > 1 ? " (shard " + shard.text() + ")" : std::string()) + " need about " + bytes_text(disk) +
+                ", and " + bytes_text(free) + " is free there (about " +
+                bytes_text(todo.empty() ? 0 : disk / int64_t(todo.size())) +
+                " per sample: `spadgen dataset plan` lists them); free some space, write fewer outputs (outputs.*), or "
+                "use another folder (-o)");
   }
   if (options.progress)
     std::fprintf(stderr, "spadgen: dataset %s: %lld of %lld samples%s to generate (%lld done already), about %s, %s on disk\n",
@@ -286,18 +276,7 @@ void dataset_run(const DatasetOptions& options) {
     const auto sample_start = std::chrono::steady_clock::now();
     try {
       if (rec.hash.empty()) throw Error(rec.error);  // the sample's parameters make an invalid scene
-      const std::optional<json> meta = [&]() -> std::optional<json> {
-        std::ifstream in(dir / s.folder() / "metadata.json");
-        if (!in) return std::nullopt;
-        try {
-          return json::parse(in);
-        } catch (const json::exception&) {
-          return std::nullopt;
-        }
-      }();
-      const bool rendered = meta && meta->contains("/dataset/sample_hash"_json_pointer) &&
-                            (*meta)["dataset"]["sample_hash"] == rec.hash;
-      if (!rendered) {
+      if (!folder.holds(s.folder(), rec.hash)) {
         RunOptions r;
         r.scene_file = spec.scenes[size_t(s.scene)];
         r.out_dir = (dir / s.folder()).string();
@@ -308,16 +287,8 @@ void dataset_run(const DatasetOptions& options) {
         run(r);
       }
       for (int k = 1; k < spec.repeats; ++k) {
-        const SampleRecord now = folder.inspect(s);
-        if (now.status == Status::Done) break;
+        if (folder.holds(s.repeat_folder(k), rec.hash)) continue;
         const fs::path rf = dir / s.repeat_folder(k);
-        std::ifstream in(rf / "metadata.json");
-        if (in) {
-          try {
-            if (json::parse(in).value("/dataset/sample_hash"_json_pointer, std::string()) == rec.hash) continue;
-          } catch (const json::exception&) {
-          }
-        }
         SenseOptions so;
         so.run_dir = (dir / s.folder()).string();
         so.out_dir = rf.string();

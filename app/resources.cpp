@@ -37,15 +37,6 @@ int64_t available_memory() {
   return available;
 }
 
-// Free bytes for an unprivileged writer on the file system the output folder is (or will be) on.
-int64_t free_disk(fs::path p) {
-  std::error_code ec;
-  p = fs::absolute(p, ec);
-  while (!p.empty() && !fs::exists(p, ec) && p != p.parent_path()) p = p.parent_path();
-  struct statvfs s {};
-  if (p.empty() || ::statvfs(p.c_str(), &s) != 0) return -1;
-  return static_cast<int64_t>(s.f_bavail) * static_cast<int64_t>(s.f_frsize);
-}
 
 std::string join_parts(std::vector<ResourcePlan::Part> parts) {
   std::sort(parts.begin(), parts.end(), [](const auto& a, const auto& b) { return a.bytes > b.bytes; });
@@ -63,6 +54,15 @@ std::vector<ResourcePlan::Part> required(const std::vector<ResourcePlan::Part>& 
 }
 
 }  // namespace
+
+int64_t free_disk(fs::path p) {
+  std::error_code ec;
+  p = fs::absolute(p, ec);
+  while (!p.empty() && !fs::exists(p, ec) && p != p.parent_path()) p = p.parent_path();
+  struct statvfs s {};
+  if (p.empty() || ::statvfs(p.c_str(), &s) != 0) return -1;
+  return static_cast<int64_t>(s.f_bavail) * static_cast<int64_t>(s.f_frsize);
+}
 
 int64_t ResourcePlan::memory_needed() const {
   int64_t n = 0;

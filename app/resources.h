@@ -41,6 +41,10 @@ void check_resources(const RunConfig& c, const sensor::SensorModel& sensor, cons
 // "memory: about 270 MB (available: 5.1 GB); disk: about 0.9 GB" for spadgen info.
 std::string resource_summary(const ResourcePlan& plan);
 
+// Free bytes for an unprivileged writer on the file system the folder `p` is (or will be) on: its nearest
+// existing ancestor's; -1 when unknown.
+int64_t free_disk(std::filesystem::path p);
+
 // "1.2 GB", "870 MB", "12 kB" (powers of 1000, as `spadgen info` gives sizes).
 std::string bytes_text(int64_t bytes);
 

@@ -32,23 +32,18 @@ namespace {
 const std::set<std::string> kOwnEntries = {"dataset.json", "samples", "failed", "index.jsonl", "index.csv", "dataset.md",
                                            ".dataset.lock"};
 
-std::optional<json> read_json(const fs::path& p) {
+// A JSON file as J (json, or ordered_json to keep its keys' order); nullopt when absent or not JSON.
+template <class J = json>
+std::optional<J> read_json(const fs::path& p) {
   std::ifstream in(p, std::ios::binary);
   if (!in) return std::nullopt;
   std::ostringstream ss;
   ss << in.rdbuf();
   try {
-    return json::parse(ss.str());
+    return J::parse(ss.str());
   } catch (const json::exception&) {
     return std::nullopt;  // a file spadgen wrote whole is never cut short; anything else is not a sample
   }
-}
-
-std::string slurp_text(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
 }
 
 std::string failure_path(const Sample& s) {
@@ -121,8 +116,7 @@ void DatasetFolder::claim() const {
   for (auto it = spec_.resolved.begin(); it != spec_.resolved.end(); ++it) record[it.key()] = it.value();
   // Compared in order: the order of the grid's keys decides which cell a sample takes.
   const ojson wanted = record;
-  std::optional<ojson> prev;
-  if (const std::optional<json> any = read_json(own)) prev = ojson::parse(slurp_text(own));
+  const std::optional<ojson> prev = read_json<ojson>(own);
   if (prev) {
     ojson a = *prev, b = wanted;
     for (const char* free_key : {"samples", "dataset_file"}) a.erase(free_key), b.erase(free_key);
@@ -176,6 +170,17 @@ DatasetFolder::Resolved DatasetFolder::resolve(const Sample& s) const {
   return out;
 }
 
+std::optional<json> DatasetFolder::sample_metadata(const std::string& folder) const {
+  std::optional<json> meta = read_json(dir_ / folder / "metadata.json");
+  if (meta && (!meta->contains("dataset") || !meta->contains("files"))) meta.reset();
+  return meta;
+}
+
+bool DatasetFolder::holds(const std::string& folder, const std::string& hash) const {
+  const std::optional<json> meta = sample_metadata(folder);
+  return meta && (*meta)["dataset"].value("sample_hash", "") == hash;
+}
+
 SampleRecord DatasetFolder::inspect(const Sample& s) const {
   SampleRecord rec;
   rec.sample = s;
@@ -191,8 +196,8 @@ SampleRecord DatasetFolder::inspect(const Sample& s) const {
   std::vector<std::string> folders = {s.folder()};
   for (int r = 1; r < spec_.repeats; ++r) folders.push_back(s.repeat_folder(r));
   for (size_t f = 0; f < folders.size(); ++f) {
-    const std::optional<json> meta = read_json(dir_ / folders[f] / "metadata.json");
-    if (!meta || !meta->contains("dataset") || !meta->contains("files")) {
+    const std::optional<json> meta = sample_metadata(folders[f]);
+    if (!meta) {
       done = false;
       continue;
     }

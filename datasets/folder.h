@@ -17,6 +17,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -60,6 +61,12 @@ class DatasetFolder {
     std::string hash;
   };
   Resolved resolve(const Sample& s) const;
+
+  // The metadata.json of a sample folder ("samples/000042", a repeat's) when it is one spadgen published
+  // (it lists its files and has a dataset section), else nullopt.
+  std::optional<nlohmann::json> sample_metadata(const std::string& folder) const;
+  // True when that folder holds the sample whose hash is `hash` (not a stale one).
+  bool holds(const std::string& folder, const std::string& hash) const;
 
   // The sample's state on disk (reads its metadata.json files and the failure record).
   SampleRecord inspect(const Sample& s) const;
