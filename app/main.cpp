@@ -7,17 +7,21 @@
 //   spadgen dataset run FILE -o DIR [--shard I/N] [--threads N] [-q]
 //   spadgen dataset status DIR
 //   spadgen dataset schema         # the reference of the dataset file (Markdown)
+//   spadgen reconstruct RUN_DIR [--detector edges|paper] [-o FILE] [--noise-free]
+//   spadgen evaluate RUN_DIR|DATASET_DIR [--detections FILE] [--tolerance-m T] [--region X,Y,W,H]
 #include <CLI/CLI.hpp>
 
 #include <malloc.h>
 
 #include <cstdio>
 #include <iostream>
+#include <sstream>
 
 #include "app/cli.h"
 #include "app/dataset.h"
 #include "datasets/dataset.h"
 #include "app/pipeline.h"
+#include "app/reconstruct.h"
 #include "core/error.h"
 #include "scenes/scene_file.h"
 
@@ -108,6 +112,37 @@ int main(int argc, char** argv) {
   bool dataset_json_schema = false;
   dschema_cmd->add_flag("--json-schema", dataset_json_schema, "print it as a JSON Schema (for editors) instead");
 
+  spadgen::app::ReconstructOptions rec;
+  bool rec_quiet = false;
+  CLI::App* rec_cmd = cli.add_subcommand("reconstruct", "reference detectors of the returns in each pixel's gate profile (detections_<detector>.exr), "
+                                                        "or the HDR inversion of a 2D run (hdr.exr); docs/detection.md");
+  rec_cmd->add_option("run_dir", rec.run_dir, "run folder")->required()->check(CLI::ExistingDirectory);
+  rec_cmd->add_option("--detector", rec.detector, "edges (multi-scale rising and falling edges, default) or paper (the paper's virtual window)")
+      ->check(CLI::IsMember({"edges", "paper"}));
+  rec_cmd->add_option("-o,--out", rec.out, "output file (default RUN_DIR/detections_<detector>.exr, or RUN_DIR/hdr.exr)");
+  rec_cmd->add_flag("--noise-free", rec.noise_free, "from the noise-free expected counts (detection_rate) instead of the sampled counts");
+  rec_cmd->add_option("--max-detections", rec.max_detections, "detection slots per pixel (the strongest are kept)")->check(CLI::Range(1, 64));
+  rec_cmd->add_option("--threads", rec.threads, "worker threads (default: all cores)")->check(CLI::NonNegativeNumber);
+  rec_cmd->add_flag("-q,--quiet", rec_quiet, "nothing on stderr but warnings and errors");
+
+  spadgen::app::EvaluateCommand eval;
+  std::string eval_region;
+  double eval_min_score = 0.0;
+  CLI::App* eval_cmd = cli.add_subcommand("evaluate", "score detections against the object labels of a run or of every sample of a dataset: "
+                                                      "metrics.json, error maps; docs/detection.md");
+  eval_cmd->add_option("target", eval.target, "run folder or dataset folder")->required()->check(CLI::ExistingDirectory);
+  eval_cmd->add_option("--detections", eval.detections, "detections file (.exr or .npy; for a dataset: its name inside each sample); default "
+                                                        "detections_<detector>.exr, computed in memory when absent");
+  eval_cmd->add_option("--detector", eval.detector, "the detector whose file is the default, or that runs when it is absent")
+      ->check(CLI::IsMember({"edges", "paper"}));
+  eval_cmd->add_option("-o,--out", eval.out_dir, "output folder (default TARGET/evaluation)");
+  eval_cmd->add_option("--tolerance-m", eval.tolerance_m, "a detection further than this from every unmatched object is false (default 0.05)");
+  CLI::Option* min_score_opt = eval_cmd->add_option("--min-score", eval_min_score, "ignore detections scoring below this");
+  eval_cmd->add_option("--region", eval_region, "accuracy and precision of the nearest object over this rectangle (image pixels)")
+      ->type_name("X,Y,W,H");
+  eval_cmd->add_flag("--noise-free", eval.noise_free, "when the detector runs: on the noise-free expected counts");
+  eval_cmd->add_option("--threads", eval.threads, "worker threads (default: all cores)")->check(CLI::NonNegativeNumber);
+
   if (const std::optional<int> code = spadgen::app::parse_command_line(cli, argc, argv)) return *code;
   return spadgen::app::run_command([&] {
     if (*run_cmd) {
@@ -128,6 +163,22 @@ int main(int argc, char** argv) {
       else if (*drun_cmd) spadgen::app::dataset_run(dataset);
       else if (*status_cmd) std::cout << spadgen::app::dataset_status(status_dir);
       else if (*dschema_cmd) std::cout << (dataset_json_schema ? spadgen::datasets::dataset_schema_json() : spadgen::app::dataset_schema());
+    } else if (*rec_cmd) {
+      rec.progress = !rec_quiet;
+      const std::string path = spadgen::app::reconstruct(rec);
+      if (!rec_quiet) std::cerr << "wrote " << path << "\n";
+    } else if (*eval_cmd) {
+      if (*min_score_opt) eval.min_score = eval_min_score;
+      if (!eval_region.empty()) {
+        spadgen::PixelRect r;
+        char c1 = 0, c2 = 0, c3 = 0;
+        std::istringstream in(eval_region);
+        if (!(in >> r.x0 >> c1 >> r.y0 >> c2 >> r.width >> c3 >> r.height) || c1 != ',' || c2 != ',' || c3 != ',' || !in.eof() ||
+            r.x0 < 0 || r.y0 < 0 || r.width < 1 || r.height < 1)
+          throw spadgen::Error("--region " + eval_region + ": expected X,Y,W,H (non-negative corner, positive size, image pixels)");
+        eval.region = r;
+      }
+      std::cout << spadgen::app::evaluate(eval);
     } else if (*schema_cmd) {
       std::cout << (json_schema ? spadgen::scenes::schema_json() : spadgen::scenes::schema_reference_markdown());
     }

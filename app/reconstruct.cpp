@@ -1,0 +1,387 @@
+#include "reconstruct.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <limits>
+#include <map>
+#include <memory>
+#include <sstream>
+
+#include "app/interrupt.h"
+#include "app/progress.h"
+#include "core/error.h"
+#include "reconstruct/detect.h"
+#include "reconstruct/evaluate.h"
+#include "reconstruct/run_folder.h"
+#include "writers/writers.h"
+
+namespace spadgen::app {
+namespace fs = std::filesystem;
+using reconstruct::Detection;
+using reconstruct::RunFolder;
+
+namespace {
+
+constexpr int kBandRows = 8;
+
+// Detections of every pixel of an image: `slots` per pixel, [slot * W * H + y * W + x]; NaN range in unused slots.
+struct DetectionImage {
+  int width = 0, height = 0, slots = 0;
+  std::vector<float> count, range, gate, amplitude, score;
+  DetectionImage(int w, int h, int m)
+      : width(w), height(h), slots(m), count(size_t(w) * size_t(h), 0.0f),
+        range(size_t(m) * count.size(), std::numeric_limits<float>::quiet_NaN()), gate(range), amplitude(range), score(range) {}
+  size_t at(int slot, size_t pixel) const { return size_t(slot) * count.size() + pixel; }
+  // (range, score) pairs of a pixel
+  std::vector<std::pair<double, double>> of(size_t pixel) const {
+    std::vector<std::pair<double, double>> d;
+    for (int s = 0; s < slots; ++s)
+      if (std::isfinite(range[at(s, pixel)])) d.emplace_back(range[at(s, pixel)], std::isnan(score[at(s, pixel)]) ? 0.0 : score[at(s, pixel)]);
+    return d;
+  }
+};
+
+// A detector with its parameters for one run: the edge detector's separation is the run's gate edge
+// (the slower of rise and fall, plus the instrument response's FWHM) in gate steps, and a rise and a fall
+// are one return within half of it.
+struct Detector {
+  std::string name;
+  reconstruct::EdgeDetector edges;
+  reconstruct::PaperDetector paper;
+
+  Detector(const std::string& n, const RunFolder& run) : name(n) {
+    if (name != "edges" && name != "paper") throw Error("--detector " + name + ": expected edges or paper");
+    const auto& g = run.metadata()["acquisition"].value("gate", nlohmann::json::object());
+    const double step_ps = run.metadata()["acquisition"].value("gate_step_ps", 0.0);
+    if (g.contains("rise_ps") && g.contains("fall_ps") && step_ps > 0.0) {
+      const double edge_ps = std::max(g["rise_ps"].get<double>(), g["fall_ps"].get<double>()) + g.value("irf_fwhm_ps", 0.0);
+      edges.separation = std::max(3, int(std::ceil(edge_ps / step_ps)));
+      // a rise and a fall of one return agree within their noise; two returns closer than half the
+      // separation are not resolved anyway
+      edges.match_s = 0.5 * edges.separation * step_ps * 1e-12;
+    }
+  }
+  std::vector<Detection> operator()(const float* profile, int K, int frames, const reconstruct::PixelTiming& t) const {
+    return name == "edges" ? reconstruct::detect(edges, profile, K, frames, t) : reconstruct::detect(paper, profile, K, frames, t);
+  }
+  nlohmann::json parameters() const {
+    if (name == "paper")
+      return {{"window", paper.window}, {"half_width", paper.half_width}, {"plateau", paper.plateau}, {"min_score", paper.min_score}};
+    return {{"scales", edges.scales}, {"min_score", edges.min_score}, {"separation", edges.separation}, {"match_ps", edges.match_s * 1e12}};
+  }
+};
+
+DetectionImage detect_image(const RunFolder& run, const Detector& detector, bool noise_free, int slots, bool progress) {
+  if (!run.gate_sweep()) throw Error(run.dir() + ": a 2D intensity run has no gate profiles to detect returns in");
+  DetectionImage img(run.width(), run.height(), slots);
+  const int bands = (run.height() + kBandRows - 1) / kBandRows;
+  Progress bar(size_t(bands), progress);
+  tbb::parallel_for(tbb::blocked_range<int>(0, bands, 1), [&](const tbb::blocked_range<int>& r) {
+    std::vector<float> profiles;
+    for (int b = r.begin(); b < r.end(); ++b) {
+      InterruptGuard::check();
+      const int y0 = b * kBandRows, y1 = std::min(run.height(), y0 + kBandRows);
+      profiles.resize(size_t(y1 - y0) * size_t(run.width()) * size_t(run.K()));
+      run.profiles(y0, y1, noise_free, profiles.data());
+      for (int y = y0; y < y1; ++y)
+        for (int x = 0; x < run.width(); ++x) {
+          const float* p = profiles.data() + (size_t(y - y0) * size_t(run.width()) + size_t(x)) * size_t(run.K());
+          std::vector<Detection> d = detector(p, run.K(), run.frames(), run.timing(x, y));
+          if (int(d.size()) > slots) {  // keep the strongest, in range order
+            std::partial_sort(d.begin(), d.begin() + slots, d.end(),
+                              [](const Detection& a, const Detection& c) { return std::abs(a.score) > std::abs(c.score); });
+            d.resize(size_t(slots));
+            std::sort(d.begin(), d.end(), [](const Detection& a, const Detection& c) { return a.range_m < c.range_m; });
+          }
+          const size_t i = size_t(y) * size_t(run.width()) + size_t(x);
+          img.count[i] = float(d.size());
+          for (size_t s = 0; s < d.size(); ++s) {
+            img.range[img.at(int(s), i)] = float(d[s].range_m);
+            img.gate[img.at(int(s), i)] = float(d[s].gate);
+            img.amplitude[img.at(int(s), i)] = float(d[s].amplitude);
+            img.score[img.at(int(s), i)] = float(d[s].score);
+          }
+        }
+      bar.tick();
+    }
+  });
+  return img;
+}
+
+std::string slot_name(int s, const char* what) { return "det" + std::to_string(s) + "." + what; }
+
+// The detections file (docs/detection.md): an EXR with `count` and det<i>.range (metres; NaN: none), and
+// optionally det<i>.score; or a float .npy (H, W, M) of ranges, NaN where there is none.
+DetectionImage read_detections(const std::string& path, int width, int height) {
+  if (!fs::is_regular_file(path)) throw Error(path + ": no such detections file (run spadgen reconstruct, or give --detections)");
+  if (fs::path(path).extension() == ".npy") {
+    writers::NpyReader npy(path);
+    if (npy.shape().size() != 3 || npy.shape()[0] != height || npy.shape()[1] != width)
+      throw Error(path + ": expected a float32 array (H, W, M) = (" + std::to_string(height) + ", " + std::to_string(width) + ", M) of ranges");
+    const int m = int(npy.shape()[2]);
+    DetectionImage img(width, height, m);
+    const float* v = npy.data<float>();
+    for (size_t i = 0; i < img.count.size(); ++i)
+      for (int s = 0; s < m; ++s) {
+        const float r = v[i * size_t(m) + size_t(s)];
+        img.range[img.at(s, i)] = r;
+        img.count[i] += std::isfinite(r);
+      }
+    return img;
+  }
+  writers::ExrData e = writers::read_exr(path);
+  if (e.width != width || e.height != height)
+    throw Error(path + ": " + std::to_string(e.width) + " x " + std::to_string(e.height) + " pixels, the run has " +
+                std::to_string(width) + " x " + std::to_string(height));
+  int m = 0;
+  while (e.channels.count(slot_name(m, "range"))) ++m;
+  if (m == 0) throw Error(path + ": no channel det0.range (a detections file holds det<i>.range in metres, NaN where there is none)");
+  DetectionImage img(width, height, m);
+  for (int s = 0; s < m; ++s) {
+    const auto& r = e.channels[slot_name(s, "range")];
+    std::copy(r.begin(), r.end(), img.range.begin() + std::ptrdiff_t(img.at(s, 0)));
+    if (e.channels.count(slot_name(s, "score"))) {
+      const auto& sc = e.channels[slot_name(s, "score")];
+      std::copy(sc.begin(), sc.end(), img.score.begin() + std::ptrdiff_t(img.at(s, 0)));
+    }
+  }
+  for (size_t i = 0; i < img.count.size(); ++i)
+    for (int s = 0; s < m; ++s) img.count[i] += std::isfinite(img.range[img.at(s, i)]);
+  return img;
+}
+
+std::unique_ptr<tbb::global_control> thread_limit(int threads) {
+  if (threads <= 0) return nullptr;
+  return std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, size_t(threads));
+}
+
+std::string provenance(const RunFolder& run) {
+  const auto& m = run.metadata();
+  return nlohmann::json{{"run", fs::absolute(run.dir()).lexically_normal().string()},
+                        {"seed", m.value("seed", nlohmann::json(nullptr))},
+                        {"scene_hash_fnv1a64", m.value("scene_hash_fnv1a64", nlohmann::json(nullptr))}}
+      .dump();
+}
+
+// The object labels of a run: per pixel, its objects (ground_truth.exr, labels.exr).
+struct Labels {
+  std::vector<std::vector<reconstruct::TruthObject>> pixels;
+  std::map<int, std::string> names;
+  bool detectability = false;
+};
+
+Labels read_labels(const RunFolder& run) {
+  const std::string gt_path = run.file("ground_truth.exr");
+  if (gt_path.empty()) throw Error(run.dir() + ": no ground_truth.exr (outputs.ground_truth) to score against");
+  const writers::ExrData gt = writers::read_exr(gt_path);
+  if (!gt.channels.count("object0.range"))
+    throw Error(gt_path + ": no object channels (object<j>.range): written by an older spadgen; run the scene again");
+  writers::ExrData labels;
+  const std::string labels_path = run.file("labels.exr");
+  if (!labels_path.empty()) labels = writers::read_exr(labels_path);
+  Labels l;
+  l.detectability = labels.channels.count("object0.detectable") > 0;
+  const size_t n = size_t(run.width()) * size_t(run.height());
+  l.pixels.resize(n);
+  for (int j = 0; gt.channels.count("object" + std::to_string(j) + ".range"); ++j) {
+    const std::string p = "object" + std::to_string(j) + ".";
+    const auto& range = gt.channels.at(p + "range");
+    const auto& id = gt.channels.at(p + "id");
+    const std::vector<float>* det = l.detectability ? &labels.channels.at(p + "detectable") : nullptr;
+    for (size_t i = 0; i < n; ++i)
+      if (std::isfinite(range[i]) && id[i] >= 0.0f) l.pixels[i].push_back({int(id[i]), range[i], det ? (*det)[i] > 0.5f : true});
+  }
+  if (run.metadata().contains("objects"))
+    for (const auto& o : run.metadata()["objects"]) l.names[o.value("id", -1)] = o.value("name", "");
+  return l;
+}
+
+// Blue (detection too near) through white to red (too far), over +-tolerance; grey: no object; black: missed.
+void write_maps(const std::string& dir, int w, int h, const std::vector<reconstruct::PixelOutcome>& o, double tolerance) {
+  std::vector<uint8_t> err(size_t(w) * size_t(h) * 3), outcome(err.size());
+  for (size_t i = 0; i < o.size(); ++i) {
+    uint8_t* e = &err[3 * i];
+    uint8_t* c = &outcome[3 * i];
+    if (o[i].objects == 0) {
+      e[0] = e[1] = e[2] = 64;
+    } else if (std::isnan(o[i].first_error_m)) {
+      e[0] = e[1] = e[2] = 0;
+    } else {
+      const double t = std::clamp(double(o[i].first_error_m) / tolerance, -1.0, 1.0);
+      const auto fade = [](double a) { return uint8_t(std::lround(255.0 * (1.0 - a))); };
+      e[0] = t < 0 ? fade(-t) : 255, e[1] = fade(std::abs(t)), e[2] = t > 0 ? fade(t) : 255;
+    }
+    // green: every object found, no false detection; yellow: objects missed; red: false detections; grey: nothing there
+    if (o[i].false_detections > 0) c[0] = 230, c[1] = 30, c[2] = 30;
+    else if (o[i].found < o[i].objects) c[0] = 240, c[1] = 200, c[2] = 20;
+    else if (o[i].objects > 0) c[0] = 30, c[1] = 180, c[2] = 60;
+    else c[0] = c[1] = c[2] = 64;
+  }
+  writers::write_png((fs::path(dir) / "range_error.png").string(), w, h, 3, err);
+  writers::write_png((fs::path(dir) / "outcome.png").string(), w, h, 3, outcome);
+}
+
+reconstruct::EvaluateOptions scorer_options(const EvaluateCommand& c) {
+  reconstruct::EvaluateOptions o;
+  o.tolerance_m = c.tolerance_m;
+  if (c.min_score) o.min_score = *c.min_score;
+  o.region = c.region;
+  return o;
+}
+
+// Scores one run; with maps_dir, writes its error maps there.
+reconstruct::Scores evaluate_run(const EvaluateCommand& c, const std::string& run_dir, const std::string& detections,
+                                 const std::string& maps_dir, std::map<int, std::string>* names, nlohmann::json* source) {
+  const RunFolder run(run_dir);
+  const Labels labels = read_labels(run);
+  if (names) names->insert(labels.names.begin(), labels.names.end());
+  const std::string default_file = (fs::path(run_dir) / ("detections_" + c.detector + ".exr")).string();
+  const std::string file = detections.empty() ? default_file : detections;
+  DetectionImage img = (detections.empty() && !fs::exists(file))
+                           ? detect_image(run, Detector(c.detector, run), c.noise_free, 8, false)
+                           : read_detections(file, run.width(), run.height());
+  if (source)
+    *source = (detections.empty() && !fs::exists(file))
+                  ? nlohmann::json{{"detector", c.detector}, {"computed", true}, {"noise_free", c.noise_free}}
+                  : nlohmann::json{{"file", file}};
+  if (source && !labels.detectability) (*source)["labels"] = "labels.exr absent: every object counted as detectable";
+  reconstruct::Scores scores(scorer_options(c));
+  std::vector<reconstruct::PixelOutcome> outcome(labels.pixels.size());
+  for (int y = 0; y < run.height(); ++y)
+    for (int x = 0; x < run.width(); ++x) {
+      const size_t i = size_t(y) * size_t(run.width()) + size_t(x);
+      outcome[i] = scores.add(x, y, labels.pixels[i], img.of(i));
+    }
+  if (!maps_dir.empty()) write_maps(maps_dir, run.width(), run.height(), outcome, c.tolerance_m);
+  return scores;
+}
+
+std::string percent(const nlohmann::json& v) {
+  if (!v.is_number()) return "-";
+  std::ostringstream s;
+  s << std::fixed << std::setprecision(1) << 100.0 * v.get<double>() << " %";
+  return s.str();
+}
+
+std::string summary(const nlohmann::json& m) {
+  std::ostringstream s;
+  s << "objects found: " << percent(m["objects"]["recall"]) << " of " << m["objects"]["objects"] << " (detectable: "
+    << percent(m["objects_detectable"]["recall"]) << " of " << m["objects_detectable"]["objects"] << ")\n";
+  s << "detections: " << m["detections"]["total"] << ", precision " << percent(m["detections"]["precision"]) << ", false "
+    << m["detections"]["false"] << "\n";
+  if (m["range_error"].contains("bias_mm"))
+    s << "range error: bias " << std::setprecision(3) << m["range_error"]["bias_mm"].get<double>() << " mm, rms "
+      << m["range_error"]["rms_mm"].get<double>() << " mm, |error| p90 " << m["range_error"]["abs_p90_mm"].get<double>() << " mm\n";
+  return s.str();
+}
+
+}  // namespace
+
+std::string reconstruct(const ReconstructOptions& o) {
+  InterruptGuard interrupt_guard;
+  const auto threads = thread_limit(o.threads);
+  if (o.max_detections < 1 || o.max_detections > 64) throw Error("--max-detections: expected 1 to 64");
+  const RunFolder run(o.run_dir);
+  if (!run.gate_sweep()) {
+    // The 2D HDR inversion: eq. (5) or (6) on the image's summed counts.
+    const std::string out = o.out.empty() ? (fs::path(o.run_dir) / "hdr.exr").string() : o.out;
+    writers::ExrImage img(run.width(), run.height());
+    std::vector<float> c(size_t(run.width()) * size_t(run.height()) * size_t(run.K()));
+    run.profiles(0, run.height(), o.noise_free, c.data());
+    float* photons = img.channel("photons");
+    float* se = img.channel("photons_se");
+    float* sat = img.channel("saturated");
+    for (size_t i = 0; i < size_t(run.width()) * size_t(run.height()); ++i) {
+      double counts = 0.0;
+      for (int k = 0; k < run.K(); ++k) counts += c[i * size_t(run.K()) + size_t(k)];
+      const reconstruct::HdrEstimate e = reconstruct::invert_hdr(counts, run.image_frames(), run.dual(), run.dual_ratio());
+      photons[i] = float(e.photons), se[i] = float(e.standard_error), sat[i] = e.saturated ? 1.0f : 0.0f;
+    }
+    img.set_attribute("spadgen_reconstruct", nlohmann::json{{"what", run.dual() ? "eq. (6) inversion" : "eq. (5) inversion"},
+                                                            {"noise_free", o.noise_free}}.dump());
+    img.set_attribute("spadgen_source", provenance(run));
+    img.write(out);
+    return out;
+  }
+  const std::string out = o.out.empty() ? (fs::path(o.run_dir) / ("detections_" + o.detector + ".exr")).string() : o.out;
+  const Detector detector(o.detector, run);
+  const DetectionImage d = detect_image(run, detector, o.noise_free, o.max_detections, o.progress);
+  writers::ExrImage img(d.width, d.height);
+  std::copy(d.count.begin(), d.count.end(), img.channel("count"));
+  const size_t n = d.count.size();
+  for (int s = 0; s < d.slots; ++s)
+    for (const auto& [name, v] : {std::pair{"range", &d.range}, {"gate", &d.gate}, {"amplitude", &d.amplitude}, {"score", &d.score}})
+      std::copy_n(v->begin() + std::ptrdiff_t(d.at(s, 0)), n, img.channel(slot_name(s, name)));
+  img.set_attribute("spadgen_reconstruct", nlohmann::json{{"detector", o.detector},
+                                                          {"parameters", detector.parameters()},
+                                                          {"noise_free", o.noise_free},
+                                                          {"units", "range m; gate: fractional gate index; amplitude: detections per frame; score: z"}}
+                                               .dump());
+  img.set_attribute("spadgen_source", provenance(run));
+  img.write(out);
+  return out;
+}
+
+std::string evaluate(const EvaluateCommand& c) {
+  InterruptGuard interrupt_guard;
+  const auto threads = thread_limit(c.threads);
+  if (!(c.tolerance_m > 0.0)) throw Error("--tolerance-m: expected a positive number of metres");
+  const fs::path target(c.target);
+  const std::string out = c.out_dir.empty() ? (target / "evaluation").string() : c.out_dir;
+  std::map<int, std::string> names;
+  nlohmann::json report;
+  std::ostringstream text;
+  if (fs::exists(target / "metadata.json")) {
+    fs::create_directories(out);
+    nlohmann::json source;
+    const reconstruct::Scores s = evaluate_run(c, c.target, c.detections, out, &names, &source);
+    report = s.to_json(names);
+    report["detections_source"] = source;
+    report["run"] = c.target;
+    text << summary(report);
+  } else if (fs::exists(target / "dataset.json")) {
+    if (!fs::is_directory(target / "samples")) throw Error(c.target + ": a dataset folder without samples/");
+    std::vector<fs::path> samples;
+    for (const auto& e : fs::directory_iterator(target / "samples"))
+      if (e.is_directory() && fs::exists(e.path() / "metadata.json")) samples.push_back(e.path());
+    std::sort(samples.begin(), samples.end());
+    if (samples.empty()) throw Error(c.target + ": no done samples to evaluate");
+    fs::create_directories(out);
+    reconstruct::Scores total(scorer_options(c));
+    std::ostringstream csv;
+    csv << "sample,objects,found,recall,detectable,detectable_found,detections,false,bias_mm,rms_mm\n";
+    nlohmann::json rows = nlohmann::json::array();
+    for (const fs::path& p : samples) {
+      InterruptGuard::check();
+      const std::string file = c.detections.empty() ? "" : (p / c.detections).string();
+      const reconstruct::Scores s = evaluate_run(c, p.string(), file, "", &names, nullptr);
+      total.merge(s);
+      const nlohmann::json m = s.to_json();
+      const auto num = [](const nlohmann::json& v) { return v.is_number() ? v.dump() : std::string(); };
+      csv << p.filename().string() << ',' << m["objects"]["objects"] << ',' << m["objects"]["found"] << ','
+          << num(m["objects"]["recall"]) << ',' << m["objects_detectable"]["objects"] << ',' << m["objects_detectable"]["found"]
+          << ',' << m["detections"]["total"] << ',' << m["detections"]["false"] << ',' << num(m["range_error"].value("bias_mm", nlohmann::json()))
+          << ',' << num(m["range_error"].value("rms_mm", nlohmann::json())) << '\n';
+      rows.push_back({{"sample", p.filename().string()}, {"metrics", m}});
+    }
+    report = total.to_json(names);
+    report["dataset"] = c.target;
+    report["samples"] = rows;
+    writers::write_file_atomic((fs::path(out) / "samples.csv").string(), csv.str());
+    text << samples.size() << " samples\n" << summary(report);
+  } else {
+    throw Error(c.target + ": neither a run folder (metadata.json) nor a dataset folder (dataset.json)");
+  }
+  writers::write_json((fs::path(out) / "metrics.json").string(), report);
+  text << "wrote " << (fs::path(out) / "metrics.json").string() << "\n";
+  return text.str();
+}
+
+}  // namespace spadgen::app

@@ -1,0 +1,38 @@
+// `spadgen reconstruct RUN_DIR` (reference detectors, the 2D HDR inversion) and `spadgen evaluate
+// RUN_DIR|DATASET_DIR` (detections scored against the object labels). docs/detection.md.
+#pragma once
+#include <optional>
+#include <string>
+
+#include "core/tile.h"
+
+namespace spadgen::app {
+
+struct ReconstructOptions {
+  std::string run_dir;
+  std::string detector = "edges";  // "edges" (the team's) or "paper"
+  std::string out;                 // default RUN_DIR/detections_<detector>.exr (2D runs: RUN_DIR/hdr.exr)
+  bool noise_free = false;         // from the noise-free expected counts (detection_rate) instead of counts
+  int max_detections = 4;          // slots per pixel in the file; a pixel keeps its highest-scoring ones
+  int threads = 0;
+  bool progress = true;
+};
+// Returns the path written.
+std::string reconstruct(const ReconstructOptions& options);
+
+struct EvaluateCommand {
+  std::string target;              // a run folder or a dataset folder
+  std::string detections;          // a file (run), or a file name inside each sample (dataset);
+                                   // default: detections_<detector>.exr, computed in memory when absent
+  std::string detector = "edges";
+  std::string out_dir;             // default TARGET/evaluation
+  double tolerance_m = 0.05;
+  std::optional<double> min_score;
+  std::optional<PixelRect> region; // image coordinates
+  bool noise_free = false;
+  int threads = 0;
+};
+// Writes metrics.json (and error maps for a run, samples.csv for a dataset); returns a short summary.
+std::string evaluate(const EvaluateCommand& command);
+
+}  // namespace spadgen::app

@@ -1,0 +1,240 @@
+#include "detect.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "sensor/sensor.h"
+
+namespace spadgen::reconstruct {
+namespace {
+
+constexpr double kSpeedOfLight = 299792458.0;
+
+// The binomial variance of one count, from a smoothed estimate of its p (a raw count of 0 or N would
+// claim no noise at all): N p (1 - p), p kept half a count inside (0, 1).
+double count_variance(double smoothed_counts, int frames) {
+  const double N = frames;
+  const double p = std::clamp(smoothed_counts / N, 0.5 / N, 1.0 - 0.5 / N);
+  return N * p * (1.0 - p);
+}
+
+// d lambda / d c at a count level (lambda = -ln(1 - c / N)).
+double lambda_slope(double counts, int frames) {
+  const double N = frames;
+  return 1.0 / (N - std::min(counts, N - 0.5));
+}
+
+// Fractional index in [lo, hi) where v first crosses `level` in the direction `up`, nearest to `near`.
+double crossing(const std::vector<double>& v, int lo, int hi, double level, bool up, double near) {
+  lo = std::max(lo, 1);
+  hi = std::min(hi, int(v.size()));
+  double best = std::nan(""), best_d = 1e300;
+  for (int k = lo; k < hi; ++k) {
+    const double a = v[size_t(k - 1)], b = v[size_t(k)];
+    const bool crosses = up ? (a < level && b >= level) : (a > level && b <= level);
+    if (!crosses) continue;
+    const double x = double(k - 1) + (level - a) / (b - a);
+    if (std::abs(x - near) < best_d) best = x, best_d = std::abs(x - near);
+  }
+  return best;
+}
+
+}  // namespace
+
+double PixelTiming::range_of_rise(double k) const {
+  return (start_s + k * step_s + rise_offset_s - emission_delay_s) * kSpeedOfLight / 2.0;
+}
+double PixelTiming::range_of_fall(double k) const {
+  return (start_s + k * step_s + fall_offset_s - emission_delay_s) * kSpeedOfLight / 2.0;
+}
+
+std::vector<double> moving_average(const std::vector<double>& p, int h) {
+  std::vector<double> s(p.size());
+  const auto n = int64_t(p.size());
+  for (int64_t k = 0; k < n; ++k) {
+    double sum = 0.0;
+    int count = 0;
+    for (int64_t j = std::max<int64_t>(0, k - h); j <= std::min<int64_t>(n - 1, k + h); ++j) sum += p[size_t(j)], ++count;
+    s[size_t(k)] = sum / count;
+  }
+  return s;
+}
+
+double linearise(double counts, int frames) {
+  const double N = frames;
+  return -std::log1p(-std::clamp(counts, 0.0, N - 0.5) / N);
+}
+
+std::vector<Detection> detect(const PaperDetector& d, const float* counts, int K, int frames, const PixelTiming& timing) {
+  std::vector<double> c(counts, counts + K);
+  const std::vector<double> s = moving_average(c, d.half_width);
+  std::vector<double> lam(static_cast<size_t>(K));
+  for (int k = 0; k < K; ++k) lam[size_t(k)] = linearise(s[size_t(k)], frames);
+  // The variance of the mean linearised level over smoothed positions [a, b): by the delta method, each raw
+  // count j enters with the weight sum over k of (1 / (b - a)) (1 / n_k) dlambda/dc(s_k), n_k the positions
+  // averaged at k.
+  const auto level = [&](int a, int b, double* variance) {
+    std::vector<double> w(size_t(K), 0.0);
+    double mean = 0.0;
+    for (int k = a; k < b; ++k) {
+      mean += lam[size_t(k)] / (b - a);
+      const int j0 = std::max(0, k - d.half_width), j1 = std::min(K - 1, k + d.half_width);
+      const double g = lambda_slope(s[size_t(k)], frames) / (b - a) / (j1 - j0 + 1);
+      for (int j = j0; j <= j1; ++j) w[size_t(j)] += g;
+    }
+    *variance = 0.0;
+    for (int j = 0; j < K; ++j)
+      if (w[size_t(j)] != 0.0) *variance += w[size_t(j)] * w[size_t(j)] * count_variance(s[size_t(j)], frames);
+    return mean;
+  };
+  // Each window that holds a significant rise names an edge; the edge itself is located on the whole
+  // profile, so that one straddling two windows is timed right: at the steepest point of the window's
+  // smoothed, linearised profile, between plateaus `guard` positions before and after it.
+  std::vector<Detection> out;
+  const int guard = d.window / 6;
+  for (int a = 0; a < K; a += d.window) {
+    const int b = std::min(K, a + d.window);
+    if (b - a < 2 * d.plateau + 2) break;  // a last partial window too short to hold two levels
+    double var_lo = 0.0, var_hi = 0.0;
+    double lo = level(a, a + d.plateau, &var_lo), hi = level(b - d.plateau, b, &var_hi);
+    double se = std::sqrt(var_lo + var_hi);
+    const double z = se > 0.0 ? (hi - lo) / se : 0.0;
+    if (!(z >= d.min_score)) continue;
+    // The edge's centre: where the profile crosses the window's middle level (nearest the window's centre),
+    // then the levels again from plateaus `guard` positions either side of it and the crossing of theirs.
+    double centre = crossing(lam, a + 1, b, 0.5 * (lo + hi), true, 0.5 * (a + b));
+    if (std::isnan(centre)) centre = 0.5 * (a + b);
+    const int c0 = int(std::lround(centre));
+    const int l0 = c0 - guard - d.plateau, h1 = c0 + guard + d.plateau;
+    if (l0 >= 0 && h1 <= K) {
+      lo = level(l0, l0 + d.plateau, &var_lo);
+      hi = level(h1 - d.plateau, h1, &var_hi);
+      se = std::sqrt(var_lo + var_hi);
+    }
+    double k = crossing(lam, c0 - guard, c0 + guard, 0.5 * (lo + hi), true, centre);
+    if (std::isnan(k)) k = centre;
+    // Two windows that both hold part of one edge name it once.
+    if (!out.empty() && std::abs(out.back().gate - k) < guard) {
+      if (out.back().score >= z) continue;
+      out.pop_back();
+    }
+    out.push_back({timing.range_of_rise(k), k, hi - lo, se > 0.0 ? (hi - lo) / se : z});
+  }
+  return out;
+}
+
+std::vector<Detection> detect(const EdgeDetector& d, const float* counts, int K, int frames, const PixelTiming& timing) {
+  std::vector<double> c(counts, counts + K);
+  const std::vector<double> cs = moving_average(c, 2);
+  std::vector<double> lam(static_cast<size_t>(K)), var(static_cast<size_t>(K));
+  // Prefix sums of lambda and of its variance p / (N (1 - p)) = var(c) (dlambda/dc)^2.
+  std::vector<double> sum_l(size_t(K) + 1, 0.0), sum_v(size_t(K) + 1, 0.0);
+  for (int k = 0; k < K; ++k) {
+    lam[size_t(k)] = linearise(c[size_t(k)], frames);
+    const double g = lambda_slope(cs[size_t(k)], frames);
+    var[size_t(k)] = count_variance(cs[size_t(k)], frames) * g * g;
+    sum_l[size_t(k) + 1] = sum_l[size_t(k)] + lam[size_t(k)];
+    sum_v[size_t(k) + 1] = sum_v[size_t(k)] + var[size_t(k)];
+  }
+  struct Edge {
+    int k = 0, scale = 0;
+    double z = 0.0, step = 0.0, lo = 0.0, hi = 0.0;
+  };
+  // Edges are taken strongest first. Each taken edge claims its transition, `separation` positions
+  // either side of it; a later edge must lie outside every claim, and only the scales whose windows stay
+  // outside every claim count for it (a window reaching into a stronger edge's transition would see that
+  // edge's foot or shoulder as a step of its own). z at boundary k (between positions k - 1 and k), the
+  // best allowed scale, recomputed after each take; at most 64 edges.
+  std::vector<Edge> taken;
+  const auto allowed = [&](int lo, int hi) {  // positions [lo, hi) touch no claim
+    return std::none_of(taken.begin(), taken.end(), [&](const Edge& t) { return lo < t.k + d.separation && hi > t.k - d.separation; });
+  };
+  while (taken.size() < 64) {
+    Edge top;
+    for (int k = 1; k < K; ++k) {
+      if (!allowed(k, k)) continue;
+      for (int s : d.scales) {
+        if (k - s < 0 || k + s > K || !allowed(k - s, k + s)) continue;
+        const double left = (sum_l[size_t(k)] - sum_l[size_t(k - s)]) / s, right = (sum_l[size_t(k + s)] - sum_l[size_t(k)]) / s;
+        const double v = (sum_v[size_t(k + s)] - sum_v[size_t(k - s)]) / (double(s) * s);
+        const double z = v > 0.0 ? (right - left) / std::sqrt(v) : 0.0;
+        if (std::abs(z) > std::abs(top.z)) top = {k, s, z, right - left, left, right};
+      }
+    }
+    if (!(std::abs(top.z) >= d.min_score)) break;
+    taken.push_back(top);
+  }
+  const std::vector<double> lam_s = moving_average(lam, 1);
+  // Each edge at the half point of its step on the lightly smoothed profile, nearest its boundary.
+  const auto pick = [&](bool rising) {
+    std::vector<std::pair<Edge, double>> located;  // the edge and its fractional position
+    for (const Edge& e : taken) {
+      if ((e.z > 0.0) != rising) continue;
+      double x = crossing(lam_s, e.k - e.scale + 1, e.k + e.scale, 0.5 * (e.lo + e.hi), rising, e.k - 0.5);
+      if (std::isnan(x)) x = e.k - 0.5;
+      // The whole step, from plateaus just outside the edge's transition when the profile has them (the
+      // statistic's windows may reach into the transition and see part of it).
+      const int lo0 = int(std::floor(x)) - d.separation - 4, hi1 = int(std::ceil(x)) + d.separation + 4;
+      Edge located_edge = e;
+      if (lo0 >= 0 && hi1 <= K)
+        located_edge.step = (sum_l[size_t(hi1)] - sum_l[size_t(hi1 - 4)]) / 4.0 - (sum_l[size_t(lo0 + 4)] - sum_l[size_t(lo0)]) / 4.0;
+      located.emplace_back(located_edge, x);
+    }
+    return located;
+  };
+  const auto rises = pick(true), falls = pick(false);
+  // Pair each rise with the fall that gives the closest return time, within match_s.
+  std::vector<bool> fall_used(falls.size(), false);
+  std::vector<Detection> out;
+  for (const auto& [r, xr] : rises) {
+    const double tr = timing.start_s + xr * timing.step_s + timing.rise_offset_s;
+    int partner = -1;
+    double best_dt = d.match_s;
+    for (size_t i = 0; i < falls.size(); ++i) {
+      if (fall_used[i]) continue;
+      const auto& [f, xf] = falls[i];
+      const double tf = timing.start_s + xf * timing.step_s + timing.fall_offset_s;
+      if (std::abs(tf - tr) <= best_dt) best_dt = std::abs(tf - tr), partner = int(i);
+    }
+    if (partner < 0) {
+      out.push_back({timing.range_of_rise(xr), xr, r.step, r.z});
+      continue;
+    }
+    fall_used[size_t(partner)] = true;
+    const auto& [f, xf] = falls[size_t(partner)];
+    // weighted by z^2: the timing variance of an edge falls as its z grows
+    const double wr = r.z * r.z, wf = f.z * f.z;
+    const double range = (wr * timing.range_of_rise(xr) + wf * timing.range_of_fall(xf)) / (wr + wf);
+    out.push_back({range, xr, (wr * r.step - wf * f.step) / (wr + wf), std::hypot(r.z, f.z)});
+  }
+  for (size_t i = 0; i < falls.size(); ++i)
+    if (!fall_used[i]) {
+      const auto& [f, xf] = falls[i];
+      out.push_back({timing.range_of_fall(xf), xf, -f.step, -f.z});
+    }
+  std::sort(out.begin(), out.end(), [](const Detection& a, const Detection& b) { return a.range_m < b.range_m; });
+  return out;
+}
+
+HdrEstimate invert_hdr(double counts, int frames, bool dual, double ratio) {
+  HdrEstimate e;
+  const double N = frames;
+  e.saturated = counts >= N - 0.5;
+  e.photons = sensor::linearise_counts(counts, frames, dual, ratio);
+  const double x = e.photons / N;  // photons per frame
+  double variance = 0.0, slope = 0.0;  // var(c) and dc / dphotons at the estimate
+  if (!dual) {
+    const double p = 1.0 - std::exp(-x);
+    variance = N * p * (1.0 - p);
+    slope = 1.0 - p;
+  } else {
+    const double aL = 2.0 * ratio / (ratio + 1.0), aS = 2.0 / (ratio + 1.0);
+    const double pL = -std::expm1(-aL * x), pS = -std::expm1(-aS * x);
+    variance = 0.5 * N * (pL * (1.0 - pL) + pS * (1.0 - pS));
+    slope = 0.5 * (aL * (1.0 - pL) + aS * (1.0 - pS));
+  }
+  e.standard_error = slope > 0.0 ? std::sqrt(variance) / slope : 0.0;
+  return e;
+}
+
+}  // namespace spadgen::reconstruct

@@ -1,0 +1,152 @@
+#include "run_folder.h"
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "core/error.h"
+#include "writers/writers.h"
+
+namespace spadgen::reconstruct {
+namespace fs = std::filesystem;
+
+// A (K, H, W) stack as .npy (memory-mapped) or Zarr (read chunk by chunk), read as float.
+struct RunFolder::Stack {
+  std::unique_ptr<writers::NpyReader> npy;
+  std::unique_ptr<writers::ZarrReader> zarr;
+  writers::Dtype dtype() const { return npy ? npy->dtype() : zarr->dtype(); }
+  const std::vector<int64_t>& shape() const { return npy ? npy->shape() : zarr->shape(); }
+  const std::string& path() const { return npy ? npy->path() : zarr->path(); }
+  // count elements from flat index offset, converted to float
+  void read(int64_t offset, int64_t count, float* out) const {
+    const auto convert = [&](const auto* src) {
+      for (int64_t i = 0; i < count; ++i) out[i] = static_cast<float>(src[i]);
+    };
+    const auto with = [&](auto tag) {
+      using T = decltype(tag);
+      if (npy) return convert(npy->data<T>() + offset);
+      std::vector<T> buffer(static_cast<size_t>(count));
+      zarr->read(offset, count, buffer.data());
+      convert(buffer.data());
+    };
+    switch (dtype()) {
+      case writers::Dtype::U8: return with(uint8_t{});
+      case writers::Dtype::U16: return with(uint16_t{});
+      case writers::Dtype::F32: return with(float{});
+      default: throw Error(path() + ": expected uint8, uint16 or float32 elements");
+    }
+  }
+};
+
+std::unique_ptr<RunFolder::Stack> open_run_stack(const std::string& dir_name, const std::string& name) {
+  const fs::path dir(dir_name);
+  auto s = std::make_unique<RunFolder::Stack>();
+  if (fs::exists(dir / (name + ".npy")))
+    s->npy = std::make_unique<writers::NpyReader>((dir / (name + ".npy")).string());
+  else if (fs::exists(dir / (name + ".zarr")))
+    s->zarr = std::make_unique<writers::ZarrReader>((dir / (name + ".zarr")).string());
+  else
+    return nullptr;
+  return s;
+}
+
+namespace {
+
+template <class T>
+T get(const nlohmann::json& j, const std::string& pointer, const std::string& file) {
+  const nlohmann::json::json_pointer p(pointer);
+  if (!j.contains(p)) throw Error(file + ": no " + pointer + " (is this a folder written by spadgen run or sense?)");
+  try {
+    return j.at(p).get<T>();
+  } catch (const nlohmann::json::exception&) {
+    throw Error(file + ": " + pointer + " has the wrong type");
+  }
+}
+
+}  // namespace
+
+RunFolder::RunFolder(const std::string& dir) : dir_(dir) {
+  const fs::path d(dir);
+  const std::string meta_path = (d / "metadata.json").string();
+  if (!fs::is_regular_file(meta_path)) throw Error(dir + ": not a run folder (no metadata.json)");
+  {
+    std::ifstream in(meta_path);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    try {
+      meta_ = nlohmann::json::parse(ss.str());
+    } catch (const nlohmann::json::exception& e) {
+      throw Error(meta_path + ": not valid JSON (" + e.what() + ")");
+    }
+  }
+  W_ = get<int>(meta_, "/image/width", meta_path);
+  H_ = get<int>(meta_, "/image/height", meta_path);
+  K_ = get<int>(meta_, "/acquisition/K", meta_path);
+  frames_ = get<int>(meta_, "/acquisition/frames_per_k", meta_path);
+  image_frames_ = get<int>(meta_, "/acquisition/frames", meta_path);
+  const std::string mode = get<std::string>(meta_, "/acquisition/mode", meta_path);
+  gate_sweep_ = mode == "gate_sweep";
+  if (gate_sweep_) {
+    const auto gates = get<std::vector<double>>(meta_, "/acquisition/gate_positions_ns", meta_path);
+    if (int(gates.size()) != K_ || K_ < 1) throw Error(meta_path + ": /acquisition/gate_positions_ns does not hold K positions");
+    start_s_ = gates.front() * 1e-9;
+    step_s_ = get<double>(meta_, "/acquisition/gate_step_ps", meta_path) * 1e-12;
+    gate_delay_s_ = get<double>(meta_, "/acquisition/gate/delay_ns", meta_path) * 1e-9;
+    emission_delay_s_ = get<double>(meta_, "/resolved_scene/laser/emission_delay_ns", meta_path) * 1e-9;
+    const std::string maps = (d / "sensor_maps.exr").string();
+    if (!fs::is_regular_file(maps)) throw Error(dir + ": no sensor_maps.exr (the per-pixel gate skew and length the edges are timed with)");
+    writers::ExrData m = writers::read_exr(maps);
+    for (const char* c : {"gate_skew_ps", "gate_length_ps"})
+      if (!m.channels.count(c)) throw Error(maps + ": no channel " + std::string(c));
+    if (m.width != W_ || m.height != H_) throw Error(maps + ": size differs from metadata.json's image");
+    skew_ps_ = std::move(m.channels["gate_skew_ps"]);
+    length_ps_ = std::move(m.channels["gate_length_ps"]);
+  } else {
+    dual_ = get<std::string>(meta_, "/resolved_scene/acquisition/intensity/exposure", meta_path) == "dual";
+    dual_ratio_ = dual_ ? get<double>(meta_, "/resolved_scene/acquisition/intensity/dual_ratio", meta_path) : 1.0;
+  }
+  counts_ = open_run_stack(dir, "counts");
+  rate_ = open_run_stack(dir, "detection_rate");
+  for (Stack* s : {counts_.get(), rate_.get()})
+    if (s && s->shape() != std::vector<int64_t>{K_, H_, W_})
+      throw Error(s->path() + ": shape differs from metadata.json's (K, H, W)");
+}
+
+RunFolder::~RunFolder() = default;
+RunFolder::RunFolder(RunFolder&&) noexcept = default;
+
+PixelTiming RunFolder::timing(int x, int y) const {
+  const size_t i = size_t(y) * size_t(W_) + size_t(x);
+  PixelTiming t;
+  t.start_s = start_s_;
+  t.step_s = step_s_;
+  t.fall_offset_s = gate_delay_s_ + skew_ps_[i] * 1e-12;
+  t.rise_offset_s = t.fall_offset_s + length_ps_[i] * 1e-12;
+  t.emission_delay_s = emission_delay_s_;
+  return t;
+}
+
+void RunFolder::profiles(int y0, int y1, bool noise_free, float* out) const {
+  const Stack* s = noise_free ? rate_.get() : counts_.get();
+  if (!s)
+    throw Error(dir_ + (noise_free ? ": no detection_rate.npy or .zarr (outputs.detection_rate)"
+                                   : ": no counts.npy or counts.zarr (outputs.counts)"));
+  const int64_t rows = y1 - y0, n = rows * W_;
+  std::vector<float> plane(static_cast<size_t>(n));
+  for (int k = 0; k < K_; ++k) {
+    s->read((int64_t(k) * H_ + y0) * W_, n, plane.data());
+    for (int64_t i = 0; i < n; ++i) {
+      float v = plane[size_t(i)];
+      if (noise_free) v = static_cast<float>(frames_ * -std::expm1(-double(v)));
+      out[size_t(i) * size_t(K_) + size_t(k)] = v;
+    }
+  }
+}
+
+std::string RunFolder::file(const std::string& name) const {
+  const fs::path p = fs::path(dir_) / name;
+  return fs::exists(p) ? p.string() : std::string();
+}
+
+}  // namespace spadgen::reconstruct

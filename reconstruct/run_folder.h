@@ -1,0 +1,53 @@
+// What reconstruction and evaluation read from a run folder (docs/outputs.md): metadata.json, the counts
+// (counts.npy or counts.zarr) or the noise-free detection rate, and the per-pixel gate maps.
+#pragma once
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "reconstruct/detect.h"
+
+namespace spadgen::reconstruct {
+
+class RunFolder {
+ public:
+  // Throws spadgen::Error naming the folder and the file when something needed is missing or malformed.
+  explicit RunFolder(const std::string& dir);
+  ~RunFolder();
+  RunFolder(RunFolder&&) noexcept;
+
+  const std::string& dir() const { return dir_; }
+  const nlohmann::json& metadata() const { return meta_; }
+  bool gate_sweep() const { return gate_sweep_; }
+  int K() const { return K_; }
+  int width() const { return W_; }
+  int height() const { return H_; }
+  int frames() const { return frames_; }  // N per gate position or exposure
+  // 2D mode: dual exposure and its ratio tau_L / tau_S; the frames of the whole image (N_sat).
+  bool dual() const { return dual_; }
+  double dual_ratio() const { return dual_ratio_; }
+  int image_frames() const { return image_frames_; }
+
+  // The timing of pixel (x, y) of the image (gate-sweep mode).
+  PixelTiming timing(int x, int y) const;
+  // Rows [y0, y1) of the counts as [((y - y0) * W + x) * K + k] (one profile per pixel). noise_free: the
+  // expected counts N (1 - exp(-lambda)) from detection_rate instead of the sampled counts.
+  void profiles(int y0, int y1, bool noise_free, float* out) const;
+  // The image's file named `name` (e.g. "ground_truth.exr"): its path, or "" when the run has none.
+  std::string file(const std::string& name) const;
+
+ private:
+  struct Stack;
+  friend std::unique_ptr<Stack> open_run_stack(const std::string& dir, const std::string& name);
+  std::string dir_;
+  nlohmann::json meta_;
+  bool gate_sweep_ = true, dual_ = false;
+  int K_ = 0, W_ = 0, H_ = 0, frames_ = 0, image_frames_ = 0;
+  double dual_ratio_ = 1.0;
+  double start_s_ = 0, step_s_ = 0, gate_delay_s_ = 0, emission_delay_s_ = 0;
+  std::vector<float> skew_ps_, length_ps_;
+  std::unique_ptr<Stack> counts_, rate_;
+};
+
+}  // namespace spadgen::reconstruct

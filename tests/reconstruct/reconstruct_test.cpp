@@ -1,0 +1,263 @@
+// The reference detectors, the HDR inversion and the scorer against profiles whose returns are known:
+// a gate of length L with Gaussian-blurred edges (sigma 150 ps, about the gate's 400 ps rise with the
+// instrument response) sweeps returns at known times; counts are Binomial(N, 1 - exp(-lambda)) draws
+// with fixed seeds. The delay puts a return at 0.45 m on gate position 40, as in the paper's Fig. 10, so
+// that every return from 0.23 to 1.55 m rises and falls inside the sweep. Statistical bounds are stated with their false-alarm rates.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include "reconstruct/detect.h"
+#include "reconstruct/evaluate.h"
+
+namespace {
+using namespace spadgen::reconstruct;
+constexpr double kC = 299792458.0;
+constexpr double kStep = 36e-12, kStart = 0.6e-9, kGate = 3.8e-9, kSigma = 150e-12, kDelay = 2.8e-9;
+constexpr int kK = 351, kN = 255;
+
+struct Return {
+  double range_m, lambda;  // lambda: detections per frame while the gate covers the return
+};
+
+PixelTiming timing() {
+  PixelTiming t;
+  t.start_s = kStart, t.step_s = kStep, t.fall_offset_s = 0.0, t.rise_offset_s = kGate, t.emission_delay_s = kDelay;
+  return t;
+}
+
+// lambda at every gate position: background plus each return seen through the gate [tau, tau + L].
+std::vector<double> lambda_profile(const std::vector<Return>& returns, double background) {
+  std::vector<double> lam(kK, background);
+  for (int k = 0; k < kK; ++k) {
+    const double tau = kStart + k * kStep;
+    for (const Return& r : returns) {
+      const double t = kDelay + 2.0 * r.range_m / kC;
+      const double open = 0.5 * std::erfc(-(t - tau) / (kSigma * std::sqrt(2.0)));           // gate opened before t
+      const double shut = 0.5 * std::erfc(-(t - tau - kGate) / (kSigma * std::sqrt(2.0)));   // gate closed before t
+      lam[size_t(k)] += r.lambda * (open - shut);
+    }
+  }
+  return lam;
+}
+
+std::vector<float> expected_counts(const std::vector<double>& lam) {
+  std::vector<float> c(lam.size());
+  for (size_t k = 0; k < lam.size(); ++k) c[k] = float(kN * -std::expm1(-lam[k]));
+  return c;
+}
+
+std::vector<float> sampled_counts(const std::vector<double>& lam, std::mt19937_64& rng) {
+  std::vector<float> c(lam.size());
+  for (size_t k = 0; k < lam.size(); ++k) c[k] = float(std::binomial_distribution<int>(kN, -std::expm1(-lam[k]))(rng));
+  return c;
+}
+
+template <class D>
+std::vector<Detection> run(const D& d, const std::vector<float>& c) {
+  return detect(d, c.data(), kK, kN, timing());
+}
+
+TEST(Detectors, NoiseFreeProfilesGiveTheRangeToAMillimetreOrTwo) {
+  for (double range : {0.45, 0.75, 1.0, 1.4})
+    for (double lambda : {0.02, 0.15, 3.0}) {  // 3.0: the plateau at 95 % of saturation
+      const auto c = expected_counts(lambda_profile({{range, lambda}}, 1e-4));
+      // The paper's detector smooths the counts before linearising them (its order): near saturation the
+      // average of counts across the edge's shoulder is low, which moves the edge by up to 1.5 mm.
+      for (const auto& [d, tolerance] : {std::pair{run(EdgeDetector{}, c), 1e-3}, {run(PaperDetector{}, c), 2e-3}}) {
+        ASSERT_EQ(d.size(), 1u) << range << " m, lambda " << lambda;
+        EXPECT_NEAR(d[0].range_m, range, tolerance) << range << " m, lambda " << lambda;
+        EXPECT_NEAR(d[0].amplitude, lambda, 0.05 * lambda + 1e-3);
+      }
+    }
+}
+
+TEST(Detectors, SampledProfilesMeetThePapersPrecisionAndFindOneReturn) {
+  // The flat target of the paper at 1 m: about 38 of 255 counts on the plateau (lambda 0.16).
+  std::mt19937_64 rng(11);
+  for (const char* name : {"edges", "paper"}) {
+    std::vector<double> err;
+    int single = 0;
+    const int pixels = 1000;
+    for (int i = 0; i < pixels; ++i) {
+      const auto c = sampled_counts(lambda_profile({{1.0, 0.16}}, 1e-4), rng);
+      const auto d = std::string(name) == "edges" ? run(EdgeDetector{}, c) : run(PaperDetector{}, c);
+      single += d.size() == 1;
+      if (!d.empty()) err.push_back(d[0].range_m - 1.0);
+    }
+    double mean = 0, sq = 0;
+    for (double e : err) mean += e / double(err.size());
+    for (double e : err) sq += (e - mean) * (e - mean) / double(err.size() - 1);
+    RecordProperty(std::string(name) + "_precision_mm", std::to_string(std::sqrt(sq) * 1e3));
+    EXPECT_GE(single, pixels * 99 / 100) << name;
+    EXPECT_LT(std::abs(mean), 1e-3) << name << ": bias";
+    EXPECT_LT(std::sqrt(sq), 7.8e-3) << name << ": precision (the paper: better than 7.8 mm rms)";
+  }
+}
+
+TEST(Detectors, EdgeDetectorFindsAFaintReturnBehindABrightOne) {
+  // The paper's multi-object geometry: plate at 0.45 m, sphere at 0.75 m, the sphere a quarter as bright.
+  std::mt19937_64 rng(12);
+  int both = 0, extra = 0;
+  const int pixels = 500;
+  for (int i = 0; i < pixels; ++i) {
+    const auto d = run(EdgeDetector{}, sampled_counts(lambda_profile({{0.45, 0.16}, {0.75, 0.04}}, 1e-4), rng));
+    const auto near = [&](double r) {
+      return std::any_of(d.begin(), d.end(), [&](const Detection& x) { return std::abs(x.range_m - r) < 0.02; });
+    };
+    both += near(0.45) && near(0.75);
+    extra += int(d.size()) - (near(0.45) + near(0.75));
+  }
+  EXPECT_GE(both, pixels * 98 / 100);
+  EXPECT_LE(extra, pixels / 100);
+}
+
+TEST(Detectors, FalseAlarmsOnProfilesWithoutReturnsAreRare) {
+  // No return: lambda is flat (dark, dim ambient, bright ambient). z >= 6 per edge is a false-alarm rate
+  // near 1e-9 per boundary and scale for a Gaussian statistic; with 350 boundaries x 4 scales and the
+  // binomial's skew at low counts, at most 1 in 1000 profiles may show one (about 1e-6 per statistic).
+  std::mt19937_64 rng(13);
+  for (double background : {0.001, 0.05, 1.0}) {
+    int alarms = 0;
+    for (int i = 0; i < 1000; ++i) alarms += !run(EdgeDetector{}, sampled_counts(lambda_profile({}, background), rng)).empty();
+    EXPECT_LE(alarms, 1) << "background lambda " << background;
+  }
+}
+
+TEST(Hdr, StandardErrorIsTheSpreadOfTheEstimateAndSaturationIsFlagged) {
+  std::mt19937_64 rng(14);
+  const int N = 4080;
+  for (bool dual : {false, true})
+    for (double photons : {50.0, 2000.0, 15000.0}) {
+      // counts of one image: single, Binomial(N, 1 - exp(-x / N)); dual, two halves at 2 tau_L / (tau_L + tau_S)
+      // and 2 tau_S / (tau_L + tau_S) of the mean exposure (the paper's eq. 6), ratio 8.
+      const double aL = 16.0 / 9.0, aS = 2.0 / 9.0;
+      std::vector<double> est;
+      double se = 0.0;
+      for (int i = 0; i < 4000; ++i) {
+        double c = 0.0;
+        if (!dual) {
+          c = std::binomial_distribution<int>(N, -std::expm1(-photons / N))(rng);
+        } else {
+          c = std::binomial_distribution<int>(N / 2, -std::expm1(-aL * photons / N))(rng) +
+              std::binomial_distribution<int>(N / 2, -std::expm1(-aS * photons / N))(rng);
+        }
+        const HdrEstimate e = invert_hdr(c, N, dual, 8.0);
+        ASSERT_FALSE(e.saturated);
+        est.push_back(e.photons);
+        se += e.standard_error / 4000.0;
+      }
+      double mean = 0, var = 0;
+      for (double v : est) mean += v / double(est.size());
+      for (double v : est) var += (v - mean) * (v - mean) / double(est.size() - 1);
+      // the spread of 4000 draws is known to about 2.2 % (1 sigma); 8 % covers 3.5 sigma and the delta
+      // method's own error at the highest flux
+      EXPECT_NEAR(se / std::sqrt(var), 1.0, 0.08) << (dual ? "dual " : "single ") << photons;
+      EXPECT_NEAR(mean / photons, 1.0, 0.01) << (dual ? "dual " : "single ") << photons;
+    }
+  const HdrEstimate s = invert_hdr(N, N, false, 1.0);
+  EXPECT_TRUE(s.saturated);
+  EXPECT_TRUE(std::isfinite(s.photons));
+  EXPECT_FALSE(invert_hdr(N - 1, N, false, 1.0).saturated);
+}
+
+// The scorer against hand-made detections with known scores: two objects on each of 100 pixels
+// (0.45 m, 0.75 m), one object on 100 more (0.75 m), 100 empty pixels.
+struct Scene {
+  std::vector<std::vector<TruthObject>> pixels;
+  Scene() {
+    for (int i = 0; i < 300; ++i) {
+      std::vector<TruthObject> o;
+      if (i < 100) o.push_back({0, 0.45, true});
+      if (i < 200) o.push_back({1, 0.75, i < 150});
+      pixels.push_back(o);
+    }
+  }
+  nlohmann::json score(const std::function<std::vector<std::pair<double, double>>(int)>& detections) const {
+    EvaluateOptions opt;
+    opt.region = spadgen::PixelRect{100, 0, 100, 1};
+    Scores s(opt);
+    for (int i = 0; i < 300; ++i) s.add(i, 0, pixels[size_t(i)], detections(i));
+    return s.to_json({{0, "plate"}, {1, "sphere"}});
+  }
+};
+
+TEST(Evaluate, PerfectDetectionsScorePerfectly) {
+  const Scene sc;
+  const auto m = sc.score([&](int i) {
+    std::vector<std::pair<double, double>> d;
+    for (const auto& o : sc.pixels[size_t(i)]) d.emplace_back(o.range_m, 10.0);
+    return d;
+  });
+  EXPECT_EQ(m["objects"]["objects"], 300);
+  EXPECT_EQ(m["objects"]["recall"], 1.0);
+  EXPECT_EQ(m["detections"]["precision"], 1.0);
+  EXPECT_EQ(m["detections"]["false"], 0);
+  EXPECT_EQ(m["range_error"]["rms_mm"], 0.0);
+  EXPECT_EQ(m["objects_by_count_on_pixel"]["2"]["objects"], 200);
+  EXPECT_EQ(m["objects_detectable"]["objects"], 250);
+}
+
+TEST(Evaluate, ShiftedDetectionsGiveTheirBiasAndMissBeyondTheTolerance) {
+  const Scene sc;
+  const auto shifted = [&](double by) {
+    return sc.score([&, by](int i) {
+      std::vector<std::pair<double, double>> d;
+      for (const auto& o : sc.pixels[size_t(i)]) d.emplace_back(o.range_m + by, 10.0);
+      return d;
+    });
+  };
+  const auto m = shifted(0.01);
+  EXPECT_NEAR(m["range_error"]["bias_mm"].get<double>(), 10.0, 1e-6);
+  EXPECT_NEAR(m["range_error"]["rms_mm"].get<double>(), 10.0, 1e-6);
+  EXPECT_NEAR(m["range_error"]["std_mm"].get<double>(), 0.0, 1e-6);
+  EXPECT_NEAR(m["region"]["bias_mm"].get<double>(), 10.0, 1e-6);  // the region holds the sphere-only pixels
+  EXPECT_EQ(m["region"]["count"], 100);
+  const auto far = shifted(0.08);  // beyond the 5 cm tolerance: every object missed, every detection false
+  EXPECT_EQ(far["objects"]["found"], 0);
+  EXPECT_EQ(far["detections"]["false"], 300);
+  EXPECT_EQ(far["detections"]["precision"], 0.0);
+}
+
+TEST(Evaluate, MissingAndExtraDetectionsAreCountedWhereTheyHappen) {
+  const Scene sc;
+  // The sphere behind the plate missed; one false return at 1.2 m on every empty pixel.
+  const auto m = sc.score([&](int i) {
+    std::vector<std::pair<double, double>> d;
+    if (i < 100) d.emplace_back(0.45, 10.0);
+    else if (i < 200) d.emplace_back(0.75, 10.0);
+    else d.emplace_back(1.2, 10.0);
+    return d;
+  });
+  EXPECT_EQ(m["objects"]["found"], 200);
+  EXPECT_EQ(m["objects_by_count_on_pixel"]["2"]["found"], 100);  // the plate on every two-object pixel
+  EXPECT_EQ(m["objects_by_count_on_pixel"]["1"]["recall"], 1.0);
+  EXPECT_EQ(m["detections"]["false"], 100);
+  EXPECT_EQ(m["detections"]["pixels_without_objects_with_detections"], 100);
+  EXPECT_NEAR(m["detections"]["precision"].get<double>(), 2.0 / 3.0, 1e-12);
+  // per object: the plate always found, the sphere on its 100 lone pixels of 200
+  EXPECT_EQ(m["by_object"][0]["name"], "plate");
+  EXPECT_EQ(m["by_object"][0]["recall"], 1.0);
+  EXPECT_EQ(m["by_object"][1]["recall"], 0.5);
+  // detectable: plate 100 + sphere on pixels 0-149 = 250, of which found 100 + 50
+  EXPECT_EQ(m["objects_detectable"]["found"], 150);
+  EXPECT_EQ(m["objects_not_detectable"]["found"], 50);
+}
+
+TEST(Evaluate, EachDetectionMatchesOneObjectAndTheNearestPairWins) {
+  EvaluateOptions opt;
+  Scores s(opt);
+  // Two objects 3 cm apart, one detection between them nearer the second: it is the second's.
+  const PixelOutcome o = s.add(0, 0, {{0, 1.00, true}, {1, 1.03, true}}, {{1.02, 5.0}});
+  EXPECT_EQ(o.found, 1);
+  EXPECT_EQ(o.false_detections, 0);
+  EXPECT_TRUE(std::isnan(o.first_error_m));  // the nearest object was not the one found
+  EXPECT_NEAR(s.errors().at(0), -0.01, 1e-12);
+  // Two detections of one object: one matches, the other is false.
+  const PixelOutcome p = s.add(1, 0, {{0, 1.0, true}}, {{1.001, 5.0}, {0.999, 5.0}});
+  EXPECT_EQ(p.found, 1);
+  EXPECT_EQ(p.false_detections, 1);
+}
+
+}  // namespace
