@@ -101,24 +101,33 @@ std::vector<Detection> detect(const PaperDetector& d, const float* counts, int K
     const double z = se > 0.0 ? (hi - lo) / se : 0.0;
     if (!(z >= d.min_score)) continue;
     // The edge's centre: where the profile crosses the window's middle level (nearest the window's centre),
-    // then the levels again from plateaus `guard` positions either side of it and the crossing of theirs.
-    double centre = crossing(lam, a + 1, b, 0.5 * (lo + hi), true, 0.5 * (a + b));
-    if (std::isnan(centre)) centre = 0.5 * (a + b);
-    const int c0 = int(std::lround(centre));
-    const int l0 = c0 - guard - d.plateau, h1 = c0 + guard + d.plateau;
-    if (l0 >= 0 && h1 <= K) {
+    // then, until it settles (a window holding only the foot of an edge first finds it early), where it
+    // crosses the middle of the levels `guard` positions either side of the last centre.
+    double k = crossing(lam, a + 1, b, 0.5 * (lo + hi), true, 0.5 * (a + b));
+    if (std::isnan(k)) k = 0.5 * (a + b);
+    for (int iteration = 0; iteration < 8; ++iteration) {
+      const int c0 = int(std::lround(k));
+      const int l0 = c0 - guard - d.plateau, h1 = c0 + guard + d.plateau;
+      if (l0 < 0 || h1 > K) break;
       lo = level(l0, l0 + d.plateau, &var_lo);
       hi = level(h1 - d.plateau, h1, &var_hi);
       se = std::sqrt(var_lo + var_hi);
+      const double next = crossing(lam, l0 + d.plateau, h1 - d.plateau + 1, 0.5 * (lo + hi), true, k);
+      if (std::isnan(next)) break;
+      const bool settled = std::abs(next - k) < 0.5;
+      k = next;
+      if (settled) break;
     }
-    double k = crossing(lam, c0 - guard, c0 + guard, 0.5 * (lo + hi), true, centre);
-    if (std::isnan(k)) k = centre;
+    // The step where the edge settled must hold up too (a window holding the shoulder of an edge that the
+    // previous window found settles on the plateau beyond it).
+    const double z_located = se > 0.0 ? (hi - lo) / se : 0.0;
+    if (!(z_located >= d.min_score)) continue;
     // Two windows that both hold part of one edge name it once.
     if (!out.empty() && std::abs(out.back().gate - k) < guard) {
-      if (out.back().score >= z) continue;
+      if (out.back().score >= z_located) continue;
       out.pop_back();
     }
-    out.push_back({timing.range_of_rise(k), k, hi - lo, se > 0.0 ? (hi - lo) / se : z});
+    out.push_back({timing.range_of_rise(k), k, hi - lo, z_located});
   }
   return out;
 }

@@ -39,8 +39,9 @@ struct PixelTiming {
 // holds a rising edge when the linearised level of its last `plateau` positions exceeds that of its first
 // `plateau` positions by min_score standard errors. The edge is then located on the whole profile (so
 // that an edge straddling two windows is timed right): where the smoothed, linearised profile crosses
-// the middle of the window's two levels, then again where it crosses the middle of the levels measured
-// `window / 6` positions either side of that first crossing. An edge named by two neighbouring windows counts once.
+// the middle of the window's two levels, then, until it settles, where it crosses the middle of the
+// levels measured `window / 6` positions either side of the last crossing; the step between those levels
+// must hold min_score standard errors too. An edge named by two neighbouring windows counts once.
 struct PaperDetector {
   int window = 60;
   int half_width = 2;
