@@ -242,16 +242,17 @@ def plots(docs, f7, f10):
     fig.savefig(os.path.join(docs, "paper", "fig10_profiles.png"), dpi=100)
     plt.close(fig)
 
+    cmap = plt.get_cmap("jet").copy()
+    cmap.set_bad("black")  # no return in the band, as in the paper's Fig. 11
     fig, axes = plt.subplots(2, 2, figsize=(9, 5))
     for row, det in enumerate(("paper", "edges")):
         for col, (m, lo, hi) in enumerate(zip(f10["maps"][det], (0.3, 0.6), (0.6, 0.9))):
             ax = axes[row][col]
-            ax.imshow(np.ma.masked_invalid(m), cmap="jet", vmin=lo, vmax=hi, interpolation="nearest")
-            ax.set_facecolor("black")
+            ax.imshow(np.ma.masked_invalid(m), cmap=cmap, vmin=lo, vmax=hi, interpolation="nearest")
             ax.set_title(f"{det}: returns in {lo}-{hi} m", fontsize=8)
             ax.axis("off")
     fig.tight_layout()
-    fig.savefig(os.path.join(docs, "paper", "fig11_detections.png"), dpi=100)
+    fig.savefig(os.path.join(docs, "paper", "fig11_detections.png"), dpi=72)
     plt.close(fig)
 
 
