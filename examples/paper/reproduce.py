@@ -308,9 +308,9 @@ def markdown(f7, f9, f10, seconds, quick):
         L.append(f"| {det} | {100 * r['plate_on_plate_pixels']:.1f} % | {100 * r['sphere_on_covered_sphere_pixels']:.1f} % | "
                  f"{100 * r['sphere_on_bare_sphere_pixels']:.1f} % | {100 * r['plate_false_on_bare_sphere']:.1f} % |")
     L += ["", "The paper: the plate at 0.45 m on \"the majority of the pixels\", the sphere at about 0.75 m \"reconstructed",
-          "precisely\" with and without the plate (Fig. 11). The shipped plate is rougher and less transparent than the",
-          "paper's (its plateau is about 4 times the step the sphere adds on covered pixels), so its rising edge hides the sphere's",
-          "from the paper's detector; the edges detector also reads the falling edges and finds both.", "",
+          "precisely\" with and without the plate (Fig. 11). Where the paper's detector misses the sphere behind the plate,",
+          "the plate's own return (brightest towards its glossy highlight) is large against the sphere's step inside the",
+          "60-position window; the edges detector also reads the falling edges, which lie apart for the two objects.", "",
           "![Fig. 11 detections](paper/fig11_detections.png)", ""]
     return "\n".join(L)
 

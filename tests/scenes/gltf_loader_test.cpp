@@ -904,7 +904,7 @@ TEST(PaperScenes, MultiObject) {
   EXPECT_FLOAT_EQ(pm.transmission, 0.95f);
   EXPECT_FLOAT_EQ(pm.ior, 1.5f);
   EXPECT_FLOAT_EQ(pm.thickness_m, 0.002f);
-  EXPECT_NEAR(pm.roughness, 0.3, 1e-7);
+  EXPECT_NEAR(pm.roughness, 0.05, 1e-7);
   EXPECT_FLOAT_EQ(pm.metallic, 0.0f);
   EXPECT_EQ(pm.base_color, glm::vec4(1.0f));
 
