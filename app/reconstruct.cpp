@@ -181,8 +181,8 @@ Labels read_labels(const RunFolder& run) {
   const std::string gt_path = run.file("ground_truth.exr");
   if (gt_path.empty()) throw Error(run.dir() + ": no ground_truth.exr (outputs.ground_truth) to score against");
   const writers::ExrData gt = writers::read_exr(gt_path);
-  if (!gt.channels.count("object0.range"))
-    throw Error(gt_path + ": no object channels (object<j>.range): written by an older spadgen; run the scene again");
+  if (!gt.channels.count("object_count"))
+    throw Error(gt_path + ": no object channels (object_count, object<j>.range): written by an older spadgen; run the scene again");
   writers::ExrData labels;
   const std::string labels_path = run.file("labels.exr");
   if (!labels_path.empty()) labels = writers::read_exr(labels_path);
@@ -283,6 +283,10 @@ std::string summary(const nlohmann::json& m) {
 }
 
 }  // namespace
+
+bool is_derived_output(const std::string& rel) {
+  return rel == "detections_edges.exr" || rel == "detections_paper.exr" || rel == "hdr.exr" || rel == "evaluation";
+}
 
 std::string reconstruct(const ReconstructOptions& o) {
   InterruptGuard interrupt_guard;

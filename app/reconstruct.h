@@ -35,4 +35,9 @@ struct EvaluateCommand {
 // Writes metrics.json (and error maps for a run, samples.csv for a dataset); returns a short summary.
 std::string evaluate(const EvaluateCommand& command);
 
+// What reconstruct and evaluate write into a run folder by default (detections_<detector>.exr, hdr.exr,
+// evaluation/): derived from that run, so a later run into the folder replaces them with the rest rather
+// than refusing them as someone else's files. rel: a name directly inside the run folder.
+bool is_derived_output(const std::string& rel);
+
 }  // namespace spadgen::app

@@ -1,4 +1,5 @@
 #include "app/staging.h"
+#include "app/reconstruct.h"
 
 #include <fcntl.h>
 #include <sys/file.h>
@@ -197,7 +198,8 @@ void Staging::recover() {
     }
 }
 
-// A run replaces OUT as a whole, so OUT may hold only what an earlier run wrote there.
+// A run replaces OUT as a whole, so OUT may hold only what an earlier run wrote there, and what
+// reconstruct and evaluate derived from it there.
 void Staging::check_owned() const {
   std::error_code ec;
   if (!fs::is_directory(out_, ec)) return;
@@ -209,7 +211,7 @@ void Staging::check_owned() const {
     folders.pop_back();
     for (const auto& e : fs::directory_iterator(folder)) {
       const std::string rel = e.path().lexically_relative(out_).string();
-      if (folder == out_ && starts_with(rel, kOldStylePrefix)) continue;
+      if (folder == out_ && (starts_with(rel, kOldStylePrefix) || is_derived_output(rel))) continue;
       const bool dir = e.is_directory(ec) && !e.is_symlink(ec);
       if (dir && fs::is_empty(e.path(), ec)) continue;  // nothing to lose
       const bool entry = listed.entries.count(rel) > 0;

@@ -28,9 +28,9 @@ using ojson = nlohmann::ordered_json;
 
 namespace {
 
-// What a dataset folder may hold besides the samples' folders.
+// What a dataset folder may hold besides the samples' folders (evaluation/: spadgen evaluate's).
 const std::set<std::string> kOwnEntries = {"dataset.json", "samples", "failed", "index.jsonl", "index.csv", "dataset.md",
-                                           ".dataset.lock"};
+                                           ".dataset.lock", "evaluation"};
 
 // A JSON file as J (json, or ordered_json to keep its keys' order); nullopt when absent or not JSON.
 template <class J = json>

@@ -158,20 +158,23 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* counts, int K,
   const auto allowed = [&](int lo, int hi) {  // positions [lo, hi) touch no claim
     return std::none_of(taken.begin(), taken.end(), [&](const Edge& t) { return lo < t.k + d.separation && hi > t.k - d.separation; });
   };
-  while (taken.size() < 64) {
-    Edge top;
-    for (int k = 1; k < K; ++k) {
-      if (!allowed(k, k)) continue;
-      for (int s : d.scales) {
-        if (k - s < 0 || k + s > K || !allowed(k - s, k + s)) continue;
-        const double left = (sum_l[size_t(k)] - sum_l[size_t(k - s)]) / s, right = (sum_l[size_t(k + s)] - sum_l[size_t(k)]) / s;
-        const double v = (sum_v[size_t(k + s)] - sum_v[size_t(k - s)]) / (double(s) * s);
-        const double z = v > 0.0 ? (right - left) / std::sqrt(v) : 0.0;
-        if (std::abs(z) > std::abs(top.z)) top = {k, s, z, right - left, left, right};
-      }
+  // Only statistics at or above min_score can be taken: list them once (in k, then scale order, which
+  // breaks ties as a full scan would), then take from the list.
+  std::vector<Edge> candidates;
+  for (int k = 1; k < K; ++k)
+    for (int s : d.scales) {
+      if (k - s < 0 || k + s > K) continue;
+      const double left = (sum_l[size_t(k)] - sum_l[size_t(k - s)]) / s, right = (sum_l[size_t(k + s)] - sum_l[size_t(k)]) / s;
+      const double v = (sum_v[size_t(k + s)] - sum_v[size_t(k - s)]) / (double(s) * s);
+      const double z = v > 0.0 ? (right - left) / std::sqrt(v) : 0.0;
+      if (std::abs(z) >= d.min_score) candidates.push_back({k, s, z, right - left, left, right});
     }
-    if (!(std::abs(top.z) >= d.min_score)) break;
-    taken.push_back(top);
+  while (taken.size() < 64) {
+    const Edge* top = nullptr;
+    for (const Edge& e : candidates)
+      if ((!top || std::abs(e.z) > std::abs(top->z)) && allowed(e.k, e.k) && allowed(e.k - e.scale, e.k + e.scale)) top = &e;
+    if (!top) break;
+    taken.push_back(*top);
   }
   const std::vector<double> lam_s = moving_average(lam, 1);
   // Each edge at the half point of its step on the lightly smoothed profile, nearest its boundary.

@@ -4,6 +4,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <unistd.h>
 
@@ -97,6 +99,125 @@ TEST_F(Reconstruct, RefusesWhatItCannotReadNamingIt) {
   r = sh("reconstruct " + run.string() + " -q --noise-free");
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("no sensor_maps.exr"), std::string::npos) << r.output;
+}
+
+TEST_F(Reconstruct, ARunIntoTheFolderAgainReplacesWhatReconstructAndEvaluateDerivedFromIt) {
+  const fs::path run = dir_ / "run";
+  const std::string cmd = "run " + kScenes + "flat_target.json --set camera.crop=[502,240,8,8] --set render.samples_per_pixel=1 -q -o " + run.string();
+  Result r = sh(cmd);
+  ASSERT_EQ(r.code, 0) << r.output;
+  ASSERT_EQ(sh("reconstruct " + run.string() + " -q").code, 0);
+  ASSERT_EQ(sh("reconstruct " + run.string() + " -q --detector paper").code, 0);
+  ASSERT_TRUE(fs::exists(run / "detections_edges.exr") && fs::exists(run / "detections_paper.exr"));
+  r = sh(cmd + " --set seeds.noise=7");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_FALSE(fs::exists(run / "detections_edges.exr")) << "derived from the earlier run: replaced with it";
+  EXPECT_FALSE(fs::exists(run / "detections_paper.exr"));
+  // anything else that spadgen did not write is still refused
+  std::ofstream(run / "notes.txt") << "mine";
+  r = sh(cmd);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("notes.txt"), std::string::npos) << r.output;
+}
+
+// A plate over a sphere: a crop where both are seen, and the sphere alone on the right.
+const std::string kMultiObjectCrop = " --set camera.crop=[480,242,64,12] --set render.samples_per_pixel=4 -q -o ";
+
+TEST_F(Reconstruct, EvaluateScoresTheEdgeDetectorOnThePlateAndTheSphere) {
+  const fs::path run = dir_ / "run";
+  Result r = sh("run " + kScenes + "multi_object.json" + kMultiObjectCrop + run.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  r = sh("reconstruct " + run.string() + " -q");
+  ASSERT_EQ(r.code, 0) << r.output;
+  r = sh("evaluate " + run.string() + " --region 40,0,24,12");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("objects found:"), std::string::npos) << r.output;
+  const auto m = nlohmann::json::parse(slurp(run / "evaluation" / "metrics.json"));
+  EXPECT_EQ(m["detections_source"]["file"], (run / "detections_edges.exr").string());
+  // the object labels: the plate and the sphere, by their glTF node names
+  ASSERT_EQ(m["by_object"].size(), 2u) << m.dump(1);
+  std::map<std::string, nlohmann::json> by_name;
+  for (const auto& o : m["by_object"]) by_name[o["name"]] = o;
+  ASSERT_TRUE(by_name.count("plate") && by_name.count("sphere")) << m.dump(1);
+  EXPECT_GE(by_name["plate"]["recall"].get<double>(), 0.95);
+  EXPECT_GE(by_name["sphere"]["recall"].get<double>(), 0.9);
+  EXPECT_GE(m["objects_detectable"]["recall"].get<double>(), 0.95);
+  EXPECT_GE(m["detections"]["precision"].get<double>(), 0.95);
+  EXPECT_GT(m["objects_by_count_on_pixel"]["2"]["objects"].get<int>(), 100);
+  EXPECT_LT(std::abs(m["range_error"]["bias_mm"].get<double>()), 10.0);
+  EXPECT_EQ(m["region"]["count"].get<int>(), 24 * 12) << "the sphere alone, found on every pixel of the region";
+  for (const char* png : {"range_error.png", "outcome.png"}) EXPECT_TRUE(fs::exists(run / "evaluation" / png)) << png;
+}
+
+TEST_F(Reconstruct, EvaluateScoresADetectionsNpyAgainstTheLabelsExactly) {
+  const fs::path run = dir_ / "run";
+  Result r = sh("run " + kScenes + "multi_object.json" + kMultiObjectCrop + run.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  const auto gt = spadgen::writers::read_exr((run / "ground_truth.exr").string());
+  const int W = gt.width, H = gt.height, M = 3;
+  // A detector that returns every labelled object 1 cm too far, and a false return at 2 m on row 0.
+  std::vector<float> ranges(size_t(W * H * M), std::nanf(""));
+  int objects = 0;
+  for (int i = 0; i < W * H; ++i)
+    for (int j = 0; j < 2 && gt.channels.count("object" + std::to_string(j) + ".range"); ++j) {
+      const float v = gt.channels.at("object" + std::to_string(j) + ".range")[size_t(i)];
+      if (std::isfinite(v)) ranges[size_t(i * M + j)] = v + 0.01f, ++objects;
+    }
+  for (int x = 0; x < W; ++x) ranges[size_t(x * M + 2)] = 2.0f;
+  {
+    spadgen::writers::NpyWriter npy((dir_ / "mine.npy").string(), spadgen::writers::Dtype::F32, {H, W, M});
+    npy.write(0, ranges.data(), int64_t(ranges.size()));
+    npy.commit();
+  }
+  r = sh("evaluate " + run.string() + " --detections " + (dir_ / "mine.npy").string() + " -o " + (dir_ / "eval").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  const auto m = nlohmann::json::parse(slurp(dir_ / "eval" / "metrics.json"));
+  EXPECT_EQ(m["objects"]["objects"], objects);
+  EXPECT_EQ(m["objects"]["found"], objects);
+  EXPECT_EQ(m["detections"]["false"], W);
+  EXPECT_EQ(m["detections"]["total"], objects + W);
+  EXPECT_NEAR(m["range_error"]["bias_mm"].get<double>(), 10.0, 0.01);  // float ranges: 1 cm to about 1e-7 m
+  EXPECT_NEAR(m["range_error"]["std_mm"].get<double>(), 0.0, 0.01);
+  // beyond a tolerance below the shift, nothing matches
+  r = sh("evaluate " + run.string() + " --detections " + (dir_ / "mine.npy").string() + " -o " + (dir_ / "eval2").string() +
+         " --tolerance-m 0.005");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(nlohmann::json::parse(slurp(dir_ / "eval2" / "metrics.json"))["objects"]["found"], 0);
+  // a file of another size is refused, naming it
+  {
+    spadgen::writers::NpyWriter npy((dir_ / "wrong.npy").string(), spadgen::writers::Dtype::F32, {H + 1, W, M});
+    npy.commit();
+  }
+  r = sh("evaluate " + run.string() + " --detections " + (dir_ / "wrong.npy").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("wrong.npy: expected a float32 array (H, W, M)"), std::string::npos) << r.output;
+}
+
+TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
+  const fs::path file = dir_ / "d.json", out = dir_ / "dataset";
+  fs::create_directories(dir_);
+  std::ofstream(file) << "{\"scenes\": [\"" + kScenes + "multi_object.json\"], \"samples\": 2, \"seed\": 5,"
+                         "\"set\": {\"render.samples_per_pixel\": 2, \"camera.crop\": [496, 236, 24, 12]},"
+                         "\"grid\": {\"laser.average_power_mW\": [1, 4]}}";
+  Result r = sh("dataset run " + file.string() + " -o " + out.string() + " -q");
+  ASSERT_EQ(r.code, 0) << r.output;
+  r = sh("evaluate " + out.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  const auto m = nlohmann::json::parse(slurp(out / "evaluation" / "metrics.json"));
+  ASSERT_EQ(m["samples"].size(), 2u);
+  int objects = 0, found = 0, detections = 0;
+  for (const auto& s : m["samples"]) {
+    objects += s["metrics"]["objects"]["objects"].get<int>();
+    found += s["metrics"]["objects"]["found"].get<int>();
+    detections += s["metrics"]["detections"]["total"].get<int>();
+  }
+  EXPECT_EQ(m["objects"]["objects"], objects);
+  EXPECT_EQ(m["objects"]["found"], found);
+  EXPECT_EQ(m["detections"]["total"], detections);
+  EXPECT_GT(objects, 2 * 24 * 12) << "the plate and the sphere on most pixels";
+  const std::string csv = slurp(out / "evaluation" / "samples.csv");
+  EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 3) << csv;
+  EXPECT_EQ(csv.rfind("sample,objects,found,recall", 0), 0u) << csv;
 }
 
 }  // namespace
