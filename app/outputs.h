@@ -61,6 +61,9 @@ class Outputs {
 
   // One tile's data; called from several threads at once, for disjoint tiles.
   void put_ground_truth(const GroundTruthTile& g);
+  // Whether the run writes labels.exr (a gate sweep with the ground truth at hand), and one tile of it.
+  bool labels() const;
+  void put_labels(const ObjectLabelsTile& l);
   void put(const TransientTile& t, const sensor::SensorMapsTile& m, const SensorTile& s);
 
   // After the last tile: the images, stamped with their provenance, and the previews into the staging folder.

@@ -25,6 +25,7 @@
 #include "render/renderer.h"
 #include "scenes/scene.h"
 #include "scenes/scene_file.h"
+#include "sensor/labels.h"
 #include "sensor/sensor.h"
 #include "writers/writers.h"
 
@@ -92,10 +93,14 @@ RunResult run(const RunOptions& options) {
   tbb::parallel_for(size_t(0), tiles.size(), [&](size_t ti) {
     InterruptGuard::check();
     const PixelRect& rect = tiles[ti];
-    if (cfg.outputs.ground_truth) outputs.put_ground_truth(renderer.ground_truth(rect));
+    // The ground truth first: the renderer splits each pixel's laser light by the objects of its slots.
+    GroundTruthTile gt;
+    if (cfg.outputs.ground_truth) gt = renderer.ground_truth(rect);
     const PixelRect data_rect = grow_clipped(rect, sensor.halo(), cfg.camera.width_px, cfg.camera.height_px);
-    const TransientTile t = renderer.transient(rect, data_rect, axis, &tile_stats[ti]);
+    const TransientTile t = renderer.transient(rect, data_rect, axis, &tile_stats[ti], cfg.outputs.ground_truth ? &gt : nullptr);
     const SensorTile s = sensor.process(t);
+    if (cfg.outputs.ground_truth) outputs.put_ground_truth(gt);
+    if (outputs.labels()) outputs.put_labels(sensor::object_labels(sensor, gt, s, axis, cfg.laser.emission_delay_s));
     outputs.put(t, sensor.maps(rect), s);
     if (light) light->put(t);
     progress.tick();
@@ -130,6 +135,7 @@ RunResult run(const RunOptions& options) {
   if (light) record.storage.update(light->storage());
   record.files = files;
   record.photons_per_pulse_emitted = renderer.photons_per_pulse();
+  record.objects = objects_json(scene);
   record.camera = camera_json(render::Camera(cfg.camera, scene), img);
   record.threads = options.threads;
   record.dataset = options.dataset;

@@ -146,6 +146,37 @@ std::vector<double> SensorModel::pixel_lambda(int x, int y, const float* g, cons
   return out;
 }
 
+std::vector<double> SensorModel::return_lambda(int x, int y, double t_s, float photons, const TimeAxis& axis) const {
+  const Impl& m = *impl_;
+  std::vector<double> out(static_cast<size_t>(m.K), 0.0);
+  if (axis.bins <= 0 || !m.acq->needs_transient() || !std::isfinite(t_s)) return out;
+  std::vector<float> g(static_cast<size_t>(axis.bins), 0.0f);
+  int64_t lo = axis.bins, hi = 0;
+  const auto put = [&](double t) {
+    const int64_t b = axis.bin_of(t);
+    if (b < 0) return;
+    g[size_t(b)] += photons;
+    lo = std::min(lo, b), hi = std::max(hi, b + 1);
+  };
+  if (axis.period_s > 0.0) {
+    // The first image at or after the window's start, then one per period up to its end.
+    for (double ti = t_s + (std::ceil((axis.start_s - t_s) / axis.period_s) - 1.0) * axis.period_s; ti < axis.end_s();
+         ti += axis.period_s)
+      put(ti);
+  } else {
+    put(t_s);
+  }
+  if (lo >= hi) return out;
+  const auto setup = m.acq->setup(axis);
+  const auto scratch = m.acq->scratch();
+  const PixelParams px = m.maps->at(x, y);
+  std::vector<double> dark(out.size());
+  m.lambda(px, {g.data(), &axis, lo, hi, 0.0, photons}, setup.get(), scratch.get(), out.data());
+  m.lambda(px, {nullptr, &axis, 0, 0, 0.0, 0.0}, setup.get(), scratch.get(), dark.data());
+  for (size_t k = 0; k < out.size(); ++k) out[k] -= dark[k];
+  return out;
+}
+
 SensorTile SensorModel::process(const TransientTile& t) const {
   return std::move(process(t, {impl_->cfg.noise_seed}).front());
 }
