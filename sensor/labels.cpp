@@ -24,6 +24,9 @@ ObjectLabelsTile object_labels(const SensorModel& sensor, const GroundTruthTile&
   out.edge_snr.assign(n * slots, 0.0f);
   out.detectable.assign(n * slots, 0);
   const double N = sensor.frames_per_k();
+  // Every object of the tile with direct light, its rates computed in one call.
+  std::vector<SensorModel::Return> returns;
+  std::vector<size_t> slot;  // [return]: its element e = pixel * slots + j
   for (int y = r.y0; y < r.y1(); ++y)
     for (int x = r.x0; x < r.x1(); ++x) {
       const auto i = static_cast<size_t>(r.index(x, y));
@@ -31,24 +34,28 @@ ObjectLabelsTile object_labels(const SensorModel& sensor, const GroundTruthTile&
         const size_t e = i * slots + j;
         out.id[e] = gt.object_slot_id[e];
         if (out.id[e] < 0 || !(gt.object_laser[e] > 0.0f) || K == 0) continue;
-        const double t = emission_delay_s + 2.0 * double(gt.object_range[e]) / kSpeedOfLight;
-        const std::vector<double> own = sensor.return_lambda(x, y, t, gt.object_laser[e], axis);
-        const double peak = *std::max_element(own.begin(), own.end());
-        if (!(peak > 0.0)) continue;
-        const size_t k = size_t(std::find_if(own.begin(), own.end(), [&](double v) { return v >= kEdgeFraction * peak; }) -
-                                own.begin());
-        const double lambda = s.rate[k * n + i];
-        // The rate without the object, never below 0: lambda is float, lambda_o double.
-        const double without = std::max(0.0, lambda - own[k]);
-        const double p1 = -std::expm1(-lambda), p0 = -std::expm1(-without);
-        const double edge = N * (std::exp(-without) - std::exp(-lambda));
-        const double noise = std::sqrt(N * p1 * (1.0 - p1) + N * p0 * (1.0 - p0));
-        const double snr = noise > 0.0 ? edge / noise : 0.0;
-        out.edge_counts[e] = static_cast<float>(edge);
-        out.edge_snr[e] = static_cast<float>(snr);
-        out.detectable[e] = snr >= kDetectableSnr;
+        returns.push_back({x, y, emission_delay_s + 2.0 * double(gt.object_range[e]) / kSpeedOfLight, gt.object_laser[e]});
+        slot.push_back(e);
       }
     }
+  const std::vector<double> rates = sensor.return_lambda(returns, axis);
+  for (size_t ri = 0; ri < returns.size(); ++ri) {
+    const size_t e = slot[ri], i = e / slots;
+    const double* own = rates.data() + ri * K;
+    const double peak = *std::max_element(own, own + K);
+    if (!(peak > 0.0)) continue;
+    const auto k = static_cast<size_t>(std::find_if(own, own + K, [&](double v) { return v >= kEdgeFraction * peak; }) - own);
+    const double lambda = s.rate[k * n + i];
+    // The rate without the object, never below 0: lambda is float, lambda_o double.
+    const double without = std::max(0.0, lambda - own[k]);
+    const double p1 = -std::expm1(-lambda), p0 = -std::expm1(-without);
+    const double edge = N * (std::exp(-without) - std::exp(-lambda));
+    const double noise = std::sqrt(N * p1 * (1.0 - p1) + N * p0 * (1.0 - p0));
+    const double snr = noise > 0.0 ? edge / noise : 0.0;
+    out.edge_counts[e] = static_cast<float>(edge);
+    out.edge_snr[e] = static_cast<float>(snr);
+    out.detectable[e] = snr >= kDetectableSnr;
+  }
   return out;
 }
 
