@@ -121,8 +121,8 @@ class Outputs::Images {
   // intensity: the mode's declaration of intensity.exr, null when the mode has none.
   // labels: the mode's declaration of labels.exr when the run's ground truth is at hand, else null.
   Images(const RunConfig& cfg, const PixelRect& img, const sensor::DeclaredOutput* intensity,
-         const sensor::DeclaredOutput* labels, const std::set<std::string>& provided)
-      : provided_(provided), img_(img), layers_(cfg.render.max_layers), gt_on_(cfg.outputs.ground_truth),
+         const sensor::DeclaredOutput* labels, int slots, const std::set<std::string>& provided)
+      : provided_(provided), img_(img), layers_(cfg.render.max_layers), slots_(slots), gt_on_(cfg.outputs.ground_truth),
         compression_(cfg.outputs.exr_compression), intensity_decl_(intensity), labels_decl_(labels),
         gt_(img.width, img.height), laser_(img.width, img.height), ambient_(img.width, img.height),
         maps_(img.width, img.height), intensity_(img.width, img.height), labels_(img.width, img.height) {
@@ -133,11 +133,11 @@ class Outputs::Images {
         layer_trans_.push_back(gt_.channel(layer_name(l, ".transmittance")));
       }
       for (const char* n : kObjectChannels) object_ch_.push_back(gt_.channel(n));
-      for (int j = 0; j < layers_; ++j)
+      for (int j = 0; j < slots_; ++j)
         for (const char* what : kObjectSlotChannels) object_slot_ch_.push_back(gt_.channel(layer_name(j, what, "object")));
     }
     if (labels_decl_)
-      for (int j = 0; j < layers_; ++j)
+      for (int j = 0; j < slots_; ++j)
         for (const char* what : kLabelSlotChannels) label_ch_.push_back(labels_.channel(layer_name(j, what, "object")));
     laser_ch_ = {laser_.channel("photons_per_pulse"), laser_.channel("out_of_window")};
     ambient_ch_ = ambient_.channel("photons_per_second");
@@ -159,7 +159,7 @@ class Outputs::Images {
       }
       const float ov[] = {float(g.object_id[i]), float(g.object_count[i]), g.direct_other_laser[i], g.indirect_laser[i]};
       for (size_t c = 0; c < object_ch_.size(); ++c) object_ch_[c][o] = ov[c];
-      for (size_t j = 0; j < size_t(layers_); ++j) {
+      for (size_t j = 0; j < size_t(slots_); ++j) {
         const size_t e = i * size_t(g.max_layers) + j;
         const float sv[] = {float(g.object_slot_id[e]), g.object_range[e], g.object_transmittance[e], g.object_laser[e]};
         for (size_t c = 0; c < std::size(kObjectSlotChannels); ++c) object_slot_ch_[j * std::size(kObjectSlotChannels) + c][o] = sv[c];
@@ -170,7 +170,7 @@ class Outputs::Images {
   bool labels() const { return labels_decl_ != nullptr; }
   void put_labels(const ObjectLabelsTile& t) {
     for_pixels(t.rect, [&](int, int, size_t i, size_t o) {
-      for (size_t j = 0; j < size_t(layers_); ++j) {
+      for (size_t j = 0; j < size_t(slots_); ++j) {
         const size_t e = i * size_t(t.slots) + j;
         const float v[] = {float(t.id[e]), t.edge_counts[e], t.edge_snr[e], float(t.detectable[e])};
         for (size_t c = 0; c < std::size(kLabelSlotChannels); ++c) label_ch_[j * std::size(kLabelSlotChannels) + c][o] = v[c];
@@ -244,7 +244,7 @@ class Outputs::Images {
         gt_.remove_channel(layer_name(l, ".range"));
         gt_.remove_channel(layer_name(l, ".transmittance"));
       }
-      for (int j = object_slots(); j < layers_; ++j)
+      for (int j = object_slots(); j < slots_; ++j)
         for (const char* what : kObjectSlotChannels) gt_.remove_channel(layer_name(j, what, "object"));
       put_file(gt_, "ground_truth.exr", "range, z, layer<i>.range, object<j>.range: metres (+inf where the ray hits nothing); "
                "transmittance: fraction; object<j>.laser, direct_other_laser, indirect_laser: photons per laser pulse reaching "
@@ -252,7 +252,7 @@ class Outputs::Images {
     }
     if (labels_decl_) {
       // Slot 0 stays when nothing is in view (ids -1): an EXR needs a channel.
-      for (int j = std::max(1, object_slots()); j < layers_; ++j)
+      for (int j = std::max(1, object_slots()); j < slots_; ++j)
         for (const char* what : kLabelSlotChannels) labels_.remove_channel(layer_name(j, what, "object"));
       put_file(labels_, labels_decl_->file, "object<j>.edge_counts: counts; edge_snr: ratio; detectable: 0 or 1");
     }
@@ -289,7 +289,7 @@ class Outputs::Images {
     const std::vector<float*>& ch = gt_on_ ? object_slot_ch_ : label_ch_;
     const size_t per_slot = gt_on_ ? std::size(kObjectSlotChannels) : std::size(kLabelSlotChannels);
     int deepest = 0;
-    for (int j = 0; j < layers_ && size_t(j) * per_slot < ch.size(); ++j) {
+    for (int j = 0; j < slots_ && size_t(j) * per_slot < ch.size(); ++j) {
       const float* id = ch[size_t(j) * per_slot];
       if (std::any_of(id, id + size_t(img_.count()), [](float v) { return v >= 0.0f; })) deepest = j + 1;
     }
@@ -306,6 +306,7 @@ class Outputs::Images {
   std::set<std::string> provided_;
   PixelRect img_;
   int layers_;
+  int slots_;  // object slots held: render.max_layers, or the scene's objects when fewer
   bool gt_on_;
   ExrCompression compression_;
   const sensor::DeclaredOutput* intensity_decl_;
@@ -441,13 +442,14 @@ class Outputs::ProfileProbe {
 };
 
 Outputs::Outputs(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img, const TimeAxis& axis,
-                 const Staging& staging, const std::set<std::string>& provided)
+                 const Staging& staging, int objects, const std::set<std::string>& provided)
     : cfg_(c), axis_(axis), gate_positions_s_(sensor.gate_positions_s()), declared_(sensor.acquisition().outputs()),
       staging_(staging) {
   // Labels come from the ground truth: this run's, or the one spadgen sense was given (provided).
   const bool ground_truth = c.outputs.ground_truth || provided.count("ground_truth.exr");
   images_ = std::make_unique<Images>(c, img, find_declared(declared_, "intensity.exr"),
-                                     ground_truth ? find_declared(declared_, "labels.exr") : nullptr, provided);
+                                     ground_truth ? find_declared(declared_, "labels.exr") : nullptr,
+                                     image_object_slots(c.render.max_layers, objects), provided);
   std::vector<StackLayout> layout = stack_layout(c, sensor, img, axis);
   for (StackLayout& s : layout)
     if (provided.count(s.file)) s.written = false;

@@ -67,15 +67,16 @@ RunResult run(const RunOptions& options) {
     sensor.set_maps(maps.width, maps.height, maps.channels, cfg.sensor.gate.maps_exr);
   }
   const render::Renderer renderer(scene, render_stage(cfg, sensor.row_fill_factor()));
+  const int objects = int(scenes::objects_of(scene).list.size());
 
   const TimeAxis axis = time_axis(cfg, sensor);
   const PixelRect img = image_rect(cfg);
   check_derived(cfg, sensor, img, axis);
 
   const fs::path out = options.out_dir.empty() ? fs::path("out") / fs::path(options.scene_file).stem() : fs::path(options.out_dir);
-  check_resources(cfg, sensor, img, axis, options.threads, out);
+  check_resources(cfg, sensor, img, axis, options.threads, out, objects);
   Staging staging(out);
-  Outputs outputs(cfg, sensor, img, axis, staging);
+  Outputs outputs(cfg, sensor, img, axis, staging, objects);
   const PixelRect light_rect = light_region(img, cfg.camera.width_px, cfg.camera.height_px);
   std::unique_ptr<LightWriter> light;
   if (cfg.outputs.light) light = std::make_unique<LightWriter>(light_rect, axis, staging, cfg.outputs.storage);
@@ -181,7 +182,7 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
     sep = ", ";
   }
   o << "\n";
-  o << "resources: " << resource_summary(plan_resources(c, sensor, img, axis, 0, ""));
+  o << "resources: " << resource_summary(plan_resources(c, sensor, img, axis, 0, "", int(scenes::objects_of(scene).list.size())));
   for (const std::string& w : r.warnings) o << "warning: " << w << "\n";
   for (const std::string& w : camera) o << "warning: " << w << "\n";
   return o.str();

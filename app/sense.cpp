@@ -245,7 +245,10 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     throw Error("-o " + out.string() + ": sense writes a new folder beside the run, not into it");
   // Memory and disk of one realisation (the estimate includes the renderer's paths, which sense does not
   // trace: an upper bound); the others add their counts and frames.
-  check_resources(write_cfg, sensor, img, axis, options.threads, out.parent_path().empty() ? fs::path(".") : out.parent_path());
+  // The run's objects bound labels.exr's slots (a run before objects had none).
+  const int objects = meta.contains("objects") ? int(meta.at("objects").size()) : 0;
+  check_resources(write_cfg, sensor, img, axis, options.threads, out.parent_path().empty() ? fs::path(".") : out.parent_path(),
+                  objects);
   std::vector<fs::path> dirs;
   std::vector<std::unique_ptr<Staging>> staging;
   std::vector<std::unique_ptr<Outputs>> outputs;
@@ -267,7 +270,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     staging.push_back(std::make_unique<Staging>(dirs.back()));
     std::set<std::string> provided = r == 0 ? from_run : shared;
     provided.insert(from_run.begin(), from_run.end());
-    outputs.push_back(std::make_unique<Outputs>(write_cfg, sensor, img, axis, *staging.back(), provided));
+    outputs.push_back(std::make_unique<Outputs>(write_cfg, sensor, img, axis, *staging.back(), objects, provided));
     seeds.push_back(runs[r].config.noise_seed());
   }
 
