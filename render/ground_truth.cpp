@@ -1,6 +1,7 @@
 // Exact ground truth along the ray through each pixel centre. Layers follow the primary ray in a straight
 // line through transmissive surfaces (refraction bending is ignored, as a depth camera's geometry would
-// report them), so layer ranges are distances from the camera centre along that one line.
+// report them), so layer ranges are distances from the camera centre along that one line. The objects
+// along it (scenes::Object) take the slots in the order the line meets them, each at its first layer.
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
