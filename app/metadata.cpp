@@ -27,6 +27,22 @@ json crop_json(const PixelRect& r) { return json::array({r.x0, r.y0, r.width, r.
 
 }  // namespace
 
+json objects_json(const scenes::Scene& scene) {
+  json list = json::array();
+  for (const scenes::Object& o : scenes::objects_of(scene).list) {
+    std::vector<std::string> meshes, materials;
+    for (int m : o.meshes) {
+      const scenes::Mesh& mesh = scene.meshes[size_t(m)];
+      meshes.push_back(mesh.name);
+      // glTF's default material has no name; "(default)" as spadgen info lists it.
+      const std::string material = mesh.material >= 0 ? scene.materials[size_t(mesh.material)].name : "(default)";
+      if (std::find(materials.begin(), materials.end(), material) == materials.end()) materials.push_back(material);
+    }
+    list.push_back({{"id", o.id}, {"name", o.name}, {"node", o.node}, {"meshes", meshes}, {"materials", materials}});
+  }
+  return list;
+}
+
 // The images' pinhole camera in the convention of OpenCV and most vision code: camera frame x right,
 // y down, z forward (the viewing direction); pixel (u, v) of an image centred at the integer point (u, v).
 // render::Camera centres sensor pixel x at x + 0.5 with the optical axis through the sensor's centre
@@ -111,6 +127,8 @@ json metadata(const scenes::ResolvedRun& resolved, const std::vector<std::string
                                      {"outside_fraction", r.laser_total > 0 ? r.out_of_window_total / r.laser_total : 0.0}};
   meta["acquisition"] = ojson::parse(sensor.describe().dump());
   meta["ground_truth_layers"] = r.ground_truth_layers;
+  meta["ground_truth_objects"] = r.ground_truth_objects;
+  meta["objects"] = ojson::parse(r.objects.dump());
   if (!r.ground_truth_summary.is_null()) meta["ground_truth_summary"] = ojson::parse(r.ground_truth_summary.dump());
   if (r.dataset) meta["dataset"] = ojson::parse(r.dataset->dump());
   meta["counts_dtype"] = r.counts_u8 ? "uint8" : "uint16";

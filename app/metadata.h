@@ -41,6 +41,10 @@ nlohmann::json axis_json(const TimeAxis& a);
 // camera-to-world pose, focal length and pitch.
 nlohmann::json camera_json(const render::Camera& cam, const PixelRect& img);
 
+// The scene's objects (scenes::objects_of) for metadata.json: id, the glTF node's name and index, the
+// names of its meshes (Scene::meshes, the ground truth's mesh_id) and of their materials.
+nlohmann::json objects_json(const scenes::Scene& scene);
+
 // What metadata.json reports that only the finished run knows.
 struct RunRecord {
   std::vector<std::string> files;  // as published, metadata.json last
@@ -49,6 +53,8 @@ struct RunRecord {
   double laser_total = 0.0, out_of_window_total = 0.0;  // photons per pulse, summed over the image
   double beyond_period_total = 0.0;  // of laser_total, from beyond the unambiguous range (run only: app/warnings.h)
   int ground_truth_layers = 0;
+  int ground_truth_objects = 0;   // the most objects along one ray (object<j> channels below it)
+  nlohmann::json objects;         // objects_json(): the scene's objects, ids as in the images
   nlohmann::json ground_truth_summary;  // Outputs: hit fraction, range span, meshes in view, deepest layer
   bool counts_u8 = true;
   PixelRect transient_crop;

@@ -119,19 +119,26 @@ void write_zarr_group(const Staging& staging, const std::string& folder, std::ve
 class Outputs::Images {
  public:
   // intensity: the mode's declaration of intensity.exr, null when the mode has none.
+  // labels: the mode's declaration of labels.exr when the run's ground truth is at hand, else null.
   Images(const RunConfig& cfg, const PixelRect& img, const sensor::DeclaredOutput* intensity,
-         const std::set<std::string>& provided)
-      : provided_(provided), img_(img), layers_(cfg.render.max_layers), gt_on_(cfg.outputs.ground_truth),
-        compression_(cfg.outputs.exr_compression), intensity_decl_(intensity),
+         const sensor::DeclaredOutput* labels, int slots, const std::set<std::string>& provided)
+      : provided_(provided), img_(img), layers_(cfg.render.max_layers), slots_(slots), gt_on_(cfg.outputs.ground_truth),
+        compression_(cfg.outputs.exr_compression), intensity_decl_(intensity), labels_decl_(labels),
         gt_(img.width, img.height), laser_(img.width, img.height), ambient_(img.width, img.height),
-        maps_(img.width, img.height), intensity_(img.width, img.height) {
+        maps_(img.width, img.height), intensity_(img.width, img.height), labels_(img.width, img.height) {
     if (gt_on_) {
       for (const char* n : kGroundTruthChannels) gt_ch_.push_back(gt_.channel(n));
       for (int l = 0; l < layers_; ++l) {
         layer_range_.push_back(gt_.channel(layer_name(l, ".range")));
         layer_trans_.push_back(gt_.channel(layer_name(l, ".transmittance")));
       }
+      for (const char* n : kObjectChannels) object_ch_.push_back(gt_.channel(n));
+      for (int j = 0; j < slots_; ++j)
+        for (const char* what : kObjectSlotChannels) object_slot_ch_.push_back(gt_.channel(layer_name(j, what, "object")));
     }
+    if (labels_decl_)
+      for (int j = 0; j < slots_; ++j)
+        for (const char* what : kLabelSlotChannels) label_ch_.push_back(labels_.channel(layer_name(j, what, "object")));
     laser_ch_ = {laser_.channel("photons_per_pulse"), laser_.channel("out_of_window")};
     ambient_ch_ = ambient_.channel("photons_per_second");
     maps_ch_ = {maps_.channel("gate_skew_ps"), maps_.channel("gate_length_ps"), maps_.channel("dcr_cps"), maps_.channel("pde")};
@@ -149,6 +156,24 @@ class Outputs::Images {
       for (size_t l = 0; l < size_t(layers_); ++l) {
         layer_range_[l][o] = g.layer_range[i * size_t(g.max_layers) + l];
         layer_trans_[l][o] = g.layer_transmittance[i * size_t(g.max_layers) + l];
+      }
+      const float ov[] = {float(g.object_id[i]), float(g.object_count[i]), g.direct_other_laser[i], g.indirect_laser[i]};
+      for (size_t c = 0; c < object_ch_.size(); ++c) object_ch_[c][o] = ov[c];
+      for (size_t j = 0; j < size_t(slots_); ++j) {
+        const size_t e = i * size_t(g.max_layers) + j;
+        const float sv[] = {float(g.object_slot_id[e]), g.object_range[e], g.object_transmittance[e], g.object_laser[e]};
+        for (size_t c = 0; c < std::size(kObjectSlotChannels); ++c) object_slot_ch_[j * std::size(kObjectSlotChannels) + c][o] = sv[c];
+      }
+    });
+  }
+
+  bool labels() const { return labels_decl_ != nullptr; }
+  void put_labels(const ObjectLabelsTile& t) {
+    for_pixels(t.rect, [&](int, int, size_t i, size_t o) {
+      for (size_t j = 0; j < size_t(slots_); ++j) {
+        const size_t e = i * size_t(t.slots) + j;
+        const float v[] = {float(t.id[e]), t.edge_counts[e], t.edge_snr[e], float(t.detectable[e])};
+        for (size_t c = 0; c < std::size(kLabelSlotChannels); ++c) label_ch_[j * std::size(kLabelSlotChannels) + c][o] = v[c];
       }
     });
   }
@@ -176,6 +201,9 @@ class Outputs::Images {
     const float* lc = gt_ch_.back();
     return int(*std::max_element(lc, lc + size_t(img_.count())));
   }
+  // The most objects along one ray: object<j> channels of ground_truth.exr and labels.exr exist below it.
+  // Known once the images are written (write() removes the slots beyond it).
+  int object_slots() const { return object_slots_; }
 
   // A summary of the ground truth for dataset indices: the share of pixels whose ray hits something, the
   // span of their first-surface ranges, the meshes seen first and the most surfaces along one ray.
@@ -210,12 +238,23 @@ class Outputs::Images {
       e.write(staging.path(name), compression_);
       files.push_back(name);
     };
+    object_slots_ = count_object_slots();
     if (gt_on_) {
       for (int l = deepest_layer(); l < layers_; ++l) {
         gt_.remove_channel(layer_name(l, ".range"));
         gt_.remove_channel(layer_name(l, ".transmittance"));
       }
-      put_file(gt_, "ground_truth.exr", "range, z, layer<i>.range: metres (+inf where the ray hits nothing); transmittance: fraction");
+      for (int j = object_slots(); j < slots_; ++j)
+        for (const char* what : kObjectSlotChannels) gt_.remove_channel(layer_name(j, what, "object"));
+      put_file(gt_, "ground_truth.exr", "range, z, layer<i>.range, object<j>.range: metres (+inf where the ray hits nothing); "
+               "transmittance: fraction; object<j>.laser, direct_other_laser, indirect_laser: photons per laser pulse reaching "
+               "the pixel's SPAD (before PDP)");
+    }
+    if (labels_decl_) {
+      // Slot 0 stays when nothing is in view (ids -1): an EXR needs a channel.
+      for (int j = std::max(1, object_slots()); j < slots_; ++j)
+        for (const char* what : kLabelSlotChannels) labels_.remove_channel(layer_name(j, what, "object"));
+      put_file(labels_, labels_decl_->file, "object<j>.edge_counts: counts; edge_snr: ratio; detectable: 0 or 1");
     }
     laser_.set_attribute("spadgen_time_axis", axis_json(axis).dump());
     put_file(laser_, "laser.exr", "photons per laser pulse reaching the pixel's SPAD (before PDP)");
@@ -239,7 +278,23 @@ class Outputs::Images {
  private:
   static constexpr const char* kGroundTruthChannels[] = {"range", "z", "normal.X", "normal.Y", "normal.Z",
                                                          "mesh_id", "material_id", "layer_count"};
-  static std::string layer_name(int l, const char* what) { return "layer" + std::to_string(l) + what; }
+  static constexpr const char* kObjectChannels[] = {"object_id", "object_count", "direct_other_laser", "indirect_laser"};
+  static constexpr const char* kObjectSlotChannels[] = {".id", ".range", ".transmittance", ".laser"};
+  static constexpr const char* kLabelSlotChannels[] = {".id", ".edge_counts", ".edge_snr", ".detectable"};
+  static std::string layer_name(int l, const char* what, const char* prefix = "layer") {
+    return prefix + std::to_string(l) + what;
+  }
+  // From the slots' ids, which both images hold (spadgen sense has labels.exr only).
+  int count_object_slots() const {
+    const std::vector<float*>& ch = gt_on_ ? object_slot_ch_ : label_ch_;
+    const size_t per_slot = gt_on_ ? std::size(kObjectSlotChannels) : std::size(kLabelSlotChannels);
+    int deepest = 0;
+    for (int j = 0; j < slots_ && size_t(j) * per_slot < ch.size(); ++j) {
+      const float* id = ch[size_t(j) * per_slot];
+      if (std::any_of(id, id + size_t(img_.count()), [](float v) { return v >= 0.0f; })) deepest = j + 1;
+    }
+    return deepest;
+  }
   // Calls f(x, y, index in rect, index in the image) for every pixel (x, y) of rect.
   template <class F>
   void for_pixels(const PixelRect& r, F&& f) const {
@@ -251,13 +306,18 @@ class Outputs::Images {
   std::set<std::string> provided_;
   PixelRect img_;
   int layers_;
+  int slots_;  // object slots held: render.max_layers, or the scene's objects when fewer
   bool gt_on_;
   ExrCompression compression_;
   const sensor::DeclaredOutput* intensity_decl_;
-  writers::ExrImage gt_, laser_, ambient_, maps_, intensity_;
-  std::vector<float*> gt_ch_, layer_range_, layer_trans_, laser_ch_, maps_ch_, intensity_ch_;
+  const sensor::DeclaredOutput* labels_decl_;
+  writers::ExrImage gt_, laser_, ambient_, maps_, intensity_, labels_;
+  // object_slot_ch_ and label_ch_: slot j's channels at [j * channels per slot + c]
+  std::vector<float*> gt_ch_, layer_range_, layer_trans_, object_ch_, object_slot_ch_, laser_ch_, maps_ch_, intensity_ch_,
+      label_ch_;
   float* ambient_ch_ = nullptr;
   std::vector<double> pixel_laser_, pixel_oow_, pixel_beyond_;
+  int object_slots_ = 0;
 };
 
 // The stacks, streamed to disk tile by tile (.npy files or Zarr stores).
@@ -382,10 +442,14 @@ class Outputs::ProfileProbe {
 };
 
 Outputs::Outputs(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img, const TimeAxis& axis,
-                 const Staging& staging, const std::set<std::string>& provided)
+                 const Staging& staging, int objects, const std::set<std::string>& provided)
     : cfg_(c), axis_(axis), gate_positions_s_(sensor.gate_positions_s()), declared_(sensor.acquisition().outputs()),
       staging_(staging) {
-  images_ = std::make_unique<Images>(c, img, find_declared(declared_, "intensity.exr"), provided);
+  // Labels come from the ground truth: this run's, or the one spadgen sense was given (provided).
+  const bool ground_truth = c.outputs.ground_truth || provided.count("ground_truth.exr");
+  images_ = std::make_unique<Images>(c, img, find_declared(declared_, "intensity.exr"),
+                                     ground_truth ? find_declared(declared_, "labels.exr") : nullptr,
+                                     image_object_slots(c.render.max_layers, objects), provided);
   std::vector<StackLayout> layout = stack_layout(c, sensor, img, axis);
   for (StackLayout& s : layout)
     if (provided.count(s.file)) s.written = false;
@@ -396,6 +460,8 @@ Outputs::Outputs(const RunConfig& c, const sensor::SensorModel& sensor, const Pi
 Outputs::~Outputs() = default;
 
 void Outputs::put_ground_truth(const GroundTruthTile& g) { images_->put_ground_truth(g); }
+void Outputs::put_labels(const ObjectLabelsTile& l) { images_->put_labels(l); }
+bool Outputs::labels() const { return images_->labels(); }
 
 void Outputs::put(const TransientTile& t, const sensor::SensorMapsTile& m, const SensorTile& s) {
   images_->put(t, m, s);
@@ -417,6 +483,7 @@ void Outputs::report(RunRecord& r) const {
   r.laser_total = images_->laser_total(), r.out_of_window_total = images_->out_of_window_total();
   r.beyond_period_total = images_->beyond_period_total();
   r.ground_truth_layers = images_->deepest_layer();
+  r.ground_truth_objects = images_->object_slots();
   r.ground_truth_summary = images_->ground_truth_summary();
   r.counts_u8 = stacks_->counts_u8();
   r.transient_crop = stacks_->transient_crop();

@@ -3,6 +3,7 @@
 // metadata.json lists, and the staging folder publishes, whatever files() holds. Files that only one
 // acquisition mode has are those the mode declares (sensor::Acquisition::outputs()).
 #pragma once
+#include <algorithm>
 #include <cstdint>
 #include <memory>
 #include <set>
@@ -20,6 +21,12 @@
 namespace spadgen::app {
 
 class Staging;
+
+// The object slots the images hold: render.max_layers, or the scene's objects when fewer (objects < 0:
+// unknown), at least one (labels.exr keeps slot 0 when nothing is in view).
+inline int image_object_slots(int max_layers, int objects) {
+  return objects < 0 ? max_layers : std::max(1, std::min(max_layers, objects));
+}
 
 // The stacks, in the order metadata.json lists them; they index stack_layout().
 enum Stack : size_t { kExpectedCounts, kDetectionRate, kCounts, kFrames, kTransient, kTransientIndirect, kStackCount };
@@ -52,15 +59,19 @@ void write_zarr_group(const Staging& staging, const std::string& folder, std::ve
 class Outputs {
  public:
   // Opens the stacks in the staging folder (the tiles stream into them) and allocates the images.
+  // objects: the scene's objects (scenes::objects_of), so that the images hold no more object slots.
   // provided: files another folder already holds (spadgen sense --repeats links them): not written here.
   Outputs(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img, const TimeAxis& axis,
-          const Staging& staging, const std::set<std::string>& provided = {});
+          const Staging& staging, int objects, const std::set<std::string>& provided = {});
   ~Outputs();
   Outputs(const Outputs&) = delete;
   Outputs& operator=(const Outputs&) = delete;
 
   // One tile's data; called from several threads at once, for disjoint tiles.
   void put_ground_truth(const GroundTruthTile& g);
+  // Whether the run writes labels.exr (a gate sweep with the ground truth at hand), and one tile of it.
+  bool labels() const;
+  void put_labels(const ObjectLabelsTile& l);
   void put(const TransientTile& t, const sensor::SensorMapsTile& m, const SensorTile& s);
 
   // After the last tile: the images, stamped with their provenance, and the previews into the staging folder.

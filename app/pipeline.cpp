@@ -25,6 +25,7 @@
 #include "render/renderer.h"
 #include "scenes/scene.h"
 #include "scenes/scene_file.h"
+#include "sensor/labels.h"
 #include "sensor/sensor.h"
 #include "writers/writers.h"
 
@@ -66,15 +67,16 @@ RunResult run(const RunOptions& options) {
     sensor.set_maps(maps.width, maps.height, maps.channels, cfg.sensor.gate.maps_exr);
   }
   const render::Renderer renderer(scene, render_stage(cfg, sensor.row_fill_factor()));
+  const int objects = int(scenes::objects_of(scene).list.size());
 
   const TimeAxis axis = time_axis(cfg, sensor);
   const PixelRect img = image_rect(cfg);
   check_derived(cfg, sensor, img, axis);
 
   const fs::path out = options.out_dir.empty() ? fs::path("out") / fs::path(options.scene_file).stem() : fs::path(options.out_dir);
-  check_resources(cfg, sensor, img, axis, options.threads, out);
+  check_resources(cfg, sensor, img, axis, options.threads, out, objects);
   Staging staging(out);
-  Outputs outputs(cfg, sensor, img, axis, staging);
+  Outputs outputs(cfg, sensor, img, axis, staging, objects);
   const PixelRect light_rect = light_region(img, cfg.camera.width_px, cfg.camera.height_px);
   std::unique_ptr<LightWriter> light;
   if (cfg.outputs.light) light = std::make_unique<LightWriter>(light_rect, axis, staging, cfg.outputs.storage);
@@ -92,10 +94,14 @@ RunResult run(const RunOptions& options) {
   tbb::parallel_for(size_t(0), tiles.size(), [&](size_t ti) {
     InterruptGuard::check();
     const PixelRect& rect = tiles[ti];
-    if (cfg.outputs.ground_truth) outputs.put_ground_truth(renderer.ground_truth(rect));
+    // The ground truth first: the renderer splits each pixel's laser light by the objects of its slots.
+    GroundTruthTile gt;
+    if (cfg.outputs.ground_truth) gt = renderer.ground_truth(rect);
     const PixelRect data_rect = grow_clipped(rect, sensor.halo(), cfg.camera.width_px, cfg.camera.height_px);
-    const TransientTile t = renderer.transient(rect, data_rect, axis, &tile_stats[ti]);
+    const TransientTile t = renderer.transient(rect, data_rect, axis, &tile_stats[ti], cfg.outputs.ground_truth ? &gt : nullptr);
     const SensorTile s = sensor.process(t);
+    if (cfg.outputs.ground_truth) outputs.put_ground_truth(gt);
+    if (outputs.labels()) outputs.put_labels(sensor::object_labels(sensor, gt, s, axis, cfg.laser.emission_delay_s));
     outputs.put(t, sensor.maps(rect), s);
     if (light) light->put(t);
     progress.tick();
@@ -130,6 +136,7 @@ RunResult run(const RunOptions& options) {
   if (light) record.storage.update(light->storage());
   record.files = files;
   record.photons_per_pulse_emitted = renderer.photons_per_pulse();
+  record.objects = objects_json(scene);
   record.camera = camera_json(render::Camera(cfg.camera, scene), img);
   record.threads = options.threads;
   record.dataset = options.dataset;
@@ -175,7 +182,7 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
     sep = ", ";
   }
   o << "\n";
-  o << "resources: " << resource_summary(plan_resources(c, sensor, img, axis, 0, ""));
+  o << "resources: " << resource_summary(plan_resources(c, sensor, img, axis, 0, "", int(scenes::objects_of(scene).list.size())));
   for (const std::string& w : r.warnings) o << "warning: " << w << "\n";
   for (const std::string& w : camera) o << "warning: " << w << "\n";
   return o.str();

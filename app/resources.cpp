@@ -87,7 +87,7 @@ std::string bytes_text(int64_t bytes) {
 }
 
 ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img,
-                            const TimeAxis& axis, int threads, const fs::path& out) {
+                            const TimeAxis& axis, int threads, const fs::path& out, int objects) {
   ResourcePlan plan;
   const int64_t T = threads > 0 ? threads : std::max(1u, std::thread::hardware_concurrency());
   // Tiles in flight: one per thread, and one more that a thread waiting inside a tile may start.
@@ -124,13 +124,15 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
                          in_flight * sensor_tile});
   plan.memory.push_back({"output stacks in flight, file-backed (camera.width_px, render.tile_size_px)", resident, true});
   plan.memory.push_back({"Zarr chunks being filled, at most (camera.width_px, render.tile_size_px, " + th + ")", chunks});
-  // EXR images held whole until the end: ground truth (8 channels and 2 per layer), laser, ambient, maps,
-  // intensity.
-  const int64_t channels = (c.outputs.ground_truth ? 8 + 2 * c.render.max_layers : 0) + 2 + 1 + 4 +
-                           (c.acquisition.mode == AcquisitionMode::Intensity ? 2 : 0);
+  // EXR images held whole until the end: ground truth (8 channels and 2 per layer, 4 and 4 per object
+  // slot), laser, ambient, maps, intensity, and in a sweep labels.exr (4 per object slot).
+  const int64_t slots = image_object_slots(c.render.max_layers, objects);
+  const bool sweep = c.acquisition.mode == AcquisitionMode::GateSweep;
+  const int64_t channels = (c.outputs.ground_truth ? 8 + 2 * c.render.max_layers + 4 + 4 * slots : 0) + 2 + 1 + 4 +
+                           (sweep ? 0 : 2) + (sweep && c.outputs.ground_truth ? 4 * slots : 0);
   plan.memory.push_back({"images (" + std::to_string(img.width) + " x " + std::to_string(img.height) +
                              " pixels: camera.crop or width_px x height_px; " + std::to_string(channels) +
-                             " channels with render.max_layers)",
+                             " channels with render.max_layers and the scene's objects)",
                          pixels * channels * 4});
   plan.memory_available = available_memory();
 
@@ -149,8 +151,8 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
 }
 
 void check_resources(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img, const TimeAxis& axis,
-                     int threads, const fs::path& out) {
-  const ResourcePlan plan = plan_resources(c, sensor, img, axis, threads, out);
+                     int threads, const fs::path& out, int objects) {
+  const ResourcePlan plan = plan_resources(c, sensor, img, axis, threads, out, objects);
   const std::string file = c.scene_file.empty() ? std::string("<scene>") : c.scene_file;
   if (plan.memory_available >= 0 && plan.memory_needed() > plan.memory_available)
     throw Error(file + ": the run needs about " + bytes_text(plan.memory_needed()) + " of memory, and " +

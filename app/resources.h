@@ -29,14 +29,15 @@ struct ResourcePlan {
   int64_t disk_needed() const;
 };
 
-// threads: as --threads (0 = all cores). out: the output folder ("" = no disk check).
+// threads: as --threads (0 = all cores). out: the output folder ("" = no disk check). objects: the scene's
+// objects (scenes::objects_of), which bound the object slots of the images; -1 unknown (render.max_layers).
 ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img,
-                            const TimeAxis& axis, int threads, const std::filesystem::path& out);
+                            const TimeAxis& axis, int threads, const std::filesystem::path& out, int objects = -1);
 
 // Throws spadgen::Error, with the figures and the keys of the largest parts, when the run needs more
 // memory or disk than there is.
 void check_resources(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img, const TimeAxis& axis,
-                     int threads, const std::filesystem::path& out);
+                     int threads, const std::filesystem::path& out, int objects = -1);
 
 // "memory: about 270 MB (available: 5.1 GB); disk: about 0.9 GB" for spadgen info.
 std::string resource_summary(const ResourcePlan& plan);

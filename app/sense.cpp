@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <memory>
 #include <set>
 #include <sstream>
@@ -28,6 +29,7 @@
 #include "scenes/input.h"
 #include "scenes/key_path.h"
 #include "scenes/scene_file.h"
+#include "sensor/labels.h"
 #include "sensor/model/pixel_layout.h"
 #include "sensor/sensor.h"
 #include "writers/writers.h"
@@ -90,6 +92,38 @@ void link_into(const fs::path& from, const Staging& staging, const std::string& 
 }
 
 std::string text(uint64_t v) { return std::to_string(v); }
+
+// What labels.exr needs of the run's ground truth over rect: the object slots' ids, ranges and laser light,
+// exactly as ground_truth.exr holds them (so the labels equal a run's bit for bit). Slots beyond the
+// image's object<j> channels are unused (id -1), as the run's were.
+GroundTruthTile object_truth(const writers::ExrData& e, const PixelRect& img, const PixelRect& rect, int slots,
+                             const fs::path& file) {
+  if (e.width != img.width || e.height != img.height)
+    throw Error(file.string() + ": expected " + std::to_string(img.width) + " x " + std::to_string(img.height) + " pixels");
+  GroundTruthTile gt;
+  gt.rect = rect;
+  gt.max_layers = slots;
+  const auto n = static_cast<size_t>(rect.count()) * static_cast<size_t>(slots);
+  gt.object_slot_id.assign(n, -1);
+  gt.object_range.assign(n, std::numeric_limits<float>::infinity());
+  gt.object_laser.assign(n, 0.0f);
+  for (int j = 0; j < slots; ++j) {
+    const std::string name = "object" + std::to_string(j);
+    const auto id = e.channels.find(name + ".id"), range = e.channels.find(name + ".range"), laser = e.channels.find(name + ".laser");
+    if (id == e.channels.end()) break;
+    if (range == e.channels.end() || laser == e.channels.end())
+      throw Error(file.string() + ": has " + name + ".id but not " + name + ".range and " + name + ".laser");
+    for (int y = rect.y0; y < rect.y1(); ++y)
+      for (int x = rect.x0; x < rect.x1(); ++x) {
+        const size_t o = size_t(y - img.y0) * size_t(img.width) + size_t(x - img.x0);
+        const size_t i = size_t(rect.index(x, y)) * size_t(slots) + size_t(j);
+        gt.object_slot_id[i] = static_cast<int32_t>(id->second[o]);
+        gt.object_range[i] = range->second[o];
+        gt.object_laser[i] = laser->second[o];
+      }
+  }
+  return gt;
+}
 
 }  // namespace
 
@@ -194,6 +228,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   }
 
   // The files the sensor does not write come from the run: the exact ground truth, the transients, the light.
+  // labels.exr is the sensor's: recomputed from the run's ground truth for this call's settings.
   std::vector<std::string> linked;
   for (const auto& f : meta.at("files")) {
     const std::string name = f.get<std::string>();
@@ -210,13 +245,19 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     throw Error("-o " + out.string() + ": sense writes a new folder beside the run, not into it");
   // Memory and disk of one realisation (the estimate includes the renderer's paths, which sense does not
   // trace: an upper bound); the others add their counts and frames.
-  check_resources(write_cfg, sensor, img, axis, options.threads, out.parent_path().empty() ? fs::path(".") : out.parent_path());
+  // The run's objects bound labels.exr's slots (a run before objects had none).
+  const int objects = meta.contains("objects") ? int(meta.at("objects").size()) : 0;
+  check_resources(write_cfg, sensor, img, axis, options.threads, out.parent_path().empty() ? fs::path(".") : out.parent_path(),
+                  objects);
   std::vector<fs::path> dirs;
   std::vector<std::unique_ptr<Staging>> staging;
   std::vector<std::unique_ptr<Outputs>> outputs;
   std::vector<uint64_t> seeds;
   // Realisations differ in their counts and frames only: the others link the files of the first.
-  std::set<std::string> shared = {"laser.exr", "ambient.exr", "sensor_maps.exr"};
+  std::set<std::string> shared = {"laser.exr", "ambient.exr", "sensor_maps.exr", "labels.exr"};
+  const bool run_truth = std::find(linked.begin(), linked.end(), "ground_truth.exr") != linked.end();
+  std::set<std::string> from_run;
+  if (run_truth) from_run.insert("ground_truth.exr");
   for (const StackLayout& l : stack_layout(write_cfg, sensor, img, axis))
     if (l.file.starts_with("detection_rate.") || l.file.starts_with("expected_counts.")) shared.insert(l.file);
   bool two_d = false;
@@ -227,8 +268,9 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     std::snprintf(name, sizeof name, "repeat_%03zu", r);
     dirs.push_back(runs.size() == 1 ? out : out / name);
     staging.push_back(std::make_unique<Staging>(dirs.back()));
-    outputs.push_back(std::make_unique<Outputs>(write_cfg, sensor, img, axis, *staging.back(),
-                                                r == 0 ? std::set<std::string>{} : shared));
+    std::set<std::string> provided = r == 0 ? from_run : shared;
+    provided.insert(from_run.begin(), from_run.end());
+    outputs.push_back(std::make_unique<Outputs>(write_cfg, sensor, img, axis, *staging.back(), objects, provided));
     seeds.push_back(runs[r].config.noise_seed());
   }
 
@@ -237,6 +279,8 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   if (options.progress)
     std::fprintf(stderr, "spadgen: sense %s: %d x %d pixels, K = %d, %zu realisation(s)\n", src.string().c_str(), img.width,
                  img.height, sensor.K(), runs.size());
+  std::unique_ptr<writers::ExrData> truth;
+  if (outputs.front()->labels()) truth = std::make_unique<writers::ExrData>(writers::read_exr((src / "ground_truth.exr").string()));
   Progress progress(tiles.size(), options.progress);
   tbb::parallel_for(size_t(0), tiles.size(), [&](size_t ti) {
     InterruptGuard::check();
@@ -244,6 +288,11 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     const TransientTile t = light.tile(rect, grow_clipped(rect, sensor.halo(), cfg.camera.width_px, cfg.camera.height_px));
     const std::vector<SensorTile> s = sensor.process(t, seeds);
     const sensor::SensorMapsTile maps = sensor.maps(rect);
+    // The labels do not depend on the noise: the first realisation's serve all (the others link them).
+    if (truth)
+      outputs.front()->put_labels(sensor::object_labels(
+          sensor, object_truth(*truth, img, rect, cfg.render.max_layers, src / "ground_truth.exr"), s.front(), axis,
+          cfg.laser.emission_delay_s));
     for (size_t r = 0; r < s.size(); ++r) outputs[r]->put(t, maps, s[r]);
     progress.tick();
   });
@@ -281,6 +330,8 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     record.photons_per_pulse_emitted = meta.at("photons_per_pulse_emitted").get<double>();
     record.camera = meta.at("camera");
     record.ground_truth_layers = meta.at("ground_truth_layers").get<int>();
+    if (meta.contains("ground_truth_objects")) record.ground_truth_objects = meta.at("ground_truth_objects").get<int>();
+    if (meta.contains("objects")) record.objects = meta.at("objects");
     if (meta.contains("ground_truth_summary")) record.ground_truth_summary = meta.at("ground_truth_summary");
     record.dataset = options.dataset;
     if (meta.contains("transient")) record.transient_crop = rect_of(meta.at("transient").at("crop_in_sensor"));

@@ -97,6 +97,32 @@ struct GroundTruthTile {
   // per pixel, max_layers entries each: [index(x, y) * max_layers + i]; +inf / 0 beyond layer_count
   std::vector<float> layer_range;
   std::vector<float> layer_transmittance;  // fraction of light reaching that surface along the ray
+
+  // Objects (scenes::Object: a glTF node with a mesh) along the same ray, as the layers are counted.
+  std::vector<int32_t> object_id;     // the first hit's object, -1 on a miss
+  std::vector<int32_t> object_count;  // distinct objects up to and including the first opaque surface
+  // per pixel, max_layers slots each, [index(x, y) * max_layers + j], the objects in the order the ray meets
+  // them; slots from object_count on: id -1, range +inf, transmittance and laser 0
+  std::vector<int32_t> object_slot_id;
+  std::vector<float> object_range;          // m, range of the object's first surface along the ray
+  std::vector<float> object_transmittance;  // fraction of light reaching that first surface
+  // Filled by Renderer::transient (given this tile), photons per pulse as in TransientTile::laser_total:
+  // the light of direct paths (one non-delta vertex) whose vertex lies on slot j's object; per pixel, the
+  // direct light of objects in no slot (a neighbour seen by jittered samples at a silhouette) and the light
+  // of indirect paths (two or more non-delta vertices). Their sum is laser_total (docs/render.md).
+  std::vector<float> object_laser;
+  std::vector<float> direct_other_laser;
+  std::vector<float> indirect_laser;
+};
+
+// Detectability of each object of GroundTruthTile's slots under one acquisition (sensor::object_labels).
+struct ObjectLabelsTile {
+  PixelRect rect;
+  int slots = 0;  // per pixel, [index(x, y) * slots + j], the ground truth's object slots
+  std::vector<int32_t> id;         // the slot's object, -1 unused
+  std::vector<float> edge_counts;  // expected-count step of the object's rising edge, counts
+  std::vector<float> edge_snr;     // that step over the standard deviation of the difference of the two counts
+  std::vector<uint8_t> detectable; // edge_snr >= sensor::kDetectableSnr
 };
 
 // What the sensor makes of a tile. K is the number of gate positions (gate sweep) or exposures (2D).

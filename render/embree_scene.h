@@ -1,5 +1,6 @@
 // Every Embree call of spadgen lives in embree_scene.cpp, so that a port to Embree 4 touches one file.
-// One Embree scene over all meshes of a scenes::Scene, in world space, with geometry ID = mesh index.
+// One Embree scene over all meshes of a scenes::Scene, in world space, with geometry ID = mesh index (the
+// renderer maps a mesh on to its ground-truth object with scenes::Objects::mesh_object).
 #pragma once
 #include <embree3/rtcore.h>
 

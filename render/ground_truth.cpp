@@ -1,9 +1,11 @@
 // Exact ground truth along the ray through each pixel centre. Layers follow the primary ray in a straight
 // line through transmissive surfaces (refraction bending is ignored, as a depth camera's geometry would
-// report them), so layer ranges are distances from the camera centre along that one line.
+// report them), so layer ranges are distances from the camera centre along that one line. The objects
+// along it (scenes::Object) take the slots in the order the line meets them, each at its first layer.
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -29,6 +31,15 @@ GroundTruthTile Renderer::ground_truth(const PixelRect& rect) const {
   gt.layer_count.assign(n, 0);
   gt.layer_range.assign(n * layers, kInf);
   gt.layer_transmittance.assign(n * layers, 0.0f);
+  gt.object_id.assign(n, -1);
+  gt.object_count.assign(n, 0);
+  gt.object_slot_id.assign(n * layers, -1);
+  gt.object_range.assign(n * layers, kInf);
+  gt.object_transmittance.assign(n * layers, 0.0f);
+  gt.object_laser.assign(n * layers, 0.0f);
+  gt.direct_other_laser.assign(n, 0.0f);
+  gt.indirect_laser.assign(n, 0.0f);
+  const std::vector<int>& mesh_object = im.objects.mesh_object;
 
   const glm::vec3 cam(im.camera.position());
   tbb::parallel_for(tbb::blocked_range<int>(rect.y0, rect.y1()), [&](const tbb::blocked_range<int>& rows) {
@@ -40,7 +51,8 @@ GroundTruthTile Renderer::ground_truth(const PixelRect& rect) const {
         glm::vec3 o = cam;
         glm::dvec3 previous = im.camera.position();
         double distance = 0.0, transmittance = 1.0;
-        int medium = -1, count = 0;
+        int medium = -1, count = 0, objects = 0;
+        int32_t* slot_id = gt.object_slot_id.data() + i * layers;
         while (count < gt.max_layers) {
           RayHit hit;
           if (!im.embree.intersect(o, d, 0.0f, kInf, &hit)) break;
@@ -61,6 +73,15 @@ GroundTruthTile Renderer::ground_truth(const PixelRect& rect) const {
           }
           gt.layer_range[i * layers + size_t(count)] = static_cast<float>(distance);
           gt.layer_transmittance[i * layers + size_t(count)] = static_cast<float>(transmittance);
+          // An object's slot holds its first surface (a plate's front face); later ones add no slot.
+          const int object = mesh_object[size_t(sf.mesh)];
+          if (count == 0) gt.object_id[i] = object;
+          if (std::find(slot_id, slot_id + objects, object) == slot_id + objects) {
+            slot_id[objects] = object;
+            gt.object_range[i * layers + size_t(objects)] = static_cast<float>(distance);
+            gt.object_transmittance[i * layers + size_t(objects)] = static_cast<float>(transmittance);
+            ++objects;
+          }
           ++count;
           const ResolvedMaterial& rm = im.shading.material(sf.material);
           if (!(rm.point.transmission > 0.0f)) break;
@@ -71,6 +92,7 @@ GroundTruthTile Renderer::ground_truth(const PixelRect& rect) const {
           o = offset_ray_origin(sf.p, sf.ng, d);
         }
         gt.layer_count[i] = count;
+        gt.object_count[i] = objects;
       }
   });
   return gt;

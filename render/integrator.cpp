@@ -65,9 +65,11 @@ int shadow_medium(const Surface& sf, bool volume, bool wo_front, const glm::vec3
 
 }  // namespace
 
-Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& scene, const EmbreeScene& embree,
-                       const Shading& shading, const Camera& camera, const Laser& laser, const Ambient& ambient)
-    : config_(config), embree_(embree), shading_(shading), camera_(camera), laser_(laser), ambient_(ambient) {
+Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& scene, const std::vector<int>& mesh_object,
+                       const EmbreeScene& embree, const Shading& shading, const Camera& camera, const Laser& laser,
+                       const Ambient& ambient)
+    : config_(config), mesh_object_(mesh_object), embree_(embree), shading_(shading), camera_(camera), laser_(laser),
+      ambient_(ambient) {
   transmission_ = scene.has_transmission();
   ambient_on_ = ambient.any() || shading.has_emission();
   optics_ = config.camera.optics_transmission;
@@ -274,6 +276,12 @@ inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, co
   if (opl >= period_opl_) film.totals->beyond_period += value;
   deposit(value, config_.laser.emission_delay_s + opl / kSpeedOfLight, film.axis, film.bins, film.totals,
           v.vertices > 0 ? film.indirect_bins : nullptr);
+  // The laser is a point light, so this connection is its only strategy: each path's light is attributed
+  // once, to the object of its one non-delta vertex when it is direct.
+  if (film.objects) {
+    if (v.vertices == 0) film.objects->add(mesh_object_[size_t(v.sf.mesh)], value);
+    else film.objects->indirect += value;
+  }
 }
 
 // Without an ambient source (ambient_on_ false) a laser-only render skips the ambient sums altogether.
@@ -381,7 +389,7 @@ inline void Integrator::connect_ambient_lights(const NeeVertex& v, double* ambie
 }
 
 PixelTotals Integrator::render_pixel(int x, int y, const CameraBlock& block, const TimeAxis& axis, double* bins,
-                                     RayCounts* rays, double* indirect_bins) const {
+                                     RayCounts* rays, double* indirect_bins, ObjectLaser* objects) const {
   PixelTotals out;
   const RenderConfig& rc = config_.render;
   const double inv_spp = 1.0 / rc.samples_per_pixel;
@@ -389,7 +397,7 @@ PixelTotals Integrator::render_pixel(int x, int y, const CameraBlock& block, con
   const int lane = x - block.x0;
   if (block.y != y || lane < 0 || lane >= block.lanes || block.spp != rc.samples_per_pixel)
     throw Error("render_pixel: pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") is not in its camera block");
-  const PixelFilm film{axis, bins, indirect_bins, &out};
+  const PixelFilm film{axis, bins, indirect_bins, &out, objects};
 
   for (int s = 0; s < rc.samples_per_pixel; ++s) {
     throw_if_interrupted();  // one relaxed load per path: a signal stops even a pixel of 10^7 paths

@@ -32,6 +32,29 @@ struct PixelTotals {
   int64_t bin_lo = INT64_MAX, bin_hi = 0;
 };
 
+// One pixel's laser light split by what returned it: direct paths (one non-delta vertex, as
+// render.split_direct_indirect counts them) by the object of that vertex, indirect paths together. A worker
+// keeps one for all its pixels: direct has a slot per object of the scene, and only the objects a pixel
+// touched are read and cleared, so a pixel costs what it touches (a pixel sees few objects).
+struct ObjectLaser {
+  std::vector<double> direct;    // photons per pulse, per object id
+  std::vector<int> touched;      // the object ids with a contribution, in the order first met
+  std::vector<uint8_t> seen;     // per object id: in touched
+  double indirect = 0.0;
+
+  explicit ObjectLaser(size_t objects) : direct(objects, 0.0), seen(objects, 0) {}
+  void add(int object, double v) {
+    const auto o = static_cast<size_t>(object);
+    if (!seen[o]) seen[o] = 1, touched.push_back(object);
+    direct[o] += v;
+  }
+  void clear() {
+    for (int o : touched) direct[size_t(o)] = 0.0, seen[size_t(o)] = 0;
+    touched.clear();
+    indirect = 0.0;
+  }
+};
+
 struct RayCounts {
   uint64_t camera = 0, shadow = 0;
 };
@@ -81,8 +104,10 @@ struct FirstSegment {
 
 class Integrator {
  public:
-  Integrator(const RenderStageConfig& config, const scenes::Scene& scene, const EmbreeScene& embree,
-             const Shading& shading, const Camera& camera, const Laser& laser, const Ambient& ambient);
+  // mesh_object: the object (scenes::Objects) of every mesh, for the per-object split of the laser light.
+  Integrator(const RenderStageConfig& config, const scenes::Scene& scene, const std::vector<int>& mesh_object,
+             const EmbreeScene& embree, const Shading& shading, const Camera& camera, const Laser& laser,
+             const Ambient& ambient);
 
   // Traces the camera rays of every sample of the block that contains pixel (x, y) (full-sensor coordinates).
   void trace_camera_block(int x, int y, CameraBlock* block, RayCounts* rays) const;
@@ -90,8 +115,9 @@ class Integrator {
   // All samples of pixel (x, y), whose block `block` holds. bins: axis.bins doubles, zeroed by the caller,
   // receive photons per pulse per bin (unused when axis.bins == 0). indirect_bins (null: no split) receive
   // the part of bins carried by paths with two or more non-delta vertices, over the same bin range.
+  // objects (null: not asked), cleared by the caller, receive the pixel's laser_total split by object.
   PixelTotals render_pixel(int x, int y, const CameraBlock& block, const TimeAxis& axis, double* bins,
-                           RayCounts* rays, double* indirect_bins = nullptr) const;
+                           RayCounts* rays, double* indirect_bins = nullptr, ObjectLaser* objects = nullptr) const;
 
   // FF * optics transmission * p^2 * pi / (4 N^2) for a pixel of row y: photons at the SPAD per unit of
   // photon radiance (cos^4 excluded).
@@ -114,6 +140,7 @@ class Integrator {
     double* bins;
     double* indirect_bins;
     PixelTotals* totals;
+    ObjectLaser* objects;
   };
   struct NeeVertex;  // integrator.cpp
 
@@ -141,6 +168,7 @@ class Integrator {
   void connect_ambient_lights(const NeeVertex& v, double* ambient, RayCounts* rays) const;
 
   const RenderStageConfig& config_;
+  const std::vector<int>& mesh_object_;
   const EmbreeScene& embree_;
   const Shading& shading_;
   const Camera& camera_;

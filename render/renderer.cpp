@@ -3,6 +3,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <atomic>
 #include <string>
 #include <vector>
@@ -19,10 +20,29 @@ std::string rect_str(const PixelRect& r) {
          std::to_string(r.height) + "]";
 }
 
+// One pixel's split into its ground-truth slots: slot j receives its object's direct light; the direct
+// light of objects in no slot is summed in ascending object order, so the sums do not depend on the order
+// the paths met them (which they do not anyway: samples come in a fixed order).
+void put_object_laser(ObjectLaser* objects, int64_t pixel, GroundTruthTile* gt) {
+  const auto slots = static_cast<size_t>(gt->max_layers);
+  const int32_t* ids = gt->object_slot_id.data() + size_t(pixel) * slots;
+  float* laser = gt->object_laser.data() + size_t(pixel) * slots;
+  std::sort(objects->touched.begin(), objects->touched.end());
+  double other = 0.0;
+  for (int o : objects->touched) {
+    const int32_t* slot = std::find(ids, ids + slots, o);
+    if (slot != ids + slots) laser[slot - ids] = static_cast<float>(objects->direct[size_t(o)]);
+    else other += objects->direct[size_t(o)];
+  }
+  gt->direct_other_laser[size_t(pixel)] = static_cast<float>(other);
+  gt->indirect_laser[size_t(pixel)] = static_cast<float>(objects->indirect);
+}
+
 }  // namespace
 
 Renderer::Impl::Impl(const scenes::Scene& s, const RenderStageConfig& c)
     : scene(s),
+      objects(scenes::objects_of(scene)),
       config(c),
       camera(config.camera, scene),
       laser(make_laser(config, camera, scene, &laser_light)),
@@ -31,7 +51,7 @@ Renderer::Impl::Impl(const scenes::Scene& s, const RenderStageConfig& c)
       embree(scene),
       shading(scene, config.laser.wavelength_m, ambient_weights,
               photons_per_second_per_photometric_unit(config.ambient.wavelength_m, config.ambient.bandwidth_m)),
-      integrator(config, scene, embree, shading, camera, laser, ambient) {}
+      integrator(config, scene, objects.mesh_object, embree, shading, camera, laser, ambient) {}
 
 void Renderer::Impl::check_rect(const PixelRect& r, const char* what) const {
   if (r.width <= 0 || r.height <= 0 || r.x0 < 0 || r.y0 < 0 || r.x1() > camera.width() || r.y1() > camera.height())
@@ -56,13 +76,15 @@ size_t Renderer::bytes_per_thread(int samples_per_pixel) {
 }
 
 TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_rect, const TimeAxis& axis,
-                                  RenderStats* stats) const {
+                                  RenderStats* stats, GroundTruthTile* gt) const {
   const Impl& im = *impl_;
   im.check_rect(data_rect, "transient data_rect");
   if (rect.x0 < data_rect.x0 || rect.y0 < data_rect.y0 || rect.x1() > data_rect.x1() || rect.y1() > data_rect.y1())
     throw Error("transient rect " + rect_str(rect) + " is not inside its data_rect " + rect_str(data_rect));
   if (axis.bins < 0 || (axis.bins > 0 && !(axis.bin_width_s > 0.0)) || !(axis.period_s >= 0.0))
     throw Error("transient time axis: expected bins >= 0, a positive bin width and a period >= 0");
+  if (gt && (gt->rect != rect || gt->object_laser.size() != size_t(rect.count()) * size_t(gt->max_layers)))
+    throw Error("transient: the ground truth given for the object split is not that of rect " + rect_str(rect));
 
   TransientTile tile;
   tile.rect = rect;
@@ -90,13 +112,20 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
     std::vector<double> acc(bins, 0.0), acc_indirect(split ? bins : 0, 0.0);
     RayCounts rays;
     CameraBlock block;
+    ObjectLaser objects(gt ? im.objects.list.size() : 0);
     for (int y = rows.begin(); y < rows.end(); ++y)
       for (int x = data_rect.x0; x < data_rect.x1(); ++x) {
         // Camera rays travel in packets fixed by the sensor (EmbreeScene::kPacket pixels of a row), so a
         // tile edge inside a block traces the whole block (and shades only its own pixels).
         if (x == data_rect.x0 || x % EmbreeScene::kPacket == 0) im.integrator.trace_camera_block(x, y, &block, &rays);
+        const bool split_objects = gt && rect.contains(x, y);
         const PixelTotals t = im.integrator.render_pixel(x, y, block, axis, acc.data(), &rays,
-                                                         split ? acc_indirect.data() : nullptr);
+                                                         split ? acc_indirect.data() : nullptr,
+                                                         split_objects ? &objects : nullptr);
+        if (split_objects) {
+          put_object_laser(&objects, rect.index(x, y), gt);
+          objects.clear();
+        }
         const auto i = static_cast<size_t>(data_rect.index(x, y));
         float* out = tile.transient.data() + i * bins;
         for (int64_t b = t.bin_lo; b < t.bin_hi; ++b) {

@@ -51,8 +51,10 @@ class Renderer {
   // Laser transient (on `axis`; axis.bins == 0 renders only the time-integrated totals), laser totals,
   // out-of-window totals and the ambient photon rate for every pixel of data_rect (which contains rect).
   // Deterministic: depends only on the scene, the config, the seed and the pixel coordinates.
+  // gt (null: not asked): the ground truth of rect, whose object_laser, direct_other_laser and
+  // indirect_laser receive each pixel's laser_total split by the objects of its slots (docs/render.md).
   TransientTile transient(const PixelRect& rect, const PixelRect& data_rect, const TimeAxis& axis,
-                          RenderStats* stats = nullptr) const;
+                          RenderStats* stats = nullptr, GroundTruthTile* gt = nullptr) const;
 
   // Photons per laser pulse emitted (N_p = P / (f_rep h c / lambda)).
   double photons_per_pulse() const;

@@ -1,6 +1,7 @@
 // The renderer's state, shared by renderer.cpp and ground_truth.cpp. Member order is construction order.
 #pragma once
 #include <string>
+#include <vector>
 
 #include "camera.h"
 #include "core/config.h"
@@ -21,6 +22,8 @@ struct Renderer::Impl {
   void check_rect(const PixelRect& rect, const char* what) const;
 
   scenes::Scene scene;  // a copy: the renderer owns what Embree's shared buffers point into
+  // Objects of the ground truth; mesh_object maps Embree's geometry ID (= mesh index) to its object.
+  scenes::Objects objects;
   RenderStageConfig config;
   Camera camera;
   int laser_light = -1;

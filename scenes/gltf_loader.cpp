@@ -1299,6 +1299,29 @@ Scene parse_gltf(const std::string& bytes, const std::string& path, const std::s
   return scene;
 }
 
+Objects objects_of(const Scene& scene) {
+  Objects o;
+  o.mesh_object.assign(scene.meshes.size(), -1);
+  const auto node_of = [&](const Mesh& m) { return m.gltf_node >= 0 && size_t(m.gltf_node) < scene.nodes.size() ? m.gltf_node : -1; };
+  std::vector<char> has_mesh(scene.nodes.size(), 0);
+  for (const Mesh& m : scene.meshes)
+    if (node_of(m) >= 0) has_mesh[size_t(m.gltf_node)] = 1;
+  std::vector<int> node_object(scene.nodes.size(), -1);
+  for (size_t n = 0; n < scene.nodes.size(); ++n)
+    if (has_mesh[n]) {
+      node_object[n] = int(o.list.size());
+      o.list.push_back({int(o.list.size()), scene.nodes[n].name, int(n), {}});
+    }
+  for (size_t m = 0; m < scene.meshes.size(); ++m) {
+    const int node = node_of(scene.meshes[m]);
+    int id = node >= 0 ? node_object[size_t(node)] : int(o.list.size());
+    if (node < 0) o.list.push_back({id, "", -1, {}});
+    o.mesh_object[m] = id;
+    o.list[size_t(id)].meshes.push_back(int(m));
+  }
+  return o;
+}
+
 std::string summarize(const Scene& scene) {
   std::ostringstream s;
   s << "glTF: " << scene.source << "\n";

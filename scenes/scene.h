@@ -110,6 +110,22 @@ struct Scene {
   }
 };
 
+// An object of the ground truth: a glTF node that has a mesh, all its primitives (Scene::meshes) together,
+// so that a plate's two faces are one object. Ids are dense, 0..M-1 in glTF node order; a mesh built
+// without a node (gltf_node -1, as tests build scenes in code) is an object of its own, after those.
+struct Object {
+  int id = 0;
+  std::string name;          // the glTF node's name (the scene file's nodes.NAME keys), "" for a mesh without node
+  int node = -1;             // glTF node index, -1 for a mesh without node
+  std::vector<int> meshes;   // indices into Scene::meshes (the mesh_id of the ground truth), ascending
+};
+
+struct Objects {
+  std::vector<Object> list;      // by id
+  std::vector<int> mesh_object;  // [mesh index]: its object's id
+};
+Objects objects_of(const Scene& scene);
+
 // Loads a .gltf (external or embedded buffers) or .glb file. scene_name "" picks the file's default scene
 // (or scene 0). Throws spadgen::Error naming the file and the glTF element on any broken input.
 //

@@ -146,6 +146,47 @@ std::vector<double> SensorModel::pixel_lambda(int x, int y, const float* g, cons
   return out;
 }
 
+std::vector<double> SensorModel::return_lambda(const std::vector<Return>& returns, const TimeAxis& axis) const {
+  const Impl& m = *impl_;
+  const auto K = static_cast<size_t>(m.K);
+  std::vector<double> out(returns.size() * K, 0.0);
+  if (axis.bins <= 0 || !m.acq->needs_transient()) return out;
+  const auto setup = m.acq->setup(axis);
+  const auto scratch = m.acq->scratch();
+  // One transient for all returns: each sets its bins and clears them again.
+  std::vector<float> g(static_cast<size_t>(axis.bins), 0.0f);
+  std::vector<int64_t> lit;
+  std::vector<double> dark(K);
+  for (size_t r = 0; r < returns.size(); ++r) {
+    const Return& ret = returns[r];
+    if (!std::isfinite(ret.t_s)) continue;
+    const auto put = [&](double t) {
+      const int64_t b = axis.bin_of(t);
+      if (b < 0) return;
+      g[size_t(b)] += ret.photons;
+      lit.push_back(b);
+    };
+    if (axis.period_s > 0.0) {
+      // The first image at or after the window's start, then one per period up to its end.
+      for (double ti = ret.t_s + (std::ceil((axis.start_s - ret.t_s) / axis.period_s) - 1.0) * axis.period_s;
+           ti < axis.end_s(); ti += axis.period_s)
+        put(ti);
+    } else {
+      put(ret.t_s);
+    }
+    if (lit.empty()) continue;
+    const auto [lo, hi] = std::minmax_element(lit.begin(), lit.end());
+    const PixelParams px = m.maps->at(ret.x, ret.y);
+    double* o = out.data() + r * K;
+    m.lambda(px, {g.data(), &axis, *lo, *hi + 1, 0.0, ret.photons}, setup.get(), scratch.get(), o);
+    m.lambda(px, {nullptr, &axis, 0, 0, 0.0, 0.0}, setup.get(), scratch.get(), dark.data());
+    for (size_t k = 0; k < K; ++k) o[k] -= dark[k];
+    for (int64_t b : lit) g[size_t(b)] = 0.0f;
+    lit.clear();
+  }
+  return out;
+}
+
 SensorTile SensorModel::process(const TransientTile& t) const {
   return std::move(process(t, {impl_->cfg.noise_seed}).front());
 }

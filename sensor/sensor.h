@@ -108,6 +108,18 @@ class SensorModel {
   // laser_total in photons per pulse. Used by process() and by tests as the reference.
   std::vector<double> pixel_lambda(int x, int y, const float* g, const TimeAxis& axis, double ambient_rate,
                                    double laser_total) const;
+  // One return of light at a pixel: `photons` per pulse arriving at t_s as a delta.
+  struct Return {
+    int x = 0, y = 0;
+    double t_s = 0.0;
+    float photons = 0.0f;
+  };
+  // The detection rate per frame of every k that each return adds to its pixel, out[r * K + k]: the
+  // photons in the bin of each periodic image t_s + m period inside `axis` (as the renderer bins light),
+  // through the pixel's PDP, gate shape, skew and length and the cycles per frame; without dark counts,
+  // ambient light or crosstalk. pixel_lambda of that one-bin transient less pixel_lambda with no light;
+  // zero when no image of t_s lies inside the axis. Many returns at once share the gate's set-up.
+  std::vector<double> return_lambda(const std::vector<Return>& returns, const TimeAxis& axis) const;
 
  private:
   struct Impl;

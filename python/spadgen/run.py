@@ -78,6 +78,29 @@ class Layers:
     transmittance: np.ndarray
 
 
+@dataclass(frozen=True)
+class ObjectSlots:
+    """The objects along each pixel's primary ray (ground_truth.exr; docs/outputs.md), in the order the ray
+    meets them, J = metadata.json's ``ground_truth_objects`` slots. ``first`` (H, W) int32: the first hit's
+    object id, -1 on a miss; ``count`` (H, W) int32: objects along the ray. Per slot, (J, H, W): ``id`` int32
+    (an index into ``Run.objects``, -1 for an unused slot), ``range`` float32 metres of the object's first
+    surface (+inf unused), ``transmittance`` float32 fraction reaching it, ``laser`` float32 photons per
+    pulse the object returns directly (0 unused). ``direct_other_laser`` and ``indirect_laser`` (H, W)
+    float32: the rest of laser.exr. From labels.exr (gate sweep only; None in a 2D run, which writes none):
+    ``edge_counts`` and ``edge_snr`` (J, H, W) float32, ``detectable`` (J, H, W) bool."""
+    first: np.ndarray
+    count: np.ndarray
+    id: np.ndarray
+    range: np.ndarray
+    transmittance: np.ndarray
+    laser: np.ndarray
+    direct_other_laser: np.ndarray
+    indirect_laser: np.ndarray
+    edge_counts: np.ndarray = None
+    edge_snr: np.ndarray = None
+    detectable: np.ndarray = None
+
+
 class Run:
     """A run folder. Every output is an attribute; asking for a file the run did not write raises
     FileNotFoundError naming the scene-file key that writes it (never None)."""
@@ -87,7 +110,8 @@ class Run:
                    "with outputs.transient", "frames.npy": "outputs.frames", "ground_truth.exr": "outputs.ground_truth",
                    "expected_counts.npy": "outputs.expected_counts", "counts.npy": "outputs.counts",
                    "detection_rate.npy": "outputs.detection_rate",
-                   "intensity.exr": "acquisition.mode = intensity"}
+                   "intensity.exr": "acquisition.mode = intensity",
+                   "labels.exr": "acquisition.mode = gate_sweep with outputs.ground_truth"}
 
     def __init__(self, path):
         self.path = os.fspath(path)
@@ -278,6 +302,16 @@ class Run:
         return self.exr("laser.exr")
 
     @property
+    def object_labels(self):
+        return self.exr("labels.exr")
+
+    @property
+    def objects(self):
+        """metadata.json's objects: one dict per glTF node with a mesh, ``id`` (the index the object
+        channels hold), ``name`` (the node's), ``node`` (glTF index), ``meshes``, ``materials``."""
+        return list(self.metadata["objects"])
+
+    @property
     def ambient(self):
         return self.exr("ambient.exr")
 
@@ -326,6 +360,24 @@ class Run:
         rng = np.stack([gt[f"layer{i}.range"] for i in range(n)]) if n else np.empty(shape, np.float32)
         tr = np.stack([gt[f"layer{i}.transmittance"] for i in range(n)]) if n else np.empty(shape, np.float32)
         return Layers(gt["layer_count"].astype(np.int32), rng, tr)
+
+    def object_slots(self):
+        """The objects along each pixel's ray, what each returns and whether it is detectable (ObjectSlots)."""
+        gt = self.ground_truth
+        n = int(self.metadata["ground_truth_objects"])
+        shape = (n, self.height, self.width)
+
+        def slots(image, what, dtype=np.float32):
+            return np.stack([image[f"object{j}.{what}"] for j in range(n)]).astype(dtype) if n else np.empty(shape, dtype)
+
+        labels = {}
+        if self.has("labels.exr"):
+            lab = self.object_labels
+            labels = {"edge_counts": slots(lab, "edge_counts"), "edge_snr": slots(lab, "edge_snr"),
+                      "detectable": slots(lab, "detectable", bool)}
+        return ObjectSlots(gt["object_id"].astype(np.int32), gt["object_count"].astype(np.int32), slots(gt, "id", np.int32),
+                           slots(gt, "range"), slots(gt, "transmittance"), slots(gt, "laser"), gt["direct_other_laser"],
+                           gt["indirect_laser"], **labels)
 
     def layer_count(self):
         """(H, W) int32: the number of surfaces along each pixel's ray."""

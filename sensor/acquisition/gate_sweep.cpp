@@ -93,7 +93,9 @@ class GateSweep final : public Acquisition {
   }
 
   std::vector<DeclaredOutput> outputs() const override {
-    return {{"previews/gate_profiles.png", "sampled gate profiles of a few pixels"}};
+    // Labels need gates to say whether an object's rising edge stands out of the noise: a sweep's only.
+    return {{"previews/gate_profiles.png", "sampled gate profiles of a few pixels"},
+            {"labels.exr", "per object of the ground truth: object<j>.id, edge_counts (counts), edge_snr, detectable (0/1)"}};
   }
 
   nlohmann::json describe() const override {

@@ -216,17 +216,25 @@ TEST_F(App, EachSeedChangesOnlyWhatItDrives) {
                         "detection_rate.npy", "counts.npy", "frames.npy"})
     EXPECT_TRUE(same("same", f)) << f;
   // The temporal noise: only the samples change.
-  for (const char* f : {"laser.exr", "ambient.exr", "sensor_maps.exr", "transient.npy", "detection_rate.npy"})
+  for (const char* f : {"laser.exr", "ambient.exr", "sensor_maps.exr", "transient.npy", "detection_rate.npy", "labels.exr"})
     EXPECT_TRUE(same("noise", f)) << "seeds.noise changed " << f;
   EXPECT_FALSE(same("noise", "counts.npy"));
   EXPECT_FALSE(same("noise", "frames.npy"));
   // The chip: its maps, hence the expectations and the samples; not the light.
   for (const char* f : {"laser.exr", "ambient.exr", "transient.npy", "ground_truth.exr"})
     EXPECT_TRUE(same("chip", f)) << "seeds.chip changed " << f;
-  for (const char* f : {"sensor_maps.exr", "detection_rate.npy", "counts.npy"}) EXPECT_FALSE(same("chip", f)) << f;
-  // The light: the rendered light and what follows; not the chip, not the exact ground truth.
-  for (const char* f : {"sensor_maps.exr", "ground_truth.exr"}) EXPECT_TRUE(same("light", f)) << "seeds.light changed " << f;
-  for (const char* f : {"laser.exr", "transient.npy", "detection_rate.npy"}) EXPECT_FALSE(same("light", f)) << f;
+  for (const char* f : {"sensor_maps.exr", "detection_rate.npy", "counts.npy", "labels.exr"}) EXPECT_FALSE(same("chip", f)) << f;
+  // The light: the rendered light and what follows; not the chip, not the exact ground truth (but the
+  // light each object returns, which ground_truth.exr holds too).
+  EXPECT_TRUE(same("light", "sensor_maps.exr")) << "seeds.light changed sensor_maps.exr";
+  for (const char* f : {"laser.exr", "transient.npy", "detection_rate.npy", "labels.exr"}) EXPECT_FALSE(same("light", f)) << f;
+  const auto base_gt = spadgen::writers::read_exr((dir_ / "base/ground_truth.exr").string());
+  const auto light_gt = spadgen::writers::read_exr((dir_ / "light/ground_truth.exr").string());
+  ASSERT_EQ(base_gt.channels.size(), light_gt.channels.size());
+  for (const auto& [name, values] : base_gt.channels)
+    if (!name.ends_with("laser")) EXPECT_TRUE(values == light_gt.channels.at(name)) << "seeds.light changed ground_truth.exr " << name;
+  // The plate's own light and the sphere's seen through the rough plate (indirect): other paths, other values.
+  for (const char* c : {"object0.laser", "indirect_laser"}) EXPECT_FALSE(base_gt.channels.at(c) == light_gt.channels.at(c)) << c;
   const auto meta = nlohmann::json::parse(slurp(dir_ / "noise/metadata.json"));
   EXPECT_EQ(meta["seeds"], nlohmann::json({{"light", 5}, {"chip", 5}, {"noise", 6}}));
 }

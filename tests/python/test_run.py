@@ -137,6 +137,37 @@ def test_ground_truth_layers_and_labels(sweep):
         sweep.depth("distance")
 
 
+def test_object_slots(sweep, intensity):
+    assert [o["name"] for o in sweep.objects] == ["plate", "sphere"]
+    assert [o["id"] for o in sweep.objects] == [0, 1]
+    J, H, W = sweep.metadata["ground_truth_objects"], sweep.height, sweep.width
+    assert J == 2
+    o = sweep.object_slots()
+    assert o.first.shape == o.count.shape == (H, W) and o.first.dtype == o.count.dtype == np.int32
+    for a in (o.id, o.range, o.transmittance, o.laser, o.edge_counts, o.edge_snr, o.detectable):
+        assert a.shape == (J, H, W)
+    assert o.id.dtype == np.int32 and o.detectable.dtype == bool and o.laser.dtype == np.float32
+    used = np.arange(J)[:, None, None] < o.count
+    np.testing.assert_array_equal(o.id >= 0, used)
+    np.testing.assert_array_equal(np.isfinite(o.range), used)
+    np.testing.assert_array_equal(o.first, np.where(sweep.hit(), o.id[0], -1))
+    # An object's slot is its first surface: the plate's front face is layer 0.
+    layers = sweep.layers()
+    np.testing.assert_array_equal(o.range[0][used[0]], layers.range[0][used[0]])
+    assert (o.count <= layers.count).all() and (o.count < layers.count).any()  # the plate's two faces
+    # What the objects return, with the other objects' direct light and the indirect light, is laser.exr.
+    laser = sweep.laser["photons_per_pulse"].astype(np.float64)
+    total = o.laser.astype(np.float64).sum(0) + o.direct_other_laser + o.indirect_laser
+    np.testing.assert_allclose(total, laser, rtol=1e-5, atol=0)
+    # Labels: the same slots; detectable exactly where the edge reaches five standard deviations.
+    np.testing.assert_array_equal(sweep.object_labels["object0.id"], o.id[0])
+    np.testing.assert_array_equal(o.detectable, o.edge_snr >= 5)
+    assert o.detectable.any()
+    assert (o.edge_counts[~used] == 0).all()
+    # A 2D run has object slots but no labels.
+    assert intensity.object_slots().edge_snr is None and not intensity.has("labels.exr")
+
+
 def test_expected_counts_from_the_detection_rate(sweep, intensity):
     # The sweep wrote both files: the expectation computed from lambda is the C++ side's to float32 rounding.
     assert sweep.has("expected_counts.npy") and not intensity.has("expected_counts.npy")

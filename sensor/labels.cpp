@@ -1,0 +1,62 @@
+#include "sensor/labels.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/error.h"
+#include "core/units.h"
+
+namespace spadgen::sensor {
+
+ObjectLabelsTile object_labels(const SensorModel& sensor, const GroundTruthTile& gt, const SensorTile& s,
+                               const TimeAxis& axis, double emission_delay_s) {
+  const PixelRect& r = gt.rect;
+  const auto n = static_cast<size_t>(r.count());
+  const auto slots = static_cast<size_t>(gt.max_layers);
+  const auto K = static_cast<size_t>(s.K);
+  if (s.rect != r || s.rate.size() != n * K || gt.object_laser.size() != n * slots)
+    throw Error("object_labels: expected the ground truth with its object slots and the sensor's rates of the same pixels");
+  ObjectLabelsTile out;
+  out.rect = r;
+  out.slots = gt.max_layers;
+  out.id.assign(n * slots, -1);
+  out.edge_counts.assign(n * slots, 0.0f);
+  out.edge_snr.assign(n * slots, 0.0f);
+  out.detectable.assign(n * slots, 0);
+  const double N = sensor.frames_per_k();
+  // Every object of the tile with direct light, its rates computed in one call.
+  std::vector<SensorModel::Return> returns;
+  std::vector<size_t> slot;  // [return]: its element e = pixel * slots + j
+  for (int y = r.y0; y < r.y1(); ++y)
+    for (int x = r.x0; x < r.x1(); ++x) {
+      const auto i = static_cast<size_t>(r.index(x, y));
+      for (size_t j = 0; j < slots; ++j) {
+        const size_t e = i * slots + j;
+        out.id[e] = gt.object_slot_id[e];
+        if (out.id[e] < 0 || !(gt.object_laser[e] > 0.0f) || K == 0) continue;
+        returns.push_back({x, y, emission_delay_s + 2.0 * double(gt.object_range[e]) / kSpeedOfLight, gt.object_laser[e]});
+        slot.push_back(e);
+      }
+    }
+  const std::vector<double> rates = sensor.return_lambda(returns, axis);
+  for (size_t ri = 0; ri < returns.size(); ++ri) {
+    const size_t e = slot[ri], i = e / slots;
+    const double* own = rates.data() + ri * K;
+    const double peak = *std::max_element(own, own + K);
+    if (!(peak > 0.0)) continue;
+    const auto k = static_cast<size_t>(std::find_if(own, own + K, [&](double v) { return v >= kEdgeFraction * peak; }) - own);
+    const double lambda = s.rate[k * n + i];
+    // The rate without the object, never below 0: lambda is float, lambda_o double.
+    const double without = std::max(0.0, lambda - own[k]);
+    const double p1 = -std::expm1(-lambda), p0 = -std::expm1(-without);
+    const double edge = N * (std::exp(-without) - std::exp(-lambda));
+    const double noise = std::sqrt(N * p1 * (1.0 - p1) + N * p0 * (1.0 - p0));
+    const double snr = noise > 0.0 ? edge / noise : 0.0;
+    out.edge_counts[e] = static_cast<float>(edge);
+    out.edge_snr[e] = static_cast<float>(snr);
+    out.detectable[e] = snr >= kDetectableSnr;
+  }
+  return out;
+}
+
+}  // namespace spadgen::sensor

@@ -1,0 +1,118 @@
+// Object-level ground truth as a user gets it: metadata.json's objects, ground_truth.exr's object
+// channels, the split of laser.exr by object, and labels.exr from spadgen run and spadgen sense.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <nlohmann/json.hpp>
+
+#include "app_fixture.h"
+#include "writers/writers.h"
+
+namespace {
+using namespace spadgen::testing;
+using spadgen::writers::read_exr;
+
+// A crop of the multi-object scene where the plate covers the sphere: every pixel-centre ray crosses the
+// plate's two faces and ends on the sphere.
+const std::string kCovered = kScenes + "multi_object.json -q --set render.samples_per_pixel=4 --set camera.crop=[400,230,48,40]";
+
+TEST_F(App, PlateOverSphereIsTwoObjectsOfThreeLayersAndSplitsTheLaserLight) {
+  ASSERT_EQ(sh("run " + kCovered + " -o " + (dir_ / "run").string()).code, 0);
+  const auto meta = nlohmann::json::parse(slurp(dir_ / "run/metadata.json"));
+  ASSERT_EQ(meta["objects"].size(), 2u);
+  EXPECT_EQ(meta["objects"][0], nlohmann::json({{"id", 0}, {"name", "plate"}, {"node", 0}, {"meshes", {"plate/plate/0"}},
+                                                {"materials", {"plastic_plate"}}}));
+  EXPECT_EQ(meta["objects"][1]["name"], "sphere");
+  EXPECT_EQ(meta["ground_truth_objects"], 2);
+  const auto gt = read_exr((dir_ / "run/ground_truth.exr").string());
+  const auto& c = gt.channels;
+  EXPECT_FALSE(c.count("object2.id"));  // slots beyond the deepest object are not written
+  const auto laser = read_exr((dir_ / "run/laser.exr").string()).channels.at("photons_per_pulse");
+  double plate = 0, sphere = 0, indirect = 0, total = 0;
+  for (size_t i = 0; i < laser.size(); ++i) {
+    ASSERT_EQ(c.at("layer_count")[i], 3.0f);
+    ASSERT_EQ(c.at("object_count")[i], 2.0f);
+    EXPECT_EQ(c.at("object_id")[i], 0.0f);
+    EXPECT_EQ(c.at("object0.id")[i], 0.0f);
+    EXPECT_EQ(c.at("object1.id")[i], 1.0f);
+    EXPECT_EQ(c.at("object0.range")[i], c.at("layer0.range")[i]);
+    EXPECT_EQ(c.at("object1.range")[i], c.at("layer2.range")[i]);
+    EXPECT_EQ(c.at("object1.transmittance")[i], c.at("layer2.transmittance")[i]);
+    const double sum = double(c.at("object0.laser")[i]) + c.at("object1.laser")[i] + c.at("direct_other_laser")[i] +
+                       c.at("indirect_laser")[i];
+    EXPECT_NEAR(sum, laser[i], 1e-5 * laser[i]) << i;
+    plate += c.at("object0.laser")[i], sphere += c.at("object1.laser")[i], indirect += c.at("indirect_laser")[i];
+    total += laser[i];
+  }
+  // The rough plate reflects the laser directly; the sphere behind it is lit and seen through two rough
+  // faces each way, so its light is indirect (docs/render.md), and it returns nothing directly.
+  EXPECT_GT(plate, 0.1 * total);
+  EXPECT_GT(indirect, 0.1 * total);
+  EXPECT_EQ(sphere, 0.0);
+  // labels.exr: the same slots.
+  const auto labels = read_exr((dir_ / "run/labels.exr").string());
+  EXPECT_TRUE(labels.channels.at("object0.id") == c.at("object0.id"));
+  EXPECT_TRUE(labels.channels.at("object1.id") == c.at("object1.id"));
+  // An object without direct light has no edge.
+  for (float v : labels.channels.at("object1.edge_counts")) EXPECT_EQ(v, 0.0f);
+}
+
+// The flat target alone: the labels' edge against the one computed here from detection_rate.npy, with the
+// object's own rate from the same run without laser light; at 1e-4 of the power the edge is noise.
+TEST_F(App, LabelsOfABrightTargetAndOfTheSameTargetTenThousandTimesDimmer) {
+  const std::string base = kScenes + "flat_target.json -q --set camera.crop=[504,244,16,12] --set render.samples_per_pixel=4 "
+                           "--set sensor.crosstalk=false";
+  ASSERT_EQ(sh("run " + base + " -o " + (dir_ / "bright").string()).code, 0);
+  ASSERT_EQ(sh("run " + base + " --set laser.average_power_mW=0 -o " + (dir_ / "dark").string()).code, 0);
+  ASSERT_EQ(sh("run " + base + " --set laser.average_power_mW=2e-4 -o " + (dir_ / "dim").string()).code, 0);
+  const auto meta = nlohmann::json::parse(slurp(dir_ / "bright/metadata.json"));
+  const double N = meta["acquisition"]["frames_per_k"].get<double>();
+  const Npy rate = read_npy(dir_ / "bright/detection_rate.npy"), dark = read_npy(dir_ / "dark/detection_rate.npy");
+  const std::vector<double> lam = values(rate), lam0 = values(dark);
+  const size_t K = size_t(rate.shape[0]), n = size_t(rate.shape[1] * rate.shape[2]);
+  const auto bright = read_exr((dir_ / "bright/labels.exr").string()).channels;
+  const auto dim = read_exr((dir_ / "dim/labels.exr").string()).channels;
+  double worst = 0;
+  for (size_t i = 0; i < n; ++i) {
+    ASSERT_EQ(bright.at("object0.id")[i], 0.0f);
+    EXPECT_EQ(bright.at("object0.detectable")[i], 1.0f);
+    EXPECT_GT(bright.at("object0.edge_snr")[i], 5.0f);
+    EXPECT_EQ(dim.at("object0.detectable")[i], 0.0f);
+    EXPECT_LT(dim.at("object0.edge_snr")[i], 5.0f);
+    EXPECT_GT(dim.at("object0.edge_snr")[i], 0.0f);
+    // The object's own rate is the run's less the run without laser light (no crosstalk, one object).
+    std::vector<double> own(K);
+    for (size_t k = 0; k < K; ++k) own[k] = lam[k * n + i] - lam0[k * n + i];
+    const double peak = *std::max_element(own.begin(), own.end());
+    size_t ks = 0;
+    while (own[ks] < 0.95 * peak) ++ks;
+    const double p1 = 1 - std::exp(-lam[ks * n + i]), p0 = 1 - std::exp(-lam0[ks * n + i]);
+    const double edge = N * (p1 - p0);
+    EXPECT_NEAR(bright.at("object0.edge_counts")[i], edge, 1e-3 * edge) << i;  // measured: below 1e-6
+    worst = std::max(worst, std::fabs(bright.at("object0.edge_counts")[i] / edge - 1));
+  }
+  RecordProperty("worst_relative_edge_error", std::to_string(worst));
+}
+
+// spadgen sense recomputes labels.exr for its own sensor settings, bit for bit a run's with them; 2D runs
+// have no labels.
+TEST_F(App, SenseWritesTheLabelsOfItsOwnSettingsAndTwoDimensionalRunsHaveNone) {
+  const std::string run = kCovered + " --set outputs.light=true";
+  ASSERT_EQ(sh("run " + run + " -o " + (dir_ / "run").string()).code, 0);
+  const std::string change = "--set acquisition.frames=40 --set seeds.chip=9";
+  ASSERT_EQ(sh("run " + run + " " + change + " -o " + (dir_ / "other").string()).code, 0);
+  const Result r = sh("sense " + (dir_ / "run").string() + " -q " + change + " -o " + (dir_ / "sensed").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_TRUE(slurp(dir_ / "other/labels.exr") == slurp(dir_ / "sensed/labels.exr"));
+  EXPECT_FALSE(slurp(dir_ / "run/labels.exr") == slurp(dir_ / "sensed/labels.exr"));
+  const auto meta = nlohmann::json::parse(slurp(dir_ / "sensed/metadata.json"));
+  EXPECT_EQ(meta["objects"], nlohmann::json::parse(slurp(dir_ / "run/metadata.json"))["objects"]);
+  EXPECT_EQ(meta["ground_truth_objects"], 2);
+  ASSERT_EQ(sh("run " + kScenes + "test_chart.json -q --set camera.crop=[500,500,16,8] --set render.samples_per_pixel=1 -o " +
+               (dir_ / "chart").string()).code, 0);
+  EXPECT_FALSE(fs::exists(dir_ / "chart/labels.exr"));
+  EXPECT_TRUE(fs::exists(dir_ / "chart/ground_truth.exr"));
+}
+
+}  // namespace
