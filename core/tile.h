@@ -107,9 +107,10 @@ struct GroundTruthTile {
   std::vector<float> object_range;          // m, range of the object's first surface along the ray
   std::vector<float> object_transmittance;  // fraction of light reaching that first surface
   // Filled by Renderer::transient (given this tile), photons per pulse as in TransientTile::laser_total:
-  // the light of direct paths (one non-delta vertex) whose vertex lies on slot j's object; per pixel, the
-  // direct light of objects in no slot (a neighbour seen by jittered samples at a silhouette) and the light
-  // of indirect paths (two or more non-delta vertices). Their sum is laser_total (docs/render.md).
+  // the direct light of slot j's object (its vertex meets the laser and the camera sees it through
+  // transmissions only); per pixel, the direct light of objects in no slot (a neighbour seen by jittered
+  // samples at a silhouette) and the light of indirect paths (a reflection before the vertex). Their sum is
+  // laser_total (docs/render.md).
   std::vector<float> object_laser;
   std::vector<float> direct_other_laser;
   std::vector<float> indirect_laser;

@@ -226,6 +226,9 @@ struct Integrator::NeeVertex {
   bool volume;    // sf bounds a medium, so a shadow ray may start in another one than the path
   int medium;     // the path's medium at sf
   int vertices;   // non-delta vertices before this one: 0 makes the path direct
+  // No reflection before this vertex (delta or not): the camera sees it directly or through transmissive
+  // surfaces, so a laser connection here is light this vertex's object returns directly (ObjectLaser).
+  bool seen_through;
   Spec beta;
   double opl;     // optical path from the camera centre, metres
   // Shadow rays pass straight through transmissive surfaces, so an earlier non-delta vertex has already
@@ -277,9 +280,11 @@ inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, co
   deposit(value, config_.laser.emission_delay_s + opl / kSpeedOfLight, film.axis, film.bins, film.totals,
           v.vertices > 0 ? film.indirect_bins : nullptr);
   // The laser is a point light, so this connection is its only strategy: each path's light is attributed
-  // once, to the object of its one non-delta vertex when it is direct.
+  // once, to the object of this vertex when the camera sees the vertex directly or through transmissive
+  // surfaces only (smooth or rough: no reflection before it), else to the indirect rest. So the sphere
+  // behind a plate returns its light directly through the plate, and a mirror image is indirect.
   if (film.objects) {
-    if (v.vertices == 0) film.objects->add(mesh_object_[size_t(v.sf.mesh)], value);
+    if (v.seen_through) film.objects->add(mesh_object_[size_t(v.sf.mesh)], value);
     else film.objects->indirect += value;
   }
 }
@@ -327,6 +332,7 @@ inline void Integrator::connect_ambient_lights(const NeeVertex& v, double* ambie
   double opl = 0.0;  // optical path from the camera centre, metres
   glm::dvec3 previous = camera_.position();
   int medium = -1, vertices = 0, deltas = 0;
+  bool reflected = false;     // a reflection (delta or not) happened on the way from the camera
   bool last_segment = false;  // after the last NEE vertex: only the environment or emission is left
   double ambient = 0.0;
   for (bool camera_ray = true;; camera_ray = false) {
@@ -356,7 +362,7 @@ inline void Integrator::connect_ambient_lights(const NeeVertex& v, double* ambie
     const bool volume = shading_.material(sf.material).volume;
 
     if (bsdf.has_non_delta()) {
-      const NeeVertex v{sf, bsdf, wo_front, volume, medium, vertices, beta, opl,
+      const NeeVertex v{sf, bsdf, wo_front, volume, medium, vertices, !reflected, beta, opl,
                         !(mp.transmission > 0.0f && vertices > 0)};
       if (beta.x > 0.0f) {
         LaserRay lr;
@@ -375,6 +381,7 @@ inline void Integrator::connect_ambient_lights(const NeeVertex& v, double* ambie
     const BsdfSample bs = bsdf.sample(uniform3(rng));
     if (!(bs.weight.x > 0.0f || bs.weight.y > 0.0f)) break;
     if (bs.delta && ++deltas > kMaxDeltaEvents) break;
+    reflected = reflected || !bs.transmitted;
     beta *= bs.weight;
     if (bs.transmitted && volume) medium = wo_front ? sf.material : -1;
     if (!last_segment && vertices >= rc.russian_roulette_from) {

@@ -32,8 +32,8 @@ struct PixelTotals {
   int64_t bin_lo = INT64_MAX, bin_hi = 0;
 };
 
-// One pixel's laser light split by what returned it: direct paths (one non-delta vertex, as
-// render.split_direct_indirect counts them) by the object of that vertex, indirect paths together. A worker
+// One pixel's laser light split by what returned it: direct paths (the camera sees the vertex that meets
+// the laser through transmissions only) by the object of that vertex, indirect paths together. A worker
 // keeps one for all its pixels: direct has a slot per object of the scene, and only the objects a pixel
 // touched are read and cleared, so a pixel costs what it touches (a pixel sees few objects).
 struct ObjectLaser {

@@ -50,7 +50,7 @@ ObjectLabelsTile object_labels(const SensorModel& sensor, const GroundTruthTile&
     const double without = std::max(0.0, lambda - own[k]);
     const double p1 = -std::expm1(-lambda), p0 = -std::expm1(-without);
     const double edge = N * (std::exp(-without) - std::exp(-lambda));
-    const double noise = std::sqrt(N * p1 * (1.0 - p1) + N * p0 * (1.0 - p0));
+    const double noise = std::sqrt((N * p1 * (1.0 - p1) + N * p0 * (1.0 - p0)) / kEdgeGates);
     const double snr = noise > 0.0 ? edge / noise : 0.0;
     out.edge_counts[e] = static_cast<float>(edge);
     out.edge_snr[e] = static_cast<float>(snr);

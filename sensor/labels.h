@@ -9,9 +9,10 @@
 // object turns the expected counts of N frames from N p0 to N p1, p1 = 1 - exp(-lambda(k*)),
 // p0 = 1 - exp(-(lambda(k*) - lambda_o(k*))):
 //   edge_counts = N (exp(-(lambda(k*) - lambda_o(k*))) - exp(-lambda(k*))) = N (p1 - p0)
-//   edge_snr    = edge_counts / sqrt(N p1 (1 - p1) + N p0 (1 - p0))   (0 where both are 0)
-// the step over the standard deviation of the difference of two independent binomial counts, and
-// detectable = edge_snr >= kDetectableSnr. An object without light in the sweep has edge 0.
+//   edge_snr    = edge_counts / sqrt((N p1 (1 - p1) + N p0 (1 - p0)) / kEdgeGates)   (0 where both are 0)
+// the step over the standard deviation of the difference of the mean counts of kEdgeGates gate positions
+// on either side of the edge, and detectable = edge_snr >= kDetectableSnr. An object without light in the
+// sweep has edge 0.
 #pragma once
 #include "core/tile.h"
 #include "core/time_axis.h"
@@ -19,9 +20,14 @@
 
 namespace spadgen::sensor {
 
-// The one-gate step of the noise-free profile at five standard deviations of the difference of two
-// binomial counts: an edge a detector looking at the counts would not mistake for noise.
+// The step of the noise-free profile at five standard deviations of the difference of two means of 12
+// gate positions each (432 ps at the paper's 36 ps step, well inside the 3.8 ns plateau): an edge that a
+// detector averaging the counts either side of it, as the reference detectors do (docs/detection.md: the
+// paper's 6-position plateaus of a 5-position moving average; scales up to 24), would not mistake for
+// noise. One gate position alone would call the paper's sphere behind its plate invisible, which both
+// detectors find.
 constexpr double kDetectableSnr = 5.0;
+constexpr double kEdgeGates = 12.0;
 // k*: the first gate position where the object's own rate reaches this fraction of its maximum.
 constexpr double kEdgeFraction = 0.95;
 

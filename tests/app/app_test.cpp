@@ -231,8 +231,11 @@ TEST_F(App, EachSeedChangesOnlyWhatItDrives) {
   const auto base_gt = spadgen::writers::read_exr((dir_ / "base/ground_truth.exr").string());
   const auto light_gt = spadgen::writers::read_exr((dir_ / "light/ground_truth.exr").string());
   ASSERT_EQ(base_gt.channels.size(), light_gt.channels.size());
-  for (const auto& [name, values] : base_gt.channels)
-    if (!name.ends_with("laser")) EXPECT_TRUE(values == light_gt.channels.at(name)) << "seeds.light changed ground_truth.exr " << name;
+  for (const auto& [name, values] : base_gt.channels) {
+    if (!name.ends_with("laser")) {
+      EXPECT_TRUE(values == light_gt.channels.at(name)) << "seeds.light changed ground_truth.exr " << name;
+    }
+  }
   // The plate's own light and the sphere's seen through the rough plate (indirect): other paths, other values.
   for (const char* c : {"object0.laser", "indirect_laser"}) EXPECT_FALSE(base_gt.channels.at(c) == light_gt.channels.at(c)) << c;
   const auto meta = nlohmann::json::parse(slurp(dir_ / "noise/metadata.json"));

@@ -45,17 +45,22 @@ TEST_F(App, PlateOverSphereIsTwoObjectsOfThreeLayersAndSplitsTheLaserLight) {
     plate += c.at("object0.laser")[i], sphere += c.at("object1.laser")[i], indirect += c.at("indirect_laser")[i];
     total += laser[i];
   }
-  // The rough plate reflects the laser directly; the sphere behind it is lit and seen through two rough
-  // faces each way, so its light is indirect (docs/render.md), and it returns nothing directly.
-  EXPECT_GT(plate, 0.1 * total);
-  EXPECT_GT(indirect, 0.1 * total);
-  EXPECT_EQ(sphere, 0.0);
-  // labels.exr: the same slots.
+  // The plate reflects part of the laser directly (its faces and the 5 % that scatters inside); the sphere
+  // behind it, lit and seen through the plate's faces (transmissions only), returns most of the light
+  // directly (docs/render.md); light reflected inside the plate, or off the plate onto the sphere, is the
+  // small indirect rest.
+  EXPECT_GT(plate, 0.02 * total);
+  EXPECT_GT(sphere, 0.5 * total);
+  EXPECT_GT(indirect, 0.0);
+  EXPECT_LT(indirect, 0.1 * total);
+  // labels.exr: the same slots; both objects detectable with the scene's acquisition on most pixels.
   const auto labels = read_exr((dir_ / "run/labels.exr").string());
   EXPECT_TRUE(labels.channels.at("object0.id") == c.at("object0.id"));
   EXPECT_TRUE(labels.channels.at("object1.id") == c.at("object1.id"));
-  // An object without direct light has no edge.
-  for (float v : labels.channels.at("object1.edge_counts")) EXPECT_EQ(v, 0.0f);
+  for (const char* o : {"object0.detectable", "object1.detectable"}) {
+    const auto& d = labels.channels.at(o);
+    EXPECT_GT(std::count(d.begin(), d.end(), 1.0f), int64_t(0.9 * double(d.size()))) << o;
+  }
 }
 
 // The flat target alone: the labels' edge against the one computed here from detection_rate.npy, with the
@@ -90,6 +95,9 @@ TEST_F(App, LabelsOfABrightTargetAndOfTheSameTargetTenThousandTimesDimmer) {
     const double p1 = 1 - std::exp(-lam[ks * n + i]), p0 = 1 - std::exp(-lam0[ks * n + i]);
     const double edge = N * (p1 - p0);
     EXPECT_NEAR(bright.at("object0.edge_counts")[i], edge, 1e-3 * edge) << i;  // measured: below 1e-6
+    // over the noise of the difference of the means of 12 gate positions on either side
+    const double noise = std::sqrt((N * p1 * (1 - p1) + N * p0 * (1 - p0)) / 12.0);
+    EXPECT_NEAR(bright.at("object0.edge_snr")[i], edge / noise, 1e-3 * edge / noise) << i;
     worst = std::max(worst, std::fabs(bright.at("object0.edge_counts")[i] / edge - 1));
   }
   RecordProperty("worst_relative_edge_error", std::to_string(worst));
