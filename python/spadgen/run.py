@@ -101,6 +101,22 @@ class ObjectSlots:
     detectable: np.ndarray = None
 
 
+@dataclass(frozen=True)
+class Detections:
+    """What ``spadgen reconstruct`` found in each pixel's gate profile (detections_<detector>.exr;
+    docs/detection.md). ``count`` (H, W) int32; per slot, (M, H, W) float32 in increasing range: ``range``
+    metres (NaN in an empty slot), ``gate`` the fractional gate index of the edge, ``amplitude`` detections
+    per frame the return adds, ``score`` its z. ``detector``: the detector and its parameters, ``source``:
+    the run it read (the file's header)."""
+    count: np.ndarray
+    range: np.ndarray
+    gate: np.ndarray
+    amplitude: np.ndarray
+    score: np.ndarray
+    detector: dict
+    source: dict
+
+
 class Run:
     """A run folder. Every output is an attribute; asking for a file the run did not write raises
     FileNotFoundError naming the scene-file key that writes it (never None)."""
@@ -378,6 +394,24 @@ class Run:
         return ObjectSlots(gt["object_id"].astype(np.int32), gt["object_count"].astype(np.int32), slots(gt, "id", np.int32),
                            slots(gt, "range"), slots(gt, "transmittance"), slots(gt, "laser"), gt["direct_other_laser"],
                            gt["indirect_laser"], **labels)
+
+    def detections(self, detector="edges"):
+        """The returns ``spadgen reconstruct RUN --detector DETECTOR`` wrote into the run folder (Detections)."""
+        path = os.path.join(self.path, f"detections_{detector}.exr")
+        if not os.path.isfile(path):
+            raise FileNotFoundError(f"{path}: no such file; write it with spadgen reconstruct {self.path} --detector {detector}")
+        f = ExrFile(path)
+        m = 0
+        while f"det{m}.range" in f:
+            m += 1
+
+        def slots(what):
+            return np.stack([f[f"det{i}.{what}"] for i in range(m)]).astype(np.float32)
+
+        attrs = f.attributes
+        return Detections(np.asarray(f["count"]).astype(np.int32), slots("range"), slots("gate"), slots("amplitude"),
+                          slots("score"), json.loads(attrs.get("spadgen_reconstruct", "{}")),
+                          json.loads(attrs.get("spadgen_source", "{}")))
 
     def layer_count(self):
         """(H, W) int32: the number of surfaces along each pixel's ray."""

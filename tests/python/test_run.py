@@ -233,3 +233,27 @@ def test_rising_edge_baseline_on_the_flat_target(make_run):
     # Sampled counts at 0.8 m: the paper's figures (accuracy 1.9 mm, precision 2.7 mm) with margin.
     err = rising_edge_range(run) - truth
     assert np.isfinite(err).all() and abs(err.mean()) < 5e-3 and err.std() < 8e-3
+
+
+def test_detections_of_spadgen_reconstruct(spadgen_bin, make_run, tmp_path):
+    # A copy of the sweep run, so that the shared fixture's folder stays as the run wrote it.
+    import shutil
+    import subprocess
+
+    run_dir = tmp_path / "run"
+    shutil.copytree(make_run("sweep"), run_dir)
+    run = spadgen.open_run(run_dir)
+    with pytest.raises(FileNotFoundError, match="spadgen reconstruct"):
+        run.detections("paper")
+    subprocess.run([spadgen_bin, "reconstruct", str(run_dir), "--detector", "paper", "-q"], check=True)
+    d = run.detections("paper")
+    assert d.detector["detector"] == "paper" and d.detector["parameters"]["window"] == 60
+    assert d.count.shape == (run.height, run.width) and d.range.shape[1:] == (run.height, run.width)
+    # the slots hold count returns each, in increasing range, NaN beyond
+    finite = np.isfinite(d.range)
+    assert (finite.sum(axis=0) == d.count).all()
+    r = np.where(finite, d.range, np.inf)
+    assert (np.diff(r, axis=0)[np.isfinite(r[1:])] >= 0).all()
+    # the channels as the EXR holds them
+    exr = spadgen.ExrFile(run_dir / "detections_paper.exr")
+    assert np.array_equal(d.range[0], exr["det0.range"], equal_nan=True)
