@@ -11,13 +11,7 @@ passes=${3:-2}
 cd "$(dirname "$0")/.."
 scene=scenes/paper/multi_object.json
 
-seconds() {  # wall seconds of a command
-  local t0 t1
-  t0=$(date +%s.%N)
-  "$@" > /dev/null 2>&1
-  t1=$(date +%s.%N)
-  awk -v a="$t0" -v b="$t1" 'BEGIN { printf "%.2f", b - a }'
-}
+source bench/seconds.sh
 
 echo "load: $(cut -d' ' -f1-3 /proc/loadavg)"
 for pass in $(seq "$passes"); do

@@ -20,13 +20,7 @@ cd "$(dirname "$0")/.."
 scene=scenes/paper/multi_object.json
 base=(--set camera.height_px=1000 "${extra[@]}")
 
-seconds() {  # wall seconds of a command
-  local t0 t1
-  t0=$(date +%s.%N)
-  "$@" > /dev/null 2>&1
-  t1=$(date +%s.%N)
-  awk -v a="$t0" -v b="$t1" 'BEGIN { printf "%.2f", b - a }'
-}
+source bench/seconds.sh
 
 declare -A sum
 for ((p = 1; p <= passes; ++p)); do
