@@ -221,12 +221,28 @@ class Outputs::Images {
       lo = std::min(lo, range[i]), hi = std::max(hi, range[i]);
       meshes.insert(int(mesh[i]));
     }
+    // Objects: those any pixel's ray meets, the most along one ray, and the pixels whose ray meets two or
+    // more (where a multi-object detector is tested).
+    std::set<int> objects;
+    const float* count = object_ch_[1];
+    size_t several = 0;
+    int most = 0;
+    for (size_t i = 0; i < n; ++i) {
+      most = std::max(most, int(count[i]));
+      several += count[i] >= 2.0f;
+    }
+    for (size_t j = 0; j < object_slot_ch_.size(); j += std::size(kObjectSlotChannels))
+      for (size_t i = 0; i < n; ++i)
+        if (object_slot_ch_[j][i] >= 0.0f) objects.insert(int(object_slot_ch_[j][i]));
     const nlohmann::json none = nullptr;
     return {{"hit_fraction", double(hits) / double(n)},
             {"range_min_m", hits ? nlohmann::json(double(lo)) : none},
             {"range_max_m", hits ? nlohmann::json(double(hi)) : none},
             {"meshes_in_view", meshes.size()},
-            {"max_layer_count", deepest_layer()}};
+            {"max_layer_count", deepest_layer()},
+            {"objects_in_view", objects.size()},
+            {"max_object_count", most},
+            {"multi_object_fraction", double(several) / double(n)}};
   }
 
   // Writes the EXRs with their provenance and the previews into the staging folder.

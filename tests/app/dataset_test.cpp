@@ -7,11 +7,13 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <set>
 #include <thread>
 
 #include "app_fixture.h"
+#include "writers/writers.h"
 
 namespace spadgen::testing {
 namespace {
@@ -105,6 +107,13 @@ TEST_F(Dataset, ShardsOnTheCommandLineSlurmAndKubernetesEqualTheSerialRun) {
     EXPECT_EQ(row["parameters"]["laser.average_power_mW"], n % 2 ? 2 : 1);
     EXPECT_EQ(row["ground_truth"]["hit_fraction"], 1.0);  // the crop sees the plate and the sphere everywhere
     EXPECT_NEAR(row["ground_truth"]["range_min_m"].get<double>(), 0.45, 1e-3);
+    // the objects: the plate and the sphere, both along the rays of the pixels the sample's ground truth says
+    EXPECT_EQ(row["ground_truth"]["objects_in_view"], 2);
+    EXPECT_EQ(row["ground_truth"]["max_object_count"], 2);
+    const auto gt = spadgen::writers::read_exr((dir_ / "serial" / row["folder"].get<std::string>() / "ground_truth.exr").string());
+    const auto& count = gt.channels.at("object_count");
+    EXPECT_DOUBLE_EQ(row["ground_truth"]["multi_object_fraction"].get<double>(),
+                     double(std::count_if(count.begin(), count.end(), [](float c) { return c >= 2.0f; })) / double(count.size()));
     const json meta = json::parse(slurp(dir_ / "serial" / row["folder"].get<std::string>() / "metadata.json"));
     EXPECT_EQ(meta["dataset"]["parameters"], row["parameters"]);
     EXPECT_EQ(meta["seeds"]["chip"], 1);
