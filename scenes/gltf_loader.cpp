@@ -1339,6 +1339,12 @@ std::string summarize(const Scene& scene) {
     }
     s << "\n";
   }
+  // The ground truth's objects: their ids are what ground_truth.exr's object<j>.id and evaluate report.
+  const Objects objects = objects_of(scene);
+  s << "objects (ground-truth ids): " << objects.list.size() << "\n";
+  for (const Object& o : objects.list)
+    s << "  " << o.id << " " << (o.name.empty() ? std::string("(mesh without node)") : "'" + o.name + "'") << ", "
+      << o.meshes.size() << (o.meshes.size() == 1 ? " mesh" : " meshes") << "\n";
   s << "meshes: " << scene.meshes.size() << " (" << scene.triangle_count() << " triangles)\n";
   for (const Mesh& m : scene.meshes)
     s << "  " << m.name << ": " << m.triangle_count() << " triangles, material "

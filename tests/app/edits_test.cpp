@@ -109,6 +109,8 @@ TEST(AppCommands, InfoListsTheNodeAndMaterialNames) {
                                   "  2 'spad_camera', at (0, 0, 0)\n"));
   EXPECT_THAT(r.output, HasSubstr("0 'plastic_plate': "));
   EXPECT_THAT(r.output, HasSubstr("1 'sphere_white': "));
+  // and the ground truth's objects by the ids ground_truth.exr and evaluate give them (the camera has no mesh)
+  EXPECT_THAT(r.output, HasSubstr("objects (ground-truth ids): 2\n  0 'plate', 1 mesh\n  1 'sphere', 1 mesh\n"));
 }
 
 }  // namespace
