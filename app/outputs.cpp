@@ -231,7 +231,8 @@ class Outputs::Images {
       most = std::max(most, int(count[i]));
       several += count[i] >= 2.0f;
     }
-    for (size_t j = 0; j < object_slot_ch_.size(); j += std::size(kObjectSlotChannels))
+    // only the slots written (write() removed the channels of the others: their pointers are gone)
+    for (size_t j = 0; j < size_t(object_slots()) * std::size(kObjectSlotChannels); j += std::size(kObjectSlotChannels))
       for (size_t i = 0; i < n; ++i)
         if (object_slot_ch_[j][i] >= 0.0f) objects.insert(int(object_slot_ch_[j][i]));
     const nlohmann::json none = nullptr;
