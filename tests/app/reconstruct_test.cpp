@@ -95,6 +95,16 @@ TEST_F(Reconstruct, RefusesWhatItCannotReadNamingIt) {
   r = sh("reconstruct " + run.string() + " --detector median");
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("--detector"), std::string::npos) << r.output;
+  // evaluate's own options
+  r = sh("evaluate " + run.string() + " --region 1,2,3");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("--region 1,2,3: expected X,Y,W,H"), std::string::npos) << r.output;
+  r = sh("evaluate " + run.string() + " --tolerance-m 0");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("--tolerance-m: expected a positive number of metres"), std::string::npos) << r.output;
+  r = sh("evaluate " + dir_.string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("neither a run folder (metadata.json) nor a dataset folder (dataset.json)"), std::string::npos) << r.output;
   fs::remove(run / "sensor_maps.exr");
   r = sh("reconstruct " + run.string() + " -q --noise-free");
   EXPECT_EQ(r.code, 1);
