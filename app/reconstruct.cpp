@@ -242,15 +242,13 @@ reconstruct::Scores evaluate_run(const EvaluateCommand& c, const std::string& ru
   const RunFolder run(run_dir);
   const Labels labels = read_labels(run);
   if (names) names->insert(labels.names.begin(), labels.names.end());
-  const std::string default_file = (fs::path(run_dir) / ("detections_" + c.detector + ".exr")).string();
-  const std::string file = detections.empty() ? default_file : detections;
-  DetectionImage img = (detections.empty() && !fs::exists(file))
-                           ? detect_image(run, Detector(c.detector, run), c.noise_free, 8, false)
-                           : read_detections(file, run.width(), run.height());
+  const std::string file = detections.empty() ? (fs::path(run_dir) / ("detections_" + c.detector + ".exr")).string() : detections;
+  const bool compute = detections.empty() && !fs::exists(file);  // the default file is absent: run the detector
+  DetectionImage img = compute ? detect_image(run, Detector(c.detector, run), c.noise_free, 8, false)
+                               : read_detections(file, run.width(), run.height());
   if (source)
-    *source = (detections.empty() && !fs::exists(file))
-                  ? nlohmann::json{{"detector", c.detector}, {"computed", true}, {"noise_free", c.noise_free}}
-                  : nlohmann::json{{"file", file}};
+    *source = compute ? nlohmann::json{{"detector", c.detector}, {"computed", true}, {"noise_free", c.noise_free}}
+                      : nlohmann::json{{"file", file}};
   if (source && !labels.detectability) (*source)["labels"] = "labels.exr absent: every object counted as detectable";
   reconstruct::Scores scores(scorer_options(c));
   std::vector<reconstruct::PixelOutcome> outcome(labels.pixels.size());

@@ -73,23 +73,25 @@ std::vector<Detection> detect(const PaperDetector& d, const float* counts, int K
   // The variance of the mean linearised level over smoothed positions [a, b): by the delta method, each raw
   // count j enters with the weight sum over k of (1 / (b - a)) (1 / n_k) dlambda/dc(s_k), n_k the positions
   // averaged at k.
+  // Only counts [a - half_width, b + half_width) enter, so the weights cover just that span.
+  std::vector<double> w;
   const auto level = [&](int a, int b, double* variance) {
-    std::vector<double> w(size_t(K), 0.0);
+    const int lo = std::max(0, a - d.half_width), hi = std::min(K, b + d.half_width);
+    w.assign(size_t(hi - lo), 0.0);
     double mean = 0.0;
     for (int k = a; k < b; ++k) {
       mean += lam[size_t(k)] / (b - a);
       const int j0 = std::max(0, k - d.half_width), j1 = std::min(K - 1, k + d.half_width);
       const double g = lambda_slope(s[size_t(k)], frames) / (b - a) / (j1 - j0 + 1);
-      for (int j = j0; j <= j1; ++j) w[size_t(j)] += g;
+      for (int j = j0; j <= j1; ++j) w[size_t(j - lo)] += g;
     }
     *variance = 0.0;
-    for (int j = 0; j < K; ++j)
-      if (w[size_t(j)] != 0.0) *variance += w[size_t(j)] * w[size_t(j)] * count_variance(s[size_t(j)], frames);
+    for (int j = lo; j < hi; ++j)
+      if (w[size_t(j - lo)] != 0.0) *variance += w[size_t(j - lo)] * w[size_t(j - lo)] * count_variance(s[size_t(j)], frames);
     return mean;
   };
   // Each window that holds a significant rise names an edge; the edge itself is located on the whole
-  // profile, so that one straddling two windows is timed right: at the steepest point of the window's
-  // smoothed, linearised profile, between plateaus `guard` positions before and after it.
+  // profile (below), so that one straddling two windows is timed right.
   std::vector<Detection> out;
   const int guard = d.window / 6;
   for (int a = 0; a < K; a += d.window) {
