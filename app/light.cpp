@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
+#include <filesystem>
 
 #include "app/outputs.h"
 #include "app/staging.h"
@@ -20,7 +21,8 @@ namespace spadgen::app {
 namespace {
 
 // The saved light's arrays, in light_files() order, as stacks: their Zarr chunks and attributes.
-enum LightFile : size_t { kRanges, kOffsets, kValues, kLaserTotal, kOutOfWindow, kAmbient, kLightFiles };
+// The last two came later: a run before them has neither, and is read without them.
+enum LightFile : size_t { kRanges, kOffsets, kValues, kLaserTotal, kOutOfWindow, kAmbient, kLaserSe, kSamples, kLightFiles };
 
 StackLayout light_layout(LightFile f, Storage storage, int64_t H, int64_t W, int64_t values) {
   using writers::Dtype;
@@ -50,9 +52,16 @@ StackLayout light_layout(LightFile f, Storage storage, int64_t H, int64_t W, int
       l = {"light/out_of_window", Dtype::F64, {H, W}, true, {kBlock, kBlock},
            "the part of laser_total that arrived outside the time window", "photons per pulse", yx};
       break;
-    default:
+    case kAmbient:
       l = {"light/ambient_rate", Dtype::F32, {H, W}, true, {kBlock, kBlock}, "ambient photons per second",
            "photons per second", yx};
+      break;
+    case kLaserSe:
+      l = {"light/laser_se", Dtype::F32, {H, W}, true, {kBlock, kBlock},
+           "the Monte Carlo standard error of laser_total (laser.exr standard_error)", "photons per pulse", yx};
+      break;
+    default:
+      l = {"light/samples", Dtype::I32, {H, W}, true, {kBlock, kBlock}, "paths rendered in the pixel", "paths", yx};
       break;
   }
   l.file += storage == Storage::Zarr ? ".zarr" : ".npy";
@@ -86,6 +95,7 @@ LightWriter::LightWriter(const PixelRect& region, const TimeAxis& axis, const St
   spill_at_.assign(n, 0);
   ranges_.assign(2 * n, 0);
   laser_total_.assign(n, 0.0), out_of_window_.assign(n, 0.0), ambient_.assign(n, 0.0f);
+  laser_se_.assign(n, 0.0f), samples_.assign(n, 0);
   for (auto& c : claimed_) c.store(0, std::memory_order_relaxed);
   // The transients wait in a file (tiles finish in any order; values.npy is in pixel order), unlinked at
   // once so that nothing is left behind whatever happens to the run.
@@ -131,6 +141,8 @@ void LightWriter::put(const TransientTile& t) {
       laser_total_[ri] = t.laser_total.size() == nd ? t.laser_total[di] : 0.0;
       out_of_window_[ri] = t.out_of_window.size() == nd ? t.out_of_window[di] : 0.0;
       ambient_[ri] = t.ambient_rate.size() == nd ? t.ambient_rate[di] : 0.0f;
+      laser_se_[ri] = t.laser_se.size() == nd ? t.laser_se[di] : 0.0f;
+      samples_[ri] = t.samples.size() == nd ? t.samples[di] : 0;
     }
   if (buf.empty()) {
     for (const auto& [ri, off] : mine) spill_at_[ri] = 0;
@@ -179,6 +191,8 @@ void LightWriter::write(std::vector<std::string>& files) {
   write_stack(layout(kLaserTotal), staging_.path(layout(kLaserTotal).file), laser_total_, storage_json_);
   write_stack(layout(kOutOfWindow), staging_.path(layout(kOutOfWindow).file), out_of_window_, storage_json_);
   write_stack(layout(kAmbient), staging_.path(layout(kAmbient).file), ambient_, storage_json_);
+  write_stack(layout(kLaserSe), staging_.path(layout(kLaserSe).file), laser_se_, storage_json_);
+  write_stack(layout(kSamples), staging_.path(layout(kSamples).file), samples_, storage_json_);
   const std::vector<std::string> f = light_files(storage_);
   files.insert(files.end(), f.begin(), f.end());
   if (storage_ == Storage::Zarr) write_zarr_group(staging_, "light", files);
@@ -201,12 +215,20 @@ SavedLight::SavedLight(const std::string& dir, const PixelRect& region, const Ti
   };
   const std::vector<std::pair<std::vector<int64_t>, std::string>> want = {
       {{H, W, 2}, "the light's bin ranges"}, {{n + 1}, "the light's offsets"}, {{}, ""},
-      {{H, W}, "the light's laser totals"},  {{H, W}, "the light's out-of-window totals"}, {{H, W}, "the light's ambient rates"}};
+      {{H, W}, "the light's laser totals"},  {{H, W}, "the light's out-of-window totals"}, {{H, W}, "the light's ambient rates"},
+      {{H, W}, "the light's standard errors"}, {{H, W}, "the light's paths per pixel"}};
+  // The standard errors and paths: both or neither (a run before them).
+  const bool accuracy = std::filesystem::exists(path(kLaserSe)) || std::filesystem::exists(path(kSamples));
+  const size_t files = accuracy ? kLightFiles : kLaserSe;
   if (storage == Storage::Zarr) {
     std::vector<writers::ZarrReader> z;
-    for (size_t i = 0; i < kLightFiles; ++i) {
+    for (size_t i = 0; i < files; ++i) {
       z.emplace_back(path(LightFile(i)));
       if (i != kValues) expect_shape(z.back().path(), z.back().shape(), want[i].first, want[i].second);
+    }
+    if (accuracy) {
+      laser_se_z_ = z[kLaserSe].read_all<float>(), samples_z_ = z[kSamples].read_all<int32_t>();
+      laser_se_ = laser_se_z_.data(), samples_ = samples_z_.data();
     }
     ranges_z_ = z[kRanges].read_all<int32_t>(), offsets_z_ = z[kOffsets].read_all<int64_t>();
     laser_total_z_ = z[kLaserTotal].read_all<double>(), out_of_window_z_ = z[kOutOfWindow].read_all<double>();
@@ -219,10 +241,11 @@ SavedLight::SavedLight(const std::string& dir, const PixelRect& region, const Ti
     ranges_ = ranges_z_.data(), offsets_ = offsets_z_.data(), laser_total_ = laser_total_z_.data();
     out_of_window_ = out_of_window_z_.data(), ambient_ = ambient_z_.data();
   } else {
-    for (size_t i = 0; i < kLightFiles; ++i) {
+    for (size_t i = 0; i < files; ++i) {
       npy_.emplace_back(path(LightFile(i)));
       if (i != kValues) npy_.back().expect_shape(want[i].first, want[i].second);
     }
+    if (accuracy) laser_se_ = npy_[kLaserSe].data<float>(), samples_ = npy_[kSamples].data<int32_t>();
     ranges_ = npy_[kRanges].data<int32_t>(), offsets_ = npy_[kOffsets].data<int64_t>(), values_ = npy_[kValues].data<float>();
     laser_total_ = npy_[kLaserTotal].data<double>(), out_of_window_ = npy_[kOutOfWindow].data<double>();
     ambient_ = npy_[kAmbient].data<float>();
@@ -255,6 +278,7 @@ TransientTile SavedLight::tile(const PixelRect& rect, const PixelRect& data_rect
   const auto T = size_t(axis_.bins);
   t.transient.assign(nd * T, 0.0f);
   t.laser_total.resize(nd), t.out_of_window.resize(nd), t.ambient_rate.resize(nd);
+  if (laser_se_) t.laser_se.resize(nd), t.samples.resize(nd);
   if (T > 0) t.bin_lo.resize(nd), t.bin_hi.resize(nd);
   const int32_t* r = ranges_;
   const int64_t* o = offsets_;
@@ -270,6 +294,7 @@ TransientTile SavedLight::tile(const PixelRect& rect, const PixelRect& data_rect
       t.laser_total[di] = laser_total_[ri];
       t.out_of_window[di] = out_of_window_[ri];
       t.ambient_rate[di] = ambient_[ri];
+      if (laser_se_) t.laser_se[di] = laser_se_[ri], t.samples[di] = samples_[ri];
       if (T == 0) continue;
       t.bin_lo[di] = r[2 * ri], t.bin_hi[di] = r[2 * ri + 1];
       std::copy(row.begin() + (o[ri] - o[first]), row.begin() + (o[ri + 1] - o[first]), t.transient.data() + di * T + size_t(r[2 * ri]));
@@ -283,6 +308,7 @@ TransientTile SavedLight::tile(const PixelRect& rect, const PixelRect& data_rect
       const auto di = size_t(dr.index(x, y));
       t.laser_total[di] *= s, t.out_of_window[di] *= s;
       t.ambient_rate[di] = float(t.ambient_rate[di] * s);
+      if (laser_se_) t.laser_se[di] = float(t.laser_se[di] * s);
       for (size_t b = di * T; b < (di + 1) * T; ++b) t.transient[b] = float(t.transient[b] * s);
     }
   }

@@ -69,6 +69,8 @@ class LightWriter {
   std::vector<int32_t> ranges_;    // per region pixel: bin_lo, bin_hi
   std::vector<double> laser_total_, out_of_window_;
   std::vector<float> ambient_;
+  std::vector<float> laser_se_;
+  std::vector<int32_t> samples_;
 };
 
 // A run folder's saved light, read-only: .npy files mapped, or Zarr stores (the per-pixel arrays
@@ -97,13 +99,16 @@ class SavedLight {
   std::vector<int32_t> ranges_z_;                  // Zarr: the per-pixel arrays, decompressed
   std::vector<int64_t> offsets_z_;
   std::vector<double> laser_total_z_, out_of_window_z_;
-  std::vector<float> ambient_z_;
+  std::vector<float> ambient_z_, laser_se_z_;
+  std::vector<int32_t> samples_z_;
   const int32_t* ranges_ = nullptr;
   const int64_t* offsets_ = nullptr;
   const float* values_ = nullptr;  // .npy only
   const double* laser_total_ = nullptr;
   const double* out_of_window_ = nullptr;
   const float* ambient_ = nullptr;
+  const float* laser_se_ = nullptr;   // null: a run before the standard errors
+  const int32_t* samples_ = nullptr;
   int64_t values_elements_ = 0;
   std::vector<double> row_scale_;
 };

@@ -125,6 +125,7 @@ json metadata(const scenes::ResolvedRun& resolved, const std::vector<std::string
   meta["laser_photons_per_pulse"] = {{"total_all_pixels", r.laser_total},
                                      {"outside_time_window", r.out_of_window_total},
                                      {"outside_fraction", r.laser_total > 0 ? r.out_of_window_total / r.laser_total : 0.0}};
+  if (!r.accuracy.is_null()) meta["accuracy"] = ojson::parse(r.accuracy.dump());
   meta["acquisition"] = ojson::parse(sensor.describe().dump());
   meta["ground_truth_layers"] = r.ground_truth_layers;
   meta["ground_truth_objects"] = r.ground_truth_objects;

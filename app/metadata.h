@@ -55,6 +55,7 @@ struct RunRecord {
   int ground_truth_layers = 0;
   int ground_truth_objects = 0;   // the most objects along one ray (object<j> channels below it)
   nlohmann::json objects;         // objects_json(): the scene's objects, ids as in the images
+  nlohmann::json accuracy;              // Outputs: the laser return's standard error and the paths per pixel
   nlohmann::json ground_truth_summary;  // Outputs: hit fraction, range span, meshes in view, deepest layer
   bool counts_u8 = true;
   PixelRect transient_crop;

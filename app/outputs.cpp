@@ -140,12 +140,17 @@ class Outputs::Images {
       for (int j = 0; j < slots_; ++j)
         for (const char* what : kLabelSlotChannels) label_ch_.push_back(labels_.channel(layer_name(j, what, "object")));
     laser_ch_ = {laser_.channel("photons_per_pulse"), laser_.channel("out_of_window")};
+    // Each pixel's standard error, and its paths when a target error decides them (dropped in write() when
+    // the light carries none: a sense of light saved before them).
+    se_ch_ = laser_.channel("standard_error");
+    if (cfg.render.target_relative_error) samples_ch_ = laser_.channel("samples");
     ambient_ch_ = ambient_.channel("photons_per_second");
     maps_ch_ = {maps_.channel("gate_skew_ps"), maps_.channel("gate_length_ps"), maps_.channel("dcr_cps"), maps_.channel("pde")};
     if (intensity_decl_) intensity_ch_ = {intensity_.channel("counts"), intensity_.channel("photons")};
     pixel_laser_.assign(size_t(img.count()), 0.0);
     pixel_oow_.assign(size_t(img.count()), 0.0);
     pixel_beyond_.assign(size_t(img.count()), 0.0);
+    pixel_samples_.assign(size_t(img.count()), 0);
   }
 
   void put_ground_truth(const GroundTruthTile& g) {
@@ -185,6 +190,9 @@ class Outputs::Images {
       ambient_ch_[o] = t.ambient_rate[d];
       pixel_laser_[o] = t.laser_total[d], pixel_oow_[o] = t.out_of_window[d];
       if (!t.beyond_period.empty()) pixel_beyond_[o] = t.beyond_period[d];
+      if (se_ch_ && !t.laser_se.empty()) se_ch_[o] = t.laser_se[d], se_seen_ = true;
+      if (samples_ch_ && !t.samples.empty()) samples_ch_[o] = float(t.samples[d]);
+      if (!t.samples.empty()) pixel_samples_[o] = t.samples[d];
       maps_ch_[0][o] = m.gate_skew_ps[i], maps_ch_[1][o] = m.gate_length_ps[i];
       maps_ch_[2][o] = m.dcr_cps[i], maps_ch_[3][o] = m.pde[i];
       if (intensity_decl_) intensity_ch_[0][o] = s.intensity_counts[i], intensity_ch_[1][o] = s.intensity_photons[i];
@@ -207,6 +215,31 @@ class Outputs::Images {
 
   // A summary of the ground truth for dataset indices: the share of pixels whose ray hits something, the
   // span of their first-surface ranges, the meshes seen first and the most surfaces along one ray.
+  // metadata.json "accuracy": the Monte Carlo standard error of the laser return relative to it, over the
+  // pixels with a return, and the paths per pixel (null when the light carries no standard errors).
+  nlohmann::json accuracy(const RunConfig& cfg) const {
+    if (!se_ch_ || !se_seen_) return nullptr;
+    const size_t n = size_t(img_.count());
+    std::vector<double> rel;
+    rel.reserve(n);
+    double paths = 0.0;
+    int32_t lo = INT32_MAX, hi = 0;
+    for (size_t i = 0; i < n; ++i) {
+      paths += pixel_samples_[i];
+      lo = std::min(lo, pixel_samples_[i]), hi = std::max(hi, pixel_samples_[i]);
+      if (pixel_laser_[i] > 0.0) rel.push_back(double(se_ch_[i]) / pixel_laser_[i]);
+    }
+    std::sort(rel.begin(), rel.end());
+    const auto q = [&](double f) { return rel.empty() ? 0.0 : rel[std::min(rel.size() - 1, size_t(f * double(rel.size())))]; };
+    nlohmann::json a;
+    a["laser_relative_standard_error"] = {{"pixels_with_laser", rel.size()}, {"median", q(0.5)}, {"p90", q(0.9)},
+                                          {"p99", q(0.99)}, {"max", rel.empty() ? 0.0 : rel.back()}};
+    a["samples_per_pixel"] = {{"mean", n ? paths / double(n) : 0.0}, {"min", n ? lo : 0}, {"max", hi}};
+    a["target_relative_error"] = cfg.render.target_relative_error ? nlohmann::json(*cfg.render.target_relative_error) : nlohmann::json(nullptr);
+    a["meaning"] = "laser.exr standard_error: the Monte Carlo standard error of photons_per_pulse (docs/render.md, Accuracy)";
+    return a;
+  }
+
   nlohmann::json ground_truth_summary() const {
     if (!gt_on_) return nullptr;
     const size_t n = size_t(img_.count());
@@ -256,6 +289,7 @@ class Outputs::Images {
       files.push_back(name);
     };
     object_slots_ = count_object_slots();
+    if (!se_seen_) laser_.remove_channel("standard_error"), laser_.remove_channel("samples");
     if (gt_on_) {
       for (int l = deepest_layer(); l < layers_; ++l) {
         gt_.remove_channel(layer_name(l, ".range"));
@@ -334,6 +368,10 @@ class Outputs::Images {
       label_ch_;
   float* ambient_ch_ = nullptr;
   std::vector<double> pixel_laser_, pixel_oow_, pixel_beyond_;
+  std::vector<int32_t> pixel_samples_;
+  float* se_ch_ = nullptr;       // laser.exr standard_error (null: not written)
+  std::atomic<bool> se_seen_{false};  // a tile carried standard errors (not light saved before them)
+  float* samples_ch_ = nullptr;  // laser.exr samples (null: not written)
   int object_slots_ = 0;
 };
 
@@ -502,6 +540,7 @@ void Outputs::report(RunRecord& r) const {
   r.ground_truth_layers = images_->deepest_layer();
   r.ground_truth_objects = images_->object_slots();
   r.ground_truth_summary = images_->ground_truth_summary();
+  r.accuracy = images_->accuracy(cfg_);
   r.counts_u8 = stacks_->counts_u8();
   r.transient_crop = stacks_->transient_crop();
   r.profile_pixels = probe_->pixels();

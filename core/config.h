@@ -59,6 +59,15 @@ struct EnumNames<Exposure> {
       {{"single", Exposure::Single}, {"dual", Exposure::Dual}}};
 };
 
+// render.quality: a preset of the sampling keys (docs/accuracy.md); custom leaves them as the scene file
+// gives them (or their defaults). A key the scene file or --set gives wins over its preset's value.
+enum class Quality { Custom, Draft, Standard, Reference };
+template <>
+struct EnumNames<Quality> {
+  static constexpr std::array<std::pair<std::string_view, Quality>, 4> values{
+      {{"custom", Quality::Custom}, {"draft", Quality::Draft}, {"standard", Quality::Standard}, {"reference", Quality::Reference}}};
+};
+
 // The container of the output stacks (docs/outputs.md, "Storage").
 enum class Storage { Npy, Zarr };
 template <>
@@ -220,7 +229,13 @@ struct AcquisitionConfig {
 };
 
 struct RenderConfig {
-  int samples_per_pixel = 16;           // render.samples_per_pixel
+  Quality quality = Quality::Custom;    // render.quality: a preset of the three keys below
+  int samples_per_pixel = 16;           // render.samples_per_pixel (with a target error: the first round)
+  // render.target_relative_error: null renders samples_per_pixel paths in every pixel; else each pixel
+  // adds paths until the standard error of its laser return is at most this fraction of it, or it has
+  // max_samples_per_pixel (docs/render.md, "Accuracy").
+  std::optional<double> target_relative_error;
+  int max_samples_per_pixel = 1024;     // render.max_samples_per_pixel
   int max_bounces = 4;                  // render.max_bounces (1 = direct light only)
   int russian_roulette_from = 3;        // render.russian_roulette_from: bounce after which paths may stop
   double time_bin_s = 9e-12;            // render.time_bin_ps

@@ -59,6 +59,11 @@ struct TransientTile {
   // per pulse whose time of flight is one laser period or more (from beyond the unambiguous range, folded
   // onto the next pulse's returns), part of laser_total.
   std::vector<double> beyond_period;
+  // Optional (the renderer fills them; empty for light read back by `spadgen sense`), per data pixel: the
+  // Monte Carlo standard error of laser_total, photons per pulse (the paths' sample standard deviation over
+  // sqrt(paths); 0 with one path, where it cannot be estimated), and the paths rendered.
+  std::vector<float> laser_se;
+  std::vector<int32_t> samples;
   // Optional, per data pixel: every non-zero bin of the pixel (in transient and transient_indirect) lies in
   // [bin_lo, bin_hi). The renderer fills them with the bins it wrote; empty means unknown (the sensor then
   // scans every bin). bin_lo >= bin_hi: no light in the window.

@@ -142,11 +142,17 @@ Spec Integrator::shadow_transmittance(const glm::vec3& origin, const glm::vec3& 
 }
 
 void Integrator::trace_camera_block(int x, int y, CameraBlock* block, RayCounts* rays) const {
+  trace_camera_block(x, y, 0, config_.render.samples_per_pixel, nullptr, nullptr, block, rays);
+}
+
+void Integrator::trace_camera_block(int x, int y, int s_begin, int s_end, const int* begin, const int* end,
+                                    CameraBlock* block, RayCounts* rays) const {
   constexpr int kPacket = EmbreeScene::kPacket;
-  const int spp = config_.render.samples_per_pixel;
+  const int spp = s_end - s_begin;
   block->x0 = x - x % kPacket;
   block->y = y;
   block->lanes = std::min(kPacket, camera_.width() - block->x0);
+  block->s0 = s_begin;
   block->spp = spp;
   const size_t n = static_cast<size_t>(spp) * kPacket;
   block->rng.clear();
@@ -162,11 +168,14 @@ void Integrator::trace_camera_block(int x, int y, CameraBlock* block, RayCounts*
   const glm::vec3 cam(camera_.position());
   bool valid[kPacket], found[kPacket];
   glm::vec3 dirs[kPacket];
-  for (int s = 0; s < spp; ++s) {
+  for (int s = s_begin; s < s_end; ++s) {
     throw_if_interrupted();  // a block of many samples per pixel can take seconds
+    const size_t row = static_cast<size_t>(s - s_begin) * kPacket;
+    int lanes_valid = 0;
     for (int i = 0; i < kPacket; ++i) {
-      const size_t j = static_cast<size_t>(s) * kPacket + static_cast<size_t>(i);
-      valid[i] = i < block->lanes;
+      const size_t j = row + static_cast<size_t>(i);
+      valid[i] = i < block->lanes && (!begin || (s >= begin[i] && s < end[i]));
+      lanes_valid += valid[i];
       const int px = block->x0 + std::min(i, block->lanes - 1);
       const uint64_t pixel =
           static_cast<uint64_t>(y) * static_cast<uint64_t>(camera_.width()) + static_cast<uint64_t>(px);
@@ -176,16 +185,16 @@ void Integrator::trace_camera_block(int x, int y, CameraBlock* block, RayCounts*
       block->dir[j] = camera_.direction(px + jx, y + jy);
       dirs[i] = glm::vec3(block->dir[j]);
     }
-    RayHit* hits = block->hit.data() + static_cast<size_t>(s) * kPacket;
+    RayHit* hits = block->hit.data() + row;
     embree_.intersect_packet(valid, cam, dirs, 0.0f, kInf, hits, found);
-    rays->camera += static_cast<uint64_t>(block->lanes);
+    rays->camera += static_cast<uint64_t>(begin ? lanes_valid : block->lanes);
     // The laser's shadow rays from these hits, as one coherent packet.
     bool shadow[kPacket];
     glm::vec3 origins[kPacket];
     float tfar[kPacket];
     int traced = 0;
     for (int i = 0; i < kPacket; ++i) {
-      const size_t j = static_cast<size_t>(s) * kPacket + static_cast<size_t>(i);
+      const size_t j = row + static_cast<size_t>(i);
       block->found[j] = found[i];
       shadow[i] = false;
       origins[i] = cam, dirs[i] = glm::vec3(0, 0, 1), tfar[i] = 0.0f;
@@ -197,7 +206,7 @@ void Integrator::trace_camera_block(int x, int y, CameraBlock* block, RayCounts*
       origins[i] = lr.origin, dirs[i] = lr.wi, tfar[i] = float(lr.r);
       ++traced;
     }
-    RayHit* shadow_hits = block->shadow_hit.data() + static_cast<size_t>(s) * kPacket;
+    RayHit* shadow_hits = block->shadow_hit.data() + row;
     bool shadow_found[kPacket];
     if (traced > 0) {
       if (transmission_)
@@ -206,7 +215,7 @@ void Integrator::trace_camera_block(int x, int y, CameraBlock* block, RayCounts*
         embree_.occluded_packet(shadow, origins, dirs, 0.0f, tfar, shadow_found);
     }
     for (int i = 0; i < kPacket; ++i) {
-      const size_t j = static_cast<size_t>(s) * kPacket + static_cast<size_t>(i);
+      const size_t j = row + static_cast<size_t>(i);
       block->shadow_traced[j] = shadow[i] && traced > 0;
       block->shadow_found[j] = shadow[i] && traced > 0 && shadow_found[i];
     }
@@ -398,24 +407,43 @@ inline void Integrator::connect_ambient_lights(const NeeVertex& v, double* ambie
 PixelTotals Integrator::render_pixel(int x, int y, const CameraBlock& block, const TimeAxis& axis, double* bins,
                                      RayCounts* rays, double* indirect_bins, ObjectLaser* objects) const {
   PixelTotals out;
-  const RenderConfig& rc = config_.render;
-  const double inv_spp = 1.0 / rc.samples_per_pixel;
-  const double k = measurement_constant(y) * inv_spp;
-  const int lane = x - block.x0;
-  if (block.y != y || lane < 0 || lane >= block.lanes || block.spp != rc.samples_per_pixel)
-    throw Error("render_pixel: pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") is not in its camera block");
-  const PixelFilm film{axis, bins, indirect_bins, &out, objects};
+  const int spp = config_.render.samples_per_pixel;
+  if (block.s0 != 0 || block.spp != spp)
+    throw Error("render_pixel: the block holds samples [" + std::to_string(block.s0) + ", " +
+                std::to_string(block.s0 + block.spp) + "), not the pixel's " + std::to_string(spp));
+  add_samples(x, y, block, 0, spp, 1.0 / spp, axis, bins, rays, indirect_bins, objects, &out);
+  return out;
+}
 
-  for (int s = 0; s < rc.samples_per_pixel; ++s) {
+void Integrator::add_samples(int x, int y, const CameraBlock& block, int s_begin, int s_end, double scale,
+                             const TimeAxis& axis, double* bins, RayCounts* rays, double* indirect_bins,
+                             ObjectLaser* objects, PixelTotals* out) const {
+  const double k = measurement_constant(y) * scale;
+  const int lane = x - block.x0;
+  if (block.y != y || lane < 0 || lane >= block.lanes || s_begin < block.s0 || s_end > block.s0 + block.spp)
+    throw Error("render_pixel: pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") is not in its camera block");
+  const PixelFilm film{axis, bins, indirect_bins, out, objects};
+
+  for (int s = s_begin; s < s_end; ++s) {
     throw_if_interrupted();  // one relaxed load per path: a signal stops even a pixel of 10^7 paths
-    const size_t j = static_cast<size_t>(s) * EmbreeScene::kPacket + static_cast<size_t>(lane);
+    const size_t j = static_cast<size_t>(s - block.s0) * EmbreeScene::kPacket + static_cast<size_t>(lane);
     const double ct = glm::dot(block.dir[j], camera_.forward());
     const double w = k * ct * ct * ct * ct;  // the camera's cos^4 falloff
+    const double before = out->laser_total;
     const double ambient = trace_path(block, j, w, film, rays);
-    out.ambient_rate += ambient * w;
-    out.camera_hits += block.found[j] != 0;
+    const double path = out->laser_total - before;
+    out->laser_sq += path * path;
+    out->ambient_rate += ambient * w;
+    out->camera_hits += block.found[j] != 0;
   }
-  return out;
+}
+
+double standard_error(double sum, double sq, int n, double scale) {
+  if (n < 2) return 0.0;
+  // The paths' estimates are scale * c for contributions c; their sample variance over n is the mean's.
+  const double dn = n;
+  const double var = (sq - sum * sum / dn) / (dn - 1.0);  // of the contributions
+  return var > 0.0 ? scale * std::sqrt(var / dn) : 0.0;
 }
 
 }  // namespace spadgen::render

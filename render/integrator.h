@@ -26,11 +26,19 @@ struct PixelTotals {
   // beyond the unambiguous range c / (2 f_rep), which fold onto the earlier ones of the next pulse.
   double beyond_period = 0.0;
   int camera_hits = 0;         // samples whose camera ray hit a surface
+  // The sum of the squares of each path's contribution to laser_total, for its standard error
+  // (standard_error()).
+  double laser_sq = 0.0;
   double ambient_rate = 0.0;   // photons per second
   // Range of bins written, [bin_lo, bin_hi) (empty when bin_lo >= bin_hi): a pixel's returns usually span
   // a small part of a long window, so only this range is converted and cleared afterwards.
   int64_t bin_lo = INT64_MAX, bin_hi = 0;
 };
+
+// The standard error of the mean of n paths' estimates, each `scale` times its contribution c, given the
+// sum and the sum of squares of the contributions: scale = n for render_pixel (whose contributions are
+// already divided by n), 1 for add_samples with scale 1. 0 for n < 2, where it cannot be estimated.
+double standard_error(double sum, double sq, int n, double scale);
 
 // One pixel's laser light split by what returned it: direct paths (the camera sees the vertex that meets
 // the laser through transmissions only) by the object of that vertex, indirect paths together. A worker
@@ -81,8 +89,9 @@ struct LaserRay {
 // per sample. The blocks are fixed by the sensor, not by tiles, so a pixel's camera rays always travel in
 // the same packet: results do not depend on the tile split or the thread count.
 struct CameraBlock {
-  int x0 = 0, y = 0, lanes = 0, spp = 0;
-  std::vector<Rng> rng;  // [s * kPacket + lane]: the path's stream, after the two jitter draws
+  int x0 = 0, y = 0, lanes = 0;
+  int s0 = 0, spp = 0;   // the samples held: [s0, s0 + spp)
+  std::vector<Rng> rng;  // [(s - s0) * kPacket + lane]: the path's stream, after the two jitter draws
   std::vector<glm::dvec3> dir;
   std::vector<RayHit> hit;
   std::vector<uint8_t> found;
@@ -111,6 +120,11 @@ class Integrator {
 
   // Traces the camera rays of every sample of the block that contains pixel (x, y) (full-sensor coordinates).
   void trace_camera_block(int x, int y, CameraBlock* block, RayCounts* rays) const;
+  // Samples [begin[i], end[i]) of lane i (the block's pixel x0 + i) only, each within [s_begin, s_end); a
+  // lane with an empty range is not traced. (The paths of sample s of a pixel are the same whichever call
+  // traces them.)
+  void trace_camera_block(int x, int y, int s_begin, int s_end, const int* begin, const int* end, CameraBlock* block,
+                          RayCounts* rays) const;
 
   // All samples of pixel (x, y), whose block `block` holds. bins: axis.bins doubles, zeroed by the caller,
   // receive photons per pulse per bin (unused when axis.bins == 0). indirect_bins (null: no split) receive
@@ -118,6 +132,12 @@ class Integrator {
   // objects (null: not asked), cleared by the caller, receive the pixel's laser_total split by object.
   PixelTotals render_pixel(int x, int y, const CameraBlock& block, const TimeAxis& axis, double* bins,
                            RayCounts* rays, double* indirect_bins = nullptr, ObjectLaser* objects = nullptr) const;
+
+  // Samples [s_begin, s_end) of pixel (x, y), which the block holds, added to *out, bins, indirect_bins and
+  // objects as render_pixel adds them, each path weighted by the measurement constant times `scale`
+  // (render_pixel: 1 / samples_per_pixel; a render to a target error: 1, divided by the final count after).
+  void add_samples(int x, int y, const CameraBlock& block, int s_begin, int s_end, double scale, const TimeAxis& axis,
+                   double* bins, RayCounts* rays, double* indirect_bins, ObjectLaser* objects, PixelTotals* out) const;
 
   // FF * optics transmission * p^2 * pi / (4 N^2) for a pixel of row y: photons at the SPAD per unit of
   // photon radiance (cos^4 excluded).

@@ -23,7 +23,7 @@ std::string rect_str(const PixelRect& r) {
 // One pixel's split into its ground-truth slots: slot j receives its object's direct light; the direct
 // light of objects in no slot is summed in ascending object order, so the sums do not depend on the order
 // the paths met them (which they do not anyway: samples come in a fixed order).
-void put_object_laser(ObjectLaser* objects, int64_t pixel, GroundTruthTile* gt) {
+void put_object_laser(ObjectLaser* objects, int64_t pixel, GroundTruthTile* gt, double scale) {
   const auto slots = static_cast<size_t>(gt->max_layers);
   const int32_t* ids = gt->object_slot_id.data() + size_t(pixel) * slots;
   float* laser = gt->object_laser.data() + size_t(pixel) * slots;
@@ -31,11 +31,11 @@ void put_object_laser(ObjectLaser* objects, int64_t pixel, GroundTruthTile* gt) 
   double other = 0.0;
   for (int o : objects->touched) {
     const int32_t* slot = std::find(ids, ids + slots, o);
-    if (slot != ids + slots) laser[slot - ids] = static_cast<float>(objects->direct[size_t(o)]);
+    if (slot != ids + slots) laser[slot - ids] = static_cast<float>(objects->direct[size_t(o)] * scale);
     else other += objects->direct[size_t(o)];
   }
-  gt->direct_other_laser[size_t(pixel)] = static_cast<float>(other);
-  gt->indirect_laser[size_t(pixel)] = static_cast<float>(objects->indirect);
+  gt->direct_other_laser[size_t(pixel)] = static_cast<float>(other * scale);
+  gt->indirect_laser[size_t(pixel)] = static_cast<float>(objects->indirect * scale);
 }
 
 }  // namespace
@@ -99,59 +99,156 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
   tile.out_of_window.assign(n, 0.0);
   tile.ambient_rate.assign(n, 0.0f);
   tile.beyond_period.assign(n, 0.0);
+  tile.laser_se.assign(n, 0.0f);
+  tile.samples.assign(n, im.config.render.samples_per_pixel);
   if (bins > 0) {
     tile.bin_lo.assign(n, 0);
     tile.bin_hi.assign(n, 0);
   }
+  const RenderConfig& rc = im.config.render;
 
   std::atomic<uint64_t> camera_rays{0}, shadow_rays{0};
   std::vector<int> camera_hits(n, 0);
-  tbb::parallel_for(tbb::blocked_range<int>(data_rect.y0, data_rect.y1()), [&](const tbb::blocked_range<int>& rows) {
-    // Accumulated in double per pixel; stored as float. Pixels are independent, so the split into tasks
-    // does not change any result. Only the bins a pixel touched are copied out and cleared again.
-    std::vector<double> acc(bins, 0.0), acc_indirect(split ? bins : 0, 0.0);
-    RayCounts rays;
-    CameraBlock block;
-    ObjectLaser objects(gt ? im.objects.list.size() : 0);
-    for (int y = rows.begin(); y < rows.end(); ++y)
-      for (int x = data_rect.x0; x < data_rect.x1(); ++x) {
-        // Camera rays travel in packets fixed by the sensor (EmbreeScene::kPacket pixels of a row), so a
-        // tile edge inside a block traces the whole block (and shades only its own pixels).
-        if (x == data_rect.x0 || x % EmbreeScene::kPacket == 0) im.integrator.trace_camera_block(x, y, &block, &rays);
-        const bool split_objects = gt && rect.contains(x, y);
-        const PixelTotals t = im.integrator.render_pixel(x, y, block, axis, acc.data(), &rays,
-                                                         split ? acc_indirect.data() : nullptr,
-                                                         split_objects ? &objects : nullptr);
-        if (split_objects) {
-          put_object_laser(&objects, rect.index(x, y), gt);
-          objects.clear();
+  // Stores pixel (x, y)'s totals, and its bins scaled by `scale` (1: as accumulated), clearing them.
+  const auto store = [&](int x, int y, const PixelTotals& t, double scale, int paths, double se, double* acc,
+                         double* acc_indirect) {
+    const auto i = static_cast<size_t>(data_rect.index(x, y));
+    float* out = tile.transient.data() + i * bins;
+    for (int64_t b = t.bin_lo; b < t.bin_hi; ++b) {
+      out[b] = static_cast<float>(acc[size_t(b)] * scale);
+      acc[size_t(b)] = 0.0;
+    }
+    if (split) {
+      float* ind = tile.transient_indirect.data() + i * bins;
+      for (int64_t b = t.bin_lo; b < t.bin_hi; ++b) {
+        ind[b] = static_cast<float>(acc_indirect[size_t(b)] * scale);
+        acc_indirect[size_t(b)] = 0.0;
+      }
+    }
+    if (bins > 0 && t.bin_lo < t.bin_hi) {
+      tile.bin_lo[i] = static_cast<int32_t>(t.bin_lo);
+      tile.bin_hi[i] = static_cast<int32_t>(t.bin_hi);
+    }
+    tile.laser_total[i] = t.laser_total * scale;
+    tile.out_of_window[i] = t.out_of_window * scale;
+    tile.beyond_period[i] = t.beyond_period * scale;
+    camera_hits[i] = t.camera_hits;
+    tile.ambient_rate[i] = static_cast<float>(t.ambient_rate * scale);
+    tile.laser_se[i] = static_cast<float>(se);
+    tile.samples[i] = paths;
+  };
+  if (!rc.target_relative_error) {
+    tbb::parallel_for(tbb::blocked_range<int>(data_rect.y0, data_rect.y1()), [&](const tbb::blocked_range<int>& rows) {
+      // Accumulated in double per pixel; stored as float. Pixels are independent, so the split into tasks
+      // does not change any result. Only the bins a pixel touched are copied out and cleared again.
+      std::vector<double> acc(bins, 0.0), acc_indirect(split ? bins : 0, 0.0);
+      RayCounts rays;
+      CameraBlock block;
+      ObjectLaser objects(gt ? im.objects.list.size() : 0);
+      for (int y = rows.begin(); y < rows.end(); ++y)
+        for (int x = data_rect.x0; x < data_rect.x1(); ++x) {
+          // Camera rays travel in packets fixed by the sensor (EmbreeScene::kPacket pixels of a row), so a
+          // tile edge inside a block traces the whole block (and shades only its own pixels).
+          if (x == data_rect.x0 || x % EmbreeScene::kPacket == 0) im.integrator.trace_camera_block(x, y, &block, &rays);
+          const bool split_objects = gt && rect.contains(x, y);
+          const PixelTotals t = im.integrator.render_pixel(x, y, block, axis, acc.data(), &rays,
+                                                           split ? acc_indirect.data() : nullptr,
+                                                           split_objects ? &objects : nullptr);
+          if (split_objects) {
+            put_object_laser(&objects, rect.index(x, y), gt, 1.0);
+            objects.clear();
+          }
+          store(x, y, t, 1.0, rc.samples_per_pixel,
+                standard_error(t.laser_total, t.laser_sq, rc.samples_per_pixel, rc.samples_per_pixel), acc.data(),
+                acc_indirect.data());
         }
-        const auto i = static_cast<size_t>(data_rect.index(x, y));
-        float* out = tile.transient.data() + i * bins;
-        for (int64_t b = t.bin_lo; b < t.bin_hi; ++b) {
-          out[b] = static_cast<float>(acc[size_t(b)]);
-          acc[size_t(b)] = 0.0;
-        }
-        if (split) {
-          float* ind = tile.transient_indirect.data() + i * bins;
-          for (int64_t b = t.bin_lo; b < t.bin_hi; ++b) {
-            ind[b] = static_cast<float>(acc_indirect[size_t(b)]);
-            acc_indirect[size_t(b)] = 0.0;
+      camera_rays += rays.camera;
+      shadow_rays += rays.shadow;
+    });
+  } else {
+    // To a target relative error: each pixel renders in rounds until the standard error of its laser
+    // return is at most the target (or it has max_samples_per_pixel paths), its paths weighted by the
+    // measurement constant alone and the sums divided by the final count. A pixel's rounds depend only on
+    // its own paths, so the result does not depend on tiles or threads.
+    constexpr int kPacket = EmbreeScene::kPacket;
+    constexpr int kChunk = 64;  // samples traced ahead per block at a time (CameraBlock's memory)
+    const double target = *rc.target_relative_error;
+    const int first = rc.samples_per_pixel, most = std::max(rc.max_samples_per_pixel, first);
+    tbb::parallel_for(tbb::blocked_range<int>(data_rect.y0, data_rect.y1()), [&](const tbb::blocked_range<int>& rows) {
+      std::vector<double> acc(bins * kPacket, 0.0), acc_indirect(split ? bins * kPacket : 0, 0.0);
+      RayCounts rays;
+      CameraBlock block;
+      std::vector<ObjectLaser> objects(kPacket, ObjectLaser(gt ? im.objects.list.size() : 0));
+      for (int y = rows.begin(); y < rows.end(); ++y)
+        for (int bx = data_rect.x0 - data_rect.x0 % kPacket; bx < data_rect.x1(); bx += kPacket) {
+          PixelTotals tot[kPacket];
+          int done_to[kPacket], want[kPacket];  // paths rendered, paths wanted after this round
+          // Every pixel of the block renders, as in the fixed-count render (a tile edge inside a block
+          // renders the whole block and keeps its own pixels): so the lanes traced together, and with
+          // them each path, do not depend on the tiles.
+          const int lanes = std::min(kPacket, im.camera.width() - bx);
+          for (int i = 0; i < kPacket; ++i) {
+            done_to[i] = 0;
+            want[i] = i < lanes ? first : 0;
+          }
+          while (true) {
+            int lo = INT32_MAX, hi = 0;
+            for (int i = 0; i < kPacket; ++i)
+              if (want[i] > done_to[i]) lo = std::min(lo, done_to[i]), hi = std::max(hi, want[i]);
+            if (hi == 0) break;
+            for (int c0 = lo; c0 < hi; c0 += kChunk) {
+              const int c1 = std::min(hi, c0 + kChunk);
+              int b[kPacket], e[kPacket];
+              for (int i = 0; i < kPacket; ++i) b[i] = std::max(done_to[i], c0), e[i] = std::min(want[i], c1);
+              im.integrator.trace_camera_block(bx, y, c0, c1, b, e, &block, &rays);
+              for (int i = 0; i < kPacket; ++i) {
+                if (b[i] >= e[i]) continue;
+                const int x = bx + i;
+                const bool split_objects = gt && rect.contains(x, y);  // (false outside the tile)
+                im.integrator.add_samples(x, y, block, b[i], e[i], 1.0, axis, acc.data() + size_t(i) * bins, &rays,
+                                          split ? acc_indirect.data() + size_t(i) * bins : nullptr,
+                                          split_objects ? &objects[size_t(i)] : nullptr, &tot[i]);
+              }
+            }
+            for (int i = 0; i < kPacket; ++i) {
+              if (want[i] <= done_to[i]) continue;
+              const int paths = done_to[i] = want[i];
+              const double mean = tot[i].laser_total / paths;
+              const double se = standard_error(tot[i].laser_total, tot[i].laser_sq, paths, 1.0);
+              // No laser light yet, or the target reached, or no paths left: done. Else the paths the
+              // error predicts (it falls as 1 / sqrt(paths)), 10 % more, at most 8 times as many.
+              if (!(mean > 0.0) || se <= target * mean || paths >= most) continue;
+              const double r = se / (target * mean);
+              const double need = std::ceil(paths * r * r * 1.1);
+              want[i] = static_cast<int>(std::min<double>({need, 8.0 * paths, double(most)}));
+              want[i] = std::max(want[i], paths + 1);
+            }
+          }
+          for (int i = 0; i < kPacket; ++i) {
+            const int x = bx + i, paths = done_to[i];
+            if (paths == 0) continue;
+            if (x < data_rect.x0 || x >= data_rect.x1()) {  // not this tile's: cleared
+              const PixelTotals& t = tot[i];
+              for (int64_t b = t.bin_lo; b < t.bin_hi; ++b) {
+                acc[size_t(i) * bins + size_t(b)] = 0.0;
+                if (split) acc_indirect[size_t(i) * bins + size_t(b)] = 0.0;
+              }
+              objects[size_t(i)].clear();
+              continue;
+            }
+            const double scale = 1.0 / paths;
+            if (gt && rect.contains(x, y)) {
+              put_object_laser(&objects[size_t(i)], rect.index(x, y), gt, scale);
+              objects[size_t(i)].clear();
+            }
+            store(x, y, tot[i], scale, paths, standard_error(tot[i].laser_total, tot[i].laser_sq, paths, 1.0),
+                  acc.data() + size_t(i) * bins, split ? acc_indirect.data() + size_t(i) * bins : nullptr);
           }
         }
-        if (bins > 0 && t.bin_lo < t.bin_hi) {
-          tile.bin_lo[i] = static_cast<int32_t>(t.bin_lo);
-          tile.bin_hi[i] = static_cast<int32_t>(t.bin_hi);
-        }
-        tile.laser_total[i] = t.laser_total;
-        tile.out_of_window[i] = t.out_of_window;
-        tile.beyond_period[i] = t.beyond_period;
-        camera_hits[i] = t.camera_hits;
-        tile.ambient_rate[i] = static_cast<float>(t.ambient_rate);
-      }
-    camera_rays += rays.camera;
-    shadow_rays += rays.shadow;
-  });
+      camera_rays += rays.camera;
+      shadow_rays += rays.shadow;
+    });
+  }
   if (stats) {
     stats->camera_rays += camera_rays.load();
     stats->shadow_rays += shadow_rays.load();

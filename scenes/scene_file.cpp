@@ -454,12 +454,23 @@ ojson to_ordered(const json& v) {
   }
 }
 
+// The value of a key the scene file does not give: its render.quality preset's, else its default.
+const json& default_of(const json& doc, const Key& k) {
+  static const json::json_pointer quality("/render/quality");
+  if (doc.contains(quality) && doc.at(quality).is_string()) {
+    const json& presets = quality_presets();
+    if (const auto q = presets.find(doc.at(quality).get_ref<const std::string&>()); q != presets.end())
+      if (const auto v = q->find(k.path); v != q->end()) return *v;
+  }
+  return k.def;
+}
+
 // Defaults filled, in schema order.
 ojson resolve(const json& doc) {
   ojson out = ojson::object();
   for (const Key& k : schema()) {
     const json::json_pointer& ptr = k.pointer;
-    json v = doc.contains(ptr) ? doc.at(ptr) : k.def;
+    json v = doc.contains(ptr) ? doc.at(ptr) : default_of(doc, k);
     // Nested sections are created in schema order as their first key appears.
     ojson* node = &out;
     size_t start = 1;
@@ -568,6 +579,10 @@ void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string
       warnings.push_back("acquisition.intensity: an exposure of " + format_bound(longest / kUs) +
                          " us is longer than one frame at " + format_bound(c.acquisition.frame_rate_Hz) + " fps");
   }
+  if (c.render.target_relative_error && c.render.max_samples_per_pixel < c.render.samples_per_pixel)
+    err("/render/max_samples_per_pixel", "found " + std::to_string(c.render.max_samples_per_pixel) +
+                                             ", expected at least render.samples_per_pixel (" +
+                                             std::to_string(c.render.samples_per_pixel) + "), the paths of the first round");
   if (c.render.window_start_s.has_value() != c.render.window_stop_s.has_value())
     err("/render/window_stop_ns", "expected render.window_start_ns and render.window_stop_ns both set or both null");
   else if (c.render.window_start_s && *c.render.window_stop_s <= *c.render.window_start_s)

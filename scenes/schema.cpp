@@ -283,6 +283,9 @@ void add_ignored_when(std::vector<Key>& keys) {
     return c.acquisition.intensity.exposure != Exposure::Dual
                ? "acquisition.intensity.exposure is " + quoted(c.acquisition.intensity.exposure) : "";
   });
+  when({"/render/max_samples_per_pixel"}, [](const RunConfig& c) {
+    return c.render.target_relative_error ? std::string() : std::string("render.target_relative_error is null");
+  });
   when({"/laser/half_angle_deg"}, [=](const RunConfig& c) {
     return c.laser.beam != Beam::Cone ? "laser.beam is " + quoted(c.laser.beam) : "";
   });
@@ -401,7 +404,10 @@ std::vector<Key> build() {
   k.push_back(number("/acquisition/intensity/dual_ratio", FIELD(acquisition.intensity.dual_ratio), kNone, closed(1, 1e6), "tau_L / tau_S in dual exposure"));
   k.push_back(boolean("/acquisition/intensity/laser_on", FIELD(acquisition.intensity.laser_on), "add the laser's mean photon rate to the ambient light in intensity mode"));
 
-  k.push_back(integer("/render/samples_per_pixel", FIELD(render.samples_per_pixel), kNone, closed(1, 1e7), "paths per pixel"));
+  k.push_back(choice("/render/quality", FIELD(render.quality), "preset of samples_per_pixel, target_relative_error and max_samples_per_pixel (draft, standard, reference; docs/accuracy.md); custom: those keys as given. A key given explicitly wins over the preset"));
+  k.push_back(integer("/render/samples_per_pixel", FIELD(render.samples_per_pixel), kNone, closed(1, 1e7), "paths per pixel; with target_relative_error, the paths of the first round, which every pixel gets"));
+  k.push_back(number("/render/target_relative_error", FIELD(render.target_relative_error), kNone, open_closed(0, 1), "null: samples_per_pixel paths in every pixel; else each pixel adds paths until the Monte Carlo standard error of its laser return is at most this fraction of it (or it has max_samples_per_pixel); laser.exr records each pixel's paths and standard error"));
+  k.push_back(integer("/render/max_samples_per_pixel", FIELD(render.max_samples_per_pixel), kNone, closed(1, 1e7), "the most paths a pixel gets with target_relative_error"));
   k.push_back(integer("/render/max_bounces", FIELD(render.max_bounces), kNone, closed(1, 64), "surface interactions per path (1 = direct light only)"));
   k.push_back(integer("/render/russian_roulette_from", FIELD(render.russian_roulette_from), kNone, closed(1, 64), "bounce from which paths may be stopped by Russian roulette"));
   k.push_back(number("/render/time_bin_ps", FIELD(render.time_bin_s), kPsUnit, open_closed(0, 1e6), "transient bin width"));
@@ -428,6 +434,16 @@ std::vector<Key> build() {
 #undef FIELD
 
 }  // namespace
+
+const nlohmann::json& quality_presets() {
+  // Measured on the shipped scenes (docs/accuracy.md, bench/accuracy.py).
+  static const json p = {
+      {"draft", {{"/render/samples_per_pixel", 4}, {"/render/target_relative_error", nullptr}, {"/render/max_samples_per_pixel", 1024}}},
+      {"standard", {{"/render/samples_per_pixel", 16}, {"/render/target_relative_error", 0.02}, {"/render/max_samples_per_pixel", 256}}},
+      {"reference", {{"/render/samples_per_pixel", 64}, {"/render/target_relative_error", 0.005}, {"/render/max_samples_per_pixel", 4096}}},
+  };
+  return p;
+}
 
 const std::vector<Key>& schema() {
   static const std::vector<Key> s = build();

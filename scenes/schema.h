@@ -67,6 +67,10 @@ struct NamedSection {
 };
 
 // Every key of a scene file, in the order the resolved scene file lists them.
+// render.quality's presets: for each preset name, the keys (JSON pointers) it sets and their values in the
+// scene file's units. A key the scene file gives keeps its own value (docs/accuracy.md).
+const nlohmann::json& quality_presets();
+
 const std::vector<Key>& schema();
 
 // The sections of named elements, listed after every key of schema() in the resolved scene file.
