@@ -166,14 +166,19 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
       shadow_rays += rays.shadow;
     });
   } else {
-    // To a target relative error: each pixel renders in rounds until the standard error of its laser
-    // return is at most the target (or it has max_samples_per_pixel paths), its paths weighted by the
-    // measurement constant alone and the sums divided by the final count. A pixel's rounds depend only on
-    // its own paths, so the result does not depend on tiles or threads.
+    // To a target relative error, in two rounds per pixel. The first, samples_per_pixel paths (laser
+    // totals only), estimates the paths' relative spread and decides the count n of the second: the
+    // count whose standard error would be the target, at least samples_per_pixel, at most
+    // max_samples_per_pixel. The estimate is the second round's n paths, samples [first, first + n) of
+    // the pixel: fresh paths, independent of the decision, so it is unbiased (a rule that stops on the
+    // paths it averages stops early where the rare bright paths have not come yet, and is biased low:
+    // tests/render/accuracy_test.cpp). The block's 8 pixels render together, and a pixel's rounds depend
+    // on its own paths only, so the result does not depend on tiles or threads.
     constexpr int kPacket = EmbreeScene::kPacket;
     constexpr int kChunk = 64;  // samples traced ahead per block at a time (CameraBlock's memory)
     const double target = *rc.target_relative_error;
     const int first = rc.samples_per_pixel, most = std::max(rc.max_samples_per_pixel, first);
+    const TimeAxis totals_only{axis.start_s, axis.bin_width_s, 0, axis.period_s};
     tbb::parallel_for(tbb::blocked_range<int>(data_rect.y0, data_rect.y1()), [&](const tbb::blocked_range<int>& rows) {
       std::vector<double> acc(bins * kPacket, 0.0), acc_indirect(split ? bins * kPacket : 0, 0.0);
       RayCounts rays;
@@ -181,52 +186,52 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
       std::vector<ObjectLaser> objects(kPacket, ObjectLaser(gt ? im.objects.list.size() : 0));
       for (int y = rows.begin(); y < rows.end(); ++y)
         for (int bx = data_rect.x0 - data_rect.x0 % kPacket; bx < data_rect.x1(); bx += kPacket) {
-          PixelTotals tot[kPacket];
-          int done_to[kPacket], want[kPacket];  // paths rendered, paths wanted after this round
           // Every pixel of the block renders, as in the fixed-count render (a tile edge inside a block
           // renders the whole block and keeps its own pixels): so the lanes traced together, and with
           // them each path, do not depend on the tiles.
           const int lanes = std::min(kPacket, im.camera.width() - bx);
-          for (int i = 0; i < kPacket; ++i) {
-            done_to[i] = 0;
-            want[i] = i < lanes ? first : 0;
-          }
-          while (true) {
+          int begin[kPacket], end[kPacket];
+          // Samples [begin[i], end[i]) of lane i, in chunks; each lane's share goes to add(i, b, e).
+          const auto render_rounds = [&](auto add) {
             int lo = INT32_MAX, hi = 0;
             for (int i = 0; i < kPacket; ++i)
-              if (want[i] > done_to[i]) lo = std::min(lo, done_to[i]), hi = std::max(hi, want[i]);
-            if (hi == 0) break;
+              if (begin[i] < end[i]) lo = std::min(lo, begin[i]), hi = std::max(hi, end[i]);
             for (int c0 = lo; c0 < hi; c0 += kChunk) {
               const int c1 = std::min(hi, c0 + kChunk);
               int b[kPacket], e[kPacket];
-              for (int i = 0; i < kPacket; ++i) b[i] = std::max(done_to[i], c0), e[i] = std::min(want[i], c1);
+              for (int i = 0; i < kPacket; ++i) b[i] = std::max(begin[i], c0), e[i] = std::min(end[i], c1);
               im.integrator.trace_camera_block(bx, y, c0, c1, b, e, &block, &rays);
-              for (int i = 0; i < kPacket; ++i) {
-                if (b[i] >= e[i]) continue;
-                const int x = bx + i;
-                const bool split_objects = gt && rect.contains(x, y);  // (false outside the tile)
-                im.integrator.add_samples(x, y, block, b[i], e[i], 1.0, axis, acc.data() + size_t(i) * bins, &rays,
-                                          split ? acc_indirect.data() + size_t(i) * bins : nullptr,
-                                          split_objects ? &objects[size_t(i)] : nullptr, &tot[i]);
-              }
+              for (int i = 0; i < kPacket; ++i)
+                if (b[i] < e[i]) add(i, b[i], e[i]);
             }
-            for (int i = 0; i < kPacket; ++i) {
-              if (want[i] <= done_to[i]) continue;
-              const int paths = done_to[i] = want[i];
-              const double mean = tot[i].laser_total / paths;
-              const double se = standard_error(tot[i].laser_total, tot[i].laser_sq, paths, 1.0);
-              // No laser light yet, or the target reached, or no paths left: done. Else the paths the
-              // error predicts (it falls as 1 / sqrt(paths)), 10 % more, at most 8 times as many.
-              if (!(mean > 0.0) || se <= target * mean || paths >= most) continue;
+          };
+          PixelTotals pilot[kPacket], tot[kPacket];
+          for (int i = 0; i < kPacket; ++i) begin[i] = 0, end[i] = i < lanes ? first : 0;
+          render_rounds([&](int i, int b, int e) {
+            im.integrator.add_samples(bx + i, y, block, b, e, 1.0, totals_only, nullptr, &rays, nullptr, nullptr, &pilot[i]);
+          });
+          for (int i = 0; i < lanes; ++i) {
+            // The paths the pilot's spread asks for (the error falls as 1 / sqrt(paths)), 10 % more; no
+            // laser light in the pilot: as many as it had.
+            const double mean = pilot[i].laser_total / first;
+            const double se = standard_error(pilot[i].laser_total, pilot[i].laser_sq, first, 1.0);
+            double want = first;
+            if (mean > 0.0 && se > 0.0) {
               const double r = se / (target * mean);
-              const double need = std::ceil(paths * r * r * 1.1);
-              want[i] = static_cast<int>(std::min<double>({need, 8.0 * paths, double(most)}));
-              want[i] = std::max(want[i], paths + 1);
+              want = std::clamp(std::ceil(first * r * r * 1.1), double(first), double(most));
             }
+            begin[i] = first, end[i] = first + int(want);
           }
-          for (int i = 0; i < kPacket; ++i) {
-            const int x = bx + i, paths = done_to[i];
-            if (paths == 0) continue;
+          render_rounds([&](int i, int b, int e) {
+            const int x = bx + i;
+            const bool own = x >= data_rect.x0 && x < data_rect.x1();
+            const bool split_objects = gt && own && rect.contains(x, y);
+            im.integrator.add_samples(x, y, block, b, e, 1.0, axis, acc.data() + size_t(i) * bins, &rays,
+                                      split ? acc_indirect.data() + size_t(i) * bins : nullptr,
+                                      split_objects ? &objects[size_t(i)] : nullptr, &tot[i]);
+          });
+          for (int i = 0; i < lanes; ++i) {
+            const int x = bx + i, paths = end[i] - begin[i];
             if (x < data_rect.x0 || x >= data_rect.x1()) {  // not this tile's: cleared
               const PixelTotals& t = tot[i];
               for (int64_t b = t.bin_lo; b < t.bin_hi; ++b) {

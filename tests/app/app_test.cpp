@@ -129,6 +129,37 @@ TEST_F(App, OutputsAreBitIdenticalForAnyThreadCountAndTileSize) {
   expect_same_outputs(dir_ / "a", dir_ / "b");
 }
 
+// A render to a target error decides each pixel's paths from its own first round: the same bits for any
+// thread count and tile size; laser.exr records every pixel's paths and standard error, and metadata.json
+// their summary.
+TEST_F(App, TargetErrorOutputsAreBitIdenticalForAnyThreadCountAndTileSize) {
+  // (kSmall gives samples_per_pixel, which the preset then leaves: given back its value here.)
+  const std::string q = " --set render.quality=standard --set render.samples_per_pixel=16 --set render.split_direct_indirect=true -o ";
+  ASSERT_EQ(sh("run " + kSmall + " --threads 1 --set render.tile_size_px=8" + q + (dir_ / "a").string()).code, 0);
+  ASSERT_EQ(sh("run " + kSmall + " --threads 2 --set render.tile_size_px=16" + q + (dir_ / "b").string()).code, 0);
+  expect_same_outputs(dir_ / "a", dir_ / "b");
+  const auto laser = spadgen::writers::read_exr((dir_ / "a/laser.exr").string());
+  const auto& se = laser.channels.at("standard_error");
+  const auto& n = laser.channels.at("samples");
+  const auto& l = laser.channels.at("photons_per_pulse");
+  const auto meta = nlohmann::json::parse(slurp(dir_ / "a/metadata.json"));
+  const auto& acc = meta.at("accuracy");
+  EXPECT_EQ(acc.at("target_relative_error"), 0.02);
+  const int first = meta["resolved_scene"]["render"]["samples_per_pixel"], most = meta["resolved_scene"]["render"]["max_samples_per_pixel"];
+  double paths = 0;
+  int over = 0, lit = 0;
+  for (size_t i = 0; i < n.size(); ++i) {
+    ASSERT_GE(n[i], float(first));
+    ASSERT_LE(n[i], float(most));
+    paths += n[i];
+    if (l[i] > 0) ++lit, over += se[i] > 0.04f * l[i] && n[i] < float(most);
+  }
+  EXPECT_DOUBLE_EQ(acc.at("samples_per_pixel").at("mean").get<double>(), paths / double(n.size()));
+  EXPECT_EQ(acc.at("laser_relative_standard_error").at("pixels_with_laser"), lit);
+  EXPECT_LE(acc.at("laser_relative_standard_error").at("median").get<double>(), 0.02 * 1.25);
+  EXPECT_LE(over, lit / 10);
+}
+
 // outputs.storage = zarr changes the container only: every stack of a Zarr run holds the .npy run's values
 // element for element (the saved light, the transients and their indirect part included), frames stay a
 // .npy, and every other file is the same bytes. Zarr stores are read here with writers::ZarrReader (itself

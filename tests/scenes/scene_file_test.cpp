@@ -12,6 +12,7 @@
 #include "core/units.h"
 #include "scenes/input.h"
 #include "scenes/scene_file.h"
+#include "scenes/schema.h"
 
 namespace spadgen::scenes {
 namespace {
@@ -109,6 +110,42 @@ TEST_F(SceneFileTest, StreamSeedsDefaultToTheSeed) {
   EXPECT_EQ(render_stage(r.config, {}).light_seed, 9u);
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "seeds": {"chip": -1}})"),
               HasSubstr("/seeds/chip: found -1 (an integer), expected an integer in [0, 9.0072e+15], or null"));
+}
+
+// render.quality fills the sampling keys the file does not give, with the values quality_presets() lists;
+// a key given (in the file or by --set) keeps its own; the resolved file holds the values, so it
+// resolves to itself.
+TEST_F(SceneFileTest, QualityPresetsFillTheSamplingKeysNotGiven) {
+  const ResolvedRun d = parse(R"({"gltf": "s.gltf"})");
+  EXPECT_EQ(d.config.render.quality, Quality::Custom);
+  EXPECT_FALSE(d.config.render.target_relative_error.has_value());
+  for (const char* q : {"draft", "standard", "reference"}) {
+    const ResolvedRun r = parse(std::string(R"({"gltf": "s.gltf", "render": {"quality": ")") + q + "\"}}");
+    const nlohmann::json& p = quality_presets().at(q);
+    EXPECT_EQ(r.config.render.samples_per_pixel, p.at("/render/samples_per_pixel").get<int>()) << q;
+    EXPECT_EQ(r.config.render.max_samples_per_pixel, p.at("/render/max_samples_per_pixel").get<int>()) << q;
+    const nlohmann::json& t = p.at("/render/target_relative_error");
+    EXPECT_EQ(r.config.render.target_relative_error.has_value(), !t.is_null()) << q;
+    if (!t.is_null()) {
+      EXPECT_EQ(*r.config.render.target_relative_error, t.get<double>()) << q;
+    }
+    EXPECT_EQ(parse(r.resolved.dump()).config, r.config) << q;
+  }
+  const ResolvedRun s = parse(R"({"gltf": "s.gltf", "render": {"quality": "reference", "max_samples_per_pixel": 300}})",
+                              {"render.samples_per_pixel=128"});
+  EXPECT_EQ(s.config.render.samples_per_pixel, 128);
+  EXPECT_EQ(s.config.render.max_samples_per_pixel, 300);
+  EXPECT_EQ(*s.config.render.target_relative_error, quality_presets().at("reference").at("/render/target_relative_error").get<double>());
+  EXPECT_FALSE(parse(R"({"gltf": "s.gltf", "render": {"quality": "standard", "target_relative_error": null}})")
+                   .config.render.target_relative_error.has_value());
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "render": {"quality": "best"}})"), HasSubstr("/render/quality"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "render": {"target_relative_error": 0.01, "samples_per_pixel": 64, "max_samples_per_pixel": 32}})"),
+              HasSubstr("/render/max_samples_per_pixel: found 32, expected at least render.samples_per_pixel (64)"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "render": {"target_relative_error": 0}})"), HasSubstr("/render/target_relative_error"));
+  // Without a target the most paths do nothing: a warning.
+  const ResolvedRun w = parse(R"({"gltf": "s.gltf", "render": {"max_samples_per_pixel": 64}})");
+  ASSERT_EQ(w.warnings.size(), 1u);
+  EXPECT_THAT(w.warnings[0], HasSubstr("render.max_samples_per_pixel: set to 64 but does nothing: render.target_relative_error is null"));
 }
 
 // Every choice's spelling maps to its enum value and back.

@@ -1,0 +1,141 @@
+// Each pixel's Monte Carlo standard error, and rendering to a target relative error.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+#include "render/integrator.h"
+#include "render/renderer.h"
+#include "scene_builders.h"
+
+namespace spadgen::render {
+namespace {
+
+using test::add_material;
+using test::add_quad;
+using test::test_config;
+
+// A Lambertian corner (a wall and a floor meeting it) lit by the laser at the camera: direct light varies
+// little across a pixel, the indirect light between the two quads a lot, so the paths' spread is real.
+scenes::Scene corner() {
+  scenes::Scene s;
+  const int m = add_material(s, test::lambertian(0.8f));
+  add_quad(s, {0, 0, -1}, {0.6f, 0, 0}, {0, 0.6f, 0}, m);           // wall at z = -1
+  add_quad(s, {0, -0.2f, -0.7f}, {0.6f, 0, 0}, {0, 0, 0.3f}, m);    // floor below the axis, in view
+  return s;
+}
+
+TEST(Accuracy, StandardErrorOfKnownContributions) {
+  // Contributions 1, 2, 3, 4 (scale 1): sample variance 5/3, standard error sqrt(5/3 / 4).
+  EXPECT_NEAR(standard_error(10.0, 30.0, 4, 1.0), std::sqrt(5.0 / 12.0), 1e-15);
+  // The same paths as render_pixel holds them (each divided by n = 4): the same error.
+  EXPECT_NEAR(standard_error(10.0 / 4, 30.0 / 16, 4, 4.0), std::sqrt(5.0 / 12.0), 1e-15);
+  EXPECT_EQ(standard_error(3.0, 9.0, 1, 1.0), 0.0);  // one path: not estimable
+  EXPECT_EQ(standard_error(8.0, 16.0, 4, 1.0), 0.0);  // equal paths
+}
+
+// The reported standard error is the spread of the laser return over independent renders: over 40 light
+// seeds, the pooled variance of each pixel's laser_total over the pooled mean of its squared standard
+// errors. With 64 pixels x 39 degrees of freedom the ratio's own spread is a few per cent; the bounds
+// are wide for the heavy tail of indirect paths at 8 per pixel.
+TEST(Accuracy, StandardErrorIsTheSpreadOverLightSeeds) {
+  const scenes::Scene s = corner();
+  RenderStageConfig c = test_config(16, 16, 0.25e-3);
+  c.render.samples_per_pixel = 8;
+  const PixelRect rect{4, 4, 8, 8};
+  const TimeAxis axis{0.0, 10e-12, 1000, 25e-9};
+  const int seeds = 40;
+  std::vector<double> sum(64, 0.0), sq(64, 0.0), se2(64, 0.0);
+  for (int k = 0; k < seeds; ++k) {
+    c.light_seed = 100 + uint64_t(k);
+    const Renderer r(s, c);
+    const TransientTile t = r.transient(rect, rect, axis);
+    for (size_t i = 0; i < 64; ++i) {
+      sum[i] += t.laser_total[i], sq[i] += t.laser_total[i] * t.laser_total[i];
+      se2[i] += double(t.laser_se[i]) * t.laser_se[i];
+      ASSERT_EQ(t.samples[i], 8);
+    }
+  }
+  double var = 0.0, reported = 0.0;
+  for (size_t i = 0; i < 64; ++i) {
+    var += (sq[i] - sum[i] * sum[i] / seeds) / (seeds - 1);
+    reported += se2[i] / seeds;
+  }
+  ASSERT_GT(reported, 0.0);
+  EXPECT_GT(var / reported, 0.8);
+  EXPECT_LT(var / reported, 1.25);
+}
+
+// To a target: the estimate agrees with a fixed render of 4096 paths within its own errors (no bias from
+// the decision: the first round's paths are not in the estimate), the pixels reach the target or the most
+// paths, and the result does not depend on the tiles.
+TEST(Accuracy, TargetRelativeErrorIsReachedUnbiasedAndTileIndependent) {
+  const scenes::Scene s = corner();
+  RenderStageConfig c = test_config(16, 16, 0.25e-3);
+  c.render.samples_per_pixel = 32;
+  c.render.target_relative_error = 0.01;
+  c.render.max_samples_per_pixel = 2048;
+  const PixelRect rect{0, 0, 16, 16};
+  const TimeAxis axis{0.0, 10e-12, 1000, 25e-9};
+  const TransientTile a = Renderer(s, c).transient(rect, rect, axis);
+
+  RenderStageConfig ref = c;
+  ref.render.target_relative_error.reset();
+  ref.render.samples_per_pixel = 4096;
+  ref.light_seed = 99;  // independent of the adaptive paths
+  const TransientTile b = Renderer(s, ref).transient(rect, rect, axis);
+
+  int lit = 0, more = 0;
+  double dsum = 0.0, var = 0.0, d2 = 0.0;
+  int at_most = 0, missed = 0;
+  std::vector<double> rel;
+  for (size_t i = 0; i < 256; ++i) {
+    if (!(a.laser_total[i] > 0.0)) continue;
+    ++lit;
+    rel.push_back(a.laser_se[i] / a.laser_total[i]);
+    dsum += a.laser_total[i] - b.laser_total[i];
+    d2 += (a.laser_total[i] - b.laser_total[i]) * (a.laser_total[i] - b.laser_total[i]);
+    at_most += a.samples[i] == 2048;
+    missed += a.samples[i] < 2048 && a.laser_se[i] > 0.02 * a.laser_total[i];
+    var += double(a.laser_se[i]) * a.laser_se[i] + double(b.laser_se[i]) * b.laser_se[i];
+    EXPECT_GE(a.samples[i], 32);
+    EXPECT_LE(a.samples[i], 2048);
+    more += a.samples[i] > 32;
+  }
+  ASSERT_GT(lit, 200);
+  std::sort(rel.begin(), rel.end());
+  EXPECT_GT(more, lit / 2);  // the target asks for more than the first round in most pixels
+  // Unbiased: the sum of the differences from the reference over their pooled error is a standard normal
+  // (|z| > 4: false alarm 6e-5).
+  EXPECT_LT(std::abs(dsum / std::sqrt(var)), 4.0);
+  // The errors are right on average: the squared differences over the squared errors, pooled (single
+  // pixels' errors from 32 paths of a heavy-tailed light are themselves uncertain).
+  EXPECT_GT(d2 / var, 0.7);
+  EXPECT_LT(d2 / var, 1.4);
+  // The target is met: the median pixel within 25 % of it, and at most 10 % of the pixels short of the
+  // most paths miss it twice over (the first round underestimated their spread; laser.exr says which).
+  EXPECT_LT(rel[rel.size() / 2], 1.25 * 0.01);
+  EXPECT_LE(missed, lit / 10);
+  EXPECT_GT(at_most, 0);  // and some pixels need more than the most paths: the bound holds them
+
+  // Tiles of 8 x 8 with a halo of 1 (the sensor's data rects): the same bits.
+  for (int ty = 0; ty < 16; ty += 8)
+    for (int tx = 0; tx < 16; tx += 8) {
+      const PixelRect t{tx, ty, 8, 8};
+      const PixelRect d{std::max(0, tx - 1), std::max(0, ty - 1), std::min(16, tx + 9) - std::max(0, tx - 1),
+                        std::min(16, ty + 9) - std::max(0, ty - 1)};
+      const TransientTile p = Renderer(s, c).transient(t, d, axis);
+      for (int y = d.y0; y < d.y1(); ++y)
+        for (int x = d.x0; x < d.x1(); ++x) {
+          const auto i = size_t(rect.index(x, y)), j = size_t(d.index(x, y));
+          ASSERT_EQ(p.laser_total[j], a.laser_total[i]) << x << ", " << y;
+          ASSERT_EQ(p.laser_se[j], a.laser_se[i]);
+          ASSERT_EQ(p.samples[j], a.samples[i]);
+          for (int k = 0; k < 1000; ++k) ASSERT_EQ(p.transient[j * 1000 + size_t(k)], a.transient[i * 1000 + size_t(k)]);
+        }
+    }
+}
+
+}  // namespace
+}  // namespace spadgen::render
