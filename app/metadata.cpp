@@ -48,6 +48,54 @@ json objects_json(const scenes::Scene& scene) {
 // render::Camera centres sensor pixel x at x + 0.5 with the optical axis through the sensor's centre
 // (width / 2, height / 2), and an image's pixel (0, 0) is the crop's corner (x0, y0): hence c = size / 2
 // - 0.5 - crop corner. A camera-frame point (X, Y, Z) lands at u = f X / Z + cx, v = f Y / Z + cy.
+json model_components(const RunConfig& c, const scenes::Scene* scene, const json& from_run) {
+  json out = json::array();
+  const auto add = [&](const char* component, bool active, const std::string& why) {
+    out.push_back({{"component", component}, {"active", active}, {"why", why}});
+  };
+  if (scene) {
+    bool transmissive = false, volumes = false, emission = false;
+    for (const scenes::Material& m : scene->materials) {
+      transmissive |= m.transmissive();
+      volumes |= m.transmissive() && m.thickness_m > 0.0f && std::isfinite(m.attenuation_distance_m);
+      emission |= m.emissive.x > 0.0f || m.emissive.y > 0.0f || m.emissive.z > 0.0f;
+    }
+    add("transmissive surfaces", transmissive,
+        transmissive ? "the glTF has transmissive materials: paths refract through them; the laser's shadow rays cross them in "
+                       "straight lines with their Fresnel transmittance (docs/render.md, Not implemented)"
+                     : "no transmissive material: shadow rays are occlusion tests");
+    add("absorbing volumes", volumes,
+        volumes ? "a transmissive material has a thickness and a finite attenuation distance (KHR_materials_volume)"
+                : "no transmissive material with a thickness and a finite attenuation distance");
+    const bool lights = c.ambient.gltf_lights && !scene->lights.empty();
+    const bool environment = c.ambient.spectral_irradiance_W_m2_nm ? *c.ambient.spectral_irradiance_W_m2_nm > 0.0
+                                                                   : c.ambient.illuminance_lux > 0.0;
+    add("ambient light", environment || lights || emission,
+        std::string(environment ? "ambient.illuminance_lux or spectral_irradiance_W_m2_nm > 0; " : "no ambient environment; ") +
+            (lights ? "glTF punctual lights (ambient.gltf_lights); " : "no glTF light used; ") +
+            (emission ? "emissive materials" : "no emissive material"));
+  } else if (from_run.is_array()) {
+    for (const json& e : from_run)
+      if (e.value("component", "") == "transmissive surfaces" || e.value("component", "") == "absorbing volumes" ||
+          e.value("component", "") == "ambient light")
+        out.push_back(e);
+  }
+  add("indirect light", c.render.max_bounces > 1,
+      "render.max_bounces = " + std::to_string(c.render.max_bounces) + (c.render.max_bounces > 1 ? "" : ": direct light only"));
+  add("target error", c.render.target_relative_error.has_value(),
+      c.render.target_relative_error ? "render.target_relative_error is set: paths per pixel from a first round"
+                                     : "render.target_relative_error is null: render.samples_per_pixel paths in every pixel");
+  add("dark counts", c.sensor.dark_counts, c.sensor.dark_counts ? "sensor.dark_counts is true" : "sensor.dark_counts is false");
+  const bool hot = c.sensor.dark_counts && (c.sensor.pixel_A.hot_pixel_fraction > 0.0 || c.sensor.pixel_B.hot_pixel_fraction > 0.0);
+  add("hot pixels", hot, hot ? "sensor.pixel_*.hot_pixel_fraction > 0" : "no dark counts, or hot_pixel_fraction 0");
+  add("crosstalk", c.sensor.crosstalk, c.sensor.crosstalk ? "sensor.crosstalk is true" : "sensor.crosstalk is false");
+  add("per-pixel gate maps", c.sensor.skew, c.sensor.skew ? "sensor.gate_skew is true" : "sensor.gate_skew is false: every pixel has the nominal gate");
+  add("PDP non-uniformity", c.sensor.pdp_nonuniformity,
+      c.sensor.pdp_nonuniformity ? "sensor.pdp_nonuniformity is true" : "sensor.pdp_nonuniformity is false");
+  add("binary frames", c.outputs.frames, c.outputs.frames ? "outputs.frames is true" : "outputs.frames is false: counts are sampled without frames");
+  return out;
+}
+
 json camera_json(const render::Camera& cam, const PixelRect& img) {
   const double f = cam.focal_length_m() / cam.pitch_m();
   const double cx = 0.5 * cam.width() - 0.5 - img.x0, cy = 0.5 * cam.height() - 0.5 - img.y0;
@@ -126,6 +174,7 @@ json metadata(const scenes::ResolvedRun& resolved, const std::vector<std::string
                                      {"outside_time_window", r.out_of_window_total},
                                      {"outside_fraction", r.laser_total > 0 ? r.out_of_window_total / r.laser_total : 0.0}};
   if (!r.accuracy.is_null()) meta["accuracy"] = ojson::parse(r.accuracy.dump());
+  if (!r.model.is_null()) meta["model"] = ojson::parse(r.model.dump());
   meta["acquisition"] = ojson::parse(sensor.describe().dump());
   meta["ground_truth_layers"] = r.ground_truth_layers;
   meta["ground_truth_objects"] = r.ground_truth_objects;

@@ -45,6 +45,11 @@ nlohmann::json camera_json(const render::Camera& cam, const PixelRect& img);
 // names of its meshes (Scene::meshes, the ground truth's mesh_id) and of their materials.
 nlohmann::json objects_json(const scenes::Scene& scene);
 
+// What of the physical model a run's scene and settings use, for metadata.json "model": one entry per
+// component, {"component", "active", "why"}. The scene's part comes from the scene (null: a sense, which
+// takes it from its source run's metadata.json, `from_run`).
+nlohmann::json model_components(const RunConfig& c, const scenes::Scene* scene, const nlohmann::json& from_run = nullptr);
+
 // What metadata.json reports that only the finished run knows.
 struct RunRecord {
   std::vector<std::string> files;  // as published, metadata.json last
@@ -55,6 +60,7 @@ struct RunRecord {
   int ground_truth_layers = 0;
   int ground_truth_objects = 0;   // the most objects along one ray (object<j> channels below it)
   nlohmann::json objects;         // objects_json(): the scene's objects, ids as in the images
+  nlohmann::json model;                 // model_components()
   nlohmann::json accuracy;              // Outputs: the laser return's standard error and the paths per pixel
   nlohmann::json ground_truth_summary;  // Outputs: hit fraction, range span, meshes in view, deepest layer
   bool counts_u8 = true;

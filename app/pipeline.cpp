@@ -137,6 +137,7 @@ RunResult run(const RunOptions& options) {
   record.files = files;
   record.photons_per_pulse_emitted = renderer.photons_per_pulse();
   record.objects = objects_json(scene);
+  record.model = model_components(cfg, &scene);
   record.camera = camera_json(render::Camera(cfg.camera, scene), img);
   record.threads = options.threads;
   record.dataset = options.dataset;

@@ -332,6 +332,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     record.ground_truth_layers = meta.at("ground_truth_layers").get<int>();
     if (meta.contains("ground_truth_objects")) record.ground_truth_objects = meta.at("ground_truth_objects").get<int>();
     if (meta.contains("objects")) record.objects = meta.at("objects");
+    record.model = model_components(write_cfg, nullptr, meta.contains("model") ? meta.at("model") : nlohmann::json(nullptr));
     if (meta.contains("ground_truth_summary")) record.ground_truth_summary = meta.at("ground_truth_summary");
     record.dataset = options.dataset;
     if (meta.contains("transient")) record.transient_crop = rect_of(meta.at("transient").at("crop_in_sensor"));

@@ -11,6 +11,7 @@
 #include <fstream>
 #include <limits>
 #include <optional>
+#include <set>
 #include <sstream>
 #include <utility>
 
@@ -389,11 +390,12 @@ std::optional<std::pair<KeyPath, Target>> override_target(const std::string& key
 }
 
 // "camera.f_number=2.8" -> (/camera/f_number, 2.8). A value that is not JSON is taken as a string.
-void apply_override(json& doc, const std::string& assignment, Checker& chk) {
+// Returns the key's path (its JSON pointer), "" when the override was refused.
+std::string apply_override(json& doc, const std::string& assignment, Checker& chk) {
   if (const size_t bad = invalid_utf8_at(assignment); bad != std::string::npos) {
     chk.errors.push_back(chk.file + ": --set " + printable(assignment) + ": not valid UTF-8 text (byte " +
                          printable(assignment.substr(bad, 1)) + " at offset " + std::to_string(bad) + ")");
-    return;
+    return {};
   }
   const size_t eq = assignment_split(assignment);
   if (eq == std::string::npos && assignment.find('=') != std::string::npos) {
@@ -403,17 +405,17 @@ void apply_override(json& doc, const std::string& assignment, Checker& chk) {
       parse_key_path(key);
     } catch (const Error& e) {
       chk.override_error(key, e.what());
-      return;
+      return {};
     }
   }
   if (eq == std::string::npos || eq == 0) {
     chk.override_error(assignment, "expected KEY=VALUE, e.g. laser.average_power_mW=5");
-    return;
+    return {};
   }
   const std::string key = assignment.substr(0, eq);
   const std::string text = assignment.substr(eq + 1);
   const auto target = override_target(key, chk);
-  if (!target) return;
+  if (!target) return {};
   const Key& k = *target->second.key;
   json value;
   try {
@@ -424,12 +426,14 @@ void apply_override(json& doc, const std::string& assignment, Checker& chk) {
     if (what.find("nested deeper") != std::string::npos || what.find("beyond the range") != std::string::npos ||
         what.find("appears twice") != std::string::npos) {
       chk.errors.push_back(what);
-      return;
+      return {};
     }
     value = text;
   }
   if ((k.type == Type::String || k.type == Type::Path) && !value.is_string() && !value.is_null()) value = text;  // names that look like numbers
+  const size_t errors = chk.errors.size();
   put(doc, target->first, target->second, value, chk, key);
+  return chk.errors.size() == errors ? k.path : std::string();
 }
 
 // A checked value (a scalar, or an array of scalars) as an ordered_json, as ojson::parse(v.dump()) gives it
@@ -645,7 +649,18 @@ ResolvedRun parse_scene_text(const std::string& text, const std::string& path, c
   json doc = parse_json(text, file);
   if (!doc.is_object()) throw Error(file + ": expected a JSON object at the top, found " + describe_json(doc));
   Checker chk{file, "--set ", {}};
-  for (const std::string& o : overrides) apply_override(doc, o, chk);
+  std::set<std::string> overridden;
+  for (const std::string& o : overrides)
+    if (std::string key = apply_override(doc, o, chk); !key.empty()) overridden.insert(std::move(key));
+  // A quality preset given by --set replaces the sampling keys the scene file gives (the shipped scenes
+  // give samples_per_pixel); a key --set gives keeps its own value.
+  static const json::json_pointer quality("/render/quality");
+  if (overridden.count(quality.to_string()) && doc.at(quality).is_string())
+    if (const auto q = quality_presets().find(doc.at(quality).get<std::string>()); q != quality_presets().end())
+      for (auto it = q->begin(); it != q->end(); ++it) {
+        const json::json_pointer ptr(it.key());
+        if (!overridden.count(it.key()) && doc.contains(ptr)) doc.at(ptr.parent_pointer()).erase(ptr.back());
+      }
   chk.walk(doc, "");
   for (const Key& k : schema())
     if (k.required && !doc.contains(k.pointer))

@@ -439,8 +439,8 @@ const nlohmann::json& quality_presets() {
   // Measured on the shipped scenes (docs/accuracy.md, bench/accuracy.py).
   static const json p = {
       {"draft", {{"/render/samples_per_pixel", 4}, {"/render/target_relative_error", nullptr}, {"/render/max_samples_per_pixel", 1024}}},
-      {"standard", {{"/render/samples_per_pixel", 16}, {"/render/target_relative_error", 0.02}, {"/render/max_samples_per_pixel", 256}}},
-      {"reference", {{"/render/samples_per_pixel", 64}, {"/render/target_relative_error", 0.005}, {"/render/max_samples_per_pixel", 4096}}},
+      {"standard", {{"/render/samples_per_pixel", 32}, {"/render/target_relative_error", 0.02}, {"/render/max_samples_per_pixel", 512}}},
+      {"reference", {{"/render/samples_per_pixel", 128}, {"/render/target_relative_error", 0.005}, {"/render/max_samples_per_pixel", 4096}}},
   };
   return p;
 }

@@ -10,6 +10,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <unistd.h>
@@ -134,7 +135,7 @@ TEST_F(App, OutputsAreBitIdenticalForAnyThreadCountAndTileSize) {
 // their summary.
 TEST_F(App, TargetErrorOutputsAreBitIdenticalForAnyThreadCountAndTileSize) {
   // (kSmall gives samples_per_pixel, which the preset then leaves: given back its value here.)
-  const std::string q = " --set render.quality=standard --set render.samples_per_pixel=16 --set render.split_direct_indirect=true -o ";
+  const std::string q = " --set render.quality=standard --set render.samples_per_pixel=32 --set render.split_direct_indirect=true -o ";
   ASSERT_EQ(sh("run " + kSmall + " --threads 1 --set render.tile_size_px=8" + q + (dir_ / "a").string()).code, 0);
   ASSERT_EQ(sh("run " + kSmall + " --threads 2 --set render.tile_size_px=16" + q + (dir_ / "b").string()).code, 0);
   expect_same_outputs(dir_ / "a", dir_ / "b");
@@ -158,6 +159,18 @@ TEST_F(App, TargetErrorOutputsAreBitIdenticalForAnyThreadCountAndTileSize) {
   EXPECT_EQ(acc.at("laser_relative_standard_error").at("pixels_with_laser"), lit);
   EXPECT_LE(acc.at("laser_relative_standard_error").at("median").get<double>(), 0.02 * 1.25);
   EXPECT_LE(over, lit / 10);
+  // metadata.json "model": what the scene and settings use, each with its reason.
+  std::map<std::string, bool> model;
+  for (const auto& e : meta.at("model")) {
+    model[e.at("component").get<std::string>()] = e.at("active").get<bool>();
+    EXPECT_FALSE(e.at("why").get<std::string>().empty());
+  }
+  EXPECT_TRUE(model.at("transmissive surfaces"));  // the plate
+  EXPECT_FALSE(model.at("ambient light"));         // the paper's dark lab
+  EXPECT_TRUE(model.at("target error"));
+  EXPECT_TRUE(model.at("binary frames"));          // kSmall writes them
+  EXPECT_TRUE(model.at("crosstalk"));
+  EXPECT_EQ(model.at("indirect light"), meta["resolved_scene"]["render"]["max_bounces"].get<int>() > 1);
 }
 
 // outputs.storage = zarr changes the container only: every stack of a Zarr run holds the .npy run's values

@@ -112,9 +112,9 @@ TEST_F(SceneFileTest, StreamSeedsDefaultToTheSeed) {
               HasSubstr("/seeds/chip: found -1 (an integer), expected an integer in [0, 9.0072e+15], or null"));
 }
 
-// render.quality fills the sampling keys the file does not give, with the values quality_presets() lists;
-// a key given (in the file or by --set) keeps its own; the resolved file holds the values, so it
-// resolves to itself.
+// render.quality fills the sampling keys not given, with the values quality_presets() lists; a key given
+// at the preset's level or after it (the file, then --set) keeps its own; the resolved file holds the
+// values, so it resolves to itself.
 TEST_F(SceneFileTest, QualityPresetsFillTheSamplingKeysNotGiven) {
   const ResolvedRun d = parse(R"({"gltf": "s.gltf"})");
   EXPECT_EQ(d.config.render.quality, Quality::Custom);
@@ -136,6 +136,14 @@ TEST_F(SceneFileTest, QualityPresetsFillTheSamplingKeysNotGiven) {
   EXPECT_EQ(s.config.render.samples_per_pixel, 128);
   EXPECT_EQ(s.config.render.max_samples_per_pixel, 300);
   EXPECT_EQ(*s.config.render.target_relative_error, quality_presets().at("reference").at("/render/target_relative_error").get<double>());
+  // The preset given by --set replaces what the file gives (the shipped scenes give samples_per_pixel),
+  // but not what --set gives; given in the file, it leaves the file's keys.
+  const std::string file64 = R"({"gltf": "s.gltf", "render": {"samples_per_pixel": 64, "max_samples_per_pixel": 100}})";
+  EXPECT_EQ(parse(file64, {"render.quality=draft"}).config.render.samples_per_pixel, 4);
+  EXPECT_EQ(parse(file64, {"render.quality=draft"}).config.render.max_samples_per_pixel, 1024);
+  EXPECT_EQ(parse(file64, {"render.samples_per_pixel=8", "render.quality=draft"}).config.render.samples_per_pixel, 8);
+  EXPECT_EQ(parse(file64, {"render.quality=custom"}).config.render.samples_per_pixel, 64);
+  EXPECT_EQ(parse(R"({"gltf": "s.gltf", "render": {"quality": "draft", "samples_per_pixel": 64}})").config.render.samples_per_pixel, 64);
   EXPECT_FALSE(parse(R"({"gltf": "s.gltf", "render": {"quality": "standard", "target_relative_error": null}})")
                    .config.render.target_relative_error.has_value());
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "render": {"quality": "best"}})"), HasSubstr("/render/quality"));

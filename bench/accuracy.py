@@ -1,0 +1,129 @@
+#!/usr/bin/env python3
+"""The renderer's speed/accuracy trade, measured: for each sampling setting (fixed paths per pixel and the
+render.quality presets) on crops of the shipped scenes, its wall time and its error against an independent
+reference render (another light seed, many more paths), in the units users care about:
+
+- the laser return (laser.exr): |error| / reference, median and p90 over the lit pixels, and what the run
+  itself reports (its standard errors, relative, median and p90);
+- the expected counts (N (1 - exp(-lambda)) from detection_rate.npy): p99 of |error| in counts, and the
+  fraction of (gate position, pixel) samples of at least one expected count whose error exceeds half the
+  counts' own shot noise sqrt(E (1 - E / N)) (where the Monte Carlo error starts to matter against the
+  sensor's noise);
+- depth: `spadgen evaluate --noise-free` (edges detector on the expected counts): recall and range error
+  rms in mm against the ground truth, next to the reference's.
+
+    python3 bench/accuracy.py [--spadgen build/app/spadgen] [--work DIR] [--quick] [--markdown FILE]
+
+Writes one table per scene to stdout (Markdown) and, with --markdown, to FILE.
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+sys.path.insert(0, os.path.join(ROOT, "python"))
+import spadgen  # noqa: E402
+
+SCENES = {
+    # The plate over the sphere's edge: glossy plate reflections, the sphere behind the plate.
+    "multi_object": ("scenes/paper/multi_object.json", [448, 200, 128, 64]),
+    # A Lambertian wall: direct light only.
+    "flat_target": ("scenes/paper/flat_target.json", [448, 218, 128, 64]),
+}
+SETTINGS = [
+    ("4 paths", ["render.samples_per_pixel=4"]),
+    ("16 paths (the scenes' default)", ["render.samples_per_pixel=16"]),
+    ("64 paths", ["render.samples_per_pixel=64"]),
+    ("256 paths", ["render.samples_per_pixel=256"]),
+    ("quality=draft", ["render.quality=draft"]),
+    ("quality=standard", ["render.quality=standard"]),
+    ("quality=reference", ["render.quality=reference"]),
+]
+REFERENCE = ["render.samples_per_pixel=2048", "seeds.light=1000"]
+
+
+def run(spadgen_bin, scene, crop, sets, out):
+    cmd = [spadgen_bin, "run", os.path.join(ROOT, scene), "-q", "-o", out, "--set",
+           f"camera.crop=[{','.join(map(str, crop))}]", "--set", "outputs.previews=false"]
+    for s in sets:
+        cmd += ["--set", s]
+    t0 = time.monotonic()
+    subprocess.run(cmd, check=True)
+    seconds = time.monotonic() - t0
+    subprocess.run([spadgen_bin, "evaluate", out, "--noise-free", "-o", out + "-eval"], check=True,
+                   stdout=subprocess.DEVNULL)
+    with open(os.path.join(out + "-eval", "metrics.json")) as f:
+        metrics = json.load(f)
+    return seconds, spadgen.Run(out), metrics
+
+
+def errors(r, ref):
+    laser = r.laser["photons_per_pulse"].astype(np.float64)
+    laser_ref = ref.laser["photons_per_pulse"].astype(np.float64)
+    lit = laser_ref > 0
+    rel = np.abs(laser[lit] - laser_ref[lit]) / laser_ref[lit]
+    se = r.laser["standard_error"].astype(np.float64)[lit] / np.maximum(laser[lit], 1e-300)
+    e = r.expected_counts.astype(np.float64)
+    e_ref = ref.expected_counts.astype(np.float64)
+    n = r.frames_per_k
+    d = np.abs(e - e_ref)
+    counted = e_ref >= 1.0  # below one expected count the shot noise is no scale
+    shot = np.sqrt(np.maximum(e_ref[counted] * (1 - e_ref[counted] / n), 1e-12))
+    return {
+        "laser_err_p50": float(np.median(rel)), "laser_err_p90": float(np.percentile(rel, 90)),
+        "se_p50": float(np.median(se)), "se_p90": float(np.percentile(se, 90)),
+        "counts_err_p99": float(np.percentile(d, 99)),
+        "counts_over_half_shot": float(np.mean(d[counted] > 0.5 * shot)),
+    }
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--spadgen", default=os.path.join(ROOT, "build/app/spadgen"))
+    ap.add_argument("--work", default=None)
+    ap.add_argument("--quick", action="store_true", help="the first two settings and 256 reference paths (a test)")
+    ap.add_argument("--markdown", default=None)
+    a = ap.parse_args()
+    work = a.work or tempfile.mkdtemp(prefix="spadgen-accuracy-")
+    settings = SETTINGS[:2] if a.quick else SETTINGS
+    reference = ["render.samples_per_pixel=256", "seeds.light=1000"] if a.quick else REFERENCE
+    text = []
+    for name, (scene, crop) in SCENES.items():
+        ref_s, ref, ref_m = run(a.spadgen, scene, crop, reference, os.path.join(work, name, "reference"))
+        rows = []
+        for label, sets in settings:
+            slug = label.split(" (")[0].replace(" ", "_").replace("=", "_")
+            s, r, m = run(a.spadgen, scene, crop, sets, os.path.join(work, name, slug))
+            paths = r.metadata["accuracy"]["samples_per_pixel"]["mean"]
+            rows.append((label, s, paths, errors(r, ref), m))
+        text.append(f"### {name} ({crop[2]} x {crop[3]} pixels at ({crop[0]}, {crop[1]}))\n")
+        ref_se = ref.metadata["accuracy"]["laser_relative_standard_error"]
+        text.append(f"Reference: {' '.join(reference)}, {ref_s:.1f} s, its own reported relative standard error "
+                    f"p50 {ref_se['median'] * 100:.2f} % / p90 {ref_se['p90'] * 100:.2f} % (part of every error below); "
+                    f"noise-free depth against the ground truth: recall {ref_m['objects']['recall'] * 100:.2f} %, "
+                    f"range error rms {ref_m['range_error']['rms_mm']:.2f} mm.\n")
+        text.append("| setting | time (s) | paths per pixel | laser error p50 / p90 | reported SE p50 / p90 | "
+                    "counts error p99 | samples over half the shot noise | depth recall | depth rms (mm) |")
+        text.append("|---|---|---|---|---|---|---|---|---|")
+        for label, s, paths, e, m in rows:
+            text.append(f"| {label} | {s:.2f} | {paths:.1f} | {e['laser_err_p50'] * 100:.2f} % / {e['laser_err_p90'] * 100:.2f} % | "
+                        f"{e['se_p50'] * 100:.2f} % / {e['se_p90'] * 100:.2f} % | {e['counts_err_p99']:.3f} | "
+                        f"{e['counts_over_half_shot'] * 100:.2f} % | {m['objects']['recall'] * 100:.2f} % | "
+                        f"{m['range_error']['rms_mm']:.2f} |")
+        text.append("")
+    out = "\n".join(text)
+    print(out)
+    if a.markdown:
+        with open(a.markdown, "w") as f:
+            f.write(out + "\n")
+
+
+if __name__ == "__main__":
+    main()
