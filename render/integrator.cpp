@@ -71,6 +71,8 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
     : config_(config), mesh_object_(mesh_object), embree_(embree), shading_(shading), camera_(camera), laser_(laser),
       ambient_(ambient) {
   transmission_ = scene.has_transmission();
+  for (const scenes::Material& m : scene.materials)
+    refractive_ |= m.transmissive() && m.thickness_m > 0.0f && m.ior != 1.0f;
   ambient_on_ = ambient.any() || shading.has_emission();
   optics_ = config.camera.optics_transmission;
   period_opl_ = kSpeedOfLight / config.laser.repetition_rate_Hz;
@@ -273,18 +275,7 @@ inline bool Integrator::ahead_shadow(const CameraBlock& block, size_t j, LaserRa
   return true;
 }
 
-inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, const FirstSegment* first, double w,
-                                      const PixelFilm& film, RayCounts* rays) const {
-  const double r = lr.r, intensity = lr.intensity;
-  const glm::vec3 wi = lr.wi;
-  if (!v.counted(wi)) return;
-  const Spec f = v.bsdf.eval_cos(wi);
-  if (!(f.x > 0.0f)) return;
-  double extra = 0.0;
-  const Spec tr = shadow_transmittance(lr.origin, wi, float(r), v.shadow_medium_towards(wi), &extra, rays, first);
-  if (!(tr.x > 0.0f)) return;
-  const double value = double(v.beta.x) * f.x * tr.x * intensity / (r * r) * w;
-  const double opl = v.opl + r + extra;
+inline void Integrator::deposit_laser(const NeeVertex& v, double value, double opl, const PixelFilm& film) const {
   if (opl >= period_opl_) film.totals->beyond_period += value;
   deposit(value, config_.laser.emission_delay_s + opl / kSpeedOfLight, film.axis, film.bins, film.totals,
           v.vertices > 0 ? film.indirect_bins : nullptr);
@@ -296,6 +287,171 @@ inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, co
     if (v.seen_through) film.objects->add(mesh_object_[size_t(v.sf.mesh)], value);
     else film.objects->indirect += value;
   }
+}
+
+// The laser seen from v through k refracting interfaces that are parallel planes (the faces of a plate,
+// flat-shaded), in media of indices n_j and thicknesses d_j along their normal (layer 0 at v, layer k at
+// the laser). Snell's invariant p = n_j sin(theta_j) fixes the path: its lateral travel
+// rho(p) = sum_j d_j tan(theta_j) must be the laser's lateral offset D (monotone in p: Newton with
+// bisection). The irradiance at v across the path is I T dOmega / dA: with theta_L the angle at the
+// laser (layer k), rho / sin(theta_L) = sum_j d_j n_k / (n_j cos theta_j) =: A and drho / dtheta_L =
+// n_k cos(theta_L) sum_j d_j / (n_j cos^3 theta_j) =: B, dOmega / dA = 1 / (A B cos theta_0) (1 / r^2
+// without interfaces). The path found is traced: it must cross the same surfaces, else (an edge of the
+// plate between) the straight connection is used. Rough interfaces are crossed as smooth ones (their
+// lobe's blur of the laser's direction is left out, as in the straight connection).
+bool Integrator::connect_laser_refracted(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const {
+  constexpr int kMaxInterfaces = 8;
+  struct Crossing {
+    glm::dvec3 p;
+    glm::vec3 ng;
+    int material;
+    MaterialPoint mp;
+  };
+  const glm::dvec3 x(v.sf.p), L = laser_.position;
+  const glm::dvec3 to = L - x;
+  const double r = glm::length(to);
+  if (!(r > 0.0)) return false;
+  const glm::vec3 d(to / r);
+  // The straight walk finds the interfaces (and an opaque blocker: then nothing arrives, as straight).
+  Crossing cr[kMaxInterfaces];
+  int k = 0, medium = v.shadow_medium_towards(d);
+  int media[kMaxInterfaces + 1];
+  media[0] = medium;
+  bool refracting = false;
+  glm::vec3 o = offset_ray_origin(v.sf.p, v.sf.ng, d);
+  float remaining = float(r);
+  while (true) {
+    RayHit hit;
+    ++rays->shadow;
+    if (!embree_.intersect(o, d, 0.0f, remaining, &hit)) break;
+    const Surface sf = shading_.surface(hit);
+    const ResolvedMaterial& rm = shading_.material(sf.material);
+    if (!(rm.point.transmission > 0.0f)) return true;  // blocked
+    if (k == kMaxInterfaces) return false;
+    const bool entering = glm::dot(d, sf.ng) < 0.0f;
+    if (rm.volume) {
+      medium = entering ? sf.material : -1;
+      refracting = refracting || rm.point.ior != 1.0f;
+    }
+    cr[k] = {glm::dvec3(sf.p), sf.ng, sf.material, shading_.material_at(sf, hit)};
+    // Planar and parallel to the first: else not this connection's case.
+    if (glm::dot(sf.ns, sf.ng) < 1.0f - 1e-6f || std::fabs(glm::dot(sf.ng, cr[0].ng)) < 1.0f - 1e-6f) return false;
+    media[++k] = medium;
+    o = offset_ray_origin(sf.p, sf.ng, d);
+    remaining -= hit.t;
+    if (!(remaining > 0.0f)) break;
+  }
+  if (!refracting) return false;
+  glm::dvec3 nrm(cr[0].ng);
+  if (glm::dot(nrm, to) < 0.0) nrm = -nrm;
+  const double H = glm::dot(to, nrm);
+  double depth[kMaxInterfaces + 1], index[kMaxInterfaces + 1];
+  double h = 0.0, p_max = 1e30;
+  for (int j = 0; j <= k; ++j) {
+    const double next = j < k ? glm::dot(cr[j].p - x, nrm) : H;
+    depth[j] = next - h;
+    h = next;
+    if (depth[j] < 0.0) return false;
+    index[j] = media[j] < 0 ? 1.0 : double(shading_.material(media[j]).point.ior);
+    if (depth[j] > 0.0) p_max = std::min(p_max, index[j]);
+  }
+  const glm::dvec3 lat = to - H * nrm;
+  const double D = glm::length(lat);
+  glm::dvec3 u = D > 1e-12 * r ? lat / D : glm::dvec3(0.0);
+  // rho(p) and its derivative.
+  const auto rho = [&](double p, double* slope) {
+    double s = 0.0, ds = 0.0;
+    for (int j = 0; j <= k; ++j) {
+      const double sn = p / index[j], c = std::sqrt(std::max(0.0, 1.0 - sn * sn));
+      s += depth[j] * sn / c;
+      ds += depth[j] / (index[j] * c * c * c);
+    }
+    *slope = ds;
+    return s;
+  };
+  double p = 0.0;
+  if (D > 0.0) {
+    double lo = 0.0, hi = p_max;
+    p = std::min(index[k] * D / r, 0.5 * (lo + hi));
+    for (int it = 0; it < 100; ++it) {
+      double slope;
+      const double f = rho(p, &slope) - D;
+      if (std::fabs(f) <= 1e-12 * (H + D)) break;
+      (f > 0.0 ? hi : lo) = p;
+      double next = p - f / slope;
+      if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
+      p = next;
+    }
+  }
+  double sn[kMaxInterfaces + 1], cs[kMaxInterfaces + 1];
+  glm::dvec3 dir[kMaxInterfaces + 1];
+  for (int j = 0; j <= k; ++j) {
+    sn[j] = p / index[j], cs[j] = std::sqrt(std::max(0.0, 1.0 - sn[j] * sn[j]));
+    if (!(cs[j] > 0.0)) return false;
+    dir[j] = sn[j] * u + cs[j] * nrm;
+  }
+  const glm::vec3 wi(dir[0]);
+  if (!v.counted(wi)) return true;
+  const Spec f = v.bsdf.eval_cos(wi);
+  if (!(f.x > 0.0f)) return true;
+  const double intensity = laser_.intensity_towards(-dir[k]);
+  if (!(intensity > 0.0)) return true;
+  // Trace the path: each segment must meet the next interface of the straight walk.
+  Spec t(1.0f);
+  double opl = 0.0;
+  glm::dvec3 q = x;
+  glm::vec3 qn = v.sf.ng;
+  for (int j = 0; j <= k; ++j) {
+    const double len = depth[j] / cs[j];
+    const glm::vec3 dj(dir[j]);
+    const glm::vec3 start = offset_ray_origin(glm::vec3(q), qn, dj);
+    ++rays->shadow;
+    RayHit hit;
+    const bool found = embree_.intersect(start, dj, 0.0f, float(len * (1.0 + 1e-5)), &hit);
+    if (j < k) {
+      if (!found) return false;
+      const Surface sf = shading_.surface(hit);
+      if (sf.material != cr[j].material || std::fabs(glm::dot(sf.ng, cr[j].ng)) < 1.0f - 1e-6f) return false;
+      const bool entering = glm::dot(dj, sf.ng) < 0.0f;
+      t *= straight_transmittance(cr[j].mp, float(cs[j]), entering);
+      q = glm::dvec3(sf.p), qn = sf.ng;
+    } else if (found) {
+      const Surface sf = shading_.surface(hit);
+      if (shading_.material(sf.material).point.transmission > 0.0f) return false;
+      return true;  // blocked on the refracted path
+    }
+    if (media[j] >= 0) {
+      const ResolvedMaterial& rm = shading_.material(media[j]);
+      if (rm.absorbing) t *= glm::exp(-rm.sigma * float(len));
+    }
+    opl += index[j] * len;
+  }
+  if (!(t.x > 0.0f)) return true;
+  double A = 0.0, B = 0.0;
+  for (int j = 0; j <= k; ++j) {
+    A += depth[j] * index[k] / (index[j] * cs[j]);
+    B += depth[j] / (index[j] * cs[j] * cs[j] * cs[j]);
+  }
+  B *= index[k] * cs[k];
+  const double g = 1.0 / (A * B * cs[0]);
+  const double value = double(v.beta.x) * f.x * t.x * intensity * g * w;
+  deposit_laser(v, value, v.opl + opl, film);
+  return true;
+}
+
+inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, const FirstSegment* first, double w,
+                                      const PixelFilm& film, RayCounts* rays) const {
+  if (refractive_ && connect_laser_refracted(v, w, film, rays)) return;
+  const double r = lr.r, intensity = lr.intensity;
+  const glm::vec3 wi = lr.wi;
+  if (!v.counted(wi)) return;
+  const Spec f = v.bsdf.eval_cos(wi);
+  if (!(f.x > 0.0f)) return;
+  double extra = 0.0;
+  const Spec tr = shadow_transmittance(lr.origin, wi, float(r), v.shadow_medium_towards(wi), &extra, rays, first);
+  if (!(tr.x > 0.0f)) return;
+  const double value = double(v.beta.x) * f.x * tr.x * intensity / (r * r) * w;
+  deposit_laser(v, value, v.opl + r + extra, film);
 }
 
 // Without an ambient source (ambient_on_ false) a laser-only render skips the ambient sums altogether.

@@ -178,6 +178,10 @@ class Integrator {
 
   // Next-event estimation to the laser from v along lr (first: the shadow ray's first segment when it was
   // traced ahead, else null).
+  // The laser's connection through refracting interfaces (parallel planar faces of volumes: a plate);
+  // false when the path to the laser crosses none, or others (then the straight connection is used).
+  bool connect_laser_refracted(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const;
+  void deposit_laser(const NeeVertex& v, double value, double opl, const PixelFilm& film) const;
   void connect_laser(const NeeVertex& v, const LaserRay& lr, const FirstSegment* first, double w,
                      const PixelFilm& film, RayCounts* rays) const;
 
@@ -193,6 +197,7 @@ class Integrator {
   const Shading& shading_;
   const Camera& camera_;
   const Laser& laser_;
+  bool refractive_ = false;  // a volume material with ior != 1: laser connections may refract
   const Ambient& ambient_;
   bool transmission_ = false;
   bool ambient_on_ = false;
