@@ -299,7 +299,8 @@ inline void Integrator::deposit_laser(const NeeVertex& v, double value, double o
 // without interfaces). The path found is traced: it must cross the same surfaces, else (an edge of the
 // plate between) the straight connection is used. Rough interfaces are crossed as smooth ones (their
 // lobe's blur of the laser's direction is left out, as in the straight connection).
-bool Integrator::connect_laser_refracted(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const {
+bool Integrator::connect_laser_refracted(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays,
+                                         const FirstSegment* first) const {
   constexpr int kMaxInterfaces = 8;
   struct Crossing {
     glm::dvec3 p;
@@ -320,10 +321,17 @@ bool Integrator::connect_laser_refracted(const NeeVertex& v, double w, const Pix
   bool refracting = false;
   glm::vec3 o = offset_ray_origin(v.sf.p, v.sf.ng, d);
   float remaining = float(r);
-  while (true) {
+  for (bool ahead = first != nullptr;; ahead = false) {
     RayHit hit;
-    ++rays->shadow;
-    if (!embree_.intersect(o, d, 0.0f, remaining, &hit)) break;
+    bool found;
+    if (ahead) {  // the camera block traced this segment as a packet
+      found = first->found;
+      hit = first->hit;
+    } else {
+      ++rays->shadow;
+      found = embree_.intersect(o, d, 0.0f, remaining, &hit);
+    }
+    if (!found) break;
     const Surface sf = shading_.surface(hit);
     const ResolvedMaterial& rm = shading_.material(sf.material);
     if (!(rm.point.transmission > 0.0f)) return true;  // blocked
@@ -441,7 +449,7 @@ bool Integrator::connect_laser_refracted(const NeeVertex& v, double w, const Pix
 
 inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, const FirstSegment* first, double w,
                                       const PixelFilm& film, RayCounts* rays) const {
-  if (refractive_ && connect_laser_refracted(v, w, film, rays)) return;
+  if (refractive_ && connect_laser_refracted(v, w, film, rays, first)) return;
   const double r = lr.r, intensity = lr.intensity;
   const glm::vec3 wi = lr.wi;
   if (!v.counted(wi)) return;

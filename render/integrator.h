@@ -180,7 +180,9 @@ class Integrator {
   // traced ahead, else null).
   // The laser's connection through refracting interfaces (parallel planar faces of volumes: a plate);
   // false when the path to the laser crosses none, or others (then the straight connection is used).
-  bool connect_laser_refracted(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const;
+  // first: the straight walk's first segment when the camera block traced it ahead (else null).
+  bool connect_laser_refracted(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays,
+                               const FirstSegment* first) const;
   void deposit_laser(const NeeVertex& v, double value, double opl, const PixelFilm& film) const;
   void connect_laser(const NeeVertex& v, const LaserRay& lr, const FirstSegment* first, double w,
                      const PixelFilm& film, RayCounts* rays) const;
