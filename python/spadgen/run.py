@@ -318,6 +318,26 @@ class Run:
         return self.exr("laser.exr")
 
     @property
+    def laser_standard_error(self):
+        """(H, W) float32 photons per pulse: the Monte Carlo standard error of ``laser["photons_per_pulse"]``
+        (laser.exr ``standard_error``; docs/render.md, "Accuracy"). None for a run saved before it."""
+        laser = self.laser
+        return laser["standard_error"] if "standard_error" in laser else None
+
+    def expected_counts_error_bound(self):
+        """(K, H, W) float32: a first-order bound on the Monte Carlo error of the expected counts, in counts:
+        N exp(-lambda) lambda times the pixel's relative standard error of its laser return (every detection
+        counted as laser light; the bound of docs/render.md, "Accuracy"). Zero where a pixel has no laser
+        light. Needs detection_rate.npy and laser.exr's standard_error."""
+        se = self.laser_standard_error
+        if se is None:
+            raise KeyError(f"{self.path}/laser.exr has no standard_error channel (a run saved before it)")
+        laser = np.asarray(self.laser["photons_per_pulse"], np.float64)
+        rel = np.divide(np.asarray(se, np.float64), laser, out=np.zeros_like(laser), where=laser > 0)
+        lam = np.asarray(self.detection_rate, np.float64)
+        return (self.frames_per_k * np.exp(-lam) * lam * rel[None, :, :]).astype(np.float32)
+
+    @property
     def object_labels(self):
         return self.exr("labels.exr")
 

@@ -82,6 +82,29 @@ def test_unpack_frames_bit_layout():
         spadgen.unpack_frames(packed, 17)
 
 
+def test_standard_error_and_the_counts_bound(sweep):
+    """laser.exr's standard error against metadata.json's summary (computed by the C++ side), and the counts
+    bound against its formula evaluated per element by hand."""
+    se = np.asarray(sweep.laser_standard_error, np.float64)
+    laser = np.asarray(sweep.laser["photons_per_pulse"], np.float64)
+    assert se.shape == laser.shape and (se >= 0).all() and se.max() > 0
+    lit = laser > 0
+    rel = np.sort(se[lit] / laser[lit])
+    acc = sweep.metadata["accuracy"]
+    assert acc["laser_relative_standard_error"]["pixels_with_laser"] == lit.sum()
+    assert acc["laser_relative_standard_error"]["median"] == pytest.approx(rel[len(rel) // 2], rel=1e-5)
+    assert acc["laser_relative_standard_error"]["max"] == pytest.approx(rel[-1], rel=1e-5)
+    bound = sweep.expected_counts_error_bound()
+    lam = np.asarray(sweep.detection_rate, np.float64)
+    assert bound.shape == lam.shape
+    k, y, x = np.unravel_index(np.argmax(bound), bound.shape)
+    n = sweep.frames_per_k
+    by_hand = n * np.exp(-lam[k, y, x]) * lam[k, y, x] * se[y, x] / laser[y, x]
+    assert bound[k, y, x] == pytest.approx(by_hand, rel=1e-5) and by_hand > 0
+    # Never more than the counts' own range.
+    assert (bound <= n).all()
+
+
 def test_laser_image_equals_metadata_totals_and_transients(sweep):
     laser = sweep.laser
     totals = sweep.metadata["laser_photons_per_pulse"]
