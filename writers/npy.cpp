@@ -252,6 +252,32 @@ void NpyWriter::write_frames(const PixelRect& rect, int origin_x, int origin_y, 
   // Bits past the image's right edge are cleared whatever the tile holds there, so that summing
   // unpacked frames never counts pixels that do not exist.
   const int tail_bits = rect.width % 8;
+  if (impl_->map && tail_bits == 0) {
+    // Mapped, whole bytes (every tile but a right-edge one of odd width): the tile's rows go straight into
+    // the mapping, checked once above for the whole tile, each row a copy of a size known at compile time
+    // for the usual tile widths (a 32-pixel tile: 4 bytes a row, millions of rows per band).
+    if (impl_->committed.load(std::memory_order_relaxed))
+      throw Error("cannot write to '" + impl_->path + "': already committed");
+    auto* base = reinterpret_cast<uint8_t*>(impl_->map + impl_->header_bytes + ((rect.y0 - origin_y) * WB + first_byte));
+    const int64_t planes = K * N, rows = rect.height, plane_bytes = H * WB;
+    const auto copy = [&](auto width) {
+      constexpr int64_t B = decltype(width)::value;
+      const int64_t b = B > 0 ? B : bpr;
+      for (int64_t kn = 0; kn < planes; ++kn) {
+        uint8_t* d = base + kn * plane_bytes;
+        for (int64_t row = 0; row < rows; ++row, d += WB, src += b) std::memcpy(d, src, size_t(b));
+      }
+    };
+    switch (bpr) {
+      case 1: copy(std::integral_constant<int64_t, 1>()); break;
+      case 2: copy(std::integral_constant<int64_t, 2>()); break;
+      case 4: copy(std::integral_constant<int64_t, 4>()); break;
+      case 8: copy(std::integral_constant<int64_t, 8>()); break;
+      case 16: copy(std::integral_constant<int64_t, 16>()); break;
+      default: copy(std::integral_constant<int64_t, 0>()); break;
+    }
+    return;
+  }
   const auto tail_mask = static_cast<uint8_t>((1u << tail_bits) - 1u);
   std::vector<uint8_t> row_buf(tail_bits ? size_t(bpr) : 0);
   for (int64_t kn = 0; kn < K * N; ++kn)
