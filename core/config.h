@@ -231,9 +231,9 @@ struct AcquisitionConfig {
 struct RenderConfig {
   Quality quality = Quality::Custom;    // render.quality: a preset of the three keys below
   int samples_per_pixel = 16;           // render.samples_per_pixel (with a target error: the first round)
-  // render.target_relative_error: null renders samples_per_pixel paths in every pixel; else each pixel
-  // adds paths until the standard error of its laser return is at most this fraction of it, or it has
-  // max_samples_per_pixel (docs/render.md, "Accuracy").
+  // render.target_relative_error: null renders samples_per_pixel paths in every pixel; else a first round
+  // of samples_per_pixel paths decides how many paths each pixel's estimate takes for its laser return's
+  // standard error to be this fraction of it, at most max_samples_per_pixel (docs/render.md, "Accuracy").
   std::optional<double> target_relative_error;
   int max_samples_per_pixel = 1024;     // render.max_samples_per_pixel
   int max_bounces = 4;                  // render.max_bounces (1 = direct light only)
