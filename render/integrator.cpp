@@ -415,7 +415,10 @@ bool Integrator::connect_laser_refracted(const NeeVertex& v, double w, const Pix
     const glm::vec3 start = offset_ray_origin(glm::vec3(q), qn, dj);
     ++rays->shadow;
     RayHit hit;
-    const bool found = embree_.intersect(start, dj, 0.0f, float(len * (1.0 + 1e-5)), &hit);
+    // To the next face: the nearest hit, with room for the float error of the faces' positions (the next
+    // face but one is a layer further). To the laser: short of it.
+    const float reach = j < k ? float(len * 1.01 + 1e-4) : float(len * (1.0 - 1e-6));
+    const bool found = embree_.intersect(start, dj, 0.0f, reach, &hit);
     if (j < k) {
       if (!found) return false;
       const Surface sf = shading_.surface(hit);
