@@ -3,10 +3,12 @@
 #include <embree3/rtcore.h>
 
 #include <algorithm>
+#include <array>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <string_view>
 
 #include "core/units.h"
 #include "scenes/input.h"
@@ -49,6 +51,8 @@ json objects_json(const scenes::Scene& scene) {
 // (width / 2, height / 2), and an image's pixel (0, 0) is the crop's corner (x0, y0): hence c = size / 2
 // - 0.5 - crop corner. A camera-frame point (X, Y, Z) lands at u = f X / Z + cx, v = f Y / Z + cy.
 json model_components(const RunConfig& c, const scenes::Scene* scene, const json& from_run) {
+  // The components the scene decides (a sense takes them from its run), in this order.
+  static constexpr std::array<std::string_view, 3> kFromScene{"transmissive surfaces", "absorbing volumes", "ambient light"};
   json out = json::array();
   const auto add = [&](const char* component, bool active, const std::string& why) {
     out.push_back({{"component", component}, {"active", active}, {"why", why}});
@@ -60,25 +64,23 @@ json model_components(const RunConfig& c, const scenes::Scene* scene, const json
       volumes |= m.transmissive() && m.thickness_m > 0.0f && std::isfinite(m.attenuation_distance_m);
       emission |= m.emissive.x > 0.0f || m.emissive.y > 0.0f || m.emissive.z > 0.0f;
     }
-    add("transmissive surfaces", transmissive,
+    add(kFromScene[0].data(), transmissive,
         transmissive ? "the glTF has transmissive materials: paths refract through them; the laser's shadow rays cross them in "
                        "straight lines with their Fresnel transmittance (docs/render.md, Not implemented)"
                      : "no transmissive material: shadow rays are occlusion tests");
-    add("absorbing volumes", volumes,
+    add(kFromScene[1].data(), volumes,
         volumes ? "a transmissive material has a thickness and a finite attenuation distance (KHR_materials_volume)"
                 : "no transmissive material with a thickness and a finite attenuation distance");
     const bool lights = c.ambient.gltf_lights && !scene->lights.empty();
     const bool environment = c.ambient.spectral_irradiance_W_m2_nm ? *c.ambient.spectral_irradiance_W_m2_nm > 0.0
                                                                    : c.ambient.illuminance_lux > 0.0;
-    add("ambient light", environment || lights || emission,
+    add(kFromScene[2].data(), environment || lights || emission,
         std::string(environment ? "ambient.illuminance_lux or spectral_irradiance_W_m2_nm > 0; " : "no ambient environment; ") +
             (lights ? "glTF punctual lights (ambient.gltf_lights); " : "no glTF light used; ") +
             (emission ? "emissive materials" : "no emissive material"));
   } else if (from_run.is_array()) {
     for (const json& e : from_run)
-      if (e.value("component", "") == "transmissive surfaces" || e.value("component", "") == "absorbing volumes" ||
-          e.value("component", "") == "ambient light")
-        out.push_back(e);
+      if (std::find(kFromScene.begin(), kFromScene.end(), e.value("component", "")) != kFromScene.end()) out.push_back(e);
   }
   add("indirect light", c.render.max_bounces > 1,
       "render.max_bounces = " + std::to_string(c.render.max_bounces) + (c.render.max_bounces > 1 ? "" : ": direct light only"));

@@ -171,8 +171,8 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
     // count whose standard error would be the target, at least samples_per_pixel, at most
     // max_samples_per_pixel. The estimate is the second round's n paths, samples [first, first + n) of
     // the pixel: fresh paths, independent of the decision, so it is unbiased (a rule that stops on the
-    // paths it averages stops early where the rare bright paths have not come yet, and is biased low:
-    // tests/render/accuracy_test.cpp). The block's 16 pixels render together, and a pixel's rounds depend
+    // paths it averages stops early where the rare bright paths have not come yet, and is biased low;
+    // tests/render/accuracy_test.cpp checks the estimate against an independent render). The block's 16 pixels render together, and a pixel's rounds depend
     // on its own paths only, so the result does not depend on tiles or threads.
     constexpr int kPacket = EmbreeScene::kPacket;
     constexpr int kChunk = 64;  // samples traced ahead per block at a time (CameraBlock's memory)
