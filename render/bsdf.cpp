@@ -134,6 +134,7 @@ BsdfSample Bsdf::sample(Uniform3 u) const {
   const float pick = u.a * total;
 
   if (pick < diffuse_weight_) {
+    s.lobe = kDiffuseLobe;
     const float p = diffuse_weight_ / total;
     const float r = std::sqrt(u.b), phi = 2.0f * kPiF * u.c;
     const glm::vec3 wi(r * std::cos(phi), r * std::sin(phi), std::sqrt(std::max(0.0f, 1.0f - u.b)));
@@ -145,6 +146,7 @@ BsdfSample Bsdf::sample(Uniform3 u) const {
   }
 
   if (pick < diffuse_weight_ + specular_weight_) {
+    s.lobe = kSpecularLobe;
     const float p = specular_weight_ / total;
     if (m_.smooth()) {
       s.delta = true;
@@ -171,6 +173,7 @@ BsdfSample Bsdf::sample(Uniform3 u) const {
 
   const float p = transmission_weight_ / total;
   s.transmitted = true;
+  s.lobe = kTransmissionLobe;
   const Spec tint = (1.0f - m_.metallic) * m_.transmission * m_.base;
   if (m_.smooth()) {
     s.delta = true;
@@ -215,6 +218,84 @@ BsdfSample Bsdf::sample(Uniform3 u) const {
   if (glm::dot(s.wi, ng_) >= 0.0f) return s;
   s.weight = tint * (g * g1_o_ * c / (wo_.z * h.z * p));
   return s;
+}
+
+LobeValues Bsdf::lobes(const glm::vec3& wi_world) const {
+  LobeValues out;
+  for (int l = 0; l < kLobes; ++l) out.f_cos[l] = Spec(0.0f), out.pdf[l] = 0.0f;
+  const float total = diffuse_weight_ + specular_weight_ + transmission_weight_;
+  if (!(total > 0.0f)) return out;
+  const glm::vec3 wi = to_local(wi_world);
+  const float g = glm::dot(wi_world, ng_);
+  if (g > 0.0f && wi.z > 0.0f) {
+    if (diffuse_weight_ > 0.0f) {
+      const float k = m_.lambertian ? 1.0f : (1.0f - m_.metallic) * (1.0f - m_.transmission) * (1.0f - fresnel_o_);
+      out.f_cos[kDiffuseLobe] = m_.base * (k * wi.z / kPiF);
+      out.pdf[kDiffuseLobe] = diffuse_weight_ / total * wi.z / kPiF;
+    }
+    if (!m_.smooth() && specular_weight_ > 0.0f) {
+      const glm::vec3 h = glm::normalize(wo_ + wi);
+      const float c = glm::dot(wo_, h);
+      if (c > 0.0f && h.z > 0.0f) {
+        out.f_cos[kSpecularLobe] = specular_f(wo_, wi) * wi.z;
+        out.pdf[kSpecularLobe] = specular_weight_ / total * ggx_d(m_.alpha, h.z) * h.z / (4.0f * c);
+      }
+    }
+    return out;
+  }
+  if (g < 0.0f && wi.z < 0.0f && !m_.smooth() && transmission_weight_ > 0.0f) {
+    float pdf = 0.0f;
+    if (m_.thin_walled) {
+      const glm::vec3 wr(wi.x, wi.y, -wi.z);
+      const glm::vec3 h = glm::normalize(wo_ + wr);
+      const float c = glm::dot(wo_, h);
+      if (c > 0.0f && h.z > 0.0f) pdf = ggx_d(m_.alpha, h.z) * h.z / (4.0f * c);
+    } else {
+      glm::vec3 h = glm::normalize(wo_ + eta_ * wi);
+      if (h.z < 0.0f) h = -h;
+      const float co = glm::dot(wo_, h), ci = glm::dot(wi, h);
+      const float denom = co + eta_ * ci;
+      if (co > 0.0f && ci < 0.0f && h.z > 0.0f)
+        pdf = ggx_d(m_.alpha, h.z) * h.z * eta_ * eta_ * std::fabs(ci) / (denom * denom);
+    }
+    if (pdf > 0.0f) {
+      out.f_cos[kTransmissionLobe] = transmission_f(wo_, wi) * std::fabs(wi.z);
+      out.pdf[kTransmissionLobe] = transmission_weight_ / total * pdf;
+    }
+  }
+  return out;
+}
+
+bool Bsdf::refracted_direction(glm::vec3* out) const {
+  if (!(transmission_weight_ > 0.0f)) return false;
+  if (m_.thin_walled) {
+    *out = -to_world(wo_);
+    return true;
+  }
+  const float sin2_t = (1.0f - wo_.z * wo_.z) / (eta_ * eta_);
+  if (sin2_t >= 1.0f) return false;
+  *out = to_world(glm::vec3(-wo_.x / eta_, -wo_.y / eta_, -std::sqrt(1.0f - sin2_t)));
+  return true;
+}
+
+bool sample_glossy_target(const GlossyTarget& g, float u, float v, glm::vec3* w) {
+  glm::vec3 t, b;
+  make_basis(g.n, &t, &b);
+  const glm::vec3 ml = sample_ggx(g.alpha, u, v);
+  const glm::vec3 m = ml.x * t + ml.y * b + ml.z * g.n;
+  const glm::vec3 out = 2.0f * glm::dot(g.wl, m) * m - g.wl;  // the reflection towards the vertex
+  if (!(glm::dot(out, g.n) > 0.0f) || !(glm::dot(g.wl, m) > 0.0f)) return false;
+  *w = -glm::normalize(out);
+  return true;
+}
+
+float glossy_target_pdf(const GlossyTarget& g, const glm::vec3& w) {
+  const glm::vec3 out = -w;
+  if (!(glm::dot(out, g.n) > 0.0f)) return 0.0f;
+  const glm::vec3 m = glm::normalize(out + g.wl);
+  const float c = glm::dot(out, m), cm = glm::dot(m, g.n);
+  if (!(c > 0.0f) || !(cm > 0.0f)) return 0.0f;
+  return ggx_d(g.alpha, cm) * cm / (4.0f * c);
 }
 
 Spec straight_transmittance(const MaterialPoint& m, float cos_theta, bool entering) {

@@ -33,11 +33,23 @@ struct MaterialPoint {
   bool smooth() const { return alpha < 1e-3f; }
 };
 
+// The lobes a Bsdf samples from, one at a time (Bsdf::sample picks one by its weight).
+enum Lobe : int { kDiffuseLobe = 0, kSpecularLobe = 1, kTransmissionLobe = 2, kLobes = 3 };
+
 struct BsdfSample {
   glm::vec3 wi{0.0f};
   Spec weight{0.0f};      // f cos / pdf (divided by the lobe's selection probability)
   bool delta = false;     // from a smooth (Dirac) lobe: no next-event estimation possible there
   bool transmitted = false;
+  Lobe lobe = kDiffuseLobe;
+};
+
+// Each non-Dirac lobe's share of f |cos| at one direction, and the density (per steradian) with which
+// Bsdf::sample draws that direction through that lobe, its selection probability included. sample()'s
+// weight for a direction drawn through lobe L is f_cos[L] / pdf[L].
+struct LobeValues {
+  Spec f_cos[kLobes];
+  float pdf[kLobes];
 };
 
 // The BSDF in a local frame around the shading normal, oriented to wo's side.
@@ -58,6 +70,19 @@ class Bsdf {
   // Ratio n(wi side) / n(wo side) for a transmitted direction.
   float eta() const { return eta_; }
 
+  // The lobes at wi_world: eval_cos(wi) is the sum of f_cos, and sample() draws wi through lobe L with
+  // density pdf[L] (0 for Dirac lobes, whose f_cos is 0 too).
+  LobeValues lobes(const glm::vec3& wi_world) const;
+  // The directions a smooth interface would send wo to: its mirror reflection, and its refraction (a
+  // volume) or straight continuation (thin-walled); false when the material transmits nothing or the
+  // refraction is totally reflected.
+  glm::vec3 mirror_direction() const { return to_world(glm::vec3(-wo_.x, -wo_.y, wo_.z)); }
+  bool refracted_direction(glm::vec3* out) const;
+  // The shading normal on wo's side, and the GGX alpha.
+  const glm::vec3& normal() const { return n_; }
+  float alpha() const { return m_.alpha; }
+  bool glossy() const { return !m_.lambertian && !m_.smooth(); }
+
  private:
   glm::vec3 to_local(const glm::vec3& v) const { return {glm::dot(v, t_), glm::dot(v, b_), glm::dot(v, n_)}; }
   glm::vec3 to_world(const glm::vec3& v) const { return v.x * t_ + v.y * b_ + v.z * n_; }
@@ -73,6 +98,18 @@ class Bsdf {
   float g1_o_ = 1.0f;         // Smith G1(wo), shared by every evaluation
   float diffuse_weight_ = 0.0f, specular_weight_ = 0.0f, transmission_weight_ = 0.0f;
 };
+
+// A glossy reflection of the laser at a surface ahead of a path vertex (Integrator's guided connection):
+// the surface's normal n (unit, on the vertex's side), the laser's direction wl seen from it (unit, on
+// n's side) and a GGX alpha. sample_glossy_target draws a direction w from the vertex towards the surface
+// whose half-vector at the surface, normalize(-w + wl), follows GGX(alpha) (density D(m) m.n); false
+// when the draw reflects below the surface. glossy_target_pdf is that draw's density of w, per steradian.
+struct GlossyTarget {
+  glm::vec3 n{0.0f}, wl{0.0f};
+  float alpha = 0.0f;
+};
+bool sample_glossy_target(const GlossyTarget& g, float u, float v, glm::vec3* w);
+float glossy_target_pdf(const GlossyTarget& g, const glm::vec3& w);
 
 // Fraction of light a transmissive surface passes straight through along direction d (used by shadow
 // rays and ground-truth layers, which ignore refraction bending): (1 - F(cos, ior)) times transmission,

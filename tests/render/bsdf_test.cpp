@@ -125,6 +125,80 @@ TEST(Bsdf, RoughLobesSampleWhatTheyEvaluateAndConserveEnergy) {
     }
 }
 
+// lobes() describes sample(): every non-Dirac draw's weight is its lobe's f_cos / pdf, and each lobe's
+// density integrates, over uniformly drawn directions, to the share of draws that lobe makes and keeps.
+TEST(Bsdf, LobeDensitiesAreTheSamplersDensities) {
+  struct Case {
+    const char* name;
+    MaterialPoint m;
+  };
+  MaterialPoint plate = gltf(1.0f, 0.0f, 0.3f, 0.95f, false);
+  const Case cases[] = {{"plastic", gltf(0.8f, 0.0f, 0.4f)},
+                        {"rough thin glass", gltf(1.0f, 0.0f, 0.3f, 1.0f, true)},
+                        {"rough glass volume with a diffuse part", plate},
+                        {"lambertian", lambert(0.7f)}};
+  for (const Case& c : cases) {
+    const glm::vec3 wo(std::sin(0.5f), 0.0f, std::cos(0.5f));
+    const Bsdf bsdf(c.m, {0, 0, 1}, {0, 0, 1}, wo, true);
+    Rng rng(13, RngKind::Test, 1);
+    const int n = 200000;
+    double kept[kLobes] = {0, 0, 0};
+    for (int i = 0; i < n; ++i) {
+      const BsdfSample b = bsdf.sample(uniform3(rng));
+      if (!(b.weight.x > 0.0f) || b.delta) continue;
+      kept[b.lobe] += 1.0 / n;
+      const LobeValues lv = bsdf.lobes(b.wi);
+      ASSERT_GT(lv.pdf[b.lobe], 0.0f) << c.name;
+      EXPECT_NEAR(lv.f_cos[b.lobe].x / lv.pdf[b.lobe], b.weight.x, 2e-4 * b.weight.x + 1e-6) << c.name;
+    }
+    double integral[kLobes] = {0, 0, 0}, sq[kLobes] = {0, 0, 0};
+    const int m = 1000000;
+    for (int i = 0; i < m; ++i) {
+      const float z = 1.0f - 2.0f * rng.next_float(), phi = 6.2831853f * rng.next_float();
+      const float r = std::sqrt(std::max(0.0f, 1.0f - z * z));
+      const LobeValues lv = bsdf.lobes({r * std::cos(phi), r * std::sin(phi), z});
+      for (int l = 0; l < kLobes; ++l) {
+        const double v = lv.pdf[l] * 4.0 * 3.14159265358979;
+        integral[l] += v / m, sq[l] += v * v / m;
+      }
+    }
+    for (int l = 0; l < kLobes; ++l) {
+      const double sigma = std::sqrt(std::max(0.0, sq[l] - integral[l] * integral[l]) / m + kept[l] / n);
+      // 5 sigma plus 1 % for the glossy peaks that uniform directions resolve slowly.
+      EXPECT_NEAR(integral[l], kept[l], 5 * sigma + 0.01 * kept[l]) << c.name << " lobe " << l;
+    }
+  }
+}
+
+// The guided draw towards a glossy reflection of the laser has the density glossy_target_pdf gives: its
+// integral over the sphere is the share of draws kept, and the mean of 1 / pdf over the kept draws is
+// the solid angle they cover, which the integral of the indicator confirms.
+TEST(Bsdf, GlossyTargetDensityIsItsDrawsDensity) {
+  const GlossyTarget g{glm::vec3(0, 0, 1), glm::normalize(glm::vec3(0.4f, 0.1f, 1.0f)), 0.3f};
+  Rng rng(14, RngKind::Test, 1);
+  const int n = 400000;
+  int kept = 0;
+  for (int i = 0; i < n; ++i) {
+    glm::vec3 w;
+    if (!sample_glossy_target(g, rng.next_float(), rng.next_float(), &w)) continue;
+    ++kept;
+    ASSERT_NEAR(glm::length(w), 1.0f, 1e-5f);
+    ASSERT_GT(glossy_target_pdf(g, w), 0.0f);
+  }
+  double integral = 0, sq = 0;
+  const int m = 2000000;
+  for (int i = 0; i < m; ++i) {
+    const float z = 1.0f - 2.0f * rng.next_float(), phi = 6.2831853f * rng.next_float();
+    const float r = std::sqrt(std::max(0.0f, 1.0f - z * z));
+    const double v = glossy_target_pdf(g, {r * std::cos(phi), r * std::sin(phi), z}) * 4.0 * 3.14159265358979;
+    integral += v / m, sq += v * v / m;
+  }
+  const double share = double(kept) / n;
+  ASSERT_GT(share, 0.5);
+  const double sigma = std::sqrt((sq - integral * integral) / m + share * (1 - share) / n);
+  EXPECT_NEAR(integral, share, 5 * sigma);
+}
+
 TEST(Bsdf, FurnaceErrorFallsAsOneOverSqrtN) {
   // Plastic has a non-constant weight: its Monte Carlo error over N samples scales as N^-1/2.
   const MaterialPoint m = gltf(0.8f, 0.0f, 0.4f);
