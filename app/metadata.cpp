@@ -11,6 +11,7 @@
 #include <string_view>
 
 #include "core/units.h"
+#include "render/integrator.h"
 #include "scenes/input.h"
 #include "render/camera.h"
 
@@ -52,7 +53,8 @@ json objects_json(const scenes::Scene& scene) {
 // - 0.5 - crop corner. A camera-frame point (X, Y, Z) lands at u = f X / Z + cx, v = f Y / Z + cy.
 json model_components(const RunConfig& c, const scenes::Scene* scene, const json& from_run) {
   // The components the scene decides (a sense takes them from its run), in this order.
-  static constexpr std::array<std::string_view, 3> kFromScene{"transmissive surfaces", "absorbing volumes", "ambient light"};
+  static constexpr std::array<std::string_view, 4> kFromScene{"transmissive surfaces", "absorbing volumes", "ambient light",
+                                                              "guided connections"};
   json out = json::array();
   const auto add = [&](const char* component, bool active, const std::string& why) {
     out.push_back({{"component", component}, {"active", active}, {"why", why}});
@@ -78,6 +80,11 @@ json model_components(const RunConfig& c, const scenes::Scene* scene, const json
         std::string(environment ? "ambient.illuminance_lux or spectral_irradiance_W_m2_nm > 0; " : "no ambient environment; ") +
             (lights ? "glTF punctual lights (ambient.gltf_lights); " : "no glTF light used; ") +
             (emission ? "emissive materials" : "no emissive material"));
+    const bool guided = render::guided_connections_active(*scene, c.render.guided_connections);
+    add(kFromScene[3].data(), guided,
+        guided ? "a material of narrow glossy lobe (roughness 0.032-0.2): its vertices' neighbours also draw towards its "
+                 "reflection of the laser, with MIS (render.guided_connections)"
+               : (c.render.guided_connections ? "no material of roughness 0.032-0.2" : "render.guided_connections is false"));
   } else if (from_run.is_array()) {
     for (const json& e : from_run)
       if (std::find(kFromScene.begin(), kFromScene.end(), e.value("component", "")) != kFromScene.end()) out.push_back(e);

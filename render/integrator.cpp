@@ -16,7 +16,11 @@ constexpr float kInf = std::numeric_limits<float>::infinity();
 // render); this bounds the specular chains instead (total internal reflection inside a slab).
 constexpr int kMaxDeltaEvents = 64;
 constexpr int kMaxShadowCrossings = 64;
+// Guided connections aim at surfaces of GGX alpha up to this (roughness 0.2): wider lobes are found well
+// enough by the BSDF's own draws.
+constexpr float kGuideMaxAlpha = 0.04f;
 
+inline double sqr(double x) { return x * x; }
 }  // namespace
 
 // In steady state the returns of earlier and later pulses overlap the window the same way, so every
@@ -52,6 +56,16 @@ void deposit(double v, double t, const TimeAxis& axis, double* bins, PixelTotals
   if (!landed) out->out_of_window += v;
 }
 
+bool guided_connections_active(const scenes::Scene& scene, bool enabled) {
+  if (!enabled) return false;
+  for (const scenes::Material& m : scene.materials) {
+    MaterialPoint mp;
+    mp.alpha = m.roughness * m.roughness;
+    if (!mp.smooth() && mp.alpha <= kGuideMaxAlpha) return true;
+  }
+  return false;
+}
+
 namespace {
 
 // The medium a shadow ray from this vertex starts in: the path's own, unless it crosses the surface of
@@ -73,6 +87,7 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
   transmission_ = scene.has_transmission();
   for (const scenes::Material& m : scene.materials)
     refractive_ |= m.transmissive() && m.thickness_m > 0.0f && m.ior != 1.0f;
+  guided_ = guided_connections_active(scene, config.render.guided_connections);
   ambient_on_ = ambient.any() || shading.has_emission();
   optics_ = config.camera.optics_transmission;
   period_opl_ = kSpeedOfLight / config.laser.repetition_rate_Hz;
@@ -499,6 +514,108 @@ inline void Integrator::connect_ambient_lights(const NeeVertex& v, double* ambie
   }
 }
 
+// The guided connections' targets from a glossy vertex: where its mirror reflection and its refraction
+// (the directions its narrow lobes scatter around) first meet a glossy surface of narrow lobe that can
+// reflect the laser back towards the vertex. Each target's laser direction is the straight one, refracted
+// into the medium the vertex's side of the surface is in (a plate's parallel faces); its alpha is the
+// surface's, narrowed by 1 + r_vertex / r_laser, because moving along the surface turns the half-vector
+// by the laser's parallax as well. Every choice here depends on the vertex only, so the targets' densities
+// are exact whatever they are: they set how well the guided draws fit, never what they estimate.
+void Integrator::find_guide_targets(const Surface& sf, const Bsdf& bsdf, int medium_r, int medium_t,
+                                    GuideTargets* out, RayCounts* rays) const {
+  out->n = 0;
+  if (!bsdf.glossy()) return;
+  glm::vec3 dirs[2];
+  int media[2], n = 0;
+  dirs[n] = bsdf.mirror_direction(), media[n++] = medium_r;
+  if (bsdf.refracted_direction(&dirs[n])) media[n++] = medium_t;
+  for (int i = 0; i < n; ++i) {
+    const glm::vec3 d = dirs[i];
+    RayHit hit;
+    ++rays->shadow;
+    if (!embree_.intersect(offset_ray_origin(sf.p, sf.ng, d), d, 0.0f, kInf, &hit)) continue;
+    const Surface sb = shading_.geometric(hit);
+    const MaterialPoint& mb = shading_.material(sb.material).point;
+    if (mb.lambertian || mb.smooth() || mb.alpha > kGuideMaxAlpha) continue;
+    const glm::vec3 nb = glm::dot(sb.ng, d) > 0.0f ? -sb.ng : sb.ng;
+    const glm::dvec3 to = laser_.position - glm::dvec3(sb.p);
+    const double r_laser = glm::length(to);
+    if (!(r_laser > 0.0)) continue;
+    glm::vec3 wl(to / r_laser);
+    if (!(laser_.intensity_towards(-glm::dvec3(wl)) > 0.0)) continue;
+    if (media[i] >= 0) {  // seen from inside a medium: refracted at the surface's plane
+      const float eta = shading_.material(media[i]).point.ior;
+      const float c = glm::dot(wl, nb);
+      const glm::vec3 t = (wl - c * nb) / eta;
+      const float t2 = glm::dot(t, t);
+      if (!(t2 < 1.0f)) continue;
+      wl = glm::normalize(t + std::copysign(std::sqrt(1.0f - t2), c) * nb);
+    }
+    if (!(glm::dot(wl, nb) > 0.0f)) continue;  // the laser is behind the surface: no reflection of it
+    const double r_vertex = glm::length(glm::dvec3(sb.p) - glm::dvec3(sf.p));
+    out->target[out->n++] = GlossyTarget{nb, wl, float(double(mb.alpha) / (1.0 + r_vertex / r_laser))};
+  }
+}
+
+// The guided strategies at a glossy vertex a: for each target, a direction drawn towards its reflection
+// of the laser, traced to the next vertex b, and the laser's connection from b, weighted against a's own
+// BSDF draw by the power heuristic (Veach's beta = 2: where one strategy's density is far above the
+// other's, as a plate's narrow transmission lobe is above the guided draw's, its weight is ~1 and the
+// other adds next to no noise; the balance heuristic measured 1.3 times the variance there). The BSDF
+// draw picks one lobe L and survives Russian roulette with probability q_L, so the integrand's part
+// through lobe L has the strategies {lobe L (density p_L = pdf_L q_L), the targets i (pdf_i)}: a draw w
+// from target i adds sum_L f_cos_L(w) pdf_i(w) / (p_L(w)^2 + sum_k pdf_k(w)^2) times what the laser
+// returns through b, and the BSDF draw's connection at b is weighted p_L^2 / (p_L^2 + sum_k pdf_k^2)
+// (trace_path's next_mis).
+void Integrator::guided_connections(const GuidedVertex& a, const GuideTargets& guide, Rng& rng, double w,
+                                    const PixelFilm& film, RayCounts* rays) const {
+  for (int i = 0; i < guide.n; ++i) {
+    const float u = uniform(rng), v = uniform(rng);
+    glm::vec3 wd;
+    if (!sample_glossy_target(guide.target[i], u, v, &wd)) continue;
+    const LobeValues lv = a.bsdf.lobes(wd);
+    const double pi = glossy_target_pdf(guide.target[i], wd);
+    double pg2 = 0.0;
+    for (int k = 0; k < guide.n; ++k) pg2 += sqr(double(glossy_target_pdf(guide.target[k], wd)));
+    if (!(pi > 0.0)) continue;
+    Spec f(0.0f);
+    for (int l = 0; l < kLobes; ++l) {
+      if (!(lv.f_cos[l].x > 0.0f)) continue;
+      double p = lv.pdf[l];
+      if (a.roulette && p > 0.0) {
+        const Spec b = a.beta * lv.f_cos[l] / lv.pdf[l];
+        p *= std::min(0.95f, ambient_on_ ? std::max(b.x, b.y) : b.x);
+      }
+      f += lv.f_cos[l] * float(pi / (p * p + pg2));
+    }
+    if (!(f.x > 0.0f)) continue;
+    RayHit hit;
+    ++rays->camera;
+    if (!embree_.intersect(offset_ray_origin(a.sf.p, a.sf.ng, wd), wd, 0.0f, kInf, &hit)) continue;
+    const Surface sb = shading_.surface(hit);
+    const MaterialPoint mb = shading_.material_at(sb, hit);
+    const glm::vec3 wo = -wd;
+    const bool wo_front = glm::dot(wo, sb.ng) > 0.0f;
+    const Bsdf bsdf(mb, sb.ns, sb.ng, wo, wo_front);
+    if (!bsdf.has_non_delta()) continue;
+    const bool transmitted = (glm::dot(wd, a.sf.ng) > 0.0f) != a.wo_front;
+    const int medium = transmitted ? a.medium_t : a.medium;
+    const double seg = glm::length(glm::dvec3(sb.p) - glm::dvec3(a.sf.p));
+    Spec beta = a.beta * f;
+    double opl = a.opl + seg;
+    if (medium >= 0) {
+      const ResolvedMaterial& rm = shading_.material(medium);
+      if (rm.absorbing) beta *= glm::exp(-rm.sigma * static_cast<float>(seg));
+      opl += (double(rm.point.ior) - 1.0) * seg;
+    }
+    if (!(beta.x > 0.0f)) continue;
+    const NeeVertex vb{sb, bsdf, wo_front, shading_.material(sb.material).volume, medium, a.vertices,
+                       !(a.reflected || !transmitted), beta, opl, !(mb.transmission > 0.0f && a.vertices > 0)};
+    LaserRay lr;
+    if (laser_ray(sb, &lr)) connect_laser(vb, lr, nullptr, w, film, rays);
+  }
+}
+
 [[gnu::always_inline]] inline double Integrator::trace_path(const CameraBlock& block, size_t j, double w,
                                                             const PixelFilm& film, RayCounts* rays) const {
   const RenderConfig& rc = config_.render;
@@ -511,7 +628,12 @@ inline void Integrator::connect_ambient_lights(const NeeVertex& v, double* ambie
   bool reflected = false;     // a reflection (delta or not) happened on the way from the camera
   bool last_segment = false;  // after the last NEE vertex: only the environment or emission is left
   double ambient = 0.0;
+  // The MIS weight of the laser connection at the next vertex, when the previous vertex also drew guided
+  // directions towards it (guided_connections): the BSDF draw's share.
+  double next_mis = 1.0;
   for (bool camera_ray = true;; camera_ray = false) {
+    const double mis = next_mis;
+    next_mis = 1.0;
     RayHit hit;
     if (!next_hit(block, j, camera_ray, o, d, &hit, rays)) {
       gather_environment(beta, &ambient);
@@ -544,7 +666,7 @@ inline void Integrator::connect_ambient_lights(const NeeVertex& v, double* ambie
         LaserRay lr;
         FirstSegment first;
         const bool ahead = camera_ray && ahead_shadow(block, j, &lr, &first);
-        if (ahead || laser_ray(sf, &lr)) connect_laser(v, lr, ahead ? &first : nullptr, w, film, rays);
+        if (ahead || laser_ray(sf, &lr)) connect_laser(v, lr, ahead ? &first : nullptr, w * mis, film, rays);
       }
       if (beta.y > 0.0f) connect_ambient_lights(v, &ambient, rays);
       ++vertices;
@@ -554,16 +676,36 @@ inline void Integrator::connect_ambient_lights(const NeeVertex& v, double* ambie
       }
     }
 
+    // Guided connections from a glossy vertex whose next vertex may reflect the laser in a narrow lobe.
+    GuideTargets guide;
+    const bool roulette = !last_segment && vertices >= rc.russian_roulette_from;
+    if (guided_ && !last_segment && beta.x > 0.0f && bsdf.glossy()) {
+      const int medium_out_t = volume ? (wo_front ? sf.material : -1) : medium;
+      find_guide_targets(sf, bsdf, medium, medium_out_t, &guide, rays);
+      if (guide.n > 0) {
+        const GuidedVertex gv{sf, bsdf, wo_front, volume, medium, medium_out_t, vertices, reflected, beta, opl,
+                              roulette};
+        guided_connections(gv, guide, rng, w, film, rays);
+      }
+    }
+
     const BsdfSample bs = bsdf.sample(uniform3(rng));
     if (!(bs.weight.x > 0.0f || bs.weight.y > 0.0f)) break;
     if (bs.delta && ++deltas > kMaxDeltaEvents) break;
     reflected = reflected || !bs.transmitted;
     beta *= bs.weight;
     if (bs.transmitted && volume) medium = wo_front ? sf.material : -1;
-    if (!last_segment && vertices >= rc.russian_roulette_from) {
-      const float q = std::min(0.95f, ambient_on_ ? std::max(beta.x, beta.y) : beta.x);
+    float q = 1.0f;
+    if (roulette) {
+      q = std::min(0.95f, ambient_on_ ? std::max(beta.x, beta.y) : beta.x);
       if (!(q > 0.0f) || uniform(rng) >= q) break;
       beta /= q;
+    }
+    if (guide.n > 0 && !bs.delta) {
+      const double p = double(bsdf.lobes(bs.wi).pdf[bs.lobe]) * q;
+      double pg2 = 0.0;
+      for (int i = 0; i < guide.n; ++i) pg2 += sqr(double(glossy_target_pdf(guide.target[i], bs.wi)));
+      if (pg2 > 0.0) next_mis = p * p / (p * p + pg2);
     }
     o = offset_ray_origin(sf.p, sf.ng, bs.wi);
     d = bs.wi;

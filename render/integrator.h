@@ -63,6 +63,10 @@ struct ObjectLaser {
   }
 };
 
+// Whether a render of this scene uses guided connections (render.guided_connections, and a material of
+// narrow glossy lobe: GGX alpha = roughness^2 in [1e-3, 0.04], the smooth ones being Dirac).
+bool guided_connections_active(const scenes::Scene& scene, bool enabled);
+
 struct RayCounts {
   uint64_t camera = 0, shadow = 0;
 };
@@ -163,6 +167,28 @@ class Integrator {
     ObjectLaser* objects;
   };
   struct NeeVertex;  // integrator.cpp
+  // Up to two surfaces ahead of a glossy vertex whose reflection of the laser its guided connections aim at.
+  struct GuideTargets {
+    GlossyTarget target[2];
+    int n = 0;
+  };
+  // A glossy path vertex, with what its guided connections need of the path.
+  struct GuidedVertex {
+    const Surface& sf;
+    const Bsdf& bsdf;
+    bool wo_front, volume;
+    int medium;       // on wo's side
+    int medium_t;     // on the other side
+    int vertices;     // non-delta vertices up to and including this one
+    bool reflected;   // a reflection before this vertex
+    Spec beta;
+    double opl;
+    bool roulette;    // the BSDF draw here faces Russian roulette
+  };
+  void find_guide_targets(const Surface& sf, const Bsdf& bsdf, int medium_r, int medium_t, GuideTargets* out,
+                          RayCounts* rays) const;
+  void guided_connections(const GuidedVertex& a, const GuideTargets& guide, Rng& rng, double w,
+                          const PixelFilm& film, RayCounts* rays) const;
 
   // One camera path, sample j of `block` (pbrt's Li): deposits its laser light, weighted by the pixel's
   // measurement w, and returns the ambient photon radiance it gathered, which render_pixel weights by w.
@@ -200,6 +226,7 @@ class Integrator {
   const Camera& camera_;
   const Laser& laser_;
   bool refractive_ = false;  // a volume material with ior != 1: laser connections may refract
+  bool guided_ = false;      // a glossy material of narrow lobe (alpha <= kGuideMaxAlpha): guided connections
   const Ambient& ambient_;
   bool transmission_ = false;
   bool ambient_on_ = false;

@@ -167,6 +167,7 @@ TEST_F(App, TargetErrorOutputsAreBitIdenticalForAnyThreadCountAndTileSize) {
   }
   EXPECT_TRUE(model.at("transmissive surfaces"));  // the plate
   EXPECT_FALSE(model.at("ambient light"));         // the paper's dark lab
+  EXPECT_TRUE(model.at("guided connections"));     // the plate's roughness 0.05
   EXPECT_TRUE(model.at("target error"));
   EXPECT_TRUE(model.at("binary frames"));          // kSmall writes them
   EXPECT_TRUE(model.at("crosstalk"));

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <vector>
 
+#include "core/units.h"
 #include "render/integrator.h"
 #include "render/renderer.h"
 #include "scene_builders.h"
@@ -135,6 +136,55 @@ TEST(Accuracy, TargetRelativeErrorIsReachedUnbiasedAndTileIndependent) {
           for (int k = 0; k < 1000; ++k) ASSERT_EQ(p.transient[j * 1000 + size_t(k)], a.transient[i * 1000 + size_t(k)]);
         }
     }
+}
+
+}  // namespace
+}  // namespace spadgen::render
+
+namespace spadgen::render {
+namespace {
+
+// A glossy plate 0.45 m ahead of a Lambertian wall, the laser 3 cm beside the camera (the multi-object
+// scene's geometry): the plate's faces mirror the laser just outside the view, so the pixels see the tails
+// of its lobes, which the BSDF's own draws find rarely (the back face's, seen through the front face).
+scenes::Scene glossy_plate(float roughness) {
+  scenes::Scene s;
+  test::add_box(s, {-1, -1, -0.452f}, {1, 1, -0.45f}, add_material(s, test::glass(1.5f, 0.002f, roughness)));
+  add_quad(s, {0, 0, -0.8f}, {3, 0, 0}, {0, 3, 0}, add_material(s, test::lambertian(0.8f)));
+  return s;
+}
+
+// Guided connections change how the glossy paths are drawn, not what they estimate: over 256 pixels the
+// summed laser return with and without them agrees within 4 of their combined standard errors (each
+// pixel's reported error: a false alarm rate of 6e-5 were they exact), and the variance falls, most for
+// the narrowest lobe: measured 9.2 times lower at roughness 0.05 (the shipped plate's), 2.8 at 0.1.
+TEST(Accuracy, GuidedConnectionsKeepTheExpectationAndLowerTheVariance) {
+  struct Case {
+    float roughness;
+    double max_variance_ratio;
+  };
+  for (const Case k : {Case{0.05f, 0.25}, Case{0.1f, 0.6}}) {
+    const scenes::Scene s = glossy_plate(k.roughness);
+    RenderStageConfig c = test_config(16, 16, 6e-3);
+    c.laser.beam = Beam::Cone;
+    c.laser.half_angle_rad = kPi;
+    c.laser.offset_m = {0.03, 0, 0};
+    c.render.samples_per_pixel = 256;
+    c.render.max_bounces = 4;
+    const PixelRect rect{0, 0, 16, 16};
+    const TimeAxis axis{0.0, 10e-12, 1000, 25e-9};
+    double total[2] = {0, 0}, var[2] = {0, 0};
+    for (int guided = 0; guided < 2; ++guided) {
+      c.render.guided_connections = guided == 1;
+      const TransientTile t = Renderer(s, c).transient(rect, rect, axis);
+      for (size_t i = 0; i < 256; ++i)
+        total[guided] += t.laser_total[i], var[guided] += double(t.laser_se[i]) * t.laser_se[i];
+    }
+    ASSERT_GT(total[0], 0.0);
+    EXPECT_LT(std::fabs(total[1] - total[0]), 4.0 * std::sqrt(var[0] + var[1]))
+        << "roughness " << k.roughness << ": " << total[0] << " " << total[1];
+    EXPECT_LT(var[1], k.max_variance_ratio * var[0]) << "roughness " << k.roughness << ": " << var[0] << " " << var[1];
+  }
 }
 
 }  // namespace
