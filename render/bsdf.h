@@ -82,6 +82,7 @@ class Bsdf {
   const glm::vec3& normal() const { return n_; }
   float alpha() const { return m_.alpha; }
   bool glossy() const { return !m_.lambertian && !m_.smooth(); }
+  bool lambertian() const { return m_.lambertian; }
 
  private:
   glm::vec3 to_local(const glm::vec3& v) const { return {glm::dot(v, t_), glm::dot(v, b_), glm::dot(v, n_)}; }

@@ -1,5 +1,7 @@
 #include "integrator.h"
 
+#include "guide.h"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -21,6 +23,12 @@ constexpr int kMaxShadowCrossings = 64;
 constexpr float kGuideMaxAlpha = 0.04f;
 
 inline double sqr(double x) { return x * x; }
+// Lambertian vertices aim at the triangles of meshes of at most this many (plates, boxes), at most
+// kMaxGlossyParts of them in a scene; and at a sliver's area only where the half-vector at its point
+// nearest the mirror point is within acos(kGuideMaxTilt) = 25 degrees of its normal.
+constexpr size_t kMaxPartsPerMesh = 64;
+constexpr size_t kMaxGlossyParts = 256;
+constexpr double kGuideMaxTilt = 0.906;
 }  // namespace
 
 // In steady state the returns of earlier and later pulses overlap the window the same way, so every
@@ -88,6 +96,47 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
   for (const scenes::Material& m : scene.materials)
     refractive_ |= m.transmissive() && m.thickness_m > 0.0f && m.ior != 1.0f;
   guided_ = guided_connections_active(scene, config.render.guided_connections);
+  // The triangles of small meshes (a plate, a box) of such a material, and their slivers: two coplanar
+  // triangles sharing a diagonal that make a parallelogram whose short side is under 1/20 of its long
+  // one (a 2 mm edge of a 40 cm plate: 1/200). A mesh of more triangles (a curved glossy object) is left
+  // to the BSDF draws, and so are all of them past kMaxGlossyParts.
+  for (size_t m = 0; m < scene.meshes.size() && guided_; ++m) {
+    const scenes::Mesh& mesh = scene.meshes[m];
+    const MaterialPoint& mp = shading.material(mesh.material).point;
+    const size_t nt = mesh.triangle_count();
+    if (mp.lambertian || mp.smooth() || mp.alpha > kGuideMaxAlpha || nt > kMaxPartsPerMesh ||
+        parts_.size() + nt > kMaxGlossyParts)
+      continue;
+    const auto corner = [&](size_t t, int k) { return glm::dvec3(mesh.positions[mesh.indices[3 * t + size_t(k)]]); };
+    for (size_t t = 0; t < nt; ++t) {
+      const glm::dvec3 e1 = corner(t, 1) - corner(t, 0), e2 = corner(t, 2) - corner(t, 0), cr = glm::cross(e1, e2);
+      const double twice = glm::length(cr);
+      if (twice > 0.0) parts_.push_back(GlossyPart{corner(t, 0), e1, e2, cr / twice, mp.alpha});
+    }
+    for (size_t t = 0; t < nt; ++t)
+      for (size_t u = t + 1; u < nt; ++u) {
+        // The corners of t not shared with u, and those shared.
+        std::vector<glm::dvec3> own, shared, other;
+        for (int i = 0; i < 3; ++i) {
+          bool in = false;
+          for (int j = 0; j < 3; ++j) in |= corner(t, i) == corner(u, j);
+          (in ? shared : own).push_back(corner(t, i));
+        }
+        if (shared.size() != 2) continue;
+        for (int j = 0; j < 3; ++j)
+          if (corner(u, j) != shared[0] && corner(u, j) != shared[1]) other.push_back(corner(u, j));
+        const glm::dvec3 o = own[0], a = shared[0] - o, b = shared[1] - o;
+        const double scale = std::max(glm::length(a), glm::length(b));
+        if (glm::length(other[0] - (o + a + b)) > 1e-9 * scale) continue;  // not a parallelogram
+        const glm::dvec3 cr = glm::cross(a, b);
+        const double area = glm::length(cr);
+        if (!(area > 0.0)) continue;
+        const bool a_long = glm::length(a) >= glm::length(b);
+        const glm::dvec3 lng = a_long ? a : b, shrt = a_long ? b : a;
+        if (glm::length(shrt) >= 0.05 * glm::length(lng)) continue;
+        strips_.push_back(GlossyStrip{o, lng, shrt, cr / area, area, mp.alpha});
+      }
+  }
   ambient_on_ = ambient.any() || shading.has_emission();
   optics_ = config.camera.optics_transmission;
   period_opl_ = kSpeedOfLight / config.laser.repetition_rate_Hz;
@@ -524,6 +573,11 @@ inline void Integrator::connect_ambient_lights(const NeeVertex& v, double* ambie
 void Integrator::find_guide_targets(const Surface& sf, const Bsdf& bsdf, int medium_r, int medium_t,
                                     GuideTargets* out, RayCounts* rays) const {
   out->n = 0;
+  out->origin = glm::dvec3(sf.p);
+  if (bsdf.lambertian()) {
+    lambertian_guide_targets(sf, out);
+    return;
+  }
   if (!bsdf.glossy()) return;
   glm::vec3 dirs[2];
   int media[2], n = 0;
@@ -553,7 +607,64 @@ void Integrator::find_guide_targets(const Surface& sf, const Bsdf& bsdf, int med
     }
     if (!(glm::dot(wl, nb) > 0.0f)) continue;  // the laser is behind the surface: no reflection of it
     const double r_vertex = glm::length(glm::dvec3(sb.p) - glm::dvec3(sf.p));
-    out->target[out->n++] = GlossyTarget{nb, wl, float(double(mb.alpha) / (1.0 + r_vertex / r_laser))};
+    GuideTarget& g = out->t[out->n++];
+    g.lobe = GlossyTarget{nb, wl, float(double(mb.alpha) / (1.0 + r_vertex / r_laser))};
+  }
+}
+
+namespace {
+
+}  // namespace
+
+
+// A Lambertian vertex in air aims at the glossy plates' parts that can mirror the laser towards it
+// (both on the same side of the part's plane): at a part's glossy reflection of the laser where the
+// mirror point (where the line to the laser's image behind the plane meets it) lies on the part; and
+// along a sliver (a plate's 2 mm edge, which the vertex's BSDF draws rarely hit) whose mirror point is
+// beside it, when the half-vector at the sliver's point nearest the mirror point is within 25 degrees
+// of its normal: the lobe's tail there outshines the rest. Along the sliver the tail falls as
+// 1 / (1 + (s / c)^2)^2, c = max(tan(tilt), alpha) / k with k = (1 / r_vertex + 1 / r_laser) / 2 the
+// half-vector's turn per metre, so s is drawn from a Cauchy law of that scale around the nearest point
+// (the integrand over the density stays bounded). No ray is traced to choose: the targets depend on the
+// vertex alone.
+void Integrator::lambertian_guide_targets(const Surface& sf, GuideTargets* out) const {
+  const glm::dvec3 x(sf.p), L = laser_.position;
+  for (const GlossyPart& part : parts_) {
+    if (out->n == kMaxGuideTargets) return;
+    const double hx = glm::dot(x - part.p0, part.n), hl = glm::dot(L - part.p0, part.n);
+    if (!(hx * hl > 0.0)) continue;
+    const glm::dvec3 q = x + (hx / (hx + hl)) * (L - 2.0 * hl * part.n - x);
+    const glm::dvec2 st = strip_coordinates(q, part.p0, part.e1, part.e2);
+    if (!(st.x >= 0.0 && st.y >= 0.0 && st.x + st.y <= 1.0)) continue;
+    const double r_vertex = glm::length(q - x), r_laser = glm::length(L - q);
+    const glm::dvec3 wl = (L - q) / r_laser;
+    if (!(laser_.intensity_towards(-wl) > 0.0)) continue;
+    GuideTarget& g = out->t[out->n++];
+    g.strip = false;
+    g.lobe = GlossyTarget{glm::vec3(hx > 0.0 ? part.n : -part.n), glm::vec3(wl),
+                          float(double(part.alpha) / (1.0 + r_vertex / r_laser))};
+  }
+  for (const GlossyStrip& strip : strips_) {
+    if (out->n == kMaxGuideTargets) return;
+    const double hx = glm::dot(x - strip.o, strip.n), hl = glm::dot(L - strip.o, strip.n);
+    if (!(hx * hl > 0.0)) continue;
+    const glm::dvec3 nb = hx > 0.0 ? strip.n : -strip.n;
+    const glm::dvec3 q = x + (hx / (hx + hl)) * (L - 2.0 * hl * strip.n - x);
+    const glm::dvec2 st = strip_coordinates(q, strip.o, strip.a, strip.b);
+    const double s0 = std::clamp(st.x, 0.0, 1.0);
+    const glm::dvec3 near = strip.o + s0 * strip.a + std::clamp(st.y, 0.0, 1.0) * strip.b;
+    const double r_vertex = glm::length(near - x), r_laser = glm::length(L - near);
+    if (!(r_vertex > 0.0 && r_laser > 0.0)) continue;
+    const glm::dvec3 wl = (L - near) / r_laser;
+    const double ch = glm::dot(glm::normalize(wl + (x - near) / r_vertex), nb);
+    if (ch < kGuideMaxTilt || !(laser_.intensity_towards(-wl) > 0.0)) continue;
+    const double k = 0.5 * (1.0 / r_vertex + 1.0 / r_laser);
+    const double tilt = std::sqrt(std::max(0.0, 1.0 - ch * ch)) / ch;
+    GuideTarget& g = out->t[out->n++];
+    g.strip = true;
+    g.part = &strip;
+    g.s0 = s0;
+    g.c = std::max(tilt, double(strip.alpha)) / k / glm::length(strip.a);
   }
 }
 
@@ -572,12 +683,11 @@ void Integrator::guided_connections(const GuidedVertex& a, const GuideTargets& g
   for (int i = 0; i < guide.n; ++i) {
     const float u = uniform(rng), v = uniform(rng);
     glm::vec3 wd;
-    if (!sample_glossy_target(guide.target[i], u, v, &wd)) continue;
+    if (!guide.sample(i, u, v, &wd)) continue;
     const LobeValues lv = a.bsdf.lobes(wd);
-    const double pi = glossy_target_pdf(guide.target[i], wd);
-    double pg2 = 0.0;
-    for (int k = 0; k < guide.n; ++k) pg2 += sqr(double(glossy_target_pdf(guide.target[k], wd)));
+    const double pi = guide.pdf(i, wd);
     if (!(pi > 0.0)) continue;
+    const double pg2 = guide.sum_pdf2(wd);
     Spec f(0.0f);
     for (int l = 0; l < kLobes; ++l) {
       if (!(lv.f_cos[l].x > 0.0f)) continue;
@@ -679,7 +789,8 @@ void Integrator::guided_connections(const GuidedVertex& a, const GuideTargets& g
     // Guided connections from a glossy vertex whose next vertex may reflect the laser in a narrow lobe.
     GuideTargets guide;
     const bool roulette = !last_segment && vertices >= rc.russian_roulette_from;
-    if (guided_ && !last_segment && beta.x > 0.0f && bsdf.glossy()) {
+    if (guided_ && !last_segment && beta.x > 0.0f &&
+        (bsdf.glossy() || (bsdf.lambertian() && medium < 0 && !parts_.empty()))) {
       const int medium_out_t = volume ? (wo_front ? sf.material : -1) : medium;
       find_guide_targets(sf, bsdf, medium, medium_out_t, &guide, rays);
       if (guide.n > 0) {
@@ -703,8 +814,7 @@ void Integrator::guided_connections(const GuidedVertex& a, const GuideTargets& g
     }
     if (guide.n > 0 && !bs.delta) {
       const double p = double(bsdf.lobes(bs.wi).pdf[bs.lobe]) * q;
-      double pg2 = 0.0;
-      for (int i = 0; i < guide.n; ++i) pg2 += sqr(double(glossy_target_pdf(guide.target[i], bs.wi)));
+      const double pg2 = guide.sum_pdf2(bs.wi);
       if (pg2 > 0.0) next_mis = p * p / (p * p + pg2);
     }
     o = offset_ray_origin(sf.p, sf.ng, bs.wi);

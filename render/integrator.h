@@ -13,6 +13,7 @@
 #include "core/config.h"
 #include "core/time_axis.h"
 #include "embree_scene.h"
+#include "guide.h"
 #include "lights.h"
 #include "renderer.h"
 #include "surface.h"
@@ -167,11 +168,6 @@ class Integrator {
     ObjectLaser* objects;
   };
   struct NeeVertex;  // integrator.cpp
-  // Up to two surfaces ahead of a glossy vertex whose reflection of the laser its guided connections aim at.
-  struct GuideTargets {
-    GlossyTarget target[2];
-    int n = 0;
-  };
   // A glossy path vertex, with what its guided connections need of the path.
   struct GuidedVertex {
     const Surface& sf;
@@ -187,6 +183,7 @@ class Integrator {
   };
   void find_guide_targets(const Surface& sf, const Bsdf& bsdf, int medium_r, int medium_t, GuideTargets* out,
                           RayCounts* rays) const;
+  void lambertian_guide_targets(const Surface& sf, GuideTargets* out) const;
   void guided_connections(const GuidedVertex& a, const GuideTargets& guide, Rng& rng, double w,
                           const PixelFilm& film, RayCounts* rays) const;
 
@@ -227,6 +224,8 @@ class Integrator {
   const Laser& laser_;
   bool refractive_ = false;  // a volume material with ior != 1: laser connections may refract
   bool guided_ = false;      // a glossy material of narrow lobe (alpha <= kGuideMaxAlpha): guided connections
+  std::vector<GlossyPart> parts_;    // the triangles of small meshes (plates) of such materials
+  std::vector<GlossyStrip> strips_;  // their slivers (pairs of triangles)
   const Ambient& ambient_;
   bool transmission_ = false;
   bool ambient_on_ = false;

@@ -1,0 +1,59 @@
+#include "guide.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace spadgen::render {
+
+namespace {
+
+double sqr(double x) { return x * x; }
+
+}  // namespace
+
+glm::dvec2 strip_coordinates(const glm::dvec3& p, const glm::dvec3& o, const glm::dvec3& a, const glm::dvec3& b) {
+  const glm::dvec3 d = p - o;
+  const double aa = glm::dot(a, a), ab = glm::dot(a, b), bb = glm::dot(b, b);
+  const double da = glm::dot(d, a), db = glm::dot(d, b), det = aa * bb - ab * ab;
+  return {(da * bb - db * ab) / det, (db * aa - da * ab) / det};
+}
+
+bool GuideTargets::sample(int i, float u, float v, glm::vec3* w) const {
+  const GuideTarget& g = t[i];
+  if (!g.strip) return sample_glossy_target(g.lobe, u, v, w);
+  const GlossyStrip& p = *g.part;
+  const double a0 = std::atan(-g.s0 / g.c), a1 = std::atan((1.0 - g.s0) / g.c);
+  const double s = std::clamp(g.s0 + g.c * std::tan(a0 + double(u) * (a1 - a0)), 0.0, 1.0);
+  const glm::dvec3 d = p.o + s * p.a + double(v) * p.b - origin;
+  const double len = glm::length(d);
+  if (!(len > 0.0)) return false;
+  *w = glm::vec3(d / len);
+  return true;
+}
+
+double GuideTargets::pdf(int i, const glm::vec3& wf) const {
+  const GuideTarget& g = t[i];
+  if (!g.strip) return glossy_target_pdf(g.lobe, wf);
+  // Where the ray from the vertex along w meets the strip: the density of (s, t) over the strip's area,
+  // times r^2 / |cos|.
+  const GlossyStrip& p = *g.part;
+  const glm::dvec3 w(wf);
+  const double wn = glm::dot(w, p.n);
+  if (wn == 0.0) return 0.0;
+  const double dist = glm::dot(p.o - origin, p.n) / wn;
+  if (!(dist > 0.0)) return 0.0;
+  const glm::dvec2 st = strip_coordinates(origin + dist * w, p.o, p.a, p.b);
+  if (!(st.x >= 0.0 && st.x <= 1.0 && st.y >= 0.0 && st.y <= 1.0)) return 0.0;
+  const double a0 = std::atan(-g.s0 / g.c), a1 = std::atan((1.0 - g.s0) / g.c);
+  const double x = (st.x - g.s0) / g.c;
+  const double ps = 1.0 / (g.c * (1.0 + x * x) * (a1 - a0));
+  return ps / p.area * dist * dist / std::fabs(wn);
+}
+
+double GuideTargets::sum_pdf2(const glm::vec3& w) const {
+  double s = 0.0;
+  for (int i = 0; i < n; ++i) s += sqr(pdf(i, w));
+  return s;
+}
+
+}  // namespace spadgen::render

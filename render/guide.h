@@ -1,0 +1,46 @@
+// The targets of the integrator's guided connections (docs/render.md, "Guided connections"): the
+// narrow glossy reflections of the laser and the slivers of glossy plates a path vertex aims extra
+// direction draws at, each with the exact density of its draws, for MIS against the vertex's BSDF.
+#pragma once
+#include <glm/glm.hpp>
+
+#include "bsdf.h"
+
+namespace spadgen::render {
+
+// A part of a glossy plate (one triangle): Lambertian vertices aim at its reflection of the laser.
+struct GlossyPart {
+  glm::dvec3 p0, e1, e2, n;  // corner, edges, unit normal
+  float alpha;
+};
+// A sliver of a glossy plate (its thin edge: a parallelogram o + s a + t b, s, t in [0, 1], |b| < |a| / 20),
+// which Lambertian vertices also aim at over its length.
+struct GlossyStrip {
+  glm::dvec3 o, a, b, n;     // corner, long side, short side, unit normal
+  double area;               // |a x b|
+  float alpha;
+};
+// The affine coordinates (s, t) of point p (projected on the plane) in o + s a + t b.
+glm::dvec2 strip_coordinates(const glm::dvec3& p, const glm::dvec3& o, const glm::dvec3& a, const glm::dvec3& b);
+
+// What a vertex's guided connections aim at: a glossy reflection of the laser (draws from
+// sample_glossy_target), or a strip (s from a Cauchy law around s0 of scale c, truncated to [0, 1], in
+// units of the long side; t uniform).
+struct GuideTarget {
+  bool strip = false;
+  GlossyTarget lobe;
+  const GlossyStrip* part = nullptr;
+  double s0 = 0.0, c = 1.0;
+};
+
+constexpr int kMaxGuideTargets = 4;
+struct GuideTargets {
+  GuideTarget t[kMaxGuideTargets];
+  glm::dvec3 origin{0.0};  // the vertex
+  int n = 0;
+  bool sample(int i, float u, float v, glm::vec3* w) const;
+  double pdf(int i, const glm::vec3& w) const;  // per steradian
+  double sum_pdf2(const glm::vec3& w) const;    // sum over the targets of pdf^2
+};
+
+}  // namespace spadgen::render
