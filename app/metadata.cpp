@@ -82,8 +82,8 @@ json model_components(const RunConfig& c, const scenes::Scene* scene, const json
             (emission ? "emissive materials" : "no emissive material"));
     const bool guided = render::guided_connections_active(*scene, c.render.guided_connections);
     add(kFromScene[3].data(), guided,
-        guided ? "a material of narrow glossy lobe (roughness 0.032-0.2): its vertices' neighbours also draw towards its "
-                 "reflection of the laser, with MIS (render.guided_connections)"
+        guided ? "a material of narrow glossy lobe (roughness 0.032-0.2): glossy and Lambertian vertices also draw towards "
+                 "its reflections of the laser, with MIS (render.guided_connections)"
                : (c.render.guided_connections ? "no material of roughness 0.032-0.2" : "render.guided_connections is false"));
   } else if (from_run.is_array()) {
     for (const json& e : from_run)

@@ -244,8 +244,8 @@ struct RenderConfig {
   int tile_size = 32;                   // render.tile_size_px (multiple of 8)
   int max_layers = 8;                   // render.max_layers in the ground truth
   bool split_direct_indirect = false;   // render.split_direct_indirect
-  // render.guided_connections: glossy vertices also draw directions towards the next surface's narrow
-  // reflection of the laser, weighted against their BSDF draws by MIS (docs/render.md)
+  // render.guided_connections: glossy and Lambertian vertices also draw directions towards narrow glossy
+  // reflections of the laser, weighted against their BSDF draws by MIS (docs/render.md)
   bool guided_connections = true;
 
   bool operator==(const RenderConfig&) const = default;

@@ -416,7 +416,7 @@ std::vector<Key> build() {
   k.push_back(integer("/render/tile_size_px", FIELD(render.tile_size), kPixel, closed(8, 4096), "tile edge (a multiple of 8); outputs do not depend on it"));
   k.push_back(integer("/render/max_layers", FIELD(render.max_layers), kNone, closed(1, 64), "surfaces recorded per pixel in the ground truth"));
   k.push_back(boolean("/render/split_direct_indirect", FIELD(render.split_direct_indirect), "also keep the indirect part of the transient separately"));
-  k.push_back(boolean("/render/guided_connections", FIELD(render.guided_connections), "glossy vertices (GGX alpha <= 0.04) also draw directions towards the next surface's narrow reflection of the laser, weighted by MIS: the same expectation, less variance through glossy plates (docs/render.md); false: BSDF draws only"));
+  k.push_back(boolean("/render/guided_connections", FIELD(render.guided_connections), "glossy and Lambertian vertices also draw directions towards the narrow glossy reflections of the laser (GGX alpha <= 0.04) of the surfaces ahead and of plates' edges, weighted by MIS: the same expectation, less variance with glossy plates (docs/render.md); false: BSDF draws only"));
 
   k.push_back(boolean("/outputs/ground_truth", FIELD(outputs.ground_truth), "write ground_truth.exr"));
   k.push_back(boolean("/outputs/transient", FIELD(outputs.transient), "write transient.npy (H, W, T) float32 photons per pulse per bin"));
