@@ -19,6 +19,7 @@ Writes one table per scene to stdout (Markdown) and, with --markdown, to FILE.
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -123,6 +124,8 @@ def main():
     if a.markdown:
         with open(a.markdown, "w") as f:
             f.write(out + "\n")
+    if not a.work:  # its runs are gigabytes: a folder given with --work is kept, a temporary one is not
+        shutil.rmtree(work)
 
 
 if __name__ == "__main__":

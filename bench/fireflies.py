@@ -11,6 +11,7 @@ among pixels of a positive median, and the error against the reference
 """
 import argparse
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -65,6 +66,7 @@ def main():
         print(f"| {name}, {a.paths} paths | {seconds:.1f} | {(smooth & (ratio > 1.5)).sum()} | {(smooth & (ratio > 3)).sum()} | "
               f"{worst:.1f} | {np.median(rel) * 100:.2f} % / {np.percentile(rel, 90) * 100:.2f} % / "
               f"{np.percentile(rel, 99) * 100:.2f} % | {rms:.3f} |")
+    shutil.rmtree(work)
 
 
 if __name__ == "__main__":
