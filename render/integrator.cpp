@@ -720,7 +720,7 @@ void Integrator::guided_connections(const GuidedVertex& a, const GuideTargets& g
     }
     if (!(beta.x > 0.0f)) continue;
     const NeeVertex vb{sb, bsdf, wo_front, shading_.material(sb.material).volume, medium, a.vertices,
-                       !(a.reflected || !transmitted), beta, opl, !(mb.transmission > 0.0f && a.vertices > 0)};
+                       !a.reflected && transmitted, beta, opl, !(mb.transmission > 0.0f && a.vertices > 0)};
     LaserRay lr;
     if (laser_ray(sb, &lr)) connect_laser(vb, lr, nullptr, w, film, rays);
   }
