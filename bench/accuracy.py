@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """The renderer's speed/accuracy trade, measured: for each sampling setting (fixed paths per pixel and the
-render.quality presets) on crops of the shipped scenes, its wall time and its error against an independent
+render.quality presets) and each of the other knobs (render.guided_connections, max_bounces, time_bin_ps)
+on crops of the shipped scenes, its wall time and its error against an independent
 reference render (another light seed, many more paths), in the units users care about:
 
 - the laser return (laser.exr): |error| / reference, median and p90 over the lit pixels, and what the run
@@ -46,6 +47,14 @@ SETTINGS = [
     ("quality=draft", ["render.quality=draft"]),
     ("quality=standard", ["render.quality=standard"]),
     ("quality=reference", ["render.quality=reference"]),
+    # The other knobs, each against the 256-path row (paths enough that the knob, not the noise, shows).
+    ("guided_connections=false, 16 paths", ["render.samples_per_pixel=16", "render.guided_connections=false"]),
+    ("max_bounces=1 (direct light), 256 paths", ["render.samples_per_pixel=256", "render.max_bounces=1"]),
+    ("max_bounces=2, 256 paths", ["render.samples_per_pixel=256", "render.max_bounces=2"]),
+    ("max_bounces=4, 256 paths", ["render.samples_per_pixel=256", "render.max_bounces=4"]),
+    ("time_bin_ps=4.5, 256 paths", ["render.samples_per_pixel=256", "render.time_bin_ps=4.5"]),
+    ("time_bin_ps=18, 256 paths", ["render.samples_per_pixel=256", "render.time_bin_ps=18"]),
+    ("time_bin_ps=36, 256 paths", ["render.samples_per_pixel=256", "render.time_bin_ps=36"]),
 ]
 REFERENCE = ["render.samples_per_pixel=2048", "seeds.light=1000"]
 
