@@ -1,6 +1,5 @@
 #include "app/pipeline.h"
 
-#include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 
 #include <cmath>
@@ -50,9 +49,7 @@ RunResult run(const RunOptions& options) {
   for (const std::string& w : resolved.warnings) std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
 
   InterruptGuard interrupt_guard;
-  std::unique_ptr<tbb::global_control> threads;
-  if (options.threads > 0)
-    threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, size_t(options.threads));
+  const ThreadLimit threads(options.threads);
 
   const scenes::Scene scene = scenes::load_gltf(cfg.gltf_path, cfg.gltf_scene, cfg.edits);
   for (const std::string& w : scene.warnings) std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());

@@ -1,7 +1,6 @@
 #include "reconstruct.h"
 
 #include <tbb/blocked_range.h>
-#include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -16,6 +15,7 @@
 
 #include "app/interrupt.h"
 #include "app/progress.h"
+#include "app/run_parts.h"
 #include "core/error.h"
 #include "reconstruct/detect.h"
 #include "reconstruct/evaluate.h"
@@ -157,11 +157,6 @@ DetectionImage read_detections(const std::string& path, int width, int height) {
   return img;
 }
 
-std::unique_ptr<tbb::global_control> thread_limit(int threads) {
-  if (threads <= 0) return nullptr;
-  return std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, size_t(threads));
-}
-
 std::string provenance(const RunFolder& run) {
   const auto& m = run.metadata();
   return nlohmann::json{{"run", fs::absolute(run.dir()).lexically_normal().string()},
@@ -288,7 +283,7 @@ bool is_derived_output(const std::string& rel) {
 
 std::string reconstruct(const ReconstructOptions& o) {
   InterruptGuard interrupt_guard;
-  const auto threads = thread_limit(o.threads);
+  const ThreadLimit threads(o.threads);
   if (o.max_detections < 1 || o.max_detections > 64) throw Error("--max-detections: expected 1 to 64");
   const RunFolder run(o.run_dir);
   if (!run.gate_sweep()) {
@@ -333,7 +328,7 @@ std::string reconstruct(const ReconstructOptions& o) {
 
 std::string evaluate(const EvaluateCommand& c) {
   InterruptGuard interrupt_guard;
-  const auto threads = thread_limit(c.threads);
+  const ThreadLimit threads(c.threads);
   if (!(c.tolerance_m > 0.0)) throw Error("--tolerance-m: expected a positive number of metres");
   const fs::path target(c.target);
   const std::string out = c.out_dir.empty() ? (target / "evaluation").string() : c.out_dir;

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "core/error.h"
+#include "writers/writers.h"
 
 namespace spadgen::app {
 
@@ -30,5 +31,12 @@ void order_files(std::vector<std::string>& files) {
     return ma != mb ? mb : a < b;
   });
 }
+
+ThreadLimit::ThreadLimit(int threads) {
+  if (threads > 0) limit_ = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, size_t(threads));
+  writers::set_exr_threads(int(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism)));
+}
+
+ThreadLimit::~ThreadLimit() { writers::set_exr_threads(0); }
 
 }  // namespace spadgen::app

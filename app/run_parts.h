@@ -1,6 +1,9 @@
 // What `run` and `sense` share: the image they cover, the time axis the sensor needs, the order of the
 // files metadata.json lists. Internal to app/.
 #pragma once
+#include <tbb/global_control.h>
+
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -21,5 +24,18 @@ TimeAxis time_axis(const RunConfig& c, const sensor::SensorModel& s);
 // The files in the order metadata.json lists them and the staging folder publishes them: by name,
 // metadata.json last.
 void order_files(std::vector<std::string>& files);
+
+// The command's worker threads while it lives: TBB's (all cores when threads <= 0) and OpenEXR's pool,
+// which compresses and decompresses the images with as many.
+class ThreadLimit {
+ public:
+  explicit ThreadLimit(int threads);
+  ~ThreadLimit();
+  ThreadLimit(const ThreadLimit&) = delete;
+  ThreadLimit& operator=(const ThreadLimit&) = delete;
+
+ private:
+  std::unique_ptr<tbb::global_control> limit_;
+};
 
 }  // namespace spadgen::app

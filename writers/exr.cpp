@@ -6,6 +6,7 @@
 #include <OpenEXR/ImfInputFile.h>
 #include <OpenEXR/ImfOutputFile.h>
 #include <OpenEXR/ImfStringAttribute.h>
+#include <OpenEXR/ImfThreading.h>
 
 #include <exception>
 #include <limits>
@@ -100,6 +101,8 @@ void ExrImage::write(const std::string& path, ExrCompression compression) const 
   }
   file.commit();
 }
+
+void set_exr_threads(int threads) { Imf::setGlobalThreadCount(threads > 0 ? threads : 0); }
 
 ExrData read_exr(const std::string& path) {
   ExrData data;

@@ -175,7 +175,10 @@ void NpyWriter::release_rows(int axis, int64_t row_begin, int64_t row_end) {
     const int64_t last = first + (row_end - row_begin) * inner;
     // Whole pages inside the range only: a page it shares with rows still being written stays mapped.
     const int64_t a = (first + page - 1) / page * page, b = last / page * page;
-    if (b > a) ::madvise(impl_->map + a, static_cast<size_t>(b - a), MADV_DONTNEED);
+    if (b <= a) continue;
+    ::madvise(impl_->map + a, static_cast<size_t>(b - a), MADV_DONTNEED);
+    // Written out now, while the next rows are computed, rather than all by commit()'s fsync.
+    (void)::sync_file_range(impl_->file.fd(), a, b - a, SYNC_FILE_RANGE_WRITE);
   }
 }
 

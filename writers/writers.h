@@ -63,9 +63,10 @@ class NpyWriter : public StackWriter {
   // bits of its last byte beyond rect.width are written as 0).
   void write_frames(const PixelRect& rect, int origin_x, int origin_y, const void* data);
   // Rows [row_begin, row_end) along `axis` (H: 1 for (K, H, W), 2 for (K, N, H, W/8), 0 for (H, W, T))
-  // are complete: their pages leave this process's resident set (the data stays in the page cache on
-  // its way to the file; writing there again only costs a page fault). Keeps a run's resident memory
-  // bounded by the rows in flight although the whole file is mapped for writing.
+  // are complete: their pages leave this process's resident set, and the page cache starts writing them
+  // to the file without waiting (writing there again only costs a page fault). Keeps a run's resident
+  // memory bounded by the rows in flight although the whole file is mapped for writing, and leaves
+  // commit()'s fsync little to flush.
   void release_rows(int axis, int64_t row_begin, int64_t row_end) override;
   // fsync, rename onto path(). Writes after commit() throw.
   void commit() override;
@@ -217,6 +218,10 @@ struct ExrData {
   std::map<std::string, std::string> attributes;
 };
 ExrData read_exr(const std::string& path);
+// OpenEXR compresses (and decompresses) an image's blocks of scanlines on its own pool of `threads` worker
+// threads (0: all on the calling thread); the files are the same bytes whatever the count. The app sets
+// it once to its own thread count, before it reads or writes an image, never while one is in use.
+void set_exr_threads(int threads);
 
 // 8-bit PNG (gray, RGB or RGBA), written atomically.
 // `pixels` is row-major, top row first, `channels` bytes per pixel (1 gray, 3 RGB, 4 RGBA).
