@@ -276,18 +276,24 @@ TransientTile SavedLight::tile(const PixelRect& rect, const PixelRect& data_rect
   t.rect = rect, t.data_rect = dr, t.axis = axis_;
   const auto nd = size_t(dr.count());
   const auto T = size_t(axis_.bins);
-  t.transient.assign(nd * T, 0.0f);
+  {
+    std::lock_guard<std::mutex> lock(pool_mutex_);
+    if (!pool_.empty()) t.transient = std::move(pool_.back()), pool_.pop_back();
+  }
+  t.transient.resize(nd * T);  // all zero: a recycled buffer's extra elements go, missing ones come as 0
   t.laser_total.resize(nd), t.out_of_window.resize(nd), t.ambient_rate.resize(nd);
   if (laser_se_) t.laser_se.resize(nd), t.samples.resize(nd);
   if (T > 0) t.bin_lo.resize(nd), t.bin_hi.resize(nd);
   const int32_t* r = ranges_;
   const int64_t* o = offsets_;
-  std::vector<float> row;  // a row's values: its pixels are contiguous in the values
+  std::vector<float> row;  // a row's values (its pixels are contiguous in the values), from a Zarr store
   for (int y = dr.y0; y < dr.y1(); ++y) {
     const auto first = size_t(region_.index(dr.x0, y)), last = size_t(region_.index(dr.x1() - 1, y));
-    if (T > 0) {
+    const float* vals = values_ ? values_ + o[first] : nullptr;  // mapped: read in place
+    if (T > 0 && !values_) {
       row.resize(size_t(o[last + 1] - o[first]));
       values(o[first], int64_t(row.size()), row.data());
+      vals = row.data();
     }
     for (int x = dr.x0; x < dr.x1(); ++x) {
       const auto di = size_t(dr.index(x, y)), ri = size_t(region_.index(x, y));
@@ -297,7 +303,7 @@ TransientTile SavedLight::tile(const PixelRect& rect, const PixelRect& data_rect
       if (laser_se_) t.laser_se[di] = laser_se_[ri], t.samples[di] = samples_[ri];
       if (T == 0) continue;
       t.bin_lo[di] = r[2 * ri], t.bin_hi[di] = r[2 * ri + 1];
-      std::copy(row.begin() + (o[ri] - o[first]), row.begin() + (o[ri + 1] - o[first]), t.transient.data() + di * T + size_t(r[2 * ri]));
+      std::copy(vals + (o[ri] - o[first]), vals + (o[ri + 1] - o[first]), t.transient.data() + di * T + size_t(r[2 * ri]));
     }
   }
   if (row_scale_.empty()) return t;
@@ -313,6 +319,16 @@ TransientTile SavedLight::tile(const PixelRect& rect, const PixelRect& data_rect
     }
   }
   return t;
+}
+
+void SavedLight::recycle(TransientTile&& t) const {
+  const auto T = size_t(axis_.bins);
+  if (T == 0 || t.transient.size() != size_t(t.data_rect.count()) * T || t.bin_lo.size() != size_t(t.data_rect.count())) return;
+  // tile() wrote bins [bin_lo, bin_hi) of each pixel and nothing else.
+  for (size_t i = 0; i < t.bin_lo.size(); ++i)
+    if (t.bin_hi[i] > t.bin_lo[i]) std::fill(t.transient.data() + i * T + t.bin_lo[i], t.transient.data() + i * T + t.bin_hi[i], 0.0f);
+  std::lock_guard<std::mutex> lock(pool_mutex_);
+  pool_.push_back(std::move(t.transient));
 }
 
 }  // namespace spadgen::app

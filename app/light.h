@@ -19,6 +19,7 @@
 #include <atomic>
 #include <memory>
 #include <mutex>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -84,6 +85,10 @@ class SavedLight {
   // The renderer's tile for `rect` with data over `data_rect` (which must lie inside the region), as
   // the renderer delivered it: the dense transient, the ranges, the totals and the ambient rates.
   TransientTile tile(const PixelRect& rect, const PixelRect& data_rect) const;
+  // Hands a tile's dense transient back for the next tile() (on any thread): its bins that tile() filled
+  // are cleared, so a tile starts from zeros without zeroing (or faulting in) the whole dense stack, which
+  // is twenty times the lit bins. Optional: a tile not handed back is simply freed.
+  void recycle(TransientTile&& t) const;
   // Light per sensor row times row_scale[y] (photons on the photosensitive area scale with the fill
   // factor: a new pixel design rescales the light the run saved). Empty or 1: as saved, bit for bit.
   void set_row_scale(std::vector<double> row_scale) { row_scale_ = std::move(row_scale); }
@@ -111,6 +116,8 @@ class SavedLight {
   const int32_t* samples_ = nullptr;
   int64_t values_elements_ = 0;
   std::vector<double> row_scale_;
+  mutable std::mutex pool_mutex_;
+  mutable std::vector<std::vector<float>> pool_;  // dense transients, all zero, for tile() to reuse
 };
 
 }  // namespace spadgen::app
