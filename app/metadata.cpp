@@ -127,6 +127,25 @@ Provenance provenance(const RunConfig& c, const PixelRect& img) {
   return {c.scene_file, scenes::content_hash(c.scene_file, c.gltf_path), c.seed, img};
 }
 
+std::string sensor_tables_hash(const RunConfig& c) {
+  uint64_t h = scenes::fnv1a64("");
+  for (const std::string* path : {&c.laser.pulse_shape_csv, &c.sensor.gate.profile_csv, &c.sensor.gate.maps_exr,
+                                  &c.sensor.pixel_A.pdp_csv, &c.sensor.pixel_B.pdp_csv}) {
+    std::string bytes;
+    if (!path->empty()) {
+      std::ifstream in(*path, std::ios::binary);
+      std::ostringstream ss;
+      ss << in.rdbuf();
+      bytes = ss.str();
+    }
+    // The length first, so that tables moved from one key to the next do not hash alike.
+    h = scenes::fnv1a64(std::to_string(bytes.size()) + ":" + bytes, h);
+  }
+  char buf[17];
+  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(h));
+  return buf;
+}
+
 void stamp(writers::ExrImage& e, const Provenance& p) {
   e.set_attribute("spadgen_version", SPADGEN_VERSION);
   e.set_attribute("spadgen_seed", std::to_string(p.seed));
@@ -149,6 +168,7 @@ json metadata(const scenes::ResolvedRun& resolved, const std::vector<std::string
   meta["scene_file"] = p.scene_file;
   meta["scene_hash_fnv1a64"] = p.scene_hash;
   meta["seed"] = p.seed;
+  meta["sensor_tables_fnv1a64"] = sensor_tables_hash(cfg);
   // The seed each random stream used (seeds.* when set, else seed).
   meta["seeds"] = {{"light", cfg.light_seed()}, {"chip", cfg.chip_seed()}, {"noise", cfg.noise_seed()}};
   meta["versions"] = {{"spadgen", SPADGEN_VERSION},

@@ -2,7 +2,6 @@
 // is rendered: the run folder's metadata.json holds the resolved scene file, light/ what the renderer
 // delivered to the sensor. The sensor settings may change (--set sensor.*, acquisition.*, seeds), the
 // light may not.
-#include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -125,6 +124,16 @@ GroundTruthTile object_truth(const writers::ExrData& e, const PixelRect& img, co
   return gt;
 }
 
+// The resolved scene less what does not change the sensor's noise-free files: the noise's seed and
+// whether counts and frames are written.
+nlohmann::ordered_json noise_free_part(nlohmann::ordered_json resolved) {
+  for (const char* key : {"/seeds/noise", "/outputs/counts", "/outputs/frames"}) {
+    const json::json_pointer p(key);
+    if (resolved.contains(p)) resolved[p.parent_pointer()].erase(p.back());
+  }
+  return resolved;
+}
+
 }  // namespace
 
 std::vector<RunResult> sense(const SenseOptions& options) {
@@ -183,9 +192,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   }
 
   InterruptGuard interrupt_guard;
-  std::unique_ptr<tbb::global_control> threads;
-  if (options.threads > 0)
-    threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, size_t(options.threads));
+  const ThreadLimit threads(options.threads);
 
   sensor::SensorModel sensor(sensor_stage(cfg));
   if (!cfg.sensor.gate.maps_exr.empty()) {
@@ -237,6 +244,11 @@ std::vector<RunResult> sense(const SenseOptions& options) {
         name.rfind("light/", 0) == 0)
       linked.push_back(name);
   }
+  // The same sensor as the run's (settings, chip, tables; only the noise may differ): what does not depend
+  // on the noise (the rates, the maps, the laser and ambient images, the labels) is the run's, bit for
+  // bit, and is linked rather than computed and written again.
+  const bool same_sensor = meta.value("sensor_tables_fnv1a64", std::string()) == sensor_tables_hash(cfg) &&
+                           noise_free_part(first.resolved) == noise_free_part(source.resolved);
   RunConfig write_cfg = cfg;  // what the sensor stage writes itself
   write_cfg.outputs.ground_truth = false, write_cfg.outputs.transient = false, write_cfg.outputs.light = false;
 
@@ -263,6 +275,12 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   bool two_d = false;
   for (const sensor::DeclaredOutput& d : sensor.acquisition().outputs()) two_d |= d.file == "intensity.exr";
   if (!two_d) shared.insert("previews/intensity.png");  // the laser light, in a gate sweep
+  if (same_sensor)
+    for (const auto& f : meta.at("files"))
+      if (shared.count(f.get<std::string>())) {
+        from_run.insert(f.get<std::string>());
+        linked.push_back(f.get<std::string>());
+      }
   for (size_t r = 0; r < runs.size(); ++r) {
     char name[32];
     std::snprintf(name, sizeof name, "repeat_%03zu", r);
@@ -280,12 +298,12 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     std::fprintf(stderr, "spadgen: sense %s: %d x %d pixels, K = %d, %zu realisation(s)\n", src.string().c_str(), img.width,
                  img.height, sensor.K(), runs.size());
   std::unique_ptr<writers::ExrData> truth;
-  if (outputs.front()->labels()) truth = std::make_unique<writers::ExrData>(writers::read_exr((src / "ground_truth.exr").string()));
+  if (outputs.front()->labels() && !from_run.count("labels.exr")) truth = std::make_unique<writers::ExrData>(writers::read_exr((src / "ground_truth.exr").string()));
   Progress progress(tiles.size(), options.progress);
   tbb::parallel_for(size_t(0), tiles.size(), [&](size_t ti) {
     InterruptGuard::check();
     const PixelRect& rect = tiles[ti];
-    const TransientTile t = light.tile(rect, grow_clipped(rect, sensor.halo(), cfg.camera.width_px, cfg.camera.height_px));
+    TransientTile t = light.tile(rect, grow_clipped(rect, sensor.halo(), cfg.camera.width_px, cfg.camera.height_px));
     const std::vector<SensorTile> s = sensor.process(t, seeds);
     const sensor::SensorMapsTile maps = sensor.maps(rect);
     // The labels do not depend on the noise: the first realisation's serve all (the others link them).
@@ -294,6 +312,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
           sensor, object_truth(*truth, img, rect, cfg.render.max_layers, src / "ground_truth.exr"), s.front(), axis,
           cfg.laser.emission_delay_s));
     for (size_t r = 0; r < s.size(); ++r) outputs[r]->put(t, maps, s[r]);
+    light.recycle(std::move(t));
     progress.tick();
   });
 
@@ -309,7 +328,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     }
     if (r > 0)
       for (const std::string& f : results.front().files)
-        if (shared.count(f)) {
+        if (shared.count(f) && !from_run.count(f)) {
           link_into(dirs.front() / f, *staging[r], f);
           files.push_back(f);
         }

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <fstream>
 #include <nlohmann/json.hpp>
 
 #include "app_fixture.h"
@@ -22,6 +23,45 @@ TEST_F(App, SenseWritesWhatTheRunWroteBitForBit) {
   expect_same_outputs(dir_ / "run", dir_ / "sense");
   const auto meta = nlohmann::json::parse(slurp(dir_ / "sense/metadata.json"));
   EXPECT_EQ(meta["sense"]["from"], (dir_ / "run").string());
+}
+
+// A new noise realisation of the run's own sensor: the files that do not depend on the noise are the
+// run's, linked (one file system here), and the counts and frames are drawn anew. Another chip, or a
+// sensor table whose contents changed since the run, makes sense compute and write them all again.
+TEST_F(App, SenseLinksTheRunsNoiseFreeFilesOnlyForTheRunsOwnSensor) {
+  const fs::path pdp = dir_ / "pdp.csv";
+  const auto write_pdp = [&](double peak) {
+    std::ofstream(pdp) << "wavelength_nm,pdp\n400," << peak << "\n1000," << peak << "\n";
+  };
+  write_pdp(0.1);
+  ASSERT_EQ(sh("run " + kLit + " --set sensor.pixel_A.pdp_csv=" + pdp.string() + " -o " + (dir_ / "run").string()).code, 0);
+  const auto linked = [&](const fs::path& d, const char* f) { return fs::equivalent(dir_ / "run" / f, d / f); };
+  const char* noise_free[] = {"detection_rate.npy", "laser.exr", "ambient.exr", "sensor_maps.exr", "labels.exr",
+                              "previews/intensity.png"};
+
+  Result r = sh("sense " + (dir_ / "run").string() + " -q --noise-seed 11 -o " + (dir_ / "noise").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  for (const char* f : noise_free) EXPECT_TRUE(linked(dir_ / "noise", f)) << f;
+  for (const char* f : {"counts.npy", "frames.npy"}) EXPECT_FALSE(linked(dir_ / "noise", f)) << f;
+  ASSERT_EQ(sh("run " + kLit + " --set sensor.pixel_A.pdp_csv=" + pdp.string() + " --set seeds.noise=11 -o " +
+               (dir_ / "run11").string()).code, 0);
+  expect_same_outputs(dir_ / "run11", dir_ / "noise");
+
+  r = sh("sense " + (dir_ / "run").string() + " -q --set seeds.chip=5 -o " + (dir_ / "chip").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  for (const char* f : {"detection_rate.npy", "sensor_maps.exr", "labels.exr"}) EXPECT_FALSE(linked(dir_ / "chip", f)) << f;
+  EXPECT_NE(slurp(dir_ / "run/sensor_maps.exr"), slurp(dir_ / "chip/sensor_maps.exr"));
+
+  write_pdp(0.2);  // the table the run read has changed: its rates are no longer this sensor's
+  r = sh("sense " + (dir_ / "run").string() + " -q -o " + (dir_ / "table").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  for (const char* f : noise_free) EXPECT_FALSE(linked(dir_ / "table", f)) << f;
+  const std::vector<double> was = values(read_npy(dir_ / "run/detection_rate.npy"));
+  const std::vector<double> now = values(read_npy(dir_ / "table/detection_rate.npy"));
+  ASSERT_EQ(was.size(), now.size());
+  size_t higher = 0;
+  for (size_t i = 0; i < was.size(); ++i) higher += now[i] > was[i];
+  EXPECT_GT(higher, was.size() / 2);  // twice the PDP: more avalanches wherever light arrives
 }
 
 // A run stored as Zarr: sense reads its light from the Zarr stores and writes what the run wrote, bit for
