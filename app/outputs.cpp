@@ -4,11 +4,14 @@
 #include <array>
 #include <atomic>
 #include <cmath>
+#include <cstring>
 #include <functional>
 #include <limits>
+#include <map>
 #include <mutex>
 #include <numeric>
 #include <set>
+#include <type_traits>
 
 #include "app/staging.h"
 #include "core/units.h"
@@ -384,7 +387,10 @@ class Outputs::Stacks {
         band_width_(size_t(img.height)), complete_(size_t(img.height), 0) {
     for (size_t k = 0; k < kStackCount; ++k) {
       if (!layout[k].written) continue;
-      if (k == kFrames) {
+      if (banded(Stack(k)) && layout[k].chunks.empty()) {  // a (K, H, W) .npy: written band by band
+        w_[k] = std::make_unique<NpyWriter>(staging.path(layout[k].file), layout[k].dtype, layout[k].shape, /*mapped=*/false);
+        band_stack_[k] = true;
+      } else if (k == kFrames) {
         auto frames = std::make_unique<NpyWriter>(staging.path(layout[k].file), layout[k].dtype, layout[k].shape);
         frames_ = frames.get();
         w_[k] = std::move(frames);
@@ -402,11 +408,20 @@ class Outputs::Stacks {
 
   void put(const TransientTile& t, const SensorTile& s) {
     const PixelRect& r = t.rect;
-    if (w_[kExpectedCounts]) w_[kExpectedCounts]->write_khw(r, img_.x0, img_.y0, s.expected.data());
-    if (w_[kDetectionRate]) w_[kDetectionRate]->write_khw(r, img_.x0, img_.y0, s.rate.data());
-    if (w_[kCounts] && counts_u8_) {
+    // A .npy stack: into the tile's band, written whole once complete; a Zarr store: chunk by chunk.
+    Band* band = band_stack_[kExpectedCounts] || band_stack_[kDetectionRate] || band_stack_[kCounts] ? &band_of(r) : nullptr;
+    const auto to_u8 = [](uint16_t v) { return uint8_t(v); };  // counts never exceed the frames, <= 255 here
+    if (band_stack_[kExpectedCounts]) band->put(kExpectedCounts, r, img_, s.expected.data());
+    else if (w_[kExpectedCounts]) w_[kExpectedCounts]->write_khw(r, img_.x0, img_.y0, s.expected.data());
+    if (band_stack_[kDetectionRate]) band->put(kDetectionRate, r, img_, s.rate.data());
+    else if (w_[kDetectionRate]) w_[kDetectionRate]->write_khw(r, img_.x0, img_.y0, s.rate.data());
+    if (band_stack_[kCounts] && counts_u8_) {
+      band->put(kCounts, r, img_, s.counts.data(), to_u8);
+    } else if (band_stack_[kCounts]) {
+      band->put(kCounts, r, img_, s.counts.data());
+    } else if (w_[kCounts] && counts_u8_) {
       std::vector<uint8_t> c8(s.counts.size());
-      std::transform(s.counts.begin(), s.counts.end(), c8.begin(), [](uint16_t v) { return uint8_t(v); });
+      std::transform(s.counts.begin(), s.counts.end(), c8.begin(), to_u8);
       w_[kCounts]->write_khw(r, img_.x0, img_.y0, c8.data());
     } else if (w_[kCounts]) {
       w_[kCounts]->write_khw(r, img_.x0, img_.y0, s.counts.data());
@@ -438,14 +453,75 @@ class Outputs::Stacks {
   }
 
  private:
-  // A .npy stack is mapped for writing (NpyWriter), so every page a tile touched stays in the run's
-  // resident set until released. Tiles come in bands (rows of tiles sharing y0 and height): when a band
+  static bool banded(Stack k) { return k == kExpectedCounts || k == kDetectionRate || k == kCounts; }
+
+  // The (K, H, W) .npy stacks of one band of tiles (the rows from y0, of the tiles' height), assembled in
+  // memory: a tile's share of gate position k is a short run per row (128 bytes for 32 pixels), the
+  // band's is rows x W contiguous values, which one pwrite puts in the page cache without the page faults,
+  // zero-filling and TLB shootdowns of writing through a mapping.
+  struct Band {
+    int rows = 0;
+    int64_t K = 0, W = 0;
+    std::array<std::unique_ptr<char[]>, kStackCount> data;  // [k][row][x], every byte written by its tiles
+    std::array<int64_t, kStackCount> element_bytes{};
+    template <class T, class Convert = std::identity>
+    void put(Stack k, const PixelRect& r, const PixelRect& img, const T* src, Convert convert = {}) {
+      using Out = std::decay_t<decltype(convert(*src))>;
+      auto* dst = reinterpret_cast<Out*>(data[k].get());
+      const auto n = size_t(r.count());
+      for (int64_t g = 0; g < K; ++g)
+        for (int y = 0; y < r.height; ++y) {
+          Out* d = dst + (size_t(g) * size_t(rows) + size_t(y)) * size_t(W) + size_t(r.x0 - img.x0);
+          const T* from = src + size_t(g) * n + size_t(y) * size_t(r.width);
+          if constexpr (std::is_same_v<T, Out>) std::memcpy(d, from, size_t(r.width) * sizeof(T));
+          else std::transform(from, from + r.width, d, convert);
+        }
+    }
+  };
+
+  Band& band_of(const PixelRect& r) {
+    std::lock_guard<std::mutex> lock(band_mutex_);
+    std::unique_ptr<Band>& b = bands_[r.y0 - img_.y0];
+    if (!b) {
+      b = std::make_unique<Band>();
+      b->rows = r.height, b->W = img_.width;
+      for (size_t k = 0; k < kStackCount; ++k)
+        if (band_stack_[k]) {
+          b->K = layout_[k].shape[0];
+          b->element_bytes[k] = writers::element_bytes(layout_[k].dtype);
+          b->data[k] = std::make_unique_for_overwrite<char[]>(size_t(b->K * b->rows * b->W * b->element_bytes[k]));
+        }
+    }
+    return *b;
+  }
+
+  // The band at `row` is complete: each gate position's rows go to the file in one write, and the band is freed.
+  void write_band(size_t row) {
+    std::unique_ptr<Band> b;
+    {
+      std::lock_guard<std::mutex> lock(band_mutex_);
+      const auto it = bands_.find(int(row));
+      if (it == bands_.end()) return;
+      b = std::move(it->second);
+      bands_.erase(it);
+    }
+    const int64_t H = img_.height, plane = int64_t(b->rows) * b->W;
+    for (size_t k = 0; k < kStackCount; ++k)
+      if (band_stack_[k])
+        for (int64_t g = 0; g < b->K; ++g)
+          w_[k]->write((g * H + int64_t(row)) * b->W, b->data[k].get() + g * plane * b->element_bytes[k], plane);
+  }
+
+  // A band of tiles is complete: its (K, H, W) .npy stacks are written; the frames and transients are
+  // mapped for writing (NpyWriter), so every page a tile touched stays in the run's resident set until
+  // released. Tiles come in bands (rows of tiles sharing y0 and height): when a band
   // is complete, the rows of the complete bands around it leave the resident set. Only whole pages
   // inside complete rows are released, so no page another tile still writes is touched; a page at a band
   // boundary goes when the band beyond it completes. (A Zarr store frees each chunk once it is complete.)
   void tile_done(const PixelRect& r) {
     const auto row = size_t(r.y0 - img_.y0);
     if (band_width_[row].fetch_add(r.width) + r.width != img_.width) return;
+    write_band(row);
     std::lock_guard<std::mutex> lock(release_mutex_);
     std::fill(complete_.begin() + ptrdiff_t(row), complete_.begin() + ptrdiff_t(row) + r.height, 1);
     size_t lo = row, hi = row + size_t(r.height);
@@ -466,6 +542,9 @@ class Outputs::Stacks {
   PixelRect img_, tcrop_;
   bool counts_u8_;
   std::array<std::unique_ptr<writers::StackWriter>, kStackCount> w_;  // null: not written
+  std::array<bool, kStackCount> band_stack_{};                        // w_[k] is written by bands
+  std::map<int, std::unique_ptr<Band>> bands_;                        // by first row - img.y0: the bands being filled
+  std::mutex band_mutex_;
   NpyWriter* frames_ = nullptr;                                       // w_[kFrames], always a .npy
   std::vector<std::atomic<int>> band_width_;  // [row - img.y0]: pixels written in the band starting there
   std::vector<char> complete_;                // [row - img.y0]: the row is complete

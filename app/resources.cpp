@@ -113,21 +113,24 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
                          in_flight * data_pixels * bins * 4 * split + T * bins * 8 * split * (adaptive ? 16 : 1)});
   // The sensor's tile: its share of every (K, ...) stack, written or not (the sensor computes them all).
   const std::vector<StackLayout> stacks = stack_layout(c, sensor, img, axis);
-  int64_t sensor_tile = 0, resident = 0, chunks = 0;
+  int64_t sensor_tile = 0, resident = 0, bands = 0, chunks = 0;
   for (const StackLayout& s : stacks) {
     const bool per_k = s.file.find("transient") == std::string::npos;  // (H, W, T) stacks: the transient tile above
     if (per_k && (s.written || s.file.rfind("frames.", 0) != 0)) sensor_tile += s.bytes() / std::max<int64_t>(1, pixels) * tile_pixels;
     if (!s.written) continue;
     const size_t rows_axis = per_k && s.shape.size() == 3 ? 1 : 0;  // H of (K, H, W); (K, N, H, W/8) is a .npy
     const int64_t rows = std::max<int64_t>(1, s.shape[rows_axis]), row_bytes = s.bytes() / rows;
-    // A .npy is written through a memory map whose completed bands leave the resident set; a Zarr store
-    // holds the chunks being filled: for each thread at most its tiles' rows grown to whole chunks.
-    if (s.chunks.empty()) resident += std::min(s.bytes(), row_bytes * tile * in_flight);
+    // A (K, H, W) .npy is assembled band by band in memory (app/outputs.cpp); the frames and transients are
+    // written through a memory map whose completed bands leave the resident set; a Zarr store holds the
+    // chunks being filled: for each thread at most its tiles' rows grown to whole chunks.
+    if (s.chunks.empty() && per_k && s.shape.size() == 3) bands += std::min(s.bytes(), row_bytes * tile * in_flight);
+    else if (s.chunks.empty()) resident += std::min(s.bytes(), row_bytes * tile * in_flight);
     else chunks += row_bytes * std::min(rows, (tile + s.chunks[rows_axis]) * T);
   }
   plan.memory.push_back({"sensor tiles (K = " + std::to_string(sensor.K()) + " gate positions or exposures, " + th + ")",
                          in_flight * sensor_tile});
-  plan.memory.push_back({"output stacks in flight, file-backed (camera.width_px, render.tile_size_px)", resident, true});
+  plan.memory.push_back({"bands of .npy stacks being assembled (camera.width_px, render.tile_size_px, " + th + ")", bands});
+  plan.memory.push_back({"frames and transients in flight, file-backed (camera.width_px, render.tile_size_px)", resident, true});
   plan.memory.push_back({"Zarr chunks being filled, at most (camera.width_px, render.tile_size_px, " + th + ")", chunks});
   // EXR images held whole until the end: ground truth (8 channels and 2 per layer, 4 and 4 per object
   // slot), laser, ambient, maps, intensity, and in a sweep labels.exr (4 per object slot).

@@ -112,7 +112,7 @@ std::string NpyWriter::header(Dtype dtype, const std::vector<int64_t>& shape) {
   return out + dict;
 }
 
-NpyWriter::NpyWriter(const std::string& path, Dtype dtype, std::vector<int64_t> shape) {
+NpyWriter::NpyWriter(const std::string& path, Dtype dtype, std::vector<int64_t> shape, bool mapped) {
   const int64_t eb = element_bytes(dtype);
   const int64_t elements = checked_elements(shape, eb, path);
   const std::string head = header(dtype, shape);
@@ -133,7 +133,7 @@ NpyWriter::NpyWriter(const std::string& path, Dtype dtype, std::vector<int64_t> 
   }
   // Tiles write short runs (a tile's row of one gate position: 128 bytes; of one binary frame: 4 bytes),
   // one system call each through pwrite; through a shared mapping each is a memcpy into the page cache.
-  if (bytes > 0) {
+  if (bytes > 0 && mapped) {
     void* m = ::mmap(nullptr, static_cast<size_t>(bytes), PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
     if (m != MAP_FAILED) {
       impl_->map = static_cast<char*>(m);
@@ -164,7 +164,7 @@ void NpyWriter::write(int64_t offset, const void* data, int64_t count) {
 
 void NpyWriter::release_rows(int axis, int64_t row_begin, int64_t row_end) {
   const auto& s = impl_->shape;
-  if (!impl_->map || axis < 0 || size_t(axis) >= s.size() || row_begin >= row_end) return;
+  if (axis < 0 || size_t(axis) >= s.size() || row_begin >= row_end) return;
   row_begin = std::max<int64_t>(row_begin, 0), row_end = std::min(row_end, s[size_t(axis)]);
   int64_t outer = 1, inner = impl_->elem_bytes;
   for (int a = 0; a < axis; ++a) outer *= s[size_t(a)];
@@ -176,7 +176,7 @@ void NpyWriter::release_rows(int axis, int64_t row_begin, int64_t row_end) {
     // Whole pages inside the range only: a page it shares with rows still being written stays mapped.
     const int64_t a = (first + page - 1) / page * page, b = last / page * page;
     if (b <= a) continue;
-    ::madvise(impl_->map + a, static_cast<size_t>(b - a), MADV_DONTNEED);
+    if (impl_->map) ::madvise(impl_->map + a, static_cast<size_t>(b - a), MADV_DONTNEED);
     // Written out now, while the next rows are computed, rather than all by commit()'s fsync.
     (void)::sync_file_range(impl_->file.fd(), a, b - a, SYNC_FILE_RANGE_WRITE);
   }

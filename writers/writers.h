@@ -50,7 +50,9 @@ class StackWriter {
 class NpyWriter : public StackWriter {
  public:
   using Dtype = writers::Dtype;
-  NpyWriter(const std::string& path, Dtype dtype, std::vector<int64_t> shape);
+  // mapped: the file is mapped for writing, so that short runs (a tile's row) are a memcpy each; else
+  // every write() is one pwrite, for a caller that writes long runs (whole bands of rows).
+  NpyWriter(const std::string& path, Dtype dtype, std::vector<int64_t> shape, bool mapped = true);
   ~NpyWriter() override;
   NpyWriter(const NpyWriter&) = delete;
   NpyWriter& operator=(const NpyWriter&) = delete;
