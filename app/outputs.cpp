@@ -13,6 +13,7 @@
 #include <set>
 #include <type_traits>
 
+#include "app/resources.h"
 #include "app/staging.h"
 #include "core/units.h"
 #include "writers/previews.h"
@@ -91,6 +92,14 @@ std::vector<StackLayout> stack_layout(const RunConfig& c, const sensor::SensorMo
                                 false, "the part of transient carried by paths with two or more scattering vertices "
                                 "(direct = transient - transient_indirect)", "photons per pulse");
   return s;
+}
+
+bool write_in_bands(const std::vector<StackLayout>& layout, const PixelRect& img, int tile_size, int threads) {
+  const int64_t rows = std::min<int64_t>(tile_size, img.height);
+  int64_t band = 0;
+  for (const StackLayout& s : layout)
+    if (s.written && s.chunks.empty() && s.dims.size() == 3 && s.dims.front() == "k") band += s.bytes() / std::max(1, img.height) * rows;
+  return band * (worker_threads(threads) + 1) <= kBandMemory;
 }
 
 std::unique_ptr<writers::StackWriter> open_stack(const StackLayout& s, const std::string& path) {
@@ -381,13 +390,14 @@ class Outputs::Images {
 // The stacks, streamed to disk tile by tile (.npy files or Zarr stores).
 class Outputs::Stacks {
  public:
+  // in_bands: write_in_bands.
   Stacks(const std::vector<StackLayout>& layout, const PixelRect& img, const PixelRect& transient_crop,
-         const Staging& staging, std::vector<std::string>& files)
+         const Staging& staging, std::vector<std::string>& files, bool in_bands)
       : layout_(layout), img_(img), tcrop_(transient_crop), counts_u8_(layout[kCounts].dtype == writers::Dtype::U8),
         band_width_(size_t(img.height)), complete_(size_t(img.height), 0) {
     for (size_t k = 0; k < kStackCount; ++k) {
       if (!layout[k].written) continue;
-      if (banded(Stack(k)) && layout[k].chunks.empty()) {  // a (K, H, W) .npy: written band by band
+      if (in_bands && banded(Stack(k)) && layout[k].chunks.empty()) {  // a (K, H, W) .npy: written band by band
         w_[k] = std::make_unique<NpyWriter>(staging.path(layout[k].file), layout[k].dtype, layout[k].shape, /*mapped=*/false);
         band_stack_[k] = true;
       } else if (k == kFrames) {
@@ -458,7 +468,9 @@ class Outputs::Stacks {
   // The (K, H, W) .npy stacks of one band of tiles (the rows from y0, of the tiles' height), assembled in
   // memory: a tile's share of gate position k is a short run per row (128 bytes for 32 pixels), the
   // band's is rows x W contiguous values, which one pwrite puts in the page cache without the page faults,
-  // zero-filling and TLB shootdowns of writing through a mapping.
+  // zero-filling and TLB shootdowns of writing through a mapping. (Frames stay mapped: assembled the same
+  // way, a 1024 x 32 band of the paper's sweep wrote at 0.55 of the mapping's speed, bench_sensor
+  // BM_FramesToDisk, its 4-byte rows scattered over 89,505 pages either way.)
   struct Band {
     int rows = 0;
     int64_t K = 0, W = 0;
@@ -576,7 +588,7 @@ class Outputs::ProfileProbe {
 };
 
 Outputs::Outputs(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img, const TimeAxis& axis,
-                 const Staging& staging, int objects, const std::set<std::string>& provided)
+                 const Staging& staging, int objects, int threads, const std::set<std::string>& provided)
     : cfg_(c), axis_(axis), gate_positions_s_(sensor.gate_positions_s()), declared_(sensor.acquisition().outputs()),
       staging_(staging) {
   // Labels come from the ground truth: this run's, or the one spadgen sense was given (provided).
@@ -587,7 +599,8 @@ Outputs::Outputs(const RunConfig& c, const sensor::SensorModel& sensor, const Pi
   std::vector<StackLayout> layout = stack_layout(c, sensor, img, axis);
   for (StackLayout& s : layout)
     if (provided.count(s.file)) s.written = false;
-  stacks_ = std::make_unique<Stacks>(layout, img, transient_crop(c, img), staging, files_);
+  stacks_ = std::make_unique<Stacks>(layout, img, transient_crop(c, img), staging, files_,
+                                     write_in_bands(layout, img, c.render.tile_size, threads));
   probe_ = std::make_unique<ProfileProbe>(img, sensor.K());
 }
 

@@ -56,13 +56,22 @@ nlohmann::json storage_json(const StackLayout& s);
 // its .zgroup and lists it in `files`. Then zarr.open(run folder) and xarray.open_zarr open them together.
 void write_zarr_group(const Staging& staging, const std::string& folder, std::vector<std::string>& files);
 
+// Whether the (K, H, W) .npy stacks are assembled band by band in memory (one pwrite per gate position)
+// or written through a mapping of the file: in bands while the bands in
+// flight (one per thread and one more) take at most kBandMemory, else through the mapping, whose pages the
+// kernel can write out and drop while a band is still open (a sweep of 100,000 gate positions has bands
+// of tens of GB). The files are the same bytes either way. threads: as --threads (0 = all cores).
+inline constexpr int64_t kBandMemory = int64_t(2) << 30;
+bool write_in_bands(const std::vector<StackLayout>& layout, const PixelRect& img, int tile_size, int threads);
+
 class Outputs {
  public:
   // Opens the stacks in the staging folder (the tiles stream into them) and allocates the images.
   // objects: the scene's objects (scenes::objects_of), so that the images hold no more object slots.
   // provided: files another folder already holds (spadgen sense --repeats links them): not written here.
+  // threads: as --threads (0 = all cores), for write_in_bands.
   Outputs(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img, const TimeAxis& axis,
-          const Staging& staging, int objects, const std::set<std::string>& provided = {});
+          const Staging& staging, int objects, int threads, const std::set<std::string>& provided = {});
   ~Outputs();
   Outputs(const Outputs&) = delete;
   Outputs& operator=(const Outputs&) = delete;

@@ -73,7 +73,7 @@ RunResult run(const RunOptions& options) {
   const fs::path out = options.out_dir.empty() ? fs::path("out") / fs::path(options.scene_file).stem() : fs::path(options.out_dir);
   check_resources(cfg, sensor, img, axis, options.threads, out, objects);
   Staging staging(out);
-  Outputs outputs(cfg, sensor, img, axis, staging, objects);
+  Outputs outputs(cfg, sensor, img, axis, staging, objects, options.threads);
   const PixelRect light_rect = light_region(img, cfg.camera.width_px, cfg.camera.height_px);
   std::unique_ptr<LightWriter> light;
   if (cfg.outputs.light) light = std::make_unique<LightWriter>(light_rect, axis, staging, cfg.outputs.storage);

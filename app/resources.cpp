@@ -86,10 +86,12 @@ std::string bytes_text(int64_t bytes) {
   return buf;
 }
 
+int64_t worker_threads(int threads) { return threads > 0 ? threads : std::max(1u, std::thread::hardware_concurrency()); }
+
 ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img,
                             const TimeAxis& axis, int threads, const fs::path& out, int objects) {
   ResourcePlan plan;
-  const int64_t T = threads > 0 ? threads : std::max(1u, std::thread::hardware_concurrency());
+  const int64_t T = worker_threads(threads);
   // Tiles in flight: one per thread, and one more that a thread waiting inside a tile may start.
   const int64_t in_flight = T + 1;
   const int64_t tile = std::min(c.render.tile_size, std::max(img.width, img.height));
@@ -114,23 +116,26 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
   // The sensor's tile: its share of every (K, ...) stack, written or not (the sensor computes them all).
   const std::vector<StackLayout> stacks = stack_layout(c, sensor, img, axis);
   int64_t sensor_tile = 0, resident = 0, bands = 0, chunks = 0;
+  const bool in_bands = write_in_bands(stacks, img, c.render.tile_size, threads);
   for (const StackLayout& s : stacks) {
     const bool per_k = s.file.find("transient") == std::string::npos;  // (H, W, T) stacks: the transient tile above
     if (per_k && (s.written || s.file.rfind("frames.", 0) != 0)) sensor_tile += s.bytes() / std::max<int64_t>(1, pixels) * tile_pixels;
     if (!s.written) continue;
-    const size_t rows_axis = per_k && s.shape.size() == 3 ? 1 : 0;  // H of (K, H, W); (K, N, H, W/8) is a .npy
+    // H: of (K, H, W), (K, N, H, W / 8) and (H, W, T)
+    const size_t rows_axis = size_t(std::find_if(s.dims.begin(), s.dims.end(), [](const std::string& d) { return d.front() == 'y'; }) -
+                                    s.dims.begin());
     const int64_t rows = std::max<int64_t>(1, s.shape[rows_axis]), row_bytes = s.bytes() / rows;
-    // A (K, H, W) .npy is assembled band by band in memory (app/outputs.cpp); the frames and transients are
-    // written through a memory map whose completed bands leave the resident set; a Zarr store holds the
+    // A (K, H, W) .npy is assembled band by band in memory (write_in_bands, unless the bands are too large);
+    // the frames, the transients and too large bands are written through a memory map whose completed bands leave the resident set; a Zarr store holds the
     // chunks being filled: for each thread at most its tiles' rows grown to whole chunks.
-    if (s.chunks.empty() && per_k && s.shape.size() == 3) bands += std::min(s.bytes(), row_bytes * tile * in_flight);
+    if (s.chunks.empty() && per_k && s.shape.size() == 3 && in_bands) bands += std::min(s.bytes(), row_bytes * tile * in_flight);
     else if (s.chunks.empty()) resident += std::min(s.bytes(), row_bytes * tile * in_flight);
     else chunks += row_bytes * std::min(rows, (tile + s.chunks[rows_axis]) * T);
   }
   plan.memory.push_back({"sensor tiles (K = " + std::to_string(sensor.K()) + " gate positions or exposures, " + th + ")",
                          in_flight * sensor_tile});
-  plan.memory.push_back({"bands of .npy stacks being assembled (camera.width_px, render.tile_size_px, " + th + ")", bands});
-  plan.memory.push_back({"frames and transients in flight, file-backed (camera.width_px, render.tile_size_px)", resident, true});
+  plan.memory.push_back({"bands of (K, H, W) .npy stacks being assembled (camera.width_px, render.tile_size_px, " + th + ")", bands});
+  plan.memory.push_back({"output pages in flight, file-backed (camera.width_px, render.tile_size_px)", resident, true});
   plan.memory.push_back({"Zarr chunks being filled, at most (camera.width_px, render.tile_size_px, " + th + ")", chunks});
   // EXR images held whole until the end: ground truth (8 channels and 2 per layer, 4 and 4 per object
   // slot), laser, ambient, maps, intensity, and in a sweep labels.exr (4 per object slot).

@@ -29,6 +29,9 @@ struct ResourcePlan {
   int64_t disk_needed() const;
 };
 
+// The worker threads of --threads (0: all cores).
+int64_t worker_threads(int threads);
+
 // threads: as --threads (0 = all cores). out: the output folder ("" = no disk check). objects: the scene's
 // objects (scenes::objects_of), which bound the object slots of the images; -1 unknown (render.max_layers).
 ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img,

@@ -288,7 +288,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     staging.push_back(std::make_unique<Staging>(dirs.back()));
     std::set<std::string> provided = r == 0 ? from_run : shared;
     provided.insert(from_run.begin(), from_run.end());
-    outputs.push_back(std::make_unique<Outputs>(write_cfg, sensor, img, axis, *staging.back(), objects, provided));
+    outputs.push_back(std::make_unique<Outputs>(write_cfg, sensor, img, axis, *staging.back(), objects, options.threads, provided));
     seeds.push_back(runs[r].config.noise_seed());
   }
 

@@ -21,6 +21,7 @@
 #include <sys/stat.h>
 #include <vector>
 
+#include "app/outputs.h"
 #include "app/staging.h"
 #include "render/integrator.h"
 #include "run_util.h"
@@ -207,6 +208,40 @@ TEST_F(Hardening, ARunTheMachineCannotHoldIsRefusedWithItsFigures) {
   EXPECT_THAT(info.output, HasSubstr("\nresources: memory: about "));
   EXPECT_THAT(info.output, HasSubstr("  disk: "));
   EXPECT_THAT(info.output, HasSubstr(" counts.npy 180 MB"));
+}
+
+// The stacks' bands are assembled in memory while the bands in flight fit in 2 GB (app/outputs.h,
+// write_in_bands), and the plan counts them as memory the run needs; larger bands go through the file's
+// mapping, whose pages the kernel can write out (shown, not required).
+TEST_F(Hardening, LargeBandsAreWrittenThroughTheMappingAndPlannedSo) {
+  // 14 MB of detection rates and counts per band of 256 x 32 pixels: in bands up to 140 threads (info plans
+  // for all cores).
+  const Outcome small = spadgen("info " + kFlat + " --set camera.crop=[0,0,256,64]");
+  expect_exit(small, 0, "small");
+  EXPECT_THAT(small.output, HasSubstr("bands of (K, H, W) .npy stacks being assembled"));
+  EXPECT_THAT(small.output, HasSubstr("disk: detection_rate.npy"));
+  EXPECT_THAT(small.output, Not(HasSubstr("output pages in flight, file-backed")));
+  // 100,000 gate positions across 1024 pixels: 0.4 GB of detection rates and counts per 32-row band.
+  const Outcome large = spadgen("info " + kFlat + " --set acquisition.gate_sweep.start_ns=0 "
+                                "--set acquisition.gate_sweep.stop_ns=99.999 --set acquisition.gate_sweep.step_ps=1");
+  expect_exit(large, 0, "large");
+  EXPECT_THAT(large.output, HasSubstr("output pages in flight, file-backed"));
+  EXPECT_THAT(large.output, Not(HasSubstr("being assembled")));
+  // The rule: (threads + 1) bands of 32 rows of every written (K, H, W) .npy stack within 2 GB.
+  using spadgen::app::StackLayout;
+  using spadgen::writers::Dtype;
+  const auto layout = [](int64_t K, bool zarr) {
+    const std::vector<std::string> khw{"k", "y", "x"};
+    return std::vector<StackLayout>{
+        {"detection_rate.npy", Dtype::F32, {K, 1000, 1024}, true, zarr ? std::vector<int64_t>{K, 32, 64} : std::vector<int64_t>{}, "", "", khw},
+        {"counts.npy", Dtype::U8, {K, 1000, 1024}, true, {}, "", "", khw},
+        {"frames.npy", Dtype::U8, {K, 255, 1000, 128}, true, {}, "", "", {"k", "n", "y", "x_byte"}}};
+  };
+  const spadgen::PixelRect img{0, 0, 1024, 1000};
+  EXPECT_TRUE(spadgen::app::write_in_bands(layout(351, false), img, 32, 2));       // 57.5 MB a band, x 3
+  EXPECT_FALSE(spadgen::app::write_in_bands(layout(351, false), img, 32, 40));     // x 41: 2.36 GB
+  EXPECT_TRUE(spadgen::app::write_in_bands(layout(351, true), img, 32, 40));       // a Zarr store has its own chunks
+  EXPECT_FALSE(spadgen::app::write_in_bands(layout(100000, false), img, 32, 1));   // 16.4 GB a band
 }
 
 // ------------------------------------------------------------------------------------------------
