@@ -6,8 +6,6 @@
 #include <array>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
-#include <sstream>
 #include <string_view>
 
 #include "core/units.h"
@@ -131,19 +129,11 @@ std::string sensor_tables_hash(const RunConfig& c) {
   uint64_t h = scenes::fnv1a64("");
   for (const std::string* path : {&c.laser.pulse_shape_csv, &c.sensor.gate.profile_csv, &c.sensor.gate.maps_exr,
                                   &c.sensor.pixel_A.pdp_csv, &c.sensor.pixel_B.pdp_csv}) {
-    std::string bytes;
-    if (!path->empty()) {
-      std::ifstream in(*path, std::ios::binary);
-      std::ostringstream ss;
-      ss << in.rdbuf();
-      bytes = ss.str();
-    }
+    const std::string bytes = path->empty() ? std::string() : scenes::file_bytes(*path);
     // The length first, so that tables moved from one key to the next do not hash alike.
     h = scenes::fnv1a64(std::to_string(bytes.size()) + ":" + bytes, h);
   }
-  char buf[17];
-  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(h));
-  return buf;
+  return scenes::hex64(h);
 }
 
 void stamp(writers::ExrImage& e, const Provenance& p) {

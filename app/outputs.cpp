@@ -98,7 +98,7 @@ bool write_in_bands(const std::vector<StackLayout>& layout, const PixelRect& img
   const int64_t rows = std::min<int64_t>(tile_size, img.height);
   int64_t band = 0;
   for (const StackLayout& s : layout)
-    if (s.written && s.chunks.empty() && s.dims.size() == 3 && s.dims.front() == "k") band += s.bytes() / std::max(1, img.height) * rows;
+    if (s.written && s.chunks.empty() && s.khw()) band += s.bytes() / std::max(1, img.height) * rows;
   return band * (worker_threads(threads) + 1) <= kBandMemory;
 }
 
@@ -397,7 +397,7 @@ class Outputs::Stacks {
         band_width_(size_t(img.height)), complete_(size_t(img.height), 0) {
     for (size_t k = 0; k < kStackCount; ++k) {
       if (!layout[k].written) continue;
-      if (in_bands && banded(Stack(k)) && layout[k].chunks.empty()) {  // a (K, H, W) .npy: written band by band
+      if (in_bands && layout[k].khw() && layout[k].chunks.empty()) {  // a (K, H, W) .npy: written band by band
         w_[k] = std::make_unique<NpyWriter>(staging.path(layout[k].file), layout[k].dtype, layout[k].shape, /*mapped=*/false);
         band_stack_[k] = true;
       } else if (k == kFrames) {
@@ -463,8 +463,6 @@ class Outputs::Stacks {
   }
 
  private:
-  static bool banded(Stack k) { return k == kExpectedCounts || k == kDetectionRate || k == kCounts; }
-
   // The (K, H, W) .npy stacks of one band of tiles (the rows from y0, of the tiles' height), assembled in
   // memory: a tile's share of gate position k is a short run per row (128 bytes for 32 pixels), the
   // band's is rows x W contiguous values, which one pwrite puts in the page cache without the page faults,

@@ -43,6 +43,8 @@ struct StackLayout {
   std::vector<std::string> dims;
   // Bytes of data, without the header (uncompressed).
   int64_t bytes() const;
+  // A (K, H, W) stack: an image per gate position or exposure (expected counts, detection rate, counts).
+  bool khw() const { return dims.size() == 3 && dims.front() == "k"; }
 };
 
 // Every stack a run of this scene can write, written or not, indexed by Stack.

@@ -128,7 +128,7 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
     // A (K, H, W) .npy is assembled band by band in memory (write_in_bands, unless the bands are too large);
     // the frames, the transients and too large bands are written through a memory map whose completed bands leave the resident set; a Zarr store holds the
     // chunks being filled: for each thread at most its tiles' rows grown to whole chunks.
-    if (s.chunks.empty() && per_k && s.shape.size() == 3 && in_bands) bands += std::min(s.bytes(), row_bytes * tile * in_flight);
+    if (s.chunks.empty() && s.khw() && in_bands) bands += std::min(s.bytes(), row_bytes * tile * in_flight);
     else if (s.chunks.empty()) resident += std::min(s.bytes(), row_bytes * tile * in_flight);
     else chunks += row_bytes * std::min(rows, (tile + s.chunks[rows_axis]) * T);
   }

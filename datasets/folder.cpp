@@ -164,9 +164,7 @@ DatasetFolder::Resolved DatasetFolder::resolve(const Sample& s) const {
   // The hash covers what shapes the sample's data: its resolved scene, the content of its files and the
   // program's version; the same function of the sample on every machine and shard.
   const std::string text = r.resolved.dump() + "\n" + scene_content_hash(s.scene) + "\n" + SPADGEN_VERSION;
-  char buf[17];
-  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(scenes::fnv1a64(text)));
-  out.hash = buf;
+  out.hash = scenes::hex64(scenes::fnv1a64(text));
   return out;
 }
 

@@ -317,16 +317,23 @@ uint64_t fnv1a64(const std::string& bytes, uint64_t h) {
   return h;
 }
 
+std::string hex64(uint64_t h) {
+  char buf[17];
+  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(h));
+  return buf;
+}
+
+std::string file_bytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
 std::string content_hash(const std::string& scene_file, const std::string& gltf_path) {
   namespace fs = std::filesystem;
-  const auto bytes = [](const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    std::ostringstream ss;
-    ss << in.rdbuf();
-    return ss.str();
-  };
-  uint64_t h = fnv1a64(bytes(scene_file));
-  h = fnv1a64(bytes(gltf_path), h);
+  uint64_t h = fnv1a64(file_bytes(scene_file));
+  h = fnv1a64(file_bytes(gltf_path), h);
   std::vector<std::string> side;
   std::error_code ec;
   for (const auto& e : fs::directory_iterator(fs::path(gltf_path).parent_path(), ec))
@@ -334,10 +341,8 @@ std::string content_hash(const std::string& scene_file, const std::string& gltf_
         (e.path().extension() == ".bin" || e.path().extension() == ".png" || e.path().extension() == ".jpg"))
       side.push_back(e.path().string());
   std::sort(side.begin(), side.end());
-  for (const std::string& f : side) h = fnv1a64(bytes(f), h);
-  char buf[17];
-  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(h));
-  return buf;
+  for (const std::string& f : side) h = fnv1a64(file_bytes(f), h);
+  return hex64(h);
 }
 
 size_t edit_distance(const std::string& a, const std::string& b) {

@@ -58,8 +58,12 @@ std::string closest(const std::string& word, const std::vector<std::string>& can
 // count as empty.
 std::string content_hash(const std::string& scene_file, const std::string& gltf_path);
 
-// FNV-1a 64 of bytes, continuing from `h`.
+// FNV-1a 64 of bytes, continuing from `h`, and as 16 hex digits.
 uint64_t fnv1a64(const std::string& bytes, uint64_t h = 0xcbf29ce484222325ull);
+std::string hex64(uint64_t h);
+
+// A file's bytes; "" when it cannot be read (for content hashes).
+std::string file_bytes(const std::string& path);
 
 // Levenshtein distance (insertions, deletions, substitutions), for the "did you mean" of messages.
 size_t edit_distance(const std::string& a, const std::string& b);
