@@ -117,11 +117,12 @@ int main(int argc, char** argv) {
   CLI::App* rec_cmd = cli.add_subcommand("reconstruct", "reference detectors of the returns in each pixel's gate profile (detections_<detector>.exr), "
                                                         "or the HDR inversion of a 2D run (hdr.exr); docs/detection.md");
   rec_cmd->add_option("run_dir", rec.run_dir, "run folder")->required()->check(CLI::ExistingDirectory);
-  rec_cmd->add_option("--detector", rec.detector, "edges (multi-scale rising and falling edges, default) or paper (the paper's virtual window)")
+  CLI::Option* rec_detector = rec_cmd->add_option("--detector", rec.detector, "edges (multi-scale rising and falling edges, default) or paper (the paper's virtual window)")
       ->check(CLI::IsMember({"edges", "paper"}));
   rec_cmd->add_option("-o,--out", rec.out, "output file (default RUN_DIR/detections_<detector>.exr, or RUN_DIR/hdr.exr)");
   rec_cmd->add_flag("--noise-free", rec.noise_free, "from the noise-free expected counts (detection_rate) instead of the sampled counts");
-  rec_cmd->add_option("--max-detections", rec.max_detections, "detection slots per pixel (the strongest are kept)")->check(CLI::Range(1, 64));
+  CLI::Option* rec_max = rec_cmd->add_option("--max-detections", rec.max_detections, "detection slots per pixel (the strongest are kept)")
+                             ->check(CLI::Range(1, 64));
   rec_cmd->add_option("--threads", rec.threads, "worker threads (default: all cores)")->check(CLI::NonNegativeNumber);
   rec_cmd->add_flag("-q,--quiet", rec_quiet, "nothing on stderr but warnings and errors");
 
@@ -165,6 +166,7 @@ int main(int argc, char** argv) {
       else if (*dschema_cmd) std::cout << (dataset_json_schema ? spadgen::datasets::dataset_schema_json() : spadgen::app::dataset_schema());
     } else if (*rec_cmd) {
       rec.progress = !rec_quiet;
+      rec.detector_given = rec_detector->count() > 0, rec.max_detections_given = rec_max->count() > 0;
       const std::string path = spadgen::app::reconstruct(rec);
       if (!rec_quiet) std::cerr << "wrote " << path << "\n";
     } else if (*eval_cmd) {

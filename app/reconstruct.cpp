@@ -287,6 +287,10 @@ std::string reconstruct(const ReconstructOptions& o) {
   if (o.max_detections < 1 || o.max_detections > 64) throw Error("--max-detections: expected 1 to 64");
   const RunFolder run(o.run_dir);
   if (!run.gate_sweep()) {
+    if (o.detector_given || o.max_detections_given)
+      throw Error(std::string(o.detector_given ? "--detector" : "--max-detections") + ": " + o.run_dir +
+                  " is a 2D run (an intensity image, no gate profiles to detect returns in); reconstruct writes its HDR "
+                  "inversion, hdr.exr, and takes only -o, --noise-free and --threads for it");
     // The 2D HDR inversion: eq. (5) or (6) on the image's summed counts.
     const std::string out = o.out.empty() ? (fs::path(o.run_dir) / "hdr.exr").string() : o.out;
     writers::ExrImage img(run.width(), run.height());

@@ -16,6 +16,8 @@ struct ReconstructOptions {
   int max_detections = 4;          // slots per pixel in the file; a pixel keeps its highest-scoring ones
   int threads = 0;
   bool progress = true;
+  // The options the user gave (a 2D run, which has no gate profiles to detect in, refuses the detectors').
+  bool detector_given = false, max_detections_given = false;
 };
 // Returns the path written.
 std::string reconstruct(const ReconstructOptions& options);

@@ -1,6 +1,7 @@
 // spadgen reconstruct, run as a user would: the HDR inversion of a 2D run against the sensor's own
 // linearised image, the same detections from .npy and Zarr stacks, and clear refusals. (The detectors'
 // accuracy on the paper's flat target: paper_test.cpp; the detectors themselves: tests/reconstruct.)
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -14,6 +15,7 @@
 
 namespace {
 using namespace spadgen::testing;
+using ::testing::HasSubstr;
 
 class Reconstruct : public ::testing::Test {
  protected:
@@ -55,6 +57,14 @@ TEST_F(Reconstruct, HdrOfADualExposureRunIsTheSensorsLinearisedImageWithItsError
   }
   EXPECT_GT(saturated, 0) << "the run should saturate somewhere";
   EXPECT_GT(lit, 1000);
+  // A 2D run has no gate profiles: the detectors' options are refused, not ignored, and nothing is written.
+  for (const char* option : {"--detector paper", "--max-detections 2"}) {
+    r = sh("reconstruct " + run.string() + " -q " + option + " -o " + (dir_ / "other.exr").string());
+    EXPECT_EQ(r.code, 1) << option;
+    EXPECT_THAT(r.output, HasSubstr(std::string(option).substr(0, std::string(option).find(' ')) + ": " + run.string() +
+                                    " is a 2D run (an intensity image, no gate profiles to detect returns in)"));
+    EXPECT_FALSE(fs::exists(dir_ / "other.exr")) << option;
+  }
 }
 
 TEST_F(Reconstruct, ZarrAndNpyRunsGiveTheSameDetections) {
