@@ -186,6 +186,7 @@ class Outputs::Images {
 
   bool labels() const { return labels_decl_ != nullptr; }
   void put_labels(const ObjectLabelsTile& t) {
+    labels_put_ = true;
     for_pixels(t.rect, [&](int, int, size_t i, size_t o) {
       for (size_t j = 0; j < size_t(slots_); ++j) {
         const size_t e = i * size_t(t.slots) + j;
@@ -253,7 +254,7 @@ class Outputs::Images {
   }
 
   nlohmann::json ground_truth_summary() const {
-    if (!gt_on_) return nullptr;
+    if (!gt_on_) return label_summary();
     const size_t n = size_t(img_.count());
     const float* range = gt_ch_[0];
     const float* mesh = gt_ch_[5];
@@ -281,7 +282,7 @@ class Outputs::Images {
       for (size_t i = 0; i < n; ++i)
         if (object_slot_ch_[j][i] >= 0.0f) objects.insert(int(object_slot_ch_[j][i]));
     const nlohmann::json none = nullptr;
-    return {{"hit_fraction", double(hits) / double(n)},
+    nlohmann::json summary = {{"hit_fraction", double(hits) / double(n)},
             {"range_min_m", hits ? nlohmann::json(double(lo)) : none},
             {"range_max_m", hits ? nlohmann::json(double(hi)) : none},
             {"meshes_in_view", meshes.size()},
@@ -289,6 +290,28 @@ class Outputs::Images {
             {"objects_in_view", objects.size()},
             {"max_object_count", most},
             {"multi_object_fraction", double(several) / double(n)}};
+    if (const nlohmann::json l = label_summary(); !l.is_null()) summary.update(l);
+    return summary;
+  }
+
+  // What this run's labels.exr says (null without labels computed here): the objects whose rising edge
+  // stands out of the noise in at least one pixel, and the share of the (pixel, object) pairs along the
+  // rays that do. Read after write(), which removed the label slots beyond the objects'.
+  nlohmann::json label_summary() const {
+    if (!labels_decl_ || !labels_put_) return nullptr;
+    const size_t n = size_t(img_.count()), per_slot = std::size(kLabelSlotChannels);
+    std::set<int> objects;
+    size_t pairs = 0, detectable = 0;
+    for (size_t j = 0; j < size_t(std::max(1, object_slots())); ++j) {
+      const float* id = label_ch_[j * per_slot];
+      const float* det = label_ch_[j * per_slot + 3];
+      for (size_t i = 0; i < n; ++i) {
+        if (id[i] < 0.0f) continue;
+        ++pairs;
+        if (det[i] > 0.5f) ++detectable, objects.insert(int(id[i]));
+      }
+    }
+    return {{"objects_detectable", objects.size()}, {"detectable_fraction", pairs ? double(detectable) / double(pairs) : 0.0}};
   }
 
   // Writes the EXRs with their provenance and the previews into the staging folder.
@@ -367,6 +390,7 @@ class Outputs::Images {
   }
 
   std::set<std::string> provided_;
+  bool labels_put_ = false;  // put_labels was called: labels.exr is this run's, not linked
   PixelRect img_;
   int layers_;
   int slots_;  // object slots held: render.max_layers, or the scene's objects when fewer

@@ -319,6 +319,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   const Provenance prov{scene_file, field<std::string>(meta, "/scene_hash_fnv1a64"_json_pointer, src), cfg.seed, img};
   std::vector<RunResult> results;
   json first_storage = json::object();
+  json labels_summary;  // Outputs::report's, of the first realisation: what this call's labels say
   for (size_t r = 0; r < runs.size(); ++r) {
     outputs[r]->write(prov);
     std::vector<std::string> files = outputs[r]->files();
@@ -352,7 +353,11 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     if (meta.contains("ground_truth_objects")) record.ground_truth_objects = meta.at("ground_truth_objects").get<int>();
     if (meta.contains("objects")) record.objects = meta.at("objects");
     record.model = model_components(write_cfg, nullptr, meta.contains("model") ? meta.at("model") : nlohmann::json(nullptr));
+    // The run's summary of its ground truth; what this call's labels say (the first realisation computed
+    // them for all) replaces the run's.
+    if (r == 0) labels_summary = record.ground_truth_summary;
     if (meta.contains("ground_truth_summary")) record.ground_truth_summary = meta.at("ground_truth_summary");
+    if (!labels_summary.is_null() && record.ground_truth_summary.is_object()) record.ground_truth_summary.update(labels_summary);
     record.dataset = options.dataset;
     if (meta.contains("transient")) record.transient_crop = rect_of(meta.at("transient").at("crop_in_sensor"));
     record.light_region = region;

@@ -310,7 +310,7 @@ std::string index_csv(const DatasetSpec& spec, const std::vector<SampleRecord>& 
   for (const RandomAxis& r : spec.random) params.push_back(r.key);
   const std::vector<std::string> summary = {"hit_fraction", "range_min_m", "range_max_m", "meshes_in_view", "max_layer_count",
                                             "objects_in_view", "max_object_count", "multi_object_fraction",
-                                            "laser_photons_per_pulse"};
+                                            "objects_detectable", "detectable_fraction", "laser_photons_per_pulse"};
   std::string out = "index,status,folder";
   for (const std::string& p : params) out.append(",").append(csv_field(p));
   out += ",seed,seed_light,seed_chip,seed_noise,sample_hash,bytes";

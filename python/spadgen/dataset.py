@@ -27,7 +27,8 @@ __all__ = ["Dataset", "Sample", "SampleNotDoneError", "open_dataset", "STATUSES"
 STATUSES = ("done", "failed", "stale", "missing")
 # The ground-truth summary of a done sample (index.jsonl "ground_truth"), in index.csv's order.
 SUMMARY_COLUMNS = ("hit_fraction", "range_min_m", "range_max_m", "meshes_in_view", "max_layer_count",
-                   "objects_in_view", "max_object_count", "multi_object_fraction", "laser_photons_per_pulse")
+                   "objects_in_view", "max_object_count", "multi_object_fraction", "objects_detectable",
+                   "detectable_fraction", "laser_photons_per_pulse")
 _SEEDS = (("seed", "seed"), ("seed_light", "light"), ("seed_chip", "chip"), ("seed_noise", "noise"))
 
 
@@ -263,7 +264,9 @@ class Dataset:
         each parameter   by its kind over the whole dataset: bool, int64, float64, str, or object (arrays)
         bytes and the ground-truth summary (hit_fraction, range_min_m, range_max_m, meshes_in_view,
                          max_layer_count, objects_in_view, max_object_count, multi_object_fraction,
-                         laser_photons_per_pulse)   float64, NaN where the sample is not done
+                         objects_detectable, detectable_fraction, laser_photons_per_pulse)   float64, NaN
+                         where the sample is not done (the two detectable columns also where it has no
+                         labels.exr: 2D runs)
         """
         names = self.columns if columns is None else list(columns)
         params = set(self.parameter_keys)

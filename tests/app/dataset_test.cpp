@@ -114,6 +114,15 @@ TEST_F(Dataset, ShardsOnTheCommandLineSlurmAndKubernetesEqualTheSerialRun) {
     const auto& count = gt.channels.at("object_count");
     EXPECT_DOUBLE_EQ(row["ground_truth"]["multi_object_fraction"].get<double>(),
                      double(std::count_if(count.begin(), count.end(), [](float c) { return c >= 2.0f; })) / double(count.size()));
+    // and how many of them stand out of the noise, as the sample's labels.exr says
+    const auto labels = spadgen::writers::read_exr((dir_ / "serial" / row["folder"].get<std::string>() / "labels.exr").string());
+    double pairs = 0, detectable = 0;
+    for (int j = 0; labels.channels.count("object" + std::to_string(j) + ".id"); ++j)
+      for (size_t i = 0; i < count.size(); ++i)
+        if (labels.channels.at("object" + std::to_string(j) + ".id")[i] >= 0)
+          ++pairs, detectable += labels.channels.at("object" + std::to_string(j) + ".detectable")[i] > 0.5f;
+    EXPECT_DOUBLE_EQ(row["ground_truth"]["detectable_fraction"].get<double>(), detectable / pairs);
+    EXPECT_LE(row["ground_truth"]["objects_detectable"].get<int>(), 2);
     const json meta = json::parse(slurp(dir_ / "serial" / row["folder"].get<std::string>() / "metadata.json"));
     EXPECT_EQ(meta["dataset"]["parameters"], row["parameters"]);
     EXPECT_EQ(meta["seeds"]["chip"], 1);

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <set>
 #include <nlohmann/json.hpp>
 
 #include "app_fixture.h"
@@ -117,6 +118,32 @@ TEST_F(App, SenseWritesTheLabelsOfItsOwnSettingsAndTwoDimensionalRunsHaveNone) {
   const auto meta = nlohmann::json::parse(slurp(dir_ / "sensed/metadata.json"));
   EXPECT_EQ(meta["objects"], nlohmann::json::parse(slurp(dir_ / "run/metadata.json"))["objects"]);
   EXPECT_EQ(meta["ground_truth_objects"], 2);
+  // The summary's detectable objects are what each folder's own labels.exr says: the sense's, a run's with
+  // its settings, and the run's it read (fewer frames: fewer pairs stand out of the noise).
+  const auto detectable = [&](const fs::path& d) {
+    const auto l = spadgen::writers::read_exr((d / "labels.exr").string()).channels;
+    std::set<int> objects;
+    double pairs = 0, yes = 0;
+    for (int j = 0; l.count("object" + std::to_string(j) + ".id"); ++j) {
+      const auto& id = l.at("object" + std::to_string(j) + ".id");
+      const auto& det = l.at("object" + std::to_string(j) + ".detectable");
+      for (size_t i = 0; i < id.size(); ++i) {
+        if (id[i] < 0) continue;
+        ++pairs;
+        if (det[i] > 0.5f) ++yes, objects.insert(int(id[i]));
+      }
+    }
+    return std::pair{int(objects.size()), pairs > 0 ? yes / pairs : 0.0};
+  };
+  for (const char* d : {"sensed", "other", "run"}) {
+    const auto m = nlohmann::json::parse(slurp(dir_ / d / "metadata.json"));
+    const auto [objects, fraction] = detectable(dir_ / d);
+    EXPECT_EQ(m["ground_truth_summary"]["objects_detectable"], objects) << d;
+    EXPECT_DOUBLE_EQ(m["ground_truth_summary"]["detectable_fraction"].get<double>(), fraction) << d;
+    EXPECT_EQ(m["ground_truth_summary"]["hit_fraction"], meta["ground_truth_summary"]["hit_fraction"]) << d;
+  }
+  EXPECT_LT(meta["ground_truth_summary"]["detectable_fraction"].get<double>(),
+            nlohmann::json::parse(slurp(dir_ / "run/metadata.json"))["ground_truth_summary"]["detectable_fraction"].get<double>());
   ASSERT_EQ(sh("run " + kScenes + "test_chart.json -q --set camera.crop=[500,500,16,8] --set render.samples_per_pixel=1 -o " +
                (dir_ / "chart").string()).code, 0);
   EXPECT_FALSE(fs::exists(dir_ / "chart/labels.exr"));
