@@ -44,6 +44,7 @@ constexpr double kSecondsPerRun = 0.3;              // loading the scene, buildi
 struct Estimate {
   int64_t disk = 0, memory = 0;
   double seconds = 0.0;
+  bool paths_bound = false;  // a target error: the time counts render.max_samples_per_pixel paths per pixel
 };
 
 Estimate estimate(const RunConfig& c, int repeats, int threads) {
@@ -56,8 +57,12 @@ Estimate estimate(const RunConfig& c, int repeats, int threads) {
   const int64_t run_disk = plan.disk_needed();
   const double pixels = double(img.count());
   const double bounces = std::min(c.render.max_bounces, 4);
+  // With a target error a pixel traces its first round and then as many paths as its spread asks, at most
+  // render.max_samples_per_pixel: the estimate takes the most, an upper bound.
+  const double paths = c.render.samples_per_pixel + (c.render.target_relative_error ? c.render.max_samples_per_pixel : 0);
+  e.paths_bound = c.render.target_relative_error.has_value();
   const double sensor_seconds = pixels * sensor.K() * kSecondsPerPixelGate;
-  e.seconds = kSecondsPerRun + pixels * double(c.render.samples_per_pixel) * bounces * kSecondsPerPathBounce + sensor_seconds +
+  e.seconds = kSecondsPerRun + pixels * paths * bounces * kSecondsPerPathBounce + sensor_seconds +
               double(run_disk) * kSecondsPerByte;
   // Repeats: the sensor stage again from the saved light, and its noise-dependent files (about the run's
   // files less the ground truth and the light, which are linked).
@@ -186,6 +191,7 @@ std::string dataset_plan(const DatasetOptions& options) {
       if (rec.status != Status::Done) ++left, left_total.disk += e.disk, left_total.seconds += e.seconds;
     }
     total.disk += e.disk, total.seconds += e.seconds;
+    total.paths_bound |= e.paths_bound;
     max_memory = std::max(max_memory, e.memory);
     const bool show = options.all || samples <= 10 || i >= n - 10 * shard.count;
     if (!show) {
@@ -212,6 +218,9 @@ std::string dataset_plan(const DatasetOptions& options) {
     << bytes_text(max_memory) << ", time about " << duration_text(samples ? total.seconds / double(samples) : 0.0) << "\n";
   o << "# " << (shard.count > 1 ? "this shard" : "total") << ": " << samples << " samples, disk about " << bytes_text(total.disk)
     << ", time about " << duration_text(total.seconds) << " (estimates for 2 cores: docs/datasets.md, \"Estimates\")\n";
+  if (total.paths_bound)
+    o << "# with render.target_relative_error a pixel's paths depend on its light: the times count "
+         "render.max_samples_per_pixel for every pixel, an upper bound\n";
   if (folder) {
     const int64_t free = free_disk(options.out_dir);
     o << "# left to generate in " << options.out_dir << ": " << left << " samples, disk about " << bytes_text(left_total.disk)

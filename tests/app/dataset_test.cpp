@@ -19,6 +19,7 @@ namespace spadgen::testing {
 namespace {
 
 using ::testing::HasSubstr;
+using ::testing::Not;
 using json = nlohmann::json;
 
 // Six samples of a 24 x 20 crop of the multi-object scene: a grid over the laser power, random ambient
@@ -250,6 +251,15 @@ TEST_F(Dataset, RefusesAnotherDatasetsFolderForeignFilesAndTooLittleDisk) {
   const Result plan = sh("dataset plan " + (dir_ / "big.json").string());
   EXPECT_EQ(plan.code, 0) << plan.output;
   EXPECT_THAT(plan.output, HasSubstr("# total: 200 samples, disk about"));
+  EXPECT_THAT(plan.output, Not(HasSubstr("an upper bound")));
+  // A target error: the time is counted at render.max_samples_per_pixel paths, and said to be a bound.
+  const auto per_sample = [](const std::string& text) { return text.substr(text.find("# per sample:")); };
+  write(dir_ / "standard.json", "{\"scenes\": [\"" + kScenes + "multi_object.json\"], \"samples\": 200, \"set\": "
+        "{\"outputs.transient\": true, \"render.quality\": \"standard\"}}");
+  const Result bound = sh("dataset plan " + (dir_ / "standard.json").string());
+  EXPECT_EQ(bound.code, 0) << bound.output;
+  EXPECT_THAT(bound.output, HasSubstr("the times count render.max_samples_per_pixel for every pixel, an upper bound"));
+  EXPECT_NE(per_sample(bound.output), per_sample(plan.output));
 }
 
 TEST_F(Dataset, AFailingSampleIsRecordedAndTheOthersGoOn) {
