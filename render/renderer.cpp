@@ -69,6 +69,8 @@ double Renderer::photons_per_pulse() const {
   return spadgen::photons_per_pulse(l.average_power_W, l.repetition_rate_Hz, l.wavelength_m);
 }
 
+static_assert(Renderer::kBlockPixels == EmbreeScene::kPacket, "a block of pixels is one packet of camera rays");
+
 size_t Renderer::bytes_per_thread(int samples_per_pixel) {
   constexpr size_t per_sample = sizeof(Rng) + sizeof(glm::dvec3) + 2 * sizeof(RayHit) + 3 * sizeof(uint8_t) +
                                 sizeof(Surface) + sizeof(LaserRay);

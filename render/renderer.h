@@ -59,6 +59,9 @@ class Renderer {
   // Photons per laser pulse emitted (N_p = P / (f_rep h c / lambda)).
   double photons_per_pulse() const;
 
+  // The pixels of a sensor row whose camera rays travel, and with a target error accumulate, together.
+  static constexpr int kBlockPixels = 16;
+
   // Bytes each rendering thread holds while it renders: the camera rays of all samples of a block of
   // pixels are traced ahead as packets, so this grows with render.samples_per_pixel (for the resource
   // plan of a run, app/resources.h).
