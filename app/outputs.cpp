@@ -13,6 +13,9 @@
 #include <set>
 #include <type_traits>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include "app/resources.h"
 #include "app/staging.h"
 #include "core/units.h"
@@ -98,7 +101,7 @@ bool write_in_bands(const std::vector<StackLayout>& layout, const PixelRect& img
   const int64_t rows = std::min<int64_t>(tile_size, img.height);
   int64_t band = 0;
   for (const StackLayout& s : layout)
-    if (s.written && s.chunks.empty() && s.khw()) band += s.bytes() / std::max(1, img.height) * rows;
+    if (s.written && s.chunks.empty() && (s.khw() || s.frames())) band += s.bytes() / std::max(1, img.height) * rows;
   return band * (worker_threads(threads) + 1) <= kBandMemory;
 }
 
@@ -424,6 +427,11 @@ class Outputs::Stacks {
       if (in_bands && layout[k].khw() && layout[k].chunks.empty()) {  // a (K, H, W) .npy: written band by band
         w_[k] = std::make_unique<NpyWriter>(staging.path(layout[k].file), layout[k].dtype, layout[k].shape, /*mapped=*/false);
         band_stack_[k] = true;
+      } else if (k == kFrames && in_bands) {  // the frames: kept by band, written whole rows at a time
+        auto frames = std::make_unique<NpyWriter>(staging.path(layout[k].file), layout[k].dtype, layout[k].shape, /*mapped=*/false);
+        frames_ = frames.get();
+        frames_in_bands_ = true;
+        w_[k] = std::move(frames);
       } else if (k == kFrames) {
         auto frames = std::make_unique<NpyWriter>(staging.path(layout[k].file), layout[k].dtype, layout[k].shape);
         frames_ = frames.get();
@@ -440,10 +448,12 @@ class Outputs::Stacks {
       }
   }
 
-  void put(const TransientTile& t, const SensorTile& s) {
+  void put(const TransientTile& t, SensorTile&& s) {
     const PixelRect& r = t.rect;
     // A .npy stack: into the tile's band, written whole once complete; a Zarr store: chunk by chunk.
-    Band* band = band_stack_[kExpectedCounts] || band_stack_[kDetectionRate] || band_stack_[kCounts] ? &band_of(r) : nullptr;
+    Band* band = band_stack_[kExpectedCounts] || band_stack_[kDetectionRate] || band_stack_[kCounts] || frames_in_bands_
+                     ? &band_of(r)
+                     : nullptr;
     const auto to_u8 = [](uint16_t v) { return uint8_t(v); };  // counts never exceed the frames, <= 255 here
     if (band_stack_[kExpectedCounts]) band->put(kExpectedCounts, r, img_, s.expected.data());
     else if (w_[kExpectedCounts]) w_[kExpectedCounts]->write_khw(r, img_.x0, img_.y0, s.expected.data());
@@ -460,7 +470,12 @@ class Outputs::Stacks {
     } else if (w_[kCounts]) {
       w_[kCounts]->write_khw(r, img_.x0, img_.y0, s.counts.data());
     }
-    if (frames_) frames_->write_frames(r, img_.x0, img_.y0, s.frames.data());
+    if (frames_in_bands_) {
+      std::lock_guard<std::mutex> lock(band_mutex_);
+      band->frames.emplace_back(r, std::move(s.frames));
+    } else if (frames_) {
+      frames_->write_frames(r, img_.x0, img_.y0, s.frames.data());
+    }
     const int x0 = std::max(r.x0, tcrop_.x0), x1 = std::min(r.x1(), tcrop_.x1());
     const int y0 = std::max(r.y0, tcrop_.y0), y1 = std::min(r.y1(), tcrop_.y1());
     if (t.axis.bins != 0 && x1 > x0 && y1 > y0) {
@@ -498,6 +513,7 @@ class Outputs::Stacks {
     int64_t K = 0, W = 0;
     std::array<std::unique_ptr<char[]>, kStackCount> data;  // [k][row][x], every byte written by its tiles
     std::array<int64_t, kStackCount> element_bytes{};
+    std::vector<std::pair<PixelRect, std::vector<uint8_t>>> frames;  // the tiles' frames, as SensorTile holds them
     template <class T, class Convert = std::identity>
     void put(Stack k, const PixelRect& r, const PixelRect& img, const T* src, Convert convert = {}) {
       using Out = std::decay_t<decltype(convert(*src))>;
@@ -544,6 +560,15 @@ class Outputs::Stacks {
       if (band_stack_[k])
         for (int64_t g = 0; g < b->K; ++g)
           w_[k]->write((g * H + int64_t(row)) * b->W, b->data[k].get() + g * plane * b->element_bytes[k], plane);
+    if (!b->frames.empty()) {
+      std::vector<NpyWriter::FramesTile> tiles;
+      for (const auto& [rect, bytes] : b->frames) tiles.push_back({rect, bytes.data()});
+      // Gate positions in parallel: this band may be the run's last, with the other threads idle.
+      const int64_t K = layout_[kFrames].shape[0];
+      tbb::parallel_for(tbb::blocked_range<int64_t>(0, K, 8), [&](const tbb::blocked_range<int64_t>& ks) {
+        frames_->write_frames_band(tiles, img_.x0, img_.y0, ks.begin(), ks.end());
+      });
+    }
   }
 
   // A band of tiles is complete: its (K, H, W) .npy stacks are written; the frames and transients are
@@ -580,6 +605,7 @@ class Outputs::Stacks {
   std::map<int, std::unique_ptr<Band>> bands_;                        // by first row - img.y0: the bands being filled
   std::mutex band_mutex_;
   NpyWriter* frames_ = nullptr;                                       // w_[kFrames], always a .npy
+  bool frames_in_bands_ = false;                                      // kept by band (Band::frames)
   std::vector<std::atomic<int>> band_width_;  // [row - img.y0]: pixels written in the band starting there
   std::vector<char> complete_;                // [row - img.y0]: the row is complete
   std::mutex release_mutex_;
@@ -632,10 +658,10 @@ void Outputs::put_ground_truth(const GroundTruthTile& g) { images_->put_ground_t
 void Outputs::put_labels(const ObjectLabelsTile& l) { images_->put_labels(l); }
 bool Outputs::labels() const { return images_->labels(); }
 
-void Outputs::put(const TransientTile& t, const sensor::SensorMapsTile& m, const SensorTile& s) {
+void Outputs::put(const TransientTile& t, const sensor::SensorMapsTile& m, SensorTile&& s) {
   images_->put(t, m, s);
-  stacks_->put(t, s);
   probe_->put(s);
+  stacks_->put(t, std::move(s));
 }
 
 void Outputs::write(const Provenance& p) {

@@ -45,6 +45,8 @@ struct StackLayout {
   int64_t bytes() const;
   // A (K, H, W) stack: an image per gate position or exposure (expected counts, detection rate, counts).
   bool khw() const { return dims.size() == 3 && dims.front() == "k"; }
+  // The (K, N, H, W / 8) bit-packed frames.
+  bool frames() const { return dims.size() == 4 && dims[1] == "n"; }
 };
 
 // Every stack a run of this scene can write, written or not, indexed by Stack.
@@ -58,8 +60,9 @@ nlohmann::json storage_json(const StackLayout& s);
 // its .zgroup and lists it in `files`. Then zarr.open(run folder) and xarray.open_zarr open them together.
 void write_zarr_group(const Staging& staging, const std::string& folder, std::vector<std::string>& files);
 
-// Whether the (K, H, W) .npy stacks are assembled band by band in memory (one pwrite per gate position)
-// or written through a mapping of the file: in bands while the bands in
+// Whether the (K, H, W) .npy stacks and the frames are assembled band by band in memory (one pwrite per
+// gate position; the frames' rows gathered whole, writers::NpyWriter::write_frames_band) or written
+// through a mapping of the file: in bands while the bands in
 // flight (one per thread and one more) take at most kBandMemory, else through the mapping, whose pages the
 // kernel can write out and drop while a band is still open (a sweep of 100,000 gate positions has bands
 // of tens of GB). The files are the same bytes either way. threads: as --threads (0 = all cores).
@@ -83,7 +86,8 @@ class Outputs {
   // Whether the run writes labels.exr (a gate sweep with the ground truth at hand), and one tile of it.
   bool labels() const;
   void put_labels(const ObjectLabelsTile& l);
-  void put(const TransientTile& t, const sensor::SensorMapsTile& m, const SensorTile& s);
+  // The tile's frames are kept (moved) until its band of tiles is written.
+  void put(const TransientTile& t, const sensor::SensorMapsTile& m, SensorTile&& s);
 
   // After the last tile: the images, stamped with their provenance, and the previews into the staging folder.
   void write(const Provenance& p);

@@ -96,10 +96,10 @@ RunResult run(const RunOptions& options) {
     if (cfg.outputs.ground_truth) gt = renderer.ground_truth(rect);
     const PixelRect data_rect = grow_clipped(rect, sensor.halo(), cfg.camera.width_px, cfg.camera.height_px);
     const TransientTile t = renderer.transient(rect, data_rect, axis, &tile_stats[ti], cfg.outputs.ground_truth ? &gt : nullptr);
-    const SensorTile s = sensor.process(t);
+    SensorTile s = sensor.process(t);
     if (cfg.outputs.ground_truth) outputs.put_ground_truth(gt);
     if (outputs.labels()) outputs.put_labels(sensor::object_labels(sensor, gt, s, axis, cfg.laser.emission_delay_s));
-    outputs.put(t, sensor.maps(rect), s);
+    outputs.put(t, sensor.maps(rect), std::move(s));
     if (light) light->put(t);
     progress.tick();
   });

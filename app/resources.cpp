@@ -126,16 +126,18 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
     const size_t rows_axis = size_t(std::find_if(s.dims.begin(), s.dims.end(), [](const std::string& d) { return d.front() == 'y'; }) -
                                     s.dims.begin());
     const int64_t rows = std::max<int64_t>(1, s.shape[rows_axis]), row_bytes = s.bytes() / rows;
-    // A (K, H, W) .npy is assembled band by band in memory (write_in_bands, unless the bands are too large);
-    // the frames, the transients and too large bands are written through a memory map whose completed bands leave the resident set; a Zarr store holds the
-    // chunks being filled: for each thread at most its tiles' rows grown to whole chunks.
-    if (s.chunks.empty() && s.khw() && in_bands) bands += std::min(s.bytes(), row_bytes * tile * in_flight);
+    // A (K, H, W) .npy and the frames are assembled band by band in memory (write_in_bands, unless the bands
+    // are too large); the transients and too large bands are written through a memory map whose completed
+    // bands leave the resident set; a Zarr store holds the chunks being filled: for each thread at most its
+    // tiles' rows grown to whole chunks.
+    const bool banded = s.chunks.empty() && (s.khw() || s.frames()) && in_bands;
+    if (banded) bands += std::min(s.bytes(), row_bytes * tile * in_flight);
     else if (s.chunks.empty()) resident += std::min(s.bytes(), row_bytes * tile * in_flight);
     else chunks += row_bytes * std::min(rows, (tile + s.chunks[rows_axis]) * T);
   }
   plan.memory.push_back({"sensor tiles (K = " + std::to_string(sensor.K()) + " gate positions or exposures, " + th + ")",
                          in_flight * sensor_tile});
-  plan.memory.push_back({"bands of (K, H, W) .npy stacks being assembled (camera.width_px, render.tile_size_px, " + th + ")", bands});
+  plan.memory.push_back({"bands of (K, H, W) .npy stacks and frames being assembled (camera.width_px, render.tile_size_px, " + th + ")", bands});
   plan.memory.push_back({"output pages in flight, file-backed (camera.width_px, render.tile_size_px)", resident, true});
   plan.memory.push_back({"Zarr chunks being filled, at most (camera.width_px, render.tile_size_px, " + th + ")", chunks});
   // EXR images held whole until the end: ground truth (8 channels and 2 per layer, 4 and 4 per object

@@ -304,14 +304,14 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     InterruptGuard::check();
     const PixelRect& rect = tiles[ti];
     TransientTile t = light.tile(rect, grow_clipped(rect, sensor.halo(), cfg.camera.width_px, cfg.camera.height_px));
-    const std::vector<SensorTile> s = sensor.process(t, seeds);
+    std::vector<SensorTile> s = sensor.process(t, seeds);
     const sensor::SensorMapsTile maps = sensor.maps(rect);
     // The labels do not depend on the noise: the first realisation's serve all (the others link them).
     if (truth)
       outputs.front()->put_labels(sensor::object_labels(
           sensor, object_truth(*truth, img, rect, cfg.render.max_layers, src / "ground_truth.exr"), s.front(), axis,
           cfg.laser.emission_delay_s));
-    for (size_t r = 0; r < s.size(); ++r) outputs[r]->put(t, maps, s[r]);
+    for (size_t r = 0; r < s.size(); ++r) outputs[r]->put(t, maps, std::move(s[r]));
     light.recycle(std::move(t));
     progress.tick();
   });

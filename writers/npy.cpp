@@ -296,6 +296,69 @@ void NpyWriter::write_frames(const PixelRect& rect, int origin_x, int origin_y, 
     }
 }
 
+void NpyWriter::write_frames_band(const std::vector<FramesTile>& tiles, int origin_x, int origin_y, int64_t k_begin,
+                                  int64_t k_end) {
+  const auto& s = impl_->shape;
+  check_rank(s, 4, "write_frames_band", impl_->path);
+  if (impl_->dtype != Dtype::U8) throw Error("write_frames_band needs a uint8 stack, but '" + impl_->path + "' is not");
+  const int64_t K = s[0], N = s[1], H = s[2], WB = s[3];
+  if (k_begin < 0 || k_end > K || k_begin > k_end)
+    throw Error("write_frames_band to '" + impl_->path + "': gate positions [" + std::to_string(k_begin) + ", " +
+                std::to_string(k_end) + ") outside [0, " + std::to_string(K) + ")");
+  if (tiles.empty() || k_begin == k_end || N == 0) return;
+  // The band: tiles side by side from x = 0 to the stack's width, sharing their rows.
+  std::vector<const FramesTile*> order;
+  for (const FramesTile& t : tiles) order.push_back(&t);
+  std::sort(order.begin(), order.end(), [](const FramesTile* a, const FramesTile* b) { return a->rect.x0 < b->rect.x0; });
+  const int rows = order.front()->rect.height, band_y0 = order.front()->rect.y0;
+  int64_t x = 0;
+  for (const FramesTile* t : order) {
+    check_inside(t->rect, origin_x, origin_y, H, WB * 8, impl_->path);
+    if (t->rect.y0 != band_y0 || t->rect.height != rows || int64_t(t->rect.x0) - origin_x != x || x % 8 != 0)
+      throw Error("write_frames_band to '" + impl_->path + "': the tile at (" + std::to_string(t->rect.x0) + ", " +
+                  std::to_string(t->rect.y0) + ") size " + std::to_string(t->rect.width) + "x" +
+                  std::to_string(t->rect.height) + " does not continue a band of tiles of " + std::to_string(rows) +
+                  " rows from x = " + std::to_string(x + origin_x) + " on a byte boundary");
+    x += t->rect.width;
+  }
+  if ((x + 7) / 8 != WB)
+    throw Error("write_frames_band to '" + impl_->path + "': the band's tiles cover " + std::to_string(x) +
+                " pixels of the stack's " + std::to_string(WB) + " bytes a row");
+  if (rows == 0) return;
+  const int64_t y0 = band_y0 - origin_y, plane = int64_t(rows) * WB;  // one plane's share of the band, bytes
+  const int64_t group = std::clamp<int64_t>(kFramesBuffer / plane, 1, N);
+  std::vector<uint8_t> buf(size_t(group * plane));
+  const auto tail_mask = static_cast<uint8_t>((1u << (x % 8)) - 1u);
+  for (int64_t k = k_begin; k < k_end; ++k)
+    for (int64_t n0 = 0; n0 < N; n0 += group) {
+      const int64_t planes = std::min(group, N - n0), lines = planes * rows;
+      for (const FramesTile* t : order) {
+        const int64_t bpr = (int64_t(t->rect.width) + 7) / 8;
+        const uint8_t* src = t->frames + (k * N + n0) * rows * bpr;
+        uint8_t* dst = buf.data() + (t->rect.x0 - origin_x) / 8;
+        const auto gather = [&](auto width) {
+          constexpr int64_t B = decltype(width)::value;
+          const int64_t b = B > 0 ? B : bpr;
+          for (int64_t j = 0; j < lines; ++j) std::memcpy(dst + j * WB, src + j * b, size_t(b));
+        };
+        switch (bpr) {
+          case 4: gather(std::integral_constant<int64_t, 4>()); break;
+          case 8: gather(std::integral_constant<int64_t, 8>()); break;
+          case 16: gather(std::integral_constant<int64_t, 16>()); break;
+          default: gather(std::integral_constant<int64_t, 0>()); break;
+        }
+      }
+      // Bits past the image's right edge are cleared, as write_frames does.
+      if (x % 8 != 0)
+        for (int64_t j = 0; j < lines; ++j) buf[size_t(j * WB + WB - 1)] &= tail_mask;
+      if (rows == H) {
+        write((k * N + n0) * H * WB, buf.data(), planes * plane);
+      } else {
+        for (int64_t p = 0; p < planes; ++p) write(((k * N + n0 + p) * H + y0) * WB, buf.data() + p * plane, plane);
+      }
+    }
+}
+
 void NpyWriter::commit() {
   if (impl_->committed.exchange(true)) throw Error("'" + impl_->path + "' was already committed");
   // Unmapping hands the mapping's dirty pages to the page cache; commit's fsync writes them.

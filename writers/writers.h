@@ -64,6 +64,20 @@ class NpyWriter : public StackWriter {
   // only the tile at the right edge of the stack may have a width that is not a multiple of 8 (the
   // bits of its last byte beyond rect.width are written as 0).
   void write_frames(const PixelRect& rect, int origin_x, int origin_y, const void* data);
+  // One tile's frames for write_frames_band, laid out as write_frames reads them.
+  struct FramesTile {
+    PixelRect rect;
+    const uint8_t* frames = nullptr;
+  };
+  // The frames of gate positions [k_begin, k_end) of a band of tiles: tiles of one row of tiles (the same
+  // y0 and height) that together cover the stack's width, each as write_frames takes it. Each gate
+  // position's rows are gathered into a buffer of at most kFramesBuffer bytes, row by row of whole stack
+  // width, and written in as few writes as the file allows: one per buffer when the band spans the
+  // stack's height (its planes are then contiguous in the file), else one per plane. So the file
+  // receives whole rows in order instead of a tile's 4-byte rows scattered over every page of the band
+  // (write_frames). Calls for disjoint ranges of gate positions may run at once.
+  static constexpr int64_t kFramesBuffer = int64_t(256) << 10;
+  void write_frames_band(const std::vector<FramesTile>& tiles, int origin_x, int origin_y, int64_t k_begin, int64_t k_end);
   // Rows [row_begin, row_end) along `axis` (H: 1 for (K, H, W), 2 for (K, N, H, W/8), 0 for (H, W, T))
   // are complete: their pages leave this process's resident set, and the page cache starts writing them
   // to the file without waiting (writing there again only costs a page fault). Keeps a run's resident

@@ -218,7 +218,7 @@ TEST_F(Hardening, LargeBandsAreWrittenThroughTheMappingAndPlannedSo) {
   // for all cores).
   const Outcome small = spadgen("info " + kFlat + " --set camera.crop=[0,0,256,64]");
   expect_exit(small, 0, "small");
-  EXPECT_THAT(small.output, HasSubstr("bands of (K, H, W) .npy stacks being assembled"));
+  EXPECT_THAT(small.output, HasSubstr("bands of (K, H, W) .npy stacks and frames being assembled"));
   EXPECT_THAT(small.output, HasSubstr("disk: detection_rate.npy"));
   EXPECT_THAT(small.output, Not(HasSubstr("output pages in flight, file-backed")));
   // 100,000 gate positions across 1024 pixels: 0.4 GB of detection rates and counts per 32-row band.
@@ -227,21 +227,24 @@ TEST_F(Hardening, LargeBandsAreWrittenThroughTheMappingAndPlannedSo) {
   expect_exit(large, 0, "large");
   EXPECT_THAT(large.output, HasSubstr("output pages in flight, file-backed"));
   EXPECT_THAT(large.output, Not(HasSubstr("being assembled")));
-  // The rule: (threads + 1) bands of 32 rows of every written (K, H, W) .npy stack within 2 GB.
+  // The rule: (threads + 1) bands of 32 rows of every written (K, H, W) .npy stack and the frames within 2 GB.
   using spadgen::app::StackLayout;
   using spadgen::writers::Dtype;
-  const auto layout = [](int64_t K, bool zarr) {
+  const auto layout = [](int64_t K, bool zarr, bool frames) {
     const std::vector<std::string> khw{"k", "y", "x"};
-    return std::vector<StackLayout>{
+    std::vector<StackLayout> l{
         {"detection_rate.npy", Dtype::F32, {K, 1000, 1024}, true, zarr ? std::vector<int64_t>{K, 32, 64} : std::vector<int64_t>{}, "", "", khw},
-        {"counts.npy", Dtype::U8, {K, 1000, 1024}, true, {}, "", "", khw},
-        {"frames.npy", Dtype::U8, {K, 255, 1000, 128}, true, {}, "", "", {"k", "n", "y", "x_byte"}}};
+        {"counts.npy", Dtype::U8, {K, 1000, 1024}, true, {}, "", "", khw}};
+    if (frames) l.push_back({"frames.npy", Dtype::U8, {K, 255, 1000, 128}, true, {}, "", "", {"k", "n", "y", "x_byte"}});
+    return l;
   };
   const spadgen::PixelRect img{0, 0, 1024, 1000};
-  EXPECT_TRUE(spadgen::app::write_in_bands(layout(351, false), img, 32, 2));       // 57.5 MB a band, x 3
-  EXPECT_FALSE(spadgen::app::write_in_bands(layout(351, false), img, 32, 40));     // x 41: 2.36 GB
-  EXPECT_TRUE(spadgen::app::write_in_bands(layout(351, true), img, 32, 40));       // a Zarr store has its own chunks
-  EXPECT_FALSE(spadgen::app::write_in_bands(layout(100000, false), img, 32, 1));   // 16.4 GB a band
+  EXPECT_TRUE(spadgen::app::write_in_bands(layout(351, false, true), img, 32, 2));     // 424 MB a band (367 MB of frames), x 3
+  EXPECT_FALSE(spadgen::app::write_in_bands(layout(351, false, true), img, 32, 5));    // x 6: 2.55 GB
+  EXPECT_TRUE(spadgen::app::write_in_bands(layout(351, false, false), img, 32, 35));   // 57.5 MB a band, x 36: 2.07 GB
+  EXPECT_FALSE(spadgen::app::write_in_bands(layout(351, false, false), img, 32, 40));  // x 41: 2.36 GB
+  EXPECT_TRUE(spadgen::app::write_in_bands(layout(351, true, false), img, 32, 40));    // a Zarr store has its own chunks
+  EXPECT_FALSE(spadgen::app::write_in_bands(layout(100000, false, false), img, 32, 1));  // 16.4 GB a band
 }
 
 // ------------------------------------------------------------------------------------------------

@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -241,6 +242,78 @@ TEST(NpyWriter, WriteFramesPacksBitsLeastSignificantFirst) {
           const bool bit = (byte >> (x % 8)) & 1u;
           ASSERT_EQ(bit, x < W && frame_bit(k, n, y, x)) << k << " " << n << " " << y << " " << x;
         }
+}
+
+// A tile's frames as SensorTile holds them, from frame_bit at the tile's image coordinates.
+std::vector<uint8_t> tile_frames(const PixelRect& r, int K, int N, int origin_x, int origin_y) {
+  const int bpr = (r.width + 7) / 8;
+  std::vector<uint8_t> data(size_t(K * N * r.height * bpr), 0);
+  for (int k = 0; k < K; ++k)
+    for (int n = 0; n < N; ++n)
+      for (int row = 0; row < r.height; ++row)
+        for (int i = 0; i < r.width; ++i)
+          if (frame_bit(k, n, r.y0 - origin_y + row, r.x0 - origin_x + i))
+            data[size_t(((k * N + n) * r.height + row) * bpr + i / 8)] |= uint8_t(1u << (i % 8));
+  return data;
+}
+
+// Bands of tiles written whole rows at a time give the bytes that frame_bit says, whatever the band (the
+// whole height or a part of it, the last one shorter), the buffer's groups of planes (N = 130 planes of
+// 4 KB: groups of 64), a right-edge tile of odd width (its padding bits cleared), an origin (a crop),
+// gate positions split between threads, and a mapped or unmapped file.
+TEST(NpyWriter, WriteFramesBandGivesTheBitsOfEveryTile) {
+  TempDir dir;
+  const int W = 1020, K = 3, N = 130, WB = (W + 7) / 8, ox = 64, oy = 10;
+  for (const int H : {32, 40})
+    for (const bool mapped : {true, false}) {
+      SCOPED_TRACE("H " + std::to_string(H) + (mapped ? " mapped" : " unmapped"));
+      const std::string file = dir.file("band" + std::to_string(H) + (mapped ? "m" : "u") + ".npy");
+      {
+        NpyWriter w(file, Dtype::U8, {K, N, H, WB}, mapped);
+        std::vector<PixelRect> tiles = make_tiles(W, H, 32);
+        for (PixelRect& r : tiles) r.x0 += ox, r.y0 += oy;
+        for (int y = oy; y < oy + H; y += 32) {
+          std::vector<std::vector<uint8_t>> data;
+          std::vector<NpyWriter::FramesTile> band;
+          for (const PixelRect& r : tiles)
+            if (r.y0 == y) data.push_back(tile_frames(r, K, N, ox, oy)), band.push_back({r, nullptr});
+          for (size_t i = 0; i < band.size(); ++i) band[i].frames = data[i].data();
+          std::reverse(band.begin(), band.end());  // in any order
+          std::thread other([&] { w.write_frames_band(band, ox, oy, 2, 3); });
+          w.write_frames_band(band, ox, oy, 0, 2);
+          other.join();
+        }
+        w.commit();
+      }
+      const std::string bytes = read_bytes(file);
+      const size_t off = parse(bytes).data_offset;
+      ASSERT_EQ(bytes.size(), off + size_t(K * N * H * WB));
+      for (int k = 0; k < K; ++k)
+        for (int n = 0; n < N; ++n)
+          for (int y = 0; y < H; ++y)
+            for (int x = 0; x < WB * 8; ++x) {
+              const auto byte = static_cast<unsigned char>(bytes[off + ((size_t(k) * N + n) * H + y) * WB + x / 8]);
+              ASSERT_EQ(bool((byte >> (x % 8)) & 1u), x < W && frame_bit(k, n, y, x)) << k << " " << n << " " << y << " " << x;
+            }
+    }
+}
+
+TEST(NpyWriter, WriteFramesBandRejectsWhatIsNotABand) {
+  TempDir dir;
+  NpyWriter w(dir.file("frames.npy"), Dtype::U8, {2, 1, 8, 3}, /*mapped=*/false);  // 24 pixels a row
+  const std::vector<uint8_t> buf(64, 0);
+  const auto band = [&](std::vector<PixelRect> rects) {
+    std::vector<NpyWriter::FramesTile> b;
+    for (const PixelRect& r : rects) b.push_back({r, buf.data()});
+    return b;
+  };
+  EXPECT_NO_THROW(w.write_frames_band(band({{0, 0, 8, 4}, {8, 0, 16, 4}}), 0, 0, 0, 2));
+  EXPECT_THROW(w.write_frames_band(band({{0, 0, 8, 4}, {16, 0, 8, 4}}), 0, 0, 0, 2), Error);  // a gap
+  EXPECT_THROW(w.write_frames_band(band({{0, 0, 8, 4}, {8, 0, 8, 4}}), 0, 0, 0, 2), Error);   // short of the width
+  EXPECT_THROW(w.write_frames_band(band({{0, 0, 8, 4}, {8, 4, 16, 4}}), 0, 0, 0, 2), Error);  // other rows
+  EXPECT_THROW(w.write_frames_band(band({{0, 0, 5, 4}, {5, 0, 19, 4}}), 0, 0, 0, 2), Error);  // off a byte boundary
+  EXPECT_THROW(w.write_frames_band(band({{0, 6, 24, 4}}), 0, 0, 0, 2), Error);                // below the stack
+  EXPECT_THROW(w.write_frames_band(band({{0, 0, 24, 4}}), 0, 0, 1, 3), Error);                // no gate position 2
 }
 
 TEST(NpyWriter, WriteFramesRejectsMisalignedTiles) {
