@@ -103,6 +103,53 @@ json model_components(const RunConfig& c, const scenes::Scene* scene, const json
   return out;
 }
 
+json run_json(const RunRecord& r) {
+  const RunTimes& t = r.times;
+  const double wall = t.setup_seconds + t.tiles_seconds + t.finish_seconds;
+  double thread_sum = 0.0;
+  for (const double s : t.stage_thread_seconds) thread_sum += s;
+  // A tile stage's wall seconds: the tiles' wall time, apportioned by the stages' thread time.
+  const auto stage_wall = [&](StageClock::Stage k) {
+    return thread_sum > 0.0 ? t.tiles_seconds * t.stage_thread_seconds[size_t(k)] / thread_sum : 0.0;
+  };
+  const auto share = [&](double seconds) { return wall > 0.0 ? seconds / wall : 0.0; };
+  json stages = json::array();
+  const auto add = [&](const char* name, double seconds, const json& thread_seconds) {
+    stages.push_back({{"stage", name}, {"seconds", seconds}, {"share", share(seconds)}, {"thread_seconds", thread_seconds}});
+  };
+  add("setup: scene, BVH, sensor maps, outputs opened", t.setup_seconds, nullptr);
+  static constexpr std::array<const char*, StageClock::kStageCount> kNames{
+      "ground truth", "light transport", "saved light read (spadgen sense)", "sensor: gate response and rates", "sensor: temporal noise (counts, frames, crosstalk)",
+      "outputs: labels and stacks"};
+  for (int k = 0; k < StageClock::kStageCount; ++k)
+    add(kNames[size_t(k)], stage_wall(StageClock::Stage(k)), t.stage_thread_seconds[size_t(k)]);
+  add("finish: images and previews", t.finish_seconds, nullptr);
+
+  const render::RayCounts& rays = r.render_stats.rays;
+  const double light = share(stage_wall(StageClock::kLightTransport));
+  const auto of_rays = [&](uint64_t n) { return rays.total() > 0 ? light * double(n) / double(rays.total()) : 0.0; };
+  json components = json::array();
+  if (r.model.is_array())
+    for (const json& m : r.model) {
+      const std::string name = m.value("component", "");
+      const bool active = m.value("active", false);
+      json value = nullptr;
+      std::string measured;
+      if (name == "transmissive surfaces") value = of_rays(rays.refracted), measured = "its refracted laser connections' share of the light transport's rays";
+      else if (name == "ambient light") value = of_rays(rays.ambient), measured = "its shadow rays' share of the light transport's rays (the environment costs none)";
+      else if (name == "guided connections") value = of_rays(rays.guided), measured = "its rays' share of the light transport's rays";
+      else if (name == "indirect light") value = of_rays(rays.indirect), measured = "the share of the light transport's rays traced after a path's first vertex";
+      else if (name == "binary frames") value = active ? share(stage_wall(StageClock::kSensorNoise)) : 0.0, measured = "the sensor's temporal-noise stage, which samples the frames";
+      else if (!active) value = 0.0, measured = "skipped";
+      else measured = "no time of its own: part of a stage above";
+      components.push_back({{"component", name}, {"share", value}, {"measured", measured}});
+    }
+  json rays_json = {{"camera", rays.camera}, {"bounce", rays.bounce}, {"laser", rays.laser}, {"refracted", rays.refracted},
+                    {"guided", rays.guided}, {"ambient", rays.ambient}, {"indirect", rays.indirect}, {"total", rays.total()}};
+  return {{"threads", r.threads}, {"seconds", r.seconds}, {"wall_seconds", wall}, {"stages", stages},
+          {"rays", rays_json}, {"components", components}};
+}
+
 json camera_json(const render::Camera& cam, const PixelRect& img) {
   const double f = cam.focal_length_m() / cam.pitch_m();
   const double cx = 0.5 * cam.width() - 0.5 - img.x0, cy = 0.5 * cam.height() - 0.5 - img.y0;
@@ -211,8 +258,7 @@ json metadata(const scenes::ResolvedRun& resolved, const std::vector<std::string
   meta["files"] = r.files;
   if (r.sense) meta["sense"] = ojson::parse(r.sense->dump());
   // Everything above depends only on the scene and the seed; "run" is how this run went.
-  meta["run"] = {{"threads", r.threads}, {"seconds", r.seconds}, {"camera_rays", r.rays.camera_rays},
-                 {"shadow_rays", r.rays.shadow_rays}};
+  meta["run"] = ojson::parse(run_json(r).dump());
   return json::parse(meta.dump());
 }
 

@@ -4,6 +4,7 @@
 #pragma once
 #include <nlohmann/json.hpp>
 
+#include <array>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -11,6 +12,7 @@
 #include <vector>
 
 #include "core/config.h"
+#include "core/stage_clock.h"
 #include "core/tile.h"
 #include "core/time_axis.h"
 #include "render/camera.h"
@@ -56,6 +58,14 @@ nlohmann::json objects_json(const scenes::Scene& scene);
 nlohmann::json model_components(const RunConfig& c, const scenes::Scene* scene, const nlohmann::json& from_run = nullptr);
 
 // What metadata.json reports that only the finished run knows.
+// Where a run's time went: wall seconds before the tiles (scene, BVH, sensor maps, outputs opened), in
+// the tiles and after them until metadata.json (images, previews); and the tiles' stages as StageClock
+// measured them, summed over threads.
+struct RunTimes {
+  double setup_seconds = 0.0, tiles_seconds = 0.0, finish_seconds = 0.0;
+  std::array<double, StageClock::kStageCount> stage_thread_seconds{};
+};
+
 struct RunRecord {
   std::vector<std::string> files;  // as published, metadata.json last
   nlohmann::json camera;           // camera_json()
@@ -82,9 +92,14 @@ struct RunRecord {
   std::optional<nlohmann::json> dataset;
   // How the run went: not a function of the scene and the seed.
   int threads = 0;
-  double seconds = 0.0;
-  render::RenderStats rays;
+  double seconds = 0.0;  // the tiles' wall time
+  render::RenderStats render_stats;
+  RunTimes times;
 };
+
+// metadata.json "run": threads, seconds, the stages' shares of the wall time, the rays by what they were
+// traced for, and each model component's share where it has one of its own (docs/outputs.md).
+nlohmann::json run_json(const RunRecord& r);
 
 // The content of metadata.json.
 // scene_warnings: what loading the glTF warned about.

@@ -2,6 +2,7 @@
 
 #include <tbb/parallel_for.h>
 
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -19,6 +20,7 @@
 #include "app/staging.h"
 #include "app/warnings.h"
 #include "core/error.h"
+#include "core/stage_clock.h"
 #include "core/units.h"
 #include "render/camera.h"
 #include "render/renderer.h"
@@ -42,6 +44,7 @@ std::string seconds_text(double s) {
 }  // namespace
 
 RunResult run(const RunOptions& options) {
+  const auto started = std::chrono::steady_clock::now();
   std::vector<std::string> overrides = options.overrides;
   if (options.seed) overrides.push_back("seed=" + std::to_string(*options.seed));
   scenes::ResolvedRun resolved = scenes::load_scene_file(options.scene_file, overrides);
@@ -86,17 +89,31 @@ RunResult run(const RunOptions& options) {
     std::fprintf(stderr, "spadgen: %s: %d x %d pixels, %zu tiles, %lld time bins of %s ps, K = %d\n",
                  options.scene_file.c_str(), img.width, img.height, tiles.size(), static_cast<long long>(axis.bins),
                  seconds_text(axis.bin_width_s / kPs).c_str(), sensor.K());
+  const double setup_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   Progress progress(tiles.size(), options.progress);
+  StageClock clock;  // where the tiles' time goes (metadata.json "run")
 
   tbb::parallel_for(size_t(0), tiles.size(), [&](size_t ti) {
     InterruptGuard::check();
     const PixelRect& rect = tiles[ti];
     // The ground truth first: the renderer splits each pixel's laser light by the objects of its slots.
     GroundTruthTile gt;
-    if (cfg.outputs.ground_truth) gt = renderer.ground_truth(rect);
+    if (cfg.outputs.ground_truth) {
+      const StageClock::Scope time(&clock, StageClock::kGroundTruth);
+      gt = renderer.ground_truth(rect);
+    }
     const PixelRect data_rect = grow_clipped(rect, sensor.halo(), cfg.camera.width_px, cfg.camera.height_px);
-    const TransientTile t = renderer.transient(rect, data_rect, axis, &tile_stats[ti], cfg.outputs.ground_truth ? &gt : nullptr);
-    SensorTile s = sensor.process(t);
+    TransientTile t;
+    {
+      const StageClock::Scope time(&clock, StageClock::kLightTransport);
+      t = renderer.transient(rect, data_rect, axis, &tile_stats[ti], cfg.outputs.ground_truth ? &gt : nullptr);
+    }
+    SensorTile s;
+    {
+      const StageClock::Scope time(&clock, StageClock::kSensorRates);  // the noise inside it times itself
+      s = sensor.process(t);
+    }
+    const StageClock::Scope time(&clock, StageClock::kOutputs);
     if (cfg.outputs.ground_truth) outputs.put_ground_truth(gt);
     if (outputs.labels()) outputs.put_labels(sensor::object_labels(sensor, gt, s, axis, cfg.laser.emission_delay_s));
     outputs.put(t, sensor.maps(rect), std::move(s));
@@ -116,6 +133,7 @@ RunResult run(const RunOptions& options) {
     });
   }
   const double render_seconds = progress.seconds();
+  const auto tiles_done = std::chrono::steady_clock::now();
 
   const Provenance prov = provenance(cfg, img);
   outputs.write(prov);
@@ -139,11 +157,12 @@ RunResult run(const RunOptions& options) {
   record.threads = options.threads;
   record.dataset = options.dataset;
   record.seconds = render_seconds;
-  for (const auto& st : tile_stats) {
-    record.rays.camera_rays += st.camera_rays, record.rays.shadow_rays += st.shadow_rays;
-    record.rays.camera_hits += st.camera_hits;
-  }
+  for (const auto& st : tile_stats) record.render_stats.rays += st.rays, record.render_stats.camera_hits += st.camera_hits;
+  record.times.setup_seconds = setup_seconds;
+  record.times.tiles_seconds = render_seconds;
+  for (int k = 0; k < StageClock::kStageCount; ++k) record.times.stage_thread_seconds[size_t(k)] = clock.seconds(StageClock::Stage(k));
   warn(light_warnings(cfg, img, record));
+  record.times.finish_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - tiles_done).count();
   writers::write_json(staging.path("metadata.json"), metadata(resolved, warnings, sensor, prov, axis, record));
 
   InterruptGuard::check();

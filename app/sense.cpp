@@ -5,6 +5,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -25,6 +26,7 @@
 #include "app/run_parts.h"
 #include "app/staging.h"
 #include "core/error.h"
+#include "core/stage_clock.h"
 #include "scenes/input.h"
 #include "scenes/key_path.h"
 #include "scenes/scene_file.h"
@@ -137,6 +139,7 @@ nlohmann::ordered_json noise_free_part(nlohmann::ordered_json resolved) {
 }  // namespace
 
 std::vector<RunResult> sense(const SenseOptions& options) {
+  const auto started = std::chrono::steady_clock::now();
   if (scenes::invalid_utf8_at(options.run_dir) != std::string::npos)  // metadata.json records it
     throw Error(scenes::printable(options.run_dir) + ": the run folder's name is not valid UTF-8 text, which metadata.json needs; rename it");
   const fs::path src = options.run_dir;
@@ -299,12 +302,23 @@ std::vector<RunResult> sense(const SenseOptions& options) {
                  img.height, sensor.K(), runs.size());
   std::unique_ptr<writers::ExrData> truth;
   if (outputs.front()->labels() && !from_run.count("labels.exr")) truth = std::make_unique<writers::ExrData>(writers::read_exr((src / "ground_truth.exr").string()));
+  const double setup_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   Progress progress(tiles.size(), options.progress);
+  StageClock clock;  // where the tiles' time goes (metadata.json "run")
   tbb::parallel_for(size_t(0), tiles.size(), [&](size_t ti) {
     InterruptGuard::check();
     const PixelRect& rect = tiles[ti];
-    TransientTile t = light.tile(rect, grow_clipped(rect, sensor.halo(), cfg.camera.width_px, cfg.camera.height_px));
-    std::vector<SensorTile> s = sensor.process(t, seeds);
+    TransientTile t;
+    {
+      const StageClock::Scope time(&clock, StageClock::kSavedLight);
+      t = light.tile(rect, grow_clipped(rect, sensor.halo(), cfg.camera.width_px, cfg.camera.height_px));
+    }
+    std::vector<SensorTile> s;
+    {
+      const StageClock::Scope time(&clock, StageClock::kSensorRates);  // the noise inside it times itself
+      s = sensor.process(t, seeds);
+    }
+    const StageClock::Scope time(&clock, StageClock::kOutputs);
     const sensor::SensorMapsTile maps = sensor.maps(rect);
     // The labels do not depend on the noise: the first realisation's serve all (the others link them).
     if (truth)
@@ -315,6 +329,8 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     light.recycle(std::move(t));
     progress.tick();
   });
+  const double tiles_seconds = progress.seconds();
+  const auto tiles_done = std::chrono::steady_clock::now();
 
   const Provenance prov{scene_file, field<std::string>(meta, "/scene_hash_fnv1a64"_json_pointer, src), cfg.seed, img};
   std::vector<RunResult> results;
@@ -363,7 +379,12 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     record.light_region = region;
     record.light_values_bytes = meta.at("light").at("values_bytes").get<int64_t>();
     record.threads = options.threads;
-    record.seconds = progress.seconds();
+    record.seconds = tiles_seconds;
+    record.times.setup_seconds = setup_seconds;
+    record.times.tiles_seconds = tiles_seconds;
+    for (int k = 0; k < StageClock::kStageCount; ++k) record.times.stage_thread_seconds[size_t(k)] = clock.seconds(StageClock::Stage(k));
+    // The realisations' images so far (a sense with --repeats writes them one after the other).
+    record.times.finish_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - tiles_done).count();
     record.sense = json{{"from", src.string()}, {"repeat", r}, {"repeats", runs.size()}};
     writers::write_json(staging[r]->path("metadata.json"), metadata(runs[r], scene_warnings, sensor, prov, axis, record));
     InterruptGuard::check();

@@ -43,7 +43,7 @@ std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img
   const double laser_total = r.laser_total;
   std::vector<std::string> w;
   const std::string image = std::to_string(img.width) + " x " + std::to_string(img.height) + " image";
-  if (r.rays.camera_hits == 0) {
+  if (r.render_stats.camera_hits == 0) {
     w.push_back("nothing in view: no camera ray of the " + image +
                 " hits a surface of the scene (camera.position_m, look_at_m, gltf_camera, crop): the outputs hold "
                 "ambient light and dark counts only");

@@ -56,7 +56,7 @@ void BM_Integrator(benchmark::State& state) {
   uint64_t rays = 0;
   for (auto _ : state) {
     const render::RenderStats st = render_image(r, c, axis, all);
-    rays += st.camera_rays + st.shadow_rays;
+    rays += st.rays.total();
   }
   state.counters["rays_per_s"] = benchmark::Counter(double(rays), benchmark::Counter::kIsRate);
   state.counters["rays_per_image"] = double(rays) / double(state.iterations());
@@ -135,7 +135,7 @@ void paired_ratio(int pairs) {
     auto t1 = std::chrono::steady_clock::now();
     replay(embree.handle(), rays);
     auto t2 = std::chrono::steady_clock::now();
-    int_rays = st.camera_rays + st.shadow_rays;
+    int_rays = st.rays.total();
     const double ti = std::chrono::duration<double>(t1 - t0).count(), tr = std::chrono::duration<double>(t2 - t1).count();
     t_int_min = std::min(t_int_min, ti);
     t_raw_min = std::min(t_raw_min, tr);

@@ -102,8 +102,7 @@ render::RenderStats render_image(const render::Renderer& r, const RunConfig& c, 
   (void)c;
   render::RenderStats total;
   for (const auto& s : stats) {
-    total.camera_rays += s.camera_rays;
-    total.shadow_rays += s.shadow_rays;
+    total.rays += s.rays;
   }
   return total;
 }

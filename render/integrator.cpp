@@ -164,9 +164,9 @@ bool Integrator::laser_ray(const Surface& sf, LaserRay* out) const {
 }
 
 Spec Integrator::shadow_transmittance(const glm::vec3& origin, const glm::vec3& dir, float dist, int medium,
-                                      double* extra_opl, RayCounts* rays, const FirstSegment* first) const {
+                                      double* extra_opl, uint64_t* rays, const FirstSegment* first) const {
   *extra_opl = 0.0;
-  if (!first) ++rays->shadow;
+  if (!first) ++*rays;
   if (!transmission_) {
     const bool blocked = first ? first->found : embree_.occluded(origin, dir, 0.0f, dist);
     return blocked ? Spec(0.0f) : Spec(1.0f);
@@ -175,7 +175,7 @@ Spec Integrator::shadow_transmittance(const glm::vec3& origin, const glm::vec3& 
   glm::vec3 o = origin;
   float remaining = dist;
   for (int crossing = 0;; ++crossing) {
-    if (crossing > 0) ++rays->shadow;
+    if (crossing > 0) ++*rays;
     RayHit hit;
     bool found;
     if (crossing == 0 && first) {
@@ -253,7 +253,7 @@ void Integrator::trace_camera_block(int x, int y, int s_begin, int s_end, const 
     }
     RayHit* hits = block->hit.data() + row;
     embree_.intersect_packet(valid, cam, dirs, 0.0f, kInf, hits, found);
-    rays->camera += static_cast<uint64_t>(begin ? lanes_valid : block->lanes);
+    rays->camera += static_cast<uint64_t>(begin ? lanes_valid : block->lanes);  // ahead: a path's first segment
     // The laser's shadow rays from these hits, as one coherent packet.
     bool shadow[kPacket];
     glm::vec3 origins[kPacket];
@@ -285,7 +285,7 @@ void Integrator::trace_camera_block(int x, int y, int s_begin, int s_end, const 
       block->shadow_traced[j] = shadow[i] && traced > 0;
       block->shadow_found[j] = shadow[i] && traced > 0 && shadow_found[i];
     }
-    rays->shadow += static_cast<uint64_t>(traced);
+    rays->laser += static_cast<uint64_t>(traced);
   }
 }
 
@@ -321,7 +321,7 @@ inline bool Integrator::next_hit(const CameraBlock& block, size_t j, bool camera
     *hit = block.hit[j];
     return block.found[j] != 0;
   }
-  ++rays->camera;
+  ++rays->bounce;
   return embree_.intersect(o, d, 0.0f, kInf, hit);
 }
 
@@ -392,7 +392,7 @@ bool Integrator::connect_laser_refracted(const NeeVertex& v, double w, const Pix
       found = first->found;
       hit = first->hit;
     } else {
-      ++rays->shadow;
+      ++rays->refracted;
       found = embree_.intersect(o, d, 0.0f, remaining, &hit);
     }
     if (!found) break;
@@ -477,7 +477,7 @@ bool Integrator::connect_laser_refracted(const NeeVertex& v, double w, const Pix
     const double len = depth[j] / cs[j];
     const glm::vec3 dj(dir[j]);
     const glm::vec3 start = offset_ray_origin(glm::vec3(q), qn, dj);
-    ++rays->shadow;
+    ++rays->refracted;
     RayHit hit;
     // To the next face: the nearest hit, with room for the float error of the faces' positions (the next
     // face but one is a layer further). To the laser: short of it.
@@ -523,7 +523,7 @@ inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, co
   const Spec f = v.bsdf.eval_cos(wi);
   if (!(f.x > 0.0f)) return;
   double extra = 0.0;
-  const Spec tr = shadow_transmittance(lr.origin, wi, float(r), v.shadow_medium_towards(wi), &extra, rays, first);
+  const Spec tr = shadow_transmittance(lr.origin, wi, float(r), v.shadow_medium_towards(wi), &extra, &rays->laser, first);
   if (!(tr.x > 0.0f)) return;
   const double value = double(v.beta.x) * f.x * tr.x * intensity / (r * r) * w;
   deposit_laser(v, value, v.opl + r + extra, film);
@@ -558,7 +558,7 @@ inline void Integrator::connect_ambient_lights(const NeeVertex& v, double* ambie
     if (!(f.y > 0.0f)) continue;
     double extra = 0.0;
     const Spec tr = shadow_transmittance(offset_ray_origin(v.sf.p, v.sf.ng, wi), wi, float(r),
-                                         v.shadow_medium_towards(wi), &extra, rays);
+                                         v.shadow_medium_towards(wi), &extra, &rays->ambient);
     *ambient += double(v.beta.y) * f.y * tr.y * e;
   }
 }
@@ -586,7 +586,7 @@ void Integrator::find_guide_targets(const Surface& sf, const Bsdf& bsdf, int med
   for (int i = 0; i < n; ++i) {
     const glm::vec3 d = dirs[i];
     RayHit hit;
-    ++rays->shadow;
+    ++rays->guided;
     if (!embree_.intersect(offset_ray_origin(sf.p, sf.ng, d), d, 0.0f, kInf, &hit)) continue;
     const Surface sb = shading_.geometric(hit);
     const MaterialPoint& mb = shading_.material(sb.material).point;
@@ -700,7 +700,7 @@ void Integrator::guided_connections(const GuidedVertex& a, const GuideTargets& g
     }
     if (!(f.x > 0.0f)) continue;
     RayHit hit;
-    ++rays->camera;
+    ++rays->guided;
     if (!embree_.intersect(offset_ray_origin(a.sf.p, a.sf.ng, wd), wd, 0.0f, kInf, &hit)) continue;
     const Surface sb = shading_.surface(hit);
     const MaterialPoint mb = shading_.material_at(sb, hit);
@@ -722,7 +722,9 @@ void Integrator::guided_connections(const GuidedVertex& a, const GuideTargets& g
     const NeeVertex vb{sb, bsdf, wo_front, shading_.material(sb.material).volume, medium, a.vertices,
                        !a.reflected && transmitted, beta, opl, !(mb.transmission > 0.0f && a.vertices > 0)};
     LaserRay lr;
-    if (laser_ray(sb, &lr)) connect_laser(vb, lr, nullptr, w, film, rays);
+    RayCounts at_end;  // the laser connection at the guided vertex: the guided connection's rays
+    if (laser_ray(sb, &lr)) connect_laser(vb, lr, nullptr, w, film, &at_end);
+    rays->guided += at_end.total();
   }
 }
 
@@ -741,6 +743,9 @@ void Integrator::guided_connections(const GuidedVertex& a, const GuideTargets& g
   // The MIS weight of the laser connection at the next vertex, when the previous vertex also drew guided
   // directions towards it (guided_connections): the BSDF draw's share.
   double next_mis = 1.0;
+  // The rays traced so far when the path left its first non-delta vertex: what follows is indirect light.
+  const uint64_t no_indirect = UINT64_MAX;
+  uint64_t indirect_from = no_indirect;
   for (bool camera_ray = true;; camera_ray = false) {
     const double mis = next_mis;
     next_mis = 1.0;
@@ -780,6 +785,7 @@ void Integrator::guided_connections(const GuidedVertex& a, const GuideTargets& g
       }
       if (beta.y > 0.0f) connect_ambient_lights(v, &ambient, rays);
       ++vertices;
+      if (vertices == 1 && rc.max_bounces > 1) indirect_from = rays->total();
       if (vertices >= rc.max_bounces) {
         if (!ambient_on_) break;
         last_segment = true;
@@ -820,6 +826,7 @@ void Integrator::guided_connections(const GuidedVertex& a, const GuideTargets& g
     o = offset_ray_origin(sf.p, sf.ng, bs.wi);
     d = bs.wi;
   }
+  if (indirect_from != no_indirect) rays->indirect += rays->total() - indirect_from;
   return ambient;
 }
 

@@ -68,10 +68,6 @@ struct ObjectLaser {
 // narrow glossy lobe: GGX alpha = roughness^2 in [1e-3, 0.04], the smooth ones being Dirac).
 bool guided_connections_active(const scenes::Scene& scene, bool enabled);
 
-struct RayCounts {
-  uint64_t camera = 0, shadow = 0;
-};
-
 // Adds a contribution v arriving at time t: to laser_total, and to the bin of every periodic image
 // t + m * period (m any integer) inside [axis.start_s, axis.end_s()), or to out_of_window when there is
 // none. A time exactly on a bin edge belongs to the later bin (TimeAxis::bin_of).
@@ -151,9 +147,10 @@ class Integrator {
   // Fraction of light (two channels) that reaches distance `dist` along unit `dir` from `origin`, through
   // transmissive surfaces (straight, ignoring refraction) starting inside volume `medium` (-1: air);
   // *extra_opl receives the optical path added by the media crossed, (n - 1) * length.
-  // first: the first segment's result when it was traced ahead (its ray is not counted again).
+  // first: the first segment's result when it was traced ahead (its ray is not counted again). The rays
+  // traced are added to *rays (a RayCounts category).
   Spec shadow_transmittance(const glm::vec3& origin, const glm::vec3& dir, float dist, int medium,
-                            double* extra_opl, RayCounts* rays, const FirstSegment* first = nullptr) const;
+                            double* extra_opl, uint64_t* rays, const FirstSegment* first = nullptr) const;
 
   // The shadow ray from sf to the laser; false when the laser sends nothing towards sf.
   bool laser_ray(const Surface& sf, LaserRay* out) const;

@@ -4,7 +4,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
-#include <atomic>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -109,7 +109,12 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
   }
   const RenderConfig& rc = im.config.render;
 
-  std::atomic<uint64_t> camera_rays{0}, shadow_rays{0};
+  RayCounts tile_rays;  // the tasks' rays, added under rays_mutex
+  std::mutex rays_mutex;
+  const auto add_rays = [&](const RayCounts& r) {
+    const std::lock_guard<std::mutex> lock(rays_mutex);
+    tile_rays += r;
+  };
   std::vector<int> camera_hits(n, 0);
   // Stores pixel (x, y)'s totals, and its bins scaled by `scale` (1: as accumulated), clearing them.
   const auto store = [&](int x, int y, const PixelTotals& t, double scale, int paths, double se, double* acc,
@@ -164,8 +169,7 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
                 standard_error(t.laser_total, t.laser_sq, rc.samples_per_pixel, rc.samples_per_pixel), acc.data(),
                 acc_indirect.data());
         }
-      camera_rays += rays.camera;
-      shadow_rays += rays.shadow;
+      add_rays(rays);
     });
   } else {
     // To a target relative error, in two rounds per pixel. The first, samples_per_pixel paths (laser
@@ -252,13 +256,11 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
                   acc.data() + size_t(i) * bins, split ? acc_indirect.data() + size_t(i) * bins : nullptr);
           }
         }
-      camera_rays += rays.camera;
-      shadow_rays += rays.shadow;
+      add_rays(rays);
     });
   }
   if (stats) {
-    stats->camera_rays += camera_rays.load();
-    stats->shadow_rays += shadow_rays.load();
+    stats->rays += tile_rays;
     for (int y = rect.y0; y < rect.y1(); ++y)
       for (int x = rect.x0; x < rect.x1(); ++x) stats->camera_hits += static_cast<uint64_t>(camera_hits[size_t(data_rect.index(x, y))]);
   }

@@ -31,8 +31,26 @@
 
 namespace spadgen::render {
 
+// The rays a render traced, by what they were traced for. The first six are disjoint and sum to every ray;
+// indirect overlaps them.
+struct RayCounts {
+  uint64_t camera = 0;     // camera rays: a path's first segment
+  uint64_t bounce = 0;     // a path's further segments
+  uint64_t laser = 0;      // straight connections to the laser, and their continuations across transmissive surfaces
+  uint64_t refracted = 0;  // connections to the laser refracted through transmissive surfaces (connect_laser_refracted)
+  uint64_t guided = 0;     // guided connections: their targets' search, their rays and the laser connections at their ends
+  uint64_t ambient = 0;    // shadow rays to the glTF's punctual lights
+  uint64_t indirect = 0;   // of all the above, those a path traced after its first non-delta vertex (render.max_bounces > 1)
+  uint64_t total() const { return camera + bounce + laser + refracted + guided + ambient; }
+  RayCounts& operator+=(const RayCounts& o) {
+    camera += o.camera, bounce += o.bounce, laser += o.laser, refracted += o.refracted, guided += o.guided,
+        ambient += o.ambient, indirect += o.indirect;
+    return *this;
+  }
+};
+
 struct RenderStats {
-  uint64_t camera_rays = 0, shadow_rays = 0;
+  RayCounts rays;
   uint64_t camera_hits = 0;  // samples of the pixels of rect (the halo left out) whose camera ray hit a surface
 };
 

@@ -12,6 +12,7 @@
 
 #include "core/error.h"
 #include "core/rng.h"
+#include "core/stage_clock.h"
 #include "core/units.h"
 #include "sensor/model/gate.h"
 #include "sensor/model/pdp.h"
@@ -259,6 +260,10 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
       }
     }
   });
+
+  // From here the temporal noise: its own stage of a run's time (app/pipeline.cpp), the rates above being
+  // the enclosing one.
+  const StageClock::Scope noise_time(StageClock::current(), StageClock::kSensorNoise);
 
   // The frames' layout of this tile (frames_tile), the same for every gate position and noise seed: the
   // crosstalk law of every region row, each tile row's neighbour directions (not across sections or the

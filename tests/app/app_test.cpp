@@ -174,6 +174,57 @@ TEST_F(App, TargetErrorOutputsAreBitIdenticalForAnyThreadCountAndTileSize) {
   EXPECT_EQ(model.at("indirect light"), meta["resolved_scene"]["render"]["max_bounces"].get<int>() > 1);
 }
 
+// metadata.json "run": the stages' shares of the run's wall time sum to 1, the rays' categories to their
+// total, and each model component has a share of its own where it has one: 0 when the scene does not
+// use it (the flat target has no transmissive surface, so no refracted connection; frames off: none sampled).
+TEST_F(App, RunSaysWhereItsTimeWentAndAComponentNotUsedCostsNothing) {
+  const auto run_of = [&](const std::string& name, const std::string& args) {
+    const Result r = sh("run " + args + " -o " + (dir_ / name).string());
+    EXPECT_EQ(r.code, 0) << r.output;
+    return nlohmann::json::parse(slurp(dir_ / name / "metadata.json")).at("run");
+  };
+  const std::string flat = kScenes + "flat_target.json -q --set camera.crop=[496,234,32,32] --set render.samples_per_pixel=4";
+  for (const auto& [name, run] : {std::pair{"small", run_of("small", kSmall)}, std::pair{"flat", run_of("flat", flat)},
+                                  std::pair{"flat_frames", run_of("flat_frames", flat + " --set outputs.frames=true --set render.max_bounces=1")}}) {
+    SCOPED_TRACE(name);
+    double shares = 0, seconds = 0;
+    for (const auto& st : run.at("stages")) {
+      EXPECT_GE(st.at("share").get<double>(), 0.0);
+      shares += st.at("share").get<double>(), seconds += st.at("seconds").get<double>();
+    }
+    EXPECT_NEAR(shares, 1.0, 1e-9);
+    EXPECT_NEAR(seconds, run.at("wall_seconds").get<double>(), 1e-9);
+    const auto& rays = run.at("rays");
+    uint64_t sum = 0;
+    for (const char* k : {"camera", "bounce", "laser", "refracted", "guided", "ambient"}) sum += rays.at(k).get<uint64_t>();
+    EXPECT_EQ(sum, rays.at("total").get<uint64_t>());
+    EXPECT_GT(rays.at("camera").get<uint64_t>(), 0u);
+    std::map<std::string, nlohmann::json> share;
+    for (const auto& c : run.at("components")) share[c.at("component").get<std::string>()] = c.at("share");
+    EXPECT_EQ(share.size(), 12u);
+    if (std::string(name) == "small") {  // the plate: refracted connections; its roughness: guided ones
+      EXPECT_GT(rays.at("refracted").get<uint64_t>(), 0u);
+      EXPECT_GT(share.at("transmissive surfaces").get<double>(), 0.0);
+      EXPECT_GT(share.at("guided connections").get<double>(), 0.0);
+      EXPECT_GT(share.at("binary frames").get<double>(), 0.0);  // kSmall writes them
+    } else {
+      EXPECT_EQ(rays.at("refracted").get<uint64_t>(), 0u);
+      EXPECT_EQ(rays.at("guided").get<uint64_t>(), 0u);
+      EXPECT_EQ(share.at("transmissive surfaces").get<double>(), 0.0);
+      EXPECT_EQ(share.at("guided connections").get<double>(), 0.0);
+      EXPECT_EQ(share.at("ambient light").get<double>(), 0.0);
+      EXPECT_TRUE(share.at("crosstalk").is_null());  // inside the sensor's stages
+      if (std::string(name) == "flat") {
+        EXPECT_EQ(share.at("binary frames").get<double>(), 0.0);
+      } else {
+        EXPECT_GT(share.at("binary frames").get<double>(), 0.0);
+        EXPECT_EQ(rays.at("indirect").get<uint64_t>(), 0u);  // render.max_bounces = 1
+        EXPECT_EQ(share.at("indirect light").get<double>(), 0.0);
+      }
+    }
+  }
+}
+
 // outputs.storage = zarr changes the container only: every stack of a Zarr run holds the .npy run's values
 // element for element (the saved light, the transients and their indirect part included), frames stay a
 // .npy, and every other file is the same bytes. Zarr stores are read here with writers::ZarrReader (itself

@@ -176,7 +176,11 @@ TEST(Accuracy, GuidedConnectionsKeepTheExpectationAndLowerTheVariance) {
     double total[2] = {0, 0}, var[2] = {0, 0};
     for (int guided = 0; guided < 2; ++guided) {
       c.render.guided_connections = guided == 1;
-      const TransientTile t = Renderer(s, c).transient(rect, rect, axis);
+      RenderStats stats;
+      const TransientTile t = Renderer(s, c).transient(rect, rect, axis, &stats);
+      // The guided connections' rays, counted as theirs.
+      if (guided == 1) EXPECT_GT(stats.rays.guided, 0u);
+      else EXPECT_EQ(stats.rays.guided, 0u);
       for (size_t i = 0; i < 256; ++i)
         total[guided] += t.laser_total[i], var[guided] += double(t.laser_se[i]) * t.laser_se[i];
     }

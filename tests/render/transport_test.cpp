@@ -610,9 +610,45 @@ TEST(Transport, StatsCountCameraAndShadowRays) {
   Renderer r(plane_scene(1.0f, 0.5f), c);
   RenderStats stats;
   r.transient({0, 0, 8, 8}, {0, 0, 8, 8}, TimeAxis{}, &stats);
-  EXPECT_EQ(stats.camera_rays, 128u);  // one per sample: direct light only, no ambient
-  EXPECT_EQ(stats.shadow_rays, 128u);
+  EXPECT_EQ(stats.rays.camera, 128u);  // one per sample: direct light only, no ambient
+  EXPECT_EQ(stats.rays.laser, 128u);
+  EXPECT_EQ(stats.rays.total(), 256u);
+  EXPECT_EQ(stats.rays.indirect, 0u);
+  // A second vertex: each path's bounce leaves the lone plane (no second vertex), and is indirect light.
+  c.render.max_bounces = 2;
+  RenderStats two;
+  Renderer(plane_scene(1.0f, 0.5f), c).transient({0, 0, 8, 8}, {0, 0, 8, 8}, TimeAxis{}, &two);
+  EXPECT_EQ(two.rays.camera, 128u);
+  EXPECT_EQ(two.rays.laser, 128u);
+  EXPECT_EQ(two.rays.bounce, 128u);
+  EXPECT_EQ(two.rays.indirect, 128u);
+  EXPECT_EQ(two.rays.refracted + two.rays.guided + two.rays.ambient, 0u);
 }
+
+// A slab between the camera and the wall: the laser connections from the wall refract through it (their
+// rays counted as refracted); without the slab there are none.
+TEST(Transport, RefractedConnectionsAreCountedOnlyWhereASceneHasThem) {
+  for (const bool slab : {false, true}) {
+    scenes::Scene s;
+    add_quad(s, {0, 0, -1}, {3, 0, 0}, {0, 3, 0}, add_material(s, test::lambertian(0.5f)));
+    if (slab) add_box(s, {-3, -3, -0.35f}, {3, 3, -0.3f}, add_material(s, test::glass(1.5f, 0.05f)));
+    RenderStageConfig c = test_config(4, 4, 12e-3);
+    c.laser.beam = Beam::Cone;
+    c.laser.half_angle_rad = kPi;
+    c.render.samples_per_pixel = 16;
+    c.render.max_bounces = 1;
+    RenderStats stats;
+    Renderer(s, c).transient({0, 0, 4, 4}, {0, 0, 4, 4}, TimeAxis{}, &stats);
+    EXPECT_EQ(stats.rays.camera, 256u);
+    if (slab) {
+      EXPECT_GT(stats.rays.refracted, 0u);
+      EXPECT_GT(stats.rays.bounce, 0u);  // the camera paths cross the slab's faces
+    } else {
+      EXPECT_EQ(stats.rays.refracted, 0u);
+      EXPECT_EQ(stats.rays.bounce, 0u);
+      EXPECT_EQ(stats.rays.laser, 256u);
+    }
+  }}
 
 // GGX (Walter et al. 2007) written out here, independently of render/bsdf.cpp: the normal distribution and
 // Smith's G1 for alpha = roughness^2.
