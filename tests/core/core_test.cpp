@@ -1,11 +1,14 @@
 // Shared value types: the time axis edge rule, tiling, units, and the counter-based RNG.
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
 #include <set>
+#include <thread>
 
 #include "core/error.h"
 #include "core/rng.h"
+#include "core/stage_clock.h"
 #include "core/tile.h"
 #include "core/time_axis.h"
 #include "core/units.h"
@@ -85,6 +88,37 @@ TEST(Rng, UniformDoublesPassChiSquare) {
   double chi2 = 0;
   for (double o : bins) chi2 += (o - e) * (o - e) / e;
   EXPECT_LT(chi2, 119.0);
+}
+
+// A thread's time goes to its innermost scope only: the outer scope, which only waits for the inner one
+// (as a tile's stage waits while its thread runs another tile's stage), is not charged for it; a scope
+// without a clock neither times nor interrupts its parent; threads add up.
+TEST(StageClock, TimeGoesToTheInnermostScopeAndThreadsAddUp) {
+  using namespace std::chrono_literals;
+  StageClock clock;
+  EXPECT_EQ(StageClock::current(), nullptr);
+  {
+    const StageClock::Scope outer(&clock, StageClock::kSensorRates);
+    EXPECT_EQ(StageClock::current(), &clock);
+    {
+      const StageClock::Scope inner(&clock, StageClock::kSensorNoise);
+      std::this_thread::sleep_for(60ms);
+    }
+    {
+      const StageClock::Scope none(nullptr, StageClock::kOutputs);  // times nothing: the time stays outer's
+      EXPECT_EQ(StageClock::current(), &clock);
+      std::this_thread::sleep_for(20ms);
+    }
+  }
+  EXPECT_EQ(StageClock::current(), nullptr);
+  EXPECT_GE(clock.seconds(StageClock::kSensorNoise), 0.060);
+  EXPECT_GE(clock.seconds(StageClock::kSensorRates), 0.020);
+  EXPECT_LT(clock.seconds(StageClock::kSensorRates), clock.seconds(StageClock::kSensorNoise));
+  EXPECT_EQ(clock.seconds(StageClock::kOutputs), 0.0);
+  std::thread a([&] { const StageClock::Scope s(&clock, StageClock::kOutputs); std::this_thread::sleep_for(30ms); });
+  std::thread b([&] { const StageClock::Scope s(&clock, StageClock::kOutputs); std::this_thread::sleep_for(30ms); });
+  a.join(), b.join();
+  EXPECT_GE(clock.seconds(StageClock::kOutputs), 0.060);
 }
 
 }  // namespace
