@@ -181,7 +181,8 @@ class Outputs::Images {
       for (size_t c = 0; c < object_ch_.size(); ++c) object_ch_[c][o] = ov[c];
       for (size_t j = 0; j < size_t(slots_); ++j) {
         const size_t e = i * size_t(g.max_layers) + j;
-        const float sv[] = {float(g.object_slot_id[e]), g.object_range[e], g.object_transmittance[e], g.object_laser[e]};
+        const float sv[] = {float(g.object_slot_id[e]), g.object_range[e], g.object_transmittance[e], g.object_laser[e],
+                            g.object_path[e]};
         for (size_t c = 0; c < std::size(kObjectSlotChannels); ++c) object_slot_ch_[j * std::size(kObjectSlotChannels) + c][o] = sv[c];
       }
     });
@@ -368,7 +369,7 @@ class Outputs::Images {
   static constexpr const char* kGroundTruthChannels[] = {"range", "z", "normal.X", "normal.Y", "normal.Z",
                                                          "mesh_id", "material_id", "layer_count"};
   static constexpr const char* kObjectChannels[] = {"object_id", "object_count", "direct_other_laser", "indirect_laser"};
-  static constexpr const char* kObjectSlotChannels[] = {".id", ".range", ".transmittance", ".laser"};
+  static constexpr const char* kObjectSlotChannels[] = {".id", ".range", ".transmittance", ".laser", ".path"};
   static constexpr const char* kLabelSlotChannels[] = {".id", ".edge_counts", ".edge_snr", ".detectable"};
   static std::string layer_name(int l, const char* what, const char* prefix = "layer") {
     return prefix + std::to_string(l) + what;

@@ -94,7 +94,7 @@ void link_into(const fs::path& from, const Staging& staging, const std::string& 
 
 std::string text(uint64_t v) { return std::to_string(v); }
 
-// What labels.exr needs of the run's ground truth over rect: the object slots' ids, ranges and laser light,
+// What labels.exr needs of the run's ground truth over rect: the object slots' ids, ranges, paths and laser light,
 // exactly as ground_truth.exr holds them (so the labels equal a run's bit for bit). Slots beyond the
 // image's object<j> channels are unused (id -1), as the run's were.
 GroundTruthTile object_truth(const writers::ExrData& e, const PixelRect& img, const PixelRect& rect, int slots,
@@ -107,19 +107,23 @@ GroundTruthTile object_truth(const writers::ExrData& e, const PixelRect& img, co
   const auto n = static_cast<size_t>(rect.count()) * static_cast<size_t>(slots);
   gt.object_slot_id.assign(n, -1);
   gt.object_range.assign(n, std::numeric_limits<float>::infinity());
+  gt.object_path.assign(n, std::numeric_limits<float>::infinity());
   gt.object_laser.assign(n, 0.0f);
   for (int j = 0; j < slots; ++j) {
     const std::string name = "object" + std::to_string(j);
     const auto id = e.channels.find(name + ".id"), range = e.channels.find(name + ".range"), laser = e.channels.find(name + ".laser");
+    const auto path = e.channels.find(name + ".path");
     if (id == e.channels.end()) break;
-    if (range == e.channels.end() || laser == e.channels.end())
-      throw Error(file.string() + ": has " + name + ".id but not " + name + ".range and " + name + ".laser");
+    if (range == e.channels.end() || laser == e.channels.end() || path == e.channels.end())
+      throw Error(file.string() + ": has " + name + ".id but not " + name + ".range, " + name + ".path and " + name +
+                  ".laser (a run of an older spadgen: run it again)");
     for (int y = rect.y0; y < rect.y1(); ++y)
       for (int x = rect.x0; x < rect.x1(); ++x) {
         const size_t o = size_t(y - img.y0) * size_t(img.width) + size_t(x - img.x0);
         const size_t i = size_t(rect.index(x, y)) * size_t(slots) + size_t(j);
         gt.object_slot_id[i] = static_cast<int32_t>(id->second[o]);
         gt.object_range[i] = range->second[o];
+        gt.object_path[i] = path->second[o];
         gt.object_laser[i] = laser->second[o];
       }
   }

@@ -111,6 +111,10 @@ struct GroundTruthTile {
   std::vector<int32_t> object_slot_id;
   std::vector<float> object_range;          // m, range of the object's first surface along the ray
   std::vector<float> object_transmittance;  // fraction of light reaching that first surface
+  // m, the optical path of the object's direct return: laser to that first surface, and it to the camera
+  // centre, each a straight line with (n - 1) x its length inside each medium added; the return arrives
+  // at laser.emission_delay + path / c
+  std::vector<float> object_path;
   // Filled by Renderer::transient (given this tile), photons per pulse as in TransientTile::laser_total:
   // the direct light of slot j's object (its vertex meets the laser and the camera sees it through
   // transmissions only); per pixel, the direct light of objects in no slot (a neighbour seen by jittered

@@ -36,12 +36,41 @@ GroundTruthTile Renderer::ground_truth(const PixelRect& rect) const {
   gt.object_slot_id.assign(n * layers, -1);
   gt.object_range.assign(n * layers, kInf);
   gt.object_transmittance.assign(n * layers, 0.0f);
+  gt.object_path.assign(n * layers, kInf);
   gt.object_laser.assign(n * layers, 0.0f);
   gt.direct_other_laser.assign(n, 0.0f);
   gt.indirect_laser.assign(n, 0.0f);
   const std::vector<int>& mesh_object = im.objects.mesh_object;
 
   const glm::vec3 cam(im.camera.position());
+  // The optical path from the laser to p in a straight line: its length, and (n - 1) x the length of each
+  // stretch inside a medium (entered through a volume's face, left through the next one's).
+  const auto laser_path = [&](const glm::dvec3& p) {
+    const glm::dvec3 to = p - im.laser.position;
+    const double length = glm::length(to);
+    if (!(length > 0.0)) return 0.0;
+    const glm::vec3 d(to / length);
+    glm::vec3 o(im.laser.position);
+    glm::dvec3 previous = im.laser.position;
+    double travelled = 0.0, excess = 0.0;
+    int medium = -1;
+    for (int crossings = 0; crossings < 64; ++crossings) {
+      RayHit hit;
+      // Short of p itself by a little more than the faces' float error.
+      const float reach = float(length - travelled) - 1e-5f * float(1.0 + length);
+      if (!(reach > 0.0f) || !im.embree.intersect(o, d, 0.0f, reach, &hit)) break;
+      const Surface sf = im.shading.surface(hit);
+      const glm::dvec3 q(sf.p);
+      const double seg = glm::length(q - previous);
+      if (medium >= 0) excess += (double(im.shading.material(medium).point.ior) - 1.0) * seg;
+      travelled += seg, previous = q;
+      const ResolvedMaterial& rm = im.shading.material(sf.material);
+      if (rm.volume) medium = glm::dot(d, sf.ng) < 0.0f ? sf.material : -1;
+      o = offset_ray_origin(sf.p, sf.ng, d);
+    }
+    if (medium >= 0) excess += (double(im.shading.material(medium).point.ior) - 1.0) * glm::length(p - previous);
+    return length + excess;
+  };
   tbb::parallel_for(tbb::blocked_range<int>(rect.y0, rect.y1()), [&](const tbb::blocked_range<int>& rows) {
     for (int y = rows.begin(); y < rows.end(); ++y)
       for (int x = rect.x0; x < rect.x1(); ++x) {
@@ -50,7 +79,7 @@ GroundTruthTile Renderer::ground_truth(const PixelRect& rect) const {
         const glm::vec3 d(dd);
         glm::vec3 o = cam;
         glm::dvec3 previous = im.camera.position();
-        double distance = 0.0, transmittance = 1.0;
+        double distance = 0.0, transmittance = 1.0, excess = 0.0;  // excess: (n - 1) x the length in media
         int medium = -1, count = 0, objects = 0;
         int32_t* slot_id = gt.object_slot_id.data() + i * layers;
         while (count < gt.max_layers) {
@@ -62,7 +91,10 @@ GroundTruthTile Renderer::ground_truth(const PixelRect& rect) const {
           const double seg = glm::length(p - previous);
           previous = p;
           distance += seg;
-          if (medium >= 0) transmittance *= std::exp(-double(im.shading.material(medium).sigma.x) * seg);
+          if (medium >= 0) {
+            transmittance *= std::exp(-double(im.shading.material(medium).sigma.x) * seg);
+            excess += (double(im.shading.material(medium).point.ior) - 1.0) * seg;
+          }
           if (count == 0) {
             gt.range[i] = static_cast<float>(distance);
             gt.z[i] = static_cast<float>(distance * glm::dot(dd, im.camera.forward()));
@@ -80,6 +112,7 @@ GroundTruthTile Renderer::ground_truth(const PixelRect& rect) const {
             slot_id[objects] = object;
             gt.object_range[i * layers + size_t(objects)] = static_cast<float>(distance);
             gt.object_transmittance[i * layers + size_t(objects)] = static_cast<float>(transmittance);
+            gt.object_path[i * layers + size_t(objects)] = static_cast<float>(distance + excess + laser_path(p));
             ++objects;
           }
           ++count;

@@ -34,7 +34,9 @@ ObjectLabelsTile object_labels(const SensorModel& sensor, const GroundTruthTile&
         const size_t e = i * slots + j;
         out.id[e] = gt.object_slot_id[e];
         if (out.id[e] < 0 || !(gt.object_laser[e] > 0.0f) || K == 0) continue;
-        returns.push_back({x, y, emission_delay_s + 2.0 * double(gt.object_range[e]) / kSpeedOfLight, gt.object_laser[e]});
+        // The direct return's arrival: its optical path (laser to the object, the object to the camera).
+        const double path = gt.object_path.empty() ? 2.0 * double(gt.object_range[e]) : double(gt.object_path[e]);
+        returns.push_back({x, y, emission_delay_s + path / kSpeedOfLight, gt.object_laser[e]});
         slot.push_back(e);
       }
     }

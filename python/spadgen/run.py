@@ -85,7 +85,8 @@ class ObjectSlots:
     object id, -1 on a miss; ``count`` (H, W) int32: objects along the ray. Per slot, (J, H, W): ``id`` int32
     (an index into ``Run.objects``, -1 for an unused slot), ``range`` float32 metres of the object's first
     surface (+inf unused), ``transmittance`` float32 fraction reaching it, ``laser`` float32 photons per
-    pulse the object returns directly (0 unused). ``direct_other_laser`` and ``indirect_laser`` (H, W)
+    pulse the object returns directly (0 unused), ``path`` float32 metres, the optical path of that direct return,
+    laser to object to camera (it arrives at laser.emission_delay + path / c; +inf unused). ``direct_other_laser`` and ``indirect_laser`` (H, W)
     float32: the rest of laser.exr. From labels.exr (gate sweep only; None in a 2D run, which writes none):
     ``edge_counts`` and ``edge_snr`` (J, H, W) float32, ``detectable`` (J, H, W) bool."""
     first: np.ndarray
@@ -98,6 +99,7 @@ class ObjectSlots:
     indirect_laser: np.ndarray
     edge_counts: np.ndarray = None
     edge_snr: np.ndarray = None
+    path: np.ndarray = None
     detectable: np.ndarray = None
 
 
@@ -413,7 +415,7 @@ class Run:
                       "detectable": slots(lab, "detectable", bool)}
         return ObjectSlots(gt["object_id"].astype(np.int32), gt["object_count"].astype(np.int32), slots(gt, "id", np.int32),
                            slots(gt, "range"), slots(gt, "transmittance"), slots(gt, "laser"), gt["direct_other_laser"],
-                           gt["indirect_laser"], **labels)
+                           gt["indirect_laser"], path=slots(gt, "path"), **labels)
 
     def detections(self, detector="edges"):
         """The returns ``spadgen reconstruct RUN --detector DETECTOR`` wrote into the run folder (Detections)."""

@@ -182,6 +182,22 @@ def test_object_slots(sweep, intensity):
     laser = sweep.laser["photons_per_pulse"].astype(np.float64)
     total = o.laser.astype(np.float64).sum(0) + o.direct_other_laser + o.indirect_laser
     np.testing.assert_allclose(total, laser, rtol=1e-5, atol=0)
+    # The returns' optical paths: where slot 0 is the plate's front face (nothing before it), the laser
+    # (laser.offset_m 3 cm to the right of the camera) to the face and the face to the camera centre.
+    cam = sweep.metadata["camera"]
+    K, c2w = np.array(cam["intrinsics"]), np.array(cam["camera_to_world"])
+    v, u = np.mgrid[0:H, 0:W]
+    d = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones((H, W))], -1)
+    d = (d / np.linalg.norm(d, axis=-1, keepdims=True)) @ c2w[:3, :3].T
+    origin = np.array(cam["position_m"])
+    p = origin + d * o.range[0].astype(np.float64)[..., None]
+    laser = origin + 0.03 * c2w[:3, 0]
+    plate = (o.id[0] == 0) & used[0]
+    assert plate.any()
+    expected = o.range[0] + np.linalg.norm(p - laser, axis=-1)
+    np.testing.assert_allclose(o.path[0][plate], expected[plate], rtol=2e-6)
+    assert np.isinf(o.path[~used]).all()
+    assert (o.path[1][used[1]] > 2 * o.range[1][used[1]]).all()  # the sphere through the plate: its glass both ways
     # Labels: the same slots; detectable exactly where the edge reaches five standard deviations.
     np.testing.assert_array_equal(sweep.object_labels["object0.id"], o.id[0])
     np.testing.assert_array_equal(o.detectable, o.edge_snr >= 5)

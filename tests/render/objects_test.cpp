@@ -78,6 +78,22 @@ TEST(Objects, SmoothPlateOverSphereIsTwoObjectsAtTheirFirstLayers) {
     EXPECT_GT(gt.object_laser[i * L + 1], 0.5f * float(t.laser_total[i]));
     EXPECT_EQ(gt.object_laser[i * L + 2], 0.0f);
     EXPECT_NEAR(sum_slots(gt, i), t.laser_total[i], 1e-5 * t.laser_total[i]);
+    // The returns' optical paths, the laser at the camera: the plate's front face 2 x its range; the
+    // sphere 2 x its range and, both ways, (n - 1) x the straight line's chord through the plate.
+    const double chord = double(gt.layer_range[i * L + 1]) - double(gt.layer_range[i * L + 0]);
+    EXPECT_NEAR(gt.object_path[i * L + 0], 2.0 * gt.object_range[i * L + 0], 1e-6);
+    EXPECT_NEAR(gt.object_path[i * L + 1], 2.0 * gt.object_range[i * L + 1] + 2.0 * 0.5 * chord, 1e-6);
+    EXPECT_GT(chord, 0.002);  // the straight line's slant
+    EXPECT_LT(chord, 0.00201);
+    EXPECT_TRUE(std::isinf(gt.object_path[i * L + 2]));
+  }
+  // The laser 5 cm in front of the camera (laser.offset_m, camera coordinates): the front face at z =
+  // -0.45 is range + |P - L| away, |P - L|^2 = range^2 - 2 P.L + L.L with P.L = 0.45 x 0.05.
+  c.laser.offset_m = {0, 0, -0.05};
+  const GroundTruthTile off = Renderer(s, c).ground_truth(rect);
+  for (size_t i = 0; i < size_t(rect.count()); ++i) {
+    const double range = off.object_range[i * L + 0];
+    EXPECT_NEAR(off.object_path[i * L + 0], range + std::sqrt(range * range - 2 * 0.45 * 0.05 + 0.05 * 0.05), 1e-6);
   }
 }
 
