@@ -12,6 +12,7 @@
 #include <CLI/CLI.hpp>
 
 #include <malloc.h>
+#include <sys/resource.h>
 
 #include <cstdio>
 #include <iostream>
@@ -36,6 +37,11 @@ int main(int argc, char** argv) {
   // tiles are reused by the next: peak memory is unchanged, the faults are gone.
   mallopt(M_MMAP_THRESHOLD, 64 << 20);
   mallopt(M_TRIM_THRESHOLD, 256 << 20);
+  // Open files up to the hard limit (a `sense --repeats` holds a few per realisation until it commits).
+  if (rlimit lim{}; getrlimit(RLIMIT_NOFILE, &lim) == 0 && lim.rlim_cur < lim.rlim_max) {
+    lim.rlim_cur = lim.rlim_max;
+    (void)setrlimit(RLIMIT_NOFILE, &lim);
+  }
   CLI::App cli{"spadgen " SPADGEN_VERSION ": synthetic datasets for time-gated SPAD cameras.\n"
                "Path-traces a glTF scene into per-pixel transients in photons per laser pulse, then samples what a\n"
                "time-gated SPAD camera streams out (counts over a gate sweep, binary frames, 2D intensity), with\n"

@@ -168,7 +168,10 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
 
 void check_resources(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img, const TimeAxis& axis,
                      int threads, const fs::path& out, int objects) {
-  const ResourcePlan plan = plan_resources(c, sensor, img, axis, threads, out, objects);
+  check_resources(plan_resources(c, sensor, img, axis, threads, out, objects), c, out);
+}
+
+void check_resources(const ResourcePlan& plan, const RunConfig& c, const fs::path& out) {
   const std::string file = c.scene_file.empty() ? std::string("<scene>") : c.scene_file;
   if (plan.memory_available >= 0 && plan.memory_needed() > plan.memory_available)
     throw Error(file + ": the run needs about " + bytes_text(plan.memory_needed()) + " of memory, and " +

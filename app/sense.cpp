@@ -2,6 +2,7 @@
 // is rendered: the run folder's metadata.json holds the resolved scene file, light/ what the renderer
 // delivered to the sensor. The sensor settings may change (--set sensor.*, acquisition.*, seeds), the
 // light may not.
+#include <sys/resource.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -262,12 +263,8 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   const fs::path out = options.out_dir.empty() ? fs::path(src.string() + "-sense") : fs::path(options.out_dir);
   if (fs::exists(out) && fs::exists(src) && fs::equivalent(out, src))
     throw Error("-o " + out.string() + ": sense writes a new folder beside the run, not into it");
-  // Memory and disk of one realisation (the estimate includes the renderer's paths, which sense does not
-  // trace: an upper bound); the others add their counts and frames.
   // The run's objects bound labels.exr's slots (a run before objects had none).
   const int objects = meta.contains("objects") ? int(meta.at("objects").size()) : 0;
-  check_resources(write_cfg, sensor, img, axis, options.threads, out.parent_path().empty() ? fs::path(".") : out.parent_path(),
-                  objects);
   std::vector<fs::path> dirs;
   std::vector<std::unique_ptr<Staging>> staging;
   std::vector<std::unique_ptr<Outputs>> outputs;
@@ -288,6 +285,39 @@ std::vector<RunResult> sense(const SenseOptions& options) {
         from_run.insert(f.get<std::string>());
         linked.push_back(f.get<std::string>());
       }
+  // Memory of one realisation (the estimate includes the renderer's paths, which sense does not trace: an
+  // upper bound; the realisations share the rates). Disk: the stacks the run's folder provides are links
+  // and take none; each further realisation writes its own counts and frames (its images are links).
+  {
+    const fs::path where = out.parent_path().empty() ? fs::path(".") : out.parent_path();
+    ResourcePlan plan = plan_resources(write_cfg, sensor, img, axis, options.threads, where, objects);
+    std::vector<ResourcePlan::Part> disk;
+    for (ResourcePlan::Part p : plan.disk) {
+      const std::string file = p.what.substr(0, p.what.find(' '));
+      if (from_run.count(file)) continue;
+      disk.push_back(p);
+      if (runs.size() > 1 && file != "images" && !shared.count(file)) {
+        p.what += " x " + std::to_string(runs.size() - 1) + " more realisations (--repeats)";
+        p.bytes *= int64_t(runs.size() - 1);
+        disk.push_back(p);
+      }
+    }
+    plan.disk = std::move(disk);
+    check_resources(plan, write_cfg, where);
+    // Every realisation holds its folder's lock and its .npy stacks open until it commits.
+    int64_t held = 0;
+    for (const StackLayout& l : stack_layout(write_cfg, sensor, img, axis))
+      if (l.written && l.chunks.empty()) held += int64_t(runs.size()) - (from_run.count(l.file) ? 1 : 0) -
+                                                (shared.count(l.file) ? int64_t(runs.size()) - 1 : 0);
+    held += 2 * int64_t(runs.size());  // the lock, and a margin for the staging folder
+    rlimit lim{};
+    if (getrlimit(RLIMIT_NOFILE, &lim) == 0 && lim.rlim_cur != RLIM_INFINITY && held + 64 > int64_t(lim.rlim_cur))
+      throw Error("--repeats " + std::to_string(runs.size()) + ": the realisations hold about " + std::to_string(held) +
+                  " files open until they are written, and this process may open " + std::to_string(lim.rlim_cur) +
+                  " (ulimit -n): ask for at most " +
+                  std::to_string(std::max<int64_t>(1, (int64_t(lim.rlim_cur) - 64) * int64_t(runs.size()) / held)) +
+                  " realisations per call, or raise the limit");
+  }
   for (size_t r = 0; r < runs.size(); ++r) {
     char name[32];
     std::snprintf(name, sizeof name, "repeat_%03zu", r);

@@ -12,6 +12,7 @@
 namespace {
 using namespace spadgen::testing;
 using ::testing::HasSubstr;
+using ::testing::Not;
 
 // kSmall with the light saved, and an 8-pixel-wide crop at the sensor's left edge with crosstalk's ring.
 const std::string kLit = kSmall + " --set outputs.light=true";
@@ -62,6 +63,25 @@ TEST_F(App, SenseLinksTheRunsNoiseFreeFilesOnlyForTheRunsOwnSensor) {
   size_t higher = 0;
   for (size_t i = 0; i < was.size(); ++i) higher += now[i] > was[i];
   EXPECT_GT(higher, was.size() / 2);  // twice the PDP: more avalanches wherever light arrives
+
+  // The disk a sense needs: the files linked from the run take none, each further realisation writes its
+  // counts and frames again (100,000 realisations of this run's frames: hundreds of GB, refused before
+  // any work).
+  write_pdp(0.1);  // the run's table again: the run's own sensor
+  r = sh("sense " + (dir_ / "run").string() + " -q --repeats 100000 --set sensor.pixel_A.pdp_csv=" + pdp.string() +
+         " -o " + (dir_ / "many").string());
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("frames.npy x 99999 more realisations (--repeats)"));
+  EXPECT_THAT(r.output, Not(HasSubstr("detection_rate.npy")));  // the run's own sensor: linked
+  EXPECT_FALSE(fs::exists(dir_ / "many"));
+  // The files the realisations hold open, against the process's limit: refused up front, not on the
+  // file that exceeds it with folders half made (ulimit -n 256: 100 realisations hold about 400).
+  r = shell("ulimit -n 256 && " + kBin + " sense " + (dir_ / "run").string() + " -q --repeats 100 --set sensor.pixel_A.pdp_csv=" +
+            pdp.string() + " -o " + (dir_ / "many").string());
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("--repeats 100: the realisations hold about 400 files open"));
+  EXPECT_THAT(r.output, HasSubstr("ask for at most 48 realisations per call"));
+  EXPECT_FALSE(fs::exists(dir_ / "many"));
 }
 
 // A run stored as Zarr: sense reads its light from the Zarr stores and writes what the run wrote, bit for
