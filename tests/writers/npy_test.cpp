@@ -213,37 +213,6 @@ TEST(NpyWriter, WriteHwtSkipsTheHaloAndKeepsTimeInnermost) {
 
 bool frame_bit(int k, int n, int y, int x) { return ((k * 7919 + n * 104729 + y * 31 + x * 17) % 5) < 2; }
 
-TEST(NpyWriter, WriteFramesPacksBitsLeastSignificantFirst) {
-  TempDir dir;
-  const int W = 21, H = 9, K = 2, N = 3, WB = (W + 7) / 8;
-  {
-    NpyWriter w(dir.file("frames.npy"), Dtype::U8, {K, N, H, WB});
-    for (const PixelRect& r : make_tiles(W, H, 8)) {
-      const int bpr = (r.width + 7) / 8;
-      std::vector<uint8_t> data(size_t(K * N * r.height * bpr), 0);
-      for (int k = 0; k < K; ++k)
-        for (int n = 0; n < N; ++n)
-          for (int row = 0; row < r.height; ++row)
-            for (int i = 0; i < r.width; ++i)
-              if (frame_bit(k, n, r.y0 + row, r.x0 + i))
-                data[size_t(((k * N + n) * r.height + row) * bpr + i / 8)] |= uint8_t(1u << (i % 8));
-      w.write_frames(r, 0, 0, data.data());
-    }
-    w.commit();
-  }
-  const std::string bytes = read_bytes(dir.file("frames.npy"));
-  const size_t off = parse(bytes).data_offset;
-  ASSERT_EQ(bytes.size(), off + size_t(K * N * H * WB));
-  for (int k = 0; k < K; ++k)
-    for (int n = 0; n < N; ++n)
-      for (int y = 0; y < H; ++y)
-        for (int x = 0; x < WB * 8; ++x) {
-          const auto byte = static_cast<unsigned char>(bytes[off + ((size_t(k) * N + n) * H + y) * WB + x / 8]);
-          const bool bit = (byte >> (x % 8)) & 1u;
-          ASSERT_EQ(bit, x < W && frame_bit(k, n, y, x)) << k << " " << n << " " << y << " " << x;
-        }
-}
-
 // A tile's frames as SensorTile holds them, from frame_bit at the tile's image coordinates.
 std::vector<uint8_t> tile_frames(const PixelRect& r, int K, int N, int origin_x, int origin_y) {
   const int bpr = (r.width + 7) / 8;
@@ -257,10 +226,32 @@ std::vector<uint8_t> tile_frames(const PixelRect& r, int K, int N, int origin_x,
   return data;
 }
 
-// Bands of tiles written whole rows at a time give the bytes that frame_bit says, whatever the band (the
-// whole height or a part of it, the last one shorter), the buffer's groups of planes (N = 130 planes of
-// 4 KB: groups of 64), a right-edge tile of odd width (its padding bits cleared), an origin (a crop),
-// gate positions split between threads, and a mapped or unmapped file.
+// The file's frames are frame_bit's, and its padding bits beyond the width W are clear.
+void expect_frame_bits(const std::string& file, int K, int N, int H, int W) {
+  const int WB = (W + 7) / 8;
+  const std::string bytes = read_bytes(file);
+  const size_t off = parse(bytes).data_offset;
+  ASSERT_EQ(bytes.size(), off + size_t(K) * size_t(N) * size_t(H) * size_t(WB));
+  for (int k = 0; k < K; ++k)
+    for (int n = 0; n < N; ++n)
+      for (int y = 0; y < H; ++y)
+        for (int x = 0; x < WB * 8; ++x) {
+          const auto byte = static_cast<unsigned char>(bytes[off + ((size_t(k) * N + n) * H + y) * WB + x / 8]);
+          ASSERT_EQ(bool((byte >> (x % 8)) & 1u), x < W && frame_bit(k, n, y, x)) << k << " " << n << " " << y << " " << x;
+        }
+}
+
+TEST(NpyWriter, WriteFramesPacksBitsLeastSignificantFirst) {
+  TempDir dir;
+  const int W = 21, H = 9, K = 2, N = 3, WB = (W + 7) / 8;
+  {
+    NpyWriter w(dir.file("frames.npy"), Dtype::U8, {K, N, H, WB});
+    for (const PixelRect& r : make_tiles(W, H, 8)) w.write_frames(r, 0, 0, tile_frames(r, K, N, 0, 0).data());
+    w.commit();
+  }
+  expect_frame_bits(dir.file("frames.npy"), K, N, H, W);
+}
+
 TEST(NpyWriter, WriteFramesBandGivesTheBitsOfEveryTile) {
   TempDir dir;
   const int W = 1020, K = 3, N = 130, WB = (W + 7) / 8, ox = 64, oy = 10;
@@ -285,16 +276,7 @@ TEST(NpyWriter, WriteFramesBandGivesTheBitsOfEveryTile) {
         }
         w.commit();
       }
-      const std::string bytes = read_bytes(file);
-      const size_t off = parse(bytes).data_offset;
-      ASSERT_EQ(bytes.size(), off + size_t(K * N * H * WB));
-      for (int k = 0; k < K; ++k)
-        for (int n = 0; n < N; ++n)
-          for (int y = 0; y < H; ++y)
-            for (int x = 0; x < WB * 8; ++x) {
-              const auto byte = static_cast<unsigned char>(bytes[off + ((size_t(k) * N + n) * H + y) * WB + x / 8]);
-              ASSERT_EQ(bool((byte >> (x % 8)) & 1u), x < W && frame_bit(k, n, y, x)) << k << " " << n << " " << y << " " << x;
-            }
+      expect_frame_bits(file, K, N, H, W);
     }
 }
 
