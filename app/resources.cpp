@@ -154,7 +154,7 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
 
   // A Zarr store is at most its data uncompressed (and a few bytes a chunk).
   for (const StackLayout& s : stacks)
-    if (s.written) plan.disk.push_back({s.file + (s.chunks.empty() ? "" : " (uncompressed)"), s.bytes()});
+    if (s.written) plan.disk.push_back({s.file + (s.chunks.empty() ? "" : " (uncompressed)"), s.bytes(), false, s.file});
   plan.disk.push_back({"images", pixels * channels * 4});
   if (c.outputs.light) {
     // light/: per pixel of the image grown by one, its bin range, offset and totals, and the values of its lit

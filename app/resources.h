@@ -21,6 +21,7 @@ struct ResourcePlan {
     std::string what;  // "camera paths of 2 threads", with the keys that drive it
     int64_t bytes = 0;
     bool file_backed = false;  // memory-mapped output pages the kernel can write out: shown, not required
+    std::string file = "";     // a disk part that is one output (a stack's file or Zarr folder); "" otherwise
   };
   std::vector<Part> memory, disk;
   int64_t memory_available = -1;  // bytes; -1 unknown

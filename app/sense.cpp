@@ -293,10 +293,9 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     ResourcePlan plan = plan_resources(write_cfg, sensor, img, axis, options.threads, where, objects);
     std::vector<ResourcePlan::Part> disk;
     for (ResourcePlan::Part p : plan.disk) {
-      const std::string file = p.what.substr(0, p.what.find(' '));
-      if (from_run.count(file)) continue;
+      if (from_run.count(p.file)) continue;
       disk.push_back(p);
-      if (runs.size() > 1 && file != "images" && !shared.count(file)) {
+      if (runs.size() > 1 && !p.file.empty() && !shared.count(p.file)) {
         p.what += " x " + std::to_string(runs.size() - 1) + " more realisations (--repeats)";
         p.bytes *= int64_t(runs.size() - 1);
         disk.push_back(p);
