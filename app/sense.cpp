@@ -175,16 +175,26 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   if (options.chip_seed) overrides.push_back("seeds.chip=" + text(*options.chip_seed));
   if (options.noise_seed) overrides.push_back("seeds.noise=" + text(*options.noise_seed));
   const scenes::ResolvedRun first = scenes::parse_scene_text(scene_text, scene_file, overrides);
-  // One resolved scene per realisation: noise seeds S, S + 1, ... (S itself when there is one).
+  // One resolved scene per realisation: noise seeds S, S + 1, ... (S itself when there is one). The scene
+  // is resolved once with seeds.noise = S; realisation r is that with the seed S + r in its configuration
+  // and its resolved scene file, as `--set seeds.noise=S+r` resolves it (tested: a realisation's metadata
+  // equals the run's with that seed), without parsing the scene R times.
   std::vector<scenes::ResolvedRun> runs;
   const uint64_t noise0 = first.config.noise_seed();
-  for (int r = 0; r < options.repeats; ++r) {
-    if (options.repeats == 1) {
-      runs.push_back(first);
-      break;
-    }
+  if (options.repeats == 1) {
+    runs.push_back(first);
+  } else {
     std::vector<std::string> o = overrides;
-    o.push_back("seeds.noise=" + text(noise0 + uint64_t(r)));
+    o.push_back("seeds.noise=" + text(noise0));
+    const scenes::ResolvedRun base = scenes::parse_scene_text(scene_text, scene_file, o);
+    runs.reserve(size_t(options.repeats));
+    for (int r = 0; r + 1 < options.repeats; ++r) {
+      scenes::ResolvedRun& run = runs.emplace_back(base);
+      run.config.seeds.noise = noise0 + uint64_t(r);
+      run.resolved["seeds"]["noise"] = noise0 + uint64_t(r);
+    }
+    // The last seed resolved in full: a seed past the key's range fails here as `--set` would.
+    o.back() = "seeds.noise=" + text(noise0 + uint64_t(options.repeats - 1));
     runs.push_back(scenes::parse_scene_text(scene_text, scene_file, o));
   }
   const RunConfig& cfg = first.config;

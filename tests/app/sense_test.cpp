@@ -175,6 +175,13 @@ TEST_F(App, SenseRepeatsAreTheRunsWithConsecutiveNoiseSeeds) {
   const auto meta = nlohmann::json::parse(slurp(dir_ / "rep/repeat_001/metadata.json"));
   EXPECT_EQ(meta["seeds"]["noise"], 8);
   EXPECT_EQ(meta["sense"]["repeat"], 1);
+  // The scene is resolved once and each realisation takes its seed (the last is resolved in full): the
+  // resolved scenes differ in seeds.noise alone, in the same key order.
+  auto last = nlohmann::ordered_json::parse(slurp(dir_ / "rep/repeat_002/metadata.json"))["resolved_scene"];
+  const auto middle = nlohmann::ordered_json::parse(slurp(dir_ / "rep/repeat_001/metadata.json"))["resolved_scene"];
+  EXPECT_EQ(last["seeds"]["noise"], 9);
+  last["seeds"]["noise"] = 8;
+  EXPECT_EQ(last.dump(), middle.dump());
 }
 
 TEST_F(App, SenseRefusesWhatItCannotDo) {
