@@ -385,6 +385,8 @@ std::vector<Key> build() {
   k.push_back(number("/sensor/gate/skew_fwhm_ps", FIELD(sensor.gate.skew_fwhm_s), kPsUnit, closed(0, 1e6), "spread of the gate position across the array (FWHM)"));
   k.push_back(number("/sensor/gate/length_fwhm_ps", FIELD(sensor.gate.length_fwhm_s), kPsUnit, closed(0, 1e6), "spread of the gate length across the array (FWHM)"));
   k.push_back(file("/sensor/gate/maps_exr", FIELD(sensor.gate.maps_exr), "EXR with channels skew_ps and length_ps (full sensor size) replacing the generated maps; relative to the scene file"));
+  k.push_back(integer("/sensor/gate/knots_per_edge", FIELD(sensor.gate.knots_per_edge), kNone, closed(2, 4096), "knots of each tabulated gate edge (a smooth edge, or any edge convolved with the pulse and jitter): the gate model's accuracy against its cost (docs/accuracy.md, \"The sensor model's knobs\")"));
+  k.push_back(number("/sensor/gate/grid_ps", FIELD(sensor.gate.grid_s), kPsUnit, closed(0.01, 100), "step of the fine grid the pulse, the jitter and the tabulated edges are convolved on (coarser where the edges and the pulse span over 12000 steps; metadata.json gate.grid_ps records the step used)"));
   k.push_back(number("/sensor/jitter_fwhm_ps", FIELD(sensor.gate.jitter_fwhm_s), kPsUnit, closed(0, 1e6), "SPAD timing jitter (Gaussian FWHM)"));
   k.push_back(number("/sensor/temperature_C", FIELD(sensor.temperature_C), plain("C"), closed(-100, 150), "sensor temperature (dark counts rise above about 30 C)"));
   k.push_back(boolean("/sensor/dark_counts", FIELD(sensor.dark_counts), "model dark counts"));

@@ -42,7 +42,6 @@ constexpr int kNbDy[4] = {0, 0, -1, 1};
 
 struct SensorModel::Impl {
   SensorStageConfig cfg;
-  SensorOptions opt;
   std::unique_ptr<Acquisition> acq;
   int K = 0;
   uint32_t frames_per_k = 0;
@@ -52,7 +51,7 @@ struct SensorModel::Impl {
   TypeInfo types[2];
   int halo = 0;
 
-  Impl(const SensorStageConfig& c, const SensorOptions& o);
+  explicit Impl(const SensorStageConfig& c);
   std::vector<TypeInfo> used_types() const;
 
   // lambda of every k for one pixel (no crosstalk).
@@ -63,8 +62,8 @@ struct SensorModel::Impl {
   }
 };
 
-SensorModel::Impl::Impl(const SensorStageConfig& c, const SensorOptions& o) : cfg(c), opt(o) {
-  acq = make_acquisition(cfg, opt.edge_knots);
+SensorModel::Impl::Impl(const SensorStageConfig& c) : cfg(c) {
+  acq = make_acquisition(cfg);
   K = acq->K();
   frames_per_k = acq->frames_per_k();
   maps = std::make_unique<PixelMaps>(cfg, acq->nominal_gate_length_s());
@@ -91,9 +90,7 @@ std::vector<TypeInfo> SensorModel::Impl::used_types() const {
   return out;
 }
 
-SensorModel::SensorModel(const SensorStageConfig& config) : SensorModel(config, SensorOptions{}) {}
-SensorModel::SensorModel(const SensorStageConfig& config, const SensorOptions& options)
-    : impl_(std::make_unique<Impl>(config, options)) {}
+SensorModel::SensorModel(const SensorStageConfig& config) : impl_(std::make_unique<Impl>(config)) {}
 SensorModel::~SensorModel() = default;
 
 int SensorModel::K() const { return impl_->K; }

@@ -40,17 +40,9 @@ struct SensorMapsTile {
   std::vector<float> pde;             // photon detection efficiency at the laser wavelength (PDP x FF x optics)
 };
 
-// Settings of the numerical method that are not part of the physics (not in the scene file).
-struct SensorOptions {
-  // Knots per gate edge when the edge is tabulated (smooth edges, or any edge convolved with the
-  // instrument response). 64 keeps the gate within about 1e-4 of its fine reference; see docs/sensor.md.
-  int edge_knots = 64;
-};
-
 class SensorModel {
  public:
   explicit SensorModel(const SensorStageConfig& config);
-  SensorModel(const SensorStageConfig& config, const SensorOptions& options);
   ~SensorModel();
   SensorModel(const SensorModel&) = delete;
   SensorModel& operator=(const SensorModel&) = delete;

@@ -94,7 +94,7 @@ class Acquisition {
   virtual nlohmann::json describe() const = 0;
 };
 
-// The mode the settings select. edge_knots: knots per tabulated gate edge (SensorOptions).
-std::unique_ptr<Acquisition> make_acquisition(const SensorStageConfig& config, int edge_knots);
+// The mode the settings select.
+std::unique_ptr<Acquisition> make_acquisition(const SensorStageConfig& config);
 
 }  // namespace spadgen::sensor

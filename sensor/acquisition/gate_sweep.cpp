@@ -16,12 +16,12 @@ namespace {
 
 class GateSweep final : public Acquisition {
  public:
-  GateSweep(const SensorStageConfig& c, int edge_knots)
+  GateSweep(const SensorStageConfig& c)
       : cfg_(c.acquisition),
         delay_s_(c.sensor.gate.delay_s),
         gate_cfg_(c.sensor.gate),
         skew_on_(c.sensor.skew),
-        gate_(build_gate_shape(c.sensor.gate, c.laser, edge_knots)) {
+        gate_(build_gate_shape(c.sensor.gate, c.laser)) {
     const GateSweepConfig& s = cfg_.gate_sweep;
     K_ = static_cast<int>(std::floor((s.stop_s - s.start_s) / s.step_s + 1e-9)) + 1;
     for (int k = 0; k < K_; ++k) positions_.push_back(s.start_s + k * s.step_s);
@@ -118,6 +118,7 @@ class GateSweep final : public Acquisition {
     gj["knots_per_edge"] = gate_.knots_per_edge;
     gj["knots_exact"] = gate_.exact;
     gj["knot_max_error"] = gate_.max_knot_error;
+    gj["grid_ps"] = gate_.grid_s / kPs;
     gj["skew_spread_fwhm_ps"] = skew_on_ ? g.skew_fwhm_s / kPs : 0.0;
     gj["length_spread_fwhm_ps"] = skew_on_ ? g.length_fwhm_s / kPs : 0.0;
     j["gate"] = gj;
@@ -136,8 +137,8 @@ class GateSweep final : public Acquisition {
 
 }  // namespace
 
-std::unique_ptr<Acquisition> make_gate_sweep(const SensorStageConfig& c, int edge_knots) {
-  return std::make_unique<GateSweep>(c, edge_knots);
+std::unique_ptr<Acquisition> make_gate_sweep(const SensorStageConfig& c) {
+  return std::make_unique<GateSweep>(c);
 }
 
 }  // namespace spadgen::sensor

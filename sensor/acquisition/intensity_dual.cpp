@@ -16,7 +16,7 @@ class IntensityDual final : public Intensity {
 
 }  // namespace
 
-std::unique_ptr<Acquisition> make_intensity_dual(const SensorStageConfig& c, int) {
+std::unique_ptr<Acquisition> make_intensity_dual(const SensorStageConfig& c) {
   return std::make_unique<IntensityDual>(c);
 }
 

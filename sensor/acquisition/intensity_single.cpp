@@ -14,7 +14,7 @@ class IntensitySingle final : public Intensity {
 
 }  // namespace
 
-std::unique_ptr<Acquisition> make_intensity_single(const SensorStageConfig& c, int) {
+std::unique_ptr<Acquisition> make_intensity_single(const SensorStageConfig& c) {
   return std::make_unique<IntensitySingle>(c);
 }
 

@@ -6,16 +6,16 @@
 
 namespace spadgen::sensor {
 
-std::unique_ptr<Acquisition> make_gate_sweep(const SensorStageConfig&, int edge_knots);
-std::unique_ptr<Acquisition> make_intensity_single(const SensorStageConfig&, int edge_knots);
-std::unique_ptr<Acquisition> make_intensity_dual(const SensorStageConfig&, int edge_knots);
+std::unique_ptr<Acquisition> make_gate_sweep(const SensorStageConfig&);
+std::unique_ptr<Acquisition> make_intensity_single(const SensorStageConfig&);
+std::unique_ptr<Acquisition> make_intensity_dual(const SensorStageConfig&);
 
 namespace {
 
 struct Mode {
   AcquisitionMode mode;
   std::optional<Exposure> exposure;  // for the 2D modes: acquisition.intensity.exposure
-  std::unique_ptr<Acquisition> (*make)(const SensorStageConfig&, int);
+  std::unique_ptr<Acquisition> (*make)(const SensorStageConfig&);
 };
 
 const Mode kModes[] = {
@@ -38,10 +38,10 @@ std::unique_ptr<Acquisition::TileSetup> Acquisition::setup(const TimeAxis&) cons
 std::unique_ptr<Acquisition::Scratch> Acquisition::scratch() const { return nullptr; }
 void Acquisition::finish_tile(SensorTile&) const {}
 
-std::unique_ptr<Acquisition> make_acquisition(const SensorStageConfig& c, int edge_knots) {
+std::unique_ptr<Acquisition> make_acquisition(const SensorStageConfig& c) {
   for (const Mode& m : kModes)
     if (m.mode == c.acquisition.mode && (!m.exposure || *m.exposure == c.acquisition.intensity.exposure))
-      return m.make(c, edge_knots);
+      return m.make(c);
   throw Error("acquisition.mode: no acquisition implements \"" + to_string(c.acquisition.mode) + "\"");
 }
 

@@ -17,8 +17,8 @@ constexpr double kTailSigmas = 8.0;
 // A linear edge never becomes a true step: a zero rise time with no instrument response would make the
 // slope changes infinite. 0.1 ps is far below any time bin.
 constexpr double kMinRampWidth = 0.1e-12;
-// Fine-grid spacing: at most this, and at most span / kMaxFinePoints.
-constexpr double kFineDx = 0.25e-12;
+// The fine grid has at most this many points: its step is gate.grid_s (sensor.gate.grid_ps), or
+// span / kMaxFinePoints where that is coarser.
 constexpr double kMaxFinePoints = 12000.0;
 // Fraction of the 10-90 % interval of a standard normal CDF: 2 * 1.2815515655 sigma.
 constexpr double kTenNinetySigmas = 2.563103131;
@@ -297,7 +297,8 @@ Sampled build_irf(const GateConfig& gate, const LaserConfig& laser, double dx) {
   return irf;
 }
 
-GateShape build_gate_shape(const GateConfig& gate, const LaserConfig& laser, int knots_per_edge) {
+GateShape build_gate_shape(const GateConfig& gate, const LaserConfig& laser) {
+  const int knots_per_edge = gate.knots_per_edge;
   if (knots_per_edge < 2) throw Error("sensor: the gate needs at least 2 knots per edge, found " + std::to_string(knots_per_edge));
   BaseEdge rise, fall;
   GateShape g;
@@ -312,9 +313,11 @@ GateShape build_gate_shape(const GateConfig& gate, const LaserConfig& laser, int
     g.nominal_length_s = gate.length_s;
   }
   g.plateau = rise.v_end();
+  if (!(gate.grid_s > 0.0)) throw Error("sensor.gate.grid_ps: the fine grid's step must be > 0");
 
   const double span = std::max(rise.end() - rise.begin(), fall.end() - fall.begin()) + irf_span(gate, laser);
-  const double dx = std::max(kFineDx, span / kMaxFinePoints);
+  const double dx = std::max(gate.grid_s, span / kMaxFinePoints);
+  g.grid_s = dx;
   Sampled irf = build_irf(gate, laser, dx);
   g.irf_fwhm_s = irf.y.empty() ? 0.0 : fwhm_of(irf);
   if (laser.pulse_shape_csv.empty())  // exact for the Gaussian (the sampled width is within dx of it)

@@ -6,8 +6,8 @@
 // edges, f_eff(t) = rise(t - s) - fall(t - s - dL), where s is the pixel's gate skew, dL its gate length
 // minus the nominal length, and both edges are piecewise-linear functions that are 0 before their first
 // knot and `v_end` after their last. For a piecewise-linear gate (linear edges or a measured table) with no
-// instrument response the knots are exact; otherwise the edges are tabulated on a fine grid (about 0.4 ps,
-// a direct discrete convolution) and `knots_per_edge` knots are placed where the curvature is, and the
+// instrument response the knots are exact; otherwise the edges are tabulated on a fine grid (step
+// gate.grid_s, 0.25 ps by default; a direct discrete convolution) and gate.knots_per_edge knots are placed where the curvature is, and the
 // largest difference between the knots' interpolation and the fine grid is recorded in max_knot_error.
 //
 #pragma once
@@ -43,6 +43,7 @@ struct GateShape {
   int knots_per_edge = 0;         // knots actually used, per edge
   bool exact = false;             // the knots are the exact response (piecewise-linear gate, no IRF)
   double max_knot_error = 0.0;    // max |knots - fine grid| over both edges, in units of the plateau
+  double grid_s = 0.0;            // the fine grid's step (gate.grid_s, or coarser for a long span)
   double irf_fwhm_s = 0.0;        // FWHM of the instrument response (0: none)
   Sampled rise_fine, fall_fine;   // the fine reference of each edge (empty when exact)
 
@@ -52,9 +53,10 @@ struct GateShape {
   double support_end(double dL) const { return fall.u.back() + dL; }
 };
 
-// Builds the effective gate (profile convolved with laser pulse and SPAD jitter). Reads
+// Builds the effective gate (profile convolved with laser pulse and SPAD jitter), with gate.knots_per_edge
+// knots per tabulated edge on a fine grid of step gate.grid_s. Reads
 // gate.profile_csv and laser.pulse_shape_csv when given; throws spadgen::Error on bad tables.
-GateShape build_gate_shape(const GateConfig& gate, const LaserConfig& laser, int knots_per_edge);
+GateShape build_gate_shape(const GateConfig& gate, const LaserConfig& laser);
 
 // The instrument response as weights on a grid of spacing dx (sum 1): a photon the renderer places at t is
 // detected at t + u with probability weight at u. Empty y: a delta (no pulse width, no jitter).

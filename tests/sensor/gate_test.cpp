@@ -76,7 +76,7 @@ TEST(Gate, LinearEdgesWithoutInstrumentResponseAreExact) {
   g.jitter_fwhm_s = 0.0;
   LaserConfig l;
   l.pulse_fwhm_s = 0.0;
-  const GateShape s = build_gate_shape(g, l, 64);
+  const GateShape s = build_gate_shape(g, l);
   EXPECT_TRUE(s.exact);
   EXPECT_EQ(s.knots_per_edge, 2);
   const double w = g.rise_s / 0.8;
@@ -97,7 +97,8 @@ TEST(Gate, FastResponseEqualsBruteForce) {
     g.jitter_fwhm_s = shape == GateEdge::Linear ? 0.0 : 60e-12;
     LaserConfig l;
     l.pulse_fwhm_s = shape == GateEdge::Linear ? 0.0 : 80e-12;
-    const GateShape gs = build_gate_shape(g, l, 48);
+    g.knots_per_edge = 48;
+    const GateShape gs = build_gate_shape(g, l);
     TimeAxis ax{-1e-9, 9e-12, 2400, 25e-9};
     std::vector<float> tr(static_cast<size_t>(ax.bins), 0.0f);
     Rng rng(3, RngKind::Test, 1);
@@ -202,8 +203,8 @@ TEST(Gate, IntegerStepPathEqualsGeneralPath) {
   steep.rise_s = steep.fall_s = 8e-12;
   LaserConfig with_irf, no_irf;
   no_irf.pulse_fwhm_s = 0.0;
-  const GateShape shapes[3] = {build_gate_shape(smooth, with_irf, 64), build_gate_shape(linear, no_irf, 64),
-                               build_gate_shape(steep, no_irf, 64)};
+  const GateShape shapes[3] = {build_gate_shape(smooth, with_irf), build_gate_shape(linear, no_irf),
+                               build_gate_shape(steep, no_irf)};
   ASSERT_FALSE(shapes[0].exact);
   ASSERT_TRUE(shapes[1].exact);
   Rng rng(11, RngKind::Test, 4);
@@ -314,7 +315,8 @@ TEST(Gate, SmoothKnotErrorAgainstClosedForm) {
   LaserConfig l;  // 80 ps pulse
   double previous = 1.0;
   for (int m : {16, 32, 64, 128}) {
-    const GateShape gs = build_gate_shape(g, l, m);
+    g.knots_per_edge = m;
+    const GateShape gs = build_gate_shape(g, l);
     double err = 0.0, fine_err = 0.0;
     for (double t = -1.5e-9; t < g.length_s + 1.5e-9; t += 0.5e-12) {
       const double ref = smooth_gate_closed_form(g, l, t, 0.0);
@@ -335,6 +337,38 @@ TEST(Gate, SmoothKnotErrorAgainstClosedForm) {
       EXPECT_LT(err, 6e-5);
     }
   }
+}
+
+// The fine grid's step (sensor.gate.grid_ps) against the closed form: the step used is the one asked for
+// (unless the span needs a coarser one), the fine edges' error grows with its square, and the knots' error
+// stays recorded against the grid they were fitted to.
+TEST(Gate, FineGridStepIsTheSceneFilesAndItsErrorGrowsWithIt) {
+  GateConfig g;
+  LaserConfig l;
+  double previous = 0.0;
+  for (double step_ps : {0.25, 1.0, 4.0, 16.0, 40.0}) {
+    g.grid_s = step_ps * 1e-12;
+    g.knots_per_edge = 1024;
+    const GateShape gs = build_gate_shape(g, l);
+    // The default edge (16 sigma of a 400 ps 10-90 % rise) and instrument response (16 sigma of the 80 ps
+    // pulse and 60 ps jitter) span 3.18 ns: 12000 steps of 0.265 ps, coarser than 0.25 ps.
+    const double span = 16 * 400e-12 / 2.563103131 + 16 * std::hypot(80e-12, 60e-12) / 2.354820045;
+    EXPECT_NEAR(gs.grid_s, step_ps < 0.3 ? span / 12000 : g.grid_s, 1e-6 * gs.grid_s);
+    double fine_err = 0.0, err = 0.0;
+    for (double t = -1.5e-9; t < g.length_s + 1.5e-9; t += 0.5e-12) {
+      const double ref = smooth_gate_closed_form(g, l, t, 0.0);
+      const double fine = fine_value(gs.rise_fine, t, gs.plateau) - fine_value(gs.fall_fine, t, gs.plateau);
+      fine_err = std::max(fine_err, std::abs(fine - ref));
+      err = std::max(err, std::abs(gs.value(t, 0.0) - ref));
+    }
+    std::printf("grid %5.2f ps: fine grid max error vs closed form %.3g, 1024 knots %.3g\n", step_ps, fine_err, err);
+    EXPECT_GE(fine_err, previous);
+    EXPECT_LT(fine_err, 1.5e-6 * step_ps * step_ps + 1e-7);  // second order in the step (measured 1.2e-6)
+    previous = fine_err;
+    EXPECT_LT(err, fine_err + gs.max_knot_error + 1e-9);
+  }
+  g.grid_s = 0.0;
+  EXPECT_THROW(build_gate_shape(g, l), Error);
 }
 
 // A delta transient seen through the sweep reproduces the effective gate, shifted by the pixel's skew
@@ -389,7 +423,7 @@ TEST(Gate, MeasuredTableProfile) {
   g.jitter_fwhm_s = 0.0;
   LaserConfig l;
   l.pulse_fwhm_s = 0.0;
-  const GateShape s = build_gate_shape(g, l, 64);
+  const GateShape s = build_gate_shape(g, l);
   EXPECT_TRUE(s.exact);
   EXPECT_NEAR(s.nominal_length_s, 4.2e-9, 1e-18);
   EXPECT_NEAR(s.value(200e-12, 0.0), 0.5, 1e-12);
@@ -406,7 +440,7 @@ TEST(Gate, BadTablesNameTheFileAndKey) {
   LaserConfig l;
   g.profile_csv = write_temp("bad_order.csv", "0,0\n400,1\n300,1\n");
   try {
-    build_gate_shape(g, l, 64);
+    build_gate_shape(g, l);
     FAIL() << "expected an error";
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("sensor.gate.profile_csv"), std::string::npos) << e.what();
@@ -414,12 +448,12 @@ TEST(Gate, BadTablesNameTheFileAndKey) {
     EXPECT_NE(std::string(e.what()).find("strictly increasing"), std::string::npos) << e.what();
   }
   g.profile_csv = "/nonexistent/profile.csv";
-  EXPECT_THROW(build_gate_shape(g, l, 64), Error);
+  EXPECT_THROW(build_gate_shape(g, l), Error);
   g.profile_csv = write_temp("bad_row.csv", "0,0\n400,abc\n");
-  EXPECT_THROW(build_gate_shape(g, l, 64), Error);
+  EXPECT_THROW(build_gate_shape(g, l), Error);
   g.profile_csv.clear();
   l.pulse_shape_csv = write_temp("bad_pulse.csv", "0,1\n10,-1\n20,0\n");
-  EXPECT_THROW(build_gate_shape(g, l, 64), Error);
+  EXPECT_THROW(build_gate_shape(g, l), Error);
 }
 
 // A pulse table sampled from the Gaussian gives the same effective gate as the Gaussian pulse.
@@ -430,7 +464,7 @@ TEST(Gate, PulseTableMatchesGaussianPulse) {
   GateConfig g;
   LaserConfig gauss, table;
   table.pulse_shape_csv = write_temp("pulse.csv", csv);
-  const GateShape a = build_gate_shape(g, gauss, 64), b = build_gate_shape(g, table, 64);
+  const GateShape a = build_gate_shape(g, gauss), b = build_gate_shape(g, table);
   EXPECT_NEAR(b.irf_fwhm_s, a.irf_fwhm_s, 1e-12);
   for (double t = -1e-9; t < 5e-9; t += 7e-12) ASSERT_NEAR(a.value(t, 0.0), b.value(t, 0.0), 2e-4) << t;
 }

@@ -273,6 +273,15 @@ TEST(Sensor, FullChipPresetUsesBothPixels) {
   EXPECT_EQ(j["pixel_types"].size(), 2u);
   EXPECT_EQ(j["K"], model.K());
   EXPECT_TRUE(j["gate"].contains("knot_max_error"));
+  EXPECT_GT(j["gate"]["grid_ps"].get<double>(), 0.25);  // span / 12000 for the default gate: 0.265 ps
+  EXPECT_EQ(j["gate"]["knots_per_edge"], 64);
+  // The gate model's knobs (sensor.gate.knots_per_edge, grid_ps) reach the gate, and metadata says so.
+  c.sensor.gate.knots_per_edge = 16;
+  c.sensor.gate.grid_s = 4e-12;
+  const auto j16 = SensorModel(c).describe();
+  EXPECT_EQ(j16["gate"]["knots_per_edge"], 16);
+  EXPECT_DOUBLE_EQ(j16["gate"]["grid_ps"].get<double>(), 4.0);
+  EXPECT_GT(j16["gate"]["knot_max_error"].get<double>(), 10 * j["gate"]["knot_max_error"].get<double>());
 }
 
 // Bit-identical results for one tile or tiles of 8, 16, 32, with 1 or 2 threads, counts and frames.
