@@ -66,6 +66,7 @@ RunResult run(const RunOptions& options) {
     const writers::ExrData maps = writers::read_exr(cfg.sensor.gate.maps_exr);
     sensor.set_maps(maps.width, maps.height, maps.channels, cfg.sensor.gate.maps_exr);
   }
+  warn(sensor_warnings(sensor));
   const render::Renderer renderer(scene, render_stage(cfg, sensor.row_fill_factor()));
   const int objects = int(scenes::objects_of(scene).list.size());
 
@@ -181,7 +182,8 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
   std::ostringstream o;
   o << "# resolved scene file " << c.scene_file << "\n" << r.resolved.dump(2) << "\n\n";
   o << "# glTF\n" << scenes::summarize(scene) << "\n";
-  const std::vector<std::string> camera = camera_warnings(c, scene);
+  std::vector<std::string> before = camera_warnings(c, scene);  // the warnings known before rendering
+  for (std::string& w : sensor_warnings(sensor)) before.push_back(std::move(w));
   const TimeAxis axis = time_axis(c, sensor);
   const PixelRect img = image_rect(c);
   check_derived(c, sensor, img, axis);
@@ -201,7 +203,7 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
   o << "\n";
   o << "resources: " << resource_summary(plan_resources(c, sensor, img, axis, 0, "", int(scenes::objects_of(scene).list.size())));
   for (const std::string& w : r.warnings) o << "warning: " << w << "\n";
-  for (const std::string& w : camera) o << "warning: " << w << "\n";
+  for (const std::string& w : before) o << "warning: " << w << "\n";
   return o.str();
 }
 

@@ -26,6 +26,7 @@
 #include "app/progress.h"
 #include "app/run_parts.h"
 #include "app/staging.h"
+#include "app/warnings.h"
 #include "core/error.h"
 #include "core/stage_clock.h"
 #include "scenes/input.h"
@@ -199,13 +200,15 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   }
   const RunConfig& cfg = first.config;
   for (const std::string& w : first.warnings) std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
-  // What the glTF warned about when the run loaded it: the run's warnings less the scene file's.
+  // What the run warned about its glTF and its light: the run's warnings less the scene file's and less
+  // its sensor's (this call's sensor warns below).
   std::vector<std::string> scene_warnings;
   const scenes::ResolvedRun source = scenes::parse_scene_text(scene_text, scene_file);
   {
     const std::vector<std::string>& file_warnings = source.warnings;
     for (const auto& w : meta.at("warnings"))
-      if (std::find(file_warnings.begin(), file_warnings.end(), w.get<std::string>()) == file_warnings.end())
+      if (std::find(file_warnings.begin(), file_warnings.end(), w.get<std::string>()) == file_warnings.end() &&
+          w.get<std::string>().rfind(kGateWarning, 0) != 0)
         scene_warnings.push_back(w.get<std::string>());
   }
 
@@ -216,6 +219,10 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   if (!cfg.sensor.gate.maps_exr.empty()) {
     const writers::ExrData maps = writers::read_exr(cfg.sensor.gate.maps_exr);
     sensor.set_maps(maps.width, maps.height, maps.channels, cfg.sensor.gate.maps_exr);
+  }
+  for (std::string& w : sensor_warnings(sensor)) {
+    std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
+    scene_warnings.push_back(std::move(w));
   }
 
   // The light's time axis, exactly as the run used it; the sensor's window must lie inside it.

@@ -10,6 +10,7 @@
 #include "core/tile.h"
 #include "app/metadata.h"
 #include "scenes/scene.h"
+#include "sensor/sensor.h"
 
 namespace spadgen::app {
 
@@ -18,6 +19,16 @@ namespace spadgen::app {
 inline constexpr double kWarnLightFraction = 0.01;
 // A glTF camera whose aspect ratio differs from the sensor's by more than this (relative) is warned about.
 inline constexpr double kWarnAspectMismatch = 0.01;
+
+// A gate tabulated more coarsely than this fraction of its open value (sensor.gate.knots_per_edge, grid_ps:
+// the knots' error against the fine grid plus the fine grid's own) is warned about: at N frames the
+// expected counts may move by up to N times it (docs/accuracy.md, "The sensor model's knobs").
+inline constexpr double kWarnGateError = 2e-3;
+// Every such warning starts with this (sense replaces the run's with its own sensor's).
+inline constexpr const char* kGateWarning = "sensor.gate: the gate is tabulated";
+
+// Before rendering (run, sense and info): the gate sweep's gate tabulated coarsely (above).
+std::vector<std::string> sensor_warnings(const sensor::SensorModel& sensor);
 
 // Before rendering (run and info): a glTF camera (camera.gltf_camera) whose aspect ratio is not the
 // sensor's, which keeps the vertical field of view and changes the horizontal one.

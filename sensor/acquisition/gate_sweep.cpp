@@ -119,6 +119,7 @@ class GateSweep final : public Acquisition {
     gj["knots_exact"] = gate_.exact;
     gj["knot_max_error"] = gate_.max_knot_error;
     gj["grid_ps"] = gate_.grid_s / kPs;
+    gj["grid_max_error"] = gate_.max_grid_error;
     gj["skew_spread_fwhm_ps"] = skew_on_ ? g.skew_fwhm_s / kPs : 0.0;
     gj["length_spread_fwhm_ps"] = skew_on_ ? g.length_fwhm_s / kPs : 0.0;
     j["gate"] = gj;

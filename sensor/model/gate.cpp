@@ -336,6 +336,11 @@ GateShape build_gate_shape(const GateConfig& gate, const LaserConfig& laser) {
     g.rise = fit_knots(g.rise_fine, g.plateau, knots_per_edge, e1);
     g.fall = fit_knots(g.fall_fine, g.plateau, knots_per_edge, e2);
     g.max_knot_error = std::max(e1, e2) / g.plateau;
+    double curvature = 0.0;
+    for (const Sampled* f : {&g.rise_fine, &g.fall_fine})
+      for (size_t i = 1; i + 1 < f->y.size(); ++i)
+        curvature = std::max(curvature, std::fabs(f->y[i - 1] - 2.0 * f->y[i] + f->y[i + 1]));
+    g.max_grid_error = curvature / 8.0 / g.plateau;
     g.knots_per_edge = static_cast<int>(std::max(g.rise.u.size(), g.fall.u.size()));
   }
   // integral over all t of rise(t) - fall(t), both constant v_end after their last knot

@@ -44,6 +44,10 @@ struct GateShape {
   bool exact = false;             // the knots are the exact response (piecewise-linear gate, no IRF)
   double max_knot_error = 0.0;    // max |knots - fine grid| over both edges, in units of the plateau
   double grid_s = 0.0;            // the fine grid's step (gate.grid_s, or coarser for a long span)
+  // The fine grid's own error against the exact effective gate, estimated as the linear interpolation's
+  // error between its points, max |y[i-1] - 2 y[i] + y[i+1]| / 8 over both edges, in units of the plateau
+  // (0 when exact). Measured within 1 % of the closed form's error from 0.25 to 40 ps (gate_test).
+  double max_grid_error = 0.0;
   double irf_fwhm_s = 0.0;        // FWHM of the instrument response (0: none)
   Sampled rise_fine, fall_fine;   // the fine reference of each edge (empty when exact)
 

@@ -184,6 +184,43 @@ TEST_F(App, SenseRepeatsAreTheRunsWithConsecutiveNoiseSeeds) {
   EXPECT_EQ(last.dump(), middle.dump());
 }
 
+// A coarsely tabulated gate (sensor.gate.knots_per_edge, grid_ps) is warned about, by run, info and sense,
+// each for its own sensor: a sense with the default gate drops the run's warning, one with a coarse grid
+// gives its own.
+TEST_F(App, ACoarselyTabulatedGateIsWarnedAboutForTheSensorThatUsesIt) {
+  const auto gate_warnings = [](const fs::path& dir) {
+    std::vector<std::string> out;
+    const nlohmann::json meta = nlohmann::json::parse(slurp(dir / "metadata.json"));
+    for (const auto& w : meta["warnings"])
+      if (w.get<std::string>().rfind("sensor.gate: the gate is tabulated", 0) == 0) out.push_back(w.get<std::string>());
+    return out;
+  };
+  // A window wide enough for the coarse grid's wider gate support (below).
+  Result r = sh("run " + kLit + " --set sensor.gate.knots_per_edge=8 --set render.window_start_ns=-3 --set "
+                "render.window_stop_ns=12 -o " + (dir_ / "run").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  // 8 knots: 2.2 % of the open gate (docs/sensor.md), up to 5.7 of 255 frames' counts.
+  EXPECT_THAT(r.output, HasSubstr("spadgen: warning: sensor.gate: the gate is tabulated to within about 2.2"));
+  ASSERT_EQ(gate_warnings(dir_ / "run").size(), 1u);
+  EXPECT_THAT(gate_warnings(dir_ / "run")[0], HasSubstr("knots_per_edge 8"));
+  r = sh("info " + kScenes + "multi_object.json --set sensor.gate.knots_per_edge=8");
+  EXPECT_THAT(r.output, HasSubstr("warning: sensor.gate: the gate is tabulated"));
+  r = sh("info " + kScenes + "multi_object.json");
+  EXPECT_THAT(r.output, Not(HasSubstr("sensor.gate: the gate is tabulated")));
+
+  r = sh("sense " + (dir_ / "run").string() + " -q --set sensor.gate.knots_per_edge=64 -o " + (dir_ / "fine").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, Not(HasSubstr("sensor.gate")));
+  EXPECT_TRUE(gate_warnings(dir_ / "fine").empty());
+  // A 40 ps grid (0.17 % of the open gate from the grid alone, docs/sensor.md) with 16 knots.
+  r = sh("sense " + (dir_ / "run").string() + " -q --set sensor.gate.knots_per_edge=16 --set sensor.gate.grid_ps=40 -o " +
+         (dir_ / "coarse").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  ASSERT_EQ(gate_warnings(dir_ / "coarse").size(), 1u);
+  EXPECT_THAT(gate_warnings(dir_ / "coarse")[0], HasSubstr("knots_per_edge 16"));
+  EXPECT_THAT(gate_warnings(dir_ / "coarse")[0], HasSubstr("grid_ps 40"));
+}
+
 TEST_F(App, SenseRefusesWhatItCannotDo) {
   ASSERT_EQ(sh("run " + kSmall + " -o " + (dir_ / "dark").string()).code, 0);
   Result r = sh("sense " + (dir_ / "dark").string());
