@@ -362,7 +362,8 @@ inline void Integrator::deposit_laser(const NeeVertex& v, double value, double o
 // n_k cos(theta_L) sum_j d_j / (n_j cos^3 theta_j) =: B, dOmega / dA = 1 / (A B cos theta_0) (1 / r^2
 // without interfaces). The path found is traced: it must cross the same surfaces, else (an edge of the
 // plate between) the straight connection is used. Rough interfaces are crossed as smooth ones (their
-// lobe's blur of the laser's direction is left out, as in the straight connection).
+// lobe's blur of the laser's direction is left out, as in the straight connection): behind a 2 mm slab
+// the light is 1.007 of the rough faces' at roughness 0.15, 1.036 at 0.3, 1.247 at 0.5 (docs/render.md).
 bool Integrator::connect_laser_refracted(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays,
                                          const FirstSegment* first) const {
   constexpr int kMaxInterfaces = 8;
