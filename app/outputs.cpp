@@ -514,7 +514,7 @@ class Outputs::Stacks {
     int64_t K = 0, W = 0;
     std::array<std::unique_ptr<char[]>, kStackCount> data;  // [k][row][x], every byte written by its tiles
     std::array<int64_t, kStackCount> element_bytes{};
-    std::vector<std::pair<PixelRect, std::vector<uint8_t>>> frames;  // the tiles' frames, as SensorTile holds them
+    std::vector<std::pair<PixelRect, FrameBytes>> frames;  // the tiles' frames, as SensorTile holds them
     template <class T, class Convert = std::identity>
     void put(Stack k, const PixelRect& r, const PixelRect& img, const T* src, Convert convert = {}) {
       using Out = std::decay_t<decltype(convert(*src))>;

@@ -326,7 +326,7 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
     const size_t bpr = static_cast<size_t>((rect.width + 7) / 8);
     if (frames) {
       out.frames_per_k = static_cast<int>(N);
-      out.frames.assign(Ks * N * static_cast<size_t>(rect.height) * bpr, 0);
+      out.frames.resize(Ks * N * static_cast<size_t>(rect.height) * bpr);  // every byte packed below
     }
     const size_t wpp = (N + 63) / 64;
 
