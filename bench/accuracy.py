@@ -80,33 +80,28 @@ SENSOR_SETTINGS = [
 SENSOR_REFERENCE = ["sensor.gate.knots_per_edge=1024"]
 
 
-def run(spadgen_bin, scene, crop, sets, out):
-    cmd = [spadgen_bin, "run", os.path.join(ROOT, scene), "-q", "-o", out, "--set",
-           f"camera.crop=[{','.join(map(str, crop))}]", "--set", "outputs.previews=false"]
+def timed(spadgen_bin, cmd, sets, out):
+    """Runs `spadgen CMD ... --set S ...` into out, then `spadgen evaluate --noise-free` of it: its wall time,
+    the run and the evaluation's metrics."""
     for s in sets:
         cmd += ["--set", s]
     t0 = time.monotonic()
-    subprocess.run(cmd, check=True)
+    subprocess.run([spadgen_bin] + cmd, check=True)
     seconds = time.monotonic() - t0
     subprocess.run([spadgen_bin, "evaluate", out, "--noise-free", "-o", out + "-eval"], check=True,
                    stdout=subprocess.DEVNULL)
     with open(os.path.join(out + "-eval", "metrics.json")) as f:
         metrics = json.load(f)
     return seconds, spadgen.Run(out), metrics
+
+
+def run(spadgen_bin, scene, crop, sets, out):
+    return timed(spadgen_bin, ["run", os.path.join(ROOT, scene), "-q", "-o", out, "--set",
+                               f"camera.crop=[{','.join(map(str, crop))}]", "--set", "outputs.previews=false"], sets, out)
 
 
 def sense(spadgen_bin, run_dir, sets, out):
-    cmd = [spadgen_bin, "sense", run_dir, "-q", "-o", out]
-    for s in sets:
-        cmd += ["--set", s]
-    t0 = time.monotonic()
-    subprocess.run(cmd, check=True)
-    seconds = time.monotonic() - t0
-    subprocess.run([spadgen_bin, "evaluate", out, "--noise-free", "-o", out + "-eval"], check=True,
-                   stdout=subprocess.DEVNULL)
-    with open(os.path.join(out + "-eval", "metrics.json")) as f:
-        metrics = json.load(f)
-    return seconds, spadgen.Run(out), metrics
+    return timed(spadgen_bin, ["sense", run_dir, "-q", "-o", out], sets, out)
 
 
 def stage_seconds(r, prefix):
