@@ -64,6 +64,10 @@ nlohmann::json model_components(const RunConfig& c, const scenes::Scene* scene, 
 struct RunTimes {
   double setup_seconds = 0.0, tiles_seconds = 0.0, finish_seconds = 0.0;
   std::array<double, StageClock::kStageCount> stage_thread_seconds{};
+  // The tiles' stages from the clock that timed them.
+  void take_stages(const StageClock& clock) {
+    for (int k = 0; k < StageClock::kStageCount; ++k) stage_thread_seconds[size_t(k)] = clock.seconds(StageClock::Stage(k));
+  }
 };
 
 struct RunRecord {

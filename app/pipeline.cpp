@@ -161,7 +161,7 @@ RunResult run(const RunOptions& options) {
   for (const auto& st : tile_stats) record.render_stats.rays += st.rays, record.render_stats.camera_hits += st.camera_hits;
   record.times.setup_seconds = setup_seconds;
   record.times.tiles_seconds = render_seconds;
-  for (int k = 0; k < StageClock::kStageCount; ++k) record.times.stage_thread_seconds[size_t(k)] = clock.seconds(StageClock::Stage(k));
+  record.times.take_stages(clock);
   warn(light_warnings(cfg, img, record));
   record.times.finish_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - tiles_done).count();
   writers::write_json(staging.path("metadata.json"), metadata(resolved, warnings, sensor, prov, axis, record));

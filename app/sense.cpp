@@ -432,7 +432,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     record.seconds = tiles_seconds;
     record.times.setup_seconds = setup_seconds;
     record.times.tiles_seconds = tiles_seconds;
-    for (int k = 0; k < StageClock::kStageCount; ++k) record.times.stage_thread_seconds[size_t(k)] = clock.seconds(StageClock::Stage(k));
+    record.times.take_stages(clock);
     // The realisations' images so far (a sense with --repeats writes them one after the other).
     record.times.finish_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - tiles_done).count();
     record.sense = json{{"from", src.string()}, {"repeat", r}, {"repeats", runs.size()}};
