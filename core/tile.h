@@ -18,7 +18,8 @@ namespace spadgen {
 // An allocator whose resize() leaves the new elements uninitialised (default-initialised), for buffers
 // whose every element is written before it is read: a tile's binary frames (11 MB per 32 x 32 tile of a
 // sweep), which the packing writes whole. In a build with AddressSanitizer the new bytes are set to 0xA5
-// instead, so that a byte the writer missed shows in every test that compares outputs.
+// instead, so that a byte the packing missed shows in the tests that check frames against their
+// reference bits and their counts (tests/sensor/frames_test.cpp, sensor_test.cpp).
 template <class T>
 struct DefaultInitAllocator : std::allocator<T> {
   template <class U>
