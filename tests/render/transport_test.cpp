@@ -338,12 +338,18 @@ TEST(Transport, SmoothPlateTransmitsOneMinusRSquaredEachWayAndDelaysTheReturn) {
   EXPECT_NEAR(t_b / main_b - t_a / total_a, delay, 0.5e-12);
 }
 
-// Unpolarised Fresnel reflectance from air into a medium of index n at incidence theta.
-double fresnel(double theta, double n) {
-  const double st = std::sin(theta) / n, ct = std::sqrt(1 - st * st), ci = std::cos(theta);
-  const double rs = (ci - n * ct) / (ci + n * ct), rp = (n * ci - ct) / (n * ci + ct);
-  return 0.5 * (rs * rs + rp * rp);
+// Unpolarised Fresnel reflectance of a dielectric interface for incidence cosine c > 0 and
+// eta = n_t / n_i (1 at total internal reflection).
+double fresnel_eta(double c, double eta) {
+  const double g2 = eta * eta - 1 + c * c;
+  if (g2 <= 0) return 1.0;
+  const double g = std::sqrt(g2);
+  const double a = (g - c) / (g + c), b = (c * (g + c) - 1) / (c * (g - c) + 1);
+  return 0.5 * a * a * (1 + b * b);
 }
+
+// The same from a medium into one of relative index n at incidence theta.
+double fresnel(double theta, double n) { return fresnel_eta(std::cos(theta), n); }
 
 // A 5 cm slab of ior 1.5 between the camera (with the laser at its centre) and a Lambertian wall 1 m away,
 // seen at an angle psi to the slab's normal (the camera turned; 12 mm focal length, so every pixel looks
@@ -795,15 +801,6 @@ TEST(Transport, AGlossyPlatesBackFaceReflectsTheLaserAsItsLobeThroughTheFrontFac
   EXPECT_NEAR(got / want, 1.0, 1e-2);
 }
 
-// Fresnel reflectance of a dielectric interface for incidence cosine c > 0 and eta = n_t / n_i (1 at total
-// internal reflection).
-double fresnel_eta(double c, double eta) {
-  const double g2 = eta * eta - 1 + c * c;
-  if (g2 <= 0) return 1.0;
-  const double g = std::sqrt(g2);
-  const double a = (g - c) / (g + c), b = (c * (g + c) - 1) / (c * (g - c) + 1);
-  return 0.5 * a * a * (1 + b * b);
-}
 
 // The laser's light behind a rough slab, traced from the laser: photons cross both rough faces by the GGX
 // rough dielectric (Walter et al. 2007, written out here: the microfacet normal drawn from D(m) (m.n), the
