@@ -8,27 +8,10 @@ namespace {
 
 constexpr float kPiF = 3.14159265358979f;
 
-float ggx_d(float alpha, float cos_h) {
-  if (cos_h <= 0.0f) return 0.0f;
-  const float a2 = alpha * alpha;
-  const float c2 = cos_h * cos_h;
-  const float d = c2 * (a2 - 1.0f) + 1.0f;
-  return a2 / (kPiF * d * d);
-}
-
 float ggx_g1(float alpha, float cos_w) {
   const float c2 = std::max(cos_w * cos_w, 1e-12f);
   const float tan2 = std::max(0.0f, (1.0f - c2) / c2);
   return 2.0f / (1.0f + std::sqrt(1.0f + alpha * alpha * tan2));
-}
-
-// Microfacet normal drawn with density D(h) cos(theta_h).
-glm::vec3 sample_ggx(float alpha, float u, float v) {
-  const float tan2 = alpha * alpha * u / std::max(1.0f - u, 1e-7f);
-  const float cos_t = 1.0f / std::sqrt(1.0f + tan2);
-  const float sin_t = std::sqrt(std::max(0.0f, 1.0f - cos_t * cos_t));
-  const float phi = 2.0f * kPiF * v;
-  return {sin_t * std::cos(phi), sin_t * std::sin(phi), cos_t};
 }
 
 Spec schlick(const Spec& f0, float c) {
@@ -40,6 +23,22 @@ Spec schlick(const Spec& f0, float c) {
 float max_of(const Spec& s) { return std::max(s.x, s.y); }
 
 }  // namespace
+
+float ggx_d(float alpha, float cos_h) {
+  if (cos_h <= 0.0f) return 0.0f;
+  const float a2 = alpha * alpha;
+  const float c2 = cos_h * cos_h;
+  const float d = c2 * (a2 - 1.0f) + 1.0f;
+  return a2 / (kPiF * d * d);
+}
+
+glm::vec3 sample_ggx(float alpha, float u, float v) {
+  const float tan2 = alpha * alpha * u / std::max(1.0f - u, 1e-7f);
+  const float cos_t = 1.0f / std::sqrt(1.0f + tan2);
+  const float sin_t = std::sqrt(std::max(0.0f, 1.0f - cos_t * cos_t));
+  const float phi = 2.0f * kPiF * v;
+  return {sin_t * std::cos(phi), sin_t * std::sin(phi), cos_t};
+}
 
 float fresnel_dielectric(float cos_i, float eta) {
   cos_i = std::clamp(cos_i, 0.0f, 1.0f);
@@ -276,26 +275,6 @@ bool Bsdf::refracted_direction(glm::vec3* out) const {
   if (sin2_t >= 1.0f) return false;
   *out = to_world(glm::vec3(-wo_.x / eta_, -wo_.y / eta_, -std::sqrt(1.0f - sin2_t)));
   return true;
-}
-
-bool sample_glossy_target(const GlossyTarget& g, float u, float v, glm::vec3* w) {
-  glm::vec3 t, b;
-  make_basis(g.n, &t, &b);
-  const glm::vec3 ml = sample_ggx(g.alpha, u, v);
-  const glm::vec3 m = ml.x * t + ml.y * b + ml.z * g.n;
-  const glm::vec3 out = 2.0f * glm::dot(g.wl, m) * m - g.wl;  // the reflection towards the vertex
-  if (!(glm::dot(out, g.n) > 0.0f) || !(glm::dot(g.wl, m) > 0.0f)) return false;
-  *w = -glm::normalize(out);
-  return true;
-}
-
-float glossy_target_pdf(const GlossyTarget& g, const glm::vec3& w) {
-  const glm::vec3 out = -w;
-  if (!(glm::dot(out, g.n) > 0.0f)) return 0.0f;
-  const glm::vec3 m = glm::normalize(out + g.wl);
-  const float c = glm::dot(out, m), cm = glm::dot(m, g.n);
-  if (!(c > 0.0f) || !(cm > 0.0f)) return 0.0f;
-  return ggx_d(g.alpha, cm) * cm / (4.0f * c);
 }
 
 Spec straight_transmittance(const MaterialPoint& m, float cos_theta, bool entering) {

@@ -19,6 +19,12 @@ namespace spadgen::render {
 // Returns 1 under total internal reflection.
 float fresnel_dielectric(float cos_incident, float eta);
 
+// The GGX (Trowbridge-Reitz) microfacet distribution of alpha = roughness^2: its density D of the half-vector
+// at cos_h from the normal, and a draw of a microfacet normal (local frame, z the normal) with density
+// D(h) cos(theta_h) from two uniform numbers.
+float ggx_d(float alpha, float cos_h);
+glm::vec3 sample_ggx(float alpha, float u, float v);
+
 // A material resolved at one point, in the two channels (laser, ambient).
 struct MaterialPoint {
   Spec base{1.0f};        // base colour (texture times factor), linear
@@ -100,17 +106,6 @@ class Bsdf {
   float diffuse_weight_ = 0.0f, specular_weight_ = 0.0f, transmission_weight_ = 0.0f;
 };
 
-// A glossy reflection of the laser at a surface ahead of a path vertex (Integrator's guided connection):
-// the surface's normal n (unit, on the vertex's side), the laser's direction wl seen from it (unit, on
-// n's side) and a GGX alpha. sample_glossy_target draws a direction w from the vertex towards the surface
-// whose half-vector at the surface, normalize(-w + wl), follows GGX(alpha) (density D(m) m.n); false
-// when the draw reflects below the surface. glossy_target_pdf is that draw's density of w, per steradian.
-struct GlossyTarget {
-  glm::vec3 n{0.0f}, wl{0.0f};
-  float alpha = 0.0f;
-};
-bool sample_glossy_target(const GlossyTarget& g, float u, float v, glm::vec3* w);
-float glossy_target_pdf(const GlossyTarget& g, const glm::vec3& w);
 
 // Fraction of light a transmissive surface passes straight through along direction d (used by shadow
 // rays and ground-truth layers, which ignore refraction bending): (1 - F(cos, ior)) times transmission,

@@ -11,6 +11,26 @@ double sqr(double x) { return x * x; }
 
 }  // namespace
 
+bool sample_glossy_target(const GlossyTarget& g, float u, float v, glm::vec3* w) {
+  glm::vec3 t, b;
+  make_basis(g.n, &t, &b);
+  const glm::vec3 ml = sample_ggx(g.alpha, u, v);
+  const glm::vec3 m = ml.x * t + ml.y * b + ml.z * g.n;
+  const glm::vec3 out = 2.0f * glm::dot(g.wl, m) * m - g.wl;  // the reflection towards the vertex
+  if (!(glm::dot(out, g.n) > 0.0f) || !(glm::dot(g.wl, m) > 0.0f)) return false;
+  *w = -glm::normalize(out);
+  return true;
+}
+
+float glossy_target_pdf(const GlossyTarget& g, const glm::vec3& w) {
+  const glm::vec3 out = -w;
+  if (!(glm::dot(out, g.n) > 0.0f)) return 0.0f;
+  const glm::vec3 m = glm::normalize(out + g.wl);
+  const float c = glm::dot(out, m), cm = glm::dot(m, g.n);
+  if (!(c > 0.0f) || !(cm > 0.0f)) return 0.0f;
+  return ggx_d(g.alpha, cm) * cm / (4.0f * c);
+}
+
 glm::dvec2 strip_coordinates(const glm::dvec3& p, const glm::dvec3& o, const glm::dvec3& a, const glm::dvec3& b) {
   const glm::dvec3 d = p - o;
   const double aa = glm::dot(a, a), ab = glm::dot(a, b), bb = glm::dot(b, b);

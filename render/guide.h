@@ -8,6 +8,18 @@
 
 namespace spadgen::render {
 
+// A glossy reflection of the laser at a surface ahead of a path vertex (Integrator's guided connection):
+// the surface's normal n (unit, on the vertex's side), the laser's direction wl seen from it (unit, on
+// n's side) and a GGX alpha. sample_glossy_target draws a direction w from the vertex towards the surface
+// whose half-vector at the surface, normalize(-w + wl), follows GGX(alpha) (density D(m) m.n); false
+// when the draw reflects below the surface. glossy_target_pdf is that draw's density of w, per steradian.
+struct GlossyTarget {
+  glm::vec3 n{0.0f}, wl{0.0f};
+  float alpha = 0.0f;
+};
+bool sample_glossy_target(const GlossyTarget& g, float u, float v, glm::vec3* w);
+float glossy_target_pdf(const GlossyTarget& g, const glm::vec3& w);
+
 // A part of a glossy plate (one triangle): Lambertian vertices aim at its reflection of the laser.
 struct GlossyPart {
   glm::dvec3 p0, e1, e2, n;  // corner, edges, unit normal

@@ -1,6 +1,7 @@
 // The guided connections' targets: their draws have the densities their pdf() gives.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "core/rng.h"
@@ -61,6 +62,35 @@ TEST(Guide, StripDrawsHaveTheirDensity) {
   const double expected = std::atan(0.3 / 0.05) / (std::atan(0.7 / 0.05) + std::atan(0.3 / 0.05));
   EXPECT_NEAR(double(below) / n, expected, 5 * std::sqrt(expected * (1 - expected) / n));
   EXPECT_DOUBLE_EQ(g.sum_pdf2(glm::vec3(0, 0, 1)), 0.0);  // a direction away from the strip
+}
+
+// The guided draw towards a glossy reflection of the laser has the density glossy_target_pdf gives: its
+// integral over the sphere is the share of draws kept, and the mean of 1 / pdf over the kept draws is
+// the solid angle they cover, which the integral of the indicator confirms.
+TEST(Guide, GlossyTargetDensityIsItsDrawsDensity) {
+  const GlossyTarget g{glm::vec3(0, 0, 1), glm::normalize(glm::vec3(0.4f, 0.1f, 1.0f)), 0.3f};
+  Rng rng(14, RngKind::Test, 1);
+  const int n = 400000;
+  int kept = 0;
+  for (int i = 0; i < n; ++i) {
+    glm::vec3 w;
+    if (!sample_glossy_target(g, rng.next_float(), rng.next_float(), &w)) continue;
+    ++kept;
+    ASSERT_NEAR(glm::length(w), 1.0f, 1e-5f);
+    ASSERT_GT(glossy_target_pdf(g, w), 0.0f);
+  }
+  double integral = 0, sq = 0;
+  const int m = 2000000;
+  for (int i = 0; i < m; ++i) {
+    const float z = 1.0f - 2.0f * rng.next_float(), phi = 6.2831853f * rng.next_float();
+    const float r = std::sqrt(std::max(0.0f, 1.0f - z * z));
+    const double v = glossy_target_pdf(g, {r * std::cos(phi), r * std::sin(phi), z}) * 4.0 * 3.14159265358979;
+    integral += v / m, sq += v * v / m;
+  }
+  const double share = double(kept) / n;
+  ASSERT_GT(share, 0.5);
+  const double sigma = std::sqrt((sq - integral * integral) / m + share * (1 - share) / n);
+  EXPECT_NEAR(integral, share, 5 * sigma);
 }
 
 }  // namespace
