@@ -679,8 +679,8 @@ void Integrator::lambertian_guide_targets(const Surface& sf, GuideTargets* out) 
 // from target i adds sum_L f_cos_L(w) pdf_i(w) / (p_L(w)^2 + sum_k pdf_k(w)^2) times what the laser
 // returns through b, and the BSDF draw's connection at b is weighted p_L^2 / (p_L^2 + sum_k pdf_k^2)
 // (trace_path's next_mis).
-void Integrator::guided_connections(const GuidedVertex& a, const GuideTargets& guide, Rng& rng, double w,
-                                    const PixelFilm& film, RayCounts* rays) const {
+void Integrator::guided_connections(const NeeVertex& a, int medium_t, bool roulette, const GuideTargets& guide,
+                                    Rng& rng, double w, const PixelFilm& film, RayCounts* rays) const {
   for (int i = 0; i < guide.n; ++i) {
     const float u = uniform(rng), v = uniform(rng);
     glm::vec3 wd;
@@ -693,10 +693,7 @@ void Integrator::guided_connections(const GuidedVertex& a, const GuideTargets& g
     for (int l = 0; l < kLobes; ++l) {
       if (!(lv.f_cos[l].x > 0.0f)) continue;
       double p = lv.pdf[l];
-      if (a.roulette && p > 0.0) {
-        const Spec b = a.beta * lv.f_cos[l] / lv.pdf[l];
-        p *= std::min(0.95f, ambient_on_ ? std::max(b.x, b.y) : b.x);
-      }
+      if (roulette && p > 0.0) p *= roulette_q(a.beta * lv.f_cos[l] / lv.pdf[l]);
       f += lv.f_cos[l] * float(pi / (p * p + pg2));
     }
     if (!(f.x > 0.0f)) continue;
@@ -710,7 +707,7 @@ void Integrator::guided_connections(const GuidedVertex& a, const GuideTargets& g
     const Bsdf bsdf(mb, sb.ns, sb.ng, wo, wo_front);
     if (!bsdf.has_non_delta()) continue;
     const bool transmitted = (glm::dot(wd, a.sf.ng) > 0.0f) != a.wo_front;
-    const int medium = transmitted ? a.medium_t : a.medium;
+    const int medium = transmitted ? medium_t : a.medium;
     const double seg = glm::length(glm::dvec3(sb.p) - glm::dvec3(a.sf.p));
     Spec beta = a.beta * f;
     double opl = a.opl + seg;
@@ -720,8 +717,9 @@ void Integrator::guided_connections(const GuidedVertex& a, const GuideTargets& g
       opl += (double(rm.point.ior) - 1.0) * seg;
     }
     if (!(beta.x > 0.0f)) continue;
-    const NeeVertex vb{sb, bsdf, wo_front, shading_.material(sb.material).volume, medium, a.vertices,
-                       !a.reflected && transmitted, beta, opl, !(mb.transmission > 0.0f && a.vertices > 0)};
+    // b is a's next vertex: a is a non-delta vertex before it.
+    const NeeVertex vb{sb, bsdf, wo_front, shading_.material(sb.material).volume, medium, a.vertices + 1,
+                       a.seen_through && transmitted, beta, opl, !(mb.transmission > 0.0f)};
     LaserRay lr;
     RayCounts at_end;  // the laser connection at the guided vertex: the guided connection's rays
     if (laser_ray(sb, &lr)) connect_laser(vb, lr, nullptr, w, film, &at_end);
@@ -775,9 +773,9 @@ void Integrator::guided_connections(const GuidedVertex& a, const GuideTargets& g
     const Bsdf bsdf(mp, sf.ns, sf.ng, wo, wo_front);
     const bool volume = shading_.material(sf.material).volume;
 
+    const NeeVertex v{sf, bsdf, wo_front, volume, medium, vertices, !reflected, beta, opl,
+                      !(mp.transmission > 0.0f && vertices > 0)};
     if (bsdf.has_non_delta()) {
-      const NeeVertex v{sf, bsdf, wo_front, volume, medium, vertices, !reflected, beta, opl,
-                        !(mp.transmission > 0.0f && vertices > 0)};
       if (beta.x > 0.0f) {
         LaserRay lr;
         FirstSegment first;
@@ -800,11 +798,7 @@ void Integrator::guided_connections(const GuidedVertex& a, const GuideTargets& g
         (bsdf.glossy() || (bsdf.lambertian() && medium < 0 && !parts_.empty()))) {
       const int medium_out_t = volume ? (wo_front ? sf.material : -1) : medium;
       find_guide_targets(sf, bsdf, medium, medium_out_t, &guide, rays);
-      if (guide.n > 0) {
-        const GuidedVertex gv{sf, bsdf, wo_front, volume, medium, medium_out_t, vertices, reflected, beta, opl,
-                              roulette};
-        guided_connections(gv, guide, rng, w, film, rays);
-      }
+      if (guide.n > 0) guided_connections(v, medium_out_t, roulette, guide, rng, w, film, rays);
     }
 
     const BsdfSample bs = bsdf.sample(uniform3(rng));
@@ -815,7 +809,7 @@ void Integrator::guided_connections(const GuidedVertex& a, const GuideTargets& g
     if (bs.transmitted && volume) medium = wo_front ? sf.material : -1;
     float q = 1.0f;
     if (roulette) {
-      q = std::min(0.95f, ambient_on_ ? std::max(beta.x, beta.y) : beta.x);
+      q = roulette_q(beta);
       if (!(q > 0.0f) || uniform(rng) >= q) break;
       beta /= q;
     }

@@ -2,6 +2,7 @@
 // NEE is its only strategy) and to the ambient punctual lights, BSDF sampling for the environment and
 // emissive surfaces (their only strategy, so no MIS weights are needed), Russian roulette.
 #pragma once
+#include <algorithm>
 #include <climits>
 #include <cstddef>
 #include <cstdint>
@@ -165,24 +166,18 @@ class Integrator {
     ObjectLaser* objects;
   };
   struct NeeVertex;  // integrator.cpp
-  // A glossy path vertex, with what its guided connections need of the path.
-  struct GuidedVertex {
-    const Surface& sf;
-    const Bsdf& bsdf;
-    bool wo_front, volume;
-    int medium;       // on wo's side
-    int medium_t;     // on the other side
-    int vertices;     // non-delta vertices up to and including this one
-    bool reflected;   // a reflection before this vertex
-    Spec beta;
-    double opl;
-    bool roulette;    // the BSDF draw here faces Russian roulette
-  };
   void find_guide_targets(const Surface& sf, const Bsdf& bsdf, int medium_r, int medium_t, GuideTargets* out,
                           RayCounts* rays) const;
   void lambertian_guide_targets(const Surface& sf, GuideTargets* out) const;
-  void guided_connections(const GuidedVertex& a, const GuideTargets& guide, Rng& rng, double w,
-                          const PixelFilm& film, RayCounts* rays) const;
+  // a: a glossy (or Lambertian) vertex; medium_t: the medium on the other side of its surface; roulette:
+  // its BSDF draw faces Russian roulette.
+  void guided_connections(const NeeVertex& a, int medium_t, bool roulette, const GuideTargets& guide, Rng& rng,
+                          double w, const PixelFilm& film, RayCounts* rays) const;
+  // Russian roulette's survival probability for a path of throughput beta: its laser channel, or the larger
+  // channel when the scene has ambient light, at most 0.95.
+  float roulette_q(const Spec& beta) const {
+    return std::min(0.95f, ambient_on_ ? std::max(beta.x, beta.y) : beta.x);
+  }
 
   // One camera path, sample j of `block` (pbrt's Li): deposits its laser light, weighted by the pixel's
   // measurement w, and returns the ambient photon radiance it gathered, which render_pixel weights by w.
