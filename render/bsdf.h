@@ -89,6 +89,7 @@ class Bsdf {
   float alpha() const { return m_.alpha; }
   bool glossy() const { return !m_.lambertian && !m_.smooth(); }
   bool lambertian() const { return m_.lambertian; }
+  bool has_diffuse() const { return m_.lambertian || diffuse_weight_ > 0.0f; }
 
  private:
   glm::vec3 to_local(const glm::vec3& v) const { return {glm::dot(v, t_), glm::dot(v, b_), glm::dot(v, n_)}; }

@@ -31,6 +31,21 @@ float glossy_target_pdf(const GlossyTarget& g, const glm::vec3& w) {
   return ggx_d(g.alpha, cm) * cm / (4.0f * c);
 }
 
+bool sample_direction_lobe(const DirectionLobe& g, float u, float v, glm::vec3* w) {
+  glm::vec3 t, b;
+  make_basis(g.axis, &t, &b);
+  const glm::vec3 m = sample_ggx(g.alpha, u, v);
+  const glm::vec3 out = m.x * t + m.y * b + m.z * g.axis;
+  if (!(glm::dot(out, g.axis) > 0.0f)) return false;
+  *w = glm::normalize(out);
+  return true;
+}
+
+float direction_lobe_pdf(const DirectionLobe& g, const glm::vec3& w) {
+  const float c = glm::dot(w, g.axis);
+  return c > 0.0f ? ggx_d(g.alpha, c) * c : 0.0f;
+}
+
 glm::dvec2 strip_coordinates(const glm::dvec3& p, const glm::dvec3& o, const glm::dvec3& a, const glm::dvec3& b) {
   const glm::dvec3 d = p - o;
   const double aa = glm::dot(a, a), ab = glm::dot(a, b), bb = glm::dot(b, b);

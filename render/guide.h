@@ -20,6 +20,27 @@ struct GlossyTarget {
 bool sample_glossy_target(const GlossyTarget& g, float u, float v, glm::vec3* w);
 float glossy_target_pdf(const GlossyTarget& g, const glm::vec3& w);
 
+// A GGX lobe of directions around a unit axis: sample_direction_lobe draws w with density
+// D_alpha(w . axis) (w . axis) per steradian (direction_lobe_pdf), a microfacet normal drawn about the axis;
+// false when the draw falls behind the axis's plane (never for alpha < 1).
+struct DirectionLobe {
+  glm::vec3 axis{0.0f, 0.0f, 1.0f};
+  float alpha = 0.0f;
+};
+bool sample_direction_lobe(const DirectionLobe& g, float u, float v, glm::vec3* w);
+float direction_lobe_pdf(const DirectionLobe& g, const glm::vec3& w);
+
+// A glossy plate's two parallel faces, for the ghost of the laser that a Lambertian vertex behind the plate
+// sees through it (Integrator::ghost_connections): planes n . x = lo and n . x = hi (hi - lo the
+// thickness, n unit), of the plate's volume material.
+struct GlossySlab {
+  glm::dvec3 n;
+  double lo, hi;
+  double ior;
+  float alpha;
+  int material;
+};
+
 // A part of a glossy plate (one triangle): Lambertian vertices aim at its reflection of the laser.
 struct GlossyPart {
   glm::dvec3 p0, e1, e2, n;  // corner, edges, unit normal

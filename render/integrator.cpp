@@ -108,10 +108,32 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
         parts_.size() + nt > kMaxGlossyParts)
       continue;
     const auto corner = [&](size_t t, int k) { return glm::dvec3(mesh.positions[mesh.indices[3 * t + size_t(k)]]); };
+    const size_t first_part = parts_.size();
     for (size_t t = 0; t < nt; ++t) {
       const glm::dvec3 e1 = corner(t, 1) - corner(t, 0), e2 = corner(t, 2) - corner(t, 0), cr = glm::cross(e1, e2);
       const double twice = glm::length(cr);
       if (twice > 0.0) parts_.push_back(GlossyPart{corner(t, 0), e1, e2, cr / twice, mp.alpha});
+    }
+    // A plate: a volume whose largest faces (by area, summed over the triangles of one normal) lie in two
+    // parallel planes.
+    const ResolvedMaterial& rmat = shading.material(mesh.material);
+    if (rmat.volume && mp.ior != 1.0f && parts_.size() > first_part) {
+      double best_area = 0.0;
+      glm::dvec3 best_n(0.0);
+      for (size_t i = first_part; i < parts_.size(); ++i) {
+        double area = 0.0;
+        for (size_t j = first_part; j < parts_.size(); ++j)
+          if (std::fabs(glm::dot(parts_[i].n, parts_[j].n)) > 1.0 - 1e-6)
+            area += 0.5 * glm::length(glm::cross(parts_[j].e1, parts_[j].e2));
+        if (area > best_area) best_area = area, best_n = parts_[i].n;
+      }
+      double lo = 1e300, hi = -1e300;
+      for (size_t j = first_part; j < parts_.size(); ++j)
+        if (std::fabs(glm::dot(best_n, parts_[j].n)) > 1.0 - 1e-6) {
+          const double o = glm::dot(best_n, parts_[j].p0);
+          lo = std::min(lo, o), hi = std::max(hi, o);
+        }
+      if (hi > lo) slabs_.push_back(GlossySlab{best_n, lo, hi, double(mp.ior), mp.alpha, mesh.material});
     }
     for (size_t t = 0; t < nt; ++t)
       for (size_t u = t + 1; u < nt; ++u) {
@@ -679,8 +701,9 @@ void Integrator::lambertian_guide_targets(const Surface& sf, GuideTargets* out) 
 // from target i adds sum_L f_cos_L(w) pdf_i(w) / (p_L(w)^2 + sum_k pdf_k(w)^2) times what the laser
 // returns through b, and the BSDF draw's connection at b is weighted p_L^2 / (p_L^2 + sum_k pdf_k^2)
 // (trace_path's next_mis).
-void Integrator::guided_connections(const NeeVertex& a, int medium_t, bool roulette, const GuideTargets& guide,
-                                    Rng& rng, double w, const PixelFilm& film, RayCounts* rays) const {
+void Integrator::guided_connections(const NeeVertex& a, int medium_t, bool roulette, const Spec& rr_beta,
+                                    const GuideTargets& guide, Rng& rng, double w, const PixelFilm& film,
+                                    RayCounts* rays) const {
   for (int i = 0; i < guide.n; ++i) {
     const float u = uniform(rng), v = uniform(rng);
     glm::vec3 wd;
@@ -693,7 +716,7 @@ void Integrator::guided_connections(const NeeVertex& a, int medium_t, bool roule
     for (int l = 0; l < kLobes; ++l) {
       if (!(lv.f_cos[l].x > 0.0f)) continue;
       double p = lv.pdf[l];
-      if (roulette && p > 0.0) p *= roulette_q(a.beta * lv.f_cos[l] / lv.pdf[l]);
+      if (roulette && p > 0.0) p *= roulette_q(rr_beta * lv.f_cos[l] / lv.pdf[l]);
       f += lv.f_cos[l] * float(pi / (p * p + pg2));
     }
     if (!(f.x > 0.0f)) continue;
@@ -727,6 +750,208 @@ void Integrator::guided_connections(const NeeVertex& a, int medium_t, bool roule
   }
 }
 
+// The ghost of the laser a vertex x of diffuse lobe in air sees through a glossy plate: the light that enters the
+// plate's far face, reflects inside off its near face, then off its far face, and leaves through the near
+// face towards x (or the reverse). Unfolded, it is a straight refracted path through three times the
+// plate's thickness, whose Snell invariant p solves rho(p) = (h_x + h_L) tan(theta) + 3 d tan(theta_glass)
+// = D (the lateral offset), as in connect_laser_refracted. A camera path meets that light only through
+// three narrow lobes (the transmission into the plate, then the two reflections: the last one evaluated by
+// the laser connection), which the BSDF's draws at x find rarely; the ghost's target is a GGX lobe of
+// directions about the ghost's direction at x, of alpha 2 sqrt(2) n alpha_plate / (1 + r_x / r_L) (two
+// reflections each turning the ray by twice its microfacet's tilt, n times wider outside, and the
+// parallax of moving along the plate as for the guided targets). From a vertex inside the plate, on its
+// face away from the laser (a diffuse lobe of the plate itself), the ghost is two reflections away: the
+// unfolded path starts in the glass, and the lobe, in the glass, has alpha 2 sqrt(2) alpha_plate. As for
+// the guided targets, the choice depends on x alone, so the densities are exact whatever it is.
+void Integrator::ghost_targets(const Surface& sf, int medium, Ghosts* out) const {
+  out->n = 0;
+  out->reach = medium < 0 ? 3 : 2;
+  const glm::dvec3 x(sf.p), L = laser_.position;
+  for (const GlossySlab& s : slabs_) {
+    if (out->n == kMaxGuideTargets) return;
+    const double sx = glm::dot(x, s.n), sl = glm::dot(L, s.n), d = s.hi - s.lo;
+    bool up, down;
+    double hx;  // the path's length in air along the normal before it enters the plate
+    if (medium < 0) {
+      up = sx < s.lo && sl > s.hi, down = sx > s.hi && sl < s.lo;
+      hx = up ? s.lo - sx : sx - s.hi;
+    } else {  // inside this plate, on its face away from the laser
+      if (medium != s.material) continue;
+      const double tol = 1e-6 * std::max(1.0, std::fabs(sx));
+      up = std::fabs(sx - s.lo) <= tol && sl > s.hi, down = std::fabs(sx - s.hi) <= tol && sl < s.lo;
+      hx = 0.0;
+    }
+    if (!up && !down) continue;
+    const glm::dvec3 nrm = up ? s.n : -s.n;
+    const double near = up ? s.lo : s.hi;
+    const double hl = std::fabs(sl - sx) - hx - d;
+    const glm::dvec3 to = L - x;
+    const glm::dvec3 lat = to - glm::dot(to, nrm) * nrm;
+    const double D = glm::length(lat);
+    const glm::dvec3 u = D > 0.0 ? lat / D : glm::dvec3(0.0);
+    const double depth_air = hx + hl, depth_glass = 3.0 * d, n = s.ior;
+    const auto rho = [&](double p, double* slope) {
+      const double sg = p / n, ca = std::sqrt(std::max(0.0, 1.0 - p * p)), cg = std::sqrt(std::max(0.0, 1.0 - sg * sg));
+      *slope = depth_air / (ca * ca * ca) + depth_glass / (n * cg * cg * cg);
+      return depth_air * p / ca + depth_glass * sg / cg;
+    };
+    double p = 0.0;
+    if (D > 0.0) {
+      double lo = 0.0, hi = 1.0;
+      p = std::min(D / glm::length(to), 0.5);
+      for (int it = 0; it < 100; ++it) {
+        double slope;
+        const double f = rho(p, &slope) - D;
+        if (std::fabs(f) <= 1e-12 * (depth_air + depth_glass + D)) break;
+        (f > 0.0 ? hi : lo) = p;
+        double next = p - f / slope;
+        if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
+        p = next;
+      }
+    }
+    const double ca = std::sqrt(std::max(0.0, 1.0 - p * p));
+    if (!(ca > 0.0)) continue;
+    const glm::dvec3 wl = p * u + ca * nrm;  // in air, at x (outside) and towards the laser
+    if (!(laser_.intensity_towards(-wl) > 0.0)) continue;
+    const double sg = p / n;
+    const glm::dvec3 w0 = medium < 0 ? wl : sg * u + std::sqrt(1.0 - sg * sg) * nrm;
+    // The entry point must lie on one of the plate's faces in the near plane.
+    const glm::dvec3 q = x + (hx / ca) * w0;
+    bool on = medium >= 0;
+    for (const GlossyPart& part : parts_) {
+      if (std::fabs(glm::dot(part.n, s.n)) < 1.0 - 1e-6 || std::fabs(glm::dot(part.p0, s.n) - near) > 1e-6 + 1e-9 * std::fabs(near))
+        continue;
+      const glm::dvec2 st = strip_coordinates(q, part.p0, part.e1, part.e2);
+      if (st.x >= 0.0 && st.y >= 0.0 && st.x + st.y <= 1.0) {
+        on = true;
+        break;
+      }
+    }
+    if (!on) continue;
+    const double rx = hx / ca, rl = hl / ca;
+    const double alpha =
+        2.0 * std::sqrt(2.0) * (medium < 0 ? n : 1.0) * double(s.alpha) / (1.0 + rx / std::max(rl, 1e-9));
+    out->lobe[out->n++] = DirectionLobe{glm::vec3(w0), float(std::clamp(alpha, 1e-3, 0.5))};
+  }
+}
+
+double Integrator::Ghosts::sum_pdf2(const glm::vec3& w) const {
+  double s = 0.0;
+  for (int i = 0; i < n; ++i) s += sqr(direction_lobe_pdf(lobe[i], w));
+  return s;
+}
+
+// The ghost draws from a Lambertian vertex a: a direction drawn from a ghost's lobe, then the camera path's
+// own rules (the BSDF's draws, Russian roulette with the survival probabilities the camera path would have,
+// the guided connections) for the next two vertices, whose laser connections are left to the camera path;
+// what the third vertex returns (by its laser connection, or by the second's guided connections) is the
+// ghost's estimate. trace_path weights the same light of its own BSDF draw at a by the power heuristic's
+// share p_a^2 / (p_a^2 + sum_i p_i^2) over the direction at a (p_a the BSDF's density times a's survival
+// probability, p_i the ghost lobes'); the draw from lobe i adds f(w) p_i / (p_a^2 + sum_k p_k^2) times the
+// rest of the path's estimate. As the two strategies continue from the direction alike, the rest cancels
+// from the weights.
+void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int deltas_after, bool roulette,
+                                   const Ghosts& ghosts, Rng& rng, double w, const PixelFilm& film,
+                                   RayCounts* rays) const {
+  const RenderConfig& rc = config_.render;
+  for (int i = 0; i < ghosts.n; ++i) {
+    const float u1 = uniform(rng), u2 = uniform(rng);
+    glm::vec3 d;
+    if (!sample_direction_lobe(ghosts.lobe[i], u1, u2, &d)) continue;
+    const double pi = direction_lobe_pdf(ghosts.lobe[i], d);
+    if (!(pi > 0.0)) continue;
+    const LobeValues lv = a.bsdf.lobes(d);
+    if (!(lv.f_cos[kDiffuseLobe].x > 0.0f) || !(lv.pdf[kDiffuseLobe] > 0.0f)) continue;
+    const Spec f = lv.f_cos[kDiffuseLobe];
+    Spec rr_beta = a.beta * f / lv.pdf[kDiffuseLobe];  // the camera path's throughput after a's draw
+    double p = lv.pdf[kDiffuseLobe];
+    if (roulette) {
+      const float q = roulette_q(rr_beta);
+      if (!(q > 0.0f)) continue;
+      p *= q;
+      rr_beta /= q;
+    }
+    Spec beta = a.beta * f * float(pi / (p * p + ghosts.sum_pdf2(d)));
+    double opl = a.opl;
+    int medium = a.medium, vertices = vertices_after, deltas = deltas_after;
+    bool reflected = true;  // a's draw is a reflection
+    glm::dvec3 previous(a.sf.p);
+    glm::vec3 o = offset_ray_origin(a.sf.p, a.sf.ng, d);
+    double mis = 1.0;
+    for (int k = 1; k <= ghosts.reach; ++k) {
+      RayHit hit;
+      ++rays->guided;
+      if (!embree_.intersect(o, d, 0.0f, kInf, &hit)) break;
+      const Surface sf = shading_.surface(hit);
+      const double seg = glm::length(glm::dvec3(sf.p) - previous);
+      previous = glm::dvec3(sf.p);
+      if (medium >= 0) {
+        const ResolvedMaterial& rm = shading_.material(medium);
+        if (rm.absorbing) {
+          const Spec att = glm::exp(-rm.sigma * static_cast<float>(seg));
+          beta *= att, rr_beta *= att;
+        }
+        opl += rm.point.ior * seg;
+      } else {
+        opl += seg;
+      }
+      const MaterialPoint mp = shading_.material_at(sf, hit);
+      const glm::vec3 wo = -d;
+      const bool wo_front = glm::dot(wo, sf.ng) > 0.0f;
+      const Bsdf bsdf(mp, sf.ns, sf.ng, wo, wo_front);
+      const bool volume = shading_.material(sf.material).volume;
+      const NeeVertex v{sf, bsdf, wo_front, volume, medium, vertices, !reflected, beta, opl,
+                        !(mp.transmission > 0.0f && vertices > 0)};
+      if (k == ghosts.reach) {  // the ghost's light: the laser connection here
+        LaserRay lr;
+        RayCounts at_end;
+        if (bsdf.has_non_delta() && beta.x > 0.0f && laser_ray(sf, &lr)) connect_laser(v, lr, nullptr, w * mis, film, &at_end);
+        rays->guided += at_end.total();
+        break;
+      }
+      if (bsdf.has_non_delta()) {
+        ++vertices;
+        if (vertices >= rc.max_bounces) break;  // the camera path meets no laser connection after this one
+      }
+      const bool rr = vertices >= rc.russian_roulette_from;
+      GuideTargets guide;
+      if (guided_ && beta.x > 0.0f &&
+          (bsdf.glossy() || (bsdf.lambertian() && medium < 0 && !parts_.empty()))) {
+        const int medium_out_t = volume ? (wo_front ? sf.material : -1) : medium;
+        RayCounts own;
+        find_guide_targets(sf, bsdf, medium, medium_out_t, &guide, &own);
+        rays->guided += own.total();
+        // The guided connections of the vertex before the last reach the last: the ghost's light.
+        if (k == ghosts.reach - 1 && guide.n > 0) {
+          RayCounts at_end;
+          guided_connections(v, medium_out_t, rr, rr_beta, guide, rng, w, film, &at_end);
+          rays->guided += at_end.total();
+        }
+      }
+      const BsdfSample bs = bsdf.sample(uniform3(rng));
+      if (!(bs.weight.x > 0.0f || bs.weight.y > 0.0f)) break;
+      if (bs.delta && ++deltas > kMaxDeltaEvents) break;
+      reflected = reflected || !bs.transmitted;
+      beta *= bs.weight, rr_beta *= bs.weight;
+      if (bs.transmitted && volume) medium = wo_front ? sf.material : -1;
+      float q = 1.0f;
+      if (rr) {
+        q = roulette_q(rr_beta);
+        if (!(q > 0.0f) || uniform(rng) >= q) break;
+        beta /= q, rr_beta /= q;
+      }
+      mis = 1.0;
+      if (guide.n > 0 && !bs.delta) {
+        const double pb = double(bsdf.lobes(bs.wi).pdf[bs.lobe]) * q;
+        const double pg2 = guide.sum_pdf2(bs.wi);
+        if (pg2 > 0.0) mis = pb * pb / (pb * pb + pg2);
+      }
+      o = offset_ray_origin(sf.p, sf.ng, bs.wi);
+      d = bs.wi;
+    }
+  }
+}
+
 [[gnu::always_inline]] inline double Integrator::trace_path(const CameraBlock& block, size_t j, double w,
                                                             const PixelFilm& film, RayCounts* rays) const {
   const RenderConfig& rc = config_.render;
@@ -745,9 +970,15 @@ void Integrator::guided_connections(const NeeVertex& a, int medium_t, bool roule
   // The rays traced so far when the path left its first non-delta vertex: what follows is indirect light.
   const uint64_t no_indirect = UINT64_MAX;
   uint64_t indirect_from = no_indirect;
+  // The ghosts' MIS weights of the light the path meets at its next vertices (ghost_connections): [i] for
+  // the vertex i ahead, the laser connection there (ghost_nee) or the guided connections from there
+  // (ghost_guided). 1 where no ghost draw estimates the same light.
+  double ghost_nee[4] = {1.0, 1.0, 1.0, 1.0}, ghost_guided[4] = {1.0, 1.0, 1.0, 1.0};
   for (bool camera_ray = true;; camera_ray = false) {
     const double mis = next_mis;
     next_mis = 1.0;
+    for (int i = 0; i < 3; ++i) ghost_nee[i] = ghost_nee[i + 1], ghost_guided[i] = ghost_guided[i + 1];
+    ghost_nee[3] = ghost_guided[3] = 1.0;
     RayHit hit;
     if (!next_hit(block, j, camera_ray, o, d, &hit, rays)) {
       gather_environment(beta, &ambient);
@@ -780,7 +1011,8 @@ void Integrator::guided_connections(const NeeVertex& a, int medium_t, bool roule
         LaserRay lr;
         FirstSegment first;
         const bool ahead = camera_ray && ahead_shadow(block, j, &lr, &first);
-        if (ahead || laser_ray(sf, &lr)) connect_laser(v, lr, ahead ? &first : nullptr, w * mis, film, rays);
+        if (ahead || laser_ray(sf, &lr))
+          connect_laser(v, lr, ahead ? &first : nullptr, w * mis * ghost_nee[0], film, rays);
       }
       if (beta.y > 0.0f) connect_ambient_lights(v, &ambient, rays);
       ++vertices;
@@ -798,7 +1030,13 @@ void Integrator::guided_connections(const NeeVertex& a, int medium_t, bool roule
         (bsdf.glossy() || (bsdf.lambertian() && medium < 0 && !parts_.empty()))) {
       const int medium_out_t = volume ? (wo_front ? sf.material : -1) : medium;
       find_guide_targets(sf, bsdf, medium, medium_out_t, &guide, rays);
-      if (guide.n > 0) guided_connections(v, medium_out_t, roulette, guide, rng, w, film, rays);
+      if (guide.n > 0) guided_connections(v, medium_out_t, roulette, beta, guide, rng, w * ghost_guided[0], film, rays);
+    }
+    // Ghost draws from a Lambertian vertex in air that sees a glossy plate's ghost of the laser.
+    Ghosts ghosts;
+    if (!slabs_.empty() && !last_segment && beta.x > 0.0f && bsdf.has_diffuse()) {
+      ghost_targets(sf, medium, &ghosts);
+      if (ghosts.n > 0) ghost_connections(v, vertices, deltas, roulette, ghosts, rng, w, film, rays);
     }
 
     const BsdfSample bs = bsdf.sample(uniform3(rng));
@@ -813,10 +1051,16 @@ void Integrator::guided_connections(const NeeVertex& a, int medium_t, bool roule
       if (!(q > 0.0f) || uniform(rng) >= q) break;
       beta /= q;
     }
-    if (guide.n > 0 && !bs.delta) {
+    if ((guide.n > 0 || ghosts.n > 0) && !bs.delta) {
       const double p = double(bsdf.lobes(bs.wi).pdf[bs.lobe]) * q;
       const double pg2 = guide.sum_pdf2(bs.wi);
       if (pg2 > 0.0) next_mis = p * p / (p * p + pg2);
+      const double ph2 = bs.lobe == kDiffuseLobe ? ghosts.sum_pdf2(bs.wi) : 0.0;
+      if (ph2 > 0.0) {  // the light met reach - 1 vertices ahead (guided) and reach ahead (laser connection)
+        const double share = p * p / (p * p + ph2);
+        ghost_guided[ghosts.reach - 1] *= share;
+        ghost_nee[ghosts.reach] *= share;
+      }
     }
     o = offset_ray_origin(sf.p, sf.ng, bs.wi);
     d = bs.wi;

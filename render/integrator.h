@@ -170,9 +170,27 @@ class Integrator {
                           RayCounts* rays) const;
   void lambertian_guide_targets(const Surface& sf, GuideTargets* out) const;
   // a: a glossy (or Lambertian) vertex; medium_t: the medium on the other side of its surface; roulette:
-  // its BSDF draw faces Russian roulette.
-  void guided_connections(const NeeVertex& a, int medium_t, bool roulette, const GuideTargets& guide, Rng& rng,
-                          double w, const PixelFilm& film, RayCounts* rays) const;
+  // its BSDF draw faces Russian roulette, with the survival probability a camera path of throughput rr_beta
+  // at a would have (a.beta itself, except in ghost_connections).
+  void guided_connections(const NeeVertex& a, int medium_t, bool roulette, const Spec& rr_beta,
+                          const GuideTargets& guide, Rng& rng, double w, const PixelFilm& film,
+                          RayCounts* rays) const;
+  // The ghosts of the laser a vertex of diffuse lobe sees through a glossy plate (twice reflected inside),
+  // from the air behind the plate or from the plate's back face inside.
+  struct Ghosts {
+    DirectionLobe lobe[kMaxGuideTargets];
+    int n = 0;
+    // The vertices from the one that draws to the one whose laser connection meets the ghost: 3 from the
+    // air (the entry into the plate, the two reflections), 2 from inside the plate.
+    int reach = 3;
+    double sum_pdf2(const glm::vec3& w) const;
+  };
+  // medium: the vertex's (-1: air).
+  void ghost_targets(const Surface& sf, int medium, Ghosts* out) const;
+  // a: the vertex of diffuse lobe (vertices_after, deltas_after: the path's non-delta vertices including a and
+  // its delta events so far; roulette: a's BSDF draw faces Russian roulette).
+  void ghost_connections(const NeeVertex& a, int vertices_after, int deltas_after, bool roulette,
+                         const Ghosts& ghosts, Rng& rng, double w, const PixelFilm& film, RayCounts* rays) const;
   // Russian roulette's survival probability for a path of throughput beta: its laser channel, or the larger
   // channel when the scene has ambient light, at most 0.95.
   float roulette_q(const Spec& beta) const {
@@ -218,6 +236,7 @@ class Integrator {
   bool guided_ = false;      // a glossy material of narrow lobe (alpha <= kGuideMaxAlpha): guided connections
   std::vector<GlossyPart> parts_;    // the triangles of small meshes (plates) of such materials
   std::vector<GlossyStrip> strips_;  // their slivers (pairs of triangles)
+  std::vector<GlossySlab> slabs_;    // the plates among them (volumes of parallel faces)
   const Ambient& ambient_;
   bool transmission_ = false;
   bool ambient_on_ = false;
