@@ -93,5 +93,51 @@ TEST(Guide, GlossyTargetDensityIsItsDrawsDensity) {
   EXPECT_NEAR(integral, share, 5 * sigma);
 }
 
+// A ghost's lobe of directions: its draws have the density direction_lobe_pdf gives. The share of draws
+// inside a cone of half-angle t about the axis is the integral of the density over that cone, computed
+// here in closed form: the GGX draw of a microfacet normal puts tan^2(theta) = alpha^2 u / (1 - u), so
+// the share is tan^2(t) / (alpha^2 + tan^2(t)) (5 sigma); every draw has a positive density, and the
+// density integrates to 1 over the sphere (uniform directions, 5 sigma).
+TEST(Guide, DirectionLobeDensityIsItsDrawsDensity) {
+  const DirectionLobe g{glm::normalize(glm::vec3(0.3f, -0.2f, 1.0f)), 0.06f};
+  Rng rng(22, RngKind::Test, 1);
+  const int n = 400000;
+  const double t = 0.05, tan2 = std::tan(t) * std::tan(t);
+  int inside = 0;
+  for (int i = 0; i < n; ++i) {
+    glm::vec3 w;
+    ASSERT_TRUE(sample_direction_lobe(g, rng.next_float(), rng.next_float(), &w));
+    ASSERT_NEAR(glm::length(w), 1.0f, 1e-5f);
+    ASSERT_GT(direction_lobe_pdf(g, w), 0.0f);
+    inside += std::acos(std::min(1.0f, glm::dot(w, g.axis))) < t;
+  }
+  const double share = tan2 / (double(g.alpha) * g.alpha + tan2), got = double(inside) / n;
+  EXPECT_NEAR(got, share, 5.0 * std::sqrt(share * (1.0 - share) / n));
+  // The density over the sphere, sampled where it lives: half the points uniform over the sphere, half
+  // uniform in the cone of 0.5 rad about the axis (a mixture density), each weighted by pdf / mixture.
+  const double cone = 0.5, cone_sr = 2.0 * 3.14159265358979 * (1.0 - std::cos(cone));
+  glm::vec3 tx, bx;
+  make_basis(g.axis, &tx, &bx);
+  double integral = 0, sq = 0;
+  const int m = 1000000;
+  for (int i = 0; i < m; ++i) {
+    glm::vec3 w;
+    if (i % 2 == 0) {
+      const float z = 1.0f - 2.0f * rng.next_float(), phi = 6.2831853f * rng.next_float();
+      const float r = std::sqrt(std::max(0.0f, 1.0f - z * z));
+      w = {r * std::cos(phi), r * std::sin(phi), z};
+    } else {
+      const double cz = 1.0 - rng.next_double() * (1.0 - std::cos(cone)), phi = 6.283185307 * rng.next_double();
+      const double r = std::sqrt(std::max(0.0, 1.0 - cz * cz));
+      w = glm::normalize(float(r * std::cos(phi)) * tx + float(r * std::sin(phi)) * bx + float(cz) * g.axis);
+    }
+    const bool in_cone = glm::dot(w, g.axis) > std::cos(cone);
+    const double mix = 0.5 / (4.0 * 3.14159265358979) + (in_cone ? 0.5 / cone_sr : 0.0);
+    const double v = direction_lobe_pdf(g, w) / mix;
+    integral += v / m, sq += v * v / m;
+  }
+  EXPECT_NEAR(integral, 1.0, 5.0 * std::sqrt((sq - integral * integral) / m));
+}
+
 }  // namespace
 }  // namespace spadgen::render
