@@ -21,6 +21,9 @@ constexpr int kMaxShadowCrossings = 64;
 // Guided connections aim at surfaces of GGX alpha up to this (roughness 0.2): wider lobes are found well
 // enough by the BSDF's own draws.
 constexpr float kGuideMaxAlpha = 0.04f;
+// A vertex draws towards each ghost with this probability (the draws' density is that share of the lobe's):
+// the ghost lobe's density stays far above the diffuse draw's where the ghost is, at a quarter of the rays.
+constexpr double kGhostDrawShare = 0.25;
 
 inline double sqr(double x) { return x * x; }
 // Lambertian vertices aim at the triangles of meshes of at most this many (plates, boxes), at most
@@ -819,8 +822,8 @@ void Integrator::ghost_targets(const Surface& sf, int medium, Ghosts* out) const
     const glm::dvec3 q = x + (hx / ca) * w0;
     bool on = medium >= 0;
     for (const GlossyPart& part : parts_) {
-      if (std::fabs(glm::dot(part.n, s.n)) < 1.0 - 1e-6 || std::fabs(glm::dot(part.p0, s.n) - near) > 1e-6 + 1e-9 * std::fabs(near))
-        continue;
+      const double off = std::fabs(glm::dot(part.p0, s.n) - near);
+      if (std::fabs(glm::dot(part.n, s.n)) < 1.0 - 1e-6 || off > 1e-6 + 1e-9 * std::fabs(near)) continue;
       const glm::dvec2 st = strip_coordinates(q, part.p0, part.e1, part.e2);
       if (st.x >= 0.0 && st.y >= 0.0 && st.x + st.y <= 1.0) {
         on = true;
@@ -835,30 +838,37 @@ void Integrator::ghost_targets(const Surface& sf, int medium, Ghosts* out) const
   }
 }
 
+double Integrator::Ghosts::pdf(int i, const glm::vec3& w) const {
+  return kGhostDrawShare * double(direction_lobe_pdf(lobe[i], w));
+}
+
 double Integrator::Ghosts::sum_pdf2(const glm::vec3& w) const {
   double s = 0.0;
-  for (int i = 0; i < n; ++i) s += sqr(direction_lobe_pdf(lobe[i], w));
+  for (int i = 0; i < n; ++i) s += sqr(pdf(i, w));
   return s;
 }
 
-// The ghost draws from a Lambertian vertex a: a direction drawn from a ghost's lobe, then the camera path's
-// own rules (the BSDF's draws, Russian roulette with the survival probabilities the camera path would have,
-// the guided connections) for the next two vertices, whose laser connections are left to the camera path;
-// what the third vertex returns (by its laser connection, or by the second's guided connections) is the
-// ghost's estimate. trace_path weights the same light of its own BSDF draw at a by the power heuristic's
-// share p_a^2 / (p_a^2 + sum_i p_i^2) over the direction at a (p_a the BSDF's density times a's survival
-// probability, p_i the ghost lobes'); the draw from lobe i adds f(w) p_i / (p_a^2 + sum_k p_k^2) times the
-// rest of the path's estimate. As the two strategies continue from the direction alike, the rest cancels
-// from the weights.
+// The ghost draws from a vertex a of diffuse lobe (for each ghost, with probability kGhostDrawShare): a
+// direction drawn from the ghost's lobe, then the camera path's own rules (the BSDF's draws, Russian
+// roulette with the survival probabilities the camera path would have, the guided connections) for the
+// next vertices up to ghosts.reach, whose own laser connections are left to the camera path; what the last
+// returns (by its laser connection, or by the guided connections of the one before) is the ghost's
+// estimate. trace_path weights the same light of its own diffuse draw at a by the power heuristic's share
+// p_a^2 / (p_a^2 + sum_i p_i^2) over the direction at a (p_a the diffuse lobe's density times a's survival
+// probability, p_i the ghosts' densities, their draw share included); the draw from ghost i adds
+// f(w) p_i / (p_a^2 + sum_k p_k^2) times the rest of the path's estimate. As the two strategies continue
+// from the direction alike, the rest cancels from the weights. (The other lobes' parts of a's light are
+// the BSDF's alone.)
 void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int deltas_after, bool roulette,
                                    const Ghosts& ghosts, Rng& rng, double w, const PixelFilm& film,
                                    RayCounts* rays) const {
   const RenderConfig& rc = config_.render;
   for (int i = 0; i < ghosts.n; ++i) {
+    if (uniform(rng) >= float(kGhostDrawShare)) continue;
     const float u1 = uniform(rng), u2 = uniform(rng);
     glm::vec3 d;
     if (!sample_direction_lobe(ghosts.lobe[i], u1, u2, &d)) continue;
-    const double pi = direction_lobe_pdf(ghosts.lobe[i], d);
+    const double pi = ghosts.pdf(i, d);
     if (!(pi > 0.0)) continue;
     const LobeValues lv = a.bsdf.lobes(d);
     if (!(lv.f_cos[kDiffuseLobe].x > 0.0f) || !(lv.pdf[kDiffuseLobe] > 0.0f)) continue;
@@ -905,7 +915,8 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
       if (k == ghosts.reach) {  // the ghost's light: the laser connection here
         LaserRay lr;
         RayCounts at_end;
-        if (bsdf.has_non_delta() && beta.x > 0.0f && laser_ray(sf, &lr)) connect_laser(v, lr, nullptr, w * mis, film, &at_end);
+        if (bsdf.has_non_delta() && beta.x > 0.0f && laser_ray(sf, &lr))
+          connect_laser(v, lr, nullptr, w * mis, film, &at_end);
         rays->guided += at_end.total();
         break;
       }

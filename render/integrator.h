@@ -183,6 +183,7 @@ class Integrator {
     // The vertices from the one that draws to the one whose laser connection meets the ghost: 3 from the
     // air (the entry into the plate, the two reflections), 2 from inside the plate.
     int reach = 3;
+    double pdf(int i, const glm::vec3& w) const;  // per steradian, the share of vertices that draw included
     double sum_pdf2(const glm::vec3& w) const;
   };
   // medium: the vertex's (-1: air).

@@ -38,7 +38,9 @@ struct RayCounts {
   uint64_t bounce = 0;     // a path's further segments
   uint64_t laser = 0;      // straight connections to the laser, and their continuations across transmissive surfaces
   uint64_t refracted = 0;  // connections to the laser refracted through transmissive surfaces (connect_laser_refracted)
-  uint64_t guided = 0;     // guided connections: their targets' search, their rays and the laser connections at their ends
+  // guided connections and ghost draws: their targets' search, their rays and the laser connections at their
+  // ends
+  uint64_t guided = 0;
   uint64_t ambient = 0;    // shadow rays to the glTF's punctual lights
   uint64_t indirect = 0;   // of all the above, those a path traced after its first non-delta vertex (render.max_bounces > 1)
   uint64_t total() const { return camera + bounce + laser + refracted + guided + ambient; }

@@ -231,17 +231,16 @@ TEST(Accuracy, GuidedConnectionsFindAPlatesEdgeGlint) {
   }
 }
 
-// The laser's ghost through a glossy plate: light that enters the plate, reflects inside off both faces and
-// leaves it, meeting the wall 0.35 m behind; the camera sees that wall through the plate, and its vertices
-// reach the ghost only through three narrow lobes (the entry into the plate and the two reflections), which
-// their BSDF draws find rarely: the ghost draws aim at it. The pixels' indirect light (the ghost, and the
-// plate's other inner reflections) over 32 x 32 pixels at 64 paths: its sum with and without guided
-// connections (ghost draws included) agrees within 4 standard errors of the pixels' spread, and that spread
-// (a nearly uniform image: the noise) falls, measured 11.6 times here. Over light seeds 1 to 4 the variance
-// with the ghost draws stays at 7.8e-14 to 8.8e-14; without them (the other guided connections alone) it
-// ranged from 7.7e-14 to 1.0e-12 (a pixel at 62 times the mean), and without guided connections from
-// 5.4e-13 to 2.5e-12.
-TEST(Accuracy, GhostDrawsKeepTheExpectationAndLowerTheVariance) {
+// The wall 0.35 m behind a glossy plate, seen through it, and lit through it: its indirect light (the
+// plate's back face mirroring the lit wall, the plate's ghost of the laser: light reflected off both faces
+// inside, which the wall's vertices reach through three narrow lobes and the ghost draws aim at) over
+// 32 x 32 pixels at 64 paths, for light seeds 1 to 4. The sum with guided connections (ghost draws
+// included) agrees with the sum without, within 4 standard errors of the pixels' spread pooled over the
+// seeds (measured 0.13 of them), and the pooled variance falls (measured 0.26 times). Here the ghost is a
+// small part of the wall's indirect light (the plate's reflectance squared) and its draws do not change
+// the variance measurably; on the multi-object scene, where it made the brightest outliers, they do
+// (docs/render.md).
+TEST(Accuracy, GuidedConnectionsAndGhostDrawsKeepTheIndirectLightBehindAPlate) {
   const scenes::Scene s = glossy_plate(0.15f);
   RenderStageConfig c = test_config(32, 32, 25e-3);
   c.laser.beam = Beam::Cone;
@@ -251,19 +250,24 @@ TEST(Accuracy, GhostDrawsKeepTheExpectationAndLowerTheVariance) {
   c.render.max_bounces = 8;
   const PixelRect rect{0, 0, 32, 32};
   const TimeAxis axis{0.0, 10e-12, 0, 25e-9};
-  double sum[2] = {0, 0}, sq[2] = {0, 0};
   const double n = 1024;
-  for (int guided = 0; guided < 2; ++guided) {
-    c.render.guided_connections = guided == 1;
-    const Renderer r(s, c);
-    GroundTruthTile gt = r.ground_truth(rect);
-    r.transient(rect, rect, axis, nullptr, &gt);
-    for (const float v : gt.indirect_laser) sum[guided] += v, sq[guided] += double(v) * v;
+  double total[2] = {0, 0}, var[2] = {0, 0};
+  for (uint64_t seed = 1; seed <= 4; ++seed) {
+    c.light_seed = seed;
+    for (int guided = 0; guided < 2; ++guided) {
+      c.render.guided_connections = guided == 1;
+      const Renderer r(s, c);
+      GroundTruthTile gt = r.ground_truth(rect);
+      r.transient(rect, rect, axis, nullptr, &gt);
+      double sum = 0, sq = 0;
+      for (const float v : gt.indirect_laser) sum += v, sq += double(v) * v;
+      total[guided] += sum;
+      var[guided] += (sq - sum * sum / n) / (n - 1);  // one pixel's, this seed
+    }
   }
-  double var[2];
-  for (int g = 0; g < 2; ++g) var[g] = (sq[g] - sum[g] * sum[g] / n) / (n - 1);
-  ASSERT_GT(sum[0], 0.0);
-  EXPECT_LT(std::fabs(sum[1] - sum[0]), 4.0 * std::sqrt(n * (var[0] + var[1]))) << sum[0] << " " << sum[1];
+  ASSERT_GT(total[0], 0.0);
+  // Each seed's sum has the variance n var_seed: the four sums' total has n sum_seeds var_seed.
+  EXPECT_LT(std::fabs(total[1] - total[0]), 4.0 * std::sqrt(n * (var[0] + var[1]))) << total[0] << " " << total[1];
   EXPECT_LT(var[1], 0.5 * var[0]) << var[0] << " " << var[1];
 }
 
