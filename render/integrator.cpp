@@ -79,6 +79,36 @@ bool guided_connections_active(const scenes::Scene& scene, bool enabled) {
 
 namespace {
 
+// Snell's invariant p = n_j sin(theta_j) of the path through parallel layers (thickness depth[j] along
+// their normal, index[j]) whose lateral travel rho(p) = sum_j depth_j tan(theta_j) is D: rho is monotone in
+// p, so Newton's steps inside a bisection bracket [0, p_max) (p_max the smallest index of a layer of some
+// depth), from the first guess p0, to 1e-12 of the path's extent.
+double snell_invariant(const double* depth, const double* index, int layers, double D, double p0, double p_max) {
+  double extent = D;
+  for (int j = 0; j < layers; ++j) extent += depth[j];
+  const auto rho = [&](double p, double* slope) {
+    double s = 0.0, ds = 0.0;
+    for (int j = 0; j < layers; ++j) {
+      const double sn = p / index[j], c = std::sqrt(std::max(0.0, 1.0 - sn * sn));
+      s += depth[j] * sn / c;
+      ds += depth[j] / (index[j] * c * c * c);
+    }
+    *slope = ds;
+    return s;
+  };
+  double lo = 0.0, hi = p_max, p = p0;
+  for (int it = 0; it < 100; ++it) {
+    double slope;
+    const double f = rho(p, &slope) - D;
+    if (std::fabs(f) <= 1e-12 * extent) break;
+    (f > 0.0 ? hi : lo) = p;
+    double next = p - f / slope;
+    if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
+    p = next;
+  }
+  return p;
+}
+
 // The medium a shadow ray from this vertex starts in: the path's own, unless it crosses the surface of
 // a volume (then inside below the front face, air above it).
 int shadow_medium(const Surface& sf, bool volume, bool wo_front, const glm::vec3& wi, int medium) {
@@ -456,31 +486,7 @@ bool Integrator::connect_laser_refracted(const NeeVertex& v, double w, const Pix
   const glm::dvec3 lat = to - H * nrm;
   const double D = glm::length(lat);
   glm::dvec3 u = D > 1e-12 * r ? lat / D : glm::dvec3(0.0);
-  // rho(p) and its derivative.
-  const auto rho = [&](double p, double* slope) {
-    double s = 0.0, ds = 0.0;
-    for (int j = 0; j <= k; ++j) {
-      const double sn = p / index[j], c = std::sqrt(std::max(0.0, 1.0 - sn * sn));
-      s += depth[j] * sn / c;
-      ds += depth[j] / (index[j] * c * c * c);
-    }
-    *slope = ds;
-    return s;
-  };
-  double p = 0.0;
-  if (D > 0.0) {
-    double lo = 0.0, hi = p_max;
-    p = std::min(index[k] * D / r, 0.5 * (lo + hi));
-    for (int it = 0; it < 100; ++it) {
-      double slope;
-      const double f = rho(p, &slope) - D;
-      if (std::fabs(f) <= 1e-12 * (H + D)) break;
-      (f > 0.0 ? hi : lo) = p;
-      double next = p - f / slope;
-      if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
-      p = next;
-    }
-  }
+  const double p = D > 0.0 ? snell_invariant(depth, index, k + 1, D, std::min(index[k] * D / r, 0.5 * p_max), p_max) : 0.0;
   double sn[kMaxInterfaces + 1], cs[kMaxInterfaces + 1];
   glm::dvec3 dir[kMaxInterfaces + 1];
   for (int j = 0; j <= k; ++j) {
@@ -792,26 +798,9 @@ void Integrator::ghost_targets(const Surface& sf, int medium, Ghosts* out) const
     const glm::dvec3 lat = to - glm::dot(to, nrm) * nrm;
     const double D = glm::length(lat);
     const glm::dvec3 u = D > 0.0 ? lat / D : glm::dvec3(0.0);
-    const double depth_air = hx + hl, depth_glass = 3.0 * d, n = s.ior;
-    const auto rho = [&](double p, double* slope) {
-      const double sg = p / n, ca = std::sqrt(std::max(0.0, 1.0 - p * p)), cg = std::sqrt(std::max(0.0, 1.0 - sg * sg));
-      *slope = depth_air / (ca * ca * ca) + depth_glass / (n * cg * cg * cg);
-      return depth_air * p / ca + depth_glass * sg / cg;
-    };
-    double p = 0.0;
-    if (D > 0.0) {
-      double lo = 0.0, hi = 1.0;
-      p = std::min(D / glm::length(to), 0.5);
-      for (int it = 0; it < 100; ++it) {
-        double slope;
-        const double f = rho(p, &slope) - D;
-        if (std::fabs(f) <= 1e-12 * (depth_air + depth_glass + D)) break;
-        (f > 0.0 ? hi : lo) = p;
-        double next = p - f / slope;
-        if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
-        p = next;
-      }
-    }
+    const double n = s.ior;
+    const double depth[2] = {hx + hl, 3.0 * d}, index[2] = {1.0, n};
+    const double p = D > 0.0 ? snell_invariant(depth, index, 2, D, std::min(D / glm::length(to), 0.5), 1.0) : 0.0;
     const double ca = std::sqrt(std::max(0.0, 1.0 - p * p));
     if (!(ca > 0.0)) continue;
     const glm::dvec3 wl = p * u + ca * nrm;  // in air, at x (outside) and towards the laser
