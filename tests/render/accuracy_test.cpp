@@ -154,6 +154,16 @@ scenes::Scene glossy_plate(float roughness, float right = 1.0f) {
   return s;
 }
 
+// The camera at the origin looking down -z over size x size pixels, and the laser, a cone of every
+// direction, 3 cm beside it (the multi-object scene's offset).
+RenderStageConfig glossy_plate_config(int size, double focal_length_m) {
+  RenderStageConfig c = test_config(size, size, focal_length_m);
+  c.laser.beam = Beam::Cone;
+  c.laser.half_angle_rad = kPi;
+  c.laser.offset_m = {0.03, 0, 0};
+  return c;
+}
+
 // Guided connections change how the glossy paths are drawn, not what they estimate: over 256 pixels the
 // summed laser return with and without them agrees within 4 of their combined standard errors (each
 // pixel's reported error: a false alarm rate of 6e-5 were they exact), and the variance falls, most for
@@ -165,11 +175,8 @@ TEST(Accuracy, GuidedConnectionsKeepTheExpectationAndLowerTheVariance) {
   };
   for (const Case k : {Case{0.05f, 0.25}, Case{0.1f, 0.6}}) {
     const scenes::Scene s = glossy_plate(k.roughness);
-    RenderStageConfig c = test_config(16, 16, 6e-3);
-    c.laser.beam = Beam::Cone;
-    c.laser.half_angle_rad = kPi;
-    c.laser.offset_m = {0.03, 0, 0};
-    c.render.samples_per_pixel = 256;
+    RenderStageConfig c = glossy_plate_config(16, 6e-3);
+        c.render.samples_per_pixel = 256;
     c.render.max_bounces = 4;
     const PixelRect rect{0, 0, 16, 16};
     const TimeAxis axis{0.0, 10e-12, 1000, 25e-9};
@@ -206,11 +213,8 @@ TEST(Accuracy, GuidedConnectionsFindAPlatesEdgeGlint) {
   };
   for (const Case k : {Case{0.15f, true, 1.0}, Case{0.1f, false, 0.5}}) {
     const scenes::Scene s = glossy_plate(k.roughness, 0.0f);
-    RenderStageConfig c = test_config(16, 16, 2e-3);
+    RenderStageConfig c = glossy_plate_config(16, 2e-3);
     c.camera.look_at_m = {0.023, 0, -0.8};  // the band where the edge mirrors the laser onto the wall
-    c.laser.beam = Beam::Cone;
-    c.laser.half_angle_rad = kPi;
-    c.laser.offset_m = {0.03, 0, 0};
     c.render.samples_per_pixel = 1024;
     c.render.max_bounces = 2;
     const PixelRect rect{0, 0, 16, 16};
@@ -242,11 +246,8 @@ TEST(Accuracy, GuidedConnectionsFindAPlatesEdgeGlint) {
 // (docs/render.md).
 TEST(Accuracy, GuidedConnectionsAndGhostDrawsKeepTheIndirectLightBehindAPlate) {
   const scenes::Scene s = glossy_plate(0.15f);
-  RenderStageConfig c = test_config(32, 32, 25e-3);
-  c.laser.beam = Beam::Cone;
-  c.laser.half_angle_rad = kPi;
-  c.laser.offset_m = {0.03, 0, 0};
-  c.render.samples_per_pixel = 64;
+  RenderStageConfig c = glossy_plate_config(32, 25e-3);
+    c.render.samples_per_pixel = 64;
   c.render.max_bounces = 8;
   const PixelRect rect{0, 0, 32, 32};
   const TimeAxis axis{0.0, 10e-12, 0, 25e-9};
