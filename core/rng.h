@@ -20,6 +20,7 @@ enum class RngKind : uint32_t {
   Crosstalk = 5,     // a = pixel index, b = gate / exposure index
   GroundTruth = 6,
   Dataset = 7,       // a = sample index, b = 0 for the sample's seed, else the FNV-1a 64 hash of an axis key
+  PixelJitter = 8,   // a = pixel index, b = round (a target-error render's second round: 1): the jitter's shift
   Test = 1000,       // tests and benchmarks
 };
 

@@ -109,6 +109,18 @@ double snell_invariant(const double* depth, const double* index, int layers, dou
   return p;
 }
 
+// Sample s's position in its pixel: point s of the R2 sequence (the additive recurrence of the plastic
+// number's powers, Roberts 2018), rotated by the pixel's uniform shift (Cranley-Patterson). Each sample is
+// uniform over the pixel, so every estimate keeps its expectation, while n consecutive samples cover the
+// pixel far more evenly than n independent ones: at a silhouette the covered share's error falls from
+// about 1 / sqrt(n) towards 1 / n. A target-error render's second round takes its own shift, so that its
+// estimate stays independent of the first round, which decided its length.
+glm::dvec2 pixel_jitter(const glm::dvec2& shift, int s) {
+  constexpr double a1 = 0.75487766624669276, a2 = 0.56984029099805327;  // 1 / g, 1 / g^2, g^3 = g + 1
+  const double x = shift.x + a1 * s, y = shift.y + a2 * s;
+  return {x - std::floor(x), y - std::floor(y)};
+}
+
 // The medium a shadow ray from this vertex starts in: the path's own, unless it crosses the surface of
 // a volume (then inside below the front face, air above it).
 int shadow_medium(const Surface& sf, bool volume, bool wo_front, const glm::vec3& wi, int medium) {
@@ -289,6 +301,20 @@ void Integrator::trace_camera_block(int x, int y, int s_begin, int s_end, const 
   const glm::vec3 cam(camera_.position());
   bool valid[kPacket], found[kPacket];
   glm::vec3 dirs[kPacket];
+  // Each lane's pixel shifts of the jitter (pixel_jitter), for the first round and a target-error render's
+  // second.
+  const int first_round = config_.render.samples_per_pixel;
+  const bool rounds = config_.render.target_relative_error.has_value();
+  glm::dvec2 shift[kPacket][2];
+  for (int i = 0; i < kPacket; ++i) {
+    const int px = block->x0 + std::min(i, block->lanes - 1);
+    const uint64_t pixel = static_cast<uint64_t>(y) * static_cast<uint64_t>(camera_.width()) + static_cast<uint64_t>(px);
+    for (uint64_t r = 0; r < 2; ++r) {
+      Rng u(config_.light_seed, RngKind::PixelJitter, pixel, r);
+      shift[i][r].x = u.next_double();
+      shift[i][r].y = u.next_double();
+    }
+  }
   for (int s = s_begin; s < s_end; ++s) {
     throw_if_interrupted();  // a block of many samples per pixel can take seconds
     const size_t row = static_cast<size_t>(s - s_begin) * kPacket;
@@ -301,9 +327,8 @@ void Integrator::trace_camera_block(int x, int y, int s_begin, int s_end, const 
       const uint64_t pixel =
           static_cast<uint64_t>(y) * static_cast<uint64_t>(camera_.width()) + static_cast<uint64_t>(px);
       block->rng.emplace_back(config_.light_seed, RngKind::CameraPath, pixel, static_cast<uint64_t>(s));
-      Rng& rng = block->rng.back();
-      const double jx = rng.next_double(), jy = rng.next_double();
-      block->dir[j] = camera_.direction(px + jx, y + jy);
+      const glm::dvec2 jit = pixel_jitter(shift[i][rounds && s >= first_round ? 1 : 0], s);
+      block->dir[j] = camera_.direction(px + jit.x, y + jit.y);
       dirs[i] = glm::vec3(block->dir[j]);
     }
     RayHit* hits = block->hit.data() + row;
