@@ -3,15 +3,15 @@
 guided connections (render.guided_connections), against an independent high-path reference.
 
 For each setting: its wall time, the pixels above 1.5 times their 3 x 3 median where the reference is
-smooth (within 10 % of its own 3 x 3 median; a lit pixel whose median is 0 counts), the worst such ratio
-among pixels of a positive median, and the error against the reference
-(relative, median / p90 / p99, and the root mean square over the mean). Then, for the default setting,
-what its pixels above 1.5 times hold, from the run's ground truth: the camera ray through the pixel's centre
-meets nothing (a silhouette: the coverage noise of the paths' jittered positions), the excess over the
-reference is indirect light (`indirect_laser`, a reflection before the vertex that meets the laser), or
-other. The figures are in docs/render.md.
+smooth (within 10 % of its own 3 x 3 median; a lit pixel whose median is 0 counts), and what they hold,
+from the run's ground truth: the camera ray through the pixel's centre meets nothing (a silhouette: the
+coverage noise of the paths' positions in the pixel), the excess over the reference is indirect light
+(`indirect_laser`, a reflection before the vertex that meets the laser), or other; the worst such ratio
+among pixels of a positive median, and among the indirect ones; the error against the reference
+(relative, median / p90 / p99, and the root mean square over the mean). Each setting for several light
+seeds (the counts of rare bright paths vary from one to the next). The figures are in docs/render.md.
 
-    /usr/bin/python3 bench/fireflies.py build/app/spadgen [--crop X,Y,W,H] [--paths 16] [--reference 256]
+    /usr/bin/python3 bench/fireflies.py build/app/spadgen [--crop X,Y,W,H] [--paths 16] [--reference 256] [--seeds 1,2,3]
 """
 import argparse
 import os
@@ -48,6 +48,8 @@ def main():
     ap.add_argument("--crop", default="0,0,1024,500")
     ap.add_argument("--paths", type=int, default=16)
     ap.add_argument("--reference", type=int, default=256)
+    ap.add_argument("--seeds", type=lambda v: [int(x) for x in v.split(",")], default=[1, 2, 3],
+                    help="the light seeds of the runs compared (comma-separated)")
     a = ap.parse_args()
     work = tempfile.mkdtemp(prefix="spadgen-fireflies-")
     _, ref, _ = run(a.spadgen, a.crop, [f"render.samples_per_pixel={a.reference}", "seeds.light=1000"],
@@ -58,32 +60,29 @@ def main():
     smooth = inner & (ref > 0) & (np.abs(ref - mr) <= 0.1 * mr)
     lit = ref > 0
     print(f"reference: {a.reference} paths, seeds.light=1000; crop {a.crop}; {smooth.sum()} smooth pixels")
-    print("| setting | time (s) | pixels > 1.5 x median | > 3 x | worst (median > 0) | error p50 / p90 / p99 | rms / mean |")
-    print("|---|---|---|---|---|---|---|")
+    print("| setting | light seed | time (s) | pixels > 1.5 x median (silhouette / indirect / other) | > 3 x | "
+          "worst (median > 0) | worst indirect | error p50 / p90 / p99 | rms / mean |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for name, sets in [("guided_connections=false", ["render.guided_connections=false"]),
                        ("guided_connections=true (default)", ["render.guided_connections=true"])]:
-        seconds, img, gt = run(a.spadgen, a.crop, [f"render.samples_per_pixel={a.paths}"] + sets, os.path.join(work, name))
-        mi = median_filter(img, 3)
-        ratio = np.where(mi > 0, img / np.where(mi > 0, mi, 1), np.where(img > 0, np.inf, 0.0))
-        rel = np.abs(img - ref)[lit] / ref[lit]
-        rms = np.sqrt(np.mean((img - ref)[lit] ** 2)) / ref[lit].mean()
-        worst = ratio[smooth & np.isfinite(ratio)].max()
-        print(f"| {name}, {a.paths} paths | {seconds:.1f} | {(smooth & (ratio > 1.5)).sum()} | {(smooth & (ratio > 3)).sum()} | "
-              f"{worst:.1f} | {np.median(rel) * 100:.2f} % / {np.percentile(rel, 90) * 100:.2f} % / "
-              f"{np.percentile(rel, 99) * 100:.2f} % | {rms:.3f} |")
-        bad = smooth & (ratio > 1.5)
-    # What the default setting's outliers hold (the last one run).
-    silhouette = bad & (gt["object_id"] < 0)
-    excess = img - ref
-    indirect = bad & ~silhouette & (gt["indirect_laser"].astype(np.float64) >= 0.5 * excess)
-    other = bad & ~silhouette & ~indirect
-    print()
-    print("| pixels > 1.5 x median (default) | count | worst ratio (median > 0) |")
-    print("|---|---|---|")
-    for name, m in [("silhouette (the centre's ray meets nothing)", silhouette),
-                    ("excess carried by indirect light", indirect), ("other", other)]:
-        fin = ratio[m & np.isfinite(ratio)]
-        print(f"| {name} | {m.sum()} | {fin.max() if fin.size else float('nan'):.1f} |")
+        for seed in a.seeds:
+            seconds, img, gt = run(a.spadgen, a.crop, [f"render.samples_per_pixel={a.paths}", f"seeds.light={seed}"] + sets,
+                                   os.path.join(work, f"{name}-{seed}"))
+            mi = median_filter(img, 3)
+            ratio = np.where(mi > 0, img / np.where(mi > 0, mi, 1), np.where(img > 0, np.inf, 0.0))
+            rel = np.abs(img - ref)[lit] / ref[lit]
+            rms = np.sqrt(np.mean((img - ref)[lit] ** 2)) / ref[lit].mean()
+            worst = ratio[smooth & np.isfinite(ratio)].max()
+            # What the outliers hold, from the run's ground truth.
+            bad = smooth & (ratio > 1.5)
+            silhouette = bad & (gt["object_id"] < 0)
+            indirect = bad & ~silhouette & (gt["indirect_laser"].astype(np.float64) >= 0.5 * (img - ref))
+            other = bad & ~silhouette & ~indirect
+            fin = ratio[indirect & np.isfinite(ratio)]
+            print(f"| {name}, {a.paths} paths | {seed} | {seconds:.1f} | {bad.sum()} ({silhouette.sum()} / {indirect.sum()} / "
+                  f"{other.sum()}) | {(smooth & (ratio > 3)).sum()} | {worst:.1f} | {fin.max() if fin.size else 0.0:.1f} | "
+                  f"{np.median(rel) * 100:.2f} % / {np.percentile(rel, 90) * 100:.2f} % / "
+                  f"{np.percentile(rel, 99) * 100:.2f} % | {rms:.3f} |")
     shutil.rmtree(work)
 
 
