@@ -107,7 +107,6 @@ class Bsdf {
   float diffuse_weight_ = 0.0f, specular_weight_ = 0.0f, transmission_weight_ = 0.0f;
 };
 
-
 // Fraction of light a transmissive surface passes straight through along direction d (used by shadow
 // rays and ground-truth layers, which ignore refraction bending): (1 - F(cos, ior)) times transmission,
 // base colour and (1 - metallic). cos is |d . n|; entering tells which side the ray comes from.

@@ -301,16 +301,18 @@ void Integrator::trace_camera_block(int x, int y, int s_begin, int s_end, const 
   const glm::vec3 cam(camera_.position());
   bool valid[kPacket], found[kPacket];
   glm::vec3 dirs[kPacket];
-  // Each lane's pixel shifts of the jitter (pixel_jitter), for the first round and a target-error render's
-  // second.
+  // Each lane's pixel (the last one's repeated past the sensor's edge) and its shifts of the jitter
+  // (pixel_jitter): the first round's, and a target-error render's second round's.
   const int first_round = config_.render.samples_per_pixel;
-  const bool rounds = config_.render.target_relative_error.has_value();
+  const int rounds = config_.render.target_relative_error.has_value() ? 2 : 1;
+  int px[kPacket];
+  uint64_t pixel[kPacket];
   glm::dvec2 shift[kPacket][2];
   for (int i = 0; i < kPacket; ++i) {
-    const int px = block->x0 + std::min(i, block->lanes - 1);
-    const uint64_t pixel = static_cast<uint64_t>(y) * static_cast<uint64_t>(camera_.width()) + static_cast<uint64_t>(px);
-    for (uint64_t r = 0; r < 2; ++r) {
-      Rng u(config_.light_seed, RngKind::PixelJitter, pixel, r);
+    px[i] = block->x0 + std::min(i, block->lanes - 1);
+    pixel[i] = static_cast<uint64_t>(y) * static_cast<uint64_t>(camera_.width()) + static_cast<uint64_t>(px[i]);
+    for (int r = 0; r < rounds; ++r) {
+      Rng u(config_.light_seed, RngKind::PixelJitter, pixel[i], static_cast<uint64_t>(r));
       shift[i][r].x = u.next_double();
       shift[i][r].y = u.next_double();
     }
@@ -323,12 +325,9 @@ void Integrator::trace_camera_block(int x, int y, int s_begin, int s_end, const 
       const size_t j = row + static_cast<size_t>(i);
       valid[i] = i < block->lanes && (!begin || (s >= begin[i] && s < end[i]));
       lanes_valid += valid[i];
-      const int px = block->x0 + std::min(i, block->lanes - 1);
-      const uint64_t pixel =
-          static_cast<uint64_t>(y) * static_cast<uint64_t>(camera_.width()) + static_cast<uint64_t>(px);
-      block->rng.emplace_back(config_.light_seed, RngKind::CameraPath, pixel, static_cast<uint64_t>(s));
-      const glm::dvec2 jit = pixel_jitter(shift[i][rounds && s >= first_round ? 1 : 0], s);
-      block->dir[j] = camera_.direction(px + jit.x, y + jit.y);
+      block->rng.emplace_back(config_.light_seed, RngKind::CameraPath, pixel[i], static_cast<uint64_t>(s));
+      const glm::dvec2 jit = pixel_jitter(shift[i][rounds == 2 && s >= first_round ? 1 : 0], s);
+      block->dir[j] = camera_.direction(px[i] + jit.x, y + jit.y);
       dirs[i] = glm::vec3(block->dir[j]);
     }
     RayHit* hits = block->hit.data() + row;
@@ -511,7 +510,8 @@ bool Integrator::connect_laser_refracted(const NeeVertex& v, double w, const Pix
   const glm::dvec3 lat = to - H * nrm;
   const double D = glm::length(lat);
   glm::dvec3 u = D > 1e-12 * r ? lat / D : glm::dvec3(0.0);
-  const double p = D > 0.0 ? snell_invariant(depth, index, k + 1, D, std::min(index[k] * D / r, 0.5 * p_max), p_max) : 0.0;
+  const double p =
+      D > 0.0 ? snell_invariant(depth, index, k + 1, D, std::min(index[k] * D / r, 0.5 * p_max), p_max) : 0.0;
   double sn[kMaxInterfaces + 1], cs[kMaxInterfaces + 1];
   glm::dvec3 dir[kMaxInterfaces + 1];
   for (int j = 0; j <= k; ++j) {
