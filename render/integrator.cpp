@@ -1057,7 +1057,7 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
       find_guide_targets(sf, bsdf, medium, medium_out_t, &guide, rays);
       if (guide.n > 0) guided_connections(v, medium_out_t, roulette, beta, guide, rng, w * ghost_guided[0], film, rays);
     }
-    // Ghost draws from a Lambertian vertex in air that sees a glossy plate's ghost of the laser.
+    // Ghost draws from a vertex of diffuse lobe that sees a glossy plate's ghost of the laser.
     Ghosts ghosts;
     if (!slabs_.empty() && !last_segment && beta.x > 0.0f && bsdf.has_diffuse()) {
       ghost_targets(sf, medium, &ghosts);
