@@ -3,7 +3,8 @@
 guided connections (render.guided_connections), against an independent high-path reference.
 
 For each setting: its wall time, the pixels above 1.5 times their 3 x 3 median where the reference is
-smooth (within 10 % of its own 3 x 3 median; a lit pixel whose median is 0 counts), and what they hold,
+smooth (within 10 % of its own 3 x 3 median, and no silhouette in the 3 x 3: the reference's ground truth
+sees the same object at the nine pixels' centres; a lit pixel whose median is 0 counts), and what they hold,
 from the run's ground truth: the camera ray through the pixel's centre meets nothing (a silhouette: the
 coverage noise of the paths' positions in the pixel), the excess over the reference is indirect light
 (`indirect_laser`, a reflection before the vertex that meets the laser), or other; the worst such ratio
@@ -22,7 +23,7 @@ import tempfile
 import time
 
 import numpy as np
-from scipy.ndimage import median_filter
+from scipy.ndimage import maximum_filter, median_filter, minimum_filter
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
@@ -52,12 +53,14 @@ def main():
                     help="the light seeds of the runs compared (comma-separated)")
     a = ap.parse_args()
     work = tempfile.mkdtemp(prefix="spadgen-fireflies-")
-    _, ref, _ = run(a.spadgen, a.crop, [f"render.samples_per_pixel={a.reference}", "seeds.light=1000"],
-                 os.path.join(work, "reference"))
+    _, ref, ref_gt = run(a.spadgen, a.crop, [f"render.samples_per_pixel={a.reference}", "seeds.light=1000"],
+                         os.path.join(work, "reference"))
     mr = median_filter(ref, 3)
     inner = np.zeros_like(ref, bool)
     inner[1:-1, 1:-1] = True
-    smooth = inner & (ref > 0) & (np.abs(ref - mr) <= 0.1 * mr)
+    ids = ref_gt["object_id"]
+    one_object = maximum_filter(ids, 3) == minimum_filter(ids, 3)
+    smooth = inner & (ref > 0) & (np.abs(ref - mr) <= 0.1 * mr) & one_object
     lit = ref > 0
     print(f"reference: {a.reference} paths, seeds.light=1000; crop {a.crop}; {smooth.sum()} smooth pixels")
     print("| setting | light seed | time (s) | pixels > 1.5 x median (silhouette / indirect / other) | > 3 x | "

@@ -53,13 +53,25 @@ glm::dvec2 strip_coordinates(const glm::dvec3& p, const glm::dvec3& o, const glm
   return {(da * bb - db * ab) / det, (db * aa - da * ab) / det};
 }
 
+double distance_to_triangle(const glm::dvec3& p, const glm::dvec3& p0, const glm::dvec3& e1, const glm::dvec3& e2) {
+  const glm::dvec2 st = strip_coordinates(p, p0, e1, e2);
+  if (st.x >= 0.0 && st.y >= 0.0 && st.x + st.y <= 1.0) return 0.0;
+  const glm::dvec3 q = p0 + st.x * e1 + st.y * e2;  // p projected on the plane
+  const auto to_segment = [&](const glm::dvec3& a, const glm::dvec3& e) {
+    const double t = std::clamp(glm::dot(q - a, e) / glm::dot(e, e), 0.0, 1.0);
+    return glm::length(q - (a + t * e));
+  };
+  return std::min({to_segment(p0, e1), to_segment(p0, e2), to_segment(p0 + e1, e2 - e1)});
+}
+
 bool GuideTargets::sample(int i, float u, float v, glm::vec3* w) const {
   const GuideTarget& g = t[i];
   if (!g.strip) return sample_glossy_target(g.lobe, u, v, w);
   const GlossyStrip& p = *g.part;
-  const double a0 = std::atan(-g.s0 / g.c), a1 = std::atan((1.0 - g.s0) / g.c);
-  const double s = std::clamp(g.s0 + g.c * std::tan(a0 + double(u) * (a1 - a0)), 0.0, 1.0);
-  const glm::dvec3 d = p.o + s * p.a + double(v) * p.b - origin;
+  const double tt = v, s0 = g.s0 + g.s1 * tt;
+  const double a0 = std::atan(-s0 / g.c), a1 = std::atan((1.0 - s0) / g.c);
+  const double s = std::clamp(s0 + g.c * std::tan(a0 + double(u) * (a1 - a0)), 0.0, 1.0);
+  const glm::dvec3 d = p.o + s * p.a + tt * p.b - origin;
   const double len = glm::length(d);
   if (!(len > 0.0)) return false;
   *w = glm::vec3(d / len);
@@ -79,8 +91,9 @@ double GuideTargets::pdf(int i, const glm::vec3& wf) const {
   if (!(dist > 0.0)) return 0.0;
   const glm::dvec2 st = strip_coordinates(origin + dist * w, p.o, p.a, p.b);
   if (!(st.x >= 0.0 && st.x <= 1.0 && st.y >= 0.0 && st.y <= 1.0)) return 0.0;
-  const double a0 = std::atan(-g.s0 / g.c), a1 = std::atan((1.0 - g.s0) / g.c);
-  const double x = (st.x - g.s0) / g.c;
+  const double s0 = g.s0 + g.s1 * st.y;
+  const double a0 = std::atan(-s0 / g.c), a1 = std::atan((1.0 - s0) / g.c);
+  const double x = (st.x - s0) / g.c;
   const double ps = 1.0 / (g.c * (1.0 + x * x) * (a1 - a0));
   return ps / p.area * dist * dist / std::fabs(wn);
 }

@@ -55,15 +55,23 @@ struct GlossyStrip {
 };
 // The affine coordinates (s, t) of point p (projected on the plane) in o + s a + t b.
 glm::dvec2 strip_coordinates(const glm::dvec3& p, const glm::dvec3& o, const glm::dvec3& a, const glm::dvec3& b);
+// The distance from p, projected on the plane of the triangle p0, p0 + e1, p0 + e2, to the triangle: 0 inside.
+double distance_to_triangle(const glm::dvec3& p, const glm::dvec3& p0, const glm::dvec3& e1, const glm::dvec3& e2);
+
+// A plate's reflection of the laser is aimed at while its mirror point (or, for a ghost, its entry point)
+// lies within this many of the lobe's widths (alpha over the mirror point's turn per metre) of the part:
+// a rough face's lobe reaches across its edge, and the BSDF's draws alone, which find that light, would
+// weight it in full (at 8 widths GGX's density is below 1 / 4000 of its peak).
+constexpr double kGuideEdgeWidths = 8.0;
 
 // What a vertex's guided connections aim at: a glossy reflection of the laser (draws from
-// sample_glossy_target), or a strip (s from a Cauchy law around s0 of scale c, truncated to [0, 1], in
-// units of the long side; t uniform).
+// sample_glossy_target), or a strip (t uniform; s from a Cauchy law of scale c around s0 + s1 t, truncated
+// to [0, 1], in units of the long side).
 struct GuideTarget {
   bool strip = false;
   GlossyTarget lobe;
   const GlossyStrip* part = nullptr;
-  double s0 = 0.0, c = 1.0;
+  double s0 = 0.0, s1 = 0.0, c = 1.0;
 };
 
 constexpr int kMaxGuideTargets = 4;

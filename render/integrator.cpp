@@ -669,33 +669,43 @@ void Integrator::find_guide_targets(const Surface& sf, const Bsdf& bsdf, int med
   }
 }
 
-namespace {
-
-}  // namespace
-
-
 // A Lambertian vertex in air aims at the glossy plates' parts that can mirror the laser towards it
 // (both on the same side of the part's plane): at a part's glossy reflection of the laser where the
-// mirror point (where the line to the laser's image behind the plane meets it) lies on the part; and
+// mirror point (where the line to the laser's image behind the plane meets it) lies on the part or
+// within kGuideEdgeWidths of the lobe's widths of it (one target per plane: a face of two triangles
+// aims once); and
 // along a sliver (a plate's 2 mm edge, which the vertex's BSDF draws rarely hit) whose mirror point is
 // beside it, when the half-vector at the sliver's point nearest the mirror point is within 25 degrees
-// of its normal: the lobe's tail there outshines the rest. Along the sliver the tail falls as
-// 1 / (1 + (s / c)^2)^2, c = max(tan(tilt), alpha) / k with k = (1 / r_vertex + 1 / r_laser) / 2 the
-// half-vector's turn per metre, so s is drawn from a Cauchy law of that scale around the nearest point
-// (the integrand over the density stays bounded). No ray is traced to choose: the targets depend on the
-// vertex alone.
+// of its normal: the lobe's tail there outshines the rest. The half-vector's slope m is nearly linear
+// along the sliver, so GGX's D ~ 1 / (alpha^2 + |m|^2)^2 falls along it as 1 / (1 + ((s - s*) / c)^2)^2,
+// about the s* of least |m| (which moves with t across the sliver), of c = sqrt(alpha^2 + m*^2) / |dm/ds|:
+// s is drawn from a Cauchy law of that scale (the integrand over the density stays bounded). At grazing
+// incidence, as on a plate's 2 mm edge, |dm/ds| is 1 / cos(theta) times its value at normal incidence:
+// a glint of 0.1 mm. No ray is traced to choose: the targets depend on the vertex alone.
 void Integrator::lambertian_guide_targets(const Surface& sf, GuideTargets* out) const {
   const glm::dvec3 x(sf.p), L = laser_.position;
+  glm::dvec3 plane_n[kMaxGuideTargets];
+  double plane_d[kMaxGuideTargets];
+  int planes = 0;
   for (const GlossyPart& part : parts_) {
     if (out->n == kMaxGuideTargets) return;
     const double hx = glm::dot(x - part.p0, part.n), hl = glm::dot(L - part.p0, part.n);
     if (!(hx * hl > 0.0)) continue;
     const glm::dvec3 q = x + (hx / (hx + hl)) * (L - 2.0 * hl * part.n - x);
-    const glm::dvec2 st = strip_coordinates(q, part.p0, part.e1, part.e2);
-    if (!(st.x >= 0.0 && st.y >= 0.0 && st.x + st.y <= 1.0)) continue;
     const double r_vertex = glm::length(q - x), r_laser = glm::length(L - q);
+    if (!(r_vertex > 0.0 && r_laser > 0.0)) continue;
+    const double k = 0.5 * (1.0 / r_vertex + 1.0 / r_laser);
+    if (distance_to_triangle(q, part.p0, part.e1, part.e2) > kGuideEdgeWidths * double(part.alpha) / k) continue;
+    // One target per plane (a face of several triangles): the lobe depends on the plane alone.
+    const double offset = glm::dot(part.p0, part.n);
+    bool seen = false;
+    for (int i = 0; i < planes; ++i)
+      seen = seen || (std::fabs(glm::dot(plane_n[i], part.n)) > 1.0 - 1e-9 &&
+                      std::fabs(glm::dot(plane_n[i], part.p0) - plane_d[i]) <= 1e-9 * (1.0 + std::fabs(offset)));
+    if (seen) continue;
     const glm::dvec3 wl = (L - q) / r_laser;
     if (!(laser_.intensity_towards(-wl) > 0.0)) continue;
+    plane_n[planes] = part.n, plane_d[planes++] = offset;
     GuideTarget& g = out->t[out->n++];
     g.strip = false;
     g.lobe = GlossyTarget{glm::vec3(hx > 0.0 ? part.n : -part.n), glm::vec3(wl),
@@ -715,13 +725,30 @@ void Integrator::lambertian_guide_targets(const Surface& sf, GuideTargets* out) 
     const glm::dvec3 wl = (L - near) / r_laser;
     const double ch = glm::dot(glm::normalize(wl + (x - near) / r_vertex), nb);
     if (ch < kGuideMaxTilt || !(laser_.intensity_towards(-wl) > 0.0)) continue;
-    const double k = 0.5 * (1.0 / r_vertex + 1.0 / r_laser);
-    const double tilt = std::sqrt(std::max(0.0, 1.0 - ch * ch)) / ch;
+    // The half-vector's slope m (its part along the sliver over its part along nb) at the nearest point,
+    // and its derivatives along s and t: u = wl + wv moves by -(dp - (dp . w) w) / r for each of w.
+    const glm::dvec3 wv = (x - near) / r_vertex, h = wl + wv;
+    const double hn = glm::dot(h, nb);
+    const glm::dvec3 m0 = (h - hn * nb) / hn;
+    const auto slope_rate = [&](const glm::dvec3& dp) {
+      const glm::dvec3 dh = -(dp - glm::dot(dp, wl) * wl) / r_laser - (dp - glm::dot(dp, wv) * wv) / r_vertex;
+      const double dhn = glm::dot(dh, nb);
+      return ((dh - dhn * nb) * hn - (h - hn * nb) * dhn) / (hn * hn);
+    };
+    const glm::dvec3 A = slope_rate(strip.a), B = slope_rate(strip.b);
+    const double a2 = glm::dot(A, A);
+    if (!(a2 > 0.0)) continue;
+    // Linear in (s, t) about the nearest point (s_n, t_n), |m| is least along s at
+    // s*(t) = s_n - (m0 + (t - t_n) B) . A / |A|^2, where it is |m0 + (s* - s_n) A + (t - t_n) B|.
+    const double t_n = std::clamp(st.y, 0.0, 1.0);
+    const double shift = -glm::dot(m0, A) / a2, per_t = -glm::dot(B, A) / a2;
+    const double m_least = glm::length(m0 + shift * A);
     GuideTarget& g = out->t[out->n++];
     g.strip = true;
     g.part = &strip;
-    g.s0 = s0;
-    g.c = std::max(tilt, double(strip.alpha)) / k / glm::length(strip.a);
+    g.s0 = s0 + shift - t_n * per_t;
+    g.s1 = per_t;
+    g.c = std::sqrt(double(strip.alpha) * double(strip.alpha) + m_least * m_least) / std::sqrt(a2);
   }
 }
 
@@ -750,7 +777,8 @@ void Integrator::guided_connections(const NeeVertex& a, int medium_t, bool roule
     for (int l = 0; l < kLobes; ++l) {
       if (!(lv.f_cos[l].x > 0.0f)) continue;
       double p = lv.pdf[l];
-      if (roulette && p > 0.0) p *= roulette_q(rr_beta * lv.f_cos[l] / lv.pdf[l]);
+      if (roulette && p > 0.0)
+        p *= roulette_q(rr_beta * lv.f_cos[l] * (l == kTransmissionLobe ? a.bsdf.eta() * a.bsdf.eta() : 1.0f) / lv.pdf[l]);
       f += lv.f_cos[l] * float(pi / (p * p + pg2));
     }
     if (!(f.x > 0.0f)) continue;
@@ -832,23 +860,20 @@ void Integrator::ghost_targets(const Surface& sf, int medium, Ghosts* out) const
     if (!(laser_.intensity_towards(-wl) > 0.0)) continue;
     const double sg = p / n;
     const glm::dvec3 w0 = medium < 0 ? wl : sg * u + std::sqrt(1.0 - sg * sg) * nrm;
-    // The entry point must lie on one of the plate's faces in the near plane.
-    const glm::dvec3 q = x + (hx / ca) * w0;
+    const double rx = hx / ca, rl = hl / ca;
+    const double alpha = std::clamp(
+        2.0 * std::sqrt(2.0) * (medium < 0 ? n : 1.0) * double(s.alpha) / (1.0 + rx / std::max(rl, 1e-9)), 1e-3, 0.5);
+    // The entry point must lie on one of the plate's faces in the near plane, or within the lobe's reach of one.
+    const glm::dvec3 q = x + rx * w0;
     bool on = medium >= 0;
     for (const GlossyPart& part : parts_) {
+      if (on) break;
       const double off = std::fabs(glm::dot(part.p0, s.n) - near);
       if (std::fabs(glm::dot(part.n, s.n)) < 1.0 - 1e-6 || off > 1e-6 + 1e-9 * std::fabs(near)) continue;
-      const glm::dvec2 st = strip_coordinates(q, part.p0, part.e1, part.e2);
-      if (st.x >= 0.0 && st.y >= 0.0 && st.x + st.y <= 1.0) {
-        on = true;
-        break;
-      }
+      on = distance_to_triangle(q, part.p0, part.e1, part.e2) <= kGuideEdgeWidths * alpha * rx;
     }
     if (!on) continue;
-    const double rx = hx / ca, rl = hl / ca;
-    const double alpha =
-        2.0 * std::sqrt(2.0) * (medium < 0 ? n : 1.0) * double(s.alpha) / (1.0 + rx / std::max(rl, 1e-9));
-    out->lobe[out->n++] = DirectionLobe{glm::vec3(w0), float(std::clamp(alpha, 1e-3, 0.5))};
+    out->lobe[out->n++] = DirectionLobe{glm::vec3(w0), float(alpha)};
   }
 }
 
@@ -874,7 +899,7 @@ double Integrator::Ghosts::sum_pdf2(const glm::vec3& w) const {
 // from the direction alike, the rest cancels from the weights. (The other lobes' parts of a's light are
 // the BSDF's alone.)
 void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int deltas_after, bool roulette,
-                                   const Ghosts& ghosts, Rng& rng, double w, const PixelFilm& film,
+                                   float eta_scale, const Ghosts& ghosts, Rng& rng, double w, const PixelFilm& film,
                                    RayCounts* rays) const {
   const RenderConfig& rc = config_.render;
   for (int i = 0; i < ghosts.n; ++i) {
@@ -887,7 +912,7 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
     const LobeValues lv = a.bsdf.lobes(d);
     if (!(lv.f_cos[kDiffuseLobe].x > 0.0f) || !(lv.pdf[kDiffuseLobe] > 0.0f)) continue;
     const Spec f = lv.f_cos[kDiffuseLobe];
-    Spec rr_beta = a.beta * f / lv.pdf[kDiffuseLobe];  // the camera path's throughput after a's draw
+    Spec rr_beta = a.beta * eta_scale * f / lv.pdf[kDiffuseLobe];  // what the camera path's roulette sees after a's draw
     double p = lv.pdf[kDiffuseLobe];
     if (roulette) {
       const float q = roulette_q(rr_beta);
@@ -958,6 +983,7 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
       if (bs.delta && ++deltas > kMaxDeltaEvents) break;
       reflected = reflected || !bs.transmitted;
       beta *= bs.weight, rr_beta *= bs.weight;
+      if (bs.transmitted) rr_beta *= bsdf.eta() * bsdf.eta();
       if (bs.transmitted && volume) medium = wo_front ? sf.material : -1;
       float q = 1.0f;
       if (rr) {
@@ -986,6 +1012,10 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
   double opl = 0.0;  // optical path from the camera centre, metres
   glm::dvec3 previous = camera_.position();
   int medium = -1, vertices = 0, deltas = 0;
+  // The product of eta^2 over the interfaces crossed (pbrt's etaScale): inside a volume of index n, beta
+  // holds the radiance's 1 / n^2 compression, which leaving gives back; Russian roulette sees beta times
+  // this, so that a path in glass is not stopped (and its survivors weighted up) for a factor it regains.
+  float eta_scale = 1.0f;
   bool reflected = false;     // a reflection (delta or not) happened on the way from the camera
   bool last_segment = false;  // after the last NEE vertex: only the environment or emission is left
   double ambient = 0.0;
@@ -1055,13 +1085,14 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
         (bsdf.glossy() || (bsdf.lambertian() && medium < 0 && !parts_.empty()))) {
       const int medium_out_t = volume ? (wo_front ? sf.material : -1) : medium;
       find_guide_targets(sf, bsdf, medium, medium_out_t, &guide, rays);
-      if (guide.n > 0) guided_connections(v, medium_out_t, roulette, beta, guide, rng, w * ghost_guided[0], film, rays);
+      if (guide.n > 0)
+        guided_connections(v, medium_out_t, roulette, beta * eta_scale, guide, rng, w * ghost_guided[0], film, rays);
     }
     // Ghost draws from a vertex of diffuse lobe that sees a glossy plate's ghost of the laser.
     Ghosts ghosts;
     if (!slabs_.empty() && !last_segment && beta.x > 0.0f && bsdf.has_diffuse()) {
       ghost_targets(sf, medium, &ghosts);
-      if (ghosts.n > 0) ghost_connections(v, vertices, deltas, roulette, ghosts, rng, w, film, rays);
+      if (ghosts.n > 0) ghost_connections(v, vertices, deltas, roulette, eta_scale, ghosts, rng, w, film, rays);
     }
 
     const BsdfSample bs = bsdf.sample(uniform3(rng));
@@ -1070,9 +1101,10 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
     reflected = reflected || !bs.transmitted;
     beta *= bs.weight;
     if (bs.transmitted && volume) medium = wo_front ? sf.material : -1;
+    if (bs.transmitted) eta_scale *= bsdf.eta() * bsdf.eta();
     float q = 1.0f;
     if (roulette) {
-      q = roulette_q(beta);
+      q = roulette_q(beta * eta_scale);
       if (!(q > 0.0f) || uniform(rng) >= q) break;
       beta /= q;
     }

@@ -170,8 +170,8 @@ class Integrator {
                           RayCounts* rays) const;
   void lambertian_guide_targets(const Surface& sf, GuideTargets* out) const;
   // a: a glossy (or Lambertian) vertex; medium_t: the medium on the other side of its surface; roulette:
-  // its BSDF draw faces Russian roulette, with the survival probability a camera path of throughput rr_beta
-  // at a would have (a.beta itself, except in ghost_connections).
+  // its BSDF draw faces Russian roulette, with the survival probability the camera path at a would have:
+  // rr_beta is what its roulette sees there (its throughput times its eta_scale, see trace_path).
   void guided_connections(const NeeVertex& a, int medium_t, bool roulette, const Spec& rr_beta,
                           const GuideTargets& guide, Rng& rng, double w, const PixelFilm& film,
                           RayCounts* rays) const;
@@ -189,9 +189,9 @@ class Integrator {
   // medium: the vertex's (-1: air).
   void ghost_targets(const Surface& sf, int medium, Ghosts* out) const;
   // a: the vertex of diffuse lobe (vertices_after, deltas_after: the path's non-delta vertices including a and
-  // its delta events so far; roulette: a's BSDF draw faces Russian roulette).
+  // its delta events so far; roulette: a's BSDF draw faces Russian roulette; eta_scale: the camera path's, at a).
   void ghost_connections(const NeeVertex& a, int vertices_after, int deltas_after, bool roulette,
-                         const Ghosts& ghosts, Rng& rng, double w, const PixelFilm& film, RayCounts* rays) const;
+                         float eta_scale, const Ghosts& ghosts, Rng& rng, double w, const PixelFilm& film, RayCounts* rays) const;
   // Russian roulette's survival probability for a path of throughput beta: its laser channel, or the larger
   // channel when the scene has ambient light, at most 0.95.
   float roulette_q(const Spec& beta) const {

@@ -250,7 +250,7 @@ TEST(Accuracy, GuidedConnectionsKeepTheExpectationAndLowerTheVariance) {
 // The plate's 2 mm edge at x = 0 glints on the wall behind it (laser -> edge -> wall -> camera): the wall's
 // Lambertian vertices aim along the edge (a sliver) and at its mirror point. Over the 16 x 16 pixels that
 // see the glint's band: at roughness 0.15, where 1024 BSDF draws per pixel converge, the same expectation
-// (4 combined standard errors; measured 0.9); at 0.1 the variance 4.3 times lower. (At the shipped 0.05
+// (4 combined standard errors; measured 0.2); at 0.1 the variance 2.5 times lower. (At the shipped 0.05
 // the BSDF draws alone do not converge in any affordable number of paths: 8192 per pixel stay 0.35 %
 // below the guided estimate, which agrees with itself from 256 to 8192 paths, because the glint's peak,
 // a few 1e-7 sr seen from the wall, is hit about once in 3e7 paths.)

@@ -23,8 +23,9 @@ GlossyStrip strip() {
 }
 
 // The density integrates to 1 over the strip (uniform points on it, pdf |cos| / r^2 times the area:
-// 5 sigma), every draw lands on the strip with a positive density, and the draws' share below s0 is the
-// truncated Cauchy law's, atan(s0 / c) / (atan((1 - s0) / c) + atan(s0 / c)), computed here (5 sigma).
+// 5 sigma), every draw lands on the strip with a positive density, and the draws' share below s = 0.3 is
+// the truncated Cauchy law's about the centre 0.25 + 0.1 t, averaged over t uniform: the mean over t of
+// (atan((0.3 - m) / c) + atan(m / c)) / (atan((1 - m) / c) + atan(m / c)), computed here (5 sigma).
 TEST(Guide, StripDrawsHaveTheirDensity) {
   const GlossyStrip s = strip();
   GuideTargets g;
@@ -32,7 +33,8 @@ TEST(Guide, StripDrawsHaveTheirDensity) {
   g.n = 1;
   g.t[0].strip = true;
   g.t[0].part = &s;
-  g.t[0].s0 = 0.3;
+  g.t[0].s0 = 0.25;
+  g.t[0].s1 = 0.1;
   g.t[0].c = 0.05;
   Rng rng(21, RngKind::Test, 1);
   const int n = 200000;
@@ -59,7 +61,12 @@ TEST(Guide, StripDrawsHaveTheirDensity) {
   // A draw at the strip's edge whose float direction falls just off it has density 0 (its light is lost,
   // a bias of that share of the strip's guided light): measured 1 in 200,000.
   EXPECT_LE(lost, n / 10000) << lost;
-  const double expected = std::atan(0.3 / 0.05) / (std::atan(0.7 / 0.05) + std::atan(0.3 / 0.05));
+  double expected = 0.0;
+  const int steps = 10000;
+  for (int k = 0; k < steps; ++k) {
+    const double m = 0.25 + 0.1 * (k + 0.5) / steps, c = 0.05;
+    expected += (std::atan((0.3 - m) / c) + std::atan(m / c)) / (std::atan((1 - m) / c) + std::atan(m / c)) / steps;
+  }
   EXPECT_NEAR(double(below) / n, expected, 5 * std::sqrt(expected * (1 - expected) / n));
   EXPECT_DOUBLE_EQ(g.sum_pdf2(glm::vec3(0, 0, 1)), 0.0);  // a direction away from the strip
 }
