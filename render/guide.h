@@ -30,7 +30,7 @@ struct DirectionLobe {
 bool sample_direction_lobe(const DirectionLobe& g, float u, float v, glm::vec3* w);
 float direction_lobe_pdf(const DirectionLobe& g, const glm::vec3& w);
 
-// A glossy plate's two parallel faces, for the ghost of the laser that a vertex of diffuse lobe behind the
+// A glossy plate's two parallel faces, for the ghost of the laser that a non-delta vertex behind the
 // plate sees through it (Integrator::ghost_targets): planes n . x = lo and n . x = hi (hi - lo the
 // thickness, n unit), of the plate's volume material.
 struct GlossySlab {

@@ -812,17 +812,18 @@ void Integrator::guided_connections(const NeeVertex& a, int medium_t, bool roule
   }
 }
 
-// The ghost of the laser a vertex x of diffuse lobe in air sees through a glossy plate: the light that enters the
+// The ghost of the laser a non-delta vertex x in air sees through a glossy plate: the light that enters the
 // plate's far face, reflects inside off its near face, then off its far face, and leaves through the near
 // face towards x (or the reverse). Unfolded, it is a straight refracted path through three times the
 // plate's thickness, whose Snell invariant p solves rho(p) = (h_x + h_L) tan(theta) + 3 d tan(theta_glass)
 // = D (the lateral offset), as in connect_laser_refracted. A camera path meets that light only through
 // three narrow lobes (the transmission into the plate, then the two reflections: the last one evaluated by
-// the laser connection), which the BSDF's draws at x find rarely; the ghost's target is a GGX lobe of
+// the laser connection), which the BSDF's draws at x find rarely (x's own lobe, if narrow, rarely too); the ghost's target is a GGX lobe of
 // directions about the ghost's direction at x, of alpha 2 sqrt(2) n alpha_plate / (1 + r_x / r_L) (two
 // reflections each turning the ray by twice its microfacet's tilt, n times wider outside, and the
 // parallax of moving along the plate as for the guided targets). From a vertex inside the plate, on its
-// face away from the laser (a diffuse lobe of the plate itself), the ghost is two reflections away: the
+// face away from the laser (the plate's own back face: its diffuse lobe, or its glossy reflection of a camera
+// ray that entered the plate), the ghost is two reflections away: the
 // unfolded path starts in the glass, and the lobe, in the glass, has alpha 2 sqrt(2) alpha_plate. As for
 // the guided targets, the choice depends on x alone, so the densities are exact whatever it is.
 void Integrator::ghost_targets(const Surface& sf, int medium, Ghosts* out) const {
@@ -887,17 +888,17 @@ double Integrator::Ghosts::sum_pdf2(const glm::vec3& w) const {
   return s;
 }
 
-// The ghost draws from a vertex a of diffuse lobe (for each ghost, with probability kGhostDrawShare): a
+// The ghost draws from a non-delta vertex a (for each ghost, with probability kGhostDrawShare): a
 // direction drawn from the ghost's lobe, then the camera path's own rules (the BSDF's draws, Russian
-// roulette with the survival probabilities the camera path would have, the guided connections) for the
-// next vertices up to ghosts.reach, whose own laser connections are left to the camera path; what the last
-// returns (by its laser connection, or by the guided connections of the one before) is the ghost's
-// estimate. trace_path weights the same light of its own diffuse draw at a by the power heuristic's share
-// p_a^2 / (p_a^2 + sum_i p_i^2) over the direction at a (p_a the diffuse lobe's density times a's survival
-// probability, p_i the ghosts' densities, their draw share included); the draw from ghost i adds
-// f(w) p_i / (p_a^2 + sum_k p_k^2) times the rest of the path's estimate. As the two strategies continue
-// from the direction alike, the rest cancels from the weights. (The other lobes' parts of a's light are
-// the BSDF's alone.)
+// roulette, the guided connections) for the next vertices up to ghosts.reach, whose own laser connections
+// are left to the camera path; what the last returns (by its laser connection, or by the guided
+// connections of the one before) is the ghost's estimate. The ghost comes back to a's side, so a's
+// reflecting lobes share its light: trace_path weights the light of its own draw at a through lobe L by
+// the power heuristic's share p_L^2 / (p_L^2 + sum_i p_i^2) over the direction at a (p_L the lobe's density
+// times a's survival probability through it, p_i the ghosts' densities, their draw share included); the
+// draw from ghost i adds sum_L f_L(w) p_i / (p_L^2 + sum_k p_k^2) times the rest of the path's estimate.
+// Both strategies estimate the same rest from the direction on (Russian roulette's later survival
+// probabilities change its variance, not its expectation), so the rest cancels from the weights.
 void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int deltas_after, bool roulette,
                                    float eta_scale, const Ghosts& ghosts, Rng& rng, double w, const PixelFilm& film,
                                    RayCounts* rays) const {
@@ -909,18 +910,23 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
     if (!sample_direction_lobe(ghosts.lobe[i], u1, u2, &d)) continue;
     const double pi = ghosts.pdf(i, d);
     if (!(pi > 0.0)) continue;
+    if ((glm::dot(d, a.sf.ng) > 0.0f) != a.wo_front) continue;  // the ghost comes back to a's side
     const LobeValues lv = a.bsdf.lobes(d);
-    if (!(lv.f_cos[kDiffuseLobe].x > 0.0f) || !(lv.pdf[kDiffuseLobe] > 0.0f)) continue;
-    const Spec f = lv.f_cos[kDiffuseLobe];
-    Spec rr_beta = a.beta * eta_scale * f / lv.pdf[kDiffuseLobe];  // what the camera path's roulette sees after a's draw
-    double p = lv.pdf[kDiffuseLobe];
-    if (roulette) {
-      const float q = roulette_q(rr_beta);
-      if (!(q > 0.0f)) continue;
-      p *= q;
-      rr_beta /= q;
+    const double ph2 = ghosts.sum_pdf2(d);
+    Spec f(0.0f), f_sum(0.0f);
+    double p_sum = 0.0;
+    for (const int l : {kDiffuseLobe, kSpecularLobe}) {
+      if (!(lv.f_cos[l].x > 0.0f) || !(lv.pdf[l] > 0.0f)) continue;
+      double p = lv.pdf[l];
+      if (roulette) p *= roulette_q(a.beta * eta_scale * lv.f_cos[l] / lv.pdf[l]);
+      f += lv.f_cos[l] * float(pi / (p * p + ph2));
+      f_sum += lv.f_cos[l], p_sum += p;
     }
-    Spec beta = a.beta * f * float(pi / (p * p + ghosts.sum_pdf2(d)));
+    if (!(f.x > 0.0f) || !(p_sum > 0.0)) continue;
+    Spec beta = a.beta * f;
+    // What the camera path's roulette would see after a's draw (any positive value keeps the rest unbiased;
+    // this one is a draw through the lobes together).
+    Spec rr_beta = a.beta * eta_scale * f_sum / float(p_sum);
     double opl = a.opl;
     int medium = a.medium, vertices = vertices_after, deltas = deltas_after;
     bool reflected = true;  // a's draw is a reflection
@@ -1088,9 +1094,9 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
       if (guide.n > 0)
         guided_connections(v, medium_out_t, roulette, beta * eta_scale, guide, rng, w * ghost_guided[0], film, rays);
     }
-    // Ghost draws from a vertex of diffuse lobe that sees a glossy plate's ghost of the laser.
+    // Ghost draws from a vertex that sees a glossy plate's ghost of the laser.
     Ghosts ghosts;
-    if (!slabs_.empty() && !last_segment && beta.x > 0.0f && bsdf.has_diffuse()) {
+    if (!slabs_.empty() && !last_segment && beta.x > 0.0f && bsdf.has_non_delta()) {
       ghost_targets(sf, medium, &ghosts);
       if (ghosts.n > 0) ghost_connections(v, vertices, deltas, roulette, eta_scale, ghosts, rng, w, film, rays);
     }
@@ -1112,7 +1118,7 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
       const double p = double(bsdf.lobes(bs.wi).pdf[bs.lobe]) * q;
       const double pg2 = guide.sum_pdf2(bs.wi);
       if (pg2 > 0.0) next_mis = p * p / (p * p + pg2);
-      const double ph2 = bs.lobe == kDiffuseLobe ? ghosts.sum_pdf2(bs.wi) : 0.0;
+      const double ph2 = bs.transmitted ? 0.0 : ghosts.sum_pdf2(bs.wi);
       if (ph2 > 0.0) {  // the light met reach - 1 vertices ahead (guided) and reach ahead (laser connection)
         const double share = p * p / (p * p + ph2);
         ghost_guided[ghosts.reach - 1] *= share;

@@ -175,7 +175,7 @@ class Integrator {
   void guided_connections(const NeeVertex& a, int medium_t, bool roulette, const Spec& rr_beta,
                           const GuideTargets& guide, Rng& rng, double w, const PixelFilm& film,
                           RayCounts* rays) const;
-  // The ghosts of the laser a vertex of diffuse lobe sees through a glossy plate (twice reflected inside),
+  // The ghosts of the laser a non-delta vertex sees through a glossy plate (twice reflected inside),
   // from the air behind the plate or from the plate's back face inside.
   struct Ghosts {
     DirectionLobe lobe[kMaxGuideTargets];
@@ -188,7 +188,7 @@ class Integrator {
   };
   // medium: the vertex's (-1: air).
   void ghost_targets(const Surface& sf, int medium, Ghosts* out) const;
-  // a: the vertex of diffuse lobe (vertices_after, deltas_after: the path's non-delta vertices including a and
+  // a: the non-delta vertex (vertices_after, deltas_after: the path's non-delta vertices including a and
   // its delta events so far; roulette: a's BSDF draw faces Russian roulette; eta_scale: the camera path's, at a).
   void ghost_connections(const NeeVertex& a, int vertices_after, int deltas_after, bool roulette,
                          float eta_scale, const Ghosts& ghosts, Rng& rng, double w, const PixelFilm& film, RayCounts* rays) const;
