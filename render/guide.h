@@ -41,10 +41,12 @@ struct GlossySlab {
   int material;
 };
 
-// A part of a glossy plate (one triangle): Lambertian vertices aim at its reflection of the laser.
+// A part of a glossy plate (one triangle): Lambertian vertices aim at its reflection of the laser, unless it
+// is half of a sliver (a GlossyStrip, aimed at along its length instead).
 struct GlossyPart {
   glm::dvec3 p0, e1, e2, n;  // corner, edges, unit normal
   float alpha;
+  bool sliver = false;
 };
 // A sliver of a glossy plate (its thin edge: a parallelogram o + s a + t b, s, t in [0, 1], |b| < |a| / 20),
 // which Lambertian vertices also aim at over its length.

@@ -154,10 +154,11 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
       continue;
     const auto corner = [&](size_t t, int k) { return glm::dvec3(mesh.positions[mesh.indices[3 * t + size_t(k)]]); };
     const size_t first_part = parts_.size();
+    std::vector<size_t> part_of(nt, SIZE_MAX);  // triangle -> its part
     for (size_t t = 0; t < nt; ++t) {
       const glm::dvec3 e1 = corner(t, 1) - corner(t, 0), e2 = corner(t, 2) - corner(t, 0), cr = glm::cross(e1, e2);
       const double twice = glm::length(cr);
-      if (twice > 0.0) parts_.push_back(GlossyPart{corner(t, 0), e1, e2, cr / twice, mp.alpha});
+      if (twice > 0.0) part_of[t] = parts_.size(), parts_.push_back(GlossyPart{corner(t, 0), e1, e2, cr / twice, mp.alpha});
     }
     // A plate: a volume whose largest faces (by area, summed over the triangles of one normal) lie in two
     // parallel planes.
@@ -202,6 +203,8 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
         const glm::dvec3 lng = a_long ? a : b, shrt = a_long ? b : a;
         if (glm::length(shrt) >= 0.05 * glm::length(lng)) continue;
         strips_.push_back(GlossyStrip{o, lng, shrt, cr / area, area, mp.alpha});
+        for (const size_t i : {part_of[t], part_of[u]})
+          if (i != SIZE_MAX) parts_[i].sliver = true;
       }
   }
   ambient_on_ = ambient.any() || shading.has_emission();
@@ -689,13 +692,12 @@ void Integrator::lambertian_guide_targets(const Surface& sf, GuideTargets* out) 
   int planes = 0;
   for (const GlossyPart& part : parts_) {
     if (out->n == kMaxGuideTargets) return;
+    if (part.sliver) continue;
     const double hx = glm::dot(x - part.p0, part.n), hl = glm::dot(L - part.p0, part.n);
     if (!(hx * hl > 0.0)) continue;
     const glm::dvec3 q = x + (hx / (hx + hl)) * (L - 2.0 * hl * part.n - x);
     const double r_vertex = glm::length(q - x), r_laser = glm::length(L - q);
     if (!(r_vertex > 0.0 && r_laser > 0.0)) continue;
-    const double k = 0.5 * (1.0 / r_vertex + 1.0 / r_laser);
-    if (distance_to_triangle(q, part.p0, part.e1, part.e2) > kGuideEdgeWidths * double(part.alpha) / k) continue;
     // One target per plane (a face of several triangles): the lobe depends on the plane alone.
     const double offset = glm::dot(part.p0, part.n);
     bool seen = false;
@@ -703,6 +705,8 @@ void Integrator::lambertian_guide_targets(const Surface& sf, GuideTargets* out) 
       seen = seen || (std::fabs(glm::dot(plane_n[i], part.n)) > 1.0 - 1e-9 &&
                       std::fabs(glm::dot(plane_n[i], part.p0) - plane_d[i]) <= 1e-9 * (1.0 + std::fabs(offset)));
     if (seen) continue;
+    const double k = 0.5 * (1.0 / r_vertex + 1.0 / r_laser);
+    if (distance_to_triangle(q, part.p0, part.e1, part.e2) > kGuideEdgeWidths * double(part.alpha) / k) continue;
     const glm::dvec3 wl = (L - q) / r_laser;
     if (!(laser_.intensity_towards(-wl) > 0.0)) continue;
     plane_n[planes] = part.n, plane_d[planes++] = offset;
