@@ -32,6 +32,12 @@ RUNS = {
     "posed": ("multi_object.json", ["camera.position_m=[0.05,0.03,0.1]", "camera.look_at_m=[-0.05,0,-0.75]",
                                     "camera.up=[0.3,1,0]", "camera.crop=[540,160,64,48]", "render.samples_per_pixel=1",
                                     "acquisition.gate_sweep.step_ps=3600", "outputs.previews=false"]),
+    # The multi-object scene at its default 16 paths: the plate alone (its light from inside it and its ghost
+    # of the laser) and the bare sphere beside the plate's edge (the edge's grazing glint); test_fireflies.py.
+    "plate_alone": ("multi_object.json", ["camera.crop=[0,0,256,128]", "acquisition.gate_sweep.step_ps=3600",
+                                          "outputs.previews=false"]),
+    "edge_glint": ("multi_object.json", ["camera.crop=[560,0,40,500]", "acquisition.gate_sweep.step_ps=3600",
+                                         "outputs.previews=false"]),
     # The paper's flat target at 0.8 m, central pixels, every 36 ps gate step (as tests/app/paper_test.cpp).
     "flat": ("flat_target.json", ["camera.position_m=[0,0,0.8]", "camera.crop=[507,245,10,10]",
                                   "render.samples_per_pixel=4", "outputs.previews=false"]),
