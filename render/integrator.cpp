@@ -676,10 +676,10 @@ void Integrator::find_guide_targets(const Surface& sf, const Bsdf& bsdf, int med
 // (both on the same side of the part's plane): at a part's glossy reflection of the laser where the
 // mirror point (where the line to the laser's image behind the plane meets it) lies on the part or
 // within kGuideEdgeWidths of the lobe's widths of it (one target per plane: a face of two triangles
-// aims once); and
-// along a sliver (a plate's 2 mm edge, which the vertex's BSDF draws rarely hit) whose mirror point is
-// beside it, when the half-vector at the sliver's point nearest the mirror point is within 25 degrees
-// of its normal: the lobe's tail there outshines the rest. The half-vector's slope m is nearly linear
+// aims once; a sliver's two triangles not at all); and along a sliver (a plate's 2 mm edge, which the
+// vertex's BSDF draws rarely hit) whose mirror point is beside it, when the half-vector at the sliver's
+// point nearest the mirror point is within 25 degrees of its normal: the lobe's tail there outshines the
+// rest. The half-vector's slope m is nearly linear
 // along the sliver, so GGX's D ~ 1 / (alpha^2 + |m|^2)^2 falls along it as 1 / (1 + ((s - s*) / c)^2)^2,
 // about the s* of least |m| (which moves with t across the sliver), of c = sqrt(alpha^2 + m*^2) / |dm/ds|:
 // s is drawn from a Cauchy law of that scale (the integrand over the density stays bounded). At grazing
@@ -822,14 +822,15 @@ void Integrator::guided_connections(const NeeVertex& a, int medium_t, bool roule
 // plate's thickness, whose Snell invariant p solves rho(p) = (h_x + h_L) tan(theta) + 3 d tan(theta_glass)
 // = D (the lateral offset), as in connect_laser_refracted. A camera path meets that light only through
 // three narrow lobes (the transmission into the plate, then the two reflections: the last one evaluated by
-// the laser connection), which the BSDF's draws at x find rarely (x's own lobe, if narrow, rarely too); the ghost's target is a GGX lobe of
-// directions about the ghost's direction at x, of alpha 2 sqrt(2) n alpha_plate / (1 + r_x / r_L) (two
-// reflections each turning the ray by twice its microfacet's tilt, n times wider outside, and the
-// parallax of moving along the plate as for the guided targets). From a vertex inside the plate, on its
-// face away from the laser (the plate's own back face: its diffuse lobe, or its glossy reflection of a camera
-// ray that entered the plate), the ghost is two reflections away: the
-// unfolded path starts in the glass, and the lobe, in the glass, has alpha 2 sqrt(2) alpha_plate. As for
-// the guided targets, the choice depends on x alone, so the densities are exact whatever it is.
+// the laser connection), which the BSDF's draws at x find rarely (and x's own lobe, if narrow, more rarely
+// still); the ghost's target is a GGX lobe of directions about the ghost's direction at x, of alpha
+// 2 sqrt(2) n alpha_plate / (1 + r_x / r_L) (two reflections each turning the ray by twice its
+// microfacet's tilt, n times wider outside, and the parallax of moving along the plate as for the guided
+// targets). From a vertex inside the plate, on its face away from the laser (the plate's own back face:
+// its diffuse lobe, or its glossy reflection of a camera ray that entered the plate), the ghost is two
+// reflections away: the unfolded path starts in the glass, and the lobe, in the glass, has alpha
+// 2 sqrt(2) alpha_plate. As for the guided targets, the choice depends on x alone, so the densities are
+// exact whatever it is.
 void Integrator::ghost_targets(const Surface& sf, int medium, Ghosts* out) const {
   out->n = 0;
   out->reach = medium < 0 ? 3 : 2;
