@@ -411,6 +411,28 @@ inline Surface Integrator::surface_at(const CameraBlock& block, size_t j, bool c
   return camera_ray ? block.surface[j] : shading_.surface(hit);
 }
 
+inline Spec Integrator::traverse(int medium, double seg, double* opl) const {
+  if (medium < 0) {
+    *opl += seg;
+    return Spec(1.0f);
+  }
+  const ResolvedMaterial& rm = shading_.material(medium);
+  *opl += rm.point.ior * seg;
+  return rm.absorbing ? glm::exp(-rm.sigma * static_cast<float>(seg)) : Spec(1.0f);
+}
+
+struct Integrator::Shaded {
+  bool wo_front;  // the side of the geometric normal the path arrives from
+  Bsdf bsdf;
+  bool volume;    // the surface bounds a medium
+};
+
+inline Integrator::Shaded Integrator::shade(const Surface& sf, const MaterialPoint& mp, const glm::vec3& d) const {
+  const glm::vec3 wo = -d;
+  const bool wo_front = glm::dot(wo, sf.ng) > 0.0f;
+  return Shaded{wo_front, Bsdf(mp, sf.ns, sf.ng, wo, wo_front), shading_.material(sf.material).volume};
+}
+
 inline bool Integrator::ahead_shadow(const CameraBlock& block, size_t j, LaserRay* lr, FirstSegment* first) const {
   // The block pass traced it whenever the laser shines towards the hit, which is exactly when laser_ray
   // would succeed here, with the same computation.
@@ -791,9 +813,7 @@ void Integrator::guided_connections(const NeeVertex& a, int medium_t, bool roule
     if (!embree_.intersect(offset_ray_origin(a.sf.p, a.sf.ng, wd), wd, 0.0f, kInf, &hit)) continue;
     const Surface sb = shading_.surface(hit);
     const MaterialPoint mb = shading_.material_at(sb, hit);
-    const glm::vec3 wo = -wd;
-    const bool wo_front = glm::dot(wo, sb.ng) > 0.0f;
-    const Bsdf bsdf(mb, sb.ns, sb.ng, wo, wo_front);
+    const auto [wo_front, bsdf, volume] = shade(sb, mb, wd);
     if (!bsdf.has_non_delta()) continue;
     const bool transmitted = (glm::dot(wd, a.sf.ng) > 0.0f) != a.wo_front;
     const int medium = transmitted ? medium_t : a.medium;
@@ -807,8 +827,8 @@ void Integrator::guided_connections(const NeeVertex& a, int medium_t, bool roule
     }
     if (!(beta.x > 0.0f)) continue;
     // b is a's next vertex: a is a non-delta vertex before it.
-    const NeeVertex vb{sb, bsdf, wo_front, shading_.material(sb.material).volume, medium, a.vertices + 1,
-                       a.seen_through && transmitted, beta, opl, !(mb.transmission > 0.0f)};
+    const NeeVertex vb{sb, bsdf, wo_front, volume, medium, a.vertices + 1, a.seen_through && transmitted, beta, opl,
+                       !(mb.transmission > 0.0f)};
     LaserRay lr;
     RayCounts at_end;  // the laser connection at the guided vertex: the guided connection's rays
     if (laser_ray(sb, &lr)) connect_laser(vb, lr, nullptr, w, film, &at_end);
@@ -945,21 +965,10 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
       const Surface sf = shading_.surface(hit);
       const double seg = glm::length(glm::dvec3(sf.p) - previous);
       previous = glm::dvec3(sf.p);
-      if (medium >= 0) {
-        const ResolvedMaterial& rm = shading_.material(medium);
-        if (rm.absorbing) {
-          const Spec att = glm::exp(-rm.sigma * static_cast<float>(seg));
-          beta *= att, rr_beta *= att;
-        }
-        opl += rm.point.ior * seg;
-      } else {
-        opl += seg;
-      }
+      const Spec att = traverse(medium, seg, &opl);
+      beta *= att, rr_beta *= att;
       const MaterialPoint mp = shading_.material_at(sf, hit);
-      const glm::vec3 wo = -d;
-      const bool wo_front = glm::dot(wo, sf.ng) > 0.0f;
-      const Bsdf bsdf(mp, sf.ns, sf.ng, wo, wo_front);
-      const bool volume = shading_.material(sf.material).volume;
+      const auto [wo_front, bsdf, volume] = shade(sf, mp, d);
       const NeeVertex v{sf, bsdf, wo_front, volume, medium, vertices, !reflected, beta, opl,
                         !(mp.transmission > 0.0f && vertices > 0)};
       if (k == ghosts.reach) {  // the ghost's light: the laser connection here
@@ -1054,21 +1063,12 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
     // From the previous surface point itself, not from the offset origin a few hundred ulps away.
     const double seg = glm::length(glm::dvec3(sf.p) - previous);
     previous = glm::dvec3(sf.p);
-    if (medium >= 0) {
-      const ResolvedMaterial& rm = shading_.material(medium);
-      if (rm.absorbing) beta *= glm::exp(-rm.sigma * static_cast<float>(seg));
-      opl += rm.point.ior * seg;
-    } else {
-      opl += seg;
-    }
+    beta *= traverse(medium, seg, &opl);
     const MaterialPoint mp = shading_.material_at(sf, hit);
     gather_emission(beta, mp, &ambient);
     if (last_segment) break;
 
-    const glm::vec3 wo = -d;
-    const bool wo_front = glm::dot(wo, sf.ng) > 0.0f;
-    const Bsdf bsdf(mp, sf.ns, sf.ng, wo, wo_front);
-    const bool volume = shading_.material(sf.material).volume;
+    const auto [wo_front, bsdf, volume] = shade(sf, mp, d);
 
     const NeeVertex v{sf, bsdf, wo_front, volume, medium, vertices, !reflected, beta, opl,
                       !(mp.transmission > 0.0f && vertices > 0)};

@@ -210,6 +210,13 @@ class Integrator {
   Surface surface_at(const CameraBlock& block, size_t j, bool camera_ray, const RayHit& hit) const;
   bool ahead_shadow(const CameraBlock& block, size_t j, LaserRay* lr, FirstSegment* first) const;
 
+  // What every path vertex sets up: a segment of length seg (metres) in `medium` (-1: air) gives its
+  // Beer-Lambert attenuation (1 in air or a clear medium) and adds its optical length to *opl; the surface
+  // point reached along d gives its BSDF and sides.
+  Spec traverse(int medium, double seg, double* opl) const;
+  struct Shaded;  // integrator.cpp
+  Shaded shade(const Surface& sf, const MaterialPoint& mp, const glm::vec3& d) const;
+
   // Next-event estimation to the laser from v along lr (first: the shadow ray's first segment when it was
   // traced ahead, else null).
   // The laser's connection through refracting interfaces (parallel planar faces of volumes: a plate);
