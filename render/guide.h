@@ -47,6 +47,7 @@ struct GlossyPart {
   glm::dvec3 p0, e1, e2, n;  // corner, edges, unit normal
   float alpha;
   bool sliver = false;
+  int plane = 0;  // the same for the parts of one plane (a face of several triangles)
 };
 // A sliver of a glossy plate (its thin edge: a parallelogram o + s a + t b, s, t in [0, 1], |b| < |a| / 20),
 // which Lambertian vertices also aim at over its length.

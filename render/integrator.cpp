@@ -207,6 +207,18 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
           if (i != SIZE_MAX) parts_[i].sliver = true;
       }
   }
+  // The parts' planes: a part shares the plane of the first earlier part whose plane it lies in.
+  for (size_t i = 0; i < parts_.size(); ++i) {
+    GlossyPart& p = parts_[i];
+    const double offset = glm::dot(p.p0, p.n);
+    p.plane = int(i);
+    for (size_t j = 0; j < i; ++j)
+      if (std::fabs(glm::dot(parts_[j].n, p.n)) > 1.0 - 1e-9 &&
+          std::fabs(glm::dot(parts_[j].n, p.p0) - glm::dot(parts_[j].n, parts_[j].p0)) <= 1e-9 * (1.0 + std::fabs(offset))) {
+        p.plane = parts_[j].plane;
+        break;
+      }
+  }
   ambient_on_ = ambient.any() || shading.has_emission();
   optics_ = config.camera.optics_transmission;
   period_opl_ = kSpeedOfLight / config.laser.repetition_rate_Hz;
@@ -709,8 +721,7 @@ void Integrator::find_guide_targets(const Surface& sf, const Bsdf& bsdf, int med
 // a glint of 0.1 mm. No ray is traced to choose: the targets depend on the vertex alone.
 void Integrator::lambertian_guide_targets(const Surface& sf, GuideTargets* out) const {
   const glm::dvec3 x(sf.p), L = laser_.position;
-  glm::dvec3 plane_n[kMaxGuideTargets];
-  double plane_d[kMaxGuideTargets];
+  int aimed[kMaxGuideTargets];  // the planes aimed at
   int planes = 0;
   for (const GlossyPart& part : parts_) {
     if (out->n == kMaxGuideTargets) return;
@@ -721,17 +732,12 @@ void Integrator::lambertian_guide_targets(const Surface& sf, GuideTargets* out) 
     const double r_vertex = glm::length(q - x), r_laser = glm::length(L - q);
     if (!(r_vertex > 0.0 && r_laser > 0.0)) continue;
     // One target per plane (a face of several triangles): the lobe depends on the plane alone.
-    const double offset = glm::dot(part.p0, part.n);
-    bool seen = false;
-    for (int i = 0; i < planes; ++i)
-      seen = seen || (std::fabs(glm::dot(plane_n[i], part.n)) > 1.0 - 1e-9 &&
-                      std::fabs(glm::dot(plane_n[i], part.p0) - plane_d[i]) <= 1e-9 * (1.0 + std::fabs(offset)));
-    if (seen) continue;
+    if (std::find(aimed, aimed + planes, part.plane) != aimed + planes) continue;
     const double k = 0.5 * (1.0 / r_vertex + 1.0 / r_laser);
     if (distance_to_triangle(q, part.p0, part.e1, part.e2) > kGuideEdgeWidths * double(part.alpha) / k) continue;
     const glm::dvec3 wl = (L - q) / r_laser;
     if (!(laser_.intensity_towards(-wl) > 0.0)) continue;
-    plane_n[planes] = part.n, plane_d[planes++] = offset;
+    aimed[planes++] = part.plane;
     GuideTarget& g = out->t[out->n++];
     g.strip = false;
     g.lobe = GlossyTarget{glm::vec3(hx > 0.0 ? part.n : -part.n), glm::vec3(wl),
