@@ -246,8 +246,10 @@ bool Integrator::laser_ray(const Surface& sf, LaserRay* out) const {
 }
 
 Spec Integrator::shadow_transmittance(const glm::vec3& origin, const glm::vec3& dir, float dist, int medium,
-                                      double* extra_opl, uint64_t* rays, const FirstSegment* first) const {
+                                      double* extra_opl, uint64_t* rays, const FirstSegment* first,
+                                      Crossings* cx) const {
   *extra_opl = 0.0;
+  if (cx) cx->medium0 = medium;
   if (!first) ++*rays;
   if (!transmission_) {
     const bool blocked = first ? first->found : embree_.occluded(origin, dir, 0.0f, dist);
@@ -273,16 +275,29 @@ Spec Integrator::shadow_transmittance(const glm::vec3& origin, const glm::vec3& 
       *extra_opl += (static_cast<double>(rm.point.ior) - 1.0) * seg;
     }
     if (!found) return t;
-    if (crossing >= kMaxShadowCrossings) return Spec(0.0f);
-    const Surface sf = shading_.geometric(hit);
+    const Surface sf = cx ? shading_.surface(hit) : shading_.geometric(hit);
     const ResolvedMaterial& rm = shading_.material(sf.material);
-    if (!(rm.point.transmission > 0.0f)) return Spec(0.0f);
+    if (crossing >= kMaxShadowCrossings || !(rm.point.transmission > 0.0f)) {
+      if (cx) cx->blocked = true;
+      return Spec(0.0f);
+    }
     const MaterialPoint mp = shading_.material_at(sf, hit);
     const float c = glm::dot(dir, sf.ng);
     const bool entering = c < 0.0f;
     t *= straight_transmittance(mp, c, entering);
-    if (!(t.x > 0.0f || t.y > 0.0f)) return Spec(0.0f);
+    if (!cx && !(t.x > 0.0f || t.y > 0.0f)) return Spec(0.0f);
     if (rm.volume) medium = entering ? sf.material : -1;
+    if (cx) {
+      cx->refracting = cx->refracting || (rm.volume && rm.point.ior != 1.0f);
+      if (cx->n == Crossings::kMax) {
+        cx->planar = false;
+      } else {
+        cx->slots.c[cx->n++] = {glm::dvec3(sf.p), sf.ng, sf.material, mp, medium};
+        // Flat-shaded and parallel to the first: else not connect_laser_refracted's case.
+        if (glm::dot(sf.ns, sf.ng) < 1.0f - 1e-6f || std::fabs(glm::dot(sf.ng, cx->slots.c[0].ng)) < 1.0f - 1e-6f)
+          cx->planar = false;
+      }
+    }
     o = offset_ray_origin(sf.p, sf.ng, dir);
     remaining -= seg;
     if (!(remaining > 0.0f)) return t;
@@ -480,57 +495,18 @@ inline void Integrator::deposit_laser(const NeeVertex& v, double value, double o
 // plate between) the straight connection is used. Rough interfaces are crossed as smooth ones (their
 // lobe's blur of the laser's direction is left out, as in the straight connection): behind a 2 mm slab
 // the light is 1.007 of the rough faces' at roughness 0.15, 1.036 at 0.3, 1.247 at 0.5 (docs/render.md).
-bool Integrator::connect_laser_refracted(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays,
-                                         const FirstSegment* first) const {
-  constexpr int kMaxInterfaces = 8;
-  struct Crossing {
-    glm::dvec3 p;
-    glm::vec3 ng;
-    int material;
-    MaterialPoint mp;
-  };
+bool Integrator::connect_laser_refracted(const NeeVertex& v, const LaserRay& lr, const Crossings& cx, double w,
+                                         const PixelFilm& film, RayCounts* rays) const {
+  constexpr int kMaxInterfaces = Crossings::kMax;
   const glm::dvec3 x(v.sf.p), L = laser_.position;
   const glm::dvec3 to = L - x;
-  const double r = glm::length(to);
+  const double r = lr.r;
   if (!(r > 0.0)) return false;
-  const glm::vec3 d(to / r);
-  // The straight walk finds the interfaces (and an opaque blocker: then nothing arrives, as straight).
-  Crossing cr[kMaxInterfaces];
-  int k = 0, medium = v.shadow_medium_towards(d);
+  const Crossings::Crossing* cr = cx.slots.c;
+  const int k = cx.n;
   int media[kMaxInterfaces + 1];
-  media[0] = medium;
-  bool refracting = false;
-  glm::vec3 o = offset_ray_origin(v.sf.p, v.sf.ng, d);
-  float remaining = float(r);
-  for (bool ahead = first != nullptr;; ahead = false) {
-    RayHit hit;
-    bool found;
-    if (ahead) {  // the camera block traced this segment as a packet
-      found = first->found;
-      hit = first->hit;
-    } else {
-      ++rays->refracted;
-      found = embree_.intersect(o, d, 0.0f, remaining, &hit);
-    }
-    if (!found) break;
-    const Surface sf = shading_.surface(hit);
-    const ResolvedMaterial& rm = shading_.material(sf.material);
-    if (!(rm.point.transmission > 0.0f)) return true;  // blocked
-    if (k == kMaxInterfaces) return false;
-    const bool entering = glm::dot(d, sf.ng) < 0.0f;
-    if (rm.volume) {
-      medium = entering ? sf.material : -1;
-      refracting = refracting || rm.point.ior != 1.0f;
-    }
-    cr[k] = {glm::dvec3(sf.p), sf.ng, sf.material, shading_.material_at(sf, hit)};
-    // Planar and parallel to the first: else not this connection's case.
-    if (glm::dot(sf.ns, sf.ng) < 1.0f - 1e-6f || std::fabs(glm::dot(sf.ng, cr[0].ng)) < 1.0f - 1e-6f) return false;
-    media[++k] = medium;
-    o = offset_ray_origin(sf.p, sf.ng, d);
-    remaining -= hit.t;
-    if (!(remaining > 0.0f)) break;
-  }
-  if (!refracting) return false;
+  media[0] = cx.medium0;
+  for (int j = 0; j < k; ++j) media[j + 1] = cr[j].medium;
   glm::dvec3 nrm(cr[0].ng);
   if (glm::dot(nrm, to) < 0.0) nrm = -nrm;
   const double H = glm::dot(to, nrm);
@@ -610,14 +586,22 @@ bool Integrator::connect_laser_refracted(const NeeVertex& v, double w, const Pix
 
 inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, const FirstSegment* first, double w,
                                       const PixelFilm& film, RayCounts* rays) const {
-  if (refractive_ && connect_laser_refracted(v, w, film, rays, first)) return;
   const double r = lr.r, intensity = lr.intensity;
   const glm::vec3 wi = lr.wi;
+  // With refracting volumes the straight walk comes first: it finds the interfaces that the refracted
+  // connection crosses, and its transmittance is the straight connection's.
+  Spec tr(0.0f);
+  double extra = 0.0;
+  if (refractive_) {
+    Crossings cx;
+    tr = shadow_transmittance(lr.origin, wi, float(r), v.shadow_medium_towards(wi), &extra, &rays->laser, first, &cx);
+    if (cx.blocked || (cx.refracting && cx.planar && connect_laser_refracted(v, lr, cx, w, film, rays))) return;
+  }
   if (!v.counted(wi)) return;
   const Spec f = v.bsdf.eval_cos(wi);
   if (!(f.x > 0.0f)) return;
-  double extra = 0.0;
-  const Spec tr = shadow_transmittance(lr.origin, wi, float(r), v.shadow_medium_towards(wi), &extra, &rays->laser, first);
+  if (!refractive_)
+    tr = shadow_transmittance(lr.origin, wi, float(r), v.shadow_medium_towards(wi), &extra, &rays->laser, first);
   if (!(tr.x > 0.0f)) return;
   const double value = double(v.beta.x) * f.x * tr.x * intensity / (r * r) * w;
   deposit_laser(v, value, v.opl + r + extra, film);

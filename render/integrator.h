@@ -145,13 +145,38 @@ class Integrator {
   // photon radiance (cos^4 excluded).
   double measurement_constant(int y) const;
 
+  // The interfaces a straight walk to the laser crossed, as shadow_transmittance records them for
+  // connect_laser_refracted.
+  struct Crossings {
+    static constexpr int kMax = 8;
+    struct Crossing {
+      glm::dvec3 p;
+      glm::vec3 ng;
+      int material;
+      MaterialPoint mp;
+      int medium;  // the walk's medium after the crossing (-1: air)
+    };
+    // Left uninitialised (a walk writes each crossing it records): the walk runs at every laser connection.
+    union Slots {
+      Slots() {}
+      Crossing c[kMax];
+    } slots;
+    int n = 0;
+    int medium0 = -1;         // the walk's medium at its start
+    bool blocked = false;     // an opaque surface (or the crossing limit) stopped the walk
+    bool refracting = false;  // it entered or left a volume of index other than 1
+    bool planar = true;       // every crossing flat-shaded and parallel to the first, and at most kMax of them
+  };
+
   // Fraction of light (two channels) that reaches distance `dist` along unit `dir` from `origin`, through
   // transmissive surfaces (straight, ignoring refraction) starting inside volume `medium` (-1: air);
   // *extra_opl receives the optical path added by the media crossed, (n - 1) * length.
   // first: the first segment's result when it was traced ahead (its ray is not counted again). The rays
-  // traced are added to *rays (a RayCounts category).
+  // traced are added to *rays (a RayCounts category). crossings: when given, the walk records the
+  // interfaces it crosses there, and goes on to the end (or a blocker) even where nothing gets through.
   Spec shadow_transmittance(const glm::vec3& origin, const glm::vec3& dir, float dist, int medium,
-                            double* extra_opl, uint64_t* rays, const FirstSegment* first = nullptr) const;
+                            double* extra_opl, uint64_t* rays, const FirstSegment* first = nullptr,
+                            Crossings* crossings = nullptr) const;
 
   // The shadow ray from sf to the laser; false when the laser sends nothing towards sf.
   bool laser_ray(const Surface& sf, LaserRay* out) const;
@@ -219,11 +244,11 @@ class Integrator {
 
   // Next-event estimation to the laser from v along lr (first: the shadow ray's first segment when it was
   // traced ahead, else null).
-  // The laser's connection through refracting interfaces (parallel planar faces of volumes: a plate);
-  // false when the path to the laser crosses none, or others (then the straight connection is used).
-  // first: the straight walk's first segment when the camera block traced it ahead (else null).
-  bool connect_laser_refracted(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays,
-                               const FirstSegment* first) const;
+  // The laser's connection from v through the refracting interfaces the straight walk to it crossed
+  // (parallel planar faces of volumes: a plate); false when the refracted path does not cross the same
+  // surfaces (then the straight connection is used).
+  bool connect_laser_refracted(const NeeVertex& v, const LaserRay& lr, const Crossings& cx, double w,
+                               const PixelFilm& film, RayCounts* rays) const;
   void deposit_laser(const NeeVertex& v, double value, double opl, const PixelFilm& film) const;
   void connect_laser(const NeeVertex& v, const LaserRay& lr, const FirstSegment* first, double w,
                      const PixelFilm& film, RayCounts* rays) const;

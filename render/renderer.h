@@ -36,8 +36,10 @@ namespace spadgen::render {
 struct RayCounts {
   uint64_t camera = 0;     // camera rays: a path's first segment
   uint64_t bounce = 0;     // a path's further segments
-  uint64_t laser = 0;      // straight connections to the laser, and their continuations across transmissive surfaces
-  uint64_t refracted = 0;  // connections to the laser refracted through transmissive surfaces (connect_laser_refracted)
+  // straight connections to the laser, and their continuations across transmissive surfaces (with
+  // refracting volumes, every laser connection's first walk: it finds the interfaces connect_laser_refracted crosses)
+  uint64_t laser = 0;
+  uint64_t refracted = 0;  // the segments of connections to the laser refracted through them (connect_laser_refracted)
   // guided connections and ghost draws: their targets' search, their rays and the laser connections at their
   // ends
   uint64_t guided = 0;
