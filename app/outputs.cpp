@@ -512,13 +512,14 @@ class Outputs::Stacks {
   struct Band {
     int rows = 0;
     int64_t K = 0, W = 0;
-    std::array<std::unique_ptr<char[]>, kStackCount> data;  // [k][row][x], every byte written by its tiles
+    // [k][row][x], every byte written by its tiles (uninitialised; large ones in huge pages, core/tile.h)
+    std::array<std::vector<char, DefaultInitAllocator<char>>, kStackCount> data;
     std::array<int64_t, kStackCount> element_bytes{};
     std::vector<std::pair<PixelRect, FrameBytes>> frames;  // the tiles' frames, as SensorTile holds them
     template <class T, class Convert = std::identity>
     void put(Stack k, const PixelRect& r, const PixelRect& img, const T* src, Convert convert = {}) {
       using Out = std::decay_t<decltype(convert(*src))>;
-      auto* dst = reinterpret_cast<Out*>(data[k].get());
+      auto* dst = reinterpret_cast<Out*>(data[k].data());
       const auto n = size_t(r.count());
       for (int64_t g = 0; g < K; ++g)
         for (int y = 0; y < r.height; ++y) {
@@ -540,7 +541,7 @@ class Outputs::Stacks {
         if (band_stack_[k]) {
           b->K = layout_[k].shape[0];
           b->element_bytes[k] = writers::element_bytes(layout_[k].dtype);
-          b->data[k] = std::make_unique_for_overwrite<char[]>(size_t(b->K * b->rows * b->W * b->element_bytes[k]));
+          b->data[k].resize(size_t(b->K * b->rows * b->W * b->element_bytes[k]));
         }
     }
     return *b;
@@ -560,7 +561,7 @@ class Outputs::Stacks {
     for (size_t k = 0; k < kStackCount; ++k)
       if (band_stack_[k])
         for (int64_t g = 0; g < b->K; ++g)
-          w_[k]->write((g * H + int64_t(row)) * b->W, b->data[k].get() + g * plane * b->element_bytes[k], plane);
+          w_[k]->write((g * H + int64_t(row)) * b->W, b->data[k].data() + g * plane * b->element_bytes[k], plane);
     if (!b->frames.empty()) {
       std::vector<NpyWriter::FramesTile> tiles;
       for (const auto& [rect, bytes] : b->frames) tiles.push_back({rect, bytes.data()});

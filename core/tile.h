@@ -15,18 +15,44 @@
 
 namespace spadgen {
 
-// An allocator whose resize() leaves the new elements uninitialised (default-initialised), for buffers
-// whose every element is written before it is read: a tile's binary frames (11 MB per 32 x 32 tile of a
-// sweep), which the packing writes whole. In a build with AddressSanitizer the new bytes are set to 0xA5
-// instead, so that a byte the packing missed shows in the tests that check frames against their
-// reference bits and their counts (tests/sensor/frames_test.cpp, sensor_test.cpp).
+// Large buffers in transparent huge pages. A run's big buffers that live until they are written (a tile's
+// frames, 11 MB per 32 x 32 tile of a sweep, kept by band; a band's (K, H, W) stacks; the EXR images'
+// channels) are new memory, which the kernel maps on first touch: in 4 kB pages, one fault per page,
+// about 10 us each on this machine kind (a virtual machine), a fifth of a frames run's CPU time
+// (bench/README.md, "End to end"). A buffer that whole 2 MB pages hold with at most an eighth to spare (from
+// 1 MiB on) gets a mapping of its own, aligned to 2 MB, in whole 2 MB pages advised MADV_HUGEPAGE (the THP mode of Debian's kernel is "madvise"; without
+// THP the advice does nothing), and unmapped when freed, so the advice never reaches the heap. Smaller
+// buffers, and every buffer under AddressSanitizer, come from operator new.
+inline constexpr size_t kHugePageBytes = size_t{2} << 20;
+void* allocate_buffer(size_t bytes);  // core/tile.cpp
+void deallocate_buffer(void* p, size_t bytes) noexcept;
+
+// std::allocator with allocate_buffer's huge pages for large buffers.
 template <class T>
-struct DefaultInitAllocator : std::allocator<T> {
+struct BufferAllocator : std::allocator<T> {
+  template <class U>
+  struct rebind {
+    using other = BufferAllocator<U>;
+  };
+  using std::allocator<T>::allocator;
+  T* allocate(size_t n) { return static_cast<T*>(allocate_buffer(n * sizeof(T))); }
+  void deallocate(T* p, size_t n) noexcept { deallocate_buffer(p, n * sizeof(T)); }
+};
+template <class T>
+using LargeBuffer = std::vector<T, BufferAllocator<T>>;
+
+// A BufferAllocator whose resize() leaves the new elements uninitialised (default-initialised), for
+// buffers whose every element is written before it is read: a tile's binary frames, which the packing
+// writes whole. In a build with AddressSanitizer the new bytes are set to 0xA5 instead, so that a byte the
+// packing missed shows in the tests that check frames against their reference bits and their counts
+// (tests/sensor/frames_test.cpp, sensor_test.cpp).
+template <class T>
+struct DefaultInitAllocator : BufferAllocator<T> {
   template <class U>
   struct rebind {
     using other = DefaultInitAllocator<U>;
   };
-  using std::allocator<T>::allocator;
+  using BufferAllocator<T>::BufferAllocator;
   template <class U>
   void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
 #if defined(__SANITIZE_ADDRESS__)
@@ -39,7 +65,7 @@ struct DefaultInitAllocator : std::allocator<T> {
   }
   template <class U, class... Args>
   void construct(U* p, Args&&... args) {
-    std::allocator_traits<std::allocator<T>>::construct(static_cast<std::allocator<T>&>(*this), p, std::forward<Args>(args)...);
+    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
   }
 };
 // A tile's binary frames (SensorTile::frames).

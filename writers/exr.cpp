@@ -47,7 +47,7 @@ float* ExrImage::channel(const std::string& name) {
   if (name.empty()) throw Error("an EXR channel needs a name");
   auto it = channels_.find(name);
   if (it == channels_.end())
-    it = channels_.emplace(name, std::vector<float>(size_t(width_) * size_t(height_), 0.0f)).first;
+    it = channels_.emplace(name, LargeBuffer<float>(size_t(width_) * size_t(height_), 0.0f)).first;
   return it->second.data();
 }
 

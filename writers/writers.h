@@ -221,7 +221,7 @@ class ExrImage {
 
  private:
   int width_, height_;
-  std::map<std::string, std::vector<float>> channels_;
+  std::map<std::string, LargeBuffer<float>> channels_;  // large images in huge pages (core/tile.h)
   std::map<std::string, std::string> attributes_;
 };
 
