@@ -1,8 +1,11 @@
 #include "tile.h"
 
 #include <cstdint>
+#include <mutex>
 #include <new>
 #include <string>
+#include <utility>
+#include <vector>
 
 #if defined(__linux__)
 #include <sys/mman.h>
@@ -25,11 +28,62 @@ size_t mapped_bytes(size_t bytes) { return (bytes + kHugePageBytes - 1) / kHugeP
 [[maybe_unused]] bool huge(size_t bytes) { return bytes >= kHugePageBytes / 2 && mapped_bytes(bytes) - bytes <= bytes / 8; }
 }  // namespace
 
+#if SPADGEN_HUGE_BUFFERS
+namespace {
+// Freed mappings kept for the next buffer of the same size (the next band's tiles), newest last: a
+// reused mapping costs neither page faults nor the kernel's zeroing of its pages. At most kCachedBytes;
+// the oldest are unmapped first.
+class MappingCache {
+ public:
+  static constexpr size_t kCachedBytes = size_t{512} << 20;
+  void* take(size_t size) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    for (size_t i = entries_.size(); i-- > 0;)
+      if (entries_[i].first == size) {
+        void* p = entries_[i].second;
+        entries_.erase(entries_.begin() + static_cast<ptrdiff_t>(i));
+        bytes_ -= size;
+        return p;
+      }
+    return nullptr;
+  }
+  void put(void* p, size_t size) noexcept {
+    if (size > kCachedBytes) {
+      munmap(p, size);
+      return;
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    size_t n = 0;  // the oldest entries that make room
+    for (size_t kept = bytes_; kept + size > kCachedBytes; ++n) {
+      kept -= entries_[n].first;
+      munmap(entries_[n].second, entries_[n].first);
+      bytes_ -= entries_[n].first;
+    }
+    entries_.erase(entries_.begin(), entries_.begin() + static_cast<ptrdiff_t>(n));
+    entries_.emplace_back(size, p);  // within the capacity reserved: no allocation
+    bytes_ += size;
+  }
+  MappingCache() { entries_.reserve(kCachedBytes / kHugePageBytes + 1); }  // a mapping is >= 2 MB
+
+ private:
+  std::mutex mutex_;
+  std::vector<std::pair<size_t, void*>> entries_;  // (size, address)
+  size_t bytes_ = 0;
+};
+// Never destroyed: buffers may be freed by static destructors after it would be.
+MappingCache& mapping_cache() {
+  static auto* c = new MappingCache;
+  return *c;
+}
+}  // namespace
+#endif
+
 void* allocate_buffer(size_t bytes) {
 #if SPADGEN_HUGE_BUFFERS
   if (huge(bytes)) {
-    // Mapped with 2 MB to spare, then trimmed to a 2 MB aligned start.
     const size_t size = mapped_bytes(bytes);
+    if (void* p = mapping_cache().take(size)) return p;
+    // Mapped with 2 MB to spare, then trimmed to a 2 MB aligned start.
     void* m = mmap(nullptr, size + kHugePageBytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
     if (m == MAP_FAILED) throw std::bad_alloc();
     const auto a = reinterpret_cast<uintptr_t>(m);
@@ -47,7 +101,7 @@ void* allocate_buffer(size_t bytes) {
 void deallocate_buffer(void* p, size_t bytes) noexcept {
 #if SPADGEN_HUGE_BUFFERS
   if (huge(bytes)) {
-    munmap(p, mapped_bytes(bytes));
+    mapping_cache().put(p, mapped_bytes(bytes));
     return;
   }
 #endif

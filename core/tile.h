@@ -19,10 +19,12 @@ namespace spadgen {
 // frames, 11 MB per 32 x 32 tile of a sweep, kept by band; a band's (K, H, W) stacks; the EXR images'
 // channels) are new memory, which the kernel maps on first touch: in 4 kB pages, one fault per page,
 // about 10 us each on this machine kind (a virtual machine), a fifth of a frames run's CPU time
-// (bench/README.md, "End to end"). A buffer that whole 2 MB pages hold with at most an eighth to spare (from
-// 1 MiB on) gets a mapping of its own, aligned to 2 MB, in whole 2 MB pages advised MADV_HUGEPAGE (the THP mode of Debian's kernel is "madvise"; without
-// THP the advice does nothing), and unmapped when freed, so the advice never reaches the heap. Smaller
-// buffers, and every buffer under AddressSanitizer, come from operator new.
+// (bench/README.md, "End to end"). A buffer that whole 2 MB pages hold with at most an eighth to spare
+// (from 1 MiB on) gets a mapping of its own, aligned to 2 MB, advised MADV_HUGEPAGE (the THP mode of
+// Debian's kernel is "madvise"; without THP the advice does nothing), never shared with the heap. A freed
+// mapping is kept (up to 512 MB, the oldest unmapped first) for the next buffer of its size, e.g. the next
+// band's tiles, which then pay no faults and no zeroing. Smaller buffers, and every buffer under
+// AddressSanitizer, come from operator new.
 inline constexpr size_t kHugePageBytes = size_t{2} << 20;
 void* allocate_buffer(size_t bytes);  // core/tile.cpp
 void deallocate_buffer(void* p, size_t bytes) noexcept;

@@ -85,6 +85,15 @@ TEST(Buffers, LargeBuffersKeepTheirValuesAndSitInHugePages) {
   for (size_t i = 0; i < frames.size(); ++i) frames[i] = static_cast<uint8_t>(i);
 #if defined(__linux__) && !defined(__SANITIZE_ADDRESS__)
   EXPECT_EQ(reinterpret_cast<uintptr_t>(frames.data()) % kHugePageBytes, 0u);
+  {  // a freed mapping serves the next buffer of its size (the next band's tiles), with its pages
+    const uint8_t* first = nullptr;
+    for (int i = 0; i < 2; ++i) {
+      FrameBytes tile(size_t{350} * 255 * 128 - 1000);
+      if (i == 0) first = tile.data();
+      else EXPECT_EQ(tile.data(), first);
+      tile[0] = 1;
+    }
+  }
   std::ifstream thp("/sys/kernel/mm/transparent_hugepage/enabled");
   std::string mode;
   std::getline(thp, mode);
