@@ -36,10 +36,10 @@ namespace {
 // scenes (docs/datasets.md, "Estimates"): camera paths, the sensor stage per pixel and gate position, and
 // the bytes written. An estimate to plan with, within a factor of about 2; `dataset run` reports the
 // measured times.
-constexpr double kSecondsPerPathBounce = 0.25e-6;   // per camera path and allowed bounce (paths end early)
+constexpr double kSecondsPerPathBounce = 0.35e-6;   // per camera path and allowed bounce (paths end early)
 constexpr double kSecondsPerPixelGate = 8e-9;       // sensor stage, per pixel and gate position (or exposure)
-constexpr double kSecondsPerByte = 1.0 / 1.0e9;     // writing the outputs
-constexpr double kSecondsPerRun = 0.3;              // loading the scene, building the BVH, publishing
+constexpr double kSecondsPerByte = 2.0 / 1.0e9;     // writing the outputs (and compressing the images)
+constexpr double kSecondsPerRun = 0.8;              // starting, loading the scene, building the BVH, publishing
 
 struct Estimate {
   int64_t disk = 0, memory = 0;
