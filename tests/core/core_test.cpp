@@ -51,7 +51,7 @@ TEST(Tiles, CoverTheImageOnceInRowMajorOrder) {
 
 // The kB of transparent huge pages (AnonHugePages) of the mapping that holds address p, from
 // /proc/self/smaps; -1 when it cannot be read.
-long huge_kb_of(const void* p) {
+[[maybe_unused]] long huge_kb_of(const void* p) {
   std::ifstream smaps("/proc/self/smaps");
   if (!smaps) return -1;
   const auto a = reinterpret_cast<uintptr_t>(p);
