@@ -15,8 +15,16 @@
 
 namespace spadgen {
 
-// Under AddressSanitizer every buffer comes from operator new, so that ASan checks its bounds.
-#if defined(__linux__) && defined(MADV_HUGEPAGE) && !defined(__SANITIZE_ADDRESS__)
+// Under AddressSanitizer every buffer comes from operator new, so that ASan checks its bounds (GCC defines
+// __SANITIZE_ADDRESS__, clang 14 only answers __has_feature).
+#if defined(__SANITIZE_ADDRESS__)
+#define SPADGEN_ASAN 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define SPADGEN_ASAN 1
+#endif
+#endif
+#if defined(__linux__) && defined(MADV_HUGEPAGE) && !defined(SPADGEN_ASAN)
 #define SPADGEN_HUGE_BUFFERS 1
 #endif
 
@@ -98,14 +106,14 @@ void* allocate_buffer(size_t bytes) {
   return ::operator new(bytes);
 }
 
-void deallocate_buffer(void* p, size_t bytes) noexcept {
+void deallocate_buffer(void* p, [[maybe_unused]] size_t bytes) noexcept {
 #if SPADGEN_HUGE_BUFFERS
   if (huge(bytes)) {
     mapping_cache().put(p, mapped_bytes(bytes));
     return;
   }
 #endif
-  ::operator delete(p, bytes);
+  ::operator delete(p);  // unsized: clang 14 declares sized deallocation only with -fsized-deallocation
 }
 
 std::vector<PixelRect> make_tiles(int width, int height, int tile_size) {
