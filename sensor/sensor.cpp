@@ -224,14 +224,16 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
   const size_t nreg = static_cast<size_t>(region.count());
   // Not value-initialised (every entry read is written first): zeroing megabytes per tile cost page faults
   // and memset time. q is kept only for frames; without frames only pixel B's neighbours read p.
-  const auto uninit = [](size_t count) { return std::make_unique_for_overwrite<double[]>(count); };
-  const auto lam = uninit(nreg * Ks);
+  // Large ones (own_prob is 9.7 MB for a 34 x 34 region of the paper's sweep) in huge pages, whose mappings
+  // the next tile's arrays of the same size reuse (core/tile.h, allocate_buffer).
+  const auto uninit = [](size_t count) { return std::vector<double, DefaultInitAllocator<double>>(count); };
+  auto lam = uninit(nreg * Ks);
   const bool ranges = transient && t.bin_lo.size() == ndata;
   const bool own_probs = frames || m.halo > 0;
-  const auto own_p = uninit(own_probs ? nreg * Ks : 0);
+  auto own_p = uninit(own_probs ? nreg * Ks : 0);
   // With frames: every region pixel's Prob {p, q, -lambda} gate-major ([k * nreg + region index]), so a
   // row at one gate position is the contiguous input of sample_bits_batch.
-  const auto own_prob = std::make_unique_for_overwrite<Prob[]>(frames ? nreg * Ks : 0);
+  auto own_prob = std::vector<Prob, DefaultInitAllocator<Prob>>(frames ? nreg * Ks : 0);
   std::vector<PixelParams> params(nreg);
   tbb::parallel_for(tbb::blocked_range<int>(region.y0, region.y1()), [&](const tbb::blocked_range<int>& rows) {
     const auto scratch = m.acq->scratch();
@@ -248,12 +250,12 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
           lo = std::clamp<int64_t>(t.bin_lo[di], 0, t.axis.bins);
           hi = std::clamp<int64_t>(t.bin_hi[di], lo, t.axis.bins);
         }
-        m.lambda(params[ri], {g, &t.axis, lo, hi, t.ambient_rate[di], laser_total}, setup.get(), scratch.get(), lam.get() + ri * Ks);
+        m.lambda(params[ri], {g, &t.axis, lo, hi, t.ambient_rate[di], laser_total}, setup.get(), scratch.get(), lam.data() + ri * Ks);
         // without frames only pixel B's neighbours read p (pixel A's read lambda); sections keep one type
         if (frames)
-          probabilities(lam.get() + ri * Ks, Ks, own_prob.get() + ri, nreg, own_p.get() + ri * Ks);
+          probabilities(lam.data() + ri * Ks, Ks, own_prob.data() + ri, nreg, own_p.data() + ri * Ks);
         else if (own_probs && m.types[params[ri].type].single_avalanche)
-          probabilities(lam.get() + ri * Ks, Ks, own_p.get() + ri * Ks, nullptr);
+          probabilities(lam.data() + ri * Ks, Ks, own_p.data() + ri * Ks, nullptr);
       }
     }
   });
@@ -376,11 +378,11 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
           const TypeInfo& ty = m.types[params[ri].type];
           int nb[4];
           const int nnb = ty.crosstalk > 0.0 ? neighbours(x, y, nb) : 0;
-          const double* l = lam.get() + ri * Ks;
+          const double* l = lam.data() + ri * Ks;
           if (nnb > 0) {
             const double* nbv[4];
             for (int i = 0; i < nnb; ++i)
-              nbv[i] = (ty.single_avalanche ? own_p.get() : lam.get()) + nb_index(x, y, nb[i]) * Ks;
+              nbv[i] = (ty.single_avalanche ? own_p.data() : lam.data()) + nb_index(x, y, nb[i]) * Ks;
             crosstalk_rates(l, Ks, nbv, nnb, ty.crosstalk, ty.single_avalanche, eff.data());
             l = eff.data();
           }
@@ -395,7 +397,7 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
               cn[k] = static_cast<uint16_t>(s.x[k]);
             }
           } else {
-            const double* p = own_p.get() + ri * Ks;
+            const double* p = own_p.data() + ri * Ks;
             if (nnb > 0) {
               probabilities(l, Ks, pe.data(), qe.data());
               p = pe.data();
@@ -423,8 +425,8 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
         for (int k = ks.begin(); k < ks.end(); ++k) {
           throw_if_interrupted();  // one gate position's frames of the tile: N x pixels bits
           const auto kk = static_cast<size_t>(k);
-          sample_bits_batch(seed, kk, region_ids.data(), nreg, *m.binom, own_prob.get() + kk * nreg, own.data());
-          frames_tile(shape, xt_key, static_cast<uint32_t>(k), own_prob.get() + kk * nreg, own.data(),
+          sample_bits_batch(seed, kk, region_ids.data(), nreg, *m.binom, own_prob.data() + kk * nreg, own.data());
+          frames_tile(shape, xt_key, static_cast<uint32_t>(k), own_prob.data() + kk * nreg, own.data(),
                       out.counts.data() + kk * n, out.frames.data() + kk * frame_bytes, scratch);
         }
       });
