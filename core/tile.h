@@ -15,9 +15,9 @@
 
 namespace spadgen {
 
-// Large buffers in transparent huge pages. A run's big buffers that live until they are written (a tile's
-// frames, 11 MB per 32 x 32 tile of a sweep, kept by band; a band's (K, H, W) stacks; the EXR images'
-// channels) are new memory, which the kernel maps on first touch: in 4 kB pages, one fault per page,
+// Large buffers in transparent huge pages. A run's big buffers (a tile's frames, 11 MB per 32 x 32 tile of a
+// sweep, kept by band; a band's (K, H, W) stacks; the EXR images' channels; the sensor's per-tile rates)
+// are new memory, which the kernel maps on first touch: in 4 kB pages, one fault per page,
 // about 10 us each on this machine kind (a virtual machine), a fifth of a frames run's CPU time
 // (bench/README.md, "End to end"). A buffer that whole 2 MB pages hold with at most an eighth to spare
 // (from 1 MiB on) gets a mapping of its own, aligned to 2 MB, advised MADV_HUGEPAGE (the THP mode of
