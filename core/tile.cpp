@@ -15,19 +15,6 @@
 
 namespace spadgen {
 
-// Under AddressSanitizer every buffer comes from operator new, so that ASan checks its bounds (GCC defines
-// __SANITIZE_ADDRESS__, clang 14 only answers __has_feature).
-#if defined(__SANITIZE_ADDRESS__)
-#define SPADGEN_ASAN 1
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define SPADGEN_ASAN 1
-#endif
-#endif
-#if defined(__linux__) && defined(MADV_HUGEPAGE) && !defined(SPADGEN_ASAN)
-#define SPADGEN_HUGE_BUFFERS 1
-#endif
-
 namespace {
 // A large buffer's own mapping: its size in whole 2 MB pages, so that no other allocation shares them.
 size_t mapped_bytes(size_t bytes) { return (bytes + kHugePageBytes - 1) / kHugePageBytes * kHugePageBytes; }
@@ -36,7 +23,7 @@ size_t mapped_bytes(size_t bytes) { return (bytes + kHugePageBytes - 1) / kHugeP
 [[maybe_unused]] bool huge(size_t bytes) { return bytes >= kHugePageBytes / 2 && mapped_bytes(bytes) - bytes <= bytes / 8; }
 }  // namespace
 
-#if SPADGEN_HUGE_BUFFERS
+#if defined(SPADGEN_HUGE_BUFFERS)
 namespace {
 // Freed mappings kept for the next buffer of the same size (the next band's tiles), newest last: a
 // reused mapping costs neither page faults nor the kernel's zeroing of its pages. At most kCachedBytes;
@@ -87,27 +74,27 @@ MappingCache& mapping_cache() {
 #endif
 
 void* allocate_buffer(size_t bytes) {
-#if SPADGEN_HUGE_BUFFERS
+#if defined(SPADGEN_HUGE_BUFFERS)
   if (huge(bytes)) {
     const size_t size = mapped_bytes(bytes);
     if (void* p = mapping_cache().take(size)) return p;
-    // Mapped with 2 MB to spare, then trimmed to a 2 MB aligned start.
-    void* m = mmap(nullptr, size + kHugePageBytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    // Mapped with 2 MB to spare; the spare before the first 2 MB boundary and after the buffer unmapped.
+    auto* m = static_cast<char*>(mmap(nullptr, size + kHugePageBytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0));
     if (m == MAP_FAILED) throw std::bad_alloc();
-    const auto a = reinterpret_cast<uintptr_t>(m);
-    const uintptr_t start = (a + kHugePageBytes - 1) / kHugePageBytes * kHugePageBytes;
-    if (start > a) munmap(m, start - a);
-    if (const size_t tail = a + size + kHugePageBytes - (start + size); tail > 0)
-      munmap(reinterpret_cast<void*>(start + size), tail);
-    (void)madvise(reinterpret_cast<void*>(start), size, MADV_HUGEPAGE);  // advice: without THP, small pages
-    return reinterpret_cast<void*>(start);
+    const size_t head = (kHugePageBytes - reinterpret_cast<uintptr_t>(m) % kHugePageBytes) % kHugePageBytes;
+    if (head > 0) munmap(m, head);
+    munmap(m + head + size, kHugePageBytes - head);
+#if defined(MADV_HUGEPAGE)
+    (void)madvise(m + head, size, MADV_HUGEPAGE);  // advice: without THP, small pages
+#endif
+    return m + head;
   }
 #endif
   return ::operator new(bytes);
 }
 
 void deallocate_buffer(void* p, [[maybe_unused]] size_t bytes) noexcept {
-#if SPADGEN_HUGE_BUFFERS
+#if defined(SPADGEN_HUGE_BUFFERS)
   if (huge(bytes)) {
     mapping_cache().put(p, mapped_bytes(bytes));
     return;

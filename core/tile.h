@@ -26,6 +26,18 @@ namespace spadgen {
 // band's tiles, which then pay no faults and no zeroing. Smaller buffers, and every buffer under
 // AddressSanitizer, come from operator new.
 inline constexpr size_t kHugePageBytes = size_t{2} << 20;
+// AddressSanitizer, as GCC (__SANITIZE_ADDRESS__) and clang 14 (__has_feature only) announce it; the huge-page
+// mappings where the machine has them and ASan is off.
+#if defined(__SANITIZE_ADDRESS__)
+#define SPADGEN_ASAN 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define SPADGEN_ASAN 1
+#endif
+#endif
+#if defined(__linux__) && !defined(SPADGEN_ASAN)
+#define SPADGEN_HUGE_BUFFERS 1
+#endif
 void* allocate_buffer(size_t bytes);  // core/tile.cpp
 void deallocate_buffer(void* p, size_t bytes) noexcept;
 
@@ -57,7 +69,7 @@ struct DefaultInitAllocator : BufferAllocator<T> {
   using BufferAllocator<T>::BufferAllocator;
   template <class U>
   void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
-#if defined(__SANITIZE_ADDRESS__)
+#if defined(SPADGEN_ASAN)
     if constexpr (std::is_same_v<U, uint8_t>) {
       ::new (static_cast<void*>(p)) U(0xA5);
       return;

@@ -83,7 +83,7 @@ TEST(Buffers, LargeBuffersKeepTheirValuesAndSitInHugePages) {
   }
   FrameBytes frames(size_t{350} * 255 * 128);
   for (size_t i = 0; i < frames.size(); ++i) frames[i] = static_cast<uint8_t>(i);
-#if defined(__linux__) && !defined(__SANITIZE_ADDRESS__)
+#if defined(SPADGEN_HUGE_BUFFERS)
   EXPECT_EQ(reinterpret_cast<uintptr_t>(frames.data()) % kHugePageBytes, 0u);
   {  // a freed mapping serves the next buffer of its size (the next band's tiles), with its pages
     const uint8_t* first = nullptr;
