@@ -13,6 +13,10 @@ among pixels of a positive median, and among the indirect ones; the error agains
 seeds (the counts of rare bright paths vary from one to the next). The figures are in docs/render.md.
 
     /usr/bin/python3 bench/fireflies.py build/app/spadgen [--crop X,Y,W,H] [--paths 16] [--reference 256] [--seeds 1,2,3]
+        [--defaults-only] [--list] [--work DIR]
+
+--work keeps the runs in DIR (default: a temporary folder, removed) and reuses its reference when it holds
+one of the same crop and paths, e.g. to compare two builds against one reference.
 """
 import argparse
 import os
@@ -51,10 +55,18 @@ def main():
     ap.add_argument("--reference", type=int, default=256)
     ap.add_argument("--seeds", type=lambda v: [int(x) for x in v.split(",")], default=[1, 2, 3],
                     help="the light seeds of the runs compared (comma-separated)")
+    ap.add_argument("--list", action="store_true", help="print every outlier's pixel")
+    ap.add_argument("--defaults-only", action="store_true", help="only the default setting (guided connections on)")
+    ap.add_argument("--work", help="keep the runs in this folder and reuse its reference (same crop and paths)")
     a = ap.parse_args()
-    work = tempfile.mkdtemp(prefix="spadgen-fireflies-")
-    _, ref, ref_gt = run(a.spadgen, a.crop, [f"render.samples_per_pixel={a.reference}", "seeds.light=1000"],
-                         os.path.join(work, "reference"))
+    work = a.work or tempfile.mkdtemp(prefix="spadgen-fireflies-")
+    reference = os.path.join(work, f"reference-{a.reference}-{a.crop.replace(',', '_')}")
+    if not os.path.isdir(reference):
+        shutil.rmtree(reference + ".partial", ignore_errors=True)
+        run(a.spadgen, a.crop, [f"render.samples_per_pixel={a.reference}", "seeds.light=1000"], reference + ".partial")
+        os.replace(reference + ".partial", reference)
+    r = spadgen.Run(reference)
+    ref, ref_gt = r.laser["photons_per_pulse"].astype(np.float64), r.ground_truth
     mr = median_filter(ref, 3)
     inner = np.zeros_like(ref, bool)
     inner[1:-1, 1:-1] = True
@@ -66,11 +78,13 @@ def main():
     print("| setting | light seed | time (s) | pixels > 1.5 x median (silhouette / indirect / other) | > 3 x | "
           "worst (median > 0) | worst indirect | error p50 / p90 / p99 | rms / mean |")
     print("|---|---|---|---|---|---|---|---|---|")
-    for name, sets in [("guided_connections=false", ["render.guided_connections=false"]),
-                       ("guided_connections=true (default)", ["render.guided_connections=true"])]:
+    settings = [("guided_connections=false", ["render.guided_connections=false"]),
+                ("guided_connections=true (default)", ["render.guided_connections=true"])]
+    for name, sets in settings[1:] if a.defaults_only else settings:
         for seed in a.seeds:
-            seconds, img, gt = run(a.spadgen, a.crop, [f"render.samples_per_pixel={a.paths}", f"seeds.light={seed}"] + sets,
-                                   os.path.join(work, f"{name}-{seed}"))
+            out = os.path.join(work, f"{name}-{seed}")
+            shutil.rmtree(out, ignore_errors=True)
+            seconds, img, gt = run(a.spadgen, a.crop, [f"render.samples_per_pixel={a.paths}", f"seeds.light={seed}"] + sets, out)
             mi = median_filter(img, 3)
             ratio = np.where(mi > 0, img / np.where(mi > 0, mi, 1), np.where(img > 0, np.inf, 0.0))
             rel = np.abs(img - ref)[lit] / ref[lit]
@@ -86,7 +100,12 @@ def main():
                   f"{other.sum()}) | {(smooth & (ratio > 3)).sum()} | {worst:.1f} | {fin.max() if fin.size else 0.0:.1f} | "
                   f"{np.median(rel) * 100:.2f} % / {np.percentile(rel, 90) * 100:.2f} % / "
                   f"{np.percentile(rel, 99) * 100:.2f} % | {rms:.3f} |")
-    shutil.rmtree(work)
+            if a.list:
+                for y, x in zip(*np.nonzero(bad)):
+                    print(f"    outlier at x {x}, y {y} of the crop: {ratio[y, x]:.2f} x its median, reference "
+                          f"{ref[y, x]:.4g}, this run {img[y, x]:.4g}, object {gt['object_id'][y, x]}")
+    if not a.work:
+        shutil.rmtree(work)
 
 
 if __name__ == "__main__":
