@@ -55,6 +55,11 @@ struct GlossyStrip {
   glm::dvec3 o, a, b, n;     // corner, long side, short side, unit normal
   double area;               // |a x b|
   float alpha;
+  int slab = -1;             // the plate (GlossySlab) whose edge it is, across its thickness, lit by the laser; -1: none
+  // An edge's plane (out of the plate) and the distance into the plate over which the laser's light
+  // entering through it climbs one thickness, at least (Integrator::edge_reflections).
+  glm::dvec3 out{0.0};
+  double offset = 0.0, per_reflection = 0.0;
 };
 // The affine coordinates (s, t) of point p (projected on the plane) in o + s a + t b.
 glm::dvec2 strip_coordinates(const glm::dvec3& p, const glm::dvec3& o, const glm::dvec3& a, const glm::dvec3& b);

@@ -24,6 +24,9 @@ constexpr float kGuideMaxAlpha = 0.04f;
 // A vertex draws towards each ghost with this probability (the draws' density is that share of the lobe's):
 // the ghost lobe's density stays far above the diffuse draw's where the ghost is, at a quarter of the rays.
 constexpr double kGhostDrawShare = 0.25;
+// A vertex near a plate's edge draws towards each of its light pipe's paths (edge_ghost_targets) every time:
+// few vertices are near an edge, and the pipe's light is its draws' alone.
+constexpr float kEdgeGhostDrawShare = 0.5f;
 
 inline double sqr(double x) { return x * x; }
 // Lambertian vertices aim at the triangles of meshes of at most this many (plates, boxes), at most
@@ -145,7 +148,9 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
   // triangles sharing a diagonal that make a parallelogram whose short side is under 1/20 of its long
   // one (a 2 mm edge of a 40 cm plate: 1/200). A mesh of more triangles (a curved glossy object) is left
   // to the BSDF draws, and so are all of them past kMaxGlossyParts.
-  for (size_t m = 0; m < scene.meshes.size() && guided_; ++m) {
+  // Built whether or not the guided connections are on: a plate's edges are also laser connections.
+  const bool glossy_meshes = guided_connections_active(scene, true);
+  for (size_t m = 0; m < scene.meshes.size() && glossy_meshes; ++m) {
     const scenes::Mesh& mesh = scene.meshes[m];
     const MaterialPoint& mp = shading.material(mesh.material).point;
     const size_t nt = mesh.triangle_count();
@@ -154,6 +159,9 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
       continue;
     const auto corner = [&](size_t t, int k) { return glm::dvec3(mesh.positions[mesh.indices[3 * t + size_t(k)]]); };
     const size_t first_part = parts_.size();
+    glm::dvec3 centroid(0.0);  // of the mesh's corners: inside a plate
+    for (size_t t = 0; t < nt; ++t)
+      for (int k = 0; k < 3; ++k) centroid += corner(t, k) / double(3 * nt);
     std::vector<size_t> part_of(nt, SIZE_MAX);  // triangle -> its part
     for (size_t t = 0; t < nt; ++t) {
       const glm::dvec3 e1 = corner(t, 1) - corner(t, 0), e2 = corner(t, 2) - corner(t, 0), cr = glm::cross(e1, e2);
@@ -163,6 +171,7 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
     // A plate: a volume whose largest faces (by area, summed over the triangles of one normal) lie in two
     // parallel planes.
     const ResolvedMaterial& rmat = shading.material(mesh.material);
+    int slab = -1;  // this mesh's plate
     if (rmat.volume && mp.ior != 1.0f && parts_.size() > first_part) {
       double best_area = 0.0;
       glm::dvec3 best_n(0.0);
@@ -179,7 +188,10 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
           const double o = glm::dot(best_n, parts_[j].p0);
           lo = std::min(lo, o), hi = std::max(hi, o);
         }
-      if (hi > lo) slabs_.push_back(GlossySlab{best_n, lo, hi, double(mp.ior), mp.alpha, mesh.material});
+      if (hi > lo) {
+        slab = int(slabs_.size());
+        slabs_.push_back(GlossySlab{best_n, lo, hi, double(mp.ior), mp.alpha, mesh.material});
+      }
     }
     for (size_t t = 0; t < nt; ++t)
       for (size_t u = t + 1; u < nt; ++u) {
@@ -202,7 +214,29 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
         const bool a_long = glm::length(a) >= glm::length(b);
         const glm::dvec3 lng = a_long ? a : b, shrt = a_long ? b : a;
         if (glm::length(shrt) >= 0.05 * glm::length(lng)) continue;
-        strips_.push_back(GlossyStrip{o, lng, shrt, cr / area, area, mp.alpha});
+        // An edge of the plate: across its thickness, square to its faces.
+        const GlossySlab* sl = slab >= 0 ? &slabs_[size_t(slab)] : nullptr;
+        GlossyStrip st{o, lng, shrt, cr / area, area, mp.alpha};
+        if (sl != nullptr && std::fabs(glm::dot(st.n, sl->n)) < 1e-6 &&
+            std::fabs(std::fabs(glm::dot(shrt, sl->n)) - (sl->hi - sl->lo)) <= 1e-6 * glm::length(lng)) {
+          // Lit from outside: the laser in front of the edge's plane, its light refracted in climbing
+          // (along the faces' normal, per metre into the plate) at least this fast along the edge.
+          const glm::dvec3 c = o + 0.5 * (lng + shrt);
+          st.out = glm::dot(st.n, c - centroid) > 0.0 ? st.n : -st.n;
+          st.offset = glm::dot(st.out, c);
+          double rate = 1e300;
+          for (const double f : {0.0, 0.5, 1.0}) {
+            const glm::dvec3 win = glm::normalize(o + f * lng + 0.5 * shrt - laser_.position);
+            const double ce = -glm::dot(win, st.out), se2 = (1.0 - ce * ce) / (double(mp.ior) * double(mp.ior));
+            rate = ce > 0.0 && se2 < 1.0 ? std::min(rate, std::fabs(glm::dot(win, sl->n)) / double(mp.ior) / std::sqrt(1.0 - se2)) : 0.0;
+          }
+          if (rate > 0.0) {
+            st.slab = slab;
+            st.per_reflection = (sl->hi - sl->lo) / rate;
+            edges_ = true;
+          }
+        }
+        strips_.push_back(st);
         for (const size_t i : {part_of[t], part_of[u]})
           if (i != SIZE_MAX) parts_[i].sliver = true;
       }
@@ -496,7 +530,7 @@ inline void Integrator::deposit_laser(const NeeVertex& v, double value, double o
 // lobe's blur of the laser's direction is left out, as in the straight connection): behind a 2 mm slab
 // the light is 1.007 of the rough faces' at roughness 0.15, 1.036 at 0.3, 1.247 at 0.5 (docs/render.md).
 bool Integrator::connect_laser_refracted(const NeeVertex& v, const LaserRay& lr, const Crossings& cx, double w,
-                                         const PixelFilm& film, RayCounts* rays) const {
+                                         const PixelFilm& film, RayCounts* rays, double p_guess) const {
   constexpr int kMaxInterfaces = Crossings::kMax;
   const glm::dvec3 x(v.sf.p), L = laser_.position;
   const glm::dvec3 to = L - x;
@@ -523,8 +557,8 @@ bool Integrator::connect_laser_refracted(const NeeVertex& v, const LaserRay& lr,
   const glm::dvec3 lat = to - H * nrm;
   const double D = glm::length(lat);
   glm::dvec3 u = D > 1e-12 * r ? lat / D : glm::dvec3(0.0);
-  const double p =
-      D > 0.0 ? snell_invariant(depth, index, k + 1, D, std::min(index[k] * D / r, 0.5 * p_max), p_max) : 0.0;
+  const double p0 = p_guess >= 0.0 ? std::min(p_guess, p_max * (1.0 - 1e-9)) : std::min(index[k] * D / r, 0.5 * p_max);
+  const double p = D > 0.0 ? snell_invariant(depth, index, k + 1, D, p0, p_max) : 0.0;
   double sn[kMaxInterfaces + 1], cs[kMaxInterfaces + 1];
   glm::dvec3 dir[kMaxInterfaces + 1];
   for (int j = 0; j <= k; ++j) {
@@ -595,6 +629,7 @@ inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, co
   if (refractive_) {
     Crossings cx;
     tr = shadow_transmittance(lr.origin, wi, float(r), v.shadow_medium_towards(wi), &extra, &rays->laser, first, &cx);
+    if (edges_ && v.medium >= 0) connect_laser_edges(v, lr, cx, w, film, rays);
     if (cx.blocked || (cx.refracting && cx.planar && connect_laser_refracted(v, lr, cx, w, film, rays))) return;
   }
   if (!v.counted(wi)) return;
@@ -605,6 +640,45 @@ inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, co
   if (!(tr.x > 0.0f)) return;
   const double value = double(v.beta.x) * f.x * tr.x * intensity / (r * r) * w;
   deposit_laser(v, value, v.opl + r + extra, film);
+}
+
+// The light entering through an edge: the edge's plane is the one interface, at the edge's middle; the
+// refracted path connect_laser_refracted solves and traces must meet the edge itself (else the plate's
+// face: no such path from v). Only edges whose refracted light can climb from the edge to v's face within
+// the plate (twice its thickness, for the spread of the laser's direction along the edge) are tried.
+void Integrator::connect_laser_edges(const NeeVertex& v, const LaserRay& lr, const Crossings& cx, double w,
+                                     const PixelFilm& film, RayCounts* rays) const {
+  const glm::dvec3 x(v.sf.p), L = laser_.position;
+  for (const GlossyStrip& st : strips_) {
+    if (st.slab < 0) continue;
+    const GlossySlab& s = slabs_[size_t(st.slab)];
+    if (v.medium != s.material || st.offset - glm::dot(st.out, x) > 2.0 * st.per_reflection) continue;
+    const double d = s.hi - s.lo, len = glm::length(st.a);
+    const glm::dvec3 along = st.a / len;
+    const glm::dvec3 c = st.o + std::clamp(glm::dot(x - st.o, along), 0.0, len) * along + 0.5 * st.b;
+    const glm::dvec3 e = glm::dot(st.n, c - x) > 0.0 ? st.n : -st.n;  // out through the edge
+    const double hg = glm::dot(c - x, e);
+    if (!(hg > 1e-3 * d) || !(glm::dot(L - c, e) > 0.0)) continue;  // (v on the edge: the straight walk's)
+    const glm::dvec3 win = glm::normalize(c - L);
+    const double ce = -glm::dot(win, e), n = s.ior, se2 = (1.0 - ce * ce) / (n * n);
+    if (!(ce > 0.0) || !(se2 < 1.0)) continue;
+    if (hg * std::fabs(glm::dot(win, s.n)) / n / std::sqrt(1.0 - se2) > 2.0 * d) continue;
+    // The straight walk's path when it left through this edge.
+    if (cx.n > 0 && cx.slots.c[0].material == s.material && std::fabs(glm::dot(glm::dvec3(cx.slots.c[0].ng), e)) > 1.0 - 1e-6 &&
+        std::fabs(glm::dot(cx.slots.c[0].p - c, e)) <= 1e-6 * (1.0 + len))
+      continue;
+    Crossings ex;
+    ex.n = 1;
+    ex.medium0 = s.material;
+    ex.refracting = true;
+    Crossings::Crossing& cr = ex.slots.c[0];
+    cr.p = c;
+    cr.ng = glm::vec3(e);
+    cr.material = s.material;
+    cr.mp = shading_.material(s.material).point;
+    cr.medium = -1;
+    connect_laser_refracted(v, lr, ex, w, film, rays, std::sqrt(1.0 - ce * ce));  // the laser's angle at the edge
+  }
 }
 
 // Without an ambient source (ambient_on_ false) a laser-only render skips the ambient sums altogether.
@@ -683,10 +757,31 @@ void Integrator::find_guide_targets(const Surface& sf, const Bsdf& bsdf, int med
       if (!(t2 < 1.0f)) continue;
       wl = glm::normalize(t + std::copysign(std::sqrt(1.0f - t2), c) * nb);
     }
-    if (!(glm::dot(wl, nb) > 0.0f)) continue;  // the laser is behind the surface: no reflection of it
     const double r_vertex = glm::length(glm::dvec3(sb.p) - glm::dvec3(sf.p));
-    GuideTarget& g = out->t[out->n++];
-    g.lobe = GlossyTarget{nb, wl, float(double(mb.alpha) / (1.0 + r_vertex / r_laser))};
+    const float alpha = float(double(mb.alpha) / (1.0 + r_vertex / r_laser));
+    if (glm::dot(wl, nb) > 0.0f) {  // else the laser is behind the surface: no reflection of it
+      GuideTarget& g = out->t[out->n++];
+      g.lobe = GlossyTarget{nb, wl, alpha};
+    }
+    // b inside a plate: also its reflection of the light entering through the plate's edges (the laser
+    // connection at b takes that path too, connect_laser_edges).
+    if (!edges_ || media[i] < 0) continue;
+    for (const GlossyStrip& st : strips_) {
+      if (out->n == kMaxGuideTargets) break;
+      if (st.slab < 0 || slabs_[size_t(st.slab)].material != media[i] ||
+          st.offset - glm::dot(st.out, glm::dvec3(sb.p)) > 2.0 * st.per_reflection)
+        continue;
+      const GlossySlab& s = slabs_[size_t(st.slab)];
+      const double zb = glm::dot(glm::dvec3(sb.p), s.n), tol = 1e-6 * std::max(1.0, std::fabs(zb));
+      const bool on_lo = std::fabs(zb - s.lo) <= tol;
+      if (!on_lo && !(std::fabs(zb - s.hi) <= tol)) continue;
+      const int reflections = edge_reflections(glm::dvec3(sb.p), s, st);
+      if (reflections < 0 || reflections > 1) continue;  // the edge's light reaches b only after reflections
+      glm::dvec3 we;
+      if (!edge_path(glm::dvec3(sb.p), s, st, on_lo, 0, alpha, &we) || !(glm::dot(glm::vec3(we), nb) > 0.0f)) continue;
+      GuideTarget& ge = out->t[out->n++];
+      ge.lobe = GlossyTarget{nb, glm::vec3(we), alpha};
+    }
   }
 }
 
@@ -780,7 +875,7 @@ void Integrator::lambertian_guide_targets(const Surface& sf, GuideTargets* out) 
 // (trace_path's next_mis).
 void Integrator::guided_connections(const NeeVertex& a, int medium_t, bool roulette, const Spec& rr_beta,
                                     const GuideTargets& guide, Rng& rng, double w, const PixelFilm& film,
-                                    RayCounts* rays) const {
+                                    RayCounts* rays, const Ghosts* ghosts) const {
   for (int i = 0; i < guide.n; ++i) {
     const float u = uniform(rng), v = uniform(rng);
     glm::vec3 wd;
@@ -788,7 +883,8 @@ void Integrator::guided_connections(const NeeVertex& a, int medium_t, bool roule
     const LobeValues lv = a.bsdf.lobes(wd);
     const double pi = guide.pdf(i, wd);
     if (!(pi > 0.0)) continue;
-    const double pg2 = guide.sum_pdf2(wd);
+    double pg2 = guide.sum_pdf2(wd);
+    if (ghosts != nullptr && (glm::dot(wd, a.sf.ng) > 0.0f) == a.wo_front) pg2 += ghosts->sum_pdf2(wd, 1);
     Spec f(0.0f);
     for (int l = 0; l < kLobes; ++l) {
       if (!(lv.f_cos[l].x > 0.0f)) continue;
@@ -839,14 +935,13 @@ void Integrator::guided_connections(const NeeVertex& a, int medium_t, bool roule
 // targets). From a vertex inside the plate, on its face away from the laser (the plate's own back face:
 // its diffuse lobe, or its glossy reflection of a camera ray that entered the plate), the ghost is two
 // reflections away: the unfolded path starts in the glass, and the lobe, in the glass, has alpha
-// 2 sqrt(2) alpha_plate. As for the guided targets, the choice depends on x alone, so the densities are
-// exact whatever it is.
+// 2 sqrt(2) alpha_plate. A vertex inside the plate on either face also aims at the light entering through
+// the plate's edges (edge_ghost_targets). As for the guided targets, the choice depends on x alone, so the
+// densities are exact whatever it is.
 void Integrator::ghost_targets(const Surface& sf, int medium, Ghosts* out) const {
   out->n = 0;
-  out->reach = medium < 0 ? 3 : 2;
   const glm::dvec3 x(sf.p), L = laser_.position;
   for (const GlossySlab& s : slabs_) {
-    if (out->n == kMaxGuideTargets) return;
     const double sx = glm::dot(x, s.n), sl = glm::dot(L, s.n), d = s.hi - s.lo;
     bool up, down;
     double hx;  // the path's length in air along the normal before it enters the plate
@@ -856,6 +951,8 @@ void Integrator::ghost_targets(const Surface& sf, int medium, Ghosts* out) const
     } else {  // inside this plate, on its face away from the laser
       if (medium != s.material) continue;
       const double tol = 1e-6 * std::max(1.0, std::fabs(sx));
+      if (std::fabs(sx - s.lo) <= tol || std::fabs(sx - s.hi) <= tol)
+        edge_ghost_targets(x, s, int(&s - slabs_.data()), std::fabs(sx - s.lo) <= tol, out);
       up = std::fabs(sx - s.lo) <= tol && sl > s.hi, down = std::fabs(sx - s.hi) <= tol && sl < s.lo;
       hx = 0.0;
     }
@@ -868,6 +965,7 @@ void Integrator::ghost_targets(const Surface& sf, int medium, Ghosts* out) const
     const double D = glm::length(lat);
     const glm::dvec3 u = D > 0.0 ? lat / D : glm::dvec3(0.0);
     const double n = s.ior;
+    if (out->n == Ghosts::kMax) return;
     const double depth[2] = {hx + hl, 3.0 * d}, index[2] = {1.0, n};
     const double p = D > 0.0 ? snell_invariant(depth, index, 2, D, std::min(D / glm::length(to), 0.5), 1.0) : 0.0;
     const double ca = std::sqrt(std::max(0.0, 1.0 - p * p));
@@ -889,17 +987,106 @@ void Integrator::ghost_targets(const Surface& sf, int medium, Ghosts* out) const
       on = distance_to_triangle(q, part.p0, part.e1, part.e2) <= kGuideEdgeWidths * alpha * rx;
     }
     if (!on) continue;
+    out->reach[out->n] = medium < 0 ? 3 : 2;
+    out->share[out->n] = float(kGhostDrawShare);
     out->lobe[out->n++] = DirectionLobe{glm::vec3(w0), float(alpha)};
   }
 }
 
-double Integrator::Ghosts::pdf(int i, const glm::vec3& w) const {
-  return kGhostDrawShare * double(direction_lobe_pdf(lobe[i], w));
+// The laser's light that enters a plate through one of its edges (a GlossyStrip across the plate's
+// thickness, lit by the laser) and is reflected k times between the plate's faces (totally, beyond the
+// critical angle) before it reaches x, a vertex inside the plate on one of its faces: a light pipe that
+// x's own lobes (a plate's diffuse lobe) meet only in a narrow cone of directions, whose light the laser
+// connection at the k-th vertex on returns through the edge (connect_laser_edges). For each k (reach k,
+// from 1 to kMaxGhostReach) about edge_reflections' estimate whose path edge_path finds: a lobe about its
+// direction at x of alpha 2 sqrt(k) alpha_plate (k reflections, each turning the ray by twice its
+// microfacet's tilt). Reach 1 is the next vertex's laser connection, which the guided connections aim at
+// too: trace_path weighs the two together.
+void Integrator::edge_ghost_targets(const glm::dvec3& x, const GlossySlab& s, int slab, bool on_lo,
+                                    Ghosts* out) const {
+  for (const GlossyStrip& st : strips_) {
+    if (st.slab != slab || st.offset - glm::dot(st.out, x) > (kMaxGhostReach + 2) * st.per_reflection) continue;
+    const int k_est = edge_reflections(x, s, st);
+    if (k_est < 0) continue;
+    for (int k = std::max(1, k_est - 1); k <= std::min(kMaxGhostReach, k_est + 1) && out->n < Ghosts::kMax; ++k) {
+      const double alpha = std::clamp(2.0 * std::sqrt(double(k)) * double(s.alpha), 1e-3, 0.5);
+      glm::dvec3 w;
+      if (!edge_path(x, s, st, on_lo, k, alpha, &w)) continue;
+      out->reach[out->n] = k;
+      out->share[out->n] = kEdgeGhostDrawShare;
+      out->lobe[out->n++] = DirectionLobe{glm::vec3(w), float(alpha)};
+    }
+  }
 }
 
-double Integrator::Ghosts::sum_pdf2(const glm::vec3& w) const {
+int Integrator::edge_reflections(const glm::dvec3& x, const GlossySlab& s, const GlossyStrip& st) const {
+  const glm::dvec3 L = laser_.position;
+  const double d = s.hi - s.lo, n = s.ior, len = glm::length(st.a);
+  const glm::dvec3 along = st.a / len;
+  const glm::dvec3 c = st.o + std::clamp(glm::dot(x - st.o, along), 0.0, len) * along + 0.5 * st.b;
+  const glm::dvec3 e = glm::dot(st.n, c - x) > 0.0 ? st.n : -st.n;  // out of the plate through the edge
+  const double hg = glm::dot(c - x, e);
+  if (!(hg > 0.0) || !(glm::dot(L - c, e) > 0.0)) return -1;  // the laser behind the edge's plane
+  // The laser's direction at the edge, refracted into the glass, climbs (its part along the faces' normal
+  // over its part along e) this much on the way to x.
+  const glm::dvec3 win = glm::normalize(c - L);
+  const double ce = glm::dot(win, -e), se2 = std::max(0.0, 1.0 - ce * ce) / (n * n);
+  if (!(ce > 0.0) || !(se2 < 1.0)) return -1;
+  return int(std::floor(hg * std::fabs(glm::dot(win, s.n)) / n / std::sqrt(1.0 - se2) / d));
+}
+
+// Unfolded across the faces, the path with k reflections is a straight line from x through the edge's
+// plane to the laser's image (its height above x's face mirrored once for each odd k), refracted there:
+// Snell's invariant as in connect_laser_refracted, the glass's depth the distance from x to the edge's
+// plane. It exists when the line meets the edge's plane between k and k + 1 thicknesses above x's face
+// (within the lobe's reach) and on the edge along its length.
+bool Integrator::edge_path(const glm::dvec3& x, const GlossySlab& s, const GlossyStrip& st, bool on_lo, int k,
+                           double alpha, glm::dvec3* w) const {
+  const glm::dvec3 L = laser_.position;
+  const double d = s.hi - s.lo, n = s.ior;
+  const glm::dvec3 m = on_lo ? s.n : -s.n;  // from x's face into the plate
+  const double zl = glm::dot(L - x, m);      // the laser's height above x's face
+  const glm::dvec3 e = glm::dot(st.n, st.o - x) > 0.0 ? st.n : -st.n;
+  const double hg = glm::dot(st.o - x, e);
+  if (!(hg > 1e-3 * d)) return false;
+  const double zk = k % 2 == 0 ? zl + k * d : (k + 1) * d - zl;
+  const glm::dvec3 Lk = L + (zk - zl) * m;
+  const glm::dvec3 to = Lk - x;
+  const glm::dvec3 lat = to - glm::dot(to, e) * e;
+  const double D = glm::length(lat);
+  if (!(D > 0.0) || !(glm::dot(to, e) > hg)) return false;
+  const glm::dvec3 u = lat / D;
+  const double depth[2] = {hg, glm::dot(to, e) - hg}, index[2] = {n, 1.0};
+  // First guess: the sine of the laser's angle to the edge's normal where the line from x meets the edge.
+  const glm::dvec3 win = glm::normalize(x + hg * e - L);
+  const double p0 = std::min(std::sqrt(std::max(0.0, 1.0 - sqr(glm::dot(win, e)))), 1.0 - 1e-9);
+  const double p = snell_invariant(depth, index, 2, D, p0, 1.0);
+  const double sg = p / n, cg = std::sqrt(std::max(0.0, 1.0 - sg * sg));
+  if (!(cg > 0.0)) return false;
+  const glm::dvec3 wg = sg * u + cg * e;  // in the glass, unfolded: x's first segment
+  const glm::dvec3 q = x + (hg / cg) * wg;
+  const double slack = kGuideEdgeWidths * alpha * hg / cg;
+  const double zq = glm::dot(q - x, m);
+  if (zq < k * d - slack || zq > (k + 1) * d + slack) return false;
+  const double len = glm::length(st.a), along = glm::dot(q - st.o, st.a) / len;
+  if (along < -slack || along > len + slack) return false;
+  // The laser's direction at the edge (real: the image's height folded back).
+  const double ca = std::sqrt(std::max(0.0, 1.0 - p * p));
+  glm::dvec3 wa = p * u + ca * e;
+  if (k % 2 == 1) wa -= 2.0 * glm::dot(wa, m) * m;
+  if (!(laser_.intensity_towards(-wa) > 0.0)) return false;
+  *w = wg;
+  return true;
+}
+
+double Integrator::Ghosts::pdf(int i, const glm::vec3& w) const {
+  return double(share[i]) * double(direction_lobe_pdf(lobe[i], w));
+}
+
+double Integrator::Ghosts::sum_pdf2(const glm::vec3& w, int r) const {
   double s = 0.0;
-  for (int i = 0; i < n; ++i) s += sqr(pdf(i, w));
+  for (int i = 0; i < n; ++i)
+    if (reach[i] == r) s += sqr(pdf(i, w));
   return s;
 }
 
@@ -915,11 +1102,13 @@ double Integrator::Ghosts::sum_pdf2(const glm::vec3& w) const {
 // Both strategies estimate the same rest from the direction on (Russian roulette's later survival
 // probabilities change its variance, not its expectation), so the rest cancels from the weights.
 void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int deltas_after, bool roulette,
-                                   float eta_scale, const Ghosts& ghosts, Rng& rng, double w, const PixelFilm& film,
-                                   RayCounts* rays) const {
+                                   float eta_scale, const Ghosts& ghosts, Rng& rng, double w, const double* nee_share,
+                                   const double* guided_share, const PixelFilm& film, RayCounts* rays,
+                                   const GuideTargets* guide_a) const {
   const RenderConfig& rc = config_.render;
   for (int i = 0; i < ghosts.n; ++i) {
-    if (uniform(rng) >= float(kGhostDrawShare)) continue;
+    const int reach = ghosts.reach[i];
+    if (uniform(rng) >= ghosts.share[i]) continue;
     const float u1 = uniform(rng), u2 = uniform(rng);
     glm::vec3 d;
     if (!sample_direction_lobe(ghosts.lobe[i], u1, u2, &d)) continue;
@@ -927,7 +1116,8 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
     if (!(pi > 0.0)) continue;
     if ((glm::dot(d, a.sf.ng) > 0.0f) != a.wo_front) continue;  // the ghost comes back to a's side
     const LobeValues lv = a.bsdf.lobes(d);
-    const double ph2 = ghosts.sum_pdf2(d);
+    // Reach 1 (the next vertex's laser connection): also against a's guided connections.
+    const double ph2 = ghosts.sum_pdf2(d, reach) + (reach == 1 && guide_a != nullptr ? guide_a->sum_pdf2(d) : 0.0);
     Spec f(0.0f), f_sum(0.0f);
     double p_sum = 0.0;
     for (const int l : {kDiffuseLobe, kSpecularLobe}) {
@@ -948,7 +1138,7 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
     glm::dvec3 previous(a.sf.p);
     glm::vec3 o = offset_ray_origin(a.sf.p, a.sf.ng, d);
     double mis = 1.0;
-    for (int k = 1; k <= ghosts.reach; ++k) {
+    for (int k = 1; k <= reach; ++k) {
       RayHit hit;
       ++rays->guided;
       if (!embree_.intersect(o, d, 0.0f, kInf, &hit)) break;
@@ -961,11 +1151,11 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
       const auto [wo_front, bsdf, volume] = shade(sf, mp, d);
       const NeeVertex v{sf, bsdf, wo_front, volume, medium, vertices, !reflected, beta, opl,
                         !(mp.transmission > 0.0f && vertices > 0)};
-      if (k == ghosts.reach) {  // the ghost's light: the laser connection here
+      if (k == reach) {  // the ghost's light: the laser connection here
         LaserRay lr;
         RayCounts at_end;
         if (bsdf.has_non_delta() && beta.x > 0.0f && laser_ray(sf, &lr))
-          connect_laser(v, lr, nullptr, w * mis, film, &at_end);
+          connect_laser(v, lr, nullptr, w * nee_share[reach] * mis, film, &at_end);
         rays->guided += at_end.total();
         break;
       }
@@ -982,9 +1172,9 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
         find_guide_targets(sf, bsdf, medium, medium_out_t, &guide, &own);
         rays->guided += own.total();
         // The guided connections of the vertex before the last reach the last: the ghost's light.
-        if (k == ghosts.reach - 1 && guide.n > 0) {
+        if (k == reach - 1 && guide.n > 0) {
           RayCounts at_end;
-          guided_connections(v, medium_out_t, rr, rr_beta, guide, rng, w, film, &at_end);
+          guided_connections(v, medium_out_t, rr, rr_beta, guide, rng, w * guided_share[reach - 1], film, &at_end);
           rays->guided += at_end.total();
         }
       }
@@ -1038,12 +1228,15 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
   // The ghosts' MIS weights of the light the path meets at its next vertices (ghost_connections): [i] for
   // the vertex i ahead, the laser connection there (ghost_nee) or the guided connections from there
   // (ghost_guided). 1 where no ghost draw estimates the same light.
-  double ghost_nee[4] = {1.0, 1.0, 1.0, 1.0}, ghost_guided[4] = {1.0, 1.0, 1.0, 1.0};
+  constexpr int kAhead = kMaxGhostReach + 1;
+  double ghost_nee[kAhead], ghost_guided[kAhead];
+  std::fill_n(ghost_nee, kAhead, 1.0);
+  std::fill_n(ghost_guided, kAhead, 1.0);
   for (bool camera_ray = true;; camera_ray = false) {
     const double mis = next_mis;
     next_mis = 1.0;
-    for (int i = 0; i < 3; ++i) ghost_nee[i] = ghost_nee[i + 1], ghost_guided[i] = ghost_guided[i + 1];
-    ghost_nee[3] = ghost_guided[3] = 1.0;
+    for (int i = 0; i + 1 < kAhead; ++i) ghost_nee[i] = ghost_nee[i + 1], ghost_guided[i] = ghost_guided[i + 1];
+    ghost_nee[kAhead - 1] = ghost_guided[kAhead - 1] = 1.0;
     RayHit hit;
     if (!next_hit(block, j, camera_ray, o, d, &hit, rays)) {
       gather_environment(beta, &ambient);
@@ -1079,6 +1272,11 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
       }
     }
 
+    // The ghosts a vertex sees of the laser through a glossy plate (no random numbers: found first, as
+    // the guided connections weigh against those whose light the next vertex's laser connection returns).
+    Ghosts ghosts;
+    if (guided_ && !slabs_.empty() && !last_segment && beta.x > 0.0f && bsdf.has_non_delta())
+      ghost_targets(sf, medium, &ghosts);
     // Guided connections from a glossy vertex whose next vertex may reflect the laser in a narrow lobe.
     GuideTargets guide;
     const bool roulette = !last_segment && vertices >= rc.russian_roulette_from;
@@ -1087,14 +1285,13 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
       const int medium_out_t = volume ? (wo_front ? sf.material : -1) : medium;
       find_guide_targets(sf, bsdf, medium, medium_out_t, &guide, rays);
       if (guide.n > 0)
-        guided_connections(v, medium_out_t, roulette, beta * eta_scale, guide, rng, w * ghost_guided[0], film, rays);
+        guided_connections(v, medium_out_t, roulette, beta * eta_scale, guide, rng, w * ghost_guided[0], film, rays,
+                           &ghosts);
     }
     // Ghost draws from a vertex that sees a glossy plate's ghost of the laser.
-    Ghosts ghosts;
-    if (!slabs_.empty() && !last_segment && beta.x > 0.0f && bsdf.has_non_delta()) {
-      ghost_targets(sf, medium, &ghosts);
-      if (ghosts.n > 0) ghost_connections(v, vertices, deltas, roulette, eta_scale, ghosts, rng, w, film, rays);
-    }
+    if (ghosts.n > 0)
+      ghost_connections(v, vertices, deltas, roulette, eta_scale, ghosts, rng, w, ghost_nee, ghost_guided, film, rays,
+                        &guide);
 
     const BsdfSample bs = bsdf.sample(uniform3(rng));
     if (!(bs.weight.x > 0.0f || bs.weight.y > 0.0f)) break;
@@ -1111,13 +1308,16 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
     }
     if ((guide.n > 0 || ghosts.n > 0) && !bs.delta) {
       const double p = double(bsdf.lobes(bs.wi).pdf[bs.lobe]) * q;
-      const double pg2 = guide.sum_pdf2(bs.wi);
+      // The next vertex's laser connection: against the guided connections and the ghosts of reach 1.
+      const double pg2 = guide.sum_pdf2(bs.wi) + (bs.transmitted ? 0.0 : ghosts.sum_pdf2(bs.wi, 1));
       if (pg2 > 0.0) next_mis = p * p / (p * p + pg2);
-      const double ph2 = bs.transmitted ? 0.0 : ghosts.sum_pdf2(bs.wi);
-      if (ph2 > 0.0) {  // the light met reach - 1 vertices ahead (guided) and reach ahead (laser connection)
-        const double share = p * p / (p * p + ph2);
-        ghost_guided[ghosts.reach - 1] *= share;
-        ghost_nee[ghosts.reach] *= share;
+      for (int r = 2; r <= kMaxGhostReach && !bs.transmitted; ++r) {
+        const double ph2 = ghosts.sum_pdf2(bs.wi, r);
+        if (ph2 > 0.0) {  // the light met r - 1 vertices ahead (guided) and r ahead (laser connection)
+          const double share = p * p / (p * p + ph2);
+          ghost_guided[r - 1] *= share;
+          ghost_nee[r] *= share;
+        }
       }
     }
     o = offset_ray_origin(sf.p, sf.ng, bs.wi);

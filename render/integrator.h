@@ -197,26 +197,45 @@ class Integrator {
   // a: a glossy (or Lambertian) vertex; medium_t: the medium on the other side of its surface; roulette:
   // its BSDF draw faces Russian roulette, with the survival probability the camera path at a would have:
   // rr_beta is what its roulette sees there (its throughput times its eta_scale, see trace_path).
+  struct Ghosts;
+  // ghosts: a's (trace_path's), whose draws of reach 1 aim at the same light (else null).
   void guided_connections(const NeeVertex& a, int medium_t, bool roulette, const Spec& rr_beta,
                           const GuideTargets& guide, Rng& rng, double w, const PixelFilm& film,
-                          RayCounts* rays) const;
-  // The ghosts of the laser a non-delta vertex sees through a glossy plate (twice reflected inside),
-  // from the air behind the plate or from the plate's back face inside.
+                          RayCounts* rays, const Ghosts* ghosts = nullptr) const;
+  // The ghosts of the laser a non-delta vertex sees through a glossy plate (reflected inside twice), from
+  // the air behind the plate or from the plate's back face inside, and the light entering a plate through
+  // its edges, from a vertex inside on either face.
+  static constexpr int kMaxGhostReach = 8;
   struct Ghosts {
-    DirectionLobe lobe[kMaxGuideTargets];
+    static constexpr int kMax = 3 * kMaxGuideTargets;
+    DirectionLobe lobe[kMax];
+    // The vertices from the one that draws to the one whose laser connection meets ghost i: from the air
+    // 3 (the entry into the plate, the two reflections), from inside 2; through an edge k (its reflections).
+    int reach[kMax] = {};
+    float share[kMax] = {};  // the probability that a vertex draws towards ghost i
     int n = 0;
-    // The vertices from the one that draws to the one whose laser connection meets the ghost: 3 from the
-    // air (the entry into the plate, the two reflections), 2 from inside the plate.
-    int reach = 3;
     double pdf(int i, const glm::vec3& w) const;  // per steradian, the share of vertices that draw included
-    double sum_pdf2(const glm::vec3& w) const;
+    double sum_pdf2(const glm::vec3& w, int reach) const;  // over the ghosts of that reach
   };
   // medium: the vertex's (-1: air).
   void ghost_targets(const Surface& sf, int medium, Ghosts* out) const;
+  // From x inside plate s (slabs_[slab]), on its face lo (on_lo) or hi: the light entering through its edges.
+  void edge_ghost_targets(const glm::dvec3& x, const GlossySlab& s, int slab, bool on_lo, Ghosts* out) const;
+  // From x inside plate s towards its edge st: about how many reflections between the faces the laser's
+  // light entering there makes on its way to x (-1: the edge faces away from the laser). From x on the face
+  // lo (on_lo) or hi: the path with k reflections (*w: its direction at x), when it meets the edge within
+  // kGuideEdgeWidths of a lobe of this alpha.
+  int edge_reflections(const glm::dvec3& x, const GlossySlab& s, const GlossyStrip& st) const;
+  bool edge_path(const glm::dvec3& x, const GlossySlab& s, const GlossyStrip& st, bool on_lo, int k, double alpha,
+                 glm::dvec3* w) const;
   // a: the non-delta vertex (vertices_after, deltas_after: the path's non-delta vertices including a and
   // its delta events so far; roulette: a's BSDF draw faces Russian roulette; eta_scale: the camera path's, at a).
+  // nee_share[r], guided_share[r]: the weights the ghost draws of earlier vertices leave to the light met
+  // r vertices ahead by its laser connection, and by the guided connections from there (trace_path's).
   void ghost_connections(const NeeVertex& a, int vertices_after, int deltas_after, bool roulette,
-                         float eta_scale, const Ghosts& ghosts, Rng& rng, double w, const PixelFilm& film, RayCounts* rays) const;
+                         float eta_scale, const Ghosts& ghosts, Rng& rng, double w, const double* nee_share,
+                         const double* guided_share, const PixelFilm& film, RayCounts* rays,
+                         const GuideTargets* guide_a) const;
   // Russian roulette's survival probability for a path of throughput beta: its laser channel, or the larger
   // channel when the scene has ambient light, at most 0.95.
   float roulette_q(const Spec& beta) const {
@@ -247,9 +266,15 @@ class Integrator {
   // The laser's connection from v through the refracting interfaces the straight walk to it crossed
   // (parallel planar faces of volumes: a plate); false when the refracted path does not cross the same
   // surfaces (then the straight connection is used).
+  // p_guess: a first guess of Snell's invariant (< 0: from the straight line to the laser).
   bool connect_laser_refracted(const NeeVertex& v, const LaserRay& lr, const Crossings& cx, double w,
-                               const PixelFilm& film, RayCounts* rays) const;
+                               const PixelFilm& film, RayCounts* rays, double p_guess = -1.0) const;
   void deposit_laser(const NeeVertex& v, double value, double opl, const PixelFilm& film) const;
+  // From a vertex inside a plate: the laser's light that enters through one of the plate's edges and
+  // reaches the vertex without a reflection (another path than the straight walk's, cx, unless that one
+  // crossed the same edge).
+  void connect_laser_edges(const NeeVertex& v, const LaserRay& lr, const Crossings& cx, double w,
+                           const PixelFilm& film, RayCounts* rays) const;
   void connect_laser(const NeeVertex& v, const LaserRay& lr, const FirstSegment* first, double w,
                      const PixelFilm& film, RayCounts* rays) const;
 
@@ -269,6 +294,7 @@ class Integrator {
   bool guided_ = false;      // a glossy material of narrow lobe (alpha <= kGuideMaxAlpha): guided connections
   std::vector<GlossyPart> parts_;    // the triangles of small meshes (plates) of such materials
   std::vector<GlossyStrip> strips_;  // their slivers (pairs of triangles)
+  bool edges_ = false;               // a strip is a plate's edge (GlossyStrip::slab)
   std::vector<GlossySlab> slabs_;    // the plates among them (volumes of parallel faces)
   const Ambient& ambient_;
   bool transmission_ = false;
