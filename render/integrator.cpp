@@ -1164,15 +1164,16 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
         if (vertices >= rc.max_bounces) break;  // the camera path meets no laser connection after this one
       }
       const bool rr = vertices >= rc.russian_roulette_from;
+      // The guided connections of the vertex before the last reach the last: the ghost's light (the
+      // vertices before need no targets: only the last draw's weight, mis, counts).
       GuideTargets guide;
-      if (guided_ && beta.x > 0.0f &&
+      if (k == reach - 1 && guided_ && beta.x > 0.0f &&
           (bsdf.glossy() || (bsdf.lambertian() && medium < 0 && !parts_.empty()))) {
         const int medium_out_t = volume ? (wo_front ? sf.material : -1) : medium;
         RayCounts own;
         find_guide_targets(sf, bsdf, medium, medium_out_t, &guide, &own);
         rays->guided += own.total();
-        // The guided connections of the vertex before the last reach the last: the ghost's light.
-        if (k == reach - 1 && guide.n > 0) {
+        if (guide.n > 0) {
           RayCounts at_end;
           guided_connections(v, medium_out_t, rr, rr_beta, guide, rng, w * guided_share[reach - 1], film, &at_end);
           rays->guided += at_end.total();
