@@ -27,6 +27,7 @@ constexpr double kGhostDrawShare = 0.25;
 // A vertex near a plate's edge draws towards each of its light pipe's paths (edge_ghost_targets) every time:
 // few vertices are near an edge, and the pipe's light is its draws' alone.
 constexpr float kEdgeGhostDrawShare = 0.5f;
+constexpr float kSecondGhostDrawShare = 0.1f;
 
 inline double sqr(double x) { return x * x; }
 // Lambertian vertices aim at the triangles of meshes of at most this many (plates, boxes), at most
@@ -990,6 +991,19 @@ void Integrator::ghost_targets(const Surface& sf, int medium, Ghosts* out) const
     out->reach[out->n] = medium < 0 ? 3 : 2;
     out->share[out->n] = float(kGhostDrawShare);
     out->lobe[out->n++] = DirectionLobe{glm::vec3(w0), float(alpha)};
+    // From inside, the second-order ghost too (four reflections: 5 d of glass unfolded, reach 4, alpha
+    // 4 alpha_plate), drawn more rarely.
+    if (medium >= 0 && out->n < Ghosts::kMax && D > 0.0) {
+      const double depth2[2] = {hl, 5.0 * d};
+      const double p2 = snell_invariant(depth2, index, 2, D, p, 1.0);
+      const double ca2 = std::sqrt(std::max(0.0, 1.0 - p2 * p2)), sg2 = p2 / n;
+      if (ca2 > 0.0 && laser_.intensity_towards(-(p2 * u + ca2 * nrm)) > 0.0) {
+        out->reach[out->n] = 4;
+        out->share[out->n] = kSecondGhostDrawShare;
+        out->lobe[out->n++] = DirectionLobe{glm::vec3(sg2 * u + std::sqrt(1.0 - sg2 * sg2) * nrm),
+                                            float(std::clamp(4.0 * double(s.alpha), 1e-3, 0.5))};
+      }
+    }
   }
 }
 
