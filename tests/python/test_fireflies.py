@@ -45,15 +45,15 @@ def test_crop_is_smooth(make_run, name):
     assert bad <= 1, f"{bad} of {smooth} smooth pixels above 1.5 x their 3 x 3 median (worst {worst:.2f})"
 
 
-def test_plate_along_its_lit_edge_is_smooth_for_eight_light_seeds(spadgen_bin, tmp_path):
-    """The plate along its lit edge (64 x 500 pixels from column 432), light seeds 1 to 8: no pixel above
-    1.5 times. The code before the edge's light was aimed at had one at seed 6 (1.51 times; and in 24 seeds
-    3, at most 2.39 times), connecting the light without aiming at it one at seed 2 (2.62 times; 5 in 24);
-    this code none in 24 seeds (measured on the whole-image reference's smooth pixels, bench/fireflies.py's
-    rule). A change of the random sequences alone may fail it: 0 in 24 bounds the chance of one outlier per
-    seed below 12 % (95 %)."""
+def test_plate_along_its_lit_edge_is_smooth(spadgen_bin, tmp_path):
+    """The plate along its lit edge (64 x 500 pixels from column 432), light seeds 1, 2 and 6 (three, for the
+    sanitizers' time): no pixel above 1.5 times. The code before the edge's light was aimed at had one at
+    seed 6 (1.51 times; 3 in 24 seeds, at most 2.39 times), connecting the light without aiming at it one at
+    seed 2 (2.62 times; 5 in 24); this code none in 24 seeds (measured on the whole-image reference's smooth
+    pixels, bench/fireflies.py's rule). A change of the random sequences alone may fail it: 0 in 24 bounds
+    the chance of one outlier per seed below 12 % (95 %)."""
     scene = os.path.join(os.path.dirname(__file__), "..", "..", "scenes", "paper", "multi_object.json")
-    for seed in range(1, 9):
+    for seed in (1, 2, 6):
         out = tmp_path / f"seed{seed}"
         subprocess.run([spadgen_bin, "run", scene, "-q", "-o", str(out), "--set", "camera.crop=[432,0,64,500]",
                         "--set", "acquisition.gate_sweep.step_ps=3600", "--set", "outputs.previews=false",
