@@ -57,7 +57,7 @@ struct GlossyStrip {
   float alpha;
   int slab = -1;             // the plate (GlossySlab) whose edge it is, across its thickness, lit by the laser; -1: none
   // An edge's plane (out of the plate) and the distance into the plate over which the laser's light
-  // entering through it climbs one thickness, at least (Integrator::edge_reflections).
+  // entering through it climbs one thickness, at least (Integrator::edge_entry).
   glm::dvec3 out{0.0};
   double offset = 0.0, per_reflection = 0.0;
 };

@@ -221,11 +221,18 @@ class Integrator {
   void ghost_targets(const Surface& sf, int medium, Ghosts* out) const;
   // From x inside plate s (slabs_[slab]), on its face lo (on_lo) or hi: the light entering through its edges.
   void edge_ghost_targets(const glm::dvec3& x, const GlossySlab& s, int slab, bool on_lo, Ghosts* out) const;
-  // From x inside plate s towards its edge st: about how many reflections between the faces the laser's
-  // light entering there makes on its way to x (-1: the edge faces away from the laser). From x on the face
-  // lo (on_lo) or hi: the path with k reflections (*w: its direction at x), when it meets the edge within
-  // kGuideEdgeWidths of a lobe of this alpha.
-  int edge_reflections(const glm::dvec3& x, const GlossySlab& s, const GlossyStrip& st) const;
+  // From x inside plate s, the laser's light entering through its lit edge st (GlossyStrip::slab >= 0): the
+  // edge's point nearest x along it, in the middle of its thickness (c); x's distance to the edge's plane
+  // (hg); the cosine of the laser's incidence at c (ce); how many thicknesses that light climbs along the
+  // faces' normal on its way to x (climb: about how many reflections between the faces it makes). False
+  // when the laser is behind the edge's plane. From x on the face lo (on_lo) or hi: edge_path, the path
+  // with k reflections (*w: its direction at x), when it meets the edge within kGuideEdgeWidths of a lobe
+  // of this alpha.
+  struct EdgeEntry {
+    glm::dvec3 c{0.0};
+    double hg = 0.0, ce = 0.0, climb = 0.0;
+  };
+  bool edge_entry(const glm::dvec3& x, const GlossySlab& s, const GlossyStrip& st, EdgeEntry* out) const;
   bool edge_path(const glm::dvec3& x, const GlossySlab& s, const GlossyStrip& st, bool on_lo, int k, double alpha,
                  glm::dvec3* w) const;
   // a: the non-delta vertex (vertices_after, deltas_after: the path's non-delta vertices including a and
