@@ -173,6 +173,29 @@ double read_component(const unsigned char* p, int component_type, bool normalize
   }
 }
 
+// A PNG's empty IDAT chunks (valid, and carrying nothing) removed: stb_image 2.27 copies such a chunk
+// with memcpy from a null buffer, which is undefined behaviour. Returns the stream unchanged when it is
+// not a PNG or has no empty IDAT; chunks past a length that runs off the end are left for stb to refuse.
+std::vector<unsigned char> without_empty_idat(const unsigned char* bytes, const size_t size) {
+  static constexpr unsigned char kSignature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+  if (size < sizeof kSignature || std::memcmp(bytes, kSignature, sizeof kSignature) != 0) return {};
+  std::vector<unsigned char> out;
+  size_t kept = 0;  // bytes of `bytes` already copied to out (or that would be, when out stays empty)
+  for (size_t at = sizeof kSignature; size - at >= 12;) {
+    const size_t length = (size_t{bytes[at]} << 24) | (size_t{bytes[at + 1]} << 16) | (size_t{bytes[at + 2]} << 8) | bytes[at + 3];
+    if (length > size - at - 12) break;
+    if (length == 0 && std::memcmp(bytes + at + 4, "IDAT", 4) == 0) {
+      if (out.empty()) out.reserve(size);
+      out.insert(out.end(), bytes + kept, bytes + at);
+      kept = at + 12;
+    }
+    at += 12 + length;
+  }
+  if (kept == 0) return {};
+  out.insert(out.end(), bytes + kept, bytes + size);
+  return out;
+}
+
 // image/bufferView bounds are not checked by tinygltf 2.7 before it hands the bytes to the image
 // decoder; this loader checks them first, against the model tinygltf is filling.
 bool load_image_checked(tinygltf::Image* image, const int image_index, std::string* err, std::string* warn,
@@ -193,6 +216,12 @@ bool load_image_checked(tinygltf::Image* image, const int image_index, std::stri
                 " does not exist or lies past the end of its buffer\n";
       return false;
     }
+  }
+  if (size > 0) {
+    const std::vector<unsigned char> png = without_empty_idat(bytes, static_cast<size_t>(size));
+    if (!png.empty())
+      return tinygltf::LoadImageData(image, image_index, err, warn, req_width, req_height, png.data(),
+                                     static_cast<int>(png.size()), nullptr);
   }
   return tinygltf::LoadImageData(image, image_index, err, warn, req_width, req_height, bytes, size, nullptr);
 }

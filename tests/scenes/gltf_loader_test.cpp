@@ -387,6 +387,31 @@ TEST(GltfLoader, BaseColorTexturesFromDataUriFileAndBufferView) {
   }
 }
 
+// Empty IDAT chunks are valid PNG; stb_image 2.27 would memcpy from a null buffer on one (found by
+// fuzz_gltf, fuzz/regressions/gltf/png_empty_idat.gltf): the loader drops them, and the texels are the same.
+TEST(GltfLoader, PngWithEmptyIdatChunksDecodesToTheSameTexels) {
+  TempDir dir;
+  std::vector<uint8_t> png = unbase64(kPng2x2);
+  const std::vector<uint8_t> empty_idat = {0, 0, 0, 0, 'I', 'D', 'A', 'T', 0x35, 0xaf, 0x06, 0x1e};
+  const size_t after_ihdr = 8 + 12 + 13;
+  ASSERT_EQ(std::string(png.begin() + 12, png.begin() + 16), "IHDR");
+  png.insert(png.begin() + static_cast<std::ptrdiff_t>(after_ihdr), empty_idat.begin(), empty_idat.end());
+  png.insert(png.end() - 12, empty_idat.begin(), empty_idat.end());  // and one between the data and IEND
+  Gltf g;
+  g.doc["images"] = {{{"bufferView", g.view_of(png)}, {"mimeType", "image/png"}}};
+  g.doc["textures"] = {{{"source", 0}}};
+  g.doc["materials"] = {{{"name", "A"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}}};
+  g.node({{"mesh", g.triangle_mesh()}});
+  const Scene s = load_gltf(g.write(dir.path(), "empty_idat", Gltf::Form::Glb));
+  ASSERT_EQ(s.textures.size(), 1u);
+  ASSERT_EQ(s.textures[0].rgba.size(), 16u);
+  expect_pixel(s.textures[0], 0, 0, {255, 0, 0, 255});
+  expect_pixel(s.textures[0], 1, 0, {0, 255, 0, 255});
+  expect_pixel(s.textures[0], 0, 1, {0, 0, 255, 255});
+  expect_pixel(s.textures[0], 1, 1, {255, 255, 255, 128});
+  EXPECT_TRUE(s.warnings.empty()) << testing::PrintToString(s.warnings);
+}
+
 TEST(GltfLoader, MissingImageFileIsWarnedNotFatal) {
   TempDir dir;
   Gltf g;
