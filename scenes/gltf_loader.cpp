@@ -16,6 +16,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iomanip>
 #include <limits>
 #include <map>
 #include <set>
@@ -217,11 +218,26 @@ bool load_image_checked(tinygltf::Image* image, const int image_index, std::stri
       return false;
     }
   }
-  if (size > 0) {
-    const std::vector<unsigned char> png = without_empty_idat(bytes, static_cast<size_t>(size));
-    if (!png.empty())
-      return tinygltf::LoadImageData(image, image_index, err, warn, req_width, req_height, png.data(),
-                                     static_cast<int>(png.size()), nullptr);
+  // glTF 2.0's images are PNG or JPEG: stb_image's other decoders (BMP, GIF, HDR, PIC, PNM, PSD, TGA) are
+  // never handed a scene's bytes.
+  static constexpr unsigned char kPng[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'}, kJpeg[3] = {0xff, 0xd8, 0xff};
+  const bool png = size >= 8 && std::memcmp(bytes, kPng, 8) == 0, jpeg = size >= 3 && std::memcmp(bytes, kJpeg, 3) == 0;
+  if (!png && !jpeg) {
+    if (err) {
+      std::ostringstream first;
+      for (int i = 0; i < std::min(size, 4); ++i)
+        first << (i ? " " : "") << "0x" << std::hex << std::setw(2) << std::setfill('0') << int(bytes[i]);
+      *err += "image " + std::to_string(image_index) + (image->name.empty() ? "" : " '" + image->name + "'") +
+              ": neither PNG nor JPEG (" + (size > 0 ? "its first bytes are " + first.str() : "it is empty") +
+              "); glTF 2.0 images are PNG (starting 0x89 'PNG') or JPEG (0xff 0xd8 0xff)\n";
+    }
+    return false;
+  }
+  if (png) {
+    const std::vector<unsigned char> cleaned = without_empty_idat(bytes, static_cast<size_t>(size));
+    if (!cleaned.empty())
+      return tinygltf::LoadImageData(image, image_index, err, warn, req_width, req_height, cleaned.data(),
+                                     static_cast<int>(cleaned.size()), nullptr);
   }
   return tinygltf::LoadImageData(image, image_index, err, warn, req_width, req_height, bytes, size, nullptr);
 }

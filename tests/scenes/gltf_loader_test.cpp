@@ -747,6 +747,27 @@ TEST_F(BrokenGltf, ImageBufferViewPastItsBuffer) {
   EXPECT_THAT(msg, HasSubstr("image 0: bufferView 0 does not exist or lies past the end of its buffer"));
 }
 
+// glTF 2.0 images are PNG or JPEG; stb_image would also decode BMP, GIF, TGA, ... (and its decoders of
+// those are where its known bugs lie): such an image is refused, named, with what it starts with.
+TEST_F(BrokenGltf, ImageThatIsNeitherPngNorJpeg) {
+  const std::vector<uint8_t> bmp = {'B', 'M', 0x3a, 0, 0, 0, 0, 0, 0, 0, 0x36, 0, 0, 0};
+  {
+    Gltf g;
+    g.doc["images"] = {{{"bufferView", g.view_of(bmp)}, {"mimeType", "image/png"}, {"name", "logo"}}};
+    g.node({{"mesh", g.triangle_mesh()}});
+    const std::string msg = error_of(g, Gltf::Form::Glb);
+    expect_names_file(msg);
+    EXPECT_THAT(msg, HasSubstr("image 0 'logo': neither PNG nor JPEG (its first bytes are 0x42 0x4d 0x3a 0x00); "
+                               "glTF 2.0 images are PNG"));
+  }
+  {
+    Gltf g;
+    g.doc["images"] = {{{"uri", "data:image/gif;base64,R0lGODlhAQABAAAAACw="}}};
+    g.node({{"mesh", g.triangle_mesh()}});
+    EXPECT_THAT(error_of(g), HasSubstr("image 0: neither PNG nor JPEG (its first bytes are 0x47 0x49 0x46 0x38)"));
+  }
+}
+
 TEST_F(BrokenGltf, BadTextureAndSpotCone) {
   {
     Gltf g;
