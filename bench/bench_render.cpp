@@ -15,6 +15,8 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
+#include <string>
 #include <vector>
 
 #include "core/units.h"
@@ -64,10 +66,21 @@ void BM_Integrator(benchmark::State& state) {
 
 // The integrator's rays for the whole image at 1 sample per pixel, as bench_render_rays records them (in
 // another process, so that no recording hook lies on the path this program times).
+// The recorder is the bench_render_rays beside this program (so that a copy of an older build's two
+// programs, measured against the new build's, records its own renderer's rays), else the one it was built
+// with.
+std::string rays_program() {
+  std::error_code ec;
+  const std::filesystem::path beside = std::filesystem::read_symlink("/proc/self/exe", ec).parent_path() / "bench_render_rays";
+  return !ec && std::filesystem::is_regular_file(beside, ec) ? beside.string() : std::string(SPADGEN_BENCH_RENDER_RAYS);
+}
+
 const std::vector<bench::RayRecord>& recorded_rays() {
   static std::vector<bench::RayRecord> rays = [] {
     std::vector<bench::RayRecord> out;
-    FILE* pipe = popen("'" SPADGEN_BENCH_RENDER_RAYS "'", "r");
+    const std::string program = rays_program();
+    std::fprintf(stderr, "recording the integrator's rays with %s\n", program.c_str());
+    FILE* pipe = popen(("'" + program + "'").c_str(), "r");
     uint64_t n = 0;
     bool ok = pipe && std::fread(&n, sizeof n, 1, pipe) == 1;
     if (ok) {
@@ -75,7 +88,7 @@ const std::vector<bench::RayRecord>& recorded_rays() {
       ok = std::fread(out.data(), sizeof(bench::RayRecord), n, pipe) == n;
     }
     if (!pipe || pclose(pipe) != 0 || !ok) {
-      std::fprintf(stderr, "could not record the integrator's rays with %s\n", SPADGEN_BENCH_RENDER_RAYS);
+      std::fprintf(stderr, "could not record the integrator's rays with %s\n", program.c_str());
       std::exit(1);
     }
     return out;
