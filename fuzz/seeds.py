@@ -22,6 +22,16 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 # A 2x2 RGBA PNG, as the fuzz_gltf harness also writes beside its input (image.png).
 PNG = base64.b64decode(
     "iVBORw0KGgoAAAANSUhEUgAAAAIAAAACCAYAAABytg0kAAAAE0lEQVR4nGP4z8DwHwyBNAg0AABJSQl4KKDbdwAAAABJRU5ErkJggg==")
+# An 8x8 JPEG of one colour (quality 95), for the JPEG decoder.
+JPEG = base64.b64decode(
+    "/9j/4AAQSkZJRgABAQAAAQABAAD/2wBDAAIBAQEBAQIBAQECAgICAgQDAgICAgUEBAMEBgUGBgYFBgYGBwkIBgcJBwYGCAsICQoKCgoKBggLDAsK"
+    "DAkKCgr/2wBDAQICAgICAgUDAwUKBwYHCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgr/wAARCAAIAAgD"
+    "ASIAAhEBAxEB/8QAHwAAAQUBAQEBAQEAAAAAAAAAAAECAwQFBgcICQoL/8QAtRAAAgEDAwIEAwUFBAQAAAF9AQIDAAQRBRIhMUEGE1FhByJxFDKB"
+    "kaEII0KxwRVS0fAkM2JyggkKFhcYGRolJicoKSo0NTY3ODk6Q0RFRkdISUpTVFVWV1hZWmNkZWZnaGlqc3R1dnd4eXqDhIWGh4iJipKTlJWWl5iZ"
+    "mqKjpKWmp6ipqrKztLW2t7i5usLDxMXGx8jJytLT1NXW19jZ2uHi4+Tl5ufo6erx8vP09fb3+Pn6/8QAHwEAAwEBAQEBAQEBAQAAAAAAAAECAwQF"
+    "BgcICQoL/8QAtREAAgECBAQDBAcFBAQAAQJ3AAECAxEEBSExBhJBUQdhcRMiMoEIFEKRobHBCSMzUvAVYnLRChYkNOEl8RcYGRomJygpKjU2Nzg5"
+    "OkNERUZHSElKU1RVVldYWVpjZGVmZ2hpanN0dXZ3eHl6goOEhYaHiImKkpOUlZaXmJmaoqOkpaanqKmqsrO0tba3uLm6wsPExcbHyMnK0tPU1dbX"
+    "2Nna4uPk5ebn6Onq8vP09fb3+Pn6/9oADAMBAAIRAxEAPwD53ooornP9MD//2Q==")
 
 
 def schema_keys():
@@ -224,7 +234,7 @@ def handmade():
     for i, n in enumerate(["laser", "bulb", "sun"]):
         b.node({"name": n, "translation": [0, 0.1 * i, 0], "extensions": {"KHR_lights_punctual": {"light": i}}})
     files["camera_lights"] = b.finish()
-    # Materials with every extension spadgen reads, and a textured quad (PNG by bufferView and by data URI).
+    # Materials with every extension spadgen reads, and textured quads (PNG by bufferView and by data URI, JPEG).
     b = Builder()
     b.doc["extensionsUsed"] = ["KHR_materials_transmission", "KHR_materials_ior", "KHR_materials_volume",
                                "KHR_materials_emissive_strength"]
@@ -241,9 +251,11 @@ def handmade():
         {"name": "chart2", "pbrMetallicRoughness": {"baseColorTexture": {"index": 1}}}]
     png_view = b.view(PNG)
     b.doc["images"] = [{"bufferView": png_view, "mimeType": "image/png"},
-                       {"uri": "data:image/png;base64," + base64.b64encode(PNG).decode()}]
+                       {"uri": "data:image/png;base64," + base64.b64encode(PNG).decode()},
+                       {"bufferView": b.view(JPEG), "mimeType": "image/jpeg"}]
     b.doc["samplers"] = [{"wrapS": 33071, "wrapT": 33648}]
-    b.doc["textures"] = [{"source": 0, "sampler": 0}, {"source": 1}]
+    b.doc["textures"] = [{"source": 0, "sampler": 0}, {"source": 1}, {"source": 2}]
+    b.doc["materials"].append({"name": "photo", "pbrMetallicRoughness": {"baseColorTexture": {"index": 2}}})
     for i in range(4):
         b.node({"name": "m%d" % i, "mesh": b.quad(i, with_uv=i >= 2), "translation": [i, 0, -2]})
     files["materials"] = b.finish()

@@ -16,7 +16,6 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <iomanip>
 #include <limits>
 #include <map>
 #include <set>
@@ -25,6 +24,7 @@
 #include <vector>
 
 #include "core/error.h"
+#include "scenes/image_decode.h"
 #include "scenes/input.h"
 #include "scenes/key_path.h"
 #include "scenes/scene.h"
@@ -174,29 +174,6 @@ double read_component(const unsigned char* p, int component_type, bool normalize
   }
 }
 
-// A PNG's empty IDAT chunks (valid, and carrying nothing) removed: stb_image 2.27 copies such a chunk
-// with memcpy from a null buffer, which is undefined behaviour. Returns the stream unchanged when it is
-// not a PNG or has no empty IDAT; chunks past a length that runs off the end are left for stb to refuse.
-std::vector<unsigned char> without_empty_idat(const unsigned char* bytes, const size_t size) {
-  static constexpr unsigned char kSignature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
-  if (size < sizeof kSignature || std::memcmp(bytes, kSignature, sizeof kSignature) != 0) return {};
-  std::vector<unsigned char> out;
-  size_t kept = 0;  // bytes of `bytes` already copied to out (or that would be, when out stays empty)
-  for (size_t at = sizeof kSignature; size - at >= 12;) {
-    const size_t length = (size_t{bytes[at]} << 24) | (size_t{bytes[at + 1]} << 16) | (size_t{bytes[at + 2]} << 8) | bytes[at + 3];
-    if (length > size - at - 12) break;
-    if (length == 0 && std::memcmp(bytes + at + 4, "IDAT", 4) == 0) {
-      if (out.empty()) out.reserve(size);
-      out.insert(out.end(), bytes + kept, bytes + at);
-      kept = at + 12;
-    }
-    at += 12 + length;
-  }
-  if (kept == 0) return {};
-  out.insert(out.end(), bytes + kept, bytes + size);
-  return out;
-}
-
 // image/bufferView bounds are not checked by tinygltf 2.7 before it hands the bytes to the image
 // decoder; this loader checks them first, against the model tinygltf is filling.
 bool load_image_checked(tinygltf::Image* image, const int image_index, std::string* err, std::string* warn,
@@ -218,28 +195,27 @@ bool load_image_checked(tinygltf::Image* image, const int image_index, std::stri
       return false;
     }
   }
-  // glTF 2.0's images are PNG or JPEG: stb_image's other decoders (BMP, GIF, HDR, PIC, PNM, PSD, TGA) are
-  // never handed a scene's bytes.
-  static constexpr unsigned char kPng[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'}, kJpeg[3] = {0xff, 0xd8, 0xff};
-  const bool png = size >= 8 && std::memcmp(bytes, kPng, 8) == 0, jpeg = size >= 3 && std::memcmp(bytes, kJpeg, 3) == 0;
-  if (!png && !jpeg) {
-    if (err) {
-      std::ostringstream first;
-      for (int i = 0; i < std::min(size, 4); ++i)
-        first << (i ? " " : "") << "0x" << std::hex << std::setw(2) << std::setfill('0') << int(bytes[i]);
-      *err += "image " + std::to_string(image_index) + (image->name.empty() ? "" : " '" + image->name + "'") +
-              ": neither PNG nor JPEG (" + (size > 0 ? "its first bytes are " + first.str() : "it is empty") +
-              "); glTF 2.0 images are PNG (starting 0x89 'PNG') or JPEG (0xff 0xd8 0xff)\n";
-    }
+  // Decoded here (image_decode.h), not by tinygltf's stb_image: its PNG decoder allocates what a chunk's
+  // length claims (2 GB for a 38-byte file) and its JPEG decoder writes past a Huffman table on a crafted
+  // one (both found by fuzzing it).
+  (void)req_width, (void)req_height;
+  DecodedImage decoded;
+  std::string warning;
+  const std::string problem =
+      decode_image(bytes, size > 0 ? static_cast<size_t>(size) : 0, &decoded, &warning);
+  const std::string who = "image " + std::to_string(image_index) + (image->name.empty() ? "" : " '" + image->name + "'");
+  if (!problem.empty()) {
+    if (err) *err += who + ": " + problem + "\n";
     return false;
   }
-  if (png) {
-    const std::vector<unsigned char> cleaned = without_empty_idat(bytes, static_cast<size_t>(size));
-    if (!cleaned.empty())
-      return tinygltf::LoadImageData(image, image_index, err, warn, req_width, req_height, cleaned.data(),
-                                     static_cast<int>(cleaned.size()), nullptr);
-  }
-  return tinygltf::LoadImageData(image, image_index, err, warn, req_width, req_height, bytes, size, nullptr);
+  if (!warning.empty() && warn) *warn += who + ": " + warning + "\n";
+  image->width = decoded.width;
+  image->height = decoded.height;
+  image->component = 4;
+  image->bits = 8;
+  image->pixel_type = TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE;
+  image->image = std::move(decoded.rgba);
+  return true;
 }
 
 // A node's local transform as glTF's translation, rotation and scale.

@@ -17,6 +17,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -387,8 +388,8 @@ TEST(GltfLoader, BaseColorTexturesFromDataUriFileAndBufferView) {
   }
 }
 
-// Empty IDAT chunks are valid PNG; stb_image 2.27 would memcpy from a null buffer on one (found by
-// fuzz_gltf, fuzz/regressions/gltf/png_empty_idat.gltf): the loader drops them, and the texels are the same.
+// Empty IDAT chunks are valid PNG; stb_image 2.27 memcpy'd from a null buffer on one (found by fuzz_gltf,
+// fuzz/regressions/gltf/png_empty_idat.gltf). libpng reads them as nothing: the texels are the same.
 TEST(GltfLoader, PngWithEmptyIdatChunksDecodesToTheSameTexels) {
   TempDir dir;
   std::vector<uint8_t> png = unbase64(kPng2x2);
@@ -409,6 +410,52 @@ TEST(GltfLoader, PngWithEmptyIdatChunksDecodesToTheSameTexels) {
   expect_pixel(s.textures[0], 1, 0, {0, 255, 0, 255});
   expect_pixel(s.textures[0], 0, 1, {0, 0, 255, 255});
   expect_pixel(s.textures[0], 1, 1, {255, 255, 255, 128});
+  EXPECT_TRUE(s.warnings.empty()) << testing::PrintToString(s.warnings);
+}
+
+// Every PNG kind glTF exporters write, and JPEG, decoded to RGBA8 by libpng and libjpeg-turbo
+// (scenes/image_decode.h): 16-bit grey keeps its high byte, a palette with a transparency chunk gives its
+// alpha, JPEG's colours come back within its loss.
+TEST(GltfLoader, PngKindsAndJpegDecodeToRgba) {
+  TempDir dir;
+  // 2 x 1 grey, 16 bits: 0x1234, 0xfedc
+  const std::string png16 = "iVBORw0KGgoAAAANSUhEUgAAAAIAAAABEAAAAACB2fwVAAAADUlEQVR4nGMQMvl3BwADwQIhDeNHMgAAAABJRU5ErkJggg==";
+  // 2 x 1 palette (10, 20, 30) alpha 77 and (250, 240, 230) alpha 255 (tRNS)
+  const std::string palette = "iVBORw0KGgoAAAANSUhEUgAAAAIAAAABAQMAAADO7O3JAAAABlBMVEUKFB768ObE3NuxAAAAAnRSTlNN/x5GE/0AAAAKSURBVHicY3AAAABCAEEpN/TvAAAAAElFTkSuQmCC";
+  // 8 x 8 of (200, 40, 90), quality 95
+  const std::string jpeg =
+      "/9j/4AAQSkZJRgABAQAAAQABAAD/2wBDAAIBAQEBAQIBAQECAgICAgQDAgICAgUEBAMEBgUGBgYFBgYGBwkIBgcJBwYGCAsICQoKCgoKBggLDAsK"
+      "DAkKCgr/2wBDAQICAgICAgUDAwUKBwYHCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgr/wAARCAAIAAgD"
+      "ASIAAhEBAxEB/8QAHwAAAQUBAQEBAQEAAAAAAAAAAAECAwQFBgcICQoL/8QAtRAAAgEDAwIEAwUFBAQAAAF9AQIDAAQRBRIhMUEGE1FhByJxFDKB"
+      "kaEII0KxwRVS0fAkM2JyggkKFhcYGRolJicoKSo0NTY3ODk6Q0RFRkdISUpTVFVWV1hZWmNkZWZnaGlqc3R1dnd4eXqDhIWGh4iJipKTlJWWl5iZ"
+      "mqKjpKWmp6ipqrKztLW2t7i5usLDxMXGx8jJytLT1NXW19jZ2uHi4+Tl5ufo6erx8vP09fb3+Pn6/8QAHwEAAwEBAQEBAQEBAQAAAAAAAAECAwQF"
+      "BgcICQoL/8QAtREAAgECBAQDBAcFBAQAAQJ3AAECAxEEBSExBhJBUQdhcRMiMoEIFEKRobHBCSMzUvAVYnLRChYkNOEl8RcYGRomJygpKjU2Nzg5"
+      "OkNERUZHSElKU1RVVldYWVpjZGVmZ2hpanN0dXZ3eHl6goOEhYaHiImKkpOUlZaXmJmaoqOkpaanqKmqsrO0tba3uLm6wsPExcbHyMnK0tPU1dbX"
+      "2Nna4uPk5ebn6Onq8vP09fb3+Pn6/9oADAMBAAIRAxEAPwD53ooornP9MD//2Q==";
+  Gltf g;
+  g.doc["images"] = {{{"bufferView", g.view_of(unbase64(png16))}, {"mimeType", "image/png"}},
+                     {{"bufferView", g.view_of(unbase64(palette))}, {"mimeType", "image/png"}},
+                     {{"uri", "data:image/jpeg;base64," + jpeg}}};
+  g.doc["textures"] = {{{"source", 0}}, {{"source", 1}}, {{"source", 2}}};
+  g.doc["materials"] = {{{"name", "A"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}},
+                        {{"name", "B"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 1}}}}}},
+                        {{"name", "C"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 2}}}}}}};
+  g.node({{"mesh", g.triangle_mesh()}});
+  const Scene s = load_gltf(g.write(dir.path(), "kinds", Gltf::Form::Glb));
+  ASSERT_EQ(s.textures.size(), 3u);
+  expect_pixel(s.textures[0], 0, 0, {0x12, 0x12, 0x12, 255});
+  expect_pixel(s.textures[0], 1, 0, {0xfe, 0xfe, 0xfe, 255});
+  expect_pixel(s.textures[1], 0, 0, {10, 20, 30, 77});
+  expect_pixel(s.textures[1], 1, 0, {250, 240, 230, 255});
+  const auto& j = s.textures[2];
+  ASSERT_EQ(j.width, 8);
+  ASSERT_EQ(j.height, 8);
+  for (size_t p = 0; p < 64; ++p) {
+    EXPECT_NEAR(j.rgba[4 * p], 200, 3) << p;
+    EXPECT_NEAR(j.rgba[4 * p + 1], 40, 3) << p;
+    EXPECT_NEAR(j.rgba[4 * p + 2], 90, 3) << p;
+    EXPECT_EQ(j.rgba[4 * p + 3], 255) << p;
+  }
   EXPECT_TRUE(s.warnings.empty()) << testing::PrintToString(s.warnings);
 }
 
@@ -766,6 +813,31 @@ TEST_F(BrokenGltf, ImageThatIsNeitherPngNorJpeg) {
     g.node({{"mesh", g.triangle_mesh()}});
     EXPECT_THAT(error_of(g), HasSubstr("image 0: neither PNG nor JPEG (its first bytes are 0x47 0x49 0x46 0x38)"));
   }
+}
+
+// Images that broke stb_image, which tinygltf would have decoded them with (fuzz/regressions/gltf/): a 95-byte
+// PNG whose IDAT chunk claims 1 GB (stb allocated 2 GB), and a JPEG whose Huffman table overflows (stb wrote
+// past its table). Refused with the decoder's word, nothing allocated for them.
+TEST_F(BrokenGltf, ImagesThatBrokeStbImage) {
+  const auto refused = [&](const std::string& fuzz_file) {
+    std::ifstream in(std::string(SPADGEN_SOURCE_DIR) + "/fuzz/regressions/gltf/" + fuzz_file, std::ios::binary);
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    EXPECT_FALSE(text.empty()) << fuzz_file;
+    const std::string path = (dir_.path() / "broken.gltf").string();
+    write_file(path, text);
+    return load_error(path);
+  };
+  EXPECT_THAT(refused("png_idat_length_2gb.gltf"), HasSubstr("image 0: not a readable PNG (libpng: "));
+  // The same claim in a well-formed chunk header (the CRCs right): read as far as the file goes.
+  std::vector<uint8_t> png = unbase64(kPng2x2);
+  png.resize(8 + 12 + 13);  // the signature and IHDR
+  const std::vector<uint8_t> idat = {0x40, 0x00, 0x00, 0x00, 'I', 'D', 'A', 'T', 0x78, 0x9c, 0x62, 0x60};
+  png.insert(png.end(), idat.begin(), idat.end());
+  Gltf g;
+  g.doc["images"] = {{{"bufferView", g.view_of(png)}, {"mimeType", "image/png"}}};
+  g.node({{"mesh", g.triangle_mesh()}});
+  EXPECT_THAT(error_of(g, Gltf::Form::Glb), HasSubstr("image 0: not a readable PNG (libpng: the file ends inside a chunk)"));
+  EXPECT_THAT(refused("jpeg_huffman_table_overflow.gltf"), HasSubstr("image 0: not a readable JPEG (libjpeg-turbo: "));
 }
 
 TEST_F(BrokenGltf, BadTextureAndSpotCone) {

@@ -1,0 +1,154 @@
+#include "scenes/image_decode.h"
+
+#include <png.h>
+#include <turbojpeg.h>
+
+#include <algorithm>
+#include <csetjmp>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+
+namespace spadgen::scenes {
+namespace {
+
+std::string size_problem(uint64_t width, uint64_t height) {
+  if (width < 1 || height < 1) return "an image of " + std::to_string(width) + " x " + std::to_string(height) + " texels";
+  if (width > uint64_t(kMaxImageSide) || height > uint64_t(kMaxImageSide) || width * height > kMaxImageTexels)
+    return std::to_string(width) + " x " + std::to_string(height) + " texels, expected at most " +
+           std::to_string(kMaxImageSide) + " on a side and " + std::to_string(kMaxImageTexels) + " in all";
+  return "";
+}
+
+// libpng reports errors by longjmp, so everything between setjmp and the end of read_png() is plain C: no
+// object with a destructor is created there, messages go to fixed buffers and the texels to malloc'd memory
+// that the caller frees.
+struct PngSource {
+  const unsigned char* data = nullptr;
+  size_t size = 0, at = 0;
+  char error[256] = {};
+  char warning[256] = {};
+};
+
+extern "C" void png_read_error_fn(png_structp png, png_const_charp msg) {
+  auto* src = static_cast<PngSource*>(png_get_error_ptr(png));
+  std::snprintf(src->error, sizeof src->error, "%s", msg);
+  png_longjmp(png, 1);
+}
+
+extern "C" void png_read_warning_fn(png_structp png, png_const_charp msg) {
+  auto* src = static_cast<PngSource*>(png_get_error_ptr(png));
+  if (src->warning[0] == '\0') std::snprintf(src->warning, sizeof src->warning, "%s", msg);
+}
+
+extern "C" void png_read_fn(png_structp png, png_bytep out, png_size_t n) {
+  auto* src = static_cast<PngSource*>(png_get_io_ptr(png));
+  if (n > src->size - src->at) png_error(png, "the file ends inside a chunk");
+  std::memcpy(out, src->data + src->at, n);
+  src->at += n;
+}
+
+// Reads the image into *texels (malloc'd, RGBA8) and *rows (malloc'd row pointers); 0 on success, 1 on an
+// error (src->error), 2 when the size is refused (*width, *height hold it).
+int read_png(png_structp png, png_infop info, PngSource* src, uint32_t* width, uint32_t* height,
+             unsigned char* volatile* texels, png_bytep* volatile* rows) {
+  if (setjmp(png_jmpbuf(png))) return 1;
+  png_set_read_fn(png, src, png_read_fn);
+  png_set_user_limits(png, uint32_t(kMaxImageSide), uint32_t(kMaxImageSide));
+  png_read_info(png, info);
+  *width = png_get_image_width(png, info);
+  *height = png_get_image_height(png, info);
+  if (uint64_t(*width) * uint64_t(*height) > kMaxImageTexels) return 2;
+  const int color = png_get_color_type(png, info), depth = png_get_bit_depth(png, info);
+  if (depth == 16) png_set_strip_16(png);  // the high byte
+  if (color == PNG_COLOR_TYPE_PALETTE) png_set_palette_to_rgb(png);
+  if (color == PNG_COLOR_TYPE_GRAY && depth < 8) png_set_expand_gray_1_2_4_to_8(png);
+  if (png_get_valid(png, info, PNG_INFO_tRNS)) png_set_tRNS_to_alpha(png);
+  if (color == PNG_COLOR_TYPE_GRAY || color == PNG_COLOR_TYPE_GRAY_ALPHA) png_set_gray_to_rgb(png);
+  if (!(color & PNG_COLOR_MASK_ALPHA) && !png_get_valid(png, info, PNG_INFO_tRNS))
+    png_set_filler(png, 0xff, PNG_FILLER_AFTER);
+  png_set_interlace_handling(png);
+  png_read_update_info(png, info);
+  if (png_get_rowbytes(png, info) != size_t(*width) * 4) png_error(png, "unexpected row size after the expansion to RGBA");
+  *texels = static_cast<unsigned char*>(std::malloc(size_t(*width) * size_t(*height) * 4));
+  *rows = static_cast<png_bytep*>(std::malloc(size_t(*height) * sizeof(png_bytep)));
+  if (!*texels || !*rows) png_error(png, "out of memory");
+  for (uint32_t y = 0; y < *height; ++y) (*rows)[y] = *texels + size_t(y) * size_t(*width) * 4;
+  png_read_image(png, *rows);
+  png_read_end(png, nullptr);
+  return 0;
+}
+
+std::string decode_png(const unsigned char* bytes, size_t size, DecodedImage* out, std::string* warning) {
+  PngSource src;
+  src.data = bytes;
+  src.size = size;
+  png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &src, png_read_error_fn, png_read_warning_fn);
+  if (!png) return "could not start the PNG decoder";
+  png_infop info = png_create_info_struct(png);
+  if (!info) {
+    png_destroy_read_struct(&png, nullptr, nullptr);
+    return "could not start the PNG decoder";
+  }
+  uint32_t width = 0, height = 0;
+  unsigned char* volatile texels = nullptr;
+  png_bytep* volatile rows = nullptr;
+  const int result = read_png(png, info, &src, &width, &height, &texels, &rows);
+  png_destroy_read_struct(&png, &info, nullptr);
+  std::free(rows);
+  std::string problem;
+  if (result == 1) problem = std::string("not a readable PNG (libpng: ") + src.error + ")";
+  if (result == 2) problem = size_problem(width, height);
+  if (problem.empty()) {
+    out->width = int(width);
+    out->height = int(height);
+    out->rgba.assign(texels, texels + size_t(width) * size_t(height) * 4);
+    if (src.warning[0] != '\0') *warning = std::string("libpng: ") + src.warning;
+  }
+  std::free(texels);
+  return problem;
+}
+
+std::string decode_jpeg(const unsigned char* bytes, size_t size, DecodedImage* out, std::string* warning) {
+  tjhandle tj = tjInitDecompress();
+  if (!tj) return "could not start the JPEG decoder";
+  struct Close {
+    tjhandle h;
+    ~Close() { tjDestroy(h); }
+  } close{tj};
+  int width = 0, height = 0, subsampling = 0, colorspace = 0;
+  if (tjDecompressHeader3(tj, bytes, static_cast<unsigned long>(size), &width, &height, &subsampling, &colorspace) != 0)
+    return std::string("not a readable JPEG (libjpeg-turbo: ") + tjGetErrorStr2(tj) + ")";
+  if (std::string p = size_problem(uint64_t(std::max(width, 0)), uint64_t(std::max(height, 0))); !p.empty()) return p;
+  std::vector<uint8_t> rgba(size_t(width) * size_t(height) * 4);
+  if (tjDecompress2(tj, bytes, static_cast<unsigned long>(size), rgba.data(), width, 0, height, TJPF_RGBA,
+                    TJFLAG_ACCURATEDCT) != 0) {
+    // A warning (a truncated or slightly corrupt file) still gives the texels it could decode.
+    if (tjGetErrorCode(tj) != TJERR_WARNING) return std::string("not a readable JPEG (libjpeg-turbo: ") + tjGetErrorStr2(tj) + ")";
+    *warning = std::string("libjpeg-turbo: ") + tjGetErrorStr2(tj);
+  }
+  out->width = width;
+  out->height = height;
+  out->rgba = std::move(rgba);
+  return "";
+}
+
+}  // namespace
+
+std::string decode_image(const unsigned char* bytes, size_t size, DecodedImage* out, std::string* warning) {
+  static constexpr unsigned char kPng[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'}, kJpeg[3] = {0xff, 0xd8, 0xff};
+  warning->clear();
+  if (size >= 8 && std::memcmp(bytes, kPng, 8) == 0) return decode_png(bytes, size, out, warning);
+  if (size >= 3 && std::memcmp(bytes, kJpeg, 3) == 0) return decode_jpeg(bytes, size, out, warning);
+  if (size == 0) return "neither PNG nor JPEG (it is empty); glTF 2.0 images are PNG (starting 0x89 'PNG') or JPEG (0xff 0xd8 0xff)";
+  std::string first;
+  char hex[8];
+  for (size_t i = 0; i < std::min<size_t>(size, 4); ++i) {
+    std::snprintf(hex, sizeof hex, "%s0x%02x", i ? " " : "", unsigned(bytes[i]));
+    first += hex;
+  }
+  return "neither PNG nor JPEG (its first bytes are " + first +
+         "); glTF 2.0 images are PNG (starting 0x89 'PNG') or JPEG (0xff 0xd8 0xff)";
+}
+
+}  // namespace spadgen::scenes
