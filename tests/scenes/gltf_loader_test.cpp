@@ -413,6 +413,17 @@ TEST(GltfLoader, PngWithEmptyIdatChunksDecodesToTheSameTexels) {
   EXPECT_TRUE(s.warnings.empty()) << testing::PrintToString(s.warnings);
 }
 
+// 8 x 8 of (200, 40, 90), JPEG quality 95
+const char* const kJpeg8x8 =
+    "/9j/4AAQSkZJRgABAQAAAQABAAD/2wBDAAIBAQEBAQIBAQECAgICAgQDAgICAgUEBAMEBgUGBgYFBgYGBwkIBgcJBwYGCAsICQoKCgoKBggLDAsK"
+    "DAkKCgr/2wBDAQICAgICAgUDAwUKBwYHCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgr/wAARCAAIAAgD"
+    "ASIAAhEBAxEB/8QAHwAAAQUBAQEBAQEAAAAAAAAAAAECAwQFBgcICQoL/8QAtRAAAgEDAwIEAwUFBAQAAAF9AQIDAAQRBRIhMUEGE1FhByJxFDKB"
+    "kaEII0KxwRVS0fAkM2JyggkKFhcYGRolJicoKSo0NTY3ODk6Q0RFRkdISUpTVFVWV1hZWmNkZWZnaGlqc3R1dnd4eXqDhIWGh4iJipKTlJWWl5iZ"
+    "mqKjpKWmp6ipqrKztLW2t7i5usLDxMXGx8jJytLT1NXW19jZ2uHi4+Tl5ufo6erx8vP09fb3+Pn6/8QAHwEAAwEBAQEBAQEBAQAAAAAAAAECAwQF"
+    "BgcICQoL/8QAtREAAgECBAQDBAcFBAQAAQJ3AAECAxEEBSExBhJBUQdhcRMiMoEIFEKRobHBCSMzUvAVYnLRChYkNOEl8RcYGRomJygpKjU2Nzg5"
+    "OkNERUZHSElKU1RVVldYWVpjZGVmZ2hpanN0dXZ3eHl6goOEhYaHiImKkpOUlZaXmJmaoqOkpaanqKmqsrO0tba3uLm6wsPExcbHyMnK0tPU1dbX"
+    "2Nna4uPk5ebn6Onq8vP09fb3+Pn6/9oADAMBAAIRAxEAPwD53ooornP9MD//2Q==";
+
 // Every PNG kind glTF exporters write, and JPEG, decoded to RGBA8 by libpng and libjpeg-turbo
 // (scenes/image_decode.h): 16-bit grey keeps its high byte, a palette with a transparency chunk gives its
 // alpha, JPEG's colours come back within its loss.
@@ -422,20 +433,10 @@ TEST(GltfLoader, PngKindsAndJpegDecodeToRgba) {
   const std::string png16 = "iVBORw0KGgoAAAANSUhEUgAAAAIAAAABEAAAAACB2fwVAAAADUlEQVR4nGMQMvl3BwADwQIhDeNHMgAAAABJRU5ErkJggg==";
   // 2 x 1 palette (10, 20, 30) alpha 77 and (250, 240, 230) alpha 255 (tRNS)
   const std::string palette = "iVBORw0KGgoAAAANSUhEUgAAAAIAAAABAQMAAADO7O3JAAAABlBMVEUKFB768ObE3NuxAAAAAnRSTlNN/x5GE/0AAAAKSURBVHicY3AAAABCAEEpN/TvAAAAAElFTkSuQmCC";
-  // 8 x 8 of (200, 40, 90), quality 95
-  const std::string jpeg =
-      "/9j/4AAQSkZJRgABAQAAAQABAAD/2wBDAAIBAQEBAQIBAQECAgICAgQDAgICAgUEBAMEBgUGBgYFBgYGBwkIBgcJBwYGCAsICQoKCgoKBggLDAsK"
-      "DAkKCgr/2wBDAQICAgICAgUDAwUKBwYHCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgr/wAARCAAIAAgD"
-      "ASIAAhEBAxEB/8QAHwAAAQUBAQEBAQEAAAAAAAAAAAECAwQFBgcICQoL/8QAtRAAAgEDAwIEAwUFBAQAAAF9AQIDAAQRBRIhMUEGE1FhByJxFDKB"
-      "kaEII0KxwRVS0fAkM2JyggkKFhcYGRolJicoKSo0NTY3ODk6Q0RFRkdISUpTVFVWV1hZWmNkZWZnaGlqc3R1dnd4eXqDhIWGh4iJipKTlJWWl5iZ"
-      "mqKjpKWmp6ipqrKztLW2t7i5usLDxMXGx8jJytLT1NXW19jZ2uHi4+Tl5ufo6erx8vP09fb3+Pn6/8QAHwEAAwEBAQEBAQEBAQAAAAAAAAECAwQF"
-      "BgcICQoL/8QAtREAAgECBAQDBAcFBAQAAQJ3AAECAxEEBSExBhJBUQdhcRMiMoEIFEKRobHBCSMzUvAVYnLRChYkNOEl8RcYGRomJygpKjU2Nzg5"
-      "OkNERUZHSElKU1RVVldYWVpjZGVmZ2hpanN0dXZ3eHl6goOEhYaHiImKkpOUlZaXmJmaoqOkpaanqKmqsrO0tba3uLm6wsPExcbHyMnK0tPU1dbX"
-      "2Nna4uPk5ebn6Onq8vP09fb3+Pn6/9oADAMBAAIRAxEAPwD53ooornP9MD//2Q==";
   Gltf g;
   g.doc["images"] = {{{"bufferView", g.view_of(unbase64(png16))}, {"mimeType", "image/png"}},
                      {{"bufferView", g.view_of(unbase64(palette))}, {"mimeType", "image/png"}},
-                     {{"uri", "data:image/jpeg;base64," + jpeg}}};
+                     {{"uri", std::string("data:image/jpeg;base64,") + kJpeg8x8}}};
   g.doc["textures"] = {{{"source", 0}}, {{"source", 1}}, {{"source", 2}}};
   g.doc["materials"] = {{{"name", "A"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}},
                         {{"name", "B"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 1}}}}}},
@@ -457,6 +458,22 @@ TEST(GltfLoader, PngKindsAndJpegDecodeToRgba) {
     EXPECT_EQ(j.rgba[4 * p + 3], 255) << p;
   }
   EXPECT_TRUE(s.warnings.empty()) << testing::PrintToString(s.warnings);
+}
+
+// A JPEG cut short (here only its end marker): libjpeg-turbo decodes what is there and warns, naming the image.
+TEST(GltfLoader, TruncatedJpegIsDecodedWithAWarning) {
+  TempDir dir;
+  std::vector<uint8_t> jpeg = unbase64(kJpeg8x8);
+  jpeg.resize(jpeg.size() - 2);  // its end marker
+  Gltf g;
+  g.doc["images"] = {{{"bufferView", g.view_of(jpeg)}, {"mimeType", "image/jpeg"}, {"name", "photo"}}};
+  g.doc["textures"] = {{{"source", 0}}};
+  g.doc["materials"] = {{{"name", "A"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}}};
+  g.node({{"mesh", g.triangle_mesh()}});
+  const Scene s = load_gltf(g.write(dir.path(), "cut", Gltf::Form::Glb));
+  ASSERT_EQ(s.textures.size(), 1u);
+  EXPECT_EQ(s.textures[0].width, 8);
+  EXPECT_TRUE(has_warning(s, "tinygltf: image 0 'photo': libjpeg-turbo: ")) << testing::PrintToString(s.warnings);
 }
 
 TEST(GltfLoader, MissingImageFileIsWarnedNotFatal) {
