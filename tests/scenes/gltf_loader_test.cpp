@@ -413,16 +413,11 @@ TEST(GltfLoader, PngWithEmptyIdatChunksDecodesToTheSameTexels) {
   EXPECT_TRUE(s.warnings.empty()) << testing::PrintToString(s.warnings);
 }
 
-// 8 x 8 of (200, 40, 90), JPEG quality 95
-const char* const kJpeg8x8 =
-    "/9j/4AAQSkZJRgABAQAAAQABAAD/2wBDAAIBAQEBAQIBAQECAgICAgQDAgICAgUEBAMEBgUGBgYFBgYGBwkIBgcJBwYGCAsICQoKCgoKBggLDAsK"
-    "DAkKCgr/2wBDAQICAgICAgUDAwUKBwYHCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgoKCgr/wAARCAAIAAgD"
-    "ASIAAhEBAxEB/8QAHwAAAQUBAQEBAQEAAAAAAAAAAAECAwQFBgcICQoL/8QAtRAAAgEDAwIEAwUFBAQAAAF9AQIDAAQRBRIhMUEGE1FhByJxFDKB"
-    "kaEII0KxwRVS0fAkM2JyggkKFhcYGRolJicoKSo0NTY3ODk6Q0RFRkdISUpTVFVWV1hZWmNkZWZnaGlqc3R1dnd4eXqDhIWGh4iJipKTlJWWl5iZ"
-    "mqKjpKWmp6ipqrKztLW2t7i5usLDxMXGx8jJytLT1NXW19jZ2uHi4+Tl5ufo6erx8vP09fb3+Pn6/8QAHwEAAwEBAQEBAQEBAQAAAAAAAAECAwQF"
-    "BgcICQoL/8QAtREAAgECBAQDBAcFBAQAAQJ3AAECAxEEBSExBhJBUQdhcRMiMoEIFEKRobHBCSMzUvAVYnLRChYkNOEl8RcYGRomJygpKjU2Nzg5"
-    "OkNERUZHSElKU1RVVldYWVpjZGVmZ2hpanN0dXZ3eHl6goOEhYaHiImKkpOUlZaXmJmaoqOkpaanqKmqsrO0tba3uLm6wsPExcbHyMnK0tPU1dbX"
-    "2Nna4uPk5ebn6Onq8vP09fb3+Pn6/9oADAMBAAIRAxEAPwD53ooornP9MD//2Q==";
+// 8 x 8 of (200, 40, 90), JPEG quality 95 (the fuzz seeds' JPEG too)
+std::vector<uint8_t> solid_jpeg() {
+  std::ifstream in(std::string(SPADGEN_SOURCE_DIR) + "/tests/data/images/solid_8x8.jpg", std::ios::binary);
+  return std::vector<uint8_t>((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
 
 // Every PNG kind glTF exporters write, and JPEG, decoded to RGBA8 by libpng and libjpeg-turbo
 // (scenes/image_decode.h): 16-bit grey keeps its high byte, a palette with a transparency chunk gives its
@@ -436,7 +431,7 @@ TEST(GltfLoader, PngKindsAndJpegDecodeToRgba) {
   Gltf g;
   g.doc["images"] = {{{"bufferView", g.view_of(unbase64(png16))}, {"mimeType", "image/png"}},
                      {{"bufferView", g.view_of(unbase64(palette))}, {"mimeType", "image/png"}},
-                     {{"uri", std::string("data:image/jpeg;base64,") + kJpeg8x8}}};
+                     {{"bufferView", g.view_of(solid_jpeg())}, {"mimeType", "image/jpeg"}}};
   g.doc["textures"] = {{{"source", 0}}, {{"source", 1}}, {{"source", 2}}};
   g.doc["materials"] = {{{"name", "A"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}},
                         {{"name", "B"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 1}}}}}},
@@ -463,7 +458,8 @@ TEST(GltfLoader, PngKindsAndJpegDecodeToRgba) {
 // A JPEG cut short (here only its end marker): libjpeg-turbo decodes what is there and warns, naming the image.
 TEST(GltfLoader, TruncatedJpegIsDecodedWithAWarning) {
   TempDir dir;
-  std::vector<uint8_t> jpeg = unbase64(kJpeg8x8);
+  std::vector<uint8_t> jpeg = solid_jpeg();
+  ASSERT_GT(jpeg.size(), 100u);
   jpeg.resize(jpeg.size() - 2);  // its end marker
   Gltf g;
   g.doc["images"] = {{{"bufferView", g.view_of(jpeg)}, {"mimeType", "image/jpeg"}, {"name", "photo"}}};
