@@ -41,7 +41,6 @@ constexpr double kMaxWorldCoordinate = 1e9;
 // Texture coordinates: beyond 4096 a float no longer resolves a texel of a 4096-wide texture, and the
 // texel index (coordinate times width) must stay an int.
 constexpr double kMaxTexcoord = 4096.0;
-constexpr int kMaxTextureSize = 65536;
 // Emitted luminance, emissiveFactor times KHR_materials_emissive_strength, in nits: 600 times the sun's
 // disc (1.6e9 nits). Photon radiances from it stay finite in float.
 constexpr double kMaxEmissiveNits = 1e12;
@@ -203,7 +202,7 @@ bool load_image_checked(tinygltf::Image* image, const int image_index, std::stri
   std::string warning;
   const std::string problem =
       decode_image(bytes, size > 0 ? static_cast<size_t>(size) : 0, &decoded, &warning);
-  const std::string who = "image " + std::to_string(image_index) + (image->name.empty() ? "" : " '" + image->name + "'");
+  const std::string who = label("image", static_cast<size_t>(image_index), image->name);
   if (!problem.empty()) {
     if (err) *err += who + ": " + problem + "\n";
     return false;
@@ -755,35 +754,18 @@ int Loader::texture(int gltf_texture, const std::string& user) {
   } else {
     const tinygltf::Image& img = m_.images[static_cast<size_t>(t.source)];
     const std::string iname = label("image", static_cast<size_t>(t.source), img.name.empty() ? img.uri : img.name);
+    // Every decoded image is RGBA8 (load_image_checked, image_decode.h, which also bounds its size); an
+    // image file that could not be read leaves none.
     const size_t w = img.width > 0 ? static_cast<size_t>(img.width) : 0;
     const size_t h = img.height > 0 ? static_cast<size_t>(img.height) : 0;
-    const size_t comps = img.component > 0 ? static_cast<size_t>(img.component) : 0;
-    const size_t bytes = img.bits == 16 ? 2 : 1;
-    if (img.image.empty() || w == 0 || h == 0 || comps == 0 || comps > 4 || (img.bits != 8 && img.bits != 16) ||
-        img.image.size() != w * h * comps * bytes) {
+    if (img.image.empty() || img.component != 4 || img.bits != 8 || img.image.size() != w * h * 4) {
       warn(iname + ": could not be read or decoded; " + user + " uses its factor only");
-    } else if (img.width > kMaxTextureSize || img.height > kMaxTextureSize) {
-      fail(iname, std::to_string(img.width) + " x " + std::to_string(img.height) + " texels, expected at most " +
-                      std::to_string(kMaxTextureSize) + " on a side");
     } else {
       Texture tex;
       tex.name = t.name.empty() ? img.name : t.name;
       tex.width = img.width;
       tex.height = img.height;
-      tex.rgba.resize(w * h * 4);
-      for (size_t p = 0; p < w * h; ++p) {
-        uint8_t c[4] = {0, 0, 0, 255};
-        for (size_t k = 0; k < comps; ++k) {
-          // 16-bit channels keep their high byte (the value rounded down to 8 bits).
-          c[k] = img.image[(p * comps + k) * bytes + (bytes == 2 ? 1 : 0)];
-        }
-        if (comps == 1 || comps == 2) {  // grey (+ alpha)
-          const uint8_t a = comps == 2 ? c[1] : 255;
-          c[1] = c[2] = c[0];
-          c[3] = a;
-        }
-        std::memcpy(&tex.rgba[p * 4], c, 4);
-      }
+      tex.rgba = img.image;
       if (t.sampler >= 0) {
         if (static_cast<size_t>(t.sampler) >= m_.samplers.size())
           fail(tname, "sampler " + std::to_string(t.sampler) + " does not exist (the file has " +

@@ -6,7 +6,6 @@
 #include <algorithm>
 #include <csetjmp>
 #include <cstdio>
-#include <cstdlib>
 #include <cstring>
 
 namespace spadgen::scenes {
@@ -20,9 +19,9 @@ std::string size_problem(uint64_t width, uint64_t height) {
   return "";
 }
 
-// libpng reports errors by longjmp, so everything between setjmp and the end of read_png() is plain C: no
-// object with a destructor is created there, messages go to fixed buffers and the texels to malloc'd memory
-// that the caller frees.
+// libpng reports errors by longjmp: the two functions that call it (png_header, png_texels) hold only
+// plain C between their setjmp and their end, messages go to fixed buffers, and the texels to vectors that
+// decode_png (which no longjmp crosses) owns.
 struct PngSource {
   const unsigned char* data = nullptr;
   size_t size = 0, at = 0;
@@ -48,17 +47,14 @@ extern "C" void png_read_fn(png_structp png, png_bytep out, png_size_t n) {
   src->at += n;
 }
 
-// Reads the image into *texels (malloc'd, RGBA8) and *rows (malloc'd row pointers); 0 on success, 1 on an
-// error (src->error), 2 when the size is refused (*width, *height hold it).
-int read_png(png_structp png, png_infop info, PngSource* src, uint32_t* width, uint32_t* height,
-             unsigned char* volatile* texels, png_bytep* volatile* rows) {
-  if (setjmp(png_jmpbuf(png))) return 1;
+// Reads the header into *width, *height and sets the expansion to RGBA8; false on an error (src->error).
+bool png_header(png_structp png, png_infop info, PngSource* src, uint32_t* width, uint32_t* height) {
+  if (setjmp(png_jmpbuf(png))) return false;
   png_set_read_fn(png, src, png_read_fn);
   png_set_user_limits(png, uint32_t(kMaxImageSide), uint32_t(kMaxImageSide));
   png_read_info(png, info);
   *width = png_get_image_width(png, info);
   *height = png_get_image_height(png, info);
-  if (uint64_t(*width) * uint64_t(*height) > kMaxImageTexels) return 2;
   const int color = png_get_color_type(png, info), depth = png_get_bit_depth(png, info);
   if (depth == 16) png_set_strip_16(png);  // the high byte
   if (color == PNG_COLOR_TYPE_PALETTE) png_set_palette_to_rgb(png);
@@ -70,13 +66,15 @@ int read_png(png_structp png, png_infop info, PngSource* src, uint32_t* width, u
   png_set_interlace_handling(png);
   png_read_update_info(png, info);
   if (png_get_rowbytes(png, info) != size_t(*width) * 4) png_error(png, "unexpected row size after the expansion to RGBA");
-  *texels = static_cast<unsigned char*>(std::malloc(size_t(*width) * size_t(*height) * 4));
-  *rows = static_cast<png_bytep*>(std::malloc(size_t(*height) * sizeof(png_bytep)));
-  if (!*texels || !*rows) png_error(png, "out of memory");
-  for (uint32_t y = 0; y < *height; ++y) (*rows)[y] = *texels + size_t(y) * size_t(*width) * 4;
-  png_read_image(png, *rows);
+  return true;
+}
+
+// Reads the texels into the rows; false on an error (src->error).
+bool png_texels(png_structp png, png_bytep* rows) {
+  if (setjmp(png_jmpbuf(png))) return false;
+  png_read_image(png, rows);
   png_read_end(png, nullptr);
-  return 0;
+  return true;
 }
 
 std::string decode_png(const unsigned char* bytes, size_t size, DecodedImage* out, std::string* warning) {
@@ -90,23 +88,23 @@ std::string decode_png(const unsigned char* bytes, size_t size, DecodedImage* ou
     png_destroy_read_struct(&png, nullptr, nullptr);
     return "could not start the PNG decoder";
   }
+  struct Destroy {
+    png_structp* png;
+    png_infop* info;
+    ~Destroy() { png_destroy_read_struct(png, info, nullptr); }
+  } destroy{&png, &info};
   uint32_t width = 0, height = 0;
-  unsigned char* volatile texels = nullptr;
-  png_bytep* volatile rows = nullptr;
-  const int result = read_png(png, info, &src, &width, &height, &texels, &rows);
-  png_destroy_read_struct(&png, &info, nullptr);
-  std::free(rows);
-  std::string problem;
-  if (result == 1) problem = std::string("not a readable PNG (libpng: ") + src.error + ")";
-  if (result == 2) problem = size_problem(width, height);
-  if (problem.empty()) {
-    out->width = int(width);
-    out->height = int(height);
-    out->rgba.assign(texels, texels + size_t(width) * size_t(height) * 4);
-    if (src.warning[0] != '\0') *warning = std::string("libpng: ") + src.warning;
-  }
-  std::free(texels);
-  return problem;
+  if (!png_header(png, info, &src, &width, &height)) return std::string("not a readable PNG (libpng: ") + src.error + ")";
+  if (std::string p = size_problem(width, height); !p.empty()) return p;
+  std::vector<uint8_t> rgba(size_t(width) * size_t(height) * 4);
+  std::vector<png_bytep> rows(height);
+  for (uint32_t y = 0; y < height; ++y) rows[y] = rgba.data() + size_t(y) * size_t(width) * 4;
+  if (!png_texels(png, rows.data())) return std::string("not a readable PNG (libpng: ") + src.error + ")";
+  out->width = int(width);
+  out->height = int(height);
+  out->rgba = std::move(rgba);
+  if (src.warning[0] != '\0') *warning = std::string("libpng: ") + src.warning;
+  return "";
 }
 
 std::string decode_jpeg(const unsigned char* bytes, size_t size, DecodedImage* out, std::string* warning) {
