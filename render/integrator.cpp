@@ -28,17 +28,21 @@ constexpr double kGhostDrawShare = 0.25;
 // probability: few vertices are near an edge, and its light is found by these draws almost alone (on the
 // multi-object plate a quarter left 3 outliers in 24 light seeds, a half none).
 constexpr float kEdgeGhostDrawShare = 0.5f;
-// A vertex inside a plate draws towards its second-order ghost with this probability: its light is the
-// plate's reflectance squared weaker than the first order's, and a quarter cost 6 % of the multi-object run.
+// A vertex draws towards a plate's ghosts of more than two reflections (ghost_targets) with this
+// probability: their light is the plate's reflectance (squared) weaker than the first order's, and a
+// quarter cost 6 % of the multi-object run.
 constexpr float kSecondGhostDrawShare = 0.1f;
 
 inline double sqr(double x) { return x * x; }
 // Lambertian vertices aim at the triangles of meshes of at most this many (plates, boxes), at most
 // kMaxGlossyParts of them in a scene; and at a sliver's area only where the half-vector at its point
-// nearest the mirror point is within acos(kGuideMaxTilt) = 25 degrees of its normal.
+// nearest the mirror point, or at its point of least tilt, is within acos(kGuideMaxTilt) = 25 degrees of
+// its normal.
 constexpr size_t kMaxPartsPerMesh = 64;
 constexpr size_t kMaxGlossyParts = 256;
 constexpr double kGuideMaxTilt = 0.906;
+// The same bound on the half-vector's slope m (the tangent of its tilt): sqrt(1 / 0.906^2 - 1).
+constexpr double kGuideMaxSlope = 0.4672;
 }  // namespace
 
 // In steady state the returns of earlier and later pulses overlap the window the same way, so every
@@ -842,7 +846,7 @@ void Integrator::lambertian_guide_targets(const Surface& sf, GuideTargets* out) 
     if (!(r_vertex > 0.0 && r_laser > 0.0)) continue;
     const glm::dvec3 wl = (L - near) / r_laser;
     const double ch = glm::dot(glm::normalize(wl + (x - near) / r_vertex), nb);
-    if (ch < kGuideMaxTilt || !(laser_.intensity_towards(-wl) > 0.0)) continue;
+    if (!(laser_.intensity_towards(-wl) > 0.0)) continue;
     // The half-vector's slope m (its part along the sliver over its part along nb) at the nearest point,
     // and its derivatives along s and t: u = wl + wv moves by -(dp - (dp . w) w) / r for each of w.
     const glm::dvec3 wv = (x - near) / r_vertex, h = wl + wv;
@@ -860,7 +864,14 @@ void Integrator::lambertian_guide_targets(const Surface& sf, GuideTargets* out) 
     // s*(t) = s_n - (m0 + (t - t_n) B) . A / |A|^2, where it is |m0 + (s* - s_n) A + (t - t_n) B|.
     const double t_n = std::clamp(st.y, 0.0, 1.0);
     const double shift = -glm::dot(m0, A) / a2, per_t = -glm::dot(B, A) / a2;
-    const double m_least = glm::length(m0 + shift * A);
+    // Along that line, m = m_s + (t - t_n) C: least over the sliver's width at t*. Seen at grazing
+    // incidence, the half-vector turns by tens of degrees across the 2 mm width, so the point nearest the
+    // mirror point can be far from the glint while the other side of the sliver holds it.
+    const glm::dvec3 m_s = m0 + shift * A, C = B + per_t * A;
+    const double c2 = glm::dot(C, C);
+    const double t_best = c2 > 0.0 ? std::clamp(t_n - glm::dot(m_s, C) / c2, 0.0, 1.0) : t_n;
+    const double m_least = glm::length(m_s + (t_best - t_n) * C);
+    if (ch < kGuideMaxTilt && !(m_least <= kGuideMaxSlope)) continue;
     GuideTarget& g = out->t[out->n++];
     g.strip = true;
     g.part = &strip;
@@ -942,73 +953,94 @@ void Integrator::guided_connections(const NeeVertex& a, int medium_t, bool roule
 // targets). From a vertex inside the plate, on its face away from the laser (the plate's own back face:
 // its diffuse lobe, or its glossy reflection of a camera ray that entered the plate), the ghost is two
 // reflections away: the unfolded path starts in the glass, and the lobe, in the glass, has alpha
-// 2 sqrt(2) alpha_plate. A vertex inside the plate on either face also aims at the light entering through
-// the plate's edges (edge_ghost_targets). As for the guided targets, the choice depends on x alone, so the
-// densities are exact whatever it is.
+// 2 sqrt(2) alpha_plate. The higher orders the same way, m reflections turning the lobe sqrt(m) times
+// wider: the second-order ghost (four reflections, five thicknesses unfolded) from the air behind the
+// plate and from its far face inside; from its face towards the laser inside, the ghost of three
+// reflections (off the far face, the near face, the far face: four thicknesses unfolded). A vertex inside
+// the plate on either face also aims at the light entering through the plate's edges
+// (edge_ghost_targets). As for the guided targets, the choice depends on x alone, so the densities are
+// exact whatever it is.
 void Integrator::ghost_targets(const Surface& sf, int medium, Ghosts* out) const {
   out->n = 0;
   const glm::dvec3 x(sf.p), L = laser_.position;
   for (const GlossySlab& s : slabs_) {
     const double sx = glm::dot(x, s.n), sl = glm::dot(L, s.n), d = s.hi - s.lo;
-    bool up, down;
+    // Where x is: in the air behind the plate (the laser beyond its far face), or inside it on its face
+    // away from the laser (far) or towards it (near).
+    bool up, down, near_face = false;
     double hx;  // the path's length in air along the normal before it enters the plate
     if (medium < 0) {
       up = sx < s.lo && sl > s.hi, down = sx > s.hi && sl < s.lo;
       hx = up ? s.lo - sx : sx - s.hi;
-    } else {  // inside this plate, on its face away from the laser
+    } else {
       if (medium != s.material) continue;
       const double tol = 1e-6 * std::max(1.0, std::fabs(sx));
-      if (std::fabs(sx - s.lo) <= tol || std::fabs(sx - s.hi) <= tol)
-        edge_ghost_targets(x, s, int(&s - slabs_.data()), std::fabs(sx - s.lo) <= tol, out);
-      up = std::fabs(sx - s.lo) <= tol && sl > s.hi, down = std::fabs(sx - s.hi) <= tol && sl < s.lo;
+      const bool on_lo = std::fabs(sx - s.lo) <= tol, on_hi = std::fabs(sx - s.hi) <= tol;
+      if (on_lo || on_hi) edge_ghost_targets(x, s, int(&s - slabs_.data()), on_lo, out);
+      up = on_lo && sl > s.hi, down = on_hi && sl < s.lo;
+      if (!up && !down && ((on_hi && sl > s.hi) || (on_lo && sl < s.lo))) {
+        near_face = true;
+        up = on_hi;  // the laser beyond the face x is on
+        down = on_lo;
+      }
       hx = 0.0;
     }
     if (!up && !down) continue;
-    const glm::dvec3 nrm = up ? s.n : -s.n;
-    const double near = up ? s.lo : s.hi;
-    const double hl = std::fabs(sl - sx) - hx - d;
+    const glm::dvec3 nrm = up ? s.n : -s.n;  // towards the laser
+    const double hl = near_face ? std::fabs(sl - sx) : std::fabs(sl - sx) - hx - d;
     const glm::dvec3 to = L - x;
     const glm::dvec3 lat = to - glm::dot(to, nrm) * nrm;
     const double D = glm::length(lat);
     const glm::dvec3 u = D > 0.0 ? lat / D : glm::dvec3(0.0);
     const double n = s.ior;
-    if (out->n == Ghosts::kMax) return;
-    const double depth[2] = {hx + hl, 3.0 * d}, index[2] = {1.0, n};
-    const double p = D > 0.0 ? snell_invariant(depth, index, 2, D, std::min(D / glm::length(to), 0.5), 1.0) : 0.0;
-    const double ca = std::sqrt(std::max(0.0, 1.0 - p * p));
-    if (!(ca > 0.0)) continue;
-    const glm::dvec3 wl = p * u + ca * nrm;  // in air, at x (outside) and towards the laser
-    if (!(laser_.intensity_towards(-wl) > 0.0)) continue;
-    const double sg = p / n;
-    const glm::dvec3 w0 = medium < 0 ? wl : sg * u + std::sqrt(1.0 - sg * sg) * nrm;
-    const double rx = hx / ca, rl = hl / ca;
-    const double alpha = std::clamp(
-        2.0 * std::sqrt(2.0) * (medium < 0 ? n : 1.0) * double(s.alpha) / (1.0 + rx / std::max(rl, 1e-9)), 1e-3, 0.5);
-    // The entry point must lie on one of the plate's faces in the near plane, or within the lobe's reach of one.
-    const glm::dvec3 q = x + rx * w0;
-    bool on = medium >= 0;
-    for (const GlossyPart& part : parts_) {
-      if (on) break;
-      const double off = std::fabs(glm::dot(part.p0, s.n) - near);
-      if (std::fabs(glm::dot(part.n, s.n)) < 1.0 - 1e-6 || off > 1e-6 + 1e-9 * std::fabs(near)) continue;
-      on = distance_to_triangle(q, part.p0, part.e1, part.e2) <= kGuideEdgeWidths * alpha * rx;
-    }
-    if (!on) continue;
-    out->reach[out->n] = medium < 0 ? 3 : 2;
-    out->share[out->n] = float(kGhostDrawShare);
-    out->lobe[out->n++] = DirectionLobe{glm::vec3(w0), float(alpha)};
-    // From inside, the second-order ghost too (four reflections: 5 d of glass unfolded, reach 4, alpha
-    // 4 alpha_plate), drawn more rarely.
-    if (medium >= 0 && out->n < Ghosts::kMax && D > 0.0) {
-      const double depth2[2] = {hl, 5.0 * d};
-      const double p2 = snell_invariant(depth2, index, 2, D, p, 1.0);
-      const double ca2 = std::sqrt(std::max(0.0, 1.0 - p2 * p2)), sg2 = p2 / n;
-      if (ca2 > 0.0 && laser_.intensity_towards(-(p2 * u + ca2 * nrm)) > 0.0) {
-        out->reach[out->n] = 4;
-        out->share[out->n] = kSecondGhostDrawShare;
-        out->lobe[out->n++] = DirectionLobe{glm::vec3(sg2 * u + std::sqrt(1.0 - sg2 * sg2) * nrm),
-                                            float(std::clamp(4.0 * double(s.alpha), 1e-3, 0.5))};
+    // The orders drawn: the glass the unfolded path crosses (in thicknesses), its reflections inside, the
+    // vertices from x to the one whose laser connection meets it (reach), the share of vertices that draw.
+    struct Order {
+      double glass;
+      int reflections, reach;
+      float share;
+    };
+    static constexpr Order kFar[2] = {{3.0, 2, 2, float(kGhostDrawShare)}, {5.0, 4, 4, kSecondGhostDrawShare}};
+    static constexpr Order kAir[2] = {{3.0, 2, 3, float(kGhostDrawShare)}, {5.0, 4, 5, kSecondGhostDrawShare}};
+    static constexpr Order kNear[1] = {{4.0, 3, 3, kSecondGhostDrawShare}};
+    const Order* orders = near_face ? kNear : medium < 0 ? kAir : kFar;
+    const int count = near_face ? 1 : 2;
+    double p = -1.0;
+    for (int o = 0; o < count && out->n < Ghosts::kMax; ++o) {
+      const Order& od = orders[o];
+      const double depth[2] = {hx + hl, od.glass * d}, index[2] = {1.0, n};
+      const double guess = p >= 0.0 ? p : std::min(D / glm::length(to), 0.5);
+      p = D > 0.0 ? snell_invariant(depth, index, 2, D, guess, 1.0) : 0.0;
+      const double ca = std::sqrt(std::max(0.0, 1.0 - p * p));
+      if (!(ca > 0.0)) break;
+      const glm::dvec3 wl = p * u + ca * nrm;  // in air, towards the laser
+      if (!(laser_.intensity_towards(-wl) > 0.0)) continue;
+      const double sg = p / n, cg = std::sqrt(1.0 - sg * sg);
+      // x's direction: in air the ghost's; inside, into the glass (towards the laser from the far face,
+      // away from it from the near face)
+      const glm::dvec3 w0 = medium < 0 ? wl : sg * u + (near_face ? -cg : cg) * nrm;
+      const double rx = hx / ca, rl = hl / ca;
+      // each reflection turns the ray by twice its microfacet's tilt; outside, n times wider and narrowed by
+      // the parallax of moving along the plate, as for the guided targets
+      const double alpha = std::clamp(2.0 * std::sqrt(double(od.reflections)) * (medium < 0 ? n : 1.0) * double(s.alpha) /
+                                          (1.0 + rx / std::max(rl, 1e-9)),
+                                      1e-3, 0.5);
+      if (medium < 0) {
+        // The entry point must lie on one of the plate's faces in the near plane, or within the lobe's
+        // reach of one.
+        const double entry_plane = up ? s.lo : s.hi;
+        const glm::dvec3 q = x + rx * w0;
+        bool on = false;
+        for (const GlossyPart& part : parts_) {
+          const double off = std::fabs(glm::dot(part.p0, s.n) - entry_plane);
+          if (std::fabs(glm::dot(part.n, s.n)) < 1.0 - 1e-6 || off > 1e-6 + 1e-9 * std::fabs(entry_plane)) continue;
+          if ((on = distance_to_triangle(q, part.p0, part.e1, part.e2) <= kGuideEdgeWidths * alpha * rx)) break;
+        }
+        if (!on) continue;
       }
+      out->reach[out->n] = od.reach;
+      out->share[out->n] = od.share;
+      out->lobe[out->n++] = DirectionLobe{glm::vec3(w0), float(alpha)};
     }
   }
 }

@@ -202,15 +202,17 @@ class Integrator {
   void guided_connections(const NeeVertex& a, int medium_t, bool roulette, const Spec& rr_beta,
                           const GuideTargets& guide, Rng& rng, double w, const PixelFilm& film,
                           RayCounts* rays, const Ghosts* ghosts = nullptr) const;
-  // The ghosts of the laser a non-delta vertex sees through a glossy plate (reflected inside twice), from
-  // the air behind the plate or from the plate's back face inside, and the light entering a plate through
-  // its edges, from a vertex inside on either face.
+  // The ghosts of the laser a non-delta vertex sees through a glossy plate (reflected inside two or four
+  // times), from the air behind the plate or from the plate's back face inside, the ghost of three
+  // reflections from its front face inside, and the light entering a plate through its edges, from a vertex
+  // inside on either face.
   static constexpr int kMaxGhostReach = 8;
   struct Ghosts {
     static constexpr int kMax = 3 * kMaxGuideTargets;
     DirectionLobe lobe[kMax];
-    // The vertices from the one that draws to the one whose laser connection meets ghost i: from the air
-    // 3 (the entry into the plate, the two reflections), from inside 2; through an edge k (its reflections).
+    // The vertices from the one that draws to the one whose laser connection meets ghost i: its
+    // reflections, plus one from the air (the entry into the plate): from the air 3 and 5, from the back
+    // face inside 2 and 4, from the front face 3; through an edge k (its reflections).
     int reach[kMax] = {};
     float share[kMax] = {};  // the probability that a vertex draws towards ghost i
     int n = 0;

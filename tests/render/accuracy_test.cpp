@@ -326,11 +326,11 @@ TEST(Accuracy, GuidedConnectionsAndGhostDrawsKeepTheIndirectLightBehindAPlate) {
 // it is. A 10 mm plate of index 3 (Fresnel reflectance 0.25 at normal incidence) in front of the wall
 // separates the wall's returns in time: each pixel's direct return, then 200 ps later the first-order
 // ghosts (two reflections inside, on the laser's way or the camera's: the wall's ghost draws aim at the
-// laser's), 400 ps later the second order (four reflections, or two on each way; the first- and
-// second-order ghost draws of the plate's back face inside aim at part of it). Summed over 16 x 16 pixels in 200 ps windows about those
-// delays, for light seeds 1 to 4 at 256 paths, the transient with guided connections agrees with the one
-// without within 4 standard errors of the pixels' spread pooled over the seeds, and the variance falls
-// (measured 0.066 and 0.086 times).
+// laser's), 400 ps later the second order (four reflections, or two on each way; the wall's second-order
+// ghost draws, and the first- and second-order ones of the plate's back face inside, aim at parts of it).
+// Summed over 16 x 16 pixels in 200 ps windows about those delays, for light seeds 1 to 4 at 256 paths,
+// the transient with guided connections agrees with the one without within 4 standard errors of the
+// pixels' spread pooled over the seeds, and the variance falls (measured 0.068 and 0.077 times).
 TEST(Accuracy, GuidedDrawsKeepThePlatesDelayedReturns) {
   scenes::Scene s;
   test::add_box(s, {-1, -1, -0.46f}, {1, 1, -0.45f}, add_material(s, test::glass(3.0f, 0.01f, 0.15f)));
@@ -353,7 +353,6 @@ TEST(Accuracy, GuidedDrawsKeepThePlatesDelayedReturns) {
         for (size_t i = 0; i < 256; ++i) {
           const float* b = t.transient.data() + i * size_t(bins);
           const int peak = int(std::max_element(b + 450, b + bins) - b);  // the direct return
-          if (i == 136 && order == 1 && seed == 1) { for (int k = peak - 5; k < std::min(bins, peak + 60); ++k) if (b[k] > 0) std::printf("g%d bin %d (+%d): %.4g\n", guided, k, k - peak, double(b[k])); }
           double v = 0;
           for (int k = peak + 20 * order - 10; k < std::min(bins, peak + 20 * order + 10); ++k) v += b[k];
           sum += v, sq += v * v;
