@@ -16,7 +16,25 @@ std::optional<int> parse_command_line(CLI::App& cli, int argc, char** argv) {
     return cli.exit(e);  // --help, --version: printed on stdout, exit 0
   } catch (const CLI::ParseError& e) {
     std::string command = "spadgen";
-    for (const CLI::App* sub : cli.get_subcommands()) command += " " + sub->get_name();
+    const CLI::App* at = &cli;
+    int next = 1;  // argv's word after the commands named
+    for (bool deeper = true; deeper;) {
+      deeper = false;
+      for (const CLI::App* sub : at->get_subcommands()) {
+        command += " " + sub->get_name();
+        at = sub, ++next, deeper = true;
+        break;
+      }
+    }
+    // A word where a command was expected: name it and the commands there are (CLI11 says only that one is
+    // required).
+    if (at->get_require_subcommand_min() > 0 && at->get_subcommands().empty() && next < argc && argv[next][0] != '-') {
+      std::string names;
+      for (const CLI::App* sub : at->get_subcommands({})) names += (names.empty() ? "" : ", ") + sub->get_name();
+      std::fprintf(stderr, "spadgen: error: unknown command '%s' after %s; expected one of %s (see %s --help)\n", argv[next],
+                   command.c_str(), names.c_str(), command.c_str());
+      return kExitBadInput;
+    }
     std::fprintf(stderr, "spadgen: error: %s (see %s --help)\n", e.what(), command.c_str());
     return kExitBadInput;
   }

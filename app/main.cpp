@@ -31,6 +31,8 @@
 #endif
 
 int main(int argc, char** argv) {
+  // --threads: 0 is every core; beyond kMaxThreads the system refuses threads (a 100000 failed in TBB).
+  const CLI::Range kThreadsRange(0, spadgen::app::kMaxThreads, "0 (every core) to " + std::to_string(spadgen::app::kMaxThreads));
   // Every tile allocates and frees buffers of megabytes (a transient tile of 32 x 32 pixels x 2394 bins is
   // 9.8 MB). glibc serves those with mmap and returns them with munmap, so each tile paid page faults and
   // the kernel's zeroing of every page again (a quarter of `sense`'s time). Kept in the heap instead, freed
@@ -58,7 +60,7 @@ int main(int argc, char** argv) {
       ->type_name("KEY=VALUE");
   CLI::Option* seed_opt = run_cmd->add_option("--seed", seed, "seed of every random stream (replaces the scene file's)");
   run_cmd->add_option("--threads", run.threads, "worker threads (default: all cores); outputs do not depend on it")
-      ->check(CLI::NonNegativeNumber);
+      ->check(kThreadsRange);
   bool quiet = false;
   run_cmd->add_flag("-q,--quiet", quiet, "nothing on stderr but warnings and errors");
 
@@ -77,7 +79,7 @@ int main(int argc, char** argv) {
                                                     "each, OUT/repeat_000, ... (rates computed once)")
       ->check(CLI::Range(1, 100000));
   sense_cmd->add_option("--threads", sense.threads, "worker threads (default: all cores); outputs do not depend on it")
-      ->check(CLI::NonNegativeNumber);
+      ->check(kThreadsRange);
   bool sense_quiet = false;
   sense_cmd->add_flag("-q,--quiet", sense_quiet, "nothing on stderr but warnings and errors");
 
@@ -101,7 +103,7 @@ int main(int argc, char** argv) {
   plan_cmd->add_option("-o,--out", dataset.out_dir, "dataset folder: also show which samples are done there and the free disk");
   CLI::Option* plan_shard = plan_cmd->add_option("--shard", dataset_shard, "only shard I of N (samples i with i mod N = I)")->type_name("I/N");
   plan_cmd->add_flag("--all", dataset.all, "list every sample (default: the first and the last 10)");
-  plan_cmd->add_option("--threads", dataset.threads, "worker threads per sample, for the time estimate")->check(CLI::NonNegativeNumber);
+  plan_cmd->add_option("--threads", dataset.threads, "worker threads per sample, for the time estimate")->check(kThreadsRange);
   CLI::App* drun_cmd = dataset_cmd->add_subcommand("run", "generate the samples that are not done, each into its own folder, as one unit");
   drun_cmd->add_option("file", dataset.file, "dataset file (.json)")->required()->check(CLI::ExistingFile);
   drun_cmd->add_option("-o,--out", dataset.out_dir, "dataset folder")->required();
@@ -110,7 +112,7 @@ int main(int argc, char** argv) {
                                                 "SLURM_ARRAY_TASK_COUNT or JOB_COMPLETION_INDEX / JOB_COMPLETIONS, else 0/1")
                                  ->type_name("I/N");
   drun_cmd->add_option("--threads", dataset.threads, "worker threads per sample (default: all cores); outputs do not depend on it")
-      ->check(CLI::NonNegativeNumber);
+      ->check(kThreadsRange);
   drun_cmd->add_flag("-q,--quiet", dataset_quiet, "nothing on stderr but warnings and errors");
   CLI::App* status_cmd = dataset_cmd->add_subcommand("status", "done, failed, stale and missing samples of a dataset folder");
   status_cmd->add_option("dir", status_dir, "dataset folder")->required()->check(CLI::ExistingDirectory);
@@ -129,7 +131,7 @@ int main(int argc, char** argv) {
   rec_cmd->add_flag("--noise-free", rec.noise_free, "from the noise-free expected counts (detection_rate) instead of the sampled counts");
   CLI::Option* rec_max = rec_cmd->add_option("--max-detections", rec.max_detections, "detection slots per pixel (the strongest are kept)")
                              ->check(CLI::Range(1, 64));
-  rec_cmd->add_option("--threads", rec.threads, "worker threads (default: all cores)")->check(CLI::NonNegativeNumber);
+  rec_cmd->add_option("--threads", rec.threads, "worker threads (default: all cores)")->check(kThreadsRange);
   rec_cmd->add_flag("-q,--quiet", rec_quiet, "nothing on stderr but warnings and errors");
 
   spadgen::app::EvaluateCommand eval;
@@ -148,7 +150,7 @@ int main(int argc, char** argv) {
   eval_cmd->add_option("--region", eval_region, "accuracy and precision of the nearest object over this rectangle (image pixels)")
       ->type_name("X,Y,W,H");
   eval_cmd->add_flag("--noise-free", eval.noise_free, "when the detector runs: on the noise-free expected counts");
-  eval_cmd->add_option("--threads", eval.threads, "worker threads (default: all cores)")->check(CLI::NonNegativeNumber);
+  eval_cmd->add_option("--threads", eval.threads, "worker threads (default: all cores)")->check(kThreadsRange);
 
   if (const std::optional<int> code = spadgen::app::parse_command_line(cli, argc, argv)) return *code;
   return spadgen::app::run_command([&] {

@@ -12,6 +12,9 @@
 
 namespace spadgen::app {
 
+// --threads above this is refused: the system runs out of threads long before (100000 failed in TBB).
+inline constexpr int kMaxThreads = 1024;
+
 struct RunOptions {
   std::string scene_file;
   std::string out_dir;                  // "" = out/<scene file stem>

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "app/pipeline.h"
 #include "core/error.h"
 #include "writers/writers.h"
 
@@ -33,6 +34,8 @@ void order_files(std::vector<std::string>& files) {
 }
 
 ThreadLimit::ThreadLimit(int threads) {
+  if (threads < 0 || threads > kMaxThreads)
+    throw Error("--threads: expected 0 (every core) to " + std::to_string(kMaxThreads) + ", found " + std::to_string(threads));
   if (threads > 0) limit_ = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, size_t(threads));
   writers::set_exr_threads(int(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism)));
 }

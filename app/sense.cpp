@@ -277,9 +277,20 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   RunConfig write_cfg = cfg;  // what the sensor stage writes itself
   write_cfg.outputs.ground_truth = false, write_cfg.outputs.transient = false, write_cfg.outputs.light = false;
 
-  const fs::path out = options.out_dir.empty() ? fs::path(src.string() + "-sense") : fs::path(options.out_dir);
-  if (fs::exists(out) && fs::exists(src) && fs::equivalent(out, src))
-    throw Error("-o " + out.string() + ": sense writes a new folder beside the run, not into it");
+  // The run's folder as a name (RUN/, ./RUN/. and RUN are one folder): the default output is beside it.
+  const auto folder = [](const fs::path& p) {
+    fs::path c = fs::weakly_canonical(fs::absolute(p));
+    return c.has_filename() ? c : c.parent_path();
+  };
+  const fs::path run_abs = folder(src);
+  const fs::path out = options.out_dir.empty() ? run_abs.parent_path() / (run_abs.filename().string() + "-sense")
+                                               : fs::path(options.out_dir);
+  {
+    const fs::path out_abs = folder(out);
+    const auto [end, it] = std::mismatch(run_abs.begin(), run_abs.end(), out_abs.begin(), out_abs.end());
+    if (end == run_abs.end())  // out is the run's folder or inside it
+      throw Error("-o " + out.string() + ": sense writes a new folder beside the run, not into it");
+  }
   // The run's objects bound labels.exr's slots (a run before objects had none).
   const int objects = meta.contains("objects") ? int(meta.at("objects").size()) : 0;
   std::vector<fs::path> dirs;
@@ -302,6 +313,12 @@ std::vector<RunResult> sense(const SenseOptions& options) {
         from_run.insert(f.get<std::string>());
         linked.push_back(f.get<std::string>());
       }
+  // The run's files this call links must all be there, before any work (a user may have removed one to
+  // save space: the run is then incomplete for sense).
+  for (const std::string& f : linked)
+    if (!fs::exists(src / f))
+      throw Error((src / f).string() + ": listed in " + (src / "metadata.json").string() +
+                  " (files) but missing; sense links the run's files as they are: restore it, or run the scene again");
   // Memory of one realisation (the estimate includes the renderer's paths, which sense does not trace: an
   // upper bound; the realisations share the rates). Disk: the stacks the run's folder provides are links
   // and take none; each further realisation writes its own counts and frames (its images are links).
@@ -327,6 +344,10 @@ std::vector<RunResult> sense(const SenseOptions& options) {
                                                 (shared.count(l.file) ? int64_t(runs.size()) - 1 : 0);
     held += 2 * int64_t(runs.size());  // the lock, and a margin for the staging folder
     rlimit lim{};
+    const int64_t per_realisation = (held + int64_t(runs.size()) - 1) / int64_t(runs.size());
+    if (getrlimit(RLIMIT_NOFILE, &lim) == 0 && lim.rlim_cur != RLIM_INFINITY && per_realisation + 64 > int64_t(lim.rlim_cur))
+      throw Error("sense holds about " + std::to_string(per_realisation + 64) + " files open (its stacks, a lock, and 64 for the "
+                  "libraries), and this process may open " + std::to_string(lim.rlim_cur) + " (ulimit -n): raise the limit");
     if (getrlimit(RLIMIT_NOFILE, &lim) == 0 && lim.rlim_cur != RLIM_INFINITY && held + 64 > int64_t(lim.rlim_cur))
       throw Error("--repeats " + std::to_string(runs.size()) + ": the realisations hold about " + std::to_string(held) +
                   " files open until they are written, and this process may open " + std::to_string(lim.rlim_cur) +

@@ -93,6 +93,9 @@ Staging::Staging(const fs::path& out, Hook hook) : hook_(std::move(hook)) {
   }
   if (fs::exists(out_, ec) && !fs::is_directory(out_, ec))
     throw cannot("it exists and is not a folder; expected a folder that exists or can be created");
+  if (fs::is_symlink(fs::symlink_status(out_, ec)))  // a link to a folder was resolved above: this one leads nowhere
+    throw cannot("it is a symbolic link to " + fs::read_symlink(out_, ec).string() +
+                 ", which does not exist; expected a folder that exists or can be created");
   lock();
   try {
     recover();

@@ -272,7 +272,11 @@ TEST_F(Hardening, CommandLineErrorsAreSpadgensWithExitCode1) {
     std::string args, expect;
   } cases[] = {
       {"run", "spadgen: error: scene is required (see spadgen run --help)"},
-      {"frob", "spadgen: error: "},
+      {"frob", "spadgen: error: unknown command 'frob' after spadgen; expected one of run, sense, info"},
+      {"dataset frob", "unknown command 'frob' after spadgen dataset; expected one of plan, run, status, schema"},
+      // 100000 threads made TBB fail with an internal error
+      {"run " + kTiny + " --threads 100000", "spadgen: error: --threads: Value 100000 not in range 0 to 1024"},
+      {"run " + kTiny + " --threads -1", "--threads: Value -1 not in range 0 to 1024"},
       {"", "spadgen: error: A subcommand is required (see spadgen --help)"},
       {"run " + kTiny + " --seed -1", "spadgen: error: --seed: found '-1', expected an integer in [0, 9007199254740992]"},
       {"run " + kTiny + " --seed 9007199254740993", "--seed: found '9007199254740993'"},

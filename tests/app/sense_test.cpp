@@ -82,6 +82,12 @@ TEST_F(App, SenseLinksTheRunsNoiseFreeFilesOnlyForTheRunsOwnSensor) {
   EXPECT_THAT(r.output, HasSubstr("--repeats 100: the realisations hold about 400 files open"));
   EXPECT_THAT(r.output, HasSubstr("ask for at most 48 realisations per call"));
   EXPECT_FALSE(fs::exists(dir_ / "many"));
+  // A limit below what one realisation needs: said so (not "ask for at most 1 realisations").
+  r = shell("ulimit -n 64 && " + kBin + " sense " + (dir_ / "run").string() + " -q --repeats 1 --set sensor.pixel_A.pdp_csv=" +
+            pdp.string() + " -o " + (dir_ / "many").string());
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("and this process may open 64 (ulimit -n): raise the limit"));
+  EXPECT_FALSE(fs::exists(dir_ / "many"));
 }
 
 // A run stored as Zarr: sense reads its light from the Zarr stores and writes what the run wrote, bit for
@@ -246,6 +252,27 @@ TEST_F(App, SenseRefusesWhatItCannotDo) {
   EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("no metadata.json"));
   EXPECT_FALSE(fs::exists(dir_ / "run-sense")) << "a refused sense leaves nothing behind";
+
+  // Into the run's folder: refused however the folder is named (the default of RUN/, as a shell completes
+  // it, is RUN-sense beside it, not RUN/-sense inside).
+  for (const std::string& o : {(dir_ / "run" / "sub").string(), (dir_ / "run" / ".").string()}) {
+    r = sh("sense " + (dir_ / "run").string() + " -o " + o);
+    EXPECT_EQ(r.code, 1) << o;
+    EXPECT_THAT(r.output, HasSubstr("sense writes a new folder beside the run, not into it")) << o;
+  }
+  EXPECT_FALSE(fs::exists(dir_ / "run" / "sub"));
+  r = sh("sense " + (dir_ / "run").string() + "/ -q");
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_TRUE(fs::exists(dir_ / "run-sense" / "counts.npy"));
+  EXPECT_FALSE(fs::exists(dir_ / "run" / "-sense"));
+
+  // A file of the run that sense links, removed: named before any work, not an internal error.
+  fs::remove(dir_ / "run" / "ground_truth.exr");
+  r = sh("sense " + (dir_ / "run").string() + " -o " + (dir_ / "again").string());
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("ground_truth.exr: listed in"));
+  EXPECT_THAT(r.output, HasSubstr("(files) but missing"));
+  EXPECT_FALSE(fs::exists(dir_ / "again"));
 }
 
 // The saved light holds every rendered bin of every pixel (the transient, compactly), and its own

@@ -317,4 +317,18 @@ TEST_F(StagingTest, ALinkToAFolderPublishesIntoTheFolder) {
   EXPECT_EQ(which_set(dir_ / "link"), "new");
 }
 
+// A link that leads nowhere is refused when the staging is made, before any work (its publishing would
+// fail: a folder cannot be renamed onto a link), and stays as it was.
+TEST_F(StagingTest, ALinkThatLeadsNowhereIsRefusedUpFront) {
+  fs::create_symlink(dir_ / "nowhere", dir_ / "dangling");
+  try {
+    Staging s(dir_ / "dangling");
+    ADD_FAILURE() << "a dangling link was accepted";
+  } catch (const spadgen::Error& e) {
+    EXPECT_THAT(std::string(e.what()), HasSubstr("it is a symbolic link to " + (dir_ / "nowhere").string() + ", which does not exist"));
+  }
+  EXPECT_TRUE(fs::is_symlink(fs::symlink_status(dir_ / "dangling")));
+  EXPECT_FALSE(fs::exists(dir_ / "nowhere"));
+}
+
 }  // namespace
