@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <optional>
 #include <set>
 
 #include "core/error.h"
@@ -266,7 +267,7 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
     try {
       (void)scenes::load_scene_file(s.scenes.front(), overrides);
     } catch (const Error& e) {
-      rd.fail(at, std::string("with the scene file ") + s.scene_names.front() + ":\n  " + e.what());
+      rd.fail(at, std::string("with the scene file ") + s.scene_names.front() + ": " + e.what());
     }
   };
   std::set<std::string> seen;
@@ -323,21 +324,36 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
       if (key == "outputs.light")
         rd.fail("/repeats", "is " + std::to_string(s.repeats) + ", which needs the saved light: remove outputs.light from set, grid and random");
   // Names of glTF nodes and materials are known only to the glTF: each scene is loaded once with the
-  // edits of its first sample, so that a misspelt name fails here rather than in every sample.
+  // edits of its first valid sample, so that a misspelt name fails here rather than in every sample. A
+  // sample whose values make an invalid scene together (a crop outside a sensor a grid shrinks) is
+  // recorded in failed/ when it runs, as a failed run is; when its scene's first 16 samples all do, the
+  // mistake is the dataset's and it is refused here.
+  constexpr int kProbes = 16;
+  const int64_t cells = s.grid_cells(), per_scene = cells / static_cast<int64_t>(s.scenes.size());
   for (size_t k = 0; k < s.scenes.size(); ++k) {
-    const int64_t first = static_cast<int64_t>(k) * (s.grid_cells() / static_cast<int64_t>(s.scenes.size()));
+    const int64_t first = static_cast<int64_t>(k) * per_scene;
     if (first >= s.count()) break;
-    scenes::ResolvedRun r;
+    std::optional<scenes::ResolvedRun> r;
+    std::string why;
+    int tried = 0;
+    for (int64_t base = first; !r && tried < kProbes && base < s.count(); base += cells)
+      for (int64_t i = base; !r && i < base + per_scene && i < s.count() && tried < kProbes; ++i, ++tried) {
+        try {
+          r = scenes::load_scene_file(s.scenes[k], make_sample(s, i).overrides);
+        } catch (const Error& e) {
+          if (why.empty()) why = e.what();
+        }
+      }
+    if (!r)
+      rd.fail("sample " + std::to_string(first), std::string("with the scene file ") + s.scene_names[k] + ": " + why +
+                                                     (tried > 1 ? " (and the next " + std::to_string(tried - 1) +
+                                                                      " samples of this scene fail too)"
+                                                                : ""));
+    if (r->config.edits.nodes.empty() && r->config.edits.materials.empty()) continue;
     try {
-      r = scenes::load_scene_file(s.scenes[k], make_sample(s, first).overrides);
+      (void)scenes::load_gltf(r->config.gltf_path, r->config.gltf_scene, r->config.edits);
     } catch (const Error& e) {
-      rd.fail("sample " + std::to_string(first), std::string("with the scene file ") + s.scene_names[k] + ":\n  " + e.what());
-    }
-    if (r.config.edits.nodes.empty() && r.config.edits.materials.empty()) continue;
-    try {
-      (void)scenes::load_gltf(r.config.gltf_path, r.config.gltf_scene, r.config.edits);
-    } catch (const Error& e) {
-      rd.fail("scenes/" + std::to_string(k), "the nodes and materials the dataset varies, in " + s.scene_names[k] + ":\n  " + e.what());
+      rd.fail("scenes/" + std::to_string(k), "the nodes and materials the dataset varies, in " + s.scene_names[k] + ": " + e.what());
     }
   }
   if (s.grid_cells() > kMaxSamples) rd.fail("/grid", "has " + std::to_string(s.grid_cells()) + " cells; expected at most 1e8");

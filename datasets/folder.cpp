@@ -157,7 +157,7 @@ DatasetFolder::Resolved DatasetFolder::resolve(const Sample& s) const {
   try {
     r = scenes::load_scene_file(spec_.scenes[size_t(s.scene)], s.overrides);
   } catch (const Error& e) {
-    throw Error("sample " + std::to_string(s.index) + " (" + s.parameters.dump() + ") makes an invalid scene:\n  " + e.what());
+    throw Error("sample " + std::to_string(s.index) + " (" + s.parameters.dump() + ") makes an invalid scene: " + e.what());
   }
   Resolved out;
   out.scene = r.resolved;

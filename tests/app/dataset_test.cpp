@@ -1,6 +1,7 @@
 // `spadgen dataset`: shards equal the serial run, a run killed with SIGKILL resumes to the same bytes, done
 // samples are skipped, stale ones replaced whole, samples added without touching the existing ones, a full
-// disk and a folder of another dataset refused, a failing sample recorded while the others go on.
+// disk and a folder of another dataset refused, a failing sample recorded while the others go on (the first
+// one too), a dataset whose samples all fail refused.
 #include <gmock/gmock.h>
 #include <signal.h>
 #include <sys/stat.h>
@@ -274,6 +275,25 @@ TEST_F(Dataset, AFailingSampleIsRecordedAndTheOthersGoOn) {
   EXPECT_THAT(st.output, HasSubstr("failed: 1, 3"));
   EXPECT_THAT(st.output, HasSubstr("/camera/crop"));
   EXPECT_THAT(slurp(dir_ / "out/index.csv"), HasSubstr(",failed,"));
+}
+
+// The first sample failing is one failing sample too (it was a refusal of the whole dataset); only when
+// every sample probed fails is the dataset refused, before any work, in one line.
+TEST_F(Dataset, AnInvalidFirstSampleIsRecordedAndAnInvalidDatasetRefused) {
+  write(dir_ / "d.json", small_dataset(4, 3, kScenes + "multi_object.json", ", \"camera.width_px\": [16, 1024]"));
+  Result r = sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("2 samples failed (0, 2)"));
+  EXPECT_TRUE(fs::exists(dir_ / "out/samples/000001/metadata.json"));
+  EXPECT_TRUE(fs::exists(dir_ / "out/failed/000000.json"));
+
+  write(dir_ / "e.json", small_dataset(4, 3, kScenes + "multi_object.json", ", \"camera.width_px\": [16]"));
+  r = sh("dataset run " + (dir_ / "e.json").string() + " -o " + (dir_ / "e").string() + " -q");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("e.json: sample 0: with the scene file "));
+  EXPECT_THAT(r.output, HasSubstr("expected a rectangle inside the 16 x 500 sensor (and the next 3 samples of this scene fail too)"));
+  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+  EXPECT_FALSE(fs::exists(dir_ / "e"));
 }
 
 }  // namespace
