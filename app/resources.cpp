@@ -101,19 +101,20 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
   const int64_t bins = axis.bins, pixels = img.count();
   const std::string th = std::to_string(T) + " threads";
 
-  // With a target error, a block's samples are traced ahead 64 at a time and its pixels accumulate their
-  // bins side by side (render/renderer.cpp).
+  // A block's samples are traced ahead 64 at a time and its pixels accumulate their bins side by side
+  // (render/renderer.cpp).
   constexpr int64_t block = render::Renderer::kBlockPixels;
   const bool adaptive = c.render.target_relative_error.has_value();
-  const int ahead = adaptive ? std::min(64, c.render.max_samples_per_pixel) : c.render.samples_per_pixel;
-  plan.memory.push_back({"camera paths (" +
-                             (adaptive ? std::to_string(ahead) + " samples" : "render.samples_per_pixel = " + std::to_string(ahead)) +
-                             " traced ahead for " + std::to_string(block) + " pixels, " + th + ")",
+  const int ahead = std::min(render::Renderer::kSamplesAhead,
+                             adaptive ? std::max(c.render.samples_per_pixel, c.render.max_samples_per_pixel)
+                                      : c.render.samples_per_pixel);
+  plan.memory.push_back({"camera paths (" + std::to_string(ahead) + " samples traced ahead for " + std::to_string(block) +
+                             " pixels, " + th + ")",
                          static_cast<int64_t>(render::Renderer::bytes_per_thread(ahead)) * T});
   const int64_t split = c.render.split_direct_indirect ? 2 : 1;
   plan.memory.push_back({"transient tiles (render.tile_size_px = " + std::to_string(c.render.tile_size) + ", " +
                              std::to_string(bins) + " time bins of render.time_bin_ps, " + th + ")",
-                         in_flight * data_pixels * bins * 4 * split + T * bins * 8 * split * (adaptive ? block : 1)});
+                         in_flight * data_pixels * bins * 4 * split + T * bins * 8 * split * block});
   // The sensor's tile: its share of every (K, ...) stack, written or not (the sensor computes them all).
   const std::vector<StackLayout> stacks = stack_layout(c, sensor, img, axis);
   int64_t sensor_tile = 0, resident = 0, bands = 0, chunks = 0;

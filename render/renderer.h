@@ -84,9 +84,12 @@ class Renderer {
   // The pixels of a sensor row whose camera rays travel, and with a target error accumulate, together.
   static constexpr int kBlockPixels = 16;
 
-  // Bytes each rendering thread holds while it renders: the camera rays of all samples of a block of
-  // pixels are traced ahead as packets, so this grows with render.samples_per_pixel (for the resource
-  // plan of a run, app/resources.h).
+  // The samples of a block whose camera rays are traced ahead at a time (as packets); the block's pixels
+  // accumulate their bins side by side meanwhile.
+  static constexpr int kSamplesAhead = 64;
+
+  // Bytes each rendering thread holds for the camera rays traced ahead of samples_per_pixel (at most
+  // kSamplesAhead) samples of a block (for the resource plan of a run, app/resources.h).
   static size_t bytes_per_thread(int samples_per_pixel);
 
  private:

@@ -184,14 +184,17 @@ TEST_F(Hardening, DepositFoldsAnyArrivalTimeInBoundedSteps) {
 // The resource plan: a run the machine cannot hold is refused at once, with the figures and the keys
 
 TEST_F(Hardening, ARunTheMachineCannotHoldIsRefusedWithItsFigures) {
-  // 10^7 paths per pixel are traced ahead for 16 pixels at a time: about 36 GB per thread, 2.3 TB for 64.
-  const Outcome memory = spadgen("run " + kTiny + " -q --threads 64 --set render.samples_per_pixel=10000000 -o " +
-                                 (dir_ / "out").string());
+  // 1 ps bins over the flat target's 21 ns window in the transient tiles of 1024 threads: about 100 GB.
+  const Outcome memory = spadgen("run " + kFlat + " -q --threads 1024 --set render.time_bin_ps=1 -o " + (dir_ / "out").string());
   expect_exit(memory, 1, "memory");
-  EXPECT_THAT(memory.err, HasSubstr("the run needs about 2"));
+  EXPECT_THAT(memory.err, HasSubstr("the run needs about 1"));
   EXPECT_THAT(memory.err, HasSubstr("GB of memory"));
-  EXPECT_THAT(memory.err, HasSubstr("camera paths (render.samples_per_pixel = 10000000 traced ahead for 16 pixels, 64 threads)"));
+  EXPECT_THAT(memory.err, HasSubstr("transient tiles (render.tile_size_px = 32, 21250 time bins of render.time_bin_ps, 1024 threads)"));
   EXPECT_LT(memory.seconds, 10.0);
+  // 10^7 paths per pixel: their camera rays are traced ahead 64 samples at a time, in bounded memory.
+  const Outcome paths = spadgen("info " + kTiny + " --set render.samples_per_pixel=10000000");
+  expect_exit(paths, 0, "info");
+  EXPECT_THAT(paths.output, HasSubstr("camera paths (64 samples traced ahead for 16 pixels"));
   // 100,000 gate positions of 1024 x 16384 pixels: 6.7 TB of expected counts (the images stay in memory).
   const Outcome disk = spadgen("run " + kFlat + " -q --set camera.height_px=16384 --set outputs.ground_truth=false "
                                "--set outputs.expected_counts=true --set acquisition.gate_sweep.start_ns=0 "
