@@ -235,7 +235,7 @@ void add_pixel_type(std::vector<Key>& s, const std::string& name, P type) {
   s.push_back(number(p + "fill_factor", PIXEL(fill_factor), kNone, open_closed(0, 1), "fraction of the pixel area that is photosensitive"));
   s.push_back(number(p + "pdp_peak", PIXEL(pdp_peak), kNone, open_closed(0, 1), "peak photon detection probability"));
   s.push_back(number(p + "pdp_peak_wavelength_nm", PIXEL(pdp_peak_wavelength_m), kNmUnit, closed(200, 2000), "wavelength of the PDP peak"));
-  s.push_back(file(p + "pdp_csv", PIXEL(pdp_csv), "table of (wavelength_nm, PDP) replacing the built-in curve; relative to the scene file; \"\" = built-in curve scaled to pdp_peak"));
+  s.push_back(file(p + "pdp_csv", PIXEL(pdp_csv), "table of (wavelength_nm, PDP) replacing the built-in curve, covering the laser's wavelength (0 outside it); relative to the scene file; \"\" = built-in curve scaled to pdp_peak"));
   s.push_back(number(p + "pdp_nonuniformity", PIXEL(pdp_nonuniformity), kNone, closed(0, 0.5), "relative spread (sigma) of PDP across pixels"));
   s.push_back(number(p + "dcr_median_cps", PIXEL(dcr_median_cps), plain("counts/s"), closed(0, 1e7), "median dark count rate at room temperature (25 C)"));
   s.push_back(number(p + "dcr_log_sigma", PIXEL(dcr_log_sigma), kNone, closed(0, 5), "spread (sigma of the natural log) of the main DCR population"));

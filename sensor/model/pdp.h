@@ -14,6 +14,9 @@ class PdpCurve {
   static PdpCurve from_config(const PixelTypeConfig& c, const std::string& key);
   // Linear interpolation between table points; 0 outside the table.
   double at(double wavelength_m) const;
+  // The table's first and last wavelength, nm.
+  double first_nm() const { return nm_.front(); }
+  double last_nm() const { return nm_.back(); }
   // Mean PDP over [centre - width/2, centre + width/2] for an equal-energy spectrum, i.e. weighted by the
   // photon flux per unit wavelength, which is proportional to the wavelength. width 0: at(centre).
   double band_average(double centre_m, double width_m) const;

@@ -272,9 +272,11 @@ TEST(Gate, SensorTakesTheGeneralPathForNonIntegerSteps) {
     SensorModel model(c);
     const TimeAxis ax = model.required_window(dt);
     std::vector<float> g(static_cast<size_t>(ax.bins), 0.0f);
-    g[static_cast<size_t>(ax.bin_of(2.0e-9))] = 0.7f;
-    g[static_cast<size_t>(ax.bin_of(2.5e-9))] = 0.2f;
-    g[static_cast<size_t>(ax.bin_of(2.5e-9)) + 1] = 0.1f;
+    const int64_t at2 = ax.bin_of(2.0e-9), at25 = ax.bin_of(2.5e-9);
+    ASSERT_TRUE(at2 >= 0 && at25 >= 0 && at25 + 1 < ax.bins);
+    g[static_cast<size_t>(at2)] = 0.7f;
+    g[static_cast<size_t>(at25)] = 0.2f;
+    g[static_cast<size_t>(at25) + 1] = 0.1f;
     const double step = 36e-12 / dt;
     EXPECT_EQ(integer_step(step) == 0, dt == 7e-12);
     for (auto [x, y] : {std::pair{3, 1}, std::pair{12, 6}}) {
@@ -456,6 +458,27 @@ TEST(Gate, BadTablesNameTheFileAndKey) {
   g.profile_csv.clear();
   l.pulse_shape_csv = write_temp("bad_pulse.csv", "0,1\n10,-1\n20,0\n");
   EXPECT_THROW(build_gate_shape(g, l), Error);
+}
+
+// A measured PDP table that stops short of the laser's wavelength would make the pixels blind to the laser
+// (PDP 0 outside a table): refused, naming the key, the file and both wavelengths; a table that covers it,
+// or one of a pixel type the layout does not use, is taken.
+TEST(Gate, APdpTableThatMissesTheLasersWavelengthIsRefused) {
+  SensorStageConfig c = sweep_config(16, 8);
+  c.sensor.preset = PixelPreset::PixelA;
+  c.laser.wavelength_m = 637e-9;
+  c.sensor.pixel_A.pdp_csv = write_temp("pdp_700_800.csv", "700,0.1\n800,0.2\n");
+  try {
+    const sensor::SensorModel m(c);
+    FAIL() << "expected an error";
+  } catch (const Error& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("sensor.pixel_A.pdp_csv: '" + c.sensor.pixel_A.pdp_csv + "' covers 700 to 800 nm, not the laser's 637 nm"),
+              std::string::npos) << what;
+  }
+  c.sensor.pixel_B.pdp_csv = c.sensor.pixel_A.pdp_csv;  // pixel_B is not in this layout
+  c.sensor.pixel_A.pdp_csv = write_temp("pdp_600_800.csv", "600,0.1\n800,0.2\n");
+  EXPECT_NO_THROW(const sensor::SensorModel m(c));
 }
 
 // A pulse table sampled from the Gaussian gives the same effective gate as the Gaussian pulse.
