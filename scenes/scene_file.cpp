@@ -143,6 +143,10 @@ std::string describe_json(const json& v) {
 std::string format_bound(double v) {
   std::ostringstream o;
   o << v;
+  // A bound that six digits do not hold exactly as its digits (the seeds' 2^53 read 9.0072e+15, as if
+  // 9007200000000000 were allowed).
+  if (std::strtod(o.str().c_str(), nullptr) != v && std::floor(v) == v && std::fabs(v) <= 0x1p53)
+    return std::to_string(static_cast<int64_t>(v));
   return o.str();
 }
 
@@ -190,6 +194,9 @@ bool value_fits(const Key& k, const json& v) {
     case Type::Integer: {
       if (!v.is_number()) return false;
       const double d = v.get<double>();
+      // Written as integer digits, the value itself: 2^53 + 1 is not 2^53 (a double would make it so).
+      if (v.is_number_unsigned() && static_cast<uint64_t>(d) != v.get<uint64_t>()) return false;
+      if (v.is_number_integer() && !v.is_number_unsigned() && static_cast<int64_t>(d) != v.get<int64_t>()) return false;
       return std::floor(d) == d && in_range(k, d);
     }
     case Type::Bool: return v.is_boolean();

@@ -93,7 +93,7 @@ TEST_F(Hardening, ValuesThatCrashedOrHungSpadgenEndInAnErrorNamingTheKey) {
   };
   const Case cases[] = {
       // SIGSEGV: the gate count overflowed int, then front() of an empty vector
-      {"acquisition.gate_sweep.step_ps=1e-6", "/acquisition/gate_sweep/step_ps: found 1e-06 ps, which makes 1.26e+10 gate positions"},
+      {"acquisition.gate_sweep.step_ps=1e-6", "/acquisition/gate_sweep/step_ps: found 1e-06 ps, which makes 12600000001 gate positions"},
       // allocated until killed
       {"acquisition.gate_sweep.start_ns=-1e6' --set 'acquisition.gate_sweep.step_ps=1", "expected at most 100000 positions"},
       // SIGABRT in Embree (ray.valid()); info accepted it

@@ -109,7 +109,11 @@ TEST_F(SceneFileTest, StreamSeedsDefaultToTheSeed) {
   EXPECT_EQ(sensor_stage(r.config).noise_seed, 4u);
   EXPECT_EQ(render_stage(r.config, {}).light_seed, 9u);
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "seeds": {"chip": -1}})"),
-              HasSubstr("/seeds/chip: found -1 (an integer), expected an integer in [0, 9.0072e+15], or null"));
+              HasSubstr("/seeds/chip: found -1 (an integer), expected an integer in [0, 9007199254740992], or null"));
+  // Integers written as digits are their own value: 2^53 + 1 is not the 2^53 a double makes of it.
+  EXPECT_EQ(parse(R"({"gltf": "s.gltf", "seed": 9007199254740992})").config.seed, 9007199254740992u);
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "seed": 9007199254740993})"),
+              HasSubstr("/seed: found 9007199254740993 (an integer), expected an integer in [0, 9007199254740992]"));
 }
 
 // render.quality fills the sampling keys not given, with the values quality_presets() lists; a key given
@@ -460,7 +464,7 @@ TEST_F(SceneFileTest, ValuesThatMakeDerivedQuantitiesNonFiniteAreOutOfRange) {
 TEST_F(SceneFileTest, TooManyGatePositionsOrBinsAreRefusedBeforeAnythingIsAllocated) {
   // step 1e-6 ps: 1.26e10 positions, which overflowed int; 2e9 positions allocated until killed.
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "acquisition": {"gate_sweep": {"step_ps": 1e-6}}})"),
-              HasSubstr("/acquisition/gate_sweep/step_ps: found 1e-06 ps, which makes 1.26e+10 gate positions"));
+              HasSubstr("/acquisition/gate_sweep/step_ps: found 1e-06 ps, which makes 12600000001 gate positions"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "acquisition": {"gate_sweep": {"start_ns": -1e6, "stop_ns": 1e6, "step_ps": 1}}})"),
               HasSubstr("expected at most 100000 positions"));
   EXPECT_EQ(error_of(R"({"gltf": "s.gltf", "acquisition": {"gate_sweep": {"start_ns": 0, "stop_ns": 99.999, "step_ps": 1}}})"), "");
