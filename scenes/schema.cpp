@@ -1,5 +1,9 @@
 #include "schema.h"
 
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <functional>
 #include <stdexcept>
@@ -14,10 +18,31 @@ using json = nlohmann::json;
 using ojson = nlohmann::ordered_json;
 
 // Units as the scene file writes them. A value v in the file is to_si(v) inside; a default is shown as
-// from_si of the field's initializer. (Lambdas, not a template on the scale: clang 14, which builds the
-// fuzzing harnesses, has no floating-point template parameters.)
-#define SCALED_UNIT(name, scale) \
-  Unit { name, [](double v) { return v * (scale); }, [](double v) { return v / (scale); } }
+// from_si of the field's initializer. Both scale the decimal that a double stands for, not the double:
+// 13.2 ns is the double nearest 13.2e-9 (as the initializer 13.2e-9 is; 13.2 * 1e-9 or 13.2 / 1e9 can be
+// an ulp off), and from_si of it is 13.2. So defaults read 13.2 ns, 10 us and 300 nm (they read
+// 10.000000000000002 and 299.99999999999994), a value given as the default is the default, and the
+// resolved scene file parses back to the very doubles the run used. (Lambdas, not a template on the
+// scale: clang 14, which builds the fuzzing harnesses, has no floating-point template parameters.)
+// The double nearest v's decimal (the shortest that reads back as v) times 10^k.
+double times_ten_to(double v, int k) {
+  if (k == 0 || !std::isfinite(v) || v == 0.0) return v;
+  char text[48];
+  for (int digits = 15; digits <= 17; ++digits) {
+    std::snprintf(text, sizeof text, "%.*e", digits - 1, v);
+    if (std::strtod(text, nullptr) == v) break;
+  }
+  char* e = std::strchr(text, 'e');
+  const long exponent = std::strtol(e + 1, nullptr, 10) + k;
+  std::snprintf(e, sizeof text - size_t(e - text), "e%ld", exponent);
+  return std::strtod(text, nullptr);
+}
+int decimal_exponent(double scale) { return static_cast<int>(std::lround(-std::log10(scale))); }
+#define SCALED_UNIT(name, scale)                                                   \
+  Unit {                                                                           \
+    name, [](double v) { return times_ten_to(v, -decimal_exponent(scale)); },     \
+        [](double v) { return times_ten_to(v, decimal_exponent(scale)); }          \
+  }
 double deg_to_rad(double v) { return v * kPi / 180.0; }
 double rad_to_deg(double v) { return v * 180.0 / kPi; }
 

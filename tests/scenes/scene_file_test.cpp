@@ -98,6 +98,29 @@ TEST_F(SceneFileTest, CodeDefaultsAreTheSceneFileDefaults) {
   EXPECT_EQ(r.resolved["acquisition"]["mode"], "gate_sweep");
 }
 
+// A value in the file's unit stands for its decimal: 13.2 ns is the double nearest 13.2e-9, the default's
+// initializer, so a default written out is the default (no "does nothing" warning for an exposure of
+// 10 us in a gate sweep), defaults read as their decimals (10 us, not 10.000000000000002), and the
+// resolved file parses back to the same doubles.
+TEST_F(SceneFileTest, ValuesInTheirUnitsAreTheirDecimals) {
+  const RunConfig d;
+  const ResolvedRun r = parse(R"({"gltf": "s.gltf", "ambient": {"bandwidth_nm": 300},
+      "acquisition": {"gate_sweep": {"stop_ns": 13.2}, "intensity": {"exposure_us": 10}}})");
+  EXPECT_EQ(r.config.ambient.bandwidth_m, d.ambient.bandwidth_m);
+  EXPECT_EQ(r.config.acquisition.gate_sweep.stop_s, d.acquisition.gate_sweep.stop_s);
+  EXPECT_EQ(r.config.acquisition.intensity.exposure_s, d.acquisition.intensity.exposure_s);
+  EXPECT_TRUE(r.warnings.empty()) << r.warnings.front();
+  const ResolvedRun defaults = parse(R"({"gltf": "s.gltf"})");
+  EXPECT_EQ(defaults.resolved["acquisition"]["intensity"]["exposure_us"].dump(), "10.0");
+  EXPECT_EQ(defaults.resolved["ambient"]["bandwidth_nm"].dump(), "300.0");
+  EXPECT_EQ(defaults.resolved["acquisition"]["gate_sweep"]["stop_ns"].dump(), "13.2");
+  // 0.9 mm is the literal 0.9e-3 m, not 0.9 * 1e-3 (an ulp above)
+  const ResolvedRun m = parse(R"({"gltf": "s.gltf", "materials": {"M": {"thickness_mm": 0.9}}})");
+  ASSERT_EQ(m.config.edits.materials.size(), 1u);
+  EXPECT_EQ(m.config.edits.materials[0].thickness_m, std::optional<double>(0.9e-3));
+  EXPECT_NE(0.9 * 1e-3, 0.9e-3);
+}
+
 // Each stream's seed defaults to `seed`; one set alone changes only that stream's.
 TEST_F(SceneFileTest, StreamSeedsDefaultToTheSeed) {
   const ResolvedRun r = parse(R"({"gltf": "s.gltf", "seed": 9, "seeds": {"noise": 4}})");
