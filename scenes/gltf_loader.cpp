@@ -598,6 +598,9 @@ void Loader::visit_one(int node, const glm::dmat4& parent_world, std::vector<std
       warn(node_label(m_, i) + ": its world transform is singular (a zero scale); its mesh is skipped");
     } else {
       const tinygltf::Mesh& mesh = m_.meshes[static_cast<size_t>(n.mesh)];
+      if (mesh.primitives.empty())
+        fail("mesh " + std::to_string(n.mesh) + (mesh.name.empty() ? "" : " '" + scenes::printable(mesh.name) + "'"),
+             "has no primitives; glTF 2.0 requires at least one (meshes[].primitives, minItems 1)");
       for (size_t p = 0; p < mesh.primitives.size(); ++p) load_primitive(i, static_cast<size_t>(n.mesh), p, world);
     }
   }
@@ -988,8 +991,8 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
 
   if (p.mode == TINYGLTF_MODE_TRIANGLES) {
     if (idx.size() % 3 != 0)
-      warn(who + ": " + std::to_string(idx.size()) + " indices are not a multiple of 3; the last " +
-           std::to_string(idx.size() % 3) + " are ignored");
+      warn(who + ": " + std::to_string(idx.size()) + (p.indices >= 0 ? " indices are" : " vertices (no indices) are") +
+           " not a multiple of 3; the last " + std::to_string(idx.size() % 3) + " are ignored");
     out.indices.assign(idx.begin(), idx.end() - static_cast<std::ptrdiff_t>(idx.size() % 3));
   } else {
     // Strips and fans become triangle lists with the glTF winding (specification 3.7.2.1);
@@ -1290,7 +1293,23 @@ Scene parse_gltf(const std::string& bytes, const std::string& path, const std::s
   // tinygltf ends each of its messages with a newline; one line reads better in a terminal and a log.
   while (!err.empty() && (err.back() == '\n' || err.back() == ' ')) err.pop_back();
   for (size_t pos; (pos = err.find('\n')) != std::string::npos;) err.replace(pos, 1, "; ");
+  // tinygltf quotes a data: URI it could not decode whole: a 200 kB buffer made a 266 kB line.
+  for (size_t pos = 0; (pos = err.find("data:", pos)) != std::string::npos;) {
+    size_t end = pos;
+    while (end < err.size() && err[end] != ' ' && err[end] != '\'' && err[end] != '"') ++end;
+    constexpr size_t kShown = 48;
+    if (end - pos > kShown + 16) {
+      const std::string tail = "... (" + std::to_string(end - pos) + " characters)";
+      err.replace(pos + kShown, end - pos - kShown, tail);
+      end = pos + kShown + tail.size();
+    }
+    pos = end;
+  }
   if (!ok) throw Error(path + ": " + (err.empty() ? std::string("tinygltf could not load the file") : err));
+  // glTF 1.0 and a future 3.0 are other formats: read as 2.0, a file of theirs would be misread.
+  if (model.asset.version.rfind("2.", 0) != 0)
+    throw Error(path + ": asset.version is '" + scenes::printable(model.asset.version) +
+                "'; expected a glTF 2.x file (asset.version \"2.0\")");
 
   Scene scene;
   scene.source = path;

@@ -618,7 +618,10 @@ void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string
                            FileKey{"/sensor/gate/maps_exr", c.sensor.gate.maps_exr, kMaxImageFileBytes},
                            FileKey{"/sensor/pixel_A/pdp_csv", c.sensor.pixel_A.pdp_csv, kMaxTableFileBytes},
                            FileKey{"/sensor/pixel_B/pdp_csv", c.sensor.pixel_B.pdp_csv, kMaxTableFileBytes}}) {
-    if (f.file.empty()) continue;
+    if (f.file.empty()) {
+      if (std::string(f.key) == "/gltf") err(f.key, "is empty; expected the path of the scene's .gltf or .glb file, relative to the scene file");
+      continue;
+    }
     const std::string problem = file_problem(f.file, f.max_bytes);
     const std::string what = std::string(f.key) == "/gltf" ? "the glTF file " : "the file ";
     if (problem == "does not exist")

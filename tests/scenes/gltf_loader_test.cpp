@@ -130,7 +130,7 @@ TEST(GltfLoader, EveryIndexComponentTypeAndNonIndexed) {
   ASSERT_EQ(s.meshes.size(), 4u);
   for (int k = 0; k < 3; ++k) EXPECT_EQ(s.meshes[static_cast<size_t>(k)].indices, want) << k;
   EXPECT_EQ(s.meshes[3].indices, (std::vector<uint32_t>{0, 1, 2}));  // 4 vertices: one triangle, one left over
-  EXPECT_TRUE(has_warning(s, "mesh 0 'Quad' primitive 3: 4 indices are not a multiple of 3"));
+  EXPECT_TRUE(has_warning(s, "mesh 0 'Quad' primitive 3: 4 vertices (no indices) are not a multiple of 3"));
   EXPECT_TRUE(s.meshes[3].normals.empty());
   EXPECT_EQ(s.triangle_count(), 7u);
 }
@@ -672,6 +672,36 @@ TEST_F(BrokenGltf, MissingBufferFile) {
   const std::string msg = load_error(path_);
   expect_names_file(msg);
   EXPECT_THAT(msg, HasSubstr("buffer 0: its file 'gone.bin' was not found"));
+}
+
+// Another version of the format, and a mesh without primitives (the specification's minItems 1): named,
+// not read as what they are not (they were taken silently).
+TEST_F(BrokenGltf, AnotherVersionOrAMeshWithoutPrimitives) {
+  Gltf g;
+  g.node({{"mesh", g.triangle_mesh()}});
+  g.doc["asset"]["version"] = "3.0";
+  std::string msg = error_of(g);
+  expect_names_file(msg);
+  EXPECT_THAT(msg, HasSubstr("asset.version is '3.0'; expected a glTF 2.x file (asset.version \"2.0\")"));
+  Gltf e;
+  e.node({{"mesh", e.mesh(json::array(), "Empty")}});
+  msg = error_of(e);
+  expect_names_file(msg);
+  EXPECT_THAT(msg, HasSubstr("mesh 0 'Empty': has no primitives; glTF 2.0 requires at least one"));
+}
+
+// A data: URI that does not decode is quoted by its first characters and its length (tinygltf quotes it
+// whole: a 200 kB buffer made a 266 kB line).
+TEST_F(BrokenGltf, AnUndecodableDataUriIsQuotedShort) {
+  Gltf g;
+  g.node({{"mesh", g.triangle_mesh()}});
+  g.doc["buffers"] = {{{"byteLength", 3000}, {"uri", "data:application/octet-stream;base64," + std::string(3999, 'A') + "!"}}};
+  path_ = (dir_.path() / "datauri.gltf").string();
+  write_file(path_, g.doc.dump());
+  const std::string msg = load_error(path_);
+  expect_names_file(msg);
+  EXPECT_THAT(msg, HasSubstr("data:application/octet-stream;base64,AAAAAAAAAAA... (4037 characters)"));
+  EXPECT_LT(msg.size(), 400u) << msg.size();
 }
 
 TEST_F(BrokenGltf, IndexOutOfRange) {

@@ -273,6 +273,8 @@ TEST_F(SceneFileTest, MissingGltfAndMissingFile) {
   EXPECT_THAT(error_of(R"({"camera": {}})"), HasSubstr("/gltf: missing; expected a string"));
   EXPECT_THAT(error_of(R"({"gltf": "nope.gltf"})"),
               HasSubstr("/gltf: the glTF file " + (dir_ / "nope.gltf").string() + " does not exist"));
+  // (an empty path was ": glTF file not found", naming neither the key nor the file)
+  EXPECT_THAT(error_of(R"({"gltf": ""})"), HasSubstr("/gltf: is empty; expected the path of the scene's .gltf or .glb file"));
 }
 
 TEST_F(SceneFileTest, SyntaxErrorGivesLineAndColumn) {
