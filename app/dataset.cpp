@@ -310,7 +310,9 @@ void dataset_run(const DatasetOptions& options) {
       folder.clear_failure(s);
       ++generated;
     } catch (const Interrupted&) {
-      throw;
+      // The samples published before stay (the next run skips them); this one's folder was not.
+      throw Interrupted("interrupted by a signal: the dataset run stopped in sample " + std::to_string(s.index) +
+                        "; the " + std::to_string(generated) + " samples it completed are kept, and running it again goes on");
     } catch (const std::exception& e) {
       folder.record_failure(s, rec.hash, e.what());
       failed.push_back(s.index);

@@ -3,6 +3,7 @@
 // disk and a folder of another dataset refused, a failing sample recorded while the others go on (the first
 // one too), a dataset whose samples all fail refused.
 #include <gmock/gmock.h>
+#include <fcntl.h>
 #include <signal.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
@@ -172,6 +173,36 @@ TEST_F(Dataset, ARunKilledWithSigkillResumesToTheSameBytesAndSkipsWhatIsDone) {
   const Result third = sh("dataset run " + (dir_ / "d.json").string() + " -o " + out.string());
   EXPECT_THAT(third.output, HasSubstr("0 of 6 samples to generate (6 done already)"));
   EXPECT_EQ(inode(out / "samples/000000/counts.npy"), first);
+}
+
+// SIGTERM inside a sample: exit 2, and the message says what is kept (it said the run wrote nothing,
+// although the samples before were published and stay).
+TEST_F(Dataset, ASignalSaysWhichSamplesAreKept) {
+  write(dir_ / "d.json", small_dataset(6));
+  const fs::path out = dir_ / "stopped", log = dir_ / "stderr.txt";
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    ::dup2(fd, 2);
+    ::execl(kBin.c_str(), kBin.c_str(), "dataset", "run", (dir_ / "d.json").c_str(), "-o", out.c_str(), "-q", nullptr);
+    ::_exit(127);
+  }
+  bool seen = false;
+  for (int i = 0; i < 3000 && !seen; ++i) {
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(out / "samples", ec))
+      if (e.path().filename().string().find(".000002.spadgen-staging") == 0) seen = true;
+    if (!seen) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ::kill(pid, SIGTERM);
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  ASSERT_TRUE(seen) << "the run was not caught inside sample 2";
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 2);
+  EXPECT_THAT(slurp(log), HasSubstr("the dataset run stopped in sample 2; the 2 samples it completed are kept"));
+  EXPECT_TRUE(fs::exists(out / "samples/000001/metadata.json"));
+  EXPECT_EQ(leftovers(out), std::vector<std::string>{});
 }
 
 TEST_F(Dataset, AddingSamplesLeavesTheExistingOnesAndEqualsTheLargerRun) {
