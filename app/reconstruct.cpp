@@ -235,6 +235,10 @@ reconstruct::EvaluateOptions scorer_options(const EvaluateCommand& c) {
 reconstruct::Scores evaluate_run(const EvaluateCommand& c, const std::string& run_dir, const std::string& detections,
                                  const std::string& maps_dir, std::map<int, std::string>* names, nlohmann::json* source) {
   const RunFolder run(run_dir);
+  if (const auto& r = c.region; r && (r->x0 < 0 || r->y0 < 0 || r->x1() > run.width() || r->y1() > run.height()))
+    throw Error("--region " + std::to_string(r->x0) + "," + std::to_string(r->y0) + "," + std::to_string(r->width) + "," +
+                std::to_string(r->height) + ": expected a rectangle inside " + run_dir + "'s " + std::to_string(run.width()) +
+                " x " + std::to_string(run.height()) + " pixels (x, y from its top left)");
   const Labels labels = read_labels(run);
   if (names) names->insert(labels.names.begin(), labels.names.end());
   const std::string file = detections.empty() ? (fs::path(run_dir) / ("detections_" + c.detector + ".exr")).string() : detections;
@@ -336,6 +340,14 @@ std::string evaluate(const EvaluateCommand& c) {
   if (!(c.tolerance_m > 0.0)) throw Error("--tolerance-m: expected a positive number of metres");
   const fs::path target(c.target);
   const std::string out = c.out_dir.empty() ? (target / "evaluation").string() : c.out_dir;
+  // A folder made here and left empty by a failure (a detections file of the wrong shape) is removed.
+  struct RemoveIfEmpty {
+    fs::path dir;
+    ~RemoveIfEmpty() {
+      std::error_code ec;
+      if (!dir.empty() && fs::is_empty(dir, ec)) fs::remove(dir, ec);
+    }
+  } made_out{fs::exists(out) ? fs::path() : fs::path(out)};
   std::map<int, std::string> names;
   nlohmann::json report;
   std::ostringstream text;

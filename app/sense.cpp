@@ -294,6 +294,15 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   // The run's objects bound labels.exr's slots (a run before objects had none).
   const int objects = meta.contains("objects") ? int(meta.at("objects").size()) : 0;
   std::vector<fs::path> dirs;
+  // With --repeats OUT holds the realisations' folders: made here, it is removed again when a failure or
+  // a signal leaves it empty (destroyed after the stagings, which are declared below it).
+  struct RemoveIfEmpty {
+    fs::path dir;
+    ~RemoveIfEmpty() {
+      std::error_code ec;
+      if (!dir.empty() && fs::is_empty(dir, ec)) fs::remove(dir, ec);
+    }
+  } made_out{runs.size() > 1 && !fs::exists(out) ? out : fs::path()};
   std::vector<std::unique_ptr<Staging>> staging;
   std::vector<std::unique_ptr<Outputs>> outputs;
   std::vector<uint64_t> seeds;

@@ -109,6 +109,10 @@ TEST_F(Reconstruct, RefusesWhatItCannotReadNamingIt) {
   r = sh("evaluate " + run.string() + " --region 1,2,3");
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("--region 1,2,3: expected X,Y,W,H"), std::string::npos) << r.output;
+  r = sh("evaluate " + run.string() + " --region 0,0,1000,10");  // was scored as if it fitted
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("--region 0,0,1000,10: expected a rectangle inside " + run.string() + "'s "), std::string::npos)
+      << r.output;
   r = sh("evaluate " + run.string() + " --tolerance-m 0");
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("--tolerance-m: expected a positive number of metres"), std::string::npos) << r.output;
@@ -208,9 +212,10 @@ TEST_F(Reconstruct, EvaluateScoresADetectionsNpyAgainstTheLabelsExactly) {
     spadgen::writers::NpyWriter npy((dir_ / "wrong.npy").string(), spadgen::writers::Dtype::F32, {H + 1, W, M});
     npy.commit();
   }
-  r = sh("evaluate " + run.string() + " --detections " + (dir_ / "wrong.npy").string());
+  r = sh("evaluate " + run.string() + " --detections " + (dir_ / "wrong.npy").string() + " -o " + (dir_ / "eval3").string());
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("wrong.npy: expected a float32 array (H, W, M)"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(dir_ / "eval3")) << "a refused evaluation leaves no empty folder";
 }
 
 TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
