@@ -201,6 +201,16 @@ void Staging::recover() {
     }
 }
 
+namespace {
+// True when a folder holds no file, however deep: only folders (a/b/ as an empty a/).
+bool holds_no_file(const fs::path& dir) {
+  std::error_code ec;
+  for (fs::recursive_directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec))
+    if (it->is_symlink(ec) || !it->is_directory(ec)) return false;
+  return !ec;
+}
+}  // namespace
+
 // A run replaces OUT as a whole, so OUT may hold only what an earlier run wrote there, and what
 // reconstruct and evaluate derived from it there.
 void Staging::check_owned() const {
@@ -216,7 +226,7 @@ void Staging::check_owned() const {
       const std::string rel = e.path().lexically_relative(out_).string();
       if (folder == out_ && (starts_with(rel, kOldStylePrefix) || is_derived_output(rel))) continue;
       const bool dir = e.is_directory(ec) && !e.is_symlink(ec);
-      if (dir && fs::is_empty(e.path(), ec)) continue;  // nothing to lose
+      if (dir && holds_no_file(e.path())) continue;  // nothing to lose (folders only, empty at their ends)
       const bool entry = listed.entries.count(rel) > 0;
       if (entry && (!dir || rel.ends_with(".zarr"))) continue;  // a listed file, or a Zarr store with all in it
       if (dir && (entry || listed.parents.count(rel))) folders.push_back(e.path());

@@ -242,13 +242,20 @@ TEST_F(StagingTest, AFolderWithFilesSpadgenDidNotWriteIsNotReplaced) {
   EXPECT_THAT(error, HasSubstr("analysis/"));
   EXPECT_EQ(slurp(out_ / "notes.txt"), "mine");
   EXPECT_EQ(slurp(out_ / "counts.npy"), "old:counts.npy");
-  // An empty folder is nobody's data: it is replaced.
+  // An empty folder is nobody's data: it is replaced; so is one holding only empty folders (a/b/ was
+  // refused as "a/" while a/ alone was taken), not one with a file deep inside.
   fs::remove_all(out_);
-  fs::create_directories(out_);
+  fs::create_directories(out_ / "a" / "b");
   error.clear();
   run(nullptr, &error);
   EXPECT_EQ(error, "");
   EXPECT_EQ(which_set(out_), "new");
+  fs::remove_all(out_);
+  fs::create_directories(out_ / "a" / "b");
+  std::ofstream(out_ / "a" / "b" / "data.bin") << "x";
+  run(nullptr, &error);
+  EXPECT_THAT(error, HasSubstr("(a/;"));
+  EXPECT_EQ(slurp(out_ / "a" / "b" / "data.bin"), "x");
 }
 
 // A Zarr store (a folder ending .zarr that metadata.json lists) is the run's with everything in it, so a
