@@ -8,8 +8,10 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <limits>
 
 #include "app/outputs.h"
 #include "app/staging.h"
@@ -199,7 +201,7 @@ void LightWriter::write(std::vector<std::string>& files) {
 }
 
 SavedLight::SavedLight(const std::string& dir, const PixelRect& region, const TimeAxis& axis, Storage storage)
-    : region_(region), axis_(axis) {
+    : dir_(dir), region_(region), axis_(axis) {
   const int64_t H = region.height, W = region.width, n = H * W;
   const std::vector<std::string> f = light_files(storage);
   const auto path = [&](LightFile i) { return dir + "/" + f[i]; };
@@ -301,9 +303,22 @@ TransientTile SavedLight::tile(const PixelRect& rect, const PixelRect& data_rect
       t.out_of_window[di] = out_of_window_[ri];
       t.ambient_rate[di] = ambient_[ri];
       if (laser_se_) t.laser_se[di] = laser_se_[ri], t.samples[di] = samples_[ri];
-      if (T == 0) continue;
-      t.bin_lo[di] = r[2 * ri], t.bin_hi[di] = r[2 * ri + 1];
-      std::copy(vals + (o[ri] - o[first]), vals + (o[ri + 1] - o[first]), t.transient.data() + di * T + size_t(r[2 * ri]));
+      // Photons are finite and not negative: a damaged file (a NaN) would make every output NaN silently.
+      bool ok = std::isfinite(t.laser_total[di]) && t.laser_total[di] >= 0.0 && std::isfinite(t.ambient_rate[di]) &&
+                t.ambient_rate[di] >= 0.0f;
+      if (T > 0) {
+        t.bin_lo[di] = r[2 * ri], t.bin_hi[di] = r[2 * ri + 1];
+        const float* from = vals + (o[ri] - o[first]);
+        const float* to = vals + (o[ri + 1] - o[first]);
+        bool photons = true;  // NaN fails both comparisons
+        for (const float* v = from; v < to; ++v) photons &= *v >= 0.0f && *v <= std::numeric_limits<float>::max();
+        ok = ok && photons;
+        std::copy(from, to, t.transient.data() + di * T + size_t(r[2 * ri]));
+      }
+      if (!ok)
+        throw Error(dir_ + "/light: pixel (" + std::to_string(x) + ", " + std::to_string(y) +
+                    ") holds a value that is not a finite number of photons >= 0 (laser_total, ambient_rate or values); "
+                    "the saved light is damaged: run the scene again");
     }
   }
   if (row_scale_.empty()) return t;

@@ -97,6 +97,7 @@ class SavedLight {
   // values[offset, offset + count) into dest.
   void values(int64_t offset, int64_t count, float* dest) const;
 
+  std::string dir_;  // the run's light/ folder, for messages
   PixelRect region_;
   TimeAxis axis_;
   std::vector<writers::NpyReader> npy_;           // .npy: the six files, mapped

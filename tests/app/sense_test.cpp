@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
 
 #include "app_fixture.h"
@@ -273,6 +274,20 @@ TEST_F(App, SenseRefusesWhatItCannotDo) {
   EXPECT_THAT(r.output, HasSubstr("ground_truth.exr: listed in"));
   EXPECT_THAT(r.output, HasSubstr("(files) but missing"));
   EXPECT_FALSE(fs::exists(dir_ / "again"));
+
+  // A damaged saved light (a NaN among the values: its last bin) is refused, not sensed into NaN outputs.
+  ASSERT_EQ(sh("run " + kLit + " -o " + (dir_ / "nan").string()).code, 0);
+  {
+    std::fstream f(dir_ / "nan" / "light" / "values.npy", std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(-4, std::ios::end);
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+    f.write(reinterpret_cast<const char*>(&nan), 4);
+  }
+  r = sh("sense " + (dir_ / "nan").string() + " --set seeds.chip=4 -o " + (dir_ / "nan_sensed").string());
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("/light: pixel ("));
+  EXPECT_THAT(r.output, HasSubstr("the saved light is damaged"));
+  EXPECT_FALSE(fs::exists(dir_ / "nan_sensed"));
 }
 
 // The saved light holds every rendered bin of every pixel (the transient, compactly), and its own
