@@ -231,6 +231,10 @@ reconstruct::EvaluateOptions scorer_options(const EvaluateCommand& c) {
   return o;
 }
 
+// The default file of a reconstruction: from the expected counts it is another file than from the sampled
+// ones, so that neither replaces the other.
+std::string derived_name(const std::string& stem, bool noise_free) { return stem + (noise_free ? "_noise_free" : "") + ".exr"; }
+
 // Scores one run; with maps_dir, writes its error maps there.
 reconstruct::Scores evaluate_run(const EvaluateCommand& c, const std::string& run_dir, const std::string& detections,
                                  const std::string& maps_dir, std::map<int, std::string>* names, nlohmann::json* source) {
@@ -241,7 +245,8 @@ reconstruct::Scores evaluate_run(const EvaluateCommand& c, const std::string& ru
                 " x " + std::to_string(run.height()) + " pixels (x, y from its top left)");
   const Labels labels = read_labels(run);
   if (names) names->insert(labels.names.begin(), labels.names.end());
-  const std::string file = detections.empty() ? (fs::path(run_dir) / ("detections_" + c.detector + ".exr")).string() : detections;
+  const std::string file =
+      detections.empty() ? (fs::path(run_dir) / derived_name("detections_" + c.detector, c.noise_free)).string() : detections;
   const bool compute = detections.empty() && !fs::exists(file);  // the default file is absent: run the detector
   DetectionImage img = compute ? detect_image(run, Detector(c.detector, run), c.noise_free, 8, false)
                                : read_detections(file, run.width(), run.height());
@@ -282,7 +287,9 @@ std::string summary(const nlohmann::json& m) {
 }  // namespace
 
 bool is_derived_output(const std::string& rel) {
-  return rel == "detections_edges.exr" || rel == "detections_paper.exr" || rel == "hdr.exr" || rel == "evaluation";
+  for (const char* d : {"detections_edges", "detections_paper", "hdr"})
+    if (rel == std::string(d) + ".exr" || rel == std::string(d) + "_noise_free.exr") return true;
+  return rel == "evaluation";
 }
 
 std::string reconstruct(const ReconstructOptions& o) {
@@ -296,7 +303,7 @@ std::string reconstruct(const ReconstructOptions& o) {
                   " is a 2D run (an intensity image, no gate profiles to detect returns in); reconstruct writes its HDR "
                   "inversion, hdr.exr, and takes only -o, --noise-free and --threads for it");
     // The 2D HDR inversion: eq. (5) or (6) on the image's summed counts.
-    const std::string out = o.out.empty() ? (fs::path(o.run_dir) / "hdr.exr").string() : o.out;
+    const std::string out = o.out.empty() ? (fs::path(o.run_dir) / derived_name("hdr", o.noise_free)).string() : o.out;
     writers::ExrImage img(run.width(), run.height());
     std::vector<float> c(size_t(run.width()) * size_t(run.height()) * size_t(run.K()));
     run.profiles(0, run.height(), o.noise_free, c.data());
@@ -315,7 +322,8 @@ std::string reconstruct(const ReconstructOptions& o) {
     img.write(out);
     return out;
   }
-  const std::string out = o.out.empty() ? (fs::path(o.run_dir) / ("detections_" + o.detector + ".exr")).string() : o.out;
+  const std::string out =
+      o.out.empty() ? (fs::path(o.run_dir) / derived_name("detections_" + o.detector, o.noise_free)).string() : o.out;
   const Detector detector(o.detector, run);
   const DetectionImage d = detect_image(run, detector, o.noise_free, o.max_detections, o.progress);
   writers::ExrImage img(d.width, d.height);

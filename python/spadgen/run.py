@@ -417,11 +417,14 @@ class Run:
                            slots(gt, "range"), slots(gt, "transmittance"), slots(gt, "laser"), gt["direct_other_laser"],
                            gt["indirect_laser"], path=slots(gt, "path"), **labels)
 
-    def detections(self, detector="edges"):
-        """The returns ``spadgen reconstruct RUN --detector DETECTOR`` wrote into the run folder (Detections)."""
-        path = os.path.join(self.path, f"detections_{detector}.exr")
+    def detections(self, detector="edges", noise_free=False):
+        """The returns ``spadgen reconstruct RUN --detector DETECTOR`` wrote into the run folder (Detections);
+        noise_free: those of ``--noise-free`` (from the expected counts), detections_<detector>_noise_free.exr."""
+        suffix = "_noise_free" if noise_free else ""
+        path = os.path.join(self.path, f"detections_{detector}{suffix}.exr")
         if not os.path.isfile(path):
-            raise FileNotFoundError(f"{path}: no such file; write it with spadgen reconstruct {self.path} --detector {detector}")
+            flag = " --noise-free" if noise_free else ""
+            raise FileNotFoundError(f"{path}: no such file; write it with spadgen reconstruct {self.path} --detector {detector}{flag}")
         f = ExrFile(path)
         m = 0
         while f"det{m}.range" in f:

@@ -102,6 +102,9 @@ TEST_F(Reconstruct, RefusesWhatItCannotReadNamingIt) {
   EXPECT_NE(r.output.find("no counts.npy or counts.zarr (outputs.counts)"), std::string::npos) << r.output;
   r = sh("reconstruct " + run.string() + " -q --noise-free");
   EXPECT_EQ(r.code, 0) << r.output;
+  // from the expected counts: a file of its own (it replaced the sampled counts' detections)
+  EXPECT_TRUE(fs::exists(run / "detections_edges_noise_free.exr"));
+  EXPECT_FALSE(fs::exists(run / "detections_edges.exr"));
   r = sh("reconstruct " + run.string() + " --detector median");
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("--detector"), std::string::npos) << r.output;

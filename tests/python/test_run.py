@@ -296,3 +296,10 @@ def test_detections_of_spadgen_reconstruct(spadgen_bin, make_run, tmp_path):
     # the channels as the EXR holds them
     exr = spadgen.ExrFile(run_dir / "detections_paper.exr")
     assert np.array_equal(d.range[0], exr["det0.range"], equal_nan=True)
+    # from the expected counts: a file of its own, read with noise_free=True; the sampled one stays
+    with pytest.raises(FileNotFoundError, match="--noise-free"):
+        run.detections("paper", noise_free=True)
+    subprocess.run([spadgen_bin, "reconstruct", str(run_dir), "--detector", "paper", "--noise-free", "-q"], check=True)
+    nf = run.detections("paper", noise_free=True)
+    assert nf.detector["noise_free"] is True and d.detector["noise_free"] is False
+    assert np.array_equal(run.detections("paper").range, d.range, equal_nan=True)
