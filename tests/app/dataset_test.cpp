@@ -40,6 +40,31 @@ void write(const fs::path& p, const std::string& text) {
   std::ofstream(p) << text;
 }
 
+// `dataset run FILE -o OUT -q` sent `sig` while sample 2 is being written (its staging folder exists), or as
+// near to it as the polling sees; its stderr into `log` when given. seen: sample 2's staging was seen.
+struct Stopped {
+  bool seen = false;
+  int status = 0;  // waitpid's
+};
+Stopped stop_inside_sample_2(const fs::path& file, const fs::path& out, int sig, const fs::path& log = {}) {
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    if (!log.empty()) ::dup2(::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644), 2);
+    ::execl(kBin.c_str(), kBin.c_str(), "dataset", "run", file.c_str(), "-o", out.c_str(), "-q", nullptr);
+    ::_exit(127);
+  }
+  Stopped s;
+  for (int i = 0; i < 3000 && !s.seen; ++i) {
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(out / "samples", ec))
+      if (e.path().filename().string().find(".000002.spadgen-staging") == 0) s.seen = true;
+    if (!s.seen) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ::kill(pid, sig);
+  ::waitpid(pid, &s.status, 0);
+  return s;
+}
+
 // Every file of two dataset folders byte for byte, except the "run" (timing) and "sense" (the folder read)
 // sections of the samples' metadata.json.
 void expect_same_dataset(const fs::path& a, const fs::path& b) {
@@ -142,24 +167,9 @@ TEST_F(Dataset, ARunKilledWithSigkillResumesToTheSameBytesAndSkipsWhatIsDone) {
   write(dir_ / "d.json", small_dataset(6));
   ASSERT_EQ(sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "whole").string() + " -q").code, 0);
   const fs::path out = dir_ / "killed";
-  const pid_t pid = ::fork();
-  if (pid == 0) {
-    ::execl(kBin.c_str(), kBin.c_str(), "dataset", "run", (dir_ / "d.json").c_str(), "-o", out.c_str(), "-q", nullptr);
-    ::_exit(127);
-  }
-  // Killed while sample 2 is being written (its staging folder exists), or as near to it as the polling sees.
-  bool seen = false;
-  for (int i = 0; i < 3000 && !seen; ++i) {
-    std::error_code ec;
-    for (const auto& e : fs::directory_iterator(out / "samples", ec))
-      if (e.path().filename().string().find(".000002.spadgen-staging") == 0) seen = true;
-    if (!seen) std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
-  ::kill(pid, SIGKILL);
-  int status = 0;
-  ::waitpid(pid, &status, 0);
-  EXPECT_TRUE(seen) << "the run was not caught inside sample 2";
-  EXPECT_TRUE(WIFSIGNALED(status));
+  const Stopped s = stop_inside_sample_2(dir_ / "d.json", out, SIGKILL);
+  EXPECT_TRUE(s.seen) << "the run was not caught inside sample 2";
+  EXPECT_TRUE(WIFSIGNALED(s.status));
   EXPECT_FALSE(fs::exists(out / "samples/000002/metadata.json"));
   EXPECT_THAT(sh("dataset status " + out.string()).output, HasSubstr("missing: 2-5"));
   const ino_t first = inode(out / "samples/000000/counts.npy");
@@ -180,26 +190,10 @@ TEST_F(Dataset, ARunKilledWithSigkillResumesToTheSameBytesAndSkipsWhatIsDone) {
 TEST_F(Dataset, ASignalSaysWhichSamplesAreKept) {
   write(dir_ / "d.json", small_dataset(6));
   const fs::path out = dir_ / "stopped", log = dir_ / "stderr.txt";
-  const pid_t pid = ::fork();
-  if (pid == 0) {
-    const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    ::dup2(fd, 2);
-    ::execl(kBin.c_str(), kBin.c_str(), "dataset", "run", (dir_ / "d.json").c_str(), "-o", out.c_str(), "-q", nullptr);
-    ::_exit(127);
-  }
-  bool seen = false;
-  for (int i = 0; i < 3000 && !seen; ++i) {
-    std::error_code ec;
-    for (const auto& e : fs::directory_iterator(out / "samples", ec))
-      if (e.path().filename().string().find(".000002.spadgen-staging") == 0) seen = true;
-    if (!seen) std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
-  ::kill(pid, SIGTERM);
-  int status = 0;
-  ::waitpid(pid, &status, 0);
-  ASSERT_TRUE(seen) << "the run was not caught inside sample 2";
-  ASSERT_TRUE(WIFEXITED(status));
-  EXPECT_EQ(WEXITSTATUS(status), 2);
+  const Stopped s = stop_inside_sample_2(dir_ / "d.json", out, SIGTERM, log);
+  ASSERT_TRUE(s.seen) << "the run was not caught inside sample 2";
+  ASSERT_TRUE(WIFEXITED(s.status));
+  EXPECT_EQ(WEXITSTATUS(s.status), 2);
   EXPECT_THAT(slurp(log), HasSubstr("the dataset run stopped in sample 2; the 2 samples it completed are kept"));
   EXPECT_TRUE(fs::exists(out / "samples/000001/metadata.json"));
   EXPECT_EQ(leftovers(out), std::vector<std::string>{});
