@@ -316,7 +316,7 @@ TransientTile SavedLight::tile(const PixelRect& rect, const PixelRect& data_rect
         std::copy(from, to, t.transient.data() + di * T + size_t(r[2 * ri]));
       }
       if (!ok)
-        throw Error(dir_ + "/light: pixel (" + std::to_string(x) + ", " + std::to_string(y) +
+        throw Error((std::filesystem::path(dir_) / "light").string() + ": pixel (" + std::to_string(x) + ", " + std::to_string(y) +
                     ") holds a value that is not a finite number of photons >= 0 (laser_total, ambient_rate or values); "
                     "the saved light is damaged: run the scene again");
     }

@@ -283,7 +283,9 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     return c.has_filename() ? c : c.parent_path();
   };
   const fs::path run_abs = folder(src);
-  const fs::path out = options.out_dir.empty() ? run_abs.parent_path() / (run_abs.filename().string() + "-sense")
+  fs::path run_named = fs::absolute(src).lexically_normal();  // as named: beside a link, not its target
+  if (!run_named.has_filename()) run_named = run_named.parent_path();
+  const fs::path out = options.out_dir.empty() ? run_named.parent_path() / (run_named.filename().string() + "-sense")
                                                : fs::path(options.out_dir);
   {
     const fs::path out_abs = folder(out);
