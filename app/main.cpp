@@ -33,6 +33,9 @@
 int main(int argc, char** argv) {
   // --threads: 0 is every core; beyond kMaxThreads the system refuses threads (a 100000 failed in TBB).
   const CLI::Range kThreadsRange(0, spadgen::app::kMaxThreads, "0 (every core) to " + std::to_string(spadgen::app::kMaxThreads));
+  // -o "" (an unset shell variable) is a mistake, not a request for the default folder.
+  const CLI::Validator kNamed([](std::string& v) { return v.empty() ? std::string("expected a path, found an empty one") : std::string(); },
+                              "");
   // Every tile allocates and frees buffers of megabytes (a transient tile of 32 x 32 pixels x 2394 bins is
   // 9.8 MB). glibc serves those with mmap and returns them with munmap, so each tile paid page faults and
   // the kernel's zeroing of every page again (a quarter of `sense`'s time). Kept in the heap instead, freed
@@ -55,7 +58,7 @@ int main(int argc, char** argv) {
   std::string seed;
   CLI::App* run_cmd = cli.add_subcommand("run", "render and sample a scene file into an output folder");
   run_cmd->add_option("scene", run.scene_file, "scene file (.json)")->required()->check(CLI::ExistingFile);
-  run_cmd->add_option("-o,--out", run.out_dir, "output folder (default: out/<scene file name>)");
+  run_cmd->add_option("-o,--out", run.out_dir, "output folder (default: out/<scene file name>)")->check(kNamed);
   run_cmd->add_option("--set", run.overrides, "override one scene-file key, e.g. --set laser.average_power_mW=5")
       ->type_name("KEY=VALUE");
   CLI::Option* seed_opt = run_cmd->add_option("--seed", seed, "seed of every random stream (replaces the scene file's)");
@@ -70,7 +73,7 @@ int main(int argc, char** argv) {
       "sense", "re-sample the sensor from a run's saved light (outputs.light) without rendering: other sensor or acquisition "
                "settings, another chip, other noise");
   sense_cmd->add_option("run_dir", sense.run_dir, "folder of a run written with outputs.light=true")->required()->check(CLI::ExistingDirectory);
-  sense_cmd->add_option("-o,--out", sense.out_dir, "output folder (default: RUN_DIR-sense)");
+  sense_cmd->add_option("-o,--out", sense.out_dir, "output folder (default: RUN_DIR-sense)")->check(kNamed);
   sense_cmd->add_option("--set", sense.overrides, "override a sensor.*, acquisition.*, seeds.chip, seeds.noise or outputs.* key")
       ->type_name("KEY=VALUE");
   CLI::Option* noise_opt = sense_cmd->add_option("--noise-seed", noise_seed, "seed of the temporal noise (seeds.noise)");
@@ -100,13 +103,13 @@ int main(int argc, char** argv) {
   dataset_cmd->require_subcommand(1);
   CLI::App* plan_cmd = dataset_cmd->add_subcommand("plan", "list the samples with their parameters, and estimate disk, memory and time");
   plan_cmd->add_option("file", dataset.file, "dataset file (.json)")->required()->check(CLI::ExistingFile);
-  plan_cmd->add_option("-o,--out", dataset.out_dir, "dataset folder: also show which samples are done there and the free disk");
+  plan_cmd->add_option("-o,--out", dataset.out_dir, "dataset folder: also show which samples are done there and the free disk")->check(kNamed);
   CLI::Option* plan_shard = plan_cmd->add_option("--shard", dataset_shard, "only shard I of N (samples i with i mod N = I)")->type_name("I/N");
   plan_cmd->add_flag("--all", dataset.all, "list every sample (default: the first and the last 10)");
   plan_cmd->add_option("--threads", dataset.threads, "worker threads per sample, for the time estimate")->check(kThreadsRange);
   CLI::App* drun_cmd = dataset_cmd->add_subcommand("run", "generate the samples that are not done, each into its own folder, as one unit");
   drun_cmd->add_option("file", dataset.file, "dataset file (.json)")->required()->check(CLI::ExistingFile);
-  drun_cmd->add_option("-o,--out", dataset.out_dir, "dataset folder")->required();
+  drun_cmd->add_option("-o,--out", dataset.out_dir, "dataset folder")->required()->check(kNamed);
   CLI::Option* run_shard = drun_cmd->add_option("--shard", dataset_shard,
                                                 "only shard I of N (samples i with i mod N = I); default: from SLURM_ARRAY_TASK_ID / "
                                                 "SLURM_ARRAY_TASK_COUNT or JOB_COMPLETION_INDEX / JOB_COMPLETIONS, else 0/1")
@@ -127,7 +130,7 @@ int main(int argc, char** argv) {
   rec_cmd->add_option("run_dir", rec.run_dir, "run folder")->required()->check(CLI::ExistingDirectory);
   CLI::Option* rec_detector = rec_cmd->add_option("--detector", rec.detector, "edges (multi-scale rising and falling edges, default) or paper (the paper's virtual window)")
       ->check(CLI::IsMember({"edges", "paper"}));
-  rec_cmd->add_option("-o,--out", rec.out, "output file (default RUN_DIR/detections_<detector>.exr, or RUN_DIR/hdr.exr)");
+  rec_cmd->add_option("-o,--out", rec.out, "output file (default RUN_DIR/detections_<detector>.exr, or RUN_DIR/hdr.exr)")->check(kNamed);
   rec_cmd->add_flag("--noise-free", rec.noise_free, "from the noise-free expected counts (detection_rate) instead of the sampled counts");
   CLI::Option* rec_max = rec_cmd->add_option("--max-detections", rec.max_detections, "detection slots per pixel (the strongest are kept)")
                              ->check(CLI::Range(1, 64));
@@ -144,7 +147,7 @@ int main(int argc, char** argv) {
                                                         "detections_<detector>.exr, computed in memory when absent");
   eval_cmd->add_option("--detector", eval.detector, "the detector whose file is the default, or that runs when it is absent")
       ->check(CLI::IsMember({"edges", "paper"}));
-  eval_cmd->add_option("-o,--out", eval.out_dir, "output folder (default TARGET/evaluation)");
+  eval_cmd->add_option("-o,--out", eval.out_dir, "output folder (default TARGET/evaluation)")->check(kNamed);
   eval_cmd->add_option("--tolerance-m", eval.tolerance_m, "a detection further than this from every unmatched object is false (default 0.05)");
   CLI::Option* min_score_opt = eval_cmd->add_option("--min-score", eval_min_score, "ignore detections scoring below this");
   eval_cmd->add_option("--region", eval_region, "accuracy and precision of the nearest object over this rectangle (image pixels)")

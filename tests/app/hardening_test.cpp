@@ -280,6 +280,8 @@ TEST_F(Hardening, CommandLineErrorsAreSpadgensWithExitCode1) {
       // 100000 threads made TBB fail with an internal error
       {"run " + kTiny + " --threads 100000", "spadgen: error: --threads: Value 100000 not in range 0 to 1024"},
       {"run " + kTiny + " --threads -1", "--threads: Value -1 not in range 0 to 1024"},
+      // an unset shell variable: it ran into the default folder
+      {"run " + kTiny + " -o ''", "spadgen: error: --out: expected a path, found an empty one"},
       {"", "spadgen: error: A subcommand is required (see spadgen --help)"},
       {"run " + kTiny + " --seed -1", "spadgen: error: --seed: found '-1', expected an integer in [0, 9007199254740992]"},
       {"run " + kTiny + " --seed 9007199254740993", "--seed: found '9007199254740993'"},
