@@ -559,6 +559,8 @@ void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string
   const Vec3d cr{axis[1] * u[2] - axis[2] * u[1], axis[2] * u[0] - axis[0] * u[2], axis[0] * u[1] - axis[1] * u[0]};
   if (c.camera.gltf_camera.empty()) {
     if (len <= 0) err("/camera/look_at_m", "equals /camera/position_m; expected a point the camera looks at");
+    else if (u[0] == 0.0 && u[1] == 0.0 && u[2] == 0.0)
+      err("/camera/up", "is the zero vector; expected a direction (for example [0, 1, 0], the glTF frame's up)");
     else if (std::sqrt(cr[0] * cr[0] + cr[1] * cr[1] + cr[2] * cr[2]) <= 1e-9 * len)
       err("/camera/up", "is parallel to the viewing direction; expected a direction not along look_at_m - position_m");
   }

@@ -319,6 +319,7 @@ TEST_F(SceneFileTest, CrossKeyChecks) {
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"look_at_m": [0, 0, 0]}})"),
               HasSubstr("/camera/look_at_m: equals /camera/position_m"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"up": [0, 0, 1]}})"), HasSubstr("/camera/up: is parallel"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"up": [0, 0, 0]}})"), HasSubstr("/camera/up: is the zero vector"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "render": {"window_start_ns": 1}})"),
               HasSubstr("both set or both null"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "laser": {"beam": "gltf_light"}})"), HasSubstr("/laser/gltf_light: is empty"));
