@@ -469,6 +469,9 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     record.times.finish_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - tiles_done).count();
     record.sense = json{{"from", src.string()}, {"repeat", r}, {"repeats", runs.size()}};
     writers::write_json(staging[r]->path("metadata.json"), metadata(runs[r], scene_warnings, sensor, prov, axis, record));
+    if (!results.empty() && interrupt_flag().load(std::memory_order_relaxed))  // the realisations published stay: say so
+      throw Interrupted("interrupted by a signal: sense stopped before realisation " + std::to_string(r) + "; the " +
+                        std::to_string(r) + " written before (" + out.string() + "/repeat_000 ...) are kept");
     InterruptGuard::check();
     outputs[r]->commit();
     staging[r]->publish(files);
