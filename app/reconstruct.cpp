@@ -117,6 +117,16 @@ DetectionImage detect_image(const RunFolder& run, const Detector& detector, bool
 
 std::string slot_name(int s, const char* what) { return "det" + std::to_string(s) + "." + what; }
 
+// A range is metres, or NaN for no detection: an infinite one is neither (it was skipped silently, as if
+// the detector had found nothing there). A negative range is a detection the scores count as false.
+void check_ranges(const std::string& path, const DetectionImage& img) {
+  for (int s = 0; s < img.slots; ++s)
+    for (size_t i = 0; i < img.count.size(); ++i)
+      if (std::isinf(img.range[img.at(s, i)]))
+        throw Error(path + ": pixel (" + std::to_string(i % size_t(img.width)) + ", " + std::to_string(i / size_t(img.width)) +
+                    ") slot " + std::to_string(s) + " holds an infinite range; expected metres, or NaN for no detection");
+}
+
 // The detections file (docs/detection.md): an EXR with `count` and det<i>.range (metres; NaN: none), and
 // optionally det<i>.score; or a float .npy (H, W, M) of ranges, NaN where there is none.
 DetectionImage read_detections(const std::string& path, int width, int height) {
@@ -134,6 +144,7 @@ DetectionImage read_detections(const std::string& path, int width, int height) {
         img.range[img.at(s, i)] = r;
         img.count[i] += std::isfinite(r);
       }
+    check_ranges(path, img);
     return img;
   }
   writers::ExrData e = writers::read_exr(path);
@@ -154,6 +165,7 @@ DetectionImage read_detections(const std::string& path, int width, int height) {
   }
   for (size_t i = 0; i < img.count.size(); ++i)
     for (int s = 0; s < m; ++s) img.count[i] += std::isfinite(img.range[img.at(s, i)]);
+  check_ranges(path, img);
   return img;
 }
 

@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <unistd.h>
@@ -219,6 +220,17 @@ TEST_F(Reconstruct, EvaluateScoresADetectionsNpyAgainstTheLabelsExactly) {
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("wrong.npy: expected a float32 array (H, W, M)"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(dir_ / "eval3")) << "a refused evaluation leaves no empty folder";
+  // an infinite range is neither metres nor "none" (it was skipped as if nothing were there)
+  {
+    spadgen::writers::NpyWriter npy((dir_ / "inf.npy").string(), spadgen::writers::Dtype::F32, {H, W, M});
+    std::vector<float> v(size_t(H * W * M), std::numeric_limits<float>::quiet_NaN());
+    v[size_t(M) + 1] = std::numeric_limits<float>::infinity();  // pixel (1, 0), slot 1
+    npy.write(0, v.data(), int64_t(v.size()));
+    npy.commit();
+  }
+  r = sh("evaluate " + run.string() + " --detections " + (dir_ / "inf.npy").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("inf.npy: pixel (1, 0) slot 1 holds an infinite range"), std::string::npos) << r.output;
 }
 
 TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
