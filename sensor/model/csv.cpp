@@ -44,7 +44,13 @@ Table2 read_table_csv(const std::string& path, const std::string& key) {
     if (first == std::string::npos || line[first] == '#') continue;
     double a = 0, b = 0;
     if (!parse_row(line, a, b)) {
-      if (first_data_row) {  // a header such as "time_ps,response"
+      // A header such as "time_ps,response"; a row that starts with a number is data, however malformed
+      // (a 3-column first row was skipped as a header and the table read without it).
+      const auto digit = [&](size_t i) { return i < line.size() && line[i] >= '0' && line[i] <= '9'; };
+      const char c = line[first];
+      const bool sign = c == '+' || c == '-' || c == '.';
+      const bool numeric = digit(first) || (sign && (digit(first + 1) || (line[first + 1] == '.' && digit(first + 2))));
+      if (first_data_row && !numeric) {
         first_data_row = false;
         continue;
       }

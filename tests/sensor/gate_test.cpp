@@ -455,6 +455,18 @@ TEST(Gate, BadTablesNameTheFileAndKey) {
   EXPECT_THROW(build_gate_shape(g, l), Error);
   g.profile_csv = write_temp("bad_row.csv", "0,0\n400,abc\n");
   EXPECT_THROW(build_gate_shape(g, l), Error);
+  // a first row that starts with a number is data, not a header: three columns are an error there too
+  g.profile_csv = write_temp("three_columns.csv", "0,0,5\n400,1\n4200,1\n4600,0\n");
+  try {
+    build_gate_shape(g, l);
+    ADD_FAILURE() << "a 3-column first row was taken as a header";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("three_columns.csv' line 1: expected two numbers"), std::string::npos) << e.what();
+  }
+  g.profile_csv = write_temp("with_header.csv", "time_ps,response\n0,0\n400,1\n4200,1\n4600,0\n");
+  EXPECT_NO_THROW(build_gate_shape(g, l));
+  g.profile_csv = write_temp("inf_header.csv", "infrared_ps,response\n0,0\n400,1\n4200,1\n4600,0\n");  // strtod reads "inf"
+  EXPECT_NO_THROW(build_gate_shape(g, l));
   g.profile_csv.clear();
   l.pulse_shape_csv = write_temp("bad_pulse.csv", "0,1\n10,-1\n20,0\n");
   EXPECT_THROW(build_gate_shape(g, l), Error);
