@@ -442,27 +442,27 @@ TEST(Gate, MeasuredTableProfile) {
 TEST(Gate, BadTablesNameTheFileAndKey) {
   GateConfig g;
   LaserConfig l;
+  const auto error_of = [&] {  // "" when the tables are taken
+    try {
+      build_gate_shape(g, l);
+    } catch (const Error& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
   g.profile_csv = write_temp("bad_order.csv", "0,0\n400,1\n300,1\n");
-  try {
-    build_gate_shape(g, l);
-    FAIL() << "expected an error";
-  } catch (const Error& e) {
-    EXPECT_NE(std::string(e.what()).find("sensor.gate.profile_csv"), std::string::npos) << e.what();
-    EXPECT_NE(std::string(e.what()).find("bad_order.csv"), std::string::npos) << e.what();
-    EXPECT_NE(std::string(e.what()).find("strictly increasing"), std::string::npos) << e.what();
-  }
+  std::string what = error_of();
+  EXPECT_NE(what.find("sensor.gate.profile_csv"), std::string::npos) << what;
+  EXPECT_NE(what.find("bad_order.csv"), std::string::npos) << what;
+  EXPECT_NE(what.find("strictly increasing"), std::string::npos) << what;
   g.profile_csv = "/nonexistent/profile.csv";
   EXPECT_THROW(build_gate_shape(g, l), Error);
   g.profile_csv = write_temp("bad_row.csv", "0,0\n400,abc\n");
   EXPECT_THROW(build_gate_shape(g, l), Error);
   // a first row that starts with a number is data, not a header: three columns are an error there too
   g.profile_csv = write_temp("three_columns.csv", "0,0,5\n400,1\n4200,1\n4600,0\n");
-  try {
-    build_gate_shape(g, l);
-    ADD_FAILURE() << "a 3-column first row was taken as a header";
-  } catch (const Error& e) {
-    EXPECT_NE(std::string(e.what()).find("three_columns.csv' line 1: expected two numbers"), std::string::npos) << e.what();
-  }
+  what = error_of();
+  EXPECT_NE(what.find("three_columns.csv' line 1: expected two numbers"), std::string::npos) << what;
   g.profile_csv = write_temp("with_header.csv", "time_ps,response\n0,0\n400,1\n4200,1\n4600,0\n");
   EXPECT_NO_THROW(build_gate_shape(g, l));
   g.profile_csv = write_temp("inf_header.csv", "infrared_ps,response\n0,0\n400,1\n4200,1\n4600,0\n");  // strtod reads "inf"
