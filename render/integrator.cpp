@@ -355,10 +355,6 @@ Spec Integrator::shadow_transmittance(const glm::vec3& origin, const glm::vec3& 
   }
 }
 
-void Integrator::trace_camera_block(int x, int y, CameraBlock* block, RayCounts* rays) const {
-  trace_camera_block(x, y, 0, config_.render.samples_per_pixel, nullptr, nullptr, block, rays);
-}
-
 void Integrator::trace_camera_block(int x, int y, int s_begin, int s_end, const int* begin, const int* end,
                                     CameraBlock* block, RayCounts* rays) const {
   constexpr int kPacket = EmbreeScene::kPacket;
@@ -449,8 +445,8 @@ void Integrator::trace_camera_block(int x, int y, int s_begin, int s_end, const 
   }
 }
 
-// render_pixel's parts. They are inline and trace_path is always inlined, so that the compiler still sees
-// one path loop in render_pixel, as before the loop was split: out of line, the parts cost up to 4 % more
+// add_samples's parts. They are inline and trace_path is always inlined, so that the compiler still sees
+// one path loop in add_samples, as before the loop was split: out of line, the parts cost up to 4 % more
 // instructions per bench_render image (cachegrind).
 
 // A non-delta vertex of a camera path, with what next-event estimation needs of the path that reached it.
@@ -1379,24 +1375,13 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
   return ambient;
 }
 
-PixelTotals Integrator::render_pixel(int x, int y, const CameraBlock& block, const TimeAxis& axis, double* bins,
-                                     RayCounts* rays, double* indirect_bins, ObjectLaser* objects) const {
-  PixelTotals out;
-  const int spp = config_.render.samples_per_pixel;
-  if (block.s0 != 0 || block.spp != spp)
-    throw Error("render_pixel: the block holds samples [" + std::to_string(block.s0) + ", " +
-                std::to_string(block.s0 + block.spp) + "), not the pixel's " + std::to_string(spp));
-  add_samples(x, y, block, 0, spp, 1.0 / spp, axis, bins, rays, indirect_bins, objects, &out);
-  return out;
-}
-
 void Integrator::add_samples(int x, int y, const CameraBlock& block, int s_begin, int s_end, double scale,
                              const TimeAxis& axis, double* bins, RayCounts* rays, double* indirect_bins,
                              ObjectLaser* objects, PixelTotals* out) const {
   const double k = measurement_constant(y) * scale;
   const int lane = x - block.x0;
   if (block.y != y || lane < 0 || lane >= block.lanes || s_begin < block.s0 || s_end > block.s0 + block.spp)
-    throw Error("render_pixel: pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") is not in its camera block");
+    throw Error("add_samples: pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") is not in its camera block");
   const PixelFilm film{axis, bins, indirect_bins, out, objects};
 
   for (int s = s_begin; s < s_end; ++s) {

@@ -38,8 +38,8 @@ struct PixelTotals {
 };
 
 // The standard error of the mean of n paths' estimates, each `scale` times its contribution c, given the
-// sum and the sum of squares of the contributions: scale = n for render_pixel (whose contributions are
-// already divided by n), 1 for add_samples with scale 1. 0 for n < 2, where it cannot be estimated.
+// sum and the sum of squares of the contributions: scale = n for add_samples with scale 1 / n (the
+// fixed-count render: contributions already divided by n), 1 for add_samples with scale 1. 0 for n < 2, where it cannot be estimated.
 double standard_error(double sum, double sq, int n, double scale);
 
 // One pixel's laser light split by what returned it: direct paths (the camera sees the vertex that meets
@@ -120,24 +120,19 @@ class Integrator {
              const EmbreeScene& embree, const Shading& shading, const Camera& camera, const Laser& laser,
              const Ambient& ambient);
 
-  // Traces the camera rays of every sample of the block that contains pixel (x, y) (full-sensor coordinates).
-  void trace_camera_block(int x, int y, CameraBlock* block, RayCounts* rays) const;
-  // Samples [begin[i], end[i]) of lane i (the block's pixel x0 + i) only, each within [s_begin, s_end); a
-  // lane with an empty range is not traced. (The paths of sample s of a pixel are the same whichever call
-  // traces them.)
+  // Traces the camera rays of samples [s_begin, s_end) of the block that contains pixel (x, y) (full-sensor
+  // coordinates); with begin and end, samples [begin[i], end[i]) of lane i (the block's pixel x0 + i) only,
+  // each within [s_begin, s_end), a lane with an empty range not traced. (The paths of sample s of a pixel
+  // are the same whichever call traces them.)
   void trace_camera_block(int x, int y, int s_begin, int s_end, const int* begin, const int* end, CameraBlock* block,
                           RayCounts* rays) const;
 
-  // All samples of pixel (x, y), whose block `block` holds. bins: axis.bins doubles, zeroed by the caller,
-  // receive photons per pulse per bin (unused when axis.bins == 0). indirect_bins (null: no split) receive
-  // the part of bins carried by paths with two or more non-delta vertices, over the same bin range.
-  // objects (null: not asked), cleared by the caller, receive the pixel's laser_total split by object.
-  PixelTotals render_pixel(int x, int y, const CameraBlock& block, const TimeAxis& axis, double* bins,
-                           RayCounts* rays, double* indirect_bins = nullptr, ObjectLaser* objects = nullptr) const;
-
-  // Samples [s_begin, s_end) of pixel (x, y), which the block holds, added to *out, bins, indirect_bins and
-  // objects as render_pixel adds them, each path weighted by the measurement constant times `scale`
-  // (render_pixel: 1 / samples_per_pixel; a render to a target error: 1, divided by the final count after).
+  // Samples [s_begin, s_end) of pixel (x, y), which the block holds, added to *out and: bins (axis.bins
+  // doubles, zeroed by the caller before the first call) photons per pulse per bin (unused when axis.bins
+  // == 0); indirect_bins (null: no split) the part of bins carried by paths with two or more non-delta
+  // vertices, over the same bin range; objects (null: not asked; cleared by the caller) the laser_total
+  // split by object. Each path is weighted by the measurement constant times `scale` (the fixed-count
+  // render: 1 / samples_per_pixel; a render to a target error: 1, divided by the final count after).
   void add_samples(int x, int y, const CameraBlock& block, int s_begin, int s_end, double scale, const TimeAxis& axis,
                    double* bins, RayCounts* rays, double* indirect_bins, ObjectLaser* objects, PixelTotals* out) const;
 
@@ -182,7 +177,7 @@ class Integrator {
   bool laser_ray(const Surface& sf, LaserRay* out) const;
 
  private:
-  // render_pixel's outputs, handed as one to each laser connection of the pixel's paths.
+  // add_samples's outputs, handed as one to each laser connection of the pixel's paths.
   struct PixelFilm {
     const TimeAxis& axis;
     double* bins;
@@ -252,7 +247,7 @@ class Integrator {
   }
 
   // One camera path, sample j of `block` (pbrt's Li): deposits its laser light, weighted by the pixel's
-  // measurement w, and returns the ambient photon radiance it gathered, which render_pixel weights by w.
+  // measurement w, and returns the ambient photon radiance it gathered, which add_samples weights by w.
   double trace_path(const CameraBlock& block, size_t j, double w, const PixelFilm& film, RayCounts* rays) const;
 
   // Packet plumbing: the camera ray's hit and surface, and the laser shadow ray from that hit with its

@@ -31,7 +31,7 @@ scenes::Scene corner() {
 TEST(Accuracy, StandardErrorOfKnownContributions) {
   // Contributions 1, 2, 3, 4 (scale 1): sample variance 5/3, standard error sqrt(5/3 / 4).
   EXPECT_NEAR(standard_error(10.0, 30.0, 4, 1.0), std::sqrt(5.0 / 12.0), 1e-15);
-  // The same paths as render_pixel holds them (each divided by n = 4): the same error.
+  // The same paths as the fixed-count render sums them (each divided by n = 4): the same error.
   EXPECT_NEAR(standard_error(10.0 / 4, 30.0 / 16, 4, 4.0), std::sqrt(5.0 / 12.0), 1e-15);
   EXPECT_EQ(standard_error(3.0, 9.0, 1, 1.0), 0.0);  // one path: not estimable
   EXPECT_EQ(standard_error(8.0, 16.0, 4, 1.0), 0.0);  // equal paths
