@@ -18,13 +18,10 @@ std::optional<int> parse_command_line(CLI::App& cli, int argc, char** argv) {
     std::string command = "spadgen";
     const CLI::App* at = &cli;
     int next = 1;  // argv's word after the commands named
-    for (bool deeper = true; deeper;) {
-      deeper = false;
-      for (const CLI::App* sub : at->get_subcommands()) {
-        command += " " + sub->get_name();
-        at = sub, ++next, deeper = true;
-        break;
-      }
+    while (!at->get_subcommands().empty()) {
+      at = at->get_subcommands().front();
+      command += " " + at->get_name();
+      ++next;
     }
     // A word where a command was expected: name it and the commands there are (CLI11 says only that one is
     // required).

@@ -310,10 +310,13 @@ TransientTile SavedLight::tile(const PixelRect& rect, const PixelRect& data_rect
         t.bin_lo[di] = r[2 * ri], t.bin_hi[di] = r[2 * ri + 1];
         const float* from = vals + (o[ri] - o[first]);
         const float* to = vals + (o[ri + 1] - o[first]);
-        bool photons = true;  // NaN fails both comparisons
-        for (const float* v = from; v < to; ++v) photons &= *v >= 0.0f && *v <= std::numeric_limits<float>::max();
+        float* dest = t.transient.data() + di * T + size_t(r[2 * ri]);
+        bool photons = true;  // copied and checked in one pass; NaN fails both comparisons
+        for (const float* v = from; v < to; ++v, ++dest) {
+          photons &= *v >= 0.0f && *v <= std::numeric_limits<float>::max();
+          *dest = *v;
+        }
         ok = ok && photons;
-        std::copy(from, to, t.transient.data() + di * T + size_t(r[2 * ri]));
       }
       if (!ok)
         throw Error((std::filesystem::path(dir_) / "light").string() + ": pixel (" + std::to_string(x) + ", " + std::to_string(y) +

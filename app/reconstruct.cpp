@@ -361,13 +361,7 @@ std::string evaluate(const EvaluateCommand& c) {
   const fs::path target(c.target);
   const std::string out = c.out_dir.empty() ? (target / "evaluation").string() : c.out_dir;
   // A folder made here and left empty by a failure (a detections file of the wrong shape) is removed.
-  struct RemoveIfEmpty {
-    fs::path dir;
-    ~RemoveIfEmpty() {
-      std::error_code ec;
-      if (!dir.empty() && fs::is_empty(dir, ec)) fs::remove(dir, ec);
-    }
-  } made_out{fs::exists(out) ? fs::path() : fs::path(out)};
+  const RemoveIfEmpty made_out(out);
   std::map<int, std::string> names;
   nlohmann::json report;
   std::ostringstream text;

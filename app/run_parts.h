@@ -3,6 +3,7 @@
 #pragma once
 #include <tbb/global_control.h>
 
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
@@ -36,6 +37,20 @@ class ThreadLimit {
 
  private:
   std::unique_ptr<tbb::global_control> limit_;
+};
+
+// A folder a command makes for its outputs, removed when the command leaves it empty (a failure or a
+// signal before anything was written there). Made for a folder that does not exist yet; an empty path
+// guards nothing.
+class RemoveIfEmpty {
+ public:
+  explicit RemoveIfEmpty(const std::filesystem::path& dir) : dir_(std::filesystem::exists(dir) ? std::filesystem::path() : dir) {}
+  ~RemoveIfEmpty();
+  RemoveIfEmpty(const RemoveIfEmpty&) = delete;
+  RemoveIfEmpty& operator=(const RemoveIfEmpty&) = delete;
+
+ private:
+  std::filesystem::path dir_;
 };
 
 }  // namespace spadgen::app

@@ -298,13 +298,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   std::vector<fs::path> dirs;
   // With --repeats OUT holds the realisations' folders: made here, it is removed again when a failure or
   // a signal leaves it empty (destroyed after the stagings, which are declared below it).
-  struct RemoveIfEmpty {
-    fs::path dir;
-    ~RemoveIfEmpty() {
-      std::error_code ec;
-      if (!dir.empty() && fs::is_empty(dir, ec)) fs::remove(dir, ec);
-    }
-  } made_out{runs.size() > 1 && !fs::exists(out) ? out : fs::path()};
+  const RemoveIfEmpty made_out(runs.size() > 1 ? out : fs::path());
   std::vector<std::unique_ptr<Staging>> staging;
   std::vector<std::unique_ptr<Outputs>> outputs;
   std::vector<uint64_t> seeds;
@@ -355,11 +349,12 @@ std::vector<RunResult> sense(const SenseOptions& options) {
                                                 (shared.count(l.file) ? int64_t(runs.size()) - 1 : 0);
     held += 2 * int64_t(runs.size());  // the lock, and a margin for the staging folder
     rlimit lim{};
+    const bool limited = getrlimit(RLIMIT_NOFILE, &lim) == 0 && lim.rlim_cur != RLIM_INFINITY;
     const int64_t per_realisation = (held + int64_t(runs.size()) - 1) / int64_t(runs.size());
-    if (getrlimit(RLIMIT_NOFILE, &lim) == 0 && lim.rlim_cur != RLIM_INFINITY && per_realisation + 64 > int64_t(lim.rlim_cur))
+    if (limited && per_realisation + 64 > int64_t(lim.rlim_cur))
       throw Error("sense holds about " + std::to_string(per_realisation + 64) + " files open (its stacks, a lock, and 64 for the "
                   "libraries), and this process may open " + std::to_string(lim.rlim_cur) + " (ulimit -n): raise the limit");
-    if (getrlimit(RLIMIT_NOFILE, &lim) == 0 && lim.rlim_cur != RLIM_INFINITY && held + 64 > int64_t(lim.rlim_cur))
+    if (limited && held + 64 > int64_t(lim.rlim_cur))
       throw Error("--repeats " + std::to_string(runs.size()) + ": the realisations hold about " + std::to_string(held) +
                   " files open until they are written, and this process may open " + std::to_string(lim.rlim_cur) +
                   " (ulimit -n): ask for at most " +

@@ -71,11 +71,21 @@ SensorModel::Impl::Impl(const SensorStageConfig& c) : cfg(c) {
   if (!cfg.outputs.frames && acq->tabulated_counts())
     table = BinomialTable::get(frames_per_k);
   const PixelTypeConfig* tc[2] = {&cfg.sensor.pixel_A, &cfg.sensor.pixel_B};
-  double table_nm[2][2] = {};  // each type's PDP table's first and last wavelength
+  const std::vector<int> used = maps->layout().types();
   for (int t = 0; t < 2; ++t) {
     types[t].name = to_string(t == 0 ? PixelPreset::PixelA : PixelPreset::PixelB);
     const PdpCurve curve = PdpCurve::from_config(*tc[t], "sensor." + types[t].name);
-    table_nm[t][0] = curve.first_nm(), table_nm[t][1] = curve.last_nm();
+    // A measured table that stops short of the laser's wavelength makes its pixels blind to the laser (PDP 0
+    // outside the table): a mistake, not a sensor.
+    const double nm = cfg.laser.wavelength_m / kNm;
+    if (!tc[t]->pdp_csv.empty() && std::find(used.begin(), used.end(), t) != used.end() &&
+        !(nm >= curve.first_nm() && nm <= curve.last_nm())) {
+      std::ostringstream m;
+      m << "sensor." << types[t].name << ".pdp_csv: '" << tc[t]->pdp_csv << "' covers " << curve.first_nm() << " to "
+        << curve.last_nm() << " nm, not the laser's " << nm
+        << " nm (laser.wavelength_nm): its pixels would not see the laser; expected a table that covers it";
+      throw Error(m.str());
+    }
     types[t].pdp_laser = curve.at(cfg.laser.wavelength_m);
     types[t].pdp_ambient = curve.band_average(cfg.ambient.wavelength_m, cfg.ambient.bandwidth_m);
     types[t].fill_factor = tc[t]->fill_factor;
@@ -84,19 +94,6 @@ SensorModel::Impl::Impl(const SensorStageConfig& c) : cfg(c) {
   }
   for (const TypeInfo& t : used_types())
     if (t.crosstalk > 0.0) halo = 1;
-  // A measured table that stops short of the laser's wavelength makes its pixels blind to the laser (PDP 0
-  // outside the table): a mistake, not a sensor.
-  for (int t : maps->layout().types()) {
-    if (tc[t]->pdp_csv.empty()) continue;
-    const double nm = cfg.laser.wavelength_m / kNm;
-    if (!(nm >= table_nm[t][0] && nm <= table_nm[t][1])) {
-      std::ostringstream m;
-      m << "sensor." << types[t].name << ".pdp_csv: '" << tc[t]->pdp_csv << "' covers " << table_nm[t][0] << " to "
-        << table_nm[t][1] << " nm, not the laser's " << nm
-        << " nm (laser.wavelength_nm): its pixels would not see the laser; expected a table that covers it";
-      throw Error(m.str());
-    }
-  }
 }
 
 std::vector<TypeInfo> SensorModel::Impl::used_types() const {
