@@ -16,6 +16,7 @@
 #include "app/interrupt.h"
 #include "app/progress.h"
 #include "app/run_parts.h"
+#include "app/staging.h"
 #include "core/error.h"
 #include "reconstruct/detect.h"
 #include "reconstruct/evaluate.h"
@@ -117,14 +118,19 @@ DetectionImage detect_image(const RunFolder& run, const Detector& detector, bool
 
 std::string slot_name(int s, const char* what) { return "det" + std::to_string(s) + "." + what; }
 
-// A range is metres, or NaN for no detection: an infinite one is neither (it was skipped silently, as if
-// the detector had found nothing there). A negative range is a detection the scores count as false.
+// A range is metres from the camera centre, or NaN for no detection: an infinite one is neither (it was
+// skipped silently, as if the detector had found nothing there), and a negative one is not a distance (a
+// sentinel such as -1 for "none" was counted as a false detection).
 void check_ranges(const std::string& path, const DetectionImage& img) {
   for (int s = 0; s < img.slots; ++s)
     for (size_t i = 0; i < img.count.size(); ++i)
-      if (std::isinf(img.range[img.at(s, i)]))
+      if (const float r = img.range[img.at(s, i)]; std::isinf(r) || r < 0.0f) {
+        std::ostringstream v;
+        v << r;
         throw Error(path + ": pixel (" + std::to_string(i % size_t(img.width)) + ", " + std::to_string(i / size_t(img.width)) +
-                    ") slot " + std::to_string(s) + " holds an infinite range; expected metres, or NaN for no detection");
+                    ") slot " + std::to_string(s) + " holds " + (std::isinf(r) ? "an infinite" : "a negative") + " range (" +
+                    v.str() + "); expected metres >= 0 from the camera centre, or NaN for no detection");
+      }
 }
 
 // The detections file (docs/detection.md): an EXR with `count` and det<i>.range (metres; NaN: none), and
@@ -359,20 +365,24 @@ std::string evaluate(const EvaluateCommand& c) {
   const ThreadLimit threads(c.threads);
   if (!(c.tolerance_m > 0.0)) throw Error("--tolerance-m: expected a positive number of metres");
   const fs::path target(c.target);
-  const std::string out = c.out_dir.empty() ? (target / "evaluation").string() : c.out_dir;
-  // A folder made here and left empty by a failure (a detections file of the wrong shape) is removed.
-  const RemoveIfEmpty made_out(out);
+  // Written into a staging folder beside the output folder and swapped in whole (app/staging.h): a failed
+  // or interrupted evaluation leaves the earlier one as it was, never a mix of the two.
+  const fs::path out_given = c.out_dir.empty() ? target / "evaluation" : fs::path(c.out_dir);
+  Staging staging(out_given,
+                  {"metrics.json", "samples.csv", "range_error.png", "outcome.png"}, "an evaluation");
+  const std::string out = staging.path("");
+  std::vector<std::string> files{"metrics.json"};
   std::map<int, std::string> names;
   nlohmann::json report;
   std::ostringstream text;
   if (fs::exists(target / "metadata.json")) {
-    fs::create_directories(out);
     nlohmann::json source;
     const reconstruct::Scores s = evaluate_run(c, c.target, c.detections, out, &names, &source);
     report = s.to_json(names);
     report["detections_source"] = source;
     report["run"] = c.target;
     text << summary(report);
+    files.insert(files.end(), {"range_error.png", "outcome.png"});
   } else if (fs::exists(target / "dataset.json")) {
     if (!fs::is_directory(target / "samples")) throw Error(c.target + ": a dataset folder without samples/");
     std::vector<fs::path> samples;
@@ -380,7 +390,6 @@ std::string evaluate(const EvaluateCommand& c) {
       if (e.is_directory() && fs::exists(e.path() / "metadata.json")) samples.push_back(e.path());
     std::sort(samples.begin(), samples.end());
     if (samples.empty()) throw Error(c.target + ": no done samples to evaluate");
-    fs::create_directories(out);
     reconstruct::Scores total(scorer_options(c));
     std::ostringstream csv;
     csv << "sample,objects,found,recall,detectable,detectable_found,detections,false,bias_mm,rms_mm\n";
@@ -402,12 +411,14 @@ std::string evaluate(const EvaluateCommand& c) {
     report["dataset"] = c.target;
     report["samples"] = rows;
     writers::write_file_atomic((fs::path(out) / "samples.csv").string(), csv.str());
+    files.push_back("samples.csv");
     text << samples.size() << " samples\n" << summary(report);
   } else {
     throw Error(c.target + ": neither a run folder (metadata.json) nor a dataset folder (dataset.json)");
   }
   writers::write_json((fs::path(out) / "metrics.json").string(), report);
-  text << "wrote " << (fs::path(out) / "metrics.json").string() << "\n";
+  staging.publish(files);
+  text << "wrote " << (out_given / "metrics.json").string() << "\n";
   return text.str();
 }
 

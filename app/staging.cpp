@@ -66,7 +66,14 @@ Listed listed_files(const fs::path& out) {
 
 }  // namespace
 
-Staging::Staging(const fs::path& out, Hook hook) : hook_(std::move(hook)) {
+Staging::Staging(const fs::path& out, std::vector<std::string> owned, std::string what)
+    : owned_(std::move(owned)), what_(std::move(what)) {
+  init(out);
+}
+
+Staging::Staging(const fs::path& out, Hook hook) : hook_(std::move(hook)) { init(out); }
+
+void Staging::init(const fs::path& out) {
   const auto cannot = [&](const std::string& why) {
     return Error("cannot use " + out.string() + " as the output folder (-o): " + why);
   };
@@ -83,8 +90,8 @@ Staging::Staging(const fs::path& out, Hook hook) : hook_(std::move(hook)) {
   if (!ec) {
     const fs::path rel = cwd.lexically_relative(out_);
     if (!rel.empty() && *rel.begin() != "..")
-      throw cannot("it is the current folder or holds it; a run replaces the output folder as a whole, so name a "
-                   "folder below the current one");
+      throw cannot("it is the current folder or holds it; " + what_ +
+                   " replaces the output folder as a whole, so name a folder below the current one");
   }
   try {
     fs::create_directories(parent_);
@@ -216,7 +223,9 @@ bool holds_no_file(const fs::path& dir) {
 void Staging::check_owned() const {
   std::error_code ec;
   if (!fs::is_directory(out_, ec)) return;
-  const Listed listed = listed_files(out_);
+  Listed listed;  // another command's folder holds its own files only (a run folder given to it is not its own)
+  if (owned_.empty()) listed = listed_files(out_);
+  else listed.entries = {owned_.begin(), owned_.end()};
   std::vector<std::string> foreign;
   std::vector<fs::path> folders{out_};
   while (!folders.empty() && foreign.size() < 6) {
@@ -224,7 +233,9 @@ void Staging::check_owned() const {
     folders.pop_back();
     for (const auto& e : fs::directory_iterator(folder)) {
       const std::string rel = e.path().lexically_relative(out_).string();
-      if (folder == out_ && (starts_with(rel, kOldStylePrefix) || is_derived_output(rel))) continue;
+      // (derived outputs: reconstruct's and evaluate's, and an interrupted evaluate's staging folder and lock)
+      if (folder == out_ && (starts_with(rel, kOldStylePrefix) || is_derived_output(rel) || starts_with(rel, ".evaluation.spadgen-")))
+        continue;
       const bool dir = e.is_directory(ec) && !e.is_symlink(ec);
       if (dir && holds_no_file(e.path())) continue;  // nothing to lose (folders only, empty at their ends)
       const bool entry = listed.entries.count(rel) > 0;
@@ -237,9 +248,14 @@ void Staging::check_owned() const {
   std::string list;
   for (size_t i = 0; i < foreign.size() && i < 5; ++i) list += (i ? ", " : "") + foreign[i];
   if (foreign.size() > 5) list += ", ...";
-  throw Error("the output folder " + out_.string() + " holds files that spadgen did not write there (" + list +
-              "; not listed in its metadata.json); a run replaces the whole folder, so it does not run into one "
-              "with other files: move them, or choose another folder (-o)");
+  std::string known = "not listed in its metadata.json";
+  if (!owned_.empty()) {
+    known = "expected only ";
+    for (size_t i = 0; i < owned_.size(); ++i) known += (i == 0 ? "" : i + 1 == owned_.size() ? " and " : ", ") + owned_[i];
+  }
+  throw Error("the output folder " + out_.string() + " holds files that spadgen did not write there (" + list + "; " +
+              known + "); " + what_ + " replaces the whole folder, so it does not write into one with other files: "
+              "move them, or choose another folder (-o)");
 }
 
 void Staging::publish(const std::vector<std::string>& files) {
@@ -252,7 +268,7 @@ void Staging::publish(const std::vector<std::string>& files) {
     if (e.is_directory() && ::rmdir(e.path().c_str()) != 0) sync_dir(e.path());
   sync_dir(dir_);
   const auto fail = [&](const std::string& what, int err) {
-    return Error("cannot publish the run into " + out_.string() + ": " + what + ": " + std::strerror(err) +
+    return Error("cannot publish into " + out_.string() + ": " + what + ": " + std::strerror(err) +
                  "; the output folder holds its earlier files");
   };
   std::error_code ec;
@@ -279,7 +295,7 @@ void Staging::publish(const std::vector<std::string>& files) {
         int back = step("restore old");
         if (!back && ::rename(old.c_str(), out_.c_str()) != 0) back = errno;
         if (back)
-          throw Error("cannot publish the run into " + out_.string() + ": renaming " + dir_.string() + " to it: " +
+          throw Error("cannot publish into " + out_.string() + ": renaming " + dir_.string() + " to it: " +
                       std::strerror(err) + "; and renaming its earlier files back from " + old.string() +
                       " failed too (" + std::strerror(back) + "): the next run into this folder renames them back");
         throw fail("renaming " + dir_.string() + " to " + out_.string(), err);

@@ -33,6 +33,9 @@ class Staging {
   // creates the staging folder. Throws spadgen::Error when the output folder cannot be used, is locked
   // by another run, or holds files spadgen did not write.
   explicit Staging(const std::filesystem::path& out, Hook hook = nullptr);
+  // A folder of another command's files (`spadgen evaluate`'s): the folder may hold only the files named in
+  // `owned` (a run folder is not replaced by it); `what` names it in messages ("an evaluation").
+  Staging(const std::filesystem::path& out, std::vector<std::string> owned, std::string what);
   ~Staging();  // removes the staging folder unless published, and releases the lock
   Staging(const Staging&) = delete;
   Staging& operator=(const Staging&) = delete;
@@ -50,11 +53,14 @@ class Staging {
   void lock();
   void unlock();
   void recover();
+  void init(const std::filesystem::path& out);
   void check_owned() const;
 
   std::filesystem::path out_, parent_, dir_, lock_path_;
   std::string name_;
   Hook hook_;
+  std::vector<std::string> owned_;
+  std::string what_ = "a run";  // in messages: "... replaces the output folder as a whole"
   int lock_fd_ = -1;
 };
 

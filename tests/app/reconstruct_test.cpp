@@ -231,6 +231,52 @@ TEST_F(Reconstruct, EvaluateScoresADetectionsNpyAgainstTheLabelsExactly) {
   r = sh("evaluate " + run.string() + " --detections " + (dir_ / "inf.npy").string());
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("inf.npy: pixel (1, 0) slot 1 holds an infinite range"), std::string::npos) << r.output;
+  // nor is a negative one (a sentinel -1 for "none" was scored as a false detection)
+  {
+    spadgen::writers::NpyWriter npy((dir_ / "neg.npy").string(), spadgen::writers::Dtype::F32, {H, W, M});
+    std::vector<float> v(size_t(H * W * M), std::numeric_limits<float>::quiet_NaN());
+    v[size_t(2 * W * M) + 2] = -1.0f;  // pixel (0, 2), slot 2
+    npy.write(0, v.data(), int64_t(v.size()));
+    npy.commit();
+  }
+  r = sh("evaluate " + run.string() + " --detections " + (dir_ / "neg.npy").string() + " -o " + (dir_ / "eval").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("neg.npy: pixel (0, 2) slot 2 holds a negative range (-1)"), std::string::npos) << r.output;
+  // ... and the refused evaluation left the earlier one in eval/ as it was
+  EXPECT_EQ(nlohmann::json::parse(slurp(dir_ / "eval" / "metrics.json"))["objects"]["found"], objects);
+}
+
+// evaluate writes its folder whole or not at all (app/staging.h): a run's evaluation (metrics and maps)
+// replaced by a dataset's leaves no map behind, and evaluate does not write into a run folder or a folder
+// of other files.
+TEST_F(Reconstruct, EvaluateReplacesItsFolderWholeAndOnlyItsOwn) {
+  const fs::path run = dir_ / "run";
+  Result r = sh("run " + kScenes + "multi_object.json" + kMultiObjectCrop + run.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  const fs::path eval = dir_ / "eval";
+  r = sh("evaluate " + run.string() + " -o " + eval.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  ASSERT_TRUE(fs::exists(eval / "outcome.png"));
+  const std::string metrics = slurp(eval / "metrics.json");
+  // a second evaluation with another tolerance replaces the first whole
+  r = sh("evaluate " + run.string() + " -o " + eval.string() + " --tolerance-m 0.001");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(slurp(eval / "metrics.json"), metrics);
+  EXPECT_EQ(nlohmann::json::parse(slurp(eval / "metrics.json"))["matching"]["tolerance_m"].get<double>(), 0.001);
+  // the run folder itself, or a folder of someone else's files, is not replaced by an evaluation
+  for (const fs::path& out : {run, dir_ / "mine"}) {
+    fs::create_directories(out);
+    std::ofstream(out / "notes.txt") << "mine";
+    r = sh("evaluate " + run.string() + " -o " + out.string());
+    EXPECT_EQ(r.code, 1) << out;
+    EXPECT_NE(r.output.find("holds files that spadgen did not write there"), std::string::npos) << r.output;
+    EXPECT_EQ(slurp(out / "notes.txt"), "mine");
+  }
+  EXPECT_TRUE(fs::exists(run / "metadata.json"));
+  EXPECT_TRUE(fs::exists(run / "ground_truth.exr"));
+  // no staging folder or lock left beside the evaluation
+  for (const fs::path& folder : {dir_, run})
+    for (const auto& e : fs::directory_iterator(folder)) EXPECT_NE(e.path().filename().string()[0], '.') << e.path();
 }
 
 TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
