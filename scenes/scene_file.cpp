@@ -174,7 +174,7 @@ std::string expected_text(const Key& k) {
       e = "an array of 3 numbers" + (has_lo && has_hi ? " each in [" + format_bound(k.lo) + ", " + format_bound(k.hi) + "]" : std::string()) + unit;
       if (k.null_components) e += " or null (keeps the glTF's)";
       break;
-    case Type::Rect: e = "[x0, y0, width, height] (integers >= 0, width and height > 0)"; break;
+    case Type::Rect: e = "[x0, y0, width, height] (integers in [0, 1000000], width and height >= 1)"; break;
   }
   if (k.nullable) e += ", or null";
   return e;
@@ -210,9 +210,10 @@ bool value_fits(const Key& k, const json& v) {
              });
     case Type::Rect: {
       if (!v.is_array() || v.size() != 4) return false;
-      for (size_t i = 0; i < 4; ++i) {
-        if (!v[i].is_number_integer() && !v[i].is_number_unsigned()) return false;
-        if (v[i].get<int64_t>() < (i < 2 ? 0 : 1) || v[i].get<int64_t>() > 1'000'000) return false;
+      for (size_t i = 0; i < 4; ++i) {  // integers as integer keys take them: 8 or 8.0
+        if (!v[i].is_number()) return false;
+        const double d = v[i].get<double>();
+        if (!(std::floor(d) == d && d >= (i < 2 ? 0.0 : 1.0) && d <= 1e6)) return false;
       }
       return true;
     }

@@ -305,6 +305,11 @@ TEST_F(SceneFileTest, OverridesGoThroughTheSameChecks) {
               HasSubstr("--set laser.average_powr_mW: /laser/average_powr_mW: unknown key; did you mean /laser/average_power_mW?"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"camera.f_number=-1"}),
               HasSubstr("/camera/f_number: found -1 (an integer), expected a number in [0.5, 64]"));
+  // a rectangle takes integers as integer keys do (8.0 is 8), and says its bounds
+  EXPECT_EQ(*parse(R"({"gltf": "s.gltf"})", {"camera.crop=[8.0,0,64,64.0]"}).config.camera.crop, (PixelRect{8, 0, 64, 64}));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"camera.crop=[0,0,4294967295,8]"}),
+              HasSubstr("expected [x0, y0, width, height] (integers in [0, 1000000], width and height >= 1)"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"camera.crop=[0.5,0,8,8]"}), HasSubstr("integers in [0, 1000000]"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"camera"}), HasSubstr("--set camera: expected KEY=VALUE"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"camera=3"}), HasSubstr("/camera: is a section, not a key"));
 }
