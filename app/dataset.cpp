@@ -1,4 +1,5 @@
 #include "app/dataset.h"
+#include "app/progress.h"
 
 #include <algorithm>
 #include <chrono>
@@ -172,10 +173,15 @@ std::string dataset_plan(const DatasetOptions& options) {
   Estimate left_total;
   std::vector<std::string> errors;
   Estimator estimator(spec.repeats, options.threads);
+  // Each sample's scene is resolved (about 0.2 ms): a plan of millions of samples takes minutes, so it shows
+  // its progress.
+  const int64_t owned = n / shard.count + (shard.index < n % shard.count ? 1 : 0);
+  Progress bar(size_t(owned), options.progress && owned > 10000, "samples");
   for (int64_t i = 0; i < n; ++i) {
     if (!shard.owns(i)) continue;
     const Sample s = datasets::make_sample(spec, i);
     ++samples;
+    bar.tick();
     Estimate e;
     std::string status;
     try {

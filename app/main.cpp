@@ -3,7 +3,7 @@
 //   spadgen sense RUN_DIR [-o DIR] [--set KEY=VALUE]... [--noise-seed S] [--chip-seed S] [--repeats R]
 //   spadgen info SCENE.json [--set KEY=VALUE]...
 //   spadgen schema                 # the reference of every scene-file key (Markdown)
-//   spadgen dataset plan FILE [-o DIR] [--shard I/N] [--all]
+//   spadgen dataset plan FILE [-o DIR] [--shard I/N] [--all] [-q]
 //   spadgen dataset run FILE -o DIR [--shard I/N] [--threads N] [-q]
 //   spadgen dataset status DIR
 //   spadgen dataset schema         # the reference of the dataset file (Markdown)
@@ -107,6 +107,7 @@ int main(int argc, char** argv) {
   CLI::Option* plan_shard = plan_cmd->add_option("--shard", dataset_shard, "only shard I of N (samples i with i mod N = I)")->type_name("I/N");
   plan_cmd->add_flag("--all", dataset.all, "list every sample (default: the first and the last 10)");
   plan_cmd->add_option("--threads", dataset.threads, "worker threads per sample, for the time estimate")->check(kThreadsRange);
+  plan_cmd->add_flag("-q,--quiet", dataset_quiet, "no progress on stderr (shown for plans of over 10,000 samples)");
   CLI::App* drun_cmd = dataset_cmd->add_subcommand("run", "generate the samples that are not done, each into its own folder, as one unit");
   drun_cmd->add_option("file", dataset.file, "dataset file (.json)")->required()->check(CLI::ExistingFile);
   drun_cmd->add_option("-o,--out", dataset.out_dir, "dataset folder")->required()->check(kNamed);

@@ -7,7 +7,8 @@
 
 namespace spadgen::app {
 
-Progress::Progress(size_t total, bool enabled) : total_(total), enabled_(enabled), tty_(isatty(2) != 0) {}
+Progress::Progress(size_t total, bool enabled, const char* unit)
+    : total_(total), enabled_(enabled), tty_(isatty(2) != 0), unit_(unit) {}
 
 void Progress::tick() {
   const size_t done = ++done_;
@@ -19,16 +20,16 @@ void Progress::tick() {
     if (elapsed - last_print_ < 0.1 && done != total_) return;
     last_print_ = elapsed;
     const int width = 30, filled = int(double(width) * double(done) / double(total_));
-    std::fprintf(stderr, "\r[%s%s] %3d%%  %zu/%zu tiles  %.1f s, ~%.0f s left ", std::string(size_t(filled), '#').c_str(),
+    std::fprintf(stderr, "\r[%s%s] %3d%%  %zu/%zu %s  %.1f s, ~%.0f s left ", std::string(size_t(filled), '#').c_str(),
                  std::string(size_t(width - filled), '.').c_str(), int(100.0 * double(done) / double(total_)), done,
-                 total_, elapsed, left);
+                 total_, unit_, elapsed, left);
     if (done == total_) std::fprintf(stderr, "\n");
   } else {
     const size_t decile = 10 * done / total_;
     if (decile > last_decile_ || done == total_) {
       last_decile_ = decile;
-      std::fprintf(stderr, "spadgen: %3d%% (%zu/%zu tiles) %.1f s elapsed, ~%.0f s left\n",
-                   int(100.0 * double(done) / double(total_)), done, total_, elapsed, left);
+      std::fprintf(stderr, "spadgen: %3d%% (%zu/%zu %s) %.1f s elapsed, ~%.0f s left\n",
+                   int(100.0 * double(done) / double(total_)), done, total_, unit_, elapsed, left);
     }
   }
 }

@@ -10,8 +10,9 @@ namespace spadgen::app {
 
 class Progress {
  public:
-  Progress(size_t total, bool enabled);
-  // One more tile done; safe to call from every worker thread.
+  // `unit` names what is counted in the messages ("tiles", "samples").
+  Progress(size_t total, bool enabled, const char* unit = "tiles");
+  // One more done; safe to call from every worker thread.
   void tick();
   // Seconds since construction.
   double seconds() const;
@@ -19,6 +20,7 @@ class Progress {
  private:
   size_t total_;
   bool enabled_, tty_;
+  const char* unit_;
   std::atomic<size_t> done_{0};
   std::mutex mutex_;
   double last_print_ = -1.0;

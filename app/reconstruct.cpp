@@ -83,7 +83,7 @@ DetectionImage detect_image(const RunFolder& run, const Detector& detector, bool
   if (!run.gate_sweep()) throw Error(run.dir() + ": a 2D intensity run has no gate profiles to detect returns in");
   DetectionImage img(run.width(), run.height(), slots);
   const int bands = (run.height() + kBandRows - 1) / kBandRows;
-  Progress bar(size_t(bands), progress);
+  Progress bar(size_t(bands), progress, "bands of rows");
   tbb::parallel_for(tbb::blocked_range<int>(0, bands, 1), [&](const tbb::blocked_range<int>& r) {
     std::vector<float> profiles;
     for (int b = r.begin(); b < r.end(); ++b) {

@@ -278,6 +278,12 @@ TEST_F(Dataset, RefusesAnotherDatasetsFolderForeignFilesAndTooLittleDisk) {
   EXPECT_EQ(plan.code, 0) << plan.output;
   EXPECT_THAT(plan.output, HasSubstr("# total: 200 samples, disk about"));
   EXPECT_THAT(plan.output, Not(HasSubstr("an upper bound")));
+  EXPECT_THAT(plan.output, Not(HasSubstr("samples) "))) << "no progress for a plan of a few samples";
+  // A plan of over 10,000 samples (0.2 ms each) says how far it is, on stderr (here not a terminal: lines).
+  write(dir_ / "many.json", "{\"scenes\": [\"" + kScenes + "multi_object.json\"], \"samples\": 10001}");
+  const Result many = sh("dataset plan " + (dir_ / "many.json").string());
+  EXPECT_EQ(many.code, 0) << many.output;
+  EXPECT_THAT(many.output, HasSubstr("spadgen: 100% (10001/10001 samples)"));
   // A target error: the time is counted at render.max_samples_per_pixel paths, and said to be a bound.
   const auto per_sample = [](const std::string& text) { return text.substr(text.find("# per sample:")); };
   write(dir_ / "standard.json", "{\"scenes\": [\"" + kScenes + "multi_object.json\"], \"samples\": 200, \"set\": "
