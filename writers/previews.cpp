@@ -172,7 +172,13 @@ Rgb8Image depth_preview(const float* range, int width, int height, float near_m,
     if (hi == lo) hi = lo + 1.0;
   }
   const bool with_legend = legend && width >= 48;
-  Rgb8Image im(width, height + (with_legend ? kDepthLegendHeight : 0));
+  const int x0 = 3, x1 = width - 4;
+  const int decimals = decimals_for(nice_step(hi - lo, 4)) + 1;
+  const std::string near_text = format_number(lo, decimals) + " m", far_text = format_number(hi, decimals) + " m",
+                    mid_text = format_number((lo + hi) / 2, decimals) + " m";
+  // Where the near and far labels do not fit side by side (a narrow crop), the far one goes a row lower.
+  const bool two_rows = text_width(near_text) + 4 + text_width(far_text) > x1 + 1 - x0;
+  Rgb8Image im(width, height + (with_legend ? kDepthLegendHeight + (two_rows ? kDepthLegendRow : 0) : 0));
   // Near is bright so that the eye reads it as close.
   auto colour_of = [&](double r) { return viridis(1.0 - (r - lo) / (hi - lo)); };
   for (int y = 0; y < height; ++y)
@@ -182,25 +188,22 @@ Rgb8Image depth_preview(const float* range, int width, int height, float near_m,
     }
   if (with_legend) {
     const Colour white{255, 255, 255};
-    const int x0 = 3, x1 = width - 4, bar_top = height + 3, bar_bottom = height + 10;
+    const int bar_top = height + 3, bar_bottom = height + 10;
     for (int x = x0; x <= x1; ++x) {
       const double r = lo + (hi - lo) * (x - x0) / double(x1 - x0);
       vline(im, x, bar_top, bar_bottom, colour_of(r));
     }
     const int tick_y = bar_bottom + 1, label_y = bar_bottom + 5;
-    const int decimals = decimals_for(nice_step(hi - lo, 4)) + 1;
-    const std::string l = format_number(lo, decimals) + " m", r = format_number(hi, decimals) + " m",
-                      m = format_number((lo + hi) / 2, decimals) + " m";
     const int xm = (x0 + x1) / 2;
     vline(im, x0, tick_y, tick_y + 2, white);
     vline(im, x1, tick_y, tick_y + 2, white);
-    draw_text(im, x0, label_y, l, white);
-    draw_text(im, x1 + 1 - text_width(r), label_y, r, white);
+    draw_text(im, x0, label_y, near_text, white);
+    draw_text(im, x1 + 1 - text_width(far_text), label_y + (two_rows ? kDepthLegendRow : 0), far_text, white);
     // The middle label only where it clears both ends.
-    const int mx = xm - text_width(m) / 2;
-    if (mx > x0 + text_width(l) + 4 && mx + text_width(m) + 4 < x1 + 1 - text_width(r)) {
+    const int mx = xm - text_width(mid_text) / 2;
+    if (!two_rows && mx > x0 + text_width(near_text) + 4 && mx + text_width(mid_text) + 4 < x1 + 1 - text_width(far_text)) {
       vline(im, xm, tick_y, tick_y + 2, white);
-      draw_text(im, mx, label_y, m, white);
+      draw_text(im, mx, label_y, mid_text, white);
     }
   }
   return im;

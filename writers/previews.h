@@ -30,8 +30,9 @@ std::array<uint8_t, 3> viridis(double t);
 // Depth as colour: range near_m maps to yellow (bright: near looks close), far_m to dark violet; values
 // outside are clamped; a miss (+inf, NaN, or <= 0) is black. If !(far_m > near_m) the range is taken
 // from the finite positive values. With `legend` (and width >= 48) a colour bar with the near, middle
-// and far distances in metres is appended below, making the result kDepthLegendHeight rows taller.
-inline constexpr int kDepthLegendHeight = 24;
+// and far distances in metres is appended below, making the result kDepthLegendHeight rows taller, and
+// kDepthLegendRow more where the near and far labels do not fit side by side (the far one goes below).
+inline constexpr int kDepthLegendHeight = 24, kDepthLegendRow = 9;
 Rgb8Image depth_preview(const float* range, int width, int height, float near_m, float far_m, bool legend = true);
 
 // Intensity as gray: black at 0, white at the `white_percentile` percentile of the finite values (above

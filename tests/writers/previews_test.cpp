@@ -52,7 +52,21 @@ TEST(DepthPreview, NearIsBrightFarIsDarkAndMissesBlack) {
   r[size_t(3 * w + 7)] = 0.0f;
   const Rgb8Image im = depth_preview(r.data(), w, h, 1.0f, 2.0f);
   ASSERT_EQ(im.width, w);
-  ASSERT_EQ(im.height, h + kDepthLegendHeight);
+  // 64 px hold "1.000 m" and "2.000 m" (41 px each) only one above the other: the far one a row lower
+  ASSERT_EQ(im.height, h + kDepthLegendHeight + kDepthLegendRow);
+  const auto white_in = [&](const Rgb8Image& m, int x0, int x1, int y0, int y1) {
+    int n = 0;
+    for (int y = y0; y < y1; ++y)
+      for (int x = x0; x < x1; ++x) n += m.at(x, y)[0] == 255 && m.at(x, y)[1] == 255 && m.at(x, y)[2] == 255;
+    return n;
+  };
+  EXPECT_GT(white_in(im, 0, 40, h + 15, h + 24), 20) << "the near label, left";
+  EXPECT_EQ(white_in(im, 44, w, h + 15, h + 24), 0) << "nothing of the far label beside it";
+  EXPECT_GT(white_in(im, w - 40, w, h + 24, h + 33), 20) << "the far label, right, a row lower";
+  {  // wide enough for both on one row, and the middle one
+    std::vector<float> wide(256 * 2, 1.5f);
+    EXPECT_EQ(depth_preview(wide.data(), 256, 2, 1.0f, 2.0f).height, 2 + kDepthLegendHeight);
+  }
   for (auto [x, y] : {std::pair{5, 1}, {6, 2}, {7, 3}}) {
     const uint8_t* p = im.at(x, y);
     EXPECT_EQ(p[0] + p[1] + p[2], 0) << x << "," << y;
