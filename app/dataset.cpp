@@ -1,10 +1,12 @@
 #include "app/dataset.h"
+#include "app/interrupt.h"
 #include "app/progress.h"
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <deque>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -284,10 +286,34 @@ void dataset_run(const DatasetOptions& options) {
 
   const auto start = std::chrono::steady_clock::now();
   std::vector<int64_t> failed;
-  int64_t generated = 0;
-  for (size_t t = 0; t < todo.size(); ++t) {
+  int64_t generated = 0, by_others = 0;
+  // Samples another run on this folder is working on (a second run without shards, or overlapping shards)
+  // are left for later: each sample is claimed first, and checked again once claimed (the other run may
+  // have completed it). When only claimed samples are left, they are tried again every 0.2 s.
+  std::deque<size_t> pending;
+  for (size_t t = 0; t < todo.size(); ++t) pending.push_back(t);
+  size_t handled = 0, busy_in_a_row = 0;
+  while (!pending.empty()) {
+    const size_t t = pending.front();
+    pending.pop_front();
     const SampleRecord& rec = todo[t].record;
     const Sample& s = rec.sample;
+    const std::unique_ptr<datasets::SampleClaim> claim = folder.try_claim(s);
+    if (!claim) {
+      pending.push_back(t);
+      if (++busy_in_a_row >= pending.size()) {  // every sample left is another run's for now
+        InterruptGuard::check();
+        std::this_thread::sleep_for(std::chrono::milliseconds(200));
+        busy_in_a_row = 0;
+      }
+      continue;
+    }
+    busy_in_a_row = 0;
+    ++handled;
+    if (!rec.hash.empty() && folder.inspect(s).status == Status::Done) {
+      ++by_others;  // completed by another run meanwhile
+      continue;
+    }
     const auto sample_start = std::chrono::steady_clock::now();
     try {
       if (rec.hash.empty()) throw Error(rec.error);  // the sample's parameters make an invalid scene
@@ -327,18 +353,19 @@ void dataset_run(const DatasetOptions& options) {
     if (options.progress) {
       const auto now = std::chrono::steady_clock::now();
       const double took = std::chrono::duration<double>(now - sample_start).count();
-      const double mean = std::chrono::duration<double>(now - start).count() / double(t + 1);
+      const double mean = std::chrono::duration<double>(now - start).count() / double(handled);
       std::fprintf(stderr, "spadgen: dataset: sample %lld %s in %.1f s; %zu/%zu of this run, %lld failed; about %s left\n",
-                   static_cast<long long>(s.index), failed.empty() || failed.back() != s.index ? "done" : "failed", took, t + 1,
-                   todo.size(), static_cast<long long>(failed.size()), duration_text(mean * double(todo.size() - t - 1)).c_str());
+                   static_cast<long long>(s.index), failed.empty() || failed.back() != s.index ? "done" : "failed", took, handled,
+                   todo.size(), static_cast<long long>(failed.size()), duration_text(mean * double(todo.size() - handled)).c_str());
     }
   }
 
   const std::vector<SampleRecord> records = inspect_all(folder);
   folder.write_index(records);
   if (options.progress)
-    std::fprintf(stderr, "spadgen: dataset %s: %s (this run: %lld generated, %lld skipped, %zu failed)\n", dir.string().c_str(),
-                 status_counts(records).c_str(), static_cast<long long>(generated), static_cast<long long>(skipped), failed.size());
+    std::fprintf(stderr, "spadgen: dataset %s: %s (this run: %lld generated, %lld skipped, %lld completed by another run, %zu failed)\n",
+                 dir.string().c_str(), status_counts(records).c_str(), static_cast<long long>(generated),
+                 static_cast<long long>(skipped), static_cast<long long>(by_others), failed.size());
   if (!failed.empty())
     throw Error("dataset run: " + std::to_string(failed.size()) + " samples failed (" + datasets::ranges_text(failed) +
                 "); their errors are in " + (dir / "failed").string() + " and `spadgen dataset status " + dir.string() + "`");

@@ -105,6 +105,27 @@ const char* status_name(Status s) {
 
 DatasetFolder::DatasetFolder(const DatasetSpec& spec, fs::path dir) : spec_(spec), dir_(std::move(dir)) {}
 
+SampleClaim::~SampleClaim() { ::close(fd_); }  // closing the description releases its locks
+
+std::unique_ptr<SampleClaim> DatasetFolder::try_claim(const Sample& s) const {
+  const std::string p = (dir_ / ".dataset.lock").string();
+  const int fd = ::open(p.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  if (fd < 0) throw Error("cannot open the dataset folder's lock " + p + ": " + std::strerror(errno));
+  struct flock l {};
+  l.l_type = F_WRLCK;
+  l.l_whence = SEEK_SET;
+  l.l_start = static_cast<off_t>(s.index);
+  l.l_len = 1;
+  while (::fcntl(fd, F_OFD_SETLK, &l) != 0) {
+    const int err = errno;
+    if (err == EINTR) continue;
+    ::close(fd);
+    if (err == EAGAIN || err == EACCES) return nullptr;
+    throw Error("cannot lock sample " + std::to_string(s.index) + " in " + p + ": " + std::strerror(err));
+  }
+  return std::make_unique<SampleClaim>(fd);
+}
+
 void DatasetFolder::claim() const {
   std::error_code ec;
   fs::create_directories(dir_, ec);

@@ -17,6 +17,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -40,6 +41,20 @@ struct SampleRecord {
   std::vector<std::pair<std::string, int64_t>> files;
   int64_t bytes = 0;                 // done: their sum
   nlohmann::ordered_json summary;    // done: metadata.json's ground_truth_summary and laser totals
+};
+
+// A dataset run's claim on one sample (an open-file-description lock on byte `index` of DIR/.dataset.lock,
+// beside the folder lock's flock, which it does not touch): while one run holds it, no other run on the
+// folder (another shard, or a second unsharded run) works on that sample. Released when destroyed.
+class SampleClaim {
+ public:
+  explicit SampleClaim(int fd) : fd_(fd) {}
+  ~SampleClaim();
+  SampleClaim(const SampleClaim&) = delete;
+  SampleClaim& operator=(const SampleClaim&) = delete;
+
+ private:
+  int fd_;
 };
 
 class DatasetFolder {
@@ -67,6 +82,9 @@ class DatasetFolder {
   std::optional<nlohmann::json> sample_metadata(const std::string& folder) const;
   // True when that folder holds the sample whose hash is `hash` (not a stale one).
   bool holds(const std::string& folder, const std::string& hash) const;
+
+  // Sample s's claim, or null when another run holds it (no waiting).
+  std::unique_ptr<SampleClaim> try_claim(const Sample& s) const;
 
   // The sample's state on disk (reads its metadata.json files and the failure record).
   SampleRecord inspect(const Sample& s) const;
