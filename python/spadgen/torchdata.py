@@ -60,6 +60,23 @@ _NEEDS = {"counts": "counts.npy", "expected_counts": ("expected_counts.npy", "de
           "layer_depth": "ground_truth.exr", "layer_mask": "ground_truth.exr"}
 
 
+def _missing_field_message(run, field, need):
+    """Why a run lacks a field, and what gives it: the keys that write the stacks (named without their
+    container: a Zarr run's are .zarr stores), `spadgen sense` where the run saved its light and the field
+    is a noise-free rate, or leaving the field out."""
+    stems = [n[:-4] if n.endswith(".npy") else n for n in need]
+    keys = [Run._WRITTEN_BY[n] for n in need if n in Run._WRITTEN_BY]
+    msg = (f"{run.path}: field '{field}' needs {' or '.join(stems)}, which this run did not write"
+           + (f" (written with {' or '.join(dict.fromkeys(keys))})" if keys else ""))
+    rates = {"expected_counts", "detection_rate"}
+    if field in rates and any(f.startswith("light/") for f in run.files):
+        flag = "detection_rate" if field == "detection_rate" else "expected_counts"
+        msg += (f"; it saved the light, from which `spadgen sense {run.path} --set outputs.{flag}=true -o DIR` writes "
+                "it without rendering, bit for bit as a run would")
+    fields = tuple(f for f in DEFAULT_FIELDS if f != field)
+    return msg + f"; or leave '{field}' out of fields (e.g. fields={fields})"
+
+
 class _RunSamples(torch.utils.data.Dataset):
     """What RunDataset and DatasetSamples share: run folders cut into samples (whole images or patches),
     checked once, and a sample loaded as a dict of tensors (the keys of the module's table but "run")."""
@@ -79,7 +96,7 @@ class _RunSamples(torch.utils.data.Dataset):
             for f in self.fields:
                 need = _NEEDS[f] if isinstance(_NEEDS[f], tuple) else (_NEEDS[f],)
                 if not any(r.has(n) for n in need):
-                    raise ValueError(f"{r.path}: field '{f}' needs {' or '.join(need)}, which this run did not write")
+                    raise ValueError(_missing_field_message(r, f, need))
         ks = {r.K for r in runs_}
         if len(ks) > 1:
             raise ValueError(f"the runs have different K ({sorted(ks)}): their samples cannot share a batch")

@@ -38,6 +38,9 @@ RUNS = {
                                           "outputs.previews=false"]),
     "edge_glint": ("multi_object.json", ["camera.crop=[560,0,40,500]", "acquisition.gate_sweep.step_ps=3600",
                                          "outputs.previews=false"]),
+    # The saved light and the counts, no noise-free rates (the shipped dataset example's storage).
+    "light_only": ("flat_target.json", ["camera.crop=[507,245,10,10]", "render.samples_per_pixel=2", "outputs.light=true",
+                                        "outputs.detection_rate=false", "outputs.previews=false"]),
     # The paper's flat target at 0.8 m, central pixels, every 36 ps gate step (as tests/app/paper_test.cpp).
     "flat": ("flat_target.json", ["camera.position_m=[0,0,0.8]", "camera.crop=[507,245,10,10]",
                                   "render.samples_per_pixel=4", "outputs.previews=false"]),

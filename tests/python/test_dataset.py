@@ -190,7 +190,7 @@ def test_dataset_samples_layout_values_and_length(ds, dataset_dir):
     layout = expected_layout(K, N, 3, H, W)
     del layout["frames"]  # the dataset's runs did not write frames.npy
     layout.update({"sample": ((), torch.int64), "repeat": ((), torch.int64), "parameters": ((3,), torch.float32)})
-    with pytest.raises(ValueError, match="needs frames.npy"):
+    with pytest.raises(ValueError, match="needs frames, which this run did not write"):
         DatasetSamples(dataset_dir, fields=FIELDS)
     fields = tuple(f for f in FIELDS if f != "frames")
     samples = DatasetSamples(dataset_dir, fields=fields)

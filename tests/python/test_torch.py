@@ -97,7 +97,7 @@ def test_runs_that_cannot_share_a_batch_are_refused(sweep_run, make_run):
     posed = make_run("posed")
     with pytest.raises(ValueError, match="different K"):
         RunDataset([sweep_run, posed])
-    with pytest.raises(ValueError, match="needs frames.npy"):
+    with pytest.raises(ValueError, match=r"needs frames, which this run did not write \(written with outputs.frames\)"):
         RunDataset([posed], fields=("frames",))
     with pytest.raises(ValueError, match="unknown field"):
         RunDataset([sweep_run], fields=("count",))
@@ -109,3 +109,18 @@ def test_import_spadgen_does_not_import_torch():
     code = "import sys, spadgen; print('torch' in sys.modules); spadgen.RunDataset; print('torch' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True).stdout.split()
     assert out == ["False", "True"]
+
+
+def test_a_run_without_noise_free_rates_says_how_to_get_them(make_run, spadgen_bin, tmp_path):
+    """A run that saved the light but no rates (the shipped dataset example's storage): the default fields ask
+    for expected_counts, and the error names the sense command that writes it; that command's folder loads."""
+    run = make_run("light_only")
+    with pytest.raises(ValueError, match=r"spadgen sense .* --set outputs.expected_counts=true -o DIR") as e:
+        RunDataset([run])
+    assert "or leave 'expected_counts' out of fields (e.g. fields=('counts', 'depth', 'mask', 'layer_count'))" in str(e.value)
+    assert RunDataset([run], fields=("counts", "depth", "mask", "layer_count"))[0]["counts"].shape[1:] == (10, 10)
+    out = tmp_path / "sensed"
+    subprocess.run([spadgen_bin, "sense", str(run), "--set", "outputs.expected_counts=true", "-o", str(out), "-q"], check=True)
+    sensed = RunDataset([out])[0]
+    np.testing.assert_array_equal(sensed["counts"].numpy(), RunDataset([run], fields=("counts",))[0]["counts"].numpy())
+    assert sensed["expected_counts"].shape == sensed["counts"].shape
