@@ -67,6 +67,11 @@ std::string num(double v) {
 }
 
 // "mesh 2 'Cube'": the index always (names need not be unique), the name when there is one.
+// A count as digits when it is whole (1000000000000, not 1e+12).
+std::string num_whole(double v) {
+  return v == std::floor(v) && std::fabs(v) < 9e15 ? std::to_string(static_cast<long long>(v)) : num(v);
+}
+
 std::string label(const char* kind, size_t index, const std::string& name) {
   std::string s = std::string(kind) + " " + std::to_string(index);
   if (!name.empty()) s += " " + quoted(name);
@@ -1194,11 +1199,139 @@ std::string gltf_json(const std::string& path, const std::string& bytes, bool* b
   return bytes;
 }
 
+// The types of the glTF 2.0 properties spadgen reads, checked on the file's JSON: tinygltf reads a
+// property of the wrong type as absent and takes its default ("mesh": "0" left a node without its mesh,
+// "scale": "big" made it 1, a byteOffset of -4 or 2.5 was read as 0). Only types and signs: what the
+// values mean (indices in range, sizes that fit) the loader checks as it reads them.
+enum class Want { Index, Offset, Count, Integer, Number, Bool, String, Object, Numbers, Indices, Objects, IndexMap };
+struct Rule {
+  const char* key;
+  Want want;
+  size_t n = 0;  // Numbers: the length (0: any)
+  const char* object = nullptr;  // Object, Objects: the rules of its properties (a key of gltf_rules())
+};
+const std::map<std::string, std::vector<Rule>>& gltf_rules() {
+  static const std::map<std::string, std::vector<Rule>> rules = {
+      {"accessor", {{"bufferView", Want::Index}, {"byteOffset", Want::Offset}, {"componentType", Want::Integer},
+                    {"normalized", Want::Bool}, {"count", Want::Count}, {"type", Want::String}, {"max", Want::Numbers},
+                    {"min", Want::Numbers}, {"sparse", Want::Object, 0, "sparse"}, {"name", Want::String}}},
+      {"sparse", {{"count", Want::Count}, {"indices", Want::Object, 0, "sparse indices"}, {"values", Want::Object, 0, "sparse values"}}},
+      {"sparse indices", {{"bufferView", Want::Index}, {"byteOffset", Want::Offset}, {"componentType", Want::Integer}}},
+      {"sparse values", {{"bufferView", Want::Index}, {"byteOffset", Want::Offset}}},
+      {"bufferView", {{"buffer", Want::Index}, {"byteOffset", Want::Offset}, {"byteLength", Want::Count},
+                      {"byteStride", Want::Index}, {"target", Want::Integer}, {"name", Want::String}}},
+      {"buffer", {{"uri", Want::String}, {"byteLength", Want::Count}, {"name", Want::String}}},
+      {"node", {{"camera", Want::Index}, {"children", Want::Indices}, {"skin", Want::Index}, {"matrix", Want::Numbers, 16},
+                {"mesh", Want::Index}, {"rotation", Want::Numbers, 4}, {"scale", Want::Numbers, 3},
+                {"translation", Want::Numbers, 3}, {"weights", Want::Numbers}, {"name", Want::String}}},
+      {"mesh", {{"primitives", Want::Objects, 0, "primitive"}, {"weights", Want::Numbers}, {"name", Want::String}}},
+      {"primitive", {{"attributes", Want::IndexMap}, {"indices", Want::Index}, {"material", Want::Index},
+                     {"mode", Want::Integer}}},
+      {"material", {{"pbrMetallicRoughness", Want::Object, 0, "pbrMetallicRoughness"}, {"normalTexture", Want::Object, 0, "texture info"},
+                    {"occlusionTexture", Want::Object, 0, "texture info"}, {"emissiveTexture", Want::Object, 0, "texture info"},
+                    {"emissiveFactor", Want::Numbers, 3}, {"alphaMode", Want::String}, {"alphaCutoff", Want::Number},
+                    {"doubleSided", Want::Bool}, {"name", Want::String}}},
+      {"pbrMetallicRoughness", {{"baseColorFactor", Want::Numbers, 4}, {"baseColorTexture", Want::Object, 0, "texture info"},
+                                {"metallicFactor", Want::Number}, {"roughnessFactor", Want::Number},
+                                {"metallicRoughnessTexture", Want::Object, 0, "texture info"}}},
+      {"texture info", {{"index", Want::Index}, {"texCoord", Want::Index}, {"scale", Want::Number}, {"strength", Want::Number}}},
+      {"texture", {{"sampler", Want::Index}, {"source", Want::Index}, {"name", Want::String}}},
+      {"image", {{"uri", Want::String}, {"mimeType", Want::String}, {"bufferView", Want::Index}, {"name", Want::String}}},
+      {"sampler", {{"magFilter", Want::Integer}, {"minFilter", Want::Integer}, {"wrapS", Want::Integer},
+                   {"wrapT", Want::Integer}, {"name", Want::String}}},
+      {"camera", {{"type", Want::String}, {"perspective", Want::Object, 0, "perspective"},
+                  {"orthographic", Want::Object, 0, "orthographic"}, {"name", Want::String}}},
+      {"perspective", {{"aspectRatio", Want::Number}, {"yfov", Want::Number}, {"zfar", Want::Number}, {"znear", Want::Number}}},
+      {"orthographic", {{"xmag", Want::Number}, {"ymag", Want::Number}, {"zfar", Want::Number}, {"znear", Want::Number}}},
+      {"scene", {{"nodes", Want::Indices}, {"name", Want::String}}},
+  };
+  return rules;
+}
+
+// An integer written without a decimal point (tinygltf reads 0.0 as no value at all) in [lo, hi]: indices
+// and enums within tinygltf's int; byte offsets, lengths and counts up to 2^53 (past what a file holds:
+// the loader refuses them with its size).
+bool gltf_integer(const nlohmann::json& v, double lo, double hi = 2147483647.0) {
+  if (!v.is_number_integer()) return false;
+  const double d = v.get<double>();
+  return d >= lo && d <= hi;
+}
+constexpr double kMaxExact = 9007199254740992.0;
+
+void check_gltf_object(const std::string& path, const std::string& who, const nlohmann::json& o, const std::string& rules) {
+  for (const Rule& r : gltf_rules().at(rules)) {
+    const auto it = o.find(r.key);
+    if (it == o.end()) continue;
+    const nlohmann::json& v = *it;
+    const std::string at = who + ": " + r.key;
+    const auto refuse = [&](const std::string& expected) {
+      std::string shown = v.dump();
+      if (shown.size() > 40) shown = shown.substr(0, 37) + "...";
+      throw Error(path + ": " + at + ": found " + shown + ", expected " + expected);
+    };
+    switch (r.want) {
+      case Want::Index: if (!gltf_integer(v, 0)) refuse(v.is_number_float() ? "an integer >= 0, written without a decimal point" : "an integer >= 0"); break;
+      case Want::Offset: if (!gltf_integer(v, 0, kMaxExact)) refuse(v.is_number_float() ? "an integer >= 0, written without a decimal point" : "an integer >= 0"); break;
+      case Want::Count: if (!gltf_integer(v, 1, kMaxExact)) refuse(v.is_number_float() ? "an integer >= 1, written without a decimal point" : "an integer >= 1"); break;
+      case Want::Integer: if (!gltf_integer(v, -2147483648.0)) refuse("an integer"); break;
+      case Want::Number: if (!v.is_number()) refuse("a number"); break;
+      case Want::Bool: if (!v.is_boolean()) refuse("true or false"); break;
+      case Want::String: if (!v.is_string()) refuse("a string"); break;
+      case Want::Numbers:
+        if (!v.is_array() || (r.n && v.size() != r.n) || !std::all_of(v.begin(), v.end(), [](const nlohmann::json& e) { return e.is_number(); }))
+          refuse(r.n ? "an array of " + std::to_string(r.n) + " numbers" : std::string("an array of numbers"));
+        break;
+      case Want::Indices:
+        if (!v.is_array() || !std::all_of(v.begin(), v.end(), [](const nlohmann::json& e) { return gltf_integer(e, 0); }))
+          refuse("an array of integers >= 0");
+        break;
+      case Want::IndexMap:
+        if (!v.is_object() || !std::all_of(v.begin(), v.end(), [](const nlohmann::json& e) { return gltf_integer(e, 0); }))
+          refuse("an object of accessor indices (integers >= 0)");
+        break;
+      case Want::Object:
+        if (!v.is_object()) refuse("an object");
+        check_gltf_object(path, at, v, r.object);
+        break;
+      case Want::Objects:
+        if (!v.is_array()) refuse("an array of objects");
+        for (size_t i = 0; i < v.size(); ++i) {
+          const std::string item = who + " " + r.object + " " + std::to_string(i);
+          if (!v[i].is_object()) throw Error(path + ": " + item + ": found " + v[i].dump().substr(0, 40) + ", expected an object");
+          check_gltf_object(path, item, v[i], r.object);
+        }
+        break;
+    }
+  }
+}
+
+void check_gltf_types(const std::string& path, const nlohmann::json& doc) {
+  static const std::vector<std::pair<const char*, const char*>> lists = {
+      {"accessors", "accessor"}, {"bufferViews", "bufferView"}, {"buffers", "buffer"}, {"nodes", "node"},
+      {"meshes", "mesh"}, {"materials", "material"}, {"textures", "texture"}, {"images", "image"},
+      {"samplers", "sampler"}, {"cameras", "camera"}, {"scenes", "scene"}};
+  for (const auto& [list, kind] : lists) {
+    const auto it = doc.find(list);
+    if (it == doc.end()) continue;
+    if (!it->is_array()) throw Error(path + ": " + list + ": found " + it->dump().substr(0, 40) + ", expected an array of objects");
+    for (size_t i = 0; i < it->size(); ++i) {
+      const nlohmann::json& o = (*it)[i];
+      const std::string name = o.is_object() && o.contains("name") && o["name"].is_string() ? o["name"].get<std::string>() : "";
+      const std::string who = label(kind, i, name);
+      if (!o.is_object()) throw Error(path + ": " + who + ": found " + o.dump().substr(0, 40) + ", expected an object");
+      check_gltf_object(path, who, o, kind);
+    }
+  }
+  if (const auto it = doc.find("scene"); it != doc.end() && !gltf_integer(*it, 0))
+    throw Error(path + ": scene: found " + it->dump().substr(0, 40) + ", expected the index of a scene (an integer >= 0)");
+}
+
 // What tinygltf would otherwise meet unprepared, checked on the file's JSON first: extensions it cannot
 // decode (Draco and meshopt compression leave accessors without data, which tinygltf reports as a broken
 // bufferView), and external buffers and images that are missing, not regular files or too large.
 void check_before_tinygltf(const std::string& path, const nlohmann::json& doc) {
   if (!doc.is_object()) throw Error(path + ": expected a JSON object at the top of the glTF file");
+  check_gltf_types(path, doc);
   if (const auto it = doc.find("extensionsRequired"); it != doc.end() && it->is_array())
     for (const nlohmann::json& e : *it)
       if (e.is_string() && !kSupportedExtensions.count(e.get<std::string>())) {
@@ -1222,6 +1355,9 @@ void check_before_tinygltf(const std::string& path, const nlohmann::json& doc) {
       if (uri.rfind("data:", 0) == 0) continue;
       const std::string name = b.contains("name") && b["name"].is_string() ? b["name"].get<std::string>() : "";
       const std::string who = label(buffer ? "buffer" : "image", i, name);
+      if (std::filesystem::path(uri_decode(uri)).is_absolute() || uri.find("://") != std::string::npos)
+        throw Error(path + ": " + who + ": its uri " + quoted(uri) +
+                    " is absolute; expected a path relative to the glTF file's folder, or a data: URI");
       std::string file = (dir / uri_decode(uri)).string();
       std::string problem = file_problem(file, buffer ? kMaxGltfFileBytes : kMaxImageFileBytes);
       if (problem == "does not exist" && uri_decode(uri) != uri) {
@@ -1236,6 +1372,12 @@ void check_before_tinygltf(const std::string& path, const nlohmann::json& doc) {
                       (dir.empty() ? std::string(".") : dir.string()));
       } else if (!problem.empty()) {
         throw Error(path + ": " + who + ": its file " + quoted(uri) + " " + problem);
+      } else if (buffer && b.contains("byteLength") && b["byteLength"].is_number()) {
+        std::error_code ec;
+        const uintmax_t size = std::filesystem::file_size(file, ec);
+        if (!ec && b["byteLength"].get<double>() > double(size))
+          throw Error(path + ": " + who + ": byteLength is " + num_whole(b["byteLength"].get<double>()) + " but its file " + quoted(uri) +
+                      " holds " + std::to_string(size) + " bytes; expected a byteLength of at most the file's size");
       }
     }
   }

@@ -16,6 +16,7 @@
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <fstream>
 #include <iterator>
 #include <stdexcept>
@@ -702,6 +703,54 @@ TEST_F(BrokenGltf, AnUndecodableDataUriIsQuotedShort) {
   expect_names_file(msg);
   EXPECT_THAT(msg, HasSubstr("data:application/octet-stream;base64,AAAAAAAAAAA... (4037 characters)"));
   EXPECT_LT(msg.size(), 400u) << msg.size();
+}
+
+// A property of the wrong type or sign is named with its element (tinygltf read it as absent and took its
+// default: a node without its mesh, scale 1, a byteOffset of 0); an absolute uri, and a buffer longer than
+// its file, are named with the buffer.
+TEST_F(BrokenGltf, PropertiesOfTheWrongTypeAreNamedNotDefaulted) {
+  const auto with = [&](const std::function<void(Gltf&)>& edit, Gltf::Form form = Gltf::Form::External) {
+    Gltf g;
+    g.node({{"mesh", g.triangle_mesh()}, {"name", "n"}});
+    edit(g);
+    const std::string msg = error_of(g, form);
+    expect_names_file(msg);
+    return msg;
+  };
+  EXPECT_THAT(with([](Gltf& g) { g.doc["bufferViews"][0]["byteOffset"] = -4; }),
+              HasSubstr("bufferView 0: byteOffset: found -4, expected an integer >= 0"));
+  EXPECT_THAT(with([](Gltf& g) { g.doc["bufferViews"][0]["byteOffset"] = 2.5; }),
+              HasSubstr("bufferView 0: byteOffset: found 2.5, expected an integer >= 0, written without a decimal point"));
+  EXPECT_THAT(with([](Gltf& g) { g.doc["accessors"][0]["byteOffset"] = -1000000; }),
+              HasSubstr("accessor 0: byteOffset: found -1000000, expected an integer >= 0"));
+  EXPECT_THAT(with([](Gltf& g) { g.doc["nodes"][0]["mesh"] = "0"; }), HasSubstr("node 0 'n': mesh: found \"0\", expected an integer >= 0"));
+  EXPECT_THAT(with([](Gltf& g) { g.doc["nodes"][0]["scale"] = "big"; }),
+              HasSubstr("node 0 'n': scale: found \"big\", expected an array of 3 numbers"));
+  EXPECT_THAT(with([](Gltf& g) { g.doc["nodes"][0]["translation"] = {0, 0, "x"}; }),
+              HasSubstr("node 0 'n': translation: found [0,0,\"x\"], expected an array of 3 numbers"));
+  EXPECT_THAT(with([](Gltf& g) { g.doc["meshes"][0]["primitives"][0]["attributes"]["POSITION"] = -1; }),
+              HasSubstr("mesh 0 'Tri' primitive 0: attributes: found {\"NORMAL\":1,\"POSITION\":-1}, expected an object of accessor indices"));
+  EXPECT_THAT(with([](Gltf& g) { g.doc["materials"] = {{{"pbrMetallicRoughness", {{"roughnessFactor", "0.5"}}}}}; }),
+              HasSubstr("material 0: pbrMetallicRoughness: roughnessFactor: found \"0.5\", expected a number"));
+  EXPECT_THAT(with([](Gltf& g) { g.doc["scene"] = "main"; }), HasSubstr("scene: found \"main\", expected the index of a scene"));
+  // 0.0 is not read as an index by tinygltf (the node had no mesh): refused, saying why
+  EXPECT_THAT(with([](Gltf& g) { g.doc["nodes"][0]["mesh"] = 0.0; }),
+              HasSubstr("node 0 'n': mesh: found 0.0, expected an integer >= 0, written without a decimal point"));
+  Gltf ok;
+  ok.node({{"mesh", ok.triangle_mesh()}});
+  EXPECT_EQ(spadgen::scenes::load_gltf(ok.write(dir_.path(), "ok", Gltf::Form::External)).meshes.size(), 1u);
+  // buffers (written by Gltf::write, edited in the file): an absolute path, and a byteLength past the file's end
+  const auto buffer_error = [&](const std::string& key, const json& value) {
+    path_ = ok.write(dir_.path(), "buf", Gltf::Form::External);
+    std::ifstream in(path_);
+    json d = json::parse(in);
+    d["buffers"][0][key] = value;
+    write_file(path_, d.dump());
+    return load_error(path_);
+  };
+  const std::string abs = (dir_.path() / "buf.bin").string();
+  EXPECT_THAT(buffer_error("uri", abs), HasSubstr("buffer 0: its uri '" + abs + "' is absolute; expected a path relative to the glTF file's folder"));
+  EXPECT_THAT(buffer_error("byteLength", int64_t{1000000000000}), HasSubstr("buffer 0: byteLength is 1000000000000 but its file 'buf.bin' holds 78 bytes"));
 }
 
 TEST_F(BrokenGltf, IndexOutOfRange) {
