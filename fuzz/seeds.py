@@ -6,7 +6,10 @@
                          the README and the hardening tests use
   OUT/seeds/gltf/        the shipped glTF files and tests/data/gltf with their buffers embedded, small
                          hand-made files for each feature the loader reads, each as .gltf and as .glb
-  OUT/scene_file.dict, OUT/set.dict, OUT/gltf.dict   libFuzzer dictionaries (keys, choices, JSON tokens)
+  OUT/seeds/dataset/     the shipped dataset files, and small ones on flat_target.json with every
+                         distribution, seeds, repeats and a grid over two scenes
+  OUT/scene_file.dict, OUT/set.dict, OUT/gltf.dict, OUT/dataset.dict   libFuzzer dictionaries (keys,
+                         choices, JSON tokens)
 
 Usage: fuzz/seeds.py OUT   (from anywhere; the repository is this file's parent folder)
 """
@@ -322,6 +325,45 @@ def embed(path):
     return doc, blobs[0] if len(blobs) == 1 else None
 
 
+DATASET_WORDS = ["description", "seed", "scenes", "samples", "set", "grid", "random", "seeds", "repeats", "uniform",
+                 "log_uniform", "normal", "uniform_int", "choice", "min", "max", "light", "chip", "noise", "per_sample",
+                 "../../scenes/paper/flat_target.json", "../../scenes/paper/test_chart.json", "nodes.target.",
+                 "materials.white_paper.", "translation_m[2]", "rotation_deg[1]", "scale[0]", "base_color[0]",
+                 "roughness", "transmission"]
+
+
+def dataset_seeds(out, keys):
+    d = out / "seeds" / "dataset"
+    d.mkdir(parents=True, exist_ok=True)
+    for f in sorted((ROOT / "examples/datasets").glob("*.json")):
+        (d / f.name).write_bytes(f.read_bytes())
+    flat = '"scenes": ["../../scenes/paper/flat_target.json"]'
+    texts = [
+        '{%s}' % flat,
+        '{%s, "samples": 5, "seed": 7}' % flat,
+        '{%s, "samples": 100000000, "grid": {"laser.average_power_mW": [1, 2, 3]}}' % flat,
+        '{"scenes": ["../../scenes/paper/flat_target.json", "../../scenes/paper/test_chart.json"], '
+        '"grid": {"camera.f_number": [1.4, 2.8], "sensor.preset": ["pixel_A", "pixel_B"]}}',
+        '{%s, "samples": 4, "random": {"laser.average_power_mW": {"uniform": [1, 5]}, '
+        '"ambient.illuminance_lux": {"log_uniform": [1, 1000]}, '
+        '"nodes.target.translation_m[2]": {"normal": [0, 0.1], "min": -0.2, "max": 0.2}, '
+        '"acquisition.frames": {"uniform_int": [1, 255]}, "sensor.preset": {"choice": ["pixel_A", "pixel_B"]}}}' % flat,
+        '{%s, "samples": 3, "set": {"render.samples_per_pixel": 2, "camera.crop": [0, 0, 8, 8]}, '
+        '"seeds": {"chip": 1, "light": "per_sample"}, "repeats": 3}' % flat,
+        '// c\n{%s, /* c */ "random": {"materials.white_paper.roughness": {"uniform": [0.1, 0.9]}}}' % flat,
+    ]
+    for i, text in enumerate(texts):
+        (d / ("dataset_%02d.json" % i)).write_text(text)
+    with open(out / "dataset.dict", "w") as f:
+        f.write("# dataset-file keys, distributions, scene paths and scene-file keys (fuzz/seeds.py)\n")
+        for w in DATASET_WORDS:
+            f.write(dict_entry('"%s"' % w))
+        for key, _, _, _ in keys:
+            f.write(dict_entry('"%s"' % key))
+        for t in JSON_TOKENS:
+            f.write(dict_entry(t))
+
+
 def gltf_seeds(out):
     d = out / "seeds" / "gltf"
     d.mkdir(parents=True, exist_ok=True)
@@ -344,6 +386,7 @@ def main():
     set_seeds(out, keys)
     scene_file_seeds(out)
     gltf_seeds(out)
+    dataset_seeds(out, keys)
 
 
 if __name__ == "__main__":
