@@ -106,6 +106,8 @@ Distribution read_distribution(const Reader& rd, const json& v, const std::strin
     (std::string(bound) == "min" ? d.min : d.max) = rd.number(v.at(bound), where + "/" + bound, "a number");
   }
   if (d.kind == Distribution::Kind::Normal) {
+    if (d.min && d.max && !(*d.min < *d.max))
+      rd.fail(where, "has min " + describe(v.at("min")) + " and max " + describe(v.at("max")) + "; expected min < max");
     const double lo = d.min ? (*d.min - d.a) / d.b : -INFINITY, hi = d.max ? (*d.max - d.a) / d.b : INFINITY;
     const double mass = normal_cdf(hi) - normal_cdf(lo);
     if (!(mass >= 1e-3))
@@ -319,10 +321,17 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
       s.random.push_back({it.key(), d, it.value()});
     }
   }
-  if (s.repeats > 1)
-    for (const std::string& key : seen)
-      if (key == "outputs.light")
-        rd.fail("/repeats", "is " + std::to_string(s.repeats) + ", which needs the saved light: remove outputs.light from set, grid and random");
+  // Realisations re-sample the noise from each sample's saved light, so `repeats` saves it (outputs.light
+  // true for every sample): the file may say so too, not otherwise.
+  if (s.repeats > 1 && seen.count("outputs.light")) {
+    const auto in_set = std::find_if(s.set.begin(), s.set.end(), [](const auto& kv) { return kv.first == "outputs.light"; });
+    const std::string why = "repeats " + std::to_string(s.repeats) + " re-samples each sample's noise from its saved light, which it saves";
+    if (in_set == s.set.end())
+      rd.fail("/repeats", "is " + std::to_string(s.repeats) + ", and outputs.light varies per sample (grid or random); " + why +
+                              " in every sample: remove outputs.light from grid and random");
+    if (in_set->second != json(true))
+      rd.fail("/set/outputs.light", "is " + in_set->second.dump() + ", but " + why + ": set it true, or remove it");
+  }
   // Names of glTF nodes and materials are known only to the glTF: each scene is loaded once with the
   // edits of its first valid sample, so that a misspelt name fails here rather than in every sample. A
   // sample whose values make an invalid scene together (a crop outside a sensor a grid shrinks) is

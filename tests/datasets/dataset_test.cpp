@@ -63,7 +63,17 @@ TEST(DatasetFile, ErrorsNameTheKeyAndWhatWasExpected) {
   EXPECT_THAT(error_of("\"set\": {\"camera.f_number\": 2}, \"grid\": {\"camera.f_number\": [2, 4]}"),
               HasSubstr("varies camera.f_number a second time"));
   EXPECT_THAT(error_of("\"seeds\": {\"chips\": 3}"), HasSubstr("/seeds/chips: unknown key; did you mean chip?"));
-  EXPECT_THAT(error_of("\"repeats\": 2, \"set\": {\"outputs.light\": false}"), HasSubstr("needs the saved light"));
+  // repeats saves the light: outputs.light true may be said too (the shipped example says it), not false or varied
+  EXPECT_THAT(error_of("\"repeats\": 2, \"set\": {\"outputs.light\": false}"),
+              HasSubstr("/set/outputs.light: is false, but repeats 2 re-samples each sample's noise from its saved light, which it "
+                        "saves: set it true, or remove it"));
+  EXPECT_THAT(error_of("\"repeats\": 2, \"grid\": {\"outputs.light\": [true, false]}"),
+              HasSubstr("/repeats: is 2, and outputs.light varies per sample (grid or random)"));
+  EXPECT_EQ(parse_dataset_text("{\"scenes\": [\"" + kScenes + "flat_target.json\"], \"repeats\": 2, \"set\": {\"outputs.light\": true}}",
+                               "test_dataset.json").repeats, 2);
+  // a truncated normal whose bounds are the wrong way round says so (it said "keeps a fraction -0.84")
+  EXPECT_THAT(error_of("\"random\": {\"camera.f_number\": {\"normal\": [2, 1], \"min\": 4, \"max\": 1.4}}"),
+              HasSubstr("/random/camera.f_number: has min 4 and max 1.4; expected min < max"));
 }
 
 TEST(DatasetFile, GltfNodesAndMaterialsAreCheckedAgainstTheGltf) {
