@@ -152,6 +152,9 @@ void DatasetFolder::claim() const {
                   "\" (only \"samples\" may change, to add samples); use another folder (-o) or remove " + dir_.string());
     }
   } else {
+    if (fs::exists(dir_ / "metadata.json", ec))
+      throw Error(dir_.string() + " is a run folder (it holds metadata.json), not a dataset folder; expected an empty "
+                  "folder or a dataset folder (with its dataset.json): use another folder (-o)");
     for (const auto& e : fs::directory_iterator(dir_)) {
       const std::string name = e.path().filename().string();
       if (kOwnEntries.count(name) || name.rfind(".dataset.json.tmp", 0) == 0) continue;
