@@ -119,6 +119,22 @@ class Detections:
     source: dict
 
 
+def _not_a_run_why(path):
+    """Why a folder without metadata.json is not a run, and where the runs are when it holds some."""
+    if not os.path.exists(path):
+        return "no such folder"
+    if not os.path.isdir(path):
+        return "not a folder"
+    if os.path.isfile(os.path.join(path, "dataset.json")):
+        return ("a dataset folder, not a run folder: spadgen.open_dataset() opens it (its samples' runs are in "
+                "samples/)")
+    repeats = sorted(n for n in os.listdir(path) if os.path.isfile(os.path.join(path, n, "metadata.json")))
+    if repeats:
+        return (f"not a run folder itself; it holds {len(repeats)} run folder(s): {', '.join(repeats[:4])}"
+                + (", ..." if len(repeats) > 4 else "") + " (spadgen sense --repeats writes one per realisation)")
+    return "not a spadgen run folder (no metadata.json; a run writes it last, so a folder without it is incomplete)"
+
+
 class Run:
     """A run folder. Every output is an attribute; asking for a file the run did not write raises
     FileNotFoundError naming the scene-file key that writes it (never None)."""
@@ -135,15 +151,29 @@ class Run:
         self.path = os.fspath(path)
         meta = os.path.join(self.path, "metadata.json")
         if not os.path.isfile(meta):
-            raise FileNotFoundError(f"{self.path}: not a spadgen run folder (no metadata.json; a run writes it last, "
-                                    "so a folder without it is incomplete)")
-        with open(meta, encoding="utf-8") as f:
-            self.metadata = json.load(f)
+            raise FileNotFoundError(f"{self.path}: " + _not_a_run_why(self.path))
+        try:
+            with open(meta, encoding="utf-8") as f:
+                self.metadata = json.load(f)
+        except (UnicodeDecodeError, json.JSONDecodeError) as e:
+            raise ValueError(f"{meta}: not valid JSON ({e}); spadgen publishes a run folder whole, so the file was damaged "
+                             "or cut short afterwards: restore it, or run the scene again") from e
+        if not isinstance(self.metadata, dict) or not isinstance(self.metadata.get("files"), list):
+            raise ValueError(f"{meta}: not a spadgen run's metadata (no list of files)")
         self.files = list(self.metadata["files"])
         self._cache = {}
 
     def __repr__(self):
         return f"Run({self.path!r}, {self.width} x {self.height}, {self.mode}, K = {self.K})"
+
+    def _meta(self, key):
+        """metadata.json's `key`; a run of another spadgen version without it is named as such."""
+        if key not in self.metadata:
+            from ._version import __version__
+            raise KeyError(f"{os.path.join(self.path, 'metadata.json')} has no {key!r}: the run was written by spadgen "
+                           f"{self.metadata.get('spadgen_version', '(unknown)')}, and this package reads runs of spadgen "
+                           f"{__version__}: run the scene again with it")
+        return self.metadata[key]
 
     # ---- what the run is --------------------------------------------------------------------------------
 
@@ -249,15 +279,26 @@ class Run:
             name += ".npy"
         path = self._require(name)
         if path not in self._cache:
+            if not os.path.exists(path):
+                raise FileNotFoundError(f"{path}: listed in {os.path.join(self.path, 'metadata.json')} (files) but missing: "
+                                        "restore it, or run the scene again")
             if path.endswith(".zarr"):
                 try:
                     import zarr
                 except ImportError as e:
                     raise ImportError(f"{path} is a Zarr store (outputs.storage = zarr): reading it needs zarr-python "
                                       "(Debian: python3-zarr)") from e
-                self._cache[path] = zarr.open_array(path, mode="r")
+                try:
+                    self._cache[path] = zarr.open_array(path, mode="r")
+                except Exception as e:  # zarr's errors do not name the store
+                    raise ValueError(f"{path}: not a readable Zarr array ({type(e).__name__}: {e}); damaged after the run "
+                                     "published it: restore it, or run the scene again") from e
             else:
-                self._cache[path] = np.load(path, mmap_mode="r")
+                try:
+                    self._cache[path] = np.load(path, mmap_mode="r")
+                except ValueError as e:
+                    raise ValueError(f"{path}: not a readable .npy file ({e}): cut short or damaged after the run published "
+                                     "it: restore it, or run the scene again") from e
         return self._cache[path]
 
     def exr(self, name):
@@ -393,7 +434,7 @@ class Run:
     def layers(self):
         """Every surface along each pixel's ray (Layers: count, range, transmittance)."""
         gt = self.ground_truth
-        n = int(self.metadata["ground_truth_layers"])
+        n = int(self._meta("ground_truth_layers"))
         shape = (n, self.height, self.width)
         rng = np.stack([gt[f"layer{i}.range"] for i in range(n)]) if n else np.empty(shape, np.float32)
         tr = np.stack([gt[f"layer{i}.transmittance"] for i in range(n)]) if n else np.empty(shape, np.float32)
@@ -402,7 +443,7 @@ class Run:
     def object_slots(self):
         """The objects along each pixel's ray, what each returns and whether it is detectable (ObjectSlots)."""
         gt = self.ground_truth
-        n = int(self.metadata["ground_truth_objects"])
+        n = int(self._meta("ground_truth_objects"))
         shape = (n, self.height, self.width)
 
         def slots(image, what, dtype=np.float32):

@@ -250,6 +250,40 @@ def test_gate_profile(sweep):
         sweep.gate_profile(sweep.width, 0)
 
 
+def test_a_damaged_or_other_folder_is_named_with_what_it_is(make_run, tmp_path):
+    """Files damaged after a run published them, a run of another version, and folders that are not runs: each
+    error names the file or folder and what it is (they were bare JSON, NumPy and KeyError messages)."""
+    import shutil
+    run = tmp_path / "run"
+    shutil.copytree(make_run("light_only"), run)
+    with open(run / "counts.npy", "r+b") as f:
+        f.truncate(200)
+    with pytest.raises(ValueError, match=f"{run / 'counts.npy'}: not a readable .npy file .*cut short or damaged"):
+        spadgen.open_run(run).counts
+    (run / "counts.npy").unlink()
+    with pytest.raises(FileNotFoundError, match=f"{run / 'counts.npy'}: listed in .*metadata.json \\(files\\) but missing"):
+        spadgen.open_run(run).counts
+    meta = json.loads((run / "metadata.json").read_text())
+    del meta["ground_truth_objects"]
+    meta["spadgen_version"] = "0.0.9"
+    (run / "metadata.json").write_text(json.dumps(meta))
+    with pytest.raises(KeyError, match="has no 'ground_truth_objects': the run was written by spadgen 0.0.9"):
+        spadgen.open_run(run).object_slots()
+    (run / "metadata.json").write_text('{"files": [')
+    with pytest.raises(ValueError, match=f"{run / 'metadata.json'}: not valid JSON .*damaged or cut short"):
+        spadgen.open_run(run)
+    with pytest.raises(FileNotFoundError, match="nothing: no such folder"):
+        spadgen.open_run(tmp_path / "nothing")
+    (tmp_path / "ds").mkdir()
+    (tmp_path / "ds" / "dataset.json").write_text("{}")
+    with pytest.raises(FileNotFoundError, match="a dataset folder, not a run folder: spadgen.open_dataset"):
+        spadgen.open_run(tmp_path / "ds")
+    (tmp_path / "repeats" / "repeat_000").mkdir(parents=True)
+    (tmp_path / "repeats" / "repeat_000" / "metadata.json").write_text("{}")
+    with pytest.raises(FileNotFoundError, match="holds 1 run folder\\(s\\): repeat_000"):
+        spadgen.open_run(tmp_path / "repeats")
+
+
 def test_what_a_run_did_not_write_is_named(make_run, tmp_path):
     posed = spadgen.open_run(make_run("posed"))
     with pytest.raises(FileNotFoundError, match="outputs.frames"):
