@@ -178,6 +178,7 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
   const scenes::ResolvedRun r = scenes::load_scene_file(scene_file, overrides);
   const RunConfig& c = r.config;
   const scenes::Scene scene = scenes::load_gltf(c.gltf_path, c.gltf_scene, c.edits);
+  (void)render::Camera(c.camera, scene);  // camera.gltf_camera names a camera of the glTF, as the run needs
   sensor::SensorModel sensor(sensor_stage(c));
   std::ostringstream o;
   o << "# resolved scene file " << c.scene_file << "\n" << r.resolved.dump(2) << "\n\n";

@@ -23,9 +23,19 @@ Camera::Camera(const CameraConfig& c, const scenes::Scene& scene)
   if (!c.gltf_camera.empty()) {
     const scenes::Camera* gc = scene.find_camera(c.gltf_camera);
     if (!gc) {
+      for (const std::string& o : scene.orthographic_cameras)
+        if (o == c.gltf_camera)
+          throw Error("camera.gltf_camera: camera '" + c.gltf_camera + "' in " + scene.source +
+                      " is orthographic; spadgen models a lens (a perspective camera): choose a perspective one, or "
+                      "place the camera with camera.position_m and camera.look_at_m");
       std::string names;
-      for (const scenes::Camera& cam : scene.cameras) names += (names.empty() ? "'" : ", '") + cam.name + "'";
-      throw Error("camera.gltf_camera: no camera named '" + c.gltf_camera + "' in " + scene.source +
+      bool unnamed = false;
+      for (const scenes::Camera& cam : scene.cameras) {
+        if (cam.name.empty()) unnamed = true;
+        else names += (names.empty() ? "'" : ", '") + cam.name + "'";
+      }
+      if (unnamed) names += std::string(names.empty() ? "" : ", and ") + "unnamed ones (name a camera's node in the glTF to choose it)";
+      throw Error("camera.gltf_camera: no perspective camera named '" + c.gltf_camera + "' in " + scene.source +
                   " (cameras: " + (names.empty() ? "none" : names) + ")");
     }
     const glm::dmat4& m = gc->world_from_camera;

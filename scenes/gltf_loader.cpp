@@ -1048,6 +1048,7 @@ void Loader::load_camera(size_t node, const glm::dmat4& world) {
   const std::string who = label("camera", static_cast<size_t>(n.camera), c.name) + " (" + node_label(m_, node) + ")";
   if (c.type == "orthographic") {
     warn(who + ": orthographic cameras are not used by spadgen; skipped");
+    scene_.orthographic_cameras.push_back(!n.name.empty() ? object_name(node) : c.name);
     return;
   }
   if (c.type != "perspective") fail(who, "type " + quoted(c.type) + " is neither perspective nor orthographic");

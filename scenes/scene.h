@@ -85,6 +85,7 @@ struct Scene {
   std::vector<Material> materials;
   std::vector<Texture> textures;
   std::vector<Camera> cameras;
+  std::vector<std::string> orthographic_cameras;  // their names (node's, else camera's): skipped, named if chosen
   std::vector<Light> lights;
   std::vector<std::string> warnings; // what spadgen does not use, once per element (also printed)
 

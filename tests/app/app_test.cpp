@@ -503,6 +503,14 @@ TEST(AppCommands, InfoWarnsAboutAGltfCameraOfAnotherAspectRatio) {
               ::testing::Not(HasSubstr("warning: camera.gltf_camera")));
 }
 
+// info checks camera.gltf_camera as the run does (it printed its summary, and the run refused)
+TEST(AppCommands, InfoRefusesACameraTheGltfDoesNotHave) {
+  const Result r = sh("info " + kScenes + "flat_target.json --set camera.gltf_camera=zzz");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("camera.gltf_camera: no perspective camera named 'zzz' in"));
+  EXPECT_THAT(r.output, HasSubstr("(cameras: 'spad_camera')"));
+}
+
 }  // namespace
 
 // detection_rate.npy keeps the flux where expected counts saturate: at 1000 times the power, lambda is

@@ -515,6 +515,7 @@ TEST(GltfLoader, CamerasWithNodeTransforms) {
   EXPECT_DOUBLE_EQ(b->aspect_ratio, 0.0);
   EXPECT_NEAR(glm::length(glm::dvec3(b->world_from_camera[0])), 1.0, 1e-12);  // scale removed
   EXPECT_TRUE(has_warning(s, "camera 1 'ortho' (node 1 'Top'): orthographic cameras are not used by spadgen; skipped"));
+  EXPECT_EQ(s.orthographic_cameras, std::vector<std::string>{"Top"});  // named when a scene file chooses it
   EXPECT_THAT(spadgen::scenes::summarize(s), HasSubstr("'Cam': yfov 28.6479"));
 }
 
