@@ -129,11 +129,17 @@ DatasetSpec spec_of_folder(const fs::path& dir) {
   return datasets::parse_dataset_text(body.dump(), file);
 }
 
-std::vector<SampleRecord> inspect_all(const DatasetFolder& folder) {
+// Every sample's record (about 0.15 ms each: its scene resolved, its folders' metadata read); past 10,000
+// samples with progress on stderr.
+std::vector<SampleRecord> inspect_all(const DatasetFolder& folder, bool progress) {
   std::vector<SampleRecord> records;
   const int64_t n = folder.spec().count();
   records.reserve(size_t(n));
-  for (int64_t i = 0; i < n; ++i) records.push_back(folder.inspect(datasets::make_sample(folder.spec(), i)));
+  Progress bar(size_t(n), progress && n > 10000, "samples inspected");
+  for (int64_t i = 0; i < n; ++i) {
+    records.push_back(folder.inspect(datasets::make_sample(folder.spec(), i)));
+    bar.tick();
+  }
   return records;
 }
 
@@ -255,9 +261,12 @@ void dataset_run(const DatasetOptions& options) {
   std::vector<Todo> todo;
   int64_t owned = 0, skipped = 0;
   Estimator estimator(spec.repeats, options.threads);
+  const int64_t mine = spec.count() / shard.count + (shard.index < spec.count() % shard.count ? 1 : 0);
+  Progress bar(size_t(mine), options.progress && mine > 10000, "samples inspected");
   for (int64_t i = 0; i < spec.count(); ++i) {
     if (!shard.owns(i)) continue;
     ++owned;
+    bar.tick();
     SampleRecord rec = folder.inspect(datasets::make_sample(spec, i));
     if (rec.status == Status::Done) {
       ++skipped;
@@ -360,7 +369,7 @@ void dataset_run(const DatasetOptions& options) {
     }
   }
 
-  const std::vector<SampleRecord> records = inspect_all(folder);
+  const std::vector<SampleRecord> records = inspect_all(folder, options.progress);
   folder.write_index(records);
   if (options.progress)
     std::fprintf(stderr, "spadgen: dataset %s: %s (this run: %lld generated, %lld skipped, %lld completed by another run, %zu failed)\n",
@@ -374,7 +383,7 @@ void dataset_run(const DatasetOptions& options) {
 std::string dataset_status(const std::string& dir) {
   const DatasetSpec spec = spec_of_folder(dir);
   const DatasetFolder folder(spec, dir);
-  const std::vector<SampleRecord> records = inspect_all(folder);
+  const std::vector<SampleRecord> records = inspect_all(folder, true);
   std::ostringstream o;
   o << dir << ": dataset " << spec.file << ", " << records.size() << " samples: " << status_counts(records) << "\n";
   for (Status st : {Status::Failed, Status::Stale, Status::Missing}) {
