@@ -144,10 +144,10 @@ std::vector<SampleRecord> inspect_all(const DatasetFolder& folder, bool progress
 }
 
 std::string status_counts(const std::vector<SampleRecord>& records) {
-  int64_t c[4] = {0, 0, 0, 0};
+  int64_t c[5] = {0, 0, 0, 0, 0};
   for (const SampleRecord& r : records) ++c[int(r.status)];
   return std::to_string(c[0]) + " done, " + std::to_string(c[1]) + " failed, " + std::to_string(c[2]) + " stale, " +
-         std::to_string(c[3]) + " missing";
+         std::to_string(c[3]) + " missing" + (c[4] ? ", " + std::to_string(c[4]) + " damaged" : std::string());
 }
 
 }  // namespace
@@ -326,7 +326,11 @@ void dataset_run(const DatasetOptions& options) {
     const auto sample_start = std::chrono::steady_clock::now();
     try {
       if (rec.hash.empty()) throw Error(rec.error);  // the sample's parameters make an invalid scene
+      // A sample rendered again (damaged, stale) has its realisations sensed again too: they hard-link its
+      // files, which are new ones now.
+      bool rendered = false;
       if (!folder.holds(s.folder(), rec.hash)) {
+        rendered = true;
         RunOptions r;
         r.scene_file = spec.scenes[size_t(s.scene)];
         r.out_dir = (dir / s.folder()).string();
@@ -337,7 +341,7 @@ void dataset_run(const DatasetOptions& options) {
         run(r);
       }
       for (int k = 1; k < spec.repeats; ++k) {
-        if (folder.holds(s.repeat_folder(k), rec.hash)) continue;
+        if (!rendered && folder.holds(s.repeat_folder(k), rec.hash)) continue;
         const fs::path rf = dir / s.repeat_folder(k);
         SenseOptions so;
         so.run_dir = (dir / s.folder()).string();
@@ -386,7 +390,7 @@ std::string dataset_status(const std::string& dir) {
   const std::vector<SampleRecord> records = inspect_all(folder, true);
   std::ostringstream o;
   o << dir << ": dataset " << spec.file << ", " << records.size() << " samples: " << status_counts(records) << "\n";
-  for (Status st : {Status::Failed, Status::Stale, Status::Missing}) {
+  for (Status st : {Status::Failed, Status::Stale, Status::Missing, Status::Damaged}) {
     std::vector<int64_t> which;
     for (const SampleRecord& r : records)
       if (r.status == st) which.push_back(r.sample.index);
@@ -394,6 +398,9 @@ std::string dataset_status(const std::string& dir) {
   }
   for (const SampleRecord& r : records)
     if (r.status == Status::Failed) o << "sample " << r.sample.index << " failed: " << r.error << "\n";
+  for (const SampleRecord& r : records)
+    if (r.status == Status::Damaged)
+      o << "sample " << r.sample.index << " damaged: " << r.error << " (`spadgen dataset run` generates it again)\n";
   return o.str();
 }
 

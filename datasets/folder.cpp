@@ -99,6 +99,7 @@ const char* status_name(Status s) {
     case Status::Failed: return "failed";
     case Status::Stale: return "stale";
     case Status::Missing: return "missing";
+    case Status::Damaged: return "damaged";
   }
   return "?";
 }
@@ -198,9 +199,21 @@ std::optional<json> DatasetFolder::sample_metadata(const std::string& folder) co
   return meta;
 }
 
+namespace {
+// The files a published folder's metadata.json lists that are not there.
+std::vector<std::string> gone_files(const fs::path& folder, const json& meta) {
+  std::vector<std::string> gone;
+  for (const json& name : meta["files"]) {
+    std::error_code ec;
+    if (name.is_string() && !fs::exists(folder / name.get<std::string>(), ec)) gone.push_back(name.get<std::string>());
+  }
+  return gone;
+}
+}  // namespace
+
 bool DatasetFolder::holds(const std::string& folder, const std::string& hash) const {
   const std::optional<json> meta = sample_metadata(folder);
-  return meta && (*meta)["dataset"].value("sample_hash", "") == hash;
+  return meta && (*meta)["dataset"].value("sample_hash", "") == hash && gone_files(dir_ / folder, *meta).empty();
 }
 
 SampleRecord DatasetFolder::inspect(const Sample& s) const {
@@ -214,6 +227,7 @@ SampleRecord DatasetFolder::inspect(const Sample& s) const {
     return rec;
   }
   bool done = true, stale = false;
+  std::vector<std::string> gone;  // listed files that are not there, relative to the sample's folder
   std::set<std::pair<dev_t, ino_t>> inodes;
   std::vector<std::string> folders = {s.folder()};
   for (int r = 1; r < spec_.repeats; ++r) folders.push_back(s.repeat_folder(r));
@@ -228,6 +242,7 @@ SampleRecord DatasetFolder::inspect(const Sample& s) const {
       continue;
     }
     const std::string prefix = f == 0 ? "" : folders[f].substr(s.folder().size()) + "/";
+    for (const std::string& g : gone_files(dir_ / folders[f], *meta)) gone.push_back(prefix + g);
     for (const json& name : (*meta)["files"]) {
       // metadata.json's size varies with its timing fields; the index and the card must not.
       if (name == "metadata.json") continue;
@@ -256,6 +271,14 @@ SampleRecord DatasetFolder::inspect(const Sample& s) const {
       if (meta->contains("/laser_photons_per_pulse/total_all_pixels"_json_pointer))
         rec.summary["laser_photons_per_pulse"] = (*meta)["laser_photons_per_pulse"]["total_all_pixels"].get<double>();
     }
+  }
+  if (done && !stale && !gone.empty()) {
+    rec.files.clear(), rec.bytes = 0, rec.summary = nullptr;
+    rec.status = Status::Damaged;
+    rec.error = "listed in metadata.json but gone: ";
+    for (size_t i = 0; i < gone.size() && i < 4; ++i) rec.error += (i ? ", " : "") + gone[i];
+    if (gone.size() > 4) rec.error += ", ... (" + std::to_string(gone.size()) + " files)";
+    return rec;
   }
   if (done && !stale) {
     rec.status = Status::Done;
@@ -322,7 +345,7 @@ std::string index_jsonl(const DatasetSpec& spec, const std::vector<SampleRecord>
       for (const auto& [name, size] : r.files) row["files"].push_back(name);
       row["ground_truth"] = r.summary;
     }
-    if (r.status == Status::Failed) row["error"] = r.error;
+    if (r.status == Status::Failed || r.status == Status::Damaged) row["error"] = r.error;
     out += row.dump() + "\n";
   }
   return out;
@@ -364,9 +387,9 @@ std::string dataset_card(const DatasetFolder& folder, const std::vector<SampleRe
     << fs::path(spec.file).filename().string() << "` (its resolved form: `dataset.json`):\n\n"
     << "```sh\nspadgen dataset run " << fs::path(spec.file).filename().string() << " -o DIR   # DIR: this folder\n```\n\n";
   o << "## Samples\n\n"
-    << "| samples | done | failed | stale | missing |\n|---|---|---|---|---|\n"
+    << "| samples | done | failed | stale | missing | damaged |\n|---|---|---|---|---|---|\n"
     << "| " << records.size() << " | " << count[Status::Done] << " | " << count[Status::Failed] << " | " << count[Status::Stale]
-    << " | " << count[Status::Missing] << " |\n\n";
+    << " | " << count[Status::Missing] << " | " << count[Status::Damaged] << " |\n\n";
   o << "Sample i is the folder `samples/<i, 6 digits>/` (a complete spadgen run folder: `metadata.json` lists its files, "
        "units and settings, and its `dataset` section the sample's parameters and seeds)";
   if (spec.repeats > 1)

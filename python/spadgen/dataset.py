@@ -24,7 +24,7 @@ from .run import open_run
 
 __all__ = ["Dataset", "Sample", "SampleNotDoneError", "open_dataset", "STATUSES", "SUMMARY_COLUMNS"]
 
-STATUSES = ("done", "failed", "stale", "missing")
+STATUSES = ("done", "failed", "stale", "missing", "damaged")
 # The ground-truth summary of a done sample (index.jsonl "ground_truth"), in index.csv's order.
 SUMMARY_COLUMNS = ("hit_fraction", "range_min_m", "range_max_m", "meshes_in_view", "max_layer_count",
                    "objects_in_view", "max_object_count", "multi_object_fraction", "objects_detectable",
@@ -91,6 +91,7 @@ class Sample:
                 "stale": " is stale: its folder holds an earlier version of it (the scene file, a glTF file or spadgen "
                          "changed since); `spadgen dataset run` generates it again, spadgen.open_run(folder) reads the old one",
                 "missing": " is missing: it has not been generated yet (`spadgen dataset run` generates it)",
+                "damaged": f" is damaged: {(self.error or '').strip()} (`spadgen dataset run` generates it again)",
             }.get(self.status, f" is {self.status}, not done"))
         if r not in self._runs:
             folder = self.folder if r == 0 else self.repeat_folders[r - 1]
@@ -188,7 +189,7 @@ class Dataset:
         return np.array([r["index"] for r in self.index], np.int64)
 
     def status_counts(self):
-        """{"done": n, "failed": n, "stale": n, "missing": n} over this selection."""
+        """{"done": n, "failed": n, "stale": n, "missing": n, "damaged": n} over this selection."""
         out = dict.fromkeys(STATUSES, 0)
         for r in self.index:
             out[r["status"]] = out.get(r["status"], 0) + 1
@@ -218,7 +219,7 @@ class Dataset:
     def select(self, status=None, where=None, **parameters):
         """The samples of this selection that match everything given:
 
-        status      "done", "failed", "stale", "missing", or several of them in a list or tuple;
+        status      "done", "failed", "stale", "missing", "damaged", or several of them in a list or tuple;
         where       a function of the index row (a dict as index.jsonl has it) returning true to keep it;
         **parameters  parameter key = value, equal by ==, a JSON array equal to a list or tuple; a dotted key
                     as select(**{"laser.average_power_mW": 2}), or with "__" for each dot: laser__average_power_mW=2.

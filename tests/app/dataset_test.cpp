@@ -134,6 +134,26 @@ TEST_F(Dataset, TwoRunsIntoOneFolderShareTheSamples) {
   EXPECT_FALSE(fs::exists(dir_ / "both/failed"));
 }
 
+// A done sample that lost a listed file (removed to save space, or a copy that left it out) is damaged, not
+// done: status names the file, the index says so, and the next run generates it again, whole.
+TEST_F(Dataset, ASampleThatLostAFileIsDamagedAndGeneratedAgain) {
+  write(dir_ / "d.json", small_dataset(3));
+  const std::string run = "dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q";
+  ASSERT_EQ(sh(run).code, 0);
+  fs::copy(dir_ / "out", dir_ / "reference", fs::copy_options::recursive);
+  fs::remove(dir_ / "out/samples/000001/counts.npy");
+  fs::remove(dir_ / "out/samples/000002_r01/counts.npy");
+  const Result st = sh("dataset status " + (dir_ / "out").string());
+  EXPECT_THAT(st.output, HasSubstr("3 samples: 1 done, 0 failed, 0 stale, 0 missing, 2 damaged"));
+  EXPECT_THAT(st.output, HasSubstr("sample 1 damaged: listed in metadata.json but gone: counts.npy"));
+  EXPECT_THAT(st.output, HasSubstr("sample 2 damaged: listed in metadata.json but gone: _r01/counts.npy"));
+  const Result again = sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string());
+  ASSERT_EQ(again.code, 0) << again.output;
+  EXPECT_THAT(again.output, HasSubstr("(this run: 2 generated, 1 skipped"));
+  EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output, HasSubstr("3 samples: 3 done, 0 failed, 0 stale, 0 missing\n"));
+  expect_same_dataset(dir_ / "reference", dir_ / "out");
+}
+
 TEST_F(Dataset, ShardsOnTheCommandLineSlurmAndKubernetesEqualTheSerialRun) {
   write(dir_ / "d.json", small_dataset(6));
   const Result serial = sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "serial").string() + " -q");

@@ -35,7 +35,7 @@ def test_opening_reads_the_index_spec_and_card(ds, dataset_dir):
     assert ds.parameter_keys == ["scene", "camera.width_px", "laser.average_power_mW", "ambient.illuminance_lux",
                                  "sensor.preset"]
     assert ds.numeric_parameter_keys == list(NUMERIC)
-    assert ds.status_counts() == {"done": 3, "failed": 1, "stale": 0, "missing": 0}
+    assert ds.status_counts() == {"done": 3, "failed": 1, "stale": 0, "missing": 0, "damaged": 0}
     assert repr(ds) == f"Dataset({str(dataset_dir)!r}, 4 samples: 3 done, 1 failed)"
 
 
@@ -117,7 +117,7 @@ def test_select_by_status_parameters_and_rows(ds):
         ds.select(status="ok")
     with pytest.raises(ValueError, match="no parameter 'laser_power'"):
         ds.select(laser_power=1)
-    assert set(STATUSES) == {"done", "failed", "stale", "missing"}
+    assert set(STATUSES) == {"done", "failed", "stale", "missing", "damaged"}
 
 
 def test_samples_are_their_folders_runs(ds, dataset_dir):
