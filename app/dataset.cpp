@@ -401,6 +401,19 @@ std::string dataset_status(const std::string& dir) {
   for (const SampleRecord& r : records)
     if (r.status == Status::Damaged)
       o << "sample " << r.sample.index << " damaged: " << r.error << " (`spadgen dataset run` generates it again)\n";
+  // Folders of samples past "samples" (the file asked for fewer since): kept, outside the index.
+  std::vector<int64_t> beyond;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(fs::path(dir) / "samples", ec)) {
+    const std::string n = e.path().filename().string();
+    if (n.size() == 6 && std::all_of(n.begin(), n.end(), [](char ch) { return ch >= '0' && ch <= '9'; }) &&
+        std::stoll(n) >= spec.count())
+      beyond.push_back(std::stoll(n));
+  }
+  std::sort(beyond.begin(), beyond.end());
+  if (!beyond.empty())
+    o << "beyond the " << spec.count() << " samples: the folders of samples " << datasets::ranges_text(beyond)
+      << " (kept, not in the index; a larger \"samples\" takes them again)\n";
   return o.str();
 }
 

@@ -152,6 +152,11 @@ TEST_F(Dataset, ASampleThatLostAFileIsDamagedAndGeneratedAgain) {
   EXPECT_THAT(again.output, HasSubstr("(this run: 2 generated, 1 skipped"));
   EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output, HasSubstr("3 samples: 3 done, 0 failed, 0 stale, 0 missing\n"));
   expect_same_dataset(dir_ / "reference", dir_ / "out");
+  // fewer samples: the folders past them stay, outside the index, and status says so
+  write(dir_ / "d2.json", small_dataset(2));
+  ASSERT_EQ(sh("dataset run " + (dir_ / "d2.json").string() + " -o " + (dir_ / "out").string() + " -q").code, 0);
+  EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output,
+              HasSubstr("beyond the 2 samples: the folders of samples 2 (kept, not in the index"));
 }
 
 TEST_F(Dataset, ShardsOnTheCommandLineSlurmAndKubernetesEqualTheSerialRun) {
