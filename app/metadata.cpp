@@ -256,6 +256,7 @@ json metadata(const scenes::ResolvedRun& resolved, const std::vector<std::string
   for (const std::string& w : scene_warnings) meta["warnings"].push_back(w);
   meta["resolved_scene"] = resolved.resolved;
   meta["files"] = r.files;
+  meta["file_bytes"] = ojson::parse(r.file_bytes.dump());
   if (r.sense) meta["sense"] = ojson::parse(r.sense->dump());
   // Everything above depends only on the scene and the seed; "run" is how this run went.
   meta["run"] = ojson::parse(run_json(r).dump());

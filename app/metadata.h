@@ -72,6 +72,7 @@ struct RunTimes {
 
 struct RunRecord {
   std::vector<std::string> files;  // as published, metadata.json last
+  nlohmann::json file_bytes = nlohmann::json::object();  // each but metadata.json: writers::bytes_on_disk
   nlohmann::json camera;           // camera_json()
   double photons_per_pulse_emitted = 0.0;
   double laser_total = 0.0, out_of_window_total = 0.0;  // photons per pulse, summed over the image

@@ -163,11 +163,11 @@ RunResult run(const RunOptions& options) {
   record.times.tiles_seconds = render_seconds;
   record.times.take_stages(clock);
   warn(light_warnings(cfg, img, record));
-  record.times.finish_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - tiles_done).count();
-  writers::write_json(staging.path("metadata.json"), metadata(resolved, warnings, sensor, prov, axis, record));
-
   InterruptGuard::check();
   outputs.commit();
+  record.file_bytes = file_bytes(staging.path(""), files);  // every file complete: metadata.json goes last
+  record.times.finish_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - tiles_done).count();
+  writers::write_json(staging.path("metadata.json"), metadata(resolved, warnings, sensor, prov, axis, record));
   staging.publish(files);
   if (options.progress)
     std::fprintf(stderr, "spadgen: wrote %zu files to %s in %.1f s\n", files.size(), out.string().c_str(), progress.seconds());

@@ -33,6 +33,13 @@ void order_files(std::vector<std::string>& files) {
   });
 }
 
+nlohmann::json file_bytes(const std::filesystem::path& dir, const std::vector<std::string>& files) {
+  nlohmann::json bytes = nlohmann::json::object();
+  for (const std::string& f : files)
+    if (f != "metadata.json") bytes[f] = writers::bytes_on_disk((dir / f).string());
+  return bytes;
+}
+
 ThreadLimit::ThreadLimit(int threads) {
   if (threads < 0 || threads > kMaxThreads)
     throw Error("--threads: expected 0 (every core) to " + std::to_string(kMaxThreads) + ", found " + std::to_string(threads));

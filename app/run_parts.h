@@ -1,6 +1,7 @@
 // What `run` and `sense` share: the image they cover, the time axis the sensor needs, the order of the
 // files metadata.json lists. Internal to app/.
 #pragma once
+#include <nlohmann/json.hpp>
 #include <tbb/global_control.h>
 
 #include <filesystem>
@@ -25,6 +26,10 @@ TimeAxis time_axis(const RunConfig& c, const sensor::SensorModel& s);
 // The files in the order metadata.json lists them and the staging folder publishes them: by name,
 // metadata.json last.
 void order_files(std::vector<std::string>& files);
+
+// The bytes of each file of the staging folder `dir` but metadata.json (writers::bytes_on_disk), for
+// metadata.json's file_bytes: written once every other file is complete.
+nlohmann::json file_bytes(const std::filesystem::path& dir, const std::vector<std::string>& files);
 
 // The command's worker threads while it lives: TBB's (all cores when threads <= 0) and OpenEXR's pool,
 // which compresses and decompresses the images with as many.

@@ -320,10 +320,17 @@ std::vector<RunResult> sense(const SenseOptions& options) {
       }
   // The run's files this call links must all be there, before any work (a user may have removed one to
   // save space: the run is then incomplete for sense).
-  for (const std::string& f : linked)
+  for (const std::string& f : linked) {
     if (!fs::exists(src / f))
       throw Error((src / f).string() + ": listed in " + (src / "metadata.json").string() +
                   " (files) but missing; sense links the run's files as they are: restore it, or run the scene again");
+    // ... and whole: as many bytes as the run wrote (a copy cut short would be linked as it is)
+    if (meta.contains("file_bytes") && meta["file_bytes"].contains(f) && meta["file_bytes"][f].is_number_integer())
+      if (const int64_t want = meta["file_bytes"][f].get<int64_t>(), have = writers::bytes_on_disk((src / f).string()); have != want)
+        throw Error((src / f).string() + ": holds " + std::to_string(have) + " bytes, and the run wrote " + std::to_string(want) +
+                    " (" + (src / "metadata.json").string() + ", file_bytes): changed or cut short since; sense links the "
+                    "run's files as they are: restore it, or run the scene again");
+  }
   // Memory of one realisation (the estimate includes the renderer's paths, which sense does not trace: an
   // upper bound; the realisations share the rates). Disk: the stacks the run's folder provides are links
   // and take none; each further realisation writes its own counts and frames (its images are links).
@@ -463,12 +470,13 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     // The realisations' images so far (a sense with --repeats writes them one after the other).
     record.times.finish_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - tiles_done).count();
     record.sense = json{{"from", src.string()}, {"repeat", r}, {"repeats", runs.size()}};
-    writers::write_json(staging[r]->path("metadata.json"), metadata(runs[r], scene_warnings, sensor, prov, axis, record));
     if (!results.empty() && interrupt_flag().load(std::memory_order_relaxed))  // the realisations published stay: say so
       throw Interrupted("interrupted by a signal: sense stopped before realisation " + std::to_string(r) + "; the " +
                         std::to_string(r) + " written before (" + out.string() + "/repeat_000 ...) are kept");
     InterruptGuard::check();
     outputs[r]->commit();
+    record.file_bytes = file_bytes(staging[r]->path(""), files);  // every file complete: metadata.json goes last
+    writers::write_json(staging[r]->path("metadata.json"), metadata(runs[r], scene_warnings, sensor, prov, axis, record));
     staging[r]->publish(files);
     results.push_back({dirs[r].string(), files});
   }

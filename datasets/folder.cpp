@@ -200,12 +200,20 @@ std::optional<json> DatasetFolder::sample_metadata(const std::string& folder) co
 }
 
 namespace {
-// The files a published folder's metadata.json lists that are not there.
+// The files a published folder's metadata.json lists that are not as the run wrote them: gone, or (where it
+// recorded file_bytes) of another size, e.g. cut short by a copy.
 std::vector<std::string> gone_files(const fs::path& folder, const json& meta) {
   std::vector<std::string> gone;
+  const json& sizes = meta.contains("file_bytes") && meta["file_bytes"].is_object() ? meta["file_bytes"] : json::object();
   for (const json& name : meta["files"]) {
-    std::error_code ec;
-    if (name.is_string() && !fs::exists(folder / name.get<std::string>(), ec)) gone.push_back(name.get<std::string>());
+    if (!name.is_string() || name == "metadata.json") continue;
+    const std::string f = name.get<std::string>();
+    const int64_t have = writers::bytes_on_disk((folder / f).string());
+    if (have < 0) {
+      gone.push_back(f);
+    } else if (const auto it = sizes.find(f); it != sizes.end() && it->is_number_integer() && it->get<int64_t>() != have) {
+      gone.push_back(f + " (" + std::to_string(have) + " of its " + std::to_string(it->get<int64_t>()) + " bytes)");
+    }
   }
   return gone;
 }
@@ -275,7 +283,7 @@ SampleRecord DatasetFolder::inspect(const Sample& s) const {
   if (done && !stale && !gone.empty()) {
     rec.files.clear(), rec.bytes = 0, rec.summary = nullptr;
     rec.status = Status::Damaged;
-    rec.error = "listed in metadata.json but gone: ";
+    rec.error = "listed in metadata.json but gone or changed: ";
     for (size_t i = 0; i < gone.size() && i < 4; ++i) rec.error += (i ? ", " : "") + gone[i];
     if (gone.size() > 4) rec.error += ", ... (" + std::to_string(gone.size()) + " files)";
     return rec;

@@ -27,7 +27,8 @@
 namespace spadgen::datasets {
 
 // Damaged: its folders carry the sample's hash, but a file their metadata.json lists is gone (removed, or a
-// copy that left it out); `dataset run` generates the sample again.
+// copy that left it out) or of another size than the run wrote (cut short); `dataset run` generates the
+// sample again.
 enum class Status { Done, Failed, Stale, Missing, Damaged };
 const char* status_name(Status s);
 
@@ -36,7 +37,7 @@ struct SampleRecord {
   Sample sample;
   Status status = Status::Missing;
   std::string hash;     // of the sample as it resolves now; "" when it does not resolve
-  std::string error;    // failed: why; damaged: the files that are gone
+  std::string error;    // failed: why; damaged: the files that are gone or changed
   std::vector<std::string> folders;  // done: the sample's folder and its repeats'
   // done: every file of its folders but metadata.json (whose size varies with its timing fields), relative to
   // the sample's folder (a repeat's as "_r01/counts.npy"), and its size; a file linked into a repeat counts once

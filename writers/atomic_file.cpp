@@ -7,6 +7,7 @@
 #include <atomic>
 #include <cerrno>
 #include <cstring>
+#include <filesystem>
 
 #include "core/error.h"
 #include "writers/writers.h"
@@ -124,6 +125,17 @@ void TempFile::commit() {
 }
 
 }  // namespace detail
+
+int64_t bytes_on_disk(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) return -1;
+  if (!S_ISDIR(st.st_mode)) return int64_t(st.st_size);
+  int64_t total = 0;
+  std::error_code ec;
+  for (const auto& e : std::filesystem::recursive_directory_iterator(path, ec))
+    if (e.is_regular_file(ec)) total += int64_t(e.file_size(ec));
+  return total;
+}
 
 void write_file_atomic(const std::string& path, const std::string& bytes) {
   detail::TempFile file(path);

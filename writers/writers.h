@@ -247,4 +247,9 @@ void write_json(const std::string& path, const nlohmann::json& value);
 // Any bytes, written atomically (temporary file, fsync, rename).
 void write_file_atomic(const std::string& path, const std::string& bytes);
 
+// The bytes of a written output: a file's size, or a folder's (a Zarr store) as the sum of the regular
+// files in it; -1 when the path does not exist. metadata.json records them (file_bytes), so that a file
+// cut short or removed after the run is told apart from the one it wrote.
+int64_t bytes_on_disk(const std::string& path);
+
 }  // namespace spadgen::writers

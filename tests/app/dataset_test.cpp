@@ -143,13 +143,19 @@ TEST_F(Dataset, ASampleThatLostAFileIsDamagedAndGeneratedAgain) {
   fs::copy(dir_ / "out", dir_ / "reference", fs::copy_options::recursive);
   fs::remove(dir_ / "out/samples/000001/counts.npy");
   fs::remove(dir_ / "out/samples/000002_r01/counts.npy");
+  fs::resize_file(dir_ / "out/samples/000000/ground_truth.exr", 1000);  // a copy cut short
   const Result st = sh("dataset status " + (dir_ / "out").string());
-  EXPECT_THAT(st.output, HasSubstr("3 samples: 1 done, 0 failed, 0 stale, 0 missing, 2 damaged"));
-  EXPECT_THAT(st.output, HasSubstr("sample 1 damaged: listed in metadata.json but gone: counts.npy"));
-  EXPECT_THAT(st.output, HasSubstr("sample 2 damaged: listed in metadata.json but gone: _r01/counts.npy"));
+  EXPECT_THAT(st.output, HasSubstr("3 samples: 0 done, 0 failed, 0 stale, 0 missing, 3 damaged"));
+  EXPECT_THAT(st.output, HasSubstr("sample 0 damaged: listed in metadata.json but gone or changed: ground_truth.exr (1000 of its "));
+  EXPECT_THAT(st.output, HasSubstr("sample 1 damaged: listed in metadata.json but gone or changed: counts.npy"));
+  EXPECT_THAT(st.output, HasSubstr("sample 2 damaged: listed in metadata.json but gone or changed: _r01/counts.npy"));
+  // sense refuses to link the run's cut file
+  const Result sense = sh("sense " + (dir_ / "out/samples/000000").string() + " -o " + (dir_ / "sensed").string() + " -q");
+  EXPECT_EQ(sense.code, 1);
+  EXPECT_THAT(sense.output, HasSubstr("ground_truth.exr: holds 1000 bytes, and the run wrote "));
   const Result again = sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string());
   ASSERT_EQ(again.code, 0) << again.output;
-  EXPECT_THAT(again.output, HasSubstr("(this run: 2 generated, 1 skipped"));
+  EXPECT_THAT(again.output, HasSubstr("(this run: 3 generated, 0 skipped"));
   EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output, HasSubstr("3 samples: 3 done, 0 failed, 0 stale, 0 missing\n"));
   expect_same_dataset(dir_ / "reference", dir_ / "out");
   // fewer samples: the folders past them stay, outside the index, and status says so

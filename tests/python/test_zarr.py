@@ -75,10 +75,10 @@ def test_a_zarr_run_reads_as_its_npy_run_through_the_package(make_run):
     assert np.array_equal(p.gate_ns, q.gate_ns) and same_bytes(p.values, q.values)
     assert same_bytes(zr.gate_profile(200, 4, expected=True).values, npy.gate_profile(200, 4, expected=True).values)
     assert np.array_equal(zr.depth(), npy.depth(), equal_nan=True)
-    # The metadata differs in the storage record only (and how the run went).
+    # The metadata differs in the storage record only (its files and their sizes, and how the run went).
     a, b = dict(zr.metadata), dict(npy.metadata)
     for m in (a, b):
-        for key in ("run", "storage", "files", "scene_hash_fnv1a64"):
+        for key in ("run", "storage", "files", "file_bytes", "scene_hash_fnv1a64"):
             m.pop(key)
         m["resolved_scene"]["outputs"].pop("storage")
     assert a == b
