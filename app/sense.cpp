@@ -296,9 +296,9 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   // The run's objects bound labels.exr's slots (a run before objects had none).
   const int objects = meta.contains("objects") ? int(meta.at("objects").size()) : 0;
   std::vector<fs::path> dirs;
-  // With --repeats OUT holds the realisations' folders: made here, it is removed again when a failure or
-  // a signal leaves it empty (destroyed after the stagings, which are declared below it).
-  const RemoveIfEmpty made_out(runs.size() > 1 ? out : fs::path());
+  // With --repeats OUT holds the realisations' folders, staged together and published as one: OUT holds
+  // the earlier set or the new one, never a mix of their realisations, never one left from a call with more.
+  std::unique_ptr<Staging> top = runs.size() > 1 ? std::make_unique<Staging>(out, Staging::OfRuns{}) : nullptr;
   std::vector<std::unique_ptr<Staging>> staging;
   std::vector<std::unique_ptr<Outputs>> outputs;
   std::vector<uint64_t> seeds;
@@ -372,7 +372,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     char name[32];
     std::snprintf(name, sizeof name, "repeat_%03zu", r);
     dirs.push_back(runs.size() == 1 ? out : out / name);
-    staging.push_back(std::make_unique<Staging>(dirs.back()));
+    staging.push_back(top ? std::make_unique<Staging>(*top, name) : std::make_unique<Staging>(dirs.back()));
     std::set<std::string> provided = r == 0 ? from_run : shared;
     provided.insert(from_run.begin(), from_run.end());
     outputs.push_back(std::make_unique<Outputs>(write_cfg, sensor, img, axis, *staging.back(), objects, options.threads, provided));
@@ -430,7 +430,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     if (r > 0)
       for (const std::string& f : results.front().files)
         if (shared.count(f) && !from_run.count(f)) {
-          link_into(dirs.front() / f, *staging[r], f);
+          link_into(staging.front()->path(f), *staging[r], f);
           files.push_back(f);
         }
     files.push_back("metadata.json");
@@ -470,15 +470,20 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     // The realisations' images so far (a sense with --repeats writes them one after the other).
     record.times.finish_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - tiles_done).count();
     record.sense = json{{"from", src.string()}, {"repeat", r}, {"repeats", runs.size()}};
-    if (!results.empty() && interrupt_flag().load(std::memory_order_relaxed))  // the realisations published stay: say so
-      throw Interrupted("interrupted by a signal: sense stopped before realisation " + std::to_string(r) + "; the " +
-                        std::to_string(r) + " written before (" + out.string() + "/repeat_000 ...) are kept");
     InterruptGuard::check();
     outputs[r]->commit();
     record.file_bytes = file_bytes(staging[r]->path(""), files);  // every file complete: metadata.json goes last
     writers::write_json(staging[r]->path("metadata.json"), metadata(runs[r], scene_warnings, sensor, prov, axis, record));
-    staging[r]->publish(files);
+    if (top) staging[r]->finish_sub();
+    else staging[r]->publish(files);
     results.push_back({dirs[r].string(), files});
+  }
+  if (top) {  // the realisations as one
+    std::vector<std::string> all;
+    for (size_t r = 0; r < results.size(); ++r)
+      for (const std::string& f : results[r].files) all.push_back(dirs[r].filename().string() + "/" + f);
+    InterruptGuard::check();
+    top->publish(all);
   }
   if (options.progress)
     std::fprintf(stderr, "spadgen: wrote %zu folder(s) to %s in %.1f s\n", results.size(), out.string().c_str(), progress.seconds());

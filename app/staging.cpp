@@ -73,6 +73,23 @@ Staging::Staging(const fs::path& out, std::vector<std::string> owned, std::strin
 
 Staging::Staging(const fs::path& out, Hook hook) : hook_(std::move(hook)) { init(out); }
 
+Staging::Staging(const fs::path& out, OfRuns) : of_runs_(true), what_("sense --repeats") {
+  init(out);
+  fs::remove(dir_ / "previews");  // its runs have their own
+  fs::remove(dir_ / "light");
+}
+
+Staging::Staging(const Staging& parent, const std::string& sub)
+    : out_(parent.out_ / sub), parent_(parent.out_), dir_(parent.dir_ / sub), name_(sub), sub_(true), what_(parent.what_) {
+  fs::create_directories(dir_ / "previews");
+  fs::create_directories(dir_ / "light");
+}
+
+void Staging::finish_sub() const {
+  for (const auto& e : fs::directory_iterator(dir_))
+    if (e.is_directory()) ::rmdir(e.path().c_str());  // fails, as it should, on folders with files
+}
+
 void Staging::init(const fs::path& out) {
   const auto cannot = [&](const std::string& why) {
     return Error("cannot use " + out.string() + " as the output folder (-o): " + why);
@@ -121,6 +138,7 @@ void Staging::init(const fs::path& out) {
 }
 
 Staging::~Staging() {
+  if (sub_) return;  // the parent's staging folder holds it
   std::error_code ec;
   if (!dir_.empty()) fs::remove_all(dir_, ec);  // unpublished files, or the earlier set after an exchange
   unlock();
@@ -224,8 +242,16 @@ void Staging::check_owned() const {
   std::error_code ec;
   if (!fs::is_directory(out_, ec)) return;
   Listed listed;  // another command's folder holds its own files only (a run folder given to it is not its own)
-  if (owned_.empty()) listed = listed_files(out_);
-  else listed.entries = {owned_.begin(), owned_.end()};
+  if (of_runs_) {
+    // a folder of runs: its run folders are its own, whole (a run replaced the same way checks its files)
+    for (const auto& e : fs::directory_iterator(out_))
+      if (e.is_directory(ec) && !e.is_symlink(ec) && fs::is_regular_file(e.path() / "metadata.json", ec))
+        listed.entries.insert(e.path().filename().string() + "/");
+  } else if (owned_.empty()) {
+    listed = listed_files(out_);
+  } else {
+    listed.entries = {owned_.begin(), owned_.end()};
+  }
   std::vector<std::string> foreign;
   std::vector<fs::path> folders{out_};
   while (!folders.empty() && foreign.size() < 6) {
@@ -238,6 +264,8 @@ void Staging::check_owned() const {
         continue;
       const bool dir = e.is_directory(ec) && !e.is_symlink(ec);
       if (dir && holds_no_file(e.path())) continue;  // nothing to lose (folders only, empty at their ends)
+      if (dir && listed.entries.count(rel + "/")) continue;  // a run folder of a folder of runs
+      if (of_runs_ && folder == out_ && starts_with(rel, ".repeat_")) continue;  // an earlier version's per-run leftovers
       const bool entry = listed.entries.count(rel) > 0;
       if (entry && (!dir || rel.ends_with(".zarr"))) continue;  // a listed file, or a Zarr store with all in it
       if (dir && (entry || listed.parents.count(rel))) folders.push_back(e.path());
@@ -259,6 +287,7 @@ void Staging::check_owned() const {
 }
 
 void Staging::publish(const std::vector<std::string>& files) {
+  if (sub_) throw std::logic_error("publish: a subfolder is published by its parent");
   for (const std::string& f : files)  // files, and the folders of Zarr stores
     if (!fs::is_regular_file(dir_ / f) && !fs::is_directory(dir_ / f))
       throw std::logic_error("publish: " + f + " was not written to the staging folder");

@@ -36,6 +36,13 @@ class Staging {
   // A folder of another command's files (`spadgen evaluate`'s): the folder may hold only the files named in
   // `owned` (a run folder is not replaced by it); `what` names it in messages ("an evaluation").
   Staging(const std::filesystem::path& out, std::vector<std::string> owned, std::string what);
+  // A folder of run folders (`spadgen sense --repeats`: repeat_000/, ...), published as one: it may hold
+  // only run folders (each with its metadata.json) and empty folders.
+  struct OfRuns {};
+  Staging(const std::filesystem::path& out, OfRuns);
+  // Subfolder `sub` of `parent`'s staging folder, for one run of a folder of runs: path() as for a folder of
+  // its own; no lock, no publishing (the parent publishes it with the rest), removed with the parent's.
+  Staging(const Staging& parent, const std::string& sub);
   ~Staging();  // removes the staging folder unless published, and releases the lock
   Staging(const Staging&) = delete;
   Staging& operator=(const Staging&) = delete;
@@ -45,6 +52,8 @@ class Staging {
   // Replaces the output folder with the staging folder, which must hold every listed file. Throws
   // spadgen::Error when the swap fails; the output folder then holds the earlier set.
   void publish(const std::vector<std::string>& files);
+  // A subfolder's: removes the folders nothing was written into (previews/, light/), as publish() does.
+  void finish_sub() const;
   // The output folder, absolute, with symbolic links resolved.
   const std::filesystem::path& out() const { return out_; }
 
@@ -60,6 +69,8 @@ class Staging {
   std::string name_;
   Hook hook_;
   std::vector<std::string> owned_;
+  bool of_runs_ = false;  // a folder of run folders
+  bool sub_ = false;      // a parent's subfolder: nothing of its own to lock, remove or publish
   std::string what_ = "a run";  // in messages: "... replaces the output folder as a whole"
   int lock_fd_ = -1;
 };

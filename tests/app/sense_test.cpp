@@ -5,6 +5,7 @@
 #include <cmath>
 #include <fstream>
 #include <limits>
+#include <set>
 #include <nlohmann/json.hpp>
 
 #include "app_fixture.h"
@@ -189,6 +190,20 @@ TEST_F(App, SenseRepeatsAreTheRunsWithConsecutiveNoiseSeeds) {
   EXPECT_EQ(last["seeds"]["noise"], 9);
   last["seeds"]["noise"] = 8;
   EXPECT_EQ(last.dump(), middle.dump());
+  // The realisations are one folder, replaced whole: two realisations into it leave no third from before
+  // (repeat_002 stayed beside the new ones, with the old seed), ...
+  const Result two = sh("sense " + (dir_ / "run").string() + " -q --noise-seed 20 --repeats 2 -o " + (dir_ / "rep").string());
+  ASSERT_EQ(two.code, 0) << two.output;
+  std::set<std::string> folders;
+  for (const auto& e : fs::directory_iterator(dir_ / "rep")) folders.insert(e.path().filename().string());
+  EXPECT_EQ(folders, (std::set<std::string>{"repeat_000", "repeat_001"}));
+  EXPECT_EQ(nlohmann::json::parse(slurp(dir_ / "rep/repeat_001/metadata.json"))["seeds"]["noise"], 21);
+  // ... and a folder with other files in it is not replaced
+  std::ofstream(dir_ / "rep/notes.txt") << "mine";
+  const Result foreign = sh("sense " + (dir_ / "run").string() + " -q --repeats 2 -o " + (dir_ / "rep").string());
+  EXPECT_EQ(foreign.code, 1);
+  EXPECT_THAT(foreign.output, HasSubstr("holds files that spadgen did not write there (notes.txt"));
+  EXPECT_TRUE(fs::exists(dir_ / "rep/repeat_001/counts.npy"));
 }
 
 // A coarsely tabulated gate (sensor.gate.knots_per_edge, grid_ps) is warned about, by run, info and sense,
