@@ -123,17 +123,21 @@ NpyWriter::NpyWriter(const std::string& path, Dtype dtype, std::vector<int64_t> 
   detail::pwrite_all(impl_->file.fd(), head.data(), head.size(), 0, path);
   // The file gets its full size up front, so tiles can land anywhere in any order. Its blocks are
   // reserved (fallocate): a full disk is an error here, naming the file, and never a SIGBUS later when a
-  // write through the mapping finds no block. File systems without fallocate get a sparse file.
+  // write through the mapping finds no block. File systems without fallocate (ext2, some network ones)
+  // get a sparse file, written through pwrite only: a full disk is then an error of the write that finds
+  // it (through a mapping it was a SIGBUS, the process killed without a word).
   const int fd = impl_->file.fd();
   const auto bytes = static_cast<off_t>(file_bytes());
+  bool reserved = true;
   if (::fallocate(fd, 0, 0, bytes) != 0) {
     const int err = errno;
     if (err != EOPNOTSUPP && err != ENOSYS) detail::throw_errno("cannot allocate", path, err);
     if (::ftruncate(fd, bytes) != 0) detail::throw_errno("cannot allocate", path, errno);
+    reserved = false;
   }
   // Tiles write short runs (a tile's row of one gate position: 128 bytes; of one binary frame: 4 bytes),
   // one system call each through pwrite; through a shared mapping each is a memcpy into the page cache.
-  if (bytes > 0 && mapped) {
+  if (bytes > 0 && mapped && reserved) {
     void* m = ::mmap(nullptr, static_cast<size_t>(bytes), PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
     if (m != MAP_FAILED) {
       impl_->map = static_cast<char*>(m);
