@@ -2,13 +2,17 @@
 // is rendered: the run folder's metadata.json holds the resolved scene file, light/ what the renderer
 // delivered to the sensor. The sensor settings may change (--set sensor.*, acquisition.*, seeds), the
 // light may not.
+#include <fcntl.h>
 #include <sys/resource.h>
+#include <sys/stat.h>
+#include <unistd.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -81,13 +85,52 @@ PixelRect rect_of(const json& a) { return {a.at(0).get<int>(), a.at(1).get<int>(
 // The run's file `rel` into the staging folder: a hard link (the run's files are never modified in place;
 // a later run replaces them with a new file), or a copy across file systems. A Zarr store's folder is
 // made anew and its files linked.
+// A copy whose failure names the file and the cause (std::filesystem::copy_file reported a full disk
+// as an input/output error, through an exception the program took for a bug of its own).
+void copy_checked(const fs::path& a, const fs::path& b) {
+  const auto fail = [&](const char* what, int err) {
+    throw Error(std::string("cannot copy ") + a.string() + " to " + b.string() + " (" + what + "): " + std::strerror(err));
+  };
+  const int in = ::open(a.c_str(), O_RDONLY | O_CLOEXEC);
+  if (in < 0) fail("open the run's file", errno);
+  const int out = ::open(b.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (out < 0) {
+    const int err = errno;
+    ::close(in);
+    fail("create", err);
+  }
+  std::vector<char> buf(size_t{1} << 20);
+  for (;;) {
+    const ssize_t n = ::read(in, buf.data(), buf.size());
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) {
+      const int err = errno;
+      ::close(in), ::close(out);
+      fail("read", err);
+    }
+    if (n == 0) break;
+    for (ssize_t done = 0; done < n;) {
+      const ssize_t w = ::write(out, buf.data() + done, size_t(n - done));
+      if (w < 0 && errno == EINTR) continue;
+      if (w < 0) {
+        const int err = errno;
+        ::close(in), ::close(out);
+        fail("write", err);
+      }
+      done += w;
+    }
+  }
+  ::close(in);
+  if (::close(out) != 0) fail("write", errno);
+}
+
 void link_into(const fs::path& from, const Staging& staging, const std::string& rel) {
   const fs::path to = staging.path(rel);
   fs::create_directories(to.parent_path());
   const auto link = [](const fs::path& a, const fs::path& b) {
     std::error_code ec;
     fs::create_hard_link(a, b, ec);
-    if (ec) fs::copy_file(a, b, fs::copy_options::overwrite_existing);
+    if (ec) copy_checked(a, b);
   };
   if (!fs::is_directory(from)) return link(from, to);
   fs::create_directories(to);
@@ -347,6 +390,14 @@ std::vector<RunResult> sense(const SenseOptions& options) {
         disk.push_back(p);
       }
     }
+    // Across file systems the run's files are copied, not linked (once: the other realisations link the
+    // first's copies).
+    fs::path existing = fs::absolute(where);
+    while (!existing.empty() && !fs::exists(existing) && existing != existing.root_path()) existing = existing.parent_path();
+    struct stat st_run {}, st_out {};
+    if (::stat(src.c_str(), &st_run) == 0 && ::stat(existing.c_str(), &st_out) == 0 && st_run.st_dev != st_out.st_dev)
+      for (const std::string& f : linked)
+        disk.push_back({f + " copied from the run (another file system: no hard link)", writers::bytes_on_disk((src / f).string()), false, f});
     plan.disk = std::move(disk);
     check_resources(plan, write_cfg, where);
     // Every realisation holds its folder's lock and its .npy stacks open until it commits.
@@ -423,8 +474,8 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   for (size_t r = 0; r < runs.size(); ++r) {
     outputs[r]->write(prov);
     std::vector<std::string> files = outputs[r]->files();
-    for (const std::string& f : linked) {
-      link_into(src / f, *staging[r], f);
+    for (const std::string& f : linked) {  // the later realisations link the first's (copies across file systems)
+      link_into(r == 0 ? src / f : fs::path(staging.front()->path(f)), *staging[r], f);
       files.push_back(f);
     }
     if (r > 0)
