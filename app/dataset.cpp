@@ -10,12 +10,14 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <set>
 #include <sstream>
 #include <thread>
 
 #include "app/pipeline.h"
 #include "app/resources.h"
 #include "app/run_parts.h"
+#include "app/staging.h"
 #include "core/error.h"
 #include "datasets/dataset.h"
 #include "datasets/folder.h"
@@ -275,6 +277,24 @@ void dataset_run(const DatasetOptions& options) {
     Estimate e;
     if (!rec.hash.empty()) e = estimator(scenes::load_scene_file(spec.scenes[size_t(rec.sample.scene)], rec.sample.overrides));
     todo.push_back({std::move(rec), e});
+  }
+  // What killed runs left in samples/ (staging folders of samples) is removed first, under each sample's
+  // lock (a sample another run is writing keeps its own), so that the disk check does not count it.
+  {
+    std::set<std::string> left;
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(dir / "samples", ec)) {
+      const std::string n = e.path().filename().string();
+      const size_t at = n.find(".spadgen-staging-");
+      if (n.size() > 1 && n[0] == '.' && at != std::string::npos && at > 1) left.insert(n.substr(1, at - 1));
+    }
+    for (const std::string& sample : left) {
+      try {
+        const Staging cleanup(dir / "samples" / sample);  // recovers under the lock, then removes its own folder
+      } catch (const Error&) {
+        // another run holds it, or the folder is not ours: left as it is
+      }
+    }
   }
   int64_t disk = 0;
   double seconds = 0.0;

@@ -75,8 +75,10 @@ RunResult run(const RunOptions& options) {
   check_derived(cfg, sensor, img, axis);
 
   const fs::path out = options.out_dir.empty() ? fs::path("out") / fs::path(options.scene_file).stem() : fs::path(options.out_dir);
-  check_resources(cfg, sensor, img, axis, options.threads, out, objects);
+  // The staging first: it removes what a killed run left beside the folder, which the disk check would
+  // otherwise count as taken.
   Staging staging(out);
+  check_resources(cfg, sensor, img, axis, options.threads, out, objects);
   Outputs outputs(cfg, sensor, img, axis, staging, objects, options.threads);
   const PixelRect light_rect = light_region(img, cfg.camera.width_px, cfg.camera.height_px);
   std::unique_ptr<LightWriter> light;

@@ -158,6 +158,12 @@ TEST_F(Dataset, ASampleThatLostAFileIsDamagedAndGeneratedAgain) {
   EXPECT_THAT(again.output, HasSubstr("(this run: 3 generated, 0 skipped"));
   EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output, HasSubstr("3 samples: 3 done, 0 failed, 0 stale, 0 missing\n"));
   expect_same_dataset(dir_ / "reference", dir_ / "out");
+  // what a killed run left beside a sample is removed at the start (before the disk check counts it), even
+  // when the sample is done and skipped
+  fs::create_directories(dir_ / "out/samples/.000000.spadgen-staging-999999");
+  std::ofstream(dir_ / "out/samples/.000000.spadgen-staging-999999/counts.npy") << "partial";
+  ASSERT_EQ(sh(run).code, 0);
+  EXPECT_FALSE(fs::exists(dir_ / "out/samples/.000000.spadgen-staging-999999"));
   // fewer samples: the folders past them stay, outside the index, and status says so
   write(dir_ / "d2.json", small_dataset(2));
   ASSERT_EQ(sh("dataset run " + (dir_ / "d2.json").string() + " -o " + (dir_ / "out").string() + " -q").code, 0);
