@@ -379,9 +379,10 @@ void dataset_run(const DatasetOptions& options) {
       throw Interrupted("interrupted by a signal: the dataset run stopped in sample " + std::to_string(s.index) +
                         "; the " + std::to_string(generated) + " samples it completed are kept, and running it again goes on");
     } catch (const std::exception& e) {
-      folder.record_failure(s, rec.hash, e.what());
-      failed.push_back(s.index);
+      // said first: recording it in failed/ may fail too (the disk that made the sample fail is full)
       std::fprintf(stderr, "spadgen: dataset: sample %lld failed: %s\n", static_cast<long long>(s.index), e.what());
+      failed.push_back(s.index);
+      folder.record_failure(s, rec.hash, e.what());
     }
     if (options.progress) {
       const auto now = std::chrono::steady_clock::now();

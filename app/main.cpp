@@ -14,6 +14,7 @@
 #include <malloc.h>
 #include <sys/resource.h>
 
+#include <csignal>
 #include <cstdio>
 #include <iostream>
 #include <sstream>
@@ -42,6 +43,9 @@ int main(int argc, char** argv) {
   // tiles are reused by the next: peak memory is unchanged, the faults are gone.
   mallopt(M_MMAP_THRESHOLD, 64 << 20);
   mallopt(M_TRIM_THRESHOLD, 256 << 20);
+  // A file-size limit (ulimit -f) is a write's error (EFBIG, naming the file), not a signal that kills the
+  // process without a word.
+  std::signal(SIGXFSZ, SIG_IGN);
   // Open files up to the hard limit (a `sense --repeats` holds a few per realisation until it commits).
   if (rlimit lim{}; getrlimit(RLIMIT_NOFILE, &lim) == 0 && lim.rlim_cur < lim.rlim_max) {
     lim.rlim_cur = lim.rlim_max;
@@ -155,6 +159,8 @@ int main(int argc, char** argv) {
       ->type_name("X,Y,W,H");
   eval_cmd->add_flag("--noise-free", eval.noise_free, "when the detector runs: on the noise-free expected counts");
   eval_cmd->add_option("--threads", eval.threads, "worker threads (default: all cores)")->check(kThreadsRange);
+  bool eval_quiet = false;  // accepted as by every command: evaluate writes nothing on stderr but warnings and errors
+  eval_cmd->add_flag("-q,--quiet", eval_quiet, "nothing on stderr but warnings and errors (as always: the scores go to stdout)");
 
   if (const std::optional<int> code = spadgen::app::parse_command_line(cli, argc, argv)) return *code;
   return spadgen::app::run_command([&] {

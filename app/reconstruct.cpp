@@ -3,8 +3,11 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
@@ -114,6 +117,15 @@ DetectionImage detect_image(const RunFolder& run, const Detector& detector, bool
     }
   });
   return img;
+}
+
+// The folder of an output file takes new files, checked before the work rather than after it (a read-only
+// file system was found once the detector had run over the whole image).
+void check_writable(const std::string& file) {
+  const fs::path dir = fs::absolute(fs::path(file)).parent_path();
+  if (!fs::is_directory(dir)) throw Error(file + ": its folder " + dir.string() + " does not exist");
+  if (::access(dir.c_str(), W_OK) != 0)
+    throw Error(file + ": cannot write into " + dir.string() + ": " + std::strerror(errno));
 }
 
 std::string slot_name(int s, const char* what) { return "det" + std::to_string(s) + "." + what; }
@@ -322,6 +334,7 @@ std::string reconstruct(const ReconstructOptions& o) {
                   "inversion, hdr.exr, and takes only -o, --noise-free and --threads for it");
     // The 2D HDR inversion: eq. (5) or (6) on the image's summed counts.
     const std::string out = o.out.empty() ? (fs::path(o.run_dir) / derived_name("hdr", o.noise_free)).string() : o.out;
+    check_writable(out);
     writers::ExrImage img(run.width(), run.height());
     std::vector<float> c(size_t(run.width()) * size_t(run.height()) * size_t(run.K()));
     run.profiles(0, run.height(), o.noise_free, c.data());
@@ -342,6 +355,7 @@ std::string reconstruct(const ReconstructOptions& o) {
   }
   const std::string out =
       o.out.empty() ? (fs::path(o.run_dir) / derived_name("detections_" + o.detector, o.noise_free)).string() : o.out;
+  check_writable(out);
   const Detector detector(o.detector, run);
   const DetectionImage d = detect_image(run, detector, o.noise_free, o.max_detections, o.progress);
   writers::ExrImage img(d.width, d.height);

@@ -314,6 +314,7 @@ void DatasetFolder::record_failure(const Sample& s, const std::string& hash, con
 void DatasetFolder::clear_failure(const Sample& s) const {
   std::error_code ec;
   fs::remove(dir_ / failure_path(s), ec);
+  fs::remove(dir_ / "failed", ec);  // when it is empty now (a resumed run leaves none, as a run never failed)
 }
 
 void DatasetFolder::write_index(const std::vector<SampleRecord>& records) const {

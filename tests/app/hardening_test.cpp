@@ -420,4 +420,16 @@ TEST_F(Hardening, LeftoversOfKilledRunsAreCleaned) {
   for (const auto& e : fs::directory_iterator(dir_)) EXPECT_EQ(e.path().filename(), "out");
 }
 
+// A file-size limit (ulimit -f) is the write's error naming the file, exit 1, not a SIGXFSZ that killed the
+// process without a word (exit 153); the earlier set stays and nothing is left beside it.
+TEST_F(Hardening, AFileSizeLimitIsAnErrorNamingTheFile) {
+  const fs::path out = dir_ / "out";
+  expect_exit(spadgen("run " + kTiny + " -q --seed 1 -o " + out.string()), 0, "first");
+  const Result r = shell("ulimit -f 64 && " + kBin + " run " + kTiny + " -q --seed 2 --set outputs.frames=true -o " + out.string());
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("File too large"));
+  expect_one_complete_set(out, 1);
+  for (const auto& e : fs::directory_iterator(dir_)) EXPECT_EQ(e.path().filename(), "out");
+}
+
 }  // namespace
