@@ -45,7 +45,14 @@ int run_command(const std::function<void()>& command) {
     std::fprintf(stderr, "spadgen: %s\n", e.what());
     return kExitInterrupted;
   } catch (const Error& e) {
-    std::fprintf(stderr, "spadgen: error: %s\n", e.what());
+    // A file that failed while being written lies in the output folder's staging folder (hidden, beside
+    // it): said so, with what became of the output folder.
+    const std::string what = e.what();
+    const bool staged = what.find(".spadgen-staging-") != std::string::npos && what.find("cannot publish") == std::string::npos;
+    std::fprintf(stderr, "spadgen: error: %s%s\n", what.c_str(),
+                 staged ? " (in the staging folder the output is written in before it replaces the output folder: "
+                          "the staging folder is removed, and the output folder is as it was)"
+                        : "");
     return kExitBadInput;
   } catch (const std::bad_alloc&) {
     std::fprintf(stderr, "spadgen: error: out of memory: the run needs more memory than the machine gives it "

@@ -427,7 +427,8 @@ TEST_F(Hardening, AFileSizeLimitIsAnErrorNamingTheFile) {
   expect_exit(spadgen("run " + kTiny + " -q --seed 1 -o " + out.string()), 0, "first");
   const Result r = shell("ulimit -f 64 && " + kBin + " run " + kTiny + " -q --seed 2 --set outputs.frames=true -o " + out.string());
   EXPECT_EQ(r.code, 1) << r.output;
-  EXPECT_THAT(r.output, HasSubstr("File too large"));
+  EXPECT_THAT(r.output, HasSubstr("File too large (in the staging folder the output is written in before it replaces the "
+                                  "output folder: the staging folder is removed, and the output folder is as it was)"));
   expect_one_complete_set(out, 1);
   for (const auto& e : fs::directory_iterator(dir_)) EXPECT_EQ(e.path().filename(), "out");
 }
