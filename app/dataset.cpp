@@ -47,7 +47,9 @@ constexpr double kSecondsPerByte = 2.0 / 1.0e9;     // writing the outputs (and 
 constexpr double kSecondsPerRun = 0.8;              // starting, loading the scene, building the BVH, publishing
 
 struct Estimate {
-  int64_t disk = 0, memory = 0;
+  int64_t disk = 0, memory = 0;  // disk: what the sample keeps
+  int64_t disk_at_least = 0;  // with compressed stores (Zarr) at a twentieth of their size (ResourcePlan)
+  int64_t disk_peak = 0;      // temporary files while the sample runs (freed at its end)
   double seconds = 0.0;
   bool paths_bound = false;  // a target error: the time counts render.max_samples_per_pixel paths per pixel
 };
@@ -71,7 +73,9 @@ Estimate estimate(const RunConfig& c, int repeats, int threads) {
               double(run_disk) * kSecondsPerByte;
   // Repeats: the sensor stage again from the saved light, and its noise-dependent files (about the run's
   // files less the ground truth and the light, which are linked).
-  e.disk = run_disk * repeats;
+  e.disk = plan.disk_kept() * repeats;
+  e.disk_at_least = plan.disk_kept_at_least() * repeats;
+  e.disk_peak = run_disk - plan.disk_kept();
   e.seconds += (repeats - 1) * (kSecondsPerRun + sensor_seconds + double(run_disk) * kSecondsPerByte);
   const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
   const double used = threads > 0 ? std::min<double>(threads, cores) : cores;
@@ -206,7 +210,7 @@ std::string dataset_plan(const DatasetOptions& options) {
       if (status.empty()) status = datasets::status_name(rec.status);
       if (rec.status != Status::Done) ++left, left_total.disk += e.disk, left_total.seconds += e.seconds;
     }
-    total.disk += e.disk, total.seconds += e.seconds;
+    total.disk += e.disk, total.disk_at_least += e.disk_at_least, total.seconds += e.seconds;
     total.paths_bound |= e.paths_bound;
     max_memory = std::max(max_memory, e.memory);
     const bool show = options.all || samples <= 10 || i >= n - 10 * shard.count;
@@ -237,6 +241,9 @@ std::string dataset_plan(const DatasetOptions& options) {
   if (total.paths_bound)
     o << "# with render.target_relative_error a pixel's paths depend on its light: the times count "
          "render.max_samples_per_pixel for every pixel, an upper bound\n";
+  if (total.disk_at_least != total.disk)
+    o << "# the disk counts the compressed stores (Zarr) uncompressed, at most: the samples take at least "
+      << bytes_text(total.disk_at_least) << " (the stores at a twentieth); the shipped example writes about a fifth of the most\n";
   if (folder) {
     const int64_t free = free_disk(options.out_dir);
     o << "# left to generate in " << options.out_dir << ": " << left << " samples, disk about " << bytes_text(left_total.disk)
@@ -296,14 +303,23 @@ void dataset_run(const DatasetOptions& options) {
       }
     }
   }
-  int64_t disk = 0;
+  int64_t disk = 0, disk_at_least = 0, peak = 0;
   double seconds = 0.0;
-  for (const Todo& t : todo) disk += t.estimate.disk, seconds += t.estimate.seconds;
-  if (const int64_t free = free_disk(dir); free >= 0 && free < disk) {
+  for (const Todo& t : todo) {
+    disk += t.estimate.disk, disk_at_least += t.estimate.disk_at_least, seconds += t.estimate.seconds;
+    peak = std::max(peak, t.estimate.disk_peak);  // one sample at a time: its temporary files, freed after it
+  }
+  disk += peak, disk_at_least += peak;
+  // Refused when even the least they can take does not fit (compressed stores at a twentieth of their size).
+  if (const int64_t free = free_disk(dir); free >= 0 && free < disk_at_least) {
+    const bool compressed = disk_at_least != disk;
     throw Error("dataset run: the " + std::to_string(todo.size()) + " samples left to generate in " + dir.string() +
-                (shard.count > 1 ? " (shard " + shard.text() + ")" : std::string()) + " need about " + bytes_text(disk) +
+                (shard.count > 1 ? " (shard " + shard.text() + ")" : std::string()) + " need " +
+                (compressed ? "at least " + bytes_text(disk_at_least) + " (their compressed stores at a twentieth of their size; at most " +
+                                  bytes_text(disk) + ")"
+                            : "about " + bytes_text(disk)) +
                 ", and " + bytes_text(free) + " is free there (about " +
-                bytes_text(todo.empty() ? 0 : disk / int64_t(todo.size())) +
+                bytes_text(todo.empty() ? 0 : disk_at_least / int64_t(todo.size())) +
                 " per sample: `spadgen dataset plan` lists them); free some space, write fewer outputs (outputs.*), or "
                 "use another folder (-o)");
   }

@@ -77,6 +77,26 @@ int64_t ResourcePlan::disk_needed() const {
   return n;
 }
 
+int64_t ResourcePlan::disk_at_least() const {
+  int64_t n = 0;
+  for (const Part& p : disk) n += p.compressed ? p.bytes / kCompressionBound : p.bytes;
+  return n;
+}
+
+int64_t ResourcePlan::disk_kept() const {
+  int64_t n = 0;
+  for (const Part& p : disk)
+    if (!p.freed_at_end) n += p.bytes;
+  return n;
+}
+
+int64_t ResourcePlan::disk_kept_at_least() const {
+  int64_t n = 0;
+  for (const Part& p : disk)
+    if (!p.freed_at_end) n += p.compressed ? p.bytes / kCompressionBound : p.bytes;
+  return n;
+}
+
 std::string bytes_text(int64_t bytes) {
   char buf[32];
   const double b = static_cast<double>(bytes);
@@ -155,13 +175,20 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
 
   // A Zarr store is at most its data uncompressed (and a few bytes a chunk).
   for (const StackLayout& s : stacks)
-    if (s.written) plan.disk.push_back({s.file + (s.chunks.empty() ? "" : " (uncompressed)"), s.bytes(), false, s.file});
-  plan.disk.push_back({"images", pixels * channels * 4});
+    if (s.written) plan.disk.push_back({s.file + (s.chunks.empty() ? "" : " (uncompressed)"), s.bytes(), false, s.file, !s.chunks.empty()});
+  plan.disk.push_back({std::string("images") + (c.outputs.exr_compression == ExrCompression::None ? "" : " (uncompressed)"),
+                       pixels * channels * 4, false, "", c.outputs.exr_compression != ExrCompression::None});
   if (c.outputs.light) {
     // light/: per pixel of the image grown by one, its bin range, offset and totals, and the values of its lit
     // bins, which the scene decides: 113 bins per pixel on the default multi-object scene (docs/outputs.md).
     const int64_t ring = (img.width + 2) * (img.height + 2);
-    plan.disk.push_back({"light/ (outputs.light; about 128 lit bins per pixel)", ring * (8 + 8 + 8 + 8 + 4 + std::min<int64_t>(bins, 128) * 4)});
+    const bool zarr = c.outputs.storage == Storage::Zarr;
+    plan.disk.push_back({std::string("light/ (outputs.light; about 128 lit bins per pixel") + (zarr ? ", uncompressed)" : ")"),
+                         ring * (8 + 8 + 8 + 8 + 4 + std::min<int64_t>(bins, 128) * 4), false, "", zarr});
+    // The values are spilled to a temporary file as the tiles finish, in tile order, and copied into
+    // light/values.npy in pixel order at the end: both are on the disk at that moment.
+    plan.disk.push_back({"the light's values spilled while the tiles render (outputs.light; freed once light/values.npy is written)",
+                         ring * std::min<int64_t>(bins, 128) * 4, false, "", false, true});
   }
   plan.disk_available = out.empty() ? -1 : free_disk(out);
   return plan;
@@ -179,17 +206,25 @@ void check_resources(const ResourcePlan& plan, const RunConfig& c, const fs::pat
                 bytes_text(plan.memory_available) + " is available: " + join_parts(required(plan.memory)) +
                 "; lower the keys of the largest parts, or run with fewer --threads");
   // The earlier set in the output folder stays until the new one is complete: the new one needs its
-  // whole size free.
-  if (plan.disk_available >= 0 && plan.disk_needed() > plan.disk_available)
-    throw Error(file + ": the run writes about " + bytes_text(plan.disk_needed()) + " into " + out.string() + ", and " +
-                bytes_text(plan.disk_available) + " is free there: " + join_parts(plan.disk) +
+  // whole size free. Compressed stores (Zarr) count a twentieth of their size here: refused only when even
+  // that does not fit (their size is known once written; a run that then finds the disk full fails
+  // cleanly, the folder as it was).
+  if (plan.disk_available >= 0 && plan.disk_at_least() > plan.disk_available) {
+    const bool any_compressed = plan.disk_at_least() != plan.disk_needed();
+    throw Error(file + ": the run writes " + (any_compressed ? "at least " + bytes_text(plan.disk_at_least()) +
+                " (the compressed stores at a twentieth of their size; at most " + bytes_text(plan.disk_needed()) + ")"
+                                                           : "about " + bytes_text(plan.disk_needed())) +
+                " into " + out.string() + ", and " + bytes_text(plan.disk_available) + " is free there: " + join_parts(plan.disk) +
                 "; switch outputs off (outputs.*), crop (camera.crop), or choose another folder (-o)");
+  }
 }
 
 std::string resource_summary(const ResourcePlan& plan) {
   std::string s = "memory: about " + bytes_text(plan.memory_needed());
   if (plan.memory_available >= 0) s += " (available: " + bytes_text(plan.memory_available) + ")";
-  s += "; disk: about " + bytes_text(plan.disk_needed());
+  s += "; disk: " + (plan.disk_at_least() != plan.disk_needed()
+                         ? bytes_text(plan.disk_at_least()) + " to " + bytes_text(plan.disk_needed()) + " (the compressed stores: at most uncompressed)"
+                         : "about " + bytes_text(plan.disk_needed()));
   if (plan.disk_available >= 0) s += " (free: " + bytes_text(plan.disk_available) + ")";
   return s + "\n  memory: " + join_parts(plan.memory) + "\n  disk: " + join_parts(plan.disk) + "\n";
 }

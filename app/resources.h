@@ -22,13 +22,24 @@ struct ResourcePlan {
     int64_t bytes = 0;
     bool file_backed = false;  // memory-mapped output pages the kernel can write out: shown, not required
     std::string file = "";     // a disk part that is one output (a stack's file or Zarr folder); "" otherwise
+    bool compressed = false;   // a disk part written compressed (Zarr, EXR): `bytes` is its uncompressed size, at most
+    bool freed_at_end = false; // a disk part the run frees before it ends (a temporary file): its peak, not kept
   };
   std::vector<Part> memory, disk;
   int64_t memory_available = -1;  // bytes; -1 unknown
   int64_t disk_available = -1;    // bytes free at the output folder; -1 unknown
   int64_t memory_needed() const;
-  int64_t disk_needed() const;
+  int64_t disk_needed() const;  // at most: compressed parts at their uncompressed size
+  // At least: compressed parts at a twentieth of their uncompressed size (the most spadgen's stores were
+  // measured to compress, the saved light's values: docs/outputs.md, "Storage"; the rates compress about 3
+  // times). A run is refused when even this does not fit; between the two it may fit.
+  int64_t disk_at_least() const;
+  // What stays once the run has ended (without the temporary parts): at most, and at least.
+  int64_t disk_kept() const;
+  int64_t disk_kept_at_least() const;
 };
+// Compressed parts count 1 / kCompressionBound of their uncompressed size in disk_at_least().
+inline constexpr int64_t kCompressionBound = 20;
 
 // The worker threads of --threads (0: all cores).
 int64_t worker_threads(int threads);
