@@ -71,29 +71,10 @@ int64_t ResourcePlan::memory_needed() const {
   return n;
 }
 
-int64_t ResourcePlan::disk_needed() const {
-  int64_t n = 0;
-  for (const Part& p : disk) n += p.bytes;
-  return n;
-}
-
-int64_t ResourcePlan::disk_at_least() const {
-  int64_t n = 0;
-  for (const Part& p : disk) n += p.compressed ? p.bytes / kCompressionBound : p.bytes;
-  return n;
-}
-
-int64_t ResourcePlan::disk_kept() const {
+int64_t ResourcePlan::disk_sum(bool at_least, bool kept_only) const {
   int64_t n = 0;
   for (const Part& p : disk)
-    if (!p.freed_at_end) n += p.bytes;
-  return n;
-}
-
-int64_t ResourcePlan::disk_kept_at_least() const {
-  int64_t n = 0;
-  for (const Part& p : disk)
-    if (!p.freed_at_end) n += p.compressed ? p.bytes / kCompressionBound : p.bytes;
+    if (!(kept_only && p.freed_at_end)) n += at_least && p.compressed ? p.bytes / kCompressionBound : p.bytes;
   return n;
 }
 

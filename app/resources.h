@@ -29,14 +29,17 @@ struct ResourcePlan {
   int64_t memory_available = -1;  // bytes; -1 unknown
   int64_t disk_available = -1;    // bytes free at the output folder; -1 unknown
   int64_t memory_needed() const;
-  int64_t disk_needed() const;  // at most: compressed parts at their uncompressed size
+  int64_t disk_needed() const { return disk_sum(false, false); }  // at most: compressed parts at their uncompressed size
   // At least: compressed parts at a twentieth of their uncompressed size (the most spadgen's stores were
   // measured to compress, the saved light's values: docs/outputs.md, "Storage"; the rates compress about 3
   // times). A run is refused when even this does not fit; between the two it may fit.
-  int64_t disk_at_least() const;
+  int64_t disk_at_least() const { return disk_sum(true, false); }
   // What stays once the run has ended (without the temporary parts): at most, and at least.
-  int64_t disk_kept() const;
-  int64_t disk_kept_at_least() const;
+  int64_t disk_kept() const { return disk_sum(false, true); }
+  int64_t disk_kept_at_least() const { return disk_sum(true, true); }
+
+ private:
+  int64_t disk_sum(bool at_least, bool kept_only) const;
 };
 // Compressed parts count 1 / kCompressionBound of their uncompressed size in disk_at_least().
 inline constexpr int64_t kCompressionBound = 20;
