@@ -10,7 +10,6 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
-#include <set>
 #include <sstream>
 #include <thread>
 
@@ -189,7 +188,7 @@ std::string dataset_plan(const DatasetOptions& options) {
   Estimator estimator(spec.repeats, options.threads);
   // Each sample's scene is resolved (about 0.2 ms): a plan of millions of samples takes minutes, so it shows
   // its progress.
-  const int64_t owned = n / shard.count + (shard.index < n % shard.count ? 1 : 0);
+  const int64_t owned = shard.owned(n);
   Progress bar(size_t(owned), options.progress && owned > 10000, "samples");
   for (int64_t i = 0; i < n; ++i) {
     if (!shard.owns(i)) continue;
@@ -270,7 +269,7 @@ void dataset_run(const DatasetOptions& options) {
   std::vector<Todo> todo;
   int64_t owned = 0, skipped = 0;
   Estimator estimator(spec.repeats, options.threads);
-  const int64_t mine = spec.count() / shard.count + (shard.index < spec.count() % shard.count ? 1 : 0);
+  const int64_t mine = shard.owned(spec.count());
   Progress bar(size_t(mine), options.progress && mine > 10000, "samples inspected");
   for (int64_t i = 0; i < spec.count(); ++i) {
     if (!shard.owns(i)) continue;
@@ -285,24 +284,9 @@ void dataset_run(const DatasetOptions& options) {
     if (!rec.hash.empty()) e = estimator(scenes::load_scene_file(spec.scenes[size_t(rec.sample.scene)], rec.sample.overrides));
     todo.push_back({std::move(rec), e});
   }
-  // What killed runs left in samples/ (staging folders of samples) is removed first, under each sample's
-  // lock (a sample another run is writing keeps its own), so that the disk check does not count it.
-  {
-    std::set<std::string> left;
-    std::error_code ec;
-    for (const auto& e : fs::directory_iterator(dir / "samples", ec)) {
-      const std::string n = e.path().filename().string();
-      const size_t at = n.find(".spadgen-staging-");
-      if (n.size() > 1 && n[0] == '.' && at != std::string::npos && at > 1) left.insert(n.substr(1, at - 1));
-    }
-    for (const std::string& sample : left) {
-      try {
-        const Staging cleanup(dir / "samples" / sample);  // recovers under the lock, then removes its own folder
-      } catch (const Error&) {
-        // another run holds it, or the folder is not ours: left as it is
-      }
-    }
-  }
+  // What killed runs left in samples/ is removed first (a sample another run is writing keeps its own), so
+  // that the disk check does not count it.
+  Staging::remove_leftovers(dir / "samples");
   int64_t disk = 0, disk_at_least = 0, peak = 0;
   double seconds = 0.0;
   for (const Todo& t : todo) {

@@ -55,10 +55,15 @@ std::vector<ResourcePlan::Part> required(const std::vector<ResourcePlan::Part>& 
 
 }  // namespace
 
-int64_t free_disk(fs::path p) {
+fs::path existing_ancestor(fs::path p) {
   std::error_code ec;
   p = fs::absolute(p, ec);
   while (!p.empty() && !fs::exists(p, ec) && p != p.parent_path()) p = p.parent_path();
+  return p;
+}
+
+int64_t free_disk(fs::path p) {
+  p = existing_ancestor(p);
   struct statvfs s {};
   if (p.empty() || ::statvfs(p.c_str(), &s) != 0) return -1;
   return static_cast<int64_t>(s.f_bavail) * static_cast<int64_t>(s.f_frsize);

@@ -65,6 +65,8 @@ std::string resource_summary(const ResourcePlan& plan);
 // Free bytes for an unprivileged writer on the file system the folder `p` is (or will be) on: its nearest
 // existing ancestor's; -1 when unknown.
 int64_t free_disk(std::filesystem::path p);
+// p made absolute, or the nearest folder above it that exists (a folder a run will create); "" if none.
+std::filesystem::path existing_ancestor(std::filesystem::path p);
 
 // "1.2 GB", "870 MB", "12 kB" (powers of 1000, as `spadgen info` gives sizes).
 std::string bytes_text(int64_t bytes);

@@ -49,9 +49,4 @@ ThreadLimit::ThreadLimit(int threads) {
 
 ThreadLimit::~ThreadLimit() { writers::set_exr_threads(0); }
 
-RemoveIfEmpty::~RemoveIfEmpty() {
-  std::error_code ec;
-  if (!dir_.empty() && std::filesystem::is_empty(dir_, ec)) std::filesystem::remove(dir_, ec);
-}
-
 }  // namespace spadgen::app

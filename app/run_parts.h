@@ -44,18 +44,4 @@ class ThreadLimit {
   std::unique_ptr<tbb::global_control> limit_;
 };
 
-// A folder a command makes for its outputs, removed when the command leaves it empty (a failure or a
-// signal before anything was written there). Made for a folder that does not exist yet; an empty path
-// guards nothing.
-class RemoveIfEmpty {
- public:
-  explicit RemoveIfEmpty(const std::filesystem::path& dir) : dir_(std::filesystem::exists(dir) ? std::filesystem::path() : dir) {}
-  ~RemoveIfEmpty();
-  RemoveIfEmpty(const RemoveIfEmpty&) = delete;
-  RemoveIfEmpty& operator=(const RemoveIfEmpty&) = delete;
-
- private:
-  std::filesystem::path dir_;
-};
-
 }  // namespace spadgen::app

@@ -82,9 +82,6 @@ T field(const json& meta, const json::json_pointer& p, const fs::path& dir) {
 
 PixelRect rect_of(const json& a) { return {a.at(0).get<int>(), a.at(1).get<int>(), a.at(2).get<int>(), a.at(3).get<int>()}; }
 
-// The run's file `rel` into the staging folder: a hard link (the run's files are never modified in place;
-// a later run replaces them with a new file), or a copy across file systems. A Zarr store's folder is
-// made anew and its files linked.
 // A copy whose failure names the file and the cause (std::filesystem::copy_file reported a full disk
 // as an input/output error, through an exception the program took for a bug of its own).
 void copy_checked(const fs::path& a, const fs::path& b) {
@@ -124,6 +121,9 @@ void copy_checked(const fs::path& a, const fs::path& b) {
   if (::close(out) != 0) fail("write", errno);
 }
 
+// The run's file `rel` into the staging folder: a hard link (the run's files are never modified in place;
+// a later run replaces them with a new file), or a copy across file systems. A Zarr store's folder is
+// made anew and its files linked.
 void link_into(const fs::path& from, const Staging& staging, const std::string& rel) {
   const fs::path to = staging.path(rel);
   fs::create_directories(to.parent_path());
@@ -392,8 +392,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     }
     // Across file systems the run's files are copied, not linked (once: the other realisations link the
     // first's copies).
-    fs::path existing = fs::absolute(where);
-    while (!existing.empty() && !fs::exists(existing) && existing != existing.root_path()) existing = existing.parent_path();
+    const fs::path existing = existing_ancestor(where);
     struct stat st_run {}, st_out {};
     if (::stat(src.c_str(), &st_run) == 0 && ::stat(existing.c_str(), &st_out) == 0 && st_run.st_dev != st_out.st_dev)
       for (const std::string& f : linked)

@@ -85,9 +85,29 @@ Staging::Staging(const Staging& parent, const std::string& sub)
   fs::create_directories(dir_ / "light");
 }
 
-void Staging::finish_sub() const {
+void Staging::finish_sub() const { prune_subfolders(); }
+
+void Staging::prune_subfolders() const {
+  // rmdir fails, as it should, on the folders with files in them
   for (const auto& e : fs::directory_iterator(dir_))
-    if (e.is_directory()) ::rmdir(e.path().c_str());  // fails, as it should, on folders with files
+    if (e.is_directory() && ::rmdir(e.path().c_str()) != 0) sync_dir(e.path());
+}
+
+void Staging::remove_leftovers(const fs::path& parent) {
+  std::set<std::string> names;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(parent, ec)) {
+    const std::string n = e.path().filename().string();
+    const size_t at = n.find(".spadgen-staging-");
+    if (n.size() > 1 && n[0] == '.' && at != std::string::npos && at > 1) names.insert(n.substr(1, at - 1));
+  }
+  for (const std::string& name : names) {
+    try {
+      const Staging cleanup(parent / name);  // recovers under the lock, then removes its own staging folder
+    } catch (const Error&) {
+      // another run holds it, or the folder is not spadgen's: left as it is
+    }
+  }
 }
 
 void Staging::init(const fs::path& out) {
@@ -291,10 +311,8 @@ void Staging::publish(const std::vector<std::string>& files) {
   for (const std::string& f : files)  // files, and the folders of Zarr stores
     if (!fs::is_regular_file(dir_ / f) && !fs::is_directory(dir_ / f))
       throw std::logic_error("publish: " + f + " was not written to the staging folder");
-  // Subfolders nothing was written into (no previews, no light/) do not go out; rmdir fails, as it should,
-  // on the others, which are made durable.
-  for (const auto& e : fs::directory_iterator(dir_))
-    if (e.is_directory() && ::rmdir(e.path().c_str()) != 0) sync_dir(e.path());
+  // Subfolders nothing was written into (no previews, no light/) do not go out.
+  prune_subfolders();
   sync_dir(dir_);
   const auto fail = [&](const std::string& what, int err) {
     return Error("cannot publish into " + out_.string() + ": " + what + ": " + std::strerror(err) +

@@ -54,6 +54,9 @@ class Staging {
   void publish(const std::vector<std::string>& files);
   // A subfolder's: removes the folders nothing was written into (previews/, light/), as publish() does.
   void finish_sub() const;
+  // Removes what killed runs left in `parent` (the staging folders of its output folders), each under its
+  // output folder's lock: one that another run is writing is left to it.
+  static void remove_leftovers(const std::filesystem::path& parent);
   // The output folder, absolute, with symbolic links resolved.
   const std::filesystem::path& out() const { return out_; }
 
@@ -64,6 +67,7 @@ class Staging {
   void recover();
   void init(const std::filesystem::path& out);
   void check_owned() const;
+  void prune_subfolders() const;  // the subfolders nothing was written into go; the others are made durable
 
   std::filesystem::path out_, parent_, dir_, lock_path_;
   std::string name_;

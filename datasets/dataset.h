@@ -110,6 +110,7 @@ Sample make_sample(const DatasetSpec& spec, int64_t index);
 struct Shard {
   int64_t index = 0, count = 1;
   bool owns(int64_t sample) const { return sample % count == index; }
+  int64_t owned(int64_t samples) const { return samples / count + (index < samples % count ? 1 : 0); }  // of 0..samples-1
   std::string text() const;  // "2/4"
 };
 // "I/N" (0 <= I < N); throws spadgen::Error naming `where` otherwise.

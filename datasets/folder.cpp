@@ -200,20 +200,29 @@ std::optional<json> DatasetFolder::sample_metadata(const std::string& folder) co
 }
 
 namespace {
-// The files a published folder's metadata.json lists that are not as the run wrote them: gone, or (where it
-// recorded file_bytes) of another size, e.g. cut short by a copy.
+// metadata.json's file_bytes (a run before it recorded them: none).
+const json& recorded_sizes(const json& meta) {
+  static const json none = json::object();
+  return meta.contains("file_bytes") && meta["file_bytes"].is_object() ? meta["file_bytes"] : none;
+}
+
+// Listed file f as found, with `have` bytes (-1: absent), against what the run wrote: "" when it is as
+// written, else f and how it differs (gone, or, where the run recorded its size, cut short or changed).
+std::string damage_of(const std::string& f, int64_t have, const json& sizes) {
+  if (have < 0) return f;
+  if (const auto it = sizes.find(f); it != sizes.end() && it->is_number_integer() && it->get<int64_t>() != have)
+    return f + " (" + std::to_string(have) + " of its " + std::to_string(it->get<int64_t>()) + " bytes)";
+  return "";
+}
+
+// The files a published folder's metadata.json lists that are not as the run wrote them.
 std::vector<std::string> gone_files(const fs::path& folder, const json& meta) {
   std::vector<std::string> gone;
-  const json& sizes = meta.contains("file_bytes") && meta["file_bytes"].is_object() ? meta["file_bytes"] : json::object();
   for (const json& name : meta["files"]) {
     if (!name.is_string() || name == "metadata.json") continue;
     const std::string f = name.get<std::string>();
-    const int64_t have = writers::bytes_on_disk((folder / f).string());
-    if (have < 0) {
-      gone.push_back(f);
-    } else if (const auto it = sizes.find(f); it != sizes.end() && it->is_number_integer() && it->get<int64_t>() != have) {
-      gone.push_back(f + " (" + std::to_string(have) + " of its " + std::to_string(it->get<int64_t>()) + " bytes)");
-    }
+    if (std::string d = damage_of(f, writers::bytes_on_disk((folder / f).string()), recorded_sizes(meta)); !d.empty())
+      gone.push_back(std::move(d));
   }
   return gone;
 }
@@ -250,26 +259,30 @@ SampleRecord DatasetFolder::inspect(const Sample& s) const {
       continue;
     }
     const std::string prefix = f == 0 ? "" : folders[f].substr(s.folder().size()) + "/";
-    for (const std::string& g : gone_files(dir_ / folders[f], *meta)) gone.push_back(prefix + g);
+    const json& sizes = recorded_sizes(*meta);
     for (const json& name : (*meta)["files"]) {
       // metadata.json's size varies with its timing fields; the index and the card must not.
       if (name == "metadata.json") continue;
       // A repeat links the files that do not depend on the noise (ground truth, light): counted once.
       // A listed folder (a Zarr store) counts with every file in it.
+      // Its bytes as they are (writers::bytes_on_disk, from the same stats) tell whether it is as written.
       const fs::path path = dir_ / folders[f] / name.get<std::string>();
       std::vector<fs::path> parts = {path};
       std::error_code ec;
+      const bool present = fs::exists(path, ec);
       if (fs::is_directory(path, ec))
         for (const auto& e : fs::recursive_directory_iterator(path, ec))
           if (e.is_regular_file(ec)) parts.push_back(e.path());
-      int64_t size = 0;
+      int64_t size = 0, whole = 0;
       bool any = false;
       for (const fs::path& q : parts) {
         struct stat st {};
         if (::stat(q.c_str(), &st) != 0 || !S_ISREG(st.st_mode)) continue;
+        whole += int64_t(st.st_size);
         if (!inodes.insert({st.st_dev, st.st_ino}).second) continue;
         size += int64_t(st.st_size), any = true;
       }
+      if (std::string d = damage_of(name.get<std::string>(), present ? whole : -1, sizes); !d.empty()) gone.push_back(prefix + d);
       if (!any) continue;
       rec.files.emplace_back(prefix + name.get<std::string>(), size);
       rec.bytes += size;
