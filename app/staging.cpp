@@ -39,6 +39,17 @@ void sync_dir(const fs::path& dir) {
   ::close(fd);
 }
 
+// True when `dir` is the root of a mounted file system (a mount point, a bind mount): no folder can be
+// renamed into its place.
+bool is_mount_point(const fs::path& dir) {
+  struct statx sx {};
+  if (::statx(AT_FDCWD, dir.c_str(), AT_SYMLINK_NOFOLLOW, STATX_BASIC_STATS, &sx) == 0 &&
+      (sx.stx_attributes_mask & STATX_ATTR_MOUNT_ROOT) != 0)
+    return (sx.stx_attributes & STATX_ATTR_MOUNT_ROOT) != 0;
+  struct stat here {}, up {};  // kernels before 5.8: another device than the parent's
+  return ::stat(dir.c_str(), &here) == 0 && ::stat(dir.parent_path().c_str(), &up) == 0 && here.st_dev != up.st_dev;
+}
+
 // What metadata.json lists, relative to `out`: the files and folders it names (a Zarr store, "counts.zarr",
 // is a folder, the run's with everything in it), and the folders they lie in ("previews", "light").
 struct Listed {
@@ -140,6 +151,9 @@ void Staging::init(const fs::path& out) {
   if (fs::is_symlink(fs::symlink_status(out_, ec)))  // a link to a folder was resolved above: this one leads nowhere
     throw cannot("it is a symbolic link to " + fs::read_symlink(out_, ec).string() +
                  ", which does not exist; expected a folder that exists or can be created");
+  if (fs::is_directory(out_, ec) && is_mount_point(out_))
+    throw cannot("it is a mount point; " + what_ + " replaces the output folder as a whole, renaming a new folder into its " +
+                 "place, which cannot be done to a mount point, so name a folder inside it (" + (out_ / "run").string() + ")");
   lock();
   try {
     recover();

@@ -440,4 +440,32 @@ TEST_F(Hardening, AFileSizeLimitIsAnErrorNamingTheFile) {
   for (const auto& e : fs::directory_iterator(dir_)) EXPECT_EQ(e.path().filename(), "out");
 }
 
+// An output folder that is a mount point cannot be replaced by renaming: refused before rendering, with the
+// folder to name instead; a folder inside the mount point works. The mount is private to one `unshare -m`
+// (root, or a user namespace with -r); where neither is allowed the case is skipped.
+TEST_F(Hardening, AMountPointAsTheOutputFolderIsRefusedUpFront) {
+  const fs::path mnt = dir_ / "mnt";
+  fs::create_directories(mnt);
+  // `cmd` run with a tmpfs mounted on mnt; exit 97: no way to mount here
+  std::string unshare = "unshare -m";
+  if (shell(unshare + " mount -t tmpfs none " + mnt.string()).code != 0) unshare = "unshare -rm";
+  const auto with_mount = [&](const std::string& cmd) {
+    return shell(unshare + " sh -c 'mount -t tmpfs none " + mnt.string() + " || exit 97; " + cmd + "'");
+  };
+  const std::string run = "timeout -s KILL 30 " + bin() + " run " + kTiny + " -q --seed 1 -o ";
+  Result r = with_mount(run + mnt.string() + " 2>&1; echo exit=$?; ls -A " + mnt.string());
+  if (r.code == 97) GTEST_SKIP() << "cannot mount a file system here: " << r.output;
+  EXPECT_THAT(r.output, HasSubstr("exit=1\n")) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("cannot use " + mnt.string() + " as the output folder (-o): it is a mount point; a run "
+                                  "replaces the output folder as a whole, renaming a new folder into its place, which "
+                                  "cannot be done to a mount point, so name a folder inside it (" + (mnt / "run").string() + ")"));
+  EXPECT_TRUE(r.output.ends_with("exit=1\n")) << "the mount point is not empty:\n" << r.output;
+  for (const auto& e : fs::directory_iterator(dir_)) EXPECT_EQ(e.path().filename(), "mnt") << "left beside it";
+
+  // inside the mount point: a run folder as anywhere else
+  r = with_mount(run + (mnt / "run").string() + " && ls " + (mnt / "run").string());
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("metadata.json"));
+}
+
 }  // namespace
