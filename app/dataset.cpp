@@ -375,9 +375,15 @@ void dataset_run(const DatasetOptions& options) {
       folder.clear_failure(s);
       ++generated;
     } catch (const Interrupted&) {
-      // The samples published before stay (the next run skips them); this one's folder was not.
+      // The samples published before stay (the next run skips them); this one's folder was not. The index
+      // lists them (Slurm's time limit and scancel send SIGTERM): best effort, the signal's message comes first.
+      try {
+        folder.write_index(inspect_all(folder, false));
+      } catch (const std::exception& e) {
+        std::fprintf(stderr, "spadgen: dataset: the index was not updated: %s\n", e.what());
+      }
       throw Interrupted("interrupted by a signal: the dataset run stopped in sample " + std::to_string(s.index) +
-                        "; the " + std::to_string(generated) + " samples it completed are kept, and running it again goes on");
+                        "; the " + std::to_string(generated) + " samples it completed are kept (index.jsonl lists them), and running it again goes on");
     } catch (const std::exception& e) {
       // said first: recording it in failed/ may fail too (the disk that made the sample fail is full)
       std::fprintf(stderr, "spadgen: dataset: sample %lld failed: %s\n", static_cast<long long>(s.index), e.what());

@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <chrono>
 #include <set>
+#include <sstream>
 #include <thread>
 
 #include "app_fixture.h"
@@ -260,9 +261,14 @@ TEST_F(Dataset, ASignalSaysWhichSamplesAreKept) {
   ASSERT_TRUE(s.seen) << "the run was not caught inside sample 2";
   ASSERT_TRUE(WIFEXITED(s.status));
   EXPECT_EQ(WEXITSTATUS(s.status), 2);
-  EXPECT_THAT(slurp(log), HasSubstr("the dataset run stopped in sample 2; the 2 samples it completed are kept"));
+  EXPECT_THAT(slurp(log), HasSubstr("the dataset run stopped in sample 2; the 2 samples it completed are kept (index.jsonl lists them)"));
   EXPECT_TRUE(fs::exists(out / "samples/000001/metadata.json"));
   EXPECT_EQ(leftovers(out), std::vector<std::string>{});
+  // the index of the first run into the folder is written (a reader of the folder sees the done samples)
+  std::vector<std::string> status;
+  std::istringstream index(slurp(out / "index.jsonl"));
+  for (std::string line; std::getline(index, line);) status.push_back(json::parse(line)["status"]);
+  EXPECT_EQ(status, (std::vector<std::string>{"done", "done", "missing", "missing", "missing", "missing"}));
 }
 
 TEST_F(Dataset, AddingSamplesLeavesTheExistingOnesAndEqualsTheLargerRun) {
