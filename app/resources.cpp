@@ -185,8 +185,9 @@ void check_resources(const RunConfig& c, const sensor::SensorModel& sensor, cons
   check_resources(plan_resources(c, sensor, img, axis, threads, out, objects), c, out);
 }
 
-void check_resources(const ResourcePlan& plan, const RunConfig& c, const fs::path& out) {
-  const std::string file = c.scene_file.empty() ? std::string("<scene>") : c.scene_file;
+void check_resources(const ResourcePlan& plan, const RunConfig& c, const fs::path& out, const std::string& who,
+                     const std::string& remedy) {
+  const std::string file = !who.empty() ? who : c.scene_file.empty() ? std::string("<scene>") : c.scene_file;
   if (plan.memory_available >= 0 && plan.memory_needed() > plan.memory_available)
     throw Error(file + ": the run needs about " + bytes_text(plan.memory_needed()) + " of memory, and " +
                 bytes_text(plan.memory_available) + " is available: " + join_parts(required(plan.memory)) +
@@ -197,11 +198,11 @@ void check_resources(const ResourcePlan& plan, const RunConfig& c, const fs::pat
   // cleanly, the folder as it was).
   if (plan.disk_available >= 0 && plan.disk_at_least() > plan.disk_available) {
     const bool any_compressed = plan.disk_at_least() != plan.disk_needed();
-    throw Error(file + ": the run writes " + (any_compressed ? "at least " + bytes_text(plan.disk_at_least()) +
+    throw Error((who.empty() ? file + ": the run writes " : who + " writes ") + (any_compressed ? "at least " + bytes_text(plan.disk_at_least()) +
                 " (the compressed stores at a twentieth of their size; at most " + bytes_text(plan.disk_needed()) + ")"
                                                            : "about " + bytes_text(plan.disk_needed())) +
                 " into " + out.string() + ", and " + bytes_text(plan.disk_available) + " is free there: " + join_parts(plan.disk) +
-                "; switch outputs off (outputs.*), crop (camera.crop), or choose another folder (-o)");
+                "; " + (remedy.empty() ? "switch outputs off (outputs.*), crop (camera.crop), or choose another folder (-o)" : remedy));
   }
 }
 

@@ -56,8 +56,10 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
 // memory or disk than there is.
 void check_resources(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img, const TimeAxis& axis,
                      int threads, const std::filesystem::path& out, int objects = -1);
-// The same for a plan already made (spadgen sense adjusts its disk: linked files, realisations).
-void check_resources(const ResourcePlan& plan, const RunConfig& c, const std::filesystem::path& out);
+// The same for a plan already made (spadgen sense adjusts its disk: linked files, realisations). `who`
+// begins the messages (the scene file when empty); `remedy` replaces the disk message's advice when given.
+void check_resources(const ResourcePlan& plan, const RunConfig& c, const std::filesystem::path& out,
+                     const std::string& who = {}, const std::string& remedy = {});
 
 // "memory: about 270 MB (available: 5.1 GB); disk: about 0.9 GB" for spadgen info.
 std::string resource_summary(const ResourcePlan& plan);

@@ -385,7 +385,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
       if (from_run.count(p.file)) continue;
       disk.push_back(p);
       if (runs.size() > 1 && !p.file.empty() && !shared.count(p.file)) {
-        p.what += " x " + std::to_string(runs.size() - 1) + " more realisations (--repeats)";
+        p.what += " x " + std::to_string(runs.size() - 1) + (runs.size() == 2 ? " more realisation" : " more realisations") + " (--repeats)";
         p.bytes *= int64_t(runs.size() - 1);
         disk.push_back(p);
       }
@@ -394,11 +394,15 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     // first's copies).
     const fs::path existing = existing_ancestor(where);
     struct stat st_run {}, st_out {};
-    if (::stat(src.c_str(), &st_run) == 0 && ::stat(existing.c_str(), &st_out) == 0 && st_run.st_dev != st_out.st_dev)
-      for (const std::string& f : linked)
-        disk.push_back({f + " copied from the run (another file system: no hard link)", writers::bytes_on_disk((src / f).string()), false, f});
+    if (::stat(src.c_str(), &st_run) == 0 && ::stat(existing.c_str(), &st_out) == 0 && st_run.st_dev != st_out.st_dev &&
+        !linked.empty()) {
+      ResourcePlan::Part copies{"the run's " + std::to_string(linked.size()) + " files it keeps, copied (another file system: no hard links)"};
+      for (const std::string& f : linked) copies.bytes += writers::bytes_on_disk((src / f).string());
+      disk.push_back(copies);
+    }
     plan.disk = std::move(disk);
-    check_resources(plan, write_cfg, where);
+    check_resources(plan, write_cfg, out, "sense " + src.string(),
+                    "switch outputs off (--set outputs.*), ask for fewer --repeats, or choose another folder (-o)");
     // Every realisation holds its folder's lock and its .npy stacks open until it commits.
     int64_t held = 0;
     for (const StackLayout& l : stack_layout(write_cfg, sensor, img, axis))

@@ -440,20 +440,22 @@ TEST_F(Hardening, AFileSizeLimitIsAnErrorNamingTheFile) {
   for (const auto& e : fs::directory_iterator(dir_)) EXPECT_EQ(e.path().filename(), "out");
 }
 
+// `cmd` (sh) run with a tmpfs mounted on `mnt` (mount options `options`) in a private mount namespace:
+// `unshare -m` as root, else in a user namespace (-r); exit 97 when neither can mount here.
+Result with_tmpfs(const fs::path& mnt, const std::string& options, const std::string& cmd) {
+  const std::string mount = "mount -t tmpfs " + (options.empty() ? "" : "-o " + options + " ") + "none " + mnt.string();
+  std::string unshare = "unshare -m";
+  if (shell(unshare + " " + mount).code != 0) unshare = "unshare -rm";
+  return shell(unshare + " sh -c '" + mount + " || exit 97; " + cmd + "'");
+}
+
 // An output folder that is a mount point cannot be replaced by renaming: refused before rendering, with the
-// folder to name instead; a folder inside the mount point works. The mount is private to one `unshare -m`
-// (root, or a user namespace with -r); where neither is allowed the case is skipped.
+// folder to name instead; a folder inside the mount point works.
 TEST_F(Hardening, AMountPointAsTheOutputFolderIsRefusedUpFront) {
   const fs::path mnt = dir_ / "mnt";
   fs::create_directories(mnt);
-  // `cmd` run with a tmpfs mounted on mnt; exit 97: no way to mount here
-  std::string unshare = "unshare -m";
-  if (shell(unshare + " mount -t tmpfs none " + mnt.string()).code != 0) unshare = "unshare -rm";
-  const auto with_mount = [&](const std::string& cmd) {
-    return shell(unshare + " sh -c 'mount -t tmpfs none " + mnt.string() + " || exit 97; " + cmd + "'");
-  };
   const std::string run = "timeout -s KILL 30 " + bin() + " run " + kTiny + " -q --seed 1 -o ";
-  Result r = with_mount(run + mnt.string() + " 2>&1; echo exit=$?; ls -A " + mnt.string());
+  Result r = with_tmpfs(mnt, "", run + mnt.string() + " 2>&1; echo exit=$?; ls -A " + mnt.string());
   if (r.code == 97) GTEST_SKIP() << "cannot mount a file system here: " << r.output;
   EXPECT_THAT(r.output, HasSubstr("exit=1\n")) << r.output;
   EXPECT_THAT(r.output, HasSubstr("cannot use " + mnt.string() + " as the output folder (-o): it is a mount point; a run "
@@ -463,9 +465,26 @@ TEST_F(Hardening, AMountPointAsTheOutputFolderIsRefusedUpFront) {
   for (const auto& e : fs::directory_iterator(dir_)) EXPECT_EQ(e.path().filename(), "mnt") << "left beside it";
 
   // inside the mount point: a run folder as anywhere else
-  r = with_mount(run + (mnt / "run").string() + " && ls " + (mnt / "run").string());
+  r = with_tmpfs(mnt, "", run + (mnt / "run").string() + " && ls " + (mnt / "run").string());
   EXPECT_EQ(r.code, 0) << r.output;
   EXPECT_THAT(r.output, HasSubstr("metadata.json"));
+}
+
+// sense onto a small file system (another one than the run's: its files are copied, not linked) is refused
+// before it samples, naming the run it senses and what sense can change; nothing is left there.
+TEST_F(Hardening, SenseOntoAFullFileSystemIsRefusedNamingTheRun) {
+  const fs::path run = dir_ / "run", mnt = dir_ / "mnt";
+  expect_exit(spadgen("run " + kTiny + " -q --seed 1 --set outputs.light=true -o " + run.string()), 0, "run");
+  fs::create_directories(mnt);
+  const Result r = with_tmpfs(mnt, "size=8k", "timeout -s KILL 30 " + bin() + " sense " + run.string() + " --repeats 2 -o " +
+                                                   (mnt / "s").string() + " 2>&1; echo exit=$?; ls -A " + mnt.string());
+  if (r.code == 97) GTEST_SKIP() << "cannot mount a file system here: " << r.output;
+  EXPECT_TRUE(r.output.ends_with("exit=1\n")) << "not refused, or something was left:\n" << r.output;
+  EXPECT_THAT(r.output, HasSubstr("spadgen: error: sense " + run.string() + " writes at least "));
+  EXPECT_THAT(r.output, HasSubstr(" into " + (mnt / "s").string() + ", and "));
+  EXPECT_THAT(r.output, HasSubstr("files it keeps, copied (another file system: no hard links)"));
+  EXPECT_THAT(r.output, HasSubstr("counts.npy x 1 more realisation (--repeats)"));
+  EXPECT_THAT(r.output, HasSubstr("; switch outputs off (--set outputs.*), ask for fewer --repeats, or choose another folder (-o)"));
 }
 
 }  // namespace
