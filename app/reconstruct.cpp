@@ -284,7 +284,9 @@ reconstruct::Scores evaluate_run(const EvaluateCommand& c, const std::string& ru
     *source = compute ? nlohmann::json{{"detector", c.detector}, {"computed", true}, {"noise_free", c.noise_free}}
                       : nlohmann::json{{"file", file}};
   if (source && !labels.detectability) (*source)["labels"] = "labels.exr absent: every object counted as detectable";
-  reconstruct::Scores scores(scorer_options(c));
+  reconstruct::EvaluateOptions options = scorer_options(c);
+  options.ambiguity_m = run.ambiguity_m();
+  reconstruct::Scores scores(options);
   std::vector<reconstruct::PixelOutcome> outcome(labels.pixels.size());
   for (int y = 0; y < run.height(); ++y)
     for (int x = 0; x < run.width(); ++x) {

@@ -39,6 +39,14 @@ double crossing(const std::vector<double>& v, int lo, int hi, double level, bool
   return best;
 }
 
+// The ranges folded by the laser period (edges are paired unfolded: a rise and its fall may straddle a
+// period's end), in increasing range.
+std::vector<Detection> folded(std::vector<Detection> out, const PixelTiming& timing) {
+  for (Detection& d : out) d.range_m = timing.fold(d.range_m);
+  std::stable_sort(out.begin(), out.end(), [](const Detection& a, const Detection& b) { return a.range_m < b.range_m; });
+  return out;
+}
+
 }  // namespace
 
 double PixelTiming::range_of_rise(double k) const {
@@ -46,6 +54,14 @@ double PixelTiming::range_of_rise(double k) const {
 }
 double PixelTiming::range_of_fall(double k) const {
   return (start_s + k * step_s + fall_offset_s - emission_delay_s) * kSpeedOfLight / 2.0;
+}
+
+double PixelTiming::fold(double range_m) const {
+  if (!(period_s > 0.0)) return range_m;
+  const double ambiguity = period_s * kSpeedOfLight / 2.0;
+  double r = std::fmod(range_m, ambiguity);
+  if (r < 0.0) r += ambiguity;
+  return r < ambiguity ? r : 0.0;  // -1e-300 + ambiguity rounds to it
 }
 
 std::vector<double> moving_average(const std::vector<double>& p, int h) {
@@ -131,7 +147,7 @@ std::vector<Detection> detect(const PaperDetector& d, const float* counts, int K
     }
     out.push_back({timing.range_of_rise(k), k, hi - lo, z_located});
   }
-  return out;
+  return folded(std::move(out), timing);
 }
 
 std::vector<Detection> detect(const EdgeDetector& d, const float* counts, int K, int frames, const PixelTiming& timing) {
@@ -226,8 +242,7 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* counts, int K,
       const auto& [f, xf] = falls[i];
       out.push_back({timing.range_of_fall(xf), xf, -f.step, -f.z});
     }
-  std::sort(out.begin(), out.end(), [](const Detection& a, const Detection& b) { return a.range_m < b.range_m; });
-  return out;
+  return folded(std::move(out), timing);
 }
 
 HdrEstimate invert_hdr(double counts, int frames, bool dual, double ratio) {

@@ -5,7 +5,8 @@
 // at time t raises lambda when the gate's end reaches t and lowers it when the gate's start passes t:
 //   rising edge at tau:  t = tau + gate_delay + skew + length      (PixelTiming::rise_offset_s)
 //   falling edge at tau: t = tau + gate_delay + skew                (PixelTiming::fall_offset_s)
-// and its range is c (t - emission_delay) / 2. Both detectors locate an edge at the half point of its
+// and its range is c (t - emission_delay) / 2, folded into [0, c T / 2) for the laser period T (a return
+// of the pulse before arrives as one of this pulse: a camera of one period cannot tell). Both detectors locate an edge at the half point of its
 // step in the linearised domain lambda = -ln(1 - c / N) (the paper's eq. 5), where overlapping returns
 // add, so a near-saturated profile does not put the edge early. docs/detection.md states each rule.
 #pragma once
@@ -30,8 +31,10 @@ struct PixelTiming {
   double rise_offset_s = 0.0;  // gate_delay + skew + length: a rising edge at tau means a return at tau + this
   double fall_offset_s = 0.0;  // gate_delay + skew: a falling edge at tau means a return at tau + this
   double emission_delay_s = 0.0;
-  double range_of_rise(double k) const;
+  double period_s = 0.0;  // the laser's: a range folds into [0, c period / 2), all a camera of one period tells; 0: none
+  double range_of_rise(double k) const;  // unfolded: c (t - emission_delay) / 2
   double range_of_fall(double k) const;
+  double fold(double range_m) const;     // into [0, c period / 2)
 };
 
 // The paper's detector (section 4.D and 4.E): the profile smoothed by a moving average over

@@ -31,7 +31,8 @@ PixelOutcome Scores::add(int x, int y, std::vector<TruthObject> objects,
   std::vector<Pair> pairs;
   for (size_t i = 0; i < objects.size(); ++i)
     for (size_t j = 0; j < dets.size(); ++j) {
-      const double e = dets[j] - objects[i].range_m;
+      double e = dets[j] - objects[i].range_m;
+      if (options_.ambiguity_m > 0.0) e = std::remainder(e, options_.ambiguity_m);
       if (std::abs(e) <= options_.tolerance_m) pairs.push_back({e, i, j});
     }
   std::stable_sort(pairs.begin(), pairs.end(), [](const Pair& a, const Pair& b) { return std::abs(a.error) < std::abs(b.error); });
@@ -106,7 +107,8 @@ nlohmann::json error_statistics(std::vector<double> e) {
 nlohmann::json Scores::to_json(const std::map<int, std::string>& names) const {
   nlohmann::json j;
   j["matching"] = {{"tolerance_m", options_.tolerance_m},
-                   {"rule", "per pixel, object-detection pairs in increasing |range error| within the tolerance, each once"}};
+                   {"rule", "per pixel, object-detection pairs in increasing |range error| within the tolerance, each once"},
+                   {"range_error", "detection minus object range, modulo c T / 2 for the run's laser period T"}};
   if (options_.min_score > -1e300) j["matching"]["min_score"] = options_.min_score;
   j["pixels"] = pixels_;
   j["objects"] = rate(all_);

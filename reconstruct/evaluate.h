@@ -3,7 +3,8 @@
 // Per pixel, the true objects along the pixel-centre ray (ground_truth.exr object<j>.range, labels.exr
 // object<j>.detectable) are matched one to one with the detections: pairs are taken in increasing
 // |range error| while the error is within `tolerance_m`. A matched object is found; an unmatched
-// detection is a false detection. Range errors are detection minus truth over the matched pairs.
+// detection is a false detection. Range errors are detection minus truth over the matched pairs, modulo
+// the range a laser period spans (a detector reports a farther object folded into it, as the camera sees it).
 #pragma once
 #include <array>
 #include <map>
@@ -23,6 +24,7 @@ struct TruthObject {
 
 struct EvaluateOptions {
   double tolerance_m = 0.05;        // a detection further from every unmatched object is false
+  double ambiguity_m = 0.0;         // c T / 2 of the laser period T: errors are taken modulo it; 0: none
   double min_score = -1e300;        // detections scoring below are ignored
   std::optional<PixelRect> region;  // image coordinates: accuracy and precision of the nearest object there
 };

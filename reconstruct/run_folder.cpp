@@ -94,6 +94,7 @@ RunFolder::RunFolder(const std::string& dir) : dir_(dir) {
     step_s_ = get<double>(meta_, "/acquisition/gate_step_ps", meta_path) * 1e-12;
     gate_delay_s_ = get<double>(meta_, "/acquisition/gate/delay_ns", meta_path) * 1e-9;
     emission_delay_s_ = get<double>(meta_, "/resolved_scene/laser/emission_delay_ns", meta_path) * 1e-9;
+    period_s_ = 1e-6 / get<double>(meta_, "/resolved_scene/laser/repetition_rate_MHz", meta_path);
     const std::string maps = (d / "sensor_maps.exr").string();
     if (!fs::is_regular_file(maps)) throw Error(dir + ": no sensor_maps.exr (the per-pixel gate skew and length the edges are timed with)");
     writers::ExrData m = writers::read_exr(maps);
@@ -124,6 +125,7 @@ PixelTiming RunFolder::timing(int x, int y) const {
   t.fall_offset_s = gate_delay_s_ + skew_ps_[i] * 1e-12;
   t.rise_offset_s = t.fall_offset_s + length_ps_[i] * 1e-12;
   t.emission_delay_s = emission_delay_s_;
+  t.period_s = period_s_;
   return t;
 }
 

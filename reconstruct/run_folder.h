@@ -31,6 +31,8 @@ class RunFolder {
 
   // The timing of pixel (x, y) of the image (gate-sweep mode).
   PixelTiming timing(int x, int y) const;
+  // c T / 2 for the laser period T: the ranges a gate sweep tells apart (0 for a 2D run).
+  double ambiguity_m() const { return period_s_ * 299792458.0 / 2.0; }
   // Rows [y0, y1) of the counts as [((y - y0) * W + x) * K + k] (one profile per pixel). noise_free: the
   // expected counts N (1 - exp(-lambda)) from detection_rate instead of the sampled counts.
   void profiles(int y0, int y1, bool noise_free, float* out) const;
@@ -45,7 +47,7 @@ class RunFolder {
   bool gate_sweep_ = true, dual_ = false;
   int K_ = 0, W_ = 0, H_ = 0, frames_ = 0, image_frames_ = 0;
   double dual_ratio_ = 1.0;
-  double start_s_ = 0, step_s_ = 0, gate_delay_s_ = 0, emission_delay_s_ = 0;
+  double start_s_ = 0, step_s_ = 0, gate_delay_s_ = 0, emission_delay_s_ = 0, period_s_ = 0;
   std::vector<float> skew_ps_, length_ps_;
   std::unique_ptr<Stack> counts_, rate_;
 };

@@ -300,4 +300,40 @@ TEST(Hdr, ThePapersFig7FiguresFollowFromTheInversionsStandardError) {
   }
 }
 
+// A return of an earlier or later pulse (the laser's emission delay a whole number of periods off, as
+// for an object beyond c T / 2) makes the same profile: both detectors report its range folded into
+// [0, c T / 2), as the camera sees it; the scorer takes errors modulo c T / 2, so the object beyond is found.
+TEST(Detectors, RangesAreFoldedByTheLaserPeriod) {
+  constexpr double kPeriod = 25e-9, kAmbiguity = kC * kPeriod / 2.0;  // 40 MHz: 3.747 m
+  const auto c = expected_counts(lambda_profile({{0.75, 0.15}}, 1e-4));
+  for (int shift : {-3, -1, 0, 1, 2}) {
+    PixelTiming t = timing();
+    t.emission_delay_s += shift * kPeriod;
+    t.period_s = kPeriod;
+    for (const auto& d : {detect(EdgeDetector{}, c.data(), kK, kN, t), detect(PaperDetector{}, c.data(), kK, kN, t)}) {
+      ASSERT_EQ(d.size(), 1u) << "shift " << shift;
+      EXPECT_NEAR(d[0].range_m, 0.75, 2e-3) << "shift " << shift << " periods";
+      EXPECT_GE(d[0].range_m, 0.0);
+      EXPECT_LT(d[0].range_m, kAmbiguity);
+    }
+    t.period_s = 0.0;  // unfolded: shifted by the periods
+    EXPECT_NEAR(detect(EdgeDetector{}, c.data(), kK, kN, t)[0].range_m, 0.75 - shift * kAmbiguity, 1e-3);
+  }
+  PixelTiming t;
+  t.period_s = kPeriod;
+  EXPECT_EQ(t.fold(-1e-300), 0.0);  // not c T / 2, which rounding would give
+  EXPECT_EQ(t.fold(kAmbiguity), 0.0);
+  EXPECT_NEAR(t.fold(10000.0), std::fmod(10000.0, kAmbiguity), 1e-9);
+
+  EvaluateOptions opt;
+  opt.ambiguity_m = kAmbiguity;
+  Scores s(opt);
+  const PixelOutcome far = s.add(0, 0, {{0, 10000.0, true}}, {{t.fold(10000.0) + 0.004, 5.0}});
+  EXPECT_EQ(far.found, 1);
+  EXPECT_NEAR(s.errors().at(0), 0.004, 1e-9);
+  const PixelOutcome unfolded = s.add(1, 0, {{0, 10000.0, true}}, {{10000.0 - 0.002, 5.0}});  // a detector that unfolds
+  EXPECT_EQ(unfolded.found, 1);
+  EXPECT_NEAR(s.errors().at(1), -0.002, 1e-9);
+}
+
 }  // namespace
