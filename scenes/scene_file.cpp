@@ -593,7 +593,11 @@ void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string
       warnings.push_back("acquisition.intensity: an exposure of " + format_bound(longest / kUs) +
                          " us is longer than one frame at " + format_bound(c.acquisition.frame_rate_Hz) + " fps");
   }
-  if (c.render.target_relative_error && c.render.max_samples_per_pixel < c.render.samples_per_pixel)
+  if (c.render.target_relative_error && c.render.samples_per_pixel < 2)
+    err("/render/samples_per_pixel", "found " + std::to_string(c.render.samples_per_pixel) +
+                                         ", expected at least 2 with render.target_relative_error: the spread of the first "
+                                         "round's paths estimates each pixel's error (one path has none, and would stop there)");
+  else if (c.render.target_relative_error && c.render.max_samples_per_pixel < c.render.samples_per_pixel)
     err("/render/max_samples_per_pixel", "found " + std::to_string(c.render.max_samples_per_pixel) +
                                              ", expected at least render.samples_per_pixel (" +
                                              std::to_string(c.render.samples_per_pixel) + "), the paths of the first round");

@@ -432,7 +432,7 @@ std::vector<Key> build() {
   k.push_back(boolean("/acquisition/intensity/laser_on", FIELD(acquisition.intensity.laser_on), "add the laser's mean photon rate to the ambient light in intensity mode"));
 
   k.push_back(choice("/render/quality", FIELD(render.quality), "preset of samples_per_pixel, target_relative_error and max_samples_per_pixel (draft, standard, reference; docs/accuracy.md); custom: those keys as given. A key given explicitly wins over the preset"));
-  k.push_back(integer("/render/samples_per_pixel", FIELD(render.samples_per_pixel), kNone, closed(1, 1e7), "paths per pixel; with target_relative_error, the paths of the first round, which every pixel gets"));
+  k.push_back(integer("/render/samples_per_pixel", FIELD(render.samples_per_pixel), kNone, closed(1, 1e7), "paths per pixel; with target_relative_error, the paths of the first round (at least 2), which every pixel gets"));
   k.push_back(number("/render/target_relative_error", FIELD(render.target_relative_error), kNone, open_closed(0, 1), "null: samples_per_pixel paths in every pixel; else a first round of samples_per_pixel paths decides each pixel's paths so that the Monte Carlo standard error of its laser return is this fraction of it (at most max_samples_per_pixel; the estimate leaves the first round out, so it is unbiased); laser.exr records each pixel's paths and standard error"));
   k.push_back(integer("/render/max_samples_per_pixel", FIELD(render.max_samples_per_pixel), kNone, closed(1, 1e7), "the most paths of a pixel's estimate with target_relative_error (its first round not counted)"));
   k.push_back(integer("/render/max_bounces", FIELD(render.max_bounces), kNone, closed(1, 64), "surface interactions per path (1 = direct light only)"));

@@ -177,6 +177,10 @@ TEST_F(SceneFileTest, QualityPresetsFillTheSamplingKeysNotGiven) {
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "render": {"target_relative_error": 0.01, "samples_per_pixel": 64, "max_samples_per_pixel": 32}})"),
               HasSubstr("/render/max_samples_per_pixel: found 32, expected at least render.samples_per_pixel (64)"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "render": {"target_relative_error": 0}})"), HasSubstr("/render/target_relative_error"));
+  // one path per pixel in the first round measures no spread: the target would stop every pixel there
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "render": {"target_relative_error": 0.001, "samples_per_pixel": 1}})"),
+              HasSubstr("/render/samples_per_pixel: found 1, expected at least 2 with render.target_relative_error"));
+  EXPECT_NO_THROW(parse(R"({"gltf": "s.gltf", "render": {"target_relative_error": 0.001, "samples_per_pixel": 2}})"));
   // Without a target the most paths do nothing: a warning.
   const ResolvedRun w = parse(R"({"gltf": "s.gltf", "render": {"max_samples_per_pixel": 64}})");
   ASSERT_EQ(w.warnings.size(), 1u);
