@@ -251,7 +251,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     const std::vector<std::string>& file_warnings = source.warnings;
     for (const auto& w : meta.at("warnings"))
       if (std::find(file_warnings.begin(), file_warnings.end(), w.get<std::string>()) == file_warnings.end() &&
-          w.get<std::string>().rfind(kGateWarning, 0) != 0)
+          !is_sensor_warning(w.get<std::string>()))
         scene_warnings.push_back(w.get<std::string>());
   }
 

@@ -39,19 +39,31 @@ std::vector<std::string> camera_warnings(const RunConfig& c, const scenes::Scene
   return w;
 }
 
+bool is_sensor_warning(const std::string& warning) {
+  return warning.rfind(kGateWarning, 0) == 0 || warning.find(kPdpWarning) != std::string::npos;
+}
+
 std::vector<std::string> sensor_warnings(const sensor::SensorModel& sensor) {
   const nlohmann::json d = sensor.describe();
-  if (!d.contains("gate")) return {};
+  std::vector<std::string> w;
+  for (const nlohmann::json& t : d.at("pixel_types"))
+    if (!(t.at("pdp_laser").get<double>() > 0.0)) {
+      const std::string key = "sensor." + t.at("name").get<std::string>();
+      w.push_back(key + kPdpWarning + " (laser.wavelength_nm) is 0 (the built-in curve spans 300 to 1100 nm; or " + key +
+                  ".pdp_csv): its pixels see no laser light, only dark counts and ambient light");
+    }
+  if (!d.contains("gate")) return w;
   const nlohmann::json& gate = d.at("gate");
   const double knots = gate.at("knot_max_error").get<double>(), grid = gate.at("grid_max_error").get<double>();
   const double error = knots + grid;
-  if (!(error > kWarnGateError)) return {};
-  return {std::string(kGateWarning) + " to within about " + percent(error) + " of its open value (knots_per_edge " +
+  if (!(error > kWarnGateError)) return w;
+  w.push_back(std::string(kGateWarning) + " to within about " + percent(error) + " of its open value (knots_per_edge " +
           std::to_string(gate.at("knots_per_edge").get<int>()) + ": the knots within " + percent(knots) +
           " of the fine grid; grid_ps " + g(gate.at("grid_ps").get<double>()) + ": the grid within about " + percent(grid) +
           " of the exact gate), above " + percent(kWarnGateError) + ": the expected counts of " +
           std::to_string(sensor.frames_per_k()) + " frames may move by up to about " + g(error * sensor.frames_per_k()) +
-          " counts; more knots or a finer grid (docs/accuracy.md, \"The sensor model's knobs\")"};
+          " counts; more knots or a finer grid (docs/accuracy.md, \"The sensor model's knobs\")");
+  return w;
 }
 
 std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img, const RunRecord& r) {

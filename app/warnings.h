@@ -24,11 +24,17 @@ inline constexpr double kWarnAspectMismatch = 0.01;
 // the knots' error against the fine grid plus the fine grid's own) is warned about: at N frames the
 // expected counts may move by up to N times it (docs/accuracy.md, "The sensor model's knobs").
 inline constexpr double kWarnGateError = 2e-3;
-// Every such warning starts with this (sense replaces the run's with its own sensor's).
+// Every such warning starts with this.
 inline constexpr const char* kGateWarning = "sensor.gate: the gate is tabulated";
 
-// Before rendering (run, sense and info): the gate sweep's gate tabulated coarsely (above).
+// Every warning about a pixel type blind to the laser holds this.
+inline constexpr const char* kPdpWarning = ": its photon detection probability at the laser's wavelength";
+
+// Before rendering (run, sense and info): the gate sweep's gate tabulated coarsely (above); a pixel type
+// whose PDP at the laser's wavelength is 0 (the built-in curve ends short of a near-infrared laser).
 std::vector<std::string> sensor_warnings(const sensor::SensorModel& sensor);
+// One of sensor_warnings' (sense replaces a run's with its own sensor's).
+bool is_sensor_warning(const std::string& warning);
 
 // Before rendering (run and info): a glTF camera (camera.gltf_camera) whose aspect ratio is not the
 // sensor's, which keeps the vertical field of view and changes the horizontal one.

@@ -206,6 +206,32 @@ TEST_F(App, SenseRepeatsAreTheRunsWithConsecutiveNoiseSeeds) {
   EXPECT_TRUE(fs::exists(dir_ / "rep/repeat_001/counts.npy"));
 }
 
+// A laser the pixels cannot detect (1550 nm: beyond the built-in PDP curve) is warned about, naming the
+// pixel type, by run, info and sense (once: sense replaces the run's sensor warnings with its own); the
+// laser adds nothing to the detection rate.
+TEST_F(App, ALaserThePixelsCannotDetectIsWarnedAbout) {
+  const std::string warning = "warning: sensor.pixel_A: its photon detection probability at the laser's wavelength "
+                              "(laser.wavelength_nm) is 0";
+  Result r = sh("run " + kLit + " --set laser.wavelength_nm=1550 -o " + (dir_ / "blind").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr(warning));
+  r = sh("info " + kScenes + "flat_target.json --set laser.wavelength_nm=1550");
+  EXPECT_THAT(r.output, HasSubstr(warning));
+  r = sh("info " + kScenes + "flat_target.json");
+  EXPECT_THAT(r.output, Not(HasSubstr("photon detection probability")));
+  r = sh("sense " + (dir_ / "blind").string() + " -q -o " + (dir_ / "sensed").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  for (const char* d : {"blind", "sensed"}) {
+    const nlohmann::json meta = nlohmann::json::parse(slurp(dir_ / d / "metadata.json"));
+    int n = 0;
+    for (const auto& w : meta["warnings"]) n += w.get<std::string>().find("photon detection probability") != std::string::npos;
+    EXPECT_EQ(n, 1) << d << ": " << meta["warnings"].dump();
+  }
+  // the same rates as without the laser
+  ASSERT_EQ(sh("run " + kLit + " --set laser.average_power_mW=0 -o " + (dir_ / "dark").string()).code, 0);
+  EXPECT_TRUE(slurp(dir_ / "blind/detection_rate.npy") == slurp(dir_ / "dark/detection_rate.npy"));
+}
+
 // A coarsely tabulated gate (sensor.gate.knots_per_edge, grid_ps) is warned about, by run, info and sense,
 // each for its own sensor: a sense with the default gate drops the run's warning, one with a coarse grid
 // gives its own.
