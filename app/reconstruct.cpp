@@ -72,8 +72,9 @@ struct Detector {
       edges.match_s = 0.5 * edges.separation * step_ps * 1e-12;
     }
   }
-  std::vector<Detection> operator()(const float* profile, int K, int frames, const reconstruct::PixelTiming& t) const {
-    return name == "edges" ? reconstruct::detect(edges, profile, K, frames, t) : reconstruct::detect(paper, profile, K, frames, t);
+  std::vector<Detection> operator()(const float* profile, int K, int frames, const reconstruct::PixelTiming& t, bool rates) const {
+    return name == "edges" ? reconstruct::detect(edges, profile, K, frames, t, rates)
+                           : reconstruct::detect(paper, profile, K, frames, t, rates);
   }
   nlohmann::json parameters() const {
     if (name == "paper")
@@ -93,11 +94,12 @@ DetectionImage detect_image(const RunFolder& run, const Detector& detector, bool
       InterruptGuard::check();
       const int y0 = b * kBandRows, y1 = std::min(run.height(), y0 + kBandRows);
       profiles.resize(size_t(y1 - y0) * size_t(run.width()) * size_t(run.K()));
-      run.profiles(y0, y1, noise_free, profiles.data());
+      if (noise_free) run.rates(y0, y1, profiles.data());
+      else run.profiles(y0, y1, false, profiles.data());
       for (int y = y0; y < y1; ++y)
         for (int x = 0; x < run.width(); ++x) {
           const float* p = profiles.data() + (size_t(y - y0) * size_t(run.width()) + size_t(x)) * size_t(run.K());
-          std::vector<Detection> d = detector(p, run.K(), run.frames(), run.timing(x, y));
+          std::vector<Detection> d = detector(p, run.K(), run.frames(), run.timing(x, y), noise_free);
           if (int(d.size()) > slots) {  // keep the strongest, in range order
             std::partial_sort(d.begin(), d.begin() + slots, d.end(),
                               [](const Detection& a, const Detection& c) { return std::abs(a.score) > std::abs(c.score); });

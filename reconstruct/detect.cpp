@@ -18,6 +18,15 @@ double count_variance(double smoothed_counts, int frames) {
   return N * p * (1.0 - p);
 }
 
+// A pixel's counts: the profile itself, or the expected counts N (1 - exp(-lambda)) of its rates (for the
+// noise model only: the rates are linearised already).
+std::vector<double> counts_of(const float* profile, int K, int frames, bool rates) {
+  std::vector<double> c(profile, profile + K);
+  if (rates)
+    for (double& v : c) v = frames * -std::expm1(-v);
+  return c;
+}
+
 // d lambda / d c at a count level (lambda = -ln(1 - c / N)).
 double lambda_slope(double counts, int frames) {
   const double N = frames;
@@ -81,11 +90,14 @@ double linearise(double counts, int frames) {
   return -std::log1p(-std::clamp(counts, 0.0, N - 0.5) / N);
 }
 
-std::vector<Detection> detect(const PaperDetector& d, const float* counts, int K, int frames, const PixelTiming& timing) {
-  std::vector<double> c(counts, counts + K);
+std::vector<Detection> detect(const PaperDetector& d, const float* profile, int K, int frames, const PixelTiming& timing,
+                              bool rates) {
+  const std::vector<double> c = counts_of(profile, K, frames, rates);
   const std::vector<double> s = moving_average(c, d.half_width);
-  std::vector<double> lam(static_cast<size_t>(K));
-  for (int k = 0; k < K; ++k) lam[size_t(k)] = linearise(s[size_t(k)], frames);
+  // linearised after the smoothing, as the paper does; the rates are linear already
+  std::vector<double> lam = rates ? moving_average(std::vector<double>(profile, profile + K), d.half_width) : s;
+  if (!rates)
+    for (int k = 0; k < K; ++k) lam[size_t(k)] = linearise(s[size_t(k)], frames);
   // The variance of the mean linearised level over smoothed positions [a, b): by the delta method, each raw
   // count j enters with the weight sum over k of (1 / (b - a)) (1 / n_k) dlambda/dc(s_k), n_k the positions
   // averaged at k.
@@ -150,14 +162,15 @@ std::vector<Detection> detect(const PaperDetector& d, const float* counts, int K
   return folded(std::move(out), timing);
 }
 
-std::vector<Detection> detect(const EdgeDetector& d, const float* counts, int K, int frames, const PixelTiming& timing) {
-  std::vector<double> c(counts, counts + K);
+std::vector<Detection> detect(const EdgeDetector& d, const float* profile, int K, int frames, const PixelTiming& timing,
+                              bool rates) {
+  const std::vector<double> c = counts_of(profile, K, frames, rates);
   const std::vector<double> cs = moving_average(c, 2);
   std::vector<double> lam(static_cast<size_t>(K)), var(static_cast<size_t>(K));
   // Prefix sums of lambda and of its variance p / (N (1 - p)) = var(c) (dlambda/dc)^2.
   std::vector<double> sum_l(size_t(K) + 1, 0.0), sum_v(size_t(K) + 1, 0.0);
   for (int k = 0; k < K; ++k) {
-    lam[size_t(k)] = linearise(c[size_t(k)], frames);
+    lam[size_t(k)] = rates ? double(profile[k]) : linearise(c[size_t(k)], frames);
     const double g = lambda_slope(cs[size_t(k)], frames);
     var[size_t(k)] = count_variance(cs[size_t(k)], frames) * g * g;
     sum_l[size_t(k) + 1] = sum_l[size_t(k)] + lam[size_t(k)];
@@ -166,15 +179,33 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* counts, int K,
   struct Edge {
     int k = 0, scale = 0;
     double z = 0.0, step = 0.0, lo = 0.0, hi = 0.0;
+    int claim_lo = 0, claim_hi = 0;  // the positions [claim_lo, claim_hi) of its transition
   };
-  // Edges are taken strongest first. Each taken edge claims its transition, `separation` positions
-  // either side of it; a later edge must lie outside every claim, and only the scales whose windows stay
-  // outside every claim count for it (a window reaching into a stronger edge's transition would see that
-  // edge's foot or shoulder as a step of its own). z at boundary k (between positions k - 1 and k), the
-  // best allowed scale, recomputed after each take; at most 64 edges.
+  // z of the step at boundary k over `s` positions either side.
+  const auto z_at = [&](int k, int s) {
+    const double left = (sum_l[size_t(k)] - sum_l[size_t(k - s)]) / s, right = (sum_l[size_t(k + s)] - sum_l[size_t(k)]) / s;
+    const double v = (sum_v[size_t(k + s)] - sum_v[size_t(k - s)]) / (double(s) * s);
+    return v > 0.0 ? (right - left) / std::sqrt(v) : 0.0;
+  };
+  // Edges are taken strongest first. Each taken edge claims its transition: `separation` positions
+  // either side of it, and beyond while the profile still steps the edge's way by min_score standard
+  // errors over the finest scale (a bright return's foot and shoulder stand out of the noise far from its
+  // centre); a later edge must lie outside every claim, and only the scales whose windows stay outside
+  // every claim count for it (a window reaching into a stronger edge's transition would see that edge's
+  // foot or shoulder as a step of its own). z at boundary k (between positions k - 1 and k), the best
+  // allowed scale, recomputed after each take; at most 64 edges.
   std::vector<Edge> taken;
   const auto allowed = [&](int lo, int hi) {  // positions [lo, hi) touch no claim
-    return std::none_of(taken.begin(), taken.end(), [&](const Edge& t) { return lo < t.k + d.separation && hi > t.k - d.separation; });
+    return std::none_of(taken.begin(), taken.end(), [&](const Edge& t) { return lo < t.claim_hi && hi > t.claim_lo; });
+  };
+  const int fine = d.scales.front();
+  const auto claim = [&](Edge e) {
+    const double sign = e.z > 0.0 ? 1.0 : -1.0;
+    int lo = e.k - d.separation, hi = e.k + d.separation;
+    while (lo - fine >= 0 && lo + fine <= K && sign * z_at(lo, fine) >= d.min_score) --lo;
+    while (hi - fine >= 0 && hi + fine <= K && sign * z_at(hi, fine) >= d.min_score) ++hi;
+    e.claim_lo = lo, e.claim_hi = hi;
+    return e;
   };
   // Only statistics at or above min_score can be taken: list them once (in k, then scale order, which
   // breaks ties as a full scan would), then take from the list.
@@ -182,9 +213,8 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* counts, int K,
   for (int k = 1; k < K; ++k)
     for (int s : d.scales) {
       if (k - s < 0 || k + s > K) continue;
+      const double z = z_at(k, s);
       const double left = (sum_l[size_t(k)] - sum_l[size_t(k - s)]) / s, right = (sum_l[size_t(k + s)] - sum_l[size_t(k)]) / s;
-      const double v = (sum_v[size_t(k + s)] - sum_v[size_t(k - s)]) / (double(s) * s);
-      const double z = v > 0.0 ? (right - left) / std::sqrt(v) : 0.0;
       if (std::abs(z) >= d.min_score) candidates.push_back({k, s, z, right - left, left, right});
     }
   while (taken.size() < 64) {
@@ -192,39 +222,101 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* counts, int K,
     for (const Edge& e : candidates)
       if ((!top || std::abs(e.z) > std::abs(top->z)) && allowed(e.k, e.k) && allowed(e.k - e.scale, e.k + e.scale)) top = &e;
     if (!top) break;
-    taken.push_back(*top);
+    taken.push_back(claim(*top));
   }
+  // Position k saturated: its count within half a count of N, or (rates) a rate that would make it so.
+  const double clip = linearise(frames, frames);  // ln(2 N)
+  const auto saturated = [&](int k) { return rates ? lam[size_t(k)] >= clip : c[size_t(k)] >= frames - 0.5; };
+  const auto saturated_in = [&](int a, int b) {
+    for (int k = std::max(0, a); k < std::min(K, b); ++k)
+      if (saturated(k)) return true;
+    return false;
+  };
   const std::vector<double> lam_s = moving_average(lam, 1);
   // Each edge at the half point of its step on the lightly smoothed profile, nearest its boundary.
   const auto pick = [&](bool rising) {
     std::vector<std::pair<Edge, double>> located;  // the edge and its fractional position
+    std::vector<bool> was_clipped;                 // [j]: located[j] runs into saturated counts
     for (const Edge& e : taken) {
       if ((e.z > 0.0) != rising) continue;
-      double x = crossing(lam_s, e.k - e.scale + 1, e.k + e.scale, 0.5 * (e.lo + e.hi), rising, e.k - 0.5);
+      // An edge into saturated counts (on its bright side, within its statistic's window or its claim and
+      // the finest scale beyond): the bright level is clipped at ln(2 N), and the edge's z, largest in the
+      // unclipped foot where the noise is least, may have named it by its foot; its half point is then
+      // taken between the dark side and the clip, over the window and claim.
+      double left = e.lo, right = e.hi;
+      double x = crossing(lam_s, e.k - e.scale + 1, e.k + e.scale, 0.5 * (left + right), rising, e.k - 0.5);
       if (std::isnan(x)) x = e.k - 0.5;
+      int span_lo = std::min(e.k - e.scale, e.claim_lo) - fine, span_hi = std::max(e.k + e.scale, e.claim_hi) + fine;
+      bool clipped = saturated_in(rising ? e.k : span_lo, rising ? span_hi : e.k);
+      if (!clipped) {  // or up the transition from the edge found, while the profile climbs on
+        const int dir = rising ? 1 : -1;
+        for (int j = rising ? int(std::ceil(x)) : int(std::floor(x)), n = 0; j >= 0 && j < K && n < 4 * d.separation; j += dir, ++n) {
+          if (saturated(j)) {
+            clipped = true;
+            (rising ? span_hi : span_lo) = j + dir * fine;
+            break;
+          }
+          if (j + dir < 0 || j + dir >= K || lam_s[size_t(j + dir)] < lam_s[size_t(j)]) break;
+        }
+      }
+      if (clipped) {
+        // the bright level: the clip; for rates, which are not clipped, the highest over the span
+        double bright = clip;
+        if (rates)
+          for (int k = std::max(0, span_lo); k < std::min(K, span_hi); ++k) bright = std::max(bright, lam_s[size_t(k)]);
+        (rising ? right : left) = bright;
+        x = crossing(lam_s, span_lo + 1, span_hi, 0.5 * (left + right), rising, e.k - 0.5);
+        if (std::isnan(x)) x = e.k - 0.5;
+      }
       // The whole step, from plateaus just outside the edge's transition when the profile has them (the
       // statistic's windows may reach into the transition and see part of it).
       const int lo0 = int(std::floor(x)) - d.separation - 4, hi1 = int(std::ceil(x)) + d.separation + 4;
       Edge located_edge = e;
       if (lo0 >= 0 && hi1 <= K)
         located_edge.step = (sum_l[size_t(hi1)] - sum_l[size_t(hi1 - 4)]) / 4.0 - (sum_l[size_t(lo0 + 4)] - sum_l[size_t(lo0)]) / 4.0;
+      // Two edges of one clipped transition (its foot and its shoulder can both stand out) are one: the
+      // stronger is kept.
+      bool merged = false;
+      for (size_t j = 0; j < located.size() && !merged; ++j) {
+        auto& [other, ox] = located[j];
+        if ((clipped || was_clipped[j]) && std::abs(ox - x) < d.separation) {
+          if (std::abs(located_edge.z) > std::abs(other.z)) other = located_edge, ox = x, was_clipped[j] = clipped;
+          merged = true;
+        }
+      }
+      if (merged) continue;
       located.emplace_back(located_edge, x);
+      was_clipped.push_back(clipped);
     }
     return located;
   };
   const auto rises = pick(true), falls = pick(false);
-  // Pair each rise with the fall that gives the closest return time, within match_s.
+  // Counts saturated (within half a count of N) at nine in ten or more of the positions strictly between
+  // fractional positions a < b, at least one: the level there is clipped at ln(2 N), so the edges either
+  // side are located on the clipped step, early for a rise and late for a fall by the same time.
+  const auto saturated_between = [&](double a, double b) {
+    const int k0 = std::max(0, int(std::floor(a)) + 1), k1 = std::min(K - 1, int(std::ceil(b)) - 1);
+    if (rates || k0 > k1) return false;
+    int n = 0;
+    for (int k = k0; k <= k1; ++k) n += c[size_t(k)] >= frames - 0.5;
+    return 10 * n >= 9 * (k1 - k0 + 1);
+  };
+  // Pair each rise with the fall that gives the closest return time, within match_s; or with the fall
+  // that ends the saturated stretch the rise begins (one return whose plateau saturates, both edges moved
+  // out by the clipping: their plain mean times it).
   std::vector<bool> fall_used(falls.size(), false);
   std::vector<Detection> out;
   for (const auto& [r, xr] : rises) {
     const double tr = timing.start_s + xr * timing.step_s + timing.rise_offset_s;
     int partner = -1;
+    bool clipped = false;
     double best_dt = d.match_s;
     for (size_t i = 0; i < falls.size(); ++i) {
       if (fall_used[i]) continue;
       const auto& [f, xf] = falls[i];
       const double tf = timing.start_s + xf * timing.step_s + timing.fall_offset_s;
-      if (std::abs(tf - tr) <= best_dt) best_dt = std::abs(tf - tr), partner = int(i);
+      if (std::abs(tf - tr) <= best_dt) best_dt = std::abs(tf - tr), partner = int(i), clipped = false;
+      else if (partner < 0 && xf > xr && saturated_between(xr, xf)) partner = int(i), clipped = true;
     }
     if (partner < 0) {
       out.push_back({timing.range_of_rise(xr), xr, r.step, r.z});
@@ -232,8 +324,9 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* counts, int K,
     }
     fall_used[size_t(partner)] = true;
     const auto& [f, xf] = falls[size_t(partner)];
-    // weighted by z^2: the timing variance of an edge falls as its z grows
-    const double wr = r.z * r.z, wf = f.z * f.z;
+    // weighted by z^2: the timing variance of an edge falls as its z grows (clipped: equally, so that the
+    // two shifts cancel)
+    const double wr = clipped ? 1.0 : r.z * r.z, wf = clipped ? 1.0 : f.z * f.z;
     const double range = (wr * timing.range_of_rise(xr) + wf * timing.range_of_fall(xf)) / (wr + wf);
     out.push_back({range, xr, (wr * r.step - wf * f.step) / (wr + wf), std::hypot(r.z, f.z)});
   }

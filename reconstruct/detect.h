@@ -71,9 +71,13 @@ struct EdgeDetector {
   double match_s = 250e-12;
 };
 
-// Returns sorted by range. counts: K values of one pixel; frames: N.
-std::vector<Detection> detect(const PaperDetector& d, const float* counts, int K, int frames, const PixelTiming& timing);
-std::vector<Detection> detect(const EdgeDetector& d, const float* counts, int K, int frames, const PixelTiming& timing);
+// Returns sorted by range. profile: K values of one pixel, its counts of N = frames binary frames, or with
+// `rates` its noise-free rates lambda themselves (--noise-free: linear at any level, where expected counts
+// within half a count of N would be clamped there; the noise is still that of counts of N frames).
+std::vector<Detection> detect(const PaperDetector& d, const float* profile, int K, int frames, const PixelTiming& timing,
+                              bool rates = false);
+std::vector<Detection> detect(const EdgeDetector& d, const float* profile, int K, int frames, const PixelTiming& timing,
+                              bool rates = false);
 
 // Moving average over 2 h + 1 positions (fewer at the ends).
 std::vector<double> moving_average(const std::vector<double>& p, int h);

@@ -129,10 +129,13 @@ PixelTiming RunFolder::timing(int x, int y) const {
   return t;
 }
 
-void RunFolder::profiles(int y0, int y1, bool noise_free, float* out) const {
-  const Stack* s = noise_free ? rate_.get() : counts_.get();
+void RunFolder::rates(int y0, int y1, float* out) const { read_rows(y0, y1, true, false, out); }
+void RunFolder::profiles(int y0, int y1, bool noise_free, float* out) const { read_rows(y0, y1, noise_free, noise_free, out); }
+
+void RunFolder::read_rows(int y0, int y1, bool rate, bool to_counts, float* out) const {
+  const Stack* s = rate ? rate_.get() : counts_.get();
   if (!s)
-    throw Error(dir_ + (noise_free ? ": no detection_rate.npy or .zarr (outputs.detection_rate)"
+    throw Error(dir_ + (rate ? ": no detection_rate.npy or .zarr (outputs.detection_rate)"
                                    : ": no counts.npy or counts.zarr (outputs.counts)"));
   const int64_t rows = y1 - y0, n = rows * W_;
   std::vector<float> plane(static_cast<size_t>(n));
@@ -140,7 +143,7 @@ void RunFolder::profiles(int y0, int y1, bool noise_free, float* out) const {
     s->read((int64_t(k) * H_ + y0) * W_, n, plane.data());
     for (int64_t i = 0; i < n; ++i) {
       float v = plane[size_t(i)];
-      if (noise_free) v = static_cast<float>(frames_ * -std::expm1(-double(v)));
+      if (to_counts) v = static_cast<float>(frames_ * -std::expm1(-double(v)));
       out[size_t(i) * size_t(K_) + size_t(k)] = v;
     }
   }

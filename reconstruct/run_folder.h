@@ -36,10 +36,14 @@ class RunFolder {
   // Rows [y0, y1) of the counts as [((y - y0) * W + x) * K + k] (one profile per pixel). noise_free: the
   // expected counts N (1 - exp(-lambda)) from detection_rate instead of the sampled counts.
   void profiles(int y0, int y1, bool noise_free, float* out) const;
+  // The same rows of detection_rate: lambda, the mean avalanches per frame (no counts: no saturation).
+  void rates(int y0, int y1, float* out) const;
   // The image's file named `name` (e.g. "ground_truth.exr"): its path, or "" when the run has none.
   std::string file(const std::string& name) const;
 
  private:
+  // Rows [y0, y1) of detection_rate (rate) or counts, as profiles; to_counts: the rates as N (1 - exp(-lambda)).
+  void read_rows(int y0, int y1, bool rate, bool to_counts, float* out) const;
   struct Stack;
   friend std::unique_ptr<Stack> open_run_stack(const std::string& dir, const std::string& name);
   std::string dir_;
