@@ -61,6 +61,9 @@ RunResult run(const RunOptions& options) {
     for (const std::string& w : ws) std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str()), warnings.push_back(w);
   };
   warn(camera_warnings(cfg, scene));
+  const render::Camera camera(cfg.camera, scene);
+  const double pixel_angle = camera.pitch_m() / camera.focal_length_m();
+  warn(laser_warnings(cfg, pixel_angle));
   sensor::SensorModel sensor(sensor_stage(cfg));
   if (!cfg.sensor.gate.maps_exr.empty()) {
     const writers::ExrData maps = writers::read_exr(cfg.sensor.gate.maps_exr);
@@ -156,7 +159,7 @@ RunResult run(const RunOptions& options) {
   record.photons_per_pulse_emitted = renderer.photons_per_pulse();
   record.objects = objects_json(scene);
   record.model = model_components(cfg, &scene);
-  record.camera = camera_json(render::Camera(cfg.camera, scene), img);
+  record.camera = camera_json(camera, img);
   record.threads = options.threads;
   record.dataset = options.dataset;
   record.seconds = render_seconds;
@@ -164,7 +167,7 @@ RunResult run(const RunOptions& options) {
   record.times.setup_seconds = setup_seconds;
   record.times.tiles_seconds = render_seconds;
   record.times.take_stages(clock);
-  warn(light_warnings(cfg, img, record));
+  warn(light_warnings(cfg, img, record, pixel_angle));
   InterruptGuard::check();
   outputs.commit();
   record.file_bytes = file_bytes(staging.path(""), files);  // every file complete: metadata.json goes last
@@ -180,12 +183,13 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
   const scenes::ResolvedRun r = scenes::load_scene_file(scene_file, overrides);
   const RunConfig& c = r.config;
   const scenes::Scene scene = scenes::load_gltf(c.gltf_path, c.gltf_scene, c.edits);
-  (void)render::Camera(c.camera, scene);  // camera.gltf_camera names a camera of the glTF, as the run needs
+  const render::Camera camera(c.camera, scene);  // camera.gltf_camera names a camera of the glTF, as the run needs
   sensor::SensorModel sensor(sensor_stage(c));
   std::ostringstream o;
   o << "# resolved scene file " << c.scene_file << "\n" << r.resolved.dump(2) << "\n\n";
   o << "# glTF\n" << scenes::summarize(scene) << "\n";
   std::vector<std::string> before = camera_warnings(c, scene);  // the warnings known before rendering
+  for (std::string& w : laser_warnings(c, camera.pitch_m() / camera.focal_length_m())) before.push_back(std::move(w));
   for (std::string& w : sensor_warnings(sensor)) before.push_back(std::move(w));
   const TimeAxis axis = time_axis(c, sensor);
   const PixelRect img = image_rect(c);

@@ -39,6 +39,20 @@ std::vector<std::string> camera_warnings(const RunConfig& c, const scenes::Scene
   return w;
 }
 
+std::vector<std::string> laser_warnings(const RunConfig& c, double pixel_angle_rad) {
+  if (c.laser.beam != Beam::Cone || !(pixel_angle_rad > 0.0)) return {};
+  // The spot against one pixel's footprint, as solid angles seen from the camera (the laser beside it).
+  const double half = c.laser.half_angle_rad;
+  const double spot_pixels = kPi * half * half / (pixel_angle_rad * pixel_angle_rad);
+  const double paths = c.render.samples_per_pixel * spot_pixels;
+  if (!(spot_pixels < 1.0 && paths < kWarnSpotPaths)) return {};
+  return {"laser.half_angle_deg: a cone of " + g(degrees(half)) + " deg lights a spot of about " + g(spot_pixels) +
+          " pixels (a pixel spans " + g(degrees(pixel_angle_rad)) + " deg): a pixel's camera paths find the laser's light only "
+          "where they land on the spot, about " + g(paths) + " of its " + std::to_string(c.render.samples_per_pixel) +
+          " paths, so its light is noisy or missed (unbiased, but zero where no path lands); widen the cone or raise "
+          "render.samples_per_pixel"};
+}
+
 bool is_sensor_warning(const std::string& warning) {
   return warning.rfind(kGateWarning, 0) == 0 || warning.find(kPdpWarning) != std::string::npos;
 }
@@ -66,7 +80,7 @@ std::vector<std::string> sensor_warnings(const sensor::SensorModel& sensor) {
   return w;
 }
 
-std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img, const RunRecord& r) {
+std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img, const RunRecord& r, double pixel_angle_rad) {
   const double laser_total = r.laser_total;
   std::vector<std::string> w;
   const std::string image = std::to_string(img.width) + " x " + std::to_string(img.height) + " image";
@@ -82,8 +96,9 @@ std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img
   if (!timed && !c.acquisition.intensity.laser_on) return w;
   if (!(laser_total > 0.0)) {
     if (c.laser.average_power_W > 0.0)
-      w.push_back("no laser light reaches the " + image + " (laser.beam, half_angle_deg, offset_m, gltf_light): the "
-                  "outputs hold ambient light and dark counts only");
+      w.push_back("no laser light reaches the " + image + " (laser.beam, half_angle_deg, offset_m, gltf_light" +
+                  (laser_warnings(c, pixel_angle_rad).empty() ? std::string() : "; or no camera path landed on the cone's small spot") +
+                  "): the outputs hold ambient light and dark counts only");
     return w;
   }
   if (!timed) return w;

@@ -36,6 +36,12 @@ std::vector<std::string> sensor_warnings(const sensor::SensorModel& sensor);
 // One of sensor_warnings' (sense replaces a run's with its own sensor's).
 bool is_sensor_warning(const std::string& warning);
 
+// Before rendering (run and info): a cone beam (laser.beam = cone) whose spot is smaller than a pixel's
+// field of view (pixel_angle_rad: pitch over focal length), so small that a pixel's camera paths land on it
+// fewer than kWarnSpotPaths times on average: its light is found by chance (noisy, or absent from the image).
+inline constexpr double kWarnSpotPaths = 16.0;
+std::vector<std::string> laser_warnings(const RunConfig& c, double pixel_angle_rad);
+
 // Before rendering (run and info): a glTF camera (camera.gltf_camera) whose aspect ratio is not the
 // sensor's, which keeps the vertical field of view and changes the horizontal one.
 std::vector<std::string> camera_warnings(const RunConfig& c, const scenes::Scene& scene);
@@ -43,6 +49,7 @@ std::vector<std::string> camera_warnings(const RunConfig& c, const scenes::Scene
 // After rendering, from the image's totals (r.rays summed over the tiles, r.laser_total, out_of_window_total,
 // beyond_period_total): nothing in view (no camera ray hits a surface), no laser light returning, laser
 // light from beyond the unambiguous range, laser light outside the time window.
-std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img, const RunRecord& r);
+// pixel_angle_rad: as laser_warnings', which no laser light returning names as a cause when it applies.
+std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img, const RunRecord& r, double pixel_angle_rad);
 
 }  // namespace spadgen::app

@@ -206,6 +206,21 @@ TEST_F(App, SenseRepeatsAreTheRunsWithConsecutiveNoiseSeeds) {
   EXPECT_TRUE(fs::exists(dir_ / "rep/repeat_001/counts.npy"));
 }
 
+// A cone beam whose spot is far smaller than a pixel (0.001 deg against a pixel's 0.01077 deg: 9.4 um at
+// 50 mm) is found by chance by the camera paths: warned about before rendering, with the spot's size and
+// the paths that land on it; a spot of a pixel or more, or one enough paths land on, is not.
+TEST_F(App, AConeNarrowerThanAPixelIsWarnedAbout) {
+  const std::string info = "info " + kScenes + "flat_target.json --set laser.beam=cone ";
+  Result r = sh(info + "--set laser.half_angle_deg=0.001 --set render.samples_per_pixel=16");
+  EXPECT_THAT(r.output, HasSubstr("warning: laser.half_angle_deg: a cone of 0.001 deg lights a spot of about 0.02708 pixels "
+                                  "(a pixel spans 0.01077 deg)"));
+  EXPECT_THAT(r.output, HasSubstr("about 0.4332 of its 16 paths"));  // 16 pi (0.001 / 0.01077)^2
+  // 0.005 deg: 0.677 pixels, 10.8 of 16 paths (warned), 43 of 64 (not); 0.1 deg: 271 pixels
+  EXPECT_THAT(sh(info + "--set laser.half_angle_deg=0.005 --set render.samples_per_pixel=16").output, HasSubstr("about 10.83 of its 16 paths"));
+  EXPECT_THAT(sh(info + "--set laser.half_angle_deg=0.005 --set render.samples_per_pixel=64").output, Not(HasSubstr("lights a spot")));
+  EXPECT_THAT(sh(info + "--set laser.half_angle_deg=0.1 --set render.samples_per_pixel=1").output, Not(HasSubstr("lights a spot")));
+}
+
 // A laser the pixels cannot detect (1550 nm: beyond the built-in PDP curve) is warned about, naming the
 // pixel type, by run, info and sense (once: sense replaces the run's sensor warnings with its own); the
 // laser adds nothing to the detection rate.
