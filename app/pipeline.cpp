@@ -204,7 +204,7 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
   const char* sep = " ";
   for (const StackLayout& st : stack_layout(c, sensor, img, axis)) {
     if (!st.written) continue;
-    o << sep << st.file << (st.chunks.empty() ? " " : " at most ") << int64_t(std::ceil(double(st.bytes()) / 1e6)) << " MB";
+    o << sep << st.file << (st.chunks.empty() ? " " : " at most ") << bytes_text(st.bytes());
     sep = ", ";
   }
   o << "\n";
