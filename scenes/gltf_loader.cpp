@@ -1508,7 +1508,9 @@ std::string summarize(const Scene& scene) {
   const Objects objects = objects_of(scene);
   s << "objects (ground-truth ids): " << objects.list.size() << "\n";
   for (const Object& o : objects.list)
-    s << "  " << o.id << " " << (o.name.empty() ? std::string("(mesh without node)") : "'" + o.name + "'") << ", "
+    s << "  " << o.id << " "
+      << (!o.name.empty() ? "'" + o.name + "'" : o.node >= 0 ? "node " + std::to_string(o.node) + " (unnamed)" : std::string("(mesh without node)"))
+      << ", "
       << o.meshes.size() << (o.meshes.size() == 1 ? " mesh" : " meshes") << "\n";
   s << "meshes: " << scene.meshes.size() << " (" << scene.triangle_count() << " triangles)\n";
   for (const Mesh& m : scene.meshes)

@@ -84,6 +84,18 @@ TEST(GltfLoader, MatrixAndHierarchy) {
   EXPECT_EQ(s.meshes[0].name, "child/Tri/0");
 }
 
+// An object of an unnamed node (Khronos' Box.gltf: a named-less child holds the mesh) is labelled by its
+// node in the summary, not as a mesh without node.
+TEST(GltfLoader, SummaryLabelsAnUnnamedNodesObjectByItsIndex) {
+  TempDir dir;
+  Gltf g;
+  const int m = g.triangle_mesh();
+  const int child = g.node({{"mesh", m}}, false);
+  g.node({{"children", {child}}});
+  const std::string summary = spadgen::scenes::summarize(load_gltf(g.write(dir.path(), "unnamed")));
+  EXPECT_THAT(summary, HasSubstr("objects (ground-truth ids): 1\n  0 node " + std::to_string(child) + " (unnamed), 1 mesh\n"));
+}
+
 TEST(GltfLoader, MirroringTransformFlipsWinding) {
   TempDir dir;
   Gltf g;
