@@ -227,37 +227,51 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* profile, int K
   // Position k saturated: its count within half a count of N, or (rates) a rate that would make it so.
   const double clip = linearise(frames, frames);  // ln(2 N)
   const auto saturated = [&](int k) { return rates ? lam[size_t(k)] >= clip : c[size_t(k)] >= frames - 0.5; };
-  const auto saturated_in = [&](int a, int b) {
-    for (int k = std::max(0, a); k < std::min(K, b); ++k)
-      if (saturated(k)) return true;
-    return false;
-  };
   const std::vector<double> lam_s = moving_average(lam, 1);
+  // The level of positions [a, b): the rates' mean, or the linearised mean count (the mean of linearised
+  // counts near N is biased by their clipping).
+  constexpr int kPlateau = 12;
+  constexpr double kPartOfStep = 0.5;
+  constexpr double kBrightLevel = 2.0;  // lambda: the noise of the linearised level has grown e^2 - 1 = 6.4 times over the foot's
+  const auto level_of = [&](int a, int b) {
+    double sum = 0.0;
+    for (int k = a; k < b; ++k) sum += rates ? lam[size_t(k)] : c[size_t(k)];
+    return rates ? sum / (b - a) : linearise(sum / (b - a), frames);
+  };
   // Each edge at the half point of its step on the lightly smoothed profile, nearest its boundary.
   const auto pick = [&](bool rising) {
     std::vector<std::pair<Edge, double>> located;  // the edge and its fractional position
     std::vector<bool> was_clipped;                 // [j]: located[j] runs into saturated counts
     for (const Edge& e : taken) {
       if ((e.z > 0.0) != rising) continue;
-      // An edge into saturated counts (on its bright side, within its statistic's window or its claim and
-      // the finest scale beyond): the bright level is clipped at ln(2 N), and the edge's z, largest in the
-      // unclipped foot where the noise is least, may have named it by its foot; its half point is then
-      // taken between the dark side and the clip, over the window and claim.
+      // An edge into a saturated plateau: the bright level is clipped at ln(2 N), and the edge's z, largest
+      // in the unclipped foot where the noise is least, may have named it by its foot; its half point is
+      // then taken between the dark side and the clip, over the window, the claim and up to the plateau.
       double left = e.lo, right = e.hi;
       double x = crossing(lam_s, e.k - e.scale + 1, e.k + e.scale, 0.5 * (left + right), rising, e.k - 0.5);
       if (std::isnan(x)) x = e.k - 0.5;
       int span_lo = std::min(e.k - e.scale, e.claim_lo) - fine, span_hi = std::max(e.k + e.scale, e.claim_hi) + fine;
-      bool clipped = saturated_in(rising ? e.k : span_lo, rising ? span_hi : e.k);
-      if (!clipped) {  // or up the transition from the edge found, while the profile climbs on
-        const int dir = rising ? 1 : -1;
-        for (int j = rising ? int(std::ceil(x)) : int(std::floor(x)), n = 0; j >= 0 && j < K && n < 4 * d.separation; j += dir, ++n) {
-          if (saturated(j)) {
-            clipped = true;
-            (rising ? span_hi : span_lo) = j + dir * fine;
-            break;
-          }
-          if (j + dir < 0 || j + dir >= K || lam_s[size_t(j + dir)] < lam_s[size_t(j)]) break;
+      // the first saturated position on the bright side: within the window and claim, or up the transition
+      // from the edge found while the profile climbs on (at most 4 claims)
+      const int dir = rising ? 1 : -1;
+      int first = -1;
+      for (int j = rising ? e.k : e.k - 1; rising ? j < span_hi : j >= span_lo; j += dir)
+        if (j >= 0 && j < K && saturated(j)) {
+          first = j;
+          break;
         }
+      for (int j = rising ? int(std::ceil(x)) : int(std::floor(x)), n = 0; first < 0 && j >= 0 && j < K && n < 4 * d.separation; j += dir, ++n) {
+        if (saturated(j)) first = j;
+        else if (j + dir < 0 || j + dir >= K || lam_s[size_t(j + dir)] < lam_s[size_t(j)]) break;
+      }
+      // clipped when the plateau it begins is: half or more of the claim's width of positions from it saturated
+      // (counts near N on a plateau reach N now and then by chance, which clips nothing)
+      bool clipped = false;
+      if (first >= 0) {
+        int n = 0, sat = 0;
+        for (int j = first; j >= 0 && j < K && n < d.separation; j += dir, ++n) sat += saturated(j);
+        clipped = 2 * sat >= n;
+        if (clipped) (rising ? span_hi : span_lo) = rising ? std::max(span_hi, first + fine) : std::min(span_lo, first - fine);
       }
       if (clipped) {
         // the bright level: the clip; for rates, which are not clipped, the highest over the span
@@ -267,6 +281,17 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* profile, int K
         (rising ? right : left) = bright;
         x = crossing(lam_s, span_lo + 1, span_hi, 0.5 * (left + right), rising, e.k - 0.5);
         if (std::isnan(x)) x = e.k - 0.5;
+      } else if (e.claim_lo - kPlateau >= 0 && e.claim_hi + kPlateau <= K) {
+        // A bright edge (a bright side of lambda 1 or more, where the linearised noise has grown many times
+        // over its foot's) may be named by its foot too, by windows that hold part of its step only: its half
+        // point is then taken between the levels either side of its whole claimed transition (the bright one
+        // from the mean count, which a plateau near N keeps unbiased).
+        const double before = level_of(e.claim_lo - kPlateau, e.claim_lo), after = level_of(e.claim_hi, e.claim_hi + kPlateau);
+        const double whole = rising ? after - before : before - after, seen = rising ? e.hi - e.lo : e.lo - e.hi;
+        if (whole > 0.0 && seen < kPartOfStep * whole && std::max(before, after) >= kBrightLevel) {
+          x = crossing(lam_s, e.claim_lo + 1, e.claim_hi, 0.5 * (before + after), rising, e.k - 0.5);
+          if (std::isnan(x)) x = e.k - 0.5;
+        }
       }
       // The whole step, from plateaus just outside the edge's transition when the profile has them (the
       // statistic's windows may reach into the transition and see part of it).
