@@ -260,6 +260,7 @@ void dataset_run(const DatasetOptions& options) {
   const DatasetFolder folder(spec, options.out_dir);
   folder.claim();
   const fs::path dir = folder.dir();
+  InterruptGuard interrupt_guard;  // for the whole run: the runs and senses of its samples hold theirs inside it
 
   // What this shard has to do: every sample it owns that is not done, checked before any work.
   struct Todo {
@@ -319,6 +320,17 @@ void dataset_run(const DatasetOptions& options) {
   // Samples another run on this folder is working on (a second run without shards, or overlapping shards)
   // are left for later: each sample is claimed first, and checked again once claimed (the other run may
   // have completed it). When only claimed samples are left, they are tried again every 0.2 s.
+  // SIGINT or SIGTERM (Slurm's time limit, scancel) stop the run; the samples published before stay (the
+  // next run skips them), and the index lists them: best effort, the signal's message comes first.
+  const auto stopped = [&](const std::string& where) {
+    try {
+      folder.write_index(inspect_all(folder, false));
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "spadgen: dataset: the index was not updated: %s\n", e.what());
+    }
+    return Interrupted("interrupted by a signal: the dataset run stopped " + where + "; the " + std::to_string(generated) +
+                       " samples it completed are kept (index.jsonl lists them), and running it again goes on");
+  };
   std::deque<size_t> pending;
   for (size_t t = 0; t < todo.size(); ++t) pending.push_back(t);
   size_t handled = 0, busy_in_a_row = 0;
@@ -331,7 +343,7 @@ void dataset_run(const DatasetOptions& options) {
     if (!claim) {
       pending.push_back(t);
       if (++busy_in_a_row >= pending.size()) {  // every sample left is another run's for now
-        InterruptGuard::check();
+        if (interrupt_flag().load()) throw stopped("waiting for samples another run is generating");
         std::this_thread::sleep_for(std::chrono::milliseconds(200));
         busy_in_a_row = 0;
       }
@@ -345,6 +357,7 @@ void dataset_run(const DatasetOptions& options) {
     }
     const auto sample_start = std::chrono::steady_clock::now();
     try {
+      InterruptGuard::check();  // a signal between two samples
       if (rec.hash.empty()) throw Error(rec.error);  // the sample's parameters make an invalid scene
       // A sample rendered again (damaged, stale) has its realisations sensed again too: they hard-link its
       // files, which are new ones now.
@@ -375,15 +388,7 @@ void dataset_run(const DatasetOptions& options) {
       folder.clear_failure(s);
       ++generated;
     } catch (const Interrupted&) {
-      // The samples published before stay (the next run skips them); this one's folder was not. The index
-      // lists them (Slurm's time limit and scancel send SIGTERM): best effort, the signal's message comes first.
-      try {
-        folder.write_index(inspect_all(folder, false));
-      } catch (const std::exception& e) {
-        std::fprintf(stderr, "spadgen: dataset: the index was not updated: %s\n", e.what());
-      }
-      throw Interrupted("interrupted by a signal: the dataset run stopped in sample " + std::to_string(s.index) +
-                        "; the " + std::to_string(generated) + " samples it completed are kept (index.jsonl lists them), and running it again goes on");
+      throw stopped("in sample " + std::to_string(s.index));  // this one's folder was not published
     } catch (const std::exception& e) {
       // said first: recording it in failed/ may fail too (the disk that made the sample fail is full)
       std::fprintf(stderr, "spadgen: dataset: sample %lld failed: %s\n", static_cast<long long>(s.index), e.what());

@@ -8,15 +8,21 @@ namespace {
 // Only a lock-free atomic may be touched from a handler; every long loop polls it (core/error.h).
 extern "C" void on_interrupt(int) { interrupt_flag().store(true); }
 
+// Guards alive (on the main thread): a guard inside another (a run or a sense inside a dataset run) neither
+// clears a signal that already arrived nor hands the signals back to their default action when it ends.
+int guards = 0;
+
 }  // namespace
 
 InterruptGuard::InterruptGuard() {
+  if (guards++ > 0) return;
   interrupt_flag().store(false);
   previous_int_ = std::signal(SIGINT, on_interrupt);
   previous_term_ = std::signal(SIGTERM, on_interrupt);
 }
 
 InterruptGuard::~InterruptGuard() {
+  if (--guards > 0) return;
   std::signal(SIGINT, previous_int_);
   std::signal(SIGTERM, previous_term_);
 }

@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <csignal>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -21,6 +22,8 @@
 #include <sys/stat.h>
 #include <vector>
 
+#include "app/interrupt.h"
+#include "core/error.h"
 #include "app/outputs.h"
 #include "app/staging.h"
 #include "render/integrator.h"
@@ -485,6 +488,31 @@ TEST_F(Hardening, SenseOntoAFullFileSystemIsRefusedNamingTheRun) {
   EXPECT_THAT(r.output, HasSubstr("files it keeps, copied (another file system: no hard links)"));
   EXPECT_THAT(r.output, HasSubstr("counts.npy x 1 more realisation (--repeats)"));
   EXPECT_THAT(r.output, HasSubstr("; switch outputs off (--set outputs.*), ask for fewer --repeats, or choose another folder (-o)"));
+}
+
+// Guards nest: a run or a sense inside a dataset run holds its own guard inside the dataset's. The inner
+// one neither clears a signal that arrived before it (a SIGTERM between a sample's run and its realisation
+// was lost: the dataset went on to the end and exited 0) nor hands SIGTERM back to its default action
+// when it ends (the next SIGTERM killed the process with no message and no index: exit 143).
+TEST(InterruptGuards, NestedGuardsKeepTheSignalAndTheHandler) {
+  using spadgen::app::InterruptGuard;
+  {
+    InterruptGuard outer;
+    EXPECT_NO_THROW(InterruptGuard::check());
+    std::raise(SIGTERM);  // caught: the flag is set
+    {
+      InterruptGuard inner;
+      EXPECT_THROW(InterruptGuard::check(), spadgen::Interrupted) << "the inner guard cleared the signal";
+    }
+    EXPECT_THROW(InterruptGuard::check(), spadgen::Interrupted);
+    std::raise(SIGTERM);  // still caught after the inner guard ended (the default action would end this test)
+    EXPECT_THROW(InterruptGuard::check(), spadgen::Interrupted);
+  }
+  {
+    InterruptGuard next;  // a new outermost guard starts without the earlier signal
+    EXPECT_NO_THROW(InterruptGuard::check());
+  }
+  EXPECT_EQ(std::signal(SIGTERM, SIG_DFL), SIG_DFL) << "the handler was not handed back";
 }
 
 }  // namespace
