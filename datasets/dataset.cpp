@@ -11,6 +11,7 @@
 #include "core/error.h"
 #include "core/rng.h"
 #include "scenes/input.h"
+#include "scenes/key_path.h"
 #include "scenes/scene.h"
 #include "scenes/scene_file.h"
 
@@ -272,9 +273,31 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
       rd.fail(at, std::string("with the scene file ") + s.scene_names.front() + ": " + e.what());
     }
   };
-  std::set<std::string> seen;
+  // Each value once: one key under two spellings (materials.plate.roughness and materials."plate".roughness),
+  // or a whole [x, y, z] key and one of its components, is one value set twice (the index would list the
+  // one and the sample render the other).
+  std::vector<std::pair<std::string, scenes::KeyPath>> seen;
   const auto once = [&](const std::string& at, const std::string& key) {
-    if (!seen.insert(key).second) rd.fail(at, "varies " + key + " a second time; expected each key in one of set, grid and random");
+    scenes::KeyPath kp;
+    try {
+      kp = scenes::parse_key_path(key);
+    } catch (const Error&) {
+      return;  // the scene file's check names what is wrong with it
+    }
+    for (const auto& [other, p] : seen) {
+      const size_t n = std::min(p.names.size(), kp.names.size());
+      if (!std::equal(p.names.begin(), p.names.begin() + std::ptrdiff_t(n), kp.names.begin())) continue;
+      if (p.names.size() == kp.names.size() && p.component && kp.component && *p.component != *kp.component) continue;
+      rd.fail(at, "varies " + key + (other == key ? " a second time" : ", which " + other + " varies too") +
+                      "; expected each key in one of set, grid and random");
+    }
+    seen.emplace_back(key, kp);
+  };
+  // The key (as the file spells it) that sets `names` whole, or "".
+  const auto spelling_of = [&](const std::vector<std::string>& names) {
+    for (const auto& [key, p] : seen)
+      if (p.names == names && !p.component) return key;
+    return std::string();
   };
   if (doc.contains("set")) {
     const json& st = doc["set"];
@@ -323,14 +346,14 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
   }
   // Realisations re-sample the noise from each sample's saved light, so `repeats` saves it (outputs.light
   // true for every sample): the file may say so too, not otherwise.
-  if (s.repeats > 1 && seen.count("outputs.light")) {
-    const auto in_set = std::find_if(s.set.begin(), s.set.end(), [](const auto& kv) { return kv.first == "outputs.light"; });
+  if (const std::string light = spelling_of({"outputs", "light"}); s.repeats > 1 && !light.empty()) {
+    const auto in_set = std::find_if(s.set.begin(), s.set.end(), [&](const auto& kv) { return kv.first == light; });
     const std::string why = "repeats " + std::to_string(s.repeats) + " re-samples each sample's noise from its saved light, which it saves";
     if (in_set == s.set.end())
       rd.fail("/repeats", "is " + std::to_string(s.repeats) + ", and outputs.light varies per sample (grid or random); " + why +
                               " in every sample: remove outputs.light from grid and random");
     if (in_set->second != json(true))
-      rd.fail("/set/outputs.light", "is " + in_set->second.dump() + ", but " + why + ": set it true, or remove it");
+      rd.fail("/set/" + light, "is " + in_set->second.dump() + ", but " + why + ": set it true, or remove it");
   }
   // Names of glTF nodes and materials are known only to the glTF: each scene is loaded once with the
   // edits of its first valid sample, so that a misspelt name fails here rather than in every sample. A

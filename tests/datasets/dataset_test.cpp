@@ -62,6 +62,16 @@ TEST(DatasetFile, ErrorsNameTheKeyAndWhatWasExpected) {
   EXPECT_THAT(error_of("\"grid\": {\"seeds.noise\": [1, 2]}"), HasSubstr("/grid/seeds.noise"));
   EXPECT_THAT(error_of("\"set\": {\"camera.f_number\": 2}, \"grid\": {\"camera.f_number\": [2, 4]}"),
               HasSubstr("varies camera.f_number a second time"));
+  // one key under another spelling, or a whole [x, y, z] key and one of its components: one value twice (the
+  // index listed the grid's and the sample rendered the random draw); two components are two values
+  EXPECT_THAT(error_of("\"grid\": {\"camera.f_number\": [2, 4]}, \"random\": {\"\\\"camera\\\".f_number\": {\"uniform\": [2, 3]}}"),
+              HasSubstr("/random/\"camera\".f_number: varies \"camera\".f_number, which camera.f_number varies too"));
+  EXPECT_THAT(error_of("\"grid\": {\"camera.position_m\": [[0, 0, 1], [0, 0, 2]]}, \"random\": {\"camera.position_m[2]\": {\"uniform\": [1, 2]}}"),
+              HasSubstr("varies camera.position_m[2], which camera.position_m varies too"));
+  EXPECT_EQ(parse_dataset_text("{\"scenes\": [\"" + kScenes + "flat_target.json\"], \"grid\": {\"camera.position_m[0]\": [0, 0.1]}, "
+                               "\"random\": {\"camera.position_m[2]\": {\"uniform\": [1, 2]}}}", "test_dataset.json").random.size(), 1u);
+  EXPECT_THAT(error_of("\"repeats\": 2, \"set\": {\"\\\"outputs\\\".light\": false}"),
+              HasSubstr("/set/\"outputs\".light: is false, but repeats 2"));
   EXPECT_THAT(error_of("\"seeds\": {\"chips\": 3}"), HasSubstr("/seeds/chips: unknown key; did you mean chip?"));
   // repeats saves the light: outputs.light true may be said too (the shipped example says it), not false or varied
   EXPECT_THAT(error_of("\"repeats\": 2, \"set\": {\"outputs.light\": false}"),
