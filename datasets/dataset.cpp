@@ -499,6 +499,12 @@ std::optional<Shard> shard_from_environment() {
       throw Error("Slurm job array: SLURM_ARRAY_TASK_ID=" + std::to_string(i) + ", MIN=" + std::to_string(min) + ", STEP=" +
                   std::to_string(step) + ", COUNT=" + std::to_string(n) +
                   " do not make a task index in [0, COUNT): use a contiguous array such as --array=0-" + std::to_string(n - 1));
+    // An array of uneven steps (--array=0,2,5) gives STEP 1 or its first step, and a MAX that the others
+    // do not make: its tasks would run some shards twice and others never.
+    if (const auto max = env("SLURM_ARRAY_TASK_MAX"); max && integer("SLURM_ARRAY_TASK_MAX", *max) != min + step * (n - 1))
+      throw Error("Slurm job array: SLURM_ARRAY_TASK_MIN=" + std::to_string(min) + ", MAX=" + *max + ", STEP=" + std::to_string(step) +
+                  ", COUNT=" + std::to_string(n) + " are not an evenly spaced array (such as --array=0,2,5), whose tasks would "
+                  "run some shards and never others: use --array=0-" + std::to_string(n - 1) + ", or START-END:STEP");
     return Shard{(i - min) / step, n};
   }
   if (const auto id = env("JOB_COMPLETION_INDEX")) {

@@ -29,6 +29,18 @@ mounts = {m["mountPath"] for m in container["volumeMounts"]}
 assert args[2] in mounts, f"the dataset file {args[2]} is not mounted ({mounts})"
 assert os.path.dirname(args[args.index("-o") + 1]) in mounts, "the output folder is not on a mounted volume"
 
+# The image copies the source tree: the host's build folders stay out of the build context (.dockerignore),
+# as their CMakeCache.txt names another source folder, which cmake in the image refuses. Docker matches
+# top-level names with Go's filepath.Match, which fnmatch agrees with for these patterns.
+import fnmatch
+dockerfile = open(os.path.join(src, "examples/kubernetes/Dockerfile")).read()
+assert "COPY . /src/spadgen" in dockerfile and "-B build" in dockerfile, "the Dockerfile changed: check what it copies"
+ignored = [p.strip() for p in open(os.path.join(src, ".dockerignore")) if p.strip() and not p.startswith("#")]
+for name in ("build", "build-sanitizers", "build-fuzz", ".git"):
+    assert any(fnmatch.fnmatchcase(name, p) for p in ignored), f".dockerignore does not leave out {name}/ ({ignored})"
+for name in ("CMakeLists.txt", "render", "sensor", "scenes", "python", ".ci"):
+    assert not any(fnmatch.fnmatchcase(name, p) for p in ignored), f".dockerignore leaves out {name}, which the image builds from"
+
 with tempfile.TemporaryDirectory() as w:
     dataset = os.path.join(w, "dataset.json")
     with open(dataset, "w") as f:

@@ -246,7 +246,7 @@ TEST(Shards, FromTheCommandLine) {
 TEST(Shards, FromSlurmJobArraysAndKubernetesIndexedJobs) {
   const auto clear = [] {
     for (const char* v : {"SLURM_ARRAY_TASK_ID", "SLURM_ARRAY_TASK_COUNT", "SLURM_ARRAY_TASK_MIN", "SLURM_ARRAY_TASK_STEP",
-                          "JOB_COMPLETION_INDEX", "JOB_COMPLETIONS"})
+                          "SLURM_ARRAY_TASK_MAX", "JOB_COMPLETION_INDEX", "JOB_COMPLETIONS"})
       ::unsetenv(v);
   };
   clear();
@@ -257,6 +257,22 @@ TEST(Shards, FromSlurmJobArraysAndKubernetesIndexedJobs) {
   EXPECT_THROW(shard_from_environment(), Error);  // beyond MIN + COUNT - 1
   ::unsetenv("SLURM_ARRAY_TASK_COUNT");
   EXPECT_THROW(shard_from_environment(), Error);
+  clear();
+  // --array=1-7:2, as Slurm 22.05 describes it: shards 0-3 of 4
+  ::setenv("SLURM_ARRAY_TASK_MIN", "1", 1), ::setenv("SLURM_ARRAY_TASK_MAX", "7", 1), ::setenv("SLURM_ARRAY_TASK_STEP", "2", 1);
+  ::setenv("SLURM_ARRAY_TASK_COUNT", "4", 1), ::setenv("SLURM_ARRAY_TASK_ID", "5", 1);
+  EXPECT_EQ(shard_from_environment()->text(), "2/4");
+  // --array=0,2,4 as it describes it (STEP 1, COUNT 3, MAX 4): task 2 would run shard 2 of 3 and task 4
+  // none, shard 1 never; every task refuses, naming the array to use
+  ::setenv("SLURM_ARRAY_TASK_MIN", "0", 1), ::setenv("SLURM_ARRAY_TASK_MAX", "4", 1), ::setenv("SLURM_ARRAY_TASK_STEP", "1", 1);
+  ::setenv("SLURM_ARRAY_TASK_COUNT", "3", 1), ::setenv("SLURM_ARRAY_TASK_ID", "2", 1);
+  try {
+    (void)shard_from_environment();
+    ADD_FAILURE() << "an uneven array was taken";
+  } catch (const Error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("are not an evenly spaced array (such as --array=0,2,5), whose tasks would run some shards "
+                                    "and never others: use --array=0-2, or START-END:STEP"));
+  }
   clear();
   ::setenv("JOB_COMPLETION_INDEX", "1", 1);
   EXPECT_THROW(shard_from_environment(), Error);  // the Job's completions must be given
