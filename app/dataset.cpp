@@ -163,7 +163,10 @@ std::string dataset_plan(const DatasetOptions& options) {
   const DatasetSpec spec = datasets::load_dataset_file(options.file);
   const datasets::Shard shard = choose_shard(options);
   std::optional<DatasetFolder> folder;
-  if (!options.out_dir.empty()) folder.emplace(spec, options.out_dir);
+  if (!options.out_dir.empty()) {
+    folder.emplace(spec, options.out_dir);
+    folder->check();  // what run would refuse (another dataset's folder, foreign files)
+  }
   std::ostringstream o;
   const int64_t n = spec.count();
   o << "# dataset " << spec.file << ": " << n << " samples (" << spec.grid_cells() << " grid cells";

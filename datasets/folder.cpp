@@ -131,14 +131,28 @@ void DatasetFolder::claim() const {
   std::error_code ec;
   fs::create_directories(dir_, ec);
   if (ec) throw Error("cannot create the dataset folder " + dir_.string() + ": " + ec.message());
-  if (!fs::is_directory(dir_)) throw Error(dir_.string() + " is not a folder; expected the dataset folder (-o)");
-  const fs::path own = dir_ / "dataset.json";
-  // dataset.json: where the dataset file is (for `dataset status`) and its resolved form.
+  check();
+  const ojson wanted = record();
+  if (read_json<ojson>(dir_ / "dataset.json") != wanted)
+    writers::write_file_atomic((dir_ / "dataset.json").string(), wanted.dump(2) + "\n");
+  fs::create_directories(dir_ / "samples", ec);
+  if (ec) throw Error("cannot create " + (dir_ / "samples").string() + ": " + ec.message());
+}
+
+// dataset.json: where the dataset file is (for `dataset status`) and its resolved form.
+ojson DatasetFolder::record() const {
   ojson record = {{"dataset_file", spec_.file}};
   for (auto it = spec_.resolved.begin(); it != spec_.resolved.end(); ++it) record[it.key()] = it.value();
+  return record;
+}
+
+void DatasetFolder::check() const {
+  std::error_code ec;
+  if (!fs::exists(dir_, ec)) return;
+  if (!fs::is_directory(dir_)) throw Error(dir_.string() + " is not a folder; expected the dataset folder (-o)");
   // Compared in order: the order of the grid's keys decides which cell a sample takes.
-  const ojson wanted = record;
-  const std::optional<ojson> prev = read_json<ojson>(own);
+  const ojson wanted = record();
+  const std::optional<ojson> prev = read_json<ojson>(dir_ / "dataset.json");
   if (prev) {
     ojson a = *prev, b = wanted;
     for (const char* free_key : {"samples", "dataset_file"}) a.erase(free_key), b.erase(free_key);
@@ -163,9 +177,6 @@ void DatasetFolder::claim() const {
                   "dataset folder (with its dataset.json): use another folder (-o)");
     }
   }
-  if (prev != wanted) writers::write_file_atomic(own.string(), record.dump(2) + "\n");
-  fs::create_directories(dir_ / "samples", ec);
-  if (ec) throw Error("cannot create " + (dir_ / "samples").string() + ": " + ec.message());
 }
 
 const std::string& DatasetFolder::scene_content_hash(int scene) const {

@@ -71,6 +71,8 @@ class DatasetFolder {
   // that differs) or files spadgen did not write, and writes dataset.json. Safe to call from every shard
   // at once (the same bytes are written atomically).
   void claim() const;
+  // The same refusals without writing anything (dataset plan -o): nothing to refuse when DIR does not exist.
+  void check() const;
 
   // The sample's scene file with its overrides, resolved and checked; throws spadgen::Error naming the
   // sample and its parameters when they make an invalid scene.
@@ -102,6 +104,7 @@ class DatasetFolder {
 
  private:
   const std::string& scene_content_hash(int scene) const;
+  nlohmann::ordered_json record() const;  // what dataset.json holds for this dataset
 
   DatasetSpec spec_;
   std::filesystem::path dir_;

@@ -323,6 +323,15 @@ TEST_F(Dataset, RefusesAnotherDatasetsFolderForeignFilesAndTooLittleDisk) {
   const Result other = sh("dataset run " + (dir_ / "b.json").string() + " -o " + (dir_ / "out").string() + " -q");
   EXPECT_EQ(other.code, 1);
   EXPECT_THAT(other.output, HasSubstr("holds another dataset: its dataset.json differs from " + (dir_ / "b.json").string() + " at \"seed\""));
+  // plan -o refuses it too (it listed the other dataset's samples as left to generate), and writes nothing
+  const std::string before = slurp(dir_ / "out/dataset.json");
+  const Result other_plan = sh("dataset plan " + (dir_ / "b.json").string() + " -o " + (dir_ / "out").string());
+  EXPECT_EQ(other_plan.code, 1) << other_plan.output;
+  EXPECT_THAT(other_plan.output, HasSubstr("holds another dataset"));
+  EXPECT_EQ(slurp(dir_ / "out/dataset.json"), before);
+  EXPECT_EQ(sh("dataset plan " + (dir_ / "a.json").string() + " -o " + (dir_ / "out").string()).code, 0);
+  EXPECT_EQ(sh("dataset plan " + (dir_ / "a.json").string() + " -o " + (dir_ / "absent").string()).code, 0);
+  EXPECT_FALSE(fs::exists(dir_ / "absent"));
   // The same keys in another order: the grid's order decides which cell a sample takes.
   const std::string ordered = small_dataset(2, 3, kScenes + "multi_object.json", ", \"camera.f_number\": [1.4]");
   std::string swapped = ordered;
