@@ -270,6 +270,12 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
     try {
       (void)scenes::load_scene_file(s.scenes.front(), overrides);
     } catch (const Error& e) {
+      // a mistake of the scene file itself is its own, not the key's (unless the dataset's keys mend it)
+      try {
+        (void)scenes::load_scene_file(s.scenes.front(), {});
+      } catch (const Error& own) {
+        rd.fail("/scenes/0", own.what());
+      }
       rd.fail(at, std::string("with the scene file ") + s.scene_names.front() + ": " + e.what());
     }
   };

@@ -2,10 +2,12 @@
 // distributions, independence of the index), and shards from the command line and the environment.
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <functional>
 #include <sstream>
@@ -20,6 +22,7 @@ namespace spadgen::datasets {
 namespace {
 
 using ::testing::HasSubstr;
+namespace fs = std::filesystem;
 
 const std::string kScenes = std::string(SPADGEN_SOURCE_DIR) + "/scenes/paper/";
 
@@ -36,6 +39,41 @@ std::string error_of(const std::string& body) {
     return e.what();
   }
   return "no error";
+}
+
+// A mistake of the scene file itself is named as the scene file's, at /scenes/0, not at the first scene-file
+// key the dataset sets (it said "/set/outputs.storage: ... /notes_for_me: unknown key"); a scene file that
+// only the dataset's keys make valid is accepted.
+TEST(DatasetFile, AMistakeOfTheSceneFileIsNamedAsItsOwn) {
+  const fs::path dir = fs::temp_directory_path() / ("spadgen_dataset_scene_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  std::string scene;
+  {
+    std::ifstream in(kScenes + "flat_target.json");
+    std::ostringstream t;
+    t << in.rdbuf();
+    scene = t.str();
+  }
+  const std::string gltf = "\"gltf\": \"" + kScenes + "flat_target.gltf\"";
+  scene.replace(scene.find("\"gltf\": \"flat_target.gltf\""), std::string("\"gltf\": \"flat_target.gltf\"").size(), gltf);
+  std::string broken = scene;
+  broken.replace(broken.find(gltf), gltf.size(), gltf + ", \"notes_for_me\": 0");
+  std::ofstream((dir / "broken.json").string()) << broken;
+  std::string mended = scene;  // a crop outside the sensor, which the dataset widens
+  mended.replace(mended.find("\"camera\": {"), 11, "\"camera\": {\"crop\": [1100, 0, 8, 8], ");
+  std::ofstream((dir / "mended.json").string()) << mended;
+  const auto error = [&](const std::string& text) {
+    try {
+      parse_dataset_text(text, (dir / "d.json").string());
+    } catch (const Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_THAT(error("{\"scenes\": [\"broken.json\"], \"set\": {\"outputs.storage\": \"zarr\"}}"),
+              HasSubstr("d.json: /scenes/0: " + (dir / "broken.json").string() + ": /notes_for_me: unknown key"));
+  EXPECT_EQ(error("{\"scenes\": [\"mended.json\"], \"set\": {\"camera.width_px\": 2048}}"), "no error");
+  fs::remove_all(dir);
 }
 
 TEST(DatasetFile, ErrorsNameTheKeyAndWhatWasExpected) {
