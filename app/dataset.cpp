@@ -245,7 +245,8 @@ std::string dataset_plan(const DatasetOptions& options) {
          "render.max_samples_per_pixel for every pixel, an upper bound\n";
   if (total.disk_at_least != total.disk)
     o << "# the disk counts the compressed stores (Zarr) uncompressed, at most: the samples take at least "
-      << bytes_text(total.disk_at_least) << " (the stores at a twentieth); the shipped example writes about a fifth of the most\n";
+      << bytes_text(total.disk_at_least) << " (the stores at a twentieth; examples/datasets/multi_object_variations.json "
+         "writes about a fifth of the most)\n";
   if (folder) {
     const int64_t free = free_disk(options.out_dir);
     o << "# left to generate in " << options.out_dir << ": " << left << " samples, disk about " << bytes_text(left_total.disk)

@@ -136,7 +136,7 @@ int main(int argc, char** argv) {
   CLI::Option* rec_detector = rec_cmd->add_option("--detector", rec.detector, "edges (multi-scale rising and falling edges, default) or paper (the paper's virtual window)")
       ->check(CLI::IsMember({"edges", "paper"}));
   rec_cmd->add_option("-o,--out", rec.out, "output file (default RUN_DIR/detections_<detector>.exr, or RUN_DIR/hdr.exr)")->check(kNamed);
-  rec_cmd->add_flag("--noise-free", rec.noise_free, "from the noise-free expected counts (detection_rate) instead of the sampled counts");
+  rec_cmd->add_flag("--noise-free", rec.noise_free, "from the noise-free rates (detection_rate) instead of the sampled counts");
   CLI::Option* rec_max = rec_cmd->add_option("--max-detections", rec.max_detections, "detection slots per pixel (the strongest are kept)")
                              ->check(CLI::Range(1, 64));
   rec_cmd->add_option("--threads", rec.threads, "worker threads (default: all cores)")->check(kThreadsRange);
@@ -157,7 +157,7 @@ int main(int argc, char** argv) {
   CLI::Option* min_score_opt = eval_cmd->add_option("--min-score", eval_min_score, "ignore detections scoring below this");
   eval_cmd->add_option("--region", eval_region, "accuracy and precision of the nearest object over this rectangle (image pixels)")
       ->type_name("X,Y,W,H");
-  eval_cmd->add_flag("--noise-free", eval.noise_free, "when the detector runs: on the noise-free expected counts");
+  eval_cmd->add_flag("--noise-free", eval.noise_free, "when the detector runs: on the noise-free rates (detection_rate)");
   eval_cmd->add_option("--threads", eval.threads, "worker threads (default: all cores)")->check(kThreadsRange);
   bool eval_quiet = false;  // accepted as by every command: evaluate writes nothing on stderr but warnings and errors
   eval_cmd->add_flag("-q,--quiet", eval_quiet, "nothing on stderr but warnings and errors (as always: the scores go to stdout)");

@@ -70,14 +70,14 @@ class Sample:
         self.row = row
         self.index = int(row["index"])
         self.status = row["status"]
-        self.folder = os.path.join(dataset.path, row["folder"])
+        self.folder = os.path.abspath(os.path.join(dataset.path, row["folder"]))
         self.parameters = dict(row["parameters"])
         self.seeds = dict(row["seeds"])
         self.sample_hash = row.get("sample_hash", "")
         self.ground_truth = dict(row.get("ground_truth") or {})
         self.error = row.get("error")
         # Realisations 1, 2, ... of the temporal noise (realisation 0 is the sample's own folder).
-        self.repeat_folders = [os.path.join(dataset.path, f) for f in row.get("repeats", [])]
+        self.repeat_folders = [os.path.abspath(os.path.join(dataset.path, f)) for f in row.get("repeats", [])]
         self._runs = {}
 
     def __repr__(self):
