@@ -282,8 +282,8 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* profile, int K
         x = crossing(lam_s, span_lo + 1, span_hi, 0.5 * (left + right), rising, e.k - 0.5);
         if (std::isnan(x)) x = e.k - 0.5;
       } else if (e.claim_lo - kPlateau >= 0 && e.claim_hi + kPlateau <= K) {
-        // A bright edge (a bright side of lambda 1 or more, where the linearised noise has grown many times
-        // over its foot's) may be named by its foot too, by windows that hold part of its step only: its half
+        // A bright edge (a bright side of lambda kBrightLevel or more, where the linearised noise has grown
+        // many times over its foot's) may be named by its foot too, by windows that hold part of its step only: its half
         // point is then taken between the levels either side of its whole claimed transition (the bright one
         // from the mean count, which a plateau near N keeps unbiased).
         const double before = level_of(e.claim_lo - kPlateau, e.claim_lo), after = level_of(e.claim_hi, e.claim_hi + kPlateau);
@@ -323,7 +323,7 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* profile, int K
     const int k0 = std::max(0, int(std::floor(a)) + 1), k1 = std::min(K - 1, int(std::ceil(b)) - 1);
     if (rates || k0 > k1) return false;
     int n = 0;
-    for (int k = k0; k <= k1; ++k) n += c[size_t(k)] >= frames - 0.5;
+    for (int k = k0; k <= k1; ++k) n += saturated(k);
     return 10 * n >= 9 * (k1 - k0 + 1);
   };
   // Pair each rise with the fall that gives the closest return time, within match_s; or with the fall
