@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "core/error.h"
 #include "core/units.h"
@@ -48,12 +49,17 @@ ObjectLabelsTile object_labels(const SensorModel& sensor, const GroundTruthTile&
     if (!(peak > 0.0)) continue;
     const auto k = static_cast<size_t>(std::find_if(own, own + K, [&](double v) { return v >= kEdgeFraction * peak; }) - own);
     const double lambda = s.rate[k * n + i];
-    // The rate without the object, never below 0: lambda is float, lambda_o double.
-    const double without = std::max(0.0, lambda - own[k]);
+    // The rate without the object, never below 0, and 0 within what own[k] is known to: the neighbours'
+    // crosstalk is theirs taken as this pixel's (their gate skew and PDP differ), and lambda is float. A
+    // bright return's lambda is large: a difference of a fraction of it would leave "without" at several
+    // avalanches per frame and no edge at all (1e7 mW: none).
+    double without = std::max(0.0, lambda - own[k]);
+    if (without <= (sensor.crosstalk_share(returns[ri].x, returns[ri].y) + 0x1p-22) * own[k]) without = 0.0;
     const double p1 = -std::expm1(-lambda), p0 = -std::expm1(-without);
     const double edge = N * (std::exp(-without) - std::exp(-lambda));
     const double noise = std::sqrt((N * p1 * (1.0 - p1) + N * p0 * (1.0 - p0)) / kEdgeGates);
-    const double snr = noise > 0.0 ? edge / noise : 0.0;
+    // no noise either side (counts certain to be 0 and N): the step is certain, infinitely above the noise
+    const double snr = noise > 0.0 ? edge / noise : edge > 0.0 ? std::numeric_limits<double>::infinity() : 0.0;
     out.edge_counts[e] = static_cast<float>(edge);
     out.edge_snr[e] = static_cast<float>(snr);
     out.detectable[e] = snr >= kDetectableSnr;

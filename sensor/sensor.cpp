@@ -156,6 +156,20 @@ std::vector<double> SensorModel::pixel_lambda(int x, int y, const float* g, cons
   return out;
 }
 
+double SensorModel::crosstalk_share(int x, int y) const {
+  const Impl& m = *impl_;
+  const TypeInfo& ty = m.types[m.maps->at(x, y).type];
+  if (!(ty.crosstalk > 0.0)) return 0.0;
+  // the neighbours that can fire it: inside the sensor, in its section
+  const int W = m.cfg.camera.width_px, H = m.cfg.camera.height_px, sec = m.maps->section_of_row(y);
+  int nnb = 0;
+  for (int d = 0; d < 4; ++d) {
+    const int nx = x + kNbDx[d], ny = y + kNbDy[d];
+    nnb += nx >= 0 && ny >= 0 && nx < W && ny < H && m.maps->section_of_row(ny) == sec;
+  }
+  return nnb * ty.crosstalk;
+}
+
 std::vector<double> SensorModel::return_lambda(const std::vector<Return>& returns, const TimeAxis& axis) const {
   const Impl& m = *impl_;
   const auto K = static_cast<size_t>(m.K);
@@ -191,6 +205,10 @@ std::vector<double> SensorModel::return_lambda(const std::vector<Return>& return
     m.lambda(px, {g.data(), &axis, *lo, *hi + 1, 0.0, ret.photons}, setup.get(), scratch.get(), o);
     m.lambda(px, {nullptr, &axis, 0, 0, 0.0, 0.0}, setup.get(), scratch.get(), dark.data());
     for (size_t k = 0; k < K; ++k) o[k] -= dark[k];
+    // Crosstalk its light fires through the neighbours that can fire this pixel, each taken to receive the
+    // same return.
+    if (const double share = crosstalk_share(ret.x, ret.y); share > 0.0)
+      for (size_t k = 0; k < K; ++k) o[k] += share * (m.types[px.type].single_avalanche ? -std::expm1(-o[k]) : o[k]);
     for (int64_t b : lit) g[size_t(b)] = 0.0f;
     lit.clear();
   }

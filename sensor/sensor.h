@@ -108,10 +108,16 @@ class SensorModel {
   };
   // The detection rate per frame of every k that each return adds to its pixel, out[r * K + k]: the
   // photons in the bin of each periodic image t_s + m period inside `axis` (as the renderer bins light),
-  // through the pixel's PDP, gate shape, skew and length and the cycles per frame; without dark counts,
-  // ambient light or crosstalk. pixel_lambda of that one-bin transient less pixel_lambda with no light;
-  // zero when no image of t_s lies inside the axis. Many returns at once share the gate's set-up.
+  // through the pixel's PDP, gate shape, skew and length and the cycles per frame; without dark counts or
+  // ambient light. pixel_lambda of that one-bin transient less pixel_lambda with no light; zero when no
+  // image of t_s lies inside the axis. With crosstalk, plus what the same return at its crosstalk
+  // neighbours would fire in it (pixel A: xt per neighbour avalanche, xt n lambda; pixel B: xt per
+  // neighbour avalanche frame, at most xt n p): an object's light reaches its neighbours too, and their
+  // avalanches fire this pixel. Many returns at once share the gate's set-up.
   std::vector<double> return_lambda(const std::vector<Return>& returns, const TimeAxis& axis) const;
+  // n xt of pixel (x, y): its crosstalk neighbours (same section, inside the sensor) times its crosstalk
+  // probability; 0 without crosstalk.
+  double crosstalk_share(int x, int y) const;
 
  private:
   struct Impl;
