@@ -17,9 +17,9 @@ from ._version import __version__
 from .camera import depth_to_points, invert_pose, pixel_rays, project, transform
 from .dataset import Dataset, Sample, SampleNotDoneError, open_dataset
 from .exr import ExrError, ExrFile, read_exr
-from .run import Detections, Layers, ObjectSlots, Profile, Run, TimeAxis, open_run, unpack_frames
+from .run import Detections, Layers, ObjectSlots, Profile, Run, RunChangedError, TimeAxis, open_run, unpack_frames
 
-__all__ = ["__version__", "open_run", "Run", "TimeAxis", "Profile", "Layers", "ObjectSlots", "Detections", "unpack_frames", "ExrFile",
+__all__ = ["__version__", "open_run", "Run", "RunChangedError", "TimeAxis", "Profile", "Layers", "ObjectSlots", "Detections", "unpack_frames", "ExrFile",
            "ExrError", "read_exr", "depth_to_points", "pixel_rays", "project", "transform", "invert_pose",
            "open_dataset", "Dataset", "Sample", "SampleNotDoneError", "RunDataset", "DatasetSamples"]
 

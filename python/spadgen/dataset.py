@@ -141,14 +141,22 @@ class Dataset:
             raise FileNotFoundError(f"{self.path}: not a spadgen dataset folder (no dataset.json;{hint} "
                                     "`spadgen dataset run FILE -o DIR` writes one)")
         with open(spec_path, encoding="utf-8") as f:
-            self.spec = json.load(f)
+            try:
+                self.spec = json.load(f)
+            except json.JSONDecodeError as e:
+                raise ValueError(f"{spec_path}: not valid JSON ({e}); `spadgen dataset run` writes it whole, so it was "
+                                 "damaged afterwards: run the dataset again to write it") from e
         index_path = os.path.join(self.path, "index.jsonl")
         if not os.path.isfile(index_path):
             raise FileNotFoundError(f"{self.path}: a dataset folder without index.jsonl: the first `spadgen dataset run` "
                                     "into it is still running or was killed (the index is written when a run ends, or "
                                     "is stopped by SIGINT or SIGTERM); run it again to finish")
         with open(index_path, encoding="utf-8") as f:
-            self.index = [json.loads(line) for line in f if line.strip()]
+            try:
+                self.index = [json.loads(line) for line in f if line.strip()]
+            except json.JSONDecodeError as e:
+                raise ValueError(f"{index_path}: not valid JSON lines ({e}); `spadgen dataset run` writes it whole, so it "
+                                 "was damaged afterwards: run the dataset again to write it") from e
         self._all = self.index
 
     def _view(self, rows):

@@ -135,9 +135,47 @@ def _not_a_run_why(path):
     return "not a spadgen run folder (no metadata.json; a run writes it last, so a folder without it is incomplete)"
 
 
+class RunChangedError(RuntimeError):
+    """The run folder was replaced (a newer run, or a dataset run regenerating its sample) since the Run was opened:
+    what it read before and what it would read after come from two versions."""
+
+
+def _identity(path):
+    """Which file `path` is: a run folder replaced whole has a new metadata.json."""
+    st = os.stat(path)
+    return st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns
+
+
+def _zarr_store(path):
+    """A Zarr directory store whose missing chunk is an error naming it: a store without a fill value would
+    otherwise read it as uninitialised memory (spadgen writes every chunk: one missing is damage)."""
+    import re
+    import zarr
+
+    class StrictStore(zarr.storage.DirectoryStore):
+        _chunk = re.compile(r"^\d+(\.\d+)*$")
+
+        def __getitem__(self, key):
+            try:
+                return super().__getitem__(key)
+            except KeyError:
+                if self._chunk.match(key.rsplit("/", 1)[-1]):
+                    raise FileNotFoundError(f"{os.path.join(path, key)}: a chunk of this Zarr store is missing (spadgen "
+                                            "writes every chunk: the store was damaged after the run published it): "
+                                            "restore it, or run the scene again") from None
+                raise
+
+    return StrictStore(path)
+
+
 class Run:
     """A run folder. Every output is an attribute; asking for a file the run did not write raises
-    FileNotFoundError naming the scene-file key that writes it (never None)."""
+    FileNotFoundError naming the scene-file key that writes it (never None).
+
+    A run folder may be replaced whole while it is open (spadgen publishes a new run, or a dataset run
+    regenerates a stale sample, by swapping folders): the memory maps of .npy stacks keep reading the version
+    they opened, but Zarr stores are read chunk by chunk from the folder. check_unchanged() raises
+    RunChangedError once the folder was replaced; RunDataset and DatasetSamples call it around every item."""
 
     # The scene-file key that makes a run write an optional file, for the error message.
     _WRITTEN_BY = {"transient.npy": "outputs.transient", "transient_indirect.npy": "render.split_direct_indirect "
@@ -162,6 +200,29 @@ class Run:
             raise ValueError(f"{meta}: not a spadgen run's metadata (no list of files)")
         self.files = list(self.metadata["files"])
         self._cache = {}
+        self._identity = _identity(meta)
+
+    def _remedy(self):
+        """How to make the run's files again: its scene, or for a dataset's sample the dataset run (which finds
+        the sample damaged and generates it again)."""
+        if isinstance(self.metadata.get("dataset"), dict):
+            return (f"run `spadgen dataset run {self.metadata['dataset'].get('dataset_file', 'DATASET.json')} -o DIR` on "
+                    "its dataset folder again (the sample is damaged: it is generated again)")
+        return "run the scene again"
+
+    def unchanged(self):
+        """True while the folder is the one this Run opened (its metadata.json is the same file)."""
+        try:
+            return _identity(os.path.join(self.path, "metadata.json")) == self._identity
+        except OSError:
+            return False
+
+    def check_unchanged(self):
+        """Raises RunChangedError when the folder was replaced since this Run opened it."""
+        if not self.unchanged():
+            raise RunChangedError(f"{self.path}: the run folder was replaced since it was opened (a newer run, or a "
+                                  "dataset run regenerating its sample, published another version): what was read from "
+                                  "it would mix the two; open it again")
 
     def __repr__(self):
         return f"Run({self.path!r}, {self.width} x {self.height}, {self.mode}, K = {self.K})"
@@ -224,7 +285,7 @@ class Run:
     def gate_positions_s(self):
         """(K,) float64 gate positions in seconds after the laser trigger (gate sweep only)."""
         if "gate_positions_ns" not in self.acquisition:
-            raise ValueError(f"{self.path}: a {self.mode} run has no gate positions (exposures_s has its exposures)")
+            raise ValueError(f"{self.path}: a 2D intensity run has no gate positions (exposures_s has its exposures)")
         return np.asarray(self.acquisition["gate_positions_ns"], np.float64) * 1e-9
 
     @property
@@ -235,7 +296,7 @@ class Run:
     def exposures_s(self):
         """(K,) float64 exposure times in seconds (intensity mode only)."""
         if "exposures_us" not in self.acquisition:
-            raise ValueError(f"{self.path}: a {self.mode} run has no exposures (gate_positions_s has its gate positions)")
+            raise ValueError(f"{self.path}: a gate-sweep run has no exposures (gate_positions_s has its gate positions)")
         return np.asarray(self.acquisition["exposures_us"], np.float64) * 1e-6
 
     @property
@@ -258,8 +319,9 @@ class Run:
 
     def has(self, name):
         """Whether the run wrote the file (a name from metadata.json's files, e.g. "frames.npy"). A stack may
-        be named in either container: has("counts.npy") is true for a run that wrote counts.zarr."""
-        return self._file(name) is not None
+        be named in either container: has("counts.npy") is true for a run that wrote counts.zarr; an image
+        without its extension too, as run[name] takes it: has("laser") is has("laser.exr")."""
+        return self._file(name) is not None or (not name.endswith((".exr", ".npy", ".zarr")) and name + ".exr" in self.files)
 
     def _require(self, name):
         found = self._file(name)
@@ -281,7 +343,7 @@ class Run:
         if path not in self._cache:
             if not os.path.exists(path):
                 raise FileNotFoundError(f"{path}: listed in {os.path.join(self.path, 'metadata.json')} (files) but missing: "
-                                        "restore it, or run the scene again")
+                                        f"restore it, or {self._remedy()}")
             if path.endswith(".zarr"):
                 try:
                     import zarr
@@ -289,16 +351,16 @@ class Run:
                     raise ImportError(f"{path} is a Zarr store (outputs.storage = zarr): reading it needs zarr-python "
                                       "(Debian: python3-zarr)") from e
                 try:
-                    self._cache[path] = zarr.open_array(path, mode="r")
+                    self._cache[path] = zarr.open_array(_zarr_store(path), mode="r")
                 except Exception as e:  # zarr's errors do not name the store
                     raise ValueError(f"{path}: not a readable Zarr array ({type(e).__name__}: {e}); damaged after the run "
-                                     "published it: restore it, or run the scene again") from e
+                                     "published it: restore it, or " + self._remedy()) from e
             else:
                 try:
                     self._cache[path] = np.load(path, mmap_mode="r")
                 except ValueError as e:
                     raise ValueError(f"{path}: not a readable .npy file ({e}): cut short or damaged after the run published "
-                                     "it: restore it, or run the scene again") from e
+                                     "it: restore it, or " + self._remedy()) from e
         return self._cache[path]
 
     def exr(self, name):
@@ -314,6 +376,10 @@ class Run:
         in either container)."""
         if name.endswith(".exr") or name + ".exr" in self.files:
             return self.exr(name)
+        if name in self.files or name == "metadata.json":
+            if not name.endswith((".npy", ".zarr")):
+                raise ValueError(f"{self.path}: {name} is a file of the run but neither a stack nor an EXR image: read it "
+                                 f"as a file ({os.path.join(self.path, name)}; metadata.json: run.metadata)")
         return self.array(name)
 
     @property

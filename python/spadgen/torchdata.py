@@ -34,10 +34,16 @@ H, W the image's (or patch's) size, K the gate positions (or exposures), N the f
 gate_positions_ns (gate sweeps only), intrinsics, origin and run come always, and with DatasetSamples sample,
 repeat and parameters. Runs that share a DataLoader batch must agree on K (and N with frames); the constructor
 checks that every run has what ``fields`` asks for.
+
+A run folder replaced while the dataset is in use (a dataset run regenerating a stale sample, a new run into
+the folder) raises spadgen.RunChangedError naming it, from the item that would read it: an item never mixes
+two versions of a run. At most ``open_runs`` runs (default 64) are kept open per process (each holds a file
+descriptor per memory-mapped stack and its decoded ground truth); the least recently used is closed first.
 """
 from __future__ import annotations
 
 import os
+from collections import OrderedDict
 
 import numpy as np
 
@@ -47,7 +53,7 @@ except ImportError as e:  # pragma: no cover - exercised only where torch is mis
     raise ImportError("spadgen.torchdata needs PyTorch (Debian 12: apt-get install python3-torch)") from e
 
 from .dataset import Dataset, open_dataset
-from .run import Run, open_run, unpack_frames
+from .run import Run, RunChangedError, open_run, unpack_frames
 
 __all__ = ["RunDataset", "DatasetSamples", "FIELDS", "DEFAULT_FIELDS"]
 
@@ -81,17 +87,24 @@ class _RunSamples(torch.utils.data.Dataset):
     """What RunDataset and DatasetSamples share: run folders cut into samples (whole images or patches),
     checked once, and a sample loaded as a dict of tensors (the keys of the module's table but "run")."""
 
-    def __init__(self, runs, patch_size=None, fields=DEFAULT_FIELDS, max_layers=None):
+    def __init__(self, runs, patch_size=None, fields=DEFAULT_FIELDS, max_layers=None, open_runs=64):
         runs = list(runs)
         self.paths = [r.path if isinstance(r, Run) else os.fspath(r) for r in runs]
         if not self.paths:
             raise ValueError(f"{type(self).__name__} needs at least one run folder")
+        if isinstance(fields, str):
+            raise ValueError(f"fields must be a list of field names, got the string {fields!r} (e.g. fields=[{fields!r}])")
         unknown = [f for f in fields if f not in FIELDS]
         if unknown:
             raise ValueError(f"unknown field(s) {unknown}; known: {', '.join(FIELDS)}")
         self.fields = tuple(fields)
-        self._runs = {i: r for i, r in enumerate(runs) if isinstance(r, Run)}
-        runs_ = [self._run(i) for i in range(len(self.paths))]
+        if int(open_runs) < 1:
+            raise ValueError(f"open_runs must be at least 1, got {open_runs}")
+        self.open_runs = int(open_runs)
+        # The runs as they were checked here: a worker that opens one later must find the same folder.
+        runs_ = [r if isinstance(r, Run) else open_run(p) for r, p in zip(runs, self.paths)]
+        self._identities = [r._identity for r in runs_]
+        self._runs = OrderedDict()
         for r in runs_:
             for f in self.fields:
                 need = _NEEDS[f] if isinstance(_NEEDS[f], tuple) else (_NEEDS[f],)
@@ -99,9 +112,13 @@ class _RunSamples(torch.utils.data.Dataset):
                     raise ValueError(_missing_field_message(r, f, need))
         ks = {r.K for r in runs_}
         if len(ks) > 1:
-            raise ValueError(f"the runs have different K ({sorted(ks)}): their samples cannot share a batch")
+            first = {k: next(r.path for r in runs_ if r.K == k) for k in sorted(ks)}
+            raise ValueError(f"the runs have different K ({', '.join(f'{k} in {p}' for k, p in first.items())}, ...): "
+                             "their samples cannot share a batch")
         if "frames" in self.fields and len({r.frames_per_k for r in runs_}) > 1:
-            raise ValueError("the runs have different frames per k: their frames cannot share a batch")
+            first = {n: next(r.path for r in runs_ if r.frames_per_k == n) for n in sorted({r.frames_per_k for r in runs_})}
+            raise ValueError(f"the runs have different frames per k ({', '.join(f'{n} in {p}' for n, p in first.items())}, "
+                             "...): their frames cannot share a batch")
         self.max_layers = int(max_layers if max_layers is not None else
                               max(int(r.metadata["ground_truth_layers"]) for r in runs_))
         if patch_size is None:
@@ -120,10 +137,20 @@ class _RunSamples(torch.utils.data.Dataset):
         self.patch_size = patch_size
 
     def _run(self, i):
-        # Each DataLoader worker opens its own memory maps (the cache is not pickled).
-        if i not in self._runs:
-            self._runs[i] = open_run(self.paths[i])
-        return self._runs[i]
+        """Run i, opened in this process (each DataLoader worker opens its own: the cache is not pickled), the
+        folder checked here; at most open_runs kept, the least recently used closed first."""
+        if i in self._runs:
+            self._runs.move_to_end(i)
+            return self._runs[i]
+        run = open_run(self.paths[i])
+        if run._identity != self._identities[i]:
+            raise RunChangedError(f"{self.paths[i]}: the run folder was replaced since {type(self).__name__} was made (a "
+                                  "dataset run regenerated its sample, or a new run was published into it): make the "
+                                  "dataset object again to read the new version")
+        self._runs[i] = run
+        while len(self._runs) > self.open_runs:
+            self._runs.popitem(last=False)
+        return run
 
     def __getstate__(self):
         state = dict(self.__dict__)
@@ -134,9 +161,16 @@ class _RunSamples(torch.utils.data.Dataset):
         return len(self.index)
 
     def _load(self, j):
-        """(index of the sample's run in paths, the sample's tensors)."""
+        """(index of the sample's run in paths, the sample's tensors): read between two checks that the folder is
+        the one checked when this object was made, so that its arrays come from one version."""
         i, x, y, h, w = self.index[j]
         run = self._run(i)
+        run.check_unchanged()
+        out = self._read(run, x, y, h, w)
+        run.check_unchanged()
+        return i, out
+
+    def _read(self, run, x, y, h, w):
         ys, xs = slice(y, y + h), slice(x, x + w)
         out = {}
         if "counts" in self.fields:
@@ -181,7 +215,7 @@ class _RunSamples(torch.utils.data.Dataset):
         K[1, 2] -= y
         out["intrinsics"] = torch.from_numpy(K.astype(np.float32))
         out["origin"] = torch.tensor([x, y], dtype=torch.int64)
-        return i, out
+        return out
 
 
 class RunDataset(_RunSamples):
@@ -218,7 +252,8 @@ class DatasetSamples(_RunSamples):
                 that has any.
     """
 
-    def __init__(self, dataset, fields=DEFAULT_FIELDS, patch_size=None, repeats="all", status="done", max_layers=None):
+    def __init__(self, dataset, fields=DEFAULT_FIELDS, patch_size=None, repeats="all", status="done", max_layers=None,
+                 open_runs=64):
         ds = dataset if isinstance(dataset, Dataset) else open_dataset(dataset)
         if repeats not in ("all", "first"):
             raise ValueError(f"repeats must be 'all' or 'first', got {repeats!r}")
@@ -230,7 +265,8 @@ class DatasetSamples(_RunSamples):
                              "have runs; status='done' leaves the others out")
         if not len(view):
             counts = ", ".join(f"{n} {s}" for s, n in ds.status_counts().items() if n)
-            raise ValueError(f"{ds.path}: no sample to load with status={status!r} (the {len(ds)} samples: {counts})")
+            raise ValueError(f"{ds.path}: no sample to load with status={status!r} "
+                             + (f"(the {len(ds)} samples: {counts})" if len(ds) else "(the selection is empty)"))
         self.dataset = view
         self.repeats = repeats
         self.parameter_names = tuple(ds.numeric_parameter_keys)
@@ -243,7 +279,7 @@ class DatasetSamples(_RunSamples):
                 self.realisations.append((s.index, r))
                 params.append(vector)
         self._parameters = np.array(params, np.float32).reshape(len(runs), len(self.parameter_names))
-        super().__init__(runs, patch_size=patch_size, fields=fields, max_layers=max_layers)
+        super().__init__(runs, patch_size=patch_size, fields=fields, max_layers=max_layers, open_runs=open_runs)
 
     def __getitem__(self, j):
         i, out = self._load(j)

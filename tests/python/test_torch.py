@@ -13,6 +13,8 @@ torch = pytest.importorskip("torch")
 import spadgen  # noqa: E402
 from spadgen.torchdata import FIELDS, RunDataset  # noqa: E402
 
+from conftest import SCENES as SCENES_DIR  # noqa: E402
+
 
 @pytest.fixture(scope="module")
 def sweep(sweep_run):
@@ -124,3 +126,53 @@ def test_a_run_without_noise_free_rates_says_how_to_get_them(make_run, spadgen_b
     sensed = RunDataset([out])[0]
     np.testing.assert_array_equal(sensed["counts"].numpy(), RunDataset([run], fields=("counts",))[0]["counts"].numpy())
     assert sensed["expected_counts"].shape == sensed["counts"].shape
+
+
+def _small_run(spadgen_bin, out, seed, storage):
+    subprocess.run([spadgen_bin, "run", str(SCENES_DIR / "flat_target.json"), "-o", str(out), "-q", "--seed", str(seed),
+                    "--set", "camera.crop=[507,245,16,8]", "--set", "render.samples_per_pixel=1",
+                    "--set", f"outputs.storage={storage}", "--set", "outputs.previews=false"], check=True)
+
+
+@pytest.mark.parametrize("storage", ["npy", "zarr"])
+def test_a_run_folder_replaced_while_in_use_is_an_error_not_two_versions(spadgen_bin, tmp_path, storage):
+    """A run published again into a folder in use (as a dataset run regenerating a stale sample does): Zarr
+    chunks are read by path, so the next item would hold the new counts and the old decoded depth; every item
+    is read between two checks of the folder, and a worker opening it later compares it with the one checked
+    at construction. A new dataset object reads the new version."""
+    out = tmp_path / "run"
+    _small_run(spadgen_bin, out, 1, storage)
+    ds = RunDataset([out])
+    first = ds[0]
+    run = spadgen.open_run(out)
+    assert run.unchanged()
+    _small_run(spadgen_bin, out, 2, storage)
+    assert not run.unchanged()
+    with pytest.raises(spadgen.RunChangedError, match=f"{out}: the run folder was replaced since it was opened"):
+        run.check_unchanged()
+    with pytest.raises(spadgen.RunChangedError, match=str(out)):
+        ds[0]
+    # what a worker would do: a copy without its open runs, then opening the folder itself
+    fresh_worker = pickle.loads(pickle.dumps(ds))
+    with pytest.raises(spadgen.RunChangedError, match="replaced since RunDataset was made"):
+        fresh_worker[0]
+    again = RunDataset([out])[0]
+    assert not torch.equal(again["counts"], first["counts"])  # another seed: the new version, whole
+    np.testing.assert_array_equal(again["counts"].numpy(), np.asarray(spadgen.open_run(out).counts))
+
+
+def test_open_runs_are_bounded(sweep_run):
+    """Each open run holds a file descriptor per memory-mapped stack (and its decoded ground truth): at most
+    open_runs stay open, the least recently used closed first (600 runs of a dataset exhausted a limit of 1024
+    descriptors)."""
+    import os
+    ds = RunDataset([sweep_run] * 200, fields=("counts", "expected_counts", "depth"), open_runs=8)
+    before = len(os.listdir("/proc/self/fd"))
+    for j in range(len(ds)):
+        ds[j]
+    assert len(ds._runs) == 8
+    assert len(os.listdir("/proc/self/fd")) - before <= 8 * 2 + 4
+    with pytest.raises(ValueError, match="open_runs must be at least 1"):
+        RunDataset([sweep_run], open_runs=0)
+    with pytest.raises(ValueError, match=r"fields must be a list of field names, got the string 'counts'"):
+        RunDataset([sweep_run], fields="counts")

@@ -117,3 +117,20 @@ def test_xarray_opens_a_zarr_run_as_a_dataset(make_run):
     light = xr.open_zarr(str(path), group="light", consolidated=False)
     assert same_bytes(light["values.zarr"].values, npy["light/values"][...])
     assert set(zarr.open_group(str(path), mode="r").array_keys()) >= {"counts.zarr", "detection_rate.zarr"}
+
+
+def test_a_missing_chunk_is_an_error_naming_it(make_run, tmp_path):
+    """spadgen writes every chunk, and its stores have no fill value: a chunk removed afterwards read as
+    uninitialised memory (counts of 64304 in a run of 300 frames). It is an error naming the chunk."""
+    import os
+    import shutil
+    run_dir = tmp_path / "run"
+    shutil.copytree(make_run("sweep_zarr"), run_dir)
+    store = run_dir / "counts.zarr"
+    chunks = sorted(n for n in os.listdir(store) if not n.startswith("."))
+    assert chunks
+    whole = np.asarray(open_run(run_dir).counts)  # every chunk there: reads
+    assert whole.max() <= open_run(run_dir).frames_per_k
+    os.remove(store / chunks[-1])
+    with pytest.raises(FileNotFoundError, match=f"{store / chunks[-1]}: a chunk of this Zarr store is missing"):
+        np.asarray(open_run(run_dir).counts)
