@@ -54,6 +54,25 @@ struct SensorModel::Impl {
   explicit Impl(const SensorStageConfig& c);
   std::vector<TypeInfo> used_types() const;
 
+  // The directions (kNbDx, kNbDy) of the neighbours that can fire pixel (x, y) by crosstalk: inside the
+  // sensor, in its section; their count.
+  int neighbours(int x, int y, int* list) const {
+    const int W = cfg.camera.width_px, H = cfg.camera.height_px, sec = maps->section_of_row(y);
+    int c = 0;
+    for (int d = 0; d < 4; ++d) {
+      const int nx = x + kNbDx[d], ny = y + kNbDy[d];
+      if (nx < 0 || ny < 0 || nx >= W || ny >= H || maps->section_of_row(ny) != sec) continue;
+      list[c++] = d;
+    }
+    return c;
+  }
+  // n xt of a pixel of type `type` at (x, y) (SensorModel::crosstalk_share).
+  double crosstalk_share(int type, int x, int y) const {
+    if (!(types[type].crosstalk > 0.0)) return 0.0;
+    int list[4];
+    return neighbours(x, y, list) * types[type].crosstalk;
+  }
+
   // lambda of every k for one pixel (no crosstalk).
   void lambda(const PixelParams& px, const PixelLight& in, const Acquisition::TileSetup* setup,
               Acquisition::Scratch* scratch, double* out) const {
@@ -156,19 +175,7 @@ std::vector<double> SensorModel::pixel_lambda(int x, int y, const float* g, cons
   return out;
 }
 
-double SensorModel::crosstalk_share(int x, int y) const {
-  const Impl& m = *impl_;
-  const TypeInfo& ty = m.types[m.maps->at(x, y).type];
-  if (!(ty.crosstalk > 0.0)) return 0.0;
-  // the neighbours that can fire it: inside the sensor, in its section
-  const int W = m.cfg.camera.width_px, H = m.cfg.camera.height_px, sec = m.maps->section_of_row(y);
-  int nnb = 0;
-  for (int d = 0; d < 4; ++d) {
-    const int nx = x + kNbDx[d], ny = y + kNbDy[d];
-    nnb += nx >= 0 && ny >= 0 && nx < W && ny < H && m.maps->section_of_row(ny) == sec;
-  }
-  return nnb * ty.crosstalk;
-}
+double SensorModel::crosstalk_share(int x, int y) const { return impl_->crosstalk_share(impl_->maps->at(x, y).type, x, y); }
 
 std::vector<double> SensorModel::return_lambda(const std::vector<Return>& returns, const TimeAxis& axis) const {
   const Impl& m = *impl_;
@@ -207,7 +214,7 @@ std::vector<double> SensorModel::return_lambda(const std::vector<Return>& return
     for (size_t k = 0; k < K; ++k) o[k] -= dark[k];
     // Crosstalk its light fires through the neighbours that can fire this pixel, each taken to receive the
     // same return.
-    if (const double share = crosstalk_share(ret.x, ret.y); share > 0.0)
+    if (const double share = m.crosstalk_share(px.type, ret.x, ret.y); share > 0.0)
       for (size_t k = 0; k < K; ++k) o[k] += share * (m.types[px.type].single_avalanche ? -std::expm1(-o[k]) : o[k]);
     for (int64_t b : lit) g[size_t(b)] = 0.0f;
     lit.clear();
@@ -362,17 +369,6 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
     }
     const size_t wpp = (N + 63) / 64;
 
-    // For pixel (x, y): the neighbours that can fire it (same section, inside the image).
-    auto neighbours = [&](int x, int y, int* list) {
-      int c = 0;
-      const int sec = m.maps->section_of_row(y);
-      for (int d = 0; d < 4; ++d) {
-        const int nx = x + kNbDx[d], ny = y + kNbDy[d];
-        if (nx < 0 || ny < 0 || nx >= W || ny >= H || m.maps->section_of_row(ny) != sec) continue;
-        list[c++] = d;
-      }
-      return c;
-    };
     auto nb_index = [&](int x, int y, int d) {
       return static_cast<size_t>(region.index(x + kNbDx[d], y + kNbDy[d]));
     };
@@ -407,7 +403,7 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
           float* ex = row_exp.data() + xi * Ks;
           const TypeInfo& ty = m.types[params[ri].type];
           int nb[4];
-          const int nnb = ty.crosstalk > 0.0 ? neighbours(x, y, nb) : 0;
+          const int nnb = ty.crosstalk > 0.0 ? m.neighbours(x, y, nb) : 0;
           const double* l = lam.data() + ri * Ks;
           if (nnb > 0) {
             const double* nbv[4];
