@@ -3,12 +3,11 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/units.h"
 #include "sensor/sensor.h"
 
 namespace spadgen::reconstruct {
 namespace {
-
-constexpr double kSpeedOfLight = 299792458.0;
 
 // The binomial variance of one count, from a smoothed estimate of its p (a raw count of 0 or N would
 // claim no noise at all): N p (1 - p), p kept half a count inside (0, 1).
@@ -65,9 +64,11 @@ double PixelTiming::range_of_fall(double k) const {
   return (start_s + k * step_s + fall_offset_s - emission_delay_s) * kSpeedOfLight / 2.0;
 }
 
+double ambiguity_range_m(double period_s) { return period_s * kSpeedOfLight / 2.0; }
+
 double PixelTiming::fold(double range_m) const {
   if (!(period_s > 0.0)) return range_m;
-  const double ambiguity = period_s * kSpeedOfLight / 2.0;
+  const double ambiguity = ambiguity_range_m(period_s);
   double r = std::fmod(range_m, ambiguity);
   if (r < 0.0) r += ambiguity;
   return r < ambiguity ? r : 0.0;  // -1e-300 + ambiguity rounds to it
@@ -94,9 +95,11 @@ std::vector<Detection> detect(const PaperDetector& d, const float* profile, int 
                               bool rates) {
   const std::vector<double> c = counts_of(profile, K, frames, rates);
   const std::vector<double> s = moving_average(c, d.half_width);
-  // linearised after the smoothing, as the paper does; the rates are linear already
-  std::vector<double> lam = rates ? moving_average(std::vector<double>(profile, profile + K), d.half_width) : s;
-  if (!rates)
+  // linearised after the smoothing, as the paper does; the rates, linear already, smoothed as they are
+  std::vector<double> lam(static_cast<size_t>(K));
+  if (rates)
+    lam = moving_average(std::vector<double>(profile, profile + K), d.half_width);
+  else
     for (int k = 0; k < K; ++k) lam[size_t(k)] = linearise(s[size_t(k)], frames);
   // The variance of the mean linearised level over smoothed positions [a, b): by the delta method, each raw
   // count j enters with the weight sum over k of (1 / (b - a)) (1 / n_k) dlambda/dc(s_k), n_k the positions

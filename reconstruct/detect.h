@@ -23,6 +23,9 @@ struct Detection {
   double score = 0.0;      // the step over its standard error under the binomial noise (z)
 };
 
+// c T / 2 for the laser period T: the ranges a camera of one period tells apart.
+double ambiguity_range_m(double period_s);
+
 // When a pixel's gate opens and closes relative to the laser trigger, from the acquisition and the
 // pixel's gate maps (sensor_maps.exr).
 struct PixelTiming {

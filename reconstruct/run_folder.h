@@ -32,7 +32,7 @@ class RunFolder {
   // The timing of pixel (x, y) of the image (gate-sweep mode).
   PixelTiming timing(int x, int y) const;
   // c T / 2 for the laser period T: the ranges a gate sweep tells apart (0 for a 2D run).
-  double ambiguity_m() const { return period_s_ * 299792458.0 / 2.0; }
+  double ambiguity_m() const { return ambiguity_range_m(period_s_); }
   // Rows [y0, y1) of the counts as [((y - y0) * W + x) * K + k] (one profile per pixel). noise_free: the
   // expected counts N (1 - exp(-lambda)) from detection_rate instead of the sampled counts.
   void profiles(int y0, int y1, bool noise_free, float* out) const;
