@@ -62,8 +62,7 @@ RunResult run(const RunOptions& options) {
   };
   warn(camera_warnings(cfg, scene));
   const render::Camera camera(cfg.camera, scene);
-  const double pixel_angle = camera.pitch_m() / camera.focal_length_m();
-  warn(laser_warnings(cfg, pixel_angle));
+  warn(laser_warnings(cfg, camera));
   sensor::SensorModel sensor(sensor_stage(cfg));
   if (!cfg.sensor.gate.maps_exr.empty()) {
     const writers::ExrData maps = writers::read_exr(cfg.sensor.gate.maps_exr);
@@ -167,7 +166,7 @@ RunResult run(const RunOptions& options) {
   record.times.setup_seconds = setup_seconds;
   record.times.tiles_seconds = render_seconds;
   record.times.take_stages(clock);
-  warn(light_warnings(cfg, img, record, pixel_angle));
+  warn(light_warnings(cfg, img, record, camera));
   InterruptGuard::check();
   outputs.commit();
   record.file_bytes = file_bytes(staging.path(""), files);  // every file complete: metadata.json goes last
@@ -189,7 +188,7 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
   o << "# resolved scene file " << c.scene_file << "\n" << r.resolved.dump(2) << "\n\n";
   o << "# glTF\n" << scenes::summarize(scene) << "\n";
   std::vector<std::string> before = camera_warnings(c, scene);  // the warnings known before rendering
-  for (std::string& w : laser_warnings(c, camera.pitch_m() / camera.focal_length_m())) before.push_back(std::move(w));
+  for (std::string& w : laser_warnings(c, camera)) before.push_back(std::move(w));
   for (std::string& w : sensor_warnings(sensor)) before.push_back(std::move(w));
   const TimeAxis axis = time_axis(c, sensor);
   const PixelRect img = image_rect(c);

@@ -39,7 +39,8 @@ std::vector<std::string> camera_warnings(const RunConfig& c, const scenes::Scene
   return w;
 }
 
-std::vector<std::string> laser_warnings(const RunConfig& c, double pixel_angle_rad) {
+std::vector<std::string> laser_warnings(const RunConfig& c, const render::Camera& camera) {
+  const double pixel_angle_rad = camera.pitch_m() / camera.focal_length_m();
   if (c.laser.beam != Beam::Cone || !(pixel_angle_rad > 0.0)) return {};
   // The spot against one pixel's footprint, as solid angles seen from the camera (the laser beside it).
   const double half = c.laser.half_angle_rad;
@@ -80,7 +81,7 @@ std::vector<std::string> sensor_warnings(const sensor::SensorModel& sensor) {
   return w;
 }
 
-std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img, const RunRecord& r, double pixel_angle_rad) {
+std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img, const RunRecord& r, const render::Camera& camera) {
   const double laser_total = r.laser_total;
   std::vector<std::string> w;
   const std::string image = std::to_string(img.width) + " x " + std::to_string(img.height) + " image";
@@ -97,7 +98,7 @@ std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img
   if (!(laser_total > 0.0)) {
     if (c.laser.average_power_W > 0.0)
       w.push_back("no laser light reaches the " + image + " (laser.beam, half_angle_deg, offset_m, gltf_light" +
-                  (laser_warnings(c, pixel_angle_rad).empty() ? std::string() : "; or no camera path landed on the cone's small spot") +
+                  (laser_warnings(c, camera).empty() ? std::string() : "; or no camera path landed on the cone's small spot") +
                   "): the outputs hold ambient light and dark counts only");
     return w;
   }

@@ -9,6 +9,7 @@
 #include "core/config.h"
 #include "core/tile.h"
 #include "app/metadata.h"
+#include "render/camera.h"
 #include "scenes/scene.h"
 #include "sensor/sensor.h"
 
@@ -37,10 +38,10 @@ std::vector<std::string> sensor_warnings(const sensor::SensorModel& sensor);
 bool is_sensor_warning(const std::string& warning);
 
 // Before rendering (run and info): a cone beam (laser.beam = cone) whose spot is smaller than a pixel's
-// field of view (pixel_angle_rad: pitch over focal length), so small that a pixel's camera paths land on it
+// field of view (the camera's pitch over its focal length), so small that a pixel's camera paths land on it
 // fewer than kWarnSpotPaths times on average: its light is found by chance (noisy, or absent from the image).
 inline constexpr double kWarnSpotPaths = 16.0;
-std::vector<std::string> laser_warnings(const RunConfig& c, double pixel_angle_rad);
+std::vector<std::string> laser_warnings(const RunConfig& c, const render::Camera& camera);
 
 // Before rendering (run and info): a glTF camera (camera.gltf_camera) whose aspect ratio is not the
 // sensor's, which keeps the vertical field of view and changes the horizontal one.
@@ -49,7 +50,7 @@ std::vector<std::string> camera_warnings(const RunConfig& c, const scenes::Scene
 // After rendering, from the image's totals (r.rays summed over the tiles, r.laser_total, out_of_window_total,
 // beyond_period_total): nothing in view (no camera ray hits a surface), no laser light returning, laser
 // light from beyond the unambiguous range, laser light outside the time window.
-// pixel_angle_rad: as laser_warnings', which no laser light returning names as a cause when it applies.
-std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img, const RunRecord& r, double pixel_angle_rad);
+// camera: as laser_warnings', which no laser light returning names as a cause when it applies.
+std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img, const RunRecord& r, const render::Camera& camera);
 
 }  // namespace spadgen::app
