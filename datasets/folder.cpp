@@ -131,10 +131,8 @@ void DatasetFolder::claim() const {
   std::error_code ec;
   fs::create_directories(dir_, ec);
   if (ec) throw Error("cannot create the dataset folder " + dir_.string() + ": " + ec.message());
-  check();
   const ojson wanted = record();
-  if (read_json<ojson>(dir_ / "dataset.json") != wanted)
-    writers::write_file_atomic((dir_ / "dataset.json").string(), wanted.dump(2) + "\n");
+  if (checked(wanted) != wanted) writers::write_file_atomic((dir_ / "dataset.json").string(), wanted.dump(2) + "\n");
   fs::create_directories(dir_ / "samples", ec);
   if (ec) throw Error("cannot create " + (dir_ / "samples").string() + ": " + ec.message());
 }
@@ -148,10 +146,13 @@ ojson DatasetFolder::record() const {
 
 void DatasetFolder::check() const {
   std::error_code ec;
-  if (!fs::exists(dir_, ec)) return;
+  if (fs::exists(dir_, ec)) (void)checked(record());
+}
+
+std::optional<ojson> DatasetFolder::checked(const ojson& wanted) const {
+  std::error_code ec;
   if (!fs::is_directory(dir_)) throw Error(dir_.string() + " is not a folder; expected the dataset folder (-o)");
   // Compared in order: the order of the grid's keys decides which cell a sample takes.
-  const ojson wanted = record();
   const std::optional<ojson> prev = read_json<ojson>(dir_ / "dataset.json");
   if (prev) {
     ojson a = *prev, b = wanted;
@@ -177,6 +178,7 @@ void DatasetFolder::check() const {
                   "dataset folder (with its dataset.json): use another folder (-o)");
     }
   }
+  return prev;
 }
 
 const std::string& DatasetFolder::scene_content_hash(int scene) const {

@@ -105,6 +105,8 @@ class DatasetFolder {
  private:
   const std::string& scene_content_hash(int scene) const;
   nlohmann::ordered_json record() const;  // what dataset.json holds for this dataset
+  // check()'s refusals of the existing folder DIR against `wanted` (record()); its dataset.json as it is.
+  std::optional<nlohmann::ordered_json> checked(const nlohmann::ordered_json& wanted) const;
 
   DatasetSpec spec_;
   std::filesystem::path dir_;
