@@ -149,12 +149,43 @@ void check_ranges(const std::string& path, const DetectionImage& img) {
 
 // The detections file (docs/detection.md): an EXR with `count` and det<i>.range (metres; NaN: none), and
 // optionally det<i>.score; or a float .npy (H, W, M) of ranges, NaN where there is none.
-DetectionImage read_detections(const std::string& path, int width, int height) {
+// What the detections file says it was made from (reconstruct's spadgen_source), against the run it is
+// scored on: another scene file or glTF (scene_hash_fnv1a64), or another crop of the sensor, is refused;
+// another run of the same scene and crop (another seed, a sense realisation) is scored. `source` records
+// whether the check could be made (a .npy, or an EXR written elsewhere, names no source).
+void check_source(const std::string& path, const std::map<std::string, std::string>& attributes, const RunFolder& run,
+                  nlohmann::json* source) {
+  const auto it = attributes.find("spadgen_source");
+  if (it == attributes.end()) {
+    if (source) (*source)["source_checked"] = "no: the file names no run (spadgen_source); its scene and crop are taken on trust";
+    return;
+  }
+  const nlohmann::json made = nlohmann::json::parse(it->second, nullptr, false);
+  const nlohmann::json& m = run.metadata();
+  const std::string made_from = made.is_object() ? made.value("run", std::string("?")) : std::string("?");
+  for (const auto& [key, what] : {std::pair<std::string, std::string>{"scene_hash_fnv1a64", "scene (scene file and glTF hash)"},
+                                  {"crop_in_sensor", "crop of the sensor"}}) {
+    if (!made.is_object() || !made.contains(key) || made[key].is_null()) continue;
+    const nlohmann::json ours = key == "crop_in_sensor" ? m.value("/image/crop_in_sensor"_json_pointer, nlohmann::json())
+                                                        : m.value(key, nlohmann::json());
+    if (!ours.is_null() && made[key] != ours)
+      throw Error(path + ": detections of another " + what + " than " + run.dir() + "'s (made from " + made_from + ": " +
+                  made[key].dump() + ", this run: " + ours.dump() + "); run spadgen reconstruct on " + run.dir() +
+                  ", or give --detections of this scene and crop");
+  }
+  if (source) (*source)["source_checked"] = "yes: made from " + made_from + ", the same scene and crop";
+}
+
+DetectionImage read_detections(const std::string& path, const RunFolder& run, bool need_scores, nlohmann::json* source) {
+  const int width = run.width(), height = run.height();
   if (!fs::is_regular_file(path)) throw Error(path + ": no such detections file (run spadgen reconstruct, or give --detections)");
   if (fs::path(path).extension() == ".npy") {
     writers::NpyReader npy(path);
     if (npy.shape().size() != 3 || npy.shape()[0] != height || npy.shape()[1] != width)
       throw Error(path + ": expected a float32 array (H, W, M) = (" + std::to_string(height) + ", " + std::to_string(width) + ", M) of ranges");
+    if (need_scores)
+      throw Error(path + ": --min-score: a .npy of ranges holds no scores (an EXR's det<i>.score does); leave --min-score out");
+    check_source(path, {}, run, source);
     const int m = int(npy.shape()[2]);
     DetectionImage img(width, height, m);
     const float* v = npy.data<float>();
@@ -174,6 +205,17 @@ DetectionImage read_detections(const std::string& path, int width, int height) {
   int m = 0;
   while (e.channels.count(slot_name(m, "range"))) ++m;
   if (m == 0) throw Error(path + ": no channel det0.range (a detections file holds det<i>.range in metres, NaN where there is none)");
+  for (const auto& [name, v] : e.channels)
+    if (name.rfind("det", 0) == 0 && name.size() > 9 && name.compare(name.size() - 6, 6, ".range") == 0 &&
+        name.find_first_not_of("0123456789", 3) == name.size() - 6 && std::stoll(name.substr(3, std::min<size_t>(name.size() - 9, 9))) >= m)
+      throw Error(path + ": channel " + name + " after " + slot_name(m - 1, "range") + " without " + slot_name(m, "range") +
+                  " (slots are numbered det0, det1, ... without gaps; the slots after a gap would not be scored)");
+  if (need_scores)
+    for (int s = 0; s < m; ++s)
+      if (!e.channels.count(slot_name(s, "score")))
+        throw Error(path + ": --min-score: slot " + std::to_string(s) + " has no " + slot_name(s, "score") +
+                    " channel (every slot's detections would be dropped); leave --min-score out, or give the scores");
+  check_source(path, e.attributes, run, source);
   DetectionImage img(width, height, m);
   for (int s = 0; s < m; ++s) {
     const auto& r = e.channels[slot_name(s, "range")];
@@ -193,7 +235,8 @@ std::string provenance(const RunFolder& run) {
   const auto& m = run.metadata();
   return nlohmann::json{{"run", fs::absolute(run.dir()).lexically_normal().string()},
                         {"seed", m.value("seed", nlohmann::json(nullptr))},
-                        {"scene_hash_fnv1a64", m.value("scene_hash_fnv1a64", nlohmann::json(nullptr))}}
+                        {"scene_hash_fnv1a64", m.value("scene_hash_fnv1a64", nlohmann::json(nullptr))},
+                        {"crop_in_sensor", m.value("/image/crop_in_sensor"_json_pointer, nlohmann::json(nullptr))}}
       .dump();
 }
 
@@ -269,22 +312,46 @@ std::string derived_name(const std::string& stem, bool noise_free) { return stem
 
 // Scores one run; with maps_dir, writes its error maps there.
 reconstruct::Scores evaluate_run(const EvaluateCommand& c, const std::string& run_dir, const std::string& detections,
-                                 const std::string& maps_dir, std::map<int, std::string>* names, nlohmann::json* source) {
+                                 const std::string& maps_dir, std::map<int, std::string>* names, nlohmann::json* source,
+                                 std::map<std::string, int>* ids_by_name = nullptr) {
   const RunFolder run(run_dir);
   if (const auto& r = c.region; r && (r->x0 < 0 || r->y0 < 0 || r->x1() > run.width() || r->y1() > run.height()))
     throw Error("--region " + std::to_string(r->x0) + "," + std::to_string(r->y0) + "," + std::to_string(r->width) + "," +
                 std::to_string(r->height) + ": expected a rectangle inside " + run_dir + "'s " + std::to_string(run.width()) +
                 " x " + std::to_string(run.height()) + " pixels (x, y from its top left)");
-  const Labels labels = read_labels(run);
+  if (run.ambiguity_m() > 0.0 && c.tolerance_m >= run.ambiguity_m() / 2.0) {
+    std::ostringstream t;
+    t << "--tolerance-m " << c.tolerance_m << ": expected less than half the range one laser period spans, c T / 4 = "
+      << run.ambiguity_m() / 2.0 << " m for " << run_dir << " (errors are taken modulo c T / 2 = " << run.ambiguity_m()
+      << " m, into [-c T / 4, c T / 4): a wider tolerance would match a detection to an object's other fold)";
+    throw Error(t.str());
+  }
+  Labels labels = read_labels(run);
+  if (ids_by_name) {
+    // A dataset's objects are counted by name across its samples (a sample's ids are its own scene's): each
+    // name gets one id, in the order the samples name them; an object without a name keeps its own.
+    std::map<int, int> to;
+    std::map<int, std::string> renamed;
+    for (const auto& [id, name] : labels.names) {
+      const std::string key = name.empty() ? "object " + std::to_string(id) : name;
+      const auto [it, added] = ids_by_name->emplace(key, int(ids_by_name->size()));
+      to[id] = it->second;
+      renamed[it->second] = key;
+    }
+    for (auto& px : labels.pixels)
+      for (reconstruct::TruthObject& o : px)
+        if (const auto t = to.find(o.id); t != to.end()) o.id = t->second;
+    labels.names = std::move(renamed);
+  }
   if (names) names->insert(labels.names.begin(), labels.names.end());
   const std::string file =
       detections.empty() ? (fs::path(run_dir) / derived_name("detections_" + c.detector, c.noise_free)).string() : detections;
   const bool compute = detections.empty() && !fs::exists(file);  // the default file is absent: run the detector
-  DetectionImage img = compute ? detect_image(run, Detector(c.detector, run), c.noise_free, 8, false)
-                               : read_detections(file, run.width(), run.height());
   if (source)
     *source = compute ? nlohmann::json{{"detector", c.detector}, {"computed", true}, {"noise_free", c.noise_free}}
                       : nlohmann::json{{"file", file}};
+  DetectionImage img = compute ? detect_image(run, Detector(c.detector, run), c.noise_free, 8, false)
+                               : read_detections(file, run, c.min_score.has_value(), source);
   if (source && !labels.detectability) (*source)["labels"] = "labels.exr absent: every object counted as detectable";
   reconstruct::EvaluateOptions options = scorer_options(c);
   options.ambiguity_m = run.ambiguity_m();
@@ -381,7 +448,7 @@ std::string reconstruct(const ReconstructOptions& o) {
 std::string evaluate(const EvaluateCommand& c) {
   InterruptGuard interrupt_guard;
   const ThreadLimit threads(c.threads);
-  if (!(c.tolerance_m > 0.0)) throw Error("--tolerance-m: expected a positive number of metres");
+  if (!(c.tolerance_m > 0.0) || !std::isfinite(c.tolerance_m)) throw Error("--tolerance-m: expected a positive, finite number of metres");
   const fs::path target(c.target);
   // Written into a staging folder beside the output folder and swapped in whole (app/staging.h): a failed
   // or interrupted evaluation leaves the earlier one as it was, never a mix of the two.
@@ -391,6 +458,7 @@ std::string evaluate(const EvaluateCommand& c) {
   const std::string out = staging.path("");
   std::vector<std::string> files{"metrics.json"};
   std::map<int, std::string> names;
+  std::map<std::string, int> ids_by_name;  // a dataset's: objects by name across samples
   nlohmann::json report;
   std::ostringstream text;
   if (fs::exists(target / "metadata.json")) {
@@ -415,9 +483,11 @@ std::string evaluate(const EvaluateCommand& c) {
     for (const fs::path& p : samples) {
       InterruptGuard::check();
       const std::string file = c.detections.empty() ? "" : (p / c.detections).string();
-      const reconstruct::Scores s = evaluate_run(c, p.string(), file, "", &names, nullptr);
+      std::map<int, std::string> sample_names;
+      const reconstruct::Scores s = evaluate_run(c, p.string(), file, "", &sample_names, nullptr, &ids_by_name);
+      names.insert(sample_names.begin(), sample_names.end());
       total.merge(s);
-      const nlohmann::json m = s.to_json();
+      const nlohmann::json m = s.to_json(sample_names);
       const auto num = [](const nlohmann::json& v) { return v.is_number() ? v.dump() : std::string(); };
       csv << p.filename().string() << ',' << m["objects"]["objects"] << ',' << m["objects"]["found"] << ','
           << num(m["objects"]["recall"]) << ',' << m["objects_detectable"]["objects"] << ',' << m["objects_detectable"]["found"]

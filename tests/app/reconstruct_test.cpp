@@ -119,7 +119,16 @@ TEST_F(Reconstruct, RefusesWhatItCannotReadNamingIt) {
       << r.output;
   r = sh("evaluate " + run.string() + " --tolerance-m 0");
   EXPECT_EQ(r.code, 1);
-  EXPECT_NE(r.output.find("--tolerance-m: expected a positive number of metres"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("--tolerance-m: expected a positive, finite number of metres"), std::string::npos) << r.output;
+  r = sh("evaluate " + run.string() + " --tolerance-m inf");  // was taken, and written as null
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("--tolerance-m: expected a positive, finite number of metres"), std::string::npos) << r.output;
+  // errors are taken modulo c T / 2 (3.747 m at 40 MHz): a tolerance of c T / 4 or more matched a detection
+  // 2.5 m too far as 1.247 m too near
+  r = sh("evaluate " + run.string() + " --tolerance-m 1.9");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("--tolerance-m 1.9: expected less than half the range one laser period spans, c T / 4 = 1.8737 m"),
+            std::string::npos) << r.output;
   r = sh("evaluate " + dir_.string());
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("neither a run folder (metadata.json) nor a dataset folder (dataset.json)"), std::string::npos) << r.output;
@@ -279,6 +288,58 @@ TEST_F(Reconstruct, EvaluateReplacesItsFolderWholeAndOnlyItsOwn) {
     for (const auto& e : fs::directory_iterator(folder)) EXPECT_NE(e.path().filename().string()[0], '.') << e.path();
 }
 
+// Detections evaluate would misread are refused, naming the file and what is wrong: detections of another
+// scene or another crop (their header names where they were made; they were scored, precision 0 or recall
+// 61 %, exit 0), slots after a gap (det0, det2: det2 was ignored), --min-score on detections without scores
+// (every detection was dropped). Another run of the same scene and crop (another seed) is scored.
+TEST_F(Reconstruct, EvaluateRefusesDetectionsOfAnotherSceneOrCropOrWithoutTheirSlots) {
+  const std::string crop = " --set render.samples_per_pixel=2 --set camera.crop=";
+  const fs::path a = dir_ / "a", flat = dir_ / "flat", other = dir_ / "other", seed = dir_ / "seed";
+  ASSERT_EQ(sh("run " + kScenes + "multi_object.json -q -o " + a.string() + crop + "[480,242,32,4]").code, 0);
+  ASSERT_EQ(sh("run " + kScenes + "flat_target.json -q -o " + flat.string() + crop + "[480,242,32,4]").code, 0);
+  ASSERT_EQ(sh("run " + kScenes + "multi_object.json -q -o " + other.string() + crop + "[200,242,32,4]").code, 0);
+  ASSERT_EQ(sh("run " + kScenes + "multi_object.json -q --seed 9 -o " + seed.string() + crop + "[480,242,32,4]").code, 0);
+  for (const fs::path& run : {flat, other, seed}) ASSERT_EQ(sh("reconstruct -q " + run.string()).code, 0) << run;
+  Result r = sh("evaluate " + a.string() + " --detections " + (flat / "detections_edges.exr").string() + " -o " + (dir_ / "e").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("flat/detections_edges.exr: detections of another scene (scene file and glTF hash) than "));
+  EXPECT_THAT(r.output, HasSubstr("run spadgen reconstruct on " + a.string()));
+  r = sh("evaluate " + a.string() + " --detections " + (other / "detections_edges.exr").string() + " -o " + (dir_ / "e").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("other/detections_edges.exr: detections of another crop of the sensor than "));
+  EXPECT_THAT(r.output, HasSubstr("[200,242,32,4], this run: [480,242,32,4]"));
+  EXPECT_FALSE(fs::exists(dir_ / "e"));
+  r = sh("evaluate " + a.string() + " --detections " + (seed / "detections_edges.exr").string() + " -o " + (dir_ / "e").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  const auto m = nlohmann::json::parse(slurp(dir_ / "e" / "metrics.json"));
+  EXPECT_EQ(m["detections_source"]["source_checked"], "yes: made from " + fs::absolute(seed).lexically_normal().string() +
+                                                          ", the same scene and crop");
+  EXPECT_GT(m["objects"]["recall"].get<double>(), 0.5);
+
+  // the seed run's detections, copied into slots 0 and 2 (no slot 1), and without scores
+  const auto d = spadgen::writers::read_exr((seed / "detections_edges.exr").string());
+  for (const bool gap : {true, false}) {
+    spadgen::writers::ExrImage img(d.width, d.height);
+    std::copy(d.channels.at("count").begin(), d.channels.at("count").end(), img.channel("count"));
+    for (const char* slot : gap ? std::vector<const char*>{"det0", "det2"} : std::vector<const char*>{"det0", "det1"}) {
+      const auto& range = d.channels.at(std::string(gap ? "det0" : slot) + ".range");
+      std::copy(range.begin(), range.end(), img.channel(std::string(slot) + ".range"));
+    }
+    img.write((dir_ / (gap ? "gap.exr" : "unscored.exr")).string());
+  }
+  r = sh("evaluate " + a.string() + " --detections " + (dir_ / "gap.exr").string() + " -o " + (dir_ / "e2").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("gap.exr: channel det2.range after det0.range without det1.range"));
+  r = sh("evaluate " + a.string() + " --detections " + (dir_ / "unscored.exr").string() + " -o " + (dir_ / "e2").string());
+  ASSERT_EQ(r.code, 0) << r.output;  // no header: scored, and said unchecked
+  EXPECT_THAT(nlohmann::json::parse(slurp(dir_ / "e2" / "metrics.json"))["detections_source"]["source_checked"].get<std::string>(),
+              HasSubstr("no: the file names no run"));
+  r = sh("evaluate " + a.string() + " --detections " + (dir_ / "unscored.exr").string() + " --min-score 1 -o " + (dir_ / "e3").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("unscored.exr: --min-score: slot 0 has no det0.score channel"));
+  EXPECT_FALSE(fs::exists(dir_ / "e3"));
+}
+
 TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
   const fs::path file = dir_ / "d.json", out = dir_ / "dataset";
   fs::create_directories(dir_);
@@ -304,6 +365,24 @@ TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
   const std::string csv = slurp(out / "evaluation" / "samples.csv");
   EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 3) << csv;
   EXPECT_EQ(csv.rfind("sample,objects,found,recall", 0), 0u) << csv;
+
+  // Two scenes: objects are counted by name across the samples (flat_target's "target" has id 0, as the
+  // multi-object scene's "plate" has: it was counted as the plate)
+  const fs::path file2 = dir_ / "d2.json", out2 = dir_ / "dataset2";
+  std::ofstream(file2) << "{\"scenes\": [\"" + kScenes + "multi_object.json\", \"" + kScenes + "flat_target.json\"], \"seed\": 3,"
+                          "\"set\": {\"render.samples_per_pixel\": 2, \"camera.crop\": [480, 242, 32, 4]}}";
+  ASSERT_EQ(sh("dataset run " + file2.string() + " -o " + out2.string() + " -q").code, 0);
+  r = sh("evaluate " + out2.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  const auto m2 = nlohmann::json::parse(slurp(out2 / "evaluation" / "metrics.json"));
+  std::map<std::string, int> total, in_samples;
+  for (const auto& o : m2["by_object"]) total[o["name"].get<std::string>()] += o["objects"].get<int>();
+  ASSERT_EQ(m2["samples"].size(), 2u);
+  for (const auto& s : m2["samples"])
+    for (const auto& o : s["metrics"]["by_object"]) in_samples[o.at("name").get<std::string>()] += o["objects"].get<int>();
+  EXPECT_EQ(total, in_samples);
+  EXPECT_EQ(total.size(), 3u);  // plate, sphere, target
+  EXPECT_TRUE(total.count("target") && total.count("plate") && total.count("sphere"));
 }
 
 }  // namespace
