@@ -3,6 +3,8 @@
 #include <cmath>
 #include <cstdio>
 
+#include <glm/glm.hpp>
+
 #include "core/units.h"
 
 namespace spadgen::app {
@@ -40,18 +42,30 @@ std::vector<std::string> camera_warnings(const RunConfig& c, const scenes::Scene
 }
 
 std::vector<std::string> laser_warnings(const RunConfig& c, const render::Camera& camera) {
+  std::vector<std::string> w;
+  // The renderer traces in float world coordinates: far from the glTF scene's origin its positions are
+  // coarse. The spacing of floats at the camera (the scene it sees is near it).
+  const double from_origin = glm::length(camera.position());
+  if (from_origin >= kWarnFromOriginM) {
+    const double spacing = std::ldexp(1.0, std::ilogb(from_origin) - 23);
+    w.push_back("the camera is " + g(from_origin) + " m from the glTF scene's origin, where the renderer's float positions are " +
+                g(spacing * 1e3) + " mm apart: depths and times of flight (" + g(2.0 * spacing / kSpeedOfLight * 1e12) +
+                " ps) are that coarse, and a flood beam's edge (the field of view's corners) loses light; move the scene "
+                "and the camera near the origin (camera.position_m, nodes.NAME.translation_m)");
+  }
   const double pixel_angle_rad = camera.pitch_m() / camera.focal_length_m();
-  if (c.laser.beam != Beam::Cone || !(pixel_angle_rad > 0.0)) return {};
+  if (c.laser.beam != Beam::Cone || !(pixel_angle_rad > 0.0)) return w;
   // The spot against one pixel's footprint, as solid angles seen from the camera (the laser beside it).
   const double half = c.laser.half_angle_rad;
   const double spot_pixels = kPi * half * half / (pixel_angle_rad * pixel_angle_rad);
   const double paths = c.render.samples_per_pixel * spot_pixels;
-  if (!(spot_pixels < 1.0 && paths < kWarnSpotPaths)) return {};
-  return {"laser.half_angle_deg: a cone of " + g(degrees(half)) + " deg lights a spot of about " + g(spot_pixels) +
-          " pixels (a pixel spans " + g(degrees(pixel_angle_rad)) + " deg): a pixel's camera paths find the laser's light only "
-          "where they land on the spot, about " + g(paths) + " of its " + std::to_string(c.render.samples_per_pixel) +
-          " paths, so its light is noisy or missed (unbiased, but zero where no path lands); widen the cone or raise "
-          "render.samples_per_pixel"};
+  if (!(spot_pixels < 1.0 && paths < kWarnSpotPaths)) return w;
+  w.push_back("laser.half_angle_deg: a cone of " + g(degrees(half)) + " deg lights a spot of about " + g(spot_pixels) +
+              " pixels (a pixel spans " + g(degrees(pixel_angle_rad)) + " deg): a pixel's camera paths find the laser's light only "
+              "where they land on the spot, about " + g(paths) + " of its " + std::to_string(c.render.samples_per_pixel) +
+              " paths, so its light is noisy or missed (unbiased, but zero where no path lands); widen the cone or raise "
+              "render.samples_per_pixel");
+  return w;
 }
 
 bool is_sensor_warning(const std::string& warning) {

@@ -41,6 +41,10 @@ bool is_sensor_warning(const std::string& warning);
 // field of view (the camera's pitch over its focal length), so small that a pixel's camera paths land on it
 // fewer than kWarnSpotPaths times on average: its light is found by chance (noisy, or absent from the image).
 inline constexpr double kWarnSpotPaths = 16.0;
+// And a camera this far from the glTF scene's origin or farther (floats there are 0.12 mm apart or more: a
+// flood beam loses light at the corners of the field of view of a scene 1 m away; 2.8 % of the image at
+// 1e5 m): the float spacing there and what it does.
+inline constexpr double kWarnFromOriginM = 1024.0;
 std::vector<std::string> laser_warnings(const RunConfig& c, const render::Camera& camera);
 
 // Before rendering (run and info): a glTF camera (camera.gltf_camera) whose aspect ratio is not the
