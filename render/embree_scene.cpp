@@ -42,15 +42,29 @@ void check(RTCDevice device, const char* what) {
 }
 
 // glTF's doubleSided = false means back-face culling: a single-sided, non-transmissive surface does not
-// exist seen from behind, for camera, bounce and shadow rays alike. Embree's Ng = (v1 - v0) x (v2 - v0),
-// the glTF front side for counter-clockwise triangles.
+// exist seen from behind. Embree's Ng = (v1 - v0) x (v2 - v0), the glTF front side for counter-clockwise
+// triangles. "Seen" is along the light's way: a camera or bounce ray looks from its origin (the surface is
+// culled when the ray meets its back); a ray towards a light (occluded rays, and intersect rays with
+// kTowardLight in their id) stands for light coming the other way, which meets the surface from the other
+// side (culled when the ray meets its front), as the light itself sees the scene.
 void cull_back_faces(const RTCFilterFunctionNArguments* args) {
   for (unsigned i = 0; i < args->N; ++i) {
     if (args->valid[i] == 0) continue;
     const float d = RTCRayN_dir_x(args->ray, args->N, i) * RTCHitN_Ng_x(args->hit, args->N, i) +
                     RTCRayN_dir_y(args->ray, args->N, i) * RTCHitN_Ng_y(args->hit, args->N, i) +
                     RTCRayN_dir_z(args->ray, args->N, i) * RTCHitN_Ng_z(args->hit, args->N, i);
-    if (d > 0.0f) args->valid[i] = 0;
+    const bool to_light = (RTCRayN_id(args->ray, args->N, i) & kTowardLight) != 0;
+    if (to_light ? d < 0.0f : d > 0.0f) args->valid[i] = 0;
+  }
+}
+
+void cull_back_faces_to_light(const RTCFilterFunctionNArguments* args) {
+  for (unsigned i = 0; i < args->N; ++i) {
+    if (args->valid[i] == 0) continue;
+    const float d = RTCRayN_dir_x(args->ray, args->N, i) * RTCHitN_Ng_x(args->hit, args->N, i) +
+                    RTCRayN_dir_y(args->ray, args->N, i) * RTCHitN_Ng_y(args->hit, args->N, i) +
+                    RTCRayN_dir_z(args->ray, args->N, i) * RTCHitN_Ng_z(args->hit, args->N, i);
+    if (d < 0.0f) args->valid[i] = 0;
   }
 }
 
@@ -92,7 +106,7 @@ EmbreeScene::EmbreeScene(const scenes::Scene& scene) {
     const bool single_sided = mat ? (!mat->double_sided && !mat->transmissive()) : true;
     if (single_sided) {
       rtcSetGeometryIntersectFilterFunction(geom, cull_back_faces);
-      rtcSetGeometryOccludedFilterFunction(geom, cull_back_faces);
+      rtcSetGeometryOccludedFilterFunction(geom, cull_back_faces_to_light);
     }
     rtcCommitGeometry(geom);
     rtcAttachGeometryByID(scene_, geom, static_cast<unsigned>(m));
@@ -108,7 +122,7 @@ EmbreeScene::~EmbreeScene() {
   if (device_) rtcReleaseDevice(device_);
 }
 
-bool EmbreeScene::intersect(const glm::vec3& o, const glm::vec3& d, float tnear, float tfar, RayHit* hit) const {
+bool EmbreeScene::intersect(const glm::vec3& o, const glm::vec3& d, float tnear, float tfar, RayHit* hit, bool toward_light) const {
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
   RTCRayHit rh;
@@ -118,7 +132,7 @@ bool EmbreeScene::intersect(const glm::vec3& o, const glm::vec3& d, float tnear,
   rh.ray.tfar = tfar;
   rh.ray.time = 0.0f;
   rh.ray.mask = 0xFFFFFFFFu;
-  rh.ray.id = 0;
+  rh.ray.id = toward_light ? kTowardLight : 0u;
   rh.ray.flags = 0;
   rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
   rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
@@ -141,7 +155,7 @@ void EmbreeScene::intersect_packet(const bool* valid, const glm::vec3& o, const 
 }
 
 void EmbreeScene::intersect_packet(const bool* valid, const glm::vec3* o, const glm::vec3* dirs, float tnear,
-                                   const float* tfar, RayHit* hit, bool* found) const {
+                                   const float* tfar, RayHit* hit, bool* found, bool toward_light) const {
   alignas(64) int lanes[kPacket];
   alignas(64) RTCRayHit16 rh;
   for (int i = 0; i < kPacket; ++i) {
@@ -152,7 +166,7 @@ void EmbreeScene::intersect_packet(const bool* valid, const glm::vec3* o, const 
     rh.ray.tfar[i] = tfar[i];
     rh.ray.time[i] = 0.0f;
     rh.ray.mask[i] = 0xFFFFFFFFu;
-    rh.ray.id[i] = static_cast<unsigned>(i);
+    rh.ray.id[i] = static_cast<unsigned>(i) | (toward_light ? kTowardLight : 0u);
     rh.ray.flags[i] = 0;
     rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
     rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;

@@ -14,6 +14,9 @@
 
 namespace spadgen::render {
 
+// The bit of a ray's id that marks it as going towards a light (EmbreeScene::intersect's toward_light).
+inline constexpr unsigned kTowardLight = 1u << 31;
+
 struct RayHit {
   float t = std::numeric_limits<float>::infinity();
   uint32_t mesh = 0, triangle = 0;
@@ -29,7 +32,10 @@ class EmbreeScene {
   EmbreeScene& operator=(const EmbreeScene&) = delete;
 
   // Closest hit on (tnear, tfar) along origin + t dir (dir need not be unit; t is in units of |dir|).
-  bool intersect(const glm::vec3& origin, const glm::vec3& dir, float tnear, float tfar, RayHit* hit) const;
+  // toward_light: the ray goes from a point towards a light (the laser), and a single-sided surface is
+  // culled as the light sees it, from the other side (occluded and occluded_packet always are).
+  bool intersect(const glm::vec3& origin, const glm::vec3& dir, float tnear, float tfar, RayHit* hit,
+                 bool toward_light = false) const;
   // kPacket rays at once (rtcIntersect16: the coherent camera rays of 16 pixels). Lanes with valid[i]
   // false are not traced; found[i] tells whether lane i hit anything, hit[i] where.
   static constexpr int kPacket = 16;
@@ -38,7 +44,7 @@ class EmbreeScene {
   // The same with one origin and tfar per lane (the shadow rays of 16 first hits towards the laser);
   // occluded_packet sets blocked[i] when anything lies on lane i's (tnear, tfar[i]).
   void intersect_packet(const bool* valid, const glm::vec3* origins, const glm::vec3* dirs, float tnear,
-                        const float* tfar, RayHit* hit, bool* found) const;
+                        const float* tfar, RayHit* hit, bool* found, bool toward_light = false) const;
   void occluded_packet(const bool* valid, const glm::vec3* origins, const glm::vec3* dirs, float tnear,
                        const float* tfar, bool* blocked) const;
   // Whether anything lies on (tnear, tfar).

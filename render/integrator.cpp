@@ -317,7 +317,7 @@ Spec Integrator::shadow_transmittance(const glm::vec3& origin, const glm::vec3& 
       found = first->found;
       hit = first->hit;
     } else {
-      found = embree_.intersect(o, dir, 0.0f, remaining, &hit);
+      found = embree_.intersect(o, dir, 0.0f, remaining, &hit, true);
     }
     const float seg = found ? hit.t : remaining;
     if (medium >= 0 && std::isfinite(seg)) {
@@ -432,7 +432,7 @@ void Integrator::trace_camera_block(int x, int y, int s_begin, int s_end, const 
     bool shadow_found[kPacket];
     if (traced > 0) {
       if (transmission_)
-        embree_.intersect_packet(shadow, origins, dirs, 0.0f, tfar, shadow_hits, shadow_found);
+        embree_.intersect_packet(shadow, origins, dirs, 0.0f, tfar, shadow_hits, shadow_found, true);
       else
         embree_.occluded_packet(shadow, origins, dirs, 0.0f, tfar, shadow_found);
     }
@@ -599,7 +599,7 @@ bool Integrator::connect_laser_refracted(const NeeVertex& v, const LaserRay& lr,
     // To the next face: the nearest hit, with room for the float error of the faces' positions (the next
     // face but one is a layer further). To the laser: short of it.
     const float reach = j < k ? float(len * 1.01 + 1e-4) : float(len * (1.0 - 1e-6));
-    const bool found = embree_.intersect(start, dj, 0.0f, reach, &hit);
+    const bool found = embree_.intersect(start, dj, 0.0f, reach, &hit, true);
     if (j < k) {
       if (!found) return false;
       const Surface sf = shading_.surface(hit);

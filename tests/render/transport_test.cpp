@@ -105,6 +105,38 @@ TEST(Transport, LambertianPlaneMatchesTheCameraEquationWithOffAxisFalloff) {
   EXPECT_LT(t.laser_total[0], 0.03 * t.laser_total[size_t(t.data_rect.index(16, 16))]);
 }
 
+// A single-sided surface does not exist seen from behind, for the laser's light as for the camera: a quad
+// between the camera (the laser at it) and a plane, its back towards both, leaves the plane's direct
+// return bit for bit as without it (its shadow rays, which go from the plane towards the laser, met its
+// front and were blocked: 0 photons). With transmissive geometry in the scene (out of view) the shadow
+// rays are intersect rays through it: the same. Facing the camera, the quad hides the plane.
+TEST(Transport, ASingleSidedSurfaceSeenFromBehindLetsTheLaserThrough) {
+  for (const bool transmissive : {false, true}) {
+    RenderStageConfig c = test_config(16, 16, 12e-3);
+    c.render.samples_per_pixel = 4;
+    c.render.max_bounces = 1;
+    const TimeAxis axis{0.0, 10e-12, 2000, 25e-9};
+    const auto render = [&](int quad) {  // 0: none; 1: its back towards the camera; 2: its front
+      scenes::Scene s = plane_scene(2.0f, 0.5f);
+      const int one_sided = add_material(s, test::lambertian(0.5f, /*double_sided=*/false));
+      if (quad == 1) add_quad(s, {0, 0, -1}, {0, 1, 0}, {1, 0, 0}, one_sided);
+      if (quad == 2) add_quad(s, {0, 0, -1}, {1, 0, 0}, {0, 1, 0}, one_sided);
+      if (transmissive) add_quad(s, {0, 0, 1}, {0.1f, 0, 0}, {0, 0.1f, 0}, add_material(s, test::glass(1.5f, 0.002f)));
+      Renderer r(s, c);
+      return r.transient({0, 0, 16, 16}, {0, 0, 16, 16}, axis);
+    };
+    const TransientTile none = render(0), behind = render(1), front = render(2);
+    double total = 0;
+    for (size_t i = 0; i < none.laser_total.size(); ++i) {
+      EXPECT_EQ(behind.laser_total[i], none.laser_total[i]) << i << (transmissive ? " (transmissive scene)" : "");
+      EXPECT_GT(none.laser_total[i], 0.0) << i;
+      total += front.laser_total[i];
+    }
+    EXPECT_GT(total, 0.0);  // the quad's own return, at 1 m
+    EXPECT_NE(front.laser_total[0], none.laser_total[0]);
+  }
+}
+
 TEST(Transport, ReturnPeaksInTheBinOfTwiceTheDistance) {
   for (float d : {0.3f, 0.75f, 1.6f}) {
     RenderStageConfig c = test_config(8, 8, 12e-3);
