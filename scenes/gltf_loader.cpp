@@ -273,6 +273,9 @@ class Loader {
   void visit_one(int node, const glm::dmat4& parent_world, std::vector<std::pair<int, glm::dmat4>>& stack);
   void check_world(const glm::dvec3& p, const std::string& who, const std::string& what) const;
   glm::dmat4 local_transform(size_t node) const;
+  glm::dmat4 world_of(size_t node) const;  // the node's parents' transforms and its own, from its root
+  // Per vertex of a skinned primitive: sum over its joints of weight x (joint's world x inverse bind).
+  std::vector<glm::dmat4> skin_matrices(size_t node, const tinygltf::Primitive& p, size_t vertices, const std::string& who);
   void resolve_edits();
   size_t named(const char* kind, const char* section, const std::vector<std::string>& names, const std::string& name) const;
   Trs decompose(size_t node, const glm::dmat4& m) const;
@@ -337,9 +340,6 @@ void Loader::check_unused_features() {
   for (size_t i = 0; i < m_.animations.size(); ++i)
     warn(label("animation", i, m_.animations[i].name) +
          ": animations are not used by spadgen; the scene is loaded in its rest pose");
-  for (size_t i = 0; i < m_.skins.size(); ++i)
-    warn(label("skin", i, m_.skins[i].name) +
-         ": skins are not used by spadgen; skinned meshes are loaded in their bind pose");
 }
 
 std::vector<int> Loader::pick_roots(const std::string& scene_name) {
@@ -376,6 +376,11 @@ std::vector<int> Loader::pick_roots(const std::string& scene_name) {
     if (n < 0 || static_cast<size_t>(n) >= m_.nodes.size())
       fail(label("scene", chosen, s.name), "node " + std::to_string(n) + " does not exist (the file has " +
                                                std::to_string(m_.nodes.size()) + " nodes)");
+    else if (parent_[static_cast<size_t>(n)] >= 0)
+      fail(label("scene", chosen, s.name), "lists " + node_label(m_, static_cast<size_t>(n)) + ", a child of " +
+                                               node_label(m_, static_cast<size_t>(parent_[static_cast<size_t>(n)])) +
+                                               "; a scene lists root nodes only (glTF 2.0 scenes[].nodes): its mesh would "
+                                               "be loaded without its parent's transform, or twice");
   return s.nodes;
 }
 
@@ -456,6 +461,71 @@ glm::dmat4 Loader::local_transform(size_t i) const {
     s = glm::scale(glm::dmat4(1.0), base.scale);
   }
   return node_edit_[i] ? edited(*node_edit_[i], base) : t * r * s;
+}
+
+glm::dmat4 Loader::world_of(size_t node) const {
+  glm::dmat4 w = local_transform(node);
+  for (int p = parent_[node]; p >= 0; p = parent_[static_cast<size_t>(p)]) w = local_transform(static_cast<size_t>(p)) * w;
+  return w;
+}
+
+// glTF 2.0 skinning (linear blend) in the pose the nodes' own transforms give (no animation): a vertex's
+// world position is sum_k weight_k x world(joint_k) x inverseBind(joint_k) x position; the transform of
+// the node holding the mesh is not used (the specification's rule).
+std::vector<glm::dmat4> Loader::skin_matrices(size_t node, const tinygltf::Primitive& p, size_t n, const std::string& who) {
+  const auto skin_index = static_cast<size_t>(m_.nodes[node].skin);
+  if (skin_index >= m_.skins.size())
+    fail(node_label(m_, node), "skin " + std::to_string(m_.nodes[node].skin) + " does not exist (the file has " +
+                                   std::to_string(m_.skins.size()) + " skins)");
+  const tinygltf::Skin& skin = m_.skins[skin_index];
+  const std::string skin_name = label("skin", skin_index, skin.name);
+  if (skin.joints.empty()) fail(skin_name, "has no joints (glTF 2.0: joints has at least one node)");
+  std::vector<glm::dmat4> joint(skin.joints.size());
+  std::vector<double> ibm;
+  if (skin.inverseBindMatrices >= 0) {
+    size_t count = 0;
+    int c = 0;
+    ibm = read_accessor(skin.inverseBindMatrices, skin_name + " inverseBindMatrices", {TINYGLTF_TYPE_MAT4}, &count, &c);
+    if (count < skin.joints.size())
+      fail(skin_name, "inverseBindMatrices holds " + std::to_string(count) + " matrices for " +
+                          std::to_string(skin.joints.size()) + " joints");
+  }
+  for (size_t j = 0; j < skin.joints.size(); ++j) {
+    const int jn = skin.joints[j];
+    if (jn < 0 || static_cast<size_t>(jn) >= m_.nodes.size())
+      fail(skin_name, "joint " + std::to_string(jn) + " is not a node (the file has " + std::to_string(m_.nodes.size()) + " nodes)");
+    joint[j] = world_of(static_cast<size_t>(jn)) * (ibm.empty() ? glm::dmat4(1.0) : glm::make_mat4(ibm.data() + 16 * j));
+  }
+  std::vector<glm::dmat4> out(n, glm::dmat4(0.0));
+  bool any = false;
+  for (int set = 0; set < 4; ++set) {
+    const auto ji = p.attributes.find("JOINTS_" + std::to_string(set));
+    const auto wi = p.attributes.find("WEIGHTS_" + std::to_string(set));
+    if (ji == p.attributes.end() && wi == p.attributes.end()) break;
+    if (ji == p.attributes.end() || wi == p.attributes.end())
+      fail(who, "has " + std::string(ji == p.attributes.end() ? "WEIGHTS_" : "JOINTS_") + std::to_string(set) + " without " +
+                    (ji == p.attributes.end() ? "JOINTS_" : "WEIGHTS_") + std::to_string(set));
+    size_t kj = 0, kw = 0;
+    int c = 0;
+    const std::vector<double> js = read_accessor(ji->second, who + " JOINTS_" + std::to_string(set), {TINYGLTF_TYPE_VEC4}, &kj, &c);
+    const std::vector<double> ws = read_accessor(wi->second, who + " WEIGHTS_" + std::to_string(set), {TINYGLTF_TYPE_VEC4}, &kw, &c);
+    if (kj != n || kw != n)
+      fail(who, "JOINTS_" + std::to_string(set) + " and WEIGHTS_" + std::to_string(set) + " have " + std::to_string(kj) + " and " +
+                    std::to_string(kw) + " elements, POSITION " + std::to_string(n));
+    for (size_t v = 0; v < n; ++v)
+      for (int k = 0; k < 4; ++k) {
+        const double w = ws[4 * v + static_cast<size_t>(k)];
+        if (w == 0.0) continue;
+        const double j = js[4 * v + static_cast<size_t>(k)];
+        if (!(j >= 0.0 && j < static_cast<double>(joint.size())))
+          fail(who, "JOINTS_" + std::to_string(set) + " element " + std::to_string(v) + " names joint " + num(j) + " of " +
+                        skin_name + "'s " + std::to_string(joint.size()));
+        out[v] += w * joint[static_cast<size_t>(j)];
+        any = true;
+      }
+  }
+  if (!any) fail(who, "its node has " + skin_name + " but the primitive has no JOINTS_0 and WEIGHTS_0 (glTF 2.0: a skinned mesh has both)");
+  return out;
 }
 
 // The scene file's edit of a node: each given component replaces the glTF's. The matrix is composed as an
@@ -916,9 +986,6 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
       fail(who, "mode " + std::to_string(p.mode) + " is not a glTF primitive mode");
     return;
   }
-  if (!p.targets.empty())
-    warn(who + ": " + std::to_string(p.targets.size()) +
-         " morph targets are not used by spadgen; the base shape is loaded");
   if (p.material >= 0 && static_cast<size_t>(p.material) >= m_.materials.size())
     fail(who, "material " + std::to_string(p.material) + " does not exist (the file has " +
                   std::to_string(m_.materials.size()) + " materials)");
@@ -936,20 +1003,49 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
 
   size_t n = 0, k = 0;
   int comps = 0;
-  const std::vector<double> pos = read_accessor(pos_it->second, who + " POSITION", {TINYGLTF_TYPE_VEC3}, &n, &comps);
+  std::vector<double> pos = read_accessor(pos_it->second, who + " POSITION", {TINYGLTF_TYPE_VEC3}, &n, &comps);
+  // Morph targets: the shape of the default weights (the node's, else the mesh's; none: the base shape),
+  // base + sum of weight x target displacement, for POSITION and NORMAL.
+  const std::vector<double>& weights = !gn.weights.empty() ? gn.weights : gm.weights;
+  if (!weights.empty() && weights.size() != p.targets.size())
+    fail(who, "has " + std::to_string(p.targets.size()) + " morph targets but " +
+                  (gn.weights.empty() ? label("mesh", mesh_index, gm.name) : node_label(m_, node)) + " gives " +
+                  std::to_string(weights.size()) + " weights (glTF 2.0: one per target)");
+  const auto morph = [&](const char* attribute, std::vector<double>& values) {
+    for (size_t t = 0; t < p.targets.size() && t < weights.size(); ++t) {
+      const auto it = p.targets[t].find(attribute);
+      if (weights[t] == 0.0 || it == p.targets[t].end()) continue;
+      size_t count = 0;
+      int c = 0;
+      const std::string target = who + " morph target " + std::to_string(t) + " " + attribute;
+      const std::vector<double> d = read_accessor(it->second, target, {TINYGLTF_TYPE_VEC3}, &count, &c);
+      if (count != n) fail(who, "morph target " + std::to_string(t) + " " + attribute + " has " + std::to_string(count) +
+                                    " elements but POSITION has " + std::to_string(n));
+      for (size_t v = 0; v < values.size(); ++v) values[v] += weights[t] * d[v];
+    }
+  };
+  morph("POSITION", pos);
+  const std::vector<glm::dmat4> skinned = gn.skin >= 0 ? skin_matrices(node, p, n, who) : std::vector<glm::dmat4>{};
   out.positions.resize(n);
   for (size_t v = 0; v < n; ++v) {
-    const glm::dvec4 w = world * glm::dvec4(pos[3 * v], pos[3 * v + 1], pos[3 * v + 2], 1.0);
+    const glm::dvec4 w = (skinned.empty() ? world : skinned[v]) * glm::dvec4(pos[3 * v], pos[3 * v + 1], pos[3 * v + 2], 1.0);
     check_world(glm::dvec3(w), who, "POSITION element " + std::to_string(v));
     out.positions[v] = glm::vec3(w);
   }
   const glm::dmat3 normal_matrix = glm::transpose(glm::inverse(glm::dmat3(world)));
   if (auto it = p.attributes.find("NORMAL"); it != p.attributes.end()) {
-    const std::vector<double> nor = read_accessor(it->second, who + " NORMAL", {TINYGLTF_TYPE_VEC3}, &k, &comps);
+    std::vector<double> nor = read_accessor(it->second, who + " NORMAL", {TINYGLTF_TYPE_VEC3}, &k, &comps);
     if (k != n) fail(who, "NORMAL has " + std::to_string(k) + " elements but POSITION has " + std::to_string(n));
+    morph("NORMAL", nor);
     out.normals.resize(n);
     for (size_t v = 0; v < n; ++v) {
-      const glm::dvec3 wn = normal_matrix * glm::dvec3(nor[3 * v], nor[3 * v + 1], nor[3 * v + 2]);
+      glm::dmat3 nm = normal_matrix;
+      if (!skinned.empty()) {  // a vertex without weights (the specification asks for a sum of 1) keeps no normal
+        const glm::dmat3 m3(skinned[v]);
+        const double det = glm::determinant(m3);
+        nm = std::abs(det) > 1e-300 && std::isfinite(det) ? glm::transpose(glm::inverse(m3)) : glm::dmat3(0.0);
+      }
+      const glm::dvec3 wn = nm * glm::dvec3(nor[3 * v], nor[3 * v + 1], nor[3 * v + 2]);
       const double len = glm::length(wn);
       // A zero normal in the file stays zero: the renderer falls back to the geometric normal.
       out.normals[v] = len > 0 ? glm::vec3(wn / len) : glm::vec3(0.0f);
@@ -968,6 +1064,14 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
     std::vector<glm::vec2>& dst = set == 0 ? out.texcoords0 : out.texcoords1;
     dst.resize(n);
     for (size_t v = 0; v < n; ++v) dst[v] = glm::vec2(glm::dvec2(uv[2 * v], uv[2 * v + 1]));
+  }
+
+  if (out.material >= 0) {
+    const Material& mat = scene_.materials[static_cast<size_t>(out.material)];
+    if (mat.base_color_texture >= 0 && mat.base_color_texcoord <= 1 &&
+        (mat.base_color_texcoord == 0 ? out.texcoords0 : out.texcoords1).empty())
+      warn(who + ": its material's baseColorTexture uses TEXCOORD_" + std::to_string(mat.base_color_texcoord) +
+           ", which the primitive does not have; the texture is not used on it (the base colour factor is)");
   }
 
   std::vector<uint32_t> idx;
@@ -1344,6 +1448,30 @@ void check_before_tinygltf(const std::string& path, const nlohmann::json& doc) {
           hint = " (export the textures as PNG or JPEG)";
         throw Error(path + ": extension " + quoted(name) + " is listed in extensionsRequired but spadgen does not support it" + hint);
       }
+  // Compressed data without the extension in extensionsRequired (it may be listed in extensionsUsed only,
+  // with a fallback spadgen cannot tell from the compressed accessors): refused as well, naming the element.
+  if (const auto meshes = doc.find("meshes"); meshes != doc.end() && meshes->is_array())
+    for (size_t i = 0; i < meshes->size(); ++i) {
+      const nlohmann::json& mesh = (*meshes)[i];
+      if (!mesh.is_object() || !mesh.contains("primitives") || !mesh["primitives"].is_array()) continue;
+      for (size_t j = 0; j < mesh["primitives"].size(); ++j) {
+        const nlohmann::json& prim = mesh["primitives"][j];
+        if (prim.is_object() && prim.contains("extensions") && prim["extensions"].is_object() &&
+            prim["extensions"].contains("KHR_draco_mesh_compression"))
+          throw Error(path + ": " + label("mesh", i, mesh.value("name", std::string())) + " primitive " + std::to_string(j) +
+                      ": compressed with KHR_draco_mesh_compression, which spadgen does not decode (export the file "
+                      "without mesh compression)");
+      }
+    }
+  if (const auto views = doc.find("bufferViews"); views != doc.end() && views->is_array())
+    for (size_t i = 0; i < views->size(); ++i) {
+      const nlohmann::json& v = (*views)[i];
+      if (!v.is_object() || !v.contains("extensions") || !v["extensions"].is_object()) continue;
+      for (const char* e : {"EXT_meshopt_compression", "KHR_meshopt_compression"})
+        if (v["extensions"].contains(e))
+          throw Error(path + ": " + label("bufferView", i, v.value("name", std::string())) + ": compressed with " + e +
+                      ", which spadgen does not decode (export the file without mesh compression)");
+    }
   const std::filesystem::path dir = std::filesystem::path(path).parent_path();
   for (const char* kind : {"buffers", "images"}) {
     const auto list = doc.find(kind);
