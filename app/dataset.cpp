@@ -83,14 +83,17 @@ Estimate estimate(const RunConfig& c, int repeats, int threads) {
 }
 
 // Estimates of many samples: the sensor's gate response (tens of milliseconds) is built once per distinct
-// shape of run. The estimate does not depend on the seeds, the light's strength or the scene's content.
+// shape of run. The estimate does not depend on the seeds, the light's strength or the scene's content,
+// nor on the laser's emission delay (it shifts the returns, not the time axis's size) or the cycles per
+// frame (they scale the rates): a dataset varying them was estimated at 60 ms per sample.
 class Estimator {
  public:
   Estimator(int repeats, int threads) : repeats_(repeats), threads_(threads) {}
   Estimate operator()(const scenes::ResolvedRun& r) {
     ojson key = r.resolved;
     for (const char* k : {"seed", "seeds", "description", "ambient", "nodes", "materials"}) key.erase(k);
-    if (key.contains("laser")) key["laser"].erase("average_power_mW");
+    if (key.contains("laser")) key["laser"].erase("average_power_mW"), key["laser"].erase("emission_delay_ns");
+    if (key.contains("acquisition")) key["acquisition"].erase("cycles_per_frame");
     const std::string text = key.dump();
     auto it = cache_.find(text);
     if (it == cache_.end()) it = cache_.emplace(text, estimate(r.config, repeats_, threads_)).first;
@@ -366,6 +369,18 @@ void dataset_run(const DatasetOptions& options) {
       // A sample rendered again (damaged, stale) has its realisations sensed again too: they hard-link its
       // files, which are new ones now.
       bool rendered = false;
+      // A sample or realisation folder without a readable metadata.json (lost, or cut short by a copy)
+      // says nothing of what it holds, and its run would refuse the files as another's: it is this sample's
+      // (in samples/, under its claim), so it goes, and the sample is generated again.
+      const auto clear_unrecorded = [&](const std::string& f) {
+        std::error_code ec;
+        if (fs::exists(dir / f, ec) && !folder.sample_metadata(f)) {
+          fs::remove_all(dir / f, ec);
+          if (ec) throw Error("cannot remove " + (dir / f).string() + ", a sample folder without its metadata.json: " + ec.message());
+        }
+      };
+      clear_unrecorded(s.folder());
+      for (int k = 1; k < spec.repeats; ++k) clear_unrecorded(s.repeat_folder(k));
       if (!folder.holds(s.folder(), rec.hash)) {
         rendered = true;
         RunOptions r;

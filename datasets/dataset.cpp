@@ -94,7 +94,8 @@ Distribution read_distribution(const Reader& rd, const json& v, const std::strin
     } else if (kind == "uniform_int") {
       d.kind = Distribution::Kind::UniformInt;
       if (d.a != std::floor(d.a) || d.b != std::floor(d.b) || !(d.b >= d.a) || std::fabs(d.a) > 9e15 || std::fabs(d.b) > 9e15)
-        rd.fail(at, "found " + describe(p) + ", expected integers a <= b (both included)");
+        rd.fail(at, "found " + describe(p) + ", expected integers a <= b (both included) within +-9e15 (beyond, a double "
+                    "no longer counts every integer)");
     } else {
       d.kind = Distribution::Kind::Normal;
       if (!(d.b > 0)) rd.fail(at, "found sigma " + describe(p[1]) + ", expected sigma > 0");
@@ -118,10 +119,13 @@ Distribution read_distribution(const Reader& rd, const json& v, const std::strin
   return d;
 }
 
+double in_range(const Distribution& d, double x) { return x >= d.b ? std::nextafter(d.b, d.a) : std::max(x, d.a); }
+
 json draw(const Distribution& d, Rng& r, const std::string& where) {
   switch (d.kind) {
-    case Distribution::Kind::Uniform: return d.a + (d.b - d.a) * uniform01(r);
-    case Distribution::Kind::LogUniform: return std::exp(std::log(d.a) + (std::log(d.b) - std::log(d.a)) * uniform01(r));
+    // [a, b): rounding can reach b, or for a log-uniform fall below a, in ranges a few ulps wide
+    case Distribution::Kind::Uniform: return in_range(d, d.a + (d.b - d.a) * uniform01(r));
+    case Distribution::Kind::LogUniform: return in_range(d, std::exp(std::log(d.a) + (std::log(d.b) - std::log(d.a)) * uniform01(r)));
     case Distribution::Kind::UniformInt: {
       const double n = d.b - d.a + 1.0;
       const auto k = static_cast<int64_t>(std::min(std::floor(uniform01(r) * n), n - 1.0));
@@ -163,7 +167,7 @@ const std::vector<DatasetKey>& dataset_keys() {
       {"random", "object: key -> distribution", "{}", "scene-file keys drawn per sample (distributions below), from the dataset seed, the sample index and the key"},
       {"seeds.light", "integer or \"per_sample\"", "\"per_sample\"", "seed of the light transport for every sample; \"per_sample\": the sample's seed"},
       {"seeds.chip", "integer or \"per_sample\"", "\"per_sample\"", "seed of the chip's fixed pattern; an integer gives every sample the same chip (one camera)"},
-      {"seeds.noise", "integer or \"per_sample\"", "\"per_sample\"", "seed of the temporal noise; realisation r of a sample uses noise seed + r"},
+      {"seeds.noise", "integer or \"per_sample\"", "\"per_sample\"", "seed of the temporal noise; realisation r of a sample uses noise seed + r (a fixed one: at most 2^53 - (repeats - 1))"},
       {"repeats", "integer in [1, 1000]", "1", "realisations of the temporal noise per rendered sample (`spadgen sense` on the saved light: the light is rendered once)"},
   };
   return keys;
@@ -255,6 +259,12 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
       if (it.value().is_string()) rd.fail(at, "found " + describe(it.value()) + ", expected an integer in [0, 2^53] or \"per_sample\"");
       *slot = rd.seed(it.value(), at);
     }
+    // realisation r uses noise seed + r: the last must be a seed too (it failed every sample after rendering)
+    if (s.noise_seed && *s.noise_seed + uint64_t(s.repeats - 1) > kMaxSeed)
+      rd.fail("/seeds/noise", "found " + std::to_string(*s.noise_seed) + ", and realisation " + std::to_string(s.repeats - 1) +
+                                  " (repeats " + std::to_string(s.repeats) + ") would use noise seed + " +
+                                  std::to_string(s.repeats - 1) + ", past 2^53; expected at most " +
+                                  std::to_string(kMaxSeed - uint64_t(s.repeats - 1)));
   }
 
   // The scene-file keys: dotted as --set writes them; the dataset owns the seeds.
@@ -347,6 +357,20 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
       else if (d.kind == Distribution::Kind::Normal) probes = {d.min.value_or(d.a), d.max.value_or(d.a)};
       else probes = {d.a, d.b};
       for (const json& p : probes) check_values(at, {it.key() + "=" + p.dump()});
+      // An untruncated side of a normal reaches any value (40 sigma stands for it): a key with a bound there
+      // needs min or max, or some samples fail.
+      if (d.kind == Distribution::Kind::Normal)
+        for (const char* side : {"min", "max"}) {
+          if (std::string(side) == "min" ? d.min.has_value() : d.max.has_value()) continue;
+          const double far = d.a + (std::string(side) == "min" ? -40.0 : 40.0) * d.b;
+          try {
+            (void)scenes::load_scene_file(s.scenes.front(), {it.key() + "=" + json(far).dump()});
+          } catch (const Error& e) {
+            rd.fail(at, std::string("a normal without \"") + side + "\" can give any value " + (std::string(side) == "min" ? "below" : "above") +
+                            " its mean, and the key has a bound there (at " + json(far).dump() + ": " + e.what() +
+                            "); give \"" + side + "\" (a truncated normal)");
+          }
+        }
       s.random.push_back({it.key(), d, it.value()});
     }
   }
@@ -546,7 +570,7 @@ std::string dataset_reference_markdown() {
   o += "\n| distribution | written | draws |\n|---|---|---|\n"
        "| uniform | `{\"uniform\": [a, b]}` | a number in [a, b) |\n"
        "| log-uniform | `{\"log_uniform\": [a, b]}` | a number in [a, b) whose logarithm is uniform (0 < a < b) |\n"
-       "| normal | `{\"normal\": [mean, sigma], \"min\": lo, \"max\": hi}` | a normal number; with min and/or max, truncated to [min, max] by rejection (which must keep at least 0.1 % of the mass) |\n"
+       "| normal | `{\"normal\": [mean, sigma], \"min\": lo, \"max\": hi}` | a normal number; with min and/or max, truncated to [min, max] by rejection (which must keep at least 0.1 % of the mass). A side without min or max reaches any value: on a key with a bound on that side (a power, a count) it is refused, asking for min or max |\n"
        "| uniform integer | `{\"uniform_int\": [a, b]}` | an integer in [a, b], both included |\n"
        "| choice | `{\"choice\": [v1, v2, ...]}` | one of the values (any JSON: numbers, strings, arrays), with equal probability |\n";
   return o;

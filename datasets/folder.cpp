@@ -168,6 +168,16 @@ std::optional<ojson> DatasetFolder::checked(const ojson& wanted) const {
                   "\" (only \"samples\" may change, to add samples); use another folder (-o) or remove " + dir_.string());
     }
   } else {
+    // dataset.json decides whose the folder is: without it (damaged, or lost), samples and an index there
+    // may be another dataset's, which this one would replace.
+    if (fs::exists(dir_ / "dataset.json", ec))
+      throw Error((dir_ / "dataset.json").string() + " is damaged (not JSON): it says which dataset file " + dir_.string() +
+                  " holds; restore it, or remove " + dir_.string() + " or use another folder (-o)");
+    for (const char* own : {"samples", "index.jsonl", "index.csv", "dataset.md", "failed"})
+      if (fs::exists(dir_ / own, ec) && !(fs::is_directory(dir_ / own, ec) && fs::is_empty(dir_ / own, ec)))
+        throw Error(dir_.string() + " holds a dataset's " + own + " but no dataset.json, which says which dataset file "
+                    "they are of (another dataset's would be replaced); restore its dataset.json, or remove " +
+                    dir_.string() + " or use another folder (-o)");
     if (fs::exists(dir_ / "metadata.json", ec))
       throw Error(dir_.string() + " is a run folder (it holds metadata.json), not a dataset folder; expected an empty "
                   "folder or a dataset folder (with its dataset.json): use another folder (-o)");
@@ -296,6 +306,7 @@ SampleRecord DatasetFolder::inspect(const Sample& s) const {
         size += int64_t(st.st_size), any = true;
       }
       if (std::string d = damage_of(name.get<std::string>(), present ? whole : -1, sizes); !d.empty()) gone.push_back(prefix + d);
+      if (present) rec.listed.push_back(prefix + name.get<std::string>());
       if (!any) continue;
       rec.files.emplace_back(prefix + name.get<std::string>(), size);
       rec.bytes += size;
@@ -307,7 +318,7 @@ SampleRecord DatasetFolder::inspect(const Sample& s) const {
     }
   }
   if (done && !stale && !gone.empty()) {
-    rec.files.clear(), rec.bytes = 0, rec.summary = nullptr;
+    rec.files.clear(), rec.listed.clear(), rec.bytes = 0, rec.summary = nullptr;
     rec.status = Status::Damaged;
     rec.error = "listed in metadata.json but gone or changed: ";
     for (size_t i = 0; i < gone.size() && i < 4; ++i) rec.error += (i ? ", " : "") + gone[i];
@@ -319,15 +330,14 @@ SampleRecord DatasetFolder::inspect(const Sample& s) const {
     rec.folders = folders;
     return rec;
   }
-  rec.files.clear(), rec.bytes = 0, rec.summary = nullptr;
-  if (stale) {
-    rec.status = Status::Stale;
-    return rec;
-  }
+  rec.files.clear(), rec.listed.clear(), rec.bytes = 0, rec.summary = nullptr;
+  // The sample as it resolves now failed (a stale folder from before stays beside it): failed, with why.
   if (const std::optional<json> f = read_json(dir_ / failure_path(s)); f && f->value("sample_hash", "") == rec.hash) {
     rec.status = Status::Failed;
     rec.error = f->value("error", "");
+    return rec;
   }
+  if (stale) rec.status = Status::Stale;
   return rec;
 }
 
@@ -369,15 +379,13 @@ std::string index_jsonl(const DatasetSpec& spec, const std::vector<SampleRecord>
     row["folder"] = r.sample.folder();
     row["parameters"] = r.sample.parameters;
     row["seeds"] = {{"seed", r.sample.seed}, {"light", r.sample.light_seed}, {"chip", r.sample.chip_seed}, {"noise", r.sample.noise_seed}};
-    if (spec.repeats > 1) {
-      row["repeats"] = ojson::array();
-      for (int k = 1; k < spec.repeats; ++k) row["repeats"].push_back(r.sample.repeat_folder(k));
-    }
+    row["repeats"] = ojson::array();
+    for (int k = 1; k < spec.repeats; ++k) row["repeats"].push_back(r.sample.repeat_folder(k));
     row["sample_hash"] = r.hash;
     if (r.status == Status::Done) {
       row["bytes"] = r.bytes;
       row["files"] = ojson::array();
-      for (const auto& [name, size] : r.files) row["files"].push_back(name);
+      for (const std::string& name : r.listed) row["files"].push_back(name);
       row["ground_truth"] = r.summary;
     }
     if (r.status == Status::Failed || r.status == Status::Damaged) row["error"] = r.error;
@@ -411,6 +419,18 @@ std::string index_csv(const DatasetSpec& spec, const std::vector<SampleRecord>& 
   return out;
 }
 
+namespace {
+// Text in a Markdown table cell: a '|' escaped (GFM reads it as a cell's end, in code spans too), lines joined.
+std::string cell(const std::string& t) {
+  std::string out;
+  for (char c : t) {
+    if (c == '|') out += "\\|";
+    else out += c == '\n' || c == '\r' ? ' ' : c;
+  }
+  return out;
+}
+}  // namespace
+
 std::string dataset_card(const DatasetFolder& folder, const std::vector<SampleRecord>& records) {
   const DatasetSpec& spec = folder.spec();
   std::map<Status, int64_t> count;
@@ -439,7 +459,7 @@ std::string dataset_card(const DatasetFolder& folder, const std::vector<SampleRe
       description = scenes::load_scene_file(spec.scenes[i]).resolved.value("description", "");
     } catch (const Error&) {
     }
-    o << "| `" << spec.scene_names[i] << "` | " << description << " |\n";
+    o << "| `" << cell(spec.scene_names[i]) << "` | " << cell(description) << " |\n";
   }
   // The camera each scene's first sample resolves to; the parameters below say which of it varies.
   o << "\n## Sensor and acquisition\n\n| scene file | image | sensor | acquisition | laser | render |\n|---|---|---|---|---|---|\n";
@@ -466,7 +486,7 @@ std::string dataset_card(const DatasetFolder& folder, const std::vector<SampleRe
                      num(acq["gate_sweep"]["step_ps"]) + " ps steps";
     else
       acquisition += ", " + acq["intensity"]["exposure"].get<std::string>() + " exposure of " + num(acq["intensity"]["exposure_us"]) + " us";
-    o << "| `" << spec.scene_names[i] << "` | " << num(cam["width_px"]) << " x " << num(cam["height_px"])
+    o << "| `" << cell(spec.scene_names[i]) << "` | " << num(cam["width_px"]) << " x " << num(cam["height_px"])
       << (cam["crop"].is_null() ? std::string() : ", crop " + cam["crop"].dump()) << " | " << r["sensor"]["preset"].get<std::string>()
       << " | " << acquisition << " | " << num(r["laser"]["wavelength_nm"]) << " nm, " << num(r["laser"]["repetition_rate_MHz"])
       << " MHz, " << num(r["laser"]["average_power_mW"]) << " mW | " << num(r["render"]["samples_per_pixel"]) << " paths per pixel |\n";
@@ -492,9 +512,9 @@ std::string dataset_card(const DatasetFolder& folder, const std::vector<SampleRe
     else if (!distinct.empty()) t << distinct.size() << " distinct values";
     return t.str();
   };
-  if (spec.scenes.size() > 1) o << "| `scene` | grid | " << ojson(spec.scene_names).dump() << " | " << observed("scene") << " |\n";
-  for (const GridAxis& g : spec.grid) o << "| `" << g.key << "` | grid | `" << g.values.dump() << "` | " << observed(g.key) << " |\n";
-  for (const RandomAxis& r : spec.random) o << "| `" << r.key << "` | random | `" << r.spec.dump() << "` | " << observed(r.key) << " |\n";
+  if (spec.scenes.size() > 1) o << "| `scene` | grid | " << cell(ojson(spec.scene_names).dump()) << " | " << observed("scene") << " |\n";
+  for (const GridAxis& g : spec.grid) o << "| `" << cell(g.key) << "` | grid | `" << cell(g.values.dump()) << "` | " << observed(g.key) << " |\n";
+  for (const RandomAxis& r : spec.random) o << "| `" << cell(r.key) << "` | random | `" << cell(r.spec.dump()) << "` | " << observed(r.key) << " |\n";
   if (!spec.set.empty()) {
     o << "\nSet for every sample:";
     for (const auto& [k, v] : spec.set) o << " `" << k << "=" << v.dump() << "`";
@@ -523,7 +543,7 @@ std::string dataset_card(const DatasetFolder& folder, const std::vector<SampleRe
   } else {
     o << "| file | mean bytes per sample | total |\n|---|---|---|\n";
     for (const auto& [name, e] : sizes)
-      o << "| `" << name << "` | " << bytes_text(double(e.second) / double(e.first)) << " | " << bytes_text(double(e.second)) << " |\n";
+      o << "| `" << cell(name) << "` | " << bytes_text(double(e.second) / double(e.first)) << " | " << bytes_text(double(e.second)) << " |\n";
     o << "| all | " << bytes_text(double(total) / double(count[Status::Done])) << " | " << bytes_text(double(total)) << " |\n";
   }
   o << "\n## Reading it\n\nFrom this folder:\n\n```python\nimport json\nrows = [json.loads(l) for l in open(\"index.jsonl\")]\n"

@@ -42,6 +42,7 @@ struct SampleRecord {
   // done: every file of its folders but metadata.json (whose size varies with its timing fields), relative to
   // the sample's folder (a repeat's as "_r01/counts.npy"), and its size; a file linked into a repeat counts once
   std::vector<std::pair<std::string, int64_t>> files;
+  std::vector<std::string> listed;  // done: every file of the sample and its realisations (hard links too)
   int64_t bytes = 0;                 // done: their sum
   nlohmann::ordered_json summary;    // done: metadata.json's ground_truth_summary and laser totals
 };

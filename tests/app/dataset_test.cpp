@@ -165,6 +165,33 @@ TEST_F(Dataset, ASampleThatLostAFileIsDamagedAndGeneratedAgain) {
   std::ofstream(dir_ / "out/samples/.000000.spadgen-staging-999999/counts.npy") << "partial";
   ASSERT_EQ(sh(run).code, 0);
   EXPECT_FALSE(fs::exists(dir_ / "out/samples/.000000.spadgen-staging-999999"));
+  // every file of a realisation is in the index, its hard links to the sample's files too (a copy made from
+  // the index's list was damaged: only _r01/counts.npy and its preview were listed)
+  {
+    std::ifstream in(dir_ / "out/index.jsonl");
+    std::string line;
+    std::getline(in, line);
+    const json row = json::parse(line);
+    std::set<std::string> listed;
+    for (const auto& f : row["files"]) listed.insert(f.get<std::string>());
+    const json meta = json::parse(slurp(dir_ / "out/samples/000000_r01/metadata.json"));
+    for (const auto& f : meta["files"])
+      if (f != "metadata.json") {
+        EXPECT_TRUE(listed.count("_r01/" + f.get<std::string>())) << f;
+      }
+    EXPECT_TRUE(listed.count("_r01/ground_truth.exr"));
+    EXPECT_EQ(row["repeats"], json::array({"samples/000000_r01"}));
+  }
+  // a sample whose metadata.json is lost, or cut short, and a realisation's: missing, and generated again
+  // (the run refused their folders as holding files spadgen did not write there, every time)
+  fs::remove(dir_ / "out/samples/000000/metadata.json");
+  std::ofstream(dir_ / "out/samples/000001/metadata.json") << "{";
+  fs::remove(dir_ / "out/samples/000002_r01/metadata.json");
+  EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output, HasSubstr("3 samples: 0 done, 0 failed, 0 stale, 3 missing"));
+  const Result regenerated = sh(run);
+  ASSERT_EQ(regenerated.code, 0) << regenerated.output;
+  EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output, HasSubstr("3 samples: 3 done, 0 failed, 0 stale, 0 missing\n"));
+  expect_same_dataset(dir_ / "reference", dir_ / "out");
   // fewer samples: the folders past them stay, outside the index, and status says so
   write(dir_ / "d2.json", small_dataset(2));
   ASSERT_EQ(sh("dataset run " + (dir_ / "d2.json").string() + " -o " + (dir_ / "out").string() + " -q").code, 0);
@@ -342,6 +369,19 @@ TEST_F(Dataset, RefusesAnotherDatasetsFolderForeignFilesAndTooLittleDisk) {
   ASSERT_EQ(sh("dataset run " + (dir_ / "ordered.json").string() + " -o " + (dir_ / "ord").string() + " -q").code, 0);
   EXPECT_THAT(sh("dataset run " + (dir_ / "swapped.json").string() + " -o " + (dir_ / "ord").string() + " -q").output,
               HasSubstr("differs from " + (dir_ / "swapped.json").string() + " at \"grid\""));
+  // without its dataset.json (damaged, or lost) the folder's samples may be another dataset's: refused (a
+  // run of another dataset file replaced them)
+  const std::string record = slurp(dir_ / "out/dataset.json");
+  write(dir_ / "out/dataset.json", "{\"seed\": ");
+  Result lost = sh("dataset run " + (dir_ / "b.json").string() + " -o " + (dir_ / "out").string() + " -q");
+  EXPECT_EQ(lost.code, 1);
+  EXPECT_THAT(lost.output, HasSubstr("out/dataset.json is damaged (not JSON): it says which dataset file "));
+  fs::remove(dir_ / "out/dataset.json");
+  lost = sh("dataset run " + (dir_ / "b.json").string() + " -o " + (dir_ / "out").string() + " -q");
+  EXPECT_EQ(lost.code, 1);
+  EXPECT_THAT(lost.output, HasSubstr("holds a dataset's samples but no dataset.json, which says which dataset file they are of"));
+  write(dir_ / "out/dataset.json", record);
+  EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output, HasSubstr("2 samples: 2 done"));
   fs::create_directories(dir_ / "mine");
   write(dir_ / "mine/notes.txt", "mine");
   const Result foreign = sh("dataset run " + (dir_ / "a.json").string() + " -o " + (dir_ / "mine").string() + " -q");
@@ -391,6 +431,45 @@ TEST_F(Dataset, AFailingSampleIsRecordedAndTheOthersGoOn) {
   EXPECT_THAT(st.output, HasSubstr("failed: 1, 3"));
   EXPECT_THAT(st.output, HasSubstr("/camera/crop"));
   EXPECT_THAT(slurp(dir_ / "out/index.csv"), HasSubstr(",failed,"));
+}
+
+// A sample made stale (its scene changed) whose regeneration fails is failed, with why, in the status and the
+// index (it was "stale" without its error, which only failed/ held); the card escapes a '|' of a scene's path
+// or a value in its Markdown tables (a row had 7 cells for 6).
+TEST_F(Dataset, AStaleSampleThatFailsAgainIsFailedAndTheCardKeepsItsTables) {
+  const fs::path scenes = dir_ / "a|b";
+  fs::create_directories(scenes);
+  for (const char* f : {"multi_object.json", "multi_object.gltf", "multi_object.bin"}) fs::copy_file(kScenes + f, scenes / f);
+  write(dir_ / "d.json", "{\"seed\": 1, \"scenes\": [\"" + (scenes / "multi_object.json").string() + "\"], \"samples\": 2, "
+        "\"set\": {\"camera.crop\": [500, 240, 4, 4], \"render.samples_per_pixel\": 1}, "
+        "\"random\": {\"description\": {\"choice\": [\"x|y\", \"z\"]}}}");
+  const std::string run = "dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q";
+  ASSERT_EQ(sh(run).code, 0);
+  std::ifstream card(dir_ / "out/dataset.md");
+  int columns = 0, rows = 0;
+  for (std::string line; std::getline(card, line);) {
+    if (line.empty() || line[0] != '|') {
+      columns = 0;
+      continue;
+    }
+    int cells = 0;  // unescaped '|'
+    for (size_t i = 0; i < line.size(); ++i) cells += line[i] == '|' && (i == 0 || line[i - 1] != '\\');
+    if (columns == 0) columns = cells;
+    EXPECT_EQ(cells, columns) << line;
+    ++rows;
+  }
+  EXPECT_GT(rows, 10);
+  EXPECT_THAT(slurp(dir_ / "out/dataset.md"), HasSubstr("a\\|b/multi_object.json"));
+  std::ofstream(dir_ / "out/samples/000001/notes.txt") << "mine";
+  std::string scene = slurp(scenes / "multi_object.json");
+  scene.replace(scene.find("\"wavelength_nm\": 510"), 20, "\"wavelength_nm\": 520");
+  write(scenes / "multi_object.json", scene);
+  EXPECT_EQ(sh(run).code, 1);
+  const Result st = sh("dataset status " + (dir_ / "out").string());
+  EXPECT_THAT(st.output, HasSubstr("2 samples: 1 done, 1 failed, 0 stale, 0 missing"));
+  EXPECT_THAT(st.output, HasSubstr("sample 1 failed: the output folder " + (dir_ / "out/samples/000001").string() +
+                                   " holds files that spadgen did not write there (notes.txt"));
+  EXPECT_THAT(slurp(dir_ / "out/index.jsonl"), HasSubstr("\"status\":\"failed\""));
 }
 
 // The first sample failing is one failing sample too (it was a refusal of the whole dataset); only when

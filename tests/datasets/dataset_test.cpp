@@ -122,6 +122,36 @@ TEST(DatasetFile, ErrorsNameTheKeyAndWhatWasExpected) {
   // a truncated normal whose bounds are the wrong way round says so (it said "keeps a fraction -0.84")
   EXPECT_THAT(error_of("\"random\": {\"camera.f_number\": {\"normal\": [2, 1], \"min\": 4, \"max\": 1.4}}"),
               HasSubstr("/random/camera.f_number: has min 4 and max 1.4; expected min < max"));
+  // an untruncated side of a normal on a key with a bound there (only the mean was checked: 7 of 20 samples
+  // failed after the plan passed); a key without one (a position) takes it
+  EXPECT_THAT(error_of("\"random\": {\"ambient.illuminance_lux\": {\"normal\": [1, 5]}}"),
+              HasSubstr("/random/ambient.illuminance_lux: a normal without \"min\" can give any value below its mean, and the "
+                        "key has a bound there"));
+  EXPECT_THAT(error_of("\"random\": {\"ambient.illuminance_lux\": {\"normal\": [1, 5], \"min\": 0}}"), "no error");
+  EXPECT_THAT(error_of("\"random\": {\"camera.position_m[2]\": {\"normal\": [1, 0.1]}}"), "no error");
+  // realisation r's noise seed is seeds.noise + r: past 2^53 it failed every sample after rendering
+  EXPECT_THAT(error_of("\"repeats\": 3, \"seeds\": {\"noise\": 9007199254740991}"),
+              HasSubstr("/seeds/noise: found 9007199254740991, and realisation 2 (repeats 3) would use noise seed + 2, past 2^53; "
+                        "expected at most 9007199254740990"));
+  EXPECT_THAT(error_of("\"repeats\": 3, \"seeds\": {\"noise\": 9007199254740990}"), "no error");
+  EXPECT_THAT(error_of("\"random\": {\"render.samples_per_pixel\": {\"uniform_int\": [1, 1e16]}}"),
+              HasSubstr("expected integers a <= b (both included) within +-9e15"));
+}
+
+// [a, b) holds for ranges a few ulps wide (b itself was drawn: 51 of 200 at [130, 130 + 2 ulp]; a
+// log-uniform fell below a).
+TEST(DatasetFile, UniformDrawsStayInTheirHalfOpenRangeAtAnyWidth) {
+  for (const char* range : {"[130, 130.00000000000006]", "[300, 300.0000000000002]", "[1, 1.0000000000000004]"}) {
+    for (const char* kind : {"uniform", "log_uniform"}) {
+      const DatasetSpec s = parse("\"samples\": 200, \"random\": {\"laser.average_power_mW\": {\"" + std::string(kind) + "\": " +
+                                  range + "}}");
+      const double a = s.random[0].dist.a, b = s.random[0].dist.b;
+      for (int i = 0; i < 200; ++i) {
+        const double x = make_sample(s, i).parameters["laser.average_power_mW"].get<double>();
+        ASSERT_TRUE(x >= a && x < b) << kind << " " << range << ": " << x;
+      }
+    }
+  }
 }
 
 TEST(DatasetFile, GltfNodesAndMaterialsAreCheckedAgainstTheGltf) {
