@@ -1,6 +1,8 @@
 #include "app/cli.h"
 
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <iostream>
 #include <new>
 
@@ -40,6 +42,12 @@ std::optional<int> parse_command_line(CLI::App& cli, int argc, char** argv) {
 int run_command(const std::function<void()>& command) {
   try {
     command();
+    errno = 0;
+    // What went to stdout (schema, info, plan, status, scores) was written: a full disk or a closed stream
+    // is an error, not a silent exit 0 with a truncated file.
+    if (std::cout.flush(); !std::cout.good() || std::fflush(stdout) != 0 || std::ferror(stdout))
+      throw Error(std::string("cannot write the output to standard output (a full disk, or a closed pipe): it is incomplete") +
+                  (errno != 0 ? std::string(": ") + std::strerror(errno) : ""));
     return kExitOk;
   } catch (const Interrupted& e) {
     std::fprintf(stderr, "spadgen: %s\n", e.what());

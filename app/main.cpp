@@ -14,6 +14,10 @@
 #include <malloc.h>
 #include <sys/resource.h>
 
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cerrno>
 #include <csignal>
 #include <cstdio>
 #include <iostream>
@@ -32,6 +36,13 @@
 #endif
 
 int main(int argc, char** argv) {
+  // Closed standard streams are opened on /dev/null first: else the next file opened takes descriptor 2
+  // (or 0, 1) and progress lines and warnings are written into it (a counts.npy began "spadgen: ...").
+  for (int fd = 0; fd <= 2; ++fd)
+    if (::fcntl(fd, F_GETFD) == -1 && errno == EBADF) {
+      const int null = ::open("/dev/null", fd == 0 ? O_RDONLY : O_WRONLY);
+      if (null != fd) return spadgen::app::kExitInternal;  // the lowest free descriptor is fd: it cannot differ
+    }
   // --threads: 0 is every core; beyond kMaxThreads the system refuses threads (a 100000 failed in TBB).
   const CLI::Range kThreadsRange(0, spadgen::app::kMaxThreads, "0 (every core) to " + std::to_string(spadgen::app::kMaxThreads));
   // -o "" (an unset shell variable) is a mistake, not a request for the default folder.

@@ -3,6 +3,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -124,6 +125,14 @@ DetectionImage detect_image(const RunFolder& run, const Detector& detector, bool
 // The folder of an output file takes new files, checked before the work rather than after it (a read-only
 // file system was found once the detector had run over the whole image).
 void check_writable(const std::string& file) {
+  // The file is replaced by rename: whatever is at the path goes. A regular file (an earlier output) may;
+  // a device, a FIFO, a folder or a symbolic link is not an output to replace (-o /dev/full replaced the
+  // device node with an EXR, as root).
+  struct stat st {};
+  if (::lstat(file.c_str(), &st) == 0 && !S_ISREG(st.st_mode))
+    throw Error(file + ": exists and is " + (S_ISLNK(st.st_mode) ? "a symbolic link" : S_ISDIR(st.st_mode) ? "a folder" :
+                                            S_ISFIFO(st.st_mode) ? "a FIFO" : S_ISCHR(st.st_mode) || S_ISBLK(st.st_mode) ? "a device" : "not a regular file") +
+                ", which writing the output would replace; expected a new file or an earlier output (-o)");
   const fs::path dir = fs::absolute(fs::path(file)).parent_path();
   if (!fs::is_directory(dir)) throw Error(file + ": its folder " + dir.string() + " does not exist");
   if (::access(dir.c_str(), W_OK) != 0)
@@ -449,6 +458,7 @@ std::string evaluate(const EvaluateCommand& c) {
   InterruptGuard interrupt_guard;
   const ThreadLimit threads(c.threads);
   if (!(c.tolerance_m > 0.0) || !std::isfinite(c.tolerance_m)) throw Error("--tolerance-m: expected a positive, finite number of metres");
+  if (c.min_score && !std::isfinite(*c.min_score)) throw Error("--min-score: expected a finite number (a detection's z score)");
   const fs::path target(c.target);
   // Written into a staging folder beside the output folder and swapped in whole (app/staging.h): a failed
   // or interrupted evaluation leaves the earlier one as it was, never a mix of the two.

@@ -33,6 +33,7 @@
 #include "app/warnings.h"
 #include "core/error.h"
 #include "core/stage_clock.h"
+#include "reconstruct/run_folder.h"
 #include "scenes/input.h"
 #include "scenes/key_path.h"
 #include "scenes/scene_file.h"
@@ -63,16 +64,7 @@ bool sense_may_set(const std::string& written) {
   return false;
 }
 
-json read_metadata(const fs::path& dir) {
-  const fs::path file = dir / "metadata.json";
-  std::ifstream in(file);
-  if (!in) throw Error(dir.string() + ": no metadata.json; expected the folder of a finished `spadgen run`");
-  try {
-    return json::parse(in);
-  } catch (const json::exception& e) {
-    throw Error(file.string() + ": not valid JSON (" + e.what() + ")");
-  }
-}
+json read_metadata(const fs::path& dir) { return reconstruct::read_run_metadata(dir.string()); }
 
 template <class T>
 T field(const json& meta, const json::json_pointer& p, const fs::path& dir) {

@@ -296,6 +296,11 @@ void Staging::check_owned() const {
       // (derived outputs: reconstruct's and evaluate's, and an interrupted evaluate's staging folder and lock)
       if (folder == out_ && (starts_with(rel, kOldStylePrefix) || is_derived_output(rel) || starts_with(rel, ".evaluation.spadgen-")))
         continue;
+      // a derived output's temporary file (writers' ".NAME.tmp-PID-N"), left by a reconstruct killed while it
+      // wrote: the swap removes it with the folder (it made every later run refuse the folder)
+      if (const size_t t = rel.find(".tmp-"); folder == out_ && rel.size() > 1 && rel[0] == '.' && t != std::string::npos &&
+                                                is_derived_output(rel.substr(1, t - 1)))
+        continue;
       const bool dir = e.is_directory(ec) && !e.is_symlink(ec);
       if (dir && holds_no_file(e.path())) continue;  // nothing to lose (folders only, empty at their ends)
       if (dir && listed.entries.count(rel + "/")) continue;  // a run folder of a folder of runs

@@ -1,6 +1,8 @@
 #include "run_folder.h"
 
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -66,20 +68,32 @@ T get(const nlohmann::json& j, const std::string& pointer, const std::string& fi
 
 }  // namespace
 
+nlohmann::json read_run_metadata(const std::string& dir) {
+  const std::string path = (fs::path(dir) / "metadata.json").string();
+  std::error_code ec;
+  const fs::file_status st = fs::status(path, ec);
+  if (!fs::exists(st)) throw Error(dir + ": not a run folder (no metadata.json); expected the folder of a finished `spadgen run`");
+  // Opened only when a regular file: a FIFO would block the open for ever, a device never end.
+  if (!fs::is_regular_file(st)) throw Error(path + ": not a regular file; expected the run's metadata.json");
+  // A run's metadata.json is kilobytes; read whole, a huge file took gigabytes of memory to be refused.
+  if (const uintmax_t size = fs::file_size(path, ec); !ec && size > kMaxMetadataBytes)
+    throw Error(path + ": " + std::to_string(size) + " bytes; a run's metadata.json is kilobytes (at most " +
+                std::to_string(kMaxMetadataBytes) + " bytes taken): not a run folder's");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error(path + ": cannot read it: " + std::strerror(errno));
+  std::stringstream ss;
+  ss << in.rdbuf();
+  try {
+    return nlohmann::json::parse(ss.str());
+  } catch (const nlohmann::json::exception& e) {
+    throw Error(path + ": not valid JSON (" + e.what() + ")");
+  }
+}
+
 RunFolder::RunFolder(const std::string& dir) : dir_(dir) {
   const fs::path d(dir);
   const std::string meta_path = (d / "metadata.json").string();
-  if (!fs::is_regular_file(meta_path)) throw Error(dir + ": not a run folder (no metadata.json)");
-  {
-    std::ifstream in(meta_path);
-    std::stringstream ss;
-    ss << in.rdbuf();
-    try {
-      meta_ = nlohmann::json::parse(ss.str());
-    } catch (const nlohmann::json::exception& e) {
-      throw Error(meta_path + ": not valid JSON (" + e.what() + ")");
-    }
-  }
+  meta_ = read_run_metadata(dir);
   W_ = get<int>(meta_, "/image/width", meta_path);
   H_ = get<int>(meta_, "/image/height", meta_path);
   K_ = get<int>(meta_, "/acquisition/K", meta_path);

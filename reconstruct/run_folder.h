@@ -1,6 +1,7 @@
 // What reconstruction and evaluation read from a run folder (docs/outputs.md): metadata.json, the counts
 // (counts.npy or counts.zarr) or the noise-free detection rate, and the per-pixel gate maps.
 #pragma once
+#include <cstdint>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -9,6 +10,11 @@
 #include "reconstruct/detect.h"
 
 namespace spadgen::reconstruct {
+
+// A run folder's metadata.json, parsed. Throws spadgen::Error naming the file when it is absent, not a
+// regular file (a FIFO is not opened), larger than kMaxMetadataBytes, or not JSON.
+inline constexpr uintmax_t kMaxMetadataBytes = 256u << 20;
+nlohmann::json read_run_metadata(const std::string& dir);
 
 class RunFolder {
  public:

@@ -376,7 +376,7 @@ std::vector<Key> build() {
   k.push_back(integer("/camera/height_px", FIELD(camera.height_px), kPixel, closed(1, 16384), "sensor rows (500: one half of the paper's chip; 1000: the full chip)"));
   k.push_back(number("/camera/pixel_pitch_um", FIELD(camera.pixel_pitch_m), kUmUnit, closed(0.1, 1000), "pixel pitch"));
   k.push_back(number("/camera/focal_length_mm", FIELD(camera.focal_length_m), kMmUnit, open_closed(0, 10000), "lens focal length (ignored when vertical_fov_deg is set)"));
-  k.push_back(number("/camera/vertical_fov_deg", FIELD(camera.vertical_fov_rad), kDegree, open_closed(0, 179), "vertical field of view; null = from focal_length_mm"));
+  k.push_back(number("/camera/vertical_fov_deg", FIELD(camera.vertical_fov_rad), kDegree, closed(1e-3, 179), "vertical field of view; null = from focal_length_mm"));
   k.push_back(number("/camera/f_number", FIELD(camera.f_number), kNone, closed(0.5, 64), "lens f-number N (aperture diameter = f / N)"));
   k.push_back(number("/camera/optics_transmission", FIELD(camera.optics_transmission), kNone, open_closed(0, 1), "fraction of the light the lens (and any filter) passes"));
   k.push_back(rect("/camera/crop", FIELD(camera.crop), "[x0, y0, width, height] region of interest; null = the whole sensor"));

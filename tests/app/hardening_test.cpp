@@ -430,6 +430,60 @@ TEST_F(Hardening, LeftoversOfKilledRunsAreCleaned) {
   for (const auto& e : fs::directory_iterator(dir_)) EXPECT_EQ(e.path().filename(), "out");
 }
 
+// Standard streams closed (a daemon, a cron job): the files the run opens do not take their descriptors,
+// so nothing the run prints lands in them (counts.npy began "spadgen: ..." with stdout and stderr closed,
+// exit 0); output that cannot reach stdout is an error, not exit 0; a derived output's temporary file
+// left by a killed reconstruct does not make the folder another's.
+TEST_F(Hardening, ClosedOrFullStandardStreamsNeverReachTheOutputs) {
+  const fs::path ref = dir_ / "ref", closed = dir_ / "closed", warned = dir_ / "warned";
+  // not -q: progress lines (and with a cone narrower than a pixel, a warning, printed with -q too)
+  expect_exit(spadgen("run " + kTiny + " -o " + ref.string()), 0, "reference");
+  const Result r = shell("(cd " + dir_.string() + " && " + bin() + " run " + kTiny + " -o " + closed.string() + " >&- 2>&- <&-)");
+  EXPECT_EQ(r.code, 0) << r.output;
+  const Result w = shell("(" + bin() + " run " + kTiny + " -q --set laser.beam=cone --set laser.half_angle_deg=0.001 -o " +
+                         warned.string() + " >&- 2>&-)");
+  EXPECT_EQ(w.code, 0) << w.output;
+  for (const char* f : {"counts.npy", "detection_rate.npy", "ground_truth.exr"}) {
+    EXPECT_EQ(slurp(closed / f), slurp(ref / f)) << f;
+    EXPECT_EQ(slurp(warned / f).substr(0, 6), slurp(ref / f).substr(0, 6)) << f;  // a file, not the warning
+  }
+  const Outcome full = spadgen("schema --json-schema > /dev/full");
+  expect_exit(full, 1, "stdout on a full device");
+  EXPECT_THAT(full.err, HasSubstr("cannot write the output to standard output (a full disk, or a closed pipe): it is incomplete"));
+  std::ofstream(ref / ".detections_edges.exr.tmp-999999999-0") << "partial";
+  expect_exit(spadgen("run " + kTiny + " -q -o " + ref.string()), 0, "a run into a folder with a killed reconstruct's temporary file");
+  EXPECT_FALSE(fs::exists(ref / ".detections_edges.exr.tmp-999999999-0"));
+}
+
+// What is at reconstruct's -o is replaced only when it is a file (it replaced a device node, a FIFO and a
+// symbolic link with an EXR: as root, /dev/full); a run's metadata.json that is a FIFO is refused, not opened
+// (sense blocked for ever).
+TEST_F(Hardening, ReconstructReplacesOnlyAFileAndAFifoIsNotReadAsMetadata) {
+  const fs::path run = dir_ / "run";
+  expect_exit(spadgen("run " + kTiny + " -q -o " + run.string()), 0, "run");
+  ASSERT_EQ(::mkfifo((dir_ / "fifo").c_str(), 0644), 0);
+  std::ofstream(dir_ / "mine.txt") << "mine";
+  fs::create_symlink(dir_ / "mine.txt", dir_ / "link.exr");
+  for (const char* target : {"fifo", "link.exr"}) {
+    const Outcome o = spadgen("reconstruct -q " + run.string() + " -o " + (dir_ / target).string());
+    expect_exit(o, 1, target);
+    EXPECT_THAT(o.err, HasSubstr(std::string(target) + ": exists and is a"));
+  }
+  EXPECT_TRUE(fs::is_fifo(dir_ / "fifo"));
+  EXPECT_TRUE(fs::is_symlink(dir_ / "link.exr"));
+  EXPECT_EQ(slurp(dir_ / "mine.txt"), "mine");
+  expect_exit(spadgen("reconstruct -q " + run.string() + " -o " + (dir_ / "d.exr").string()), 0, "a new file");
+  expect_exit(spadgen("reconstruct -q " + run.string() + " -o " + (dir_ / "d.exr").string()), 0, "an earlier output");
+  fs::copy(run, dir_ / "piped", fs::copy_options::recursive);
+  fs::remove(dir_ / "piped/metadata.json");
+  ASSERT_EQ(::mkfifo((dir_ / "piped/metadata.json").c_str(), 0644), 0);
+  for (const char* command : {"sense", "reconstruct", "evaluate"}) {
+    const Outcome o = spadgen(std::string(command) + " " + (dir_ / "piped").string() + " -o " + (dir_ / "x").string(), 20);
+    expect_exit(o, 1, command);
+    EXPECT_THAT(o.err, HasSubstr("piped/metadata.json: not a regular file")) << command;
+  }
+}
+
 // A file-size limit (ulimit -f) is the write's error naming the file, exit 1, not a SIGXFSZ that killed the
 // process without a word (exit 153); the earlier set stays and nothing is left beside it.
 TEST_F(Hardening, AFileSizeLimitIsAnErrorNamingTheFile) {

@@ -120,6 +120,9 @@ TEST_F(Reconstruct, RefusesWhatItCannotReadNamingIt) {
   r = sh("evaluate " + run.string() + " --tolerance-m 0");
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("--tolerance-m: expected a positive, finite number of metres"), std::string::npos) << r.output;
+  r = sh("evaluate " + run.string() + " --min-score nan");  // was taken, and dropped every detection
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("--min-score: expected a finite number"), std::string::npos) << r.output;
   r = sh("evaluate " + run.string() + " --tolerance-m inf");  // was taken, and written as null
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("--tolerance-m: expected a positive, finite number of metres"), std::string::npos) << r.output;
