@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
+#include <optional>
 #include <limits>
 #include <map>
 #include <memory>
@@ -406,6 +407,10 @@ std::string reconstruct(const ReconstructOptions& o) {
   InterruptGuard interrupt_guard;
   const ThreadLimit threads(o.threads);
   if (o.max_detections < 1 || o.max_detections > 64) throw Error("--max-detections: expected 1 to 64");
+  // The run folder's lock, held from reading the run to writing the detections (into it, by default): a run
+  // replacing the folder meanwhile would leave the earlier run's detections beside its own counts.
+  std::optional<FolderLock> run_lock;
+  if (fs::is_regular_file(fs::path(o.run_dir) / "metadata.json")) run_lock.emplace(o.run_dir);
   const RunFolder run(o.run_dir);
   if (!run.gate_sweep()) {
     if (o.detector_given || o.max_detections_given)
@@ -472,6 +477,7 @@ std::string evaluate(const EvaluateCommand& c) {
   nlohmann::json report;
   std::ostringstream text;
   if (fs::exists(target / "metadata.json")) {
+    const FolderLock run_lock(target);  // the run is not replaced while it is scored (labels and counts of one run)
     nlohmann::json source;
     const reconstruct::Scores s = evaluate_run(c, c.target, c.detections, out, &names, &source);
     report = s.to_json(names);

@@ -178,23 +178,18 @@ Staging::~Staging() {
   unlock();
 }
 
-void Staging::unlock() {
-  if (lock_fd_ < 0) return;
-  // Unlinked while still locked: a run that opened it meanwhile sees the file gone and locks a new one.
-  ::unlink(lock_path_.c_str());
-  ::close(lock_fd_);
-  lock_fd_ = -1;
-}
 
 std::string Staging::path(const std::string& rel) const { return (dir_ / rel).string(); }
 
-void Staging::lock() {
-  lock_path_ = parent_ / ("." + name_ + ".spadgen-lock");
+namespace {
+// Locks P/.NAME.spadgen-lock (flock, exclusive, not waiting) for the folder `out` = P/NAME and returns the
+// descriptor; throws spadgen::Error naming the holder when another spadgen process has it.
+int take_folder_lock(const fs::path& lock_path, const fs::path& out) {
   for (int attempt = 0; attempt < 16; ++attempt) {
-    const int fd = ::open(lock_path_.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+    const int fd = ::open(lock_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
     if (fd < 0)
-      throw Error("cannot use " + out_.string() + " as the output folder (-o): cannot create its lock file " +
-                  lock_path_.string() + ": " + std::strerror(errno));
+      throw Error("cannot use " + out.string() + " as the output folder (-o): cannot create its lock file " +
+                  lock_path.string() + ": " + std::strerror(errno));
     if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
       const int err = errno;
       char holder[64] = {0};
@@ -203,26 +198,56 @@ void Staging::lock() {
       std::string who = n > 0 ? std::string(holder, static_cast<size_t>(n)) : std::string();
       while (!who.empty() && (who.back() == '\n' || who.back() == ' ')) who.pop_back();
       if (err == EWOULDBLOCK)
-        throw Error("the output folder " + out_.string() + " is being written by another spadgen run" +
-                    (who.empty() ? std::string() : " (" + who + ")") + ", which holds " + lock_path_.string() +
+        throw Error("the output folder " + out.string() + " is being written by another spadgen run" +
+                    (who.empty() ? std::string() : " (" + who + ")") + ", which holds " + lock_path.string() +
                     "; wait for it to finish, or choose another folder (-o)");
-      throw Error("cannot lock the output folder " + out_.string() + " (" + lock_path_.string() + "): " + std::strerror(err));
+      throw Error("cannot lock the output folder " + out.string() + " (" + lock_path.string() + "): " + std::strerror(err));
     }
     // The run that held the lock may have removed the file between our open and our flock.
     struct stat locked {}, now {};
-    if (::fstat(fd, &locked) == 0 && ::stat(lock_path_.c_str(), &now) == 0 && locked.st_ino == now.st_ino &&
+    if (::fstat(fd, &locked) == 0 && ::stat(lock_path.c_str(), &now) == 0 && locked.st_ino == now.st_ino &&
         locked.st_dev == now.st_dev) {
-      lock_fd_ = fd;
       const std::string me = "pid " + pid_text() + "\n";
       if (::ftruncate(fd, 0) == 0 && ::pwrite(fd, me.data(), me.size(), 0) < 0) {
       }  // the pid is only for the message of a second run
-      return;
+      return fd;
     }
     ::close(fd);
   }
-  throw Error("cannot lock the output folder " + out_.string() + ": its lock file " + lock_path_.string() +
+  throw Error("cannot lock the output folder " + out.string() + ": its lock file " + lock_path.string() +
               " keeps being replaced");
 }
+
+void release_folder_lock(const fs::path& lock_path, int& fd) {
+  if (fd < 0) return;
+  // Unlinked while still locked: a run that opened it meanwhile sees the file gone and locks a new one.
+  ::unlink(lock_path.c_str());
+  ::close(fd);
+  fd = -1;
+}
+}  // namespace
+
+void Staging::lock() {
+  lock_path_ = parent_ / ("." + name_ + ".spadgen-lock");
+  lock_fd_ = take_folder_lock(lock_path_, out_);
+}
+
+void Staging::unlock() { release_folder_lock(lock_path_, lock_fd_); }
+
+FolderLock::FolderLock(const fs::path& folder) {
+  std::error_code ec;
+  fs::path abs = fs::absolute(folder, ec).lexically_normal();
+  if (!abs.has_filename()) abs = abs.parent_path();
+  fs::path out = fs::weakly_canonical(abs, ec);  // as Staging names it: through a symbolic link, the folder
+  if (ec) out = abs;
+  path_ = out.parent_path() / ("." + out.filename().string() + ".spadgen-lock");
+  // A folder no one may write beside (a read-only copy, another user's): nothing can replace it through
+  // this lock, and reading it needs none.
+  if (::access(out.parent_path().c_str(), W_OK) != 0 && (errno == EROFS || errno == EACCES || errno == EPERM)) return;
+  fd_ = take_folder_lock(path_, out);
+}
+
+FolderLock::~FolderLock() { release_folder_lock(path_, fd_); }
 
 // Under the lock every staging or old folder of OUT belongs to a run that is gone.
 void Staging::recover() {

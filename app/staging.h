@@ -79,4 +79,20 @@ class Staging {
   int lock_fd_ = -1;
 };
 
+// The output folder's lock alone (the one a run holds while it writes and replaces the folder), for a
+// command that reads a run folder and writes a file into it (reconstruct): while it is held no run replaces
+// the folder (a reconstruct while a run replaced it wrote the earlier run's detections beside the new run's
+// counts), and a run or another such command refuses, naming the holder.
+class FolderLock {
+ public:
+  explicit FolderLock(const std::filesystem::path& folder);
+  ~FolderLock();
+  FolderLock(const FolderLock&) = delete;
+  FolderLock& operator=(const FolderLock&) = delete;
+
+ private:
+  std::filesystem::path path_;
+  int fd_ = -1;
+};
+
 }  // namespace spadgen::app
