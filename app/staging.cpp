@@ -301,13 +301,22 @@ void Staging::check_owned() const {
   std::error_code ec;
   if (!fs::is_directory(out_, ec)) return;
   Listed listed;  // another command's folder holds its own files only (a run folder given to it is not its own)
-  if (of_runs_) {
-    // a folder of runs: its run folders are its own, whole (a run replaced the same way checks its files)
-    for (const auto& e : fs::directory_iterator(out_))
-      if (e.is_directory(ec) && !e.is_symlink(ec) && fs::is_regular_file(e.path() / "metadata.json", ec))
-        listed.entries.insert(e.path().filename().string() + "/");
-  } else if (owned_.empty()) {
-    listed = listed_files(out_);
+  // a folder of runs' run folders are its own, whole (a run replaced the same way checks its files); for a
+  // run, only those a sense --repeats names (repeat_NNN): other run folders inside are someone's runs
+  const auto run_folders = [&](bool repeats_only) {
+    for (const auto& e : fs::directory_iterator(out_)) {
+      const std::string n = e.path().filename().string();
+      if (repeats_only && !(n.size() > 7 && starts_with(n, "repeat_") &&
+                            std::all_of(n.begin() + 7, n.end(), [](char c) { return c >= '0' && c <= '9'; })))
+        continue;
+      if (e.is_directory(ec) && !e.is_symlink(ec) && fs::is_regular_file(e.path() / "metadata.json", ec)) listed.entries.insert(n + "/");
+    }
+  };
+  if (of_runs_ || owned_.empty()) {
+    // A run and a folder of runs (sense --repeats) replace each other: a run folder's listed files, or a
+    // folder of runs' run folders, are spadgen's either way (each refused the other as foreign files).
+    if (fs::is_regular_file(out_ / "metadata.json", ec)) listed = listed_files(out_);
+    else run_folders(!of_runs_);
   } else {
     listed.entries = {owned_.begin(), owned_.end()};
   }

@@ -211,6 +211,27 @@ TEST_F(App, SenseRepeatsAreTheRunsWithConsecutiveNoiseSeeds) {
   EXPECT_TRUE(fs::exists(dir_ / "rep/repeat_001/counts.npy"));
 }
 
+// A sense of one realisation and one of several (--repeats, a folder of repeat_NNN run folders) replace
+// each other in one output folder (each refused the other's files as "not written by spadgen"); a run folder
+// of another name inside stays someone's.
+TEST_F(App, OneRealisationAndSeveralReplaceEachOther) {
+  ASSERT_EQ(sh("run " + kLit + " -o " + (dir_ / "run").string()).code, 0);
+  const std::string sense = "sense " + (dir_ / "run").string() + " -q -o " + (dir_ / "s").string();
+  ASSERT_EQ(sh(sense + " --repeats 2").code, 0);
+  Result r = sh(sense);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_TRUE(fs::exists(dir_ / "s/metadata.json"));
+  EXPECT_FALSE(fs::exists(dir_ / "s/repeat_000"));
+  r = sh(sense + " --repeats 2");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_TRUE(fs::exists(dir_ / "s/repeat_001/metadata.json"));
+  EXPECT_FALSE(fs::exists(dir_ / "s/metadata.json"));
+  fs::copy(dir_ / "run", dir_ / "s/mine", fs::copy_options::recursive);
+  r = sh(sense);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("holds files that spadgen did not write there (mine/"));
+}
+
 // A cone beam whose spot is far smaller than a pixel (0.001 deg against a pixel's 0.01077 deg: 9.4 um at
 // 50 mm) is found by chance by the camera paths: warned about before rendering, with the spot's size and
 // the paths that land on it; a spot of a pixel or more, or one enough paths land on, is not.
