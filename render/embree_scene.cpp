@@ -47,25 +47,25 @@ void check(RTCDevice device, const char* what) {
 // culled when the ray meets its back); a ray towards a light (occluded rays, and intersect rays with
 // kTowardLight in their id) stands for light coming the other way, which meets the surface from the other
 // side (culled when the ray meets its front), as the light itself sees the scene.
+// Ray direction . geometric normal of hit i: negative when the ray meets the front side.
+float facing(const RTCFilterFunctionNArguments* args, unsigned i) {
+  return RTCRayN_dir_x(args->ray, args->N, i) * RTCHitN_Ng_x(args->hit, args->N, i) +
+         RTCRayN_dir_y(args->ray, args->N, i) * RTCHitN_Ng_y(args->hit, args->N, i) +
+         RTCRayN_dir_z(args->ray, args->N, i) * RTCHitN_Ng_z(args->hit, args->N, i);
+}
+
 void cull_back_faces(const RTCFilterFunctionNArguments* args) {
   for (unsigned i = 0; i < args->N; ++i) {
     if (args->valid[i] == 0) continue;
-    const float d = RTCRayN_dir_x(args->ray, args->N, i) * RTCHitN_Ng_x(args->hit, args->N, i) +
-                    RTCRayN_dir_y(args->ray, args->N, i) * RTCHitN_Ng_y(args->hit, args->N, i) +
-                    RTCRayN_dir_z(args->ray, args->N, i) * RTCHitN_Ng_z(args->hit, args->N, i);
+    const float d = facing(args, i);
     const bool to_light = (RTCRayN_id(args->ray, args->N, i) & kTowardLight) != 0;
     if (to_light ? d < 0.0f : d > 0.0f) args->valid[i] = 0;
   }
 }
 
 void cull_back_faces_to_light(const RTCFilterFunctionNArguments* args) {
-  for (unsigned i = 0; i < args->N; ++i) {
-    if (args->valid[i] == 0) continue;
-    const float d = RTCRayN_dir_x(args->ray, args->N, i) * RTCHitN_Ng_x(args->hit, args->N, i) +
-                    RTCRayN_dir_y(args->ray, args->N, i) * RTCHitN_Ng_y(args->hit, args->N, i) +
-                    RTCRayN_dir_z(args->ray, args->N, i) * RTCHitN_Ng_z(args->hit, args->N, i);
-    if (d < 0.0f) args->valid[i] = 0;
-  }
+  for (unsigned i = 0; i < args->N; ++i)
+    if (args->valid[i] != 0 && facing(args, i) < 0.0f) args->valid[i] = 0;
 }
 
 }  // namespace
