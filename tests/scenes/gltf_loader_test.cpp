@@ -1116,6 +1116,16 @@ TEST_F(BrokenGltf, CompressedDataIsRefusedWhereverTheExtensionIsListed) {
   EXPECT_THAT(error_of(h), HasSubstr(path_ + ": bufferView 0: compressed with EXT_meshopt_compression"));
 }
 
+// A file that is neither JSON nor a .glb is refused by its first bytes, before it is read whole: a 1 GB
+// sparse file of zeros was read into 2.1 GB and refused as "unexpected end of input at line 1, column 1".
+TEST_F(BrokenGltf, AHugeFileOfZerosIsRefusedByItsFirstBytes) {
+  path_ = (dir_.path() / "zeros.gltf").string();
+  std::ofstream(path_).close();
+  fs::resize_file(path_, uint64_t{1} << 30);
+  EXPECT_THAT(load_error(path_), HasSubstr(path_ + ": not a glTF file: it starts with '\\x00\\x00"));
+  fs::remove(path_);
+}
+
 // A scene lists root nodes only (the validator's SCENE_NON_ROOT_NODE): listing a child loaded its mesh a
 // second time without its parent's transform.
 TEST_F(BrokenGltf, ASceneListingAChildNodeIsRefused) {
