@@ -1,8 +1,11 @@
 #include "app/cli.h"
 
+#include <unistd.h>
+
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <iostream>
 #include <new>
 
@@ -61,6 +64,13 @@ int run_command(const std::function<void()>& command) {
                  staged ? " (in the staging folder the output is written in before it replaces the output folder: "
                           "the staging folder is removed, and the output folder is as it was)"
                         : "");
+    return kExitBadInput;
+  } catch (const std::filesystem::filesystem_error& e) {
+    // The file system's refusal (a path in a folder that is gone, permissions): the environment's, not a bug.
+    char cwd[4096];
+    const bool cwd_gone = ::getcwd(cwd, sizeof cwd) == nullptr && errno == ENOENT;
+    std::fprintf(stderr, "spadgen: error: %s%s\n", e.what(),
+                 cwd_gone ? " (the current folder no longer exists: run from one that does, or give absolute paths)" : "");
     return kExitBadInput;
   } catch (const std::bad_alloc&) {
     std::fprintf(stderr, "spadgen: error: out of memory: the run needs more memory than the machine gives it "

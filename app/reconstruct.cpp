@@ -188,7 +188,9 @@ void check_source(const std::string& path, const std::map<std::string, std::stri
 
 DetectionImage read_detections(const std::string& path, const RunFolder& run, bool need_scores, nlohmann::json* source) {
   const int width = run.width(), height = run.height();
-  if (!fs::is_regular_file(path)) throw Error(path + ": no such detections file (run spadgen reconstruct, or give --detections)");
+  if (std::error_code ec; !fs::exists(path, ec))
+    throw Error(path + ": no such detections file (run spadgen reconstruct, or give --detections)");
+  if (!fs::is_regular_file(path)) throw Error(path + ": not a regular file (a FIFO, a device or a folder); expected a detections EXR or .npy");
   if (fs::path(path).extension() == ".npy") {
     writers::NpyReader npy(path);
     if (npy.shape().size() != 3 || npy.shape()[0] != height || npy.shape()[1] != width)

@@ -489,6 +489,15 @@ TEST_F(Hardening, ReconstructReplacesOnlyAFileAndAFifoIsNotReadAsMetadata) {
   }
   expect_exit(spadgen("reconstruct -q " + run.string() + " -o " + (dir_ / "d.exr").string()), 0, "a new file");
   expect_exit(spadgen("reconstruct -q " + run.string() + " -o " + (dir_ / "d.exr").string()), 0, "an earlier output");
+  // a FIFO given as the detections is named as one (it was "no such detections file")
+  const Outcome fifo = spadgen("evaluate -q " + run.string() + " --detections " + (dir_ / "fifo").string() + " -o " + (dir_ / "e").string());
+  expect_exit(fifo, 1, "detections from a FIFO");
+  EXPECT_THAT(fifo.err, HasSubstr("fifo: not a regular file (a FIFO, a device or a folder)"));
+  // a relative path in a current folder that was removed: the environment's error, not an internal one
+  const Result gone = shell("mkdir " + (dir_ / "gone").string() + " && cd " + (dir_ / "gone").string() + " && rmdir ../gone && " + bin() +
+                            " reconstruct " + run.string() + " -q -o rel.exr");
+  EXPECT_EQ(gone.code, 1) << gone.output;
+  EXPECT_THAT(gone.output, HasSubstr("the current folder no longer exists"));
   fs::copy(run, dir_ / "piped", fs::copy_options::recursive);
   fs::remove(dir_ / "piped/metadata.json");
   ASSERT_EQ(::mkfifo((dir_ / "piped/metadata.json").c_str(), 0644), 0);
