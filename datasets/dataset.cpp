@@ -275,8 +275,13 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
       rd.fail(at, "the dataset sets every sample's seeds: use the dataset file's \"seed\" and \"seeds\" keys instead");
     return at;
   };
-  // Checks `key=value` overrides against the first scene file, with the scene file's own checks.
-  const auto check_values = [&](const std::string& at, const std::vector<std::string>& overrides) {
+  // Checks `key=value` overrides against the first scene file, with the scene file's own checks; a grid or
+  // random value with every `set` key applied too (keys checked together, as window_start_ns and
+  // window_stop_ns are, may need each other).
+  std::vector<std::string> set_overrides;
+  const auto check_values = [&](const std::string& at, const std::vector<std::string>& values) {
+    std::vector<std::string> overrides = set_overrides;
+    overrides.insert(overrides.end(), values.begin(), values.end());
     try {
       (void)scenes::load_scene_file(s.scenes.front(), overrides);
     } catch (const Error& e) {
@@ -321,12 +326,31 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
     std::vector<std::string> all;
     for (const std::string& key : keys_of("set")) {
       const auto it = st.find(key);
-      const std::string at = check_key("set", it.key());
-      once(at, it.key());
+      (void)check_key("set", it.key());
+      once("/set/" + it.key(), it.key());
       s.set.emplace_back(it.key(), it.value());
       all.push_back(it.key() + "=" + it.value().dump());
-      check_values(at, {all.back()});
     }
+    // Each key alone names its own mistake; one that fails alone is taken when the whole set passes (it
+    // needs another key of the set: both ends of the time window).
+    bool together = false, tried = false;
+    for (size_t i = 0; i < all.size(); ++i) {
+      try {
+        (void)scenes::load_scene_file(s.scenes.front(), {all[i]});
+        continue;
+      } catch (const Error&) {
+      }
+      if (!tried) {
+        tried = true;
+        try {
+          (void)scenes::load_scene_file(s.scenes.front(), all);
+          together = true;
+        } catch (const Error&) {
+        }
+      }
+      if (!together) check_values("/set/" + s.set[i].first, {all[i]});  // fails, naming the key
+    }
+    set_overrides = all;
   }
   if (doc.contains("grid")) {
     const json& g = doc["grid"];

@@ -122,6 +122,14 @@ TEST(DatasetFile, ErrorsNameTheKeyAndWhatWasExpected) {
   // a truncated normal whose bounds are the wrong way round says so (it said "keeps a fraction -0.84")
   EXPECT_THAT(error_of("\"random\": {\"camera.f_number\": {\"normal\": [2, 1], \"min\": 4, \"max\": 1.4}}"),
               HasSubstr("/random/camera.f_number: has min 4 and max 1.4; expected min < max"));
+  // keys the scene file checks together (both ends of the time window) are taken together from `set` (each
+  // was refused alone); one end alone is still refused, naming it
+  EXPECT_EQ(error_of("\"set\": {\"render.window_start_ns\": 0, \"render.window_stop_ns\": 20}"), "no error");
+  EXPECT_EQ(error_of("\"set\": {\"render.window_stop_ns\": 20, \"render.window_start_ns\": 0}"), "no error");
+  EXPECT_THAT(error_of("\"set\": {\"render.window_stop_ns\": 20}"), HasSubstr("/set/render.window_stop_ns"));
+  // a grid value is checked with the set keys applied (both ends set, the stop varied)
+  EXPECT_EQ(error_of("\"set\": {\"render.window_start_ns\": 0, \"render.window_stop_ns\": 20}, "
+                     "\"grid\": {\"laser.average_power_mW\": [1, 2]}"), "no error");
   // an untruncated side of a normal on a key with a bound there (only the mean was checked: 7 of 20 samples
   // failed after the plan passed); a key without one (a position) takes it
   EXPECT_THAT(error_of("\"random\": {\"ambient.illuminance_lux\": {\"normal\": [1, 5]}}"),
