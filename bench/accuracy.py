@@ -186,7 +186,17 @@ def main():
     ap.add_argument("--markdown", default=None)
     ap.add_argument("--sensor-only", action="store_true", help="only the sensor model's knobs (their table alone)")
     a = ap.parse_args()
+    if not (os.path.isfile(a.spadgen) and os.access(a.spadgen, os.X_OK)):
+        ap.error(f"--spadgen {a.spadgen}: no such program (build it, or give its path)")
     work = a.work or tempfile.mkdtemp(prefix="spadgen-accuracy-")
+    try:
+        measure(a, work)
+    finally:
+        if not a.work:  # its runs are gigabytes: a folder given with --work is kept, a temporary one is not
+            shutil.rmtree(work, ignore_errors=True)
+
+
+def measure(a, work):
     settings = SETTINGS[:2] if a.quick else SETTINGS
     reference = ["render.samples_per_pixel=256", "seeds.light=1000"] if a.quick else REFERENCE
     text = []
@@ -219,8 +229,6 @@ def main():
     if a.markdown:
         with open(a.markdown, "w") as f:
             f.write(out + "\n")
-    if not a.work:  # its runs are gigabytes: a folder given with --work is kept, a temporary one is not
-        shutil.rmtree(work)
 
 
 if __name__ == "__main__":

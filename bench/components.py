@@ -9,6 +9,7 @@ transmissive material, so the refracted connections never run).
 """
 import argparse
 import os
+import re
 import statistics
 import subprocess
 import tempfile
@@ -44,19 +45,25 @@ def main():
     ap.add_argument("--pairs", type=int, default=3)
     ap.add_argument("--crop", default="384,186,256,128")
     a = ap.parse_args()
+    if a.pairs < 1:
+        ap.error("--pairs: expected at least 1")
+    if not re.fullmatch(r"\d+,\d+,\d+,\d+", a.crop):
+        ap.error(f"--crop {a.crop}: expected X,Y,W,H (non-negative integers)")
+    if not (os.path.isfile(a.spadgen) and os.access(a.spadgen, os.X_OK)):
+        ap.error(f"--spadgen {a.spadgen}: no such program (build it, or give its path)")
     scene = os.path.join(ROOT, "scenes/paper/flat_target.json")
-    work = tempfile.mkdtemp(prefix="spadgen-components-")
     print(f"flat target, crop [{a.crop}], {a.pairs} alternated pairs, load {os.getloadavg()[0]:.1f}\n")
     print("| component | off (s) | on (s) | share of the run with it on |")
     print("|---|---|---|---|")
-    for name, off, on in COMPONENTS:
-        t_off, t_on, shares = [], [], []
-        for i in range(a.pairs):
-            t_off.append(seconds(a.spadgen, scene, a.crop, off, os.path.join(work, f"off{i}")))
-            t_on.append(seconds(a.spadgen, scene, a.crop, on, os.path.join(work, f"on{i}")))
-            shares.append((t_on[-1] - t_off[-1]) / t_on[-1])
-        print(f"| {name} | {statistics.median(t_off):.2f} | {statistics.median(t_on):.2f} | "
-              f"{statistics.median(shares) * 100:.0f} % |")
+    with tempfile.TemporaryDirectory(prefix="spadgen-components-") as work:  # removed however the script ends
+        for name, off, on in COMPONENTS:
+            t_off, t_on, shares = [], [], []
+            for i in range(a.pairs):
+                t_off.append(seconds(a.spadgen, scene, a.crop, off, os.path.join(work, f"off{i}")))
+                t_on.append(seconds(a.spadgen, scene, a.crop, on, os.path.join(work, f"on{i}")))
+                shares.append((t_on[-1] - t_off[-1]) / t_on[-1])
+            print(f"| {name} | {statistics.median(t_off):.2f} | {statistics.median(t_on):.2f} | "
+                  f"{statistics.median(shares) * 100:.0f} % |")
 
 
 if __name__ == "__main__":

@@ -322,6 +322,8 @@ def main():
     ap.add_argument("--json", help="also write the measured figures here")
     ap.add_argument("--quick", action="store_true", help="fewer points and smaller crops")
     a = ap.parse_args()
+    if not (os.path.isfile(a.spadgen) and os.access(a.spadgen, os.X_OK)):
+        ap.error(f"--spadgen {a.spadgen}: no such program (build it, or give its path)")
     start = time.time()
     work = tempfile.mkdtemp(prefix="spadgen_paper_")
     try:
