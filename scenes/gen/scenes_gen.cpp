@@ -171,6 +171,14 @@ Options parse_options(int argc, char** argv) {
   positive("--sphere-radius", o.sphere_radius);
   positive("--chart-distance", o.chart_distance);
   positive("--chart-size", o.chart_size);
+  // What spadgen then loads: world coordinates within +-1e6 m (the scene file's camera position), an index
+  // of refraction of at least 1 (scenes_gen wrote files spadgen refused, and exited 0)
+  for (const auto& [name, v] : {std::pair<const char*, double>{"--distance", o.distance}, {"--target-size", o.target_size},
+                                {"--plate-distance", o.plate_distance}, {"--plate-thickness", o.plate_thickness},
+                                {"--sphere-distance", o.sphere_distance}, {"--sphere-radius", o.sphere_radius},
+                                {"--chart-distance", o.chart_distance}, {"--chart-size", o.chart_size}})
+    if (!(v <= 1e6)) throw std::runtime_error(std::string(name) + " must be at most 1e6 m (spadgen's world coordinates)");
+  if (!(o.plate_ior >= 1.0)) throw std::runtime_error("--plate-ior must be at least 1 (glTF's KHR_materials_ior)");
   if (o.sphere_distance <= o.plate_distance + o.plate_thickness)
     throw std::runtime_error("--sphere-distance must lie behind the plate's back face");
   for (double r : {o.target_reflectance, o.sphere_reflectance, o.plate_roughness, o.plate_transmission})

@@ -457,6 +457,23 @@ TEST_F(Hardening, ClosedOrFullStandardStreamsNeverReachTheOutputs) {
   EXPECT_FALSE(fs::exists(ref / ".detections_edges.exr.tmp-999999999-0"));
 }
 
+// scenes_gen refuses what spadgen would refuse to load (an ior below 1, a camera beyond +-1e6 m): it wrote
+// those files and exited 0.
+TEST_F(Hardening, ScenesGenRefusesScenesSpadgenWouldNotLoad) {
+  const std::string gen = std::string(SPADGEN_BINARY_DIR) + "/scenes/gen/scenes_gen ";
+  for (const auto& [option, message] : {std::pair<std::string, std::string>{"--plate-ior 0.5", "--plate-ior must be at least 1"},
+                                        {"--distance 2e6", "--distance must be at most 1e6 m"},
+                                        {"--sphere-distance 2e9", "--sphere-distance must be at most 1e6 m"}}) {
+    const Result r = shell(gen + option + " " + (dir_ / "out").string());
+    EXPECT_EQ(r.code, 1) << option << "\n" << r.output;
+    EXPECT_THAT(r.output, HasSubstr(message)) << option;
+    EXPECT_FALSE(fs::exists(dir_ / "out/multi_object.gltf")) << option;
+  }
+  const Result ok = shell(gen + "--plate-ior 1.7 --only multi_object " + (dir_ / "out").string());
+  EXPECT_EQ(ok.code, 0) << ok.output;
+  expect_exit(spadgen("info " + (dir_ / "out/multi_object.json").string()), 0, "the generated scene");
+}
+
 // What is at reconstruct's -o is replaced only when it is a file (it replaced a device node, a FIFO and a
 // symbolic link with an EXR: as root, /dev/full); a run's metadata.json that is a FIFO is refused, not opened
 // (sense blocked for ever).
