@@ -160,7 +160,8 @@ class Outputs::Images {
     se_ch_ = laser_.channel("standard_error");
     if (cfg.render.target_relative_error) samples_ch_ = laser_.channel("samples");
     ambient_ch_ = ambient_.channel("photons_per_second");
-    maps_ch_ = {maps_.channel("gate_skew_ps"), maps_.channel("gate_length_ps"), maps_.channel("dcr_cps"), maps_.channel("pde")};
+    maps_ch_ = {maps_.channel("gate_skew_ps"), maps_.channel("gate_length_ps"), maps_.channel("dcr_cps"), maps_.channel("pde"),
+                maps_.channel("pde_ambient")};
     if (intensity_decl_) intensity_ch_ = {intensity_.channel("counts"), intensity_.channel("photons")};
     pixel_laser_.assign(size_t(img.count()), 0.0);
     pixel_oow_.assign(size_t(img.count()), 0.0);
@@ -211,7 +212,7 @@ class Outputs::Images {
       if (samples_ch_ && !t.samples.empty()) samples_ch_[o] = float(t.samples[d]);
       if (!t.samples.empty()) pixel_samples_[o] = t.samples[d];
       maps_ch_[0][o] = m.gate_skew_ps[i], maps_ch_[1][o] = m.gate_length_ps[i];
-      maps_ch_[2][o] = m.dcr_cps[i], maps_ch_[3][o] = m.pde[i];
+      maps_ch_[2][o] = m.dcr_cps[i], maps_ch_[3][o] = m.pde[i], maps_ch_[4][o] = m.pde_ambient[i];
       if (intensity_decl_) intensity_ch_[0][o] = s.intensity_counts[i], intensity_ch_[1][o] = s.intensity_photons[i];
     });
   }
@@ -349,7 +350,7 @@ class Outputs::Images {
     laser_.set_attribute("spadgen_time_axis", axis_json(axis).dump());
     put_file(laser_, "laser.exr", "photons per laser pulse reaching the pixel's SPAD (before PDP)");
     put_file(ambient_, "ambient.exr", "ambient photons per second reaching the pixel's SPAD (before PDP)");
-    put_file(maps_, "sensor_maps.exr", "gate_skew_ps, gate_length_ps: ps; dcr_cps: counts/s; pde: fraction");
+    put_file(maps_, "sensor_maps.exr", "gate_skew_ps, gate_length_ps: ps; dcr_cps: counts/s; pde, pde_ambient: fraction");
     // The mode that declares the image knows what its channels mean.
     if (intensity_decl_) put_file(intensity_, intensity_decl_->file, intensity_decl_->what);
     if (!previews) return;

@@ -151,15 +151,19 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
   plan.memory.push_back({"output pages in flight, file-backed (camera.width_px, render.tile_size_px)", resident, true});
   plan.memory.push_back({"Zarr chunks being filled, at most (camera.width_px, render.tile_size_px, " + th + ")", chunks});
   // EXR images held whole until the end: ground truth (8 channels and 2 per layer, 4 and 4 per object
-  // slot), laser, ambient, maps, intensity, and in a sweep labels.exr (4 per object slot).
+  // slot), laser (photons, out of window, standard error), ambient, maps (5), intensity, and in a sweep
+  // labels.exr (4 per object slot).
   const int64_t slots = image_object_slots(c.render.max_layers, objects);
   const bool sweep = c.acquisition.mode == AcquisitionMode::GateSweep;
-  const int64_t channels = (c.outputs.ground_truth ? 8 + 2 * c.render.max_layers + 4 + 4 * slots : 0) + 2 + 1 + 4 +
+  const int64_t channels = (c.outputs.ground_truth ? 8 + 2 * c.render.max_layers + 4 + 4 * slots : 0) + 3 + 1 + 5 +
                            (sweep ? 0 : 2) + (sweep && c.outputs.ground_truth ? 4 * slots : 0);
   plan.memory.push_back({"images (" + std::to_string(img.width) + " x " + std::to_string(img.height) +
                              " pixels: camera.crop or width_px x height_px; " + std::to_string(channels) +
                              " channels with render.max_layers and the scene's objects)",
                          pixels * channels * 4});
+  // The program itself, whatever the image: code, libraries, Embree's and TBB's pools, the sensor's tables
+  // (an 8 x 8 crop peaks at about 50 MB of resident memory; measured with /usr/bin/time -v).
+  plan.memory.push_back({"the program (code, libraries, Embree and TBB, the sensor's tables)", int64_t{48} << 20});
   plan.memory_available = available_memory();
 
   // A Zarr store is at most its data uncompressed (and a few bytes a chunk).
@@ -167,6 +171,9 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
     if (s.written) plan.disk.push_back({s.file + (s.chunks.empty() ? "" : " (uncompressed)"), s.bytes(), false, s.file, !s.chunks.empty()});
   plan.disk.push_back({std::string("images") + (c.outputs.exr_compression == ExrCompression::None ? "" : " (uncompressed)"),
                        pixels * channels * 4, false, "", c.outputs.exr_compression != ExrCompression::None});
+  // metadata.json (about 16 kB) and the previews (three PNG images, compressed: at most 3 bytes a pixel each)
+  plan.disk.push_back({std::string("metadata.json") + (c.outputs.previews ? " and previews/ (uncompressed)" : ""),
+                       (int64_t{32} << 10) + (c.outputs.previews ? 9 * pixels : 0), false, "", c.outputs.previews});
   if (c.outputs.light) {
     // light/: per pixel of the image grown by one, its bin range, offset and totals, and the values of its lit
     // bins, which the scene decides: 113 bins per pixel on the default multi-object scene (docs/outputs.md).

@@ -473,6 +473,7 @@ SensorMapsTile SensorModel::maps(const PixelRect& rect) const {
   t.gate_length_ps.resize(n);
   t.dcr_cps.resize(n);
   t.pde.resize(n);
+  t.pde_ambient.resize(n);
   for (int y = rect.y0; y < rect.y1(); ++y)
     for (int x = rect.x0; x < rect.x1(); ++x) {
       const auto i = static_cast<size_t>(rect.index(x, y));
@@ -481,7 +482,9 @@ SensorMapsTile SensorModel::maps(const PixelRect& rect) const {
       t.gate_skew_ps[i] = static_cast<float>(p.skew_s / kPs);
       t.gate_length_ps[i] = static_cast<float>((m.acq->nominal_gate_length_s() + p.dL_s) / kPs);
       t.dcr_cps[i] = static_cast<float>(p.dcr_cps);
-      t.pde[i] = static_cast<float>(ty.pdp_laser * p.pdp_scale * ty.fill_factor * m.cfg.camera.optics_transmission);
+      const double collected = p.pdp_scale * ty.fill_factor * m.cfg.camera.optics_transmission;
+      t.pde[i] = static_cast<float>(ty.pdp_laser * collected);
+      t.pde_ambient[i] = static_cast<float>(ty.pdp_ambient * collected);
     }
   return t;
 }

@@ -38,6 +38,7 @@ struct SensorMapsTile {
   std::vector<float> gate_length_ps;  // gate length of the pixel, ps
   std::vector<float> dcr_cps;         // dark count rate at the set temperature, counts per second
   std::vector<float> pde;             // photon detection efficiency at the laser wavelength (PDP x FF x optics)
+  std::vector<float> pde_ambient;     // the same for the ambient light (its band's PDP: pdp_ambient_band)
 };
 
 class SensorModel {

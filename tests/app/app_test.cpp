@@ -378,6 +378,7 @@ TEST_F(App, RendererAndSensorAgreeOnEveryRowsPixelDesign) {
     const auto la = spadgen::writers::read_exr((a / "laser.exr").string()), lf = spadgen::writers::read_exr((f / "laser.exr").string());
     const auto ma = spadgen::writers::read_exr((a / "sensor_maps.exr").string()), mf = spadgen::writers::read_exr((f / "sensor_maps.exr").string());
     const int y0 = c.crop.empty() ? 0 : std::stoi(c.crop.substr(c.crop.find(',') + 1));
+    const nlohmann::json meta_f = nlohmann::json::parse(slurp(f / "metadata.json"));
     int b_rows = 0;
     for (int y = 0; y < lf.height; ++y)
       for (int x = 0; x < lf.width; ++x) {
@@ -394,6 +395,14 @@ TEST_F(App, RendererAndSensorAgreeOnEveryRowsPixelDesign) {
         // Rows [H/2, H) are pixel B (docs/sensor.md): the middle row of an odd height is pixel B.
         EXPECT_EQ(sensor_b, y0 + y >= c.height / 2) << "height " << c.height << " row " << y0 + y;
         b_rows += sensor_b && x == 0;
+        // the PDE of the ambient light: the same pixel, the ambient band's PDP in place of the laser's
+        // (metadata.json's acquisition.pixel_types; a 2D image's photons divided by the laser's PDE were 52 %
+        // high)
+        for (const auto& type : meta_f["acquisition"]["pixel_types"]) {
+          if (type["name"] != (sensor_b ? "pixel_B" : "pixel_A")) continue;
+          EXPECT_NEAR(mf.channels.at("pde_ambient")[i] / qf,
+                      type["pdp_ambient_band"].get<double>() / type["pdp_laser"].get<double>(), 1e-5);
+        }
       }
     EXPECT_EQ(b_rows, std::max(0, y0 + lf.height - std::max(y0, c.height / 2))) << "height " << c.height;
   }

@@ -207,7 +207,7 @@ TEST_F(Hardening, ARunTheMachineCannotHoldIsRefusedWithItsFigures) {
                                (dir_ / "out").string());
   expect_exit(disk, 1, "disk");
   // (the EXR images are compressed: counted at a twentieth of their size as the least, whole as the most)
-  EXPECT_THAT(disk.err, HasSubstr("the run writes at least 15099.5 GB (the compressed stores at a twentieth of their size; at most 15100.0 GB)"));
+  EXPECT_THAT(disk.err, HasSubstr("the run writes at least 15099.5 GB (the compressed stores at a twentieth of their size; at most 15100.2 GB)"));
   EXPECT_THAT(disk.err, HasSubstr("into " + (dir_ / "out").string()));
   EXPECT_THAT(disk.err, HasSubstr("expected_counts.npy 6710.9 GB"));
   EXPECT_FALSE(fs::exists(dir_ / "out"));
@@ -218,10 +218,10 @@ TEST_F(Hardening, ARunTheMachineCannotHoldIsRefusedWithItsFigures) {
   EXPECT_THAT(info.output, HasSubstr("  disk: "));
   EXPECT_THAT(info.output, HasSubstr(" counts.npy 180 MB"));
   // Compressed outputs count whole as the most and a twentieth as the least (the refusal's figure): 180 MB
-  // of counts as Zarr and 14 MB of EXR images, (180 + 14) / 20 = 9.7 MB
+  // of counts as Zarr, 18 MB of EXR images and 5 MB of previews, (180 + 18 + 5) / 20 = 10.2 MB
   const Outcome zarr = spadgen("info " + kFlat + " --set outputs.storage=zarr --set outputs.detection_rate=false --set outputs.ground_truth=false");
   expect_exit(zarr, 0, "info zarr");
-  EXPECT_THAT(zarr.output, HasSubstr("disk: 10 MB to 194 MB (the compressed stores: at most uncompressed)"));
+  EXPECT_THAT(zarr.output, HasSubstr("disk: 10 MB to 203 MB (the compressed stores: at most uncompressed)"));
   EXPECT_THAT(zarr.output, HasSubstr("counts.zarr (uncompressed) 180 MB"));
 }
 

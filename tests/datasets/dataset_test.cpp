@@ -127,7 +127,6 @@ TEST(DatasetFile, ErrorsNameTheKeyAndWhatWasExpected) {
   EXPECT_EQ(error_of("\"set\": {\"render.window_start_ns\": 0, \"render.window_stop_ns\": 20}"), "no error");
   EXPECT_EQ(error_of("\"set\": {\"render.window_stop_ns\": 20, \"render.window_start_ns\": 0}"), "no error");
   EXPECT_THAT(error_of("\"set\": {\"render.window_stop_ns\": 20}"), HasSubstr("/set/render.window_stop_ns"));
-  // a grid value is checked with the set keys applied (both ends set, the stop varied)
   EXPECT_EQ(error_of("\"set\": {\"render.window_start_ns\": 0, \"render.window_stop_ns\": 20}, "
                      "\"grid\": {\"laser.average_power_mW\": [1, 2]}"), "no error");
   // an untruncated side of a normal on a key with a bound there (only the mean was checked: 7 of 20 samples
