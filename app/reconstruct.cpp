@@ -424,14 +424,19 @@ std::string reconstruct(const ReconstructOptions& o) {
     check_writable(out);
     writers::ExrImage img(run.width(), run.height());
     std::vector<float> c(size_t(run.width()) * size_t(run.height()) * size_t(run.K()));
-    run.profiles(0, run.height(), o.noise_free, c.data());
+    // noise-free: the rates themselves (the expected counts, inverted, were clamped at N - 0.5: N = 1 gave
+    // 0.693 for any brighter pixel)
+    if (o.noise_free) run.rates(0, run.height(), c.data());
+    else run.profiles(0, run.height(), false, c.data());
     float* photons = img.channel("photons");
     float* se = img.channel("photons_se");
     float* sat = img.channel("saturated");
     for (size_t i = 0; i < size_t(run.width()) * size_t(run.height()); ++i) {
       double counts = 0.0;
       for (int k = 0; k < run.K(); ++k) counts += c[i * size_t(run.K()) + size_t(k)];
-      const reconstruct::HdrEstimate e = reconstruct::invert_hdr(counts, run.image_frames(), run.dual(), run.dual_ratio());
+      const reconstruct::HdrEstimate e =
+          o.noise_free ? reconstruct::hdr_of_rates(&c[i * size_t(run.K())], run.image_frames(), run.dual(), run.dual_ratio())
+                       : reconstruct::invert_hdr(counts, run.image_frames(), run.dual(), run.dual_ratio());
       photons[i] = float(e.photons), se[i] = float(e.standard_error), sat[i] = e.saturated ? 1.0f : 0.0f;
     }
     img.set_attribute("spadgen_reconstruct", nlohmann::json{{"what", run.dual() ? "eq. (6) inversion" : "eq. (5) inversion"},

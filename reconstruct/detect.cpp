@@ -366,11 +366,10 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* profile, int K
   return folded(std::move(out), timing);
 }
 
-HdrEstimate invert_hdr(double counts, int frames, bool dual, double ratio) {
-  HdrEstimate e;
+namespace {
+// The standard error of e.photons from N frames at x photons per frame (delta method).
+void set_standard_error(HdrEstimate& e, int frames, bool dual, double ratio) {
   const double N = frames;
-  e.saturated = counts >= N - 0.5;
-  e.photons = sensor::linearise_counts(counts, frames, dual, ratio);
   const double x = e.photons / N;  // photons per frame
   double variance = 0.0, slope = 0.0;  // var(c) and dc / dphotons at the estimate
   if (!dual) {
@@ -384,6 +383,28 @@ HdrEstimate invert_hdr(double counts, int frames, bool dual, double ratio) {
     slope = 0.5 * (aL * (1.0 - pL) + aS * (1.0 - pS));
   }
   e.standard_error = slope > 0.0 ? std::sqrt(variance) / slope : 0.0;
+}
+}  // namespace
+
+HdrEstimate invert_hdr(double counts, int frames, bool dual, double ratio) {
+  HdrEstimate e;
+  e.saturated = counts >= frames - 0.5;
+  e.photons = sensor::linearise_counts(counts, frames, dual, ratio);
+  set_standard_error(e, frames, dual, ratio);
+  return e;
+}
+
+HdrEstimate hdr_of_rates(const float* lambda, int frames, bool dual, double ratio) {
+  HdrEstimate e;
+  const int K = dual ? 2 : 1;
+  double mean = 0.0, counts = 0.0;
+  for (int k = 0; k < K; ++k) {
+    mean += double(lambda[k]) / K;
+    counts += double(frames) / K * -std::expm1(-double(lambda[k]));
+  }
+  e.photons = frames * mean;
+  e.saturated = counts >= frames - 0.5;
+  set_standard_error(e, frames, dual, ratio);
   return e;
 }
 

@@ -90,7 +90,7 @@ double linearise(double counts, int frames);
 // The 2D HDR inversion (the paper's eq. 5 single, eq. 6 dual with tau_L / tau_S = ratio, N_sat = frames):
 // the incident detectable photons per N-frame image, its standard error from the binomial noise of the
 // counts propagated through the inverse (delta method), and whether the counts were saturated (at or
-// above N - 0.5: the estimate is then a lower bound, flagged rather than clamped silently).
+// above N - 0.5: the estimate is then that of N - 0.5 counts, flagged rather than clamped silently).
 struct HdrEstimate {
   double photons = 0.0;
   double standard_error = 0.0;
@@ -98,5 +98,9 @@ struct HdrEstimate {
 };
 // counts: the image's summed counts (both exposures in dual mode).
 HdrEstimate invert_hdr(double counts, int frames, bool dual, double ratio);
+// The same from the noise-free rates (detections per frame of each exposure, lambda_k, K = 1 or 2): the
+// photons exactly, N times their mean (linear at any level: not clamped at saturation, which it flags
+// where the expected counts reach N - 0.5), with the standard error sampled counts would give.
+HdrEstimate hdr_of_rates(const float* lambda, int frames, bool dual, double ratio);
 
 }  // namespace spadgen::reconstruct

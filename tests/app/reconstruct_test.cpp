@@ -58,6 +58,20 @@ TEST_F(Reconstruct, HdrOfADualExposureRunIsTheSensorsLinearisedImageWithItsError
   }
   EXPECT_GT(saturated, 0) << "the run should saturate somewhere";
   EXPECT_GT(lit, 1000);
+  // --noise-free: the photons from the rates themselves, N times the mean of the two exposures' lambda, also
+  // where the counts saturate (the expected counts, inverted, were clamped at N - 0.5)
+  r = sh("reconstruct " + run.string() + " -q --noise-free");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const auto exact = spadgen::writers::read_exr((run / "hdr_noise_free.exr").string());
+  const Npy rates = read_npy(run / "detection_rate.npy");
+  ASSERT_EQ(rates.shape.size(), 3u);
+  const std::vector<double> lambda = values(rates);
+  const size_t pixels = exact.channels.at("photons").size();
+  ASSERT_EQ(lambda.size(), 2 * pixels);
+  for (size_t i = 0; i < pixels; ++i) {
+    const double truth = N * (lambda[i] + lambda[pixels + i]) / 2;
+    EXPECT_NEAR(exact.channels.at("photons")[i], truth, 1e-6 * truth + 1e-9) << "pixel " << i;
+  }
   // A 2D run has no gate profiles: the detectors' options are refused, not ignored, and nothing is written.
   for (const char* option : {"--detector paper", "--max-detections 2"}) {
     r = sh("reconstruct " + run.string() + " -q " + option + " -o " + (dir_ / "other.exr").string());
