@@ -121,15 +121,29 @@ void Staging::remove_leftovers(const fs::path& parent) {
   }
 }
 
+namespace {
+// The output folder as Staging and FolderLock name it: absolute, "out/" as "out", through a symbolic link
+// to a folder the folder.
+fs::path resolved_folder(const fs::path& out) {
+  std::error_code ec;
+  fs::path abs = fs::absolute(out, ec).lexically_normal();
+  if (!abs.has_filename()) abs = abs.parent_path();
+  fs::path resolved = fs::weakly_canonical(abs, ec);
+  return ec ? abs : resolved;
+}
+
+// The lock file of the resolved folder P/NAME: P/.NAME.spadgen-lock.
+fs::path lock_path_of(const fs::path& resolved) {
+  return resolved.parent_path() / ("." + resolved.filename().string() + ".spadgen-lock");
+}
+}  // namespace
+
 void Staging::init(const fs::path& out) {
   const auto cannot = [&](const std::string& why) {
     return Error("cannot use " + out.string() + " as the output folder (-o): " + why);
   };
   std::error_code ec;
-  fs::path abs = fs::absolute(out, ec).lexically_normal();
-  if (!abs.has_filename()) abs = abs.parent_path();  // "out/" names "out"
-  out_ = fs::weakly_canonical(abs, ec);              // a symbolic link to a folder: the folder
-  if (ec) out_ = abs;
+  out_ = resolved_folder(out);
   if (!out_.has_filename() || out_ == out_.root_path()) throw cannot("expected a folder below the root");
   parent_ = out_.parent_path();
   name_ = out_.filename().string();
@@ -177,7 +191,6 @@ Staging::~Staging() {
   if (!dir_.empty()) fs::remove_all(dir_, ec);  // unpublished files, or the earlier set after an exchange
   unlock();
 }
-
 
 std::string Staging::path(const std::string& rel) const { return (dir_ / rel).string(); }
 
@@ -228,19 +241,15 @@ void release_folder_lock(const fs::path& lock_path, int& fd) {
 }  // namespace
 
 void Staging::lock() {
-  lock_path_ = parent_ / ("." + name_ + ".spadgen-lock");
+  lock_path_ = lock_path_of(out_);
   lock_fd_ = take_folder_lock(lock_path_, out_);
 }
 
 void Staging::unlock() { release_folder_lock(lock_path_, lock_fd_); }
 
 FolderLock::FolderLock(const fs::path& folder) {
-  std::error_code ec;
-  fs::path abs = fs::absolute(folder, ec).lexically_normal();
-  if (!abs.has_filename()) abs = abs.parent_path();
-  fs::path out = fs::weakly_canonical(abs, ec);  // as Staging names it: through a symbolic link, the folder
-  if (ec) out = abs;
-  path_ = out.parent_path() / ("." + out.filename().string() + ".spadgen-lock");
+  const fs::path out = resolved_folder(folder);
+  path_ = lock_path_of(out);
   // A folder no one may write beside (a read-only copy, another user's): nothing can replace it through
   // this lock, and reading it needs none.
   if (::access(out.parent_path().c_str(), W_OK) != 0 && (errno == EROFS || errno == EACCES || errno == EPERM)) return;
