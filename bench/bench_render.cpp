@@ -105,12 +105,12 @@ void replay(RTCScene scene, const std::vector<bench::RayRecord>& rays) {
       RTCIntersectContext ctx;
       rtcInitIntersectContext(&ctx);
       if (q.occlusion) {
-        RTCRay ray{q.origin[0], q.origin[1], q.origin[2], q.tnear, q.dir[0], q.dir[1], q.dir[2], 0.0f, q.tfar, ~0u, 0, 0};
+        RTCRay ray{q.origin[0], q.origin[1], q.origin[2], q.tnear, q.dir[0], q.dir[1], q.dir[2], 0.0f, q.tfar, ~0u, q.id, 0};
         rtcOccluded1(scene, &ctx, &ray);
         hits += ray.tfar < 0.0f;
       } else {
         RTCRayHit rh{};
-        rh.ray = {q.origin[0], q.origin[1], q.origin[2], q.tnear, q.dir[0], q.dir[1], q.dir[2], 0.0f, q.tfar, ~0u, 0, 0};
+        rh.ray = {q.origin[0], q.origin[1], q.origin[2], q.tnear, q.dir[0], q.dir[1], q.dir[2], 0.0f, q.tfar, ~0u, q.id, 0};
         rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
         rtcIntersect1(scene, &ctx, &rh);
         hits += rh.hit.geomID != RTC_INVALID_GEOMETRY_ID;

@@ -34,7 +34,7 @@ using spadgen::bench::RayRecord;
 std::vector<RayRecord>* g_sink = nullptr;
 
 void note(const RTCRay& r, bool occlusion) {
-  g_sink->push_back({{r.org_x, r.org_y, r.org_z}, {r.dir_x, r.dir_y, r.dir_z}, r.tnear, r.tfar, occlusion ? 1u : 0u});
+  g_sink->push_back({{r.org_x, r.org_y, r.org_z}, {r.dir_x, r.dir_y, r.dir_z}, r.tnear, r.tfar, occlusion ? 1u : 0u, r.id});
 }
 
 template <class Ray16>
@@ -46,7 +46,8 @@ void note16(const int* valid, const Ray16& r, bool occlusion) {
                          {r.dir_x[i], r.dir_y[i], r.dir_z[i]},
                          r.tnear[i],
                          r.tfar[i],
-                         occlusion ? 1u : 0u});
+                         occlusion ? 1u : 0u,
+                         r.id[i]});
 }
 
 }  // namespace

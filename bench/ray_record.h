@@ -9,6 +9,7 @@ struct RayRecord {
   float origin[3], dir[3];
   float tnear, tfar;
   uint32_t occlusion;  // 1: rtcOccluded1 (else rtcIntersect1)
+  uint32_t id;         // the ray's id: its render::kTowardLight bit decides which side the back-face filter culls
 };
 
 }  // namespace spadgen::bench

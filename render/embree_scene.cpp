@@ -41,12 +41,6 @@ void check(RTCDevice device, const char* what) {
   if (!message.empty()) throw Error(std::string("while ") + what + ": " + message);
 }
 
-// glTF's doubleSided = false means back-face culling: a single-sided, non-transmissive surface does not
-// exist seen from behind. Embree's Ng = (v1 - v0) x (v2 - v0), the glTF front side for counter-clockwise
-// triangles. "Seen" is along the light's way: a camera or bounce ray looks from its origin (the surface is
-// culled when the ray meets its back); a ray towards a light (occluded rays, and intersect rays with
-// kTowardLight in their id) stands for light coming the other way, which meets the surface from the other
-// side (culled when the ray meets its front), as the light itself sees the scene.
 // Ray direction . geometric normal of hit i: negative when the ray meets the front side.
 float facing(const RTCFilterFunctionNArguments* args, unsigned i) {
   return RTCRayN_dir_x(args->ray, args->N, i) * RTCHitN_Ng_x(args->hit, args->N, i) +
@@ -54,6 +48,12 @@ float facing(const RTCFilterFunctionNArguments* args, unsigned i) {
          RTCRayN_dir_z(args->ray, args->N, i) * RTCHitN_Ng_z(args->hit, args->N, i);
 }
 
+// glTF's doubleSided = false means back-face culling: a single-sided, non-transmissive surface does not
+// exist seen from behind. Embree's Ng = (v1 - v0) x (v2 - v0), the glTF front side for counter-clockwise
+// triangles. "Seen" is along the light's way: a camera or bounce ray looks from its origin (the surface is
+// culled when the ray meets its back); a ray towards a light (every occluded ray, and intersect rays with
+// toward_light; both carry kTowardLight in their id) stands for light coming the other way, which meets
+// the surface from the other side (culled when the ray meets its front), as the light itself sees the scene.
 void cull_back_faces(const RTCFilterFunctionNArguments* args) {
   for (unsigned i = 0; i < args->N; ++i) {
     if (args->valid[i] == 0) continue;
@@ -61,11 +61,6 @@ void cull_back_faces(const RTCFilterFunctionNArguments* args) {
     const bool to_light = (RTCRayN_id(args->ray, args->N, i) & kTowardLight) != 0;
     if (to_light ? d < 0.0f : d > 0.0f) args->valid[i] = 0;
   }
-}
-
-void cull_back_faces_to_light(const RTCFilterFunctionNArguments* args) {
-  for (unsigned i = 0; i < args->N; ++i)
-    if (args->valid[i] != 0 && facing(args, i) < 0.0f) args->valid[i] = 0;
 }
 
 }  // namespace
@@ -106,7 +101,7 @@ EmbreeScene::EmbreeScene(const scenes::Scene& scene) {
     const bool single_sided = mat ? (!mat->double_sided && !mat->transmissive()) : true;
     if (single_sided) {
       rtcSetGeometryIntersectFilterFunction(geom, cull_back_faces);
-      rtcSetGeometryOccludedFilterFunction(geom, cull_back_faces_to_light);
+      rtcSetGeometryOccludedFilterFunction(geom, cull_back_faces);
     }
     rtcCommitGeometry(geom);
     rtcAttachGeometryByID(scene_, geom, static_cast<unsigned>(m));
@@ -198,7 +193,7 @@ void EmbreeScene::occluded_packet(const bool* valid, const glm::vec3* o, const g
     ray.tfar[i] = tfar[i];
     ray.time[i] = 0.0f;
     ray.mask[i] = 0xFFFFFFFFu;
-    ray.id[i] = static_cast<unsigned>(i);
+    ray.id[i] = static_cast<unsigned>(i) | kTowardLight;
     ray.flags[i] = 0;
   }
   RTCIntersectContext context;
@@ -218,7 +213,7 @@ bool EmbreeScene::occluded(const glm::vec3& o, const glm::vec3& d, float tnear, 
   ray.tfar = tfar;
   ray.time = 0.0f;
   ray.mask = 0xFFFFFFFFu;
-  ray.id = 0;
+  ray.id = kTowardLight;
   ray.flags = 0;
   rtcOccluded1(scene_, &context, &ray);
   return ray.tfar < 0.0f;  // Embree sets tfar to -inf when something was hit

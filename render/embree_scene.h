@@ -14,7 +14,7 @@
 
 namespace spadgen::render {
 
-// The bit of a ray's id that marks it as going towards a light (EmbreeScene::intersect's toward_light).
+// The bit of a ray's id that marks it as going towards a light (every occluded ray; intersect's toward_light).
 inline constexpr unsigned kTowardLight = 1u << 31;
 
 struct RayHit {
