@@ -327,25 +327,16 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
       s.set.emplace_back(it.key(), it.value());
       all.push_back(it.key() + "=" + it.value().dump());
     }
-    // Each key alone names its own mistake; one that fails alone is taken when the whole set passes (it
-    // needs another key of the set: both ends of the time window).
-    bool together = false, tried = false;
-    for (size_t i = 0; i < all.size(); ++i) {
-      try {
-        (void)scenes::load_scene_file(s.scenes.front(), {all[i]});
-        continue;
-      } catch (const Error&) {
-      }
-      if (!tried) {
-        tried = true;
-        try {
-          (void)scenes::load_scene_file(s.scenes.front(), all);
-          together = true;
-        } catch (const Error&) {
-        }
-      }
-      if (!together) check_values("/set/" + s.set[i].first, {all[i]});  // fails, naming the key
+    // The whole set together first (a key may need another of the set: both ends of the time window); when
+    // it fails, each key alone names its own mistake.
+    bool together = true;
+    try {
+      (void)scenes::load_scene_file(s.scenes.front(), all);
+    } catch (const Error&) {
+      together = false;
     }
+    if (!together)
+      for (size_t i = 0; i < all.size(); ++i) check_values("/set/" + s.set[i].first, {all[i]});
   }
   if (doc.contains("grid")) {
     const json& g = doc["grid"];
