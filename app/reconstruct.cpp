@@ -159,6 +159,15 @@ void check_ranges(const std::string& path, const DetectionImage& img) {
 
 // The detections file (docs/detection.md): an EXR with `count` and det<i>.range (metres; NaN: none), and
 // optionally det<i>.score; or a float .npy (H, W, M) of ranges, NaN where there is none.
+// What a derived file records of the run it was made from (its spadgen_source, with the run's path) and
+// check_source compares: the seed, the scene's hash, the crop of the sensor (null where metadata lacks them).
+nlohmann::json source_fields(const RunFolder& run) {
+  const auto& m = run.metadata();
+  return {{"seed", m.value("seed", nlohmann::json(nullptr))},
+          {"scene_hash_fnv1a64", m.value("scene_hash_fnv1a64", nlohmann::json(nullptr))},
+          {"crop_in_sensor", m.value("/image/crop_in_sensor"_json_pointer, nlohmann::json(nullptr))}};
+}
+
 // What the detections file says it was made from (reconstruct's spadgen_source), against the run it is
 // scored on: another scene file or glTF (scene_hash_fnv1a64), or another crop of the sensor, is refused;
 // another run of the same scene and crop (another seed, a sense realisation) is scored. `source` records
@@ -171,13 +180,12 @@ void check_source(const std::string& path, const std::map<std::string, std::stri
     return;
   }
   const nlohmann::json made = nlohmann::json::parse(it->second, nullptr, false);
-  const nlohmann::json& m = run.metadata();
+  const nlohmann::json ours_all = source_fields(run);
   const std::string made_from = made.is_object() ? made.value("run", std::string("?")) : std::string("?");
   for (const auto& [key, what] : {std::pair<std::string, std::string>{"scene_hash_fnv1a64", "scene (scene file and glTF hash)"},
                                   {"crop_in_sensor", "crop of the sensor"}}) {
     if (!made.is_object() || !made.contains(key) || made[key].is_null()) continue;
-    const nlohmann::json ours = key == "crop_in_sensor" ? m.value("/image/crop_in_sensor"_json_pointer, nlohmann::json())
-                                                        : m.value(key, nlohmann::json());
+    const nlohmann::json& ours = ours_all[key];
     if (!ours.is_null() && made[key] != ours)
       throw Error(path + ": detections of another " + what + " than " + run.dir() + "'s (made from " + made_from + ": " +
                   made[key].dump() + ", this run: " + ours.dump() + "); run spadgen reconstruct on " + run.dir() +
@@ -244,12 +252,9 @@ DetectionImage read_detections(const std::string& path, const RunFolder& run, bo
 }
 
 std::string provenance(const RunFolder& run) {
-  const auto& m = run.metadata();
-  return nlohmann::json{{"run", fs::absolute(run.dir()).lexically_normal().string()},
-                        {"seed", m.value("seed", nlohmann::json(nullptr))},
-                        {"scene_hash_fnv1a64", m.value("scene_hash_fnv1a64", nlohmann::json(nullptr))},
-                        {"crop_in_sensor", m.value("/image/crop_in_sensor"_json_pointer, nlohmann::json(nullptr))}}
-      .dump();
+  nlohmann::json p = source_fields(run);
+  p["run"] = fs::absolute(run.dir()).lexically_normal().string();
+  return p.dump();
 }
 
 // The object labels of a run: per pixel, its objects (ground_truth.exr, labels.exr).
