@@ -277,11 +277,26 @@ bool Bsdf::refracted_direction(glm::vec3* out) const {
   return true;
 }
 
-Spec straight_transmittance(const MaterialPoint& m, float cos_theta, bool entering) {
+Spec interface_transmittance(const MaterialPoint& m, float cos_theta, bool entering) {
   if (!(m.transmission > 0.0f)) return Spec(0.0f);
   const float eta = m.thin_walled ? m.ior : (entering ? m.ior : 1.0f / m.ior);
   const float f = fresnel_dielectric(std::fabs(cos_theta), eta);
   return (1.0f - m.metallic) * m.transmission * (1.0f - f) * m.base;
+}
+
+Spec straight_transmittance(const MaterialPoint& m, bool volume, const glm::vec3& d, const glm::vec3& ng, glm::vec3* inside) {
+  const float c = glm::dot(d, ng);
+  const bool entering = c < 0.0f;
+  if (!volume || m.thin_walled) return interface_transmittance(m, c, entering);
+  if (entering) {
+    // Snell's law for the light's direction inside: eta = 1 / ior, n facing the light.
+    const float eta = 1.0f / m.ior, ci = -c, k = 1.0f - eta * eta * (1.0f - ci * ci);
+    *inside = glm::normalize(eta * d + (eta * ci - std::sqrt(std::max(k, 0.0f))) * ng);
+    return interface_transmittance(m, c, true);
+  }
+  const float ci = glm::dot(*inside, ng);  // the light's angle at the face it leaves by (total reflection past critical)
+  *inside = d;
+  return ci > 0.0f ? interface_transmittance(m, ci, false) : Spec(0.0f);
 }
 
 }  // namespace spadgen::render

@@ -107,9 +107,16 @@ class Bsdf {
   float diffuse_weight_ = 0.0f, specular_weight_ = 0.0f, transmission_weight_ = 0.0f;
 };
 
-// Fraction of light a transmissive surface passes straight through along direction d (used by shadow
-// rays and ground-truth layers, which ignore refraction bending): (1 - F(cos, ior)) times transmission,
-// base colour and (1 - metallic). cos is |d . n|; entering tells which side the ray comes from.
-Spec straight_transmittance(const MaterialPoint& m, float cos_theta, bool entering);
+// Fraction of light a transmissive interface passes along a refracted path: (1 - F(cos, eta)) times
+// transmission, base colour and (1 - metallic). cos is |d . n| on the side the light comes from, entering
+// which side that is (eta = ior entering, 1 / ior leaving).
+Spec interface_transmittance(const MaterialPoint& m, float cos_theta, bool entering);
+// The same for a ray that goes straight through (shadow rays and ground-truth layers, which ignore
+// refraction bending) crossing a face of normal ng in direction d. Its Fresnel terms are the light's:
+// entering a volume (`volume`: the material bounds a medium) the light refracts, and `inside` becomes its
+// direction in the medium; leaving it, the light meets the face at that direction's angle (and reflects
+// all of it past the critical angle, as off a plate's edge), and `inside` becomes d again. Through a
+// plate's parallel faces that is exact: the light leaves at the angle it came in. Start `inside` at d.
+Spec straight_transmittance(const MaterialPoint& m, bool volume, const glm::vec3& d, const glm::vec3& ng, glm::vec3* inside);
 
 }  // namespace spadgen::render

@@ -49,26 +49,25 @@ GroundTruthTile Renderer::ground_truth(const PixelRect& rect) const {
     const glm::dvec3 to = p - im.laser.position;
     const double length = glm::length(to);
     if (!(length > 0.0)) return 0.0;
-    const glm::vec3 d(to / length);
-    glm::vec3 o(im.laser.position);
-    glm::dvec3 previous = im.laser.position;
-    double travelled = 0.0, excess = 0.0;
+    const glm::vec3 d(to / length), o(im.laser.position);
+    const double unit = glm::length(glm::dvec3(d));  // |d| in float: t times it is a distance
+    // Short of p itself by a little more than the faces' float error.
+    const float reach = float(length / unit) - 1e-5f * float(1.0 + length);
+    double previous = 0.0, excess = 0.0;
+    float tnear = 0.0f;
     int medium = -1;
     for (int crossings = 0; crossings < 64; ++crossings) {
       RayHit hit;
-      // Short of p itself by a little more than the faces' float error.
-      const float reach = float(length - travelled) - 1e-5f * float(1.0 + length);
-      if (!(reach > 0.0f) || !im.embree.intersect(o, d, 0.0f, reach, &hit)) break;
+      if (!(reach > tnear) || !im.embree.intersect(o, d, tnear, reach, &hit)) break;
       const Surface sf = im.shading.surface(hit);
-      const glm::dvec3 q(sf.p);
-      const double seg = glm::length(q - previous);
-      if (medium >= 0) excess += (double(im.shading.material(medium).point.ior) - 1.0) * seg;
-      travelled += seg, previous = q;
+      const double t = double(hit.t) * unit;
+      if (medium >= 0) excess += (double(im.shading.material(medium).point.ior) - 1.0) * (t - previous);
+      previous = t;
       const ResolvedMaterial& rm = im.shading.material(sf.material);
       if (rm.volume) medium = glm::dot(d, sf.ng) < 0.0f ? sf.material : -1;
-      o = offset_ray_origin(sf.p, sf.ng, d);
+      tnear = std::nextafter(hit.t, kInf);  // past this face along the same ray (see the camera's walk below)
     }
-    if (medium >= 0) excess += (double(im.shading.material(medium).point.ior) - 1.0) * glm::length(p - previous);
+    if (medium >= 0) excess += (double(im.shading.material(medium).point.ior) - 1.0) * (length - previous);
     return length + excess;
   };
   tbb::parallel_for(tbb::blocked_range<int>(rect.y0, rect.y1()), [&](const tbb::blocked_range<int>& rows) {
@@ -77,20 +76,25 @@ GroundTruthTile Renderer::ground_truth(const PixelRect& rect) const {
         const auto i = static_cast<size_t>(rect.index(x, y));
         const glm::dvec3 dd = im.camera.direction(x + 0.5, y + 0.5);
         const glm::vec3 d(dd);
-        glm::vec3 o = cam;
-        glm::dvec3 previous = im.camera.position();
-        double distance = 0.0, transmittance = 1.0, excess = 0.0;  // excess: (n - 1) x the length in media
+        const double unit = glm::length(glm::dvec3(d));
+        // Every layer is a hit of the one ray from the camera, each traced from just past the last: the same
+        // face gives the same t for the same ray, so none is found twice, and however thin a plate and far
+        // from the scene's origin, its back face is not stepped over (an origin moved off each face by a
+        // number of float ulps of its coordinates would step over millimetres at a hundred metres).
+        float tnear = 0.0f;
+        glm::vec3 inside = d;  // the light's direction in a medium, for the Fresnel terms (straight_transmittance)
+        double previous = 0.0, distance = 0.0, transmittance = 1.0, excess = 0.0;  // excess: (n - 1) x the length in media
         int medium = -1, count = 0, objects = 0;
         int32_t* slot_id = gt.object_slot_id.data() + i * layers;
         while (count < gt.max_layers) {
           RayHit hit;
-          if (!im.embree.intersect(o, d, 0.0f, kInf, &hit)) break;
+          if (!im.embree.intersect(cam, d, tnear, kInf, &hit)) break;
+          tnear = std::nextafter(hit.t, kInf);
           const Surface sf = im.shading.surface(hit);
-          // Measured from the surface point itself, not the offset origin, which sits a few ulps away.
-          const glm::dvec3 p(sf.p);
-          const double seg = glm::length(p - previous);
-          previous = p;
-          distance += seg;
+          distance = double(hit.t) * unit;
+          const double seg = distance - previous;
+          previous = distance;
+          const glm::dvec3 p = glm::dvec3(cam) + double(hit.t) * glm::dvec3(d);
           if (medium >= 0) {
             transmittance *= std::exp(-double(im.shading.material(medium).sigma.x) * seg);
             excess += (double(im.shading.material(medium).point.ior) - 1.0) * seg;
@@ -118,11 +122,9 @@ GroundTruthTile Renderer::ground_truth(const PixelRect& rect) const {
           ++count;
           const ResolvedMaterial& rm = im.shading.material(sf.material);
           if (!(rm.point.transmission > 0.0f)) break;
-          const float c = glm::dot(d, sf.ng);
-          const bool entering = c < 0.0f;
-          transmittance *= straight_transmittance(im.shading.material_at(sf, hit), c, entering).x;
+          const bool entering = glm::dot(d, sf.ng) < 0.0f;
+          transmittance *= straight_transmittance(im.shading.material_at(sf, hit), rm.volume, d, sf.ng, &inside).x;
           if (rm.volume) medium = entering ? sf.material : -1;
-          o = offset_ray_origin(sf.p, sf.ng, d);
         }
         gt.layer_count[i] = count;
         gt.object_count[i] = objects;

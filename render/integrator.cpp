@@ -307,7 +307,7 @@ Spec Integrator::shadow_transmittance(const glm::vec3& origin, const glm::vec3& 
     return blocked ? Spec(0.0f) : Spec(1.0f);
   }
   Spec t(1.0f);
-  glm::vec3 o = origin;
+  glm::vec3 o = origin, inside = dir;
   float remaining = dist;
   for (int crossing = 0;; ++crossing) {
     if (crossing > 0) ++*rays;
@@ -335,7 +335,7 @@ Spec Integrator::shadow_transmittance(const glm::vec3& origin, const glm::vec3& 
     const MaterialPoint mp = shading_.material_at(sf, hit);
     const float c = glm::dot(dir, sf.ng);
     const bool entering = c < 0.0f;
-    t *= straight_transmittance(mp, c, entering);
+    t *= straight_transmittance(mp, rm.volume, dir, sf.ng, &inside);
     if (!cx && !(t.x > 0.0f || t.y > 0.0f)) return Spec(0.0f);
     if (rm.volume) medium = entering ? sf.material : -1;
     if (cx) {
@@ -605,7 +605,7 @@ bool Integrator::connect_laser_refracted(const NeeVertex& v, const LaserRay& lr,
       const Surface sf = shading_.surface(hit);
       if (sf.material != cr[j].material || std::fabs(glm::dot(sf.ng, cr[j].ng)) < 1.0f - 1e-6f) return false;
       const bool entering = glm::dot(dj, sf.ng) < 0.0f;
-      t *= straight_transmittance(cr[j].mp, float(cs[j]), entering);
+      t *= interface_transmittance(cr[j].mp, float(cs[j]), entering);
       q = glm::dvec3(sf.p), qn = sf.ng;
     } else if (found) {
       const Surface sf = shading_.surface(hit);

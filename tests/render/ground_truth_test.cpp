@@ -160,6 +160,50 @@ TEST(GroundTruth, PlateAndSphereLayersAtAnalyticDistancesAndTransmittances) {
   }
 }
 
+// A 2 mm plate seen at 50 degrees (past the critical angle of 41.8 at ior 1.5 for a straight ray leaving
+// it), camera and scene 300 m from the origin, where a float's ulp is 31 um: the layers are the plate's two
+// faces and the wall, at their distances along the ray, and the light through the plate's parallel faces
+// is (1 - F(50 deg))^2 (the refracted light leaves at the angle it came in).
+TEST(GroundTruth, TiltedPlateFarFromTheOriginKeepsBothFacesAndItsTransmittance) {
+  const float far = -300.0f, front = 0.45f, thickness = 0.002f, wall = 1.0f, ior = 1.5f;
+  scenes::Scene s;
+  add_box(s, {-1, -1, far - front - thickness}, {1, 1, far - front}, add_material(s, test::glass(ior, thickness)));
+  add_quad(s, {0, 0, far - wall}, {3, 0, 0}, {0, 3, 0}, add_material(s, test::lambertian(0.5f)));
+  RenderStageConfig c = test_config(16, 16, 12e-3);
+  const double angle = 50.0 * kPi / 180.0;
+  c.camera.position_m = {0, 0, far};
+  c.camera.look_at_m = {std::sin(angle), 0, far - std::cos(angle)};
+  Renderer r(s, c);
+  const GroundTruthTile gt = r.ground_truth({0, 0, 16, 16});
+  int checked = 0;
+  for (int y = 7; y < 9; ++y)
+    for (int x = 7; x < 9; ++x) {
+      const auto i = static_cast<size_t>(gt.rect.index(x, y));
+      const size_t L = size_t(gt.max_layers);
+      // The pixel's ray in the world: the camera turned by `angle` about +y.
+      // The pixel's ray in the world: the camera's frame turned by `angle` about +y (right (cos, 0, sin),
+      // forward (sin, 0, -cos)); the plate's normal is +z.
+      const glm::dvec3 v = pixel_dir(c, x, y);
+      const double cos_plate = -(v.x * std::sin(angle) + v.z * std::cos(angle));
+      ASSERT_EQ(gt.layer_count[i], 3) << x << "," << y;
+      // The faces where the scene's float coordinates put them (an ulp is 31 um here).
+      const auto depth = [&](float z) { return (double(far) - double(z)) / cos_plate; };
+      EXPECT_NEAR(gt.layer_range[i * L + 0], depth(far - front), 2e-6);
+      EXPECT_NEAR(gt.layer_range[i * L + 1], depth(far - front - thickness), 2e-6);
+      EXPECT_NEAR(gt.layer_range[i * L + 2], depth(far - wall), 2e-6);
+      // Unpolarised Fresnel reflectance entering glass at that angle.
+      const double st2 = (1.0 - cos_plate * cos_plate) / (ior * ior), ct = std::sqrt(1.0 - st2);
+      const double rs = std::pow((cos_plate - ior * ct) / (cos_plate + ior * ct), 2.0);
+      const double rp = std::pow((ior * cos_plate - ct) / (ior * cos_plate + ct), 2.0);
+      const double T = 1.0 - 0.5 * (rs + rp);
+      EXPECT_NEAR(gt.layer_transmittance[i * L + 1], T, 1e-5);
+      EXPECT_NEAR(gt.layer_transmittance[i * L + 2], T * T, 1e-5);
+      EXPECT_GT(gt.layer_transmittance[i * L + 2], 0.5);
+      ++checked;
+    }
+  EXPECT_EQ(checked, 4);
+}
+
 TEST(GroundTruth, BeerLambertInsideTheVolumeAndLayerLimit) {
   // glTF: attenuationColor 0.5 after attenuationDistance 4 mm, so 2 mm of glass passes sqrt(0.5).
   PlateScene p = plate_and_sphere(0.002f, 0.004f, 0.5f);
