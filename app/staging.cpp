@@ -310,50 +310,56 @@ void Staging::check_owned() const {
   std::error_code ec;
   if (!fs::is_directory(out_, ec)) return;
   Listed listed;  // another command's folder holds its own files only (a run folder given to it is not its own)
-  // a folder of runs' run folders are its own, whole (a run replaced the same way checks its files); for a
-  // run, only those a sense --repeats names (repeat_NNN): other run folders inside are someone's runs
-  const auto run_folders = [&](bool repeats_only) {
-    for (const auto& e : fs::directory_iterator(out_)) {
-      const std::string n = e.path().filename().string();
-      if (repeats_only && !(n.size() > 7 && starts_with(n, "repeat_") &&
-                            std::all_of(n.begin() + 7, n.end(), [](char c) { return c >= '0' && c <= '9'; })))
-        continue;
-      if (e.is_directory(ec) && !e.is_symlink(ec) && fs::is_regular_file(e.path() / "metadata.json", ec)) listed.entries.insert(n + "/");
-    }
-  };
+  // The run folders a sense --repeats writes (repeat_NNN, with their metadata.json): each holds the files
+  // its own metadata.json lists. Any other folder inside, a run's or not, is someone else's.
+  std::set<std::string> repeats;
   if (of_runs_ || owned_.empty()) {
     // A run and a folder of runs (sense --repeats) replace each other: a run folder's listed files, or a
     // folder of runs' run folders, are spadgen's either way (each refused the other as foreign files).
     if (fs::is_regular_file(out_ / "metadata.json", ec)) listed = listed_files(out_);
-    else run_folders(!of_runs_);
+    else
+      for (const auto& e : fs::directory_iterator(out_)) {
+        const std::string n = e.path().filename().string();
+        if (n.size() > 7 && starts_with(n, "repeat_") && std::all_of(n.begin() + 7, n.end(), [](char c) { return c >= '0' && c <= '9'; }) &&
+            e.is_directory(ec) && !e.is_symlink(ec) && fs::is_regular_file(e.path() / "metadata.json", ec))
+          repeats.insert(n);
+      }
   } else {
     listed.entries = {owned_.begin(), owned_.end()};
   }
   std::vector<std::string> foreign;
-  std::vector<fs::path> folders{out_};
-  while (!folders.empty() && foreign.size() < 6) {
-    const fs::path folder = folders.back();
-    folders.pop_back();
-    for (const auto& e : fs::directory_iterator(folder)) {
-      const std::string rel = e.path().lexically_relative(out_).string();
-      // (derived outputs: reconstruct's and evaluate's, and an interrupted evaluate's staging folder and lock)
-      if (folder == out_ && (starts_with(rel, kOldStylePrefix) || is_derived_output(rel) || starts_with(rel, ".evaluation.spadgen-")))
-        continue;
-      // a derived output's temporary file (writers' ".NAME.tmp-PID-N"), left by a reconstruct killed while it
-      // wrote: the swap removes it with the folder (it made every later run refuse the folder)
-      if (const size_t t = rel.find(".tmp-"); folder == out_ && rel.size() > 1 && rel[0] == '.' && t != std::string::npos &&
-                                                is_derived_output(rel.substr(1, t - 1)))
-        continue;
-      const bool dir = e.is_directory(ec) && !e.is_symlink(ec);
-      if (dir && holds_no_file(e.path())) continue;  // nothing to lose (folders only, empty at their ends)
-      if (dir && listed.entries.count(rel + "/")) continue;  // a run folder of a folder of runs
-      if (of_runs_ && folder == out_ && starts_with(rel, ".repeat_")) continue;  // an earlier version's per-run leftovers
-      const bool entry = listed.entries.count(rel) > 0;
-      if (entry && (!dir || rel.ends_with(".zarr"))) continue;  // a listed file, or a Zarr store with all in it
-      if (dir && (entry || listed.parents.count(rel))) folders.push_back(e.path());
-      else foreign.push_back(rel + (dir ? "/" : ""));
+  // The entries of a run folder `root` (OUT, or one of its repeat_NNN) that `of_root` does not list.
+  const auto walk = [&](const fs::path& root, const Listed& of_root, const auto& self) -> void {
+    std::vector<fs::path> folders{root};
+    while (!folders.empty() && foreign.size() < 6) {
+      const fs::path folder = folders.back();
+      folders.pop_back();
+      for (const auto& e : fs::directory_iterator(folder)) {
+        const std::string rel = e.path().lexically_relative(root).string();
+        const bool top = folder == root, out = root == out_;
+        // (derived outputs: reconstruct's and evaluate's, and an interrupted evaluate's staging folder and lock)
+        if (top && (is_derived_output(rel) || starts_with(rel, ".evaluation.spadgen-") || (out && starts_with(rel, kOldStylePrefix))))
+          continue;
+        // a derived output's temporary file (writers' ".NAME.tmp-PID-N"), left by a reconstruct killed while it
+        // wrote: the swap removes it with the folder (it made every later run refuse the folder)
+        if (const size_t t = rel.find(".tmp-"); top && rel.size() > 1 && rel[0] == '.' && t != std::string::npos &&
+                                                  is_derived_output(rel.substr(1, t - 1)))
+          continue;
+        const bool dir = e.is_directory(ec) && !e.is_symlink(ec);
+        if (dir && holds_no_file(e.path())) continue;  // nothing to lose (folders only, empty at their ends)
+        if (dir && top && out && repeats.count(rel)) {  // a realisation's run folder: its own files only
+          self(e.path(), listed_files(e.path()), self);
+          continue;
+        }
+        if (of_runs_ && top && out && starts_with(rel, ".repeat_")) continue;  // an earlier version's per-run leftovers
+        const bool entry = of_root.entries.count(rel) > 0;
+        if (entry && (!dir || rel.ends_with(".zarr"))) continue;  // a listed file, or a Zarr store with all in it
+        if (dir && (entry || of_root.parents.count(rel))) folders.push_back(e.path());
+        else foreign.push_back(e.path().lexically_relative(out_).string() + (dir ? "/" : ""));
+      }
     }
-  }
+  };
+  walk(out_, listed, walk);
   if (foreign.empty()) return;
   std::string list;
   for (size_t i = 0; i < foreign.size() && i < 5; ++i) list += (i ? ", " : "") + foreign[i];

@@ -226,10 +226,24 @@ TEST_F(App, OneRealisationAndSeveralReplaceEachOther) {
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_TRUE(fs::exists(dir_ / "s/repeat_001/metadata.json"));
   EXPECT_FALSE(fs::exists(dir_ / "s/metadata.json"));
+  // A user's file inside a realisation's folder is not spadgen's (it was removed with the folder).
+  std::ofstream(dir_ / "s/repeat_000/notes.txt") << "mine";
+  for (const std::string& call : {sense, sense + " --repeats 2"}) {
+    r = sh(call);
+    EXPECT_EQ(r.code, 1) << call;
+    EXPECT_THAT(r.output, HasSubstr("holds files that spadgen did not write there (repeat_000/notes.txt")) << call;
+    EXPECT_TRUE(fs::exists(dir_ / "s/repeat_000/notes.txt"));
+  }
+  fs::remove(dir_ / "s/repeat_000/notes.txt");
   fs::copy(dir_ / "run", dir_ / "s/mine", fs::copy_options::recursive);
   r = sh(sense);
   EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("holds files that spadgen did not write there (mine/"));
+  // Neither is a folder of runs of other names, for realisations (they removed every run folder in it).
+  r = sh(sense + " --repeats 2");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("holds files that spadgen did not write there (mine/"));
+  EXPECT_TRUE(fs::exists(dir_ / "s/mine/metadata.json"));
 }
 
 // A cone beam whose spot is far smaller than a pixel (0.001 deg against a pixel's 0.01077 deg: 9.4 um at
