@@ -184,6 +184,10 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   if (scenes::invalid_utf8_at(options.run_dir) != std::string::npos)  // metadata.json records it
     throw Error(scenes::printable(options.run_dir) + ": the run folder's name is not valid UTF-8 text, which metadata.json needs; rename it");
   const fs::path src = options.run_dir;
+  // The run folder's lock, shared with other senses of it, held until the realisations are published: a run
+  // replacing the folder meanwhile would give them its light beside counts of the earlier one.
+  std::optional<FolderLock> run_lock;
+  if (fs::is_regular_file(src / "metadata.json")) run_lock.emplace(src, true);
   const json meta = read_metadata(src);
   if (!meta.contains("light"))
     throw Error(src.string() + ": the run saved no light; run it again with --set outputs.light=true to re-sample its sensor");

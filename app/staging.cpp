@@ -195,21 +195,26 @@ Staging::~Staging() {
 std::string Staging::path(const std::string& rel) const { return (dir_ / rel).string(); }
 
 namespace {
-// Locks P/.NAME.spadgen-lock (flock, exclusive, not waiting) for the folder `out` = P/NAME and returns the
-// descriptor; throws spadgen::Error naming the holder when another spadgen process has it.
-int take_folder_lock(const fs::path& lock_path, const fs::path& out) {
+// Locks P/.NAME.spadgen-lock (flock, exclusive, or shared by readers; not waiting) for the folder `out` =
+// P/NAME and returns the descriptor; throws spadgen::Error naming the holder when another spadgen process
+// has it exclusively (or, exclusive, at all).
+int take_folder_lock(const fs::path& lock_path, const fs::path& out, bool shared = false) {
   for (int attempt = 0; attempt < 16; ++attempt) {
     const int fd = ::open(lock_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
     if (fd < 0)
       throw Error("cannot use " + out.string() + " as the output folder (-o): cannot create its lock file " +
                   lock_path.string() + ": " + std::strerror(errno));
-    if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+    if (::flock(fd, (shared ? LOCK_SH : LOCK_EX) | LOCK_NB) != 0) {
       const int err = errno;
       char holder[64] = {0};
       const ssize_t n = ::pread(fd, holder, sizeof holder - 1, 0);
       ::close(fd);
       std::string who = n > 0 ? std::string(holder, static_cast<size_t>(n)) : std::string();
       while (!who.empty() && (who.back() == '\n' || who.back() == ' ')) who.pop_back();
+      if (err == EWOULDBLOCK && shared)
+        throw Error("the run folder " + out.string() + " is being written by another spadgen run" +
+                    (who.empty() ? std::string() : " (" + who + ")") + ", which holds " + lock_path.string() +
+                    "; wait for it to finish");
       if (err == EWOULDBLOCK)
         throw Error("the output folder " + out.string() + " is being written by another spadgen run" +
                     (who.empty() ? std::string() : " (" + who + ")") + ", which holds " + lock_path.string() +
@@ -221,7 +226,7 @@ int take_folder_lock(const fs::path& lock_path, const fs::path& out) {
     if (::fstat(fd, &locked) == 0 && ::stat(lock_path.c_str(), &now) == 0 && locked.st_ino == now.st_ino &&
         locked.st_dev == now.st_dev) {
       const std::string me = "pid " + pid_text() + "\n";
-      if (::ftruncate(fd, 0) == 0 && ::pwrite(fd, me.data(), me.size(), 0) < 0) {
+      if (!shared && ::ftruncate(fd, 0) == 0 && ::pwrite(fd, me.data(), me.size(), 0) < 0) {
       }  // the pid is only for the message of a second run
       return fd;
     }
@@ -231,10 +236,11 @@ int take_folder_lock(const fs::path& lock_path, const fs::path& out) {
               " keeps being replaced");
 }
 
-void release_folder_lock(const fs::path& lock_path, int& fd) {
+void release_folder_lock(const fs::path& lock_path, int& fd, bool shared = false) {
   if (fd < 0) return;
   // Unlinked while still locked: a run that opened it meanwhile sees the file gone and locks a new one.
-  ::unlink(lock_path.c_str());
+  // (A reader leaves it: other readers may hold it still.)
+  if (!shared) ::unlink(lock_path.c_str());
   ::close(fd);
   fd = -1;
 }
@@ -247,16 +253,16 @@ void Staging::lock() {
 
 void Staging::unlock() { release_folder_lock(lock_path_, lock_fd_); }
 
-FolderLock::FolderLock(const fs::path& folder) {
+FolderLock::FolderLock(const fs::path& folder, bool shared) : shared_(shared) {
   const fs::path out = resolved_folder(folder);
   path_ = lock_path_of(out);
   // A folder no one may write beside (a read-only copy, another user's): nothing can replace it through
   // this lock, and reading it needs none.
   if (::access(out.parent_path().c_str(), W_OK) != 0 && (errno == EROFS || errno == EACCES || errno == EPERM)) return;
-  fd_ = take_folder_lock(path_, out);
+  fd_ = take_folder_lock(path_, out, shared);
 }
 
-FolderLock::~FolderLock() { release_folder_lock(path_, fd_); }
+FolderLock::~FolderLock() { release_folder_lock(path_, fd_, shared_); }
 
 // Under the lock every staging or old folder of OUT belongs to a run that is gone.
 void Staging::recover() {

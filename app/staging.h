@@ -85,7 +85,8 @@ class Staging {
 // counts), and a run or another such command refuses, naming the holder.
 class FolderLock {
  public:
-  explicit FolderLock(const std::filesystem::path& folder);
+  // shared: a reader's (sense of a run), which other readers may hold too, but not a run replacing the folder.
+  explicit FolderLock(const std::filesystem::path& folder, bool shared = false);
   ~FolderLock();
   FolderLock(const FolderLock&) = delete;
   FolderLock& operator=(const FolderLock&) = delete;
@@ -93,6 +94,7 @@ class FolderLock {
  private:
   std::filesystem::path path_;
   int fd_ = -1;
+  bool shared_ = false;
 };
 
 }  // namespace spadgen::app

@@ -2,6 +2,10 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <fcntl.h>
+#include <sys/file.h>
+#include <unistd.h>
+
 #include <cmath>
 #include <fstream>
 #include <limits>
@@ -169,6 +173,25 @@ TEST_F(App, SenseWithAnotherPixelDesignRescalesTheLight) {
   const auto& a = lw.channels.at("photons_per_pulse");
   const auto& b = lg.channels.at("photons_per_pulse");
   for (size_t i = 0; i < a.size(); ++i) ASSERT_NEAR(b[i], a[i], 1e-6 * a[i]) << i;
+}
+
+// A sense holds the run folder's lock, shared: while a run replaces the folder (its lock exclusive) a
+// sense refuses rather than read light of one run and link files of the next; senses of one run share it.
+TEST_F(App, SenseRefusesARunFolderBeingReplaced) {
+  ASSERT_EQ(sh("run " + kLit + " -o " + (dir_ / "run").string()).code, 0);
+  const std::string lock = (dir_ / ".run.spadgen-lock").string();
+  const int fd = ::open(lock.c_str(), O_RDWR | O_CREAT, 0644);
+  ASSERT_GE(fd, 0);
+  ASSERT_EQ(::flock(fd, LOCK_EX | LOCK_NB), 0);
+  Result r = sh("sense " + (dir_ / "run").string() + " -q -o " + (dir_ / "s1").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("the run folder " + (dir_ / "run").string() + " is being written by another spadgen run"));
+  EXPECT_FALSE(fs::exists(dir_ / "s1"));
+  // Another reader's shared lock does not stop it.
+  ASSERT_EQ(::flock(fd, LOCK_SH | LOCK_NB), 0);
+  r = sh("sense " + (dir_ / "run").string() + " -q -o " + (dir_ / "s1").string());
+  EXPECT_EQ(r.code, 0) << r.output;
+  ::close(fd);
 }
 
 // Realisation r of --repeats R with --noise-seed S is the run with seeds.noise = S + r: same files (the
