@@ -1545,6 +1545,28 @@ Scene load_gltf(const std::string& path, const std::string& scene_name, const Sc
   return parse_gltf(read_file_bounded(path, kMaxGltfFileBytes, "glTF file"), path, scene_name, edits);
 }
 
+std::vector<std::string> gltf_external_files(const std::string& path) {
+  const std::string bytes = read_file_bounded(path, kMaxGltfFileBytes, "glTF file");
+  bool binary = false;
+  const nlohmann::json doc = parse_json(gltf_json(path, bytes, &binary), binary ? path + " (its JSON chunk)" : path,
+                                        {/*comments=*/false, /*reject_duplicates=*/false});
+  const std::filesystem::path dir = std::filesystem::path(path).parent_path();
+  std::vector<std::string> files;
+  for (const char* kind : {"buffers", "images"}) {
+    const auto list = doc.find(kind);
+    if (list == doc.end() || !list->is_array()) continue;
+    for (const nlohmann::json& b : *list) {
+      if (!b.is_object() || !b.contains("uri") || !b["uri"].is_string()) continue;
+      const std::string uri = b["uri"].get<std::string>();
+      if (uri.rfind("data:", 0) == 0) continue;
+      const std::string decoded = (dir / uri_decode(uri)).string(), raw = (dir / uri).string();
+      files.push_back(file_problem(decoded, kMaxGltfFileBytes) == "does not exist" && file_problem(raw, kMaxGltfFileBytes) != "does not exist"
+                          ? raw : decoded);
+    }
+  }
+  return files;
+}
+
 Scene parse_gltf(const std::string& bytes, const std::string& path, const std::string& scene_name, const SceneEdits& edits) {
   if (bytes.size() > kMaxGltfFileBytes)
     throw Error(path + ": the glTF file is " + size_text(bytes.size()) + ", larger than the " + size_text(kMaxGltfFileBytes) +

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "core/error.h"
+#include "scenes/scene.h"
 
 namespace spadgen::scenes {
 namespace {
@@ -334,14 +335,14 @@ std::string content_hash(const std::string& scene_file, const std::string& gltf_
   namespace fs = std::filesystem;
   uint64_t h = fnv1a64(file_bytes(scene_file));
   h = fnv1a64(file_bytes(gltf_path), h);
-  std::vector<std::string> side;
-  std::error_code ec;
-  for (const auto& e : fs::directory_iterator(fs::path(gltf_path).parent_path(), ec))
-    if (e.is_regular_file() && e.path() != fs::path(gltf_path) &&
-        (e.path().extension() == ".bin" || e.path().extension() == ".png" || e.path().extension() == ".jpg"))
-      side.push_back(e.path().string());
-  std::sort(side.begin(), side.end());
-  for (const std::string& f : side) h = fnv1a64(file_bytes(f), h);
+  std::vector<std::string> referenced;
+  try {
+    referenced = gltf_external_files(gltf_path);
+  } catch (const Error&) {
+  }  // not a glTF file: loading it fails with the reason; its bytes are hashed above
+  // each file's name (relative to the glTF's folder) and its bytes, so that a swap of two names counts
+  for (const std::string& f : referenced)
+    h = fnv1a64(file_bytes(f), fnv1a64(fs::path(f).lexically_relative(fs::path(gltf_path).parent_path()).string(), h));
   return hex64(h);
 }
 

@@ -53,9 +53,9 @@ std::string printable(const std::string& text);
 // third of the word's length, and at least 2 edits allowed), else "": for "did you mean" messages.
 std::string closest(const std::string& word, const std::vector<std::string>& candidates);
 
-// FNV-1a 64 (16 hex digits) of a scene file, its glTF file and every .bin, .png and .jpg beside the glTF
-// (sorted by name): a stable content hash for provenance, not for security. Files that cannot be read
-// count as empty.
+// FNV-1a 64 (16 hex digits) of a scene file, its glTF file and the files the glTF reads (its buffers and
+// images, gltf_external_files, each by name and content): a stable content hash for provenance, not for
+// security. Files that cannot be read count as empty.
 std::string content_hash(const std::string& scene_file, const std::string& gltf_path);
 
 // FNV-1a 64 of bytes, continuing from `h`, and as 16 hex digits.

@@ -139,6 +139,11 @@ Objects objects_of(const Scene& scene);
 // scene, is a warning (it changes nothing). docs/scene-file.md, "Varying the glTF scene".
 Scene load_gltf(const std::string& path, const std::string& scene_name = "", const SceneEdits& edits = {});
 
+// The files a glTF file reads besides itself: its buffers' and images' URIs that are not data: URIs,
+// resolved against its folder as the loader resolves them (percent-decoded, else as written), in the order
+// it lists them. Throws spadgen::Error when the file is not glTF (as load_gltf does).
+std::vector<std::string> gltf_external_files(const std::string& path);
+
 // The same from the file's bytes (.gltf or .glb, told apart by content): `path` names the file in messages
 // and its folder is where external buffers and images are looked for. The fuzzing harnesses call it.
 Scene parse_gltf(const std::string& bytes, const std::string& path, const std::string& scene_name = "",

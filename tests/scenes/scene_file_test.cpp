@@ -11,6 +11,7 @@
 #include "core/error.h"
 #include "core/units.h"
 #include "scenes/input.h"
+#include "scenes/scene.h"
 #include "scenes/scene_file.h"
 #include "scenes/schema.h"
 
@@ -738,6 +739,32 @@ TEST(SceneFileReference, JsonSchemaIsShippedAndListsEveryKey) {
   EXPECT_EQ(j["properties"]["camera"]["properties"]["crop"]["type"], nlohmann::json::array({"array", "null"}));
   EXPECT_EQ(j["properties"]["seeds"]["properties"]["noise"]["default"], nullptr);
   EXPECT_FALSE(j["properties"]["sensor"]["properties"]["gate"]["additionalProperties"].get<bool>());
+}
+
+}  // namespace
+}  // namespace spadgen::scenes
+
+namespace spadgen::scenes {
+namespace {
+
+// The provenance hash covers the files the glTF reads, wherever they are (a buffer in a sub-folder, a
+// percent-encoded name), and nothing else: an unrelated image beside the glTF made every sample of a
+// dataset stale, and a texture in a sub-folder changed the light while the hash stayed the same.
+TEST_F(SceneFileTest, ContentHashCoversTheFilesTheGltfReadsAndNoOthers) {
+  namespace fs = std::filesystem;
+  fs::create_directories(dir_ / "data");
+  std::ofstream(dir_ / "data/my mesh.bin") << "0123";
+  std::ofstream(dir_ / "scene.json") << "{\"gltf\": \"s.gltf\"}";
+  std::ofstream(dir_ / "s.gltf") << R"({"asset": {"version": "2.0"}, "buffers": [{"uri": "data/my%20mesh.bin", "byteLength": 4},
+                                     {"uri": "data:application/octet-stream;base64,AAAA", "byteLength": 3}]})";
+  EXPECT_EQ(gltf_external_files((dir_ / "s.gltf").string()), std::vector<std::string>{(dir_ / "data/my mesh.bin").string()});
+  const auto hash = [&] { return content_hash((dir_ / "scene.json").string(), (dir_ / "s.gltf").string()); };
+  const std::string before = hash();
+  std::ofstream(dir_ / "notes_screenshot.png") << "not the scene's";
+  std::ofstream(dir_ / "other_scene.bin") << "not the scene's either";
+  EXPECT_EQ(hash(), before);
+  std::ofstream(dir_ / "data/my mesh.bin") << "0124";
+  EXPECT_NE(hash(), before);
 }
 
 }  // namespace
