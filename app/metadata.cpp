@@ -235,6 +235,11 @@ json metadata(const scenes::ResolvedRun& resolved, const std::vector<std::string
                                       {"laser_period", axis.period_s}}},
                      {"values_bytes", r.light_values_bytes},
                      {"layout", "docs/outputs.md, section Saved light"}};
+    json runs = json::array();
+    for (size_t y = 0; y < r.light_fill_factor.size(); ++y)
+      if (y == 0 || r.light_fill_factor[y] != r.light_fill_factor[y - 1]) runs.push_back({y, 1, r.light_fill_factor[y]});
+      else runs.back()[1] = runs.back()[1].get<size_t>() + 1;
+    meta["light"]["fill_factor"] = runs;
   }
   meta["laser_photons_per_pulse"] = {{"total_all_pixels", r.laser_total},
                                      {"outside_time_window", r.out_of_window_total},

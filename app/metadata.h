@@ -91,6 +91,9 @@ struct RunRecord {
   // outputs.light: the pixels it covers (sensor coordinates) and the size of its values.
   std::optional<PixelRect> light_region;
   int64_t light_values_bytes = 0;
+  // The fill factor of each sensor row in that light (the renderer's; a sense with another pixel design
+  // links the light as it is): metadata.json light.fill_factor, as runs of rows [first, count, value].
+  std::vector<double> light_fill_factor;
   // spadgen sense: the run folder it read and which realisation of the temporal noise this is.
   std::optional<nlohmann::json> sense;
   // spadgen dataset: the dataset, the sample's index, parameters and hash (app/dataset.h).

@@ -148,6 +148,7 @@ RunResult run(const RunOptions& options) {
     light->write(files);
     record.light_region = light_rect;
     record.light_values_bytes = light->values_bytes();
+    record.light_fill_factor = sensor.row_fill_factor();
   }
   files.push_back("metadata.json");
   order_files(files);

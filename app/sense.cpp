@@ -167,6 +167,46 @@ GroundTruthTile object_truth(const writers::ExrData& e, const PixelRect& img, co
   return gt;
 }
 
+// The run's ground truth for another pixel design: its laser channels (photons reaching the pixel's
+// active area, the fill factor in them) times row_scale of the image's sensor rows.
+void scale_truth(writers::ExrData& e, const PixelRect& img, const std::vector<double>& row_scale) {
+  for (auto& [name, values] : e.channels) {
+    if (!(name == "direct_other_laser" || name == "indirect_laser" || (name.starts_with("object") && name.ends_with(".laser"))))
+      continue;
+    for (int y = 0; y < e.height; ++y) {
+      const double s = row_scale[size_t(img.y0 + y)];
+      for (int x = 0; x < e.width; ++x) {
+        float& v = values[size_t(y) * size_t(e.width) + size_t(x)];
+        v = static_cast<float>(double(v) * s);
+      }
+    }
+  }
+}
+
+void write_exr_as(const writers::ExrData& e, const std::string& path, ExrCompression compression) {
+  writers::ExrImage image(e.width, e.height);
+  for (const auto& [name, values] : e.channels) std::copy(values.begin(), values.end(), image.channel(name));
+  for (const auto& [key, value] : e.attributes) image.set_attribute(key, value);
+  image.write(path, compression);
+}
+
+// A run's (H, W, T) transient of the sensor rows crop.y0 .., each row's photons times its row_scale.
+void write_rescaled_transient(const fs::path& from, const std::string& to, const std::vector<double>& row_scale, const PixelRect& crop) {
+  const writers::NpyReader in(from.string());
+  if (in.shape().size() != 3 || in.shape()[0] != crop.height)
+    throw Error(from.string() + ": expected (" + std::to_string(crop.height) + ", W, T) as metadata.json's transient crop");
+  const float* v = in.data<float>();
+  const int64_t row = in.shape()[1] * in.shape()[2];
+  writers::NpyWriter out(to, writers::Dtype::F32, in.shape(), /*mapped=*/false);
+  std::vector<float> buf(static_cast<size_t>(row));
+  for (int64_t y = 0; y < in.shape()[0]; ++y) {
+    const double s = row_scale[size_t(crop.y0 + y)];
+    for (int64_t i = 0; i < row; ++i) buf[size_t(i)] = static_cast<float>(double(v[y * row + i]) * s);
+    out.write(y * row, buf.data(), row);
+  }
+  out.commit();
+}
+
 // The resolved scene less what does not change the sensor's noise-free files: the noise's seed and
 // whether counts and frames are written.
 nlohmann::ordered_json noise_free_part(nlohmann::ordered_json resolved) {
@@ -287,26 +327,56 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     throw Error((src / "metadata.json").string() + ": light.crop_in_sensor does not match the run's image");
   // The light as the run stored it (its outputs.storage), whatever this call's storage is.
   SavedLight light(src.string(), region, axis, source.config.outputs.storage);
-  // The renderer applied the run's fill factor of each row; another pixel design rescales the light.
-  {
-    const std::vector<double> was = sensor::PixelLayout(source.config.sensor.preset, cfg.camera.height_px).row_fill_factor(source.config.sensor);
-    const std::vector<double> now = sensor.row_fill_factor();
-    if (was != now) {
-      std::vector<double> scale(now.size());
-      for (size_t y = 0; y < now.size(); ++y) scale[y] = now[y] / was[y];
-      light.set_row_scale(std::move(scale));
+  // The renderer applied the run's fill factor of each row (as the light records it: a sense with another
+  // design links the light unchanged; a run before the record, its own design's); another pixel design
+  // rescales the light, and every file of photons the sense keeps from the run (the ground truth's laser
+  // channels, the transients), which it then writes anew rather than links.
+  const std::vector<double> now = sensor.row_fill_factor();
+  // The run folder's files of photons (its ground truth, transients) are its own design's ...
+  const std::vector<double> design = sensor::PixelLayout(source.config.sensor.preset, cfg.camera.height_px).row_fill_factor(source.config.sensor);
+  std::vector<double> file_scale;  // empty: this call's design
+  if (design != now) {
+    file_scale.resize(now.size());
+    for (size_t y = 0; y < now.size(); ++y) file_scale[y] = now[y] / design[y];
+  }
+  // ... and its light the one it records
+  std::vector<double> was = design;
+  if (const json::json_pointer p("/light/fill_factor"); meta.contains(p)) {
+    std::vector<double> recorded;
+    for (const json& r : meta.at(p)) {
+      if (!r.is_array() || r.size() != 3 || !r[0].is_number_unsigned() || !r[1].is_number_unsigned() || !r[2].is_number() ||
+          r[0].get<size_t>() != recorded.size() || !(r[2].get<double>() > 0.0))
+        throw Error((src / "metadata.json").string() + ": light.fill_factor: expected runs of rows [first, count, fill factor > 0] from row 0");
+      recorded.insert(recorded.end(), r[1].get<size_t>(), r[2].get<double>());
     }
+    if (recorded.size() != was.size())
+      throw Error((src / "metadata.json").string() + ": light.fill_factor covers " + std::to_string(recorded.size()) +
+                  " rows, the sensor has " + std::to_string(was.size()));
+    was = std::move(recorded);
+  }
+  if (was != now) {
+    std::vector<double> row_scale(now.size());
+    for (size_t y = 0; y < now.size(); ++y) row_scale[y] = now[y] / was[y];
+    light.set_row_scale(std::move(row_scale));
   }
 
   // The files the sensor does not write come from the run: the exact ground truth, the transients, the light.
   // labels.exr is the sensor's: recomputed from the run's ground truth for this call's settings.
   std::vector<std::string> linked;
+  std::set<std::string> rescaled;  // of those, the files of photons another pixel design rewrites
   for (const auto& f : meta.at("files")) {
     const std::string name = f.get<std::string>();
     const std::string stem = name.substr(0, name.rfind('.'));
-    if (name == "ground_truth.exr" || name == "previews/depth.png" || stem == "transient" || stem == "transient_indirect" ||
-        name.rfind("light/", 0) == 0)
+    const bool transient = stem == "transient" || stem == "transient_indirect";
+    if (name == "ground_truth.exr" || name == "previews/depth.png" || transient || name.rfind("light/", 0) == 0)
       linked.push_back(name);
+    if (!file_scale.empty() && (name == "ground_truth.exr" || transient)) {
+      if (transient && !name.ends_with(".npy"))
+        throw Error(src.string() + ": its " + name + " holds the light of the run's pixel design, which sense rescales for "
+                    "another design in .npy transients only; sense a run with outputs.storage = npy, or keep the run's "
+                    "sensor.preset and fill factors");
+      rescaled.insert(name);
+    }
   }
   // The same sensor as the run's (settings, chip, tables; only the noise may differ): what does not depend
   // on the noise (the rates, the maps, the laser and ambient images, the labels) is the run's, bit for
@@ -444,8 +514,12 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   if (options.progress)
     std::fprintf(stderr, "spadgen: sense %s: %d x %d pixels, K = %d, %zu realisation(s)\n", src.string().c_str(), img.width,
                  img.height, sensor.K(), runs.size());
-  std::unique_ptr<writers::ExrData> truth;
-  if (outputs.front()->labels() && !from_run.count("labels.exr")) truth = std::make_unique<writers::ExrData>(writers::read_exr((src / "ground_truth.exr").string()));
+  const bool labels_from_truth = outputs.front()->labels() && !from_run.count("labels.exr");
+  std::unique_ptr<writers::ExrData> truth;  // the run's, for the labels and the ground truth rescaled
+  if (labels_from_truth || rescaled.count("ground_truth.exr")) {
+    truth = std::make_unique<writers::ExrData>(writers::read_exr((src / "ground_truth.exr").string()));
+    if (!file_scale.empty()) scale_truth(*truth, img, file_scale);
+  }
   const double setup_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   Progress progress(tiles.size(), options.progress);
   StageClock clock;  // where the tiles' time goes (metadata.json "run")
@@ -465,7 +539,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     const StageClock::Scope time(&clock, StageClock::kOutputs);
     const sensor::SensorMapsTile maps = sensor.maps(rect);
     // The labels do not depend on the noise: the first realisation's serve all (the others link them).
-    if (truth)
+    if (labels_from_truth)
       outputs.front()->put_labels(sensor::object_labels(
           sensor, object_truth(*truth, img, rect, cfg.render.max_layers, src / "ground_truth.exr"), s.front(), axis,
           cfg.laser.emission_delay_s));
@@ -484,7 +558,12 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     outputs[r]->write(prov);
     std::vector<std::string> files = outputs[r]->files();
     for (const std::string& f : linked) {  // the later realisations link the first's (copies across file systems)
-      link_into(r == 0 ? src / f : fs::path(staging.front()->path(f)), *staging[r], f);
+      if (r == 0 && rescaled.count(f)) {
+        if (f == "ground_truth.exr") write_exr_as(*truth, staging[r]->path(f), cfg.outputs.exr_compression);
+        else write_rescaled_transient(src / f, staging[r]->path(f), file_scale, rect_of(meta.at("transient").at("crop_in_sensor")));
+      } else {
+        link_into(r == 0 ? src / f : fs::path(staging.front()->path(f)), *staging[r], f);
+      }
       files.push_back(f);
     }
     if (r > 0)
@@ -522,6 +601,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     if (meta.contains("transient")) record.transient_crop = rect_of(meta.at("transient").at("crop_in_sensor"));
     record.light_region = region;
     record.light_values_bytes = meta.at("light").at("values_bytes").get<int64_t>();
+    record.light_fill_factor = was;  // the light is linked as the run saved it
     record.threads = options.threads;
     record.seconds = tiles_seconds;
     record.times.setup_seconds = setup_seconds;

@@ -173,6 +173,27 @@ TEST_F(App, SenseWithAnotherPixelDesignRescalesTheLight) {
   const auto& a = lw.channels.at("photons_per_pulse");
   const auto& b = lg.channels.at("photons_per_pulse");
   for (size_t i = 0; i < a.size(); ++i) ASSERT_NEAR(b[i], a[i], 1e-6 * a[i]) << i;
+  // The files of photons it keeps from the run are the design's too (they were linked at the run's:
+  // labels from them were half a run's), and the labels computed from them.
+  const auto near_all = [&](const fs::path& want_file, const fs::path& got_file, const std::vector<std::string>& channels) {
+    const auto w = spadgen::writers::read_exr(want_file.string()), g = spadgen::writers::read_exr(got_file.string());
+    for (const std::string& c : channels) {
+      SCOPED_TRACE(want_file.filename().string() + " " + c);
+      const auto &x = w.channels.at(c), &y = g.channels.at(c);
+      ASSERT_EQ(x.size(), y.size());
+      for (size_t i = 0; i < x.size(); ++i) ASSERT_NEAR(y[i], x[i], 1e-6 * std::fabs(x[i]) + 1e-30) << i;
+    }
+  };
+  near_all(dir_ / "other/ground_truth.exr", dir_ / "sensed/ground_truth.exr",
+           {"object0.laser", "direct_other_laser", "indirect_laser", "range", "object0.path"});
+  near_all(dir_ / "other/labels.exr", dir_ / "sensed/labels.exr", {"object0.edge_counts", "object0.detectable"});
+  const std::vector<double> tw = values(read_npy(dir_ / "other/transient.npy")), tg = values(read_npy(dir_ / "sensed/transient.npy"));
+  ASSERT_EQ(tw.size(), tg.size());
+  for (size_t i = 0; i < tw.size(); ++i) ASSERT_NEAR(tg[i], tw[i], 1e-6 * tw[i] + 1e-30) << i;
+  // A sense of that sense back to the run's design reads the light as it was saved: the run's rates, exactly.
+  ASSERT_EQ(sh("sense " + (dir_ / "sensed").string() + " -q --set sensor.preset=pixel_A -o " + (dir_ / "back").string()).code, 0);
+  EXPECT_EQ(slurp(dir_ / "run/detection_rate.npy"), slurp(dir_ / "back/detection_rate.npy"));
+  near_all(dir_ / "run/ground_truth.exr", dir_ / "back/ground_truth.exr", {"object0.laser", "indirect_laser"});
 }
 
 // A sense holds the run folder's lock, shared: while a run replaces the folder (its lock exclusive) a
