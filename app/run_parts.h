@@ -32,7 +32,9 @@ void order_files(std::vector<std::string>& files);
 nlohmann::json file_bytes(const std::filesystem::path& dir, const std::vector<std::string>& files);
 
 // The command's worker threads while it lives: TBB's (all cores when threads <= 0) and OpenEXR's pool,
-// which compresses and decompresses the images with as many.
+// which compresses and decompresses the images with as many. From the first one on, every thread of the
+// process flushes denormal floats to zero (FTZ, DAZ), whether or not it renders (the renderer's Embree
+// sets them on its threads): a run's and a sense's sensor stages agree bit for bit.
 class ThreadLimit {
  public:
   explicit ThreadLimit(int threads);

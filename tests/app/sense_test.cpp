@@ -196,6 +196,17 @@ TEST_F(App, SenseWithAnotherPixelDesignRescalesTheLight) {
   near_all(dir_ / "run/ground_truth.exr", dir_ / "back/ground_truth.exr", {"object0.laser", "indirect_laser"});
 }
 
+// Rates so small they are float denormals (a PDP of 1e-36): the run's sensor stage flushed them to 0 on
+// the threads Embree had set up, a sense (no Embree) kept them; every command flushes them now.
+TEST_F(App, SenseFlushesDenormalsAsTheRunDoes) {
+  const std::string dim = " --set sensor.pixel_A.pdp_peak=1e-36 --set sensor.dark_counts=false --set sensor.crosstalk=false";
+  ASSERT_EQ(sh("run " + kLit + " -o " + (dir_ / "run").string()).code, 0);
+  ASSERT_EQ(sh("run " + kLit + dim + " -o " + (dir_ / "dim").string()).code, 0);
+  const Result r = sh("sense " + (dir_ / "run").string() + " -q" + dim + " -o " + (dir_ / "sensed").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(slurp(dir_ / "dim/detection_rate.npy"), slurp(dir_ / "sensed/detection_rate.npy"));
+}
+
 // A sense holds the run folder's lock, shared: while a run replaces the folder (its lock exclusive) a
 // sense refuses rather than read light of one run and link files of the next; senses of one run share it.
 TEST_F(App, SenseRefusesARunFolderBeingReplaced) {
