@@ -93,8 +93,8 @@ int main(int argc, char** argv) {
       ->type_name("KEY=VALUE");
   CLI::Option* noise_opt = sense_cmd->add_option("--noise-seed", noise_seed, "seed of the temporal noise (seeds.noise)");
   CLI::Option* chip_opt = sense_cmd->add_option("--chip-seed", chip_seed, "seed of the chip's fixed pattern (seeds.chip)");
-  sense_cmd->add_option("--repeats", sense.repeats, "realisations of the temporal noise, noise seeds S, S + 1, ...: one folder "
-                                                    "each, OUT/repeat_000, ... (rates computed once)")
+  sense_cmd->add_option("--repeats", sense.repeats, "realisations of the temporal noise, noise seeds S, S + 1, ...: for R > 1 one "
+                                                    "folder each, OUT/repeat_000, ... (rates computed once); 1: OUT is the run folder")
       ->check(CLI::Range(1, 100000));
   sense_cmd->add_option("--threads", sense.threads, "worker threads (default: all cores); outputs do not depend on it")
       ->check(kThreadsRange);

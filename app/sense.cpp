@@ -247,6 +247,12 @@ std::vector<RunResult> sense(const SenseOptions& options) {
                   " shapes the rendered light: use spadgen run");
   }
   if (options.repeats < 1) throw Error("--repeats: expected at least 1, found " + std::to_string(options.repeats));
+  // A seed given twice, as an option and by --set, is refused rather than one silently winning.
+  for (const std::string& o : options.overrides) {
+    const std::string key = o.substr(0, scenes::assignment_split(o));
+    if ((key == "seeds.noise" && options.noise_seed) || (key == "seeds.chip" && options.chip_seed))
+      throw Error("--set " + key + " and --" + (key == "seeds.noise" ? "noise" : "chip") + "-seed both give the seed: give one");
+  }
 
   // The run's scene file as it resolved, with this call's changes.
   const std::string scene_text = meta.at("resolved_scene").dump();
@@ -368,7 +374,8 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     const std::string name = f.get<std::string>();
     const std::string stem = name.substr(0, name.rfind('.'));
     const bool transient = stem == "transient" || stem == "transient_indirect";
-    if (name == "ground_truth.exr" || name == "previews/depth.png" || transient || name.rfind("light/", 0) == 0)
+    if (name == "ground_truth.exr" || (name == "previews/depth.png" && cfg.outputs.previews) || transient ||
+        name.rfind("light/", 0) == 0)
       linked.push_back(name);
     if (!file_scale.empty() && (name == "ground_truth.exr" || transient)) {
       if (transient && !name.ends_with(".npy"))
@@ -381,8 +388,11 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   // The same sensor as the run's (settings, chip, tables; only the noise may differ): what does not depend
   // on the noise (the rates, the maps, the laser and ambient images, the labels) is the run's, bit for
   // bit, and is linked rather than computed and written again.
-  const bool same_sensor = meta.value("sensor_tables_fnv1a64", std::string()) == sensor_tables_hash(cfg) &&
-                           noise_free_part(first.resolved) == noise_free_part(source.resolved);
+  const bool same_tables = meta.value("sensor_tables_fnv1a64", std::string()) == sensor_tables_hash(cfg);
+  const bool same_sensor = same_tables && noise_free_part(first.resolved) == noise_free_part(source.resolved);
+  if (!same_tables && meta.contains("sensor_tables_fnv1a64") && sensor_tables_hash(source.config) != meta.at("sensor_tables_fnv1a64").get<std::string>())
+    std::fprintf(stderr, "spadgen: warning: the sensor's tables (laser.pulse_shape_csv, sensor.gate.profile_csv or maps_exr, "
+                         "a pdp_csv) have changed on disk since the run: this sense uses them as they are now\n");
   RunConfig write_cfg = cfg;  // what the sensor stage writes itself
   write_cfg.outputs.ground_truth = false, write_cfg.outputs.transient = false, write_cfg.outputs.light = false;
 
@@ -596,6 +606,8 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     // them for all) replaces the run's.
     if (r == 0) labels_summary = record.ground_truth_summary;
     if (meta.contains("ground_truth_summary")) record.ground_truth_summary = meta.at("ground_truth_summary");
+    if (record.ground_truth_summary.is_object() && std::find(files.begin(), files.end(), "labels.exr") == files.end())
+      for (const char* key : {"objects_detectable", "detectable_fraction"}) record.ground_truth_summary.erase(key);  // no labels
     if (!labels_summary.is_null() && record.ground_truth_summary.is_object()) record.ground_truth_summary.update(labels_summary);
     record.dataset = options.dataset;
     if (meta.contains("transient")) record.transient_crop = rect_of(meta.at("transient").at("crop_in_sensor"));
@@ -609,7 +621,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     record.times.take_stages(clock);
     // The realisations' images so far (a sense with --repeats writes them one after the other).
     record.times.finish_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - tiles_done).count();
-    record.sense = json{{"from", src.string()}, {"repeat", r}, {"repeats", runs.size()}};
+    record.sense = json{{"from", fs::absolute(src).lexically_normal().string()}, {"repeat", r}, {"repeats", runs.size()}};
     InterruptGuard::check();
     outputs[r]->commit();
     record.file_bytes = file_bytes(staging[r]->path(""), files);  // every file complete: metadata.json goes last
@@ -626,7 +638,8 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     top->publish(all);
   }
   if (options.progress)
-    std::fprintf(stderr, "spadgen: wrote %zu folder(s) to %s in %.1f s\n", results.size(), out.string().c_str(), progress.seconds());
+    std::fprintf(stderr, "spadgen: wrote %zu folder(s) to %s in %.1f s\n", results.size(), out.string().c_str(),
+                 std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count());
   return results;
 }
 

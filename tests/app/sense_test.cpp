@@ -207,6 +207,25 @@ TEST_F(App, SenseFlushesDenormalsAsTheRunDoes) {
   EXPECT_EQ(slurp(dir_ / "dim/detection_rate.npy"), slurp(dir_ / "sensed/detection_rate.npy"));
 }
 
+// What a sense keeps from the run follows its own settings: an intensity-mode sense of a gate sweep writes
+// no labels and its summary says nothing of them (it kept the run's); without previews it links none; a seed
+// given twice is refused (the option silently won).
+TEST_F(App, SenseKeepsOnlyWhatItsSettingsAskFor) {
+  ASSERT_EQ(sh("run " + kLit + " --set outputs.transient=false -o " + (dir_ / "run").string()).code, 0);
+  const std::string sense = "sense " + (dir_ / "run").string() + " -q ";
+  ASSERT_EQ(sh(sense + "--set acquisition.mode=intensity -o " + (dir_ / "int").string()).code, 0);
+  const auto meta = nlohmann::json::parse(slurp(dir_ / "int/metadata.json"));
+  EXPECT_FALSE(fs::exists(dir_ / "int/labels.exr"));
+  EXPECT_TRUE(meta["ground_truth_summary"].contains("hit_fraction"));
+  EXPECT_FALSE(meta["ground_truth_summary"].contains("objects_detectable"));
+  EXPECT_FALSE(meta["ground_truth_summary"].contains("detectable_fraction"));
+  ASSERT_EQ(sh(sense + "--set outputs.previews=false -o " + (dir_ / "np").string()).code, 0);
+  EXPECT_FALSE(fs::exists(dir_ / "np/previews"));
+  const Result r = sh(sense + "--noise-seed 30 --set seeds.noise=31 -o " + (dir_ / "two").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("--set seeds.noise and --noise-seed both give the seed"));
+}
+
 // A sense holds the run folder's lock, shared: while a run replaces the folder (its lock exclusive) a
 // sense refuses rather than read light of one run and link files of the next; senses of one run share it.
 TEST_F(App, SenseRefusesARunFolderBeingReplaced) {
