@@ -259,7 +259,7 @@ void add_pixel_type(std::vector<Key>& s, const std::string& name, P type) {
 #define PIXEL(member) [type](auto& c) -> auto& { return type(c).member; }
   s.push_back(number(p + "fill_factor", PIXEL(fill_factor), kNone, open_closed(0, 1), "fraction of the pixel area that is photosensitive"));
   s.push_back(number(p + "pdp_peak", PIXEL(pdp_peak), kNone, open_closed(0, 1), "peak photon detection probability"));
-  s.push_back(number(p + "pdp_peak_wavelength_nm", PIXEL(pdp_peak_wavelength_m), kNmUnit, closed(200, 2000), "wavelength of the PDP peak"));
+  s.push_back(number(p + "pdp_peak_wavelength_nm", PIXEL(pdp_peak_wavelength_m), kNmUnit, closed(200, 2000), "wavelength of the PDP peak; without pdp_csv, strictly between 300 and 1100 nm (the built-in curve is zero at and beyond both ends)"));
   s.push_back(file(p + "pdp_csv", PIXEL(pdp_csv), "table of (wavelength_nm, PDP) replacing the built-in curve, covering the laser's wavelength (0 outside it); relative to the scene file; \"\" = built-in curve scaled to pdp_peak"));
   s.push_back(number(p + "pdp_nonuniformity", PIXEL(pdp_nonuniformity), kNone, closed(0, 0.5), "relative spread (sigma) of PDP across pixels"));
   s.push_back(number(p + "dcr_median_cps", PIXEL(dcr_median_cps), plain("counts/s"), closed(0, 1e7), "median dark count rate at room temperature (25 C)"));
@@ -368,7 +368,7 @@ std::vector<Key> build() {
   k.push_back(integer("/seeds/chip", FIELD(seeds.chip), kNone, closed(0, 9.007199254740992e15), "seed of the chip's fixed pattern (gate skew and length maps, DCR population, PDP non-uniformity: sensor_maps.exr); null = seed"));
   k.push_back(integer("/seeds/noise", FIELD(seeds.noise), kNone, closed(0, 9.007199254740992e15), "seed of the temporal noise (binary frames, counts, crosstalk draws); null = seed"));
 
-  k.push_back(string("/camera/gltf_camera", FIELD(camera.gltf_camera), "name of a glTF camera node to use instead of position/look_at/up and the field of view; \"\" = defined here"));
+  k.push_back(string("/camera/gltf_camera", FIELD(camera.gltf_camera), "name of a glTF camera node to use instead of position/look_at/up and focal_length_mm (its field of view, unless vertical_fov_deg is set); \"\" = defined here"));
   k.push_back(vec3("/camera/position_m", FIELD(camera.position_m), kMetre, kWorld, "camera centre (world, glTF frame: +Y up)"));
   k.push_back(vec3("/camera/look_at_m", FIELD(camera.look_at_m), kMetre, kWorld, "point the optical axis passes through"));
   k.push_back(vec3("/camera/up", FIELD(camera.up), kNone, kWorld, "up direction (world); need not be orthogonal to the axis"));
@@ -376,7 +376,7 @@ std::vector<Key> build() {
   k.push_back(integer("/camera/height_px", FIELD(camera.height_px), kPixel, closed(1, 16384), "sensor rows (500: one half of the paper's chip; 1000: the full chip)"));
   k.push_back(number("/camera/pixel_pitch_um", FIELD(camera.pixel_pitch_m), kUmUnit, closed(0.1, 1000), "pixel pitch"));
   k.push_back(number("/camera/focal_length_mm", FIELD(camera.focal_length_m), kMmUnit, open_closed(0, 10000), "lens focal length (ignored when vertical_fov_deg is set)"));
-  k.push_back(number("/camera/vertical_fov_deg", FIELD(camera.vertical_fov_rad), kDegree, closed(1e-3, 179), "vertical field of view; null = from focal_length_mm"));
+  k.push_back(number("/camera/vertical_fov_deg", FIELD(camera.vertical_fov_rad), kDegree, closed(1e-3, 179), "vertical field of view (also over a glTF camera's); null = from focal_length_mm, or the glTF camera's"));
   k.push_back(number("/camera/f_number", FIELD(camera.f_number), kNone, closed(0.5, 64), "lens f-number N (aperture diameter = f / N)"));
   k.push_back(number("/camera/optics_transmission", FIELD(camera.optics_transmission), kNone, open_closed(0, 1), "fraction of the light the lens (and any filter) passes"));
   k.push_back(rect("/camera/crop", FIELD(camera.crop), "[x0, y0, width, height] region of interest; null = the whole sensor"));

@@ -120,8 +120,10 @@ class GateSweep final : public Acquisition {
     gj["knot_max_error"] = gate_.max_knot_error;
     gj["grid_ps"] = gate_.grid_s / kPs;
     gj["grid_max_error"] = gate_.max_grid_error;
-    gj["skew_spread_fwhm_ps"] = skew_on_ ? g.skew_fwhm_s / kPs : 0.0;
-    gj["length_spread_fwhm_ps"] = skew_on_ ? g.length_fwhm_s / kPs : 0.0;
+    // The spreads the maps were drawn with: none when they are the user's (sensor.gate.maps_exr).
+    const nlohmann::json none(nullptr);
+    gj["skew_spread_fwhm_ps"] = !g.maps_exr.empty() ? none : nlohmann::json(skew_on_ ? g.skew_fwhm_s / kPs : 0.0);
+    gj["length_spread_fwhm_ps"] = !g.maps_exr.empty() ? none : nlohmann::json(skew_on_ ? g.length_fwhm_s / kPs : 0.0);
     j["gate"] = gj;
     return j;
   }

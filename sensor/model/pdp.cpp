@@ -45,7 +45,7 @@ PdpCurve PdpCurve::from_config(const PixelTypeConfig& c, const std::string& key)
   if (!(at_peak > 0.0)) {
     std::ostringstream m;
     m << key << ".pdp_peak_wavelength_nm: the built-in PDP curve is zero at " << c.pdp_peak_wavelength_m / kNm
-      << " nm; expected a wavelength between 300 and 1100 nm or a pdp_csv table";
+      << " nm; expected a wavelength strictly between 300 and 1100 nm (the curve is zero at and beyond both ends) or a pdp_csv table";
     throw Error(m.str());
   }
   for (double& v : curve.pdp_) v *= c.pdp_peak / at_peak;
