@@ -349,9 +349,23 @@ void add_ignored_when(std::vector<Key>& keys) {
          [](const RunConfig& c) { return c.sensor.crosstalk ? "" : "sensor.crosstalk is false"; });
     when({(p + "pdp_nonuniformity").c_str()},
          [](const RunConfig& c) { return c.sensor.pdp_nonuniformity ? "" : "sensor.pdp_nonuniformity is false"; });
+    const bool a = p == "/sensor/pixel_A/";
+    when({(p + "pdp_peak").c_str(), (p + "pdp_peak_wavelength_nm").c_str()}, [a](const RunConfig& c) {
+      const PixelTypeConfig& px = a ? c.sensor.pixel_A : c.sensor.pixel_B;
+      return px.pdp_csv.empty() ? std::string() : std::string("sensor.pixel_") + (a ? "A" : "B") + ".pdp_csv is set (its table is the PDP)";
+    });
   }
-  when({"/sensor/gate/skew_fwhm_ps", "/sensor/gate/length_fwhm_ps"},
-       [](const RunConfig& c) { return c.sensor.skew ? "" : "sensor.gate_skew is false"; });
+  when({"/laser/pulse_fwhm_ps"}, [](const RunConfig& c) {
+    return c.laser.pulse_shape_csv.empty() ? "" : "laser.pulse_shape_csv is set (its table is the pulse)";
+  });
+  when({"/sensor/gate/rise_ps", "/sensor/gate/fall_ps", "/sensor/gate/edge_shape", "/sensor/gate/length_ns"}, [](const RunConfig& c) {
+    return c.sensor.gate.profile_csv.empty() ? "" : "sensor.gate.profile_csv is set (its table is the gate, with its own length)";
+  });
+  when({"/sensor/temperature_C"}, [](const RunConfig& c) { return c.sensor.dark_counts ? "" : "sensor.dark_counts is false"; });
+  when({"/sensor/gate/skew_fwhm_ps", "/sensor/gate/length_fwhm_ps"}, [](const RunConfig& c) {
+    if (!c.sensor.skew) return std::string("sensor.gate_skew is false");
+    return c.sensor.gate.maps_exr.empty() ? std::string() : std::string("sensor.gate.maps_exr is set (its maps are the skews and lengths)");
+  });
 }
 
 std::vector<Key> build() {

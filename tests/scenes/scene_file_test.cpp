@@ -378,7 +378,15 @@ TEST_F(SceneFileTest, KeysThatDoNothingInTheChosenModeAreWarnings) {
       {{"sensor.crosstalk=false", "sensor.pixel_A.crosstalk_probability=0.1"}, "but does nothing: sensor.crosstalk is false"},
       {{"sensor.pdp_nonuniformity=false", "sensor.pixel_A.pdp_nonuniformity=0.1"}, "but does nothing: sensor.pdp_nonuniformity is false"},
       {{"sensor.gate_skew=false", "sensor.gate.skew_fwhm_ps=100"}, "sensor.gate.skew_fwhm_ps: set to 100 but does nothing: sensor.gate_skew is false"},
+      {{"sensor.gate.maps_exr=m.exr", "sensor.gate.length_fwhm_ps=50"}, "sensor.gate.length_fwhm_ps: set to 50 but does nothing: sensor.gate.maps_exr is set"},
+      {{"laser.pulse_shape_csv=t.csv", "laser.pulse_fwhm_ps=100"}, "laser.pulse_fwhm_ps: set to 100 but does nothing: laser.pulse_shape_csv is set"},
+      {{"sensor.gate.profile_csv=t.csv", "sensor.gate.rise_ps=100"}, "sensor.gate.rise_ps: set to 100 but does nothing: sensor.gate.profile_csv is set"},
+      {{"sensor.gate.profile_csv=t.csv", "sensor.gate.length_ns=3"}, "sensor.gate.length_ns: set to 3 but does nothing: sensor.gate.profile_csv is set"},
+      {{"sensor.pixel_A.pdp_csv=t.csv", "sensor.pixel_A.pdp_peak=0.2"}, "sensor.pixel_A.pdp_peak: set to 0.2 but does nothing: sensor.pixel_A.pdp_csv is set"},
+      {{"sensor.dark_counts=false", "sensor.temperature_C=40"}, "sensor.temperature_C: set to 40 but does nothing: sensor.dark_counts is false"},
       // Where the keys take effect, or hold their default, nothing is said.
+      {{"laser.pulse_fwhm_ps=100", "sensor.gate.rise_ps=100", "sensor.pixel_A.pdp_peak=0.2", "sensor.temperature_C=40"}, ""},
+      {{"sensor.pixel_B.pdp_csv=t.csv", "sensor.preset=full_chip", "sensor.pixel_A.pdp_peak=0.2"}, ""},
       {{"acquisition.gate_sweep.step_ps=50", "acquisition.cycles_per_frame=10"}, ""},
       {{"acquisition.mode=intensity", "acquisition.gate_sweep.step_ps=36", "acquisition.intensity.exposure_us=2"}, ""},
       {{"acquisition.mode=intensity", "acquisition.frames=256", "acquisition.intensity.exposure=dual", "acquisition.intensity.dual_ratio=4"}, ""},
@@ -388,6 +396,8 @@ TEST_F(SceneFileTest, KeysThatDoNothingInTheChosenModeAreWarnings) {
       {{"sensor.preset=full_chip", "sensor.pixel_A.pdp_peak=0.5", "sensor.pixel_B.pdp_peak=0.5"}, ""},
       {{"sensor.gate.skew_fwhm_ps=100", "sensor.pixel_A.dcr_median_cps=100"}, ""},
   };
+  std::ofstream(dir_ / "t.csv") << "0,0\n1,1\n";  // tables the keys name (the scene file checks they exist)
+  std::ofstream(dir_ / "m.exr") << "";
   for (const Case& c : cases) {
     std::string set;
     for (const std::string& o : c.set) set += " --set " + o;
