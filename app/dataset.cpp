@@ -3,6 +3,7 @@
 #include "app/progress.h"
 
 #include <algorithm>
+#include <optional>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -331,7 +332,7 @@ void dataset_run(const DatasetOptions& options) {
   // next run skips them), and the index lists them: best effort, the signal's message comes first.
   const auto stopped = [&](const std::string& where) {
     try {
-      folder.write_index(inspect_all(folder, false));
+      folder.write_index([&] { return inspect_all(folder, false); });
     } catch (const std::exception& e) {
       std::fprintf(stderr, "spadgen: dataset: the index was not updated: %s\n", e.what());
     }
@@ -341,6 +342,9 @@ void dataset_run(const DatasetOptions& options) {
   std::deque<size_t> pending;
   for (size_t t = 0; t < todo.size(); ++t) pending.push_back(t);
   size_t handled = 0, busy_in_a_row = 0;
+  std::optional<std::chrono::steady_clock::time_point> waiting_since;  // since all samples left were others'
+  std::chrono::steady_clock::time_point last_said;
+  int said = 0;
   while (!pending.empty()) {
     const size_t t = pending.front();
     pending.pop_front();
@@ -351,12 +355,27 @@ void dataset_run(const DatasetOptions& options) {
       pending.push_back(t);
       if (++busy_in_a_row >= pending.size()) {  // every sample left is another run's for now
         if (interrupt_flag().load()) throw stopped("waiting for samples another run is generating");
+        // Said after 10 s and every minute: a run that was stopped (SIGSTOP, a suspended job) or hangs holds
+        // its samples until it ends, and this one waits for it.
+        const auto now = std::chrono::steady_clock::now();
+        if (!waiting_since) waiting_since = now, last_said = now;
+        const double waited = std::chrono::duration<double>(now - *waiting_since).count();
+        if (waited >= 10.0 && (said == 0 || std::chrono::duration<double>(now - last_said).count() >= 60.0)) {
+          std::vector<int64_t> held;
+          for (size_t p : pending) held.push_back(todo[p].record.sample.index);
+          std::sort(held.begin(), held.end());
+          std::fprintf(stderr, "spadgen: dataset: waiting %.0f s for sample(s) %s, which another run on %s holds (a run "
+                               "that was stopped or hangs holds them until it ends)\n",
+                       waited, datasets::ranges_text(held).c_str(), dir.string().c_str());
+          last_said = now, ++said;
+        }
         std::this_thread::sleep_for(std::chrono::milliseconds(200));
         busy_in_a_row = 0;
       }
       continue;
     }
     busy_in_a_row = 0;
+    waiting_since.reset(), said = 0;
     ++handled;
     if (!rec.hash.empty() && folder.inspect(s).status == Status::Done) {
       ++by_others;  // completed by another run meanwhile
@@ -412,7 +431,12 @@ void dataset_run(const DatasetOptions& options) {
       // said first: recording it in failed/ may fail too (the disk that made the sample fail is full)
       std::fprintf(stderr, "spadgen: dataset: sample %lld failed: %s\n", static_cast<long long>(s.index), e.what());
       failed.push_back(s.index);
-      folder.record_failure(s, rec.hash, e.what());
+      try {
+        folder.record_failure(s, rec.hash, e.what());
+      } catch (const std::exception& r) {  // the other samples go on (a full disk failed the whole run)
+        std::fprintf(stderr, "spadgen: dataset: the failure of sample %lld is not recorded in failed/: %s\n",
+                     static_cast<long long>(s.index), r.what());
+      }
     }
     if (options.progress) {
       const auto now = std::chrono::steady_clock::now();
@@ -424,8 +448,7 @@ void dataset_run(const DatasetOptions& options) {
     }
   }
 
-  const std::vector<SampleRecord> records = inspect_all(folder, options.progress);
-  folder.write_index(records);
+  const std::vector<SampleRecord> records = folder.write_index([&] { return inspect_all(folder, options.progress); });
   if (options.progress)
     std::fprintf(stderr, "spadgen: dataset %s: %s (this run: %lld generated, %lld skipped, %lld completed by another run, %zu failed)\n",
                  dir.string().c_str(), status_counts(records).c_str(), static_cast<long long>(generated),

@@ -132,7 +132,12 @@ void DatasetFolder::claim() const {
   fs::create_directories(dir_, ec);
   if (ec) throw Error("cannot create the dataset folder " + dir_.string() + ": " + ec.message());
   const ojson wanted = record();
-  if (checked(wanted) != wanted) writers::write_file_atomic((dir_ / "dataset.json").string(), wanted.dump(2) + "\n");
+  {
+    // Checked and written as one step: two datasets started at once on a new folder both found it empty
+    // and both wrote dataset.json, mixing their samples.
+    const FolderLock lock(dir_);
+    if (checked(wanted) != wanted) writers::write_file_atomic((dir_ / "dataset.json").string(), wanted.dump(2) + "\n");
+  }
   fs::create_directories(dir_ / "samples", ec);
   if (ec) throw Error("cannot create " + (dir_ / "samples").string() + ": " + ec.message());
 }
@@ -353,11 +358,13 @@ void DatasetFolder::clear_failure(const Sample& s) const {
   fs::remove(dir_ / "failed", ec);  // when it is empty now (a resumed run leaves none, as a run never failed)
 }
 
-void DatasetFolder::write_index(const std::vector<SampleRecord>& records) const {
+std::vector<SampleRecord> DatasetFolder::write_index(const std::function<std::vector<SampleRecord>()>& inspect) const {
   const FolderLock lock(dir_);
+  std::vector<SampleRecord> records = inspect();
   writers::write_file_atomic((dir_ / "index.jsonl").string(), index_jsonl(spec_, records));
   writers::write_file_atomic((dir_ / "index.csv").string(), index_csv(spec_, records));
   writers::write_file_atomic((dir_ / "dataset.md").string(), dataset_card(*this, records));
+  return records;
 }
 
 json dataset_section(const DatasetFolder& folder, const Sample& s, const std::string& hash, int repeat) {

@@ -17,6 +17,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <map>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -99,9 +100,11 @@ class DatasetFolder {
   void record_failure(const Sample& s, const std::string& hash, const std::string& error) const;
   void clear_failure(const Sample& s) const;
 
-  // Rewrites index.jsonl, index.csv and dataset.md from the records of every sample (in index order),
-  // under the folder's lock so that the last shard to finish writes the complete index.
-  void write_index(const std::vector<SampleRecord>& records) const;
+  // Rewrites index.jsonl, index.csv and dataset.md from the records of every sample (in index order) that
+  // `inspect` reads from the folder, under the folder's lock: the read and the write are one step, so that
+  // the last shard to finish writes the complete index (a shard that read the folder before another's last
+  // sample and wrote after it listed that sample missing). Returns the records.
+  std::vector<SampleRecord> write_index(const std::function<std::vector<SampleRecord>()>& inspect) const;
 
  private:
   const std::string& scene_content_hash(int scene) const;
