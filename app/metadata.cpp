@@ -150,12 +150,13 @@ json run_json(const RunRecord& r) {
           {"rays", rays_json}, {"components", components}};
 }
 
-json camera_json(const render::Camera& cam, const PixelRect& img) {
+json camera_json(const render::Camera& cam, const PixelRect& img, const glm::dvec3& laser_world) {
   const double f = cam.focal_length_m() / cam.pitch_m();
   const double cx = 0.5 * cam.width() - 0.5 - img.x0, cy = 0.5 * cam.height() - 0.5 - img.y0;
   // + 0.0 turns the -0.0 of a negated zero into 0.0, which reads better in the JSON.
   const glm::dvec3 x = cam.right() + 0.0, up = cam.up() + 0.0, y = -cam.up() + 0.0, z = cam.forward() + 0.0;
   const glm::dvec3 t = cam.position() + 0.0;
+  const glm::dvec3 l = laser_world - t;
   return {{"convention", "OpenCV: camera x right, y down, z forward; pixel (u, v) centred at integers (u, v), "
                          "(0, 0) the image's top-left pixel (the crop's corner); world: the glTF scene's frame"},
           {"intrinsics", {{f, 0.0, cx}, {0.0, f, cy}, {0.0, 0.0, 1.0}}},
@@ -164,7 +165,8 @@ json camera_json(const render::Camera& cam, const PixelRect& img) {
           {"pixel_pitch_m", cam.pitch_m()},
           {"position_m", {t.x, t.y, t.z}},
           {"forward", {z.x, z.y, z.z}},
-          {"up", {up.x, up.y, up.z}}};
+          {"up", {up.x, up.y, up.z}},
+          {"laser_position_m", {glm::dot(l, x) + 0.0, glm::dot(l, y) + 0.0, glm::dot(l, z) + 0.0}}};
 }
 
 

@@ -45,8 +45,8 @@ std::string sensor_tables_hash(const RunConfig& c);
 nlohmann::json axis_json(const TimeAxis& a);
 
 // The images' pinhole camera for metadata.json: OpenCV intrinsics (with the crop's offset), the
-// camera-to-world pose, focal length and pitch.
-nlohmann::json camera_json(const render::Camera& cam, const PixelRect& img);
+// camera-to-world pose, focal length and pitch, and where the laser emits from in the camera's frame.
+nlohmann::json camera_json(const render::Camera& cam, const PixelRect& img, const glm::dvec3& laser_world);
 
 // The scene's objects (scenes::objects_of) for metadata.json: id, the glTF node's name and index, the
 // names of its meshes (Scene::meshes, the ground truth's mesh_id) and of their materials.

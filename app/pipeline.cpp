@@ -159,7 +159,7 @@ RunResult run(const RunOptions& options) {
   record.photons_per_pulse_emitted = renderer.photons_per_pulse();
   record.objects = objects_json(scene);
   record.model = model_components(cfg, &scene);
-  record.camera = camera_json(camera, img);
+  record.camera = camera_json(camera, img, renderer.laser_position());
   record.threads = options.threads;
   record.dataset = options.dataset;
   record.seconds = render_seconds;

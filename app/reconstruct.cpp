@@ -377,7 +377,7 @@ reconstruct::Scores evaluate_run(const EvaluateCommand& c, const std::string& ru
   for (int y = 0; y < run.height(); ++y)
     for (int x = 0; x < run.width(); ++x) {
       const size_t i = size_t(y) * size_t(run.width()) + size_t(x);
-      outcome[i] = scores.add(x, y, labels.pixels[i], img.of(i));
+      outcome[i] = scores.add(x, y, labels.pixels[i], img.of(i), run.bistatic(x, y));
     }
   if (!maps_dir.empty()) write_maps(maps_dir, run.width(), run.height(), outcome, c.tolerance_m);
   return scores;

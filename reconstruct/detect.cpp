@@ -47,15 +47,33 @@ double crossing(const std::vector<double>& v, int lo, int hi, double level, bool
   return best;
 }
 
-// The ranges folded by the laser period (edges are paired unfolded: a rise and its fall may straddle a
-// period's end), in increasing range.
+// The detections' half paths folded by the laser period (edges are paired unfolded: a rise and its fall
+// may straddle a period's end) and turned into ranges, in increasing range.
 std::vector<Detection> folded(std::vector<Detection> out, const PixelTiming& timing) {
-  for (Detection& d : out) d.range_m = timing.fold(d.range_m);
+  for (Detection& d : out) d.range_m = timing.range(d.range_m);
   std::stable_sort(out.begin(), out.end(), [](const Detection& a, const Detection& b) { return a.range_m < b.range_m; });
   return out;
 }
 
 }  // namespace
+
+Bistatic Bistatic::of(const double ray[3], const double laser_m[3]) {
+  return {ray[0] * laser_m[0] + ray[1] * laser_m[1] + ray[2] * laser_m[2],
+          laser_m[0] * laser_m[0] + laser_m[1] * laser_m[1] + laser_m[2] * laser_m[2]};
+}
+
+double Bistatic::range_of_half_path(double h) const {
+  if (coaxial()) return h;
+  const double s = 2.0 * h, baseline = std::sqrt(sq_m2);
+  if (!(s > baseline)) return 0.5 * (s - baseline);  // r(|L|) = 0, where the formula's r starts
+  // (s^2 - |L|^2) / (2 (s - L.d)), written so that it stays finite as the ray points at the laser (L.d -> |L|)
+  return 0.5 * (s + along_m) + 0.5 * (along_m * along_m - sq_m2) / (s - along_m);
+}
+
+double Bistatic::half_path_of_range(double r) const {
+  if (coaxial()) return r;
+  return 0.5 * (r + std::sqrt(std::max(0.0, r * r - 2.0 * r * along_m + sq_m2)));
+}
 
 double PixelTiming::range_of_rise(double k) const {
   return (start_s + k * step_s + rise_offset_s - emission_delay_s) * kSpeedOfLight / 2.0;
@@ -66,10 +84,10 @@ double PixelTiming::range_of_fall(double k) const {
 
 double ambiguity_range_m(double period_s) { return period_s * kSpeedOfLight / 2.0; }
 
-double PixelTiming::fold(double range_m) const {
-  if (!(period_s > 0.0)) return range_m;
+double PixelTiming::fold(double half_path_m) const {
+  if (!(period_s > 0.0)) return half_path_m;
   const double ambiguity = ambiguity_range_m(period_s);
-  double r = std::fmod(range_m, ambiguity);
+  double r = std::fmod(half_path_m, ambiguity);
   if (r < 0.0) r += ambiguity;
   return r < ambiguity ? r : 0.0;  // -1e-300 + ambiguity rounds to it
 }

@@ -5,8 +5,9 @@
 // at time t raises lambda when the gate's end reaches t and lowers it when the gate's start passes t:
 //   rising edge at tau:  t = tau + gate_delay + skew + length      (PixelTiming::rise_offset_s)
 //   falling edge at tau: t = tau + gate_delay + skew                (PixelTiming::fall_offset_s)
-// and its range is c (t - emission_delay) / 2, folded into [0, c T / 2) for the laser period T (a return
-// of the pulse before arrives as one of this pulse: a camera of one period cannot tell). Both detectors locate an edge at the half point of its
+// and its half path c (t - emission_delay) / 2, folded into [0, c T / 2) for the laser period T (a return
+// of the pulse before arrives as one of this pulse: a camera of one period cannot tell), gives its range
+// (Bistatic: the half path itself when the laser sits at the camera). Both detectors locate an edge at the half point of its
 // step in the linearised domain lambda = -ln(1 - c / N) (the paper's eq. 5), where overlapping returns
 // add, so a near-saturated profile does not put the edge early. docs/detection.md states each rule.
 #pragma once
@@ -26,18 +27,36 @@ struct Detection {
 // c T / 2 for the laser period T: the ranges a camera of one period tells apart.
 double ambiguity_range_m(double period_s);
 
+// Where the laser sits against a pixel's ray. A surface at range r along the pixel-centre ray (unit d from
+// the camera centre) returns after the path s = |r d - L| + r: from the laser at L (relative to the camera
+// centre) to the surface and back to the camera. A return's time gives its half path h = s / 2 =
+// c (t - emission_delay) / 2, which is its range only when the laser sits at the camera (L = 0); beside the
+// lens, r = (s^2 - |L|^2) / (2 (s - L.d)), exactly (the surface in the air: a medium on the way lengthens s).
+struct Bistatic {
+  double along_m = 0.0;  // L . d
+  double sq_m2 = 0.0;    // |L|^2; 0: the laser at the camera, range = half path
+  // The pixel's ray from the camera centre (unit) and the laser's position from it, in one frame.
+  static Bistatic of(const double ray[3], const double laser_m[3]);
+  bool coaxial() const { return sq_m2 == 0.0; }
+  double range_of_half_path(double h) const;  // for any h: below |L| / 2 (no surface can return), continued linearly
+  double half_path_of_range(double r) const;  // (r + |r d - L|) / 2, for r >= 0
+};
+
 // When a pixel's gate opens and closes relative to the laser trigger, from the acquisition and the
-// pixel's gate maps (sensor_maps.exr).
+// pixel's gate maps (sensor_maps.exr), and where its laser sits.
 struct PixelTiming {
   double start_s = 0.0;        // gate position of k = 0
   double step_s = 0.0;         // gate step
   double rise_offset_s = 0.0;  // gate_delay + skew + length: a rising edge at tau means a return at tau + this
   double fall_offset_s = 0.0;  // gate_delay + skew: a falling edge at tau means a return at tau + this
   double emission_delay_s = 0.0;
-  double period_s = 0.0;  // the laser's: a range folds into [0, c period / 2), all a camera of one period tells; 0: none
-  double range_of_rise(double k) const;  // unfolded: c (t - emission_delay) / 2
+  double period_s = 0.0;  // the laser's: a half path folds into [0, c period / 2), all a camera of one period tells; 0: none
+  Bistatic bistatic;
+  double range_of_rise(double k) const;  // the half path c (t - emission_delay) / 2, unfolded
   double range_of_fall(double k) const;
-  double fold(double range_m) const;     // into [0, c period / 2)
+  double fold(double half_path_m) const;  // into [0, c period / 2)
+  // A return's range from its unfolded half path: folded, then converted through `bistatic`.
+  double range(double half_path_m) const { return bistatic.range_of_half_path(fold(half_path_m)); }
 };
 
 // The paper's detector (section 4.D and 4.E): the profile smoothed by a moving average over

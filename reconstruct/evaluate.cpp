@@ -16,7 +16,7 @@ nlohmann::json rate(const Scores::Tally& t) {
 }  // namespace
 
 PixelOutcome Scores::add(int x, int y, std::vector<TruthObject> objects,
-                         const std::vector<std::pair<double, double>>& detections) {
+                         const std::vector<std::pair<double, double>>& detections, const Bistatic& bistatic) {
   PixelOutcome o;
   o.first_error_m = std::numeric_limits<float>::quiet_NaN();
   std::vector<double> dets;
@@ -29,10 +29,18 @@ PixelOutcome Scores::add(int x, int y, std::vector<TruthObject> objects,
     size_t object, detection;
   };
   std::vector<Pair> pairs;
+  // The error of a detection folded by the laser period: folded as the return's half path is (which is
+  // its range only with the laser at the camera), then that half path's range against the object's.
+  const auto error = [&](double det, double object) {
+    if (bistatic.coaxial()) return options_.ambiguity_m > 0.0 ? std::remainder(det - object, options_.ambiguity_m) : det - object;
+    const double h = bistatic.half_path_of_range(object);
+    double e = bistatic.half_path_of_range(det) - h;
+    if (options_.ambiguity_m > 0.0) e = std::remainder(e, options_.ambiguity_m);
+    return bistatic.range_of_half_path(h + e) - object;
+  };
   for (size_t i = 0; i < objects.size(); ++i)
     for (size_t j = 0; j < dets.size(); ++j) {
-      double e = dets[j] - objects[i].range_m;
-      if (options_.ambiguity_m > 0.0) e = std::remainder(e, options_.ambiguity_m);
+      const double e = error(dets[j], objects[i].range_m);
       if (std::abs(e) <= options_.tolerance_m) pairs.push_back({e, i, j});
     }
   std::stable_sort(pairs.begin(), pairs.end(), [](const Pair& a, const Pair& b) { return std::abs(a.error) < std::abs(b.error); });
@@ -108,7 +116,7 @@ nlohmann::json Scores::to_json(const std::map<int, std::string>& names) const {
   nlohmann::json j;
   j["matching"] = {{"tolerance_m", options_.tolerance_m},
                    {"rule", "per pixel, object-detection pairs in increasing |range error| within the tolerance, each once"},
-                   {"range_error", "detection minus object range, modulo c T / 2 for the run's laser period T"}};
+                   {"range_error", "detection minus object range, the detection folded onto the object by c T / 2 of half path (laser to object to camera, over 2) for the run's laser period T"}};
   if (options_.min_score > -1e300) j["matching"]["min_score"] = options_.min_score;
   j["pixels"] = pixels_;
   j["objects"] = rate(all_);

@@ -4,7 +4,8 @@
 // object<j>.detectable) are matched one to one with the detections: pairs are taken in increasing
 // |range error| while the error is within `tolerance_m`. A matched object is found; an unmatched
 // detection is a false detection. Range errors are detection minus truth over the matched pairs, modulo
-// the range a laser period spans (a detector reports a farther object folded into it, as the camera sees it).
+// the half path a laser period spans (a detector reports a farther object folded into it, as the camera
+// sees it; with the laser beside the lens the fold is of the return's half path, not of its range).
 #pragma once
 #include <array>
 #include <map>
@@ -13,6 +14,7 @@
 #include <vector>
 
 #include "core/tile.h"
+#include "reconstruct/detect.h"
 
 namespace spadgen::reconstruct {
 
@@ -39,8 +41,10 @@ struct PixelOutcome {
 class Scores {
  public:
   explicit Scores(const EvaluateOptions& options) : options_(options) {}
-  // One pixel. detections: ranges and scores, any order.
-  PixelOutcome add(int x, int y, std::vector<TruthObject> objects, const std::vector<std::pair<double, double>>& detections);
+  // One pixel. detections: ranges and scores, any order; bistatic: where the laser sits against the pixel's
+  // ray (the folding is of half paths, detect.h).
+  PixelOutcome add(int x, int y, std::vector<TruthObject> objects, const std::vector<std::pair<double, double>>& detections,
+                   const Bistatic& bistatic = {});
   void merge(const Scores& other);
   // metrics.json's content; names: object id -> name, for the per-object table.
   nlohmann::json to_json(const std::map<int, std::string>& names = {}) const;

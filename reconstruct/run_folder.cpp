@@ -117,6 +117,24 @@ RunFolder::RunFolder(const std::string& dir) : dir_(dir) {
     if (m.width != W_ || m.height != H_) throw Error(maps + ": size differs from metadata.json's image");
     skew_ps_ = std::move(m.channels["gate_skew_ps"]);
     length_ps_ = std::move(m.channels["gate_length_ps"]);
+    // The pixel rays and where the laser sits (a return's time holds both legs of its path).
+    const auto K = get<std::vector<std::vector<double>>>(meta_, "/camera/intrinsics", meta_path);
+    if (K.size() != 3 || K[0].size() != 3 || K[1].size() != 3 || !(K[0][0] > 0.0) || !(K[1][1] > 0.0))
+      throw Error(meta_path + ": /camera/intrinsics is not a 3 x 3 pinhole matrix");
+    fx_ = K[0][0], fy_ = K[1][1], cx_ = K[0][2], cy_ = K[1][2];
+    if (meta_.contains(nlohmann::json::json_pointer("/camera/laser_position_m"))) {
+      const auto l = get<std::vector<double>>(meta_, "/camera/laser_position_m", meta_path);
+      if (l.size() != 3) throw Error(meta_path + ": /camera/laser_position_m is not 3 numbers");
+      std::copy(l.begin(), l.end(), laser_m_);
+    } else if (get<std::string>(meta_, "/resolved_scene/laser/beam", meta_path) != "gltf_light") {
+      // a run of a spadgen that did not record it: laser.offset_m, from (x right, y up, -z forward)
+      const auto o = get<std::vector<double>>(meta_, "/resolved_scene/laser/offset_m", meta_path);
+      if (o.size() != 3) throw Error(meta_path + ": /resolved_scene/laser/offset_m is not 3 numbers");
+      laser_m_[0] = o[0], laser_m_[1] = -o[1], laser_m_[2] = -o[2];
+    } else {
+      throw Error(meta_path + ": no /camera/laser_position_m (where the glTF light that is the laser sits): written by "
+                  "an older spadgen; run the scene again");
+    }
   } else {
     dual_ = get<std::string>(meta_, "/resolved_scene/acquisition/intensity/exposure", meta_path) == "dual";
     dual_ratio_ = dual_ ? get<double>(meta_, "/resolved_scene/acquisition/intensity/dual_ratio", meta_path) : 1.0;
@@ -140,7 +158,14 @@ PixelTiming RunFolder::timing(int x, int y) const {
   t.rise_offset_s = t.fall_offset_s + length_ps_[i] * 1e-12;
   t.emission_delay_s = emission_delay_s_;
   t.period_s = period_s_;
+  t.bistatic = bistatic(x, y);
   return t;
+}
+
+Bistatic RunFolder::bistatic(int x, int y) const {
+  const double u = (x - cx_) / fx_, v = (y - cy_) / fy_, n = std::sqrt(u * u + v * v + 1.0);
+  const double ray[3] = {u / n, v / n, 1.0 / n};
+  return Bistatic::of(ray, laser_m_);
 }
 
 void RunFolder::rates(int y0, int y1, float* out) const { read_rows(y0, y1, true, false, out); }

@@ -64,6 +64,8 @@ Renderer::Renderer(const scenes::Scene& scene, const RenderStageConfig& config)
 
 Renderer::~Renderer() = default;
 
+glm::dvec3 Renderer::laser_position() const { return impl_->laser.position; }
+
 double Renderer::photons_per_pulse() const {
   const LaserConfig& l = impl_->config.laser;
   return spadgen::photons_per_pulse(l.average_power_W, l.repetition_rate_Hz, l.wavelength_m);

@@ -80,6 +80,8 @@ class Renderer {
 
   // Photons per laser pulse emitted (N_p = P / (f_rep h c / lambda)).
   double photons_per_pulse() const;
+  // Where the laser emits from (world): laser.offset_m from the camera centre, or the glTF light's position.
+  glm::dvec3 laser_position() const;
 
   // The pixels of a sensor row whose camera rays travel, and with a target error accumulate, together.
   static constexpr int kBlockPixels = 16;

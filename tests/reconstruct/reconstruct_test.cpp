@@ -389,4 +389,53 @@ TEST(Detectors, RangesAreFoldedByTheLaserPeriod) {
   EXPECT_NEAR(s.errors().at(1), -0.002, 1e-9);
 }
 
+// With the laser beside the lens a return's half path is not its range. For surfaces at known ranges r
+// along unit rays d, with lasers at L up to 10 cm from the camera centre, the path laser -> surface ->
+// camera computed here, s = |r d - L| + r: Bistatic gives back r from s / 2 and s / 2 from r.
+TEST(Bistatic, RangeAndHalfPathAreEachOthersInverseAndTheClosedForm) {
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int i = 0; i < 2000; ++i) {
+    double d[3] = {u(rng) * 0.3, u(rng) * 0.3, 1.0};  // a camera's field of view
+    const double n = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    for (double& c : d) c /= n;
+    const double L[3] = {u(rng) * 0.1, u(rng) * 0.1, u(rng) * 0.05};
+    const double r = 0.05 * std::pow(2000.0, (u(rng) + 1.0) / 2.0);  // 5 cm to 100 m
+    const double leg = std::sqrt(std::pow(r * d[0] - L[0], 2) + std::pow(r * d[1] - L[1], 2) + std::pow(r * d[2] - L[2], 2));
+    const double h = (leg + r) / 2.0;
+    const Bistatic b = Bistatic::of(d, L);
+    ASSERT_NEAR(b.range_of_half_path(h), r, 1e-12 * (1.0 + r)) << i;
+    ASSERT_NEAR(b.half_path_of_range(r), h, 1e-12 * (1.0 + r)) << i;
+  }
+  // The laser at the camera: the half path is the range, exactly; and no surface returns before |L| / 2.
+  const double d[3] = {0.0, 0.0, 1.0}, none[3] = {0.0, 0.0, 0.0}, beside[3] = {0.03, 0.0, 0.0};
+  EXPECT_EQ(Bistatic::of(d, none).range_of_half_path(0.123456789), 0.123456789);
+  const Bistatic b = Bistatic::of(d, beside);
+  EXPECT_NEAR(b.range_of_half_path(0.015), 0.0, 1e-15);  // s = |L|: the surface at the camera
+  EXPECT_LT(b.range_of_half_path(0.01), 0.0);             // earlier: continued, monotone
+  EXPECT_GT(b.range_of_half_path(0.0151), b.range_of_half_path(0.0149));
+}
+
+// A return folds by its half path (time), not by its range: an object beyond c T / 2 seen with the laser
+// 3 cm beside the lens is matched with no error when the detection is its folded half path's range.
+TEST(Evaluate, FoldsABistaticReturnByItsHalfPath) {
+  constexpr double kPeriod = 25e-9, kAmbiguity = kC * kPeriod / 2.0;
+  const double d[3] = {0.2 / std::sqrt(1.04), 0.0, 1.0 / std::sqrt(1.04)}, L[3] = {0.03, 0.0, 0.0};
+  const Bistatic b = Bistatic::of(d, L);
+  PixelTiming t;
+  t.period_s = kPeriod;
+  t.bistatic = b;
+  EvaluateOptions opt;
+  opt.ambiguity_m = kAmbiguity;
+  Scores s(opt);
+  for (const double r : {0.5, 4.2, 9.0}) {
+    const double detected = t.range(b.half_path_of_range(r));  // what a detector reports of its return
+    const PixelOutcome o = s.add(0, 0, {{0, r, true}}, {{detected, 5.0}}, b);
+    EXPECT_EQ(o.found, 1) << r;
+    EXPECT_NEAR(s.errors().back(), 0.0, 1e-9) << r;
+  }
+  // taken modulo c T / 2 in range instead, the folded ones were off by the bistatic term's change
+  EXPECT_GT(std::abs(std::remainder(t.range(b.half_path_of_range(9.0)) - 9.0, kAmbiguity)), 1e-5);
+}
+
 }  // namespace
