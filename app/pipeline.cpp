@@ -23,6 +23,7 @@
 #include "core/stage_clock.h"
 #include "core/units.h"
 #include "render/camera.h"
+#include "render/lights.h"
 #include "render/renderer.h"
 #include "scenes/scene.h"
 #include "scenes/scene_file.h"
@@ -64,10 +65,7 @@ RunResult run(const RunOptions& options) {
   const render::Camera camera(cfg.camera, scene);
   warn(laser_warnings(cfg, camera));
   sensor::SensorModel sensor(sensor_stage(cfg));
-  if (!cfg.sensor.gate.maps_exr.empty()) {
-    const writers::ExrData maps = writers::read_exr(cfg.sensor.gate.maps_exr);
-    sensor.set_maps(maps.width, maps.height, maps.channels, cfg.sensor.gate.maps_exr);
-  }
+  apply_user_maps(sensor, cfg);
   warn(sensor_warnings(sensor));
   const render::Renderer renderer(scene, render_stage(cfg, sensor.row_fill_factor()));
   const int objects = int(scenes::objects_of(scene).list.size());
@@ -185,6 +183,11 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
   const scenes::Scene scene = scenes::load_gltf(c.gltf_path, c.gltf_scene, c.edits);
   const render::Camera camera(c.camera, scene);  // camera.gltf_camera names a camera of the glTF, as the run needs
   sensor::SensorModel sensor(sensor_stage(c));
+  apply_user_maps(sensor, c);  // maps that do not fit the sensor are refused here as by the run
+  {
+    int laser_light = -1;  // laser.gltf_light names a light of the glTF, as the run needs
+    (void)render::make_laser(render_stage(c, sensor.row_fill_factor()), camera, scene, &laser_light);
+  }
   std::ostringstream o;
   o << "# resolved scene file " << c.scene_file << "\n" << r.resolved.dump(2) << "\n\n";
   o << "# glTF\n" << scenes::summarize(scene) << "\n";

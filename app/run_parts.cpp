@@ -31,6 +31,12 @@ TimeAxis time_axis(const RunConfig& c, const sensor::SensorModel& s) {
   return a;
 }
 
+void apply_user_maps(sensor::SensorModel& sensor, const RunConfig& c) {
+  if (c.sensor.gate.maps_exr.empty()) return;
+  const writers::ExrData maps = writers::read_exr(c.sensor.gate.maps_exr);
+  sensor.set_maps(maps.width, maps.height, maps.channels, c.sensor.gate.maps_exr);
+}
+
 void order_files(std::vector<std::string>& files) {
   std::sort(files.begin(), files.end(), [](const std::string& a, const std::string& b) {
     const bool ma = a == "metadata.json", mb = b == "metadata.json";

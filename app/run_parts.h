@@ -31,6 +31,10 @@ void order_files(std::vector<std::string>& files);
 // metadata.json's file_bytes: written once every other file is complete.
 nlohmann::json file_bytes(const std::filesystem::path& dir, const std::vector<std::string>& files);
 
+// The user's gate maps (sensor.gate.maps_exr), when the scene file names them, into the sensor: run,
+// sense and info read them alike (throws spadgen::Error naming the file when they do not fit the sensor).
+void apply_user_maps(sensor::SensorModel& sensor, const RunConfig& c);
+
 // The command's worker threads while it lives: TBB's (all cores when threads <= 0) and OpenEXR's pool,
 // which compresses and decompresses the images with as many. From the first one on, every thread of the
 // process flushes denormal floats to zero (FTZ, DAZ), whether or not it renders (the renderer's Embree

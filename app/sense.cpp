@@ -301,10 +301,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   const ThreadLimit threads(options.threads);
 
   sensor::SensorModel sensor(sensor_stage(cfg));
-  if (!cfg.sensor.gate.maps_exr.empty()) {
-    const writers::ExrData maps = writers::read_exr(cfg.sensor.gate.maps_exr);
-    sensor.set_maps(maps.width, maps.height, maps.channels, cfg.sensor.gate.maps_exr);
-  }
+  apply_user_maps(sensor, cfg);
   for (std::string& w : sensor_warnings(sensor)) {
     std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
     scene_warnings.push_back(std::move(w));

@@ -93,6 +93,9 @@ SensorModel::Impl::Impl(const SensorStageConfig& c) : cfg(c) {
   const std::vector<int> used = maps->layout().types();
   for (int t = 0; t < 2; ++t) {
     types[t].name = to_string(t == 0 ? PixelPreset::PixelA : PixelPreset::PixelB);
+    // A design the preset does not use is not built: its keys do nothing (a warning says so), and one
+    // its PDP curve would refuse (a wavelength where the built-in curve is zero) refused the whole run.
+    if (std::find(used.begin(), used.end(), t) == used.end()) continue;
     const PdpCurve curve = PdpCurve::from_config(*tc[t], "sensor." + types[t].name);
     // A measured table that stops short of the laser's wavelength makes its pixels blind to the laser (PDP 0
     // outside the table): a mistake, not a sensor.

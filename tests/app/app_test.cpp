@@ -523,6 +523,23 @@ TEST(AppCommands, InfoRefusesACameraTheGltfDoesNotHave) {
   EXPECT_THAT(r.output, HasSubstr("(cameras: 'spad_camera')"));
 }
 
+// What the run refuses before rendering, info refuses too (it passed both): a laser.gltf_light the glTF
+// does not have; gate maps of another size than the sensor; and a pixel design the preset does not use
+// is not built (a wavelength its PDP curve refuses failed the run after the 'does nothing' warning).
+TEST_F(App, InfoRefusesWhatTheRunRefusesAndNotWhatItIgnores) {
+  Result r = sh("info " + kScenes + "flat_target.json --set laser.beam=gltf_light --set laser.gltf_light=zzz");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("laser.gltf_light: no KHR_lights_punctual light named 'zzz'"));
+  ASSERT_EQ(sh("run " + kScenes + "flat_target.json -q --set camera.crop=[500,240,8,8] -o " + (dir_ / "crop").string()).code, 0);
+  r = sh("info " + kScenes + "flat_target.json --set sensor.gate.maps_exr=" + (dir_ / "crop/sensor_maps.exr").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("expected the full sensor, 1024 x 500 pixels, found 8 x 8"));
+  r = sh("run " + kScenes + "flat_target.json -q --set camera.crop=[500,240,4,4] --set sensor.pixel_B.pdp_peak_wavelength_nm=250 -o " +
+         (dir_ / "b").string());
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("sensor.pixel_B.pdp_peak_wavelength_nm: set to 250 but does nothing"));
+}
+
 }  // namespace
 
 // detection_rate.npy keeps the flux where expected counts saturate: at 1000 times the power, lambda is
