@@ -69,8 +69,10 @@ class FlushDenormals : public tbb::task_scheduler_observer {
 ThreadLimit::ThreadLimit(int threads) {
   // Every command's floats flush denormals, as Embree sets its threads for the renderer: a sense (which
   // creates no Embree device) kept rates of 1e-40 that the run's sensor stage had flushed to 0.
-  static FlushDenormals flush;
+  // The calling thread first: TBB's task contexts take the floating-point settings of the thread that
+  // starts TBB (the observer's first use does), and apply them to every task they run.
   flush_denormals();
+  static FlushDenormals flush;
   if (threads < 0 || threads > kMaxThreads)
     throw Error("--threads: expected 0 (every core) to " + std::to_string(kMaxThreads) + ", found " + std::to_string(threads));
   if (threads > 0) limit_ = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, size_t(threads));

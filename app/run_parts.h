@@ -37,8 +37,9 @@ void apply_user_maps(sensor::SensorModel& sensor, const RunConfig& c);
 
 // The command's worker threads while it lives: TBB's (all cores when threads <= 0) and OpenEXR's pool,
 // which compresses and decompresses the images with as many. From the first one on, every thread of the
-// process flushes denormal floats to zero (FTZ, DAZ), whether or not it renders (the renderer's Embree
-// sets them on its threads): a run's and a sense's sensor stages agree bit for bit.
+// process flushes denormal floats to zero (FTZ, DAZ), set on the calling thread before TBB starts (TBB's
+// tasks take that thread's settings): whether the run's tasks flushed depended on whether Embree had
+// set them before TBB's first use, and a sense (no Embree) never did; now run and sense agree bit for bit.
 class ThreadLimit {
  public:
   explicit ThreadLimit(int threads);

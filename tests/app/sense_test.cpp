@@ -205,6 +205,17 @@ TEST_F(App, SenseFlushesDenormalsAsTheRunDoes) {
   const Result r = sh("sense " + (dir_ / "run").string() + " -q" + dim + " -o " + (dir_ / "sensed").string());
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_EQ(slurp(dir_ / "dim/detection_rate.npy"), slurp(dir_ / "sensed/detection_rate.npy"));
+  // ... flushed, both: TBB's tasks run with the settings of the thread that started TBB, which the run once
+  // left without them in some settings (outputs.frames off) and not in others
+  size_t nonzero = 0;
+  for (const double v : values(read_npy(dir_ / "sensed/detection_rate.npy"))) {
+    ASSERT_TRUE(v == 0.0 || std::fabs(v) >= double(std::numeric_limits<float>::min())) << v;
+    nonzero += v != 0.0;
+  }
+  EXPECT_GT(nonzero, 0u);
+  ASSERT_EQ(sh("run " + kLit + dim + " --set outputs.frames=false -o " + (dir_ / "dim2").string()).code, 0);
+  for (const double v : values(read_npy(dir_ / "dim2/detection_rate.npy")))
+    ASSERT_TRUE(v == 0.0 || std::fabs(v) >= double(std::numeric_limits<float>::min())) << v;
 }
 
 // What a sense keeps from the run follows its own settings: an intensity-mode sense of a gate sweep writes
