@@ -216,7 +216,7 @@ int take_folder_lock(const fs::path& lock_path, const fs::path& out, bool shared
                     (who.empty() ? std::string() : " (" + who + ")") + ", which holds " + lock_path.string() +
                     "; wait for it to finish");
       if (err == EWOULDBLOCK)
-        throw Error("the output folder " + out.string() + " is being written by another spadgen run" +
+        throw Error("the output folder " + out.string() + " is being written or read by another spadgen process" +
                     (who.empty() ? std::string() : " (" + who + ")") + ", which holds " + lock_path.string() +
                     "; wait for it to finish, or choose another folder (-o)");
       throw Error("cannot lock the output folder " + out.string() + " (" + lock_path.string() + "): " + std::strerror(err));
@@ -345,6 +345,9 @@ void Staging::check_owned() const {
         const bool top = folder == root, out = root == out_;
         // (derived outputs: reconstruct's and evaluate's, and an interrupted evaluate's staging folder and lock)
         if (top && (is_derived_output(rel) || starts_with(rel, ".evaluation.spadgen-") || (out && starts_with(rel, kOldStylePrefix))))
+          continue;
+        // a run folder's lock file inside (a sense of a run in OUT leaves its reader's lock): spadgen's, no data
+        if (top && rel.size() > 1 && rel[0] == '.' && rel.ends_with(".spadgen-lock") && e.is_regular_file(ec) && e.file_size(ec) < 64)
           continue;
         // a derived output's temporary file (writers' ".NAME.tmp-PID-N"), left by a reconstruct killed while it
         // wrote: the swap removes it with the folder (it made every later run refuse the folder)

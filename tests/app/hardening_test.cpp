@@ -398,7 +398,7 @@ TEST_F(Hardening, ASecondRunIntoAFolderInUseRefuses) {
     spadgen::app::Staging busy(out);  // another run writing the folder (this process holds its lock)
     const Outcome o = spadgen("run " + kTiny + " -q --seed 2 -o " + out.string());
     expect_exit(o, 1, "while locked");
-    EXPECT_THAT(o.err, HasSubstr("the output folder " + out.string() + " is being written by another spadgen run (pid " +
+    EXPECT_THAT(o.err, HasSubstr("the output folder " + out.string() + " is being written or read by another spadgen process (pid " +
                                  std::to_string(::getpid()) + ")"));
   }
   expect_one_complete_set(out, 1);
@@ -410,7 +410,7 @@ TEST_F(Hardening, ASecondRunIntoAFolderInUseRefuses) {
   for (int s : {3, 4}) {
     const std::string log = slurp(dir_ / ("log" + std::to_string(s)));
     if (log.empty()) ++published;
-    else EXPECT_THAT(log, HasSubstr("is being written by another spadgen run")) << log;
+    else EXPECT_THAT(log, HasSubstr("is being written or read by another spadgen process")) << log;
   }
   EXPECT_GE(published, 1);
   const uint64_t seed = nlohmann::json::parse(slurp(out / "metadata.json"))["seed"];
@@ -500,7 +500,7 @@ TEST_F(Hardening, ReconstructReplacesOnlyAFileAndAFifoIsNotReadAsMetadata) {
     for (const std::string& command : {"reconstruct -q " + run.string(), "evaluate -q " + run.string() + " -o " + (dir_ / "e").string()}) {
       const Outcome o = spadgen(command);
       expect_exit(o, 1, command);
-      EXPECT_THAT(o.err, HasSubstr("run is being written by another spadgen run")) << command;
+      EXPECT_THAT(o.err, HasSubstr("run is being written or read by another spadgen process")) << command;
     }
     ::close(fd);
   }

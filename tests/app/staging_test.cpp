@@ -219,7 +219,7 @@ TEST_F(StagingTest, OneRunAtATimePerFolder) {
   {
     Staging first(out_);
     run(nullptr, &error);
-    EXPECT_THAT(error, HasSubstr("the output folder " + out_.string() + " is being written by another spadgen run (pid " +
+    EXPECT_THAT(error, HasSubstr("the output folder " + out_.string() + " is being written or read by another spadgen process (pid " +
                                  std::to_string(::getpid()) + ")"));
     EXPECT_EQ(which_set(out_), "old");
     // Another folder in the same parent is not affected.
