@@ -41,11 +41,18 @@ std::vector<std::string> camera_warnings(const RunConfig& c, const scenes::Scene
   return w;
 }
 
-std::vector<std::string> laser_warnings(const RunConfig& c, const render::Camera& camera) {
+std::vector<std::string> laser_warnings(const RunConfig& c, const render::Camera& camera, bool transmissive) {
   std::vector<std::string> w;
   // The renderer traces in float world coordinates: far from the glTF scene's origin its positions are
   // coarse. The spacing of floats at the camera (the scene it sees is near it).
   const double from_origin = glm::length(camera.position());
+  if (transmissive && from_origin >= kWarnTransmissiveFromOriginM && from_origin < kWarnFromOriginM) {
+    const double step = 256.0 * std::ldexp(1.0, std::ilogb(from_origin) - 23);
+    w.push_back("the camera is " + g(from_origin) + " m from the glTF scene's origin, where the renderer moves each path's "
+                "next ray " + g(step * 1e3) + " mm off the surface it leaves (256 float ulps): a transmissive plate about "
+                "that thin or thinner loses the light behind its back face (the ground truth is exact); move the scene "
+                "and the camera near the origin (camera.position_m, nodes.NAME.translation_m)");
+  }
   if (from_origin >= kWarnFromOriginM) {
     const double spacing = std::ldexp(1.0, std::ilogb(from_origin) - 23);
     w.push_back("the camera is " + g(from_origin) + " m from the glTF scene's origin, where the renderer's float positions are " +

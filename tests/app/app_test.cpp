@@ -523,6 +523,22 @@ TEST(AppCommands, InfoRefusesACameraTheGltfDoesNotHave) {
   EXPECT_THAT(r.output, HasSubstr("(cameras: 'spad_camera')"));
 }
 
+// With transmissive surfaces, a camera 64 m or more from the scene's origin is warned about: the renderer
+// steps each path's next ray 256 float ulps off a surface (1.95 mm at 64 m, 3.9 mm from 128 m), and a
+// 2 mm plate there lost the light behind its back face (halved from about 100 m).
+TEST(AppCommands, InfoWarnsAboutAThinPlateFarFromTheOrigin) {
+  const std::string info = "info " + kScenes + "multi_object.json";
+  Result r = sh(info + " --set camera.position_m=[0,0,100] --set camera.look_at_m=[0,0,99]");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("the camera is 100 m from the glTF scene's origin, where the renderer moves each path's next ray 1.953 mm"));
+  r = sh(info);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, Not(HasSubstr("next ray")));
+  r = sh("info " + kScenes + "flat_target.json --set camera.position_m=[0,0,100]");  // nothing transmissive
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, Not(HasSubstr("next ray")));
+}
+
 // What the run refuses before rendering, info refuses too (it passed both): a laser.gltf_light the glTF
 // does not have; gate maps of another size than the sensor; and a pixel design the preset does not use
 // is not built (a wavelength its PDP curve refuses failed the run after the 'does nothing' warning).
