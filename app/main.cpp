@@ -28,6 +28,7 @@
 #include "datasets/dataset.h"
 #include "app/pipeline.h"
 #include "app/reconstruct.h"
+#include "app/run_parts.h"
 #include "core/error.h"
 #include "scenes/scene_file.h"
 
@@ -36,6 +37,7 @@
 #endif
 
 int main(int argc, char** argv) {
+  spadgen::app::flush_denormals();  // before TBB or any thread starts (app/run_parts.h)
   // Closed standard streams are opened on /dev/null first: else the next file opened takes descriptor 2
   // (or 0, 1) and progress lines and warnings are written into it (a counts.npy began "spadgen: ...").
   for (int fd = 0; fd <= 2; ++fd)

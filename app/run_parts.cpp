@@ -1,6 +1,5 @@
 #include "app/run_parts.h"
 
-#include <tbb/task_scheduler_observer.h>
 #if defined(__SSE__)
 #include <xmmintrin.h>
 #endif
@@ -51,28 +50,16 @@ nlohmann::json file_bytes(const std::filesystem::path& dir, const std::vector<st
   return bytes;
 }
 
-namespace {
-// Denormal floats flushed to zero and read as zero (FTZ and DAZ in MXCSR) on the calling thread.
 void flush_denormals() {
 #if defined(__SSE__)
-  _mm_setcsr(_mm_getcsr() | 0x8040u);
+  _mm_setcsr(_mm_getcsr() | 0x8040u);  // FTZ (bit 15) and DAZ (bit 6)
 #endif
 }
-// ... and on every TBB thread that works for the process.
-class FlushDenormals : public tbb::task_scheduler_observer {
- public:
-  FlushDenormals() { observe(true); }
-  void on_scheduler_entry(bool) override { flush_denormals(); }
-};
-}  // namespace
 
 ThreadLimit::ThreadLimit(int threads) {
-  // Every command's floats flush denormals, as Embree sets its threads for the renderer: a sense (which
-  // creates no Embree device) kept rates of 1e-40 that the run's sensor stage had flushed to 0.
-  // The calling thread first: TBB's task contexts take the floating-point settings of the thread that
-  // starts TBB (the observer's first use does), and apply them to every task they run.
+  // Before TBB starts (main() did it first): TBB's tasks run with the floating-point settings of the thread
+  // that started it.
   flush_denormals();
-  static FlushDenormals flush;
   if (threads < 0 || threads > kMaxThreads)
     throw Error("--threads: expected 0 (every core) to " + std::to_string(kMaxThreads) + ", found " + std::to_string(threads));
   if (threads > 0) limit_ = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, size_t(threads));

@@ -35,11 +35,15 @@ nlohmann::json file_bytes(const std::filesystem::path& dir, const std::vector<st
 // sense and info read them alike (throws spadgen::Error naming the file when they do not fit the sensor).
 void apply_user_maps(sensor::SensorModel& sensor, const RunConfig& c);
 
+// Denormal floats flushed to zero and read as zero (FTZ, DAZ) on the calling thread. main() calls it
+// first, before TBB starts: TBB's tasks run with the floating-point settings of the thread that started
+// it, and threads inherit their creator's. Whether a run's sensor tasks flushed depended on whether
+// Embree (which sets them) had run before TBB's first use, and a sense (no Embree) never did: with every
+// command's threads flushing, run and sense agree bit for bit.
+void flush_denormals();
+
 // The command's worker threads while it lives: TBB's (all cores when threads <= 0) and OpenEXR's pool,
-// which compresses and decompresses the images with as many. From the first one on, every thread of the
-// process flushes denormal floats to zero (FTZ, DAZ), set on the calling thread before TBB starts (TBB's
-// tasks take that thread's settings): whether the run's tasks flushed depended on whether Embree had
-// set them before TBB's first use, and a sense (no Embree) never did; now run and sense agree bit for bit.
+// which compresses and decompresses the images with as many (and flush_denormals on the calling thread).
 class ThreadLimit {
  public:
   explicit ThreadLimit(int threads);
