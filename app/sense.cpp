@@ -330,19 +330,20 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     throw Error((src / "metadata.json").string() + ": light.crop_in_sensor does not match the run's image");
   // The light as the run stored it (its outputs.storage), whatever this call's storage is.
   SavedLight light(src.string(), region, axis, source.config.outputs.storage);
-  // The renderer applied the run's fill factor of each row (as the light records it: a sense with another
-  // design links the light unchanged; a run before the record, its own design's); another pixel design
-  // rescales the light, and every file of photons the sense keeps from the run (the ground truth's laser
-  // channels, the transients), which it then writes anew rather than links.
+  // The renderer applied a fill factor to each row; another pixel design rescales by this call's over it,
+  // row by row (empty: the same design).
   const std::vector<double> now = sensor.row_fill_factor();
-  // The run folder's files of photons (its ground truth, transients) are its own design's ...
+  const auto scale_from = [&](const std::vector<double>& was) {
+    std::vector<double> scale;
+    if (was != now)
+      for (size_t y = 0; y < now.size(); ++y) scale.push_back(now[y] / was[y]);
+    return scale;
+  };
+  // The run folder's files of photons (its ground truth, transients) are its own design's, which this
+  // call rewrites rather than links for another; its light is the design light.fill_factor records (a
+  // sense with another design links the light unchanged; a run before the record, its own design's).
   const std::vector<double> design = sensor::PixelLayout(source.config.sensor.preset, cfg.camera.height_px).row_fill_factor(source.config.sensor);
-  std::vector<double> file_scale;  // empty: this call's design
-  if (design != now) {
-    file_scale.resize(now.size());
-    for (size_t y = 0; y < now.size(); ++y) file_scale[y] = now[y] / design[y];
-  }
-  // ... and its light the one it records
+  const std::vector<double> file_scale = scale_from(design);
   std::vector<double> was = design;
   if (const json::json_pointer p("/light/fill_factor"); meta.contains(p)) {
     std::vector<double> recorded;
@@ -357,11 +358,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
                   " rows, the sensor has " + std::to_string(was.size()));
     was = std::move(recorded);
   }
-  if (was != now) {
-    std::vector<double> row_scale(now.size());
-    for (size_t y = 0; y < now.size(); ++y) row_scale[y] = now[y] / was[y];
-    light.set_row_scale(std::move(row_scale));
-  }
+  if (std::vector<double> row_scale = scale_from(was); !row_scale.empty()) light.set_row_scale(std::move(row_scale));
 
   // The files the sensor does not write come from the run: the exact ground truth, the transients, the light.
   // labels.exr is the sensor's: recomputed from the run's ground truth for this call's settings.

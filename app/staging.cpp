@@ -199,11 +199,12 @@ namespace {
 // P/NAME and returns the descriptor; throws spadgen::Error naming the holder when another spadgen process
 // has it exclusively (or, exclusive, at all).
 int take_folder_lock(const fs::path& lock_path, const fs::path& out, bool shared = false) {
+  const std::string folder = (shared ? "the run folder " : "the output folder ") + out.string();
   for (int attempt = 0; attempt < 16; ++attempt) {
     const int fd = ::open(lock_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
     if (fd < 0)
-      throw Error("cannot use " + out.string() + " as the output folder (-o): cannot create its lock file " +
-                  lock_path.string() + ": " + std::strerror(errno));
+      throw Error((shared ? "cannot lock " + folder : "cannot use " + out.string() + " as the output folder (-o)") +
+                  ": cannot create its lock file " + lock_path.string() + ": " + std::strerror(errno));
     if (::flock(fd, (shared ? LOCK_SH : LOCK_EX) | LOCK_NB) != 0) {
       const int err = errno;
       char holder[64] = {0};
@@ -212,14 +213,14 @@ int take_folder_lock(const fs::path& lock_path, const fs::path& out, bool shared
       std::string who = n > 0 ? std::string(holder, static_cast<size_t>(n)) : std::string();
       while (!who.empty() && (who.back() == '\n' || who.back() == ' ')) who.pop_back();
       if (err == EWOULDBLOCK && shared)
-        throw Error("the run folder " + out.string() + " is being written by another spadgen run" +
+        throw Error(folder + " is being written by another spadgen run" +
                     (who.empty() ? std::string() : " (" + who + ")") + ", which holds " + lock_path.string() +
                     "; wait for it to finish");
       if (err == EWOULDBLOCK)
-        throw Error("the output folder " + out.string() + " is being written or read by another spadgen process" +
+        throw Error(folder + " is being written or read by another spadgen process" +
                     (who.empty() ? std::string() : " (" + who + ")") + ", which holds " + lock_path.string() +
                     "; wait for it to finish, or choose another folder (-o)");
-      throw Error("cannot lock the output folder " + out.string() + " (" + lock_path.string() + "): " + std::strerror(err));
+      throw Error("cannot lock " + folder + " (" + lock_path.string() + "): " + std::strerror(err));
     }
     // The run that held the lock may have removed the file between our open and our flock.
     struct stat locked {}, now {};
@@ -232,8 +233,7 @@ int take_folder_lock(const fs::path& lock_path, const fs::path& out, bool shared
     }
     ::close(fd);
   }
-  throw Error("cannot lock the output folder " + out.string() + ": its lock file " + lock_path.string() +
-              " keeps being replaced");
+  throw Error("cannot lock " + folder + ": its lock file " + lock_path.string() + " keeps being replaced");
 }
 
 void release_folder_lock(const fs::path& lock_path, int& fd, bool shared = false) {

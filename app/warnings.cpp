@@ -6,6 +6,7 @@
 #include <glm/glm.hpp>
 
 #include "core/units.h"
+#include "render/embree_scene.h"
 
 namespace spadgen::app {
 namespace {
@@ -46,15 +47,15 @@ std::vector<std::string> laser_warnings(const RunConfig& c, const render::Camera
   // The renderer traces in float world coordinates: far from the glTF scene's origin its positions are
   // coarse. The spacing of floats at the camera (the scene it sees is near it).
   const double from_origin = glm::length(camera.position());
+  const double spacing = from_origin > 0.0 ? std::ldexp(1.0, std::ilogb(from_origin) - 23) : 0.0;
   if (transmissive && from_origin >= kWarnTransmissiveFromOriginM && from_origin < kWarnFromOriginM) {
-    const double step = 256.0 * std::ldexp(1.0, std::ilogb(from_origin) - 23);
+    const double step = double(render::kOffsetUlps) * spacing;
     w.push_back("the camera is " + g(from_origin) + " m from the glTF scene's origin, where the renderer moves each path's "
-                "next ray " + g(step * 1e3) + " mm off the surface it leaves (256 float ulps): a transmissive plate about "
-                "that thin or thinner loses the light behind its back face (the ground truth is exact); move the scene "
-                "and the camera near the origin (camera.position_m, nodes.NAME.translation_m)");
+                "next ray " + g(step * 1e3) + " mm off the surface it leaves (" + g(render::kOffsetUlps) + " float ulps): a "
+                "transmissive plate about that thin or thinner loses the light behind its back face (the ground truth is "
+                "exact); move the scene and the camera near the origin (camera.position_m, nodes.NAME.translation_m)");
   }
   if (from_origin >= kWarnFromOriginM) {
-    const double spacing = std::ldexp(1.0, std::ilogb(from_origin) - 23);
     w.push_back("the camera is " + g(from_origin) + " m from the glTF scene's origin, where the renderer's float positions are " +
                 g(spacing * 1e3) + " mm apart: depths and times of flight (" + g(2.0 * spacing / kSpeedOfLight * 1e12) +
                 " ps) are that coarse, and a flood beam's edge (the field of view's corners) loses light; move the scene "

@@ -45,8 +45,8 @@ inline constexpr double kWarnSpotPaths = 16.0;
 // flood beam loses light at the corners of the field of view of a scene 1 m away; 2.8 % of the image at
 // 1e5 m): the float spacing there and what it does.
 inline constexpr double kWarnFromOriginM = 1024.0;
-// With transmissive surfaces, from this far on: the renderer moves each path's next ray 256 float ulps of
-// its coordinates off the surface it leaves (render/embree_scene.cpp offset_ray_origin), 1.95 mm at 64 m,
+// With transmissive surfaces, from this far on: the renderer moves each path's next ray render::kOffsetUlps
+// float ulps of its coordinates off the surface it leaves (render/embree_scene.h offset_ray_origin), 1.95 mm at 64 m,
 // which steps over the back face of a plate about as thin (a 2 mm plate's light behind it halved from
 // about 100 m).
 inline constexpr double kWarnTransmissiveFromOriginM = 64.0;

@@ -220,11 +220,11 @@ bool EmbreeScene::occluded(const glm::vec3& o, const glm::vec3& d, float tnear, 
 }
 
 glm::vec3 offset_ray_origin(const glm::vec3& p, const glm::vec3& n_in, const glm::vec3& dir) {
-  constexpr float kOrigin = 1.0f / 32.0f, kFloatScale = 1.0f / 65536.0f, kIntScale = 256.0f;
+  constexpr float kOrigin = 1.0f / 32.0f, kFloatScale = 1.0f / 65536.0f;
   const glm::vec3 n = glm::dot(n_in, dir) < 0.0f ? -n_in : n_in;
   glm::vec3 out;
   for (int c = 0; c < 3; ++c) {
-    const auto of = static_cast<int32_t>(kIntScale * n[c]);
+    const auto of = static_cast<int32_t>(kOffsetUlps * n[c]);
     const auto bits = std::bit_cast<int32_t>(p[c]);
     const float moved = std::bit_cast<float>(bits + (p[c] < 0.0f ? -of : of));
     out[c] = std::fabs(p[c]) < kOrigin ? p[c] + kFloatScale * n[c] : moved;

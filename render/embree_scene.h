@@ -62,8 +62,10 @@ class EmbreeScene {
 };
 
 // Moves a point off the surface it lies on, along the geometric normal n towards the side the next ray
-// leaves to, by a few ulps of its own coordinates (Waechter and Binder, Ray Tracing Gems ch. 6), so that
-// the next ray neither re-hits that surface nor skips a nearby one (a 2 mm plate, a contact).
+// leaves to, by kOffsetUlps ulps of its own coordinates (times n's component; Waechter and Binder, Ray
+// Tracing Gems ch. 6), so that the next ray neither re-hits that surface nor skips a nearby one (a 2 mm
+// plate within about 100 m of the scene's origin: farther, the step is longer than the plate is thick).
+inline constexpr float kOffsetUlps = 256.0f;
 glm::vec3 offset_ray_origin(const glm::vec3& p, const glm::vec3& n, const glm::vec3& dir);
 
 }  // namespace spadgen::render
