@@ -63,7 +63,7 @@ RunResult run(const RunOptions& options) {
   };
   warn(camera_warnings(cfg, scene));
   const render::Camera camera(cfg.camera, scene);
-  warn(laser_warnings(cfg, camera, scene.has_transmission()));
+  warn(laser_warnings(cfg, camera, &scene));
   sensor::SensorModel sensor(sensor_stage(cfg));
   apply_user_maps(sensor, cfg);
   warn(sensor_warnings(sensor));
@@ -192,7 +192,7 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
   o << "# resolved scene file " << c.scene_file << "\n" << r.resolved.dump(2) << "\n\n";
   o << "# glTF\n" << scenes::summarize(scene) << "\n";
   std::vector<std::string> before = camera_warnings(c, scene);  // the warnings known before rendering
-  for (std::string& w : laser_warnings(c, camera, scene.has_transmission())) before.push_back(std::move(w));
+  for (std::string& w : laser_warnings(c, camera, &scene)) before.push_back(std::move(w));
   for (std::string& w : sensor_warnings(sensor)) before.push_back(std::move(w));
   const TimeAxis axis = time_axis(c, sensor);
   const PixelRect img = image_rect(c);

@@ -15,7 +15,7 @@ std::string vec_str(const glm::dvec3& v) {
 
 }  // namespace
 
-Camera::Camera(const CameraConfig& c, const scenes::Scene& scene)
+Camera::Camera(const CameraConfig& c, const scenes::Scene& scene, const glm::dvec3& origin)
     : width_(c.width_px), height_(c.height_px), pitch_(c.pixel_pitch_m) {
   const double sensor_height = height_ * pitch_;
 
@@ -73,6 +73,7 @@ Camera::Camera(const CameraConfig& c, const scenes::Scene& scene)
   }
   if (!(focal_ > 0.0) || !std::isfinite(focal_))
     throw Error("camera.focal_length_mm must be positive, found " + std::to_string(focal_ * 1e3));
+  position_ -= origin;
 }
 
 glm::dvec3 Camera::direction(double px, double py) const {

@@ -12,7 +12,8 @@ class Camera {
  public:
   // From camera.gltf_camera (a node of `scene`) or from position_m / look_at_m / up. Throws
   // spadgen::Error naming the key when the camera is degenerate or the glTF camera does not exist.
-  Camera(const CameraConfig& config, const scenes::Scene& scene);
+  // origin: the world point position() is measured from (the renderer's frame, centred on the camera).
+  Camera(const CameraConfig& config, const scenes::Scene& scene, const glm::dvec3& origin = glm::dvec3(0.0));
 
   int width() const { return width_; }
   int height() const { return height_; }

@@ -38,13 +38,26 @@ void put_object_laser(ObjectLaser* objects, int64_t pixel, GroundTruthTile* gt, 
   gt->indirect_laser[size_t(pixel)] = static_cast<float>(objects->indirect * scale);
 }
 
+// The scene with every world position measured from `origin`, in double before rounding to float once.
+scenes::Scene centred_on(const scenes::Scene& world, const glm::dvec3& origin) {
+  scenes::Scene s = world;
+  for (scenes::Mesh& m : s.meshes)
+    for (glm::vec3& p : m.positions) p = glm::vec3(glm::dvec3(p) - origin);
+  for (scenes::Light& l : s.lights) l.position -= origin;
+  for (scenes::Camera& c : s.cameras) c.world_from_camera[3] -= glm::dvec4(origin, 0.0);
+  for (scenes::Node& n : s.nodes)
+    if (n.loaded) n.world[3] -= glm::dvec4(origin, 0.0);
+  return s;
+}
+
 }  // namespace
 
 Renderer::Impl::Impl(const scenes::Scene& s, const RenderStageConfig& c)
-    : scene(s),
+    : origin(Camera(c.camera, s).position()),
+      scene(centred_on(s, origin)),
       objects(scenes::objects_of(scene)),
       config(c),
-      camera(config.camera, scene),
+      camera(config.camera, s, origin),
       laser(make_laser(config, camera, scene, &laser_light)),
       ambient_weights(rgb_weights_over(config.ambient.wavelength_m, config.ambient.bandwidth_m)),
       ambient(make_ambient(config, scene, ambient_weights, laser_light)),
@@ -64,7 +77,7 @@ Renderer::Renderer(const scenes::Scene& scene, const RenderStageConfig& config)
 
 Renderer::~Renderer() = default;
 
-glm::dvec3 Renderer::laser_position() const { return impl_->laser.position; }
+glm::dvec3 Renderer::laser_position() const { return impl_->laser.position + impl_->origin; }
 
 double Renderer::photons_per_pulse() const {
   const LaserConfig& l = impl_->config.laser;

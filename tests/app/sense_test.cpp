@@ -346,13 +346,12 @@ TEST_F(App, AConeNarrowerThanAPixelIsWarnedAbout) {
   EXPECT_THAT(sh(info + "--set laser.half_angle_deg=0.1 --set render.samples_per_pixel=1").output, Not(HasSubstr("lights a spot")));
 }
 
-// A camera far from the glTF scene's origin, where the renderer's float positions are coarse (at 1e5 m,
-// 7.8 mm apart: a flood beam lost 2.8 % of a plane's light at the field of view's corners), is warned about
-// with the spacing; at 1000 m (0.06 mm) it is not.
+// A camera far from the glTF scene's origin, where the glTF's float positions are coarse (at 1e5 m, 7.8 mm
+// apart), is warned about with the spacing; at 1000 m (0.06 mm) it is not.
 TEST_F(App, ACameraFarFromTheSceneOriginIsWarnedAbout) {
   const std::string info = "info " + kScenes + "flat_target.json ";
   Result r = sh(info + "--set camera.position_m=[100000,0,0] --set camera.look_at_m=[100000,0,-1]");
-  EXPECT_THAT(r.output, HasSubstr("warning: the camera is 1e+05 m from the glTF scene's origin, where the renderer's float "
+  EXPECT_THAT(r.output, HasSubstr("warning: the camera is 1e+05 m from the glTF scene's origin, where the glTF's float "
                                   "positions are 7.812 mm apart: depths and times of flight (52.12 ps) are that coarse"));
   r = sh(info + "--set camera.position_m=[0,1000,0] --set camera.look_at_m=[0,1000,-1]");
   EXPECT_THAT(r.output, Not(HasSubstr("from the glTF scene's origin")));

@@ -370,6 +370,47 @@ TEST(Transport, SmoothPlateTransmitsOneMinusRSquaredEachWayAndDelaysTheReturn) {
   EXPECT_NEAR(t_b / main_b - t_a / total_a, delay, 0.5e-12);
 }
 
+// The same plate and wall 300 m from the glTF's origin (float positions 31 um apart there) with the camera
+// in front of them: the renderer works in a frame centred on the camera, so a path's next ray steps 256
+// ulps of its coordinates near the camera (30 um at 0.45 m), not of the world's (7.8 mm at 300 m, longer
+// than the plate is thick, which lost the light through it). The light through the plate, its transient
+// and the laser's position are those of the scene at the origin.
+TEST(Transport, ASceneFarFromTheOriginRendersAsNearIt) {
+  const glm::vec3 far(-120.0f, 80.0f, -300.0f);
+  RenderStageConfig c = test_config(8, 8, 12e-3);
+  c.render.samples_per_pixel = 256;
+  c.render.max_bounces = 1;
+  c.laser.offset_m = {0.001, 0.0005, 0.0};  // inside the flood beam's 3 mm at 1 m
+  RenderStageConfig cf = c;
+  cf.camera.position_m = {far.x, far.y, far.z};
+  cf.camera.look_at_m = {far.x, far.y, far.z - 1.0};
+  scenes::Scene moved = wall_behind_plate(true);
+  for (scenes::Mesh& m : moved.meshes)
+    for (glm::vec3& p : m.positions) p += far;
+  const TimeAxis axis{6.6e-9, 0.5e-12, 300, 25e-9};
+  Renderer near_r(wall_behind_plate(true), c), far_r(moved, cf);
+  EXPECT_NEAR(glm::length(far_r.laser_position() - (glm::dvec3(far) + glm::dvec3(0.001, 0.0005, 0))), 0.0, 1e-12);
+  const TransientTile a = near_r.transient({0, 0, 8, 8}, {0, 0, 8, 8}, axis);
+  const TransientTile b = far_r.transient({0, 0, 8, 8}, {0, 0, 8, 8}, axis);
+  double total_a = 0, total_b = 0, t_a = 0, t_b = 0;
+  for (int y = 0; y < 8; ++y)
+    for (int x = 0; x < 8; ++x) {
+      const size_t i = size_t(a.data_rect.index(x, y));
+      // The same paths, with vertices 31 um (a float's spacing at 300 m) from where they are near the origin.
+      if (a.laser_total[i] == 0.0) EXPECT_EQ(b.laser_total[i], 0.0) << x << "," << y;  // a corner outside the beam
+      else EXPECT_NEAR(b.laser_total[i] / a.laser_total[i], 1.0, 1e-3) << x << "," << y;
+      total_a += a.laser_total[i];
+      total_b += b.laser_total[i];
+      for (int64_t k = 0; k < axis.bins; ++k) {
+        t_a += a.pixel_transient(x, y)[k] * axis.bin_centre_s(k);
+        t_b += b.pixel_transient(x, y)[k] * axis.bin_centre_s(k);
+      }
+    }
+  EXPECT_NEAR(total_b / total_a, 1.0, 1e-4);
+  // Mean arrival within 0.5 ps (the bin); the plate moved its vertices by at most half a 31 um spacing.
+  EXPECT_NEAR(t_b / total_b, t_a / total_a, 0.5e-12);
+}
+
 // Unpolarised Fresnel reflectance of a dielectric interface for incidence cosine c > 0 and
 // eta = n_t / n_i (1 at total internal reflection).
 double fresnel_eta(double c, double eta) {
