@@ -161,7 +161,9 @@ std::string expected_text(const Key& k) {
   std::string e;
   switch (k.type) {
     case Type::Number: e = "a number" + range + unit; break;
-    case Type::Integer: e = "an integer" + range + unit; break;
+    case Type::Integer:
+      e = (k.multiple_of ? "an integer multiple of " + std::to_string(k.multiple_of) : std::string("an integer")) + range + unit;
+      break;
     case Type::Bool: e = "true or false"; break;
     case Type::String: e = "a string"; break;
     case Type::Path: e = "a string (a file name)"; break;
@@ -197,7 +199,7 @@ bool value_fits(const Key& k, const json& v) {
       // Written as integer digits, the value itself: 2^53 + 1 is not 2^53 (a double would make it so).
       if (v.is_number_unsigned() && static_cast<uint64_t>(d) != v.get<uint64_t>()) return false;
       if (v.is_number_integer() && !v.is_number_unsigned() && static_cast<int64_t>(d) != v.get<int64_t>()) return false;
-      return std::floor(d) == d && in_range(k, d);
+      return std::floor(d) == d && in_range(k, d) && (k.multiple_of == 0 || std::fmod(d, k.multiple_of) == 0.0);
     }
     case Type::Bool: return v.is_boolean();
     case Type::String:
@@ -550,8 +552,6 @@ void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string
     if (!(t.x0 >= img.x0 && t.y0 >= img.y0 && t.x1() <= img.x1() && t.y1() <= img.y1()))
       err("/outputs/transient_crop", "found " + rect_text(t) + ", expected a rectangle inside the rendered region " + rect_text(img));
   }
-  if (c.render.tile_size % 8 != 0)
-    err("/render/tile_size_px", "found " + std::to_string(c.render.tile_size) + ", expected a multiple of 8 (bit-packed frames start on a byte)");
   const Vec3d& p = c.camera.position_m;
   const Vec3d& a = c.camera.look_at_m;
   const Vec3d axis{a[0] - p[0], a[1] - p[1], a[2] - p[2]};
@@ -739,6 +739,7 @@ ojson key_schema(const Key& k) {
       typed(k.type == Type::Number ? "number" : "integer");
       if (std::isfinite(k.lo)) p[k.lo_open ? "exclusiveMinimum" : "minimum"] = k.lo;
       if (std::isfinite(k.hi)) p["maximum"] = k.hi;
+      if (k.multiple_of) p["multipleOf"] = k.multiple_of;
       break;
     case Type::Bool: typed("boolean"); break;
     case Type::String:

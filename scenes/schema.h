@@ -35,6 +35,7 @@ struct Key {
   double lo = -std::numeric_limits<double>::infinity();
   double hi = std::numeric_limits<double>::infinity();
   bool lo_open = false;  // lo is exclusive
+  int multiple_of = 0;   // Integer: valid values are multiples of it (0: any)
   std::vector<std::string> choices;
   bool nullable = false;
   bool null_components = false;  // Vec3: each component may be null instead (a named element's: the glTF's)

@@ -323,7 +323,7 @@ TEST_F(SceneFileTest, CrossKeyChecks) {
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"crop": [1000, 0, 100, 10]}})"),
               HasSubstr("/camera/crop: found [1000, 0, 100, 10], expected a rectangle inside the 1024 x 500 sensor"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "render": {"tile_size_px": 20}})"),
-              HasSubstr("/render/tile_size_px: found 20, expected a multiple of 8"));
+              HasSubstr("/render/tile_size_px: found 20 (an integer), expected an integer multiple of 8 in [8, 4096] px"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "acquisition": {"gate_sweep": {"start_ns": 5, "stop_ns": 1}}})"),
               HasSubstr("/acquisition/gate_sweep/stop_ns: is before"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"look_at_m": [0, 0, 0]}})"),
@@ -745,6 +745,7 @@ TEST(SceneFileReference, JsonSchemaIsShippedAndListsEveryKey) {
   EXPECT_EQ(f["default"], 1.4);
   const auto& fill = j["properties"]["sensor"]["properties"]["pixel_B"]["properties"]["fill_factor"];
   EXPECT_EQ(fill["exclusiveMinimum"], 0.0);
+  EXPECT_EQ(j["properties"]["render"]["properties"]["tile_size_px"]["multipleOf"], 8);
   EXPECT_EQ(j["properties"]["laser"]["properties"]["beam"]["enum"], nlohmann::json::array({"flood", "cone", "gltf_light"}));
   EXPECT_EQ(j["properties"]["camera"]["properties"]["crop"]["type"], nlohmann::json::array({"array", "null"}));
   EXPECT_EQ(j["properties"]["seeds"]["properties"]["noise"]["default"], nullptr);
