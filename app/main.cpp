@@ -78,7 +78,7 @@ int main(int argc, char** argv) {
   run_cmd->add_option("-o,--out", run.out_dir, "output folder (default: out/<scene file name>)")->check(kNamed);
   run_cmd->add_option("--set", run.overrides, "override one scene-file key, e.g. --set laser.average_power_mW=5")
       ->type_name("KEY=VALUE");
-  CLI::Option* seed_opt = run_cmd->add_option("--seed", seed, "seed of every random stream (replaces the scene file's)");
+  CLI::Option* seed_opt = run_cmd->add_option("--seed", seed, "the scene file's seed replaced: every random stream that seeds.* does not set");
   run_cmd->add_option("--threads", run.threads, "worker threads (default: all cores); outputs do not depend on it")
       ->check(kThreadsRange);
   bool quiet = false;

@@ -260,7 +260,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   std::vector<std::string> overrides = options.overrides;
   if (options.chip_seed) overrides.push_back("seeds.chip=" + text(*options.chip_seed));
   if (options.noise_seed) overrides.push_back("seeds.noise=" + text(*options.noise_seed));
-  const scenes::ResolvedRun first = scenes::parse_scene_text(scene_text, scene_file, overrides);
+  const scenes::ResolvedRun first = scenes::parse_scene_text(scene_text, scene_file, overrides, false);
   // One resolved scene per realisation: noise seeds S, S + 1, ... (S itself when there is one). The scene
   // is resolved once with seeds.noise = S; realisation r is that with the seed S + r in its configuration
   // and its resolved scene file, as `--set seeds.noise=S+r` resolves it (tested: a realisation's metadata
@@ -272,7 +272,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   } else {
     std::vector<std::string> o = overrides;
     o.push_back("seeds.noise=" + text(noise0));
-    const scenes::ResolvedRun base = scenes::parse_scene_text(scene_text, scene_file, o);
+    const scenes::ResolvedRun base = scenes::parse_scene_text(scene_text, scene_file, o, false);
     runs.reserve(size_t(options.repeats));
     for (int r = 0; r + 1 < options.repeats; ++r) {
       scenes::ResolvedRun& run = runs.emplace_back(base);
@@ -281,14 +281,14 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     }
     // The last seed resolved in full: a seed past the key's range fails here as `--set` would.
     o.back() = "seeds.noise=" + text(noise0 + uint64_t(options.repeats - 1));
-    runs.push_back(scenes::parse_scene_text(scene_text, scene_file, o));
+    runs.push_back(scenes::parse_scene_text(scene_text, scene_file, o, false));
   }
   const RunConfig& cfg = first.config;
   for (const std::string& w : first.warnings) std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
   // What the run warned about its glTF and its light: the run's warnings less the scene file's and less
   // its sensor's (this call's sensor warns below).
   std::vector<std::string> scene_warnings;
-  const scenes::ResolvedRun source = scenes::parse_scene_text(scene_text, scene_file);
+  const scenes::ResolvedRun source = scenes::parse_scene_text(scene_text, scene_file, {}, false);
   {
     const std::vector<std::string>& file_warnings = source.warnings;
     for (const auto& w : meta.at("warnings"))

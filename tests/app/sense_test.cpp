@@ -32,6 +32,26 @@ TEST_F(App, SenseWritesWhatTheRunWroteBitForBit) {
   EXPECT_EQ(meta["sense"]["from"], (dir_ / "run").string());
 }
 
+// sense reads the saved light and the sensor's tables, not the scene's geometry: a run whose glTF (and its
+// buffers) are gone since, as in an archive of runs, is re-sampled as before (it was refused: "the glTF file
+// ... does not exist").
+TEST_F(App, SenseNeedsNoGltf) {
+  fs::create_directories(dir_ / "scene");
+  for (const char* f : {"multi_object.json", "multi_object.gltf", "multi_object.bin"})
+    fs::copy_file(fs::path(kScenes) / f, dir_ / "scene" / f);
+  const std::string settings = kLit.substr(kLit.find(" -q"));
+  ASSERT_EQ(sh("run " + (dir_ / "scene/multi_object.json").string() + settings + " -o " + (dir_ / "run").string()).code, 0);
+  fs::remove(dir_ / "scene/multi_object.gltf");
+  fs::remove(dir_ / "scene/multi_object.bin");
+  const Result r = sh("sense " + (dir_ / "run").string() + " -q -o " + (dir_ / "sense").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  expect_same_outputs(dir_ / "run", dir_ / "sense");
+  // The run itself needs it.
+  const Result again = sh("run " + (dir_ / "scene/multi_object.json").string() + settings + " -o " + (dir_ / "again").string());
+  EXPECT_EQ(again.code, 1);
+  EXPECT_THAT(again.output, HasSubstr("does not exist"));
+}
+
 // A new noise realisation of the run's own sensor: the files that do not depend on the noise are the
 // run's, linked (one file system here), and the counts and frames are drawn anew. Another chip, or a
 // sensor table whose contents changed since the run, makes sense compute and write them all again.
