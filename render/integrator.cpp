@@ -219,9 +219,12 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
           for (int j = 0; j < 3; ++j) in |= corner(t, i) == corner(u, j);
           (in ? shared : own).push_back(corner(t, i));
         }
-        if (shared.size() != 2) continue;
+        // Two distinct triangles sharing one edge (a degenerate one, two of its corners equal, has no edge
+        // to share: a 2 mm plate's sides collapse where floats are coarser than that).
+        if (part_of[t] == SIZE_MAX || part_of[u] == SIZE_MAX || shared.size() != 2 || own.size() != 1) continue;
         for (int j = 0; j < 3; ++j)
           if (corner(u, j) != shared[0] && corner(u, j) != shared[1]) other.push_back(corner(u, j));
+        if (other.size() != 1) continue;
         const glm::dvec3 o = own[0], a = shared[0] - o, b = shared[1] - o;
         const double scale = std::max(glm::length(a), glm::length(b));
         if (glm::length(other[0] - (o + a + b)) > 1e-9 * scale) continue;  // not a parallelogram

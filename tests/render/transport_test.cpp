@@ -411,6 +411,40 @@ TEST(Transport, ASceneFarFromTheOriginRendersAsNearIt) {
   EXPECT_NEAR(t_b / total_b, t_a / total_a, 0.5e-12);
 }
 
+// A glossy plate whose sides collapse (its two faces at one z: a 2 mm plate 70 km from the origin, where
+// floats are 7.8 mm apart, rounds so) crashed the renderer's search for the plate's edges (a degenerate
+// triangle shares "two corners" with a neighbour and leaves no third). Its degenerate triangles are never
+// hit: it renders as the same plate without them.
+TEST(Transport, APlateWithCollapsedSidesRendersAsOneWithoutThem) {
+  const auto scene = [](bool keep_degenerate) {
+    scenes::Scene s = wall_behind_plate(false);
+    add_box(s, {-1, -1, -0.45f}, {1, 1, -0.45f}, add_material(s, test::glass(1.5f, 0.002f, 0.1f)));
+    scenes::Mesh& m = s.meshes.back();
+    std::vector<uint32_t> kept, degenerate;  // the faces first: a face, then a side sharing two of its corners
+    for (size_t t = 0; t < m.triangle_count(); ++t) {
+      const glm::vec3 a = m.positions[m.indices[3 * t]], b = m.positions[m.indices[3 * t + 1]], c = m.positions[m.indices[3 * t + 2]];
+      std::vector<uint32_t>& to = glm::length(glm::cross(b - a, c - a)) > 0.0f ? kept : degenerate;
+      to.insert(to.end(), &m.indices[3 * t], &m.indices[3 * t + 3]);
+    }
+    if (keep_degenerate) kept.insert(kept.end(), degenerate.begin(), degenerate.end());
+    EXPECT_EQ(kept.size(), keep_degenerate ? 36u : 12u);
+    m.indices = kept;
+    return s;
+  };
+  RenderStageConfig c = test_config(8, 8, 12e-3);
+  c.render.samples_per_pixel = 16;
+  const TimeAxis axis{6.6e-9, 0.5e-12, 300, 25e-9};
+  const Renderer with(scene(true), c), without(scene(false), c);
+  const TransientTile a = with.transient({0, 0, 8, 8}, {0, 0, 8, 8}, axis);
+  const TransientTile b = without.transient({0, 0, 8, 8}, {0, 0, 8, 8}, axis);
+  double total = 0;
+  for (size_t i = 0; i < a.laser_total.size(); ++i) {
+    EXPECT_EQ(a.laser_total[i], b.laser_total[i]) << i;
+    total += a.laser_total[i];
+  }
+  EXPECT_GT(total, 0.0);
+}
+
 // Unpolarised Fresnel reflectance of a dielectric interface for incidence cosine c > 0 and
 // eta = n_t / n_i (1 at total internal reflection).
 double fresnel_eta(double c, double eta) {
