@@ -148,22 +148,40 @@ def _identity(path):
 
 def _zarr_store(path):
     """A Zarr directory store whose missing chunk is an error naming it: a store without a fill value would
-    otherwise read it as uninitialised memory (spadgen writes every chunk: one missing is damage)."""
+    otherwise read it as uninitialised memory (spadgen writes every chunk: one missing is damage). A Blosc
+    chunk shorter or longer than its header says (cut short by a full disk or a copy) is an error naming it
+    too, where Blosc's own says only "error during blosc decompression: -1"."""
+    import json
     import re
     import zarr
+
+    try:
+        with open(os.path.join(path, ".zarray"), "rb") as f:
+            blosc = (json.load(f).get("compressor") or {}).get("id") == "blosc"
+    except (OSError, ValueError, AttributeError):
+        blosc = False  # zarr reports a store without a readable .zarray itself
 
     class StrictStore(zarr.storage.DirectoryStore):
         _chunk = re.compile(r"^\d+(\.\d+)*$")
 
         def __getitem__(self, key):
             try:
-                return super().__getitem__(key)
+                value = super().__getitem__(key)
             except KeyError:
                 if self._chunk.match(key.rsplit("/", 1)[-1]):
                     raise FileNotFoundError(f"{os.path.join(path, key)}: a chunk of this Zarr store is missing (spadgen "
                                             "writes every chunk: the store was damaged after the run published it): "
                                             "restore it, or run the scene again") from None
                 raise
+            if blosc and self._chunk.match(key.rsplit("/", 1)[-1]):
+                # Blosc's 16-byte header: bytes 12-15 hold the chunk's compressed size, little-endian.
+                stated = int.from_bytes(value[12:16], "little") if len(value) >= 16 else None
+                if stated != len(value):
+                    raise OSError(f"{os.path.join(path, key)}: a chunk of this Zarr store holds {len(value)} bytes, "
+                                  + (f"its Blosc header says {stated}" if stated is not None else "less than a Blosc header")
+                                  + ": it was cut short or damaged after the run published it; restore it, or run the "
+                                  "scene again")
+            return value
 
     return StrictStore(path)
 

@@ -134,3 +134,23 @@ def test_a_missing_chunk_is_an_error_naming_it(make_run, tmp_path):
     os.remove(store / chunks[-1])
     with pytest.raises(FileNotFoundError, match=f"{store / chunks[-1]}: a chunk of this Zarr store is missing"):
         np.asarray(open_run(run_dir).counts)
+
+
+def test_a_cut_short_chunk_is_an_error_naming_it(make_run, tmp_path):
+    """A chunk cut short (a full disk, an interrupted copy) made Blosc say only "error during blosc
+    decompression: -1": the error names the chunk and the sizes; one of the right length reads as before."""
+    import os
+    import shutil
+    run_dir = tmp_path / "run"
+    shutil.copytree(make_run("sweep_zarr"), run_dir)
+    store = run_dir / "counts.zarr"
+    chunk = store / sorted(n for n in os.listdir(store) if not n.startswith("."))[0]
+    data = chunk.read_bytes()
+    assert int.from_bytes(data[12:16], "little") == len(data)  # the header spadgen wrote states the chunk's size
+    expected = np.asarray(open_run(run_dir).counts)
+    for cut in (len(data) - 1, 100, 10):
+        chunk.write_bytes(data[:cut])
+        with pytest.raises(OSError, match=f"{chunk}: a chunk of this Zarr store holds {cut} bytes"):
+            np.asarray(open_run(run_dir).counts)
+    chunk.write_bytes(data)
+    assert same_bytes(np.asarray(open_run(run_dir).counts), expected)
