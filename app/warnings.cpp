@@ -1,5 +1,6 @@
 #include "app/warnings.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 
@@ -44,35 +45,35 @@ std::vector<std::string> camera_warnings(const RunConfig& c, const scenes::Scene
 
 std::vector<std::string> laser_warnings(const RunConfig& c, const render::Camera& camera, const scenes::Scene* scene) {
   std::vector<std::string> w;
-  // The glTF's positions are floats in world coordinates: far from its origin they are coarse. The spacing
-  // of floats at the camera (the scene it sees is near it).
-  const double from_origin = glm::length(camera.position());
-  const double spacing = from_origin > 0.0 ? std::ldexp(1.0, std::ilogb(from_origin) - 23) : 0.0;
-  // The renderer works in a frame centred on the camera: a path's next ray steps off a transmissive
-  // surface by kOffsetUlps ulps of the surface's distance from the camera.
+  const auto spacing = [](double at) { return at > 0.0 ? std::ldexp(1.0, std::ilogb(at) - 23) : 0.0; };
   if (scene) {
-    double farthest = 0.0;
-    std::string mesh;
+    // The renderer works in a frame centred on the camera: a path's next ray steps off a transmissive
+    // surface by kOffsetUlps ulps of the surface's distance from the camera.
+    double farthest = 0.0, coarsest = 0.0;
+    std::string far_mesh, coarse_mesh;
     for (const scenes::Mesh& m : scene->meshes) {
-      if (m.material < 0 || !scene->materials[size_t(m.material)].transmissive()) continue;
+      const bool transmissive = m.material >= 0 && scene->materials[size_t(m.material)].transmissive();
       for (const glm::vec3& p : m.positions) {
-        const double d = glm::length(glm::dvec3(p) - camera.position());
-        if (d > farthest) farthest = d, mesh = m.name;
+        // Floats measured from the mesh's offset (its node's place): their spacing is that of their size.
+        const double size = std::max({std::fabs(double(p.x)), std::fabs(double(p.y)), std::fabs(double(p.z))});
+        if (size > coarsest) coarsest = size, coarse_mesh = m.name;
+        if (!transmissive) continue;
+        const double d = glm::length(glm::dvec3(p) + m.offset - camera.position());
+        if (d > farthest) farthest = d, far_mesh = m.name;
       }
     }
     if (farthest >= kWarnTransmissiveFromCameraM) {
-      const double step = double(render::kOffsetUlps) * std::ldexp(1.0, std::ilogb(farthest) - 23);
-      w.push_back("the transmissive mesh '" + mesh + "' reaches " + g(farthest) + " m from the camera, where the renderer "
+      const double step = double(render::kOffsetUlps) * spacing(farthest);
+      w.push_back("the transmissive mesh '" + far_mesh + "' reaches " + g(farthest) + " m from the camera, where the renderer "
                   "moves each path's next ray up to " + g(step * 1e3) + " mm off the surface it leaves (" +
                   g(render::kOffsetUlps) + " float ulps of its distance from the camera): a plate about that thin or "
                   "thinner that far loses the light behind its back face (the ground truth is exact)");
     }
-  }
-  if (from_origin >= kWarnFromOriginM) {
-    w.push_back("the camera is " + g(from_origin) + " m from the glTF scene's origin, where the glTF's float positions are " +
-                g(spacing * 1e3) + " mm apart: depths and times of flight (" + g(2.0 * spacing / kSpeedOfLight * 1e12) +
-                " ps) are that coarse; move the scene and the camera near the origin (camera.position_m, "
-                "nodes.NAME.translation_m)");
+    if (coarsest >= kWarnCoarseVerticesM)
+      w.push_back("the mesh '" + coarse_mesh + "' has vertices " + g(coarsest) + " m from its node's place (the glTF's POSITION "
+                  "values times the node's scale and rotation), where floats are " + g(spacing(coarsest) * 1e3) +
+                  " mm apart: its depths and times of flight (" + g(2.0 * spacing(coarsest) / kSpeedOfLight * 1e12) +
+                  " ps) are that coarse; split it into nodes placed near their parts");
   }
   const double pixel_angle_rad = camera.pitch_m() / camera.focal_length_m();
   if (c.laser.beam != Beam::Cone || !(pixel_angle_rad > 0.0)) return w;

@@ -41,13 +41,13 @@ bool is_sensor_warning(const std::string& warning);
 // field of view (the camera's pitch over its focal length), so small that a pixel's camera paths land on it
 // fewer than kWarnSpotPaths times on average: its light is found by chance (noisy, or absent from the image).
 inline constexpr double kWarnSpotPaths = 16.0;
-// And a camera this far from the glTF scene's origin or farther (the glTF's float positions there are 0.12
-// mm apart or more): the float spacing there and what it does.
-inline constexpr double kWarnFromOriginM = 1024.0;
-// With scene given: a transmissive surface this far from the camera or farther. The renderer works in a
-// frame centred on the camera and moves each path's next ray render::kOffsetUlps float ulps of its
-// coordinates off the surface it leaves (render/embree_scene.h offset_ray_origin), 1.95 mm at 64 m, which
-// steps over the back face of a plate about as thin.
+// With scene given: a mesh whose vertices lie this far or farther from the point they are measured from
+// (scenes::Mesh::offset, its node's place: floats there are 0.12 mm apart or more), the float spacing there
+// and what it does; and a transmissive surface this far from the camera or farther (kWarnTransmissiveFromCameraM).
+// The renderer works in a frame centred on the camera and moves each path's next ray render::kOffsetUlps
+// float ulps of its coordinates off the surface it leaves (render/embree_scene.h offset_ray_origin), 1.95
+// mm at 64 m, which steps over the back face of a plate about as thin.
+inline constexpr double kWarnCoarseVerticesM = 1024.0;
 inline constexpr double kWarnTransmissiveFromCameraM = 64.0;
 std::vector<std::string> laser_warnings(const RunConfig& c, const render::Camera& camera,
                                         const scenes::Scene* scene = nullptr);

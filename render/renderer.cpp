@@ -38,11 +38,15 @@ void put_object_laser(ObjectLaser* objects, int64_t pixel, GroundTruthTile* gt, 
   gt->indirect_laser[size_t(pixel)] = static_cast<float>(objects->indirect * scale);
 }
 
-// The scene with every world position measured from `origin`, in double before rounding to float once.
+// The scene with every world position measured from `origin`, in double before rounding to float once
+// (each mesh's from its offset: the renderer's meshes have offset 0).
 scenes::Scene centred_on(const scenes::Scene& world, const glm::dvec3& origin) {
   scenes::Scene s = world;
-  for (scenes::Mesh& m : s.meshes)
-    for (glm::vec3& p : m.positions) p = glm::vec3(glm::dvec3(p) - origin);
+  for (scenes::Mesh& m : s.meshes) {
+    const glm::dvec3 shift = m.offset - origin;
+    for (glm::vec3& p : m.positions) p = glm::vec3(glm::dvec3(p) + shift);
+    m.offset = glm::dvec3(0.0);
+  }
   for (scenes::Light& l : s.lights) l.position -= origin;
   for (scenes::Camera& c : s.cameras) c.world_from_camera[3] -= glm::dvec4(origin, 0.0);
   for (scenes::Node& n : s.nodes)

@@ -1026,11 +1026,12 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
   };
   morph("POSITION", pos);
   const std::vector<glm::dmat4> skinned = gn.skin >= 0 ? skin_matrices(node, p, n, who) : std::vector<glm::dmat4>{};
+  out.offset = glm::round(glm::dvec3(world[3]) / kMeshOffsetGridM) * kMeshOffsetGridM;
   out.positions.resize(n);
   for (size_t v = 0; v < n; ++v) {
     const glm::dvec4 w = (skinned.empty() ? world : skinned[v]) * glm::dvec4(pos[3 * v], pos[3 * v + 1], pos[3 * v + 2], 1.0);
     check_world(glm::dvec3(w), who, "POSITION element " + std::to_string(v));
-    out.positions[v] = glm::vec3(w);
+    out.positions[v] = glm::vec3(glm::dvec3(w) - out.offset);
   }
   const glm::dmat3 normal_matrix = glm::transpose(glm::inverse(glm::dmat3(world)));
   if (auto it = p.attributes.find("NORMAL"); it != p.attributes.end()) {

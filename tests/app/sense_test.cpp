@@ -366,15 +366,21 @@ TEST_F(App, AConeNarrowerThanAPixelIsWarnedAbout) {
   EXPECT_THAT(sh(info + "--set laser.half_angle_deg=0.1 --set render.samples_per_pixel=1").output, Not(HasSubstr("lights a spot")));
 }
 
-// A camera far from the glTF scene's origin, where the glTF's float positions are coarse (at 1e5 m, 7.8 mm
-// apart), is warned about with the spacing; at 1000 m (0.06 mm) it is not.
-TEST_F(App, ACameraFarFromTheSceneOriginIsWarnedAbout) {
+// The glTF's positions are measured from their node's place (scenes::Mesh::offset) and the renderer's from
+// the camera: a camera and scene 1e5 m from the origin are not warned about. A mesh whose own vertices lie
+// 1024 m or more from its node's place is, with the float spacing there (the target, its corners 2 m out, scaled by 3000:
+// vertices 6000 m out, floats 0.49 mm apart).
+TEST_F(App, AMeshWithCoarseVerticesIsWarnedAbout) {
   const std::string info = "info " + kScenes + "flat_target.json ";
-  Result r = sh(info + "--set camera.position_m=[100000,0,0] --set camera.look_at_m=[100000,0,-1]");
-  EXPECT_THAT(r.output, HasSubstr("warning: the camera is 1e+05 m from the glTF scene's origin, where the glTF's float "
-                                  "positions are 7.812 mm apart: depths and times of flight (52.12 ps) are that coarse"));
-  r = sh(info + "--set camera.position_m=[0,1000,0] --set camera.look_at_m=[0,1000,-1]");
-  EXPECT_THAT(r.output, Not(HasSubstr("from the glTF scene's origin")));
+  Result r = sh(info + "--set camera.position_m=[100000,0,1] --set camera.look_at_m=[100000,0,0] "
+                       "--set nodes.target.translation_m=[100000,0,0]");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, Not(HasSubstr("floats are")));
+  r = sh(info + "--set nodes.target.scale=[3000,3000,1]");
+  EXPECT_THAT(r.output, HasSubstr("warning: the mesh 'target/target/0' has vertices 6000 m from its node's place (the glTF's "
+                                  "POSITION values times the node's scale and rotation), where floats are 0.4883 mm apart"));
+  r = sh(info + "--set nodes.target.scale=[300,300,1]");  // 600 m
+  EXPECT_THAT(r.output, Not(HasSubstr("floats are")));
 }
 
 // A laser the pixels cannot detect (1550 nm: beyond the built-in PDP curve) is warned about, naming the

@@ -411,6 +411,29 @@ TEST(Transport, ASceneFarFromTheOriginRendersAsNearIt) {
   EXPECT_NEAR(t_b / total_b, t_a / total_a, 0.5e-12);
 }
 
+// A mesh's positions are measured from its offset (scenes::Mesh::offset, where the glTF loader puts a node
+// far from the origin): the same plate and wall 123 km away, offset there, with the camera in front of them
+// render bit for bit as at the origin.
+TEST(Transport, AMeshesPositionsAreMeasuredFromItsOffset) {
+  const glm::dvec3 far(12345.678, -98765.4321, 123456.5);
+  RenderStageConfig c = test_config(8, 8, 12e-3);
+  c.render.samples_per_pixel = 64;
+  RenderStageConfig cf = c;
+  cf.camera.position_m = {far.x, far.y, far.z};
+  cf.camera.look_at_m = {far.x, far.y, far.z - 1.0};
+  scenes::Scene moved = wall_behind_plate(true, 0.1f);
+  for (scenes::Mesh& m : moved.meshes) m.offset = far;
+  const TimeAxis axis{6.6e-9, 0.5e-12, 300, 25e-9};
+  const Renderer near_r(wall_behind_plate(true, 0.1f), c), far_r(moved, cf);
+  const TransientTile a = near_r.transient({0, 0, 8, 8}, {0, 0, 8, 8}, axis);
+  const TransientTile b = far_r.transient({0, 0, 8, 8}, {0, 0, 8, 8}, axis);
+  EXPECT_EQ(a.laser_total, b.laser_total);
+  EXPECT_EQ(a.transient, b.transient);
+  const GroundTruthTile ga = near_r.ground_truth({0, 0, 8, 8}), gb = far_r.ground_truth({0, 0, 8, 8});
+  EXPECT_EQ(ga.layer_range, gb.layer_range);
+  EXPECT_GT(std::accumulate(a.laser_total.begin(), a.laser_total.end(), 0.0), 0.0);
+}
+
 // A glossy plate whose sides collapse (its two faces at one z: a 2 mm plate 70 km from the origin, where
 // floats are 7.8 mm apart, rounds so) crashed the renderer's search for the plate's edges (a degenerate
 // triangle shares "two corners" with a neighbour and leaves no third). Its degenerate triangles are never

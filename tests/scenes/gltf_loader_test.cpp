@@ -84,6 +84,33 @@ TEST(GltfLoader, MatrixAndHierarchy) {
   EXPECT_EQ(s.meshes[0].name, "child/Tri/0");
 }
 
+// A node far from the origin: its mesh's positions are measured from the node's place rounded to a 64 m
+// grid (Mesh::offset), in double before rounding to float, so a 2 mm plate 70 km away keeps its thickness
+// (world floats there are 7.8 mm apart: its faces rounded onto one plane, and the renderer crashed on the
+// collapsed sides). A node within 32 m of the origin keeps world positions (offset 0).
+TEST(GltfLoader, AMeshFarFromTheOriginIsMeasuredFromItsNode) {
+  TempDir dir;
+  Gltf g;
+  const int pos = g.positions({-0.2f, -0.2f, 0, 0.2f, -0.2f, 0, 0.2f, 0.2f, -0.002f});
+  const int m = g.mesh(json::array({{{"attributes", {{"POSITION", pos}}}}}), "Tri");
+  const glm::dvec3 far(50000.3, -70000.7, 123456.0);
+  g.node({{"name", "far"}, {"mesh", m}, {"translation", {far.x, far.y, far.z}}});
+  g.node({{"name", "near"}, {"mesh", m}, {"translation", {31.0, 0, -20.0}}});
+  const Scene s = load_gltf(g.write(dir.path(), "far"));
+  ASSERT_EQ(s.meshes.size(), 2u);
+  const auto& f = s.meshes[0];
+  // The grid point nearest the node: a multiple of 64 m in each coordinate, within 32 m of it.
+  EXPECT_EQ(f.offset, glm::dvec3(781 * 64.0, -1094 * 64.0, 1929 * 64.0));
+  for (int c = 0; c < 3; ++c) EXPECT_LE(std::fabs(far[c] - f.offset[c]), 32.0);
+  const double corner[3][3] = {{-0.2, -0.2, 0}, {0.2, -0.2, 0}, {0.2, 0.2, -0.002}};
+  for (size_t v = 0; v < 3; ++v)
+    for (int c = 0; c < 3; ++c)  // the float of (node + the file's float) - offset: within 2 um of the world
+      EXPECT_NEAR(f.offset[c] + double(f.positions[v][c]), far[c] + double(float(corner[v][c])), 2e-6) << v << "," << c;
+  EXPECT_NEAR(double(f.positions[0].z) - double(f.positions[2].z), 0.002, 4e-6);  // 0 in world floats
+  EXPECT_EQ(s.meshes[1].offset, glm::dvec3(0.0));
+  expect_vec(s.meshes[1].positions[0], {30.8, -0.2, -20.0});
+}
+
 // An object of an unnamed node (Khronos' Box.gltf: a named-less child holds the mesh) is labelled by its
 // node in the summary, not as a mesh without node.
 TEST(GltfLoader, SummaryLabelsAnUnnamedNodesObjectByItsIndex) {
