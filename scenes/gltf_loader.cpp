@@ -855,6 +855,11 @@ int Loader::texture(int gltf_texture, const std::string& user) {
             fail(label("sampler", static_cast<size_t>(t.sampler), s.name), "wrap mode " + std::to_string(wrap) + " is not a glTF wrap mode");
         tex.wrap_s = s.wrapS;
         tex.wrap_t = s.wrapT;
+        // NEAREST (9728) and its mipmap variants (9984 NEAREST_MIPMAP_NEAREST, 9986 NEAREST_MIPMAP_LINEAR).
+        for (int filter : {s.magFilter, s.minFilter})
+          if (filter == 9728 || filter == 9984 || filter == 9986)
+            warn(label("sampler", static_cast<size_t>(t.sampler), s.name) +
+                 ": NEAREST filtering is not used; its textures are filtered bilinearly");
       }
       scene_.textures.push_back(std::move(tex));
       result = static_cast<int>(scene_.textures.size()) - 1;
@@ -1206,12 +1211,17 @@ void Loader::load_light(size_t node, const glm::dmat4& world) {
   else
     fail(who, "type " + quoted(g.type) + " is not point, spot or directional");
   const glm::dvec3 color = vec3(g.color, {1, 1, 1}, who, "color");
-  if (color.x < 0 || color.y < 0 || color.z < 0) fail(who, "color has a negative value");
+  if (!(color.x >= 0 && color.y >= 0 && color.z >= 0 && color.x <= 1 && color.y <= 1 && color.z <= 1))
+    fail(who, "color [" + num(color.x) + ", " + num(color.y) + ", " + num(color.z) +
+                  "] must lie in [0, 1] (glTF 2.0; the intensity carries the brightness)");
   l.color = glm::vec3(color);
   if (!(g.intensity >= 0) || !std::isfinite(g.intensity)) fail(who, "intensity " + num(g.intensity) + " must be >= 0");
   l.intensity = g.intensity;
   if (!(g.range >= 0) || !std::isfinite(g.range)) fail(who, "range " + num(g.range) + " must be > 0");
   l.range = g.range;
+  if (g.range > 0)
+    warn(who + ": range " + num(g.range) + " m is not used; the light falls off as the inverse square of the distance "
+               "without a cutoff");
   if (l.type == Light::Type::Spot) {
     const double inner = g.spot.innerConeAngle, outer = g.spot.outerConeAngle;
     if (!(inner >= 0 && inner < outer && outer <= kPi / 2 + 1e-9))

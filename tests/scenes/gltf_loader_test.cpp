@@ -474,7 +474,7 @@ TEST(GltfLoader, BaseColorTexturesFromDataUriFileAndBufferView) {
   g.doc["images"] = {{{"uri", std::string("data:image/png;base64,") + kPng2x2}},
                      {{"uri", "checker.png"}},
                      {{"bufferView", png_view}, {"mimeType", "image/png"}, {"name", "in_buffer"}}};
-  g.doc["samplers"] = {{{"wrapS", 33071}, {"wrapT", 33648}}};
+  g.doc["samplers"] = {{{"wrapS", 33071}, {"wrapT", 33648}, {"magFilter", 9728}}};  // NEAREST: warned, bilinear
   g.doc["textures"] = {{{"source", 0}, {"sampler", 0}, {"name", "uri_tex"}}, {{"source", 1}}, {{"source", 2}}};
   g.doc["materials"] = {{{"name", "A"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}, {"texCoord", 1}}}}}},
                         {{"name", "B"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 1}}}}}},
@@ -485,6 +485,11 @@ TEST(GltfLoader, BaseColorTexturesFromDataUriFileAndBufferView) {
     const Scene s = load_gltf(g.write(dir.path(), "textures", form));
     ASSERT_EQ(s.materials.size(), 4u);
     ASSERT_EQ(s.textures.size(), 3u);  // material D shares texture 0
+    EXPECT_EQ(std::count_if(s.warnings.begin(), s.warnings.end(),
+                            [](const std::string& w) {
+                              return w == "sampler 0: NEAREST filtering is not used; its textures are filtered bilinearly";
+                            }),
+              1);
     EXPECT_EQ(s.materials[0].base_color_texture, 0);
     EXPECT_EQ(s.materials[3].base_color_texture, 0);
     EXPECT_EQ(s.materials[0].base_color_texcoord, 1);
@@ -672,6 +677,14 @@ TEST(GltfLoader, PunctualLights) {
   EXPECT_EQ(sun->type, Light::Type::Directional);
   EXPECT_NEAR(sun->direction.x, -1.0, 1e-9);
   EXPECT_THAT(spadgen::scenes::summarize(s), HasSubstr("'Spot': spot, intensity 100 cd"));
+  // range is a cutoff spadgen does not apply: said once (it was dropped silently); a colour above 1 is not
+  // glTF 2.0's (each component in [0, 1]): refused, as material colours are.
+  ASSERT_EQ(s.warnings.size(), 1u);
+  EXPECT_THAT(s.warnings[0], HasSubstr("light 0 'bulb'"));
+  EXPECT_THAT(s.warnings[0], HasSubstr("range 3 m is not used; the light falls off as the inverse square"));
+  g.doc["extensions"]["KHR_lights_punctual"]["lights"][0]["color"] = {1.5, 0.5, 0.25};
+  EXPECT_THAT(load_error(g.write(dir.path(), "light_colour")),
+              HasSubstr("light 0 'bulb' (node 0 'Bulb'): color [1.5, 0.5, 0.25] must lie in [0, 1]"));
 }
 
 // ---------------------------------------------------------------------------------------------
