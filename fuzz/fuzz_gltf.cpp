@@ -36,9 +36,11 @@ void remove_dir() {
   fs::remove_all(g_dir, ec);
 }
 
-bool finite_bounded(const glm::vec3& p) {
+// A world point (the loader checks every vertex within +-1e9 m; positions are measured from the mesh's
+// offset, within half its 64 m grid of the node's place).
+bool finite_bounded(const glm::dvec3& p) {
   for (int i = 0; i < 3; ++i)
-    if (!std::isfinite(p[i]) || std::fabs(p[i]) > 1e9f) return false;
+    if (!std::isfinite(p[i]) || std::fabs(p[i]) > 1e9 + 64.0) return false;
   return true;
 }
 
@@ -49,7 +51,7 @@ void check(const Scene& s) {
     for (uint32_t i : m.indices)
       if (i >= n) broken(m.name + ": index past the vertices");
     for (const glm::vec3& p : m.positions)
-      if (!finite_bounded(p)) broken(m.name + ": a vertex not finite or beyond 1e9 m");
+      if (!finite_bounded(glm::dvec3(p) + m.offset)) broken(m.name + ": a vertex not finite or beyond 1e9 m");
     if (!m.normals.empty() && m.normals.size() != n) broken(m.name + ": normals not one per vertex");
     for (const glm::vec3& v : m.normals)
       if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z)) broken(m.name + ": a normal not finite");
