@@ -578,6 +578,11 @@ void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string
               format_bound(g.start_s / kNs) + " to " + format_bound(g.stop_s / kNs) +
               " ns (/acquisition/gate_sweep/start_ns, stop_ns); expected at most " + std::to_string(kMaxGatePositions) +
               " positions: a larger step or a shorter sweep");
+    if (c.render.time_bin_s > g.step_s * (1.0 + 1e-9))
+      warnings.push_back("render.time_bin_ps: bins of " + format_bound(c.render.time_bin_s / kPs) +
+                         " ps are wider than the gate sweep's step of " + format_bound(g.step_s / kPs) +
+                         " ps: the sensor takes the light as constant within each bin, so a return's edge in the counts is "
+                         "spread over a bin (docs/accuracy.md measures the depth error of the bin width)");
     const double exposure = static_cast<double>(c.acquisition.cycles_per_frame) / c.laser.repetition_rate_Hz;
     if (exposure > 1.0 / c.acquisition.frame_rate_Hz)
       warnings.push_back("acquisition.cycles_per_frame: " + std::to_string(c.acquisition.cycles_per_frame) +

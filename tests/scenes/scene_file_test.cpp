@@ -349,6 +349,16 @@ TEST_F(SceneFileTest, ExposureLongerThanAFrameIsAWarning) {
   EXPECT_TRUE(parse(R"({"gltf": "s.gltf"})").warnings.empty());
 }
 
+// Bins wider than the gate sweep's step smear each return's edge over a bin (the sensor takes the light as
+// constant within a bin): 1e6 ps bins made every gate position count the same, silently. At the step, no.
+TEST_F(SceneFileTest, BinsWiderThanTheGateStepAreAWarning) {
+  const ResolvedRun r = parse(R"({"gltf": "s.gltf", "render": {"time_bin_ps": 50}})");
+  ASSERT_EQ(r.warnings.size(), 1u);
+  EXPECT_THAT(r.warnings[0], HasSubstr("render.time_bin_ps: bins of 50 ps are wider than the gate sweep's step of 36 ps"));
+  EXPECT_TRUE(parse(R"({"gltf": "s.gltf", "render": {"time_bin_ps": 36}})").warnings.empty());
+  EXPECT_TRUE(parse(R"({"gltf": "s.gltf", "render": {"time_bin_ps": 50}, "acquisition": {"mode": "intensity"}})").warnings.empty());
+}
+
 // A key that the other settings make do nothing, given a value other than its default, is a warning naming
 // the key, its value and the setting that ignores it; at its default, or where it takes effect, it is not.
 TEST_F(SceneFileTest, KeysThatDoNothingInTheChosenModeAreWarnings) {
