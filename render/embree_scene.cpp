@@ -54,19 +54,12 @@ float facing(const RTCFilterFunctionNArguments* args, unsigned i) {
 // culled when the ray meets its back); a ray towards a light (every occluded ray, and intersect rays with
 // toward_light; both carry kTowardLight in their id) stands for light coming the other way, which meets
 // the surface from the other side (culled when the ray meets its front), as the light itself sees the scene.
-// Set when the filter culls a back face for a ray that is not towards a light: intersect() reports whether
-// its ray may have passed one (the filter runs on the calling thread; a face beyond the closest hit may set it too).
-thread_local bool t_passed_back_face = false;
-
 void cull_back_faces(const RTCFilterFunctionNArguments* args) {
   for (unsigned i = 0; i < args->N; ++i) {
     if (args->valid[i] == 0) continue;
     const float d = facing(args, i);
     const bool to_light = (RTCRayN_id(args->ray, args->N, i) & kTowardLight) != 0;
-    if (to_light ? d < 0.0f : d > 0.0f) {
-      args->valid[i] = 0;
-      if (!to_light) t_passed_back_face = true;
-    }
+    if (to_light ? d < 0.0f : d > 0.0f) args->valid[i] = 0;
   }
 }
 
@@ -124,9 +117,7 @@ EmbreeScene::~EmbreeScene() {
   if (device_) rtcReleaseDevice(device_);
 }
 
-bool EmbreeScene::intersect(const glm::vec3& o, const glm::vec3& d, float tnear, float tfar, RayHit* hit, bool toward_light,
-                            bool* passed_back_face) const {
-  t_passed_back_face = false;
+bool EmbreeScene::intersect(const glm::vec3& o, const glm::vec3& d, float tnear, float tfar, RayHit* hit, bool toward_light) const {
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
   RTCRayHit rh;
@@ -141,7 +132,6 @@ bool EmbreeScene::intersect(const glm::vec3& o, const glm::vec3& d, float tnear,
   rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
   rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
   rtcIntersect1(scene_, &context, &rh);
-  if (passed_back_face) *passed_back_face = t_passed_back_face;
   if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
   hit->t = rh.ray.tfar;
   hit->mesh = rh.hit.geomID;

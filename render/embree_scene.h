@@ -34,10 +34,8 @@ class EmbreeScene {
   // Closest hit on (tnear, tfar) along origin + t dir (dir need not be unit; t is in units of |dir|).
   // toward_light: the ray goes from a point towards a light (the laser), and a single-sided surface is
   // culled as the light sees it, from the other side (occluded and occluded_packet always are).
-  // passed_back_face (not null): whether the ray may have passed a single-sided surface's back (false: it
-  // certainly did not; true also when the face culled lay beyond the hit).
   bool intersect(const glm::vec3& origin, const glm::vec3& dir, float tnear, float tfar, RayHit* hit,
-                 bool toward_light = false, bool* passed_back_face = nullptr) const;
+                 bool toward_light = false) const;
   // kPacket rays at once (rtcIntersect16: the coherent camera rays of 16 pixels). Lanes with valid[i]
   // false are not traced; found[i] tells whether lane i hit anything, hit[i] where.
   static constexpr int kPacket = 16;

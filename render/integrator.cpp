@@ -274,13 +274,6 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
       }
   }
   ambient_on_ = ambient.any() || shading.has_emission();
-  single_sided_.resize(scene.meshes.size());
-  for (size_t m = 0; m < scene.meshes.size(); ++m) {
-    const int mat = scene.meshes[m].material;  // as EmbreeScene culls: the glTF default material is single-sided
-    const scenes::Material* sm = mat >= 0 && size_t(mat) < scene.materials.size() ? &scene.materials[size_t(mat)] : nullptr;
-    single_sided_[m] = sm ? (!sm->double_sided && !sm->transmissive()) : 1;
-    sky_culls_ |= single_sided_[m] && ambient.environment_radiance > 0.0;
-  }
   optics_ = config.camera.optics_transmission;
   period_opl_ = kSpeedOfLight / config.laser.repetition_rate_Hz;
   // The one check left here is of the interface, not of the scene file: the rows the caller describes.
@@ -482,13 +475,13 @@ struct Integrator::NeeVertex {
 };
 
 inline bool Integrator::next_hit(const CameraBlock& block, size_t j, bool camera_ray, const glm::vec3& o,
-                                const glm::vec3& d, RayHit* hit, RayCounts* rays, bool* passed_back_face) const {
+                                const glm::vec3& d, RayHit* hit, RayCounts* rays) const {
   if (camera_ray) {
     *hit = block.hit[j];
     return block.found[j] != 0;
   }
   ++rays->bounce;
-  return embree_.intersect(o, d, 0.0f, kInf, hit, false, passed_back_face);
+  return embree_.intersect(o, d, 0.0f, kInf, hit);
 }
 
 inline Surface Integrator::surface_at(const CameraBlock& block, size_t j, bool camera_ray, const RayHit& hit) const {
@@ -1296,18 +1289,7 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
     for (int i = 0; i + 1 < kAhead; ++i) ghost_nee[i] = ghost_nee[i + 1], ghost_guided[i] = ghost_guided[i + 1];
     ghost_nee[kAhead - 1] = ghost_guided[kAhead - 1] = 1.0;
     RayHit hit;
-    bool passed_back_face = false;
-    const bool found = next_hit(block, j, camera_ray, o, d, &hit, rays, &passed_back_face);
-    if (sky_culls_ && !camera_ray && (found ? single_sided_[hit.mesh] != 0 : passed_back_face)) {
-      // The sky is a light: a single-sided surface exists for it seen from its own side only (embree_scene.cpp
-      // cull_back_faces), the side a bounce ray towards it meets from the other. Where the ray met no such
-      // surface (it escaped past no back face, or hit a double-sided or transmissive surface, whose light the
-      // path carries) both agree; else one more ray, culled as towards a light, decides (a sheet above a floor
-      // shadows it from the sky when it faces up, not when it faces down).
-      ++rays->ambient;
-      if (!embree_.occluded(o, d, 0.0f, kInf)) gather_environment(beta, &ambient);
-      if (!found) break;
-    } else if (!found) {
+    if (!next_hit(block, j, camera_ray, o, d, &hit, rays)) {
       gather_environment(beta, &ambient);
       break;
     }

@@ -252,10 +252,9 @@ class Integrator {
 
   // Packet plumbing: the camera ray's hit and surface, and the laser shadow ray from that hit with its
   // first segment, come from trace_camera_block, which traces them as packets (neighbouring pixels' rays
-  // are coherent, and their shadow rays converge on the laser); every later ray is traced one at a time,
-  // and *passed_back_face tells whether it may have passed a single-sided surface's back (EmbreeScene::intersect).
+  // are coherent, and their shadow rays converge on the laser); every later ray is traced one at a time.
   bool next_hit(const CameraBlock& block, size_t j, bool camera_ray, const glm::vec3& o, const glm::vec3& d,
-                RayHit* hit, RayCounts* rays, bool* passed_back_face) const;
+                RayHit* hit, RayCounts* rays) const;
   Surface surface_at(const CameraBlock& block, size_t j, bool camera_ray, const RayHit& hit) const;
   bool ahead_shadow(const CameraBlock& block, size_t j, LaserRay* lr, FirstSegment* first) const;
 
@@ -304,10 +303,6 @@ class Integrator {
   const Ambient& ambient_;
   bool transmission_ = false;
   bool ambient_on_ = false;
-  // The environment lights the scene and a surface is single-sided: bounce rays test the sky as it sees
-  // the scene (Integrator::path), single_sided_[mesh] the meshes culled from behind.
-  bool sky_culls_ = false;
-  std::vector<uint8_t> single_sided_;
   double optics_ = 1.0;
   double period_opl_ = 0.0;  // c / f_rep: the optical path of one laser period, metres
 };

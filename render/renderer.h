@@ -43,7 +43,7 @@ struct RayCounts {
   // guided connections and ghost draws: their targets' search, their rays and the laser connections at their
   // ends
   uint64_t guided = 0;
-  uint64_t ambient = 0;    // shadow rays to the glTF's punctual lights, and to the sky past single-sided surfaces
+  uint64_t ambient = 0;    // shadow rays to the glTF's punctual lights
   uint64_t indirect = 0;   // of all the above, those a path traced after its first non-delta vertex (render.max_bounces > 1)
   uint64_t total() const { return camera + bounce + laser + refracted + guided + ambient; }
   RayCounts& operator+=(const RayCounts& o) {
