@@ -179,6 +179,37 @@ TEST(Transport, AmbientEnvironmentGivesTheCosFourthFalloff) {
     }
 }
 
+// The sky, all around, reaches a point along a bounce ray that escapes as the point sees the scene (the
+// camera's rule for single-sided surfaces, not the lights': docs/render.md), so that a single-sided ground
+// shades what stands on it from the sky below. A black 10 cm sheet 10 cm above a floor, seen from behind by
+// the floor (facing up), does not shade it; facing the floor it does, to 1 - F of the bare floor (F =
+// 0.2395, the floor point's view factor of the sheet). The camera stands between them, looking down.
+TEST(Transport, ASingleSidedSheetShadesTheSkyAsTheReceivingPointSeesIt) {
+  RenderStageConfig c = test_config(8, 8, 12e-3);
+  c.render.samples_per_pixel = 4096;
+  c.ambient.illuminance_lux = 100.0;
+  const auto ambient = [&](int sheet) {  // 0: none, +1: facing up (away from the floor, +z), -1: down
+    scenes::Scene s;
+    add_quad(s, {0, 0, -0.05f}, {2, 0, 0}, {0, 2, 0}, add_material(s, test::lambertian(0.6f)));
+    if (sheet != 0)
+      add_quad(s, {0, 0, 0.05f}, {float(sheet) * 0.05f, 0, 0}, {0, 0.05f, 0}, add_material(s, test::lambertian(0.0f, false)));
+    const TransientTile t = Renderer(s, c).transient({0, 0, 8, 8}, {0, 0, 8, 8}, TimeAxis{});
+    return std::accumulate(t.ambient_rate.begin(), t.ambient_rate.end(), 0.0);
+  };
+  // Differential area to a parallel rectangle, a corner above it at height h (sides a, b in units of h): four.
+  const auto corner = [](double a, double b) {
+    const double A = a / std::sqrt(1 + a * a), B = b / std::sqrt(1 + b * b);
+    return (A * std::atan(b / std::sqrt(1 + a * a)) + B * std::atan(a / std::sqrt(1 + b * b))) / (2 * kPi);
+  };
+  const double F = 4 * corner(0.5, 0.5);
+  ASSERT_NEAR(F, 0.2395, 1e-4);
+  const double bare = ambient(0), up = ambient(1), down = ambient(-1);
+  // Each path's bounce reaches the sky or not (cosine-weighted, as the view factor weighs it): Bernoulli.
+  const double sigma = std::sqrt(F * (1 - F) / (64.0 * 4096));
+  EXPECT_NEAR(down / bare, 1 - F, 5 * sigma);
+  EXPECT_NEAR(up / bare, 1.0, 1e-12);
+}
+
 // beyond_period holds the light whose time of flight is a laser period or more: all of it for a plane
 // beyond the unambiguous range c / (2 f_rep), none of it in front; the camera rays' hits are counted for
 // the tile's own pixels.
