@@ -54,7 +54,7 @@ std::vector<std::string> laser_warnings(const RunConfig& c, const render::Camera
     for (const scenes::Mesh& m : scene->meshes) {
       const bool transmissive = m.material >= 0 && scene->materials[size_t(m.material)].transmissive();
       for (const glm::vec3& p : m.positions) {
-        // Floats measured from the mesh's offset (its node's place): their spacing is that of their size.
+        // Floats measured from the mesh's offset (the centre of its vertices): their spacing is that of their size.
         const double size = std::max({std::fabs(double(p.x)), std::fabs(double(p.y)), std::fabs(double(p.z))});
         if (size > coarsest) coarsest = size, coarse_mesh = m.name;
         if (!transmissive) continue;
@@ -70,10 +70,10 @@ std::vector<std::string> laser_warnings(const RunConfig& c, const render::Camera
                   "thinner that far loses the light behind its back face (the ground truth is exact)");
     }
     if (coarsest >= kWarnCoarseVerticesM)
-      w.push_back("the mesh '" + coarse_mesh + "' has vertices " + g(coarsest) + " m from its node's place (the glTF's POSITION "
-                  "values times the node's scale and rotation), where floats are " + g(spacing(coarsest) * 1e3) +
+      w.push_back("the mesh '" + coarse_mesh + "' has vertices " + g(coarsest) + " m from its centre, where floats are " +
+                  g(spacing(coarsest) * 1e3) +
                   " mm apart: its depths and times of flight (" + g(2.0 * spacing(coarsest) / kSpeedOfLight * 1e12) +
-                  " ps) are that coarse; split it into nodes placed near their parts");
+                  " ps) are that coarse; split it into smaller meshes");
   }
   const double pixel_angle_rad = camera.pitch_m() / camera.focal_length_m();
   if (c.laser.beam != Beam::Cone || !(pixel_angle_rad > 0.0)) return w;

@@ -42,7 +42,7 @@ bool is_sensor_warning(const std::string& warning);
 // fewer than kWarnSpotPaths times on average: its light is found by chance (noisy, or absent from the image).
 inline constexpr double kWarnSpotPaths = 16.0;
 // With scene given: a mesh whose vertices lie this far or farther from the point they are measured from
-// (scenes::Mesh::offset, its node's place: floats there are 0.12 mm apart or more), the float spacing there
+// (scenes::Mesh::offset, the centre of its vertices: floats there are 0.12 mm apart or more), the float spacing there
 // and what it does; and a transmissive surface this far from the camera or farther (kWarnTransmissiveFromCameraM).
 // The renderer works in a frame centred on the camera and moves each path's next ray render::kOffsetUlps
 // float ulps of its coordinates off the surface it leaves (render/embree_scene.h offset_ray_origin), 1.95

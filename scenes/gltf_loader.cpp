@@ -13,9 +13,11 @@
 #include <array>
 #include <cctype>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iomanip>
 #include <limits>
 #include <map>
 #include <set>
@@ -59,11 +61,21 @@ const std::set<std::string> kSupportedExtensions = {
 
 std::string quoted(const std::string& s) { return "'" + s + "'"; }
 
-// Numbers in messages as a person writes them ("0.5", "1e+308"), not std::to_string's "0.500000".
+// Numbers in messages as a person writes them ("0.5", "1e+308"), not std::to_string's "0.500000": the
+// shortest of 6 to 17 digits that reads back as v (as a float, when v is one: accessors' values are), so a
+// refused value is told from its bound (1.0000001, not 1).
 std::string num(double v) {
-  std::ostringstream s;
-  s << v;
-  return s.str();
+  const bool is_float = std::isfinite(v) && std::fabs(v) <= std::numeric_limits<float>::max() &&
+                        static_cast<double>(static_cast<float>(v)) == v;
+  std::string out;
+  for (int digits = 6; digits <= 17; ++digits) {
+    std::ostringstream s;
+    s << std::setprecision(digits) << v;
+    out = s.str();
+    const double back = std::strtod(out.c_str(), nullptr);
+    if (is_float ? static_cast<float>(back) == static_cast<float>(v) : back == v) break;
+  }
+  return out;
 }
 
 // "mesh 2 'Cube'": the index always (names need not be unique), the name when there is one.
@@ -1031,13 +1043,18 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
   };
   morph("POSITION", pos);
   const std::vector<glm::dmat4> skinned = gn.skin >= 0 ? skin_matrices(node, p, n, who) : std::vector<glm::dmat4>{};
-  out.offset = glm::round(glm::dvec3(world[3]) / kMeshOffsetGridM) * kMeshOffsetGridM;
-  out.positions.resize(n);
+  std::vector<glm::dvec3> world_pos(n);
+  glm::dvec3 lo(std::numeric_limits<double>::infinity()), hi(-std::numeric_limits<double>::infinity());
   for (size_t v = 0; v < n; ++v) {
     const glm::dvec4 w = (skinned.empty() ? world : skinned[v]) * glm::dvec4(pos[3 * v], pos[3 * v + 1], pos[3 * v + 2], 1.0);
-    check_world(glm::dvec3(w), who, "POSITION element " + std::to_string(v));
-    out.positions[v] = glm::vec3(glm::dvec3(w) - out.offset);
+    world_pos[v] = glm::dvec3(w);
+    check_world(world_pos[v], who, "POSITION element " + std::to_string(v));
+    lo = glm::min(lo, world_pos[v]), hi = glm::max(hi, world_pos[v]);
   }
+  // Where the vertices are (a skinned mesh's come from its joints, not its node).
+  if (n > 0) out.offset = glm::round(0.5 * (lo + hi) / kMeshOffsetGridM) * kMeshOffsetGridM;
+  out.positions.resize(n);
+  for (size_t v = 0; v < n; ++v) out.positions[v] = glm::vec3(world_pos[v] - out.offset);
   const glm::dmat3 normal_matrix = glm::transpose(glm::inverse(glm::dmat3(world)));
   if (auto it = p.attributes.find("NORMAL"); it != p.attributes.end()) {
     std::vector<double> nor = read_accessor(it->second, who + " NORMAL", {TINYGLTF_TYPE_VEC3}, &k, &comps);

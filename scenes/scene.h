@@ -39,16 +39,16 @@ struct Material {
   bool transmissive() const { return transmission > 0.0f; }
 };
 
-// Mesh::offset's grid: a mesh whose node lies this far from the glTF's origin or farther has its positions
-// measured from a point of this grid near the node (floats 32 m from a point are 3.8 um apart at most).
+// Mesh::offset's grid: a mesh whose vertices lie this far from the glTF's origin or farther has its positions
+// measured from a point of this grid near their centre (floats 32 m from a point are 3.8 um apart at most).
 inline constexpr double kMeshOffsetGridM = 64.0;
 
 // One glTF primitive instanced by one node, flattened into world space.
 struct Mesh {
   std::string name;        // "<node name>/<mesh name>/<primitive index>"
   int gltf_node = -1, gltf_mesh = -1, gltf_primitive = -1;
-  // World point the positions are measured from (world = offset + position, in double): the node's world
-  // translation rounded to kMeshOffsetGridM (0 for a node within 32 m of the origin), so that a scene far
+  // World point the positions are measured from (world = offset + position, in double): the centre of the
+  // vertices' bounding box rounded to kMeshOffsetGridM (0 within 32 m of the origin), so that a scene far
   // from the glTF's origin keeps its float precision (a 2 mm plate 70 km away, where world floats are 7.8
   // mm apart, keeps its thickness).
   glm::dvec3 offset{0.0};

@@ -366,9 +366,9 @@ TEST_F(App, AConeNarrowerThanAPixelIsWarnedAbout) {
   EXPECT_THAT(sh(info + "--set laser.half_angle_deg=0.1 --set render.samples_per_pixel=1").output, Not(HasSubstr("lights a spot")));
 }
 
-// The glTF's positions are measured from their node's place (scenes::Mesh::offset) and the renderer's from
+// The glTF's positions are measured from each mesh's centre (scenes::Mesh::offset) and the renderer's from
 // the camera: a camera and scene 1e5 m from the origin are not warned about. A mesh whose own vertices lie
-// 1024 m or more from its node's place is, with the float spacing there (the target, its corners 2 m out, scaled by 3000:
+// 1024 m or more from its centre is, with the float spacing there (the target, its corners 2 m out, scaled by 3000:
 // vertices 6000 m out, floats 0.49 mm apart).
 TEST_F(App, AMeshWithCoarseVerticesIsWarnedAbout) {
   const std::string info = "info " + kScenes + "flat_target.json ";
@@ -377,8 +377,8 @@ TEST_F(App, AMeshWithCoarseVerticesIsWarnedAbout) {
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_THAT(r.output, Not(HasSubstr("floats are")));
   r = sh(info + "--set nodes.target.scale=[3000,3000,1]");
-  EXPECT_THAT(r.output, HasSubstr("warning: the mesh 'target/target/0' has vertices 6000 m from its node's place (the glTF's "
-                                  "POSITION values times the node's scale and rotation), where floats are 0.4883 mm apart"));
+  EXPECT_THAT(r.output, HasSubstr("warning: the mesh 'target/target/0' has vertices 6000 m from its centre, where floats are "
+                                  "0.4883 mm apart"));
   r = sh(info + "--set nodes.target.scale=[300,300,1]");  // 600 m
   EXPECT_THAT(r.output, Not(HasSubstr("floats are")));
 }

@@ -206,6 +206,14 @@ inline void expect_vec(const glm::vec3& got, const glm::dvec3& want, double tol 
   EXPECT_NEAR(got.z, want.z, tol);
 }
 
+// Vertex v of m in the world: its float position plus the mesh's offset (scenes::Mesh::offset).
+inline void expect_world(const spadgen::scenes::Mesh& m, size_t v, const glm::dvec3& want, double tol = 1e-6) {
+  const glm::dvec3 got = glm::dvec3(m.positions[v]) + m.offset;
+  EXPECT_NEAR(got.x, want.x, tol);
+  EXPECT_NEAR(got.y, want.y, tol);
+  EXPECT_NEAR(got.z, want.z, tol);
+}
+
 inline glm::dvec3 face_normal(const spadgen::scenes::Mesh& m, size_t t) {
   const glm::dvec3 a(m.positions[m.indices[3 * t]]), b(m.positions[m.indices[3 * t + 1]]),
       c(m.positions[m.indices[3 * t + 2]]);

@@ -84,11 +84,11 @@ TEST(GltfLoader, MatrixAndHierarchy) {
   EXPECT_EQ(s.meshes[0].name, "child/Tri/0");
 }
 
-// A node far from the origin: its mesh's positions are measured from the node's place rounded to a 64 m
-// grid (Mesh::offset), in double before rounding to float, so a 2 mm plate 70 km away keeps its thickness
+// A node far from the origin: its mesh's positions are measured from the centre of its vertices rounded
+// to a 64 m grid (Mesh::offset), in double before rounding to float, so a 2 mm plate 70 km away keeps its thickness
 // (world floats there are 7.8 mm apart: its faces rounded onto one plane, and the renderer crashed on the
 // collapsed sides). A node within 32 m of the origin keeps world positions (offset 0).
-TEST(GltfLoader, AMeshFarFromTheOriginIsMeasuredFromItsNode) {
+TEST(GltfLoader, AMeshFarFromTheOriginIsMeasuredFromItsCentre) {
   TempDir dir;
   Gltf g;
   const int pos = g.positions({-0.2f, -0.2f, 0, 0.2f, -0.2f, 0, 0.2f, 0.2f, -0.002f});
@@ -99,7 +99,7 @@ TEST(GltfLoader, AMeshFarFromTheOriginIsMeasuredFromItsNode) {
   const Scene s = load_gltf(g.write(dir.path(), "far"));
   ASSERT_EQ(s.meshes.size(), 2u);
   const auto& f = s.meshes[0];
-  // The grid point nearest the node: a multiple of 64 m in each coordinate, within 32 m of it.
+  // The grid point nearest the centre of its vertices: a multiple of 64 m in each coordinate.
   EXPECT_EQ(f.offset, glm::dvec3(781 * 64.0, -1094 * 64.0, 1929 * 64.0));
   for (int c = 0; c < 3; ++c) EXPECT_LE(std::fabs(far[c] - f.offset[c]), 32.0);
   const double corner[3][3] = {{-0.2, -0.2, 0}, {0.2, -0.2, 0}, {0.2, 0.2, -0.002}};
@@ -206,8 +206,8 @@ TEST(GltfLoader, QuantizedPositionsAndByteStrides) {
   expect_vec(s.meshes[1].positions[2], {7, 8, 9});
   expect_vec(s.meshes[2].positions[0], {1, 0, -1});
   expect_vec(s.meshes[2].positions[1], {0, 16384 / 32767.0, 0});
-  expect_vec(s.meshes[3].positions[1], {0, 2000, 0});
-  expect_vec(s.meshes[3].positions[2], {0, 0, 3000});
+  expect_world(s.meshes[3], 1, {0, 2000, 0});  // measured from the grid point near its centre (Mesh::offset)
+  expect_world(s.meshes[3], 2, {0, 0, 3000});
   expect_vec(s.meshes[4].positions[1], {1, 0, 0});
   expect_vec(s.meshes[4].positions[2], {0, 1, 0});
   expect_vec(s.meshes[4].normals[1], {0, 0, 1});
@@ -384,6 +384,19 @@ TEST(GltfLoader, SkinnedMeshesArePosedByTheirJoints) {
   expect_vec(p[2], {0.5, 1.5, 0});  // half (1, 1, 0), half turned about (0, 1, 0): (0, 2, 0)
   expect_vec(p[3], {0, 1, 0});      // (0, 1, 0) on the turning axis
   EXPECT_TRUE(s.warnings.empty()) << testing::PrintToString(s.warnings);
+  // Positions are measured from where the vertices are (Mesh::offset): the body node 100 km out moves nothing
+  // (offset 0, positions exact), the skeleton 100 km out moves the offset with it.
+  g.doc["nodes"][2]["translation"] = {100000.0, 0, 0};
+  const Scene far_body = load_gltf(g.write(dir.path(), "skin_far_body"));
+  EXPECT_EQ(far_body.meshes[0].offset, glm::dvec3(0.0));
+  EXPECT_EQ(far_body.meshes[0].positions, p);
+  g.doc["nodes"][0]["translation"] = {100000.0, 0, 0};
+  const Scene far_joints = load_gltf(g.write(dir.path(), "skin_far_joints"));
+  EXPECT_EQ(far_joints.meshes[0].offset, glm::dvec3(1563 * 64.0, 0, 0));  // the grid point nearest 100000.5
+  for (size_t v = 0; v < 4; ++v)
+    for (int c = 0; c < 3; ++c)
+      EXPECT_NEAR(far_joints.meshes[0].offset[c] + double(far_joints.meshes[0].positions[v][c]),
+                  double(p[v][c]) + (c == 0 ? 100000.0 : 0.0), 1e-6);
   g.doc["meshes"][0]["primitives"][0]["attributes"].erase("WEIGHTS_0");
   EXPECT_THAT(load_error(g.write(dir.path(), "skin_bad")), HasSubstr("mesh 0 'Skinned' primitive 0: has JOINTS_0 without WEIGHTS_0"));
 }
@@ -685,6 +698,8 @@ TEST(GltfLoader, PunctualLights) {
   g.doc["extensions"]["KHR_lights_punctual"]["lights"][0]["color"] = {1.5, 0.5, 0.25};
   EXPECT_THAT(load_error(g.write(dir.path(), "light_colour")),
               HasSubstr("light 0 'bulb' (node 0 'Bulb'): color [1.5, 0.5, 0.25] must lie in [0, 1]"));
+  g.doc["extensions"]["KHR_lights_punctual"]["lights"][0]["color"] = {1.0000001, 0.5, 0.25};  // named as it is, not "1"
+  EXPECT_THAT(load_error(g.write(dir.path(), "light_colour")), HasSubstr("color [1.0000001, 0.5, 0.25] must lie in [0, 1]"));
 }
 
 // ---------------------------------------------------------------------------------------------
