@@ -182,16 +182,23 @@ void check_source(const std::string& path, const std::map<std::string, std::stri
   const nlohmann::json made = nlohmann::json::parse(it->second, nullptr, false);
   const nlohmann::json ours_all = source_fields(run);
   const std::string made_from = made.is_object() ? made.value("run", std::string("?")) : std::string("?");
+  std::string unchecked;  // what the file does not say, so was not compared
   for (const auto& [key, what] : {std::pair<std::string, std::string>{"scene_hash_fnv1a64", "scene (scene file and glTF hash)"},
                                   {"crop_in_sensor", "crop of the sensor"}}) {
-    if (!made.is_object() || !made.contains(key) || made[key].is_null()) continue;
     const nlohmann::json& ours = ours_all[key];
-    if (!ours.is_null() && made[key] != ours)
+    if (!made.is_object() || !made.contains(key) || made[key].is_null() || ours.is_null()) {
+      unchecked += (unchecked.empty() ? "" : " and its ") + what;
+      continue;
+    }
+    if (made[key] != ours)
       throw Error(path + ": detections of another " + what + " than " + run.dir() + "'s (made from " + made_from + ": " +
                   made[key].dump() + ", this run: " + ours.dump() + "); run spadgen reconstruct on " + run.dir() +
                   ", or give --detections of this scene and crop");
   }
-  if (source) (*source)["source_checked"] = "yes: made from " + made_from + ", the same scene and crop";
+  if (source)
+    (*source)["source_checked"] = unchecked.empty() ? "yes: made from " + made_from + ", the same scene and crop"
+                                                    : "no: its spadgen_source names no " + unchecked +
+                                                          " (made from " + made_from + "); taken on trust";
 }
 
 DetectionImage read_detections(const std::string& path, const RunFolder& run, bool need_scores, nlohmann::json* source) {
@@ -273,12 +280,26 @@ Labels read_labels(const RunFolder& run) {
   writers::ExrData labels;
   const std::string labels_path = run.file("labels.exr");
   if (!labels_path.empty()) labels = writers::read_exr(labels_path);
+  // Both images are the run's (a file replaced since, of another crop, was read past its end).
+  const auto check_size = [&](const std::string& path, const writers::ExrData& e) {
+    if (e.width != run.width() || e.height != run.height())
+      throw Error(path + ": " + std::to_string(e.width) + " x " + std::to_string(e.height) + " pixels, the run (" +
+                  run.dir() + "/metadata.json) has " + std::to_string(run.width()) + " x " + std::to_string(run.height()) +
+                  ": replaced since the run? run the scene again");
+  };
+  check_size(gt_path, gt);
   Labels l;
   l.detectability = labels.channels.count("object0.detectable") > 0;
+  if (!labels_path.empty()) check_size(labels_path, labels);
   const size_t n = size_t(run.width()) * size_t(run.height());
   l.pixels.resize(n);
   for (int j = 0; gt.channels.count("object" + std::to_string(j) + ".range"); ++j) {
     const std::string p = "object" + std::to_string(j) + ".";
+    if (!gt.channels.count(p + "id"))
+      throw Error(gt_path + ": channel " + p + "range without " + p + "id: not a ground truth spadgen wrote; run the scene again");
+    if (l.detectability && !labels.channels.count(p + "detectable"))
+      throw Error(labels_path + ": no channel " + p + "detectable, while " + gt_path + " has object slot " +
+                  std::to_string(j) + ": the two files are not of one run; run the scene again");
     const auto& range = gt.channels.at(p + "range");
     const auto& id = gt.channels.at(p + "id");
     const std::vector<float>* det = l.detectability ? &labels.channels.at(p + "detectable") : nullptr;

@@ -105,7 +105,7 @@ nlohmann::json error_statistics(std::vector<double> e) {
   const auto pct = [&](double q) { return e[std::min(e.size() - 1, size_t(std::max(0.0, std::ceil(q * n) - 1.0)))] * 1e3; };
   j["bias_mm"] = mean * 1e3;
   j["rms_mm"] = std::sqrt(sq / n) * 1e3;
-  j["std_mm"] = e.size() > 1 ? std::sqrt(var / (n - 1)) * 1e3 : 0.0;
+  j["std_mm"] = e.size() > 1 ? nlohmann::json(std::sqrt(var / (n - 1)) * 1e3) : nlohmann::json(nullptr);  // undefined for one
   j["abs_p50_mm"] = pct(0.50);
   j["abs_p90_mm"] = pct(0.90);
   j["abs_p99_mm"] = pct(0.99);

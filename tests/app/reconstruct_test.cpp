@@ -155,6 +155,27 @@ TEST_F(Reconstruct, RefusesWhatItCannotReadNamingIt) {
   EXPECT_NE(r.output.find("no sensor_maps.exr"), std::string::npos) << r.output;
 }
 
+// evaluate reads ground_truth.exr and labels.exr as the run's: one of another size (replaced since, from
+// another crop) was read past its end and scored (exit 0, object counts of garbage); a labels.exr with
+// fewer object slots than the ground truth was an internal error (map::at). Each is named.
+TEST_F(Reconstruct, EvaluateRefusesLabelsOrGroundTruthThatAreNotTheRuns) {
+  const std::string cmd = "run " + kScenes + "flat_target.json --set render.samples_per_pixel=1 -q --set camera.crop=";
+  const fs::path run = dir_ / "run", other = dir_ / "other";
+  ASSERT_EQ(sh(cmd + "[502,240,8,8] -o " + run.string()).code, 0);
+  ASSERT_EQ(sh(cmd + "[502,240,4,4] -o " + other.string()).code, 0);
+  ASSERT_EQ(sh("reconstruct " + run.string() + " -q").code, 0);
+  ASSERT_EQ(sh("evaluate " + run.string() + " -q").code, 0);
+  for (const char* file : {"labels.exr", "ground_truth.exr"}) {
+    const fs::path kept = dir_ / "kept.exr";
+    fs::copy_file(run / file, kept, fs::copy_options::overwrite_existing);
+    fs::copy_file(other / file, run / file, fs::copy_options::overwrite_existing);
+    const Result r = sh("evaluate " + run.string() + " -q");
+    EXPECT_EQ(r.code, 1) << file << r.output;
+    EXPECT_THAT(r.output, HasSubstr((run / file).string() + ": 4 x 4 pixels, the run (" + run.string() + "/metadata.json) has 8 x 8"));
+    fs::copy_file(kept, run / file, fs::copy_options::overwrite_existing);
+  }
+}
+
 TEST_F(Reconstruct, ARunIntoTheFolderAgainReplacesWhatReconstructAndEvaluateDerivedFromIt) {
   const fs::path run = dir_ / "run";
   const std::string cmd = "run " + kScenes + "flat_target.json --set camera.crop=[502,240,8,8] --set render.samples_per_pixel=1 -q -o " + run.string();
@@ -362,7 +383,15 @@ TEST_F(Reconstruct, EvaluateRefusesDetectionsOfAnotherSceneOrCropOrWithoutTheirS
       std::copy(range.begin(), range.end(), img.channel(std::string(slot) + ".range"));
     }
     img.write((dir_ / (gap ? "gap.exr" : "unscored.exr")).string());
+    if (gap) continue;
+    // A header that names no scene or crop: scored, and said unchecked (it said "yes: ... the same scene and crop").
+    img.set_attribute("spadgen_source", "{}");
+    img.write((dir_ / "no_source.exr").string());
   }
+  r = sh("evaluate " + a.string() + " --detections " + (dir_ / "no_source.exr").string() + " -o " + (dir_ / "e4").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(nlohmann::json::parse(slurp(dir_ / "e4" / "metrics.json"))["detections_source"]["source_checked"],
+            "no: its spadgen_source names no scene (scene file and glTF hash) and its crop of the sensor (made from ?); taken on trust");
   r = sh("evaluate " + a.string() + " --detections " + (dir_ / "gap.exr").string() + " -o " + (dir_ / "e2").string());
   EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("gap.exr: channel det2.range after det0.range without det1.range"));

@@ -268,6 +268,13 @@ TEST(Evaluate, ShiftedDetectionsGiveTheirBiasAndMissBeyondTheTolerance) {
   EXPECT_NEAR(m["range_error"]["rms_mm"].get<double>(), 10.0, 1e-6);
   EXPECT_NEAR(m["range_error"]["std_mm"].get<double>(), 0.0, 1e-6);
   EXPECT_NEAR(m["region"]["bias_mm"].get<double>(), 10.0, 1e-6);  // the region holds the sphere-only pixels
+  // One error has no sample standard deviation (n - 1 = 0): null, not 0.
+  const auto one = sc.score([&](int i) {  // pixel 150 holds the sphere alone
+    return i == 150 ? std::vector<std::pair<double, double>>{{0.76, 10.0}} : std::vector<std::pair<double, double>>{};
+  });
+  ASSERT_EQ(one["range_error"]["count"], 1);
+  EXPECT_TRUE(one["range_error"]["std_mm"].is_null());
+  EXPECT_NEAR(one["range_error"]["bias_mm"].get<double>(), 10.0, 1e-6);
   EXPECT_EQ(m["region"]["count"], 100);
   const auto far = shifted(0.08);  // beyond the 5 cm tolerance: every object missed, every detection false
   EXPECT_EQ(far["objects"]["found"], 0);
