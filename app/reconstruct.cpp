@@ -529,11 +529,17 @@ std::string evaluate(const EvaluateCommand& c) {
     std::ostringstream csv;
     csv << "sample,objects,found,recall,detectable,detectable_found,detections,false,bias_mm,rms_mm\n";
     nlohmann::json rows = nlohmann::json::array();
+    if (fs::path(c.detections).is_absolute())
+      throw Error("--detections " + c.detections + ": for a dataset, expected a file name relative to each sample's folder "
+                  "(one file would be scored against every sample)");
+    int unlabelled = 0;
     for (const fs::path& p : samples) {
       InterruptGuard::check();
       const std::string file = c.detections.empty() ? "" : (p / c.detections).string();
       std::map<int, std::string> sample_names;
-      const reconstruct::Scores s = evaluate_run(c, p.string(), file, "", &sample_names, nullptr, &ids_by_name);
+      nlohmann::json sample_source;
+      const reconstruct::Scores s = evaluate_run(c, p.string(), file, "", &sample_names, &sample_source, &ids_by_name);
+      unlabelled += sample_source.contains("labels");
       names.insert(sample_names.begin(), sample_names.end());
       total.merge(s);
       const nlohmann::json m = s.to_json(sample_names);
@@ -542,10 +548,13 @@ std::string evaluate(const EvaluateCommand& c) {
           << num(m["objects"]["recall"]) << ',' << m["objects_detectable"]["objects"] << ',' << m["objects_detectable"]["found"]
           << ',' << m["detections"]["total"] << ',' << m["detections"]["false"] << ',' << num(m["range_error"].value("bias_mm", nlohmann::json()))
           << ',' << num(m["range_error"].value("rms_mm", nlohmann::json())) << '\n';
-      rows.push_back({{"sample", p.filename().string()}, {"metrics", m}});
+      rows.push_back({{"sample", p.filename().string()}, {"detections_source", sample_source}, {"metrics", m}});
     }
     report = total.to_json(names);
     report["dataset"] = c.target;
+    if (unlabelled > 0)
+      report["labels"] = std::to_string(unlabelled) + " of " + std::to_string(samples.size()) +
+                         " samples without labels.exr: their objects are counted as detectable (samples[].detections_source.labels)";
     report["samples"] = rows;
     writers::write_file_atomic((fs::path(out) / "samples.csv").string(), csv.str());
     files.push_back("samples.csv");

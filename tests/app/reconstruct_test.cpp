@@ -448,6 +448,22 @@ TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
   EXPECT_EQ(total, in_samples);
   EXPECT_EQ(total.size(), 3u);  // plate, sphere, target
   EXPECT_TRUE(total.count("target") && total.count("plate") && total.count("sphere"));
+  for (const auto& s : m2["samples"]) EXPECT_EQ(s["detections_source"]["computed"], true);
+  EXPECT_FALSE(m2.contains("labels"));
+
+  // A sample without labels.exr is scored with every object detectable, and the report says so (it was
+  // pooled silently); one detections file for every sample (an absolute path) is refused.
+  const fs::path first = out2 / "samples" / m2["samples"][0]["sample"].get<std::string>();
+  fs::remove(first / "labels.exr");
+  r = sh("evaluate " + out2.string() + " -o " + (dir_ / "e_unlabelled").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  const auto m3 = nlohmann::json::parse(slurp(dir_ / "e_unlabelled" / "metrics.json"));
+  EXPECT_THAT(m3["labels"].get<std::string>(), HasSubstr("1 of 2 samples without labels.exr"));
+  EXPECT_TRUE(m3["samples"][0]["detections_source"].contains("labels"));
+  EXPECT_FALSE(m3["samples"][1]["detections_source"].contains("labels"));
+  r = sh("evaluate " + out2.string() + " --detections " + (first / "detections_edges.exr").string() + " -o " + (dir_ / "e_abs").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("for a dataset, expected a file name relative to each sample's folder"));
 }
 
 }  // namespace
