@@ -493,7 +493,9 @@ const T* NpyReader::data() const {
                                     : std::is_same_v<T, int64_t>  ? NpyWriter::Dtype::I64
                                     : std::is_same_v<T, uint16_t> ? NpyWriter::Dtype::U16
                                                                   : NpyWriter::Dtype::U8;
-  if (dtype_ != want) throw Error(read_error(path_, "its dtype is not the one expected here"));
+  if (dtype_ != want)
+    throw Error(read_error(path_, std::string("its dtype is ") + numpy_descr(dtype_) + ", expected " + numpy_descr(want) +
+                                      " (NumPy's descr: <f4 float32, <f8 float64, |u1 uint8, <u2 uint16, <i4 int32, <i8 int64)"));
   return reinterpret_cast<const T*>(map_ + data_offset_);
 }
 template const float* NpyReader::data<float>() const;

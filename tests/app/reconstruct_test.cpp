@@ -286,6 +286,14 @@ TEST_F(Reconstruct, EvaluateScoresADetectionsNpyAgainstTheLabelsExactly) {
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("wrong.npy: expected a float32 array (H, W, M)"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(dir_ / "eval3")) << "a refused evaluation leaves no empty folder";
+  // a float64 array of the right shape: its dtype named, and the one expected (it said "not the one expected here")
+  {
+    spadgen::writers::NpyWriter npy((dir_ / "f8.npy").string(), spadgen::writers::Dtype::F64, {H, W, M});
+    npy.commit();
+  }
+  r = sh("evaluate " + run.string() + " --detections " + (dir_ / "f8.npy").string() + " -o " + (dir_ / "eval3").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("its dtype is <f8, expected <f4"), std::string::npos) << r.output;
   // an infinite range is neither metres nor "none" (it was skipped as if nothing were there)
   {
     spadgen::writers::NpyWriter npy((dir_ / "inf.npy").string(), spadgen::writers::Dtype::F32, {H, W, M});
