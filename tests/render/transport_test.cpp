@@ -478,7 +478,7 @@ TEST(Transport, APlateWithCollapsedSidesRendersAsOneWithoutThem) {
     for (size_t t = 0; t < m.triangle_count(); ++t) {
       const glm::vec3 a = m.positions[m.indices[3 * t]], b = m.positions[m.indices[3 * t + 1]], c = m.positions[m.indices[3 * t + 2]];
       std::vector<uint32_t>& to = glm::length(glm::cross(b - a, c - a)) > 0.0f ? kept : degenerate;
-      to.insert(to.end(), &m.indices[3 * t], &m.indices[3 * t + 3]);
+      to.insert(to.end(), m.indices.begin() + std::ptrdiff_t(3 * t), m.indices.begin() + std::ptrdiff_t(3 * t + 3));
     }
     if (keep_degenerate) kept.insert(kept.end(), degenerate.begin(), degenerate.end());
     EXPECT_EQ(kept.size(), keep_degenerate ? 36u : 12u);
