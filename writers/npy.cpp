@@ -82,6 +82,11 @@ const char* numpy_descr(Dtype dtype) {
   return "";
 }
 
+std::string dtype_mismatch(Dtype found, Dtype expected) {
+  return std::string("its dtype is ") + numpy_descr(found) + ", expected " + numpy_descr(expected) +
+         " (NumPy's descr: <f4 float32, <f8 float64, |u1 uint8, <u2 uint16, <i4 int32, <i8 int64)";
+}
+
 int64_t element_bytes(Dtype dtype) {
   switch (dtype) {
     case Dtype::F32: return 4;
@@ -493,9 +498,7 @@ const T* NpyReader::data() const {
                                     : std::is_same_v<T, int64_t>  ? NpyWriter::Dtype::I64
                                     : std::is_same_v<T, uint16_t> ? NpyWriter::Dtype::U16
                                                                   : NpyWriter::Dtype::U8;
-  if (dtype_ != want)
-    throw Error(read_error(path_, std::string("its dtype is ") + numpy_descr(dtype_) + ", expected " + numpy_descr(want) +
-                                      " (NumPy's descr: <f4 float32, <f8 float64, |u1 uint8, <u2 uint16, <i4 int32, <i8 int64)"));
+  if (dtype_ != want) throw Error(read_error(path_, dtype_mismatch(dtype_, want)));
   return reinterpret_cast<const T*>(map_ + data_offset_);
 }
 template const float* NpyReader::data<float>() const;

@@ -19,6 +19,8 @@ namespace spadgen::writers {
 enum class Dtype { F32, U8, U16, I32, I64, F64 };
 int64_t element_bytes(Dtype dtype);
 const char* numpy_descr(Dtype dtype);
+// "its dtype is <f8, expected <f4 (NumPy's descr: ...)": a reader's message for a stack of another type.
+std::string dtype_mismatch(Dtype found, Dtype expected);
 
 // A C-order array written in parts from several threads at once (each element once), completed by
 // commit(): a .npy file (NpyWriter) or a Zarr store (ZarrWriter). The app streams its tiles through this.

@@ -513,9 +513,7 @@ std::vector<T> ZarrReader::read_all() const {
                          : std::is_same_v<T, int64_t>  ? Dtype::I64
                          : std::is_same_v<T, uint16_t> ? Dtype::U16
                                                        : Dtype::U8;
-  if (m.dtype != want)
-    throw Error(m.error(std::string("its dtype is ") + numpy_descr(m.dtype) + ", expected " + numpy_descr(want) +
-                        " (NumPy's descr: <f4 float32, <f8 float64, |u1 uint8, <u2 uint16, <i4 int32, <i8 int64)"));
+  if (m.dtype != want) throw Error(m.error(dtype_mismatch(m.dtype, want)));
   std::vector<T> out(size_t(m.grid.elements));
   const size_t rank = m.grid.rank(), last = rank - 1;
   // Chunk by chunk, each decompressed once; its rows (runs along the last dimension) copied into place.
