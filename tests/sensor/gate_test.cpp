@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <fstream>
 #include <unistd.h>
+#include <vector>
 
 #include "core/error.h"
 #include "core/rng.h"
@@ -413,9 +414,22 @@ TEST(Gate, DeltaTransientReproducesGateShiftedBySkew) {
   EXPECT_GT(std::abs(model.pixel(3, 1).skew_s - model.pixel(30, 30).skew_s), 50e-12);
 }
 
+// The files written by write_temp, removed when the test program exits.
+struct TempFiles {
+  std::vector<std::filesystem::path> paths;
+  ~TempFiles() {
+    for (const auto& p : paths) {
+      std::error_code ec;
+      std::filesystem::remove(p, ec);
+    }
+  }
+};
+
 std::string write_temp(const std::string& name, const std::string& text) {
+  static TempFiles files;
   const auto p = std::filesystem::temp_directory_path() / ("spadgen_sensor_" + std::to_string(::getpid()) + "_" + name);
   std::ofstream(p) << text;
+  files.paths.push_back(p);
   return p.string();
 }
 
