@@ -303,6 +303,19 @@ Labels read_labels(const RunFolder& run) {
     const auto& range = gt.channels.at(p + "range");
     const auto& id = gt.channels.at(p + "id");
     const std::vector<float>* det = l.detectability ? &labels.channels.at(p + "detectable") : nullptr;
+    // The labels' slots are the ground truth's: the same object in each pixel's slot j (a labels.exr of
+    // another scene, or with its slots in another order, would score one object by another's edge).
+    if (det && labels.channels.count(p + "id")) {
+      const auto& label_id = labels.channels.at(p + "id");
+      for (size_t i = 0; i < n; ++i)
+        if (label_id[i] != id[i] && !(std::isnan(label_id[i]) && std::isnan(id[i]))) {
+          std::ostringstream m;
+          m << labels_path << ": pixel (" << i % size_t(run.width()) << ", " << i / size_t(run.width())
+            << ") holds object id " << label_id[i] << " in slot " << j << ", " << gt_path << " object id " << id[i]
+            << ": the two files are not of one run; run the scene again";
+          throw Error(m.str());
+        }
+    }
     for (size_t i = 0; i < n; ++i)
       if (std::isfinite(range[i]) && id[i] >= 0.0f) l.pixels[i].push_back({int(id[i]), range[i], det ? (*det)[i] > 0.5f : true});
   }

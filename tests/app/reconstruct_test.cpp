@@ -176,6 +176,35 @@ TEST_F(Reconstruct, EvaluateRefusesLabelsOrGroundTruthThatAreNotTheRuns) {
   }
 }
 
+// labels.exr's slot j must hold the ground truth's object j in every pixel: a labels file with its slots in
+// another order (or another scene's of the same size) scored one object by another's edge, with exit 0.
+TEST_F(Reconstruct, EvaluateRefusesLabelsWhoseObjectsAreNotTheGroundTruths) {
+  const fs::path run = dir_ / "run";
+  ASSERT_EQ(sh("run " + kScenes + "multi_object.json --set camera.crop=[480,242,64,12] --set render.samples_per_pixel=1 -q -o " +
+               run.string()).code, 0);
+  ASSERT_EQ(sh("reconstruct " + run.string() + " -q").code, 0);
+  ASSERT_EQ(sh("evaluate " + run.string() + " -q").code, 0);
+  // the same labels with slots 0 and 1 swapped
+  const auto labels = spadgen::writers::read_exr((run / "labels.exr").string());
+  spadgen::writers::ExrImage swapped(labels.width, labels.height);
+  size_t both = 0;
+  for (const auto& [name, values] : labels.channels) {
+    std::string to = name;
+    if (name.rfind("object0.", 0) == 0) to = "object1." + name.substr(8);
+    if (name.rfind("object1.", 0) == 0) to = "object0." + name.substr(8);
+    std::copy(values.begin(), values.end(), swapped.channel(to));
+  }
+  for (const auto& [key, value] : labels.attributes) swapped.set_attribute(key, value);
+  for (size_t i = 0; i < labels.channels.at("object1.id").size(); ++i) both += labels.channels.at("object1.id")[i] >= 0.0f;
+  ASSERT_GT(both, 0u) << "the crop has pixels that see the plate and the sphere";
+  swapped.write((run / "labels.exr").string());
+  const Result r = sh("evaluate " + run.string() + " -q");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr((run / "labels.exr").string() + ": pixel ("));
+  EXPECT_THAT(r.output, HasSubstr("in slot 0, " + (run / "ground_truth.exr").string() + " object id"));
+  EXPECT_THAT(r.output, HasSubstr("the two files are not of one run"));
+}
+
 TEST_F(Reconstruct, ARunIntoTheFolderAgainReplacesWhatReconstructAndEvaluateDerivedFromIt) {
   const fs::path run = dir_ / "run";
   const std::string cmd = "run " + kScenes + "flat_target.json --set camera.crop=[502,240,8,8] --set render.samples_per_pixel=1 -q -o " + run.string();
