@@ -3,6 +3,7 @@
 #include "guide.h"
 
 #include <algorithm>
+#include <cfloat>
 #include <cmath>
 #include <limits>
 
@@ -18,6 +19,9 @@ constexpr float kInf = std::numeric_limits<float>::infinity();
 // render); this bounds the specular chains instead (total internal reflection inside a slab).
 constexpr int kMaxDeltaEvents = 64;
 constexpr int kMaxShadowCrossings = 64;
+// A punctual light this many float ulps of a hit point's largest coordinate from the surface's plane is
+// taken to lie in it (the hit point's own rounding is a few ulps).
+constexpr double kPlaneRoundingUlps = 32.0;
 // Guided connections aim at surfaces of GGX alpha up to this (roughness 0.2): wider lobes are found well
 // enough by the BSDF's own draws.
 constexpr float kGuideMaxAlpha = 0.04f;
@@ -710,6 +714,11 @@ inline void Integrator::connect_ambient_lights(const NeeVertex& v, double* ambie
       e = l.power;
     } else {
       const glm::dvec3 to = l.position - glm::dvec3(v.sf.p);
+      // A light in the surface's plane, to within the hit point's rounding, lights it at grazing
+      // incidence (none of its light), where cos / r^2 would read that rounding as a height: a light in a
+      // lit plane put 2.7e6 photons/s in the pixel it sits in, instead of 0.
+      const double p_max = std::max({std::fabs(double(v.sf.p.x)), std::fabs(double(v.sf.p.y)), std::fabs(double(v.sf.p.z))});
+      if (std::fabs(glm::dot(to, glm::dvec3(v.sf.ng))) <= kPlaneRoundingUlps * double(FLT_EPSILON) * p_max) continue;
       r = glm::length(to);
       wid = to / r;
       e = l.intensity_towards(-wid) / (r * r);

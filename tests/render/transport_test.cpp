@@ -210,6 +210,27 @@ TEST(Transport, ASingleSidedSheetShadesTheSkyAsTheReceivingPointSeesIt) {
   EXPECT_NEAR(up / bare, 1.0, 1e-12);
 }
 
+// A point light in the plane it stands on lights it at grazing incidence: none of its light. The hit
+// points' rounding (about 1e-7 m here) read as a height gave 2.7e6 photons/s in the pixel it sits in.
+TEST(Transport, APointLightInALitPlaneGivesItNoLight) {
+  RenderStageConfig c = test_config(2, 2, 50e-3);
+  c.render.samples_per_pixel = 4096;
+  const auto ambient = [&](double height) {
+    scenes::Scene s;
+    add_quad(s, {0, 0, -1.0f}, {2, 0, 0}, {0, 2, 0}, add_material(s, test::lambertian(0.6f)));
+    scenes::Light light;
+    light.name = "bulb";
+    light.position = {0, 0, -1.0 + height};
+    light.intensity = 2;
+    s.lights.push_back(light);
+    const TransientTile t = Renderer(s, c).transient({0, 0, 2, 2}, {0, 0, 2, 2}, TimeAxis{});
+    return t.ambient_rate;
+  };
+  for (const double v : ambient(0.0)) EXPECT_EQ(v, 0.0);
+  // 1 mm above it, the light is seen: each pixel about I rho h / (pi r^3) over its footprint
+  for (const double v : ambient(1e-3)) EXPECT_GT(v, 0.0);
+}
+
 // beyond_period holds the light whose time of flight is a laser period or more: all of it for a plane
 // beyond the unambiguous range c / (2 f_rep), none of it in front; the camera rays' hits are counted for
 // the tile's own pixels.
