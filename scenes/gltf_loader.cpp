@@ -1377,6 +1377,9 @@ const std::map<std::string, std::vector<Rule>>& gltf_rules() {
       {"perspective", {{"aspectRatio", Want::Number}, {"yfov", Want::Number}, {"zfar", Want::Number}, {"znear", Want::Number}}},
       {"orthographic", {{"xmag", Want::Number}, {"ymag", Want::Number}, {"zfar", Want::Number}, {"znear", Want::Number}}},
       {"scene", {{"nodes", Want::Indices}, {"name", Want::String}}},
+      {"light", {{"type", Want::String}, {"color", Want::Numbers, 3}, {"intensity", Want::Number}, {"range", Want::Number},
+                 {"spot", Want::Object, 0, "spot"}, {"name", Want::String}}},
+      {"spot", {{"innerConeAngle", Want::Number}, {"outerConeAngle", Want::Number}}},
   };
   return rules;
 }
@@ -1455,6 +1458,21 @@ void check_gltf_types(const std::string& path, const nlohmann::json& doc) {
       check_gltf_object(path, who, o, kind);
     }
   }
+  // KHR_lights_punctual's lights: tinygltf reads an absent range as 0, so a range of 0 (which glTF refuses:
+  // it must be > 0) is told apart here.
+  if (const auto ext = doc.find("extensions"); ext != doc.end() && ext->is_object())
+    if (const auto kl = ext->find("KHR_lights_punctual"); kl != ext->end() && kl->is_object())
+      if (const auto lights = kl->find("lights"); lights != kl->end() && lights->is_array())
+        for (size_t i = 0; i < lights->size(); ++i) {
+          const nlohmann::json& o = (*lights)[i];
+          const std::string name = o.is_object() && o.contains("name") && o["name"].is_string() ? o["name"].get<std::string>() : "";
+          const std::string who = label("light", i, name);
+          if (!o.is_object()) throw Error(path + ": " + who + ": found " + o.dump().substr(0, 40) + ", expected an object");
+          check_gltf_object(path, who, o, "light");
+          if (const auto r = o.find("range"); r != o.end() && !(r->get<double>() > 0.0))
+            throw Error(path + ": " + who + ": range: found " + r->dump() +
+                        ", expected a number > 0 (metres; leave it out for a light without a range)");
+        }
   if (const auto it = doc.find("scene"); it != doc.end() && !gltf_integer(*it, 0))
     throw Error(path + ": scene: found " + it->dump().substr(0, 40) + ", expected the index of a scene (an integer >= 0)");
 }

@@ -700,6 +700,17 @@ TEST(GltfLoader, PunctualLights) {
               HasSubstr("light 0 'bulb' (node 0 'Bulb'): color [1.5, 0.5, 0.25] must lie in [0, 1]"));
   g.doc["extensions"]["KHR_lights_punctual"]["lights"][0]["color"] = {1.0000001, 0.5, 0.25};  // named as it is, not "1"
   EXPECT_THAT(load_error(g.write(dir.path(), "light_colour")), HasSubstr("color [1.0000001, 0.5, 0.25] must lie in [0, 1]"));
+  g.doc["extensions"]["KHR_lights_punctual"]["lights"][0]["color"] = {1, 0.5, 0.25};
+  // a range of 0 (tinygltf's value for an absent range, so it was accepted) and one of the wrong type
+  g.doc["extensions"]["KHR_lights_punctual"]["lights"][0]["range"] = 0;
+  EXPECT_THAT(load_error(g.write(dir.path(), "light_range")),
+              HasSubstr("light 0 'bulb': range: found 0, expected a number > 0 (metres; leave it out for a light without a range)"));
+  g.doc["extensions"]["KHR_lights_punctual"]["lights"][0]["range"] = "3";
+  EXPECT_THAT(load_error(g.write(dir.path(), "light_range")), HasSubstr("light 0 'bulb': range: found \"3\", expected a number"));
+  g.doc["extensions"]["KHR_lights_punctual"]["lights"][0].erase("range");
+  g.doc["extensions"]["KHR_lights_punctual"]["lights"][1]["spot"]["outerConeAngle"] = "0.5";
+  EXPECT_THAT(load_error(g.write(dir.path(), "light_spot")),
+              HasSubstr("light 1: spot: outerConeAngle: found \"0.5\", expected a number"));
 }
 
 // ---------------------------------------------------------------------------------------------
