@@ -78,7 +78,11 @@ Bsdf::Bsdf(const MaterialPoint& m, const glm::vec3& n_shading, const glm::vec3& 
   if (!m_.smooth()) g1_o_ = ggx_g1(m_.alpha, wo_.z);
   const float dielectric = 1.0f - m_.metallic;
   specular_weight_ = dielectric * fresnel_o_ + (m_.metallic > 0.0f ? m_.metallic * max_of(schlick(m_.base, wo_.z)) : 0.0f);
-  transmission_weight_ = dielectric * m_.transmission * (1.0f - fresnel_o_) * max_of(m_.base);
+  // Drawn with 1 - F at the mean normal, but no less than alpha (at most 1/2) when rough: past the mean
+  // surface's critical angle (1 - F = 0 from inside) tilted microfacets still transmit. The weights divide
+  // by these shares, so they set the variance only.
+  const float transmit_share = m_.smooth() ? 1.0f - fresnel_o_ : std::max(1.0f - fresnel_o_, std::min(0.5f, m_.alpha));
+  transmission_weight_ = dielectric * m_.transmission * transmit_share * max_of(m_.base);
   diffuse_weight_ = dielectric * (1.0f - m_.transmission) * (1.0f - fresnel_o_) * max_of(m_.base);
 }
 
