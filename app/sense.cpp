@@ -311,7 +311,11 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   const json& la = meta.at("light").at("time_axis_s");
   TimeAxis axis{la.at("start").get<double>(), la.at("bin_width").get<double>(), la.at("bins").get<int64_t>(),
                 la.at("laser_period").get<double>()};
-  const TimeAxis need = time_axis(cfg, sensor);
+  // What the sensor needs (the run's transient.npy, linked when sensed, does not depend on the mode: a gate
+  // sweep run with transients sensed in 2D needs no bins).
+  RunConfig sensor_cfg = cfg;
+  sensor_cfg.outputs.transient = false;
+  const TimeAxis need = time_axis(sensor_cfg, sensor);
   if (need.bins > 0 && (axis.bins == 0 || need.start_s < axis.start_s - 1e-3 * axis.bin_width_s ||
                         need.end_s() > axis.end_s() + 1e-3 * axis.bin_width_s)) {
     char buf[400];

@@ -250,6 +250,13 @@ TEST_F(App, SenseKeepsOnlyWhatItsSettingsAskFor) {
   EXPECT_TRUE(meta["ground_truth_summary"].contains("hit_fraction"));
   EXPECT_FALSE(meta["ground_truth_summary"].contains("objects_detectable"));
   EXPECT_FALSE(meta["ground_truth_summary"].contains("detectable_fraction"));
+  // A run that kept its transients too: its transient.npy is linked, whatever the mode (sense refused it
+  // as "intensity mode needs no time bins", naming keys sense does not take), and the 2D rates are the same.
+  ASSERT_EQ(sh("run " + kLit + " --set outputs.transient=true -o " + (dir_ / "run_t").string()).code, 0);
+  Result t = sh("sense " + (dir_ / "run_t").string() + " -q --set acquisition.mode=intensity -o " + (dir_ / "int_t").string());
+  ASSERT_EQ(t.code, 0) << t.output;
+  EXPECT_EQ(slurp(dir_ / "int_t/detection_rate.npy"), slurp(dir_ / "int/detection_rate.npy"));
+  EXPECT_EQ(slurp(dir_ / "int_t/transient.npy"), slurp(dir_ / "run_t/transient.npy"));
   ASSERT_EQ(sh(sense + "--set outputs.previews=false -o " + (dir_ / "np").string()).code, 0);
   EXPECT_FALSE(fs::exists(dir_ / "np/previews"));
   const Result r = sh(sense + "--noise-seed 30 --set seeds.noise=31 -o " + (dir_ / "two").string());
