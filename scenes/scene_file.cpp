@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <map>
 #include <optional>
 #include <set>
 #include <sstream>
@@ -242,9 +243,17 @@ struct Checker {
   std::string file;            // "" : messages name no file (check_override)
   std::string set = "--set ";  // how messages name an override: "--set KEY: ..."
   std::vector<std::string> errors;
+  // The keys an override gave, by JSON pointer, as the user wrote them: an error in one names the override,
+  // not the scene file (which does not hold the value, and for spadgen sense may no longer exist).
+  std::map<std::string, std::string> set_keys;
 
   std::string prefix() const { return file.empty() ? std::string() : file + ": "; }
-  void error(const std::string& where, const std::string& what) { errors.push_back(prefix() + where + ": " + what); }
+  void error(const std::string& where, const std::string& what) {
+    if (const auto it = set_keys.find(where); it != set_keys.end())
+      errors.push_back(set + it->second + ": " + what);
+    else
+      errors.push_back(prefix() + where + ": " + what);
+  }
   void override_error(const std::string& key, const std::string& what) { errors.push_back(prefix() + set + key + ": " + what); }
 
   // A section of named elements: any non-empty name, each an object of the section's keys.
@@ -672,10 +681,13 @@ ResolvedRun parse_scene_text(const std::string& text, const std::string& path, c
   const std::string file = path.empty() ? "<scene>" : path;
   json doc = parse_json(text, file);
   if (!doc.is_object()) throw Error(file + ": expected a JSON object at the top, found " + describe_json(doc));
-  Checker chk{file, "--set ", {}};
+  Checker chk{file, "--set ", {}, {}};
   std::set<std::string> overridden;
   for (const std::string& o : overrides)
-    if (std::string key = apply_override(doc, o, chk); !key.empty()) overridden.insert(std::move(key));
+    if (std::string key = apply_override(doc, o, chk); !key.empty()) {
+      chk.set_keys[key] = o.substr(0, assignment_split(o));
+      overridden.insert(std::move(key));
+    }
   // A quality preset given by --set replaces the sampling keys the scene file gives (the shipped scenes
   // give samples_per_pixel); a key --set gives keeps its own value.
   static const json::json_pointer quality("/render/quality");
@@ -708,7 +720,7 @@ ResolvedRun load_scene_file(const std::string& path, const std::vector<std::stri
 }
 
 std::vector<std::string> check_override(const std::string& key, const nlohmann::json& value) {
-  Checker chk{"", "", {}};
+  Checker chk{"", "", {}, {}};
   if (const size_t bad = invalid_utf8_at(key); bad != std::string::npos) {
     chk.override_error(printable(key), "not valid UTF-8 text (byte " + printable(key.substr(bad, 1)) + " at offset " +
                                            std::to_string(bad) + ")");

@@ -262,6 +262,11 @@ TEST_F(App, SenseKeepsOnlyWhatItsSettingsAskFor) {
   const Result r = sh(sense + "--noise-seed 30 --set seeds.noise=31 -o " + (dir_ / "two").string());
   EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("--set seeds.noise and --noise-seed both give the seed"));
+  // A bad value names the --set that gave it, not the run's scene file (which sense does not read)
+  const Result bad = sh(sense + "--set acquisition.frames=0 -o " + (dir_ / "bad").string());
+  EXPECT_EQ(bad.code, 1);
+  EXPECT_THAT(bad.output, HasSubstr("spadgen: error: --set acquisition.frames: found 0"));
+  EXPECT_FALSE(fs::exists(dir_ / "bad"));
 }
 
 // A sense holds the run folder's lock, shared: while a run replaces the folder (its lock exclusive) a
