@@ -239,8 +239,15 @@ int take_folder_lock(const fs::path& lock_path, const fs::path& out, bool shared
 void release_folder_lock(const fs::path& lock_path, int& fd, bool shared = false) {
   if (fd < 0) return;
   // Unlinked while still locked: a run that opened it meanwhile sees the file gone and locks a new one.
-  // (A reader leaves it: other readers may hold it still.)
-  if (!shared) ::unlink(lock_path.c_str());
+  // A reader unlinks it only when no one else holds it (its lock made exclusive without waiting), and only
+  // while the path is still its file.
+  bool remove = !shared;
+  if (shared && ::flock(fd, LOCK_EX | LOCK_NB) == 0) {
+    struct stat locked {}, now {};
+    remove = ::fstat(fd, &locked) == 0 && ::stat(lock_path.c_str(), &now) == 0 && locked.st_ino == now.st_ino &&
+             locked.st_dev == now.st_dev;
+  }
+  if (remove) ::unlink(lock_path.c_str());
   ::close(fd);
   fd = -1;
 }

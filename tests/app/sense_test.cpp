@@ -285,7 +285,16 @@ TEST_F(App, SenseRefusesARunFolderBeingReplaced) {
   ASSERT_EQ(::flock(fd, LOCK_SH | LOCK_NB), 0);
   r = sh("sense " + (dir_ / "run").string() + " -q -o " + (dir_ / "s1").string());
   EXPECT_EQ(r.code, 0) << r.output;
+  // ... and the sense leaves the lock file to the reader still holding it
+  EXPECT_TRUE(fs::exists(lock));
   ::close(fd);
+  // The last reader removes it (every sense left one beside the run folder).
+  r = sh("sense " + (dir_ / "run").string() + " -q -o " + (dir_ / "s2").string());
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_FALSE(fs::exists(lock));
+  r = sh("sense " + (dir_ / "run").string() + " -q --set acquisition.frames=0 -o " + (dir_ / "s3").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_FALSE(fs::exists(lock)) << "nor after an error";
 }
 
 // Realisation r of --repeats R with --noise-seed S is the run with seeds.noise = S + r: same files (the
