@@ -5,8 +5,11 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <iomanip>
+#include <limits>
 #include <optional>
 #include <set>
+#include <sstream>
 
 #include "core/error.h"
 #include "core/rng.h"
@@ -175,7 +178,8 @@ const std::vector<DatasetKey>& dataset_keys() {
 
 int64_t DatasetSpec::grid_cells() const {
   int64_t n = static_cast<int64_t>(scenes.size());
-  for (const GridAxis& g : grid) n *= static_cast<int64_t>(g.values.size());
+  for (const GridAxis& g : grid)
+    if (__builtin_mul_overflow(n, static_cast<int64_t>(g.values.size()), &n)) return std::numeric_limits<int64_t>::max();
   return n;
 }
 
@@ -400,6 +404,15 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
   // sample whose values make an invalid scene together (a crop outside a sensor a grid shrinks) is
   // recorded in failed/ when it runs, as a failed run is; when its scene's first 16 samples all do, the
   // mistake is the dataset's and it is refused here.
+  // Checked first: the probes below step through the samples a grid's cells at a time (a grid of 2^64
+  // cells wrapped to 0 cells, and looped for ever).
+  if (s.grid_cells() > kMaxSamples) {
+    double cells = static_cast<double>(s.scenes.size());
+    for (const GridAxis& g : s.grid) cells *= static_cast<double>(g.values.size());
+    std::ostringstream n;
+    n << std::setprecision(cells < 1e15 ? 15 : 3) << cells;
+    rd.fail("/grid", "has " + n.str() + " cells (the scene files times each key's values); expected at most 1e8");
+  }
   constexpr int kProbes = 16;
   const int64_t cells = s.grid_cells(), per_scene = cells / static_cast<int64_t>(s.scenes.size());
   for (size_t k = 0; k < s.scenes.size(); ++k) {
@@ -428,7 +441,6 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
       rd.fail("scenes/" + std::to_string(k), "the nodes and materials the dataset varies, in " + s.scene_names[k] + ": " + e.what());
     }
   }
-  if (s.grid_cells() > kMaxSamples) rd.fail("/grid", "has " + std::to_string(s.grid_cells()) + " cells; expected at most 1e8");
 
   // The resolved file, every default explicit.
   ojson& o = s.resolved;

@@ -76,6 +76,28 @@ TEST(DatasetFile, AMistakeOfTheSceneFileIsNamedAsItsOwn) {
   fs::remove_all(dir);
 }
 
+// A grid of 16 keys of 16 values has 2^64 cells: the count wrapped to 0 (a dataset of 0 samples, exit 0),
+// to -2^63 at 2^63 (internal error: vector::reserve), and with "samples" given the check looped for ever.
+TEST(DatasetFile, AGridOfMoreCellsThanAnIntegerHoldsIsRefused) {
+  const char* keys[] = {"camera.position_m[0]", "camera.position_m[1]", "camera.look_at_m[0]", "camera.look_at_m[1]",
+                        "laser.offset_m[0]", "laser.offset_m[1]", "laser.offset_m[2]", "laser.average_power_mW",
+                        "ambient.illuminance_lux", "camera.f_number", "render.samples_per_pixel", "render.max_bounces",
+                        "camera.focal_length_mm", "laser.repetition_rate_MHz", "camera.look_at_m[2]", "camera.position_m[2]"};
+  const auto grid = [&](int n_keys, const std::string& extra) {
+    std::string g = "\"grid\": {";
+    for (int k = 0; k < n_keys; ++k) {
+      g += std::string(k ? ", " : "") + "\"" + keys[k] + "\": [";
+      for (int v = 0; v < 16; ++v) g += (v ? ", " : "") + std::to_string(k == 14 ? -1 - v : 1 + v);
+      g += "]";
+    }
+    return g + "}" + extra;
+  };
+  EXPECT_THAT(error_of(grid(16, "")), HasSubstr("/grid: has 1.84e+19 cells (the scene files times each key's values); expected at most 1e8"));
+  EXPECT_THAT(error_of(grid(16, ", \"samples\": 5")), HasSubstr("/grid: has 1.84e+19 cells"));
+  EXPECT_THAT(error_of(grid(15, "")), HasSubstr("/grid: has 1.15e+18 cells"));
+  EXPECT_THAT(error_of(grid(7, "")), HasSubstr("/grid: has 268435456 cells (the scene files times each key's values); expected at most 1e8"));
+}
+
 TEST(DatasetFile, ErrorsNameTheKeyAndWhatWasExpected) {
   EXPECT_THAT(error_of("\"sampels\": 3"), HasSubstr("test_dataset.json: /sampels: unknown key; did you mean samples?"));
   EXPECT_THAT(error_of("\"samples\": 0"), HasSubstr("/samples: found 0, expected an integer in [1, 1e8] or null"));
