@@ -174,17 +174,6 @@ Provenance provenance(const RunConfig& c, const PixelRect& img) {
   return {c.scene_file, scenes::content_hash(c.scene_file, c.gltf_path), c.seed, img};
 }
 
-std::string sensor_tables_hash(const RunConfig& c) {
-  uint64_t h = scenes::fnv1a64("");
-  for (const std::string* path : {&c.laser.pulse_shape_csv, &c.sensor.gate.profile_csv, &c.sensor.gate.maps_exr,
-                                  &c.sensor.pixel_A.pdp_csv, &c.sensor.pixel_B.pdp_csv}) {
-    const std::string bytes = path->empty() ? std::string() : scenes::file_bytes(*path);
-    // The length first, so that tables moved from one key to the next do not hash alike.
-    h = scenes::fnv1a64(std::to_string(bytes.size()) + ":" + bytes, h);
-  }
-  return scenes::hex64(h);
-}
-
 void stamp(writers::ExrImage& e, const Provenance& p) {
   e.set_attribute("spadgen_version", SPADGEN_VERSION);
   e.set_attribute("spadgen_seed", std::to_string(p.seed));
@@ -207,7 +196,7 @@ json metadata(const scenes::ResolvedRun& resolved, const std::vector<std::string
   meta["scene_file"] = p.scene_file;
   meta["scene_hash_fnv1a64"] = p.scene_hash;
   meta["seed"] = p.seed;
-  meta["sensor_tables_fnv1a64"] = sensor_tables_hash(cfg);
+  meta["sensor_tables_fnv1a64"] = scenes::sensor_tables_hash(cfg);
   // The seed each random stream used (seeds.* when set, else seed).
   meta["seeds"] = {{"light", cfg.light_seed()}, {"chip", cfg.chip_seed()}, {"noise", cfg.noise_seed()}};
   meta["versions"] = {{"spadgen", SPADGEN_VERSION},

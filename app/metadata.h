@@ -36,10 +36,6 @@ Provenance provenance(const RunConfig& c, const PixelRect& img);
 // Sets the provenance attributes (spadgen_version, _seed, _scene_file, _scene_hash, _crop) of an EXR.
 void stamp(writers::ExrImage& e, const Provenance& p);
 
-// FNV-1a 64 (hex) of the tables the sensor stage reads besides the scene file (laser.pulse_shape_csv,
-// sensor.gate.profile_csv and maps_exr, each pixel design's pdp_csv), "" for a table not set: metadata.json
-// records it, so that `spadgen sense` knows whether the sensor it rebuilds is the run's.
-std::string sensor_tables_hash(const RunConfig& c);
 
 // The time axis as laser.exr (attribute spadgen_time_axis) and metadata.json record it.
 nlohmann::json axis_json(const TimeAxis& a);

@@ -386,9 +386,9 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   // The same sensor as the run's (settings, chip, tables; only the noise may differ): what does not depend
   // on the noise (the rates, the maps, the laser and ambient images, the labels) is the run's, bit for
   // bit, and is linked rather than computed and written again.
-  const bool same_tables = meta.value("sensor_tables_fnv1a64", std::string()) == sensor_tables_hash(cfg);
+  const bool same_tables = meta.value("sensor_tables_fnv1a64", std::string()) == scenes::sensor_tables_hash(cfg);
   const bool same_sensor = same_tables && noise_free_part(first.resolved) == noise_free_part(source.resolved);
-  if (!same_tables && meta.contains("sensor_tables_fnv1a64") && sensor_tables_hash(source.config) != meta.at("sensor_tables_fnv1a64").get<std::string>())
+  if (!same_tables && meta.contains("sensor_tables_fnv1a64") && scenes::sensor_tables_hash(source.config) != meta.at("sensor_tables_fnv1a64").get<std::string>())
     std::fprintf(stderr, "spadgen: warning: the sensor's tables (laser.pulse_shape_csv, sensor.gate.profile_csv or maps_exr, "
                          "a pdp_csv) have changed on disk since the run: this sense uses them as they are now\n");
   RunConfig write_cfg = cfg;  // what the sensor stage writes itself

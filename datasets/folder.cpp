@@ -216,7 +216,10 @@ DatasetFolder::Resolved DatasetFolder::resolve(const Sample& s) const {
   out.scene = r.resolved;
   // The hash covers what shapes the sample's data: its resolved scene, the content of its files and the
   // program's version; the same function of the sample on every machine and shard.
-  const std::string text = r.resolved.dump() + "\n" + scene_content_hash(s.scene) + "\n" + SPADGEN_VERSION;
+  // The sensor's tables (CSV and EXR files the scene file names) by content, when it names any (a pulse
+  // shape replaced under a done dataset left its samples done, mixing two pulses).
+  std::string text = r.resolved.dump() + "\n" + scene_content_hash(s.scene) + "\n" + SPADGEN_VERSION;
+  if (scenes::uses_sensor_tables(r.config)) text += "\n" + scenes::sensor_tables_hash(r.config);
   out.hash = scenes::hex64(scenes::fnv1a64(text));
   return out;
 }

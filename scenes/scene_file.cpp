@@ -843,4 +843,20 @@ std::string schema_json() {
   return root.dump(2) + "\n";
 }
 
+std::string sensor_tables_hash(const RunConfig& c) {
+  uint64_t h = fnv1a64("");
+  for (const std::string* path : {&c.laser.pulse_shape_csv, &c.sensor.gate.profile_csv, &c.sensor.gate.maps_exr,
+                                  &c.sensor.pixel_A.pdp_csv, &c.sensor.pixel_B.pdp_csv}) {
+    const std::string bytes = path->empty() ? std::string() : file_bytes(*path);
+    // The length first, so that tables moved from one key to the next do not hash alike.
+    h = fnv1a64(std::to_string(bytes.size()) + ":" + bytes, h);
+  }
+  return hex64(h);
+}
+
+bool uses_sensor_tables(const RunConfig& c) {
+  return !c.laser.pulse_shape_csv.empty() || !c.sensor.gate.profile_csv.empty() || !c.sensor.gate.maps_exr.empty() ||
+         !c.sensor.pixel_A.pdp_csv.empty() || !c.sensor.pixel_B.pdp_csv.empty();
+}
+
 }  // namespace spadgen::scenes

@@ -55,4 +55,12 @@ std::string schema_reference_markdown();
 // defaults, and no keys but these. Scene files may hold comments, so editors should read them as JSONC.
 std::string schema_json();
 
+// FNV-1a 64 (hex) of the tables the sensor stage reads besides the scene file (laser.pulse_shape_csv,
+// sensor.gate.profile_csv and maps_exr, each pixel design's pdp_csv), each as its length and bytes ("" for
+// a table not set, or not readable): a run's metadata.json records it, so that `spadgen sense` knows
+// whether the sensor it rebuilds is the run's, and a dataset's sample hash holds it.
+std::string sensor_tables_hash(const RunConfig& c);
+// Whether c names any of those tables.
+bool uses_sensor_tables(const RunConfig& c);
+
 }  // namespace spadgen::scenes

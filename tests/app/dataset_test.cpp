@@ -322,6 +322,20 @@ TEST_F(Dataset, AddingSamplesLeavesTheExistingOnesAndEqualsTheLargerRun) {
   EXPECT_EQ(slurp(dir_ / "grown/index.csv"), slurp(dir_ / "fresh/index.csv"));
 }
 
+// A sensor table the scene names (here the pulse shape) is part of the sample: replaced under a done dataset
+// it made nothing stale, and a grown dataset mixed samples of two pulses, all "done".
+TEST_F(Dataset, AChangedSensorTableMakesSamplesStale) {
+  write(dir_ / "pulse.csv", "0,0\n50,1\n100,0\n");
+  write(dir_ / "d.json", small_dataset(2, 3, kScenes + "multi_object.json",
+                                       ", \"laser.pulse_shape_csv\": [\"" + (dir_ / "pulse.csv").string() + "\"]"));
+  ASSERT_EQ(sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q").code, 0);
+  EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output, HasSubstr("2 samples: 2 done, 0 failed, 0 stale"));
+  write(dir_ / "pulse.csv", "0,0\n300,1\n600,0\n");
+  EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output, HasSubstr("stale: 0-1"));
+  write(dir_ / "pulse.csv", "0,0\n50,1\n100,0\n");  // the same bytes again: done again
+  EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output, HasSubstr("2 samples: 2 done, 0 failed, 0 stale"));
+}
+
 TEST_F(Dataset, AChangedSceneMakesSamplesStaleAndReplacesThemWhole) {
   // A copy of the scene whose outputs change: with transients, then without.
   fs::copy(kScenes + "multi_object.gltf", dir_ / "multi_object.gltf");
