@@ -259,10 +259,16 @@ SavedLight::SavedLight(const std::string& dir, const PixelRect& region, const Ti
   const int64_t* o = offsets_;
   if (o[0] != 0 || o[n] != values_elements_)
     throw Error("'" + path(kOffsets) + "': the offsets do not span the values");
-  for (int64_t i = 0; i < n; ++i)
-    if (r[2 * i] < 0 || r[2 * i + 1] < r[2 * i] || r[2 * i + 1] > axis.bins || o[i + 1] - o[i] != r[2 * i + 1] - r[2 * i])
-      throw Error("'" + path(kRanges) + "': pixel " + std::to_string(i) + " has a bin range that does not fit the time axis (" +
-                  std::to_string(axis.bins) + " bins) or its offsets");
+  for (int64_t i = 0; i < n; ++i) {
+    if (r[2 * i] < 0 || r[2 * i + 1] < r[2 * i] || r[2 * i + 1] > axis.bins)
+      throw Error("'" + path(kRanges) + "': pixel " + std::to_string(i) + " has the bin range [" + std::to_string(r[2 * i]) +
+                  ", " + std::to_string(r[2 * i + 1]) + "), which does not fit the time axis (" + std::to_string(axis.bins) +
+                  " bins)");
+    if (o[i + 1] - o[i] != r[2 * i + 1] - r[2 * i])
+      throw Error("'" + path(kRanges) + "' and '" + path(kOffsets) + "' disagree at pixel " + std::to_string(i) + ": its range [" +
+                  std::to_string(r[2 * i]) + ", " + std::to_string(r[2 * i + 1]) + ") holds " +
+                  std::to_string(r[2 * i + 1] - r[2 * i]) + " bins, its offsets " + std::to_string(o[i + 1] - o[i]));
+  }
 }
 
 void SavedLight::values(int64_t offset, int64_t count, float* dest) const {

@@ -564,6 +564,19 @@ TEST_F(App, SavedLightIsTheTransientOverEachPixelsLitBins) {
     }
   // Compact: the multi-object transient spans a small part of the window.
   EXPECT_LT(lit_bins, size_t(24 * 20 * T) / 4);
+  // Offsets that disagree with the ranges name both files (the ranges alone were named).
+  const size_t at = size_t(21 * 26 + 25);  // a pixel of the ring's last row; its offset moved by one bin
+  std::string bytes = slurp(d / "light/offsets.npy");
+  const size_t data = bytes.size() - 8 * (22 * 26 + 1);
+  int64_t o;
+  std::memcpy(&o, bytes.data() + data + 8 * at, 8);
+  ++o;
+  std::memcpy(bytes.data() + data + 8 * at, &o, 8);
+  std::ofstream(d / "light/offsets.npy", std::ios::binary) << bytes;
+  const Result r = sh("sense " + d.string() + " -q -o " + (dir_ / "damaged").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("light/ranges.npy' and '"));
+  EXPECT_THAT(r.output, HasSubstr("light/offsets.npy' disagree at pixel " + std::to_string(at - 1) + ": its range ["));
 }
 
 }  // namespace
