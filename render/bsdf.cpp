@@ -223,6 +223,35 @@ BsdfSample Bsdf::sample(Uniform3 u) const {
   return s;
 }
 
+bool Bsdf::delta_branches(BsdfSample* reflected, BsdfSample* transmitted) const {
+  if (m_.lambertian || !m_.smooth() || diffuse_weight_ > 0.0f || !(specular_weight_ > 0.0f) || !(transmission_weight_ > 0.0f))
+    return false;
+  // sample()'s Dirac branches with the lobe chosen for certain (p = 1).
+  BsdfSample& r = *reflected;
+  r = BsdfSample{};
+  r.lobe = kSpecularLobe;
+  r.delta = true;
+  r.wi = to_world(glm::vec3(-wo_.x, -wo_.y, wo_.z));
+  if (!(glm::dot(r.wi, ng_) > 0.0f)) return false;
+  r.weight = (1.0f - m_.metallic) * Spec(fresnel_o_) + m_.metallic * schlick(m_.base, wo_.z);
+  BsdfSample& t = *transmitted;
+  t = BsdfSample{};
+  t.lobe = kTransmissionLobe;
+  t.delta = true;
+  t.transmitted = true;
+  const Spec tint = (1.0f - m_.metallic) * m_.transmission * m_.base;
+  if (m_.thin_walled) {
+    t.wi = -to_world(wo_);
+    t.weight = tint * (1.0f - fresnel_o_);
+  } else {
+    const float sin2_t = (1.0f - wo_.z * wo_.z) / (eta_ * eta_);
+    if (sin2_t >= 1.0f) return false;
+    t.wi = to_world(glm::vec3(-wo_.x / eta_, -wo_.y / eta_, -std::sqrt(1.0f - sin2_t)));
+    t.weight = tint * ((1.0f - fresnel_o_) / (eta_ * eta_));
+  }
+  return glm::dot(t.wi, ng_) < 0.0f && (r.weight.x > 0.0f || r.weight.y > 0.0f) && (t.weight.x > 0.0f || t.weight.y > 0.0f);
+}
+
 LobeValues Bsdf::lobes(const glm::vec3& wi_world) const {
   LobeValues out;
   for (int l = 0; l < kLobes; ++l) out.f_cos[l] = Spec(0.0f), out.pdf[l] = 0.0f;

@@ -73,6 +73,11 @@ class Bsdf {
   // Draws 3 numbers from u (lobe choice and direction).
   BsdfSample sample(Uniform3 u) const;
 
+  // A smooth interface with nothing but its two Dirac lobes (a clear plate): both of them, each weighted by
+  // its own share (F and the transmitted 1 - F), for a path that follows both instead of drawing one. False
+  // when the material has a non-Dirac part, or one of the two sends no light (total internal reflection).
+  bool delta_branches(BsdfSample* reflected, BsdfSample* transmitted) const;
+
   // Ratio n(wi side) / n(wo side) for a transmitted direction.
   float eta() const { return eta_; }
 

@@ -18,6 +18,9 @@ constexpr float kInf = std::numeric_limits<float>::infinity();
 // Smooth interfaces do not count as bounces (a plate in front of a wall must not use up a direct-light
 // render); this bounds the specular chains instead (total internal reflection inside a slab).
 constexpr int kMaxDeltaEvents = 64;
+// A camera path follows both branches of its first this many clear (purely Dirac) interfaces: a plate's
+// two faces and its first echo inside (through a 2 mm clear plate, the paths' spread fell from 7 % to 3e-6).
+constexpr int kMaxDeltaSplits = 4;
 constexpr int kMaxShadowCrossings = 64;
 // A punctual light this many float ulps of a hit point's largest coordinate from the surface's plane is
 // taken to lie in it (the hit point's own rounding is a few ulps).
@@ -1292,96 +1295,136 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
   double ghost_nee[kAhead], ghost_guided[kAhead];
   std::fill_n(ghost_nee, kAhead, 1.0);
   std::fill_n(ghost_guided, kAhead, 1.0);
-  for (bool camera_ray = true;; camera_ray = false) {
-    const double mis = next_mis;
-    next_mis = 1.0;
-    for (int i = 0; i + 1 < kAhead; ++i) ghost_nee[i] = ghost_nee[i + 1], ghost_guided[i] = ghost_guided[i + 1];
-    ghost_nee[kAhead - 1] = ghost_guided[kAhead - 1] = 1.0;
-    RayHit hit;
-    if (!next_hit(block, j, camera_ray, o, d, &hit, rays)) {
-      gather_environment(beta, &ambient);
-      break;
-    }
-    const Surface sf = surface_at(block, j, camera_ray, hit);
-    // From the previous surface point itself, not from the offset origin a few hundred ulps away.
-    const double seg = glm::length(glm::dvec3(sf.p) - previous);
-    previous = glm::dvec3(sf.p);
-    beta *= traverse(medium, seg, &opl);
-    const MaterialPoint mp = shading_.material_at(sf, hit);
-    gather_emission(beta, mp, &ambient);
-    if (last_segment) break;
-
-    const auto [wo_front, bsdf, volume] = shade(sf, mp, d);
-
-    const NeeVertex v{sf, bsdf, wo_front, volume, medium, vertices, !reflected, beta, opl,
-                      !(mp.transmission > 0.0f && vertices > 0)};
-    if (bsdf.has_non_delta()) {
-      if (beta.x > 0.0f) {
-        LaserRay lr;
-        FirstSegment first;
-        const bool ahead = camera_ray && ahead_shadow(block, j, &lr, &first);
-        if (ahead || laser_ray(sf, &lr))
-          connect_laser(v, lr, ahead ? &first : nullptr, w * mis * ghost_nee[0], film, rays);
+  // The path follows both branches of its first kMaxDeltaSplits clear interfaces (delta_branches): the
+  // reflected one waits here while the transmitted one goes on. Drawing one branch (the front face's F
+  // reflected: 8 %) left 27 % of the pixels of 16 paths without a reflection, their error read as 0 where
+  // it was 8.5 %, and render.target_relative_error stopped them there.
+  struct Branch {
+    glm::vec3 o, d;
+    Spec beta;
+    double opl;
+    glm::dvec3 previous;
+    int medium, vertices, deltas;
+    float eta_scale;
+    bool reflected, last_segment;
+    double ghost_nee[kAhead], ghost_guided[kAhead];
+  };
+  Branch pending[kMaxDeltaSplits];
+  int n_pending = 0, splits = 0;
+  bool camera_ray = true;
+  for (;;) {
+    for (;; camera_ray = false) {
+      const double mis = next_mis;
+      next_mis = 1.0;
+      for (int i = 0; i + 1 < kAhead; ++i) ghost_nee[i] = ghost_nee[i + 1], ghost_guided[i] = ghost_guided[i + 1];
+      ghost_nee[kAhead - 1] = ghost_guided[kAhead - 1] = 1.0;
+      RayHit hit;
+      if (!next_hit(block, j, camera_ray, o, d, &hit, rays)) {
+        gather_environment(beta, &ambient);
+        break;
       }
-      if (beta.y > 0.0f) connect_ambient_lights(v, &ambient, rays);
-      ++vertices;
-      if (vertices == 1 && rc.max_bounces > 1) indirect_from = rays->total();
-      if (vertices >= rc.max_bounces) {
-        if (!ambient_on_) break;
-        last_segment = true;
-      }
-    }
+      const Surface sf = surface_at(block, j, camera_ray, hit);
+      // From the previous surface point itself, not from the offset origin a few hundred ulps away.
+      const double seg = glm::length(glm::dvec3(sf.p) - previous);
+      previous = glm::dvec3(sf.p);
+      beta *= traverse(medium, seg, &opl);
+      const MaterialPoint mp = shading_.material_at(sf, hit);
+      gather_emission(beta, mp, &ambient);
+      if (last_segment) break;
 
-    // The ghosts a vertex sees of the laser through a glossy plate (no random numbers: found first, as
-    // the guided connections weigh against those whose light the next vertex's laser connection returns).
-    Ghosts ghosts;
-    if (guided_ && !slabs_.empty() && !last_segment && beta.x > 0.0f && bsdf.has_non_delta())
-      ghost_targets(sf, medium, &ghosts);
-    // Guided connections from a glossy vertex whose next vertex may reflect the laser in a narrow lobe.
-    GuideTargets guide;
-    const bool roulette = !last_segment && vertices >= rc.russian_roulette_from;
-    if (guided_ && !last_segment && beta.x > 0.0f &&
-        (bsdf.glossy() || (bsdf.lambertian() && medium < 0 && !parts_.empty()))) {
-      const int medium_out_t = volume ? (wo_front ? sf.material : -1) : medium;
-      find_guide_targets(sf, bsdf, medium, medium_out_t, &guide, rays);
-      if (guide.n > 0)
-        guided_connections(v, medium_out_t, roulette, beta * eta_scale, guide, rng, w * ghost_guided[0], film, rays,
-                           &ghosts);
-    }
-    // Ghost draws from a vertex that sees a glossy plate's ghost of the laser.
-    if (ghosts.n > 0)
-      ghost_connections(v, vertices, deltas, roulette, eta_scale, ghosts, rng, w, ghost_nee, ghost_guided, film, rays,
-                        &guide);
+      const auto [wo_front, bsdf, volume] = shade(sf, mp, d);
 
-    const BsdfSample bs = bsdf.sample(uniform3(rng));
-    if (!(bs.weight.x > 0.0f || bs.weight.y > 0.0f)) break;
-    if (bs.delta && ++deltas > kMaxDeltaEvents) break;
-    reflected = reflected || !bs.transmitted;
-    beta *= bs.weight;
-    if (bs.transmitted && volume) medium = wo_front ? sf.material : -1;
-    if (bs.transmitted) eta_scale *= bsdf.eta() * bsdf.eta();
-    float q = 1.0f;
-    if (roulette) {
-      q = roulette_q(beta * eta_scale);
-      if (!(q > 0.0f) || uniform(rng) >= q) break;
-      beta /= q;
-    }
-    if ((guide.n > 0 || ghosts.n > 0) && !bs.delta) {
-      const double p = double(bsdf.lobes(bs.wi).pdf[bs.lobe]) * q;
-      // The next vertex's laser connection: against the guided connections and the ghosts of reach 1.
-      const double pg2 = guide.sum_pdf2(bs.wi) + (bs.transmitted ? 0.0 : ghosts.sum_pdf2(bs.wi, 1));
-      if (pg2 > 0.0) next_mis = p * p / (p * p + pg2);
-      for (int r = 2; r <= kMaxGhostReach && !bs.transmitted; ++r) {
-        const double ph2 = ghosts.sum_pdf2(bs.wi, r);
-        if (ph2 > 0.0) {  // the light met r - 1 vertices ahead (guided) and r ahead (laser connection)
-          const double share = p * p / (p * p + ph2);
-          ghost_guided[r - 1] *= share;
-          ghost_nee[r] *= share;
+      const NeeVertex v{sf, bsdf, wo_front, volume, medium, vertices, !reflected, beta, opl,
+                        !(mp.transmission > 0.0f && vertices > 0)};
+      if (bsdf.has_non_delta()) {
+        if (beta.x > 0.0f) {
+          LaserRay lr;
+          FirstSegment first;
+          const bool ahead = camera_ray && ahead_shadow(block, j, &lr, &first);
+          if (ahead || laser_ray(sf, &lr))
+            connect_laser(v, lr, ahead ? &first : nullptr, w * mis * ghost_nee[0], film, rays);
+        }
+        if (beta.y > 0.0f) connect_ambient_lights(v, &ambient, rays);
+        ++vertices;
+        if (vertices == 1 && rc.max_bounces > 1) indirect_from = rays->total();
+        if (vertices >= rc.max_bounces) {
+          if (!ambient_on_) break;
+          last_segment = true;
         }
       }
+
+      // The ghosts a vertex sees of the laser through a glossy plate (no random numbers: found first, as
+      // the guided connections weigh against those whose light the next vertex's laser connection returns).
+      Ghosts ghosts;
+      if (guided_ && !slabs_.empty() && !last_segment && beta.x > 0.0f && bsdf.has_non_delta())
+        ghost_targets(sf, medium, &ghosts);
+      // Guided connections from a glossy vertex whose next vertex may reflect the laser in a narrow lobe.
+      GuideTargets guide;
+      const bool roulette = !last_segment && vertices >= rc.russian_roulette_from;
+      if (guided_ && !last_segment && beta.x > 0.0f &&
+          (bsdf.glossy() || (bsdf.lambertian() && medium < 0 && !parts_.empty()))) {
+        const int medium_out_t = volume ? (wo_front ? sf.material : -1) : medium;
+        find_guide_targets(sf, bsdf, medium, medium_out_t, &guide, rays);
+        if (guide.n > 0)
+          guided_connections(v, medium_out_t, roulette, beta * eta_scale, guide, rng, w * ghost_guided[0], film, rays,
+                             &ghosts);
+      }
+      // Ghost draws from a vertex that sees a glossy plate's ghost of the laser.
+      if (ghosts.n > 0)
+        ghost_connections(v, vertices, deltas, roulette, eta_scale, ghosts, rng, w, ghost_nee, ghost_guided, film, rays,
+                          &guide);
+
+      BsdfSample bs, other;
+      if (splits < kMaxDeltaSplits && !roulette && bsdf.delta_branches(&other, &bs)) {
+        ++splits;
+        if (deltas + 1 <= kMaxDeltaEvents) {
+          Branch& b = pending[n_pending++];
+          b.o = offset_ray_origin(sf.p, sf.ng, other.wi), b.d = other.wi;
+          b.beta = beta * other.weight, b.opl = opl, b.previous = previous;
+          b.medium = medium, b.vertices = vertices, b.deltas = deltas + 1;
+          b.eta_scale = eta_scale, b.reflected = true, b.last_segment = last_segment;
+          std::copy_n(ghost_nee, kAhead, b.ghost_nee);
+          std::copy_n(ghost_guided, kAhead, b.ghost_guided);
+        }
+      } else {
+        bs = bsdf.sample(uniform3(rng));
+      }
+      if (!(bs.weight.x > 0.0f || bs.weight.y > 0.0f)) break;
+      if (bs.delta && ++deltas > kMaxDeltaEvents) break;
+      reflected = reflected || !bs.transmitted;
+      beta *= bs.weight;
+      if (bs.transmitted && volume) medium = wo_front ? sf.material : -1;
+      if (bs.transmitted) eta_scale *= bsdf.eta() * bsdf.eta();
+      float q = 1.0f;
+      if (roulette) {
+        q = roulette_q(beta * eta_scale);
+        if (!(q > 0.0f) || uniform(rng) >= q) break;
+        beta /= q;
+      }
+      if ((guide.n > 0 || ghosts.n > 0) && !bs.delta) {
+        const double p = double(bsdf.lobes(bs.wi).pdf[bs.lobe]) * q;
+        // The next vertex's laser connection: against the guided connections and the ghosts of reach 1.
+        const double pg2 = guide.sum_pdf2(bs.wi) + (bs.transmitted ? 0.0 : ghosts.sum_pdf2(bs.wi, 1));
+        if (pg2 > 0.0) next_mis = p * p / (p * p + pg2);
+        for (int r = 2; r <= kMaxGhostReach && !bs.transmitted; ++r) {
+          const double ph2 = ghosts.sum_pdf2(bs.wi, r);
+          if (ph2 > 0.0) {  // the light met r - 1 vertices ahead (guided) and r ahead (laser connection)
+            const double share = p * p / (p * p + ph2);
+            ghost_guided[r - 1] *= share;
+            ghost_nee[r] *= share;
+          }
+        }
+      }
+      o = offset_ray_origin(sf.p, sf.ng, bs.wi);
+      d = bs.wi;
     }
-    o = offset_ray_origin(sf.p, sf.ng, bs.wi);
-    d = bs.wi;
+    if (n_pending == 0) break;
+    const Branch& b = pending[--n_pending];  // the latest branch left waiting
+    o = b.o, d = b.d, beta = b.beta, opl = b.opl, previous = b.previous;
+    medium = b.medium, vertices = b.vertices, deltas = b.deltas, eta_scale = b.eta_scale;
+    reflected = b.reflected, last_segment = b.last_segment, next_mis = 1.0, camera_ray = false;
+    std::copy_n(b.ghost_nee, kAhead, ghost_nee);
+    std::copy_n(b.ghost_guided, kAhead, ghost_guided);
   }
   if (indirect_from != no_indirect) rays->indirect += rays->total() - indirect_from;
   return ambient;

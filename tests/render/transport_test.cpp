@@ -583,10 +583,51 @@ TEST(Transport, LaserLightRefractsThroughAThickSlab) {
       const double h = 1e-6, drho = (rho(psi + h) - rho(psi - h)) / (2 * h);
       expected = T * T * std::sin(psi) / (rho(psi) * drho * std::pow(std::cos(psi), 3));
     }
-    // Both renders carry their camera paths' Bernoulli choice at each face of the slab (the bare one
-    // none): a binomial spread of sqrt(T (1 - T) / paths) relative, 5 sigma.
+    // 5 sigma of the binomial spread sqrt(T (1 - T) / paths) that a draw at each face of the slab would
+    // give (the faces are followed both ways, AClearPlatesBranchesAreFollowedBothWays: a loose bound).
     const double paths = 16.0 * 4096;
     EXPECT_NEAR(main / bare / expected, 1.0, 5 * std::sqrt((1 - T) / (T * paths)) + 1e-3) << psi_deg << " deg";
+  }
+}
+
+// A clear plate's faces send a camera path both ways (reflected and transmitted, each with its Fresnel
+// share) at its first four clear interfaces: the two faces and the first echo inside. Drawn at random, the
+// front face's 4 % reflection made 16 paths disagree by whether they took it (a pixel's relative spread
+// about 20 %, its reported error 0 where none did). Here the slab of LaserLightRefractsThroughAThickSlab
+// at normal incidence, 16 paths per pixel: every pixel is the closed form (the direct return through the
+// slab, T^2 / (1 - t + t / n)^2; plus its first echo, R^2 of it, at 2 n t / c) within 2e-4, with two
+// light seeds alike, and reports an error that small.
+TEST(Transport, AClearPlatesBranchesAreFollowedBothWays) {
+  const float t = 0.05f, n = 1.5f;
+  const auto scene = [&](bool slab) {
+    scenes::Scene s;
+    add_quad(s, {0, 0, -1}, {3, 0, 0}, {0, 3, 0}, add_material(s, test::lambertian(0.5f)));
+    if (slab) add_box(s, {-3, -3, -0.3f - t}, {3, 3, -0.3f}, add_material(s, test::glass(n, t)));
+    return s;
+  };
+  RenderStageConfig c = test_config(4, 4, 50e-3);  // 50 mm: every pixel within 0.03 deg of the axis
+  c.laser.beam = Beam::Cone;
+  c.laser.half_angle_rad = kPi;
+  c.render.samples_per_pixel = 16;
+  c.render.max_bounces = 1;
+  const TimeAxis axis{2 / kC - 0.2e-9, 1e-12, 1400, 1.0};
+  const TransientTile bare = Renderer(scene(false), c).transient({0, 0, 4, 4}, {0, 0, 4, 4}, axis);
+  const double R = fresnel(0.0, n), T = (1 - R) * (1 - R);
+  const double direct = T * T / ((1 - t + t / n) * (1 - t + t / n));
+  const double echo_at = 2 * n * t / kC;  // after the direct return
+  const double t_main = 2 * ((1 - t) + n * t) / kC;
+  for (const uint64_t seed : {7u, 8u}) {
+    c.light_seed = seed;
+    const TransientTile b = Renderer(scene(true), c).transient({0, 0, 4, 4}, {0, 0, 4, 4}, axis);
+    for (size_t i = 0; i < 16; ++i) {
+      double main = 0, echo = 0;
+      const float* g = b.transient.data() + i * size_t(axis.bins);
+      for (int64_t k = 0; k < axis.bins; ++k) (axis.bin_centre_s(k) < t_main + echo_at / 2 ? main : echo) += g[k];
+      EXPECT_NEAR(main / bare.laser_total[i] / direct, 1.0, 2e-4) << "pixel " << i << " seed " << seed;
+      // the echo: one more round trip inside, R^2 of the direct return (its path 3 % longer: 1 / r^2)
+      EXPECT_NEAR(echo / main / (R * R), 1.0, 0.05) << "pixel " << i << " seed " << seed;
+      EXPECT_LT(b.laser_se[i], 2e-4 * b.laser_total[i]) << "pixel " << i;
+    }
   }
 }
 
