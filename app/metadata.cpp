@@ -58,16 +58,21 @@ json model_components(const RunConfig& c, const scenes::Scene* scene, const json
     out.push_back({{"component", component}, {"active", active}, {"why", why}});
   };
   if (scene) {
-    bool transmissive = false, volumes = false, emission = false;
-    for (const scenes::Material& m : scene->materials) {
+    bool transmissive = false, volumes = false, emission = false, refractive = false;
+    for (size_t i = 0; i < scene->materials.size(); ++i) {
+      const scenes::Material& m = scene->materials[i];
+      if (!scene->material_used(i)) continue;
       transmissive |= m.transmissive();
+      refractive |= m.transmissive() && m.thickness_m > 0.0f && m.ior != 1.0f;
       volumes |= m.transmissive() && m.thickness_m > 0.0f && std::isfinite(m.attenuation_distance_m);
       emission |= m.emissive.x > 0.0f || m.emissive.y > 0.0f || m.emissive.z > 0.0f;
     }
     add(kFromScene[0].data(), transmissive,
-        transmissive ? "the glTF has transmissive materials: paths refract through them; the laser's shadow rays cross them in "
-                       "straight lines with their Fresnel transmittance (docs/render.md, Not implemented)"
-                     : "no transmissive material: shadow rays are occlusion tests");
+        transmissive ? std::string("a mesh has a transmissive material: paths refract through it, and shadow rays walk through it "
+                                   "with its Fresnel transmittance") +
+                           (refractive ? "; the laser's connections refract through its volumes (a thickness, ior != 1)"
+                                       : " in straight lines (no volume of ior != 1)")
+                     : "no mesh has a transmissive material: shadow rays are occlusion tests");
     add(kFromScene[1].data(), volumes,
         volumes ? "a transmissive material has a thickness and a finite attenuation distance (KHR_materials_volume)"
                 : "no transmissive material with a thickness and a finite attenuation distance");

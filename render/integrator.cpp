@@ -87,10 +87,10 @@ void deposit(double v, double t, const TimeAxis& axis, double* bins, PixelTotals
 
 bool guided_connections_active(const scenes::Scene& scene, bool enabled) {
   if (!enabled) return false;
-  for (const scenes::Material& m : scene.materials) {
+  for (size_t i = 0; i < scene.materials.size(); ++i) {
     MaterialPoint mp;
-    mp.alpha = m.roughness * m.roughness;
-    if (!mp.smooth() && mp.alpha <= kGuideMaxAlpha) return true;
+    mp.alpha = scene.materials[i].roughness * scene.materials[i].roughness;
+    if (!mp.smooth() && mp.alpha <= kGuideMaxAlpha && scene.material_used(i)) return true;
   }
   return false;
 }
@@ -165,8 +165,10 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
     : config_(config), mesh_object_(mesh_object), embree_(embree), shading_(shading), camera_(camera), laser_(laser),
       ambient_(ambient) {
   transmission_ = scene.has_transmission();
-  for (const scenes::Material& m : scene.materials)
-    refractive_ |= m.transmissive() && m.thickness_m > 0.0f && m.ior != 1.0f;
+  for (size_t i = 0; i < scene.materials.size(); ++i) {
+    const scenes::Material& m = scene.materials[i];
+    refractive_ |= m.transmissive() && m.thickness_m > 0.0f && m.ior != 1.0f && scene.material_used(i);
+  }
   guided_ = guided_connections_active(scene, config.render.guided_connections);
   // The triangles of small meshes (a plate, a box) of such a material, and their slivers: two coplanar
   // triangles sharing a diagonal that make a parallelogram whose short side is under 1/20 of its long

@@ -98,9 +98,16 @@ struct Scene {
   std::vector<Light> lights;
   std::vector<std::string> warnings; // what spadgen does not use, once per element (also printed)
 
+  // Whether some mesh uses material i (a glTF may define materials no mesh uses: the renderer's choices,
+  // and what a run reports of its model, depend on the used ones only).
+  bool material_used(size_t i) const {
+    for (const Mesh& m : meshes)
+      if (m.material >= 0 && static_cast<size_t>(m.material) == i) return true;
+    return false;
+  }
   bool has_transmission() const {
-    for (const Material& m : materials)
-      if (m.transmissive()) return true;
+    for (size_t i = 0; i < materials.size(); ++i)
+      if (materials[i].transmissive() && material_used(i)) return true;
     return false;
   }
   size_t triangle_count() const {

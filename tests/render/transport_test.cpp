@@ -747,6 +747,20 @@ TEST(Transport, RowFillFactorsMustCoverTheSensor) {
   }
 }
 
+// A material no mesh uses (a glTF's library of materials) switches nothing on: the straight shadow walk
+// through transmissive surfaces, the refracted connections and the guided connections were on (and
+// metadata.json's model said "transmissive surfaces") for a glass material no mesh had.
+TEST(Transport, AMaterialNoMeshUsesSwitchesNothingOn) {
+  scenes::Scene s;
+  add_quad(s, {0, 0, -1}, {3, 0, 0}, {0, 3, 0}, add_material(s, test::lambertian(0.5f)));
+  add_material(s, test::glass(1.5f, 0.002f, 0.1f));
+  EXPECT_FALSE(s.has_transmission());
+  EXPECT_FALSE(guided_connections_active(s, true));
+  add_box(s, {-0.1f, -0.1f, -0.5f}, {0.1f, 0.1f, -0.498f}, 1);
+  EXPECT_TRUE(s.has_transmission());
+  EXPECT_TRUE(guided_connections_active(s, true));
+}
+
 scenes::Scene busy_scene() {
   scenes::Scene s;
   add_quad(s, {0, 0, -1.2f}, {1, 0, 0}, {0, 1, 0}, add_material(s, test::lambertian(0.6f)));
