@@ -364,6 +364,11 @@ void DatasetFolder::clear_failure(const Sample& s) const {
 std::vector<SampleRecord> DatasetFolder::write_index(const std::function<std::vector<SampleRecord>()>& inspect) const {
   const FolderLock lock(dir_);
   std::vector<SampleRecord> records = inspect();
+  // dataset.json with the index, as one step: two runs of different sample counts at once left the one's
+  // dataset.json (written as it began) beside the other's index.
+  const ojson wanted = record();
+  if (read_json<ojson>(dir_ / "dataset.json") != wanted)
+    writers::write_file_atomic((dir_ / "dataset.json").string(), wanted.dump(2) + "\n");
   writers::write_file_atomic((dir_ / "index.jsonl").string(), index_jsonl(spec_, records));
   writers::write_file_atomic((dir_ / "index.csv").string(), index_csv(spec_, records));
   writers::write_file_atomic((dir_ / "dataset.md").string(), dataset_card(*this, records));

@@ -298,6 +298,39 @@ TEST_F(Dataset, ASignalSaysWhichSamplesAreKept) {
   EXPECT_EQ(status, (std::vector<std::string>{"done", "done", "missing", "missing", "missing", "missing"}));
 }
 
+// dataset.json is written with the index: a run of 3 samples whose folder another run (of 2) claimed
+// meanwhile (its dataset.json written as it began) left "samples": 2 beside an index of 3.
+TEST_F(Dataset, DatasetJsonAndTheIndexAreWrittenTogether) {
+  write(dir_ / "d3.json", small_dataset(3));
+  write(dir_ / "d2.json", small_dataset(2));
+  ASSERT_EQ(sh("dataset run " + (dir_ / "d2.json").string() + " -o " + (dir_ / "other").string() + " -q").code, 0);
+  const std::string claimed = slurp(dir_ / "other/dataset.json");
+  const fs::path out = dir_ / "out", file = dir_ / "d3.json";
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    ::execl(kBin.c_str(), kBin.c_str(), "dataset", "run", file.c_str(), "-o", out.c_str(), "-q", nullptr);
+    ::_exit(127);
+  }
+  bool seen = false;  // the other run's claim, while this one writes sample 2
+  for (int i = 0; i < 3000 && !seen; ++i) {
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(out / "samples", ec))
+      if (e.path().filename().string().find(".000002.spadgen-staging") == 0) seen = true;
+    if (!seen) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  if (seen) write(out / "dataset.json", claimed);
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  ASSERT_TRUE(seen) << "the run was not caught inside sample 2";
+  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0);
+  EXPECT_EQ(json::parse(slurp(out / "dataset.json"))["samples"], 3);
+  size_t lines = 0;
+  std::istringstream index(slurp(out / "index.jsonl"));
+  for (std::string line; std::getline(index, line);) ++lines;
+  EXPECT_EQ(lines, 3u);
+  EXPECT_THAT(sh("dataset status " + out.string()).output, HasSubstr("3 samples: 3 done"));
+}
+
 TEST_F(Dataset, AddingSamplesLeavesTheExistingOnesAndEqualsTheLargerRun) {
   write(dir_ / "d3.json", small_dataset(3));
   write(dir_ / "d5.json", small_dataset(5));
