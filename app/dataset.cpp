@@ -309,7 +309,7 @@ void dataset_run(const DatasetOptions& options) {
     const bool compressed = disk_at_least != disk;
     throw Error("dataset run: the " + std::to_string(todo.size()) + " samples left to generate in " + dir.string() +
                 (shard.count > 1 ? " (shard " + shard.text() + ")" : std::string()) + " need " +
-                (compressed ? "at least " + bytes_text(disk_at_least) + " (their compressed stores at a twentieth of their size; at most " +
+                (compressed ? "at least " + bytes_text(disk_at_least) + " (their compressed files, EXR images and Zarr stores, at a twentieth of their size; at most " +
                                   bytes_text(disk) + ")"
                             : "about " + bytes_text(disk)) +
                 ", and " + bytes_text(free) + " is free there (about " +

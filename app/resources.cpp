@@ -209,7 +209,7 @@ void check_resources(const ResourcePlan& plan, const RunConfig& c, const fs::pat
   if (plan.disk_available >= 0 && plan.disk_at_least() > plan.disk_available) {
     const bool any_compressed = plan.disk_at_least() != plan.disk_needed();
     throw Error((who.empty() ? file + ": the run writes " : who + " writes ") + (any_compressed ? "at least " + bytes_text(plan.disk_at_least()) +
-                " (the compressed stores at a twentieth of their size; at most " + bytes_text(plan.disk_needed()) + ")"
+                " (the compressed files, EXR images and Zarr stores, at a twentieth of their size; at most " + bytes_text(plan.disk_needed()) + ")"
                                                            : "about " + bytes_text(plan.disk_needed())) +
                 " into " + out.string() + ", and " + bytes_text(plan.disk_available) + " is free there: " + join_parts(plan.disk) +
                 "; " + (remedy.empty() ? "switch outputs off (outputs.*), crop (camera.crop), or choose another folder (-o)" : remedy));
