@@ -101,8 +101,9 @@ class Sample:
             if found != (self.index, r, self.sample_hash):
                 raise SampleNotDoneError(
                     f"{folder}: its metadata.json's dataset section (sample, realisation, hash {found}) is not realisation {r} "
-                    f"of sample {self.index} as index.jsonl has it (hash {self.sample_hash!r}): the index is out of date "
-                    "(a `spadgen dataset run` into the folder has not finished): run it again")
+                    f"of sample {self.index} as this Dataset read index.jsonl (hash {self.sample_hash!r}): the sample "
+                    "was generated again since; open the dataset again (spadgen.open_dataset) to read the new index, "
+                    "or, if index.jsonl itself is behind (a `spadgen dataset run` into the folder was stopped), run it again")
             self._runs[r] = run
         return self._runs[r]
 

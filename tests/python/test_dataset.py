@@ -164,9 +164,9 @@ def test_errors_name_the_folder(ds, dataset_dir, tmp_path, sweep_run):
     missing = spadgen.Sample(ds, dict(ds.index[0], status="missing"))
     with pytest.raises(spadgen.SampleNotDoneError, match=f"{dataset_dir}: sample 0 .* is missing"):
         missing.run
-    # An index that does not describe the folder any more (another run into it has not finished).
+    # An index read before the sample was generated again (or one a stopped run left behind).
     moved = spadgen.Sample(ds, dict(ds.index[0], sample_hash="0123456789abcdef"))
-    with pytest.raises(spadgen.SampleNotDoneError, match="index is out of date"):
+    with pytest.raises(spadgen.SampleNotDoneError, match=r"was generated again since; open the dataset again \(spadgen.open_dataset\)"):
         moved.run
     with pytest.raises(FileNotFoundError, match=f"{tmp_path / 'nothing'}: not a spadgen dataset folder.*no such folder"):
         spadgen.open_dataset(tmp_path / "nothing")
