@@ -151,14 +151,7 @@ BsdfSample Bsdf::sample(Uniform3 u) const {
   if (pick < diffuse_weight_ + specular_weight_) {
     s.lobe = kSpecularLobe;
     const float p = specular_weight_ / total;
-    if (m_.smooth()) {
-      s.delta = true;
-      s.wi = to_world(glm::vec3(-wo_.x, -wo_.y, wo_.z));
-      if (glm::dot(s.wi, ng_) <= 0.0f) return s;
-      const Spec f = (1.0f - m_.metallic) * Spec(fresnel_o_) + m_.metallic * schlick(m_.base, wo_.z);
-      s.weight = f / p;
-      return s;
-    }
+    if (m_.smooth()) return smooth_reflection(p);
     const glm::vec3 h = sample_ggx(m_.alpha, u.b, u.c);
     const float c = glm::dot(wo_, h);
     if (c <= 0.0f) return s;
@@ -177,23 +170,8 @@ BsdfSample Bsdf::sample(Uniform3 u) const {
   const float p = transmission_weight_ / total;
   s.transmitted = true;
   s.lobe = kTransmissionLobe;
+  if (m_.smooth()) return smooth_transmission(p);
   const Spec tint = (1.0f - m_.metallic) * m_.transmission * m_.base;
-  if (m_.smooth()) {
-    s.delta = true;
-    if (m_.thin_walled) {
-      s.wi = -to_world(wo_);
-      s.weight = tint * ((1.0f - fresnel_o_) / p);
-    } else {
-      const float sin2_t = (1.0f - wo_.z * wo_.z) / (eta_ * eta_);
-      if (sin2_t >= 1.0f) return s;
-      const float cos_t = std::sqrt(1.0f - sin2_t);
-      s.wi = to_world(glm::vec3(-wo_.x / eta_, -wo_.y / eta_, -cos_t));
-      // Radiance is n^2-compressed across the interface; a round trip air-glass-air cancels it.
-      s.weight = tint * ((1.0f - fresnel_o_) / (eta_ * eta_ * p));
-    }
-    if (glm::dot(s.wi, ng_) >= 0.0f) s.weight = Spec(0.0f);
-    return s;
-  }
   const glm::vec3 h = sample_ggx(m_.alpha, u.b, u.c);
   const float c = glm::dot(wo_, h);
   if (c <= 0.0f) return s;
@@ -223,33 +201,47 @@ BsdfSample Bsdf::sample(Uniform3 u) const {
   return s;
 }
 
+// The Dirac branches, each chosen with probability p (its weight divided by p).
+BsdfSample Bsdf::smooth_reflection(float p) const {
+  BsdfSample s;
+  s.lobe = kSpecularLobe;
+  s.delta = true;
+  s.wi = to_world(glm::vec3(-wo_.x, -wo_.y, wo_.z));
+  if (glm::dot(s.wi, ng_) <= 0.0f) return s;
+  const Spec f = (1.0f - m_.metallic) * Spec(fresnel_o_) + m_.metallic * schlick(m_.base, wo_.z);
+  s.weight = f / p;
+  return s;
+}
+
+BsdfSample Bsdf::smooth_transmission(float p) const {
+  BsdfSample s;
+  s.lobe = kTransmissionLobe;
+  s.delta = true;
+  s.transmitted = true;
+  const Spec tint = (1.0f - m_.metallic) * m_.transmission * m_.base;
+  if (m_.thin_walled) {
+    s.wi = -to_world(wo_);
+    s.weight = tint * ((1.0f - fresnel_o_) / p);
+  } else {
+    const float sin2_t = (1.0f - wo_.z * wo_.z) / (eta_ * eta_);
+    if (sin2_t >= 1.0f) return s;
+    const float cos_t = std::sqrt(1.0f - sin2_t);
+    s.wi = to_world(glm::vec3(-wo_.x / eta_, -wo_.y / eta_, -cos_t));
+    // Radiance is n^2-compressed across the interface; a round trip air-glass-air cancels it.
+    s.weight = tint * ((1.0f - fresnel_o_) / (eta_ * eta_ * p));
+  }
+  if (glm::dot(s.wi, ng_) >= 0.0f) s.weight = Spec(0.0f);
+  return s;
+}
+
 bool Bsdf::delta_branches(BsdfSample* reflected, BsdfSample* transmitted) const {
   if (m_.lambertian || !m_.smooth() || diffuse_weight_ > 0.0f || !(specular_weight_ > 0.0f) || !(transmission_weight_ > 0.0f))
     return false;
   // sample()'s Dirac branches with the lobe chosen for certain (p = 1).
-  BsdfSample& r = *reflected;
-  r = BsdfSample{};
-  r.lobe = kSpecularLobe;
-  r.delta = true;
-  r.wi = to_world(glm::vec3(-wo_.x, -wo_.y, wo_.z));
-  if (!(glm::dot(r.wi, ng_) > 0.0f)) return false;
-  r.weight = (1.0f - m_.metallic) * Spec(fresnel_o_) + m_.metallic * schlick(m_.base, wo_.z);
-  BsdfSample& t = *transmitted;
-  t = BsdfSample{};
-  t.lobe = kTransmissionLobe;
-  t.delta = true;
-  t.transmitted = true;
-  const Spec tint = (1.0f - m_.metallic) * m_.transmission * m_.base;
-  if (m_.thin_walled) {
-    t.wi = -to_world(wo_);
-    t.weight = tint * (1.0f - fresnel_o_);
-  } else {
-    const float sin2_t = (1.0f - wo_.z * wo_.z) / (eta_ * eta_);
-    if (sin2_t >= 1.0f) return false;
-    t.wi = to_world(glm::vec3(-wo_.x / eta_, -wo_.y / eta_, -std::sqrt(1.0f - sin2_t)));
-    t.weight = tint * ((1.0f - fresnel_o_) / (eta_ * eta_));
-  }
-  return glm::dot(t.wi, ng_) < 0.0f && (r.weight.x > 0.0f || r.weight.y > 0.0f) && (t.weight.x > 0.0f || t.weight.y > 0.0f);
+  *reflected = smooth_reflection(1.0f);
+  *transmitted = smooth_transmission(1.0f);
+  const auto lit = [](const BsdfSample& b) { return b.weight.x > 0.0f || b.weight.y > 0.0f; };
+  return lit(*reflected) && lit(*transmitted);
 }
 
 LobeValues Bsdf::lobes(const glm::vec3& wi_world) const {

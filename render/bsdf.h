@@ -101,6 +101,8 @@ class Bsdf {
   glm::vec3 to_world(const glm::vec3& v) const { return v.x * t_ + v.y * b_ + v.z * n_; }
   Spec specular_f(const glm::vec3& wo, const glm::vec3& wi) const;
   Spec transmission_f(const glm::vec3& wo, const glm::vec3& wi) const;
+  BsdfSample smooth_reflection(float p) const;
+  BsdfSample smooth_transmission(float p) const;
 
   MaterialPoint m_;
   glm::vec3 n_, t_, b_, ng_;  // ng_: geometric normal on wo's side
