@@ -63,7 +63,7 @@ json model_components(const RunConfig& c, const scenes::Scene* scene, const json
       const scenes::Material& m = scene->materials[i];
       if (!scene->material_used(i)) continue;
       transmissive |= m.transmissive();
-      refractive |= m.transmissive() && m.thickness_m > 0.0f && m.ior != 1.0f;
+      refractive |= m.refracting();
       volumes |= m.transmissive() && m.thickness_m > 0.0f && std::isfinite(m.attenuation_distance_m);
       emission |= m.emissive.x > 0.0f || m.emissive.y > 0.0f || m.emissive.z > 0.0f;
     }

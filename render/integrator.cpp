@@ -165,10 +165,7 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
     : config_(config), mesh_object_(mesh_object), embree_(embree), shading_(shading), camera_(camera), laser_(laser),
       ambient_(ambient) {
   transmission_ = scene.has_transmission();
-  for (size_t i = 0; i < scene.materials.size(); ++i) {
-    const scenes::Material& m = scene.materials[i];
-    refractive_ |= m.transmissive() && m.thickness_m > 0.0f && m.ior != 1.0f && scene.material_used(i);
-  }
+  for (size_t i = 0; i < scene.materials.size(); ++i) refractive_ |= scene.materials[i].refracting() && scene.material_used(i);
   guided_ = guided_connections_active(scene, config.render.guided_connections);
   // The triangles of small meshes (a plate, a box) of such a material, and their slivers: two coplanar
   // triangles sharing a diagonal that make a parallelogram whose short side is under 1/20 of its long

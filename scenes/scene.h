@@ -37,6 +37,8 @@ struct Material {
   float attenuation_distance_m = std::numeric_limits<float>::infinity();  // KHR_materials_volume
   glm::vec3 attenuation_color{1, 1, 1};                                   // KHR_materials_volume
   bool transmissive() const { return transmission > 0.0f; }
+  // A volume that bends light: the laser's connections refract through it.
+  bool refracting() const { return transmissive() && thickness_m > 0.0f && ior != 1.0f; }
 };
 
 // Mesh::offset's grid: a mesh whose vertices lie this far from the glTF's origin or farther has its positions
