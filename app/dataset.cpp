@@ -267,6 +267,8 @@ void dataset_run(const DatasetOptions& options) {
   if (options.out_dir.empty()) throw Error("dataset run: expected the dataset folder (-o DIR)");
   const DatasetFolder folder(spec, options.out_dir);
   folder.claim();
+  // The index is written by the last run on the folder to end (datasets::RunPresence).
+  const std::unique_ptr<datasets::RunPresence> presence = folder.enter();
   const fs::path dir = folder.dir();
   InterruptGuard interrupt_guard;  // for the whole run: the runs and senses of its samples hold theirs inside it
 
@@ -332,13 +334,16 @@ void dataset_run(const DatasetOptions& options) {
   // SIGINT or SIGTERM (Slurm's time limit, scancel) stop the run; the samples published before stay (the
   // next run skips them), and the index lists them: best effort, the signal's message comes first.
   const auto stopped = [&](const std::string& where) {
+    std::string listed = "index.jsonl lists them";
     try {
-      folder.write_index([&] { return inspect_all(folder, false); });
+      if (!folder.write_index([&] { return inspect_all(folder, false); }, presence.get()))
+        listed = "the last run on the folder to end lists them in index.jsonl";
     } catch (const std::exception& e) {
       std::fprintf(stderr, "spadgen: dataset: the index was not updated: %s\n", e.what());
+      listed = "the next run lists them in index.jsonl";
     }
     return Interrupted("interrupted by a signal: the dataset run stopped " + where + "; the " + std::to_string(generated) +
-                       " samples it completed are kept (index.jsonl lists them), and running it again goes on");
+                       " samples it completed are kept (" + listed + "), and running it again goes on");
   };
   std::deque<size_t> pending;
   for (size_t t = 0; t < todo.size(); ++t) pending.push_back(t);
@@ -449,11 +454,15 @@ void dataset_run(const DatasetOptions& options) {
     }
   }
 
-  const std::vector<SampleRecord> records = folder.write_index([&] { return inspect_all(folder, options.progress); });
+  const std::optional<std::vector<SampleRecord>> records =
+      folder.write_index([&] { return inspect_all(folder, options.progress); }, presence.get());
   if (options.progress)
     std::fprintf(stderr, "spadgen: dataset %s: %s (this run: %lld generated, %lld skipped, %lld completed by another run, %zu failed)\n",
-                 dir.string().c_str(), status_counts(records).c_str(), static_cast<long long>(generated),
-                 static_cast<long long>(skipped), static_cast<long long>(by_others), failed.size());
+                 dir.string().c_str(),
+                 records ? status_counts(*records).c_str()
+                         : "another run is still on the folder: the last to end writes the index",
+                 static_cast<long long>(generated), static_cast<long long>(skipped), static_cast<long long>(by_others),
+                 failed.size());
   if (!failed.empty())
     throw Error("dataset run: " + std::to_string(failed.size()) + " samples failed (" + datasets::ranges_text(failed) +
                 "); their errors are in " + (dir / "failed").string() + " and `spadgen dataset status " + dir.string() + "`");

@@ -108,23 +108,45 @@ DatasetFolder::DatasetFolder(const DatasetSpec& spec, fs::path dir) : spec_(spec
 
 SampleClaim::~SampleClaim() { ::close(fd_); }  // closing the description releases its locks
 
-std::unique_ptr<SampleClaim> DatasetFolder::try_claim(const Sample& s) const {
-  const std::string p = (dir_ / ".dataset.lock").string();
+namespace {
+constexpr off_t kPresenceByte = off_t(1) << 40;  // past every sample's byte (at most 1e8 samples)
+
+// An open-file-description lock of `type` on byte `at` of DIR/.dataset.lock, on a description of its own: its
+// fd (closing it releases the lock), or -1 when another run's lock conflicts and `wait` is false.
+int lock_byte(const fs::path& dir, short type, off_t at, const std::string& what, bool wait) {
+  const std::string p = (dir / ".dataset.lock").string();
   const int fd = ::open(p.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
   if (fd < 0) throw Error("cannot open the dataset folder's lock " + p + ": " + std::strerror(errno));
   struct flock l {};
-  l.l_type = F_WRLCK;
+  l.l_type = type;
   l.l_whence = SEEK_SET;
-  l.l_start = static_cast<off_t>(s.index);
+  l.l_start = at;
   l.l_len = 1;
-  while (::fcntl(fd, F_OFD_SETLK, &l) != 0) {
+  while (::fcntl(fd, wait ? F_OFD_SETLKW : F_OFD_SETLK, &l) != 0) {
     const int err = errno;
     if (err == EINTR) continue;
     ::close(fd);
-    if (err == EAGAIN || err == EACCES) return nullptr;
-    throw Error("cannot lock sample " + std::to_string(s.index) + " in " + p + ": " + std::strerror(err));
+    if (!wait && (err == EAGAIN || err == EACCES)) return -1;
+    throw Error("cannot lock " + what + " in " + p + ": " + std::strerror(err));
   }
-  return std::make_unique<SampleClaim>(fd);
+  return fd;
+}
+}  // namespace
+
+RunPresence::~RunPresence() { release(); }
+void RunPresence::release() {
+  if (fd_ >= 0) ::close(fd_);
+  fd_ = -1;
+}
+
+std::unique_ptr<RunPresence> DatasetFolder::enter() const {
+  // Shared; a run ending takes it exclusively for a moment, to test for others.
+  return std::make_unique<RunPresence>(lock_byte(dir_, F_RDLCK, kPresenceByte, "this run's presence", true));
+}
+
+std::unique_ptr<SampleClaim> DatasetFolder::try_claim(const Sample& s) const {
+  const int fd = lock_byte(dir_, F_WRLCK, static_cast<off_t>(s.index), "sample " + std::to_string(s.index), false);
+  return fd < 0 ? nullptr : std::make_unique<SampleClaim>(fd);
 }
 
 void DatasetFolder::claim() const {
@@ -361,8 +383,16 @@ void DatasetFolder::clear_failure(const Sample& s) const {
   fs::remove(dir_ / "failed", ec);  // when it is empty now (a resumed run leaves none, as a run never failed)
 }
 
-std::vector<SampleRecord> DatasetFolder::write_index(const std::function<std::vector<SampleRecord>()>& inspect) const {
+std::optional<std::vector<SampleRecord>> DatasetFolder::write_index(
+    const std::function<std::vector<SampleRecord>()>& inspect, RunPresence* leaving) const {
   const FolderLock lock(dir_);
+  if (leaving) {
+    // Under the folder's lock, so that of two runs ending at once the second sees the first gone.
+    leaving->release();
+    const int others = lock_byte(dir_, F_WRLCK, kPresenceByte, "the runs' presence", false);
+    if (others < 0) return std::nullopt;
+    ::close(others);
+  }
   std::vector<SampleRecord> records = inspect();
   // dataset.json with the index, as one step: two runs of different sample counts at once left the one's
   // dataset.json (written as it began) beside the other's index.
