@@ -182,8 +182,9 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
     plan.disk.push_back({std::string("light/ (outputs.light; about 128 lit bins per pixel") + (zarr ? ", uncompressed)" : ")"),
                          ring * (8 + 8 + 8 + 8 + 4 + std::min<int64_t>(bins, 128) * 4), false, "", zarr});
     // The values are spilled to a temporary file as the tiles finish, in tile order, and copied into
-    // light/values.npy in pixel order at the end: both are on the disk at that moment.
-    plan.disk.push_back({"the light's values spilled while the tiles render (outputs.light; freed once light/values.npy is written)",
+    // light/values (.npy or .zarr) in pixel order at the end: both are on the disk at that moment.
+    plan.disk.push_back({std::string("the light's values spilled while the tiles render (outputs.light; freed once light/values") +
+                             (zarr ? ".zarr" : ".npy") + " is written)",
                          ring * std::min<int64_t>(bins, 128) * 4, false, "", false, true});
   }
   plan.disk_available = out.empty() ? -1 : free_disk(out);

@@ -587,6 +587,21 @@ TEST_F(Hardening, SenseOntoAFullFileSystemIsRefusedNamingTheRun) {
   EXPECT_THAT(r.output, HasSubstr("; switch outputs off (--set outputs.*), ask for fewer --repeats, or choose another folder (-o)"));
 }
 
+// A run onto a small file system is refused before it renders, naming the files it writes as the storage
+// names them (a Zarr run's message named the light's values light/values.npy).
+TEST_F(Hardening, AFullFileSystemIsRefusedNamingTheFilesOfTheStorage) {
+  const fs::path mnt = dir_ / "mnt";
+  fs::create_directories(mnt);
+  for (const std::string storage : {"npy", "zarr"}) {
+    const Result r = with_tmpfs(mnt, "size=8k", "timeout -s KILL 30 " + bin() + " run " + kTiny + " -q --set outputs.light=true " +
+                                                    "--set outputs.storage=" + storage + " -o " + (mnt / "r").string() +
+                                                    " 2>&1; echo exit=$?; ls -A " + mnt.string());
+    if (r.code == 97) GTEST_SKIP() << "cannot mount a file system here: " << r.output;
+    EXPECT_TRUE(r.output.ends_with("exit=1\n")) << "not refused, or something was left:\n" << r.output;
+    EXPECT_THAT(r.output, HasSubstr("freed once light/values." + storage + " is written")) << r.output;
+  }
+}
+
 // Guards nest: a run or a sense inside a dataset run holds its own guard inside the dataset's. The inner
 // one neither clears a signal that arrived before it (a SIGTERM between a sample's run and its realisation
 // was lost: the dataset went on to the end and exited 0) nor hands SIGTERM back to its default action
