@@ -551,7 +551,10 @@ std::vector<RunResult> sense(const SenseOptions& options) {
       outputs.front()->put_labels(sensor::object_labels(
           sensor, object_truth(*truth, img, rect, cfg.render.max_layers, src / "ground_truth.exr"), s.front(), axis,
           cfg.laser.emission_delay_s));
-    for (size_t r = 0; r < s.size(); ++r) outputs[r]->put(t, maps, std::move(s[r]));
+    for (size_t r = 0; r < s.size(); ++r) {
+      InterruptGuard::check();  // --repeats 400: a tile's realisations took seconds to store after a signal
+      outputs[r]->put(t, maps, std::move(s[r]));
+    }
     light.recycle(std::move(t));
     progress.tick();
   });
@@ -563,6 +566,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   json first_storage = json::object();
   json labels_summary;  // Outputs::report's, of the first realisation: what this call's labels say
   for (size_t r = 0; r < runs.size(); ++r) {
+    InterruptGuard::check();
     outputs[r]->write(prov);
     std::vector<std::string> files = outputs[r]->files();
     for (const std::string& f : linked) {  // the later realisations link the first's (copies across file systems)
