@@ -26,6 +26,7 @@
 #include "reconstruct/detect.h"
 #include "reconstruct/evaluate.h"
 #include "reconstruct/run_folder.h"
+#include "scenes/input.h"
 #include "writers/writers.h"
 
 namespace spadgen::app {
@@ -436,6 +437,69 @@ std::string summary(const nlohmann::json& m) {
   return s.str();
 }
 
+// The folders of a dataset's done samples as its index.jsonl lists them (the samples a run has published;
+// not every folder under samples/: stale ones, those past the dataset's samples and those a run has not
+// finished are not done), in index order, each sample's realisations after it; `left_out` counts the rows
+// not done by status ("" when every row is done). A folder whose metadata.json carries another hash than its
+// row was generated again since the index was written: refused.
+std::vector<fs::path> done_sample_folders(const fs::path& dir, std::string* left_out) {
+  const fs::path index = dir / "index.jsonl";
+  if (!fs::is_regular_file(index))
+    throw Error(dir.string() + ": a dataset folder without index.jsonl: the first `spadgen dataset run` into it is "
+                "still running or was killed (the last run on the folder to end writes the index); run it again to finish");
+  std::istringstream lines(scenes::read_file_bounded(index.string(), int64_t{1} << 36, "index.jsonl"));
+  std::vector<fs::path> out;
+  std::map<std::string, int> not_done;
+  int row = 0;
+  for (std::string line; std::getline(lines, line);) {
+    if (line.empty()) continue;
+    ++row;
+    const std::string where = index.string() + " row " + std::to_string(row);
+    nlohmann::json r;
+    try {
+      r = nlohmann::json::parse(line);
+    } catch (const nlohmann::json::exception&) {
+      throw Error(where + ": not JSON; `spadgen dataset run` writes the index whole, so it was damaged afterwards: run the "
+                  "dataset again to write it");
+    }
+    const auto text = [&](const nlohmann::json& j, const char* key) {
+      if (!j.is_object() || !j.contains(key) || !j[key].is_string())
+        throw Error(where + ": expected a string \"" + key + "\" (an index row spadgen wrote); run the dataset again to write it");
+      return j[key].get<std::string>();
+    };
+    const std::string status = text(r, "status");
+    if (status != "done") {
+      ++not_done[status];
+      continue;
+    }
+    std::vector<std::string> folders{text(r, "folder")};
+    if (r.contains("repeats") && r["repeats"].is_array())
+      for (const nlohmann::json& f : r["repeats"])
+        if (f.is_string()) folders.push_back(f.get<std::string>());
+    const std::string hash = text(r, "sample_hash");
+    for (const std::string& f : folders) {
+      const fs::path meta = dir / f / "metadata.json";
+      std::string found = "no readable metadata.json";
+      try {
+        const nlohmann::json m = nlohmann::json::parse(scenes::read_file_bounded(meta.string(), int64_t{1} << 28, "metadata.json"));
+        const auto at = "/dataset/sample_hash"_json_pointer;
+        found = m.contains(at) && m.at(at).is_string() ? "hash " + m.at(at).get<std::string>() : "no dataset section";
+      } catch (const std::exception&) {
+      }
+      if (found != "hash " + hash)
+        throw Error((dir / f).string() + ": index.jsonl lists it done with hash " + hash + ", and its folder has " + found +
+                    ": the sample changed since the index was written; `spadgen dataset run` brings the index up to date "
+                    "(and generates what is not done)");
+      out.push_back(dir / f);
+    }
+  }
+  if (left_out) {
+    left_out->clear();
+    for (const auto& [status, n] : not_done) *left_out += (left_out->empty() ? "" : ", ") + std::to_string(n) + " " + status;
+  }
+  return out;
+}
+
 }  // namespace
 
 bool is_derived_output(const std::string& rel) {
@@ -532,12 +596,10 @@ std::string evaluate(const EvaluateCommand& c) {
     text << summary(report);
     files.insert(files.end(), {"range_error.png", "outcome.png"});
   } else if (fs::exists(target / "dataset.json")) {
-    if (!fs::is_directory(target / "samples")) throw Error(c.target + ": a dataset folder without samples/");
-    std::vector<fs::path> samples;
-    for (const auto& e : fs::directory_iterator(target / "samples"))
-      if (e.is_directory() && fs::exists(e.path() / "metadata.json")) samples.push_back(e.path());
-    std::sort(samples.begin(), samples.end());
-    if (samples.empty()) throw Error(c.target + ": no done samples to evaluate");
+    std::string left_out;
+    const std::vector<fs::path> samples = done_sample_folders(target, &left_out);
+    if (samples.empty())
+      throw Error(c.target + ": no done samples to evaluate (index.jsonl: " + left_out + ")");
     reconstruct::Scores total(scorer_options(c));
     std::ostringstream csv;
     csv << "sample,objects,found,recall,detectable,detectable_found,detections,false,bias_mm,rms_mm\n";
@@ -569,9 +631,11 @@ std::string evaluate(const EvaluateCommand& c) {
       report["labels"] = std::to_string(unlabelled) + " of " + std::to_string(samples.size()) +
                          " samples without labels.exr: their objects are counted as detectable (samples[].detections_source.labels)";
     report["samples"] = rows;
+    if (!left_out.empty()) report["not_scored"] = "the samples index.jsonl lists as not done: " + left_out;
     writers::write_file_atomic((fs::path(out) / "samples.csv").string(), csv.str());
     files.push_back("samples.csv");
-    text << samples.size() << " samples\n" << summary(report);
+    text << samples.size() << " sample folders (realisations included)"
+         << (left_out.empty() ? std::string() : "; not scored, not done: " + left_out) << "\n" << summary(report);
   } else {
     throw Error(c.target + ": neither a run folder (metadata.json) nor a dataset folder (dataset.json)");
   }

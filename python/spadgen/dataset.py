@@ -150,8 +150,8 @@ class Dataset:
         index_path = os.path.join(self.path, "index.jsonl")
         if not os.path.isfile(index_path):
             raise FileNotFoundError(f"{self.path}: a dataset folder without index.jsonl: the first `spadgen dataset run` "
-                                    "into it is still running or was killed (the index is written when a run ends, or "
-                                    "is stopped by SIGINT or SIGTERM); run it again to finish")
+                                    "into it is still running or was killed (the last run on the folder to end writes the "
+                                    "index, also when stopped by SIGINT or SIGTERM); run it again to finish")
         with open(index_path, encoding="utf-8") as f:
             try:
                 self.index = [json.loads(line) for line in f if line.strip()]

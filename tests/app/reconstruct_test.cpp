@@ -468,6 +468,28 @@ TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
   EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 3) << csv;
   EXPECT_EQ(csv.rfind("sample,objects,found,recall", 0), 0u) << csv;
 
+  // The done samples as index.jsonl lists them, not every folder under samples/ (sample 1, past a dataset
+  // shrunk to 1 sample, was scored); a folder generated again since the index was written is refused.
+  std::ofstream(dir_ / "d1.json") << "{\"scenes\": [\"" + kScenes + "multi_object.json\"], \"samples\": 1, \"seed\": 5,"
+                                     "\"set\": {\"render.samples_per_pixel\": 2, \"camera.crop\": [496, 236, 24, 12]},"
+                                     "\"grid\": {\"laser.average_power_mW\": [1, 4]}}";
+  ASSERT_EQ(sh("dataset run " + (dir_ / "d1.json").string() + " -o " + out.string() + " -q").code, 0);
+  ASSERT_TRUE(fs::exists(out / "samples/000001/metadata.json"));
+  r = sh("evaluate " + out.string() + " -o " + (dir_ / "e_shrunk").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("1 sample folders (realisations included)\n"));
+  EXPECT_EQ(nlohmann::json::parse(slurp(dir_ / "e_shrunk" / "metrics.json"))["samples"].size(), 1u);
+  std::string meta = slurp(out / "samples/000000/metadata.json");
+  const size_t at = meta.find("\"sample_hash\": \"");
+  ASSERT_NE(at, std::string::npos) << meta;
+  meta[at + 16] = meta[at + 16] == '0' ? '1' : '0';
+  std::ofstream(out / "samples/000000/metadata.json") << meta;
+  r = sh("evaluate " + out.string() + " -o " + (dir_ / "e_changed").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("samples/000000: index.jsonl lists it done with hash "));
+  EXPECT_THAT(r.output, HasSubstr(": the sample changed since the index was written"));
+  EXPECT_FALSE(fs::exists(dir_ / "e_changed"));
+
   // Two scenes: objects are counted by name across the samples (flat_target's "target" has id 0, as the
   // multi-object scene's "plate" has: it was counted as the plate)
   const fs::path file2 = dir_ / "d2.json", out2 = dir_ / "dataset2";
