@@ -181,6 +181,10 @@ void check_source(const std::string& path, const std::map<std::string, std::stri
     return;
   }
   const nlohmann::json made = nlohmann::json::parse(it->second, nullptr, false);
+  if (!made.is_object()) {
+    if (source) (*source)["source_checked"] = "no: its spadgen_source is not a JSON object (unreadable); its scene and crop are taken on trust";
+    return;
+  }
   const nlohmann::json ours_all = source_fields(run);
   const std::string made_from = made.is_object() ? made.value("run", std::string("?")) : std::string("?");
   std::string unchecked;  // what the file does not say, so was not compared
@@ -226,7 +230,13 @@ DetectionImage read_detections(const std::string& path, const RunFolder& run, bo
     check_ranges(path, img);
     return img;
   }
-  writers::ExrData e = writers::read_exr(path);
+  writers::ExrData e;
+  try {
+    e = writers::read_exr(path);
+  } catch (const Error& err) {
+    throw Error(std::string(err.what()) + " (a detections file is an OpenEXR image, or a NumPy array named *.npy: the "
+                "extension .npy selects the NumPy reader)");
+  }
   if (e.width != width || e.height != height)
     throw Error(path + ": " + std::to_string(e.width) + " x " + std::to_string(e.height) + " pixels, the run has " +
                 std::to_string(width) + " x " + std::to_string(height));
@@ -254,7 +264,15 @@ DetectionImage read_detections(const std::string& path, const RunFolder& run, bo
     }
   }
   for (size_t i = 0; i < img.count.size(); ++i)
-    for (int s = 0; s < m; ++s) img.count[i] += std::isfinite(img.range[img.at(s, i)]);
+    for (int s = 0; s < m; ++s) {
+      const bool found = std::isfinite(img.range[img.at(s, i)]);
+      img.count[i] += found;
+      // --min-score compares the score: a NaN one would drop the detection without a word
+      if (need_scores && found && std::isnan(img.score[img.at(s, i)]))
+        throw Error(path + ": --min-score: " + slot_name(s, "score") + " is NaN at pixel (" + std::to_string(i % size_t(width)) +
+                    ", " + std::to_string(i / size_t(width)) + "), where " + slot_name(s, "range") +
+                    " holds a detection; expected a number (or leave --min-score out)");
+    }
   check_ranges(path, img);
   return img;
 }

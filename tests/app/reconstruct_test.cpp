@@ -440,6 +440,38 @@ TEST_F(Reconstruct, EvaluateRefusesDetectionsOfAnotherSceneOrCropOrWithoutTheirS
   EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("unscored.exr: --min-score: slot 0 has no det0.score channel"));
   EXPECT_FALSE(fs::exists(dir_ / "e3"));
+
+  // A NaN score where a slot holds a detection: refused under --min-score (it dropped the detection without a
+  // word), scored without; a spadgen_source that is not JSON is said unreadable; a file that is not an EXR
+  // says that only *.npy is read as NumPy.
+  {
+    spadgen::writers::ExrImage img(d.width, d.height);
+    std::copy(d.channels.at("count").begin(), d.channels.at("count").end(), img.channel("count"));
+    for (const char* slot : {"det0", "det1"}) {
+      const auto& range = d.channels.at(std::string(slot) + ".range");
+      std::copy(range.begin(), range.end(), img.channel(std::string(slot) + ".range"));
+      std::fill_n(img.channel(std::string(slot) + ".score"), size_t(d.width) * size_t(d.height), 10.0f);
+    }
+    const auto& r0 = d.channels.at("det0.range");
+    const size_t first = size_t(std::find_if(r0.begin(), r0.end(), [](float v) { return std::isfinite(v); }) - r0.begin());
+    ASSERT_LT(first, r0.size());
+    img.channel("det0.score")[first] = std::numeric_limits<float>::quiet_NaN();
+    img.set_attribute("spadgen_source", "not json");
+    img.write((dir_ / "nan_score.exr").string());
+  }
+  r = sh("evaluate " + a.string() + " --detections " + (dir_ / "nan_score.exr").string() + " --min-score 5 -o " + (dir_ / "e5").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("nan_score.exr: --min-score: det0.score is NaN at pixel ("));
+  EXPECT_FALSE(fs::exists(dir_ / "e5"));
+  r = sh("evaluate " + a.string() + " --detections " + (dir_ / "nan_score.exr").string() + " -o " + (dir_ / "e5").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(nlohmann::json::parse(slurp(dir_ / "e5" / "metrics.json"))["detections_source"]["source_checked"],
+            "no: its spadgen_source is not a JSON object (unreadable); its scene and crop are taken on trust");
+  std::ofstream(dir_ / "upper.NPY") << "\x93NUMPY";
+  r = sh("evaluate " + a.string() + " --detections " + (dir_ / "upper.NPY").string() + " -o " + (dir_ / "e6").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("upper.NPY"));
+  EXPECT_THAT(r.output, HasSubstr("the extension .npy selects the NumPy reader"));
 }
 
 TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
