@@ -605,7 +605,8 @@ std::string evaluate(const EvaluateCommand& c) {
   nlohmann::json report;
   std::ostringstream text;
   if (fs::exists(target / "metadata.json")) {
-    const FolderLock run_lock(target);  // the run is not replaced while it is scored (labels and counts of one run)
+    // Shared with other readers: the run is not replaced while it is scored (labels and counts of one run).
+    const FolderLock run_lock(target, true);
     nlohmann::json source;
     const reconstruct::Scores s = evaluate_run(c, c.target, c.detections, out, &names, &source);
     report = s.to_json(names);

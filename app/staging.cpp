@@ -198,12 +198,13 @@ namespace {
 // Locks P/.NAME.spadgen-lock (flock, exclusive, or shared by readers; not waiting) for the folder `out` =
 // P/NAME and returns the descriptor; throws spadgen::Error naming the holder when another spadgen process
 // has it exclusively (or, exclusive, at all).
-int take_folder_lock(const fs::path& lock_path, const fs::path& out, bool shared = false) {
-  const std::string folder = (shared ? "the run folder " : "the output folder ") + out.string();
+// output: the lock of the folder a command writes (-o); else of a run folder it reads (and may write into).
+int take_folder_lock(const fs::path& lock_path, const fs::path& out, bool shared, bool output) {
+  const std::string folder = (output ? "the output folder " : "the run folder ") + out.string();
   for (int attempt = 0; attempt < 16; ++attempt) {
     const int fd = ::open(lock_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
     if (fd < 0)
-      throw Error((shared ? "cannot lock " + folder : "cannot use " + out.string() + " as the output folder (-o)") +
+      throw Error((!output ? "cannot lock " + folder : "cannot use " + out.string() + " as the output folder (-o)") +
                   ": cannot create its lock file " + lock_path.string() + ": " + std::strerror(errno));
     if (::flock(fd, (shared ? LOCK_SH : LOCK_EX) | LOCK_NB) != 0) {
       const int err = errno;
@@ -219,7 +220,7 @@ int take_folder_lock(const fs::path& lock_path, const fs::path& out, bool shared
       if (err == EWOULDBLOCK)
         throw Error(folder + " is being written or read by another spadgen process" +
                     (who.empty() ? std::string() : " (" + who + ")") + ", which holds " + lock_path.string() +
-                    "; wait for it to finish, or choose another folder (-o)");
+                    (output ? "; wait for it to finish, or choose another folder (-o)" : "; wait for it to finish"));
       throw Error("cannot lock " + folder + " (" + lock_path.string() + "): " + std::strerror(err));
     }
     // The run that held the lock may have removed the file between our open and our flock.
@@ -255,7 +256,7 @@ void release_folder_lock(const fs::path& lock_path, int& fd, bool shared = false
 
 void Staging::lock() {
   lock_path_ = lock_path_of(out_);
-  lock_fd_ = take_folder_lock(lock_path_, out_);
+  lock_fd_ = take_folder_lock(lock_path_, out_, false, true);
 }
 
 void Staging::unlock() { release_folder_lock(lock_path_, lock_fd_); }
@@ -266,7 +267,7 @@ FolderLock::FolderLock(const fs::path& folder, bool shared) : shared_(shared) {
   // A folder no one may write beside (a read-only copy, another user's): nothing can replace it through
   // this lock, and reading it needs none.
   if (::access(out.parent_path().c_str(), W_OK) != 0 && (errno == EROFS || errno == EACCES || errno == EPERM)) return;
-  fd_ = take_folder_lock(path_, out, shared);
+  fd_ = take_folder_lock(path_, out, shared, false);
 }
 
 FolderLock::~FolderLock() { release_folder_lock(path_, fd_, shared_); }

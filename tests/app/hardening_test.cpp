@@ -502,7 +502,10 @@ TEST_F(Hardening, ReconstructReplacesOnlyAFileAndAFifoIsNotReadAsMetadata) {
     for (const std::string& command : {"reconstruct -q " + run.string(), "evaluate -q " + run.string() + " -o " + (dir_ / "e").string()}) {
       const Outcome o = spadgen(command);
       expect_exit(o, 1, command);
-      EXPECT_THAT(o.err, HasSubstr("run is being written or read by another spadgen process")) << command;
+      // the folder it reads is named as the run folder, with no "-o" to choose (it named the output folder)
+      EXPECT_THAT(o.err, HasSubstr("the run folder " + run.string() + " is being written")) << command;
+      EXPECT_THAT(o.err, HasSubstr("; wait for it to finish")) << command;
+      EXPECT_THAT(o.err, Not(HasSubstr("(-o)"))) << command;
     }
     ::close(fd);
   }
