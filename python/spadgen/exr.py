@@ -256,6 +256,9 @@ class ExrFile:
                 raise ExrError(f"{self.path}: a chunk offset points past the end of the file (truncated file?)")
             y, size = struct.unpack_from("<ii", data, off)
             block = (y - y_min) // lpc
+            if off + 8 + size > len(data) and size >= 0 and not (y - y_min) % lpc and 0 <= block < chunks:
+                raise ExrError(f"{self.path}: cut short: the chunk at byte {off} (y = {y}) holds {size} bytes, past the "
+                               f"file's end at byte {len(data)} (truncated file?)")
             if (y - y_min) % lpc or not 0 <= block < chunks or off + 8 + size > len(data) or size < 0:
                 raise ExrError(f"{self.path}: corrupt chunk at byte {off} (y = {y}, size = {size})")
             lines = min(lpc, H - block * lpc)

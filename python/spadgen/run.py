@@ -386,7 +386,11 @@ class Run:
         if not name.endswith(".exr"):
             name += ".exr"
         if name not in self._cache:
-            self._cache[name] = ExrFile(self._require(name))
+            path = self._require(name)
+            if not os.path.exists(path):
+                raise FileNotFoundError(f"{path}: listed in {os.path.join(self.path, 'metadata.json')} (files) but missing: "
+                                        f"restore it, or {self._remedy()}")
+            self._cache[name] = ExrFile(path)
         return self._cache[name]
 
     def __getitem__(self, name):

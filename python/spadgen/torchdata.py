@@ -119,17 +119,24 @@ class _RunSamples(torch.utils.data.Dataset):
             first = {n: next(r.path for r in runs_ if r.frames_per_k == n) for n in sorted({r.frames_per_k for r in runs_})}
             raise ValueError(f"the runs have different frames per k ({', '.join(f'{n} in {p}' for n, p in first.items())}, "
                              "...): their frames cannot share a batch")
-        self.max_layers = int(max_layers if max_layers is not None else
-                              max(int(r.metadata["ground_truth_layers"]) for r in runs_))
+        def whole(value, what, least):
+            # an integer (a float such as 7.9 was cut to 7 without a word), at least `least`
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < least:
+                raise ValueError(f"{what} must be an integer >= {least}, got {value!r}")
+            return int(value)
+
+        self.max_layers = (whole(max_layers, "max_layers", 0) if max_layers is not None else
+                           max(int(r.metadata["ground_truth_layers"]) for r in runs_))
         if patch_size is None:
             sizes = {(r.height, r.width) for r in runs_}
             if len(sizes) > 1:
                 raise ValueError(f"the runs have different image sizes {sorted(sizes)}: give patch_size")
             self.index = [(i, 0, 0, r.height, r.width) for i, r in enumerate(runs_)]
         else:
-            ph, pw = (int(patch_size), int(patch_size)) if np.isscalar(patch_size) else map(int, patch_size)
-            if ph < 1 or pw < 1:
-                raise ValueError(f"patch_size must be positive, got {patch_size}")
+            sides = [patch_size, patch_size] if np.isscalar(patch_size) else list(patch_size)
+            if len(sides) != 2:
+                raise ValueError(f"patch_size must be an integer or a pair (h, w) of integers, got {patch_size!r}")
+            ph, pw = (whole(v, "patch_size", 1) for v in sides)
             self.index = [(i, x, y, ph, pw) for i, r in enumerate(runs_)
                           for y in range(0, r.height - ph + 1, ph) for x in range(0, r.width - pw + 1, pw)]
             if not self.index:

@@ -95,8 +95,8 @@ def test_not_an_exr_and_truncated_files_are_errors(exr_tool, tmp_path):
     data = path.read_bytes()
     cut = tmp_path / "cut.exr"
     cut.write_bytes(data[:len(data) - 200])
-    with pytest.raises(ExrError, match="cut.exr"):
-        ExrFile(cut)["float"]
+    with pytest.raises(ExrError, match="cut.exr: cut short: the chunk at byte .* past the file's end"):
+        ExrFile(cut)["float"]  # it said "corrupt chunk"
     cut.write_bytes(data[:40])
     with pytest.raises(ExrError, match="truncated header"):
         ExrFile(cut)

@@ -263,6 +263,9 @@ def test_a_damaged_or_other_folder_is_named_with_what_it_is(make_run, tmp_path):
     (run / "counts.npy").unlink()
     with pytest.raises(FileNotFoundError, match=f"{run / 'counts.npy'}: listed in .*metadata.json \\(files\\) but missing"):
         spadgen.open_run(run).counts
+    (run / "laser.exr").unlink()  # an image too (it was a bare "No such file or directory")
+    with pytest.raises(FileNotFoundError, match=f"{run / 'laser.exr'}: listed in .*metadata.json \\(files\\) but missing"):
+        spadgen.open_run(run).laser
     meta = json.loads((run / "metadata.json").read_text())
     del meta["ground_truth_objects"]
     meta["spadgen_version"] = "0.0.9"

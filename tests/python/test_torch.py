@@ -105,6 +105,13 @@ def test_runs_that_cannot_share_a_batch_are_refused(sweep_run, make_run):
         RunDataset([sweep_run], fields=("count",))
     with pytest.raises(ValueError, match="no run is as large"):
         RunDataset([sweep_run], patch_size=(11, 8))
+    # sizes that are not whole numbers were cut (7.9 to 7) or failed later with a bare message
+    for bad, match in [(7.9, "patch_size must be an integer >= 1, got 7.9"), ((8,), r"a pair \(h, w\) of integers, got \(8,\)"),
+                       ((0, 8), "patch_size must be an integer >= 1, got 0"), (True, "got True")]:
+        with pytest.raises(ValueError, match=match):
+            RunDataset([sweep_run], patch_size=bad)
+    with pytest.raises(ValueError, match="max_layers must be an integer >= 0, got -1"):
+        RunDataset([sweep_run], max_layers=-1)
 
 
 def test_import_spadgen_does_not_import_torch():
