@@ -39,7 +39,8 @@ Shading::Shading(const scenes::Scene& scene, double laser_wavelength_m, const gl
   auto resolve = [&](const scenes::Material& m) {
     ResolvedMaterial r;
     MaterialPoint& p = r.point;
-    p.base = to_spec(glm::vec3(m.base_color), w_laser_, w_ambient_);
+    r.base_rgb = glm::vec3(m.base_color);
+    p.base = to_spec(r.base_rgb, w_laser_, w_ambient_);
     p.metallic = std::clamp(m.metallic, 0.0f, 1.0f);
     const float roughness = std::clamp(m.roughness, 0.0f, 1.0f);
     p.alpha = roughness * roughness;
@@ -116,15 +117,22 @@ Surface Shading::surface(const RayHit& hit) const {
 MaterialPoint Shading::material_at(const Surface& s, const RayHit& hit) const {
   const ResolvedMaterial& r = material(s.material);
   MaterialPoint p = r.point;
+  const scenes::Mesh& mesh = scene_.meshes[size_t(s.mesh)];
+  if (r.texture < 0 && mesh.colors0.empty()) return p;
+  const uint32_t* idx = &mesh.indices[3 * size_t(hit.triangle)];
+  const float w0 = 1.0f - hit.u - hit.v;
+  // glTF: base colour = factor x texture x COLOR_0, channel by channel, then reduced to the laser's and the
+  // ambient light's bands (the product of reductions is not the reduction of the product: a red factor on a
+  // green texture reflected ambient light).
+  glm::vec3 rgb = r.base_rgb;
   if (r.texture >= 0) {
-    const scenes::Mesh& mesh = scene_.meshes[size_t(s.mesh)];
     const std::vector<glm::vec2>& tc = r.texcoord == 1 ? mesh.texcoords1 : mesh.texcoords0;
-    if (tc.size() == mesh.positions.size()) {
-      const uint32_t* idx = &mesh.indices[3 * size_t(hit.triangle)];
-      const glm::vec2 uv = (1.0f - hit.u - hit.v) * tc[idx[0]] + hit.u * tc[idx[1]] + hit.v * tc[idx[2]];
-      p.base *= to_spec(texture_rgb(r.texture, uv), w_laser_, w_ambient_);
-    }
+    if (tc.size() == mesh.positions.size())
+      rgb *= texture_rgb(r.texture, w0 * tc[idx[0]] + hit.u * tc[idx[1]] + hit.v * tc[idx[2]]);
   }
+  if (mesh.colors0.size() == mesh.positions.size())
+    rgb *= w0 * mesh.colors0[idx[0]] + hit.u * mesh.colors0[idx[1]] + hit.v * mesh.colors0[idx[2]];
+  p.base = to_spec(rgb, w_laser_, w_ambient_);
   return p;
 }
 

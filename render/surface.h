@@ -22,7 +22,8 @@ struct Surface {
 
 // Per-material constants in the two channels (laser, ambient).
 struct ResolvedMaterial {
-  MaterialPoint point;          // factors (the base colour texture multiplies point.base)
+  MaterialPoint point;          // factors (with a base colour texture or COLOR_0, point.base is recomputed per hit)
+  glm::vec3 base_rgb{1.0f};     // baseColorFactor's RGB (linear), which the texture and COLOR_0 multiply
   int texture = -1, texcoord = 0;
   Spec sigma{0.0f};             // absorption coefficient inside the volume, 1/m
   bool absorbing = false;       // sigma > 0

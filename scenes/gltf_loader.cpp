@@ -1020,6 +1020,25 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
 
   size_t n = 0, k = 0;
   int comps = 0;
+  // Component types an attribute may have (glTF 2.0 3.7.2.1; POSITION's integers: KHR_mesh_quantization):
+  // an UNSIGNED_INT POSITION was read as integers of metres, and COLOR_0 as BYTE took negative colours.
+  const auto check_component = [&](int accessor, const char* attribute, std::initializer_list<int> allowed, bool normalized_only) {
+    if (accessor < 0 || static_cast<size_t>(accessor) >= m_.accessors.size()) return;  // read_accessor names it
+    const tinygltf::Accessor& a = m_.accessors[static_cast<size_t>(accessor)];
+    const bool ok = std::find(allowed.begin(), allowed.end(), a.componentType) != allowed.end() &&
+                    (!normalized_only || a.componentType == TINYGLTF_COMPONENT_TYPE_FLOAT || a.normalized);
+    if (!ok) {
+      std::string list;
+      for (int t : allowed) list += std::string(list.empty() ? "" : ", ") + component_name(t);
+      fail(who, std::string(attribute) + " accessor " + std::to_string(accessor) + " has componentType " +
+                    component_name(a.componentType) + (a.normalized ? " (normalized)" : "") + "; expected " + list +
+                    (normalized_only ? " (integers normalized)" : ""));
+    }
+  };
+  check_component(pos_it->second, "POSITION",
+                  {TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_COMPONENT_TYPE_BYTE, TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE,
+                   TINYGLTF_COMPONENT_TYPE_SHORT, TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT},
+                  false);
   std::vector<double> pos = read_accessor(pos_it->second, who + " POSITION", {TINYGLTF_TYPE_VEC3}, &n, &comps);
   // Morph targets: the shape of the default weights (the node's, else the mesh's; none: the base shape),
   // base + sum of weight x target displacement, for POSITION and NORMAL.
@@ -1087,6 +1106,22 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
     std::vector<glm::vec2>& dst = set == 0 ? out.texcoords0 : out.texcoords1;
     dst.resize(n);
     for (size_t v = 0; v < n; ++v) dst[v] = glm::vec2(glm::dvec2(uv[2 * v], uv[2 * v + 1]));
+  }
+
+  // COLOR_0 multiplies the base colour (glTF 2.0 3.9.2); its alpha is not used (surfaces are opaque).
+  if (auto it = p.attributes.find("COLOR_0"); it != p.attributes.end()) {
+    check_component(it->second, "COLOR_0",
+                    {TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE, TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT}, true);
+    int cc = 0;
+    const std::vector<double> col = read_accessor(it->second, who + " COLOR_0", {TINYGLTF_TYPE_VEC3, TINYGLTF_TYPE_VEC4}, &k, &cc);
+    if (k != n) fail(who, "COLOR_0 has " + std::to_string(k) + " elements but POSITION has " + std::to_string(n));
+    for (size_t v = 0; v < col.size(); ++v)
+      if (!(col[v] >= 0.0 && col[v] <= 1.0))
+        fail(who, "COLOR_0 element " + std::to_string(v / size_t(cc)) + " has the value " + num(col[v]) +
+                      ", expected a colour within [0, 1] (glTF 2.0: linear RGB or RGBA)");
+    out.colors0.resize(n);
+    for (size_t v = 0; v < n; ++v)
+      out.colors0[v] = glm::vec3(glm::dvec3(col[size_t(cc) * v], col[size_t(cc) * v + 1], col[size_t(cc) * v + 2]));
   }
 
   if (out.material >= 0) {

@@ -57,6 +57,7 @@ struct Mesh {
   std::vector<glm::vec3> positions;  // world space minus offset, metres
   std::vector<glm::vec3> normals;    // world space, unit; empty when the primitive has none
   std::vector<glm::vec2> texcoords0, texcoords1;  // empty when absent
+  std::vector<glm::vec3> colors0;    // COLOR_0 (linear RGB, multiplies the base colour); empty when absent
   std::vector<uint32_t> indices;     // 3 per triangle (non-indexed primitives get 0, 1, 2, ...)
   int material = -1;                 // index into Scene::materials, -1: the glTF default material
   size_t triangle_count() const { return indices.size() / 3; }

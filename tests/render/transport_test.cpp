@@ -179,6 +179,36 @@ TEST(Transport, AmbientEnvironmentGivesTheCosFourthFalloff) {
     }
 }
 
+// COLOR_0 multiplies the base colour channel by channel before the colour is reduced to the laser's and the
+// ambient light's bands (glTF 2.0): a plate of factor 0.6 painted 0.5 renders as one of factor 0.3, to float rounding
+// (it rendered 0.6: COLOR_0 was ignored); a red factor painted green reflects nothing (a product of each one's
+// reduction reflected ambient light).
+TEST(Transport, VertexColoursMultiplyTheBaseColourBeforeItIsReduced) {
+  RenderStageConfig c = test_config(8, 8, 110e-6);
+  c.render.samples_per_pixel = 4;
+  c.ambient.illuminance_lux = 50.0;
+  c.ambient.wavelength_m = 550e-9;
+  c.ambient.bandwidth_m = 100e-9;
+  const auto render = [&](glm::vec3 factor, glm::vec3 paint) {
+    scenes::Scene s;
+    scenes::Material m = test::lambertian(1.0f);
+    m.base_color = glm::vec4(factor, 1.0f);
+    add_quad(s, {0, 0, -1}, {5, 0, 0}, {0, 5, 0}, add_material(s, m));
+    if (paint != glm::vec3(-1.0f)) s.meshes[0].colors0.assign(4, paint);
+    return Renderer(s, c).transient({0, 0, 8, 8}, {0, 0, 8, 8}, TimeAxis{});
+  };
+  const TransientTile painted = render(glm::vec3(0.6f), glm::vec3(0.5f)), plain = render(glm::vec3(0.3f), glm::vec3(-1.0f));
+  ASSERT_GT(std::accumulate(plain.laser_total.begin(), plain.laser_total.end(), 0.0), 0.0);
+  ASSERT_GT(sum(plain.ambient_rate.data(), 64), 0.0);
+  for (size_t i = 0; i < 64; ++i) {  // the same paths; the paint interpolated over the triangle rounds (w0 + u + v != 1)
+    EXPECT_NEAR(painted.laser_total[i], plain.laser_total[i], 1e-6 * plain.laser_total[i]) << i;
+    EXPECT_NEAR(painted.ambient_rate[i], plain.ambient_rate[i], 1e-6 * plain.ambient_rate[i]) << i;
+  }
+  const TransientTile red_green = render({1, 0, 0}, {0, 1, 0});
+  EXPECT_EQ(std::accumulate(red_green.laser_total.begin(), red_green.laser_total.end(), 0.0), 0.0);
+  EXPECT_EQ(sum(red_green.ambient_rate.data(), 64), 0.0);
+}
+
 // The sky, all around, reaches a point along a bounce ray that escapes as the point sees the scene (the
 // camera's rule for single-sided surfaces, not the lights': docs/render.md), so that a single-sided ground
 // shades what stands on it from the sky below. A black 10 cm sheet 10 cm above a floor, seen from behind by

@@ -285,6 +285,26 @@ TEST(GltfLoader, TexcoordSets) {
   EXPECT_FLOAT_EQ(s.meshes[0].texcoords1[1].y, 1.0f);
 }
 
+// COLOR_0 (float RGBA, or normalized unsigned integers) is read as linear RGB (it was ignored without a word).
+TEST(GltfLoader, VertexColours) {
+  TempDir dir;
+  Gltf g;
+  const int pos = g.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const int rgba = g.accessor(g.view_of(std::vector<float>{0.5f, 0.25f, 1, 0.1f, 0, 1, 0, 1, 1, 1, 1, 1}), kFloat, "VEC4", 3);
+  const int rgb8 = g.accessor(g.view_of(std::vector<uint8_t>{255, 0, 51, 0, 0, 0, 255, 255, 255, 0}), kUByte, "VEC3", 3, 0, true);
+  g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}, {"COLOR_0", rgba}}}},
+                                       {{"attributes", {{"POSITION", pos}, {"COLOR_0", rgb8}}}}}))}});
+  const Scene s = load_gltf(g.write(dir.path(), "painted"));
+  ASSERT_EQ(s.meshes.size(), 2u);
+  ASSERT_EQ(s.meshes[0].colors0.size(), 3u);
+  EXPECT_EQ(s.meshes[0].colors0[0], glm::vec3(0.5f, 0.25f, 1.0f));
+  EXPECT_EQ(s.meshes[0].colors0[1], glm::vec3(0.0f, 1.0f, 0.0f));
+  ASSERT_EQ(s.meshes[1].colors0.size(), 3u);
+  EXPECT_EQ(s.meshes[1].colors0[0], glm::vec3(1.0f, 0.0f, 0.2f));
+  EXPECT_EQ(s.meshes[1].colors0[2], glm::vec3(1.0f, 1.0f, 1.0f));
+  EXPECT_TRUE(s.warnings.empty());
+}
+
 // ---------------------------------------------------------------------------------------------
 // What spadgen does not use: one warning per element
 
@@ -1228,6 +1248,35 @@ TEST_F(BrokenGltf, APathThatIsNotARegularFileIsNamedForWhatItIs) {
   path_ = (dir_.path() / "fifo_buffer.gltf").string();
   write_file(path_, g.doc.dump());
   EXPECT_THAT(load_error(path_), HasSubstr("buffer 0: its file 'pipe.glb' is a FIFO (named pipe)"));
+}
+
+// Attributes of component types glTF does not allow for them: a POSITION of UNSIGNED_INT was read as integer
+// metres (3.2e9 m), a COLOR_0 of signed bytes, or of integers not normalized, as colours; a colour above 1.
+TEST_F(BrokenGltf, AttributesOfComponentTypesGltfDoesNotAllowAreRefused) {
+  {
+    Gltf g;
+    const int pos = g.accessor(g.view_of(std::vector<uint32_t>{0, 0, 0, 1, 0, 0, 0, 1, 0}), kUInt, "VEC3", 3);
+    g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}}}}}), "Tri")}});
+    EXPECT_THAT(error_of(g), HasSubstr("mesh 0 'Tri' primitive 0: POSITION accessor 0 has componentType UNSIGNED_INT; expected "
+                                       "FLOAT, BYTE, UNSIGNED_BYTE, SHORT, UNSIGNED_SHORT"));
+  }
+  for (const bool normalized : {true, false}) {
+    Gltf g;
+    const int pos = g.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+    const int col = normalized ? g.accessor(g.view_of(std::vector<int8_t>{1, 2, 3, 4, 5, 6, 7, 8, 9}), kByte, "VEC3", 3, 0, true)
+                               : g.accessor(g.view_of(std::vector<uint8_t>{1, 2, 3, 4, 5, 6, 7, 8, 9}), kUByte, "VEC3", 3);
+    g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}, {"COLOR_0", col}}}}}), "Tri")}});
+    EXPECT_THAT(error_of(g), HasSubstr(std::string("mesh 0 'Tri' primitive 0: COLOR_0 accessor 1 has componentType ") +
+                                       (normalized ? "BYTE (normalized)" : "UNSIGNED_BYTE") +
+                                       "; expected FLOAT, UNSIGNED_BYTE, UNSIGNED_SHORT (integers normalized)"));
+  }
+  {
+    Gltf g;
+    const int pos = g.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+    const int col = g.accessor(g.view_of(std::vector<float>{1, 1, 1, 1, 2, 1, 1, 1, 1}), kFloat, "VEC3", 3);
+    g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}, {"COLOR_0", col}}}}}), "Tri")}});
+    EXPECT_THAT(error_of(g), HasSubstr("mesh 0 'Tri' primitive 0: COLOR_0 element 1 has the value 2, expected a colour within [0, 1]"));
+  }
 }
 
 TEST_F(BrokenGltf, ValuesThatWouldBecomeNonFiniteInTheRendererAreRefused) {
