@@ -459,10 +459,13 @@ glm::dmat4 Loader::local_transform(size_t i) const {
       fail(node_label(m_, i), "rotation has " + std::to_string(n.rotation.size()) + " values, expected 4 (x, y, z, w)");
     finite(n.rotation, "rotation");
     glm::dquat q(n.rotation[3], n.rotation[0], n.rotation[1], n.rotation[2]);
-    const double len = glm::length(q);
-    if (!(len > 1e-12)) fail(node_label(m_, i), "rotation is a zero quaternion");
-    // Exporters write unit quaternions rounded to float: normalise so rounding never scales.
-    base.rotation = q / len;
+    // Exporters write unit quaternions rounded to float: normalise so rounding never scales; divided by its
+    // largest component first, so that no length overflows (1e160 components made an infinite length and an
+    // identity rotation) or underflows.
+    const double big = std::max({std::abs(q.w), std::abs(q.x), std::abs(q.y), std::abs(q.z)});
+    if (!(big > 0.0)) fail(node_label(m_, i), "rotation is a zero quaternion");
+    q /= big;
+    base.rotation = q / glm::length(q);
     r = glm::mat4_cast(base.rotation);
   }
   if (!n.scale.empty()) {

@@ -66,6 +66,21 @@ TEST(GltfLoader, TrsTransformAndInverseTransposeNormals) {
   EXPECT_TRUE(s.warnings.empty());
 }
 
+// A rotation is normalised whatever its length: [0, 0, v, v] turns 90 degrees about Z for any v (from 1e160 up
+// its length overflowed, and the node was not turned at all).
+TEST(GltfLoader, ARotationOfAnyLengthIsNormalised) {
+  for (const double v : {1e-300, 1e-3, 1.0, 1e160, 1e300}) {
+    TempDir dir;
+    Gltf g;
+    g.node({{"name", "N"}, {"mesh", g.triangle_mesh()}, {"rotation", {0, 0, v, v}}});
+    const Scene s = load_gltf(g.write(dir.path(), "turned"));
+    ASSERT_EQ(s.meshes.size(), 1u);
+    const glm::dvec3 p = glm::dvec3(s.meshes[0].positions[1]) + s.meshes[0].offset;  // (1, 0, 0) turned to (0, 1, 0)
+    EXPECT_NEAR(p.x, 0.0, 1e-7) << v;
+    EXPECT_NEAR(p.y, 1.0, 1e-7) << v;
+  }
+}
+
 TEST(GltfLoader, MatrixAndHierarchy) {
   TempDir dir;
   Gltf g;
