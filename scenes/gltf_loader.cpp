@@ -1565,9 +1565,24 @@ void check_before_tinygltf(const std::string& path, const nlohmann::json& doc) {
       const nlohmann::json& b = (*list)[i];
       if (!b.is_object() || !b.contains("uri") || !b["uri"].is_string()) continue;
       const std::string uri = b["uri"].get<std::string>();
-      if (uri.rfind("data:", 0) == 0) continue;
       const std::string name = b.contains("name") && b["name"].is_string() ? b["name"].get<std::string>() : "";
       const std::string who = label(buffer ? "buffer" : "image", i, name);
+      // tinygltf reads exactly byteLength bytes of a buffer, and reported another length as a failure to
+      // decode the data URI, or as "File size mismatch" naming no buffer.
+      const auto check_length = [&](uintmax_t size, const std::string& what) {
+        if (buffer && b.contains("byteLength") && b["byteLength"].is_number() && b["byteLength"].get<double>() != double(size))
+          throw Error(path + ": " + who + ": byteLength is " + num_whole(b["byteLength"].get<double>()) + " but " + what +
+                      " holds " + std::to_string(size) + " bytes; expected a byteLength equal to its size");
+      };
+      if (uri.rfind("data:", 0) == 0) {
+        const size_t comma = uri.find(',');
+        if (comma != std::string::npos && uri.compare(comma - 7, 7, ";base64") == 0 && comma >= 12) {
+          size_t chars = uri.size() - comma - 1, pad = 0;
+          while (pad < 2 && chars > 0 && uri[comma + chars - pad] == '=') ++pad;
+          if (chars % 4 == 0) check_length(chars / 4 * 3 - pad, "its data URI");
+        }
+        continue;
+      }
       if (std::filesystem::path(uri_decode(uri)).is_absolute() || uri.find("://") != std::string::npos)
         throw Error(path + ": " + who + ": its uri " + quoted(uri) +
                     " is absolute; expected a path relative to the glTF file's folder, or a data: URI");
@@ -1585,12 +1600,10 @@ void check_before_tinygltf(const std::string& path, const nlohmann::json& doc) {
                       (dir.empty() ? std::string(".") : dir.string()));
       } else if (!problem.empty()) {
         throw Error(path + ": " + who + ": its file " + quoted(uri) + " " + problem);
-      } else if (buffer && b.contains("byteLength") && b["byteLength"].is_number()) {
+      } else if (buffer) {
         std::error_code ec;
         const uintmax_t size = std::filesystem::file_size(file, ec);
-        if (!ec && b["byteLength"].get<double>() > double(size))
-          throw Error(path + ": " + who + ": byteLength is " + num_whole(b["byteLength"].get<double>()) + " but its file " + quoted(uri) +
-                      " holds " + std::to_string(size) + " bytes; expected a byteLength of at most the file's size");
+        if (!ec) check_length(size, "its file " + quoted(uri));
       }
     }
   }

@@ -944,6 +944,19 @@ TEST_F(BrokenGltf, PropertiesOfTheWrongTypeAreNamedNotDefaulted) {
   const std::string abs = (dir_.path() / "buf.bin").string();
   EXPECT_THAT(buffer_error("uri", abs), HasSubstr("buffer 0: its uri '" + abs + "' is absolute; expected a path relative to the glTF file's folder"));
   EXPECT_THAT(buffer_error("byteLength", int64_t{1000000000000}), HasSubstr("buffer 0: byteLength is 1000000000000 but its file 'buf.bin' holds 78 bytes"));
+  // shorter than the file, which tinygltf refuses too ("File size mismatch", naming no buffer)
+  EXPECT_THAT(buffer_error("byteLength", 70), HasSubstr("buffer 0: byteLength is 70 but its file 'buf.bin' holds 78 bytes; "
+                                                        "expected a byteLength equal to its size"));
+  // a data URI of another size than byteLength (tinygltf: "Failed to decode 'uri'")
+  for (const int length : {60, 80}) {
+    path_ = ok.write(dir_.path(), "embedded", Gltf::Form::Embedded);
+    std::ifstream in(path_);
+    json d = json::parse(in);
+    d["buffers"][0]["byteLength"] = length;
+    write_file(path_, d.dump());
+    EXPECT_THAT(load_error(path_), HasSubstr("buffer 0: byteLength is " + std::to_string(length) + " but its data URI holds 78 "
+                                             "bytes; expected a byteLength equal to its size"));
+  }
 }
 
 TEST_F(BrokenGltf, IndexOutOfRange) {
