@@ -36,7 +36,7 @@ Camera::Camera(const CameraConfig& c, const scenes::Scene& scene, const glm::dve
       }
       if (unnamed) names += std::string(names.empty() ? "" : ", and ") + "unnamed ones (name a camera's node in the glTF to choose it)";
       throw Error("camera.gltf_camera: no perspective camera named '" + c.gltf_camera + "' in " + scene.source +
-                  " (cameras: " + (names.empty() ? "none" : names) + ")");
+                  " (cameras: " + (names.empty() ? "none" : names) + ")" + scene.not_loaded_note(c.gltf_camera));
     }
     const glm::dmat4& m = gc->world_from_camera;
     position_ = glm::dvec3(m[3]);

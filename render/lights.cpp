@@ -28,7 +28,7 @@ Laser make_laser(const RenderStageConfig& config, const Camera& camera, const sc
       std::string names;
       for (const scenes::Light& x : scene.lights) names += (names.empty() ? "'" : ", '") + x.name + "'";
       throw Error("laser.gltf_light: no KHR_lights_punctual light named '" + c.gltf_light + "' in " +
-                  scene.source + " (lights: " + (names.empty() ? "none" : names) + ")");
+                  scene.source + " (lights: " + (names.empty() ? "none" : names) + ")" + scene.not_loaded_note(c.gltf_light));
     }
     if (l->type == scenes::Light::Type::Directional)
       throw Error("laser.gltf_light: light '" + c.gltf_light +

@@ -128,6 +128,15 @@ struct Scene {
       if (l.name == name) return &l;
     return nullptr;
   }
+  // For a camera or light not found by name: "" or, when a node of that name is in the file but not in the
+  // loaded glTF scene (whose cameras and lights are the only ones read), a sentence that says so.
+  std::string not_loaded_note(const std::string& name) const {
+    for (const Node& n : nodes)
+      if (n.name == name && !n.loaded)
+        return "; the file has a node '" + name + "', but it is not in the glTF scene loaded (gltf_scene: \"\" is the file's "
+               "default scene), whose cameras and lights are the only ones read";
+    return "";
+  }
 };
 
 // An object of the ground truth: a glTF node that has a mesh, all its primitives (Scene::meshes) together,

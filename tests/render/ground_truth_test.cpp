@@ -257,6 +257,25 @@ TEST(GroundTruth, BadInputNamesTheKey) {
   }
   Renderer ok(s, test_config(8, 8, 12e-3));
   EXPECT_THROW(ok.ground_truth({4, 4, 8, 8}), Error);
+  // a camera or light whose node is in the file but not in the loaded glTF scene is said to be there (the
+  // message listed "cameras: none" although the file had the node)
+  scenes::Scene other = s;
+  other.nodes.push_back({"C", -1, false, glm::dmat4(1.0)});
+  other.nodes.push_back({"spot", -1, false, glm::dmat4(1.0)});
+  for (const bool camera : {true, false}) {
+    c = test_config(8, 8, 12e-3);
+    if (camera) c.camera.gltf_camera = "C";
+    else c.laser.beam = Beam::GltfLight, c.laser.gltf_light = "spot";
+    try {
+      Renderer r(other, c);
+      FAIL() << "expected an error";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(std::string("; the file has a node '") + (camera ? "C" : "spot") +
+                                           "', but it is not in the glTF scene loaded"),
+                std::string::npos)
+          << e.what();
+    }
+  }
 }
 
 TEST(GroundTruth, GltfCameraLooksDownItsLocalMinusZ) {
