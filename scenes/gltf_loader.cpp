@@ -1050,6 +1050,12 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
     fail(who, "has " + std::to_string(p.targets.size()) + " morph targets but " +
                   (gn.weights.empty() ? label("mesh", mesh_index, gm.name) : node_label(m_, node)) + " gives " +
                   std::to_string(weights.size()) + " weights (glTF 2.0: one per target)");
+  // Every target's accessors exist, whatever the weights (a target of weight 0 named accessor 77 of 3 silently).
+  for (size_t t = 0; t < p.targets.size(); ++t)
+    for (const auto& [attribute, accessor] : p.targets[t])
+      if (accessor < 0 || static_cast<size_t>(accessor) >= m_.accessors.size())
+        fail(who, "morph target " + std::to_string(t) + " " + attribute + ": accessor " + std::to_string(accessor) +
+                      " does not exist (the file has " + std::to_string(m_.accessors.size()) + " accessors)");
   const auto morph = [&](const char* attribute, std::vector<double>& values) {
     for (size_t t = 0; t < p.targets.size() && t < weights.size(); ++t) {
       const auto it = p.targets[t].find(attribute);
@@ -1494,6 +1500,12 @@ void check_gltf_types(const std::string& path, const nlohmann::json& doc) {
       const std::string who = label(kind, i, name);
       if (!o.is_object()) throw Error(path + ": " + who + ": found " + o.dump().substr(0, 40) + ", expected an object");
       check_gltf_object(path, who, o, kind);
+      // glTF 2.0: a node's transform is a matrix or TRS, not both (the translation beside a matrix was dropped)
+      if (std::strcmp(kind, "node") == 0 && o.contains("matrix"))
+        for (const char* trs : {"translation", "rotation", "scale"})
+          if (o.contains(trs))
+            throw Error(path + ": " + who + ": has both matrix and " + trs + "; expected one or the other (glTF 2.0: a "
+                        "node's transform is a matrix, or any of translation, rotation and scale)");
     }
   }
   // KHR_lights_punctual's lights: tinygltf reads an absent range as 0, so a range of 0 (which glTF refuses:
@@ -1713,12 +1725,18 @@ Scene parse_gltf(const std::string& bytes, const std::string& path, const std::s
     throw Error(path + ": asset.version is '" + scenes::printable(model.asset.version) +
                 "'; expected a glTF 2.x file (asset.version \"2.0\")");
 
+  // minVersion: the least glTF version a reader needs (a 2.1 file may use what 2.0 readers misread).
+  if (!model.asset.minVersion.empty() && model.asset.minVersion != "2.0")
+    throw Error(path + ": asset.minVersion is '" + scenes::printable(model.asset.minVersion) +
+                "': the file needs a reader of that glTF version, and spadgen reads glTF 2.0");
+
   Scene scene;
   scene.source = path;
-  std::istringstream lines(warn);
+  std::istringstream lines(warn + "\n" + err);
   for (std::string line; std::getline(lines, line);)
-    if (!line.empty()) scene.warnings.push_back("tinygltf: " + line);
-  if (!err.empty()) scene.warnings.push_back("tinygltf: " + err);
+    // inverseBindMatrices is optional (glTF 2.0: identity matrices without it), and skins are read as such
+    if (!line.empty() && line.find("'inverseBindMatrices' property is missing") == std::string::npos)
+      scene.warnings.push_back("tinygltf: " + line);
   Loader(path, model, edits, scene).load(scene_name);
   return scene;
 }

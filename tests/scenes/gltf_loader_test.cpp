@@ -432,6 +432,10 @@ TEST(GltfLoader, SkinnedMeshesArePosedByTheirJoints) {
     for (int c = 0; c < 3; ++c)
       EXPECT_NEAR(far_joints.meshes[0].offset[c] + double(far_joints.meshes[0].positions[v][c]),
                   double(p[v][c]) + (c == 0 ? 100000.0 : 0.0), 1e-6);
+  // inverseBindMatrices is optional (identities): no warning (tinygltf's "property is missing" was passed on)
+  g.doc["skins"][0].erase("inverseBindMatrices");
+  const Scene no_ibm = load_gltf(g.write(dir.path(), "skin_no_ibm"));
+  EXPECT_TRUE(no_ibm.warnings.empty()) << testing::PrintToString(no_ibm.warnings);
   g.doc["meshes"][0]["primitives"][0]["attributes"].erase("WEIGHTS_0");
   EXPECT_THAT(load_error(g.write(dir.path(), "skin_bad")), HasSubstr("mesh 0 'Skinned' primitive 0: has JOINTS_0 without WEIGHTS_0"));
 }
@@ -877,6 +881,22 @@ TEST_F(BrokenGltf, AnotherVersionOrAMeshWithoutPrimitives) {
   std::string msg = error_of(g);
   expect_names_file(msg);
   EXPECT_THAT(msg, HasSubstr("asset.version is '3.0'; expected a glTF 2.x file (asset.version \"2.0\")"));
+  // a 2.x file that needs a newer reader than 2.0 (it was read as 2.0)
+  g.doc["asset"]["version"] = "2.1";
+  g.doc["asset"]["minVersion"] = "2.1";
+  EXPECT_THAT(error_of(g), HasSubstr("asset.minVersion is '2.1': the file needs a reader of that glTF version, and spadgen reads glTF 2.0"));
+  g.doc["asset"]["minVersion"] = "2.0";
+  EXPECT_EQ(spadgen::scenes::load_gltf(g.write(dir_.path(), "min20")).meshes.size(), 1u);
+  // a matrix and a translation (the translation was dropped)
+  Gltf both;
+  both.node({{"name", "N"}, {"mesh", both.triangle_mesh()}, {"matrix", {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1}},
+             {"translation", {1, 2, 3}}});
+  EXPECT_THAT(error_of(both), HasSubstr("node 0 'N': has both matrix and translation; expected one or the other"));
+  // a morph target naming an accessor that does not exist, at weight 0 (it loaded; at weight 1 it failed)
+  Gltf t;
+  const int pos = t.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  t.node({{"mesh", t.mesh(json::array({{{"attributes", {{"POSITION", pos}}}, {"targets", {{{"POSITION", 77}}}}}}), "Morph")}});
+  EXPECT_THAT(error_of(t), HasSubstr("mesh 0 'Morph' primitive 0: morph target 0 POSITION: accessor 77 does not exist (the file has 1 accessors)"));
   Gltf e;
   e.node({{"mesh", e.mesh(json::array(), "Empty")}});
   msg = error_of(e);
