@@ -66,6 +66,9 @@ int64_t free_disk(fs::path p) {
   p = existing_ancestor(p);
   struct statvfs s {};
   if (p.empty() || ::statvfs(p.c_str(), &s) != 0) return -1;
+  // A file system of no blocks (/proc, /sys) stores no files: unknown, so that writing there fails with
+  // its own message (it was reported as a full disk, 0 kB free)
+  if (s.f_blocks == 0) return -1;
   return static_cast<int64_t>(s.f_bavail) * static_cast<int64_t>(s.f_frsize);
 }
 

@@ -588,6 +588,13 @@ TEST_F(Hardening, SenseOntoAFullFileSystemIsRefusedNamingTheRun) {
   EXPECT_THAT(r.output, HasSubstr("files it keeps, copied (another file system: no hard links)"));
   EXPECT_THAT(r.output, HasSubstr("counts.npy x 1 more realisation (--repeats)"));
   EXPECT_THAT(r.output, HasSubstr("; switch outputs off (--set outputs.*), ask for fewer --repeats, or choose another folder (-o)"));
+  // a file system that stores nothing (/proc: no blocks) is not a full disk (it was "0 kB is free there")
+  if (fs::is_directory("/proc/self")) {
+    const Outcome proc = spadgen("sense " + run.string() + " -o /proc/spadgen-test");
+    expect_exit(proc, 1, "sense into /proc");
+    EXPECT_THAT(proc.err, HasSubstr("cannot use /proc/spadgen-test as the output folder (-o)"));
+    EXPECT_THAT(proc.err, Not(HasSubstr("is free there")));
+  }
 }
 
 // A run onto a small file system is refused before it renders, naming the files it writes as the storage
