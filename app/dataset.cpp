@@ -48,7 +48,7 @@ constexpr double kSecondsPerRun = 0.8;              // starting, loading the sce
 
 struct Estimate {
   int64_t disk = 0, memory = 0;  // disk: what the sample keeps
-  int64_t disk_at_least = 0;  // with compressed stores (Zarr) at a twentieth of their size (ResourcePlan)
+  int64_t disk_at_least = 0;  // with compressed files (EXR images, Zarr stores) at a twentieth of their size (ResourcePlan)
   int64_t disk_peak = 0;      // temporary files while the sample runs (freed at its end)
   double seconds = 0.0;
   bool paths_bound = false;  // a target error: the time counts render.max_samples_per_pixel paths per pixel
@@ -248,8 +248,8 @@ std::string dataset_plan(const DatasetOptions& options) {
     o << "# with render.target_relative_error a pixel's paths depend on its light: the times count "
          "render.max_samples_per_pixel for every pixel, an upper bound\n";
   if (total.disk_at_least != total.disk)
-    o << "# the disk counts the compressed stores (Zarr) uncompressed, at most: the samples take at least "
-      << bytes_text(total.disk_at_least) << " (the stores at a twentieth; examples/datasets/multi_object_variations.json "
+    o << "# the disk counts the compressed files (EXR images, Zarr stores) uncompressed, at most: the samples take at least "
+      << bytes_text(total.disk_at_least) << " (those files at a twentieth; examples/datasets/multi_object_variations.json "
          "writes about a fifth of the most)\n";
   if (folder) {
     const int64_t free = free_disk(options.out_dir);

@@ -174,9 +174,10 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
     if (s.written) plan.disk.push_back({s.file + (s.chunks.empty() ? "" : " (uncompressed)"), s.bytes(), false, s.file, !s.chunks.empty()});
   plan.disk.push_back({std::string("images") + (c.outputs.exr_compression == ExrCompression::None ? "" : " (uncompressed)"),
                        pixels * channels * 4, false, "", c.outputs.exr_compression != ExrCompression::None});
-  // metadata.json (about 16 kB) and the previews (three PNG images, compressed: at most 3 bytes a pixel each)
+  // metadata.json (about 16 kB) and the previews (three PNG images, compressed: at most 3 bytes a pixel each,
+  // and the plot of the gate profiles, about 62 kB whatever the image)
   plan.disk.push_back({std::string("metadata.json") + (c.outputs.previews ? " and previews/ (uncompressed)" : ""),
-                       (int64_t{32} << 10) + (c.outputs.previews ? 9 * pixels : 0), false, "", c.outputs.previews});
+                       (int64_t{32} << 10) + (c.outputs.previews ? 9 * pixels + (int64_t{64} << 10) : 0), false, "", c.outputs.previews});
   if (c.outputs.light) {
     // light/: per pixel of the image grown by one, its bin range, offset and totals, and the values of its lit
     // bins, which the scene decides: 113 bins per pixel on the default multi-object scene (docs/outputs.md).

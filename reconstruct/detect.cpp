@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "core/units.h"
 #include "sensor/sensor.h"
@@ -263,6 +264,7 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* profile, int K
   const auto pick = [&](bool rising) {
     std::vector<std::pair<Edge, double>> located;  // the edge and its fractional position
     std::vector<bool> was_clipped;                 // [j]: located[j] runs into saturated counts
+    std::vector<double> whole_x;                   // [j]: located[j]'s half point between the plateaus (NaN: none)
     for (const Edge& e : taken) {
       if ((e.z > 0.0) != rising) continue;
       // An edge into a saturated plateau: the bright level is clipped at ln(2 N), and the edge's z, largest
@@ -314,6 +316,16 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* profile, int K
           if (std::isnan(x)) x = e.k - 0.5;
         }
       }
+      // The half point between the plateaus either side of the whole claimed transition, for an edge left
+      // unpaired (below): the windows of the statistic that named it are not centred on its half point (its
+      // z peaks towards the foot, where the noise is least), which places a rise early and a fall late by
+      // the same time, about 25 ps (3.5 mm) on the default gate; a pair's two shifts cancel, a lone edge's
+      // (its partner outside the sweep) did not.
+      double xw = std::numeric_limits<double>::quiet_NaN();
+      if (!clipped && e.claim_lo - kPlateau >= 0 && e.claim_hi + kPlateau <= K) {
+        const double before = level_of(e.claim_lo - kPlateau, e.claim_lo), after = level_of(e.claim_hi, e.claim_hi + kPlateau);
+        if ((after - before > 0.0) == rising) xw = crossing(lam_s, e.claim_lo + 1, e.claim_hi, 0.5 * (before + after), rising, x);
+      }
       // The whole step, from plateaus just outside the edge's transition when the profile has them (the
       // statistic's windows may reach into the transition and see part of it).
       const int lo0 = int(std::floor(x)) - d.separation - 4, hi1 = int(std::ceil(x)) + d.separation + 4;
@@ -326,17 +338,20 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* profile, int K
       for (size_t j = 0; j < located.size() && !merged; ++j) {
         auto& [other, ox] = located[j];
         if ((clipped || was_clipped[j]) && std::abs(ox - x) < d.separation) {
-          if (std::abs(located_edge.z) > std::abs(other.z)) other = located_edge, ox = x, was_clipped[j] = clipped;
+          if (std::abs(located_edge.z) > std::abs(other.z)) other = located_edge, ox = x, was_clipped[j] = clipped, whole_x[j] = xw;
           merged = true;
         }
       }
       if (merged) continue;
       located.emplace_back(located_edge, x);
       was_clipped.push_back(clipped);
+      whole_x.push_back(xw);
     }
-    return located;
+    return std::make_pair(located, whole_x);
   };
-  const auto rises = pick(true), falls = pick(false);
+  const auto [rises, rise_whole_x] = pick(true);
+  const auto [falls, fall_whole_x] = pick(false);
+  const auto lone = [](double x, double whole) { return std::isnan(whole) ? x : whole; };
   // Counts saturated (within half a count of N) at nine in ten or more of the positions strictly between
   // fractional positions a < b, at least one: the level there is clipped at ln(2 N), so the edges either
   // side are located on the clipped step, early for a rise and late for a fall by the same time.
@@ -352,7 +367,8 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* profile, int K
   // out by the clipping: their plain mean times it).
   std::vector<bool> fall_used(falls.size(), false);
   std::vector<Detection> out;
-  for (const auto& [r, xr] : rises) {
+  for (size_t ri = 0; ri < rises.size(); ++ri) {
+    const auto& [r, xr] = rises[ri];
     const double tr = timing.start_s + xr * timing.step_s + timing.rise_offset_s;
     int partner = -1;
     bool clipped = false;
@@ -365,7 +381,8 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* profile, int K
       else if (partner < 0 && xf > xr && saturated_between(xr, xf)) partner = int(i), clipped = true;
     }
     if (partner < 0) {
-      out.push_back({timing.range_of_rise(xr), xr, r.step, r.z});
+      const double x = lone(xr, rise_whole_x[ri]);
+      out.push_back({timing.range_of_rise(x), x, r.step, r.z});
       continue;
     }
     fall_used[size_t(partner)] = true;
@@ -379,7 +396,8 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* profile, int K
   for (size_t i = 0; i < falls.size(); ++i)
     if (!fall_used[i]) {
       const auto& [f, xf] = falls[i];
-      out.push_back({timing.range_of_fall(xf), xf, -f.step, -f.z});
+      const double x = lone(xf, fall_whole_x[i]);
+      out.push_back({timing.range_of_fall(x), x, -f.step, -f.z});
     }
   return folded(std::move(out), timing);
 }

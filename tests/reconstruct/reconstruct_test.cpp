@@ -73,6 +73,23 @@ TEST(Detectors, NoiseFreeProfilesGiveTheRangeToAMillimetreOrTwo) {
     }
 }
 
+// A return whose other edge lies outside the sweep (a far target whose fall is past the last gate position,
+// a near one whose rise is before the first) is located by its one edge to a millimetre: the edge's half
+// point between the plateaus either side. Located by the windows that named it, a lone rise was 3.9 mm early
+// and a lone fall 3.3 mm late on a run's profiles (the two shifts cancel in a pair).
+TEST(Detectors, AReturnWithOneEdgeInTheSweepIsLocatedByItsEdgeAlone) {
+  for (const double lambda : {0.02, 0.15, 1.0})
+    for (const bool rise_only : {true, false}) {
+      // the rise of a return at 1.85 m lies at position 281 and its fall past the end (at 387); one at 0.05 m
+      // rises before the start (position -73) and falls at 32
+      const double range = rise_only ? 1.85 : 0.05;
+      const auto c = expected_counts(lambda_profile({{range, lambda}}, 1e-4));
+      const auto d = run(EdgeDetector{}, c);
+      ASSERT_EQ(d.size(), 1u) << range << " m, lambda " << lambda;
+      EXPECT_NEAR(d[0].range_m, range, 1e-3) << range << " m, lambda " << lambda;
+    }
+}
+
 TEST(Detectors, SampledProfilesMeetThePapersPrecisionAndFindOneReturn) {
   // The flat target of the paper: about 38 of 255 counts on the plateau (lambda 0.16), at 1 m and at
   // 0.5636 m, whose rising edge lies on gate position 60, the border of two of the paper's windows.
