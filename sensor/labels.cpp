@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iterator>
 #include <limits>
 
 #include "core/error.h"
@@ -47,7 +48,16 @@ ObjectLabelsTile object_labels(const SensorModel& sensor, const GroundTruthTile&
     const double* own = rates.data() + ri * K;
     const double peak = *std::max_element(own, own + K);
     if (!(peak > 0.0)) continue;
-    const auto k = static_cast<size_t>(std::find_if(own, own + K, [&](double v) { return v >= kEdgeFraction * peak; }) - own);
+    auto k = static_cast<size_t>(std::find_if(own, own + K, [&](double v) { return v >= kEdgeFraction * peak; }) - own);
+    if (k == 0) {
+      // The sweep begins on the object's plateau: its rise lies before the first gate position (it was
+      // labelled by a step the counts do not hold). Its falling edge instead, from the last position on the
+      // plateau; none when the plateau runs to the end too (no edge in the sweep at all).
+      k = K - 1 - static_cast<size_t>(std::find_if(std::make_reverse_iterator(own + K), std::make_reverse_iterator(own),
+                                                    [&](double v) { return v >= kEdgeFraction * peak; }) -
+                                       std::make_reverse_iterator(own + K));
+      if (k == K - 1) continue;
+    }
     const double lambda = s.rate[k * n + i];
     // The rate without the object, never below 0, and 0 within what own[k] is known to: the neighbours'
     // crosstalk is theirs taken as this pixel's (their gate skew and PDP differ), and lambda is float. A

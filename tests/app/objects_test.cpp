@@ -104,6 +104,38 @@ TEST_F(App, LabelsOfABrightTargetAndOfTheSameTargetTenThousandTimesDimmer) {
   RecordProperty("worst_relative_edge_error", std::to_string(worst));
 }
 
+// A sweep that begins on the target's plateau (its rise before the first gate position) labels it by its
+// falling edge, from the last position on the plateau (it was labelled by a rise the counts do not hold:
+// k* = 0); a sweep that covers neither edge labels it with no edge at all.
+TEST_F(App, LabelsOfAReturnWhoseRiseIsBeforeTheSweepAreOfItsFall) {
+  const std::string base = kScenes + "flat_target.json -q --set camera.crop=[504,244,8,8] --set render.samples_per_pixel=4 "
+                           "--set sensor.crosstalk=false --set acquisition.gate_sweep.start_ns=8.5";
+  ASSERT_EQ(sh("run " + base + " -o " + (dir_ / "fall").string()).code, 0);
+  ASSERT_EQ(sh("run " + base + " --set laser.average_power_mW=0 -o " + (dir_ / "dark").string()).code, 0);
+  ASSERT_EQ(sh("run " + base + " --set acquisition.gate_sweep.stop_ns=9.5 -o " + (dir_ / "plateau").string()).code, 0);
+  const auto meta = nlohmann::json::parse(slurp(dir_ / "fall/metadata.json"));
+  const double N = meta["acquisition"]["frames_per_k"].get<double>();
+  const Npy rate = read_npy(dir_ / "fall/detection_rate.npy"), dark = read_npy(dir_ / "dark/detection_rate.npy");
+  const std::vector<double> lam = values(rate), lam0 = values(dark);
+  const size_t K = size_t(rate.shape[0]), n = size_t(rate.shape[1] * rate.shape[2]);
+  const auto fall = read_exr((dir_ / "fall/labels.exr").string()).channels;
+  const auto plateau = read_exr((dir_ / "plateau/labels.exr").string()).channels;
+  for (size_t i = 0; i < n; ++i) {
+    std::vector<double> own(K);
+    for (size_t k = 0; k < K; ++k) own[k] = lam[k * n + i] - lam0[k * n + i];
+    const double peak = *std::max_element(own.begin(), own.end());
+    ASSERT_GE(own[0], 0.95 * peak) << "the sweep does not begin on the plateau at pixel " << i;
+    size_t kf = K - 1;
+    while (own[kf] < 0.95 * peak) --kf;
+    ASSERT_LT(kf, K - 1);
+    const double p1 = 1 - std::exp(-lam[kf * n + i]), p0 = 1 - std::exp(-lam0[kf * n + i]);
+    EXPECT_NEAR(fall.at("object0.edge_counts")[i], N * (p1 - p0), 1e-3 * N * (p1 - p0)) << i;
+    EXPECT_EQ(fall.at("object0.detectable")[i], 1.0f) << i;
+    EXPECT_EQ(plateau.at("object0.edge_counts")[i], 0.0f) << i;
+    EXPECT_EQ(plateau.at("object0.detectable")[i], 0.0f) << i;
+  }
+}
+
 // With crosstalk, an object's light fires a pixel through its neighbours too: the edge it makes is against
 // the run without its light (neighbours dark too), at the gate position where its own rate (crosstalk off,
 // where the neighbours' gate skews do not mix in) reaches 95 % of its peak. Pixel A, the flat target at 0.2
