@@ -21,7 +21,8 @@ struct DatasetOptions {
 std::string dataset_plan(const DatasetOptions& options);
 
 // Generates the shard's samples that are not done, each published as one unit; skips done ones; refuses
-// to start when the free disk is below the estimate. Rewrites the index and the card at the end. Throws
+// to start when the free disk is below the estimate. Rewrites the index and the card at the end when no other
+// run is on the folder (the last run to end writes them: datasets::RunPresence). Throws
 // spadgen::Error after the index is written when samples failed (their errors are in DIR/failed/).
 void dataset_run(const DatasetOptions& options);
 
