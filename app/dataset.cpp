@@ -261,16 +261,11 @@ std::string dataset_plan(const DatasetOptions& options) {
   return o.str();
 }
 
-void dataset_run(const DatasetOptions& options) {
-  const DatasetSpec spec = datasets::load_dataset_file(options.file);
-  const datasets::Shard shard = choose_shard(options);
-  if (options.out_dir.empty()) throw Error("dataset run: expected the dataset folder (-o DIR)");
-  const DatasetFolder folder(spec, options.out_dir);
-  folder.claim();
-  // The index is written by the last run on the folder to end (datasets::RunPresence).
-  const std::unique_ptr<datasets::RunPresence> presence = folder.enter();
+namespace {
+// dataset_run's work once it is on the folder: the shard's samples, then the index when no other run is on it.
+void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, const datasets::Shard& shard,
+                       const DatasetFolder& folder, datasets::RunPresence& presence) {
   const fs::path dir = folder.dir();
-  InterruptGuard interrupt_guard;  // for the whole run: the runs and senses of its samples hold theirs inside it
 
   // What this shard has to do: every sample it owns that is not done, checked before any work.
   struct Todo {
@@ -336,7 +331,7 @@ void dataset_run(const DatasetOptions& options) {
   const auto stopped = [&](const std::string& where) {
     std::string listed = "index.jsonl lists them";
     try {
-      if (!folder.write_index([&] { return inspect_all(folder, false); }, presence.get()))
+      if (!folder.write_index([&] { return inspect_all(folder, false); }, &presence))
         listed = "the last run on the folder to end lists them in index.jsonl";
     } catch (const std::exception& e) {
       std::fprintf(stderr, "spadgen: dataset: the index was not updated: %s\n", e.what());
@@ -455,7 +450,7 @@ void dataset_run(const DatasetOptions& options) {
   }
 
   const std::optional<std::vector<SampleRecord>> records =
-      folder.write_index([&] { return inspect_all(folder, options.progress); }, presence.get());
+      folder.write_index([&] { return inspect_all(folder, options.progress); }, &presence);
   if (options.progress)
     std::fprintf(stderr, "spadgen: dataset %s: %s (this run: %lld generated, %lld skipped, %lld completed by another run, %zu failed)\n",
                  dir.string().c_str(),
@@ -466,6 +461,33 @@ void dataset_run(const DatasetOptions& options) {
   if (!failed.empty())
     throw Error("dataset run: " + std::to_string(failed.size()) + " samples failed (" + datasets::ranges_text(failed) +
                 "); their errors are in " + (dir / "failed").string() + " and `spadgen dataset status " + dir.string() + "`");
+}
+}  // namespace
+
+void dataset_run(const DatasetOptions& options) {
+  const DatasetSpec spec = datasets::load_dataset_file(options.file);
+  const datasets::Shard shard = choose_shard(options);
+  if (options.out_dir.empty()) throw Error("dataset run: expected the dataset folder (-o DIR)");
+  const DatasetFolder folder(spec, options.out_dir);
+  folder.claim();
+  // The index is written by the last run on the folder to end (datasets::RunPresence).
+  const std::unique_ptr<datasets::RunPresence> presence = folder.enter();
+  InterruptGuard interrupt_guard;  // for the whole run: the runs and senses of its samples hold theirs inside it
+  try {
+    run_owned_samples(options, spec, shard, folder, *presence);
+  } catch (...) {
+    // Any other way out (a signal while the samples are checked, the disk check's refusal, an error): the
+    // index is written as at the end when no other run is on the folder (another may have left it to this
+    // one, which would leave it to no one).
+    if (presence->held()) {
+      try {
+        folder.write_index([&] { return inspect_all(folder, false); }, presence.get());
+      } catch (const std::exception& e) {
+        std::fprintf(stderr, "spadgen: dataset: the index was not updated: %s\n", e.what());
+      }
+    }
+    throw;
+  }
 }
 
 std::string dataset_status(const std::string& dir) {

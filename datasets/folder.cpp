@@ -30,7 +30,7 @@ namespace {
 
 // What a dataset folder may hold besides the samples' folders (evaluation/: spadgen evaluate's).
 const std::set<std::string> kOwnEntries = {"dataset.json", "samples", "failed", "index.jsonl", "index.csv", "dataset.md",
-                                           ".dataset.lock", "evaluation"};
+                                           ".dataset.lock", ".dataset.runs", "evaluation"};
 
 // A JSON file as J (json, or ordered_json to keep its keys' order); nullopt when absent or not JSON.
 template <class J = json>
@@ -73,6 +73,10 @@ std::string bytes_text(double b) {
   return buf;
 }
 
+// The runs' presence (RunPresence): a file of its own, not .dataset.lock, whose flock (FolderLock) NFS emulates
+// as a whole-file fcntl lock, which a presence lock on the same file would block for ever.
+constexpr const char* kPresenceFile = ".dataset.runs";
+
 // Holds DIR/.dataset.lock for the scope.
 class FolderLock {
  public:
@@ -109,12 +113,10 @@ DatasetFolder::DatasetFolder(const DatasetSpec& spec, fs::path dir) : spec_(spec
 SampleClaim::~SampleClaim() { ::close(fd_); }  // closing the description releases its locks
 
 namespace {
-constexpr off_t kPresenceByte = off_t(1) << 40;  // past every sample's byte (at most 1e8 samples)
-
-// An open-file-description lock of `type` on byte `at` of DIR/.dataset.lock, on a description of its own: its
-// fd (closing it releases the lock), or -1 when another run's lock conflicts and `wait` is false.
-int lock_byte(const fs::path& dir, short type, off_t at, const std::string& what, bool wait) {
-  const std::string p = (dir / ".dataset.lock").string();
+// An open-file-description lock of `type` on byte `at` of DIR/`file`, on a description of its own: its fd
+// (closing it releases the lock), or -1 when another run's lock conflicts and `wait` is false.
+int lock_byte(const fs::path& dir, const char* file, short type, off_t at, const std::string& what, bool wait) {
+  const std::string p = (dir / file).string();
   const int fd = ::open(p.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
   if (fd < 0) throw Error("cannot open the dataset folder's lock " + p + ": " + std::strerror(errno));
   struct flock l {};
@@ -141,11 +143,11 @@ void RunPresence::release() {
 
 std::unique_ptr<RunPresence> DatasetFolder::enter() const {
   // Shared; a run ending takes it exclusively for a moment, to test for others.
-  return std::make_unique<RunPresence>(lock_byte(dir_, F_RDLCK, kPresenceByte, "this run's presence", true));
+  return std::make_unique<RunPresence>(lock_byte(dir_, kPresenceFile, F_RDLCK, 0, "this run's presence", true));
 }
 
 std::unique_ptr<SampleClaim> DatasetFolder::try_claim(const Sample& s) const {
-  const int fd = lock_byte(dir_, F_WRLCK, static_cast<off_t>(s.index), "sample " + std::to_string(s.index), false);
+  const int fd = lock_byte(dir_, ".dataset.lock", F_WRLCK, static_cast<off_t>(s.index), "sample " + std::to_string(s.index), false);
   return fd < 0 ? nullptr : std::make_unique<SampleClaim>(fd);
 }
 
@@ -389,7 +391,7 @@ std::optional<std::vector<SampleRecord>> DatasetFolder::write_index(
   if (leaving) {
     // Under the folder's lock, so that of two runs ending at once the second sees the first gone.
     leaving->release();
-    const int others = lock_byte(dir_, F_WRLCK, kPresenceByte, "the runs' presence", false);
+    const int others = lock_byte(dir_, kPresenceFile, F_WRLCK, 0, "the runs' presence", false);
     if (others < 0) return std::nullopt;
     ::close(others);
   }

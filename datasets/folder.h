@@ -62,8 +62,8 @@ class SampleClaim {
   int fd_;
 };
 
-// A dataset run on the folder, for as long as it lives (a shared open-file-description lock on a byte of
-// DIR/.dataset.lock past every sample's, 2^40): the index is written by the last run on the folder to end,
+// A dataset run on the folder, for as long as it lives (a shared open-file-description lock on
+// DIR/.dataset.runs): the index is written by the last run on the folder to end,
 // so that a shard's end does not read and rewrite the whole index while other shards are still running
 // (100,000 samples took about 29 s and 183 MB per shard under the folder's lock).
 class RunPresence {
@@ -73,6 +73,7 @@ class RunPresence {
   RunPresence(const RunPresence&) = delete;
   RunPresence& operator=(const RunPresence&) = delete;
   void release();  // this run is ending
+  bool held() const { return fd_ >= 0; }
 
  private:
   int fd_;

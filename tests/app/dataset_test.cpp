@@ -259,20 +259,20 @@ TEST_F(Dataset, ShardsOnTheCommandLineSlurmAndKubernetesEqualTheSerialRun) {
 
 // The index is written by the last run on the folder to end: a shard ending while another run is on the
 // folder reads and writes nothing (100,000 samples took 29 s and 183 MB per shard's end), and the last one
-// writes it complete. The other run is this test holding a run's presence (a shared lock on byte 2^40 of
-// .dataset.lock), as a running `dataset run` does.
+// writes it complete. The other run is this test holding a run's presence (a shared lock on byte 0 of
+// .dataset.runs), as a running `dataset run` does.
 TEST_F(Dataset, OnlyTheLastRunOnTheFolderToEndWritesTheIndex) {
   write(dir_ / "d.json", small_dataset(2));
   const fs::path out = dir_ / "out";
   ASSERT_EQ(sh("dataset run " + (dir_ / "d.json").string() + " -o " + out.string() + " -q --shard 0/2").code, 0);
   ASSERT_TRUE(fs::exists(out / "index.jsonl"));  // alone on the folder: written
   fs::remove(out / "index.jsonl"), fs::remove(out / "index.csv"), fs::remove(out / "dataset.md");
-  const int fd = ::open((out / ".dataset.lock").c_str(), O_RDWR | O_CLOEXEC);
+  const int fd = ::open((out / ".dataset.runs").c_str(), O_RDWR | O_CLOEXEC);
   ASSERT_GE(fd, 0);
   struct flock l {};
   l.l_type = F_RDLCK;
   l.l_whence = SEEK_SET;
-  l.l_start = off_t(1) << 40;
+  l.l_start = 0;
   l.l_len = 1;
   ASSERT_EQ(::fcntl(fd, F_OFD_SETLK, &l), 0);
   const Result shard1 = sh("dataset run " + (dir_ / "d.json").string() + " -o " + out.string() + " --shard 1/2");
