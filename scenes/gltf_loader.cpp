@@ -23,6 +23,7 @@
 #include <set>
 #include <sstream>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "core/error.h"
@@ -1588,7 +1589,7 @@ void check_before_tinygltf(const std::string& path, const nlohmann::json& doc) {
       };
       if (uri.rfind("data:", 0) == 0) {
         const size_t comma = uri.find(',');
-        if (comma != std::string::npos && uri.compare(comma - 7, 7, ";base64") == 0 && comma >= 12) {
+        if (comma != std::string::npos && std::string_view(uri).substr(0, comma).ends_with(";base64")) {
           size_t chars = uri.size() - comma - 1, pad = 0;
           while (pad < 2 && chars > 0 && uri[comma + chars - pad] == '=') ++pad;
           if (chars % 4 == 0) check_length(chars / 4 * 3 - pad, "its data URI");

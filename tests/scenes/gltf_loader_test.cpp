@@ -36,6 +36,7 @@ using spadgen::scenes::Light;
 using spadgen::scenes::load_gltf;
 using spadgen::scenes::Scene;
 using testing::HasSubstr;
+using testing::Not;
 using namespace spadgen::test_gltf;
 
 // ---------------------------------------------------------------------------------------------
@@ -967,15 +968,42 @@ TEST_F(BrokenGltf, PropertiesOfTheWrongTypeAreNamedNotDefaulted) {
   // shorter than the file, which tinygltf refuses too ("File size mismatch", naming no buffer)
   EXPECT_THAT(buffer_error("byteLength", 70), HasSubstr("buffer 0: byteLength is 70 but its file 'buf.bin' holds 78 bytes; "
                                                         "expected a byteLength equal to its size"));
-  // a data URI of another size than byteLength (tinygltf: "Failed to decode 'uri'")
-  for (const int length : {60, 80}) {
-    path_ = ok.write(dir_.path(), "embedded", Gltf::Form::Embedded);
+  // a data URI of another size than byteLength (tinygltf: "Failed to decode 'uri'"), with no, one and two
+  // padding characters (78, 76 and 77 bytes)
+  for (const int bytes : {78, 76, 77})
+    for (const int length : {bytes - 18, bytes + 2}) {
+      path_ = ok.write(dir_.path(), "embedded", Gltf::Form::Embedded);
+      std::ifstream in(path_);
+      json d = json::parse(in);
+      const std::string uri = d["buffers"][0]["uri"].get<std::string>();
+      const size_t comma = uri.find(',');
+      std::string data(size_t(bytes), '\x5a');  // base64 of `bytes` bytes of 0x5a
+      static const char* kB64 = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+      std::string enc;
+      for (size_t i = 0; i < data.size(); i += 3) {
+        const uint32_t v = uint32_t(uint8_t(data[i])) << 16 | (i + 1 < data.size() ? uint32_t(uint8_t(data[i + 1])) << 8 : 0) |
+                           (i + 2 < data.size() ? uint32_t(uint8_t(data[i + 2])) : 0);
+        enc += kB64[v >> 18 & 63], enc += kB64[v >> 12 & 63];
+        enc += i + 1 < data.size() ? kB64[v >> 6 & 63] : '=';
+        enc += i + 2 < data.size() ? kB64[v & 63] : '=';
+      }
+      d["buffers"][0]["uri"] = uri.substr(0, comma + 1) + enc;
+      d["buffers"][0]["byteLength"] = length;
+      write_file(path_, d.dump());
+      EXPECT_THAT(load_error(path_), HasSubstr("buffer 0: byteLength is " + std::to_string(length) + " but its data URI holds " +
+                                               std::to_string(bytes) + " bytes; expected a byteLength equal to its size"));
+    }
+  // data URIs too short to name a media type: an error of the file, not an internal one (an out-of-range
+  // string compare)
+  for (const char* uri : {"data:,AAAA", "data:a,AAAA"}) {
+    path_ = ok.write(dir_.path(), "short_uri", Gltf::Form::Embedded);
     std::ifstream in(path_);
     json d = json::parse(in);
-    d["buffers"][0]["byteLength"] = length;
+    d["buffers"][0]["uri"] = uri;
     write_file(path_, d.dump());
-    EXPECT_THAT(load_error(path_), HasSubstr("buffer 0: byteLength is " + std::to_string(length) + " but its data URI holds 78 "
-                                             "bytes; expected a byteLength equal to its size"));
+    const std::string msg = load_error(path_);
+    EXPECT_THAT(msg, HasSubstr(path_)) << uri;
+    EXPECT_THAT(msg, Not(HasSubstr("basic_string"))) << uri;
   }
 }
 
