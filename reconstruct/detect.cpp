@@ -253,6 +253,8 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* profile, int K
   // The level of positions [a, b): the rates' mean, or the linearised mean count (the mean of linearised
   // counts near N is biased by their clipping).
   constexpr int kPlateau = 12;
+  constexpr int kMinPlateau = 4;
+  constexpr double kPlateauFlatness = 0.1;
   constexpr double kPartOfStep = 0.5;
   constexpr double kBrightLevel = 2.0;  // lambda: the noise of the linearised level has grown e^2 - 1 = 6.4 times over the foot's
   const auto level_of = [&](int a, int b) {
@@ -321,10 +323,28 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* profile, int K
       // z peaks towards the foot, where the noise is least), which places a rise early and a fall late by
       // the same time, about 25 ps (3.5 mm) on the default gate; a pair's two shifts cancel, a lone edge's
       // (its partner outside the sweep) did not.
+      // The plateaus end where another edge's claim begins (a lone edge's partner is often under another
+      // return's edge) or the sweep ends; at least kMinPlateau positions each, else the statistic's timing
+      // stays.
       double xw = std::numeric_limits<double>::quiet_NaN();
-      if (!clipped && e.claim_lo - kPlateau >= 0 && e.claim_hi + kPlateau <= K) {
-        const double before = level_of(e.claim_lo - kPlateau, e.claim_lo), after = level_of(e.claim_hi, e.claim_hi + kPlateau);
-        if ((after - before > 0.0) == rising) xw = crossing(lam_s, e.claim_lo + 1, e.claim_hi, 0.5 * (before + after), rising, x);
+      int p0 = std::max(0, e.claim_lo - kPlateau), p1 = std::min(K, e.claim_hi + kPlateau);
+      for (const Edge& t : taken) {
+        if (t.claim_hi <= e.claim_lo) p0 = std::max(p0, t.claim_hi);
+        if (t.claim_lo >= e.claim_hi) p1 = std::min(p1, t.claim_lo);
+      }
+      if (!clipped && e.claim_lo - p0 >= kMinPlateau && p1 - e.claim_hi >= kMinPlateau) {
+        const double before = level_of(p0, e.claim_lo), after = level_of(e.claim_hi, p1);
+        // plateaus indeed: each window's halves within a tenth of the step of each other, beyond two
+        // standard errors of their noise (the foot of another return's edge just past the claim is not one)
+        const auto flat = [&](int a, int b) {
+          const int m = (a + b) / 2;
+          // the halves' difference and its standard error (the noise of lambda's means over them)
+          const double se = std::sqrt((sum_v[size_t(m)] - sum_v[size_t(a)]) / double((m - a) * (m - a)) +
+                                      (sum_v[size_t(b)] - sum_v[size_t(m)]) / double((b - m) * (b - m)));
+          return std::abs(level_of(a, m) - level_of(m, b)) <= kPlateauFlatness * std::abs(after - before) + 2.0 * se;
+        };
+        if ((after - before > 0.0) == rising && flat(p0, e.claim_lo) && flat(e.claim_hi, p1))
+          xw = crossing(lam_s, e.claim_lo + 1, e.claim_hi, 0.5 * (before + after), rising, x);
       }
       // The whole step, from plateaus just outside the edge's transition when the profile has them (the
       // statistic's windows may reach into the transition and see part of it).

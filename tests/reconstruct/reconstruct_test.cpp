@@ -88,6 +88,20 @@ TEST(Detectors, AReturnWithOneEdgeInTheSweepIsLocatedByItsEdgeAlone) {
       ASSERT_EQ(d.size(), 1u) << range << " m, lambda " << lambda;
       EXPECT_NEAR(d[0].range_m, range, 1e-3) << range << " m, lambda " << lambda;
     }
+  // Two far returns, both falls past the sweep: two lone rises. The plateaus either side of a rise end at the
+  // other's claim and must be flat: between two rises 12 cm apart there is none (the next rise's foot), and
+  // the statistic's timing stays (the foot taken for a plateau put the first 5 mm long and the second 9 mm
+  // short at lambda 1); from 15 cm they are, and both are within a millimetre.
+  struct Case {
+    double dz, lambda, tolerance;
+  };
+  for (const auto& [dz, lambda, tolerance] : {Case{0.12, 1.0, 3e-3}, {0.15, 0.15, 1e-3}, {0.15, 1.0, 1e-3}, {0.20, 0.15, 1e-3}, {0.20, 1.0, 1e-3}}) {
+    const auto c = expected_counts(lambda_profile({{1.85 - dz, lambda}, {1.85, lambda}}, 1e-4));
+    const auto d = run(EdgeDetector{}, c);
+    ASSERT_EQ(d.size(), 2u) << dz << " m apart, lambda " << lambda;
+    EXPECT_NEAR(d[0].range_m, 1.85 - dz, tolerance) << dz << " m apart, lambda " << lambda;
+    EXPECT_NEAR(d[1].range_m, 1.85, tolerance) << dz << " m apart, lambda " << lambda;
+  }
 }
 
 TEST(Detectors, SampledProfilesMeetThePapersPrecisionAndFindOneReturn) {
