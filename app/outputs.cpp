@@ -299,7 +299,7 @@ class Outputs::Images {
     return summary;
   }
 
-  // What this run's labels.exr says (null without labels computed here): the objects whose rising edge
+  // What this run's labels.exr says (null without labels computed here): the objects whose edge (labels.exr's)
   // stands out of the noise in at least one pixel, and the share of the (pixel, object) pairs along the
   // rays that do. Read after write(), which removed the label slots beyond the objects'.
   nlohmann::json label_summary() const {

@@ -497,7 +497,7 @@ std::vector<fs::path> done_sample_folders(const fs::path& dir, std::string* left
     const std::string hash = text(r, "sample_hash");
     for (const std::string& f : folders) {
       const fs::path meta = dir / f / "metadata.json";
-      std::string found = "no readable metadata.json";
+      std::string found = fs::exists(dir / f) ? "no readable metadata.json" : "no folder";
       try {
         const nlohmann::json m = nlohmann::json::parse(scenes::read_file_bounded(meta.string(), int64_t{1} << 28, "metadata.json"));
         const auto at = "/dataset/sample_hash"_json_pointer;
@@ -506,7 +506,7 @@ std::vector<fs::path> done_sample_folders(const fs::path& dir, std::string* left
       }
       if (found != "hash " + hash)
         throw Error((dir / f).string() + ": index.jsonl lists it done with hash " + hash + ", and its folder has " + found +
-                    ": the sample changed since the index was written; `spadgen dataset run` brings the index up to date "
+                    ": the sample was removed or changed since the index was written; `spadgen dataset run` brings the index up to date "
                     "(and generates what is not done)");
       out.push_back(dir / f);
     }
@@ -618,7 +618,7 @@ std::string evaluate(const EvaluateCommand& c) {
     std::string left_out;
     const std::vector<fs::path> samples = done_sample_folders(target, &left_out);
     if (samples.empty())
-      throw Error(c.target + ": no done samples to evaluate (index.jsonl: " + left_out + ")");
+      throw Error(c.target + ": no done samples to evaluate (index.jsonl: " + (left_out.empty() ? "no rows" : left_out) + ")");
     reconstruct::Scores total(scorer_options(c));
     std::ostringstream csv;
     csv << "sample,objects,found,recall,detectable,detectable_found,detections,false,bias_mm,rms_mm\n";
@@ -653,7 +653,7 @@ std::string evaluate(const EvaluateCommand& c) {
     if (!left_out.empty()) report["not_scored"] = "the samples index.jsonl lists as not done: " + left_out;
     writers::write_file_atomic((fs::path(out) / "samples.csv").string(), csv.str());
     files.push_back("samples.csv");
-    text << samples.size() << " sample folders (realisations included)"
+    text << samples.size() << (samples.size() == 1 ? " sample folder" : " sample folders") << " (realisations included)"
          << (left_out.empty() ? std::string() : "; not scored, not done: " + left_out) << "\n" << summary(report);
   } else {
     throw Error(c.target + ": neither a run folder (metadata.json) nor a dataset folder (dataset.json)");

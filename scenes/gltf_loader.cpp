@@ -1057,10 +1057,17 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
       if (accessor < 0 || static_cast<size_t>(accessor) >= m_.accessors.size())
         fail(who, "morph target " + std::to_string(t) + " " + attribute + ": accessor " + std::to_string(accessor) +
                       " does not exist (the file has " + std::to_string(m_.accessors.size()) + " accessors)");
+      else if (attribute != "POSITION" && attribute != "NORMAL" && attribute != "TANGENT" && t < weights.size() &&
+               weights[t] != 0.0)
+        warn(who + ": morph target " + std::to_string(t) + " " + attribute + " is not used by spadgen (its POSITION and "
+             "NORMAL are); the base " + attribute + " is");
   const auto morph = [&](const char* attribute, std::vector<double>& values) {
     for (size_t t = 0; t < p.targets.size() && t < weights.size(); ++t) {
       const auto it = p.targets[t].find(attribute);
       if (weights[t] == 0.0 || it == p.targets[t].end()) continue;
+      if (std::strcmp(attribute, "POSITION") == 0)  // displacements: float, or KHR_mesh_quantization's integers
+        check_component(it->second, "morph target POSITION",
+                        {TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_COMPONENT_TYPE_BYTE, TINYGLTF_COMPONENT_TYPE_SHORT}, false);
       size_t count = 0;
       int c = 0;
       const std::string target = who + " morph target " + std::to_string(t) + " " + attribute;

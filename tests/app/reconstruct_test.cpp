@@ -509,7 +509,7 @@ TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
   ASSERT_TRUE(fs::exists(out / "samples/000001/metadata.json"));
   r = sh("evaluate " + out.string() + " -o " + (dir_ / "e_shrunk").string());
   ASSERT_EQ(r.code, 0) << r.output;
-  EXPECT_THAT(r.output, HasSubstr("1 sample folders (realisations included)\n"));
+  EXPECT_THAT(r.output, HasSubstr("1 sample folder (realisations included)\n"));
   EXPECT_EQ(nlohmann::json::parse(slurp(dir_ / "e_shrunk" / "metrics.json"))["samples"].size(), 1u);
   std::string meta = slurp(out / "samples/000000/metadata.json");
   const size_t at = meta.find("\"sample_hash\": \"");
@@ -519,7 +519,7 @@ TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
   r = sh("evaluate " + out.string() + " -o " + (dir_ / "e_changed").string());
   EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("samples/000000: index.jsonl lists it done with hash "));
-  EXPECT_THAT(r.output, HasSubstr(": the sample changed since the index was written"));
+  EXPECT_THAT(r.output, HasSubstr(": the sample was removed or changed since the index was written"));
   EXPECT_FALSE(fs::exists(dir_ / "e_changed"));
 
   // Two scenes: objects are counted by name across the samples (flat_target's "target" has id 0, as the

@@ -898,6 +898,21 @@ TEST_F(BrokenGltf, AnotherVersionOrAMeshWithoutPrimitives) {
   const int pos = t.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
   t.node({{"mesh", t.mesh(json::array({{{"attributes", {{"POSITION", pos}}}, {"targets", {{{"POSITION", 77}}}}}}), "Morph")}});
   EXPECT_THAT(error_of(t), HasSubstr("mesh 0 'Morph' primitive 0: morph target 0 POSITION: accessor 77 does not exist (the file has 1 accessors)"));
+  // a target's displacements as UNSIGNED_INT (read as integer metres, as POSITION was), and a COLOR_0 target
+  // at weight 1 (ignored without a word)
+  Gltf u;
+  const int base = u.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const int moved = u.accessor(u.view_of(std::vector<uint32_t>{0, 0, 1, 0, 0, 1, 0, 0, 1}), kUInt, "VEC3", 3);
+  u.node({{"mesh", u.mesh(json::array({{{"attributes", {{"POSITION", base}}}, {"targets", {{{"POSITION", moved}}}}}}), "Morph")}});
+  u.doc["meshes"][0]["weights"] = {1.0};
+  EXPECT_THAT(error_of(u), HasSubstr("mesh 0 'Morph' primitive 0: morph target POSITION accessor 1 has componentType UNSIGNED_INT"));
+  Gltf col;
+  const int p3 = col.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const int tint = col.accessor(col.view_of(std::vector<float>{0.1f, 0, 0, 0.1f, 0, 0, 0.1f, 0, 0}), kFloat, "VEC3", 3);
+  col.node({{"mesh", col.mesh(json::array({{{"attributes", {{"POSITION", p3}}}, {"targets", {{{"COLOR_0", tint}}}}}}), "Morph")}});
+  col.doc["meshes"][0]["weights"] = {1.0};
+  const Scene painted = spadgen::scenes::load_gltf(col.write(dir_.path(), "color_target"));
+  EXPECT_TRUE(has_warning(painted, "mesh 0 'Morph' primitive 0: morph target 0 COLOR_0 is not used by spadgen")) << testing::PrintToString(painted.warnings);
   Gltf e;
   e.node({{"mesh", e.mesh(json::array(), "Empty")}});
   msg = error_of(e);
