@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <iterator>
 #include <limits>
 
 #include "core/error.h"
@@ -48,14 +47,15 @@ ObjectLabelsTile object_labels(const SensorModel& sensor, const GroundTruthTile&
     const double* own = rates.data() + ri * K;
     const double peak = *std::max_element(own, own + K);
     if (!(peak > 0.0)) continue;
-    auto k = static_cast<size_t>(std::find_if(own, own + K, [&](double v) { return v >= kEdgeFraction * peak; }) - own);
+    const auto on_plateau = [&](size_t j) { return own[j] >= kEdgeFraction * peak; };
+    size_t k = 0;
+    while (!on_plateau(k)) ++k;  // the peak is on it
     if (k == 0) {
       // The sweep begins on the object's plateau: its rise lies before the first gate position (it was
       // labelled by a step the counts do not hold). Its falling edge instead, from the last position on the
       // plateau; none when the plateau runs to the end too (no edge in the sweep at all).
-      k = K - 1 - static_cast<size_t>(std::find_if(std::make_reverse_iterator(own + K), std::make_reverse_iterator(own),
-                                                    [&](double v) { return v >= kEdgeFraction * peak; }) -
-                                       std::make_reverse_iterator(own + K));
+      k = K - 1;
+      while (!on_plateau(k)) --k;
       if (k == K - 1) continue;
     }
     const double lambda = s.rate[k * n + i];

@@ -7,9 +7,10 @@
 // (SensorModel::return_lambda, with the crosstalk the same light fires through the neighbours). lambda(k)
 // is the pixel's full noise-free rate (detection_rate.npy). At k*, the first k with lambda_o(k) >= 0.95
 // max_k lambda_o(k) (just past the object's rising edge; when that is k = 0, the sweep beginning on the
-// object's plateau, the last such k, just before its falling edge, and no edge when that is K - 1), the object turns the expected counts of N frames
-// from N p0 to N p1, p1 = 1 - exp(-lambda(k*)), p0 = 1 - exp(-(lambda(k*) - lambda_o(k*))) (the difference
-// taken as 0 within what lambda_o is known to: n xt of it, and lambda's float rounding):
+// object's plateau, the last such k, just before its falling edge, and no edge when that is K - 1), the
+// object turns the expected counts of N frames from N p0 to N p1, p1 = 1 - exp(-lambda(k*)),
+// p0 = 1 - exp(-(lambda(k*) - lambda_o(k*))) (the difference taken as 0 within what lambda_o is known to:
+// n xt of it, and lambda's float rounding):
 //   edge_counts = N (exp(-(lambda(k*) - lambda_o(k*))) - exp(-lambda(k*))) = N (p1 - p0)
 //   edge_snr    = edge_counts / sqrt((N p1 (1 - p1) + N p0 (1 - p0)) / kEdgeGates)   (infinite where the
 //                 noise is 0 and the edge is not, 0 where both are)
