@@ -186,12 +186,12 @@ void check_source(const std::string& path, const std::map<std::string, std::stri
     return;
   }
   const nlohmann::json ours_all = source_fields(run);
-  const std::string made_from = made.is_object() ? made.value("run", std::string("?")) : std::string("?");
+  const std::string made_from = made.value("run", std::string("?"));
   std::string unchecked;  // what the file does not say, so was not compared
   for (const auto& [key, what] : {std::pair<std::string, std::string>{"scene_hash_fnv1a64", "scene (scene file and glTF hash)"},
                                   {"crop_in_sensor", "crop of the sensor"}}) {
     const nlohmann::json& ours = ours_all[key];
-    if (!made.is_object() || !made.contains(key) || made[key].is_null() || ours.is_null()) {
+    if (!made.contains(key) || made[key].is_null() || ours.is_null()) {
       unchecked += (unchecked.empty() ? "" : " and its ") + what;
       continue;
     }
