@@ -262,6 +262,19 @@ std::string dataset_plan(const DatasetOptions& options) {
 }
 
 namespace {
+// The index as a run leaves early (a signal, an error), best effort: the way it leaves is reported first.
+// Where the completed samples are listed: "index.jsonl lists them" when written here.
+std::string leave_index(const DatasetFolder& folder, datasets::RunPresence& presence) {
+  try {
+    return folder.write_index([&] { return inspect_all(folder, false); }, &presence)
+               ? "index.jsonl lists them"
+               : "the last run on the folder to end lists them in index.jsonl";
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "spadgen: dataset: the index was not updated: %s\n", e.what());
+    return "the next run lists them in index.jsonl";
+  }
+}
+
 // dataset_run's work once it is on the folder: the shard's samples, then the index when no other run is on it.
 void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, const datasets::Shard& shard,
                        const DatasetFolder& folder, datasets::RunPresence& presence) {
@@ -329,14 +342,7 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
   // SIGINT or SIGTERM (Slurm's time limit, scancel) stop the run; the samples published before stay (the
   // next run skips them), and the index lists them: best effort, the signal's message comes first.
   const auto stopped = [&](const std::string& where) {
-    std::string listed = "index.jsonl lists them";
-    try {
-      if (!folder.write_index([&] { return inspect_all(folder, false); }, &presence))
-        listed = "the last run on the folder to end lists them in index.jsonl";
-    } catch (const std::exception& e) {
-      std::fprintf(stderr, "spadgen: dataset: the index was not updated: %s\n", e.what());
-      listed = "the next run lists them in index.jsonl";
-    }
+    const std::string listed = leave_index(folder, presence);
     return Interrupted("interrupted by a signal: the dataset run stopped " + where + "; the " + std::to_string(generated) +
                        " samples it completed are kept (" + listed + "), and running it again goes on");
   };
@@ -479,13 +485,7 @@ void dataset_run(const DatasetOptions& options) {
     // Any other way out (a signal while the samples are checked, the disk check's refusal, an error): the
     // index is written as at the end when no other run is on the folder (another may have left it to this
     // one, which would leave it to no one).
-    if (presence->held()) {
-      try {
-        folder.write_index([&] { return inspect_all(folder, false); }, presence.get());
-      } catch (const std::exception& e) {
-        std::fprintf(stderr, "spadgen: dataset: the index was not updated: %s\n", e.what());
-      }
-    }
+    if (presence->held()) (void)leave_index(folder, *presence);
     throw;
   }
 }
