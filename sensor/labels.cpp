@@ -50,6 +50,10 @@ ObjectLabelsTile object_labels(const SensorModel& sensor, const GroundTruthTile&
     const auto on_plateau = [&](size_t j) { return own[j] >= kEdgeFraction * peak; };
     size_t k = 0;
     while (!on_plateau(k)) ++k;  // the peak is on it
+    // The gate positions the sweep holds on either side of the edge, at most kEdgeGates each: the
+    // object's side along its plateau, the other side to the sweep's end (a rise at k* = 3 has 3 positions
+    // before it to average, not 12).
+    size_t with = 0, other = 0;
     if (k == 0) {
       // The sweep begins on the object's plateau: its rise lies before the first gate position (it was
       // labelled by a step the counts do not hold). Its falling edge instead, from the last position on the
@@ -57,6 +61,11 @@ ObjectLabelsTile object_labels(const SensorModel& sensor, const GroundTruthTile&
       k = K - 1;
       while (!on_plateau(k)) --k;
       if (k == K - 1) continue;
+      while (with <= k && with < size_t(kEdgeGates) && on_plateau(k - with)) ++with;
+      other = std::min(K - 1 - k, size_t(kEdgeGates));
+    } else {
+      while (k + with < K && with < size_t(kEdgeGates) && on_plateau(k + with)) ++with;
+      other = std::min(k, size_t(kEdgeGates));
     }
     const double lambda = s.rate[k * n + i];
     // The rate without the object, never below 0, and 0 within what own[k] is known to: the neighbours'
@@ -67,7 +76,7 @@ ObjectLabelsTile object_labels(const SensorModel& sensor, const GroundTruthTile&
     if (without <= (sensor.crosstalk_share(returns[ri].x, returns[ri].y) + 0x1p-22) * own[k]) without = 0.0;
     const double p1 = -std::expm1(-lambda), p0 = -std::expm1(-without);
     const double edge = N * (std::exp(-without) - std::exp(-lambda));
-    const double noise = std::sqrt((N * p1 * (1.0 - p1) + N * p0 * (1.0 - p0)) / kEdgeGates);
+    const double noise = std::sqrt(N * p1 * (1.0 - p1) / double(with) + N * p0 * (1.0 - p0) / double(other));
     // no noise either side (counts certain to be 0 and N): the step is certain, infinitely above the noise
     const double snr = noise > 0.0 ? edge / noise : edge > 0.0 ? std::numeric_limits<double>::infinity() : 0.0;
     out.edge_counts[e] = static_cast<float>(edge);

@@ -12,11 +12,12 @@
 // p0 = 1 - exp(-(lambda(k*) - lambda_o(k*))) (the difference taken as 0 within what lambda_o is known to:
 // n xt of it, and lambda's float rounding):
 //   edge_counts = N (exp(-(lambda(k*) - lambda_o(k*))) - exp(-lambda(k*))) = N (p1 - p0)
-//   edge_snr    = edge_counts / sqrt((N p1 (1 - p1) + N p0 (1 - p0)) / kEdgeGates)   (infinite where the
+//   edge_snr    = edge_counts / sqrt(N p1 (1 - p1) / n1 + N p0 (1 - p0) / n0)   (infinite where the
 //                 noise is 0 and the edge is not, 0 where both are)
-// the step over the standard deviation of the difference of the mean counts of kEdgeGates gate positions
-// on either side of the edge, and detectable = edge_snr >= kDetectableSnr. An object without light in the
-// sweep has edge 0.
+// the step over the standard deviation of the difference of the mean counts of the gate positions on
+// either side of the edge, kEdgeGates of them or as many as the sweep holds: n1 along the object's plateau
+// from k*, n0 on the other side to the sweep's end; detectable = edge_snr >= kDetectableSnr. An object
+// without light in the sweep has edge 0.
 #pragma once
 #include "core/tile.h"
 #include "core/time_axis.h"
