@@ -60,6 +60,11 @@ struct GlossyStrip {
   // entering through it climbs one thickness, at least (Integrator::edge_entry).
   glm::dvec3 out{0.0};
   double offset = 0.0, per_reflection = 0.0;
+  // Its two triangles (GlossyPart indices, and their triangles in mesh `mesh`), for the base colour's texture
+  // and COLOR_0 where the laser's light enters through it.
+  int mesh = -1;
+  size_t part[2] = {0, 0};
+  uint32_t triangle[2] = {0, 0};
 };
 // The affine coordinates (s, t) of point p (projected on the plane) in o + s a + t b.
 glm::dvec2 strip_coordinates(const glm::dvec3& p, const glm::dvec3& o, const glm::dvec3& a, const glm::dvec3& b);

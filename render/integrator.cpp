@@ -243,6 +243,9 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
         // An edge of the plate: across its thickness, square to its faces.
         const GlossySlab* sl = slab >= 0 ? &slabs_[size_t(slab)] : nullptr;
         GlossyStrip st{o, lng, shrt, cr / area, area, mp.alpha};
+        st.mesh = int(m);
+        st.part[0] = part_of[t], st.part[1] = part_of[u];
+        st.triangle[0] = uint32_t(t), st.triangle[1] = uint32_t(u);
         if (sl != nullptr && std::fabs(glm::dot(st.n, sl->n)) < 1e-6 &&
             std::fabs(std::fabs(glm::dot(shrt, sl->n)) - (sl->hi - sl->lo)) <= 1e-6 * glm::length(lng)) {
           // Lit from outside: the laser in front of the edge's plane, its light refracted in climbing
@@ -691,10 +694,34 @@ void Integrator::connect_laser_edges(const NeeVertex& v, const LaserRay& lr, con
     cr.p = c;
     cr.ng = glm::vec3(e);
     cr.material = s.material;
-    cr.mp = shading_.material(s.material).point;
+    cr.mp = strip_material(st, c);
     cr.medium = -1;
     connect_laser_refracted(v, lr, ex, w, film, rays, std::sqrt(std::max(0.0, 1.0 - en.ce * en.ce)));  // its angle there
   }
+}
+
+// The material at point c of strip st (on its plane): the base colour's texture and COLOR_0 at c, from c's
+// barycentrics in whichever of the strip's two triangles holds it (the nearer one when rounding puts it
+// outside both).
+MaterialPoint Integrator::strip_material(const GlossyStrip& st, const glm::dvec3& c) const {
+  RayHit hit;
+  double best = std::numeric_limits<double>::infinity();
+  for (int i = 0; i < 2; ++i) {
+    const GlossyPart& g = parts_[st.part[i]];
+    const glm::dvec3 d = c - g.p0;
+    const double e11 = glm::dot(g.e1, g.e1), e12 = glm::dot(g.e1, g.e2), e22 = glm::dot(g.e2, g.e2);
+    const double d1 = glm::dot(d, g.e1), d2 = glm::dot(d, g.e2), den = e11 * e22 - e12 * e12;
+    const double u = (e22 * d1 - e12 * d2) / den, v = (e11 * d2 - e12 * d1) / den;
+    const double outside = std::max({0.0, -u, -v, u + v - 1.0});
+    if (!(outside < best)) continue;
+    best = outside;
+    const double uc = std::clamp(u, 0.0, 1.0), vc = std::clamp(v, 0.0, 1.0 - uc);
+    hit.mesh = uint32_t(st.mesh), hit.triangle = st.triangle[i], hit.u = float(uc), hit.v = float(vc);
+  }
+  Surface sf;
+  sf.mesh = st.mesh;
+  sf.material = slabs_[size_t(st.slab)].material;
+  return shading_.material_at(sf, hit);
 }
 
 // Without an ambient source (ambient_on_ false) a laser-only render skips the ambient sums altogether.

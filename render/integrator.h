@@ -279,6 +279,7 @@ class Integrator {
   // crossed the same edge).
   void connect_laser_edges(const NeeVertex& v, const LaserRay& lr, const Crossings& cx, double w,
                            const PixelFilm& film, RayCounts* rays) const;
+  MaterialPoint strip_material(const GlossyStrip& st, const glm::dvec3& c) const;
   void connect_laser(const NeeVertex& v, const LaserRay& lr, const FirstSegment* first, double w,
                      const PixelFilm& film, RayCounts* rays) const;
 

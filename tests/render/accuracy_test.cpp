@@ -415,6 +415,37 @@ TEST(Accuracy, GuidedDrawsKeepTheLightPipedThroughAPlatesEdge) {
   EXPECT_LT(var[1], 0.5 * var[0]) << var[0] << " " << var[1];
 }
 
+// The laser's light entering a plate through its edge is tinted by the plate's base colour there, COLOR_0
+// included: the pipe above with the plate painted 0.5 (COLOR_0, factor 1) renders as the plate of factor
+// 0.5 to float rounding, pixel by pixel (the edge's crossing took the factor alone: the painted plate's
+// piped light came out up to twice as bright).
+TEST(Accuracy, APlatesPaintTintsTheLaserLightEnteringThroughItsEdge) {
+  RenderStageConfig c = glossy_plate_config(16, 6e-3);
+  c.laser.offset_m = {0.03, 0, -0.9};
+  c.render.samples_per_pixel = 16;
+  c.render.max_bounces = 8;
+  const PixelRect rect{0, 0, 16, 16};
+  const TimeAxis axis{0.0, 10e-12, 0, 25e-9};
+  const auto render = [&](float factor, float paint) {
+    scenes::Scene s;
+    scenes::Material plate = test::glass(1.5f, 0.002f, 0.05f);
+    plate.transmission = 0.95f;
+    plate.base_color = glm::vec4(glm::vec3(factor), 1.0f);
+    test::add_box(s, {-1, -1, -0.452f}, {0.005f, 1, -0.45f}, add_material(s, plate));
+    if (paint >= 0.0f) s.meshes[0].colors0.assign(s.meshes[0].positions.size(), glm::vec3(paint));
+    add_quad(s, {-0.5f, 0, -0.4525f}, {0.5045f, 0, 0}, {0, 1, 0}, add_material(s, test::lambertian(0.0f)));
+    return Renderer(s, c).transient(rect, rect, axis);
+  };
+  const TransientTile painted = render(1.0f, 0.5f), plain = render(0.5f, -1.0f), white = render(1.0f, -1.0f);
+  double total = 0.0, total_white = 0.0;
+  for (size_t i = 0; i < 256; ++i) {
+    EXPECT_NEAR(painted.laser_total[i], plain.laser_total[i], 1e-5 * plain.laser_total[i]) << i;
+    total += plain.laser_total[i], total_white += white.laser_total[i];
+  }
+  // the piped light crosses the painted plate: the white plate's is brighter
+  EXPECT_GT(total_white, 1.5 * total) << total << " " << total_white;
+}
+
 // Inside a plate of index n a path's throughput holds the radiance's 1 / n^2, which it regains on leaving:
 // Russian roulette sees the throughput times eta_scale (pbrt's etaScale), so a path through the plate is
 // not stopped for it. Over 16 x 16 pixels that see the wall through a rough plate (ior 1.5), roulette from
