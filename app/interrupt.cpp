@@ -19,12 +19,14 @@ InterruptGuard::InterruptGuard() {
   interrupt_flag().store(false);
   previous_int_ = std::signal(SIGINT, on_interrupt);
   previous_term_ = std::signal(SIGTERM, on_interrupt);
+  previous_hup_ = std::signal(SIGHUP, on_interrupt);  // the terminal closed: stop as for SIGTERM
 }
 
 InterruptGuard::~InterruptGuard() {
   if (--guards > 0) return;
   std::signal(SIGINT, previous_int_);
   std::signal(SIGTERM, previous_term_);
+  std::signal(SIGHUP, previous_hup_);
 }
 
 void InterruptGuard::check() { throw_if_interrupted(); }

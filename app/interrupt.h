@@ -1,4 +1,4 @@
-// SIGINT / SIGTERM during a run: every long loop stops (it polls spadgen::interrupt_flag), the staging
+// SIGINT / SIGTERM / SIGHUP during a run: every long loop stops (it polls spadgen::interrupt_flag), the staging
 // folder is removed, nothing is published, and the program exits with code 2.
 #pragma once
 #include <csignal>
@@ -19,6 +19,7 @@ class InterruptGuard {
  private:
   void (*previous_int_)(int) = SIG_DFL;
   void (*previous_term_)(int) = SIG_DFL;
+  void (*previous_hup_)(int) = SIG_DFL;
 };
 
 }  // namespace spadgen::app

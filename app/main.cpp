@@ -59,6 +59,9 @@ int main(int argc, char** argv) {
   // A file-size limit (ulimit -f) is a write's error (EFBIG, naming the file), not a signal that kills the
   // process without a word.
   std::signal(SIGXFSZ, SIG_IGN);
+  // Nor is a closed pipe on stderr or stdout (`spadgen run ... 2>&1 | head -1`): the run goes on, its messages
+  // lost, instead of dying mid-write.
+  std::signal(SIGPIPE, SIG_IGN);
   // Open files up to the hard limit (a `sense --repeats` holds a few per realisation until it commits).
   if (rlimit lim{}; getrlimit(RLIMIT_NOFILE, &lim) == 0 && lim.rlim_cur < lim.rlim_max) {
     lim.rlim_cur = lim.rlim_max;

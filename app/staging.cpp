@@ -320,9 +320,9 @@ bool holds_no_file(const fs::path& dir) {
 
 // A run replaces OUT as a whole, so OUT may hold only what an earlier run wrote there, and what
 // reconstruct and evaluate derived from it there.
-void Staging::check_owned() const {
+std::vector<std::string> Staging::foreign_entries(const fs::path& folder_out) const {
   std::error_code ec;
-  if (!fs::is_directory(out_, ec)) return;
+  if (!fs::is_directory(folder_out, ec)) return {};
   Listed listed;  // another command's folder holds its own files only (a run folder given to it is not its own)
   // The run folders a sense --repeats writes (repeat_NNN, with their metadata.json): each holds the files
   // its own metadata.json lists. Any other folder inside, a run's or not, is someone else's.
@@ -330,9 +330,9 @@ void Staging::check_owned() const {
   if (of_runs_ || owned_.empty()) {
     // A run and a folder of runs (sense --repeats) replace each other: a run folder's listed files, or a
     // folder of runs' run folders, are spadgen's either way (each refused the other as foreign files).
-    if (fs::is_regular_file(out_ / "metadata.json", ec)) listed = listed_files(out_);
+    if (fs::is_regular_file(folder_out / "metadata.json", ec)) listed = listed_files(folder_out);
     else
-      for (const auto& e : fs::directory_iterator(out_)) {
+      for (const auto& e : fs::directory_iterator(folder_out)) {
         const std::string n = e.path().filename().string();
         if (n.size() > 7 && starts_with(n, "repeat_") && std::all_of(n.begin() + 7, n.end(), [](char c) { return c >= '0' && c <= '9'; }) &&
             e.is_directory(ec) && !e.is_symlink(ec) && fs::is_regular_file(e.path() / "metadata.json", ec))
@@ -350,7 +350,7 @@ void Staging::check_owned() const {
       folders.pop_back();
       for (const auto& e : fs::directory_iterator(folder)) {
         const std::string rel = e.path().lexically_relative(root).string();
-        const bool top = folder == root, out = root == out_;
+        const bool top = folder == root, out = root == folder_out;
         // (derived outputs: reconstruct's and evaluate's, and an interrupted evaluate's staging folder and lock)
         if (top && (is_derived_output(rel) || starts_with(rel, ".evaluation.spadgen-") || (out && starts_with(rel, kOldStylePrefix))))
           continue;
@@ -372,20 +372,35 @@ void Staging::check_owned() const {
         const bool entry = of_root.entries.count(rel) > 0;
         if (entry && (!dir || rel.ends_with(".zarr"))) continue;  // a listed file, or a Zarr store with all in it
         if (dir && (entry || of_root.parents.count(rel))) folders.push_back(e.path());
-        else foreign.push_back(e.path().lexically_relative(out_).string() + (dir ? "/" : ""));
+        else foreign.push_back(e.path().lexically_relative(folder_out).string() + (dir ? "/" : ""));
       }
     }
   };
-  walk(out_, listed, walk);
-  if (foreign.empty()) return;
+  walk(folder_out, listed, walk);
+  return foreign;
+}
+
+// A list of at most five of them, for a message.
+std::string Staging::foreign_list(const std::vector<std::string>& foreign) {
   std::string list;
   for (size_t i = 0; i < foreign.size() && i < 5; ++i) list += (i ? ", " : "") + foreign[i];
   if (foreign.size() > 5) list += ", ...";
+  return list;
+}
+
+void Staging::check_owned(bool publishing) const {
+  const std::vector<std::string> foreign = foreign_entries(out_);
+  if (foreign.empty()) return;
+  const std::string list = foreign_list(foreign);
   std::string known = "not listed in its metadata.json";
   if (!owned_.empty()) {
     known = "expected only ";
     for (size_t i = 0; i < owned_.size(); ++i) known += (i == 0 ? "" : i + 1 == owned_.size() ? " and " : ", ") + owned_[i];
   }
+  if (publishing)
+    throw Error("the output folder " + out_.string() + " now holds files that spadgen did not write there, put there " +
+                "while " + what_ + " ran (" + list + "; " + known + "); " + what_ + " replaces the whole folder, so " +
+                "nothing was published and they are as they were: move them and run again, or choose another folder (-o)");
   throw Error("the output folder " + out_.string() + " holds files that spadgen did not write there (" + list + "; " +
               known + "); " + what_ + " replaces the whole folder, so it does not write into one with other files: "
               "move them, or choose another folder (-o)");
@@ -396,6 +411,10 @@ void Staging::publish(const std::vector<std::string>& files) {
   for (const std::string& f : files)  // files, and the folders of Zarr stores
     if (!fs::is_regular_file(dir_ / f) && !fs::is_directory(dir_ / f))
       throw std::logic_error("publish: " + f + " was not written to the staging folder");
+  // A signal that arrived after the last long loop (the stacks' fsyncs take seconds) still stops the run.
+  throw_if_interrupted();
+  // Files put into the output folder while the run ran would go with the earlier set.
+  check_owned(true);
   // Subfolders nothing was written into (no previews, no light/) do not go out.
   prune_subfolders();
   sync_dir(dir_);
@@ -438,8 +457,21 @@ void Staging::publish(const std::vector<std::string>& files) {
     }
   }
   sync_dir(parent_);
-  // The new set is in place; the earlier one goes. If that fails, the next run removes it.
-  if (!earlier.empty() && step("remove old") == 0) fs::remove_all(earlier, ec);
+  if (earlier.empty()) return;
+  // The new set is in place; the earlier one goes, unless a file was put into the output folder between
+  // the check above and the swap: then it is kept, in a visible folder beside it that no run removes.
+  if (const std::vector<std::string> foreign = foreign_entries(earlier); !foreign.empty()) {
+    const fs::path keep = parent_ / (name_ + ".spadgen-earlier-" + pid_text());
+    const bool kept = ::rename(earlier.c_str(), keep.c_str()) == 0;
+    std::fprintf(stderr, "spadgen: warning: files not spadgen's were put into %s as %s published its outputs there (%s): "
+                 "the folder's earlier contents, with them, are in %s\n", out_.c_str(), what_.c_str(),
+                 foreign_list(foreign).c_str(), (kept ? keep : earlier).c_str());
+    return;
+  }
+  // If that fails, the next run into the folder removes it again.
+  if (step("remove old") == 0 && (fs::remove_all(earlier, ec), ec))
+    std::fprintf(stderr, "spadgen: warning: the earlier contents of %s, kept in %s, could not be removed (%s); the next run "
+                 "into the folder tries again\n", out_.c_str(), earlier.c_str(), ec.message().c_str());
 }
 
 }  // namespace spadgen::app

@@ -66,7 +66,11 @@ class Staging {
   void unlock();
   void recover();
   void init(const std::filesystem::path& out);
-  void check_owned() const;
+  // Throws spadgen::Error naming foreign_entries(out_), if any (publishing: put there during the run).
+  void check_owned(bool publishing = false) const;
+  // The entries of `folder` (the output folder, or its earlier set once exchanged) spadgen did not write.
+  std::vector<std::string> foreign_entries(const std::filesystem::path& folder) const;
+  static std::string foreign_list(const std::vector<std::string>& foreign);
   void prune_subfolders() const;  // the subfolders nothing was written into go; the others are made durable
 
   std::filesystem::path out_, parent_, dir_, lock_path_;

@@ -11,6 +11,7 @@
 #include <cstring>
 
 #include <algorithm>
+#include <charconv>
 #include <atomic>
 #include <limits>
 #include <type_traits>
@@ -448,17 +449,24 @@ NpyReader::NpyReader(const std::string& path) : path_(path) {
   if (!found) throw Error(read_error(path, "dtype " + d + " is not one spadgen writes (<f4, <f8, |u1, <u2, <i4, <i8)"));
   if (dict_value(dict, "fortran_order", path) != "False") throw Error(read_error(path, "Fortran order is not supported"));
   const std::string s = dict_value(dict, "shape", path);
+  // (d0, d1, ...) of non-negative integers, a trailing comma allowed: "(5,)", "()".
+  const auto malformed = [&] { return Error(read_error(path, "malformed shape " + s + ", expected (d0, d1, ...) of integers >= 0")); };
+  if (s.size() < 2 || s.front() != '(' || s.back() != ')') throw malformed();
   int64_t n = 1;
-  for (size_t i = 1; i + 1 < s.size();) {
-    while (i + 1 < s.size() && (s[i] == ' ' || s[i] == ',')) ++i;
-    if (i + 1 >= s.size()) break;
-    size_t used = 0;
-    const long long v = std::stoll(s.substr(i), &used);
-    if (used == 0 || v < 0) throw Error(read_error(path, "malformed shape " + s));
+  const size_t end = s.size() - 1;
+  for (size_t i = 1;;) {
+    while (i < end && s[i] == ' ') ++i;
+    if (i == end) break;
+    int64_t v = 0;
+    const auto [next, ec] = std::from_chars(s.data() + i, s.data() + end, v);
+    if (ec == std::errc::result_out_of_range) throw Error(read_error(path, "shape " + s + " too large"));
+    if (ec != std::errc() || v < 0) throw malformed();
     shape_.push_back(v);
     if (v != 0 && n > std::numeric_limits<int64_t>::max() / v) throw Error(read_error(path, "shape " + s + " too large"));
     n *= v;
-    i += used;
+    i = size_t(next - s.data());
+    while (i < end && s[i] == ' ') ++i;
+    if (i < end && s[i++] != ',') throw malformed();
   }
   elements_ = n;
   const int64_t eb = NpyWriter::element_bytes(dtype_);

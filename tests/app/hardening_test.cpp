@@ -281,6 +281,20 @@ TEST_F(Hardening, ASignalStopsARunInsideItsOnlyTileAndExitsWithCode2) {
   EXPECT_FALSE(fs::exists(dir_ / "out"));
 }
 
+// A closed pipe on stderr (`spadgen run ... 2>&1 | head -c 1`) does not end a run: its progress lines are
+// lost, its files published (SIGPIPE killed it mid-run, exit 141, leaving its staging folder and lock).
+TEST_F(Hardening, AClosedPipeOnStderrDoesNotStopARun) {
+  const fs::path out = dir_ / "piped", rc = dir_ / "rc";
+  const Result r = shell("(" + bin() + " run " + kScenes + "flat_target.json --set camera.crop=[0,0,256,64] -o " + out.string() +
+                         "; echo $? > " + rc.string() + ") 2>&1 | head -c 1");
+  EXPECT_EQ(r.output, "s");
+  std::ifstream in(rc);
+  int code = -1;
+  in >> code;
+  EXPECT_EQ(code, 0);
+  EXPECT_TRUE(fs::exists(out / "metadata.json"));
+}
+
 // ------------------------------------------------------------------------------------------------
 // Errors in spadgen's own words, documented exit codes, -q
 
@@ -633,6 +647,8 @@ TEST(InterruptGuards, NestedGuardsKeepTheSignalAndTheHandler) {
   {
     InterruptGuard next;  // a new outermost guard starts without the earlier signal
     EXPECT_NO_THROW(InterruptGuard::check());
+    std::raise(SIGHUP);  // the terminal closed: caught as SIGTERM is (its default action ended the process)
+    EXPECT_THROW(InterruptGuard::check(), spadgen::Interrupted);
   }
   EXPECT_EQ(std::signal(SIGTERM, SIG_DFL), SIG_DFL) << "the handler was not handed back";
 }

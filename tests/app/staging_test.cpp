@@ -258,6 +258,67 @@ TEST_F(StagingTest, AFolderWithFilesSpadgenDidNotWriteIsNotReplaced) {
   EXPECT_EQ(slurp(out_ / "a" / "b" / "data.bin"), "x");
 }
 
+// The folder is checked again as the run publishes: a file put there while the run ran (into the earlier
+// set, or into a folder that did not exist when the run began) stops the publish, the file as it was (the
+// swap removed it with the earlier set); one put there after that check, as the swap happens, is kept with
+// the earlier set in a visible folder beside it. A signal that arrives once the files are written stops the
+// publish too (it was published, exit 0).
+TEST_F(StagingTest, FilesPutIntoTheFolderWhileTheRunRanAreNotRemoved) {
+  write_old();
+  const auto publish_after = [&](const std::function<void()>& meanwhile, const Staging::Hook& hook = nullptr) {
+    std::string error;
+    try {
+      Staging s(out_, hook);
+      const auto files = write_set([&](const std::string& f) { return s.path(f); }, "new", kNewFiles);
+      meanwhile();
+      s.publish(files);
+    } catch (const spadgen::Error& e) {
+      error = e.what();
+    }
+    return error;
+  };
+  std::string error = publish_after([&] { std::ofstream(out_ / "analysis.txt") << "mine"; });
+  EXPECT_THAT(error, HasSubstr("now holds files that spadgen did not write there, put there while a run ran (analysis.txt;"));
+  EXPECT_THAT(error, HasSubstr("nothing was published"));
+  EXPECT_EQ(slurp(out_ / "analysis.txt"), "mine");
+  EXPECT_EQ(slurp(out_ / "counts.npy"), "old:counts.npy");
+  expect_no_leftovers();
+  fs::remove_all(out_);
+  error = publish_after([&] {
+    fs::create_directories(out_);
+    std::ofstream(out_ / "thesis.tex") << "draft";
+  });
+  EXPECT_THAT(error, HasSubstr("(thesis.tex;"));
+  EXPECT_EQ(slurp(out_ / "thesis.tex"), "draft");
+  expect_no_leftovers();
+  // Between the check and the swap.
+  fs::remove_all(out_);
+  write_old();
+  error = publish_after([] {}, [&](const std::string& step) {
+    if (step == "exchange") std::ofstream(out_ / "late.txt") << "late";
+    return 0;
+  });
+  EXPECT_EQ(error, "");
+  EXPECT_EQ(which_set(out_), "new");
+  const fs::path kept = dir_ / ("out.spadgen-earlier-" + std::to_string(::getpid()));
+  EXPECT_EQ(slurp(kept / "late.txt"), "late");
+  EXPECT_EQ(slurp(kept / "counts.npy"), "old:counts.npy");
+  // A signal once every file is written.
+  fs::remove_all(kept);
+  fs::remove_all(out_);
+  write_old();
+  try {
+    Staging s(out_);
+    const auto files = write_set([&](const std::string& f) { return s.path(f); }, "new", kNewFiles);
+    spadgen::interrupt_flag().store(true);
+    EXPECT_THROW(s.publish(files), spadgen::Interrupted);
+  } catch (...) {
+  }
+  spadgen::interrupt_flag().store(false);
+  EXPECT_EQ(which_set(out_), "old");
+  expect_no_leftovers();
+}
+
 // A Zarr store (a folder ending .zarr that metadata.json lists) is the run's with everything in it, so a
 // new run replaces it; a listed folder of another name is looked into, and files beside a store are not
 // the run's.

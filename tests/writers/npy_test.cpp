@@ -102,6 +102,37 @@ TEST(NpyWriter, ZeroSizedDimensions) {
   EXPECT_NE(bytes.find("'shape': (0, 4, 5)"), std::string::npos);
 }
 
+// A shape the header spells wrongly is an error naming the file (std::stoll's exception escaped as an
+// internal error: "stoll"); spellings numpy writes are read.
+TEST(NpyReader, AMalformedShapeIsAnErrorNamingTheFile) {
+  TempDir dir;
+  {
+    NpyWriter w(dir.file("a.npy"), Dtype::F32, {2, 3});
+    w.commit();
+  }
+  const std::string good = read_bytes(dir.file("a.npy"));
+  const size_t at = good.find("(2, 3)");
+  ASSERT_NE(at, std::string::npos);
+  const auto with_shape = [&](const std::string& shape) {  // same length: the header's padding is kept
+    std::string bytes = good;
+    bytes.replace(at, 6, shape);
+    std::ofstream(dir.file("b.npy"), std::ios::binary) << bytes;
+    return dir.file("b.npy");
+  };
+  for (const char* bad : {"(a, 3)", "(2; 3)", "(2, 3 ", "(-2, 3)", "(2 3) "}) {
+    const std::string shape = std::string(bad).substr(0, 6);
+    try {
+      NpyReader r(with_shape(shape));
+      ADD_FAILURE() << shape << " was read";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("b.npy"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("shape"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_EQ(NpyReader(with_shape("(2,3) ")).shape(), (std::vector<int64_t>{2, 3}));
+  EXPECT_EQ(NpyReader(with_shape("(6,)  ")).shape(), (std::vector<int64_t>{6}));
+}
+
 TEST(NpyWriter, RejectsWritesOutsideTheArrayAndAfterCommit) {
   TempDir dir;
   NpyWriter w(dir.file("e.npy"), Dtype::U8, {2, 4, 8});
