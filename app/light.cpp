@@ -105,6 +105,8 @@ LightWriter::LightWriter(const PixelRect& region, const TimeAxis& axis, const St
   spill_fd_ = ::open(spill_path_.c_str(), O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
   if (spill_fd_ < 0) writers::detail::throw_errno("cannot create", spill_path_, errno);
   ::unlink(spill_path_.c_str());
+  // Messages name what it is for (a full disk said only ".../.light-spill").
+  spill_path_ = "the transients held for outputs.light (an unlinked temporary file in " + staging.path("") + ")";
 }
 
 LightWriter::~LightWriter() {

@@ -62,7 +62,7 @@ class LightWriter {
   const Staging& staging_;
   Storage storage_;
   nlohmann::json storage_json_ = nlohmann::json::object();
-  std::string spill_path_;
+  std::string spill_path_;  // once unlinked: what it is, for messages
   int spill_fd_ = -1;
   std::atomic<int64_t> spill_elements_{0};
   std::vector<std::atomic<char>> claimed_;

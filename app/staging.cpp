@@ -162,9 +162,14 @@ void Staging::init(const fs::path& out) {
   }
   if (fs::exists(out_, ec) && !fs::is_directory(out_, ec))
     throw cannot("it exists and is not a folder; expected a folder that exists or can be created");
-  if (fs::is_symlink(fs::symlink_status(out_, ec)))  // a link to a folder was resolved above: this one leads nowhere
+  if (fs::is_symlink(fs::symlink_status(out_, ec))) {  // a link to a folder was resolved above: this one leads nowhere
+    struct stat st{};
+    if (::stat(out_.c_str(), &st) != 0 && errno == ELOOP)
+      throw cannot("it is a loop of symbolic links (" + out_.string() + " -> " + fs::read_symlink(out_, ec).string() +
+                   " -> ...); expected a folder that exists or can be created");
     throw cannot("it is a symbolic link to " + fs::read_symlink(out_, ec).string() +
                  ", which does not exist; expected a folder that exists or can be created");
+  }
   if (fs::is_directory(out_, ec) && is_mount_point(out_))
     throw cannot("it is a mount point; " + what_ + " replaces the output folder as a whole, renaming a new folder into its " +
                  "place, which cannot be done to a mount point, so name a folder inside it (" + (out_ / "run").string() + ")");

@@ -397,6 +397,15 @@ TEST_F(StagingTest, ALinkThatLeadsNowhereIsRefusedUpFront) {
   }
   EXPECT_TRUE(fs::is_symlink(fs::symlink_status(dir_ / "dangling")));
   EXPECT_FALSE(fs::exists(dir_ / "nowhere"));
+  // two links naming each other: a loop, not a link to a folder that "does not exist"
+  fs::create_symlink("loopb", dir_ / "loopa");
+  fs::create_symlink("loopa", dir_ / "loopb");
+  try {
+    Staging s(dir_ / "loopa");
+    ADD_FAILURE() << "a loop of links was accepted";
+  } catch (const spadgen::Error& e) {
+    EXPECT_THAT(std::string(e.what()), HasSubstr("it is a loop of symbolic links (" + (dir_ / "loopa").string() + " -> loopb -> ...)"));
+  }
 }
 
 }  // namespace
