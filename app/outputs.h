@@ -4,6 +4,7 @@
 // acquisition mode has are those the mode declares (sensor::Acquisition::outputs()).
 #pragma once
 #include <algorithm>
+#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <set>
@@ -113,6 +114,7 @@ class Outputs {
   std::unique_ptr<Images> images_;
   std::unique_ptr<Stacks> stacks_;
   std::unique_ptr<ProfileProbe> probe_;
+  std::atomic<float> max_rate_{0.0f};  // the largest detection rate of the sensor's tiles (SensorTile::max_rate)
 };
 
 }  // namespace spadgen::app

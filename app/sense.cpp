@@ -589,6 +589,11 @@ std::vector<RunResult> sense(const SenseOptions& options) {
 
     RunRecord record;
     outputs[r]->report(record);
+    if (r == 0)  // the realisations share their rates
+      for (std::string& w : bright_gate_warnings(sensor, record.max_rate)) {
+        std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
+        scene_warnings.push_back(std::move(w));
+      }
     // The containers of the files linked from the run or from the first realisation, as recorded there.
     const json& run_storage = meta.contains("/storage/files"_json_pointer) ? meta.at("/storage/files"_json_pointer) : json::object();
     for (const std::string& f : files) {

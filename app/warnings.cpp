@@ -113,8 +113,25 @@ std::vector<std::string> sensor_warnings(const sensor::SensorModel& sensor) {
           " of the fine grid; grid_ps " + g(gate.at("grid_ps").get<double>()) + ": the grid within about " + percent(grid) +
           " of the exact gate), above " + percent(kWarnGateError) + ": the expected counts of " +
           std::to_string(sensor.frames_per_k()) + " frames may move by up to about " + g(error * sensor.frames_per_k()) +
-          " counts; more knots or a finer grid (docs/accuracy.md, \"The sensor model's knobs\")");
+          " counts per avalanche per frame of a pixel's rate with the gate open; more knots or a finer grid "
+          "(docs/accuracy.md, \"The sensor model's knobs\")");
   return w;
+}
+
+std::vector<std::string> bright_gate_warnings(const sensor::SensorModel& sensor, double max_rate) {
+  const nlohmann::json d = sensor.describe();
+  if (!d.contains("gate") || !(max_rate > 1.0)) return {};
+  const nlohmann::json& gate = d.at("gate");
+  const double error = gate.at("knot_max_error").get<double>() + gate.at("grid_max_error").get<double>();
+  if (!(error * max_rate > kWarnGateError)) return {};
+  const double N = sensor.frames_per_k();
+  return {std::string(kGateWarning) + " to within about " + percent(error) + " of its open value (knots_per_edge " +
+          std::to_string(gate.at("knots_per_edge").get<int>()) + ", grid_ps " + g(gate.at("grid_ps").get<double>()) +
+          "), and that error is of the open gate's rate: the brightest pixel's, " + g(max_rate) +
+          " avalanches per frame, makes it up to about " + g(error * max_rate) + " per frame where the gate's edges let "
+          "little through, so expected counts of " + std::to_string(sensor.frames_per_k()) + " frames there may be off by up "
+          "to about " + g(N * -std::expm1(-error * max_rate)) + " counts (the returns' edges widen); more knots "
+          "(sensor.gate.knots_per_edge) or a finer grid (docs/accuracy.md, \"The sensor model's knobs\")"};
 }
 
 std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img, const RunRecord& r, const render::Camera& camera) {

@@ -4,6 +4,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <bit>
 #include <cmath>
 #include <memory>
@@ -363,7 +364,9 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
     } else {
       out.expected = outs.front().expected;
       out.rate = outs.front().rate;
+      out.max_rate = outs.front().max_rate;
     }
+    std::atomic<float> max_rate{0.0f};
     out.counts.assign(n * Ks, 0);
     const size_t bpr = static_cast<size_t>((rect.width + 7) / 8);
     if (frames) {
@@ -390,6 +393,7 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
       const size_t rw = static_cast<size_t>(rect.width);
       std::vector<float> row_exp(rw * Ks), row_rate(keep_rate ? rw * Ks : 0);
       std::vector<uint16_t> row_cnt(frames ? 0 : rw * Ks + 1);  // + 1: transpose_rows reads one beyond
+      double rows_max = 0.0;
       for (int y = rows.begin(); y < rows.end(); ++y) {
         throw_if_interrupted();
         for (int x = rect.x0; x < rect.x1(); ++x) {
@@ -416,6 +420,7 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
             l = eff.data();
           }
           if (keep_rate) std::transform(l, l + Ks, row_rate.data() + xi * Ks, [](double v) { return static_cast<float>(v); });
+          for (size_t k = 0; k < Ks; ++k) rows_max = std::max(rows_max, l[k]);
           if (cached) std::copy(l, l + Ks, cached);
           if (!frames) {
             if (m.table) binomial_counts(l, Ks, counts_key, pixel_index(x, y), *m.table, s);
@@ -439,7 +444,10 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
         if (first && keep_rate) transpose_rows(row_rate.data(), rw, Ks, out.rate.data() + o0, n);
         if (!frames) transpose_rows(row_cnt.data(), rw, Ks, out.counts.data() + o0, n);
       }
+      for (float seen = max_rate.load(); float(rows_max) > seen && !max_rate.compare_exchange_weak(seen, float(rows_max));) {
+      }
     });
+    if (first) out.max_rate = max_rate.load();
 
     if (frames) {
       // Per gate position: every region pixel's own avalanches (its keyed stream, identical in whichever tile

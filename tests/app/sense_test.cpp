@@ -430,6 +430,43 @@ TEST_F(App, ALaserThePixelsCannotDetectIsWarnedAbout) {
   EXPECT_TRUE(slurp(dir_ / "blind/detection_rate.npy") == slurp(dir_ / "dark/detection_rate.npy"));
 }
 
+// The gate's tabulation error is of the open gate's rate: where a bright return's pixel sees little through
+// the gate's edge, its counts are off by N x error x lambda, not N x error (the flat target at 10 cm, lambda
+// about 16: up to 0.9 of 255 counts against 64 x more knots, while the warning before the render, which
+// knows no rate, stays silent below 0.2 % and promised 0.06). The run warns with the brightest rate and a
+// bound the counts keep; at 1 m (lambda about 0.2) it does not, nor does a sense with 1024 knots.
+TEST_F(App, ABrightReturnsGateTabulationErrorIsWarnedAboutWithItsRate) {
+  const std::string base = kScenes + "flat_target.json -q --set camera.crop=[504,244,8,8] --set render.samples_per_pixel=4 "
+                           "--set outputs.light=true --set outputs.detection_rate=true --set outputs.expected_counts=true";
+  Result r = sh("run " + base + " --set camera.position_m=[0,0,0.1] -o " + (dir_ / "near").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::string key = "the brightest pixel's, ";
+  const size_t at = r.output.find(key);
+  ASSERT_NE(at, std::string::npos) << r.output;
+  const double lambda = std::stod(r.output.substr(at + key.size()));
+  const std::vector<double> rate = values(read_npy(dir_ / "near/detection_rate.npy"));
+  const double max_rate = *std::max_element(rate.begin(), rate.end());
+  EXPECT_NEAR(lambda, max_rate, 1e-3 * max_rate);  // printed to 4 digits
+  const std::string bound_key = "may be off by up to about ";
+  const size_t b = r.output.find(bound_key);
+  ASSERT_NE(b, std::string::npos);
+  const double bound = std::stod(r.output.substr(b + bound_key.size()));
+  // The same light through a finely tabulated gate.
+  r = sh("sense " + (dir_ / "near").string() + " -q --set sensor.gate.knots_per_edge=4096 -o " + (dir_ / "fine").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, Not(HasSubstr("sensor.gate")));
+  const std::vector<double> e = values(read_npy(dir_ / "near/expected_counts.npy"));
+  const std::vector<double> f = values(read_npy(dir_ / "fine/expected_counts.npy"));
+  ASSERT_EQ(e.size(), f.size());
+  double worst = 0.0;
+  for (size_t i = 0; i < e.size(); ++i) worst = std::max(worst, std::fabs(e[i] - f[i]));
+  EXPECT_LE(worst, bound) << "the warning's bound";
+  EXPECT_GE(worst, 0.25 * bound) << "the warning's bound is far above what the counts move";
+  r = sh("run " + base + " -o " + (dir_ / "far").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, Not(HasSubstr("sensor.gate")));
+}
+
 // A coarsely tabulated gate (sensor.gate.knots_per_edge, grid_ps) is warned about, by run, info and sense,
 // each for its own sensor: a sense with the default gate drops the run's warning, one with a coarse grid
 // gives its own.
