@@ -73,8 +73,13 @@ Estimate estimate(const RunConfig& c, int repeats, int threads) {
               double(run_disk) * kSecondsPerByte;
   // Repeats: the sensor stage again from the saved light, and its noise-dependent files (about the run's
   // files less the ground truth and the light, which are linked).
-  e.disk = plan.disk_kept() * repeats;
-  e.disk_at_least = plan.disk_kept_at_least() * repeats;
+  // Each further realisation writes the noise's files and links the rest (ResourcePlan::Part::noise_free):
+  // the whole sample again for each overcounted a sample of two realisations by 1.9 times.
+  int64_t again = 0, again_at_least = 0;
+  for (const ResourcePlan::Part& p : plan.disk)
+    if (!p.freed_at_end && !p.noise_free) again += p.bytes, again_at_least += p.compressed ? p.bytes / kCompressionBound : p.bytes;
+  e.disk = plan.disk_kept() + (repeats - 1) * again;
+  e.disk_at_least = plan.disk_kept_at_least() + (repeats - 1) * again_at_least;
   e.disk_peak = run_disk - plan.disk_kept();
   e.seconds += (repeats - 1) * (kSecondsPerRun + sensor_seconds + double(run_disk) * kSecondsPerByte);
   const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
@@ -343,8 +348,10 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
   // next run skips them), and the index lists them: best effort, the signal's message comes first.
   const auto stopped = [&](const std::string& where) {
     const std::string listed = leave_index(folder, presence);
-    return Interrupted("interrupted by a signal: the dataset run stopped " + where + "; the " + std::to_string(generated) +
-                       " samples it completed are kept (" + listed + "), and running it again goes on");
+    const std::string kept = generated == 0 ? "it completed no sample" :
+                             generated == 1 ? "the sample it completed is kept (" + listed + ")" :
+                             "the " + std::to_string(generated) + " samples it completed are kept (" + listed + ")";
+    return Interrupted("interrupted by a signal: the dataset run stopped " + where + "; " + kept + ", and running it again goes on");
   };
   std::deque<size_t> pending;
   for (size_t t = 0; t < todo.size(); ++t) pending.push_back(t);

@@ -662,7 +662,7 @@ void Outputs::put_labels(const ObjectLabelsTile& l) { images_->put_labels(l); }
 bool Outputs::labels() const { return images_->labels(); }
 
 void Outputs::put(const TransientTile& t, const sensor::SensorMapsTile& m, SensorTile&& s) {
-  for (float v = max_rate_.load(); s.max_rate > v && !max_rate_.compare_exchange_weak(v, s.max_rate);) {
+  for (float v = rate_swing_.load(); s.rate_swing > v && !rate_swing_.compare_exchange_weak(v, s.rate_swing);) {
   }
   images_->put(t, m, s);
   probe_->put(s);
@@ -690,7 +690,7 @@ void Outputs::report(RunRecord& r) const {
   r.transient_crop = stacks_->transient_crop();
   r.profile_pixels = probe_->pixels();
   r.storage = stacks_->storage();
-  r.max_rate = max_rate_.load();
+  r.rate_swing = rate_swing_.load();
 }
 
 }  // namespace spadgen::app

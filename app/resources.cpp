@@ -171,9 +171,15 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
 
   // A Zarr store is at most its data uncompressed (and a few bytes a chunk).
   for (const StackLayout& s : stacks)
-    if (s.written) plan.disk.push_back({s.file + (s.chunks.empty() ? "" : " (uncompressed)"), s.bytes(), false, s.file, !s.chunks.empty()});
+    if (s.written) {
+      const bool noise_free = s.file.starts_with("detection_rate.") || s.file.starts_with("expected_counts.") ||
+                              s.file.starts_with("transient.");  // (a realisation writes no transient)
+      plan.disk.push_back({s.file + (s.chunks.empty() ? "" : " (uncompressed)"), s.bytes(), false, s.file, !s.chunks.empty(), false,
+                           noise_free});
+    }
+  // (a 2D run's intensity.exr holds counts; a gate sweep's images are all noise-free)
   plan.disk.push_back({std::string("images") + (c.outputs.exr_compression == ExrCompression::None ? "" : " (uncompressed)"),
-                       pixels * channels * 4, false, "", c.outputs.exr_compression != ExrCompression::None});
+                       pixels * channels * 4, false, "", c.outputs.exr_compression != ExrCompression::None, false, sweep});
   // metadata.json (about 16 kB) and the previews (three PNG images, compressed: at most 3 bytes a pixel each,
   // and the plot of the gate profiles, about 62 kB whatever the image)
   plan.disk.push_back({std::string("metadata.json") + (c.outputs.previews ? " and previews/ (uncompressed)" : ""),
@@ -184,7 +190,7 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
     const int64_t ring = (img.width + 2) * (img.height + 2);
     const bool zarr = c.outputs.storage == Storage::Zarr;
     plan.disk.push_back({std::string("light/ (outputs.light; about 128 lit bins per pixel") + (zarr ? ", uncompressed)" : ")"),
-                         ring * (8 + 8 + 8 + 8 + 4 + std::min<int64_t>(bins, 128) * 4), false, "", zarr});
+                         ring * (8 + 8 + 8 + 8 + 4 + std::min<int64_t>(bins, 128) * 4), false, "", zarr, false, true});
     // The values are spilled to a temporary file as the tiles finish, in tile order, and copied into
     // light/values (.npy or .zarr) in pixel order at the end: both are on the disk at that moment.
     plan.disk.push_back({std::string("the light's values spilled while the tiles render (outputs.light; freed once light/values") +

@@ -24,6 +24,9 @@ struct ResourcePlan {
     std::string file = "";     // a disk part that is one output (a stack's file or Zarr folder); "" otherwise
     bool compressed = false;   // a disk part written compressed (Zarr, EXR): `bytes` is its uncompressed size, at most
     bool freed_at_end = false; // a disk part the run frees before it ends (a temporary file): its peak, not kept
+    // A disk part that a further realisation of the temporal noise (sense --noise-seed, a dataset's repeats)
+    // links from the run rather than writes: the light, the noise-free stacks, a gate sweep's images.
+    bool noise_free = false;
   };
   std::vector<Part> memory, disk;
   int64_t memory_available = -1;  // bytes; -1 unknown

@@ -590,7 +590,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     RunRecord record;
     outputs[r]->report(record);
     if (r == 0)  // the realisations share their rates
-      for (std::string& w : bright_gate_warnings(sensor, record.max_rate)) {
+      for (std::string& w : bright_gate_warnings(sensor, record.rate_swing)) {
         std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
         scene_warnings.push_back(std::move(w));
       }

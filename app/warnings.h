@@ -34,10 +34,10 @@ inline constexpr const char* kPdpWarning = ": its photon detection probability a
 // Before rendering (run, sense and info): the gate sweep's gate tabulated coarsely (above); a pixel type
 // whose PDP at the laser's wavelength is 0 (the built-in curve ends short of a near-infrared laser).
 std::vector<std::string> sensor_warnings(const sensor::SensorModel& sensor);
-// After the sensor stage: the gate's tabulation error (above) is of the open gate's rate, so a bright pixel
-// (max_rate avalanches per frame, RunRecord::max_rate) makes it max_rate times larger in the gate's tails;
-// warned about when that exceeds kWarnGateError. Starts with kGateWarning.
-std::vector<std::string> bright_gate_warnings(const sensor::SensorModel& sensor, double max_rate);
+// After the sensor stage: the gate's tabulation error (above) is of the open gate's rate, so a bright return
+// (rate_swing: the largest swing of a pixel's rate over the sweep, RunRecord::rate_swing) makes it rate_swing
+// times larger in the gate's tails; warned about when that exceeds kWarnGateError. Starts with kGateWarning.
+std::vector<std::string> bright_gate_warnings(const sensor::SensorModel& sensor, double rate_swing);
 // One of sensor_warnings' or bright_gate_warnings' (sense replaces a run's with its own sensor's).
 bool is_sensor_warning(const std::string& warning);
 

@@ -218,7 +218,9 @@ struct SensorTile {
   // noise-free detection rate lambda: mean avalanches per binary frame, crosstalk included, so that
   // p = 1 - exp(-lambda) and expected = N p; empty unless the sensor was asked for it
   std::vector<float> rate;
-  float max_rate = 0.0f;           // the largest of the tile's lambda (kept or not), for the gate's warning
+  // The largest of its pixels' max_k lambda - min_k lambda (kept or not): the rate the sweep moves over (a
+  // return's), without the steady part (ambient light, dark counts); for the gate's warning.
+  float rate_swing = 0.0f;
   std::vector<uint16_t> counts;    // sampled counts
   // optional binary frames, [((k * N + n) * rect.height + row) * bytes_per_row + byte], bits packed
   // along x least significant bit first, bytes_per_row = ceil(rect.width / 8)

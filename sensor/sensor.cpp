@@ -364,9 +364,9 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
     } else {
       out.expected = outs.front().expected;
       out.rate = outs.front().rate;
-      out.max_rate = outs.front().max_rate;
+      out.rate_swing = outs.front().rate_swing;
     }
-    std::atomic<float> max_rate{0.0f};
+    std::atomic<float> rate_swing{0.0f};
     out.counts.assign(n * Ks, 0);
     const size_t bpr = static_cast<size_t>((rect.width + 7) / 8);
     if (frames) {
@@ -420,7 +420,8 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
             l = eff.data();
           }
           if (keep_rate) std::transform(l, l + Ks, row_rate.data() + xi * Ks, [](double v) { return static_cast<float>(v); });
-          for (size_t k = 0; k < Ks; ++k) rows_max = std::max(rows_max, l[k]);
+          const auto [lo, hi] = std::minmax_element(l, l + Ks);
+          rows_max = std::max(rows_max, *hi - *lo);
           if (cached) std::copy(l, l + Ks, cached);
           if (!frames) {
             if (m.table) binomial_counts(l, Ks, counts_key, pixel_index(x, y), *m.table, s);
@@ -444,10 +445,10 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
         if (first && keep_rate) transpose_rows(row_rate.data(), rw, Ks, out.rate.data() + o0, n);
         if (!frames) transpose_rows(row_cnt.data(), rw, Ks, out.counts.data() + o0, n);
       }
-      for (float seen = max_rate.load(); float(rows_max) > seen && !max_rate.compare_exchange_weak(seen, float(rows_max));) {
+      for (float seen = rate_swing.load(); float(rows_max) > seen && !rate_swing.compare_exchange_weak(seen, float(rows_max));) {
       }
     });
-    if (first) out.max_rate = max_rate.load();
+    if (first) out.rate_swing = rate_swing.load();
 
     if (frames) {
       // Per gate position: every region pixel's own avalanches (its keyed stream, identical in whichever tile

@@ -516,6 +516,33 @@ TEST_F(Dataset, RefusesAnotherDatasetsFolderForeignFilesAndTooLittleDisk) {
   EXPECT_NE(per_sample(bound.output), per_sample(plan.output));
 }
 
+// The disk a dataset is planned to take, against what it takes: a further realisation of the noise writes
+// its counts and links the sample's light, images and noise-free stacks (each counted as a whole sample
+// again, three realisations were planned at 3.5 times the disk they took (94 MB against 27), and a disk that held it
+// was refused).
+TEST_F(Dataset, ThePlannedDiskCountsTheRealisationsLinks) {
+  write(dir_ / "d.json", "{\"scenes\": [\"" + kScenes + "multi_object.json\"], \"samples\": 2, \"repeats\": 3, \"set\": "
+        "{\"render.samples_per_pixel\": 1, \"acquisition.gate_sweep.stop_ns\": 4.2, \"camera.crop\": [448, 186, 128, 64], "
+        "\"outputs.detection_rate\": true, \"outputs.expected_counts\": true}}");
+  const Result plan = sh("dataset plan " + (dir_ / "d.json").string());
+  ASSERT_EQ(plan.code, 0) << plan.output;
+  const std::string key = "# total: 2 samples, disk about ";
+  const size_t at = plan.output.find(key);
+  ASSERT_NE(at, std::string::npos) << plan.output;
+  std::istringstream in(plan.output.substr(at + key.size()));
+  double planned = 0.0;
+  std::string unit;
+  in >> planned >> unit;  // "35 MB,"
+  planned *= unit.starts_with("GB") ? 1e9 : unit.starts_with("MB") ? 1e6 : 1e3;
+  ASSERT_EQ(sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q").code, 0);
+  std::set<ino_t> seen;
+  double taken = 0.0;  // each file once (a realisation's links are the sample's files)
+  for (const auto& e : fs::recursive_directory_iterator(dir_ / "out/samples"))
+    if (e.is_regular_file() && seen.insert(inode(e.path())).second) taken += double(e.file_size());
+  EXPECT_LE(planned, 1.4 * taken) << planned << " planned, " << taken << " taken";
+  EXPECT_GE(planned, 0.7 * taken) << planned << " planned, " << taken << " taken";
+}
+
 TEST_F(Dataset, AFailingSampleIsRecordedAndTheOthersGoOn) {
   // camera.width_px 16 leaves the crop outside the sensor: cells with it fail, the others do not.
   write(dir_ / "d.json", small_dataset(4, 3, kScenes + "multi_object.json", ", \"camera.width_px\": [1024, 16]"));
