@@ -3,6 +3,7 @@
 #include "app/progress.h"
 
 #include <algorithm>
+#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -145,13 +146,21 @@ DatasetSpec spec_of_folder(const fs::path& dir) {
 
 // Every sample's record (about 0.15 ms each: its scene resolved, its folders' metadata read); past 10,000
 // samples with progress on stderr.
-std::vector<SampleRecord> inspect_all(const DatasetFolder& folder, bool progress) {
+// The hashes of the samples a run inspected as it began (SampleHashes), by index, 0 where not known: resolving a
+// sample's scene is most of its inspection (0.3 ms; a run of 100,000 samples stopped by a signal took 29 s to
+// list them in the index). Kept for datasets of up to kMaxKeptHashes samples (8 bytes each).
+constexpr int64_t kMaxKeptHashes = 10'000'000;
+using SampleHashes = std::vector<uint64_t>;
+
+std::vector<SampleRecord> inspect_all(const DatasetFolder& folder, bool progress, const SampleHashes* hashes = nullptr) {
   std::vector<SampleRecord> records;
   const int64_t n = folder.spec().count();
   records.reserve(size_t(n));
   Progress bar(size_t(n), progress && n > 10000, "samples inspected");
   for (int64_t i = 0; i < n; ++i) {
-    records.push_back(folder.inspect(datasets::make_sample(folder.spec(), i)));
+    const uint64_t h = hashes != nullptr && size_t(i) < hashes->size() ? (*hashes)[size_t(i)] : 0;
+    const std::string known = h != 0 ? scenes::hex64(h) : std::string();
+    records.push_back(folder.inspect(datasets::make_sample(folder.spec(), i), &known));
     bar.tick();
   }
   return records;
@@ -269,9 +278,9 @@ std::string dataset_plan(const DatasetOptions& options) {
 namespace {
 // The index as a run leaves early (a signal, an error), best effort: the way it leaves is reported first.
 // Where the completed samples are listed: "index.jsonl lists them" when written here.
-std::string leave_index(const DatasetFolder& folder, datasets::RunPresence& presence) {
+std::string leave_index(const DatasetFolder& folder, datasets::RunPresence& presence, const SampleHashes& hashes) {
   try {
-    return folder.write_index([&] { return inspect_all(folder, false); }, &presence)
+    return folder.write_index([&] { return inspect_all(folder, false, &hashes); }, &presence)
                ? "index.jsonl lists them"
                : "the last run on the folder to end lists them in index.jsonl";
   } catch (const std::exception& e) {
@@ -282,7 +291,7 @@ std::string leave_index(const DatasetFolder& folder, datasets::RunPresence& pres
 
 // dataset_run's work once it is on the folder: the shard's samples, then the index when no other run is on it.
 void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, const datasets::Shard& shard,
-                       const DatasetFolder& folder, datasets::RunPresence& presence) {
+                       const DatasetFolder& folder, datasets::RunPresence& presence, SampleHashes& hashes) {
   const fs::path dir = folder.dir();
 
   // What this shard has to do: every sample it owns that is not done, checked before any work.
@@ -301,6 +310,7 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
     ++owned;
     bar.tick();
     SampleRecord rec = folder.inspect(datasets::make_sample(spec, i));
+    if (size_t(i) < hashes.size() && !rec.hash.empty()) std::from_chars(rec.hash.data(), rec.hash.data() + rec.hash.size(), hashes[size_t(i)], 16);
     if (rec.status == Status::Done) {
       ++skipped;
       continue;
@@ -347,7 +357,7 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
   // SIGINT or SIGTERM (Slurm's time limit, scancel) stop the run; the samples published before stay (the
   // next run skips them), and the index lists them: best effort, the signal's message comes first.
   const auto stopped = [&](const std::string& where) {
-    const std::string listed = leave_index(folder, presence);
+    const std::string listed = leave_index(folder, presence, hashes);
     const std::string kept = generated == 0 ? "it completed no sample" :
                              generated == 1 ? "the sample it completed is kept (" + listed + ")" :
                              "the " + std::to_string(generated) + " samples it completed are kept (" + listed + ")";
@@ -463,7 +473,7 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
   }
 
   const std::optional<std::vector<SampleRecord>> records =
-      folder.write_index([&] { return inspect_all(folder, options.progress); }, &presence);
+      folder.write_index([&] { return inspect_all(folder, options.progress, &hashes); }, &presence);
   if (options.progress)
     std::fprintf(stderr, "spadgen: dataset %s: %s (this run: %lld generated, %lld skipped, %lld completed by another run, %zu failed)\n",
                  dir.string().c_str(),
@@ -486,13 +496,14 @@ void dataset_run(const DatasetOptions& options) {
   // The index is written by the last run on the folder to end (datasets::RunPresence).
   const std::unique_ptr<datasets::RunPresence> presence = folder.enter();
   InterruptGuard interrupt_guard;  // for the whole run: the runs and senses of its samples hold theirs inside it
+  SampleHashes hashes(spec.count() <= kMaxKeptHashes ? size_t(spec.count()) : 0);
   try {
-    run_owned_samples(options, spec, shard, folder, *presence);
+    run_owned_samples(options, spec, shard, folder, *presence, hashes);
   } catch (...) {
     // Any other way out (a signal while the samples are checked, the disk check's refusal, an error): the
     // index is written as at the end when no other run is on the folder (another may have left it to this
     // one, which would leave it to no one).
-    if (presence->held()) (void)leave_index(folder, *presence);
+    if (presence->held()) (void)leave_index(folder, *presence, hashes);
     throw;
   }
 }

@@ -288,11 +288,11 @@ bool DatasetFolder::holds(const std::string& folder, const std::string& hash) co
   return meta && (*meta)["dataset"].value("sample_hash", "") == hash && gone_files(dir_ / folder, *meta).empty();
 }
 
-SampleRecord DatasetFolder::inspect(const Sample& s) const {
+SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash) const {
   SampleRecord rec;
   rec.sample = s;
   try {
-    rec.hash = resolve(s).hash;
+    rec.hash = hash != nullptr && !hash->empty() ? *hash : resolve(s).hash;
   } catch (const Error& e) {
     rec.status = Status::Failed;
     rec.error = e.what();

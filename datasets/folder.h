@@ -110,8 +110,9 @@ class DatasetFolder {
   // Sample s's claim, or null when another run holds it (no waiting).
   std::unique_ptr<SampleClaim> try_claim(const Sample& s) const;
 
-  // The sample's state on disk (reads its metadata.json files and the failure record).
-  SampleRecord inspect(const Sample& s) const;
+  // The sample's state on disk (reads its metadata.json files and the failure record). hash: the sample's
+  // hash when known (a run's own samples, resolved as it began), else it is computed (its scene resolved).
+  SampleRecord inspect(const Sample& s, const std::string* hash = nullptr) const;
 
   // Failure records (DIR/failed/000042.json), written atomically.
   void record_failure(const Sample& s, const std::string& hash, const std::string& error) const;
