@@ -428,7 +428,7 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
             else binomial_counts(l, Ks, counts_key, pixel_index(x, y), *m.binom, s);
             uint16_t* cn = row_cnt.data() + xi * Ks;
             for (size_t k = 0; k < Ks; ++k) {
-              ex[k] = static_cast<float>(static_cast<double>(N) * s.p[k]);
+              ex[k] = static_cast<float>(static_cast<double>(N) * s.p[k] + 0.0);  // + 0.0: p = -expm1(-0) is -0
               cn[k] = static_cast<uint16_t>(s.x[k]);
             }
           } else {
@@ -437,7 +437,7 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
               probabilities(l, Ks, pe.data(), qe.data());
               p = pe.data();
             }
-            for (size_t k = 0; k < Ks; ++k) ex[k] = static_cast<float>(static_cast<double>(N) * p[k]);
+            for (size_t k = 0; k < Ks; ++k) ex[k] = static_cast<float>(static_cast<double>(N) * p[k] + 0.0);
           }
         }
         const size_t o0 = static_cast<size_t>(rect.index(rect.x0, y));

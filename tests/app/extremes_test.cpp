@@ -84,6 +84,11 @@ TEST_F(Extremes, DistancesFromOneMillimetreToTenKilometres) {
 TEST_F(Extremes, ZeroAndABillionPhotonsPerFrame) {
   const Outputs dark = run("dark", "--set laser.average_power_mW=0");
   for (float v : dark.laser) EXPECT_EQ(v, 0.0f);
+  // No light and no dark counts: lambda 0, and the expected counts +0 (they were -0, from -expm1(-0)).
+  const Outputs none = run("none", "--set laser.average_power_mW=0 --set sensor.dark_counts=false --set outputs.expected_counts=true");
+  const std::vector<double> expected = values(read_npy(dir_ / "none/expected_counts.npy"));
+  ASSERT_FALSE(expected.empty());
+  for (double v : expected) EXPECT_TRUE(v == 0.0 && !std::signbit(v)) << v;
   // 1e9 mW (the key's bound): about 5e8 detections per frame in the gates that see the return; the
   // frames saturate: counts N exactly, the rate finite (lossless, unlike 1 - p).
   const Outputs bright = run("bright", "--set laser.average_power_mW=1e9");
