@@ -147,6 +147,17 @@ void Staging::init(const fs::path& out) {
   if (!out_.has_filename() || out_ == out_.root_path()) throw cannot("expected a folder below the root");
   parent_ = out_.parent_path();
   name_ = out_.filename().string();
+  // Beside OUT go .OUT.spadgen-staging-<pid>, the longest of spadgen's names (a pid of up to 7 digits): a name
+  // the file system takes could not take those ("File name too long" naming the hidden folder).
+  {
+    constexpr size_t kLongestAddition = std::char_traits<char>::length("..spadgen-staging-") + 7;
+    const long name_max = ::pathconf(fs::exists(parent_, ec) ? parent_.c_str() : "/", _PC_NAME_MAX);
+    const size_t most = (name_max > 0 ? size_t(name_max) : 255) - kLongestAddition;
+    if (name_.size() > most)
+      throw cannot("its name is " + std::to_string(name_.size()) + " bytes long; spadgen first writes into a hidden folder " +
+                   "beside it whose name adds " + std::to_string(kLongestAddition) + " bytes to it, so expected a name of at most " +
+                   std::to_string(most) + " bytes");
+  }
   // The swap replaces OUT as a whole: a shell standing in it would be left in a removed folder.
   const fs::path cwd = fs::current_path(ec);
   if (!ec) {

@@ -371,6 +371,15 @@ TEST_F(StagingTest, PathsThatCannotBeTheOutputFolder) {
     EXPECT_THAT(std::string(e.what()), HasSubstr("it is the current folder or holds it"));
   }
   fs::current_path(cwd);
+  // a name the file system takes, but not with the staging folder's 25 more bytes
+  try {
+    Staging s(dir_ / std::string(240, 'a'));
+    ADD_FAILURE() << "a name of 240 bytes was accepted";
+  } catch (const spadgen::Error& e) {
+    EXPECT_THAT(std::string(e.what()), HasSubstr("its name is 240 bytes long; spadgen first writes into a hidden folder beside "
+                                                 "it whose name adds 25 bytes to it, so expected a name of at most 230 bytes"));
+  }
+  EXPECT_NO_THROW(Staging(dir_ / std::string(230, 'a')));
 }
 
 TEST_F(StagingTest, ALinkToAFolderPublishesIntoTheFolder) {
