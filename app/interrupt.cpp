@@ -20,6 +20,10 @@ InterruptGuard::InterruptGuard() {
   previous_int_ = std::signal(SIGINT, on_interrupt);
   previous_term_ = std::signal(SIGTERM, on_interrupt);
   previous_hup_ = std::signal(SIGHUP, on_interrupt);  // the terminal closed: stop as for SIGTERM
+  // Ignored when the process started (nohup; a shell's background job without job control, for SIGINT):
+  // ignored still, as the user asked (a nohup run was stopped by the hangup).
+  if (previous_hup_ == SIG_IGN) std::signal(SIGHUP, SIG_IGN);
+  if (previous_int_ == SIG_IGN) std::signal(SIGINT, SIG_IGN);
 }
 
 InterruptGuard::~InterruptGuard() {

@@ -80,7 +80,7 @@ struct RunRecord {
   nlohmann::json accuracy;              // Outputs: the laser return's standard error and the paths per pixel
   nlohmann::json ground_truth_summary;  // Outputs: hit fraction, range span, meshes in view, deepest layer
   bool counts_u8 = true;
-  double rate_swing = 0.0;        // SensorTile::rate_swing, of the image (avalanches per frame)
+  double laser_open_rate = 0.0;   // SensorTile::laser_open_rate, of the image (avalanches per frame)
   PixelRect transient_crop;
   std::vector<std::pair<int, int>> profile_pixels;
   // Per stack written (relative path): its container, and a Zarr store's chunks and compressor.

@@ -662,7 +662,7 @@ void Outputs::put_labels(const ObjectLabelsTile& l) { images_->put_labels(l); }
 bool Outputs::labels() const { return images_->labels(); }
 
 void Outputs::put(const TransientTile& t, const sensor::SensorMapsTile& m, SensorTile&& s) {
-  for (float v = rate_swing_.load(); s.rate_swing > v && !rate_swing_.compare_exchange_weak(v, s.rate_swing);) {
+  for (float v = laser_open_rate_.load(); s.laser_open_rate > v && !laser_open_rate_.compare_exchange_weak(v, s.laser_open_rate);) {
   }
   images_->put(t, m, s);
   probe_->put(s);
@@ -690,7 +690,7 @@ void Outputs::report(RunRecord& r) const {
   r.transient_crop = stacks_->transient_crop();
   r.profile_pixels = probe_->pixels();
   r.storage = stacks_->storage();
-  r.rate_swing = rate_swing_.load();
+  r.laser_open_rate = laser_open_rate_.load();
 }
 
 }  // namespace spadgen::app

@@ -114,7 +114,7 @@ class Outputs {
   std::unique_ptr<Images> images_;
   std::unique_ptr<Stacks> stacks_;
   std::unique_ptr<ProfileProbe> probe_;
-  std::atomic<float> rate_swing_{0.0f};  // of the sensor's tiles (SensorTile::rate_swing)
+  std::atomic<float> laser_open_rate_{0.0f};  // of the sensor's tiles (SensorTile::laser_open_rate)
 };
 
 }  // namespace spadgen::app

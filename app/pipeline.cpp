@@ -152,7 +152,7 @@ RunResult run(const RunOptions& options) {
   order_files(files);
 
   outputs.report(record);
-  warn(bright_gate_warnings(sensor, record.rate_swing));
+  warn(bright_gate_warnings(sensor, record.laser_open_rate));
   if (light) record.storage.update(light->storage());
   record.files = files;
   record.photons_per_pulse_emitted = renderer.photons_per_pulse();

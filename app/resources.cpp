@@ -177,9 +177,11 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
       plan.disk.push_back({s.file + (s.chunks.empty() ? "" : " (uncompressed)"), s.bytes(), false, s.file, !s.chunks.empty(), false,
                            noise_free});
     }
-  // (a 2D run's intensity.exr holds counts; a gate sweep's images are all noise-free)
-  plan.disk.push_back({std::string("images") + (c.outputs.exr_compression == ExrCompression::None ? "" : " (uncompressed)"),
-                       pixels * channels * 4, false, "", c.outputs.exr_compression != ExrCompression::None, false, sweep});
+  // (a 2D run's intensity.exr, 2 channels, holds counts: a further realisation writes it; the rest it links)
+  const bool compressed_images = c.outputs.exr_compression != ExrCompression::None;
+  const std::string uncompressed = compressed_images ? " (uncompressed)" : "";
+  plan.disk.push_back({"images" + uncompressed, pixels * (channels - (sweep ? 0 : 2)) * 4, false, "", compressed_images, false, true});
+  if (!sweep) plan.disk.push_back({"intensity.exr" + uncompressed, pixels * 2 * 4, false, "", compressed_images});
   // metadata.json (about 16 kB) and the previews (three PNG images, compressed: at most 3 bytes a pixel each,
   // and the plot of the gate profiles, about 62 kB whatever the image)
   plan.disk.push_back({std::string("metadata.json") + (c.outputs.previews ? " and previews/ (uncompressed)" : ""),

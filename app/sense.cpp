@@ -590,7 +590,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     RunRecord record;
     outputs[r]->report(record);
     if (r == 0)  // the realisations share their rates
-      for (std::string& w : bright_gate_warnings(sensor, record.rate_swing)) {
+      for (std::string& w : bright_gate_warnings(sensor, record.laser_open_rate)) {
         std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
         scene_warnings.push_back(std::move(w));
       }

@@ -477,11 +477,27 @@ void Staging::publish(const std::vector<std::string>& files) {
   // The new set is in place; the earlier one goes, unless a file was put into the output folder between
   // the check above and the swap: then it is kept, in a visible folder beside it that no run removes.
   if (const std::vector<std::string> foreign = foreign_entries(earlier); !foreign.empty()) {
-    const fs::path keep = parent_ / (name_ + ".spadgen-earlier-" + pid_text());
-    const bool kept = ::rename(earlier.c_str(), keep.c_str()) == 0;
+    // A name no other folder has (a container's runs often have the same pid), never replacing one.
+    fs::path keep;
+    for (int i = 0; i < 1000 && keep.empty(); ++i) {
+      const fs::path k = parent_ / (name_ + ".spadgen-earlier-" + pid_text() + (i ? "-" + std::to_string(i) : std::string()));
+      if (::renameat2(AT_FDCWD, earlier.c_str(), AT_FDCWD, k.c_str(), RENAME_NOREPLACE) == 0) keep = k;
+      else if (errno != EEXIST && errno != ENOTEMPTY) break;
+    }
+    if (keep.empty()) {
+      // Left where it is: not removed by this run (the staging folder's name after the exchange), but a later
+      // run into the folder removes what lies under spadgen's hidden names.
+      if (earlier == dir_) dir_.clear();
+      std::fprintf(stderr, "spadgen: warning: files not spadgen's were put into %s as %s published its outputs there (%s): "
+                   "the folder's earlier contents, with them, are in %s, which could not be renamed to a visible name: "
+                   "move them out of it before the next run into %s, which removes it\n", out_.c_str(), what_.c_str(),
+                   foreign_list(foreign).c_str(), earlier.c_str(), out_.c_str());
+      return;
+    }
+    sync_dir(parent_);
     std::fprintf(stderr, "spadgen: warning: files not spadgen's were put into %s as %s published its outputs there (%s): "
                  "the folder's earlier contents, with them, are in %s\n", out_.c_str(), what_.c_str(),
-                 foreign_list(foreign).c_str(), (kept ? keep : earlier).c_str());
+                 foreign_list(foreign).c_str(), keep.c_str());
     return;
   }
   // If that fails, the next run into the folder removes it again.

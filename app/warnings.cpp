@@ -118,19 +118,20 @@ std::vector<std::string> sensor_warnings(const sensor::SensorModel& sensor) {
   return w;
 }
 
-std::vector<std::string> bright_gate_warnings(const sensor::SensorModel& sensor, double rate_swing) {
+std::vector<std::string> bright_gate_warnings(const sensor::SensorModel& sensor, double laser_open_rate) {
   const nlohmann::json d = sensor.describe();
-  if (!d.contains("gate") || !(rate_swing > 1.0)) return {};
+  if (!d.contains("gate") || !(laser_open_rate > 1.0)) return {};
   const nlohmann::json& gate = d.at("gate");
   const double error = gate.at("knot_max_error").get<double>() + gate.at("grid_max_error").get<double>();
-  if (!(error * rate_swing > kWarnGateError)) return {};
+  if (!(error * laser_open_rate > kWarnGateError)) return {};
   const double N = sensor.frames_per_k();
   return {std::string(kGateWarning) + " to within about " + percent(error) + " of its open value (knots_per_edge " +
           std::to_string(gate.at("knots_per_edge").get<int>()) + ", grid_ps " + g(gate.at("grid_ps").get<double>()) +
-          "), and that error is of the open gate's rate: the brightest return's, " + g(rate_swing) +
-          " avalanches per frame (the largest swing of a pixel's rate over the sweep), makes it up to about " + g(error * rate_swing) + " per frame where the gate's edges let "
+          "), and that error is of the open gate's rate: the brightest return's, " + g(laser_open_rate) +
+          " avalanches per frame with the gate open (cycles x PDP x laser photons per pulse), makes it up to about " +
+          g(error * laser_open_rate) + " per frame where the gate's edges let "
           "little through, so expected counts of " + std::to_string(sensor.frames_per_k()) + " frames there may be off by up "
-          "to about " + g(N * -std::expm1(-error * rate_swing)) + " counts (the returns' edges widen); more knots "
+          "to about " + g(N * -std::expm1(-error * laser_open_rate)) + " counts (the returns' edges widen); more knots "
           "(sensor.gate.knots_per_edge) or a finer grid (docs/accuracy.md, \"The sensor model's knobs\")"};
 }
 

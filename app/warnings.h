@@ -35,9 +35,10 @@ inline constexpr const char* kPdpWarning = ": its photon detection probability a
 // whose PDP at the laser's wavelength is 0 (the built-in curve ends short of a near-infrared laser).
 std::vector<std::string> sensor_warnings(const sensor::SensorModel& sensor);
 // After the sensor stage: the gate's tabulation error (above) is of the open gate's rate, so a bright return
-// (rate_swing: the largest swing of a pixel's rate over the sweep, RunRecord::rate_swing) makes it rate_swing
-// times larger in the gate's tails; warned about when that exceeds kWarnGateError. Starts with kGateWarning.
-std::vector<std::string> bright_gate_warnings(const sensor::SensorModel& sensor, double rate_swing);
+// (laser_open_rate: the largest laser rate of a pixel with the gate open, RunRecord::laser_open_rate) makes
+// it that many times larger in the gate's tails; warned about when that exceeds kWarnGateError. Starts with
+// kGateWarning.
+std::vector<std::string> bright_gate_warnings(const sensor::SensorModel& sensor, double laser_open_rate);
 // One of sensor_warnings' or bright_gate_warnings' (sense replaces a run's with its own sensor's).
 bool is_sensor_warning(const std::string& warning);
 

@@ -218,9 +218,10 @@ struct SensorTile {
   // noise-free detection rate lambda: mean avalanches per binary frame, crosstalk included, so that
   // p = 1 - exp(-lambda) and expected = N p; empty unless the sensor was asked for it
   std::vector<float> rate;
-  // The largest of its pixels' max_k lambda - min_k lambda (kept or not): the rate the sweep moves over (a
-  // return's), without the steady part (ambient light, dark counts); for the gate's warning.
-  float rate_swing = 0.0f;
+  // The largest of its pixels' laser rates with the gate open (cycles per frame x PDP x laser photons per
+  // pulse, and n xt more for crosstalk; avalanches per frame): what the gate's tabulation error is a fraction of, at any gate position
+  // (ambient light and dark counts see the gate's integral, which that error barely moves); for its warning.
+  float laser_open_rate = 0.0f;
   std::vector<uint16_t> counts;    // sampled counts
   // optional binary frames, [((k * N + n) * rect.height + row) * bytes_per_row + byte], bits packed
   // along x least significant bit first, bytes_per_row = ceil(rect.width / 8)

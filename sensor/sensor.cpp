@@ -276,8 +276,11 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
   // row at one gate position is the contiguous input of sample_bits_batch.
   auto own_prob = std::vector<Prob, DefaultInitAllocator<Prob>>(frames ? nreg * Ks : 0);
   std::vector<PixelParams> params(nreg);
+  std::atomic<float> laser_open_rate{0.0f};  // SensorTile::laser_open_rate
+  const double cycles = static_cast<double>(m.cfg.acquisition.cycles_per_frame);
   tbb::parallel_for(tbb::blocked_range<int>(region.y0, region.y1()), [&](const tbb::blocked_range<int>& rows) {
     const auto scratch = m.acq->scratch();
+    double open_max = 0.0;
     for (int y = rows.begin(); y < rows.end(); ++y) {
       throw_if_interrupted();  // a row of K gate responses; with long sweeps a tile takes seconds
       for (int x = region.x0; x < region.x1(); ++x) {
@@ -292,12 +295,17 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
           hi = std::clamp<int64_t>(t.bin_hi[di], lo, t.axis.bins);
         }
         m.lambda(params[ri], {g, &t.axis, lo, hi, t.ambient_rate[di], laser_total}, setup.get(), scratch.get(), lam.data() + ri * Ks);
+        if (rect.contains(x, y))  // (with the share its neighbours' avalanches fire in it, at most n xt of its own)
+          open_max = std::max(open_max, cycles * m.types[params[ri].type].pdp_laser * params[ri].pdp_scale * laser_total *
+                                            (1.0 + m.crosstalk_share(params[ri].type, x, y)));
         // without frames only pixel B's neighbours read p (pixel A's read lambda); sections keep one type
         if (frames)
           probabilities(lam.data() + ri * Ks, Ks, own_prob.data() + ri, nreg, own_p.data() + ri * Ks);
         else if (own_probs && m.types[params[ri].type].single_avalanche)
           probabilities(lam.data() + ri * Ks, Ks, own_p.data() + ri * Ks, nullptr);
       }
+    }
+    for (float seen = laser_open_rate.load(); float(open_max) > seen && !laser_open_rate.compare_exchange_weak(seen, float(open_max));) {
     }
   });
 
@@ -364,9 +372,8 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
     } else {
       out.expected = outs.front().expected;
       out.rate = outs.front().rate;
-      out.rate_swing = outs.front().rate_swing;
     }
-    std::atomic<float> rate_swing{0.0f};
+    out.laser_open_rate = laser_open_rate.load();
     out.counts.assign(n * Ks, 0);
     const size_t bpr = static_cast<size_t>((rect.width + 7) / 8);
     if (frames) {
@@ -393,7 +400,6 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
       const size_t rw = static_cast<size_t>(rect.width);
       std::vector<float> row_exp(rw * Ks), row_rate(keep_rate ? rw * Ks : 0);
       std::vector<uint16_t> row_cnt(frames ? 0 : rw * Ks + 1);  // + 1: transpose_rows reads one beyond
-      double rows_max = 0.0;
       for (int y = rows.begin(); y < rows.end(); ++y) {
         throw_if_interrupted();
         for (int x = rect.x0; x < rect.x1(); ++x) {
@@ -420,8 +426,6 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
             l = eff.data();
           }
           if (keep_rate) std::transform(l, l + Ks, row_rate.data() + xi * Ks, [](double v) { return static_cast<float>(v); });
-          const auto [lo, hi] = std::minmax_element(l, l + Ks);
-          rows_max = std::max(rows_max, *hi - *lo);
           if (cached) std::copy(l, l + Ks, cached);
           if (!frames) {
             if (m.table) binomial_counts(l, Ks, counts_key, pixel_index(x, y), *m.table, s);
@@ -445,10 +449,7 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
         if (first && keep_rate) transpose_rows(row_rate.data(), rw, Ks, out.rate.data() + o0, n);
         if (!frames) transpose_rows(row_cnt.data(), rw, Ks, out.counts.data() + o0, n);
       }
-      for (float seen = rate_swing.load(); float(rows_max) > seen && !rate_swing.compare_exchange_weak(seen, float(rows_max));) {
-      }
     });
-    if (first) out.rate_swing = rate_swing.load();
 
     if (frames) {
       // Per gate position: every region pixel's own avalanches (its keyed stream, identical in whichever tile

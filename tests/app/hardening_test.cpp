@@ -650,6 +650,14 @@ TEST(InterruptGuards, NestedGuardsKeepTheSignalAndTheHandler) {
     std::raise(SIGHUP);  // the terminal closed: caught as SIGTERM is (its default action ended the process)
     EXPECT_THROW(InterruptGuard::check(), spadgen::Interrupted);
   }
+  // Started ignoring SIGHUP (nohup): it stays ignored (a nohup run was stopped when its terminal closed).
+  std::signal(SIGHUP, SIG_IGN);
+  {
+    InterruptGuard nohup;
+    std::raise(SIGHUP);
+    EXPECT_NO_THROW(InterruptGuard::check());
+  }
+  EXPECT_EQ(std::signal(SIGHUP, SIG_DFL), SIG_IGN);
   EXPECT_EQ(std::signal(SIGTERM, SIG_DFL), SIG_DFL) << "the handler was not handed back";
 }
 

@@ -303,6 +303,18 @@ TEST_F(StagingTest, FilesPutIntoTheFolderWhileTheRunRanAreNotRemoved) {
   const fs::path kept = dir_ / ("out.spadgen-earlier-" + std::to_string(::getpid()));
   EXPECT_EQ(slurp(kept / "late.txt"), "late");
   EXPECT_EQ(slurp(kept / "counts.npy"), "old:counts.npy");
+  // again, that folder still there (a container's runs have the same pid): a name of its own, neither
+  // replacing it nor lost (the rename failed and the earlier set was removed with the staging folder)
+  fs::remove_all(out_);
+  write_old();
+  error = publish_after([] {}, [&](const std::string& step) {
+    if (step == "exchange") std::ofstream(out_ / "later.txt") << "later";
+    return 0;
+  });
+  EXPECT_EQ(error, "");
+  EXPECT_EQ(slurp(kept / "late.txt"), "late");
+  EXPECT_EQ(slurp(fs::path(kept.string() + "-1") / "later.txt"), "later");
+  fs::remove_all(kept.string() + "-1");
   // A signal once every file is written.
   fs::remove_all(kept);
   fs::remove_all(out_);
