@@ -18,6 +18,7 @@
 
 #include "app/resources.h"
 #include "app/staging.h"
+#include "core/atomic_max.h"
 #include "core/units.h"
 #include "writers/previews.h"
 
@@ -662,8 +663,7 @@ void Outputs::put_labels(const ObjectLabelsTile& l) { images_->put_labels(l); }
 bool Outputs::labels() const { return images_->labels(); }
 
 void Outputs::put(const TransientTile& t, const sensor::SensorMapsTile& m, SensorTile&& s) {
-  for (float v = laser_open_rate_.load(); s.laser_open_rate > v && !laser_open_rate_.compare_exchange_weak(v, s.laser_open_rate);) {
-  }
+  store_max(laser_open_rate_, s.laser_open_rate);
   images_->put(t, m, s);
   probe_->put(s);
   stacks_->put(t, std::move(s));

@@ -11,6 +11,7 @@
 #include <optional>
 #include <sstream>
 
+#include "core/atomic_max.h"
 #include "core/error.h"
 #include "core/rng.h"
 #include "core/stage_clock.h"
@@ -305,8 +306,7 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
           probabilities(lam.data() + ri * Ks, Ks, own_p.data() + ri * Ks, nullptr);
       }
     }
-    for (float seen = laser_open_rate.load(); float(open_max) > seen && !laser_open_rate.compare_exchange_weak(seen, float(open_max));) {
-    }
+    store_max(laser_open_rate, float(open_max));
   });
 
   // From here the temporal noise: its own stage of a run's time (app/pipeline.cpp), the rates above being
