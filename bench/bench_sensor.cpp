@@ -12,6 +12,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "core/rng.h"
@@ -87,6 +88,49 @@ void BM_FrameBits(benchmark::State& state) {
   state.SetLabel(sensor::dense_bits_target());
 }
 BENCHMARK(BM_FrameBits)->UseRealTime()->Unit(benchmark::kMillisecond);
+
+// The AVX2 kernel's AES rounds with VAES against Highway's split 128-bit rounds, on BM_FrameBits' mix,
+// alternated pass by pass in one run (manual time: the VAES passes). Skipped unless the dispatcher chose
+// AVX2 on a processor with VAES.
+void BM_FrameBitsVaes(benchmark::State& state) {
+  if (std::string(sensor::dense_bits_target()) != "AVX2+VAES") {
+    state.SkipWithError("the dispatcher did not choose AVX2 with VAES on this processor");
+    return;
+  }
+  const uint32_t N = 255;
+  const size_t pixels = 1 << 16, block = 1024;
+  const std::vector<double> lam = realistic_lambdas(pixels);
+  std::vector<uint64_t> ids(pixels);
+  for (size_t i = 0; i < pixels; ++i) ids[i] = i;
+  const sensor::BinomialSampler sampler(N);
+  std::vector<uint64_t> words(pixels * 4);
+  std::vector<sensor::Prob> prob(pixels);
+  uint64_t k = 0;
+  const auto pass = [&] {
+    const auto t0 = std::chrono::steady_clock::now();
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, pixels, block), [&](const tbb::blocked_range<size_t>& r) {
+      sensor::probabilities(lam.data() + r.begin(), r.size(), prob.data() + r.begin(), 1);
+      sensor::sample_bits_batch(1, k, ids.data() + r.begin(), r.size(), sampler, prob.data() + r.begin(), words.data() + 4 * r.begin());
+    });
+    benchmark::DoNotOptimize(words.data());
+    ++k;
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  };
+  double on = 0.0, off = 0.0;
+  for (auto _ : state) {
+    sensor::set_avx2_vaes(false);
+    off += pass();
+    sensor::set_avx2_vaes(true);
+    const double t = pass();
+    on += t;
+    state.SetIterationTime(t);
+  }
+  const double bits = static_cast<double>(state.iterations()) * pixels * N;
+  state.counters["Gbit_per_s"] = bits * 1e-9 / on;
+  state.counters["split_Gbit_per_s"] = bits * 1e-9 / off;
+  state.counters["x_split"] = off / on;
+}
+BENCHMARK(BM_FrameBitsVaes)->UseManualTime()->Unit(benchmark::kMillisecond);
 
 // A synthetic transient: one return per pixel, a second one for 30 % of them (a semi-transparent
 // layer), photons per pulse log-uniform in [1e-4, 1e-2] (the paper's flat target at 0.2-1.6 m sees

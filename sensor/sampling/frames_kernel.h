@@ -38,7 +38,14 @@ bool dense_bit_reference(const Rng& stream, uint32_t n, uint64_t T, uint32_t fra
 // tests compare it with the scalar ars7 on every target).
 void ars7_blocks(const ArsKeys& keys, const uint32_t* ctr, size_t count, uint32_t* out);
 
-// The instruction set the dispatcher chose, for the benchmark's report.
+// The instruction set the dispatcher chose, for the benchmark's report ("AVX2+VAES": AVX2 with the
+// 256-bit AES rounds below).
 const char* dense_bits_target();
+
+// Whether the AVX2 kernel runs its AES rounds with VAES (set when the processor has it; the bits are the
+// same either way). set_avx2_vaes(false) makes it split them as Highway's AVX2 target does, for the tests
+// and the benchmark's comparison; set_avx2_vaes(true) is ignored without VAES. Returns the previous setting.
+bool avx2_vaes();
+bool set_avx2_vaes(bool on);
 
 }  // namespace spadgen::sensor

@@ -405,25 +405,32 @@ TEST(Sampling, BatchBitsEqualReferenceOnEveryTarget) {
     pr[i] = prob_from_lambda(0.07 + 0.038 * static_cast<double>(i));  // p from 0.068 to 0.93: dense
   }
   int targets = 0;
+  const bool vaes = avx2_vaes();
   for (const int64_t target : hwy::SupportedAndGeneratedTargets()) {
     hwy::SetSupportedTargetsForTest(target);
-    ++targets;
-    std::vector<uint64_t> batch(count * nw);
-    sample_bits_batch(4, 2, ids.data(), count, sampler, pr.data(), batch.data());
-    for (size_t i = 0; i < count; ++i) {
-      ASSERT_FALSE(bits_are_sparse(pr[i]));
-      const Rng stream(4, RngKind::Frames, ids[i], 2);
-      const bool invert = pr[i].p > pr[i].q;
-      const uint64_t T = probability_threshold(invert ? pr[i].q : pr[i].p);
-      for (uint32_t f = 0; f < n; ++f) {
-        const bool bit = dense_bit_reference(stream, n, T, f) != invert;
-        ASSERT_EQ(((batch[i * nw + f / 64] >> (f % 64)) & 1) != 0, bit)
-            << hwy::TargetName(target) << " pixel " << i << " frame " << f;
+    // AVX2 twice where the processor has VAES: its 256-bit AES rounds, and Highway's split ones
+    for (const bool use_vaes : {false, true}) {
+      if (use_vaes && (!vaes || target != HWY_AVX2)) continue;
+      set_avx2_vaes(use_vaes);
+      ++targets;
+      std::vector<uint64_t> batch(count * nw);
+      sample_bits_batch(4, 2, ids.data(), count, sampler, pr.data(), batch.data());
+      for (size_t i = 0; i < count; ++i) {
+        ASSERT_FALSE(bits_are_sparse(pr[i]));
+        const Rng stream(4, RngKind::Frames, ids[i], 2);
+        const bool invert = pr[i].p > pr[i].q;
+        const uint64_t T = probability_threshold(invert ? pr[i].q : pr[i].p);
+        for (uint32_t f = 0; f < n; ++f) {
+          const bool bit = dense_bit_reference(stream, n, T, f) != invert;
+          ASSERT_EQ(((batch[i * nw + f / 64] >> (f % 64)) & 1) != 0, bit)
+              << hwy::TargetName(target) << (use_vaes ? "+VAES" : "") << " pixel " << i << " frame " << f;
+        }
       }
     }
   }
   hwy::SetSupportedTargetsForTest(0);
-  std::printf("dense batch checked on %d targets\n", targets);
+  set_avx2_vaes(vaes);
+  std::printf("dense batch checked on %d targets%s\n", targets, vaes ? " (AVX2 twice: with and without VAES)" : "");
   EXPECT_GE(targets, 1);
 }
 
