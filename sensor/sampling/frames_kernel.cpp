@@ -17,6 +17,7 @@
 
 #include "sensor/sampling/frames_kernel.h"
 #include "sensor/sampling/ars-inl.h"
+#include "sensor/sampling/compress-inl.h"
 #include "sensor/sampling/philox-inl.h"
 #include "sensor/sampling/threshold-inl.h"
 #include "sensor/sampling/sampling.h"
@@ -484,41 +485,6 @@ HWY_INLINE void DenseBitsBatch(const ArsKeys& keys, uint32_t c1, const uint64_t*
   SettleTies(keys, c1, pixels, T, refine_base, nw, words, tb);
 }
 
-// Compress of 64-bit lanes: on AVX-512, vpcompressq in registers; on AVX2, one vpermd with the indices from
-// a static table of the 16 masks. (Highway 1.0's Compress looks the lanes up in a constant table that GCC
-// copies onto the stack on every call: 2 KB on AVX-512, 512 bytes on AVX2, where the copies took 12 % of
-// the frame-bit sampler's time.)
-#if HWY_ARCH_X86 && HWY_TARGET == HWY_AVX2
-struct Compress64Table {
-  alignas(32) uint32_t idx[16][8] = {};
-  constexpr Compress64Table() {
-    for (unsigned m = 0; m < 16; ++m) {
-      unsigned o = 0;
-      for (unsigned i = 0; i < 4; ++i)
-        if ((m >> i) & 1u) {
-          idx[m][2 * o] = 2 * i;
-          idx[m][2 * o + 1] = 2 * i + 1;
-          ++o;
-        }
-    }
-  }
-};
-inline constexpr Compress64Table kCompress64;
-#endif
-template <class D>
-HWY_INLINE hn::Vec<D> Compress64(D /*d*/, hn::Vec<D> v, hn::Mask<D> m) {
-#if HWY_ARCH_X86 && HWY_TARGET <= HWY_AVX3
-  if constexpr (sizeof(hn::Vec<D>) == 64) return hn::Vec<D>{_mm512_maskz_compress_epi64(m.raw, v.raw)};
-#endif
-#if HWY_ARCH_X86 && HWY_TARGET == HWY_AVX2
-  if constexpr (sizeof(hn::Vec<D>) == 32) {
-    const int bits = _mm256_movemask_pd(_mm256_castsi256_pd(m.raw));
-    const __m256i idx = _mm256_load_si256(reinterpret_cast<const __m256i*>(kCompress64.idx[bits]));
-    return hn::Vec<D>{_mm256_permutevar8x32_epi32(v.raw, idx)};
-  }
-#endif
-  return hn::Compress(v, m);
-}
 
 // Philox on 64-bit lanes: each lane carries one block's 32-bit word in its low half; the high half is
 // ignored (MulEven reads only the low halves; the outputs are the low halves), so the lanes line up with
@@ -619,9 +585,9 @@ size_t FrameBitsGroup(const uint32_t key[2], uint32_t c1, const uint64_t* HWY_RE
     }
     const auto idx = hn::Add(iota64, hn::Set(du, uint64_t{i}));
     // compressed in registers and stored whole (a compressing store to memory is slow on AVX-512)
-    hn::StoreU(Compress64(du, idx, hn::RebindMask(du, is_dense)), du, dense + nd);
+    hn::StoreU(CompressLanes(du, idx, hn::RebindMask(du, is_dense)), du, dense + nd);
     nd += hn::CountTrue(du, hn::RebindMask(du, is_dense));
-    hn::StoreU(Compress64(du, idx, hn::RebindMask(du, go_slow)), du, slow_list + ns);
+    hn::StoreU(CompressLanes(du, idx, hn::RebindMask(du, go_slow)), du, slow_list + ns);
     ns += hn::CountTrue(du, hn::RebindMask(du, go_slow));
   }
   // every pixel's words all equal first (final for a = 0 and for sparse pixels without a rare outcome)

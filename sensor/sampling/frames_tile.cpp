@@ -13,6 +13,7 @@
 #include <cstring>
 
 #include "sensor/sampling/frames_tile.h"
+#include "sensor/sampling/compress-inl.h"
 #include "sensor/sampling/philox-inl.h"
 #include "sensor/sampling/threshold-inl.h"
 
@@ -320,15 +321,6 @@ HWY_INLINE hn::Vec<D> SelectInWord(D d, hn::Vec<D> word, hn::Vec<D> t) {
   return pos;
 }
 
-// Compress of 64-bit lanes: on AVX-512, vpcompressq (Highway 1.0's Compress looks the lanes up in a
-// constant table that GCC copies onto the stack, 2 KB per call).
-template <class D>
-HWY_INLINE hn::Vec<D> Compress64(D /*d*/, hn::Vec<D> v, hn::Mask<D> m) {
-#if HWY_ARCH_X86 && HWY_TARGET <= HWY_AVX3
-  if constexpr (sizeof(hn::Vec<D>) == 64) return hn::Vec<D>{_mm512_maskz_compress_epi64(m.raw, v.raw)};
-#endif
-  return hn::Compress(v, m);
-}
 
 // The draws of the listed (pixel, direction) pairs, eight (a vector of 64-bit lanes) at a time, exactly as
 // CrosstalkDirection makes them: U, then crosstalk_hits' bounds (H = 0; H = 1, whose one frame comes from
@@ -442,20 +434,20 @@ HWY_INLINE void DecidePairs(const FramesTileShape& sh, size_t np, const uint64_t
       const auto tv = hn::PromoteTo(du, hn::BitCast(d32, t));
       const auto rank1 = hn::ShiftRight<32>(m1);
       size_t nh = s.nhits;
-      hn::StoreU(Compress64(du, tv, hit), du, s.hit_t.data() + nh);
-      hn::StoreU(Compress64(du, frame_of(rank1, hit), hit), du, s.hit_frame.data() + nh);
+      hn::StoreU(CompressLanes(du, tv, hit), du, s.hit_t.data() + nh);
+      hn::StoreU(CompressLanes(du, frame_of(rank1, hit), hit), du, s.hit_frame.data() + nh);
       nh += hn::CountTrue(du, hit);
       if (!hn::AllFalse(du, hit2)) {
         auto rank2 = hn::ShiftRight<32>(m2);
         rank2 = hn::IfThenElse(hn::Eq(rank2, rank1), hn::Sub(n_u, hn::Set(du, 1)), rank2);
-        hn::StoreU(Compress64(du, tv, hit2), du, s.hit_t.data() + nh);
-        hn::StoreU(Compress64(du, frame_of(rank2, hit2), hit2), du, s.hit_frame.data() + nh);
+        hn::StoreU(CompressLanes(du, tv, hit2), du, s.hit_t.data() + nh);
+        hn::StoreU(CompressLanes(du, frame_of(rank2, hit2), hit2), du, s.hit_frame.data() + nh);
         nh += hn::CountTrue(du, hit2);
       }
       s.nhits = nh;
     }
     if (!hn::AllFalse(du, fb)) {
-      hn::StoreU(Compress64(du, hn::Add(iota, hn::Set(du, j0)), fb), du, s.fallback.data() + s.nfallback);
+      hn::StoreU(CompressLanes(du, hn::Add(iota, hn::Set(du, j0)), fb), du, s.fallback.data() + s.nfallback);
       s.nfallback += hn::CountTrue(du, fb);
     }
   }
@@ -544,10 +536,11 @@ void FramesTile(const FramesTileShape& sh, const uint32_t key[2], uint32_t k, co
           const auto m = hn::And(hn::And(inside, hn::Ne(hn::And(dirs, hn::Set(d32, 1u << d)), hn::Zero(d32))),
                                  hn::Or(hn::Lt(x[d], lim[d]), hn::Eq(lim[d], max)));
           if (hn::AllFalse(d32, m)) continue;
-          hn::StoreU(hn::Compress(tv, m), d32, s.p_t.data() + np);
-          hn::StoreU(hn::Compress(x[d], m), d32, s.p_w.data() + np);
-          hn::StoreU(hn::Compress(lo, m), d32, s.p_lo.data() + np);
-          hn::StoreU(hn::Compress(hi, m), d32, s.p_hi.data() + np);
+          const Compressor<decltype(d32)> compress(d32, m);
+          hn::StoreU(compress(tv), d32, s.p_t.data() + np);
+          hn::StoreU(compress(x[d]), d32, s.p_w.data() + np);
+          hn::StoreU(compress(lo), d32, s.p_lo.data() + np);
+          hn::StoreU(compress(hi), d32, s.p_hi.data() + np);
           hn::StoreU(hn::Set(d32, d), d32, s.p_d.data() + np);
           hn::StoreU(row, d32, s.p_row.data() + np);
           np += hn::CountTrue(d32, m);
