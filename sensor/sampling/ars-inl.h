@@ -57,11 +57,54 @@ HWY_INLINE void Transpose4x4(D d, hn::Vec<D>& a0, hn::Vec<D>& a1, hn::Vec<D>& a2
 
 #endif  // HWY_TARGET != HWY_SCALAR
 
+#if HWY_ARCH_X86 && HWY_TARGET == HWY_AVX2
+// Ars7Words on eight lanes with VAES (avx2_vaes_flag): compiled for the AVX2 target plus VAES, called only
+// when the processor has it (not inlined into the AVX2 code, which may not use VAES).
+__attribute__((target(HWY_TARGET_STR ",vaes"), noinline)) inline void Ars7WordsVaes(const ArsKeys& keys, __m256i* x) {
+  __m256i rk[kArsRounds + 1];
+  for (int r = 0; r <= kArsRounds; ++r)
+    rk[r] = _mm256_broadcastsi128_si256(_mm_load_si128(reinterpret_cast<const __m128i*>(keys.rk[r])));
+  const auto transpose = [](__m256i* a) __attribute__((always_inline, target(HWY_TARGET_STR ",vaes"))) {
+    const __m256i t0 = _mm256_unpacklo_epi32(a[0], a[1]), t1 = _mm256_unpackhi_epi32(a[0], a[1]);
+    const __m256i t2 = _mm256_unpacklo_epi32(a[2], a[3]), t3 = _mm256_unpackhi_epi32(a[2], a[3]);
+    a[0] = _mm256_unpacklo_epi64(t0, t2);
+    a[1] = _mm256_unpackhi_epi64(t0, t2);
+    a[2] = _mm256_unpacklo_epi64(t1, t3);
+    a[3] = _mm256_unpackhi_epi64(t1, t3);
+  };
+  __m256i v[4] = {x[0], x[1], x[2], x[3]};
+  transpose(v);  // part l of v_j: the block of lane 4 l + j
+#pragma GCC unroll 4
+  for (int j = 0; j < 4; ++j) v[j] = _mm256_xor_si256(v[j], rk[0]);
+#pragma GCC unroll 8
+  for (int r = 1; r < kArsRounds; ++r)
+#pragma GCC unroll 4
+    for (int j = 0; j < 4; ++j) v[j] = _mm256_aesenc_epi128(v[j], rk[r]);
+#pragma GCC unroll 4
+  for (int j = 0; j < 4; ++j) v[j] = _mm256_aesenclast_epi128(v[j], rk[kArsRounds]);
+  transpose(v);
+  for (int j = 0; j < 4; ++j) x[j] = v[j];
+}
+#endif
+
 // ARS-7 with the counters and outputs as words, like Philox10: lane i's block has counter
 // (x0[i], x1[i], x2[i], x3[i]) and afterwards x0..x3 are its output words.
 template <class D>
 HWY_INLINE void Ars7Words(D d, const ArsKeys& keys, hn::Vec<D>& x0, hn::Vec<D>& x1, hn::Vec<D>& x2,
                           hn::Vec<D>& x3) {
+#if HWY_ARCH_X86 && HWY_TARGET == HWY_AVX2
+  if constexpr (sizeof(hn::Vec<D>) == 32) {
+    if (avx2_vaes_flag().load(std::memory_order_relaxed)) {
+      __m256i x[4] = {x0.raw, x1.raw, x2.raw, x3.raw};
+      Ars7WordsVaes(keys, x);
+      x0.raw = x[0];
+      x1.raw = x[1];
+      x2.raw = x[2];
+      x3.raw = x[3];
+      return;
+    }
+  }
+#endif
 #if HWY_TARGET == HWY_SCALAR
   const Block128 o = ars7({hn::GetLane(x0), hn::GetLane(x1), hn::GetLane(x2), hn::GetLane(x3)}, keys);
   x0 = hn::Set(d, o[0]);

@@ -15,6 +15,7 @@
 // construction for Rng(seed, Counts, pixel, k).
 #pragma once
 #include <array>
+#include <atomic>
 #include <cstdint>
 
 #include "core/rng.h"
@@ -94,6 +95,18 @@ inline ArsKeys ars_round_keys(const Block128& key) {
 
 inline void words_to_bytes(const uint32_t w[4], uint8_t b[16]) {
   for (int i = 0; i < 16; ++i) b[i] = static_cast<uint8_t>(w[i / 4] >> (8 * (i % 4)));
+}
+
+// Whether the AVX2 kernels run ARS-7's rounds with VAES (256-bit AES rounds: AMD Zen 3, Intel Alder Lake
+// and later), where Highway's AVX2 target splits each into two 128-bit AESENC: on when the processor has
+// VAES; frames_kernel.h's set_avx2_vaes turns it off for tests and the benchmark. The bits are the same.
+inline std::atomic<bool>& avx2_vaes_flag() {
+#if defined(__x86_64__) || defined(__i386__)
+  static std::atomic<bool> on{__builtin_cpu_supports("vaes") != 0};
+#else
+  static std::atomic<bool> on{false};
+#endif
+  return on;
 }
 
 // ARS-7 of one counter, in software.

@@ -22,21 +22,6 @@
 #include "sensor/sampling/threshold-inl.h"
 #include "sensor/sampling/sampling.h"
 
-#ifndef SPADGEN_FRAMES_KERNEL_ONCE
-#define SPADGEN_FRAMES_KERNEL_ONCE
-namespace spadgen::sensor::frames_kernel_detail {
-// avx2_vaes(): whether the AVX2 kernels use VAES now (frames_kernel.h).
-inline std::atomic<bool>& avx2_vaes_flag() {
-#if defined(__x86_64__) || defined(__i386__)
-  static std::atomic<bool> on{__builtin_cpu_supports("vaes") != 0};
-#else
-  static std::atomic<bool> on{false};
-#endif
-  return on;
-}
-}  // namespace spadgen::sensor::frames_kernel_detail
-#endif
-
 HWY_BEFORE_NAMESPACE();
 namespace spadgen::sensor {
 namespace HWY_NAMESPACE {
@@ -336,7 +321,7 @@ HWY_INLINE void DenseBitsBatch(const ArsKeys& keys, uint32_t c1, const uint64_t*
   const size_t nw = (static_cast<size_t>(n) + 63) / 64;
   const uint64_t tail = n % 64 != 0 ? (uint64_t{1} << (n % 64)) - 1 : ~uint64_t{0};
 #if HWY_ARCH_X86 && HWY_TARGET == HWY_AVX2
-  if (frames_kernel_detail::avx2_vaes_flag().load(std::memory_order_relaxed)) {
+  if (avx2_vaes_flag().load(std::memory_order_relaxed)) {
     DenseBitsBatchVaes(keys, c1, pixels, T, flips, slots, count, n, words);
     return;
   }
@@ -657,11 +642,11 @@ const char* dense_bits_target() {
   return std::strcmp(name, "AVX2") == 0 && avx2_vaes() ? "AVX2+VAES" : name;
 }
 
-bool avx2_vaes() { return frames_kernel_detail::avx2_vaes_flag().load(); }
+bool avx2_vaes() { return avx2_vaes_flag().load(); }
 
 bool set_avx2_vaes(bool on) {
   if (on && !__builtin_cpu_supports("vaes")) on = false;
-  return frames_kernel_detail::avx2_vaes_flag().exchange(on);
+  return avx2_vaes_flag().exchange(on);
 }
 
 bool dense_bit_reference(const Rng& stream, uint32_t n, uint64_t T, uint32_t frame) {

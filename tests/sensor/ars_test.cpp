@@ -70,25 +70,32 @@ TEST(Ars, ScalarMatchesRandom123) {
 TEST(Ars, VectorMatchesScalarOnEveryTarget) {
   Rng rng(5, RngKind::Test, 1);
   int targets = 0;
+  const bool vaes = avx2_vaes();
   for (const int64_t target : hwy::SupportedAndGeneratedTargets()) {
     hwy::SetSupportedTargetsForTest(target);
-    ++targets;
-    for (int trial = 0; trial < 20; ++trial) {
-      const Block128 key = {rng.next_u32(), rng.next_u32(), rng.next_u32(), rng.next_u32()};
-      const ArsKeys k = ars_round_keys(key);
-      const size_t count = 1 + static_cast<size_t>(trial) * 3;
-      std::vector<uint32_t> ctr(4 * count), out(4 * count + 4, 0xABABABABu);
-      for (auto& c : ctr) c = rng.next_u32();
-      ars7_blocks(k, ctr.data(), count, out.data());
-      for (size_t i = 0; i < count; ++i) {
-        const Block128 e = ars7({ctr[4 * i], ctr[4 * i + 1], ctr[4 * i + 2], ctr[4 * i + 3]}, k);
-        for (size_t w = 0; w < 4; ++w) ASSERT_EQ(out[4 * i + w], e[w]) << hwy::TargetName(target) << " block " << i;
+    for (const bool use_vaes : {false, true}) {  // AVX2 twice where the processor has VAES
+      if (use_vaes && (!vaes || target != HWY_AVX2)) continue;
+      set_avx2_vaes(use_vaes);
+      ++targets;
+      for (int trial = 0; trial < 20; ++trial) {
+        const Block128 key = {rng.next_u32(), rng.next_u32(), rng.next_u32(), rng.next_u32()};
+        const ArsKeys k = ars_round_keys(key);
+        const size_t count = 1 + static_cast<size_t>(trial) * 3;
+        std::vector<uint32_t> ctr(4 * count), out(4 * count + 4, 0xABABABABu);
+        for (auto& c : ctr) c = rng.next_u32();
+        ars7_blocks(k, ctr.data(), count, out.data());
+        for (size_t i = 0; i < count; ++i) {
+          const Block128 e = ars7({ctr[4 * i], ctr[4 * i + 1], ctr[4 * i + 2], ctr[4 * i + 3]}, k);
+          for (size_t w = 0; w < 4; ++w)
+            ASSERT_EQ(out[4 * i + w], e[w]) << hwy::TargetName(target) << (use_vaes ? "+VAES" : "") << " block " << i;
+        }
+        for (size_t w = 0; w < 4; ++w) ASSERT_EQ(out[4 * count + w], 0xABABABABu);
       }
-      for (size_t w = 0; w < 4; ++w) ASSERT_EQ(out[4 * count + w], 0xABABABABu);
     }
   }
   hwy::SetSupportedTargetsForTest(0);
-  std::printf("vector ARS-7 checked on %d targets\n", targets);
+  set_avx2_vaes(vaes);
+  std::printf("vector ARS-7 checked on %d targets%s\n", targets, vaes ? " (AVX2 twice: with and without VAES)" : "");
   EXPECT_GE(targets, 1);
 }
 
