@@ -72,7 +72,7 @@ RunResult run(const RunOptions& options) {
 
   const TimeAxis axis = time_axis(cfg, sensor);
   const PixelRect img = image_rect(cfg);
-  check_derived(cfg, sensor, img, axis);
+  check_derived(cfg, sensor, img, axis, resolved.set_keys);
 
   const fs::path out = options.out_dir.empty() ? fs::path("out") / fs::path(options.scene_file).stem() : fs::path(options.out_dir);
   // The staging first: it removes what a killed run left beside the folder, which the disk check would
@@ -197,7 +197,7 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
   for (std::string& w : sensor_warnings(sensor)) before.push_back(std::move(w));
   const TimeAxis axis = time_axis(c, sensor);
   const PixelRect img = image_rect(c);
-  check_derived(c, sensor, img, axis);
+  check_derived(c, sensor, img, axis, r.set_keys);
   o << "# run\n";
   o << "photons per pulse emitted: " << photons_per_pulse(c.laser.average_power_W, c.laser.repetition_rate_Hz, c.laser.wavelength_m) << "\n";
   o << "image: " << img.width << " x " << img.height << " pixels; K = " << sensor.K() << "\n";

@@ -1,6 +1,8 @@
 #include "app/preflight.h"
 
 #include <cmath>
+#include <initializer_list>
+#include <map>
 #include <sstream>
 #include <string>
 
@@ -29,16 +31,30 @@ std::string window_keys(const RunConfig& c) {
 
 }  // namespace
 
-void check_derived(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img, const TimeAxis& axis) {
+void check_derived(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img, const TimeAxis& axis,
+                   const std::map<std::string, std::string>& set_keys) {
   const std::string file = c.scene_file.empty() ? std::string("<scene>") : c.scene_file;
+  // How a message starts: the first of the keys that drive it that `--set` gave ("--set KEY: "), else the
+  // scene file and the first key's pointer.
+  const auto where = [&](std::initializer_list<const char*> pointers) {
+    for (const char* p : pointers)
+      if (const auto it = set_keys.find(p); it != set_keys.end()) return "--set " + it->second + ": ";
+    return file + ": " + *pointers.begin() + ": ";
+  };
   const double span = static_cast<double>(axis.bins) * axis.bin_width_s;
   if (axis.bins < 0 || axis.bins > scenes::kMaxTimeBins || !std::isfinite(span))
-    throw Error(file + ": /render/time_bin_ps: the time window that " + window_keys(c) + " set, from " +
+    throw Error(where({"/render/time_bin_ps", "/render/window_stop_ns", "/render/window_start_ns", "/acquisition/gate_sweep/start_ns",
+                       "/acquisition/gate_sweep/stop_ns", "/sensor/gate/length_ns", "/sensor/gate/rise_ps", "/sensor/gate/fall_ps",
+                       "/sensor/gate/delay_ns", "/sensor/gate/skew_fwhm_ps", "/sensor/gate/length_fwhm_ps", "/laser/pulse_fwhm_ps",
+                       "/sensor/jitter_fwhm_ps"}) +
+                "the time window that " +
+                window_keys(c) + " set, from " +
                 g(axis.start_s / kNs) + " ns on, needs " + (axis.bins < 0 ? std::string("more than 2^63") : g(double(axis.bins))) +
                 " bins of " + g(axis.bin_width_s / kPs) + " ps; expected at most " + std::to_string(scenes::kMaxTimeBins) +
                 " bins: wider bins (render.time_bin_ps) or a shorter window");
   if (axis.bins > 0 && axis.period_s > 0 && span / axis.period_s > kMaxWindowPeriods)
-    throw Error(file + ": /laser/repetition_rate_MHz: the time window of " + g(span / kNs) + " ns spans " +
+    throw Error(where({"/laser/repetition_rate_MHz", "/render/window_stop_ns", "/render/window_start_ns"}) + "the time window of " +
+                g(span / kNs) + " ns spans " +
                 g(span / axis.period_s) + " laser periods of " + g(axis.period_s / kPs) + " ps; expected at most " +
                 g(kMaxWindowPeriods) + " (a lower repetition rate or a shorter window: " + window_keys(c) + ")");
 
@@ -56,7 +72,7 @@ void check_derived(const RunConfig& c, const sensor::SensorModel& sensor, const 
     for (int x = img.x0; x < img.x1(); ++x) {
       const double length = nominal + sensor.pixel(x, y).dL_s;
       if (length > 0.0) continue;
-      throw Error(file + ": /sensor/gate/length_fwhm_ps: a spread of " + g(c.sensor.gate.length_fwhm_s / kPs) +
+      throw Error(where({"/sensor/gate/length_fwhm_ps", "/sensor/gate/length_ns"}) + "a spread of " + g(c.sensor.gate.length_fwhm_s / kPs) +
                   " ps (FWHM) about a gate of " + g(nominal / kNs) +
                   " ns (sensor.gate.length_ns, or the gate profile's) gives pixel (" + std::to_string(x) + ", " +
                   std::to_string(y) + ") a gate " + g(length / kPs) +

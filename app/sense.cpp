@@ -279,9 +279,17 @@ std::vector<RunResult> sense(const SenseOptions& options) {
       run.config.seeds.noise = noise0 + uint64_t(r);
       run.resolved["seeds"]["noise"] = noise0 + uint64_t(r);
     }
-    // The last seed resolved in full: a seed past the key's range fails here as `--set` would.
-    o.back() = "seeds.noise=" + text(noise0 + uint64_t(options.repeats - 1));
-    runs.push_back(scenes::parse_scene_text(scene_text, scene_file, o, false));
+    // The last seed resolved in full: a seed past the key's range fails here as `--set` would, said in
+    // terms of what the user gave (the noise seed, from --noise-seed, --set or the run, and --repeats).
+    const uint64_t last = noise0 + uint64_t(options.repeats - 1);
+    o.back() = "seeds.noise=" + text(last);
+    try {
+      runs.push_back(scenes::parse_scene_text(scene_text, scene_file, o, false));
+    } catch (const Error& e) {
+      throw Error("--repeats " + std::to_string(options.repeats) + ": the realisations' noise seeds run from " + text(noise0) +
+                  " (" + (options.noise_seed ? "--noise-seed" : "the run's seeds.noise or --set seeds.noise") + ") to " +
+                  text(last) + ", and the last is refused: " + e.what());
+    }
   }
   const RunConfig& cfg = first.config;
   for (const std::string& w : first.warnings) std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
@@ -328,7 +336,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   }
 
   const PixelRect img = image_rect(cfg);
-  check_derived(cfg, sensor, img, need);  // the sensor's own overrides may give negative gate lengths
+  check_derived(cfg, sensor, img, need, first.set_keys);  // the sensor's own overrides may give negative gate lengths
   const PixelRect region = rect_of(meta.at("light").at("crop_in_sensor"));
   if (region != light_region(img, cfg.camera.width_px, cfg.camera.height_px))
     throw Error((src / "metadata.json").string() + ": light.crop_in_sensor does not match the run's image");

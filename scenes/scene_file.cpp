@@ -452,7 +452,8 @@ std::string apply_override(json& doc, const std::string& assignment, Checker& ch
   if ((k.type == Type::String || k.type == Type::Path) && !value.is_string() && !value.is_null()) value = text;  // names that look like numbers
   const size_t errors = chk.errors.size();
   put(doc, target->first, target->second, value, chk, key);
-  return chk.errors.size() == errors ? k.path : std::string();
+  // the key's whole pointer (a named element's key: /nodes/NAME/KEY, where k.path is the element's /KEY)
+  return chk.errors.size() == errors ? target->first.pointer() : std::string();
 }
 
 // A checked value (a scalar, or an array of scalars) as an ordered_json, as ojson::parse(v.dump()) gives it
@@ -621,10 +622,19 @@ void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string
     err("/render/window_stop_ns", "expected a window end after render.window_start_ns");
   else if (c.render.window_start_s) {
     const double bins = std::ceil((*c.render.window_stop_s - *c.render.window_start_s) / c.render.time_bin_s - 1e-9);
-    if (!(bins <= static_cast<double>(kMaxTimeBins)))
+    // named by the key the user changed: the bin width, or else a window end --set gave
+    const char* window_key = chk.set_keys.count("/render/window_stop_ns") ? "/render/window_stop_ns"
+                             : chk.set_keys.count("/render/window_start_ns") ? "/render/window_start_ns"
+                                                                             : nullptr;
+    if (!(bins <= static_cast<double>(kMaxTimeBins)) && (chk.set_keys.count("/render/time_bin_ps") || !window_key))
       err("/render/time_bin_ps", "found " + format_bound(c.render.time_bin_s / kPs) + " ps, which makes " + format_bound(bins) +
                                      " time bins over the window /render/window_start_ns to window_stop_ns; expected at most " +
                                      std::to_string(kMaxTimeBins) + " bins: wider bins or a shorter window");
+    else if (!(bins <= static_cast<double>(kMaxTimeBins)))
+      err(window_key, "the window from " + format_bound(*c.render.window_start_s / kNs) + " to " +
+                          format_bound(*c.render.window_stop_s / kNs) + " ns makes " + format_bound(bins) + " time bins of " +
+                          format_bound(c.render.time_bin_s / kPs) + " ps (render.time_bin_ps); expected at most " +
+                          std::to_string(kMaxTimeBins) + " bins: a shorter window or wider bins");
   }
   // Every file is read whole, so it must be a regular file of bounded size (a FIFO or /dev/zero would
   // block or never end).
@@ -709,6 +719,7 @@ ResolvedRun parse_scene_text(const std::string& text, const std::string& path, c
   check_consistency(run.config, chk, run.warnings, check_gltf);
   if (!chk.errors.empty()) throw Error(join_errors(chk.errors));
   ignored_keys(doc, run.config, run.warnings);
+  run.set_keys = chk.set_keys;
   return run;
 }
 

@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -23,6 +24,9 @@ struct ResolvedRun {
   // The scene file as the user would write it, every default explicit, keys in schema order.
   nlohmann::ordered_json resolved;
   std::vector<std::string> warnings;  // consistent but suspicious settings, e.g. exposure longer than a frame
+  // The keys `--set` gave, by JSON pointer (/render/time_bin_ps), each as the user wrote it
+  // (render.time_bin_ps): the program's later checks name the override, not the file, as these do.
+  std::map<std::string, std::string> set_keys;
 };
 
 // Reads, validates and resolves a scene file. overrides are "key.path=value" strings (as `--set`),

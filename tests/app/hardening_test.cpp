@@ -109,11 +109,13 @@ TEST_F(Hardening, ValuesThatCrashedOrHungSpadgenEndInAnErrorNamingTheKey) {
       {"camera.pixel_pitch_um=1e-200", "--set camera.pixel_pitch_um: found 1e-200"},
       {"laser.repetition_rate_MHz=1e-100", "--set laser.repetition_rate_MHz: found 1e-100"},
       // negative gate_length_ps in sensor_maps.exr
-      {"sensor.gate.length_fwhm_ps=1e6", "/sensor/gate/length_fwhm_ps: a spread of 1e+06 ps (FWHM) about a gate of 3.8 ns"},
-      {"sensor.gate.length_ns=1e-6", "/sensor/gate/length_fwhm_ps: a spread of 120 ps (FWHM) about a gate of 1e-06 ns"},
+      {"sensor.gate.length_fwhm_ps=1e6", "--set sensor.gate.length_fwhm_ps: a spread of 1e+06 ps (FWHM) about a gate of 3.8 ns"},
+      {"sensor.gate.length_ns=1e-6", "--set sensor.gate.length_ns: a spread of 120 ps (FWHM) about a gate of 1e-06 ns"},
       // info printed -9223372036854775808 bins and exited 0; run said "transient time axis: expected bins >= 0"
-      {"render.time_bin_ps=1e-300", "/render/time_bin_ps: the time window that the gate sweep"},
-      {"sensor.gate.length_ns=1e6", "expected at most 1000000 bins"},
+      {"render.time_bin_ps=1e-300", "--set render.time_bin_ps: the time window that the gate sweep"},
+      {"sensor.gate.length_ns=1e6", "--set sensor.gate.length_ns: the time window that the gate sweep"},
+      {"render.window_start_ns=0' --set 'render.window_stop_ns=1e5",
+       "--set render.window_stop_ns: the window from 0 to 100000 ns makes 11111112 time bins of 9 ps (render.time_bin_ps)"},
       // "internal error: [json.exception.out_of_range.406] number overflow parsing '1e309'"
       {"laser.average_power_mW=1e309", "--set laser.average_power_mW:1:1: the number 1e309 is beyond the range of a double"},
       // nesting overflowed the stack in the message's dump (a file with 100,000 levels: below)
@@ -124,9 +126,9 @@ TEST_F(Hardening, ValuesThatCrashedOrHungSpadgenEndInAnErrorNamingTheKey) {
       const Outcome o = spadgen(std::string(command) + kFlat + " --set '" + c.set + "'");
       expect_exit(o, 1, c.set.substr(0, 60));
       EXPECT_THAT(o.output, HasSubstr(c.expect)) << c.set.substr(0, 60);
-      // an error in the value --set gave names the --set; one it makes elsewhere names the scene file
-      EXPECT_THAT(o.output, ::testing::AnyOf(HasSubstr("spadgen: error: " + kFlat), HasSubstr("spadgen: error: --set ")))
-          << c.set.substr(0, 60);
+      // an error in a value --set gave names the --set, also where the program finds it from several keys
+      // (the time window's bins, the gate lengths), not the scene file, which does not hold the value
+      EXPECT_THAT(o.output, HasSubstr("--set ")) << c.set.substr(0, 60);
       EXPECT_LT(o.seconds, 10.0) << c.set.substr(0, 60) << ": refused only after work";
     }
   }

@@ -335,6 +335,14 @@ TEST_F(App, SenseRepeatsAreTheRunsWithConsecutiveNoiseSeeds) {
   EXPECT_EQ(foreign.code, 1);
   EXPECT_THAT(foreign.output, HasSubstr("holds files that spadgen did not write there (notes.txt"));
   EXPECT_TRUE(fs::exists(dir_ / "rep/repeat_001/counts.npy"));
+  // Seeds past the key's range: said in terms of --noise-seed and --repeats (it named a --set the user
+  // never gave, with a seed they never wrote)
+  const Result past = sh("sense " + (dir_ / "run").string() + " -q --noise-seed 9007199254740992 --repeats 2 -o " +
+                         (dir_ / "past").string());
+  EXPECT_EQ(past.code, 1);
+  EXPECT_THAT(past.output, HasSubstr("spadgen: error: --repeats 2: the realisations' noise seeds run from 9007199254740992 "
+                                     "(--noise-seed) to 9007199254740993, and the last is refused: "));
+  EXPECT_FALSE(fs::exists(dir_ / "past"));
 }
 
 // A sense of one realisation and one of several (--repeats, a folder of repeat_NNN run folders) replace
