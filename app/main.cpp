@@ -138,7 +138,7 @@ int main(int argc, char** argv) {
   drun_cmd->add_option("--threads", dataset.threads, "worker threads per sample (default: all cores); outputs do not depend on it")
       ->check(kThreadsRange);
   drun_cmd->add_flag("-q,--quiet", dataset_quiet, "nothing on stderr but warnings and errors");
-  CLI::App* status_cmd = dataset_cmd->add_subcommand("status", "done, failed, stale and missing samples of a dataset folder");
+  CLI::App* status_cmd = dataset_cmd->add_subcommand("status", "done, failed, stale, missing and damaged samples of a dataset folder");
   status_cmd->add_option("dir", status_dir, "dataset folder")->required()->check(CLI::ExistingDirectory);
   CLI::App* dschema_cmd = dataset_cmd->add_subcommand("schema", "print the reference of the dataset file's keys (Markdown)");
   bool dataset_json_schema = false;

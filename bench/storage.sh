@@ -5,7 +5,7 @@
 #
 #   bench/storage.sh [SPADGEN] [WORK_DIR] [PAIRS] [-- EXTRA --set ARGUMENTS]
 #
-# Default: build/app/spadgen, a temporary folder, 3 passes, the multi-object scene at 1024 x 1000 (the full
+# Default: build/app/spadgen, a temporary folder, 3 passes (0: the sizes alone), the multi-object scene at 1024 x 1000 (the full
 # chip, camera.height_px=1000), its 16 spp; EXTRA arguments go to every run (e.g. -- --set
 # render.samples_per_pixel=4). Needs build/bench/exr_compression beside the program's build folder.
 #
@@ -62,8 +62,8 @@ for out in counts detection_rate expected_counts transient transient_indirect li
   done
   label=$out
   [ "$out" = transient ] || [ "$out" = transient_indirect ] && label="$out (128 x 128 crop)"
-  [ "$out" = light ] && label="light/ (saved light, all six arrays)"
-  [ "$out" = images ] && label="EXR images (ground_truth, laser, ambient, sensor_maps; zip)"
+  [ "$out" = light ] && label="light/ (saved light, its eight arrays)"
+  [ "$out" = images ] && label="EXR images (ground_truth, laser, ambient, sensor_maps, labels; zip)"
   echo "| $label | $(mb "${size[$out.npy]}") | $(mb "${size[$out.zarr]}") | $(ratio "${size[$out.zarr]}" "${size[$out.npy]}") |"
 done
 echo
@@ -97,6 +97,7 @@ for ((p = 1; p <= passes; ++p)); do
        "C zarr counts+light $c s ${cm} MB | D sense npy $d s ${dm} MB | E sense zarr $e s ${em} MB"
   for k in a b c d e; do sum[$k]=$(add "${sum[$k]:-0}" "${!k}"); done
 done
+[ "$passes" -gt 0 ] || { rm -rf "$work/saved" "$work/time.txt"; exit 0; }  # sizes only
 echo "run, zarr / npy (counts + detection_rate, B / A): $(ratio "${sum[b]}" "${sum[a]}")"
 echo "run, zarr counts + light / npy counts + detection_rate (C / A): $(ratio "${sum[c]}" "${sum[a]}")"
 echo "sense, zarr / npy (counts + detection_rate, E / D): $(ratio "${sum[e]}" "${sum[d]}")"
