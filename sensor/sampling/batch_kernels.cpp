@@ -6,6 +6,7 @@
 #include <hwy/contrib/math/math-inl.h>
 
 #include <algorithm>
+#include <cstring>
 #include <array>
 #include <cmath>
 
@@ -305,6 +306,36 @@ void BinomialCounts(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t 
 // grid row g = floor(a G); X1 from the guide and a step or two up the row, comparing the top 16 bits of T
 // and U1 (gathers from tables that stay in cache); Y = 0 where U2 >= floor((n - X1) delta 2^64). Lanes with
 // equal top bits take BinomialTable::first_round, lanes with a possible Y > 0 second_round.
+// Gathers of 64-bit lanes for the table sampler: on AVX2, four scalar loads (AMD's vpgatherqq, microcoded
+// on Zen 1-3, was slower); elsewhere Highway's gathers. Offsets in bytes, indices in elements.
+template <class D, typename T>
+HWY_INLINE hn::Vec<D> Gather64Offset(D d, const T* HWY_RESTRICT base, hn::Vec<hn::RebindToSigned<D>> off) {
+#if HWY_ARCH_X86 && HWY_TARGET == HWY_AVX2
+  if constexpr (sizeof(hn::Vec<D>) == 32) {
+    alignas(32) int64_t o[4];
+    hn::Store(off, hn::RebindToSigned<D>(), o);
+    const auto* b = reinterpret_cast<const char*>(base);
+    alignas(32) hn::TFromD<D> v[4];
+    for (int j = 0; j < 4; ++j) std::memcpy(&v[j], b + o[j], sizeof(v[j]));
+    return hn::Load(d, v);
+  }
+#endif
+  return hn::GatherOffset(d, base, off);
+}
+template <class D, typename T>
+HWY_INLINE hn::Vec<D> Gather64Index(D d, const T* HWY_RESTRICT base, hn::Vec<hn::RebindToSigned<D>> idx) {
+#if HWY_ARCH_X86 && HWY_TARGET == HWY_AVX2
+  if constexpr (sizeof(hn::Vec<D>) == 32) {
+    alignas(32) int64_t o[4];
+    hn::Store(idx, hn::RebindToSigned<D>(), o);
+    alignas(32) hn::TFromD<D> v[4];
+    for (int j = 0; j < 4; ++j) v[j] = base[o[j]];
+    return hn::Load(d, v);
+  }
+#endif
+  return hn::GatherIndex(d, base, idx);
+}
+
 void BinomialCountsTable(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t key[2], uint64_t pixel,
                          const BinomialTable& table, KernelScratch& s) {
   const uint32_t N = table.n();
@@ -346,15 +377,15 @@ void BinomialCountsTable(const double* HWY_RESTRICT lam_in, size_t K, const uint
     const auto g = hn::Floor(hn::Mul(a, grid));
     const auto pg = hn::Mul(g, inv_grid);
     const auto gi = hn::ConvertTo(di64, g);
-    hn::StoreU(hn::Mul(hn::Sub(a, pg), hn::GatherIndex(d, inv1m, gi)), d, delta_a + k);
+    hn::StoreU(hn::Mul(hn::Sub(a, pg), Gather64Index(d, inv1m, gi)), d, delta_a + k);
     hn::StoreU(g, d, g_a + k);
     const auto U1 = hn::Min(hn::Or(hn::ShiftLeft<32>(hn::PromoteTo(d64, hn::LoadU(d32, s.hi.data() + k))),
                                    hn::PromoteTo(d64, hn::LoadU(d32, s.lo.data() + k))), u_cap);
     hn::StoreU(U1, d64, U1_a + k);
-    hn::StoreU(hn::GatherIndex(di64, rows, gi), di64, row_a + k);
+    hn::StoreU(Gather64Index(di64, rows, gi), di64, row_a + k);
     // bytes b and b + 1 of the row's guide: X1 - lo lies between them (bucket 255: below 256)
     const auto bucket = hn::BitCast(di64, hn::ShiftRight<64 - BinomialTable::kGuideBits>(U1));
-    const auto gv = hn::GatherOffset(di64, guide, hn::Add(hn::ShiftLeft<BinomialTable::kGuideBits>(gi), bucket));
+    const auto gv = Gather64Offset(di64, guide, hn::Add(hn::ShiftLeft<BinomialTable::kGuideBits>(gi), bucket));
     hn::StoreU(hn::And(gv, byte_mask), di64, i_a + k);
     hn::StoreU(hn::IfThenElse(hn::Eq(bucket, byte_mask), byte_mask, hn::And(hn::ShiftRight<8>(gv), byte_mask)), di64, bound_a + k);
   }
@@ -365,7 +396,7 @@ void BinomialCountsTable(const double* HWY_RESTRICT lam_in, size_t K, const uint
     for (size_t k = 0; k < K; k += L) {
       const auto i = hn::LoadU(di64, i_a + k);
       const auto u_top = hn::BitCast(di64, hn::ShiftRight<48>(hn::LoadU(d64, U1_a + k)));
-      const auto t = hn::And(hn::GatherOffset(di64, t16, hn::ShiftLeft<1>(hn::Add(hn::And(hn::LoadU(di64, row_a + k), low32), i))), u16_mask);
+      const auto t = hn::And(Gather64Offset(di64, t16, hn::ShiftLeft<1>(hn::Add(hn::And(hn::LoadU(di64, row_a + k), low32), i))), u16_mask);
       const auto step = hn::VecFromMask(di64, hn::Lt(t, u_top));
       const auto i_next = hn::Sub(i, step);  // + 1 where T(x) < U1
       auto scalar = hn::VecFromMask(di64, hn::Eq(t, u_top));
