@@ -1,10 +1,10 @@
 #include "app/preflight.h"
 
 #include <cmath>
-#include <initializer_list>
 #include <map>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "core/error.h"
 #include "core/units.h"
@@ -36,24 +36,26 @@ void check_derived(const RunConfig& c, const sensor::SensorModel& sensor, const 
   const std::string file = c.scene_file.empty() ? std::string("<scene>") : c.scene_file;
   // How a message starts: the first of the keys that drive it that `--set` gave ("--set KEY: "), else the
   // scene file and the first key's pointer.
-  const auto where = [&](std::initializer_list<const char*> pointers) {
+  const auto where = [&](const std::vector<const char*>& pointers) {
     for (const char* p : pointers)
       if (const auto it = set_keys.find(p); it != set_keys.end()) return "--set " + it->second + ": ";
-    return file + ": " + *pointers.begin() + ": ";
+    return file + ": " + pointers.front() + ": ";
   };
+  // The keys that set the time window (the window's ends, else the sweep, the gate and the IRF)
+  const std::vector<const char*> window = {"/render/window_stop_ns", "/render/window_start_ns", "/acquisition/gate_sweep/start_ns",
+                                           "/acquisition/gate_sweep/stop_ns", "/sensor/gate/length_ns", "/sensor/gate/rise_ps",
+                                           "/sensor/gate/fall_ps", "/sensor/gate/delay_ns", "/sensor/gate/skew_fwhm_ps",
+                                           "/sensor/gate/length_fwhm_ps", "/laser/pulse_fwhm_ps", "/sensor/jitter_fwhm_ps"};
+  std::vector<const char*> bins_keys = {"/render/time_bin_ps"}, periods_keys = {"/laser/repetition_rate_MHz"};
+  bins_keys.insert(bins_keys.end(), window.begin(), window.end());
+  periods_keys.insert(periods_keys.end(), window.begin(), window.end());
   const double span = static_cast<double>(axis.bins) * axis.bin_width_s;
   if (axis.bins < 0 || axis.bins > scenes::kMaxTimeBins || !std::isfinite(span))
-    throw Error(where({"/render/time_bin_ps", "/render/window_stop_ns", "/render/window_start_ns", "/acquisition/gate_sweep/start_ns",
-                       "/acquisition/gate_sweep/stop_ns", "/sensor/gate/length_ns", "/sensor/gate/rise_ps", "/sensor/gate/fall_ps",
-                       "/sensor/gate/delay_ns", "/sensor/gate/skew_fwhm_ps", "/sensor/gate/length_fwhm_ps", "/laser/pulse_fwhm_ps",
-                       "/sensor/jitter_fwhm_ps"}) +
-                "the time window that " +
-                window_keys(c) + " set, from " +
-                g(axis.start_s / kNs) + " ns on, needs " + (axis.bins < 0 ? std::string("more than 2^63") : g(double(axis.bins))) +
+    throw Error(where(bins_keys) + "the time window that " + window_keys(c) + " set, from " + g(axis.start_s / kNs) + " ns on, needs " + (axis.bins < 0 ? std::string("more than 2^63") : g(double(axis.bins))) +
                 " bins of " + g(axis.bin_width_s / kPs) + " ps; expected at most " + std::to_string(scenes::kMaxTimeBins) +
                 " bins: wider bins (render.time_bin_ps) or a shorter window");
   if (axis.bins > 0 && axis.period_s > 0 && span / axis.period_s > kMaxWindowPeriods)
-    throw Error(where({"/laser/repetition_rate_MHz", "/render/window_stop_ns", "/render/window_start_ns"}) + "the time window of " +
+    throw Error(where(periods_keys) + "the time window of " +
                 g(span / kNs) + " ns spans " +
                 g(span / axis.period_s) + " laser periods of " + g(axis.period_s / kPs) + " ps; expected at most " +
                 g(kMaxWindowPeriods) + " (a lower repetition rate or a shorter window: " + window_keys(c) + ")");

@@ -279,17 +279,25 @@ std::vector<RunResult> sense(const SenseOptions& options) {
       run.config.seeds.noise = noise0 + uint64_t(r);
       run.resolved["seeds"]["noise"] = noise0 + uint64_t(r);
     }
-    // The last seed resolved in full: a seed past the key's range fails here as `--set` would, said in
-    // terms of what the user gave (the noise seed, from --noise-seed, --set or the run, and --repeats).
+    // Seeds past the key's range (0 .. 2^53, scenes/schema.cpp) are refused in terms of what the user gave:
+    // the first seed's source and --repeats.
+    constexpr uint64_t kMaxSeed = uint64_t{1} << 53;
     const uint64_t last = noise0 + uint64_t(options.repeats - 1);
-    o.back() = "seeds.noise=" + text(last);
-    try {
-      runs.push_back(scenes::parse_scene_text(scene_text, scene_file, o, false));
-    } catch (const Error& e) {
-      throw Error("--repeats " + std::to_string(options.repeats) + ": the realisations' noise seeds run from " + text(noise0) +
-                  " (" + (options.noise_seed ? "--noise-seed" : "the run's seeds.noise or --set seeds.noise") + ") to " +
-                  text(last) + ", and the last is refused: " + e.what());
+    if (last > kMaxSeed) {
+      bool set = false;
+      for (const std::string& s : options.overrides) set = set || s.substr(0, scenes::assignment_split(s)) == "seeds.noise";
+      const json& run_seeds = meta.at("resolved_scene").at("seeds");
+      const std::string source = options.noise_seed ? "--noise-seed"
+                                 : set            ? "--set seeds.noise"
+                                 : run_seeds.contains("noise") && !run_seeds.at("noise").is_null() ? "the run's seeds.noise"
+                                                                                                  : "the run's seed";
+      throw Error("--repeats " + std::to_string(options.repeats) + ": the realisations' noise seeds would run from " +
+                  text(noise0) + " (" + source + ") to " + text(last) + "; expected seeds of at most " + text(kMaxSeed) +
+                  ": a smaller first seed or fewer repeats");
     }
+    // The last seed resolved in full, as `--set seeds.noise` resolves it.
+    o.back() = "seeds.noise=" + text(last);
+    runs.push_back(scenes::parse_scene_text(scene_text, scene_file, o, false));
   }
   const RunConfig& cfg = first.config;
   for (const std::string& w : first.warnings) std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());

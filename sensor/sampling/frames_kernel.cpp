@@ -645,7 +645,11 @@ const char* dense_bits_target() {
 bool avx2_vaes() { return avx2_vaes_flag().load(); }
 
 bool set_avx2_vaes(bool on) {
+#if defined(__x86_64__) || defined(__i386__)
   if (on && !__builtin_cpu_supports("vaes")) on = false;
+#else
+  on = false;
+#endif
   return avx2_vaes_flag().exchange(on);
 }
 

@@ -393,45 +393,54 @@ TEST(Sampling, BatchSettlesTiesLikeTheReference) {
 }
 
 // Every instruction set compiled into the dense kernels (the dispatcher's choice forced in turn) gives the
-// bits of dense_bit_reference in sample_bits_batch, both sides and two chunks.
+// bits of dense_bit_reference in sample_bits_batch, both sides, frame counts over several chunks and not
+// multiples of 64, and enough pixels (150 at n = 1000: about 590 ties) that ties are settled mid-stream.
+// AVX2 twice where the processor has VAES: its 256-bit AES rounds, and Highway's split ones.
 TEST(Sampling, BatchBitsEqualReferenceOnEveryTarget) {
-  const uint32_t n = 300;
-  const BinomialSampler sampler(n);
-  const size_t nw = (n + 63) / 64, count = 70;
-  std::vector<uint64_t> ids(count);
-  std::vector<Prob> pr(count);
-  for (size_t i = 0; i < count; ++i) {
-    ids[i] = 7919 * i + 3;
-    pr[i] = prob_from_lambda(0.07 + 0.038 * static_cast<double>(i));  // p from 0.068 to 0.93: dense
-  }
-  int targets = 0;
-  const bool vaes = avx2_vaes();
-  for (const int64_t target : hwy::SupportedAndGeneratedTargets()) {
-    hwy::SetSupportedTargetsForTest(target);
-    // AVX2 twice where the processor has VAES: its 256-bit AES rounds, and Highway's split ones
-    for (const bool use_vaes : {false, true}) {
-      if (use_vaes && (!vaes || target != HWY_AVX2)) continue;
-      set_avx2_vaes(use_vaes);
-      ++targets;
-      std::vector<uint64_t> batch(count * nw);
-      sample_bits_batch(4, 2, ids.data(), count, sampler, pr.data(), batch.data());
-      for (size_t i = 0; i < count; ++i) {
-        ASSERT_FALSE(bits_are_sparse(pr[i]));
-        const Rng stream(4, RngKind::Frames, ids[i], 2);
-        const bool invert = pr[i].p > pr[i].q;
-        const uint64_t T = probability_threshold(invert ? pr[i].q : pr[i].p);
-        for (uint32_t f = 0; f < n; ++f) {
-          const bool bit = dense_bit_reference(stream, n, T, f) != invert;
-          ASSERT_EQ(((batch[i * nw + f / 64] >> (f % 64)) & 1) != 0, bit)
-              << hwy::TargetName(target) << (use_vaes ? "+VAES" : "") << " pixel " << i << " frame " << f;
+  struct RestoreVaes {  // also when an assertion returns early
+    bool on = avx2_vaes();
+    ~RestoreVaes() {
+      set_avx2_vaes(on);
+      hwy::SetSupportedTargetsForTest(0);
+    }
+  } restore;
+  int passes = 0;
+  for (const uint32_t n : {100u, 300u, 1000u}) {
+    const BinomialSampler sampler(n);
+    const size_t nw = (n + 63) / 64, count = 150;
+    std::vector<uint64_t> ids(count);
+    std::vector<Prob> pr(count);
+    for (size_t i = 0; i < count; ++i) {
+      ids[i] = 7919 * i + 3;
+      pr[i] = prob_from_lambda(0.07 + 0.0175 * static_cast<double>(i));  // p from 0.068 to 0.93: dense
+    }
+    for (const int64_t target : hwy::SupportedAndGeneratedTargets()) {
+      hwy::SetSupportedTargetsForTest(target);
+      for (const bool use_vaes : {false, true}) {
+        if (use_vaes && (!restore.on || target != HWY_AVX2)) continue;
+        set_avx2_vaes(use_vaes);
+        ++passes;
+        std::vector<uint64_t> batch(count * nw + 1, 0x5A5A5A5A5A5A5A5Aull);  // + a guard word
+        sample_bits_batch(4, 2, ids.data(), count, sampler, pr.data(), batch.data());
+        const std::string where = std::string(hwy::TargetName(target)) + (use_vaes ? "+VAES" : "") + " n " + std::to_string(n);
+        for (size_t i = 0; i < count; ++i) {
+          ASSERT_FALSE(bits_are_sparse(pr[i]));
+          const Rng stream(4, RngKind::Frames, ids[i], 2);
+          const bool invert = pr[i].p > pr[i].q;
+          const uint64_t T = probability_threshold(invert ? pr[i].q : pr[i].p);
+          for (uint32_t f = 0; f < n; ++f) {
+            const bool bit = dense_bit_reference(stream, n, T, f) != invert;
+            ASSERT_EQ(((batch[i * nw + f / 64] >> (f % 64)) & 1) != 0, bit) << where << " pixel " << i << " frame " << f;
+          }
+          for (uint32_t f = n; f < nw * 64; ++f) ASSERT_EQ((batch[i * nw + f / 64] >> (f % 64)) & 1, 0u) << where << " pixel " << i;
         }
+        ASSERT_EQ(batch.back(), 0x5A5A5A5A5A5A5A5Aull) << where;
       }
     }
   }
-  hwy::SetSupportedTargetsForTest(0);
-  set_avx2_vaes(vaes);
-  std::printf("dense batch checked on %d targets%s\n", targets, vaes ? " (AVX2 twice: with and without VAES)" : "");
-  EXPECT_GE(targets, 1);
+  std::printf("dense batch checked in %d passes (3 frame counts x targets%s)\n", passes,
+              restore.on ? "; AVX2 twice: with and without VAES" : "");
+  EXPECT_GE(passes, 3);
 }
 
 // Pixel B's crosstalk-corrected rate takes one logarithm for all neighbours (-log of prod (1 - xt p_i));
