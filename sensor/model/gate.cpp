@@ -157,7 +157,20 @@ Sampled convolve_edge(const BaseEdge& e, const Sampled& irf) {
   out.x0 = static_cast<double>(i_first) * dx;
   out.dx = dx;
   out.y.assign(static_cast<size_t>(n), 0.0);
-  for (int64_t i = 0; i < n; ++i) {
+  // Eight outputs at a time, each its own sum in the order of k (the same operations as one output at a
+  // time, so the same bits), which the compiler vectorises across the eight.
+  constexpr int64_t kBlock = 8;
+  int64_t i = 0;
+  for (; i + kBlock <= n; i += kBlock) {
+    const double* s = samples.data() + i;
+    double acc[kBlock] = {};
+    for (int64_t k = 0; k < nk; ++k) {
+      const double w = irf.y[static_cast<size_t>(k)];
+      for (int64_t j = 0; j < kBlock; ++j) acc[j] += w * s[k + j];
+    }
+    for (int64_t j = 0; j < kBlock; ++j) out.y[static_cast<size_t>(i + j)] = acc[j];
+  }
+  for (; i < n; ++i) {
     const double* s = samples.data() + i;
     double acc = 0.0;
     for (int64_t k = 0; k < nk; ++k) acc += irf.y[static_cast<size_t>(k)] * s[k];
