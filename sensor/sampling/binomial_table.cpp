@@ -7,6 +7,7 @@
 #include <array>
 #include <atomic>
 #include <cmath>
+#include <deque>
 #include <map>
 #include <mutex>
 
@@ -19,11 +20,29 @@ constexpr uint64_t kMax = ~uint64_t{0};
 
 std::shared_ptr<const BinomialTable> BinomialTable::get(uint32_t n) {
   static std::mutex mu;
-  static std::map<uint32_t, std::shared_ptr<const BinomialTable>> cache;
+  static std::map<uint32_t, std::weak_ptr<const BinomialTable>> live;  // every table someone holds
+  static std::deque<std::pair<uint32_t, std::shared_ptr<const BinomialTable>>> recent;  // the last kKeep asked for
   const std::lock_guard<std::mutex> lock(mu);
-  auto it = cache.find(n);
-  if (it == cache.end()) it = cache.emplace(n, std::shared_ptr<const BinomialTable>(build(n))).first;
-  return it->second;
+  std::shared_ptr<const BinomialTable> t;
+  bool known = false;  // in recent, also as nullptr (n above 802)
+  for (const auto& [m, held] : recent)
+    if (m == n) {
+      t = held;
+      known = true;
+      break;
+    }
+  if (!known) {
+    if (const auto it = live.find(n); it != live.end()) t = it->second.lock();
+    if (t == nullptr) {
+      t = std::shared_ptr<const BinomialTable>(build(n));
+      std::erase_if(live, [](const auto& e) { return e.second.expired(); });
+      if (t != nullptr) live[n] = t;
+    }
+  }
+  std::erase_if(recent, [n](const auto& e) { return e.first == n; });
+  recent.emplace_front(n, t);
+  if (recent.size() > kKeep) recent.pop_back();
+  return t;
 }
 
 std::unique_ptr<BinomialTable> BinomialTable::build(uint32_t n) {

@@ -40,8 +40,11 @@ class BinomialTable {
   static constexpr int kGuideBits = 8;
   static constexpr uint32_t kGuide = 1u << kGuideBits;
 
-  // The tables for n frames (built once per n and process, in parallel, and shared), or nullptr when a
-  // row would hold more than 256 entries (n above 802).
+  // The tables for n frames (built in parallel and shared), or nullptr when a row would hold more than 256
+  // entries (n above 802). Built once per n while any holder keeps them, and the last kKeep built or asked
+  // for are kept between runs: a dataset whose samples vary the frames (about 3 MB of tables each at 255
+  // frames) holds a few, not one per value it met.
+  static constexpr size_t kKeep = 4;
   static std::shared_ptr<const BinomialTable> get(uint32_t n);
   uint32_t n() const { return n_; }
 

@@ -112,6 +112,32 @@ TEST(BinomialTable, OtherFrameCounts) {
   EXPECT_EQ(BinomialTable::get(255).get(), &table255());  // built once and shared
 }
 
+// The tables of the last kKeep frame counts asked for are kept, and those someone holds; the others are
+// freed (a dataset planned with a random acquisition.frames kept one per value, 700 MB for 200 samples).
+TEST(BinomialTable, KeepsTheLastFewAndTheHeldTablesNotEveryOne) {
+  std::vector<uint32_t> draws;
+  const auto draw_all = [](const BinomialTable& t) {
+    Rng rng(3, RngKind::Test, 101);
+    std::vector<uint32_t> d;
+    for (int i = 0; i < 1000; ++i) {
+      const uint64_t U1 = rng.next_u64(), U2 = rng.next_u64();
+      d.push_back(t.sample(U1, U2, 0.5 * rng.next_double()));
+    }
+    return d;
+  };
+  std::weak_ptr<const BinomialTable> first = BinomialTable::get(101);
+  ASSERT_FALSE(first.expired());  // among the last kKeep
+  draws = draw_all(*first.lock());
+  const std::shared_ptr<const BinomialTable> held = BinomialTable::get(102);
+  for (uint32_t n = 103; n < 103 + BinomialTable::kKeep; ++n) ASSERT_NE(BinomialTable::get(n), nullptr);
+  EXPECT_TRUE(first.expired());  // no holder, no longer among the last kKeep: freed
+  EXPECT_EQ(BinomialTable::get(102).get(), held.get());  // held: the same table, not built again
+  EXPECT_EQ(BinomialTable::get(255).get(), &table255());
+  const std::shared_ptr<const BinomialTable> again = BinomialTable::get(101);  // built again: the same draws
+  ASSERT_NE(again, nullptr);
+  EXPECT_EQ(draw_all(*again), draws);
+}
+
 // The kernel equals the scalar sampler draw for draw: U1, U2 = the words of counts_block(key, pixel, k)
 // (ARS-7 in software), a = min(p, q) with the kernel's own p and q. Lambdas cover zero, background,
 // edges, plateaus, p = 1/2, p near 1 and infinity, in vectors that mix them; K not a multiple of 8.
