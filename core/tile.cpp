@@ -11,6 +11,7 @@
 #include <sys/mman.h>
 #endif
 
+#include "buffer_cache.h"
 #include "error.h"
 
 namespace spadgen {
@@ -58,6 +59,12 @@ class MappingCache {
     entries_.emplace_back(size, p);  // within the capacity reserved: no allocation
     bytes_ += size;
   }
+  void release() noexcept {
+    std::lock_guard<std::mutex> lock(mutex_);
+    for (const auto& [size, p] : entries_) munmap(p, size);
+    entries_.clear();
+    bytes_ = 0;
+  }
   MappingCache() { entries_.reserve(kCachedBytes / kHugePageBytes + 1); }  // a mapping is >= 2 MB
 
  private:
@@ -72,6 +79,12 @@ MappingCache& mapping_cache() {
 }
 }  // namespace
 #endif
+
+void release_cached_buffers() noexcept {
+#if defined(SPADGEN_HUGE_BUFFERS)
+  mapping_cache().release();
+#endif
+}
 
 void* allocate_buffer(size_t bytes) {
 #if defined(SPADGEN_HUGE_BUFFERS)
