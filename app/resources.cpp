@@ -90,7 +90,8 @@ int64_t ResourcePlan::disk_sum(bool at_least, bool kept_only) const {
 std::string bytes_text(int64_t bytes) {
   char buf[32];
   const double b = static_cast<double>(bytes);
-  if (b >= 1e9) std::snprintf(buf, sizeof buf, "%.1f GB", b / 1e9);
+  if (b >= 1e12) std::snprintf(buf, sizeof buf, "%.1f TB", b / 1e12);  // (22202.3 GB read as 22.2 TB)
+  else if (b >= 1e9) std::snprintf(buf, sizeof buf, "%.1f GB", b / 1e9);
   else if (b >= 1e6) std::snprintf(buf, sizeof buf, "%.0f MB", b / 1e6);
   else std::snprintf(buf, sizeof buf, "%.0f kB", b / 1e3);
   return buf;

@@ -525,7 +525,7 @@ double planned_disk(const std::string& plan) {
   double planned = 0.0;
   std::string unit;
   in >> planned >> unit;  // "35 MB,"
-  return planned * (unit.starts_with("GB") ? 1e9 : unit.starts_with("MB") ? 1e6 : 1e3);
+  return planned * (unit.starts_with("TB") ? 1e12 : unit.starts_with("GB") ? 1e9 : unit.starts_with("MB") ? 1e6 : 1e3);
 }
 
 // Bytes of the regular files under a folder, each file once (a realisation's links are the sample's files).

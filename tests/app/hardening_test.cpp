@@ -213,9 +213,9 @@ TEST_F(Hardening, ARunTheMachineCannotHoldIsRefusedWithItsFigures) {
                                (dir_ / "out").string());
   expect_exit(disk, 1, "disk");
   // (the EXR images are compressed: counted at a twentieth of their size as the least, whole as the most)
-  EXPECT_THAT(disk.err, HasSubstr("the run writes at least 15099.5 GB (the compressed files, EXR images and Zarr stores, at a twentieth of their size; at most 15100.2 GB)"));
+  EXPECT_THAT(disk.err, HasSubstr("the run writes at least 15.1 TB (the compressed files, EXR images and Zarr stores, at a twentieth of their size; at most 15.1 TB)"));
   EXPECT_THAT(disk.err, HasSubstr("into " + (dir_ / "out").string()));
-  EXPECT_THAT(disk.err, HasSubstr("expected_counts.npy 6710.9 GB"));
+  EXPECT_THAT(disk.err, HasSubstr("expected_counts.npy 6.7 TB"));
   EXPECT_FALSE(fs::exists(dir_ / "out"));
   // info shows the plan.
   const Outcome info = spadgen("info " + kFlat);
