@@ -48,27 +48,35 @@ std::vector<double> realistic_lambdas(size_t n) {
 // The sampler alone: N = 255 Bernoulli bits per pixel and gate position, keyed streams, all threads.
 // Per block of 1024 pixels: Prob {p, q, -lambda} from lambda (vectorised, as process() forms them for a
 // tile), then sample_bits_batch (what process() calls for a row of pixels at one gate position).
-void BM_FrameBits(benchmark::State& state) {
-  const uint32_t N = 255;
-  const size_t pixels = 1 << 16, block = 1024;
+// BM_FrameBits' mix: 65,536 pixels of realistic rates, N = 255, sampled in blocks of 1024 in parallel; one
+// pass per gate position k (Prob of every pixel as process() forms them for a tile, into a buffer that lives
+// as long as the run, as process()'s does).
+struct FrameBitsMix {
+  static constexpr uint32_t N = 255;
+  static constexpr size_t pixels = 1 << 16, block = 1024;
   const std::vector<double> lam = realistic_lambdas(pixels);
-  std::vector<uint64_t> ids(pixels);
-  for (size_t i = 0; i < pixels; ++i) ids[i] = i;
-  const sensor::BinomialSampler sampler(N);
-  std::vector<uint64_t> words(pixels * 4);
-  uint64_t k = 0;
-  // Prob of every pixel, as process() forms them for a tile (all gates of a pixel in one pass), into a buffer
-  // per block that lives as long as the run, as process()'s does
-  std::vector<sensor::Prob> prob(pixels);
-  for (auto _ : state) {
+  std::vector<uint64_t> ids = std::vector<uint64_t>(pixels);
+  const sensor::BinomialSampler sampler{N};
+  std::vector<uint64_t> words = std::vector<uint64_t>(pixels * 4);
+  std::vector<sensor::Prob> prob = std::vector<sensor::Prob>(pixels);
+  FrameBitsMix() {
+    for (size_t i = 0; i < pixels; ++i) ids[i] = i;
+  }
+  void pass(uint64_t k) {
     tbb::parallel_for(tbb::blocked_range<size_t>(0, pixels, block), [&](const tbb::blocked_range<size_t>& r) {
       sensor::probabilities(lam.data() + r.begin(), r.size(), prob.data() + r.begin(), 1);
       sensor::sample_bits_batch(1, k, ids.data() + r.begin(), r.size(), sampler, prob.data() + r.begin(), words.data() + 4 * r.begin());
     });
     benchmark::DoNotOptimize(words.data());
-    ++k;
   }
-  const double bits = static_cast<double>(state.iterations()) * pixels * N;
+};
+
+void BM_FrameBits(benchmark::State& state) {
+  FrameBitsMix m;
+  const size_t pixels = m.pixels, block = m.block;
+  uint64_t k = 0;
+  for (auto _ : state) m.pass(k++);
+  const double bits = static_cast<double>(state.iterations()) * pixels * m.N;
   // Bit-identity check across builds: FNV-1a of the words of gate positions 0..3 (one pass each, outside
   // the timing), modulo 10^6.
   uint64_t hash = 0xcbf29ce484222325ull;
@@ -76,11 +84,11 @@ void BM_FrameBits(benchmark::State& state) {
     for (size_t b0 = 0; b0 < pixels; b0 += block) {
       std::vector<double> p(block), q(block);
       std::vector<sensor::Prob> pr(block);
-      sensor::probabilities(lam.data() + b0, block, p.data(), q.data());
-      for (size_t i = 0; i < block; ++i) pr[i] = {p[i], q[i], -lam[b0 + i]};
-      sensor::sample_bits_batch(1, kk, ids.data() + b0, block, sampler, pr.data(), words.data() + 4 * b0);
+      sensor::probabilities(m.lam.data() + b0, block, p.data(), q.data());
+      for (size_t i = 0; i < block; ++i) pr[i] = {p[i], q[i], -m.lam[b0 + i]};
+      sensor::sample_bits_batch(1, kk, m.ids.data() + b0, block, m.sampler, pr.data(), m.words.data() + 4 * b0);
     }
-    for (uint64_t w : words) hash = (hash ^ w) * 0x100000001b3ull;
+    for (uint64_t w : m.words) hash = (hash ^ w) * 0x100000001b3ull;
   }
   state.counters["outputs_hash"] = static_cast<double>(hash % 1000000);
   state.counters["Gbit_per_s"] = benchmark::Counter(bits * 1e-9, benchmark::Counter::kIsRate);
@@ -97,35 +105,23 @@ void BM_FrameBitsVaes(benchmark::State& state) {
     state.SkipWithError("the dispatcher did not choose AVX2 with VAES on this processor");
     return;
   }
-  const uint32_t N = 255;
-  const size_t pixels = 1 << 16, block = 1024;
-  const std::vector<double> lam = realistic_lambdas(pixels);
-  std::vector<uint64_t> ids(pixels);
-  for (size_t i = 0; i < pixels; ++i) ids[i] = i;
-  const sensor::BinomialSampler sampler(N);
-  std::vector<uint64_t> words(pixels * 4);
-  std::vector<sensor::Prob> prob(pixels);
+  FrameBitsMix m;
   uint64_t k = 0;
-  const auto pass = [&] {
+  const auto timed = [&] {
     const auto t0 = std::chrono::steady_clock::now();
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, pixels, block), [&](const tbb::blocked_range<size_t>& r) {
-      sensor::probabilities(lam.data() + r.begin(), r.size(), prob.data() + r.begin(), 1);
-      sensor::sample_bits_batch(1, k, ids.data() + r.begin(), r.size(), sampler, prob.data() + r.begin(), words.data() + 4 * r.begin());
-    });
-    benchmark::DoNotOptimize(words.data());
-    ++k;
+    m.pass(k++);
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   };
   double on = 0.0, off = 0.0;
   for (auto _ : state) {
     sensor::set_avx2_vaes(false);
-    off += pass();
+    off += timed();
     sensor::set_avx2_vaes(true);
-    const double t = pass();
+    const double t = timed();
     on += t;
     state.SetIterationTime(t);
   }
-  const double bits = static_cast<double>(state.iterations()) * pixels * N;
+  const double bits = static_cast<double>(state.iterations()) * m.pixels * m.N;
   state.counters["Gbit_per_s"] = bits * 1e-9 / on;
   state.counters["split_Gbit_per_s"] = bits * 1e-9 / off;
   state.counters["x_split"] = off / on;

@@ -58,22 +58,32 @@ HWY_INLINE void Transpose4x4(D d, hn::Vec<D>& a0, hn::Vec<D>& a1, hn::Vec<D>& a2
 #endif  // HWY_TARGET != HWY_SCALAR
 
 #if HWY_ARCH_X86 && HWY_TARGET == HWY_AVX2
-// Ars7Words on eight lanes with VAES (avx2_vaes_flag): compiled for the AVX2 target plus VAES, called only
-// when the processor has it (not inlined into the AVX2 code, which may not use VAES).
-__attribute__((target(HWY_TARGET_STR ",vaes"), noinline)) inline void Ars7WordsVaes(const ArsKeys& keys, __m256i* x) {
-  __m256i rk[kArsRounds + 1];
+// The AVX2 target plus VAES: functions with it are called only when the processor has VAES
+// (avx2_vaes_flag), and are not inlined into the AVX2 code, which may not use it.
+#define SPADGEN_AVX2_VAES __attribute__((target(HWY_TARGET_STR ",vaes")))
+
+// ARS-7's round keys in both 128-bit parts.
+SPADGEN_AVX2_VAES HWY_INLINE void ArsKeys256(const ArsKeys& keys, __m256i* rk) {
   for (int r = 0; r <= kArsRounds; ++r)
     rk[r] = _mm256_broadcastsi128_si256(_mm_load_si128(reinterpret_cast<const __m128i*>(keys.rk[r])));
-  const auto transpose = [](__m256i* a) __attribute__((always_inline, target(HWY_TARGET_STR ",vaes"))) {
-    const __m256i t0 = _mm256_unpacklo_epi32(a[0], a[1]), t1 = _mm256_unpackhi_epi32(a[0], a[1]);
-    const __m256i t2 = _mm256_unpacklo_epi32(a[2], a[3]), t3 = _mm256_unpackhi_epi32(a[2], a[3]);
-    a[0] = _mm256_unpacklo_epi64(t0, t2);
-    a[1] = _mm256_unpackhi_epi64(t0, t2);
-    a[2] = _mm256_unpacklo_epi64(t1, t3);
-    a[3] = _mm256_unpackhi_epi64(t1, t3);
-  };
+}
+
+// Transpose4x4 on four 256-bit vectors: a 4 x 4 transpose of u32 inside each 128-bit part.
+SPADGEN_AVX2_VAES HWY_INLINE void Transpose4x4Parts(__m256i* a) {
+  const __m256i t0 = _mm256_unpacklo_epi32(a[0], a[1]), t1 = _mm256_unpackhi_epi32(a[0], a[1]);
+  const __m256i t2 = _mm256_unpacklo_epi32(a[2], a[3]), t3 = _mm256_unpackhi_epi32(a[2], a[3]);
+  a[0] = _mm256_unpacklo_epi64(t0, t2);
+  a[1] = _mm256_unpackhi_epi64(t0, t2);
+  a[2] = _mm256_unpacklo_epi64(t1, t3);
+  a[3] = _mm256_unpackhi_epi64(t1, t3);
+}
+
+// Ars7Words on eight lanes with VAES.
+SPADGEN_AVX2_VAES __attribute__((noinline)) inline void Ars7WordsVaes(const ArsKeys& keys, __m256i* x) {
+  __m256i rk[kArsRounds + 1];
+  ArsKeys256(keys, rk);
   __m256i v[4] = {x[0], x[1], x[2], x[3]};
-  transpose(v);  // part l of v_j: the block of lane 4 l + j
+  Transpose4x4Parts(v);  // part l of v_j: the block of lane 4 l + j
 #pragma GCC unroll 4
   for (int j = 0; j < 4; ++j) v[j] = _mm256_xor_si256(v[j], rk[0]);
 #pragma GCC unroll 8
@@ -82,7 +92,7 @@ __attribute__((target(HWY_TARGET_STR ",vaes"), noinline)) inline void Ars7WordsV
     for (int j = 0; j < 4; ++j) v[j] = _mm256_aesenc_epi128(v[j], rk[r]);
 #pragma GCC unroll 4
   for (int j = 0; j < 4; ++j) v[j] = _mm256_aesenclast_epi128(v[j], rk[kArsRounds]);
-  transpose(v);
+  Transpose4x4Parts(v);
   for (int j = 0; j < 4; ++j) x[j] = v[j];
 }
 #endif

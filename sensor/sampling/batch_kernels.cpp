@@ -324,16 +324,8 @@ HWY_INLINE hn::Vec<D> Gather64Offset(D d, const T* HWY_RESTRICT base, hn::Vec<hn
 }
 template <class D, typename T>
 HWY_INLINE hn::Vec<D> Gather64Index(D d, const T* HWY_RESTRICT base, hn::Vec<hn::RebindToSigned<D>> idx) {
-#if HWY_ARCH_X86 && HWY_TARGET == HWY_AVX2
-  if constexpr (sizeof(hn::Vec<D>) == 32) {
-    alignas(32) int64_t o[4];
-    hn::Store(idx, hn::RebindToSigned<D>(), o);
-    alignas(32) hn::TFromD<D> v[4];
-    for (int j = 0; j < 4; ++j) v[j] = base[o[j]];
-    return hn::Load(d, v);
-  }
-#endif
-  return hn::GatherIndex(d, base, idx);
+  static_assert(sizeof(T) == 8);
+  return Gather64Offset(d, base, hn::ShiftLeft<3>(idx));
 }
 
 void BinomialCountsTable(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t key[2], uint64_t pixel,

@@ -234,7 +234,7 @@ HWY_INLINE void SettleTies(const ArsKeys& keys, uint32_t c1, const uint64_t* HWY
 // vector 4 g + j holds block 16 ch + 8 g + j + 4 l in its 128-bit part l; a 4 x 4 transpose inside the
 // parts turns vectors 4 g .. 4 g + 3 into words 0..3 of blocks 8 g .. 8 g + 7, i.e. the bytes of frames
 // 256 ch + 64 i + 32 g .. + 31 for word i, compared in registers (byte order as DenseBitsImpl's).
-__attribute__((target(HWY_TARGET_STR ",vaes"), noinline)) void DenseBitsBatchVaes(
+SPADGEN_AVX2_VAES __attribute__((noinline)) void DenseBitsBatchVaes(
     const ArsKeys& keys, uint32_t c1, const uint64_t* HWY_RESTRICT pixels, const uint64_t* HWY_RESTRICT T,
     const uint64_t* HWY_RESTRICT flips, const uint64_t* HWY_RESTRICT slots, size_t count, uint32_t n,
     uint64_t* HWY_RESTRICT words) {
@@ -244,20 +244,10 @@ __attribute__((target(HWY_TARGET_STR ",vaes"), noinline)) void DenseBitsBatchVae
   const uint64_t tail = n % 64 != 0 ? (uint64_t{1} << (n % 64)) - 1 : ~uint64_t{0};
   TieBuffer tb;
   __m256i rk[kArsRounds + 1];
-  for (int r = 0; r <= kArsRounds; ++r)
-    rk[r] = _mm256_broadcastsi128_si256(_mm_load_si128(reinterpret_cast<const __m128i*>(keys.rk[r])));
+  ArsKeys256(keys, rk);
   // (b, 0, 0, 0) in part l for b = 4 l: the block indices of vector 0 of a chunk's group 0
   const __m256i base_idx = _mm256_setr_epi32(0, 0, 0, 0, 4, 0, 0, 0);
   const __m256i sign = _mm256_set1_epi8(static_cast<char>(0x80));
-  const auto transpose = [](__m256i& a0, __m256i& a1, __m256i& a2, __m256i& a3)
-                             __attribute__((always_inline, target(HWY_TARGET_STR ",vaes"))) {
-    const __m256i t0 = _mm256_unpacklo_epi32(a0, a1), t1 = _mm256_unpackhi_epi32(a0, a1);
-    const __m256i t2 = _mm256_unpacklo_epi32(a2, a3), t3 = _mm256_unpackhi_epi32(a2, a3);
-    a0 = _mm256_unpacklo_epi64(t0, t2);
-    a1 = _mm256_unpackhi_epi64(t0, t2);
-    a2 = _mm256_unpacklo_epi64(t1, t3);
-    a3 = _mm256_unpackhi_epi64(t1, t3);
-  };
   for (size_t j = 0; j < count; ++j) {
     const auto slot = static_cast<uint32_t>(slots[j]);
     const uint64_t px = pixels[slot];
@@ -284,8 +274,8 @@ __attribute__((target(HWY_TARGET_STR ",vaes"), noinline)) void DenseBitsBatchVae
         for (int v = 0; v < 8; ++v) x[v] = _mm256_aesenc_epi128(x[v], rk[r]);
 #pragma GCC unroll 8
       for (int v = 0; v < 8; ++v) x[v] = _mm256_aesenclast_epi128(x[v], rk[kArsRounds]);
-      transpose(x[0], x[1], x[2], x[3]);
-      transpose(x[4], x[5], x[6], x[7]);
+      Transpose4x4Parts(x);
+      Transpose4x4Parts(x + 4);
       const size_t left = nw - 4 * static_cast<size_t>(ch);  // words of this chunk inside the pixel
       const size_t words_here = std::min<size_t>(4, left);
 #pragma GCC unroll 4
