@@ -198,8 +198,10 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
     // sphere (where a fixed 128 bins planned a quarter of the disk 1 ps bins took). Planned at 2.5 ns.
     const int64_t ring = (img.width + 2) * (img.height + 2);
     const bool zarr = c.outputs.storage == Storage::Zarr;
-    const int64_t lit = std::min<int64_t>(bins, static_cast<int64_t>(std::ceil(kLitSpan_s / c.render.time_bin_s)));
-    plan.disk.push_back({"light/ (outputs.light; about " + std::to_string(lit) + " lit bins per pixel, 2.5 ns" +
+    // (the bins' count bounds the span's first: a bin width of 1e-20 ps made it overflow)
+    const auto lit = static_cast<int64_t>(std::min(static_cast<double>(bins), std::ceil(kLitSpan_s / c.render.time_bin_s)));
+    plan.disk.push_back({std::string("light/ (outputs.light; ") +
+                             (bins > 0 ? "about " + std::to_string(lit) + " lit bins per pixel, 2.5 ns" : "no time bins: the totals") +
                              (zarr ? ", uncompressed)" : ")"),
                          ring * (8 + 8 + 8 + 8 + 4 + lit * 4), false, "", zarr, false, true});
     // The values are spilled to a temporary file as the tiles finish, in tile order, and copied into

@@ -158,7 +158,8 @@ Sampled convolve_edge(const BaseEdge& e, const Sampled& irf) {
   out.dx = dx;
   out.y.assign(static_cast<size_t>(n), 0.0);
   // Eight outputs at a time, each its own sum in the order of k (the same operations as one output at a
-  // time, so the same bits), which the compiler vectorises across the eight.
+  // time, so the same bits: this file is compiled without FMA contraction, sensor/CMakeLists.txt), which the
+  // compiler vectorises across the eight.
   constexpr int64_t kBlock = 8;
   int64_t i = 0;
   for (; i + kBlock <= n; i += kBlock) {

@@ -10,6 +10,7 @@
 #include <deque>
 #include <map>
 #include <mutex>
+#include <set>
 
 #include "sensor/sampling/sampling.h"
 
@@ -22,7 +23,9 @@ std::shared_ptr<const BinomialTable> BinomialTable::get(uint32_t n) {
   static std::mutex mu;
   static std::map<uint32_t, std::weak_ptr<const BinomialTable>> live;  // every table someone holds
   static std::deque<std::pair<uint32_t, std::shared_ptr<const BinomialTable>>> recent;  // the last kKeep asked for
+  static std::set<uint32_t> too_long;  // frame counts without tables (a failed build takes seconds at 65,535)
   const std::lock_guard<std::mutex> lock(mu);
+  if (too_long.count(n) != 0) return nullptr;
   std::shared_ptr<const BinomialTable> t;
   bool known = false;  // in recent, also as nullptr (n above 802)
   for (const auto& [m, held] : recent)
@@ -36,7 +39,11 @@ std::shared_ptr<const BinomialTable> BinomialTable::get(uint32_t n) {
     if (t == nullptr) {
       t = std::shared_ptr<const BinomialTable>(build(n));
       std::erase_if(live, [](const auto& e) { return e.second.expired(); });
-      if (t != nullptr) live[n] = t;
+      if (t == nullptr) {
+        too_long.insert(n);
+        return nullptr;
+      }
+      live[n] = t;
     }
   }
   std::erase_if(recent, [n](const auto& e) { return e.first == n; });

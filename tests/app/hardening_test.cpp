@@ -136,6 +136,16 @@ TEST_F(Hardening, ValuesThatCrashedOrHungSpadgenEndInAnErrorNamingTheKey) {
   }
 }
 
+// The saved light's planned size at a bin width far below the window's (an intensity run has no bins): the
+// lit bins' count overflowed int64 before it was bounded (-9223372036854775808 bins printed, undefined
+// behaviour that the sanitizers' build stops on).
+TEST_F(Hardening, ThePlanOfTheSavedLightAtATinyBinWidthIsFinite) {
+  const Outcome o = spadgen("info " + kFlat + " --set render.time_bin_ps=1e-20 --set outputs.light=true --set acquisition.mode=intensity");
+  expect_exit(o, 0, "info");
+  EXPECT_THAT(o.output, HasSubstr("light/ (outputs.light; no time bins: the totals)"));
+  EXPECT_THAT(o.output, Not(HasSubstr("-92233")));
+}
+
 TEST_F(Hardening, SceneFilesThatCrashedOrWereIgnoredAreRefused) {
   std::ofstream(dir_ / "t.gltf") << slurp(kScenes + "flat_target.gltf");
   const std::pair<std::string, std::string> cases[] = {
