@@ -242,9 +242,11 @@ std::string dataset_plan(const DatasetOptions& options) {
     if (folder) {
       const SampleRecord rec = folder->inspect(s);
       if (status.empty()) status = datasets::status_name(rec.status);
-      if (rec.status != Status::Done) ++left, left_total.disk += e.disk, left_total.seconds += e.seconds;
+      if (rec.status != Status::Done)
+        ++left, left_total.disk += e.disk, left_total.seconds += e.seconds, left_total.disk_peak = std::max(left_total.disk_peak, e.disk_peak);
     }
     total.disk += e.disk, total.disk_at_least += e.disk_at_least, total.seconds += e.seconds;
+    total.disk_peak = std::max(total.disk_peak, e.disk_peak);  // one sample at a time, as dataset run counts it
     total.paths_bound |= e.paths_bound;
     max_memory = std::max(max_memory, e.memory);
     const bool show = options.all || samples <= 10 || i >= n - 10 * shard.count;
@@ -268,7 +270,9 @@ std::string dataset_plan(const DatasetOptions& options) {
     if (folder) o << "\t" << status;
     o << "\n";
   }
-  o << "# per sample: disk about " << bytes_text(samples ? total.disk / samples : 0) << ", memory up to "
+  // the totals hold one sample's temporary files (freed after it), as dataset run's disk check does
+  total.disk += total.disk_peak, total.disk_at_least += total.disk_peak, left_total.disk += left_total.disk_peak;
+  o << "# per sample: disk about " << bytes_text(samples ? (total.disk - total.disk_peak) / samples : 0) << ", memory up to "
     << bytes_text(max_memory) << ", time about " << duration_text(samples ? total.seconds / double(samples) : 0.0) << "\n";
   o << "# " << (shard.count > 1 ? "this shard" : "total") << ": " << samples << " samples, disk about " << bytes_text(total.disk)
     << ", time about " << duration_text(total.seconds) << " (estimates for 2 cores: docs/datasets.md, \"Estimates\")\n";

@@ -516,10 +516,12 @@ TEST_F(Dataset, RefusesAnotherDatasetsFolderForeignFilesAndTooLittleDisk) {
   EXPECT_NE(per_sample(bound.output), per_sample(plan.output));
 }
 
-// The total disk of `dataset plan`'s output ("# total: N samples, disk about 35 MB, ..."), in bytes.
-double planned_disk(const std::string& plan) {
-  const std::string key = " samples, disk about ";
-  const size_t at = plan.find(key, plan.find("# total: "));
+// The disk of `dataset plan`'s output, in bytes: per sample ("# per sample: disk about 35 MB, ...": what a
+// sample keeps), or the total ("# total: N samples, disk about 71 MB, ...": every sample and one sample's
+// temporary files, freed after it).
+double planned_disk(const std::string& plan, bool per_sample = false) {
+  const std::string key = per_sample ? "# per sample: disk about " : " samples, disk about ";
+  const size_t at = plan.find(key, per_sample ? 0 : plan.find("# total: "));
   if (at == std::string::npos) return -1.0;
   std::istringstream in(plan.substr(at + key.size()));
   double planned = 0.0;
@@ -547,8 +549,9 @@ TEST_F(Dataset, ThePlannedDiskCountsTheRealisationsLinks) {
         "\"outputs.detection_rate\": true, \"outputs.expected_counts\": true}}");
   const Result plan = sh("dataset plan " + (dir_ / "d.json").string());
   ASSERT_EQ(plan.code, 0) << plan.output;
-  const double planned = planned_disk(plan.output);
+  const double planned = 2 * planned_disk(plan.output, true);  // what the 2 samples keep
   ASSERT_GT(planned, 0.0) << plan.output;
+  EXPECT_GT(planned_disk(plan.output), planned) << "the total holds a sample's temporary files too";
   ASSERT_EQ(sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q").code, 0);
   const double taken = bytes_taken(dir_ / "out/samples");
   // at most 2: the saved light (the realisations' source) is planned at 2.5 ns of bins per pixel, which a
