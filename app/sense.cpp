@@ -50,13 +50,18 @@ namespace {
 
 // Keys sense may change: the sensor's, the acquisition's, the chip's and the noise's seeds, and the files
 // the sensor writes. Everything else shaped the light, which sense cannot change.
-bool sense_may_set(const std::string& written) {
-  std::string key = written;
+// A key as --set wrote it, in its plain form ("sensor"."gate".length_ns is sensor.gate.length_ns); a
+// malformed key as written (it is reported as such when the scene file is parsed).
+std::string plain_key(const std::string& written) {
   try {
-    key = scenes::parse_key_path(written).text();  // "sensor"."gate".length_ns is sensor.gate.length_ns
+    return scenes::parse_key_path(written).text();
   } catch (const Error&) {
-    // A malformed key is reported as such when the scene file is parsed.
+    return written;
   }
+}
+
+bool sense_may_set(const std::string& written) {
+  const std::string key = plain_key(written);
   for (const char* prefix : {"sensor.", "acquisition.", "seeds.chip", "seeds.noise", "outputs.expected_counts",
                              "outputs.detection_rate", "outputs.counts", "outputs.frames", "outputs.previews",
                              "outputs.storage", "outputs.exr_compression"})
@@ -249,7 +254,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   if (options.repeats < 1) throw Error("--repeats: expected at least 1, found " + std::to_string(options.repeats));
   // A seed given twice, as an option and by --set, is refused rather than one silently winning.
   for (const std::string& o : options.overrides) {
-    const std::string key = o.substr(0, scenes::assignment_split(o));
+    const std::string key = plain_key(o.substr(0, scenes::assignment_split(o)));
     if ((key == "seeds.noise" && options.noise_seed) || (key == "seeds.chip" && options.chip_seed))
       throw Error("--set " + key + " and --" + (key == "seeds.noise" ? "noise" : "chip") + "-seed both give the seed: give one");
   }
@@ -285,7 +290,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     const uint64_t last = noise0 + uint64_t(options.repeats - 1);
     if (last > kMaxSeed) {
       bool set = false;
-      for (const std::string& s : options.overrides) set = set || s.substr(0, scenes::assignment_split(s)) == "seeds.noise";
+      for (const std::string& s : options.overrides) set = set || plain_key(s.substr(0, scenes::assignment_split(s))) == "seeds.noise";
       const json& run_seeds = meta.at("resolved_scene").at("seeds");
       const std::string source = options.noise_seed ? "--noise-seed"
                                  : set            ? "--set seeds.noise"

@@ -262,6 +262,10 @@ TEST_F(App, SenseKeepsOnlyWhatItsSettingsAskFor) {
   const Result r = sh(sense + "--noise-seed 30 --set seeds.noise=31 -o " + (dir_ / "two").string());
   EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("--set seeds.noise and --noise-seed both give the seed"));
+  // also when the key is written with quotes (the option won silently: the keys were compared as written)
+  const Result quoted = sh(sense + "--noise-seed 30 --set '\"seeds\".\"noise\"=31' -o " + (dir_ / "two").string());
+  EXPECT_EQ(quoted.code, 1);
+  EXPECT_THAT(quoted.output, HasSubstr("--set seeds.noise and --noise-seed both give the seed"));
   // A bad value names the --set that gave it, not the run's scene file (which sense does not read)
   const Result bad = sh(sense + "--set acquisition.frames=0 -o " + (dir_ / "bad").string());
   EXPECT_EQ(bad.code, 1);
