@@ -78,6 +78,18 @@ SPADGEN_AVX2_VAES HWY_INLINE void Transpose4x4Parts(__m256i* a) {
   a[3] = _mm256_unpackhi_epi64(t1, t3);
 }
 
+// Rounds 1..7 of ARS-7 on n vectors of two blocks each (x: counters XOR k_0), interleaved so that the n
+// chains overlap.
+template <int n>
+SPADGEN_AVX2_VAES HWY_INLINE void ArsRounds256(const __m256i* rk, __m256i* x) {
+#pragma GCC unroll 8
+  for (int r = 1; r < kArsRounds; ++r)
+#pragma GCC unroll 8
+    for (int j = 0; j < n; ++j) x[j] = _mm256_aesenc_epi128(x[j], rk[r]);
+#pragma GCC unroll 8
+  for (int j = 0; j < n; ++j) x[j] = _mm256_aesenclast_epi128(x[j], rk[kArsRounds]);
+}
+
 // Ars7Words on eight lanes with VAES.
 SPADGEN_AVX2_VAES __attribute__((noinline)) inline void Ars7WordsVaes(const ArsKeys& keys, __m256i* x) {
   __m256i rk[kArsRounds + 1];
@@ -86,12 +98,7 @@ SPADGEN_AVX2_VAES __attribute__((noinline)) inline void Ars7WordsVaes(const ArsK
   Transpose4x4Parts(v);  // part l of v_j: the block of lane 4 l + j
 #pragma GCC unroll 4
   for (int j = 0; j < 4; ++j) v[j] = _mm256_xor_si256(v[j], rk[0]);
-#pragma GCC unroll 8
-  for (int r = 1; r < kArsRounds; ++r)
-#pragma GCC unroll 4
-    for (int j = 0; j < 4; ++j) v[j] = _mm256_aesenc_epi128(v[j], rk[r]);
-#pragma GCC unroll 4
-  for (int j = 0; j < 4; ++j) v[j] = _mm256_aesenclast_epi128(v[j], rk[kArsRounds]);
+  ArsRounds256<4>(rk, v);
   Transpose4x4Parts(v);
   for (int j = 0; j < 4; ++j) x[j] = v[j];
 }

@@ -268,12 +268,7 @@ SPADGEN_AVX2_VAES __attribute__((noinline)) void DenseBitsBatchVaes(
       for (int v = 0; v < 8; ++v)
         x[v] = _mm256_xor_si256(ck, _mm256_add_epi32(base_idx, _mm256_setr_epi32(static_cast<int>(16 * ch + 8 * (v / 4) + v % 4), 0, 0, 0,
                                                                                   static_cast<int>(16 * ch + 8 * (v / 4) + v % 4), 0, 0, 0)));
-#pragma GCC unroll 8
-      for (int r = 1; r < kArsRounds; ++r)
-#pragma GCC unroll 8
-        for (int v = 0; v < 8; ++v) x[v] = _mm256_aesenc_epi128(x[v], rk[r]);
-#pragma GCC unroll 8
-      for (int v = 0; v < 8; ++v) x[v] = _mm256_aesenclast_epi128(x[v], rk[kArsRounds]);
+      ArsRounds256<8>(rk, x);
       Transpose4x4Parts(x);
       Transpose4x4Parts(x + 4);
       const size_t left = nw - 4 * static_cast<size_t>(ch);  // words of this chunk inside the pixel
