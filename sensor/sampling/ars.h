@@ -100,12 +100,15 @@ inline void words_to_bytes(const uint32_t w[4], uint8_t b[16]) {
 // Whether the AVX2 kernels run ARS-7's rounds with VAES (256-bit AES rounds: AMD Zen 3, Intel Alder Lake
 // and later), where Highway's AVX2 target splits each into two 128-bit AESENC: on when the processor has
 // VAES; frames_kernel.h's set_avx2_vaes turns it off for tests and the benchmark. The bits are the same.
-inline std::atomic<bool>& avx2_vaes_flag() {
+inline bool cpu_has_vaes() {
 #if defined(__x86_64__) || defined(__i386__)
-  static std::atomic<bool> on{__builtin_cpu_supports("vaes") != 0};
+  return __builtin_cpu_supports("vaes") != 0;
 #else
-  static std::atomic<bool> on{false};
+  return false;
 #endif
+}
+inline std::atomic<bool>& avx2_vaes_flag() {
+  static std::atomic<bool> on{cpu_has_vaes()};
   return on;
 }
 

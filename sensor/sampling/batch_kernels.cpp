@@ -6,9 +6,9 @@
 #include <hwy/contrib/math/math-inl.h>
 
 #include <algorithm>
-#include <cstring>
 #include <array>
 #include <cmath>
+#include <cstring>
 
 #include "sensor/sampling/batch_kernels.h"
 #include "sensor/sampling/ars-inl.h"
@@ -301,11 +301,6 @@ void BinomialCounts(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t 
   }
 }
 
-// Counts by the tables of BinomialTable (see binomial_table.h), all K gates of one pixel: the ARS-7 block
-// with counter (0, k, pixel) gives U1 (words 0, 1) and U2 (words 2, 3). Per vector of gates: the
-// grid row g = floor(a G); X1 from the guide and a step or two up the row, comparing the top 16 bits of T
-// and U1 (gathers from tables that stay in cache); Y = 0 where U2 >= floor((n - X1) delta 2^64). Lanes with
-// equal top bits take BinomialTable::first_round, lanes with a possible Y > 0 second_round.
 // Gathers of 64-bit lanes for the table sampler: on AVX2, four scalar loads (AMD's vpgatherqq, microcoded
 // on Zen 1-3, was slower); elsewhere Highway's gathers. Offsets in bytes, indices in elements.
 template <class D, typename T>
@@ -328,6 +323,11 @@ HWY_INLINE hn::Vec<D> Gather64Index(D d, const T* HWY_RESTRICT base, hn::Vec<hn:
   return Gather64Offset(d, base, hn::ShiftLeft<3>(idx));
 }
 
+// Counts by the tables of BinomialTable (see binomial_table.h), all K gates of one pixel: the ARS-7 block
+// with counter (0, k, pixel) gives U1 (words 0, 1) and U2 (words 2, 3). Per vector of gates: the
+// grid row g = floor(a G); X1 from the guide and a step or two up the row, comparing the top 16 bits of T
+// and U1 (gathers from tables that stay in cache); Y = 0 where U2 >= floor((n - X1) delta 2^64). Lanes with
+// equal top bits take BinomialTable::first_round, lanes with a possible Y > 0 second_round.
 void BinomialCountsTable(const double* HWY_RESTRICT lam_in, size_t K, const uint32_t key[2], uint64_t pixel,
                          const BinomialTable& table, KernelScratch& s) {
   const uint32_t N = table.n();

@@ -26,25 +26,16 @@ std::shared_ptr<const BinomialTable> BinomialTable::get(uint32_t n) {
   static std::set<uint32_t> too_long;  // frame counts without tables (a failed build takes seconds at 65,535)
   const std::lock_guard<std::mutex> lock(mu);
   if (too_long.count(n) != 0) return nullptr;
-  std::shared_ptr<const BinomialTable> t;
-  bool known = false;  // in recent, also as nullptr (n above 802)
-  for (const auto& [m, held] : recent)
-    if (m == n) {
-      t = held;
-      known = true;
-      break;
-    }
-  if (!known) {
-    if (const auto it = live.find(n); it != live.end()) t = it->second.lock();
+  std::shared_ptr<const BinomialTable> t;  // recent holds it, or someone does, or it is built
+  if (const auto it = live.find(n); it != live.end()) t = it->second.lock();
+  if (t == nullptr) {
+    t = std::shared_ptr<const BinomialTable>(build(n));
+    std::erase_if(live, [](const auto& e) { return e.second.expired(); });
     if (t == nullptr) {
-      t = std::shared_ptr<const BinomialTable>(build(n));
-      std::erase_if(live, [](const auto& e) { return e.second.expired(); });
-      if (t == nullptr) {
-        too_long.insert(n);
-        return nullptr;
-      }
-      live[n] = t;
+      too_long.insert(n);
+      return nullptr;
     }
+    live[n] = t;
   }
   std::erase_if(recent, [n](const auto& e) { return e.first == n; });
   recent.emplace_front(n, t);

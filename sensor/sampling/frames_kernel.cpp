@@ -299,18 +299,18 @@ HWY_INLINE void DenseBitsBatch(const ArsKeys& keys, uint32_t c1, const uint64_t*
                                const uint64_t* HWY_RESTRICT T, const uint64_t* HWY_RESTRICT flips,
                                const uint64_t* HWY_RESTRICT slots, size_t count, uint32_t n,
                                uint64_t* HWY_RESTRICT words) {
-  const hn::ScalableTag<uint8_t> d8;
-  const size_t L = hn::Lanes(d8);
-  const uint32_t chunks = (n + 255) / 256;
-  const uint32_t refine_base = chunks * 16;
-  const size_t nw = (static_cast<size_t>(n) + 63) / 64;
-  const uint64_t tail = n % 64 != 0 ? (uint64_t{1} << (n % 64)) - 1 : ~uint64_t{0};
 #if HWY_ARCH_X86 && HWY_TARGET == HWY_AVX2
   if (avx2_vaes_flag().load(std::memory_order_relaxed)) {
     DenseBitsBatchVaes(keys, c1, pixels, T, flips, slots, count, n, words);
     return;
   }
 #endif
+  const hn::ScalableTag<uint8_t> d8;
+  const size_t L = hn::Lanes(d8);
+  const uint32_t chunks = (n + 255) / 256;
+  const uint32_t refine_base = chunks * 16;
+  const size_t nw = (static_cast<size_t>(n) + 63) / 64;
+  const uint64_t tail = n % 64 != 0 ? (uint64_t{1} << (n % 64)) - 1 : ~uint64_t{0};
   TieBuffer tb;
   // Vectors of 16 u32 (AVX-512): ARS word v of a chunk's 16 blocks is one vector, i.e. the chunk's
   // bytes 64 v .. 64 v + 63 (frames 256 ch + 64 v + i), compared in registers and stored as whole words
@@ -454,7 +454,6 @@ HWY_INLINE void DenseBitsBatch(const ArsKeys& keys, uint32_t c1, const uint64_t*
   }
   SettleTies(keys, c1, pixels, T, refine_base, nw, words, tb);
 }
-
 
 // Philox on 64-bit lanes: each lane carries one block's 32-bit word in its low half; the high half is
 // ignored (MulEven reads only the low halves; the outputs are the low halves), so the lanes line up with
@@ -629,14 +628,7 @@ const char* dense_bits_target() {
 
 bool avx2_vaes() { return avx2_vaes_flag().load(); }
 
-bool set_avx2_vaes(bool on) {
-#if defined(__x86_64__) || defined(__i386__)
-  if (on && !__builtin_cpu_supports("vaes")) on = false;
-#else
-  on = false;
-#endif
-  return avx2_vaes_flag().exchange(on);
-}
+bool set_avx2_vaes(bool on) { return avx2_vaes_flag().exchange(on && cpu_has_vaes()); }
 
 bool dense_bit_reference(const Rng& stream, uint32_t n, uint64_t T, uint32_t frame) {
   const uint32_t chunks = (n + 255) / 256;

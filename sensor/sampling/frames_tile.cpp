@@ -321,7 +321,6 @@ HWY_INLINE hn::Vec<D> SelectInWord(D d, hn::Vec<D> word, hn::Vec<D> t) {
   return pos;
 }
 
-
 // The draws of the listed (pixel, direction) pairs, eight (a vector of 64-bit lanes) at a time, exactly as
 // CrosstalkDirection makes them: U, then crosstalk_hits' bounds (H = 0; H = 1, whose one frame comes from
 // the direction's next word by uniform_below when its first multiply decides, found among the neighbour's
