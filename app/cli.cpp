@@ -10,6 +10,7 @@
 #include <new>
 
 #include "core/error.h"
+#include "scenes/scene_file.h"
 
 namespace spadgen::app {
 
@@ -83,7 +84,7 @@ int run_command(const std::function<void()>& command) {
 }
 
 uint64_t parse_seed(const std::string& text, const std::string& option) {
-  constexpr uint64_t kMax = uint64_t{1} << 53;  // seeds are exact in metadata.json's JSON numbers
+  constexpr uint64_t kMax = scenes::kMaxSeed;
   uint64_t v = 0;
   bool ok = !text.empty() && text.size() <= 16;
   for (char c : text) {

@@ -57,6 +57,21 @@ struct Estimate {
   bool paths_bound = false;  // a target error: the time counts render.max_samples_per_pixel paths per pixel
 };
 
+// The estimates of samples generated one at a time (a plan's, a run's): their kept disk, time and largest
+// memory, with the largest sample's temporary files on top of the disk (freed after each sample).
+struct Totals {
+  int64_t kept = 0, kept_at_least = 0, peak = 0, memory = 0;
+  double seconds = 0.0;
+  bool paths_bound = false;
+  void add(const Estimate& e) {
+    kept += e.disk, kept_at_least += e.disk_at_least, seconds += e.seconds;
+    peak = std::max(peak, e.disk_peak), memory = std::max(memory, e.memory);
+    paths_bound = paths_bound || e.paths_bound;
+  }
+  int64_t disk() const { return kept + peak; }
+  int64_t disk_at_least() const { return kept_at_least + peak; }
+};
+
 Estimate estimate(const RunConfig& c, int repeats, int threads) {
   // The sensor's shape (gate positions, window, halo), not its counts: with frames the model builds no
   // counts tables (about 3 MB and 15 ms per frame count; a dataset with a random acquisition.frames held
@@ -216,9 +231,8 @@ std::string dataset_plan(const DatasetOptions& options) {
   if (folder) o << "\tstatus";
   o << "\n";
 
-  Estimate total;
-  int64_t max_memory = 0, samples = 0, left = 0;
-  Estimate left_total;
+  Totals total, left_total;
+  int64_t samples = 0, left = 0;
   std::vector<std::string> errors;
   Estimator estimator(spec.repeats, options.threads);
   // Each sample's scene is resolved (about 0.2 ms): a plan of millions of samples takes minutes, so it shows
@@ -242,13 +256,9 @@ std::string dataset_plan(const DatasetOptions& options) {
     if (folder) {
       const SampleRecord rec = folder->inspect(s);
       if (status.empty()) status = datasets::status_name(rec.status);
-      if (rec.status != Status::Done)
-        ++left, left_total.disk += e.disk, left_total.seconds += e.seconds, left_total.disk_peak = std::max(left_total.disk_peak, e.disk_peak);
+      if (rec.status != Status::Done) ++left, left_total.add(e);
     }
-    total.disk += e.disk, total.disk_at_least += e.disk_at_least, total.seconds += e.seconds;
-    total.disk_peak = std::max(total.disk_peak, e.disk_peak);  // one sample at a time, as dataset run counts it
-    total.paths_bound |= e.paths_bound;
-    max_memory = std::max(max_memory, e.memory);
+    total.add(e);
     const bool show = options.all || samples <= 10 || i >= n - 10 * shard.count;
     if (!show) {
       if (samples == 11) o << "...\t(" << "--all lists every sample)\n";
@@ -270,22 +280,21 @@ std::string dataset_plan(const DatasetOptions& options) {
     if (folder) o << "\t" << status;
     o << "\n";
   }
-  // the totals hold one sample's temporary files (freed after it), as dataset run's disk check does
-  total.disk += total.disk_peak, total.disk_at_least += total.disk_peak, left_total.disk += left_total.disk_peak;
-  o << "# per sample: disk about " << bytes_text(samples ? (total.disk - total.disk_peak) / samples : 0) << ", memory up to "
-    << bytes_text(max_memory) << ", time about " << duration_text(samples ? total.seconds / double(samples) : 0.0) << "\n";
-  o << "# " << (shard.count > 1 ? "this shard" : "total") << ": " << samples << " samples, disk about " << bytes_text(total.disk)
+  // per sample what it keeps; the totals with one sample's temporary files, as dataset run's disk check counts them
+  o << "# per sample: disk about " << bytes_text(samples ? total.kept / samples : 0) << ", memory up to "
+    << bytes_text(total.memory) << ", time about " << duration_text(samples ? total.seconds / double(samples) : 0.0) << "\n";
+  o << "# " << (shard.count > 1 ? "this shard" : "total") << ": " << samples << " samples, disk about " << bytes_text(total.disk())
     << ", time about " << duration_text(total.seconds) << " (estimates for 2 cores: docs/datasets.md, \"Estimates\")\n";
   if (total.paths_bound)
     o << "# with render.target_relative_error a pixel's paths depend on its light: the times count "
          "render.max_samples_per_pixel for every pixel, an upper bound\n";
-  if (total.disk_at_least != total.disk)
+  if (total.disk_at_least() != total.disk())
     o << "# the disk counts the compressed files (EXR images, Zarr stores) uncompressed, at most: the samples take at least "
-      << bytes_text(total.disk_at_least) << " (those files at a twentieth; examples/datasets/multi_object_variations.json "
+      << bytes_text(total.disk_at_least()) << " (those files at a twentieth; examples/datasets/multi_object_variations.json "
          "writes about an eighth of the most)\n";
   if (folder) {
     const int64_t free = free_disk(options.out_dir);
-    o << "# left to generate in " << options.out_dir << ": " << left << " samples, disk about " << bytes_text(left_total.disk)
+    o << "# left to generate in " << options.out_dir << ": " << left << " samples, disk about " << bytes_text(left_total.disk())
       << " (free: " << (free >= 0 ? bytes_text(free) : std::string("unknown")) << "), time about "
       << duration_text(left_total.seconds) << "\n";
   }
@@ -340,13 +349,10 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
   // What killed runs left in samples/ is removed first (a sample another run is writing keeps its own), so
   // that the disk check does not count it.
   Staging::remove_leftovers(dir / "samples");
-  int64_t disk = 0, disk_at_least = 0, peak = 0;
-  double seconds = 0.0;
-  for (const Todo& t : todo) {
-    disk += t.estimate.disk, disk_at_least += t.estimate.disk_at_least, seconds += t.estimate.seconds;
-    peak = std::max(peak, t.estimate.disk_peak);  // one sample at a time: its temporary files, freed after it
-  }
-  disk += peak, disk_at_least += peak;
+  Totals totals;
+  for (const Todo& t : todo) totals.add(t.estimate);
+  const int64_t disk = totals.disk(), disk_at_least = totals.disk_at_least();
+  const double seconds = totals.seconds;
   // Refused when even the least they can take does not fit (compressed stores at a twentieth of their size).
   if (const int64_t free = free_disk(dir); free >= 0 && free < disk_at_least) {
     const bool compressed = disk_at_least != disk;

@@ -51,14 +51,13 @@ void check_derived(const RunConfig& c, const sensor::SensorModel& sensor, const 
   periods_keys.insert(periods_keys.end(), window.begin(), window.end());
   const double span = static_cast<double>(axis.bins) * axis.bin_width_s;
   if (axis.bins < 0 || axis.bins > scenes::kMaxTimeBins || !std::isfinite(span))
-    throw Error(where(bins_keys) + "the time window that " + window_keys(c) + " set, from " + g(axis.start_s / kNs) + " ns on, needs " + (axis.bins < 0 ? std::string("more than 2^63") : g(double(axis.bins))) +
-                " bins of " + g(axis.bin_width_s / kPs) + " ps; expected at most " + std::to_string(scenes::kMaxTimeBins) +
+    throw Error(where(bins_keys) + "the time window that " + window_keys(c) + " set, from " + g(axis.start_s / kNs) +
+                " ns on, needs " + (axis.bins < 0 ? std::string("more than 2^63") : g(double(axis.bins))) + " bins of " +
+                g(axis.bin_width_s / kPs) + " ps; expected at most " + std::to_string(scenes::kMaxTimeBins) +
                 " bins: wider bins (render.time_bin_ps) or a shorter window");
   if (axis.bins > 0 && axis.period_s > 0 && span / axis.period_s > kMaxWindowPeriods)
-    throw Error(where(periods_keys) + "the time window of " +
-                g(span / kNs) + " ns spans " +
-                g(span / axis.period_s) + " laser periods of " + g(axis.period_s / kPs) + " ps; expected at most " +
-                g(kMaxWindowPeriods) + " (a lower repetition rate or a shorter window: " + window_keys(c) + ")");
+    throw Error(where(periods_keys) + "the time window of " + g(span / kNs) + " ns spans " + g(span / axis.period_s) +
+                " laser periods of " + g(axis.period_s / kPs) + " ps; expected at most " + g(kMaxWindowPeriods) + " (a lower repetition rate or a shorter window: " + window_keys(c) + ")");
 
   // A gate cannot be open for a negative time: with a length spread large against the gate length, the
   // Gaussian model of the spread stops being physical. Refused rather than clamped, so that the maps in

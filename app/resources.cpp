@@ -200,8 +200,10 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
     const bool zarr = c.outputs.storage == Storage::Zarr;
     // (the bins' count bounds the span's first: a bin width of 1e-20 ps made it overflow)
     const auto lit = static_cast<int64_t>(std::min(static_cast<double>(bins), std::ceil(kLitSpan_s / c.render.time_bin_s)));
+    char span[32];
+    std::snprintf(span, sizeof span, "%g", kLitSpan_s * 1e9);
     plan.disk.push_back({std::string("light/ (outputs.light; ") +
-                             (bins > 0 ? "about " + std::to_string(lit) + " lit bins per pixel, 2.5 ns" : "no time bins: the totals") +
+                             (bins > 0 ? "about " + std::to_string(lit) + " lit bins per pixel, " + span + " ns" : "no time bins: the totals") +
                              (zarr ? ", uncompressed)" : ")"),
                          ring * (8 + 8 + 8 + 8 + 4 + lit * 4), false, "", zarr, false, true});
     // The values are spilled to a temporary file as the tiles finish, in tile order, and copied into

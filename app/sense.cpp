@@ -253,10 +253,12 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   }
   if (options.repeats < 1) throw Error("--repeats: expected at least 1, found " + std::to_string(options.repeats));
   // A seed given twice, as an option and by --set, is refused rather than one silently winning.
+  bool noise_by_set = false;
   for (const std::string& o : options.overrides) {
     const std::string key = plain_key(o.substr(0, scenes::assignment_split(o)));
     if ((key == "seeds.noise" && options.noise_seed) || (key == "seeds.chip" && options.chip_seed))
       throw Error("--set " + key + " and --" + (key == "seeds.noise" ? "noise" : "chip") + "-seed both give the seed: give one");
+    noise_by_set = noise_by_set || key == "seeds.noise";
   }
 
   // The run's scene file as it resolved, with this call's changes.
@@ -284,16 +286,14 @@ std::vector<RunResult> sense(const SenseOptions& options) {
       run.config.seeds.noise = noise0 + uint64_t(r);
       run.resolved["seeds"]["noise"] = noise0 + uint64_t(r);
     }
-    // Seeds past the key's range (0 .. 2^53, scenes/schema.cpp) are refused in terms of what the user gave:
-    // the first seed's source and --repeats.
-    constexpr uint64_t kMaxSeed = uint64_t{1} << 53;
+    // Seeds past the key's range (0 .. scenes::kMaxSeed) are refused in terms of what the user gave: the first
+    // seed's source and --repeats.
+    using scenes::kMaxSeed;
     const uint64_t last = noise0 + uint64_t(options.repeats - 1);
     if (last > kMaxSeed) {
-      bool set = false;
-      for (const std::string& s : options.overrides) set = set || plain_key(s.substr(0, scenes::assignment_split(s))) == "seeds.noise";
       const json& run_seeds = meta.at("resolved_scene").at("seeds");
       const std::string source = options.noise_seed ? "--noise-seed"
-                                 : set            ? "--set seeds.noise"
+                                 : noise_by_set   ? "--set seeds.noise"
                                  : run_seeds.contains("noise") && !run_seeds.at("noise").is_null() ? "the run's seeds.noise"
                                                                                                   : "the run's seed";
       throw Error("--repeats " + std::to_string(options.repeats) + ": the realisations' noise seeds would run from " +

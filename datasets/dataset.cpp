@@ -25,7 +25,7 @@ using ojson = nlohmann::ordered_json;
 
 namespace {
 
-constexpr uint64_t kMaxSeed = (uint64_t{1} << 53);  // seeds are JSON integers, exact in a double
+using scenes::kMaxSeed;
 
 // A uniform double in [0, 1) with 53 random bits.
 double uniform01(Rng& r) { return static_cast<double>(r.next_u64() >> 11) * 0x1p-53; }

@@ -622,19 +622,21 @@ void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string
     err("/render/window_stop_ns", "expected a window end after render.window_start_ns");
   else if (c.render.window_start_s) {
     const double bins = std::ceil((*c.render.window_stop_s - *c.render.window_start_s) / c.render.time_bin_s - 1e-9);
-    // named by the key the user changed: the bin width, or else a window end --set gave
-    const char* window_key = chk.set_keys.count("/render/window_stop_ns") ? "/render/window_stop_ns"
-                             : chk.set_keys.count("/render/window_start_ns") ? "/render/window_start_ns"
-                                                                             : nullptr;
-    if (!(bins <= static_cast<double>(kMaxTimeBins)) && (chk.set_keys.count("/render/time_bin_ps") || !window_key))
-      err("/render/time_bin_ps", "found " + format_bound(c.render.time_bin_s / kPs) + " ps, which makes " + format_bound(bins) +
-                                     " time bins over the window /render/window_start_ns to window_stop_ns; expected at most " +
-                                     std::to_string(kMaxTimeBins) + " bins: wider bins or a shorter window");
-    else if (!(bins <= static_cast<double>(kMaxTimeBins)))
-      err(window_key, "the window from " + format_bound(*c.render.window_start_s / kNs) + " to " +
-                          format_bound(*c.render.window_stop_s / kNs) + " ns makes " + format_bound(bins) + " time bins of " +
-                          format_bound(c.render.time_bin_s / kPs) + " ps (render.time_bin_ps); expected at most " +
-                          std::to_string(kMaxTimeBins) + " bins: a shorter window or wider bins");
+    if (!(bins <= static_cast<double>(kMaxTimeBins))) {
+      // named by the key the user changed: the bin width, or else a window end --set gave
+      const char* window_key = chk.set_keys.count("/render/window_stop_ns") ? "/render/window_stop_ns"
+                               : chk.set_keys.count("/render/window_start_ns") ? "/render/window_start_ns"
+                                                                               : nullptr;
+      if (chk.set_keys.count("/render/time_bin_ps") || !window_key)
+        err("/render/time_bin_ps", "found " + format_bound(c.render.time_bin_s / kPs) + " ps, which makes " + format_bound(bins) +
+                                       " time bins over the window /render/window_start_ns to window_stop_ns; expected at most " +
+                                       std::to_string(kMaxTimeBins) + " bins: wider bins or a shorter window");
+      else
+        err(window_key, "the window from " + format_bound(*c.render.window_start_s / kNs) + " to " +
+                            format_bound(*c.render.window_stop_s / kNs) + " ns makes " + format_bound(bins) + " time bins of " +
+                            format_bound(c.render.time_bin_s / kPs) + " ps (render.time_bin_ps); expected at most " +
+                            std::to_string(kMaxTimeBins) + " bins: a shorter window or wider bins");
+    }
   }
   // Every file is read whole, so it must be a regular file of bounded size (a FIFO or /dev/zero would
   // block or never end).

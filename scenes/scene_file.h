@@ -18,6 +18,9 @@ namespace spadgen::scenes {
 // axis a gate sweep derives is checked against kMaxTimeBins by the program, app/preflight.h).
 inline constexpr int64_t kMaxGatePositions = 100'000;  // acquisition.gate_sweep: (stop - start) / step + 1
 inline constexpr int64_t kMaxTimeBins = 1'000'000;     // transient bins: window / render.time_bin_ps
+// The largest seed (seed, seeds.*, --seed, a dataset's seeds): 2^53, so that every seed is exact as a JSON
+// number in metadata.json.
+inline constexpr uint64_t kMaxSeed = uint64_t{1} << 53;
 
 struct ResolvedRun {
   RunConfig config;         // SI units, every default explicit

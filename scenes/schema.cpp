@@ -10,6 +10,7 @@
 #include <type_traits>
 
 #include "core/units.h"
+#include "scenes/scene_file.h"
 
 namespace spadgen::scenes {
 namespace {
@@ -377,10 +378,10 @@ std::vector<Key> build() {
   Key description = make("/description", Type::String, "", "free text, copied into metadata.json");
   description.def = "";
   k.push_back(description);
-  k.push_back(integer("/seed", FIELD(seed), kNone, closed(0, 9.007199254740992e15), "seed of every random stream that seeds.* does not set (overridden by --seed)"));
-  k.push_back(integer("/seeds/light", FIELD(seeds.light), kNone, closed(0, 9.007199254740992e15), "seed of the Monte Carlo light transport (laser.exr, ambient.exr, transients); null = seed"));
-  k.push_back(integer("/seeds/chip", FIELD(seeds.chip), kNone, closed(0, 9.007199254740992e15), "seed of the chip's fixed pattern (gate skew and length maps, DCR population, PDP non-uniformity: sensor_maps.exr); null = seed"));
-  k.push_back(integer("/seeds/noise", FIELD(seeds.noise), kNone, closed(0, 9.007199254740992e15), "seed of the temporal noise (binary frames, counts, crosstalk draws); null = seed"));
+  k.push_back(integer("/seed", FIELD(seed), kNone, closed(0, double(kMaxSeed)), "seed of every random stream that seeds.* does not set (overridden by --seed)"));
+  k.push_back(integer("/seeds/light", FIELD(seeds.light), kNone, closed(0, double(kMaxSeed)), "seed of the Monte Carlo light transport (laser.exr, ambient.exr, transients); null = seed"));
+  k.push_back(integer("/seeds/chip", FIELD(seeds.chip), kNone, closed(0, double(kMaxSeed)), "seed of the chip's fixed pattern (gate skew and length maps, DCR population, PDP non-uniformity: sensor_maps.exr); null = seed"));
+  k.push_back(integer("/seeds/noise", FIELD(seeds.noise), kNone, closed(0, double(kMaxSeed)), "seed of the temporal noise (binary frames, counts, crosstalk draws); null = seed"));
 
   k.push_back(string("/camera/gltf_camera", FIELD(camera.gltf_camera), "name of a glTF camera node to use instead of position/look_at/up and focal_length_mm (its field of view, unless vertical_fov_deg is set); \"\" = defined here"));
   k.push_back(vec3("/camera/position_m", FIELD(camera.position_m), kMetre, kWorld, "camera centre (world, glTF frame: +Y up)"));
