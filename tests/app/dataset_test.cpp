@@ -539,6 +539,16 @@ double bytes_taken(const fs::path& dir) {
   return taken;
 }
 
+// `dataset plan`, then `dataset run` of DIR/d.json into DIR/out: the plan's output, "" (a failure recorded)
+// when either fails.
+std::string plan_then_run(const fs::path& dir) {
+  const Result plan = sh("dataset plan " + (dir / "d.json").string());
+  const Result run = sh("dataset run " + (dir / "d.json").string() + " -o " + (dir / "out").string() + " -q");
+  if (plan.code == 0 && run.code == 0) return plan.output;
+  ADD_FAILURE() << "plan: " << plan.code << " " << plan.output << "\nrun: " << run.code << " " << run.output;
+  return "";
+}
+
 // The disk a dataset is planned to take, against what it takes: a further realisation of the noise writes
 // its counts and links the sample's light, images and noise-free stacks (each counted as a whole sample
 // again, three realisations were planned at 3.5 times the disk they took (94 MB against 27), and a disk that held it
@@ -547,12 +557,11 @@ TEST_F(Dataset, ThePlannedDiskCountsTheRealisationsLinks) {
   write(dir_ / "d.json", "{\"scenes\": [\"" + kScenes + "multi_object.json\"], \"samples\": 2, \"repeats\": 3, \"set\": "
         "{\"render.samples_per_pixel\": 1, \"acquisition.gate_sweep.stop_ns\": 4.2, \"camera.crop\": [448, 186, 128, 64], "
         "\"outputs.detection_rate\": true, \"outputs.expected_counts\": true}}");
-  const Result plan = sh("dataset plan " + (dir_ / "d.json").string());
-  ASSERT_EQ(plan.code, 0) << plan.output;
-  const double planned = 2 * planned_disk(plan.output, true);  // what the 2 samples keep
-  ASSERT_GT(planned, 0.0) << plan.output;
-  EXPECT_GT(planned_disk(plan.output), planned) << "the total holds a sample's temporary files too";
-  ASSERT_EQ(sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q").code, 0);
+  const std::string plan = plan_then_run(dir_);
+  ASSERT_FALSE(plan.empty());
+  const double planned = 2 * planned_disk(plan, true);  // what the 2 samples keep
+  ASSERT_GT(planned, 0.0) << plan;
+  EXPECT_GT(planned_disk(plan), planned) << "the total holds a sample's temporary files too";
   const double taken = bytes_taken(dir_ / "out/samples");
   // at most 2: the saved light (the realisations' source) is planned at 2.5 ns of bins per pixel, which a
   // plate in front of a sphere reaches; this crop's pixels span less
@@ -567,11 +576,10 @@ TEST_F(Dataset, ThePlannedDiskOfTheSavedLightFollowsTheBinWidth) {
   write(dir_ / "d.json", "{\"scenes\": [\"" + kScenes + "multi_object.json\"], \"samples\": 1, \"set\": "
         "{\"render.samples_per_pixel\": 2, \"render.time_bin_ps\": 1, \"camera.crop\": [448, 186, 64, 32], "
         "\"outputs.light\": true, \"outputs.counts\": false, \"outputs.previews\": false}}");
-  const Result plan = sh("dataset plan " + (dir_ / "d.json").string());
-  ASSERT_EQ(plan.code, 0) << plan.output;
-  const double planned = planned_disk(plan.output);
-  ASSERT_GT(planned, 0.0) << plan.output;
-  ASSERT_EQ(sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q").code, 0);
+  const std::string plan = plan_then_run(dir_);
+  ASSERT_FALSE(plan.empty());
+  const double planned = planned_disk(plan);
+  ASSERT_GT(planned, 0.0) << plan;
   const double light = bytes_taken(dir_ / "out/samples/000000/light"), taken = bytes_taken(dir_ / "out/samples");
   EXPECT_GT(light, 0.5 * taken) << "the light is most of the sample";
   EXPECT_GE(planned, taken) << planned << " planned, " << taken << " taken";

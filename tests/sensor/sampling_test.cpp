@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <string>
 
 #include "core/rng.h"
 #include "sensor/sampling/batch_kernels.h"
@@ -359,6 +360,32 @@ TEST(Sampling, BatchBitsWithNoFramesWriteNothing) {
   for (uint64_t g : guard) EXPECT_EQ(g, 0x5555555555555555ull);
 }
 
+// Where sample_bits_batch's words (pixels ids, probabilities pr, n frames) differ from dense_bit_reference of
+// the streams Rng(seed, Frames, ids[i], k), each pixel inverted where p > q, or hold a bit past n: the first
+// such place, "" when none. ties (if given) counts the frames whose top byte equals the threshold's.
+std::string batch_mismatch(const std::vector<uint64_t>& batch, uint64_t seed, uint64_t k, const std::vector<uint64_t>& ids,
+                           const std::vector<Prob>& pr, uint32_t n, size_t* ties = nullptr) {
+  const size_t nw = (n + 63) / 64;
+  for (size_t i = 0; i < ids.size(); ++i) {
+    if (bits_are_sparse(pr[i])) return "pixel " + std::to_string(i) + " is sparse";
+    const Rng stream(seed, RngKind::Frames, ids[i], k);
+    const bool invert = pr[i].p > pr[i].q;
+    const uint64_t T = probability_threshold(invert ? pr[i].q : pr[i].p);
+    for (uint32_t f = 0; f < n; ++f) {
+      if ((((batch[i * nw + f / 64] >> (f % 64)) & 1) != 0) != (dense_bit_reference(stream, n, T, f) != invert))
+        return "pixel " + std::to_string(i) + " frame " + std::to_string(f);
+      if (ties != nullptr) {
+        const uint32_t r = f % 256;
+        const auto blk = ars_block(stream, ars_keys_of(stream), 16 * (f / 256) + (r % 64) / 4);
+        *ties += static_cast<uint8_t>(blk[r / 64] >> (8 * (r % 4))) == static_cast<uint8_t>(T >> 56);
+      }
+    }
+    for (uint32_t f = n; f < nw * 64; ++f)
+      if ((batch[i * nw + f / 64] >> (f % 64)) & 1) return "pixel " + std::to_string(i) + " bit " + std::to_string(f) + " past n";
+  }
+  return "";
+}
+
 // The batch settles the dense pixels' top-byte ties with one vectorised ARS-7 per 16: every frame equals
 // dense_bit_reference (one scalar ars_block per tie), for frame counts that are not multiples of 64 or 256
 // (several chunks) and both sides (a = p and a = q); the test counts the ties it covered.
@@ -375,20 +402,7 @@ TEST(Sampling, BatchSettlesTiesLikeTheReference) {
     std::vector<uint64_t> batch(count * nw);
     sample_bits_batch(9, 5, ids.data(), count, sampler, pr.data(), batch.data());
     size_t ties = 0;
-    for (size_t i = 0; i < count; ++i) {
-      ASSERT_FALSE(bits_are_sparse(pr[i]));
-      const Rng stream(9, RngKind::Frames, ids[i], 5);
-      const bool invert = pr[i].p > pr[i].q;
-      const uint64_t T = probability_threshold(invert ? pr[i].q : pr[i].p);
-      for (uint32_t f = 0; f < n; ++f) {
-        const bool bit = dense_bit_reference(stream, n, T, f) != invert;
-        ASSERT_EQ(((batch[i * nw + f / 64] >> (f % 64)) & 1) != 0, bit) << "n " << n << " pixel " << i << " frame " << f;
-        const uint32_t r = f % 256;
-        const auto blk = ars_block(stream, ars_keys_of(stream), 16 * (f / 256) + (r % 64) / 4);
-        ties += static_cast<uint8_t>(blk[r / 64] >> (8 * (r % 4))) == static_cast<uint8_t>(T >> 56);
-      }
-      for (uint32_t f = n; f < nw * 64; ++f) ASSERT_EQ((batch[i * nw + f / 64] >> (f % 64)) & 1, 0u);
-    }
+    ASSERT_EQ(batch_mismatch(batch, 9, 5, ids, pr, n, &ties), "") << "n " << n;
     EXPECT_GT(ties, count * n / 512);  // about count n / 256 ties were settled
   }
 }
@@ -426,17 +440,7 @@ TEST(Sampling, BatchBitsEqualReferenceOnEveryTarget) {
         std::vector<uint64_t> batch(count * nw + 1, 0x5A5A5A5A5A5A5A5Aull);  // + a guard word
         sample_bits_batch(4, 2, ids.data(), count, sampler, pr.data(), batch.data());
         const std::string where = std::string(hwy::TargetName(target)) + (use_vaes ? "+VAES" : "") + " n " + std::to_string(n);
-        for (size_t i = 0; i < count; ++i) {
-          ASSERT_FALSE(bits_are_sparse(pr[i]));
-          const Rng stream(4, RngKind::Frames, ids[i], 2);
-          const bool invert = pr[i].p > pr[i].q;
-          const uint64_t T = probability_threshold(invert ? pr[i].q : pr[i].p);
-          for (uint32_t f = 0; f < n; ++f) {
-            const bool bit = dense_bit_reference(stream, n, T, f) != invert;
-            ASSERT_EQ(((batch[i * nw + f / 64] >> (f % 64)) & 1) != 0, bit) << where << " pixel " << i << " frame " << f;
-          }
-          for (uint32_t f = n; f < nw * 64; ++f) ASSERT_EQ((batch[i * nw + f / 64] >> (f % 64)) & 1, 0u) << where << " pixel " << i;
-        }
+        ASSERT_EQ(batch_mismatch(batch, 4, 2, ids, pr, n), "") << where;
         ASSERT_EQ(batch.back(), 0x5A5A5A5A5A5A5A5Aull) << where;
       }
     }
