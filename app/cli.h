@@ -1,7 +1,8 @@
 // The command line in spadgen's own words: CLI11's parse errors become "spadgen: error: ..." with exit
 // code 1, and every exception a command throws becomes one line on stderr and the documented exit code:
 //   0 success; 1 bad input or an environment problem (spadgen::Error, out of memory); 2 interrupted
-//   (SIGINT, SIGTERM: spadgen::Interrupted); 3 internal error (a bug: please report it).
+//   (SIGINT, SIGTERM: spadgen::Interrupted); 3 internal error (a bug: please report it); 4 `dataset status`
+//   of a dataset whose samples are not all done (the report says which).
 // Part of the spadgen executable only (it needs CLI11), not of spadgen_app.
 #pragma once
 #include <CLI/CLI.hpp>
@@ -13,7 +14,7 @@
 
 namespace spadgen::app {
 
-inline constexpr int kExitOk = 0, kExitBadInput = 1, kExitInterrupted = 2, kExitInternal = 3;
+inline constexpr int kExitOk = 0, kExitBadInput = 1, kExitInterrupted = 2, kExitInternal = 3, kExitIncomplete = 4;
 
 // Parses the command line. nullopt: go on; otherwise the exit code, after printing help or the version
 // (0) or a usage error in spadgen's format (1).

@@ -538,7 +538,7 @@ void dataset_run(const DatasetOptions& options) {
   }
 }
 
-std::string dataset_status(const std::string& dir) {
+DatasetStatus dataset_status(const std::string& dir) {
   const DatasetSpec spec = spec_of_folder(dir);
   const DatasetFolder folder(spec, dir);
   const std::vector<SampleRecord> records = inspect_all(folder, true);
@@ -568,7 +568,8 @@ std::string dataset_status(const std::string& dir) {
   if (!beyond.empty())
     o << "beyond the " << spec.count() << " samples: the folders of samples " << datasets::ranges_text(beyond)
       << " (kept, not in the index; a larger \"samples\" takes them again)\n";
-  return o.str();
+  const bool complete = std::all_of(records.begin(), records.end(), [](const SampleRecord& r) { return r.status == Status::Done; });
+  return {o.str(), complete};
 }
 
 }  // namespace spadgen::app

@@ -26,8 +26,13 @@ std::string dataset_plan(const DatasetOptions& options);
 // spadgen::Error after the index is written when samples failed (their errors are in DIR/failed/).
 void dataset_run(const DatasetOptions& options);
 
-// Done, failed, stale and missing samples of a dataset folder.
-std::string dataset_status(const std::string& dir);
+// Done, failed, stale, missing and damaged samples of a dataset folder: the report, and whether every
+// sample is done (`dataset status` exits kExitIncomplete otherwise).
+struct DatasetStatus {
+  std::string text;
+  bool complete = false;
+};
+DatasetStatus dataset_status(const std::string& dir);
 
 // The dataset file reference (Markdown), for docs/datasets.md.
 std::string dataset_schema();

@@ -179,7 +179,8 @@ int main(int argc, char** argv) {
   eval_cmd->add_flag("-q,--quiet", eval_quiet, "nothing on stderr but warnings and errors (as always: the scores go to stdout)");
 
   if (const std::optional<int> code = spadgen::app::parse_command_line(cli, argc, argv)) return *code;
-  return spadgen::app::run_command([&] {
+  int done_code = spadgen::app::kExitOk;  // the exit code of a command that ran to its end
+  const int code = spadgen::app::run_command([&] {
     if (*run_cmd) {
       if (*seed_opt) run.seed = spadgen::app::parse_seed(seed);
       run.progress = !quiet;
@@ -196,7 +197,11 @@ int main(int argc, char** argv) {
       dataset.progress = !dataset_quiet;
       if (*plan_cmd) std::cout << spadgen::app::dataset_plan(dataset);
       else if (*drun_cmd) spadgen::app::dataset_run(dataset);
-      else if (*status_cmd) std::cout << spadgen::app::dataset_status(status_dir);
+      else if (*status_cmd) {
+        const spadgen::app::DatasetStatus st = spadgen::app::dataset_status(status_dir);
+        std::cout << st.text;
+        if (!st.complete) done_code = spadgen::app::kExitIncomplete;
+      }
       else if (*dschema_cmd) std::cout << (dataset_json_schema ? spadgen::datasets::dataset_schema_json() : spadgen::app::dataset_schema());
     } else if (*rec_cmd) {
       rec.progress = !rec_quiet;
@@ -219,4 +224,5 @@ int main(int argc, char** argv) {
       std::cout << (json_schema ? spadgen::scenes::schema_json() : spadgen::scenes::schema_reference_markdown());
     }
   });
+  return code == spadgen::app::kExitOk ? done_code : code;
 }

@@ -146,6 +146,7 @@ TEST_F(Dataset, ASampleThatLostAFileIsDamagedAndGeneratedAgain) {
   fs::remove(dir_ / "out/samples/000002_r01/counts.npy");
   fs::resize_file(dir_ / "out/samples/000000/ground_truth.exr", 1000);  // a copy cut short
   const Result st = sh("dataset status " + (dir_ / "out").string());
+  EXPECT_EQ(st.code, 4);  // not all done
   EXPECT_THAT(st.output, HasSubstr("3 samples: 0 done, 0 failed, 0 stale, 0 missing, 3 damaged"));
   EXPECT_THAT(st.output, HasSubstr("sample 0 damaged: listed in metadata.json but gone or changed: ground_truth.exr (1000 of its "));
   EXPECT_THAT(st.output, HasSubstr("sample 1 damaged: listed in metadata.json but gone or changed: counts.npy"));
@@ -157,7 +158,9 @@ TEST_F(Dataset, ASampleThatLostAFileIsDamagedAndGeneratedAgain) {
   const Result again = sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string());
   ASSERT_EQ(again.code, 0) << again.output;
   EXPECT_THAT(again.output, HasSubstr("(this run: 3 generated, 0 skipped"));
-  EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output, HasSubstr("3 samples: 3 done, 0 failed, 0 stale, 0 missing\n"));
+  const Result done = sh("dataset status " + (dir_ / "out").string());
+  EXPECT_EQ(done.code, 0);
+  EXPECT_THAT(done.output, HasSubstr("3 samples: 3 done, 0 failed, 0 stale, 0 missing\n"));
   expect_same_dataset(dir_ / "reference", dir_ / "out");
   // what a killed run left beside a sample is removed at the start (before the disk check counts it), even
   // when the sample is done and skipped
@@ -595,6 +598,7 @@ TEST_F(Dataset, AFailingSampleIsRecordedAndTheOthersGoOn) {
   EXPECT_TRUE(fs::exists(dir_ / "out/samples/000002/metadata.json"));
   EXPECT_FALSE(fs::exists(dir_ / "out/samples/000001"));
   const Result st = sh("dataset status " + (dir_ / "out").string());
+  EXPECT_EQ(st.code, 4);
   EXPECT_THAT(st.output, HasSubstr("failed: 1, 3"));
   EXPECT_THAT(st.output, HasSubstr("makes an invalid scene: --set camera.crop: found [496, 232, 24, 20]"));
   EXPECT_THAT(slurp(dir_ / "out/index.csv"), HasSubstr(",failed,"));
