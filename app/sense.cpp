@@ -62,10 +62,13 @@ std::string plain_key(const std::string& written) {
 
 bool sense_may_set(const std::string& written) {
   const std::string key = plain_key(written);
-  for (const char* prefix : {"sensor.", "acquisition.", "seeds.chip", "seeds.noise", "outputs.expected_counts",
-                             "outputs.detection_rate", "outputs.counts", "outputs.frames", "outputs.previews",
-                             "outputs.storage", "outputs.exr_compression"})
-    if (key.rfind(prefix, 0) == 0) return true;
+  for (const char* section : {"sensor.", "acquisition."})
+    if (key.rfind(section, 0) == 0) return true;
+  // whole keys or a component of one ("seeds.noiseX" is another key, which the schema refuses)
+  for (const std::string k : {"seeds.chip", "seeds.noise", "outputs.expected_counts", "outputs.detection_rate", "outputs.counts",
+                              "outputs.frames", "outputs.previews", "outputs.storage", "outputs.exr_compression"})
+    if (key.rfind(k, 0) == 0 && (key.size() == k.size() || key[k.size()] == '.' || key[k.size()] == '['))
+      return true;
   return false;
 }
 
@@ -246,8 +249,12 @@ std::vector<RunResult> sense(const SenseOptions& options) {
                   " with outputs.light (run the scene again)");
   for (const std::string& o : options.overrides) {
     const std::string key = o.substr(0, scenes::assignment_split(o));
-    if (!sense_may_set(key))
-      throw Error("--set " + key + ": sense re-samples the sensor only, so it takes sensor.*, acquisition.*, seeds.chip, "
+    if (sense_may_set(key)) continue;
+    // A key the scene file does not have (a typo) gets the schema's message, with its suggestion, rather
+    // than being called a key of the rendered light.
+    (void)scenes::parse_scene_text(meta.at("resolved_scene").dump(), field<std::string>(meta, "/scene_file"_json_pointer, src), {o},
+                                   false);
+    throw Error("--set " + key + ": sense re-samples the sensor only, so it takes sensor.*, acquisition.*, seeds.chip, "
                   "seeds.noise and outputs.{expected_counts,detection_rate,counts,frames,previews,storage,exr_compression}; " + key +
                   " shapes the rendered light: use spadgen run");
   }

@@ -554,6 +554,17 @@ TEST_F(App, SenseRefusesWhatItCannotDo) {
   r = sh("sense " + (dir_ / "run").string() + " --set 'materials.\"a=b\".ior=1.2'");
   EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("--set materials.\"a=b\".ior: sense re-samples the sensor only"));
+  // A key the scene file does not have is a typo, named as the schema names it (sense called it a key of
+  // the rendered light; a key that began as a sensor key did pass its check: "seeds.noiseX").
+  r = sh("sense " + (dir_ / "run").string() + " --set lazer.power=1");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("--set lazer.power: /lazer/power: unknown key: there is no section /lazer; did you mean /laser?"));
+  r = sh("sense " + (dir_ / "run").string() + " --set seeds.noiseX=1");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("--set seeds.noiseX: /seeds/noiseX: unknown key; did you mean /seeds/noise?"));
+  r = sh("sense " + (dir_ / "run").string() + " --set seeds.light=3");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("--set seeds.light: sense re-samples the sensor only"));
   // A sweep beyond the rendered window (the run stopped at 4.2 ns).
   r = sh("sense " + (dir_ / "run").string() + " --set acquisition.gate_sweep.stop_ns=9");
   EXPECT_EQ(r.code, 1);
