@@ -126,7 +126,7 @@ DetectionImage detect_image(const RunFolder& run, const Detector& detector, bool
 
 // The folder of an output file takes new files, checked before the work rather than after it (a read-only
 // file system was found once the detector had run over the whole image).
-void check_writable(const std::string& file) {
+void check_writable(const std::string& file, const RunFolder& run, const std::string& run_dir) {
   // The file is replaced by rename: whatever is at the path goes. A regular file (an earlier output) may;
   // a device, a FIFO, a folder or a symbolic link is not an output to replace (-o /dev/full replaced the
   // device node with an EXR, as root).
@@ -137,6 +137,22 @@ void check_writable(const std::string& file) {
                 ", which writing the output would replace; expected a new file or an earlier output (-o)");
   const fs::path dir = fs::absolute(fs::path(file)).parent_path();
   if (!fs::is_directory(dir)) throw Error(file + ": its folder " + dir.string() + " does not exist");
+  // Nor is a file of the run itself (-o RUN/counts.npy replaced the counts with an EXR, and every later
+  // reconstruct or evaluate of the run failed): metadata.json and what it lists, or a file inside a listed
+  // folder (a Zarr store, light/).
+  std::error_code ec;
+  const fs::path target = fs::weakly_canonical(fs::absolute(fs::path(file)), ec);
+  std::vector<std::string> own = {"metadata.json"};
+  if (run.metadata().contains("files") && run.metadata()["files"].is_array())
+    for (const nlohmann::json& f : run.metadata()["files"])
+      if (f.is_string()) own.push_back(f.get<std::string>());
+  for (const std::string& f : own) {
+    const fs::path listed = fs::weakly_canonical(fs::absolute(fs::path(run_dir) / f), ec);
+    const auto [end, it] = std::mismatch(listed.begin(), listed.end(), target.begin(), target.end());
+    if (end == listed.end())
+      throw Error(file + ": is the run's own " + f + " (" + run_dir + "/metadata.json lists it), which writing the output "
+                  "would replace; expected a new file or an earlier output (-o)");
+  }
   if (::access(dir.c_str(), W_OK) != 0)
     throw Error(file + ": cannot write into " + dir.string() + ": " + std::strerror(errno));
 }
@@ -237,6 +253,9 @@ DetectionImage read_detections(const std::string& path, const RunFolder& run, bo
     throw Error(std::string(err.what()) + " (a detections file is an OpenEXR image, or a NumPy array named *.npy: the "
                 "extension .npy selects the NumPy reader)");
   }
+  // pixels at other positions than the image's (a shifted data window was scored one row off)
+  if (!e.partial_window.empty())
+    throw Error(path + ": its " + e.partial_window + "; expected the whole image's pixels (a data window equal to the display window)");
   if (e.width != width || e.height != height)
     throw Error(path + ": " + std::to_string(e.width) + " x " + std::to_string(e.height) + " pixels, the run has " +
                 std::to_string(width) + " x " + std::to_string(height));
@@ -542,7 +561,7 @@ std::string reconstruct(const ReconstructOptions& o) {
                   "inversion, hdr.exr, and takes only -o, --noise-free and --threads for it");
     // The 2D HDR inversion: eq. (5) or (6) on the image's summed counts.
     const std::string out = o.out.empty() ? (fs::path(o.run_dir) / derived_name("hdr", o.noise_free)).string() : o.out;
-    check_writable(out);
+    check_writable(out, run, o.run_dir);
     writers::ExrImage img(run.width(), run.height());
     std::vector<float> c(size_t(run.width()) * size_t(run.height()) * size_t(run.K()));
     // noise-free: the rates themselves (the expected counts, inverted, were clamped at N - 0.5: N = 1 gave
@@ -568,7 +587,7 @@ std::string reconstruct(const ReconstructOptions& o) {
   }
   const std::string out =
       o.out.empty() ? (fs::path(o.run_dir) / derived_name("detections_" + o.detector, o.noise_free)).string() : o.out;
-  check_writable(out);
+  check_writable(out, run, o.run_dir);
   const Detector detector(o.detector, run);
   const DetectionImage d = detect_image(run, detector, o.noise_free, o.max_detections, o.progress);
   writers::ExrImage img(d.width, d.height);

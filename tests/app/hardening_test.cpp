@@ -521,6 +521,18 @@ TEST_F(Hardening, ReconstructReplacesOnlyAFileAndAFifoIsNotReadAsMetadata) {
   EXPECT_TRUE(fs::is_fifo(dir_ / "fifo"));
   EXPECT_TRUE(fs::is_symlink(dir_ / "link.exr"));
   EXPECT_EQ(slurp(dir_ / "mine.txt"), "mine");
+  // nor the run's own files (-o RUN/counts.npy replaced the counts with an EXR, exit 0), also through a path
+  // that names them another way
+  const std::string counts_before = slurp(run / "counts.npy"), meta_before = slurp(run / "metadata.json");
+  fs::create_directory_symlink(run, dir_ / "alias");
+  for (const fs::path& target : {run / "counts.npy", run / "metadata.json", run / "ground_truth.exr", run / "./counts.npy",
+                                dir_ / "alias/counts.npy"}) {
+    const Outcome o = spadgen("reconstruct -q " + run.string() + " -o " + target.string());
+    expect_exit(o, 1, target.string());
+    EXPECT_THAT(o.err, HasSubstr(": is the run's own ")) << target;
+  }
+  EXPECT_EQ(slurp(run / "counts.npy"), counts_before);
+  EXPECT_EQ(slurp(run / "metadata.json"), meta_before);
   // a run replacing the folder holds its lock: reconstruct and evaluate wait for no one and refuse (a
   // reconstruct during the swap wrote the earlier run's detections beside the new run's counts)
   {
