@@ -33,6 +33,9 @@ TimeAxis time_axis(const RunConfig& c, const sensor::SensorModel& s) {
 void apply_user_maps(sensor::SensorModel& sensor, const RunConfig& c) {
   if (c.sensor.gate.maps_exr.empty()) return;
   const writers::ExrData maps = writers::read_exr(c.sensor.gate.maps_exr);
+  if (!maps.partial_window.empty())
+    throw Error(c.sensor.gate.maps_exr + " (sensor.gate.maps_exr): its " + maps.partial_window +
+                "; expected the whole sensor's pixels (a data window equal to the display window)");
   sensor.set_maps(maps.width, maps.height, maps.channels, c.sensor.gate.maps_exr);
 }
 

@@ -21,7 +21,7 @@ PixelOutcome Scores::add(int x, int y, std::vector<TruthObject> objects,
   o.first_error_m = std::numeric_limits<float>::quiet_NaN();
   std::vector<double> dets;
   for (const auto& [range, score] : detections)
-    if (std::isfinite(range) && score >= options_.min_score) dets.push_back(range);
+    if (std::isfinite(range) && (!options_.min_score || score >= *options_.min_score)) dets.push_back(range);
   std::sort(objects.begin(), objects.end(), [](const TruthObject& a, const TruthObject& b) { return a.range_m < b.range_m; });
   // Candidate pairs within the tolerance, taken in increasing |error|, each object and detection once.
   struct Pair {
@@ -117,7 +117,7 @@ nlohmann::json Scores::to_json(const std::map<int, std::string>& names) const {
   j["matching"] = {{"tolerance_m", options_.tolerance_m},
                    {"rule", "per pixel, object-detection pairs in increasing |range error| within the tolerance, each once"},
                    {"range_error", "detection minus object range, the detection folded onto the object by c T / 2 of half path (laser to object to camera, over 2) for the run's laser period T"}};
-  if (options_.min_score > -1e300) j["matching"]["min_score"] = options_.min_score;
+  if (options_.min_score) j["matching"]["min_score"] = *options_.min_score;
   j["pixels"] = pixels_;
   j["objects"] = rate(all_);
   j["objects_detectable"] = rate(detectable_);

@@ -27,7 +27,7 @@ struct TruthObject {
 struct EvaluateOptions {
   double tolerance_m = 0.05;        // a detection further from every unmatched object is false
   double ambiguity_m = 0.0;         // c T / 2 of the laser period T: errors are taken modulo it; 0: none
-  double min_score = -1e300;        // detections scoring below are ignored
+  std::optional<double> min_score;  // detections scoring below are ignored; none: every score counts (-inf too)
   std::optional<PixelRect> region;  // image coordinates: accuracy and precision of the nearest object there
 };
 

@@ -8,6 +8,7 @@
 #include <OpenEXR/ImfStringAttribute.h>
 #include <OpenEXR/ImfThreading.h>
 
+#include <cstdio>
 #include <exception>
 #include <limits>
 
@@ -115,6 +116,14 @@ ExrData read_exr(const std::string& path) {
       throw Error("EXR '" + path + "' has an empty or oversized data window");
     data.width = int(w);
     data.height = int(hh);
+    if (const Imath::Box2i disp = h.displayWindow(); disp != dw) {
+      const auto box = [](const Imath::Box2i& b) {
+        char text[96];
+        std::snprintf(text, sizeof text, "(%d, %d)-(%d, %d)", b.min.x, b.min.y, b.max.x, b.max.y);
+        return std::string(text);
+      };
+      data.partial_window = "data window " + box(dw) + " is not its display window " + box(disp);
+    }
     Imf::FrameBuffer fb;
     for (auto it = h.channels().begin(); it != h.channels().end(); ++it) {
       if (it.channel().xSampling != 1 || it.channel().ySampling != 1)

@@ -231,7 +231,10 @@ class ExrImage {
 // tests and for user-supplied maps). A data window that does not start at (0, 0) is read as if it did.
 // Throws spadgen::Error naming the file.
 struct ExrData {
-  int width = 0, height = 0;
+  int width = 0, height = 0;  // of the data window, whose pixels the channels hold
+  // Empty when the data window is the display window (the whole image); otherwise both, as text, for the
+  // readers that take an image's pixels at their positions (detections, gate maps).
+  std::string partial_window;
   std::map<std::string, std::vector<float>> channels;
   std::map<std::string, std::string> attributes;
 };

@@ -1,6 +1,10 @@
 // spadgen reconstruct, run as a user would: the HDR inversion of a 2D run against the sensor's own
 // linearised image, the same detections from .npy and Zarr stacks, and clear refusals. (The detectors'
 // accuracy on the paper's flat target: paper_test.cpp; the detectors themselves: tests/reconstruct.)
+#include <OpenEXR/ImfChannelList.h>
+#include <OpenEXR/ImfFrameBuffer.h>
+#include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfOutputFile.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -429,6 +433,22 @@ TEST_F(Reconstruct, EvaluateRefusesDetectionsOfAnotherSceneOrCropOrWithoutTheirS
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_EQ(nlohmann::json::parse(slurp(dir_ / "e4" / "metrics.json"))["detections_source"]["source_checked"],
             "no: its spadgen_source names no scene (scene file and glTF hash) and its crop of the sensor (made from ?); taken on trust");
+  // det0.range with its data window one row below the display window (scored one row off, exit 0)
+  {
+    const auto& range = d.channels.at("det0.range");
+    Imf::Header h(Imath::Box2i({0, 0}, {d.width - 1, d.height - 1}), Imath::Box2i({0, 1}, {d.width - 1, d.height}));
+    h.channels().insert("det0.range", Imf::Channel(Imf::FLOAT));
+    Imf::FrameBuffer fb;
+    fb.insert("det0.range", Imf::Slice::Make(Imf::FLOAT, range.data(), h.dataWindow()));
+    Imf::OutputFile out((dir_ / "shifted.exr").c_str(), h);
+    out.setFrameBuffer(fb);
+    out.writePixels(d.height);
+  }
+  r = sh("evaluate " + a.string() + " --detections " + (dir_ / "shifted.exr").string() + " -o " + (dir_ / "e2").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("shifted.exr: its data window (0, 1)-(" + std::to_string(d.width - 1) + ", " + std::to_string(d.height) +
+                                  ") is not its display window (0, 0)-("));
+  EXPECT_FALSE(fs::exists(dir_ / "e2"));
   r = sh("evaluate " + a.string() + " --detections " + (dir_ / "gap.exr").string() + " -o " + (dir_ / "e2").string());
   EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("gap.exr: channel det2.range after det0.range without det1.range"));
@@ -455,10 +475,21 @@ TEST_F(Reconstruct, EvaluateRefusesDetectionsOfAnotherSceneOrCropOrWithoutTheirS
     const auto& r0 = d.channels.at("det0.range");
     const size_t first = size_t(std::find_if(r0.begin(), r0.end(), [](float v) { return std::isfinite(v); }) - r0.begin());
     ASSERT_LT(first, r0.size());
+    img.channel("det0.score")[first] = -std::numeric_limits<float>::infinity();
+    img.write((dir_ / "inf_score.exr").string());
     img.channel("det0.score")[first] = std::numeric_limits<float>::quiet_NaN();
     img.set_attribute("spadgen_source", "not json");
     img.write((dir_ / "nan_score.exr").string());
   }
+  // Scores count only under --min-score: a detection scoring -inf is scored as the unscored file's (it was
+  // dropped, against a default threshold of -1e300)
+  r = sh("evaluate " + a.string() + " --detections " + (dir_ / "inf_score.exr").string() + " -o " + (dir_ / "e7").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  const auto m7 = nlohmann::json::parse(slurp(dir_ / "e7" / "metrics.json"));
+  const auto m2 = nlohmann::json::parse(slurp(dir_ / "e2" / "metrics.json"));
+  EXPECT_EQ(m7["detections"], m2["detections"]);
+  EXPECT_EQ(m7["objects"], m2["objects"]);
+  EXPECT_FALSE(m7["matching"].contains("min_score"));
   r = sh("evaluate " + a.string() + " --detections " + (dir_ / "nan_score.exr").string() + " --min-score 5 -o " + (dir_ / "e5").string());
   EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("nan_score.exr: --min-score: det0.score is NaN at pixel ("));

@@ -56,6 +56,7 @@ TEST(Exr, RoundTripThroughReadExr) {
   EXPECT_EQ(d.attributes.at("spadgen.seed"), "12345");
   EXPECT_EQ(d.attributes.at("spadgen.scene_hash"), "sha256:00ff");
   EXPECT_EQ(d.attributes.at("spadgen.time_axis"), R"({"start_s": 1e-9, "bins": 0})");
+  EXPECT_EQ(d.partial_window, "");  // the whole image
 }
 
 // The same file read with OpenEXR directly: FLOAT channels, ZIP, string attributes.
@@ -140,6 +141,7 @@ TEST(Exr, ReadExrConvertsHalfAndUintAndOffsetWindows) {
     EXPECT_EQ(d.channels.at("u")[size_t(i)], float(i * 1000));
   }
   EXPECT_EQ(d.attributes.at("note"), "hello");
+  EXPECT_EQ(d.partial_window, "data window (2, 3)-(4, 4) is not its display window (0, 0)-(9, 9)");
 }
 
 TEST(Exr, ErrorsNameTheFile) {
