@@ -411,6 +411,13 @@ std::vector<RunResult> sense(const SenseOptions& options) {
       rescaled.insert(name);
     }
   }
+  // Zarr stores of the run linked into a folder whose own stacks are .npy: the folder is still a Zarr group
+  // (docs/outputs.md), so the run's .zgroup comes too.
+  if (cfg.outputs.storage != Storage::Zarr && std::any_of(linked.begin(), linked.end(), [](const std::string& f) {
+        return f.find('/') == std::string::npos && f.ends_with(".zarr");
+      }))
+    for (const auto& f : meta.at("files"))
+      if (f.get<std::string>() == ".zgroup") linked.push_back(".zgroup");
   // The same sensor as the run's (settings, chip, tables; only the noise may differ): what does not depend
   // on the noise (the rates, the maps, the laser and ambient images, the labels) is the run's, bit for
   // bit, and is linked rather than computed and written again.

@@ -138,6 +138,9 @@ TEST_F(App, SenseReadsAZarrRunsLightAndWritesEitherStorage) {
   EXPECT_EQ(meta["storage"]["files"]["light/values.zarr"]["format"], "zarr");
   EXPECT_EQ(meta["storage"]["files"]["counts.npy"]["format"], "npy");
   EXPECT_TRUE(slurp(dir_ / "run/transient.zarr/0.0.0") == slurp(dir_ / "sense_npy/transient.zarr/0.0.0"));
+  // ... so the folder is a Zarr group of them, as the run's is (it had light/.zgroup only)
+  EXPECT_EQ(slurp(dir_ / "sense_npy/.zgroup"), slurp(dir_ / "run/.zgroup"));
+  EXPECT_NE(std::find(meta["files"].begin(), meta["files"].end(), ".zgroup"), meta["files"].end());
 }
 
 // The dataset sample docs/outputs.md recommends (Zarr, the saved light, no detection rate) gives the
