@@ -61,7 +61,8 @@ def plot_gate_profiles(run, pixels=None, ax=None, expected=True):
         x0, y0 = run.crop[:2]
         pixels = [(x - x0, y - y0) for x, y in run.metadata["preview_profile_pixels"]]
     depth = run.depth() if run.has("ground_truth.exr") else None
-    show_expected = expected and run.has("expected_counts.npy")
+    # expected counts from expected_counts.npy, or N (1 - exp(-lambda)) of detection_rate.npy (gate_profile)
+    show_expected = expected and (run.has("expected_counts.npy") or run.has("detection_rate.npy"))
     for i, (x, y) in enumerate(pixels):
         color = f"C{i % 10}"
         p = run.gate_profile(x, y)

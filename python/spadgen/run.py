@@ -130,8 +130,12 @@ def _not_a_run_why(path):
                 "samples/)")
     repeats = sorted(n for n in os.listdir(path) if os.path.isfile(os.path.join(path, n, "metadata.json")))
     if repeats:
+        parent = os.path.dirname(os.path.abspath(path))
+        where = (f"a dataset's samples: spadgen.open_dataset({parent!r}) opens the dataset"
+                 if os.path.basename(os.path.abspath(path)) == "samples" and os.path.isfile(os.path.join(parent, "dataset.json"))
+                 else "spadgen sense --repeats writes one per realisation")
         return (f"not a run folder itself; it holds {len(repeats)} run folder(s): {', '.join(repeats[:4])}"
-                + (", ..." if len(repeats) > 4 else "") + " (spadgen sense --repeats writes one per realisation)")
+                + (", ..." if len(repeats) > 4 else "") + f" ({where})")
     return "not a spadgen run folder (no metadata.json; a run writes it last, so a folder without it is incomplete)"
 
 
@@ -505,6 +509,10 @@ class Run:
             x, y = x - self.crop[0], y - self.crop[1]
         if not (0 <= x < self.width and 0 <= y < self.height):
             raise IndexError(f"pixel ({x}, {y}) lies outside the {self.width} x {self.height} image")
+        if expected and not self.has("expected_counts.npy") and self.has("detection_rate.npy"):
+            # as expected_counts computes it, for this pixel's rates only (not the whole stack in float64)
+            lam = np.asarray(self.detection_rate[:, y, x], np.float64)
+            return Profile(self.gate_positions_ns, (self.frames_per_k * -np.expm1(-lam)).astype(np.float32), int(x), int(y))
         stack = self.expected_counts if expected else self.counts
         return Profile(self.gate_positions_ns, np.asarray(stack[:, y, x]), int(x), int(y))
 
@@ -550,6 +558,10 @@ class Run:
         """The returns ``spadgen reconstruct RUN --detector DETECTOR`` wrote into the run folder (Detections);
         noise_free: those of ``--noise-free`` (from the expected counts), detections_<detector>_noise_free.exr."""
         suffix = "_noise_free" if noise_free else ""
+        if self.mode != "gate_sweep":
+            raise ValueError(f"{self.path} is a 2D run ({self.mode}): no gate profiles to detect returns in; "
+                             f"spadgen reconstruct {self.path}{' --noise-free' if noise_free else ''} writes its HDR inversion, "
+                             f"which run.hdr({'noise_free=True' if noise_free else ''}) reads")
         path = os.path.join(self.path, f"detections_{detector}{suffix}.exr")
         if not os.path.isfile(path):
             flag = " --noise-free" if noise_free else ""
@@ -566,6 +578,18 @@ class Run:
         return Detections(np.asarray(f["count"]).astype(np.int32), slots("range"), slots("gate"), slots("amplitude"),
                           slots("score"), json.loads(attrs.get("spadgen_reconstruct", "{}")),
                           json.loads(attrs.get("spadgen_source", "{}")))
+
+    def hdr(self, noise_free=False):
+        """The HDR inversion of a 2D run that ``spadgen reconstruct RUN`` (``--noise-free``) wrote into its folder,
+        hdr.exr (hdr_noise_free.exr): channels photons, photons_se, saturated (docs/detection.md)."""
+        path = os.path.join(self.path, "hdr_noise_free.exr" if noise_free else "hdr.exr")
+        if not os.path.isfile(path):
+            if self.mode == "gate_sweep":
+                raise ValueError(f"{self.path} is a gate sweep: reconstruct writes its detections (run.detections()), "
+                                 "not an HDR inversion, which is for 2D runs")
+            flag = " --noise-free" if noise_free else ""
+            raise FileNotFoundError(f"{path}: no such file; write it with spadgen reconstruct {self.path}{flag}")
+        return ExrFile(path)
 
     def layer_count(self):
         """(H, W) int32: the number of surfaces along each pixel's ray."""

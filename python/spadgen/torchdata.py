@@ -66,6 +66,11 @@ _NEEDS = {"counts": "counts.npy", "expected_counts": ("expected_counts.npy", "de
           "layer_depth": "ground_truth.exr", "layer_mask": "ground_truth.exr"}
 
 
+def _needs(field):
+    """The files any one of which gives the field."""
+    return _NEEDS[field] if isinstance(_NEEDS[field], tuple) else (_NEEDS[field],)
+
+
 def _missing_field_message(run, field, need):
     """Why a run lacks a field, and what gives it: the keys that write the stacks (named without their
     container: a Zarr run's are .zarr stores), `spadgen sense` where the run saved its light and the field
@@ -79,7 +84,8 @@ def _missing_field_message(run, field, need):
         flag = "detection_rate" if field == "detection_rate" else "expected_counts"
         msg += (f"; it saved the light, from which `spadgen sense {run.path} --set outputs.{flag}=true -o DIR` writes "
                 "it without rendering, bit for bit as a run would")
-    fields = tuple(f for f in DEFAULT_FIELDS if f != field)
+    # the default fields this run has (those needing the same missing file would fail next)
+    fields = tuple(f for f in DEFAULT_FIELDS if f != field and any(run.has(n) for n in _needs(f)))
     return msg + f"; or leave '{field}' out of fields (e.g. fields={fields})"
 
 
@@ -107,9 +113,14 @@ class _RunSamples(torch.utils.data.Dataset):
         self._runs = OrderedDict()
         for r in runs_:
             for f in self.fields:
-                need = _NEEDS[f] if isinstance(_NEEDS[f], tuple) else (_NEEDS[f],)
+                need = _needs(f)
                 if not any(r.has(n) for n in need):
                     raise ValueError(_missing_field_message(r, f, need))
+        modes = {r.mode for r in runs_}
+        if len(modes) > 1:
+            first = {m: next(r.path for r in runs_ if r.mode == m) for m in sorted(modes)}
+            raise ValueError(f"the runs have different acquisition modes ({', '.join(f'{m} in {p}' for m, p in first.items())}): "
+                             "a gate sweep's K gate positions and a 2D run's K exposures cannot share a batch")
         ks = {r.K for r in runs_}
         if len(ks) > 1:
             first = {k: next(r.path for r in runs_ if r.K == k) for k in sorted(ks)}
@@ -161,7 +172,7 @@ class _RunSamples(torch.utils.data.Dataset):
 
     def __getstate__(self):
         state = dict(self.__dict__)
-        state["_runs"] = {}
+        state["_runs"] = OrderedDict()  # the cache's type: _run moves and evicts in its order
         return state
 
     def __len__(self):

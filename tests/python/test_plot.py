@@ -47,6 +47,19 @@ def test_gate_profiles_one_labelled_curve_per_pixel(sweep):
     plt.close("all")
 
 
+def test_gate_profiles_expected_from_the_detection_rates(make_run):
+    """A run with the default outputs (counts and detection_rate, no expected_counts.npy): the dashed expected
+    counts are N (1 - exp(-lambda)) of the pixel's rates (none were drawn)."""
+    run = spadgen.open_run(make_run("flat"))
+    assert not run.has("expected_counts.npy") and run.has("detection_rate.npy")
+    ax = plot.plot_gate_profiles(run, [(1, 1), (5, 5)])
+    assert len(ax.lines) == 4 and ax.get_title() == "gate profiles (dashed: expected)"
+    lam = np.asarray(run.detection_rate[:, 5, 5], np.float64)
+    np.testing.assert_array_equal(ax.lines[3].get_ydata(), (run.frames_per_k * -np.expm1(-lam)).astype(np.float32))
+    np.testing.assert_array_equal(ax.lines[3].get_ydata(), run.expected_counts[:, 5, 5])
+    plt.close("all")
+
+
 def test_detection_and_error_maps(sweep):
     truth = sweep.depth()
     detected = np.isfinite(truth)

@@ -130,6 +130,23 @@ def test_intensity_image_equals_summed_counts(intensity):
     assert (intensity.intensity["photons"] >= 0).all()
 
 
+def test_hdr_inversion_of_a_2d_run(intensity_run, spadgen_bin, tmp_path):
+    """A 2D run's reconstruction is its HDR inversion, hdr.exr, which run.hdr() reads; detections() says so
+    (it told to run reconstruct --detector, which 2D runs refuse)."""
+    import shutil
+    import subprocess
+    folder = tmp_path / "run"
+    shutil.copytree(intensity_run, folder)
+    run = spadgen.open_run(folder)
+    with pytest.raises(ValueError, match=r"is a 2D run \(intensity\): no gate profiles .* run.hdr\(\) reads"):
+        run.detections()
+    with pytest.raises(FileNotFoundError, match=f"write it with spadgen reconstruct {folder}"):
+        run.hdr()
+    subprocess.run([spadgen_bin, "reconstruct", str(folder), "-q"], check=True)
+    hdr = run.hdr()
+    np.testing.assert_allclose(hdr["photons"], run.intensity["photons"], rtol=1e-6)
+
+
 def test_ground_truth_layers_and_labels(sweep):
     gt = sweep.ground_truth
     n = sweep.metadata["ground_truth_layers"]
@@ -254,6 +271,7 @@ def test_a_damaged_or_other_folder_is_named_with_what_it_is(make_run, tmp_path):
     """Files damaged after a run published them, a run of another version, and folders that are not runs: each
     error names the file or folder and what it is (they were bare JSON, NumPy and KeyError messages)."""
     import shutil
+    import subprocess
     run = tmp_path / "run"
     shutil.copytree(make_run("light_only"), run)
     with open(run / "counts.npy", "r+b") as f:
@@ -285,6 +303,11 @@ def test_a_damaged_or_other_folder_is_named_with_what_it_is(make_run, tmp_path):
     (tmp_path / "repeats" / "repeat_000" / "metadata.json").write_text("{}")
     with pytest.raises(FileNotFoundError, match="holds 1 run folder\\(s\\): repeat_000"):
         spadgen.open_run(tmp_path / "repeats")
+    # a dataset's samples/ folder is named as one (it was called sense's realisations)
+    (tmp_path / "ds" / "samples" / "000000").mkdir(parents=True)
+    (tmp_path / "ds" / "samples" / "000000" / "metadata.json").write_text("{}")
+    with pytest.raises(FileNotFoundError, match="holds 1 run folder\\(s\\): 000000 \\(a dataset's samples: spadgen.open_dataset"):
+        spadgen.open_run(tmp_path / "ds" / "samples")
 
 
 def test_what_a_run_did_not_write_is_named(make_run, tmp_path):
@@ -314,6 +337,7 @@ def test_rising_edge_baseline_on_the_flat_target(make_run):
 def test_detections_of_spadgen_reconstruct(spadgen_bin, make_run, tmp_path):
     # A copy of the sweep run, so that the shared fixture's folder stays as the run wrote it.
     import shutil
+    import subprocess
     import subprocess
 
     run_dir = tmp_path / "run"

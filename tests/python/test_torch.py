@@ -93,9 +93,16 @@ def test_data_loader_batches_and_a_training_step(sweep_run, sweep):
     # The dataset pickles without its open memory maps (DataLoader workers open their own).
     again = pickle.loads(pickle.dumps(ds))
     np.testing.assert_array_equal(again[1]["counts"].numpy(), ds[1]["counts"].numpy())
+    # twice from one run in the copy (a spawned worker's: the cache came back as a dict, without move_to_end)
+    np.testing.assert_array_equal(again[0]["counts"].numpy(), ds[0]["counts"].numpy())
+    np.testing.assert_array_equal(again[1]["counts"].numpy(), ds[1]["counts"].numpy())
+    # workers started by spawn (macOS's and Windows's default) get the dataset pickled: every patch once
+    spawned = torch.utils.data.DataLoader(ds, batch_size=None, num_workers=2, multiprocessing_context="spawn")
+    seen = sorted(tuple(b["origin"].tolist()) for b in spawned)
+    assert seen == sorted(tuple(ds[j]["origin"].tolist()) for j in range(len(ds)))
 
 
-def test_runs_that_cannot_share_a_batch_are_refused(sweep_run, make_run):
+def test_runs_that_cannot_share_a_batch_are_refused(sweep_run, make_run, spadgen_bin, tmp_path):
     posed = make_run("posed")
     with pytest.raises(ValueError, match="different K"):
         RunDataset([sweep_run, posed])
@@ -103,6 +110,16 @@ def test_runs_that_cannot_share_a_batch_are_refused(sweep_run, make_run):
         RunDataset([posed], fields=("frames",))
     with pytest.raises(ValueError, match="unknown field"):
         RunDataset([sweep_run], fields=("count",))
+    # a gate sweep and a 2D run of the same K (it failed in the batch, KeyError 'gate_positions_ns')
+    sweep2 = tmp_path / "sweep2"
+    subprocess.run([spadgen_bin, "run", str(SCENES_DIR / "multi_object.json"), "--set", "camera.crop=[500,240,4,4]",
+                    "--set", "render.samples_per_pixel=1", "--set", "acquisition.gate_sweep.start_ns=3",
+                    "--set", "acquisition.gate_sweep.stop_ns=3.036", "--set", "outputs.previews=false", "-o", str(sweep2), "-q"],
+                   check=True)
+    dual = make_run("intensity")
+    assert spadgen.open_run(sweep2).K == spadgen.open_run(dual).K == 2
+    with pytest.raises(ValueError, match="different acquisition modes"):
+        RunDataset([sweep2, dual], fields=("counts",))
     with pytest.raises(ValueError, match="no run is as large"):
         RunDataset([sweep_run], patch_size=(11, 8))
     # sizes that are not whole numbers were cut (7.9 to 7) or failed later with a bare message
@@ -128,6 +145,16 @@ def test_a_run_without_noise_free_rates_says_how_to_get_them(make_run, spadgen_b
         RunDataset([run])
     assert "or leave 'expected_counts' out of fields (e.g. fields=('counts', 'depth', 'mask', 'layer_count'))" in str(e.value)
     assert RunDataset([run], fields=("counts", "depth", "mask", "layer_count"))[0]["counts"].shape[1:] == (10, 10)
+    # a run without ground_truth.exr: the suggestion leaves out every field that needs it (it named mask and
+    # layer_count, which fail next)
+    no_truth = tmp_path / "no_truth"
+    subprocess.run([spadgen_bin, "run", str(SCENES_DIR / "flat_target.json"), "--set", "camera.crop=[507,245,4,4]",
+                    "--set", "render.samples_per_pixel=1", "--set", "outputs.ground_truth=false", "--set",
+                    "outputs.previews=false", "-o", str(no_truth), "-q"], check=True)
+    with pytest.raises(ValueError, match="field 'depth' needs ground_truth.exr") as e:
+        RunDataset([no_truth])
+    assert "or leave 'depth' out of fields (e.g. fields=('counts', 'expected_counts'))" in str(e.value)
+    assert RunDataset([no_truth], fields=("counts", "expected_counts"))[0]["counts"].shape[1:] == (4, 4)
     out = tmp_path / "sensed"
     subprocess.run([spadgen_bin, "sense", str(run), "--set", "outputs.expected_counts=true", "-o", str(out), "-q"], check=True)
     sensed = RunDataset([out])[0]
@@ -179,6 +206,11 @@ def test_open_runs_are_bounded(sweep_run):
         ds[j]
     assert len(ds._runs) == 8
     assert len(os.listdir("/proc/self/fd")) - before <= 8 * 2 + 4
+    # the same in a pickled copy (a worker's): its cache evicts in order too
+    copy = pickle.loads(pickle.dumps(ds))
+    for j in range(20):
+        copy[j]
+    assert len(copy._runs) == 8 and list(copy._runs) == list(range(12, 20))
     with pytest.raises(ValueError, match="open_runs must be at least 1"):
         RunDataset([sweep_run], open_runs=0)
     with pytest.raises(ValueError, match=r"fields must be a list of field names, got the string 'counts'"):
