@@ -111,6 +111,10 @@ void Staging::remove_leftovers(const fs::path& parent) {
     const std::string n = e.path().filename().string();
     const size_t at = n.find(".spadgen-staging-");
     if (n.size() > 1 && n[0] == '.' && at != std::string::npos && at > 1) names.insert(n.substr(1, at - 1));
+    // a lock file alone: its run was killed after publishing its folder, before removing it (taken and
+    // released below as any run does, which removes it; one a live run holds stays)
+    static const std::string kLock = ".spadgen-lock";
+    if (n.size() > kLock.size() + 1 && n[0] == '.' && n.ends_with(kLock)) names.insert(n.substr(1, n.size() - kLock.size() - 1));
   }
   for (const std::string& name : names) {
     try {

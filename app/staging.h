@@ -54,8 +54,8 @@ class Staging {
   void publish(const std::vector<std::string>& files);
   // A subfolder's: removes the folders nothing was written into (previews/, light/), as publish() does.
   void finish_sub() const;
-  // Removes what killed runs left in `parent` (the staging folders of its output folders), each under its
-  // output folder's lock: one that another run is writing is left to it.
+  // Removes what killed runs left in `parent` (the staging folders of its output folders, and lock files no
+  // process holds), each under its output folder's lock: one that another run is writing is left to it.
   static void remove_leftovers(const std::filesystem::path& parent);
   // The output folder, absolute, with symbolic links resolved.
   const std::filesystem::path& out() const { return out_; }
