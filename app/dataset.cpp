@@ -3,6 +3,7 @@
 #include "app/progress.h"
 
 #include <algorithm>
+#include <array>
 #include <charconv>
 #include <chrono>
 #include <cmath>
@@ -181,23 +182,20 @@ DatasetSpec spec_of_folder(const fs::path& dir) {
 constexpr int64_t kMaxKeptHashes = 10'000'000;
 using SampleHashes = std::vector<uint64_t>;
 
-std::vector<SampleRecord> inspect_all(const DatasetFolder& folder, bool progress, const SampleHashes* hashes = nullptr) {
-  std::vector<SampleRecord> records;
+// Every sample's record, handed to `sink` in index order and not kept (a million samples' records took 1.7 GB).
+void inspect_each(const DatasetFolder& folder, bool progress, const SampleHashes* hashes,
+                  const DatasetFolder::RecordSink& sink) {
   const int64_t n = folder.spec().count();
-  records.reserve(size_t(n));
   Progress bar(size_t(n), progress && n > 10000, "samples inspected");
   for (int64_t i = 0; i < n; ++i) {
     const uint64_t h = hashes != nullptr && size_t(i) < hashes->size() ? (*hashes)[size_t(i)] : 0;
     const std::string known = h != 0 ? scenes::hex64(h) : std::string();
-    records.push_back(folder.inspect(datasets::make_sample(folder.spec(), i), &known));
+    sink(folder.inspect(datasets::make_sample(folder.spec(), i), &known));
     bar.tick();
   }
-  return records;
 }
 
-std::string status_counts(const std::vector<SampleRecord>& records) {
-  int64_t c[5] = {0, 0, 0, 0, 0};
-  for (const SampleRecord& r : records) ++c[int(r.status)];
+std::string status_counts(const std::array<int64_t, 5>& c) {
   return std::to_string(c[0]) + " done, " + std::to_string(c[1]) + " failed, " + std::to_string(c[2]) + " stale, " +
          std::to_string(c[3]) + " missing" + (c[4] ? ", " + std::to_string(c[4]) + " damaged" : std::string());
 }
@@ -245,16 +243,17 @@ std::string dataset_plan(const DatasetOptions& options) {
     ++samples;
     bar.tick();
     Estimate e;
-    std::string status;
+    std::string status, hash;
     try {
       const scenes::ResolvedRun r = scenes::load_scene_file(spec.scenes[size_t(s.scene)], s.overrides);
       e = estimator(r);
+      if (folder) hash = folder->sample_hash(s, r);  // the folder's inspection need not resolve it again
     } catch (const Error& err) {
       errors.push_back("sample " + std::to_string(i) + ": " + err.what());
       status = "invalid";
     }
     if (folder) {
-      const SampleRecord rec = folder->inspect(s);
+      const SampleRecord rec = folder->inspect(s, &hash);
       if (status.empty()) status = datasets::status_name(rec.status);
       if (rec.status != Status::Done) ++left, left_total.add(e);
     }
@@ -307,7 +306,7 @@ namespace {
 // Where the completed samples are listed: "index.jsonl lists them" when written here.
 std::string leave_index(const DatasetFolder& folder, datasets::RunPresence& presence, const SampleHashes& hashes) {
   try {
-    return folder.write_index([&] { return inspect_all(folder, false, &hashes); }, &presence)
+    return folder.write_index([&](const DatasetFolder::RecordSink& sink) { inspect_each(folder, false, &hashes, sink); }, &presence)
                ? "index.jsonl lists them"
                : "the last run on the folder to end lists them in index.jsonl";
   } catch (const std::exception& e) {
@@ -321,14 +320,12 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
                        const DatasetFolder& folder, datasets::RunPresence& presence, SampleHashes& hashes) {
   const fs::path dir = folder.dir();
 
-  // What this shard has to do: every sample it owns that is not done, checked before any work.
-  struct Todo {
-    SampleRecord record;
-    Estimate estimate;
-  };
-  std::vector<Todo> todo;
+  // What this shard has to do: every sample it owns that is not done, checked before any work, by index
+  // (inspected again when its turn comes: a record per sample took 1.7 kB, 1.7 GB for a million samples).
+  std::vector<int64_t> todo;
   int64_t owned = 0, skipped = 0;
   Estimator estimator(spec.repeats, options.threads);
+  Totals totals;
   const int64_t mine = shard.owned(spec.count());
   Progress bar(size_t(mine), options.progress && mine > 10000, "samples inspected");
   for (int64_t i = 0; i < spec.count(); ++i) {
@@ -336,21 +333,19 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
     InterruptGuard::check();  // a signal while the samples are checked (100,000 took 50 s before it stopped)
     ++owned;
     bar.tick();
-    SampleRecord rec = folder.inspect(datasets::make_sample(spec, i));
+    scenes::ResolvedRun resolved;  // the sample's scene, resolved once for its hash and its estimate
+    const SampleRecord rec = folder.inspect(datasets::make_sample(spec, i), nullptr, &resolved);
     if (size_t(i) < hashes.size() && !rec.hash.empty()) std::from_chars(rec.hash.data(), rec.hash.data() + rec.hash.size(), hashes[size_t(i)], 16);
     if (rec.status == Status::Done) {
       ++skipped;
       continue;
     }
-    Estimate e;
-    if (!rec.hash.empty()) e = estimator(scenes::load_scene_file(spec.scenes[size_t(rec.sample.scene)], rec.sample.overrides));
-    todo.push_back({std::move(rec), e});
+    if (!rec.hash.empty()) totals.add(estimator(resolved));
+    todo.push_back(i);
   }
   // What killed runs left in samples/ is removed first (a sample another run is writing keeps its own), so
   // that the disk check does not count it.
   Staging::remove_leftovers(dir / "samples");
-  Totals totals;
-  for (const Todo& t : todo) totals.add(t.estimate);
   const int64_t disk = totals.disk(), disk_at_least = totals.disk_at_least();
   const double seconds = totals.seconds;
   // Refused when even the least they can take does not fit (compressed stores at a twentieth of their size).
@@ -390,14 +385,14 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
   std::deque<size_t> pending;
   for (size_t t = 0; t < todo.size(); ++t) pending.push_back(t);
   size_t handled = 0, busy_in_a_row = 0;
-  std::optional<std::chrono::steady_clock::time_point> waiting_since;  // since all samples left were others'
+  bool waiting = false;  // since waiting_since, every sample left was another run's
+  std::chrono::steady_clock::time_point waiting_since{};
   std::chrono::steady_clock::time_point last_said;
   int said = 0;
   while (!pending.empty()) {
     const size_t t = pending.front();
     pending.pop_front();
-    const SampleRecord& rec = todo[t].record;
-    const Sample& s = rec.sample;
+    const Sample s = datasets::make_sample(spec, todo[t]);
     const std::unique_ptr<datasets::SampleClaim> claim = folder.try_claim(s);
     if (!claim) {
       pending.push_back(t);
@@ -406,11 +401,11 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
         // Said after 10 s and every minute: a run that was stopped (SIGSTOP, a suspended job) or hangs holds
         // its samples until it ends, and this one waits for it.
         const auto now = std::chrono::steady_clock::now();
-        if (!waiting_since) waiting_since = now, last_said = now;
-        const double waited = std::chrono::duration<double>(now - *waiting_since).count();
+        if (!waiting) waiting = true, waiting_since = now, last_said = now;
+        const double waited = std::chrono::duration<double>(now - waiting_since).count();
         if (waited >= 10.0 && (said == 0 || std::chrono::duration<double>(now - last_said).count() >= 60.0)) {
           std::vector<int64_t> held;
-          for (size_t p : pending) held.push_back(todo[p].record.sample.index);
+          for (size_t p : pending) held.push_back(todo[p]);
           std::sort(held.begin(), held.end());
           std::fprintf(stderr, "spadgen: dataset: waiting %.0f s for sample(s) %s, which another run on %s holds (a run "
                                "that was stopped or hangs holds them until it ends)\n",
@@ -423,9 +418,10 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
       continue;
     }
     busy_in_a_row = 0;
-    waiting_since.reset(), said = 0;
+    waiting = false, said = 0;
     ++handled;
-    if (!rec.hash.empty() && folder.inspect(s).status == Status::Done) {
+    const SampleRecord rec = folder.inspect(s);  // as it is now, under the claim
+    if (rec.status == Status::Done) {
       ++by_others;  // completed by another run meanwhile
       continue;
     }
@@ -502,12 +498,12 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
     }
   }
 
-  const std::optional<std::vector<SampleRecord>> records =
-      folder.write_index([&] { return inspect_all(folder, options.progress, &hashes); }, &presence);
+  const std::optional<datasets::CardTally> records = folder.write_index(
+      [&](const DatasetFolder::RecordSink& sink) { inspect_each(folder, options.progress, &hashes, sink); }, &presence);
   if (options.progress)
     std::fprintf(stderr, "spadgen: dataset %s: %s (this run: %lld generated, %lld skipped, %lld completed by another run, %zu failed)\n",
                  dir.string().c_str(),
-                 records ? status_counts(*records).c_str()
+                 records ? status_counts(records->count).c_str()
                          : "another run is still on the folder: the last to end writes the index",
                  static_cast<long long>(generated), static_cast<long long>(skipped), static_cast<long long>(by_others),
                  failed.size());
@@ -541,20 +537,22 @@ void dataset_run(const DatasetOptions& options) {
 DatasetStatus dataset_status(const std::string& dir) {
   const DatasetSpec spec = spec_of_folder(dir);
   const DatasetFolder folder(spec, dir);
-  const std::vector<SampleRecord> records = inspect_all(folder, true);
-  std::ostringstream o;
-  o << dir << ": dataset " << spec.file << ", " << records.size() << " samples: " << status_counts(records) << "\n";
-  for (Status st : {Status::Failed, Status::Stale, Status::Missing, Status::Damaged}) {
-    std::vector<int64_t> which;
-    for (const SampleRecord& r : records)
-      if (r.status == st) which.push_back(r.sample.index);
-    if (!which.empty()) o << datasets::status_name(st) << ": " << datasets::ranges_text(which) << "\n";
-  }
-  for (const SampleRecord& r : records)
-    if (r.status == Status::Failed) o << "sample " << r.sample.index << " failed: " << r.error << "\n";
-  for (const SampleRecord& r : records)
+  // The samples by status and the errors of the failed and damaged ones; no record kept.
+  std::array<int64_t, 5> count{};
+  std::array<std::vector<int64_t>, 5> which;
+  std::string failed, damaged;
+  inspect_each(folder, true, nullptr, [&](const SampleRecord& r) {
+    ++count[size_t(r.status)];
+    if (r.status != Status::Done) which[size_t(r.status)].push_back(r.sample.index);
+    if (r.status == Status::Failed) failed += "sample " + std::to_string(r.sample.index) + " failed: " + r.error + "\n";
     if (r.status == Status::Damaged)
-      o << "sample " << r.sample.index << " damaged: " << r.error << " (`spadgen dataset run` generates it again)\n";
+      damaged += "sample " + std::to_string(r.sample.index) + " damaged: " + r.error + " (`spadgen dataset run` generates it again)\n";
+  });
+  std::ostringstream o;
+  o << dir << ": dataset " << spec.file << ", " << spec.count() << " samples: " << status_counts(count) << "\n";
+  for (Status st : {Status::Failed, Status::Stale, Status::Missing, Status::Damaged})
+    if (!which[size_t(st)].empty()) o << datasets::status_name(st) << ": " << datasets::ranges_text(which[size_t(st)]) << "\n";
+  o << failed << damaged;
   // Folders of samples past "samples" (the file asked for fewer since): kept, outside the index.
   std::vector<int64_t> beyond;
   std::error_code ec;
@@ -568,7 +566,7 @@ DatasetStatus dataset_status(const std::string& dir) {
   if (!beyond.empty())
     o << "beyond the " << spec.count() << " samples: the folders of samples " << datasets::ranges_text(beyond)
       << " (kept, not in the index; a larger \"samples\" takes them again)\n";
-  const bool complete = std::all_of(records.begin(), records.end(), [](const SampleRecord& r) { return r.status == Status::Done; });
+  const bool complete = count[size_t(Status::Done)] == spec.count();
   return {o.str(), complete};
 }
 

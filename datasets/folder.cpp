@@ -178,6 +178,31 @@ void DatasetFolder::check() const {
   if (fs::exists(dir_, ec)) (void)checked(record());
 }
 
+namespace {
+// Where the dataset file's resolved form `file` first differs from the folder's dataset.json `folder`: the
+// keys down to the value that differs ("set"."render.samples_per_pixel"), with both values (it named the
+// top-level key alone: "set").
+std::string first_difference(const ojson& folder, const ojson& file, const std::string& path) {
+  const auto text = [](const ojson& v) {
+    const std::string t = v.dump();
+    return t.size() <= 60 ? t : t.substr(0, 57) + "...";
+  };
+  if (folder.is_object() && file.is_object()) {
+    for (auto it = file.begin(); it != file.end(); ++it) {
+      const std::string here = path + (path.empty() ? "" : ".") + "\"" + it.key() + "\"";
+      if (!folder.contains(it.key())) return here + " (the dataset file has it, the folder's dataset.json has not)";
+      if (folder[it.key()] != it.value()) return first_difference(folder[it.key()], it.value(), here);
+    }
+    for (auto it = folder.begin(); it != folder.end(); ++it)
+      if (!file.contains(it.key()))
+        return path + (path.empty() ? "" : ".") + "\"" + it.key() + "\" (the folder's dataset.json has it, the dataset file has not)";
+    return (path.empty() ? std::string("the top level") : path) +
+           " (the order of its keys, which decides the grid cell each sample takes)";
+  }
+  return path + " (the folder's dataset.json: " + text(folder) + ", the dataset file: " + text(file) + ")";
+}
+}  // namespace
+
 std::optional<ojson> DatasetFolder::checked(const ojson& wanted) const {
   std::error_code ec;
   if (!fs::is_directory(dir_)) throw Error(dir_.string() + " is not a folder; expected the dataset folder (-o)");
@@ -186,16 +211,10 @@ std::optional<ojson> DatasetFolder::checked(const ojson& wanted) const {
   if (prev) {
     ojson a = *prev, b = wanted;
     for (const char* free_key : {"samples", "dataset_file"}) a.erase(free_key), b.erase(free_key);
-    if (a != b) {
-      std::string key = "?";
-      for (auto it = b.begin(); it != b.end(); ++it)
-        if (!a.contains(it.key()) || a[it.key()] != it.value()) {
-          key = it.key();
-          break;
-        }
-      throw Error(dir_.string() + " holds another dataset: its dataset.json differs from " + spec_.file + " at \"" + key +
-                  "\" (only \"samples\" may change, to add samples); use another folder (-o) or remove " + dir_.string());
-    }
+    if (a != b)
+      throw Error(dir_.string() + " holds another dataset: its dataset.json differs from " + spec_.file + " at " +
+                  first_difference(a, b, "") + " (only \"samples\" may change, to add samples); use another folder (-o) or remove " +
+                  dir_.string());
   } else {
     // dataset.json decides whose the folder is: without it (damaged, or lost), samples and an index there
     // may be another dataset's, which this one would replace.
@@ -237,15 +256,19 @@ DatasetFolder::Resolved DatasetFolder::resolve(const Sample& s) const {
     throw Error("sample " + std::to_string(s.index) + " (" + s.parameters.dump() + ") makes an invalid scene: " + e.what());
   }
   Resolved out;
-  out.scene = r.resolved;
+  out.hash = sample_hash(s, r);
+  out.run = std::move(r);
+  return out;
+}
+
+std::string DatasetFolder::sample_hash(const Sample& s, const scenes::ResolvedRun& r) const {
   // The hash covers what shapes the sample's data: its resolved scene, the content of its files and the
   // program's version; the same function of the sample on every machine and shard.
   // The sensor's tables (CSV and EXR files the scene file names) by content, when it names any (a pulse
   // shape replaced under a done dataset left its samples done, mixing two pulses).
   std::string text = r.resolved.dump() + "\n" + scene_content_hash(s.scene) + "\n" + SPADGEN_VERSION;
   if (scenes::uses_sensor_tables(r.config)) text += "\n" + scenes::sensor_tables_hash(r.config);
-  out.hash = scenes::hex64(scenes::fnv1a64(text));
-  return out;
+  return scenes::hex64(scenes::fnv1a64(text));
 }
 
 std::optional<json> DatasetFolder::sample_metadata(const std::string& folder) const {
@@ -288,11 +311,17 @@ bool DatasetFolder::holds(const std::string& folder, const std::string& hash) co
   return meta && (*meta)["dataset"].value("sample_hash", "") == hash && gone_files(dir_ / folder, *meta).empty();
 }
 
-SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash) const {
+SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash, scenes::ResolvedRun* resolved) const {
   SampleRecord rec;
   rec.sample = s;
   try {
-    rec.hash = hash != nullptr && !hash->empty() ? *hash : resolve(s).hash;
+    if (hash != nullptr && !hash->empty()) {
+      rec.hash = *hash;
+    } else {
+      Resolved r = resolve(s);
+      rec.hash = std::move(r.hash);
+      if (resolved != nullptr) *resolved = std::move(r.run);
+    }
   } catch (const Error& e) {
     rec.status = Status::Failed;
     rec.error = e.what();
@@ -349,7 +378,18 @@ SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash) co
         rec.summary["laser_photons_per_pulse"] = (*meta)["laser_photons_per_pulse"]["total_all_pixels"].get<double>();
     }
   }
+  // The sample as it resolves now failed: failed, with why (also when its folder is damaged or stale: a run
+  // that could not generate the damaged sample again left it damaged, and said it would generate it).
+  const auto failed = [&]() {
+    const std::optional<json> f = read_json(dir_ / failure_path(s));
+    if (!f || f->value("sample_hash", "") != rec.hash) return false;
+    rec.files.clear(), rec.listed.clear(), rec.bytes = 0, rec.summary = nullptr;
+    rec.status = Status::Failed;
+    rec.error = f->value("error", "");
+    return true;
+  };
   if (done && !stale && !gone.empty()) {
+    if (failed()) return rec;
     rec.files.clear(), rec.listed.clear(), rec.bytes = 0, rec.summary = nullptr;
     rec.status = Status::Damaged;
     rec.error = "listed in metadata.json but gone or changed: ";
@@ -362,13 +402,8 @@ SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash) co
     rec.folders = folders;
     return rec;
   }
+  if (failed()) return rec;
   rec.files.clear(), rec.listed.clear(), rec.bytes = 0, rec.summary = nullptr;
-  // The sample as it resolves now failed (a stale folder from before stays beside it): failed, with why.
-  if (const std::optional<json> f = read_json(dir_ / failure_path(s)); f && f->value("sample_hash", "") == rec.hash) {
-    rec.status = Status::Failed;
-    rec.error = f->value("error", "");
-    return rec;
-  }
   if (stale) rec.status = Status::Stale;
   return rec;
 }
@@ -385,8 +420,8 @@ void DatasetFolder::clear_failure(const Sample& s) const {
   fs::remove(dir_ / "failed", ec);  // when it is empty now (a resumed run leaves none, as a run never failed)
 }
 
-std::optional<std::vector<SampleRecord>> DatasetFolder::write_index(
-    const std::function<std::vector<SampleRecord>()>& inspect, RunPresence* leaving) const {
+std::optional<CardTally> DatasetFolder::write_index(const std::function<void(const RecordSink&)>& inspect_each,
+                                                    RunPresence* leaving) const {
   const FolderLock lock(dir_);
   if (leaving) {
     // Under the folder's lock, so that of two runs ending at once the second sees the first gone.
@@ -395,16 +430,24 @@ std::optional<std::vector<SampleRecord>> DatasetFolder::write_index(
     if (others < 0) return std::nullopt;
     ::close(others);
   }
-  std::vector<SampleRecord> records = inspect();
+  // Streamed: the rows are written as the records come (a million samples' records took 1.7 GB).
+  writers::AtomicWriter jsonl((dir_ / "index.jsonl").string()), csv((dir_ / "index.csv").string());
+  csv.append(index_csv_header(spec_));
+  CardTally tally;
+  inspect_each([&](const SampleRecord& r) {
+    jsonl.append(index_jsonl_row(spec_, r));
+    csv.append(index_csv_row(spec_, r));
+    tally.add(r);
+  });
   // dataset.json with the index, as one step: two runs of different sample counts at once left the one's
   // dataset.json (written as it began) beside the other's index.
   const ojson wanted = record();
   if (read_json<ojson>(dir_ / "dataset.json") != wanted)
     writers::write_file_atomic((dir_ / "dataset.json").string(), wanted.dump(2) + "\n");
-  writers::write_file_atomic((dir_ / "index.jsonl").string(), index_jsonl(spec_, records));
-  writers::write_file_atomic((dir_ / "index.csv").string(), index_csv(spec_, records));
-  writers::write_file_atomic((dir_ / "dataset.md").string(), dataset_card(*this, records));
-  return records;
+  jsonl.commit();
+  csv.commit();
+  writers::write_file_atomic((dir_ / "dataset.md").string(), dataset_card(*this, tally));
+  return tally;
 }
 
 json dataset_section(const DatasetFolder& folder, const Sample& s, const std::string& hash, int repeat) {
@@ -417,9 +460,8 @@ json dataset_section(const DatasetFolder& folder, const Sample& s, const std::st
           {"sample_hash", hash}};
 }
 
-std::string index_jsonl(const DatasetSpec& spec, const std::vector<SampleRecord>& records) {
-  std::string out;
-  for (const SampleRecord& r : records) {
+std::string index_jsonl_row(const DatasetSpec& spec, const SampleRecord& r) {
+  {
     ojson row;
     row["index"] = r.sample.index;
     row["status"] = status_name(r.status);
@@ -436,24 +478,36 @@ std::string index_jsonl(const DatasetSpec& spec, const std::vector<SampleRecord>
       row["ground_truth"] = r.summary;
     }
     if (r.status == Status::Failed || r.status == Status::Damaged) row["error"] = r.error;
-    out += row.dump() + "\n";
+    return row.dump() + "\n";
   }
-  return out;
 }
 
-std::string index_csv(const DatasetSpec& spec, const std::vector<SampleRecord>& records) {
+namespace {
+std::vector<std::string> csv_parameters(const DatasetSpec& spec) {
   std::vector<std::string> params = {"scene"};
   for (const GridAxis& g : spec.grid) params.push_back(g.key);
   for (const RandomAxis& r : spec.random) params.push_back(r.key);
-  const std::vector<std::string> summary = {"hit_fraction", "range_min_m", "range_max_m", "meshes_in_view", "max_layer_count",
-                                            "objects_in_view", "max_object_count", "multi_object_fraction",
-                                            "objects_detectable", "detectable_fraction", "laser_photons_per_pulse"};
+  return params;
+}
+const std::vector<std::string> kCsvSummary = {"hit_fraction", "range_min_m", "range_max_m", "meshes_in_view", "max_layer_count",
+                                              "objects_in_view", "max_object_count", "multi_object_fraction",
+                                              "objects_detectable", "detectable_fraction", "laser_photons_per_pulse"};
+}  // namespace
+
+std::string index_csv_header(const DatasetSpec& spec) {
   std::string out = "index,status,folder";
-  for (const std::string& p : params) out.append(",").append(csv_field(p));
+  for (const std::string& p : csv_parameters(spec)) out.append(",").append(csv_field(p));
   out += ",seed,seed_light,seed_chip,seed_noise,sample_hash,bytes";
-  for (const std::string& k : summary) out.append(",").append(k);
+  for (const std::string& k : kCsvSummary) out.append(",").append(k);
   out += ",error\n";
-  for (const SampleRecord& r : records) {
+  return out;
+}
+
+std::string index_csv_row(const DatasetSpec& spec, const SampleRecord& r) {
+  const std::vector<std::string> params = csv_parameters(spec);
+  const std::vector<std::string>& summary = kCsvSummary;
+  std::string out;
+  {
     out += std::to_string(r.sample.index) + "," + status_name(r.status) + "," + r.sample.folder();
     for (const std::string& p : params) out.append(",").append(csv_value(r.sample.parameters.value(p, ojson())));
     out += "," + std::to_string(r.sample.seed) + "," + std::to_string(r.sample.light_seed) + "," + std::to_string(r.sample.chip_seed) +
@@ -478,10 +532,26 @@ std::string cell(const std::string& t) {
 }
 }  // namespace
 
-std::string dataset_card(const DatasetFolder& folder, const std::vector<SampleRecord>& records) {
+void CardTally::add(const SampleRecord& r) {
+  ++samples, ++count[size_t(r.status)];
+  if (r.status != Status::Done) return;
+  for (const auto& [key, v] : r.sample.parameters.items()) {
+    Observed& o = observed[key];
+    if (v.is_number()) o.lo = std::min(o.lo, v.get<double>()), o.hi = std::max(o.hi, v.get<double>());
+    else o.distinct.insert(v.dump());
+  }
+  for (const auto& [name, size] : r.files) {
+    std::string key = name;
+    if (key.rfind("_r", 0) == 0) key = "_rNN" + key.substr(key.find('/'));  // repeats together
+    auto& e = sizes[key];
+    ++e.first, e.second += size;
+  }
+  bytes += r.bytes;
+}
+
+std::string dataset_card(const DatasetFolder& folder, const CardTally& tally) {
   const DatasetSpec& spec = folder.spec();
-  std::map<Status, int64_t> count;
-  for (const SampleRecord& r : records) ++count[r.status];
+  const auto count = [&tally](Status st) { return tally.count[size_t(st)]; };
   std::ostringstream o;
   const std::string title = spec.description.empty() ? fs::path(spec.file).filename().string() : spec.description;
   o << "# " << title << "\n\n";
@@ -490,8 +560,8 @@ std::string dataset_card(const DatasetFolder& folder, const std::vector<SampleRe
     << "```sh\nspadgen dataset run " << fs::path(spec.file).filename().string() << " -o DIR   # DIR: this folder\n```\n\n";
   o << "## Samples\n\n"
     << "| samples | done | failed | stale | missing | damaged |\n|---|---|---|---|---|---|\n"
-    << "| " << records.size() << " | " << count[Status::Done] << " | " << count[Status::Failed] << " | " << count[Status::Stale]
-    << " | " << count[Status::Missing] << " | " << count[Status::Damaged] << " |\n\n";
+    << "| " << tally.samples << " | " << count(Status::Done) << " | " << count(Status::Failed) << " | " << count(Status::Stale)
+    << " | " << count(Status::Missing) << " | " << count(Status::Damaged) << " |\n\n";
   o << "Sample i is the folder `samples/<i, 6 digits>/` (a complete spadgen run folder: `metadata.json` lists its files, "
        "units and settings, and its `dataset` section the sample's parameters and seeds)";
   if (spec.repeats > 1)
@@ -515,7 +585,7 @@ std::string dataset_card(const DatasetFolder& folder, const std::vector<SampleRe
     if (first >= spec.count()) break;
     ojson r;
     try {
-      r = folder.resolve(make_sample(spec, first)).scene;
+      r = folder.resolve(make_sample(spec, first)).run.resolved;
     } catch (const Error&) {
       continue;
     }
@@ -546,17 +616,11 @@ std::string dataset_card(const DatasetFolder& folder, const std::vector<SampleRe
     << "unchanged.\n\n";
   o << "| key | varied by | values | range over the done samples |\n|---|---|---|---|\n";
   const auto observed = [&](const std::string& key) {
-    double lo = INFINITY, hi = -INFINITY;
-    std::set<std::string> distinct;
-    for (const SampleRecord& r : records) {
-      if (r.status != Status::Done || !r.sample.parameters.contains(key)) continue;
-      const ojson& v = r.sample.parameters[key];
-      if (v.is_number()) lo = std::min(lo, v.get<double>()), hi = std::max(hi, v.get<double>());
-      else distinct.insert(v.dump());
-    }
     std::ostringstream t;
-    if (lo <= hi) t << lo << " to " << hi;
-    else if (!distinct.empty()) t << distinct.size() << " distinct values";
+    const auto it = tally.observed.find(key);
+    if (it == tally.observed.end()) return t.str();
+    if (it->second.lo <= it->second.hi) t << it->second.lo << " to " << it->second.hi;
+    else if (!it->second.distinct.empty()) t << it->second.distinct.size() << " distinct values";
     return t.str();
   };
   if (spec.scenes.size() > 1) o << "| `scene` | grid | " << cell(ojson(spec.scene_names).dump()) << " | " << observed("scene") << " |\n";
@@ -572,26 +636,16 @@ std::string dataset_card(const DatasetFolder& folder, const std::vector<SampleRe
     << seed_text(spec.noise_seed) << " (per sample: derived from the dataset seed and the index; each row of the index "
     << "lists them).\n";
   // Sizes per output file, over the done samples.
-  std::map<std::string, std::pair<int64_t, int64_t>> sizes;  // file -> (samples holding it, bytes)
-  int64_t total = 0;
-  for (const SampleRecord& r : records) {
-    if (r.status != Status::Done) continue;
-    for (const auto& [name, size] : r.files) {
-      std::string key = name;
-      if (key.rfind("_r", 0) == 0) key = "_rNN" + key.substr(key.find('/'));  // repeats together
-      auto& e = sizes[key];
-      ++e.first, e.second += size;
-    }
-    total += r.bytes;
-  }
+  const auto& sizes = tally.sizes;
+  const int64_t total = tally.bytes;
   o << "\n## Files and sizes\n\n";
-  if (count[Status::Done] == 0) {
+  if (count(Status::Done) == 0) {
     o << "No sample is done yet.\n";
   } else {
     o << "| file | mean bytes per sample | total |\n|---|---|---|\n";
     for (const auto& [name, e] : sizes)
       o << "| `" << cell(name) << "` | " << bytes_text(double(e.second) / double(e.first)) << " | " << bytes_text(double(e.second)) << " |\n";
-    o << "| all | " << bytes_text(double(total) / double(count[Status::Done])) << " | " << bytes_text(double(total)) << " |\n";
+    o << "| all | " << bytes_text(double(total) / double(count(Status::Done))) << " | " << bytes_text(double(total)) << " |\n";
   }
   o << "\n## Reading it\n\nFrom this folder:\n\n```python\nimport json\nrows = [json.loads(l) for l in open(\"index.jsonl\")]\n"
        "import spadgen                                   # python/ in the spadgen repository (docs/python.md, Datasets)\n"

@@ -14,16 +14,20 @@
 #pragma once
 #include <nlohmann/json.hpp>
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <limits>
 #include <map>
 #include <memory>
 #include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
 #include "datasets/dataset.h"
+#include "scenes/scene_file.h"
 
 namespace spadgen::datasets {
 
@@ -46,6 +50,19 @@ struct SampleRecord {
   std::vector<std::string> listed;  // done: every file of the sample and its realisations (hard links too)
   int64_t bytes = 0;                 // done: their sum
   nlohmann::ordered_json summary;    // done: metadata.json's ground_truth_summary and laser totals
+};
+
+// What the dataset card says of the samples, gathered one record at a time (in index order).
+struct CardTally {
+  std::array<int64_t, 5> count{};  // by Status
+  int64_t samples = 0, bytes = 0;  // bytes: of the done samples
+  struct Observed {
+    double lo = std::numeric_limits<double>::infinity(), hi = -std::numeric_limits<double>::infinity();
+    std::set<std::string> distinct;  // values that are not numbers
+  };
+  std::map<std::string, Observed> observed;                    // parameter key: its values over the done samples
+  std::map<std::string, std::pair<int64_t, int64_t>> sizes;  // output file: (done samples holding it, bytes)
+  void add(const SampleRecord& r);
 };
 
 // A dataset run's claim on one sample (an open-file-description lock on byte `index` of DIR/.dataset.lock,
@@ -96,10 +113,12 @@ class DatasetFolder {
   // The sample's scene file with its overrides, resolved and checked; throws spadgen::Error naming the
   // sample and its parameters when they make an invalid scene.
   struct Resolved {
-    nlohmann::ordered_json scene;  // the resolved scene file
+    scenes::ResolvedRun run;  // run.resolved: the resolved scene file
     std::string hash;
   };
   Resolved resolve(const Sample& s) const;
+  // The hash of sample s whose scene resolved to r (as resolve computes it).
+  std::string sample_hash(const Sample& s, const scenes::ResolvedRun& r) const;
 
   // The metadata.json of a sample folder ("samples/000042", a repeat's) when it is one spadgen published
   // (it lists its files and has a dataset section), else nullopt.
@@ -111,8 +130,9 @@ class DatasetFolder {
   std::unique_ptr<SampleClaim> try_claim(const Sample& s) const;
 
   // The sample's state on disk (reads its metadata.json files and the failure record). hash: the sample's
-  // hash when known (a run's own samples, resolved as it began), else it is computed (its scene resolved).
-  SampleRecord inspect(const Sample& s, const std::string* hash = nullptr) const;
+  // hash when known (a run's own samples, resolved as it began), else it is computed (its scene resolved,
+  // and handed to *resolved when given: resolving is most of an inspection).
+  SampleRecord inspect(const Sample& s, const std::string* hash = nullptr, scenes::ResolvedRun* resolved = nullptr) const;
 
   // Failure records (DIR/failed/000042.json), written atomically.
   void record_failure(const Sample& s, const std::string& hash, const std::string& error) const;
@@ -121,14 +141,16 @@ class DatasetFolder {
   // This run's presence on the folder (see RunPresence), taken as it begins.
   std::unique_ptr<RunPresence> enter() const;
 
-  // Rewrites index.jsonl, index.csv and dataset.md from the records of every sample (in index order) that
-  // `inspect` reads from the folder, under the folder's lock: the read and the write are one step, so that
-  // the last shard to finish writes the complete index (a shard that read the folder before another's last
-  // sample and wrote after it listed that sample missing). Returns the records. With `leaving` (the ending
-  // run's presence, released under the lock): nothing is read or written, and nullopt returned, while
-  // another run is on the folder; that run, or the last of them, writes the index as it ends.
-  std::optional<std::vector<SampleRecord>> write_index(const std::function<std::vector<SampleRecord>()>& inspect,
-                                                       RunPresence* leaving = nullptr) const;
+  // Rewrites index.jsonl, index.csv and dataset.md from the records of every sample that `inspect_each`
+  // reads from the folder and hands, in index order, to its argument, under the folder's lock: the read and
+  // the write are one step, so that the last shard to finish writes the complete index (a shard that read
+  // the folder before another's last sample and wrote after it listed that sample missing). Returns the
+  // records' tally. With `leaving` (the ending run's presence, released under the lock): nothing is read or
+  // written, and nullopt returned, while another run is on the folder; that run, or the last of them, writes
+  // the index as it ends.
+  using RecordSink = std::function<void(const SampleRecord&)>;
+  std::optional<CardTally> write_index(const std::function<void(const RecordSink&)>& inspect_each,
+                                       RunPresence* leaving = nullptr) const;
 
  private:
   const std::string& scene_content_hash(int scene) const;
@@ -145,9 +167,12 @@ class DatasetFolder {
 nlohmann::json dataset_section(const DatasetFolder& folder, const Sample& s, const std::string& hash, int repeat);
 
 // The index rows as JSON Lines and CSV, and the dataset card (Markdown): pure functions of the records,
-// so that any set of shards writes the same bytes as one serial run.
-std::string index_jsonl(const DatasetSpec& spec, const std::vector<SampleRecord>& records);
-std::string index_csv(const DatasetSpec& spec, const std::vector<SampleRecord>& records);
-std::string dataset_card(const DatasetFolder& folder, const std::vector<SampleRecord>& records);
+// so that any set of shards writes the same bytes as one serial run. One record at a time: an index of
+// millions of samples is written without holding their records.
+std::string index_jsonl_row(const DatasetSpec& spec, const SampleRecord& r);
+std::string index_csv_header(const DatasetSpec& spec);
+std::string index_csv_row(const DatasetSpec& spec, const SampleRecord& r);
+
+std::string dataset_card(const DatasetFolder& folder, const CardTally& tally);
 
 }  // namespace spadgen::datasets

@@ -143,4 +143,29 @@ void write_file_atomic(const std::string& path, const std::string& bytes) {
   file.commit();
 }
 
+struct AtomicWriter::Impl {
+  explicit Impl(const std::string& path) : file(path) {}
+  void flush() {
+    detail::pwrite_all(file.fd(), buffer.data(), buffer.size(), offset, file.destination());
+    offset += buffer.size();
+    buffer.clear();
+  }
+  detail::TempFile file;
+  std::string buffer;
+  uint64_t offset = 0;
+};
+
+AtomicWriter::AtomicWriter(const std::string& path) : impl_(std::make_unique<Impl>(path)) {}
+AtomicWriter::~AtomicWriter() = default;
+
+void AtomicWriter::append(const std::string& bytes) {
+  impl_->buffer += bytes;
+  if (impl_->buffer.size() >= (size_t{1} << 20)) impl_->flush();
+}
+
+void AtomicWriter::commit() {
+  impl_->flush();
+  impl_->file.commit();
+}
+
 }  // namespace spadgen::writers

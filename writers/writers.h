@@ -252,6 +252,22 @@ void write_json(const std::string& path, const nlohmann::json& value);
 // Any bytes, written atomically (temporary file, fsync, rename).
 void write_file_atomic(const std::string& path, const std::string& bytes);
 
+// A file written in pieces and published whole, as write_file_atomic does, by commit(); removed when never
+// committed. For files too large to hold in memory first (a dataset's index of millions of samples).
+class AtomicWriter {
+ public:
+  explicit AtomicWriter(const std::string& path);
+  ~AtomicWriter();
+  AtomicWriter(const AtomicWriter&) = delete;
+  AtomicWriter& operator=(const AtomicWriter&) = delete;
+  void append(const std::string& bytes);  // buffered: written a megabyte at a time
+  void commit();
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
 // The bytes of a written output: a file's size, or a folder's (a Zarr store) as the sum of the regular
 // files in it; -1 when the path does not exist. metadata.json records them (file_bytes), so that a file
 // cut short or removed after the run is told apart from the one it wrote.

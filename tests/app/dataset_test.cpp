@@ -5,6 +5,7 @@
 #include <gmock/gmock.h>
 #include <fcntl.h>
 #include <signal.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -310,10 +311,19 @@ TEST_F(Dataset, ARunKilledWithSigkillResumesToTheSameBytesAndSkipsWhatIsDone) {
   EXPECT_EQ(inode(out / "samples/000000/counts.npy"), first);  // skipped, not rewritten
   EXPECT_EQ(leftovers(out), std::vector<std::string>{});
   expect_same_dataset(dir_ / "whole", out);
+  // A lock file a run killed after publishing its sample left (the next runs kept it for good): removed; one a
+  // live process holds stays.
+  std::ofstream(out / "samples/.000001.spadgen-lock") << "pid 999999\n";
+  const int held = ::open((out / "samples/.000003.spadgen-lock").c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  ASSERT_GE(held, 0);
+  ASSERT_EQ(::flock(held, LOCK_EX), 0);
   // Nothing left to do: a third run writes no sample.
   const Result third = sh("dataset run " + (dir_ / "d.json").string() + " -o " + out.string());
   EXPECT_THAT(third.output, HasSubstr("0 of 6 samples to generate (6 done already)"));
   EXPECT_EQ(inode(out / "samples/000000/counts.npy"), first);
+  EXPECT_FALSE(fs::exists(out / "samples/.000001.spadgen-lock"));
+  EXPECT_TRUE(fs::exists(out / "samples/.000003.spadgen-lock"));
+  ::close(held);
 }
 
 // SIGTERM inside a sample: exit 2, and the message says what is kept (it said the run wrote nothing,
@@ -449,7 +459,16 @@ TEST_F(Dataset, RefusesAnotherDatasetsFolderForeignFilesAndTooLittleDisk) {
   ASSERT_EQ(sh("dataset run " + (dir_ / "a.json").string() + " -o " + (dir_ / "out").string() + " -q").code, 0);
   const Result other = sh("dataset run " + (dir_ / "b.json").string() + " -o " + (dir_ / "out").string() + " -q");
   EXPECT_EQ(other.code, 1);
-  EXPECT_THAT(other.output, HasSubstr("holds another dataset: its dataset.json differs from " + (dir_ / "b.json").string() + " at \"seed\""));
+  EXPECT_THAT(other.output, HasSubstr("holds another dataset: its dataset.json differs from " + (dir_ / "b.json").string() +
+                                      " at \"seed\" (the folder's dataset.json: 3, the dataset file: 4)"));
+  // a key deeper down is named down to it (it named "set" alone)
+  std::string deeper = small_dataset(2, 3);
+  const std::string spp = "\"render.samples_per_pixel\": 2";
+  deeper.replace(deeper.find(spp), spp.size(), "\"render.samples_per_pixel\": 5");
+  write(dir_ / "c.json", deeper);
+  const Result set = sh("dataset run " + (dir_ / "c.json").string() + " -o " + (dir_ / "out").string() + " -q");
+  EXPECT_EQ(set.code, 1);
+  EXPECT_THAT(set.output, HasSubstr(" at \"set\".\"render.samples_per_pixel\" (the folder's dataset.json: 2, the dataset file: 5)"));
   // plan -o refuses it too (it listed the other dataset's samples as left to generate), and writes nothing
   const std::string before = slurp(dir_ / "out/dataset.json");
   const Result other_plan = sh("dataset plan " + (dir_ / "b.json").string() + " -o " + (dir_ / "out").string());
@@ -602,6 +621,27 @@ TEST_F(Dataset, AFailingSampleIsRecordedAndTheOthersGoOn) {
   EXPECT_THAT(st.output, HasSubstr("failed: 1, 3"));
   EXPECT_THAT(st.output, HasSubstr("makes an invalid scene: --set camera.crop: found [496, 232, 24, 20]"));
   EXPECT_THAT(slurp(dir_ / "out/index.csv"), HasSubstr(",failed,"));
+}
+
+// A damaged sample whose regeneration fails (a file of the user's in its folder) is failed, with why (status
+// and the index said damaged, to be generated again by the next run, which failed the same way).
+TEST_F(Dataset, ADamagedSampleThatFailsAgainIsFailed) {
+  write(dir_ / "d.json", small_dataset(2));
+  const std::string run = "dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q";
+  ASSERT_EQ(sh(run).code, 0);
+  fs::resize_file(dir_ / "out/samples/000001/counts.npy", 1000);
+  std::ofstream(dir_ / "out/samples/000001/notes.txt") << "mine";
+  const Result r = sh(run);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("holds files that spadgen did not write there (notes.txt"));
+  const Result st = sh("dataset status " + (dir_ / "out").string());
+  EXPECT_EQ(st.code, 4);
+  EXPECT_THAT(st.output, HasSubstr("2 samples: 1 done, 1 failed, 0 stale, 0 missing\n"));
+  EXPECT_THAT(st.output, HasSubstr("sample 1 failed: the output folder " + (dir_ / "out/samples/000001").string() +
+                                   " holds files that spadgen did not write there (notes.txt"));
+  EXPECT_THAT(st.output, Not(HasSubstr("damaged")));
+  EXPECT_THAT(slurp(dir_ / "out/index.jsonl"), HasSubstr("\"status\":\"failed\""));
+  EXPECT_EQ(slurp(dir_ / "out/samples/000001/notes.txt"), "mine");
 }
 
 // A sample made stale (its scene changed) whose regeneration fails is failed, with why, in the status and the
