@@ -164,16 +164,20 @@ int main(int argc, char** argv) {
   CLI::App* eval_cmd = cli.add_subcommand("evaluate", "score detections against the object labels of a run or of every sample of a dataset: "
                                                       "metrics.json, error maps; docs/detection.md");
   eval_cmd->add_option("target", eval.target, "run folder or dataset folder")->required()->check(CLI::ExistingDirectory);
-  eval_cmd->add_option("--detections", eval.detections, "detections file (.exr or .npy; for a dataset: its name inside each sample); default "
+  CLI::Option* eval_detections = eval_cmd->add_option("--detections", eval.detections, "detections file (.exr or .npy; for a dataset: its name inside each sample); default "
                                                         "detections_<detector>.exr, computed in memory when absent");
+  // --detector and --noise-free choose the default file and the detector that runs without one: with
+  // --detections they would be ignored without a word, so they are refused.
   eval_cmd->add_option("--detector", eval.detector, "the detector whose file is the default, or that runs when it is absent")
-      ->check(CLI::IsMember({"edges", "paper"}));
+      ->check(CLI::IsMember({"edges", "paper"}))
+      ->excludes(eval_detections);
   eval_cmd->add_option("-o,--out", eval.out_dir, "output folder (default TARGET/evaluation)")->check(kNamed);
   eval_cmd->add_option("--tolerance-m", eval.tolerance_m, "a detection further than this from every unmatched object is false (default 0.05)");
   CLI::Option* min_score_opt = eval_cmd->add_option("--min-score", eval_min_score, "ignore detections scoring below this");
   eval_cmd->add_option("--region", eval_region, "accuracy and precision of the nearest object over this rectangle (image pixels)")
       ->type_name("X,Y,W,H");
-  eval_cmd->add_flag("--noise-free", eval.noise_free, "when the detector runs: on the noise-free rates (detection_rate)");
+  eval_cmd->add_flag("--noise-free", eval.noise_free, "when the detector runs: on the noise-free rates (detection_rate)")
+      ->excludes(eval_detections);
   eval_cmd->add_option("--threads", eval.threads, "worker threads (default: all cores)")->check(kThreadsRange);
   bool eval_quiet = false;  // accepted as by every command: evaluate writes nothing on stderr but warnings and errors
   eval_cmd->add_flag("-q,--quiet", eval_quiet, "nothing on stderr but warnings and errors (as always: the scores go to stdout)");

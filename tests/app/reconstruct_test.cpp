@@ -452,6 +452,13 @@ TEST_F(Reconstruct, EvaluateRefusesDetectionsOfAnotherSceneOrCropOrWithoutTheirS
   r = sh("evaluate " + a.string() + " --detections " + (dir_ / "gap.exr").string() + " -o " + (dir_ / "e2").string());
   EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("gap.exr: channel det2.range after det0.range without det1.range"));
+  // --detector and --noise-free choose the detector that runs without a file: refused beside one (ignored
+  // without a word)
+  for (const char* opt : {"--noise-free", "--detector paper"}) {
+    r = sh("evaluate " + a.string() + " --detections " + (seed / "detections_edges.exr").string() + " " + opt + " -o " + (dir_ / "e2").string());
+    EXPECT_EQ(r.code, 1) << opt;
+    EXPECT_THAT(r.output, HasSubstr("--detections excludes --")) << opt;
+  }
   r = sh("evaluate " + a.string() + " --detections " + (dir_ / "unscored.exr").string() + " -o " + (dir_ / "e2").string());
   ASSERT_EQ(r.code, 0) << r.output;  // no header: scored, and said unchecked
   EXPECT_THAT(nlohmann::json::parse(slurp(dir_ / "e2" / "metrics.json"))["detections_source"]["source_checked"].get<std::string>(),
