@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdio>
 #include <deque>
+#include <functional>
 #include <filesystem>
 #include <fstream>
 #include <initializer_list>
@@ -16,6 +17,8 @@
 #include <optional>
 #include <sstream>
 #include <thread>
+
+#include <tbb/parallel_for.h>
 
 #include "app/pipeline.h"
 #include "app/resources.h"
@@ -120,7 +123,10 @@ Estimate estimate(const RunConfig& c, int repeats, int threads) {
 class Estimator {
  public:
   Estimator(int repeats, int threads) : repeats_(repeats), threads_(threads) {}
-  Estimate operator()(const scenes::ResolvedRun& r) {
+
+  // The cache key of r's estimate: a hash of its resolved scene without the keys the estimate ignores (a
+  // dataset of a million distinct pulse widths keeps 8 bytes per value, not the text).
+  static uint64_t key(const scenes::ResolvedRun& r) {
     ojson key = r.resolved;
     for (const char* k : {"seed", "seeds", "description", "ambient", "nodes", "materials"}) key.erase(k);
     const auto erase = [&key](const char* section, std::initializer_list<const char*> keys) {
@@ -131,16 +137,71 @@ class Estimator {
     erase("acquisition", {"cycles_per_frame"});
     erase("camera", {"f_number", "focal_length_mm", "gltf_camera", "look_at_m", "optics_transmission", "pixel_pitch_um",
                      "position_m", "up", "vertical_fov_deg"});
-    const std::string text = key.dump();
-    auto it = cache_.find(text);
-    if (it == cache_.end()) it = cache_.emplace(text, estimate(r.config, repeats_, threads_)).first;
-    return it->second;
+    return scenes::fnv1a64(key.dump());
   }
+
+  // The estimates of the keys not known yet, computed in parallel from the first run of each (by key).
+  void add(const std::vector<std::pair<uint64_t, const RunConfig*>>& runs) {
+    std::vector<std::pair<uint64_t, const RunConfig*>> todo;
+    for (const auto& [k, c] : runs)
+      if (!cache_.count(k) && std::none_of(todo.begin(), todo.end(), [k = k](const auto& t) { return t.first == k; }))
+        todo.emplace_back(k, c);
+    std::vector<Estimate> done(todo.size());
+    tbb::parallel_for(size_t{0}, todo.size(), [&](size_t j) { done[j] = estimate(*todo[j].second, repeats_, threads_); });
+    for (size_t j = 0; j < todo.size(); ++j) cache_.emplace(todo[j].first, done[j]);
+  }
+  const Estimate& at(uint64_t key) const { return cache_.at(key); }
 
  private:
   int repeats_, threads_;
-  std::map<std::string, Estimate> cache_;
+  std::map<uint64_t, Estimate> cache_;
 };
+
+// One sample as the plan and a run's check see it: resolved, its estimate, and with a folder its state there.
+struct Checked {
+  Sample sample;
+  bool resolved = false;  // else error says why
+  std::string error;
+  Estimate estimate;
+  SampleRecord record;  // with a folder
+};
+
+// Samples [begin, end) that the shard owns, resolved and inspected in parallel (the scenes resolve and the
+// folders are read on every core; a distinct sensor shape's estimate too), handed to `each` in index order.
+void check_samples(const DatasetSpec& spec, const datasets::Shard& shard, const DatasetFolder* folder, Estimator& estimator,
+                   int64_t begin, int64_t end, const std::function<void(Checked&)>& each) {
+  constexpr int64_t kBlock = 2048;
+  for (int64_t b = begin; b < end; b += kBlock) {
+    std::vector<int64_t> mine;
+    for (int64_t i = b; i < std::min(end, b + kBlock); ++i)
+      if (shard.owns(i)) mine.push_back(i);
+    std::vector<Checked> rows(mine.size());
+    std::vector<scenes::ResolvedRun> runs(mine.size());
+    std::vector<uint64_t> keys(mine.size());
+    tbb::parallel_for(size_t{0}, mine.size(), [&](size_t j) {
+      Checked& c = rows[j];
+      c.sample = datasets::make_sample(spec, mine[j]);
+      std::string hash;
+      try {
+        runs[j] = scenes::load_scene_file(spec.scenes[size_t(c.sample.scene)], c.sample.overrides);
+        keys[j] = Estimator::key(runs[j]);
+        if (folder) hash = folder->sample_hash(c.sample, runs[j]);  // the folder's inspection need not resolve it again
+        c.resolved = true;
+      } catch (const Error& err) {
+        c.error = err.what();
+      }
+      if (folder) c.record = folder->inspect(c.sample, &hash);
+    });
+    std::vector<std::pair<uint64_t, const RunConfig*>> wanted;
+    for (size_t j = 0; j < rows.size(); ++j)
+      if (rows[j].resolved) wanted.emplace_back(keys[j], &runs[j].config);
+    estimator.add(wanted);
+    for (size_t j = 0; j < rows.size(); ++j) {
+      if (rows[j].resolved) rows[j].estimate = estimator.at(keys[j]);
+      each(rows[j]);
+    }
+  }
+}
 
 std::string duration_text(double s) {
   char buf[64];
@@ -233,27 +294,23 @@ std::string dataset_plan(const DatasetOptions& options) {
   int64_t samples = 0, left = 0;
   std::vector<std::string> errors;
   Estimator estimator(spec.repeats, options.threads);
-  // Each sample's scene is resolved (about 0.2 ms): a plan of millions of samples takes minutes, so it shows
-  // its progress.
+  // Each sample's scene is resolved (about 0.2 ms of one core): a plan of millions of samples takes minutes,
+  // so it shows its progress.
   const int64_t owned = shard.owned(n);
   Progress bar(size_t(owned), options.progress && owned > 10000, "samples");
-  for (int64_t i = 0; i < n; ++i) {
-    if (!shard.owns(i)) continue;
-    const Sample s = datasets::make_sample(spec, i);
+  check_samples(spec, shard, folder ? &*folder : nullptr, estimator, 0, n, [&](Checked& checked) {
+    const Sample& s = checked.sample;
+    const int64_t i = s.index;
     ++samples;
     bar.tick();
-    Estimate e;
-    std::string status, hash;
-    try {
-      const scenes::ResolvedRun r = scenes::load_scene_file(spec.scenes[size_t(s.scene)], s.overrides);
-      e = estimator(r);
-      if (folder) hash = folder->sample_hash(s, r);  // the folder's inspection need not resolve it again
-    } catch (const Error& err) {
-      errors.push_back("sample " + std::to_string(i) + ": " + err.what());
+    const Estimate& e = checked.estimate;
+    std::string status;
+    if (!checked.resolved) {
+      errors.push_back("sample " + std::to_string(i) + ": " + checked.error);
       status = "invalid";
     }
     if (folder) {
-      const SampleRecord rec = folder->inspect(s, &hash);
+      const SampleRecord& rec = checked.record;
       if (status.empty()) status = datasets::status_name(rec.status);
       if (rec.status != Status::Done) ++left, left_total.add(e);
     }
@@ -261,7 +318,7 @@ std::string dataset_plan(const DatasetOptions& options) {
     const bool show = options.all || samples <= 10 || i >= n - 10 * shard.count;
     if (!show) {
       if (samples == 11) o << "...\t(" << "--all lists every sample)\n";
-      continue;
+      return;
     }
     o << i;
     for (const std::string& c : columns) {
@@ -278,7 +335,7 @@ std::string dataset_plan(const DatasetOptions& options) {
     o << "\t" << s.seed << "\t" << bytes_text(e.disk) << "\t" << bytes_text(e.memory) << "\t" << duration_text(e.seconds);
     if (folder) o << "\t" << status;
     o << "\n";
-  }
+  });
   // per sample what it keeps; the totals with one sample's temporary files, as dataset run's disk check counts them
   o << "# per sample: disk about " << bytes_text(samples ? total.kept / samples : 0) << ", memory up to "
     << bytes_text(total.memory) << ", time about " << duration_text(samples ? total.seconds / double(samples) : 0.0) << "\n";
@@ -328,21 +385,20 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
   Totals totals;
   const int64_t mine = shard.owned(spec.count());
   Progress bar(size_t(mine), options.progress && mine > 10000, "samples inspected");
-  for (int64_t i = 0; i < spec.count(); ++i) {
-    if (!shard.owns(i)) continue;
+  check_samples(spec, shard, &folder, estimator, 0, spec.count(), [&](Checked& c) {
     InterruptGuard::check();  // a signal while the samples are checked (100,000 took 50 s before it stopped)
     ++owned;
     bar.tick();
-    scenes::ResolvedRun resolved;  // the sample's scene, resolved once for its hash and its estimate
-    const SampleRecord rec = folder.inspect(datasets::make_sample(spec, i), nullptr, &resolved);
+    const SampleRecord& rec = c.record;
+    const int64_t i = c.sample.index;
     if (size_t(i) < hashes.size() && !rec.hash.empty()) std::from_chars(rec.hash.data(), rec.hash.data() + rec.hash.size(), hashes[size_t(i)], 16);
     if (rec.status == Status::Done) {
       ++skipped;
-      continue;
+      return;
     }
-    if (!rec.hash.empty()) totals.add(estimator(resolved));
+    if (!rec.hash.empty()) totals.add(c.estimate);
     todo.push_back(i);
-  }
+  });
   // What killed runs left in samples/ is removed first (a sample another run is writing keeps its own), so
   // that the disk check does not count it.
   Staging::remove_leftovers(dir / "samples");

@@ -240,6 +240,7 @@ std::optional<ojson> DatasetFolder::checked(const ojson& wanted) const {
 }
 
 const std::string& DatasetFolder::scene_content_hash(int scene) const {
+  const std::lock_guard<std::mutex> lock(content_mutex_);  // map nodes stay where they are: the reference outlives it
   auto it = content_hashes_.find(scene);
   if (it == content_hashes_.end()) {
     const scenes::ResolvedRun base = scenes::load_scene_file(spec_.scenes[size_t(scene)]);
@@ -311,17 +312,11 @@ bool DatasetFolder::holds(const std::string& folder, const std::string& hash) co
   return meta && (*meta)["dataset"].value("sample_hash", "") == hash && gone_files(dir_ / folder, *meta).empty();
 }
 
-SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash, scenes::ResolvedRun* resolved) const {
+SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash) const {
   SampleRecord rec;
   rec.sample = s;
   try {
-    if (hash != nullptr && !hash->empty()) {
-      rec.hash = *hash;
-    } else {
-      Resolved r = resolve(s);
-      rec.hash = std::move(r.hash);
-      if (resolved != nullptr) *resolved = std::move(r.run);
-    }
+    rec.hash = hash != nullptr && !hash->empty() ? *hash : resolve(s).hash;
   } catch (const Error& e) {
     rec.status = Status::Failed;
     rec.error = e.what();

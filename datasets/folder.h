@@ -21,6 +21,7 @@
 #include <limits>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <set>
 #include <string>
@@ -130,9 +131,9 @@ class DatasetFolder {
   std::unique_ptr<SampleClaim> try_claim(const Sample& s) const;
 
   // The sample's state on disk (reads its metadata.json files and the failure record). hash: the sample's
-  // hash when known (a run's own samples, resolved as it began), else it is computed (its scene resolved,
-  // and handed to *resolved when given: resolving is most of an inspection).
-  SampleRecord inspect(const Sample& s, const std::string* hash = nullptr, scenes::ResolvedRun* resolved = nullptr) const;
+  // hash when known (sample_hash of its resolved scene: resolving is most of an inspection), else it is
+  // computed (its scene resolved). Safe to call from several threads at once.
+  SampleRecord inspect(const Sample& s, const std::string* hash = nullptr) const;
 
   // Failure records (DIR/failed/000042.json), written atomically.
   void record_failure(const Sample& s, const std::string& hash, const std::string& error) const;
@@ -160,7 +161,8 @@ class DatasetFolder {
 
   DatasetSpec spec_;
   std::filesystem::path dir_;
-  mutable std::map<int, std::string> content_hashes_;
+  mutable std::map<int, std::string> content_hashes_;  // under content_mutex_
+  mutable std::mutex content_mutex_;
 };
 
 // The metadata.json "dataset" section of sample s.
