@@ -513,6 +513,7 @@ std::vector<glm::dmat4> Loader::skin_matrices(size_t node, const tinygltf::Primi
     joint[j] = world_of(static_cast<size_t>(jn)) * (ibm.empty() ? glm::dmat4(1.0) : glm::make_mat4(ibm.data() + 16 * j));
   }
   std::vector<glm::dmat4> out(n, glm::dmat4(0.0));
+  std::vector<double> sum(n, 0.0);  // of each vertex's weights
   bool any = false;
   for (int set = 0; set < 4; ++set) {
     const auto ji = p.attributes.find("JOINTS_" + std::to_string(set));
@@ -528,19 +529,37 @@ std::vector<glm::dmat4> Loader::skin_matrices(size_t node, const tinygltf::Primi
     if (kj != n || kw != n)
       fail(who, "JOINTS_" + std::to_string(set) + " and WEIGHTS_" + std::to_string(set) + " have " + std::to_string(kj) + " and " +
                     std::to_string(kw) + " elements, POSITION " + std::to_string(n));
+    any = true;
     for (size_t v = 0; v < n; ++v)
       for (int k = 0; k < 4; ++k) {
         const double w = ws[4 * v + static_cast<size_t>(k)];
+        if (!(w >= 0.0)) fail(who, "WEIGHTS_" + std::to_string(set) + " element " + std::to_string(v) + " holds weight " + num(w) +
+                                       " (glTF 2.0: weights are not negative)");
         if (w == 0.0) continue;
         const double j = js[4 * v + static_cast<size_t>(k)];
         if (!(j >= 0.0 && j < static_cast<double>(joint.size())))
           fail(who, "JOINTS_" + std::to_string(set) + " element " + std::to_string(v) + " names joint " + num(j) + " of " +
                         skin_name + "'s " + std::to_string(joint.size()));
         out[v] += w * joint[static_cast<size_t>(j)];
-        any = true;
+        sum[v] += w;
       }
   }
   if (!any) fail(who, "its node has " + skin_name + " but the primitive has no JOINTS_0 and WEIGHTS_0 (glTF 2.0: a skinned mesh has both)");
+  // glTF 2.0: a vertex's weights sum to 1. None (a vertex bound to no joint) would put it at the origin; a
+  // sum off by more than quantised weights can be (1 %) scales it towards the origin: normalised, and said.
+  size_t off = 0, first_off = 0;
+  for (size_t v = 0; v < n; ++v) {
+    if (!(sum[v] > 0.0))
+      fail(who, "the weights of vertex " + std::to_string(v) + " are all 0 (glTF 2.0: a vertex's weights sum to 1; it would stand "
+                "at the origin)");
+    if (std::abs(sum[v] - 1.0) > 1e-2) {
+      if (off++ == 0) first_off = v;
+      out[v] /= sum[v];
+    }
+  }
+  if (off > 0)
+    warn(who + ": the weights of " + std::to_string(off) + " of its " + std::to_string(n) + " vertices do not sum to 1 (vertex " +
+         std::to_string(first_off) + ": " + num(sum[first_off]) + "); normalised, as glTF 2.0 asks them to be");
   return out;
 }
 
@@ -657,10 +676,19 @@ void Loader::warn_unused_edits() {
       warn("/materials/" + pointer_token(m_.materials[i].name) + ": " + label("material", i, m_.materials[i].name) +
            " is used by no mesh of the loaded scene; the edit changes nothing");
   }
-  for (size_t i = 0; i < node_edit_.size(); ++i)
+  for (size_t i = 0; i < node_edit_.size(); ++i) {
     if (node_edit_[i] && !scene_.nodes[i].loaded)
       warn("/nodes/" + pointer_token(m_.nodes[i].name) + ": " + node_label(m_, i) +
            " is not part of the loaded glTF scene; the edit changes nothing");
+    // glTF 2.0 places a skinned mesh by its skin's joints, not by the node that holds it
+    else if (node_edit_[i] && m_.nodes[i].skin >= 0 && m_.nodes[i].children.empty() && m_.nodes[i].camera < 0 &&
+             std::none_of(m_.skins.begin(), m_.skins.end(), [i](const tinygltf::Skin& sk) {
+               return std::find(sk.joints.begin(), sk.joints.end(), static_cast<int>(i)) != sk.joints.end();
+             }))
+      warn("/nodes/" + pointer_token(m_.nodes[i].name) + ": " + node_label(m_, i) +
+           " holds a skinned mesh, which its skin's joints place (glTF 2.0 ignores the transform of its node); the edit "
+           "changes nothing: edit the joints' nodes");
+  }
 }
 
 // Depth first, children in order (the order of Scene::meshes), with an explicit stack: a parent chain

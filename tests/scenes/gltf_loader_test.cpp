@@ -437,6 +437,37 @@ TEST(GltfLoader, SkinnedMeshesArePosedByTheirJoints) {
   g.doc["skins"][0].erase("inverseBindMatrices");
   const Scene no_ibm = load_gltf(g.write(dir.path(), "skin_no_ibm"));
   EXPECT_TRUE(no_ibm.warnings.empty()) << testing::PrintToString(no_ibm.warnings);
+  // An edit of the body node changes nothing, and says so (it was silent)
+  spadgen::SceneEdits move;
+  spadgen::NodeEdit body;
+  body.name = "body";
+  body.translation_m = {0.0, 0.0, -5.0};
+  move.nodes.push_back(body);
+  const Scene moved = load_gltf(g.write(dir.path(), "skin_moved"), "", move);
+  EXPECT_EQ(moved.meshes[0].positions, no_ibm.meshes[0].positions);
+  ASSERT_EQ(moved.warnings.size(), 1u);
+  EXPECT_THAT(moved.warnings[0], HasSubstr("node 2 'body' holds a skinned mesh, which its skin's joints place"));
+  // Weights that do not sum to 1 are normalised, and said (the mesh was scaled towards the origin); a vertex
+  // whose weights are all 0 is refused (it stood at the origin, and was "no JOINTS_0 and WEIGHTS_0" when all
+  // were); a negative weight is refused.
+  const int weights_in = g.doc["meshes"][0]["primitives"][0]["attributes"]["WEIGHTS_0"].get<int>();
+  g.doc["meshes"][0]["primitives"][0]["attributes"]["WEIGHTS_0"] =
+      g.accessor(g.view_of(std::vector<float>{0.5, 0, 0, 0, 1, 0, 0, 0, 0.25, 0.25, 0, 0, 0, 1, 0, 0}), kFloat, "VEC4", 4);
+  const Scene halved = load_gltf(g.write(dir.path(), "skin_half"));
+  EXPECT_EQ(halved.meshes[0].positions, no_ibm.meshes[0].positions);
+  ASSERT_EQ(halved.warnings.size(), 1u);
+  EXPECT_THAT(halved.warnings[0], HasSubstr("mesh 0 'Skinned' primitive 0: the weights of 2 of its 4 vertices do not sum to 1 "
+                                            "(vertex 0: 0.5); normalised"));
+  g.doc["meshes"][0]["primitives"][0]["attributes"]["WEIGHTS_0"] =
+      g.accessor(g.view_of(std::vector<float>{1, 0, 0, 0, 0, 0, 0, 0, 0.5, 0.5, 0, 0, 0, 1, 0, 0}), kFloat, "VEC4", 4);
+  EXPECT_THAT(load_error(g.write(dir.path(), "skin_zero")), HasSubstr("mesh 0 'Skinned' primitive 0: the weights of vertex 1 are all 0"));
+  g.doc["meshes"][0]["primitives"][0]["attributes"]["WEIGHTS_0"] =
+      g.accessor(g.view_of(std::vector<float>{0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0}), kFloat, "VEC4", 4);
+  EXPECT_THAT(load_error(g.write(dir.path(), "skin_all_zero")), HasSubstr("the weights of vertex 0 are all 0"));
+  g.doc["meshes"][0]["primitives"][0]["attributes"]["WEIGHTS_0"] =
+      g.accessor(g.view_of(std::vector<float>{1.5, -0.5, 0, 0, 1, 0, 0, 0, 0.5, 0.5, 0, 0, 0, 1, 0, 0}), kFloat, "VEC4", 4);
+  EXPECT_THAT(load_error(g.write(dir.path(), "skin_negative")), HasSubstr("WEIGHTS_0 element 0 holds weight -0.5"));
+  g.doc["meshes"][0]["primitives"][0]["attributes"]["WEIGHTS_0"] = weights_in;
   g.doc["meshes"][0]["primitives"][0]["attributes"].erase("WEIGHTS_0");
   EXPECT_THAT(load_error(g.write(dir.path(), "skin_bad")), HasSubstr("mesh 0 'Skinned' primitive 0: has JOINTS_0 without WEIGHTS_0"));
 }
