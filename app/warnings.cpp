@@ -145,6 +145,14 @@ std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img
                 "ambient light and dark counts only");
     return w;
   }
+  // A surface through the camera's centre is met at range 0 (a ground plane at the camera's height, a mesh on
+  // the camera's node): its pixels see nothing else.
+  if (const nlohmann::json& lo = r.ground_truth_summary.is_object() ? r.ground_truth_summary.value("range_min_m", nlohmann::json())
+                                                                     : nlohmann::json();
+      lo.is_number() && lo.get<double>() <= kWarnRangeAtCameraM)
+    w.push_back("a surface passes through the camera's centre: pixels of the " + image + " meet it at range " + g(std::max(0.0, lo.get<double>())) +
+                " m (ground_truth.exr range; camera.position_m lies on a surface of the glTF, such as a ground plane at the "
+                "camera's height or a mesh on the camera's node): move the camera off it");
   // The laser matters to a gate sweep, to transients, and to the intensity mode with laser_on; its timing
   // only to the first two.
   const bool timed = c.acquisition.mode == AcquisitionMode::GateSweep || c.outputs.transient;

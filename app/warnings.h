@@ -62,8 +62,10 @@ std::vector<std::string> laser_warnings(const RunConfig& c, const render::Camera
 std::vector<std::string> camera_warnings(const RunConfig& c, const scenes::Scene& scene);
 
 // After rendering, from the image's totals (r.rays summed over the tiles, r.laser_total, out_of_window_total,
-// beyond_period_total): nothing in view (no camera ray hits a surface), no laser light returning, laser
+// beyond_period_total, ground_truth_summary): nothing in view (no camera ray hits a surface), a surface
+// through the camera's centre (a pixel's range at most kWarnRangeAtCameraM), no laser light returning, laser
 // light from beyond the unambiguous range, laser light outside the time window.
+inline constexpr double kWarnRangeAtCameraM = 1e-6;
 // camera: as laser_warnings', which no laser light returning names as a cause when it applies.
 std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img, const RunRecord& r, const render::Camera& camera);
 

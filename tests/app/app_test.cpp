@@ -471,6 +471,9 @@ TEST_F(App, UselessRunsAreWarnedAboutOnStderrAndInTheMetadata) {
   const std::vector<Case> cases = {
       {"", ""},
       {"--set camera.look_at_m=[0,0,5]", "nothing in view: no camera ray of the 16 x 16 image hits a surface"},
+      // the camera on the target's plane, looking through it: every pixel met it at range -0, without a word
+      {"--set camera.position_m=[0,0,0] --set camera.look_at_m=[0,0,-1]",
+       "a surface passes through the camera's centre: pixels of the 16 x 16 image meet it at range"},
       {"--set laser.beam=cone --set laser.half_angle_deg=0.01 --set laser.offset_m=[0.5,0,0]",
        "no laser light reaches the 16 x 16 image"},
       // 40 MHz: 3.747 m; the target 5 m away folds into the window, so none of it is outside.
