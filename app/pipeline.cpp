@@ -78,6 +78,7 @@ RunResult run(const RunOptions& options) {
   // The staging first: it removes what a killed run left beside the folder, which the disk check would
   // otherwise count as taken.
   Staging staging(out);
+  // (the scene's geometry and BVH are in memory already: what is available counts them)
   check_resources(cfg, sensor, img, axis, options.threads, out, objects);
   Outputs outputs(cfg, sensor, img, axis, staging, objects, options.threads);
   const PixelRect light_rect = light_region(img, cfg.camera.width_px, cfg.camera.height_px);
@@ -212,7 +213,7 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
     sep = ", ";
   }
   o << "\n";
-  o << "resources: " << resource_summary(plan_resources(c, sensor, img, axis, 0, "", int(scenes::objects_of(scene).list.size())));
+  o << "resources: " << resource_summary(plan_resources(c, sensor, img, axis, 0, "", int(scenes::objects_of(scene).list.size()), &scene));
   for (const std::string& w : r.warnings) o << "warning: " << w << "\n";
   for (const std::string& w : before) o << "warning: " << w << "\n";
   return o.str();

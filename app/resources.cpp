@@ -103,7 +103,7 @@ int64_t worker_threads(int threads) { return threads > 0 ? threads : std::max(1u
 constexpr double kLitSpan_s = 2.5e-9;
 
 ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img,
-                            const TimeAxis& axis, int threads, const fs::path& out, int objects) {
+                            const TimeAxis& axis, int threads, const fs::path& out, int objects, const scenes::Scene* scene) {
   ResourcePlan plan;
   const int64_t tile = std::min(c.render.tile_size, std::max(img.width, img.height));
   // Threads at work: at most one per tile (a 40 x 40 crop at --threads 1024 was refused for 26.7 GB; it
@@ -172,6 +172,12 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
   // The program itself, whatever the image: code, libraries, Embree's and TBB's pools, the sensor's tables
   // (an 8 x 8 crop peaks at about 50 MB of resident memory; measured with /usr/bin/time -v).
   plan.memory.push_back({"the program (code, libraries, Embree and TBB, the sensor's tables)", int64_t{48} << 20});
+  if (scene != nullptr) {
+    const auto triangles = static_cast<int64_t>(scene->triangle_count()), meshes = static_cast<int64_t>(scene->meshes.size());
+    plan.memory.push_back({"the scene's geometry and Embree's BVH (" + std::to_string(triangles) + " triangles in " +
+                               std::to_string(meshes) + " meshes)",
+                           triangles * kBytesPerTriangle + meshes * kBytesPerMesh});
+  }
   plan.memory_available = available_memory();
 
   // A Zarr store is at most its data uncompressed (and a few bytes a chunk).
@@ -190,7 +196,9 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
   // metadata.json (about 16 kB) and the previews (three PNG images, compressed: at most 3 bytes a pixel each,
   // and the plot of the gate profiles, about 62 kB whatever the image)
   plan.disk.push_back({std::string("metadata.json") + (c.outputs.previews ? " and previews/ (uncompressed)" : ""),
-                       (int64_t{32} << 10) + (c.outputs.previews ? 9 * pixels + (int64_t{64} << 10) : 0), false, "", c.outputs.previews});
+                       kMetadataBytes + std::max(objects, 0) * kMetadataBytesPerObject +
+                           (c.outputs.previews ? 9 * pixels + (int64_t{64} << 10) : 0),
+                       false, "", c.outputs.previews});
   if (c.outputs.light) {
     // light/: per pixel of the image grown by one, its bin range, offset and totals, and the values of its
     // bins from its first arrival to its last, which the scene decides: on the multi-object scene 113 bins of
@@ -217,8 +225,8 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
 }
 
 void check_resources(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img, const TimeAxis& axis,
-                     int threads, const fs::path& out, int objects) {
-  check_resources(plan_resources(c, sensor, img, axis, threads, out, objects), c, out);
+                     int threads, const fs::path& out, int objects, const scenes::Scene* scene) {
+  check_resources(plan_resources(c, sensor, img, axis, threads, out, objects, scene), c, out);
 }
 
 void check_resources(const ResourcePlan& plan, const RunConfig& c, const fs::path& out, const std::string& who,

@@ -233,6 +233,11 @@ TEST_F(Hardening, ARunTheMachineCannotHoldIsRefusedWithItsFigures) {
   EXPECT_THAT(info.output, HasSubstr("\nresources: memory: about "));
   EXPECT_THAT(info.output, HasSubstr("  disk: "));
   EXPECT_THAT(info.output, HasSubstr(" counts.npy 180 MB"));
+  // The scene's geometry in memory (left out: 2 M triangles peaked 434 MB against 52 MB planned), and
+  // metadata.json with its list of objects (a fixed 32 kB: 100,000 objects wrote 17 MB)
+  const Outcome geometry = spadgen("info " + kScenes + "multi_object.json");
+  expect_exit(geometry, 0, "info multi_object");
+  EXPECT_THAT(geometry.output, HasSubstr("the scene's geometry and Embree's BVH (81932 triangles in 2 meshes) 16 MB"));
   // Compressed outputs count whole as the most and a twentieth as the least (the refusal's figure): 180 MB
   // of counts as Zarr, 18 MB of EXR images and 5 MB of previews, (180 + 18 + 5) / 20 = 10.2 MB
   const Outcome zarr = spadgen("info " + kFlat + " --set outputs.storage=zarr --set outputs.detection_rate=false --set outputs.ground_truth=false");
