@@ -1474,6 +1474,15 @@ bool gltf_integer(const nlohmann::json& v, double lo, double hi = 2147483647.0) 
 }
 constexpr double kMaxExact = 9007199254740992.0;
 
+// What an index, offset or count must be, said for the value found: its bound when it is an integer past it
+// (2^62 was told "an integer >= 1").
+std::string integer_wanted(const nlohmann::json& v, int lo, const char* hi) {
+  const std::string least = "an integer >= " + std::to_string(lo);
+  if (v.is_number_float()) return least + ", written without a decimal point";
+  if (v.is_number_integer() && v.get<double>() >= lo) return least + " and at most " + hi;
+  return least;
+}
+
 void check_gltf_object(const std::string& path, const std::string& who, const nlohmann::json& o, const std::string& rules) {
   for (const Rule& r : gltf_rules().at(rules)) {
     const auto it = o.find(r.key);
@@ -1486,9 +1495,9 @@ void check_gltf_object(const std::string& path, const std::string& who, const nl
       throw Error(path + ": " + at + ": found " + shown + ", expected " + expected);
     };
     switch (r.want) {
-      case Want::Index: if (!gltf_integer(v, 0)) refuse(v.is_number_float() ? "an integer >= 0, written without a decimal point" : "an integer >= 0"); break;
-      case Want::Offset: if (!gltf_integer(v, 0, kMaxExact)) refuse(v.is_number_float() ? "an integer >= 0, written without a decimal point" : "an integer >= 0"); break;
-      case Want::Count: if (!gltf_integer(v, 1, kMaxExact)) refuse(v.is_number_float() ? "an integer >= 1, written without a decimal point" : "an integer >= 1"); break;
+      case Want::Index: if (!gltf_integer(v, 0)) refuse(integer_wanted(v, 0, "2147483647")); break;
+      case Want::Offset: if (!gltf_integer(v, 0, kMaxExact)) refuse(integer_wanted(v, 0, "2^53")); break;
+      case Want::Count: if (!gltf_integer(v, 1, kMaxExact)) refuse(integer_wanted(v, 1, "2^53")); break;
       case Want::Integer: if (!gltf_integer(v, -2147483648.0)) refuse("an integer"); break;
       case Want::Number: if (!v.is_number()) refuse("a number"); break;
       case Want::Bool: if (!v.is_boolean()) refuse("true or false"); break;

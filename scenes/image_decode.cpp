@@ -94,6 +94,13 @@ std::string decode_png(const unsigned char* bytes, size_t size, DecodedImage* ou
     ~Destroy() { png_destroy_read_struct(png, info, nullptr); }
   } destroy{&png, &info};
   uint32_t width = 0, height = 0;
+  // The size from the IHDR chunk first: libpng refuses one past its user limits as "Invalid IHDR data"
+  if (src.size >= 24 && std::memcmp(src.data + 12, "IHDR", 4) == 0) {
+    const auto be32 = [&src](size_t at) {
+      return uint32_t(src.data[at]) << 24 | uint32_t(src.data[at + 1]) << 16 | uint32_t(src.data[at + 2]) << 8 | uint32_t(src.data[at + 3]);
+    };
+    if (std::string p = size_problem(be32(16), be32(20)); !p.empty()) return p;
+  }
   if (!png_header(png, info, &src, &width, &height)) return std::string("not a readable PNG (libpng: ") + src.error + ")";
   if (std::string p = size_problem(width, height); !p.empty()) return p;
   std::vector<uint8_t> rgba(size_t(width) * size_t(height) * 4);

@@ -25,6 +25,7 @@
 
 #include "core/error.h"
 #include "gltf_files.h"
+#include "scenes/image_decode.h"
 #include "scenes/scene.h"
 
 namespace {
@@ -663,6 +664,17 @@ TEST(GltfLoader, PngKindsAndJpegDecodeToRgba) {
   EXPECT_TRUE(s.warnings.empty()) << testing::PrintToString(s.warnings);
 }
 
+// A PNG wider than the limit is named with the limit (libpng refused it first as "Invalid IHDR data").
+TEST(GltfLoader, APngPastTheSizeLimitIsNamedWithTheLimit) {
+  std::vector<uint8_t> png = unbase64("iVBORw0KGgoAAAANSUhEUgAAAAIAAAABEAAAAACB2fwVAAAADUlEQVR4nGMQMvl3BwADwQIhDeNHMgAAAABJRU5ErkJggg==");
+  ASSERT_EQ(std::string(png.begin() + 12, png.begin() + 16), "IHDR");
+  png[17] = 0x01, png[18] = 0x11, png[19] = 0x70;  // width 70000
+  spadgen::scenes::DecodedImage out;
+  std::string warning;
+  EXPECT_EQ(spadgen::scenes::decode_image(png.data(), png.size(), &out, &warning),
+            "70000 x 1 texels, expected at most 65536 on a side and 268435456 in all");
+}
+
 // A JPEG cut short (here only its end marker): libjpeg-turbo decodes what is there and warns, naming the image.
 TEST(GltfLoader, TruncatedJpegIsDecodedWithAWarning) {
   TempDir dir;
@@ -983,6 +995,11 @@ TEST_F(BrokenGltf, PropertiesOfTheWrongTypeAreNamedNotDefaulted) {
               HasSubstr("bufferView 0: byteOffset: found 2.5, expected an integer >= 0, written without a decimal point"));
   EXPECT_THAT(with([](Gltf& g) { g.doc["accessors"][0]["byteOffset"] = -1000000; }),
               HasSubstr("accessor 0: byteOffset: found -1000000, expected an integer >= 0"));
+  // past the bound: the bound said (it said "an integer >= 1" of 2^62)
+  EXPECT_THAT(with([](Gltf& g) { g.doc["accessors"][0]["count"] = 4611686018427387904; }),
+              HasSubstr("accessor 0: count: found 4611686018427387904, expected an integer >= 1 and at most 2^53"));
+  EXPECT_THAT(with([](Gltf& g) { g.doc["nodes"][0]["mesh"] = 2147483648LL; }),
+              HasSubstr("node 0 'n': mesh: found 2147483648, expected an integer >= 0 and at most 2147483647"));
   EXPECT_THAT(with([](Gltf& g) { g.doc["nodes"][0]["mesh"] = "0"; }), HasSubstr("node 0 'n': mesh: found \"0\", expected an integer >= 0"));
   EXPECT_THAT(with([](Gltf& g) { g.doc["nodes"][0]["scale"] = "big"; }),
               HasSubstr("node 0 'n': scale: found \"big\", expected an array of 3 numbers"));
