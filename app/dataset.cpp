@@ -597,9 +597,11 @@ DatasetStatus dataset_status(const std::string& dir) {
   std::array<int64_t, 5> count{};
   std::array<std::vector<int64_t>, 5> which;
   std::string failed, damaged;
+  std::map<std::string, std::vector<int64_t>> stale_why;  // what changed, and the samples it made stale
   inspect_each(folder, true, nullptr, [&](const SampleRecord& r) {
     ++count[size_t(r.status)];
     if (r.status != Status::Done) which[size_t(r.status)].push_back(r.sample.index);
+    if (r.status == Status::Stale) stale_why[r.error].push_back(r.sample.index);
     if (r.status == Status::Failed) failed += "sample " + std::to_string(r.sample.index) + " failed: " + r.error + "\n";
     if (r.status == Status::Damaged)
       damaged += "sample " + std::to_string(r.sample.index) + " damaged: " + r.error + " (`spadgen dataset run` generates it again)\n";
@@ -608,6 +610,8 @@ DatasetStatus dataset_status(const std::string& dir) {
   o << dir << ": dataset " << spec.file << ", " << spec.count() << " samples: " << status_counts(count) << "\n";
   for (Status st : {Status::Failed, Status::Stale, Status::Missing, Status::Damaged})
     if (!which[size_t(st)].empty()) o << datasets::status_name(st) << ": " << datasets::ranges_text(which[size_t(st)]) << "\n";
+  for (const auto& [why, samples] : stale_why)
+    o << "stale " << datasets::ranges_text(samples) << ": " << why << " (`spadgen dataset run` generates them again)\n";
   o << failed << damaged;
   // Folders of samples past "samples" (the file asked for fewer since): kept, outside the index.
   std::vector<int64_t> beyond;

@@ -43,7 +43,7 @@ struct SampleRecord {
   Sample sample;
   Status status = Status::Missing;
   std::string hash;     // of the sample as it resolves now; "" when it does not resolve
-  std::string error;    // failed: why; damaged: the files that are gone or changed
+  std::string error;    // failed: why; damaged: the files that are gone or changed; stale: what changed (status)
   std::vector<std::string> folders;  // done: the sample's folder and its repeats'
   // done: every file of its folders but metadata.json (whose size varies with its timing fields), relative to
   // the sample's folder (a repeat's as "_r01/counts.npy"), and its size; a file linked into a repeat counts once

@@ -411,7 +411,11 @@ TEST_F(Dataset, AChangedSensorTableMakesSamplesStale) {
   ASSERT_EQ(sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q").code, 0);
   EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output, HasSubstr("2 samples: 2 done, 0 failed, 0 stale"));
   write(dir_ / "pulse.csv", "0,0\n300,1\n600,0\n");
-  EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output, HasSubstr("stale: 0-1"));
+  const Result st = sh("dataset status " + (dir_ / "out").string());
+  EXPECT_THAT(st.output, HasSubstr("stale: 0-1"));
+  // and what changed, as far as the samples' metadata.json tell
+  EXPECT_THAT(st.output, HasSubstr("stale 0-1: the scene as it resolves now differs (a sensor table the scene file names, or the "
+                                   "parameters) (`spadgen dataset run` generates them again)"));
   write(dir_ / "pulse.csv", "0,0\n50,1\n100,0\n");  // the same bytes again: done again
   EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output, HasSubstr("2 samples: 2 done, 0 failed, 0 stale"));
 }
@@ -427,7 +431,9 @@ TEST_F(Dataset, AChangedSceneMakesSamplesStaleAndReplacesThemWhole) {
   ASSERT_EQ(sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q").code, 0);
   ASSERT_TRUE(fs::exists(dir_ / "out/samples/000001/transient.npy"));
   write(dir_ / "scene.json", slurp(kScenes + "multi_object.json"));
-  EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output, HasSubstr("stale: 0-1"));
+  const Result st = sh("dataset status " + (dir_ / "out").string());
+  EXPECT_THAT(st.output, HasSubstr("stale: 0-1"));
+  EXPECT_THAT(st.output, HasSubstr("stale 0-1: the scene file, its glTF or a file the glTF reads changed since it was generated"));
   const Result again = sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string());
   ASSERT_EQ(again.code, 0) << again.output;
   EXPECT_THAT(again.output, HasSubstr("2 of 2 samples to generate"));
