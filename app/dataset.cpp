@@ -140,21 +140,36 @@ class Estimator {
     return scenes::fnv1a64(key.dump());
   }
 
-  // The estimates of the keys not known yet, computed in parallel from the first run of each (by key).
-  void add(const std::vector<std::pair<uint64_t, const RunConfig*>>& runs) {
+  // An estimate, or why there is none (the sensor's tables or time axis refuse the run: the sample is invalid).
+  struct Entry {
+    Estimate estimate;
+    std::string error;
+  };
+
+  // The estimates of the keys not known yet, computed in parallel from the first run of each (by key); none
+  // while a signal is pending (interruptible: the caller stops).
+  void add(const std::vector<std::pair<uint64_t, const RunConfig*>>& runs, bool interruptible) {
     std::vector<std::pair<uint64_t, const RunConfig*>> todo;
     for (const auto& [k, c] : runs)
       if (!cache_.count(k) && std::none_of(todo.begin(), todo.end(), [k = k](const auto& t) { return t.first == k; }))
         todo.emplace_back(k, c);
-    std::vector<Estimate> done(todo.size());
-    tbb::parallel_for(size_t{0}, todo.size(), [&](size_t j) { done[j] = estimate(*todo[j].second, repeats_, threads_); });
-    for (size_t j = 0; j < todo.size(); ++j) cache_.emplace(todo[j].first, done[j]);
+    std::vector<Entry> done(todo.size());
+    tbb::parallel_for(size_t{0}, todo.size(), [&](size_t j) {
+      if (interruptible && interrupt_flag().load()) return;
+      try {
+        done[j].estimate = estimate(*todo[j].second, repeats_, threads_);
+      } catch (const Error& e) {
+        done[j].error = e.what();
+      }
+    });
+    if (interruptible) InterruptGuard::check();
+    for (size_t j = 0; j < todo.size(); ++j) cache_.emplace(todo[j].first, std::move(done[j]));
   }
-  const Estimate& at(uint64_t key) const { return cache_.at(key); }
+  const Entry& at(uint64_t key) const { return cache_.at(key); }
 
  private:
   int repeats_, threads_;
-  std::map<uint64_t, Estimate> cache_;
+  std::map<uint64_t, Entry> cache_;
 };
 
 // One sample as the plan and a run's check see it: resolved, its estimate, and with a folder its state there.
@@ -168,8 +183,10 @@ struct Checked {
 
 // Samples [begin, end) that the shard owns, resolved and inspected in parallel (the scenes resolve and the
 // folders are read on every core; a distinct sensor shape's estimate too), handed to `each` in index order.
+// estimate_done: also the samples the folder holds done (a plan lists their estimates; a run skips them).
+// interruptible: a signal stops the work within a sample per thread (InterruptGuard::check).
 void check_samples(const DatasetSpec& spec, const datasets::Shard& shard, const DatasetFolder* folder, Estimator& estimator,
-                   int64_t begin, int64_t end, const std::function<void(Checked&)>& each) {
+                   int64_t begin, int64_t end, bool estimate_done, bool interruptible, const std::function<void(Checked&)>& each) {
   constexpr int64_t kBlock = 2048;
   for (int64_t b = begin; b < end; b += kBlock) {
     std::vector<int64_t> mine;
@@ -179,25 +196,35 @@ void check_samples(const DatasetSpec& spec, const datasets::Shard& shard, const 
     std::vector<scenes::ResolvedRun> runs(mine.size());
     std::vector<uint64_t> keys(mine.size());
     tbb::parallel_for(size_t{0}, mine.size(), [&](size_t j) {
+      if (interruptible && interrupt_flag().load()) return;
       Checked& c = rows[j];
       c.sample = datasets::make_sample(spec, mine[j]);
       std::string hash;
       try {
         runs[j] = scenes::load_scene_file(spec.scenes[size_t(c.sample.scene)], c.sample.overrides);
         keys[j] = Estimator::key(runs[j]);
-        if (folder) hash = folder->sample_hash(c.sample, runs[j]);  // the folder's inspection need not resolve it again
         c.resolved = true;
       } catch (const Error& err) {
         c.error = err.what();
       }
+      try {  // the folder's inspection need not resolve it again (without the hash it does, and says why it fails)
+        if (folder && c.resolved) hash = folder->sample_hash(c.sample, runs[j]);
+      } catch (const Error&) {
+      }
       if (folder) c.record = folder->inspect(c.sample, &hash);
     });
+    if (interruptible) InterruptGuard::check();
     std::vector<std::pair<uint64_t, const RunConfig*>> wanted;
     for (size_t j = 0; j < rows.size(); ++j)
-      if (rows[j].resolved) wanted.emplace_back(keys[j], &runs[j].config);
-    estimator.add(wanted);
+      if (rows[j].resolved && (estimate_done || !folder || rows[j].record.status != Status::Done))
+        wanted.emplace_back(keys[j], &runs[j].config);
+    estimator.add(wanted, interruptible);
     for (size_t j = 0; j < rows.size(); ++j) {
-      if (rows[j].resolved) rows[j].estimate = estimator.at(keys[j]);
+      if (rows[j].resolved && (estimate_done || !folder || rows[j].record.status != Status::Done)) {
+        const Estimator::Entry& e = estimator.at(keys[j]);
+        if (e.error.empty()) rows[j].estimate = e.estimate;
+        else rows[j].resolved = false, rows[j].error = e.error;
+      }
       each(rows[j]);
     }
   }
@@ -298,7 +325,8 @@ std::string dataset_plan(const DatasetOptions& options) {
   // so it shows its progress.
   const int64_t owned = shard.owned(n);
   Progress bar(size_t(owned), options.progress && owned > 10000, "samples");
-  check_samples(spec, shard, folder ? &*folder : nullptr, estimator, 0, n, [&](Checked& checked) {
+  const ThreadLimit thread_limit(options.threads);
+  check_samples(spec, shard, folder ? &*folder : nullptr, estimator, 0, n, true, false, [&](Checked& checked) {
     const Sample& s = checked.sample;
     const int64_t i = s.index;
     ++samples;
@@ -385,7 +413,7 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
   Totals totals;
   const int64_t mine = shard.owned(spec.count());
   Progress bar(size_t(mine), options.progress && mine > 10000, "samples inspected");
-  check_samples(spec, shard, &folder, estimator, 0, spec.count(), [&](Checked& c) {
+  check_samples(spec, shard, &folder, estimator, 0, spec.count(), false, true, [&](Checked& c) {
     InterruptGuard::check();  // a signal while the samples are checked (100,000 took 50 s before it stopped)
     ++owned;
     bar.tick();
@@ -578,6 +606,7 @@ void dataset_run(const DatasetOptions& options) {
   // The index is written by the last run on the folder to end (datasets::RunPresence).
   const std::unique_ptr<datasets::RunPresence> presence = folder.enter();
   InterruptGuard interrupt_guard;  // for the whole run: the runs and senses of its samples hold theirs inside it
+  const ThreadLimit thread_limit(options.threads);  // the samples' checks too (each run and sense sets its own as well)
   SampleHashes hashes(spec.count() <= kMaxKeptHashes ? size_t(spec.count()) : 0);
   try {
     run_owned_samples(options, spec, shard, folder, *presence, hashes);

@@ -126,7 +126,8 @@ int main(int argc, char** argv) {
   plan_cmd->add_option("-o,--out", dataset.out_dir, "dataset folder: also show which samples are done there and the free disk")->check(kNamed);
   CLI::Option* plan_shard = plan_cmd->add_option("--shard", dataset_shard, "only shard I of N (samples i with i mod N = I)")->type_name("I/N");
   plan_cmd->add_flag("--all", dataset.all, "list every sample (default: the first and the last 10)");
-  plan_cmd->add_option("--threads", dataset.threads, "worker threads per sample, for the time estimate")->check(kThreadsRange);
+  plan_cmd->add_option("--threads", dataset.threads, "worker threads (default: all cores): the plan's, and each sample's for the time estimate")
+      ->check(kThreadsRange);
   plan_cmd->add_flag("-q,--quiet", dataset_quiet, "no progress on stderr (shown for plans of over 10,000 samples)");
   CLI::App* drun_cmd = dataset_cmd->add_subcommand("run", "generate the samples that are not done, each into its own folder, as one unit");
   drun_cmd->add_option("file", dataset.file, "dataset file (.json)")->required()->check(CLI::ExistingFile);

@@ -148,6 +148,7 @@ void check_writable(const std::string& file, const RunFolder& run, const std::st
       if (f.is_string()) own.push_back(f.get<std::string>());
   for (const std::string& f : own) {
     const fs::path listed = fs::weakly_canonical(fs::absolute(fs::path(run_dir) / f), ec);
+    if (ec || listed.empty()) continue;  // (an empty path would be the prefix of every output)
     const auto [end, it] = std::mismatch(listed.begin(), listed.end(), target.begin(), target.end());
     if (end == listed.end())
       throw Error(file + ": is the run's own " + f + " (" + run_dir + "/metadata.json lists it), which writing the output "

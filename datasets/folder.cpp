@@ -435,6 +435,16 @@ std::optional<CardTally> DatasetFolder::write_index(const std::function<void(con
     if (others < 0) return std::nullopt;
     ::close(others);
   }
+  // The temporary files of index writes that never ended (a run killed while it wrote the index, which takes
+  // minutes for millions of samples): every such write holds this lock, so those left are of dead processes.
+  {
+    std::error_code ec;
+    std::vector<fs::path> stale;
+    for (const auto& e : fs::directory_iterator(dir_, ec))
+      for (const char* prefix : {".index.jsonl.tmp-", ".index.csv.tmp-", ".dataset.md.tmp-"})
+        if (e.path().filename().string().rfind(prefix, 0) == 0) stale.push_back(e.path());
+    for (const fs::path& p : stale) fs::remove(p, ec);
+  }
   // Streamed: the rows are written as the records come (a million samples' records took 1.7 GB).
   writers::AtomicWriter jsonl((dir_ / "index.jsonl").string()), csv((dir_ / "index.csv").string());
   csv.append(index_csv_header(spec_));

@@ -682,6 +682,7 @@ void Loader::warn_unused_edits() {
            " is not part of the loaded glTF scene; the edit changes nothing");
     // glTF 2.0 places a skinned mesh by its skin's joints, not by the node that holds it
     else if (node_edit_[i] && m_.nodes[i].skin >= 0 && m_.nodes[i].children.empty() && m_.nodes[i].camera < 0 &&
+             !m_.nodes[i].extensions.count("KHR_lights_punctual") &&
              std::none_of(m_.skins.begin(), m_.skins.end(), [i](const tinygltf::Skin& sk) {
                return std::find(sk.joints.begin(), sk.joints.end(), static_cast<int>(i)) != sk.joints.end();
              }))

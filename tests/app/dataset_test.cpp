@@ -314,6 +314,7 @@ TEST_F(Dataset, ARunKilledWithSigkillResumesToTheSameBytesAndSkipsWhatIsDone) {
   // A lock file a run killed after publishing its sample left (the next runs kept it for good): removed; one a
   // live process holds stays.
   std::ofstream(out / "samples/.000001.spadgen-lock") << "pid 999999\n";
+  std::ofstream(out / ".index.jsonl.tmp-999999-7") << "{\"index\": 0";  // an index write killed midway
   const int held = ::open((out / "samples/.000003.spadgen-lock").c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
   ASSERT_GE(held, 0);
   ASSERT_EQ(::flock(held, LOCK_EX), 0);
@@ -322,6 +323,7 @@ TEST_F(Dataset, ARunKilledWithSigkillResumesToTheSameBytesAndSkipsWhatIsDone) {
   EXPECT_THAT(third.output, HasSubstr("0 of 6 samples to generate (6 done already)"));
   EXPECT_EQ(inode(out / "samples/000000/counts.npy"), first);
   EXPECT_FALSE(fs::exists(out / "samples/.000001.spadgen-lock"));
+  EXPECT_FALSE(fs::exists(out / ".index.jsonl.tmp-999999-7"));
   EXPECT_TRUE(fs::exists(out / "samples/.000003.spadgen-lock"));
   ::close(held);
 }
@@ -627,6 +629,19 @@ TEST_F(Dataset, AFailingSampleIsRecordedAndTheOthersGoOn) {
   EXPECT_THAT(st.output, HasSubstr("failed: 1, 3"));
   EXPECT_THAT(st.output, HasSubstr("makes an invalid scene: --set camera.crop: found [496, 232, 24, 20]"));
   EXPECT_THAT(slurp(dir_ / "out/index.csv"), HasSubstr(",failed,"));
+}
+
+// A sample whose estimate the sensor refuses (here transients in the intensity mode without a window) is
+// listed invalid with why, and the plan goes on (the estimates, computed together, stopped the whole plan).
+TEST_F(Dataset, APlanListsASampleItCannotEstimateAsInvalid) {
+  write(dir_ / "d.json", "{\"seed\": 1, \"scenes\": [\"" + kScenes + "flat_target.json\"], \"samples\": 4, "
+        "\"set\": {\"outputs.transient\": true, \"camera.crop\": [0, 0, 8, 8]}, \"grid\": {\"acquisition.mode\": [\"gate_sweep\", \"intensity\"]}}");
+  const Result r = sh("dataset plan " + (dir_ / "d.json").string());
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("# total: 4 samples"));
+  EXPECT_THAT(r.output, HasSubstr("error: sample 1: " + kScenes + "flat_target.json: /outputs/transient: intensity mode needs no time bins"));
+  EXPECT_THAT(r.output, HasSubstr("error: sample 3: "));
+  EXPECT_THAT(r.output, Not(HasSubstr("error: sample 0")));
 }
 
 // A damaged sample whose regeneration fails (a file of the user's in its folder) is failed, with why (status
