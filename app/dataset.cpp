@@ -29,6 +29,7 @@
 #include "datasets/dataset.h"
 #include "datasets/folder.h"
 #include "scenes/input.h"
+#include "scenes/scene.h"
 #include "scenes/scene_file.h"
 #include "sensor/sensor.h"
 
@@ -76,7 +77,13 @@ struct Totals {
   int64_t disk_at_least() const { return kept_at_least + peak; }
 };
 
-Estimate estimate(const RunConfig& c, int repeats, int threads) {
+// What a sample's scene adds to its plan: its glTF's objects and geometry (-1 objects, no geometry: unknown).
+struct SceneSize {
+  int objects = -1;
+  std::optional<Geometry> geometry;
+};
+
+Estimate estimate(const RunConfig& c, int repeats, int threads, const SceneSize& size) {
   // The sensor's shape (gate positions, window, halo), not its counts: with frames the model builds no
   // counts tables (about 3 MB and 15 ms per frame count; a dataset with a random acquisition.frames held
   // one per value it planned). The plan below takes the outputs from c.
@@ -85,7 +92,7 @@ Estimate estimate(const RunConfig& c, int repeats, int threads) {
   sensor::SensorModel sensor(shape);
   const TimeAxis axis = time_axis(c, sensor);
   const PixelRect img = image_rect(c);
-  const ResourcePlan plan = plan_resources(c, sensor, img, axis, threads, "");
+  const ResourcePlan plan = plan_resources(c, sensor, img, axis, threads, "", size.objects, size.geometry ? &*size.geometry : nullptr);
   Estimate e;
   e.memory = plan.memory_needed();
   const int64_t run_disk = plan.disk_needed();
@@ -153,11 +160,25 @@ class Estimator {
     for (const auto& [k, c] : runs)
       if (!cache_.count(k) && std::none_of(todo.begin(), todo.end(), [k = k](const auto& t) { return t.first == k; }))
         todo.emplace_back(k, c);
+    // Each glTF (and scene of it) loaded once, for its objects and geometry: the node and material edits
+    // change neither (a glTF that does not load leaves them unknown; its samples' runs fail and say why).
+    for (const auto& [k, c] : todo) {
+      const std::string where = c->gltf_path + "\n" + c->gltf_scene;
+      if (scenes_.count(where)) continue;
+      SceneSize& size = scenes_[where];
+      try {
+        const scenes::Scene scene = scenes::load_gltf(c->gltf_path, c->gltf_scene);
+        size.objects = int(scenes::objects_of(scene).list.size());
+        size.geometry = geometry_of(scene);
+      } catch (const Error&) {
+      }
+    }
     std::vector<Entry> done(todo.size());
     tbb::parallel_for(size_t{0}, todo.size(), [&](size_t j) {
       if (interruptible && interrupt_flag().load()) return;
       try {
-        done[j].estimate = estimate(*todo[j].second, repeats_, threads_);
+        const RunConfig& c = *todo[j].second;
+        done[j].estimate = estimate(c, repeats_, threads_, scenes_.at(c.gltf_path + "\n" + c.gltf_scene));
       } catch (const Error& e) {
         done[j].error = e.what();
       }
@@ -170,6 +191,7 @@ class Estimator {
  private:
   int repeats_, threads_;
   std::map<uint64_t, Entry> cache_;
+  std::map<std::string, SceneSize> scenes_;  // by glTF path and scene name
 };
 
 // One sample as the plan and a run's check see it: resolved, its estimate, and with a folder its state there.

@@ -213,7 +213,8 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
     sep = ", ";
   }
   o << "\n";
-  o << "resources: " << resource_summary(plan_resources(c, sensor, img, axis, 0, "", int(scenes::objects_of(scene).list.size()), &scene));
+  const Geometry geometry = geometry_of(scene);
+  o << "resources: " << resource_summary(plan_resources(c, sensor, img, axis, 0, "", int(scenes::objects_of(scene).list.size()), &geometry));
   for (const std::string& w : r.warnings) o << "warning: " << w << "\n";
   for (const std::string& w : before) o << "warning: " << w << "\n";
   return o.str();

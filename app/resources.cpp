@@ -11,6 +11,7 @@
 
 #include "app/outputs.h"
 #include "core/error.h"
+#include "scenes/scene.h"
 #include "render/renderer.h"
 
 namespace spadgen::app {
@@ -102,8 +103,12 @@ int64_t worker_threads(int threads) { return threads > 0 ? threads : std::max(1u
 // The arrival times a pixel's saved light spans, for the plan (outputs.light).
 constexpr double kLitSpan_s = 2.5e-9;
 
+Geometry geometry_of(const scenes::Scene& scene) {
+  return {static_cast<int64_t>(scene.triangle_count()), static_cast<int64_t>(scene.meshes.size())};
+}
+
 ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img,
-                            const TimeAxis& axis, int threads, const fs::path& out, int objects, const scenes::Scene* scene) {
+                            const TimeAxis& axis, int threads, const fs::path& out, int objects, const Geometry* geometry) {
   ResourcePlan plan;
   const int64_t tile = std::min(c.render.tile_size, std::max(img.width, img.height));
   // Threads at work: at most one per tile (a 40 x 40 crop at --threads 1024 was refused for 26.7 GB; it
@@ -172,12 +177,10 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
   // The program itself, whatever the image: code, libraries, Embree's and TBB's pools, the sensor's tables
   // (an 8 x 8 crop peaks at about 50 MB of resident memory; measured with /usr/bin/time -v).
   plan.memory.push_back({"the program (code, libraries, Embree and TBB, the sensor's tables)", int64_t{48} << 20});
-  if (scene != nullptr) {
-    const auto triangles = static_cast<int64_t>(scene->triangle_count()), meshes = static_cast<int64_t>(scene->meshes.size());
-    plan.memory.push_back({"the scene's geometry and Embree's BVH (" + std::to_string(triangles) + " triangles in " +
-                               std::to_string(meshes) + " meshes)",
-                           triangles * kBytesPerTriangle + meshes * kBytesPerMesh});
-  }
+  if (geometry != nullptr)
+    plan.memory.push_back({"the scene's geometry and Embree's BVH (" + std::to_string(geometry->triangles) + " triangles in " +
+                               std::to_string(geometry->meshes) + " meshes)",
+                           geometry->triangles * kBytesPerTriangle + geometry->meshes * kBytesPerMesh});
   plan.memory_available = available_memory();
 
   // A Zarr store is at most its data uncompressed (and a few bytes a chunk).
@@ -225,8 +228,8 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
 }
 
 void check_resources(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img, const TimeAxis& axis,
-                     int threads, const fs::path& out, int objects, const scenes::Scene* scene) {
-  check_resources(plan_resources(c, sensor, img, axis, threads, out, objects, scene), c, out);
+                     int threads, const fs::path& out, int objects, const Geometry* geometry) {
+  check_resources(plan_resources(c, sensor, img, axis, threads, out, objects, geometry), c, out);
 }
 
 void check_resources(const ResourcePlan& plan, const RunConfig& c, const fs::path& out, const std::string& who,

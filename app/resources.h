@@ -60,17 +60,24 @@ inline constexpr int64_t kBytesPerTriangle = 200, kBytesPerMesh = 4096;
 // metadata.json's size: 32 kB, and its list of the scene's objects (100,000 objects: 17 MB).
 inline constexpr int64_t kMetadataBytes = 32 << 10, kMetadataBytesPerObject = 256;
 
+// The size of a loaded scene's geometry, for a plan of a run's peak before the scene is in memory (info, a
+// dataset's estimates).
+struct Geometry {
+  int64_t triangles = 0, meshes = 0;
+};
+Geometry geometry_of(const scenes::Scene& scene);
+
 // threads: as --threads (0 = all cores). out: the output folder ("" = no disk check). objects: the scene's
 // objects (scenes::objects_of), which bound the object slots of the images and size metadata.json; -1 unknown
-// (render.max_layers). scene: for a plan of a run's peak before the scene is in memory (info), its geometry.
+// (render.max_layers). geometry: the scene's, when it is not in memory yet.
 ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img,
                             const TimeAxis& axis, int threads, const std::filesystem::path& out, int objects = -1,
-                            const scenes::Scene* scene = nullptr);
+                            const Geometry* geometry = nullptr);
 
 // Throws spadgen::Error, with the figures and the keys of the largest parts, when the run needs more
 // memory or disk than there is.
 void check_resources(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img, const TimeAxis& axis,
-                     int threads, const std::filesystem::path& out, int objects = -1, const scenes::Scene* scene = nullptr);
+                     int threads, const std::filesystem::path& out, int objects = -1, const Geometry* geometry = nullptr);
 // The same for a plan already made (spadgen sense adjusts its disk: linked files, realisations). `who`
 // begins the messages (the scene file when empty); `remedy` replaces the disk message's advice when given.
 void check_resources(const ResourcePlan& plan, const RunConfig& c, const std::filesystem::path& out,
