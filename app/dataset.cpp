@@ -422,6 +422,12 @@ std::string leave_index(const DatasetFolder& folder, datasets::RunPresence& pres
   }
 }
 
+// A signal while the samples are checked: no sample generated, so the index stays as it was (rewriting it
+// resolves every sample the check had not reached: about a minute per 200,000, past Slurm's 30 s to SIGKILL).
+struct StoppedWhileChecking : Interrupted {
+  using Interrupted::Interrupted;
+};
+
 // dataset_run's work once it is on the folder: the shard's samples, then the index when no other run is on it.
 void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, const datasets::Shard& shard,
                        const DatasetFolder& folder, datasets::RunPresence& presence, SampleHashes& hashes) {
@@ -435,20 +441,25 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
   Totals totals;
   const int64_t mine = shard.owned(spec.count());
   Progress bar(size_t(mine), options.progress && mine > 10000, "samples inspected");
-  check_samples(spec, shard, &folder, estimator, 0, spec.count(), false, true, [&](Checked& c) {
-    InterruptGuard::check();  // a signal while the samples are checked (100,000 took 50 s before it stopped)
-    ++owned;
-    bar.tick();
-    const SampleRecord& rec = c.record;
-    const int64_t i = c.sample.index;
-    if (size_t(i) < hashes.size() && !rec.hash.empty()) std::from_chars(rec.hash.data(), rec.hash.data() + rec.hash.size(), hashes[size_t(i)], 16);
-    if (rec.status == Status::Done) {
-      ++skipped;
-      return;
-    }
-    if (!rec.hash.empty()) totals.add(c.estimate);
-    todo.push_back(i);
-  });
+  try {
+    check_samples(spec, shard, &folder, estimator, 0, spec.count(), false, true, [&](Checked& c) {
+      InterruptGuard::check();  // a signal while the samples are checked (100,000 took 50 s before it stopped)
+      ++owned;
+      bar.tick();
+      const SampleRecord& rec = c.record;
+      const int64_t i = c.sample.index;
+      if (size_t(i) < hashes.size() && !rec.hash.empty()) std::from_chars(rec.hash.data(), rec.hash.data() + rec.hash.size(), hashes[size_t(i)], 16);
+      if (rec.status == Status::Done) {
+        ++skipped;
+        return;
+      }
+      if (!rec.hash.empty()) totals.add(c.estimate);
+      todo.push_back(i);
+    });
+  } catch (const Interrupted&) {
+    throw StoppedWhileChecking("interrupted by a signal: the dataset run stopped while it checked the samples, before it "
+                               "generated any; the index is as it was, and running it again goes on");
+  }
   // What killed runs left in samples/ is removed first (a sample another run is writing keeps its own), so
   // that the disk check does not count it.
   Staging::remove_leftovers(dir / "samples");
@@ -632,8 +643,10 @@ void dataset_run(const DatasetOptions& options) {
   SampleHashes hashes(spec.count() <= kMaxKeptHashes ? size_t(spec.count()) : 0);
   try {
     run_owned_samples(options, spec, shard, folder, *presence, hashes);
+  } catch (const StoppedWhileChecking&) {
+    throw;
   } catch (...) {
-    // Any other way out (a signal while the samples are checked, the disk check's refusal, an error): the
+    // Any other way out (a signal while samples are generated, the disk check's refusal, an error): the
     // index is written as at the end when no other run is on the folder (another may have left it to this
     // one, which would leave it to no one).
     if (presence->held()) (void)leave_index(folder, *presence, hashes);

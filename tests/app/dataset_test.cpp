@@ -328,6 +328,24 @@ TEST_F(Dataset, ARunKilledWithSigkillResumesToTheSameBytesAndSkipsWhatIsDone) {
   ::close(held);
 }
 
+// SIGTERM while the samples are checked (before any is generated): exit 2 at once, the index as it was (it
+// rewrote the index, resolving every sample the check had not reached: 45-60 s for 200,000, past Slurm's 30 s).
+TEST_F(Dataset, ASignalWhileTheSamplesAreCheckedStopsAtOnce) {
+  // 600 samples of a random pulse width: a sensor shape each, about 40 ms to estimate: a check of seconds
+  write(dir_ / "d.json", "{\"seed\": 1, \"scenes\": [\"" + kScenes + "flat_target.json\"], \"samples\": 600, "
+        "\"set\": {\"camera.crop\": [0, 0, 8, 8]}, \"random\": {\"laser.pulse_fwhm_ps\": {\"uniform\": [60, 120]}}}");
+  const fs::path out = dir_ / "out", err = dir_ / "err.txt";
+  const Result r = shell("start=$(date +%s%N); " + kBin + " dataset run " + (dir_ / "d.json").string() + " -o " + out.string() +
+                         " -q 2> " + err.string() + " & p=$!; sleep 1; kill -TERM $p; wait $p; code=$?; end=$(date +%s%N); "
+                         "echo code=$code ms=$(( (end - start) / 1000000 ))");
+  EXPECT_THAT(r.output, HasSubstr("code=2 "));
+  const long ms = std::stol(r.output.substr(r.output.find("ms=") + 3));
+  EXPECT_LT(ms, 6000) << "the run took " << ms << " ms to stop";
+  EXPECT_THAT(slurp(err), HasSubstr("the dataset run stopped while it checked the samples, before it generated any; the index is as it was"));
+  EXPECT_FALSE(fs::exists(out / "index.jsonl"));
+  EXPECT_EQ(leftovers(out), std::vector<std::string>{});  // (temporary files included)
+}
+
 // SIGTERM inside a sample: exit 2, and the message says what is kept (it said the run wrote nothing,
 // although the samples before were published and stay).
 TEST_F(Dataset, ASignalSaysWhichSamplesAreKept) {
