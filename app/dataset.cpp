@@ -163,9 +163,9 @@ class Estimator {
     // Each glTF (and scene of it) loaded once, for its objects and geometry: the node and material edits
     // change neither (a glTF that does not load leaves them unknown; its samples' runs fail and say why).
     for (const auto& [k, c] : todo) {
-      const std::string where = c->gltf_path + "\n" + c->gltf_scene;
-      if (scenes_.count(where)) continue;
-      SceneSize& size = scenes_[where];
+      const auto [at, fresh] = scenes_.try_emplace(scene_of(*c));
+      if (!fresh) continue;
+      SceneSize& size = at->second;
       try {
         const scenes::Scene scene = scenes::load_gltf(c->gltf_path, c->gltf_scene);
         size.objects = int(scenes::objects_of(scene).list.size());
@@ -178,7 +178,7 @@ class Estimator {
       if (interruptible && interrupt_flag().load()) return;
       try {
         const RunConfig& c = *todo[j].second;
-        done[j].estimate = estimate(c, repeats_, threads_, scenes_.at(c.gltf_path + "\n" + c.gltf_scene));
+        done[j].estimate = estimate(c, repeats_, threads_, scenes_.at(scene_of(c)));
       } catch (const Error& e) {
         done[j].error = e.what();
       }
@@ -191,7 +191,8 @@ class Estimator {
  private:
   int repeats_, threads_;
   std::map<uint64_t, Entry> cache_;
-  std::map<std::string, SceneSize> scenes_;  // by glTF path and scene name
+  std::map<std::string, SceneSize> scenes_;  // by scene_of
+  static std::string scene_of(const RunConfig& c) { return c.gltf_path + "\n" + c.gltf_scene; }
 };
 
 // One sample as the plan and a run's check see it: resolved, its estimate, and with a folder its state there.
@@ -203,14 +204,15 @@ struct Checked {
   SampleRecord record;  // with a folder
 };
 
-// Samples [begin, end) that the shard owns, resolved and inspected in parallel (the scenes resolve and the
+// The samples the shard owns, resolved and inspected in parallel (the scenes resolve and the
 // folders are read on every core; a distinct sensor shape's estimate too), handed to `each` in index order.
 // estimate_done: also the samples the folder holds done (a plan lists their estimates; a run skips them).
 // interruptible: a signal stops the work within a sample per thread (InterruptGuard::check).
 void check_samples(const DatasetSpec& spec, const datasets::Shard& shard, const DatasetFolder* folder, Estimator& estimator,
-                   int64_t begin, int64_t end, bool estimate_done, bool interruptible, const std::function<void(Checked&)>& each) {
+                   bool estimate_done, bool interruptible, const std::function<void(Checked&)>& each) {
   constexpr int64_t kBlock = 2048;
-  for (int64_t b = begin; b < end; b += kBlock) {
+  const int64_t end = spec.count();
+  for (int64_t b = 0; b < end; b += kBlock) {
     std::vector<int64_t> mine;
     for (int64_t i = b; i < std::min(end, b + kBlock); ++i)
       if (shard.owns(i)) mine.push_back(i);
@@ -236,13 +238,15 @@ void check_samples(const DatasetSpec& spec, const datasets::Shard& shard, const 
       if (folder) c.record = folder->inspect(c.sample, &hash);
     });
     if (interruptible) InterruptGuard::check();
-    std::vector<std::pair<uint64_t, const RunConfig*>> wanted;
+    const auto wanted = [&](size_t j) {
+      return rows[j].resolved && (estimate_done || !folder || rows[j].record.status != Status::Done);
+    };
+    std::vector<std::pair<uint64_t, const RunConfig*>> estimates;
     for (size_t j = 0; j < rows.size(); ++j)
-      if (rows[j].resolved && (estimate_done || !folder || rows[j].record.status != Status::Done))
-        wanted.emplace_back(keys[j], &runs[j].config);
-    estimator.add(wanted, interruptible);
+      if (wanted(j)) estimates.emplace_back(keys[j], &runs[j].config);
+    estimator.add(estimates, interruptible);
     for (size_t j = 0; j < rows.size(); ++j) {
-      if (rows[j].resolved && (estimate_done || !folder || rows[j].record.status != Status::Done)) {
+      if (wanted(j)) {
         const Estimator::Entry& e = estimator.at(keys[j]);
         if (e.error.empty()) rows[j].estimate = e.estimate;
         else rows[j].resolved = false, rows[j].error = e.error;
@@ -348,7 +352,7 @@ std::string dataset_plan(const DatasetOptions& options) {
   const int64_t owned = shard.owned(n);
   Progress bar(size_t(owned), options.progress && owned > 10000, "samples");
   const ThreadLimit thread_limit(options.threads);
-  check_samples(spec, shard, folder ? &*folder : nullptr, estimator, 0, n, true, false, [&](Checked& checked) {
+  check_samples(spec, shard, folder ? &*folder : nullptr, estimator, true, false, [&](Checked& checked) {
     const Sample& s = checked.sample;
     const int64_t i = s.index;
     ++samples;
@@ -442,7 +446,7 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
   const int64_t mine = shard.owned(spec.count());
   Progress bar(size_t(mine), options.progress && mine > 10000, "samples inspected");
   try {
-    check_samples(spec, shard, &folder, estimator, 0, spec.count(), false, true, [&](Checked& c) {
+    check_samples(spec, shard, &folder, estimator, false, true, [&](Checked& c) {
       InterruptGuard::check();  // a signal while the samples are checked (100,000 took 50 s before it stopped)
       ++owned;
       bar.tick();

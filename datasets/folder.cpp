@@ -256,10 +256,7 @@ DatasetFolder::Resolved DatasetFolder::resolve(const Sample& s) const {
   } catch (const Error& e) {
     throw Error("sample " + std::to_string(s.index) + " (" + s.parameters.dump() + ") makes an invalid scene: " + e.what());
   }
-  Resolved out;
-  out.hash = sample_hash(s, r);
-  out.run = std::move(r);
-  return out;
+  return {r.resolved, sample_hash(s, r)};
 }
 
 std::string DatasetFolder::sample_hash(const Sample& s, const scenes::ResolvedRun& r) const {
@@ -475,26 +472,31 @@ json dataset_section(const DatasetFolder& folder, const Sample& s, const std::st
           {"sample_hash", hash}};
 }
 
+namespace {
+// The error the index lists: a failed sample's cause, a damaged one's files (a stale one's change is status's).
+std::string listed_error(const SampleRecord& r) {
+  return r.status == Status::Failed || r.status == Status::Damaged ? r.error : std::string();
+}
+}  // namespace
+
 std::string index_jsonl_row(const DatasetSpec& spec, const SampleRecord& r) {
-  {
-    ojson row;
-    row["index"] = r.sample.index;
-    row["status"] = status_name(r.status);
-    row["folder"] = r.sample.folder();
-    row["parameters"] = r.sample.parameters;
-    row["seeds"] = {{"seed", r.sample.seed}, {"light", r.sample.light_seed}, {"chip", r.sample.chip_seed}, {"noise", r.sample.noise_seed}};
-    row["repeats"] = ojson::array();
-    for (int k = 1; k < spec.repeats; ++k) row["repeats"].push_back(r.sample.repeat_folder(k));
-    row["sample_hash"] = r.hash;
-    if (r.status == Status::Done) {
-      row["bytes"] = r.bytes;
-      row["files"] = ojson::array();
-      for (const std::string& name : r.listed) row["files"].push_back(name);
-      row["ground_truth"] = r.summary;
-    }
-    if (r.status == Status::Failed || r.status == Status::Damaged) row["error"] = r.error;
-    return row.dump() + "\n";
+  ojson row;
+  row["index"] = r.sample.index;
+  row["status"] = status_name(r.status);
+  row["folder"] = r.sample.folder();
+  row["parameters"] = r.sample.parameters;
+  row["seeds"] = {{"seed", r.sample.seed}, {"light", r.sample.light_seed}, {"chip", r.sample.chip_seed}, {"noise", r.sample.noise_seed}};
+  row["repeats"] = ojson::array();
+  for (int k = 1; k < spec.repeats; ++k) row["repeats"].push_back(r.sample.repeat_folder(k));
+  row["sample_hash"] = r.hash;
+  if (r.status == Status::Done) {
+    row["bytes"] = r.bytes;
+    row["files"] = ojson::array();
+    for (const std::string& name : r.listed) row["files"].push_back(name);
+    row["ground_truth"] = r.summary;
   }
+  if (const std::string error = listed_error(r); !error.empty()) row["error"] = error;
+  return row.dump() + "\n";
 }
 
 namespace {
@@ -519,19 +521,14 @@ std::string index_csv_header(const DatasetSpec& spec) {
 }
 
 std::string index_csv_row(const DatasetSpec& spec, const SampleRecord& r) {
-  const std::vector<std::string> params = csv_parameters(spec);
-  const std::vector<std::string>& summary = kCsvSummary;
-  std::string out;
-  {
-    out += std::to_string(r.sample.index) + "," + status_name(r.status) + "," + r.sample.folder();
-    for (const std::string& p : params) out.append(",").append(csv_value(r.sample.parameters.value(p, ojson())));
-    out += "," + std::to_string(r.sample.seed) + "," + std::to_string(r.sample.light_seed) + "," + std::to_string(r.sample.chip_seed) +
-           "," + std::to_string(r.sample.noise_seed) + "," + r.hash + ",";
-    if (r.status == Status::Done) out += std::to_string(r.bytes);
-    for (const std::string& k : summary)
-      out.append(",").append(r.summary.is_object() ? csv_value(r.summary.value(k, ojson())) : std::string());
-    out.append(",").append(csv_field(r.status == Status::Failed || r.status == Status::Damaged ? r.error : std::string())).append("\n");
-  }
+  std::string out = std::to_string(r.sample.index) + "," + status_name(r.status) + "," + r.sample.folder();
+  for (const std::string& p : csv_parameters(spec)) out.append(",").append(csv_value(r.sample.parameters.value(p, ojson())));
+  out += "," + std::to_string(r.sample.seed) + "," + std::to_string(r.sample.light_seed) + "," + std::to_string(r.sample.chip_seed) +
+         "," + std::to_string(r.sample.noise_seed) + "," + r.hash + ",";
+  if (r.status == Status::Done) out += std::to_string(r.bytes);
+  for (const std::string& k : kCsvSummary)
+    out.append(",").append(r.summary.is_object() ? csv_value(r.summary.value(k, ojson())) : std::string());
+  out.append(",").append(csv_field(listed_error(r))).append("\n");
   return out;
 }
 
@@ -600,7 +597,7 @@ std::string dataset_card(const DatasetFolder& folder, const CardTally& tally) {
     if (first >= spec.count()) break;
     ojson r;
     try {
-      r = folder.resolve(make_sample(spec, first)).run.resolved;
+      r = folder.resolve(make_sample(spec, first)).scene;
     } catch (const Error&) {
       continue;
     }

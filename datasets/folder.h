@@ -114,7 +114,7 @@ class DatasetFolder {
   // The sample's scene file with its overrides, resolved and checked; throws spadgen::Error naming the
   // sample and its parameters when they make an invalid scene.
   struct Resolved {
-    scenes::ResolvedRun run;  // run.resolved: the resolved scene file
+    nlohmann::ordered_json scene;  // the resolved scene file
     std::string hash;
   };
   Resolved resolve(const Sample& s) const;
