@@ -54,6 +54,12 @@ constexpr double kSecondsPerPixelGate = 8e-9;       // sensor stage, per pixel a
 constexpr double kSecondsPerByte = 2.0 / 1.0e9;     // writing the outputs (and compressing the images)
 constexpr double kSecondsPerRun = 0.8;              // starting, loading the scene, building the BVH, publishing
 
+// The cores a run with --threads `threads` (0: all) uses, which the estimates are for.
+int estimate_cores(int threads) {
+  const int cores = int(std::max(1u, std::thread::hardware_concurrency()));
+  return threads > 0 ? std::min(threads, cores) : cores;
+}
+
 struct Estimate {
   int64_t disk = 0, memory = 0;  // disk: what the sample keeps
   int64_t disk_at_least = 0;  // with compressed files (EXR images, Zarr stores) at a twentieth of their size (ResourcePlan)
@@ -116,9 +122,7 @@ Estimate estimate(const RunConfig& c, int repeats, int threads, const SceneSize&
   e.disk_at_least = plan.disk_kept_at_least() + (repeats - 1) * again_at_least;
   e.disk_peak = run_disk - plan.disk_kept();
   e.seconds += (repeats - 1) * (kSecondsPerRun + sensor_seconds + double(run_disk) * kSecondsPerByte);
-  const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
-  const double used = threads > 0 ? std::min<double>(threads, cores) : cores;
-  e.seconds *= 2.0 / used;  // the model is of 2 cores; the work is parallel
+  e.seconds *= 2.0 / estimate_cores(threads);  // the model is of 2 cores; the work is parallel
   return e;
 }
 
@@ -256,6 +260,34 @@ void check_samples(const DatasetSpec& spec, const datasets::Shard& shard, const 
   }
 }
 
+// datasets' rule of the first samples (probe_samples), with the sensor's refusals too: when every probed
+// sample of a scene file makes an invalid scene or a run the sensor refuses (its time axis, its tables:
+// transients in the intensity mode), the mistake is the dataset file's, refused before any work (it was
+// recorded as 5000 failed samples). The estimates made here stay in the estimator's cache.
+void refuse_a_dataset_of_invalid_samples(const DatasetSpec& spec, Estimator& estimator) {
+  for (size_t k = 0; k < spec.scenes.size(); ++k) {
+    const std::vector<int64_t> probes = datasets::probe_samples(spec, k);
+    std::string why;
+    bool valid = false;
+    for (size_t j = 0; !valid && j < probes.size(); ++j) {
+      std::string error;
+      try {
+        const scenes::ResolvedRun r = scenes::load_scene_file(spec.scenes[k], datasets::make_sample(spec, probes[j]).overrides);
+        const uint64_t key = Estimator::key(r);
+        estimator.add({{key, &r.config}}, false);
+        error = estimator.at(key).error;
+      } catch (const Error& e) {
+        error = e.what();
+      }
+      valid = error.empty();
+      if (why.empty()) why = error;
+    }
+    if (!valid && !probes.empty())
+      throw Error(spec.file + ": sample " + std::to_string(probes[0]) + ": with the scene file " + spec.scene_names[k] + ": " +
+                  why + (probes.size() > 1 ? " (and the next " + std::to_string(probes.size() - 1) + " samples of this scene fail too)" : ""));
+  }
+}
+
 std::string duration_text(double s) {
   char buf[64];
   if (s < 90) std::snprintf(buf, sizeof buf, "%.0f s", s);
@@ -318,9 +350,11 @@ std::string status_counts(const std::array<int64_t, 5>& c) {
 
 std::string dataset_schema() { return datasets::dataset_reference_markdown(); }
 
-std::string dataset_plan(const DatasetOptions& options) {
+DatasetPlan dataset_plan(const DatasetOptions& options) {
   const DatasetSpec spec = datasets::load_dataset_file(options.file);
   const datasets::Shard shard = choose_shard(options);
+  Estimator estimator(spec.repeats, options.threads);
+  refuse_a_dataset_of_invalid_samples(spec, estimator);
   std::optional<DatasetFolder> folder;
   if (!options.out_dir.empty()) {
     folder.emplace(spec, options.out_dir);
@@ -346,7 +380,6 @@ std::string dataset_plan(const DatasetOptions& options) {
   Totals total, left_total;
   int64_t samples = 0, left = 0;
   std::vector<std::string> errors;
-  Estimator estimator(spec.repeats, options.threads);
   // Each sample's scene is resolved (about 0.2 ms of one core): a plan of millions of samples takes minutes,
   // so it shows its progress.
   const int64_t owned = shard.owned(n);
@@ -386,15 +419,18 @@ std::string dataset_plan(const DatasetOptions& options) {
         o << (v.is_string() ? v.get<std::string>() : v.dump());
       }
     }
-    o << "\t" << s.seed << "\t" << bytes_text(e.disk) << "\t" << bytes_text(e.memory) << "\t" << duration_text(e.seconds);
+    if (checked.resolved) o << "\t" << s.seed << "\t" << bytes_text(e.disk) << "\t" << bytes_text(e.memory) << "\t" << duration_text(e.seconds);
+    else o << "\t" << s.seed << "\t-\t-\t-";  // its error below
     if (folder) o << "\t" << status;
     o << "\n";
   });
   // per sample what it keeps; the totals with one sample's temporary files, as dataset run's disk check counts them
-  o << "# per sample: disk about " << bytes_text(samples ? total.kept / samples : 0) << ", memory up to "
-    << bytes_text(total.memory) << ", time about " << duration_text(samples ? total.seconds / double(samples) : 0.0) << "\n";
+  const int64_t valid = samples - int64_t(errors.size());  // the invalid ones have no estimate
+  o << "# per sample: disk about " << bytes_text(valid ? total.kept / valid : 0) << ", memory up to "
+    << bytes_text(total.memory) << ", time about " << duration_text(valid ? total.seconds / double(valid) : 0.0) << "\n";
   o << "# " << (shard.count > 1 ? "this shard" : "total") << ": " << samples << " samples, disk about " << bytes_text(total.disk())
-    << ", time about " << duration_text(total.seconds) << " (estimates for 2 cores: docs/datasets.md, \"Estimates\")\n";
+    << ", time about " << duration_text(total.seconds) << " (estimates for " << estimate_cores(options.threads)
+    << (estimate_cores(options.threads) == 1 ? " core" : " cores") << ": docs/datasets.md, \"Estimates\")\n";
   if (total.paths_bound)
     o << "# with render.target_relative_error a pixel's paths depend on its light: the times count "
          "render.max_samples_per_pixel for every pixel, an upper bound\n";
@@ -409,7 +445,7 @@ std::string dataset_plan(const DatasetOptions& options) {
       << duration_text(left_total.seconds) << "\n";
   }
   for (const std::string& e : errors) o << "error: " << e << "\n";
-  return o.str();
+  return {o.str(), int64_t(errors.size())};
 }
 
 namespace {
@@ -434,14 +470,14 @@ struct StoppedWhileChecking : Interrupted {
 
 // dataset_run's work once it is on the folder: the shard's samples, then the index when no other run is on it.
 void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, const datasets::Shard& shard,
-                       const DatasetFolder& folder, datasets::RunPresence& presence, SampleHashes& hashes) {
+                       const DatasetFolder& folder, datasets::RunPresence& presence, SampleHashes& hashes,
+                       Estimator& estimator) {
   const fs::path dir = folder.dir();
 
   // What this shard has to do: every sample it owns that is not done, checked before any work, by index
   // (inspected again when its turn comes: a record per sample took 1.7 kB, 1.7 GB for a million samples).
   std::vector<int64_t> todo;
   int64_t owned = 0, skipped = 0;
-  Estimator estimator(spec.repeats, options.threads);
   Totals totals;
   const int64_t mine = shard.owned(spec.count());
   Progress bar(size_t(mine), options.progress && mine > 10000, "samples inspected");
@@ -638,6 +674,8 @@ void dataset_run(const DatasetOptions& options) {
   const DatasetSpec spec = datasets::load_dataset_file(options.file);
   const datasets::Shard shard = choose_shard(options);
   if (options.out_dir.empty()) throw Error("dataset run: expected the dataset folder (-o DIR)");
+  Estimator estimator(spec.repeats, options.threads);
+  refuse_a_dataset_of_invalid_samples(spec, estimator);  // before the folder is made
   const DatasetFolder folder(spec, options.out_dir);
   folder.claim();
   // The index is written by the last run on the folder to end (datasets::RunPresence).
@@ -646,7 +684,7 @@ void dataset_run(const DatasetOptions& options) {
   const ThreadLimit thread_limit(options.threads);  // the samples' checks too (each run and sense sets its own as well)
   SampleHashes hashes(spec.count() <= kMaxKeptHashes ? size_t(spec.count()) : 0);
   try {
-    run_owned_samples(options, spec, shard, folder, *presence, hashes);
+    run_owned_samples(options, spec, shard, folder, *presence, hashes, estimator);
   } catch (const StoppedWhileChecking&) {
     throw;
   } catch (...) {

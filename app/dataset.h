@@ -17,8 +17,14 @@ struct DatasetOptions {
 };
 
 // The samples with their parameters and seeds, and estimates of disk, memory and time per sample and in
-// total; with out_dir, which samples are done there and the free disk.
-std::string dataset_plan(const DatasetOptions& options);
+// total; with out_dir, which samples are done there and the free disk. Samples whose parameters make an
+// invalid scene (or a run the sensor refuses) are listed with their errors at the end and counted
+// (`dataset plan` then exits 1).
+struct DatasetPlan {
+  std::string text;
+  int64_t invalid = 0;
+};
+DatasetPlan dataset_plan(const DatasetOptions& options);
 
 // Generates the shard's samples that are not done, each published as one unit; skips done ones; refuses
 // to start when the free disk is below the estimate. Rewrites the index and the card at the end when no other

@@ -200,7 +200,15 @@ int main(int argc, char** argv) {
     } else if (*dataset_cmd) {
       if ((*plan_shard && *plan_cmd) || (*run_shard && *drun_cmd)) dataset.shard = dataset_shard;
       dataset.progress = !dataset_quiet;
-      if (*plan_cmd) std::cout << spadgen::app::dataset_plan(dataset);
+      if (*plan_cmd) {
+        const spadgen::app::DatasetPlan plan = spadgen::app::dataset_plan(dataset);
+        std::cout << plan.text;
+        if (plan.invalid > 0) {
+          std::cerr << "spadgen: " << plan.invalid << (plan.invalid == 1 ? " sample makes" : " samples make")
+                    << " an invalid run (the errors end the plan); `dataset run` records them in failed/\n";
+          done_code = spadgen::app::kExitBadInput;
+        }
+      }
       else if (*drun_cmd) spadgen::app::dataset_run(dataset);
       else if (*status_cmd) {
         const spadgen::app::DatasetStatus st = spadgen::app::dataset_status(status_dir);

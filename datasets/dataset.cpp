@@ -413,27 +413,23 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
     n << std::setprecision(cells < 1e15 ? 15 : 3) << cells;
     rd.fail("/grid", "has " + n.str() + " cells (the scene files times each key's values); expected at most 1e8");
   }
-  constexpr int kProbes = 16;
-  const int64_t cells = s.grid_cells(), per_scene = cells / static_cast<int64_t>(s.scenes.size());
   for (size_t k = 0; k < s.scenes.size(); ++k) {
-    const int64_t first = static_cast<int64_t>(k) * per_scene;
-    if (first >= s.count()) break;
+    const std::vector<int64_t> probes = probe_samples(s, k);
+    if (probes.empty()) break;
     std::optional<scenes::ResolvedRun> r;
     std::string why;
-    int tried = 0;
-    for (int64_t base = first; !r && tried < kProbes && base < s.count(); base += cells)
-      for (int64_t i = base; !r && i < base + per_scene && i < s.count() && tried < kProbes; ++i, ++tried) {
-        try {
-          r = scenes::load_scene_file(s.scenes[k], make_sample(s, i).overrides);
-        } catch (const Error& e) {
-          if (why.empty()) why = e.what();
-        }
+    for (size_t j = 0; !r && j < probes.size(); ++j) {
+      try {
+        r = scenes::load_scene_file(s.scenes[k], make_sample(s, probes[j]).overrides);
+      } catch (const Error& e) {
+        if (why.empty()) why = e.what();
       }
+    }
     if (!r)
-      rd.fail("sample " + std::to_string(first), std::string("with the scene file ") + s.scene_names[k] + ": " + why +
-                                                     (tried > 1 ? " (and the next " + std::to_string(tried - 1) +
-                                                                      " samples of this scene fail too)"
-                                                                : ""));
+      rd.fail("sample " + std::to_string(probes[0]), std::string("with the scene file ") + s.scene_names[k] + ": " + why +
+                                                     (probes.size() > 1 ? " (and the next " + std::to_string(probes.size() - 1) +
+                                                                              " samples of this scene fail too)"
+                                                                        : ""));
     if (r->config.edits.nodes.empty() && r->config.edits.materials.empty()) continue;
     try {
       (void)scenes::load_gltf(r->config.gltf_path, r->config.gltf_scene, r->config.edits);
@@ -464,6 +460,15 @@ DatasetSpec load_dataset_file(const std::string& path) {
   if (scenes::invalid_utf8_at(path) != std::string::npos)
     throw Error("dataset file " + scenes::printable(path) + ": its name is not valid UTF-8 text; rename it");
   return parse_dataset_text(scenes::read_file_bounded(path, scenes::kMaxSceneFileBytes, "dataset file"), path);
+}
+
+std::vector<int64_t> probe_samples(const DatasetSpec& spec, size_t scene) {
+  const int64_t cells = spec.grid_cells(), per_scene = cells / static_cast<int64_t>(spec.scenes.size());
+  const int64_t first = static_cast<int64_t>(scene) * per_scene;
+  std::vector<int64_t> out;
+  for (int64_t base = first; out.size() < size_t{kProbeSamples} && base < spec.count(); base += cells)
+    for (int64_t i = base; i < base + per_scene && i < spec.count() && out.size() < size_t{kProbeSamples}; ++i) out.push_back(i);
+  return out;
 }
 
 std::string Sample::folder() const { return folder_of(index); }

@@ -106,6 +106,13 @@ struct Sample {
 // Sample `index` (0 <= index < spec.count()): a function of the dataset seed, the axes and the index only.
 Sample make_sample(const DatasetSpec& spec, int64_t index);
 
+// The samples of scene file `scene` that tell whether the dataset file is wrong: its first kProbeSamples
+// samples (index order, over the grid's cells of that scene). When all of them make invalid scenes (or
+// runs the sensor refuses), the mistake is the dataset file's: load_dataset_file and `dataset plan|run`
+// refuse it naming the first.
+inline constexpr int kProbeSamples = 16;
+std::vector<int64_t> probe_samples(const DatasetSpec& spec, size_t scene);
+
 // Which samples a shard runs: index i belongs to shard i mod count.
 struct Shard {
   int64_t index = 0, count = 1;

@@ -137,8 +137,11 @@ TEST_F(App, OutputsAreBitIdenticalForAnyThreadCountAndTileSize) {
 // thread count and tile size; laser.exr records every pixel's paths and standard error, and metadata.json
 // their summary.
 TEST_F(App, TargetErrorOutputsAreBitIdenticalForAnyThreadCountAndTileSize) {
-  // (kSmall gives samples_per_pixel, which the preset then leaves: given back its value here.)
-  const std::string q = " --set render.quality=standard --set render.samples_per_pixel=32 --set render.split_direct_indirect=true -o ";
+  // (kSmall gives samples_per_pixel, which the preset then leaves: given back its value here. The target
+  // error given too, above the preset's 0.02: the same test at a third of the paths, 221 s -> 90 s of
+  // CI's sanitizer suite.)
+  const std::string q = " --set render.quality=standard --set render.samples_per_pixel=32 --set render.target_relative_error=0.05 "
+                        "--set render.split_direct_indirect=true -o ";
   ASSERT_EQ(sh("run " + kSmall + " --threads 1 --set render.tile_size_px=8" + q + (dir_ / "a").string()).code, 0);
   ASSERT_EQ(sh("run " + kSmall + " --threads 2 --set render.tile_size_px=16" + q + (dir_ / "b").string()).code, 0);
   expect_same_outputs(dir_ / "a", dir_ / "b");
@@ -148,7 +151,7 @@ TEST_F(App, TargetErrorOutputsAreBitIdenticalForAnyThreadCountAndTileSize) {
   const auto& l = laser.channels.at("photons_per_pulse");
   const auto meta = nlohmann::json::parse(slurp(dir_ / "a/metadata.json"));
   const auto& acc = meta.at("accuracy");
-  EXPECT_EQ(acc.at("target_relative_error"), 0.02);
+  EXPECT_EQ(acc.at("target_relative_error"), 0.05);
   const int first = meta["resolved_scene"]["render"]["samples_per_pixel"], most = meta["resolved_scene"]["render"]["max_samples_per_pixel"];
   double paths = 0;
   int over = 0, lit = 0;
@@ -156,11 +159,11 @@ TEST_F(App, TargetErrorOutputsAreBitIdenticalForAnyThreadCountAndTileSize) {
     ASSERT_GE(n[i], float(first));
     ASSERT_LE(n[i], float(most));
     paths += n[i];
-    if (l[i] > 0) ++lit, over += se[i] > 0.04f * l[i] && n[i] < float(most);
+    if (l[i] > 0) ++lit, over += se[i] > 0.1f * l[i] && n[i] < float(most);
   }
   EXPECT_DOUBLE_EQ(acc.at("samples_per_pixel").at("mean").get<double>(), paths / double(n.size()));
   EXPECT_EQ(acc.at("laser_relative_standard_error").at("pixels_with_laser"), lit);
-  EXPECT_LE(acc.at("laser_relative_standard_error").at("median").get<double>(), 0.02 * 1.25);
+  EXPECT_LE(acc.at("laser_relative_standard_error").at("median").get<double>(), 0.05 * 1.25);
   EXPECT_LE(over, lit / 10);
   // metadata.json "model": what the scene and settings use, each with its reason.
   std::map<std::string, bool> model;

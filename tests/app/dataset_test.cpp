@@ -650,16 +650,42 @@ TEST_F(Dataset, AFailingSampleIsRecordedAndTheOthersGoOn) {
 }
 
 // A sample whose estimate the sensor refuses (here transients in the intensity mode without a window) is
-// listed invalid with why, and the plan goes on (the estimates, computed together, stopped the whole plan).
+// listed invalid with why, and the plan goes on (the estimates, computed together, stopped the whole plan);
+// the plan then exits 1 (it exited 0) and its averages are of the valid samples. When every probed sample
+// of the scene is refused so, the dataset is refused before any work, as for invalid scenes (its run
+// recorded every sample in failed/).
 TEST_F(Dataset, APlanListsASampleItCannotEstimateAsInvalid) {
-  write(dir_ / "d.json", "{\"seed\": 1, \"scenes\": [\"" + kScenes + "flat_target.json\"], \"samples\": 4, "
-        "\"set\": {\"outputs.transient\": true, \"camera.crop\": [0, 0, 8, 8]}, \"grid\": {\"acquisition.mode\": [\"gate_sweep\", \"intensity\"]}}");
+  const std::string body = "{\"seed\": 1, \"scenes\": [\"" + kScenes + "flat_target.json\"], \"samples\": 4, "
+                           "\"set\": {\"outputs.transient\": true, \"camera.crop\": [0, 0, 8, 8]}, \"grid\": {\"acquisition.mode\": ";
+  write(dir_ / "d.json", body + "[\"gate_sweep\", \"intensity\"]}}");
   const Result r = sh("dataset plan " + (dir_ / "d.json").string());
-  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_THAT(r.output, HasSubstr("# total: 4 samples"));
   EXPECT_THAT(r.output, HasSubstr("error: sample 1: " + kScenes + "flat_target.json: /outputs/transient: intensity mode needs no time bins"));
   EXPECT_THAT(r.output, HasSubstr("error: sample 3: "));
   EXPECT_THAT(r.output, Not(HasSubstr("error: sample 0")));
+  EXPECT_THAT(r.output, HasSubstr("\tintensity\t"));
+  EXPECT_THAT(r.output, HasSubstr("\t-\t-\t-\n"));  // no estimate for samples 1 and 3
+  EXPECT_THAT(r.output, HasSubstr("spadgen: 2 samples make an invalid run"));
+  // the per-sample disk is sample 0's (and 2's), not halved by the invalid two
+  const auto row0 = r.output.find("\n0\t"), per = r.output.find("# per sample: disk about ");
+  ASSERT_NE(row0, std::string::npos);
+  ASSERT_NE(per, std::string::npos);
+  std::string disk0 = r.output.substr(row0 + 1, r.output.find('\n', row0 + 1) - row0 - 1);
+  for (int i = 0; i < 4; ++i) disk0 = disk0.substr(disk0.find('\t') + 1);  // index, scene, mode, seed
+  disk0 = disk0.substr(0, disk0.find('\t'));
+  EXPECT_EQ(r.output.substr(per + 25, disk0.size() + 1), disk0 + ",") << r.output;
+
+  write(dir_ / "e.json", body + "[\"intensity\"]}}");
+  for (const char* cmd : {"dataset plan ", "dataset run "}) {
+    const Result e = sh(cmd + (dir_ / "e.json").string() + " -o " + (dir_ / "e").string() + " -q");
+    EXPECT_EQ(e.code, 1);
+    EXPECT_THAT(e.output, HasSubstr("e.json: sample 0: with the scene file "));
+    EXPECT_THAT(e.output, HasSubstr("intensity mode needs no time bins; set /render/window_start_ns and /render/window_stop_ns "
+                                    "to say which window transient.npy should cover (and the next 3 samples of this scene fail too)"));
+    EXPECT_EQ(std::count(e.output.begin(), e.output.end(), '\n'), 1) << e.output;
+    EXPECT_FALSE(fs::exists(dir_ / "e"));
+  }
 }
 
 // A damaged sample whose regeneration fails (a file of the user's in its folder) is failed, with why (status
