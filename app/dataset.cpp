@@ -135,8 +135,9 @@ class Estimator {
  public:
   Estimator(int repeats, int threads) : repeats_(repeats), threads_(threads) {}
 
-  // The cache key of r's estimate: a hash of its resolved scene without the keys the estimate ignores (a
-  // dataset of a million distinct pulse widths keeps 8 bytes per value, not the text).
+  // The cache key of r's estimate: a hash of its resolved scene without the keys the estimate ignores, and
+  // the durations estimate_shape rounds as rounded (a dataset of a million distinct pulse widths keeps 8
+  // bytes per value, not the text).
   static uint64_t key(const scenes::ResolvedRun& r) {
     ojson key = r.resolved;
     for (const char* k : {"seed", "seeds", "description", "ambient", "nodes", "materials"}) key.erase(k);
@@ -144,7 +145,13 @@ class Estimator {
       if (key.contains(section))
         for (const char* k : keys) key[section].erase(k);
     };
-    erase("laser", {"average_power_mW", "emission_delay_ns", "beam", "gltf_light", "half_angle_deg", "offset_m"});
+    erase("laser", {"average_power_mW", "emission_delay_ns", "beam", "gltf_light", "half_angle_deg", "offset_m", "pulse_fwhm_ps"});
+    erase("sensor", {"jitter_fwhm_ps"});
+    if (key.contains("sensor") && key["sensor"].contains("gate"))
+      for (const char* k : {"rise_ps", "fall_ps", "length_ns", "length_fwhm_ps", "skew_fwhm_ps"}) key["sensor"]["gate"].erase(k);
+    const RunConfig shape = estimate_shape(r.config);
+    const GateConfig& g = shape.sensor.gate;
+    key["rounded_durations_s"] = {shape.laser.pulse_fwhm_s, g.jitter_fwhm_s, g.rise_s, g.fall_s, g.length_s, g.length_fwhm_s, g.skew_fwhm_s};
     erase("acquisition", {"cycles_per_frame"});
     erase("camera", {"f_number", "focal_length_mm", "gltf_camera", "look_at_m", "optics_transmission", "pixel_pitch_um",
                      "position_m", "up", "vertical_fov_deg"});
@@ -181,7 +188,7 @@ class Estimator {
     tbb::parallel_for(size_t{0}, todo.size(), [&](size_t j) {
       if (interruptible && interrupt_flag().load()) return;
       try {
-        const RunConfig& c = *todo[j].second;
+        const RunConfig c = estimate_shape(*todo[j].second);
         done[j].estimate = estimate(c, repeats_, threads_, scenes_.at(scene_of(c)));
       } catch (const Error& e) {
         done[j].error = e.what();
@@ -347,6 +354,18 @@ std::string status_counts(const std::array<int64_t, 5>& c) {
 }
 
 }  // namespace
+
+RunConfig estimate_shape(RunConfig c) {
+  const auto round_up_2 = [](double v) {
+    if (!(v > 0.0) || !std::isfinite(v)) return v;
+    const double step = std::pow(10.0, std::floor(std::log10(v)) - 1.0);
+    return std::ceil(v / step - 1e-9) * step;
+  };
+  GateConfig& g = c.sensor.gate;
+  for (double* v : {&c.laser.pulse_fwhm_s, &g.jitter_fwhm_s, &g.rise_s, &g.fall_s, &g.length_s, &g.length_fwhm_s, &g.skew_fwhm_s})
+    *v = round_up_2(*v);
+  return c;
+}
 
 std::string dataset_schema() { return datasets::dataset_reference_markdown(); }
 

@@ -5,6 +5,8 @@
 #include <optional>
 #include <string>
 
+#include "core/config.h"
+
 namespace spadgen::app {
 
 struct DatasetOptions {
@@ -39,6 +41,13 @@ struct DatasetStatus {
   bool complete = false;
 };
 DatasetStatus dataset_status(const std::string& dir);
+
+// The run whose estimate stands for c's in a plan: c with the durations that set the width of the gate
+// response (the pulse, the jitter, the gate's edges, its length and its spread) rounded up to 2 significant
+// digits. A continuous random pulse width made every sample a distinct estimate of about 40 ms (the gate's
+// tabulation and the chip's maps): half an hour of CPU for a plan of 50,000 samples. The rounded values
+// widen the time window a little at most (the disk and memory of the bins it adds), never narrow it.
+RunConfig estimate_shape(RunConfig c);
 
 // The dataset file reference (Markdown), for docs/datasets.md.
 std::string dataset_schema();

@@ -16,7 +16,10 @@
 #include <sstream>
 #include <thread>
 
+#include "app/dataset.h"
+#include "app/run_parts.h"
 #include "app_fixture.h"
+#include "scenes/scene_file.h"
 #include "writers/writers.h"
 
 namespace spadgen::testing {
@@ -685,6 +688,34 @@ TEST_F(Dataset, APlanListsASampleItCannotEstimateAsInvalid) {
                                     "to say which window transient.npy should cover (and the next 3 samples of this scene fail too)"));
     EXPECT_EQ(std::count(e.output.begin(), e.output.end(), '\n'), 1) << e.output;
     EXPECT_FALSE(fs::exists(dir_ / "e"));
+  }
+}
+
+// A plan estimates a sample from its durations rounded up to 2 significant digits (app::estimate_shape: a
+// continuous random pulse width made each sample an estimate of its own, 40 ms each): the rounding is up,
+// and the rounded run's time window has as many bins as the exact one's, or a few more.
+TEST(DatasetEstimate, TheRoundedDurationsCoverTheExactTimeWindow) {
+  const struct {
+    double value, rounded;
+  } cases[] = {{57.3, 58}, {58, 58}, {123.4, 130}, {9.99, 10}, {1234.5, 1300}, {0, 0}};
+  for (const auto& k : cases) {
+    RunConfig c;
+    c.laser.pulse_fwhm_s = k.value * 1e-12;
+    EXPECT_NEAR(app::estimate_shape(c).laser.pulse_fwhm_s, k.rounded * 1e-12, 1e-9 * k.rounded * 1e-12) << k.value;
+  }
+  for (const char* set : {"laser.pulse_fwhm_ps=57.3", "laser.pulse_fwhm_ps=123.4", "sensor.jitter_fwhm_ps=33.3",
+                          "sensor.gate.rise_ps=412", "sensor.gate.fall_ps=1234", "sensor.gate.length_ns=3.73",
+                          "sensor.gate.length_fwhm_ps=111", "sensor.gate.skew_fwhm_ps=432.1"}) {
+    SCOPED_TRACE(set);
+    const RunConfig exact = scenes::load_scene_file(kScenes + "multi_object.json", {set}).config;
+    const RunConfig rounded = app::estimate_shape(exact);
+    EXPECT_NE(exact, rounded);
+    const sensor::SensorModel se(sensor_stage(exact)), sr(sensor_stage(rounded));
+    const TimeAxis a = app::time_axis(exact, se), b = app::time_axis(rounded, sr);
+    EXPECT_LE(b.start_s, a.start_s + 1e-3 * a.bin_width_s);
+    EXPECT_GE(b.bins, a.bins);  // what the disk and memory count
+    EXPECT_LE(b.bins, a.bins + a.bins / 20) << a.bins << " bins exact, " << b.bins << " rounded";
+    EXPECT_EQ(sr.K(), se.K());
   }
 }
 
