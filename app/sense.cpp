@@ -423,9 +423,13 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   // bit, and is linked rather than computed and written again.
   const bool same_tables = meta.value("sensor_tables_fnv1a64", std::string()) == scenes::sensor_tables_hash(cfg);
   const bool same_sensor = same_tables && noise_free_part(first.resolved) == noise_free_part(source.resolved);
-  if (!same_tables && meta.contains("sensor_tables_fnv1a64") && scenes::sensor_tables_hash(source.config) != meta.at("sensor_tables_fnv1a64").get<std::string>())
-    std::fprintf(stderr, "spadgen: warning: the sensor's tables (laser.pulse_shape_csv, sensor.gate.profile_csv or maps_exr, "
-                         "a pdp_csv) have changed on disk since the run: this sense uses them as they are now\n");
+  if (!same_tables && meta.contains("sensor_tables_fnv1a64") &&
+      scenes::sensor_tables_hash(source.config) != meta.at("sensor_tables_fnv1a64").get<std::string>()) {
+    std::string w = std::string(kTablesChangedWarning) + ", sensor.gate.profile_csv or maps_exr, a pdp_csv) have changed on "
+                    "disk since the run: this sense uses them as they are now";
+    std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
+    scene_warnings.push_back(std::move(w));  // metadata.json's warnings hold it too (it was on stderr only)
+  }
   RunConfig write_cfg = cfg;  // what the sensor stage writes itself
   write_cfg.outputs.ground_truth = false, write_cfg.outputs.transient = false, write_cfg.outputs.light = false;
 
@@ -444,7 +448,18 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     const auto [end, it] = std::mismatch(run_abs.begin(), run_abs.end(), out_abs.begin(), out_abs.end());
     if (end == run_abs.end())  // out is the run's folder or inside it
       throw Error("-o " + out.string() + ": sense writes a new folder beside the run, not into it");
+    if (it == out_abs.end())  // out holds the run: its swap would remove the run (a repeats set's realisation)
+      throw Error("-o " + out.string() + ": it holds the run " + run_abs.string() + ", which sense reads, and sense replaces " +
+                  "its output folder as a whole; write beside the run, not around it");
   }
+  // Realisations differ in their sampled counts and frames only (a gate sweep's; a 2D run's images hold its
+  // counts): without them R folders of the same files (it wrote them, exit 0).
+  const std::vector<sensor::DeclaredOutput> declared = sensor.acquisition().outputs();
+  if (runs.size() > 1 && !cfg.outputs.counts && !cfg.outputs.frames &&
+      std::none_of(declared.begin(), declared.end(), [](const sensor::DeclaredOutput& d) { return d.file == "intensity.exr"; }))
+    throw Error("--repeats " + std::to_string(runs.size()) + ": the realisations differ in their counts and frames only, and " +
+                "outputs.counts and outputs.frames are false: each would hold the same files; set one of them true (--set " +
+                "outputs.counts=true), or sense once");
   // The run's objects bound labels.exr's slots (a run before objects had none).
   const int objects = meta.contains("objects") ? int(meta.at("objects").size()) : 0;
   std::vector<fs::path> dirs;
@@ -462,7 +477,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   for (const StackLayout& l : stack_layout(write_cfg, sensor, img, axis))
     if (l.file.starts_with("detection_rate.") || l.file.starts_with("expected_counts.")) shared.insert(l.file);
   bool two_d = false;
-  for (const sensor::DeclaredOutput& d : sensor.acquisition().outputs()) two_d |= d.file == "intensity.exr";
+  for (const sensor::DeclaredOutput& d : declared) two_d |= d.file == "intensity.exr";
   if (!two_d) shared.insert("previews/intensity.png");  // the laser light, in a gate sweep
   if (same_sensor)
     for (const auto& f : meta.at("files"))

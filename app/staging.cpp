@@ -188,6 +188,7 @@ void Staging::init(const fs::path& out) {
   if (fs::is_directory(out_, ec) && is_mount_point(out_))
     throw cannot("it is a mount point; " + what_ + " replaces the output folder as a whole, renaming a new folder into its " +
                  "place, which cannot be done to a mount point, so name a folder inside it (" + (out_ / "run").string() + ")");
+  if (!of_runs_ && owned_.empty()) refuse_a_realisation_or_a_folder_being_written();
   lock();
   try {
     recover();
@@ -273,6 +274,49 @@ void release_folder_lock(const fs::path& lock_path, int& fd, bool shared = false
   fd = -1;
 }
 }  // namespace
+
+// A run folder OUT that is one realisation of a `sense --repeats` set (its metadata.json's sense.repeats > 1),
+// or that lies in a folder another spadgen process writes as a whole (a set of realisations being made):
+// the set's folder would mix calls, or its swap would replace this run's files (both exited 0).
+void Staging::refuse_a_realisation_or_a_folder_being_written() const {
+  const auto cannot = [&](const std::string& why) {
+    return Error("cannot use " + out_.string() + " as the output folder (-o): " + why);
+  };
+  // A set's folders are repeat_000, repeat_001, ...: a folder of that name beside a set's realisation 0
+  // (or that is one) is in the set.
+  const bool repeat_name = name_.size() > 7 && starts_with(name_, "repeat_") &&
+                           std::all_of(name_.begin() + 7, name_.end(), [](char c) { return c >= '0' && c <= '9'; });
+  std::error_code ec;
+  for (const fs::path& m : {out_ / "metadata.json", parent_ / "repeat_000" / "metadata.json"}) {
+    if (!repeat_name || !fs::is_regular_file(m, ec)) continue;
+    nlohmann::json meta;
+    try {
+      meta = nlohmann::json::parse(scenes::read_file_bounded(m.string(), uint64_t{64} << 20, "metadata"), nullptr,
+                                   /*allow_exceptions=*/false);
+    } catch (const Error&) {
+    }
+    const nlohmann::json* sense = meta.is_object() && meta.contains("sense") && meta["sense"].is_object() ? &meta["sense"] : nullptr;
+    const nlohmann::json repeats = sense != nullptr ? sense->value("repeats", nlohmann::json()) : nlohmann::json();
+    if (repeats.is_number_integer() && repeats.get<int64_t>() > 1)
+      throw cannot("it lies in " + parent_.string() + ", the " + std::to_string(repeats.get<int64_t>()) +
+                   " realisations that one `spadgen sense --repeats` wrote together, a set no other call writes into; " +
+                   "write the whole set again (-o " + parent_.string() + " --repeats " + std::to_string(repeats.get<int64_t>()) +
+                   "), or choose another folder");
+  }
+  const fs::path parent_lock = lock_path_of(parent_);
+  const int fd = ::open(parent_lock.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return;
+  const bool written = ::flock(fd, LOCK_SH | LOCK_NB) != 0 && errno == EWOULDBLOCK;
+  char holder[64] = {0};
+  const ssize_t n = written ? ::pread(fd, holder, sizeof holder - 1, 0) : 0;
+  ::close(fd);  // (and the shared lock with it)
+  std::string who = n > 0 ? std::string(holder, static_cast<size_t>(n)) : std::string();
+  while (!who.empty() && (who.back() == '\n' || who.back() == ' ')) who.pop_back();
+  if (written)
+    throw cannot("the folder holding it, " + parent_.string() + ", is being written by another spadgen process" +
+                 (who.empty() ? std::string() : " (" + who + ")") + ", which replaces it as a whole when it ends; wait for it " +
+                 "to finish, or choose another folder");
+}
 
 void Staging::lock() {
   lock_path_ = lock_path_of(out_);
@@ -412,7 +456,8 @@ void Staging::check_owned(bool publishing) const {
   const std::vector<std::string> foreign = foreign_entries(out_);
   if (foreign.empty()) return;
   const std::string list = foreign_list(foreign);
-  std::string known = "not listed in its metadata.json";
+  std::string known = of_runs_ ? "expected only the realisations' folders, repeat_NNN, each with the files its metadata.json lists"
+                               : "not listed in its metadata.json";
   if (!owned_.empty()) {
     known = "expected only ";
     for (size_t i = 0; i < owned_.size(); ++i) known += (i == 0 ? "" : i + 1 == owned_.size() ? " and " : ", ") + owned_[i];

@@ -62,6 +62,7 @@ class Staging {
 
  private:
   int step(const std::string& name) const { return hook_ ? hook_(name) : 0; }
+  void refuse_a_realisation_or_a_folder_being_written() const;
   void lock();
   void unlock();
   void recover();

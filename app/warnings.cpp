@@ -91,7 +91,8 @@ std::vector<std::string> laser_warnings(const RunConfig& c, const render::Camera
 }
 
 bool is_sensor_warning(const std::string& warning) {
-  return warning.rfind(kGateWarning, 0) == 0 || warning.find(kPdpWarning) != std::string::npos;
+  return warning.rfind(kGateWarning, 0) == 0 || warning.rfind(kTablesChangedWarning, 0) == 0 ||
+         warning.find(kPdpWarning) != std::string::npos;
 }
 
 std::vector<std::string> sensor_warnings(const sensor::SensorModel& sensor) {

@@ -28,6 +28,10 @@ inline constexpr double kWarnGateError = 2e-3;
 // Every such warning starts with this.
 inline constexpr const char* kGateWarning = "sensor.gate: the gate is tabulated";
 
+// `sense`'s warning that the sensor's tables changed on disk since the run starts with this (a sensor
+// warning: a sense of that sense compares its own tables).
+inline constexpr const char* kTablesChangedWarning = "the sensor's tables (laser.pulse_shape_csv";
+
 // Every warning about a pixel type blind to the laser holds this.
 inline constexpr const char* kPdpWarning = ": its photon detection probability at the laser's wavelength";
 

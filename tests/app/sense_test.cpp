@@ -89,6 +89,15 @@ TEST_F(App, SenseLinksTheRunsNoiseFreeFilesOnlyForTheRunsOwnSensor) {
   size_t higher = 0;
   for (size_t i = 0; i < was.size(); ++i) higher += now[i] > was[i];
   EXPECT_GT(higher, was.size() / 2);  // twice the PDP: more avalanches wherever light arrives
+  // said on stderr (-q keeps warnings) and kept in metadata.json's warnings (it was on stderr only), and not
+  // carried into a sense of that sense, whose tables are its own
+  EXPECT_THAT(r.output, HasSubstr("have changed on disk since the run"));
+  const auto warned = [](const fs::path& d) {
+    return nlohmann::json::parse(slurp(d / "metadata.json")).at("warnings").dump().find("have changed on disk") != std::string::npos;
+  };
+  EXPECT_TRUE(warned(dir_ / "table"));
+  ASSERT_EQ(sh("sense " + (dir_ / "table").string() + " -q --noise-seed 3 -o " + (dir_ / "table2").string()).code, 0);
+  EXPECT_FALSE(warned(dir_ / "table2"));
 
   // The disk a sense needs: the files linked from the run take none, each further realisation writes its
   // counts and frames again (100,000 realisations of this run's frames: hundreds of GB, refused before
@@ -387,6 +396,56 @@ TEST_F(App, OneRealisationAndSeveralReplaceEachOther) {
   EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("holds files that spadgen did not write there (mine/"));
   EXPECT_TRUE(fs::exists(dir_ / "s/mine/metadata.json"));
+}
+
+// A realisation's folder is part of its set: a sense into repeat_001 of a set (it mixed two calls in one
+// set, exit 0), and a sense of repeat_001 into the set's folder (its swap removed the run it read, exit 0),
+// are refused; so are realisations that would hold the same files (no counts, no frames), and a folder
+// inside one another spadgen process is writing (its swap replaced this one's files when it ended).
+TEST_F(App, SenseKeepsARealisationSetWhole) {
+  ASSERT_EQ(sh("run " + kLit + " -o " + (dir_ / "run").string()).code, 0);
+  ASSERT_EQ(sh("sense " + (dir_ / "run").string() + " -q --repeats 2 -o " + (dir_ / "set").string()).code, 0);
+  const std::string before = slurp(dir_ / "set/repeat_001/counts.npy");
+  Result r = sh("sense " + (dir_ / "run").string() + " -q --noise-seed 77 -o " + (dir_ / "set/repeat_001").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("it lies in " + fs::canonical(dir_ / "set").string() +
+                                  ", the 2 realisations that one `spadgen sense --repeats` wrote together"));
+  for (const char* o : {"set/repeat_001", "set/repeat_002"}) {
+    r = sh("run " + kLit + " -o " + (dir_ / o).string());
+    EXPECT_EQ(r.code, 1) << o;
+    EXPECT_THAT(r.output, HasSubstr("the 2 realisations that one `spadgen sense --repeats` wrote together")) << o;
+  }
+  EXPECT_FALSE(fs::exists(dir_ / "set/repeat_002"));
+  r = sh("sense " + (dir_ / "set/repeat_001").string() + " -q -o " + (dir_ / "set").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("it holds the run " + fs::canonical(dir_ / "set/repeat_001").string() + ", which sense reads"));
+  EXPECT_EQ(slurp(dir_ / "set/repeat_001/counts.npy"), before);
+  EXPECT_TRUE(fs::exists(dir_ / "set/repeat_000/metadata.json"));
+  // a set's realisation can still be read: sensed beside the set
+  EXPECT_EQ(sh("sense " + (dir_ / "set/repeat_001").string() + " -q -o " + (dir_ / "again").string()).code, 0);
+
+  r = sh("sense " + (dir_ / "run").string() + " -q --repeats 3 --set outputs.counts=false --set outputs.frames=false -o " +
+         (dir_ / "same").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("--repeats 3: the realisations differ in their counts and frames only"));
+  EXPECT_FALSE(fs::exists(dir_ / "same"));
+
+  // another process holding a folder as its output (its lock, as a sense --repeats holds its set's): a run
+  // folder inside it is refused while it writes
+  fs::create_directories(dir_ / "new_set");
+  const fs::path lock = dir_ / ".new_set.spadgen-lock";
+  const int fd = ::open(lock.c_str(), O_RDWR | O_CREAT, 0644);
+  ASSERT_GE(fd, 0);
+  ASSERT_EQ(::flock(fd, LOCK_EX), 0);
+  ASSERT_EQ(::pwrite(fd, "pid 4242\n", 9, 0), 9);
+  r = sh("sense " + (dir_ / "run").string() + " -q -o " + (dir_ / "new_set/repeat_001").string());
+  ::close(fd);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("the folder holding it, " + fs::canonical(dir_ / "new_set").string() +
+                                  ", is being written by another spadgen process (pid 4242)"));
+  EXPECT_FALSE(fs::exists(dir_ / "new_set/repeat_001"));
+  // once it is gone, a folder inside is the user's to choose
+  EXPECT_EQ(sh("sense " + (dir_ / "run").string() + " -q -o " + (dir_ / "new_set/repeat_001").string()).code, 0);
 }
 
 // A cone beam whose spot is far smaller than a pixel (0.001 deg against a pixel's 0.01077 deg: 9.4 um at
