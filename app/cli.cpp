@@ -1,5 +1,7 @@
 #include "app/cli.h"
 
+#include <poll.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -43,15 +45,29 @@ std::optional<int> parse_command_line(CLI::App& cli, int argc, char** argv) {
   }
 }
 
+namespace {
+// stdout is a pipe whose every reader has closed it (the write end polls POLLERR).
+bool stdout_reader_gone() {
+  struct stat st {};
+  if (::fstat(STDOUT_FILENO, &st) != 0 || !S_ISFIFO(st.st_mode)) return false;
+  pollfd p{STDOUT_FILENO, POLLOUT, 0};
+  return ::poll(&p, 1, 0) == 1 && (p.revents & POLLERR) != 0;
+}
+}  // namespace
+
 int run_command(const std::function<void()>& command) {
   try {
     command();
     errno = 0;
     // What went to stdout (schema, info, plan, status, scores) was written: a full disk or a closed stream
     // is an error, not a silent exit 0 with a truncated file.
-    if (std::cout.flush(); !std::cout.good() || std::fflush(stdout) != 0 || std::ferror(stdout))
+    if (std::cout.flush(); !std::cout.good() || std::fflush(stdout) != 0 || std::ferror(stdout)) {
+      // A reader that closed the pipe early (`spadgen schema | head -5`) has what it wanted: a quiet exit 0,
+      // as ripgrep does (it was an error or not by the race between the two processes).
+      if (errno == EPIPE || stdout_reader_gone()) return kExitOk;
       throw Error(std::string("cannot write the output to standard output (a full disk, or a closed pipe): it is incomplete") +
                   (errno != 0 ? std::string(": ") + std::strerror(errno) : ""));
+    }
     return kExitOk;
   } catch (const Interrupted& e) {
     std::fprintf(stderr, "spadgen: %s\n", e.what());

@@ -94,7 +94,7 @@ int main(int argc, char** argv) {
                "settings, another chip, other noise");
   sense_cmd->add_option("run_dir", sense.run_dir, "folder of a run written with outputs.light=true")->required()->check(CLI::ExistingDirectory);
   sense_cmd->add_option("-o,--out", sense.out_dir, "output folder (default: RUN_DIR-sense)")->check(kNamed);
-  sense_cmd->add_option("--set", sense.overrides, "override a sensor.*, acquisition.*, seeds.chip, seeds.noise or outputs.* key")
+  sense_cmd->add_option("--set", sense.overrides, "override a sensor.*, acquisition.*, seeds.chip, seeds.noise or outputs.{counts,frames,expected_counts,detection_rate,previews,storage,exr_compression} key")
       ->type_name("KEY=VALUE");
   CLI::Option* noise_opt = sense_cmd->add_option("--noise-seed", noise_seed, "seed of the temporal noise (seeds.noise)");
   CLI::Option* chip_opt = sense_cmd->add_option("--chip-seed", chip_seed, "seed of the chip's fixed pattern (seeds.chip)");

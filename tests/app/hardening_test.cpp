@@ -469,7 +469,8 @@ TEST_F(Hardening, LeftoversOfKilledRunsAreCleaned) {
 
 // Standard streams closed (a daemon, a cron job): the files the run opens do not take their descriptors,
 // so nothing the run prints lands in them (counts.npy began "spadgen: ..." with stdout and stderr closed,
-// exit 0); output that cannot reach stdout is an error, not exit 0; a derived output's temporary file
+// exit 0); output that cannot reach stdout is an error, not exit 0 (but for a reader that stopped reading);
+// a derived output's temporary file
 // left by a killed reconstruct does not make the folder another's.
 TEST_F(Hardening, ClosedOrFullStandardStreamsNeverReachTheOutputs) {
   const fs::path ref = dir_ / "ref", closed = dir_ / "closed", warned = dir_ / "warned";
@@ -487,6 +488,13 @@ TEST_F(Hardening, ClosedOrFullStandardStreamsNeverReachTheOutputs) {
   const Outcome full = spadgen("schema --json-schema > /dev/full");
   expect_exit(full, 1, "stdout on a full device");
   EXPECT_THAT(full.err, HasSubstr("cannot write the output to standard output (a full disk, or a closed pipe): it is incomplete"));
+  // A reader that closed the pipe early (`spadgen schema | head -5`) is not an error: exit 0, nothing said
+  // (it was exit 1 with the message above, or exit 0, by the race between the two processes). The reader
+  // here closes its end before spadgen starts.
+  const Result early = shell("bash -o pipefail -c '(sleep 0.3; exec " + bin() + " schema --json-schema) 2>" + (dir_ / "err").string() +
+                             " | (exec 0<&-; sleep 1)'");
+  EXPECT_EQ(early.code, 0) << slurp(dir_ / "err");
+  EXPECT_EQ(slurp(dir_ / "err"), "");
   std::ofstream(ref / ".detections_edges.exr.tmp-999999999-0") << "partial";
   expect_exit(spadgen("run " + kTiny + " -q -o " + ref.string()), 0, "a run into a folder with a killed reconstruct's temporary file");
   EXPECT_FALSE(fs::exists(ref / ".detections_edges.exr.tmp-999999999-0"));
