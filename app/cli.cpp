@@ -55,7 +55,7 @@ bool stdout_reader_gone() {
 }
 }  // namespace
 
-int run_command(const std::function<void()>& command) {
+int run_command(const std::function<void()>& command, const std::string& name) {
   try {
     command();
     errno = 0;
@@ -70,7 +70,12 @@ int run_command(const std::function<void()>& command) {
     }
     return kExitOk;
   } catch (const Interrupted& e) {
-    std::fprintf(stderr, "spadgen: %s\n", e.what());
+    // The message of throw_if_interrupted (core/error.h) says "the run": another command is named.
+    std::string message = e.what();
+    const std::string run = "the run stopped and wrote nothing";
+    if (const size_t at = message.find(run); at != std::string::npos && !name.empty() && name != "run")
+      message.replace(at, 7, "spadgen " + name);
+    std::fprintf(stderr, "spadgen: %s\n", message.c_str());
     return kExitInterrupted;
   } catch (const Error& e) {
     // A file that failed while being written lies in the output folder's staging folder (hidden, beside

@@ -20,8 +20,9 @@ inline constexpr int kExitOk = 0, kExitBadInput = 1, kExitInterrupted = 2, kExit
 // (0) or a usage error in spadgen's format (1).
 std::optional<int> parse_command_line(CLI::App& cli, int argc, char** argv);
 
-// Runs a command and returns its exit code, printing what went wrong on stderr.
-int run_command(const std::function<void()>& command);
+// Runs a command and returns its exit code, printing what went wrong on stderr. `name` names the command
+// in the message of a signal ("spadgen sense stopped and wrote nothing"; "the run" by default).
+int run_command(const std::function<void()>& command, const std::string& name = "");
 
 // `--seed S` (or --noise-seed, --chip-seed: `option`): an integer in [0, 2^53] written as digits; throws
 // spadgen::Error naming the option otherwise (CLI11 read "-1" as 18446744073709551615).

@@ -185,6 +185,11 @@ int main(int argc, char** argv) {
 
   if (const std::optional<int> code = spadgen::app::parse_command_line(cli, argc, argv)) return *code;
   int done_code = spadgen::app::kExitOk;  // the exit code of a command that ran to its end
+  std::string command_name;  // "sense", "dataset run": for the message of a signal
+  for (const CLI::App* c = &cli; !c->get_subcommands().empty();) {
+    c = c->get_subcommands().front();
+    command_name += (command_name.empty() ? "" : " ") + c->get_name();
+  }
   const int code = spadgen::app::run_command([&] {
     if (*run_cmd) {
       if (*seed_opt) run.seed = spadgen::app::parse_seed(seed);
@@ -236,6 +241,6 @@ int main(int argc, char** argv) {
     } else if (*schema_cmd) {
       std::cout << (json_schema ? spadgen::scenes::schema_json() : spadgen::scenes::schema_reference_markdown());
     }
-  });
+  }, command_name);
   return code == spadgen::app::kExitOk ? done_code : code;
 }

@@ -298,6 +298,14 @@ TEST_F(Hardening, ASignalStopsARunInsideItsOnlyTileAndExitsWithCode2) {
   EXPECT_THAT(t.output, HasSubstr("spadgen: interrupted by a signal: the run stopped and wrote nothing"));
   EXPECT_LT(t.seconds, 3.0);
   EXPECT_FALSE(fs::exists(dir_ / "out"));
+  // Another command is named as itself (sense said "the run stopped").
+  expect_exit(spadgen("run " + kScenes + "multi_object.json -q --set camera.crop=[448,186,64,64] --set render.samples_per_pixel=1 "
+                      "--set outputs.light=true -o " + (dir_ / "lit").string()), 0, "a run that saves its light");
+  const Result s = shell("timeout -s KILL 30 timeout --preserve-status -s TERM 1 " + bin() + " sense " + (dir_ / "lit").string() +
+                         " -q --repeats 100 -o " + (dir_ / "sensed").string());
+  EXPECT_EQ(s.code, 2) << s.output;
+  EXPECT_THAT(s.output, HasSubstr("spadgen: interrupted by a signal: spadgen sense stopped and wrote nothing"));
+  EXPECT_FALSE(fs::exists(dir_ / "sensed"));
 }
 
 // A closed pipe on stderr (`spadgen run ... 2>&1 | head -c 1`) does not end a run: its progress lines are
