@@ -262,7 +262,7 @@ void add_pixel_type(std::vector<Key>& s, const std::string& name, P type) {
   s.push_back(number(p + "pdp_peak", PIXEL(pdp_peak), kNone, open_closed(0, 1), "peak photon detection probability"));
   s.push_back(number(p + "pdp_peak_wavelength_nm", PIXEL(pdp_peak_wavelength_m), kNmUnit, closed(200, 2000), "wavelength of the PDP peak; without pdp_csv, strictly between 300 and 1100 nm (the built-in curve is zero at and beyond both ends)"));
   s.push_back(file(p + "pdp_csv", PIXEL(pdp_csv), "table of (wavelength_nm, PDP) replacing the built-in curve, covering the laser's wavelength (0 outside it); relative to the scene file; \"\" = built-in curve scaled to pdp_peak"));
-  s.push_back(number(p + "pdp_nonuniformity", PIXEL(pdp_nonuniformity), kNone, closed(0, 0.5), "relative spread (sigma) of PDP across pixels"));
+  s.push_back(number(p + "pdp_nonuniformity", PIXEL(pdp_nonuniformity), kNone, closed(0, 0.2), "relative spread (sigma) of PDP across pixels: each pixel's PDP is the curve times 1 + sigma z, z a standard normal truncated at 5, so at most 0.2 keeps it positive (and the curve times 1 + 5 sigma must stay at most 1)"));
   s.push_back(number(p + "dcr_median_cps", PIXEL(dcr_median_cps), plain("counts/s"), closed(0, 1e7), "median dark count rate at room temperature (25 C)"));
   s.push_back(number(p + "dcr_log_sigma", PIXEL(dcr_log_sigma), kNone, closed(0, 5), "spread (sigma of the natural log) of the main DCR population"));
   s.push_back(number(p + "hot_pixel_fraction", PIXEL(hot_pixel_fraction), kNone, closed(0, 1), "fraction of hot pixels (the DCR tail)"));

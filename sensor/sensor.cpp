@@ -110,6 +110,20 @@ SensorModel::Impl::Impl(const SensorStageConfig& c) : cfg(c) {
         << " nm (laser.wavelength_nm): its pixels would not see the laser; expected a table that covers it";
       throw Error(m.str());
     }
+    // Each pixel's PDP is the curve times 1 + pdp_nonuniformity z (z truncated at 5): a probability at most 1
+    // (a pdp_peak of 1 gave half the pixels a PDP above 1; a peak wavelength off the built-in curve's own
+    // peak scaled it past 1 at 520 nm).
+    const double spread = cfg.sensor.pdp_nonuniformity ? tc[t]->pdp_nonuniformity : 0.0;
+    if (const double most = curve.max() * (1.0 + 5.0 * spread); most > 1.0) {
+      const std::string key = "sensor." + types[t].name;
+      std::ostringstream m;
+      m << key << ": the PDP curve reaches " << curve.max()
+        << (tc[t]->pdp_csv.empty() ? " (the built-in curve scaled so that PDP(pdp_peak_wavelength_nm) = pdp_peak)" : " (pdp_csv)");
+      if (spread > 0.0) m << " and " << key << ".pdp_nonuniformity " << spread << " spreads it to " << most << " (times 1 + 5 sigma)";
+      m << ": expected a photon detection probability of at most 1; lower the curve"
+        << (spread > 0.0 ? ", or the spread (sensor.pdp_nonuniformity = false for none)" : "");
+      throw Error(m.str());
+    }
     types[t].pdp_laser = curve.at(cfg.laser.wavelength_m);
     types[t].pdp_ambient = curve.band_average(cfg.ambient.wavelength_m, cfg.ambient.bandwidth_m);
     types[t].fill_factor = tc[t]->fill_factor;

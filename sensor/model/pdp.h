@@ -1,5 +1,6 @@
 // Photon detection probability of a SPAD as a function of wavelength.
 #pragma once
+#include <algorithm>
 #include <string>
 #include <vector>
 
@@ -15,6 +16,7 @@ class PdpCurve {
   // Linear interpolation between table points; 0 outside the table.
   double at(double wavelength_m) const;
   // The table's first and last wavelength, nm.
+  double max() const { return *std::max_element(pdp_.begin(), pdp_.end()); }
   double first_nm() const { return nm_.front(); }
   double last_nm() const { return nm_.back(); }
   // Mean PDP over [centre - width/2, centre + width/2] for an equal-energy spectrum, i.e. weighted by the

@@ -75,7 +75,7 @@ TEST_F(Extremes, DistancesFromOneMillimetreToTenKilometres) {
     ASSERT_FALSE(o.laser.empty());
     // Hit points are float points on the target's triangles: their error is about the triangle's size
     // times 2^-23 (here 0.5 m x scale), which moves the distance by that much: at 1 mm, 1e-4 of it. (A
-    // 10 km triangle seen from 1 cm is 2 % off: docs/accuracy.md.)
+    // 20 km target seen from 1 cm is 2.8 % off: docs/accuracy.md.)
     const double tolerance = 1e-5 + 4 * 0.5 * scale * std::ldexp(1.0, -23) / d;
     EXPECT_NEAR(mean(o.laser) * d * d / k, 1.0, tolerance) << d << " m";
   }

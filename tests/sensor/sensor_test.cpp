@@ -404,6 +404,37 @@ TEST(Sensor, BinRangesChangeNothing) {
   EXPECT_THROW(model.process(bad), Error);
 }
 
+// Each pixel's PDP is the curve times 1 + pdp_nonuniformity z (z truncated at 5): a design whose pixels
+// could pass a PDP of 1 is refused (a pdp_peak of 1 gave half the pixels a PDP above 1, up to 1.05 at the
+// default spread; a peak wavelength off the built-in curve's peak scaled the curve past 1 at 520 nm).
+TEST(Sensor, APdpAboveOneIsRefused) {
+  const auto message = [](const SensorStageConfig& c) {
+    try {
+      SensorModel m(c);
+      return std::string();
+    } catch (const Error& e) {
+      return std::string(e.what());
+    }
+  };
+  SensorStageConfig c = sweep_config(8, 8);
+  c.sensor.pixel_A.pdp_peak = 1.0;
+  c.sensor.pixel_A.pdp_nonuniformity = 0.014;
+  const auto says = [&](const std::string& what) { return message(c).find(what) != std::string::npos; };
+  EXPECT_TRUE(says("sensor.pixel_A: the PDP curve reaches 1 (the built-in curve scaled so that PDP(pdp_peak_wavelength_nm) = "
+                   "pdp_peak) and sensor.pixel_A.pdp_nonuniformity 0.014 spreads it to 1.07 (times 1 + 5 sigma): expected a "
+                   "photon detection probability of at most 1")) << message(c);
+  c.sensor.pdp_nonuniformity = false;  // no spread: a PDP of 1 is a probability
+  EXPECT_EQ(message(c), "");
+  const SensorModel ideal(c);
+  const SensorMapsTile maps = ideal.maps({0, 0, 8, 8});
+  for (float pde : maps.pde) EXPECT_LE(pde, 1.0f);
+  c.sensor.pdp_nonuniformity = true;
+  c.sensor.pixel_A.pdp_peak = 0.9, c.sensor.pixel_A.pdp_nonuniformity = 0.02;  // 0.9 x 1.1 = 0.99
+  EXPECT_EQ(message(c), "");
+  c.sensor.pixel_A.pdp_peak = 0.3, c.sensor.pixel_A.pdp_peak_wavelength_m = 350e-9;  // 0.22 of the curve's peak there
+  EXPECT_TRUE(says("sensor.pixel_A: the PDP curve reaches 1.36")) << message(c);
+}
+
 TEST(Sensor, TileWithoutHaloIsRejected) {
   SensorStageConfig c = sweep_config(16, 16);
   SensorModel model(c);
