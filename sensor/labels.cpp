@@ -41,10 +41,16 @@ ObjectLabelsTile object_labels(const SensorModel& sensor, const GroundTruthTile&
         slot.push_back(e);
       }
     }
-  const std::vector<double> rates = sensor.return_lambda(returns, axis);
+  // The returns' rates a block at a time, at most about 8 MB of them (each return's rates are its own): the
+  // whole tile's at once took returns x K doubles, 82 MB per tile at 10,001 gate positions, which the
+  // resource plan did not count (a run of 278 MB planned peaked at 594 MB).
+  const size_t block = std::max<size_t>(1, (size_t{1} << 20) / std::max<size_t>(1, K));
+  std::vector<double> rates;
   for (size_t ri = 0; ri < returns.size(); ++ri) {
+    if (ri % block == 0)
+      rates = sensor.return_lambda({returns.begin() + ptrdiff_t(ri), returns.begin() + ptrdiff_t(std::min(returns.size(), ri + block))}, axis);
     const size_t e = slot[ri], i = e / slots;
-    const double* own = rates.data() + ri * K;
+    const double* own = rates.data() + (ri % block) * K;
     const double peak = *std::max_element(own, own + K);
     if (!(peak > 0.0)) continue;
     const auto on_plateau = [&](size_t j) { return own[j] >= kEdgeFraction * peak; };
