@@ -130,7 +130,8 @@ Estimate estimate(const RunConfig& c, int repeats, int threads, const SceneSize&
 // shape of run. The estimate does not depend on the seeds, the light's strength or the scene's content,
 // nor on the laser's emission delay (it shifts the returns, not the time axis's size), the cycles per
 // frame (they scale the rates), the camera's optics and pose or the laser's beam: varying them costs
-// about 0.25 ms per sample to plan, the gate's keys, the pulse or the frames about 40 ms per distinct value.
+// about 0.25 ms per sample to plan; the durations estimate_shape rounds, about 40 ms per distinct rounded
+// value; the gate's other keys or the frames, about 40 ms per distinct value.
 class Estimator {
  public:
   Estimator(int repeats, int threads) : repeats_(repeats), threads_(threads) {}
@@ -271,7 +272,7 @@ void check_samples(const DatasetSpec& spec, const datasets::Shard& shard, const 
 // sample of a scene file makes an invalid scene or a run the sensor refuses (its time axis, its tables:
 // transients in the intensity mode), the mistake is the dataset file's, refused before any work (it was
 // recorded as 5000 failed samples). The estimates made here stay in the estimator's cache.
-void refuse_a_dataset_of_invalid_samples(const DatasetSpec& spec, Estimator& estimator) {
+void refuse_a_dataset_of_invalid_samples(const DatasetSpec& spec, Estimator& estimator, bool interruptible) {
   for (size_t k = 0; k < spec.scenes.size(); ++k) {
     const std::vector<int64_t> probes = datasets::probe_samples(spec, k);
     std::string why;
@@ -281,8 +282,10 @@ void refuse_a_dataset_of_invalid_samples(const DatasetSpec& spec, Estimator& est
       try {
         const scenes::ResolvedRun r = scenes::load_scene_file(spec.scenes[k], datasets::make_sample(spec, probes[j]).overrides);
         const uint64_t key = Estimator::key(r);
-        estimator.add({{key, &r.config}}, false);
+        estimator.add({{key, &r.config}}, interruptible);
         error = estimator.at(key).error;
+      } catch (const Interrupted&) {
+        throw;
       } catch (const Error& e) {
         error = e.what();
       }
@@ -372,8 +375,9 @@ std::string dataset_schema() { return datasets::dataset_reference_markdown(); }
 DatasetPlan dataset_plan(const DatasetOptions& options) {
   const DatasetSpec spec = datasets::load_dataset_file(options.file);
   const datasets::Shard shard = choose_shard(options);
+  const ThreadLimit thread_limit(options.threads);
   Estimator estimator(spec.repeats, options.threads);
-  refuse_a_dataset_of_invalid_samples(spec, estimator);
+  refuse_a_dataset_of_invalid_samples(spec, estimator, false);
   std::optional<DatasetFolder> folder;
   if (!options.out_dir.empty()) {
     folder.emplace(spec, options.out_dir);
@@ -403,7 +407,6 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
   // so it shows its progress.
   const int64_t owned = shard.owned(n);
   Progress bar(size_t(owned), options.progress && owned > 10000, "samples");
-  const ThreadLimit thread_limit(options.threads);
   check_samples(spec, shard, folder ? &*folder : nullptr, estimator, true, false, [&](Checked& checked) {
     const Sample& s = checked.sample;
     const int64_t i = s.index;
@@ -693,14 +696,14 @@ void dataset_run(const DatasetOptions& options) {
   const DatasetSpec spec = datasets::load_dataset_file(options.file);
   const datasets::Shard shard = choose_shard(options);
   if (options.out_dir.empty()) throw Error("dataset run: expected the dataset folder (-o DIR)");
+  InterruptGuard interrupt_guard;  // for the whole run: the runs and senses of its samples hold theirs inside it
+  const ThreadLimit thread_limit(options.threads);  // the samples' checks too (each run and sense sets its own as well)
   Estimator estimator(spec.repeats, options.threads);
-  refuse_a_dataset_of_invalid_samples(spec, estimator);  // before the folder is made
+  refuse_a_dataset_of_invalid_samples(spec, estimator, true);  // before the folder is made
   const DatasetFolder folder(spec, options.out_dir);
   folder.claim();
   // The index is written by the last run on the folder to end (datasets::RunPresence).
   const std::unique_ptr<datasets::RunPresence> presence = folder.enter();
-  InterruptGuard interrupt_guard;  // for the whole run: the runs and senses of its samples hold theirs inside it
-  const ThreadLimit thread_limit(options.threads);  // the samples' checks too (each run and sense sets its own as well)
   SampleHashes hashes(spec.count() <= kMaxKeptHashes ? size_t(spec.count()) : 0);
   try {
     run_owned_samples(options, spec, shard, folder, *presence, hashes, estimator);

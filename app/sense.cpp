@@ -441,8 +441,14 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   const fs::path run_abs = folder(src);
   fs::path run_named = fs::absolute(src).lexically_normal();  // as named: beside a link, not its target
   if (!run_named.has_filename()) run_named = run_named.parent_path();
-  const fs::path out = options.out_dir.empty() ? run_named.parent_path() / (run_named.filename().string() + "-sense")
-                                               : fs::path(options.out_dir);
+  // A realisation of a sense --repeats set (set/repeat_001): beside the set (set-repeat_001-sense), which holds
+  // its realisations only.
+  const bool realisation = meta.contains("sense") && meta["sense"].is_object() &&
+                           meta["sense"].value("repeats", json()).is_number_integer() && meta["sense"]["repeats"].get<int64_t>() > 1;
+  const fs::path beside = realisation ? run_named.parent_path().parent_path() /
+                                            (run_named.parent_path().filename().string() + "-" + run_named.filename().string() + "-sense")
+                                      : run_named.parent_path() / (run_named.filename().string() + "-sense");
+  const fs::path out = options.out_dir.empty() ? beside : fs::path(options.out_dir);
   {
     const fs::path out_abs = folder(out);
     const auto [end, it] = std::mismatch(run_abs.begin(), run_abs.end(), out_abs.begin(), out_abs.end());
@@ -455,11 +461,11 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   // Realisations differ in their sampled counts and frames only (a gate sweep's; a 2D run's images hold its
   // counts): without them R folders of the same files (it wrote them, exit 0).
   const std::vector<sensor::DeclaredOutput> declared = sensor.acquisition().outputs();
-  if (runs.size() > 1 && !cfg.outputs.counts && !cfg.outputs.frames &&
+  if (runs.size() > 1 && !cfg.outputs.counts && !cfg.outputs.frames && !cfg.outputs.previews &&
       std::none_of(declared.begin(), declared.end(), [](const sensor::DeclaredOutput& d) { return d.file == "intensity.exr"; }))
-    throw Error("--repeats " + std::to_string(runs.size()) + ": the realisations differ in their counts and frames only, and " +
-                "outputs.counts and outputs.frames are false: each would hold the same files; set one of them true (--set " +
-                "outputs.counts=true), or sense once");
+    throw Error("--repeats " + std::to_string(runs.size()) + ": the realisations differ in their counts, frames and the " +
+                "previews of the counts only, and outputs.counts, outputs.frames and outputs.previews are false: each " +
+                "would hold the same files; set one of them true (--set outputs.counts=true), or sense once");
   // The run's objects bound labels.exr's slots (a run before objects had none).
   const int objects = meta.contains("objects") ? int(meta.at("objects").size()) : 0;
   std::vector<fs::path> dirs;

@@ -188,7 +188,7 @@ void Staging::init(const fs::path& out) {
   if (fs::is_directory(out_, ec) && is_mount_point(out_))
     throw cannot("it is a mount point; " + what_ + " replaces the output folder as a whole, renaming a new folder into its " +
                  "place, which cannot be done to a mount point, so name a folder inside it (" + (out_ / "run").string() + ")");
-  if (!of_runs_ && owned_.empty()) refuse_a_realisation_or_a_folder_being_written();
+  if (owned_.empty()) refuse_a_realisation_or_a_folder_being_written();
   lock();
   try {
     recover();
@@ -275,20 +275,19 @@ void release_folder_lock(const fs::path& lock_path, int& fd, bool shared = false
 }
 }  // namespace
 
-// A run folder OUT that is one realisation of a `sense --repeats` set (its metadata.json's sense.repeats > 1),
-// or that lies in a folder another spadgen process writes as a whole (a set of realisations being made):
-// the set's folder would mix calls, or its swap would replace this run's files (both exited 0).
+// A run folder (or a folder of runs) OUT inside a `sense --repeats` set (beside the set's realisation 0, whose
+// metadata.json says sense.repeats > 1), or inside a folder another spadgen process writes as a whole (a set
+// being made): the set would mix calls, or hold a folder that keeps it from being written again, or the
+// other process's swap would replace this one's files (each exited 0).
 void Staging::refuse_a_realisation_or_a_folder_being_written() const {
   const auto cannot = [&](const std::string& why) {
     return Error("cannot use " + out_.string() + " as the output folder (-o): " + why);
   };
-  // A set's folders are repeat_000, repeat_001, ...: a folder of that name beside a set's realisation 0
-  // (or that is one) is in the set.
-  const bool repeat_name = name_.size() > 7 && starts_with(name_, "repeat_") &&
-                           std::all_of(name_.begin() + 7, name_.end(), [](char c) { return c >= '0' && c <= '9'; });
-  std::error_code ec;
-  for (const fs::path& m : {out_ / "metadata.json", parent_ / "repeat_000" / "metadata.json"}) {
-    if (!repeat_name || !fs::is_regular_file(m, ec)) continue;
+  // The set's size from its realisation 0's metadata.json (0: not a set).
+  const auto set_size = [&]() -> int64_t {
+    std::error_code ec;
+    const fs::path m = parent_ / "repeat_000" / "metadata.json";
+    if (!fs::is_regular_file(m, ec)) return 0;
     nlohmann::json meta;
     try {
       meta = nlohmann::json::parse(scenes::read_file_bounded(m.string(), uint64_t{64} << 20, "metadata"), nullptr,
@@ -297,12 +296,13 @@ void Staging::refuse_a_realisation_or_a_folder_being_written() const {
     }
     const nlohmann::json* sense = meta.is_object() && meta.contains("sense") && meta["sense"].is_object() ? &meta["sense"] : nullptr;
     const nlohmann::json repeats = sense != nullptr ? sense->value("repeats", nlohmann::json()) : nlohmann::json();
-    if (repeats.is_number_integer() && repeats.get<int64_t>() > 1)
-      throw cannot("it lies in " + parent_.string() + ", the " + std::to_string(repeats.get<int64_t>()) +
-                   " realisations that one `spadgen sense --repeats` wrote together, a set no other call writes into; " +
-                   "write the whole set again (-o " + parent_.string() + " --repeats " + std::to_string(repeats.get<int64_t>()) +
-                   "), or choose another folder");
-  }
+    return repeats.is_number_integer() && repeats.get<int64_t>() > 1 ? repeats.get<int64_t>() : 0;
+  };
+  if (const int64_t repeats = set_size(); repeats > 0)
+    throw cannot("it lies in " + parent_.string() + ", the " + std::to_string(repeats) +
+                 " realisations that one `spadgen sense --repeats` wrote together, a set no other call writes into; " +
+                 "write the whole set again (-o " + parent_.string() + " --repeats " + std::to_string(repeats) +
+                 "), or choose a folder outside it");
   const fs::path parent_lock = lock_path_of(parent_);
   const int fd = ::open(parent_lock.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd < 0) return;
@@ -313,9 +313,9 @@ void Staging::refuse_a_realisation_or_a_folder_being_written() const {
   std::string who = n > 0 ? std::string(holder, static_cast<size_t>(n)) : std::string();
   while (!who.empty() && (who.back() == '\n' || who.back() == ' ')) who.pop_back();
   if (written)
-    throw cannot("the folder holding it, " + parent_.string() + ", is being written by another spadgen process" +
-                 (who.empty() ? std::string() : " (" + who + ")") + ", which replaces it as a whole when it ends; wait for it " +
-                 "to finish, or choose another folder");
+    throw cannot("the folder holding it, " + parent_.string() + ", is held by another spadgen process" +
+                 (who.empty() ? std::string() : " (" + who + ")") + " that writes it (a run or a sense --repeats, which " +
+                 "replaces it as a whole when it ends, or a reconstruct); wait for it to finish, or choose another folder");
 }
 
 void Staging::lock() {

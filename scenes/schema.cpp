@@ -259,7 +259,7 @@ void add_pixel_type(std::vector<Key>& s, const std::string& name, P type) {
   // The pixel design's field: its accessor composed with the design's.
 #define PIXEL(member) [type](auto& c) -> auto& { return type(c).member; }
   s.push_back(number(p + "fill_factor", PIXEL(fill_factor), kNone, open_closed(0, 1), "fraction of the pixel area that is photosensitive"));
-  s.push_back(number(p + "pdp_peak", PIXEL(pdp_peak), kNone, open_closed(0, 1), "peak photon detection probability"));
+  s.push_back(number(p + "pdp_peak", PIXEL(pdp_peak), kNone, open_closed(0, 1), "peak photon detection probability (times 1 + 5 pdp_nonuniformity, the brightest pixel's, at most 1)"));
   s.push_back(number(p + "pdp_peak_wavelength_nm", PIXEL(pdp_peak_wavelength_m), kNmUnit, closed(200, 2000), "wavelength of the PDP peak; without pdp_csv, strictly between 300 and 1100 nm (the built-in curve is zero at and beyond both ends)"));
   s.push_back(file(p + "pdp_csv", PIXEL(pdp_csv), "table of (wavelength_nm, PDP) replacing the built-in curve, covering the laser's wavelength (0 outside it); relative to the scene file; \"\" = built-in curve scaled to pdp_peak"));
   s.push_back(number(p + "pdp_nonuniformity", PIXEL(pdp_nonuniformity), kNone, closed(0, 0.2), "relative spread (sigma) of PDP across pixels: each pixel's PDP is the curve times 1 + sigma z, z a standard normal truncated at 5, so at most 0.2 keeps it positive (and the curve times 1 + 5 sigma must stay at most 1)"));

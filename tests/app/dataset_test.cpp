@@ -669,7 +669,7 @@ TEST_F(Dataset, APlanListsASampleItCannotEstimateAsInvalid) {
   EXPECT_THAT(r.output, Not(HasSubstr("error: sample 0")));
   EXPECT_THAT(r.output, HasSubstr("\tintensity\t"));
   EXPECT_THAT(r.output, HasSubstr("\t-\t-\t-\n"));  // no estimate for samples 1 and 3
-  EXPECT_THAT(r.output, HasSubstr("spadgen: 2 samples make an invalid run"));
+  EXPECT_THAT(r.output, HasSubstr("spadgen: error: 2 samples make an invalid run"));
   // the per-sample disk is sample 0's (and 2's), not halved by the invalid two
   const auto row0 = r.output.find("\n0\t"), per = r.output.find("# per sample: disk about ");
   ASSERT_NE(row0, std::string::npos);

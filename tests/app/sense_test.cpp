@@ -424,11 +424,31 @@ TEST_F(App, SenseKeepsARealisationSetWhole) {
   // a set's realisation can still be read: sensed beside the set
   EXPECT_EQ(sh("sense " + (dir_ / "set/repeat_001").string() + " -q -o " + (dir_ / "again").string()).code, 0);
 
-  r = sh("sense " + (dir_ / "run").string() + " -q --repeats 3 --set outputs.counts=false --set outputs.frames=false -o " +
-         (dir_ / "same").string());
+  // a set's realisation sensed without -o: beside the set (it went inside it, set/repeat_000-sense, and the
+  // set could not be written again)
+  ASSERT_EQ(sh("sense " + (dir_ / "set/repeat_000").string() + " -q --noise-seed 9").code, 0);
+  EXPECT_TRUE(fs::exists(dir_ / "set-repeat_000-sense/counts.npy"));
+  EXPECT_FALSE(fs::exists(dir_ / "set/repeat_000-sense"));
+  // any folder in the set is refused (a sense --repeats into set/repeat_001 wrote a set inside the set), and
+  // the set can be written again whole
+  for (const std::string extra : {"", " --repeats 2"}) {
+    r = sh("sense " + (dir_ / "run").string() + " -q" + extra + " -o " + (dir_ / "set/repeat_001").string());
+    EXPECT_EQ(r.code, 1) << extra;
+    EXPECT_THAT(r.output, HasSubstr("the 2 realisations that one `spadgen sense --repeats` wrote together")) << extra;
+  }
+  r = sh("sense " + (dir_ / "run").string() + " -q -o " + (dir_ / "set/mine").string());
   EXPECT_EQ(r.code, 1);
-  EXPECT_THAT(r.output, HasSubstr("--repeats 3: the realisations differ in their counts and frames only"));
+  EXPECT_FALSE(fs::exists(dir_ / "set/mine"));
+  EXPECT_EQ(sh("sense " + (dir_ / "run").string() + " -q --repeats 2 --noise-seed 5 -o " + (dir_ / "set").string()).code, 0);
+
+  // realisations without counts, frames or previews (of the counts) would be the same files
+  r = sh("sense " + (dir_ / "run").string() + " -q --repeats 3 --set outputs.counts=false --set outputs.frames=false "
+         "--set outputs.previews=false -o " + (dir_ / "same").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("--repeats 3: the realisations differ in their counts, frames and the previews of the counts only"));
   EXPECT_FALSE(fs::exists(dir_ / "same"));
+  EXPECT_EQ(sh("sense " + (dir_ / "run").string() + " -q --repeats 2 --set outputs.counts=false --set outputs.frames=false -o " +
+               (dir_ / "previews").string()).code, 0);
 
   // another process holding a folder as its output (its lock, as a sense --repeats holds its set's): a run
   // folder inside it is refused while it writes
@@ -442,7 +462,7 @@ TEST_F(App, SenseKeepsARealisationSetWhole) {
   ::close(fd);
   EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("the folder holding it, " + fs::canonical(dir_ / "new_set").string() +
-                                  ", is being written by another spadgen process (pid 4242)"));
+                                  ", is held by another spadgen process (pid 4242) that writes it"));
   EXPECT_FALSE(fs::exists(dir_ / "new_set/repeat_001"));
   // once it is gone, a folder inside is the user's to choose
   EXPECT_EQ(sh("sense " + (dir_ / "run").string() + " -q -o " + (dir_ / "new_set/repeat_001").string()).code, 0);
