@@ -703,6 +703,17 @@ TEST(DatasetEstimate, TheRoundedDurationsCoverTheExactTimeWindow) {
     c.laser.pulse_fwhm_s = k.value * 1e-12;
     EXPECT_NEAR(app::estimate_shape(c).laser.pulse_fwhm_s, k.rounded * 1e-12, 1e-9 * k.rounded * 1e-12) << k.value;
   }
+  // A plan estimates one shape per rounded value: 12 widths in (57, 58] are one shape (they were 12).
+  {
+    const fs::path dir = fs::temp_directory_path() / ("spadgen_rounded_" + std::to_string(::getpid()));
+    fs::create_directories(dir);
+    std::ofstream(dir / "d.json") << "{\"scenes\": [\"" + kScenes + "flat_target.json\"], \"samples\": 12, \"set\": "
+                                     "{\"camera.crop\": [0, 0, 8, 8]}, \"random\": {\"laser.pulse_fwhm_ps\": {\"uniform\": [57.01, 58]}}}";
+    const Result r = sh("dataset plan " + (dir / "d.json").string() + " -q");
+    fs::remove_all(dir);
+    EXPECT_EQ(r.code, 0) << r.output;
+    EXPECT_THAT(r.output, HasSubstr("# 1 distinct sensor shape estimated"));
+  }
   for (const char* set : {"laser.pulse_fwhm_ps=57.3", "laser.pulse_fwhm_ps=123.4", "sensor.jitter_fwhm_ps=33.3",
                           "sensor.gate.rise_ps=412", "sensor.gate.fall_ps=1234", "sensor.gate.length_ns=3.73",
                           "sensor.gate.length_fwhm_ps=111", "sensor.gate.skew_fwhm_ps=432.1"}) {
