@@ -133,8 +133,8 @@ int main(int argc, char** argv) {
   drun_cmd->add_option("file", dataset.file, "dataset file (.json)")->required()->check(CLI::ExistingFile);
   drun_cmd->add_option("-o,--out", dataset.out_dir, "dataset folder")->required()->check(kNamed);
   CLI::Option* run_shard = drun_cmd->add_option("--shard", dataset_shard,
-                                                "only shard I of N (samples i with i mod N = I); default: from SLURM_ARRAY_TASK_ID / "
-                                                "SLURM_ARRAY_TASK_COUNT or JOB_COMPLETION_INDEX / JOB_COMPLETIONS, else 0/1")
+                                                "only shard I of N (samples i with i mod N = I); default: from a Slurm job array (SLURM_ARRAY_TASK_ID, "
+                                                "_MIN, _STEP, _MAX, _COUNT: docs/datasets.md) or JOB_COMPLETION_INDEX / JOB_COMPLETIONS, else 0/1")
                                  ->type_name("I/N");
   drun_cmd->add_option("--threads", dataset.threads, "worker threads per sample (default: all cores); outputs do not depend on it")
       ->check(kThreadsRange);
