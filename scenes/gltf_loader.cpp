@@ -765,6 +765,10 @@ std::vector<double> Loader::read_accessor(int index, const std::string& user, st
   }
   const size_t csize = component_size(a.componentType);
   if (csize == 0) fail(who, "componentType " + std::to_string(a.componentType) + " is not a glTF 2.0 component type");
+  // glTF 3.6.2.1: normalized MUST NOT be true for FLOAT or UNSIGNED_INT (it was read as if absent).
+  if (a.normalized && (a.componentType == TINYGLTF_COMPONENT_TYPE_FLOAT || a.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT))
+    fail(who, std::string("normalized is true for a ") + component_name(a.componentType) +
+                  " accessor; expected it only for BYTE, UNSIGNED_BYTE, SHORT and UNSIGNED_SHORT (glTF 2.0, 3.6.2.1)");
   const int comps = type_components(a.type);
   const size_t elem = csize * static_cast<size_t>(comps);
   const size_t count = a.count;
@@ -819,11 +823,16 @@ std::vector<double> Loader::read_accessor(int index, const std::string& user, st
     };
     const unsigned char* idx = bytes_of(a.sparse.indices.bufferView, a.sparse.indices.byteOffset);
     const unsigned char* val = bytes_of(a.sparse.values.bufferView, a.sparse.values.byteOffset);
-    for (size_t k = 0; k < un; ++k) {
+    for (size_t k = 0, previous = 0; k < un; ++k) {
       const auto target = static_cast<size_t>(read_component(idx + k * isize, itype, false));
       if (target >= count)
         fail(who, "sparse index " + std::to_string(target) + " is out of range of its " + std::to_string(count) +
                       " elements");
+      // glTF 3.6.2.3: the indices MUST strictly increase (a repeated index was read as the last value).
+      if (k > 0 && target <= previous)
+        fail(who, "sparse index " + std::to_string(k) + " is " + std::to_string(target) + " after " +
+                      std::to_string(previous) + "; expected strictly increasing indices (glTF 2.0, 3.6.2.3)");
+      previous = target;
       for (int c = 0; c < comps; ++c)
         out[target * static_cast<size_t>(comps) + static_cast<size_t>(c)] =
             read_component(val + k * elem + static_cast<size_t>(c) * csize, a.componentType, a.normalized);

@@ -1191,6 +1191,27 @@ TEST_F(BrokenGltf, SparseIndexOutOfRange) {
   EXPECT_THAT(error_of(g), HasSubstr("accessor 0 (mesh 0 primitive 0 POSITION): sparse index 9 is out of range of its 3 elements"));
 }
 
+// Sparse indices that do not strictly increase, and normalized on a FLOAT or UNSIGNED_INT accessor, break
+// glTF 2.0 (3.6.2.3, 3.6.2.1): refused (a repeated index was read as its last value, the flag ignored).
+TEST_F(BrokenGltf, UnsortedSparseIndicesAndNormalizedFloats) {
+  for (const std::vector<uint8_t>& order : {std::vector<uint8_t>{2, 0}, std::vector<uint8_t>{1, 1}}) {
+    Gltf g;
+    const int sidx = g.view_of(order);
+    const int sval = g.view_of(std::vector<float>{5, 5, 5, 6, 6, 6});
+    const int a = g.accessor(g.view_of(std::vector<float>{0, 0, 0, 1, 0, 0, 0, 1, 0}), kFloat, "VEC3", 3);
+    g.doc["accessors"][static_cast<size_t>(a)]["sparse"] = {
+        {"count", 2}, {"indices", {{"bufferView", sidx}, {"componentType", kUByte}}}, {"values", {{"bufferView", sval}}}};
+    g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", a}}}}}))}});
+    EXPECT_THAT(error_of(g), HasSubstr("POSITION): sparse index 1 is " + std::to_string(order[1]) + " after " +
+                                       std::to_string(order[0]) + "; expected strictly increasing indices (glTF 2.0, 3.6.2.3)"));
+  }
+  Gltf g;
+  const int a = g.accessor(g.view_of(std::vector<float>{0, 0, 0, 1, 0, 0, 0, 1, 0}), kFloat, "VEC3", 3, 0, true);
+  g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", a}}}}}))}});
+  EXPECT_THAT(error_of(g), HasSubstr("accessor 0 (mesh 0 primitive 0 POSITION): normalized is true for a FLOAT accessor; "
+                                     "expected it only for BYTE, UNSIGNED_BYTE, SHORT and UNSIGNED_SHORT"));
+}
+
 TEST_F(BrokenGltf, ImageBufferViewPastItsBuffer) {
   Gltf g;
   const std::vector<uint8_t> png = unbase64(kPng2x2);
