@@ -228,6 +228,9 @@ nlohmann::ordered_json noise_free_part(nlohmann::ordered_json resolved) {
 }  // namespace
 
 std::vector<RunResult> sense(const SenseOptions& options) {
+  // From the start: the scene is resolved once per realisation before any work, and a signal meanwhile is an
+  // interruption (exit 2), not a kill.
+  InterruptGuard interrupt_guard;
   const auto started = std::chrono::steady_clock::now();
   if (scenes::invalid_utf8_at(options.run_dir) != std::string::npos)  // metadata.json records it
     throw Error(scenes::printable(options.run_dir) + ": the run folder's name is not valid UTF-8 text, which metadata.json needs; rename it");
@@ -325,7 +328,6 @@ std::vector<RunResult> sense(const SenseOptions& options) {
         scene_warnings.push_back(w.get<std::string>());
   }
 
-  InterruptGuard interrupt_guard;
   const ThreadLimit threads(options.threads);
 
   sensor::SensorModel sensor(sensor_stage(cfg));
