@@ -199,7 +199,7 @@ class Estimator {
     for (size_t j = 0; j < todo.size(); ++j) cache_.emplace(todo[j].first, std::move(done[j]));
   }
   const Entry& at(uint64_t key) const { return cache_.at(key); }
-  size_t shapes() const { return cache_.size(); }  // the distinct shapes estimated
+  size_t shapes() const { return cache_.size(); }  // the estimates computed (the probes' included)
 
  private:
   int repeats_, threads_;
@@ -454,8 +454,9 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
   o << "# " << (shard.count > 1 ? "this shard" : "total") << ": " << samples << " samples, disk about " << bytes_text(total.disk())
     << ", time about " << duration_text(total.seconds) << " (estimates for " << estimate_cores(options.threads)
     << (estimate_cores(options.threads) == 1 ? " core" : " cores") << ": docs/datasets.md, \"Estimates\")\n";
-  o << "# " << estimator.shapes() << (estimator.shapes() == 1 ? " distinct sensor shape" : " distinct sensor shapes")
-    << " estimated (each about 40 ms of one core; docs/datasets.md, \"Estimates\")\n";
+  o << "# " << estimator.shapes() << (estimator.shapes() == 1 ? " estimate" : " estimates")
+    << " computed, one per distinct shape of run (about 40 ms of one core each where the sensor's gate response "
+       "differs; docs/datasets.md, \"Estimates\")\n";
   if (total.paths_bound)
     o << "# with render.target_relative_error a pixel's paths depend on its light: the times count "
          "render.max_samples_per_pixel for every pixel, an upper bound\n";

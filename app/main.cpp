@@ -124,7 +124,7 @@ int main(int argc, char** argv) {
   CLI::App* plan_cmd = dataset_cmd->add_subcommand("plan", "list the samples with their parameters, and estimate disk, memory and time");
   plan_cmd->add_option("file", dataset.file, "dataset file (.json)")->required()->check(CLI::ExistingFile);
   plan_cmd->add_option("-o,--out", dataset.out_dir, "dataset folder: also show which samples are done there and the free disk")->check(kNamed);
-  CLI::Option* plan_shard = plan_cmd->add_option("--shard", dataset_shard, "only shard I of N (samples i with i mod N = I)")->type_name("I/N");
+  CLI::Option* plan_shard = plan_cmd->add_option("--shard", dataset_shard, "only shard I of N (samples i with i mod N = I); default: as dataset run's")->type_name("I/N");
   plan_cmd->add_flag("--all", dataset.all, "list every sample (default: the first and the last 10)");
   plan_cmd->add_option("--threads", dataset.threads, "worker threads (default: all cores): the plan's, and each sample's for the time estimate")
       ->check(kThreadsRange);

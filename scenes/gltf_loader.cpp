@@ -765,7 +765,8 @@ std::vector<double> Loader::read_accessor(int index, const std::string& user, st
   }
   const size_t csize = component_size(a.componentType);
   if (csize == 0) fail(who, "componentType " + std::to_string(a.componentType) + " is not a glTF 2.0 component type");
-  // glTF 3.6.2.1: normalized MUST NOT be true for FLOAT or UNSIGNED_INT (it was read as if absent).
+  // glTF 3.6.2.1: normalized MUST NOT be true for FLOAT or UNSIGNED_INT (a FLOAT's was ignored; an UNSIGNED_INT
+  // index accessor's values were divided by 2^32 - 1, every triangle collapsed to vertex 0).
   if (a.normalized && (a.componentType == TINYGLTF_COMPONENT_TYPE_FLOAT || a.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT))
     fail(who, std::string("normalized is true for a ") + component_name(a.componentType) +
                   " accessor; expected it only for BYTE, UNSIGNED_BYTE, SHORT and UNSIGNED_SHORT (glTF 2.0, 3.6.2.1)");
@@ -830,7 +831,7 @@ std::vector<double> Loader::read_accessor(int index, const std::string& user, st
                       " elements");
       // glTF 3.6.2.3: the indices MUST strictly increase (a repeated index was read as the last value).
       if (k > 0 && target <= previous)
-        fail(who, "sparse index " + std::to_string(k) + " is " + std::to_string(target) + " after " +
+        fail(who, "sparse.indices[" + std::to_string(k) + "] is " + std::to_string(target) + " after " +
                       std::to_string(previous) + "; expected strictly increasing indices (glTF 2.0, 3.6.2.3)");
       previous = target;
       for (int c = 0; c < comps; ++c)

@@ -712,7 +712,7 @@ TEST(DatasetEstimate, TheRoundedDurationsCoverTheExactTimeWindow) {
     const Result r = sh("dataset plan " + (dir / "d.json").string() + " -q");
     fs::remove_all(dir);
     EXPECT_EQ(r.code, 0) << r.output;
-    EXPECT_THAT(r.output, HasSubstr("# 1 distinct sensor shape estimated"));
+    EXPECT_THAT(r.output, HasSubstr("# 1 estimate computed, one per distinct shape of run"));
   }
   for (const char* set : {"laser.pulse_fwhm_ps=57.3", "laser.pulse_fwhm_ps=123.4", "sensor.jitter_fwhm_ps=33.3",
                           "sensor.gate.rise_ps=412", "sensor.gate.fall_ps=1234", "sensor.gate.length_ns=3.73",

@@ -1202,7 +1202,7 @@ TEST_F(BrokenGltf, UnsortedSparseIndicesAndNormalizedFloats) {
     g.doc["accessors"][static_cast<size_t>(a)]["sparse"] = {
         {"count", 2}, {"indices", {{"bufferView", sidx}, {"componentType", kUByte}}}, {"values", {{"bufferView", sval}}}};
     g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", a}}}}}))}});
-    EXPECT_THAT(error_of(g), HasSubstr("POSITION): sparse index 1 is " + std::to_string(order[1]) + " after " +
+    EXPECT_THAT(error_of(g), HasSubstr("POSITION): sparse.indices[1] is " + std::to_string(order[1]) + " after " +
                                        std::to_string(order[0]) + "; expected strictly increasing indices (glTF 2.0, 3.6.2.3)"));
   }
   Gltf g;
@@ -1210,6 +1210,12 @@ TEST_F(BrokenGltf, UnsortedSparseIndicesAndNormalizedFloats) {
   g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", a}}}}}))}});
   EXPECT_THAT(error_of(g), HasSubstr("accessor 0 (mesh 0 primitive 0 POSITION): normalized is true for a FLOAT accessor; "
                                      "expected it only for BYTE, UNSIGNED_BYTE, SHORT and UNSIGNED_SHORT"));
+  // an index accessor of normalized UNSIGNED_INT (every index was divided by 2^32 - 1: one vertex)
+  Gltf u;
+  const int pos = u.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const int idx = u.accessor(u.view_of(std::vector<uint32_t>{0, 1, 2}), kUInt, "SCALAR", 3, 0, true);
+  u.node({{"mesh", u.mesh(json::array({{{"attributes", {{"POSITION", pos}}}, {"indices", idx}}}))}});
+  EXPECT_THAT(error_of(u), HasSubstr("normalized is true for a UNSIGNED_INT accessor"));
 }
 
 TEST_F(BrokenGltf, ImageBufferViewPastItsBuffer) {
