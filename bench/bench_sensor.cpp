@@ -341,7 +341,7 @@ BENCHMARK(BM_CountsSampling)->Arg(0)->Arg(1)->UseRealTime()->Unit(benchmark::kMi
 // 255 frames, 367 MB; BM_CountsSweep's scene, computed once outside the timing) written as the program
 // writes them (writers::NpyWriter: the file allocated and mapped, write_frames per tile from parallel tasks,
 // the band's rows released, commit: unmap, fsync, rename), alternated with `dd if=/dev/zero bs=1M
-// conv=fsync` of the same size into the same folder, $SPADGEN_BENCH_DIR (unset: skipped, so that a run of
+// conv=fsync` of the same size into the same folder, $SPADGEN_BENCH_DIR (unset: an error and no figure, so that a run of
 // every benchmark does not write gigabytes). Manual time: the writer's; counters: both bandwidths and
 // writer / dd over the whole run.
 void BM_FramesToDisk(benchmark::State& state) {
