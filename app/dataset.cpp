@@ -293,9 +293,7 @@ void refuse_a_dataset_of_invalid_samples(const DatasetSpec& spec, Estimator& est
       valid = error.empty();
       if (why.empty()) why = error;
     }
-    if (!valid && !probes.empty())
-      throw Error(spec.file + ": sample " + std::to_string(probes[0]) + ": with the scene file " + spec.scene_names[k] + ": " +
-                  why + (probes.size() > 1 ? " (and the next " + std::to_string(probes.size() - 1) + " samples of this scene fail too)" : ""));
+    if (!valid && !probes.empty()) throw Error(spec.file + ": " + datasets::invalid_probes_message(spec, k, probes, why));
   }
 }
 

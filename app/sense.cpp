@@ -445,9 +445,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   if (!run_named.has_filename()) run_named = run_named.parent_path();
   // A realisation of a sense --repeats set (set/repeat_001): beside the set (set-repeat_001-sense), which holds
   // its realisations only.
-  const bool realisation = meta.contains("sense") && meta["sense"].is_object() &&
-                           meta["sense"].value("repeats", json()).is_number_integer() && meta["sense"]["repeats"].get<int64_t>() > 1;
-  const fs::path beside = realisation ? run_named.parent_path().parent_path() /
+  const fs::path beside = realisations_of(meta) > 0 ? run_named.parent_path().parent_path() /
                                             (run_named.parent_path().filename().string() + "-" + run_named.filename().string() + "-sense")
                                       : run_named.parent_path() / (run_named.filename().string() + "-sense");
   const fs::path out = options.out_dir.empty() ? beside : fs::path(options.out_dir);

@@ -216,6 +216,15 @@ Staging::~Staging() {
 std::string Staging::path(const std::string& rel) const { return (dir_ / rel).string(); }
 
 namespace {
+// The holder a lock file names ("pid N", written by its exclusive holder), "" when it names none.
+std::string lock_holder(int fd) {
+  char holder[64] = {0};
+  const ssize_t n = ::pread(fd, holder, sizeof holder - 1, 0);
+  std::string who = n > 0 ? std::string(holder, static_cast<size_t>(n)) : std::string();
+  while (!who.empty() && (who.back() == '\n' || who.back() == ' ')) who.pop_back();
+  return who;
+}
+
 // Locks P/.NAME.spadgen-lock (flock, exclusive, or shared by readers; not waiting) for the folder `out` =
 // P/NAME and returns the descriptor; throws spadgen::Error naming the holder when another spadgen process
 // has it exclusively (or, exclusive, at all).
@@ -229,11 +238,8 @@ int take_folder_lock(const fs::path& lock_path, const fs::path& out, bool shared
                   ": cannot create its lock file " + lock_path.string() + ": " + std::strerror(errno));
     if (::flock(fd, (shared ? LOCK_SH : LOCK_EX) | LOCK_NB) != 0) {
       const int err = errno;
-      char holder[64] = {0};
-      const ssize_t n = ::pread(fd, holder, sizeof holder - 1, 0);
+      const std::string who = lock_holder(fd);
       ::close(fd);
-      std::string who = n > 0 ? std::string(holder, static_cast<size_t>(n)) : std::string();
-      while (!who.empty() && (who.back() == '\n' || who.back() == ' ')) who.pop_back();
       if (err == EWOULDBLOCK && shared)
         throw Error(folder + " is being written by another spadgen run" +
                     (who.empty() ? std::string() : " (" + who + ")") + ", which holds " + lock_path.string() +
@@ -275,6 +281,12 @@ void release_folder_lock(const fs::path& lock_path, int& fd, bool shared = false
 }
 }  // namespace
 
+int64_t realisations_of(const nlohmann::json& metadata) {
+  if (!metadata.is_object() || !metadata.contains("sense") || !metadata["sense"].is_object()) return 0;
+  const nlohmann::json repeats = metadata["sense"].value("repeats", nlohmann::json());
+  return repeats.is_number_integer() && repeats.get<int64_t>() > 1 ? repeats.get<int64_t>() : 0;
+}
+
 // A run folder (or a folder of runs) OUT inside a `sense --repeats` set (beside the set's realisation 0, whose
 // metadata.json says sense.repeats > 1), or inside a folder another spadgen process writes as a whole (a set
 // being made): the set would mix calls, or hold a folder that keeps it from being written again, or the
@@ -288,15 +300,12 @@ void Staging::refuse_a_realisation_or_a_folder_being_written() const {
     std::error_code ec;
     const fs::path m = parent_ / "repeat_000" / "metadata.json";
     if (!fs::is_regular_file(m, ec)) return 0;
-    nlohmann::json meta;
     try {
-      meta = nlohmann::json::parse(scenes::read_file_bounded(m.string(), uint64_t{64} << 20, "metadata"), nullptr,
-                                   /*allow_exceptions=*/false);
+      return realisations_of(nlohmann::json::parse(scenes::read_file_bounded(m.string(), uint64_t{64} << 20, "metadata"),
+                                                   nullptr, /*allow_exceptions=*/false));
     } catch (const Error&) {
+      return 0;
     }
-    const nlohmann::json* sense = meta.is_object() && meta.contains("sense") && meta["sense"].is_object() ? &meta["sense"] : nullptr;
-    const nlohmann::json repeats = sense != nullptr ? sense->value("repeats", nlohmann::json()) : nlohmann::json();
-    return repeats.is_number_integer() && repeats.get<int64_t>() > 1 ? repeats.get<int64_t>() : 0;
   };
   if (const int64_t repeats = set_size(); repeats > 0)
     throw cannot("it lies in " + parent_.string() + ", the " + std::to_string(repeats) +
@@ -307,11 +316,8 @@ void Staging::refuse_a_realisation_or_a_folder_being_written() const {
   const int fd = ::open(parent_lock.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd < 0) return;
   const bool written = ::flock(fd, LOCK_SH | LOCK_NB) != 0 && errno == EWOULDBLOCK;
-  char holder[64] = {0};
-  const ssize_t n = written ? ::pread(fd, holder, sizeof holder - 1, 0) : 0;
+  const std::string who = written ? lock_holder(fd) : std::string();
   ::close(fd);  // (and the shared lock with it)
-  std::string who = n > 0 ? std::string(holder, static_cast<size_t>(n)) : std::string();
-  while (!who.empty() && (who.back() == '\n' || who.back() == ' ')) who.pop_back();
   if (written)
     throw cannot("the folder holding it, " + parent_.string() + ", is held by another spadgen process" +
                  (who.empty() ? std::string() : " (" + who + ")") + " that writes it (a run or a sense --repeats, which " +

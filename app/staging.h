@@ -15,6 +15,9 @@
 // - OUT must hold only what spadgen wrote there (metadata.json and the files it lists): a folder with
 //   other files in it is refused rather than replaced.
 #pragma once
+#include <nlohmann/json_fwd.hpp>
+
+#include <cstdint>
 #include <filesystem>
 #include <functional>
 #include <string>
@@ -88,6 +91,10 @@ class Staging {
 // command that reads a run folder and writes a file into it (reconstruct): while it is held no run replaces
 // the folder (a reconstruct while a run replaced it wrote the earlier run's detections beside the new run's
 // counts), and a run or another such command refuses, naming the holder.
+// R when a run folder's metadata.json says it is one of the R > 1 realisations of a `sense --repeats` set
+// (sense.repeats), else 0.
+int64_t realisations_of(const nlohmann::json& metadata);
+
 class FolderLock {
  public:
   // shared: a reader's (sense of a run), which other readers may hold too, but not a run replacing the folder.

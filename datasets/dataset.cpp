@@ -425,11 +425,7 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
         if (why.empty()) why = e.what();
       }
     }
-    if (!r)
-      rd.fail("sample " + std::to_string(probes[0]), std::string("with the scene file ") + s.scene_names[k] + ": " + why +
-                                                     (probes.size() > 1 ? " (and the next " + std::to_string(probes.size() - 1) +
-                                                                              " samples of this scene fail too)"
-                                                                        : ""));
+    if (!r) throw Error(rd.file + ": " + invalid_probes_message(s, k, probes, why));
     if (r->config.edits.nodes.empty() && r->config.edits.materials.empty()) continue;
     try {
       (void)scenes::load_gltf(r->config.gltf_path, r->config.gltf_scene, r->config.edits);
@@ -469,6 +465,12 @@ std::vector<int64_t> probe_samples(const DatasetSpec& spec, size_t scene) {
   for (int64_t base = first; out.size() < size_t{kProbeSamples} && base < spec.count(); base += cells)
     for (int64_t i = base; i < base + per_scene && i < spec.count() && out.size() < size_t{kProbeSamples}; ++i) out.push_back(i);
   return out;
+}
+
+std::string invalid_probes_message(const DatasetSpec& spec, size_t scene, const std::vector<int64_t>& probes,
+                                   const std::string& why) {
+  return "sample " + std::to_string(probes.at(0)) + ": with the scene file " + spec.scene_names[scene] + ": " + why +
+         (probes.size() > 1 ? " (and the next " + std::to_string(probes.size() - 1) + " samples of this scene fail too)" : "");
 }
 
 std::string Sample::folder() const { return folder_of(index); }

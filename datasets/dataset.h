@@ -112,6 +112,9 @@ Sample make_sample(const DatasetSpec& spec, int64_t index);
 // refuse it naming the first.
 inline constexpr int kProbeSamples = 16;
 std::vector<int64_t> probe_samples(const DatasetSpec& spec, size_t scene);
+// Their refusal, after "FILE: ": the first probe, the scene file and `why` (the first probe's error).
+std::string invalid_probes_message(const DatasetSpec& spec, size_t scene, const std::vector<int64_t>& probes,
+                                   const std::string& why);
 
 // Which samples a shard runs: index i belongs to shard i mod count.
 struct Shard {
