@@ -64,7 +64,7 @@ inline constexpr int64_t kMetadataBytes = 32 << 10, kMetadataBytesPerObject = 25
 // dataset's estimates).
 struct Geometry {
   int64_t triangles = 0, meshes = 0;
-  int64_t textures = 0, texture_bytes = 0;  // decoded RGBA texels
+  int64_t textures = 0, texture_bytes = 0;  // decoded RGBA images (textures of one image count it once)
 };
 Geometry geometry_of(const scenes::Scene& scene);
 

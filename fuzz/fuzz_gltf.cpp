@@ -70,7 +70,7 @@ void check(const Scene& s) {
       if (!std::isfinite(v)) broken(m.name + ": a material parameter not finite");
   }
   for (const spadgen::scenes::Texture& t : s.textures)
-    if (t.width <= 0 || t.height <= 0 || t.rgba.size() != size_t(t.width) * size_t(t.height) * 4)
+    if (t.width <= 0 || t.height <= 0 || t.rgba().size() != size_t(t.width) * size_t(t.height) * 4)
       broken(t.name + ": texel count does not match the size");
   for (const spadgen::scenes::Camera& c : s.cameras) {
     if (!(c.yfov_rad > 0.0 && c.yfov_rad < 3.1416)) broken(c.name + ": camera field of view out of (0, pi)");

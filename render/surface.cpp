@@ -146,7 +146,7 @@ glm::vec3 Shading::texture_rgb(int texture, const glm::vec2& uv) const {
   const int x0 = static_cast<int>(fx), y0 = static_cast<int>(fy);
   auto texel = [&](int i, int j) {
     const int xi = wrap(i, t.width, t.wrap_s), yj = wrap(j, t.height, t.wrap_t);
-    const uint8_t* px = &t.rgba[(size_t(yj) * size_t(t.width) + size_t(xi)) * 4];
+    const uint8_t* px = &t.rgba()[(size_t(yj) * size_t(t.width) + size_t(xi)) * 4];
     return glm::vec3(srgb_[px[0]], srgb_[px[1]], srgb_[px[2]]);
   };
   return (1 - ay) * ((1 - ax) * texel(x0, y0) + ax * texel(x0 + 1, y0)) +

@@ -265,8 +265,8 @@ glm::dvec3 euler_xyz_of(const glm::dmat3& r) {
 
 class Loader {
  public:
-  Loader(std::string path, const tinygltf::Model& model, const SceneEdits& edits, Scene& scene)
-      : path_(std::move(path)), m_(model), edits_(edits), scene_(scene) {}
+  Loader(std::string path, tinygltf::Model& model, const SceneEdits& edits, Scene& scene)
+      : path_(std::move(path)), m_(model), images_(model.images), edits_(edits), scene_(scene) {}
 
   void load(const std::string& scene_name);
 
@@ -313,12 +313,14 @@ class Loader {
 
   std::string path_;
   const tinygltf::Model& m_;
+  std::vector<tinygltf::Image>& images_;  // m_.images: the decoded images move into the scene
   const SceneEdits& edits_;
   Scene& scene_;
   std::vector<const NodeEdit*> node_edit_;          // per glTF node: the scene file's edit, or null
   std::vector<const MaterialEdit*> material_edit_;  // per glTF material
   std::set<std::string> warned_;
   std::map<int, int> texture_of_gltf_;   // glTF texture index -> Scene::textures index
+  std::map<int, std::shared_ptr<const std::vector<uint8_t>>> texels_of_image_;  // glTF image -> its decoded texels
   std::vector<int> parent_;              // per node, -1 for roots
 };
 
@@ -885,20 +887,23 @@ int Loader::texture(int gltf_texture, const std::string& user) {
     fail(tname, "image " + std::to_string(t.source) + " does not exist (the file has " +
                     std::to_string(m_.images.size()) + " images)");
   } else {
-    const tinygltf::Image& img = m_.images[static_cast<size_t>(t.source)];
+    tinygltf::Image& img = images_[static_cast<size_t>(t.source)];
+    std::shared_ptr<const std::vector<uint8_t>>& texels = texels_of_image_[t.source];
     const std::string iname = label("image", static_cast<size_t>(t.source), img.name.empty() ? img.uri : img.name);
     // Every decoded image is RGBA8 (load_image_checked, image_decode.h, which also bounds its size); an
     // image file that could not be read leaves none.
     const size_t w = img.width > 0 ? static_cast<size_t>(img.width) : 0;
     const size_t h = img.height > 0 ? static_cast<size_t>(img.height) : 0;
-    if (img.image.empty() || img.component != 4 || img.bits != 8 || img.image.size() != w * h * 4) {
+    if (texels == nullptr && (img.image.empty() || img.component != 4 || img.bits != 8 || img.image.size() != w * h * 4)) {
       warn(iname + ": could not be read or decoded; " + user + " uses its factor only");
     } else {
       Texture tex;
       tex.name = t.name.empty() ? img.name : t.name;
       tex.width = img.width;
       tex.height = img.height;
-      tex.rgba = img.image;
+      // the decoded image moved (not copied) into the scene, once for the textures that use it
+      if (texels == nullptr) texels = std::make_shared<const std::vector<uint8_t>>(std::move(img.image));
+      tex.texels = texels;
       if (t.sampler >= 0) {
         if (static_cast<size_t>(t.sampler) >= m_.samplers.size())
           fail(tname, "sampler " + std::to_string(t.sampler) + " does not exist (the file has " +

@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <limits>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -17,7 +18,11 @@ namespace spadgen::scenes {
 struct Texture {
   std::string name;
   int width = 0, height = 0;
-  std::vector<uint8_t> rgba;  // width * height * 4, row 0 at the top (glTF uv (0,0) is the top-left)
+  // width * height * 4 bytes, row 0 at the top (glTF uv (0,0) is the top-left); immutable and shared, so
+  // that a copy of the Scene (the renderer's, centred on its camera) and textures of one image hold the
+  // texels once.
+  std::shared_ptr<const std::vector<uint8_t>> texels;
+  const std::vector<uint8_t>& rgba() const { return *texels; }
   // Sampler wrap modes (glTF codes: 10497 repeat, 33071 clamp, 33648 mirrored repeat).
   int wrap_s = 10497, wrap_t = 10497;
 };

@@ -547,7 +547,7 @@ TEST(GltfLoader, MaterialsAndExtensions) {
 
 void expect_pixel(const spadgen::scenes::Texture& t, int x, int y, std::array<int, 4> rgba) {
   const size_t o = (static_cast<size_t>(y) * static_cast<size_t>(t.width) + static_cast<size_t>(x)) * 4;
-  for (size_t k = 0; k < 4; ++k) EXPECT_EQ(t.rgba[o + k], rgba[k]) << "pixel " << x << "," << y << " channel " << k;
+  for (size_t k = 0; k < 4; ++k) EXPECT_EQ(t.rgba()[o + k], rgba[k]) << "pixel " << x << "," << y << " channel " << k;
 }
 
 TEST(GltfLoader, BaseColorTexturesFromDataUriFileAndBufferView) {
@@ -560,16 +560,22 @@ TEST(GltfLoader, BaseColorTexturesFromDataUriFileAndBufferView) {
                      {{"uri", "checker.png"}},
                      {{"bufferView", png_view}, {"mimeType", "image/png"}, {"name", "in_buffer"}}};
   g.doc["samplers"] = {{{"wrapS", 33071}, {"wrapT", 33648}, {"magFilter", 9728}}};  // NEAREST: warned, bilinear
-  g.doc["textures"] = {{{"source", 0}, {"sampler", 0}, {"name", "uri_tex"}}, {{"source", 1}}, {{"source", 2}}};
+  g.doc["textures"] = {{{"source", 0}, {"sampler", 0}, {"name", "uri_tex"}}, {{"source", 1}}, {{"source", 2}},
+                       {{"source", 0}, {"name", "again"}}};  // image 0 again, its own (default) sampler
   g.doc["materials"] = {{{"name", "A"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}, {"texCoord", 1}}}}}},
                         {{"name", "B"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 1}}}}}},
                         {{"name", "C"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 2}}}}}},
-                        {{"name", "D"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}}};
+                        {{"name", "D"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}},
+                        {{"name", "E"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 3}}}}}}};
   g.node({{"mesh", g.triangle_mesh()}});
   for (auto form : {Gltf::Form::External, Gltf::Form::Glb}) {
     const Scene s = load_gltf(g.write(dir.path(), "textures", form));
-    ASSERT_EQ(s.materials.size(), 4u);
-    ASSERT_EQ(s.textures.size(), 3u);  // material D shares texture 0
+    ASSERT_EQ(s.materials.size(), 5u);
+    ASSERT_EQ(s.textures.size(), 4u);  // material D shares texture 0
+    // textures of one image share its texels (held once), each with its own sampler
+    EXPECT_EQ(s.textures[3].texels, s.textures[0].texels);
+    EXPECT_NE(s.textures[1].texels, s.textures[0].texels);
+    EXPECT_EQ(s.textures[3].wrap_s, 10497);
     EXPECT_EQ(std::count_if(s.warnings.begin(), s.warnings.end(),
                             [](const std::string& w) {
                               return w == "sampler 0: NEAREST filtering is not used; its textures are filtered bilinearly";
@@ -587,7 +593,7 @@ TEST(GltfLoader, BaseColorTexturesFromDataUriFileAndBufferView) {
     EXPECT_EQ(t.wrap_t, 33648);
     EXPECT_EQ(s.textures[1].wrap_s, 10497);
     for (const auto& tex : s.textures) {
-      ASSERT_EQ(tex.rgba.size(), 16u);
+      ASSERT_EQ(tex.rgba().size(), 16u);
       expect_pixel(tex, 0, 0, {255, 0, 0, 255});
       expect_pixel(tex, 1, 0, {0, 255, 0, 255});
       expect_pixel(tex, 0, 1, {0, 0, 255, 255});
@@ -614,7 +620,7 @@ TEST(GltfLoader, PngWithEmptyIdatChunksDecodesToTheSameTexels) {
   g.node({{"mesh", g.triangle_mesh()}});
   const Scene s = load_gltf(g.write(dir.path(), "empty_idat", Gltf::Form::Glb));
   ASSERT_EQ(s.textures.size(), 1u);
-  ASSERT_EQ(s.textures[0].rgba.size(), 16u);
+  ASSERT_EQ(s.textures[0].rgba().size(), 16u);
   expect_pixel(s.textures[0], 0, 0, {255, 0, 0, 255});
   expect_pixel(s.textures[0], 1, 0, {0, 255, 0, 255});
   expect_pixel(s.textures[0], 0, 1, {0, 0, 255, 255});
@@ -656,10 +662,10 @@ TEST(GltfLoader, PngKindsAndJpegDecodeToRgba) {
   ASSERT_EQ(j.width, 8);
   ASSERT_EQ(j.height, 8);
   for (size_t p = 0; p < 64; ++p) {
-    EXPECT_NEAR(j.rgba[4 * p], 200, 3) << p;
-    EXPECT_NEAR(j.rgba[4 * p + 1], 40, 3) << p;
-    EXPECT_NEAR(j.rgba[4 * p + 2], 90, 3) << p;
-    EXPECT_EQ(j.rgba[4 * p + 3], 255) << p;
+    EXPECT_NEAR(j.rgba()[4 * p], 200, 3) << p;
+    EXPECT_NEAR(j.rgba()[4 * p + 1], 40, 3) << p;
+    EXPECT_NEAR(j.rgba()[4 * p + 2], 90, 3) << p;
+    EXPECT_EQ(j.rgba()[4 * p + 3], 255) << p;
   }
   EXPECT_TRUE(s.warnings.empty()) << testing::PrintToString(s.warnings);
 }
@@ -1568,9 +1574,9 @@ TEST(PaperScenes, TestChart) {
   EXPECT_EQ(tex.height, 2048);
   EXPECT_EQ(tex.wrap_s, 33071);
   // The frame is black ink (reflectance 0.04, sRGB 56), the paper white (0.8, sRGB 231).
-  EXPECT_EQ(tex.rgba[0], 56);
+  EXPECT_EQ(tex.rgba()[0], 56);
   const size_t centre_left = (static_cast<size_t>(1100) * 2048 + 40) * 4;
-  EXPECT_EQ(tex.rgba[centre_left], 231);
+  EXPECT_EQ(tex.rgba()[centre_left], 231);
   ASSERT_EQ(chart.texcoords0.size(), 4u);
 }
 
