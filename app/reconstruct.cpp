@@ -477,17 +477,17 @@ std::string summary(const nlohmann::json& m) {
 
 // The folders of a dataset's done samples as its index.jsonl lists them (the samples a run has published;
 // not every folder under samples/: stale ones, those past the dataset's samples and those a run has not
-// finished are not done), in index order, each sample's realisations after it; `left_out` counts the rows
-// not done by status ("" when every row is done). A folder whose metadata.json carries another hash than its
+// finished are not done), in index order, each sample's realisations after it; `not_done` counts the rows
+// not done by status (empty when every row is done). A folder whose metadata.json carries another hash than its
 // row was generated again since the index was written: refused.
-std::vector<fs::path> done_sample_folders(const fs::path& dir, std::string* left_out) {
+std::vector<fs::path> done_sample_folders(const fs::path& dir, std::map<std::string, int>& not_done) {
   const fs::path index = dir / "index.jsonl";
   if (!fs::is_regular_file(index))
     throw Error(dir.string() + ": a dataset folder without index.jsonl: the first `spadgen dataset run` into it is "
                 "still running or was killed (the last run on the folder to end writes the index); run it again to finish");
   std::istringstream lines(scenes::read_file_bounded(index.string(), int64_t{1} << 36, "index.jsonl"));
   std::vector<fs::path> out;
-  std::map<std::string, int> not_done;
+  not_done.clear();
   int row = 0;
   for (std::string line; std::getline(lines, line);) {
     if (line.empty()) continue;
@@ -530,10 +530,6 @@ std::vector<fs::path> done_sample_folders(const fs::path& dir, std::string* left
                     "(and generates what is not done)");
       out.push_back(dir / f);
     }
-  }
-  if (left_out) {
-    left_out->clear();
-    for (const auto& [status, n] : not_done) *left_out += (left_out->empty() ? "" : ", ") + std::to_string(n) + " " + status;
   }
   return out;
 }
@@ -635,8 +631,10 @@ std::string evaluate(const EvaluateCommand& c) {
     text << summary(report);
     files.insert(files.end(), {"range_error.png", "outcome.png"});
   } else if (fs::exists(target / "dataset.json")) {
-    std::string left_out;
-    const std::vector<fs::path> samples = done_sample_folders(target, &left_out);
+    std::map<std::string, int> not_done;
+    const std::vector<fs::path> samples = done_sample_folders(target, not_done);
+    std::string left_out;  // "1 failed, 2 stale"
+    for (const auto& [status, n] : not_done) left_out += (left_out.empty() ? "" : ", ") + std::to_string(n) + " " + status;
     if (samples.empty())
       throw Error(c.target + ": no done samples to evaluate (index.jsonl: " + (left_out.empty() ? "no rows" : left_out) + ")");
     reconstruct::Scores total(scorer_options(c));
@@ -670,7 +668,7 @@ std::string evaluate(const EvaluateCommand& c) {
       report["labels"] = std::to_string(unlabelled) + " of " + std::to_string(samples.size()) +
                          " samples without labels.exr: their objects are counted as detectable (samples[].detections_source.labels)";
     report["samples"] = rows;
-    if (!left_out.empty()) report["not_scored"] = "the samples index.jsonl lists as not done: " + left_out;
+    if (!not_done.empty()) report["not_scored"] = not_done;  // {"failed": 1}: index.jsonl's rows not done, by status
     writers::write_file_atomic((fs::path(out) / "samples.csv").string(), csv.str());
     files.push_back("samples.csv");
     text << samples.size() << (samples.size() == 1 ? " sample folder" : " sample folders") << " (realisations included)"

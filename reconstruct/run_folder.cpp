@@ -72,7 +72,14 @@ nlohmann::json read_run_metadata(const std::string& dir) {
   const std::string path = (fs::path(dir) / "metadata.json").string();
   std::error_code ec;
   const fs::file_status st = fs::status(path, ec);
-  if (!fs::exists(st)) throw Error(dir + ": not a run folder (no metadata.json); expected the folder of a finished `spadgen run`");
+  if (!fs::exists(st)) {
+    // a dataset's folder holds run folders, one per sample: name one
+    const bool dataset = fs::is_regular_file(fs::path(dir) / "dataset.json", ec);
+    throw Error(dir + ": not a run folder (no metadata.json); expected the folder of a finished `spadgen run`" +
+                (dataset ? std::string(" (this is a dataset's folder: its samples' run folders are in its samples/, e.g. ") +
+                               (fs::path(dir) / "samples" / "000000").string() + ")"
+                         : std::string()));
+  }
   // Opened only when a regular file: a FIFO would block the open for ever, a device never end.
   if (!fs::is_regular_file(st)) throw Error(path + ": not a regular file; expected the run's metadata.json");
   // A run's metadata.json is kilobytes; read whole, a huge file took gigabytes of memory to be refused.

@@ -650,6 +650,14 @@ TEST_F(Dataset, AFailingSampleIsRecordedAndTheOthersGoOn) {
   EXPECT_THAT(st.output, HasSubstr("failed: 1, 3"));
   EXPECT_THAT(st.output, HasSubstr("makes an invalid scene: --set camera.crop: found [496, 232, 24, 20]"));
   EXPECT_THAT(slurp(dir_ / "out/index.csv"), HasSubstr(",failed,"));
+  // evaluate scores the done samples and counts the others by status, as an object a script reads (it was
+  // a sentence)
+  const Result ev = sh("evaluate " + (dir_ / "out").string() + " -o " + (dir_ / "ev").string());
+  ASSERT_EQ(ev.code, 0) << ev.output;
+  EXPECT_THAT(ev.output, HasSubstr("not scored, not done: 2 failed"));
+  const auto m = nlohmann::json::parse(slurp(dir_ / "ev/metrics.json"));
+  EXPECT_EQ(m["samples"].size(), 4u);  // samples 0 and 2, two realisations each
+  EXPECT_EQ(m["not_scored"], nlohmann::json({{"failed", 2}})) << m["not_scored"];
 }
 
 // A sample whose estimate the sensor refuses (here transients in the intensity mode without a window) is

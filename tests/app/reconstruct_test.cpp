@@ -112,6 +112,13 @@ TEST_F(Reconstruct, RefusesWhatItCannotReadNamingIt) {
   Result r = sh("reconstruct " + dir_.string());
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("not a run folder (no metadata.json)"), std::string::npos) << r.output;
+  EXPECT_THAT(r.output, Not(HasSubstr("dataset")));
+  std::ofstream(dir_ / "dataset.json") << "{}";  // a dataset's folder: its samples are named
+  r = sh("reconstruct " + dir_.string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("(this is a dataset's folder: its samples' run folders are in its samples/, e.g. " +
+                                  (dir_ / "samples" / "000000").string() + ")"));
+  fs::remove(dir_ / "dataset.json");
   const fs::path run = dir_ / "run";
   r = sh("run " + kScenes + "flat_target.json --set camera.crop=[502,240,8,8] --set render.samples_per_pixel=1 -q -o " + run.string() +
          " --set outputs.counts=false");
