@@ -334,9 +334,12 @@ TEST_F(Dataset, ARunKilledWithSigkillResumesToTheSameBytesAndSkipsWhatIsDone) {
 // SIGTERM while the samples are checked (before any is generated): exit 2 at once, the index as it was (it
 // rewrote the index, resolving every sample the check had not reached: 45-60 s for 200,000, past Slurm's 30 s).
 TEST_F(Dataset, ASignalWhileTheSamplesAreCheckedStopsAtOnce) {
-  // 600 samples of a random pulse width: a sensor shape each, about 40 ms to estimate: a check of seconds
+  // 600 samples of a random pulse width and jitter: 518 sensor shapes (the durations rounded to 2 significant
+  // digits), about 40 ms each to estimate: a check of about 10 s (a random pulse width alone gives 42 shapes,
+  // a check of about 1.1 s, which the signal at 1 s could miss)
   write(dir_ / "d.json", "{\"seed\": 1, \"scenes\": [\"" + kScenes + "flat_target.json\"], \"samples\": 600, "
-        "\"set\": {\"camera.crop\": [0, 0, 8, 8]}, \"random\": {\"laser.pulse_fwhm_ps\": {\"uniform\": [60, 120]}}}");
+        "\"set\": {\"camera.crop\": [0, 0, 8, 8]}, \"random\": {\"laser.pulse_fwhm_ps\": {\"uniform\": [60, 120]}, "
+        "\"sensor.jitter_fwhm_ps\": {\"uniform\": [10, 99]}}}");
   const fs::path out = dir_ / "out", err = dir_ / "err.txt";
   const Result r = shell("start=$(date +%s%N); " + kBin + " dataset run " + (dir_ / "d.json").string() + " -o " + out.string() +
                          " -q 2> " + err.string() + " & p=$!; sleep 1; kill -TERM $p; wait $p; code=$?; end=$(date +%s%N); "
