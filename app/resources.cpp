@@ -163,6 +163,12 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
     else if (s.chunks.empty()) resident += std::min(s.bytes(), row_bytes * tile * in_flight);
     else chunks += row_bytes * std::min(rows, (tile + s.chunks[rows_axis]) * T);
   }
+  // And its working arrays over the tile and its halo (sensor/sensor.cpp, process): every pixel's lambda per
+  // k, 8 bytes; its own avalanches' probability where crosstalk or frames read it, 8 more; with frames, the
+  // (p, q, -lambda) of each, 24 more. At 10,001 gate positions they are most of a tile (a 32 x 32 crop
+  // peaked at 311 MB against 222 MB planned without them).
+  const bool frames = c.outputs.frames;
+  sensor_tile += data_pixels * sensor.K() * (8 + (frames || halo > 0 ? 8 : 0) + (frames ? 24 : 0));
   plan.memory.push_back({"sensor tiles (K = " + std::to_string(sensor.K()) + " gate positions or exposures, " + th + ")",
                          in_flight * sensor_tile});
   plan.memory.push_back({"bands of (K, H, W) .npy stacks and frames being assembled (camera.width_px, render.tile_size_px, " + th + ")", bands});
