@@ -231,16 +231,20 @@ DetectionImage read_detections(const std::string& path, const RunFolder& run, bo
   if (fs::path(path).extension() == ".npy") {
     writers::NpyReader npy(path);
     if (npy.shape().size() != 3 || npy.shape()[0] != height || npy.shape()[1] != width)
-      throw Error(path + ": expected a float32 array (H, W, M) = (" + std::to_string(height) + ", " + std::to_string(width) + ", M) of ranges");
+      throw Error(path + ": expected a float32 or float64 array (H, W, M) = (" + std::to_string(height) + ", " + std::to_string(width) + ", M) of ranges");
     if (need_scores)
       throw Error(path + ": --min-score: a .npy of ranges holds no scores (an EXR's det<i>.score does); leave --min-score out");
     check_source(path, {}, run, source);
     const int m = int(npy.shape()[2]);
     DetectionImage img(width, height, m);
-    const float* v = npy.data<float>();
+    // float64 (NumPy's default) is taken too, to float32: 1 um at 10 m, far below any tolerance
+    const bool f64 = npy.dtype() == writers::Dtype::F64;
+    const float* v = f64 ? nullptr : npy.data<float>();
+    const double* v64 = f64 ? npy.data<double>() : nullptr;
     for (size_t i = 0; i < img.count.size(); ++i)
       for (int s = 0; s < m; ++s) {
-        const float r = v[i * size_t(m) + size_t(s)];
+        const size_t at = i * size_t(m) + size_t(s);
+        const float r = f64 ? static_cast<float>(v64[at]) : v[at];
         img.range[img.at(s, i)] = r;
         img.count[i] += std::isfinite(r);
       }

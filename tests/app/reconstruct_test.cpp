@@ -324,16 +324,29 @@ TEST_F(Reconstruct, EvaluateScoresADetectionsNpyAgainstTheLabelsExactly) {
   }
   r = sh("evaluate " + run.string() + " --detections " + (dir_ / "wrong.npy").string() + " -o " + (dir_ / "eval3").string());
   EXPECT_EQ(r.code, 1);
-  EXPECT_NE(r.output.find("wrong.npy: expected a float32 array (H, W, M)"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("wrong.npy: expected a float32 or float64 array (H, W, M)"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(dir_ / "eval3")) << "a refused evaluation leaves no empty folder";
-  // a float64 array of the right shape: its dtype named, and the one expected (it said "not the one expected here")
+  // the same ranges as float64 (NumPy's default dtype; it was refused): the same scores
   {
     spadgen::writers::NpyWriter npy((dir_ / "f8.npy").string(), spadgen::writers::Dtype::F64, {H, W, M});
+    const std::vector<double> r64(ranges.begin(), ranges.end());
+    npy.write(0, r64.data(), int64_t(r64.size()));
     npy.commit();
   }
-  r = sh("evaluate " + run.string() + " --detections " + (dir_ / "f8.npy").string() + " -o " + (dir_ / "eval3").string());
+  r = sh("evaluate " + run.string() + " --detections " + (dir_ / "f8.npy").string() + " -o " + (dir_ / "eval_f8").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  const auto m8 = nlohmann::json::parse(slurp(dir_ / "eval_f8" / "metrics.json"));
+  EXPECT_EQ(m8["objects"], m["objects"]);
+  EXPECT_EQ(m8["detections"], m["detections"]);
+  EXPECT_EQ(m8["range_error"], m["range_error"]);
+  // other dtypes: named, and the ones expected
+  {
+    spadgen::writers::NpyWriter npy((dir_ / "i4.npy").string(), spadgen::writers::Dtype::I32, {H, W, M});
+    npy.commit();
+  }
+  r = sh("evaluate " + run.string() + " --detections " + (dir_ / "i4.npy").string() + " -o " + (dir_ / "eval3").string());
   EXPECT_EQ(r.code, 1);
-  EXPECT_NE(r.output.find("its dtype is <f8, expected <f4"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("its dtype is <i4, expected <f4"), std::string::npos) << r.output;
   // an infinite range is neither metres nor "none" (it was skipped as if nothing were there)
   {
     spadgen::writers::NpyWriter npy((dir_ / "inf.npy").string(), spadgen::writers::Dtype::F32, {H, W, M});
