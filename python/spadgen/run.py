@@ -418,7 +418,14 @@ class Run:
     def expected_counts(self):
         """(K, H, W) float32 noise-free expected counts N (1 - exp(-lambda)): expected_counts.npy when the run
         wrote it (outputs.expected_counts), else computed from detection_rate.npy (in memory, once)."""
-        if self.has("expected_counts.npy") or not self.has("detection_rate.npy"):
+        if not self.has("expected_counts.npy") and not self.has("detection_rate.npy"):
+            msg = (f"{self.path}: this run wrote neither expected_counts nor detection_rate, from which expected counts "
+                   "are computed (written with outputs.expected_counts or outputs.detection_rate)")
+            if any(f.startswith("light/") for f in self.files):
+                msg += (f"; it saved the light, from which `spadgen sense {self.path} --set outputs.detection_rate=true -o DIR` "
+                        "writes the rates without rendering, bit for bit as a run would")
+            raise FileNotFoundError(msg)
+        if self.has("expected_counts.npy"):
             return self.array("expected_counts.npy")
         if "expected_counts (from detection_rate.npy)" not in self._cache:
             lam = np.asarray(self.detection_rate, np.float64)

@@ -145,6 +145,10 @@ def test_a_run_without_noise_free_rates_says_how_to_get_them(make_run, spadgen_b
         RunDataset([run])
     assert "or leave 'expected_counts' out of fields (e.g. fields=('counts', 'depth', 'mask', 'layer_count'))" in str(e.value)
     assert RunDataset([run], fields=("counts", "depth", "mask", "layer_count"))[0]["counts"].shape[1:] == (10, 10)
+    # Run.expected_counts says the same (it raised "did not write expected_counts.npy", silent on the rates)
+    with pytest.raises(FileNotFoundError, match=r"wrote neither expected_counts nor detection_rate.*spadgen sense .* "
+                                                r"--set outputs.detection_rate=true -o DIR"):
+        spadgen.open_run(run).expected_counts
     # a run without ground_truth.exr: the suggestion leaves out every field that needs it (it named mask and
     # layer_count, which fail next)
     no_truth = tmp_path / "no_truth"
