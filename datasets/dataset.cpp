@@ -157,6 +157,21 @@ std::string folder_of(int64_t index) {
   return buf;
 }
 
+// v with every float that holds an integer (6.0, -3.0; below 2^53 in magnitude, not -0.0) as that integer.
+// JSON's 6 and 6.0 are one value, and equal values must make the same sample: its hash is of the resolved
+// scene's text, where 6.0 and 6 differ (a dataset file saved again by another tool, Python's json.dump
+// writes 6.0, made every sample stale and generated again).
+json integral_numbers_as_integers(json v) {
+  if (v.is_structured()) {
+    for (json& e : v) e = integral_numbers_as_integers(std::move(e));
+  } else if (v.is_number_float()) {
+    const double d = v.get<double>();
+    if (std::trunc(d) == d && std::abs(d) < 9007199254740992.0 && !(d == 0.0 && std::signbit(d)))
+      return json(static_cast<int64_t>(d));
+  }
+  return v;
+}
+
 }  // namespace
 
 const std::vector<DatasetKey>& dataset_keys() {
@@ -187,7 +202,9 @@ int64_t DatasetSpec::count() const { return samples.value_or(grid_cells()); }
 
 DatasetSpec parse_dataset_text(const std::string& text, const std::string& path) {
   const Reader rd{path.empty() ? "<dataset>" : path};
-  const json doc = scenes::parse_json(text, rd.file);  // checked: depth, duplicate keys, numbers
+  // checked: depth, duplicate keys, numbers; a number written with a fraction of zero (6.0) read as the
+  // integer (6), so that it makes the same samples
+  const json doc = integral_numbers_as_integers(scenes::parse_json(text, rd.file));
   // The same text with the keys in the file's order, which orders the axes.
   const ojson ordered = ojson::parse(text, nullptr, true, /*ignore_comments=*/true);
   const auto keys_of = [&](const char* section) {

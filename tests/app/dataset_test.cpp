@@ -640,6 +640,26 @@ TEST_F(Dataset, ThePlannedDiskOfTheSavedLightFollowsTheBinWidth) {
   EXPECT_LE(planned, 3.0 * taken) << planned << " planned, " << taken << " taken";
 }
 
+// 6 and 6.0 are one JSON value: a dataset file saved again with its integers written as floats (Python's
+// json.dump) makes the same samples (the folder took it as the same dataset, and every sample was stale
+// and generated again: their hash covered the values' text).
+TEST_F(Dataset, AValueWrittenWithAZeroFractionMakesTheSameSamples) {
+  const std::string text = small_dataset(2);
+  write(dir_ / "d.json", text);
+  ASSERT_EQ(sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q").code, 0);
+  std::string floats = text;
+  for (const auto& [from, to] : {std::pair<std::string, std::string>{"[1, 2]", "[1.0, 2.0]"}, {"[496, 232, 24, 20]", "[496.0, 232, 24.0, 20]"},
+                                 {"samples_per_pixel\": 2,", "samples_per_pixel\": 2.0,"}}) {
+    ASSERT_NE(floats.find(from), std::string::npos) << from;
+    floats.replace(floats.find(from), from.size(), to);
+  }
+  write(dir_ / "f.json", floats);
+  const Result r = sh("dataset run " + (dir_ / "f.json").string() + " -o " + (dir_ / "out").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("0 of 2 samples to generate (2 done already)"));
+  EXPECT_THAT(r.output, HasSubstr("2 done, 0 failed, 0 stale, 0 missing"));
+}
+
 TEST_F(Dataset, AFailingSampleIsRecordedAndTheOthersGoOn) {
   // camera.width_px 16 leaves the crop outside the sensor: cells with it fail, the others do not.
   write(dir_ / "d.json", small_dataset(4, 3, kScenes + "multi_object.json", ", \"camera.width_px\": [1024, 16]"));
