@@ -62,25 +62,28 @@ int estimate_cores(int threads) {
 
 struct Estimate {
   int64_t disk = 0, memory = 0;  // disk: what the sample keeps
-  int64_t disk_at_least = 0;  // with compressed files (EXR images, Zarr stores) at a twentieth of their size (ResourcePlan)
-  int64_t disk_peak = 0;      // temporary files while the sample runs (freed at its end)
+  int64_t disk_at_least = 0;  // compressed files (EXR, Zarr) at a twentieth, the saved light without lit bins (ResourcePlan)
+  int64_t disk_peak = 0, disk_peak_at_least = 0;  // temporary files while the sample runs (freed at its end)
   double seconds = 0.0;
   bool paths_bound = false;  // a target error: the time counts render.max_samples_per_pixel paths per pixel
+  bool light = false;        // the light is saved: its least is without lit bins
 };
 
 // The estimates of samples generated one at a time (a plan's, a run's): their kept disk, time and largest
 // memory, with the largest sample's temporary files on top of the disk (freed after each sample).
 struct Totals {
-  int64_t kept = 0, kept_at_least = 0, peak = 0, memory = 0;
+  int64_t kept = 0, kept_at_least = 0, peak = 0, peak_at_least = 0, memory = 0;
   double seconds = 0.0;
-  bool paths_bound = false;
+  bool paths_bound = false, light = false;
   void add(const Estimate& e) {
     kept += e.disk, kept_at_least += e.disk_at_least, seconds += e.seconds;
-    peak = std::max(peak, e.disk_peak), memory = std::max(memory, e.memory);
+    peak = std::max(peak, e.disk_peak), peak_at_least = std::max(peak_at_least, e.disk_peak_at_least);
+    memory = std::max(memory, e.memory);
     paths_bound = paths_bound || e.paths_bound;
+    light = light || e.light;
   }
   int64_t disk() const { return kept + peak; }
-  int64_t disk_at_least() const { return kept_at_least + peak; }
+  int64_t disk_at_least() const { return kept_at_least + peak_at_least; }
 };
 
 // What a sample's scene adds to its plan: its glTF's objects and geometry (-1 objects, no geometry: unknown).
@@ -117,10 +120,12 @@ Estimate estimate(const RunConfig& c, int repeats, int threads, const SceneSize&
   // the whole sample again for each overcounted a sample of two realisations by 1.9 times.
   int64_t again = 0, again_at_least = 0;
   for (const ResourcePlan::Part& p : plan.disk)
-    if (!p.freed_at_end && !p.noise_free) again += p.bytes, again_at_least += p.compressed ? p.bytes / kCompressionBound : p.bytes;
+    if (!p.freed_at_end && !p.noise_free) again += p.bytes, again_at_least += p.at_least();
   e.disk = plan.disk_kept() + (repeats - 1) * again;
   e.disk_at_least = plan.disk_kept_at_least() + (repeats - 1) * again_at_least;
   e.disk_peak = run_disk - plan.disk_kept();
+  e.disk_peak_at_least = plan.disk_at_least() - plan.disk_kept_at_least();
+  e.light = std::any_of(plan.disk.begin(), plan.disk.end(), [](const ResourcePlan::Part& p) { return p.least >= 0; });
   e.seconds += (repeats - 1) * (kSecondsPerRun + sensor_seconds + double(run_disk) * kSecondsPerByte);
   e.seconds *= 2.0 / estimate_cores(threads);  // the model is of 2 cores; the work is parallel
   return e;
@@ -460,8 +465,8 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
          "render.max_samples_per_pixel for every pixel, an upper bound\n";
   if (total.disk_at_least() != total.disk())
     o << "# the disk counts the compressed files (EXR images, Zarr stores) uncompressed, at most: the samples take at least "
-      << bytes_text(total.disk_at_least()) << " (those files at a twentieth; examples/datasets/multi_object_variations.json "
-         "writes about an eighth of the most)\n";
+      << bytes_text(total.disk_at_least()) << " (those files at a twentieth" << (total.light ? ", the saved light without lit bins" : "")
+      << "; examples/datasets/multi_object_variations.json writes about an eighth of the most)\n";
   if (folder) {
     const int64_t free = free_disk(options.out_dir);
     o << "# left to generate in " << options.out_dir << ": " << left << " samples, disk about " << bytes_text(left_total.disk())
@@ -529,12 +534,14 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
   Staging::remove_leftovers(dir / "samples");
   const int64_t disk = totals.disk(), disk_at_least = totals.disk_at_least();
   const double seconds = totals.seconds;
-  // Refused when even the least they can take does not fit (compressed stores at a twentieth of their size).
+  // Refused when even the least they can take does not fit (compressed stores at a twentieth of their size,
+  // the saved light without lit bins: the scene decides them).
   if (const int64_t free = free_disk(dir); free >= 0 && free < disk_at_least) {
     const bool compressed = disk_at_least != disk;
     throw Error("dataset run: the " + std::to_string(todo.size()) + " samples left to generate in " + dir.string() +
                 (shard.count > 1 ? " (shard " + shard.text() + ")" : std::string()) + " need " +
-                (compressed ? "at least " + bytes_text(disk_at_least) + " (their compressed files, EXR images and Zarr stores, at a twentieth of their size; at most " +
+                (compressed ? "at least " + bytes_text(disk_at_least) + " (their compressed files, EXR images and Zarr stores, at a twentieth of their size" +
+                                  (totals.light ? ", the saved light without lit bins" : "") + "; at most " +
                                   bytes_text(disk) + ")"
                             : "about " + bytes_text(disk)) +
                 ", and " + bytes_text(free) + " is free there (about " +

@@ -82,10 +82,15 @@ int64_t ResourcePlan::memory_needed() const {
   return n;
 }
 
+int64_t ResourcePlan::Part::at_least() const {
+  if (least >= 0) return least;
+  return compressed ? bytes / kCompressionBound : bytes;
+}
+
 int64_t ResourcePlan::disk_sum(bool at_least, bool kept_only) const {
   int64_t n = 0;
   for (const Part& p : disk)
-    if (!(kept_only && p.freed_at_end)) n += at_least && p.compressed ? p.bytes / kCompressionBound : p.bytes;
+    if (!(kept_only && p.freed_at_end)) n += at_least ? p.at_least() : p.bytes;
   return n;
 }
 
@@ -233,12 +238,13 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
     plan.disk.push_back({std::string("light/ (outputs.light; ") +
                              (bins > 0 ? "about " + std::to_string(lit) + " lit bins per pixel, " + span + " ns" : "no time bins: the totals") +
                              (zarr ? ", uncompressed)" : ")"),
-                         ring * (8 + 8 + 8 + 8 + 4 + lit * 4), false, "", zarr, false, true});
+                         ring * (8 + 8 + 8 + 8 + 4 + lit * 4), false, "", zarr, false, true,
+                         /*least: no lit bins*/ ring * (8 + 8 + 8 + 8 + 4)});
     // The values are spilled to a temporary file as the tiles finish, in tile order, and copied into
     // light/values (.npy or .zarr) in pixel order at the end: both are on the disk at that moment.
     plan.disk.push_back({std::string("the light's values spilled while the tiles render (outputs.light; freed once light/values") +
                              (zarr ? ".zarr" : ".npy") + " is written)",
-                         ring * lit * 4, false, "", false, true});
+                         ring * lit * 4, false, "", false, true, false, /*least*/ 0});
   }
   plan.disk_available = out.empty() ? -1 : free_disk(out);
   return plan;
@@ -257,13 +263,15 @@ void check_resources(const ResourcePlan& plan, const RunConfig& c, const fs::pat
                 bytes_text(plan.memory_available) + " is available: " + join_parts(required(plan.memory)) +
                 "; lower the keys of the largest parts, or run with fewer --threads");
   // The earlier set in the output folder stays until the new one is complete: the new one needs its
-  // whole size free. Compressed stores (Zarr) count a twentieth of their size here: refused only when even
-  // that does not fit (their size is known once written; a run that then finds the disk full fails
+  // whole size free. Compressed stores (Zarr) count a twentieth of their size here, the saved light no lit
+  // bins: refused only when even that does not fit (their size is known once written; a run that then finds the disk full fails
   // cleanly, the folder as it was).
   if (plan.disk_available >= 0 && plan.disk_at_least() > plan.disk_available) {
     const bool any_compressed = plan.disk_at_least() != plan.disk_needed();
+    const bool light = std::any_of(plan.disk.begin(), plan.disk.end(), [](const ResourcePlan::Part& p) { return p.least >= 0; });
     throw Error((who.empty() ? file + ": the run writes " : who + " writes ") + (any_compressed ? "at least " + bytes_text(plan.disk_at_least()) +
-                " (the compressed files, EXR images and Zarr stores, at a twentieth of their size; at most " + bytes_text(plan.disk_needed()) + ")"
+                " (the compressed files, EXR images and Zarr stores, at a twentieth of their size" +
+                (light ? ", the saved light without lit bins" : "") + "; at most " + bytes_text(plan.disk_needed()) + ")"
                                                            : "about " + bytes_text(plan.disk_needed())) +
                 " into " + out.string() + ", and " + bytes_text(plan.disk_available) + " is free there: " + join_parts(plan.disk) +
                 "; " + (remedy.empty() ? "switch outputs off (outputs.*), crop (camera.crop), or choose another folder (-o)" : remedy));

@@ -31,6 +31,10 @@ struct ResourcePlan {
     // A disk part that a further realisation of the temporal noise (sense --noise-seed, a dataset's repeats)
     // links from the run rather than writes: the light, the noise-free stacks, a gate sweep's images.
     bool noise_free = false;
+    // The least the part can take when the scene decides its size (the saved light's lit bins: a pixel may
+    // have none); -1: `bytes`, or a compressed part's bound.
+    int64_t least = -1;
+    int64_t at_least() const;  // least, else bytes (a compressed part: bytes / kCompressionBound)
   };
   std::vector<Part> memory, disk;
   int64_t memory_available = -1;  // bytes; -1 unknown
