@@ -24,6 +24,7 @@
 #include <sstream>
 #include <string>
 #include <string_view>
+#include <unordered_map>
 #include <vector>
 
 #include "core/error.h"
@@ -294,6 +295,7 @@ class Loader {
   Trs decompose(size_t node, const glm::dmat4& m) const;
   glm::dmat4 edited(const NodeEdit& e, const Trs& base) const;
   void warn_unused_edits();
+  void check_volumes();
 
   void load_materials();
   int texture(int gltf_texture, const std::string& user);
@@ -387,8 +389,12 @@ std::vector<int> Loader::pick_roots(const std::string& scene_name) {
     chosen = static_cast<size_t>(m_.defaultScene);
   }
   const tinygltf::Scene& s = m_.scenes[chosen];
+  std::set<int> listed;
   for (int n : s.nodes)
-    if (n < 0 || static_cast<size_t>(n) >= m_.nodes.size())
+    if (!listed.insert(n).second)
+      fail(label("scene", chosen, s.name), "lists node " + std::to_string(n) + " twice; a scene's nodes are unique "
+                                           "(glTF 2.0 scenes[].nodes, uniqueItems): its meshes would be loaded twice");
+    else if (n < 0 || static_cast<size_t>(n) >= m_.nodes.size())
       fail(label("scene", chosen, s.name), "node " + std::to_string(n) + " does not exist (the file has " +
                                                std::to_string(m_.nodes.size()) + " nodes)");
     else if (parent_[static_cast<size_t>(n)] >= 0)
@@ -1363,6 +1369,96 @@ void Loader::load(const std::string& scene_name) {
   load_materials();
   for (int r : roots) visit(r, glm::dmat4(1.0));
   warn_unused_edits();
+  check_volumes();
+}
+
+// A volume material (transmission and KHR_materials_volume thickness > 0) makes a medium of what its mesh
+// encloses: a ray that enters through a front face travels in it until it leaves through a back face. Its
+// node's triangles must enclose a solid, with outward faces. An open sheet (a plane exported with a volume
+// thickness) let rays in that never left: the wall behind it was seen through 0.5 m of glass (+1.7 ns); an
+// inside-out box was a medium outside and air inside. Both are warned, naming the node and the material.
+// Edges are matched by their vertices' positions (exporters split vertices at seams), over all of the
+// node's primitives (a solid may have faces of other materials).
+namespace {
+std::string volume_text(double m3) {
+  char buf[48];
+  std::snprintf(buf, sizeof buf, "%.3g cm^3", m3 * 1e6);
+  return buf;
+}
+}  // namespace
+
+void Loader::check_volumes() {
+  std::map<int, std::vector<size_t>> meshes_of_node;  // nodes with a volume primitive -> all their meshes
+  std::set<int> volume_nodes;
+  for (size_t i = 0; i < scene_.meshes.size(); ++i) {
+    const Mesh& m = scene_.meshes[i];
+    meshes_of_node[m.gltf_node].push_back(i);
+    if (m.material >= 0) {
+      const Material& mat = scene_.materials[static_cast<size_t>(m.material)];
+      if (mat.transmissive() && mat.thickness_m > 0.0f) volume_nodes.insert(m.gltf_node);
+    }
+  }
+  for (const int node : volume_nodes) {
+    // position -> id: exact world coordinates (offset + float position); hashed (a glass model of a million
+    // triangles)
+    struct PositionHash {
+      size_t operator()(const std::array<double, 3>& p) const {
+        size_t h = 0;
+        for (double x : p) h = h * 1000003u ^ std::hash<double>()(x);
+        return h;
+      }
+    };
+    std::unordered_map<std::array<double, 3>, uint32_t, PositionHash> ids;
+    const auto id = [&](const Mesh& m, uint32_t v) {
+      const glm::dvec3 p = m.offset + glm::dvec3(m.positions[v]);
+      return ids.emplace(std::array<double, 3>{p.x, p.y, p.z}, static_cast<uint32_t>(ids.size())).first->second;
+    };
+    std::unordered_map<uint64_t, int> edges;  // undirected edge (low id << 32 | high id) -> triangles on it
+    const auto edge = [](uint32_t u, uint32_t v) { return uint64_t{std::min(u, v)} << 32 | std::max(u, v); };
+    struct Tri {
+      uint32_t a, b, c;
+      bool volume;
+      glm::dvec3 p[3];
+    };
+    std::vector<Tri> tris;
+    std::set<std::string> materials;
+    for (const size_t mi : meshes_of_node[node]) {
+      const Mesh& m = scene_.meshes[mi];
+      const bool volume = m.material >= 0 && scene_.materials[static_cast<size_t>(m.material)].transmissive() &&
+                          scene_.materials[static_cast<size_t>(m.material)].thickness_m > 0.0f;
+      if (volume) materials.insert(label("material", static_cast<size_t>(m.material), scene_.materials[static_cast<size_t>(m.material)].name));
+      for (size_t t = 0; t + 2 < m.indices.size(); t += 3) {
+        Tri tri{id(m, m.indices[t]), id(m, m.indices[t + 1]), id(m, m.indices[t + 2]), volume, {}};
+        if (tri.a == tri.b || tri.b == tri.c || tri.a == tri.c) continue;  // no area
+        for (int k = 0; k < 3; ++k) tri.p[k] = m.offset + glm::dvec3(m.positions[m.indices[t + size_t(k)]]);
+        for (const auto& [u, v] : {std::pair{tri.a, tri.b}, std::pair{tri.b, tri.c}, std::pair{tri.c, tri.a}}) ++edges[edge(u, v)];
+        tris.push_back(tri);
+      }
+    }
+    size_t open = 0;  // edges of the volume's triangles that bound an odd number of the node's triangles
+    for (const Tri& t : tris)
+      if (t.volume)
+        for (const auto& [u, v] : {std::pair{t.a, t.b}, std::pair{t.b, t.c}, std::pair{t.c, t.a}})
+          open += edges[edge(u, v)] % 2 != 0;
+    std::string mats;
+    for (const std::string& m : materials) mats += (mats.empty() ? "" : ", ") + m;
+    const std::string who = node_label(m_, static_cast<size_t>(node)) + " (" + mats + ": transmission and a volume thickness)";
+    if (open > 0) {
+      warn(who + ": its triangles do not enclose a solid (" + std::to_string(open) + (open == 1 ? " edge bounds" : " edges bound") +
+           " one face only): a volume's mesh is the boundary of its medium, and a ray entering it through an open "
+           "surface travels in it until it meets another back face, the surfaces behind included; close the mesh "
+           "(a plate as a box of its thickness), or set thicknessFactor 0 for a thin sheet");
+      continue;
+    }
+    // Closed: the enclosed volume's sign says whether the faces point out (divergence theorem).
+    const glm::dvec3 o = tris.empty() ? glm::dvec3(0.0) : tris.front().p[0];
+    double six_v = 0.0;
+    for (const Tri& t : tris) six_v += glm::dot(t.p[0] - o, glm::cross(t.p[1] - o, t.p[2] - o));
+    if (six_v < 0.0)
+      warn(who + ": its faces point inward (the solid's enclosed volume is negative, " + volume_text(six_v / 6.0) +
+           "): the medium is taken as outside the mesh and air inside; reverse its triangles' winding (in Blender: "
+           "Mesh > Normals > Flip, or Recalculate Outside)");
+  }
 }
 
 // glTF URIs are percent-encoded ("my%20scene.bin").

@@ -83,6 +83,69 @@ TEST(GltfLoader, ARotationOfAnyLengthIsNormalised) {
   }
 }
 
+// A volume material's mesh bounds its medium: an open sheet (a plane exported with a volume thickness: the
+// wall behind it was seen through 0.5 m of glass) and an inside-out box (the medium outside) are warned,
+// naming the node and the material; a closed outward box is not, also when its faces are split over two
+// primitives of two materials (edges matched by position, not index), nor a thin sheet (thickness 0).
+TEST(GltfLoader, AVolumeWhoseMeshIsOpenOrInsideOutIsWarned) {
+  // a 1 x 1 x 0.1 box: 8 corners, 12 outward triangles (counter-clockwise seen from outside)
+  const std::vector<float> corners = {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0, 0, 0, 0.1f, 1, 0, 0.1f, 1, 1, 0.1f, 0, 1, 0.1f};
+  const std::vector<uint16_t> box = {0, 2, 1, 0, 3, 2, 4, 5, 6, 4, 6, 7, 0, 1, 5, 0, 5, 4,
+                                     1, 2, 6, 1, 6, 5, 2, 3, 7, 2, 7, 6, 3, 0, 4, 3, 4, 7};
+  struct Case {
+    const char* name;
+    std::vector<uint16_t> first, second;  // two primitives (second empty: one)
+    double thickness;
+    const char* warning;  // "" none
+  };
+  std::vector<uint16_t> inward = box;
+  for (size_t t = 0; t < inward.size(); t += 3) std::swap(inward[t + 1], inward[t + 2]);
+  const std::vector<uint16_t> top(box.begin() + 6, box.begin() + 12), rest_a(box.begin(), box.begin() + 6),
+      rest_b(box.begin() + 12, box.end());
+  std::vector<uint16_t> rest = rest_a;
+  rest.insert(rest.end(), rest_b.begin(), rest_b.end());
+  const std::vector<Case> cases = {
+      {"closed", box, {}, 0.002, ""},
+      {"split", rest, top, 0.002, ""},
+      {"open", top, {}, 0.002, "its triangles do not enclose a solid (4 edges bound one face only)"},
+      {"thin", top, {}, 0.0, ""},
+      {"inward", inward, {}, 0.002, "its faces point inward (the solid's enclosed volume is negative, -1e+05 cm^3)"},
+  };
+  for (const Case& c : cases) {
+    TempDir dir;
+    Gltf g;
+    const int pos = g.positions(corners);
+    json prims = json::array({{{"attributes", {{"POSITION", pos}}}, {"indices", g.indices(c.first, kUShort)}, {"material", 0}}});
+    if (!c.second.empty())  // the other faces of another, opaque material
+      prims.push_back({{"attributes", {{"POSITION", g.positions(corners)}}}, {"indices", g.indices(c.second, kUShort)}, {"material", 1}});
+    g.doc["materials"] = {{{"name", "glass"}, {"extensions", {{"KHR_materials_transmission", {{"transmissionFactor", 1.0}}},
+                                                              {"KHR_materials_volume", {{"thicknessFactor", c.thickness}}}}}},
+                          {{"name", "paint"}}};
+    g.node({{"name", "Plate"}, {"mesh", g.mesh(prims)}});
+    const Scene s = load_gltf(g.write(dir.path(), c.name));
+    const std::string prefix = "node 0 'Plate' (material 0 'glass': transmission and a volume thickness): ";
+    std::string found;
+    for (const std::string& w : s.warnings)
+      if (w.rfind(prefix, 0) == 0) found = w.substr(prefix.size());
+    if (std::string(c.warning).empty()) EXPECT_EQ(found, "") << c.name;
+    else EXPECT_EQ(found.rfind(c.warning, 0), 0u) << c.name << ": " << found;
+  }
+}
+
+// A scene listing a node twice (glTF 2.0 scenes[].nodes: uniqueItems) is refused: its meshes were loaded twice.
+TEST(GltfLoader, ASceneListingANodeTwiceIsRefused) {
+  TempDir dir;
+  Gltf g;
+  g.node({{"name", "N"}, {"mesh", g.triangle_mesh()}});
+  g.doc["scenes"][0]["nodes"] = {0, 0};
+  try {
+    (void)load_gltf(g.write(dir.path(), "twice"));
+    FAIL() << "loaded";
+  } catch (const spadgen::Error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("scene 0 'main': lists node 0 twice; a scene's nodes are unique"));
+  }
+}
+
 TEST(GltfLoader, MatrixAndHierarchy) {
   TempDir dir;
   Gltf g;
