@@ -162,7 +162,8 @@ std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img
     if (c.laser.average_power_W > 0.0)
       w.push_back("no laser light reaches the " + image + " (laser.beam, half_angle_deg, offset_m, gltf_light" +
                   (laser_warnings(c, camera).empty() ? std::string() : "; or no camera path landed on the cone's small spot") +
-                  "; or what it lights reflects none of it: a black base colour): the "
+                  "; or what it lights reflects none of it: a black base colour, or a smooth mirror (roughness below "
+                  "0.032, a Dirac lobe), whose reflection of the laser is not rendered: docs/render.md, \"Not implemented\"): the "
                   "outputs hold ambient light and dark counts only");
     return w;
   }
