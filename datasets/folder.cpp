@@ -197,7 +197,7 @@ std::string first_difference(const ojson& folder, const ojson& file, const std::
       if (!file.contains(it.key()))
         return path + (path.empty() ? "" : ".") + "\"" + it.key() + "\" (the folder's dataset.json has it, the dataset file has not)";
     return (path.empty() ? std::string("the top level") : path) +
-           " (the order of its keys, which decides the grid cell each sample takes)";
+           " (the order of its keys" + (path == "\"grid\"" ? ", which decides the grid cell each sample takes)" : ")");
   }
   return path + " (the folder's dataset.json: " + text(folder) + ", the dataset file: " + text(file) + ")";
 }
@@ -211,6 +211,9 @@ std::optional<ojson> DatasetFolder::checked(const ojson& wanted) const {
   if (prev) {
     ojson a = *prev, b = wanted;
     for (const char* free_key : {"samples", "dataset_file"}) a.erase(free_key), b.erase(free_key);
+    // set's and random's keys in any order make the same samples (only the grid's order decides the cells)
+    for (const char* unordered : {"set", "random"})
+      if (a.contains(unordered) && b.contains(unordered) && json(a[unordered]) == json(b[unordered])) b[unordered] = a[unordered];
     if (a != b)
       throw Error(dir_.string() + " holds another dataset: its dataset.json differs from " + spec_.file + " at " +
                   first_difference(a, b, "") + " (only \"samples\" may change, to add samples); use another folder (-o) or remove " +

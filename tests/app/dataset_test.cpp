@@ -519,7 +519,22 @@ TEST_F(Dataset, RefusesAnotherDatasetsFolderForeignFilesAndTooLittleDisk) {
   write(dir_ / "swapped.json", swapped);
   ASSERT_EQ(sh("dataset run " + (dir_ / "ordered.json").string() + " -o " + (dir_ / "ord").string() + " -q").code, 0);
   EXPECT_THAT(sh("dataset run " + (dir_ / "swapped.json").string() + " -o " + (dir_ / "ord").string() + " -q").output,
-              HasSubstr("differs from " + (dir_ / "swapped.json").string() + " at \"grid\""));
+              HasSubstr("differs from " + (dir_ / "swapped.json").string() + " at \"grid\" (the order of its keys, which "
+                        "decides the grid cell each sample takes)"));
+  // set's and random's keys in another order make the same samples: the same dataset (refused before, "as
+  // the order decides the grid cell")
+  std::string reordered = ordered;
+  const std::string set_keys = "\"render.samples_per_pixel\": 2, \"acquisition.gate_sweep.stop_ns\": 4.2";
+  const std::string random_keys = "\"ambient.illuminance_lux\": {\"log_uniform\": [1, 1000]}, \"sensor.preset\": {\"choice\": [\"pixel_A\", \"pixel_B\"]}";
+  ASSERT_NE(reordered.find(set_keys), std::string::npos);
+  ASSERT_NE(reordered.find(random_keys), std::string::npos);
+  reordered.replace(reordered.find(set_keys), set_keys.size(), "\"acquisition.gate_sweep.stop_ns\": 4.2, \"render.samples_per_pixel\": 2");
+  reordered.replace(reordered.find(random_keys), random_keys.size(),
+                    "\"sensor.preset\": {\"choice\": [\"pixel_A\", \"pixel_B\"]}, \"ambient.illuminance_lux\": {\"log_uniform\": [1, 1000]}");
+  write(dir_ / "reordered.json", reordered);
+  const Result same = sh("dataset run " + (dir_ / "reordered.json").string() + " -o " + (dir_ / "ord").string());
+  EXPECT_EQ(same.code, 0) << same.output;
+  EXPECT_THAT(same.output, HasSubstr("0 of 2 samples to generate (2 done already)"));
   // without its dataset.json (damaged, or lost) the folder's samples may be another dataset's: refused (a
   // run of another dataset file replaced them)
   const std::string record = slurp(dir_ / "out/dataset.json");
