@@ -600,6 +600,11 @@ std::optional<Shard> shard_from_environment() {
                   "run some shards and never others: use --array=0-" + std::to_string(n - 1) + ", or START-END:STEP");
     return Shard{(i - min) / step, n};
   }
+  // JOB_COMPLETIONS (which the Job's env sets) without an index: not an Indexed Job, or an empty index; every
+  // pod would run the whole dataset (it was taken silently as shard 0 of 1)
+  if (env("JOB_COMPLETIONS") && !env("JOB_COMPLETION_INDEX"))
+    throw Error("JOB_COMPLETIONS is set but JOB_COMPLETION_INDEX is " + std::string(std::getenv("JOB_COMPLETION_INDEX") ? "empty" : "not") +
+                ": run as a Kubernetes Indexed Job (completionMode: Indexed, examples/kubernetes/), or unset JOB_COMPLETIONS");
   if (const auto id = env("JOB_COMPLETION_INDEX")) {
     const auto count = env("JOB_COMPLETIONS");
     if (!count)

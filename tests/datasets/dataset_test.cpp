@@ -378,6 +378,19 @@ TEST(Shards, FromSlurmJobArraysAndKubernetesIndexedJobs) {
   EXPECT_EQ(shard_from_environment()->text(), "1/3");
   ::setenv("JOB_COMPLETIONS", "x", 1);
   EXPECT_THROW(shard_from_environment(), Error);
+  // the completions without an index (not an Indexed Job, or an empty index): refused (taken as 0 of 1)
+  for (const bool empty : {true, false}) {
+    clear();
+    ::setenv("JOB_COMPLETIONS", "2", 1);
+    if (empty) ::setenv("JOB_COMPLETION_INDEX", "", 1);
+    try {
+      (void)shard_from_environment();
+      FAIL() << "no index";
+    } catch (const Error& e) {
+      EXPECT_THAT(e.what(), HasSubstr(std::string("JOB_COMPLETIONS is set but JOB_COMPLETION_INDEX is ") + (empty ? "empty" : "not") +
+                                      ": run as a Kubernetes Indexed Job"));
+    }
+  }
   clear();
 }
 
