@@ -454,7 +454,8 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
   const int64_t valid = samples - int64_t(errors.size());  // the invalid ones have no estimate
   o << "# per sample: disk about " << bytes_text(valid ? total.kept / valid : 0) << ", memory up to "
     << bytes_text(total.memory) << ", time about " << duration_text(valid ? total.seconds / double(valid) : 0.0) << "\n";
-  o << "# " << (shard.count > 1 ? "this shard" : "total") << ": " << samples << " samples, disk about " << bytes_text(total.disk())
+  o << "# " << (shard.count > 1 ? "this shard" : "total") << ": " << samples << " samples"
+    << (valid < samples ? " (the " + std::to_string(valid) + " valid ones estimated)" : std::string()) << ", disk about " << bytes_text(total.disk())
     << ", time about " << duration_text(total.seconds) << " (estimates for " << estimate_cores(options.threads)
     << (estimate_cores(options.threads) == 1 ? " core" : " cores") << ": docs/datasets.md, \"Estimates\")\n";
   o << "# " << estimator.shapes() << (estimator.shapes() == 1 ? " estimate" : " estimates")

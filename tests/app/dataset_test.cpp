@@ -721,7 +721,7 @@ TEST_F(Dataset, APlanListsASampleItCannotEstimateAsInvalid) {
   write(dir_ / "d.json", body + "[\"gate_sweep\", \"intensity\"]}}");
   const Result r = sh("dataset plan " + (dir_ / "d.json").string());
   EXPECT_EQ(r.code, 1) << r.output;
-  EXPECT_THAT(r.output, HasSubstr("# total: 4 samples"));
+  EXPECT_THAT(r.output, HasSubstr("# total: 4 samples (the 2 valid ones estimated), disk about "));
   EXPECT_THAT(r.output, HasSubstr("error: sample 1: " + kScenes + "flat_target.json: /outputs/transient: intensity mode needs no time bins"));
   EXPECT_THAT(r.output, HasSubstr("error: sample 3: "));
   EXPECT_THAT(r.output, Not(HasSubstr("error: sample 0")));
