@@ -573,7 +573,17 @@ void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string
     else if (u[0] == 0.0 && u[1] == 0.0 && u[2] == 0.0)
       err("/camera/up", "is the zero vector; expected a direction (for example [0, 1, 0], the glTF frame's up)");
     else if (std::sqrt(cr[0] * cr[0] + cr[1] * cr[1] + cr[2] * cr[2]) <= 1e-9 * len)
-      err("/camera/up", "is parallel to the viewing direction; expected a direction not along look_at_m - position_m");
+    {
+      // the values (the up is often the default, given by neither the file nor --set)
+      const auto vec = [](const Vec3d& v) {
+        std::ostringstream o;
+        o << "[" << v[0] << ", " << v[1] << ", " << v[2] << "]";
+        return o.str();
+      };
+      err("/camera/up", vec(u) + " is parallel to the viewing direction look_at_m - position_m = " + vec(axis) +
+                            " (position_m " + vec(p) + ", look_at_m " + vec(a) +
+                            "); expected an up not along it (a camera looking straight down -Y: up [0, 0, -1])");
+    }
   }
   if (c.laser.beam == Beam::GltfLight && c.laser.gltf_light.empty())
     err("/laser/gltf_light", "is empty, expected the name of a glTF light because /laser/beam is \"gltf_light\"");

@@ -328,7 +328,11 @@ TEST_F(SceneFileTest, CrossKeyChecks) {
               HasSubstr("/acquisition/gate_sweep/stop_ns: is before"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"look_at_m": [0, 0, 0]}})"),
               HasSubstr("/camera/look_at_m: equals /camera/position_m"));
-  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"up": [0, 0, 1]}})"), HasSubstr("/camera/up: is parallel"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"up": [0, 0, 1]}})"), HasSubstr("/camera/up: [0, 0, 1] is parallel"));
+  // the default up along a camera looking down: the values named (it blamed /camera/up, which nothing gave)
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"position_m": [0, 2, 0], "look_at_m": [0, 0, 0]}})"),
+              HasSubstr("/camera/up: [0, 1, 0] is parallel to the viewing direction look_at_m - position_m = [0, -2, 0] "
+                        "(position_m [0, 2, 0], look_at_m [0, 0, 0]); expected an up not along it"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"up": [0, 0, 0]}})"), HasSubstr("/camera/up: is the zero vector"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "render": {"window_start_ns": 1}})"),
               HasSubstr("both set or both null"));
