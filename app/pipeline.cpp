@@ -42,6 +42,23 @@ std::string seconds_text(double s) {
   return buf;
 }
 
+// The glTF with the scene file's node and material edits. An edit of a node or material the glTF does not
+// have is named as the user gave it: the --set key (--set nodes.a.scale), else the scene file's pointer
+// after the file's name (it was "/nodes/a" alone).
+scenes::Scene load_edited_gltf(const scenes::ResolvedRun& r, const std::string& scene_file) {
+  const RunConfig& c = r.config;
+  try {
+    return scenes::load_gltf(c.gltf_path, c.gltf_scene, c.edits);
+  } catch (const Error& e) {
+    const std::string what = e.what();
+    if (what.rfind("/nodes/", 0) != 0 && what.rfind("/materials/", 0) != 0) throw;
+    const std::string element = what.substr(0, what.find(": "));
+    for (const auto& [pointer, key] : r.set_keys)
+      if (pointer.rfind(element + "/", 0) == 0) throw Error("--set " + key + what.substr(element.size()));
+    throw Error(scene_file + ": " + what);
+  }
+}
+
 }  // namespace
 
 RunResult run(const RunOptions& options) {
@@ -55,7 +72,7 @@ RunResult run(const RunOptions& options) {
   InterruptGuard interrupt_guard;
   const ThreadLimit threads(options.threads);
 
-  const scenes::Scene scene = scenes::load_gltf(cfg.gltf_path, cfg.gltf_scene, cfg.edits);
+  const scenes::Scene scene = load_edited_gltf(resolved, options.scene_file);
   for (const std::string& w : scene.warnings) std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
   std::vector<std::string> warnings = scene.warnings;  // for metadata.json, with those of the run (app/warnings.h)
   const auto warn = [&](const std::vector<std::string>& ws) {
@@ -182,7 +199,7 @@ RunResult run(const RunOptions& options) {
 std::string info(const std::string& scene_file, const std::vector<std::string>& overrides) {
   const scenes::ResolvedRun r = scenes::load_scene_file(scene_file, overrides);
   const RunConfig& c = r.config;
-  const scenes::Scene scene = scenes::load_gltf(c.gltf_path, c.gltf_scene, c.edits);
+  const scenes::Scene scene = load_edited_gltf(r, scene_file);
   const render::Camera camera(c.camera, scene);  // camera.gltf_camera names a camera of the glTF, as the run needs
   sensor::SensorModel sensor(sensor_stage(c));
   apply_user_maps(sensor, c);  // maps that do not fit the sensor are refused here as by the run

@@ -92,13 +92,22 @@ TEST_F(App, TheResolvedSceneOfAnEditedRunReproducesIt) {
   EXPECT_FALSE(exr(dir_ / "a/ground_truth.exr").channels == exr(dir_ / "c/ground_truth.exr").channels);
 }
 
-// A name the glTF does not have stops the run before anything is written, with the names it has.
+// A name the glTF does not have stops the run before anything is written, with the names it has, named as
+// the user gave it: the --set key, else the scene file and its key (it was "/nodes/targte" alone).
 TEST_F(App, AnUnknownNodeStopsTheRunWithTheGltfsNames) {
-  const Result r = sh("run " + kFlat + " --set nodes.targte.scale=[1,1,1] -o " + (dir_ / "a").string());
+  Result r = sh("run " + kFlat + " --set nodes.targte.scale=[1,1,1] -o " + (dir_ / "a").string());
   EXPECT_EQ(r.code, 1);
-  EXPECT_THAT(r.output, HasSubstr("spadgen: error: /nodes/targte: the glTF file " + kScenes + "flat_target.gltf has no node named "
+  EXPECT_THAT(r.output, HasSubstr("spadgen: error: --set nodes.targte.scale: the glTF file " + kScenes + "flat_target.gltf has no node named "
                                   "\"targte\"; did you mean \"target\"? (its nodes: \"spad_camera\", \"target\")"));
   EXPECT_FALSE(fs::exists(dir_ / "a"));
+  fs::create_directories(dir_);
+  for (const char* f : {"flat_target.gltf"}) fs::copy_file(kScenes + f, dir_ / f);
+  std::string scene = slurp(kScenes + "flat_target.json");
+  scene.replace(scene.rfind('}'), 1, ", \"materials\": {\"papr\": {\"roughness\": 0.5}}}");
+  std::ofstream(dir_ / "edited.json") << scene;
+  r = sh("info " + (dir_ / "edited.json").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("spadgen: error: " + (dir_ / "edited.json").string() + ": /materials/papr: the glTF file "));
 }
 
 // info lists every node and material by name, the names the scene file's sections take.
