@@ -1744,12 +1744,25 @@ void check_before_tinygltf(const std::string& path, const nlohmann::json& doc) {
                       " holds " + std::to_string(size) + " bytes; expected a byteLength equal to its size");
       };
       if (uri.rfind("data:", 0) == 0) {
+        // glTF embeds bytes as base64 (3.6.1.1, 3.9.2: data:<media type>;base64,<data>); anything else reached
+        // tinygltf's "Failed to decode 'uri'", which named no buffer or image.
         const size_t comma = uri.find(',');
-        if (comma != std::string::npos && std::string_view(uri).substr(0, comma).ends_with(";base64")) {
-          size_t chars = uri.size() - comma - 1, pad = 0;
-          while (pad < 2 && chars > 0 && uri[comma + chars - pad] == '=') ++pad;
-          if (chars % 4 == 0) check_length(chars / 4 * 3 - pad, "its data URI");
+        if (comma == std::string::npos || !std::string_view(uri).substr(0, comma).ends_with(";base64"))
+          throw Error(path + ": " + who + ": its data URI " + quoted(uri.substr(0, std::min<size_t>(uri.size(), 48)) + (uri.size() > 48 ? "..." : "")) +
+                      " is not base64; expected data:<media type>;base64,<data> (glTF 2.0, 3.6.1.1)");
+        size_t chars = uri.size() - comma - 1, pad = 0;
+        while (pad < 2 && chars > 0 && uri[comma + chars - pad] == '=') ++pad;
+        for (size_t k = comma + 1; k < uri.size() - pad; ++k) {
+          const auto ch = static_cast<unsigned char>(uri[k]);
+          if (!std::isalnum(ch) && ch != '+' && ch != '/')
+            throw Error(path + ": " + who + ": its data URI's base64 has " +
+                        (std::isprint(ch) ? "'" + std::string(1, char(ch)) + "'" : "byte " + std::to_string(ch)) + " at character " +
+                        std::to_string(k - comma - 1) + " of " + std::to_string(chars) + "; expected A-Z, a-z, 0-9, + and /, then up to two =");
         }
+        if (chars % 4 != 0)
+          throw Error(path + ": " + who + ": its data URI's base64 has " + std::to_string(chars) +
+                      " characters; expected a multiple of 4 (the data cut short, or its = padding missing)");
+        check_length(chars / 4 * 3 - pad, "its data URI");
         continue;
       }
       if (std::filesystem::path(uri_decode(uri)).is_absolute() || uri.find("://") != std::string::npos)
