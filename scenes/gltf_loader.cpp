@@ -1759,10 +1759,14 @@ void check_before_tinygltf(const std::string& path, const nlohmann::json& doc) {
                         (std::isprint(ch) ? "'" + std::string(1, char(ch)) + "'" : "byte " + std::to_string(ch)) + " at character " +
                         std::to_string(k - comma - 1) + " of " + std::to_string(chars) + "; expected A-Z, a-z, 0-9, + and /, then up to two =");
         }
-        if (chars % 4 != 0)
+        // without its = padding (2 or 3 characters in the last group) it decodes, as tinygltf reads it; 1 cannot
+        if (pad == 0 && chars % 4 == 1)
           throw Error(path + ": " + who + ": its data URI's base64 has " + std::to_string(chars) +
-                      " characters; expected a multiple of 4 (the data cut short, or its = padding missing)");
-        check_length(chars / 4 * 3 - pad, "its data URI");
+                      " characters, one more than a multiple of 4, which no data encodes (the data cut short)");
+        if (pad > 0 && chars % 4 != 0)
+          throw Error(path + ": " + who + ": its data URI's base64 has " + std::to_string(chars) +
+                      " characters with its = padding; expected a multiple of 4 (the data cut short)");
+        check_length(chars / 4 * 3 - pad + (chars % 4 == 0 ? 0 : chars % 4 - 1), "its data URI");
         continue;
       }
       if (std::filesystem::path(uri_decode(uri)).is_absolute() || uri.find("://") != std::string::npos)

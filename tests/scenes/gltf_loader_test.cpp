@@ -1149,7 +1149,10 @@ TEST_F(BrokenGltf, PropertiesOfTheWrongTypeAreNamedNotDefaulted) {
                                                "expected data:<media type>;base64,<data>"},
       {"data:application/octet-stream;base64,AAA!AAAA", "buffer 0: its data URI's base64 has '!' at character 3 of 8; "
                                                         "expected A-Z, a-z, 0-9, + and /, then up to two ="},
-      {"data:application/octet-stream;base64,AAAAAA", "buffer 0: its data URI's base64 has 6 characters; expected a multiple of 4"},
+      {"data:application/octet-stream;base64,AAAAA", "buffer 0: its data URI's base64 has 5 characters, one more than a multiple of 4"},
+      {"data:application/octet-stream;base64,AAAAA=", "buffer 0: its data URI's base64 has 6 characters with its = padding"},
+      // without padding (6 characters: 4 bytes) it decodes, as tinygltf reads it: only its length is checked
+      {"data:application/octet-stream;base64,AAAAAA", "but its data URI holds 4 bytes; expected a byteLength equal to its size"},
   };
   for (const auto& b : broken) {
     path_ = ok.write(dir_.path(), "bad_uri", Gltf::Form::Embedded);
