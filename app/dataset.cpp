@@ -66,7 +66,7 @@ struct Estimate {
   int64_t disk_peak = 0, disk_peak_at_least = 0;  // temporary files while the sample runs (freed at its end)
   double seconds = 0.0;
   bool paths_bound = false;  // a target error: the time counts render.max_samples_per_pixel paths per pixel
-  bool light = false;        // the light is saved: its least is without lit bins
+  LeastParts least;          // what makes disk_at_least less than disk
 };
 
 // The estimates of samples generated one at a time (a plan's, a run's): their kept disk, time and largest
@@ -74,13 +74,14 @@ struct Estimate {
 struct Totals {
   int64_t kept = 0, kept_at_least = 0, peak = 0, peak_at_least = 0, memory = 0;
   double seconds = 0.0;
-  bool paths_bound = false, light = false;
+  bool paths_bound = false;
+  LeastParts least;
   void add(const Estimate& e) {
     kept += e.disk, kept_at_least += e.disk_at_least, seconds += e.seconds;
     peak = std::max(peak, e.disk_peak), peak_at_least = std::max(peak_at_least, e.disk_peak_at_least);
     memory = std::max(memory, e.memory);
     paths_bound = paths_bound || e.paths_bound;
-    light = light || e.light;
+    least.compressed = least.compressed || e.least.compressed, least.light = least.light || e.least.light;
   }
   int64_t disk() const { return kept + peak; }
   int64_t disk_at_least() const { return kept_at_least + peak_at_least; }
@@ -125,7 +126,7 @@ Estimate estimate(const RunConfig& c, int repeats, int threads, const SceneSize&
   e.disk_at_least = plan.disk_kept_at_least() + (repeats - 1) * again_at_least;
   e.disk_peak = run_disk - plan.disk_kept();
   e.disk_peak_at_least = plan.disk_at_least() - plan.disk_kept_at_least();
-  e.light = std::any_of(plan.disk.begin(), plan.disk.end(), [](const ResourcePlan::Part& p) { return p.least >= 0; });
+  e.least = least_parts(plan.disk);
   e.seconds += (repeats - 1) * (kSecondsPerRun + sensor_seconds + double(run_disk) * kSecondsPerByte);
   e.seconds *= 2.0 / estimate_cores(threads);  // the model is of 2 cores; the work is parallel
   return e;
@@ -465,8 +466,9 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
     o << "# with render.target_relative_error a pixel's paths depend on its light: the times count "
          "render.max_samples_per_pixel for every pixel, an upper bound\n";
   if (total.disk_at_least() != total.disk())
-    o << "# the disk counts the compressed files (EXR images, Zarr stores) uncompressed, at most: the samples take at least "
-      << bytes_text(total.disk_at_least()) << " (those files at a twentieth" << (total.light ? ", the saved light without lit bins" : "")
+    o << "# the disk counts the compressed files (EXR images, Zarr stores) uncompressed"
+      << (total.least.light ? " and the saved light at 2.5 ns of bins per pixel" : "") << ": the samples take at least "
+      << bytes_text(total.disk_at_least()) << " (" << least_text(total.least)
       << "; examples/datasets/multi_object_variations.json writes about an eighth of the most)\n";
   if (folder) {
     const int64_t free = free_disk(options.out_dir);
@@ -541,8 +543,7 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
     const bool compressed = disk_at_least != disk;
     throw Error("dataset run: the " + std::to_string(todo.size()) + " samples left to generate in " + dir.string() +
                 (shard.count > 1 ? " (shard " + shard.text() + ")" : std::string()) + " need " +
-                (compressed ? "at least " + bytes_text(disk_at_least) + " (their compressed files, EXR images and Zarr stores, at a twentieth of their size" +
-                                  (totals.light ? ", the saved light without lit bins" : "") + "; at most " +
+                (compressed ? "at least " + bytes_text(disk_at_least) + " (" + least_text(totals.least) + "; at most " +
                                   bytes_text(disk) + ")"
                             : "about " + bytes_text(disk)) +
                 ", and " + bytes_text(free) + " is free there (about " +

@@ -82,9 +82,24 @@ int64_t ResourcePlan::memory_needed() const {
   return n;
 }
 
+LeastParts least_parts(const std::vector<ResourcePlan::Part>& disk) {
+  LeastParts l;
+  for (const ResourcePlan::Part& p : disk) {
+    l.compressed = l.compressed || (p.compressed && p.bytes > 0);
+    l.light = l.light || (p.least >= 0 && p.least < p.bytes);
+  }
+  return l;
+}
+
+std::string least_text(LeastParts l) {
+  std::string r = l.compressed ? "the compressed files, EXR images and Zarr stores, at a twentieth of their size" : "";
+  if (l.light) r += std::string(r.empty() ? "" : ", ") + "the saved light without lit bins";
+  return r;
+}
+
 int64_t ResourcePlan::Part::at_least() const {
-  if (least >= 0) return least;
-  return compressed ? bytes / kCompressionBound : bytes;
+  const int64_t bound = compressed ? bytes / kCompressionBound : bytes;  // a compressed store's least
+  return least >= 0 ? std::min(least, bound) : bound;
 }
 
 int64_t ResourcePlan::disk_sum(bool at_least, bool kept_only) const {
@@ -268,10 +283,8 @@ void check_resources(const ResourcePlan& plan, const RunConfig& c, const fs::pat
   // cleanly, the folder as it was).
   if (plan.disk_available >= 0 && plan.disk_at_least() > plan.disk_available) {
     const bool any_compressed = plan.disk_at_least() != plan.disk_needed();
-    const bool light = std::any_of(plan.disk.begin(), plan.disk.end(), [](const ResourcePlan::Part& p) { return p.least >= 0; });
     throw Error((who.empty() ? file + ": the run writes " : who + " writes ") + (any_compressed ? "at least " + bytes_text(plan.disk_at_least()) +
-                " (the compressed files, EXR images and Zarr stores, at a twentieth of their size" +
-                (light ? ", the saved light without lit bins" : "") + "; at most " + bytes_text(plan.disk_needed()) + ")"
+                " (" + least_text(least_parts(plan.disk)) + "; at most " + bytes_text(plan.disk_needed()) + ")"
                                                            : "about " + bytes_text(plan.disk_needed())) +
                 " into " + out.string() + ", and " + bytes_text(plan.disk_available) + " is free there: " + join_parts(plan.disk) +
                 "; " + (remedy.empty() ? "switch outputs off (outputs.*), crop (camera.crop), or choose another folder (-o)" : remedy));
@@ -282,7 +295,7 @@ std::string resource_summary(const ResourcePlan& plan) {
   std::string s = "memory: about " + bytes_text(plan.memory_needed());
   if (plan.memory_available >= 0) s += " (available: " + bytes_text(plan.memory_available) + ")";
   s += "; disk: " + (plan.disk_at_least() != plan.disk_needed()
-                         ? bytes_text(plan.disk_at_least()) + " to " + bytes_text(plan.disk_needed()) + " (the compressed stores: at most uncompressed)"
+                         ? bytes_text(plan.disk_at_least()) + " to " + bytes_text(plan.disk_needed()) + " (the least: " + least_text(least_parts(plan.disk)) + ")"
                          : "about " + bytes_text(plan.disk_needed()));
   if (plan.disk_available >= 0) s += " (free: " + bytes_text(plan.disk_available) + ")";
   return s + "\n  memory: " + join_parts(plan.memory) + "\n  disk: " + join_parts(plan.disk) + "\n";

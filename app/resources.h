@@ -52,6 +52,14 @@ struct ResourcePlan {
  private:
   int64_t disk_sum(bool at_least, bool kept_only) const;
 };
+// What makes disk_at_least() less than disk_needed(): compressed parts, the saved light (its lit bins), and
+// the words for them ("the compressed files, EXR images and Zarr stores, at a twentieth of their size", "the
+// saved light without lit bins").
+struct LeastParts {
+  bool compressed = false, light = false;
+};
+LeastParts least_parts(const std::vector<ResourcePlan::Part>& disk);
+std::string least_text(LeastParts parts);
 // Compressed parts count 1 / kCompressionBound of their uncompressed size in disk_at_least().
 inline constexpr int64_t kCompressionBound = 20;
 

@@ -242,7 +242,8 @@ TEST_F(Hardening, ARunTheMachineCannotHoldIsRefusedWithItsFigures) {
   // of counts as Zarr, 18 MB of EXR images and 5 MB of previews, (180 + 18 + 5) / 20 = 10.2 MB
   const Outcome zarr = spadgen("info " + kFlat + " --set outputs.storage=zarr --set outputs.detection_rate=false --set outputs.ground_truth=false");
   expect_exit(zarr, 0, "info zarr");
-  EXPECT_THAT(zarr.output, HasSubstr("disk: 10 MB to 203 MB (the compressed stores: at most uncompressed)"));
+  EXPECT_THAT(zarr.output, HasSubstr("disk: 10 MB to 203 MB (the least: the compressed files, EXR images and Zarr stores, at a "
+                                     "twentieth of their size)"));
   EXPECT_THAT(zarr.output, HasSubstr("counts.zarr (uncompressed) 180 MB"));
 }
 
