@@ -1376,88 +1376,155 @@ void Loader::load(const std::string& scene_name) {
 // encloses: a ray that enters through a front face travels in it until it leaves through a back face. Its
 // node's triangles must enclose a solid, with outward faces. An open sheet (a plane exported with a volume
 // thickness) let rays in that never left: the wall behind it was seen through 0.5 m of glass (+1.7 ns); an
-// inside-out box was a medium outside and air inside. Both are warned, naming the node and the material.
-// Edges are matched by their vertices' positions (exporters split vertices at seams), over all of the
-// node's primitives (a solid may have faces of other materials).
+// inside-out box was a medium outside and air inside. Each connected piece of a node's triangles that holds
+// a volume's faces is checked: every edge shared by two faces (else open), each edge crossed once each way
+// (else faces flipped within it), a volume enclosed (else a sheet with faces on both sides), and a positive
+// one (else inward). Vertices are matched by position within 10 um (exporters split vertices at seams, and
+// a node's primitives round their positions about their own offsets), over all of the node's primitives
+// (a solid may have faces of other materials).
 namespace {
 std::string volume_text(double m3) {
   char buf[48];
   std::snprintf(buf, sizeof buf, "%.3g cm^3", m3 * 1e6);
   return buf;
 }
+
+// Ids of positions, equal within kTolerance (a grid of cells of that size, a point looked up in the 27
+// cells around it).
+class PositionIds {
+ public:
+  static constexpr double kTolerance = 1e-5;  // m: floats are 3.8 um apart 32 m from a mesh's offset
+  uint32_t id(const glm::dvec3& p) {
+    const std::array<int64_t, 3> c = cell(p);
+    for (int64_t dx = -1; dx <= 1; ++dx)
+      for (int64_t dy = -1; dy <= 1; ++dy)
+        for (int64_t dz = -1; dz <= 1; ++dz)
+          if (const auto it = cells_.find({c[0] + dx, c[1] + dy, c[2] + dz}); it != cells_.end())
+            for (const uint32_t i : it->second)
+              if (std::abs(points_[i].x - p.x) <= kTolerance && std::abs(points_[i].y - p.y) <= kTolerance &&
+                  std::abs(points_[i].z - p.z) <= kTolerance)
+                return i;
+    points_.push_back(p);
+    cells_[c].push_back(static_cast<uint32_t>(points_.size() - 1));
+    return static_cast<uint32_t>(points_.size() - 1);
+  }
+
+ private:
+  static std::array<int64_t, 3> cell(const glm::dvec3& p) {
+    return {static_cast<int64_t>(std::floor(p.x / kTolerance)), static_cast<int64_t>(std::floor(p.y / kTolerance)),
+            static_cast<int64_t>(std::floor(p.z / kTolerance))};
+  }
+  struct CellHash {
+    size_t operator()(const std::array<int64_t, 3>& c) const {
+      return std::hash<int64_t>()(c[0]) * 1000003u ^ std::hash<int64_t>()(c[1]) * 10007u ^ std::hash<int64_t>()(c[2]);
+    }
+  };
+  std::vector<glm::dvec3> points_;
+  std::unordered_map<std::array<int64_t, 3>, std::vector<uint32_t>, CellHash> cells_;
+};
 }  // namespace
 
 void Loader::check_volumes() {
+  const auto is_volume = [&](int material) {
+    if (material < 0) return false;
+    const Material& mat = scene_.materials[static_cast<size_t>(material)];
+    return mat.transmissive() && mat.thickness_m > 0.0f;
+  };
   std::map<int, std::vector<size_t>> meshes_of_node;  // nodes with a volume primitive -> all their meshes
   std::set<int> volume_nodes;
   for (size_t i = 0; i < scene_.meshes.size(); ++i) {
-    const Mesh& m = scene_.meshes[i];
-    meshes_of_node[m.gltf_node].push_back(i);
-    if (m.material >= 0) {
-      const Material& mat = scene_.materials[static_cast<size_t>(m.material)];
-      if (mat.transmissive() && mat.thickness_m > 0.0f) volume_nodes.insert(m.gltf_node);
-    }
+    meshes_of_node[scene_.meshes[i].gltf_node].push_back(i);
+    if (is_volume(scene_.meshes[i].material)) volume_nodes.insert(scene_.meshes[i].gltf_node);
   }
   for (const int node : volume_nodes) {
-    // position -> id: exact world coordinates (offset + float position); hashed (a glass model of a million
-    // triangles)
-    struct PositionHash {
-      size_t operator()(const std::array<double, 3>& p) const {
-        size_t h = 0;
-        for (double x : p) h = h * 1000003u ^ std::hash<double>()(x);
-        return h;
-      }
-    };
-    std::unordered_map<std::array<double, 3>, uint32_t, PositionHash> ids;
-    const auto id = [&](const Mesh& m, uint32_t v) {
-      const glm::dvec3 p = m.offset + glm::dvec3(m.positions[v]);
-      return ids.emplace(std::array<double, 3>{p.x, p.y, p.z}, static_cast<uint32_t>(ids.size())).first->second;
-    };
-    std::unordered_map<uint64_t, int> edges;  // undirected edge (low id << 32 | high id) -> triangles on it
-    const auto edge = [](uint32_t u, uint32_t v) { return uint64_t{std::min(u, v)} << 32 | std::max(u, v); };
+    PositionIds ids;
     struct Tri {
-      uint32_t a, b, c;
-      bool volume;
+      uint32_t v[3];
       glm::dvec3 p[3];
+      bool volume;
     };
     std::vector<Tri> tris;
     std::set<std::string> materials;
     for (const size_t mi : meshes_of_node[node]) {
       const Mesh& m = scene_.meshes[mi];
-      const bool volume = m.material >= 0 && scene_.materials[static_cast<size_t>(m.material)].transmissive() &&
-                          scene_.materials[static_cast<size_t>(m.material)].thickness_m > 0.0f;
+      const bool volume = is_volume(m.material);
       if (volume) materials.insert(label("material", static_cast<size_t>(m.material), scene_.materials[static_cast<size_t>(m.material)].name));
       for (size_t t = 0; t + 2 < m.indices.size(); t += 3) {
-        Tri tri{id(m, m.indices[t]), id(m, m.indices[t + 1]), id(m, m.indices[t + 2]), volume, {}};
-        if (tri.a == tri.b || tri.b == tri.c || tri.a == tri.c) continue;  // no area
-        for (int k = 0; k < 3; ++k) tri.p[k] = m.offset + glm::dvec3(m.positions[m.indices[t + size_t(k)]]);
-        for (const auto& [u, v] : {std::pair{tri.a, tri.b}, std::pair{tri.b, tri.c}, std::pair{tri.c, tri.a}}) ++edges[edge(u, v)];
-        tris.push_back(tri);
+        Tri tri{};
+        for (int k = 0; k < 3; ++k) {
+          tri.p[k] = m.offset + glm::dvec3(m.positions[m.indices[t + size_t(k)]]);
+          tri.v[k] = ids.id(tri.p[k]);
+        }
+        tri.volume = volume;
+        if (tri.v[0] != tri.v[1] && tri.v[1] != tri.v[2] && tri.v[0] != tri.v[2]) tris.push_back(tri);  // no area
       }
     }
-    size_t open = 0;  // edges of the volume's triangles that bound an odd number of the node's triangles
-    for (const Tri& t : tris)
-      if (t.volume)
-        for (const auto& [u, v] : {std::pair{t.a, t.b}, std::pair{t.b, t.c}, std::pair{t.c, t.a}})
-          open += edges[edge(u, v)] % 2 != 0;
+    // Undirected edges (low id << 32 | high id): the faces on them, and how many cross them low -> high.
+    struct Edge {
+      int faces = 0, forward = 0;
+      std::vector<uint32_t> tris;
+    };
+    std::unordered_map<uint64_t, Edge> edges;
+    const auto key = [](uint32_t u, uint32_t v) { return uint64_t{std::min(u, v)} << 32 | std::max(u, v); };
+    for (size_t t = 0; t < tris.size(); ++t)
+      for (int k = 0; k < 3; ++k) {
+        const uint32_t u = tris[t].v[k], v = tris[t].v[(k + 1) % 3];
+        Edge& e = edges[key(u, v)];
+        ++e.faces, e.forward += u < v;
+        e.tris.push_back(static_cast<uint32_t>(t));
+      }
+    // Connected pieces (faces sharing an edge), by union-find.
+    std::vector<uint32_t> parent(tris.size());
+    for (size_t t = 0; t < tris.size(); ++t) parent[t] = static_cast<uint32_t>(t);
+    const auto root = [&](uint32_t t) {
+      while (parent[t] != t) t = parent[t] = parent[parent[t]];
+      return t;
+    };
+    for (const auto& [k, e] : edges)
+      for (const uint32_t t : e.tris) parent[root(t)] = root(e.tris.front());
+    std::map<uint32_t, std::vector<uint32_t>> pieces;
+    for (size_t t = 0; t < tris.size(); ++t) pieces[root(static_cast<uint32_t>(t))].push_back(static_cast<uint32_t>(t));
     std::string mats;
     for (const std::string& m : materials) mats += (mats.empty() ? "" : ", ") + m;
     const std::string who = node_label(m_, static_cast<size_t>(node)) + " (" + mats + ": transmission and a volume thickness)";
-    if (open > 0) {
-      warn(who + ": its triangles do not enclose a solid (" + std::to_string(open) + (open == 1 ? " edge bounds" : " edges bound") +
-           " one face only): a volume's mesh is the boundary of its medium, and a ray entering it through an open "
-           "surface travels in it until it meets another back face, the surfaces behind included; close the mesh "
-           "(a plate as a box of its thickness), or set thicknessFactor 0 for a thin sheet");
-      continue;
+    for (const auto& [r, piece] : pieces) {
+      if (std::none_of(piece.begin(), piece.end(), [&](uint32_t t) { return tris[t].volume; })) continue;
+      size_t open = 0, flipped = 0;  // edges of the piece (each counted once, from its first face)
+      glm::dvec3 lo(std::numeric_limits<double>::infinity()), hi(-std::numeric_limits<double>::infinity());
+      for (const uint32_t t : piece)
+        for (int k = 0; k < 3; ++k) {
+          lo = glm::min(lo, tris[t].p[k]), hi = glm::max(hi, tris[t].p[k]);
+          const Edge& e = edges[key(tris[t].v[k], tris[t].v[(k + 1) % 3])];
+          if (e.tris.front() != t) continue;
+          open += e.faces != 2;
+          flipped += e.faces == 2 && e.forward != 1;
+        }
+      if (open > 0) {
+        warn(who + ": its triangles do not enclose a solid (" + std::to_string(open) + (open == 1 ? " edge is" : " edges are") +
+             " not shared by exactly two faces): a volume's mesh is the boundary of its medium, and a ray entering it "
+             "through an open surface travels in it until it meets another back face, the surfaces behind included; close "
+             "the mesh (a plate as a box of its thickness), or set thicknessFactor 0 for a thin sheet");
+        continue;
+      }
+      if (flipped > 0) {
+        warn(who + ": its faces are not consistently oriented (" + std::to_string(flipped) + (flipped == 1 ? " edge" : " edges") +
+             " between faces of opposite windings): where a face points in, a ray changes medium the wrong way; recalculate "
+             "its normals outside (in Blender: Mesh > Normals > Recalculate Outside)");
+        continue;
+      }
+      // Closed and consistent: the enclosed volume's sign says whether the faces point out (divergence theorem).
+      const glm::dvec3 o = tris[piece.front()].p[0];
+      double six_v = 0.0;
+      for (const uint32_t t : piece) six_v += glm::dot(tris[t].p[0] - o, glm::cross(tris[t].p[1] - o, tris[t].p[2] - o));
+      const double d = glm::length(hi - lo);
+      if (std::abs(six_v) / 6.0 <= 1e-9 * d * d * d)
+        warn(who + ": its triangles enclose no volume (a sheet with faces on both sides?): a volume's mesh is the boundary of "
+             "its medium; make it a solid (a plate as a box of its thickness), or set thicknessFactor 0 for a thin sheet");
+      else if (six_v < 0.0)
+        warn(who + ": its faces point inward (the solid's enclosed volume is negative, " + volume_text(six_v / 6.0) +
+             "): the medium is taken as outside the mesh and air inside; reverse its triangles' winding (in Blender: "
+             "Mesh > Normals > Flip, or Recalculate Outside)");
     }
-    // Closed: the enclosed volume's sign says whether the faces point out (divergence theorem).
-    const glm::dvec3 o = tris.empty() ? glm::dvec3(0.0) : tris.front().p[0];
-    double six_v = 0.0;
-    for (const Tri& t : tris) six_v += glm::dot(t.p[0] - o, glm::cross(t.p[1] - o, t.p[2] - o));
-    if (six_v < 0.0)
-      warn(who + ": its faces point inward (the solid's enclosed volume is negative, " + volume_text(six_v / 6.0) +
-           "): the medium is taken as outside the mesh and air inside; reverse its triangles' winding (in Blender: "
-           "Mesh > Normals > Flip, or Recalculate Outside)");
   }
 }
 

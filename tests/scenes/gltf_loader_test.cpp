@@ -84,44 +84,65 @@ TEST(GltfLoader, ARotationOfAnyLengthIsNormalised) {
 }
 
 // A volume material's mesh bounds its medium: an open sheet (a plane exported with a volume thickness: the
-// wall behind it was seen through 0.5 m of glass) and an inside-out box (the medium outside) are warned,
-// naming the node and the material; a closed outward box is not, also when its faces are split over two
-// primitives of two materials (edges matched by position, not index), nor a thin sheet (thickness 0).
+// wall behind it was seen through 0.5 m of glass), an inside-out box (the medium outside), a sheet with
+// faces on both sides (no volume), a box with one face flipped, and an inverted box beside a good one in
+// one node are warned, naming the node and the material; a closed outward box is not, also when its faces
+// are split over two primitives of two materials, far from the origin where they round their positions
+// about other offsets (edges matched by position, not index), nor a thin sheet (thickness 0).
 TEST(GltfLoader, AVolumeWhoseMeshIsOpenOrInsideOutIsWarned) {
-  // a 1 x 1 x 0.1 box: 8 corners, 12 outward triangles (counter-clockwise seen from outside)
-  const std::vector<float> corners = {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0, 0, 0, 0.1f, 1, 0, 0.1f, 1, 1, 0.1f, 0, 1, 0.1f};
+  // a 1.9 x 1 x 0.1 box: 8 corners, 12 outward triangles (counter-clockwise seen from outside)
+  const std::vector<float> corners = {0, 0, 0, 1.9f, 0, 0, 1.9f, 1, 0, 0, 1, 0, 0, 0, 0.1f, 1.9f, 0, 0.1f, 1.9f, 1, 0.1f, 0, 1, 0.1f};
   const std::vector<uint16_t> box = {0, 2, 1, 0, 3, 2, 4, 5, 6, 4, 6, 7, 0, 1, 5, 0, 5, 4,
                                      1, 2, 6, 1, 6, 5, 2, 3, 7, 2, 7, 6, 3, 0, 4, 3, 4, 7};
+  const auto flip = [](std::vector<uint16_t> v) {
+    for (size_t t = 0; t < v.size(); t += 3) std::swap(v[t + 1], v[t + 2]);
+    return v;
+  };
+  const auto cat = [](std::vector<uint16_t> a, const std::vector<uint16_t>& b) {
+    a.insert(a.end(), b.begin(), b.end());
+    return a;
+  };
+  const std::vector<uint16_t> top(box.begin() + 6, box.begin() + 12), bottom(box.begin(), box.begin() + 6),
+      sides(box.begin() + 12, box.end()), plus_x(box.begin() + 18, box.begin() + 24);
+  std::vector<uint16_t> no_plus_x = cat(cat(bottom, top), std::vector<uint16_t>(box.begin() + 12, box.begin() + 18));
+  no_plus_x = cat(no_plus_x, std::vector<uint16_t>(box.begin() + 24, box.end()));
+  // a second box 3 m away, its corners 8 .. 15
+  std::vector<uint16_t> second = flip(box);
+  for (uint16_t& i : second) i = static_cast<uint16_t>(i + 8);
   struct Case {
     const char* name;
     std::vector<uint16_t> first, second;  // two primitives (second empty: one)
-    double thickness;
-    const char* warning;  // "" none
+    double thickness, x;                  // the node's translation along x
+    const char* warning;                  // "" none
   };
-  std::vector<uint16_t> inward = box;
-  for (size_t t = 0; t < inward.size(); t += 3) std::swap(inward[t + 1], inward[t + 2]);
-  const std::vector<uint16_t> top(box.begin() + 6, box.begin() + 12), rest_a(box.begin(), box.begin() + 6),
-      rest_b(box.begin() + 12, box.end());
-  std::vector<uint16_t> rest = rest_a;
-  rest.insert(rest.end(), rest_b.begin(), rest_b.end());
   const std::vector<Case> cases = {
-      {"closed", box, {}, 0.002, ""},
-      {"split", rest, top, 0.002, ""},
-      {"open", top, {}, 0.002, "its triangles do not enclose a solid (4 edges bound one face only)"},
-      {"thin", top, {}, 0.0, ""},
-      {"inward", inward, {}, 0.002, "its faces point inward (the solid's enclosed volume is negative, -1e+05 cm^3)"},
+      {"closed", box, {}, 0.002, 0.0, ""},
+      {"split", no_plus_x, plus_x, 0.002, 0.0, ""},
+      {"split_far", no_plus_x, plus_x, 0.002, 31.0, ""},      // the primitives' offsets differ (0 and 64 m)
+      {"split_farther", no_plus_x, plus_x, 0.002, 70047.0, ""},
+      {"open", top, {}, 0.002, 0.0, "its triangles do not enclose a solid (4 edges are not shared by exactly two faces)"},
+      {"thin", top, {}, 0.0, 0.0, ""},
+      {"inward", flip(box), {}, 0.002, 0.0, "its faces point inward (the solid's enclosed volume is negative, -1.9e+05 cm^3)"},
+      // both sides of a sheet: triangulated alike, its diagonal has four faces; otherwise it encloses nothing
+      {"two_sided", cat(top, flip(top)), {}, 0.002, 0.0, "its triangles do not enclose a solid (1 edge is not shared"},
+      {"two_sided_other_diagonal", cat(top, flip({4, 5, 7, 5, 6, 7})), {}, 0.002, 0.0,
+       "its triangles enclose no volume (a sheet with faces on both sides?)"},
+      {"one_flipped", cat(cat(bottom, flip(top)), sides), {}, 0.002, 0.0, "its faces are not consistently oriented (4 edges between"},
+      {"good_and_inverted", cat(box, second), {}, 0.002, 0.0, "its faces point inward"},
   };
+  std::vector<float> corners2 = corners;
+  for (size_t i = 0; i < corners.size(); i += 3) corners2.insert(corners2.end(), {corners[i] + 3.0f, corners[i + 1], corners[i + 2]});
   for (const Case& c : cases) {
     TempDir dir;
     Gltf g;
-    const int pos = g.positions(corners);
+    const int pos = g.positions(corners2);
     json prims = json::array({{{"attributes", {{"POSITION", pos}}}, {"indices", g.indices(c.first, kUShort)}, {"material", 0}}});
-    if (!c.second.empty())  // the other faces of another, opaque material
-      prims.push_back({{"attributes", {{"POSITION", g.positions(corners)}}}, {"indices", g.indices(c.second, kUShort)}, {"material", 1}});
+    if (!c.second.empty())  // the other faces, of another, opaque material, with positions of their own
+      prims.push_back({{"attributes", {{"POSITION", g.positions(corners2)}}}, {"indices", g.indices(c.second, kUShort)}, {"material", 1}});
     g.doc["materials"] = {{{"name", "glass"}, {"extensions", {{"KHR_materials_transmission", {{"transmissionFactor", 1.0}}},
                                                               {"KHR_materials_volume", {{"thicknessFactor", c.thickness}}}}}},
                           {{"name", "paint"}}};
-    g.node({{"name", "Plate"}, {"mesh", g.mesh(prims)}});
+    g.node({{"name", "Plate"}, {"mesh", g.mesh(prims)}, {"translation", {c.x, 0.0, 0.0}}});
     const Scene s = load_gltf(g.write(dir.path(), c.name));
     const std::string prefix = "node 0 'Plate' (material 0 'glass': transmission and a volume thickness): ";
     std::string found;
