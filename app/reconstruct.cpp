@@ -239,11 +239,17 @@ DetectionImage read_detections(const std::string& path, const RunFolder& run, bo
     DetectionImage img(width, height, m);
     // float64 (NumPy's default) is taken too, to float32: 1 um at 10 m, far below any tolerance
     const bool f64 = npy.dtype() == writers::Dtype::F64;
+    if (!f64 && npy.dtype() != writers::Dtype::F32)
+      throw Error(path + ": its dtype is " + writers::numpy_descr(npy.dtype()) + "; expected <f4 or <f8 ranges in metres");
     const float* v = f64 ? nullptr : npy.data<float>();
     const double* v64 = f64 ? npy.data<double>() : nullptr;
     for (size_t i = 0; i < img.count.size(); ++i)
       for (int s = 0; s < m; ++s) {
         const size_t at = i * size_t(m) + size_t(s);
+        // a double beyond float's range (its conversion would be undefined)
+        if (f64 && std::isfinite(v64[at]) && std::abs(v64[at]) > double(std::numeric_limits<float>::max()))
+          throw Error(path + ": the range " + nlohmann::json(v64[at]).dump() + " m at pixel (" + std::to_string(i % size_t(width)) + ", " +
+                      std::to_string(i / size_t(width)) + "), detection " + std::to_string(s) + ", is beyond float32's range; expected metres");
         const float r = f64 ? static_cast<float>(v64[at]) : v[at];
         img.range[img.at(s, i)] = r;
         img.count[i] += std::isfinite(r);

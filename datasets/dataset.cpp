@@ -157,7 +157,7 @@ std::string folder_of(int64_t index) {
   return buf;
 }
 
-// v with every float that holds an integer (6.0, -3.0; below 2^53 in magnitude, not -0.0) as that integer.
+// v with every float that holds an integer (6.0, -3.0; up to 2^53 in magnitude, not -0.0) as that integer.
 // JSON's 6 and 6.0 are one value, and equal values must make the same sample: its hash is of the resolved
 // scene's text, where 6.0 and 6 differ (a dataset file saved again by another tool, Python's json.dump
 // writes 6.0, made every sample stale and generated again).
@@ -166,7 +166,7 @@ json integral_numbers_as_integers(json v) {
     for (json& e : v) e = integral_numbers_as_integers(std::move(e));
   } else if (v.is_number_float()) {
     const double d = v.get<double>();
-    if (std::trunc(d) == d && std::abs(d) < 9007199254740992.0 && !(d == 0.0 && std::signbit(d)))
+    if (std::trunc(d) == d && std::abs(d) <= 9007199254740992.0 && !(d == 0.0 && std::signbit(d)))
       return json(static_cast<int64_t>(d));
   }
   return v;

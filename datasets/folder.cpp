@@ -570,7 +570,8 @@ std::string dataset_card(const DatasetFolder& folder, const CardTally& tally) {
   std::ostringstream o;
   // The description's first line is the title, the rest a paragraph under it (a newline in the title broke
   // the heading).
-  const std::string& d = spec.description;
+  const size_t start = spec.description.find_first_not_of(" \t\r\n");
+  const std::string d = start == std::string::npos ? std::string() : spec.description.substr(start);
   const size_t eol = d.find_first_of("\r\n");
   const std::string title = d.empty() ? fs::path(spec.file).filename().string() : d.substr(0, eol);
   o << "# " << title << "\n\n";

@@ -1811,8 +1811,10 @@ void check_before_tinygltf(const std::string& path, const nlohmann::json& doc) {
                       " holds " + std::to_string(size) + " bytes; expected a byteLength equal to its size");
       };
       if (uri.rfind("data:", 0) == 0) {
-        // glTF embeds bytes as base64 (3.6.1.1, 3.9.2: data:<media type>;base64,<data>); anything else reached
-        // tinygltf's "Failed to decode 'uri'", which named no buffer or image.
+        // glTF embeds bytes as base64 (3.6.1.1: data:<media type>;base64,<data>); anything else reached
+        // tinygltf's "Failed to decode 'uri'", which named no buffer. (An image's data URI that does not
+        // decode leaves its material with the factor, a warning of the loader, as a missing image file does.)
+        if (!buffer) continue;
         const size_t comma = uri.find(',');
         if (comma == std::string::npos || !std::string_view(uri).substr(0, comma).ends_with(";base64"))
           throw Error(path + ": " + who + ": its data URI " + quoted(uri.substr(0, std::min<size_t>(uri.size(), 48)) + (uri.size() > 48 ? "..." : "")) +
@@ -1824,7 +1826,8 @@ void check_before_tinygltf(const std::string& path, const nlohmann::json& doc) {
           if (!std::isalnum(ch) && ch != '+' && ch != '/')
             throw Error(path + ": " + who + ": its data URI's base64 has " +
                         (std::isprint(ch) ? "'" + std::string(1, char(ch)) + "'" : "byte " + std::to_string(ch)) + " at character " +
-                        std::to_string(k - comma - 1) + " of " + std::to_string(chars) + "; expected A-Z, a-z, 0-9, + and /, then up to two =");
+                        std::to_string(k - comma - 1) + " of " + std::to_string(chars) + "; expected A-Z, a-z, 0-9, + and /, then up to two =" +
+                        (ch == '-' || ch == '_' ? " (base64, not its URL-safe variant)" : std::isspace(ch) ? " (no line breaks or spaces)" : ""));
         }
         // without its = padding (2 or 3 characters in the last group) it decodes, as tinygltf reads it; 1 cannot
         if (pad == 0 && chars % 4 == 1)

@@ -588,7 +588,12 @@ TEST_F(App, ThePlanCoversThePeakMemoryAtTenThousandGatePositions) {
   ASSERT_THAT(info.output, HasSubstr("K = 10001 gate positions"));
   const size_t at = info.output.find("memory: about ");
   ASSERT_NE(at, std::string::npos) << info.output;
-  const double planned_mb = std::stod(info.output.substr(at + 14));
+  std::istringstream planned_text(info.output.substr(at + 14));  // "407 MB", or "1.2 GB"
+  double planned_mb = 0.0;
+  std::string unit;
+  planned_text >> planned_mb >> unit;
+  ASSERT_TRUE(unit == "MB" || unit == "GB") << info.output;
+  if (unit == "GB") planned_mb *= 1000.0;
   const pid_t pid = ::fork();
   if (pid == 0) {
     std::vector<std::string> argv = {kBin, "run", kScenes + "multi_object.json", "-q", "-o", (dir_ / "k").string()};

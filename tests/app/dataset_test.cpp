@@ -817,12 +817,13 @@ TEST_F(Dataset, AStaleSampleThatFailsAgainIsFailedAndTheCardKeepsItsTables) {
   fs::create_directories(scenes);
   for (const char* f : {"multi_object.json", "multi_object.gltf", "multi_object.bin"}) fs::copy_file(kScenes + f, scenes / f);
   write(dir_ / "d.json", "{\"seed\": 1, \"scenes\": [\"" + (scenes / "multi_object.json").string() + "\"], \"samples\": 2, "
-        "\"description\": \"Plates\\nof two lines\", "
+        "\"description\": \"\\nPlates\\nof two lines\", "
         "\"set\": {\"camera.crop\": [500, 240, 4, 4], \"render.samples_per_pixel\": 1}, "
         "\"random\": {\"description\": {\"choice\": [\"x|y\", \"z\"]}}}");
   const std::string run = "dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q";
   ASSERT_EQ(sh(run).code, 0);
-  // a description of several lines: its first is the title, the rest a paragraph (the heading was broken)
+  // a description of several lines: its first (not blank) is the title, the rest a paragraph (the heading
+  // was broken)
   EXPECT_EQ(slurp(dir_ / "out/dataset.md").rfind("# Plates\n\nof two lines\n\nA synthetic", 0), 0u) << slurp(dir_ / "out/dataset.md");
   std::ifstream card(dir_ / "out/dataset.md");
   int columns = 0, rows = 0;

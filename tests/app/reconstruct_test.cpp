@@ -346,7 +346,18 @@ TEST_F(Reconstruct, EvaluateScoresADetectionsNpyAgainstTheLabelsExactly) {
   }
   r = sh("evaluate " + run.string() + " --detections " + (dir_ / "i4.npy").string() + " -o " + (dir_ / "eval3").string());
   EXPECT_EQ(r.code, 1);
-  EXPECT_NE(r.output.find("its dtype is <i4, expected <f4"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("i4.npy: its dtype is <i4; expected <f4 or <f8 ranges in metres"), std::string::npos) << r.output;
+  // a float64 beyond float32's range is named (its conversion was undefined)
+  {
+    spadgen::writers::NpyWriter npy((dir_ / "huge.npy").string(), spadgen::writers::Dtype::F64, {H, W, M});
+    std::vector<double> v(size_t(H * W * M), std::numeric_limits<double>::quiet_NaN());
+    v[size_t(M) + 1] = 1e39;  // pixel (1, 0), detection 1
+    npy.write(0, v.data(), int64_t(v.size()));
+    npy.commit();
+  }
+  r = sh("evaluate " + run.string() + " --detections " + (dir_ / "huge.npy").string() + " -o " + (dir_ / "eval_huge").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("huge.npy: the range 1e+39 m at pixel (1, 0), detection 1, is beyond float32's range"));
   // an infinite range is neither metres nor "none" (it was skipped as if nothing were there)
   {
     spadgen::writers::NpyWriter npy((dir_ / "inf.npy").string(), spadgen::writers::Dtype::F32, {H, W, M});
