@@ -180,9 +180,15 @@ void RunFolder::profiles(int y0, int y1, bool noise_free, float* out) const { re
 
 void RunFolder::read_rows(int y0, int y1, bool rate, bool to_counts, float* out) const {
   const Stack* s = rate ? rate_.get() : counts_.get();
-  if (!s)
-    throw Error(dir_ + (rate ? ": no detection_rate.npy or .zarr (outputs.detection_rate)"
-                                   : ": no counts.npy or counts.zarr (outputs.counts)"));
+  if (!s) {
+    std::error_code ec;
+    const bool light = std::filesystem::is_directory(std::filesystem::path(dir_) / "light", ec);
+    throw Error(dir_ + (rate ? ": no detection_rate.npy or .zarr (outputs.detection_rate)" +
+                                   (light ? "; it saved the light, from which `spadgen sense " + dir_ +
+                                                " --set outputs.detection_rate=true -o DIR` writes it without rendering"
+                                          : std::string())
+                             : ": no counts.npy or counts.zarr (outputs.counts)"));
+  }
   const int64_t rows = y1 - y0, n = rows * W_;
   std::vector<float> plane(static_cast<size_t>(n));
   for (int k = 0; k < K_; ++k) {

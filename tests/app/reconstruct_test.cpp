@@ -126,6 +126,15 @@ TEST_F(Reconstruct, RefusesWhatItCannotReadNamingIt) {
   r = sh("reconstruct " + run.string() + " -q");
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("no counts.npy or counts.zarr (outputs.counts)"), std::string::npos) << r.output;
+  // a run without the rates that saved the light (the README's dataset storage): the sense command named
+  const fs::path light_run = dir_ / "light_run";
+  r = sh("run " + kScenes + "flat_target.json --set camera.crop=[502,240,8,8] --set render.samples_per_pixel=1 -q -o " +
+         light_run.string() + " --set outputs.detection_rate=false --set outputs.light=true --set outputs.previews=false");
+  ASSERT_EQ(r.code, 0) << r.output;
+  r = sh("reconstruct " + light_run.string() + " -q --noise-free");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("no detection_rate.npy or .zarr (outputs.detection_rate); it saved the light, from which `spadgen sense " +
+                                  light_run.string() + " --set outputs.detection_rate=true -o DIR` writes it without rendering"));
   r = sh("reconstruct " + run.string() + " -q --noise-free");
   EXPECT_EQ(r.code, 0) << r.output;
   // from the expected counts: a file of its own (it replaced the sampled counts' detections)
