@@ -1382,7 +1382,8 @@ void Loader::load(const std::string& scene_name) {
 // vertices at seams; a solid may have faces of other materials): exactly when they share one offset (Mesh::offset),
 // else within 4 float steps of the largest position (primitives far from the origin round their positions
 // about their own offsets: a closed box 31 m away was warned open). Sorted arrays, not maps: a glass
-// sphere of a million triangles is checked in about 0.6 s (and 100 MB, freed before rendering).
+// sphere of a million triangles is checked in about 0.6 s and 100 MB, freed before rendering (a pane of
+// two million, all of a face's vertices at one x, 1.6 s).
 namespace {
 std::string volume_text(double m3) {
   char buf[48];
@@ -1425,21 +1426,37 @@ void Loader::check_volumes() {
     }
     const double tolerance = one_offset ? 0.0 : 4.0 * double(largest) * double(std::numeric_limits<float>::epsilon());
     std::vector<uint32_t> id(vs.size());
-    {
+    uint32_t next = 0;
+    if (tolerance == 0.0) {
+      // equal positions side by side once sorted
       std::vector<Vertex> sorted = vs;
       std::sort(sorted.begin(), sorted.end(), [](const Vertex& a, const Vertex& b) {
         return a.p.x != b.p.x ? a.p.x < b.p.x : a.p.y != b.p.y ? a.p.y < b.p.y : a.p.z < b.p.z;
       });
-      // along x (sorted), the positions within the tolerance of a new one are compared in y and z
-      uint32_t next = 0;
-      std::vector<bool> done(sorted.size(), false);
-      for (size_t i = 0; i < sorted.size(); ++i) {
-        if (done[i]) continue;
-        id[sorted[i].index] = next;
-        for (size_t j = i + 1; j < sorted.size() && sorted[j].p.x - sorted[i].p.x <= tolerance; ++j)
-          if (!done[j] && std::abs(sorted[j].p.y - sorted[i].p.y) <= tolerance && std::abs(sorted[j].p.z - sorted[i].p.z) <= tolerance)
-            id[sorted[j].index] = next, done[j] = true;
-        ++next;
+      for (size_t i = 0; i < sorted.size(); ++i) id[sorted[i].index] = i > 0 && sorted[i].p == sorted[i - 1].p ? next - 1 : next++;
+    } else {
+      // within the tolerance: a grid of cells of 8 tolerances, a position looked up in the cells within the
+      // tolerance of it (one, unless it lies near a cell's side)
+      const double cell_size = 8.0 * tolerance;
+      const auto cell = [&](const glm::dvec3& p) {
+        return std::array<int64_t, 3>{static_cast<int64_t>(std::floor(p.x / cell_size)), static_cast<int64_t>(std::floor(p.y / cell_size)),
+                                      static_cast<int64_t>(std::floor(p.z / cell_size))};
+      };
+      std::map<std::array<int64_t, 3>, std::vector<uint32_t>> cells;  // cell -> the first vertex of each id in it
+      for (const Vertex& v : vs) {
+        const std::array<int64_t, 3> lo = cell(v.p - glm::dvec3(tolerance)), hi = cell(v.p + glm::dvec3(tolerance));
+        bool found = false;
+        for (int64_t x = lo[0]; x <= hi[0] && !found; ++x)
+          for (int64_t y = lo[1]; y <= hi[1] && !found; ++y)
+            for (int64_t z = lo[2]; z <= hi[2] && !found; ++z)
+              if (const auto it = cells.find({x, y, z}); it != cells.end())
+                for (const uint32_t w : it->second)
+                  if (std::abs(vs[w].p.x - v.p.x) <= tolerance && std::abs(vs[w].p.y - v.p.y) <= tolerance &&
+                      std::abs(vs[w].p.z - v.p.z) <= tolerance) {
+                    id[v.index] = id[w], found = true;
+                    break;
+                  }
+        if (!found) id[v.index] = next++, cells[cell(v.p)].push_back(v.index);
       }
     }
     struct Tri {
