@@ -133,7 +133,7 @@ Geometry geometry_of(const scenes::Scene& scene) {
 }
 
 ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img,
-                            const TimeAxis& axis, int threads, const fs::path& out, int objects, const Geometry* geometry) {
+                            const TimeAxis& axis, int threads, const fs::path& out, int objects, const Geometry* geometry, int realisations) {
   ResourcePlan plan;
   const int64_t tile = std::min(c.render.tile_size, std::max(img.width, img.height));
   // Threads at work: at most one per tile (a 40 x 40 crop at --threads 1024 was refused for 26.7 GB; it
@@ -168,7 +168,11 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
   const bool in_bands = write_in_bands(stacks, img, c.render.tile_size, threads);
   for (const StackLayout& s : stacks) {
     const bool per_k = s.file.find("transient") == std::string::npos;  // (H, W, T) stacks: the transient tile above
-    if (per_k && (s.written || s.file.rfind("frames.", 0) != 0)) sensor_tile += s.bytes() / std::max<int64_t>(1, pixels) * tile_pixels;
+    // the temporal noise's stacks, one per realisation sampled together (sense --repeats: R = 8 with frames
+    // peaked at 945 MB against 301 MB planned for one)
+    const int64_t copies = s.file.rfind("counts.", 0) == 0 || s.file.rfind("frames.", 0) == 0 ? std::max(1, realisations) : 1;
+    if (per_k && (s.written || s.file.rfind("frames.", 0) != 0))
+      sensor_tile += copies * (s.bytes() / std::max<int64_t>(1, pixels) * tile_pixels);
     if (!s.written) continue;
     // H: of (K, H, W), (K, N, H, W / 8) and (H, W, T)
     const size_t rows_axis = size_t(std::find_if(s.dims.begin(), s.dims.end(), [](const std::string& d) { return d.front() == 'y'; }) -
@@ -179,9 +183,9 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
     // bands leave the resident set; a Zarr store holds the chunks being filled: for each thread at most its
     // tiles' rows grown to whole chunks.
     const bool banded = s.chunks.empty() && (s.khw() || s.frames()) && in_bands;
-    if (banded) bands += std::min(s.bytes(), row_bytes * tile * in_flight);
-    else if (s.chunks.empty()) resident += std::min(s.bytes(), row_bytes * tile * in_flight);
-    else chunks += row_bytes * std::min(rows, (tile + s.chunks[rows_axis]) * T);
+    if (banded) bands += copies * std::min(s.bytes(), row_bytes * tile * in_flight);
+    else if (s.chunks.empty()) resident += copies * std::min(s.bytes(), row_bytes * tile * in_flight);
+    else chunks += copies * row_bytes * std::min(rows, (tile + s.chunks[rows_axis]) * T);
   }
   // And its working arrays over the tile and its halo (sensor/sensor.cpp, process): every pixel's lambda per
   // k, 8 bytes; its own avalanches' probability where crosstalk or frames read it, 8 more; with frames, the
@@ -189,9 +193,10 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
   // peaked at 311 MB against 222 MB planned without them).
   const bool frames = c.outputs.frames;
   sensor_tile += data_pixels * sensor.K() * (8 + (frames || halo > 0 ? 8 : 0) + (frames ? 24 : 0));
-  plan.memory.push_back({"sensor tiles (K = " + std::to_string(sensor.K()) + " gate positions or exposures, " + th + ")",
+  const std::string each = realisations > 1 ? ", the counts and frames of " + std::to_string(realisations) + " realisations (--repeats)" : "";
+  plan.memory.push_back({"sensor tiles (K = " + std::to_string(sensor.K()) + " gate positions or exposures, " + th + each + ")",
                          in_flight * sensor_tile});
-  plan.memory.push_back({"bands of (K, H, W) .npy stacks and frames being assembled (camera.width_px, render.tile_size_px, " + th + ")", bands});
+  plan.memory.push_back({"bands of (K, H, W) .npy stacks and frames being assembled (camera.width_px, render.tile_size_px, " + th + each + ")", bands});
   plan.memory.push_back({"output pages in flight, file-backed (camera.width_px, render.tile_size_px)", resident, true});
   plan.memory.push_back({"Zarr chunks being filled, at most (camera.width_px, render.tile_size_px, " + th + ")", chunks});
   // EXR images held whole until the end: ground truth (8 channels and 2 per layer, 4 and 4 per object
@@ -273,22 +278,27 @@ void check_resources(const RunConfig& c, const sensor::SensorModel& sensor, cons
 void check_resources(const ResourcePlan& plan, const RunConfig& c, const fs::path& out, const std::string& who,
                      const std::string& remedy) {
   const std::string file = !who.empty() ? who : c.scene_file.empty() ? std::string("<scene>") : c.scene_file;
+  std::string memory, disk;
   if (plan.memory_available >= 0 && plan.memory_needed() > plan.memory_available)
-    throw Error(file + ": the run needs about " + bytes_text(plan.memory_needed()) + " of memory, and " +
-                bytes_text(plan.memory_available) + " is available: " + join_parts(required(plan.memory)) +
-                "; lower the keys of the largest parts, or run with fewer --threads");
+    memory = file + ": the run needs about " + bytes_text(plan.memory_needed()) + " of memory, and " +
+             bytes_text(plan.memory_available) + " is available: " + join_parts(required(plan.memory)) +
+             "; lower the keys of the largest parts, or run with fewer --threads";
   // The earlier set in the output folder stays until the new one is complete: the new one needs its
   // whole size free. Compressed stores (Zarr) count a twentieth of their size here, the saved light no lit
-  // bins: refused only when even that does not fit (their size is known once written; a run that then finds the disk full fails
-  // cleanly, the folder as it was).
+  // bins: refused only when even that does not fit (their size is known once written; a run that then
+  // finds the disk full fails cleanly, the folder as it was).
   if (plan.disk_available >= 0 && plan.disk_at_least() > plan.disk_available) {
     const bool any_compressed = plan.disk_at_least() != plan.disk_needed();
-    throw Error((who.empty() ? file + ": the run writes " : who + " writes ") + (any_compressed ? "at least " + bytes_text(plan.disk_at_least()) +
-                " (" + least_text(least_parts(plan.disk)) + "; at most " + bytes_text(plan.disk_needed()) + ")"
-                                                           : "about " + bytes_text(plan.disk_needed())) +
-                " into " + out.string() + ", and " + bytes_text(plan.disk_available) + " is free there: " + join_parts(plan.disk) +
-                "; " + (remedy.empty() ? "switch outputs off (outputs.*), crop (camera.crop), or choose another folder (-o)" : remedy));
+    disk = "writes " + (any_compressed ? "at least " + bytes_text(plan.disk_at_least()) + " (" + least_text(least_parts(plan.disk)) +
+                                             "; at most " + bytes_text(plan.disk_needed()) + ")"
+                                       : "about " + bytes_text(plan.disk_needed())) +
+           " into " + out.string() + ", and " + bytes_text(plan.disk_available) + " is free there: " + join_parts(plan.disk) +
+           "; " + (remedy.empty() ? "switch outputs off (outputs.*), crop (camera.crop), or choose another folder (-o)" : remedy);
   }
+  // both said at once (the disk's refusal was hidden behind the memory's)
+  if (!memory.empty() && !disk.empty()) throw Error(memory + "; and it " + disk);
+  if (!memory.empty()) throw Error(memory);
+  if (!disk.empty()) throw Error((who.empty() ? file + ": the run " : who + " ") + disk);
 }
 
 std::string resource_summary(const ResourcePlan& plan) {

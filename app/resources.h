@@ -82,10 +82,11 @@ Geometry geometry_of(const scenes::Scene& scene);
 
 // threads: as --threads (0 = all cores). out: the output folder ("" = no disk check). objects: the scene's
 // objects (scenes::objects_of), which bound the object slots of the images and size metadata.json; -1 unknown
-// (render.max_layers). geometry: the scene's, when it is not in memory yet.
+// (render.max_layers). geometry: the scene's, when it is not in memory yet. realisations: of the temporal
+// noise sampled together (sense --repeats), each with its own counts and frames in the tiles and bands.
 ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img,
                             const TimeAxis& axis, int threads, const std::filesystem::path& out, int objects = -1,
-                            const Geometry* geometry = nullptr);
+                            const Geometry* geometry = nullptr, int realisations = 1);
 
 // Throws spadgen::Error, with the figures and the keys of the largest parts, when the run needs more
 // memory or disk than there is.

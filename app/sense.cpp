@@ -504,12 +504,12 @@ std::vector<RunResult> sense(const SenseOptions& options) {
                     " (" + (src / "metadata.json").string() + ", file_bytes): changed or cut short since; sense links the "
                     "run's files as they are: restore it, or run the scene again");
   }
-  // Memory of one realisation (the estimate includes the renderer's paths, which sense does not trace: an
-  // upper bound; the realisations share the rates). Disk: the stacks the run's folder provides are links
+  // Memory: the realisations' counts and frames each, their rates shared (the estimate includes the
+  // renderer's paths, which sense does not trace: an upper bound). Disk: the stacks the run's folder provides are links
   // and take none; each further realisation writes its own counts and frames (its images are links).
   {
     const fs::path where = out.parent_path().empty() ? fs::path(".") : out.parent_path();
-    ResourcePlan plan = plan_resources(write_cfg, sensor, img, axis, options.threads, where, objects);
+    ResourcePlan plan = plan_resources(write_cfg, sensor, img, axis, options.threads, where, objects, nullptr, int(runs.size()));
     std::vector<ResourcePlan::Part> disk;
     for (ResourcePlan::Part p : plan.disk) {
       if (from_run.count(p.file)) continue;

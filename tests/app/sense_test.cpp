@@ -107,6 +107,10 @@ TEST_F(App, SenseLinksTheRunsNoiseFreeFilesOnlyForTheRunsOwnSensor) {
          " -o " + (dir_ / "many").string());
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_THAT(r.output, HasSubstr("frames.npy x 99999 more realisations (--repeats)"));
+  // and the memory of the realisations sampled together, each with its counts and frames (8 with frames
+  // peaked at 945 MB against 301 MB planned for one): both refusals said at once
+  EXPECT_THAT(r.output, HasSubstr("the counts and frames of 100000 realisations (--repeats)) "));
+  EXPECT_THAT(r.output, HasSubstr("; and it writes "));
   EXPECT_THAT(r.output, Not(HasSubstr("detection_rate.npy")));  // the run's own sensor: linked
   EXPECT_FALSE(fs::exists(dir_ / "many"));
   // The files the realisations hold open, against the process's limit: refused up front, not on the
