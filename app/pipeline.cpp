@@ -25,6 +25,7 @@
 #include "render/camera.h"
 #include "render/lights.h"
 #include "render/renderer.h"
+#include "scenes/key_path.h"
 #include "scenes/scene.h"
 #include "scenes/scene_file.h"
 #include "sensor/labels.h"
@@ -49,10 +50,9 @@ scenes::Scene load_edited_gltf(const scenes::ResolvedRun& r, const std::string& 
   const RunConfig& c = r.config;
   try {
     return scenes::load_gltf(c.gltf_path, c.gltf_scene, c.edits);
-  } catch (const Error& e) {
-    const std::string what = e.what();
-    if (what.rfind("/nodes/", 0) != 0 && what.rfind("/materials/", 0) != 0) throw;
-    const std::string element = what.substr(0, what.find(": "));
+  } catch (const scenes::EditError& e) {
+    // the --set key of that node or material (nodes.a.scale), else the scene file
+    const std::string what = e.what(), element = "/" + e.section + "/" + scenes::pointer_token(e.name);
     for (const auto& [pointer, key] : r.set_keys)
       if (pointer.rfind(element + "/", 0) == 0) throw Error("--set " + key + what.substr(element.size()));
     throw Error(scene_file + ": " + what);

@@ -446,25 +446,21 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
     if (r->config.edits.nodes.empty() && r->config.edits.materials.empty()) continue;
     try {
       (void)scenes::load_gltf(r->config.gltf_path, r->config.gltf_scene, r->config.edits);
-    } catch (const Error& e) {
-      // the dataset's key that names the node or material (/random/nodes.plat.translation_m[2]), when the
-      // glTF's error is about one (it named "scenes/0" and the scene file's /nodes/plat)
-      const std::string what = e.what();
+    } catch (const scenes::EditError& e) {
+      // the dataset's key that edits the node or material (/random/nodes.plat.translation_m[2]; it named
+      // "scenes/0" and the scene file's /nodes/plat)
+      const std::string prefix = e.section + "." + e.name + ".";
       std::string where;
-      for (const char* section : {"nodes", "materials"}) {
-        const std::string at = "/" + std::string(section) + "/";
-        if (what.rfind(at, 0) != 0) continue;
-        const std::string name = what.substr(at.size(), what.find(": ") == std::string::npos ? std::string::npos : what.find(": ") - at.size());
-        const std::string prefix = std::string(section) + "." + name + ".";
-        for (const auto& [key, v] : s.set)
-          if (where.empty() && key.rfind(prefix, 0) == 0) where = "/set/" + key;
-        for (const GridAxis& g : s.grid)
-          if (where.empty() && g.key.rfind(prefix, 0) == 0) where = "/grid/" + g.key;
-        for (const RandomAxis& ra : s.random)
-          if (where.empty() && ra.key.rfind(prefix, 0) == 0) where = "/random/" + ra.key;
-      }
+      for (const auto& [key, v] : s.set)
+        if (where.empty() && key.rfind(prefix, 0) == 0) where = "/set/" + key;
+      for (const GridAxis& g : s.grid)
+        if (where.empty() && g.key.rfind(prefix, 0) == 0) where = "/grid/" + g.key;
+      for (const RandomAxis& ra : s.random)
+        if (where.empty() && ra.key.rfind(prefix, 0) == 0) where = "/random/" + ra.key;
       rd.fail(where.empty() ? "/scenes/" + std::to_string(k) : where,
-              "the nodes and materials the dataset varies, in " + s.scene_names[k] + ": " + what);
+              "the nodes and materials the dataset varies, in " + s.scene_names[k] + ": " + e.what());
+    } catch (const Error& e) {
+      rd.fail("/scenes/" + std::to_string(k), "the nodes and materials the dataset varies, in " + s.scene_names[k] + ": " + e.what());
     }
   }
 

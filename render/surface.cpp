@@ -56,7 +56,7 @@ Shading::Shading(const scenes::Scene& scene, double laser_wavelength_m, const gl
                     ? m.base_color_texture
                     : -1;
     r.texcoord = m.base_color_texcoord;
-    r.volume = p.transmission > 0.0f && !p.thin_walled;
+    r.volume = m.bounds_medium();
     // glTF: attenuationColor is the colour white light becomes after attenuationDistance inside.
     if (r.volume && std::isfinite(m.attenuation_distance_m) && m.attenuation_distance_m > 0.0f) {
       const Spec c = glm::clamp(to_spec(m.attenuation_color, w_laser_, w_ambient_), Spec(1e-30f), Spec(1.0f));

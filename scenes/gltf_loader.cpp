@@ -623,6 +623,7 @@ Trs Loader::decompose(size_t i, const glm::dmat4& m) const {
 size_t Loader::named(const char* kind, const char* section, const std::vector<std::string>& names, const std::string& name) const {
   std::string key = section;  // built up: GCC 12 warns falsely (-Wrestrict) on const char* + std::string
   key += pointer_token(name);
+  const std::string edits(section + 1, std::strlen(section) - 2);  // "/nodes/" -> "nodes
   const std::string shown = nlohmann::json(name).dump();
   std::vector<size_t> hits;
   for (size_t i = 0; i < names.size(); ++i)
@@ -631,7 +632,7 @@ size_t Loader::named(const char* kind, const char* section, const std::vector<st
   if (hits.size() > 1) {
     std::string list;
     for (size_t h : hits) list += (list.empty() ? "" : ", ") + std::to_string(h);
-    throw Error(key + ": " + std::to_string(hits.size()) + " " + kind + "s of the glTF file " + path_ + " are named " + shown +
+    throw EditError(edits, name, key + ": " + std::to_string(hits.size()) + " " + kind + "s of the glTF file " + path_ + " are named " + shown +
                 " (" + kind + "s " + list + "); give them distinct names in the glTF file to edit one");
   }
   const auto lower = [](std::string v) {
@@ -659,7 +660,7 @@ size_t Loader::named(const char* kind, const char* section, const std::vector<st
   } else {
     msg += " (it has " + std::to_string(distinct.size()) + " named " + kind + "s; spadgen info lists them)";
   }
-  throw Error(msg);
+  throw EditError(edits, name, msg);
 }
 
 void Loader::resolve_edits() {
@@ -1393,11 +1394,7 @@ std::string volume_text(double m3) {
 }  // namespace
 
 void Loader::check_volumes() {
-  const auto is_volume = [&](int material) {
-    if (material < 0) return false;
-    const Material& mat = scene_.materials[static_cast<size_t>(material)];
-    return mat.transmissive() && mat.thickness_m > 0.0f;
-  };
+  const auto is_volume = [&](int material) { return material >= 0 && scene_.materials[static_cast<size_t>(material)].bounds_medium(); };
   std::map<int, std::vector<size_t>> meshes_of_node;  // nodes with a volume primitive -> all their meshes
   std::set<int> volume_nodes;
   for (size_t i = 0; i < scene_.meshes.size(); ++i) {
@@ -1527,7 +1524,7 @@ void Loader::check_volumes() {
       const Mesh& m = scene_.meshes[meshes[tris[t].mesh]];
       glm::dvec3 p[3];
       for (int c = 0; c < 3; ++c) {
-        p[c] = m.offset + glm::dvec3(m.positions[m.indices[tris[t].at + size_t(c)]]);
+        p[c] = vs[first_vertex[tris[t].mesh] + m.indices[tris[t].at + size_t(c)]].p;
         pc.lo = glm::min(pc.lo, p[c]), pc.hi = glm::max(pc.hi, p[c]);
       }
       if (!pc.has_o) pc.o = p[0], pc.has_o = true;

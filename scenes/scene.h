@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "core/config.h"
+#include "core/error.h"
 
 namespace spadgen::scenes {
 
@@ -42,8 +43,10 @@ struct Material {
   float attenuation_distance_m = std::numeric_limits<float>::infinity();  // KHR_materials_volume
   glm::vec3 attenuation_color{1, 1, 1};                                   // KHR_materials_volume
   bool transmissive() const { return transmission > 0.0f; }
+  // A medium bounded by the mesh (not thin-walled): what its triangles enclose.
+  bool bounds_medium() const { return transmissive() && thickness_m > 0.0f; }
   // A volume that bends light: the laser's connections refract through it.
-  bool refracting() const { return transmissive() && thickness_m > 0.0f && ior != 1.0f; }
+  bool refracting() const { return bounds_medium() && ior != 1.0f; }
 };
 
 // Mesh::offset's grid: a mesh whose vertices lie this far from the glTF's origin or farther has its positions
@@ -171,6 +174,15 @@ Objects objects_of(const Scene& scene);
 // replaces its factors. An edit of a material no loaded mesh uses, or of a node outside the loaded glTF
 // scene, is a warning (it changes nothing). docs/scene-file.md, "Varying the glTF scene".
 Scene load_gltf(const std::string& path, const std::string& scene_name = "", const SceneEdits& edits = {});
+
+// load_gltf's error for an edit of a node or material the glTF does not have, or has several of: its
+// message starts with the edit's pointer ("/nodes/NAME: "); section ("nodes", "materials") and name say which
+// edit, for a caller to name the key that gave it (a --set key, a dataset's key).
+struct EditError : Error {
+  EditError(std::string edit_section, std::string edit_name, const std::string& message)
+      : Error(message), section(std::move(edit_section)), name(std::move(edit_name)) {}
+  std::string section, name;
+};
 
 // The files a glTF file reads besides itself: its buffers' and images' URIs that are not data: URIs,
 // resolved against its folder as the loader resolves them (percent-decoded, else as written), in the order
