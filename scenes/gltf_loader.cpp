@@ -722,7 +722,7 @@ void Loader::visit_one(int node, const glm::dmat4& parent_world, std::vector<std
       fail(node_label(m_, i), "mesh " + std::to_string(n.mesh) + " does not exist (the file has " +
                                   std::to_string(m_.meshes.size()) + " meshes)");
     const double det = glm::determinant(glm::dmat3(world));
-    if (!(std::abs(det) > 1e-300) || !std::isfinite(det)) {
+    if (n.skin < 0 && (!(std::abs(det) > 1e-300) || !std::isfinite(det))) {  // (a skinned mesh: its skin's)
       warn(node_label(m_, i) + ": its world transform is singular (a zero scale); its mesh is skipped");
     } else {
       const tinygltf::Mesh& mesh = m_.meshes[static_cast<size_t>(n.mesh)];
@@ -1246,9 +1246,18 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
       out.indices.insert(out.indices.end(), {a, b, c});
     }
   }
-  // A mirroring transform turns counter-clockwise triangles clockwise: swap to keep the front side.
-  if (glm::determinant(glm::dmat3(world)) < 0)
-    for (size_t t = 0; t + 2 < out.indices.size(); t += 3) std::swap(out.indices[t + 1], out.indices[t + 2]);
+  // A mirroring transform turns counter-clockwise triangles clockwise: swap to keep the front side. A skinned
+  // mesh's transform is its skin's, per vertex (glTF ignores its node's): the sum of the triangle's three.
+  if (skinned.empty()) {
+    if (glm::determinant(glm::dmat3(world)) < 0)
+      for (size_t t = 0; t + 2 < out.indices.size(); t += 3) std::swap(out.indices[t + 1], out.indices[t + 2]);
+  } else {
+    for (size_t t = 0; t + 2 < out.indices.size(); t += 3) {
+      const uint32_t* v = &out.indices[t];
+      if (glm::determinant(glm::dmat3(skinned[v[0]]) + glm::dmat3(skinned[v[1]]) + glm::dmat3(skinned[v[2]])) < 0)
+        std::swap(out.indices[t + 1], out.indices[t + 2]);
+    }
+  }
   if (out.indices.empty()) {
     warn(who + ": has no triangles; skipped");
     return;

@@ -532,6 +532,23 @@ TEST(GltfLoader, SkinnedMeshesArePosedByTheirJoints) {
   EXPECT_EQ(moved.meshes[0].positions, no_ibm.meshes[0].positions);
   ASSERT_EQ(moved.warnings.size(), 1u);
   EXPECT_THAT(moved.warnings[0], HasSubstr("node 2 'body' holds a skinned mesh, which its skin's joints place"));
+  // The front side follows the skin's transform, not the body node's (which glTF ignores): a mirroring body
+  // node keeps the triangles' order (it swapped it, turning the mesh inside out: a closed glass mesh held its
+  // medium outside), a mirroring skeleton swaps it; the first face looks to +z in all three.
+  g.doc["nodes"][2]["scale"] = {-1.0, 1.0, 1.0};
+  const Scene body_mirrored = load_gltf(g.write(dir.path(), "skin_body_mirrored"));
+  EXPECT_EQ(body_mirrored.meshes[0].indices, (std::vector<uint32_t>{0, 1, 2, 0, 2, 3}));
+  g.doc["nodes"][2]["scale"] = {0.0, 0.0, 0.0};  // nor does a singular one skip the mesh
+  const Scene body_flat = load_gltf(g.write(dir.path(), "skin_body_flat"));
+  ASSERT_EQ(body_flat.meshes.size(), 1u);
+  EXPECT_EQ(body_flat.meshes[0].positions, no_ibm.meshes[0].positions);
+  g.doc["nodes"][2].erase("scale");
+  g.doc["nodes"][0]["scale"] = {-1.0, 1.0, 1.0};
+  const Scene skeleton_mirrored = load_gltf(g.write(dir.path(), "skin_skeleton_mirrored"));
+  EXPECT_EQ(skeleton_mirrored.meshes[0].indices, (std::vector<uint32_t>{0, 2, 1, 0, 3, 2}));
+  g.doc["nodes"][0].erase("scale");
+  for (const Scene* sc : {&no_ibm, &body_mirrored, &skeleton_mirrored})
+    EXPECT_NEAR(face_normal(sc->meshes[0], 0).z, 1.0, 1e-9);  // (triangle 1 is degenerate in this pose)
   // Weights that do not sum to 1 are normalised, and said (the mesh was scaled towards the origin); a vertex
   // whose weights are all 0 is refused (it stood at the origin, and was "no JOINTS_0 and WEIGHTS_0" when all
   // were); a negative weight is refused.
