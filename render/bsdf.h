@@ -68,6 +68,8 @@ class Bsdf {
        const glm::vec3& wo_world, bool entering);
 
   bool has_non_delta() const { return m_.lambertian || !m_.smooth() || diffuse_weight_ > 0.0f; }
+  // Whether sample() may draw a Dirac lobe (a smooth reflection or transmission).
+  bool has_delta() const { return !m_.lambertian && m_.smooth() && (specular_weight_ > 0.0f || transmission_weight_ > 0.0f); }
   // f(wo, wi) |cos(wi)| over the non-Dirac lobes.
   Spec eval_cos(const glm::vec3& wi_world) const;
   // Draws 3 numbers from u (lobe choice and direction).

@@ -1247,15 +1247,20 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
         rays->guided += at_end.total();
         break;
       }
+      // as trace_path counts and ends the camera path
+      bool at_limit = false;
       if (bsdf.has_non_delta()) {
         ++vertices;
-        if (vertices >= rc.max_bounces) break;  // the camera path meets no laser connection after this one
+        if (vertices >= rc.max_bounces) {
+          if (!bsdf.has_delta()) break;  // the camera path meets no laser connection after this one
+          at_limit = true;
+        }
       }
-      const bool rr = vertices >= rc.russian_roulette_from;
+      const bool rr = !at_limit && vertices >= rc.russian_roulette_from;
       // The guided connections of the vertex before the last reach the last: the ghost's light (the
       // vertices before need no targets: only the last draw's weight, mis, counts).
       GuideTargets guide;
-      if (k == reach - 1 && guided_ && beta.x > 0.0f &&
+      if (k == reach - 1 && !at_limit && guided_ && beta.x > 0.0f &&
           (bsdf.glossy() || (bsdf.lambertian() && medium < 0 && !parts_.empty()))) {
         const int medium_out_t = volume ? (wo_front ? sf.material : -1) : medium;
         RayCounts own;
@@ -1269,7 +1274,9 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
       }
       const BsdfSample bs = bsdf.sample(uniform3(rng));
       if (!(bs.weight.x > 0.0f || bs.weight.y > 0.0f)) break;
+      if (at_limit && !bs.delta) break;
       if (bs.delta && ++deltas > kMaxDeltaEvents) break;
+      if (bs.delta && bsdf.has_non_delta()) --vertices;
       reflected = reflected || !bs.transmitted;
       beta *= bs.weight, rr_beta *= bs.weight;
       if (bs.transmitted) rr_beta *= bsdf.eta() * bsdf.eta();
@@ -1362,6 +1369,12 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
 
       const NeeVertex v{sf, bsdf, wo_front, volume, medium, vertices, !reflected, beta, opl,
                         !(mp.transmission > 0.0f && vertices > 0)};
+      // A vertex counts (max_bounces, direct or indirect) only when the path leaves it through a non-Dirac
+      // lobe: through a Dirac one (a smooth interface's reflection or transmission, beside a diffuse part)
+      // it did not scatter there. At the last vertex it may scatter at, a material with Dirac lobes is
+      // still drawn: a Dirac draw goes on, any other ends the path (or, with ambient light, takes the last
+      // segment).
+      bool at_limit = false;
       if (bsdf.has_non_delta()) {
         if (beta.x > 0.0f) {
           LaserRay lr;
@@ -1372,22 +1385,26 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
         }
         if (beta.y > 0.0f) connect_ambient_lights(v, &ambient, rays);
         ++vertices;
-        if (vertices == 1 && rc.max_bounces > 1) indirect_from = rays->total();
+        if (vertices == 1 && rc.max_bounces > 1 && indirect_from == no_indirect) indirect_from = rays->total();
         if (vertices >= rc.max_bounces) {
-          if (!ambient_on_) break;
-          last_segment = true;
+          if (bsdf.has_delta()) {
+            at_limit = true;
+          } else {
+            if (!ambient_on_) break;
+            last_segment = true;
+          }
         }
       }
 
       // The ghosts a vertex sees of the laser through a glossy plate (no random numbers: found first, as
       // the guided connections weigh against those whose light the next vertex's laser connection returns).
       Ghosts ghosts;
-      if (guided_ && !slabs_.empty() && !last_segment && beta.x > 0.0f && bsdf.has_non_delta())
+      if (guided_ && !slabs_.empty() && !last_segment && !at_limit && beta.x > 0.0f && bsdf.has_non_delta())
         ghost_targets(sf, medium, &ghosts);
       // Guided connections from a glossy vertex whose next vertex may reflect the laser in a narrow lobe.
       GuideTargets guide;
-      const bool roulette = !last_segment && vertices >= rc.russian_roulette_from;
-      if (guided_ && !last_segment && beta.x > 0.0f &&
+      const bool roulette = !last_segment && !at_limit && vertices >= rc.russian_roulette_from;
+      if (guided_ && !last_segment && !at_limit && beta.x > 0.0f &&
           (bsdf.glossy() || (bsdf.lambertian() && medium < 0 && !parts_.empty()))) {
         const int medium_out_t = volume ? (wo_front ? sf.material : -1) : medium;
         find_guide_targets(sf, bsdf, medium, medium_out_t, &guide, rays);
@@ -1416,7 +1433,12 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
         bs = bsdf.sample(uniform3(rng));
       }
       if (!(bs.weight.x > 0.0f || bs.weight.y > 0.0f)) break;
+      if (at_limit && !bs.delta) {
+        if (!ambient_on_) break;
+        last_segment = true;
+      }
       if (bs.delta && ++deltas > kMaxDeltaEvents) break;
+      if (bs.delta && bsdf.has_non_delta()) --vertices;
       reflected = reflected || !bs.transmitted;
       beta *= bs.weight;
       if (bs.transmitted && volume) medium = wo_front ? sf.material : -1;

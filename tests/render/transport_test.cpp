@@ -452,6 +452,41 @@ TEST(Transport, SmoothPlateTransmitsOneMinusRSquaredEachWayAndDelaysTheReturn) {
   EXPECT_NEAR(t_b / main_b - t_a / total_a, delay, 0.5e-12);
 }
 
+// A smooth plate that transmits 0.9 (its other 0.1 a diffuse base) in front of the wall: the wall's light
+// through it is direct light, rendered at max_bounces 1 and written to the direct bins. The plate's faces
+// have a non-Dirac (diffuse) part, but the paths that reach the wall leave them through their Dirac
+// transmission, which is no scattering (docs/render.md, "Transport"). The wall got no light below
+// max_bounces 3: each face the path crossed counted as a vertex.
+TEST(Transport, ASemiTransparentSmoothPlateDoesNotUseUpTheBounces) {
+  const TimeAxis axis{6.6e-9, 0.5e-12, 300, 25e-9};
+  scenes::Scene semi = wall_behind_plate(true);
+  semi.materials.back().transmission = 0.9f;
+  const double R = 0.04, T = 0.9, delay = 2 * 0.5 * 0.002 / kC, echo = 2 * 1.5 * 0.002 / kC;
+  // A camera path crosses each face with probability T (1 - R) at weight 1, the shadow ray passes
+  // (T (1 - R))^2: the estimate is (T (1 - R))^2 p_hat, of mean (T (1 - R))^4.
+  const double n = 64.0 * 1024, p = T * T * (1 - R) * (1 - R);
+  const double sigma = p * std::sqrt(p * (1 - p) / n);
+  for (const int bounces : {1, 2}) {
+    RenderStageConfig c = test_config(8, 8, 12e-3);
+    c.render.samples_per_pixel = 1024;
+    c.render.max_bounces = bounces;
+    c.render.split_direct_indirect = true;
+    Renderer bare(wall_behind_plate(false), c), plate(semi, c);
+    const TransientTile a = bare.transient({0, 0, 8, 8}, {0, 0, 8, 8}, axis);
+    const TransientTile b = plate.transient({0, 0, 8, 8}, {0, 0, 8, 8}, axis);
+    double total_a = 0, direct_b = 0;  // the wall's direct return, before the plate's first internal echo
+    for (int y = 0; y < 8; ++y)
+      for (int x = 0; x < 8; ++x) {
+        const size_t i = size_t(b.data_rect.index(x, y));
+        total_a += a.laser_total[i];
+        for (int64_t k = 0; k < axis.bins; ++k)
+          if (axis.bin_centre_s(k) < 2.0 / kC + delay + echo / 2)
+            direct_b += b.transient[i * size_t(axis.bins) + size_t(k)] - b.transient_indirect[i * size_t(axis.bins) + size_t(k)];
+      }
+    EXPECT_NEAR(direct_b / total_a, p * p, 5 * sigma) << "max_bounces " << bounces;
+  }
+}
+
 // The same plate and wall 300 m from the glTF's origin (float positions 31 um apart there) with the camera
 // in front of them: the renderer works in a frame centred on the camera, so a path's next ray steps 256
 // ulps of its coordinates near the camera (30 um at 0.45 m), not of the world's (7.8 mm at 300 m, longer
