@@ -74,6 +74,7 @@ struct RunRecord {
   double laser_total = 0.0, out_of_window_total = 0.0;  // photons per pulse, summed over the image
   double beyond_period_total = 0.0;  // of laser_total, from beyond the unambiguous range (run only: app/warnings.h)
   int ground_truth_layers = 0;
+  int64_t ground_truth_layers_cut = 0;  // pixels whose layers render.max_layers cut (run only: app/warnings.h)
   int ground_truth_objects = 0;   // the most objects along one ray (object<j> channels below it)
   nlohmann::json objects;         // objects_json(): the scene's objects, ids as in the images
   nlohmann::json model;                 // model_components()

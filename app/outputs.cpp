@@ -171,6 +171,7 @@ class Outputs::Images {
   }
 
   void put_ground_truth(const GroundTruthTile& g) {
+    layers_cut_.fetch_add(g.layers_cut, std::memory_order_relaxed);
     for_pixels(g.rect, [&](int, int, size_t i, size_t o) {
       const float v[] = {g.range[i], g.z[i], g.normal[3 * i], g.normal[3 * i + 1], g.normal[3 * i + 2],
                          float(g.mesh_id[i]), float(g.material_id[i]), float(g.layer_count[i])};
@@ -223,6 +224,8 @@ class Outputs::Images {
   double out_of_window_total() const { return std::accumulate(pixel_oow_.begin(), pixel_oow_.end(), 0.0); }
   double beyond_period_total() const { return std::accumulate(pixel_beyond_.begin(), pixel_beyond_.end(), 0.0); }
   // The deepest layer any pixel has; layer channels beyond it are not written.
+  // Pixels whose layers render.max_layers cut before their first opaque surface (GroundTruthTile).
+  int64_t layers_cut() const { return layers_cut_.load(); }
   int deepest_layer() const {
     if (!gt_on_) return 0;
     const float* lc = gt_ch_.back();
@@ -400,6 +403,7 @@ class Outputs::Images {
   PixelRect img_;
   int layers_;
   int slots_;  // object slots held: render.max_layers, or the scene's objects when fewer
+  std::atomic<int64_t> layers_cut_{0};
   bool gt_on_;
   ExrCompression compression_;
   const sensor::DeclaredOutput* intensity_decl_;
@@ -683,6 +687,7 @@ void Outputs::report(RunRecord& r) const {
   r.laser_total = images_->laser_total(), r.out_of_window_total = images_->out_of_window_total();
   r.beyond_period_total = images_->beyond_period_total();
   r.ground_truth_layers = images_->deepest_layer();
+  r.ground_truth_layers_cut = images_->layers_cut();
   r.ground_truth_objects = images_->object_slots();
   r.ground_truth_summary = images_->ground_truth_summary();
   r.accuracy = images_->accuracy(cfg_);

@@ -154,6 +154,12 @@ std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img
     w.push_back("a surface passes through the camera's centre: pixels of the " + image + " meet it at range " + g(std::max(0.0, lo.get<double>())) +
                 " m (ground_truth.exr range; camera.position_m lies on a surface of the glTF, such as a ground plane at the "
                 "camera's height or a mesh on the camera's node): move the camera off it");
+  if (r.ground_truth_layers_cut > 0)
+    w.push_back("render.max_layers (" + std::to_string(c.render.max_layers) + ") cuts the ground truth of " +
+                std::to_string(r.ground_truth_layers_cut) + " pixels of the " + image + ": their rays pass " +
+                std::to_string(c.render.max_layers) + " transmissive surfaces and meet more beyond, whose objects get no "
+                "slot in ground_truth.exr and labels.exr (their direct light counts in direct_other_laser, and spadgen "
+                "evaluate scores a detection of them as false): raise render.max_layers");
   // The laser matters to a gate sweep, to transients, and to the intensity mode with laser_on; its timing
   // only to the first two.
   const bool timed = c.acquisition.mode == AcquisitionMode::GateSweep || c.outputs.transient;

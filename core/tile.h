@@ -173,6 +173,9 @@ struct GroundTruthTile {
   std::vector<int32_t> mesh_id;      // -1 on a miss
   std::vector<int32_t> material_id;  // -1 on a miss or a mesh without material
   std::vector<int32_t> layer_count;  // surfaces along the ray up to and including the first opaque one
+  // Pixels whose ray met max_layers transmissive surfaces and more surfaces beyond them: their layers and
+  // objects stop there (render.max_layers), before the first opaque surface.
+  int64_t layers_cut = 0;
   // per pixel, max_layers entries each: [index(x, y) * max_layers + i]; +inf / 0 beyond layer_count
   std::vector<float> layer_range;
   std::vector<float> layer_transmittance;  // fraction of light reaching that surface along the ray

@@ -6,6 +6,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 
@@ -70,6 +71,7 @@ GroundTruthTile Renderer::ground_truth(const PixelRect& rect) const {
     if (medium >= 0) excess += (double(im.shading.material(medium).point.ior) - 1.0) * (length - previous);
     return length + excess;
   };
+  std::atomic<int64_t> cut{0};
   tbb::parallel_for(tbb::blocked_range<int>(rect.y0, rect.y1()), [&](const tbb::blocked_range<int>& rows) {
     for (int y = rows.begin(); y < rows.end(); ++y)
       for (int x = rect.x0; x < rect.x1(); ++x) {
@@ -85,6 +87,7 @@ GroundTruthTile Renderer::ground_truth(const PixelRect& rect) const {
         glm::vec3 inside = d;  // the light's direction in a medium, for the Fresnel terms (straight_transmittance)
         double previous = 0.0, distance = 0.0, transmittance = 1.0, excess = 0.0;  // excess: (n - 1) x the length in media
         int medium = -1, count = 0, objects = 0;
+        bool transmissive = false;  // the last surface met lets light through
         int32_t* slot_id = gt.object_slot_id.data() + i * layers;
         while (count < gt.max_layers) {
           RayHit hit;
@@ -121,15 +124,21 @@ GroundTruthTile Renderer::ground_truth(const PixelRect& rect) const {
           }
           ++count;
           const ResolvedMaterial& rm = im.shading.material(sf.material);
-          if (!(rm.point.transmission > 0.0f)) break;
+          transmissive = rm.point.transmission > 0.0f;
+          if (!transmissive) break;
           const bool entering = glm::dot(d, sf.ng) < 0.0f;
           transmittance *= straight_transmittance(im.shading.material_at(sf, hit), rm.volume, d, sf.ng, &inside).x;
           if (rm.volume) medium = entering ? sf.material : -1;
         }
         gt.layer_count[i] = count;
         gt.object_count[i] = objects;
+        if (transmissive && count == gt.max_layers) {
+          RayHit beyond;
+          if (im.embree.intersect(cam, d, tnear, kInf, &beyond)) cut.fetch_add(1, std::memory_order_relaxed);
+        }
       }
   });
+  gt.layers_cut = cut.load();
   return gt;
 }
 

@@ -520,6 +520,23 @@ TEST_F(App, UselessRunsAreWarnedAboutOnStderrAndInTheMetadata) {
             nlohmann::json::parse(slurp(dir_ / "out/metadata.json"))["warnings"]);
 }
 
+// The plate's two faces fill render.max_layers 2 over the sphere: its slot was dropped without a word, its
+// light moved to direct_other_laser and evaluate would score a detection of it as false.
+TEST_F(App, AGroundTruthCutByMaxLayersIsWarned) {
+  const std::string run = "run " + kScenes + "multi_object.json -q --set camera.crop=[504,242,8,8] "
+                          "--set render.samples_per_pixel=1 --set outputs.previews=false -o " + (dir_ / "out").string();
+  const std::string warning = "render.max_layers (2) cuts the ground truth of 64 pixels of the 8 x 8 image: their rays pass "
+                              "2 transmissive surfaces and meet more beyond";
+  const Result cut = sh(run + " --set render.max_layers=2");
+  ASSERT_EQ(cut.code, 0) << cut.output;
+  EXPECT_THAT(cut.output, HasSubstr("spadgen: warning: " + warning));
+  EXPECT_THAT(nlohmann::json::parse(slurp(dir_ / "out/metadata.json"))["warnings"].dump(), HasSubstr(warning));
+  const Result whole = sh(run);  // the default 8: plate, sphere and nothing cut
+  ASSERT_EQ(whole.code, 0) << whole.output;
+  EXPECT_THAT(whole.output, ::testing::Not(HasSubstr("max_layers")));
+  EXPECT_EQ(nlohmann::json::parse(slurp(dir_ / "out/metadata.json"))["ground_truth_summary"]["max_object_count"], 2);
+}
+
 TEST(AppCommands, InfoWarnsAboutAGltfCameraOfAnotherAspectRatio) {
   const Result r = sh("info " + kScenes + "flat_target.json --set camera.gltf_camera=spad_camera --set camera.height_px=1000");
   ASSERT_EQ(r.code, 0) << r.output;
