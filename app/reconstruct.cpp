@@ -13,6 +13,7 @@
 #include <fstream>
 #include <iomanip>
 #include <optional>
+#include <set>
 #include <limits>
 #include <map>
 #include <memory>
@@ -126,6 +127,23 @@ DetectionImage detect_image(const RunFolder& run, const Detector& detector, bool
 
 // The folder of an output file takes new files, checked before the work rather than after it (a read-only
 // file system was found once the detector had run over the whole image).
+// Whether `target` is a file a listing owns: metadata.json, what its "files" list, or a file inside a listed
+// folder (a Zarr store, light/); the entry it falls under, or "".
+std::string listed_entry(const fs::path& target, const fs::path& folder, const nlohmann::json& metadata) {
+  std::error_code ec;
+  std::vector<std::string> own = {"metadata.json"};
+  if (metadata.is_object() && metadata.contains("files") && metadata["files"].is_array())
+    for (const nlohmann::json& f : metadata["files"])
+      if (f.is_string()) own.push_back(f.get<std::string>());
+  for (const std::string& f : own) {
+    const fs::path listed = fs::weakly_canonical(fs::absolute(folder / f), ec);
+    if (ec || listed.empty() || f.empty()) continue;  // (an empty path would be the prefix of every output)
+    const auto [end, it] = std::mismatch(listed.begin(), listed.end(), target.begin(), target.end());
+    if (end == listed.end()) return f;
+  }
+  return "";
+}
+
 void check_writable(const std::string& file, const RunFolder& run, const std::string& run_dir) {
   // The file is replaced by rename: whatever is at the path goes. A regular file (an earlier output) may;
   // a device, a FIFO, a folder or a symbolic link is not an output to replace (-o /dev/full replaced the
@@ -142,17 +160,33 @@ void check_writable(const std::string& file, const RunFolder& run, const std::st
   // folder (a Zarr store, light/).
   std::error_code ec;
   const fs::path target = fs::weakly_canonical(fs::absolute(fs::path(file)), ec);
-  std::vector<std::string> own = {"metadata.json"};
-  if (run.metadata().contains("files") && run.metadata()["files"].is_array())
-    for (const nlohmann::json& f : run.metadata()["files"])
-      if (f.is_string()) own.push_back(f.get<std::string>());
-  for (const std::string& f : own) {
-    const fs::path listed = fs::weakly_canonical(fs::absolute(fs::path(run_dir) / f), ec);
-    if (ec || listed.empty()) continue;  // (an empty path would be the prefix of every output)
-    const auto [end, it] = std::mismatch(listed.begin(), listed.end(), target.begin(), target.end());
-    if (end == listed.end())
-      throw Error(file + ": is the run's own " + f + " (" + run_dir + "/metadata.json lists it), which writing the output "
-                  "would replace; expected a new file or an earlier output (-o)");
+  if (const std::string f = listed_entry(target, fs::path(run_dir), run.metadata()); !f.empty())
+    throw Error(file + ": is the run's own " + f + " (" + run_dir + "/metadata.json lists it), which writing the output "
+                "would replace; expected a new file or an earlier output (-o)");
+  // Nor a file of another run, or of a dataset (-o OTHER/counts.npy, -o DATASET/index.jsonl replaced them,
+  // exit 0): the folders above the target holding a spadgen run's metadata.json or a dataset's dataset.json.
+  static const std::set<std::string> kDatasetEntries = {"dataset.json", "samples", "failed", "index.jsonl", "index.csv",
+                                                        "dataset.md", ".dataset.lock", ".dataset.runs"};
+  for (fs::path folder = target.parent_path(); !folder.empty(); folder = folder.parent_path()) {
+    if (fs::is_regular_file(folder / "metadata.json", ec)) {
+      nlohmann::json meta;
+      try {  // (not a run's when it does not read as one)
+        const std::string m = (folder / "metadata.json").string();
+        meta = scenes::parse_json(scenes::read_file_bounded(m, 256u << 20, "metadata"), m);
+      } catch (const Error&) {
+      }
+      if (meta.is_object() && meta.contains("spadgen_version"))
+        if (const std::string f = listed_entry(target, folder, meta); !f.empty())
+          throw Error(file + ": is the run " + folder.string() + "'s own " + f + " (its metadata.json lists it), which "
+                      "writing the output would replace; expected a new file or an earlier output (-o)");
+    }
+    if (fs::is_regular_file(folder / "dataset.json", ec)) {
+      const fs::path rel = target.lexically_relative(folder);
+      if (!rel.empty() && kDatasetEntries.count(rel.begin()->string()))
+        throw Error(file + ": is the dataset " + folder.string() + "'s own " + rel.string() + ", which writing the output "
+                    "would replace or add to; expected a new file or an earlier output (-o)");
+    }
+    if (folder == folder.root_path()) break;
   }
   if (::access(dir.c_str(), W_OK) != 0)
     throw Error(file + ": cannot write into " + dir.string() + ": " + std::strerror(errno));

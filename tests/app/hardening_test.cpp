@@ -555,6 +555,26 @@ TEST_F(Hardening, ReconstructReplacesOnlyAFileAndAFifoIsNotReadAsMetadata) {
   }
   EXPECT_EQ(slurp(run / "counts.npy"), counts_before);
   EXPECT_EQ(slurp(run / "metadata.json"), meta_before);
+  // nor another run's files, or a dataset's (-o OTHER/counts.npy replaced that run's counts with an EXR,
+  // -o DATASET/index.jsonl its index, exit 0)
+  const fs::path other = dir_ / "other", dataset = dir_ / "dataset";
+  fs::create_directories(dataset / "samples");
+  expect_exit(spadgen("run " + kTiny + " -q -o " + other.string()), 0, "run");
+  std::ofstream(dataset / "dataset.json") << "{}";
+  std::ofstream(dataset / "index.jsonl") << "index";
+  const std::string other_counts = slurp(other / "counts.npy");
+  for (const auto& [target, says] : std::vector<std::pair<fs::path, std::string>>{
+           {other / "counts.npy", ": is the run " + other.string() + "'s own counts.npy"},
+           {other / "metadata.json", ": is the run " + other.string() + "'s own metadata.json"},
+           {dataset / "index.jsonl", ": is the dataset " + dataset.string() + "'s own index.jsonl"},
+           {dataset / "samples/000000.exr", ": is the dataset " + dataset.string() + "'s own samples/000000.exr"}}) {
+    const Outcome o = spadgen("reconstruct -q " + run.string() + " -o " + target.string());
+    expect_exit(o, 1, target.string());
+    EXPECT_THAT(o.err, HasSubstr(says)) << target;
+  }
+  EXPECT_EQ(slurp(other / "counts.npy"), other_counts);
+  EXPECT_EQ(slurp(dataset / "index.jsonl"), "index");
+  EXPECT_FALSE(fs::exists(dataset / "samples/000000.exr"));
   // a run replacing the folder holds its lock: reconstruct and evaluate wait for no one and refuse (a
   // reconstruct during the swap wrote the earlier run's detections beside the new run's counts)
   {
