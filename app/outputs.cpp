@@ -161,6 +161,7 @@ class Outputs::Images {
     se_ch_ = laser_.channel("standard_error");
     if (cfg.render.target_relative_error) samples_ch_ = laser_.channel("samples");
     ambient_ch_ = ambient_.channel("photons_per_second");
+    ambient_se_ch_ = ambient_.channel("standard_error");
     maps_ch_ = {maps_.channel("gate_skew_ps"), maps_.channel("gate_length_ps"), maps_.channel("dcr_cps"), maps_.channel("pde"),
                 maps_.channel("pde_ambient")};
     if (intensity_decl_) intensity_ch_ = {intensity_.channel("counts"), intensity_.channel("photons")};
@@ -208,6 +209,7 @@ class Outputs::Images {
       const auto d = size_t(t.data_rect.index(x, y));  // the transient tile carries a halo
       laser_ch_[0][o] = float(t.laser_total[d]), laser_ch_[1][o] = float(t.out_of_window[d]);
       ambient_ch_[o] = t.ambient_rate[d];
+      if (!t.ambient_se.empty()) ambient_se_ch_[o] = t.ambient_se[d], ambient_se_seen_ = true;
       pixel_laser_[o] = t.laser_total[d], pixel_oow_[o] = t.out_of_window[d];
       if (!t.beyond_period.empty()) pixel_beyond_[o] = t.beyond_period[d];
       if (se_ch_ && !t.laser_se.empty()) se_ch_[o] = t.laser_se[d], se_seen_ = true;
@@ -251,14 +253,24 @@ class Outputs::Images {
       lo = std::min(lo, pixel_samples_[i]), hi = std::max(hi, pixel_samples_[i]);
       if (pixel_laser_[i] > 0.0) rel.push_back(double(se_ch_[i]) / pixel_laser_[i]);
     }
-    std::sort(rel.begin(), rel.end());
-    const auto q = [&](double f) { return rel.empty() ? 0.0 : rel[std::min(rel.size() - 1, size_t(f * double(rel.size())))]; };
+    const auto summary = [](std::vector<double>& v, const char* pixels) {
+      std::sort(v.begin(), v.end());
+      const auto q = [&](double f) { return v.empty() ? 0.0 : v[std::min(v.size() - 1, size_t(f * double(v.size())))]; };
+      return nlohmann::json{{pixels, v.size()}, {"median", q(0.5)}, {"p90", q(0.9)}, {"p99", q(0.99)}, {"max", v.empty() ? 0.0 : v.back()}};
+    };
     nlohmann::json a;
-    a["laser_relative_standard_error"] = {{"pixels_with_laser", rel.size()}, {"median", q(0.5)}, {"p90", q(0.9)},
-                                          {"p99", q(0.99)}, {"max", rel.empty() ? 0.0 : rel.back()}};
+    a["laser_relative_standard_error"] = summary(rel, "pixels_with_laser");
+    if (ambient_se_ch_) {
+      std::vector<double> amb;
+      amb.reserve(n);
+      for (size_t i = 0; i < n; ++i)
+        if (ambient_ch_[i] > 0.0f) amb.push_back(double(ambient_se_ch_[i]) / double(ambient_ch_[i]));
+      a["ambient_relative_standard_error"] = summary(amb, "pixels_with_ambient");
+    }
     a["samples_per_pixel"] = {{"mean", n ? paths / double(n) : 0.0}, {"min", n ? lo : 0}, {"max", hi}};
     a["target_relative_error"] = cfg.render.target_relative_error ? nlohmann::json(*cfg.render.target_relative_error) : nlohmann::json(nullptr);
-    a["meaning"] = "laser.exr standard_error: the Monte Carlo standard error of photons_per_pulse (docs/render.md, Accuracy)";
+    a["meaning"] = "laser.exr standard_error: the Monte Carlo standard error of photons_per_pulse; ambient.exr standard_error: "
+                   "of photons_per_second (docs/render.md, Accuracy)";
     return a;
   }
 
@@ -334,6 +346,7 @@ class Outputs::Images {
     };
     object_slots_ = count_object_slots();
     if (!se_seen_) laser_.remove_channel("standard_error"), laser_.remove_channel("samples");
+    if (!ambient_se_seen_) ambient_.remove_channel("standard_error"), ambient_se_ch_ = nullptr;
     if (gt_on_) {
       for (int l = deepest_layer(); l < layers_; ++l) {
         gt_.remove_channel(layer_name(l, ".range"));
@@ -353,7 +366,8 @@ class Outputs::Images {
     }
     laser_.set_attribute("spadgen_time_axis", axis_json(axis).dump());
     put_file(laser_, "laser.exr", "photons per laser pulse reaching the pixel's SPAD (before PDP)");
-    put_file(ambient_, "ambient.exr", "ambient photons per second reaching the pixel's SPAD (before PDP)");
+    put_file(ambient_, "ambient.exr", "photons_per_second, standard_error: ambient photons per second reaching the pixel's "
+             "SPAD (before PDP)");
     put_file(maps_, "sensor_maps.exr", "gate_skew_ps, gate_length_ps: ps; dcr_cps: counts/s; pde, pde_ambient: fraction");
     // The mode that declares the image knows what its channels mean.
     if (intensity_decl_) put_file(intensity_, intensity_decl_->file, intensity_decl_->what);
@@ -413,6 +427,8 @@ class Outputs::Images {
   std::vector<float*> gt_ch_, layer_range_, layer_trans_, object_ch_, object_slot_ch_, laser_ch_, maps_ch_, intensity_ch_,
       label_ch_;
   float* ambient_ch_ = nullptr;
+  float* ambient_se_ch_ = nullptr;
+  std::atomic<bool> ambient_se_seen_{false};
   std::vector<double> pixel_laser_, pixel_oow_, pixel_beyond_;
   std::vector<int32_t> pixel_samples_;
   float* se_ch_ = nullptr;       // laser.exr standard_error (null: not written)

@@ -200,11 +200,11 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
   plan.memory.push_back({"output pages in flight, file-backed (camera.width_px, render.tile_size_px)", resident, true});
   plan.memory.push_back({"Zarr chunks being filled, at most (camera.width_px, render.tile_size_px, " + th + ")", chunks});
   // EXR images held whole until the end: ground truth (8 channels and 2 per layer, 4 and 4 per object
-  // slot), laser (photons, out of window, standard error), ambient, maps (5), intensity, and in a sweep
-  // labels.exr (4 per object slot).
+  // slot), laser (photons, out of window, standard error), ambient (photons, standard error), maps (5),
+  // intensity, and in a sweep labels.exr (4 per object slot).
   const int64_t slots = image_object_slots(c.render.max_layers, objects);
   const bool sweep = c.acquisition.mode == AcquisitionMode::GateSweep;
-  const int64_t channels = (c.outputs.ground_truth ? 8 + 2 * c.render.max_layers + 4 + 4 * slots : 0) + 3 + 1 + 5 +
+  const int64_t channels = (c.outputs.ground_truth ? 8 + 2 * c.render.max_layers + 4 + 4 * slots : 0) + 3 + 2 + 5 +
                            (sweep ? 0 : 2) + (sweep && c.outputs.ground_truth ? 4 * slots : 0);
   plan.memory.push_back({"images (" + std::to_string(img.width) + " x " + std::to_string(img.height) +
                              " pixels: camera.crop or width_px x height_px; " + std::to_string(channels) +

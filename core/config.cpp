@@ -19,7 +19,11 @@ SensorStageConfig sensor_stage(const RunConfig& c) {
 }
 
 RenderStageConfig render_stage(const RunConfig& c, std::vector<double> row_fill_factor) {
-  return {c.camera, c.laser, c.ambient, c.render, c.light_seed(), std::move(row_fill_factor)};
+  RenderStageConfig r{c.camera, c.laser, c.ambient, c.render, c.light_seed(), std::move(row_fill_factor)};
+  const bool intensity = c.acquisition.mode == AcquisitionMode::Intensity;
+  r.target_laser = !intensity || c.acquisition.intensity.laser_on;
+  r.target_ambient = intensity;
+  return r;
 }
 
 }  // namespace spadgen

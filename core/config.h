@@ -374,6 +374,10 @@ struct RenderStageConfig {
   RenderConfig render;
   uint64_t light_seed = RunConfig{}.seed;  // light transport (RunConfig::light_seed())
   std::vector<double> row_fill_factor;  // camera.height_px values, row 0 at the top
+  // What render.target_relative_error holds to the target: the laser return (unless the acquisition sees
+  // none: the intensity mode without laser_on) and, in the intensity mode, whose counts are of it, the
+  // ambient light.
+  bool target_laser = true, target_ambient = false;
 };
 
 SensorStageConfig sensor_stage(const RunConfig& c);

@@ -138,6 +138,8 @@ struct TransientTile {
   // sqrt(paths); 0 with one path, where it cannot be estimated), and the paths rendered.
   std::vector<float> laser_se;
   std::vector<int32_t> samples;
+  // Optional, as laser_se: the Monte Carlo standard error of ambient_rate, photons per second.
+  std::vector<float> ambient_se;
   // Optional, per data pixel: every non-zero bin of the pixel (in transient and transient_indirect) lies in
   // [bin_lo, bin_hi). The renderer fills them with the bins it wrote; empty means unknown (the sensor then
   // scans every bin). bin_lo >= bin_hi: no light in the window.

@@ -1497,6 +1497,7 @@ void Integrator::add_samples(int x, int y, const CameraBlock& block, int s_begin
     const double path = out->laser_total - before;
     out->laser_sq += path * path;
     out->ambient_rate += ambient * w;
+    out->ambient_sq += (ambient * w) * (ambient * w);
     out->camera_hits += block.found[j] != 0;
   }
 }

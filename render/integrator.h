@@ -32,6 +32,7 @@ struct PixelTotals {
   // (standard_error()).
   double laser_sq = 0.0;
   double ambient_rate = 0.0;   // photons per second
+  double ambient_sq = 0.0;     // the sum of the squares of each path's contribution to ambient_rate
   // Range of bins written, [bin_lo, bin_hi) (empty when bin_lo >= bin_hi): a pixel's returns usually span
   // a small part of a long window, so only this range is converted and cleared afterwards.
   int64_t bin_lo = INT64_MAX, bin_hi = 0;

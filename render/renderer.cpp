@@ -121,6 +121,7 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
   tile.ambient_rate.assign(n, 0.0f);
   tile.beyond_period.assign(n, 0.0);
   tile.laser_se.assign(n, 0.0f);
+  tile.ambient_se.assign(n, 0.0f);
   tile.samples.assign(n, im.config.render.samples_per_pixel);
   if (bins > 0) {
     tile.bin_lo.assign(n, 0);
@@ -136,8 +137,9 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
   };
   std::vector<int> camera_hits(n, 0);
   // Stores pixel (x, y)'s totals, and its bins scaled by `scale` (1: as accumulated), clearing them.
-  const auto store = [&](int x, int y, const PixelTotals& t, double scale, int paths, double se, double* acc,
-                         double* acc_indirect) {
+  // se: of the laser total; ambient_se: of the ambient rate.
+  const auto store = [&](int x, int y, const PixelTotals& t, double scale, int paths, double se, double ambient_se,
+                         double* acc, double* acc_indirect) {
     const auto i = static_cast<size_t>(data_rect.index(x, y));
     float* out = tile.transient.data() + i * bins;
     for (int64_t b = t.bin_lo; b < t.bin_hi; ++b) {
@@ -161,6 +163,7 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
     camera_hits[i] = t.camera_hits;
     tile.ambient_rate[i] = static_cast<float>(t.ambient_rate * scale);
     tile.laser_se[i] = static_cast<float>(se);
+    tile.ambient_se[i] = static_cast<float>(ambient_se);
     tile.samples[i] = paths;
   };
   constexpr int kPacket = EmbreeScene::kPacket;
@@ -201,7 +204,7 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
               objects[size_t(i)].clear();
             }
             store(x, y, tot[i], 1.0, spp, standard_error(tot[i].laser_total, tot[i].laser_sq, spp, spp),
-                  acc.data() + size_t(i) * bins, split ? acc_indirect.data() + size_t(i) * bins : nullptr);
+                  standard_error(tot[i].ambient_rate, tot[i].ambient_sq, spp, spp), acc.data() + size_t(i) * bins, split ? acc_indirect.data() + size_t(i) * bins : nullptr);
           }
         }
       add_rays(rays);
@@ -249,16 +252,19 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
           render_rounds([&](int i, int b, int e) {
             im.integrator.add_samples(bx + i, y, block, b, e, 1.0, totals_only, nullptr, &rays, nullptr, nullptr, &pilot[i]);
           });
+          // The paths the pilot's spread asks for (the error falls as 1 / sqrt(paths)), 10 % more; none of the
+          // light in the pilot: as many as it had. Of the laser return and, where the acquisition's counts are
+          // of it (RenderStageConfig), of the ambient light: the more of the two.
+          const auto paths_for = [&](double sum, double sq) {
+            const double mean = sum / first, se = standard_error(sum, sq, first, 1.0);
+            if (!(mean > 0.0 && se > 0.0)) return double(first);
+            const double r = se / (target * mean);
+            return std::clamp(std::ceil(first * r * r * 1.1), double(first), double(most));
+          };
           for (int i = 0; i < lanes; ++i) {
-            // The paths the pilot's spread asks for (the error falls as 1 / sqrt(paths)), 10 % more; no
-            // laser light in the pilot: as many as it had.
-            const double mean = pilot[i].laser_total / first;
-            const double se = standard_error(pilot[i].laser_total, pilot[i].laser_sq, first, 1.0);
             double want = first;
-            if (mean > 0.0 && se > 0.0) {
-              const double r = se / (target * mean);
-              want = std::clamp(std::ceil(first * r * r * 1.1), double(first), double(most));
-            }
+            if (im.config.target_laser) want = std::max(want, paths_for(pilot[i].laser_total, pilot[i].laser_sq));
+            if (im.config.target_ambient) want = std::max(want, paths_for(pilot[i].ambient_rate, pilot[i].ambient_sq));
             begin[i] = first, end[i] = first + int(want);
           }
           render_rounds([&](int i, int b, int e) {
@@ -286,7 +292,7 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
               objects[size_t(i)].clear();
             }
             store(x, y, tot[i], scale, paths, standard_error(tot[i].laser_total, tot[i].laser_sq, paths, 1.0),
-                  acc.data() + size_t(i) * bins, split ? acc_indirect.data() + size_t(i) * bins : nullptr);
+                  standard_error(tot[i].ambient_rate, tot[i].ambient_sq, paths, 1.0), acc.data() + size_t(i) * bins, split ? acc_indirect.data() + size_t(i) * bins : nullptr);
           }
         }
       add_rays(rays);

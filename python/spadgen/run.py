@@ -466,16 +466,28 @@ class Run:
         laser = self.laser
         return laser["standard_error"] if "standard_error" in laser else None
 
+    @property
+    def ambient_standard_error(self):
+        """(H, W) float32 photons per second: the Monte Carlo standard error of ``ambient["photons_per_second"]``
+        (ambient.exr ``standard_error``; docs/render.md, "Accuracy"). None for a run saved before it."""
+        ambient = self.ambient
+        return ambient["standard_error"] if "standard_error" in ambient else None
+
     def expected_counts_error_bound(self):
         """(K, H, W) float32: a first-order bound on the Monte Carlo error of the expected counts, in counts:
-        N exp(-lambda) lambda times the pixel's relative standard error of its laser return (every detection
-        counted as laser light; the bound of docs/render.md, "Accuracy"). Zero where a pixel has no laser
-        light. Needs detection_rate.npy and laser.exr's standard_error."""
+        N exp(-lambda) lambda times the larger of the pixel's relative standard errors of its laser return and
+        of its ambient light (every detection counted as the noisier light; the bound of docs/render.md,
+        "Accuracy"). Zero where a pixel has neither. Needs detection_rate.npy and laser.exr's standard_error
+        (ambient.exr's too where the run has it)."""
         se = self.laser_standard_error
         if se is None:
             raise KeyError(f"{self.path}/laser.exr has no standard_error channel (a run saved before it)")
         laser = np.asarray(self.laser["photons_per_pulse"], np.float64)
         rel = np.divide(np.asarray(se, np.float64), laser, out=np.zeros_like(laser), where=laser > 0)
+        ase = self.ambient_standard_error
+        if ase is not None:
+            amb = np.asarray(self.ambient["photons_per_second"], np.float64)
+            rel = np.maximum(rel, np.divide(np.asarray(ase, np.float64), amb, out=np.zeros_like(amb), where=amb > 0))
         lam = np.asarray(self.detection_rate, np.float64)
         return (self.frames_per_k * np.exp(-lam) * lam * rel[None, :, :]).astype(np.float32)
 
