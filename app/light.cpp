@@ -24,7 +24,7 @@ namespace {
 
 // The saved light's arrays, in light_files() order, as stacks: their Zarr chunks and attributes.
 // The last two came later: a run before them has neither, and is read without them.
-enum LightFile : size_t { kRanges, kOffsets, kValues, kLaserTotal, kOutOfWindow, kAmbient, kLaserSe, kSamples, kLightFiles };
+enum LightFile : size_t { kRanges, kOffsets, kValues, kLaserTotal, kOutOfWindow, kAmbient, kLaserSe, kSamples, kAmbientSe, kLightFiles };
 
 StackLayout light_layout(LightFile f, Storage storage, int64_t H, int64_t W, int64_t values) {
   using writers::Dtype;
@@ -62,8 +62,12 @@ StackLayout light_layout(LightFile f, Storage storage, int64_t H, int64_t W, int
       l = {"light/laser_se", Dtype::F32, {H, W}, true, {kBlock, kBlock},
            "the Monte Carlo standard error of laser_total (laser.exr standard_error)", "photons per pulse", yx};
       break;
-    default:
+    case kSamples:
       l = {"light/samples", Dtype::I32, {H, W}, true, {kBlock, kBlock}, "paths rendered in the pixel", "paths", yx};
+      break;
+    default:
+      l = {"light/ambient_se", Dtype::F32, {H, W}, true, {kBlock, kBlock},
+           "the Monte Carlo standard error of ambient_rate (ambient.exr standard_error)", "photons per second", yx};
       break;
   }
   l.file += storage == Storage::Zarr ? ".zarr" : ".npy";
@@ -97,7 +101,7 @@ LightWriter::LightWriter(const PixelRect& region, const TimeAxis& axis, const St
   spill_at_.assign(n, 0);
   ranges_.assign(2 * n, 0);
   laser_total_.assign(n, 0.0), out_of_window_.assign(n, 0.0), ambient_.assign(n, 0.0f);
-  laser_se_.assign(n, 0.0f), samples_.assign(n, 0);
+  laser_se_.assign(n, 0.0f), samples_.assign(n, 0), ambient_se_.assign(n, 0.0f);
   for (auto& c : claimed_) c.store(0, std::memory_order_relaxed);
   // The transients wait in a file (tiles finish in any order; values.npy is in pixel order), unlinked at
   // once so that nothing is left behind whatever happens to the run.
@@ -146,6 +150,7 @@ void LightWriter::put(const TransientTile& t) {
       out_of_window_[ri] = t.out_of_window.size() == nd ? t.out_of_window[di] : 0.0;
       ambient_[ri] = t.ambient_rate.size() == nd ? t.ambient_rate[di] : 0.0f;
       laser_se_[ri] = t.laser_se.size() == nd ? t.laser_se[di] : 0.0f;
+      ambient_se_[ri] = t.ambient_se.size() == nd ? t.ambient_se[di] : 0.0f;
       samples_[ri] = t.samples.size() == nd ? t.samples[di] : 0;
     }
   if (buf.empty()) {
@@ -197,6 +202,7 @@ void LightWriter::write(std::vector<std::string>& files) {
   write_stack(layout(kAmbient), staging_.path(layout(kAmbient).file), ambient_, storage_json_);
   write_stack(layout(kLaserSe), staging_.path(layout(kLaserSe).file), laser_se_, storage_json_);
   write_stack(layout(kSamples), staging_.path(layout(kSamples).file), samples_, storage_json_);
+  write_stack(layout(kAmbientSe), staging_.path(layout(kAmbientSe).file), ambient_se_, storage_json_);
   const std::vector<std::string> f = light_files(storage_);
   files.insert(files.end(), f.begin(), f.end());
   if (storage_ == Storage::Zarr) write_zarr_group(staging_, "light", files);
@@ -220,10 +226,13 @@ SavedLight::SavedLight(const std::string& dir, const PixelRect& region, const Ti
   const std::vector<std::pair<std::vector<int64_t>, std::string>> want = {
       {{H, W, 2}, "the light's bin ranges"}, {{n + 1}, "the light's offsets"}, {{}, ""},
       {{H, W}, "the light's laser totals"},  {{H, W}, "the light's out-of-window totals"}, {{H, W}, "the light's ambient rates"},
-      {{H, W}, "the light's standard errors"}, {{H, W}, "the light's paths per pixel"}};
-  // The standard errors and paths: both or neither (a run before them).
+      {{H, W}, "the light's standard errors"}, {{H, W}, "the light's paths per pixel"},
+      {{H, W}, "the light's ambient standard errors"}};
+  // The standard errors and paths: both or neither (a run before them); the ambient light's standard errors,
+  // or not (a run before them).
   const bool accuracy = std::filesystem::exists(path(kLaserSe)) || std::filesystem::exists(path(kSamples));
-  const size_t files = accuracy ? kLightFiles : kLaserSe;
+  const bool ambient_accuracy = accuracy && std::filesystem::exists(path(kAmbientSe));
+  const size_t files = ambient_accuracy ? kLightFiles : accuracy ? kAmbientSe : kLaserSe;
   if (storage == Storage::Zarr) {
     std::vector<writers::ZarrReader> z;
     for (size_t i = 0; i < files; ++i) {
@@ -234,6 +243,7 @@ SavedLight::SavedLight(const std::string& dir, const PixelRect& region, const Ti
       laser_se_z_ = z[kLaserSe].read_all<float>(), samples_z_ = z[kSamples].read_all<int32_t>();
       laser_se_ = laser_se_z_.data(), samples_ = samples_z_.data();
     }
+    if (ambient_accuracy) ambient_se_z_ = z[kAmbientSe].read_all<float>(), ambient_se_ = ambient_se_z_.data();
     ranges_z_ = z[kRanges].read_all<int32_t>(), offsets_z_ = z[kOffsets].read_all<int64_t>();
     laser_total_z_ = z[kLaserTotal].read_all<double>(), out_of_window_z_ = z[kOutOfWindow].read_all<double>();
     ambient_z_ = z[kAmbient].read_all<float>();
@@ -250,6 +260,7 @@ SavedLight::SavedLight(const std::string& dir, const PixelRect& region, const Ti
       if (i != kValues) npy_.back().expect_shape(want[i].first, want[i].second);
     }
     if (accuracy) laser_se_ = npy_[kLaserSe].data<float>(), samples_ = npy_[kSamples].data<int32_t>();
+    if (ambient_accuracy) ambient_se_ = npy_[kAmbientSe].data<float>();
     ranges_ = npy_[kRanges].data<int32_t>(), offsets_ = npy_[kOffsets].data<int64_t>(), values_ = npy_[kValues].data<float>();
     laser_total_ = npy_[kLaserTotal].data<double>(), out_of_window_ = npy_[kOutOfWindow].data<double>();
     ambient_ = npy_[kAmbient].data<float>();
@@ -293,6 +304,7 @@ TransientTile SavedLight::tile(const PixelRect& rect, const PixelRect& data_rect
   t.transient.resize(nd * T);  // all zero: a recycled buffer's extra elements go, missing ones come as 0
   t.laser_total.resize(nd), t.out_of_window.resize(nd), t.ambient_rate.resize(nd);
   if (laser_se_) t.laser_se.resize(nd), t.samples.resize(nd);
+  if (ambient_se_) t.ambient_se.resize(nd);
   if (T > 0) t.bin_lo.resize(nd), t.bin_hi.resize(nd);
   const int32_t* r = ranges_;
   const int64_t* o = offsets_;
@@ -311,6 +323,7 @@ TransientTile SavedLight::tile(const PixelRect& rect, const PixelRect& data_rect
       t.out_of_window[di] = out_of_window_[ri];
       t.ambient_rate[di] = ambient_[ri];
       if (laser_se_) t.laser_se[di] = laser_se_[ri], t.samples[di] = samples_[ri];
+      if (ambient_se_) t.ambient_se[di] = ambient_se_[ri];
       // Photons are finite and not negative: a damaged file (a NaN) would make every output NaN silently.
       bool ok = std::isfinite(t.laser_total[di]) && t.laser_total[di] >= 0.0 && std::isfinite(t.ambient_rate[di]) &&
                 t.ambient_rate[di] >= 0.0f;
@@ -341,6 +354,7 @@ TransientTile SavedLight::tile(const PixelRect& rect, const PixelRect& data_rect
       t.laser_total[di] *= s, t.out_of_window[di] *= s;
       t.ambient_rate[di] = float(t.ambient_rate[di] * s);
       if (laser_se_) t.laser_se[di] = float(t.laser_se[di] * s);
+      if (ambient_se_) t.ambient_se[di] = float(t.ambient_se[di] * s);
       for (size_t b = di * T; b < (di + 1) * T; ++b) t.transient[b] = float(t.transient[b] * s);
     }
   }

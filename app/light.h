@@ -72,6 +72,7 @@ class LightWriter {
   std::vector<float> ambient_;
   std::vector<float> laser_se_;
   std::vector<int32_t> samples_;
+  std::vector<float> ambient_se_;
 };
 
 // A run folder's saved light, read-only: .npy files mapped, or Zarr stores (the per-pixel arrays
@@ -100,12 +101,12 @@ class SavedLight {
   std::string dir_;  // the run's light/ folder, for messages
   PixelRect region_;
   TimeAxis axis_;
-  std::vector<writers::NpyReader> npy_;           // .npy: the six files, mapped
+  std::vector<writers::NpyReader> npy_;           // .npy: the files, mapped
   std::unique_ptr<writers::ZarrReader> values_z_;  // Zarr: the values
   std::vector<int32_t> ranges_z_;                  // Zarr: the per-pixel arrays, decompressed
   std::vector<int64_t> offsets_z_;
   std::vector<double> laser_total_z_, out_of_window_z_;
-  std::vector<float> ambient_z_, laser_se_z_;
+  std::vector<float> ambient_z_, laser_se_z_, ambient_se_z_;
   std::vector<int32_t> samples_z_;
   const int32_t* ranges_ = nullptr;
   const int64_t* offsets_ = nullptr;
@@ -115,6 +116,7 @@ class SavedLight {
   const float* ambient_ = nullptr;
   const float* laser_se_ = nullptr;   // null: a run before the standard errors
   const int32_t* samples_ = nullptr;
+  const float* ambient_se_ = nullptr;  // null: a run before the ambient light's standard errors
   int64_t values_elements_ = 0;
   std::vector<double> row_scale_;
   mutable std::mutex pool_mutex_;

@@ -12,6 +12,7 @@
 #include "render/integrator.h"
 #include "scenes/input.h"
 #include "render/camera.h"
+#include "sensor/model/pixel_layout.h"
 
 #ifndef SPADGEN_VERSION
 #define SPADGEN_VERSION "dev"
@@ -97,13 +98,35 @@ json model_components(const RunConfig& c, const scenes::Scene* scene, const json
   add("target error", c.render.target_relative_error.has_value(),
       c.render.target_relative_error ? "render.target_relative_error is set: paths per pixel from a first round"
                                      : "render.target_relative_error is null: render.samples_per_pixel paths in every pixel");
-  add("dark counts", c.sensor.dark_counts, c.sensor.dark_counts ? "sensor.dark_counts is true" : "sensor.dark_counts is false");
-  const bool hot = c.sensor.dark_counts && (c.sensor.pixel_A.hot_pixel_fraction > 0.0 || c.sensor.pixel_B.hot_pixel_fraction > 0.0);
-  add("hot pixels", hot, hot ? "sensor.pixel_*.hot_pixel_fraction > 0" : "no dark counts, or hot_pixel_fraction 0");
-  add("crosstalk", c.sensor.crosstalk, c.sensor.crosstalk ? "sensor.crosstalk is true" : "sensor.crosstalk is false");
-  add("per-pixel gate maps", c.sensor.skew, c.sensor.skew ? "sensor.gate_skew is true" : "sensor.gate_skew is false: every pixel has the nominal gate");
-  add("PDP non-uniformity", c.sensor.pdp_nonuniformity,
-      c.sensor.pdp_nonuniformity ? "sensor.pdp_nonuniformity is true" : "sensor.pdp_nonuniformity is false");
+  // The sensor's components, as the pixel designs the chip has (sensor.preset) set them: a switch that is on
+  // does nothing where those designs' values are 0 (listed active, their rates were bit-identical to the
+  // component's off).
+  std::vector<const PixelTypeConfig*> designs;
+  for (const int t : sensor::PixelLayout(c.sensor.preset, c.camera.height_px).types())
+    designs.push_back(t == 0 ? &c.sensor.pixel_A : &c.sensor.pixel_B);
+  const auto any = [&](auto value) {
+    return std::any_of(designs.begin(), designs.end(), [&](const PixelTypeConfig* d) { return value(*d) > 0.0; });
+  };
+  const std::string used = designs.size() == 2 ? "sensor.pixel_A or pixel_B's" : designs[0] == &c.sensor.pixel_A ? "sensor.pixel_A's" : "sensor.pixel_B's";
+  const bool dark = c.sensor.dark_counts && any([](const PixelTypeConfig& d) { return d.dcr_median_cps; });
+  add("dark counts", dark, !c.sensor.dark_counts ? "sensor.dark_counts is false"
+                           : dark ? "sensor.dark_counts is true" : "the pixel designs in use have dcr_median_cps 0");
+  const bool hot = dark && any([](const PixelTypeConfig& d) { return d.hot_pixel_fraction; });
+  add("hot pixels", hot, hot ? used + " hot_pixel_fraction > 0" : "no dark counts, or hot_pixel_fraction 0 in the pixel designs in use");
+  const bool crosstalk = c.sensor.crosstalk && any([](const PixelTypeConfig& d) { return d.crosstalk_probability; });
+  add("crosstalk", crosstalk, !c.sensor.crosstalk ? "sensor.crosstalk is false"
+                              : crosstalk ? "sensor.crosstalk is true" : "the pixel designs in use have crosstalk_probability 0");
+  const bool sweep = c.acquisition.mode == AcquisitionMode::GateSweep;
+  const bool file_maps = !c.sensor.gate.maps_exr.empty();
+  const bool maps = sweep && (file_maps || (c.sensor.skew && (c.sensor.gate.skew_fwhm_s > 0.0 || c.sensor.gate.length_fwhm_s > 0.0)));
+  add("per-pixel gate maps", maps, !sweep ? "the intensity mode has no gate"
+                                   : file_maps ? "sensor.gate.maps_exr is set"
+                                   : !c.sensor.skew ? "sensor.gate_skew is false: every pixel has the nominal gate"
+                                   : maps ? "sensor.gate_skew is true"
+                                          : "sensor.gate.skew_fwhm_ps and length_fwhm_ps are 0: every pixel has the nominal gate");
+  const bool pdp = c.sensor.pdp_nonuniformity && any([](const PixelTypeConfig& d) { return d.pdp_nonuniformity; });
+  add("PDP non-uniformity", pdp, !c.sensor.pdp_nonuniformity ? "sensor.pdp_nonuniformity is false"
+                                 : pdp ? "sensor.pdp_nonuniformity is true" : "the pixel designs in use have pdp_nonuniformity 0");
   add("binary frames", c.outputs.frames, c.outputs.frames ? "outputs.frames is true" : "outputs.frames is false: counts are sampled without frames");
   return out;
 }

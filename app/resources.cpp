@@ -245,7 +245,8 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
                            (c.outputs.previews ? 9 * pixels + (int64_t{64} << 10) : 0),
                        false, "", c.outputs.previews});
   if (c.outputs.light) {
-    // light/: per pixel of the image grown by one, its bin range, offset and totals, and the values of its
+    // light/: per pixel of the image grown by one, its bin range, offset, totals, standard errors and paths,
+    // and the values of its
     // bins from its first arrival to its last, which the scene decides: on the multi-object scene 113 bins of
     // 9 ps per pixel on average over the image (1.0 ns), up to 2.3 ns over crops of the plate in front of the
     // sphere (where a fixed 128 bins planned a quarter of the disk 1 ps bins took). Planned at 2.5 ns.
@@ -258,8 +259,8 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
     plan.disk.push_back({std::string("light/ (outputs.light; ") +
                              (bins > 0 ? "about " + std::to_string(lit) + " lit bins per pixel, " + span + " ns" : "no time bins: the totals") +
                              (zarr ? ", uncompressed)" : ")"),
-                         ring * (8 + 8 + 8 + 8 + 4 + lit * 4), false, "", zarr, false, true,
-                         /*least: no lit bins*/ ring * (8 + 8 + 8 + 8 + 4)});
+                         ring * (8 + 8 + 8 + 8 + 4 + 4 + 4 + 4 + lit * 4), false, "", zarr, false, true,
+                         /*least: no lit bins*/ ring * (8 + 8 + 8 + 8 + 4 + 4 + 4 + 4)});
     // The values are spilled to a temporary file as the tiles finish, in tile order, and copied into
     // light/values (.npy or .zarr) in pixel order at the end: both are on the disk at that moment.
     plan.disk.push_back({std::string("the light's values spilled while the tiles render (outputs.light; freed once light/values") +

@@ -34,8 +34,12 @@ def half_rise_index(p, frames):
     NaN where it never does. ``p`` (K, ...) smoothed counts; ``frames`` the frames summed per position."""
     p = np.asarray(p, np.float64)
     top = p.max(axis=0)
-    near_top = p >= 0.9 * top
-    plateau = np.where(near_top, p, 0).sum(axis=0) / np.maximum(near_top.sum(axis=0), 1)
+    # The plateau: the median of the positions above half the top. (The mean of those within 10 % of the
+    # noisy top selects the high ones: the half level sat too high and the range 6.4 mm too far on the
+    # counts of a plane at 1 m, against -0.4 mm on its expected counts.)
+    upper = np.where(p >= 0.5 * top, p, np.nan)
+    with np.errstate(invalid="ignore"):
+        plateau = np.nan_to_num(np.nanmedian(upper, axis=0)) if p.size else top
     plateau = np.minimum(plateau, frames - 0.5)
     half = frames * -np.expm1(0.5 * np.log1p(-plateau / frames))
     crossing = (p[1:] >= half) & (p[:-1] < half)

@@ -182,6 +182,28 @@ TEST_F(App, TargetErrorOutputsAreBitIdenticalForAnyThreadCountAndTileSize) {
   EXPECT_EQ(model.at("indirect light"), meta["resolved_scene"]["render"]["max_bounces"].get<int>() > 1);
 }
 
+// The sensor's components are active as the pixel designs the chip has set them: with pixel A alone and its
+// DCR, crosstalk and PDP spread at 0, and no gate spreads, none is (each was listed active, with rates
+// bit-identical to the component off; the hot pixels by the unused pixel B's fraction); a 2D run has no gate.
+TEST_F(App, TheModelListsTheSensorsComponentsThePixelDesignsInUseHave) {
+  const auto model_of = [&](const std::string& args) {
+    const Result r = sh("run " + kScenes + "flat_target.json -q --set camera.crop=[508,246,8,8] --set render.samples_per_pixel=1 "
+                        "--set outputs.previews=false --set sensor.preset=pixel_A " + args + " -o " + (dir_ / "m").string());
+    EXPECT_EQ(r.code, 0) << r.output;
+    std::map<std::string, bool> model;
+    const nlohmann::json meta = nlohmann::json::parse(slurp(dir_ / "m/metadata.json"));
+    for (const auto& e : meta.at("model")) model[e.at("component").get<std::string>()] = e.at("active").get<bool>();
+    return model;
+  };
+  const auto on = model_of("");
+  for (const char* c : {"dark counts", "hot pixels", "crosstalk", "per-pixel gate maps", "PDP non-uniformity"}) EXPECT_TRUE(on.at(c)) << c;
+  const auto zero = model_of("--set sensor.pixel_A.dcr_median_cps=0 --set sensor.pixel_A.crosstalk_probability=0 "
+                             "--set sensor.pixel_A.pdp_nonuniformity=0 --set sensor.gate.skew_fwhm_ps=0 --set sensor.gate.length_fwhm_ps=0");
+  for (const char* c : {"dark counts", "hot pixels", "crosstalk", "per-pixel gate maps", "PDP non-uniformity"}) EXPECT_FALSE(zero.at(c)) << c;
+  EXPECT_FALSE(model_of("--set sensor.pixel_A.hot_pixel_fraction=0").at("hot pixels"));
+  EXPECT_FALSE(model_of("--set acquisition.mode=intensity").at("per-pixel gate maps"));
+}
+
 // metadata.json "run": the stages' shares of the run's wall time sum to 1, the rays' categories to their
 // total, and each model component has a share of its own where it has one: 0 when the scene does not
 // use it (the flat target has no transmissive surface, so no refracted connection; frames off: none sampled).
