@@ -19,7 +19,10 @@ PixelRect image_rect(const RunConfig& c) {
 
 TimeAxis time_axis(const RunConfig& c, const sensor::SensorModel& s) {
   TimeAxis a = s.required_window(c.render.time_bin_s);
-  if (c.render.window_start_s) {
+  // (the intensity mode needs no bins: a window there is for transient.npy or the saved light only; a
+  // window set without them rendered transients no output held)
+  const bool wanted = a.bins > 0 || c.outputs.transient || c.outputs.light;
+  if (c.render.window_start_s && wanted) {
     a.start_s = *c.render.window_start_s;
     a.bins = static_cast<int64_t>(std::ceil((*c.render.window_stop_s - a.start_s) / a.bin_width_s - 1e-9));
     return a;

@@ -309,6 +309,13 @@ void add_ignored_when(std::vector<Key>& keys) {
     return c.acquisition.intensity.exposure != Exposure::Dual
                ? "acquisition.intensity.exposure is " + quoted(c.acquisition.intensity.exposure) : "";
   });
+  // The intensity mode needs no time bins: a window only for transient.npy or the saved light (which a sense in
+  // a gate sweep reads).
+  when({"/render/window_start_ns", "/render/window_stop_ns", "/render/time_bin_ps"}, [](const RunConfig& c) {
+    return c.acquisition.mode == AcquisitionMode::Intensity && !c.outputs.transient && !c.outputs.light
+               ? std::string("acquisition.mode is \"intensity\" (no time bins) and outputs.transient and outputs.light are false")
+               : std::string();
+  });
   when({"/render/max_samples_per_pixel"}, [](const RunConfig& c) {
     return c.render.target_relative_error ? std::string() : std::string("render.target_relative_error is null");
   });

@@ -519,11 +519,19 @@ TEST_F(App, UselessRunsAreWarnedAboutOnStderrAndInTheMetadata) {
       {"--set camera.gltf_camera=spad_camera", "camera.position_m: set to [0,0,1.0] but does nothing: camera.gltf_camera is \"spad_camera\""},
       {"--set acquisition.mode=intensity --set acquisition.gate_sweep.step_ps=50",
        "acquisition.gate_sweep.step_ps: set to 50 but does nothing: acquisition.mode is \"intensity\""},
+      // a 2D run rendered the window's transients for nothing, and said 100 % of the laser light was outside it
+      {"--set acquisition.mode=intensity --set render.window_start_ns=0 --set render.window_stop_ns=5",
+       "render.window_start_ns: set to 0 but does nothing: acquisition.mode is \"intensity\" (no time bins) and outputs.transient "
+       "and outputs.light are false"},
   };
   for (const Case& c : cases) {
     const Result r = sh(run + " " + c.set);
     ASSERT_EQ(r.code, 0) << c.set << ": " << r.output;
-    const nlohmann::json warnings = nlohmann::json::parse(slurp(dir_ / "out/metadata.json"))["warnings"];
+    const nlohmann::json meta = nlohmann::json::parse(slurp(dir_ / "out/metadata.json"));
+    if (c.set.find("intensity") != std::string::npos) {
+      EXPECT_EQ(meta["time_axis"]["bins"], 0) << c.set;
+    }
+    const nlohmann::json warnings = meta["warnings"];
     if (c.warning.empty()) {
       EXPECT_EQ(r.output, "") << c.set;
       EXPECT_EQ(warnings, nlohmann::json::array()) << c.set;
