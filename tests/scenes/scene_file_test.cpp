@@ -360,7 +360,10 @@ TEST_F(SceneFileTest, BinsWiderThanTheGateStepAreAWarning) {
   ASSERT_EQ(r.warnings.size(), 1u);
   EXPECT_THAT(r.warnings[0], HasSubstr("render.time_bin_ps: bins of 50 ps are wider than the gate sweep's step of 36 ps"));
   EXPECT_TRUE(parse(R"({"gltf": "s.gltf", "render": {"time_bin_ps": 36}})").warnings.empty());
-  EXPECT_TRUE(parse(R"({"gltf": "s.gltf", "render": {"time_bin_ps": 50}, "acquisition": {"mode": "intensity"}})").warnings.empty());
+  // the intensity mode has no bins: the key does nothing there (not the sweep's warning)
+  const ResolvedRun i = parse(R"({"gltf": "s.gltf", "render": {"time_bin_ps": 50}, "acquisition": {"mode": "intensity"}})");
+  ASSERT_EQ(i.warnings.size(), 1u);
+  EXPECT_THAT(i.warnings[0], HasSubstr("render.time_bin_ps: set to 50 but does nothing: acquisition.mode is \"intensity\""));
 }
 
 // A key that the other settings make do nothing, given a value other than its default, is a warning naming
