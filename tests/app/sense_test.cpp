@@ -694,6 +694,19 @@ TEST_F(App, SenseRefusesWhatItCannotDo) {
   EXPECT_THAT(r.output, HasSubstr("/light: pixel ("));
   EXPECT_THAT(r.output, HasSubstr("the saved light is damaged"));
   EXPECT_FALSE(fs::exists(dir_ / "nan_sensed"));
+
+  // A bad value in the run's resolved scene is named there: sense reads it from metadata.json (it was
+  // reported against the scene file, which held a good one).
+  {
+    nlohmann::ordered_json meta = nlohmann::ordered_json::parse(slurp(dir_ / "nan" / "metadata.json"));
+    meta["resolved_scene"]["camera"]["width_px"] = "abc";
+    std::ofstream(dir_ / "nan" / "metadata.json") << meta.dump(2);
+  }
+  r = sh("sense " + (dir_ / "nan").string() + " -o " + (dir_ / "bad_meta").string());
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr((dir_ / "nan" / "metadata.json").string() + ": resolved_scene (the run's scene file as it resolved"));
+  EXPECT_THAT(r.output, HasSubstr("/camera/width_px"));
+  EXPECT_FALSE(fs::exists(dir_ / "bad_meta"));
 }
 
 // The saved light holds every rendered bin of every pixel (the transient, compactly), and its own
