@@ -22,11 +22,14 @@ std::string g(double v) {
 }
 
 // The keys a derived time window depends on, for messages.
+// A table replaces the keys of what it tabulates (a pulse table's span was blamed on laser.pulse_fwhm_ps).
 std::string window_keys(const RunConfig& c) {
   if (c.render.window_start_s) return "render.window_start_ns and render.window_stop_ns";
-  return "the gate sweep (acquisition.gate_sweep.start_ns, stop_ns), the gate (sensor.gate.length_ns, rise_ps, "
-         "fall_ps, delay_ns, skew_fwhm_ps, length_fwhm_ps) and the instrument response (laser.pulse_fwhm_ps, "
-         "sensor.jitter_fwhm_ps)";
+  const bool gate_table = !c.sensor.gate.profile_csv.empty(), pulse_table = !c.laser.pulse_shape_csv.empty();
+  return std::string("the gate sweep (acquisition.gate_sweep.start_ns, stop_ns), the gate (") +
+         (gate_table ? "its table sensor.gate.profile_csv, " : "sensor.gate.length_ns, rise_ps, fall_ps, ") +
+         "delay_ns, skew_fwhm_ps, length_fwhm_ps) and the instrument response (" +
+         (pulse_table ? "the pulse's table laser.pulse_shape_csv" : "laser.pulse_fwhm_ps") + ", sensor.jitter_fwhm_ps)";
 }
 
 }  // namespace
@@ -42,17 +45,23 @@ void check_derived(const RunConfig& c, const sensor::SensorModel& sensor, const 
     return file + ": " + pointers.front() + ": ";
   };
   // The keys that set the time window (the window's ends, else the sweep, the gate and the IRF)
-  const std::vector<const char*> window = {"/render/window_stop_ns", "/render/window_start_ns", "/acquisition/gate_sweep/start_ns",
-                                           "/acquisition/gate_sweep/stop_ns", "/sensor/gate/length_ns", "/sensor/gate/rise_ps",
-                                           "/sensor/gate/fall_ps", "/sensor/gate/delay_ns", "/sensor/gate/skew_fwhm_ps",
-                                           "/sensor/gate/length_fwhm_ps", "/laser/pulse_fwhm_ps", "/sensor/jitter_fwhm_ps"};
+  // (the tables first when set: their span is what makes the window)
+  std::vector<const char*> window = {"/render/window_stop_ns", "/render/window_start_ns"};
+  if (!c.laser.pulse_shape_csv.empty()) window.push_back("/laser/pulse_shape_csv");
+  if (!c.sensor.gate.profile_csv.empty()) window.push_back("/sensor/gate/profile_csv");
+  for (const char* k : {"/acquisition/gate_sweep/start_ns", "/acquisition/gate_sweep/stop_ns"}) window.push_back(k);
+  if (c.sensor.gate.profile_csv.empty())
+    for (const char* k : {"/sensor/gate/length_ns", "/sensor/gate/rise_ps", "/sensor/gate/fall_ps"}) window.push_back(k);
+  for (const char* k : {"/sensor/gate/delay_ns", "/sensor/gate/skew_fwhm_ps", "/sensor/gate/length_fwhm_ps"}) window.push_back(k);
+  if (c.laser.pulse_shape_csv.empty()) window.push_back("/laser/pulse_fwhm_ps");
+  window.push_back("/sensor/jitter_fwhm_ps");
   std::vector<const char*> bins_keys = {"/render/time_bin_ps"}, periods_keys = {"/laser/repetition_rate_MHz"};
   bins_keys.insert(bins_keys.end(), window.begin(), window.end());
   periods_keys.insert(periods_keys.end(), window.begin(), window.end());
   const double span = static_cast<double>(axis.bins) * axis.bin_width_s;
   if (axis.bins < 0 || axis.bins > scenes::kMaxTimeBins || !std::isfinite(span))
-    throw Error(where(bins_keys) + "the time window that " + window_keys(c) + " set, from " + g(axis.start_s / kNs) +
-                " ns on, needs " + (axis.bins < 0 ? std::string("more than 2^63") : g(double(axis.bins))) + " bins of " +
+    throw Error(where(bins_keys) + "the time window that " + window_keys(c) + " set, " +
+                (std::isfinite(axis.start_s) ? "from " + g(axis.start_s / kNs) + " ns on, " : "without a finite start, ") + "needs " + (axis.bins < 0 ? std::string("more than 2^63") : g(double(axis.bins))) + " bins of " +
                 g(axis.bin_width_s / kPs) + " ps; expected at most " + std::to_string(scenes::kMaxTimeBins) +
                 " bins: wider bins (render.time_bin_ps) or a shorter window");
   if (axis.bins > 0 && axis.period_s > 0 && span / axis.period_s > kMaxWindowPeriods)

@@ -22,6 +22,7 @@
 #include <fcntl.h>
 #include <sys/file.h>
 #include <sys/stat.h>
+#include <tuple>
 #include <vector>
 
 #include "app/interrupt.h"
@@ -133,6 +134,20 @@ TEST_F(Hardening, ValuesThatCrashedOrHungSpadgenEndInAnErrorNamingTheKey) {
           << c.set.substr(0, 60);
       EXPECT_LT(o.seconds, 10.0) << c.set.substr(0, 60) << ": refused only after work";
     }
+  }
+  // A pulse or gate table whose span makes the window is named by its key, not by the keys it replaces
+  // (laser.pulse_fwhm_ps; the gate's length_ns, rise_ps, fall_ps), nor is an infinite start printed.
+  std::ofstream(dir_ / "pulse_huge.csv") << "0,1\n1e300,1\n";
+  std::ofstream(dir_ / "gate_wide.csv") << "0,1\n100000000,1\n";
+  for (const auto& [key, table, names] : std::vector<std::tuple<std::string, std::string, std::string>>{
+           {"laser.pulse_shape_csv", "pulse_huge.csv", "the pulse's table laser.pulse_shape_csv"},
+           {"sensor.gate.profile_csv", "gate_wide.csv", "its table sensor.gate.profile_csv"}}) {
+    const Outcome o = spadgen("info " + kFlat + " --set " + key + "=" + (dir_ / table).string());
+    expect_exit(o, 1, table);
+    EXPECT_THAT(o.output, HasSubstr("--set " + key + ": the time window that")) << table;
+    EXPECT_THAT(o.output, HasSubstr(names)) << table;
+    EXPECT_THAT(o.output, Not(HasSubstr(key == "laser.pulse_shape_csv" ? "pulse_fwhm_ps" : "rise_ps"))) << table;
+    EXPECT_THAT(o.output, Not(HasSubstr("inf ns"))) << table;
   }
 }
 
