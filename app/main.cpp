@@ -46,7 +46,15 @@ int main(int argc, char** argv) {
       if (null != fd) return spadgen::app::kExitInternal;  // the lowest free descriptor is fd: it cannot differ
     }
   // --threads: 0 is every core; beyond kMaxThreads the system refuses threads (a 100000 failed in TBB).
-  const CLI::Range kThreadsRange(0, spadgen::app::kMaxThreads, "0 (every core) to " + std::to_string(spadgen::app::kMaxThreads));
+  // (a whole number: 1e3 was "not in range 0 to 1024")
+  const std::string threads_range = "an integer in [0, " + std::to_string(spadgen::app::kMaxThreads) + "] (0: every core)";
+  const CLI::Validator kThreadsRange(
+      [threads_range](std::string& v) {
+        const bool digits = !v.empty() && v.size() <= 9 && v.find_first_not_of("0123456789") == std::string::npos;
+        if (digits && std::stoi(v) <= spadgen::app::kMaxThreads) return std::string();
+        return "found '" + v + "', expected " + threads_range;
+      },
+      threads_range);
   // -o "" (an unset shell variable) is a mistake, not a request for the default folder.
   const CLI::Validator kNamed([](std::string& v) { return v.empty() ? std::string("expected a path, found an empty one") : std::string(); },
                               "");

@@ -349,8 +349,10 @@ TEST_F(Hardening, CommandLineErrorsAreSpadgensWithExitCode1) {
       {"frob", "spadgen: error: unknown command 'frob' after spadgen; expected one of run, sense, info"},
       {"dataset frob", "unknown command 'frob' after spadgen dataset; expected one of plan, run, status, schema"},
       // 100000 threads made TBB fail with an internal error
-      {"run " + kTiny + " --threads 100000", "spadgen: error: --threads: Value 100000 not in range 0 to 1024"},
-      {"run " + kTiny + " --threads -1", "--threads: Value -1 not in range 0 to 1024"},
+      {"run " + kTiny + " --threads 100000", "spadgen: error: --threads: found '100000', expected an integer in [0, 1024] (0: every core)"},
+      {"run " + kTiny + " --threads -1", "--threads: found '-1', expected an integer in [0, 1024]"},
+      // 1000 written another way: it was "not in range 0 to 1024"
+      {"run " + kTiny + " --threads 1e3", "--threads: found '1e3', expected an integer in [0, 1024]"},
       // an unset shell variable: it ran into the default folder
       {"run " + kTiny + " -o ''", "spadgen: error: --out: expected a path, found an empty one"},
       {"", "spadgen: error: A subcommand is required (see spadgen --help)"},
