@@ -23,7 +23,8 @@ namespace spadgen::app {
 namespace {
 
 // The saved light's arrays, in light_files() order, as stacks: their Zarr chunks and attributes.
-// The last two came later: a run before them has neither, and is read without them.
+// kLaserSe and kSamples came later (a run before them has neither), kAmbientSe after them: a run before them
+// is read without them.
 enum LightFile : size_t { kRanges, kOffsets, kValues, kLaserTotal, kOutOfWindow, kAmbient, kLaserSe, kSamples, kAmbientSe, kLightFiles };
 
 StackLayout light_layout(LightFile f, Storage storage, int64_t H, int64_t W, int64_t values) {

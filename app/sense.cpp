@@ -250,6 +250,12 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     if (!meta.contains(json::json_pointer(key)))
       throw Error((src / "metadata.json").string() + ": no " + key + "; expected a run folder written by spadgen " SPADGEN_VERSION
                   " with outputs.light (run the scene again)");
+  // Every run lists its files, metadata.json last: a list without it is damaged (an emptied one made sense
+  // write a folder without the ground truth, labels and depth preview the run had, exit 0).
+  if (const json& files = meta.at("files");
+      !files.is_array() || std::none_of(files.begin(), files.end(), [](const json& f) { return f == "metadata.json"; }))
+    throw Error((src / "metadata.json").string() + ": files does not list metadata.json, as every run's list does: the list "
+                "is damaged (run the scene again)");
   for (const std::string& o : options.overrides) {
     const std::string key = o.substr(0, scenes::assignment_split(o));
     if (sense_may_set(key)) continue;

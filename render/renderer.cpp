@@ -204,7 +204,8 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
               objects[size_t(i)].clear();
             }
             store(x, y, tot[i], 1.0, spp, standard_error(tot[i].laser_total, tot[i].laser_sq, spp, spp),
-                  standard_error(tot[i].ambient_rate, tot[i].ambient_sq, spp, spp), acc.data() + size_t(i) * bins, split ? acc_indirect.data() + size_t(i) * bins : nullptr);
+                  standard_error(tot[i].ambient_rate, tot[i].ambient_sq, spp, spp), acc.data() + size_t(i) * bins,
+                  split ? acc_indirect.data() + size_t(i) * bins : nullptr);
           }
         }
       add_rays(rays);
@@ -292,7 +293,8 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
               objects[size_t(i)].clear();
             }
             store(x, y, tot[i], scale, paths, standard_error(tot[i].laser_total, tot[i].laser_sq, paths, 1.0),
-                  standard_error(tot[i].ambient_rate, tot[i].ambient_sq, paths, 1.0), acc.data() + size_t(i) * bins, split ? acc_indirect.data() + size_t(i) * bins : nullptr);
+                  standard_error(tot[i].ambient_rate, tot[i].ambient_sq, paths, 1.0), acc.data() + size_t(i) * bins,
+                  split ? acc_indirect.data() + size_t(i) * bins : nullptr);
           }
         }
       add_rays(rays);

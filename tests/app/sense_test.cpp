@@ -707,6 +707,17 @@ TEST_F(App, SenseRefusesWhatItCannotDo) {
   EXPECT_THAT(r.output, HasSubstr((dir_ / "nan" / "metadata.json").string() + ": resolved_scene (the run's scene file as it resolved"));
   EXPECT_THAT(r.output, HasSubstr("/camera/width_px"));
   EXPECT_FALSE(fs::exists(dir_ / "bad_meta"));
+  // nor is an emptied list of the run's files taken for a run without them (sense wrote a folder without
+  // the run's ground truth, labels and depth preview, exit 0)
+  {
+    nlohmann::ordered_json meta = nlohmann::ordered_json::parse(slurp(dir_ / "run" / "metadata.json"));
+    meta["files"] = nlohmann::ordered_json::array();
+    std::ofstream(dir_ / "run" / "metadata.json") << meta.dump(2);
+  }
+  r = sh("sense " + (dir_ / "run").string() + " -o " + (dir_ / "no_files").string());
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("metadata.json: files does not list metadata.json, as every run's list does"));
+  EXPECT_FALSE(fs::exists(dir_ / "no_files"));
 }
 
 // The saved light holds every rendered bin of every pixel (the transient, compactly), and its own
