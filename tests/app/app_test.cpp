@@ -288,7 +288,7 @@ TEST_F(App, ZarrRunHoldsTheNpyRunsValues) {
     EXPECT_EQ(mz["storage"]["files"][zname]["chunks"].size(), r.chunks().size()) << zname;
     ++stacks;
   }
-  EXPECT_EQ(stacks, 13u);  // counts, detection rate, expected counts, transient and its indirect part, 8 of light
+  EXPECT_EQ(stacks, 14u);  // counts, detection rate, expected counts, transient and its indirect part, 9 of light
   EXPECT_EQ(mz["storage"]["stacks"], "zarr");
   EXPECT_EQ(mz["storage"]["files"]["frames.npy"]["format"], "npy");
   EXPECT_EQ(mn["storage"]["files"]["counts.npy"]["format"], "npy");
