@@ -366,8 +366,8 @@ class Outputs::Images {
     }
     laser_.set_attribute("spadgen_time_axis", axis_json(axis).dump());
     put_file(laser_, "laser.exr", "photons per laser pulse reaching the pixel's SPAD (before PDP)");
-    put_file(ambient_, "ambient.exr", "photons_per_second, standard_error: ambient photons per second reaching the pixel's "
-             "SPAD (before PDP)");
+    put_file(ambient_, "ambient.exr", std::string(ambient_se_ch_ ? "photons_per_second, standard_error: " : "") +
+             "ambient photons per second reaching the pixel's SPAD (before PDP)");
     put_file(maps_, "sensor_maps.exr", "gate_skew_ps, gate_length_ps: ps; dcr_cps: counts/s; pde, pde_ambient: fraction");
     // The mode that declares the image knows what its channels mean.
     if (intensity_decl_) put_file(intensity_, intensity_decl_->file, intensity_decl_->what);

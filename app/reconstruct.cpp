@@ -13,7 +13,6 @@
 #include <fstream>
 #include <iomanip>
 #include <optional>
-#include <set>
 #include <limits>
 #include <map>
 #include <memory>
@@ -24,6 +23,7 @@
 #include "app/run_parts.h"
 #include "app/staging.h"
 #include "core/error.h"
+#include "datasets/folder.h"
 #include "reconstruct/detect.h"
 #include "reconstruct/evaluate.h"
 #include "reconstruct/run_folder.h"
@@ -164,9 +164,9 @@ void check_writable(const std::string& file, const RunFolder& run, const std::st
     throw Error(file + ": is the run's own " + f + " (" + run_dir + "/metadata.json lists it), which writing the output "
                 "would replace; expected a new file or an earlier output (-o)");
   // Nor a file of another run, or of a dataset (-o OTHER/counts.npy, -o DATASET/index.jsonl replaced them,
-  // exit 0): the folders above the target holding a spadgen run's metadata.json or a dataset's dataset.json.
-  static const std::set<std::string> kDatasetEntries = {"dataset.json", "samples", "failed", "index.jsonl", "index.csv",
-                                                        "dataset.md", ".dataset.lock", ".dataset.runs"};
+  // exit 0): the nearest folder above the target holding a spadgen run's metadata.json decides by what it
+  // lists (a dataset's sample is a run: a new file there is fine, as reconstruct's default output is),
+  // else one holding a dataset's dataset.json by its own entries (evaluation/ aside, evaluate's).
   for (fs::path folder = target.parent_path(); !folder.empty(); folder = folder.parent_path()) {
     if (fs::is_regular_file(folder / "metadata.json", ec)) {
       nlohmann::json meta;
@@ -175,14 +175,16 @@ void check_writable(const std::string& file, const RunFolder& run, const std::st
         meta = scenes::parse_json(scenes::read_file_bounded(m, 256u << 20, "metadata"), m);
       } catch (const Error&) {
       }
-      if (meta.is_object() && meta.contains("spadgen_version"))
+      if (meta.is_object() && meta.contains("spadgen_version")) {
         if (const std::string f = listed_entry(target, folder, meta); !f.empty())
           throw Error(file + ": is the run " + folder.string() + "'s own " + f + " (its metadata.json lists it), which "
                       "writing the output would replace; expected a new file or an earlier output (-o)");
+        break;
+      }
     }
     if (fs::is_regular_file(folder / "dataset.json", ec)) {
       const fs::path rel = target.lexically_relative(folder);
-      if (!rel.empty() && kDatasetEntries.count(rel.begin()->string()))
+      if (!rel.empty() && rel.begin()->string() != "evaluation" && datasets::own_entries().count(rel.begin()->string()))
         throw Error(file + ": is the dataset " + folder.string() + "'s own " + rel.string() + ", which writing the output "
                     "would replace or add to; expected a new file or an earlier output (-o)");
     }

@@ -9,6 +9,7 @@
 
 #include "app/pipeline.h"
 #include "core/error.h"
+#include "scenes/scene_file.h"
 #include "writers/writers.h"
 
 namespace spadgen::app {
@@ -19,10 +20,8 @@ PixelRect image_rect(const RunConfig& c) {
 
 TimeAxis time_axis(const RunConfig& c, const sensor::SensorModel& s) {
   TimeAxis a = s.required_window(c.render.time_bin_s);
-  // (the intensity mode needs no bins: a window there is for transient.npy or the saved light only; a
-  // window set without them rendered transients no output held)
-  const bool wanted = a.bins > 0 || c.outputs.transient || c.outputs.light;
-  if (c.render.window_start_s && wanted) {
+  // (a window set where none is used rendered transients no output held: scenes::time_window_used)
+  if (c.render.window_start_s && scenes::time_window_used(c)) {
     a.start_s = *c.render.window_start_s;
     a.bins = static_cast<int64_t>(std::ceil((*c.render.window_stop_s - a.start_s) / a.bin_width_s - 1e-9));
     return a;

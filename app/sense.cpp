@@ -283,15 +283,22 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   std::vector<std::string> overrides = options.overrides;
   if (options.chip_seed) overrides.push_back("seeds.chip=" + text(*options.chip_seed));
   if (options.noise_seed) overrides.push_back("seeds.noise=" + text(*options.noise_seed));
-  // What the run's metadata.json holds is read from there, not from the scene file it names (a bad value
-  // there was reported against the scene file, which held a good one).
-  try {
-    (void)scenes::parse_scene_text(scene_text, scene_file, {}, false);
-  } catch (const Error& e) {
-    throw Error((src / "metadata.json").string() + ": resolved_scene (the run's scene file as it resolved; sense reads it "
-                "from here): " + e.what());
-  }
-  const scenes::ResolvedRun first = scenes::parse_scene_text(scene_text, scene_file, overrides, false);
+  // What the run's metadata.json holds is read from there, not from the scene file it names: a mistake the
+  // overrides do not mend, that the run's resolved scene makes alone, is named there (a bad value was
+  // reported against the scene file, which held a good one).
+  const scenes::ResolvedRun first = [&] {
+    try {
+      return scenes::parse_scene_text(scene_text, scene_file, overrides, false);
+    } catch (const Error&) {
+      try {
+        (void)scenes::parse_scene_text(scene_text, scene_file, {}, false);
+      } catch (const Error& e) {
+        throw Error((src / "metadata.json").string() + ": resolved_scene (the run's scene file as it resolved; sense reads "
+                    "it from here): " + e.what());
+      }
+      throw;
+    }
+  }();
   // One resolved scene per realisation: noise seeds S, S + 1, ... (S itself when there is one). The scene
   // is resolved once with seeds.noise = S; realisation r is that with the seed S + r in its configuration
   // and its resolved scene file, as `--set seeds.noise=S+r` resolves it (tested: a realisation's metadata

@@ -97,6 +97,8 @@ class FolderLock {
 
 }  // namespace
 
+const std::set<std::string>& own_entries() { return kOwnEntries; }
+
 const char* status_name(Status s) {
   switch (s) {
     case Status::Done: return "done";

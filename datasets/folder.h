@@ -38,6 +38,10 @@ namespace spadgen::datasets {
 enum class Status { Done, Failed, Stale, Missing, Damaged };
 const char* status_name(Status s);
 
+// What a dataset folder may hold besides its samples' folders: its dataset.json, samples/, failed/, index,
+// card, lock files, and evaluation/ (spadgen evaluate's).
+const std::set<std::string>& own_entries();
+
 // One row of the index.
 struct SampleRecord {
   Sample sample;

@@ -132,9 +132,18 @@ GroundTruthTile Renderer::ground_truth(const PixelRect& rect) const {
         }
         gt.layer_count[i] = count;
         gt.object_count[i] = objects;
-        if (transmissive && count == gt.max_layers) {
+        // Cut: beyond the last layer the ray meets an object that has no slot (its own back faces, a glass
+        // object's, are no loss), through the surfaces of those that have one.
+        for (int more = 0; transmissive && count == gt.max_layers && more < 64; ++more) {
           RayHit beyond;
-          if (im.embree.intersect(cam, d, tnear, kInf, &beyond)) cut.fetch_add(1, std::memory_order_relaxed);
+          if (!im.embree.intersect(cam, d, tnear, kInf, &beyond)) break;
+          tnear = std::nextafter(beyond.t, kInf);
+          const Surface sb = im.shading.surface(beyond);
+          if (std::find(slot_id, slot_id + objects, mesh_object[size_t(sb.mesh)]) == slot_id + objects) {
+            cut.fetch_add(1, std::memory_order_relaxed);
+            break;
+          }
+          if (!(im.shading.material(sb.material).point.transmission > 0.0f)) break;
         }
       }
   });

@@ -1319,8 +1319,9 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
   // directions towards it (guided_connections): the BSDF draw's share.
   double next_mis = 1.0;
   // The rays traced so far when the path left its first non-delta vertex: what follows is indirect light.
+  // Taken at that vertex's laser connection, and kept once the path leaves it through a non-Dirac lobe.
   const uint64_t no_indirect = UINT64_MAX;
-  uint64_t indirect_from = no_indirect;
+  uint64_t indirect_from = no_indirect, indirect_candidate = no_indirect;
   // The ghosts' MIS weights of the light the path meets at its next vertices (ghost_connections): [i] for
   // the vertex i ahead, the laser connection there (ghost_nee) or the guided connections from there
   // (ghost_guided). 1 where no ghost draw estimates the same light.
@@ -1385,7 +1386,7 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
         }
         if (beta.y > 0.0f) connect_ambient_lights(v, &ambient, rays);
         ++vertices;
-        if (vertices == 1 && rc.max_bounces > 1 && indirect_from == no_indirect) indirect_from = rays->total();
+        if (vertices == 1 && rc.max_bounces > 1 && indirect_from == no_indirect) indirect_candidate = rays->total();
         if (vertices >= rc.max_bounces) {
           if (bsdf.has_delta()) {
             at_limit = true;
@@ -1432,6 +1433,8 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
       } else {
         bs = bsdf.sample(uniform3(rng));
       }
+      if (!bs.delta && indirect_candidate != no_indirect && indirect_from == no_indirect) indirect_from = indirect_candidate;
+      indirect_candidate = no_indirect;
       if (!(bs.weight.x > 0.0f || bs.weight.y > 0.0f)) break;
       if (at_limit && !bs.delta) {
         if (!ambient_on_) break;

@@ -44,7 +44,9 @@ struct RayCounts {
   // ends
   uint64_t guided = 0;
   uint64_t ambient = 0;    // shadow rays to the glTF's punctual lights
-  uint64_t indirect = 0;   // of all the above, those a path traced after its first non-delta vertex (render.max_bounces > 1)
+  // of all the above, those a path traced after it left its first non-delta vertex through a non-Dirac lobe
+  // (render.max_bounces > 1)
+  uint64_t indirect = 0;
   uint64_t total() const { return camera + bounce + laser + refracted + guided + ambient; }
   RayCounts& operator+=(const RayCounts& o) {
     camera += o.camera, bounce += o.bounce, laser += o.laser, refracted += o.refracted, guided += o.guided,

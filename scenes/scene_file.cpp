@@ -630,7 +630,7 @@ void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string
     err("/render/window_stop_ns", "expected render.window_start_ns and render.window_stop_ns both set or both null");
   else if (c.render.window_start_s && *c.render.window_stop_s <= *c.render.window_start_s)
     err("/render/window_stop_ns", "expected a window end after render.window_start_ns");
-  else if (c.render.window_start_s) {
+  else if (c.render.window_start_s && time_window_used(c)) {
     const double bins = std::ceil((*c.render.window_stop_s - *c.render.window_start_s) / c.render.time_bin_s - 1e-9);
     if (!(bins <= static_cast<double>(kMaxTimeBins))) {
       // named by the key the user changed: the bin width, or else a window end --set gave
@@ -875,6 +875,10 @@ std::string sensor_tables_hash(const RunConfig& c) {
     h = fnv1a64(std::to_string(bytes.size()) + ":" + bytes, h);
   }
   return hex64(h);
+}
+
+bool time_window_used(const RunConfig& c) {
+  return c.acquisition.mode == AcquisitionMode::GateSweep || c.outputs.transient || c.outputs.light;
 }
 
 bool uses_sensor_tables(const RunConfig& c) {

@@ -70,4 +70,9 @@ std::string sensor_tables_hash(const RunConfig& c);
 // Whether c names any of those tables.
 bool uses_sensor_tables(const RunConfig& c);
 
+// Whether the run uses a time window (render.window_start_ns, window_stop_ns, time_bin_ps): a gate sweep
+// does; the intensity mode, which needs no time bins, only for transient.npy or the saved light (which a
+// sense in a gate sweep reads). Elsewhere those keys do nothing: the bins they would make are not checked.
+bool time_window_used(const RunConfig& c);
+
 }  // namespace spadgen::scenes

@@ -309,12 +309,10 @@ void add_ignored_when(std::vector<Key>& keys) {
     return c.acquisition.intensity.exposure != Exposure::Dual
                ? "acquisition.intensity.exposure is " + quoted(c.acquisition.intensity.exposure) : "";
   });
-  // The intensity mode needs no time bins: a window only for transient.npy or the saved light (which a sense in
-  // a gate sweep reads).
   when({"/render/window_start_ns", "/render/window_stop_ns", "/render/time_bin_ps"}, [](const RunConfig& c) {
-    return c.acquisition.mode == AcquisitionMode::Intensity && !c.outputs.transient && !c.outputs.light
-               ? std::string("acquisition.mode is \"intensity\" (no time bins) and outputs.transient and outputs.light are false")
-               : std::string();
+    return time_window_used(c)
+               ? std::string()
+               : std::string("acquisition.mode is \"intensity\" (no time bins) and outputs.transient and outputs.light are false");
   });
   when({"/render/max_samples_per_pixel"}, [](const RunConfig& c) {
     return c.render.target_relative_error ? std::string() : std::string("render.target_relative_error is null");
@@ -455,7 +453,7 @@ std::vector<Key> build() {
 
   k.push_back(choice("/render/quality", FIELD(render.quality), "preset of samples_per_pixel, target_relative_error and max_samples_per_pixel (draft, standard, reference; docs/accuracy.md); custom: those keys as given. A key given explicitly wins over the preset"));
   k.push_back(integer("/render/samples_per_pixel", FIELD(render.samples_per_pixel), kNone, closed(1, 1e7), "paths per pixel; with target_relative_error, the paths of the first round (at least 2), which every pixel gets"));
-  k.push_back(number("/render/target_relative_error", FIELD(render.target_relative_error), kNone, open_closed(0, 1), "null: samples_per_pixel paths in every pixel; else a first round of samples_per_pixel paths decides each pixel's paths so that the Monte Carlo standard error of its laser return is this fraction of it (at most max_samples_per_pixel; the estimate leaves the first round out, so it is unbiased); laser.exr records each pixel's paths and standard error"));
+  k.push_back(number("/render/target_relative_error", FIELD(render.target_relative_error), kNone, open_closed(0, 1), "null: samples_per_pixel paths in every pixel; else a first round of samples_per_pixel paths decides each pixel's paths so that the Monte Carlo standard error of its laser return (in a gate sweep, or with acquisition.intensity.laser_on) and of its ambient light (in the intensity mode) is this fraction of each (at most max_samples_per_pixel; the estimate leaves the first round out, so it is unbiased); laser.exr records each pixel's paths and standard error, ambient.exr the ambient light's"));
   k.push_back(integer("/render/max_samples_per_pixel", FIELD(render.max_samples_per_pixel), kNone, closed(1, 1e7), "the most paths of a pixel's estimate with target_relative_error (its first round not counted)"));
   k.push_back(integer("/render/max_bounces", FIELD(render.max_bounces), kNone, closed(1, 64), "scattering vertices per path (1 = direct light only); smooth interfaces a path crosses or mirrors off do not count, a rough plate's faces do (an object behind a rough plate needs 3)"));
   k.push_back(integer("/render/russian_roulette_from", FIELD(render.russian_roulette_from), kNone, closed(1, 64), "bounce from which paths may be stopped by Russian roulette"));

@@ -523,6 +523,11 @@ TEST_F(App, UselessRunsAreWarnedAboutOnStderrAndInTheMetadata) {
       {"--set acquisition.mode=intensity --set render.window_start_ns=0 --set render.window_stop_ns=5",
        "render.window_start_ns: set to 0 but does nothing: acquisition.mode is \"intensity\" (no time bins) and outputs.transient "
        "and outputs.light are false"},
+      // nor are the bins such a window would make refused (1e11 of them)
+      {"--set acquisition.mode=intensity --set render.window_start_ns=0 --set render.window_stop_ns=100000 "
+       "--set render.time_bin_ps=0.001",
+       "render.window_start_ns: set to 0 but does nothing: acquisition.mode is \"intensity\" (no time bins) and outputs.transient "
+       "and outputs.light are false"},
   };
   for (const Case& c : cases) {
     const Result r = sh(run + " " + c.set);

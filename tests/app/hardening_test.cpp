@@ -592,6 +592,14 @@ TEST_F(Hardening, ReconstructReplacesOnlyAFileAndAFifoIsNotReadAsMetadata) {
   EXPECT_EQ(slurp(other / "counts.npy"), other_counts);
   EXPECT_EQ(slurp(dataset / "index.jsonl"), "index");
   EXPECT_FALSE(fs::exists(dataset / "samples/000000.exr"));
+  // but a new file in a dataset's sample, a run folder, is fine: reconstruct's default output (it was refused
+  // as the dataset's own samples/000000/detections_edges.exr)
+  fs::copy(run, dataset / "samples/000000", fs::copy_options::recursive);
+  expect_exit(spadgen("reconstruct -q " + (dataset / "samples/000000").string()), 0, "a dataset's sample");
+  EXPECT_TRUE(fs::exists(dataset / "samples/000000/detections_edges.exr"));
+  const Outcome listed = spadgen("reconstruct -q " + run.string() + " -o " + (dataset / "samples/000000/counts.npy").string());
+  expect_exit(listed, 1, "a sample's own file");
+  EXPECT_THAT(listed.err, HasSubstr("'s own counts.npy"));
   // a run replacing the folder holds its lock: reconstruct and evaluate wait for no one and refuse (a
   // reconstruct during the swap wrote the earlier run's detections beside the new run's counts)
   {

@@ -216,12 +216,29 @@ TEST(GroundTruth, BeerLambertInsideTheVolumeAndLayerLimit) {
   EXPECT_EQ(gt.layer_count[0], 2);
   // 1e-5: the plate's 2 mm thickness is the difference of two float coordinates (1.5e-5 relative).
   EXPECT_NEAR(gt.layer_transmittance[1], (1.0 - rf) * std::sqrt(0.5), 1e-5);
+  EXPECT_EQ(gt.layers_cut, 1);  // the sphere beyond the plate's two faces has no slot (warned by the app)
 
   c.render.max_layers = 8;
   Renderer r8(p.scene, c);
   const GroundTruthTile gt8 = r8.ground_truth({8, 8, 1, 1});
   EXPECT_EQ(gt8.layer_count[0], 3);
   EXPECT_NEAR(gt8.layer_transmittance[2], (1.0 - rf) * (1.0 - rf) * std::sqrt(0.5), 1e-5);
+}
+
+// A ground truth is cut (GroundTruthTile::layers_cut) where an object beyond max_layers gets no slot; not where
+// all that lies beyond is the back of an object that has one (a closed glass box alone: a false warning).
+TEST(GroundTruth, LayersAreCutOnlyWhereAnObjectBeyondHasNoSlot) {
+  for (const bool wall : {false, true}) {
+    scenes::Scene s;
+    add_box(s, {-1, -1, -0.6f}, {1, 1, -0.5f}, add_material(s, test::glass(1.5f, 0.1f)));
+    if (wall) add_quad(s, {0, 0, -1}, {2, 0, 0}, {0, 2, 0}, add_material(s, test::lambertian(0.5f)));
+    RenderStageConfig c = test_config(8, 8, 12e-3);
+    c.render.max_layers = 1;
+    const GroundTruthTile gt = Renderer(s, c).ground_truth({0, 0, 8, 8});
+    EXPECT_EQ(gt.layers_cut, wall ? 64 : 0) << wall;
+    c.render.max_layers = 3;  // the box's two faces and the wall: nothing cut
+    EXPECT_EQ(Renderer(s, c).ground_truth({0, 0, 8, 8}).layers_cut, 0) << wall;
+  }
 }
 
 TEST(GroundTruth, BadInputNamesTheKey) {
