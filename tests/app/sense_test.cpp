@@ -714,16 +714,6 @@ TEST_F(App, SenseRefusesWhatItCannotDo) {
     meta["files"] = nlohmann::ordered_json::array();
     std::ofstream(dir_ / "run" / "metadata.json") << meta.dump(2);
   }
-  // A table the run read, moved, is given by --set: the override mends the run's scene (it was refused first,
-  // the resolved scene parsed without the override and named as damaged)
-  std::ofstream(dir_ / "gate.csv") << "0,0\n400,1\n3400,1\n3800,0\n";
-  ASSERT_EQ(sh("run " + kLit + " --set sensor.gate.profile_csv=" + (dir_ / "gate.csv").string() + " -o " + (dir_ / "table").string()).code, 0);
-  fs::rename(dir_ / "gate.csv", dir_ / "moved.csv");
-  r = sh("sense " + (dir_ / "table").string() + " -q -o " + (dir_ / "table_sensed").string());
-  EXPECT_EQ(r.code, 1) << r.output;
-  r = sh("sense " + (dir_ / "table").string() + " -q --set sensor.gate.profile_csv=" + (dir_ / "moved.csv").string() + " -o " +
-         (dir_ / "table_sensed").string());
-  EXPECT_EQ(r.code, 0) << r.output;
   r = sh("sense " + (dir_ / "run").string() + " -o " + (dir_ / "no_files").string());
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_THAT(r.output, HasSubstr("metadata.json: files does not list metadata.json, as every run's list does"));
