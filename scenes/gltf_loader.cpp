@@ -191,6 +191,16 @@ double read_component(const unsigned char* p, int component_type, bool normalize
   }
 }
 
+// The format of a texture extension's image (KHR_texture_basisu's KTX2, EXT_texture_webp's WebP), by its
+// bytes or its mimeType, or nullptr.
+const char* extension_image_format(const unsigned char* bytes, size_t size, const std::string& mime) {
+  static constexpr unsigned char kKtx2[8] = {0xab, 'K', 'T', 'X', ' ', '2', '0', 0xbb};
+  if ((size >= 8 && std::memcmp(bytes, kKtx2, 8) == 0) || mime == "image/ktx2") return "KTX2 (KHR_texture_basisu)";
+  if ((size >= 12 && std::memcmp(bytes, "RIFF", 4) == 0 && std::memcmp(bytes + 8, "WEBP", 4) == 0) || mime == "image/webp")
+    return "WebP (EXT_texture_webp)";
+  return nullptr;
+}
+
 // image/bufferView bounds are not checked by tinygltf 2.7 before it hands the bytes to the image
 // decoder; this loader checks them first, against the model tinygltf is filling.
 bool load_image_checked(tinygltf::Image* image, const int image_index, std::string* err, std::string* warn,
@@ -216,11 +226,19 @@ bool load_image_checked(tinygltf::Image* image, const int image_index, std::stri
   // length claims (2 GB for a 38-byte file) and its JPEG decoder writes past a Huffman table on a crafted
   // one (both found by fuzzing it).
   (void)req_width, (void)req_height;
+  const std::string who = label("image", static_cast<size_t>(image_index), image->name);
+  // A texture extension's image is left undecoded: a texture reads its PNG or JPEG source (the extension's
+  // fallback) where the file gives one, else its factor (Loader::texture). It failed the whole file.
+  if (const char* format = extension_image_format(bytes, size > 0 ? static_cast<size_t>(size) : 0, image->mimeType)) {
+    if (warn)
+      *warn += who + ": " + format + ", which spadgen does not decode; a texture uses its PNG or JPEG source where the file "
+               "gives one\n";
+    return true;
+  }
   DecodedImage decoded;
   std::string warning;
   const std::string problem =
       decode_image(bytes, size > 0 ? static_cast<size_t>(size) : 0, &decoded, &warning);
-  const std::string who = label("image", static_cast<size_t>(image_index), image->name);
   if (!problem.empty()) {
     if (err) *err += who + ": " + problem + "\n";
     return false;

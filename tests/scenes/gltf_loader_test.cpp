@@ -1362,6 +1362,40 @@ TEST_F(BrokenGltf, ImageBufferViewPastItsBuffer) {
   EXPECT_THAT(msg, HasSubstr("image 0: bufferView 0 does not exist or lies past the end of its buffer"));
 }
 
+// A texture extension's image (KHR_texture_basisu's KTX2, EXT_texture_webp's WebP) beside a PNG fallback:
+// the file loads, the texture reads its PNG source, and the image is warned about (the whole file was
+// refused: "image 1: neither PNG nor JPEG (its first bytes are 0xab 0x4b 0x54 0x58)"); a texture whose only
+// image is one uses its factor.
+TEST(GltfLoader, ATextureExtensionsImageIsLeftForItsPngFallback) {
+  TempDir dir;
+  Gltf g;
+  const std::vector<uint8_t> ktx2 = {0xab, 'K', 'T', 'X', ' ', '2', '0', 0xbb, '\r', '\n', 0x1a, '\n', 0, 0, 0, 0};
+  const std::vector<uint8_t> webp = {'R', 'I', 'F', 'F', 4, 0, 0, 0, 'W', 'E', 'B', 'P'};
+  g.doc["images"] = {{{"bufferView", g.view_of(unbase64(kPng2x2))}, {"mimeType", "image/png"}},
+                     {{"bufferView", g.view_of(ktx2)}, {"mimeType", "image/ktx2"}},
+                     {{"bufferView", g.view_of(webp)}, {"mimeType", "image/webp"}}};
+  g.doc["textures"] = {{{"source", 0}, {"extensions", {{"KHR_texture_basisu", {{"source", 1}}}}}},
+                       {{"source", 0}, {"extensions", {{"EXT_texture_webp", {{"source", 2}}}}}},
+                       {{"source", 1}}};
+  g.doc["extensionsUsed"] = {"KHR_texture_basisu", "EXT_texture_webp"};
+  g.doc["materials"] = {{{"name", "A"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}},
+                        {{"name", "B"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 1}}}}}},
+                        {{"name", "C"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 2}}}}}}};
+  for (int m = 0; m < 3; ++m) {
+    const int mesh = g.triangle_mesh();
+    g.doc["meshes"][static_cast<size_t>(mesh)]["primitives"][0]["material"] = m;
+    g.node({{"mesh", mesh}});
+  }
+  const Scene s = load_gltf(g.write(dir.path(), "basisu", Gltf::Form::Glb));
+  ASSERT_EQ(s.textures.size(), 2u);  // A's and B's, both of the PNG's texels
+  EXPECT_EQ(s.textures[0].texels, s.textures[1].texels);
+  expect_pixel(s.textures[0], 0, 0, {255, 0, 0, 255});
+  const std::string w = testing::PrintToString(s.warnings);
+  EXPECT_THAT(w, HasSubstr("image 1: KTX2 (KHR_texture_basisu), which spadgen does not decode; a texture uses its PNG or JPEG source"));
+  EXPECT_THAT(w, HasSubstr("image 2: WebP (EXT_texture_webp), which spadgen does not decode"));
+  EXPECT_THAT(w, HasSubstr("could not be read or decoded"));  // C's texture: its only image is the KTX2
+}
+
 // glTF 2.0 images are PNG or JPEG; stb_image would also decode BMP, GIF, TGA, ... (and its decoders of
 // those are where its known bugs lie): such an image is refused, named, with what it starts with.
 TEST_F(BrokenGltf, ImageThatIsNeitherPngNorJpeg) {
