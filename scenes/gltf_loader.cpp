@@ -702,8 +702,20 @@ void Loader::warn_unused_edits() {
       warn("/materials/" + pointer_token(m_.materials[i].name) + ": " + label("material", i, m_.materials[i].name) +
            " is used by no mesh of the loaded scene; the edit changes nothing");
   }
+  // A node outside the scene still places a loaded skinned mesh when it is one of its skin's joints, or
+  // above one: its joints' world transforms are composed whatever scene they are in (it was warned as
+  // changing nothing, and moved the mesh).
+  std::vector<char> poses(m_.nodes.size(), 0);
+  for (size_t i = 0; i < m_.nodes.size(); ++i) {
+    const int skin = m_.nodes[i].skin;
+    if (!scene_.nodes[i].loaded || m_.nodes[i].mesh < 0 || skin < 0 || static_cast<size_t>(skin) >= m_.skins.size()) continue;
+    for (const int j : m_.skins[static_cast<size_t>(skin)].joints)
+      for (int n = j; n >= 0 && static_cast<size_t>(n) < m_.nodes.size() && !poses[static_cast<size_t>(n)];
+           n = parent_[static_cast<size_t>(n)])
+        poses[static_cast<size_t>(n)] = 1;
+  }
   for (size_t i = 0; i < node_edit_.size(); ++i) {
-    if (node_edit_[i] && !scene_.nodes[i].loaded)
+    if (node_edit_[i] && !scene_.nodes[i].loaded && !poses[i])
       warn("/nodes/" + pointer_token(m_.nodes[i].name) + ": " + node_label(m_, i) +
            " is not part of the loaded glTF scene; the edit changes nothing");
     // glTF 2.0 places a skinned mesh by its skin's joints, not by the node that holds it

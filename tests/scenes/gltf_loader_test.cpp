@@ -549,6 +549,19 @@ TEST(GltfLoader, SkinnedMeshesArePosedByTheirJoints) {
   g.doc["nodes"][0].erase("scale");
   for (const Scene* sc : {&no_ibm, &body_mirrored, &skeleton_mirrored})
     EXPECT_NEAR(face_normal(sc->meshes[0], 0).z, 1.0, 1e-9);  // (triangle 1 is degenerate in this pose)
+  // A skeleton outside the loaded scene still poses the skin: an edit of its root moves the mesh, without the
+  // warning that the edit changes nothing (it said so, and moved the mesh)
+  const json scene_nodes = g.doc["scenes"][0]["nodes"];
+  g.doc["scenes"][0]["nodes"] = {2};
+  spadgen::SceneEdits lift;
+  spadgen::NodeEdit root_edit;
+  root_edit.name = "root";
+  root_edit.translation_m = {0.0, 0.0, 1.0};
+  lift.nodes.push_back(root_edit);
+  const Scene lifted = load_gltf(g.write(dir.path(), "skin_outside"), "", lift);
+  EXPECT_TRUE(lifted.warnings.empty()) << testing::PrintToString(lifted.warnings);
+  expect_world(lifted.meshes[0], 0, {0, 0, 1});
+  g.doc["scenes"][0]["nodes"] = scene_nodes;
   // Weights that do not sum to 1 are normalised, and said (the mesh was scaled towards the origin); a vertex
   // whose weights are all 0 is refused (it stood at the origin, and was "no JOINTS_0 and WEIGHTS_0" when all
   // were); a negative weight is refused.
