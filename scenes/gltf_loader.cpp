@@ -1573,28 +1573,46 @@ void Loader::check_volumes() {
     std::string mats;
     for (const std::string& m : materials) mats += (mats.empty() ? "" : ", ") + m;
     const std::string who = node_label(m_, static_cast<size_t>(node)) + " (" + mats + ": transmission and a volume thickness)";
+    // One warning per problem, over the node's connected pieces (one per piece repeated the same text, which
+    // the warnings' de-duplication merged: six open pieces of 128 edges were told as two of 32).
+    size_t n_pieces = 0, open_pieces = 0, open_edges = 0, flipped_pieces = 0, flipped_edges = 0, flat = 0, inward = 0;
+    double inward_v = 0.0;
     for (const auto& [r, pc] : pieces) {
       if (!pc.volume) continue;
+      ++n_pieces;
       const double d = glm::length(pc.hi - pc.lo);
       if (pc.open > 0) {
-        warn(who + ": its triangles do not enclose a solid (" + std::to_string(pc.open) + (pc.open == 1 ? " edge is" : " edges are") +
-             " not shared by exactly two faces): a volume's mesh is the boundary of its medium, and a ray entering it "
-             "through an open surface travels in it until it meets another back face, the surfaces behind included; close "
-             "the mesh (a plate as a box of its thickness), or set thicknessFactor 0 for a thin sheet");
+        ++open_pieces, open_edges += pc.open;
       } else if (pc.flipped > 0) {
-        warn(who + ": its faces are not consistently oriented (" + std::to_string(pc.flipped) + (pc.flipped == 1 ? " edge" : " edges") +
-             " between faces of opposite windings): where a face points in, a ray changes medium the wrong way; recalculate "
-             "its normals outside (in Blender: Mesh > Normals > Recalculate Outside)");
+        ++flipped_pieces, flipped_edges += pc.flipped;
       } else if (std::abs(pc.six_v) / 6.0 <= 1e-9 * d * d * d) {
-        // closed and consistent: the enclosed volume's sign says whether the faces point out (divergence theorem)
-        warn(who + ": its triangles enclose no volume (a sheet with faces on both sides?): a volume's mesh is the boundary of "
-             "its medium; make it a solid (a plate as a box of its thickness), or set thicknessFactor 0 for a thin sheet");
+        ++flat;  // closed and consistent: the enclosed volume's sign says whether the faces point out (divergence theorem)
       } else if (pc.six_v < 0.0) {
-        warn(who + ": its faces point inward (the solid's enclosed volume is negative, " + volume_text(pc.six_v / 6.0) +
-             "): the medium is taken as outside the mesh and air inside; reverse its triangles' winding (in Blender: "
-             "Mesh > Normals > Flip, or Recalculate Outside)");
+        ++inward, inward_v += pc.six_v / 6.0;
       }
     }
+    const auto of = [n_pieces](size_t k) {
+      return n_pieces == 1 ? std::string() : std::to_string(k) + " of its " + std::to_string(n_pieces) + " connected pieces: ";
+    };
+    if (open_pieces > 0)
+      warn(who + ": its triangles do not enclose a solid (" + of(open_pieces) + std::to_string(open_edges) +
+           (open_edges == 1 ? " edge is" : " edges are") +
+           " not shared by exactly two faces): a volume's mesh is the boundary of its medium, and a ray entering it "
+           "through an open surface travels in it until it meets another back face, the surfaces behind included; close "
+           "the mesh (a plate as a box of its thickness), or set thicknessFactor 0 for a thin sheet");
+    if (flipped_pieces > 0)
+      warn(who + ": its faces are not consistently oriented (" + of(flipped_pieces) + std::to_string(flipped_edges) +
+           (flipped_edges == 1 ? " edge" : " edges") +
+           " between faces of opposite windings): where a face points in, a ray changes medium the wrong way; recalculate "
+           "its normals outside (in Blender: Mesh > Normals > Recalculate Outside)");
+    if (flat > 0)
+      warn(who + ": its triangles enclose no volume (" + (n_pieces == 1 ? std::string("a sheet") : of(flat) + "sheets") +
+           " with faces on both sides?): a volume's mesh is the boundary of its medium; make it a solid (a plate as a box "
+           "of its thickness), or set thicknessFactor 0 for a thin sheet");
+    if (inward > 0)
+      warn(who + ": its faces point inward (" + of(inward) + "the enclosed volume is negative, " + volume_text(inward_v) +
+           "): the medium is taken as outside the mesh and air inside; reverse its triangles' winding (in Blender: "
+           "Mesh > Normals > Flip, or Recalculate Outside)");
   }
 }
 

@@ -109,6 +109,8 @@ TEST(GltfLoader, AVolumeWhoseMeshIsOpenOrInsideOutIsWarned) {
   // a second box 3 m away, its corners 8 .. 15
   std::vector<uint16_t> second = flip(box);
   for (uint16_t& i : second) i = static_cast<uint16_t>(i + 8);
+  std::vector<uint16_t> top_far(box.begin() + 6, box.begin() + 12);
+  for (uint16_t& i : top_far) i = static_cast<uint16_t>(i + 8);
   struct Case {
     const char* name;
     std::vector<uint16_t> first, second;  // two primitives (second empty: one)
@@ -122,13 +124,16 @@ TEST(GltfLoader, AVolumeWhoseMeshIsOpenOrInsideOutIsWarned) {
       {"split_farther", no_plus_x, plus_x, 0.002, 70047.0, ""},
       {"open", top, {}, 0.002, 0.0, "its triangles do not enclose a solid (4 edges are not shared by exactly two faces)"},
       {"thin", top, {}, 0.0, 0.0, ""},
-      {"inward", flip(box), {}, 0.002, 0.0, "its faces point inward (the solid's enclosed volume is negative, -1.9e+05 cm^3)"},
+      {"inward", flip(box), {}, 0.002, 0.0, "its faces point inward (the enclosed volume is negative, -1.9e+05 cm^3)"},
       // both sides of a sheet: triangulated alike, its diagonal has four faces; otherwise it encloses nothing
       {"two_sided", cat(top, flip(top)), {}, 0.002, 0.0, "its triangles do not enclose a solid (1 edge is not shared"},
       {"two_sided_other_diagonal", cat(top, flip({4, 5, 7, 5, 6, 7})), {}, 0.002, 0.0,
        "its triangles enclose no volume (a sheet with faces on both sides?)"},
       {"one_flipped", cat(cat(bottom, flip(top)), sides), {}, 0.002, 0.0, "its faces are not consistently oriented (4 edges between"},
-      {"good_and_inverted", cat(box, second), {}, 0.002, 0.0, "its faces point inward"},
+      {"good_and_inverted", cat(box, second), {}, 0.002, 0.0, "its faces point inward (1 of its 2 connected pieces: the enclosed"},
+      // two open sheets: one warning counting both (one per piece said the same words, merged as one of 4 edges)
+      {"two_open", cat(top, top_far), {}, 0.002, 0.0,
+       "its triangles do not enclose a solid (2 of its 2 connected pieces: 8 edges are not shared by exactly two faces)"},
   };
   std::vector<float> corners2 = corners;
   for (size_t i = 0; i < corners.size(); i += 3) corners2.insert(corners2.end(), {corners[i] + 3.0f, corners[i + 1], corners[i + 2]});
