@@ -32,6 +32,26 @@ TEST_F(App, SenseWritesWhatTheRunWroteBitForBit) {
   EXPECT_EQ(meta["sense"]["from"], (dir_ / "run").string());
 }
 
+// Light saved before the ambient light's standard error (no light/ambient_se) is sensed as before: the
+// ambient image without its standard_error, metadata.json's accuracy without the ambient summary.
+TEST_F(App, SenseReadsLightSavedBeforeTheAmbientStandardError) {
+  ASSERT_EQ(sh("run " + kLit + " -o " + (dir_ / "run").string()).code, 0);
+  nlohmann::ordered_json meta = nlohmann::ordered_json::parse(slurp(dir_ / "run/metadata.json"));
+  fs::remove(dir_ / "run/light/ambient_se.npy");
+  auto& files = meta["files"];
+  files.erase(std::find(files.begin(), files.end(), "light/ambient_se.npy"));
+  meta["file_bytes"].erase("light/ambient_se.npy");
+  std::ofstream(dir_ / "run/metadata.json") << meta.dump(2);
+  const Result r = sh("sense " + (dir_ / "run").string() + " -q --set seeds.chip=5 -o " + (dir_ / "sense").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  const auto ambient = spadgen::writers::read_exr((dir_ / "sense/ambient.exr").string());
+  EXPECT_TRUE(ambient.channels.count("photons_per_second"));
+  EXPECT_FALSE(ambient.channels.count("standard_error"));
+  const auto sensed = nlohmann::json::parse(slurp(dir_ / "sense/metadata.json"));
+  EXPECT_TRUE(sensed["accuracy"].contains("laser_relative_standard_error"));
+  EXPECT_FALSE(sensed["accuracy"].contains("ambient_relative_standard_error"));
+}
+
 // sense reads the saved light and the sensor's tables, not the scene's geometry: a run whose glTF (and its
 // buffers) are gone since, as in an archive of runs, is re-sampled as before (it was refused: "the glTF file
 // ... does not exist").

@@ -105,6 +105,30 @@ def test_standard_error_and_the_counts_bound(sweep):
     assert (bound <= n).all()
 
 
+def test_ambient_standard_error_and_the_counts_bound(intensity_run):
+    """ambient.exr's standard error against metadata.json's summary, and the counts bound taking the larger of
+    the laser's and the ambient light's relative errors (the test chart: ambient light)."""
+    run = spadgen.open_run(intensity_run)
+    ase = np.asarray(run.ambient_standard_error, np.float64)
+    amb = np.asarray(run.ambient["photons_per_second"], np.float64)
+    assert ase.shape == amb.shape and (ase >= 0).all() and ase.max() > 0
+    lit = amb > 0
+    rel = np.sort(ase[lit] / amb[lit])
+    acc = run.metadata["accuracy"]["ambient_relative_standard_error"]
+    assert acc["pixels_with_ambient"] == lit.sum()
+    assert acc["median"] == pytest.approx(rel[len(rel) // 2], rel=1e-5)
+    assert acc["max"] == pytest.approx(rel[-1], rel=1e-5)
+    se = np.asarray(run.laser_standard_error, np.float64)
+    laser = np.asarray(run.laser["photons_per_pulse"], np.float64)
+    bound = run.expected_counts_error_bound()
+    lam = np.asarray(run.detection_rate, np.float64)
+    k, y, x = np.unravel_index(np.argmax(bound), bound.shape)
+    rel_laser = se[y, x] / laser[y, x] if laser[y, x] > 0 else 0.0
+    rel_ambient = ase[y, x] / amb[y, x]
+    by_hand = run.frames_per_k * np.exp(-lam[k, y, x]) * lam[k, y, x] * max(rel_laser, rel_ambient)
+    assert bound[k, y, x] == pytest.approx(by_hand, rel=1e-5) and by_hand > 0
+
+
 def test_laser_image_equals_metadata_totals_and_transients(sweep):
     laser = sweep.laser
     totals = sweep.metadata["laser_photons_per_pulse"]

@@ -260,6 +260,21 @@ TEST(Accuracy, TheTargetHoldsTheAmbientLightInTheIntensityMode) {
   c.target_ambient = false;
   const TransientTile b = Renderer(s, c).transient(rect, rect, TimeAxis{});
   EXPECT_EQ(*std::max_element(b.samples.begin(), b.samples.end()), 32);
+  // The intensity mode with laser_on: both lights held to the target (the more paths of the two)
+  c.laser.average_power_W = 2e-3;
+  c.target_laser = c.target_ambient = true;
+  const TransientTile both = Renderer(s, c).transient(rect, rect, TimeAxis{});
+  std::vector<double> rel_laser, rel_ambient;
+  for (size_t i = 0; i < 256; ++i) {
+    if (both.laser_total[i] > 0.0) rel_laser.push_back(both.laser_se[i] / both.laser_total[i]);
+    if (both.ambient_rate[i] > 0.0f) rel_ambient.push_back(both.ambient_se[i] / both.ambient_rate[i]);
+  }
+  ASSERT_GT(rel_laser.size(), 200u);
+  ASSERT_GT(rel_ambient.size(), 200u);
+  std::sort(rel_laser.begin(), rel_laser.end());
+  std::sort(rel_ambient.begin(), rel_ambient.end());
+  EXPECT_LT(rel_laser[rel_laser.size() / 2], 1.25 * 0.01);
+  EXPECT_LT(rel_ambient[rel_ambient.size() / 2], 1.25 * 0.01);
   // render_stage sets the flags from the acquisition
   RunConfig run;
   run.acquisition.mode = AcquisitionMode::Intensity;
