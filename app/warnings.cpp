@@ -157,7 +157,7 @@ std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img
   if (r.ground_truth_layers_cut > 0)
     w.push_back("render.max_layers (" + std::to_string(c.render.max_layers) + ") cuts the ground truth of " +
                 std::to_string(r.ground_truth_layers_cut) + " pixels of the " + image + ": their rays pass " +
-                std::to_string(c.render.max_layers) + " transmissive surfaces and meet more beyond, whose objects get no "
+                std::to_string(c.render.max_layers) + " transmissive surfaces and meet beyond them an object that gets no "
                 "slot in ground_truth.exr and labels.exr (their direct light counts in direct_other_laser, and spadgen "
                 "evaluate scores a detection of them as false): raise render.max_layers");
   // The laser matters to a gate sweep, to transients, and to the intensity mode with laser_on; its timing

@@ -561,7 +561,7 @@ TEST_F(App, AGroundTruthCutByMaxLayersIsWarned) {
   const std::string run = "run " + kScenes + "multi_object.json -q --set camera.crop=[504,242,8,8] "
                           "--set render.samples_per_pixel=1 --set outputs.previews=false -o " + (dir_ / "out").string();
   const std::string warning = "render.max_layers (2) cuts the ground truth of 64 pixels of the 8 x 8 image: their rays pass "
-                              "2 transmissive surfaces and meet more beyond";
+                              "2 transmissive surfaces and meet beyond them an object that gets no slot";
   const Result cut = sh(run + " --set render.max_layers=2");
   ASSERT_EQ(cut.code, 0) << cut.output;
   EXPECT_THAT(cut.output, HasSubstr("spadgen: warning: " + warning));
