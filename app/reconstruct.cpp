@@ -164,9 +164,12 @@ void check_writable(const std::string& file, const RunFolder& run, const std::st
     throw Error(file + ": is the run's own " + f + " (" + run_dir + "/metadata.json lists it), which writing the output "
                 "would replace; expected a new file or an earlier output (-o)");
   // Nor a file of another run, or of a dataset (-o OTHER/counts.npy, -o DATASET/index.jsonl replaced them,
-  // exit 0): the nearest folder above the target holding a spadgen run's metadata.json decides by what it
-  // lists (a dataset's sample is a run: a new file there is fine, as reconstruct's default output is),
-  // else one holding a dataset's dataset.json by its own entries (evaluation/ aside, evaluate's).
+  // exit 0), nor any other file in a run folder (it holds what spadgen writes there only: a later run into
+  // it, or a dataset's check of its sample, refused it for a foreign file): the nearest folder above the
+  // target holding a spadgen run's metadata.json takes reconstruct's own outputs at its top only
+  // (is_derived_output; its evaluation/ is evaluate's); else one holding a dataset's dataset.json refuses
+  // its own entries (samples, index, card, evaluation/ ...); a folder holding sense --repeats'
+  // realisations (repeat_000/) holds those only.
   for (fs::path folder = target.parent_path(); !folder.empty(); folder = folder.parent_path()) {
     if (fs::is_regular_file(folder / "metadata.json", ec)) {
       nlohmann::json meta;
@@ -179,15 +182,23 @@ void check_writable(const std::string& file, const RunFolder& run, const std::st
         if (const std::string f = listed_entry(target, folder, meta); !f.empty())
           throw Error(file + ": is the run " + folder.string() + "'s own " + f + " (its metadata.json lists it), which "
                       "writing the output would replace; expected a new file or an earlier output (-o)");
-        break;
+        const fs::path rel = target.lexically_relative(folder);
+        if (std::distance(rel.begin(), rel.end()) == 1 && rel != "evaluation" && is_derived_output(rel.string())) break;
+        throw Error(file + ": lies in the run folder " + folder.string() + ", which holds only what spadgen writes there (a "
+                    "later run into it, or a dataset's check of it, would refuse the folder for a foreign file); expected a "
+                    "file outside run folders, or one of reconstruct's own names at the run's top (detections_edges.exr, "
+                    "detections_paper.exr, hdr.exr, or their _noise_free.exr) (-o)");
       }
     }
     if (fs::is_regular_file(folder / "dataset.json", ec)) {
       const fs::path rel = target.lexically_relative(folder);
-      if (!rel.empty() && rel.begin()->string() != "evaluation" && datasets::own_entries().count(rel.begin()->string()))
+      if (!rel.empty() && datasets::own_entries().count(rel.begin()->string()))
         throw Error(file + ": is the dataset " + folder.string() + "'s own " + rel.string() + ", which writing the output "
                     "would replace or add to; expected a new file or an earlier output (-o)");
     }
+    if (fs::is_regular_file(folder / "repeat_000" / "metadata.json", ec))
+      throw Error(file + ": lies in the folder " + folder.string() + " of sense --repeats' realisations, which holds those only; "
+                  "expected a file outside it (-o)");
     if (folder == folder.root_path()) break;
   }
   if (::access(dir.c_str(), W_OK) != 0)

@@ -283,22 +283,18 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   std::vector<std::string> overrides = options.overrides;
   if (options.chip_seed) overrides.push_back("seeds.chip=" + text(*options.chip_seed));
   if (options.noise_seed) overrides.push_back("seeds.noise=" + text(*options.noise_seed));
-  // What the run's metadata.json holds is read from there, not from the scene file it names: a mistake the
-  // overrides do not mend, that the run's resolved scene makes alone, is named there (a bad value was
-  // reported against the scene file, which held a good one).
-  const scenes::ResolvedRun first = [&] {
+  // The run's scene as it resolved, read from its metadata.json (and parsed as the run's below, for its
+  // warnings and light): a mistake in it is named there, not against the scene file it names, which may
+  // hold a good value. The tables it names must be where the run read them (README), --set or not.
+  const scenes::ResolvedRun source = [&] {
     try {
-      return scenes::parse_scene_text(scene_text, scene_file, overrides, false);
-    } catch (const Error&) {
-      try {
-        (void)scenes::parse_scene_text(scene_text, scene_file, {}, false);
-      } catch (const Error& e) {
-        throw Error((src / "metadata.json").string() + ": resolved_scene (the run's scene file as it resolved; sense reads "
-                    "it from here): " + e.what());
-      }
-      throw;
+      return scenes::parse_scene_text(scene_text, scene_file, {}, false);
+    } catch (const Error& e) {
+      throw Error((src / "metadata.json").string() + ": resolved_scene (the run's scene file as it resolved; sense reads it "
+                  "from here): " + e.what());
     }
   }();
+  const scenes::ResolvedRun first = scenes::parse_scene_text(scene_text, scene_file, overrides, false);
   // One resolved scene per realisation: noise seeds S, S + 1, ... (S itself when there is one). The scene
   // is resolved once with seeds.noise = S; realisation r is that with the seed S + r in its configuration
   // and its resolved scene file, as `--set seeds.noise=S+r` resolves it (tested: a realisation's metadata
@@ -323,12 +319,12 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     const uint64_t last = noise0 + uint64_t(options.repeats - 1);
     if (last > kMaxSeed) {
       const json& run_seeds = meta.at("resolved_scene").at("seeds");
-      const std::string source = options.noise_seed ? "--noise-seed"
+      const std::string given_by = options.noise_seed ? "--noise-seed"
                                  : noise_by_set   ? "--set seeds.noise"
                                  : run_seeds.contains("noise") && !run_seeds.at("noise").is_null() ? "the run's seeds.noise"
                                                                                                   : "the run's seed";
       throw Error("--repeats " + std::to_string(options.repeats) + ": the realisations' noise seeds would run from " +
-                  text(noise0) + " (" + source + ") to " + text(last) + "; expected seeds of at most " + text(kMaxSeed) +
+                  text(noise0) + " (" + given_by + ") to " + text(last) + "; expected seeds of at most " + text(kMaxSeed) +
                   ": a smaller first seed or fewer repeats");
     }
     // The last seed resolved in full, as `--set seeds.noise` resolves it.
@@ -340,7 +336,6 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   // What the run warned about its glTF and its light: the run's warnings less the scene file's and less
   // its sensor's (this call's sensor warns below).
   std::vector<std::string> scene_warnings;
-  const scenes::ResolvedRun source = scenes::parse_scene_text(scene_text, scene_file, {}, false);
   {
     const std::vector<std::string>& file_warnings = source.warnings;
     for (const auto& w : meta.at("warnings"))

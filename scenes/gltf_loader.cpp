@@ -191,14 +191,16 @@ double read_component(const unsigned char* p, int component_type, bool normalize
   }
 }
 
-// The format of a texture extension's image (KHR_texture_basisu's KTX2, EXT_texture_webp's WebP), by its
-// bytes or its mimeType, or nullptr.
-const char* extension_image_format(const unsigned char* bytes, size_t size, const std::string& mime) {
+// The mimeType of a texture extension's image (KHR_texture_basisu's KTX2, EXT_texture_webp's WebP), by its
+// bytes, or by its mimeType when the bytes are neither PNG nor JPEG (the bytes decide: a PNG labelled
+// image/webp is a PNG); "" for any other image.
+std::string extension_image_type(const unsigned char* bytes, size_t size, const std::string& mime) {
   static constexpr unsigned char kKtx2[8] = {0xab, 'K', 'T', 'X', ' ', '2', '0', 0xbb};
-  if ((size >= 8 && std::memcmp(bytes, kKtx2, 8) == 0) || mime == "image/ktx2") return "KTX2 (KHR_texture_basisu)";
-  if ((size >= 12 && std::memcmp(bytes, "RIFF", 4) == 0 && std::memcmp(bytes + 8, "WEBP", 4) == 0) || mime == "image/webp")
-    return "WebP (EXT_texture_webp)";
-  return nullptr;
+  static constexpr unsigned char kPng[4] = {0x89, 'P', 'N', 'G'}, kJpeg[3] = {0xff, 0xd8, 0xff};
+  if (size >= 8 && std::memcmp(bytes, kKtx2, 8) == 0) return "image/ktx2";
+  if (size >= 12 && std::memcmp(bytes, "RIFF", 4) == 0 && std::memcmp(bytes + 8, "WEBP", 4) == 0) return "image/webp";
+  if ((size >= 4 && std::memcmp(bytes, kPng, 4) == 0) || (size >= 3 && std::memcmp(bytes, kJpeg, 3) == 0)) return "";
+  return mime == "image/ktx2" || mime == "image/webp" ? mime : "";
 }
 
 // image/bufferView bounds are not checked by tinygltf 2.7 before it hands the bytes to the image
@@ -227,12 +229,13 @@ bool load_image_checked(tinygltf::Image* image, const int image_index, std::stri
   // one (both found by fuzzing it).
   (void)req_width, (void)req_height;
   const std::string who = label("image", static_cast<size_t>(image_index), image->name);
-  // A texture extension's image is left undecoded: a texture reads its PNG or JPEG source (the extension's
-  // fallback) where the file gives one, else its factor (Loader::texture). It failed the whole file.
-  if (const char* format = extension_image_format(bytes, size > 0 ? static_cast<size_t>(size) : 0, image->mimeType)) {
-    if (warn)
-      *warn += who + ": " + format + ", which spadgen does not decode; a texture uses its PNG or JPEG source where the file "
-               "gives one\n";
+  // A texture extension's image is left undecoded (as_is marks it, mimeType says which): textures read
+  // their PNG or JPEG source, the extensions' fallback; one whose source it is, is refused (Loader::texture).
+  // It failed the whole file, also when every texture had its fallback.
+  if (const std::string type = extension_image_type(bytes, size > 0 ? static_cast<size_t>(size) : 0, image->mimeType);
+      !type.empty()) {
+    image->as_is = true;
+    image->mimeType = type;
     return true;
   }
   DecodedImage decoded;
@@ -926,6 +929,10 @@ int Loader::texture(int gltf_texture, const std::string& user) {
     tinygltf::Image& img = images_[static_cast<size_t>(t.source)];
     std::shared_ptr<const std::vector<uint8_t>>& texels = texels_of_image_[t.source];
     const std::string iname = label("image", static_cast<size_t>(t.source), img.name.empty() ? img.uri : img.name);
+    if (img.as_is)  // (load_image_checked)
+      fail(tname, "its source, " + iname + ", is " + (img.mimeType == "image/ktx2" ? "KTX2 (KHR_texture_basisu)" : "WebP (EXT_texture_webp)") +
+                      ", which spadgen does not decode; a texture's source is PNG or JPEG (glTF 2.0: the extension's "
+                      "fallback), used by " + user);
     // Every decoded image is RGBA8 (load_image_checked, image_decode.h, which also bounds its size); an
     // image file that could not be read leaves none.
     const size_t w = img.width > 0 ? static_cast<size_t>(img.width) : 0;

@@ -600,6 +600,24 @@ TEST_F(Hardening, ReconstructReplacesOnlyAFileAndAFifoIsNotReadAsMetadata) {
   const Outcome listed = spadgen("reconstruct -q " + run.string() + " -o " + (dataset / "samples/000000/counts.npy").string());
   expect_exit(listed, 1, "a sample's own file");
   EXPECT_THAT(listed.err, HasSubstr("'s own counts.npy"));
+  // any other file in a run folder is refused: a later run into it, or the dataset's check of its sample,
+  // refused the folder for it; nor evaluate's outputs, in a run or a dataset; nor a realisation set's folder
+  fs::create_directories(dataset / "evaluation");
+  fs::create_directories(dir_ / "set/repeat_000");
+  std::ofstream(dir_ / "set/repeat_000/metadata.json") << "{}";
+  for (const auto& [target, says] : std::vector<std::pair<fs::path, std::string>>{
+           {dataset / "samples/000000/mine.exr", ": lies in the run folder " + (dataset / "samples/000000").string()},
+           {run / "mine.exr", ": lies in the run folder " + run.string()},
+           {run / "evaluation/metrics.json", ": lies in the run folder " + run.string()},
+           {dataset / "evaluation/metrics.json", ": is the dataset " + dataset.string() + "'s own evaluation/metrics.json"},
+           {dir_ / "set/mine.exr", ": lies in the folder " + (dir_ / "set").string() + " of sense --repeats' realisations"}}) {
+    if (!fs::exists(target.parent_path())) fs::create_directories(target.parent_path());
+    const Outcome o = spadgen("reconstruct -q " + run.string() + " -o " + target.string());
+    expect_exit(o, 1, target.string());
+    EXPECT_THAT(o.err, HasSubstr(says)) << target;
+    EXPECT_FALSE(fs::exists(target)) << target;
+  }
+  fs::remove_all(run / "evaluation");
   // a run replacing the folder holds its lock: reconstruct and evaluate wait for no one and refuse (a
   // reconstruct during the swap wrote the earlier run's detections beside the new run's counts)
   {

@@ -1381,9 +1381,9 @@ TEST_F(BrokenGltf, ImageBufferViewPastItsBuffer) {
 }
 
 // A texture extension's image (KHR_texture_basisu's KTX2, EXT_texture_webp's WebP) beside a PNG fallback:
-// the file loads, the texture reads its PNG source, and the image is warned about (the whole file was
-// refused: "image 1: neither PNG nor JPEG (its first bytes are 0xab 0x4b 0x54 0x58)"); a texture whose only
-// image is one uses its factor.
+// the file loads and the textures read their PNG source (the whole file was refused: "image 1: neither PNG
+// nor JPEG (its first bytes are 0xab 0x4b 0x54 0x58)"); a PNG labelled image/webp is a PNG; a texture whose
+// source is a KTX2 image is refused, named.
 TEST(GltfLoader, ATextureExtensionsImageIsLeftForItsPngFallback) {
   TempDir dir;
   Gltf g;
@@ -1391,27 +1391,30 @@ TEST(GltfLoader, ATextureExtensionsImageIsLeftForItsPngFallback) {
   const std::vector<uint8_t> webp = {'R', 'I', 'F', 'F', 4, 0, 0, 0, 'W', 'E', 'B', 'P'};
   g.doc["images"] = {{{"bufferView", g.view_of(unbase64(kPng2x2))}, {"mimeType", "image/png"}},
                      {{"bufferView", g.view_of(ktx2)}, {"mimeType", "image/ktx2"}},
-                     {{"bufferView", g.view_of(webp)}, {"mimeType", "image/webp"}}};
+                     {{"bufferView", g.view_of(webp)}, {"mimeType", "image/webp"}},
+                     {{"bufferView", g.view_of(unbase64(kPng2x2))}, {"mimeType", "image/webp"}}};
   g.doc["textures"] = {{{"source", 0}, {"extensions", {{"KHR_texture_basisu", {{"source", 1}}}}}},
-                       {{"source", 0}, {"extensions", {{"EXT_texture_webp", {{"source", 2}}}}}},
-                       {{"source", 1}}};
+                       {{"source", 3}, {"extensions", {{"EXT_texture_webp", {{"source", 2}}}}}}};
   g.doc["extensionsUsed"] = {"KHR_texture_basisu", "EXT_texture_webp"};
   g.doc["materials"] = {{{"name", "A"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}},
-                        {{"name", "B"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 1}}}}}},
-                        {{"name", "C"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 2}}}}}}};
-  for (int m = 0; m < 3; ++m) {
+                        {{"name", "B"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 1}}}}}}};
+  for (int m = 0; m < 2; ++m) {
     const int mesh = g.triangle_mesh();
     g.doc["meshes"][static_cast<size_t>(mesh)]["primitives"][0]["material"] = m;
     g.node({{"mesh", mesh}});
   }
   const Scene s = load_gltf(g.write(dir.path(), "basisu", Gltf::Form::Glb));
-  ASSERT_EQ(s.textures.size(), 2u);  // A's and B's, both of the PNG's texels
-  EXPECT_EQ(s.textures[0].texels, s.textures[1].texels);
+  ASSERT_EQ(s.textures.size(), 2u);  // A's PNG and B's PNG labelled image/webp, both decoded
   expect_pixel(s.textures[0], 0, 0, {255, 0, 0, 255});
-  const std::string w = testing::PrintToString(s.warnings);
-  EXPECT_THAT(w, HasSubstr("image 1: KTX2 (KHR_texture_basisu), which spadgen does not decode; a texture uses its PNG or JPEG source"));
-  EXPECT_THAT(w, HasSubstr("image 2: WebP (EXT_texture_webp), which spadgen does not decode"));
-  EXPECT_THAT(w, HasSubstr("could not be read or decoded"));  // C's texture: its only image is the KTX2
+  expect_pixel(s.textures[1], 0, 0, {255, 0, 0, 255});
+  for (const std::string& w : s.warnings) EXPECT_THAT(w, Not(HasSubstr("image"))) << w;
+  g.doc["textures"][0]["source"] = 1;  // A's texture without its fallback: the KTX2 itself
+  try {
+    (void)load_gltf(g.write(dir.path(), "ktx2_source", Gltf::Form::Glb));
+    FAIL() << "loaded";
+  } catch (const spadgen::Error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("texture 0: its source, image 1, is KTX2 (KHR_texture_basisu), which spadgen does not decode"));
+  }
 }
 
 // glTF 2.0 images are PNG or JPEG; stb_image would also decode BMP, GIF, TGA, ... (and its decoders of
