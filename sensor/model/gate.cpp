@@ -279,6 +279,13 @@ Sampled build_irf(const GateConfig& gate, const LaserConfig& laser, double dx) {
   for (size_t i = 0; i < t.y.size(); ++i)
     if (!(t.y[i] >= 0.0))
       throw Error(key + ": '" + laser.pulse_shape_csv + "' row " + std::to_string(i + 1) + ": power must be >= 0");
+  // A laser pulse lasts at most a microsecond: a table spanning 1e300 ps overflowed its centroid below
+  // (an infinite centre, then a signed overflow: undefined behaviour, found by the sanitizers).
+  if (const double span = t.x.back() - t.x.front(); !(span <= 1e6)) {
+    std::ostringstream o;
+    o << span;
+    throw Error(key + ": '" + laser.pulse_shape_csv + "': the pulse spans " + o.str() + " ps; expected at most 1e+06 ps (1 us)");
+  }
   for (double& v : t.x) v *= kPs;
   // Centroid of the piecewise-linear table, so that the pulse's mean arrival is the emission instant the
   // renderer uses (as for the Gaussian pulse).
