@@ -61,7 +61,8 @@ void check_derived(const RunConfig& c, const sensor::SensorModel& sensor, const 
   const double span = static_cast<double>(axis.bins) * axis.bin_width_s;
   if (axis.bins < 0 || axis.bins > scenes::kMaxTimeBins || !std::isfinite(span))
     throw Error(where(bins_keys) + "the time window that " + window_keys(c) + " set, " +
-                (std::isfinite(axis.start_s) ? "from " + g(axis.start_s / kNs) + " ns on, " : "without a finite start, ") + "needs " + (axis.bins < 0 ? std::string("more than 2^63") : g(double(axis.bins))) + " bins of " +
+                (std::isfinite(axis.start_s) ? "from " + g(axis.start_s / kNs) + " ns on, " : "without a finite start, ") +
+                "needs " + (axis.bins < 0 ? std::string("more than 2^63") : g(double(axis.bins))) + " bins of " +
                 g(axis.bin_width_s / kPs) + " ps; expected at most " + std::to_string(scenes::kMaxTimeBins) +
                 " bins: wider bins (render.time_bin_ps) or a shorter window");
   if (axis.bins > 0 && axis.period_s > 0 && span / axis.period_s > kMaxWindowPeriods)

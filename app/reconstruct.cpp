@@ -157,31 +157,35 @@ void check_writable(const std::string& file, const RunFolder& run, const std::st
   if (!fs::is_directory(dir)) throw Error(file + ": its folder " + dir.string() + " does not exist");
   // Nor is a file of the run itself (-o RUN/counts.npy replaced the counts with an EXR, and every later
   // reconstruct or evaluate of the run failed): metadata.json and what it lists, or a file inside a listed
-  // folder (a Zarr store, light/).
-  std::error_code ec;
-  const fs::path target = fs::weakly_canonical(fs::absolute(fs::path(file)), ec);
-  if (const std::string f = listed_entry(target, fs::path(run_dir), run.metadata()); !f.empty())
-    throw Error(file + ": is the run's own " + f + " (" + run_dir + "/metadata.json lists it), which writing the output "
-                "would replace; expected a new file or an earlier output (-o)");
-  // Nor a file of another run, or of a dataset (-o OTHER/counts.npy, -o DATASET/index.jsonl replaced them,
-  // exit 0), nor any other file in a run folder (it holds what spadgen writes there only: a later run into
+  // folder (a Zarr store, light/); nor a file of another run, or of a dataset (-o OTHER/counts.npy,
+  // -o DATASET/index.jsonl replaced them, exit 0), nor any other file in a run folder (it holds what spadgen writes there only: a later run into
   // it, or a dataset's check of its sample, refused it for a foreign file): the nearest folder above the
   // target holding a spadgen run's metadata.json takes reconstruct's own outputs at its top only
   // (is_derived_output; its evaluation/ is evaluate's); else one holding a dataset's dataset.json refuses
   // its own entries (samples, index, card, evaluation/ ...); a folder holding sense --repeats'
   // realisations (repeat_000/) holds those only.
+  // The run being read is known by its metadata already (and, in the messages, as "the run").
+  std::error_code ec;
+  const fs::path target = fs::weakly_canonical(fs::absolute(fs::path(file)), ec);
+  const fs::path own_run = fs::weakly_canonical(fs::absolute(fs::path(run_dir)), ec);
   for (fs::path folder = target.parent_path(); !folder.empty(); folder = folder.parent_path()) {
-    if (fs::is_regular_file(folder / "metadata.json", ec)) {
+    const bool the_run = folder == own_run;
+    if (the_run || fs::is_regular_file(folder / "metadata.json", ec)) {
       nlohmann::json meta;
-      try {  // (not a run's when it does not read as one)
-        const std::string m = (folder / "metadata.json").string();
-        meta = scenes::parse_json(scenes::read_file_bounded(m, 256u << 20, "metadata"), m);
-      } catch (const Error&) {
+      if (the_run) {
+        meta = run.metadata();
+      } else {
+        try {  // (not a run's when it does not read as one)
+          const std::string m = (folder / "metadata.json").string();
+          meta = scenes::parse_json(scenes::read_file_bounded(m, 256u << 20, "metadata"), m);
+        } catch (const Error&) {
+        }
       }
-      if (meta.is_object() && meta.contains("spadgen_version")) {
+      if (the_run || (meta.is_object() && meta.contains("spadgen_version"))) {
         if (const std::string f = listed_entry(target, folder, meta); !f.empty())
-          throw Error(file + ": is the run " + folder.string() + "'s own " + f + " (its metadata.json lists it), which "
-                      "writing the output would replace; expected a new file or an earlier output (-o)");
+          throw Error(file + (the_run ? ": is the run's own " + f + " (" + run_dir + "/metadata.json lists it)"
+                                      : ": is the run " + folder.string() + "'s own " + f + " (its metadata.json lists it)") +
+                      ", which writing the output would replace; expected a new file or an earlier output (-o)");
         const fs::path rel = target.lexically_relative(folder);
         if (std::distance(rel.begin(), rel.end()) == 1 && rel != "evaluation" && is_derived_output(rel.string())) break;
         throw Error(file + ": lies in the run folder " + folder.string() + ", which holds only what spadgen writes there (a "

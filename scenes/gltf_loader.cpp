@@ -196,10 +196,9 @@ double read_component(const unsigned char* p, int component_type, bool normalize
 // image/webp is a PNG); "" for any other image.
 std::string extension_image_type(const unsigned char* bytes, size_t size, const std::string& mime) {
   static constexpr unsigned char kKtx2[8] = {0xab, 'K', 'T', 'X', ' ', '2', '0', 0xbb};
-  static constexpr unsigned char kPng[4] = {0x89, 'P', 'N', 'G'}, kJpeg[3] = {0xff, 0xd8, 0xff};
   if (size >= 8 && std::memcmp(bytes, kKtx2, 8) == 0) return "image/ktx2";
   if (size >= 12 && std::memcmp(bytes, "RIFF", 4) == 0 && std::memcmp(bytes + 8, "WEBP", 4) == 0) return "image/webp";
-  if ((size >= 4 && std::memcmp(bytes, kPng, 4) == 0) || (size >= 3 && std::memcmp(bytes, kJpeg, 3) == 0)) return "";
+  if (is_png_or_jpeg(bytes, size)) return "";
   return mime == "image/ktx2" || mime == "image/webp" ? mime : "";
 }
 
@@ -1285,15 +1284,12 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
   }
   // A mirroring transform turns counter-clockwise triangles clockwise: swap to keep the front side. A skinned
   // mesh's transform is its skin's, per vertex (glTF ignores its node's): the sum of the triangle's three.
-  if (skinned.empty()) {
-    if (glm::determinant(glm::dmat3(world)) < 0)
-      for (size_t t = 0; t + 2 < out.indices.size(); t += 3) std::swap(out.indices[t + 1], out.indices[t + 2]);
-  } else {
-    for (size_t t = 0; t + 2 < out.indices.size(); t += 3) {
-      const uint32_t* v = &out.indices[t];
-      if (glm::determinant(glm::dmat3(skinned[v[0]]) + glm::dmat3(skinned[v[1]]) + glm::dmat3(skinned[v[2]])) < 0)
-        std::swap(out.indices[t + 1], out.indices[t + 2]);
-    }
+  const bool mirrored = glm::determinant(glm::dmat3(world)) < 0;
+  for (size_t t = 0; t + 2 < out.indices.size(); t += 3) {
+    const uint32_t* v = &out.indices[t];
+    if (skinned.empty() ? mirrored
+                        : glm::determinant(glm::dmat3(skinned[v[0]]) + glm::dmat3(skinned[v[1]]) + glm::dmat3(skinned[v[2]])) < 0)
+      std::swap(out.indices[t + 1], out.indices[t + 2]);
   }
   if (out.indices.empty()) {
     warn(who + ": has no triangles; skipped");

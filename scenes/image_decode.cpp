@@ -140,11 +140,18 @@ std::string decode_jpeg(const unsigned char* bytes, size_t size, DecodedImage* o
 
 }  // namespace
 
+namespace {
+constexpr unsigned char kPng[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'}, kJpeg[3] = {0xff, 0xd8, 0xff};
+bool is_png(const unsigned char* bytes, size_t size) { return size >= 8 && std::memcmp(bytes, kPng, 8) == 0; }
+bool is_jpeg(const unsigned char* bytes, size_t size) { return size >= 3 && std::memcmp(bytes, kJpeg, 3) == 0; }
+}  // namespace
+
+bool is_png_or_jpeg(const unsigned char* bytes, size_t size) { return is_png(bytes, size) || is_jpeg(bytes, size); }
+
 std::string decode_image(const unsigned char* bytes, size_t size, DecodedImage* out, std::string* warning) {
-  static constexpr unsigned char kPng[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'}, kJpeg[3] = {0xff, 0xd8, 0xff};
   warning->clear();
-  if (size >= 8 && std::memcmp(bytes, kPng, 8) == 0) return decode_png(bytes, size, out, warning);
-  if (size >= 3 && std::memcmp(bytes, kJpeg, 3) == 0) return decode_jpeg(bytes, size, out, warning);
+  if (is_png(bytes, size)) return decode_png(bytes, size, out, warning);
+  if (is_jpeg(bytes, size)) return decode_jpeg(bytes, size, out, warning);
   if (size == 0) return "neither PNG nor JPEG (it is empty); glTF 2.0 images are PNG (starting 0x89 'PNG') or JPEG (0xff 0xd8 0xff)";
   std::string first;
   char hex[8];

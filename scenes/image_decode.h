@@ -25,4 +25,7 @@ struct DecodedImage {
 // about data it could still decode (empty when none).
 std::string decode_image(const unsigned char* bytes, size_t size, DecodedImage* out, std::string* warning);
 
+// Whether the bytes start as a PNG or a JPEG does (the formats decode_image reads).
+bool is_png_or_jpeg(const unsigned char* bytes, size_t size);
+
 }  // namespace spadgen::scenes
