@@ -93,6 +93,13 @@ json model_components(const RunConfig& c, const scenes::Scene* scene, const json
     for (const json& e : from_run)
       if (std::find(kFromScene.begin(), kFromScene.end(), e.value("component", "")) != kFromScene.end()) out.push_back(e);
   }
+  const bool laser = laser_traced(c);
+  add("laser light", laser,
+      c.acquisition.mode == AcquisitionMode::GateSweep ? "a gate sweep images the laser's light"
+      : c.acquisition.intensity.laser_on              ? "acquisition.intensity.laser_on is true"
+      : laser ? std::string(c.outputs.transient ? "outputs.transient" : "outputs.light") + " is true: the laser's light is kept"
+              : "the intensity mode without acquisition.intensity.laser_on (and no outputs.transient or outputs.light): "
+                "the laser is not traced; no laser.exr, no laser channels in ground_truth.exr");
   add("indirect light", c.render.max_bounces > 1,
       "render.max_bounces = " + std::to_string(c.render.max_bounces) + (c.render.max_bounces > 1 ? "" : ": direct light only"));
   add("target error", c.render.target_relative_error.has_value(),
@@ -164,6 +171,7 @@ json run_json(const RunRecord& r) {
       json value = nullptr;
       std::string measured;
       if (name == "transmissive surfaces") value = of_rays(rays.refracted), measured = "its refracted laser connections' share of the light transport's rays";
+      else if (name == "laser light") value = of_rays(rays.laser), measured = "its shadow rays' share of the light transport's rays";
       else if (name == "ambient light") value = of_rays(rays.ambient), measured = "its shadow rays' share of the light transport's rays (the environment costs none)";
       else if (name == "guided connections") value = of_rays(rays.guided), measured = "its rays' share of the light transport's rays";
       else if (name == "indirect light") value = of_rays(rays.indirect), measured = "the share of the light transport's rays traced after a path's first vertex";
@@ -260,9 +268,12 @@ json metadata(const scenes::ResolvedRun& resolved, const std::vector<std::string
       else runs.back()[1] = runs.back()[1].get<size_t>() + 1;
     meta["light"]["fill_factor"] = runs;
   }
-  meta["laser_photons_per_pulse"] = {{"total_all_pixels", r.laser_total},
-                                     {"outside_time_window", r.out_of_window_total},
-                                     {"outside_fraction", r.laser_total > 0 ? r.out_of_window_total / r.laser_total : 0.0}};
+  if (laser_traced(cfg))
+    meta["laser_photons_per_pulse"] = {{"total_all_pixels", r.laser_total},
+                                       {"outside_time_window", r.out_of_window_total},
+                                       {"outside_fraction", r.laser_total > 0 ? r.out_of_window_total / r.laser_total : 0.0}};
+  else
+    meta["laser_photons_per_pulse"] = nullptr;  // not traced (model: "laser light")
   if (!r.accuracy.is_null()) meta["accuracy"] = ojson::parse(r.accuracy.dump());
   if (!r.model.is_null()) meta["model"] = ojson::parse(r.model.dump());
   meta["acquisition"] = ojson::parse(sensor.describe().dump());

@@ -139,7 +139,8 @@ class Outputs::Images {
   Images(const RunConfig& cfg, const PixelRect& img, const sensor::DeclaredOutput* intensity,
          const sensor::DeclaredOutput* labels, int slots, const std::set<std::string>& provided)
       : provided_(provided), img_(img), layers_(cfg.render.max_layers), slots_(slots), gt_on_(cfg.outputs.ground_truth),
-        compression_(cfg.outputs.exr_compression), intensity_decl_(intensity), labels_decl_(labels),
+        laser_traced_(laser_traced(cfg)), compression_(cfg.outputs.exr_compression), intensity_decl_(intensity),
+        labels_decl_(labels),
         gt_(img.width, img.height), laser_(img.width, img.height), ambient_(img.width, img.height),
         maps_(img.width, img.height), intensity_(img.width, img.height), labels_(img.width, img.height) {
     if (gt_on_) {
@@ -259,7 +260,7 @@ class Outputs::Images {
       return nlohmann::json{{pixels, v.size()}, {"median", q(0.5)}, {"p90", q(0.9)}, {"p99", q(0.99)}, {"max", v.empty() ? 0.0 : v.back()}};
     };
     nlohmann::json a;
-    a["laser_relative_standard_error"] = summary(rel, "pixels_with_laser");
+    a["laser_relative_standard_error"] = laser_traced_ ? summary(rel, "pixels_with_laser") : nlohmann::json(nullptr);
     if (ambient_se_ch_) {
       std::vector<double> amb;
       amb.reserve(n);
@@ -354,9 +355,13 @@ class Outputs::Images {
       }
       for (int j = object_slots(); j < slots_; ++j)
         for (const char* what : kObjectSlotChannels) gt_.remove_channel(layer_name(j, what, "object"));
-      put_file(gt_, "ground_truth.exr", "range, z, layer<i>.range, object<j>.range: metres (+inf where the ray hits nothing); "
-               "transmittance: fraction; object<j>.laser, direct_other_laser, indirect_laser: photons per laser pulse reaching "
-               "the pixel's SPAD (before PDP)");
+      if (!laser_traced_) {  // the laser's light by object: none traced
+        gt_.remove_channel("direct_other_laser"), gt_.remove_channel("indirect_laser");
+        for (int j = 0; j < object_slots(); ++j) gt_.remove_channel(layer_name(j, ".laser", "object"));
+      }
+      put_file(gt_, "ground_truth.exr", std::string("range, z, layer<i>.range, object<j>.range: metres (+inf where the ray hits nothing); "
+               "transmittance: fraction") + (laser_traced_ ? "; object<j>.laser, direct_other_laser, indirect_laser: photons per laser "
+                                                             "pulse reaching the pixel's SPAD (before PDP)" : ""));
     }
     if (labels_decl_) {
       // Slot 0 stays when nothing is in view (ids -1): an EXR needs a channel.
@@ -365,7 +370,7 @@ class Outputs::Images {
       put_file(labels_, labels_decl_->file, "object<j>.edge_counts: counts; edge_snr: ratio; detectable: 0 or 1");
     }
     laser_.set_attribute("spadgen_time_axis", axis_json(axis).dump());
-    put_file(laser_, "laser.exr", "photons per laser pulse reaching the pixel's SPAD (before PDP)");
+    if (laser_traced_) put_file(laser_, "laser.exr", "photons per laser pulse reaching the pixel's SPAD (before PDP)");
     put_file(ambient_, "ambient.exr", std::string(ambient_se_ch_ ? "photons_per_second, standard_error: " : "") +
              "ambient photons per second reaching the pixel's SPAD (before PDP)");
     put_file(maps_, "sensor_maps.exr", "gate_skew_ps, gate_length_ps: ps; dcr_cps: counts/s; pde, pde_ambient: fraction");
@@ -419,6 +424,7 @@ class Outputs::Images {
   int slots_;  // object slots held: render.max_layers, or the scene's objects when fewer
   std::atomic<int64_t> layers_cut_{0};
   bool gt_on_;
+  bool laser_traced_;  // laser_traced(): else no laser.exr and no laser channels in ground_truth.exr
   ExrCompression compression_;
   const sensor::DeclaredOutput* intensity_decl_;
   const sensor::DeclaredOutput* labels_decl_;

@@ -18,10 +18,16 @@ SensorStageConfig sensor_stage(const RunConfig& c) {
   return s;
 }
 
+bool laser_traced(const RunConfig& c) {
+  return c.acquisition.mode != AcquisitionMode::Intensity || c.acquisition.intensity.laser_on || c.outputs.transient ||
+         c.outputs.light;
+}
+
 RenderStageConfig render_stage(const RunConfig& c, std::vector<double> row_fill_factor) {
   RenderStageConfig r{c.camera, c.laser, c.ambient, c.render, c.light_seed(), std::move(row_fill_factor)};
   const bool intensity = c.acquisition.mode == AcquisitionMode::Intensity;
   r.target_laser = !intensity || c.acquisition.intensity.laser_on;
+  r.trace_laser = laser_traced(c);
   r.target_ambient = intensity;
   return r;
 }

@@ -378,9 +378,17 @@ struct RenderStageConfig {
   // none: the intensity mode without laser_on) and, in the intensity mode, whose counts are of it, the
   // ambient light.
   bool target_laser = true, target_ambient = false;
+  // Whether the renderer traces the laser at all: not in the intensity mode without laser_on unless an
+  // output holds its light (outputs.transient, or outputs.light for a later spadgen sense). Untraced, the
+  // paths are drawn as they would be (the ambient light's estimate is the same unless guided connections
+  // would draw towards the laser: render::guided_connections_active) but connect nothing to the
+  // laser, and the laser's images are not written.
+  bool trace_laser = true;
 };
 
 SensorStageConfig sensor_stage(const RunConfig& c);
+// RenderStageConfig::trace_laser of the run (whether the laser's images and ground truth channels exist).
+bool laser_traced(const RunConfig& c);
 RenderStageConfig render_stage(const RunConfig& c, std::vector<double> row_fill_factor);
 
 }  // namespace spadgen

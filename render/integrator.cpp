@@ -283,6 +283,7 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
       }
   }
   ambient_on_ = ambient.any() || shading.has_emission();
+  laser_traced_ = config.trace_laser;
   optics_ = config.camera.optics_transmission;
   period_opl_ = kSpeedOfLight / config.laser.repetition_rate_Hz;
   // The one check left here is of the interface, not of the scene file: the rows the caller describes.
@@ -435,7 +436,7 @@ void Integrator::trace_camera_block(int x, int y, int s_begin, int s_end, const 
       if (!found[i]) continue;
       block->surface[j] = shading_.surface(hits[i]);
       LaserRay& lr = block->laser[j];
-      if (!laser_ray(block->surface[j], &lr)) continue;
+      if (!laser_traced_ || !laser_ray(block->surface[j], &lr)) continue;
       shadow[i] = true;
       origins[i] = lr.origin, dirs[i] = lr.wi, tfar[i] = float(lr.r);
       ++traced;
@@ -1376,8 +1377,11 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
       // still drawn: a Dirac draw goes on, any other ends the path (or, with ambient light, takes the last
       // segment).
       bool at_limit = false;
+      // The laser's work (its connections, the guided and ghost draws towards it) only where the run traces
+      // it; the path itself (its draws, roulette) is the same either way.
+      const bool lit = laser_traced_ && beta.x > 0.0f;
       if (bsdf.has_non_delta()) {
-        if (beta.x > 0.0f) {
+        if (lit) {
           LaserRay lr;
           FirstSegment first;
           const bool ahead = camera_ray && ahead_shadow(block, j, &lr, &first);
@@ -1400,12 +1404,12 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
       // The ghosts a vertex sees of the laser through a glossy plate (no random numbers: found first, as
       // the guided connections weigh against those whose light the next vertex's laser connection returns).
       Ghosts ghosts;
-      if (guided_ && !slabs_.empty() && !last_segment && !at_limit && beta.x > 0.0f && bsdf.has_non_delta())
+      if (guided_ && !slabs_.empty() && !last_segment && !at_limit && lit && bsdf.has_non_delta())
         ghost_targets(sf, medium, &ghosts);
       // Guided connections from a glossy vertex whose next vertex may reflect the laser in a narrow lobe.
       GuideTargets guide;
       const bool roulette = !last_segment && !at_limit && vertices >= rc.russian_roulette_from;
-      if (guided_ && !last_segment && !at_limit && beta.x > 0.0f &&
+      if (guided_ && !last_segment && !at_limit && lit &&
           (bsdf.glossy() || (bsdf.lambertian() && medium < 0 && !parts_.empty()))) {
         const int medium_out_t = volume ? (wo_front ? sf.material : -1) : medium;
         find_guide_targets(sf, bsdf, medium, medium_out_t, &guide, rays);

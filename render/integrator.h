@@ -305,6 +305,7 @@ class Integrator {
   const Ambient& ambient_;
   bool transmission_ = false;
   bool ambient_on_ = false;
+  bool laser_traced_ = true;  // RenderStageConfig::trace_laser
   double optics_ = 1.0;
   double period_opl_ = 0.0;  // c / f_rep: the optical path of one laser period, metres
 };

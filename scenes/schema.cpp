@@ -449,7 +449,7 @@ std::vector<Key> build() {
   k.push_back(choice("/acquisition/intensity/exposure", FIELD(acquisition.intensity.exposure), "single exposure, or dual exposure interleaving tau_S and tau_L"));
   k.push_back(number("/acquisition/intensity/exposure_us", FIELD(acquisition.intensity.exposure_s), kUsUnit, open_closed(0, 1e9), "global exposure per frame (single), or the short exposure tau_S (dual)"));
   k.push_back(number("/acquisition/intensity/dual_ratio", FIELD(acquisition.intensity.dual_ratio), kNone, closed(1, 1e6), "tau_L / tau_S in dual exposure"));
-  k.push_back(boolean("/acquisition/intensity/laser_on", FIELD(acquisition.intensity.laser_on), "add the laser's mean photon rate to the ambient light in intensity mode"));
+  k.push_back(boolean("/acquisition/intensity/laser_on", FIELD(acquisition.intensity.laser_on), "add the laser's mean photon rate to the ambient light in intensity mode (false: the laser is not traced, unless outputs.transient or outputs.light keep its light)"));
 
   k.push_back(choice("/render/quality", FIELD(render.quality), "preset of samples_per_pixel, target_relative_error and max_samples_per_pixel (draft, standard, reference; docs/accuracy.md); custom: those keys as given. A key given explicitly wins over the preset"));
   k.push_back(integer("/render/samples_per_pixel", FIELD(render.samples_per_pixel), kNone, closed(1, 1e7), "paths per pixel; with target_relative_error, the paths of the first round (at least 2), which every pixel gets"));

@@ -87,7 +87,8 @@ class ObjectSlots:
     surface (+inf unused), ``transmittance`` float32 fraction reaching it, ``laser`` float32 photons per
     pulse the object returns directly (0 unused), ``path`` float32 metres, the optical path of that direct return,
     laser to object to camera (it arrives at laser.emission_delay + path / c; +inf unused). ``direct_other_laser`` and ``indirect_laser`` (H, W)
-    float32: the rest of laser.exr. From labels.exr (gate sweep only; None in a 2D run, which writes none):
+    float32: the rest of laser.exr. ``laser``, ``direct_other_laser`` and ``indirect_laser`` are None when the run
+    traced no laser (a 2D run without acquisition.intensity.laser_on; metadata.json ``model``). From labels.exr (gate sweep only; None in a 2D run, which writes none):
     ``edge_counts`` and ``edge_snr`` (J, H, W) float32, ``detectable`` (J, H, W) bool."""
     first: np.ndarray
     count: np.ndarray
@@ -205,7 +206,9 @@ class Run:
                    "expected_counts.npy": "outputs.expected_counts", "counts.npy": "outputs.counts",
                    "detection_rate.npy": "outputs.detection_rate",
                    "intensity.exr": "acquisition.mode = intensity",
-                   "labels.exr": "acquisition.mode = gate_sweep with outputs.ground_truth"}
+                   "labels.exr": "acquisition.mode = gate_sweep with outputs.ground_truth",
+                   "laser.exr": "a gate sweep, or in the intensity mode with acquisition.intensity.laser_on, "
+                   "outputs.transient or outputs.light: else the laser is not traced"}
 
     def __init__(self, path):
         self.path = os.fspath(path)
@@ -463,7 +466,7 @@ class Run:
     def laser_standard_error(self):
         """(H, W) float32 photons per pulse: the Monte Carlo standard error of ``laser["photons_per_pulse"]``
         (laser.exr ``standard_error``; docs/render.md, "Accuracy"). None for a run saved before it."""
-        laser = self.laser
+        laser = self.laser  # FileNotFoundError, saying why, for a run that traced no laser
         return laser["standard_error"] if "standard_error" in laser else None
 
     @property
@@ -478,12 +481,14 @@ class Run:
         N exp(-lambda) lambda times the larger of the pixel's relative standard errors of its laser return and
         of its ambient light (every detection counted as the noisier light; the bound of docs/render.md,
         "Accuracy"). Zero where a pixel has neither. Needs detection_rate.npy and laser.exr's standard_error
-        (ambient.exr's too where the run has it)."""
-        se = self.laser_standard_error
-        if se is None:
-            raise KeyError(f"{self.path}/laser.exr has no standard_error channel (a run saved before it)")
-        laser = np.asarray(self.laser["photons_per_pulse"], np.float64)
-        rel = np.divide(np.asarray(se, np.float64), laser, out=np.zeros_like(laser), where=laser > 0)
+        (ambient.exr's too where the run has it; a 2D run that traced no laser has the ambient light's alone)."""
+        rel = np.zeros((self.height, self.width), np.float64)
+        if self.has("laser.exr"):
+            se = self.laser_standard_error
+            if se is None:
+                raise KeyError(f"{self.path}/laser.exr has no standard_error channel (a run saved before it)")
+            laser = np.asarray(self.laser["photons_per_pulse"], np.float64)
+            rel = np.divide(np.asarray(se, np.float64), laser, out=np.zeros_like(laser), where=laser > 0)
         ase = self.ambient_standard_error
         if ase is not None:
             amb = np.asarray(self.ambient["photons_per_second"], np.float64)
@@ -569,9 +574,11 @@ class Run:
             lab = self.object_labels
             labels = {"edge_counts": slots(lab, "edge_counts"), "edge_snr": slots(lab, "edge_snr"),
                       "detectable": slots(lab, "detectable", bool)}
+        traced = "direct_other_laser" in gt  # else the run traced no laser
         return ObjectSlots(gt["object_id"].astype(np.int32), gt["object_count"].astype(np.int32), slots(gt, "id", np.int32),
-                           slots(gt, "range"), slots(gt, "transmittance"), slots(gt, "laser"), gt["direct_other_laser"],
-                           gt["indirect_laser"], path=slots(gt, "path"), **labels)
+                           slots(gt, "range"), slots(gt, "transmittance"), slots(gt, "laser") if traced else None,
+                           gt["direct_other_laser"] if traced else None, gt["indirect_laser"] if traced else None,
+                           path=slots(gt, "path"), **labels)
 
     def detections(self, detector="edges", noise_free=False):
         """The returns ``spadgen reconstruct RUN --detector DETECTOR`` wrote into the run folder (Detections);

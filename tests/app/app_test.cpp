@@ -231,7 +231,8 @@ TEST_F(App, RunSaysWhereItsTimeWentAndAComponentNotUsedCostsNothing) {
     EXPECT_GT(rays.at("camera").get<uint64_t>(), 0u);
     std::map<std::string, nlohmann::json> share;
     for (const auto& c : run.at("components")) share[c.at("component").get<std::string>()] = c.at("share");
-    EXPECT_EQ(share.size(), 12u);
+    EXPECT_EQ(share.size(), 13u);
+    EXPECT_GT(share.at("laser light").get<double>(), 0.0);  // its shadow rays
     if (std::string(name) == "small") {  // the plate: refracted connections; its roughness: guided ones
       EXPECT_GT(rays.at("refracted").get<uint64_t>(), 0u);
       EXPECT_GT(share.at("transmissive surfaces").get<double>(), 0.0);
@@ -253,6 +254,49 @@ TEST_F(App, RunSaysWhereItsTimeWentAndAComponentNotUsedCostsNothing) {
       }
     }
   }
+}
+
+// A 2D run without acquisition.intensity.laser_on models no laser (the test chart: 39 % of its rays were the
+// laser's shadow rays): no laser.exr, no laser channels in ground_truth.exr, null laser figures in metadata.json,
+// "laser light" skipped, no laser ray traced. The paths are drawn as when it is traced (outputs.transient keeps
+// its light), so the ambient light and the counts are the same bits.
+TEST_F(App, AnIntensityRunWithoutTheLaserTracesNone) {
+  const std::string base = "run " + kScenes + "test_chart.json -q --set camera.crop=[480,480,32,16] "
+                           "--set render.samples_per_pixel=2 --set outputs.previews=false -o ";
+  Result r = sh(base + (dir_ / "off").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  r = sh(base + (dir_ / "kept").string() + " --set outputs.transient=true --set render.window_start_ns=0 --set render.window_stop_ns=20");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const nlohmann::json off = nlohmann::json::parse(slurp(dir_ / "off/metadata.json"));
+  const nlohmann::json kept = nlohmann::json::parse(slurp(dir_ / "kept/metadata.json"));
+  EXPECT_FALSE(fs::exists(dir_ / "off/laser.exr"));
+  for (const auto& f : off.at("files")) EXPECT_NE(f.get<std::string>(), "laser.exr");
+  EXPECT_TRUE(fs::exists(dir_ / "kept/laser.exr"));
+  EXPECT_TRUE(off.at("laser_photons_per_pulse").is_null());
+  EXPECT_TRUE(off.at("accuracy").at("laser_relative_standard_error").is_null());
+  EXPECT_GT(kept.at("laser_photons_per_pulse").at("total_all_pixels").get<double>(), 0.0);
+  const auto model = [](const nlohmann::json& m) {
+    for (const auto& e : m.at("model"))
+      if (e.at("component") == "laser light") return e.at("active").get<bool>();
+    ADD_FAILURE() << "no laser light in model";
+    return false;
+  };
+  EXPECT_FALSE(model(off));
+  EXPECT_TRUE(model(kept));
+  EXPECT_EQ(off.at("run").at("rays").at("laser").get<uint64_t>(), 0u);
+  EXPECT_GT(kept.at("run").at("rays").at("laser").get<uint64_t>(), 0u);
+  EXPECT_LT(off.at("run").at("rays").at("total").get<uint64_t>(), kept.at("run").at("rays").at("total").get<uint64_t>());
+  const auto gt_off = spadgen::writers::read_exr((dir_ / "off/ground_truth.exr").string());
+  const auto gt_kept = spadgen::writers::read_exr((dir_ / "kept/ground_truth.exr").string());
+  for (const char* c : {"direct_other_laser", "indirect_laser", "object0.laser"}) {
+    EXPECT_FALSE(gt_off.channels.count(c)) << c;
+    EXPECT_TRUE(gt_kept.channels.count(c)) << c;
+  }
+  EXPECT_EQ(gt_off.channels.at("range"), gt_kept.channels.at("range"));
+  const auto amb_off = spadgen::writers::read_exr((dir_ / "off/ambient.exr").string());
+  const auto amb_kept = spadgen::writers::read_exr((dir_ / "kept/ambient.exr").string());
+  for (const char* c : {"photons_per_second", "standard_error"}) EXPECT_EQ(amb_off.channels.at(c), amb_kept.channels.at(c)) << c;
+  EXPECT_EQ(slurp(dir_ / "off/counts.npy"), slurp(dir_ / "kept/counts.npy"));
 }
 
 // outputs.storage = zarr changes the container only: every stack of a Zarr run holds the .npy run's values

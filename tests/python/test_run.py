@@ -34,7 +34,8 @@ def test_metadata_and_shapes(sweep, intensity):
         for stack in (run.detection_rate, run.counts, run.frames_packed):
             assert isinstance(stack, np.memmap) and not stack.flags.writeable  # lazily loaded
         assert run.ground_truth["range"].shape == (H, W)
-        assert run["counts"] is run.counts and run["laser.exr"] is run.laser
+        assert run["counts"] is run.counts
+    assert sweep["laser.exr"] is sweep.laser and not intensity.has("laser")  # the 2D run traces no laser
     assert sweep.counts.dtype == np.uint8 and intensity.counts.dtype == np.uint16  # 255 and 2040 frames per k
     assert (sweep.width, sweep.height, sweep.K) == (347, 10, 36)
     assert sweep.crop == (490, 236, 347, 10)
@@ -118,14 +119,15 @@ def test_ambient_standard_error_and_the_counts_bound(intensity_run):
     assert acc["pixels_with_ambient"] == lit.sum()
     assert acc["median"] == pytest.approx(rel[len(rel) // 2], rel=1e-5)
     assert acc["max"] == pytest.approx(rel[-1], rel=1e-5)
-    se = np.asarray(run.laser_standard_error, np.float64)
-    laser = np.asarray(run.laser["photons_per_pulse"], np.float64)
+    # The test chart's 2D run without acquisition.intensity.laser_on traces no laser: no laser.exr (reading it
+    # says why), the bound is the ambient light's alone.
+    assert not run.has("laser.exr") and run.metadata["accuracy"]["laser_relative_standard_error"] is None
+    with pytest.raises(FileNotFoundError, match="laser.exr.*acquisition.intensity.laser_on"):
+        run.laser_standard_error
     bound = run.expected_counts_error_bound()
     lam = np.asarray(run.detection_rate, np.float64)
     k, y, x = np.unravel_index(np.argmax(bound), bound.shape)
-    rel_laser = se[y, x] / laser[y, x] if laser[y, x] > 0 else 0.0
-    rel_ambient = ase[y, x] / amb[y, x]
-    by_hand = run.frames_per_k * np.exp(-lam[k, y, x]) * lam[k, y, x] * max(rel_laser, rel_ambient)
+    by_hand = run.frames_per_k * np.exp(-lam[k, y, x]) * lam[k, y, x] * ase[y, x] / amb[y, x]
     assert bound[k, y, x] == pytest.approx(by_hand, rel=1e-5) and by_hand > 0
 
 
@@ -244,8 +246,12 @@ def test_object_slots(sweep, intensity):
     np.testing.assert_array_equal(o.detectable, o.edge_snr >= 5)
     assert o.detectable.any()
     assert (o.edge_counts[~used] == 0).all()
-    # A 2D run has object slots but no labels.
-    assert intensity.object_slots().edge_snr is None and not intensity.has("labels.exr")
+    # A 2D run has object slots but no labels; without acquisition.intensity.laser_on it traces no laser, so no
+    # object's return either.
+    two_d = intensity.object_slots()
+    assert two_d.edge_snr is None and not intensity.has("labels.exr")
+    assert two_d.laser is None and two_d.direct_other_laser is None and two_d.indirect_laser is None
+    assert two_d.id.shape == two_d.range.shape and (two_d.count > 0).any()
 
 
 def test_expected_counts_from_the_detection_rate(sweep, intensity):

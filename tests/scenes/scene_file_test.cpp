@@ -742,8 +742,15 @@ TEST(SceneFileReference, DocsListEveryKeyAsTheSchemaDeclaresIt) {
   ASSERT_TRUE(in) << "docs/scene-file.md is missing";
   std::stringstream ss;
   ss << in.rdbuf();
-  EXPECT_THAT(ss.str(), HasSubstr(schema_reference_markdown()))
-      << "docs/scene-file.md is out of date: regenerate its key table with `spadgen schema`";
+  const std::string doc = ss.str(), table = schema_reference_markdown();
+  EXPECT_THAT(doc, HasSubstr(table)) << "docs/scene-file.md is out of date: regenerate its key table with `spadgen schema`";
+  // Once, in its section "Every key": a regeneration that pasted it over another section's table (the hand-written
+  // ones above hold keys too) would still contain it.
+  const size_t at = doc.find(table), section = doc.find("\n## Every key\n");
+  ASSERT_NE(section, std::string::npos) << "docs/scene-file.md has no section \"## Every key\"";
+  EXPECT_GT(at, section) << "the key table is not in the section \"Every key\"";
+  EXPECT_EQ(doc.find("\n## ", section + 1), doc.find("\n## ", at)) << "the key table is not in the section \"Every key\"";
+  EXPECT_EQ(doc.find(table, at + 1), std::string::npos) << "the key table is in docs/scene-file.md twice";
 }
 
 // The shipped JSON Schema (for editors that do not run spadgen) is the program's, and it lists every key
