@@ -209,6 +209,42 @@ void check_writable(const std::string& file, const RunFolder& run, const std::st
     throw Error(file + ": cannot write into " + dir.string() + ": " + std::strerror(errno));
 }
 
+// evaluate's output folder (-o): not inside a run folder, a dataset's own entries or a folder of sense --repeats'
+// realisations, whose contents spadgen checks (-o RUN/scores made a later run into RUN refuse it for a foreign
+// folder), except the evaluated run's or dataset's own evaluation/, the default.
+void check_evaluation_folder(const fs::path& out, const fs::path& target) {
+  std::error_code ec;
+  const fs::path where = fs::weakly_canonical(fs::absolute(out), ec), own = fs::weakly_canonical(fs::absolute(target), ec);
+  const auto own_evaluation = [&](const fs::path& folder) { return folder == own && where == own / "evaluation"; };
+  for (fs::path folder = where.parent_path(); !folder.empty(); folder = folder.parent_path()) {
+    const fs::path rel = where.lexically_relative(folder);
+    if (fs::is_regular_file(folder / "metadata.json", ec)) {
+      nlohmann::json meta;
+      try {  // (not a run's when it does not read as one)
+        const std::string m = (folder / "metadata.json").string();
+        meta = scenes::parse_json(scenes::read_file_bounded(m, 256u << 20, "metadata"), m);
+      } catch (const Error&) {
+      }
+      if (meta.is_object() && meta.contains("spadgen_version")) {
+        if (own_evaluation(folder)) return;
+        throw Error("-o " + out.string() + ": lies in the run folder " + folder.string() + ", which holds only what spadgen "
+                    "writes there (a later run into it, or a dataset's check of it, would refuse the folder for a foreign "
+                    "one); expected a folder outside run folders, or the evaluated run's own evaluation/ (the default)");
+      }
+    }
+    if (fs::is_regular_file(folder / "dataset.json", ec) && !rel.empty() && datasets::own_entries().count(rel.begin()->string())) {
+      if (own_evaluation(folder)) return;
+      throw Error("-o " + out.string() + ": is the dataset " + folder.string() + "'s own " + rel.string() + ", which the "
+                  "evaluation would replace or add to; expected a folder outside it, or the evaluated dataset's own "
+                  "evaluation/ (the default)");
+    }
+    if (fs::is_regular_file(folder / "repeat_000" / "metadata.json", ec))
+      throw Error("-o " + out.string() + ": lies in the folder " + folder.string() + " of sense --repeats' realisations, "
+                  "which holds those only; expected a folder outside it");
+    if (folder == folder.root_path()) break;
+  }
+}
+
 std::string slot_name(int s, const char* what) { return "det" + std::to_string(s) + "." + what; }
 
 // A range is metres from the camera centre, or NaN for no detection: an infinite one is neither (it was
@@ -501,7 +537,8 @@ reconstruct::Scores evaluate_run(const EvaluateCommand& c, const std::string& ru
   if (source)
     *source = compute ? nlohmann::json{{"detector", c.detector}, {"computed", true}, {"noise_free", c.noise_free}}
                       : nlohmann::json{{"file", file}};
-  DetectionImage img = compute ? detect_image(run, Detector(c.detector, run), c.noise_free, 8, false)
+  // As reconstruct writes it by default (its slots too), so that the scores are those of its file.
+  DetectionImage img = compute ? detect_image(run, Detector(c.detector, run), c.noise_free, ReconstructOptions{}.max_detections, false)
                                : read_detections(file, run, c.min_score.has_value(), source);
   if (source && !labels.detectability) (*source)["labels"] = "labels.exr absent: every object counted as detectable";
   reconstruct::EvaluateOptions options = scorer_options(c);
@@ -673,6 +710,7 @@ std::string evaluate(const EvaluateCommand& c) {
   // Written into a staging folder beside the output folder and swapped in whole (app/staging.h): a failed
   // or interrupted evaluation leaves the earlier one as it was, never a mix of the two.
   const fs::path out_given = c.out_dir.empty() ? target / "evaluation" : fs::path(c.out_dir);
+  check_evaluation_folder(out_given, target);
   Staging staging(out_given,
                   {"metrics.json", "samples.csv", "range_error.png", "outcome.png"}, "an evaluation");
   const std::string out = staging.path("");

@@ -426,6 +426,34 @@ TEST_F(Reconstruct, EvaluateReplacesItsFolderWholeAndOnlyItsOwn) {
     for (const auto& e : fs::directory_iterator(folder)) EXPECT_NE(e.path().filename().string()[0], '.') << e.path();
 }
 
+// evaluate -o writes no folder into a run folder but the evaluated run's own evaluation/ (-o RUN/scores was
+// written, exit 0, and the next run into RUN refused the folder for a foreign one), nor into another run's
+// evaluation/, a dataset's own entries or a folder of sense --repeats' realisations.
+TEST_F(Reconstruct, EvaluateWritesIntoNoRunOrDatasetButItsOwnEvaluation) {
+  const fs::path a = dir_ / "a", b = dir_ / "b";
+  const std::string run_a = "run " + kScenes + "multi_object.json" + kMultiObjectCrop + a.string();
+  Result r = sh(run_a);
+  ASSERT_EQ(r.code, 0) << r.output;
+  r = sh("run " + kScenes + "multi_object.json" + kMultiObjectCrop + b.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  fs::create_directories(dir_ / "d");
+  std::ofstream(dir_ / "d/dataset.json") << "{}";
+  fs::create_directories(dir_ / "set/repeat_000");
+  std::ofstream(dir_ / "set/repeat_000/metadata.json") << "{}";
+  for (const auto& [out, says] : {std::pair{a / "scores", "lies in the run folder"}, {a / "evaluation/x", "lies in the run folder"},
+                                  {b / "evaluation", "lies in the run folder"}, {dir_ / "d/samples/e", "is the dataset"},
+                                  {dir_ / "d/evaluation", "is the dataset"}, {dir_ / "set/e", "sense --repeats"}}) {
+    r = sh("evaluate " + a.string() + " -o " + out.string());
+    EXPECT_EQ(r.code, 1) << out << r.output;
+    EXPECT_THAT(r.output, HasSubstr(says)) << out;
+    EXPECT_FALSE(fs::exists(out)) << out;
+  }
+  r = sh("evaluate " + a.string() + " -o " + (a / "evaluation").string());
+  EXPECT_EQ(r.code, 0) << r.output;
+  r = sh(run_a);  // the run folder holds nothing foreign
+  EXPECT_EQ(r.code, 0) << r.output;
+}
+
 // Detections evaluate would misread are refused, naming the file and what is wrong: detections of another
 // scene or another crop (their header names where they were made; they were scored, precision 0 or recall
 // 61 %, exit 0), slots after a gap (det0, det2: det2 was ignored), --min-score on detections without scores
