@@ -236,7 +236,10 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
   // (a 2D run's intensity.exr, 2 channels, holds counts: a further realisation writes it; the rest it links)
   const bool compressed_images = c.outputs.exr_compression != ExrCompression::None;
   const std::string uncompressed = compressed_images ? " (uncompressed)" : "";
-  plan.disk.push_back({"images" + uncompressed, pixels * (channels - (sweep ? 0 : 2)) * 4, false, "", compressed_images, false, true});
+  // (a run that traces no laser writes no laser.exr and no laser channels of the ground truth)
+  const int64_t untraced = laser_traced(c) ? 0 : 3 + (c.outputs.ground_truth ? 2 + slots : 0);
+  plan.disk.push_back({"images" + uncompressed, pixels * (channels - untraced - (sweep ? 0 : 2)) * 4, false, "", compressed_images,
+                       false, true});
   if (!sweep) plan.disk.push_back({"intensity.exr" + uncompressed, pixels * 2 * 4, false, "", compressed_images});
   // metadata.json (about 16 kB) and the previews (three PNG images, compressed: at most 3 bytes a pixel each,
   // and the plot of the gate profiles, about 62 kB whatever the image)

@@ -592,7 +592,7 @@ std::optional<Shard> shard_from_environment() {
     // do not make: its tasks would run some shards twice and others never.
     if (const auto max = env("SLURM_ARRAY_TASK_MAX"); max && integer("SLURM_ARRAY_TASK_MAX", *max) != min + step * (n - 1))
       throw Error("Slurm job array: SLURM_ARRAY_TASK_MIN=" + std::to_string(min) + ", MAX=" + *max + ", STEP=" + std::to_string(step) +
-                  ", COUNT=" + std::to_string(n) + " are not an evenly spaced array (such as --array=0,2,5), whose tasks would "
+                  ", COUNT=" + std::to_string(n) + " are not an evenly spaced array (--array=0,2,5, for example, is uneven), whose tasks would "
                   "run some shards and never others: use --array=0-" + std::to_string(n - 1) + ", or START-END:STEP");
     return Shard{(i - min) / step, n};
   }

@@ -368,7 +368,7 @@ TEST(Shards, FromSlurmJobArraysAndKubernetesIndexedJobs) {
     (void)shard_from_environment();
     ADD_FAILURE() << "an uneven array was taken";
   } catch (const Error& e) {
-    EXPECT_THAT(e.what(), HasSubstr("are not an evenly spaced array (such as --array=0,2,5), whose tasks would run some shards "
+    EXPECT_THAT(e.what(), HasSubstr("are not an evenly spaced array (--array=0,2,5, for example, is uneven), whose tasks would run some shards "
                                     "and never others: use --array=0-2, or START-END:STEP"));
   }
   clear();
