@@ -582,7 +582,8 @@ class Run:
 
     def detections(self, detector="edges", noise_free=False):
         """The returns ``spadgen reconstruct RUN --detector DETECTOR`` wrote into the run folder (Detections);
-        noise_free: those of ``--noise-free`` (from the expected counts), detections_<detector>_noise_free.exr."""
+        noise_free: those of ``--noise-free`` (from the noise-free rates lambda, detection_rate),
+        detections_<detector>_noise_free.exr."""
         suffix = "_noise_free" if noise_free else ""
         if self.mode != "gate_sweep":
             raise ValueError(f"{self.path} is a 2D run ({self.mode}): no gate profiles to detect returns in; "
