@@ -3,7 +3,7 @@
     run = spadgen.open_run("out/multi_object")
     run.counts                      # (K, H, W) uint8/uint16 memory map of counts.npy (zarr.Array of counts.zarr)
     run.ground_truth["range"]       # (H, W) float32 channel of ground_truth.exr
-    run.gate_profile(300, 120)      # (gate positions in ns, counts) of pixel x=300, y=120
+    run.gate_profile(300, 120)      # Profile of pixel x=300, y=120: gate_ns, values (its counts), x, y
     run.points(frame="world")       # (H, W, 3) ground-truth surface points
 
 Nothing is read until it is used: metadata.json on opening, a stack when first indexed (a NumPy memory
@@ -354,7 +354,9 @@ class Run:
             stem = name[:-4] if name.endswith(".npy") else name[:-5] if name.endswith(".zarr") else name
             why = self._WRITTEN_BY.get(stem + ".npy", self._WRITTEN_BY.get(name,
                                        "outputs.light" if name.startswith("light/") else None))
-            raise FileNotFoundError(f"{self.path}: this run did not write {name}" + (f" (written with {why})" if why else "")
+            # A stack by its stem: a run writes it as .npy or as .zarr (outputs.storage), so an extension would mislead.
+            shown = stem if name.endswith((".npy", ".zarr")) else name
+            raise FileNotFoundError(f"{self.path}: this run did not write {shown}" + (f" (written with {why})" if why else "")
                                     + f"; it wrote {', '.join(self.files)}")
         return os.path.join(self.path, found)
 
