@@ -33,7 +33,8 @@ _SEEDS = (("seed", "seed"), ("seed_light", "light"), ("seed_chip", "chip"), ("se
 
 
 class SampleNotDoneError(RuntimeError):
-    """A sample's run was asked for, but the sample is not done (failed, stale or missing)."""
+    """A sample's run was asked for, but the sample is not done (failed, stale, missing or damaged), or its
+    folder holds another generation of it than the index.jsonl this Dataset read."""
 
 
 def _is_number(v):
