@@ -137,9 +137,9 @@ class Outputs::Images {
   // intensity: the mode's declaration of intensity.exr, null when the mode has none.
   // labels: the mode's declaration of labels.exr when the run's ground truth is at hand, else null.
   Images(const RunConfig& cfg, const PixelRect& img, const sensor::DeclaredOutput* intensity,
-         const sensor::DeclaredOutput* labels, int slots, const std::set<std::string>& provided)
+         const sensor::DeclaredOutput* labels, int slots, bool laser, const std::set<std::string>& provided)
       : provided_(provided), img_(img), layers_(cfg.render.max_layers), slots_(slots), gt_on_(cfg.outputs.ground_truth),
-        laser_traced_(laser_traced(cfg)), compression_(cfg.outputs.exr_compression), intensity_decl_(intensity),
+        laser_traced_(laser), compression_(cfg.outputs.exr_compression), intensity_decl_(intensity),
         labels_decl_(labels),
         gt_(img.width, img.height), laser_(img.width, img.height), ambient_(img.width, img.height),
         maps_(img.width, img.height), intensity_(img.width, img.height), labels_(img.width, img.height) {
@@ -424,7 +424,7 @@ class Outputs::Images {
   int slots_;  // object slots held: render.max_layers, or the scene's objects when fewer
   std::atomic<int64_t> layers_cut_{0};
   bool gt_on_;
-  bool laser_traced_;  // laser_traced(): else no laser.exr and no laser channels in ground_truth.exr
+  bool laser_traced_;  // the light holds the laser's: else no laser.exr and no laser channels in ground_truth.exr
   ExrCompression compression_;
   const sensor::DeclaredOutput* intensity_decl_;
   const sensor::DeclaredOutput* labels_decl_;
@@ -666,14 +666,14 @@ class Outputs::ProfileProbe {
 };
 
 Outputs::Outputs(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img, const TimeAxis& axis,
-                 const Staging& staging, int objects, int threads, const std::set<std::string>& provided)
+                 const Staging& staging, int objects, int threads, bool laser, const std::set<std::string>& provided)
     : cfg_(c), axis_(axis), gate_positions_s_(sensor.gate_positions_s()), declared_(sensor.acquisition().outputs()),
       staging_(staging) {
   // Labels come from the ground truth: this run's, or the one spadgen sense was given (provided).
   const bool ground_truth = c.outputs.ground_truth || provided.count("ground_truth.exr");
   images_ = std::make_unique<Images>(c, img, find_declared(declared_, "intensity.exr"),
                                      ground_truth ? find_declared(declared_, "labels.exr") : nullptr,
-                                     image_object_slots(c.render.max_layers, objects), provided);
+                                     image_object_slots(c.render.max_layers, objects), laser, provided);
   std::vector<StackLayout> layout = stack_layout(c, sensor, img, axis);
   for (StackLayout& s : layout)
     if (provided.count(s.file)) s.written = false;

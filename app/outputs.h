@@ -75,9 +75,10 @@ class Outputs {
   // Opens the stacks in the staging folder (the tiles stream into them) and allocates the images.
   // objects: the scene's objects (scenes::objects_of), so that the images hold no more object slots.
   // provided: files another folder already holds (spadgen sense --repeats links them): not written here.
-  // threads: as --threads (0 = all cores), for write_in_bands.
+  // threads: as --threads (0 = all cores), for write_in_bands. laser: whether the light holds the laser's
+  // (laser_traced of the run that rendered it): else no laser.exr and no laser channels in the ground truth.
   Outputs(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img, const TimeAxis& axis,
-          const Staging& staging, int objects, int threads, const std::set<std::string>& provided = {});
+          const Staging& staging, int objects, int threads, bool laser, const std::set<std::string>& provided = {});
   ~Outputs();
   Outputs(const Outputs&) = delete;
   Outputs& operator=(const Outputs&) = delete;

@@ -97,7 +97,7 @@ RunResult run(const RunOptions& options) {
   Staging staging(out);
   // (the scene's geometry and BVH are in memory already: what is available counts them)
   check_resources(cfg, sensor, img, axis, options.threads, out, objects);
-  Outputs outputs(cfg, sensor, img, axis, staging, objects, options.threads);
+  Outputs outputs(cfg, sensor, img, axis, staging, objects, options.threads, laser_traced(cfg));
   const PixelRect light_rect = light_region(img, cfg.camera.width_px, cfg.camera.height_px);
   std::unique_ptr<LightWriter> light;
   if (cfg.outputs.light) light = std::make_unique<LightWriter>(light_rect, axis, staging, cfg.outputs.storage);

@@ -585,7 +585,9 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     staging.push_back(top ? std::make_unique<Staging>(*top, name) : std::make_unique<Staging>(dirs.back()));
     std::set<std::string> provided = r == 0 ? from_run : shared;
     provided.insert(from_run.begin(), from_run.end());
-    outputs.push_back(std::make_unique<Outputs>(write_cfg, sensor, img, axis, *staging.back(), objects, options.threads, provided));
+    // (the saved light holds the laser's: outputs.light has the run trace it)
+    outputs.push_back(std::make_unique<Outputs>(write_cfg, sensor, img, axis, *staging.back(), objects, options.threads,
+                                                laser_traced(cfg), provided));
     seeds.push_back(runs[r].config.noise_seed());
   }
 
@@ -680,7 +682,8 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     record.ground_truth_layers = meta.at("ground_truth_layers").get<int>();
     if (meta.contains("ground_truth_objects")) record.ground_truth_objects = meta.at("ground_truth_objects").get<int>();
     if (meta.contains("objects")) record.objects = meta.at("objects");
-    record.model = model_components(write_cfg, nullptr, meta.contains("model") ? meta.at("model") : nlohmann::json(nullptr));
+    // (cfg: its outputs.light, the run's, says the light holds the laser's)
+    record.model = model_components(cfg, nullptr, meta.contains("model") ? meta.at("model") : nlohmann::json(nullptr));
     // The run's summary of its ground truth; what this call's labels say (the first realisation computed
     // them for all) replaces the run's.
     if (r == 0) labels_summary = record.ground_truth_summary;

@@ -286,6 +286,16 @@ TEST_F(App, SenseKeepsOnlyWhatItsSettingsAskFor) {
   EXPECT_TRUE(meta["ground_truth_summary"].contains("hit_fraction"));
   EXPECT_FALSE(meta["ground_truth_summary"].contains("objects_detectable"));
   EXPECT_FALSE(meta["ground_truth_summary"].contains("detectable_fraction"));
+  // The saved light holds the laser's (outputs.light has the run trace it): a 2D sense without laser_on still
+  // writes laser.exr and its figures (it wrote none, and listed the laser light as skipped).
+  EXPECT_TRUE(fs::exists(dir_ / "int/laser.exr"));
+  EXPECT_GT(meta.at("laser_photons_per_pulse").at("total_all_pixels").get<double>(), 0.0);
+  EXPECT_FALSE(meta.at("accuracy").at("laser_relative_standard_error").is_null());
+  for (const auto& e : meta.at("model")) {
+    if (e.at("component") == "laser light") {
+      EXPECT_TRUE(e.at("active").get<bool>()) << e;
+    }
+  }
   // A run that kept its transients too: its transient.npy is linked, whatever the mode (sense refused it
   // as "intensity mode needs no time bins", naming keys sense does not take), and the 2D rates are the same.
   ASSERT_EQ(sh("run " + kLit + " --set outputs.transient=true -o " + (dir_ / "run_t").string()).code, 0);
