@@ -84,11 +84,13 @@ json model_components(const RunConfig& c, const scenes::Scene* scene, const json
         std::string(environment ? "ambient.illuminance_lux or spectral_irradiance_W_m2_nm > 0; " : "no ambient environment; ") +
             (lights ? "glTF punctual lights (ambient.gltf_lights); " : "no glTF light used; ") +
             (emission ? "emissive materials" : "no emissive material"));
-    const bool guided = render::guided_connections_active(*scene, c.render.guided_connections);
+    const bool guided = render::guided_connections_active(*scene, c.render.guided_connections) && laser_traced(c);
     add(kFromScene[3].data(), guided,
         guided ? "a material of narrow glossy lobe (roughness 0.032-0.2): glossy and Lambertian vertices also draw towards "
                  "its reflections of the laser, with MIS (render.guided_connections)"
-               : (c.render.guided_connections ? "no material of roughness 0.032-0.2" : "render.guided_connections is false"));
+               : !c.render.guided_connections ? "render.guided_connections is false"
+               : !laser_traced(c)             ? "the laser is not traced (laser light)"
+                                              : "no material of roughness 0.032-0.2");
   } else if (from_run.is_array()) {
     for (const json& e : from_run)
       if (std::find(kFromScene.begin(), kFromScene.end(), e.value("component", "")) != kFromScene.end()) out.push_back(e);

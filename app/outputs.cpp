@@ -160,7 +160,8 @@ class Outputs::Images {
     // Each pixel's standard error, and its paths when a target error decides them (dropped in write() when
     // the light carries none: a sense of light saved before them).
     se_ch_ = laser_.channel("standard_error");
-    if (cfg.render.target_relative_error) samples_ch_ = laser_.channel("samples");
+    // (in ambient.exr when the laser is not traced: no laser.exr)
+    if (cfg.render.target_relative_error) samples_ch_ = (laser_traced_ ? laser_ : ambient_).channel("samples");
     ambient_ch_ = ambient_.channel("photons_per_second");
     ambient_se_ch_ = ambient_.channel("standard_error");
     maps_ch_ = {maps_.channel("gate_skew_ps"), maps_.channel("gate_length_ps"), maps_.channel("dcr_cps"), maps_.channel("pde"),
@@ -270,8 +271,14 @@ class Outputs::Images {
     }
     a["samples_per_pixel"] = {{"mean", n ? paths / double(n) : 0.0}, {"min", n ? lo : 0}, {"max", hi}};
     a["target_relative_error"] = cfg.render.target_relative_error ? nlohmann::json(*cfg.render.target_relative_error) : nlohmann::json(nullptr);
-    a["meaning"] = "laser.exr standard_error: the Monte Carlo standard error of photons_per_pulse; ambient.exr standard_error: "
-                   "of photons_per_second (docs/render.md, Accuracy)";
+    a["meaning"] = std::string(laser_traced_ ? "laser.exr standard_error: the Monte Carlo standard error of photons_per_pulse; "
+                                               "ambient.exr standard_error: of photons_per_second"
+                                             : "ambient.exr standard_error: the Monte Carlo standard error of photons_per_second "
+                                               "(the laser is not traced)") +
+                   (cfg.render.target_relative_error ? std::string("; ") + (laser_traced_ ? "laser.exr" : "ambient.exr") +
+                                                           " samples: each pixel's paths"
+                                                     : "") +
+                   " (docs/render.md, Accuracy)";
     return a;
   }
 
@@ -439,7 +446,7 @@ class Outputs::Images {
   std::vector<int32_t> pixel_samples_;
   float* se_ch_ = nullptr;       // laser.exr standard_error (null: not written)
   std::atomic<bool> se_seen_{false};  // a tile carried standard errors (not light saved before them)
-  float* samples_ch_ = nullptr;  // laser.exr samples (null: not written)
+  float* samples_ch_ = nullptr;  // laser.exr samples, ambient.exr's without the laser (null: not written)
   int object_slots_ = 0;
 };
 

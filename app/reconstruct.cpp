@@ -214,7 +214,12 @@ void check_writable(const std::string& file, const RunFolder& run, const std::st
 // folder), except the evaluated run's or dataset's own evaluation/, the default.
 void check_evaluation_folder(const fs::path& out, const fs::path& target) {
   std::error_code ec;
-  const fs::path where = fs::weakly_canonical(fs::absolute(out), ec), own = fs::weakly_canonical(fs::absolute(target), ec);
+  // (without a trailing separator, which weakly_canonical keeps where the path does not exist yet)
+  const auto folder_of = [&](const fs::path& p) {
+    fs::path c = fs::weakly_canonical(fs::absolute(p), ec);
+    return c.has_filename() ? c : c.parent_path();
+  };
+  const fs::path where = folder_of(out), own = folder_of(target);
   const auto own_evaluation = [&](const fs::path& folder) { return folder == own && where == own / "evaluation"; };
   for (fs::path folder = where.parent_path(); !folder.empty(); folder = folder.parent_path()) {
     const fs::path rel = where.lexically_relative(folder);
@@ -710,6 +715,8 @@ std::string evaluate(const EvaluateCommand& c) {
   // Written into a staging folder beside the output folder and swapped in whole (app/staging.h): a failed
   // or interrupted evaluation leaves the earlier one as it was, never a mix of the two.
   const fs::path out_given = c.out_dir.empty() ? target / "evaluation" : fs::path(c.out_dir);
+  if (!fs::exists(target / "metadata.json") && !fs::exists(target / "dataset.json"))
+    throw Error(c.target + ": neither a run folder (metadata.json) nor a dataset folder (dataset.json)");
   check_evaluation_folder(out_given, target);
   Staging staging(out_given,
                   {"metrics.json", "samples.csv", "range_error.png", "outcome.png"}, "an evaluation");

@@ -133,7 +133,8 @@ Geometry geometry_of(const scenes::Scene& scene) {
 }
 
 ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img,
-                            const TimeAxis& axis, int threads, const fs::path& out, int objects, const Geometry* geometry, int realisations) {
+                            const TimeAxis& axis, int threads, const fs::path& out, int objects, const Geometry* geometry, int realisations,
+                            std::optional<bool> laser) {
   ResourcePlan plan;
   const int64_t tile = std::min(c.render.tile_size, std::max(img.width, img.height));
   // Threads at work: at most one per tile (a 40 x 40 crop at --threads 1024 was refused for 26.7 GB; it
@@ -199,12 +200,12 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
   plan.memory.push_back({"bands of (K, H, W) .npy stacks and frames being assembled (camera.width_px, render.tile_size_px, " + th + each + ")", bands});
   plan.memory.push_back({"output pages in flight, file-backed (camera.width_px, render.tile_size_px)", resident, true});
   plan.memory.push_back({"Zarr chunks being filled, at most (camera.width_px, render.tile_size_px, " + th + ")", chunks});
-  // EXR images held whole until the end: ground truth (8 channels and 2 per layer, 4 and 4 per object
+  // EXR images held whole until the end: ground truth (8 channels and 2 per layer, 4 and 5 per object
   // slot), laser (photons, out of window, standard error), ambient (photons, standard error), maps (5),
   // intensity, and in a sweep labels.exr (4 per object slot).
   const int64_t slots = image_object_slots(c.render.max_layers, objects);
   const bool sweep = c.acquisition.mode == AcquisitionMode::GateSweep;
-  const int64_t channels = (c.outputs.ground_truth ? 8 + 2 * c.render.max_layers + 4 + 4 * slots : 0) + 3 + 2 + 5 +
+  const int64_t channels = (c.outputs.ground_truth ? 8 + 2 * c.render.max_layers + 4 + 5 * slots : 0) + 3 + 2 + 5 +
                            (sweep ? 0 : 2) + (sweep && c.outputs.ground_truth ? 4 * slots : 0);
   plan.memory.push_back({"images (" + std::to_string(img.width) + " x " + std::to_string(img.height) +
                              " pixels: camera.crop or width_px x height_px; " + std::to_string(channels) +
@@ -237,7 +238,7 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
   const bool compressed_images = c.outputs.exr_compression != ExrCompression::None;
   const std::string uncompressed = compressed_images ? " (uncompressed)" : "";
   // (a run that traces no laser writes no laser.exr and no laser channels of the ground truth)
-  const int64_t untraced = laser_traced(c) ? 0 : 3 + (c.outputs.ground_truth ? 2 + slots : 0);
+  const int64_t untraced = laser.value_or(laser_traced(c)) ? 0 : 3 + (c.outputs.ground_truth ? 2 + slots : 0);
   plan.disk.push_back({"images" + uncompressed, pixels * (channels - untraced - (sweep ? 0 : 2)) * 4, false, "", compressed_images,
                        false, true});
   if (!sweep) plan.disk.push_back({"intensity.exr" + uncompressed, pixels * 2 * 4, false, "", compressed_images});

@@ -6,6 +6,7 @@
 #pragma once
 #include <cstdint>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -86,7 +87,7 @@ Geometry geometry_of(const scenes::Scene& scene);
 // noise sampled together (sense --repeats), each with its own counts and frames in the tiles and bands.
 ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& sensor, const PixelRect& img,
                             const TimeAxis& axis, int threads, const std::filesystem::path& out, int objects = -1,
-                            const Geometry* geometry = nullptr, int realisations = 1);
+                            const Geometry* geometry = nullptr, int realisations = 1, std::optional<bool> laser = {});
 
 // Throws spadgen::Error, with the figures and the keys of the largest parts, when the run needs more
 // memory or disk than there is.

@@ -525,7 +525,8 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   // and take none; each further realisation writes its own counts and frames (its images are links).
   {
     const fs::path where = out.parent_path().empty() ? fs::path(".") : out.parent_path();
-    ResourcePlan plan = plan_resources(write_cfg, sensor, img, axis, options.threads, where, objects, nullptr, int(runs.size()));
+    ResourcePlan plan = plan_resources(write_cfg, sensor, img, axis, options.threads, where, objects, nullptr, int(runs.size()),
+                                       laser_traced(cfg));
     std::vector<ResourcePlan::Part> disk;
     for (ResourcePlan::Part p : plan.disk) {
       if (from_run.count(p.file)) continue;

@@ -467,8 +467,9 @@ class Run:
     @property
     def laser_standard_error(self):
         """(H, W) float32 photons per pulse: the Monte Carlo standard error of ``laser["photons_per_pulse"]``
-        (laser.exr ``standard_error``; docs/render.md, "Accuracy"). None for a run saved before it."""
-        laser = self.laser  # FileNotFoundError, saying why, for a run that traced no laser
+        (laser.exr ``standard_error``; docs/render.md, "Accuracy"). None for a run saved before it; a
+        FileNotFoundError, saying why, for a run that traced no laser (no laser.exr)."""
+        laser = self.laser
         return laser["standard_error"] if "standard_error" in laser else None
 
     @property
@@ -483,9 +484,10 @@ class Run:
         N exp(-lambda) lambda times the larger of the pixel's relative standard errors of its laser return and
         of its ambient light (every detection counted as the noisier light; the bound of docs/render.md,
         "Accuracy"). Zero where a pixel has neither. Needs detection_rate.npy and laser.exr's standard_error
-        (ambient.exr's too where the run has it; a 2D run that traced no laser has the ambient light's alone)."""
+        (ambient.exr's too where the run has it). The laser's error counts only where the counts see the laser:
+        in a gate sweep, and in the intensity mode with acquisition.intensity.laser_on."""
         rel = np.zeros((self.height, self.width), np.float64)
-        if self.has("laser.exr"):
+        if self.mode == "gate_sweep" or self.acquisition.get("laser_on", False):
             se = self.laser_standard_error
             if se is None:
                 raise KeyError(f"{self.path}/laser.exr has no standard_error channel (a run saved before it)")

@@ -297,6 +297,24 @@ TEST_F(App, AnIntensityRunWithoutTheLaserTracesNone) {
   const auto amb_kept = spadgen::writers::read_exr((dir_ / "kept/ambient.exr").string());
   for (const char* c : {"photons_per_second", "standard_error"}) EXPECT_EQ(amb_off.channels.at(c), amb_kept.channels.at(c)) << c;
   EXPECT_EQ(slurp(dir_ / "off/counts.npy"), slurp(dir_ / "kept/counts.npy"));
+  // With a target error, each pixel's paths go to ambient.exr (laser.exr held them); the guided connections,
+  // which draw towards the laser, are not modelled either (the multi-object scene's glossy plate).
+  r = sh(base + (dir_ / "target").string() + " --set render.target_relative_error=0.2 --set render.max_samples_per_pixel=8");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const auto samples = spadgen::writers::read_exr((dir_ / "target/ambient.exr").string()).channels.at("samples");
+  EXPECT_GE(*std::min_element(samples.begin(), samples.end()), 2.0f);
+  EXPECT_LE(*std::max_element(samples.begin(), samples.end()), 8.0f);
+  EXPECT_FALSE(fs::exists(dir_ / "target/laser.exr"));
+  r = sh("run " + kScenes + "multi_object.json -q --set acquisition.mode=intensity --set camera.crop=[480,230,16,8] "
+         "--set render.samples_per_pixel=1 --set outputs.previews=false -o " + (dir_ / "glossy").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  const nlohmann::json glossy = nlohmann::json::parse(slurp(dir_ / "glossy/metadata.json"));
+  for (const auto& e : glossy.at("model")) {
+    if (e.at("component") == "guided connections") {
+      EXPECT_FALSE(e.at("active").get<bool>()) << e;
+    }
+  }
+  EXPECT_EQ(glossy.at("run").at("rays").at("guided").get<uint64_t>(), 0u);
 }
 
 // outputs.storage = zarr changes the container only: every stack of a Zarr run holds the .npy run's values

@@ -448,10 +448,15 @@ TEST_F(Reconstruct, EvaluateWritesIntoNoRunOrDatasetButItsOwnEvaluation) {
     EXPECT_THAT(r.output, HasSubstr(says)) << out;
     EXPECT_FALSE(fs::exists(out)) << out;
   }
-  r = sh("evaluate " + a.string() + " -o " + (a / "evaluation").string());
+  // its own evaluation/, named with a trailing separator before it exists (it was taken for another folder)
+  r = sh("evaluate " + a.string() + " -o " + (a / "evaluation").string() + "/");
   EXPECT_EQ(r.code, 0) << r.output;
   r = sh(run_a);  // the run folder holds nothing foreign
   EXPECT_EQ(r.code, 0) << r.output;
+  // A target neither a run nor a dataset is named as such, not by the default -o inside it.
+  r = sh("evaluate " + (dir_ / "set").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("neither a run folder (metadata.json) nor a dataset folder (dataset.json)"));
 }
 
 // Detections evaluate would misread are refused, naming the file and what is wrong: detections of another
