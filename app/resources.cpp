@@ -219,7 +219,7 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
                                std::to_string(geometry->meshes) + " meshes)",
                            geometry->triangles * kBytesPerTriangle + geometry->meshes * kBytesPerMesh});
   // Decoded textures, shared by the loaded scene and the renderer's copy of it (the test chart's 16.8 MB
-  // texture: 248 MB planned against a 267 MB peak on 2 threads).
+  // texture: 252 MB planned against a 267 MB peak on 2 threads).
   if (geometry != nullptr && geometry->texture_bytes > 0)
     plan.memory.push_back({"the scene's textures, decoded (" + std::to_string(geometry->textures) +
                                (geometry->textures == 1 ? " texture" : " textures") + ")",
