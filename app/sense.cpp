@@ -217,8 +217,10 @@ void write_rescaled_transient(const fs::path& from, const std::string& to, const
 
 // The resolved scene less what does not change the sensor's noise-free files: the noise's seed and
 // whether counts and frames are written.
+// (the tables by their content, sensor_tables_hash, not by where they are: a --set may give them moved)
 nlohmann::ordered_json noise_free_part(nlohmann::ordered_json resolved) {
-  for (const char* key : {"/seeds/noise", "/outputs/counts", "/outputs/frames"}) {
+  for (const char* key : {"/seeds/noise", "/outputs/counts", "/outputs/frames", "/laser/pulse_shape_csv", "/sensor/gate/profile_csv",
+                          "/sensor/gate/maps_exr", "/sensor/pixel_A/pdp_csv", "/sensor/pixel_B/pdp_csv"}) {
     const json::json_pointer p(key);
     if (resolved.contains(p)) resolved[p.parent_pointer()].erase(p.back());
   }
@@ -262,7 +264,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     // A key the scene file does not have (a typo) gets the schema's message, with its suggestion, rather
     // than being called a key of the rendered light.
     (void)scenes::parse_scene_text(meta.at("resolved_scene").dump(), field<std::string>(meta, "/scene_file"_json_pointer, src), {o},
-                                   false);
+                                   scenes::FileChecks::None);
     throw Error("--set " + key + ": sense re-samples the sensor only, so it takes sensor.*, acquisition.*, seeds.chip, "
                   "seeds.noise and outputs.{expected_counts,detection_rate,counts,frames,previews,storage,exr_compression}; " + key +
                   " shapes the rendered light: use spadgen run");
@@ -285,16 +287,32 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   if (options.noise_seed) overrides.push_back("seeds.noise=" + text(*options.noise_seed));
   // The run's scene as it resolved, read from its metadata.json (and parsed as the run's below, for its
   // warnings and light): a mistake in it is named there, not against the scene file it names, which may
-  // hold a good value. The tables it names must be where the run read them (README), --set or not.
+  // hold a good value. Its tables are looked for only as this call uses them: a --set may give a table
+  // moved since the run in its new place.
+  const auto in_metadata = [&](const Error& e) {
+    return Error((src / "metadata.json").string() + ": resolved_scene (the run's scene file as it resolved; sense reads it "
+                 "from here): " + e.what());
+  };
   const scenes::ResolvedRun source = [&] {
     try {
-      return scenes::parse_scene_text(scene_text, scene_file, {}, false);
+      return scenes::parse_scene_text(scene_text, scene_file, {}, scenes::FileChecks::None);
     } catch (const Error& e) {
-      throw Error((src / "metadata.json").string() + ": resolved_scene (the run's scene file as it resolved; sense reads it "
-                  "from here): " + e.what());
+      throw in_metadata(e);
     }
   }();
-  const scenes::ResolvedRun first = scenes::parse_scene_text(scene_text, scene_file, overrides, false);
+  const scenes::ResolvedRun first = [&] {
+    try {
+      return scenes::parse_scene_text(scene_text, scene_file, overrides, scenes::FileChecks::Tables);
+    } catch (const Error&) {
+      // A table the run's scene names that is gone (and no --set gives anew) is the run's mistake: named there.
+      try {
+        (void)scenes::parse_scene_text(scene_text, scene_file, {}, scenes::FileChecks::Tables);
+      } catch (const Error& own) {
+        throw in_metadata(own);
+      }
+      throw;
+    }
+  }();
   // One resolved scene per realisation: noise seeds S, S + 1, ... (S itself when there is one). The scene
   // is resolved once with seeds.noise = S; realisation r is that with the seed S + r in its configuration
   // and its resolved scene file, as `--set seeds.noise=S+r` resolves it (tested: a realisation's metadata
@@ -306,7 +324,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   } else {
     std::vector<std::string> o = overrides;
     o.push_back("seeds.noise=" + text(noise0));
-    const scenes::ResolvedRun base = scenes::parse_scene_text(scene_text, scene_file, o, false);
+    const scenes::ResolvedRun base = scenes::parse_scene_text(scene_text, scene_file, o, scenes::FileChecks::Tables);
     runs.reserve(size_t(options.repeats));
     for (int r = 0; r + 1 < options.repeats; ++r) {
       scenes::ResolvedRun& run = runs.emplace_back(base);
@@ -329,7 +347,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     }
     // The last seed resolved in full, as `--set seeds.noise` resolves it.
     o.back() = "seeds.noise=" + text(last);
-    runs.push_back(scenes::parse_scene_text(scene_text, scene_file, o, false));
+    runs.push_back(scenes::parse_scene_text(scene_text, scene_file, o, scenes::FileChecks::Tables));
   }
   const RunConfig& cfg = first.config;
   for (const std::string& w : first.warnings) std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
@@ -441,7 +459,13 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   // bit, and is linked rather than computed and written again.
   const bool same_tables = meta.value("sensor_tables_fnv1a64", std::string()) == scenes::sensor_tables_hash(cfg);
   const bool same_sensor = same_tables && noise_free_part(first.resolved) == noise_free_part(source.resolved);
-  if (!same_tables && meta.contains("sensor_tables_fnv1a64") &&
+  // The run's own tables changed where it read them (when moved away, and given anew by --set: nothing to say)
+  const RunConfig& run_cfg = source.config;
+  bool tables_there = true;
+  for (const std::string* t : {&run_cfg.laser.pulse_shape_csv, &run_cfg.sensor.gate.profile_csv, &run_cfg.sensor.gate.maps_exr,
+                               &run_cfg.sensor.pixel_A.pdp_csv, &run_cfg.sensor.pixel_B.pdp_csv})
+    tables_there = tables_there && (t->empty() || fs::is_regular_file(*t));
+  if (!same_tables && tables_there && meta.contains("sensor_tables_fnv1a64") &&
       scenes::sensor_tables_hash(source.config) != meta.at("sensor_tables_fnv1a64").get<std::string>()) {
     std::string w = std::string(kTablesChangedWarning) + ", sensor.gate.profile_csv or maps_exr, a pdp_csv) have changed on "
                     "disk since the run: this sense uses them as they are now";

@@ -546,7 +546,7 @@ RunConfig to_config(const ojson& r, const std::string& scene_path) {
 bool rect_inside(const PixelRect& r, int w, int h) { return r.x0 >= 0 && r.y0 >= 0 && r.x1() <= w && r.y1() <= h; }
 
 // Checks that involve more than one key, in the units the user wrote.
-void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string>& warnings, bool check_gltf) {
+void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string>& warnings, FileChecks files) {
   const auto err = [&](const std::string& key, const std::string& what) { chk.error(key, what); };
   const int w = c.camera.width_px, h = c.camera.height_px;
   const auto rect_text = [](const PixelRect& r) {
@@ -665,7 +665,7 @@ void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string
       if (std::string(f.key) == "/gltf") err(f.key, "is empty; expected the path of the scene's .gltf or .glb file, relative to the scene file");
       continue;
     }
-    if (!check_gltf && std::string(f.key) == "/gltf") continue;
+    if (files == FileChecks::None || (files == FileChecks::Tables && std::string(f.key) == "/gltf")) continue;
     const std::string problem = file_problem(f.file, f.max_bytes);
     const std::string what = std::string(f.key) == "/gltf" ? "the glTF file " : "the file ";
     if (problem == "does not exist")
@@ -699,7 +699,7 @@ std::string join_errors(const std::vector<std::string>& errors) {
 }  // namespace
 
 ResolvedRun parse_scene_text(const std::string& text, const std::string& path, const std::vector<std::string>& overrides,
-                             bool check_gltf) {
+                             FileChecks files) {
   const std::string file = path.empty() ? "<scene>" : path;
   json doc = parse_json(text, file);
   if (!doc.is_object()) throw Error(file + ": expected a JSON object at the top, found " + describe_json(doc));
@@ -728,7 +728,7 @@ ResolvedRun parse_scene_text(const std::string& text, const std::string& path, c
   ResolvedRun run;
   run.resolved = resolve(doc);
   run.config = to_config(run.resolved, path);
-  check_consistency(run.config, chk, run.warnings, check_gltf);
+  check_consistency(run.config, chk, run.warnings, files);
   if (!chk.errors.empty()) throw Error(join_errors(chk.errors));
   ignored_keys(doc, run.config, run.warnings);
   run.set_keys = chk.set_keys;

@@ -37,10 +37,12 @@ struct ResolvedRun {
 ResolvedRun load_scene_file(const std::string& path, const std::vector<std::string>& overrides = {});
 
 // The same from JSON text; `path` names the file in messages and resolves the relative glTF path.
-// check_gltf false: the glTF file is not looked for (spadgen sense re-samples a run's saved light, which
-// needs the sensor's tables but not the scene's geometry).
+// files: which files the scene names are looked for (regular, of bounded size): all of them; the sensor's
+// tables alone (spadgen sense re-samples a run's saved light, which needs the tables but not the geometry);
+// none (sense's reading of the run's own scene, whose tables a --set may give anew in another place).
+enum class FileChecks { All, Tables, None };
 ResolvedRun parse_scene_text(const std::string& text, const std::string& path,
-                             const std::vector<std::string>& overrides = {}, bool check_gltf = true);
+                             const std::vector<std::string>& overrides = {}, FileChecks files = FileChecks::All);
 
 // Checks one override as `--set KEY=VALUE` does, without a scene file: the key's syntax (dots, quoted
 // names, a final [i]; scenes/key_path.h), that the schema has the key (a named element's key for

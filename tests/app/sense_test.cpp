@@ -154,6 +154,28 @@ TEST_F(App, SenseLinksTheRunsNoiseFreeFilesOnlyForTheRunsOwnSensor) {
   EXPECT_FALSE(fs::exists(dir_ / "many"));
 }
 
+// A sensor table moved since the run: a --set gives it in its new place (sense needed it where the run read
+// it too, for the run's own scene), the same table by its contents, so the run's noise-free files are linked;
+// without the --set the missing table is the run's mistake, named in its metadata.json.
+TEST_F(App, SenseTakesATableMovedSinceTheRunFromSet) {
+  fs::create_directories(dir_ / "was");
+  fs::create_directories(dir_ / "now");
+  std::ofstream(dir_ / "was/pdp.csv") << "wavelength_nm,pdp\n400,0.1\n1000,0.1\n";
+  Result r = sh("run " + kLit + " --set sensor.pixel_A.pdp_csv=" + (dir_ / "was/pdp.csv").string() + " -o " + (dir_ / "run").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  fs::rename(dir_ / "was/pdp.csv", dir_ / "now/pdp.csv");
+  r = sh("sense " + (dir_ / "run").string() + " -q -o " + (dir_ / "missing").string());
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr((dir_ / "run/metadata.json").string() + ": resolved_scene"));
+  EXPECT_THAT(r.output, HasSubstr((dir_ / "was/pdp.csv").string() + " does not exist"));
+  r = sh("sense " + (dir_ / "run").string() + " -q --noise-seed 11 --set sensor.pixel_A.pdp_csv=" + (dir_ / "now/pdp.csv").string() +
+         " -o " + (dir_ / "moved").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, Not(HasSubstr("have changed on disk")));
+  for (const char* f : {"detection_rate.npy", "sensor_maps.exr", "labels.exr"})
+    EXPECT_TRUE(fs::equivalent(dir_ / "run" / f, dir_ / "moved" / f)) << f;
+}
+
 // A run stored as Zarr: sense reads its light from the Zarr stores and writes what the run wrote, bit for
 // bit; asked for .npy stacks, it writes the .npy run's files.
 TEST_F(App, SenseReadsAZarrRunsLightAndWritesEitherStorage) {
