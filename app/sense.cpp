@@ -88,8 +88,15 @@ void copy_checked(const fs::path& a, const fs::path& b) {
   const auto fail = [&](const char* what, int err) {
     throw Error(std::string("cannot copy ") + a.string() + " to " + b.string() + " (" + what + "): " + std::strerror(err));
   };
-  const int in = ::open(a.c_str(), O_RDONLY | O_CLOEXEC);
+  // (O_NONBLOCK: a FIFO in the run's place would block the open; only a regular file is copied)
+  const int in = ::open(a.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
   if (in < 0) fail("open the run's file", errno);
+  struct stat st {};
+  if (::fstat(in, &st) != 0 || !S_ISREG(st.st_mode)) {
+    ::close(in);
+    throw Error(a.string() + ": is not a regular file (" + (S_ISFIFO(st.st_mode) ? "a FIFO" : S_ISDIR(st.st_mode) ? "a folder" : "a device or socket") +
+                "); expected the run's file as spadgen wrote it");
+  }
   const int out = ::open(b.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (out < 0) {
     const int err = errno;
@@ -127,10 +134,10 @@ void copy_checked(const fs::path& a, const fs::path& b) {
 void link_into(const fs::path& from, const Staging& staging, const std::string& rel) {
   const fs::path to = staging.path(rel);
   fs::create_directories(to.parent_path());
+  // (a symbolic link in the run is followed: its target is linked, not the link, whose relative target would
+  // point elsewhere from the staging folder, or at nothing)
   const auto link = [](const fs::path& a, const fs::path& b) {
-    std::error_code ec;
-    fs::create_hard_link(a, b, ec);
-    if (ec) copy_checked(a, b);
+    if (::linkat(AT_FDCWD, a.c_str(), AT_FDCWD, b.c_str(), AT_SYMLINK_FOLLOW) != 0) copy_checked(a, b);
   };
   if (!fs::is_directory(from)) return link(from, to);
   fs::create_directories(to);

@@ -51,6 +51,36 @@ void throw_errno(const std::string& what, const std::string& path, int err) {
   throw Error(what + " '" + path + "': " + std::strerror(err));
 }
 
+namespace {
+std::string not_regular(const std::string& path, mode_t mode) {
+  return "'" + path + "': is " + (S_ISFIFO(mode) ? "a FIFO" : S_ISDIR(mode) ? "a folder" : S_ISSOCK(mode) ? "a socket" : "a device") +
+         ", not a regular file; expected the file as spadgen wrote it";
+}
+}  // namespace
+
+int open_regular_file(const std::string& path) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
+  if (fd < 0) throw_errno("cannot open", path, errno);
+  struct stat st {};
+  if (::fstat(fd, &st) != 0) {
+    const int err = errno;
+    ::close(fd);
+    throw_errno("cannot read", path, err);
+  }
+  if (!S_ISREG(st.st_mode)) {
+    ::close(fd);
+    throw Error(not_regular(path, st.st_mode));
+  }
+  (void)::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);
+  return fd;
+}
+
+void require_regular_file(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) throw_errno("cannot open", path, errno);
+  if (!S_ISREG(st.st_mode)) throw Error(not_regular(path, st.st_mode));
+}
+
 void pwrite_all(int fd, const void* data, uint64_t size, uint64_t offset, const std::string& path) {
   const char* p = static_cast<const char*>(data);
   // Linux moves at most about 2 GiB per call; larger blocks need several.

@@ -9,6 +9,13 @@ namespace spadgen::writers::detail {
 // Throws spadgen::Error: "<what> '<path>': <strerror(err)>".
 [[noreturn]] void throw_errno(const std::string& what, const std::string& path, int err);
 
+// Opens `path` for reading, only if it is a regular file (a symbolic link followed): a FIFO, a device or a
+// folder in its place is refused, naming it, without blocking (the open does not wait for a FIFO's writer).
+// Returns the descriptor (blocking mode); throws spadgen::Error.
+int open_regular_file(const std::string& path);
+// The same check by name, for readers that open the file themselves (OpenEXR, std::ifstream).
+void require_regular_file(const std::string& path);
+
 // Writes all `size` bytes at `offset`, retrying short writes and EINTR. Safe to call from several
 // threads at once on one descriptor (pwrite does not move a shared file position).
 void pwrite_all(int fd, const void* data, uint64_t size, uint64_t offset, const std::string& path);

@@ -107,6 +107,7 @@ void set_exr_threads(int threads) { Imf::setGlobalThreadCount(threads > 0 ? thre
 
 ExrData read_exr(const std::string& path) {
   ExrData data;
+  detail::require_regular_file(path);  // (a FIFO would block OpenEXR's open)
   try {
     Imf::InputFile in(path.c_str());
     const Imf::Header& h = in.header();

@@ -416,8 +416,7 @@ std::string dict_value(const std::string& dict, const std::string& key, const st
 }  // namespace
 
 NpyReader::NpyReader(const std::string& path) : path_(path) {
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) detail::throw_errno("cannot open", path, errno);
+  const int fd = detail::open_regular_file(path);
   struct Closer {
     int fd;
     ~Closer() { ::close(fd); }

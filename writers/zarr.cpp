@@ -367,9 +367,9 @@ struct ZarrReader::Impl {
     const size_t nbytes = size_t(grid.chunk_elements * eb);
     auto out = std::make_shared<std::vector<char>>(nbytes);
     const std::string file = path + "/" + grid.key(c);
-    const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
+    struct stat entry {};
+    const int fd = ::stat(file.c_str(), &entry) != 0 && errno == ENOENT ? -1 : detail::open_regular_file(file);
     if (fd < 0) {
-      if (errno != ENOENT) detail::throw_errno("cannot open", file, errno);
       for (size_t i = 0; i < nbytes; i += size_t(eb)) std::memcpy(out->data() + i, fill.data(), size_t(eb));
       return out;
     }
@@ -423,6 +423,8 @@ struct ZarrReader::Impl {
 ZarrReader::ZarrReader(const std::string& path, size_t cache_chunks) : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
   m.path = path, m.capacity = std::max<size_t>(1, cache_chunks);
+  if (!fs::exists(path + "/.zarray")) throw Error(m.error("no .zarray in it"));
+  detail::require_regular_file(path + "/.zarray");
   std::ifstream in(path + "/.zarray", std::ios::binary);
   if (!in) throw Error(m.error("no .zarray in it"));
   std::ostringstream text;

@@ -779,3 +779,37 @@ TEST(InterruptGuards, NestedGuardsKeepTheSignalAndTheHandler) {
 }
 
 }  // namespace
+
+namespace {
+
+// A FIFO in a run folder where a file spadgen wrote was (light/values.npy, counts.npy, labels.exr) is refused,
+// named, at once: reading it blocked sense, reconstruct and evaluate for ever (SIGTERM did not end them,
+// and they held the run folder's lock). A run's files behind relative symbolic links are read through them:
+// sense linked the links themselves, which pointed at nothing from the staging folder (exit 3) or at another file.
+TEST_F(Hardening, AFifoInARunFolderIsRefusedAndSymbolicLinksAreFollowed) {
+  const fs::path run = dir_ / "run";
+  expect_exit(spadgen("run " + kTiny + " -q --set outputs.light=true -o " + run.string()), 0, "run");
+  for (const auto& [file, command] : {std::pair{"light/values.npy", "sense " + run.string() + " -q -o " + (dir_ / "s").string()},
+                                      {"counts.npy", "reconstruct " + run.string() + " -q -o " + (dir_ / "d.exr").string()},
+                                      {"labels.exr", "evaluate " + run.string() + " -q -o " + (dir_ / "e").string()}}) {
+    const fs::path f = run / file, kept = dir_ / "kept";
+    fs::rename(f, kept);
+    ASSERT_EQ(::mkfifo(f.c_str(), 0644), 0);
+    const Outcome o = spadgen(command, 20);
+    expect_exit(o, 1, file);
+    EXPECT_THAT(o.output, HasSubstr(f.string() + "': is a FIFO, not a regular file")) << file;
+    fs::remove(f);
+    fs::rename(kept, f);
+  }
+  // ground_truth.exr and a light array moved out of the run, relative links in their place
+  fs::rename(run / "ground_truth.exr", dir_ / "gt.exr");
+  fs::create_symlink("../gt.exr", run / "ground_truth.exr");
+  fs::rename(run / "light/values.npy", dir_ / "values.npy");
+  fs::create_symlink("../../values.npy", run / "light/values.npy");
+  const Outcome o = spadgen("sense " + run.string() + " -q -o " + (dir_ / "linked").string());
+  expect_exit(o, 0, "sense through links");
+  EXPECT_TRUE(fs::is_regular_file(fs::symlink_status(dir_ / "linked/ground_truth.exr")));
+  EXPECT_EQ(slurp(dir_ / "linked/ground_truth.exr"), slurp(dir_ / "gt.exr"));
+}
+
+}  // namespace
