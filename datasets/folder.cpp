@@ -241,6 +241,17 @@ std::optional<ojson> DatasetFolder::checked(const ojson& wanted) const {
                   "dataset folder (with its dataset.json): use another folder (-o)");
     }
   }
+  // The dataset's own folders are its own: a symbolic link there (samples/, failed/, a sample's folder) led
+  // the samples into another dataset's folders, which they replaced (exit 0), or made two samples one folder.
+  for (const char* own : {"samples", "failed"})
+    if (fs::is_symlink(dir_ / own, ec))
+      throw Error((dir_ / own).string() + " is a symbolic link; a dataset's " + own + " is a folder of its own (the samples "
+                  "would be written into the link's target): replace the link with the folder it should be");
+  if (fs::is_directory(dir_ / "samples", ec))
+    for (const auto& e : fs::directory_iterator(dir_ / "samples", ec))
+      if (e.is_symlink(ec))
+        throw Error(e.path().string() + " is a symbolic link; a dataset's samples are folders of their own (the sample "
+                    "would be written into the link's target): replace the link with the folder, or remove it");
   return prev;
 }
 

@@ -139,6 +139,32 @@ TEST_F(Dataset, TwoRunsIntoOneFolderShareTheSamples) {
   EXPECT_FALSE(fs::exists(dir_ / "both/failed"));
 }
 
+// A dataset's own folders are its own: samples/ linked to another dataset's, or one sample's folder linked to
+// another folder, is refused, naming the link, and the link's target is left as it was (the samples were
+// written through the link into the other dataset, exit 0).
+TEST_F(Dataset, SymbolicLinksAmongTheSamplesAreRefused) {
+  write(dir_ / "d.json", small_dataset(3));
+  Result r = sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "a").string() + " -q");
+  ASSERT_EQ(r.code, 0) << r.output;
+  fs::create_directories(dir_ / "other/000001");
+  write(dir_ / "other/000001/mine.txt", "mine");
+  fs::rename(dir_ / "a/samples/000001", dir_ / "a_000001");
+  fs::create_symlink(dir_ / "other/000001", dir_ / "a/samples/000001");
+  r = sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "a").string() + " -q");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr((dir_ / "a/samples/000001").string() + " is a symbolic link"));
+  fs::remove(dir_ / "a/samples/000001");
+  fs::rename(dir_ / "a/samples", dir_ / "a_samples");
+  fs::create_symlink(dir_ / "other", dir_ / "a/samples");
+  r = sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "a").string() + " -q");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr((dir_ / "a/samples").string() + " is a symbolic link"));
+  EXPECT_EQ(slurp(dir_ / "other/000001/mine.txt"), "mine");
+  std::vector<std::string> in_other;
+  for (const auto& e : fs::directory_iterator(dir_ / "other")) in_other.push_back(e.path().filename().string());
+  EXPECT_EQ(in_other, std::vector<std::string>{"000001"});
+}
+
 // A done sample that lost a listed file (removed to save space, or a copy that left it out) is damaged, not
 // done: status names the file, the index says so, and the next run generates it again, whole.
 TEST_F(Dataset, ASampleThatLostAFileIsDamagedAndGeneratedAgain) {
