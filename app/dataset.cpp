@@ -711,6 +711,7 @@ void dataset_run(const DatasetOptions& options) {
   const ThreadLimit thread_limit(options.threads);  // the samples' checks too (each run and sense sets its own as well)
   Estimator estimator(spec.repeats, options.threads);
   refuse_a_dataset_of_invalid_samples(spec, estimator, true);  // before the folder is made
+  refuse_output_inside(options.out_dir, "-o " + options.out_dir);  // (in a run folder, a dataset's entries, a set)
   const DatasetFolder folder(spec, options.out_dir);
   folder.claim();
   // The index is written by the last run on the folder to end (datasets::RunPresence).

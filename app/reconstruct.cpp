@@ -209,47 +209,6 @@ void check_writable(const std::string& file, const RunFolder& run, const std::st
     throw Error(file + ": cannot write into " + dir.string() + ": " + std::strerror(errno));
 }
 
-// evaluate's output folder (-o): not inside a run folder, a dataset's own entries or a folder of sense --repeats'
-// realisations, whose contents spadgen checks (-o RUN/scores made a later run into RUN refuse it for a foreign
-// folder), except the evaluated run's or dataset's own evaluation/, the default.
-void check_evaluation_folder(const fs::path& out, const fs::path& target) {
-  std::error_code ec;
-  // (without a trailing separator, which weakly_canonical keeps where the path does not exist yet)
-  const auto folder_of = [&](const fs::path& p) {
-    fs::path c = fs::weakly_canonical(fs::absolute(p), ec);
-    return c.has_filename() ? c : c.parent_path();
-  };
-  const fs::path where = folder_of(out), own = folder_of(target);
-  const auto own_evaluation = [&](const fs::path& folder) { return folder == own && where == own / "evaluation"; };
-  for (fs::path folder = where.parent_path(); !folder.empty(); folder = folder.parent_path()) {
-    const fs::path rel = where.lexically_relative(folder);
-    if (fs::is_regular_file(folder / "metadata.json", ec)) {
-      nlohmann::json meta;
-      try {  // (not a run's when it does not read as one)
-        const std::string m = (folder / "metadata.json").string();
-        meta = scenes::parse_json(scenes::read_file_bounded(m, 256u << 20, "metadata"), m);
-      } catch (const Error&) {
-      }
-      if (meta.is_object() && meta.contains("spadgen_version")) {
-        if (own_evaluation(folder)) return;
-        throw Error("-o " + out.string() + ": lies in the run folder " + folder.string() + ", which holds only what spadgen "
-                    "writes there (a later run into it, or a dataset's check of it, would refuse the folder for a foreign "
-                    "one); expected a folder outside run folders, or the evaluated run's own evaluation/ (the default)");
-      }
-    }
-    if (fs::is_regular_file(folder / "dataset.json", ec) && !rel.empty() && datasets::own_entries().count(rel.begin()->string())) {
-      if (own_evaluation(folder)) return;
-      throw Error("-o " + out.string() + ": is the dataset " + folder.string() + "'s own " + rel.string() + ", which the "
-                  "evaluation would replace or add to; expected a folder outside it, or the evaluated dataset's own "
-                  "evaluation/ (the default)");
-    }
-    if (fs::is_regular_file(folder / "repeat_000" / "metadata.json", ec))
-      throw Error("-o " + out.string() + ": lies in the folder " + folder.string() + " of sense --repeats' realisations, "
-                  "which holds those only; expected a folder outside it");
-    if (folder == folder.root_path()) break;
-  }
-}
-
 std::string slot_name(int s, const char* what) { return "det" + std::to_string(s) + "." + what; }
 
 // A range is metres from the camera centre, or NaN for no detection: an infinite one is neither (it was
@@ -717,7 +676,15 @@ std::string evaluate(const EvaluateCommand& c) {
   const fs::path out_given = c.out_dir.empty() ? target / "evaluation" : fs::path(c.out_dir);
   if (!fs::exists(target / "metadata.json") && !fs::exists(target / "dataset.json"))
     throw Error(c.target + ": neither a run folder (metadata.json) nor a dataset folder (dataset.json)");
-  check_evaluation_folder(out_given, target);
+  // Not inside a run folder, a dataset's own entries or a folder of sense --repeats' realisations (-o RUN/scores
+  // made the next run into RUN refuse it for a foreign folder), but the evaluated run's or dataset's own
+  // evaluation/, the default.
+  std::error_code ec;
+  fs::path own = fs::weakly_canonical(fs::absolute(target), ec);
+  if (!own.has_filename()) own = own.parent_path();
+  refuse_output_inside(out_given, "-o " + out_given.string(), [&](CheckedFolder kind, const fs::path& folder, const fs::path& rel) {
+    return kind != CheckedFolder::RepeatSet && folder == own && rel == "evaluation";
+  });
   Staging staging(out_given,
                   {"metrics.json", "samples.csv", "range_error.png", "outcome.png"}, "an evaluation");
   const std::string out = staging.path("");

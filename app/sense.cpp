@@ -505,6 +505,15 @@ std::vector<RunResult> sense(const SenseOptions& options) {
       throw Error("-o " + out.string() + ": it holds the run " + run_abs.string() + ", which sense reads, and sense replaces " +
                   "its output folder as a whole; write beside the run, not around it");
   }
+  // Not inside another run folder, a set of realisations or a dataset's own entries, but a dataset's sample
+  // when the dataset writes its realisations (samples/000003_r01).
+  refuse_output_inside(out, (options.out_dir.empty() ? "the output folder " : "-o ") + out.string(),
+                       [&](CheckedFolder kind, const fs::path&, const fs::path& rel) {
+                         const auto depth = std::distance(rel.begin(), rel.end());
+                         // (a set's own folder: the staging's check says what the set is, and how to write it again)
+                         return (kind == CheckedFolder::RepeatSet && depth == 1) ||
+                                (options.dataset && kind == CheckedFolder::Dataset && depth == 2 && *rel.begin() == "samples");
+                       });
   // Realisations differ in their sampled counts and frames only (a gate sweep's; a 2D run's images hold its
   // counts): without them R folders of the same files (it wrote them, exit 0).
   const std::vector<sensor::DeclaredOutput> declared = sensor.acquisition().outputs();

@@ -18,6 +18,7 @@
 #include <stdexcept>
 
 #include "core/error.h"
+#include "datasets/folder.h"
 #include "scenes/input.h"
 
 namespace spadgen::app {
@@ -76,6 +77,41 @@ Listed listed_files(const fs::path& out) {
 }
 
 }  // namespace
+
+void refuse_output_inside(const fs::path& out, const std::string& option,
+                          const std::function<bool(CheckedFolder, const fs::path&, const fs::path&)>& allowed) {
+  std::error_code ec;
+  fs::path where = fs::weakly_canonical(fs::absolute(out), ec);
+  if (!where.has_filename()) where = where.parent_path();  // (weakly_canonical keeps a trailing separator)
+  const auto check = [&](CheckedFolder kind, const fs::path& folder, const std::string& what) {
+    const fs::path rel = where.lexically_relative(folder);
+    if (allowed && allowed(kind, folder, rel)) return;
+    throw Error(option + ": " + what + "; expected a folder outside it");
+  };
+  for (fs::path folder = where.parent_path(); !folder.empty(); folder = folder.parent_path()) {
+    if (fs::is_regular_file(folder / "metadata.json", ec)) {
+      nlohmann::json meta;
+      try {  // (not a run's when it does not read as one)
+        const std::string m = (folder / "metadata.json").string();
+        meta = scenes::parse_json(scenes::read_file_bounded(m, 256u << 20, "metadata"), m);
+      } catch (const Error&) {
+      }
+      if (meta.is_object() && meta.contains("spadgen_version"))
+        return check(CheckedFolder::Run, folder, "lies in the run folder " + folder.string() + ", which holds only what spadgen "
+                     "writes there (a later run into it, or a dataset's check of it, would refuse the folder for a foreign one)");
+    }
+    if (fs::is_regular_file(folder / "dataset.json", ec)) {
+      const fs::path rel = where.lexically_relative(folder);
+      if (!rel.empty() && datasets::own_entries().count(rel.begin()->string()))
+        return check(CheckedFolder::Dataset, folder, "lies in the dataset " + folder.string() + "'s own " + rel.begin()->string() +
+                     ", which holds only what spadgen writes there");
+    }
+    if (fs::is_regular_file(folder / "repeat_000" / "metadata.json", ec))
+      return check(CheckedFolder::RepeatSet, folder, "lies in the folder " + folder.string() + " of sense --repeats' "
+                   "realisations, which holds those only");
+    if (folder == folder.root_path()) break;
+  }
+}
 
 Staging::Staging(const fs::path& out, std::vector<std::string> owned, std::string what)
     : owned_(std::move(owned)), what_(std::move(what)) {

@@ -25,6 +25,16 @@
 
 namespace spadgen::app {
 
+// The folders whose contents spadgen checks (a later run into the folder, or a dataset's check of its samples,
+// refuses one holding a foreign file or folder), which an output folder must not be placed inside.
+enum class CheckedFolder { Run, Dataset, RepeatSet };
+// Throws spadgen::Error, naming `option` (e.g. "-o out/x") and the folder, when `out` lies inside a run folder,
+// a folder of sense --repeats' realisations, or a dataset's own entries (samples/, failed/, evaluation/, ...),
+// the nearest such folder above it deciding, unless allowed(kind, folder, out relative to folder) says it is
+// that folder's own place (a dataset's sample, a run's evaluation/).
+void refuse_output_inside(const std::filesystem::path& out, const std::string& option,
+                          const std::function<bool(CheckedFolder, const std::filesystem::path&, const std::filesystem::path&)>& allowed = nullptr);
+
 class Staging {
  public:
   // Fault injection for tests: called before each file-system step of publishing and recovery with the

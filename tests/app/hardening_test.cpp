@@ -813,3 +813,30 @@ TEST_F(Hardening, AFifoInARunFolderIsRefusedAndSymbolicLinksAreFollowed) {
 }
 
 }  // namespace
+
+namespace {
+
+// An output folder inside a folder whose contents spadgen checks is refused, naming both, and nothing is
+// written there: run -o RUN/x, sense -o OTHER_RUN/x and dataset run -o RUN/x made the next run into RUN
+// refuse it for a foreign folder; run -o DATASET/failed replaced the dataset's own folder with a run.
+TEST_F(Hardening, AnOutputFolderInsideARunOrADatasetsOwnFoldersIsRefused) {
+  const fs::path a = dir_ / "a", b = dir_ / "b";
+  expect_exit(spadgen("run " + kTiny + " -q --set outputs.light=true -o " + a.string()), 0, "run a");
+  expect_exit(spadgen("run " + kTiny + " -q -o " + b.string()), 0, "run b");
+  fs::create_directories(dir_ / "d");
+  std::ofstream(dir_ / "d/dataset.json") << "{}";
+  std::ofstream(dir_ / "ds.json") << "{\"scenes\": [\"" << kFlat << "\"], \"samples\": 1}";
+  for (const auto& [command, out, says] :
+       {std::tuple{"run " + kTiny + " -q -o ", b / "x", "lies in the run folder " + b.string()},
+        {"run " + kTiny + " -q -o ", dir_ / "d/failed", "lies in the dataset " + (dir_ / "d").string() + "'s own failed"},
+        {"sense " + a.string() + " -q -o ", b / "x", "lies in the run folder " + b.string()},
+        {"dataset run " + (dir_ / "ds.json").string() + " -q -o ", b / "x", "lies in the run folder " + b.string()}}) {
+    const Outcome o = spadgen(command + out.string());
+    expect_exit(o, 1, command);
+    EXPECT_THAT(o.output, HasSubstr("-o " + out.string() + ": " + says)) << command;
+    EXPECT_FALSE(fs::exists(out)) << out;
+  }
+  expect_exit(spadgen("run " + kTiny + " -q -o " + b.string()), 0, "run b again: nothing foreign in it");
+}
+
+}  // namespace
