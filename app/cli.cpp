@@ -94,6 +94,17 @@ int run_command(const std::function<void()>& command, const std::string& name) {
     std::fprintf(stderr, "spadgen: error: %s%s\n", e.what(),
                  cwd_gone ? " (the current folder no longer exists: run from one that does, or give absolute paths)" : "");
     return kExitBadInput;
+  } catch (const std::system_error& e) {
+    // Threads the process may not start (ulimit -u on a shared node, or memory for their stacks, ulimit -v):
+    // the environment's, not a bug.
+    if (e.code() == std::errc::resource_unavailable_try_again || e.code() == std::errc::not_enough_memory) {
+      std::fprintf(stderr, "spadgen: error: cannot start the threads the command needs: %s (the processes this user may "
+                           "run, ulimit -u, or the memory for their stacks, ulimit -v); ask for fewer with --threads N\n",
+                   e.what());
+      return kExitBadInput;
+    }
+    std::fprintf(stderr, "spadgen: internal error: %s (a bug in spadgen; please report it with the command line)\n", e.what());
+    return kExitInternal;
   } catch (const std::bad_alloc&) {
     std::fprintf(stderr, "spadgen: error: out of memory: the run needs more memory than the machine gives it "
                          "(spadgen info shows the sizes of a run)\n");

@@ -174,7 +174,8 @@ int main(int argc, char** argv) {
                                                       "metrics.json, error maps; docs/detection.md");
   eval_cmd->add_option("target", eval.target, "run folder or dataset folder")->required()->check(CLI::ExistingDirectory);
   CLI::Option* eval_detections = eval_cmd->add_option("--detections", eval.detections, "detections file (.exr or .npy; for a dataset: its name inside each sample); default "
-                                                        "detections_<detector>.exr, computed in memory when absent");
+                                                        "detections_<detector>.exr, computed in memory when absent")
+                                     ->check(kNamed);  // (an empty name was ignored: the detector ran instead)
   // --detector and --noise-free choose the default file and the detector that runs without one: with
   // --detections they would be ignored without a word, so they are refused.
   eval_cmd->add_option("--detector", eval.detector, "the detector whose file is the default, or that runs when it is absent")

@@ -15,6 +15,7 @@
 #include <optional>
 #include <limits>
 #include <map>
+#include <set>
 #include <memory>
 #include <sstream>
 
@@ -466,7 +467,9 @@ reconstruct::Scores evaluate_run(const EvaluateCommand& c, const std::string& ru
                                  const std::string& maps_dir, std::map<int, std::string>* names, nlohmann::json* source,
                                  std::map<std::string, int>* ids_by_name = nullptr) {
   const RunFolder run(run_dir);
-  if (const auto& r = c.region; r && (r->x0 < 0 || r->y0 < 0 || r->x1() > run.width() || r->y1() > run.height()))
+  // (in 64 bits: x0 + width of int overflowed, and a rectangle of 2147483647 pixels passed)
+  if (const auto& r = c.region; r && (r->x0 < 0 || r->y0 < 0 || int64_t{r->x0} + r->width > run.width() ||
+                                      int64_t{r->y0} + r->height > run.height()))
     throw Error("--region " + std::to_string(r->x0) + "," + std::to_string(r->y0) + "," + std::to_string(r->width) + "," +
                 std::to_string(r->height) + ": expected a rectangle inside " + run_dir + "'s " + std::to_string(run.width()) +
                 " x " + std::to_string(run.height()) + " pixels (x, y from its top left)");
@@ -549,6 +552,7 @@ std::vector<fs::path> done_sample_folders(const fs::path& dir, std::map<std::str
                 "still running or was killed (the last run on the folder to end writes the index); run it again to finish");
   std::istringstream lines(scenes::read_file_bounded(index.string(), int64_t{1} << 36, "index.jsonl"));
   std::vector<fs::path> out;
+  std::set<std::string> seen;
   not_done.clear();
   int row = 0;
   for (std::string line; std::getline(lines, line);) {
@@ -578,16 +582,26 @@ std::vector<fs::path> done_sample_folders(const fs::path& dir, std::map<std::str
         if (f.is_string()) folders.push_back(f.get<std::string>());
     const std::string hash = text(r, "sample_hash");
     for (const std::string& f : folders) {
+      // A sample folder, once: a row copied by hand scored its sample twice; a folder outside samples/ was scored too.
+      const fs::path rel(f);
+      if (rel.is_absolute() || rel.empty() || *rel.begin() != "samples" ||
+          std::any_of(rel.begin(), rel.end(), [](const fs::path& part) { return part == ".." || part == "."; }))
+        throw Error(where + ": lists the folder " + f + ", not a sample folder of the dataset (samples/NAME); the index was "
+                    "damaged after `spadgen dataset run` wrote it: run the dataset again to write it");
+      if (!seen.insert(rel.lexically_normal().string()).second)
+        throw Error(where + ": lists the folder " + f + " again (an earlier row lists it); the index was damaged after "
+                    "`spadgen dataset run` wrote it: run the dataset again to write it");
       const fs::path meta = dir / f / "metadata.json";
-      std::string found = fs::exists(dir / f) ? "no readable metadata.json" : "no folder";
+      std::string found = fs::exists(dir / f) ? "its folder has no readable metadata.json" : "its folder does not exist";
       try {
         const nlohmann::json m = nlohmann::json::parse(scenes::read_file_bounded(meta.string(), int64_t{1} << 28, "metadata.json"));
         const auto at = "/dataset/sample_hash"_json_pointer;
-        found = m.contains(at) && m.at(at).is_string() ? "hash " + m.at(at).get<std::string>() : "no dataset section";
+        found = m.contains(at) && m.at(at).is_string() ? "its folder has hash " + m.at(at).get<std::string>()
+                                                       : "its folder has no dataset section";
       } catch (const std::exception&) {
       }
-      if (found != "hash " + hash)
-        throw Error((dir / f).string() + ": index.jsonl lists it done with hash " + hash + ", and its folder has " + found +
+      if (found != "its folder has hash " + hash)
+        throw Error((dir / f).string() + ": index.jsonl lists it done with hash " + hash + ", and " + found +
                     ": the sample was removed or changed since the index was written; `spadgen dataset run` brings the index up to date "
                     "(and generates what is not done)");
       out.push_back(dir / f);
@@ -714,9 +728,10 @@ std::string evaluate(const EvaluateCommand& c) {
     std::ostringstream csv;
     csv << "sample,objects,found,recall,detectable,detectable_found,detections,false,bias_mm,rms_mm\n";
     nlohmann::json rows = nlohmann::json::array();
-    if (fs::path(c.detections).is_absolute())
-      throw Error("--detections " + c.detections + ": for a dataset, expected a file name relative to each sample's folder "
-                  "(one file would be scored against every sample)");
+    const fs::path named(c.detections);
+    if (named.is_absolute() || std::any_of(named.begin(), named.end(), [](const fs::path& part) { return part == ".."; }))
+      throw Error("--detections " + c.detections + ": for a dataset, expected a file name relative to each sample's folder, "
+                  "inside it (one file would be scored against every sample)");
     int unlabelled = 0;
     for (const fs::path& p : samples) {
       InterruptGuard::check();

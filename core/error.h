@@ -13,7 +13,19 @@ namespace spadgen {
 
 class Error : public std::runtime_error {
  public:
-  explicit Error(const std::string& message) : std::runtime_error(message) {}
+  // A NUL byte in the message (a name from a file, "fl\u0000at.json") is written \0: what() would end there.
+  explicit Error(const std::string& message) : std::runtime_error(without_nul(message)) {}
+
+ private:
+  static std::string without_nul(const std::string& m) {
+    if (m.find('\0') == std::string::npos) return m;
+    std::string out;
+    for (const char c : m) {
+      if (c == '\0') out += "\\0";
+      else out += c;
+    }
+    return out;
+  }
 };
 
 // The run was asked to stop (SIGINT, SIGTERM) and stopped without publishing anything.

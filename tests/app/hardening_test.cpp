@@ -840,3 +840,31 @@ TEST_F(Hardening, AnOutputFolderInsideARunOrADatasetsOwnFoldersIsRefused) {
 }
 
 }  // namespace
+
+namespace {
+
+// Threads the process may not start (ulimit -v for their stacks here; ulimit -u on a shared node) are the
+// environment's refusal, exit 1, saying what to do: it was "internal error: Resource temporarily
+// unavailable", exit 3. (Not under AddressSanitizer, which reserves more address space than the limit.)
+TEST_F(Hardening, ThreadsTheProcessMayNotStartAreAnEnvironmentError) {
+#if defined(__SANITIZE_ADDRESS__)
+  GTEST_SKIP() << "AddressSanitizer reserves more address space than the limit";
+#else
+  const Result r = shell("bash -c 'ulimit -v 2000000; exec timeout -s KILL 60 " + bin() + " run " + kTiny + " -q --threads 300 -o " +
+                         (dir_ / "out").string() + "'");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("cannot start the threads the command needs"));
+  EXPECT_THAT(r.output, HasSubstr("ask for fewer with --threads N"));
+  EXPECT_FALSE(fs::exists(dir_ / "out"));
+#endif
+}
+
+// A NUL byte in a name (from JSON's \u0000) is written \0 in the message, which went on to its end (it ended
+// at the NUL: "the glTF file .../fl", no reason).
+TEST_F(Hardening, ANulByteInANameIsShownAndTheMessageIsWhole) {
+  const Outcome o = spadgen("run " + kTiny + " -q --set 'gltf=\"fl\\u0000x.gltf\"' -o " + (dir_ / "out").string());
+  expect_exit(o, 1, "NUL");
+  EXPECT_THAT(o.output, HasSubstr("fl\\0x.gltf does not exist; expected a path relative to the scene file"));
+}
+
+}  // namespace

@@ -12,6 +12,7 @@
 #include <fstream>
 #include <limits>
 #include <map>
+#include <regex>
 #include <nlohmann/json.hpp>
 #include <unistd.h>
 
@@ -151,6 +152,12 @@ TEST_F(Reconstruct, RefusesWhatItCannotReadNamingIt) {
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("--region 0,0,1000,10: expected a rectangle inside " + run.string() + "'s "), std::string::npos)
       << r.output;
+  // x0 + width beyond an int (it overflowed to a negative edge and passed, scoring 0 pixels, exit 0)
+  for (const char* region : {"8,0,2147483647,8", "0,1,1,2147483647", "2147483647,2147483647,1,1"}) {
+    r = sh("evaluate " + run.string() + " --region " + region + " -o " + (dir_ / "e_region").string());
+    EXPECT_EQ(r.code, 1) << region << r.output;
+    EXPECT_THAT(r.output, HasSubstr("expected a rectangle inside")) << region;
+  }
   r = sh("evaluate " + run.string() + " --tolerance-m 0");
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("--tolerance-m: expected a positive, finite number of metres"), std::string::npos) << r.output;
@@ -623,6 +630,7 @@ TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
   EXPECT_THAT(r.output, HasSubstr("1 sample folder (realisations included)\n"));
   EXPECT_EQ(nlohmann::json::parse(slurp(dir_ / "e_shrunk" / "metrics.json"))["samples"].size(), 1u);
   std::string meta = slurp(out / "samples/000000/metadata.json");
+  const std::string original_meta = meta;
   const size_t at = meta.find("\"sample_hash\": \"");
   ASSERT_NE(at, std::string::npos) << meta;
   meta[at + 16] = meta[at + 16] == '0' ? '1' : '0';
@@ -632,6 +640,27 @@ TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
   EXPECT_THAT(r.output, HasSubstr("samples/000000: index.jsonl lists it done with hash "));
   EXPECT_THAT(r.output, HasSubstr(": the sample was removed or changed since the index was written"));
   EXPECT_FALSE(fs::exists(dir_ / "e_changed"));
+  std::ofstream(out / "samples/000000/metadata.json") << original_meta;  // the sample as it was
+  // A damaged index: a row copied (its sample was scored twice), a folder outside samples/ (scored too).
+  const std::string index = slurp(out / "index.jsonl");
+  const std::string first_row = index.substr(0, index.find('\n') + 1);
+  for (const auto& [rows, says] : {std::pair{index + first_row, "lists the folder samples/000000 again"},
+                                   {index + std::regex_replace(first_row, std::regex("samples/000000"), "../../elsewhere"),
+                                    "lists the folder ../../elsewhere, not a sample folder of the dataset"}}) {
+    std::ofstream(out / "index.jsonl") << rows;
+    r = sh("evaluate " + out.string() + " -o " + (dir_ / "e_index").string());
+    EXPECT_EQ(r.code, 1) << r.output;
+    EXPECT_THAT(r.output, HasSubstr(says));
+  }
+  std::ofstream(out / "index.jsonl") << index;
+  // --detections: a name inside each sample's folder, not an empty one (ignored: the detector ran) nor one
+  // leaving the folder (one file scored against every sample)
+  for (const char* d : {"../../x.npy", "\"\""}) {
+    r = sh("evaluate " + out.string() + " --detections " + d + " -o " + (dir_ / "e_det").string());
+    EXPECT_EQ(r.code, 1) << d << r.output;
+  }
+  EXPECT_FALSE(fs::exists(dir_ / "e_index"));
+  EXPECT_FALSE(fs::exists(dir_ / "e_det"));
 
   // Two scenes: objects are counted by name across the samples (flat_target's "target" has id 0, as the
   // multi-object scene's "plate" has: it was counted as the plate)
