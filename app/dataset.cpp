@@ -712,7 +712,9 @@ void dataset_run(const DatasetOptions& options) {
   Estimator estimator(spec.repeats, options.threads);
   refuse_a_dataset_of_invalid_samples(spec, estimator, true);  // before the folder is made
   refuse_output_inside(options.out_dir, "-o " + options.out_dir);  // (in a run folder, a dataset's entries, a set)
-  const DatasetFolder folder(spec, options.out_dir);
+  // The folder as the samples' staging names it (-o LINK/../D: the dataset's own files and its samples went
+  // to two folders, the kernel's and the lexical one)
+  const DatasetFolder folder(spec, resolved_folder(options.out_dir).string());
   folder.claim();
   // The index is written by the last run on the folder to end (datasets::RunPresence).
   const std::unique_ptr<datasets::RunPresence> presence = folder.enter();

@@ -235,6 +235,9 @@ json metadata(const scenes::ResolvedRun& resolved, const std::vector<std::string
   meta["scene_hash_fnv1a64"] = p.scene_hash;
   meta["seed"] = p.seed;
   meta["sensor_tables_fnv1a64"] = scenes::sensor_tables_hash(cfg);
+  // Per table in use, so that spadgen sense says which of the tables it reads where the run did have changed
+  for (const scenes::SensorTable& t : scenes::sensor_tables(cfg))
+    if (!t.path.empty()) meta["sensor_table_fnv1a64"][t.key] = t.hash;
   // The seed each random stream used (seeds.* when set, else seed).
   meta["seeds"] = {{"light", cfg.light_seed()}, {"chip", cfg.chip_seed()}, {"noise", cfg.noise_seed()}};
   meta["versions"] = {{"spadgen", SPADGEN_VERSION},

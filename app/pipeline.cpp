@@ -94,7 +94,8 @@ RunResult run(const RunOptions& options) {
   const fs::path out = options.out_dir.empty() ? fs::path("out") / fs::path(options.scene_file).stem() : fs::path(options.out_dir);
   // Not inside a run folder, a set of realisations or a dataset's own entries (-o RUN/x made the next run
   // into RUN refuse it for a foreign folder), but a dataset's sample when the dataset writes it.
-  refuse_output_inside(out, (options.out_dir.empty() ? "the output folder " : "-o ") + out.string(),
+  refuse_output_inside(out, options.out_dir.empty() ? "the default output folder " + out.string() + " (give another with -o)"
+                                                   : "-o " + out.string(),
                        [&](CheckedFolder kind, const fs::path&, const fs::path& rel) {
                          const auto depth = std::distance(rel.begin(), rel.end());
                          // (a set's own folder: the staging's check says what the set is, and how to write it again)

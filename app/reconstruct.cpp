@@ -693,9 +693,7 @@ std::string evaluate(const EvaluateCommand& c) {
   // Not inside a run folder, a dataset's own entries or a folder of sense --repeats' realisations (-o RUN/scores
   // made the next run into RUN refuse it for a foreign folder), but the evaluated run's or dataset's own
   // evaluation/, the default.
-  std::error_code ec;
-  fs::path own = fs::weakly_canonical(fs::absolute(target), ec);
-  if (!own.has_filename()) own = own.parent_path();
+  const fs::path own = resolved_folder(target);
   refuse_output_inside(out_given, "-o " + out_given.string(), [&](CheckedFolder kind, const fs::path& folder, const fs::path& rel) {
     return kind != CheckedFolder::RepeatSet && folder == own && rel == "evaluation";
   });

@@ -311,9 +311,14 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     try {
       return scenes::parse_scene_text(scene_text, scene_file, overrides, scenes::FileChecks::Tables);
     } catch (const Error&) {
-      // A table the run's scene names that is gone (and no --set gives anew) is the run's mistake: named there.
+      // A table the run's scene names that is gone and that no --set gives anew is the run's mistake: named
+      // there (the run's scene with this call's tables alone).
+      std::vector<std::string> tables;
+      for (const std::string& o : overrides)
+        for (const scenes::SensorTable& t : scenes::sensor_tables(RunConfig{}))
+          if (o.substr(0, scenes::assignment_split(o)) == t.key) tables.push_back(o);
       try {
-        (void)scenes::parse_scene_text(scene_text, scene_file, {}, scenes::FileChecks::Tables);
+        (void)scenes::parse_scene_text(scene_text, scene_file, tables, scenes::FileChecks::Tables);
       } catch (const Error& own) {
         throw in_metadata(own);
       }
@@ -466,35 +471,47 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   // bit, and is linked rather than computed and written again.
   const bool same_tables = meta.value("sensor_tables_fnv1a64", std::string()) == scenes::sensor_tables_hash(cfg);
   const bool same_sensor = same_tables && noise_free_part(first.resolved) == noise_free_part(source.resolved);
-  // The run's own tables changed where it read them (when moved away, and given anew by --set: nothing to say)
-  const RunConfig& run_cfg = source.config;
-  bool tables_there = true;
-  for (const std::string* t : {&run_cfg.laser.pulse_shape_csv, &run_cfg.sensor.gate.profile_csv, &run_cfg.sensor.gate.maps_exr,
-                               &run_cfg.sensor.pixel_A.pdp_csv, &run_cfg.sensor.pixel_B.pdp_csv})
-    tables_there = tables_there && (t->empty() || fs::is_regular_file(*t));
-  if (!same_tables && tables_there && meta.contains("sensor_tables_fnv1a64") &&
-      scenes::sensor_tables_hash(source.config) != meta.at("sensor_tables_fnv1a64").get<std::string>()) {
-    std::string w = std::string(kTablesChangedWarning) + ", sensor.gate.profile_csv or maps_exr, a pdp_csv) have changed on "
-                    "disk since the run: this sense uses them as they are now";
-    std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
-    scene_warnings.push_back(std::move(w));  // metadata.json's warnings hold it too (it was on stderr only)
+  // The run's own tables that this call reads where the run read them and that changed there since (a table
+  // --set gives anew, in another place or of other contents, is this call's own: nothing to say of it).
+  if (!same_tables) {
+    std::string changed;
+    const std::vector<scenes::SensorTable> run_tables = scenes::sensor_tables(source.config), tables = scenes::sensor_tables(cfg);
+    const json* recorded = meta.contains("sensor_table_fnv1a64") && meta.at("sensor_table_fnv1a64").is_object()
+                               ? &meta.at("sensor_table_fnv1a64") : nullptr;
+    bool all_same_paths = true;
+    for (size_t i = 0; i < run_tables.size(); ++i) {
+      all_same_paths = all_same_paths && run_tables[i].path == tables[i].path;
+      if (recorded && !tables[i].path.empty() && tables[i].path == run_tables[i].path && recorded->contains(tables[i].key) &&
+          recorded->at(tables[i].key) != tables[i].hash)
+        changed += (changed.empty() ? "" : ", ") + tables[i].key;
+    }
+    // (a run saved before the per-table hashes: its tables at their paths, one hash of them all)
+    if (!recorded && all_same_paths && meta.contains("sensor_tables_fnv1a64"))
+      changed = "laser.pulse_shape_csv, sensor.gate.profile_csv or maps_exr, a pdp_csv";
+    if (!changed.empty()) {
+      std::string w = std::string(kTablesChangedWarning) + changed + ") have changed on disk since the run: this sense "
+                      "uses them as they are now";
+      std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
+      scene_warnings.push_back(std::move(w));  // metadata.json's warnings hold it too (it was on stderr only)
+    }
   }
   RunConfig write_cfg = cfg;  // what the sensor stage writes itself
   write_cfg.outputs.ground_truth = false, write_cfg.outputs.transient = false, write_cfg.outputs.light = false;
 
   // The run's folder as a name (RUN/, ./RUN/. and RUN are one folder): the default output is beside it.
-  const auto folder = [](const fs::path& p) {
-    fs::path c = fs::weakly_canonical(fs::absolute(p));
-    return c.has_filename() ? c : c.parent_path();
-  };
+  const auto folder = [](const fs::path& p) { return resolved_folder(p); };
   const fs::path run_abs = folder(src);
   fs::path run_named = fs::absolute(src).lexically_normal();  // as named: beside a link, not its target
   if (!run_named.has_filename()) run_named = run_named.parent_path();
   // A realisation of a sense --repeats set (set/repeat_001): beside the set (set-repeat_001-sense), which holds
-  // its realisations only.
-  const fs::path beside = realisations_of(meta) > 0 ? run_named.parent_path().parent_path() /
-                                            (run_named.parent_path().filename().string() + "-" + run_named.filename().string() + "-sense")
-                                      : run_named.parent_path() / (run_named.filename().string() + "-sense");
+  // its realisations only; a dataset's sample (DATASET/samples/000001): beside the dataset
+  // (DATASET-000001-sense), whose samples/ holds its samples only.
+  const fs::path set = run_named.parent_path(), dataset = set.parent_path();
+  const bool of_dataset = set.filename() == "samples" && fs::is_regular_file(dataset / "dataset.json");
+  const fs::path beside =
+      realisations_of(meta) > 0 ? set.parent_path() / (set.filename().string() + "-" + run_named.filename().string() + "-sense")
+      : of_dataset             ? dataset.parent_path() / (dataset.filename().string() + "-" + run_named.filename().string() + "-sense")
+                               : set / (run_named.filename().string() + "-sense");
   const fs::path out = options.out_dir.empty() ? beside : fs::path(options.out_dir);
   {
     const fs::path out_abs = folder(out);
@@ -507,7 +524,8 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   }
   // Not inside another run folder, a set of realisations or a dataset's own entries, but a dataset's sample
   // when the dataset writes its realisations (samples/000003_r01).
-  refuse_output_inside(out, (options.out_dir.empty() ? "the output folder " : "-o ") + out.string(),
+  refuse_output_inside(out, options.out_dir.empty() ? "the default output folder " + out.string() + " (give another with -o)"
+                                                   : "-o " + out.string(),
                        [&](CheckedFolder kind, const fs::path&, const fs::path& rel) {
                          const auto depth = std::distance(rel.begin(), rel.end());
                          // (a set's own folder: the staging's check says what the set is, and how to write it again)

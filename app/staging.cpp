@@ -78,11 +78,19 @@ Listed listed_files(const fs::path& out) {
 
 }  // namespace
 
+fs::path resolved_folder(const fs::path& out) {
+  std::error_code ec;
+  fs::path abs = fs::absolute(out, ec).lexically_normal();
+  if (!abs.has_filename()) abs = abs.parent_path();
+  fs::path resolved = fs::weakly_canonical(abs, ec);
+  return ec ? abs : resolved;
+}
+
 void refuse_output_inside(const fs::path& out, const std::string& option,
                           const std::function<bool(CheckedFolder, const fs::path&, const fs::path&)>& allowed) {
   std::error_code ec;
-  fs::path where = fs::weakly_canonical(fs::absolute(out), ec);
-  if (!where.has_filename()) where = where.parent_path();  // (weakly_canonical keeps a trailing separator)
+  // Where Staging writes it (".." taken before a symbolic link is followed, as the path names it)
+  const fs::path where = resolved_folder(out);
   const auto check = [&](CheckedFolder kind, const fs::path& folder, const std::string& what) {
     const fs::path rel = where.lexically_relative(folder);
     if (allowed && allowed(kind, folder, rel)) return;
@@ -91,9 +99,9 @@ void refuse_output_inside(const fs::path& out, const std::string& option,
   for (fs::path folder = where.parent_path(); !folder.empty(); folder = folder.parent_path()) {
     if (fs::is_regular_file(folder / "metadata.json", ec)) {
       nlohmann::json meta;
-      try {  // (not a run's when it does not read as one)
+      try {  // (not a run's when it does not read as one; a run's is kilobytes: another tool's large file is not read)
         const std::string m = (folder / "metadata.json").string();
-        meta = scenes::parse_json(scenes::read_file_bounded(m, 256u << 20, "metadata"), m);
+        meta = scenes::parse_json(scenes::read_file_bounded(m, 16u << 20, "metadata"), m);
       } catch (const Error&) {
       }
       if (meta.is_object() && meta.contains("spadgen_version"))
@@ -103,7 +111,8 @@ void refuse_output_inside(const fs::path& out, const std::string& option,
     if (fs::is_regular_file(folder / "dataset.json", ec)) {
       const fs::path rel = where.lexically_relative(folder);
       if (!rel.empty() && datasets::own_entries().count(rel.begin()->string()))
-        return check(CheckedFolder::Dataset, folder, "lies in the dataset " + folder.string() + "'s own " + rel.begin()->string() +
+        return check(CheckedFolder::Dataset, folder, (std::distance(rel.begin(), rel.end()) == 1 ? "is" : "lies in") +
+                     std::string(" the dataset ") + folder.string() + "'s own " + rel.begin()->string() +
                      ", which holds only what spadgen writes there");
     }
     if (fs::is_regular_file(folder / "repeat_000" / "metadata.json", ec))
@@ -162,16 +171,6 @@ void Staging::remove_leftovers(const fs::path& parent) {
 }
 
 namespace {
-// The output folder as Staging and FolderLock name it: absolute, "out/" as "out", through a symbolic link
-// to a folder the folder.
-fs::path resolved_folder(const fs::path& out) {
-  std::error_code ec;
-  fs::path abs = fs::absolute(out, ec).lexically_normal();
-  if (!abs.has_filename()) abs = abs.parent_path();
-  fs::path resolved = fs::weakly_canonical(abs, ec);
-  return ec ? abs : resolved;
-}
-
 // The lock file of the resolved folder P/NAME: P/.NAME.spadgen-lock.
 fs::path lock_path_of(const fs::path& resolved) {
   return resolved.parent_path() / ("." + resolved.filename().string() + ".spadgen-lock");

@@ -25,6 +25,10 @@
 
 namespace spadgen::app {
 
+// An output folder as Staging and FolderLock name it: absolute, "out/" as "out", ".." taken as the path
+// names it (lexically), then through a symbolic link to a folder the folder.
+std::filesystem::path resolved_folder(const std::filesystem::path& out);
+
 // The folders whose contents spadgen checks (a later run into the folder, or a dataset's check of its samples,
 // refuses one holding a foreign file or folder), which an output folder must not be placed inside.
 enum class CheckedFolder { Run, Dataset, RepeatSet };

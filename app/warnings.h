@@ -30,7 +30,7 @@ inline constexpr const char* kGateWarning = "sensor.gate: the gate is tabulated"
 
 // `sense`'s warning that the sensor's tables changed on disk since the run starts with this (a sensor
 // warning: a sense of that sense compares its own tables).
-inline constexpr const char* kTablesChangedWarning = "the sensor's tables (laser.pulse_shape_csv";
+inline constexpr const char* kTablesChangedWarning = "the sensor's tables (";
 
 // Every warning about a pixel type blind to the laser holds this.
 inline constexpr const char* kPdpWarning = ": its photon detection probability at the laser's wavelength";

@@ -877,6 +877,17 @@ std::string sensor_tables_hash(const RunConfig& c) {
   return hex64(h);
 }
 
+std::vector<SensorTable> sensor_tables(const RunConfig& c) {
+  std::vector<SensorTable> out;
+  for (const auto& [key, path] : {std::pair<const char*, const std::string*>{"laser.pulse_shape_csv", &c.laser.pulse_shape_csv},
+                                  {"sensor.gate.profile_csv", &c.sensor.gate.profile_csv},
+                                  {"sensor.gate.maps_exr", &c.sensor.gate.maps_exr},
+                                  {"sensor.pixel_A.pdp_csv", &c.sensor.pixel_A.pdp_csv},
+                                  {"sensor.pixel_B.pdp_csv", &c.sensor.pixel_B.pdp_csv}})
+    out.push_back({key, *path, hex64(fnv1a64(path->empty() ? std::string() : file_bytes(*path)))});
+  return out;
+}
+
 bool time_window_used(const RunConfig& c) {
   return c.acquisition.mode == AcquisitionMode::GateSweep || c.outputs.transient || c.outputs.light;
 }

@@ -69,6 +69,12 @@ std::string schema_json();
 // a table not set, or not readable): a run's metadata.json records it, so that `spadgen sense` knows
 // whether the sensor it rebuilds is the run's, and a dataset's sample hash holds it.
 std::string sensor_tables_hash(const RunConfig& c);
+// The same per table: its key (laser.pulse_shape_csv, ...), its path (as the scene resolved it, "" when not
+// set) and the FNV-1a 64 (hex) of its bytes (of "" when not set or not readable), in that key order.
+struct SensorTable {
+  std::string key, path, hash;
+};
+std::vector<SensorTable> sensor_tables(const RunConfig& c);
 // Whether c names any of those tables.
 bool uses_sensor_tables(const RunConfig& c);
 

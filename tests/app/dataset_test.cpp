@@ -146,6 +146,11 @@ TEST_F(Dataset, SymbolicLinksAmongTheSamplesAreRefused) {
   write(dir_ / "d.json", small_dataset(3));
   Result r = sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "a").string() + " -q");
   ASSERT_EQ(r.code, 0) << r.output;
+  // A sense of a sample writes beside the dataset by default (DATASET-000000-sense), not into its samples/
+  r = sh("sense " + (dir_ / "a/samples/000000").string() + " -q --noise-seed 9");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_TRUE(fs::exists(dir_ / "a-000000-sense/metadata.json"));
+  EXPECT_EQ(sh("dataset status " + (dir_ / "a").string()).code, 0);
   fs::create_directories(dir_ / "other/000001");
   write(dir_ / "other/000001/mine.txt", "mine");
   fs::rename(dir_ / "a/samples/000001", dir_ / "a_000001");

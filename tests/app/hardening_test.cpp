@@ -826,15 +826,20 @@ TEST_F(Hardening, AnOutputFolderInsideARunOrADatasetsOwnFoldersIsRefused) {
   fs::create_directories(dir_ / "d");
   std::ofstream(dir_ / "d/dataset.json") << "{}";
   std::ofstream(dir_ / "ds.json") << "{\"scenes\": [\"" << kFlat << "\"], \"samples\": 1}";
+  fs::create_directories(dir_ / "elsewhere/sub");
+  fs::create_symlink(dir_ / "elsewhere/sub", dir_ / "lnk");
   for (const auto& [command, out, says] :
        {std::tuple{"run " + kTiny + " -q -o ", b / "x", "lies in the run folder " + b.string()},
-        {"run " + kTiny + " -q -o ", dir_ / "d/failed", "lies in the dataset " + (dir_ / "d").string() + "'s own failed"},
+        {"run " + kTiny + " -q -o ", dir_ / "d/failed", "is the dataset " + (dir_ / "d").string() + "'s own failed"},
         {"sense " + a.string() + " -q -o ", b / "x", "lies in the run folder " + b.string()},
-        {"dataset run " + (dir_ / "ds.json").string() + " -q -o ", b / "x", "lies in the run folder " + b.string()}}) {
+        {"dataset run " + (dir_ / "ds.json").string() + " -q -o ", b / "x", "lies in the run folder " + b.string()},
+        // through a symbolic link and "..": where the output is written, ".." taken as the path names it
+        {"run " + kTiny + " -q -o ", dir_ / "lnk/../b/x", "lies in the run folder " + b.string()}}) {
     const Outcome o = spadgen(command + out.string());
     expect_exit(o, 1, command);
     EXPECT_THAT(o.output, HasSubstr("-o " + out.string() + ": " + says)) << command;
     EXPECT_FALSE(fs::exists(out)) << out;
+    EXPECT_FALSE(fs::exists(b / "x")) << out;
   }
   expect_exit(spadgen("run " + kTiny + " -q -o " + b.string()), 0, "run b again: nothing foreign in it");
 }

@@ -449,7 +449,7 @@ TEST_F(Reconstruct, EvaluateWritesIntoNoRunOrDatasetButItsOwnEvaluation) {
   std::ofstream(dir_ / "set/repeat_000/metadata.json") << "{}";
   for (const auto& [out, says] : {std::pair{a / "scores", "lies in the run folder"}, {a / "evaluation/x", "lies in the run folder"},
                                   {b / "evaluation", "lies in the run folder"}, {dir_ / "d/samples/e", "lies in the dataset"},
-                                  {dir_ / "d/evaluation", "lies in the dataset"}, {dir_ / "set/e", "sense --repeats"}}) {
+                                  {dir_ / "d/evaluation", "is the dataset"}, {dir_ / "set/e", "sense --repeats"}}) {
     r = sh("evaluate " + a.string() + " -o " + out.string());
     EXPECT_EQ(r.code, 1) << out << r.output;
     EXPECT_THAT(r.output, HasSubstr(says)) << out;

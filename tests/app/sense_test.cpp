@@ -174,6 +174,35 @@ TEST_F(App, SenseTakesATableMovedSinceTheRunFromSet) {
   EXPECT_THAT(r.output, Not(HasSubstr("have changed on disk")));
   for (const char* f : {"detection_rate.npy", "sensor_maps.exr", "labels.exr"})
     EXPECT_TRUE(fs::equivalent(dir_ / "run" / f, dir_ / "moved" / f)) << f;
+
+  // Two tables (pixel A's and B's PDP). Both moved, one given anew: the other is named, not the one given.
+  const auto pdp = [](const fs::path& p, double v) { std::ofstream(p) << "wavelength_nm,pdp\n400," << v << "\n1000," << v << "\n"; };
+  pdp(dir_ / "was/a.csv", 0.1);
+  pdp(dir_ / "was/b.csv", 0.2);
+  const std::string tables = " --set sensor.pixel_A.pdp_csv=" + (dir_ / "was/a.csv").string() + " --set sensor.pixel_B.pdp_csv=" +
+                             (dir_ / "was/b.csv").string();
+  r = sh("run " + kLit + tables + " -o " + (dir_ / "two").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  fs::rename(dir_ / "was/a.csv", dir_ / "now/a.csv");
+  fs::rename(dir_ / "was/b.csv", dir_ / "now/b.csv");
+  const std::string a_anew = " --set sensor.pixel_A.pdp_csv=" + (dir_ / "now/a.csv").string();
+  r = sh("sense " + (dir_ / "two").string() + " -q" + a_anew + " -o " + (dir_ / "one_given").string());
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr((dir_ / "was/b.csv").string() + " does not exist"));
+  EXPECT_THAT(r.output, Not(HasSubstr((dir_ / "was/a.csv").string())));
+  // A given anew, B back where the run read it but changed: B is said to have changed (it was not: one flag
+  // for all the tables, A's gone)
+  pdp(dir_ / "was/b.csv", 0.3);
+  r = sh("sense " + (dir_ / "two").string() + " -q" + a_anew + " -o " + (dir_ / "b_changed").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("the sensor's tables (sensor.pixel_B.pdp_csv) have changed on disk since the run"));
+  // Both given anew (B of other contents): this call reads none of the run's, so nothing changed under it
+  // (it said the run's had changed, B being changed where the run read it)
+  pdp(dir_ / "now/b.csv", 0.4);
+  r = sh("sense " + (dir_ / "two").string() + " -q" + a_anew + " --set sensor.pixel_B.pdp_csv=" + (dir_ / "now/b.csv").string() +
+         " -o " + (dir_ / "both_given").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, Not(HasSubstr("have changed on disk")));
 }
 
 // A run stored as Zarr: sense reads its light from the Zarr stores and writes what the run wrote, bit for
