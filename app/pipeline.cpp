@@ -94,14 +94,7 @@ RunResult run(const RunOptions& options) {
   const fs::path out = options.out_dir.empty() ? fs::path("out") / fs::path(options.scene_file).stem() : fs::path(options.out_dir);
   // Not inside a run folder, a set of realisations or a dataset's own entries (-o RUN/x made the next run
   // into RUN refuse it for a foreign folder), but a dataset's sample when the dataset writes it.
-  refuse_output_inside(out, options.out_dir.empty() ? "the default output folder " + out.string() + " (give another with -o)"
-                                                   : "-o " + out.string(),
-                       [&](CheckedFolder kind, const fs::path&, const fs::path& rel) {
-                         const auto depth = std::distance(rel.begin(), rel.end());
-                         // (a set's own folder: the staging's check says what the set is, and how to write it again)
-                         return (kind == CheckedFolder::RepeatSet && depth == 1) ||
-                                (options.dataset && kind == CheckedFolder::Dataset && depth == 2 && *rel.begin() == "samples");
-                       });
+  refuse_run_folder_inside(out, !options.out_dir.empty(), options.dataset.has_value());
   // The staging first: it removes what a killed run left beside the folder, which the disk check would
   // otherwise count as taken.
   Staging staging(out);

@@ -524,14 +524,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   }
   // Not inside another run folder, a set of realisations or a dataset's own entries, but a dataset's sample
   // when the dataset writes its realisations (samples/000003_r01).
-  refuse_output_inside(out, options.out_dir.empty() ? "the default output folder " + out.string() + " (give another with -o)"
-                                                   : "-o " + out.string(),
-                       [&](CheckedFolder kind, const fs::path&, const fs::path& rel) {
-                         const auto depth = std::distance(rel.begin(), rel.end());
-                         // (a set's own folder: the staging's check says what the set is, and how to write it again)
-                         return (kind == CheckedFolder::RepeatSet && depth == 1) ||
-                                (options.dataset && kind == CheckedFolder::Dataset && depth == 2 && *rel.begin() == "samples");
-                       });
+  refuse_run_folder_inside(out, !options.out_dir.empty(), options.dataset.has_value());
   // Realisations differ in their sampled counts and frames only (a gate sweep's; a 2D run's images hold its
   // counts): without them R folders of the same files (it wrote them, exit 0).
   const std::vector<sensor::DeclaredOutput> declared = sensor.acquisition().outputs();

@@ -122,6 +122,15 @@ void refuse_output_inside(const fs::path& out, const std::string& option,
   }
 }
 
+void refuse_run_folder_inside(const fs::path& out, bool given, bool dataset_sample) {
+  refuse_output_inside(out, given ? "-o " + out.string() : "the default output folder " + out.string() + " (give another with -o)",
+                       [&](CheckedFolder kind, const fs::path&, const fs::path& rel) {
+                         const auto depth = std::distance(rel.begin(), rel.end());
+                         return (kind == CheckedFolder::RepeatSet && depth == 1) ||
+                                (dataset_sample && kind == CheckedFolder::Dataset && depth == 2 && *rel.begin() == "samples");
+                       });
+}
+
 Staging::Staging(const fs::path& out, std::vector<std::string> owned, std::string what)
     : owned_(std::move(owned)), what_(std::move(what)) {
   init(out);

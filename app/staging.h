@@ -39,6 +39,11 @@ enum class CheckedFolder { Run, Dataset, RepeatSet };
 void refuse_output_inside(const std::filesystem::path& out, const std::string& option,
                           const std::function<bool(CheckedFolder, const std::filesystem::path&, const std::filesystem::path&)>& allowed = nullptr);
 
+// refuse_output_inside for the folder of a run or a sense (`given`: named by -o, else the default), which a
+// dataset writes into its samples/NAME (`dataset_sample`); a set's direct child is left to Staging, whose
+// message says what the set is and how to write it again.
+void refuse_run_folder_inside(const std::filesystem::path& out, bool given, bool dataset_sample);
+
 class Staging {
  public:
   // Fault injection for tests: called before each file-system step of publishing and recovery with the
