@@ -12,7 +12,6 @@
 #include <fstream>
 #include <limits>
 #include <map>
-#include <regex>
 #include <nlohmann/json.hpp>
 #include <unistd.h>
 
@@ -644,9 +643,11 @@ TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
   // A damaged index: a row copied (its sample was scored twice), a folder outside samples/ (scored too).
   const std::string index = slurp(out / "index.jsonl");
   const std::string first_row = index.substr(0, index.find('\n') + 1);
+  std::string outside = first_row;  // (no std::regex: GCC 12 warns inside it under the sanitizers' -O1)
+  ASSERT_NE(outside.find("\"samples/000000\""), std::string::npos) << first_row;
+  outside.replace(outside.find("\"samples/000000\""), 16, "\"../../elsewhere\"");
   for (const auto& [rows, says] : {std::pair{index + first_row, "lists the folder samples/000000 again"},
-                                   {index + std::regex_replace(first_row, std::regex("samples/000000"), "../../elsewhere"),
-                                    "lists the folder ../../elsewhere, not a sample folder of the dataset"}}) {
+                                   {index + outside, "lists the folder ../../elsewhere, not a sample folder of the dataset"}}) {
     std::ofstream(out / "index.jsonl") << rows;
     r = sh("evaluate " + out.string() + " -o " + (dir_ / "e_index").string());
     EXPECT_EQ(r.code, 1) << r.output;
