@@ -226,8 +226,13 @@ void write_rescaled_transient(const fs::path& from, const std::string& to, const
 // whether counts and frames are written.
 // (the tables by their content, sensor_tables_hash, not by where they are: a --set may give them moved)
 nlohmann::ordered_json noise_free_part(nlohmann::ordered_json resolved) {
-  for (const char* key : {"/seeds/noise", "/outputs/counts", "/outputs/frames", "/laser/pulse_shape_csv", "/sensor/gate/profile_csv",
-                          "/sensor/gate/maps_exr", "/sensor/pixel_A/pdp_csv", "/sensor/pixel_B/pdp_csv"}) {
+  std::vector<std::string> keys = {"/seeds/noise", "/outputs/counts", "/outputs/frames"};
+  for (const scenes::SensorTable& t : scenes::sensor_tables(RunConfig{})) {  // (their keys: "sensor.gate.profile_csv")
+    std::string pointer = "/" + t.key;
+    std::replace(pointer.begin(), pointer.end(), '.', '/');
+    keys.push_back(pointer);
+  }
+  for (const std::string& key : keys) {
     const json::json_pointer p(key);
     if (resolved.contains(p)) resolved[p.parent_pointer()].erase(p.back());
   }
@@ -499,8 +504,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   write_cfg.outputs.ground_truth = false, write_cfg.outputs.transient = false, write_cfg.outputs.light = false;
 
   // The run's folder as a name (RUN/, ./RUN/. and RUN are one folder): the default output is beside it.
-  const auto folder = [](const fs::path& p) { return resolved_folder(p); };
-  const fs::path run_abs = folder(src);
+  const fs::path run_abs = resolved_folder(src);
   fs::path run_named = fs::absolute(src).lexically_normal();  // as named: beside a link, not its target
   if (!run_named.has_filename()) run_named = run_named.parent_path();
   // A realisation of a sense --repeats set (set/repeat_001): beside the set (set-repeat_001-sense), which holds
@@ -514,7 +518,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
                                : set / (run_named.filename().string() + "-sense");
   const fs::path out = options.out_dir.empty() ? beside : fs::path(options.out_dir);
   {
-    const fs::path out_abs = folder(out);
+    const fs::path out_abs = resolved_folder(out);
     const auto [end, it] = std::mismatch(run_abs.begin(), run_abs.end(), out_abs.begin(), out_abs.end());
     if (end == run_abs.end())  // out is the run's folder or inside it
       throw Error("-o " + out.string() + ": sense writes a new folder beside the run, not into it");

@@ -4,6 +4,7 @@
 #include "scene_file.h"
 
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <cstring>
 #include <cmath>
@@ -866,10 +867,20 @@ std::string schema_json() {
   return root.dump(2) + "\n";
 }
 
+namespace {
+// The tables the sensor stage reads besides the scene file, by key, in the order their hashes take them.
+std::array<std::pair<const char*, const std::string*>, 5> table_paths(const RunConfig& c) {
+  return {{{"laser.pulse_shape_csv", &c.laser.pulse_shape_csv},
+           {"sensor.gate.profile_csv", &c.sensor.gate.profile_csv},
+           {"sensor.gate.maps_exr", &c.sensor.gate.maps_exr},
+           {"sensor.pixel_A.pdp_csv", &c.sensor.pixel_A.pdp_csv},
+           {"sensor.pixel_B.pdp_csv", &c.sensor.pixel_B.pdp_csv}}};
+}
+}  // namespace
+
 std::string sensor_tables_hash(const RunConfig& c) {
   uint64_t h = fnv1a64("");
-  for (const std::string* path : {&c.laser.pulse_shape_csv, &c.sensor.gate.profile_csv, &c.sensor.gate.maps_exr,
-                                  &c.sensor.pixel_A.pdp_csv, &c.sensor.pixel_B.pdp_csv}) {
+  for (const auto& [key, path] : table_paths(c)) {
     const std::string bytes = path->empty() ? std::string() : file_bytes(*path);
     // The length first, so that tables moved from one key to the next do not hash alike.
     h = fnv1a64(std::to_string(bytes.size()) + ":" + bytes, h);
@@ -879,11 +890,7 @@ std::string sensor_tables_hash(const RunConfig& c) {
 
 std::vector<SensorTable> sensor_tables(const RunConfig& c) {
   std::vector<SensorTable> out;
-  for (const auto& [key, path] : {std::pair<const char*, const std::string*>{"laser.pulse_shape_csv", &c.laser.pulse_shape_csv},
-                                  {"sensor.gate.profile_csv", &c.sensor.gate.profile_csv},
-                                  {"sensor.gate.maps_exr", &c.sensor.gate.maps_exr},
-                                  {"sensor.pixel_A.pdp_csv", &c.sensor.pixel_A.pdp_csv},
-                                  {"sensor.pixel_B.pdp_csv", &c.sensor.pixel_B.pdp_csv}})
+  for (const auto& [key, path] : table_paths(c))
     out.push_back({key, *path, hex64(fnv1a64(path->empty() ? std::string() : file_bytes(*path)))});
   return out;
 }
@@ -893,8 +900,8 @@ bool time_window_used(const RunConfig& c) {
 }
 
 bool uses_sensor_tables(const RunConfig& c) {
-  return !c.laser.pulse_shape_csv.empty() || !c.sensor.gate.profile_csv.empty() || !c.sensor.gate.maps_exr.empty() ||
-         !c.sensor.pixel_A.pdp_csv.empty() || !c.sensor.pixel_B.pdp_csv.empty();
+  const auto paths = table_paths(c);
+  return std::any_of(paths.begin(), paths.end(), [](const auto& t) { return !t.second->empty(); });
 }
 
 }  // namespace spadgen::scenes
