@@ -55,6 +55,12 @@ std::unique_ptr<RunFolder::Stack> open_run_stack(const std::string& dir_name, co
 
 namespace {
 
+std::string format_value(float v) {
+  std::ostringstream o;
+  o << v;
+  return o.str();
+}
+
 template <class T>
 T get(const nlohmann::json& j, const std::string& pointer, const std::string& file) {
   const nlohmann::json::json_pointer p(pointer);
@@ -195,6 +201,14 @@ void RunFolder::read_rows(int y0, int y1, bool rate, bool to_counts, float* out)
     s->read((int64_t(k) * H_ + y0) * W_, n, plane.data());
     for (int64_t i = 0; i < n; ++i) {
       float v = plane[size_t(i)];
+      // A count above the frames, or a rate that is no rate, is not what a run writes (a hand-edited or
+      // damaged file): its detections and scores would be of data no camera gives.
+      if (!(v >= 0.0f) || (!rate && v > float(frames_)))
+        throw Error(s->path() + ": " + (rate ? "detection rate " : "count ") + format_value(v) + " at (k " +
+                    std::to_string(k) + ", y " + std::to_string(y0 + i / W_) + ", x " + std::to_string(i % W_) +
+                    "); expected " +
+                    (rate ? std::string("a rate >= 0 (expected detections per frame)")
+                          : "0 to " + std::to_string(frames_) + " (/acquisition/frames_per_k of metadata.json)"));
       if (to_counts) v = static_cast<float>(frames_ * -std::expm1(-double(v)));
       out[size_t(i) * size_t(K_) + size_t(k)] = v;
     }

@@ -181,6 +181,48 @@ TEST_F(Reconstruct, RefusesWhatItCannotReadNamingIt) {
   EXPECT_NE(r.output.find("no sensor_maps.exr"), std::string::npos) << r.output;
 }
 
+// A count above the frames (a hand-edited or damaged counts.npy) or a rate below 0 or NaN is no camera's data:
+// reconstruct and evaluate took them without a word, and detected and scored them.
+TEST_F(Reconstruct, RefusesCountsAboveTheFramesAndRatesThatAreNoRates) {
+  const fs::path run = dir_ / "run";
+  Result r = sh("run " + kScenes + "flat_target.json --set camera.crop=[502,240,8,8] --set render.samples_per_pixel=1 -q -o " +
+                run.string() + " --set acquisition.frames=100");
+  ASSERT_EQ(r.code, 0) << r.output;
+  // overwrite one element of a stack in place, after its header
+  const auto poke = [](const fs::path& npy, size_t element, const std::string& bytes) {
+    std::fstream f(npy, std::ios::in | std::ios::out | std::ios::binary);
+    char h[10];
+    f.read(h, 10);
+    const size_t hlen = size_t(uint8_t(h[8])) | (size_t(uint8_t(h[9])) << 8);
+    f.seekp(std::streamoff(10 + hlen + element * bytes.size()));
+    f.write(bytes.data(), std::streamsize(bytes.size()));
+  };
+  const Npy counts = read_npy(run / "counts.npy");
+  ASSERT_EQ(counts.descr, "|u1");
+  const int64_t K = counts.shape[0];
+  // element (k 1, y 2, x 3) of (K, 8, 8)
+  poke(run / "counts.npy", size_t(1 * 64 + 2 * 8 + 3), std::string(1, char(101)));
+  // evaluate first: it detects in memory when the run has no detections file
+  for (const std::string& cmd : {"evaluate " + run.string() + " -q", "reconstruct " + run.string() + " -q"}) {
+    r = sh(cmd);
+    EXPECT_EQ(r.code, 1) << cmd << r.output;
+    EXPECT_THAT(r.output, HasSubstr((run / "counts.npy").string() +
+                                    ": count 101 at (k 1, y 2, x 3); expected 0 to 100 (/acquisition/frames_per_k of metadata.json)"))
+        << cmd;
+  }
+  poke(run / "counts.npy", size_t(1 * 64 + 2 * 8 + 3), std::string(1, char(100)));  // N itself is a count
+  EXPECT_EQ(sh("reconstruct " + run.string() + " -q").code, 0);
+  for (const float bad : {-1.0f, std::numeric_limits<float>::quiet_NaN()}) {
+    std::string b(4, '\0');
+    std::memcpy(b.data(), &bad, 4);
+    poke(run / "detection_rate.npy", size_t((K - 1) * 64 + 7 * 8 + 7), b);
+    r = sh("reconstruct " + run.string() + " -q --noise-free");
+    EXPECT_EQ(r.code, 1) << r.output;
+    EXPECT_THAT(r.output, HasSubstr((run / "detection_rate.npy").string() + ": detection rate " + (bad < 0 ? "-1" : "nan") +
+                                    " at (k " + std::to_string(K - 1) + ", y 7, x 7); expected a rate >= 0 (expected detections per frame)"));
+  }
+}
+
 // evaluate reads ground_truth.exr and labels.exr as the run's: one of another size (replaced since, from
 // another crop) was read past its end and scored (exit 0, object counts of garbage); a labels.exr with
 // fewer object slots than the ground truth was an internal error (map::at). Each is named.
