@@ -74,6 +74,35 @@ bool sense_may_set(const std::string& written) {
 
 json read_metadata(const fs::path& dir) { return reconstruct::read_run_metadata(dir.string()); }
 
+// "0.10.2" -> {0, 10, 2}; empty when not numbers and dots.
+std::vector<long> version_numbers(const std::string& v) {
+  std::vector<long> n;
+  size_t i = 0;
+  while (i < v.size()) {
+    size_t j = i;
+    while (j < v.size() && v[j] >= '0' && v[j] <= '9' && j - i < 9) ++j;
+    if (j == i || (j < v.size() && v[j] != '.')) return {};
+    n.push_back(std::stol(v.substr(i, j - i)));
+    i = j + 1;
+  }
+  return n;
+}
+
+// A run of a later spadgen may lay out its light or its keys otherwise than this one reads them: refused,
+// named, rather than re-sampled on a guess. An earlier version's run is read as long as its keys are there.
+void refuse_later_version(const json& meta, const fs::path& src) {
+  const json* v = meta.contains("spadgen_version") ? &meta.at("spadgen_version") : nullptr;
+  if (!v) return;
+  const std::vector<long> theirs = v->is_string() ? version_numbers(v->get<std::string>()) : std::vector<long>{};
+  if (theirs.empty())
+    throw Error((src / "metadata.json").string() + ": spadgen_version " + v->dump() +
+                "; expected a version such as \"" SPADGEN_VERSION "\" (a damaged metadata.json: run the scene again)");
+  if (theirs > version_numbers(SPADGEN_VERSION))
+    throw Error((src / "metadata.json").string() + ": written by spadgen " + v->get<std::string>() +
+                ", later than this spadgen " SPADGEN_VERSION ", whose sense may read its light otherwise: use spadgen " +
+                v->get<std::string>() + " or later");
+}
+
 template <class T>
 T field(const json& meta, const json::json_pointer& p, const fs::path& dir) {
   if (!meta.contains(p)) throw Error((dir / "metadata.json").string() + ": no " + p.to_string() + "; was it written by this spadgen?");
@@ -254,6 +283,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   std::optional<FolderLock> run_lock;
   if (fs::is_regular_file(src / "metadata.json")) run_lock.emplace(src, true);
   const json meta = read_metadata(src);
+  refuse_later_version(meta, src);
   if (!meta.contains("light"))
     throw Error(src.string() + ": the run saved no light; run it again with --set outputs.light=true to re-sample its sensor");
   // Everything sense reads from metadata.json, checked once: a folder of another spadgen version is named.

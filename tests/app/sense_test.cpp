@@ -799,6 +799,30 @@ TEST_F(App, SenseRefusesWhatItCannotDo) {
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_THAT(r.output, HasSubstr("metadata.json: files does not list metadata.json, as every run's list does"));
   EXPECT_FALSE(fs::exists(dir_ / "no_files"));
+  // A run of a later spadgen, which may lay out its light otherwise, is named rather than read on a guess (it
+  // was sensed); an earlier version's is read while its keys are there; a version that is no version is named.
+  const std::string ours = nlohmann::json::parse(slurp(dir_ / "nan" / "metadata.json"))["spadgen_version"];
+  const std::string later = std::to_string(std::stoi(ours.substr(0, ours.find('.'))) + 1) + ".0.0";
+  for (const std::string& version : {later, std::string("0.0.1"), std::string("x.1")}) {
+    ASSERT_EQ(sh("run " + kLit + " -o " + (dir_ / "versioned").string()).code, 0);
+    {
+      nlohmann::ordered_json meta = nlohmann::ordered_json::parse(slurp(dir_ / "versioned" / "metadata.json"));
+      meta["spadgen_version"] = version;
+      std::ofstream(dir_ / "versioned" / "metadata.json") << meta.dump(2);
+    }
+    const fs::path out = dir_ / ("v_" + version);
+    r = sh("sense " + (dir_ / "versioned").string() + " -q -o " + out.string());
+    if (version == "0.0.1") {
+      EXPECT_EQ(r.code, 0) << r.output;
+      continue;
+    }
+    EXPECT_EQ(r.code, 1) << version << r.output;
+    EXPECT_THAT(r.output, HasSubstr((dir_ / "versioned" / "metadata.json").string() +
+                                    (version == later ? ": written by spadgen " + later + ", later than this spadgen " + ours +
+                                                            ", whose sense may read its light otherwise: use spadgen " + later + " or later"
+                                                      : ": spadgen_version \"x.1\"; expected a version such as \"" + ours + "\"")));
+    EXPECT_FALSE(fs::exists(out));
+  }
 }
 
 // The saved light holds every rendered bin of every pixel (the transient, compactly), and its own
