@@ -397,6 +397,21 @@ std::string read_error(const std::string& path, const std::string& what) {
   return "cannot read '" + path + "' as a NumPy array: " + what;
 }
 
+// Header text in a one-line message: control bytes escaped (\n, \xNN), at most 80 characters.
+std::string shown(const std::string& text) {
+  std::string out;
+  for (size_t i = 0; i < text.size() && i < 80; ++i) {
+    const unsigned char c = static_cast<unsigned char>(text[i]);
+    if (c == '\n') out += "\\n";
+    else if (c < 0x20 || c >= 0x7f) {
+      const char hex[] = "0123456789abcdef";
+      out += std::string("\\x") + hex[c >> 4] + hex[c & 15];
+    } else
+      out += char(c);
+  }
+  return text.size() > 80 ? out + "..." : out;
+}
+
 // The value of `key` in the header's Python dict literal, as its raw text (a quoted string, False/True or a tuple).
 std::string dict_value(const std::string& dict, const std::string& key, const std::string& path) {
   const size_t k = dict.find("'" + key + "'");
@@ -436,7 +451,10 @@ NpyReader::NpyReader(const std::string& path) : path_(path) {
   else if (major == 2 || major == 3) header_len = int64_t(u[8]) | int64_t(u[9]) << 8 | int64_t(u[10]) << 16 | int64_t(u[11]) << 24, prefix = 12;
   else throw Error(read_error(path, "format version " + std::to_string(major) + " is not 1, 2 or 3"));
   data_offset_ = prefix + header_len;
-  if (data_offset_ > size) throw Error(read_error(path, "the header runs past the end of the file"));
+  if (data_offset_ > size)
+    throw Error(read_error(path, "its header (format version " + std::to_string(major) + ", " + std::to_string(header_len) +
+                                     " bytes after a " + std::to_string(prefix) + "-byte prefix) runs past the end of the file (" +
+                                     std::to_string(size) + " bytes)"));
   const std::string dict(map_ + prefix, static_cast<size_t>(header_len));
   const std::string d = dict_value(dict, "descr", path);
   const std::pair<const char*, NpyWriter::Dtype> known[] = {
@@ -445,11 +463,11 @@ NpyReader::NpyReader(const std::string& path) : path_(path) {
   bool found = false;
   for (const auto& [text, dt] : known)
     if (d == text) dtype_ = dt, found = true;
-  if (!found) throw Error(read_error(path, "dtype " + d + " is not one spadgen writes (<f4, <f8, |u1, <u2, <i4, <i8)"));
+  if (!found) throw Error(read_error(path, "dtype " + shown(d) + " is not one spadgen writes (<f4, <f8, |u1, <u2, <i4, <i8)"));
   if (dict_value(dict, "fortran_order", path) != "False") throw Error(read_error(path, "Fortran order is not supported"));
   const std::string s = dict_value(dict, "shape", path);
   // (d0, d1, ...) of non-negative integers, a trailing comma allowed: "(5,)", "()".
-  const auto malformed = [&] { return Error(read_error(path, "malformed shape " + s + ", expected (d0, d1, ...) of integers >= 0")); };
+  const auto malformed = [&] { return Error(read_error(path, "malformed shape " + shown(s) + ", expected (d0, d1, ...) of integers >= 0")); };
   if (s.size() < 2 || s.front() != '(' || s.back() != ')') throw malformed();
   int64_t n = 1;
   const size_t end = s.size() - 1;
@@ -458,10 +476,10 @@ NpyReader::NpyReader(const std::string& path) : path_(path) {
     if (i == end) break;
     int64_t v = 0;
     const auto [next, ec] = std::from_chars(s.data() + i, s.data() + end, v);
-    if (ec == std::errc::result_out_of_range) throw Error(read_error(path, "shape " + s + " too large"));
+    if (ec == std::errc::result_out_of_range) throw Error(read_error(path, "shape " + shown(s) + " too large"));
     if (ec != std::errc() || v < 0) throw malformed();
     shape_.push_back(v);
-    if (v != 0 && n > std::numeric_limits<int64_t>::max() / v) throw Error(read_error(path, "shape " + s + " too large"));
+    if (v != 0 && n > std::numeric_limits<int64_t>::max() / v) throw Error(read_error(path, "shape " + shown(s) + " too large"));
     n *= v;
     i = size_t(next - s.data());
     while (i < end && s[i] == ' ') ++i;
@@ -470,7 +488,7 @@ NpyReader::NpyReader(const std::string& path) : path_(path) {
   elements_ = n;
   const int64_t eb = NpyWriter::element_bytes(dtype_);
   if (elements_ > (size - data_offset_) / eb)
-    throw Error(read_error(path, "the file holds " + std::to_string(size - data_offset_) + " bytes of data, shape " + s +
+    throw Error(read_error(path, "the file holds " + std::to_string(size - data_offset_) + " bytes of data, shape " + shown(s) +
                                  " needs " + std::to_string(elements_ * eb)));
 }
 

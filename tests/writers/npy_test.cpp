@@ -131,6 +131,38 @@ TEST(NpyReader, AMalformedShapeIsAnErrorNamingTheFile) {
   }
   EXPECT_EQ(NpyReader(with_shape("(2,3) ")).shape(), (std::vector<int64_t>{2, 3}));
   EXPECT_EQ(NpyReader(with_shape("(6,)  ")).shape(), (std::vector<int64_t>{6}));
+  // A shape without its ')' ran to the header's end, and the header's newline and padding went into the
+  // one-line message as they were: escaped.
+  try {
+    NpyReader r(with_shape("(2, 3,"));
+    ADD_FAILURE() << "an unclosed shape was read";
+  } catch (const Error& e) {
+    const std::string m = e.what();
+    EXPECT_EQ(m.find('\n'), std::string::npos) << m;
+    EXPECT_NE(m.find("malformed shape (2, 3,"), std::string::npos) << m;
+    EXPECT_NE(m.find("\\n"), std::string::npos) << m;
+  }
+}
+
+// A header longer than the file says which format version's prefix it read the length from (a version 3
+// file whose prefix was of version 1 was only "the header runs past the end").
+TEST(NpyReader, AHeaderPastTheEndNamesItsVersionAndSizes) {
+  TempDir dir;
+  {
+    NpyWriter w(dir.file("a.npy"), Dtype::F32, {2, 3});
+    w.commit();
+  }
+  std::string bytes = read_bytes(dir.file("a.npy"));
+  bytes[6] = 3;  // version 3.0 reads a 4-byte length: bytes 8-11, here the v1 length and "{'"
+  std::ofstream(dir.file("b.npy"), std::ios::binary) << bytes;
+  try {
+    NpyReader r(dir.file("b.npy"));
+    ADD_FAILURE() << "was read";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("b.npy' as a NumPy array: its header (format version 3, "), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("runs past the end of the file (" + std::to_string(bytes.size()) + " bytes)"),
+              std::string::npos) << e.what();
+  }
 }
 
 TEST(NpyWriter, RejectsWritesOutsideTheArrayAndAfterCommit) {
