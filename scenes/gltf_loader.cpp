@@ -639,6 +639,23 @@ Trs Loader::decompose(size_t i, const glm::dmat4& m) const {
   return out;
 }
 
+// "U+0063 U+0061 U+0066 U+00E9" of valid UTF-8 text (a byte that starts no sequence: U+FFFD).
+std::string code_points(const std::string& v) {
+  std::string out;
+  for (size_t i = 0; i < v.size();) {
+    const auto b = static_cast<unsigned char>(v[i]);
+    const size_t n = b < 0x80 ? 1 : b >= 0xF0 ? 4 : b >= 0xE0 ? 3 : b >= 0xC0 ? 2 : 1;
+    uint32_t cp = n == 1 ? (b < 0x80 ? b : 0xFFFD) : b & (0x7F >> n);
+    for (size_t k = 1; k < n && i + k < v.size(); ++k) cp = cp << 6 | (static_cast<unsigned char>(v[i + k]) & 0x3F);
+    char buf[12];
+    std::snprintf(buf, sizeof buf, "U+%04X", static_cast<unsigned>(cp));
+    if (!out.empty()) out += ' ';
+    out += buf;
+    i += n;
+  }
+  return out;
+}
+
 // The glTF element carrying `name` in `names` (kind "node", section "/nodes/"): exactly one must.
 size_t Loader::named(const char* kind, const char* section, const std::vector<std::string>& names, const std::string& name) const {
   std::string key = section;  // built up: GCC 12 warns falsely (-Wrestrict) on const char* + std::string
@@ -667,7 +684,17 @@ size_t Loader::named(const char* kind, const char* section, const std::vector<st
   for (const std::string& n : distinct)
     if (const size_t d = edit_distance(lower(name), lower(n)); d < best_d) best_d = d, best = n;
   std::string msg = key + ": the glTF file " + path_ + " has no " + kind + " named " + shown;
-  if (!best.empty()) msg += "; did you mean " + nlohmann::json(best).dump() + "?";
+  if (!best.empty()) {
+    msg += "; did you mean " + nlohmann::json(best).dump();
+    // Two spellings of one accented name (NFC and NFD: "caf\u00e9" and "cafe\u0301") print alike: their code
+    // points tell them apart.
+    const auto non_ascii = [](const std::string& v) {
+      return std::any_of(v.begin(), v.end(), [](char c) { return static_cast<unsigned char>(c) >= 0x80; });
+    };
+    if (non_ascii(best) && non_ascii(name))
+      msg += " (code points " + code_points(best) + "; you gave " + code_points(name) + ")";
+    msg += "?";
+  }
   if (distinct.empty()) {
     msg += std::string(" (none of its ") + kind + "s has a name)";
   } else if (distinct.size() <= 12) {

@@ -270,6 +270,16 @@ TEST(SceneEdits, UnknownAndAmbiguousNamesAreErrorsNamingTheKeyAndTheFile) {
   const std::string two = "/materials/Glass: 2 materials of the glTF file " + path;
   EXPECT_THAT(edit_error(path, {{}, {glass}}), HasSubstr(two + " are named \"Glass\" (materials 0, 1)"));
   EXPECT_THAT(edit_error(path, {{}, {paper}}), HasSubstr("has no material named \"paper\"; did you mean \"Paper\"?"));
+  // An accented name spelt in another Unicode normalization (NFC "Caf\u00e9" against the glTF's NFD "Cafe\u0301")
+  // printed alike in the suggestion: the code points tell them apart.
+  {
+    Gltf u;
+    u.node({{"name", "Cafe\xcc\x81 table"}, {"mesh", u.triangle_mesh()}});
+    EXPECT_THAT(edit_error(u.write(dir.path(), "nfd"), node_edits({node("Caf\xc3\xa9 table")})),
+                HasSubstr("has no node named \"Caf\xc3\xa9 table\"; did you mean \"Cafe\xcc\x81 table\" (code points U+0043 U+0061 "
+                          "U+0066 U+0065 U+0301 U+0020 U+0074 U+0061 U+0062 U+006C U+0065; you gave U+0043 U+0061 U+0066 U+00E9 "
+                          "U+0020 U+0074 U+0061 U+0062 U+006C U+0065)?"));
+  }
   // A name with '/' or '~' in the key as a JSON pointer writes it.
   EXPECT_THAT(edit_error(path, node_edits({node("a/b~c")})), HasSubstr("/nodes/a~1b~0c: the glTF file"));
   // Many names are not listed.
