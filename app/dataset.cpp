@@ -331,8 +331,15 @@ DatasetSpec spec_of_folder(const fs::path& dir) {
   const std::string file = j["dataset_file"].get<std::string>();
   ojson body = j;
   body.erase("dataset_file");
-  // The scene files are relative to the dataset file: parsed as if from there.
-  return datasets::parse_dataset_text(body.dump(), file);
+  // The scene files are relative to the dataset file: parsed as if from there. A mistake is this folder's
+  // record's, not the dataset file's (which may hold a good value): named here.
+  try {
+    return datasets::parse_dataset_text(body.dump(), file);
+  } catch (const Error& e) {
+    std::string m = e.what();
+    if (m.rfind(file + ": ", 0) == 0) m.erase(0, file.size() + 2);
+    throw Error(own.string() + " (the dataset file " + file + " as this folder recorded it): " + m);
+  }
 }
 
 // Every sample's record (about 0.15 ms each: its scene resolved, its folders' metadata read); past 10,000

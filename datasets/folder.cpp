@@ -210,6 +210,9 @@ std::optional<ojson> DatasetFolder::checked(const ojson& wanted) const {
   if (!fs::is_directory(dir_)) throw Error(dir_.string() + " is not a folder; expected the dataset folder (-o)");
   // Compared in order: the order of the grid's keys decides which cell a sample takes.
   const std::optional<ojson> prev = read_json<ojson>(dir_ / "dataset.json");
+  if (prev && !prev->is_object())  // JSON, not a dataset's (it was an internal error: erase() of a string)
+    throw Error((dir_ / "dataset.json").string() + " is damaged (JSON, but not an object): it says which dataset file " +
+                dir_.string() + " holds; restore it, or remove " + dir_.string() + " or use another folder (-o)");
   if (prev) {
     ojson a = *prev, b = wanted;
     for (const char* free_key : {"samples", "dataset_file"}) a.erase(free_key), b.erase(free_key);
@@ -287,7 +290,23 @@ std::string DatasetFolder::sample_hash(const Sample& s, const scenes::ResolvedRu
 
 std::optional<json> DatasetFolder::sample_metadata(const std::string& folder) const {
   std::optional<json> meta = read_json(dir_ / folder / "metadata.json");
-  if (meta && (!meta->contains("dataset") || !meta->contains("files"))) meta.reset();
+  // What the dataset reads of it, of the types a run writes: a damaged one (a number among the files, a
+  // dataset section that is no object) is a sample not written, generated again as an unreadable one is
+  // (it stopped every dataset status and run: an internal error).
+  const auto well_formed = [](const json& m) {
+    if (!m.is_object() || !m.contains("dataset") || !m["dataset"].is_object() || !m.contains("files") || !m["files"].is_array())
+      return false;
+    if (const auto h = m["dataset"].find("sample_hash"); h != m["dataset"].end() && !h->is_string()) return false;
+    for (const json& f : m["files"])
+      if (!f.is_string()) return false;
+    if (m.contains("ground_truth_summary") && !m["ground_truth_summary"].is_object()) return false;
+    if (const auto l = m.find("laser_photons_per_pulse"); l != m.end() && !l->is_null()) {  // null: no laser traced
+      if (!l->is_object()) return false;
+      if (const auto t = l->find("total_all_pixels"); t != l->end() && !t->is_number()) return false;
+    }
+    return true;
+  };
+  if (meta && !well_formed(*meta)) meta.reset();
   return meta;
 }
 
@@ -400,7 +419,10 @@ SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash) co
   // that could not generate the damaged sample again left it damaged, and said it would generate it).
   const auto failed = [&]() {
     const std::optional<json> f = read_json(dir_ / failure_path(s));
-    if (!f || f->value("sample_hash", "") != rec.hash) return false;
+    // (a damaged record, of other types than record_failure writes, is none)
+    if (!f || !f->is_object() || !f->contains("sample_hash") || (*f)["sample_hash"] != rec.hash ||
+        (f->contains("error") && !(*f)["error"].is_string()))
+      return false;
     rec.files.clear(), rec.listed.clear(), rec.bytes = 0, rec.summary = nullptr;
     rec.status = Status::Failed;
     rec.error = f->value("error", "");

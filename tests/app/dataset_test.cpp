@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <functional>
 #include <set>
 #include <sstream>
 #include <thread>
@@ -230,6 +231,37 @@ TEST_F(Dataset, ASampleThatLostAFileIsDamagedAndGeneratedAgain) {
   ASSERT_EQ(regenerated.code, 0) << regenerated.output;
   EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output, HasSubstr("3 samples: 3 done, 0 failed, 0 stale, 0 missing\n"));
   expect_same_dataset(dir_ / "reference", dir_ / "out");
+  // a metadata.json of other types than a run writes (a number among the files, a dataset section that is no
+  // object, a summary that is no object): missing, and generated again (each stopped every dataset status
+  // and run with an internal error, exit 3)
+  const auto edit = [&](const fs::path& meta, const std::function<void(json&)>& change) {
+    json m = json::parse(slurp(meta));
+    change(m);
+    write(meta, m.dump());
+  };
+  edit(dir_ / "out/samples/000000/metadata.json", [](json& m) { m["files"].push_back(7); });
+  edit(dir_ / "out/samples/000001/metadata.json", [](json& m) { m["dataset"] = "x"; });
+  edit(dir_ / "out/samples/000002/metadata.json", [](json& m) { m["ground_truth_summary"] = "x"; });
+  edit(dir_ / "out/samples/000002_r01/metadata.json", [](json& m) { m["dataset"]["sample_hash"] = 12; });
+  const Result typed = sh("dataset status " + (dir_ / "out").string());
+  EXPECT_EQ(typed.code, 4) << typed.output;
+  EXPECT_THAT(typed.output, HasSubstr("3 samples: 0 done, 0 failed, 0 stale, 3 missing"));
+  const Result retyped = sh(run);
+  ASSERT_EQ(retyped.code, 0) << retyped.output;
+  expect_same_dataset(dir_ / "reference", dir_ / "out");
+  // the folder's dataset.json: JSON but no object (an internal error: erase() of a string), and a bad value
+  // in it (blamed on the dataset file, which held a good one)
+  const std::string own = slurp(dir_ / "out/dataset.json");
+  write(dir_ / "out/dataset.json", "\"hello\"");
+  Result damaged = sh(run);
+  EXPECT_EQ(damaged.code, 1) << damaged.output;
+  EXPECT_THAT(damaged.output, HasSubstr((dir_ / "out/dataset.json").string() + " is damaged (JSON, but not an object)"));
+  edit(dir_ / "out/dataset.json", [&](json& m) { m = json::parse(own), m["seed"] = "7"; });
+  damaged = sh("dataset status " + (dir_ / "out").string());
+  EXPECT_EQ(damaged.code, 1) << damaged.output;
+  EXPECT_THAT(damaged.output, HasSubstr((dir_ / "out/dataset.json").string() + " (the dataset file " + (dir_ / "d.json").string() +
+                                        " as this folder recorded it): /seed"));
+  write(dir_ / "out/dataset.json", own);
   // fewer samples: the folders past them stay, outside the index, and status says so
   write(dir_ / "d2.json", small_dataset(2));
   ASSERT_EQ(sh("dataset run " + (dir_ / "d2.json").string() + " -o " + (dir_ / "out").string() + " -q").code, 0);
