@@ -28,7 +28,9 @@ RenderStageConfig render_stage(const RunConfig& c, std::vector<double> row_fill_
   const bool intensity = c.acquisition.mode == AcquisitionMode::Intensity;
   r.target_laser = !intensity || c.acquisition.intensity.laser_on;
   r.trace_laser = laser_traced(c);
-  r.target_ambient = intensity;
+  // The counts see the ambient light in every mode (a gate sweep's background): it is held to the target
+  // as the laser is (a scene without it has none, and takes the laser's paths).
+  r.target_ambient = true;
   return r;
 }
 

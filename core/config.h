@@ -375,9 +375,9 @@ struct RenderStageConfig {
   uint64_t light_seed = RunConfig{}.seed;  // light transport (RunConfig::light_seed())
   std::vector<double> row_fill_factor;  // camera.height_px values, row 0 at the top
   // What render.target_relative_error holds to the target: the laser return (unless the acquisition sees
-  // none: the intensity mode without laser_on) and, in the intensity mode, whose counts are of it, the
-  // ambient light.
-  bool target_laser = true, target_ambient = false;
+  // none: the intensity mode without laser_on) and the ambient light, which every mode's counts see (a gate
+  // sweep's background; a pixel without ambient light takes the laser's paths).
+  bool target_laser = true, target_ambient = true;
   // Whether the renderer traces the laser at all: not in the intensity mode without laser_on unless an
   // output holds its light (outputs.transient, or outputs.light for a later spadgen sense). Untraced, the
   // paths are drawn as they would be (the ambient light's estimate is the same unless guided connections

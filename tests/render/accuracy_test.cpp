@@ -267,7 +267,9 @@ TEST(Accuracy, TheTargetHoldsTheAmbientLightInTheIntensityMode) {
   EXPECT_TRUE(render_stage(run, {}).target_laser);
   run.acquisition.mode = AcquisitionMode::GateSweep;
   EXPECT_TRUE(render_stage(run, {}).target_laser);
-  EXPECT_FALSE(render_stage(run, {}).target_ambient);
+  // a gate sweep's counts see the ambient light as their background: held too (it was not, and at 100 lux the
+  // multi-object scene's counts at quality=standard were 4.6-5.7 counts off at the 99th percentile)
+  EXPECT_TRUE(render_stage(run, {}).target_ambient);
 }
 
 }  // namespace
