@@ -261,8 +261,12 @@ class Outputs::Images {
       return nlohmann::json{{pixels, v.size()}, {"median", q(0.5)}, {"p90", q(0.9)}, {"p99", q(0.99)}, {"max", v.empty() ? 0.0 : v.back()}};
     };
     nlohmann::json a;
-    a["laser_relative_standard_error"] = laser_traced_ ? summary(rel, "pixels_with_laser") : nlohmann::json(nullptr);
-    if (ambient_se_ch_) {
+    // One path per pixel has no spread to estimate an error from: every standard_error is 0, which a summary
+    // of zeros would read as exact (it is null, and `meaning` says why).
+    const bool estimable = hi >= 2;
+    a["laser_relative_standard_error"] = laser_traced_ && estimable ? summary(rel, "pixels_with_laser") : nlohmann::json(nullptr);
+    if (ambient_se_ch_ && !estimable) a["ambient_relative_standard_error"] = nullptr;
+    if (ambient_se_ch_ && estimable) {
       std::vector<double> amb;
       amb.reserve(n);
       for (size_t i = 0; i < n; ++i)
@@ -271,7 +275,9 @@ class Outputs::Images {
     }
     a["samples_per_pixel"] = {{"mean", n ? paths / double(n) : 0.0}, {"min", n ? lo : 0}, {"max", hi}};
     a["target_relative_error"] = cfg.render.target_relative_error ? nlohmann::json(*cfg.render.target_relative_error) : nlohmann::json(nullptr);
-    a["meaning"] = std::string(laser_traced_ ? "laser.exr standard_error: the Monte Carlo standard error of photons_per_pulse; "
+    a["meaning"] = std::string(estimable ? "" : "one path per pixel: no spread to estimate the error from, so every "
+                                                "standard_error is 0 and the summaries are null (2 paths or more estimate it); ") +
+                   std::string(laser_traced_ ? "laser.exr standard_error: the Monte Carlo standard error of photons_per_pulse; "
                                                "ambient.exr standard_error: of photons_per_second"
                                              : "ambient.exr standard_error: the Monte Carlo standard error of photons_per_second "
                                                "(the laser is not traced)") +

@@ -480,10 +480,12 @@ class Run:
         return ambient["standard_error"] if "standard_error" in ambient else None
 
     def expected_counts_error_bound(self):
-        """(K, H, W) float32: a first-order bound on the Monte Carlo error of the expected counts, in counts:
-        N exp(-lambda) lambda times the larger of the pixel's relative standard errors of its laser return and
-        of its ambient light (every detection counted as the noisier light; the bound of docs/render.md,
-        "Accuracy"). Zero where a pixel has neither. Needs detection_rate.npy and laser.exr's standard_error
+        """(K, H, W) float32: a first-order estimate of one standard error of the expected counts' Monte Carlo
+        error, in counts (not a bound): N exp(-lambda) lambda times the larger of the pixel's relative standard
+        errors of its laser return and of its ambient light (every detection counted as the noisier light;
+        docs/render.md, "Accuracy"). The relative error is the pixel's whole return's: where the return has
+        several parts, the gate positions that see only a weaker one (an object behind a plate) are off by more
+        (about 1.4 times in rms on the multi-object scene). Zero where a pixel has neither. Needs detection_rate.npy and laser.exr's standard_error
         (ambient.exr's too where the run has it). The laser's error counts only where the counts see the laser:
         in a gate sweep, and in the intensity mode with acquisition.intensity.laser_on."""
         rel = np.zeros((self.height, self.width), np.float64)

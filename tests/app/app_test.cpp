@@ -256,6 +256,24 @@ TEST_F(App, RunSaysWhereItsTimeWentAndAComponentNotUsedCostsNothing) {
   }
 }
 
+// One path per pixel has no spread to estimate an error from: every standard_error is 0, and metadata.json's
+// summaries of them read 0 (exact) where the real error was 39 % rms behind the multi-object plate: null, and
+// `meaning` says why. Two paths estimate it.
+TEST_F(App, OnePathPerPixelReportsNoErrorSummary) {
+  const std::string base = "run " + kScenes + "multi_object.json -q --set camera.crop=[440,234,16,8] --set ambient.illuminance_lux=10 "
+                           "--set outputs.previews=false -o ";
+  ASSERT_EQ(sh(base + (dir_ / "one").string() + " --set render.samples_per_pixel=1").code, 0);
+  ASSERT_EQ(sh(base + (dir_ / "two").string() + " --set render.samples_per_pixel=2").code, 0);
+  const nlohmann::json one = nlohmann::json::parse(slurp(dir_ / "one/metadata.json")).at("accuracy");
+  const nlohmann::json two = nlohmann::json::parse(slurp(dir_ / "two/metadata.json")).at("accuracy");
+  EXPECT_TRUE(one.at("laser_relative_standard_error").is_null()) << one.dump();
+  EXPECT_TRUE(one.at("ambient_relative_standard_error").is_null()) << one.dump();
+  EXPECT_EQ(one.at("meaning").get<std::string>().rfind("one path per pixel: no spread to estimate the error from", 0), 0u);
+  EXPECT_GT(two.at("laser_relative_standard_error").at("median").get<double>(), 0.0);
+  EXPECT_GT(two.at("ambient_relative_standard_error").at("median").get<double>(), 0.0);
+  EXPECT_EQ(two.at("meaning").get<std::string>().find("one path"), std::string::npos);
+}
+
 // A 2D run without acquisition.intensity.laser_on models no laser (the test chart: 39 % of its rays were the
 // laser's shadow rays): no laser.exr, no laser channels in ground_truth.exr, null laser figures in metadata.json,
 // "laser light" skipped, no laser ray traced. The paths are drawn as when it is traced (outputs.transient keeps
