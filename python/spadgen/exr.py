@@ -19,6 +19,7 @@ field, header attributes up to an empty name, the line offset table, then one ch
 from __future__ import annotations
 
 import os
+import stat
 import struct
 import zlib
 from dataclasses import dataclass
@@ -134,22 +135,35 @@ class ExrFile:
 
     def __init__(self, path):
         self.path = os.fspath(path)
-        with open(self.path, "rb") as f:
-            head = f.read(8)
-            if len(head) < 8 or struct.unpack("<i", head[:4])[0] != MAGIC:
-                raise ExrError(f"{self.path}: not an OpenEXR file (bad magic number)")
-            version = struct.unpack("<I", head[4:8])[0]
-            if version & 0xFF != 2:
-                raise ExrError(f"{self.path}: OpenEXR file format version {version & 0xFF} is not supported (2 is)")
-            if version & _MULTIPART:
-                raise ExrError(f"{self.path}: multi-part EXR files are not supported (spadgen writes single-part scanline files)")
-            if version & _DEEP:
-                raise ExrError(f"{self.path}: deep-data EXR files are not supported")
-            if version & _TILED:
-                raise ExrError(f"{self.path}: tiled EXR files are not supported (spadgen writes scanline files)")
-            self._read_header(f)
-            self._offsets_at = f.tell()
+        # Opened only when a regular file (a FIFO would block the open for ever), and kept open until the
+        # channels are decoded: a file replaced meanwhile (its run folder swapped for a newer run's) is not
+        # read as the rest of this one's.
+        if not stat.S_ISREG(os.stat(self.path).st_mode):
+            raise ExrError(f"{self.path}: not a regular file; expected an OpenEXR file")
+        f = open(self.path, "rb")
+        try:
+            self._read_whole_header(f)
+        except BaseException:
+            f.close()
+            raise
+        self._file = f
         self._channels = None
+
+    def _read_whole_header(self, f):
+        head = f.read(8)
+        if len(head) < 8 or struct.unpack("<i", head[:4])[0] != MAGIC:
+            raise ExrError(f"{self.path}: not an OpenEXR file (bad magic number)")
+        version = struct.unpack("<I", head[4:8])[0]
+        if version & 0xFF != 2:
+            raise ExrError(f"{self.path}: OpenEXR file format version {version & 0xFF} is not supported (2 is)")
+        if version & _MULTIPART:
+            raise ExrError(f"{self.path}: multi-part EXR files are not supported (spadgen writes single-part scanline files)")
+        if version & _DEEP:
+            raise ExrError(f"{self.path}: deep-data EXR files are not supported")
+        if version & _TILED:
+            raise ExrError(f"{self.path}: tiled EXR files are not supported (spadgen writes scanline files)")
+        self._read_header(f)
+        self._offsets_at = f.tell()
 
     def _read_header(self, f):
         self.header = {}
@@ -240,8 +254,12 @@ class ExrFile:
         y_min = self.data_window[1]
         lpc = LINES_PER_CHUNK[comp]
         chunks = -(-H // lpc)
-        with open(self.path, "rb") as f:
+        f, self._file = self._file or open(self.path, "rb"), None  # (opened again only after a failed decode)
+        try:
+            f.seek(0)
             data = f.read()
+        finally:
+            f.close()
         if self._offsets_at + 8 * chunks > len(data):
             raise ExrError(f"{self.path}: truncated line offset table")
         offsets = struct.unpack_from(f"<{chunks}Q", data, self._offsets_at)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import os
+import stat
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -196,9 +197,11 @@ class Run:
     FileNotFoundError naming the scene-file key that writes it (never None).
 
     A run folder may be replaced whole while it is open (spadgen publishes a new run, or a dataset run
-    regenerates a stale sample, by swapping folders): the memory maps of .npy stacks keep reading the version
-    they opened, but Zarr stores are read chunk by chunk from the folder. check_unchanged() raises
-    RunChangedError once the folder was replaced; RunDataset and DatasetSamples call it around every item."""
+    regenerates a stale sample, by swapping folders): the memory maps of .npy stacks and the EXR images keep
+    reading the version they opened, but Zarr stores are read chunk by chunk from the folder. check_unchanged()
+    raises RunChangedError once the folder was replaced, and so does every file the Run opens after that (it
+    would be the newer run's, beside this one's metadata); RunDataset and DatasetSamples call it around every
+    item."""
 
     # The scene-file key that makes a run write an optional file, for the error message.
     _WRITTEN_BY = {"transient.npy": "outputs.transient", "transient_indirect.npy": "render.split_direct_indirect "
@@ -383,11 +386,19 @@ class Run:
                     raise ValueError(f"{path}: not a readable Zarr array ({type(e).__name__}: {e}); damaged after the run "
                                      "published it: restore it, or " + self._remedy()) from e
             else:
+                if not stat.S_ISREG(os.stat(path).st_mode):  # a FIFO would block the open for ever
+                    raise ValueError(f"{path}: not a regular file; expected the run's .npy stack: restore it, or "
+                                     + self._remedy())
                 try:
                     self._cache[path] = np.load(path, mmap_mode="r")
                 except ValueError as e:
                     raise ValueError(f"{path}: not a readable .npy file ({e}): cut short or damaged after the run published "
                                      "it: restore it, or " + self._remedy()) from e
+            # A file opened after the folder was replaced is the newer run's, beside this Run's metadata and
+            # whatever it read before: refused (it mixed the two without a word).
+            if not self.unchanged():
+                del self._cache[path]
+                self.check_unchanged()
         return self._cache[path]
 
     def exr(self, name):
@@ -399,7 +410,9 @@ class Run:
             if not os.path.exists(path):
                 raise FileNotFoundError(f"{path}: listed in {os.path.join(self.path, 'metadata.json')} (files) but missing: "
                                         f"restore it, or {self._remedy()}")
-            self._cache[name] = ExrFile(path)
+            image = ExrFile(path)
+            self.check_unchanged()  # opened after the folder was replaced: the newer run's (see array())
+            self._cache[name] = image
         return self._cache[name]
 
     def __getitem__(self, name):

@@ -166,9 +166,9 @@ def test_a_run_without_noise_free_rates_says_how_to_get_them(make_run, spadgen_b
     assert sensed["expected_counts"].shape == sensed["counts"].shape
 
 
-def _small_run(spadgen_bin, out, seed, storage):
+def _small_run(spadgen_bin, out, seed, storage, crop="[507,245,16,8]"):
     subprocess.run([spadgen_bin, "run", str(SCENES_DIR / "flat_target.json"), "-o", str(out), "-q", "--seed", str(seed),
-                    "--set", "camera.crop=[507,245,16,8]", "--set", "render.samples_per_pixel=1",
+                    "--set", f"camera.crop={crop}", "--set", "render.samples_per_pixel=1",
                     "--set", f"outputs.storage={storage}", "--set", "outputs.previews=false"], check=True)
 
 
@@ -184,10 +184,19 @@ def test_a_run_folder_replaced_while_in_use_is_an_error_not_two_versions(spadgen
     first = ds[0]
     run = spadgen.open_run(out)
     assert run.unchanged()
-    _small_run(spadgen_bin, out, 2, storage)
+    run.counts[0]
+    gt_header = spadgen.open_run(out).ground_truth  # its header read, its channels not yet decoded
+    _small_run(spadgen_bin, out, 2, storage, crop="[100,100,24,16]")
     assert not run.unchanged()
     with pytest.raises(spadgen.RunChangedError, match=f"{out}: the run folder was replaced since it was opened"):
         run.check_unchanged()
+    # a file the Run opens after the swap is the newer run's: refused (the depth of a 24 x 16 crop beside the
+    # metadata of a 16 x 8 one was read, and points() built from the two without a word)
+    for read in (lambda: run.depth(), lambda: run.detection_rate, lambda: run.ground_truth):
+        with pytest.raises(spadgen.RunChangedError, match=f"{out}: the run folder was replaced since it was opened"):
+            read()
+    # an EXR opened before the swap decodes the file it opened, not the newer one
+    assert gt_header["range"].shape == (8, 16)
     with pytest.raises(spadgen.RunChangedError, match=str(out)):
         ds[0]
     # what a worker would do: a copy without its open runs, then opening the folder itself
