@@ -206,6 +206,19 @@ void check_writable(const std::string& file, const RunFolder& run, const std::st
                   "expected a file outside it (-o)");
     if (folder == folder.root_path()) break;
   }
+  // (After the walk, whose messages name whose file it is.) A regular file there is replaced only when it is an earlier output of reconstruct: an OpenEXR file whose
+  // header names its spadgen_reconstruct attribute (-o my.json replaced a scene file with an EXR, exit 0).
+  if (::lstat(file.c_str(), &st) == 0 && S_ISREG(st.st_mode)) {
+    std::string head(size_t(64) << 10, '\0');
+    std::ifstream in(file, std::ios::binary);
+    in.read(head.data(), std::streamsize(head.size()));
+    head.resize(size_t(in.gcount()));
+    static const std::string kMagic("\x76\x2f\x31\x01", 4), kMark("spadgen_reconstruct\0", 20);
+    if (head.compare(0, 4, kMagic) != 0 || head.find(kMark) == std::string::npos)
+      throw Error(file + ": exists and is not an output of spadgen reconstruct (" +
+                  (head.compare(0, 4, kMagic) != 0 ? std::string("not an OpenEXR file") : "an OpenEXR file without its spadgen_reconstruct attribute") +
+                  "), which writing the output would replace; expected a new file or an earlier output (-o)");
+  }
   if (::access(dir.c_str(), W_OK) != 0)
     throw Error(file + ": cannot write into " + dir.string() + ": " + std::strerror(errno));
 }

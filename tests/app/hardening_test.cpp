@@ -642,6 +642,20 @@ TEST_F(Hardening, ReconstructReplacesOnlyAFileAndAFifoIsNotReadAsMetadata) {
   }
   expect_exit(spadgen("reconstruct -q " + run.string() + " -o " + (dir_ / "d.exr").string()), 0, "a new file");
   expect_exit(spadgen("reconstruct -q " + run.string() + " -o " + (dir_ / "d.exr").string()), 0, "an earlier output");
+  // any other file is not replaced (-o my.json replaced a scene file with an EXR, exit 0): a text file, and an
+  // OpenEXR file reconstruct did not write (the run's ground truth, copied out)
+  std::ofstream(dir_ / "notes.txt") << "important\n";
+  fs::copy_file(run / "ground_truth.exr", dir_ / "image.exr");
+  for (const char* name : {"notes.txt", "image.exr"}) {
+    const Outcome o = spadgen("reconstruct -q " + run.string() + " -o " + (dir_ / name).string());
+    expect_exit(o, 1, name);
+    EXPECT_THAT(o.err, HasSubstr((dir_ / name).string() + ": exists and is not an output of spadgen reconstruct (" +
+                                 (std::string(name) == "notes.txt" ? "not an OpenEXR file"
+                                                                    : "an OpenEXR file without its spadgen_reconstruct attribute") +
+                                 "), which writing the output would replace"));
+  }
+  EXPECT_EQ(slurp(dir_ / "notes.txt"), "important\n");
+  EXPECT_EQ(slurp(dir_ / "image.exr"), slurp(run / "ground_truth.exr"));
   // a FIFO given as the detections is named as one (it was "no such detections file")
   const Outcome fifo = spadgen("evaluate -q " + run.string() + " --detections " + (dir_ / "fifo").string() + " -o " + (dir_ / "e").string());
   expect_exit(fifo, 1, "detections from a FIFO");
