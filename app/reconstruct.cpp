@@ -433,8 +433,23 @@ Labels read_labels(const RunFolder& run) {
     for (size_t i = 0; i < n; ++i)
       if (std::isfinite(range[i]) && id[i] >= 0.0f) l.pixels[i].push_back({int(id[i]), range[i], det ? (*det)[i] > 0.5f : true});
   }
-  if (run.metadata().contains("objects"))
-    for (const auto& o : run.metadata()["objects"]) l.names[o.value("id", -1)] = o.value("name", "");
+  // The objects' names, for the metrics: a list of {"id": integer, "name": string}, as a run writes it (a
+  // damaged one was an internal error: value() of a number).
+  if (const auto& meta = run.metadata(); meta.contains("objects")) {
+    const nlohmann::json& objects = meta["objects"];
+    const auto damaged = [&](const std::string& what) {
+      return Error((fs::path(run.dir()) / "metadata.json").string() + ": objects " + what +
+                   "; expected a list of {\"id\": integer, \"name\": text, ...} as a run writes it (run the scene again)");
+    };
+    if (!objects.is_array()) throw damaged("is not a list");
+    for (size_t k = 0; k < objects.size(); ++k) {
+      const nlohmann::json& o = objects[k];
+      if (!o.is_object() || !o.contains("id") || !o["id"].is_number_integer() || !(o["id"].get<double>() >= 0.0) ||
+          !(o["id"].get<double>() < 2147483647.0) || (o.contains("name") && !o["name"].is_string()))
+        throw damaged("entry " + std::to_string(k) + " is " + scenes::printable(o.dump()).substr(0, 60));
+      l.names[o["id"].get<int>()] = o.value("name", "");
+    }
+  }
   return l;
 }
 

@@ -242,6 +242,20 @@ TEST_F(Reconstruct, EvaluateRefusesLabelsOrGroundTruthThatAreNotTheRuns) {
     EXPECT_THAT(r.output, HasSubstr((run / file).string() + ": 4 x 4 pixels, the run (" + run.string() + "/metadata.json) has 8 x 8"));
     fs::copy_file(kept, run / file, fs::copy_options::overwrite_existing);
   }
+  // metadata.json's objects (their names, for the metrics), damaged: named, not an internal error (value() of
+  // a number, exit 3)
+  const std::string meta = slurp(run / "metadata.json");
+  for (const char* objects : {"[1, 2]", "\"x\"", "[{\"id\": \"0\", \"name\": \"a\"}]", "[{\"id\": 0, \"name\": 5}]"}) {
+    nlohmann::ordered_json m = nlohmann::ordered_json::parse(meta);
+    m["objects"] = nlohmann::ordered_json::parse(objects);
+    std::ofstream(run / "metadata.json") << m.dump(2);
+    const Result r = sh("evaluate " + run.string() + " -q -o " + (dir_ / "e").string());
+    EXPECT_EQ(r.code, 1) << objects << r.output;
+    EXPECT_THAT(r.output, HasSubstr((run / "metadata.json").string() + ": objects ")) << objects;
+    EXPECT_THAT(r.output, HasSubstr("; expected a list of {\"id\": integer, \"name\": text, ...} as a run writes it")) << objects;
+  }
+  std::ofstream(run / "metadata.json") << meta;
+  EXPECT_EQ(sh("evaluate " + run.string() + " -q -o " + (dir_ / "e").string()).code, 0);
 }
 
 // labels.exr's slot j must hold the ground truth's object j in every pixel: a labels file with its slots in
