@@ -719,6 +719,10 @@ void dataset_run(const DatasetOptions& options) {
   Estimator estimator(spec.repeats, options.threads);
   refuse_a_dataset_of_invalid_samples(spec, estimator, true);  // before the folder is made
   refuse_output_inside(options.out_dir, "-o " + options.out_dir);  // (in a run folder, a dataset's entries, a set)
+  // A realisation's metadata.json names the sample it re-samples (sense.from): every sample failed with it
+  if (spec.repeats > 1)
+    require_utf8_path(resolved_folder(options.out_dir), "the dataset folder",
+                      "which each realisation's metadata.json records (repeats: sense.from names its sample)");
   // The folder as the samples' staging names it (-o LINK/../D: the dataset's own files and its samples went
   // to two folders, the kernel's and the lexical one)
   const DatasetFolder folder(spec, resolved_folder(options.out_dir).string());

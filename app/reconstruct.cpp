@@ -650,6 +650,7 @@ std::string reconstruct(const ReconstructOptions& o) {
   InterruptGuard interrupt_guard;
   const ThreadLimit threads(o.threads);
   if (o.max_detections < 1 || o.max_detections > 64) throw Error("--max-detections: expected 1 to 64");
+  require_utf8_path(o.run_dir, "the run folder", "which the output records (spadgen_source)");
   // The run folder's lock, held from reading the run to writing the detections (into it, by default): a run
   // replacing the folder meanwhile would leave the earlier run's detections beside its own counts.
   std::optional<FolderLock> run_lock;
@@ -712,6 +713,8 @@ std::string evaluate(const EvaluateCommand& c) {
   const ThreadLimit threads(c.threads);
   if (!(c.tolerance_m > 0.0) || !std::isfinite(c.tolerance_m)) throw Error("--tolerance-m: expected a positive, finite number of metres");
   if (c.min_score && !std::isfinite(*c.min_score)) throw Error("--min-score: expected a finite number (a detection's z score)");
+  require_utf8_path(c.target, "the evaluated folder", "which metrics.json records");
+  if (!c.detections.empty()) require_utf8_path(c.detections, "the detections file", "which metrics.json records");
   const fs::path target(c.target);
   // Written into a staging folder beside the output folder and swapped in whole (app/staging.h): a failed
   // or interrupted evaluation leaves the earlier one as it was, never a mix of the two.

@@ -275,8 +275,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   // interruption (exit 2), not a kill.
   InterruptGuard interrupt_guard;
   const auto started = std::chrono::steady_clock::now();
-  if (scenes::invalid_utf8_at(options.run_dir) != std::string::npos)  // metadata.json records it
-    throw Error(scenes::printable(options.run_dir) + ": the run folder's name is not valid UTF-8 text, which metadata.json needs; rename it");
+  require_utf8_path(options.run_dir, "the run folder", "which metadata.json records (sense.from)");
   const fs::path src = options.run_dir;
   // The run folder's lock, shared with other senses of it, held until the realisations are published: a run
   // replacing the folder meanwhile would give them its light beside counts of the earlier one.

@@ -86,6 +86,14 @@ fs::path resolved_folder(const fs::path& out) {
   return ec ? abs : resolved;
 }
 
+void require_utf8_path(const fs::path& path, const std::string& what, const std::string& why) {
+  std::error_code ec;
+  const std::string recorded = fs::absolute(path, ec).lexically_normal().string();
+  if (scenes::invalid_utf8_at(ec ? path.string() : recorded) != std::string::npos)
+    throw Error(scenes::printable(path.string()) + ": " + what + "'s name (or a folder's above it) is not valid UTF-8 text, " +
+                why + "; rename it");
+}
+
 void refuse_output_inside(const fs::path& out, const std::string& option,
                           const std::function<bool(CheckedFolder, const fs::path&, const fs::path&)>& allowed) {
   std::error_code ec;

@@ -862,6 +862,34 @@ TEST_F(Hardening, AnOutputFolderInsideARunOrADatasetsOwnFoldersIsRefused) {
 
 namespace {
 
+// A folder whose name is not valid UTF-8 (a run may be written there: its metadata.json records no path) read by
+// what records its path as JSON text: reconstruct ran its detector, then failed (an internal error, exit 3);
+// evaluate failed writing metrics.json; a dataset with repeats failed every sample. Each is refused first.
+TEST_F(Hardening, AFolderNameThatIsNotUtf8IsRefusedBeforeTheWorkByWhatRecordsIt) {
+  const fs::path bad = dir_ / "bad\xff\xfe", run = bad / "r", good = dir_ / "good";
+  fs::create_directories(bad);
+  expect_exit(spadgen("run " + kTiny + " -q -o '" + run.string() + "'"), 0, "run");
+  expect_exit(spadgen("run " + kTiny + " -q --set outputs.light=true -o " + good.string()), 0, "run good");
+  const std::string says = "'s name (or a folder's above it) is not valid UTF-8 text, ";
+  for (const auto& [command, what] :
+       {std::pair{"reconstruct -q '" + run.string() + "'", "the run folder" + says + "which the output records (spadgen_source)"},
+        {"evaluate -q '" + run.string() + "' -o " + (dir_ / "e").string(), "the evaluated folder" + says + "which metrics.json records"},
+        {"evaluate -q " + good.string() + " --detections '" + (bad / "d.exr").string() + "' -o " + (dir_ / "e").string(),
+         "the detections file" + says},
+        {"sense -q '" + run.string() + "' -o " + (dir_ / "s").string(), "the run folder" + says + "which metadata.json records (sense.from)"}}) {
+    const Outcome o = spadgen(command);
+    expect_exit(o, 1, command);
+    EXPECT_THAT(o.err, HasSubstr("bad\\xFF\\xFE")) << command;
+    EXPECT_THAT(o.err, HasSubstr(what)) << command;
+  }
+  std::ofstream(dir_ / "ds.json") << "{\"scenes\": [\"" << kFlat << "\"], \"samples\": 1, \"repeats\": 2, \"set\": "
+                                     "{\"camera.crop\": [508, 246, 8, 8], \"render.samples_per_pixel\": 1}}";
+  const Outcome ds = spadgen("dataset run " + (dir_ / "ds.json").string() + " -q -o '" + (bad / "ds").string() + "'");
+  expect_exit(ds, 1, "dataset run with repeats");
+  EXPECT_THAT(ds.err, HasSubstr("the dataset folder" + says + "which each realisation's metadata.json records"));
+  EXPECT_FALSE(fs::exists(bad / "ds"));
+}
+
 // Threads the process may not start (ulimit -v for their stacks here; ulimit -u on a shared node) are the
 // environment's refusal, exit 1, saying what to do: it was "internal error: Resource temporarily
 // unavailable", exit 3. (Not under AddressSanitizer, which reserves more address space than the limit.)
