@@ -291,12 +291,27 @@ void check_source(const std::string& path, const std::map<std::string, std::stri
 DetectionImage read_detections(const std::string& path, const RunFolder& run, bool need_scores, nlohmann::json* source) {
   const int width = run.width(), height = run.height();
   if (std::error_code ec; !fs::exists(path, ec))
-    throw Error(path + ": no such detections file (run spadgen reconstruct, or give --detections)");
+    throw Error(path + ": no such file; expected the detections file --detections names (of a dataset: a file of that "
+                "name in every sample's folder)");
   if (!fs::is_regular_file(path)) throw Error(path + ": not a regular file (a FIFO, a device or a folder); expected a detections EXR or .npy");
   if (fs::path(path).extension() == ".npy") {
-    writers::NpyReader npy(path);
-    if (npy.shape().size() != 3 || npy.shape()[0] != height || npy.shape()[1] != width)
-      throw Error(path + ": expected a float32 or float64 array (H, W, M) = (" + std::to_string(height) + ", " + std::to_string(width) + ", M) of ranges");
+    const writers::NpyReader npy = [&] {
+      try {
+        return writers::NpyReader(path);
+      } catch (const Error& e) {
+        throw Error(std::string(e.what()) + " (detections: a C-order float32 or float64 array (H, W, M) of ranges; "
+                    "np.save(f, np.ascontiguousarray(a, np.float32)) writes one)");
+      }
+    }();
+    if (npy.shape().size() != 3 || npy.shape()[0] != height || npy.shape()[1] != width) {
+      std::string found;
+      for (int64_t d : npy.shape()) found += (found.empty() ? "" : ", ") + std::to_string(d);
+      if (npy.shape().size() == 1) found += ",";
+      const bool mhw = npy.shape().size() == 3 && npy.shape()[1] == height && npy.shape()[2] == width;
+      throw Error(path + ": expected a float32 or float64 array (H, W, M) = (" + std::to_string(height) + ", " + std::to_string(width) +
+                  ", M) of ranges, found shape (" + found + ")" +
+                  (mhw ? std::string(": (M, H, W), as Python's Run.detections().range gives it; np.moveaxis(a, 0, -1) is (H, W, M)") : ""));
+    }
     if (need_scores)
       throw Error(path + ": --min-score: a .npy of ranges holds no scores (an EXR's det<i>.score does); leave --min-score out");
     check_source(path, {}, run, source);

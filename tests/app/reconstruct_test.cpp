@@ -396,7 +396,22 @@ TEST_F(Reconstruct, EvaluateScoresADetectionsNpyAgainstTheLabelsExactly) {
   r = sh("evaluate " + run.string() + " --detections " + (dir_ / "wrong.npy").string() + " -o " + (dir_ / "eval3").string());
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("wrong.npy: expected a float32 or float64 array (H, W, M)"), std::string::npos) << r.output;
+  EXPECT_THAT(r.output, HasSubstr(", M) of ranges, found shape (" + std::to_string(H + 1) + ", " + std::to_string(W) + ", " +
+                                  std::to_string(M) + ")"));
   EXPECT_FALSE(fs::exists(dir_ / "eval3")) << "a refused evaluation leaves no empty folder";
+  // (M, H, W), as Python's Run.detections().range gives it, is named as such with the axis move
+  {
+    spadgen::writers::NpyWriter npy((dir_ / "mhw.npy").string(), spadgen::writers::Dtype::F32, {M, H, W});
+    npy.commit();
+  }
+  r = sh("evaluate " + run.string() + " --detections " + (dir_ / "mhw.npy").string() + " -o " + (dir_ / "eval3").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr(": (M, H, W), as Python's Run.detections().range gives it; np.moveaxis(a, 0, -1) is (H, W, M)"));
+  // a file that is not there: --detections named it (the message said to give --detections)
+  r = sh("evaluate " + run.string() + " --detections " + (dir_ / "none.npy").string() + " -o " + (dir_ / "eval3").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("none.npy: no such file; expected the detections file --detections names"));
+  EXPECT_THAT(r.output, Not(HasSubstr("or give --detections")));
   // the same ranges as float64 (NumPy's default dtype; it was refused): the same scores
   {
     spadgen::writers::NpyWriter npy((dir_ / "f8.npy").string(), spadgen::writers::Dtype::F64, {H, W, M});
