@@ -285,7 +285,15 @@ class Run:
 
     @property
     def seed(self):
+        """The scene file's `seed`: the default of every stream (a dataset's sample, its realisations and a
+        sense's repeats share it); the streams' own are ``seeds``."""
         return self.metadata["seed"]
+
+    @property
+    def seeds(self):
+        """The seed each random stream used: ``{"light": ..., "chip": ..., "noise": ...}`` (metadata.json
+        ``seeds``; a realisation's ``noise`` is its own)."""
+        return dict(self._meta("seeds"))
 
     @property
     def spadgen_version(self):

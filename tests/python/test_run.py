@@ -42,6 +42,8 @@ def test_metadata_and_shapes(sweep, intensity):
     assert sweep.mode == "gate_sweep" and intensity.mode == "intensity"
     assert sweep.units["length"] == "m"
     assert sweep.spadgen_version == spadgen.__version__
+    # every stream's seed defaults to the scene file's seed (docs/scene-file.md, "Seeds")
+    assert sweep.seeds == {"light": sweep.seed, "chip": sweep.seed, "noise": sweep.seed}
 
 
 def test_time_axis_and_gate_positions(sweep, intensity):
