@@ -9,7 +9,8 @@
 Both load their samples the same way. One sample is a whole run's image, or with ``patch_size=(h, w)`` one
 patch of a run: the images are cut into non-overlapping h x w patches from the top-left corner, and a
 remainder narrower than a patch at the right or bottom edge is left out. A sample is a dict of tensors; with
-H, W the image's (or patch's) size, K the gate positions (or exposures), N the frames per k, L = ``max_layers``:
+H, W the image's (or patch's) size, K the gate positions (or exposures), N the frames per k, L = ``max_layers``,
+J = ``max_objects`` (default: the most of any run's ``ground_truth_objects``):
 
 | key | shape | dtype | what |
 |---|---|---|---|
@@ -21,6 +22,10 @@ H, W the image's (or patch's) size, K the gate positions (or exposures), N the f
 | layer_count | (H, W) | int64 | surfaces along the pixel's ray |
 | layer_depth | (L, H, W) | float32 | range (m) of every surface along the ray, nearest first, 0 beyond layer_count |
 | layer_mask | (L, H, W) | bool | layer l exists at the pixel (l < layer_count) |
+| object_count | (H, W) | int64 | distinct objects along the pixel's ray (a plate over a sphere: 2 objects, 3 layers) |
+| object_range | (J, H, W) | float32 | range (m) of each object's first surface along the ray, nearest first, 0 beyond object_count: what `spadgen evaluate` scores detections against |
+| object_mask | (J, H, W) | bool | object slot j exists at the pixel (j < object_count) |
+| object_detectable | (J, H, W) | bool | gate sweeps: slot j's object is detectable (labels.exr: its edge in the noise-free counts stands out; evaluate's "detectable") |
 | frames | (K, N, H, W) | uint8 | binary frames, 0 / 1 (large: only when asked for) |
 | gate_positions_ns | (K,) | float32 | gate positions (gate-sweep runs only) |
 | intrinsics | (3, 3) | float32 | the sample's pinhole intrinsics (OpenCV convention, shifted to the patch) |
@@ -30,7 +35,7 @@ H, W the image's (or patch's) size, K the gate positions (or exposures), N the f
 | repeat | () | int64 | DatasetSamples only: the realisation of the temporal noise (0: the sample's own folder) |
 | parameters | (P,) | float32 | DatasetSamples only: the sample's numeric parameters, in the order of ``parameter_names`` |
 
-``fields`` chooses among the first nine (default: counts, expected_counts, depth, mask, layer_count);
+``fields`` chooses among the first thirteen (default: counts, expected_counts, depth, mask, layer_count);
 gate_positions_ns (gate sweeps only), intrinsics, origin and run come always, and with DatasetSamples sample,
 repeat and parameters. Runs that share a DataLoader batch must agree on K (and N with frames); the constructor
 checks that every run has what ``fields`` asks for.
@@ -57,13 +62,15 @@ from .run import Run, RunChangedError, open_run, unpack_frames
 
 __all__ = ["RunDataset", "DatasetSamples", "FIELDS", "DEFAULT_FIELDS"]
 
-FIELDS = ("counts", "expected_counts", "detection_rate", "depth", "mask", "layer_count", "layer_depth", "layer_mask", "frames")
+FIELDS = ("counts", "expected_counts", "detection_rate", "depth", "mask", "layer_count", "layer_depth", "layer_mask",
+          "object_count", "object_range", "object_mask", "object_detectable", "frames")
 DEFAULT_FIELDS = ("counts", "expected_counts", "depth", "mask", "layer_count")
 # The file each field reads; a tuple: any one of them.
 _NEEDS = {"counts": "counts.npy", "expected_counts": ("expected_counts.npy", "detection_rate.npy"),
           "detection_rate": "detection_rate.npy", "frames": "frames.npy",
           "depth": "ground_truth.exr", "mask": "ground_truth.exr", "layer_count": "ground_truth.exr",
-          "layer_depth": "ground_truth.exr", "layer_mask": "ground_truth.exr"}
+          "layer_depth": "ground_truth.exr", "layer_mask": "ground_truth.exr", "object_count": "ground_truth.exr",
+          "object_range": "ground_truth.exr", "object_mask": "ground_truth.exr", "object_detectable": "labels.exr"}
 
 
 def _needs(field):
@@ -93,7 +100,7 @@ class _RunSamples(torch.utils.data.Dataset):
     """What RunDataset and DatasetSamples share: run folders cut into samples (whole images or patches),
     checked once, and a sample loaded as a dict of tensors (the keys of the module's table but "run")."""
 
-    def __init__(self, runs, patch_size=None, fields=DEFAULT_FIELDS, max_layers=None, open_runs=64):
+    def __init__(self, runs, patch_size=None, fields=DEFAULT_FIELDS, max_layers=None, open_runs=64, max_objects=None):
         runs = list(runs)
         self.paths = [r.path if isinstance(r, Run) else os.fspath(r) for r in runs]
         if not self.paths:
@@ -138,6 +145,8 @@ class _RunSamples(torch.utils.data.Dataset):
 
         self.max_layers = (whole(max_layers, "max_layers", 0) if max_layers is not None else
                            max(int(r.metadata["ground_truth_layers"]) for r in runs_))
+        self.max_objects = (whole(max_objects, "max_objects", 0) if max_objects is not None else
+                            max(int(r.metadata.get("ground_truth_objects", 0)) for r in runs_))
         if patch_size is None:
             sizes = {(r.height, r.width) for r in runs_}
             if len(sizes) > 1:
@@ -223,6 +232,26 @@ class _RunSamples(torch.utils.data.Dataset):
                 out["layer_depth"] = torch.from_numpy(np.where(exists, depth, 0).astype(np.float32))
             if "layer_mask" in self.fields:
                 out["layer_mask"] = torch.from_numpy(exists)
+        if {"object_count", "object_range", "object_mask", "object_detectable"} & set(self.fields):
+            gt = run.ground_truth
+            count = np.asarray(gt["object_count"][ys, xs]).astype(np.int64)
+            J, n = self.max_objects, min(self.max_objects, int(run.metadata.get("ground_truth_objects", 0)))
+            exists = np.arange(J)[:, None, None] < count[None]
+            if "object_count" in self.fields:
+                out["object_count"] = torch.from_numpy(count)
+            if "object_range" in self.fields:
+                r = np.zeros((J, h, w), np.float32)
+                for j in range(n):
+                    r[j] = gt[f"object{j}.range"][ys, xs]
+                out["object_range"] = torch.from_numpy(np.where(exists, r, 0).astype(np.float32))
+            if "object_mask" in self.fields:
+                out["object_mask"] = torch.from_numpy(exists)
+            if "object_detectable" in self.fields:
+                d = np.zeros((J, h, w), bool)
+                labels = run.object_labels
+                for j in range(n):
+                    d[j] = labels[f"object{j}.detectable"][ys, xs] > 0.5
+                out["object_detectable"] = torch.from_numpy(d & exists)
         if "frames" in self.fields:
             packed = run.frames_packed[:, :, ys]
             out["frames"] = torch.from_numpy(np.ascontiguousarray(unpack_frames(packed, run.width)[..., xs]))
@@ -271,7 +300,7 @@ class DatasetSamples(_RunSamples):
     """
 
     def __init__(self, dataset, fields=DEFAULT_FIELDS, patch_size=None, repeats="all", status="done", max_layers=None,
-                 open_runs=64):
+                 open_runs=64, max_objects=None):
         ds = dataset if isinstance(dataset, Dataset) else open_dataset(dataset)
         if repeats not in ("all", "first"):
             raise ValueError(f"repeats must be 'all' or 'first', got {repeats!r}")
@@ -297,7 +326,8 @@ class DatasetSamples(_RunSamples):
                 self.realisations.append((s.index, r))
                 params.append(vector)
         self._parameters = np.array(params, np.float32).reshape(len(runs), len(self.parameter_names))
-        super().__init__(runs, patch_size=patch_size, fields=fields, max_layers=max_layers, open_runs=open_runs)
+        super().__init__(runs, patch_size=patch_size, fields=fields, max_layers=max_layers, open_runs=open_runs,
+                         max_objects=max_objects)
 
     def __getitem__(self, j):
         i, out = self._load(j)

@@ -187,7 +187,7 @@ def test_dataset_samples_layout_values_and_length(ds, dataset_dir):
     run = ds.sample(0).run
     K, N, H, W = run.K, run.frames_per_k, run.height, run.width
     from test_torch import expected_layout
-    layout = expected_layout(K, N, 3, H, W)
+    layout = expected_layout(K, N, 3, H, W, int(run.metadata["ground_truth_objects"]))
     del layout["frames"]  # the dataset's runs did not write frames.npy
     layout.update({"sample": ((), torch.int64), "repeat": ((), torch.int64), "parameters": ((3,), torch.float32)})
     with pytest.raises(ValueError, match="needs frames, which this run did not write"):

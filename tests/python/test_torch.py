@@ -21,12 +21,14 @@ def sweep(sweep_run):
     return spadgen.open_run(sweep_run)
 
 
-def expected_layout(K, N, L, H, W):
+def expected_layout(K, N, L, H, W, J):
     """The module docstring's table."""
     return {"counts": ((K, H, W), torch.float32), "expected_counts": ((K, H, W), torch.float32),
             "detection_rate": ((K, H, W), torch.float32),
             "depth": ((1, H, W), torch.float32), "mask": ((1, H, W), torch.bool), "layer_count": ((H, W), torch.int64),
             "layer_depth": ((L, H, W), torch.float32), "layer_mask": ((L, H, W), torch.bool),
+            "object_count": ((H, W), torch.int64), "object_range": ((J, H, W), torch.float32),
+            "object_mask": ((J, H, W), torch.bool), "object_detectable": ((J, H, W), torch.bool),
             "frames": ((K, N, H, W), torch.uint8), "gate_positions_ns": ((K,), torch.float32),
             "intrinsics": ((3, 3), torch.float32), "origin": ((2,), torch.int64), "run": ((), torch.int64)}
 
@@ -35,7 +37,9 @@ def test_whole_image_sample_has_the_documented_layout_and_values(sweep_run, swee
     ds = RunDataset([sweep_run], fields=FIELDS)
     assert len(ds) == 1
     s = ds[0]
-    layout = expected_layout(sweep.K, sweep.frames_per_k, 3, sweep.height, sweep.width)
+    J = int(sweep.metadata["ground_truth_objects"])
+    assert J >= 2  # the plate and the sphere along some rays
+    layout = expected_layout(sweep.K, sweep.frames_per_k, 3, sweep.height, sweep.width, J)
     assert set(s) == set(layout)
     for key, (shape, dtype) in layout.items():
         assert tuple(s[key].shape) == shape and s[key].dtype == dtype, key
@@ -50,6 +54,14 @@ def test_whole_image_sample_has_the_documented_layout_and_values(sweep_run, swee
     np.testing.assert_array_equal(s["layer_depth"].numpy(), np.where(np.isfinite(layers.range), layers.range, 0))
     np.testing.assert_array_equal(s["layer_mask"].numpy().sum(0), layers.count)
     np.testing.assert_array_equal(s["frames"].sum(1).numpy(), sweep.counts)
+    # the objects, as evaluate scores them: Run.object_slots' (ground_truth.exr's and labels.exr's slots)
+    slots = sweep.object_slots()
+    used = slots.id >= 0
+    np.testing.assert_array_equal(s["object_count"].numpy(), slots.count)
+    np.testing.assert_array_equal(s["object_mask"].numpy(), used)
+    np.testing.assert_array_equal(s["object_range"].numpy(), np.where(used, slots.range, 0))
+    np.testing.assert_array_equal(s["object_detectable"].numpy(), slots.detectable & used)
+    assert (s["object_count"] == 2).any() and s["object_detectable"][1].any()
     np.testing.assert_allclose(s["intrinsics"].numpy(), sweep.intrinsics, rtol=1e-7)
     assert s["origin"].tolist() == [0, 0] and int(s["run"]) == 0
 
@@ -69,6 +81,11 @@ def test_patches_cover_the_image_and_shift_the_intrinsics(sweep_run, sweep):
     assert (u, v) == pytest.approx((50 - 48, 2), abs=1e-3)
     full = RunDataset([sweep_run], patch_size=(5, 16), fields=("layer_depth",), max_layers=4)[0]
     assert tuple(full["layer_depth"].shape) == (4, 5, 16) and not full["layer_depth"][3].any()
+    objects = RunDataset([sweep_run], patch_size=(5, 16), fields=("object_range", "object_mask"), max_objects=3)[3]
+    assert tuple(objects["object_range"].shape) == (3, 5, 16) and not objects["object_mask"][2].any()
+    slots = sweep.object_slots()
+    np.testing.assert_array_equal(objects["object_range"][:2].numpy(),
+                                  np.where(slots.id[:2, 0:5, 48:64] >= 0, slots.range[:2, 0:5, 48:64], 0))
 
 
 def test_data_loader_batches_and_a_training_step(sweep_run, sweep):
