@@ -154,8 +154,13 @@ Staging::Staging(const fs::path& out, OfRuns) : of_runs_(true), what_("sense --r
 
 Staging::Staging(const Staging& parent, const std::string& sub)
     : out_(parent.out_ / sub), parent_(parent.out_), dir_(parent.dir_ / sub), name_(sub), sub_(true), what_(parent.what_) {
-  fs::create_directories(dir_ / "previews");
-  fs::create_directories(dir_ / "light");
+  try {
+    fs::create_directories(dir_ / "previews");
+    fs::create_directories(dir_ / "light");
+  } catch (const fs::filesystem_error& e) {  // (a full disk's inodes: it was the library's raw message)
+    throw Error("cannot write " + out_.string() + ": " + e.code().message() + " (" + e.path1().string() +
+                ")");
+  }
 }
 
 void Staging::finish_sub() const { prune_subfolders(); }
@@ -250,10 +255,16 @@ void Staging::init(const fs::path& out) {
     fs::create_directories(dir_ / "previews");
     fs::create_directories(dir_ / "light");
   } catch (const fs::filesystem_error& e) {
+    // No destructor runs for an object whose constructor throws: the staging folder made before a subfolder
+    // failed (a full disk's inodes) is removed here (it was left, hidden, until a later run).
+    std::error_code removed;
+    if (!dir_.empty()) fs::remove_all(dir_, removed);
     unlock();
     throw cannot(e.code().message() + " (" + e.path1().string() + ")");
   } catch (...) {
-    unlock();  // no destructor runs for an object whose constructor throws
+    std::error_code removed;
+    if (!dir_.empty()) fs::remove_all(dir_, removed);
+    unlock();
     throw;
   }
 }
