@@ -245,6 +245,11 @@ void Staging::init(const fs::path& out) {
   if (fs::is_directory(out_, ec) && is_mount_point(out_))
     throw cannot("it is a mount point; " + what_ + " replaces the output folder as a whole, renaming a new folder into its " +
                  "place, which cannot be done to a mount point, so name a folder inside it (" + (out_ / "run").string() + ")");
+  // A folder whose entries this user may not remove (mode 555) would be replaced, and its earlier files left
+  // in a hidden folder no later run could remove: refused while nothing is written.
+  if (fs::is_directory(out_, ec) && ::access(out_.c_str(), W_OK) != 0 && errno == EACCES)
+    throw cannot("it is read-only to this user (its entries could not be removed once it is replaced); make it "
+                 "writable (chmod u+w " + out_.string() + "), or choose another folder");
   if (owned_.empty()) refuse_a_realisation_or_a_folder_being_written();
   lock();
   try {

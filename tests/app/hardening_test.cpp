@@ -897,6 +897,31 @@ TEST_F(Hardening, AFolderNameThatIsNotUtf8IsRefusedBeforeTheWorkByWhatRecordsIt)
   EXPECT_FALSE(fs::exists(bad / "ds"));
 }
 
+// An output folder this user may not remove entries from (mode 555): replaced, its earlier files were kept
+// in a hidden staging folder that every later run failed to remove without a word. Refused before any
+// work, as a user without root's rights (root may remove them).
+TEST_F(Hardening, AReadOnlyOutputFolderIsRefusedNotHiddenForEver) {
+  if (shell("command -v setpriv").code != 0) GTEST_SKIP() << "no setpriv to run as another user";
+  const fs::path p = dir_ / "p";
+  fs::create_directories(p);
+  fs::permissions(dir_, fs::perms::all);
+  fs::permissions(p, fs::perms::all);
+  const std::string as_nobody = "setpriv --reuid=65534 --regid=65534 --clear-groups " + bin() + " run " + kTiny + " -q -o " + (p / "r").string();
+  Result r = shell(as_nobody);
+  if (r.code != 0 && r.output.find("Permission denied") != std::string::npos) GTEST_SKIP() << "another user cannot run the build here";
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::string before = slurp(p / "r" / "counts.npy");
+  fs::permissions(p / "r", fs::perms::owner_read | fs::perms::owner_exec | fs::perms::group_read | fs::perms::group_exec |
+                               fs::perms::others_read | fs::perms::others_exec);
+  r = shell(as_nobody + " --seed 3");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("cannot use " + (p / "r").string() + " as the output folder (-o): it is read-only to this user"));
+  EXPECT_THAT(r.output, HasSubstr("make it writable (chmod u+w " + (p / "r").string() + ")"));
+  EXPECT_EQ(slurp(p / "r" / "counts.npy"), before);
+  for (const auto& e : fs::directory_iterator(p)) EXPECT_EQ(e.path().filename(), "r");
+  fs::permissions(p / "r", fs::perms::all);
+}
+
 // Threads the process may not start (ulimit -v for their stacks here; ulimit -u on a shared node) are the
 // environment's refusal, exit 1, saying what to do: it was "internal error: Resource temporarily
 // unavailable", exit 3. (Not under AddressSanitizer, which reserves more address space than the limit.)
