@@ -156,6 +156,17 @@ void check_writable(const std::string& file, const RunFolder& run, const std::st
                 ", which writing the output would replace; expected a new file or an earlier output (-o)");
   const fs::path dir = fs::absolute(fs::path(file)).parent_path();
   if (!fs::is_directory(dir)) throw Error(file + ": its folder " + dir.string() + " does not exist");
+  // The file is written as .NAME.tmp-<pid>-<n> beside it first (a pid of up to 7 digits, a counter of up to 4):
+  // a name the file system takes could not take those ("File name too long", after the detector had run).
+  {
+    constexpr size_t kAddition = std::char_traits<char>::length("..tmp--") + 7 + 4;
+    const long name_max = ::pathconf(dir.c_str(), _PC_NAME_MAX);
+    const size_t most = (name_max > 0 ? size_t(name_max) : 255) - kAddition;
+    if (const size_t n = fs::path(file).filename().string().size(); n > most)
+      throw Error(file + ": its name is " + std::to_string(n) + " bytes long; it is written into a hidden file beside it " +
+                  "whose name adds " + std::to_string(kAddition) + " bytes to it first, so expected a name of at most " +
+                  std::to_string(most) + " bytes (-o)");
+  }
   // Nor is a file of the run itself (-o RUN/counts.npy replaced the counts with an EXR, and every later
   // reconstruct or evaluate of the run failed): metadata.json and what it lists, or a file inside a listed
   // folder (a Zarr store, light/); nor a file of another run, or of a dataset (-o OTHER/counts.npy,

@@ -655,6 +655,12 @@ TEST_F(Hardening, ReconstructReplacesOnlyAFileAndAFifoIsNotReadAsMetadata) {
                                  "), which writing the output would replace"));
   }
   EXPECT_EQ(slurp(dir_ / "notes.txt"), "important\n");
+  // a name the file system takes but its hidden temporary file's could not: refused before the detector runs
+  // (it ran, then failed with "File name too long")
+  const std::string long_name = std::string(241, 'a') + ".exr";
+  const Outcome too_long = spadgen("reconstruct -q " + run.string() + " -o " + (dir_ / long_name).string());
+  expect_exit(too_long, 1, "a 245-byte name");
+  EXPECT_THAT(too_long.err, HasSubstr(": its name is 245 bytes long; it is written into a hidden file beside it whose name adds "));
   EXPECT_EQ(slurp(dir_ / "image.exr"), slurp(run / "ground_truth.exr"));
   // a FIFO given as the detections is named as one (it was "no such detections file")
   const Outcome fifo = spadgen("evaluate -q " + run.string() + " --detections " + (dir_ / "fifo").string() + " -o " + (dir_ / "e").string());
