@@ -15,6 +15,7 @@
 #include <initializer_list>
 #include <map>
 #include <optional>
+#include <set>
 #include <sstream>
 #include <thread>
 
@@ -28,6 +29,7 @@
 #include "core/error.h"
 #include "datasets/dataset.h"
 #include "datasets/folder.h"
+#include "reconstruct/run_folder.h"
 #include "scenes/input.h"
 #include "scenes/scene.h"
 #include "scenes/scene_file.h"
@@ -361,6 +363,41 @@ void inspect_each(const DatasetFolder& folder, bool progress, const SampleHashes
     sink(folder.inspect(datasets::make_sample(folder.spec(), i), &known));
     bar.tick();
   }
+}
+
+// A line naming an evaluation/ that scored other versions of the samples than the folder holds now (generated
+// again since, removed, or added): its metrics are of data no longer there. Empty when it is current, or absent.
+std::string evaluation_status(const std::string& dir, int64_t done_folders) {
+  const fs::path metrics = fs::path(dir) / "evaluation" / "metrics.json";
+  std::error_code ec;
+  if (!fs::is_regular_file(metrics, ec)) return "";
+  nlohmann::json m;
+  try {
+    m = scenes::parse_json(scenes::read_file_bounded(metrics.string(), uint64_t{256} << 20, "metrics"), metrics.string());
+  } catch (const Error&) {
+    return "evaluation/: " + metrics.string() + " does not read as spadgen evaluate's: run `spadgen evaluate " + dir + "` again\n";
+  }
+  if (!m.is_object() || !m.contains("samples") || !m["samples"].is_array()) return "";
+  std::set<std::string> scored;
+  int64_t changed = 0;
+  for (const nlohmann::json& row : m["samples"]) {
+    if (!row.is_object() || !row.contains("sample") || !row["sample"].is_string()) continue;
+    const std::string name = row["sample"].get<std::string>();
+    scored.insert(name);
+    std::optional<nlohmann::json> now;
+    try {
+      now = reconstruct::read_run_metadata((fs::path(dir) / "samples" / name).string());
+    } catch (const Error&) {
+    }
+    const nlohmann::json hash = now ? now->value("/dataset/sample_hash"_json_pointer, nlohmann::json(nullptr)) : nlohmann::json();
+    if (!now || (row.contains("sample_hash") && row["sample_hash"] != hash)) ++changed;
+  }
+  // the done samples' folders now (realisations included), against those scored as they are
+  const int64_t unscored = std::max<int64_t>(0, done_folders - (int64_t(scored.size()) - changed));
+  if (changed == 0 && unscored == 0) return "";
+  return "evaluation/ is out of date: of the sample folders it scored, " + std::to_string(changed) +
+         " were generated again or removed since, and " + std::to_string(unscored) +
+         " done ones are not in it: run `spadgen evaluate " + dir + "` again\n";
 }
 
 std::string status_counts(const std::array<int64_t, 5>& c) {
@@ -704,6 +741,10 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
                          : "another run is still on the folder: the last to end writes the index",
                  static_cast<long long>(generated), static_cast<long long>(skipped), static_cast<long long>(by_others),
                  failed.size());
+  // An evaluation/ of the samples this run generated again is of data no longer there: said (even with -q).
+  if (records && generated > 0)
+    if (const std::string note = evaluation_status(dir.string(), records->count[size_t(Status::Done)] * spec.repeats); !note.empty())
+      std::fprintf(stderr, "spadgen: dataset: %s", note.c_str());
   if (!failed.empty())
     throw Error("dataset run: " + std::to_string(failed.size()) + " samples failed (" + datasets::ranges_text(failed) +
                 "); their errors are in " + (dir / "failed").string() + " and `spadgen dataset status " + dir.string() + "`");
@@ -779,6 +820,7 @@ DatasetStatus dataset_status(const std::string& dir) {
   if (!beyond.empty())
     o << "beyond the " << spec.count() << " samples: the folders of samples " << datasets::ranges_text(beyond)
       << " (kept, not in the index; a larger \"samples\" takes them again)\n";
+  o << evaluation_status(dir, count[size_t(Status::Done)] * spec.repeats);
   const bool complete = count[size_t(Status::Done)] == spec.count();
   return {o.str(), complete};
 }

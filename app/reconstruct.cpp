@@ -803,7 +803,12 @@ std::string evaluate(const EvaluateCommand& c) {
           << num(m["objects"]["recall"]) << ',' << m["objects_detectable"]["objects"] << ',' << m["objects_detectable"]["found"]
           << ',' << m["detections"]["total"] << ',' << m["detections"]["false"] << ',' << num(m["range_error"].value("bias_mm", nlohmann::json()))
           << ',' << num(m["range_error"].value("rms_mm", nlohmann::json())) << '\n';
-      rows.push_back({{"sample", p.filename().string()}, {"detections_source", sample_source}, {"metrics", m}});
+      // the version of the sample scored: dataset status names an evaluation of samples generated again since
+      const nlohmann::json sample_meta = reconstruct::read_run_metadata(p.string());
+      rows.push_back({{"sample", p.filename().string()},
+                      {"sample_hash", sample_meta.value("/dataset/sample_hash"_json_pointer, nlohmann::json(nullptr))},
+                      {"detections_source", sample_source},
+                      {"metrics", m}});
     }
     report = total.to_json(names);
     report["dataset"] = c.target;

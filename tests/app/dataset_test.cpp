@@ -519,6 +519,8 @@ TEST_F(Dataset, AChangedSceneMakesSamplesStaleAndReplacesThemWhole) {
   write(dir_ / "d.json", small_dataset(2, 3, (dir_ / "scene.json").string()));
   ASSERT_EQ(sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q").code, 0);
   ASSERT_TRUE(fs::exists(dir_ / "out/samples/000001/transient.npy"));
+  ASSERT_EQ(sh("evaluate " + (dir_ / "out").string() + " -q").code, 0);
+  EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output, Not(HasSubstr("evaluation/")));
   write(dir_ / "scene.json", slurp(kScenes + "multi_object.json"));
   const Result st = sh("dataset status " + (dir_ / "out").string());
   EXPECT_THAT(st.output, HasSubstr("stale: 0-1"));
@@ -530,6 +532,14 @@ TEST_F(Dataset, AChangedSceneMakesSamplesStaleAndReplacesThemWhole) {
   const json meta = json::parse(slurp(dir_ / "out/samples/000001/metadata.json"));
   for (const json& f : meta["files"]) EXPECT_NE(f, "transient.npy");
   EXPECT_EQ(leftovers(dir_ / "out"), std::vector<std::string>{});
+  // the evaluation scored the samples before they were generated again: said by the run (even with -q) and by
+  // status (nothing told its metrics were of data no longer there), until evaluate runs again
+  const std::string out_of_date = "evaluation/ is out of date: of the sample folders it scored, 4 were generated again or removed "
+                                  "since, and 4 done ones are not in it: run `spadgen evaluate " + (dir_ / "out").string() + "` again";
+  EXPECT_THAT(again.output, HasSubstr(out_of_date));
+  EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output, HasSubstr(out_of_date));
+  ASSERT_EQ(sh("evaluate " + (dir_ / "out").string() + " -q").code, 0);
+  EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output, Not(HasSubstr("evaluation/")));
 }
 
 // Two datasets started at the same moment on a new folder: one is refused, whichever writes dataset.json
