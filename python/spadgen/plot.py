@@ -80,7 +80,7 @@ def plot_gate_profiles(run, pixels=None, ax=None, expected=True):
     return ax
 
 
-def plot_detection_map(run, detected=None, ax=None):
+def plot_detection_map(run, detected=None, ax=None, label="the single-edge baseline"):
     """Where a surface was detected, against the ground truth: detected (a surface is there), missed,
     false detection (no surface), nothing. ``detected`` (H, W) bool, or a depth estimate (finite = detected);
     default: the baseline rising-edge estimate of spadgen.estimate on the sampled counts."""
@@ -101,11 +101,11 @@ def plot_detection_map(run, detected=None, ax=None):
     counts = [int((cls == i).sum()) for i in range(4)]
     ax.legend(handles=[Patch(color=c, label=f"{n} ({k})") for c, n, k in zip(colors, names, counts)],
               fontsize="small", loc="upper right", framealpha=0.8)
-    ax.set_title("detection")
+    ax.set_title(f"detection: {label}")
     return ax
 
 
-def plot_error_map(run, estimate=None, ax=None, limit_mm=None):
+def plot_error_map(run, estimate=None, ax=None, limit_mm=None, label="the single-edge baseline"):
     """A depth estimate (H, W, metres of range; NaN where there is none) minus the ground truth's nearest
     surface, in mm, blue too near, red too far; default estimate: the baseline of spadgen.estimate."""
     ax = _axes(ax)
@@ -120,13 +120,15 @@ def plot_error_map(run, estimate=None, ax=None, limit_mm=None):
     im = ax.imshow(err, cmap="coolwarm", vmin=-limit_mm, vmax=limit_mm, interpolation="nearest")
     ax.figure.colorbar(im, ax=ax, label="estimate - ground truth (mm)")
     rms = float(np.sqrt(np.mean(err.compressed() ** 2))) if err.count() else float("nan")
-    ax.set_title(f"depth error (rms {rms:.1f} mm over {err.count()} pixels)")
+    ax.set_title(f"nearest-surface error of {label}\n(rms {rms:.1f} mm over {err.count()} pixels)")
     return ax
 
 
 def overview(run, pixels=None):
-    """One figure: depth, intensity, gate profiles, and for gate sweeps the detection and error maps of the
-    baseline estimate."""
+    """One figure: depth, intensity, gate profiles, and for gate sweeps the detection and error maps: of the
+    nearest return ``spadgen reconstruct`` found where the run folder holds its detections_edges.exr (the
+    multi-return detector; the baseline finds one edge, the sphere rather than the plate in front of it),
+    else of the single-edge baseline (spadgen.estimate.rising_edge_range)."""
     import matplotlib.pyplot as plt
     sweep = run.mode == "gate_sweep" and run.K > 1 and run.has("counts.npy")
     gt = run.has("ground_truth.exr")
@@ -135,15 +137,20 @@ def overview(run, pixels=None):
     cols = 2 if len(panels) > 1 else 1
     rows = -(-len(panels) // cols)
     fig, axes = plt.subplots(rows, cols, figsize=(6.5 * cols, 4.2 * rows), squeeze=False)
-    estimate = None
+    estimate, label = None, "the single-edge baseline"
     if "detection" in panels:
-        from .estimate import rising_edge_range
-        estimate = rising_edge_range(run)
+        if os.path.isfile(os.path.join(run.path, "detections_edges.exr")):
+            d = run.detections("edges")
+            ranges = np.where(np.isfinite(d.range), d.range, np.inf).min(axis=0)
+            estimate, label = np.where(np.isfinite(ranges), ranges, np.nan), "reconstruct's nearest return"
+        else:
+            from .estimate import rising_edge_range
+            estimate = rising_edge_range(run)
     for ax, name in zip(axes.flat, panels):
         {"depth": lambda: plot_depth(run, ax), "intensity": lambda: plot_intensity(run, ax),
          "profiles": lambda: plot_gate_profiles(run, pixels, ax),
-         "detection": lambda: plot_detection_map(run, estimate, ax=ax),
-         "error": lambda: plot_error_map(run, estimate, ax=ax)}[name]()
+         "detection": lambda: plot_detection_map(run, estimate, ax=ax, label=label),
+         "error": lambda: plot_error_map(run, estimate, ax=ax, label=label)}[name]()
     for ax in list(axes.flat)[len(panels):]:
         ax.set_axis_off()
     fig.suptitle(f"{os.path.basename(os.path.abspath(run.path))}: {run.width} x {run.height}, {run.mode}, K = {run.K}")

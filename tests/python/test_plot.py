@@ -92,3 +92,24 @@ def test_command_line_writes_a_png(make_run, tmp_path, run_name):
 def test_command_line_names_what_is_wrong(tmp_path):
     r = subprocess.run([sys.executable, "-m", "spadgen.plot", str(tmp_path)], capture_output=True, text=True)
     assert r.returncode == 1 and "no metadata.json" in r.stderr
+
+
+def test_overview_maps_reconstructs_nearest_return_where_the_run_has_it(sweep_run, spadgen_bin, tmp_path):
+    """With detections_edges.exr in the run folder the detection and error maps are of the multi-return
+    detector's nearest return (the single-edge baseline finds the sphere behind the multi-object plate: 142 mm
+    rms was drawn beside a run whose own detections were right); without it, of the baseline, so named."""
+    import shutil
+    run_dir = tmp_path / "run"
+    shutil.copytree(sweep_run, run_dir)
+    base = plot.overview(spadgen.open_run(run_dir))
+    assert any("the single-edge baseline" in a.get_title() for a in base.axes)
+    subprocess.run([spadgen_bin, "reconstruct", str(run_dir), "-q"], check=True)
+    run = spadgen.open_run(run_dir)
+    fig = plot.overview(run)
+    error = [a for a in fig.axes if a.get_title().startswith("nearest-surface error of reconstruct's nearest return")]
+    assert len(error) == 1
+    d = run.detections("edges")
+    nearest = np.where(np.isfinite(d.range), d.range, np.inf).min(axis=0)
+    expected = np.ma.masked_invalid((np.where(np.isfinite(nearest), nearest, np.nan) - run.depth()) * 1e3)
+    np.testing.assert_allclose(error[0].images[0].get_array().compressed(), expected.compressed(), rtol=1e-6)
+    plt.close("all")
