@@ -229,6 +229,49 @@ class Run:
         self.files = list(self.metadata["files"])
         self._cache = {}
         self._identity = _identity(meta)
+        self._check_metadata(meta)
+
+    def _check_metadata(self, meta):
+        """What every reader of the run takes from metadata.json, where present, of the types a run writes: a
+        damaged one is named with the key (it was a bare KeyError, ValueError or TypeError from wherever it was
+        read). A key that is absent is named where it is read (a run of another spadgen version)."""
+        m = self.metadata
+
+        def bad(key, what):
+            return ValueError(f"{meta}: {key} {what}; spadgen writes metadata.json whole, so it was damaged or edited "
+                              "afterwards: restore it, or " + self._remedy())
+
+        def section(name):
+            if name in m and not isinstance(m[name], dict):
+                raise bad(name, "is not an object")
+            return m.get(name, {})
+
+        def whole(name, key, least=1):
+            v = section(name).get(key, least)
+            if isinstance(v, bool) or not isinstance(v, int) or not least <= v <= 1 << 20:
+                raise bad(f"{name}.{key}", f"is {json.dumps(v)[:40]}, not an integer in [{least}, {1 << 20}]")
+
+        if not all(isinstance(f, str) for f in self.files):
+            raise bad("files", "holds an entry that is not a file name")
+        whole("image", "width")
+        whole("image", "height")
+        crop = section("image").get("crop_in_sensor", [0, 0, 0, 0])
+        if not (isinstance(crop, list) and len(crop) == 4 and all(isinstance(v, int) and not isinstance(v, bool) for v in crop)):
+            raise bad("image.crop_in_sensor", "is not 4 integers (x0, y0, width, height)")
+        acq = section("acquisition")
+        if "mode" in acq and acq["mode"] not in ("gate_sweep", "intensity"):
+            raise bad("acquisition.mode", f"is {json.dumps(acq['mode'])[:40]}, not \"gate_sweep\" or \"intensity\"")
+        whole("acquisition", "K")
+        whole("acquisition", "frames_per_k")
+        g = acq.get("gate_positions_ns")
+        if acq.get("mode") == "gate_sweep" and g is not None and not (
+                isinstance(g, list) and len(g) == acq.get("K", len(g)) and
+                all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in g)):
+            raise bad("acquisition.gate_positions_ns", "is not K numbers")
+        intr = section("camera").get("intrinsics", [[1, 0, 0], [0, 1, 0], [0, 0, 1]])
+        if not (isinstance(intr, list) and len(intr) == 3 and
+                all(isinstance(r, list) and len(r) == 3 and all(isinstance(v, (int, float)) for v in r) for r in intr)):
+            raise bad("camera.intrinsics", "is not a 3 x 3 matrix of numbers")
 
     def _remedy(self):
         """How to make the run's files again: its scene, or for a dataset's sample the dataset run (which finds
@@ -407,6 +450,15 @@ class Run:
             if not self.unchanged():
                 del self._cache[path]
                 self.check_unchanged()
+            # The (K, H, W) stacks are of the run's shape (a stack of another run copied in was read without a word)
+            stem = os.path.basename(path).rsplit(".", 1)[0]
+            if stem in ("counts", "expected_counts", "detection_rate"):
+                want = (self.K, self.height, self.width)
+                got = tuple(self._cache[path].shape)
+                if got != want:
+                    del self._cache[path]
+                    raise ValueError(f"{path}: shape {got}, but metadata.json's (K, H, W) is {want}: the file is not this "
+                                     "run's; restore it, or " + self._remedy())
         return self._cache[path]
 
     def exr(self, name):

@@ -316,7 +316,24 @@ def test_a_damaged_or_other_folder_is_named_with_what_it_is(make_run, tmp_path):
     (run / "laser.exr").unlink()  # an image too (it was a bare "No such file or directory")
     with pytest.raises(FileNotFoundError, match=f"{run / 'laser.exr'}: listed in .*metadata.json \\(files\\) but missing"):
         spadgen.open_run(run).laser
-    meta = json.loads((run / "metadata.json").read_text())
+    # metadata.json edited to other types than a run writes: named with the key (bare ValueError, KeyError,
+    # TypeError and IndexError from wherever they were read), and a stack of another shape than its (K, H, W)
+    good = (run / "metadata.json").read_text()
+    for key, value, says in (("image", {"width": "abc", "height": 10}, "image.width is \"abc\", not an integer"),
+                             ("files", ["counts.npy", 7], "files holds an entry that is not a file name"),
+                             ("camera", {"intrinsics": None}, "camera.intrinsics is not a 3 x 3 matrix"),
+                             ("acquisition", "x", "acquisition is not an object")):
+        meta = json.loads(good)
+        meta[key] = value
+        (run / "metadata.json").write_text(json.dumps(meta))
+        with pytest.raises(ValueError, match=f"{run / 'metadata.json'}: " + says.replace("(", "\\(")):
+            spadgen.open_run(run)
+    (run / "metadata.json").write_text(good)
+    np.save(run / "counts.npy", np.zeros((2, 3, 4), np.uint8))
+    with pytest.raises(ValueError, match="counts.npy: shape \\(2, 3, 4\\), but metadata.json's \\(K, H, W\\) is"):
+        spadgen.open_run(run).counts
+    (run / "counts.npy").unlink()
+    meta = json.loads(good)
     del meta["ground_truth_objects"]
     meta["spadgen_version"] = "0.0.9"
     (run / "metadata.json").write_text(json.dumps(meta))
