@@ -389,8 +389,10 @@ std::string evaluation_status(const std::string& dir, int64_t done_folders) {
       now = reconstruct::read_run_metadata((fs::path(dir) / "samples" / name).string());
     } catch (const Error&) {
     }
-    const nlohmann::json hash = now ? now->value("/dataset/sample_hash"_json_pointer, nlohmann::json(nullptr)) : nlohmann::json();
-    if (!now || (row.contains("sample_hash") && row["sample_hash"] != hash)) ++changed;
+    // (a metadata.json that is JSON but no object is a damaged sample: not the one scored)
+    const bool readable = now && now->is_object();
+    const nlohmann::json hash = readable ? now->value("/dataset/sample_hash"_json_pointer, nlohmann::json(nullptr)) : nlohmann::json();
+    if (!readable || (row.contains("sample_hash") && row["sample_hash"] != hash)) ++changed;
   }
   // the done samples' folders now (realisations included), against those scored as they are
   const int64_t unscored = std::max<int64_t>(0, done_folders - (int64_t(scored.size()) - changed));

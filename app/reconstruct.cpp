@@ -222,6 +222,9 @@ void check_writable(const std::string& file, const RunFolder& run, const std::st
   if (::lstat(file.c_str(), &st) == 0 && S_ISREG(st.st_mode)) {
     std::string head(size_t(64) << 10, '\0');
     std::ifstream in(file, std::ios::binary);
+    if (!in)
+      throw Error(file + ": exists and cannot be read (" + std::strerror(errno) + "), so it cannot be told an earlier output "
+                  "of spadgen reconstruct, which writing the output would replace; expected a new file or an earlier output (-o)");
     in.read(head.data(), std::streamsize(head.size()));
     head.resize(size_t(in.gcount()));
     static const std::string kMagic("\x76\x2f\x31\x01", 4), kMark("spadgen_reconstruct\0", 20);
@@ -739,8 +742,9 @@ std::string evaluate(const EvaluateCommand& c) {
   const ThreadLimit threads(c.threads);
   if (!(c.tolerance_m > 0.0) || !std::isfinite(c.tolerance_m)) throw Error("--tolerance-m: expected a positive, finite number of metres");
   if (c.min_score && !std::isfinite(*c.min_score)) throw Error("--min-score: expected a finite number (a detection's z score)");
-  require_utf8_path(c.target, "the evaluated folder", "which metrics.json records");
-  if (!c.detections.empty()) require_utf8_path(c.detections, "the detections file", "which metrics.json records");
+  // (as given: metrics.json records them so)
+  require_utf8_path(c.target, "the evaluated folder", "which metrics.json records", false);
+  if (!c.detections.empty()) require_utf8_path(c.detections, "the detections file", "which metrics.json records", false);
   const fs::path target(c.target);
   // Written into a staging folder beside the output folder and swapped in whole (app/staging.h): a failed
   // or interrupted evaluation leaves the earlier one as it was, never a mix of the two.

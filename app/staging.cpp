@@ -86,9 +86,9 @@ fs::path resolved_folder(const fs::path& out) {
   return ec ? abs : resolved;
 }
 
-void require_utf8_path(const fs::path& path, const std::string& what, const std::string& why) {
+void require_utf8_path(const fs::path& path, const std::string& what, const std::string& why, bool absolute) {
   std::error_code ec;
-  const std::string recorded = fs::absolute(path, ec).lexically_normal().string();
+  const std::string recorded = absolute ? fs::absolute(path, ec).lexically_normal().string() : path.string();
   if (scenes::invalid_utf8_at(ec ? path.string() : recorded) != std::string::npos)
     throw Error(scenes::printable(path.string()) + ": " + what + "'s name (or a folder's above it) is not valid UTF-8 text, " +
                 why + "; rename it");
@@ -247,9 +247,24 @@ void Staging::init(const fs::path& out) {
                  "place, which cannot be done to a mount point, so name a folder inside it (" + (out_ / "run").string() + ")");
   // A folder whose entries this user may not remove (mode 555) would be replaced, and its earlier files left
   // in a hidden folder no later run could remove: refused while nothing is written.
-  if (fs::is_directory(out_, ec) && ::access(out_.c_str(), W_OK) != 0 && errno == EACCES)
-    throw cannot("it is read-only to this user (its entries could not be removed once it is replaced); make it "
-                 "writable (chmod u+w " + out_.string() + "), or choose another folder");
+  // Its subfolders too (light/, previews/, a Zarr store: `chmod -R a-w`, or a copy from read-only media).
+  if (fs::is_directory(out_, ec)) {
+    const auto locked = [](const fs::path& d) { return ::access(d.c_str(), W_OK | X_OK) != 0 && errno == EACCES; };
+    fs::path found = locked(out_) ? out_ : fs::path();
+    if (found.empty()) {
+      size_t seen = 0;
+      for (auto it = fs::recursive_directory_iterator(out_, fs::directory_options::skip_permission_denied, ec);
+           !ec && it != fs::recursive_directory_iterator() && seen < 100000; it.increment(ec), ++seen)
+        if (it->is_directory(ec) && !it->is_symlink(ec) && locked(it->path())) {
+          found = it->path();
+          break;
+        }
+    }
+    if (!found.empty())
+      throw cannot((found == out_ ? std::string("it is") : found.string() + " is") +
+                   " read-only to this user (its entries could not be removed once the folder is replaced); make it "
+                   "writable (chmod -R u+w " + out_.string() + "), or choose another folder");
+  }
   if (owned_.empty()) refuse_a_realisation_or_a_folder_being_written();
   lock();
   try {

@@ -30,9 +30,10 @@ namespace spadgen::app {
 std::filesystem::path resolved_folder(const std::filesystem::path& out);
 
 // A path an output records (metadata.json, metrics.json, an EXR's spadgen_source hold it as JSON text) must
-// be valid UTF-8, absolute as recorded: else an Error naming it (escaped) as `what` ("the run folder"), with
-// `why` ("which the detections file records"), before any work (it failed after the work, an internal error).
-void require_utf8_path(const std::filesystem::path& path, const std::string& what, const std::string& why);
+// be valid UTF-8 as it is recorded (made absolute, or as given): else an Error naming it (escaped) as `what`
+// ("the run folder"), with `why` ("which the detections file records"), before any work (it failed after the
+// work, an internal error).
+void require_utf8_path(const std::filesystem::path& path, const std::string& what, const std::string& why, bool absolute = true);
 
 // The folders whose contents spadgen checks (a later run into the folder, or a dataset's check of its samples,
 // refuses one holding a foreign file or folder), which an output folder must not be placed inside.

@@ -284,6 +284,10 @@ std::string DatasetFolder::sample_hash(const Sample& s, const scenes::ResolvedRu
   // The sensor's tables (CSV and EXR files the scene file names) by content, when it names any (a pulse
   // shape replaced under a done dataset left its samples done, mixing two pulses).
   std::string text = r.resolved.dump() + "\n" + scene_content_hash(s.scene) + "\n" + SPADGEN_VERSION;
+  // Revisions of what a resolved scene renders to, within one version: a gate sweep to a target error holds
+  // the ambient light too (2026-12-01; its samples rendered before are stale, not mixed with the new rule).
+  if (r.config.render.target_relative_error && r.config.acquisition.mode == AcquisitionMode::GateSweep)
+    text += "\nthe target holds the ambient light";
   if (scenes::uses_sensor_tables(r.config)) text += "\n" + scenes::sensor_tables_hash(r.config);
   return scenes::hex64(scenes::fnv1a64(text));
 }
@@ -297,6 +301,8 @@ std::optional<json> DatasetFolder::sample_metadata(const std::string& folder) co
     if (!m.is_object() || !m.contains("dataset") || !m["dataset"].is_object() || !m.contains("files") || !m["files"].is_array())
       return false;
     if (const auto h = m["dataset"].find("sample_hash"); h != m["dataset"].end() && !h->is_string()) return false;
+    for (const char* text : {"spadgen_version", "scene_hash_fnv1a64"})  // (read to say why a sample is stale)
+      if (const auto t = m.find(text); t != m.end() && !t->is_string()) return false;
     for (const json& f : m["files"])
       if (!f.is_string()) return false;
     if (m.contains("ground_truth_summary") && !m["ground_truth_summary"].is_object()) return false;

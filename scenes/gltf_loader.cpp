@@ -1937,10 +1937,11 @@ void check_before_tinygltf(const std::string& path, const nlohmann::json& doc) {
         if (comma == std::string::npos || !std::string_view(uri).substr(0, comma).ends_with(";base64"))
           throw Error(path + ": " + who + ": its data URI " + quoted(uri.substr(0, std::min<size_t>(uri.size(), 48)) + (uri.size() > 48 ? "..." : "")) +
                       " is not base64; expected data:<media type>;base64,<data> (glTF 2.0, 3.6.1.1)");
-        // glTF names a buffer's two media types; tinygltf decodes only those (another, or none as RFC 2397
-        // allows, was its "File not found").
-        if (const std::string_view media = std::string_view(uri).substr(5, comma - 5 - 7);
-            media != "application/octet-stream" && media != "application/gltf-buffer")
+        // glTF names a buffer's two media types; tinygltf decodes those and a few of images and text, and
+        // another (or none, as RFC 2397 allows) was its "File not found".
+        static const std::set<std::string_view> kDecoded = {"application/octet-stream", "application/gltf-buffer", "text/plain",
+                                                            "image/png", "image/jpeg", "image/bmp", "image/gif"};
+        if (const std::string_view media = std::string_view(uri).substr(5, comma - 5 - 7); !kDecoded.count(media))
           throw Error(path + ": " + who + ": its data URI's media type is " + quoted(scenes::printable(std::string(media.substr(0, 48)))) +
                       "; expected data:application/octet-stream;base64, or data:application/gltf-buffer;base64, (glTF 2.0, "
                       "3.6.1.1: a buffer's data URI must name one of them)");

@@ -128,6 +128,11 @@ def _rle_decode(data, expected, path):
     return bytes(out)
 
 
+def _file_identity(f):
+    st = os.fstat(f.fileno())
+    return st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns
+
+
 class ExrFile:
     """One EXR image: its header on opening, its channels (by name) on first access, decoded all at once
     and kept. Every channel is a read-only (H, W) array of its stored type (float32 for FLOAT, float16 for
@@ -135,18 +140,14 @@ class ExrFile:
 
     def __init__(self, path):
         self.path = os.fspath(path)
-        # Opened only when a regular file (a FIFO would block the open for ever), and kept open until the
-        # channels are decoded: a file replaced meanwhile (its run folder swapped for a newer run's) is not
-        # read as the rest of this one's.
+        # Opened only when a regular file (a FIFO would block the open for ever). Which file it is (device,
+        # inode, size, modification time) is kept: the channels, decoded later, must come from the same one
+        # (a run folder swapped for a newer run's meanwhile is not read as the rest of this one's).
         if not stat.S_ISREG(os.stat(self.path).st_mode):
             raise ExrError(f"{self.path}: not a regular file; expected an OpenEXR file")
-        f = open(self.path, "rb")
-        try:
+        with open(self.path, "rb") as f:
+            self._identity = _file_identity(f)
             self._read_whole_header(f)
-        except BaseException:
-            f.close()
-            raise
-        self._file = f
         self._channels = None
 
     def _read_whole_header(self, f):
@@ -254,12 +255,11 @@ class ExrFile:
         y_min = self.data_window[1]
         lpc = LINES_PER_CHUNK[comp]
         chunks = -(-H // lpc)
-        f, self._file = self._file or open(self.path, "rb"), None  # (opened again only after a failed decode)
-        try:
-            f.seek(0)
+        with open(self.path, "rb") as f:
+            if _file_identity(f) != self._identity:
+                raise ExrError(f"{self.path}: the file was replaced since its header was read (a newer run published "
+                               "into its folder): open it, or its run, again")
             data = f.read()
-        finally:
-            f.close()
         if self._offsets_at + 8 * chunks > len(data):
             raise ExrError(f"{self.path}: truncated line offset table")
         offsets = struct.unpack_from(f"<{chunks}Q", data, self._offsets_at)

@@ -147,8 +147,8 @@ class RunChangedError(RuntimeError):
 
 
 def _identity(path):
-    """Which file `path` is: a run folder replaced whole has a new metadata.json."""
-    st = os.stat(path)
+    """Which file `path` (or an open file's descriptor) is: a run folder replaced whole has a new metadata.json."""
+    st = os.fstat(path) if isinstance(path, int) else os.stat(path)
     return st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns
 
 
@@ -197,8 +197,9 @@ class Run:
     FileNotFoundError naming the scene-file key that writes it (never None).
 
     A run folder may be replaced whole while it is open (spadgen publishes a new run, or a dataset run
-    regenerates a stale sample, by swapping folders): the memory maps of .npy stacks and the EXR images keep
-    reading the version they opened, but Zarr stores are read chunk by chunk from the folder. check_unchanged()
+    regenerates a stale sample, by swapping folders): the memory maps of .npy stacks keep reading the version
+    they opened, an EXR image whose header was read before refuses to decode the newer file (ExrError), and
+    Zarr stores are read chunk by chunk from the folder. check_unchanged()
     raises RunChangedError once the folder was replaced, and so does every file the Run opens after that (it
     would be the newer run's, beside this one's metadata); RunDataset and DatasetSamples call it around every
     item."""
@@ -220,6 +221,7 @@ class Run:
             raise FileNotFoundError(f"{self.path}: " + _not_a_run_why(self.path))
         try:
             with open(meta, encoding="utf-8") as f:
+                identity = _identity(f.fileno())  # of the file read (a swap between reading and a stat would pass)
                 self.metadata = json.load(f)
         except (UnicodeDecodeError, json.JSONDecodeError) as e:
             raise ValueError(f"{meta}: not valid JSON ({e}); spadgen publishes a run folder whole, so the file was damaged "
@@ -228,7 +230,7 @@ class Run:
             raise ValueError(f"{meta}: not a spadgen run's metadata (no list of files)")
         self.files = list(self.metadata["files"])
         self._cache = {}
-        self._identity = _identity(meta)
+        self._identity = identity
         self._check_metadata(meta)
 
     def _check_metadata(self, meta):
@@ -423,6 +425,7 @@ class Run:
         path = self._require(name)
         if path not in self._cache:
             if not os.path.exists(path):
+                self.check_unchanged()  # (a newer run without the file: that, not damage)
                 raise FileNotFoundError(f"{path}: listed in {os.path.join(self.path, 'metadata.json')} (files) but missing: "
                                         f"restore it, or {self._remedy()}")
             if path.endswith(".zarr"):
@@ -468,6 +471,7 @@ class Run:
         if name not in self._cache:
             path = self._require(name)
             if not os.path.exists(path):
+                self.check_unchanged()
                 raise FileNotFoundError(f"{path}: listed in {os.path.join(self.path, 'metadata.json')} (files) but missing: "
                                         f"restore it, or {self._remedy()}")
             image = ExrFile(path)

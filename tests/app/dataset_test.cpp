@@ -242,7 +242,7 @@ TEST_F(Dataset, ASampleThatLostAFileIsDamagedAndGeneratedAgain) {
   edit(dir_ / "out/samples/000000/metadata.json", [](json& m) { m["files"].push_back(7); });
   edit(dir_ / "out/samples/000001/metadata.json", [](json& m) { m["dataset"] = "x"; });
   edit(dir_ / "out/samples/000002/metadata.json", [](json& m) { m["ground_truth_summary"] = "x"; });
-  edit(dir_ / "out/samples/000002_r01/metadata.json", [](json& m) { m["dataset"]["sample_hash"] = 12; });
+  edit(dir_ / "out/samples/000002_r01/metadata.json", [](json& m) { m["dataset"]["sample_hash"] = 12, m["spadgen_version"] = 5; });
   const Result typed = sh("dataset status " + (dir_ / "out").string());
   EXPECT_EQ(typed.code, 4) << typed.output;
   EXPECT_THAT(typed.output, HasSubstr("3 samples: 0 done, 0 failed, 0 stale, 3 missing"));
@@ -540,6 +540,11 @@ TEST_F(Dataset, AChangedSceneMakesSamplesStaleAndReplacesThemWhole) {
   EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output, HasSubstr(out_of_date));
   ASSERT_EQ(sh("evaluate " + (dir_ / "out").string() + " -q").code, 0);
   EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output, Not(HasSubstr("evaluation/")));
+  // a scored sample's metadata.json damaged into JSON that is no object: out of date, not an internal error
+  write(dir_ / "out/samples/000001/metadata.json", "[]");
+  const Result damaged = sh("dataset status " + (dir_ / "out").string());
+  EXPECT_EQ(damaged.code, 4) << damaged.output;
+  EXPECT_THAT(damaged.output, HasSubstr("evaluation/ is out of date: of the sample folders it scored, 1 were generated again or removed"));
 }
 
 // Two datasets started at the same moment on a new folder: one is refused, whichever writes dataset.json

@@ -895,6 +895,9 @@ TEST_F(Hardening, AFolderNameThatIsNotUtf8IsRefusedBeforeTheWorkByWhatRecordsIt)
     EXPECT_THAT(o.err, HasSubstr("bad\\xFF\\xFE")) << command;
     EXPECT_THAT(o.err, HasSubstr(what)) << command;
   }
+  // a relative name of valid UTF-8 in a folder whose name is not: evaluate records it as given (it was refused)
+  const Result relative = shell("cd '" + bad.string() + "' && " + bin() + " evaluate r -q -o " + (dir_ / "e_rel").string());
+  EXPECT_EQ(relative.code, 0) << relative.output;
   std::ofstream(dir_ / "ds.json") << "{\"scenes\": [\"" << kFlat << "\"], \"samples\": 1, \"repeats\": 2, \"set\": "
                                      "{\"camera.crop\": [508, 246, 8, 8], \"render.samples_per_pixel\": 1}}";
   const Outcome ds = spadgen("dataset run " + (dir_ / "ds.json").string() + " -q -o '" + (bad / "ds").string() + "'");
@@ -912,7 +915,8 @@ TEST_F(Hardening, AReadOnlyOutputFolderIsRefusedNotHiddenForEver) {
   fs::create_directories(p);
   fs::permissions(dir_, fs::perms::all);
   fs::permissions(p, fs::perms::all);
-  const std::string as_nobody = "setpriv --reuid=65534 --regid=65534 --clear-groups " + bin() + " run " + kTiny + " -q -o " + (p / "r").string();
+  const std::string as_nobody = "setpriv --reuid=65534 --regid=65534 --clear-groups " + bin() + " run " + kTiny +
+                                " --set outputs.previews=true -q -o " + (p / "r").string();
   Result r = shell(as_nobody);
   if (r.code != 0 && r.output.find("Permission denied") != std::string::npos) GTEST_SKIP() << "another user cannot run the build here";
   ASSERT_EQ(r.code, 0) << r.output;
@@ -922,10 +926,18 @@ TEST_F(Hardening, AReadOnlyOutputFolderIsRefusedNotHiddenForEver) {
   r = shell(as_nobody + " --seed 3");
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_THAT(r.output, HasSubstr("cannot use " + (p / "r").string() + " as the output folder (-o): it is read-only to this user"));
-  EXPECT_THAT(r.output, HasSubstr("make it writable (chmod u+w " + (p / "r").string() + ")"));
+  EXPECT_THAT(r.output, HasSubstr("make it writable (chmod -R u+w " + (p / "r").string() + ")"));
   EXPECT_EQ(slurp(p / "r" / "counts.npy"), before);
   for (const auto& e : fs::directory_iterator(p)) EXPECT_EQ(e.path().filename(), "r");
   fs::permissions(p / "r", fs::perms::all);
+  // a read-only subfolder (chmod -R a-w, then u+w on the folder as the first hint said): the same
+  fs::permissions(p / "r" / "previews", fs::perms::owner_read | fs::perms::owner_exec | fs::perms::others_read | fs::perms::others_exec);
+  r = shell(as_nobody + " --seed 4");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr((p / "r" / "previews").string() + " is read-only to this user"));
+  EXPECT_THAT(r.output, HasSubstr("(chmod -R u+w " + (p / "r").string() + ")"));
+  for (const auto& e : fs::directory_iterator(p)) EXPECT_EQ(e.path().filename(), "r");
+  fs::permissions(p / "r" / "previews", fs::perms::all);
 }
 
 // Threads the process may not start (ulimit -v for their stacks here; ulimit -u on a shared node) are the

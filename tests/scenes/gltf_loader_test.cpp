@@ -1203,10 +1203,11 @@ TEST_F(BrokenGltf, PropertiesOfTheWrongTypeAreNamedNotDefaulted) {
   } broken[] = {
       {"data:application/octet-stream,%00%01", "buffer 0: its data URI 'data:application/octet-stream,%00%01' is not base64; "
                                                "expected data:<media type>;base64,<data>"},
-      // a media type glTF does not give a buffer (tinygltf: "File not found"), or none (RFC 2397 allows it)
+      // a media type glTF does not give a buffer and tinygltf does not decode ("File not found"), or none (RFC
+      // 2397 allows it); those it decodes (text/plain, image/png, ...) load as they did
       {"data:;base64,AAAA", "buffer 0: its data URI's media type is ''; expected data:application/octet-stream;base64, or "
                             "data:application/gltf-buffer;base64, (glTF 2.0, 3.6.1.1"},
-      {"data:image/png;base64,AAAA", "buffer 0: its data URI's media type is 'image/png'; expected data:application/octet-stream"},
+      {"data:image/webp;base64,AAAA", "buffer 0: its data URI's media type is 'image/webp'; expected data:application/octet-stream"},
       {"data:application/octet-stream;base64,AAA!AAAA", "buffer 0: its data URI's base64 has '!' at character 3 of 8; "
                                                         "expected A-Z, a-z, 0-9, + and /, then up to two ="},
       {"data:application/octet-stream;base64,AAAAA", "buffer 0: its data URI's base64 has 5 characters, one more than a multiple of 4"},
