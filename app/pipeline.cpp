@@ -84,7 +84,7 @@ RunResult run(const RunOptions& options) {
   sensor::SensorModel sensor(sensor_stage(cfg));
   apply_user_maps(sensor, cfg);
   warn(sensor_warnings(sensor));
-  const render::Renderer renderer(scene, render_stage(cfg, sensor.row_fill_factor()));
+  const render::Renderer renderer(scene, render_stage(cfg, sensor.row_fill_factor(), sensor.row_ambient_floor()));
   const int objects = int(scenes::objects_of(scene).list.size());
 
   const TimeAxis axis = time_axis(cfg, sensor);

@@ -378,6 +378,11 @@ struct RenderStageConfig {
   // none: the intensity mode without laser_on) and the ambient light, which every mode's counts see (a gate
   // sweep's background; a pixel without ambient light takes the laser's paths).
   bool target_laser = true, target_ambient = true;
+  // Per sensor row (empty: 0), photons per second: the ambient light a gate sweep's counts hardly see against
+  // their own noise (the ambient rate that gives one expected count over a gate position's frames, plus the
+  // dark counts as ambient photons; SensorModel::row_ambient_floor). The target holds the ambient light's
+  // error against its rate plus this floor, so that a negligible background costs no paths.
+  std::vector<double> row_ambient_floor{};
   // Whether the renderer traces the laser at all: not in the intensity mode without laser_on unless an
   // output holds its light (outputs.transient, or outputs.light for a later spadgen sense). Untraced, the
   // paths are drawn as they would be (the ambient light's estimate is the same unless guided connections
@@ -389,6 +394,7 @@ struct RenderStageConfig {
 SensorStageConfig sensor_stage(const RunConfig& c);
 // RenderStageConfig::trace_laser of the run (whether the laser's images and ground truth channels exist).
 bool laser_traced(const RunConfig& c);
-RenderStageConfig render_stage(const RunConfig& c, std::vector<double> row_fill_factor);
+RenderStageConfig render_stage(const RunConfig& c, std::vector<double> row_fill_factor,
+                               std::vector<double> row_ambient_floor = {});
 
 }  // namespace spadgen

@@ -290,6 +290,9 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
   if (config.row_fill_factor.size() != static_cast<size_t>(camera.height()))
     throw Error("renderer: RenderStageConfig::row_fill_factor holds " + std::to_string(config.row_fill_factor.size()) +
                 " rows, expected camera.height_px = " + std::to_string(camera.height()));
+  if (!config.row_ambient_floor.empty() && config.row_ambient_floor.size() != static_cast<size_t>(camera.height()))
+    throw Error("renderer: RenderStageConfig::row_ambient_floor holds " + std::to_string(config.row_ambient_floor.size()) +
+                " rows, expected none or camera.height_px = " + std::to_string(camera.height()));
 }
 
 double Integrator::measurement_constant(int y) const {

@@ -227,7 +227,8 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
       RayCounts rays;
       CameraBlock block;
       std::vector<ObjectLaser> objects(kPacket, ObjectLaser(gt ? im.objects.list.size() : 0));
-      for (int y = rows.begin(); y < rows.end(); ++y)
+      for (int y = rows.begin(); y < rows.end(); ++y) {
+        const double ambient_floor = im.config.row_ambient_floor.empty() ? 0.0 : im.config.row_ambient_floor[size_t(y)];
         for (int bx = data_rect.x0 - data_rect.x0 % kPacket; bx < data_rect.x1(); bx += kPacket) {
           // Every pixel of the block renders, as in the fixed-count render (a tile edge inside a block
           // renders the whole block and keeps its own pixels): so the lanes traced together, and with
@@ -256,16 +257,18 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
           // The paths the pilot's spread asks for (the error falls as 1 / sqrt(paths)), 10 % more; none of the
           // light in the pilot: as many as it had. Of the laser return and, where the acquisition's counts are
           // of it (RenderStageConfig), of the ambient light: the more of the two.
-          const auto paths_for = [&](double sum, double sq) {
+          // floor: a rate the counts hardly see, added to the light's mean (the ambient light's, per row)
+          const auto paths_for = [&](double sum, double sq, double floor = 0.0) {
             const double mean = sum / first, se = standard_error(sum, sq, first, 1.0);
             if (!(mean > 0.0 && se > 0.0)) return double(first);
-            const double r = se / (target * mean);
+            const double r = se / (target * (mean + floor));
             return std::clamp(std::ceil(first * r * r * 1.1), double(first), double(most));
           };
           for (int i = 0; i < lanes; ++i) {
             double want = first;
             if (im.config.target_laser) want = std::max(want, paths_for(pilot[i].laser_total, pilot[i].laser_sq));
-            if (im.config.target_ambient) want = std::max(want, paths_for(pilot[i].ambient_rate, pilot[i].ambient_sq));
+            if (im.config.target_ambient && !(ambient_floor == std::numeric_limits<double>::infinity()))
+              want = std::max(want, paths_for(pilot[i].ambient_rate, pilot[i].ambient_sq, ambient_floor));
             begin[i] = first, end[i] = first + int(want);
           }
           render_rounds([&](int i, int b, int e) {
@@ -297,6 +300,7 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
                   split ? acc_indirect.data() + size_t(i) * bins : nullptr);
           }
         }
+      }
       add_rays(rays);
     });
   }

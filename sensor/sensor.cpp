@@ -149,6 +149,21 @@ const std::vector<double>& SensorModel::exposures_s() const { return impl_->acq-
 const Acquisition& SensorModel::acquisition() const { return *impl_->acq; }
 const PixelLayout& SensorModel::layout() const { return impl_->maps->layout(); }
 std::vector<double> SensorModel::row_fill_factor() const { return layout().row_fill_factor(impl_->cfg.sensor); }
+std::vector<double> SensorModel::row_ambient_floor() const {
+  const SensorStageConfig& c = impl_->cfg;
+  const double open_s = c.sensor.gate.length_s * double(c.acquisition.cycles_per_frame);
+  const double tf = PixelMaps::temperature_factor(c.sensor.temperature_C);
+  std::vector<double> floor(size_t(c.camera.height_px));
+  for (size_t y = 0; y < floor.size(); ++y) {
+    const int type = layout().type_of_row(int(y));
+    const double pdp = impl_->types[type].pdp_ambient;
+    const PixelTypeConfig& t = type == 0 ? c.sensor.pixel_A : c.sensor.pixel_B;
+    const double dcr = c.sensor.dark_counts ? t.dcr_median_cps * tf : 0.0;
+    floor[y] = pdp > 0.0 && open_s > 0.0 ? (1.0 / (double(impl_->frames_per_k) * pdp * open_s) + dcr / pdp)
+                                         : std::numeric_limits<double>::infinity();
+  }
+  return floor;
+}
 int SensorModel::halo() const { return impl_->halo; }
 int SensorModel::frames_per_k() const { return static_cast<int>(impl_->frames_per_k); }
 const GateShape& SensorModel::gate() const {

@@ -270,6 +270,10 @@ TEST(Accuracy, TheTargetHoldsTheAmbientLightInTheIntensityMode) {
   // a gate sweep's counts see the ambient light as their background: held too (it was not, and at 100 lux the
   // multi-object scene's counts at quality=standard were 4.6-5.7 counts off at the 99th percentile)
   EXPECT_TRUE(render_stage(run, {}).target_ambient);
+  // the floor of a faint background, a gate sweep's only (in the intensity mode the ambient light is the signal)
+  EXPECT_EQ(render_stage(run, {}, {5.0, 6.0}).row_ambient_floor, (std::vector<double>{5.0, 6.0}));
+  run.acquisition.mode = AcquisitionMode::Intensity;
+  EXPECT_TRUE(render_stage(run, {}, {5.0, 6.0}).row_ambient_floor.empty());
 }
 
 }  // namespace
