@@ -365,25 +365,50 @@ void inspect_each(const DatasetFolder& folder, bool progress, const SampleHashes
   }
 }
 
+// The names of the done sample folders (realisations included) index.jsonl lists, as evaluate scores them;
+// rows that do not read are left out (evaluate names them).
+std::set<std::string> indexed_done_folders(const fs::path& dir) {
+  std::set<std::string> out;
+  std::ifstream in(dir / "index.jsonl");
+  for (std::string line; std::getline(in, line);) {
+    const nlohmann::json r = nlohmann::json::parse(line, nullptr, /*allow_exceptions=*/false);
+    if (!r.is_object() || r.value("status", nlohmann::json()) != "done") continue;
+    std::vector<nlohmann::json> folders{r.value("folder", nlohmann::json())};
+    if (r.contains("repeats") && r["repeats"].is_array()) folders.insert(folders.end(), r["repeats"].begin(), r["repeats"].end());
+    for (const nlohmann::json& f : folders)
+      if (f.is_string()) out.insert(fs::path(f.get<std::string>()).filename().string());
+  }
+  return out;
+}
+
 // A line naming an evaluation/ that scored other versions of the samples than the folder holds now (generated
-// again since, removed, or added): its metrics are of data no longer there. Empty when it is current, or absent.
-std::string evaluation_status(const std::string& dir, int64_t done_folders) {
+// again with another sample_hash since, no longer done, or done and not scored): its metrics are of data no
+// longer there. Empty when it is current, or absent.
+std::string evaluation_status(const std::string& dir) {
   const fs::path metrics = fs::path(dir) / "evaluation" / "metrics.json";
   std::error_code ec;
   if (!fs::is_regular_file(metrics, ec)) return "";
+  constexpr uint64_t kMost = uint64_t{1} << 30;  // about 3 kB per sample folder: 300,000 folders
+  if (const uintmax_t size = fs::file_size(metrics, ec); !ec && size > kMost)
+    return "evaluation/: " + metrics.string() + " is larger than 1 GB: not checked against the samples\n";
   nlohmann::json m;
   try {
-    m = scenes::parse_json(scenes::read_file_bounded(metrics.string(), uint64_t{256} << 20, "metrics"), metrics.string());
+    m = scenes::parse_json(scenes::read_file_bounded(metrics.string(), kMost, "metrics"), metrics.string());
   } catch (const Error&) {
     return "evaluation/: " + metrics.string() + " does not read as spadgen evaluate's: run `spadgen evaluate " + dir + "` again\n";
   }
   if (!m.is_object() || !m.contains("samples") || !m["samples"].is_array()) return "";
+  const std::set<std::string> done = indexed_done_folders(dir);
   std::set<std::string> scored;
-  int64_t changed = 0;
+  int64_t changed = 0, gone = 0;
   for (const nlohmann::json& row : m["samples"]) {
     if (!row.is_object() || !row.contains("sample") || !row["sample"].is_string()) continue;
     const std::string name = row["sample"].get<std::string>();
     scored.insert(name);
+    if (!done.count(name)) {  // removed, no longer done, or past the dataset's samples
+      ++gone;
+      continue;
+    }
     std::optional<nlohmann::json> now;
     try {
       now = reconstruct::read_run_metadata((fs::path(dir) / "samples" / name).string());
@@ -394,12 +419,13 @@ std::string evaluation_status(const std::string& dir, int64_t done_folders) {
     const nlohmann::json hash = readable ? now->value("/dataset/sample_hash"_json_pointer, nlohmann::json(nullptr)) : nlohmann::json();
     if (!readable || (row.contains("sample_hash") && row["sample_hash"] != hash)) ++changed;
   }
-  // the done samples' folders now (realisations included), against those scored as they are
-  const int64_t unscored = std::max<int64_t>(0, done_folders - (int64_t(scored.size()) - changed));
-  if (changed == 0 && unscored == 0) return "";
-  return "evaluation/ is out of date: of the sample folders it scored, " + std::to_string(changed) +
-         " were generated again or removed since, and " + std::to_string(unscored) +
-         " done ones are not in it: run `spadgen evaluate " + dir + "` again\n";
+  int64_t unscored = 0;
+  for (const std::string& f : done) unscored += !scored.count(f);
+  if (changed == 0 && gone == 0 && unscored == 0) return "";
+  return "evaluation/ is out of date: of the " + std::to_string(scored.size()) + " sample folders it scored, " +
+         std::to_string(changed) + " changed since (generated again with another sample_hash, or damaged) and " + std::to_string(gone) +
+         " are no longer done samples, and " + std::to_string(unscored) + " done ones are not in it: run `spadgen evaluate " +
+         dir + "` again\n";
 }
 
 std::string status_counts(const std::array<int64_t, 5>& c) {
@@ -750,7 +776,7 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
                  failed.size());
   // An evaluation/ of the samples this run generated again is of data no longer there: said (even with -q).
   if (records && generated > 0)
-    if (const std::string note = evaluation_status(dir.string(), records->count[size_t(Status::Done)] * spec.repeats); !note.empty())
+    if (const std::string note = evaluation_status(dir.string()); !note.empty())
       std::fprintf(stderr, "spadgen: dataset: %s", note.c_str());
   if (!failed.empty())
     throw Error("dataset run: " + std::to_string(failed.size()) + " samples failed (" + datasets::ranges_text(failed) +
@@ -827,7 +853,7 @@ DatasetStatus dataset_status(const std::string& dir) {
   if (!beyond.empty())
     o << "beyond the " << spec.count() << " samples: the folders of samples " << datasets::ranges_text(beyond)
       << " (kept, not in the index; a larger \"samples\" takes them again)\n";
-  o << evaluation_status(dir, count[size_t(Status::Done)] * spec.repeats);
+  o << evaluation_status(dir);
   const bool complete = count[size_t(Status::Done)] == spec.count();
   return {o.str(), complete};
 }

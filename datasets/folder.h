@@ -120,10 +120,11 @@ class DatasetFolder {
   struct Resolved {
     nlohmann::ordered_json scene;  // the resolved scene file
     std::string hash;
+    std::string hash_before_revisions;  // the hash without sample_hash's revisions of the renderer's rules
   };
   Resolved resolve(const Sample& s) const;
   // The hash of sample s whose scene resolved to r (as resolve computes it).
-  std::string sample_hash(const Sample& s, const scenes::ResolvedRun& r) const;
+  std::string sample_hash(const Sample& s, const scenes::ResolvedRun& r, bool revisions = true) const;
 
   // The metadata.json of a sample folder ("samples/000042", a repeat's) when it is one spadgen published
   // (it lists its files and has a dataset section), else nullopt.

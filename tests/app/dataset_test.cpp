@@ -534,8 +534,9 @@ TEST_F(Dataset, AChangedSceneMakesSamplesStaleAndReplacesThemWhole) {
   EXPECT_EQ(leftovers(dir_ / "out"), std::vector<std::string>{});
   // the evaluation scored the samples before they were generated again: said by the run (even with -q) and by
   // status (nothing told its metrics were of data no longer there), until evaluate runs again
-  const std::string out_of_date = "evaluation/ is out of date: of the sample folders it scored, 4 were generated again or removed "
-                                  "since, and 4 done ones are not in it: run `spadgen evaluate " + (dir_ / "out").string() + "` again";
+  const std::string out_of_date = "evaluation/ is out of date: of the 4 sample folders it scored, 4 changed since (generated again "
+                                  "with another sample_hash, or damaged) and 0 are no longer done samples, and 0 done ones are "
+                                  "not in it: run `spadgen evaluate " + (dir_ / "out").string() + "` again";
   EXPECT_THAT(again.output, HasSubstr(out_of_date));
   EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output, HasSubstr(out_of_date));
   ASSERT_EQ(sh("evaluate " + (dir_ / "out").string() + " -q").code, 0);
@@ -544,7 +545,13 @@ TEST_F(Dataset, AChangedSceneMakesSamplesStaleAndReplacesThemWhole) {
   write(dir_ / "out/samples/000001/metadata.json", "[]");
   const Result damaged = sh("dataset status " + (dir_ / "out").string());
   EXPECT_EQ(damaged.code, 4) << damaged.output;
-  EXPECT_THAT(damaged.output, HasSubstr("evaluation/ is out of date: of the sample folders it scored, 1 were generated again or removed"));
+  EXPECT_THAT(damaged.output, HasSubstr("evaluation/ is out of date: of the 4 sample folders it scored, 1 changed since"));
+  // fewer samples: the evaluation scored folders that are no longer the dataset's (it was reported current)
+  write(dir_ / "d1.json", small_dataset(1, 3, (dir_ / "scene.json").string()));
+  ASSERT_EQ(sh("dataset run " + (dir_ / "d1.json").string() + " -o " + (dir_ / "out").string() + " -q").code, 0);
+  EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output,
+              HasSubstr("of the 4 sample folders it scored, 0 changed since (generated again with another sample_hash, or damaged) "
+                        "and 2 are no longer done samples, and 0 done ones are not in it"));
 }
 
 // Two datasets started at the same moment on a new folder: one is refused, whichever writes dataset.json
