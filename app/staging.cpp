@@ -245,31 +245,32 @@ void Staging::init(const fs::path& out) {
   if (fs::is_directory(out_, ec) && is_mount_point(out_))
     throw cannot("it is a mount point; " + what_ + " replaces the output folder as a whole, renaming a new folder into its " +
                  "place, which cannot be done to a mount point, so name a folder inside it (" + (out_ / "run").string() + ")");
-  // A folder whose entries this user may not remove (mode 555) would be replaced, and its earlier files left
-  // in a hidden folder no later run could remove: refused while nothing is written.
-  // Its subfolders too (light/, previews/, a Zarr store: `chmod -R a-w`, or a copy from read-only media).
-  if (fs::is_directory(out_, ec)) {
-    const auto locked = [](const fs::path& d) { return ::access(d.c_str(), W_OK | X_OK) != 0 && errno == EACCES; };
-    fs::path found = locked(out_) ? out_ : fs::path();
-    if (found.empty()) {
-      size_t seen = 0;
-      for (auto it = fs::recursive_directory_iterator(out_, fs::directory_options::skip_permission_denied, ec);
-           !ec && it != fs::recursive_directory_iterator() && seen < 100000; it.increment(ec), ++seen)
-        if (it->is_directory(ec) && !it->is_symlink(ec) && locked(it->path())) {
-          found = it->path();
-          break;
-        }
-    }
-    if (!found.empty())
-      throw cannot((found == out_ ? std::string("it is") : found.string() + " is") +
-                   " read-only to this user (its entries could not be removed once the folder is replaced); make it "
-                   "writable (chmod -R u+w " + out_.string() + "), or choose another folder");
-  }
   if (owned_.empty()) refuse_a_realisation_or_a_folder_being_written();
   lock();
   try {
     recover();
     check_owned();
+    // A folder whose entries this user may not remove (mode 555) would be replaced, and its earlier files left
+    // in a hidden folder no later run could remove: refused while nothing is written. Its subfolders too
+    // (light/, previews/, a Zarr store: `chmod -R a-w`, or a copy from read-only media). After check_owned:
+    // a folder of someone else's files is named as such first.
+    if (fs::is_directory(out_, ec)) {
+      const auto locked = [](const fs::path& d) { return ::access(d.c_str(), W_OK | X_OK) != 0 && errno == EACCES; };
+      fs::path found = locked(out_) ? out_ : fs::path();
+      if (found.empty()) {
+        size_t seen = 0;
+        for (auto it = fs::recursive_directory_iterator(out_, fs::directory_options::skip_permission_denied, ec);
+             !ec && it != fs::recursive_directory_iterator() && seen < 100000; it.increment(ec), ++seen)
+          if (it->is_directory(ec) && !it->is_symlink(ec) && locked(it->path())) {
+            found = it->path();
+            break;
+          }
+      }
+      if (!found.empty())
+        throw cannot((found == out_ ? std::string("it is") : found.string() + " is") +
+                     " read-only to this user (its entries could not be removed once the folder is replaced); make it "
+                     "writable (chmod -R u+w " + out_.string() + "), or choose another folder");
+    }
     dir_ = parent_ / ("." + name_ + ".spadgen-staging-" + pid_text());
     fs::remove_all(dir_);
     fs::create_directories(dir_ / "previews");

@@ -25,8 +25,9 @@ bool laser_traced(const RunConfig& c) {
 
 RenderStageConfig render_stage(const RunConfig& c, std::vector<double> row_fill_factor, std::vector<double> row_ambient_floor) {
   RenderStageConfig r{c.camera, c.laser, c.ambient, c.render, c.light_seed(), std::move(row_fill_factor)};
-  // (a gate sweep's background only: in the intensity mode the ambient light is what the counts measure)
-  if (c.acquisition.mode == AcquisitionMode::GateSweep) r.row_ambient_floor = std::move(row_ambient_floor);
+  // (a gate sweep's background only: in the intensity mode the ambient light is what the counts measure; and
+  // not for light saved for a later spadgen sense, which may sense it in another mode or with another sensor)
+  if (c.acquisition.mode == AcquisitionMode::GateSweep && !c.outputs.light) r.row_ambient_floor = std::move(row_ambient_floor);
   const bool intensity = c.acquisition.mode == AcquisitionMode::Intensity;
   r.target_laser = !intensity || c.acquisition.intensity.laser_on;
   r.trace_laser = laser_traced(c);

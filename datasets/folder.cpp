@@ -285,9 +285,10 @@ std::string DatasetFolder::sample_hash(const Sample& s, const scenes::ResolvedRu
   // shape replaced under a done dataset left its samples done, mixing two pulses).
   std::string text = r.resolved.dump() + "\n" + scene_content_hash(s.scene) + "\n" + SPADGEN_VERSION;
   // Revisions of what a resolved scene renders to, within one version: a gate sweep to a target error holds
-  // the ambient light too (2026-12-01; its samples rendered before are stale, not mixed with the new rule).
+  // the ambient light too, where the counts see it (its samples rendered before are stale, not mixed with
+  // the new rule; dark scenes' bits did not change, but are not told apart here).
   if (revisions && r.config.render.target_relative_error && r.config.acquisition.mode == AcquisitionMode::GateSweep)
-    text += "\nthe target holds the ambient light";
+    text += "\nthe target holds the ambient light where the counts see it";
   if (scenes::uses_sensor_tables(r.config)) text += "\n" + scenes::sensor_tables_hash(r.config);
   return scenes::hex64(scenes::fnv1a64(text));
 }

@@ -151,7 +151,9 @@ const PixelLayout& SensorModel::layout() const { return impl_->maps->layout(); }
 std::vector<double> SensorModel::row_fill_factor() const { return layout().row_fill_factor(impl_->cfg.sensor); }
 std::vector<double> SensorModel::row_ambient_floor() const {
   const SensorStageConfig& c = impl_->cfg;
-  const double open_s = c.sensor.gate.length_s * double(c.acquisition.cycles_per_frame);
+  // the gate's effective open time (its integral: a tabulated gate's too), as the counts' background sees it
+  const GateShape* gate = impl_->acq->gate();
+  const double open_s = gate ? gate->open_time_s * double(c.acquisition.cycles_per_frame) : 0.0;
   const double tf = PixelMaps::temperature_factor(c.sensor.temperature_C);
   std::vector<double> floor(size_t(c.camera.height_px));
   for (size_t y = 0; y < floor.size(); ++y) {

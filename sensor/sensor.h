@@ -56,8 +56,8 @@ class SensorModel {
   std::vector<double> row_fill_factor() const;
   // Per sensor row, photons per second on the photosensitive area: the ambient rate a gate sweep's counts
   // hardly see, 1 / (N PDP_ambient t) (one expected count over a gate position's N frames, t the gate's open
-  // time per frame: gate length x cycles per frame) plus the median dark count rate / PDP_ambient; +inf where
-  // the pixels cannot detect the ambient light (RenderStageConfig::row_ambient_floor).
+  // time per frame: its effective length x cycles per frame) plus the median dark count rate / PDP_ambient;
+  // +inf where the pixels cannot detect the ambient light; 0 without a gate (RenderStageConfig::row_ambient_floor).
   std::vector<double> row_ambient_floor() const;
 
   // K: gate positions (gate sweep) or exposures (2D intensity: 1 single, 2 dual).

@@ -129,8 +129,10 @@ def _rle_decode(data, expected, path):
 
 
 def _file_identity(f):
+    """Which file f is: a file replaced by a rename (a run folder swapped) has another inode; the modification
+    time is left out (touching the same bytes is no replacement)."""
     st = os.fstat(f.fileno())
-    return st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns
+    return st.st_dev, st.st_ino, st.st_size
 
 
 class ExrFile:
@@ -141,7 +143,7 @@ class ExrFile:
     def __init__(self, path):
         self.path = os.fspath(path)
         # Opened only when a regular file (a FIFO would block the open for ever). Which file it is (device,
-        # inode, size, modification time) is kept: the channels, decoded later, must come from the same one
+        # inode, size) is kept: the channels, decoded later, must come from the same one
         # (a run folder swapped for a newer run's meanwhile is not read as the rest of this one's).
         if not stat.S_ISREG(os.stat(self.path).st_mode):
             raise ExrError(f"{self.path}: not a regular file; expected an OpenEXR file")

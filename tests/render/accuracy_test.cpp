@@ -272,6 +272,9 @@ TEST(Accuracy, TheTargetHoldsTheAmbientLightInTheIntensityMode) {
   EXPECT_TRUE(render_stage(run, {}).target_ambient);
   // the floor of a faint background, a gate sweep's only (in the intensity mode the ambient light is the signal)
   EXPECT_EQ(render_stage(run, {}, {5.0, 6.0}).row_ambient_floor, (std::vector<double>{5.0, 6.0}));
+  run.outputs.light = true;  // light saved for a sense that may read it in another mode or with another sensor
+  EXPECT_TRUE(render_stage(run, {}, {5.0, 6.0}).row_ambient_floor.empty());
+  run.outputs.light = false;
   run.acquisition.mode = AcquisitionMode::Intensity;
   EXPECT_TRUE(render_stage(run, {}, {5.0, 6.0}).row_ambient_floor.empty());
 }
