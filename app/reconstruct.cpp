@@ -217,9 +217,9 @@ void check_writable(const std::string& file, const RunFolder& run, const std::st
                   "expected a file outside it (-o)");
     if (folder == folder.root_path()) break;
   }
-  // (After the walk, whose messages name whose file it is.) A regular file there is replaced only when it is an earlier output of reconstruct: an OpenEXR file whose
-  // header names its spadgen_reconstruct attribute (-o my.json replaced a scene file with an EXR, exit 0).
-  // (An empty file, a placeholder such as mktemp's, holds nothing to lose.)
+  // (After the walk, whose messages name whose file it is.) A regular file there is replaced only when it is
+  // an earlier output of reconstruct, an OpenEXR file whose header names its spadgen_reconstruct attribute
+  // (-o my.json replaced a scene file with an EXR, exit 0), or empty (a placeholder such as mktemp's).
   if (::lstat(file.c_str(), &st) == 0 && S_ISREG(st.st_mode) && st.st_size > 0) {
     std::string head(size_t(64) << 10, '\0');
     std::ifstream in(file, std::ios::binary);

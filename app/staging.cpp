@@ -158,8 +158,7 @@ Staging::Staging(const Staging& parent, const std::string& sub)
     fs::create_directories(dir_ / "previews");
     fs::create_directories(dir_ / "light");
   } catch (const fs::filesystem_error& e) {  // (a full disk's inodes: it was the library's raw message)
-    throw Error("cannot write " + out_.string() + ": " + e.code().message() + " (" + e.path1().string() +
-                ")");
+    throw Error("cannot write " + out_.string() + ": " + e.code().message() + " (" + e.path1().string() + ")");
   }
 }
 

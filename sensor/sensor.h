@@ -57,7 +57,8 @@ class SensorModel {
   // Per sensor row, photons per second on the photosensitive area: the ambient rate a gate sweep's counts
   // hardly see, 1 / (N PDP_ambient t) (one expected count over a gate position's N frames, t the gate's open
   // time per frame: its effective length x cycles per frame) plus the median dark count rate / PDP_ambient;
-  // +inf where the pixels cannot detect the ambient light; 0 without a gate (RenderStageConfig::row_ambient_floor).
+  // +inf where the pixels cannot detect the ambient light, and without a gate (the intensity mode, whose
+  // render_stage takes none) (RenderStageConfig::row_ambient_floor).
   std::vector<double> row_ambient_floor() const;
 
   // K: gate positions (gate sweep) or exposures (2D intensity: 1 single, 2 dual).
