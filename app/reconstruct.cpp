@@ -150,7 +150,8 @@ void check_writable(const std::string& file, const RunFolder& run, const std::st
   // a device, a FIFO, a folder or a symbolic link is not an output to replace (-o /dev/full replaced the
   // device node with an EXR, as root).
   struct stat st {};
-  if (::lstat(file.c_str(), &st) == 0 && !S_ISREG(st.st_mode))
+  const bool exists = ::lstat(file.c_str(), &st) == 0;
+  if (exists && !S_ISREG(st.st_mode))
     throw Error(file + ": exists and is " + (S_ISLNK(st.st_mode) ? "a symbolic link" : S_ISDIR(st.st_mode) ? "a folder" :
                                             S_ISFIFO(st.st_mode) ? "a FIFO" : S_ISCHR(st.st_mode) || S_ISBLK(st.st_mode) ? "a device" : "not a regular file") +
                 ", which writing the output would replace; expected a new file or an earlier output (-o)");
@@ -220,7 +221,7 @@ void check_writable(const std::string& file, const RunFolder& run, const std::st
   // (After the walk, whose messages name whose file it is.) A regular file there is replaced only when it is
   // an earlier output of reconstruct, an OpenEXR file whose header names its spadgen_reconstruct attribute
   // (-o my.json replaced a scene file with an EXR, exit 0), or empty (a placeholder such as mktemp's).
-  if (::lstat(file.c_str(), &st) == 0 && S_ISREG(st.st_mode) && st.st_size > 0) {
+  if (exists && st.st_size > 0) {
     std::string head(size_t(64) << 10, '\0');
     std::ifstream in(file, std::ios::binary);
     if (!in)
@@ -602,14 +603,18 @@ std::string summary(const nlohmann::json& m) {
 // not every folder under samples/: stale ones, those past the dataset's samples and those a run has not
 // finished are not done), in index order, each sample's realisations after it; `not_done` counts the rows
 // not done by status (empty when every row is done). A folder whose metadata.json carries another hash than its
-// row was generated again since the index was written: refused.
-std::vector<fs::path> done_sample_folders(const fs::path& dir, std::map<std::string, int>& not_done) {
+// row was generated again since the index was written: refused; each folder comes with the hash it carries.
+struct DoneFolder {
+  fs::path path;
+  std::string sample_hash;
+};
+std::vector<DoneFolder> done_sample_folders(const fs::path& dir, std::map<std::string, int>& not_done) {
   const fs::path index = dir / "index.jsonl";
   if (!fs::is_regular_file(index))
     throw Error(dir.string() + ": a dataset folder without index.jsonl: the first `spadgen dataset run` into it is "
                 "still running or was killed (the last run on the folder to end writes the index); run it again to finish");
   std::istringstream lines(scenes::read_file_bounded(index.string(), int64_t{1} << 36, "index.jsonl"));
-  std::vector<fs::path> out;
+  std::vector<DoneFolder> out;
   std::set<std::string> seen;
   not_done.clear();
   int row = 0;
@@ -662,7 +667,7 @@ std::vector<fs::path> done_sample_folders(const fs::path& dir, std::map<std::str
         throw Error((dir / f).string() + ": index.jsonl lists it done with hash " + hash + ", and " + found +
                     ": the sample was removed or changed since the index was written; `spadgen dataset run` brings the index up to date "
                     "(and generates what is not done)");
-      out.push_back(dir / f);
+      out.push_back({dir / f, hash});
     }
   }
   return out;
@@ -779,7 +784,7 @@ std::string evaluate(const EvaluateCommand& c) {
     files.insert(files.end(), {"range_error.png", "outcome.png"});
   } else if (fs::exists(target / "dataset.json")) {
     std::map<std::string, int> not_done;
-    const std::vector<fs::path> samples = done_sample_folders(target, not_done);
+    const std::vector<DoneFolder> samples = done_sample_folders(target, not_done);
     std::string left_out;  // "1 failed, 2 stale"
     for (const auto& [status, n] : not_done) left_out += (left_out.empty() ? "" : ", ") + std::to_string(n) + " " + status;
     if (samples.empty())
@@ -793,7 +798,7 @@ std::string evaluate(const EvaluateCommand& c) {
       throw Error("--detections " + c.detections + ": for a dataset, expected a file name relative to each sample's folder, "
                   "inside it (one file would be scored against every sample)");
     int unlabelled = 0;
-    for (const fs::path& p : samples) {
+    for (const auto& [p, sample_hash] : samples) {
       InterruptGuard::check();
       const std::string file = c.detections.empty() ? "" : (p / c.detections).string();
       std::map<int, std::string> sample_names;
@@ -808,10 +813,10 @@ std::string evaluate(const EvaluateCommand& c) {
           << num(m["objects"]["recall"]) << ',' << m["objects_detectable"]["objects"] << ',' << m["objects_detectable"]["found"]
           << ',' << m["detections"]["total"] << ',' << m["detections"]["false"] << ',' << num(m["range_error"].value("bias_mm", nlohmann::json()))
           << ',' << num(m["range_error"].value("rms_mm", nlohmann::json())) << '\n';
-      // the version of the sample scored: dataset status names an evaluation of samples generated again since
-      const nlohmann::json sample_meta = reconstruct::read_run_metadata(p.string());
+      // the version of the sample scored (done_sample_folders checked it in its metadata.json): dataset status
+      // names an evaluation of samples generated again since
       rows.push_back({{"sample", p.filename().string()},
-                      {"sample_hash", sample_meta.value("/dataset/sample_hash"_json_pointer, nlohmann::json(nullptr))},
+                      {"sample_hash", sample_hash},
                       {"detections_source", sample_source},
                       {"metrics", m}});
     }
