@@ -173,7 +173,7 @@ int main(int argc, char** argv) {
   CLI::App* eval_cmd = cli.add_subcommand("evaluate", "score detections against the object labels of a run or of every sample of a dataset: "
                                                       "metrics.json, error maps; docs/detection.md");
   eval_cmd->add_option("target", eval.target, "run folder or dataset folder")->required()->check(CLI::ExistingDirectory);
-  CLI::Option* eval_detections = eval_cmd->add_option("--detections", eval.detections, "detections file (.exr or .npy; for a dataset: its name inside each sample); default "
+  CLI::Option* eval_detections = eval_cmd->add_option("--detections", eval.detections, "detections file (.exr or .npy; for a dataset: its name inside each sample, or a path with {sample}, the sample folder's name); default "
                                                         "detections_<detector>.exr, computed in memory when absent")
                                      ->check(kNamed);  // (an empty name was ignored: the detector ran instead)
   // --detector and --noise-free choose the default file and the detector that runs without one: with

@@ -18,6 +18,7 @@
 #include <set>
 #include <memory>
 #include <sstream>
+#include <string_view>
 
 #include "app/interrupt.h"
 #include "app/progress.h"
@@ -743,6 +744,26 @@ std::string reconstruct(const ReconstructOptions& o) {
   return out;
 }
 
+namespace {
+
+// --detections' placeholder for a dataset's sample folder name.
+constexpr std::string_view kSampleField = "{sample}";
+
+std::string expand_sample_field(const std::string& pattern, const std::string& sample) {
+  std::string out;
+  for (size_t i = 0; i < pattern.size();) {
+    if (pattern.compare(i, kSampleField.size(), kSampleField) == 0) {
+      out += sample;
+      i += kSampleField.size();
+    } else {
+      out += pattern[i++];
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
 std::string evaluate(const EvaluateCommand& c) {
   InterruptGuard interrupt_guard;
   const ThreadLimit threads(c.threads);
@@ -775,6 +796,9 @@ std::string evaluate(const EvaluateCommand& c) {
   if (fs::exists(target / "metadata.json")) {
     // Shared with other readers: the run is not replaced while it is scored (labels and counts of one run).
     const FolderLock run_lock(target, true);
+    if (c.detections.find(kSampleField) != std::string::npos)
+      throw Error("--detections " + c.detections + ": {sample} names each sample folder of a dataset; " + c.target +
+                  " is a run folder (give its detections file)");
     nlohmann::json source;
     const reconstruct::Scores s = evaluate_run(c, c.target, c.detections, out, &names, &source);
     report = s.to_json(names);
@@ -793,14 +817,33 @@ std::string evaluate(const EvaluateCommand& c) {
     std::ostringstream csv;
     csv << "sample,objects,found,recall,detectable,detectable_found,detections,false,bias_mm,rms_mm\n";
     nlohmann::json rows = nlohmann::json::array();
+    // --detections: a name inside each sample folder, or a path with {sample} (the sample folder's name)
+    const bool templated = c.detections.find(kSampleField) != std::string::npos;
     const fs::path named(c.detections);
-    if (named.is_absolute() || std::any_of(named.begin(), named.end(), [](const fs::path& part) { return part == ".."; }))
+    if (!templated &&
+        (named.is_absolute() || std::any_of(named.begin(), named.end(), [](const fs::path& part) { return part == ".."; })))
       throw Error("--detections " + c.detections + ": for a dataset, expected a file name relative to each sample's folder, "
-                  "inside it (one file would be scored against every sample)");
+                  "inside it (one file would be scored against every sample), or a path with {sample}, the sample folder's "
+                  "name (preds/{sample}.npy)");
+    const auto file_of = [&](const fs::path& sample) {
+      if (c.detections.empty()) return std::string();
+      return templated ? expand_sample_field(c.detections, sample.filename().string()) : (sample / c.detections).string();
+    };
+    // Every sample's file first: a missing one is named before any is scored.
+    if (!c.detections.empty()) {
+      std::vector<std::string> missing;
+      for (const auto& sample : samples)
+        if (const std::string f = file_of(sample.path); !fs::exists(f)) missing.push_back(f);
+      if (!missing.empty())
+        throw Error("--detections " + c.detections + ": " + std::to_string(missing.size()) + " of " + std::to_string(samples.size()) +
+                    " done sample folders have no detections file, first " + missing.front() +
+                    (templated ? " ({sample} is the sample folder's name, realisations' too: 000042, 000042_r01)"
+                               : " (a name inside each sample's folder; a path with {sample} names files elsewhere)"));
+    }
     int unlabelled = 0;
     for (const auto& [p, sample_hash] : samples) {
       InterruptGuard::check();
-      const std::string file = c.detections.empty() ? "" : (p / c.detections).string();
+      const std::string file = file_of(p);
       std::map<int, std::string> sample_names;
       nlohmann::json sample_source;
       const reconstruct::Scores s = evaluate_run(c, p.string(), file, "", &sample_names, &sample_source, &ids_by_name);

@@ -10,18 +10,20 @@ PyTorch for spadgen.torchdata.
     ds = spadgen.open_dataset("out/plates")  # a `spadgen dataset run` folder
     for sample in ds.select(status="done"):
         sample.parameters, sample.run.counts
+    spadgen.evaluate("out/plates", {"000000": ranges})  # your detections scored (spadgen evaluate)
 
 Reference: docs/python.md.
 """
 from ._version import __version__
 from .camera import depth_to_points, invert_pose, pixel_rays, project, transform
 from .dataset import Dataset, Sample, SampleNotDoneError, open_dataset
+from .evaluate import EvaluateError, evaluate
 from .exr import ExrError, ExrFile, read_exr
 from .run import Detections, Layers, ObjectSlots, Profile, Run, RunChangedError, TimeAxis, open_run, unpack_frames
 
 __all__ = ["__version__", "open_run", "Run", "RunChangedError", "TimeAxis", "Profile", "Layers", "ObjectSlots", "Detections", "unpack_frames", "ExrFile",
            "ExrError", "read_exr", "depth_to_points", "pixel_rays", "project", "transform", "invert_pose",
-           "open_dataset", "Dataset", "Sample", "SampleNotDoneError", "RunDataset", "DatasetSamples"]
+           "open_dataset", "Dataset", "Sample", "SampleNotDoneError", "evaluate", "EvaluateError", "RunDataset", "DatasetSamples"]
 
 
 def __getattr__(name):

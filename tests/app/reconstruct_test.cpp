@@ -767,6 +767,34 @@ TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
   r = sh("evaluate " + out2.string() + " --detections " + (first / "detections_edges.exr").string() + " -o " + (dir_ / "e_abs").string());
   EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("for a dataset, expected a file name relative to each sample's folder"));
+
+  // Detections kept outside the dataset: --detections with {sample}, the sample folder's name. The edges
+  // detector's files written by reconstruct -o elsewhere score as the detector run in memory does; a missing
+  // file is named before any sample is scored.
+  fs::create_directories(dir_ / "preds");
+  r = sh("evaluate " + out2.string() + " --detections " + (dir_ / "preds" / "{sample}.exr").string() + " -o " + (dir_ / "e_tpl").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("2 of 2 done sample folders have no detections file, first " + (dir_ / "preds").string() + "/0000"));
+  EXPECT_FALSE(fs::exists(dir_ / "e_tpl"));
+  for (const auto& s : m2["samples"]) {
+    const std::string name = s["sample"].get<std::string>();
+    ASSERT_EQ(sh("reconstruct " + (out2 / "samples" / name).string() + " -q -o " + (dir_ / "preds" / (name + ".exr")).string()).code, 0);
+  }
+  r = sh("evaluate " + out2.string() + " --detections " + (dir_ / "preds" / "{sample}.exr").string() + " -o " + (dir_ / "e_tpl").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  const auto mt = nlohmann::json::parse(slurp(dir_ / "e_tpl" / "metrics.json"));
+  EXPECT_EQ(mt["objects"], m3["objects"]);  // (the first sample still without labels.exr, as for m3)
+  EXPECT_EQ(mt["range_error"], m3["range_error"]);
+  EXPECT_EQ(mt["detections"], m3["detections"]);
+  EXPECT_GT(mt["objects"]["found"].get<int>(), 0);
+  ASSERT_EQ(mt["samples"].size(), 2u);
+  for (const auto& s : mt["samples"])
+    EXPECT_EQ(s["detections_source"]["file"], (dir_ / "preds" / (s["sample"].get<std::string>() + ".exr")).string());
+  // {sample} names a dataset's samples: refused for a run
+  r = sh("evaluate " + first.string() + " --detections " + (dir_ / "preds" / "{sample}.exr").string() + " -o " + (dir_ / "e_run").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("{sample} names each sample folder of a dataset; "));
+  EXPECT_FALSE(fs::exists(dir_ / "e_run"));
 }
 
 }  // namespace

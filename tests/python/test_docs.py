@@ -53,7 +53,7 @@ def test_worked_example_runs(sweep_run, spadgen_bin, tmp_path, monkeypatch):
 
 def test_datasets_section_runs(spadgen_bin, tmp_path, monkeypatch):
     blocks = section_blocks("Datasets")
-    assert [kind for kind, _ in blocks] == ["sh", "python", "python", "python"]
+    assert [kind for kind, _ in blocks] == ["sh", "python", "python", "python", "python"]
     ns = run_blocks(blocks, tmp_path, spadgen_bin, monkeypatch)
     # What the comments of the section say.
     assert repr(ns["ds"]) == "Dataset('out/plates', 4 samples: 4 done)"
@@ -66,3 +66,5 @@ def test_datasets_section_runs(spadgen_bin, tmp_path, monkeypatch):
     assert (len(ns["train"]), len(ns["val"])) == (24, 4)
     assert ns["train"].parameter_names == ("laser.average_power_mW", "ambient.illuminance_lux")
     assert ns["val_loss"] > 0 and (tmp_path / "out" / "plates" / "samples" / "000003_r01" / "counts.npy").is_file()
+    assert len(ns["m"]["samples"]) == 8 and ns["m"]["objects"]["recall"] == 1.0
+    assert round(ns["m"]["range_error"]["bias_mm"], 3) == 3.0 and (tmp_path / "out" / "plates_scores" / "metrics.json").is_file()

@@ -1,0 +1,85 @@
+"""spadgen.evaluate: detections given from Python (arrays, a mapping per sample, files) scored by the program,
+against detections made from the ground truth itself (perfect, shifted, none)."""
+import os
+
+import numpy as np
+import pytest
+
+import spadgen
+from spadgen.evaluate import EvaluateError
+
+
+def perfect_ranges(run):
+    """Every object's range along each pixel's ray as detections (H, W, J), NaN in unused slots."""
+    slots = run.object_slots()
+    r = np.where(slots.id >= 0, slots.range, np.nan).astype(np.float32)
+    return np.moveaxis(r, 0, -1)
+
+
+def test_perfect_shifted_and_no_detections(sweep_run, spadgen_bin, tmp_path):
+    run = spadgen.open_run(sweep_run)
+    truth = perfect_ranges(run)
+    objects = int(np.count_nonzero(~np.isnan(truth)))
+    assert objects > run.width * run.height  # the plate's pixels hold two objects
+    m = spadgen.evaluate(run.path, truth, out=tmp_path / "perfect", program=spadgen_bin)
+    assert m["objects"]["objects"] == objects and m["objects"]["found"] == objects
+    assert m["detections"]["false"] == 0 and m["detections"]["total"] == objects
+    assert abs(m["range_error"]["bias_mm"]) < 1e-9 and m["range_error"]["rms_mm"] < 1e-9  # (the unfolding in double)
+    assert m["detections_source"]["file"].endswith("detections.npy")
+    assert not os.path.exists(m["detections_source"]["file"])  # the temporary file is gone
+    # 10 mm too far: every object found, the bias the shift (float32 ranges: within 1e-3 mm)
+    m = spadgen.evaluate(run.path, truth + np.float32(0.01), out=tmp_path / "shifted", program=spadgen_bin)
+    assert m["objects"]["found"] == objects
+    assert m["range_error"]["bias_mm"] == pytest.approx(10.0, abs=1e-3)
+    assert m["range_error"]["rms_mm"] == pytest.approx(10.0, abs=1e-3)
+    # beyond the tolerance (50 mm): nothing found, every detection false
+    m = spadgen.evaluate(run.path, truth + np.float32(0.06), out=tmp_path / "far", tolerance_m=0.05, program=spadgen_bin)
+    assert m["objects"]["found"] == 0 and m["detections"]["false"] == objects
+    m = spadgen.evaluate(run.path, np.full_like(truth, np.nan), out=tmp_path / "none", program=spadgen_bin)
+    assert m["objects"]["found"] == 0 and m["detections"]["total"] == 0
+
+
+def test_the_detector_and_the_programs_refusals(sweep_run, spadgen_bin, tmp_path):
+    run = spadgen.open_run(sweep_run)
+    m = spadgen.evaluate(run.path, out=tmp_path / "edges", program=spadgen_bin)
+    assert m["detections_source"]["computed"] is True
+    assert 0 < m["objects"]["found"] <= m["objects"]["objects"]
+    with pytest.raises(EvaluateError, match="--tolerance-m") as e:
+        spadgen.evaluate(run.path, tolerance_m=-1, out=tmp_path / "bad", program=spadgen_bin)
+    assert e.value.returncode == 1 and not (tmp_path / "bad").exists()
+    with pytest.raises(ValueError, match=r"expected a float array \(H, W, M\)"):
+        spadgen.evaluate(run.path, np.zeros((run.height, run.width)), program=spadgen_bin)
+    with pytest.raises(EvaluateError, match="shape"):  # (W, H, M): the program names the run's shape
+        spadgen.evaluate(run.path, np.full((run.width, run.height, 2), np.nan, np.float32), out=tmp_path / "t",
+                         program=spadgen_bin)
+    with pytest.raises(ValueError, match="not a dataset folder"):
+        spadgen.evaluate(run.path, {"000000": perfect_ranges(run)}, program=spadgen_bin)
+    with pytest.raises(FileNotFoundError, match="no such executable file"):
+        spadgen.evaluate(run.path, program=tmp_path / "no_such_program")
+
+
+def test_a_dataset_scored_from_a_mapping_and_from_files(dataset_dir, spadgen_bin, tmp_path):
+    ds = spadgen.open_dataset(dataset_dir)
+    folders = [f for s in ds.select(status="done") for f in [s.folder] + s.repeat_folders]
+    assert len(folders) == 6  # 3 done samples, 2 realisations each
+    truth = {os.path.basename(f): perfect_ranges(spadgen.open_run(f)) for f in folders}
+    objects = sum(int(np.count_nonzero(~np.isnan(t))) for t in truth.values())
+    m = spadgen.evaluate(dataset_dir, truth, out=tmp_path / "mapping", program=spadgen_bin)
+    assert m["objects"]["objects"] == objects and m["objects"]["found"] == objects
+    assert sorted(s["sample"] for s in m["samples"]) == sorted(truth)
+    for s in m["samples"]:
+        assert s["metrics"]["objects"]["found"] == int(np.count_nonzero(~np.isnan(truth[s["sample"]])))
+    # the same as files named with {sample}
+    preds = tmp_path / "preds"
+    preds.mkdir()
+    for name, t in truth.items():
+        np.save(preds / f"{name}.npy", t + np.float32(0.002))
+    m = spadgen.evaluate(dataset_dir, str(preds / "{sample}.npy"), out=tmp_path / "files", program=spadgen_bin)
+    assert m["objects"]["found"] == objects and m["range_error"]["bias_mm"] == pytest.approx(2.0, abs=1e-3)
+    # a sample without detections is named by the program; a name that is no done sample by the package
+    partial = dict(truth)
+    del partial[sorted(partial)[0]]
+    with pytest.raises(EvaluateError, match="1 of 6 done sample folders have no detections file"):
+        spadgen.evaluate(dataset_dir, partial, out=tmp_path / "partial", program=spadgen_bin)
+    with pytest.raises(ValueError, match="first '000002'"):  # sample 2 failed
+        spadgen.evaluate(dataset_dir, dict(truth, **{"000002": truth[sorted(truth)[0]]}), program=spadgen_bin)
