@@ -28,9 +28,11 @@ RenderStageConfig render_stage(const RunConfig& c, std::vector<double> row_fill_
   // (a gate sweep's background only: in the intensity mode the ambient light is what the counts measure; and
   // not for light saved for a later spadgen sense, which may sense it in another mode or with another sensor)
   if (c.acquisition.mode == AcquisitionMode::GateSweep && !c.outputs.light) r.row_ambient_floor = std::move(row_ambient_floor);
-  const bool intensity = c.acquisition.mode == AcquisitionMode::Intensity;
-  r.target_laser = !intensity || c.acquisition.intensity.laser_on;
+  // The laser is held to the target wherever it is traced: what the counts see (a gate sweep, laser_on) and
+  // what is kept of it (outputs.transient; outputs.light, which a later sense may read as a gate sweep: an
+  // intensity run's saved laser return had the first round's paths only).
   r.trace_laser = laser_traced(c);
+  r.target_laser = r.trace_laser;
   // The counts see the ambient light in every mode (a gate sweep's background): it is held to the target
   // as the laser is (a scene without it has none, and takes the laser's paths).
   r.target_ambient = true;

@@ -284,11 +284,15 @@ std::string DatasetFolder::sample_hash(const Sample& s, const scenes::ResolvedRu
   // The sensor's tables (CSV and EXR files the scene file names) by content, when it names any (a pulse
   // shape replaced under a done dataset left its samples done, mixing two pulses).
   std::string text = r.resolved.dump() + "\n" + scene_content_hash(s.scene) + "\n" + SPADGEN_VERSION;
-  // Revisions of what a resolved scene renders to, within one version: a gate sweep to a target error holds
-  // the ambient light too, where the counts see it (its samples rendered before are stale, not mixed with
-  // the new rule; dark scenes' bits did not change, but are not told apart here).
+  // Revisions of what a resolved scene renders to, within one version (its samples rendered before are stale,
+  // not mixed with the new rule): a gate sweep to a target error holds the ambient light too, where the counts
+  // see it (dark scenes' bits did not change, but are not told apart here).
   if (revisions && r.config.render.target_relative_error && r.config.acquisition.mode == AcquisitionMode::GateSweep)
     text += "\nthe target holds the ambient light where the counts see it";
+  // and an intensity run's laser return where it is kept (outputs.light, outputs.transient) without laser_on
+  if (revisions && r.config.render.target_relative_error && r.config.acquisition.mode == AcquisitionMode::Intensity &&
+      !r.config.acquisition.intensity.laser_on && (r.config.outputs.light || r.config.outputs.transient))
+    text += "\nthe target holds a kept laser return";
   if (scenes::uses_sensor_tables(r.config)) text += "\n" + scenes::sensor_tables_hash(r.config);
   return scenes::hex64(scenes::fnv1a64(text));
 }

@@ -263,6 +263,12 @@ TEST(Accuracy, TheTargetHoldsTheAmbientLightInTheIntensityMode) {
   run.acquisition.mode = AcquisitionMode::Intensity;
   EXPECT_FALSE(render_stage(run, {}).target_laser);
   EXPECT_TRUE(render_stage(run, {}).target_ambient);
+  for (const bool light : {false, true}) {  // the laser return kept, for a later sense or as transients
+    run.outputs.light = light;
+    run.outputs.transient = !light;
+    EXPECT_TRUE(render_stage(run, {}).target_laser) << light;
+  }
+  run.outputs.light = run.outputs.transient = false;
   run.acquisition.intensity.laser_on = true;
   EXPECT_TRUE(render_stage(run, {}).target_laser);
   run.acquisition.mode = AcquisitionMode::GateSweep;
