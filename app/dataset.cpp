@@ -25,6 +25,7 @@
 #include "app/resources.h"
 #include "app/run_parts.h"
 #include "app/staging.h"
+#include "app/warnings.h"
 #include "core/buffer_cache.h"
 #include "core/error.h"
 #include "datasets/dataset.h"
@@ -222,6 +223,7 @@ struct Checked {
   bool resolved = false;  // else error says why
   std::string error;
   Estimate estimate;
+  std::vector<std::string> warnings;  // the scene file's, as the sample resolves (a run prints and records them)
   SampleRecord record;  // with a folder
 };
 
@@ -248,6 +250,7 @@ void check_samples(const DatasetSpec& spec, const datasets::Shard& shard, const 
       try {
         runs[j] = scenes::load_scene_file(spec.scenes[size_t(c.sample.scene)], c.sample.overrides);
         keys[j] = Estimator::key(runs[j]);
+        c.warnings = runs[j].warnings;
         c.resolved = true;
       } catch (const Error& err) {
         c.error = err.what();
@@ -480,6 +483,7 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
   Totals total, left_total;
   int64_t samples = 0, left = 0;
   std::vector<std::string> errors;
+  datasets::WarningTally warnings;  // the scene file's, as each sample resolves
   // Each sample's scene is resolved (about 0.2 ms of one core): a plan of millions of samples takes minutes,
   // so it shows its progress.
   const int64_t owned = shard.owned(n);
@@ -490,6 +494,7 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
     ++samples;
     bar.tick();
     const Estimate& e = checked.estimate;
+    warnings.add(i, checked.warnings);
     std::string status;
     if (!checked.resolved) {
       errors.push_back("sample " + std::to_string(i) + ": " + checked.error);
@@ -553,6 +558,7 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
       << " (free: " << (free >= 0 ? bytes_text(free) : std::string("unknown")) << "), time about "
       << duration_text(left_total.seconds) << "\n";
   }
+  for (const std::string& w : warnings.lines()) o << "warning: " << w << "\n";
   for (const std::string& e : errors) o << "error: " << e << "\n";
   return {o.str(), int64_t(errors.size())};
 }
@@ -726,6 +732,7 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
         r.threads = options.threads;
         r.progress = false;
         r.dataset = datasets::dataset_section(folder, s, rec.hash, 0);
+        const WarningContext context("sample " + std::to_string(s.index) + ": ");
         run(r);
       }
       for (int k = 1; k < spec.repeats; ++k) {
@@ -738,6 +745,7 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
         so.threads = options.threads;
         so.progress = false;
         so.dataset = datasets::dataset_section(folder, s, rec.hash, k);
+        const WarningContext context("sample " + std::to_string(s.index) + ", realisation " + std::to_string(k) + ": ");
         sense(so);
       }
       folder.clear_failure(s);

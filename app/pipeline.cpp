@@ -67,16 +67,16 @@ RunResult run(const RunOptions& options) {
   if (options.seed) overrides.push_back("seed=" + std::to_string(*options.seed));
   scenes::ResolvedRun resolved = scenes::load_scene_file(options.scene_file, overrides);
   const RunConfig& cfg = resolved.config;
-  for (const std::string& w : resolved.warnings) std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
+  for (const std::string& w : resolved.warnings) print_warning(w);
 
   InterruptGuard interrupt_guard;
   const ThreadLimit threads(options.threads);
 
   const scenes::Scene scene = load_edited_gltf(resolved, options.scene_file);
-  for (const std::string& w : scene.warnings) std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
+  for (const std::string& w : scene.warnings) print_warning(w);
   std::vector<std::string> warnings = scene.warnings;  // for metadata.json, with those of the run (app/warnings.h)
   const auto warn = [&](const std::vector<std::string>& ws) {
-    for (const std::string& w : ws) std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str()), warnings.push_back(w);
+    for (const std::string& w : ws) print_warning(w), warnings.push_back(w);
   };
   warn(camera_warnings(cfg, scene));
   const render::Camera camera(cfg.camera, scene);

@@ -396,7 +396,9 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     runs.push_back(scenes::parse_scene_text(scene_text, scene_file, o, scenes::FileChecks::Tables));
   }
   const RunConfig& cfg = first.config;
-  for (const std::string& w : first.warnings) std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
+  // (a dataset's further realisation: its sample's run said them)
+  if (!options.dataset || options.dataset->value("repeat", 0) == 0)
+    for (const std::string& w : first.warnings) print_warning(w);
   // What the run warned about its glTF and its light: the run's warnings less the scene file's and less
   // its sensor's (this call's sensor warns below).
   std::vector<std::string> scene_warnings;
@@ -413,7 +415,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   sensor::SensorModel sensor(sensor_stage(cfg));
   apply_user_maps(sensor, cfg);
   for (std::string& w : sensor_warnings(sensor)) {
-    std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
+    print_warning(w);
     scene_warnings.push_back(std::move(w));
   }
 
@@ -525,7 +527,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     if (!changed.empty()) {
       std::string w = std::string(kTablesChangedWarning) + changed + ") have changed on disk since the run: this sense "
                       "uses them as they are now";
-      std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
+      print_warning(w);
       scene_warnings.push_back(std::move(w));  // metadata.json's warnings hold it too (it was on stderr only)
     }
   }
@@ -750,7 +752,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     outputs[r]->report(record);
     if (r == 0)  // the realisations share their rates
       for (std::string& w : bright_gate_warnings(sensor, record.laser_open_rate)) {
-        std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
+        print_warning(w);
         scene_warnings.push_back(std::move(w));
       }
     // The containers of the files linked from the run or from the first realisation, as recorded there.

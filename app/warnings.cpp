@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <string>
+#include <utility>
 
 #include <glm/glm.hpp>
 
@@ -23,6 +25,17 @@ std::string percent(double fraction) { return g(100.0 * fraction) + " %"; }
 double degrees(double rad) { return rad * 180.0 / kPi; }
 
 }  // namespace
+
+namespace {
+std::string warning_context;  // WarningContext's
+}  // namespace
+
+void print_warning(const std::string& warning) {
+  std::fprintf(stderr, "spadgen: warning: %s%s\n", warning_context.c_str(), warning.c_str());
+}
+
+WarningContext::WarningContext(std::string context) : previous_(std::exchange(warning_context, std::move(context))) {}
+WarningContext::~WarningContext() { warning_context = std::move(previous_); }
 
 std::vector<std::string> camera_warnings(const RunConfig& c, const scenes::Scene& scene) {
   std::vector<std::string> w;

@@ -35,6 +35,20 @@ inline constexpr const char* kTablesChangedWarning = "the sensor's tables (";
 // Every warning about a pixel type blind to the laser holds this.
 inline constexpr const char* kPdpWarning = ": its photon detection probability at the laser's wavelength";
 
+// A warning on stderr: "spadgen: warning: ", the context (a dataset's "sample 3: "), the warning.
+void print_warning(const std::string& warning);
+// The context print_warning names while it lives (one at a time: a dataset generates one sample at a time).
+class WarningContext {
+ public:
+  explicit WarningContext(std::string context);
+  ~WarningContext();
+  WarningContext(const WarningContext&) = delete;
+  WarningContext& operator=(const WarningContext&) = delete;
+
+ private:
+  std::string previous_;
+};
+
 // Before rendering (run, sense and info): the gate sweep's gate tabulated coarsely (above); a pixel type
 // whose PDP at the laser's wavelength is 0 (the built-in curve ends short of a near-infrared laser).
 std::vector<std::string> sensor_warnings(const sensor::SensorModel& sensor);

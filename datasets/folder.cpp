@@ -5,6 +5,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -424,6 +425,9 @@ SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash) co
       rec.bytes += size;
     }
     if (f == 0) {
+      if (const auto w = meta->find("warnings"); w != meta->end() && w->is_array())
+        for (const json& t : *w)
+          if (t.is_string()) rec.warnings.push_back(t.get<std::string>());
       if (meta->contains("ground_truth_summary")) rec.summary = ojson::parse((*meta)["ground_truth_summary"].dump());
       if (meta->contains("/laser_photons_per_pulse/total_all_pixels"_json_pointer))
         rec.summary["laser_photons_per_pulse"] = (*meta)["laser_photons_per_pulse"]["total_all_pixels"].get<double>();
@@ -437,14 +441,14 @@ SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash) co
     if (!f || !f->is_object() || !f->contains("sample_hash") || (*f)["sample_hash"] != rec.hash ||
         (f->contains("error") && !(*f)["error"].is_string()))
       return false;
-    rec.files.clear(), rec.listed.clear(), rec.bytes = 0, rec.summary = nullptr;
+    rec.files.clear(), rec.listed.clear(), rec.bytes = 0, rec.summary = nullptr, rec.warnings.clear();
     rec.status = Status::Failed;
     rec.error = f->value("error", "");
     return true;
   };
   if (done && !stale && !gone.empty()) {
     if (failed()) return rec;
-    rec.files.clear(), rec.listed.clear(), rec.bytes = 0, rec.summary = nullptr;
+    rec.files.clear(), rec.listed.clear(), rec.bytes = 0, rec.summary = nullptr, rec.warnings.clear();
     rec.status = Status::Damaged;
     rec.error = "listed in metadata.json but gone or changed: ";
     for (size_t i = 0; i < gone.size() && i < 4; ++i) rec.error += (i ? ", " : "") + gone[i];
@@ -546,6 +550,7 @@ std::string index_jsonl_row(const DatasetSpec& spec, const SampleRecord& r) {
     row["files"] = ojson::array();
     for (const std::string& name : r.listed) row["files"].push_back(name);
     row["ground_truth"] = r.summary;
+    row["warnings"] = r.warnings;
   }
   if (const std::string error = listed_error(r); !error.empty()) row["error"] = error;
   return row.dump() + "\n";
@@ -568,7 +573,7 @@ std::string index_csv_header(const DatasetSpec& spec) {
   for (const std::string& p : csv_parameters(spec)) out.append(",").append(csv_field(p));
   out += ",seed,seed_light,seed_chip,seed_noise,sample_hash,bytes";
   for (const std::string& k : kCsvSummary) out.append(",").append(k);
-  out += ",error\n";
+  out += ",warnings,error\n";
   return out;
 }
 
@@ -580,6 +585,7 @@ std::string index_csv_row(const DatasetSpec& spec, const SampleRecord& r) {
   if (r.status == Status::Done) out += std::to_string(r.bytes);
   for (const std::string& k : kCsvSummary)
     out.append(",").append(r.summary.is_object() ? csv_value(r.summary.value(k, ojson())) : std::string());
+  out.append(",").append(r.status == Status::Done ? std::to_string(r.warnings.size()) : std::string());
   out.append(",").append(csv_field(listed_error(r))).append("\n");
   return out;
 }
@@ -611,6 +617,37 @@ void CardTally::add(const SampleRecord& r) {
     ++e.first, e.second += size;
   }
   bytes += r.bytes;
+  warnings.add(r.sample.index, r.warnings);
+}
+
+void WarningTally::add(int64_t sample, const std::vector<std::string>& ws) {
+  std::set<std::string> keys;
+  for (const std::string& w : ws) {
+    const size_t colon = w.find(": ");
+    const std::string key = w.substr(0, colon);
+    if (!keys.insert(key).second) continue;  // a sample counts once per key
+    Group& g = groups[key];
+    if (g.samples++ == 0) g.example = w;
+    if (g.first.size() < kListed) g.first.push_back(sample);
+  }
+}
+
+std::vector<std::string> WarningTally::lines() const {
+  std::vector<std::pair<const std::string*, const Group*>> order;
+  for (const auto& [key, g] : groups) order.emplace_back(&key, &g);
+  // the most frequent first; ties in the order of their first sample
+  std::sort(order.begin(), order.end(), [](const auto& a, const auto& b) {
+    return a.second->samples != b.second->samples ? a.second->samples > b.second->samples : a.second->first < b.second->first;
+  });
+  std::vector<std::string> out;
+  for (const auto& [key, g] : order) {
+    std::string line = std::to_string(g->samples) + (g->samples == 1 ? " sample (" : " samples (");
+    for (size_t i = 0; i < g->first.size(); ++i) line += (i ? ", " : "") + std::to_string(g->first[i]);
+    if (g->samples > int64_t(g->first.size())) line += ", ...";
+    line += "): " + g->example;
+    out.push_back(std::move(line));
+  }
+  return out;
 }
 
 std::string dataset_card(const DatasetFolder& folder, const CardTally& tally) {
@@ -638,8 +675,14 @@ std::string dataset_card(const DatasetFolder& folder, const CardTally& tally) {
   if (spec.repeats > 1)
     o << "; its realisations 1 to " << spec.repeats - 1 << " of the temporal noise are `samples/<i>_r01/`, ... (the same "
       << "light, noise seeds S + 1, ...)";
-  o << ". `index.jsonl` and `index.csv` have one row per sample: parameters, seeds, status, files, bytes and a summary of "
-       "its ground truth.\n\n";
+  o << ". `index.jsonl` and `index.csv` have one row per sample: parameters, seeds, status, files, bytes, a summary of "
+       "its ground truth and its run's warnings.\n\n";
+  if (!tally.warnings.groups.empty()) {
+    o << "## Warnings\n\nWhat the done samples' runs warned about (each sample's `metadata.json` `warnings`, its row's "
+         "`warnings`): settings that are consistent but likely not what was meant.\n\n";
+    for (const std::string& line : tally.warnings.lines()) o << "- " << cell(line) << "\n";
+    o << "\n";
+  }
   o << "## Scenes\n\n| scene file | description |\n|---|---|\n";
   for (size_t i = 0; i < spec.scenes.size(); ++i) {
     std::string description;

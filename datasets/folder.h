@@ -55,6 +55,22 @@ struct SampleRecord {
   std::vector<std::string> listed;  // done: every file of the sample and its realisations (hard links too)
   int64_t bytes = 0;                 // done: their sum
   nlohmann::ordered_json summary;    // done: metadata.json's ground_truth_summary and laser totals
+  std::vector<std::string> warnings;  // done: metadata.json's warnings (the sample's run's)
+};
+
+// Warnings of many samples, grouped by what they warn about (a warning's text before its first ": ", its
+// key): how many samples, the first few of them, the first one's text.
+struct WarningTally {
+  struct Group {
+    int64_t samples = 0;
+    std::vector<int64_t> first;  // at most kListed
+    std::string example;
+  };
+  static constexpr size_t kListed = 5;
+  std::map<std::string, Group> groups;
+  void add(int64_t sample, const std::vector<std::string>& warnings);
+  // One line per group: "2 samples (3, 7): <the first's text>".
+  std::vector<std::string> lines() const;
 };
 
 // What the dataset card says of the samples, gathered one record at a time (in index order).
@@ -67,6 +83,7 @@ struct CardTally {
   };
   std::map<std::string, Observed> observed;                    // parameter key: its values over the done samples
   std::map<std::string, std::pair<int64_t, int64_t>> sizes;  // output file: (done samples holding it, bytes)
+  WarningTally warnings;                                      // of the done samples
   void add(const SampleRecord& r);
 };
 

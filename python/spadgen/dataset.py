@@ -77,6 +77,9 @@ class Sample:
         self.sample_hash = row.get("sample_hash", "")
         self.ground_truth = dict(row.get("ground_truth") or {})
         self.error = row.get("error")
+        # What the sample's run warned about (metadata.json's warnings): settings that are consistent but likely
+        # not what was meant (a frame longer than the camera's); [] where the sample is not done.
+        self.warnings = list(row.get("warnings") or [])
         # Realisations 1, 2, ... of the temporal noise (realisation 0 is the sample's own folder).
         self.repeat_folders = [os.path.abspath(os.path.join(dataset.path, f)) for f in row.get("repeats", [])]
         self._runs = {}
@@ -260,7 +263,7 @@ class Dataset:
     def columns(self):
         """The table's columns: index.csv's."""
         return (["index", "status", "folder"] + self.parameter_keys + [c for c, _ in _SEEDS] + ["sample_hash", "bytes"]
-                + list(self._summary_keys()) + ["error"])
+                + list(self._summary_keys()) + ["warnings", "error"])
 
     def _summary_keys(self):
         keys = list(SUMMARY_COLUMNS)
@@ -279,6 +282,8 @@ class Dataset:
                          objects_detectable, detectable_fraction, laser_photons_per_pulse)   float64, NaN
                          where the sample is not done (the two detectable columns also where it has no
                          labels.exr: 2D runs)
+        warnings         float64: how many warnings the sample's run gave (Sample.warnings lists them), NaN
+                         where the sample is not done
         """
         names = self.columns if columns is None else list(columns)
         params = set(self.parameter_keys)
@@ -294,6 +299,8 @@ class Dataset:
                 out[c] = np.array([r["seeds"][seeds[c]] for r in self.index], np.int64)
             elif c == "bytes":
                 out[c] = np.array([r.get("bytes", math.nan) for r in self.index], np.float64)
+            elif c == "warnings":
+                out[c] = np.array([len(r["warnings"]) if "warnings" in r else math.nan for r in self.index], np.float64)
             elif c in summary:
                 out[c] = np.array([(r.get("ground_truth") or {}).get(c, math.nan) for r in self.index], np.float64)
             elif c in params:

@@ -805,6 +805,43 @@ TEST_F(Dataset, AFailingSampleIsRecordedAndTheOthersGoOn) {
   EXPECT_EQ(m["not_scored"], nlohmann::json({{"failed", 2}})) << m["not_scored"];
 }
 
+// A sample's warnings (a frame longer than the camera's) are not lost among many samples: the plan lists them
+// by key with their samples, the run names the sample on stderr, once per sample (its realisations' senses
+// said them again), and the index rows (jsonl: the texts, csv: how many) and the card keep them (only each
+// sample's metadata.json did).
+TEST_F(Dataset, ASamplesWarningsAreNamedListedAndKept) {
+  write(dir_ / "d.json", small_dataset(4, 3, kScenes + "multi_object.json", ", \"acquisition.cycles_per_frame\": [200, 1915]"));
+  const std::string warning = "acquisition.cycles_per_frame: 1915 laser cycles last 47.875 us, longer than one frame at 24000 fps";
+  const Result plan = sh("dataset plan " + (dir_ / "d.json").string());
+  ASSERT_EQ(plan.code, 0) << plan.output;
+  EXPECT_THAT(plan.output, HasSubstr("\nwarning: 2 samples (1, 3): " + warning + "\n"));
+  const Result r = shell(kBin + " dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q 2>&1");
+  ASSERT_EQ(r.code, 0) << r.output;
+  for (const char* sample : {"1", "3"}) {
+    const std::string line = std::string("spadgen: warning: sample ") + sample + ": " + warning + "\n";
+    const size_t at = r.output.find(line);
+    EXPECT_NE(at, std::string::npos) << r.output;
+    EXPECT_EQ(r.output.find(line, at + 1), std::string::npos) << "said twice: " << r.output;
+  }
+  EXPECT_THAT(r.output, Not(HasSubstr("sample 0:")));
+  std::ifstream index(dir_ / "out/index.jsonl");
+  std::string line;
+  int rows = 0;
+  while (std::getline(index, line)) {
+    const json row = json::parse(line);
+    const int i = row["index"].get<int>();
+    const json meta = json::parse(slurp(dir_ / "out" / row["folder"].get<std::string>() / "metadata.json"));
+    EXPECT_EQ(row["warnings"], meta["warnings"]) << i;
+    EXPECT_EQ(row["warnings"].size(), i % 2 == 1 ? 1u : 0u) << i;
+    ++rows;
+  }
+  EXPECT_EQ(rows, 4);
+  const std::string csv = slurp(dir_ / "out/index.csv");
+  EXPECT_THAT(csv.substr(0, csv.find('\n')), HasSubstr(",warnings,error"));
+  EXPECT_THAT(slurp(dir_ / "out/dataset.md"), HasSubstr("## Warnings\n"));
+  EXPECT_THAT(slurp(dir_ / "out/dataset.md"), HasSubstr("\n- 2 samples (1, 3): " + warning + "\n"));
+}
+
 // A sample whose estimate the sensor refuses (here transients in the intensity mode without a window) is
 // listed invalid with why, and the plan goes on (the estimates, computed together, stopped the whole plan);
 // the plan then exits 1 (it exited 0) and its averages are of the valid samples. When every probed sample

@@ -69,6 +69,13 @@ def test_table_equals_index_jsonl_and_index_csv(ds, dataset_dir):
                     assert math.isnan(value) and text == "" and row["status"] != "done", name
                 else:
                     assert value == known == float(text), name
+            elif name == "warnings":  # how many the sample's run gave (its metadata.json's)
+                if row["status"] == "done":
+                    assert value == len(row["warnings"]) == int(text), name
+                    meta = json.loads((dataset_dir / row["folder"] / "metadata.json").read_text())
+                    assert row["warnings"] == meta["warnings"] == ds.sample(i).warnings
+                else:
+                    assert math.isnan(value) and text == "" and "warnings" not in row, name
             elif name == "index":
                 assert value == row["index"] == int(text) == i
             else:
