@@ -777,7 +777,10 @@ std::string evaluate(const EvaluateCommand& c) {
   // or interrupted evaluation leaves the earlier one as it was, never a mix of the two.
   const fs::path out_given = c.out_dir.empty() ? target / "evaluation" : fs::path(c.out_dir);
   if (!fs::exists(target / "metadata.json") && !fs::exists(target / "dataset.json"))
-    throw Error(c.target + ": neither a run folder (metadata.json) nor a dataset folder (dataset.json)");
+    throw Error(c.target + ": neither a run folder (metadata.json) nor a dataset folder (dataset.json)" +
+                (fs::is_regular_file(target / "repeat_000" / "metadata.json")
+                     ? " but the folder of `spadgen sense --repeats`' realisations: evaluate each, " + (target / "repeat_000").string() + ", ..."
+                     : std::string()));
   // Not inside a run folder, a dataset's own entries or a folder of sense --repeats' realisations (-o RUN/scores
   // made the next run into RUN refuse it for a foreign folder), but the evaluated run's or dataset's own
   // evaluation/, the default.

@@ -534,6 +534,14 @@ TEST_F(Reconstruct, EvaluateWritesIntoNoRunOrDatasetButItsOwnEvaluation) {
   r = sh("evaluate " + (dir_ / "set").string());
   EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("neither a run folder (metadata.json) nor a dataset folder (dataset.json)"));
+  // a folder of sense --repeats' realisations is named as such, with its realisations' folders (reconstruct
+  // said "not a run folder" only)
+  EXPECT_THAT(r.output, HasSubstr("the folder of `spadgen sense --repeats`' realisations: evaluate each, " +
+                                  (dir_ / "set" / "repeat_000").string()));
+  r = sh("reconstruct " + (dir_ / "set").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("this is the folder of `spadgen sense --repeats`' realisations: each is a run folder, " +
+                                  (dir_ / "set" / "repeat_000").string()));
 }
 
 // Detections evaluate would misread are refused, naming the file and what is wrong: detections of another
