@@ -28,6 +28,8 @@ J = ``max_objects`` (default: the most of any run's ``ground_truth_objects``):
 | object_detectable | (J, H, W) | bool | gate sweeps: slot j's object is detectable (labels.exr: its edge in the noise-free counts stands out; evaluate's "detectable") |
 | frames | (K, N, H, W) | uint8 | binary frames, 0 / 1 (large: only when asked for) |
 | gate_positions_ns | (K,) | float32 | gate positions (gate-sweep runs only) |
+| exposures_us | (K,) | float32 | exposure of each image (intensity runs only: one, or the short and the long) |
+| frames_per_k | () | int64 | N, the binary frames each count sums (counts / N is the detection probability) |
 | intrinsics | (3, 3) | float32 | the sample's pinhole intrinsics (OpenCV convention, shifted to the patch) |
 | origin | (2,) | int64 | (x, y) of the sample's top-left pixel in its run's image |
 | run | () | int64 | index of the sample's run in ``paths`` (RunDataset: in ``runs``) |
@@ -36,7 +38,8 @@ J = ``max_objects`` (default: the most of any run's ``ground_truth_objects``):
 | parameters | (P,) | float32 | DatasetSamples only: the sample's numeric parameters, in the order of ``parameter_names`` |
 
 ``fields`` chooses among the first thirteen (default: counts, expected_counts, depth, mask, layer_count);
-gate_positions_ns (gate sweeps only), intrinsics, origin and run come always, and with DatasetSamples sample,
+gate_positions_ns (gate sweeps only), exposures_us (intensity runs only), frames_per_k, intrinsics, origin and run
+come always, and with DatasetSamples sample,
 repeat and parameters. Runs that share a DataLoader batch must agree on K (and N with frames); the constructor
 checks that every run has what ``fields`` asks for.
 
@@ -257,6 +260,9 @@ class _RunSamples(torch.utils.data.Dataset):
             out["frames"] = torch.from_numpy(np.ascontiguousarray(unpack_frames(packed, run.width)[..., xs]))
         if run.mode == "gate_sweep":
             out["gate_positions_ns"] = torch.from_numpy(run.gate_positions_ns.astype(np.float32))
+        else:
+            out["exposures_us"] = torch.from_numpy((run.exposures_s * 1e6).astype(np.float32))
+        out["frames_per_k"] = torch.tensor(run.frames_per_k, dtype=torch.int64)
         K = run.intrinsics.copy()
         K[0, 2] -= x
         K[1, 2] -= y

@@ -30,7 +30,8 @@ def expected_layout(K, N, L, H, W, J):
             "object_count": ((H, W), torch.int64), "object_range": ((J, H, W), torch.float32),
             "object_mask": ((J, H, W), torch.bool), "object_detectable": ((J, H, W), torch.bool),
             "frames": ((K, N, H, W), torch.uint8), "gate_positions_ns": ((K,), torch.float32),
-            "intrinsics": ((3, 3), torch.float32), "origin": ((2,), torch.int64), "run": ((), torch.int64)}
+            "frames_per_k": ((), torch.int64), "intrinsics": ((3, 3), torch.float32), "origin": ((2,), torch.int64),
+            "run": ((), torch.int64)}
 
 
 def test_whole_image_sample_has_the_documented_layout_and_values(sweep_run, sweep):
@@ -64,6 +65,16 @@ def test_whole_image_sample_has_the_documented_layout_and_values(sweep_run, swee
     assert (s["object_count"] == 2).any() and s["object_detectable"][1].any()
     np.testing.assert_allclose(s["intrinsics"].numpy(), sweep.intrinsics, rtol=1e-7)
     assert s["origin"].tolist() == [0, 0] and int(s["run"]) == 0
+    assert int(s["frames_per_k"]) == sweep.frames_per_k == 255
+
+
+def test_an_intensity_runs_exposures_and_frames(make_run):
+    dual = spadgen.open_run(make_run("intensity"))
+    s = RunDataset([dual.path], fields=("counts",))[0]
+    assert "gate_positions_ns" not in s and s["exposures_us"].dtype == torch.float32
+    np.testing.assert_allclose(s["exposures_us"].numpy(), dual.exposures_s * 1e6, rtol=1e-7)
+    assert s["exposures_us"].shape == (2,) and s["exposures_us"][1] > s["exposures_us"][0]  # short, long
+    assert int(s["frames_per_k"]) == dual.frames_per_k and int(s["counts"].max()) <= dual.frames_per_k
 
 
 def test_patches_cover_the_image_and_shift_the_intrinsics(sweep_run, sweep):
