@@ -422,8 +422,14 @@ std::string evaluation_status(const std::string& dir) {
     const nlohmann::json hash = readable ? now->value("/dataset/sample_hash"_json_pointer, nlohmann::json(nullptr)) : nlohmann::json();
     if (!readable || (row.contains("sample_hash") && row["sample_hash"] != hash)) ++changed;
   }
+  // (2D samples evaluate left out, without detections for them: accounted for)
+  std::set<std::string> left_out;
+  if (const auto n = m.find("not_scored_intensity"); n != m.end() && n->is_object() && n->contains("sample_folders") &&
+                                                     (*n)["sample_folders"].is_array())
+    for (const nlohmann::json& f : (*n)["sample_folders"])
+      if (f.is_string()) left_out.insert(f.get<std::string>());
   int64_t unscored = 0;
-  for (const std::string& f : done) unscored += !scored.count(f);
+  for (const std::string& f : done) unscored += !scored.count(f) && !left_out.count(f);
   if (changed == 0 && gone == 0 && unscored == 0) return "";
   return "evaluation/ is out of date: of the " + std::to_string(scored.size()) + " sample folders it scored, " +
          std::to_string(changed) + " changed since (generated again with another sample_hash, or damaged) and " + std::to_string(gone) +

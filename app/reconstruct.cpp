@@ -844,8 +844,21 @@ std::string evaluate(const EvaluateCommand& c) {
                                : " (a name inside each sample's folder; a path with {sample} names files elsewhere)"));
     }
     int unlabelled = 0;
+    // Without --detections the detector reads each sample's gate profiles: a 2D sample (a dataset mixing
+    // scenes of both modes) has none, so it is left out and counted (it stopped the whole evaluation).
+    nlohmann::json intensity_folders = nlohmann::json::array();
+    size_t scored = 0;
     for (const auto& [p, sample_hash] : samples) {
       InterruptGuard::check();
+      if (c.detections.empty()) {
+        const nlohmann::json meta = reconstruct::read_run_metadata(p.string());
+        if (const auto mode = meta.find("acquisition"); mode != meta.end() && mode->is_object() &&
+                                                         mode->value("mode", "") == "intensity") {
+          intensity_folders.push_back(p.filename().string());
+          continue;
+        }
+      }
+      ++scored;
       const std::string file = file_of(p);
       std::map<int, std::string> sample_names;
       nlohmann::json sample_source;
@@ -871,12 +884,23 @@ std::string evaluate(const EvaluateCommand& c) {
     if (unlabelled > 0)
       report["labels"] = std::to_string(unlabelled) + " of " + std::to_string(samples.size()) +
                          " samples without labels.exr: their objects are counted as detectable (samples[].detections_source.labels)";
+    const size_t intensity = intensity_folders.size();
+    if (scored == 0)
+      throw Error(c.target + ": its " + std::to_string(intensity) + " done sample folders are 2D intensity runs, without gate "
+                  "profiles for the detector to read: give their detections with --detections");
     report["samples"] = rows;
     if (!not_done.empty()) report["not_scored"] = not_done;  // {"failed": 1}: index.jsonl's rows not done, by status
+    if (intensity > 0)
+      report["not_scored_intensity"] = {{"sample_folders", intensity_folders},
+                                        {"why", "2D intensity runs have no gate profiles for the detector; --detections scores "
+                                                "them with detections given"}};
     writers::write_file_atomic((fs::path(out) / "samples.csv").string(), csv.str());
     files.push_back("samples.csv");
-    text << samples.size() << (samples.size() == 1 ? " sample folder" : " sample folders") << " (realisations included)"
-         << (left_out.empty() ? std::string() : "; not scored, not done: " + left_out) << "\n" << summary(report);
+    text << scored << (scored == 1 ? " sample folder" : " sample folders") << " (realisations included)"
+         << (left_out.empty() ? std::string() : "; not scored, not done: " + left_out)
+         << (intensity > 0 ? "; not scored, 2D intensity runs (no gate profiles for the detector): " + std::to_string(intensity)
+                           : std::string())
+         << "\n" << summary(report);
   } else {
     throw Error(c.target + ": neither a run folder (metadata.json) nor a dataset folder (dataset.json)");
   }

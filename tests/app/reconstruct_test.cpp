@@ -798,6 +798,29 @@ TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
   ASSERT_EQ(mt["samples"].size(), 2u);
   for (const auto& s : mt["samples"])
     EXPECT_EQ(s["detections_source"]["file"], (dir_ / "preds" / (s["sample"].get<std::string>() + ".exr")).string());
+  // A dataset mixing 2D and gate-sweep scenes: the detector has no gate profiles in a 2D sample, which is
+  // left out and named (it stopped the whole evaluation), and dataset status counts it as accounted for; a
+  // dataset of 2D samples only needs detections given.
+  const fs::path file3 = dir_ / "d3.json", out3 = dir_ / "dataset3";
+  std::ofstream(file3) << "{\"scenes\": [\"" + kScenes + "multi_object.json\", \"" + kScenes + "test_chart.json\"], \"seed\": 3,"
+                          "\"set\": {\"render.samples_per_pixel\": 2, \"camera.crop\": [480, 242, 16, 4]}}";
+  ASSERT_EQ(sh("dataset run " + file3.string() + " -o " + out3.string() + " -q").code, 0);
+  r = sh("evaluate " + out3.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("1 sample folder (realisations included); not scored, 2D intensity runs (no gate profiles for the detector): 1\n"));
+  const auto m4 = nlohmann::json::parse(slurp(out3 / "evaluation" / "metrics.json"));
+  EXPECT_EQ(m4["not_scored_intensity"]["sample_folders"], nlohmann::json::array({"000001"}));
+  ASSERT_EQ(m4["samples"].size(), 1u);
+  EXPECT_EQ(m4["samples"][0]["sample"], "000000");
+  r = sh("dataset status " + out3.string());
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, Not(HasSubstr("out of date")));
+  std::ofstream(dir_ / "d4.json") << "{\"scenes\": [\"" + kScenes + "test_chart.json\"], \"seed\": 3,"
+                                     "\"set\": {\"render.samples_per_pixel\": 2, \"camera.crop\": [480, 242, 16, 4]}}";
+  ASSERT_EQ(sh("dataset run " + (dir_ / "d4.json").string() + " -o " + (dir_ / "dataset4").string() + " -q").code, 0);
+  r = sh("evaluate " + (dir_ / "dataset4").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("its 1 done sample folders are 2D intensity runs, without gate profiles for the detector"));
   // {sample} names a dataset's samples: refused for a run
   r = sh("evaluate " + first.string() + " --detections " + (dir_ / "preds" / "{sample}.exr").string() + " -o " + (dir_ / "e_run").string());
   EXPECT_EQ(r.code, 1);
