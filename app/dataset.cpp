@@ -404,7 +404,15 @@ std::string evaluation_status(const std::string& dir) {
   const std::set<std::string> done = indexed_done_folders(dir);
   std::set<std::string> scored;
   int64_t changed = 0, gone = 0;
-  for (const nlohmann::json& row : m["samples"]) {
+  // The folders scored, and the 2D ones evaluate left out (without detections for them) with their hashes:
+  // each is accounted for while it holds the version evaluate saw.
+  std::vector<const nlohmann::json*> rows;
+  for (const nlohmann::json& row : m["samples"]) rows.push_back(&row);
+  if (const auto n = m.find("not_scored_intensity"); n != m.end() && n->is_object() && n->contains("sample_folders") &&
+                                                     (*n)["sample_folders"].is_array())
+    for (const nlohmann::json& row : (*n)["sample_folders"]) rows.push_back(&row);
+  for (const nlohmann::json* r : rows) {
+    const nlohmann::json& row = *r;
     if (!row.is_object() || !row.contains("sample") || !row["sample"].is_string()) continue;
     const std::string name = row["sample"].get<std::string>();
     scored.insert(name);
@@ -422,14 +430,8 @@ std::string evaluation_status(const std::string& dir) {
     const nlohmann::json hash = readable ? now->value("/dataset/sample_hash"_json_pointer, nlohmann::json(nullptr)) : nlohmann::json();
     if (!readable || (row.contains("sample_hash") && row["sample_hash"] != hash)) ++changed;
   }
-  // (2D samples evaluate left out, without detections for them: accounted for)
-  std::set<std::string> left_out;
-  if (const auto n = m.find("not_scored_intensity"); n != m.end() && n->is_object() && n->contains("sample_folders") &&
-                                                     (*n)["sample_folders"].is_array())
-    for (const nlohmann::json& f : (*n)["sample_folders"])
-      if (f.is_string()) left_out.insert(f.get<std::string>());
   int64_t unscored = 0;
-  for (const std::string& f : done) unscored += !scored.count(f) && !left_out.count(f);
+  for (const std::string& f : done) unscored += !scored.count(f);
   if (changed == 0 && gone == 0 && unscored == 0) return "";
   return "evaluation/ is out of date: of the " + std::to_string(scored.size()) + " sample folders it scored, " +
          std::to_string(changed) + " changed since (generated again with another sample_hash, or damaged) and " + std::to_string(gone) +
@@ -751,7 +753,8 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
         so.threads = options.threads;
         so.progress = false;
         so.dataset = datasets::dataset_section(folder, s, rec.hash, k);
-        const WarningContext context("sample " + std::to_string(s.index) + ", realisation " + std::to_string(k) + ": ");
+        // (silent after the sample's run, which said the same: the same scene, sensor and light)
+        const WarningContext context("sample " + std::to_string(s.index) + ", realisation " + std::to_string(k) + ": ", rendered);
         sense(so);
       }
       folder.clear_failure(s);

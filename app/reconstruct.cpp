@@ -214,7 +214,7 @@ void check_writable(const std::string& file, const RunFolder& run, const std::st
         throw Error(file + ": is the dataset " + folder.string() + "'s own " + rel.string() + ", which writing the output "
                     "would replace or add to; expected a new file or an earlier output (-o)");
     }
-    if (fs::is_regular_file(folder / "repeat_000" / "metadata.json", ec))
+    if (reconstruct::is_repeat_set(folder))
       throw Error(file + ": lies in the folder " + folder.string() + " of sense --repeats' realisations, which holds those only; "
                   "expected a file outside it (-o)");
     if (folder == folder.root_path()) break;
@@ -608,6 +608,7 @@ std::string summary(const nlohmann::json& m) {
 struct DoneFolder {
   fs::path path;
   std::string sample_hash;
+  bool intensity = false;  // a 2D intensity run (its metadata.json's acquisition.mode)
 };
 std::vector<DoneFolder> done_sample_folders(const fs::path& dir, std::map<std::string, int>& not_done) {
   const fs::path index = dir / "index.jsonl";
@@ -657,18 +658,21 @@ std::vector<DoneFolder> done_sample_folders(const fs::path& dir, std::map<std::s
                     "`spadgen dataset run` wrote it: run the dataset again to write it");
       const fs::path meta = dir / f / "metadata.json";
       std::string found = fs::exists(dir / f) ? "its folder has no readable metadata.json" : "its folder does not exist";
+      bool intensity = false;
       try {
         const nlohmann::json m = nlohmann::json::parse(scenes::read_file_bounded(meta.string(), int64_t{1} << 28, "metadata.json"));
         const auto at = "/dataset/sample_hash"_json_pointer;
         found = m.contains(at) && m.at(at).is_string() ? "its folder has hash " + m.at(at).get<std::string>()
                                                        : "its folder has no dataset section";
+        const auto mode = "/acquisition/mode"_json_pointer;
+        intensity = m.contains(mode) && m.at(mode) == "intensity";
       } catch (const std::exception&) {
       }
       if (found != "its folder has hash " + hash)
         throw Error((dir / f).string() + ": index.jsonl lists it done with hash " + hash + ", and " + found +
                     ": the sample was removed or changed since the index was written; `spadgen dataset run` brings the index up to date "
                     "(and generates what is not done)");
-      out.push_back({dir / f, hash});
+      out.push_back({dir / f, hash, intensity});
     }
   }
   return out;
@@ -778,7 +782,7 @@ std::string evaluate(const EvaluateCommand& c) {
   const fs::path out_given = c.out_dir.empty() ? target / "evaluation" : fs::path(c.out_dir);
   if (!fs::exists(target / "metadata.json") && !fs::exists(target / "dataset.json"))
     throw Error(c.target + ": neither a run folder (metadata.json) nor a dataset folder (dataset.json)" +
-                (fs::is_regular_file(target / "repeat_000" / "metadata.json")
+                (reconstruct::is_repeat_set(target)
                      ? " but the folder of `spadgen sense --repeats`' realisations: evaluate each, " + (target / "repeat_000").string() + ", ..."
                      : std::string()));
   // Not inside a run folder, a dataset's own entries or a folder of sense --repeats' realisations (-o RUN/scores
@@ -832,11 +836,27 @@ std::string evaluate(const EvaluateCommand& c) {
       if (c.detections.empty()) return std::string();
       return templated ? expand_sample_field(c.detections, sample.filename().string()) : (sample / c.detections).string();
     };
-    // Every sample's file first: a missing one is named before any is scored.
+    // Every sample's file first: a missing one is named before any is scored, as is one that is no regular
+    // file, or one file named for two samples ({sample}/../x.npy, a link: one file scored against several).
     if (!c.detections.empty()) {
       std::vector<std::string> missing;
-      for (const auto& sample : samples)
-        if (const std::string f = file_of(sample.path); !fs::exists(f)) missing.push_back(f);
+      std::map<fs::path, std::string> sample_of;  // the files, resolved
+      for (const auto& sample : samples) {
+        const std::string f = file_of(sample.path);
+        std::error_code ec;
+        if (!fs::exists(f, ec)) {
+          missing.push_back(f);
+          continue;
+        }
+        if (!fs::is_regular_file(f, ec))
+          throw Error("--detections " + c.detections + ": " + f + " is not a regular file (a folder, a FIFO or a device); "
+                      "expected the detections of " + sample.path.filename().string());
+        const fs::path resolved = fs::weakly_canonical(f, ec);
+        const auto [at, fresh] = sample_of.emplace(ec ? fs::absolute(f).lexically_normal() : resolved, sample.path.filename().string());
+        if (!fresh)
+          throw Error("--detections " + c.detections + ": names one file, " + at->first.string() + ", for the samples " +
+                      at->second + " and " + sample.path.filename().string() + "; expected each sample's own detections");
+      }
       if (!missing.empty())
         throw Error("--detections " + c.detections + ": " + std::to_string(missing.size()) + " of " + std::to_string(samples.size()) +
                     " done sample folders have no detections file, first " + missing.front() +
@@ -848,15 +868,11 @@ std::string evaluate(const EvaluateCommand& c) {
     // scenes of both modes) has none, so it is left out and counted (it stopped the whole evaluation).
     nlohmann::json intensity_folders = nlohmann::json::array();
     size_t scored = 0;
-    for (const auto& [p, sample_hash] : samples) {
+    for (const auto& [p, sample_hash, is_2d] : samples) {
       InterruptGuard::check();
-      if (c.detections.empty()) {
-        const nlohmann::json meta = reconstruct::read_run_metadata(p.string());
-        if (const auto mode = meta.find("acquisition"); mode != meta.end() && mode->is_object() &&
-                                                         mode->value("mode", "") == "intensity") {
-          intensity_folders.push_back(p.filename().string());
-          continue;
-        }
+      if (c.detections.empty() && is_2d) {  // (with its hash: dataset status names it when generated again)
+        intensity_folders.push_back({{"sample", p.filename().string()}, {"sample_hash", sample_hash}});
+        continue;
       }
       ++scored;
       const std::string file = file_of(p);
@@ -882,7 +898,7 @@ std::string evaluate(const EvaluateCommand& c) {
     report = total.to_json(names);
     report["dataset"] = c.target;
     if (unlabelled > 0)
-      report["labels"] = std::to_string(unlabelled) + " of " + std::to_string(samples.size()) +
+      report["labels"] = std::to_string(unlabelled) + " of " + std::to_string(scored) +
                          " samples without labels.exr: their objects are counted as detectable (samples[].detections_source.labels)";
     const size_t intensity = intensity_folders.size();
     if (scored == 0)

@@ -396,9 +396,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     runs.push_back(scenes::parse_scene_text(scene_text, scene_file, o, scenes::FileChecks::Tables));
   }
   const RunConfig& cfg = first.config;
-  // (a dataset's further realisation: its sample's run said them)
-  if (!options.dataset || options.dataset->value("repeat", 0) == 0)
-    for (const std::string& w : first.warnings) print_warning(w);
+  for (const std::string& w : first.warnings) print_warning(w);
   // What the run warned about its glTF and its light: the run's warnings less the scene file's and less
   // its sensor's (this call's sensor warns below).
   std::vector<std::string> scene_warnings;

@@ -19,6 +19,7 @@
 
 #include "core/error.h"
 #include "datasets/folder.h"
+#include "reconstruct/run_folder.h"
 #include "scenes/input.h"
 
 namespace spadgen::app {
@@ -123,7 +124,7 @@ void refuse_output_inside(const fs::path& out, const std::string& option,
                      std::string(" the dataset ") + folder.string() + "'s own " + rel.begin()->string() +
                      ", which holds only what spadgen writes there");
     }
-    if (fs::is_regular_file(folder / "repeat_000" / "metadata.json", ec))
+    if (reconstruct::is_repeat_set(folder))
       return check(CheckedFolder::RepeatSet, folder, "lies in the folder " + folder.string() + " of sense --repeats' "
                    "realisations, which holds those only");
     if (folder == folder.root_path()) break;

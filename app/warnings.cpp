@@ -28,14 +28,19 @@ double degrees(double rad) { return rad * 180.0 / kPi; }
 
 namespace {
 std::string warning_context;  // WarningContext's
+bool warnings_silent = false;
 }  // namespace
 
 void print_warning(const std::string& warning) {
-  std::fprintf(stderr, "spadgen: warning: %s%s\n", warning_context.c_str(), warning.c_str());
+  if (!warnings_silent) std::fprintf(stderr, "spadgen: warning: %s%s\n", warning_context.c_str(), warning.c_str());
 }
 
-WarningContext::WarningContext(std::string context) : previous_(std::exchange(warning_context, std::move(context))) {}
-WarningContext::~WarningContext() { warning_context = std::move(previous_); }
+WarningContext::WarningContext(std::string context, bool silent)
+    : previous_(std::exchange(warning_context, std::move(context))), previous_silent_(std::exchange(warnings_silent, silent)) {}
+WarningContext::~WarningContext() {
+  warning_context = std::move(previous_);
+  warnings_silent = previous_silent_;
+}
 
 std::vector<std::string> camera_warnings(const RunConfig& c, const scenes::Scene& scene) {
   std::vector<std::string> w;

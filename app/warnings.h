@@ -37,16 +37,19 @@ inline constexpr const char* kPdpWarning = ": its photon detection probability a
 
 // A warning on stderr: "spadgen: warning: ", the context (a dataset's "sample 3: "), the warning.
 void print_warning(const std::string& warning);
-// The context print_warning names while it lives (one at a time: a dataset generates one sample at a time).
+// The context print_warning names while it lives (one at a time: a dataset generates one sample at a time);
+// silent: print none (a dataset's further realisations repeat what their sample's run said; metadata.json
+// records them all the same).
 class WarningContext {
  public:
-  explicit WarningContext(std::string context);
+  explicit WarningContext(std::string context, bool silent = false);
   ~WarningContext();
   WarningContext(const WarningContext&) = delete;
   WarningContext& operator=(const WarningContext&) = delete;
 
  private:
   std::string previous_;
+  bool previous_silent_;
 };
 
 // Before rendering (run, sense and info): the gate sweep's gate tabulated coarsely (above); a pixel type

@@ -58,18 +58,18 @@ struct SampleRecord {
   std::vector<std::string> warnings;  // done: metadata.json's warnings (the sample's run's)
 };
 
-// Warnings of many samples, grouped by what they warn about (a warning's text before its first ": ", its
-// key): how many samples, the first few of them, the first one's text.
+// Warnings of many samples, grouped by kind (a warning's text with its numbers left out): how many samples,
+// the first few of them, the first one's text; the kinds most samples share first, at most kKindsShown.
 struct WarningTally {
   struct Group {
     int64_t samples = 0;
     std::vector<int64_t> first;  // at most kListed
     std::string example;
   };
-  static constexpr size_t kListed = 5;
+  static constexpr size_t kListed = 5, kKindsShown = 20;
   std::map<std::string, Group> groups;
   void add(int64_t sample, const std::vector<std::string>& warnings);
-  // One line per group: "2 samples (3, 7): <the first's text>".
+  // One line per kind: "2 samples (3, 7): <the first's text>", then "and N more kinds ..." past kKindsShown.
   std::vector<std::string> lines() const;
 };
 
@@ -138,6 +138,7 @@ class DatasetFolder {
     nlohmann::ordered_json scene;  // the resolved scene file
     std::string hash;
     std::string hash_before_revisions;  // the hash without sample_hash's revisions of the renderer's rules
+    std::string revisions;              // those revisions in words ("" when none applies)
   };
   Resolved resolve(const Sample& s) const;
   // The hash of sample s whose scene resolved to r (as resolve computes it).

@@ -74,6 +74,11 @@ T get(const nlohmann::json& j, const std::string& pointer, const std::string& fi
 
 }  // namespace
 
+bool is_repeat_set(const fs::path& dir) {
+  std::error_code ec;
+  return fs::is_regular_file(dir / "repeat_000" / "metadata.json", ec);
+}
+
 nlohmann::json read_run_metadata(const std::string& dir) {
   const std::string path = (fs::path(dir) / "metadata.json").string();
   std::error_code ec;
@@ -82,13 +87,13 @@ nlohmann::json read_run_metadata(const std::string& dir) {
     // a dataset's folder holds run folders, one per sample: name one
     const bool dataset = fs::is_regular_file(fs::path(dir) / "dataset.json", ec);
     // sense --repeats' folder holds one run folder per realisation
-    const bool repeats = fs::is_regular_file(fs::path(dir) / "repeat_000" / "metadata.json", ec);
+    const bool repeats = is_repeat_set(dir);
     throw Error(dir + ": not a run folder (no metadata.json); expected the folder of a finished `spadgen run`" +
                 (dataset ? std::string(" (this is a dataset's folder: its samples' run folders are in its samples/, e.g. ") +
                                (fs::path(dir) / "samples" / "000000").string() + ")"
                  : repeats ? " (this is the folder of `spadgen sense --repeats`' realisations: each is a run folder, " +
-                                 (fs::path(dir) / "repeat_000").string() + ", ...; one command per realisation, e.g. `for r in " +
-                                 (fs::path(dir) / "repeat_*").string() + "; do spadgen reconstruct \"$r\"; done`)"
+                                 (fs::path(dir) / "repeat_000").string() + ", ...; one command per realisation, e.g. `for r in '" +
+                                 dir + "'/repeat_*; do spadgen reconstruct \"$r\"; done`)"
                            : std::string()));
   }
   // Opened only when a regular file: a FIFO would block the open for ever, a device never end.

@@ -2,6 +2,7 @@
 // (counts.npy or counts.zarr) or the noise-free detection rate, and the per-pixel gate maps.
 #pragma once
 #include <cstdint>
+#include <filesystem>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -15,6 +16,10 @@ namespace spadgen::reconstruct {
 // regular file (a FIFO is not opened), larger than kMaxMetadataBytes, or not JSON.
 inline constexpr uintmax_t kMaxMetadataBytes = 256u << 20;
 nlohmann::json read_run_metadata(const std::string& dir);
+
+// Whether dir is the folder of `spadgen sense --repeats`' realisations (it holds repeat_000/metadata.json):
+// each realisation is a run folder, the set is none.
+bool is_repeat_set(const std::filesystem::path& dir);
 
 class RunFolder {
  public:

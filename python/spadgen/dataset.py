@@ -263,7 +263,7 @@ class Dataset:
     def columns(self):
         """The table's columns: index.csv's."""
         return (["index", "status", "folder"] + self.parameter_keys + [c for c, _ in _SEEDS] + ["sample_hash", "bytes"]
-                + list(self._summary_keys()) + ["warnings", "error"])
+                + list(self._summary_keys()) + ["error", "warnings"])
 
     def _summary_keys(self):
         keys = list(SUMMARY_COLUMNS)

@@ -7,6 +7,7 @@ import pathlib
 import shutil
 import subprocess
 import tempfile
+import warnings
 
 import numpy as np
 
@@ -22,26 +23,45 @@ class EvaluateError(RuntimeError):
         self.command = command
 
 
+def _executable(path):
+    return os.path.isfile(path) and os.access(path, os.X_OK)
+
+
 def spadgen_program(program=None):
-    """The spadgen program to run: `program` when given, else $SPADGEN_BIN, else `spadgen` on PATH, else the
-    README's build/app/spadgen beside this package in a source checkout. FileNotFoundError saying how to
-    point at it when none exists."""
-    if program is not None:
-        if not (os.path.isfile(program) and os.access(program, os.X_OK)):
-            raise FileNotFoundError(f"{os.fspath(program)}: no such executable file (program=: the spadgen program; "
-                                    "without it: $SPADGEN_BIN, spadgen on PATH or the build folder)")
-        return os.fspath(program)
-    tried = []
-    for candidate in (os.environ.get("SPADGEN_BIN"), shutil.which("spadgen"),
-                      pathlib.Path(__file__).resolve().parents[2] / "build" / "app" / "spadgen"):
-        if candidate is None:
-            continue
-        candidate = os.fspath(candidate)
-        tried.append(candidate)
-        if os.path.isfile(candidate) and os.access(candidate, os.X_OK):
-            return candidate
-    raise FileNotFoundError("no spadgen program found (tried " + (", ".join(tried) or "nothing") + "): pass "
-                            "program=PATH, set SPADGEN_BIN, or put spadgen on PATH")
+    """The spadgen program to run: `program` when given, else $SPADGEN_BIN, else the README's build/app/spadgen
+    of the source checkout this package sits in, else `spadgen` on PATH. A program named (by the argument or
+    $SPADGEN_BIN) must be an executable file; FileNotFoundError saying how to point at one when none is found.
+    A program of another version than the package's is used with a warning (an older one may lack what the
+    package passes it)."""
+    for given, how in ((program, "program="), (os.environ.get("SPADGEN_BIN"), "$SPADGEN_BIN")):
+        if given is not None and given != "":
+            if not _executable(given):
+                raise FileNotFoundError(f"{os.fspath(given)} ({how}): no such executable file; expected the spadgen program")
+            return _checked_version(os.fspath(given))
+    checkout = pathlib.Path(__file__).resolve().parents[2] / "build" / "app" / "spadgen"
+    for candidate in (str(checkout), shutil.which("spadgen")):
+        if candidate is not None and _executable(candidate):
+            return _checked_version(candidate)
+    raise FileNotFoundError(f"no spadgen program found (tried {checkout} and spadgen on PATH): pass program=PATH, "
+                            "set SPADGEN_BIN, or put spadgen on PATH")
+
+
+_versions = {}
+
+
+def _checked_version(program):
+    if program not in _versions:
+        try:
+            out = subprocess.run([program, "--version"], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+                                 timeout=60).stdout.strip()
+        except (OSError, subprocess.SubprocessError):
+            out = ""
+        _versions[program] = out
+        from ._version import __version__
+        if out.split()[-1:] != [__version__]:
+            warnings.warn(f"{program} says its version is {out or 'nothing'!r}, the package is {__version__}: "
+                          "results may differ from the docs", stacklevel=3)
+    return program
 
 
 def _ranges_array(a, what):
@@ -62,7 +82,7 @@ def _done_folder_names(dataset):
 
 
 def evaluate(target, detections=None, *, detector=None, out=None, tolerance_m=None, min_score=None, region=None,
-             noise_free=False, threads=None, program=None):
+             noise_free=False, threads=None, program=None, tmp_dir=None):
     """Scores detections against the object labels of a run folder or of every done sample of a dataset folder
     with `spadgen evaluate` (docs/detection.md), and returns its metrics.json as a dict.
 
@@ -73,7 +93,8 @@ def evaluate(target, detections=None, *, detector=None, out=None, tolerance_m=No
       - an array (H, W, M) of ranges in metres, NaN where there is none (a run);
       - a mapping {sample folder name: array} (a dataset: "000042", "000042_r01" for a realisation), one per
         done sample folder.
-    Arrays are written as .npy into a temporary folder, removed afterwards (metrics.json's
+    Arrays are written as .npy into a temporary folder in tmp_dir (default: Python's, often a tmpfs in
+    memory: a whole dataset's detections are written at once), removed afterwards (metrics.json's
     detections_source names the file the program read).
 
     The other arguments are the command's options (--detector, -o, --tolerance-m, --min-score,
@@ -83,14 +104,19 @@ def evaluate(target, detections=None, *, detector=None, out=None, tolerance_m=No
     """
     target = os.fspath(target)
     exe = spadgen_program(program)
-    with tempfile.TemporaryDirectory(prefix="spadgen_evaluate_") as tmp:
+    dataset = os.path.isfile(os.path.join(target, "dataset.json"))
+    with tempfile.TemporaryDirectory(prefix="spadgen_evaluate_", dir=tmp_dir) as tmp:
         if detections is None or isinstance(detections, (str, os.PathLike)):
             given = None if detections is None else os.fspath(detections)
         elif hasattr(detections, "keys"):
-            if not os.path.isfile(os.path.join(target, "dataset.json")):
+            if not dataset:
                 raise ValueError(f"{target}: not a dataset folder (dataset.json): a mapping of detections names the "
                                  "samples of a dataset; give a run's detections as one array")
             done = set(_done_folder_names(target))
+            missing = sorted(done - {str(k) for k in detections.keys()})
+            if missing:
+                raise ValueError(f"no detections for {len(missing)} of the {len(done)} done sample folders of {target}, "
+                                 f"first {missing[0]!r}: the mapping needs one array per done sample folder (realisations too)")
             unknown = sorted(str(k) for k in detections.keys() if str(k) not in done)
             if unknown:
                 raise ValueError(f"detections for {len(unknown)} folders that are no done sample folder of {target}, "
@@ -99,6 +125,9 @@ def evaluate(target, detections=None, *, detector=None, out=None, tolerance_m=No
                 np.save(os.path.join(tmp, f"{name}.npy"), _ranges_array(a, f"detections[{name!r}]"))
             given = os.path.join(tmp, "{sample}.npy")
         else:
+            if dataset:
+                raise ValueError(f"{target} is a dataset folder: give its detections as a mapping {{sample folder name: "
+                                 "array}, or files (a name inside each sample folder, or a path with {sample})")
             given = os.path.join(tmp, "detections.npy")
             np.save(given, _ranges_array(detections, "detections"))
         out_dir = os.fspath(out) if out is not None else os.path.join(target, "evaluation")

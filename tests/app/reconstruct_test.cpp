@@ -809,12 +809,36 @@ TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_THAT(r.output, HasSubstr("1 sample folder (realisations included); not scored, 2D intensity runs (no gate profiles for the detector): 1\n"));
   const auto m4 = nlohmann::json::parse(slurp(out3 / "evaluation" / "metrics.json"));
-  EXPECT_EQ(m4["not_scored_intensity"]["sample_folders"], nlohmann::json::array({"000001"}));
+  ASSERT_EQ(m4["not_scored_intensity"]["sample_folders"].size(), 1u);
+  EXPECT_EQ(m4["not_scored_intensity"]["sample_folders"][0]["sample"], "000001");
   ASSERT_EQ(m4["samples"].size(), 1u);
   EXPECT_EQ(m4["samples"][0]["sample"], "000000");
   r = sh("dataset status " + out3.string());
   EXPECT_EQ(r.code, 0) << r.output;
   EXPECT_THAT(r.output, Not(HasSubstr("out of date")));
+  // the 2D sample generated again (its hash changed by hand, as a changed scene would): the evaluation is out
+  // of date (it may be a gate sweep now; the left-out folder was accounted for by name alone)
+  {
+    const fs::path meta_2d = out3 / "samples/000001/metadata.json";
+    std::string text = slurp(meta_2d);
+    const size_t hash_at = text.find("\"sample_hash\": \"");
+    ASSERT_NE(hash_at, std::string::npos);
+    text[hash_at + 16] = text[hash_at + 16] == '0' ? '1' : '0';
+    std::ofstream(meta_2d) << text;
+    r = sh("dataset status " + out3.string());
+    EXPECT_THAT(r.output, HasSubstr("evaluation/ is out of date: of the 2 sample folders it scored, 1 changed since"));
+  }
+  // {sample} may not name one file for several samples (p/{sample}/../x.npy), nor a folder
+  fs::create_directories(dir_ / "p" / "000000");
+  fs::create_directories(dir_ / "p" / "000001");
+  std::ofstream(dir_ / "p" / "x.npy") << "";
+  r = sh("evaluate " + out2.string() + " --detections " + (dir_ / "p" / "{sample}" / ".." / "x.npy").string() + " -o " + (dir_ / "e_one").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("names one file, " + (dir_ / "p" / "x.npy").string() + ", for the samples 00000"));
+  r = sh("evaluate " + out2.string() + " --detections " + (dir_ / "p" / "{sample}").string() + " -o " + (dir_ / "e_one").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("/p/000000 is not a regular file (a folder, a FIFO or a device)"));
+  EXPECT_FALSE(fs::exists(dir_ / "e_one"));
   std::ofstream(dir_ / "d4.json") << "{\"scenes\": [\"" + kScenes + "test_chart.json\"], \"seed\": 3,"
                                      "\"set\": {\"render.samples_per_pixel\": 2, \"camera.crop\": [480, 242, 16, 4]}}";
   ASSERT_EQ(sh("dataset run " + (dir_ / "d4.json").string() + " -o " + (dir_ / "dataset4").string() + " -q").code, 0);

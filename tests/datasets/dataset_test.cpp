@@ -17,6 +17,7 @@
 
 #include "core/error.h"
 #include "datasets/dataset.h"
+#include "datasets/folder.h"
 
 namespace spadgen::datasets {
 namespace {
@@ -416,4 +417,35 @@ TEST(DatasetFile, RangesText) {
 }
 
 }  // namespace
+// sample_hash's revisions of the renderer's rules: each applies where its rule changed what a sample renders
+// (its samples rendered before are stale, with the change in words), and nowhere else (other samples keep their
+// hashes): a gate sweep to a target error; an intensity run to a target error that keeps its laser return
+// without laser_on.
+TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
+  const fs::path dir = fs::temp_directory_path() / ("spadgen_dataset_revisions_" + std::to_string(::getpid()));
+  const auto resolved = [&](const std::string& set) {
+    const DatasetSpec spec = parse("\"set\": {" + set + "}");
+    return DatasetFolder(spec, dir).resolve(make_sample(spec, 0));
+  };
+  const std::string target = "\"render.target_relative_error\": 0.05, ";
+  const std::string intensity = "\"acquisition.mode\": \"intensity\"";
+  struct Case {
+    std::string set;
+    std::string revisions;  // "" where none applies
+  };
+  for (const Case& c : std::vector<Case>{
+           {"\"render.samples_per_pixel\": 4", ""},
+           {target + "\"render.samples_per_pixel\": 4", "a gate sweep to render.target_relative_error holds the ambient light too"},
+           {target + intensity, ""},
+           {target + intensity + ", \"outputs.light\": true",
+            "render.target_relative_error holds the laser return an intensity run keeps (outputs.light, outputs.transient)"},
+           {target + intensity + ", \"outputs.light\": true, \"acquisition.intensity.laser_on\": true", ""},
+           {intensity + ", \"outputs.light\": true", ""}}) {
+    const DatasetFolder::Resolved r = resolved(c.set);
+    EXPECT_EQ(r.revisions, c.revisions) << c.set;
+    EXPECT_EQ(r.hash != r.hash_before_revisions, !c.revisions.empty()) << c.set;
+  }
+  fs::remove_all(dir);
+}
+
 }  // namespace spadgen::datasets

@@ -5,12 +5,14 @@ errors, and DatasetSamples' layout, length, values and DataLoader batches."""
 import csv
 import json
 import math
+import subprocess
 
 import numpy as np
 import pytest
 
 import spadgen
 from spadgen.dataset import STATUSES, SUMMARY_COLUMNS
+from conftest import SOURCE
 
 WIDTHS = [1024, 1000, 16, 1024]  # the grid cell of sample i is i mod 3
 DONE = [0, 1, 3]
@@ -269,3 +271,21 @@ def test_the_cards_snippet_runs_in_the_folder(ds, dataset_dir, monkeypatch):
     exec(compile(code, "dataset.md", "exec"), namespace)
     assert namespace["rows"] == ds.index and namespace["ds"].indices.tolist() == [0, 1, 2, 3]
     assert namespace["run"].metadata["dataset"]["index"] == 0 and namespace["run"].counts.shape == (101, 20, 24)
+
+
+def test_a_samples_warnings(spadgen_bin, tmp_path):
+    """Sample.warnings and the table's warnings column hold what each sample's run warned about (here frames
+    longer than the camera's in sample 1 only), as its metadata.json and index.csv have them."""
+    (tmp_path / "d.json").write_text(json.dumps({
+        "seed": 1, "scenes": [str(SOURCE / "scenes" / "paper" / "multi_object.json")], "samples": 2,
+        "set": {"render.samples_per_pixel": 2, "camera.crop": [496, 236, 8, 4], "outputs.previews": False},
+        "grid": {"acquisition.cycles_per_frame": [1600, 1915]}}))
+    subprocess.run([spadgen_bin, "dataset", "run", str(tmp_path / "d.json"), "-o", str(tmp_path / "out"), "-q"], check=True,
+                   capture_output=True)
+    ds = spadgen.open_dataset(tmp_path / "out")
+    quiet, warned = ds.sample(0), ds.sample(1)
+    assert quiet.warnings == [] and len(warned.warnings) == 1 and "1915 laser cycles" in warned.warnings[0]
+    assert warned.warnings == warned.run.metadata["warnings"]
+    assert ds.table(columns=["warnings"])["warnings"].tolist() == [0.0, 1.0]
+    with open(tmp_path / "out" / "index.csv", newline="") as f:
+        assert [r["warnings"] for r in csv.DictReader(f)] == ["0", "1"]

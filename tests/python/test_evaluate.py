@@ -39,7 +39,7 @@ def test_perfect_shifted_and_no_detections(sweep_run, spadgen_bin, tmp_path):
     assert m["objects"]["found"] == 0 and m["detections"]["total"] == 0
 
 
-def test_the_detector_and_the_programs_refusals(sweep_run, spadgen_bin, tmp_path):
+def test_the_detector_and_the_programs_refusals(sweep_run, spadgen_bin, tmp_path, monkeypatch):
     run = spadgen.open_run(sweep_run)
     m = spadgen.evaluate(run.path, out=tmp_path / "edges", program=spadgen_bin)
     assert m["detections_source"]["computed"] is True
@@ -56,6 +56,10 @@ def test_the_detector_and_the_programs_refusals(sweep_run, spadgen_bin, tmp_path
         spadgen.evaluate(run.path, {"000000": perfect_ranges(run)}, program=spadgen_bin)
     with pytest.raises(FileNotFoundError, match="no such executable file"):
         spadgen.evaluate(run.path, program=tmp_path / "no_such_program")
+    (tmp_path / "not_executable").write_text("")
+    monkeypatch.setenv("SPADGEN_BIN", str(tmp_path / "not_executable"))  # named, so not passed over
+    with pytest.raises(FileNotFoundError, match=r"not_executable \(\$SPADGEN_BIN\): no such executable file"):
+        spadgen.evaluate(run.path)
 
 
 def test_a_dataset_scored_from_a_mapping_and_from_files(dataset_dir, spadgen_bin, tmp_path):
@@ -79,7 +83,19 @@ def test_a_dataset_scored_from_a_mapping_and_from_files(dataset_dir, spadgen_bin
     # a sample without detections is named by the program; a name that is no done sample by the package
     partial = dict(truth)
     del partial[sorted(partial)[0]]
-    with pytest.raises(EvaluateError, match="1 of 6 done sample folders have no detections file"):
+    with pytest.raises(ValueError, match=f"no detections for 1 of the 6 done sample folders of .*, first '{sorted(truth)[0]}'"):
         spadgen.evaluate(dataset_dir, partial, out=tmp_path / "partial", program=spadgen_bin)
+    assert not (tmp_path / "partial").exists()
+    with pytest.raises(ValueError, match="is a dataset folder: give its detections as a mapping"):
+        spadgen.evaluate(dataset_dir, truth[sorted(truth)[0]], program=spadgen_bin)
+    # the program's check, through files: a sample without one is named
+    os.remove(preds / f"{sorted(truth)[0]}.npy")
+    with pytest.raises(EvaluateError, match="1 of 6 done sample folders have no detections file"):
+        spadgen.evaluate(dataset_dir, str(preds / "{sample}.npy"), out=tmp_path / "partial", program=spadgen_bin)
+    # the temporary files in the folder asked for, removed afterwards
+    (tmp_path / "scratch").mkdir()
+    m = spadgen.evaluate(dataset_dir, truth, out=tmp_path / "mapping2", program=spadgen_bin, tmp_dir=tmp_path / "scratch")
+    assert all(s["detections_source"]["file"].startswith(str(tmp_path / "scratch")) for s in m["samples"])
+    assert list((tmp_path / "scratch").iterdir()) == []
     with pytest.raises(ValueError, match="first '000002'"):  # sample 2 failed
         spadgen.evaluate(dataset_dir, dict(truth, **{"000002": truth[sorted(truth)[0]]}), program=spadgen_bin)
