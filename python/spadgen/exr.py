@@ -83,9 +83,11 @@ def _parse_attribute(type_name, value, path):
         return value.decode("utf-8", "replace")
     if type_name == "chlist":
         return _parse_chlist(value, path)
-    if type_name == "compression":
-        return COMPRESSIONS.get(value[0], f"unknown ({value[0]})")
-    if type_name == "lineOrder":
+    if type_name in ("compression", "lineOrder"):
+        if len(value) != 1:
+            raise ExrError(f"{path}: a {type_name} attribute of {len(value)} bytes (it is one byte)")
+        if type_name == "compression":
+            return COMPRESSIONS.get(value[0], f"unknown ({value[0]})")
         return {0: "INCREASING_Y", 1: "DECREASING_Y", 2: "RANDOM_Y"}.get(value[0], value[0])
     fmt = {"int": "<i", "float": "<f", "double": "<d", "box2i": "<4i", "box2f": "<4f", "v2i": "<2i",
            "v2f": "<2f", "v3i": "<3i", "v3f": "<3f", "m33f": "<9f", "m44f": "<16f"}.get(type_name)
@@ -196,14 +198,20 @@ class ExrFile:
             need(4)
             size = struct.unpack_from("<i", buf, pos)[0]
             pos += 4
+            if size < 0:  # (pos would walk back and read the same attribute for ever)
+                raise ExrError(f"{self.path}: the header attribute {attr!r} has a negative size ({size})")
             need(size)
             self.header[attr] = _parse_attribute(type_name, bytes(buf[pos:pos + size]), self.path)
             self.attribute_types[attr] = type_name
             pos += size
         f.seek(8 + pos)
-        for required in ("channels", "compression", "dataWindow", "lineOrder"):
+        for required, kind in (("channels", "chlist"), ("compression", "compression"), ("dataWindow", "box2i"),
+                               ("lineOrder", "lineOrder")):
             if required not in self.header:
                 raise ExrError(f"{self.path}: header lacks the required attribute '{required}'")
+            if self.attribute_types[required] != kind or (kind == "box2i" and not isinstance(self.header[required], tuple)):
+                raise ExrError(f"{self.path}: the header attribute '{required}' is of type "
+                               f"'{self.attribute_types[required]}' ({len(self.header[required])} bytes), not {kind}")
         self.compression = self.header["compression"]
         self.channels = {c.name: c for c in self.header["channels"]}
         self.data_window = tuple(self.header["dataWindow"])
@@ -269,6 +277,12 @@ class ExrFile:
         widths = [W * c.dtype.itemsize for c in chans]
         starts = np.concatenate([[0], np.cumsum(widths)]).astype(int)
         line_bytes = int(starts[-1])
+        # What the image holds decoded, against what the file can hold: deflate packs at most about 1032 bytes
+        # into one, RLE 64 (a header that names a huge data window asked for gigabytes before any chunk was read).
+        most = len(data) * (1100 if comp in ("ZIP", "ZIPS") else 70 if comp == "RLE" else 1)
+        if H * line_bytes > most:
+            raise ExrError(f"{self.path}: its data window {self.data_window} and {len(chans)} channels hold "
+                           f"{H * line_bytes} bytes, more than its {len(data)} bytes can hold with {comp} compression")
         out = {c.name: np.empty((H, W), c.dtype) for c in chans}
         filled = np.zeros(chunks, bool)
         for off in offsets:
@@ -287,8 +301,8 @@ class ExrFile:
             if size >= expected:  # stored uncompressed: compressing did not make it smaller
                 raw = np.frombuffer(packed, np.uint8, expected)
             elif comp in ("ZIP", "ZIPS"):
-                try:
-                    raw = _undo_predictor_and_interleave(zlib.decompress(packed))
+                try:  # (at most one byte more than its scanlines hold: a chunk cannot inflate without bound)
+                    raw = _undo_predictor_and_interleave(zlib.decompressobj().decompress(packed, expected + 1))
                 except zlib.error as e:
                     raise ExrError(f"{self.path}: corrupt ZIP data in the chunk at y = {y}: {e}") from None
             elif comp == "RLE":

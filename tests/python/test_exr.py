@@ -3,6 +3,8 @@ reader takes (NONE, RLE, ZIPS, ZIP; HALF, FLOAT, UINT; a data window off the ori
 and every image of real spadgen runs, each compared bit for bit with what OpenEXR reads (exr_tool dump);
 and the layouts it refuses, refused with a message that names them."""
 import pathlib
+import signal
+import struct
 import subprocess
 
 import numpy as np
@@ -100,6 +102,43 @@ def test_not_an_exr_and_truncated_files_are_errors(exr_tool, tmp_path):
     cut.write_bytes(data[:40])
     with pytest.raises(ExrError, match="truncated header"):
         ExrFile(cut)
+
+
+def test_damaged_headers_and_chunks_are_errors_not_hangs(make_run, tmp_path):
+    """A run's EXR with bytes changed (a negative attribute size looped for ever; attributes of other types,
+    a huge data window and inflating chunks escaped as other errors or asked for gigabytes): every read ends,
+    within seconds, in the image or an ExrError. 400 seeded mutations of the header and of the first chunk."""
+    original = (make_run("sweep") / "labels.exr").read_bytes()
+    header_end = original.index(b"\0\0", original.index(b"lineOrder"))  # around the header's attributes
+    path = tmp_path / "m.exr"
+
+    def read_within_a_second(data):
+        """None when the image reads, else its ExrError (another exception, or over 5 s, fails)."""
+        path.write_bytes(bytes(data))
+
+        def late(*_):
+            raise TimeoutError(f"reading took over 5 s: the file's first bytes {bytes(data[:48])!r}")
+        signal.signal(signal.SIGALRM, late)
+        signal.alarm(5)  # (a small file: milliseconds; a loop never ends)
+        try:
+            ExrFile(path).read()
+        except ExrError as e:
+            return e
+        finally:
+            signal.alarm(0)
+        return None
+
+    # the attribute size of the channel list negative (the reported loop)
+    looped = bytearray(original)
+    struct.pack_into("<i", looped, 8 + len(b"channels\0chlist\0"), -20)
+    assert "negative size" in str(read_within_a_second(looped))
+    rng = np.random.default_rng(5)
+    for i in range(400):
+        data = bytearray(original)
+        for _ in range(int(rng.integers(1, 4))):
+            at = int(rng.integers(8, header_end + 64 if i % 2 else min(len(data), header_end + 400)))
+            data[at] = int(rng.integers(0, 256)) if i % 3 else data[at] ^ 0x80
+        read_within_a_second(data)
 
 
 @pytest.mark.parametrize("run_name", ["sweep", "intensity"])
