@@ -146,7 +146,10 @@ std::string listed_entry(const fs::path& target, const fs::path& folder, const n
   return "";
 }
 
-void check_writable(const std::string& file, const RunFolder& run, const std::string& run_dir) {
+// own_name: the name this output has by default at the run's top (detections_edges.exr, hdr_noise_free.exr):
+// at a run's top no other of reconstruct's names is taken (-o RUN/detections_edges.exr of the paper detector was
+// then scored as the edges detector's).
+void check_writable(const std::string& file, const RunFolder& run, const std::string& run_dir, const std::string& own_name) {
   // The file is replaced by rename: whatever is at the path goes. A regular file (an earlier output) may;
   // a device, a FIFO, a folder or a symbolic link is not an output to replace (-o /dev/full replaced the
   // device node with an EXR, as root).
@@ -201,7 +204,12 @@ void check_writable(const std::string& file, const RunFolder& run, const std::st
                                       : ": is the run " + folder.string() + "'s own " + f + " (its metadata.json lists it)") +
                       ", which writing the output would replace; expected a new file or an earlier output (-o)");
         const fs::path rel = target.lexically_relative(folder);
-        if (std::distance(rel.begin(), rel.end()) == 1 && rel != "evaluation" && is_derived_output(rel.string())) break;
+        if (std::distance(rel.begin(), rel.end()) == 1 && rel != "evaluation" && is_derived_output(rel.string())) {
+          if (rel.string() == own_name) break;
+          throw Error(file + ": is the name of another of reconstruct's outputs at the top of the run folder " + folder.string() +
+                      ", which evaluate and Python read as that output; this one's is " + own_name +
+                      " (-o: that name, or a file outside run folders)");
+        }
         throw Error(file + ": lies in the run folder " + folder.string() + ", which holds only what spadgen writes there (a "
                     "later run into it, or a dataset's check of it, would refuse the folder for a foreign file); expected a "
                     "file outside run folders, or one of reconstruct's own names at the run's top (detections_edges.exr, "
@@ -381,6 +389,11 @@ DetectionImage read_detections(const std::string& path, const RunFolder& run, bo
         throw Error(path + ": --min-score: slot " + std::to_string(s) + " has no " + slot_name(s, "score") +
                     " channel (every slot's detections would be dropped); leave --min-score out, or give the scores");
   check_source(path, e.attributes, run, source);
+  if (const auto made = e.attributes.find("spadgen_reconstruct"); source && made != e.attributes.end()) {
+    const nlohmann::json by = nlohmann::json::parse(made->second, nullptr, false);
+    if (by.is_object() && by.contains("detector"))  // which of reconstruct's detectors wrote it, and from what
+      (*source)["made_by"] = {{"detector", by["detector"]}, {"noise_free", by.value("noise_free", nlohmann::json(nullptr))}};
+  }
   DetectionImage img(width, height, m);
   for (int s = 0; s < m; ++s) {
     const auto& r = e.channels[slot_name(s, "range")];
@@ -565,8 +578,20 @@ reconstruct::Scores evaluate_run(const EvaluateCommand& c, const std::string& ru
     *source = compute ? nlohmann::json{{"detector", c.detector}, {"computed", true}, {"noise_free", c.noise_free}}
                       : nlohmann::json{{"file", file}};
   // As reconstruct writes it by default (its slots too), so that the scores are those of its file.
+  nlohmann::json read_source;  // (what the file says of itself, also when the caller keeps none)
   DetectionImage img = compute ? detect_image(run, Detector(c.detector, run), c.noise_free, ReconstructOptions{}.max_detections, false)
-                               : read_detections(file, run, c.min_score.has_value(), source);
+                               : read_detections(file, run, c.min_score.has_value(), source ? source : &read_source);
+  // The default file stands for --detector (and --noise-free): one another detector wrote is refused.
+  if (const nlohmann::json& s = source ? *source : read_source; detections.empty() && !compute && s.contains("made_by")) {
+    const nlohmann::json want = {{"detector", c.detector}, {"noise_free", c.noise_free}};
+    if (s["made_by"] != want)
+      throw Error(file + ": written by reconstruct's " +
+                  (s["made_by"]["detector"].is_string() ? s["made_by"]["detector"].get<std::string>() : s["made_by"]["detector"].dump()) +
+                  (s["made_by"]["noise_free"] == true ? " detector on the noise-free rates" : " detector") + ", not the " +
+                  c.detector + " detector" + (c.noise_free ? " on the noise-free rates" : "") +
+                  " its name stands for; run `spadgen reconstruct " + run_dir + (c.detector == "edges" ? "" : " --detector " + c.detector) +
+                  (c.noise_free ? " --noise-free" : "") + "` again, or give it with --detections");
+  }
   if (source && !labels.detectability) (*source)["labels"] = "labels.exr absent: every object counted as detectable";
   reconstruct::EvaluateOptions options = scorer_options(c);
   options.ambiguity_m = run.ambiguity_m();
@@ -703,7 +728,7 @@ std::string reconstruct(const ReconstructOptions& o) {
                   "inversion, hdr.exr, and takes only -o, --noise-free and --threads for it");
     // The 2D HDR inversion: eq. (5) or (6) on the image's summed counts.
     const std::string out = o.out.empty() ? (fs::path(o.run_dir) / derived_name("hdr", o.noise_free)).string() : o.out;
-    check_writable(out, run, o.run_dir);
+    check_writable(out, run, o.run_dir, derived_name("hdr", o.noise_free));
     writers::ExrImage img(run.width(), run.height());
     std::vector<float> c(size_t(run.width()) * size_t(run.height()) * size_t(run.K()));
     // noise-free: the rates themselves (the expected counts, inverted, were clamped at N - 0.5: N = 1 gave
@@ -729,7 +754,7 @@ std::string reconstruct(const ReconstructOptions& o) {
   }
   const std::string out =
       o.out.empty() ? (fs::path(o.run_dir) / derived_name("detections_" + o.detector, o.noise_free)).string() : o.out;
-  check_writable(out, run, o.run_dir);
+  check_writable(out, run, o.run_dir, derived_name("detections_" + o.detector, o.noise_free));
   const Detector detector(o.detector, run);
   const DetectionImage d = detect_image(run, detector, o.noise_free, o.max_detections, o.progress);
   writers::ExrImage img(d.width, d.height);

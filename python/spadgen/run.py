@@ -685,9 +685,14 @@ class Run:
             return np.stack([f[f"det{i}.{what}"] for i in range(m)]).astype(np.float32)
 
         attrs = f.attributes
+        made = json.loads(attrs.get("spadgen_reconstruct", "{}"))
+        if isinstance(made, dict) and "detector" in made and (made["detector"], made.get("noise_free")) != (detector, noise_free):
+            raise ValueError(f"{path}: written by reconstruct's {made['detector']} detector"
+                             f"{' on the noise-free rates' if made.get('noise_free') else ''}, not the {detector} detector"
+                             f"{' on the noise-free rates' if noise_free else ''} its name stands for (reconstruct -o named "
+                             "it so); write it again with spadgen reconstruct")
         return Detections(np.asarray(f["count"]).astype(np.int32), slots("range"), slots("gate"), slots("amplitude"),
-                          slots("score"), json.loads(attrs.get("spadgen_reconstruct", "{}")),
-                          json.loads(attrs.get("spadgen_source", "{}")))
+                          slots("score"), made, json.loads(attrs.get("spadgen_source", "{}")))
 
     def hdr(self, noise_free=False):
         """The HDR inversion of a 2D run that ``spadgen reconstruct RUN`` (``--noise-free``) wrote into its folder,

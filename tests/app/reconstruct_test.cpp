@@ -306,6 +306,34 @@ TEST_F(Reconstruct, ARunIntoTheFolderAgainReplacesWhatReconstructAndEvaluateDeri
   EXPECT_NE(r.output.find("notes.txt"), std::string::npos) << r.output;
 }
 
+// reconstruct -o at a run's top takes no other of its outputs' names (the noise-free edges detector written as
+// detections_edges.exr was scored as the noisy one, recall 100 % against 95 %; the edges detector's as
+// detections_paper.exr), and evaluate refuses a default file another detector wrote (a copy, an older -o).
+TEST_F(Reconstruct, AnOutputAtTheRunsTopHasItsOwnNameAndEvaluateChecksIt) {
+  const fs::path run = dir_ / "run";
+  ASSERT_EQ(sh("run " + kScenes + "flat_target.json --set camera.crop=[502,240,8,8] --set render.samples_per_pixel=1 -q -o " +
+               run.string()).code, 0);
+  for (const auto& [args, name, own] : {std::tuple{" --noise-free", "detections_edges.exr", "detections_edges_noise_free.exr"},
+                                        {"", "detections_paper.exr", "detections_edges.exr"},
+                                        {" --detector paper", "hdr.exr", "detections_paper.exr"}}) {
+    const Result r = sh("reconstruct " + run.string() + args + " -q -o " + (run / name).string());
+    EXPECT_EQ(r.code, 1) << name;
+    EXPECT_THAT(r.output, HasSubstr((run / name).string() + ": is the name of another of reconstruct's outputs at the top of the "
+                                    "run folder " + run.string() + ", which evaluate and Python read as that output; this one's is " + own));
+    EXPECT_FALSE(fs::exists(run / name)) << name;
+  }
+  ASSERT_EQ(sh("reconstruct " + run.string() + " -q --noise-free -o " + (run / "detections_edges_noise_free.exr").string()).code, 0);
+  fs::copy_file(run / "detections_edges_noise_free.exr", run / "detections_edges.exr");
+  Result r = sh("evaluate " + run.string() + " -q");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("detections_edges.exr: written by reconstruct's edges detector on the noise-free rates, not "
+                                  "the edges detector its name stands for"));
+  r = sh("evaluate " + run.string() + " -q --noise-free");  // the file of that name is that detector's: scored
+  EXPECT_EQ(r.code, 0) << r.output;
+  const auto m = nlohmann::json::parse(slurp(run / "evaluation" / "metrics.json"));
+  EXPECT_EQ(m["detections_source"]["made_by"], nlohmann::json({{"detector", "edges"}, {"noise_free", true}}));
+}
+
 // A plate over a sphere: a crop where both are seen, and the sphere alone on the right.
 const std::string kMultiObjectCrop = " --set camera.crop=[480,242,64,12] --set render.samples_per_pixel=4 -q -o ";
 

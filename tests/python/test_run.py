@@ -390,7 +390,6 @@ def test_detections_of_spadgen_reconstruct(spadgen_bin, make_run, tmp_path):
     # A copy of the sweep run, so that the shared fixture's folder stays as the run wrote it.
     import shutil
     import subprocess
-    import subprocess
 
     run_dir = tmp_path / "run"
     shutil.copytree(make_run("sweep"), run_dir)
@@ -416,3 +415,7 @@ def test_detections_of_spadgen_reconstruct(spadgen_bin, make_run, tmp_path):
     nf = run.detections("paper", noise_free=True)
     assert nf.detector["noise_free"] is True and d.detector["noise_free"] is False
     assert np.array_equal(run.detections("paper").range, d.range, equal_nan=True)
+    # a file under another detector's name (a copy) is refused, naming whose it is (it was read as that detector's)
+    shutil.copy(run_dir / "detections_paper_noise_free.exr", run_dir / "detections_edges.exr")
+    with pytest.raises(ValueError, match="written by reconstruct's paper detector on the noise-free rates, not the edges detector"):
+        run.detections("edges")
