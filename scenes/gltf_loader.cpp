@@ -1357,6 +1357,7 @@ void Loader::load_camera(size_t node, const glm::dmat4& world) {
     fail(who, "aspectRatio " + num(aspect) + " must be > 0");
   Camera cam;
   cam.name = !n.name.empty() ? object_name(node) : c.name;
+  cam.where = who;
   cam.yfov_rad = yfov;
   cam.aspect_ratio = aspect;
   // Cameras take position and orientation from their node; a scale there (allowed, but meaningless
@@ -1390,6 +1391,7 @@ void Loader::load_light(size_t node, const glm::dmat4& world) {
   const std::string who = label("light", static_cast<size_t>(li), g.name) + " (" + nwho + ")";
   Light l;
   l.name = !n.name.empty() ? object_name(node) : g.name;
+  l.where = who;
   if (g.type == "point")
     l.type = Light::Type::Point;
   else if (g.type == "spot")

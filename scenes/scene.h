@@ -73,6 +73,7 @@ struct Mesh {
 
 struct Camera {
   std::string name;                  // the node's name (or the camera's when the node has none)
+  std::string where;                 // the glTF camera and node, for messages ("camera 0 'c' (node 3 'cam')")
   glm::dmat4 world_from_camera{1.0}; // the node's world transform; the camera looks down its local -Z, +Y up
   double yfov_rad = 0.0;
   double aspect_ratio = 0.0;         // 0 when the glTF does not give one
@@ -81,6 +82,7 @@ struct Camera {
 struct Light {
   enum class Type { Point, Spot, Directional };
   std::string name;
+  std::string where;                 // the glTF light and node, for messages
   Type type = Type::Point;
   glm::vec3 color{1, 1, 1};
   double intensity = 1.0;            // KHR_lights_punctual: candela (point, spot) or lux (directional)
@@ -126,15 +128,28 @@ struct Scene {
     for (const Mesh& m : meshes) n += m.triangle_count();
     return n;
   }
-  const Camera* find_camera(const std::string& name) const {
-    for (const Camera& c : cameras)
-      if (c.name == name) return &c;
-    return nullptr;
+  // The camera or light of that name; nullptr when none has it. Two of one name are an error naming both
+  // (the first was taken: a scene file could not tell which it chose). what: the scene-file key, for it.
+  const Camera* find_camera(const std::string& name, const char* what = "camera.gltf_camera") const {
+    return find_named(cameras, name, what, "perspective cameras");
   }
-  const Light* find_light(const std::string& name) const {
-    for (const Light& l : lights)
-      if (l.name == name) return &l;
-    return nullptr;
+  const Light* find_light(const std::string& name, const char* what = "laser.gltf_light") const {
+    return find_named(lights, name, what, "KHR_lights_punctual lights");
+  }
+  template <class T>
+  const T* find_named(const std::vector<T>& list, const std::string& name, const char* what, const char* kind) const {
+    const T* found = nullptr;
+    std::string all;
+    int n = 0;
+    for (const T& x : list)
+      if (x.name == name) {
+        if (!found) found = &x;
+        all += (n++ ? ", " : "") + x.where;
+      }
+    if (n > 1)
+      throw Error(std::string(what) + ": " + std::to_string(n) + " " + kind + " are named '" + name + "' in " + source + " (" +
+                  all + "); expected one: rename them in the glTF so that the name picks one");
+    return found;
   }
   // For a camera or light not found by name: "" or, when a node of that name is in the file but not in the
   // loaded glTF scene (whose cameras and lights are the only ones read), a sentence that says so.

@@ -865,6 +865,40 @@ TEST(GltfLoader, CamerasWithNodeTransforms) {
   EXPECT_THAT(spadgen::scenes::summarize(s), HasSubstr("'Cam': yfov 28.6479"));
 }
 
+// A camera or light name that two carry is refused when a scene file chooses it, naming both (the first was
+// used: camera.gltf_camera=cam took the one at z = 1 of two, with no word).
+TEST(GltfLoader, ACameraOrLightNameTwoCarryIsRefusedWhenChosen) {
+  TempDir dir;
+  Gltf g;
+  g.doc["cameras"] = {{{"type", "perspective"}, {"perspective", {{"yfov", 0.5}, {"znear", 0.01}}}}};
+  g.doc["extensionsUsed"] = {"KHR_lights_punctual"};
+  g.doc["extensions"] = {{"KHR_lights_punctual", {{"lights", {{{"type", "point"}, {"intensity", 1}}}}}}};
+  const json light = {{"KHR_lights_punctual", {{"light", 0}}}};
+  g.node({{"name", "cam"}, {"camera", 0}, {"translation", {0, 0, 1}}});
+  g.node({{"name", "cam"}, {"camera", 0}, {"translation", {0, 0, 2}}});
+  g.node({{"name", "L"}, {"extensions", light}});
+  g.node({{"name", "L"}, {"extensions", light}, {"translation", {0, 1, 0}}});
+  g.node({{"name", "one"}, {"camera", 0}});
+  const Scene s = load_gltf(g.write(dir.path(), "twins"));
+  ASSERT_EQ(s.cameras.size(), 3u);
+  EXPECT_NE(s.find_camera("one"), nullptr);
+  try {
+    s.find_camera("cam");
+    ADD_FAILURE() << "two cameras named 'cam' were not refused";
+  } catch (const Error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("camera.gltf_camera: 2 perspective cameras are named 'cam' in "));
+    EXPECT_THAT(e.what(), HasSubstr("(camera 0 (node 0 'cam'), camera 0 (node 1 'cam')); expected one"));
+  }
+  try {
+    s.find_light("L");
+    ADD_FAILURE() << "two lights named 'L' were not refused";
+  } catch (const Error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("laser.gltf_light: 2 KHR_lights_punctual lights are named 'L' in "));
+    EXPECT_THAT(e.what(), HasSubstr("node 2 'L'"));
+    EXPECT_THAT(e.what(), HasSubstr("node 3 'L'"));
+  }
+}
+
 TEST(GltfLoader, PunctualLights) {
   TempDir dir;
   Gltf g;
