@@ -2057,8 +2057,11 @@ Scene parse_gltf(const std::string& bytes, const std::string& path, const std::s
   const std::string json_text = gltf_json(path, bytes, &binary);
   // Parsed here first, without recursion and to a bounded depth: tinygltf turns extras into its own
   // values recursively, and a file nested 15,000 deep would exhaust the stack there.
+  // A key twice in one object: glTF 2.0 (JSON encoding) asks writers for unique keys and readers to take the
+  // later value, as tinygltf does; said, since a file that has one was likely edited by hand or merged.
+  std::string duplicate;
   check_before_tinygltf(path, parse_json(json_text, binary ? path + " (its JSON chunk)" : path,
-                                         {/*comments=*/false, /*reject_duplicates=*/false}));
+                                         {/*comments=*/false, /*reject_duplicates=*/false, &duplicate}));
 
   tinygltf::Model model;
   tinygltf::TinyGLTF io;
@@ -2104,6 +2107,9 @@ Scene parse_gltf(const std::string& bytes, const std::string& path, const std::s
 
   Scene scene;
   scene.source = path;
+  if (!duplicate.empty())
+    scene.warnings.push_back(duplicate + " (the first such key; glTF 2.0 asks for unique keys, and the later value is "
+                             "taken, the earlier ignored)");
   std::istringstream lines(warn + "\n" + err);
   for (std::string line; std::getline(lines, line);)
     // inverseBindMatrices is optional (glTF 2.0: identity matrices without it), and skins are read as such

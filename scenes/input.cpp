@@ -85,9 +85,13 @@ class CheckedSax {
   bool key(json::string_t& k) {
     Level& l = levels_.back();
     ++keys_seen;
-    if (options_.reject_duplicates && !l.keys.insert(k).second) {
+    if ((options_.reject_duplicates || (options_.first_duplicate && duplicate_key == 0)) && !l.keys.insert(k).second) {
       duplicate_key = keys_seen;
       l.key = k;
+      if (!options_.reject_duplicates) {  // noted, and read on: the later value is kept
+        duplicate_path = path();
+        return dom_.key(k);
+      }
       problem = path() + ": appears twice in one object; expected each key once (JSON readers keep one of them "
                          "silently)";
       return false;
@@ -128,6 +132,7 @@ class CheckedSax {
   bool syntax = false;  // the problem has an offset
   size_t keys_seen = 0;      // object keys read so far
   size_t duplicate_key = 0;  // which of them (from 1) repeated a key of its object; 0 = none
+  std::string duplicate_path;  // its path, when it was only noted
 
  private:
   struct Level {
@@ -291,7 +296,13 @@ json parse_json(const std::string& text, const std::string& where, const JsonOpt
   json root;
   CheckedSax sax(root, options);
   const bool ok = json::sax_parse(text, &sax, json::input_format_t::json, /*strict=*/true, options.comments);
-  if (sax.duplicate_key > 0) {
+  if (sax.duplicate_key > 0 && !options.reject_duplicates) {
+    if (ok && sax.problem.empty() && options.first_duplicate) {
+      const size_t at = nth_key_offset(text, sax.duplicate_key);
+      *options.first_duplicate = where + (at == std::string::npos ? std::string() : ":" + line_column(text, at)) + ": " +
+                                 sax.duplicate_path + " appears twice in one object";
+    }
+  } else if (sax.duplicate_key > 0) {
     // The SAX interface gives no positions: the repeated key is found again by counting keys in the text.
     const size_t at = nth_key_offset(text, sax.duplicate_key);
     throw Error(where + (at == std::string::npos ? std::string() : ":" + line_column(text, at)) + ": " + sax.problem);

@@ -34,6 +34,9 @@ std::string size_text(uint64_t bytes);
 struct JsonOptions {
   bool comments = true;         // // and /* */ comments (scene files are JSONC)
   bool reject_duplicates = true;  // the same key twice in one object is an error
+  // Without reject_duplicates: where the first key repeated in its object is, with its path (the later value
+  // is kept), or "" when none is ("file:3:5: /materials appears twice in one object").
+  std::string* first_duplicate = nullptr;
 };
 
 // Parses JSON without recursion. Throws spadgen::Error naming `where` (a file, or "--set key") with

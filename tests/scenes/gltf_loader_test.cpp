@@ -865,6 +865,30 @@ TEST(GltfLoader, CamerasWithNodeTransforms) {
   EXPECT_THAT(spadgen::scenes::summarize(s), HasSubstr("'Cam': yfov 28.6479"));
 }
 
+// A key twice in one object (a hand-merged file: a second "materials" replaced the first without a word):
+// read as glTF 2.0 asks (the later value), and said, with where.
+TEST(GltfLoader, AKeyTwiceInAnObjectIsReadAsTheLaterAndSaid) {
+  TempDir dir;
+  Gltf g;
+  g.doc["materials"] = {{{"name", "grey"}, {"pbrMetallicRoughness", {{"baseColorFactor", {0.5, 0.5, 0.5, 1}}}}}};
+  g.node({{"mesh", g.triangle_mesh()}});
+  g.doc["meshes"][0]["primitives"][0]["material"] = 0;
+  const std::string path = g.write(dir.path(), "twice");
+  std::ifstream in(path);
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const size_t at = text.find("\"materials\"");
+  ASSERT_NE(at, std::string::npos);
+  text.insert(at, "\"materials\": [{\"name\": \"first\"}],\n");
+  write_file(path, text);
+  const Scene s = load_gltf(path);
+  ASSERT_EQ(s.materials.size(), 1u);
+  EXPECT_EQ(s.materials[0].name, "grey");  // the later value
+  EXPECT_TRUE(has_warning(s, path + ":"));
+  EXPECT_TRUE(has_warning(s, ": /materials appears twice in one object (the first such key; glTF 2.0 asks for unique keys, "
+                             "and the later value is taken, the earlier ignored)"))
+      << testing::PrintToString(s.warnings);
+}
+
 // A camera or light name that two carry is refused when a scene file chooses it, naming both (the first was
 // used: camera.gltf_camera=cam took the one at z = 1 of two, with no word).
 TEST(GltfLoader, ACameraOrLightNameTwoCarryIsRefusedWhenChosen) {
