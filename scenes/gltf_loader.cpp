@@ -1715,7 +1715,7 @@ std::string gltf_json(const std::string& path, const std::string& bytes, bool* b
 // property of the wrong type as absent and takes its default ("mesh": "0" left a node without its mesh,
 // "scale": "big" made it 1, a byteOffset of -4 or 2.5 was read as 0). Only types and signs: what the
 // values mean (indices in range, sizes that fit) the loader checks as it reads them.
-enum class Want { Index, Offset, Count, Integer, Number, Bool, String, Object, Numbers, Indices, Objects, IndexMap };
+enum class Want { Index, Offset, Count, IntCount, Integer, Number, Bool, String, Object, Numbers, Indices, Objects, IndexMap };
 struct Rule {
   const char* key;
   Want want;
@@ -1727,7 +1727,7 @@ const std::map<std::string, std::vector<Rule>>& gltf_rules() {
       {"accessor", {{"bufferView", Want::Index}, {"byteOffset", Want::Offset}, {"componentType", Want::Integer},
                     {"normalized", Want::Bool}, {"count", Want::Count}, {"type", Want::String}, {"max", Want::Numbers},
                     {"min", Want::Numbers}, {"sparse", Want::Object, 0, "sparse"}, {"name", Want::String}}},
-      {"sparse", {{"count", Want::Count}, {"indices", Want::Object, 0, "sparse indices"}, {"values", Want::Object, 0, "sparse values"}}},
+      {"sparse", {{"count", Want::IntCount}, {"indices", Want::Object, 0, "sparse indices"}, {"values", Want::Object, 0, "sparse values"}}},
       {"sparse indices", {{"bufferView", Want::Index}, {"byteOffset", Want::Offset}, {"componentType", Want::Integer}}},
       {"sparse values", {{"bufferView", Want::Index}, {"byteOffset", Want::Offset}}},
       {"bufferView", {{"buffer", Want::Index}, {"byteOffset", Want::Offset}, {"byteLength", Want::Count},
@@ -1797,6 +1797,8 @@ void check_gltf_object(const std::string& path, const std::string& who, const nl
       case Want::Index: if (!gltf_integer(v, 0)) refuse(integer_wanted(v, 0, "2147483647")); break;
       case Want::Offset: if (!gltf_integer(v, 0, kMaxExact)) refuse(integer_wanted(v, 0, "2^53")); break;
       case Want::Count: if (!gltf_integer(v, 1, kMaxExact)) refuse(integer_wanted(v, 1, "2^53")); break;
+      // (a count tinygltf keeps in an int: 2^31 became -2147483648, and the message said so)
+      case Want::IntCount: if (!gltf_integer(v, 1)) refuse(integer_wanted(v, 1, "2147483647")); break;
       case Want::Integer: if (!gltf_integer(v, -2147483648.0)) refuse("an integer"); break;
       case Want::Number: if (!v.is_number()) refuse("a number"); break;
       case Want::Bool: if (!v.is_boolean()) refuse("true or false"); break;

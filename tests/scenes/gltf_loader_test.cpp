@@ -1184,6 +1184,9 @@ TEST_F(BrokenGltf, PropertiesOfTheWrongTypeAreNamedNotDefaulted) {
   // past the bound: the bound said (it said "an integer >= 1" of 2^62)
   EXPECT_THAT(with([](Gltf& g) { g.doc["accessors"][0]["count"] = 4611686018427387904; }),
               HasSubstr("accessor 0: count: found 4611686018427387904, expected an integer >= 1 and at most 2^53"));
+  // a sparse count tinygltf keeps in an int (2^31 was said to be "-2147483648 is outside [1, 4]")
+  EXPECT_THAT(with([](Gltf& g) { g.doc["accessors"][0]["sparse"] = {{"count", 2147483648LL}}; }),
+              HasSubstr("accessor 0: sparse: count: found 2147483648, expected an integer >= 1 and at most 2147483647"));
   EXPECT_THAT(with([](Gltf& g) { g.doc["nodes"][0]["mesh"] = 2147483648LL; }),
               HasSubstr("node 0 'n': mesh: found 2147483648, expected an integer >= 0 and at most 2147483647"));
   EXPECT_THAT(with([](Gltf& g) { g.doc["nodes"][0]["mesh"] = "0"; }), HasSubstr("node 0 'n': mesh: found \"0\", expected an integer >= 0"));
