@@ -523,6 +523,10 @@ std::vector<glm::dmat4> Loader::skin_matrices(size_t node, const tinygltf::Primi
   const tinygltf::Skin& skin = m_.skins[skin_index];
   const std::string skin_name = label("skin", skin_index, skin.name);
   if (skin.joints.empty()) fail(skin_name, "has no joints (glTF 2.0: joints has at least one node)");
+  // skeleton, the joints' common root, is not used (the joints' world transforms are), but must be a node
+  if (skin.skeleton >= 0 && static_cast<size_t>(skin.skeleton) >= m_.nodes.size())
+    fail(skin_name, "skeleton " + std::to_string(skin.skeleton) + " is not a node (the file has " + std::to_string(m_.nodes.size()) +
+                        " nodes)");
   std::vector<glm::dmat4> joint(skin.joints.size());
   std::vector<double> ibm;
   if (skin.inverseBindMatrices >= 0) {

@@ -567,6 +567,10 @@ TEST(GltfLoader, SkinnedMeshesArePosedByTheirJoints) {
   EXPECT_TRUE(lifted.warnings.empty()) << testing::PrintToString(lifted.warnings);
   expect_world(lifted.meshes[0], 0, {0, 0, 1});
   g.doc["scenes"][0]["nodes"] = scene_nodes;
+  // a skeleton that is no node (accepted without a word: the glTF says it is one)
+  g.doc["skins"][0]["skeleton"] = 7;
+  EXPECT_THAT(load_error(g.write(dir.path(), "skin_no_skeleton")), HasSubstr("skin 0 'Armature': skeleton 7 is not a node (the file has 3 nodes)"));
+  g.doc["skins"][0].erase("skeleton");
   // Weights that do not sum to 1 are normalised, and said (the mesh was scaled towards the origin); a vertex
   // whose weights are all 0 is refused (it stood at the origin, and was "no JOINTS_0 and WEIGHTS_0" when all
   // were); a negative weight is refused.
