@@ -74,7 +74,7 @@ bool sense_may_set(const std::string& written) {
 
 json read_metadata(const fs::path& dir) { return reconstruct::read_run_metadata(dir.string()); }
 
-// "0.10.2" -> {0, 10, 2}; empty when not numbers and dots.
+// "0.10.2" -> {0, 10, 2}, trailing zeros left out ("0.1.0.0" is "0.1"); empty when not numbers and dots.
 std::vector<long> version_numbers(const std::string& v) {
   std::vector<long> n;
   size_t i = 0;
@@ -85,6 +85,7 @@ std::vector<long> version_numbers(const std::string& v) {
     n.push_back(std::stol(v.substr(i, j - i)));
     i = j + 1;
   }
+  while (n.size() > 1 && n.back() == 0) n.pop_back();
   return n;
 }
 

@@ -803,7 +803,8 @@ TEST_F(App, SenseRefusesWhatItCannotDo) {
   // was sensed); an earlier version's is read while its keys are there; a version that is no version is named.
   const std::string ours = nlohmann::json::parse(slurp(dir_ / "nan" / "metadata.json"))["spadgen_version"];
   const std::string later = std::to_string(std::stoi(ours.substr(0, ours.find('.'))) + 1) + ".0.0";
-  for (const std::string& version : {later, std::string("0.0.1"), std::string("x.1")}) {
+  // ("0.1.0.0" is this 0.1.0, not a later one: it was refused as later)
+  for (const std::string& version : {later, std::string("0.0.1"), ours + ".0", std::string("x.1")}) {
     ASSERT_EQ(sh("run " + kLit + " -o " + (dir_ / "versioned").string()).code, 0);
     {
       nlohmann::ordered_json meta = nlohmann::ordered_json::parse(slurp(dir_ / "versioned" / "metadata.json"));
@@ -812,7 +813,7 @@ TEST_F(App, SenseRefusesWhatItCannotDo) {
     }
     const fs::path out = dir_ / ("v_" + version);
     r = sh("sense " + (dir_ / "versioned").string() + " -q -o " + out.string());
-    if (version == "0.0.1") {
+    if (version == "0.0.1" || version == ours + ".0") {
       EXPECT_EQ(r.code, 0) << r.output;
       continue;
     }
