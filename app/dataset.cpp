@@ -387,7 +387,7 @@ std::set<std::string> indexed_done_folders(const fs::path& dir) {
 // A line naming an evaluation/ that scored other versions of the samples than the folder holds now (generated
 // again with another sample_hash since, no longer done, or done and not scored): its metrics are of data no
 // longer there. Empty when it is current, or absent.
-std::string evaluation_status(const std::string& dir) {
+std::string evaluation_status(const std::string& dir, const std::set<std::string>* done_now = nullptr) {
   const fs::path metrics = fs::path(dir) / "evaluation" / "metrics.json";
   std::error_code ec;
   if (!fs::is_regular_file(metrics, ec)) return "";
@@ -400,8 +400,13 @@ std::string evaluation_status(const std::string& dir) {
   } catch (const Error&) {
     return "evaluation/: " + metrics.string() + " does not read as spadgen evaluate's: run `spadgen evaluate " + dir + "` again\n";
   }
-  if (!m.is_object() || !m.contains("samples") || !m["samples"].is_array()) return "";
-  const std::set<std::string> done = indexed_done_folders(dir);
+  // (evaluate writes samples for a dataset: a metrics.json without them is not its)
+  if (!m.is_object() || !m.contains("samples") || !m["samples"].is_array())
+    return "evaluation/: " + metrics.string() + " does not read as spadgen evaluate's of a dataset: run `spadgen evaluate " + dir +
+           "` again\n";
+  // done: as the folders are now (dataset status inspects them: a damaged sample is no longer done), or as
+  // index.jsonl lists them
+  const std::set<std::string> done = done_now ? *done_now : indexed_done_folders(dir);
   std::set<std::string> scored;
   int64_t changed = 0, gone = 0;
   // The folders scored, and the 2D ones evaluate left out (without detections for them) with their hashes:
@@ -433,7 +438,8 @@ std::string evaluation_status(const std::string& dir) {
   int64_t unscored = 0;
   for (const std::string& f : done) unscored += !scored.count(f);
   if (changed == 0 && gone == 0 && unscored == 0) return "";
-  return "evaluation/ is out of date: of the " + std::to_string(scored.size()) + " sample folders it scored, " +
+  return "evaluation/ is out of date: of the " + std::to_string(scored.size()) + " sample folders it scored" +
+         (rows.size() > m["samples"].size() ? " (or left out: 2D)" : "") + ", " +
          std::to_string(changed) + " changed since (generated again with another sample_hash, or damaged) and " + std::to_string(gone) +
          " are no longer done samples, and " + std::to_string(unscored) + " done ones are not in it: run `spadgen evaluate " +
          dir + "` again\n";
@@ -566,7 +572,7 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
       << " (free: " << (free >= 0 ? bytes_text(free) : std::string("unknown")) << "), time about "
       << duration_text(left_total.seconds) << "\n";
   }
-  for (const std::string& w : warnings.lines()) o << "warning: " << w << "\n";
+  for (const std::string& w : warnings.lines(" (spadgen info SCENE --set ... shows a sample's)")) o << "warning: " << w << "\n";
   for (const std::string& e : errors) o << "error: " << e << "\n";
   return {o.str(), int64_t(errors.size())};
 }
@@ -743,6 +749,7 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
         const WarningContext context("sample " + std::to_string(s.index) + ": ");
         run(r);
       }
+      bool warned = rendered;  // the sample's warnings said on stderr (by its run, or a realisation's sense)
       for (int k = 1; k < spec.repeats; ++k) {
         if (!rendered && folder.holds(s.repeat_folder(k), rec.hash)) continue;
         const fs::path rf = dir / s.repeat_folder(k);
@@ -753,9 +760,10 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
         so.threads = options.threads;
         so.progress = false;
         so.dataset = datasets::dataset_section(folder, s, rec.hash, k);
-        // (silent after the sample's run, which said the same: the same scene, sensor and light)
-        const WarningContext context("sample " + std::to_string(s.index) + ", realisation " + std::to_string(k) + ": ", rendered);
+        // (silent once said: the same scene, sensor and light)
+        const WarningContext context("sample " + std::to_string(s.index) + ", realisation " + std::to_string(k) + ": ", warned);
         sense(so);
+        warned = true;
       }
       folder.clear_failure(s);
       ++generated;
@@ -842,8 +850,11 @@ DatasetStatus dataset_status(const std::string& dir) {
   std::array<std::vector<int64_t>, 5> which;
   std::string failed, damaged;
   std::map<std::string, std::vector<int64_t>> stale_why;  // what changed, and the samples it made stale
+  std::set<std::string> done_folders;                      // (their names, as evaluate's metrics.json names them)
   inspect_each(folder, true, nullptr, [&](const SampleRecord& r) {
     ++count[size_t(r.status)];
+    if (r.status == Status::Done)
+      for (const std::string& f : r.folders) done_folders.insert(fs::path(f).filename().string());
     if (r.status != Status::Done) which[size_t(r.status)].push_back(r.sample.index);
     if (r.status == Status::Stale) stale_why[r.error].push_back(r.sample.index);
     if (r.status == Status::Failed) failed += "sample " + std::to_string(r.sample.index) + " failed: " + r.error + "\n";
@@ -870,7 +881,7 @@ DatasetStatus dataset_status(const std::string& dir) {
   if (!beyond.empty())
     o << "beyond the " << spec.count() << " samples: the folders of samples " << datasets::ranges_text(beyond)
       << " (kept, not in the index; a larger \"samples\" takes them again)\n";
-  o << evaluation_status(dir);
+  o << evaluation_status(dir, &done_folders);
   const bool complete = count[size_t(Status::Done)] == spec.count();
   return {o.str(), complete};
 }

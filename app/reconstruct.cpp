@@ -204,7 +204,8 @@ void check_writable(const std::string& file, const RunFolder& run, const std::st
                                       : ": is the run " + folder.string() + "'s own " + f + " (its metadata.json lists it)") +
                       ", which writing the output would replace; expected a new file or an earlier output (-o)");
         const fs::path rel = target.lexically_relative(folder);
-        if (std::distance(rel.begin(), rel.end()) == 1 && rel != "evaluation" && is_derived_output(rel.string())) {
+        // (only the run reconstructed: its outputs at another run's top were scored as that run's)
+        if (the_run && std::distance(rel.begin(), rel.end()) == 1 && rel != "evaluation" && is_derived_output(rel.string())) {
           if (rel.string() == own_name) break;
           throw Error(file + ": is the name of another of reconstruct's outputs at the top of the run folder " + folder.string() +
                       ", which evaluate and Python read as that output; this one's is " + own_name +
@@ -212,8 +213,8 @@ void check_writable(const std::string& file, const RunFolder& run, const std::st
         }
         throw Error(file + ": lies in the run folder " + folder.string() + ", which holds only what spadgen writes there (a "
                     "later run into it, or a dataset's check of it, would refuse the folder for a foreign file); expected a "
-                    "file outside run folders, or one of reconstruct's own names at the run's top (detections_edges.exr, "
-                    "detections_paper.exr, hdr.exr, or their _noise_free.exr) (-o)");
+                    "file outside run folders, or one of reconstruct's own names at the top of the run it reads "
+                    "(detections_edges.exr, detections_paper.exr, hdr.exr, or their _noise_free.exr) (-o)");
       }
     }
     if (fs::is_regular_file(folder / "dataset.json", ec)) {
@@ -273,7 +274,9 @@ nlohmann::json source_fields(const RunFolder& run) {
   const auto& m = run.metadata();
   return {{"seed", m.value("seed", nlohmann::json(nullptr))},
           {"scene_hash_fnv1a64", m.value("scene_hash_fnv1a64", nlohmann::json(nullptr))},
-          {"crop_in_sensor", m.value("/image/crop_in_sensor"_json_pointer, nlohmann::json(nullptr))}};
+          {"crop_in_sensor", m.value("/image/crop_in_sensor"_json_pointer, nlohmann::json(nullptr))},
+          // a dataset sample's parameters are --set values, which the scene hash does not see
+          {"sample_hash", m.value("/dataset/sample_hash"_json_pointer, nlohmann::json(nullptr))}};
 }
 
 // What the detections file says it was made from (reconstruct's spadgen_source), against the run it is
@@ -307,6 +310,13 @@ void check_source(const std::string& path, const std::map<std::string, std::stri
                   made[key].dump() + ", this run: " + ours.dump() + "); run spadgen reconstruct on " + run.dir() +
                   ", or give --detections of this scene and crop");
   }
+  // A dataset sample's detections made from another sample (other parameters: another sample_hash; its own
+  // realisations share its hash) are refused as another scene's are.
+  if (const nlohmann::json& ours = ours_all["sample_hash"]; ours.is_string() && made.contains("sample_hash") &&
+                                                            made["sample_hash"].is_string() && made["sample_hash"] != ours)
+    throw Error(path + ": detections of another dataset sample than " + run.dir() + " (made from " + made_from + ", sample_hash " +
+                made["sample_hash"].dump() + "; this sample's " + ours.dump() + ": other parameters); run spadgen reconstruct on " +
+                run.dir() + ", or give --detections of this sample");
   if (source)
     (*source)["source_checked"] = unchecked.empty() ? "yes: made from " + made_from + ", the same scene and crop"
                                                     : "no: its spadgen_source names no " + unchecked +
@@ -392,7 +402,7 @@ DetectionImage read_detections(const std::string& path, const RunFolder& run, bo
   if (const auto made = e.attributes.find("spadgen_reconstruct"); source && made != e.attributes.end()) {
     const nlohmann::json by = nlohmann::json::parse(made->second, nullptr, false);
     if (by.is_object() && by.contains("detector"))  // which of reconstruct's detectors wrote it, and from what
-      (*source)["made_by"] = {{"detector", by["detector"]}, {"noise_free", by.value("noise_free", nlohmann::json(nullptr))}};
+      (*source)["made_by"] = {{"detector", by["detector"]}, {"noise_free", by.value("noise_free", false)}};
   }
   DetectionImage img(width, height, m);
   for (int s = 0; s < m; ++s) {
@@ -865,22 +875,23 @@ std::string evaluate(const EvaluateCommand& c) {
     // file, or one file named for two samples ({sample}/../x.npy, a link: one file scored against several).
     if (!c.detections.empty()) {
       std::vector<std::string> missing;
-      std::map<fs::path, std::string> sample_of;  // the files, resolved
+      std::map<std::pair<dev_t, ino_t>, std::pair<std::string, std::string>> sample_of;  // by file: (its path, sample)
       for (const auto& sample : samples) {
         const std::string f = file_of(sample.path);
-        std::error_code ec;
-        if (!fs::exists(f, ec)) {
-          missing.push_back(f);
+        struct stat st {};
+        if (::stat(f.c_str(), &st) != 0) {
+          // a 2D sample without detections is left out as without --detections (the detectors' own have none)
+          if (!sample.intensity) missing.push_back(f);
           continue;
         }
-        if (!fs::is_regular_file(f, ec))
+        if (!S_ISREG(st.st_mode))
           throw Error("--detections " + c.detections + ": " + f + " is not a regular file (a folder, a FIFO or a device); "
                       "expected the detections of " + sample.path.filename().string());
-        const fs::path resolved = fs::weakly_canonical(f, ec);
-        const auto [at, fresh] = sample_of.emplace(ec ? fs::absolute(f).lexically_normal() : resolved, sample.path.filename().string());
+        // (one file under two names, by .., a symbolic or a hard link, is told by its device and inode)
+        const auto [at, fresh] = sample_of.try_emplace({st.st_dev, st.st_ino}, f, sample.path.filename().string());
         if (!fresh)
-          throw Error("--detections " + c.detections + ": names one file, " + at->first.string() + ", for the samples " +
-                      at->second + " and " + sample.path.filename().string() + "; expected each sample's own detections");
+          throw Error("--detections " + c.detections + ": names one file, " + at->second.first + " and " + f + ", for the samples " +
+                      at->second.second + " and " + sample.path.filename().string() + "; expected each sample's own detections");
       }
       if (!missing.empty())
         throw Error("--detections " + c.detections + ": " + std::to_string(missing.size()) + " of " + std::to_string(samples.size()) +
@@ -895,7 +906,7 @@ std::string evaluate(const EvaluateCommand& c) {
     size_t scored = 0;
     for (const auto& [p, sample_hash, is_2d] : samples) {
       InterruptGuard::check();
-      if (c.detections.empty() && is_2d) {  // (with its hash: dataset status names it when generated again)
+      if (is_2d && (c.detections.empty() || !fs::exists(file_of(p)))) {  // (with its hash: status names it when generated again)
         intensity_folders.push_back({{"sample", p.filename().string()}, {"sample_hash", sample_hash}});
         continue;
       }

@@ -643,22 +643,42 @@ void CardTally::add(const SampleRecord& r) {
   warnings.add(r.sample.index, r.warnings);
 }
 
+std::string warning_kind(const std::string& w) {
+  // Each number standing alone ("-1.5e+06", "47.875") becomes '#'; digits that are part of a name (layer0,
+  // offset_m[2], pde_905nm.csv, x86) stay, so that warnings of different keys or files are not one kind.
+  const auto name_char = [](char c) { return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '[' || c == '.'; };
+  const auto digit = [&](size_t i) { return i < w.size() && std::isdigit(static_cast<unsigned char>(w[i])); };
+  std::string key;
+  for (size_t i = 0; i < w.size();) {
+    size_t j = i;
+    if ((w[j] == '-' || w[j] == '+') && (digit(j + 1) || (w[j + 1 < w.size() ? j + 1 : j] == '.' && digit(j + 2)))) ++j;
+    const bool starts = digit(j) || (j + 1 < w.size() && w[j] == '.' && digit(j + 1));
+    if (starts && (i == 0 || !name_char(w[i - 1]))) {
+      while (digit(j)) ++j;
+      if (j < w.size() && w[j] == '.' && digit(j + 1))
+        for (++j; digit(j);) ++j;
+      if (j < w.size() && (w[j] == 'e' || w[j] == 'E')) {  // an exponent: e+06, e-9
+        size_t e = j + 1;
+        if (e < w.size() && (w[e] == '+' || w[e] == '-')) ++e;
+        if (digit(e)) {
+          for (j = e; digit(j);) ++j;
+        }
+      }
+      if (j >= w.size() || !(std::isalpha(static_cast<unsigned char>(w[j])) || w[j] == '_')) {  // (not 400nm: a name)
+        key += '#';
+        i = j;
+        continue;
+      }
+    }
+    key += w[i++];
+  }
+  return key;
+}
+
 void WarningTally::add(int64_t sample, const std::vector<std::string>& ws) {
   std::set<std::string> keys;
   for (const std::string& w : ws) {
-    // the warning's kind: its text with each number as '#' (the values vary from sample to sample)
-    std::string key;
-    for (size_t i = 0; i < w.size();) {
-      size_t j = i;
-      bool digit = false;
-      while (j < w.size() && (std::isdigit(static_cast<unsigned char>(w[j])) || w[j] == '.')) digit |= w[j] != '.', ++j;
-      if (digit) {
-        key += '#';
-        i = j;
-      } else {
-        key += w[i++];
-      }
-    }
+    const std::string key = warning_kind(w);
     if (!keys.insert(key).second) continue;  // a sample counts once per kind
     Group& g = groups[key];
     if (g.samples++ == 0) g.example = w;
@@ -666,7 +686,7 @@ void WarningTally::add(int64_t sample, const std::vector<std::string>& ws) {
   }
 }
 
-std::vector<std::string> WarningTally::lines() const {
+std::vector<std::string> WarningTally::lines(const std::string& more) const {
   std::vector<std::pair<const std::string*, const Group*>> order;
   for (const auto& [key, g] : groups) order.emplace_back(&key, &g);
   // the most frequent first; ties in the order of their first sample
@@ -676,8 +696,7 @@ std::vector<std::string> WarningTally::lines() const {
   std::vector<std::string> out;
   for (const auto& [key, g] : order) {
     if (out.size() == kKindsShown) {
-      out.push_back("and " + std::to_string(order.size() - kKindsShown) +
-                    " more kinds of warning (each sample's metadata.json lists its own)");
+      out.push_back("and " + std::to_string(order.size() - kKindsShown) + " more kinds of warning" + more);
       break;
     }
     std::string line = std::to_string(g->samples) + (g->samples == 1 ? " sample (" : " samples (");
@@ -722,7 +741,7 @@ std::string dataset_card(const DatasetFolder& folder, const CardTally& tally) {
   if (!tally.warnings.groups.empty()) {
     o << "## Warnings\n\nWhat the done samples' runs warned about (each sample's `metadata.json` `warnings`, its row's "
          "`warnings`): settings that are consistent but likely not what was meant.\n\n";
-    for (const std::string& line : tally.warnings.lines()) o << "- " << cell(line) << "\n";
+    for (const std::string& line : tally.warnings.lines(" (each sample's metadata.json lists its own)")) o << "- " << cell(line) << "\n";
     o << "\n";
   }
   o << "## Scenes\n\n| scene file | description |\n|---|---|\n";

@@ -58,7 +58,7 @@ struct SampleRecord {
   std::vector<std::string> warnings;  // done: metadata.json's warnings (the sample's run's)
 };
 
-// Warnings of many samples, grouped by kind (a warning's text with its numbers left out): how many samples,
+// Warnings of many samples, grouped by kind (warning_kind: the text with its numbers left out): how many samples,
 // the first few of them, the first one's text; the kinds most samples share first, at most kKindsShown.
 struct WarningTally {
   struct Group {
@@ -69,9 +69,12 @@ struct WarningTally {
   static constexpr size_t kListed = 5, kKindsShown = 20;
   std::map<std::string, Group> groups;
   void add(int64_t sample, const std::vector<std::string>& warnings);
-  // One line per kind: "2 samples (3, 7): <the first's text>", then "and N more kinds ..." past kKindsShown.
-  std::vector<std::string> lines() const;
+  // One line per kind: "2 samples (3, 7): <the first's text>", then "and N more kinds of warning<more>" past
+  // kKindsShown.
+  std::vector<std::string> lines(const std::string& more) const;
 };
+// A warning's kind: its text with each number standing alone as '#' (digits inside names stay).
+std::string warning_kind(const std::string& warning);
 
 // What the dataset card says of the samples, gathered one record at a time (in index order).
 struct CardTally {

@@ -307,13 +307,15 @@ TransientTile Renderer::transient(const PixelRect& rect, const PixelRect& data_r
   }
   // Stored as float: a light too bright for the scene's distances (a glTF point light of 1e35 cd half a metre
   // from a wall) was stored as infinity, and every output from it (counts, detections) was meaningless. The
-  // first such pixel in the tile's order is named.
-  for (size_t i = 0; i < n; ++i)
-    if (!std::isfinite(tile.ambient_rate[i]) || !std::isfinite(tile.ambient_se[i]))
-      throw Error("render: sensor pixel (" + std::to_string(data_rect.x0 + int(i % size_t(data_rect.width))) + ", " +
-                  std::to_string(data_rect.y0 + int(i / size_t(data_rect.width))) + ") receives more than " +
+  // first such pixel in the tile's order is named (the tile's own pixels before its halo's, outside the image).
+  for (const bool own : {true, false})
+    for (size_t i = 0; i < n; ++i) {
+      const int x = data_rect.x0 + int(i % size_t(data_rect.width)), y = data_rect.y0 + int(i / size_t(data_rect.width));
+      if (rect.contains(x, y) == own && (!std::isfinite(tile.ambient_rate[i]) || !std::isfinite(tile.ambient_se[i])))
+        throw Error("render: sensor pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") receives more than " +
                   "3.4e38 photons per second of ambient light, beyond what its float32 outputs hold: a glTF light "
-                  "(KHR_lights_punctual intensity) or emissive material is too bright for the scene's distances");
+                    "(KHR_lights_punctual intensity) or emissive material is too bright for the scene's distances");
+    }
   if (stats) {
     stats->rays += tile_rays;
     for (int y = rect.y0; y < rect.y1(); ++y)

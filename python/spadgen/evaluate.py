@@ -2,6 +2,7 @@
 returned as a dict. The program is the one scorer (matching, unfolding, labels: docs/detection.md); this module
 passes it the detections, as files or as arrays."""
 import json
+import operator
 import os
 import pathlib
 import shutil
@@ -35,6 +36,9 @@ def spadgen_program(program=None):
     package passes it)."""
     for given, how in ((program, "program="), (os.environ.get("SPADGEN_BIN"), "$SPADGEN_BIN")):
         if given is not None and given != "":
+            given = os.fspath(given)
+            if os.sep not in given:  # a bare name, as a shell finds it: on PATH
+                given = shutil.which(given) or given
             if not _executable(given):
                 raise FileNotFoundError(f"{os.fspath(given)} ({how}): no such executable file; expected the spadgen program")
             return _checked_version(os.fspath(given))
@@ -73,12 +77,15 @@ def _ranges_array(a, what):
 
 
 def _done_folder_names(dataset):
+    """The done sample folders' names (realisations too), and those of them that are 2D intensity runs."""
     from .dataset import open_dataset
-    names = []
+    names, intensity = [], set()
     for s in open_dataset(dataset).select(status="done"):
-        names.append(os.path.basename(s.folder))
-        names.extend(os.path.basename(f) for f in s.repeat_folders)
-    return names
+        folders = [os.path.basename(f) for f in [s.folder] + s.repeat_folders]
+        names.extend(folders)
+        if s.run.mode == "intensity":  # (without detections given, evaluate leaves them out, as its detector does)
+            intensity.update(folders)
+    return names, intensity
 
 
 def evaluate(target, detections=None, *, detector=None, out=None, tolerance_m=None, min_score=None, region=None,
@@ -106,14 +113,18 @@ def evaluate(target, detections=None, *, detector=None, out=None, tolerance_m=No
     exe = spadgen_program(program)
     dataset = os.path.isfile(os.path.join(target, "dataset.json"))
     with tempfile.TemporaryDirectory(prefix="spadgen_evaluate_", dir=tmp_dir) as tmp:
+        if "{sample}" in tmp:  # (the program would take it for the placeholder)
+            raise ValueError(f"{tmp}: the temporary folder's path holds {{sample}}, which --detections replaces; "
+                             "give another tmp_dir")
         if detections is None or isinstance(detections, (str, os.PathLike)):
             given = None if detections is None else os.fspath(detections)
         elif hasattr(detections, "keys"):
             if not dataset:
                 raise ValueError(f"{target}: not a dataset folder (dataset.json): a mapping of detections names the "
                                  "samples of a dataset; give a run's detections as one array")
-            done = set(_done_folder_names(target))
-            missing = sorted(done - {str(k) for k in detections.keys()})
+            names, intensity = _done_folder_names(target)
+            done = set(names)
+            missing = sorted(done - intensity - {str(k) for k in detections.keys()})
             if missing:
                 raise ValueError(f"no detections for {len(missing)} of the {len(done)} done sample folders of {target}, "
                                  f"first {missing[0]!r}: the mapping needs one array per done sample folder (realisations too)")
@@ -131,7 +142,7 @@ def evaluate(target, detections=None, *, detector=None, out=None, tolerance_m=No
             given = os.path.join(tmp, "detections.npy")
             np.save(given, _ranges_array(detections, "detections"))
         out_dir = os.fspath(out) if out is not None else os.path.join(target, "evaluation")
-        cmd = [exe, "evaluate", target, "-q", "-o", out_dir]
+        cmd = [exe, "evaluate", "-q", "-o", out_dir]
         if given is not None:
             cmd += ["--detections", given]
         if detector is not None:
@@ -140,15 +151,20 @@ def evaluate(target, detections=None, *, detector=None, out=None, tolerance_m=No
             cmd += ["--tolerance-m", repr(float(tolerance_m))]
         if min_score is not None:
             cmd += ["--min-score", repr(float(min_score))]
-        if region is not None:
-            cmd += ["--region", ",".join(str(int(v)) for v in region)]
+        if region is not None:  # (whole pixels: 0.9 was taken as 0)
+            cmd += ["--region", ",".join(str(operator.index(v)) for v in region)]
         if noise_free:
             cmd += ["--noise-free"]
         if threads is not None:
-            cmd += ["--threads", str(int(threads))]
+            cmd += ["--threads", str(operator.index(threads))]
+        cmd += ["--", target]  # (a target named -x is no option)
         p = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         if p.returncode != 0:
             message = p.stderr.strip() or p.stdout.strip() or f"exit status {p.returncode}"
             raise EvaluateError(message, p.returncode, cmd)
-        with open(os.path.join(out_dir, "metrics.json"), encoding="utf-8") as f:
-            return json.load(f)
+        try:
+            with open(os.path.join(out_dir, "metrics.json"), encoding="utf-8") as f:
+                return json.load(f)
+        except (OSError, ValueError) as e:
+            raise EvaluateError(f"{out_dir}/metrics.json: the program ended without error but the file does not read "
+                                f"({e})", p.returncode, cmd) from None

@@ -73,6 +73,8 @@ def _parse_chlist(value, path):
         if ptype not in PIXEL_TYPES:
             raise ExrError(f"{path}: channel '{name}' has unknown pixel type {ptype}")
         tname, dtype = PIXEL_TYPES[ptype]
+        if any(c.name == name for c in channels):  # (the second was dropped, and every line read short)
+            raise ExrError(f"{path}: the channel list names {name!r} twice")
         channels.append(ExrChannel(name, tname, dtype, xs, ys))
     return channels
 
@@ -173,6 +175,7 @@ class ExrFile:
     def _read_header(self, f):
         self.header = {}
         self.attribute_types = {}
+        sizes = {}  # each attribute's value in bytes
         buf, pos = bytearray(), 0
 
         def need(n):  # at least n bytes from pos in buf
@@ -203,6 +206,7 @@ class ExrFile:
             need(size)
             self.header[attr] = _parse_attribute(type_name, bytes(buf[pos:pos + size]), self.path)
             self.attribute_types[attr] = type_name
+            sizes[attr] = size
             pos += size
         f.seek(8 + pos)
         for required, kind in (("channels", "chlist"), ("compression", "compression"), ("dataWindow", "box2i"),
@@ -211,7 +215,7 @@ class ExrFile:
                 raise ExrError(f"{self.path}: header lacks the required attribute '{required}'")
             if self.attribute_types[required] != kind or (kind == "box2i" and not isinstance(self.header[required], tuple)):
                 raise ExrError(f"{self.path}: the header attribute '{required}' is of type "
-                               f"'{self.attribute_types[required]}' ({len(self.header[required])} bytes), not {kind}")
+                               f"{self.attribute_types[required]!r} ({sizes[required]} bytes), not {kind}")
         self.compression = self.header["compression"]
         self.channels = {c.name: c for c in self.header["channels"]}
         self.data_window = tuple(self.header["dataWindow"])
@@ -283,7 +287,9 @@ class ExrFile:
         if H * line_bytes > most:
             raise ExrError(f"{self.path}: its data window {self.data_window} and {len(chans)} channels hold "
                            f"{H * line_bytes} bytes, more than its {len(data)} bytes can hold with {comp} compression")
-        out = {c.name: np.empty((H, W), c.dtype) for c in chans}
+        # The scanlines whole, then each channel cut out once (per chunk and channel, a file of 3000 channels
+        # took 27 s).
+        lines_all = np.empty((H, line_bytes), np.uint8)
         filled = np.zeros(chunks, bool)
         for off in offsets:
             if off + 8 > len(data):
@@ -302,7 +308,11 @@ class ExrFile:
                 raw = np.frombuffer(packed, np.uint8, expected)
             elif comp in ("ZIP", "ZIPS"):
                 try:  # (at most one byte more than its scanlines hold: a chunk cannot inflate without bound)
-                    raw = _undo_predictor_and_interleave(zlib.decompressobj().decompress(packed, expected + 1))
+                    inflate = zlib.decompressobj()
+                    unpacked = inflate.decompress(packed, expected + 1)
+                    if not inflate.eof and len(unpacked) <= expected:  # (zlib.decompress said so of a cut stream)
+                        raise zlib.error("incomplete or truncated stream")
+                    raw = _undo_predictor_and_interleave(unpacked)
                 except zlib.error as e:
                     raise ExrError(f"{self.path}: corrupt ZIP data in the chunk at y = {y}: {e}") from None
             elif comp == "RLE":
@@ -311,15 +321,15 @@ class ExrFile:
                 raise ExrError(f"{self.path}: the chunk at y = {y} holds {size} bytes, its scanlines {expected}")
             if raw.size != expected:
                 raise ExrError(f"{self.path}: the chunk at y = {y} decodes to {raw.size} bytes, its scanlines hold {expected}")
-            rows = raw.reshape(lines, line_bytes)
             r0 = block * lpc
-            for c, a, b in zip(chans, starts[:-1], starts[1:]):
-                out[c.name][r0:r0 + lines] = rows[:, a:b].copy().view(c.dtype).reshape(lines, W)
+            lines_all[r0:r0 + lines] = raw.reshape(lines, line_bytes)
             filled[block] = True
         if not filled.all():
             raise ExrError(f"{self.path}: {int((~filled).sum())} of {chunks} chunks are missing")
-        for a in out.values():
-            a.flags.writeable = False
+        out = {}
+        for c, a, b in zip(chans, starts[:-1], starts[1:]):
+            out[c.name] = np.ascontiguousarray(lines_all[:, a:b]).view(c.dtype).reshape(H, W)
+            out[c.name].flags.writeable = False
         return out
 
     def __repr__(self):

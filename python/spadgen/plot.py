@@ -139,8 +139,13 @@ def overview(run, pixels=None):
     fig, axes = plt.subplots(rows, cols, figsize=(6.5 * cols, 4.2 * rows), squeeze=False)
     estimate, label = None, "the single-edge baseline"
     if "detection" in panels:
+        d = None
         if os.path.isfile(os.path.join(run.path, "detections_edges.exr")):
-            d = run.detections("edges")
+            try:
+                d = run.detections("edges")
+            except ValueError:  # another detector's file under that name: the baseline, as without one
+                d = None
+        if d is not None:
             ranges = np.where(np.isfinite(d.range), d.range, np.inf).min(axis=0)
             estimate, label = np.where(np.isfinite(ranges), ranges, np.nan), "reconstruct's nearest return"
         else:

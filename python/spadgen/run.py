@@ -685,8 +685,11 @@ class Run:
             return np.stack([f[f"det{i}.{what}"] for i in range(m)]).astype(np.float32)
 
         attrs = f.attributes
-        made = json.loads(attrs.get("spadgen_reconstruct", "{}"))
-        if isinstance(made, dict) and "detector" in made and (made["detector"], made.get("noise_free")) != (detector, noise_free):
+        try:  # (unreadable: as if absent, as the program takes it)
+            made = json.loads(attrs.get("spadgen_reconstruct", "{}"))
+        except ValueError:
+            made = {}
+        if isinstance(made, dict) and "detector" in made and (made["detector"], made.get("noise_free", False)) != (detector, noise_free):
             raise ValueError(f"{path}: written by reconstruct's {made['detector']} detector"
                              f"{' on the noise-free rates' if made.get('noise_free') else ''}, not the {detector} detector"
                              f"{' on the noise-free rates' if noise_free else ''} its name stands for (reconstruct -o named "

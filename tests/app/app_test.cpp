@@ -773,7 +773,7 @@ TEST_F(App, ThePlanCoversThePeakMemoryAtTenThousandGatePositions) {
 
 // A glTF light too bright for the scene's distances (a point light of 1e35 cd half a metre before the target) made
 // ambient.exr infinite in every pixel and the rates infinite, exit 0: refused, naming the first pixel (sensor
-// coordinates) of the tile and the likely cause; 1e30 cd renders (finite).
+// coordinates; the tile's own before its halo's) and the likely cause; 1e30 cd renders (finite).
 TEST_F(App, ALightTooBrightForFloatOutputsIsRefused) {
   nlohmann::json gltf = nlohmann::json::parse(slurp(kScenes + "flat_target.gltf"));
   gltf["extensionsUsed"].push_back("KHR_lights_punctual");
@@ -787,7 +787,7 @@ TEST_F(App, ALightTooBrightForFloatOutputsIsRefused) {
   const std::string run = "run " + (dir_ / "bright.json").string() + " -q --set camera.crop=[500,240,8,4] --set render.samples_per_pixel=1 -o ";
   Result r = sh(run + (dir_ / "o35").string());
   EXPECT_EQ(r.code, 1) << r.output;
-  EXPECT_THAT(r.output, HasSubstr("render: sensor pixel (499, 239) receives more than 3.4e38 photons per second of ambient "
+  EXPECT_THAT(r.output, HasSubstr("render: sensor pixel (500, 240) receives more than 3.4e38 photons per second of ambient "
                                   "light, beyond what its float32 outputs hold: a glTF light (KHR_lights_punctual intensity)"));
   EXPECT_FALSE(fs::exists(dir_ / "o35"));
   gltf["extensions"]["KHR_lights_punctual"]["lights"][0]["intensity"] = 1e30;

@@ -322,6 +322,16 @@ TEST_F(Reconstruct, AnOutputAtTheRunsTopHasItsOwnNameAndEvaluateChecksIt) {
                                     "run folder " + run.string() + ", which evaluate and Python read as that output; this one's is " + own));
     EXPECT_FALSE(fs::exists(run / name)) << name;
   }
+  // nor at another run's top (another run's detections were scored as that run's)
+  const fs::path other = dir_ / "other";
+  ASSERT_EQ(sh("run " + kScenes + "flat_target.json --set camera.crop=[502,240,8,8] --set render.samples_per_pixel=1 --set seed=7 -q -o " +
+               other.string()).code, 0);
+  {
+    const Result o = sh("reconstruct " + run.string() + " -q -o " + (other / "detections_edges.exr").string());
+    EXPECT_EQ(o.code, 1);
+    EXPECT_THAT(o.output, HasSubstr(": lies in the run folder " + other.string() + ", which holds only what spadgen writes there"));
+    EXPECT_FALSE(fs::exists(other / "detections_edges.exr"));
+  }
   ASSERT_EQ(sh("reconstruct " + run.string() + " -q --noise-free -o " + (run / "detections_edges_noise_free.exr").string()).code, 0);
   fs::copy_file(run / "detections_edges_noise_free.exr", run / "detections_edges.exr");
   Result r = sh("evaluate " + run.string() + " -q");
@@ -332,6 +342,37 @@ TEST_F(Reconstruct, AnOutputAtTheRunsTopHasItsOwnNameAndEvaluateChecksIt) {
   EXPECT_EQ(r.code, 0) << r.output;
   const auto m = nlohmann::json::parse(slurp(run / "evaluation" / "metrics.json"));
   EXPECT_EQ(m["detections_source"]["made_by"], nlohmann::json({{"detector", "edges"}, {"noise_free", true}}));
+}
+
+// A dataset sample scored with detections made from another sample (other parameters: the same scene file and
+// crop, so the scene hash and crop agreed and the source was reported checked) is refused; its own detections
+// and a realisation's are scored.
+TEST_F(Reconstruct, EvaluateRefusesAnotherDatasetSamplesDetections) {
+  const fs::path out = dir_ / "ds";
+  fs::create_directories(dir_);
+  std::ofstream(dir_ / "d.json") << "{\"scenes\": [\"" + kScenes + "multi_object.json\"], \"seed\": 3, \"repeats\": 2,"
+                                    "\"set\": {\"render.samples_per_pixel\": 2, \"camera.crop\": [480, 242, 16, 4]},"
+                                    "\"grid\": {\"laser.average_power_mW\": [1, 3]}}";
+  const Result made = sh("dataset run " + (dir_ / "d.json").string() + " -o " + out.string() + " -q");
+  ASSERT_EQ(made.code, 0) << made.output;
+  fs::create_directories(dir_ / "swapped");
+  fs::create_directories(dir_ / "own");
+  for (const auto& [from, to] : {std::pair{"000000", "000001"}, {"000001", "000000"}, {"000000_r01", "000001_r01"}, {"000001_r01", "000000_r01"}}) {
+    ASSERT_EQ(sh("reconstruct " + (out / "samples" / from).string() + " -q -o " + (dir_ / "swapped" / (std::string(to) + ".exr")).string()).code, 0);
+    // a realisation's own detections from its sample's folder: the same sample_hash, scored
+    const std::string own_from = std::string(to).substr(0, 6);
+    ASSERT_EQ(sh("reconstruct " + (out / "samples" / own_from).string() + " -q -o " + (dir_ / "own" / (std::string(to) + ".exr")).string()).code, 0);
+  }
+  Result r = sh("evaluate " + out.string() + " --detections " + (dir_ / "swapped" / "{sample}.exr").string() + " -o " + (dir_ / "e1").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("swapped/000000.exr: detections of another dataset sample than " + (out / "samples" / "000000").string()));
+  EXPECT_FALSE(fs::exists(dir_ / "e1"));
+  r = sh("evaluate " + out.string() + " --detections " + (dir_ / "own" / "{sample}.exr").string() + " -o " + (dir_ / "e2").string());
+  EXPECT_EQ(r.code, 0) << r.output;
+  const auto m = nlohmann::json::parse(slurp(dir_ / "e2" / "metrics.json"));
+  ASSERT_EQ(m["samples"].size(), 4u);
+  for (const auto& s : m["samples"])
+    EXPECT_THAT(s["detections_source"]["source_checked"].get<std::string>(), HasSubstr("yes: made from")) << s["sample"];
 }
 
 // A plate over a sphere: a crop where both are seen, and the sphere alone on the right.
@@ -848,13 +889,16 @@ TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
   // of date (it may be a gate sweep now; the left-out folder was accounted for by name alone)
   {
     const fs::path meta_2d = out3 / "samples/000001/metadata.json";
-    std::string text = slurp(meta_2d);
+    const std::string original_2d = slurp(meta_2d);
+    std::string text = original_2d;
     const size_t hash_at = text.find("\"sample_hash\": \"");
     ASSERT_NE(hash_at, std::string::npos);
     text[hash_at + 16] = text[hash_at + 16] == '0' ? '1' : '0';
     std::ofstream(meta_2d) << text;
     r = sh("dataset status " + out3.string());
-    EXPECT_THAT(r.output, HasSubstr("evaluation/ is out of date: of the 2 sample folders it scored, 1 changed since"));
+    EXPECT_THAT(r.output, HasSubstr("evaluation/ is out of date: of the 2 sample folders it scored (or left out: 2D), 0 changed since "
+                                    "(generated again with another sample_hash, or damaged) and 1 are no longer done samples"));
+    std::ofstream(meta_2d) << original_2d;  // (as generated)
   }
   // {sample} may not name one file for several samples (p/{sample}/../x.npy), nor a folder
   fs::create_directories(dir_ / "p" / "000000");
@@ -862,7 +906,8 @@ TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
   std::ofstream(dir_ / "p" / "x.npy") << "";
   r = sh("evaluate " + out2.string() + " --detections " + (dir_ / "p" / "{sample}" / ".." / "x.npy").string() + " -o " + (dir_ / "e_one").string());
   EXPECT_EQ(r.code, 1);
-  EXPECT_THAT(r.output, HasSubstr("names one file, " + (dir_ / "p" / "x.npy").string() + ", for the samples 00000"));
+  EXPECT_THAT(r.output, HasSubstr("names one file, " + (dir_ / "p" / "000000" / ".." / "x.npy").string() + " and " +
+                                  (dir_ / "p" / "000001" / ".." / "x.npy").string() + ", for the samples 000000 and 000001"));
   r = sh("evaluate " + out2.string() + " --detections " + (dir_ / "p" / "{sample}").string() + " -o " + (dir_ / "e_one").string());
   EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("/p/000000 is not a regular file (a folder, a FIFO or a device)"));
@@ -873,6 +918,21 @@ TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
   r = sh("evaluate " + (dir_ / "dataset4").string());
   EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("its 1 done sample folders are 2D intensity runs, without gate profiles for the detector"));
+  // detections given for the gate-sweep sample only: the 2D one is left out as without --detections
+  ASSERT_EQ(sh("reconstruct " + (out3 / "samples" / "000000").string() + " -q -o " + (dir_ / "mixed_000000.exr").string()).code, 0);
+  r = sh("evaluate " + out3.string() + " --detections " + (dir_ / "mixed_{sample}.exr").string() + " -o " + (dir_ / "e_mixed").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("1 sample folder (realisations included); not scored, 2D intensity runs"));
+  // a scored sample damaged since (a file gone; its metadata.json as it was): the evaluation is out of date as
+  // dataset status finds the folders (index.jsonl still lists it done); a metrics.json of no dataset is named
+  fs::remove(out3 / "samples/000000/counts.npy");
+  r = sh("dataset status " + out3.string());
+  EXPECT_THAT(r.output, HasSubstr("sample 0 damaged: "));
+  EXPECT_THAT(r.output, HasSubstr("evaluation/ is out of date: of the 2 sample folders it scored (or left out: 2D), 0 changed "
+                                  "since (generated again with another sample_hash, or damaged) and 1 are no longer done samples"));
+  std::ofstream(out3 / "evaluation/metrics.json") << "{}";
+  r = sh("dataset status " + out3.string());
+  EXPECT_THAT(r.output, HasSubstr("metrics.json does not read as spadgen evaluate's of a dataset"));
   // {sample} names a dataset's samples: refused for a run
   r = sh("evaluate " + first.string() + " --detections " + (dir_ / "preds" / "{sample}.exr").string() + " -o " + (dir_ / "e_run").string());
   EXPECT_EQ(r.code, 1);

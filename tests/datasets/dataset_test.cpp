@@ -448,4 +448,26 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
   fs::remove_all(dir);
 }
 
+// Warnings grouped by kind: numbers standing alone vary from sample to sample (values, exponents, signs), digits
+// inside names tell kinds apart (offset_m[0] and [2], layer0 and layer1, pde_400nm.csv and pde_905nm.csv were
+// one kind); at most kKindsShown kinds, then how many more.
+TEST(DatasetFolder, WarningsAreGroupedByKindWithTheirNumbersLeftOut) {
+  EXPECT_EQ(warning_kind("acquisition.cycles_per_frame: 1915 laser cycles last 47.875 us"),
+            warning_kind("acquisition.cycles_per_frame: 2000 laser cycles last 50 us"));
+  EXPECT_EQ(warning_kind("a rate of 1e+06 per s, -2.5 mm"), warning_kind("a rate of 100000 per s, 3 mm"));
+  EXPECT_EQ(warning_kind("a rate of 1e+06 per s"), "a rate of # per s");
+  for (const auto& [a, b] : {std::pair{"laser.offset_m[0]: far", "laser.offset_m[2]: far"}, {"layer0 too deep", "layer1 too deep"},
+                             {"pde_400nm.csv: short", "pde_905nm.csv: short"}})
+    EXPECT_NE(warning_kind(a), warning_kind(b)) << a;
+  WarningTally t;
+  for (int64_t i = 0; i < 30; ++i) t.add(i, {"kind k" + std::string(1, char('a' + i % 26)) + "x: " + std::to_string(i) + " s"});
+  const std::vector<std::string> lines = t.lines(" (more)");
+  ASSERT_EQ(lines.size(), WarningTally::kKindsShown + 1);
+  EXPECT_EQ(lines.front(), "2 samples (0, 26): kind kax: 0 s");  // the kinds most samples share first
+  EXPECT_EQ(lines.back(), "and 6 more kinds of warning (more)");
+  WarningTally once;
+  once.add(3, {"x: 1 s", "x: 2 s"});  // a sample counts once per kind
+  EXPECT_EQ(once.lines("").front(), "1 sample (3): x: 1 s");
+}
+
 }  // namespace spadgen::datasets

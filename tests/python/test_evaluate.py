@@ -99,3 +99,31 @@ def test_a_dataset_scored_from_a_mapping_and_from_files(dataset_dir, spadgen_bin
     assert list((tmp_path / "scratch").iterdir()) == []
     with pytest.raises(ValueError, match="first '000002'"):  # sample 2 failed
         spadgen.evaluate(dataset_dir, dict(truth, **{"000002": truth[sorted(truth)[0]]}), program=spadgen_bin)
+
+
+def test_the_program_found_and_its_version(sweep_run, spadgen_bin, tmp_path, monkeypatch):
+    from spadgen.evaluate import spadgen_program
+    # a bare name is looked up on PATH, as a shell does (it was taken as ./spadgen)
+    (tmp_path / "bin").mkdir()
+    os.symlink(spadgen_bin, tmp_path / "bin" / "spadgen")
+    monkeypatch.setenv("PATH", str(tmp_path / "bin") + os.pathsep + os.environ.get("PATH", ""))
+    monkeypatch.setenv("SPADGEN_BIN", "spadgen")
+    assert spadgen_program() == str(tmp_path / "bin" / "spadgen")
+    # a program of another version is used, with a warning
+    other = tmp_path / "other"
+    other.write_text("#!/bin/sh\necho 9.9.9\n")
+    other.chmod(0o755)
+    with pytest.warns(UserWarning, match="says its version is '9.9.9', the package is"):
+        assert spadgen_program(other) == str(other)
+    # the temporary folder may not hold the placeholder; a target named like an option is a target
+    weird = tmp_path / "t{sample}"
+    weird.mkdir()
+    run = spadgen.open_run(sweep_run)
+    with pytest.raises(ValueError, match="holds {sample}"):
+        spadgen.evaluate(run.path, np.full((run.height, run.width, 1), np.nan, np.float32), tmp_dir=weird, program=spadgen_bin)
+    os.symlink(sweep_run, tmp_path / "-r")
+    monkeypatch.chdir(tmp_path)
+    m = spadgen.evaluate("-r", out=tmp_path / "dash", program=spadgen_bin)
+    assert m["run"] == "-r"
+    with pytest.raises(TypeError):
+        spadgen.evaluate(run.path, region=(0.9, 0, 4, 4), program=spadgen_bin)

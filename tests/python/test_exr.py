@@ -5,6 +5,7 @@ and the layouts it refuses, refused with a message that names them."""
 import pathlib
 import signal
 import struct
+import zlib
 import subprocess
 
 import numpy as np
@@ -156,3 +157,65 @@ def test_every_image_of_a_run_equals_openexr(make_run, exr_tool, tmp_path, run_n
             assert_same_bits(channels[name], theirs[name])
         assert attributes == their_attributes
         assert attributes["spadgen_crop"].startswith("[")
+
+
+def crafted_exr(channels, width, height, compression=0, chunk=None, attributes=()):
+    """A small scanline EXR written by hand (FLOAT channels, zeros): the header OpenEXR needs, the offset table,
+    one chunk per 1 (NONE) or 16 (ZIP) lines whose data chunk(y, raw) gives (default: the lines stored as they
+    are). attributes: (name, type, value bytes) added or replacing the defaults."""
+    def attr(name, kind, value):
+        return name.encode() + b"\0" + kind.encode() + b"\0" + struct.pack("<i", len(value)) + value
+    chlist = b"".join(c.encode() + b"\0" + struct.pack("<iB3xii", 2, 0, 1, 1) for c in channels) + b"\0"
+    box = struct.pack("<4i", 0, 0, width - 1, height - 1)
+    base = {"channels": ("chlist", chlist), "compression": ("compression", bytes([compression])),
+            "dataWindow": ("box2i", box), "displayWindow": ("box2i", box), "lineOrder": ("lineOrder", b"\0"),
+            "pixelAspectRatio": ("float", struct.pack("<f", 1)), "screenWindowCenter": ("v2f", struct.pack("<2f", 0, 0)),
+            "screenWindowWidth": ("float", struct.pack("<f", 1))}
+    for name, kind, value in attributes:
+        base[name] = (kind, value)
+    header = struct.pack("<iI", 20000630, 2) + b"".join(attr(n, k, v) for n, (k, v) in base.items()) + b"\0"
+    lpc = 16 if compression == 3 else 1
+    line = 4 * width * len(channels)
+    chunks = []
+    for y in range(0, height, lpc):
+        raw = bytes(line * min(lpc, height - y))
+        data = chunk(y, raw) if chunk else raw
+        chunks.append(struct.pack("<ii", y, len(data)) + data)
+    at = len(header) + 8 * len(chunks)
+    offsets = []
+    for c in chunks:
+        offsets.append(at)
+        at += len(c)
+    return header + struct.pack(f"<{len(chunks)}Q", *offsets) + b"".join(chunks)
+
+
+def zip_zeros(y, raw):
+    # ZIP's byte predictor over zeros: the first byte 0, the others 128 (OpenEXR's differences plus 128)
+    return zlib.compress(bytes([0]) + bytes([128]) * (len(raw) - 1), 9)
+
+
+def test_crafted_headers_and_chunks(tmp_path):
+    path = tmp_path / "c.exr"
+    path.write_bytes(crafted_exr(["A", "B"], 3, 2))
+    f = ExrFile(path)
+    assert f.channel_names == ["A", "B"] and (f["B"] == 0).all() and f["A"].shape == (2, 3)
+    # a channel named twice (the second was dropped and every line read short, without a word)
+    path.write_bytes(crafted_exr(["A", "A"], 3, 2))
+    with pytest.raises(ExrError, match="names 'A' twice"):
+        ExrFile(path)
+    # a required attribute of another type (a TypeError escaped from the message itself)
+    path.write_bytes(crafted_exr(["A"], 3, 2, attributes=[("compression", "int", struct.pack("<i", 0))]))
+    with pytest.raises(ExrError, match="'compression' is of type 'int' \\(4 bytes\\), not compression"):
+        ExrFile(path)
+    path.write_bytes(crafted_exr(["A"], 3, 2, attributes=[("dataWindow", "int", struct.pack("<i", 0))]))
+    with pytest.raises(ExrError, match="'dataWindow' is of type 'int'"):
+        ExrFile(path)
+    # a large image of zeros compresses about 1000 times (deflate's limit is about 1032): read whole and fast
+    path.write_bytes(crafted_exr(["A", "B", "C"], 1024, 64, compression=3, chunk=zip_zeros))
+    assert path.stat().st_size * 100 < 1024 * 64 * 12
+    f = ExrFile(path)
+    assert (f["C"] == 0).all() and f["C"].shape == (64, 1024)
+    # a ZIP chunk cut short (its checksum gone) is corrupt (zlib.decompressobj reads it without a word)
+    path.write_bytes(crafted_exr(["A"], 8, 16, compression=3, chunk=lambda y, raw: zip_zeros(y, raw)[:-4]))
+    with pytest.raises(ExrError, match="corrupt ZIP data in the chunk at y = 0"):
+        ExrFile(path)["A"]
