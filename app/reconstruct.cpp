@@ -629,7 +629,7 @@ std::string summary(const nlohmann::json& m) {
     << percent(m["objects_detectable"]["recall"]) << " of " << m["objects_detectable"]["objects"] << ")\n";
   s << "detections: " << m["detections"]["total"] << ", precision " << percent(m["detections"]["precision"]) << ", false "
     << m["detections"]["false"] << "\n";
-  if (m["range_error"].contains("bias_mm"))
+  if (m["range_error"].value("bias_mm", nlohmann::json()).is_number())
     s << "range error: bias " << std::setprecision(3) << m["range_error"]["bias_mm"].get<double>() << " mm, rms "
       << m["range_error"]["rms_mm"].get<double>() << " mm, |error| p90 " << m["range_error"]["abs_p90_mm"].get<double>() << " mm\n";
   return s.str();

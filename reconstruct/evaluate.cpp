@@ -93,7 +93,10 @@ void Scores::merge(const Scores& s) {
 
 nlohmann::json error_statistics(std::vector<double> e) {
   nlohmann::json j = {{"count", e.size()}};
-  if (e.empty()) return j;
+  if (e.empty()) {  // the same keys, null (a reader of bias_mm met a missing key where nothing matched)
+    for (const char* k : {"bias_mm", "rms_mm", "std_mm", "abs_p50_mm", "abs_p90_mm", "abs_p99_mm"}) j[k] = nullptr;
+    return j;
+  }
   double sum = 0, sq = 0;
   for (double v : e) sum += v, sq += v * v;
   const double n = double(e.size()), mean = sum / n;

@@ -37,6 +37,10 @@ def test_perfect_shifted_and_no_detections(sweep_run, spadgen_bin, tmp_path):
     assert m["objects"]["found"] == 0 and m["detections"]["false"] == objects
     m = spadgen.evaluate(run.path, np.full_like(truth, np.nan), out=tmp_path / "none", program=spadgen_bin)
     assert m["objects"]["found"] == 0 and m["detections"]["total"] == 0
+    # nothing matched: the error statistics' keys are there, null (bias_mm was missing: a KeyError for readers)
+    assert m["range_error"] == {"count": 0, "bias_mm": None, "rms_mm": None, "std_mm": None, "abs_p50_mm": None,
+                                "abs_p90_mm": None, "abs_p99_mm": None}
+    assert all(o["range_error"]["bias_mm"] is None for o in m["by_object"])
 
 
 def test_the_detector_and_the_programs_refusals(sweep_run, spadgen_bin, tmp_path, monkeypatch):
