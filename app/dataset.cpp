@@ -406,7 +406,18 @@ std::string evaluation_status(const std::string& dir, const std::set<std::string
            "` again\n";
   // done: as the folders are now (dataset status inspects them: a damaged sample is no longer done), or as
   // index.jsonl lists them
-  const std::set<std::string> done = done_now ? *done_now : indexed_done_folders(dir);
+  std::set<std::string> done = done_now ? *done_now : indexed_done_folders(dir);
+  // an evaluation of some samples (--samples) is of those: the others' folders are not expected in it
+  if (const auto sel = m.find("selection"); sel != m.end() && sel->is_array()) {
+    std::set<int64_t> chosen;
+    for (const nlohmann::json& i : *sel)
+      if (i.is_number_integer()) chosen.insert(i.get<int64_t>());
+    for (auto it = done.begin(); it != done.end();) {
+      const std::string& f = *it;
+      const bool numbered = f.size() >= 6 && std::all_of(f.begin(), f.begin() + 6, [](char ch) { return ch >= '0' && ch <= '9'; });
+      it = numbered && !chosen.count(std::stoll(f.substr(0, 6))) ? done.erase(it) : std::next(it);
+    }
+  }
   std::set<std::string> scored;
   int64_t changed = 0, gone = 0;
   // The folders scored, and the 2D ones evaluate left out (without detections for them) with their hashes:

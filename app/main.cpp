@@ -188,6 +188,9 @@ int main(int argc, char** argv) {
       ->type_name("X,Y,W,H");
   eval_cmd->add_flag("--noise-free", eval.noise_free, "when the detector runs: on the noise-free rates (detection_rate)")
       ->excludes(eval_detections);
+  eval_cmd->add_option("--samples", eval.samples, "for a dataset: score these samples only (dataset indices, 0,3,5-8; their "
+                                                  "realisations too), e.g. a validation split; @FILE reads them from a file")
+      ->type_name("LIST");
   eval_cmd->add_option("--threads", eval.threads, "worker threads (default: all cores)")->check(kThreadsRange);
   bool eval_quiet = false;  // accepted as by every command: evaluate writes nothing on stderr but warnings and errors
   eval_cmd->add_flag("-q,--quiet", eval_quiet, "nothing on stderr but warnings and errors (as always: the scores go to stdout)");

@@ -645,7 +645,47 @@ struct DoneFolder {
   std::string sample_hash;
   bool intensity = false;  // a 2D intensity run (its metadata.json's acquisition.mode)
 };
-std::vector<DoneFolder> done_sample_folders(const fs::path& dir, std::map<std::string, int>& not_done) {
+// The dataset indices of --samples: "0,3,5-8" (each at most the dataset's count - 1 is left to the caller).
+std::set<int64_t> parse_sample_list(const std::string& given) {
+  // @FILE: the list in a file (commas or whitespace between items: a long selection exceeds what one
+  // command-line argument may hold, 128 kB)
+  std::string text = given;
+  if (!given.empty() && given[0] == '@') {
+    text = scenes::read_file_bounded(given.substr(1), int64_t{1} << 30, "--samples file");
+    for (char& ch : text)
+      if (ch == '\n' || ch == '\r' || ch == ' ' || ch == '\t') ch = ',';
+    std::string squeezed;  // (runs of separators as one; none at the ends)
+    for (char ch : text)
+      if (ch != ',' || (!squeezed.empty() && squeezed.back() != ',')) squeezed += ch;
+    while (!squeezed.empty() && squeezed.back() == ',') squeezed.pop_back();
+    text = squeezed;
+  }
+  std::set<int64_t> out;
+  const auto number = [&](const std::string& t) {
+    if (t.empty() || t.size() > 15 || t.find_first_not_of("0123456789") != std::string::npos)
+      throw Error("--samples " + given + ": found '" + t + "', expected dataset indices and ranges such as 0,3,5-8");
+    return std::stoll(t);
+  };
+  for (size_t i = 0; i <= text.size();) {
+    const size_t end = std::min(text.find(',', i), text.size());
+    const std::string part = text.substr(i, end - i);
+    const size_t dash = part.find('-');
+    if (dash == std::string::npos) {
+      out.insert(number(part));
+    } else {
+      const int64_t a = number(part.substr(0, dash)), b = number(part.substr(dash + 1));
+      if (b < a || b - a > 100000000)
+        throw Error("--samples " + given + ": the range " + part + " is empty or larger than 10^8 samples");
+      for (int64_t k = a; k <= b; ++k) out.insert(k);
+    }
+    i = end + 1;
+  }
+  return out;
+}
+
+// only: the dataset indices to take (nullptr: every row); rows: set to the index's rows.
+std::vector<DoneFolder> done_sample_folders(const fs::path& dir, std::map<std::string, int>& not_done,
+                                            const std::set<int64_t>* only = nullptr, int64_t* rows = nullptr) {
   const fs::path index = dir / "index.jsonl";
   if (!fs::is_regular_file(index))
     throw Error(dir.string() + ": a dataset folder without index.jsonl: the first `spadgen dataset run` into it is "
@@ -671,6 +711,8 @@ std::vector<DoneFolder> done_sample_folders(const fs::path& dir, std::map<std::s
         throw Error(where + ": expected a string \"" + key + "\" (an index row spadgen wrote); run the dataset again to write it");
       return j[key].get<std::string>();
     };
+    if (rows) ++*rows;
+    if (only && !(r.contains("index") && r["index"].is_number_integer() && only->count(r["index"].get<int64_t>()))) continue;
     const std::string status = text(r, "status");
     if (status != "done") {
       ++not_done[status];
@@ -841,6 +883,7 @@ std::string evaluate(const EvaluateCommand& c) {
     if (c.detections.find(kSampleField) != std::string::npos)
       throw Error("--detections " + c.detections + ": {sample} names each sample folder of a dataset; " + c.target +
                   " is a run folder (give its detections file)");
+    if (!c.samples.empty()) throw Error("--samples " + c.samples + ": chooses samples of a dataset; " + c.target + " is a run folder");
     nlohmann::json source;
     const reconstruct::Scores s = evaluate_run(c, c.target, c.detections, out, &names, &source);
     report = s.to_json(names);
@@ -850,7 +893,13 @@ std::string evaluate(const EvaluateCommand& c) {
     files.insert(files.end(), {"range_error.png", "outcome.png"});
   } else if (fs::exists(target / "dataset.json")) {
     std::map<std::string, int> not_done;
-    const std::vector<DoneFolder> samples = done_sample_folders(target, not_done);
+    std::optional<std::set<int64_t>> selected;
+    if (!c.samples.empty()) selected = parse_sample_list(c.samples);
+    int64_t rows_total = 0;
+    const std::vector<DoneFolder> samples = done_sample_folders(target, not_done, selected ? &*selected : nullptr, &rows_total);
+    if (selected && !selected->empty() && *selected->rbegin() >= rows_total)
+      throw Error("--samples " + c.samples + ": sample " + std::to_string(*selected->rbegin()) + " is not one of the dataset's " +
+                  std::to_string(rows_total) + " (index.jsonl: 0 to " + std::to_string(rows_total - 1) + ")");
     std::string left_out;  // "1 failed, 2 stale"
     for (const auto& [status, n] : not_done) left_out += (left_out.empty() ? "" : ", ") + std::to_string(n) + " " + status;
     if (samples.empty())
@@ -941,6 +990,7 @@ std::string evaluate(const EvaluateCommand& c) {
       throw Error(c.target + ": its " + std::to_string(intensity) + " done sample folders are 2D intensity runs, without gate "
                   "profiles for the detector to read: give their detections with --detections");
     report["samples"] = rows;
+    if (selected) report["selection"] = *selected;  // the dataset indices asked for (--samples)
     if (!not_done.empty()) report["not_scored"] = not_done;  // {"failed": 1}: index.jsonl's rows not done, by status
     if (intensity > 0)
       report["not_scored_intensity"] = {{"sample_folders", intensity_folders},

@@ -76,11 +76,14 @@ def _ranges_array(a, what):
     return np.ascontiguousarray(a, dtype=np.float32 if a.dtype.itemsize <= 4 else np.float64)
 
 
-def _done_folder_names(dataset):
-    """The done sample folders' names (realisations too), and those of them that are 2D intensity runs."""
+def _done_folder_names(dataset, selection=None):
+    """The done sample folders' names (realisations too; of the selected dataset indices), and those of them
+    that are 2D intensity runs."""
     from .dataset import open_dataset
     names, intensity = [], set()
     for s in open_dataset(dataset).select(status="done"):
+        if selection is not None and s.index not in selection:
+            continue
         folders = [os.path.basename(f) for f in [s.folder] + s.repeat_folders]
         names.extend(folders)
         if s.run.mode == "intensity":  # (without detections given, evaluate leaves them out, as its detector does)
@@ -91,7 +94,9 @@ def _done_folder_names(dataset):
 def evaluate(target, detections=None, *, detector=None, out=None, tolerance_m=None, min_score=None, region=None,
              noise_free=False, threads=None, program=None, tmp_dir=None):
     """Scores detections against the object labels of a run folder or of every done sample of a dataset folder
-    with `spadgen evaluate` (docs/detection.md), and returns its metrics.json as a dict.
+    with `spadgen evaluate` (docs/detection.md), and returns its metrics.json as a dict. target: a folder, or a
+    Dataset selection (spadgen.open_dataset(...).select(...), a slice): its samples only (--samples), e.g. a
+    validation split.
 
     detections:
       - None: each run's detections_<detector>.exr, or the detector run in memory where it is absent;
@@ -109,6 +114,12 @@ def evaluate(target, detections=None, *, detector=None, out=None, tolerance_m=No
     program: the spadgen program (spadgen_program()). EvaluateError with the program's message when it
     refuses the input.
     """
+    from .dataset import Dataset
+    selection = None
+    if isinstance(target, Dataset):  # a selection of a dataset (Dataset.select, slicing): those samples only
+        if len(target) < len(target._all):
+            selection = {int(i) for i in target.indices}
+        target = target.path
     target = os.fspath(target)
     exe = spadgen_program(program)
     dataset = os.path.isfile(os.path.join(target, "dataset.json"))
@@ -122,7 +133,7 @@ def evaluate(target, detections=None, *, detector=None, out=None, tolerance_m=No
             if not dataset:
                 raise ValueError(f"{target}: not a dataset folder (dataset.json): a mapping of detections names the "
                                  "samples of a dataset; give a run's detections as one array")
-            names, intensity = _done_folder_names(target)
+            names, intensity = _done_folder_names(target, selection)
             done = set(names)
             missing = sorted(done - intensity - {str(k) for k in detections.keys()})
             if missing:
@@ -157,6 +168,10 @@ def evaluate(target, detections=None, *, detector=None, out=None, tolerance_m=No
             cmd += ["--noise-free"]
         if threads is not None:
             cmd += ["--threads", str(operator.index(threads))]
+        if selection is not None:  # (a file: a long list exceeds what one argument may hold)
+            with open(os.path.join(tmp, "samples.txt"), "w") as f:
+                f.write("\n".join(str(i) for i in sorted(selection)) + "\n")
+            cmd += ["--samples", "@" + os.path.join(tmp, "samples.txt")]
         cmd += ["--", target]  # (a target named -x is no option)
         p = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         if p.returncode != 0:

@@ -373,6 +373,33 @@ TEST_F(Reconstruct, EvaluateRefusesAnotherDatasetSamplesDetections) {
   ASSERT_EQ(m["samples"].size(), 4u);
   for (const auto& s : m["samples"])
     EXPECT_THAT(s["detections_source"]["source_checked"].get<std::string>(), HasSubstr("yes: made from")) << s["sample"];
+
+  // Some samples only (a validation split): --samples, also from a file; the evaluation is of those, and
+  // dataset status does not count the others as missing from it.
+  r = sh("evaluate " + out.string() + " --samples 1");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("2 sample folders (realisations included)"));
+  const auto sub = nlohmann::json::parse(slurp(out / "evaluation" / "metrics.json"));
+  EXPECT_EQ(sub["selection"], nlohmann::json::array({1}));
+  ASSERT_EQ(sub["samples"].size(), 2u);
+  EXPECT_EQ(sub["samples"][0]["sample"], "000001");
+  EXPECT_EQ(sub["samples"][1]["sample"], "000001_r01");
+  EXPECT_THAT(sh("dataset status " + out.string()).output, Not(HasSubstr("evaluation/")));
+  std::ofstream(dir_ / "split.txt") << "0\n\n1\n";
+  r = sh("evaluate " + out.string() + " --samples @" + (dir_ / "split.txt").string() + " -o " + (dir_ / "e3").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(nlohmann::json::parse(slurp(dir_ / "e3" / "metrics.json"))["samples"].size(), 4u);
+  for (const auto& [list, says] : {std::pair{"2", "sample 2 is not one of the dataset's 2 (index.jsonl: 0 to 1)"},
+                                   {"0-x", "found 'x', expected dataset indices and ranges such as 0,3,5-8"},
+                                   {"1-0", "the range 1-0 is empty"}}) {
+    r = sh("evaluate " + out.string() + " --samples " + list + " -o " + (dir_ / "e4").string());
+    EXPECT_EQ(r.code, 1) << list;
+    EXPECT_THAT(r.output, HasSubstr(says)) << list;
+  }
+  r = sh("evaluate " + (out / "samples" / "000000").string() + " --samples 0 -o " + (dir_ / "e4").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("chooses samples of a dataset; "));
+  EXPECT_FALSE(fs::exists(dir_ / "e4"));
 }
 
 // A plate over a sphere: a crop where both are seen, and the sphere alone on the right.

@@ -96,6 +96,12 @@ def test_a_dataset_scored_from_a_mapping_and_from_files(dataset_dir, spadgen_bin
     os.remove(preds / f"{sorted(truth)[0]}.npy")
     with pytest.raises(EvaluateError, match="1 of 6 done sample folders have no detections file"):
         spadgen.evaluate(dataset_dir, str(preds / "{sample}.npy"), out=tmp_path / "partial", program=spadgen_bin)
+    # a selection of the dataset (a validation split): its samples only, its arrays only
+    val = ds.select(where=lambda row: row["index"] == 3)
+    picked = {k: v for k, v in truth.items() if k.startswith("000003")}
+    m = spadgen.evaluate(val, picked, out=tmp_path / "val", program=spadgen_bin)
+    assert m["selection"] == [3] and sorted(s["sample"] for s in m["samples"]) == sorted(picked)
+    assert m["objects"]["found"] == m["objects"]["objects"] > 0
     # the temporary files in the folder asked for, removed afterwards
     (tmp_path / "scratch").mkdir()
     m = spadgen.evaluate(dataset_dir, truth, out=tmp_path / "mapping2", program=spadgen_bin, tmp_dir=tmp_path / "scratch")
