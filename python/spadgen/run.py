@@ -562,7 +562,9 @@ class Run:
         errors of its laser return and of its ambient light (every detection counted as the noisier light;
         docs/render.md, "Accuracy"). The relative error is the pixel's whole return's: where the return has
         several parts, the gate positions that see only a weaker one (an object behind a plate) are off by more
-        (about 1.4 times in rms on the multi-object scene). Zero where a pixel has neither. Needs detection_rate.npy and laser.exr's standard_error
+        (about 1.4 times in rms on the multi-object scene), and in the dark, where the laser's part is below 1 % of
+        the pixel's peak (the return's edges, the late light of inter-reflections), it is far too small, though the
+        error there is a fraction of a count (docs/render.md, "Accuracy"). Zero where a pixel has neither. Needs detection_rate.npy and laser.exr's standard_error
         (ambient.exr's too where the run has it). The laser's error counts only where the counts see the laser:
         in a gate sweep, and in the intensity mode with acquisition.intensity.laser_on."""
         rel = np.zeros((self.height, self.width), np.float64)
