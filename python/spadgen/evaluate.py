@@ -68,11 +68,18 @@ def _checked_version(program):
     return program
 
 
-def _ranges_array(a, what):
+def _ranges_array(a, what, folder):
     a = np.asarray(a)
     if a.ndim != 3 or a.dtype.kind != "f":
         raise ValueError(f"{what}: expected a float array (H, W, M) of ranges in metres (NaN: none), got "
                          f"{a.dtype} of shape {a.shape}")
+    # the run's image, checked here: the program's message would name a temporary file already gone
+    from .run import open_run
+    run = open_run(folder)
+    if a.shape[:2] != (run.height, run.width):
+        hint = " (an (M, H, W) array, as Run.detections().range and torch's object_range are: np.moveaxis(a, 0, -1))" \
+            if a.shape[1:] == (run.height, run.width) else ""
+        raise ValueError(f"{what}: shape {a.shape}, expected ({run.height}, {run.width}, M): the image of {folder}{hint}")
     return np.ascontiguousarray(a, dtype=np.float32 if a.dtype.itemsize <= 4 else np.float64)
 
 
@@ -144,14 +151,15 @@ def evaluate(target, detections=None, *, detector=None, out=None, tolerance_m=No
                 raise ValueError(f"detections for {len(unknown)} folders that are no done sample folder of {target}, "
                                  f"first {unknown[0]!r} (done: {', '.join(sorted(done)[:4])}{', ...' if len(done) > 4 else ''})")
             for name, a in detections.items():
-                np.save(os.path.join(tmp, f"{name}.npy"), _ranges_array(a, f"detections[{name!r}]"))
+                np.save(os.path.join(tmp, f"{name}.npy"),
+                        _ranges_array(a, f"detections[{name!r}]", os.path.join(target, "samples", str(name))))
             given = os.path.join(tmp, "{sample}.npy")
         else:
             if dataset:
                 raise ValueError(f"{target} is a dataset folder: give its detections as a mapping {{sample folder name: "
                                  "array}, or files (a name inside each sample folder, or a path with {sample})")
             given = os.path.join(tmp, "detections.npy")
-            np.save(given, _ranges_array(detections, "detections"))
+            np.save(given, _ranges_array(detections, "detections", target))
         out_dir = os.fspath(out) if out is not None else os.path.join(target, "evaluation")
         cmd = [exe, "evaluate", "-q", "-o", out_dir]
         if given is not None:

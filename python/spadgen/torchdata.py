@@ -25,6 +25,7 @@ J = ``max_objects`` (default: the most of any run's ``ground_truth_objects``):
 | object_count | (H, W) | int64 | distinct objects along the pixel's ray (a plate over a sphere: 2 objects, 3 layers) |
 | object_range | (J, H, W) | float32 | range (m) of each object's first surface along the ray, nearest first, 0 beyond object_count: what `spadgen evaluate` scores detections against |
 | object_mask | (J, H, W) | bool | object slot j exists at the pixel (j < object_count) |
+| object_id | (J, H, W) | int64 | the object slot j holds: its id in its run (Run.objects names it; runs of different scenes number their objects each their own way), -1 beyond object_count |
 | object_detectable | (J, H, W) | bool | gate sweeps: slot j's object is detectable (labels.exr: its edge in the noise-free counts stands out; evaluate's "detectable") |
 | frames | (K, N, H, W) | uint8 | binary frames, 0 / 1 (large: only when asked for) |
 | gate_positions_ns | (K,) | float32 | gate positions (gate-sweep runs only) |
@@ -37,7 +38,7 @@ J = ``max_objects`` (default: the most of any run's ``ground_truth_objects``):
 | repeat | () | int64 | DatasetSamples only: the realisation of the temporal noise (0: the sample's own folder) |
 | parameters | (P,) | float32 | DatasetSamples only: the sample's numeric parameters, in the order of ``parameter_names`` |
 
-``fields`` chooses among the first thirteen (default: counts, expected_counts, depth, mask, layer_count);
+``fields`` chooses among the first fourteen (default: counts, expected_counts, depth, mask, layer_count);
 gate_positions_ns (gate sweeps only), exposures_us (intensity runs only), frames_per_k, intrinsics, origin and run
 come always, and with DatasetSamples sample,
 repeat and parameters. Runs that share a DataLoader batch must agree on K (and N with frames); the constructor
@@ -66,14 +67,15 @@ from .run import Run, RunChangedError, open_run, unpack_frames
 __all__ = ["RunDataset", "DatasetSamples", "FIELDS", "DEFAULT_FIELDS"]
 
 FIELDS = ("counts", "expected_counts", "detection_rate", "depth", "mask", "layer_count", "layer_depth", "layer_mask",
-          "object_count", "object_range", "object_mask", "object_detectable", "frames")
+          "object_count", "object_range", "object_mask", "object_detectable", "object_id", "frames")
 DEFAULT_FIELDS = ("counts", "expected_counts", "depth", "mask", "layer_count")
 # The file each field reads; a tuple: any one of them.
 _NEEDS = {"counts": "counts.npy", "expected_counts": ("expected_counts.npy", "detection_rate.npy"),
           "detection_rate": "detection_rate.npy", "frames": "frames.npy",
           "depth": "ground_truth.exr", "mask": "ground_truth.exr", "layer_count": "ground_truth.exr",
           "layer_depth": "ground_truth.exr", "layer_mask": "ground_truth.exr", "object_count": "ground_truth.exr",
-          "object_range": "ground_truth.exr", "object_mask": "ground_truth.exr", "object_detectable": "labels.exr"}
+          "object_range": "ground_truth.exr", "object_mask": "ground_truth.exr", "object_detectable": "labels.exr",
+          "object_id": "ground_truth.exr"}
 
 
 def _needs(field):
@@ -235,7 +237,7 @@ class _RunSamples(torch.utils.data.Dataset):
                 out["layer_depth"] = torch.from_numpy(np.where(exists, depth, 0).astype(np.float32))
             if "layer_mask" in self.fields:
                 out["layer_mask"] = torch.from_numpy(exists)
-        if {"object_count", "object_range", "object_mask", "object_detectable"} & set(self.fields):
+        if {"object_count", "object_range", "object_mask", "object_detectable", "object_id"} & set(self.fields):
             gt = run.ground_truth
             count = np.asarray(gt["object_count"][ys, xs]).astype(np.int64)
             J, n = self.max_objects, min(self.max_objects, int(run.metadata.get("ground_truth_objects", 0)))
@@ -249,6 +251,11 @@ class _RunSamples(torch.utils.data.Dataset):
                 out["object_range"] = torch.from_numpy(np.where(exists, r, 0).astype(np.float32))
             if "object_mask" in self.fields:
                 out["object_mask"] = torch.from_numpy(exists)
+            if "object_id" in self.fields:  # which object each slot holds (slot 0 is the plate here, the sphere there)
+                ids = np.full((J, h, w), -1, np.int64)
+                for j in range(n):
+                    ids[j] = gt[f"object{j}.id"][ys, xs]
+                out["object_id"] = torch.from_numpy(np.where(exists, ids, -1))
             if "object_detectable" in self.fields:
                 d = np.zeros((J, h, w), bool)
                 labels = run.object_labels

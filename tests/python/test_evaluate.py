@@ -53,9 +53,11 @@ def test_the_detector_and_the_programs_refusals(sweep_run, spadgen_bin, tmp_path
     assert e.value.returncode == 1 and not (tmp_path / "bad").exists()
     with pytest.raises(ValueError, match=r"expected a float array \(H, W, M\)"):
         spadgen.evaluate(run.path, np.zeros((run.height, run.width)), program=spadgen_bin)
-    with pytest.raises(EvaluateError, match="shape"):  # (W, H, M): the program names the run's shape
+    with pytest.raises(ValueError, match=rf"shape \({run.width}, {run.height}, 2\), expected \({run.height}, {run.width}, M\)"):
         spadgen.evaluate(run.path, np.full((run.width, run.height, 2), np.nan, np.float32), out=tmp_path / "t",
                          program=spadgen_bin)
+    with pytest.raises(ValueError, match=r"np.moveaxis\(a, 0, -1\)"):  # (M, H, W), as torch's object_range is
+        spadgen.evaluate(run.path, np.full((2, run.height, run.width), np.nan, np.float32), program=spadgen_bin)
     with pytest.raises(ValueError, match="not a dataset folder"):
         spadgen.evaluate(run.path, {"000000": perfect_ranges(run)}, program=spadgen_bin)
     with pytest.raises(FileNotFoundError, match="no such executable file"):

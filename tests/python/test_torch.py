@@ -29,6 +29,7 @@ def expected_layout(K, N, L, H, W, J):
             "layer_depth": ((L, H, W), torch.float32), "layer_mask": ((L, H, W), torch.bool),
             "object_count": ((H, W), torch.int64), "object_range": ((J, H, W), torch.float32),
             "object_mask": ((J, H, W), torch.bool), "object_detectable": ((J, H, W), torch.bool),
+            "object_id": ((J, H, W), torch.int64),
             "frames": ((K, N, H, W), torch.uint8), "gate_positions_ns": ((K,), torch.float32),
             "frames_per_k": ((), torch.int64), "intrinsics": ((3, 3), torch.float32), "origin": ((2,), torch.int64),
             "run": ((), torch.int64)}
@@ -62,6 +63,9 @@ def test_whole_image_sample_has_the_documented_layout_and_values(sweep_run, swee
     np.testing.assert_array_equal(s["object_mask"].numpy(), used)
     np.testing.assert_array_equal(s["object_range"].numpy(), np.where(used, slots.range, 0))
     np.testing.assert_array_equal(s["object_detectable"].numpy(), slots.detectable & used)
+    np.testing.assert_array_equal(s["object_id"].numpy(), np.where(used, slots.id, -1))
+    # slot 0 holds the plate over part of the image and the sphere beside it: the id says which
+    assert len(set(s["object_id"][0].numpy().ravel().tolist()) - {-1}) >= 2
     assert (s["object_count"] == 2).any() and s["object_detectable"][1].any()
     np.testing.assert_allclose(s["intrinsics"].numpy(), sweep.intrinsics, rtol=1e-7)
     assert s["origin"].tolist() == [0, 0] and int(s["run"]) == 0
