@@ -408,14 +408,30 @@ std::string evaluation_status(const std::string& dir, const std::set<std::string
   // index.jsonl lists them
   std::set<std::string> done = done_now ? *done_now : indexed_done_folders(dir);
   // an evaluation of some samples (--samples) is of those: the others' folders are not expected in it
+  std::string selection;  // "(of samples 0-3, 7: evaluate --samples)" when the evaluation is of some samples
   if (const auto sel = m.find("selection"); sel != m.end() && sel->is_array()) {
-    std::set<int64_t> chosen;
-    for (const nlohmann::json& i : *sel)
-      if (i.is_number_integer()) chosen.insert(i.get<int64_t>());
+    std::vector<std::pair<int64_t, int64_t>> ranges;  // [[first, last], ...]
+    for (const nlohmann::json& r : *sel)
+      if (r.is_array() && r.size() == 2 && r[0].is_number_integer() && r[1].is_number_integer())
+        ranges.emplace_back(r[0].get<int64_t>(), r[1].get<int64_t>());
+    const auto chosen = [&](int64_t i) {
+      return std::any_of(ranges.begin(), ranges.end(), [i](const auto& r) { return r.first <= i && i <= r.second; });
+    };
     for (auto it = done.begin(); it != done.end();) {
-      const std::string& f = *it;
-      const bool numbered = f.size() >= 6 && std::all_of(f.begin(), f.begin() + 6, [](char ch) { return ch >= '0' && ch <= '9'; });
-      it = numbered && !chosen.count(std::stoll(f.substr(0, 6))) ? done.erase(it) : std::next(it);
+      const std::string& f = *it;  // 000042, 000042_r01, 1234567 (a sample's index: the digits before _)
+      const size_t digits = std::min(f.find('_'), f.size());
+      const bool numbered = digits > 0 && digits <= 15 &&
+                            std::all_of(f.begin(), f.begin() + std::ptrdiff_t(digits), [](char ch) { return ch >= '0' && ch <= '9'; });
+      it = numbered && !chosen(std::stoll(f.substr(0, digits))) ? done.erase(it) : std::next(it);
+    }
+    for (const auto& [a, b] : ranges) {
+      if (selection.size() > 60) {
+        selection += ", ...";
+        break;
+      }
+      if (!selection.empty()) selection += ", ";
+      selection += std::to_string(a);
+      if (b > a) selection += "-" + std::to_string(b);
     }
   }
   std::set<std::string> scored;
@@ -448,7 +464,8 @@ std::string evaluation_status(const std::string& dir, const std::set<std::string
   }
   int64_t unscored = 0;
   for (const std::string& f : done) unscored += !scored.count(f);
-  if (changed == 0 && gone == 0 && unscored == 0) return "";
+  if (changed == 0 && gone == 0 && unscored == 0)
+    return selection.empty() ? "" : "evaluation/ is current, of some samples only: " + selection + " (evaluate --samples)\n";
   return "evaluation/ is out of date: of the " + std::to_string(scored.size()) + " sample folders it scored" +
          (rows.size() > m["samples"].size() ? " (or left out: 2D)" : "") + ", " +
          std::to_string(changed) + " changed since (generated again with another sample_hash, or damaged) and " + std::to_string(gone) +

@@ -170,6 +170,7 @@ int main(int argc, char** argv) {
   spadgen::app::EvaluateCommand eval;
   std::string eval_region;
   double eval_min_score = 0.0;
+  std::string eval_samples;
   CLI::App* eval_cmd = cli.add_subcommand("evaluate", "score detections against the object labels of a run or of every sample of a dataset: "
                                                       "metrics.json, error maps; docs/detection.md");
   eval_cmd->add_option("target", eval.target, "run folder or dataset folder")->required()->check(CLI::ExistingDirectory);
@@ -188,7 +189,7 @@ int main(int argc, char** argv) {
       ->type_name("X,Y,W,H");
   eval_cmd->add_flag("--noise-free", eval.noise_free, "when the detector runs: on the noise-free rates (detection_rate)")
       ->excludes(eval_detections);
-  eval_cmd->add_option("--samples", eval.samples, "for a dataset: score these samples only (dataset indices, 0,3,5-8; their "
+  CLI::Option* samples_opt = eval_cmd->add_option("--samples", eval_samples, "for a dataset: score these samples only (dataset indices, 0,3,5-8; their "
                                                   "realisations too), e.g. a validation split; @FILE reads them from a file")
       ->type_name("LIST");
   eval_cmd->add_option("--threads", eval.threads, "worker threads (default: all cores)")->check(kThreadsRange);
@@ -240,6 +241,7 @@ int main(int argc, char** argv) {
       if (!rec_quiet) std::cerr << "wrote " << path << "\n";
     } else if (*eval_cmd) {
       if (*min_score_opt) eval.min_score = eval_min_score;
+      if (*samples_opt) eval.samples = eval_samples;  // (given empty: refused, as selecting nothing)
       if (!eval_region.empty()) {
         spadgen::PixelRect r;
         char c1 = 0, c2 = 0, c3 = 0;

@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cerrno>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -276,7 +277,7 @@ nlohmann::json source_fields(const RunFolder& run) {
           {"scene_hash_fnv1a64", m.value("scene_hash_fnv1a64", nlohmann::json(nullptr))},
           {"crop_in_sensor", m.value("/image/crop_in_sensor"_json_pointer, nlohmann::json(nullptr))},
           // a dataset sample's parameters are --set values, which the scene hash does not see
-          {"sample_hash", m.value("/dataset/sample_hash"_json_pointer, nlohmann::json(nullptr))}};
+          {"sample_parameters", m.value("/dataset/parameters"_json_pointer, nlohmann::json(nullptr))}};
 }
 
 // What the detections file says it was made from (reconstruct's spadgen_source), against the run it is
@@ -310,13 +311,17 @@ void check_source(const std::string& path, const std::map<std::string, std::stri
                   made[key].dump() + ", this run: " + ours.dump() + "); run spadgen reconstruct on " + run.dir() +
                   ", or give --detections of this scene and crop");
   }
-  // A dataset sample's detections made from another sample (other parameters: another sample_hash; its own
-  // realisations share its hash) are refused as another scene's are.
-  if (const nlohmann::json& ours = ours_all["sample_hash"]; ours.is_string() && made.contains("sample_hash") &&
-                                                            made["sample_hash"].is_string() && made["sample_hash"] != ours)
-    throw Error(path + ": detections of another dataset sample than " + run.dir() + " (made from " + made_from + ", sample_hash " +
-                made["sample_hash"].dump() + "; this sample's " + ours.dump() + ": other parameters); run spadgen reconstruct on " +
-                run.dir() + ", or give --detections of this sample");
+  // A dataset sample's detections made from a sample of other parameters (which the scene hash does not see)
+  // are refused as another scene's are; another seed's are scored. Made from a run that is no dataset sample
+  // (a plain run, a sense), or scored on one, the parameters are not compared, and the source is said unchecked.
+  const nlohmann::json& ours_p = ours_all["sample_parameters"];
+  const nlohmann::json theirs_p = made.value("sample_parameters", nlohmann::json(nullptr));
+  if (ours_p.is_object() && theirs_p.is_object() && theirs_p != ours_p)
+    throw Error(path + ": detections of a dataset sample of other parameters than " + run.dir() + "'s (made from " + made_from +
+                ": " + theirs_p.dump() + ", this sample: " + ours_p.dump() + "); run spadgen reconstruct on " + run.dir() +
+                ", or give --detections of this sample");
+  if (ours_p.is_object() != theirs_p.is_object())
+    unchecked += std::string(unchecked.empty() ? "" : " and its ") + "dataset sample's parameters (one of the two runs is no dataset sample)";
   if (source)
     (*source)["source_checked"] = unchecked.empty() ? "yes: made from " + made_from + ", the same scene and crop"
                                                     : "no: its spadgen_source names no " + unchecked +
@@ -402,7 +407,8 @@ DetectionImage read_detections(const std::string& path, const RunFolder& run, bo
   if (const auto made = e.attributes.find("spadgen_reconstruct"); source && made != e.attributes.end()) {
     const nlohmann::json by = nlohmann::json::parse(made->second, nullptr, false);
     if (by.is_object() && by.contains("detector"))  // which of reconstruct's detectors wrote it, and from what
-      (*source)["made_by"] = {{"detector", by["detector"]}, {"noise_free", by.value("noise_free", false)}};
+      (*source)["made_by"] = {{"detector", by["detector"]},
+                              {"noise_free", by.contains("noise_free") && by["noise_free"].is_boolean() && by["noise_free"].get<bool>()}};
   }
   DetectionImage img(width, height, m);
   for (int s = 0; s < m; ++s) {
@@ -645,47 +651,65 @@ struct DoneFolder {
   std::string sample_hash;
   bool intensity = false;  // a 2D intensity run (its metadata.json's acquisition.mode)
 };
-// The dataset indices of --samples: "0,3,5-8" (each at most the dataset's count - 1 is left to the caller).
-std::set<int64_t> parse_sample_list(const std::string& given) {
-  // @FILE: the list in a file (commas or whitespace between items: a long selection exceeds what one
-  // command-line argument may hold, 128 kB)
-  std::string text = given;
-  if (!given.empty() && given[0] == '@') {
-    text = scenes::read_file_bounded(given.substr(1), int64_t{1} << 30, "--samples file");
-    for (char& ch : text)
-      if (ch == '\n' || ch == '\r' || ch == ' ' || ch == '\t') ch = ',';
-    std::string squeezed;  // (runs of separators as one; none at the ends)
-    for (char ch : text)
-      if (ch != ',' || (!squeezed.empty() && squeezed.back() != ',')) squeezed += ch;
-    while (!squeezed.empty() && squeezed.back() == ',') squeezed.pop_back();
-    text = squeezed;
-  }
-  std::set<int64_t> out;
-  const auto number = [&](const std::string& t) {
-    if (t.empty() || t.size() > 15 || t.find_first_not_of("0123456789") != std::string::npos)
-      throw Error("--samples " + given + ": found '" + t + "', expected dataset indices and ranges such as 0,3,5-8");
-    return std::stoll(t);
-  };
-  for (size_t i = 0; i <= text.size();) {
-    const size_t end = std::min(text.find(',', i), text.size());
-    const std::string part = text.substr(i, end - i);
-    const size_t dash = part.find('-');
-    if (dash == std::string::npos) {
-      out.insert(number(part));
-    } else {
-      const int64_t a = number(part.substr(0, dash)), b = number(part.substr(dash + 1));
-      if (b < a || b - a > 100000000)
-        throw Error("--samples " + given + ": the range " + part + " is empty or larger than 10^8 samples");
-      for (int64_t k = a; k <= b; ++k) out.insert(k);
+// The dataset indices of --samples, as sorted, disjoint, inclusive ranges (a range of 10^8 samples is two
+// numbers, not 10^8: it was expanded into a set, 4.7 GB, before it was checked against the dataset).
+class SampleSelection {
+ public:
+  // "0,3,5-8", or @FILE with the list in a file (commas or whitespace between items: a long selection exceeds
+  // what one command-line argument may hold, 128 kB).
+  explicit SampleSelection(const std::string& given) {
+    std::string text = given;
+    if (!given.empty() && given[0] == '@') {
+      text = scenes::read_file_bounded(given.substr(1), int64_t{1} << 30, "--samples file");
+      for (char& ch : text)
+        if (ch == '\n' || ch == '\r' || ch == ' ' || ch == '\t') ch = ',';
     }
-    i = end + 1;
+    const auto shown = [](const std::string& t) {  // (a token quoted as it is, shortened and printable)
+      std::string out = scenes::printable(t.substr(0, 40));
+      return t.size() > 40 ? out + "..." : out;
+    };
+    const auto number = [&](const std::string& t) {
+      if (t.empty() || t.size() > 15 || t.find_first_not_of("0123456789") != std::string::npos)
+        throw Error("--samples " + shown(given) + ": found '" + shown(t) + "', expected dataset indices and ranges such as 0,3,5-8");
+      return std::stoll(t);
+    };
+    std::vector<std::pair<int64_t, int64_t>> parts;
+    for (size_t i = 0; i < text.size();) {
+      const size_t end = std::min(text.find(',', i), text.size());
+      if (const std::string part = text.substr(i, end - i); !part.empty()) {
+        const size_t dash = part.find('-');
+        const int64_t a = number(part.substr(0, dash));
+        const int64_t b = dash == std::string::npos ? a : number(part.substr(dash + 1));
+        if (b < a) throw Error("--samples " + shown(given) + ": the range " + shown(part) + " is empty");
+        parts.emplace_back(a, b);
+      }
+      i = end + 1;
+    }
+    if (parts.empty()) throw Error("--samples " + shown(given) + ": selects no samples; expected dataset indices such as 0,3,5-8");
+    std::sort(parts.begin(), parts.end());
+    for (const auto& [a, b] : parts)  // (overlapping and adjacent ranges merged)
+      if (!ranges_.empty() && a <= ranges_.back().second + 1) ranges_.back().second = std::max(ranges_.back().second, b);
+      else ranges_.emplace_back(a, b);
   }
-  return out;
-}
+  bool contains(int64_t i) const {
+    const auto it = std::upper_bound(ranges_.begin(), ranges_.end(), std::pair{i, std::numeric_limits<int64_t>::max()});
+    return it != ranges_.begin() && std::prev(it)->second >= i;
+  }
+  int64_t last() const { return ranges_.back().second; }
+  // As metrics.json records it: [[first, last], ...].
+  nlohmann::json json() const {
+    nlohmann::json out = nlohmann::json::array();
+    for (const auto& [a, b] : ranges_) out.push_back({a, b});
+    return out;
+  }
+
+ private:
+  std::vector<std::pair<int64_t, int64_t>> ranges_;
+};
 
 // only: the dataset indices to take (nullptr: every row); rows: set to the index's rows.
 std::vector<DoneFolder> done_sample_folders(const fs::path& dir, std::map<std::string, int>& not_done,
-                                            const std::set<int64_t>* only = nullptr, int64_t* rows = nullptr) {
+                                            const SampleSelection* only = nullptr, int64_t* rows = nullptr) {
   const fs::path index = dir / "index.jsonl";
   if (!fs::is_regular_file(index))
     throw Error(dir.string() + ": a dataset folder without index.jsonl: the first `spadgen dataset run` into it is "
@@ -696,7 +720,7 @@ std::vector<DoneFolder> done_sample_folders(const fs::path& dir, std::map<std::s
   not_done.clear();
   int row = 0;
   for (std::string line; std::getline(lines, line);) {
-    if (line.empty()) continue;
+    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
     ++row;
     const std::string where = index.string() + " row " + std::to_string(row);
     nlohmann::json r;
@@ -711,8 +735,8 @@ std::vector<DoneFolder> done_sample_folders(const fs::path& dir, std::map<std::s
         throw Error(where + ": expected a string \"" + key + "\" (an index row spadgen wrote); run the dataset again to write it");
       return j[key].get<std::string>();
     };
-    if (rows) ++*rows;
-    if (only && !(r.contains("index") && r["index"].is_number_integer() && only->count(r["index"].get<int64_t>()))) continue;
+    if (rows && r.contains("index") && r["index"].is_number_integer()) *rows = std::max(*rows, r["index"].get<int64_t>() + 1);
+    if (only && !(r.contains("index") && r["index"].is_number_integer() && only->contains(r["index"].get<int64_t>()))) continue;
     const std::string status = text(r, "status");
     if (status != "done") {
       ++not_done[status];
@@ -883,7 +907,7 @@ std::string evaluate(const EvaluateCommand& c) {
     if (c.detections.find(kSampleField) != std::string::npos)
       throw Error("--detections " + c.detections + ": {sample} names each sample folder of a dataset; " + c.target +
                   " is a run folder (give its detections file)");
-    if (!c.samples.empty()) throw Error("--samples " + c.samples + ": chooses samples of a dataset; " + c.target + " is a run folder");
+    if (c.samples) throw Error("--samples: chooses samples of a dataset; " + c.target + " is a run folder");
     nlohmann::json source;
     const reconstruct::Scores s = evaluate_run(c, c.target, c.detections, out, &names, &source);
     report = s.to_json(names);
@@ -893,12 +917,12 @@ std::string evaluate(const EvaluateCommand& c) {
     files.insert(files.end(), {"range_error.png", "outcome.png"});
   } else if (fs::exists(target / "dataset.json")) {
     std::map<std::string, int> not_done;
-    std::optional<std::set<int64_t>> selected;
-    if (!c.samples.empty()) selected = parse_sample_list(c.samples);
+    std::optional<SampleSelection> selected;
+    if (c.samples) selected.emplace(*c.samples);
     int64_t rows_total = 0;
     const std::vector<DoneFolder> samples = done_sample_folders(target, not_done, selected ? &*selected : nullptr, &rows_total);
-    if (selected && !selected->empty() && *selected->rbegin() >= rows_total)
-      throw Error("--samples " + c.samples + ": sample " + std::to_string(*selected->rbegin()) + " is not one of the dataset's " +
+    if (selected && selected->last() >= rows_total)
+      throw Error("--samples: sample " + std::to_string(selected->last()) + " is not one of the dataset's " +
                   std::to_string(rows_total) + " (index.jsonl: 0 to " + std::to_string(rows_total - 1) + ")");
     std::string left_out;  // "1 failed, 2 stale"
     for (const auto& [status, n] : not_done) left_out += (left_out.empty() ? "" : ", ") + std::to_string(n) + " " + status;
@@ -929,6 +953,8 @@ std::string evaluate(const EvaluateCommand& c) {
         const std::string f = file_of(sample.path);
         struct stat st {};
         if (::stat(f.c_str(), &st) != 0) {
+          if (errno != ENOENT && errno != ENOTDIR)
+            throw Error("--detections " + c.detections + ": " + f + ": " + std::strerror(errno));
           // a 2D sample without detections is left out as without --detections (the detectors' own have none)
           if (!sample.intensity) missing.push_back(f);
           continue;
@@ -988,14 +1014,20 @@ std::string evaluate(const EvaluateCommand& c) {
     const size_t intensity = intensity_folders.size();
     if (scored == 0)
       throw Error(c.target + ": its " + std::to_string(intensity) + " done sample folders are 2D intensity runs, without gate "
-                  "profiles for the detector to read: give their detections with --detections");
+                  "profiles for the detector to read: " +
+                  (c.detections.empty() ? std::string("give their detections with --detections")
+                                        : "--detections " + c.detections + " names no file for any of them (first " +
+                                              file_of(samples.front().path) + ")"));
     report["samples"] = rows;
-    if (selected) report["selection"] = *selected;  // the dataset indices asked for (--samples)
+    if (selected) report["selection"] = selected->json();  // the dataset indices asked for (--samples), as ranges
     if (!not_done.empty()) report["not_scored"] = not_done;  // {"failed": 1}: index.jsonl's rows not done, by status
     if (intensity > 0)
       report["not_scored_intensity"] = {{"sample_folders", intensity_folders},
-                                        {"why", "2D intensity runs have no gate profiles for the detector; --detections scores "
-                                                "them with detections given"}};
+                                        {"why", c.detections.empty()
+                                                    ? "2D intensity runs have no gate profiles for the detector; --detections "
+                                                      "scores them with detections given"
+                                                    : "2D intensity runs for which --detections names no file (the detectors "
+                                                      "have no gate profiles to read in them)"}};
     writers::write_file_atomic((fs::path(out) / "samples.csv").string(), csv.str());
     files.push_back("samples.csv");
     text << scored << (scored == 1 ? " sample folder" : " sample folders") << " (realisations included)"

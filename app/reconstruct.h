@@ -32,7 +32,7 @@ struct EvaluateCommand {
   std::optional<double> min_score;
   std::optional<PixelRect> region; // image coordinates
   bool noise_free = false;
-  std::string samples;             // a dataset's samples to score ("0,3,5-8"); "" = every one
+  std::optional<std::string> samples;  // a dataset's samples to score ("0,3,5-8", "@FILE"); none = every one
   int threads = 0;
 };
 // Writes metrics.json (and error maps for a run, samples.csv for a dataset); returns a short summary.

@@ -646,14 +646,19 @@ void CardTally::add(const SampleRecord& r) {
 std::string warning_kind(const std::string& w) {
   // Each number standing alone ("-1.5e+06", "47.875") becomes '#'; digits that are part of a name (layer0,
   // offset_m[2], pde_905nm.csv, x86) stay, so that warnings of different keys or files are not one kind.
-  const auto name_char = [](char c) { return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '[' || c == '.'; };
+  // (a '[' is part of a name after one: offset_m[2]; not in a list: [0, 1])
+  const auto name_char_at = [&](size_t k) {
+    const char c = w[k];
+    if (c == '[') return k > 0 && (std::isalnum(static_cast<unsigned char>(w[k - 1])) || w[k - 1] == '_');
+    return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '.';
+  };
   const auto digit = [&](size_t i) { return i < w.size() && std::isdigit(static_cast<unsigned char>(w[i])); };
   std::string key;
   for (size_t i = 0; i < w.size();) {
     size_t j = i;
     if ((w[j] == '-' || w[j] == '+') && (digit(j + 1) || (w[j + 1 < w.size() ? j + 1 : j] == '.' && digit(j + 2)))) ++j;
     const bool starts = digit(j) || (j + 1 < w.size() && w[j] == '.' && digit(j + 1));
-    if (starts && (i == 0 || !name_char(w[i - 1]))) {
+    if (starts && (i == 0 || !name_char_at(i - 1))) {
       while (digit(j)) ++j;
       if (j < w.size() && w[j] == '.' && digit(j + 1))
         for (++j; digit(j);) ++j;

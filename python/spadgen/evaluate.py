@@ -123,9 +123,10 @@ def evaluate(target, detections=None, *, detector=None, out=None, tolerance_m=No
     """
     from .dataset import Dataset
     selection = None
-    if isinstance(target, Dataset):  # a selection of a dataset (Dataset.select, slicing): those samples only
-        if len(target) < len(target._all):
-            selection = {int(i) for i in target.indices}
+    if isinstance(target, Dataset):  # a dataset, or a selection of one (Dataset.select, slicing): its samples only
+        selection = {int(i) for i in target.indices}
+        if not selection:
+            raise ValueError(f"{target.path}: the selection holds no samples; expected some to score")
         target = target.path
     target = os.fspath(target)
     exe = spadgen_program(program)

@@ -102,8 +102,10 @@ def test_a_dataset_scored_from_a_mapping_and_from_files(dataset_dir, spadgen_bin
     val = ds.select(where=lambda row: row["index"] == 3)
     picked = {k: v for k, v in truth.items() if k.startswith("000003")}
     m = spadgen.evaluate(val, picked, out=tmp_path / "val", program=spadgen_bin)
-    assert m["selection"] == [3] and sorted(s["sample"] for s in m["samples"]) == sorted(picked)
+    assert m["selection"] == [[3, 3]] and sorted(s["sample"] for s in m["samples"]) == sorted(picked)
     assert m["objects"]["found"] == m["objects"]["objects"] > 0
+    with pytest.raises(ValueError, match="the selection holds no samples"):
+        spadgen.evaluate(ds.select(where=lambda row: False), {}, program=spadgen_bin)
     # the temporary files in the folder asked for, removed afterwards
     (tmp_path / "scratch").mkdir()
     m = spadgen.evaluate(dataset_dir, truth, out=tmp_path / "mapping2", program=spadgen_bin, tmp_dir=tmp_path / "scratch")
