@@ -386,8 +386,10 @@ std::set<std::string> indexed_done_folders(const fs::path& dir) {
 
 // A line naming an evaluation/ that scored other versions of the samples than the folder holds now (generated
 // again with another sample_hash since, no longer done, or done and not scored): its metrics are of data no
-// longer there. Empty when it is current, or absent.
-std::string evaluation_status(const std::string& dir, const std::set<std::string>* done_now = nullptr) {
+// longer there. Empty when it is current (but see say_current), or absent.
+// say_current: also a line for a current evaluation of some samples only (dataset status; a run says only
+// what is out of date).
+std::string evaluation_status(const std::string& dir, const std::set<std::string>* done_now = nullptr, bool say_current = false) {
   const fs::path metrics = fs::path(dir) / "evaluation" / "metrics.json";
   std::error_code ec;
   if (!fs::is_regular_file(metrics, ec)) return "";
@@ -410,26 +412,28 @@ std::string evaluation_status(const std::string& dir, const std::set<std::string
   // an evaluation of some samples (--samples) is of those: the others' folders are not expected in it
   std::string selection;  // "(of samples 0-3, 7: evaluate --samples)" when the evaluation is of some samples
   if (const auto sel = m.find("selection"); sel != m.end() && sel->is_array()) {
-    std::vector<std::pair<int64_t, int64_t>> ranges;  // [[first, last], ...]
+    std::vector<std::pair<int64_t, int64_t>> ranges;  // [[first, last], ...] (a malformed one: no selection)
     for (const nlohmann::json& r : *sel)
       if (r.is_array() && r.size() == 2 && r[0].is_number_integer() && r[1].is_number_integer())
         ranges.emplace_back(r[0].get<int64_t>(), r[1].get<int64_t>());
-    const auto chosen = [&](int64_t i) {
-      return std::any_of(ranges.begin(), ranges.end(), [i](const auto& r) { return r.first <= i && i <= r.second; });
+    std::sort(ranges.begin(), ranges.end());
+    const auto chosen = [&](int64_t i) {  // (by bisection: a random split is about one range per sample)
+      const auto it = std::upper_bound(ranges.begin(), ranges.end(), std::pair{i, std::numeric_limits<int64_t>::max()});
+      return it != ranges.begin() && std::prev(it)->second >= i;
     };
-    for (auto it = done.begin(); it != done.end();) {
+    for (auto it = done.begin(); !ranges.empty() && it != done.end();) {
       const std::string& f = *it;  // 000042, 000042_r01, 1234567 (a sample's index: the digits before _)
       const size_t digits = std::min(f.find('_'), f.size());
       const bool numbered = digits > 0 && digits <= 15 &&
                             std::all_of(f.begin(), f.begin() + std::ptrdiff_t(digits), [](char ch) { return ch >= '0' && ch <= '9'; });
       it = numbered && !chosen(std::stoll(f.substr(0, digits))) ? done.erase(it) : std::next(it);
     }
-    for (const auto& [a, b] : ranges) {
-      if (selection.size() > 60) {
-        selection += ", ...";
+    for (const auto& [a, b] : ranges) {  // (as --samples takes it)
+      if (selection.size() > 200) {
+        selection += ",...";
         break;
       }
-      if (!selection.empty()) selection += ", ";
+      if (!selection.empty()) selection += ",";
       selection += std::to_string(a);
       if (b > a) selection += "-" + std::to_string(b);
     }
@@ -465,12 +469,13 @@ std::string evaluation_status(const std::string& dir, const std::set<std::string
   int64_t unscored = 0;
   for (const std::string& f : done) unscored += !scored.count(f);
   if (changed == 0 && gone == 0 && unscored == 0)
-    return selection.empty() ? "" : "evaluation/ is current, of some samples only: " + selection + " (evaluate --samples)\n";
+    return selection.empty() || !say_current ? "" : "evaluation/ is current, of some samples only: " + selection + " (evaluate --samples)\n";
   return "evaluation/ is out of date: of the " + std::to_string(scored.size()) + " sample folders it scored" +
          (rows.size() > m["samples"].size() ? " (or left out: 2D)" : "") + ", " +
          std::to_string(changed) + " changed since (generated again with another sample_hash, or damaged) and " + std::to_string(gone) +
          " are no longer done samples, and " + std::to_string(unscored) + " done ones are not in it: run `spadgen evaluate " +
-         dir + "` again\n";
+         dir + (selection.empty() ? std::string() : selection.back() == '.' ? " --samples @FILE" : " --samples " + selection) +
+         "` again\n";
 }
 
 std::string status_counts(const std::array<int64_t, 5>& c) {
@@ -909,7 +914,7 @@ DatasetStatus dataset_status(const std::string& dir) {
   if (!beyond.empty())
     o << "beyond the " << spec.count() << " samples: the folders of samples " << datasets::ranges_text(beyond)
       << " (kept, not in the index; a larger \"samples\" takes them again)\n";
-  o << evaluation_status(dir, &done_folders);
+  o << evaluation_status(dir, &done_folders, /*say_current=*/true);
   const bool complete = count[size_t(Status::Done)] == spec.count();
   return {o.str(), complete};
 }

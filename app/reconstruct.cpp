@@ -271,13 +271,25 @@ void check_ranges(const std::string& path, const DetectionImage& img) {
 // optionally det<i>.score; or a float .npy (H, W, M) of ranges, NaN where there is none.
 // What a derived file records of the run it was made from (its spadgen_source, with the run's path) and
 // check_source compares: the seed, the scene's hash, the crop of the sensor (null where metadata lacks them).
+// What the scene was set to, which the scene hash (of the files) does not see: --set values and a dataset
+// sample's parameters and `set`. A hash of the run's resolved scene without what only draws another
+// realisation of the same data (the seeds), what is only written (outputs) and the Monte Carlo's settings
+// (render): detections of another seed or path count are scored, of another pulse or plate position not.
+// null for a run that records no resolved scene.
+nlohmann::json settings_hash(const nlohmann::json& meta) {
+  const auto it = meta.find("resolved_scene");
+  if (it == meta.end() || !it->is_object()) return nullptr;
+  nlohmann::json settings = *it;  // (nlohmann::json: keys sorted, so the text is canonical)
+  for (const char* k : {"seed", "seeds", "outputs", "render", "description"}) settings.erase(k);
+  return scenes::hex64(scenes::fnv1a64(settings.dump()));
+}
+
 nlohmann::json source_fields(const RunFolder& run) {
   const auto& m = run.metadata();
   return {{"seed", m.value("seed", nlohmann::json(nullptr))},
           {"scene_hash_fnv1a64", m.value("scene_hash_fnv1a64", nlohmann::json(nullptr))},
           {"crop_in_sensor", m.value("/image/crop_in_sensor"_json_pointer, nlohmann::json(nullptr))},
-          // a dataset sample's parameters are --set values, which the scene hash does not see
-          {"sample_parameters", m.value("/dataset/parameters"_json_pointer, nlohmann::json(nullptr))}};
+          {"settings_hash", settings_hash(m)}};
 }
 
 // What the detections file says it was made from (reconstruct's spadgen_source), against the run it is
@@ -311,19 +323,22 @@ void check_source(const std::string& path, const std::map<std::string, std::stri
                   made[key].dump() + ", this run: " + ours.dump() + "); run spadgen reconstruct on " + run.dir() +
                   ", or give --detections of this scene and crop");
   }
-  // A dataset sample's detections made from a sample of other parameters (which the scene hash does not see)
-  // are refused as another scene's are; another seed's are scored. Made from a run that is no dataset sample
-  // (a plain run, a sense), or scored on one, the parameters are not compared, and the source is said unchecked.
-  const nlohmann::json& ours_p = ours_all["sample_parameters"];
-  const nlohmann::json theirs_p = made.value("sample_parameters", nlohmann::json(nullptr));
-  if (ours_p.is_object() && theirs_p.is_object() && theirs_p != ours_p)
-    throw Error(path + ": detections of a dataset sample of other parameters than " + run.dir() + "'s (made from " + made_from +
-                ": " + theirs_p.dump() + ", this sample: " + ours_p.dump() + "); run spadgen reconstruct on " + run.dir() +
-                ", or give --detections of this sample");
-  if (ours_p.is_object() != theirs_p.is_object())
-    unchecked += std::string(unchecked.empty() ? "" : " and its ") + "dataset sample's parameters (one of the two runs is no dataset sample)";
+  // Made with other settings (--set values, a dataset sample's parameters and set: the scene hash does not
+  // see them): refused as another scene's are; another seed's or path count's are scored. A file of an
+  // earlier spadgen names none: said unchecked.
+  const nlohmann::json& ours_s = ours_all["settings_hash"];
+  const nlohmann::json theirs_s = made.value("settings_hash", nlohmann::json(nullptr));
+  if (ours_s.is_string() && theirs_s.is_string() && theirs_s != ours_s)
+    throw Error(path + ": detections of a run of other settings than " + run.dir() + " (made from " + made_from +
+                ": its resolved scene differs in a --set value, a dataset sample's parameters or the dataset's set, not "
+                "only in seeds, outputs or render settings); run spadgen reconstruct on " + run.dir() +
+                ", or give --detections of this run");
+  if (!ours_s.is_string() || !theirs_s.is_string()) {
+    if (!unchecked.empty()) unchecked += " and its ";
+    unchecked += "settings (--set values, dataset parameters; an earlier spadgen's file names none)";
+  }
   if (source)
-    (*source)["source_checked"] = unchecked.empty() ? "yes: made from " + made_from + ", the same scene and crop"
+    (*source)["source_checked"] = unchecked.empty() ? "yes: made from " + made_from + ", the same scene, settings and crop"
                                                     : "no: its spadgen_source names no " + unchecked +
                                                           " (made from " + made_from + "); taken on trust";
 }

@@ -649,7 +649,7 @@ std::string warning_kind(const std::string& w) {
   // (a '[' is part of a name after one: offset_m[2]; not in a list: [0, 1])
   const auto name_char_at = [&](size_t k) {
     const char c = w[k];
-    if (c == '[') return k > 0 && (std::isalnum(static_cast<unsigned char>(w[k - 1])) || w[k - 1] == '_');
+    if (c == '[') return k > 0 && (std::isalnum(static_cast<unsigned char>(w[k - 1])) || w[k - 1] == '_' || w[k - 1] == ']');
     return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '.';
   };
   const auto digit = [&](size_t i) { return i < w.size() && std::isdigit(static_cast<unsigned char>(w[i])); };

@@ -124,9 +124,10 @@ def evaluate(target, detections=None, *, detector=None, out=None, tolerance_m=No
     from .dataset import Dataset
     selection = None
     if isinstance(target, Dataset):  # a dataset, or a selection of one (Dataset.select, slicing): its samples only
-        selection = {int(i) for i in target.indices}
-        if not selection:
+        if len(target) == 0:
             raise ValueError(f"{target.path}: the selection holds no samples; expected some to score")
+        if len(target) < len(target._all):  # (the whole dataset: no --samples, as for its folder)
+            selection = {int(i) for i in target.indices}
         target = target.path
     target = os.fspath(target)
     exe = spadgen_program(program)

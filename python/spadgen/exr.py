@@ -327,11 +327,12 @@ class ExrFile:
         if not filled.all():
             raise ExrError(f"{self.path}: {int((~filled).sum())} of {chunks} chunks are missing")
         del data  # (the file's bytes: not held beside the image)
-        # Each channel a view of the scanlines (its bytes are contiguous along a line): no second copy.
+        # Each channel copied out of the scanlines whole (a view of them would need numpy 1.23, and be misaligned
+        # beside HALF channels for torch).
         out = {}
-        lines_all.flags.writeable = False
         for c, a, b in zip(chans, starts[:-1], starts[1:]):
-            out[c.name] = lines_all[:, a:b].view(c.dtype).reshape(H, W)
+            out[c.name] = np.ascontiguousarray(lines_all[:, a:b]).view(c.dtype).reshape(H, W)
+            out[c.name].flags.writeable = False
         return out
 
     def __repr__(self):

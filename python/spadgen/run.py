@@ -691,9 +691,10 @@ class Run:
             made = json.loads(attrs.get("spadgen_reconstruct", "{}"))
         except ValueError:
             made = {}
-        if isinstance(made, dict) and "detector" in made and (made["detector"], made.get("noise_free", False)) != (detector, noise_free):
+        made_nf = made.get("noise_free") is True if isinstance(made, dict) else False  # (as the program: not true, false)
+        if isinstance(made, dict) and "detector" in made and (made["detector"], made_nf) != (detector, noise_free):
             raise ValueError(f"{path}: written by reconstruct's {made['detector']} detector"
-                             f"{' on the noise-free rates' if made.get('noise_free') else ''}, not the {detector} detector"
+                             f"{' on the noise-free rates' if made_nf else ''}, not the {detector} detector"
                              f"{' on the noise-free rates' if noise_free else ''} its name stands for (reconstruct -o named "
                              "it so); write it again with spadgen reconstruct")
         return Detections(np.asarray(f["count"]).astype(np.int32), slots("range"), slots("gate"), slots("amplitude"),

@@ -365,8 +365,8 @@ TEST_F(Reconstruct, EvaluateRefusesAnotherDatasetSamplesDetections) {
   }
   Result r = sh("evaluate " + out.string() + " --detections " + (dir_ / "swapped" / "{sample}.exr").string() + " -o " + (dir_ / "e1").string());
   EXPECT_EQ(r.code, 1);
-  EXPECT_THAT(r.output, HasSubstr("swapped/000000.exr: detections of a dataset sample of other parameters than " +
-                                  (out / "samples" / "000000").string() + "'s (made from "));
+  EXPECT_THAT(r.output, HasSubstr("swapped/000000.exr: detections of a run of other settings than " +
+                                  (out / "samples" / "000000").string() + " (made from "));
   EXPECT_FALSE(fs::exists(dir_ / "e1"));
   r = sh("evaluate " + out.string() + " --detections " + (dir_ / "own" / "{sample}.exr").string() + " -o " + (dir_ / "e2").string());
   EXPECT_EQ(r.code, 0) << r.output;
@@ -386,6 +386,7 @@ TEST_F(Reconstruct, EvaluateRefusesAnotherDatasetSamplesDetections) {
   EXPECT_EQ(sub["samples"][0]["sample"], "000001");
   EXPECT_EQ(sub["samples"][1]["sample"], "000001_r01");
   EXPECT_THAT(sh("dataset status " + out.string()).output, HasSubstr("evaluation/ is current, of some samples only: 1 (evaluate --samples)\n"));
+  EXPECT_EQ(shell(kBin + " dataset run " + (dir_ / "d.json").string() + " -o " + out.string() + " -q 2>&1").output, "");  // (nothing out of date)
   std::ofstream(dir_ / "split.txt") << "0\n\n1\n";
   r = sh("evaluate " + out.string() + " --samples @" + (dir_ / "split.txt").string() + " -o " + (dir_ / "e3").string());
   ASSERT_EQ(r.code, 0) << r.output;
@@ -424,6 +425,20 @@ TEST_F(Reconstruct, EvaluateRefusesAnotherDatasetSamplesDetections) {
   ASSERT_EQ(r.code, 0) << r.output;
   for (const auto& s : nlohmann::json::parse(slurp(dir_ / "e6" / "metrics.json"))["samples"])
     EXPECT_THAT(s["detections_source"]["source_checked"].get<std::string>(), HasSubstr("yes: made from")) << s["sample"];
+  // Plain runs: another --set value the scene hash does not see (the pulse) is refused, another path count or
+  // seed is scored.
+  const std::string run = "run " + kScenes + "multi_object.json --set camera.crop=[480,242,16,4] -q";
+  ASSERT_EQ(sh(run + " --set render.samples_per_pixel=2 -o " + (dir_ / "p1").string()).code, 0);
+  ASSERT_EQ(sh(run + " --set render.samples_per_pixel=4 --set seed=9 -o " + (dir_ / "p2").string()).code, 0);
+  ASSERT_EQ(sh(run + " --set render.samples_per_pixel=2 --set laser.pulse_fwhm_ps=3000 -o " + (dir_ / "p3").string()).code, 0);
+  ASSERT_EQ(sh("reconstruct " + (dir_ / "p1").string() + " -q -o " + (dir_ / "p1.exr").string()).code, 0);
+  r = sh("evaluate " + (dir_ / "p2").string() + " --detections " + (dir_ / "p1.exr").string() + " -o " + (dir_ / "e7").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(nlohmann::json::parse(slurp(dir_ / "e7" / "metrics.json"))["detections_source"]["source_checked"].get<std::string>(),
+              HasSubstr("yes: made from " + (dir_ / "p1").string() + ", the same scene, settings and crop"));
+  r = sh("evaluate " + (dir_ / "p3").string() + " --detections " + (dir_ / "p1.exr").string() + " -o " + (dir_ / "e8").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("p1.exr: detections of a run of other settings than " + (dir_ / "p3").string()));
 }
 
 // A plate over a sphere: a crop where both are seen, and the sphere alone on the right.
@@ -689,7 +704,7 @@ TEST_F(Reconstruct, EvaluateRefusesDetectionsOfAnotherSceneOrCropOrWithoutTheirS
   ASSERT_EQ(r.code, 0) << r.output;
   const auto m = nlohmann::json::parse(slurp(dir_ / "e" / "metrics.json"));
   EXPECT_EQ(m["detections_source"]["source_checked"], "yes: made from " + fs::absolute(seed).lexically_normal().string() +
-                                                          ", the same scene and crop");
+                                                          ", the same scene, settings and crop");
   EXPECT_GT(m["objects"]["recall"].get<double>(), 0.5);
 
   // the seed run's detections, copied into slots 0 and 2 (no slot 1), and without scores
@@ -703,14 +718,15 @@ TEST_F(Reconstruct, EvaluateRefusesDetectionsOfAnotherSceneOrCropOrWithoutTheirS
     }
     img.write((dir_ / (gap ? "gap.exr" : "unscored.exr")).string());
     if (gap) continue;
-    // A header that names no scene or crop: scored, and said unchecked (it said "yes: ... the same scene and crop").
+    // A header that names no scene, crop or settings: scored, and said unchecked (it said "yes: ... the same scene and crop").
     img.set_attribute("spadgen_source", "{}");
     img.write((dir_ / "no_source.exr").string());
   }
   r = sh("evaluate " + a.string() + " --detections " + (dir_ / "no_source.exr").string() + " -o " + (dir_ / "e4").string());
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_EQ(nlohmann::json::parse(slurp(dir_ / "e4" / "metrics.json"))["detections_source"]["source_checked"],
-            "no: its spadgen_source names no scene (scene file and glTF hash) and its crop of the sensor (made from ?); taken on trust");
+            "no: its spadgen_source names no scene (scene file and glTF hash) and its crop of the sensor and its settings (--set "
+            "values, dataset parameters; an earlier spadgen's file names none) (made from ?); taken on trust");
   // det0.range with its data window one row below the display window (scored one row off, exit 0)
   {
     const auto& range = d.channels.at("det0.range");

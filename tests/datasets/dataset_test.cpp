@@ -458,6 +458,7 @@ TEST(DatasetFolder, WarningsAreGroupedByKindWithTheirNumbersLeftOut) {
   EXPECT_EQ(warning_kind("a rate of 1e+06 per s"), "a rate of # per s");
   EXPECT_EQ(warning_kind("expected a value in [0, 1]"), warning_kind("expected a value in [2, 5]"));  // a list's numbers
   for (const auto& [a, b] : {std::pair{"laser.offset_m[0]: far", "laser.offset_m[2]: far"}, {"layer0 too deep", "layer1 too deep"},
+                             {"m[0][1]: far", "m[0][2]: far"},
                              {"pde_400nm.csv: short", "pde_905nm.csv: short"}})
     EXPECT_NE(warning_kind(a), warning_kind(b)) << a;
   WarningTally t;

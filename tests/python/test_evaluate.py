@@ -104,6 +104,8 @@ def test_a_dataset_scored_from_a_mapping_and_from_files(dataset_dir, spadgen_bin
     m = spadgen.evaluate(val, picked, out=tmp_path / "val", program=spadgen_bin)
     assert m["selection"] == [[3, 3]] and sorted(s["sample"] for s in m["samples"]) == sorted(picked)
     assert m["objects"]["found"] == m["objects"]["objects"] > 0
+    m = spadgen.evaluate(ds, truth, out=tmp_path / "whole", program=spadgen_bin)  # the whole dataset: no selection
+    assert "selection" not in m and len(m["samples"]) == 6
     with pytest.raises(ValueError, match="the selection holds no samples"):
         spadgen.evaluate(ds.select(where=lambda row: False), {}, program=spadgen_bin)
     # the temporary files in the folder asked for, removed afterwards
