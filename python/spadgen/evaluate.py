@@ -111,7 +111,7 @@ def evaluate(target, detections=None, *, detector=None, out=None, tolerance_m=No
         or a path with {sample}, replaced by each sample folder's name ("preds/{sample}.npy");
       - an array (H, W, M) of ranges in metres, NaN where there is none (a run);
       - a mapping {sample folder name: array} (a dataset: "000042", "000042_r01" for a realisation), one per
-        done sample folder.
+        done sample folder of the selection (a 2D sample's may be left out: it is not scored then).
     Arrays are written as .npy into a temporary folder in tmp_dir (default: Python's, often a tmpfs in
     memory: a whole dataset's detections are written at once), removed afterwards (metrics.json's
     detections_source names the file the program read).

@@ -423,7 +423,8 @@ TEST_F(Reconstruct, EvaluateRefusesAnotherDatasetSamplesDetections) {
   r = sh("evaluate " + (dir_ / "seeds").string() + " --detections " + (dir_ / "seed_swap" / "{sample}.exr").string() + " -o " +
          (dir_ / "e6").string());
   ASSERT_EQ(r.code, 0) << r.output;
-  for (const auto& s : nlohmann::json::parse(slurp(dir_ / "e6" / "metrics.json"))["samples"])
+  const auto m6 = nlohmann::json::parse(slurp(dir_ / "e6" / "metrics.json"));  // (a temporary's member dangled)
+  for (const auto& s : m6["samples"])
     EXPECT_THAT(s["detections_source"]["source_checked"].get<std::string>(), HasSubstr("yes: made from")) << s["sample"];
   // Plain runs: another --set value the scene hash does not see (the pulse) is refused, another path count or
   // seed is scored.
