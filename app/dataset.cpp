@@ -1,6 +1,7 @@
 #include "app/dataset.h"
 #include "app/interrupt.h"
 #include "app/progress.h"
+#include "app/reconstruct.h"
 
 #include <algorithm>
 #include <array>
@@ -409,34 +410,18 @@ std::string evaluation_status(const std::string& dir, const std::set<std::string
   // done: as the folders are now (dataset status inspects them: a damaged sample is no longer done), or as
   // index.jsonl lists them
   std::set<std::string> done = done_now ? *done_now : indexed_done_folders(dir);
-  // an evaluation of some samples (--samples) is of those: the others' folders are not expected in it
-  std::string selection;  // "(of samples 0-3, 7: evaluate --samples)" when the evaluation is of some samples
-  if (const auto sel = m.find("selection"); sel != m.end() && sel->is_array()) {
-    std::vector<std::pair<int64_t, int64_t>> ranges;  // [[first, last], ...] (a malformed one: no selection)
-    for (const nlohmann::json& r : *sel)
-      if (r.is_array() && r.size() == 2 && r[0].is_number_integer() && r[1].is_number_integer())
-        ranges.emplace_back(r[0].get<int64_t>(), r[1].get<int64_t>());
-    std::sort(ranges.begin(), ranges.end());
-    const auto chosen = [&](int64_t i) {  // (by bisection: a random split is about one range per sample)
-      const auto it = std::upper_bound(ranges.begin(), ranges.end(), std::pair{i, std::numeric_limits<int64_t>::max()});
-      return it != ranges.begin() && std::prev(it)->second >= i;
-    };
-    for (auto it = done.begin(); !ranges.empty() && it != done.end();) {
+  // (an evaluation of some samples, --samples, is of those: the others' folders are not expected in it)
+  const auto chosen = SampleSelection::from_json(m.value("selection", nlohmann::json()));
+  std::string selection;  // "0-3,7" when the evaluation is of some samples, as --samples takes it
+  if (chosen) {
+    for (auto it = done.begin(); it != done.end();) {
       const std::string& f = *it;  // 000042, 000042_r01, 1234567 (a sample's index: the digits before _)
       const size_t digits = std::min(f.find('_'), f.size());
       const bool numbered = digits > 0 && digits <= 15 &&
                             std::all_of(f.begin(), f.begin() + std::ptrdiff_t(digits), [](char ch) { return ch >= '0' && ch <= '9'; });
-      it = numbered && !chosen(std::stoll(f.substr(0, digits))) ? done.erase(it) : std::next(it);
+      it = numbered && !chosen->contains(std::stoll(f.substr(0, digits))) ? done.erase(it) : std::next(it);
     }
-    for (const auto& [a, b] : ranges) {  // (as --samples takes it)
-      if (selection.size() > 200) {
-        selection += ",...";
-        break;
-      }
-      if (!selection.empty()) selection += ",";
-      selection += std::to_string(a);
-      if (b > a) selection += "-" + std::to_string(b);
-    }
+    selection = chosen->text(200);
   }
   std::set<std::string> scored;
   int64_t changed = 0, gone = 0;

@@ -269,8 +269,6 @@ void check_ranges(const std::string& path, const DetectionImage& img) {
 
 // The detections file (docs/detection.md): an EXR with `count` and det<i>.range (metres; NaN: none), and
 // optionally det<i>.score; or a float .npy (H, W, M) of ranges, NaN where there is none.
-// What a derived file records of the run it was made from (its spadgen_source, with the run's path) and
-// check_source compares: the seed, the scene's hash, the crop of the sensor (null where metadata lacks them).
 // What the scene was set to, which the scene hash (of the files) does not see: --set values and a dataset
 // sample's parameters and `set`. A hash of the run's resolved scene without what only draws another
 // realisation of the same data (the seeds), what is only written (outputs) and the Monte Carlo's settings
@@ -284,6 +282,9 @@ nlohmann::json settings_hash(const nlohmann::json& meta) {
   return scenes::hex64(scenes::fnv1a64(settings.dump()));
 }
 
+// What a derived file records of the run it was made from (its spadgen_source, with the run's path) and
+// check_source compares: the seed, the scene's hash, the crop of the sensor, the settings hash (null where
+// metadata lacks them).
 nlohmann::json source_fields(const RunFolder& run) {
   const auto& m = run.metadata();
   return {{"seed", m.value("seed", nlohmann::json(nullptr))},
@@ -666,65 +667,10 @@ struct DoneFolder {
   std::string sample_hash;
   bool intensity = false;  // a 2D intensity run (its metadata.json's acquisition.mode)
 };
-// The dataset indices of --samples, as sorted, disjoint, inclusive ranges (a range of 10^8 samples is two
-// numbers, not 10^8: it was expanded into a set, 4.7 GB, before it was checked against the dataset).
-class SampleSelection {
- public:
-  // "0,3,5-8", or @FILE with the list in a file (commas or whitespace between items: a long selection exceeds
-  // what one command-line argument may hold, 128 kB).
-  explicit SampleSelection(const std::string& given) {
-    std::string text = given;
-    if (!given.empty() && given[0] == '@') {
-      text = scenes::read_file_bounded(given.substr(1), int64_t{1} << 30, "--samples file");
-      for (char& ch : text)
-        if (ch == '\n' || ch == '\r' || ch == ' ' || ch == '\t') ch = ',';
-    }
-    const auto shown = [](const std::string& t) {  // (a token quoted as it is, shortened and printable)
-      std::string out = scenes::printable(t.substr(0, 40));
-      return t.size() > 40 ? out + "..." : out;
-    };
-    const auto number = [&](const std::string& t) {
-      if (t.empty() || t.size() > 15 || t.find_first_not_of("0123456789") != std::string::npos)
-        throw Error("--samples " + shown(given) + ": found '" + shown(t) + "', expected dataset indices and ranges such as 0,3,5-8");
-      return std::stoll(t);
-    };
-    std::vector<std::pair<int64_t, int64_t>> parts;
-    for (size_t i = 0; i < text.size();) {
-      const size_t end = std::min(text.find(',', i), text.size());
-      if (const std::string part = text.substr(i, end - i); !part.empty()) {
-        const size_t dash = part.find('-');
-        const int64_t a = number(part.substr(0, dash));
-        const int64_t b = dash == std::string::npos ? a : number(part.substr(dash + 1));
-        if (b < a) throw Error("--samples " + shown(given) + ": the range " + shown(part) + " is empty");
-        parts.emplace_back(a, b);
-      }
-      i = end + 1;
-    }
-    if (parts.empty()) throw Error("--samples " + shown(given) + ": selects no samples; expected dataset indices such as 0,3,5-8");
-    std::sort(parts.begin(), parts.end());
-    for (const auto& [a, b] : parts)  // (overlapping and adjacent ranges merged)
-      if (!ranges_.empty() && a <= ranges_.back().second + 1) ranges_.back().second = std::max(ranges_.back().second, b);
-      else ranges_.emplace_back(a, b);
-  }
-  bool contains(int64_t i) const {
-    const auto it = std::upper_bound(ranges_.begin(), ranges_.end(), std::pair{i, std::numeric_limits<int64_t>::max()});
-    return it != ranges_.begin() && std::prev(it)->second >= i;
-  }
-  int64_t last() const { return ranges_.back().second; }
-  // As metrics.json records it: [[first, last], ...].
-  nlohmann::json json() const {
-    nlohmann::json out = nlohmann::json::array();
-    for (const auto& [a, b] : ranges_) out.push_back({a, b});
-    return out;
-  }
-
- private:
-  std::vector<std::pair<int64_t, int64_t>> ranges_;
-};
-
-// only: the dataset indices to take (nullptr: every row); rows: set to the index's rows.
+// only: the dataset indices to take (nullptr: every row); samples: set to the samples the index knows (its
+// largest index + 1).
 std::vector<DoneFolder> done_sample_folders(const fs::path& dir, std::map<std::string, int>& not_done,
-                                            const SampleSelection* only = nullptr, int64_t* rows = nullptr) {
+                                            const SampleSelection* only = nullptr, int64_t* samples = nullptr) {
   const fs::path index = dir / "index.jsonl";
   if (!fs::is_regular_file(index))
     throw Error(dir.string() + ": a dataset folder without index.jsonl: the first `spadgen dataset run` into it is "
@@ -750,7 +696,8 @@ std::vector<DoneFolder> done_sample_folders(const fs::path& dir, std::map<std::s
         throw Error(where + ": expected a string \"" + key + "\" (an index row spadgen wrote); run the dataset again to write it");
       return j[key].get<std::string>();
     };
-    if (rows && r.contains("index") && r["index"].is_number_integer()) *rows = std::max(*rows, r["index"].get<int64_t>() + 1);
+    if (samples && r.contains("index") && r["index"].is_number_integer())
+      *samples = std::max(*samples, r["index"].get<int64_t>() + 1);
     if (only && !(r.contains("index") && r["index"].is_number_integer() && only->contains(r["index"].get<int64_t>()))) continue;
     const std::string status = text(r, "status");
     if (status != "done") {
@@ -795,6 +742,85 @@ std::vector<DoneFolder> done_sample_folders(const fs::path& dir, std::map<std::s
 }
 
 }  // namespace
+
+SampleSelection::SampleSelection(const std::string& given) {
+  std::string text = given;
+  if (!given.empty() && given[0] == '@') {
+    text = scenes::read_file_bounded(given.substr(1), int64_t{1} << 30, "--samples file");
+    for (char& ch : text)
+      if (ch == '\n' || ch == '\r' || ch == ' ' || ch == '\t') ch = ',';
+  }
+  const auto shown = [](const std::string& t) {  // (a token quoted as it is, shortened and printable)
+    std::string out = scenes::printable(t.substr(0, 40));
+    return t.size() > 40 ? out + "..." : out;
+  };
+  const auto number = [&](const std::string& t) {
+    if (t.empty() || t.size() > 15 || t.find_first_not_of("0123456789") != std::string::npos)
+      throw Error("--samples " + shown(given) + ": found '" + shown(t) + "', expected dataset indices and ranges such as 0,3,5-8");
+    return std::stoll(t);
+  };
+  std::vector<std::pair<int64_t, int64_t>> parts;
+  for (size_t i = 0; i < text.size();) {
+    const size_t end = std::min(text.find(',', i), text.size());
+    if (const std::string part = text.substr(i, end - i); !part.empty()) {
+      const size_t dash = part.find('-');
+      const int64_t a = number(part.substr(0, dash));
+      const int64_t b = dash == std::string::npos ? a : number(part.substr(dash + 1));
+      if (b < a) throw Error("--samples " + shown(given) + ": the range " + shown(part) + " is empty");
+      parts.emplace_back(a, b);
+    }
+    i = end + 1;
+  }
+  if (parts.empty()) throw Error("--samples " + shown(given) + ": selects no samples; expected dataset indices such as 0,3,5-8");
+  add_sorted_merged(std::move(parts));
+}
+
+std::optional<SampleSelection> SampleSelection::from_json(const nlohmann::json& ranges) {
+  std::vector<std::pair<int64_t, int64_t>> parts;
+  if (ranges.is_array())
+    for (const nlohmann::json& r : ranges)
+      if (r.is_array() && r.size() == 2 && r[0].is_number_integer() && r[1].is_number_integer() && r[0] <= r[1])
+        parts.emplace_back(r[0].get<int64_t>(), r[1].get<int64_t>());
+  if (parts.empty()) return std::nullopt;
+  SampleSelection s;
+  s.add_sorted_merged(std::move(parts));
+  return s;
+}
+
+void SampleSelection::add_sorted_merged(std::vector<std::pair<int64_t, int64_t>> parts) {
+  std::sort(parts.begin(), parts.end());
+  for (const auto& [a, b] : parts)  // (overlapping and adjacent ranges merged)
+    if (!ranges_.empty() && a <= ranges_.back().second + 1) ranges_.back().second = std::max(ranges_.back().second, b);
+    else ranges_.emplace_back(a, b);
+}
+
+bool SampleSelection::contains(int64_t i) const {  // (by bisection: a random split is about one range per sample)
+  const auto it = std::upper_bound(ranges_.begin(), ranges_.end(), std::pair{i, std::numeric_limits<int64_t>::max()});
+  return it != ranges_.begin() && std::prev(it)->second >= i;
+}
+
+nlohmann::json SampleSelection::json() const {
+  nlohmann::json out = nlohmann::json::array();
+  for (const auto& [a, b] : ranges_) out.push_back({a, b});
+  return out;
+}
+
+std::string SampleSelection::text(size_t most) const {
+  std::string out;
+  for (const auto& [a, b] : ranges_) {
+    if (out.size() > most) {
+      out += ",...";
+      break;
+    }
+    if (!out.empty()) out += ',';
+    out += std::to_string(a);
+    if (b > a) {
+      out += '-';
+      out += std::to_string(b);
+    }
+  }
+  return out;
+}
 
 bool is_derived_output(const std::string& rel) {
   for (const char* d : {"detections_edges", "detections_paper", "hdr"})
@@ -934,11 +960,11 @@ std::string evaluate(const EvaluateCommand& c) {
     std::map<std::string, int> not_done;
     std::optional<SampleSelection> selected;
     if (c.samples) selected.emplace(*c.samples);
-    int64_t rows_total = 0;
-    const std::vector<DoneFolder> samples = done_sample_folders(target, not_done, selected ? &*selected : nullptr, &rows_total);
-    if (selected && selected->last() >= rows_total)
+    int64_t indexed = 0;
+    const std::vector<DoneFolder> samples = done_sample_folders(target, not_done, selected ? &*selected : nullptr, &indexed);
+    if (selected && selected->last() >= indexed)
       throw Error("--samples: sample " + std::to_string(selected->last()) + " is not one of the dataset's " +
-                  std::to_string(rows_total) + " (index.jsonl: 0 to " + std::to_string(rows_total - 1) + ")");
+                  std::to_string(indexed) + " (index.jsonl: 0 to " + std::to_string(indexed - 1) + ")");
     std::string left_out;  // "1 failed, 2 stale"
     for (const auto& [status, n] : not_done) left_out += (left_out.empty() ? "" : ", ") + std::to_string(n) + " " + status;
     if (samples.empty())
@@ -961,6 +987,7 @@ std::string evaluate(const EvaluateCommand& c) {
     };
     // Every sample's file first: a missing one is named before any is scored, as is one that is no regular
     // file, or one file named for two samples ({sample}/../x.npy, a link: one file scored against several).
+    std::set<fs::path> without_file;  // the 2D sample folders --detections names no file for: left out
     if (!c.detections.empty()) {
       std::vector<std::string> missing;
       std::map<std::pair<dev_t, ino_t>, std::pair<std::string, std::string>> sample_of;  // by file: (its path, sample)
@@ -971,7 +998,8 @@ std::string evaluate(const EvaluateCommand& c) {
           if (errno != ENOENT && errno != ENOTDIR)
             throw Error("--detections " + c.detections + ": " + f + ": " + std::strerror(errno));
           // a 2D sample without detections is left out as without --detections (the detectors' own have none)
-          if (!sample.intensity) missing.push_back(f);
+          if (sample.intensity) without_file.insert(sample.path);
+          else missing.push_back(f);
           continue;
         }
         if (!S_ISREG(st.st_mode))
@@ -996,7 +1024,7 @@ std::string evaluate(const EvaluateCommand& c) {
     size_t scored = 0;
     for (const auto& [p, sample_hash, is_2d] : samples) {
       InterruptGuard::check();
-      if (is_2d && (c.detections.empty() || !fs::exists(file_of(p)))) {  // (with its hash: status names it when generated again)
+      if (is_2d && (c.detections.empty() || without_file.count(p))) {  // (with its hash: status names it when generated again)
         intensity_folders.push_back({{"sample", p.filename().string()}, {"sample_hash", sample_hash}});
         continue;
       }

@@ -1,8 +1,13 @@
 // `spadgen reconstruct RUN_DIR` (reference detectors, the 2D HDR inversion) and `spadgen evaluate
 // RUN_DIR|DATASET_DIR` (detections scored against the object labels). docs/detection.md.
 #pragma once
+#include <nlohmann/json.hpp>
+
+#include <cstdint>
 #include <optional>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "core/tile.h"
 
@@ -21,6 +26,28 @@ struct ReconstructOptions {
 };
 // Returns the path written.
 std::string reconstruct(const ReconstructOptions& options);
+
+// The dataset indices `evaluate --samples` chooses, as sorted, disjoint, inclusive ranges (a range of 10^8
+// samples is two numbers, not 10^8: it was expanded into a set, 4.7 GB, before it was checked against the
+// dataset). metrics.json records it as `selection`, which dataset status reads back.
+class SampleSelection {
+ public:
+  // "0,3,5-8", or @FILE with the list in a file (commas or whitespace between items: a long selection exceeds
+  // what one command-line argument may hold, 128 kB). Error naming the token otherwise, or when it selects none.
+  explicit SampleSelection(const std::string& given);
+  // metrics.json's [[first, last], ...]; none when it holds no well-formed range.
+  static std::optional<SampleSelection> from_json(const nlohmann::json& ranges);
+  bool contains(int64_t index) const;
+  int64_t last() const { return ranges_.back().second; }
+  nlohmann::json json() const;
+  // As --samples takes it ("0-3,7"), ",..." once past `most` characters.
+  std::string text(size_t most) const;
+
+ private:
+  SampleSelection() = default;
+  void add_sorted_merged(std::vector<std::pair<int64_t, int64_t>> parts);
+  std::vector<std::pair<int64_t, int64_t>> ranges_;
+};
 
 struct EvaluateCommand {
   std::string target;              // a run folder or a dataset folder

@@ -458,20 +458,22 @@ SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash) co
   }
   // The sample as it resolves now failed: failed, with why (also when its folder is damaged or stale: a run
   // that could not generate the damaged sample again left it damaged, and said it would generate it).
+  // (what a done sample's record holds of its files, dropped when it is not done after all)
+  const auto forget_files = [&rec] { rec.files.clear(), rec.listed.clear(), rec.bytes = 0, rec.summary = nullptr, rec.warnings.clear(); };
   const auto failed = [&]() {
     const std::optional<json> f = read_json(dir_ / failure_path(s));
     // (a damaged record, of other types than record_failure writes, is none)
     if (!f || !f->is_object() || !f->contains("sample_hash") || (*f)["sample_hash"] != rec.hash ||
         (f->contains("error") && !(*f)["error"].is_string()))
       return false;
-    rec.files.clear(), rec.listed.clear(), rec.bytes = 0, rec.summary = nullptr, rec.warnings.clear();
+    forget_files();
     rec.status = Status::Failed;
     rec.error = f->value("error", "");
     return true;
   };
   if (done && !stale && !gone.empty()) {
     if (failed()) return rec;
-    rec.files.clear(), rec.listed.clear(), rec.bytes = 0, rec.summary = nullptr, rec.warnings.clear();
+    forget_files();
     rec.status = Status::Damaged;
     rec.error = "listed in metadata.json but gone or changed: ";
     for (size_t i = 0; i < gone.size() && i < 4; ++i) rec.error += (i ? ", " : "") + gone[i];
@@ -484,7 +486,7 @@ SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash) co
     return rec;
   }
   if (failed()) return rec;
-  rec.files.clear(), rec.listed.clear(), rec.bytes = 0, rec.summary = nullptr, rec.warnings.clear();
+  forget_files();
   if (stale) rec.status = Status::Stale;
   return rec;
 }
