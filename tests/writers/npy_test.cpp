@@ -144,6 +144,35 @@ TEST(NpyReader, AMalformedShapeIsAnErrorNamingTheFile) {
   }
 }
 
+// A header naming a key twice (Python's dict literal takes the later value; the reader took the first) is
+// refused, naming the key and the file.
+TEST(NpyReader, AKeyNamedTwiceInTheHeaderIsRefused) {
+  TempDir dir;
+  {
+    NpyWriter w(dir.file("a.npy"), Dtype::F32, {2, 3});
+    w.commit();
+  }
+  const std::string good = read_bytes(dir.file("a.npy"));
+  ASSERT_EQ(good.find("{'descr': '<f4'"), 10u);
+  const std::string twice = "'descr': '<f8', ";
+  std::string bytes = good;
+  const size_t pad = bytes.find("}") + 1;  // the padding's spaces after the dict make room for it
+  ASSERT_GE(bytes.find('\n', pad) - pad, twice.size());
+  bytes.erase(pad, twice.size());
+  bytes.insert(11, twice);
+  ASSERT_EQ(bytes.size(), good.size());
+  std::ofstream(dir.file("b.npy"), std::ios::binary) << bytes;
+  try {
+    NpyReader r(dir.file("b.npy"));
+    ADD_FAILURE() << "was read as " << writers::numpy_descr(r.dtype());
+  } catch (const Error& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("b.npy"), std::string::npos) << m;
+    EXPECT_NE(m.find("'descr' twice"), std::string::npos) << m;
+  }
+  EXPECT_EQ(NpyReader(dir.file("a.npy")).dtype(), Dtype::F32);
+}
+
 // A header longer than the file says which format version's prefix it read the length from (a version 3
 // file whose prefix was of version 1 was only "the header runs past the end").
 TEST(NpyReader, AHeaderPastTheEndNamesItsVersionAndSizes) {
