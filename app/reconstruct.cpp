@@ -1075,8 +1075,9 @@ std::string evaluate(const EvaluateCommand& c) {
     files.push_back("samples.csv");
     text << scored << (scored == 1 ? " sample folder" : " sample folders") << " (realisations included)"
          << (left_out.empty() ? std::string() : "; not scored, not done: " + left_out)
-         << (intensity > 0 ? "; not scored, 2D intensity runs (no gate profiles for the detector): " + std::to_string(intensity)
-                           : std::string())
+         << (intensity == 0             ? std::string()
+             : c.detections.empty() ? "; not scored, 2D intensity runs (no gate profiles for the detector): " + std::to_string(intensity)
+                                    : "; not scored, 2D intensity runs without a file of --detections: " + std::to_string(intensity))
          << "\n" << summary(report);
   } else {
     throw Error(c.target + ": neither a run folder (metadata.json) nor a dataset folder (dataset.json)");

@@ -990,7 +990,9 @@ TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
   ASSERT_EQ(sh("reconstruct " + (out3 / "samples" / "000000").string() + " -q -o " + (dir_ / "mixed_000000.exr").string()).code, 0);
   r = sh("evaluate " + out3.string() + " --detections " + (dir_ / "mixed_{sample}.exr").string() + " -o " + (dir_ / "e_mixed").string());
   ASSERT_EQ(r.code, 0) << r.output;
-  EXPECT_THAT(r.output, HasSubstr("1 sample folder (realisations included); not scored, 2D intensity runs"));
+  // (the summary says why: no file, not "no gate profiles", which --detections makes up for)
+  EXPECT_THAT(r.output, HasSubstr("1 sample folder (realisations included); not scored, 2D intensity runs without a file of "
+                                  "--detections: 1\n"));
   // a scored sample damaged since (a file gone; its metadata.json as it was): the evaluation is out of date as
   // dataset status finds the folders (index.jsonl still lists it done); a metrics.json of no dataset is named
   fs::remove(out3 / "samples/000000/counts.npy");
