@@ -25,9 +25,11 @@
 #include <optional>
 #include <set>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "datasets/dataset.h"
+#include "scenes/scene.h"
 #include "scenes/scene_file.h"
 
 namespace spadgen::datasets {
@@ -181,6 +183,10 @@ class DatasetFolder {
 
  private:
   const std::string& scene_content_hash(int scene) const;
+  // Whether a sample's resolved scene r renders GGX lobes (render_revisions): a material its meshes use is not Lambertian
+  // as the sample's edits leave it, or a mesh has the glTF's default material. The glTF's materials are loaded
+  // once per glTF (and glTF scene).
+  bool renders_ggx(const scenes::ResolvedRun& r) const;
   nlohmann::ordered_json record() const;  // what dataset.json holds for this dataset
   // check()'s refusals of the existing folder DIR against `wanted` (record()); its dataset.json as it is.
   std::optional<nlohmann::ordered_json> checked(const nlohmann::ordered_json& wanted) const;
@@ -188,6 +194,12 @@ class DatasetFolder {
   DatasetSpec spec_;
   std::filesystem::path dir_;
   mutable std::map<int, std::string> content_hashes_;  // under content_mutex_
+  struct SceneMaterials {
+    bool loaded = false;                      // else unknown (the glTF did not load): GGX taken to be rendered
+    bool default_material = false;            // a mesh has none (the glTF's default: metallic 1)
+    std::vector<scenes::Material> used;       // the materials the meshes use, unedited
+  };
+  mutable std::map<std::pair<std::string, std::string>, SceneMaterials> scene_materials_;  // by glTF and glTF scene; under content_mutex_
   mutable std::mutex content_mutex_;
 };
 

@@ -24,18 +24,22 @@ float max_of(const Spec& s) { return std::max(s.x, s.y); }
 
 }  // namespace
 
-float ggx_d(float alpha, float cos_h) {
+float ggx_d(float alpha, float cos_h, float sin2_h) {
   if (cos_h <= 0.0f) return 0.0f;
   const float a2 = alpha * alpha;
-  const float c2 = cos_h * cos_h;
-  const float d = c2 * (a2 - 1.0f) + 1.0f;
+  // cos^2 (a^2 - 1) + 1 = a^2 cos^2 + sin^2: near a narrow lobe's peak the left side is a difference of
+  // numbers near 1 (float steps of about 1e-7 against a^2 = 6e-6 at roughness 0.05: the peak was 1.4 %
+  // bright there, 7 % at 0.035); sin^2 from the vector's own small components keeps its precision.
+  const float d = a2 * cos_h * cos_h + sin2_h;
   return a2 / (kPiF * d * d);
 }
+
+float ggx_d(float alpha, const glm::vec3& h) { return ggx_d(alpha, h.z, h.x * h.x + h.y * h.y); }
 
 glm::vec3 sample_ggx(float alpha, float u, float v) {
   const float tan2 = alpha * alpha * u / std::max(1.0f - u, 1e-7f);
   const float cos_t = 1.0f / std::sqrt(1.0f + tan2);
-  const float sin_t = std::sqrt(std::max(0.0f, 1.0f - cos_t * cos_t));
+  const float sin_t = std::sqrt(tan2) * cos_t;  // not sqrt(1 - cos^2): no cancellation in a narrow lobe
   const float phi = 2.0f * kPiF * v;
   return {sin_t * std::cos(phi), sin_t * std::sin(phi), cos_t};
 }
@@ -91,7 +95,7 @@ Spec Bsdf::specular_f(const glm::vec3& wo, const glm::vec3& wi) const {
   const float c = glm::dot(wo, h);
   Spec f((1.0f - m_.metallic) * fresnel_dielectric(c, eta_fresnel_));
   if (m_.metallic > 0.0f) f += m_.metallic * schlick(m_.base, c);
-  const float dg = ggx_d(m_.alpha, h.z) * g1_o_ * ggx_g1(m_.alpha, wi.z);
+  const float dg = ggx_d(m_.alpha, h) * g1_o_ * ggx_g1(m_.alpha, wi.z);
   return f * (dg / (4.0f * wo.z * wi.z));
 }
 
@@ -102,7 +106,7 @@ Spec Bsdf::transmission_f(const glm::vec3& wo, const glm::vec3& wi) const {
     const glm::vec3 wr(wi.x, wi.y, -wi.z);
     const glm::vec3 h = glm::normalize(wo + wr);
     const float f_d = fresnel_dielectric(glm::dot(wo, h), m_.ior);
-    const float dg = ggx_d(m_.alpha, h.z) * g1_o_ * ggx_g1(m_.alpha, wr.z);
+    const float dg = ggx_d(m_.alpha, h) * g1_o_ * ggx_g1(m_.alpha, wr.z);
     return tint * ((1.0f - f_d) * dg / (4.0f * wo.z * wr.z));
   }
   // Walter et al. 2007 in radiance mode (pbrt-v3 MicrofacetTransmission with the 1/eta^2 factor folded in).
@@ -112,7 +116,7 @@ Spec Bsdf::transmission_f(const glm::vec3& wo, const glm::vec3& wi) const {
   if (co <= 0.0f || ci >= 0.0f) return Spec(0.0f);
   const float f_d = fresnel_dielectric(co, eta_);
   const float denom = co + eta_ * ci;
-  const float dg = ggx_d(m_.alpha, h.z) * g1_o_ * ggx_g1(m_.alpha, wi.z);
+  const float dg = ggx_d(m_.alpha, h) * g1_o_ * ggx_g1(m_.alpha, wi.z);
   return tint * ((1.0f - f_d) * dg * std::fabs(ci) * co / (std::fabs(wi.z) * wo.z * denom * denom));
 }
 
@@ -262,7 +266,7 @@ LobeValues Bsdf::lobes(const glm::vec3& wi_world) const {
       const float c = glm::dot(wo_, h);
       if (c > 0.0f && h.z > 0.0f) {
         out.f_cos[kSpecularLobe] = specular_f(wo_, wi) * wi.z;
-        out.pdf[kSpecularLobe] = specular_weight_ / total * ggx_d(m_.alpha, h.z) * h.z / (4.0f * c);
+        out.pdf[kSpecularLobe] = specular_weight_ / total * ggx_d(m_.alpha, h) * h.z / (4.0f * c);
       }
     }
     return out;
@@ -273,14 +277,14 @@ LobeValues Bsdf::lobes(const glm::vec3& wi_world) const {
       const glm::vec3 wr(wi.x, wi.y, -wi.z);
       const glm::vec3 h = glm::normalize(wo_ + wr);
       const float c = glm::dot(wo_, h);
-      if (c > 0.0f && h.z > 0.0f) pdf = ggx_d(m_.alpha, h.z) * h.z / (4.0f * c);
+      if (c > 0.0f && h.z > 0.0f) pdf = ggx_d(m_.alpha, h) * h.z / (4.0f * c);
     } else {
       glm::vec3 h = glm::normalize(wo_ + eta_ * wi);
       if (h.z < 0.0f) h = -h;
       const float co = glm::dot(wo_, h), ci = glm::dot(wi, h);
       const float denom = co + eta_ * ci;
       if (co > 0.0f && ci < 0.0f && h.z > 0.0f)
-        pdf = ggx_d(m_.alpha, h.z) * h.z * eta_ * eta_ * std::fabs(ci) / (denom * denom);
+        pdf = ggx_d(m_.alpha, h) * h.z * eta_ * eta_ * std::fabs(ci) / (denom * denom);
     }
     if (pdf > 0.0f) {
       out.f_cos[kTransmissionLobe] = transmission_f(wo_, wi) * std::fabs(wi.z);

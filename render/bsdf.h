@@ -20,9 +20,11 @@ namespace spadgen::render {
 float fresnel_dielectric(float cos_incident, float eta);
 
 // The GGX (Trowbridge-Reitz) microfacet distribution of alpha = roughness^2: its density D of the half-vector
-// at cos_h from the normal, and a draw of a microfacet normal (local frame, z the normal) with density
-// D(h) cos(theta_h) from two uniform numbers.
-float ggx_d(float alpha, float cos_h);
+// at cos_h from the normal (sin2_h = sin^2 of that angle, computed apart: its precision sets a narrow lobe's),
+// or of unit h in the local frame (z the normal), and a draw of a microfacet normal (local frame) with
+// density D(h) cos(theta_h) from two uniform numbers.
+float ggx_d(float alpha, float cos_h, float sin2_h);
+float ggx_d(float alpha, const glm::vec3& h);
 glm::vec3 sample_ggx(float alpha, float u, float v);
 
 // A material resolved at one point, in the two channels (laser, ambient).

@@ -28,7 +28,7 @@ float glossy_target_pdf(const GlossyTarget& g, const glm::vec3& w) {
   const glm::vec3 m = glm::normalize(out + g.wl);
   const float c = glm::dot(out, m), cm = glm::dot(m, g.n);
   if (!(c > 0.0f) || !(cm > 0.0f)) return 0.0f;
-  return ggx_d(g.alpha, cm) * cm / (4.0f * c);
+  return ggx_d(g.alpha, cm, glm::dot(glm::cross(m, g.n), glm::cross(m, g.n))) * cm / (4.0f * c);
 }
 
 bool sample_direction_lobe(const DirectionLobe& g, float u, float v, glm::vec3* w) {
@@ -43,7 +43,9 @@ bool sample_direction_lobe(const DirectionLobe& g, float u, float v, glm::vec3* 
 
 float direction_lobe_pdf(const DirectionLobe& g, const glm::vec3& w) {
   const float c = glm::dot(w, g.axis);
-  return c > 0.0f ? ggx_d(g.alpha, c) * c : 0.0f;
+  if (!(c > 0.0f)) return 0.0f;
+  const glm::vec3 s = glm::cross(w, g.axis);
+  return ggx_d(g.alpha, c, glm::dot(s, s)) * c;
 }
 
 glm::dvec2 strip_coordinates(const glm::dvec3& p, const glm::dvec3& o, const glm::dvec3& a, const glm::dvec3& b) {

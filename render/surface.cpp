@@ -47,7 +47,7 @@ Shading::Shading(const scenes::Scene& scene, double laser_wavelength_m, const gl
     p.transmission = std::clamp(m.transmission, 0.0f, 1.0f);
     p.ior = m.ior > 0.0f ? m.ior : 1.5f;
     p.thin_walled = !(m.thickness_m > 0.0f);
-    p.lambertian = p.metallic == 0.0f && roughness == 1.0f && p.transmission == 0.0f;
+    p.lambertian = m.lambertian();
     p.emission = to_spec(m.emissive, w_laser_, w_ambient_) * static_cast<float>(ambient_photometric);
     p.emission.x = 0.0f;  // emissive surfaces are ambient light; the laser is the only pulsed source
     if (p.emission.y > 0.0f) has_emission_ = true;

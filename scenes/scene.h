@@ -4,6 +4,7 @@
 #pragma once
 #include <glm/glm.hpp>
 
+#include <algorithm>
 #include <cstdint>
 #include <limits>
 #include <memory>
@@ -43,6 +44,12 @@ struct Material {
   float attenuation_distance_m = std::numeric_limits<float>::infinity();  // KHR_materials_volume
   glm::vec3 attenuation_color{1, 1, 1};                                   // KHR_materials_volume
   bool transmissive() const { return transmission > 0.0f; }
+  // Diffuse only, without a Fresnel layer or a GGX lobe (metallic 0, roughness 1, no transmission, each
+  // clamped to [0, 1] as the renderer takes them).
+  bool lambertian() const {
+    return std::clamp(metallic, 0.0f, 1.0f) == 0.0f && std::clamp(roughness, 0.0f, 1.0f) == 1.0f &&
+           std::clamp(transmission, 0.0f, 1.0f) == 0.0f;
+  }
   // A medium bounded by the mesh (not thin-walled): what its triangles enclose.
   bool bounds_medium() const { return transmissive() && thickness_m > 0.0f; }
   // A volume that bends light: the laser's connections refract through it.

@@ -420,7 +420,8 @@ TEST(DatasetFile, RangesText) {
 // sample_hash's revisions of the renderer's rules: each applies where its rule changed what a sample renders
 // (its samples rendered before are stale, with the change in words), and nowhere else (other samples keep their
 // hashes): a gate sweep to a target error; an intensity run to a target error that keeps its laser return
-// without laser_on.
+// without laser_on; a scene rendering GGX lobes (a glossy or metallic material, in its glTF or by a sample's
+// parameters).
 TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
   const fs::path dir = fs::temp_directory_path() / ("spadgen_dataset_revisions_" + std::to_string(::getpid()));
   const auto resolved = [&](const std::string& set) {
@@ -429,6 +430,7 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
   };
   const std::string target = "\"render.target_relative_error\": 0.05, ";
   const std::string intensity = "\"acquisition.mode\": \"intensity\"";
+  const std::string ggx = "glossy and metallic materials (GGX) render otherwise: a narrow lobe's peak was up to 7 % bright";
   struct Case {
     std::string set;
     std::string revisions;  // "" where none applies
@@ -440,11 +442,20 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
            {target + intensity + ", \"outputs.light\": true",
             "render.target_relative_error holds the laser return an intensity run keeps (outputs.light, outputs.transient)"},
            {target + intensity + ", \"outputs.light\": true, \"acquisition.intensity.laser_on\": true", ""},
-           {intensity + ", \"outputs.light\": true", ""}}) {
+           {intensity + ", \"outputs.light\": true", ""},
+           // the flat target's paper is Lambertian: a GGX lobe only where a sample's parameters make it glossy
+           {"\"materials.white_paper.roughness\": 0.5", ggx},
+           {"\"materials.white_paper.roughness\": 1", ""},
+           {"\"materials.white_paper.metallic\": 0.2", ggx}}) {
     const DatasetFolder::Resolved r = resolved(c.set);
     EXPECT_EQ(r.revisions, c.revisions) << c.set;
     EXPECT_EQ(r.hash != r.hash_before_revisions, !c.revisions.empty()) << c.set;
   }
+  // the multi-object scene's plates are glossy (roughness 0.05): every sample of it
+  const DatasetSpec spec = parse_dataset_text("{\"scenes\": [\"" + kScenes + "multi_object.json\"]}", "test_dataset.json");
+  const DatasetFolder::Resolved r = DatasetFolder(spec, dir).resolve(make_sample(spec, 0));
+  EXPECT_EQ(r.revisions, ggx);
+  EXPECT_NE(r.hash, r.hash_before_revisions);
   fs::remove_all(dir);
 }
 
