@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # A real single-node Slurm cluster: starts munged, slurmctld and slurmd (Debian's slurm-wlm and munge) in a
-# temporary folder with their own ports and socket, submits the shipped examples/slurm/dataset_array.sbatch
+# temporary folder with their own ports and socket by examples/slurm/local_slurm.sh, submits the shipped examples/slurm/dataset_array.sbatch
 # as a 4-task job array on a small dataset, waits for it, and checks that the dataset equals a serial run
 # byte for byte and that each task ran its own shard. Stops the daemons and removes everything afterwards.
 #
@@ -18,70 +18,21 @@ done
 W=$(mktemp -d /tmp/spadgen-slurm.XXXXXX)
 chmod 755 "$W"
 cleanup() {
-  for f in slurmd slurmctld munged; do
-    [ -f "$W/$f.pid" ] && kill "$(cat "$W/$f.pid")" 2>/dev/null || true
-  done
-  sleep 0.5
-  for f in slurmd slurmctld munged; do
-    [ -f "$W/$f.pid" ] && kill -9 "$(cat "$W/$f.pid")" 2>/dev/null || true
-  done
+  "$SRC/examples/slurm/local_slurm.sh" stop "$W/slurm" 2>/dev/null || true
   rm -rf "$W"
 }
 trap cleanup EXIT
 fail() {
   echo "FAIL: $*"
-  for log in munged.log slurmctld.log slurmd.log; do [ -f "$W/$log" ] && { echo "--- $log"; tail -20 "$W/$log"; }; done
+  for log in munged.log slurmctld.log slurmd.log; do [ -f "$W/slurm/$log" ] && { echo "--- $log"; tail -20 "$W/slurm/$log"; }; done
   exit 1
 }
 
-# munge: its own socket and pid file, the package's key.
-mkdir -p "$W/munge"
-chown munge:munge "$W/munge"
-runuser -u munge -- munged --socket="$W/munge/munge.sock" --pid-file="$W/munge/munged.pid" \
-  --log-file="$W/munge/munged.log" --seed-file="$W/munge/munged.seed" || fail "munged did not start"
-ln -sf "$W/munge/munged.pid" "$W/munged.pid"
-
-# Slurm: one node (this machine), ports of our own, state in $W.
-host=$(hostname -s)
-port=$((20000 + RANDOM % 20000))
-mkdir -p "$W/state" "$W/spool"
-cat > "$W/slurm.conf" <<CONF
-ClusterName=spadgentest
-SlurmctldHost=$host(127.0.0.1)
-SlurmctldPort=$port
-SlurmdPort=$((port + 1))
-AuthType=auth/munge
-AuthInfo=socket=$W/munge/munge.sock
-CredType=cred/munge
-SlurmUser=root
-SlurmdUser=root
-ProctrackType=proctrack/linuxproc
-TaskPlugin=task/none
-SelectType=select/cons_tres
-SelectTypeParameters=CR_Core
-MpiDefault=none
-ReturnToService=2
-StateSaveLocation=$W/state
-SlurmdSpoolDir=$W/spool
-SlurmctldPidFile=$W/slurmctld.pid
-SlurmdPidFile=$W/slurmd.pid
-SlurmctldLogFile=$W/slurmctld.log
-SlurmdLogFile=$W/slurmd.log
-JobCompType=jobcomp/none
-AccountingStorageType=accounting_storage/none
-NodeName=$host NodeAddr=127.0.0.1 CPUs=$(nproc) State=UNKNOWN
-PartitionName=test Nodes=ALL Default=YES MaxTime=INFINITE State=UP
-CONF
-export SLURM_CONF="$W/slurm.conf"
-slurmctld -c -f "$SLURM_CONF" || fail "slurmctld did not start"
-slurmd -f "$SLURM_CONF" || fail "slurmd did not start"
-for i in $(seq 1 60); do
-  state=$(sinfo -h -o %T 2>/dev/null | head -1 || true)
-  [ "$state" = "idle" ] && break
-  sleep 0.5
-done
-[ "$state" = "idle" ] || fail "the node is not idle after 30 s (state: '$state')"
-echo "slurm up: node $host idle (controller port $port)"
+# The shipped one-machine Slurm (munged, slurmctld, slurmd in a folder of their own), as a user starts it.
+"$SRC/examples/slurm/local_slurm.sh" start "$W/slurm" > "$W/slurm.env" || fail "examples/slurm/local_slurm.sh start failed"
+grep -qx "export SLURM_CONF=$W/slurm/slurm.conf" "$W/slurm.env" || { cat "$W/slurm.env"; fail "start printed no SLURM_CONF line"; }
+. "$W/slurm.env"
+"$SRC/examples/slurm/local_slurm.sh" status "$W/slurm" | grep -q " idle " || fail "status does not say the node is idle"
 
 # A small dataset: 6 samples of a crop of the multi-object scene, 2 realisations of the noise each.
 cat > "$W/dataset.json" <<JSON
