@@ -40,8 +40,27 @@ std::string describe(const json& v) {
 
 struct Reader {
   std::string file;
+  // The file's mistakes so far: each part of the file (a top-level key, a key of set, grid or random) is read
+  // on its own (each()), so that one reading names them all, as a scene file's does.
+  mutable std::vector<std::string> errors;
   [[noreturn]] void fail(const std::string& where, const std::string& what) const {
     throw Error(file + ": " + where + ": " + what);
+  }
+  template <class F>
+  void each(F&& read_part) const {
+    try {
+      read_part();
+    } catch (const Error& e) {
+      errors.push_back(e.what());
+    }
+  }
+  // Stops with every mistake found (one: as it is; several: counted, one per line).
+  void stop_on_errors() const {
+    if (errors.empty()) return;
+    if (errors.size() == 1) throw Error(errors.front());
+    std::string out = std::to_string(errors.size()) + " errors in the dataset file:";
+    for (const std::string& e : errors) out += "\n" + e;
+    throw Error(out);
   }
   double number(const json& v, const std::string& where, const std::string& expected) const {
     if (!v.is_number() || !std::isfinite(v.get<double>())) fail(where, "found " + describe(v) + ", expected " + expected);
@@ -201,7 +220,7 @@ int64_t DatasetSpec::grid_cells() const {
 int64_t DatasetSpec::count() const { return samples.value_or(grid_cells()); }
 
 DatasetSpec parse_dataset_text(const std::string& text, const std::string& path) {
-  const Reader rd{path.empty() ? "<dataset>" : path};
+  const Reader rd{path.empty() ? "<dataset>" : path, {}};
   // checked: depth, duplicate keys, numbers; a number written with a fraction of zero (6.0) read as the
   // integer (6), so that it makes the same samples
   const json doc = integral_numbers_as_integers(scenes::parse_json(text, rd.file));
@@ -219,74 +238,89 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
     if (k.key.find('.') == std::string::npos) known.push_back(k.key);
   known.push_back("seeds");
   for (auto it = doc.begin(); it != doc.end(); ++it)
-    if (std::find(known.begin(), known.end(), it.key()) == known.end()) {
-      const std::string near = scenes::closest(it.key(), known);
-      rd.fail("/" + it.key(), "unknown key" + (near.empty() ? "; the keys of a dataset file are: description, seed, scenes, "
-                                                              "samples, set, grid, random, seeds, repeats"
-                                                            : "; did you mean " + near + "?"));
-    }
+    if (std::find(known.begin(), known.end(), it.key()) == known.end())
+      rd.each([&] {
+        const std::string near = scenes::closest(it.key(), known);
+        rd.fail("/" + it.key(), "unknown key" + (near.empty() ? "; the keys of a dataset file are: description, seed, scenes, "
+                                                                "samples, set, grid, random, seeds, repeats"
+                                                              : "; did you mean " + near + "?"));
+      });
 
   DatasetSpec s;
   s.file = path.empty() ? "" : fs::absolute(path).lexically_normal().string();
   const std::string dir = path.empty() ? "." : fs::absolute(path).parent_path().string();
-  if (doc.contains("description")) {
-    if (!doc["description"].is_string()) rd.fail("/description", "found " + describe(doc["description"]) + ", expected a string");
-    s.description = doc["description"].get<std::string>();
-  }
-  if (doc.contains("seed")) s.seed = rd.seed(doc["seed"], "/seed");
-  if (!doc.contains("scenes")) rd.fail("/scenes", "missing; expected an array of scene files (relative to the dataset file)");
-  const json& sc = doc["scenes"];
-  if (!sc.is_array() || sc.empty()) rd.fail("/scenes", "found " + describe(sc) + ", expected a non-empty array of scene files");
-  for (size_t i = 0; i < sc.size(); ++i) {
-    const std::string at = "/scenes/" + std::to_string(i);
-    if (!sc[i].is_string() || sc[i].get<std::string>().empty()) rd.fail(at, "found " + describe(sc[i]) + ", expected a file name");
-    const std::string name = sc[i].get<std::string>();
-    fs::path p(name);
-    if (p.is_relative()) p = fs::path(dir) / p;
-    const std::string full = p.lexically_normal().string();
-    const std::string problem = scenes::file_problem(full, scenes::kMaxSceneFileBytes);
-    if (!problem.empty()) rd.fail(at, "the scene file " + full + " " + problem + "; expected a path relative to the dataset file");
-    if (std::find(s.scene_names.begin(), s.scene_names.end(), name) != s.scene_names.end())
-      rd.fail(at, "lists " + name + " twice; expected each scene file once");
-    s.scenes.push_back(full);
-    s.scene_names.push_back(name);
-  }
-  if (doc.contains("samples") && !doc["samples"].is_null()) {
-    const json& n = doc["samples"];
-    if (!n.is_number_integer() && !n.is_number_unsigned()) rd.fail("/samples", "found " + describe(n) + ", expected an integer in [1, 1e8] or null");
-    const int64_t v = n.get<int64_t>();
-    if (v < 1 || v > kMaxSamples) rd.fail("/samples", "found " + describe(n) + ", expected an integer in [1, 1e8] or null");
-    s.samples = v;
-  }
-  if (doc.contains("repeats")) {
-    const json& r = doc["repeats"];
-    if (!r.is_number_integer() && !r.is_number_unsigned()) rd.fail("/repeats", "found " + describe(r) + ", expected an integer in [1, 1000]");
-    const int64_t v = r.get<int64_t>();
-    if (v < 1 || v > 1000) rd.fail("/repeats", "found " + describe(r) + ", expected an integer in [1, 1000]");
-    s.repeats = static_cast<int>(v);
-  }
-  if (doc.contains("seeds")) {
-    const json& sd = doc["seeds"];
-    if (!sd.is_object()) rd.fail("/seeds", "found " + describe(sd) + ", expected an object {\"light\": ..., \"chip\": ..., \"noise\": ...}");
-    for (auto it = sd.begin(); it != sd.end(); ++it) {
-      const std::string at = "/seeds/" + it.key();
-      std::optional<uint64_t>* slot = it.key() == "light" ? &s.light_seed : it.key() == "chip" ? &s.chip_seed
-                                                                        : it.key() == "noise" ? &s.noise_seed : nullptr;
-      if (!slot) {
-        const std::string near = scenes::closest(it.key(), {"light", "chip", "noise"});
-        rd.fail(at, "unknown key" + (near.empty() ? "; the seeds are light, chip and noise" : "; did you mean " + near + "?"));
-      }
-      if (it.value().is_string() && it.value().get<std::string>() == "per_sample") continue;
-      if (it.value().is_string()) rd.fail(at, "found " + describe(it.value()) + ", expected an integer in [0, 2^53] or \"per_sample\"");
-      *slot = rd.seed(it.value(), at);
+  rd.each([&] {
+    if (doc.contains("description")) {
+      if (!doc["description"].is_string()) rd.fail("/description", "found " + describe(doc["description"]) + ", expected a string");
+      s.description = doc["description"].get<std::string>();
     }
-    // realisation r uses noise seed + r: the last must be a seed too (it failed every sample after rendering)
-    if (s.noise_seed && *s.noise_seed + uint64_t(s.repeats - 1) > kMaxSeed)
-      rd.fail("/seeds/noise", "found " + std::to_string(*s.noise_seed) + ", and realisation " + std::to_string(s.repeats - 1) +
-                                  " (repeats " + std::to_string(s.repeats) + ") would use noise seed + " +
-                                  std::to_string(s.repeats - 1) + ", past 2^53; expected at most " +
-                                  std::to_string(kMaxSeed - uint64_t(s.repeats - 1)));
-  }
+  });
+  rd.each([&] {
+    if (doc.contains("seed")) s.seed = rd.seed(doc["seed"], "/seed");
+  });
+  bool scenes_read = false;  // the keys' values are checked against the first scene file: none without a valid list
+  rd.each([&] {
+    if (!doc.contains("scenes")) rd.fail("/scenes", "missing; expected an array of scene files (relative to the dataset file)");
+    const json& sc = doc["scenes"];
+    if (!sc.is_array() || sc.empty()) rd.fail("/scenes", "found " + describe(sc) + ", expected a non-empty array of scene files");
+    for (size_t i = 0; i < sc.size(); ++i) {
+      const std::string at = "/scenes/" + std::to_string(i);
+      if (!sc[i].is_string() || sc[i].get<std::string>().empty()) rd.fail(at, "found " + describe(sc[i]) + ", expected a file name");
+      const std::string name = sc[i].get<std::string>();
+      fs::path p(name);
+      if (p.is_relative()) p = fs::path(dir) / p;
+      const std::string full = p.lexically_normal().string();
+      const std::string problem = scenes::file_problem(full, scenes::kMaxSceneFileBytes);
+      if (!problem.empty()) rd.fail(at, "the scene file " + full + " " + problem + "; expected a path relative to the dataset file");
+      if (std::find(s.scene_names.begin(), s.scene_names.end(), name) != s.scene_names.end())
+        rd.fail(at, "lists " + name + " twice; expected each scene file once");
+      s.scenes.push_back(full);
+      s.scene_names.push_back(name);
+    }
+    scenes_read = true;
+  });
+  rd.each([&] {
+    if (doc.contains("samples") && !doc["samples"].is_null()) {
+      const json& n = doc["samples"];
+      if (!n.is_number_integer() && !n.is_number_unsigned()) rd.fail("/samples", "found " + describe(n) + ", expected an integer in [1, 1e8] or null");
+      const int64_t v = n.get<int64_t>();
+      if (v < 1 || v > kMaxSamples) rd.fail("/samples", "found " + describe(n) + ", expected an integer in [1, 1e8] or null");
+      s.samples = v;
+    }
+  });
+  rd.each([&] {
+    if (doc.contains("repeats")) {
+      const json& r = doc["repeats"];
+      if (!r.is_number_integer() && !r.is_number_unsigned()) rd.fail("/repeats", "found " + describe(r) + ", expected an integer in [1, 1000]");
+      const int64_t v = r.get<int64_t>();
+      if (v < 1 || v > 1000) rd.fail("/repeats", "found " + describe(r) + ", expected an integer in [1, 1000]");
+      s.repeats = static_cast<int>(v);
+    }
+  });
+  rd.each([&] {
+    if (doc.contains("seeds")) {
+      const json& sd = doc["seeds"];
+      if (!sd.is_object()) rd.fail("/seeds", "found " + describe(sd) + ", expected an object {\"light\": ..., \"chip\": ..., \"noise\": ...}");
+      for (auto it = sd.begin(); it != sd.end(); ++it) {
+        const std::string at = "/seeds/" + it.key();
+        std::optional<uint64_t>* slot = it.key() == "light" ? &s.light_seed : it.key() == "chip" ? &s.chip_seed
+                                                                          : it.key() == "noise" ? &s.noise_seed : nullptr;
+        if (!slot) {
+          const std::string near = scenes::closest(it.key(), {"light", "chip", "noise"});
+          rd.fail(at, "unknown key" + (near.empty() ? "; the seeds are light, chip and noise" : "; did you mean " + near + "?"));
+        }
+        if (it.value().is_string() && it.value().get<std::string>() == "per_sample") continue;
+        if (it.value().is_string()) rd.fail(at, "found " + describe(it.value()) + ", expected an integer in [0, 2^53] or \"per_sample\"");
+        *slot = rd.seed(it.value(), at);
+      }
+      // realisation r uses noise seed + r: the last must be a seed too (it failed every sample after rendering)
+      if (s.noise_seed && *s.noise_seed + uint64_t(s.repeats - 1) > kMaxSeed)
+        rd.fail("/seeds/noise", "found " + std::to_string(*s.noise_seed) + ", and realisation " + std::to_string(s.repeats - 1) +
+                                    " (repeats " + std::to_string(s.repeats) + ") would use noise seed + " +
+                                    std::to_string(s.repeats - 1) + ", past 2^53; expected at most " +
+                                    std::to_string(kMaxSeed - uint64_t(s.repeats - 1)));
+    }
+  });
 
   // The scene-file keys: dotted as --set writes them; the dataset owns the seeds.
   const auto check_key = [&](const std::string& section, const std::string& key) {
@@ -299,6 +333,7 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
   // Checks `key=value` overrides against the first scene file, with the scene file's own checks (each value
   // alone: a value that makes some samples invalid with other keys is those samples' failure, not the file's).
   const auto check_values = [&](const std::string& at, const std::vector<std::string>& overrides) {
+    if (!scenes_read) return;
     try {
       (void)scenes::load_scene_file(s.scenes.front(), overrides);
     } catch (const Error& e) {
@@ -337,87 +372,100 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
       if (p.names == names && !p.component) return key;
     return std::string();
   };
-  if (doc.contains("set")) {
+  if (doc.contains("set") && !doc["set"].is_object())
+    rd.each([&] { rd.fail("/set", "found " + describe(doc["set"]) + ", expected an object of scene-file keys and values"); });
+  if (doc.contains("set") && doc["set"].is_object()) {
     const json& st = doc["set"];
-    if (!st.is_object()) rd.fail("/set", "found " + describe(st) + ", expected an object of scene-file keys and values");
     std::vector<std::string> all;
     for (const std::string& key : keys_of("set")) {
       const auto it = st.find(key);
-      (void)check_key("set", it.key());
-      once("/set/" + it.key(), it.key());
-      s.set.emplace_back(it.key(), it.value());
-      all.push_back(it.key() + "=" + it.value().dump());
+      rd.each([&] {
+        (void)check_key("set", it.key());
+        once("/set/" + it.key(), it.key());
+        s.set.emplace_back(it.key(), it.value());
+        all.push_back(it.key() + "=" + it.value().dump());
+      });
     }
     // The whole set together first (a key may need another of the set: both ends of the time window); when
     // it fails, each key alone names its own mistake.
     bool together = true;
     try {
-      (void)scenes::load_scene_file(s.scenes.front(), all);
+      if (scenes_read) (void)scenes::load_scene_file(s.scenes.front(), all);
     } catch (const Error&) {
       together = false;
     }
     if (!together)
-      for (size_t i = 0; i < all.size(); ++i) check_values("/set/" + s.set[i].first, {all[i]});
+      for (size_t i = 0; i < all.size(); ++i) rd.each([&] { check_values("/set/" + s.set[i].first, {all[i]}); });
   }
-  if (doc.contains("grid")) {
+  if (doc.contains("grid") && !doc["grid"].is_object())
+    rd.each([&] { rd.fail("/grid", "found " + describe(doc["grid"]) + ", expected an object of scene-file keys and arrays of values"); });
+  if (doc.contains("grid") && doc["grid"].is_object()) {
     const json& g = doc["grid"];
-    if (!g.is_object()) rd.fail("/grid", "found " + describe(g) + ", expected an object of scene-file keys and arrays of values");
     for (const std::string& key : keys_of("grid")) {
       const auto it = g.find(key);
-      const std::string at = check_key("grid", it.key());
-      once(at, it.key());
-      if (!it.value().is_array() || it.value().empty())
-        rd.fail(at, "found " + describe(it.value()) + ", expected a non-empty array of values");
-      for (size_t i = 0; i < it.value().size(); ++i)
-        check_values(at + "/" + std::to_string(i), {it.key() + "=" + it.value()[i].dump()});
-      s.grid.push_back({it.key(), it.value()});
+      rd.each([&] {
+        const std::string at = check_key("grid", it.key());
+        once(at, it.key());
+        if (!it.value().is_array() || it.value().empty())
+          rd.fail(at, "found " + describe(it.value()) + ", expected a non-empty array of values");
+        for (size_t i = 0; i < it.value().size(); ++i)
+          check_values(at + "/" + std::to_string(i), {it.key() + "=" + it.value()[i].dump()});
+        s.grid.push_back({it.key(), it.value()});
+      });
     }
   }
-  if (doc.contains("random")) {
+  if (doc.contains("random") && !doc["random"].is_object())
+    rd.each([&] { rd.fail("/random", "found " + describe(doc["random"]) + ", expected an object of scene-file keys and distributions"); });
+  if (doc.contains("random") && doc["random"].is_object()) {
     const json& r = doc["random"];
-    if (!r.is_object()) rd.fail("/random", "found " + describe(r) + ", expected an object of scene-file keys and distributions");
     for (const std::string& key : keys_of("random")) {
       const auto it = r.find(key);
-      const std::string at = check_key("random", it.key());
-      once(at, it.key());
-      const Distribution d = read_distribution(rd, it.value(), at);
-      // The ends of the range must be valid values (a key's range check catches most mistakes here).
-      std::vector<json> probes;
-      if (d.kind == Distribution::Kind::Choice) probes.assign(d.choices.begin(), d.choices.end());
-      else if (d.kind == Distribution::Kind::UniformInt) probes = {static_cast<int64_t>(d.a), static_cast<int64_t>(d.b)};
-      else if (d.kind == Distribution::Kind::Normal) probes = {d.min.value_or(d.a), d.max.value_or(d.a)};
-      else probes = {d.a, d.b};
-      for (const json& p : probes) check_values(at, {it.key() + "=" + p.dump()});
-      // An untruncated side of a normal reaches any value (40 sigma stands for it): a key with a bound there
-      // needs min or max, or some samples fail.
-      if (d.kind == Distribution::Kind::Normal)
-        for (const char* side : {"min", "max"}) {
-          if (std::string(side) == "min" ? d.min.has_value() : d.max.has_value()) continue;
-          const double far = d.a + (std::string(side) == "min" ? -40.0 : 40.0) * d.b;
-          try {
-            (void)scenes::load_scene_file(s.scenes.front(), {it.key() + "=" + json(far).dump()});
-          } catch (const Error& e) {
-            rd.fail(at, std::string("a normal without \"") + side + "\" can give any value " + (std::string(side) == "min" ? "below" : "above") +
-                            " its mean, and the key has a bound there (at " + json(far).dump() + ": " + e.what() +
-                            "); give \"" + side + "\" (a truncated normal)");
+      rd.each([&] {
+        const std::string at = check_key("random", it.key());
+        once(at, it.key());
+        const Distribution d = read_distribution(rd, it.value(), at);
+        // The ends of the range must be valid values (a key's range check catches most mistakes here).
+        std::vector<json> probes;
+        if (d.kind == Distribution::Kind::Choice) probes.assign(d.choices.begin(), d.choices.end());
+        else if (d.kind == Distribution::Kind::UniformInt) probes = {static_cast<int64_t>(d.a), static_cast<int64_t>(d.b)};
+        else if (d.kind == Distribution::Kind::Normal) probes = {d.min.value_or(d.a), d.max.value_or(d.a)};
+        else probes = {d.a, d.b};
+        for (const json& p : probes) check_values(at, {it.key() + "=" + p.dump()});
+        // An untruncated side of a normal reaches any value (40 sigma stands for it): a key with a bound there
+        // needs min or max, or some samples fail.
+        if (d.kind == Distribution::Kind::Normal)
+          for (const char* side : {"min", "max"}) {
+            if (std::string(side) == "min" ? d.min.has_value() : d.max.has_value()) continue;
+            const double far = d.a + (std::string(side) == "min" ? -40.0 : 40.0) * d.b;
+            try {
+              (void)scenes::load_scene_file(s.scenes.front(), {it.key() + "=" + json(far).dump()});
+            } catch (const Error& e) {
+              rd.fail(at, std::string("a normal without \"") + side + "\" can give any value " + (std::string(side) == "min" ? "below" : "above") +
+                              " its mean, and the key has a bound there (at " + json(far).dump() + ": " + e.what() +
+                              "); give \"" + side + "\" (a truncated normal)");
+            }
           }
-        }
-      s.random.push_back({it.key(), d, it.value()});
+        s.random.push_back({it.key(), d, it.value()});
+      });
     }
   }
   // Realisations re-sample the noise from each sample's saved light, so `repeats` saves it (outputs.light
   // true for every sample): the file may say so too, not otherwise.
-  if (const std::string light = spelling_of({"outputs", "light"}); s.repeats > 1 && !light.empty()) {
-    const auto in_set = std::find_if(s.set.begin(), s.set.end(), [&](const auto& kv) { return kv.first == light; });
-    const std::string why = "repeats " + std::to_string(s.repeats) + " re-samples each sample's noise from its saved light, which it saves";
-    if (in_set == s.set.end())
-      rd.fail("/repeats", "is " + std::to_string(s.repeats) + ", and outputs.light varies per sample (grid or random); " + why +
-                              " in every sample: remove outputs.light from grid and random");
-    if (in_set->second != json(true))
-      rd.fail("/set/" + light, "is " + in_set->second.dump() + ", but " + why + ": set it true, or remove it");
-  }
+  rd.each([&] {
+    if (const std::string light = spelling_of({"outputs", "light"}); s.repeats > 1 && !light.empty()) {
+      const auto in_set = std::find_if(s.set.begin(), s.set.end(), [&](const auto& kv) { return kv.first == light; });
+      const std::string why = "repeats " + std::to_string(s.repeats) + " re-samples each sample's noise from its saved light, which it saves";
+      if (in_set == s.set.end())
+        rd.fail("/repeats", "is " + std::to_string(s.repeats) + ", and outputs.light varies per sample (grid or random); " + why +
+                                " in every sample: remove outputs.light from grid and random");
+      if (in_set->second != json(true))
+        rd.fail("/set/" + light, "is " + in_set->second.dump() + ", but " + why + ": set it true, or remove it");
+    }
+  });
+  if (!scenes_read) rd.stop_on_errors();
   // Names of glTF nodes and materials are known only to the glTF: each scene is loaded once with the
-  // edits of its first valid sample, so that a misspelt name fails here rather than in every sample. A
+  // edits of its first valid sample, so that a misspelt name fails here rather than in every sample (and
+  // beside the file's other mistakes: the keys found wrong above are left out of the samples here). A
   // sample whose values make an invalid scene together (a crop outside a sensor a grid shrinks) is
   // recorded in failed/ when it runs, as a failed run is; when its scene's first 16 samples all do, the
   // mistake is the dataset's and it is refused here.
@@ -428,41 +476,45 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
     for (const GridAxis& g : s.grid) cells *= static_cast<double>(g.values.size());
     std::ostringstream n;
     n << std::setprecision(cells < 1e15 ? 15 : 3) << cells;
-    rd.fail("/grid", "has " + n.str() + " cells (the scene files times each key's values); expected at most 1e8");
+    rd.each([&] { rd.fail("/grid", "has " + n.str() + " cells (the scene files times each key's values); expected at most 1e8"); });
+    rd.stop_on_errors();
   }
   for (size_t k = 0; k < s.scenes.size(); ++k) {
     const std::vector<int64_t> probes = probe_samples(s, k);
     if (probes.empty()) break;
-    std::optional<scenes::ResolvedRun> r;
-    std::string why;
-    for (size_t j = 0; !r && j < probes.size(); ++j) {
-      try {
-        r = scenes::load_scene_file(s.scenes[k], make_sample(s, probes[j]).overrides);
-      } catch (const Error& e) {
-        if (why.empty()) why = e.what();
+    rd.each([&] {
+      std::optional<scenes::ResolvedRun> r;
+      std::string why;
+      for (size_t j = 0; !r && j < probes.size(); ++j) {
+        try {
+          r = scenes::load_scene_file(s.scenes[k], make_sample(s, probes[j]).overrides);
+        } catch (const Error& e) {
+          if (why.empty()) why = e.what();
+        }
       }
-    }
-    if (!r) throw Error(rd.file + ": " + invalid_probes_message(s, k, probes, why));
-    if (r->config.edits.nodes.empty() && r->config.edits.materials.empty()) continue;
-    try {
-      (void)scenes::load_gltf(r->config.gltf_path, r->config.gltf_scene, r->config.edits);
-    } catch (const scenes::EditError& e) {
-      // the dataset's key that edits the node or material (/random/nodes.plat.translation_m[2]; it named
-      // "scenes/0" and the scene file's /nodes/plat)
-      const std::string prefix = e.section + "." + e.name + ".";
-      std::string where;
-      for (const auto& [key, v] : s.set)
-        if (where.empty() && key.rfind(prefix, 0) == 0) where = "/set/" + key;
-      for (const GridAxis& g : s.grid)
-        if (where.empty() && g.key.rfind(prefix, 0) == 0) where = "/grid/" + g.key;
-      for (const RandomAxis& ra : s.random)
-        if (where.empty() && ra.key.rfind(prefix, 0) == 0) where = "/random/" + ra.key;
-      rd.fail(where.empty() ? "/scenes/" + std::to_string(k) : where,
-              "the nodes and materials the dataset varies, in " + s.scene_names[k] + ": " + e.what());
-    } catch (const Error& e) {
-      rd.fail("/scenes/" + std::to_string(k), "the nodes and materials the dataset varies, in " + s.scene_names[k] + ": " + e.what());
-    }
+      if (!r) throw Error(rd.file + ": " + invalid_probes_message(s, k, probes, why));
+      if (r->config.edits.nodes.empty() && r->config.edits.materials.empty()) return;
+      try {
+        (void)scenes::load_gltf(r->config.gltf_path, r->config.gltf_scene, r->config.edits);
+      } catch (const scenes::EditError& e) {
+        // the dataset's key that edits the node or material (/random/nodes.plat.translation_m[2]; it named
+        // "scenes/0" and the scene file's /nodes/plat)
+        const std::string prefix = e.section + "." + e.name + ".";
+        std::string where;
+        for (const auto& [key, v] : s.set)
+          if (where.empty() && key.rfind(prefix, 0) == 0) where = "/set/" + key;
+        for (const GridAxis& g : s.grid)
+          if (where.empty() && g.key.rfind(prefix, 0) == 0) where = "/grid/" + g.key;
+        for (const RandomAxis& ra : s.random)
+          if (where.empty() && ra.key.rfind(prefix, 0) == 0) where = "/random/" + ra.key;
+        rd.fail(where.empty() ? "/scenes/" + std::to_string(k) : where,
+                "the nodes and materials the dataset varies, in " + s.scene_names[k] + ": " + e.what());
+      } catch (const Error& e) {
+        rd.fail("/scenes/" + std::to_string(k), "the nodes and materials the dataset varies, in " + s.scene_names[k] + ": " + e.what());
+      }
+    });
   }
+  rd.stop_on_errors();
 
   // The resolved file, every default explicit.
   ojson& o = s.resolved;

@@ -168,6 +168,25 @@ TEST(DatasetFile, ErrorsNameTheKeyAndWhatWasExpected) {
               HasSubstr("expected integers a <= b (both included) within +-9e15"));
 }
 
+// One reading names every mistake of the file, as a scene file's does (a new user's file of two mistakes
+// took two plans): each top-level key and each key of set, grid and random on its own, then the glTF's names
+// of the keys found right; one mistake reads as before.
+TEST(DatasetFile, EveryMistakeIsNamedAtOnce) {
+  const std::string e = error_of("\"sampels\": 3, \"repeats\": 0, "
+                                 "\"random\": {\"ambient.illuminance_lux\": {\"log_uniform\": [0, 80]}, "
+                                 "\"nodes.Target.translation_m[2]\": {\"uniform\": [1, 2]}}, "
+                                 "\"grid\": {\"laser.average_power_mW\": [1, -2]}");
+  EXPECT_THAT(e, HasSubstr("5 errors in the dataset file:\n"));
+  for (const char* part : {"test_dataset.json: /sampels: unknown key; did you mean samples?",
+                           "test_dataset.json: /repeats: found 0, expected an integer in [1, 1000]",
+                           "test_dataset.json: /random/ambient.illuminance_lux/log_uniform: found [0,80], expected 0 < a < b",
+                           "test_dataset.json: /grid/laser.average_power_mW/1: ",
+                           "test_dataset.json: /random/nodes.Target.translation_m[2]: the nodes and materials the dataset varies"})
+    EXPECT_THAT(e, HasSubstr(part));
+  EXPECT_EQ(std::count(e.begin(), e.end(), '\n'), 5) << e;  // one line each (after the count's)
+  EXPECT_EQ(error_of("\"repeats\": 0").find("errors in the dataset file"), std::string::npos);
+}
+
 // [a, b) holds for ranges a few ulps wide (b itself was drawn: 51 of 200 at [130, 130 + 2 ulp]; a
 // log-uniform fell below a).
 TEST(DatasetFile, UniformDrawsStayInTheirHalfOpenRangeAtAnyWidth) {
