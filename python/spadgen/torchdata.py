@@ -18,6 +18,7 @@ J = ``max_objects`` (default: the most of any run's ``ground_truth_objects``):
 | expected_counts | (K, H, W) | float32 | noise-free expected counts N (1 - exp(-lambda)) (from detection_rate.npy when the run did not write expected_counts.npy) |
 | detection_rate | (K, H, W) | float32 | noise-free lambda, mean avalanches per binary frame (never saturates) |
 | depth | (1, H, W) | float32 | ground-truth range (m) of the nearest surface, 0 where there is none |
+| depth_z | (1, H, W) | float32 | the same surface's z depth (m), along the optical axis (a depth map's), 0 where there is none |
 | mask | (1, H, W) | bool | the pixel's ray hits a surface |
 | layer_count | (H, W) | int64 | surfaces along the pixel's ray |
 | layer_depth | (L, H, W) | float32 | range (m) of every surface along the ray, nearest first, 0 beyond layer_count |
@@ -38,7 +39,7 @@ J = ``max_objects`` (default: the most of any run's ``ground_truth_objects``):
 | repeat | () | int64 | DatasetSamples only: the realisation of the temporal noise (0: the sample's own folder) |
 | parameters | (P,) | float32 | DatasetSamples only: the sample's numeric parameters, in the order of ``parameter_names`` |
 
-``fields`` chooses among the first fourteen (default: counts, expected_counts, depth, mask, layer_count);
+``fields`` chooses among the first fifteen (default: counts, expected_counts, depth, mask, layer_count);
 gate_positions_ns (gate sweeps only), exposures_us (intensity runs only), frames_per_k, intrinsics, origin and run
 come always, and with DatasetSamples sample,
 repeat and parameters. Runs that share a DataLoader batch must agree on K (and N with frames); the constructor
@@ -66,13 +67,13 @@ from .run import Run, RunChangedError, open_run, unpack_frames
 
 __all__ = ["RunDataset", "DatasetSamples", "FIELDS", "DEFAULT_FIELDS"]
 
-FIELDS = ("counts", "expected_counts", "detection_rate", "depth", "mask", "layer_count", "layer_depth", "layer_mask",
+FIELDS = ("counts", "expected_counts", "detection_rate", "depth", "depth_z", "mask", "layer_count", "layer_depth", "layer_mask",
           "object_count", "object_range", "object_mask", "object_detectable", "object_id", "frames")
 DEFAULT_FIELDS = ("counts", "expected_counts", "depth", "mask", "layer_count")
 # The file each field reads; a tuple: any one of them.
 _NEEDS = {"counts": "counts.npy", "expected_counts": ("expected_counts.npy", "detection_rate.npy"),
           "detection_rate": "detection_rate.npy", "frames": "frames.npy",
-          "depth": "ground_truth.exr", "mask": "ground_truth.exr", "layer_count": "ground_truth.exr",
+          "depth": "ground_truth.exr", "depth_z": "ground_truth.exr", "mask": "ground_truth.exr", "layer_count": "ground_truth.exr",
           "layer_depth": "ground_truth.exr", "layer_mask": "ground_truth.exr", "object_count": "ground_truth.exr",
           "object_range": "ground_truth.exr", "object_mask": "ground_truth.exr", "object_detectable": "labels.exr",
           "object_id": "ground_truth.exr"}
@@ -223,6 +224,9 @@ class _RunSamples(torch.utils.data.Dataset):
                 out["depth"] = torch.from_numpy(np.where(hit, d, 0).astype(np.float32)[None])
             if "mask" in self.fields:
                 out["mask"] = torch.from_numpy(hit[None].copy())
+        if "depth_z" in self.fields:
+            z = np.asarray(run.depth("z")[ys, xs], np.float32)
+            out["depth_z"] = torch.from_numpy(np.where(np.isfinite(z), z, 0).astype(np.float32)[None])
         if {"layer_count", "layer_depth", "layer_mask"} & set(self.fields):
             layers = run.layers()
             count = layers.count[ys, xs].astype(np.int64)

@@ -25,7 +25,7 @@ def expected_layout(K, N, L, H, W, J):
     """The module docstring's table."""
     return {"counts": ((K, H, W), torch.float32), "expected_counts": ((K, H, W), torch.float32),
             "detection_rate": ((K, H, W), torch.float32),
-            "depth": ((1, H, W), torch.float32), "mask": ((1, H, W), torch.bool), "layer_count": ((H, W), torch.int64),
+            "depth": ((1, H, W), torch.float32), "depth_z": ((1, H, W), torch.float32), "mask": ((1, H, W), torch.bool), "layer_count": ((H, W), torch.int64),
             "layer_depth": ((L, H, W), torch.float32), "layer_mask": ((L, H, W), torch.bool),
             "object_count": ((H, W), torch.int64), "object_range": ((J, H, W), torch.float32),
             "object_mask": ((J, H, W), torch.bool), "object_detectable": ((J, H, W), torch.bool),
@@ -51,6 +51,14 @@ def test_whole_image_sample_has_the_documented_layout_and_values(sweep_run, swee
     hit = sweep.hit()
     np.testing.assert_array_equal(s["mask"][0].numpy(), hit)
     np.testing.assert_array_equal(s["depth"][0].numpy(), np.where(hit, sweep.depth(), 0))
+    # z depth: the range over the length of the pixel's ray direction (u - cx, v - cy) / f, 1, computed here from
+    # the sample's intrinsics (pixel centres at integer coordinates)
+    K = s["intrinsics"].numpy().astype(np.float64)
+    v, u = np.mgrid[0:sweep.height, 0:sweep.width]
+    norm = np.sqrt(1 + ((u - K[0, 2]) / K[0, 0]) ** 2 + ((v - K[1, 2]) / K[1, 1]) ** 2)
+    z = s["depth_z"][0].numpy()
+    assert not z[~hit].any()
+    np.testing.assert_allclose(z[hit], (sweep.depth()[hit] / norm[hit]), rtol=2e-6)
     layers = sweep.layers()
     np.testing.assert_array_equal(s["layer_count"].numpy(), layers.count)
     np.testing.assert_array_equal(s["layer_depth"].numpy(), np.where(np.isfinite(layers.range), layers.range, 0))
