@@ -16,6 +16,7 @@
 
 #include "core/error.h"
 #include "scenes/input.h"
+#include "scenes/key_path.h"
 #include "scenes/scene_file.h"
 #include "writers/writers.h"
 
@@ -654,6 +655,15 @@ std::string index_csv_row(const DatasetSpec& spec, const SampleRecord& r) {
 
 namespace {
 // Text in a Markdown table cell: a '|' escaped (GFM reads it as a cell's end, in code spans too), lines joined.
+// The names of a dataset's key (materials."Glass.001".roughness: materials, Glass.001, roughness).
+std::vector<std::string> varied_names(const std::string& key) {
+  try {
+    return scenes::parse_key_path(key).names;
+  } catch (const Error&) {
+    return {};
+  }
+}
+
 std::string cell(const std::string& t) {
   std::string out;
   for (char c : t) {
@@ -797,7 +807,25 @@ std::string dataset_card(const DatasetFolder& folder, const CardTally& tally) {
     }
     o << "| `" << cell(spec.scene_names[i]) << "` | " << cell(description) << " |\n";
   }
-  // The camera each scene's first sample resolves to; the parameters below say which of it varies.
+  // The camera each scene's first sample resolves to; a value a grid or random key varies reads "varies" (a new
+  // user read sample 0's sensor preset and laser power as the dataset's).
+  std::vector<std::vector<std::string>> varied_keys;
+  for (const GridAxis& g : spec.grid) varied_keys.push_back(varied_names(g.key));
+  for (const RandomAxis& ra : spec.random) varied_keys.push_back(varied_names(ra.key));
+  // dotted: a key of the resolved scene (camera.width_px); varied when a varied key sets it, a part of it or all of it
+  const auto varies = [&](const std::string& dotted) {
+    std::vector<std::string> names;
+    for (size_t a = 0, b; a <= dotted.size(); a = b + 1) {
+      b = dotted.find('.', a);
+      if (b == std::string::npos) b = dotted.size();
+      names.push_back(dotted.substr(a, b - a));
+    }
+    for (const std::vector<std::string>& k : varied_keys) {
+      const size_t n = std::min(k.size(), names.size());
+      if (!k.empty() && std::equal(k.begin(), k.begin() + std::ptrdiff_t(n), names.begin())) return true;
+    }
+    return false;
+  };
   o << "\n## Sensor and acquisition\n\n| scene file | image | sensor | acquisition | laser | render |\n|---|---|---|---|---|---|\n";
   for (size_t i = 0; i < spec.scenes.size(); ++i) {
     const int64_t first = static_cast<int64_t>(i) * (spec.grid_cells() / static_cast<int64_t>(spec.scenes.size()));
@@ -808,26 +836,37 @@ std::string dataset_card(const DatasetFolder& folder, const CardTally& tally) {
     } catch (const Error&) {
       continue;
     }
-    const auto num = [](const ojson& v) {
+    // the value of dotted key k in the resolved scene, or "varies"
+    const auto num = [&](const std::string& k) {
+      if (varies(k)) return std::string("varies");
+      const ojson* v = &r;
+      for (size_t a = 0, b; a <= k.size(); a = b + 1) {
+        b = k.find('.', a);
+        if (b == std::string::npos) b = k.size();
+        v = &(*v)[k.substr(a, b - a)];
+      }
       std::ostringstream t;
-      if (v.is_number()) t << v.get<double>();
-      else t << v.dump();
+      if (v->is_number()) t << v->get<double>();
+      else if (v->is_string()) t << v->get<std::string>();
+      else t << v->dump();
       return t.str();
     };
-    const ojson& cam = r["camera"];
     const ojson& acq = r["acquisition"];
-    std::string acquisition = acq["mode"].get<std::string>() + ", " + num(acq["frames"]) + " frames";
-    if (acq["mode"] == "gate_sweep")
-      acquisition += ", gates " + num(acq["gate_sweep"]["start_ns"]) + " to " + num(acq["gate_sweep"]["stop_ns"]) + " ns in " +
-                     num(acq["gate_sweep"]["step_ps"]) + " ps steps";
-    else
-      acquisition += ", " + acq["intensity"]["exposure"].get<std::string>() + " exposure of " + num(acq["intensity"]["exposure_us"]) + " us";
-    o << "| `" << cell(spec.scene_names[i]) << "` | " << num(cam["width_px"]) << " x " << num(cam["height_px"])
-      << (cam["crop"].is_null() ? std::string() : ", crop " + cam["crop"].dump()) << " | " << r["sensor"]["preset"].get<std::string>()
-      << " | " << acquisition << " | " << num(r["laser"]["wavelength_nm"]) << " nm, " << num(r["laser"]["repetition_rate_MHz"])
-      << " MHz, " << num(r["laser"]["average_power_mW"]) << " mW | " << num(r["render"]["samples_per_pixel"]) << " paths per pixel |\n";
+    std::string acquisition = num("acquisition.mode") + ", " + num("acquisition.frames") + " frames";
+    if (!varies("acquisition.mode")) {
+      if (acq["mode"] == "gate_sweep")
+        acquisition += ", gates " + num("acquisition.gate_sweep.start_ns") + " to " + num("acquisition.gate_sweep.stop_ns") +
+                       " ns in " + num("acquisition.gate_sweep.step_ps") + " ps steps";
+      else
+        acquisition += ", " + num("acquisition.intensity.exposure") + " exposure of " + num("acquisition.intensity.exposure_us") + " us";
+    }
+    const std::string crop = num("camera.crop");
+    o << "| `" << cell(spec.scene_names[i]) << "` | " << num("camera.width_px") << " x " << num("camera.height_px")
+      << (crop == "null" ? std::string() : ", crop " + crop) << " | " << num("sensor.preset") << " | " << acquisition << " | "
+      << num("laser.wavelength_nm") << " nm, " << num("laser.repetition_rate_MHz") << " MHz, " << num("laser.average_power_mW")
+      << " mW | " << num("render.samples_per_pixel") << " paths per pixel |\n";
   }
-  o << "\nAs each scene's first sample resolves; the keys under Parameters vary per sample. Every sample's full settings "
+  o << "\nAs each scene's first sample resolves; \"varies\": a key under Parameters sets it per sample. Every sample's full settings "
        "are its `metadata.json`'s `resolved_scene`.\n";
   o << "\n## Parameters\n\n";
   o << "Sample i takes grid cell i mod " << spec.grid_cells() << " (the scene outermost, the last grid key fastest) and its "

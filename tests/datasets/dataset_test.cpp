@@ -23,6 +23,7 @@ namespace spadgen::datasets {
 namespace {
 
 using ::testing::HasSubstr;
+using ::testing::Not;
 namespace fs = std::filesystem;
 
 const std::string kScenes = std::string(SPADGEN_SOURCE_DIR) + "/scenes/paper/";
@@ -475,6 +476,25 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
   const DatasetFolder::Resolved r = DatasetFolder(spec, dir).resolve(make_sample(spec, 0));
   EXPECT_EQ(r.revisions, ggx);
   EXPECT_NE(r.hash, r.hash_before_revisions);
+  fs::remove_all(dir);
+}
+
+// The card's "Sensor and acquisition" row is each scene's first sample: a value the dataset varies reads
+// "varies" (a new user read sample 0's preset and laser power as the dataset's), the others their value.
+TEST(DatasetFolder, TheCardSaysWhichSettingsVary) {
+  const fs::path dir = fs::temp_directory_path() / ("spadgen_dataset_card_" + std::to_string(::getpid()));
+  const DatasetSpec spec = parse("\"grid\": {\"sensor.preset\": [\"pixel_A\", \"pixel_B\"]}, "
+                                 "\"random\": {\"\\\"laser\\\".average_power_mW\": {\"uniform\": [1, 2]}, "
+                                 "\"acquisition.gate_sweep.step_ps\": {\"uniform\": [30, 40]}}, "
+                                 "\"set\": {\"render.samples_per_pixel\": 3}");
+  const std::string card = dataset_card(DatasetFolder(spec, dir), CardTally{});
+  const size_t at = card.find("flat_target.json` | 1024 x 500 | ", card.find("## Sensor and acquisition"));
+  ASSERT_NE(at, std::string::npos) << card;
+  const std::string row = card.substr(at, card.find('\n', at) - at);
+  EXPECT_THAT(row, HasSubstr(" | varies | gate_sweep, "));  // the preset, by the grid
+  EXPECT_THAT(row, HasSubstr(" ns in varies ps steps"));    // the sweep's step, by a random key
+  EXPECT_THAT(row, HasSubstr(" MHz, varies mW | 3 paths per pixel |"));  // a quoted spelling; set's value as it is
+  EXPECT_THAT(row, Not(HasSubstr("pixel_A")));
   fs::remove_all(dir);
 }
 
