@@ -75,6 +75,7 @@ struct RunRecord {
   double beyond_period_total = 0.0;  // of laser_total, from beyond the unambiguous range (run only: app/warnings.h)
   int ground_truth_layers = 0;
   int64_t ground_truth_layers_cut = 0;  // pixels whose layers render.max_layers cut (run only: app/warnings.h)
+  std::array<int64_t, 4> label_edges{};  // the labels' (pixel, object) pairs by EdgeInSweep (app/warnings.h)
   int ground_truth_objects = 0;   // the most objects along one ray (object<j> channels below it)
   nlohmann::json objects;         // objects_json(): the scene's objects, ids as in the images
   nlohmann::json model;                 // model_components()

@@ -197,13 +197,22 @@ class Outputs::Images {
   bool labels() const { return labels_decl_ != nullptr; }
   void put_labels(const ObjectLabelsTile& t) {
     labels_put_ = true;
+    std::array<int64_t, 4> edges{};
     for_pixels(t.rect, [&](int, int, size_t i, size_t o) {
       for (size_t j = 0; j < size_t(slots_); ++j) {
         const size_t e = i * size_t(t.slots) + j;
         const float v[] = {float(t.id[e]), t.edge_counts[e], t.edge_snr[e], float(t.detectable[e])};
         for (size_t c = 0; c < std::size(kLabelSlotChannels); ++c) label_ch_[j * std::size(kLabelSlotChannels) + c][o] = v[c];
       }
+      if (!t.edge.empty())
+        for (size_t j = 0; j < size_t(t.slots); ++j) ++edges[std::min<size_t>(t.edge[i * size_t(t.slots) + j], 3)];
     });
+    for (size_t k = 0; k < edges.size(); ++k) label_edges_[k] += edges[k];
+  }
+  std::array<int64_t, 4> label_edges() const {
+    std::array<int64_t, 4> out{};
+    for (size_t k = 0; k < out.size(); ++k) out[k] = label_edges_[k].load();
+    return out;
   }
 
   void put(const TransientTile& t, const sensor::SensorMapsTile& m, const SensorTile& s) {
@@ -436,6 +445,7 @@ class Outputs::Images {
   int layers_;
   int slots_;  // object slots held: render.max_layers, or the scene's objects when fewer
   std::atomic<int64_t> layers_cut_{0};
+  std::array<std::atomic<int64_t>, 4> label_edges_{};  // (pixel, object) pairs by EdgeInSweep (put_labels)
   bool gt_on_;
   bool laser_traced_;  // the light holds the laser's: else no laser.exr and no laser channels in ground_truth.exr
   ExrCompression compression_;
@@ -725,6 +735,7 @@ void Outputs::report(RunRecord& r) const {
   r.ground_truth_layers_cut = images_->layers_cut();
   r.ground_truth_objects = images_->object_slots();
   r.ground_truth_summary = images_->ground_truth_summary();
+  r.label_edges = images_->label_edges();
   r.accuracy = images_->accuracy(cfg_);
   r.counts_u8 = stacks_->counts_u8();
   r.transient_crop = stacks_->transient_crop();

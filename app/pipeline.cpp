@@ -174,6 +174,7 @@ RunResult run(const RunOptions& options) {
 
   outputs.report(record);
   warn(bright_gate_warnings(sensor, record.laser_open_rate));
+  warn(sweep_edge_warnings(cfg, record));
   if (light) record.storage.update(light->storage());
   record.files = files;
   record.photons_per_pulse_emitted = renderer.photons_per_pulse();

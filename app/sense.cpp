@@ -749,11 +749,14 @@ std::vector<RunResult> sense(const SenseOptions& options) {
 
     RunRecord record;
     outputs[r]->report(record);
-    if (r == 0)  // the realisations share their rates
-      for (std::string& w : bright_gate_warnings(sensor, record.laser_open_rate)) {
+    if (r == 0) {  // the realisations share their rates and labels
+      std::vector<std::string> ws = bright_gate_warnings(sensor, record.laser_open_rate);
+      for (std::string& w : sweep_edge_warnings(cfg, record)) ws.push_back(std::move(w));
+      for (std::string& w : ws) {
         print_warning(w);
         scene_warnings.push_back(std::move(w));
       }
+    }
     // The containers of the files linked from the run or from the first realisation, as recorded there.
     const json& run_storage = meta.contains("/storage/files"_json_pointer) ? meta.at("/storage/files"_json_pointer) : json::object();
     for (const std::string& f : files) {

@@ -154,6 +154,23 @@ std::vector<std::string> bright_gate_warnings(const sensor::SensorModel& sensor,
           "(sensor.gate.knots_per_edge) or a finer grid (docs/accuracy.md, \"The sensor model's knobs\")"};
 }
 
+std::vector<std::string> sweep_edge_warnings(const RunConfig& c, const RunRecord& r) {
+  if (c.acquisition.mode != AcquisitionMode::GateSweep) return {};
+  const auto& e = r.label_edges;
+  const int64_t lit = e[kRisingEdge] + e[kFallingEdgeOnly] + e[kNoEdgeInSweep];
+  const int64_t without = e[kFallingEdgeOnly] + e[kNoEdgeInSweep];
+  if (lit == 0 || !(double(without) > kWarnLightFraction * double(lit))) return {};
+  const auto pairs = [](int64_t n) { return std::to_string(n) + (n == 1 ? " pair" : " pairs"); };
+  std::string w = percent(double(without) / double(lit)) + " of the objects' returns along the rays (" + std::to_string(without) +
+                  " of the " + pairs(lit) + " (pixel, object) with laser light in labels.exr) rise before the gate sweep's first "
+                  "position (acquisition.gate_sweep.start_ns " + g(c.acquisition.gate_sweep.start_s * 1e9) +
+                  " ns; a pixel's gate opens at the position plus sensor.gate.delay_ns " + g(c.sensor.gate.delay_s * 1e9) +
+                  " ns and its skew): the counts hold no rising edge of them, only a fall (" + pairs(e[kFallingEdgeOnly]) +
+                  ", which labels.exr labels) or no edge at all (" + pairs(e[kNoEdgeInSweep]) +
+                  ": flat over the sweep); start the sweep earlier or lower sensor.gate.delay_ns";
+  return {w};
+}
+
 std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img, const RunRecord& r, const render::Camera& camera) {
   const double laser_total = r.laser_total;
   std::vector<std::string> w;

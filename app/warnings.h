@@ -60,6 +60,11 @@ std::vector<std::string> sensor_warnings(const sensor::SensorModel& sensor);
 // it that many times larger in the gate's tails; warned about when that exceeds kWarnGateError. Starts with
 // kGateWarning.
 std::vector<std::string> bright_gate_warnings(const sensor::SensorModel& sensor, double laser_open_rate);
+// After the labels (run and sense, gate sweeps): more than kWarnLightFraction of the lit (pixel, object)
+// pairs (RunRecord::label_edges) have no rising edge in the sweep: it begins on their return's plateau (their
+// rise lies before the first gate position; the labels take the falling edge), or the plateau spans it (no
+// edge at all). A new user's plate 0.8-1.2 m away rose before a sweep starting at 4 ns, silently.
+std::vector<std::string> sweep_edge_warnings(const RunConfig& c, const RunRecord& r);
 // One of sensor_warnings' or bright_gate_warnings' (sense replaces a run's with its own sensor's).
 bool is_sensor_warning(const std::string& warning);
 

@@ -212,7 +212,13 @@ struct ObjectLabelsTile {
   std::vector<float> edge_counts;  // expected-count step of the object's rising edge, counts
   std::vector<float> edge_snr;     // that step over the standard deviation of the difference of the two counts
   std::vector<uint8_t> detectable; // edge_snr >= sensor::kDetectableSnr
+  // Which edge of the object's return the sweep holds (EdgeInSweep; not written: the run's warnings count them).
+  std::vector<uint8_t> edge;
 };
+// The edge sensor::object_labels labels: none (no light of the object in the sweep), its rising edge, its
+// falling edge only (the sweep begins on the return's plateau: the rise lies before the first gate position),
+// or none (the plateau spans the whole sweep).
+enum EdgeInSweep : uint8_t { kNoReturn = 0, kRisingEdge = 1, kFallingEdgeOnly = 2, kNoEdgeInSweep = 3 };
 
 // What the sensor makes of a tile. K is the number of gate positions (gate sweep) or exposures (2D).
 struct SensorTile {

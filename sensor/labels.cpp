@@ -24,6 +24,7 @@ ObjectLabelsTile object_labels(const SensorModel& sensor, const GroundTruthTile&
   out.edge_counts.assign(n * slots, 0.0f);
   out.edge_snr.assign(n * slots, 0.0f);
   out.detectable.assign(n * slots, 0);
+  out.edge.assign(n * slots, kNoReturn);
   const double N = sensor.frames_per_k();
   // Every object of the tile with direct light, its rates computed in one call.
   std::vector<SensorModel::Return> returns;
@@ -66,10 +67,15 @@ ObjectLabelsTile object_labels(const SensorModel& sensor, const GroundTruthTile&
       // plateau; none when the plateau runs to the end too (no edge in the sweep at all).
       k = K - 1;
       while (!on_plateau(k)) --k;
-      if (k == K - 1) continue;
+      if (k == K - 1) {
+        out.edge[e] = kNoEdgeInSweep;
+        continue;
+      }
+      out.edge[e] = kFallingEdgeOnly;
       while (with <= k && with < size_t(kEdgeGates) && on_plateau(k - with)) ++with;
       other = std::min(K - 1 - k, size_t(kEdgeGates));
     } else {
+      out.edge[e] = kRisingEdge;
       while (k + with < K && with < size_t(kEdgeGates) && on_plateau(k + with)) ++with;
       other = std::min(k, size_t(kEdgeGates));
     }

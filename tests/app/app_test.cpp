@@ -618,6 +618,13 @@ TEST_F(App, UselessRunsAreWarnedAboutOnStderrAndInTheMetadata) {
        "100 % of the laser light comes from beyond the unambiguous range of 3.747 m"},
       // The return of the target 1 m away arrives at 4 + 6.7 ns, after the window the gates up to 1 ns need.
       {"--set acquisition.gate_sweep.stop_ns=1", "100 % of the laser light arrives outside the time window"},
+      // The return rises at about 4 + 6.7 - 3.8 ns (the gate's length): a sweep from 8 ns begins on its plateau, and
+      // the counts hold only its fall (a new user's plate rose before a sweep from 4 ns without a word)
+      {"--set acquisition.gate_sweep.start_ns=8",
+       "100 % of the objects' returns along the rays (256 of the 256 pairs (pixel, object) with laser light in labels.exr) rise "
+       "before the gate sweep's first position (acquisition.gate_sweep.start_ns 8 ns; a pixel's gate opens at the position plus "
+       "sensor.gate.delay_ns 0 ns and its skew): the counts hold no rising edge of them, only a fall (256 pairs, which "
+       "labels.exr labels) or no edge at all (0 pairs: flat over the sweep); start the sweep earlier or lower sensor.gate.delay_ns"},
       {"--set camera.gltf_camera=spad_camera --set camera.height_px=1000 --set camera.crop=[500,490,16,16]",
        "camera.gltf_camera: the glTF camera 'spad_camera' has the aspect ratio 2.048, the 1024 x 1000 sensor 1.024: the "
        "vertical field of view (5.382 deg) is kept and the horizontal one is 5.511 deg instead of 11"},
@@ -652,6 +659,12 @@ TEST_F(App, UselessRunsAreWarnedAboutOnStderrAndInTheMetadata) {
     for (const auto& w : warnings) recorded |= w.get<std::string>().find(c.warning) == 0;
     EXPECT_TRUE(recorded) << c.set << ": " << warnings.dump();
   }
+  // sense warns of its own sweep's edges (a sound run's light, a sweep that starts too late)
+  ASSERT_EQ(sh(run + " --set outputs.light=true").code, 0);
+  const Result late = sh("sense " + (dir_ / "out").string() + " -q --set acquisition.gate_sweep.start_ns=8 -o " + (dir_ / "late").string());
+  ASSERT_EQ(late.code, 0) << late.output;
+  EXPECT_THAT(late.output, HasSubstr("spadgen: warning: 100 % of the objects' returns along the rays (256 of the 256 pairs"));
+  EXPECT_THAT(nlohmann::json::parse(slurp(dir_ / "late/metadata.json"))["warnings"].dump(), HasSubstr("rise before the gate sweep's"));
   // sense re-samples the same light: it records the run's warnings, once each.
   ASSERT_EQ(sh(run + " --set camera.look_at_m=[0,0,5] --set outputs.light=true").code, 0);
   const Result sensed = sh("sense " + (dir_ / "out").string() + " -q -o " + (dir_ / "sensed").string());
