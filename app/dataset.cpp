@@ -698,11 +698,13 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
     const size_t t = pending.front();
     pending.pop_front();
     const Sample s = datasets::make_sample(spec, todo[t]);
-    const std::unique_ptr<datasets::SampleClaim> claim = folder.try_claim(s);
-    if (!claim) {
+    // A sample another spadgen process holds (its claim: another dataset run generates it; or its folder's lock:
+    // a reader such as reconstruct or sense, or a run into it) is tried again after the others, with a wait
+    // when every sample left is held (a reader's lock failed the sample, as if it could not be generated).
+    const auto wait_turn = [&] {
       pending.push_back(t);
-      if (++busy_in_a_row >= pending.size()) {  // every sample left is another run's for now
-        if (interrupt_flag().load()) throw stopped("waiting for samples another run is generating");
+      if (++busy_in_a_row >= pending.size()) {  // every sample left is held for now
+        if (interrupt_flag().load()) throw stopped("waiting for samples another spadgen process holds");
         // Said after 10 s and every minute: a run that was stopped (SIGSTOP, a suspended job) or hangs holds
         // its samples until it ends, and this one waits for it.
         const auto now = std::chrono::steady_clock::now();
@@ -712,14 +714,19 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
           std::vector<int64_t> held;
           for (size_t p : pending) held.push_back(todo[p]);
           std::sort(held.begin(), held.end());
-          std::fprintf(stderr, "spadgen: dataset: waiting %.0f s for sample(s) %s, which another run on %s holds (a run "
-                               "that was stopped or hangs holds them until it ends)\n",
+          std::fprintf(stderr, "spadgen: dataset: waiting %.0f s for sample(s) %s, which another spadgen process holds "
+                               "(another run on %s, or a reader of the sample's folder: reconstruct, sense, evaluate; a "
+                               "process that was stopped or hangs holds them until it ends)\n",
                        waited, datasets::ranges_text(held).c_str(), dir.string().c_str());
           last_said = now, ++said;
         }
         std::this_thread::sleep_for(std::chrono::milliseconds(200));
         busy_in_a_row = 0;
       }
+    };
+    const std::unique_ptr<datasets::SampleClaim> claim = folder.try_claim(s);
+    if (!claim) {
+      wait_turn();
       continue;
     }
     busy_in_a_row = 0;
@@ -787,6 +794,10 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
       ++generated;
     } catch (const Interrupted&) {
       throw stopped("in sample " + std::to_string(s.index));  // this one's folder was not published
+    } catch (const FolderBusy&) {  // before anything of it was written: tried again later
+      --handled;
+      wait_turn();
+      continue;
     } catch (const std::exception& e) {
       // said first: recording it in failed/ may fail too (the disk that made the sample fail is full)
       std::fprintf(stderr, "spadgen: dataset: sample %lld failed: %s\n", static_cast<long long>(s.index), e.what());

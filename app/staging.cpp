@@ -325,11 +325,11 @@ int take_folder_lock(const fs::path& lock_path, const fs::path& out, bool shared
       const std::string who = lock_holder(fd);
       ::close(fd);
       if (err == EWOULDBLOCK && shared)
-        throw Error(folder + " is being written by another spadgen run" +
+        throw FolderBusy(folder + " is being written by another spadgen run" +
                     (who.empty() ? std::string() : " (" + who + ")") + ", which holds " + lock_path.string() +
                     "; wait for it to finish");
       if (err == EWOULDBLOCK)
-        throw Error(folder + " is being written or read by another spadgen process" +
+        throw FolderBusy(folder + " is being written or read by another spadgen process" +
                     (who.empty() ? std::string() : " (" + who + ")") + ", which holds " + lock_path.string() +
                     (output ? "; wait for it to finish, or choose another folder (-o)" : "; wait for it to finish"));
       throw Error("cannot lock " + folder + " (" + lock_path.string() + "): " + std::strerror(err));

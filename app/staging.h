@@ -23,6 +23,8 @@
 #include <string>
 #include <vector>
 
+#include "core/error.h"
+
 namespace spadgen::app {
 
 // An output folder as Staging and FolderLock name it: absolute, "out/" as "out", ".." taken as the path
@@ -119,6 +121,13 @@ class Staging {
 // R when a run folder's metadata.json says it is one of the R > 1 realisations of a `sense --repeats` set
 // (sense.repeats), else 0.
 int64_t realisations_of(const nlohmann::json& metadata);
+
+// The error of a folder whose lock another spadgen process holds (a run writing it, a reader of it): a dataset
+// run waits for such a sample and tries it again, as for one another dataset run generates.
+class FolderBusy : public spadgen::Error {
+ public:
+  using Error::Error;
+};
 
 class FolderLock {
  public:

@@ -950,6 +950,27 @@ TEST_F(Dataset, ADamagedSampleThatFailsAgainIsFailed) {
   EXPECT_EQ(slurp(dir_ / "out/samples/000001/notes.txt"), "mine");
 }
 
+// A sample whose folder another spadgen process holds (a reader: reconstruct, sense; here its lock taken by
+// flock(1) as reconstruct takes it) is tried again when the others are done, and generated once the holder
+// lets go: it was recorded as failed, the run exiting 1 ("or choose another folder (-o)").
+TEST_F(Dataset, ASampleAReaderHoldsIsGeneratedOnceItIsReleased) {
+  write(dir_ / "d.json", small_dataset(2));
+  const std::string run = "dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q";
+  ASSERT_EQ(sh(run).code, 0);
+  fs::remove(dir_ / "out/samples/000001/counts.npy");  // damaged: generated again
+  const fs::path lock = dir_ / "out/samples/.000001.spadgen-lock";
+  const auto started = std::chrono::steady_clock::now();
+  const Result r = shell("(flock -x " + lock.string() + " sleep 3 > /dev/null 2>&1 &) && sleep 0.5 && " + kBin + " " + run);
+  const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(r.output, "");
+  EXPECT_GE(took, 3.0);  // it waited for the holder
+  EXPECT_FALSE(fs::exists(dir_ / "out/failed"));
+  const Result st = sh("dataset status " + (dir_ / "out").string());
+  EXPECT_EQ(st.code, 0) << st.output;
+  EXPECT_THAT(st.output, HasSubstr("2 samples: 2 done, 0 failed, 0 stale, 0 missing"));
+}
+
 // A sample made stale (its scene changed) whose regeneration fails is failed, with why, in the status and the
 // index (it was "stale" without its error, which only failed/ held); the card escapes a '|' of a scene's path
 // or a value in its Markdown tables (a row had 7 cells for 6).
