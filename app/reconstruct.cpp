@@ -942,9 +942,12 @@ std::string evaluate(const EvaluateCommand& c) {
   std::map<std::string, int> ids_by_name;  // a dataset's: objects by name across samples
   nlohmann::json report;
   std::ostringstream text;
+  // A run folder's lock, shared with other readers: the run is not replaced while it is scored (labels and counts
+  // of one run) nor before its evaluation/ is published into it (released before, a run replacing the folder
+  // meanwhile failed the publication: "No such file or directory").
+  std::optional<FolderLock> run_lock;
   if (fs::exists(target / "metadata.json")) {
-    // Shared with other readers: the run is not replaced while it is scored (labels and counts of one run).
-    const FolderLock run_lock(target, true);
+    run_lock.emplace(target, true);
     if (c.detections.find(kSampleField) != std::string::npos)
       throw Error("--detections " + c.detections + ": {sample} names each sample folder of a dataset; " + c.target +
                   " is a run folder (give its detections file)");

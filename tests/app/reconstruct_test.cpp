@@ -639,6 +639,26 @@ TEST_F(Reconstruct, EvaluateReplacesItsFolderWholeAndOnlyItsOwn) {
     for (const auto& e : fs::directory_iterator(folder)) EXPECT_NE(e.path().filename().string()[0], '.') << e.path();
 }
 
+// evaluate holds the run folder's lock until its evaluation/ is published into it: a run into the folder
+// meanwhile is refused (it let go after scoring, and a run replacing the folder then failed the publication,
+// "No such file or directory", the work lost). Each of its renames (its two images', metrics.json's, the
+// publication's) delayed 1 s by strace(1), the run started in the third (skipped without strace).
+TEST_F(Reconstruct, EvaluateHoldsTheRunFolderUntilItsEvaluationIsPublished) {
+  if (shell("strace -o /dev/null true").code != 0) GTEST_SKIP() << "strace cannot run here";
+  const fs::path a = dir_ / "a";
+  const std::string run_a = "run " + kScenes + "multi_object.json" + kMultiObjectCrop + a.string();
+  ASSERT_EQ(sh(run_a).code, 0);
+  ASSERT_EQ(sh("reconstruct " + a.string() + " -q").code, 0);
+  const Result r = shell("(strace -f -o /dev/null -e trace=rename -e inject=rename:delay_enter=1000000 " + kBin + " evaluate " +
+                         a.string() + " -q > " + (dir_ / "e.log").string() + " 2>&1; echo \"evaluate $?\" >> " +
+                         (dir_ / "e.log").string() + ") & sleep 2.5; " + kBin + " " + run_a + " 2>&1; echo \"run $?\"; wait");
+  const std::string e = slurp(dir_ / "e.log");
+  EXPECT_THAT(e, HasSubstr("evaluate 0")) << e;
+  EXPECT_THAT(r.output, HasSubstr("is being written or read by another spadgen process"));
+  EXPECT_THAT(r.output, HasSubstr("run 1"));
+  EXPECT_TRUE(fs::exists(a / "evaluation/metrics.json"));
+}
+
 // evaluate -o writes no folder into a run folder but the evaluated run's own evaluation/ (-o RUN/scores was
 // written, exit 0, and the next run into RUN refused the folder for a foreign one), nor into another run's
 // evaluation/, a dataset's own entries or a folder of sense --repeats' realisations.
