@@ -248,6 +248,8 @@ void check_writable(const std::string& file, const RunFolder& run, const std::st
   }
   if (::access(dir.c_str(), W_OK) != 0)
     throw Error(file + ": cannot write into " + dir.string() + ": " + std::strerror(errno));
+  // the temporary file a reconstruct killed while it wrote this one left (stayed for ever beside the run's files)
+  writers::remove_dead_temporaries(dir.string(), {fs::path(file).filename().string()});
 }
 
 std::string slot_name(int s, const char* what) { return "det" + std::to_string(s) + "." + what; }

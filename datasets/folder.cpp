@@ -165,6 +165,8 @@ void DatasetFolder::claim() const {
     // Checked and written as one step: two datasets started at once on a new folder both found it empty
     // and both wrote dataset.json, mixing their samples.
     const FolderLock lock(dir_);
+    // what a run killed while it wrote them left (the index's files are written by the last run to end)
+    writers::remove_dead_temporaries(dir_.string(), {"dataset.json", "index.jsonl", "index.csv", "dataset.md"});
     if (checked(wanted) != wanted) writers::write_file_atomic((dir_ / "dataset.json").string(), wanted.dump(2) + "\n");
   }
   fs::create_directories(dir_ / "samples", ec);

@@ -1,6 +1,7 @@
 #include "writers/atomic_file.h"
 
 #include <fcntl.h>
+#include <signal.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -39,6 +40,35 @@ void fsync_folder(const std::string& folder) {
   (void)::fsync(dfd);
   ::close(dfd);
 }
+
+}  // namespace detail
+
+int remove_dead_temporaries(const std::string& folder, const std::vector<std::string>& names) {
+  std::error_code ec;
+  int removed = 0;
+  for (const auto& e : std::filesystem::directory_iterator(folder, ec)) {
+    const std::string f = e.path().filename().string();
+    for (const std::string& name : names) {
+      const std::string prefix = "." + name + ".tmp-";
+      if (f.size() <= prefix.size() || f.compare(0, prefix.size(), prefix) != 0) continue;
+      // <pid>-<counter>, digits
+      const size_t dash = f.find('-', prefix.size());
+      const std::string pid = f.substr(prefix.size(), dash == std::string::npos ? std::string::npos : dash - prefix.size());
+      const std::string counter = dash == std::string::npos ? std::string() : f.substr(dash + 1);
+      const auto digits = [](const std::string& t) {
+        return !t.empty() && t.size() <= 10 && t.find_first_not_of("0123456789") == std::string::npos;
+      };
+      if (!digits(pid) || !digits(counter)) continue;
+      const long p = std::stol(pid);
+      if (p <= 0 || p == long(::getpid())) continue;
+      if (::kill(pid_t(p), 0) == 0 || errno != ESRCH) continue;  // running (or not ours to signal: running)
+      if (e.is_regular_file(ec) && !e.is_symlink(ec) && ::unlink(e.path().c_str()) == 0) ++removed;
+    }
+  }
+  return removed;
+}
+
+namespace detail {
 
 std::string temp_name(const std::string& destination) {
   const std::string name = split_path(destination).name;

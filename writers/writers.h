@@ -252,6 +252,11 @@ void write_json(const std::string& path, const nlohmann::json& value);
 // Any bytes, written atomically (temporary file, fsync, rename).
 void write_file_atomic(const std::string& path, const std::string& bytes);
 
+// Removes the temporary files of `names` in `folder` (".<name>.tmp-<pid>-<n>", as the writers make them) that a
+// process killed while it wrote left behind: those of a pid no longer running (not this one's). For a command
+// that holds the folder (its lock) before it writes those files there. Returns how many it removed.
+int remove_dead_temporaries(const std::string& folder, const std::vector<std::string>& names);
+
 // A file written in pieces and published whole, as write_file_atomic does, by commit(); removed when never
 // committed. For files too large to hold in memory first (a dataset's index of millions of samples).
 class AtomicWriter {

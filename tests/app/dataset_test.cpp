@@ -950,6 +950,23 @@ TEST_F(Dataset, ADamagedSampleThatFailsAgainIsFailed) {
   EXPECT_EQ(slurp(dir_ / "out/samples/000001/notes.txt"), "mine");
 }
 
+// What a dataset run killed while it wrote dataset.json or the index left (".dataset.json.tmp-PID-N", which
+// stayed after a successful resume) goes with the next run on the folder.
+TEST_F(Dataset, ADeadRunsTemporaryFilesGoWithTheNextRun) {
+  write(dir_ / "d.json", small_dataset(1));
+  const std::string run = "dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q";
+  ASSERT_EQ(sh(run).code, 0);
+  const pid_t child = ::fork();
+  if (child == 0) ::_exit(0);
+  ASSERT_GT(child, 0);
+  ASSERT_EQ(::waitpid(child, nullptr, 0), child);
+  const std::vector<fs::path> left = {dir_ / "out" / (".dataset.json.tmp-" + std::to_string(child) + "-0"),
+                                      dir_ / "out" / (".index.csv.tmp-" + std::to_string(child) + "-3")};
+  for (const fs::path& f : left) std::ofstream(f) << "{";
+  ASSERT_EQ(sh(run).code, 0);
+  for (const fs::path& f : left) EXPECT_FALSE(fs::exists(f)) << f;
+}
+
 // A sample whose folder another spadgen process holds (a reader: reconstruct, sense; here its lock taken by
 // flock(1) as reconstruct takes it) is tried again when the others are done, and generated once the holder
 // lets go: it was recorded as failed, the run exiting 1 ("or choose another folder (-o)").

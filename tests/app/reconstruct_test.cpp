@@ -6,6 +6,8 @@
 #include <OpenEXR/ImfHeader.h>
 #include <OpenEXR/ImfOutputFile.h>
 #include <gmock/gmock.h>
+#include <sys/wait.h>
+#include <unistd.h>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -637,6 +639,27 @@ TEST_F(Reconstruct, EvaluateReplacesItsFolderWholeAndOnlyItsOwn) {
   // no staging folder or lock left beside the evaluation
   for (const fs::path& folder : {dir_, run})
     for (const auto& e : fs::directory_iterator(folder)) EXPECT_NE(e.path().filename().string()[0], '.') << e.path();
+}
+
+// The temporary file a reconstruct killed while it wrote left in the run folder (".detections_edges.exr.tmp-
+// PID-N", a full-size EXR no later reconstruct, sense or status removed) goes with the next reconstruct of that
+// file; a running process's stays.
+TEST_F(Reconstruct, ADeadReconstructsTemporaryFileIsRemovedByTheNext) {
+  const fs::path a = dir_ / "a";
+  ASSERT_EQ(sh("run " + kScenes + "multi_object.json" + kMultiObjectCrop + a.string()).code, 0);
+  const pid_t child = ::fork();
+  if (child == 0) ::_exit(0);
+  ASSERT_GT(child, 0);
+  ASSERT_EQ(::waitpid(child, nullptr, 0), child);
+  const fs::path dead = a / (".detections_edges.exr.tmp-" + std::to_string(child) + "-0");
+  const fs::path live = a / ".detections_edges.exr.tmp-1-0";  // init's: running
+  std::ofstream(dead) << "half an EXR";
+  std::ofstream(live) << "another's";
+  const Result r = sh("reconstruct " + a.string() + " -q");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_FALSE(fs::exists(dead));
+  EXPECT_TRUE(fs::exists(live));
+  EXPECT_TRUE(fs::exists(a / "detections_edges.exr"));
 }
 
 // evaluate holds the run folder's lock until its evaluation/ is published into it: a run into the folder

@@ -1,3 +1,4 @@
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <gtest/gtest.h>
@@ -107,6 +108,27 @@ TEST(Atomic, JsonIsPrettyWithTrailingNewlineAndBadUtf8IsAnError) {
   const std::string bad = dir.file("bad.json");
   expect_error_naming([&] { write_json(bad, nlohmann::json("\xff\xfe")); }, {bad});
   EXPECT_FALSE(std::filesystem::exists(bad));
+}
+
+// The temporary files of a process killed while it wrote (".<name>.tmp-<pid>-<n>" of a pid no longer running)
+// go; a running process's (this one's, init's), another name's, and names that only look alike stay.
+TEST(Atomic, DeadProcessesTemporariesAreRemovedAndNoOthers) {
+  TempDir dir;
+  const pid_t child = ::fork();
+  if (child == 0) ::_exit(0);
+  ASSERT_GT(child, 0);
+  int status = 0;
+  ASSERT_EQ(::waitpid(child, &status, 0), child);
+  const std::string dead = std::to_string(child), me = std::to_string(::getpid());
+  const std::vector<std::string> stay = {".x.exr.tmp-" + me + "-3", ".x.exr.tmp-1-0", ".y.exr.tmp-" + dead + "-0",
+                                         ".x.exr.tmp-" + dead, ".x.exr.tmp-" + dead + "-a", "x.exr.tmp-" + dead + "-0",
+                                         "x.exr"};
+  const std::vector<std::string> go = {".x.exr.tmp-" + dead + "-0", ".index.csv.tmp-" + dead + "-12"};
+  for (const auto& f : stay) std::ofstream(dir.file(f)) << "s";
+  for (const auto& f : go) std::ofstream(dir.file(f)) << "g";
+  EXPECT_EQ(remove_dead_temporaries(dir.path().string(), {"x.exr", "index.csv"}), 2);
+  for (const auto& f : stay) EXPECT_TRUE(std::filesystem::exists(dir.file(f))) << f;
+  for (const auto& f : go) EXPECT_FALSE(std::filesystem::exists(dir.file(f))) << f;
 }
 
 }  // namespace
