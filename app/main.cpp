@@ -19,6 +19,7 @@
 
 #include <cerrno>
 #include <csignal>
+#include <filesystem>
 #include <cstdio>
 #include <iostream>
 #include <sstream>
@@ -55,6 +56,26 @@ int main(int argc, char** argv) {
         return "found '" + v + "', expected " + threads_range;
       },
       threads_range);
+  // A folder to read. One absent because a run replacing it was stopped in its swap (a file system without an
+  // atomic exchange) names the earlier set the run moved aside (it said only "Directory does not exist").
+  const CLI::Validator kExistingFolder(
+      [](std::string& v) {
+        namespace fs = std::filesystem;
+        std::error_code ec;
+        if (fs::is_directory(v, ec)) return std::string();
+        if (fs::exists(v, ec)) return v + " is not a folder";
+        fs::path p = fs::path(v).lexically_normal();
+        if (p.filename().empty()) p = p.parent_path();
+        const fs::path parent = p.parent_path().empty() ? fs::path(".") : p.parent_path();
+        const std::string aside = "." + p.filename().string() + ".spadgen-old-";
+        std::string found;
+        for (const auto& e : fs::directory_iterator(parent, ec))
+          if (e.path().filename().string().rfind(aside, 0) == 0 && e.is_directory(ec)) found = e.path().string();
+        if (found.empty()) return "no such folder: " + v;
+        return "no such folder: " + v + "; a run replacing it was stopped during its swap and left its earlier files in " +
+               found + ", which the next `spadgen run -o " + v + "` puts back (or move it back yourself)";
+      },
+      "DIR");
   // -o "" (an unset shell variable) is a mistake, not a request for the default folder.
   const CLI::Validator kNamed([](std::string& v) { return v.empty() ? std::string("expected a path, found an empty one") : std::string(); },
                               "");
@@ -100,7 +121,7 @@ int main(int argc, char** argv) {
   CLI::App* sense_cmd = cli.add_subcommand(
       "sense", "re-sample the sensor from a run's saved light (outputs.light) without rendering: other sensor or acquisition "
                "settings, another chip, other noise");
-  sense_cmd->add_option("run_dir", sense.run_dir, "folder of a run written with outputs.light=true")->required()->check(CLI::ExistingDirectory);
+  sense_cmd->add_option("run_dir", sense.run_dir, "folder of a run written with outputs.light=true")->required()->check(kExistingFolder);
   sense_cmd->add_option("-o,--out", sense.out_dir, "output folder (default: RUN_DIR-sense)")->check(kNamed);
   sense_cmd->add_option("--set", sense.overrides, "override a sensor.*, acquisition.*, seeds.chip, seeds.noise or outputs.{counts,frames,expected_counts,detection_rate,previews,storage,exr_compression} key")
       ->type_name("KEY=VALUE");
@@ -148,7 +169,7 @@ int main(int argc, char** argv) {
       ->check(kThreadsRange);
   drun_cmd->add_flag("-q,--quiet", dataset_quiet, "nothing on stderr but warnings and errors");
   CLI::App* status_cmd = dataset_cmd->add_subcommand("status", "done, failed, stale, missing and damaged samples of a dataset folder");
-  status_cmd->add_option("dir", status_dir, "dataset folder")->required()->check(CLI::ExistingDirectory);
+  status_cmd->add_option("dir", status_dir, "dataset folder")->required()->check(kExistingFolder);
   CLI::App* dschema_cmd = dataset_cmd->add_subcommand("schema", "print the reference of the dataset file's keys (Markdown)");
   bool dataset_json_schema = false;
   dschema_cmd->add_flag("--json-schema", dataset_json_schema, "print it as a JSON Schema (for editors) instead");
@@ -157,7 +178,7 @@ int main(int argc, char** argv) {
   bool rec_quiet = false;
   CLI::App* rec_cmd = cli.add_subcommand("reconstruct", "reference detectors of the returns in each pixel's gate profile (detections_<detector>.exr), "
                                                         "or the HDR inversion of a 2D run (hdr.exr); docs/detection.md");
-  rec_cmd->add_option("run_dir", rec.run_dir, "run folder")->required()->check(CLI::ExistingDirectory);
+  rec_cmd->add_option("run_dir", rec.run_dir, "run folder")->required()->check(kExistingFolder);
   CLI::Option* rec_detector = rec_cmd->add_option("--detector", rec.detector, "edges (multi-scale rising and falling edges, default) or paper (the paper's virtual window)")
       ->check(CLI::IsMember({"edges", "paper"}));
   rec_cmd->add_option("-o,--out", rec.out, "output file (default RUN_DIR/detections_<detector>.exr, or RUN_DIR/hdr.exr)")->check(kNamed);
@@ -173,7 +194,7 @@ int main(int argc, char** argv) {
   std::string eval_samples;
   CLI::App* eval_cmd = cli.add_subcommand("evaluate", "score detections against the object labels of a run or of every sample of a dataset: "
                                                       "metrics.json, error maps; docs/detection.md");
-  eval_cmd->add_option("target", eval.target, "run folder or dataset folder")->required()->check(CLI::ExistingDirectory);
+  eval_cmd->add_option("target", eval.target, "run folder or dataset folder")->required()->check(kExistingFolder);
   CLI::Option* eval_detections = eval_cmd->add_option("--detections", eval.detections, "detections file (.exr or .npy; for a dataset: its name inside each sample, or a path with {sample}, the sample folder's name); default "
                                                         "detections_<detector>.exr, computed in memory when absent")
                                      ->check(kNamed);  // (an empty name was ignored: the detector ran instead)

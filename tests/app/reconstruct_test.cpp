@@ -662,6 +662,23 @@ TEST_F(Reconstruct, ADeadReconstructsTemporaryFileIsRemovedByTheNext) {
   EXPECT_TRUE(fs::exists(a / "detections_edges.exr"));
 }
 
+// A run folder absent because a run replacing it was stopped in its swap (a file system without an atomic
+// exchange) is named with the earlier set the run moved aside, by every command that reads a folder (they said
+// only "Directory does not exist").
+TEST_F(Reconstruct, AFolderLeftAsideInASwapIsNamed) {
+  fs::create_directories(dir_ / ".t.spadgen-old-42");
+  for (const char* cmd : {"reconstruct", "sense", "evaluate"}) {
+    const Result r = sh(std::string(cmd) + " " + (dir_ / "t").string());
+    EXPECT_EQ(r.code, 1) << cmd;
+    EXPECT_THAT(r.output, HasSubstr("no such folder: " + (dir_ / "t").string() + "; a run replacing it was stopped during its "
+                                    "swap and left its earlier files in " + (dir_ / ".t.spadgen-old-42").string() +
+                                    ", which the next `spadgen run -o " + (dir_ / "t").string() + "` puts back"))
+        << cmd;
+  }
+  const Result r = sh("reconstruct " + (dir_ / "u").string());
+  EXPECT_THAT(r.output, HasSubstr("no such folder: " + (dir_ / "u").string() + " "));
+}
+
 // evaluate holds the run folder's lock until its evaluation/ is published into it: a run into the folder
 // meanwhile is refused (it let go after scoring, and a run replacing the folder then failed the publication,
 // "No such file or directory", the work lost). Each of its renames (its two images', metrics.json's, the
