@@ -133,7 +133,9 @@ RunFolder::RunFolder(const std::string& dir) : dir_(dir) {
     emission_delay_s_ = get<double>(meta_, "/resolved_scene/laser/emission_delay_ns", meta_path) * 1e-9;
     period_s_ = 1e-6 / get<double>(meta_, "/resolved_scene/laser/repetition_rate_MHz", meta_path);
     const std::string maps = (d / "sensor_maps.exr").string();
-    if (!fs::is_regular_file(maps)) throw Error(dir + ": no sensor_maps.exr (the per-pixel gate skew and length the edges are timed with)");
+    if (!fs::is_regular_file(maps))
+      throw Error(dir + (fs::exists(maps) ? ": sensor_maps.exr is not a regular file (a folder, a FIFO or a device)"
+                                          : ": no sensor_maps.exr") + " (the per-pixel gate skew and length the edges are timed with)");
     writers::ExrData m = writers::read_exr(maps);
     for (const char* c : {"gate_skew_ps", "gate_length_ps"})
       if (!m.channels.count(c)) throw Error(maps + ": no channel " + std::string(c));

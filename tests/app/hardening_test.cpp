@@ -830,6 +830,22 @@ TEST_F(Hardening, AFifoInARunFolderIsRefusedAndSymbolicLinksAreFollowed) {
     fs::remove(f);
     fs::rename(kept, f);
   }
+  // in place of a file sense links, or of the gate maps reconstruct times its edges with: named as such (sense said
+  // "holds 0 bytes ... changed or cut short", reconstruct "no sensor_maps.exr")
+  for (const auto& [file, command, says] :
+       {std::tuple{"ground_truth.exr", "sense " + run.string() + " -q -o " + (dir_ / "s").string(),
+                   "ground_truth.exr: listed in " + (run / "metadata.json").string() + " (files) but is not a regular file (a FIFO"},
+        {"sensor_maps.exr", "reconstruct " + run.string() + " -q -o " + (dir_ / "d.exr").string(),
+         ": sensor_maps.exr is not a regular file (a folder, a FIFO or a device)"}}) {
+    const fs::path f = run / file, kept = dir_ / "kept";
+    fs::rename(f, kept);
+    ASSERT_EQ(::mkfifo(f.c_str(), 0644), 0);
+    const Outcome o = spadgen(command, 20);
+    expect_exit(o, 1, file);
+    EXPECT_THAT(o.output, HasSubstr(says)) << file;
+    fs::remove(f);
+    fs::rename(kept, f);
+  }
   // ground_truth.exr and a light array moved out of the run, relative links in their place
   fs::rename(run / "ground_truth.exr", dir_ / "gt.exr");
   fs::create_symlink("../gt.exr", run / "ground_truth.exr");
