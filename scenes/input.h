@@ -51,6 +51,9 @@ size_t invalid_utf8_at(const std::string& text);
 
 // `text` for a message: bytes outside printable ASCII shown as \xHH.
 std::string printable(const std::string& text);
+// The text on one line: control bytes (a newline, a tab, ...) as \n, \t or \xNN, the rest (UTF-8 included, and
+// NUL, which spadgen::Error shows as \0) as it is: for a user's key or name in a one-line message.
+std::string one_line(const std::string& text);
 
 // The candidate closest to `word` by edit distance when it is close enough to be a likely typo (at most a
 // third of the word's length, and at least 2 edits allowed), else "": for "did you mean" messages.

@@ -693,7 +693,8 @@ void ignored_keys(const json& doc, const RunConfig& c, std::vector<std::string>&
 
 std::string join_errors(const std::vector<std::string>& errors) {
   std::string out = errors.size() == 1 ? "" : std::to_string(errors.size()) + " errors in the scene file:\n";
-  for (size_t i = 0; i < errors.size(); ++i) out += (i ? "\n" : "") + errors[i];
+  // one line each (a key or a glTF name holding a newline broke a message in two)
+  for (size_t i = 0; i < errors.size(); ++i) out += (i ? "\n" : "") + one_line(errors[i]);
   return out;
 }
 

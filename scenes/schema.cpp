@@ -457,7 +457,7 @@ std::vector<Key> build() {
   k.push_back(integer("/render/max_samples_per_pixel", FIELD(render.max_samples_per_pixel), kNone, closed(1, 1e7), "the most paths of a pixel's estimate with target_relative_error (its first round not counted)"));
   k.push_back(integer("/render/max_bounces", FIELD(render.max_bounces), kNone, closed(1, 64), "scattering vertices per path (1 = direct light only); smooth interfaces a path crosses or mirrors off do not count, a rough plate's faces do (an object behind a rough plate needs 3)"));
   k.push_back(integer("/render/russian_roulette_from", FIELD(render.russian_roulette_from), kNone, closed(1, 64), "bounce from which paths may be stopped by Russian roulette"));
-  k.push_back(number("/render/time_bin_ps", FIELD(render.time_bin_s), kPsUnit, closed(1e-6, 1e6), "transient bin width"));
+  k.push_back(number("/render/time_bin_ps", FIELD(render.time_bin_s), kPsUnit, open_closed(0, 1e6), "transient bin width"));
   k.push_back(number("/render/window_start_ns", FIELD(render.window_start_s), kNsUnit, closed(-1e6, 1e6), "start of the transient window; null = derived from the acquisition"));
   k.push_back(number("/render/window_stop_ns", FIELD(render.window_stop_s), kNsUnit, closed(-1e6, 1e6), "end of the transient window; null = derived from the acquisition"));
   k.push_back(integer("/render/tile_size_px", FIELD(render.tile_size), kPixel, closed(8, 4096), "tile edge (a multiple of 8: bit-packed frames start on a byte); outputs do not depend on it"));

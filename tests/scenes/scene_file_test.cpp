@@ -447,6 +447,17 @@ TEST_F(SceneFileTest, OverridesThatAreNotUtf8AreRefusedAsSuch) {
   EXPECT_EQ(parse(file, {"description=caf\xc3\xa9 \xe2\x82\xac \xf0\x9f\x93\xb7"}).resolved["description"], "caf\xc3\xa9 \xe2\x82\xac \xf0\x9f\x93\xb7");
 }
 
+// A key holding a newline or a tab (a glTF name with one, quoted) is named on one line, the rest of its text,
+// UTF-8 included, as written (the message broke in two at the newline).
+TEST_F(SceneFileTest, AnErrorNamingAKeyWithANewlineStaysOnOneLine) {
+  const std::string file = R"({"gltf": "s.gltf"})";
+  const std::string e = error_of(file, {"laser.aver\nage\t\x01=1", "nodes.\"t\xc3\xa4\nx\".translation_m[2]=\"abc\""});
+  EXPECT_EQ(std::count(e.begin(), e.end(), '\n'), 2) << e;  // the count's line, then one line per error
+  EXPECT_THAT(e, HasSubstr("--set laser.aver\\nage\\t\\x01: /laser/aver\\nage\\t\\x01: unknown key"));
+  EXPECT_THAT(e, HasSubstr("--set nodes.\"t\xc3\xa4\\nx\".translation_m[2]: found"));
+  EXPECT_EQ(one_line("a\xc3\xa9\n\t\x7f"), "a\xc3\xa9\\n\\t\\x7F");
+}
+
 TEST(Utf8, MalformedSequencesAreFoundAtTheirFirstByte) {
   EXPECT_EQ(invalid_utf8_at("plain ascii"), std::string::npos);
   EXPECT_EQ(invalid_utf8_at("\xc3\xa9\xe2\x82\xac\xf0\x9f\x93\xb7\xf4\x8f\xbf\xbf"), std::string::npos);
