@@ -183,7 +183,7 @@ struct GateConfig {
   std::string maps_exr;                 // sensor.gate.maps_exr: EXR with channels skew_ps, length_ps
   double jitter_fwhm_s = 60e-12;        // sensor.jitter_fwhm_ps: SPAD timing jitter (Gaussian)
   // The numerical gate model (docs/sensor.md, "Knots"; their cost and error in docs/accuracy.md):
-  int knots_per_edge = 64;              // sensor.gate.knots_per_edge: knots of a tabulated edge
+  int knots_per_edge = 256;             // sensor.gate.knots_per_edge: knots of a tabulated edge
   double grid_s = 0.25e-12;             // sensor.gate.grid_ps: step of the fine grid the edges and the
                                         // instrument response are tabulated on (at least span / 12000)
 

@@ -317,7 +317,7 @@ TEST(Gate, SmoothKnotErrorAgainstClosedForm) {
   GateConfig g;  // defaults: smooth, 400 ps edges, 60 ps jitter
   LaserConfig l;  // 80 ps pulse
   double previous = 1.0;
-  for (int m : {16, 32, 64, 128}) {
+  for (int m : {16, 32, 64, 128, 256}) {
     g.knots_per_edge = m;
     const GateShape gs = build_gate_shape(g, l);
     double err = 0.0, fine_err = 0.0;
@@ -338,6 +338,9 @@ TEST(Gate, SmoothKnotErrorAgainstClosedForm) {
     }
     if (m == 128) {
       EXPECT_LT(err, 6e-5);
+    }
+    if (m == 256) {  // the default
+      EXPECT_LT(err, 1.5e-5);
     }
   }
 }

@@ -274,7 +274,7 @@ TEST(Sensor, FullChipPresetUsesBothPixels) {
   EXPECT_EQ(j["K"], model.K());
   EXPECT_TRUE(j["gate"].contains("knot_max_error"));
   EXPECT_GT(j["gate"]["grid_ps"].get<double>(), 0.25);  // span / 12000 for the default gate: 0.265 ps
-  EXPECT_EQ(j["gate"]["knots_per_edge"], 64);
+  EXPECT_EQ(j["gate"]["knots_per_edge"], 256);
   // The gate model's knobs (sensor.gate.knots_per_edge, grid_ps) reach the gate, and metadata says so.
   c.sensor.gate.knots_per_edge = 16;
   c.sensor.gate.grid_s = 4e-12;
