@@ -110,7 +110,7 @@ std::vector<std::string> laser_warnings(const RunConfig& c, const render::Camera
 
 bool is_sensor_warning(const std::string& warning) {
   return warning.rfind(kGateWarning, 0) == 0 || warning.rfind(kTablesChangedWarning, 0) == 0 ||
-         warning.find(kPdpWarning) != std::string::npos;
+         warning.find(kPdpWarning) != std::string::npos || warning.find(kSweepEdgeWarning) != std::string::npos;
 }
 
 std::vector<std::string> sensor_warnings(const sensor::SensorModel& sensor) {
@@ -161,7 +161,7 @@ std::vector<std::string> sweep_edge_warnings(const RunConfig& c, const RunRecord
   const int64_t without = e[kFallingEdgeOnly] + e[kNoEdgeInSweep];
   if (lit == 0 || !(double(without) > kWarnLightFraction * double(lit))) return {};
   const auto pairs = [](int64_t n) { return std::to_string(n) + (n == 1 ? " pair" : " pairs"); };
-  std::string w = percent(double(without) / double(lit)) + " of the objects' returns along the rays (" + std::to_string(without) +
+  std::string w = percent(double(without) / double(lit)) + kSweepEdgeWarning + std::to_string(without) +
                   " of the " + pairs(lit) + " (pixel, object) with laser light in labels.exr) rise before the gate sweep's first "
                   "position (acquisition.gate_sweep.start_ns " + g(c.acquisition.gate_sweep.start_s * 1e9) +
                   " ns; a pixel's gate opens at the position plus sensor.gate.delay_ns " + g(c.sensor.gate.delay_s * 1e9) +

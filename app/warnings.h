@@ -32,6 +32,9 @@ inline constexpr const char* kGateWarning = "sensor.gate: the gate is tabulated"
 // warning: a sense of that sense compares its own tables).
 inline constexpr const char* kTablesChangedWarning = "the sensor's tables (";
 
+// Every sweep_edge_warnings warning holds this (a sense with another sweep says its own, not the run's).
+inline constexpr const char* kSweepEdgeWarning = " of the objects' returns along the rays (";
+
 // Every warning about a pixel type blind to the laser holds this.
 inline constexpr const char* kPdpWarning = ": its photon detection probability at the laser's wavelength";
 
@@ -65,7 +68,8 @@ std::vector<std::string> bright_gate_warnings(const sensor::SensorModel& sensor,
 // rise lies before the first gate position; the labels take the falling edge), or the plateau spans it (no
 // edge at all). A new user's plate 0.8-1.2 m away rose before a sweep starting at 4 ns, silently.
 std::vector<std::string> sweep_edge_warnings(const RunConfig& c, const RunRecord& r);
-// One of sensor_warnings' or bright_gate_warnings' (sense replaces a run's with its own sensor's).
+// One of sensor_warnings', bright_gate_warnings' or sweep_edge_warnings' (sense replaces a run's with its own
+// sensor's and sweep's).
 bool is_sensor_warning(const std::string& warning);
 
 // Before rendering (run and info): a cone beam (laser.beam = cone) whose spot is smaller than a pixel's

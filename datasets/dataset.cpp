@@ -332,17 +332,24 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
   };
   // Checks `key=value` overrides against the first scene file, with the scene file's own checks (each value
   // alone: a value that makes some samples invalid with other keys is those samples' failure, not the file's).
+  // A mistake of the first scene file itself is its own, named once at /scenes/0 (not the keys', unless the
+  // dataset's keys mend it: then the keys are checked with it as they are).
+  std::optional<std::string> own_mistake;
   const auto check_values = [&](const std::string& at, const std::vector<std::string>& overrides) {
     if (!scenes_read) return;
     try {
       (void)scenes::load_scene_file(s.scenes.front(), overrides);
     } catch (const Error& e) {
-      // a mistake of the scene file itself is its own, not the key's (unless the dataset's keys mend it)
-      try {
-        (void)scenes::load_scene_file(s.scenes.front(), {});
-      } catch (const Error& own) {
-        rd.fail("/scenes/0", own.what());
+      if (!own_mistake) {
+        own_mistake = "";
+        try {
+          (void)scenes::load_scene_file(s.scenes.front(), {});
+        } catch (const Error& own) {
+          own_mistake = own.what();
+          rd.fail("/scenes/0", own.what());
+        }
       }
+      if (!own_mistake->empty()) return;  // named once, above
       rd.fail(at, std::string("with the scene file ") + s.scene_names.front() + ": " + e.what());
     }
   };
@@ -394,8 +401,16 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
     } catch (const Error&) {
       together = false;
     }
-    if (!together)
-      for (size_t i = 0; i < all.size(); ++i) rd.each([&] { check_values("/set/" + s.set[i].first, {all[i]}); });
+    if (!together) {
+      // each key alone; one found wrong is left out of the samples the checks below make (it failed them all)
+      std::vector<std::pair<std::string, json>> right;
+      for (size_t i = 0; i < all.size(); ++i) {
+        const size_t errors = rd.errors.size();
+        rd.each([&] { check_values("/set/" + s.set[i].first, {all[i]}); });
+        if (rd.errors.size() == errors) right.push_back(s.set[i]);
+      }
+      s.set = std::move(right);
+    }
   }
   if (doc.contains("grid") && !doc["grid"].is_object())
     rd.each([&] { rd.fail("/grid", "found " + describe(doc["grid"]) + ", expected an object of scene-file keys and arrays of values"); });
@@ -450,8 +465,9 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
     }
   }
   // Realisations re-sample the noise from each sample's saved light, so `repeats` saves it (outputs.light
-  // true for every sample): the file may say so too, not otherwise.
-  rd.each([&] {
+  // true for every sample): the file may say so too, not otherwise. (Not of keys found wrong above: a value of
+  // outputs.light that is no boolean was named, and told to be set true, twice.)
+  if (rd.errors.empty()) rd.each([&] {
     if (const std::string light = spelling_of({"outputs", "light"}); s.repeats > 1 && !light.empty()) {
       const auto in_set = std::find_if(s.set.begin(), s.set.end(), [&](const auto& kv) { return kv.first == light; });
       const std::string why = "repeats " + std::to_string(s.repeats) + " re-samples each sample's noise from its saved light, which it saves";
@@ -492,7 +508,11 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
           if (why.empty()) why = e.what();
         }
       }
-      if (!r) throw Error(rd.file + ": " + invalid_probes_message(s, k, probes, why));
+      // (where mistakes were named above, the probes' failures are theirs: not named again)
+      if (!r) {
+        if (!rd.errors.empty()) return;
+        throw Error(rd.file + ": " + invalid_probes_message(s, k, probes, why));
+      }
       if (r->config.edits.nodes.empty() && r->config.edits.materials.empty()) return;
       try {
         (void)scenes::load_gltf(r->config.gltf_path, r->config.gltf_scene, r->config.edits);

@@ -186,6 +186,28 @@ void DatasetFolder::check() const {
 }
 
 namespace {
+// Where a sample's resolved scene as its metadata.json recorded it (`was`) first differs from the scene as it
+// resolves now: the dotted key and both values ("sensor.gate.knots_per_edge (64 in the sample, 256 now)"),
+// "" when they are equal.
+std::string resolved_difference(const json& was, const json& now, const std::string& path) {
+  const auto text = [](const json& v) {
+    const std::string t = v.dump();
+    return t.size() <= 40 ? t : t.substr(0, 37) + "...";
+  };
+  if (was == now) return "";
+  if (was.is_object() && now.is_object()) {
+    for (auto it = now.begin(); it != now.end(); ++it) {
+      const std::string here = path + (path.empty() ? "" : ".") + it.key();
+      if (!was.contains(it.key())) return here + " (not in the sample's, " + text(it.value()) + " now)";
+      if (const std::string d = resolved_difference(was[it.key()], it.value(), here); !d.empty()) return d;
+    }
+    for (auto it = was.begin(); it != was.end(); ++it)
+      if (!now.contains(it.key())) return path + (path.empty() ? "" : ".") + it.key() + " (" + text(it.value()) + " in the sample's, gone now)";
+    return "";
+  }
+  return (path.empty() ? std::string("the top level") : path) + " (" + text(was) + " in the sample, " + text(now) + " now)";
+}
+
 // Where the dataset file's resolved form `file` first differs from the folder's dataset.json `folder`: the
 // keys down to the value that differs ("set"."render.samples_per_pixel"), with both values (it named the
 // top-level key alone: "set").
@@ -300,7 +322,9 @@ bool DatasetFolder::renders_ggx(const scenes::ResolvedRun& r) const {
         if (e.metallic) mat.metallic = float(*e.metallic);
         if (e.transmission) mat.transmission = float(*e.transmission);
       }
-    if (!mat.lambertian()) return true;
+    // a smooth surface (alpha = roughness^2 below 1e-3, render/bsdf.h) reflects and refracts by Dirac lobes only
+    const float roughness = std::clamp(mat.roughness, 0.0f, 1.0f);
+    if (!mat.lambertian() && roughness * roughness >= 1e-3f) return true;
   }
   return false;
 }
@@ -450,6 +474,12 @@ SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash) co
         else if (meta->value("scene_hash_fnv1a64", "") != scene_content_hash(s.scene))
           rec.error = "the scene file, its glTF or a file the glTF reads changed since it was generated";
         else if (const Resolved now = resolve(s); (*meta)["dataset"].value("sample_hash", "") == now.hash_before_revisions)
+          rec.error = "spadgen renders this scene otherwise now (" + now.revisions + ")";
+        else if (const std::string at = resolved_difference(meta->value("resolved_scene", json()), json(now.scene), ""); !at.empty())
+          // (a default of this spadgen: the knots of the gate, 64 then 256, made every sample stale with the
+          // reason below, which named no default)
+          rec.error = "the scene as it resolves now differs at " + at + ": a parameter, or a default of this spadgen";
+        else if (!now.revisions.empty())
           rec.error = "spadgen renders this scene otherwise now (" + now.revisions + ")";
         else
           rec.error = "the scene as it resolves now differs (a sensor table the scene file names, or the parameters)";
@@ -815,6 +845,7 @@ std::string dataset_card(const DatasetFolder& folder, const CardTally& tally) {
   for (const GridAxis& g : spec.grid) varied_keys.push_back(varied_names(g.key));
   for (const RandomAxis& ra : spec.random) varied_keys.push_back(varied_names(ra.key));
   // dotted: a key of the resolved scene (camera.width_px); varied when a varied key sets it, a part of it or all of it
+  // (below: or its value differs among the scene's first samples: a preset that sets it, render.quality)
   const auto varies = [&](const std::string& dotted) {
     std::vector<std::string> names;
     for (size_t a = 0, b; a <= dotted.size(); a = b + 1) {
@@ -838,15 +869,27 @@ std::string dataset_card(const DatasetFolder& folder, const CardTally& tally) {
     } catch (const Error&) {
       continue;
     }
-    // the value of dotted key k in the resolved scene, or "varies"
-    const auto num = [&](const std::string& k) {
-      if (varies(k)) return std::string("varies");
-      const ojson* v = &r;
+    std::vector<ojson> others;  // the scene's next samples, as they resolve (the valid ones)
+    for (const int64_t p : probe_samples(spec, i))
+      if (p != first) try {
+          others.push_back(folder.resolve(make_sample(spec, p)).scene);
+        } catch (const Error&) {
+        }
+    const auto at = [](ojson& scene, const std::string& k) {
+      ojson* v = &scene;
       for (size_t a = 0, b; a <= k.size(); a = b + 1) {
         b = k.find('.', a);
         if (b == std::string::npos) b = k.size();
         v = &(*v)[k.substr(a, b - a)];
       }
+      return v;
+    };
+    // the value of dotted key k in the resolved scene, or "varies"
+    const auto num = [&](const std::string& k) {
+      if (varies(k)) return std::string("varies");
+      const ojson* v = at(r, k);
+      for (ojson& other : others)
+        if (*at(other, k) != *v) return std::string("varies");
       std::ostringstream t;
       if (v->is_number()) t << v->get<double>();
       else if (v->is_string()) t << v->get<std::string>();
@@ -868,7 +911,7 @@ std::string dataset_card(const DatasetFolder& folder, const CardTally& tally) {
       << num("laser.wavelength_nm") << " nm, " << num("laser.repetition_rate_MHz") << " MHz, " << num("laser.average_power_mW")
       << " mW | " << num("render.samples_per_pixel") << " paths per pixel |\n";
   }
-  o << "\nAs each scene's first sample resolves; \"varies\": a key under Parameters sets it per sample. Every sample's full settings "
+  o << "\nAs each scene's first sample resolves; \"varies\": a key under Parameters sets it per sample (or a preset it sets). Every sample's full settings "
        "are its `metadata.json`'s `resolved_scene`.\n";
   o << "\n## Parameters\n\n";
   o << "Sample i takes grid cell i mod " << spec.grid_cells() << " (the scene outermost, the last grid key fastest) and its "

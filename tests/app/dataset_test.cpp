@@ -950,6 +950,22 @@ TEST_F(Dataset, ADamagedSampleThatFailsAgainIsFailed) {
   EXPECT_EQ(slurp(dir_ / "out/samples/000001/notes.txt"), "mine");
 }
 
+// A sample stale because the scene resolves otherwise now names the first key that differs, with both values
+// (a new default of spadgen, the gate's knots, made every sample stale "for a sensor table or the parameters").
+TEST_F(Dataset, AStaleSampleNamesTheKeyItsSceneResolvesOtherwiseAt) {
+  write(dir_ / "d.json", small_dataset(1));
+  ASSERT_EQ(sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q").code, 0);
+  const fs::path meta_path = dir_ / "out/samples/000000/metadata.json";
+  nlohmann::json meta = nlohmann::json::parse(slurp(meta_path));
+  meta["resolved_scene"]["sensor"]["gate"]["knots_per_edge"] = 64;  // as an earlier spadgen resolved it
+  meta["dataset"]["sample_hash"] = "0123456789abcdef";
+  std::ofstream(meta_path) << meta.dump(2);
+  const Result st = sh("dataset status " + (dir_ / "out").string());
+  EXPECT_EQ(st.code, 4);
+  EXPECT_THAT(st.output, HasSubstr("stale 0: the scene as it resolves now differs at sensor.gate.knots_per_edge (64 in the "
+                                   "sample, 256 now): a parameter, or a default of this spadgen"));
+}
+
 // What a dataset run killed while it wrote dataset.json or the index left (".dataset.json.tmp-PID-N", which
 // stayed after a successful resume) goes with the next run on the folder.
 TEST_F(Dataset, ADeadRunsTemporaryFilesGoWithTheNextRun) {

@@ -75,6 +75,12 @@ TEST(DatasetFile, AMistakeOfTheSceneFileIsNamedAsItsOwn) {
   EXPECT_THAT(error("{\"scenes\": [\"broken.json\"], \"set\": {\"outputs.storage\": \"zarr\"}}"),
               HasSubstr("d.json: /scenes/0: " + (dir / "broken.json").string() + ": /notes_for_me: unknown key"));
   EXPECT_EQ(error("{\"scenes\": [\"mended.json\"], \"set\": {\"camera.width_px\": 2048}}"), "no error");
+  // once, whatever the keys checked with it (each key's check named it again, and the samples' probe too)
+  EXPECT_EQ(error("{\"scenes\": [\"broken.json\"], \"set\": {\"render.samples_per_pixel\": 2}, "
+                  "\"grid\": {\"laser.average_power_mW\": [1, 2], \"camera.f_number\": [2, 3]}}"),
+            (dir / "d.json").string() + ": /scenes/0: " + (dir / "broken.json").string() +
+                ": /notes_for_me: unknown key; the keys here are: gltf, gltf_scene, description, seed, seeds, camera, laser, "
+                "ambient, sensor, acquisition, render, outputs, nodes, materials");
   fs::remove_all(dir);
 }
 
@@ -186,6 +192,13 @@ TEST(DatasetFile, EveryMistakeIsNamedAtOnce) {
     EXPECT_THAT(e, HasSubstr(part));
   EXPECT_EQ(std::count(e.begin(), e.end(), '\n'), 5) << e;  // one line each (after the count's)
   EXPECT_EQ(error_of("\"repeats\": 0").find("errors in the dataset file"), std::string::npos);
+  // a wrong value of set is named once: not again by the samples it fails, nor by the checks across keys
+  for (const char* body : {"\"set\": {\"camera.f_number\": -3}", "\"repeats\": 2, \"set\": {\"outputs.light\": \"yes\"}"}) {
+    const std::string one = error_of(body);
+    EXPECT_EQ(one.find("errors in the dataset file"), std::string::npos) << one;
+    EXPECT_EQ(one.find('\n'), std::string::npos) << one;
+    EXPECT_THAT(one, HasSubstr("test_dataset.json: /set/")) << one;
+  }
 }
 
 // [a, b) holds for ranges a few ulps wide (b itself was drawn: 51 of 200 at [130, 130 + 2 ulp]; a
@@ -466,7 +479,9 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
            // the flat target's paper is Lambertian: a GGX lobe only where a sample's parameters make it glossy
            {"\"materials.white_paper.roughness\": 0.5", ggx},
            {"\"materials.white_paper.roughness\": 1", ""},
-           {"\"materials.white_paper.metallic\": 0.2", ggx}}) {
+           {"\"materials.white_paper.metallic\": 0.2", ggx},
+           // a mirror (roughness below 0.032: Dirac lobes only) renders no GGX lobe
+           {"\"materials.white_paper.metallic\": 1, \"materials.white_paper.roughness\": 0.01", ""}}) {
     const DatasetFolder::Resolved r = resolved(c.set);
     EXPECT_EQ(r.revisions, c.revisions) << c.set;
     EXPECT_EQ(r.hash != r.hash_before_revisions, !c.revisions.empty()) << c.set;
@@ -480,20 +495,22 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
 }
 
 // The card's "Sensor and acquisition" row is each scene's first sample: a value the dataset varies reads
-// "varies" (a new user read sample 0's preset and laser power as the dataset's), the others their value.
+// "varies" (a new user read sample 0's preset and laser power as the dataset's), also one a preset sets (a
+// reviewer's render.quality grid showed sample 0's paths), the others their value.
 TEST(DatasetFolder, TheCardSaysWhichSettingsVary) {
   const fs::path dir = fs::temp_directory_path() / ("spadgen_dataset_card_" + std::to_string(::getpid()));
-  const DatasetSpec spec = parse("\"grid\": {\"sensor.preset\": [\"pixel_A\", \"pixel_B\"]}, "
+  const DatasetSpec spec = parse("\"grid\": {\"sensor.preset\": [\"pixel_A\", \"pixel_B\"], \"render.quality\": [\"draft\", \"standard\"]}, "
                                  "\"random\": {\"\\\"laser\\\".average_power_mW\": {\"uniform\": [1, 2]}, "
-                                 "\"acquisition.gate_sweep.step_ps\": {\"uniform\": [30, 40]}}, "
-                                 "\"set\": {\"render.samples_per_pixel\": 3}");
+                                 "\"acquisition.gate_sweep.step_ps\": {\"uniform\": [30, 40]}}");
   const std::string card = dataset_card(DatasetFolder(spec, dir), CardTally{});
   const size_t at = card.find("flat_target.json` | 1024 x 500 | ", card.find("## Sensor and acquisition"));
   ASSERT_NE(at, std::string::npos) << card;
   const std::string row = card.substr(at, card.find('\n', at) - at);
   EXPECT_THAT(row, HasSubstr(" | varies | gate_sweep, "));  // the preset, by the grid
   EXPECT_THAT(row, HasSubstr(" ns in varies ps steps"));    // the sweep's step, by a random key
-  EXPECT_THAT(row, HasSubstr(" MHz, varies mW | 3 paths per pixel |"));  // a quoted spelling; set's value as it is
+  // a quoted spelling; a preset that sets the paths (found by the values of the scene's first samples); what
+  // nothing varies, as it is
+  EXPECT_THAT(row, HasSubstr(" | 637 nm, 40 MHz, varies mW | varies paths per pixel |"));
   EXPECT_THAT(row, Not(HasSubstr("pixel_A")));
   fs::remove_all(dir);
 }
