@@ -690,6 +690,7 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
   std::deque<size_t> pending;
   for (size_t t = 0; t < todo.size(); ++t) pending.push_back(t);
   size_t handled = 0, busy_in_a_row = 0;
+  std::set<int64_t> rendered_here;  // samples this run rendered (a retried one's realisations follow its render)
   bool waiting = false;  // since waiting_since, every sample left was another run's
   std::chrono::steady_clock::time_point waiting_since{};
   std::chrono::steady_clock::time_point last_said;
@@ -729,12 +730,14 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
       wait_turn();
       continue;
     }
-    busy_in_a_row = 0;
-    waiting = false, said = 0;
+    // (the counts of held samples restart only once a sample is handled: one whose folder turns out held, below,
+    // spun without a pause or a word when they restarted here)
+    const auto handled_one = [&] { busy_in_a_row = 0, waiting = false, said = 0; };
     ++handled;
     const SampleRecord rec = folder.inspect(s);  // as it is now, under the claim
     if (rec.status == Status::Done) {
       ++by_others;  // completed by another run meanwhile
+      handled_one();
       continue;
     }
     const auto sample_start = std::chrono::steady_clock::now();
@@ -749,7 +752,9 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
       if (rec.hash.empty()) throw Error(rec.error);  // the sample's parameters make an invalid scene
       // A sample rendered again (damaged, stale) has its realisations sensed again too: they hard-link its
       // files, which are new ones now.
-      bool rendered = false;
+      // (rendered in an earlier attempt of this run, which a realisation's held folder stopped: its realisations
+      // are sensed again all the same)
+      bool rendered = rendered_here.count(s.index) > 0;
       // A sample or realisation folder without a readable metadata.json (lost, or cut short by a copy)
       // says nothing of what it holds, and its run would refuse the files as another's: it is this sample's
       // (in samples/, under its claim), so it goes, and the sample is generated again.
@@ -764,6 +769,7 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
       for (int k = 1; k < spec.repeats; ++k) clear_unrecorded(s.repeat_folder(k));
       if (!folder.holds(s.folder(), rec.hash)) {
         rendered = true;
+        rendered_here.insert(s.index);
         RunOptions r;
         r.scene_file = spec.scenes[size_t(s.scene)];
         r.out_dir = (dir / s.folder()).string();
@@ -809,6 +815,7 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
                      static_cast<long long>(s.index), r.what());
       }
     }
+    handled_one();
     if (options.progress) {
       const auto now = std::chrono::steady_clock::now();
       const double took = std::chrono::duration<double>(now - sample_start).count();

@@ -68,9 +68,11 @@ int main(int argc, char** argv) {
         if (p.filename().empty()) p = p.parent_path();
         const fs::path parent = p.parent_path().empty() ? fs::path(".") : p.parent_path();
         const std::string aside = "." + p.filename().string() + ".spadgen-old-";
-        std::string found;
+        std::string found;  // the newest, as the next run takes it back (Staging)
+        fs::file_time_type newest{};
         for (const auto& e : fs::directory_iterator(parent, ec))
-          if (e.path().filename().string().rfind(aside, 0) == 0 && e.is_directory(ec)) found = e.path().string();
+          if (e.path().filename().string().rfind(aside, 0) == 0 && e.is_directory(ec))
+            if (const auto t = e.last_write_time(ec); found.empty() || t > newest) found = e.path().string(), newest = t;
         if (found.empty()) return "no such folder: " + v;
         return "no such folder: " + v + "; a run replacing it was stopped during its swap and left its earlier files in " +
                found + ", which the next `spadgen run -o " + v + "` puts back (or move it back yourself)";

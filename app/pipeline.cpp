@@ -27,6 +27,7 @@
 #include "render/renderer.h"
 #include "scenes/key_path.h"
 #include "scenes/scene.h"
+#include "scenes/input.h"
 #include "scenes/scene_file.h"
 #include "sensor/labels.h"
 #include "sensor/sensor.h"
@@ -54,7 +55,8 @@ scenes::Scene load_edited_gltf(const scenes::ResolvedRun& r, const std::string& 
     // the --set key of that node or material (nodes.a.scale), else the scene file
     const std::string what = e.what(), element = "/" + e.section + "/" + scenes::pointer_token(e.name);
     for (const auto& [pointer, key] : r.set_keys)
-      if (pointer.rfind(element + "/", 0) == 0) throw Error("--set " + key + what.substr(element.size()));
+      if (pointer.rfind(element + "/", 0) == 0)  // (the message holds the element on one line: a newline escaped)
+        throw Error("--set " + scenes::one_line(key) + what.substr(std::min(what.size(), scenes::one_line(element).size())));
     throw Error(scene_file + ": " + what);
   }
 }

@@ -248,8 +248,10 @@ void check_writable(const std::string& file, const RunFolder& run, const std::st
   }
   if (::access(dir.c_str(), W_OK) != 0)
     throw Error(file + ": cannot write into " + dir.string() + ": " + std::strerror(errno));
-  // the temporary file a reconstruct killed while it wrote this one left (stayed for ever beside the run's files)
-  writers::remove_dead_temporaries(dir.string(), {fs::path(file).filename().string()});
+  // the temporary file a reconstruct killed while it wrote this one left (stayed for ever beside the run's files):
+  // in the run folder, whose lock this process holds (a writer of another pid namespace or host, elsewhere, may
+  // live without a pid here)
+  if (std::error_code same; fs::equivalent(dir, fs::path(run_dir), same)) writers::remove_dead_temporaries(dir.string(), {fs::path(file).filename().string()});
 }
 
 std::string slot_name(int s, const char* what) { return "det" + std::to_string(s) + "." + what; }

@@ -479,8 +479,6 @@ SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash) co
           // (a default of this spadgen: the knots of the gate, 64 then 256, made every sample stale with the
           // reason below, which named no default)
           rec.error = "the scene as it resolves now differs at " + at + ": a parameter, or a default of this spadgen";
-        else if (!now.revisions.empty())
-          rec.error = "spadgen renders this scene otherwise now (" + now.revisions + ")";
         else
           rec.error = "the scene as it resolves now differs (a sensor table the scene file names, or the parameters)";
       }

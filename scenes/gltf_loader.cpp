@@ -673,7 +673,7 @@ size_t Loader::named(const char* kind, const char* section, const std::vector<st
   if (hits.size() > 1) {
     std::string list;
     for (size_t h : hits) list += (list.empty() ? "" : ", ") + std::to_string(h);
-    throw EditError(edits, name, key + ": " + std::to_string(hits.size()) + " " + kind + "s of the glTF file " + path_ + " are named " + shown +
+    throw EditError(edits, name, one_line(key) + ": " + std::to_string(hits.size()) + " " + kind + "s of the glTF file " + path_ + " are named " + shown +
                 " (" + kind + "s " + list + "); give them distinct names in the glTF file to edit one");
   }
   const auto lower = [](std::string v) {
@@ -711,7 +711,7 @@ size_t Loader::named(const char* kind, const char* section, const std::vector<st
   } else {
     msg += " (it has " + std::to_string(distinct.size()) + " named " + kind + "s; spadgen info lists them)";
   }
-  throw EditError(edits, name, msg);
+  throw EditError(edits, name, one_line(msg));
 }
 
 void Loader::resolve_edits() {

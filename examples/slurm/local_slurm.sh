@@ -16,14 +16,18 @@ cmd=$1
 dir=$2
 daemons="slurmd slurmctld munged"
 
-running() {  # the daemon whose pid file is in DIR runs (an exited one not yet reaped does not)
+running() {  # the daemon whose pid file is in DIR runs: that pid is a live process of its name (a stale pid
+  # file, of a crash or a reboot, may name another process now), not exited and unreaped
   [ -f "$dir/$1.pid" ] || return 1
   local pid
-  pid=$(cat "$dir/$1.pid")
-  kill -0 "$pid" 2>/dev/null && ! grep -q '^State:[[:space:]]*Z' "/proc/$pid/status" 2>/dev/null
+  pid=$(cat "$dir/$1.pid" 2>/dev/null) || return 1
+  case "$pid" in '' | *[!0-9]*) return 1 ;; esac
+  [ "$(cat "/proc/$pid/comm" 2>/dev/null)" = "$1" ] && ! grep -q '^State:[[:space:]]*Z' "/proc/$pid/status" 2>/dev/null
 }
 
 stop() {
+  # the jobs first (their tasks would run on without the daemons)
+  [ -f "$dir/slurm.conf" ] && running slurmctld && SLURM_CONF="$dir/slurm.conf" scancel --user="$(id -un)" 2>/dev/null || true
   for d in $daemons; do running "$d" && kill "$(cat "$dir/$d.pid")" 2>/dev/null || true; done
   for _ in $(seq 1 20); do
     alive=0
@@ -44,6 +48,9 @@ case "$cmd" in
     exit 0 ;;
   stop)
     [ -d "$dir" ] || { echo "$dir: no such folder" >&2; exit 1; }
+    any=0
+    for d in $daemons; do running "$d" && any=1; done
+    if [ $any -eq 0 ]; then echo "nothing of $dir was running" >&2; exit 0; fi
     stop
     echo "stopped (logs in $dir)" >&2
     exit 0 ;;
@@ -57,6 +64,9 @@ done
 for d in $daemons; do
   if running "$d"; then echo "$0: $d already runs from $dir (stop it first: $0 stop $dir)" >&2; exit 1; fi
 done
+case "$dir" in *[[:space:]]* | *\'* | *\"* | *\$* | *\\*)
+  echo "$0: $dir: a folder whose path holds no spaces or quotes, please (it is written into slurm.conf)" >&2; exit 1 ;;
+esac
 mkdir -p "$dir"
 dir=$(readlink -f "$dir")
 chmod 755 "$dir"
@@ -81,6 +91,7 @@ ln -sf "$dir/munge/munged.log" "$dir/munged.log"
 
 # Slurm: one node (this machine), ports of its own, state in DIR.
 host=$(hostname -s)
+cpus=$(getconf _NPROCESSORS_ONLN)  # (nproc follows OMP_NUM_THREADS)
 port=$((20000 + RANDOM % 20000))
 mkdir -p "$dir/state" "$dir/spool"
 cat > "$dir/slurm.conf" <<CONF
@@ -107,7 +118,7 @@ SlurmctldLogFile=$dir/slurmctld.log
 SlurmdLogFile=$dir/slurmd.log
 JobCompType=jobcomp/none
 AccountingStorageType=accounting_storage/none
-NodeName=$host NodeAddr=127.0.0.1 CPUs=$(nproc) State=UNKNOWN
+NodeName=$host NodeAddr=127.0.0.1 CPUs=$cpus State=UNKNOWN
 PartitionName=local Nodes=ALL Default=YES MaxTime=INFINITE State=UP
 CONF
 export SLURM_CONF="$dir/slurm.conf"
@@ -120,5 +131,5 @@ for _ in $(seq 1 60); do
   sleep 0.5
 done
 [ "$state" = "idle" ] || fail "the node is not idle after 30 s (state: '$state')"
-echo "slurm up: node $host idle, $(nproc) CPUs, controller port $port; stop it with: $0 stop $dir" >&2
+echo "slurm up: node $host idle, $cpus CPUs, controller port $port; stop it with: $0 stop $dir" >&2
 echo "export SLURM_CONF=$SLURM_CONF"

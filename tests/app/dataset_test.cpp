@@ -993,11 +993,20 @@ TEST_F(Dataset, ASampleAReaderHoldsIsGeneratedOnceItIsReleased) {
   fs::remove(dir_ / "out/samples/000001/counts.npy");  // damaged: generated again
   const fs::path lock = dir_ / "out/samples/.000001.spadgen-lock";
   const auto started = std::chrono::steady_clock::now();
-  const Result r = shell("(flock -x " + lock.string() + " sleep 3 > /dev/null 2>&1 &) && sleep 0.5 && " + kBin + " " + run);
+  // (started once the lock is held: flock writes READY under it; two samples held, so that the run waits on
+  // both, which spun without a pause when it restarted its count of held samples on each)
+  fs::remove(dir_ / "out/samples/000000/counts.npy");
+  const fs::path lock0 = dir_ / "out/samples/.000000.spadgen-lock";
+  const std::string ready = (dir_ / "READY").string();
+  const fs::path cpu = dir_ / "cpu.txt";
+  const Result r = shell("(flock -x " + lock0.string() + " flock -x " + lock.string() + " sh -c 'touch " + ready +
+                         "; sleep 3' > /dev/null 2>&1 &) && while [ ! -e " + ready + " ]; do sleep 0.05; done && bash -c " +
+                         "'TIMEFORMAT=%U; { time " + kBin + " " + run + "; } 2> " + cpu.string() + "'");
   const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   EXPECT_EQ(r.code, 0) << r.output;
   EXPECT_EQ(r.output, "");
   EXPECT_GE(took, 3.0);  // it waited for the holder
+  EXPECT_LT(std::stod(slurp(cpu)), 2.0) << "seconds of CPU while it waited (the samples take a fraction of one)";
   EXPECT_FALSE(fs::exists(dir_ / "out/failed"));
   const Result st = sh("dataset status " + (dir_ / "out").string());
   EXPECT_EQ(st.code, 0) << st.output;

@@ -55,6 +55,15 @@ TEST_F(App, MovingANodeMovesTheGroundTruthByTheGeometrysAmount) {
   EXPECT_TRUE(nlohmann::json::parse(slurp(dir_ / "a/metadata.json"))["warnings"].empty());
 }
 
+// An edit of a glTF name holding a newline that the glTF does not have is named on one line, the newline
+// escaped (the message broke in two; a reviewer).
+TEST_F(App, AnEditOfANameWithANewlineIsNamedOnOneLine) {
+  const Result r = sh("run " + kFlat + " --set 'materials.\"no\nsuch\".roughness=0.5' -o " + (dir_ / "a").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_EQ(r.output, "spadgen: error: --set materials.\"no\\nsuch\".roughness: the glTF file " + kScenes +
+                          "flat_target.gltf has no material named \"no\\nsuch\" (its materials: \"white_paper\")\n");
+}
+
 // Half the albedo of a Lambertian target lit directly gives half the laser light, bit for bit up to float
 // rounding: the paths sampled do not depend on the albedo (the plane's only lobe is the diffuse one; the
 // path continues by cosine sampling whatever its weight, and with max_bounces 2 Russian roulette never
