@@ -767,6 +767,9 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
       };
       clear_unrecorded(s.folder());
       for (int k = 1; k < spec.repeats; ++k) clear_unrecorded(s.repeat_folder(k));
+      // Another process's hold on the sample's folder, found before the scene is loaded (the run takes the same
+      // lock later: this is a quick look, so that a held sample costs little each time it is tried)
+      { const FolderLock probe(dir / s.folder()); }
       if (!folder.holds(s.folder(), rec.hash)) {
         rendered = true;
         rendered_here.insert(s.index);
