@@ -845,12 +845,7 @@ std::string dataset_card(const DatasetFolder& folder, const CardTally& tally) {
   // dotted: a key of the resolved scene (camera.width_px); varied when a varied key sets it, a part of it or all of it
   // (below: or its value differs among the scene's first samples: a preset that sets it, render.quality)
   const auto varies = [&](const std::string& dotted) {
-    std::vector<std::string> names;
-    for (size_t a = 0, b; a <= dotted.size(); a = b + 1) {
-      b = dotted.find('.', a);
-      if (b == std::string::npos) b = dotted.size();
-      names.push_back(dotted.substr(a, b - a));
-    }
+    const std::vector<std::string> names = varied_names(dotted);
     for (const std::vector<std::string>& k : varied_keys) {
       const size_t n = std::min(k.size(), names.size());
       if (!k.empty() && std::equal(k.begin(), k.begin() + std::ptrdiff_t(n), names.begin())) return true;
@@ -875,11 +870,7 @@ std::string dataset_card(const DatasetFolder& folder, const CardTally& tally) {
         }
     const auto at = [](ojson& scene, const std::string& k) {
       ojson* v = &scene;
-      for (size_t a = 0, b; a <= k.size(); a = b + 1) {
-        b = k.find('.', a);
-        if (b == std::string::npos) b = k.size();
-        v = &(*v)[k.substr(a, b - a)];
-      }
+      for (const std::string& name : varied_names(k)) v = &(*v)[name];
       return v;
     };
     // the value of dotted key k in the resolved scene, or "varies"
