@@ -75,7 +75,8 @@ int main(int argc, char** argv) {
             if (const auto t = e.last_write_time(ec); found.empty() || t > newest) found = e.path().string(), newest = t;
         if (found.empty()) return "no such folder: " + v;
         return "no such folder: " + v + "; a run replacing it was stopped during its swap and left its earlier files in " +
-               found + ", which the next `spadgen run -o " + v + "` puts back (or move it back yourself)";
+               found + ", which the next `spadgen run -o " + v + "` puts back and then replaces with its own files (to keep them, " +
+               "move it back yourself: mv " + found + " " + v + ")";
       },
       "DIR");
   // -o "" (an unset shell variable) is a mistake, not a request for the default folder.

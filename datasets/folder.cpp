@@ -322,9 +322,8 @@ bool DatasetFolder::renders_ggx(const scenes::ResolvedRun& r) const {
         if (e.metallic) mat.metallic = float(*e.metallic);
         if (e.transmission) mat.transmission = float(*e.transmission);
       }
-    // a smooth surface (alpha = roughness^2 below 1e-3, render/bsdf.h) reflects and refracts by Dirac lobes only
-    const float roughness = std::clamp(mat.roughness, 0.0f, 1.0f);
-    if (!mat.lambertian() && roughness * roughness >= 1e-3f) return true;
+    // a smooth surface reflects and refracts by Dirac lobes only
+    if (!mat.lambertian() && !mat.smooth()) return true;
   }
   return false;
 }

@@ -38,7 +38,7 @@ struct MaterialPoint {
   bool lambertian = false;
   Spec emission{0.0f};     // ambient only: photon radiance, photons/s/m^2/sr (channel 1)
 
-  bool smooth() const { return alpha < 1e-3f; }
+  bool smooth() const { return alpha < scenes::kSmoothAlpha; }
 };
 
 // The lobes a Bsdf samples from, one at a time (Bsdf::sample picks one by its weight).

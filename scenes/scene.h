@@ -29,6 +29,9 @@ struct Texture {
   int wrap_s = 10497, wrap_t = 10497;
 };
 
+// Below this GGX alpha (roughness^2) a surface is smooth: it reflects and refracts by Dirac lobes only.
+inline constexpr float kSmoothAlpha = 1e-3f;
+
 struct Material {
   std::string name;
   glm::vec4 base_color{1, 1, 1, 1};  // pbrMetallicRoughness.baseColorFactor (linear)
@@ -49,6 +52,12 @@ struct Material {
   bool lambertian() const {
     return std::clamp(metallic, 0.0f, 1.0f) == 0.0f && std::clamp(roughness, 0.0f, 1.0f) == 1.0f &&
            std::clamp(transmission, 0.0f, 1.0f) == 0.0f;
+  }
+  // A smooth surface (GGX alpha = roughness^2, clamped as the renderer takes it, below kSmoothAlpha): Dirac
+  // lobes only.
+  bool smooth() const {
+    const float r = std::clamp(roughness, 0.0f, 1.0f);
+    return r * r < kSmoothAlpha;
   }
   // A medium bounded by the mesh (not thin-walled): what its triangles enclose.
   bool bounds_medium() const { return transmissive() && thickness_m > 0.0f; }

@@ -417,8 +417,9 @@ std::string dict_value(const std::string& dict, const std::string& key, const st
   const size_t k = dict.find("'" + key + "'");
   if (k == std::string::npos) throw Error(read_error(path, "the header has no '" + key + "'"));
   // NumPy's header is a Python dict literal, whose later value of a repeated key wins: a header naming a
-  // key twice is refused rather than read either way
-  if (dict.find("'" + key + "'", k + key.size() + 2) != std::string::npos)
+  // key twice, in either quotes, is refused rather than read either way
+  if (dict.find("'" + key + "'", k + key.size() + 2) != std::string::npos ||
+      dict.find("\"" + key + "\"") != std::string::npos)
     throw Error(read_error(path, "the header names '" + key + "' twice"));
   size_t v = dict.find(':', k);
   if (v == std::string::npos) throw Error(read_error(path, "malformed header"));

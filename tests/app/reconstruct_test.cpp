@@ -672,7 +672,9 @@ TEST_F(Reconstruct, AFolderLeftAsideInASwapIsNamed) {
     EXPECT_EQ(r.code, 1) << cmd;
     EXPECT_THAT(r.output, HasSubstr("no such folder: " + (dir_ / "t").string() + "; a run replacing it was stopped during its "
                                     "swap and left its earlier files in " + (dir_ / ".t.spadgen-old-42").string() +
-                                    ", which the next `spadgen run -o " + (dir_ / "t").string() + "` puts back"))
+                                    ", which the next `spadgen run -o " + (dir_ / "t").string() + "` puts back and then "
+                                    "replaces with its own files (to keep them, move it back yourself: mv " +
+                                    (dir_ / ".t.spadgen-old-42").string() + " " + (dir_ / "t").string() + ")"))
         << cmd;
   }
   const Result r = sh("reconstruct " + (dir_ / "u").string());
