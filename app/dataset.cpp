@@ -56,7 +56,7 @@ namespace {
 constexpr double kSecondsPerPathBounce = 0.35e-6;   // per camera path and allowed bounce (paths end early)
 constexpr double kSecondsPerPixelGate = 8e-9;       // sensor stage, per pixel and gate position (or exposure)
 constexpr double kSecondsPerByte = 2.0 / 1.0e9;     // writing the outputs (and compressing the images)
-constexpr double kSecondsPerRun = 0.8;              // starting, loading the scene, building the BVH, publishing
+constexpr double kSecondsPerRun = 0.2;              // loading the scene, building the BVH, publishing
 
 // The cores a run with --threads `threads` (0: all) uses, which the estimates are for.
 int estimate_cores(int threads) {
@@ -514,6 +514,9 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
 
   Totals total, left_total;
   int64_t samples = 0, left = 0;
+  // The done samples' measured wall times against their estimates: the pace of this machine and dataset.
+  double done_seconds = 0.0, done_estimated = 0.0;
+  int64_t done_timed = 0;
   std::vector<std::string> errors;
   datasets::WarningTally warnings;  // the scene file's, as each sample resolves
   // Each sample's scene is resolved (about 0.2 ms of one core): a plan of millions of samples takes minutes,
@@ -536,6 +539,7 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
       const SampleRecord& rec = checked.record;
       if (status.empty()) status = datasets::status_name(rec.status);
       if (rec.status != Status::Done) ++left, left_total.add(e);
+      else if (checked.resolved && rec.seconds > 0.0) done_seconds += rec.seconds, done_estimated += e.seconds, ++done_timed;
     }
     total.add(e);
     const bool show = options.all || samples <= 10 || i >= n - 10 * shard.count;
@@ -589,6 +593,19 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
       << (left_total.disk_at_least() != left_total.disk() ? "disk at most " : "disk about ") << bytes_text(left_total.disk())
       << " (free: " << (free >= 0 ? bytes_text(free) : std::string("unknown")) << "), time about "
       << duration_text(left_total.seconds) << "\n";
+    // The model is of one machine kind; the samples done here tell this machine's pace (the model's fixed cost
+    // per run was 3-6 times what small samples took on another).
+    if (done_timed > 0 && done_estimated > 0.0) {
+      const double pace = done_seconds / done_estimated;
+      char ratio[32];
+      std::snprintf(ratio, sizeof ratio, pace >= 10.0 ? "%.0f" : "%.2g", pace);
+      const bool one = done_timed == 1;
+      o << "# the " << done_timed << " done " << (one ? "sample" : "samples") << " took " << duration_text(done_seconds)
+        << ", " << ratio << (one ? " times its estimate (its" : " times their estimates (their")
+        << " metadata.json's run.wall_seconds, on the threads they ran with)"
+        << (left > 0 ? ": at that pace the samples left take about " + duration_text(left_total.seconds * pace) : std::string())
+        << "\n";
+    }
   }
   for (const std::string& w : warnings.lines(" (spadgen info SCENE --set ... shows a sample's)")) o << "warning: " << w << "\n";
   for (const std::string& e : errors) o << "error: " << e << "\n";

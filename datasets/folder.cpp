@@ -484,6 +484,8 @@ SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash) co
       stale = true;
       continue;
     }
+    if (const json::json_pointer wall("/run/wall_seconds"); meta->contains(wall) && (*meta)[wall].is_number())
+      rec.seconds += std::max(0.0, (*meta)[wall].get<double>());
     const std::string prefix = f == 0 ? "" : folders[f].substr(s.folder().size()) + "/";
     const json& sizes = recorded_sizes(*meta);
     for (const json& name : (*meta)["files"]) {
@@ -526,7 +528,9 @@ SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash) co
   // The sample as it resolves now failed: failed, with why (also when its folder is damaged or stale: a run
   // that could not generate the damaged sample again left it damaged, and said it would generate it).
   // (what a done sample's record holds of its files, dropped when it is not done after all)
-  const auto forget_files = [&rec] { rec.files.clear(), rec.listed.clear(), rec.bytes = 0, rec.summary = nullptr, rec.warnings.clear(); };
+  const auto forget_files = [&rec] {
+    rec.files.clear(), rec.listed.clear(), rec.bytes = 0, rec.summary = nullptr, rec.warnings.clear(), rec.seconds = 0.0;
+  };
   const auto failed = [&]() {
     const std::optional<json> f = read_json(dir_ / failure_path(s));
     // (a damaged record, of other types than record_failure writes, is none)

@@ -58,6 +58,9 @@ struct SampleRecord {
   int64_t bytes = 0;                 // done: their sum
   nlohmann::ordered_json summary;    // done: metadata.json's ground_truth_summary and laser totals
   std::vector<std::string> warnings;  // done: metadata.json's warnings (the sample's run's)
+  // done: the wall time its run and its realisations' senses took, the sum of their metadata.json's
+  // run.wall_seconds; 0 where none records it
+  double seconds = 0.0;
 };
 
 // Warnings of many samples, grouped by kind (warning_kind: the text with its numbers left out): how many samples,

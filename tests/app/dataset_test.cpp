@@ -890,6 +890,50 @@ TEST_F(Dataset, APlanListsASampleItCannotEstimateAsInvalid) {
   }
 }
 
+// A plan of a folder with done samples tells how long they took against their estimates (metadata.json's
+// run.wall_seconds) and the time left at that pace: the cost model is of one machine kind, and it planned
+// small samples at 3-6 times what they took on another.
+TEST_F(Dataset, APlanTellsThePaceOfTheDoneSamples) {
+  write(dir_ / "d.json", small_dataset(2));
+  const std::string out = (dir_ / "out").string();
+  ASSERT_EQ(sh("dataset run " + (dir_ / "d.json").string() + " -o " + out + " -q").code, 0);
+  const Result measured = sh("dataset plan " + (dir_ / "d.json").string() + " -o " + out);
+  ASSERT_EQ(measured.code, 0) << measured.output;
+  EXPECT_THAT(measured.output, HasSubstr("# the 2 done samples took "));
+  EXPECT_THAT(measured.output, Not(HasSubstr("at that pace")));  // nothing left
+  // Each folder (two samples, two realisations each) said to have taken 50 s: 200 s in all, far more than
+  // the model's estimate of these 24 x 20 pixels; the dataset grown to 4 samples, the two left of the
+  // same size take about 200 s at that pace.
+  for (const char* f : {"000000", "000000_r01", "000001", "000001_r01"}) {
+    const fs::path meta = dir_ / "out/samples" / f / "metadata.json";
+    json m = json::parse(slurp(meta));
+    ASSERT_TRUE(m["run"]["wall_seconds"].is_number()) << f;
+    m["run"]["wall_seconds"] = 50.0;
+    write(meta, m.dump());
+  }
+  write(dir_ / "d4.json", small_dataset(4));
+  const Result r = sh("dataset plan " + (dir_ / "d4.json").string() + " -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::string took = "# the 2 done samples took 3 min, ";
+  const size_t at = r.output.find(took);
+  ASSERT_NE(at, std::string::npos) << r.output;
+  const double pace = std::stod(r.output.substr(at + took.size()));
+  EXPECT_GT(pace, 20.0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr(" times their estimates (their metadata.json's run.wall_seconds, on the threads they ran "
+                                  "with): at that pace the samples left take about 3 min\n"));
+  // a sample whose metadata.json records no time does not count
+  json m = json::parse(slurp(dir_ / "out/samples/000001/metadata.json"));
+  m.erase("run");
+  write(dir_ / "out/samples/000001/metadata.json", m.dump());
+  json m1 = json::parse(slurp(dir_ / "out/samples/000001_r01/metadata.json"));
+  m1.erase("run");
+  write(dir_ / "out/samples/000001_r01/metadata.json", m1.dump());
+  const Result one = sh("dataset plan " + (dir_ / "d4.json").string() + " -o " + out);
+  EXPECT_THAT(one.output, HasSubstr("# the 1 done sample took 2 min, "));
+  EXPECT_THAT(one.output, HasSubstr(" times its estimate (its metadata.json's run.wall_seconds"));
+  EXPECT_THAT(sh("dataset plan " + (dir_ / "d4.json").string()).output, Not(HasSubstr("done sample")));
+}
+
 // A plan estimates a sample from its durations rounded up to 2 significant digits (app::estimate_shape: a
 // continuous random pulse width made each sample an estimate of its own, 40 ms each): the rounding is up,
 // and the rounded run's time window has as many bins as the exact one's, or a few more.
