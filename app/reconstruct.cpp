@@ -670,6 +670,10 @@ struct DoneFolder {
   fs::path path;
   std::string sample_hash;
   bool intensity = false;  // a 2D intensity run (its metadata.json's acquisition.mode)
+  // the index row's: the sample's index, the realisation (0: the sample's own folder), its parameters
+  int64_t index = -1;
+  int repeat = 0;
+  nlohmann::ordered_json parameters = nlohmann::ordered_json::object();
 };
 // only: the dataset indices to take (nullptr: every row); samples: set to the samples the index knows (its
 // largest index + 1).
@@ -713,7 +717,12 @@ std::vector<DoneFolder> done_sample_folders(const fs::path& dir, std::map<std::s
       for (const nlohmann::json& f : r["repeats"])
         if (f.is_string()) folders.push_back(f.get<std::string>());
     const std::string hash = text(r, "sample_hash");
-    for (const std::string& f : folders) {
+    // (in the row's order of keys: the dataset file's)
+    nlohmann::ordered_json parameters = nlohmann::ordered_json::parse(line).value("parameters", nlohmann::ordered_json::object());
+    if (!parameters.is_object()) parameters = nlohmann::ordered_json::object();
+    const int64_t sample_index = r.contains("index") && r["index"].is_number_integer() ? r["index"].get<int64_t>() : -1;
+    for (size_t repeat = 0; repeat < folders.size(); ++repeat) {
+      const std::string& f = folders[repeat];
       // A sample folder, once: a row copied by hand scored its sample twice; a folder outside samples/ was scored too.
       const fs::path rel(f);
       if (rel.is_absolute() || rel.empty() || *rel.begin() != "samples" ||
@@ -739,7 +748,7 @@ std::vector<DoneFolder> done_sample_folders(const fs::path& dir, std::map<std::s
         throw Error((dir / f).string() + ": index.jsonl lists it done with hash " + hash + ", and " + found +
                     ": the sample was removed or changed since the index was written; `spadgen dataset run` brings the index up to date "
                     "(and generates what is not done)");
-      out.push_back({dir / f, hash, intensity});
+      out.push_back({dir / f, hash, intensity, sample_index, int(repeat), parameters});
     }
   }
   return out;
@@ -977,8 +986,16 @@ std::string evaluate(const EvaluateCommand& c) {
     if (samples.empty())
       throw Error(c.target + ": no done samples to evaluate (index.jsonl: " + (left_out.empty() ? "no rows" : left_out) + ")");
     reconstruct::Scores total(scorer_options(c));
+    // After the metrics, each sample's index, realisation and parameters (index.jsonl's: the scene and every
+    // grid and random key), so that a detector's scores can be read against what the dataset varies.
+    std::vector<std::string> parameter_keys;
+    for (const DoneFolder& d : samples)
+      for (const auto& [key, value] : d.parameters.items())
+        if (std::find(parameter_keys.begin(), parameter_keys.end(), key) == parameter_keys.end()) parameter_keys.push_back(key);
     std::ostringstream csv;
-    csv << "sample,objects,found,recall,detectable,detectable_found,detections,false,bias_mm,rms_mm\n";
+    csv << "sample,objects,found,recall,detectable,detectable_found,detections,false,bias_mm,rms_mm,index,repeat";
+    for (const std::string& k : parameter_keys) csv << ',' << datasets::csv_value(k);
+    csv << '\n';
     nlohmann::json rows = nlohmann::json::array();
     // --detections: a name inside each sample folder, or a path with {sample} (the sample folder's name)
     const bool templated = c.detections.find(kSampleField) != std::string::npos;
@@ -1029,7 +1046,7 @@ std::string evaluate(const EvaluateCommand& c) {
     // scenes of both modes) has none, so it is left out and counted (it stopped the whole evaluation).
     nlohmann::json intensity_folders = nlohmann::json::array();
     size_t scored = 0;
-    for (const auto& [p, sample_hash, is_2d] : samples) {
+    for (const auto& [p, sample_hash, is_2d, sample_index, repeat, parameters] : samples) {
       InterruptGuard::check();
       if (is_2d && (c.detections.empty() || without_file.count(p))) {  // (with its hash: status names it when generated again)
         intensity_folders.push_back({{"sample", p.filename().string()}, {"sample_hash", sample_hash}});
@@ -1048,10 +1065,16 @@ std::string evaluate(const EvaluateCommand& c) {
       csv << p.filename().string() << ',' << m["objects"]["objects"] << ',' << m["objects"]["found"] << ','
           << num(m["objects"]["recall"]) << ',' << m["objects_detectable"]["objects"] << ',' << m["objects_detectable"]["found"]
           << ',' << m["detections"]["total"] << ',' << m["detections"]["false"] << ',' << num(m["range_error"].value("bias_mm", nlohmann::json()))
-          << ',' << num(m["range_error"].value("rms_mm", nlohmann::json())) << '\n';
+          << ',' << num(m["range_error"].value("rms_mm", nlohmann::json())) << ',' << (sample_index >= 0 ? std::to_string(sample_index) : "")
+          << ',' << repeat;
+      for (const std::string& k : parameter_keys) csv << ',' << datasets::csv_value(parameters.value(k, nlohmann::ordered_json()));
+      csv << '\n';
       // the version of the sample scored (done_sample_folders checked it in its metadata.json): dataset status
       // names an evaluation of samples generated again since
       rows.push_back({{"sample", p.filename().string()},
+                      {"index", sample_index >= 0 ? nlohmann::json(sample_index) : nlohmann::json()},
+                      {"repeat", repeat},
+                      {"parameters", nlohmann::json::parse(parameters.dump())},
                       {"sample_hash", sample_hash},
                       {"detections_source", sample_source},
                       {"metrics", m}});

@@ -62,11 +62,6 @@ std::string csv_field(const std::string& v) {
   for (char c : v) q += c == '"' ? std::string("\"\"") : std::string(1, c);
   return q + "\"";
 }
-std::string csv_value(const ojson& v) {
-  if (v.is_null()) return "";
-  if (v.is_string()) return csv_field(v.get<std::string>());
-  return csv_field(v.dump());
-}
 
 std::string bytes_text(double b) {
   char buf[32];
@@ -671,6 +666,12 @@ std::string index_csv_header(const DatasetSpec& spec) {
   for (const std::string& k : kCsvSummary) out.append(",").append(k);
   out += ",error,warnings\n";
   return out;
+}
+
+std::string csv_value(const ojson& v) {
+  if (v.is_null()) return "";
+  if (v.is_string()) return csv_field(v.get<std::string>());
+  return csv_field(v.dump());
 }
 
 std::string index_csv_row(const DatasetSpec& spec, const SampleRecord& r) {

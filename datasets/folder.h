@@ -214,6 +214,9 @@ nlohmann::json dataset_section(const DatasetFolder& folder, const Sample& s, con
 // millions of samples is written without holding their records.
 std::string index_jsonl_row(const DatasetSpec& spec, const SampleRecord& r);
 std::string index_csv_header(const DatasetSpec& spec);
+// A CSV field (RFC 4180) of a JSON value as index.csv writes it: a string's text, any other value as JSON,
+// quoted when it holds a comma, a quote or a line break; null as an empty field.
+std::string csv_value(const nlohmann::ordered_json& v);
 std::string index_csv_row(const DatasetSpec& spec, const SampleRecord& r);
 
 std::string dataset_card(const DatasetFolder& folder, const CardTally& tally);

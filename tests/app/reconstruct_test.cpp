@@ -896,7 +896,27 @@ TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
   EXPECT_GT(objects, 2 * 24 * 12) << "the plate and the sphere on most pixels";
   const std::string csv = slurp(out / "evaluation" / "samples.csv");
   EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 3) << csv;
-  EXPECT_EQ(csv.rfind("sample,objects,found,recall", 0), 0u) << csv;
+  // each sample's metrics, then its index, realisation and parameters as index.jsonl lists them (the grid's
+  // power of each sample: 1 mW, then 4 mW)
+  EXPECT_EQ(csv.rfind("sample,objects,found,recall,detectable,detectable_found,detections,false,bias_mm,rms_mm,index,repeat,scene,"
+                      "laser.average_power_mW\n", 0), 0u) << csv;
+  const std::string index_text = slurp(out / "index.jsonl");
+  const std::vector<nlohmann::json> index_rows = {nlohmann::json::parse(index_text.substr(0, index_text.find('\n'))),
+                                                  nlohmann::json::parse(index_text.substr(index_text.find('\n') + 1))};
+  for (int i = 0; i < 2; ++i) {
+    const std::string line = "\n00000" + std::to_string(i) + ",";
+    const size_t at = csv.find(line);
+    ASSERT_NE(at, std::string::npos) << csv;
+    const std::string row = csv.substr(at + 1, csv.find('\n', at + 1) - at - 1);
+    const std::string tail = "," + std::to_string(i) + ",0," + index_rows[size_t(i)]["parameters"]["scene"].get<std::string>() + "," +
+                             index_rows[size_t(i)]["parameters"]["laser.average_power_mW"].dump();
+    EXPECT_EQ(row.substr(row.size() - std::min(row.size(), tail.size())), tail) << row;
+    EXPECT_EQ(m["samples"][size_t(i)]["index"], i);
+    EXPECT_EQ(m["samples"][size_t(i)]["repeat"], 0);
+    EXPECT_EQ(m["samples"][size_t(i)]["parameters"], index_rows[size_t(i)]["parameters"]);
+  }
+  EXPECT_EQ(m["samples"][0]["parameters"]["laser.average_power_mW"], 1);
+  EXPECT_EQ(m["samples"][1]["parameters"]["laser.average_power_mW"], 4);
 
   // The done samples as index.jsonl lists them, not every folder under samples/ (sample 1, past a dataset
   // shrunk to 1 sample, was scored); a folder generated again since the index was written is refused.
