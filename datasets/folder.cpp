@@ -895,8 +895,12 @@ std::string dataset_card(const DatasetFolder& folder, const CardTally& tally) {
       if (acq["mode"] == "gate_sweep")
         acquisition += ", gates " + num("acquisition.gate_sweep.start_ns") + " to " + num("acquisition.gate_sweep.stop_ns") +
                        " ns in " + num("acquisition.gate_sweep.step_ps") + " ps steps";
-      else
-        acquisition += ", " + num("acquisition.intensity.exposure") + " exposure of " + num("acquisition.intensity.exposure_us") + " us";
+      else {
+        // ("varies exposure of varies us" read as a typo: the varying parts said as such)
+        const std::string exposure = num("acquisition.intensity.exposure"), us = num("acquisition.intensity.exposure_us");
+        acquisition += exposure == "varies" ? std::string(", exposure (single or dual) varies") : ", " + exposure + " exposure";
+        acquisition += us == "varies" ? std::string(", its length varies") : " of " + us + " us";
+      }
     }
     const std::string crop = num("camera.crop");
     o << "| `" << cell(spec.scene_names[i]) << "` | " << num("camera.width_px") << " x " << num("camera.height_px")

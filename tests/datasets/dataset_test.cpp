@@ -512,6 +512,13 @@ TEST(DatasetFolder, TheCardSaysWhichSettingsVary) {
   // nothing varies, as it is
   EXPECT_THAT(row, HasSubstr(" | 637 nm, 40 MHz, varies mW | varies paths per pixel |"));
   EXPECT_THAT(row, Not(HasSubstr("pixel_A")));
+  // a 2D dataset varying the exposure and its length reads so (it read "varies exposure of varies us")
+  const DatasetSpec two_d = parse("\"set\": {\"acquisition.mode\": \"intensity\"}, \"grid\": {\"acquisition.intensity.exposure\": "
+                                  "[\"single\", \"dual\"]}, \"random\": {\"acquisition.intensity.exposure_us\": {\"uniform\": [5, 10]}}");
+  const std::string card2 = dataset_card(DatasetFolder(two_d, dir), CardTally{});
+  EXPECT_THAT(card2, HasSubstr("| intensity, 255 frames, exposure (single or dual) varies, its length varies |")) << card2;
+  const DatasetSpec single = parse("\"set\": {\"acquisition.mode\": \"intensity\", \"acquisition.intensity.exposure_us\": 10}");
+  EXPECT_THAT(dataset_card(DatasetFolder(single, dir), CardTally{}), HasSubstr("| intensity, 255 frames, single exposure of 10 us |"));
   fs::remove_all(dir);
 }
 
