@@ -17,6 +17,11 @@ inline constexpr double kMm = 1e-3;
 inline constexpr double kUm = 1e-6;
 inline constexpr double kNm = 1e-9;
 
+// The double nearest v's decimal (the shortest that reads back as v) times 10^k: a value in seconds said in
+// microseconds without the ulp a product or quotient by 1e-6 may add (times_ten_to(1e-5, 6) is 10, where
+// 1e-5 / 1e-6 is 10.000000000000002).
+double times_ten_to(double v, int k);
+
 // Energy of one photon of the given vacuum wavelength, in joules.
 inline constexpr double photon_energy_J(double wavelength_m) { return kPlanck * kSpeedOfLight / wavelength_m; }
 

@@ -25,19 +25,7 @@ using ojson = nlohmann::ordered_json;
 // 10.000000000000002 and 299.99999999999994), a value given as the default is the default, and the
 // resolved scene file parses back to the very doubles the run used. (Lambdas, not a template on the
 // scale: clang 14, which builds the fuzzing harnesses, has no floating-point template parameters.)
-// The double nearest v's decimal (the shortest that reads back as v) times 10^k.
-double times_ten_to(double v, int k) {
-  if (k == 0 || !std::isfinite(v) || v == 0.0) return v;
-  char text[48];
-  for (int digits = 15; digits <= 17; ++digits) {
-    std::snprintf(text, sizeof text, "%.*e", digits - 1, v);
-    if (std::strtod(text, nullptr) == v) break;
-  }
-  char* e = std::strchr(text, 'e');
-  const long exponent = std::strtol(e + 1, nullptr, 10) + k;
-  std::snprintf(e, sizeof text - size_t(e - text), "e%ld", exponent);
-  return std::strtod(text, nullptr);
-}
+// (times_ten_to: core/units.h)
 int decimal_exponent(double scale) { return static_cast<int>(std::lround(-std::log10(scale))); }
 #define SCALED_UNIT(name, scale)                                                   \
   Unit {                                                                           \

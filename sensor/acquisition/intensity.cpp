@@ -50,7 +50,7 @@ std::vector<DeclaredOutput> Intensity::outputs() const {
 nlohmann::json Intensity::describe() const {
   nlohmann::json j;
   std::vector<double> us;
-  for (double e : exposures_) us.push_back(e / kUs);
+  for (double e : exposures_) us.push_back(times_ten_to(e, 6));  // (e / kUs: 10.000000000000002 for 10 us)
   j["exposures_us"] = us;
   j["laser_on"] = laser_on_;
   return j;

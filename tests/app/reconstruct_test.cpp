@@ -662,6 +662,15 @@ TEST_F(Reconstruct, ADeadReconstructsTemporaryFileIsRemovedByTheNext) {
   EXPECT_TRUE(fs::exists(a / "detections_edges.exr"));
 }
 
+// reconstruct --help names the files --noise-free writes (it named the noisy ones only: a user looked for
+// hdr.exr and found hdr_noise_free.exr).
+TEST_F(Reconstruct, TheHelpNamesTheNoiseFreeFiles) {
+  const Result r = sh("reconstruct --help");
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("detections_<detector>_noise_free.exr"));
+  EXPECT_THAT(r.output, HasSubstr("hdr_noise_free.exr"));
+}
+
 // A run folder absent because a run replacing it was stopped in its swap (a file system without an atomic
 // exchange) is named with the earlier set the run moved aside, by every command that reads a folder (they said
 // only "Directory does not exist").

@@ -284,6 +284,18 @@ TEST(Sensor, FullChipPresetUsesBothPixels) {
   EXPECT_GT(j16["gate"]["knot_max_error"].get<double>(), 10 * j["gate"]["knot_max_error"].get<double>());
 }
 
+// metadata.json's exposures in microseconds are the scene file's decimals (10 us read 10.000000000000002,
+// 2.2222 us 2.2222000000000004: the seconds divided by 1e-6), the dual's long one that of its seconds.
+TEST(Sensor, ExposuresAreDescribedInTheirDecimals) {
+  SensorStageConfig c = intensity_config(4, 4, Exposure::Single, 100);
+  c.acquisition.intensity.exposure_s = 1e-5;  // as the scene file's 10 us reads
+  EXPECT_EQ(SensorModel(c).describe()["exposures_us"], nlohmann::json::array({10.0}));
+  c = intensity_config(4, 4, Exposure::Dual, 100);
+  c.acquisition.intensity.exposure_s = 2.2222e-6;
+  c.acquisition.intensity.dual_ratio = 8;
+  EXPECT_EQ(SensorModel(c).describe()["exposures_us"], nlohmann::json::array({2.2222, 17.7776}));
+}
+
 // Bit-identical results for one tile or tiles of 8, 16, 32, with 1 or 2 threads, counts and frames.
 TEST(Sensor, DeterministicAcrossTilesAndThreads) {
   const int W = 40, H = 24;
