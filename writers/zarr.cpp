@@ -355,6 +355,7 @@ struct ZarrReader::Impl {
   Grid grid;
   bool blosc = false;
   std::vector<char> fill;  // one element of the fill value
+  bool has_fill = false;   // .zarray names one: else every chunk must be stored (spadgen's stores)
   size_t capacity = 16;
   using Chunk = std::shared_ptr<const std::vector<char>>;
   mutable std::mutex mutex;
@@ -362,7 +363,9 @@ struct ZarrReader::Impl {
 
   std::string error(const std::string& what) const { return "cannot read '" + path + "' as a Zarr array: " + what; }
 
-  // Chunk c decompressed (a missing chunk: the fill value throughout).
+  // Chunk c decompressed (a missing chunk: the fill value throughout; without one, an error: a store
+  // without a fill value has every chunk stored, and one gone was lost, not zeros: reconstruct scored a
+  // store without a quarter of its counts as complete).
   Chunk load(int64_t c) const {
     const size_t nbytes = size_t(grid.chunk_elements * eb);
     auto out = std::make_shared<std::vector<char>>(nbytes);
@@ -370,6 +373,9 @@ struct ZarrReader::Impl {
     struct stat entry {};
     const int fd = ::stat(file.c_str(), &entry) != 0 && errno == ENOENT ? -1 : detail::open_regular_file(file);
     if (fd < 0) {
+      if (!has_fill)
+        throw Error(error("chunk " + grid.key(c) + " is missing, and the store has no fill value to stand for it (every chunk is "
+                          "stored): the store was damaged after it was written"));
       for (size_t i = 0; i < nbytes; i += size_t(eb)) std::memcpy(out->data() + i, fill.data(), size_t(eb));
       return out;
     }
@@ -464,11 +470,12 @@ ZarrReader::ZarrReader(const std::string& path, size_t cache_chunks) : impl_(std
     if (!c.is_object() || c.value("id", "") != "blosc") throw Error(m.error("only the blosc compressor (or none) is supported"));
     m.blosc = true;
   }
-  // The fill value as one element of the dtype (null: 0).
+  // The fill value as one element of the dtype (null: none).
   m.fill.assign(size_t(m.eb), 0);
   const json& f = get("fill_value");
   if (!f.is_null()) {
     if (!f.is_number()) throw Error(m.error("fill_value " + f.dump() + " is not a number"));
+    m.has_fill = true;
     const auto put = [&](auto v) { std::memcpy(m.fill.data(), &v, sizeof v); };
     switch (m.dtype) {
       case Dtype::F32: put(f.get<float>()); break;

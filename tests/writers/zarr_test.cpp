@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <random>
 #include <thread>
 
@@ -218,9 +219,20 @@ TEST(ZarrWriter, UnwrittenElementsAreZero) {
               std::vector<float>(expected.begin() + 10 * c, expected.begin() + 10 * c + 10)) << c;
   }
   EXPECT_EQ(ZarrReader(dir.file("p.zarr")).read_all<float>(), expected);
-  // A reader takes a missing chunk for zeros (the fill value, or 0 without one).
+  // A missing chunk of a store without a fill value (spadgen's) was lost: refused, naming the store and the
+  // chunk (it was read as zeros, and reconstruct scored a store without a quarter of its counts as complete).
   fs::remove(dir.file("p.zarr/4"));
-  std::fill(expected.begin() + 40, expected.begin() + 50, 0.0f);
+  try {
+    (void)ZarrReader(dir.file("p.zarr")).read_all<float>();
+    ADD_FAILURE() << "a missing chunk was read";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("p.zarr' as a Zarr array: chunk 4 is missing, and the store has no fill value"), std::string::npos) << e.what();
+  }
+  // With a fill value (another program's store), the chunk is that value throughout.
+  nlohmann::json zarray = nlohmann::json::parse(read_bytes(dir.file("p.zarr/.zarray")));
+  zarray["fill_value"] = 0.5;
+  std::ofstream(dir.file("p.zarr/.zarray"), std::ios::trunc) << zarray.dump();
+  std::fill(expected.begin() + 40, expected.begin() + 50, 0.5f);
   EXPECT_EQ(ZarrReader(dir.file("p.zarr")).read_all<float>(), expected);
 }
 
