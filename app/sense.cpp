@@ -689,7 +689,16 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   const bool labels_from_truth = outputs.front()->labels() && !from_run.count("labels.exr");
   std::unique_ptr<writers::ExrData> truth;  // the run's, for the labels and the ground truth rescaled
   if (labels_from_truth || rescaled.count("ground_truth.exr")) {
-    truth = std::make_unique<writers::ExrData>(writers::read_exr((src / "ground_truth.exr").string()));
+    const std::string path = (src / "ground_truth.exr").string();
+    truth = std::make_unique<writers::ExrData>(writers::read_exr(path));
+    // the run's image (another run's of another size or crop would label the counts with its objects)
+    const std::string crop = nlohmann::json::array({img.x0, img.y0, img.width, img.height}).dump();
+    const auto at = truth->attributes.find("spadgen_crop");
+    if (truth->width != img.width || truth->height != img.height || (at != truth->attributes.end() && at->second != crop))
+      throw Error(path + ": an image of " + std::to_string(truth->width) + " x " + std::to_string(truth->height) + " pixels" +
+                  (at != truth->attributes.end() ? " at the crop " + scenes::one_line(at->second.substr(0, 80)) : std::string()) +
+                  ", and the run's is " + crop + " (metadata.json image.crop_in_sensor): a file of another run; restore the "
+                  "run's, or run the scene again");
     if (!file_scale.empty()) scale_truth(*truth, img, file_scale);
   }
   const double setup_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();

@@ -72,6 +72,21 @@ T get(const nlohmann::json& j, const std::string& pointer, const std::string& fi
   }
 }
 
+// An integer of metadata.json in [lo, hi] (get<int> of 1e308 or 2^63 overflowed, and a frames_per_k of -1 was
+// then blamed on counts.npy: "expected 0 to -1").
+int get_int(const nlohmann::json& j, const std::string& pointer, const std::string& file, int64_t lo, int64_t hi) {
+  const nlohmann::json::json_pointer p(pointer);
+  if (!j.contains(p)) throw Error(file + ": no " + pointer + " (is this a folder written by spadgen run or sense?)");
+  const nlohmann::json& v = j.at(p);
+  const bool in_range = v.is_number_unsigned()  ? v.get<uint64_t>() >= uint64_t(lo) && v.get<uint64_t>() <= uint64_t(hi)
+                        : v.is_number_integer() ? v.get<int64_t>() >= lo && v.get<int64_t>() <= hi
+                                                : false;
+  if (!in_range)
+    throw Error(file + ": " + pointer + " is " + v.dump() + ", not an integer in [" + std::to_string(lo) + ", " +
+                std::to_string(hi) + "] (is this a folder written by spadgen run or sense?)");
+  return int(v.get<int64_t>());
+}
+
 }  // namespace
 
 bool is_repeat_set(const fs::path& dir) {
@@ -117,11 +132,12 @@ RunFolder::RunFolder(const std::string& dir) : dir_(dir) {
   const fs::path d(dir);
   const std::string meta_path = (d / "metadata.json").string();
   meta_ = read_run_metadata(dir);
-  W_ = get<int>(meta_, "/image/width", meta_path);
-  H_ = get<int>(meta_, "/image/height", meta_path);
-  K_ = get<int>(meta_, "/acquisition/K", meta_path);
-  frames_ = get<int>(meta_, "/acquisition/frames_per_k", meta_path);
-  image_frames_ = get<int>(meta_, "/acquisition/frames", meta_path);
+  W_ = get_int(meta_, "/image/width", meta_path, 1, 1 << 20);
+  H_ = get_int(meta_, "/image/height", meta_path, 1, 1 << 20);
+  K_ = get_int(meta_, "/acquisition/K", meta_path, 1, 1 << 24);
+  frames_ = get_int(meta_, "/acquisition/frames_per_k", meta_path, 1, 65535);
+  image_frames_ = get_int(meta_, "/acquisition/frames", meta_path, 1, 65535);
+  if (meta_.contains("/image/crop_in_sensor"_json_pointer)) crop_ = meta_["image"]["crop_in_sensor"];
   const std::string mode = get<std::string>(meta_, "/acquisition/mode", meta_path);
   gate_sweep_ = mode == "gate_sweep";
   if (gate_sweep_) {
@@ -139,7 +155,7 @@ RunFolder::RunFolder(const std::string& dir) : dir_(dir) {
     writers::ExrData m = writers::read_exr(maps);
     for (const char* c : {"gate_skew_ps", "gate_length_ps"})
       if (!m.channels.count(c)) throw Error(maps + ": no channel " + std::string(c));
-    if (m.width != W_ || m.height != H_) throw Error(maps + ": size differs from metadata.json's image");
+    check_image(maps, m);
     skew_ps_ = std::move(m.channels["gate_skew_ps"]);
     length_ps_ = std::move(m.channels["gate_length_ps"]);
     // The pixel rays and where the laser sits (a return's time holds both legs of its path).
@@ -224,6 +240,27 @@ void RunFolder::read_rows(int y0, int y1, bool rate, bool to_counts, float* out)
       if (to_counts) v = static_cast<float>(frames_ * -std::expm1(-double(v)));
       out[size_t(i) * size_t(K_) + size_t(k)] = v;
     }
+  }
+}
+
+void RunFolder::check_image(const std::string& path, const writers::ExrData& e) const {
+  if (e.width != W_ || e.height != H_)
+    throw Error(path + ": " + std::to_string(e.width) + " x " + std::to_string(e.height) + " pixels, and the run's image is " +
+                std::to_string(W_) + " x " + std::to_string(H_) + " (metadata.json): a file of another run");
+  // (an image of another run of the same size: a crop elsewhere on the sensor)
+  const auto at = e.attributes.find("spadgen_crop");
+  if (at == e.attributes.end() || crop_.is_null()) return;
+  nlohmann::json crop;
+  try {
+    crop = nlohmann::json::parse(at->second);
+  } catch (const nlohmann::json::exception&) {
+  }
+  if (crop != crop_) {
+    std::string shown = at->second.substr(0, 80);  // (one line, whatever the header holds)
+    for (char& ch : shown)
+      if (static_cast<unsigned char>(ch) < 0x20) ch = '?';
+    throw Error(path + ": an image of the crop " + shown + " (its spadgen_crop), and the run's is " +
+                crop_.dump() + " (metadata.json image.crop_in_sensor): a file of another run");
   }
 }
 

@@ -10,6 +10,10 @@
 
 #include "reconstruct/detect.h"
 
+namespace spadgen::writers {
+struct ExrData;
+}
+
 namespace spadgen::reconstruct {
 
 // A run folder's metadata.json, parsed. Throws spadgen::Error naming the file when it is absent, not a
@@ -52,6 +56,9 @@ class RunFolder {
   void profiles(int y0, int y1, bool noise_free, float* out) const;
   // The same rows of detection_rate: lambda, the mean avalanches per frame (no counts: no saturation).
   void rates(int y0, int y1, float* out) const;
+  // Refuses an image (an EXR of the run folder, read as e) of another size or, where its header says so
+  // (spadgen_crop), of another crop than metadata.json's, naming the file.
+  void check_image(const std::string& path, const writers::ExrData& e) const;
   // The image's file named `name` (e.g. "ground_truth.exr"): its path, or "" when the run has none.
   std::string file(const std::string& name) const;
 
@@ -62,6 +69,7 @@ class RunFolder {
   friend std::unique_ptr<Stack> open_run_stack(const std::string& dir, const std::string& name);
   std::string dir_;
   nlohmann::json meta_;
+  nlohmann::json crop_;  // metadata.json's image.crop_in_sensor (null when absent)
   bool gate_sweep_ = true, dual_ = false;
   int K_ = 0, W_ = 0, H_ = 0, frames_ = 0, image_frames_ = 0;
   double dual_ratio_ = 1.0;
