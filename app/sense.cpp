@@ -14,6 +14,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <fstream>
 #include <limits>
 #include <memory>
@@ -283,6 +284,8 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   std::optional<FolderLock> run_lock;
   if (fs::is_regular_file(src / "metadata.json")) run_lock.emplace(src, true);
   const json meta = read_metadata(src);
+  if (!meta.is_object())
+    throw Error((src / "metadata.json").string() + ": not a JSON object; expected a run's metadata.json (a damaged one: run the scene again)");
   refuse_later_version(meta, src);
   if (!meta.contains("light"))
     throw Error(src.string() + ": the run saved no light; run it again with --set outputs.light=true to re-sample its sensor");
@@ -294,6 +297,47 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     if (!meta.contains(json::json_pointer(key)))
       throw Error((src / "metadata.json").string() + ": no " + key + "; expected a run folder written by spadgen " SPADGEN_VERSION
                   " with outputs.light (run the scene again)");
+  // ... and of the types a run writes (a wrong one was an internal error, exit 3, naming neither file nor key)
+  {
+    const auto is_text = [](const json& v) { return v.is_string(); };
+    const auto is_number = [](const json& v) { return v.is_number(); };
+    const auto is_positive = [](const json& v) { return v.is_number() && v.get<double>() > 0.0; };
+    const auto is_count = [](const json& v) { return v.is_number_unsigned(); };
+    const auto is_texts = [](const json& v) { return v.is_array() && std::all_of(v.begin(), v.end(), [](const json& t) { return t.is_string(); }); };
+    const auto is_rect = [](const json& v) {
+      return v.is_array() && v.size() == 4 && std::all_of(v.begin(), v.end(), [](const json& t) { return t.is_number_unsigned() && t.get<uint64_t>() <= (1u << 20); }) &&
+             v[2].get<uint64_t>() > 0 && v[3].get<uint64_t>() > 0;
+    };
+    const auto is_object = [](const json& v) { return v.is_object(); };
+    const auto is_array = [](const json& v) { return v.is_array(); };
+    struct Typed {
+      const char* key;
+      bool required;
+      std::function<bool(const json&)> ok;
+      const char* expected;
+    };
+    const Typed typed[] = {
+        {"/resolved_scene", true, is_object, "an object"}, {"/scene_file", true, is_text, "text"},
+        {"/scene_hash_fnv1a64", true, is_text, "text"}, {"/warnings", true, is_texts, "a list of texts"},
+        {"/files", true, is_texts, "a list of file names"}, {"/camera", true, is_object, "an object"},
+        {"/photons_per_pulse_emitted", true, is_number, "a number"}, {"/ground_truth_layers", true, is_count, "an integer >= 0"},
+        {"/light/crop_in_sensor", true, is_rect, "[x, y, width, height] in pixels"},
+        {"/light/values_bytes", true, is_count, "an integer >= 0"}, {"/light/time_axis_s/start", true, is_number, "a number"},
+        {"/light/time_axis_s/bin_width", true, is_positive, "a number > 0"},
+        {"/light/time_axis_s/bins", true, is_count, "an integer >= 0"},
+        {"/light/time_axis_s/laser_period", true, is_positive, "a number > 0"},
+        {"/sensor_tables_fnv1a64", false, is_text, "text"}, {"/ground_truth_objects", false, is_count, "an integer >= 0"},
+        {"/objects", false, is_array, "a list"}, {"/transient/crop_in_sensor", false, is_rect, "[x, y, width, height] in pixels"},
+        {"/ground_truth_summary", false, is_object, "an object"}, {"/file_bytes", false, is_object, "an object"},
+        {"/storage/files", false, is_object, "an object"}, {"/light/fill_factor", false, is_array, "a list"}};
+    for (const Typed& t : typed) {
+      const json::json_pointer p(t.key);
+      if (!meta.contains(p)) continue;
+      if (!t.ok(meta.at(p)))
+        throw Error((src / "metadata.json").string() + ": " + t.key + " is " + scenes::one_line(meta.at(p).dump().substr(0, 80)) +
+                    "; expected " + t.expected + ", as a run writes it (a damaged metadata.json: run the scene again)");
+    }
+  }
   // Every run lists its files, metadata.json last: a list without it is damaged (an emptied one made sense
   // write a folder without the ground truth, labels and depth preview the run had, exit 0).
   if (const json& files = meta.at("files");
@@ -464,8 +508,9 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     std::vector<double> recorded;
     for (const json& r : meta.at(p)) {
       if (!r.is_array() || r.size() != 3 || !r[0].is_number_unsigned() || !r[1].is_number_unsigned() || !r[2].is_number() ||
-          r[0].get<size_t>() != recorded.size() || !(r[2].get<double>() > 0.0))
-        throw Error((src / "metadata.json").string() + ": light.fill_factor: expected runs of rows [first, count, fill factor > 0] from row 0");
+          r[0].get<size_t>() != recorded.size() || !(r[2].get<double>() > 0.0) || !(r[2].get<double>() <= 1.0) ||
+          r[1].get<size_t>() > size_t{1} << 20)
+        throw Error((src / "metadata.json").string() + ": light.fill_factor: expected runs of rows [first, count, fill factor in (0, 1]] from row 0");
       recorded.insert(recorded.end(), r[1].get<size_t>(), r[2].get<double>());
     }
     if (recorded.size() != was.size())

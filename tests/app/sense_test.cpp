@@ -828,6 +828,41 @@ TEST_F(App, SenseRefusesWhatItCannotDo) {
   }
 }
 
+// metadata.json's fields of another type than a run writes are named with the file and the key (each was an
+// internal error, exit 3: "type must be number, but is string"; an adversarial tester's), and so is a file
+// that is no JSON object ("the run saved no light").
+TEST_F(App, SenseNamesMetadataFieldsOfTheWrongType) {
+  ASSERT_EQ(sh("run " + kLit + " -o " + (dir_ / "run").string()).code, 0);
+  const fs::path meta = dir_ / "run" / "metadata.json";
+  const std::string kept = slurp(meta);
+  const struct {
+    const char* pointer;
+    const char* value;
+    const char* expected;
+  } cases[] = {{"/light/time_axis_s/start", "\"x\"", "a number"},
+               {"/light/time_axis_s/bins", "\"12\"", "an integer >= 0"},
+               {"/light/time_axis_s/bin_width", "true", "a number > 0"},
+               {"/light/crop_in_sensor", "[1, 2, 3]", "[x, y, width, height] in pixels"},
+               {"/sensor_tables_fnv1a64", "5", "text"},
+               {"/files", "[5]", "a list of file names"},
+               {"/warnings", "5", "a list of texts"}};
+  for (const auto& c : cases) {
+    nlohmann::ordered_json m = nlohmann::ordered_json::parse(kept);
+    m[nlohmann::ordered_json::json_pointer(c.pointer)] = nlohmann::ordered_json::parse(c.value);
+    std::ofstream(meta, std::ios::trunc) << m.dump(2);
+    const Result r = sh("sense " + (dir_ / "run").string() + " -o " + (dir_ / "s").string());
+    EXPECT_EQ(r.code, 1) << c.pointer << r.output;
+    EXPECT_THAT(r.output, HasSubstr(meta.string() + ": " + c.pointer + " is " + nlohmann::json::parse(c.value).dump() + "; expected " +
+                                    c.expected + ", as a run writes it")) << c.pointer;
+  }
+  std::ofstream(meta, std::ios::trunc) << "[[[]]]";
+  EXPECT_THAT(sh("sense " + (dir_ / "run").string() + " -o " + (dir_ / "s").string()).output,
+              HasSubstr(meta.string() + ": not a JSON object; expected a run's metadata.json"));
+  std::ofstream(meta, std::ios::trunc) << kept;
+  EXPECT_EQ(sh("sense " + (dir_ / "run").string() + " -o " + (dir_ / "s").string() + " -q").code, 0);
+  EXPECT_FALSE(fs::exists(dir_ / "run-sense"));
+}
+
 // The saved light holds every rendered bin of every pixel (the transient, compactly), and its own
 // description (metadata.json's light section) agrees with its files.
 TEST_F(App, SavedLightIsTheTransientOverEachPixelsLitBins) {
