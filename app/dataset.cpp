@@ -898,6 +898,43 @@ void dataset_run(const DatasetOptions& options) {
   }
 }
 
+namespace {
+// What is wrong with index.jsonl against the samples as they are now (now[i]: sample i done, its hash):
+// "" when every row is there, in order, and says done for the done samples with their hash.
+std::string index_status(const fs::path& dir, const std::vector<std::pair<bool, std::string>>& now) {
+  const fs::path path = dir / "index.jsonl";
+  const std::string fix = ": `spadgen dataset run` writes it again (with nothing left to generate, it writes only the index and the card)";
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec))
+    return "index: " + path.string() + (fs::exists(path, ec) ? " is not a regular file" : " is missing") + fix;
+  std::ifstream in(path);
+  size_t row = 0;
+  for (std::string line; std::getline(in, line); ++row) {
+    const std::string where = "index: " + path.string() + " row " + std::to_string(row + 1);
+    json r;
+    try {
+      r = json::parse(line);
+    } catch (const json::exception&) {
+      return where + " is not JSON (damaged since it was written)" + fix;
+    }
+    const auto text = [&r](const char* key) { return r.is_object() && r.contains(key) && r[key].is_string() ? r[key].get<std::string>() : std::string(); };
+    if (!r.is_object() || !r.contains("index") || !r["index"].is_number_unsigned() || text("status").empty())
+      return where + " is not a row spadgen writes (index, status, ...)" + fix;
+    if (r["index"].get<uint64_t>() != row)
+      return where + " lists sample " + r["index"].dump() + " where sample " + std::to_string(row) + " belongs (damaged since it was written)" + fix;
+    if (row >= now.size()) return where + ": the dataset has " + std::to_string(now.size()) + " samples" + fix;
+    const bool done = text("status") == "done";
+    if (done != now[row].first || (done && text("sample_hash") != now[row].second))
+      return where + " lists sample " + std::to_string(row) + " as " + text("status") + (done ? " with another hash" : "") +
+             ", and it is " + (now[row].first ? "done" : "not done") + " now: the index is out of date" + fix;
+  }
+  if (row < now.size())
+    return "index: " + path.string() + " has " + std::to_string(row) + " rows for the dataset's " + std::to_string(now.size()) +
+           " samples" + fix;
+  return "";
+}
+}  // namespace
+
 DatasetStatus dataset_status(const std::string& dir) {
   const DatasetSpec spec = spec_of_folder(dir);
   const DatasetFolder folder(spec, dir);
@@ -907,7 +944,11 @@ DatasetStatus dataset_status(const std::string& dir) {
   std::string failed, damaged;
   std::map<std::string, std::vector<int64_t>> stale_why;  // what changed, and the samples it made stale
   std::set<std::string> done_folders;                      // (their names, as evaluate's metrics.json names them)
+  // Per sample: done now, and its hash (to compare with index.jsonl's rows)
+  std::vector<std::pair<bool, std::string>> now;
   inspect_each(folder, true, nullptr, [&](const SampleRecord& r) {
+    if (size_t(r.sample.index) >= now.size()) now.resize(size_t(r.sample.index) + 1);
+    now[size_t(r.sample.index)] = {r.status == Status::Done, r.hash};
     ++count[size_t(r.status)];
     if (r.status == Status::Done)
       for (const std::string& f : r.folders) done_folders.insert(fs::path(f).filename().string());
@@ -938,7 +979,11 @@ DatasetStatus dataset_status(const std::string& dir) {
     o << "beyond the " << spec.count() << " samples: the folders of samples " << datasets::ranges_text(beyond)
       << " (kept, not in the index; a larger \"samples\" takes them again)\n";
   o << evaluation_status(dir, &done_folders, /*say_current=*/true);
-  const bool complete = count[size_t(Status::Done)] == spec.count();
+  // The index as the folders are now: a missing, damaged or out-of-date index.jsonl is said, and the dataset is
+  // not complete (status said "all done", exit 0, and evaluate and the Python package then refused the folder)
+  const std::string index = index_status(fs::path(dir), now);
+  if (!index.empty()) o << index << "\n";
+  const bool complete = count[size_t(Status::Done)] == spec.count() && index.empty();
   return {o.str(), complete};
 }
 

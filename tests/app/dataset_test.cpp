@@ -890,6 +890,48 @@ TEST_F(Dataset, APlanListsASampleItCannotEstimateAsInvalid) {
   }
 }
 
+// dataset status checks index.jsonl against the samples: missing, damaged (a row not JSON, a row twice) or out
+// of date, it is named with the fix and the dataset is not complete (exit 4): status said all done, exit 0,
+// and evaluate and the Python package then refused the folder (an adversarial tester's find).
+TEST_F(Dataset, StatusChecksTheIndex) {
+  write(dir_ / "d.json", small_dataset(2));
+  const std::string out = (dir_ / "out").string(), run = "dataset run " + (dir_ / "d.json").string() + " -o " + out + " -q";
+  ASSERT_EQ(sh(run).code, 0);
+  const std::string status = "dataset status " + out;
+  ASSERT_EQ(sh(status).code, 0);
+  const std::string index = slurp(dir_ / "out/index.jsonl"), first = index.substr(0, index.find('\n') + 1);
+  const std::string fix = ": `spadgen dataset run` writes it again (with nothing left to generate, it writes only the index and the card)";
+  const struct {
+    std::string text, says;
+  } cases[] = {{"", "index: " + out + "/index.jsonl is missing" + fix},
+               {first, "index: " + out + "/index.jsonl has 1 rows for the dataset's 2 samples" + fix},
+               {first + first, "index: " + out + "/index.jsonl row 2 lists sample 0 where sample 1 belongs (damaged since it was written)" + fix},
+               {first + "{\"index\": 1, \n", "index: " + out + "/index.jsonl row 2 is not JSON (damaged since it was written)" + fix},
+               {index + first, "index: " + out + "/index.jsonl row 3 lists sample 0 where sample 2 belongs"}};
+  for (const auto& c : cases) {
+    if (c.text.empty()) fs::remove(dir_ / "out/index.jsonl");
+    else write(dir_ / "out/index.jsonl", c.text);
+    const Result r = sh(status);
+    EXPECT_EQ(r.code, 4) << c.says << r.output;
+    EXPECT_THAT(r.output, HasSubstr("2 samples: 2 done, 0 failed, 0 stale, 0 missing"));
+    EXPECT_THAT(r.output, HasSubstr(c.says));
+  }
+  // out of date: sample 1 listed as missing while it is done
+  std::string missing = index;
+  const size_t second = index.find('\n') + 1;
+  const size_t at = missing.find("\"status\":\"done\"", second);
+  ASSERT_NE(at, std::string::npos) << index;
+  missing.replace(at, 15, "\"status\":\"missing\"");
+  write(dir_ / "out/index.jsonl", missing);
+  const Result stale = sh(status);
+  EXPECT_EQ(stale.code, 4) << stale.output;
+  EXPECT_THAT(stale.output, HasSubstr("row 2 lists sample 1 as missing, and it is done now: the index is out of date" + fix));
+  // the run writes it again
+  ASSERT_EQ(sh(run).code, 0);
+  EXPECT_EQ(slurp(dir_ / "out/index.jsonl"), index);
+  EXPECT_EQ(sh(status).code, 0);
+}
+
 // A plan of a folder with done samples tells how long they took against their estimates (metadata.json's
 // run.wall_seconds) and the time left at that pace: the cost model is of one machine kind, and it planned
 // small samples at 3-6 times what they took on another.
