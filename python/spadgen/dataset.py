@@ -63,6 +63,49 @@ def _same(a, b):
     return a == b
 
 
+def _check_index(rows, index_path):
+    """The rows of index.jsonl as `spadgen dataset run` writes them (as `spadgen evaluate` checks them): an object
+    per row with an integer "index", strings "status", "folder" (samples/NAME) and "sample_hash", objects
+    "parameters" and "seeds", a list of folders "repeats"; no sample and no folder listed twice. Row N counts
+    the non-blank lines from 1, as the program's messages do. A damaged row was a TypeError, AttributeError or
+    KeyError from wherever it was read, and a row copied by hand read (and trained on) its sample twice."""
+    damaged = "the index was damaged after `spadgen dataset run` wrote it: run the dataset again to write it"
+    indices, folders = {}, {}
+    for n, r in enumerate(rows, 1):
+        where = f"{index_path} row {n}"
+        if not isinstance(r, dict):
+            raise ValueError(f"{where}: not a JSON object (an index row spadgen writes is one); {damaged}")
+        i = r.get("index")
+        if isinstance(i, bool) or not isinstance(i, int) or not 0 <= i < 1 << 62:
+            raise ValueError(f"{where}: expected an integer \"index\" >= 0, found {json.dumps(i)[:40]}; {damaged}")
+        for key in ("status", "folder", "sample_hash"):
+            if key in r or key != "sample_hash":
+                if not isinstance(r.get(key), str):
+                    raise ValueError(f"{where}: expected a string \"{key}\", found {json.dumps(r.get(key))[:40]}; {damaged}")
+        if r["status"] not in STATUSES:
+            raise ValueError(f"{where}: status {json.dumps(r['status'])[:40]} is not one of {', '.join(STATUSES)}; {damaged}")
+        for key in ("parameters", "seeds"):
+            if not isinstance(r.get(key), dict):
+                raise ValueError(f"{where}: expected an object \"{key}\", found {json.dumps(r.get(key))[:40]}; {damaged}")
+        repeats = r.get("repeats", [])
+        if not isinstance(repeats, list) or not all(isinstance(f, str) for f in repeats):
+            raise ValueError(f"{where}: expected a list of folders \"repeats\", found {json.dumps(repeats)[:40]}; {damaged}")
+        for key, kind in (("ground_truth", dict), ("warnings", list), ("error", str)):
+            if r.get(key) is not None and not isinstance(r[key], kind):
+                raise ValueError(f"{where}: \"{key}\" is {json.dumps(r[key])[:40]}, not a{'n object' if kind is dict else ' list' if kind is list else ' string'}; {damaged}")
+        if i in indices:
+            raise ValueError(f"{where}: lists sample {i} again (row {indices[i]} lists it); {damaged}")
+        indices[i] = n
+        for f in [r["folder"]] + repeats:
+            parts = f.replace("\\", "/").split("/")
+            if os.path.isabs(f) or len(parts) < 2 or parts[0] != "samples" or any(p in ("", ".", "..") for p in parts[1:]):
+                raise ValueError(f"{where}: lists the folder {f}, not a sample folder of the dataset (samples/NAME); {damaged}")
+            key = os.path.normpath(f)
+            if key in folders:
+                raise ValueError(f"{where}: lists the folder {f} again (row {folders[key]} lists it); {damaged}")
+            folders[key] = n
+
+
 class Sample:
     """One sample of a dataset: its row of the index, and its run folders opened on first use."""
 
@@ -162,6 +205,7 @@ class Dataset:
             except json.JSONDecodeError as e:
                 raise ValueError(f"{index_path}: not valid JSON lines ({e}); `spadgen dataset run` writes it whole, so it "
                                  "was damaged afterwards: run the dataset again to write it") from e
+        _check_index(self.index, index_path)
         self._all = self.index
 
     def _view(self, rows):

@@ -152,20 +152,69 @@ def _identity(path):
     return st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns
 
 
-def _zarr_store(path):
+# The dtypes spadgen writes a Zarr array in (writers/zarr.cpp reads no other).
+_ZARR_DTYPES = ("<f4", "<f8", "|u1", "<u1", "<u2", "<i4", "<i8")
+
+
+def _check_zarray(path):
+    """The store's .zarray as parsed, checked as the program's Zarr reader (writers/zarr.cpp) checks it: format 2,
+    C order (an "F" was read as C order without a word), no filters, "." separators, a dtype spadgen writes, a
+    shape and chunks of positive integers of one length, Blosc or no compressor, a number or null fill value.
+    A ValueError naming the store and the field otherwise; None when there is no readable .zarray (zarr reports
+    that itself)."""
+    try:
+        with open(os.path.join(path, ".zarray"), "rb") as f:
+            z = json.load(f)
+    except (OSError, ValueError):
+        return None
+
+    def bad(what):
+        return ValueError(f"{path}: {what}; spadgen writes its Zarr stores whole, so .zarray was damaged or edited after "
+                          "the run published it")
+
+    if not isinstance(z, dict):
+        raise bad(".zarray is not a JSON object")
+    for key in ("zarr_format", "order", "dtype", "shape", "chunks", "compressor", "fill_value"):
+        if key not in z:
+            raise bad(f".zarray has no {key!r}")
+    if z["zarr_format"] != 2 or isinstance(z["zarr_format"], bool):
+        raise bad(f".zarray's zarr_format is {json.dumps(z['zarr_format'])[:40]}, not 2")
+    if z["order"] != "C":
+        raise bad(f".zarray's order is {json.dumps(z['order'])[:40]}: only C order is supported (spadgen writes C)")
+    if z.get("filters") not in (None, []):
+        raise bad(f".zarray has filters ({json.dumps(z['filters'])[:60]}): filters are not supported (spadgen writes none)")
+    if z.get("dimension_separator", ".") != ".":
+        raise bad(f".zarray's dimension_separator is {json.dumps(z['dimension_separator'])[:40]}: only '.' is supported")
+    if z["dtype"] not in _ZARR_DTYPES:
+        raise bad(f".zarray's dtype {json.dumps(z['dtype'])[:40]} is not one spadgen writes ({', '.join(_ZARR_DTYPES)})")
+    for key in ("shape", "chunks"):
+        v = z[key]
+        if not (isinstance(v, list) and v and all(isinstance(e, int) and not isinstance(e, bool) and e >= (key == "chunks")
+                                                  for e in v)):
+            raise bad(f".zarray's {key} {json.dumps(v)[:60]} is not a list of {'positive' if key == 'chunks' else 'non-negative'} integers")
+    if len(z["chunks"]) != len(z["shape"]):
+        raise bad(f".zarray's chunks {z['chunks']} and shape {z['shape']} differ in length")
+    c = z["compressor"]
+    if c is not None and not (isinstance(c, dict) and c.get("id") == "blosc"):
+        raise bad(f".zarray's compressor {json.dumps(c)[:60]}: only Blosc (or none) is supported")
+    f = z["fill_value"]
+    if f is not None and (isinstance(f, bool) or not isinstance(f, (int, float))):
+        raise bad(f".zarray's fill_value {json.dumps(f)[:40]} is not a number")
+    return z
+
+
+def _zarr_store(path, z=None):
     """A Zarr directory store whose missing chunk is an error naming it: a store without a fill value would
     otherwise read it as uninitialised memory (spadgen writes every chunk: one missing is damage). A Blosc
     chunk shorter or longer than its header says (cut short by a full disk or a copy) is an error naming it
-    too, where Blosc's own says only "error during blosc decompression: -1"."""
-    import json
+    too, where Blosc's own says only "error during blosc decompression: -1"; so is a chunk that decodes to
+    another size than .zarray's chunks of its dtype (z: the .zarray checked by _check_zarray; a dtype edited
+    was "cannot reshape array of size ...")."""
     import re
     import zarr
 
-    try:
-        with open(os.path.join(path, ".zarray"), "rb") as f:
-            blosc = (json.load(f).get("compressor") or {}).get("id") == "blosc"
-    except (OSError, ValueError, AttributeError):
-        blosc = False  # zarr reports a store without a readable .zarray itself
+    blosc = isinstance(z, dict) and (z.get("compressor") or {}).get("id") == "blosc"
+    nbytes = int(np.prod(z["chunks"])) * np.dtype(z["dtype"]).itemsize if isinstance(z, dict) else None
 
     class StrictStore(zarr.storage.DirectoryStore):
         _chunk = re.compile(r"^\d+(\.\d+)*$")
@@ -187,6 +236,14 @@ def _zarr_store(path):
                                   + (f"its Blosc header says {stated}" if stated is not None else "less than a Blosc header")
                                   + ": it was cut short or damaged after the run published it; restore it, or run the "
                                   "scene again")
+            if nbytes is not None and self._chunk.match(key.rsplit("/", 1)[-1]):
+                # Blosc's bytes 4-7: the chunk's decoded size; an uncompressed chunk is that size itself.
+                decoded = int.from_bytes(value[4:8], "little") if blosc else len(value)
+                if decoded != nbytes:
+                    raise ValueError(f"{os.path.join(path, key)}: a chunk of this Zarr store decodes to {decoded} bytes, "
+                                     f"but .zarray's chunks {z['chunks']} of {z['dtype']} take {nbytes}: .zarray or the "
+                                     "chunk was damaged or edited after the run published it; restore it, or run the "
+                                     "scene again")
             return value
 
     return StrictStore(path)
@@ -255,6 +312,14 @@ class Run:
 
         if not all(isinstance(f, str) for f in self.files):
             raise bad("files", "holds an entry that is not a file name")
+        for name in ("units", "seeds", "dataset"):
+            section(name)
+        if "objects" in m and not isinstance(m["objects"], list):
+            raise bad("objects", "is not a list")
+        for key in ("start_ns", "bin_width_ps", "bins", "laser_period_ns"):
+            v = section("time_axis").get(key, 0)
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                raise bad(f"time_axis.{key}", f"is {json.dumps(v)[:40]}, not a number")
         whole("image", "width")
         whole("image", "height")
         crop = section("image").get("crop_in_sensor", [0, 0, 0, 0])
@@ -309,20 +374,28 @@ class Run:
                            f"{__version__}: run the scene again with it")
         return self.metadata[key]
 
+    def _required(self, section, key):
+        """metadata.json's section.key, which every run writes: a file without it was edited (it was a bare
+        KeyError naming the key alone), named as such."""
+        if not isinstance(self.metadata.get(section), dict) or key not in self.metadata[section]:
+            raise ValueError(f"{os.path.join(self.path, 'metadata.json')}: has no {section}.{key}, which every run writes: "
+                             "it was damaged or edited after the run published it: restore it, or " + self._remedy())
+        return self.metadata[section][key]
+
     # ---- what the run is --------------------------------------------------------------------------------
 
     @property
     def width(self):
-        return int(self.metadata["image"]["width"])
+        return int(self._required("image", "width"))
 
     @property
     def height(self):
-        return int(self.metadata["image"]["height"])
+        return int(self._required("image", "height"))
 
     @property
     def crop(self):
         """(x0, y0, width, height) of the images in sensor pixels."""
-        return tuple(int(v) for v in self.metadata["image"]["crop_in_sensor"])
+        return tuple(int(v) for v in self._required("image", "crop_in_sensor"))
 
     @property
     def units(self):
@@ -346,21 +419,22 @@ class Run:
 
     @property
     def acquisition(self):
+        self._required("acquisition", "mode")
         return self.metadata["acquisition"]
 
     @property
     def mode(self):
         """The acquisition mode: "gate_sweep" or "intensity"."""
-        return self.acquisition["mode"]
+        return self._required("acquisition", "mode")
 
     @property
     def K(self):
         """Gate positions (gate sweep) or exposures (intensity mode): the first axis of the (K, H, W) stacks."""
-        return int(self.acquisition["K"])
+        return int(self._required("acquisition", "K"))
 
     @property
     def frames_per_k(self):
-        return int(self.acquisition["frames_per_k"])
+        return int(self._required("acquisition", "frames_per_k"))
 
     @property
     def gate_positions_s(self):
@@ -382,7 +456,7 @@ class Run:
 
     @property
     def time_axis(self):
-        a = self.metadata["time_axis"]
+        a = {k: self._required("time_axis", k) for k in ("start_ns", "bin_width_ps", "bins", "laser_period_ns")}
         return TimeAxis(a["start_ns"] * 1e-9, a["bin_width_ps"] * 1e-12, int(a["bins"]), a["laser_period_ns"] * 1e-9)
 
     # ---- files ------------------------------------------------------------------------------------------
@@ -435,7 +509,11 @@ class Run:
                     raise ImportError(f"{path} is a Zarr store (outputs.storage = zarr): reading it needs zarr-python "
                                       "(Debian: python3-zarr)") from e
                 try:
-                    self._cache[path] = zarr.open_array(_zarr_store(path), mode="r")
+                    z = _check_zarray(path)
+                except ValueError as e:
+                    raise ValueError(f"{e}: restore it, or {self._remedy()}") from None
+                try:
+                    self._cache[path] = zarr.open_array(_zarr_store(path, z), mode="r")
                 except Exception as e:  # zarr's errors do not name the store
                     raise ValueError(f"{path}: not a readable Zarr array ({type(e).__name__}: {e}); damaged after the run "
                                      "published it: restore it, or " + self._remedy()) from e
@@ -462,7 +540,26 @@ class Run:
                     del self._cache[path]
                     raise ValueError(f"{path}: shape {got}, but metadata.json's (K, H, W) is {want}: the file is not this "
                                      "run's; restore it, or " + self._remedy())
+            # and of the dtype the run writes them in (a float or wider counts file was read as counts)
+            want = self._dtypes(stem)
+            got = np.dtype(self._cache[path].dtype)
+            if want and got not in want:
+                del self._cache[path]
+                raise ValueError(f"{path}: dtype {got.str}, but the run writes {stem} as "
+                                 f"{' or '.join(str(d) for d in want)}: the file is not this run's or was damaged; restore "
+                                 "it, or " + self._remedy())
         return self._cache[path]
+
+    def _dtypes(self, stem):
+        """The dtypes a run writes stack `stem` in (little-endian, as the program writes them); () if not known."""
+        if stem == "counts":
+            given = self.metadata.get("counts_dtype")  # (uint8 up to 255 frames per k, else uint16)
+            return (np.dtype(given),) if given in ("uint8", "uint16") else (np.dtype(np.uint8), np.dtype("<u2"))
+        if stem in ("expected_counts", "detection_rate", "transient", "transient_indirect"):
+            return (np.dtype("<f4"),)
+        if stem == "frames":
+            return (np.dtype(np.uint8),)
+        return ()
 
     def exr(self, name):
         """An .exr file of the run: channels by name, decoded on first access (spadgen.exr.ExrFile)."""
@@ -476,8 +573,28 @@ class Run:
                                         f"restore it, or {self._remedy()}")
             image = ExrFile(path)
             self.check_unchanged()  # opened after the folder was replaced: the newer run's (see array())
+            self._check_image(image)
             self._cache[name] = image
         return self._cache[name]
+
+    def _check_image(self, image):
+        """An EXR image of the run is of its size (metadata.json's image) and, where its header says the crop
+        (spadgen_crop), of its crop: a file of another run copied in was read without a word (images of two
+        sizes mixed, or one crop's truth beside another's counts)."""
+        if (image.width, image.height) != (self.width, self.height):
+            raise ValueError(f"{image.path}: a {image.width} x {image.height} image, but metadata.json's image is "
+                             f"{self.width} x {self.height}: the file is not this run's; restore it, or " + self._remedy())
+        said = image.attributes.get("spadgen_crop")
+        image_meta = self.metadata.get("image", {})
+        if said is not None and "crop_in_sensor" in image_meta:
+            try:
+                crop = json.loads(said)
+            except ValueError:
+                crop = said
+            if crop != list(self.crop):
+                raise ValueError(f"{image.path}: its header's spadgen_crop is {said}, but metadata.json's "
+                                 f"image.crop_in_sensor is {json.dumps(list(self.crop))}: the file is not this run's; "
+                                 "restore it, or " + self._remedy())
 
     def __getitem__(self, name):
         """run["counts"], run["counts.npy"], run["ground_truth.exr"]: any stack or image by file name (a stack
@@ -516,8 +633,31 @@ class Run:
 
     @property
     def counts(self):
-        """(K, H, W) uint8 (up to 255 frames per k) or uint16 sampled counts."""
-        return self.array("counts.npy")
+        """(K, H, W) uint8 (up to 255 frames per k) or uint16 sampled counts. The first use checks every count
+        is at most frames_per_k (a ValueError naming the file and the first pixel above it): one pass over the
+        file (about 0.1 s for 360 MB from the page cache, more from disk), once per Run object."""
+        counts = self.array("counts.npy")
+        if "counts checked" not in self._cache:
+            self._check_counts(counts)
+            self._cache["counts checked"] = True
+        return counts
+
+    def _check_counts(self, counts):
+        """Every count at most N = frames_per_k (`spadgen reconstruct` refuses more), read k by k in blocks of
+        about 64 MB (a Zarr store is decoded, not loaded whole); nothing to read where the dtype cannot exceed N."""
+        n = self.frames_per_k
+        if np.iinfo(counts.dtype).max <= n:
+            return
+        K, H, W = counts.shape
+        step = max(1, (64 << 20) // max(1, H * W * counts.dtype.itemsize))
+        for k0 in range(0, K, step):
+            block = np.asarray(counts[k0:k0 + step])
+            if block.size and block.max() > n:
+                k, y, x = (int(v) for v in np.argwhere(block > n)[0])
+                raise ValueError(f"{self._require('counts.npy')}: the count at (k, y, x) = ({k0 + k}, {y}, {x}) is "
+                                 f"{int(block[k, y, x])}, more than metadata.json's acquisition.frames_per_k = {n} (a count "
+                                 "sums that many binary frames): the file is not this run's or was damaged; restore it, or "
+                                 + self._remedy())
 
     @property
     def frames_packed(self):
@@ -675,10 +815,11 @@ class Run:
                              f"spadgen reconstruct {self.path}{' --noise-free' if noise_free else ''} writes its HDR inversion, "
                              f"which run.hdr({'noise_free=True' if noise_free else ''}) reads")
         path = os.path.join(self.path, f"detections_{detector}{suffix}.exr")
-        if not os.path.isfile(path):
+        if not os.path.lexists(path):  # (anything else in its place: ExrFile names what it is)
             flag = " --noise-free" if noise_free else ""
             raise FileNotFoundError(f"{path}: no such file; write it with spadgen reconstruct {self.path} --detector {detector}{flag}")
         f = ExrFile(path)
+        self._check_image(f)
         m = 0
         while f"det{m}.range" in f:
             m += 1
@@ -697,20 +838,31 @@ class Run:
                              f"{' on the noise-free rates' if made_nf else ''}, not the {detector} detector"
                              f"{' on the noise-free rates' if noise_free else ''} its name stands for (reconstruct -o named "
                              "it so); write it again with spadgen reconstruct")
+        try:
+            source = json.loads(attrs.get("spadgen_source", "{}"))
+        except ValueError:
+            source = {}
+        crop = source.get("crop_in_sensor") if isinstance(source, dict) else None
+        if crop is not None and "crop_in_sensor" in self.metadata.get("image", {}) and crop != list(self.crop):
+            raise ValueError(f"{path}: its header's spadgen_source says crop_in_sensor {json.dumps(crop)}, but metadata.json's "
+                             f"image.crop_in_sensor is {json.dumps(list(self.crop))}: the detections are of another run; "
+                             "write them again with spadgen reconstruct")
         return Detections(np.asarray(f["count"]).astype(np.int32), slots("range"), slots("gate"), slots("amplitude"),
-                          slots("score"), made, json.loads(attrs.get("spadgen_source", "{}")))
+                          slots("score"), made, source if isinstance(source, dict) else {})
 
     def hdr(self, noise_free=False):
         """The HDR inversion of a 2D run that ``spadgen reconstruct RUN`` (``--noise-free``) wrote into its folder,
         hdr.exr (hdr_noise_free.exr): channels photons, photons_se, saturated (docs/detection.md)."""
         path = os.path.join(self.path, "hdr_noise_free.exr" if noise_free else "hdr.exr")
-        if not os.path.isfile(path):
+        if not os.path.lexists(path):
             if self.mode == "gate_sweep":
                 raise ValueError(f"{self.path} is a gate sweep: reconstruct writes its detections (run.detections()), "
                                  "not an HDR inversion, which is for 2D runs")
             flag = " --noise-free" if noise_free else ""
             raise FileNotFoundError(f"{path}: no such file; write it with spadgen reconstruct {self.path}{flag}")
-        return ExrFile(path)
+        image = ExrFile(path)
+        self._check_image(image)
+        return image
 
     def layer_count(self):
         """(H, W) int32: the number of surfaces along each pixel's ray."""

@@ -49,6 +49,7 @@ A run folder replaced while the dataset is in use (a dataset run regenerating a 
 the folder) raises spadgen.RunChangedError naming it, from the item that would read it: an item never mixes
 two versions of a run. At most ``open_runs`` runs (default 64) are kept open per process (each holds a file
 descriptor per memory-mapped stack and its decoded ground truth); the least recently used is closed first.
+A run's counts are checked against frames_per_k once per opened run (Run.counts reads them once whole), not per item.
 """
 from __future__ import annotations
 

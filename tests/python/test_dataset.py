@@ -187,6 +187,37 @@ def test_errors_name_the_folder(ds, dataset_dir, tmp_path, sweep_run):
         spadgen.open_dataset(tmp_path / "unfinished")
 
 
+def test_a_damaged_index_is_refused_naming_its_row(dataset_dir, tmp_path):
+    """index.jsonl edited after `spadgen dataset run` wrote it: a row copied again (its sample was read, and
+    trained on, twice), rows of other types than spadgen writes (they were TypeError, AttributeError or
+    KeyError from wherever they were read): a ValueError naming the file and the row, as `spadgen evaluate`."""
+    rows = (dataset_dir / "index.jsonl").read_text().splitlines()
+    copy = tmp_path / "ds"
+    copy.mkdir()
+    (copy / "dataset.json").write_text((dataset_dir / "dataset.json").read_text())
+    index = copy / "index.jsonl"
+
+    def refused(lines, says, row=2):
+        index.write_text("\n".join(lines) + "\n")
+        with pytest.raises(ValueError, match=f"{index} row {row}: " + says):
+            spadgen.open_dataset(copy)
+
+    refused(rows + [rows[0]], "lists sample 0 again \\(row 1 lists it\\); the index was damaged", len(rows) + 1)
+    twin = dict(json.loads(rows[0]), index=len(rows))  # another index, the same folder
+    refused(rows + [json.dumps(twin)], "lists the folder samples/000000 again \\(row 1 lists it\\)", len(rows) + 1)
+    for key, value, says in (("index", "1", 'expected an integer "index"'), ("status", 5, 'expected a string "status"'),
+                             ("folder", 5, 'expected a string "folder"'), ("status", "great", 'status "great" is not one of'),
+                             ("parameters", [1], 'expected an object "parameters"'),
+                             ("repeats", "x", 'expected a list of folders "repeats"'),
+                             ("folder", "../../elsewhere", "lists the folder ../../elsewhere, not a sample folder")):
+        edited = list(rows)
+        edited[1] = json.dumps(dict(json.loads(rows[1]), **{key: value}))
+        refused(edited, says)
+    refused([rows[0], "[1, 2]"] + rows[2:], "not a JSON object")
+    index.write_text("\n".join(rows) + "\n")
+    assert len(spadgen.open_dataset(copy)) == len(rows)
+
+
 # ---- spadgen.torchdata.DatasetSamples --------------------------------------------------------------------------
 
 def test_dataset_samples_layout_values_and_length(ds, dataset_dir):

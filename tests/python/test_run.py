@@ -359,6 +359,102 @@ def test_a_damaged_or_other_folder_is_named_with_what_it_is(make_run, tmp_path):
         spadgen.open_run(tmp_path / "ds" / "samples")
 
 
+def test_metadata_without_what_every_run_writes_is_named(make_run, tmp_path):
+    """metadata.json edited: without its image section, time_axis or the dataset section of another type (they
+    were a bare KeyError: 'image', "TypeError: string indices must be integers" and an AttributeError), named
+    with the file and the key."""
+    import shutil
+    run = tmp_path / "run"
+    shutil.copytree(make_run("light_only"), run)
+    meta = run / "metadata.json"
+    good = json.loads(meta.read_text())
+    meta.write_text(json.dumps({k: v for k, v in good.items() if k != "image"}))
+    with pytest.raises(ValueError, match=f"{meta}: has no image.width, which every run writes"):
+        spadgen.open_run(run).width
+    with pytest.raises(ValueError, match=f"{meta}: has no image.(width|height)"):
+        spadgen.open_run(run).depth()
+    pytest.importorskip("torch")
+    from spadgen.torchdata import RunDataset
+    with pytest.raises(ValueError, match=f"{meta}: has no image"):
+        RunDataset([run], fields=("counts",))
+    for key, value, says in (("time_axis", "x", "time_axis is not an object"),
+                             ("time_axis", dict(good["time_axis"], bins="x"), 'time_axis.bins is "x", not a number'),
+                             ("dataset", "x", "dataset is not an object"), ("units", [1], "units is not an object")):
+        meta.write_text(json.dumps(dict(good, **{key: value})))
+        with pytest.raises(ValueError, match=f"{meta}: {says}"):
+            spadgen.open_run(run).time_axis
+    meta.write_text(json.dumps({k: v for k, v in good.items() if k != "time_axis"}))
+    with pytest.raises(ValueError, match=f"{meta}: has no time_axis.start_ns"):
+        spadgen.open_run(run).time_axis
+    meta.write_text(json.dumps(good))
+    assert spadgen.open_run(run).time_axis.bins == good["time_axis"]["bins"]
+
+
+def test_counts_above_the_frames_or_of_another_dtype_are_refused(make_run, tmp_path):
+    """Counts the run cannot have written (`spadgen reconstruct` refuses them): above N = frames_per_k (N + 1 in
+    a uint16 file was read as a count), or of another dtype than metadata.json's counts_dtype (NaN float
+    counts were read, also through torchdata). The error names the file, the first bad (k, y, x) and its value."""
+    import shutil
+    run = tmp_path / "run"
+    shutil.copytree(make_run("intensity"), run)
+    good = np.load(run / "counts.npy")
+    n = spadgen.open_run(run).frames_per_k
+    assert good.dtype == np.uint16 and good.max() <= n and good.shape[0] >= 2
+    bad = good.copy()
+    bad[1, 5, 7] = n + 7
+    bad[1, 2, 3] = n + 1
+    np.save(run / "counts.npy", bad)
+    says = f"{run / 'counts.npy'}: the count at \\(k, y, x\\) = \\(1, 2, 3\\) is {n + 1}, more than metadata.json's " \
+           f"acquisition.frames_per_k = {n}"
+    with pytest.raises(ValueError, match=says):
+        spadgen.open_run(run).counts
+    with pytest.raises(ValueError, match=says):
+        spadgen.open_run(run).gate_profile(0, 0)
+    pytest.importorskip("torch")
+    from spadgen.torchdata import RunDataset
+    with pytest.raises(ValueError, match=says):
+        RunDataset([run], fields=("counts",))[0]
+    np.save(run / "counts.npy", np.full(good.shape, np.nan, np.float32))
+    with pytest.raises(ValueError, match=f"{run / 'counts.npy'}: dtype <f4, but the run writes counts as uint16"):
+        RunDataset([run], fields=("counts",))[0]
+    np.save(run / "counts.npy", good)
+    assert np.array_equal(spadgen.open_run(run).counts, good)
+
+
+def test_images_of_another_run_are_refused(make_run, tmp_path):
+    """An EXR image of another run copied into the folder: of another size (depth (48, 64) beside 10 x 10
+    counts, object slots of two shapes, a broadcast error in torchdata), or of the same size but another crop
+    (its header's spadgen_crop): refused naming the file, what it holds and what the run expects. A folder in
+    place of an image is named as such (Run.detections said "no such file")."""
+    import shutil
+    run = tmp_path / "run"
+    shutil.copytree(make_run("light_only"), run)
+    gt = run / "ground_truth.exr"
+    shutil.copy(make_run("posed") / "ground_truth.exr", gt)
+    says = f"{gt}: a 64 x 48 image, but metadata.json's image is 10 x 10: the file is not this run's"
+    with pytest.raises(ValueError, match=says):
+        spadgen.open_run(run).depth()
+    with pytest.raises(ValueError, match=says):
+        spadgen.open_run(run).object_slots()
+    pytest.importorskip("torch")
+    from spadgen.torchdata import RunDataset
+    with pytest.raises(ValueError, match=says):
+        RunDataset([run], fields=("layer_depth",))[0]
+    shutil.copy(make_run("light_only") / "ground_truth.exr", gt)
+    assert spadgen.open_run(run).depth().shape == (10, 10)
+    for name in ("laser.exr", "labels.exr", "sensor_maps.exr", "ambient.exr"):
+        data = (run / name).read_bytes()
+        assert data.count(b"[507,245,10,10]") == 1
+        (run / name).write_bytes(data.replace(b"[507,245,10,10]", b"[508,245,10,10]"))
+        with pytest.raises(ValueError, match=f"{run / name}: its header's spadgen_crop is \\[508,245,10,10\\], but "
+                                             "metadata.json's image.crop_in_sensor is \\[507, 245, 10, 10\\]"):
+            spadgen.open_run(run)[name]
+        (run / name).write_bytes(data)
+    (run / "detections_edges.exr").mkdir()
+    with pytest.raises(spadgen.ExrError, match=f"{run / 'detections_edges.exr'}: not a regular file"):
+        spadgen.open_run(run).detections()
+
+
 def test_what_a_run_did_not_write_is_named(make_run, tmp_path):
     posed = spadgen.open_run(make_run("posed"))
     with pytest.raises(FileNotFoundError, match="outputs.frames"):
@@ -419,3 +515,14 @@ def test_detections_of_spadgen_reconstruct(spadgen_bin, make_run, tmp_path):
     shutil.copy(run_dir / "detections_paper_noise_free.exr", run_dir / "detections_edges.exr")
     with pytest.raises(ValueError, match="written by reconstruct's paper detector on the noise-free rates, not the edges detector"):
         run.detections("edges")
+    # detections of another run: of another size, or of the same size but another crop (the header's source)
+    other = tmp_path / "other"
+    shutil.copytree(make_run("light_only"), other)
+    shutil.copy(run_dir / "detections_paper.exr", other / "detections_paper.exr")
+    with pytest.raises(ValueError, match=f"{other / 'detections_paper.exr'}: a 347 x 10 image, but metadata.json's image is 10 x 10"):
+        spadgen.open_run(other).detections("paper")
+    data = (run_dir / "detections_paper.exr").read_bytes()
+    assert data.count(b'"crop_in_sensor":[490,236,347,10]') == 1
+    (run_dir / "detections_paper.exr").write_bytes(data.replace(b"[490,236,347,10]", b"[491,236,347,10]"))
+    with pytest.raises(ValueError, match="detections_paper.exr: its header's spadgen_source says crop_in_sensor \\[491, 236, 347, 10\\]"):
+        spadgen.open_run(run_dir).detections("paper")

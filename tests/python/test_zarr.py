@@ -154,3 +154,41 @@ def test_a_cut_short_chunk_is_an_error_naming_it(make_run, tmp_path):
             np.asarray(open_run(run_dir).counts)
     chunk.write_bytes(data)
     assert same_bytes(np.asarray(open_run(run_dir).counts), expected)
+
+
+def test_a_zarray_spadgen_does_not_write_is_refused_naming_the_store(make_run, tmp_path):
+    """.zarray edited after the run published it: order "F" was read as if C order (every element moved, also
+    through torchdata), a dtype edited gave "cannot reshape array of size ..." naming nothing; the fields the
+    program's reader checks (writers/zarr.cpp) are checked as it does, the error naming the store."""
+    import shutil
+    run_dir = tmp_path / "run"
+    shutil.copytree(make_run("sweep_zarr"), run_dir)
+    store = run_dir / "counts.zarr"
+    good = json.loads((store / ".zarray").read_text())
+    expected = np.asarray(open_run(run_dir).counts)
+    for key, value, says in (("order", "F", "order is \"F\": only C order is supported"),
+                             ("dtype", "<u2", "dtype <u2, but the run writes counts as uint8"),
+                             ("dtype", ">f4", "dtype \">f4\" is not one spadgen writes"),
+                             ("filters", [{"id": "delta", "dtype": "|u1"}], "filters are not supported"),
+                             ("compressor", {"id": "zlib"}, "only Blosc \\(or none\\) is supported"),
+                             ("fill_value", "x", "fill_value \"x\" is not a number"),
+                             ("shape", [good["shape"][0], 2, 3], "shape \\(.*\\), but metadata.json's \\(K, H, W\\) is"),
+                             ("chunks", [0, 1, 1], "chunks \\[0, 1, 1\\] is not a list of positive integers")):
+        (store / ".zarray").write_text(json.dumps(dict(good, **{key: value})))
+        with pytest.raises(ValueError, match=f"{store}: .*{says}"):
+            np.asarray(open_run(run_dir).counts)
+    (store / ".zarray").write_text(json.dumps(dict(good, order="F")))
+    pytest.importorskip("torch")
+    from spadgen.torchdata import RunDataset
+    with pytest.raises(ValueError, match=f"{store}: .*only C order"):
+        RunDataset([run_dir], fields=("counts",))[0]
+    # a stack whose dtype the run does not fix (the saved light's): its chunks decode to another size than
+    # .zarray's chunks of the edited dtype take
+    values = run_dir / "light" / "values.zarr"
+    light = json.loads((values / ".zarray").read_text())
+    wider = {"<f4": "<f8", "<f8": "<f4"}[light["dtype"]]
+    (values / ".zarray").write_text(json.dumps(dict(light, dtype=wider)))
+    with pytest.raises(ValueError, match=f"{values}/[0-9.]+: a chunk of this Zarr store decodes to"):
+        np.asarray(open_run(run_dir)["light/values"][:])
+    (store / ".zarray").write_text(json.dumps(good))
+    assert same_bytes(np.asarray(open_run(run_dir).counts), expected)
