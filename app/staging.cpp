@@ -197,6 +197,7 @@ namespace {
 fs::path lock_path_of(const fs::path& resolved) {
   return resolved.parent_path() / ("." + resolved.filename().string() + ".spadgen-lock");
 }
+int take_folder_lock(const fs::path& lock_path, const fs::path& out, bool shared, bool output);
 }  // namespace
 
 void Staging::init(const fs::path& out) {
@@ -249,6 +250,15 @@ void Staging::init(const fs::path& out) {
   lock();
   try {
     recover();
+    // A folder of sense --repeats' realisations is replaced with them: each one's lock too, held to the end,
+    // so that a reconstruct or evaluate working in one (which holds that realisation's lock, not the set's)
+    // is not left writing into a folder replaced under it (its file was lost: "No such file or directory").
+    if (reconstruct::is_repeat_set(out_))
+      for (const auto& e : fs::directory_iterator(out_, ec))
+        if (const std::string n = e.path().filename().string(); n.rfind("repeat_", 0) == 0 && e.is_directory(ec)) {
+          realisation_locks_.emplace_back(lock_path_of(e.path()), -1);
+          realisation_locks_.back().second = take_folder_lock(realisation_locks_.back().first, e.path(), false, false);
+        }
     check_owned();
     // A folder whose entries this user may not remove (mode 555) would be replaced, and its earlier files left
     // in a hidden folder no later run could remove: refused while nothing is written. Its subfolders too
@@ -413,7 +423,18 @@ void Staging::lock() {
   lock_fd_ = take_folder_lock(lock_path_, out_, false, true);
 }
 
-void Staging::unlock() { release_folder_lock(lock_path_, lock_fd_); }
+void Staging::unlock() {
+  // (a realisation's lock file is removed only while its path is still that file: once the set is replaced
+  // the path is the new set's, whose readers may hold a lock file of their own there)
+  for (auto& [path, fd] : realisation_locks_) {
+    struct stat locked {}, now {};
+    if (::fstat(fd, &locked) == 0 && ::stat(path.c_str(), &now) == 0 && locked.st_ino == now.st_ino && locked.st_dev == now.st_dev)
+      ::unlink(path.c_str());
+    ::close(fd);
+  }
+  realisation_locks_.clear();
+  release_folder_lock(lock_path_, lock_fd_);
+}
 
 FolderLock::FolderLock(const fs::path& folder, bool shared) : shared_(shared) {
   const fs::path out = resolved_folder(folder);

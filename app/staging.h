@@ -112,6 +112,8 @@ class Staging {
   bool sub_ = false;      // a parent's subfolder: nothing of its own to lock, remove or publish
   std::string what_ = "a run";  // in messages: "... replaces the output folder as a whole"
   int lock_fd_ = -1;
+  // the locks of the realisations of a sense --repeats set being replaced (lock file, fd)
+  std::vector<std::pair<std::filesystem::path, int>> realisation_locks_;
 };
 
 // The output folder's lock alone (the one a run holds while it writes and replaces the folder), for a

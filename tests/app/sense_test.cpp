@@ -551,6 +551,26 @@ TEST_F(App, SenseKeepsARealisationSetWhole) {
   EXPECT_FALSE(fs::exists(dir_ / "new_set/repeat_001"));
   // once it is gone, a folder inside is the user's to choose
   EXPECT_EQ(sh("sense " + (dir_ / "run").string() + " -q -o " + (dir_ / "new_set/repeat_001").string()).code, 0);
+
+  // a reader of one realisation (reconstruct, evaluate: its lock, set/.repeat_001.spadgen-lock) keeps the set
+  // from being replaced, by a set or a run (the set was replaced under a reconstruct, whose file was lost)
+  const std::string counts = slurp(dir_ / "set/repeat_001/counts.npy");
+  const fs::path reader = dir_ / "set/.repeat_001.spadgen-lock";
+  const int held = ::open(reader.c_str(), O_RDWR | O_CREAT, 0644);
+  ASSERT_GE(held, 0);
+  ASSERT_EQ(::flock(held, LOCK_EX), 0);
+  ASSERT_EQ(::pwrite(held, "pid 4343\n", 9, 0), 9);
+  for (const std::string& cmd : {"sense " + (dir_ / "run").string() + " -q --repeats 2 --noise-seed 6 -o " + (dir_ / "set").string(),
+                                 "run " + kLit + " -q -o " + (dir_ / "set").string()}) {
+    r = sh(cmd);
+    EXPECT_EQ(r.code, 1) << cmd << r.output;
+    EXPECT_THAT(r.output, HasSubstr("the run folder " + fs::canonical(dir_ / "set").string() + "/repeat_001 is being written or read "
+                                    "by another spadgen process (pid 4343)")) << cmd;
+  }
+  ::close(held);
+  EXPECT_EQ(slurp(dir_ / "set/repeat_001/counts.npy"), counts);
+  EXPECT_EQ(sh("sense " + (dir_ / "run").string() + " -q --repeats 2 --noise-seed 6 -o " + (dir_ / "set").string()).code, 0);
+  EXPECT_FALSE(fs::exists(dir_ / "set/.repeat_001.spadgen-lock"));
 }
 
 // A cone beam whose spot is far smaller than a pixel (0.001 deg against a pixel's 0.01077 deg: 9.4 um at
