@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <climits>
 #include <cerrno>
 #include <csignal>
 #include <cstdio>
@@ -219,6 +220,15 @@ void Staging::init(const fs::path& out) {
       throw cannot("its name is " + std::to_string(name_.size()) + " bytes long; spadgen first writes into a hidden folder " +
                    "beside it whose name adds " + std::to_string(kLongestAddition) + " bytes to it, so expected a name of at most " +
                    std::to_string(most) + " bytes");
+    // ... and a path the system takes with the files' names in it (a run of a path near PATH_MAX rendered
+    // everything, then failed writing previews/gate_profiles.png): the longest of them, with a temporary
+    // file's suffix, fits in kLongestFile bytes
+    constexpr size_t kLongestFile = 96;
+    const size_t path_most = size_t(PATH_MAX) - 1 - kLongestAddition - 1 - kLongestFile;
+    if (out_.string().size() > path_most)
+      throw cannot("its path is " + std::to_string(out_.string().size()) + " bytes long (resolved), and the files spadgen writes in " +
+                   "it need up to " + std::to_string(kLongestAddition + 1 + kLongestFile) + " more within the system's limit of " +
+                   std::to_string(PATH_MAX) + " bytes, so expected a path of at most " + std::to_string(path_most) + " bytes");
   }
   // The swap replaces OUT as a whole: a shell standing in it would be left in a removed folder.
   const fs::path cwd = fs::current_path(ec);

@@ -392,6 +392,18 @@ TEST_F(StagingTest, PathsThatCannotBeTheOutputFolder) {
                                                  "it whose name adds 25 bytes to it, so expected a name of at most 230 bytes"));
   }
   EXPECT_NO_THROW(Staging(dir_ / std::string(230, 'a')));
+  // a path whose files' paths would pass the system's limit (PATH_MAX), in folders of 200-byte names
+  fs::path deep = dir_;
+  while (deep.string().size() + 201 < 3990) deep /= std::string(200, 'd');
+  deep /= std::string(3990 - deep.string().size() - 1, 'e');  // 3990 bytes: with /out, 21 past the most
+  try {
+    Staging s(deep / "out");
+    ADD_FAILURE() << "a path of " << (deep / "out").string().size() << " bytes was accepted";
+  } catch (const spadgen::Error& e) {
+    EXPECT_THAT(std::string(e.what()), HasSubstr("bytes long (resolved), and the files spadgen writes in it need up to 122 more "
+                                                 "within the system's limit of 4096 bytes"));
+  }
+  EXPECT_FALSE(fs::exists(deep / "out"));
 }
 
 TEST_F(StagingTest, ALinkToAFolderPublishesIntoTheFolder) {
