@@ -49,7 +49,8 @@ A run folder replaced while the dataset is in use (a dataset run regenerating a 
 the folder) raises spadgen.RunChangedError naming it, from the item that would read it: an item never mixes
 two versions of a run. At most ``open_runs`` runs (default 64) are kept open per process (each holds a file
 descriptor per memory-mapped stack and its decoded ground truth); the least recently used is closed first.
-A run's counts are checked against frames_per_k once per opened run (Run.counts reads them once whole), not per item.
+A run's counts are checked against frames_per_k once per run and process (Run.counts reads them once whole; a run
+closed to stay within open_runs and opened again is not read again), not per item.
 """
 from __future__ import annotations
 
@@ -125,6 +126,7 @@ class _RunSamples(torch.utils.data.Dataset):
         runs_ = [r if isinstance(r, Run) else open_run(p) for r, p in zip(runs, self.paths)]
         self._identities = [r._identity for r in runs_]
         self._runs = OrderedDict()
+        self._counts_checked = set()  # runs whose counts this process checked (a run closed and opened again is not re-read)
         for r in runs_:
             for f in self.fields:
                 need = _needs(f)
@@ -181,6 +183,8 @@ class _RunSamples(torch.utils.data.Dataset):
             raise RunChangedError(f"{self.paths[i]}: the run folder was replaced since {type(self).__name__} was made (a "
                                   "dataset run regenerated its sample, or a new run was published into it): make the "
                                   "dataset object again to read the new version")
+        if i in self._counts_checked:  # the same folder (its identity, above) checked before it was closed
+            run._cache["counts checked"] = True
         self._runs[i] = run
         while len(self._runs) > self.open_runs:
             self._runs.popitem(last=False)
@@ -202,6 +206,8 @@ class _RunSamples(torch.utils.data.Dataset):
         run.check_unchanged()
         out = self._read(run, x, y, h, w)
         run.check_unchanged()
+        if "counts checked" in run._cache:
+            self._counts_checked.add(i)
         return i, out
 
     def _read(self, run, x, y, h, w):

@@ -173,6 +173,23 @@ def test_hdr_inversion_of_a_2d_run(intensity_run, spadgen_bin, tmp_path):
     subprocess.run([spadgen_bin, "reconstruct", str(folder), "-q"], check=True)
     hdr = run.hdr()
     np.testing.assert_allclose(hdr["photons"], run.intensity["photons"], rtol=1e-6)
+    # An inversion of another crop of the same size (its header's spadgen_source) is refused, as detections are
+    # (it was read beside this run's truth without a word).
+    path = folder / "hdr.exr"
+    data = path.read_bytes()
+    source = data.count(b'"crop_in_sensor":[400,300,40,24]')
+    assert source == 1
+    path.write_bytes(data.replace(b'"crop_in_sensor":[400,300,40,24]', b'"crop_in_sensor":[401,300,40,24]'))
+    with pytest.raises(ValueError, match=f"{path}: its header's spadgen_source says crop_in_sensor \\[401, 300, 40, 24\\], "
+                                         "but metadata.json's image.crop_in_sensor is \\[400, 300, 40, 24\\]: the HDR "
+                                         "inversion is of another run"):
+        spadgen.open_run(folder).hdr()
+    # A symbolic link to nothing in its place: named as such, with how to write the file (the remedy was lost).
+    path.unlink()
+    path.symlink_to(tmp_path / "gone.exr")
+    with pytest.raises(FileNotFoundError, match=f"{path}: a symbolic link to {tmp_path / 'gone.exr'}, which does not "
+                                                f"exist; write it with spadgen reconstruct {folder}"):
+        spadgen.open_run(folder).hdr()
 
 
 def test_ground_truth_layers_and_labels(sweep):
@@ -378,7 +395,7 @@ def test_metadata_without_what_every_run_writes_is_named(make_run, tmp_path):
     with pytest.raises(ValueError, match=f"{meta}: has no image"):
         RunDataset([run], fields=("counts",))
     for key, value, says in (("time_axis", "x", "time_axis is not an object"),
-                             ("time_axis", dict(good["time_axis"], bins="x"), 'time_axis.bins is "x", not a number'),
+                             ("time_axis", dict(good["time_axis"], bins="x"), 'time_axis.bins is "x", not an integer'),
                              ("dataset", "x", "dataset is not an object"), ("units", [1], "units is not an object")):
         meta.write_text(json.dumps(dict(good, **{key: value})))
         with pytest.raises(ValueError, match=f"{meta}: {says}"):
@@ -386,6 +403,25 @@ def test_metadata_without_what_every_run_writes_is_named(make_run, tmp_path):
     meta.write_text(json.dumps({k: v for k, v in good.items() if k != "time_axis"}))
     with pytest.raises(ValueError, match=f"{meta}: has no time_axis.start_ns"):
         spadgen.open_run(run).time_axis
+    # what every run writes, absent: named as such (each was a bare KeyError naming the key alone)
+    for key, read in (("units", lambda r: r.units), ("objects", lambda r: r.objects), ("seed", lambda r: r.seed),
+                      ("spadgen_version", lambda r: r.spadgen_version)):
+        meta.write_text(json.dumps({k: v for k, v in good.items() if k != key}))
+        with pytest.raises(ValueError, match=f"{meta}: has no {key}, which every run writes"):
+            read(spadgen.open_run(run))
+    meta.write_text(json.dumps(dict(good, acquisition={k: v for k, v in good["acquisition"].items()
+                                                       if k != "gate_positions_ns"})))
+    assert good["acquisition"]["mode"] == "gate_sweep"  # (it said "a 2D intensity run has no gate positions")
+    with pytest.raises(ValueError, match=f"{meta}: has no acquisition.gate_positions_ns, which every run writes"):
+        spadgen.open_run(run).gate_positions_ns
+    # what no run writes: a counts dtype the program does not write, a fractional number of time bins, a seed
+    # that is not an integer (each was accepted)
+    for key, value, says in (("counts_dtype", "int7", 'counts_dtype is "int7", not "uint8" or "uint16"'),
+                             ("time_axis", dict(good["time_axis"], bins=2394.5), "time_axis.bins is 2394.5, not an integer"),
+                             ("seed", 1.5, "seed is 1.5, not an integer")):
+        meta.write_text(json.dumps(dict(good, **{key: value})))
+        with pytest.raises(ValueError, match=f"{meta}: {says}"):
+            spadgen.open_run(run)
     meta.write_text(json.dumps(good))
     assert spadgen.open_run(run).time_axis.bins == good["time_axis"]["bins"]
 

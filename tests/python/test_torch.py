@@ -249,6 +249,28 @@ def test_a_run_folder_replaced_while_in_use_is_an_error_not_two_versions(spadgen
     np.testing.assert_array_equal(again["counts"].numpy(), np.asarray(spadgen.open_run(out).counts))
 
 
+def test_counts_are_checked_once_per_run_not_per_opening(make_run, monkeypatch):
+    """Run.counts checks every count against frames_per_k, once per Run object; a run closed to stay within
+    open_runs and opened again (a shuffled loader over more runs than open_runs) was checked again, a whole pass
+    over its counts per item. Once per run and process: of the same folder (its identity is checked on opening)."""
+    checked = []
+    check = spadgen.run.Run._check_counts
+    monkeypatch.setattr(spadgen.run.Run, "_check_counts", lambda run, counts: (checked.append(run.path), check(run, counts)))
+    run = make_run("intensity")
+    assert np.iinfo(spadgen.open_run(run).counts.dtype).max > spadgen.open_run(run).frames_per_k  # (else not read)
+    checked.clear()
+    ds = RunDataset([run] * 3, fields=("counts",), open_runs=1)
+    for _ in range(2):
+        for j in range(len(ds)):
+            ds[j]
+    assert len(checked) == 3  # once per run: 6 before
+    copy = pickle.loads(pickle.dumps(RunDataset([run] * 3, fields=("counts",), open_runs=1)))
+    checked.clear()
+    for j in (0, 1, 0, 1):
+        copy[j]
+    assert len(checked) == 2
+
+
 def test_open_runs_are_bounded(sweep_run):
     """Each open run holds a file descriptor per memory-mapped stack (and its decoded ground truth): at most
     open_runs stay open, the least recently used closed first (600 runs of a dataset exhausted a limit of 1024

@@ -136,6 +136,41 @@ def test_a_missing_chunk_is_an_error_naming_it(make_run, tmp_path):
         np.asarray(open_run(run_dir).counts)
 
 
+def test_the_counts_check_decodes_each_chunk_once(make_run, monkeypatch):
+    """Run.counts checks every count against frames_per_k in blocks of whole chunks: it read k by k, and as a
+    chunk spans every k it decoded each chunk K / (blocks of k) times (6 to 11 times on a 1024 x 1000 run). With
+    blocks far smaller than the store (as a large run's are against 64 MB), every chunk is read exactly once."""
+    import spadgen.run as module
+    reads = []
+    strict = module._zarr_store
+
+    def counting(path, z=None):
+        store = strict(path, z)
+        get = store.__getitem__
+
+        class Counting(type(store)):
+            def __getitem__(self, key):
+                if not key.startswith("."):
+                    reads.append(key)
+                return get(key)
+        store.__class__ = Counting
+        return store
+
+    monkeypatch.setattr(module, "_zarr_store", counting)
+    run = open_run(make_run("sweep_zarr"))
+    z = run.array("counts")
+    K, H, W = z.shape
+    monkeypatch.setattr(module, "_CHECK_BLOCK_BYTES", 1)  # a block of one chunk's rows
+    # uint8 counts of 255 frames need no check (none can exceed N): as if of 254 frames, which need one
+    assert z.dtype == np.uint8 and run.frames_per_k == 255 and np.asarray(z).max() <= 254
+    run.metadata["acquisition"]["frames_per_k"] = 254
+    reads.clear()
+    run.counts
+    every = [".".join(str(i) for i in c) for c in np.ndindex(*(math.ceil(n / c) for n, c in zip(z.shape, z.chunks)))]
+    assert len(every) > 1
+    assert sorted(reads) == sorted(every)
+
+
 def test_a_cut_short_chunk_is_an_error_naming_it(make_run, tmp_path):
     """A chunk cut short (a full disk, an interrupted copy) made Blosc say only "error during blosc
     decompression: -1": the error names the chunk and the sizes; one of the right length reads as before."""
