@@ -87,6 +87,21 @@ int get_int(const nlohmann::json& j, const std::string& pointer, const std::stri
   return int(v.get<int64_t>());
 }
 
+// A number of metadata.json in [lo, hi] (a run writes it from a scene-file key of that range): an emission
+// delay of 1e308 ns was taken, and every return's range came out negative.
+double get_real(const nlohmann::json& j, const std::string& pointer, const std::string& file, double lo, double hi) {
+  const nlohmann::json::json_pointer p(pointer);
+  if (!j.contains(p)) throw Error(file + ": no " + pointer + " (is this a folder written by spadgen run or sense?)");
+  const nlohmann::json& v = j.at(p);
+  if (!v.is_number() || !(v.get<double>() >= lo && v.get<double>() <= hi)) {
+    std::ostringstream range;
+    range << "[" << lo << ", " << hi << "]";
+    throw Error(file + ": " + pointer + " is " + v.dump() + ", not a number in " + range.str() +
+                " (is this a folder written by spadgen run or sense?)");
+  }
+  return v.get<double>();
+}
+
 }  // namespace
 
 bool is_repeat_set(const fs::path& dir) {
@@ -143,11 +158,12 @@ RunFolder::RunFolder(const std::string& dir) : dir_(dir) {
   if (gate_sweep_) {
     const auto gates = get<std::vector<double>>(meta_, "/acquisition/gate_positions_ns", meta_path);
     if (int(gates.size()) != K_ || K_ < 1) throw Error(meta_path + ": /acquisition/gate_positions_ns does not hold K positions");
-    start_s_ = gates.front() * 1e-9;
-    step_s_ = get<double>(meta_, "/acquisition/gate_step_ps", meta_path) * 1e-12;
-    gate_delay_s_ = get<double>(meta_, "/acquisition/gate/delay_ns", meta_path) * 1e-9;
-    emission_delay_s_ = get<double>(meta_, "/resolved_scene/laser/emission_delay_ns", meta_path) * 1e-9;
-    period_s_ = 1e-6 / get<double>(meta_, "/resolved_scene/laser/repetition_rate_MHz", meta_path);
+    // The timing's numbers in the ranges of the scene-file keys they come from (docs/scene-file.md).
+    start_s_ = get_real(meta_, "/acquisition/gate_positions_ns/0", meta_path, -1e6, 1e6) * 1e-9;
+    step_s_ = get_real(meta_, "/acquisition/gate_step_ps", meta_path, 1e-6, 1e9) * 1e-12;
+    gate_delay_s_ = get_real(meta_, "/acquisition/gate/delay_ns", meta_path, -1e6, 1e6) * 1e-9;
+    emission_delay_s_ = get_real(meta_, "/resolved_scene/laser/emission_delay_ns", meta_path, -1e6, 1e6) * 1e-9;
+    period_s_ = 1e-6 / get_real(meta_, "/resolved_scene/laser/repetition_rate_MHz", meta_path, 1e-6, 1e5);
     const std::string maps = (d / "sensor_maps.exr").string();
     if (!fs::is_regular_file(maps))
       throw Error(dir + (fs::exists(maps) ? ": sensor_maps.exr is not a regular file (a folder, a FIFO or a device)"
@@ -178,7 +194,7 @@ RunFolder::RunFolder(const std::string& dir) : dir_(dir) {
     }
   } else {
     dual_ = get<std::string>(meta_, "/resolved_scene/acquisition/intensity/exposure", meta_path) == "dual";
-    dual_ratio_ = dual_ ? get<double>(meta_, "/resolved_scene/acquisition/intensity/dual_ratio", meta_path) : 1.0;
+    dual_ratio_ = dual_ ? get_real(meta_, "/resolved_scene/acquisition/intensity/dual_ratio", meta_path, 1.0, 1e6) : 1.0;
   }
   counts_ = open_run_stack(dir, "counts");
   rate_ = open_run_stack(dir, "detection_rate");

@@ -15,6 +15,8 @@
 #include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <string>
+#include <tuple>
 #include <unistd.h>
 
 #include "run_util.h"
@@ -228,8 +230,8 @@ TEST_F(Reconstruct, RefusesCountsAboveTheFramesAndRatesThatAreNoRates) {
 // evaluate reads ground_truth.exr and labels.exr as the run's: one of another size (replaced since, from
 // another crop) was read past its end and scored (exit 0, object counts of garbage); a labels.exr with
 // fewer object slots than the ground truth was an internal error (map::at). Each is named.
-// metadata.json's integers out of range or of another type are named (a frames_per_k of -1 was blamed on
-// counts.npy, "expected 0 to -1"; 1e308 overflowed the conversion to int).
+// metadata.json's integers and the timing's numbers out of range or of another type are named (a frames_per_k of
+// -1 was blamed on counts.npy, "expected 0 to -1"; 1e308 overflowed the conversion to int).
 TEST_F(Reconstruct, MetadataIntegersOutOfRangeAreNamed) {
   const fs::path run = dir_ / "run";
   ASSERT_EQ(sh("run " + kScenes + "flat_target.json --set render.samples_per_pixel=1 -q --set camera.crop=[502,240,4,4] -o " +
@@ -243,6 +245,25 @@ TEST_F(Reconstruct, MetadataIntegersOutOfRangeAreNamed) {
     EXPECT_EQ(r.code, 1) << value << r.output;
     EXPECT_THAT(r.output, HasSubstr((run / "metadata.json").string() + ": /acquisition/frames_per_k is " + m["acquisition"]["frames_per_k"].dump() +
                                     ", not an integer in [1, 65535]")) << value;
+  }
+  // and its numbers out of their scene-file keys' ranges: an emission delay of 1e308 ns was taken (every
+  // return's range negative), a repetition rate of 0 divided by zero
+  for (const auto& [pointer, value, range] :
+       std::vector<std::tuple<std::string, std::string, std::string>>{
+           {"/resolved_scene/laser/emission_delay_ns", "1e308", "[-1e+06, 1e+06]"},
+           {"/resolved_scene/laser/emission_delay_ns", "\"0\"", "[-1e+06, 1e+06]"},
+           {"/resolved_scene/laser/repetition_rate_MHz", "0", "[1e-06, 100000]"},
+           {"/acquisition/gate_step_ps", "-36", "[1e-06, 1e+09]"},
+           {"/acquisition/gate/delay_ns", "-1e300", "[-1e+06, 1e+06]"},
+           {"/acquisition/gate_positions_ns/0", "2e6", "[-1e+06, 1e+06]"}}) {
+    nlohmann::ordered_json m = nlohmann::ordered_json::parse(meta);
+    m[nlohmann::ordered_json::json_pointer(pointer)] = nlohmann::ordered_json::parse(value);
+    std::ofstream(run / "metadata.json") << m.dump(2);
+    const Result r = sh("reconstruct " + run.string() + " -q -o " + (dir_ / "d.exr").string());
+    EXPECT_EQ(r.code, 1) << pointer << " " << value << r.output;
+    EXPECT_THAT(r.output, HasSubstr((run / "metadata.json").string() + ": " + pointer + " is " +
+                                    m[nlohmann::ordered_json::json_pointer(pointer)].dump() + ", not a number in " + range))
+        << pointer << " " << value;
   }
   std::ofstream(run / "metadata.json") << meta;
   EXPECT_EQ(sh("reconstruct " + run.string() + " -q -o " + (dir_ / "d.exr").string()).code, 0);
