@@ -267,6 +267,9 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
       const std::string at = "/scenes/" + std::to_string(i);
       if (!sc[i].is_string() || sc[i].get<std::string>().empty()) rd.fail(at, "found " + describe(sc[i]) + ", expected a file name");
       const std::string name = sc[i].get<std::string>();
+      // A NUL byte ends a path for the system: the file opened would be another than the one named.
+      if (name.find('\0') != std::string::npos)
+        rd.fail(at, "found '" + scenes::printable(name) + "', which holds a NUL byte; expected a file name without one");
       fs::path p(name);
       if (p.is_relative()) p = fs::path(dir) / p;
       const std::string full = p.lexically_normal().string();

@@ -1685,8 +1685,10 @@ std::string start_of(const std::string& bytes) {
 
 // The JSON of a .gltf or .glb, after recognising which it is; anything else is named for what it looks
 // like, before tinygltf sees it.
-std::string gltf_json(const std::string& path, const std::string& bytes, bool* binary) {
+// `bin_bytes`, when given, is set to the length of a .glb's BIN chunk, or -1 when it has none (and for a .gltf).
+std::string gltf_json(const std::string& path, const std::string& bytes, bool* binary, int64_t* bin_bytes = nullptr) {
   *binary = bytes.size() >= 4 && std::memcmp(bytes.data(), "glTF", 4) == 0;
+  if (bin_bytes) *bin_bytes = -1;
   if (*binary) {
     // GLB: magic, version, length, then the JSON chunk's length, type ("JSON") and content.
     uint32_t version = 0, length = 0, chunk = 0, type = 0;
@@ -1696,9 +1698,28 @@ std::string gltf_json(const std::string& path, const std::string& bytes, bool* b
       std::memcpy(&chunk, bytes.data() + 12, 4);
       std::memcpy(&type, bytes.data() + 16, 4);
     }
-    if (bytes.size() < 20 || version != 2 || length > bytes.size() || chunk > bytes.size() - 20 || type != 0x4E4F534Au)
-      throw Error(path + ": not a valid binary glTF (.glb): expected a 12-byte header of version 2 and a JSON chunk "
-                  "within the file's " + std::to_string(bytes.size()) + " bytes");
+    const std::string invalid = path + ": not a valid binary glTF (.glb): ";
+    if (bytes.size() >= 20 && version == 2 && length > bytes.size())
+      throw Error(invalid + "its header gives a length of " + std::to_string(length) + " bytes but the file holds " +
+                  std::to_string(bytes.size()) + " (cut short, as by an interrupted download or copy?)");
+    if (bytes.size() < 20 || version != 2 || length > bytes.size() || length < 20 || chunk > length - 20 ||
+        type != 0x4E4F534Au)
+      throw Error(invalid + "expected a 12-byte header of version 2 and a JSON chunk within the file's " +
+                  std::to_string(bytes.size()) + " bytes");
+    // The BIN chunk, when the length leaves room for one: its 8-byte header and its bytes within the length.
+    // (tinygltf 2.7 leaves the chunk's header out of that bound, and read up to 8 bytes past a file cut short.)
+    const uint64_t json_end = 20ull + chunk;
+    if (json_end < length) {
+      if (json_end + 8 > length)
+        throw Error(invalid + std::to_string(length - json_end) + " bytes follow the JSON chunk, too few for a chunk's 8-byte "
+                    "header; expected a BIN chunk or nothing after it");
+      uint32_t bin = 0;
+      std::memcpy(&bin, bytes.data() + json_end, 4);
+      if (json_end + 8 + bin > length)
+        throw Error(invalid + "its BIN chunk gives a length of " + std::to_string(bin) + " bytes but " +
+                    std::to_string(length - json_end - 8) + " follow its header (cut short, as by an interrupted download or copy?)");
+      if (bin_bytes) *bin_bytes = bin;
+    }
     return bytes.substr(20, chunk);
   }
   size_t i = bytes.compare(0, 3, "\xEF\xBB\xBF") == 0 ? 3 : 0;  // a UTF-8 byte order mark
@@ -1880,7 +1901,8 @@ void check_gltf_types(const std::string& path, const nlohmann::json& doc) {
 // What tinygltf would otherwise meet unprepared, checked on the file's JSON first: extensions it cannot
 // decode (Draco and meshopt compression leave accessors without data, which tinygltf reports as a broken
 // bufferView), and external buffers and images that are missing, not regular files or too large.
-void check_before_tinygltf(const std::string& path, const nlohmann::json& doc) {
+// `binary`: the file is a .glb, whose BIN chunk holds `bin_bytes` bytes (-1: it has none).
+void check_before_tinygltf(const std::string& path, const nlohmann::json& doc, bool binary, int64_t bin_bytes) {
   if (!doc.is_object()) throw Error(path + ": expected a JSON object at the top of the glTF file");
   check_gltf_types(path, doc);
   if (const auto it = doc.find("extensionsRequired"); it != doc.end() && it->is_array())
@@ -1925,10 +1947,27 @@ void check_before_tinygltf(const std::string& path, const nlohmann::json& doc) {
     const bool buffer = std::strcmp(kind, "buffers") == 0;
     for (size_t i = 0; i < list->size(); ++i) {
       const nlohmann::json& b = (*list)[i];
-      if (!b.is_object() || !b.contains("uri") || !b["uri"].is_string()) continue;
-      const std::string uri = b["uri"].get<std::string>();
+      if (!b.is_object()) continue;
       const std::string name = b.contains("name") && b["name"].is_string() ? b["name"].get<std::string>() : "";
       const std::string who = label(buffer ? "buffer" : "image", i, name);
+      // A buffer without a uri is a .glb's BIN chunk (glTF 2.0, 4.4.3.3): only the first buffer of a .glb can be
+      // (tinygltf gave a second one the same bytes, and said "'uri' is missing" of a .gltf's naming no buffer).
+      if (buffer && !b.contains("uri")) {
+        if (!binary)
+          throw Error(path + ": " + who + ": has no uri; expected the path of its file, relative to the glTF file, or a "
+                      "data: URI (only the first buffer of a .glb may leave it out, for the .glb's BIN chunk)");
+        if (i > 0)
+          throw Error(path + ": " + who + ": has no uri, but only the first buffer of a .glb is its BIN chunk; expected "
+                      "the path of its file or a data: URI");
+        if (bin_bytes < 0)
+          throw Error(path + ": " + who + ": has no uri, for the .glb's BIN chunk, but the file has no BIN chunk");
+        if (b.contains("byteLength") && b["byteLength"].is_number() && b["byteLength"].get<double>() > double(bin_bytes))
+          throw Error(path + ": " + who + ": byteLength is " + num_whole(b["byteLength"].get<double>()) + " but the .glb's BIN "
+                      "chunk holds " + std::to_string(bin_bytes) + " bytes; expected at most its length");
+        continue;
+      }
+      if (!b.contains("uri") || !b["uri"].is_string()) continue;
+      const std::string uri = b["uri"].get<std::string>();
       // tinygltf reads exactly byteLength bytes of a buffer, and reported another length as a failure to
       // decode the data URI, or as "File size mismatch" naming no buffer.
       const auto check_length = [&](uintmax_t size, const std::string& what) {
@@ -1973,6 +2012,10 @@ void check_before_tinygltf(const std::string& path, const nlohmann::json& doc) {
         check_length(chars / 4 * 3 - pad + (chars % 4 == 0 ? 0 : chars % 4 - 1), "its data URI");
         continue;
       }
+      // A NUL byte ends a path for the system: the file opened would be another than the one named.
+      if (uri.find('\0') != std::string::npos || uri_decode(uri).find('\0') != std::string::npos)
+        throw Error(path + ": " + who + ": its uri " + quoted(scenes::printable(uri)) + " holds a NUL byte" +
+                    (uri.find('\0') == std::string::npos ? " (%00)" : "") + "; expected a path without one");
       if (std::filesystem::path(uri_decode(uri)).is_absolute() || uri.find("://") != std::string::npos)
         throw Error(path + ": " + who + ": its uri " + quoted(uri) +
                     " is absolute; expected a path relative to the glTF file's folder, or a data: URI");
@@ -2060,14 +2103,16 @@ Scene parse_gltf(const std::string& bytes, const std::string& path, const std::s
                 " spadgen reads");
   // .glb and .gltf are told apart by content: exporters and users both mislabel them.
   bool binary = false;
-  const std::string json_text = gltf_json(path, bytes, &binary);
+  int64_t bin_bytes = -1;
+  const std::string json_text = gltf_json(path, bytes, &binary, &bin_bytes);
   // Parsed here first, without recursion and to a bounded depth: tinygltf turns extras into its own
   // values recursively, and a file nested 15,000 deep would exhaust the stack there.
   // A key twice in one object: glTF 2.0 (JSON encoding) asks writers for unique keys and readers to take the
   // later value, as tinygltf does; said, since a file that has one was likely edited by hand or merged.
   std::string duplicate;
   check_before_tinygltf(path, parse_json(json_text, binary ? path + " (its JSON chunk)" : path,
-                                         {/*comments=*/false, /*reject_duplicates=*/false, &duplicate}));
+                                         {/*comments=*/false, /*reject_duplicates=*/false, &duplicate}),
+                        binary, bin_bytes);
 
   tinygltf::Model model;
   tinygltf::TinyGLTF io;

@@ -666,6 +666,11 @@ void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string
       if (std::string(f.key) == "/gltf") err(f.key, "is empty; expected the path of the scene's .gltf or .glb file, relative to the scene file");
       continue;
     }
+    // A NUL byte ends a path for the system: the file opened would be another than the one named.
+    if (f.file.find('\0') != std::string::npos) {
+      err(f.key, "is '" + printable(f.file) + "', which holds a NUL byte; expected a path without one");
+      continue;
+    }
     if (files == FileChecks::None || (files == FileChecks::Tables && std::string(f.key) == "/gltf")) continue;
     const std::string problem = file_problem(f.file, f.max_bytes);
     const std::string what = std::string(f.key) == "/gltf" ? "the glTF file " : "the file ";

@@ -251,6 +251,17 @@ TEST(DatasetFile, MissingSceneFilesAreNamed) {
   } catch (const Error& e) {
     EXPECT_THAT(std::string(e.what()), HasSubstr("/tmp/d.json: /scenes/0: the scene file /tmp/nowhere.json does not exist"));
   }
+  // A NUL byte (\u0000 in JSON) ended the path the system opened: there.json was read for "there.json\0.old".
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / ("spadgen_dataset_nul_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  std::ofstream(dir / "there.json") << "{}";
+  try {
+    parse_dataset_text("{\"scenes\": [\"there.json\\u0000.old\"]}", (dir / "d.json").string());
+    ADD_FAILURE() << "a scene file name holding a NUL byte was taken";
+  } catch (const Error& e) {
+    EXPECT_THAT(std::string(e.what()), HasSubstr("d.json: /scenes/0: found 'there.json\\x00.old', which holds a NUL byte"));
+  }
+  std::filesystem::remove_all(dir);
 }
 
 TEST(DatasetFile, TheGridIsEnumeratedWithTheLastKeyFastestAndRepeatsPastItsEnd) {

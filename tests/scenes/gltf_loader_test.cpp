@@ -1105,6 +1105,75 @@ TEST_F(BrokenGltf, MissingBufferFile) {
   EXPECT_THAT(msg, HasSubstr("buffer 0: its file 'gone.bin' was not found"));
 }
 
+// A .glb cut short (an interrupted download or copy), and buffers without a uri other than a .glb's first: each
+// named, with the buffer. tinygltf 2.7 bounds the BIN chunk's bytes without its 8-byte header, and a file cut
+// 8 bytes short, with its header's length rewritten, loaded reading 8 bytes past its end (an adversarial
+// tester's find); a .glb's second buffer without a uri got the BIN chunk's bytes.
+TEST_F(BrokenGltf, AGlbCutShortOrABufferWithoutAUriIsNamed) {
+  Gltf g;
+  g.node({{"mesh", g.triangle_mesh()}});
+  const std::string glb = g.write(dir_.path(), "whole", Gltf::Form::Glb);
+  EXPECT_EQ(load_gltf(glb).meshes.size(), 1u);
+  std::ifstream in(glb, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const auto with_length = [](std::string b, uint32_t length) {
+    std::memcpy(b.data() + 8, &length, 4);
+    return b;
+  };
+  path_ = (dir_.path() / "cut.glb").string();
+  const std::string bin_length = std::to_string((g.bin.size() + 3) / 4 * 4);  // the BIN chunk, padded to 4 bytes
+  // cut 8 bytes short, the header's length too: the BIN chunk's own length is past the end
+  std::string cut = bytes.substr(0, bytes.size() - 8);
+  write_file(path_, with_length(cut, static_cast<uint32_t>(cut.size())));
+  EXPECT_THAT(load_error(path_), HasSubstr(path_ + ": not a valid binary glTF (.glb): its BIN chunk gives a length of " + bin_length +
+                                           " bytes but " + std::to_string(std::stoul(bin_length) - 8) + " follow its header (cut short"));
+  // cut short, the header left as it was
+  write_file(path_, cut);
+  EXPECT_THAT(load_error(path_), HasSubstr("its header gives a length of " + std::to_string(bytes.size()) +
+                                           " bytes but the file holds " + std::to_string(cut.size())));
+  // cut inside the BIN chunk's header
+  cut = bytes.substr(0, bytes.size() - 8 - std::stoul(bin_length) + 4);
+  write_file(path_, with_length(cut, static_cast<uint32_t>(cut.size())));
+  EXPECT_THAT(load_error(path_), HasSubstr("4 bytes follow the JSON chunk, too few for a chunk's 8-byte header"));
+
+  // The same file with other buffers: a second without a uri, the first's byteLength past the BIN chunk.
+  const auto glb_with_buffers = [&](const json& buffers) {
+    json d = g.doc;
+    d["buffers"] = buffers;
+    std::string js = d.dump();
+    while (js.size() % 4) js += ' ';
+    std::string b(g.bin.begin(), g.bin.end());
+    while (b.size() % 4) b += '\0';
+    const auto u32 = [](size_t v) {
+      const auto w = static_cast<uint32_t>(v);
+      return std::string(reinterpret_cast<const char*>(&w), 4);
+    };
+    write_file(path_, "glTF" + u32(2) + u32(28 + js.size() + b.size()) + u32(js.size()) + "JSON" + js + u32(b.size()) + "BIN" +
+                          std::string(1, '\0') + b);
+    return path_;
+  };
+  const size_t n = g.bin.size();
+  EXPECT_EQ(load_gltf(glb_with_buffers(json::array({{{"byteLength", n}}}))).meshes.size(), 1u);
+  EXPECT_THAT(load_error(glb_with_buffers(json::array({{{"byteLength", n}}, {{"byteLength", n}, {"name", "extra"}}}))),
+              HasSubstr(path_ + ": buffer 1 'extra': has no uri, but only the first buffer of a .glb is its BIN chunk"));
+  EXPECT_THAT(load_error(glb_with_buffers(json::array({{{"byteLength", n + 8}}}))),
+              HasSubstr("buffer 0: byteLength is " + std::to_string(n + 8) + " but the .glb's BIN chunk holds " + bin_length +
+                        " bytes; expected at most its length"));
+  // and a .gltf's buffer without a uri
+  json text = g.doc;
+  text["buffers"] = json::array({{{"byteLength", n}}});
+  path_ = (dir_.path() / "nouri.gltf").string();
+  write_file(path_, text.dump());
+  EXPECT_THAT(load_error(path_), HasSubstr(path_ + ": buffer 0: has no uri; expected the path of its file"));
+  // A NUL byte in a uri, escaped or not, would end the path the system opens: named, not cut there.
+  write_file(dir_.path() / "a", std::string(g.bin.begin(), g.bin.end()));
+  for (const std::string& uri : {std::string("a%00.bin"), std::string("a\0.bin", 6)}) {
+    text["buffers"] = json::array({{{"byteLength", n}, {"uri", uri}}});
+    write_file(path_, text.dump());
+    EXPECT_THAT(load_error(path_), HasSubstr("buffer 0: its uri 'a" + std::string(uri.size() == 8 ? "%00" : "\\x00") + ".bin' holds a NUL byte"));
+  }
+}
+
 // Another version of the format, and a mesh without primitives (the specification's minItems 1): named,
 // not read as what they are not (they were taken silently).
 TEST_F(BrokenGltf, AnotherVersionOrAMeshWithoutPrimitives) {

@@ -280,6 +280,11 @@ TEST_F(SceneFileTest, MissingGltfAndMissingFile) {
               HasSubstr("/gltf: the glTF file " + (dir_ / "nope.gltf").string() + " does not exist"));
   // (an empty path was ": glTF file not found", naming neither the key nor the file)
   EXPECT_THAT(error_of(R"({"gltf": ""})"), HasSubstr("/gltf: is empty; expected the path of the scene's .gltf or .glb file"));
+  // A NUL byte (\u0000 in JSON) ended the path the system opened: s.gltf was read in place of the file named.
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf\u0000.bak"})"),
+              HasSubstr("/gltf: is '" + (dir_ / "s.gltf").string() + "\\x00.bak', which holds a NUL byte; expected a path without one"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "laser": {"pulse_shape_csv": "s.gltf\u0000"}})"),
+              HasSubstr("/laser/pulse_shape_csv: is '" + (dir_ / "s.gltf").string() + "\\x00', which holds a NUL byte"));
 }
 
 TEST_F(SceneFileTest, SyntaxErrorGivesLineAndColumn) {
