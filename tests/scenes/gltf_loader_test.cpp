@@ -1644,6 +1644,36 @@ TEST(GltfLoader, ADeepNodeChainLoadsWithoutExhaustingTheStack) {
   expect_vec(s.meshes[0].positions[1], {1, 0, kDepth * 1e-4}, 1e-6);
 }
 
+// A skin whose joints are a chain 65,000 deep: each joint's world transform is its parent's times its own,
+// 0.9 s here (computed from its root for every joint, it was quadratic: 53 s for 50,000 joints alone on this
+// machine, past this test's 60 s limit at 65,000; an adversarial tester's find). The triangle's third vertex,
+// bound to the last joint, moves by the chain's 65,000 steps of 2^-13 m (exact in binary: the sum is
+// exact); its first, bound to the root, by one.
+TEST(GltfLoader, ASkinOverADeepJointChainIsPosedThroughTheWholeChain) {
+  TempDir dir;
+  Gltf g;
+  constexpr int kDepth = 65000;
+  const int pos = g.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const uint16_t last = kDepth - 1;
+  const int joints = g.accessor(g.view_of(std::vector<uint16_t>{0, 0, 0, 0, 0, 0, 0, 0, last, 0, 0, 0}), kUShort, "VEC4", 3);
+  const int weights = g.accessor(g.view_of(std::vector<float>{1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0}), kFloat, "VEC4", 3);
+  const int m = g.mesh(json::array({{{"attributes", {{"POSITION", pos}, {"JOINTS_0", joints}, {"WEIGHTS_0", weights}}}}}));
+  std::vector<int> chain;
+  for (int i = 0; i < kDepth; ++i) {
+    json n = {{"translation", {0, 0, 1.0 / 8192}}};
+    if (i + 1 < kDepth) n["children"] = {i + 1};
+    chain.push_back(g.node(n, i == 0));
+  }
+  g.node({{"mesh", m}, {"skin", 0}});
+  g.doc["skins"] = {{{"joints", chain}}};
+  const Scene s = load_gltf(g.write(dir.path(), "deep_skin"));
+  ASSERT_EQ(s.meshes.size(), 1u);
+  const auto world = [&](size_t v) { return s.meshes[0].offset + glm::dvec3(s.meshes[0].positions[v]); };
+  EXPECT_EQ(world(0), glm::dvec3(0, 0, 1.0 / 8192));
+  EXPECT_EQ(world(1), glm::dvec3(1, 0, 1.0 / 8192));
+  EXPECT_EQ(world(2), glm::dvec3(0, 1, kDepth / 8192.0));
+}
+
 TEST_F(BrokenGltf, ExtrasNestedDeeperThanTheLimitAreRefusedBeforeTinygltf) {
   // 15,000 levels of extras overflowed the stack inside tinygltf.
   Gltf g;
