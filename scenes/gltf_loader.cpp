@@ -1094,6 +1094,8 @@ void Loader::load_materials() {
     if (const tinygltf::Value* e = ext("KHR_materials_ior")) {
       const double n = number(*e, "ior", 1.5, who + " KHR_materials_ior");
       if (n < 1.0) fail(who, "KHR_materials_ior.ior " + num(n) + " is below 1");
+      // the renderer's Fresnel squares it in single precision: past 1.8e19 that was infinite, and NaN followed
+      if (n > 1e6) fail(who, "KHR_materials_ior.ior " + num(n) + " is above 1e6; expected an index of refraction in [1, 1e6]");
       mat.ior = static_cast<float>(n);
     }
     if (const tinygltf::Value* e = ext("KHR_materials_volume")) {
@@ -1103,6 +1105,12 @@ void Loader::load_materials() {
       mat.thickness_m = static_cast<float>(thickness);
       const double dist = number(*e, "attenuationDistance", std::numeric_limits<double>::infinity(), vw);
       if (!(dist > 0)) fail(who, "KHR_materials_volume.attenuationDistance " + num(dist) + " must be > 0");
+      // Below a nanometre a medium absorbs everything at its surface; below 1.2e-38 m the distance was 0 or a
+      // denormal in single precision, and the medium was taken as clear.
+      if (dist < 1e-9)
+        fail(who, "KHR_materials_volume.attenuationDistance " + num(dist) + " m is below 1e-9 m: such a medium absorbs "
+                  "all light within a nanometre of its surface; expected a distance of at least 1e-9 m (for an opaque "
+                  "material, no KHR_materials_transmission)");
       mat.attenuation_distance_m = static_cast<float>(dist);
       if (e->Has("attenuationColor")) {
         const tinygltf::Value& c = e->Get("attenuationColor");

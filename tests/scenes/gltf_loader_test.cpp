@@ -1174,6 +1174,32 @@ TEST_F(BrokenGltf, AGlbCutShortOrABufferWithoutAUriIsNamed) {
   }
 }
 
+// Values the renderer's single precision cannot hold, refused naming the material: an attenuation distance of
+// 1e-40 m became 0 (or a denormal), and the glass was taken as clear (an adversarial tester's find); an index
+// of refraction of 1e20 squared to infinity in the Fresnel term.
+TEST_F(BrokenGltf, VolumeAndIorValuesBeyondSinglePrecisionAreRefused) {
+  Gltf g;
+  g.doc["extensionsUsed"] = {"KHR_materials_transmission", "KHR_materials_ior", "KHR_materials_volume"};
+  const auto with = [&](double distance, double ior) {
+    g.doc["materials"] = {{{"name", "Glass"},
+                           {"extensions",
+                            {{"KHR_materials_transmission", {{"transmissionFactor", 1}}},
+                             {"KHR_materials_ior", {{"ior", ior}}},
+                             {"KHR_materials_volume", {{"thicknessFactor", 0.01}, {"attenuationDistance", distance}}}}}}};
+    return g.write(dir_.path(), "glass");
+  };
+  const int pos = g.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}}}, {"material", 0}}}))}});
+  const Scene ok = load_gltf(with(1e-9, 1e6));
+  EXPECT_FLOAT_EQ(ok.materials[0].attenuation_distance_m, 1e-9f);
+  EXPECT_FLOAT_EQ(ok.materials[0].ior, 1e6f);
+  EXPECT_THAT(load_error(with(1e-40, 1.5)),
+              HasSubstr("material 0 'Glass': KHR_materials_volume.attenuationDistance 1e-40 m is below 1e-9 m"));
+  EXPECT_THAT(load_error(with(9.9e-10, 1.5)), HasSubstr("attenuationDistance 9.9e-10 m is below 1e-9 m"));
+  EXPECT_THAT(load_error(with(1, 1e20)),
+              HasSubstr("material 0 'Glass': KHR_materials_ior.ior 1e+20 is above 1e6; expected an index of refraction in [1, 1e6]"));
+}
+
 // Another version of the format, and a mesh without primitives (the specification's minItems 1): named,
 // not read as what they are not (they were taken silently).
 TEST_F(BrokenGltf, AnotherVersionOrAMeshWithoutPrimitives) {
