@@ -307,6 +307,7 @@ class Loader {
   void check_world(const glm::dvec3& p, const std::string& who, const std::string& what) const;
   glm::dmat4 local_transform(size_t node) const;
   glm::dmat4 world_of(size_t node) const;  // the node's parents' transforms and its own, from its root
+  void check_matrix(size_t node);
   // Per vertex of a skinned primitive: sum over its joints of weight x (joint's world x inverse bind).
   std::vector<glm::dmat4> skin_matrices(size_t node, const tinygltf::Primitive& p, size_t vertices, const std::string& who);
   void resolve_edits();
@@ -634,21 +635,15 @@ glm::dmat4 Loader::edited(const NodeEdit& e, const Trs& base) const {
   return t * r * glm::scale(glm::dmat4(1.0), scale);
 }
 
-// A node's matrix as translation, rotation and scale, for an edit to replace some of them; an error naming
-// the node when the matrix is not one (a shear, a last row other than (0, 0, 0, 1), a zero scale).
-Trs Loader::decompose(size_t i, const glm::dmat4& m) const {
-  const std::string who = node_label(m_, i);
-  const std::string cannot = ", so the scene file's /nodes/" + pointer_token(m_.nodes[i].name) +
-                             " cannot replace its translation, rotation or scale; give the node translation, rotation and "
-                             "scale in the glTF file instead of a matrix";
-  if (m[0][3] != 0.0 || m[1][3] != 0.0 || m[2][3] != 0.0 || m[3][3] != 1.0)
-    fail(who, "its matrix's last row is not (0, 0, 0, 1)" + cannot);
-  Trs out;
+// A 4 x 4 matrix whose last row is (0, 0, 0, 1) as translation, rotation and scale, and how far from its 3 x 3
+// part they recompose, as a fraction of its largest entry (infinite for a zero scale): more than
+// kDecomposeTolerance is a shear.
+double decompose_trs(const glm::dmat4& m, Trs& out) {
   out.translation = glm::dvec3(m[3]);
   const glm::dmat3 a(m);
   for (int k = 0; k < 3; ++k) {
     out.scale[k] = glm::length(a[k]);
-    if (!(out.scale[k] > 0.0)) fail(who, "its matrix has a zero scale" + cannot);
+    if (!(out.scale[k] > 0.0)) return std::numeric_limits<double>::infinity();
   }
   if (glm::determinant(a) < 0.0) out.scale.x = -out.scale.x;  // a mirror: one negative scale
   out.rotation = glm::normalize(glm::quat_cast(glm::dmat3(a[0] / out.scale.x, a[1] / out.scale.y, a[2] / out.scale.z)));
@@ -656,10 +651,46 @@ Trs Loader::decompose(size_t i, const glm::dmat4& m) const {
   double err = 0.0, size = 0.0;
   for (int c = 0; c < 3; ++c)
     for (int r = 0; r < 3; ++r) err = std::max(err, std::abs(back[c][r] - a[c][r])), size = std::max(size, std::abs(a[c][r]));
-  if (!(err <= kDecomposeTolerance * size))
+  return err / size;
+}
+
+bool affine(const glm::dmat4& m) { return m[0][3] == 0.0 && m[1][3] == 0.0 && m[2][3] == 0.0 && m[3][3] == 1.0; }
+
+// A node's matrix as translation, rotation and scale, for an edit to replace some of them; an error naming
+// the node when the matrix is not one (a shear, a last row other than (0, 0, 0, 1), a zero scale).
+Trs Loader::decompose(size_t i, const glm::dmat4& m) const {
+  const std::string who = node_label(m_, i);
+  const std::string cannot = ", so the scene file's /nodes/" + pointer_token(m_.nodes[i].name) +
+                             " cannot replace its translation, rotation or scale; give the node translation, rotation and "
+                             "scale in the glTF file instead of a matrix";
+  if (!affine(m)) fail(who, "its matrix's last row is not (0, 0, 0, 1)" + cannot);
+  Trs out;
+  const double residual = decompose_trs(m, out);
+  if (std::isinf(residual)) fail(who, "its matrix has a zero scale" + cannot);
+  if (!(residual <= kDecomposeTolerance))
     fail(who, "its matrix is not a translation, rotation and scale (it shears: recomposed from them it differs by " +
-                  num(err / size) + " of its largest entry, more than " + num(kDecomposeTolerance) + ")" + cannot);
+                  num(residual) + " of its largest entry, more than " + num(kDecomposeTolerance) + ")" + cannot);
   return out;
+}
+
+// glTF 2.0 (3.5.3): a node's matrix must decompose into translation, rotation and scale. A last row other
+// than (0, 0, 0, 1) is a projection no renderer of positions applies: refused. A shear is rendered as given
+// (normals by the inverse transpose), and said, since other readers may not (both were silent unless the
+// scene file edited the node).
+void Loader::check_matrix(size_t i) {
+  const tinygltf::Node& n = m_.nodes[i];
+  if (n.matrix.size() != 16) return;  // local_transform names it
+  const glm::dmat4 m = glm::make_mat4(n.matrix.data());
+  if (!affine(m))
+    fail(node_label(m_, i), "its matrix's last row is (" + num(m[0][3]) + ", " + num(m[1][3]) + ", " + num(m[2][3]) + ", " +
+                                num(m[3][3]) + "); expected (0, 0, 0, 1): glTF 2.0 node matrices are translation, rotation and "
+                                "scale (3.5.3), and a projection cannot place vertices");
+  Trs trs;
+  const double residual = decompose_trs(m, trs);
+  if (!std::isinf(residual) && !(residual <= kDecomposeTolerance))
+    warn(node_label(m_, i) + ": its matrix shears (recomposed from a translation, rotation and scale it differs by " +
+         num(residual) + " of its largest entry); glTF 2.0 requires matrices without shear (3.5.3), and other readers "
+         "may place its meshes otherwise; rendered as given");
 }
 
 // "U+0063 U+0061 U+0066 U+00E9" of valid UTF-8 text (a byte that starts no sequence: U+FFFD).
@@ -796,6 +827,7 @@ void Loader::visit(int root, const glm::dmat4& root_world) {
 void Loader::visit_one(int node, const glm::dmat4& parent_world, std::vector<std::pair<int, glm::dmat4>>& stack) {
   const auto i = static_cast<size_t>(node);
   const glm::dmat4 world = parent_world * local_transform(i);
+  check_matrix(i);
   scene_.nodes[i].loaded = true;
   scene_.nodes[i].world = world;
   const tinygltf::Node& n = m_.nodes[i];
@@ -804,8 +836,14 @@ void Loader::visit_one(int node, const glm::dmat4& parent_world, std::vector<std
       fail(node_label(m_, i), "mesh " + std::to_string(n.mesh) + " does not exist (the file has " +
                                   std::to_string(m_.meshes.size()) + " meshes)");
     const double det = glm::determinant(glm::dmat3(world));
-    if (n.skin < 0 && (!(std::abs(det) > 1e-300) || !std::isfinite(det))) {  // (a skinned mesh: its skin's)
-      warn(node_label(m_, i) + ": its world transform is singular (a zero scale); its mesh is skipped");
+    // A scale past 1e100 overflows the determinant: every vertex but the origin lies beyond what is traced (it
+    // was called a zero scale).
+    if (n.skin < 0 && !std::isfinite(det))
+      fail(node_label(m_, i), "its world transform scales volumes by " + num(det) + " (its own and its parents' scales "
+                              "multiplied): its mesh's vertices would lie beyond +-" + num(kMaxWorldCoordinate) +
+                              " m, which spadgen traces; expected scales that keep the scene within that");
+    if (n.skin < 0 && !(std::abs(det) > 1e-300)) {  // (a skinned mesh: its skin's)
+      warn(node_label(m_, i) + ": its world transform is singular (a zero scale, determinant " + num(det) + "); its mesh is skipped");
     } else {
       const tinygltf::Mesh& mesh = m_.meshes[static_cast<size_t>(n.mesh)];
       if (mesh.primitives.empty())

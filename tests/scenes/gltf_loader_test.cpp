@@ -254,7 +254,19 @@ TEST(GltfLoader, SingularTransformIsWarnedAndSkipped) {
   g.node({{"name", "flat"}, {"mesh", m}, {"scale", {1, 0, 1}}});
   const Scene s = load_gltf(g.write(dir.path(), "singular"));
   EXPECT_TRUE(s.meshes.empty());
-  EXPECT_TRUE(has_warning(s, "node 0 'flat'"));
+  EXPECT_TRUE(has_warning(s, "node 0 'flat': its world transform is singular (a zero scale, determinant 0)"));
+  // A scale whose volume overflows is not a zero scale (it was called one, and skipped): its vertices lie
+  // beyond what is traced.
+  g.doc["nodes"][0]["scale"] = {1e200, 1e200, 1e200};
+  EXPECT_THAT(load_error(g.write(dir.path(), "huge")),
+              HasSubstr("node 0 'flat': its world transform scales volumes by inf (its own and its parents' scales multiplied): "
+                        "its mesh's vertices would lie beyond +-1e+09 m"));
+  // A matrix whose last row is not (0, 0, 0, 1) is a projection: refused whether the scene file edits the
+  // node or not (it was taken silently, its w dropped).
+  g.doc["nodes"][0].erase("scale");
+  g.doc["nodes"][0]["matrix"] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0.5, 0, 0, 0, 1};
+  EXPECT_THAT(load_error(g.write(dir.path(), "projective")),
+              HasSubstr("node 0 'flat': its matrix's last row is (0, 0, 0.5, 1); expected (0, 0, 0, 1)"));
 }
 
 // ---------------------------------------------------------------------------------------------

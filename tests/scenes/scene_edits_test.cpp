@@ -231,7 +231,12 @@ TEST(SceneEdits, AShearingMatrixIsAnErrorNamingTheNode) {
   const std::string path = g.write(dir.path(), "shear");
   NodeEdit e = node("Sheared");
   e.translation_m[0] = 1.0;
-  EXPECT_NO_THROW(load_gltf(path)) << "unedited, a shearing matrix is the glTF's business";
+  // unedited, it is rendered as given, and said (glTF 2.0 requires matrices without shear; it was silent)
+  const Scene sheared = load_gltf(path);
+  ASSERT_EQ(sheared.warnings.size(), 1u) << testing::PrintToString(sheared.warnings);
+  EXPECT_THAT(sheared.warnings[0], HasSubstr("node 0 'Sheared': its matrix shears (recomposed from a translation, rotation and "
+                                             "scale it differs by "));
+  EXPECT_EQ(sheared.meshes[0].positions[2], glm::vec3(0.01f, 1, 0));  // (0, 1, 0) sheared along x
   const std::string msg = edit_error(path, node_edits({e}));
   EXPECT_THAT(msg, HasSubstr("node 0 'Sheared': its matrix is not a translation, rotation and scale (it shears"));
   EXPECT_THAT(msg, HasSubstr("/nodes/Sheared cannot replace"));
@@ -244,6 +249,7 @@ TEST(SceneEdits, AShearingMatrixIsAnErrorNamingTheNode) {
   g.doc["nodes"][0]["matrix"] = rounded;
   const Scene s = load_gltf(g.write(dir.path(), "float"), "", node_edits({e}));
   expect_positions(s.meshes[0], glm::translate(glm::dmat4(1.0), glm::dvec3(1, 0, 0)) * r);
+  EXPECT_TRUE(load_gltf(g.write(dir.path(), "float")).warnings.empty()) << "a float rotation does not shear";
 }
 
 // Names are the glTF's: one that no element carries is an error naming the scene-file key, the glTF file,
