@@ -53,11 +53,35 @@ scenes::Scene load_edited_gltf(const scenes::ResolvedRun& r, const std::string& 
     return scenes::load_gltf(c.gltf_path, c.gltf_scene, c.edits);
   } catch (const scenes::EditError& e) {
     // the --set key of that node or material (nodes.a.scale), else the scene file
-    const std::string what = e.what(), element = "/" + e.section + "/" + scenes::pointer_token(e.name);
+    // (gltf_scene: the key itself; nodes and materials: the element's pointer, a prefix of its keys')
+    const bool top = e.section == "gltf_scene";
+    const std::string what = e.what(), element = top ? "/gltf_scene" : "/" + e.section + "/" + scenes::pointer_token(e.name);
     for (const auto& [pointer, key] : r.set_keys)
-      if (pointer.rfind(element + "/", 0) == 0)  // (the message holds the element on one line: a newline escaped)
+      if (top ? pointer == element : pointer.rfind(element + "/", 0) == 0)  // (the message holds the element on one line: a newline escaped)
         throw Error("--set " + scenes::one_line(key) + what.substr(std::min(what.size(), scenes::one_line(element).size())));
     throw Error(scene_file + ": " + what);
+  }
+}
+
+// What `make` builds, with an error of a key the render stage checks against the glTF ("camera.gltf_camera:
+// no perspective camera named ...") named as the user gave the key: the --set key, else the scene file and
+// the key's pointer (it named neither the scene file nor the pointer).
+template <class Make>
+auto naming_gltf_keys(const scenes::ResolvedRun& r, const std::string& scene_file, Make&& make) {
+  try {
+    return make();
+  } catch (const scenes::EditError&) {
+    throw;
+  } catch (const Error& e) {
+    const std::string what = e.what();
+    for (const auto& [key, pointer] : {std::pair<std::string, std::string>{"camera.gltf_camera", "/camera/gltf_camera"},
+                                       {"laser.gltf_light", "/laser/gltf_light"}}) {
+      if (what.rfind(key + ": ", 0) != 0) continue;
+      const auto set = r.set_keys.find(pointer);
+      throw Error((set != r.set_keys.end() ? "--set " + scenes::one_line(set->second) : scene_file + ": " + pointer) +
+                  what.substr(key.size()));
+    }
+    throw;
   }
 }
 
@@ -81,12 +105,14 @@ RunResult run(const RunOptions& options) {
     for (const std::string& w : ws) print_warning(w), warnings.push_back(w);
   };
   warn(camera_warnings(cfg, scene));
-  const render::Camera camera(cfg.camera, scene);
+  const render::Camera camera = naming_gltf_keys(resolved, options.scene_file, [&] { return render::Camera(cfg.camera, scene); });
   warn(laser_warnings(cfg, camera, &scene));
   sensor::SensorModel sensor(sensor_stage(cfg));
   apply_user_maps(sensor, cfg);
   warn(sensor_warnings(sensor));
-  const render::Renderer renderer(scene, render_stage(cfg, sensor.row_fill_factor(), sensor.row_ambient_floor()));
+  const render::Renderer renderer = naming_gltf_keys(resolved, options.scene_file, [&] {
+    return render::Renderer(scene, render_stage(cfg, sensor.row_fill_factor(), sensor.row_ambient_floor()));
+  });
   const int objects = int(scenes::objects_of(scene).list.size());
 
   const TimeAxis axis = time_axis(cfg, sensor);
@@ -206,13 +232,14 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
   const scenes::ResolvedRun r = scenes::load_scene_file(scene_file, overrides);
   const RunConfig& c = r.config;
   const scenes::Scene scene = load_edited_gltf(r, scene_file);
-  const render::Camera camera(c.camera, scene);  // camera.gltf_camera names a camera of the glTF, as the run needs
+  // camera.gltf_camera names a camera of the glTF, as the run needs
+  const render::Camera camera = naming_gltf_keys(r, scene_file, [&] { return render::Camera(c.camera, scene); });
   sensor::SensorModel sensor(sensor_stage(c));
   apply_user_maps(sensor, c);  // maps that do not fit the sensor are refused here as by the run
-  {
+  naming_gltf_keys(r, scene_file, [&] {
     int laser_light = -1;  // laser.gltf_light names a light of the glTF, as the run needs
     (void)render::make_laser(render_stage(c, sensor.row_fill_factor()), camera, scene, &laser_light);
-  }
+  });
   std::ostringstream o;
   o << "# resolved scene file " << c.scene_file << "\n" << r.resolved.dump(2) << "\n\n";
   o << "# glTF\n" << scenes::summarize(scene) << "\n";

@@ -116,7 +116,7 @@ size_t component_size(int component_type) {
   }
 }
 
-const char* component_name(int component_type) {
+std::string component_name(int component_type) {
   switch (component_type) {
     case TINYGLTF_COMPONENT_TYPE_BYTE: return "BYTE";
     case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: return "UNSIGNED_BYTE";
@@ -124,7 +124,8 @@ const char* component_name(int component_type) {
     case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: return "UNSIGNED_SHORT";
     case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: return "UNSIGNED_INT";
     case TINYGLTF_COMPONENT_TYPE_FLOAT: return "FLOAT";
-    default: return "invalid";
+    case 5124: return "INT (5124, which glTF 2.0 does not allow)";
+    default: return std::to_string(component_type) + " (no glTF 2.0 component type)";
   }
 }
 
@@ -383,7 +384,9 @@ void Loader::check_unused_features() {
 
 std::vector<int> Loader::pick_roots(const std::string& scene_name) {
   if (m_.scenes.empty()) {
-    if (!scene_name.empty()) throw Error(path_ + ": no scene named " + quoted(scene_name) + ": the file has no scenes");
+    if (!scene_name.empty())
+      throw EditError("gltf_scene", scene_name, "/gltf_scene: the glTF file " + path_ + " has no scene named " +
+                                                    quoted(scenes::printable(scene_name)) + ": it has no scenes");
     // Without scenes the specification leaves the file's content unspecified: load every root node
     // rather than nothing, and say so.
     if (!m_.nodes.empty()) warn("the file has no scenes; every root node is loaded");
@@ -401,7 +404,8 @@ std::vector<int> Loader::pick_roots(const std::string& scene_name) {
       for (size_t i = 0; i < m_.scenes.size(); ++i)
         names += (i ? ", " : "") + (m_.scenes[i].name.empty() ? "(unnamed scene " + std::to_string(i) + ")"
                                                               : quoted(m_.scenes[i].name));
-      throw Error(path_ + ": no scene named " + quoted(scene_name) + "; the file's scenes are: " + names);
+      throw EditError("gltf_scene", scene_name, "/gltf_scene: the glTF file " + path_ + " has no scene named " +
+                                                    quoted(scenes::printable(scene_name)) + "; its scenes are: " + names);
     }
     chosen = static_cast<size_t>(it - m_.scenes.begin());
   } else if (m_.defaultScene >= 0) {

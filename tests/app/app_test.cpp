@@ -710,7 +710,7 @@ TEST(AppCommands, InfoWarnsAboutAGltfCameraOfAnotherAspectRatio) {
 TEST(AppCommands, InfoRefusesACameraTheGltfDoesNotHave) {
   const Result r = sh("info " + kScenes + "flat_target.json --set camera.gltf_camera=zzz");
   EXPECT_EQ(r.code, 1);
-  EXPECT_THAT(r.output, HasSubstr("camera.gltf_camera: no perspective camera named 'zzz' in"));
+  EXPECT_THAT(r.output, HasSubstr("--set camera.gltf_camera: no perspective camera named 'zzz' in"));
   EXPECT_THAT(r.output, HasSubstr("(cameras: 'spad_camera')"));
 }
 
@@ -820,7 +820,22 @@ TEST_F(App, ALightTooBrightForFloatOutputsIsRefused) {
 TEST_F(App, InfoRefusesWhatTheRunRefusesAndNotWhatItIgnores) {
   Result r = sh("info " + kScenes + "flat_target.json --set laser.beam=gltf_light --set laser.gltf_light=zzz");
   EXPECT_EQ(r.code, 1);
-  EXPECT_THAT(r.output, HasSubstr("laser.gltf_light: no KHR_lights_punctual light named 'zzz'"));
+  EXPECT_THAT(r.output, HasSubstr("--set laser.gltf_light: no KHR_lights_punctual light named 'zzz'"));
+  // The keys that name elements of the glTF, given in a scene file: named with the scene file and their
+  // pointer (the camera's and the light's named neither; gltf_scene's named only the glTF file).
+  const std::string named = (dir_ / "named.json").string();
+  const auto scene_file = [&](const std::string& keys) {
+    std::ofstream(named) << "{\"gltf\": \"" + kScenes + "flat_target.gltf\", " + keys + "}";
+    return sh("info " + named);
+  };
+  r = scene_file(R"("gltf_scene": "nope")");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr(named + ": /gltf_scene: the glTF file " + kScenes + "flat_target.gltf has no scene named 'nope'; its scenes are: "));
+  EXPECT_THAT(sh("info " + kScenes + "flat_target.json --set gltf_scene=nope").output, HasSubstr("--set gltf_scene: the glTF file "));
+  r = scene_file(R"("camera": {"gltf_camera": "zzz"})");
+  EXPECT_THAT(r.output, HasSubstr(named + ": /camera/gltf_camera: no perspective camera named 'zzz' in"));
+  r = scene_file(R"("laser": {"beam": "gltf_light", "gltf_light": "zzz"})");
+  EXPECT_THAT(r.output, HasSubstr(named + ": /laser/gltf_light: no KHR_lights_punctual light named 'zzz'"));
   ASSERT_EQ(sh("run " + kScenes + "flat_target.json -q --set camera.crop=[500,240,8,8] -o " + (dir_ / "crop").string()).code, 0);
   r = sh("info " + kScenes + "flat_target.json --set sensor.gate.maps_exr=" + (dir_ / "crop/sensor_maps.exr").string());
   EXPECT_EQ(r.code, 1);

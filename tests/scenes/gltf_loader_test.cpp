@@ -1819,6 +1819,16 @@ TEST_F(BrokenGltf, AttributesOfComponentTypesGltfDoesNotAllowAreRefused) {
     g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}}}}}), "Tri")}});
     EXPECT_THAT(error_of(g), HasSubstr("mesh 0 'Tri' primitive 0: POSITION accessor 0 has componentType UNSIGNED_INT; expected "
                                        "FLOAT, BYTE, UNSIGNED_BYTE, SHORT, UNSIGNED_SHORT"));
+    // a component type glTF does not have is given by its value (it was "invalid")
+    g.doc["accessors"][0]["componentType"] = 5124;
+    EXPECT_THAT(error_of(g), HasSubstr("POSITION accessor 0 has componentType INT (5124, which glTF 2.0 does not allow); expected FLOAT"));
+  }
+  {
+    Gltf g;
+    const int pos = g.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+    const int idx = g.accessor(g.view_of(std::vector<int32_t>{0, 1, 2}), 5127, "SCALAR", 3);
+    g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}}}, {"indices", idx}}}), "Tri")}});
+    EXPECT_THAT(error_of(g), HasSubstr("indices accessor 1 has componentType 5127 (no glTF 2.0 component type); indices must be"));
   }
   for (const bool normalized : {true, false}) {
     Gltf g;
