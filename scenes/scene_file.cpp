@@ -464,7 +464,10 @@ ojson to_ordered(const json& v) {
     case json::value_t::null: return nullptr;
     case json::value_t::boolean: return v.get<bool>();
     case json::value_t::string: return v.get_ref<const std::string&>();
-    case json::value_t::number_float: return v.get<double>();
+    case json::value_t::number_float: {
+      const double d = v.get<double>();
+      return d == 0.0 ? 0.0 : d;  // -0.0 as 0 (it was written back as -0.0, and printed as -0 in messages)
+    }
     case json::value_t::number_unsigned: return v.get<uint64_t>();
     case json::value_t::number_integer: {
       const int64_t i = v.get<int64_t>();

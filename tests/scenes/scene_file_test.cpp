@@ -2,6 +2,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -272,6 +273,13 @@ TEST_F(SceneFileTest, WrongChoiceListsTheChoices) {
 TEST_F(SceneFileTest, SectionGivenAsValueIsAnError) {
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": 3})"),
               HasSubstr("/camera: found 3 (an integer), expected an object"));
+}
+
+// A negative zero is zero: resolved and written back as 0.0, not -0.0.
+TEST_F(SceneFileTest, ANegativeZeroResolvesToZero) {
+  const ResolvedRun r = parse(R"({"gltf": "s.gltf", "laser": {"average_power_mW": -0.0}})");
+  EXPECT_FALSE(std::signbit(r.config.laser.average_power_W));
+  EXPECT_EQ(r.resolved["laser"]["average_power_mW"].dump(), "0.0");
 }
 
 TEST_F(SceneFileTest, MissingGltfAndMissingFile) {
