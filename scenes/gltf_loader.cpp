@@ -2081,6 +2081,9 @@ void check_before_tinygltf(const std::string& path, const nlohmann::json& doc, b
         check_length(chars / 4 * 3 - pad + (chars % 4 == 0 ? 0 : chars % 4 - 1), "its data URI");
         continue;
       }
+      if (uri.empty())
+        throw Error(path + ": " + who + ": its uri is empty; expected the path of its file, relative to the glTF file, or a "
+                    "data: URI" + (buffer && binary && i == 0 ? " (or no uri, for the .glb's BIN chunk)" : ""));
       // A NUL byte ends a path for the system: the file opened would be another than the one named.
       if (uri.find('\0') != std::string::npos || uri_decode(uri).find('\0') != std::string::npos)
         throw Error(path + ": " + who + ": its uri " + quoted(scenes::printable(uri)) + " holds a NUL byte" +

@@ -1177,6 +1177,10 @@ TEST_F(BrokenGltf, AGlbCutShortOrABufferWithoutAUriIsNamed) {
   path_ = (dir_.path() / "nouri.gltf").string();
   write_file(path_, text.dump());
   EXPECT_THAT(load_error(path_), HasSubstr(path_ + ": buffer 0: has no uri; expected the path of its file"));
+  // an empty uri (it was "its file '' is a directory", the glTF's folder)
+  text["buffers"] = json::array({{{"byteLength", n}, {"uri", ""}}});
+  write_file(path_, text.dump());
+  EXPECT_THAT(load_error(path_), HasSubstr("buffer 0: its uri is empty; expected the path of its file"));
   // A NUL byte in a uri, escaped or not, would end the path the system opens: named, not cut there.
   write_file(dir_.path() / "a", std::string(g.bin.begin(), g.bin.end()));
   for (const std::string& uri : {std::string("a%00.bin"), std::string("a\0.bin", 6)}) {
