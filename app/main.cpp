@@ -48,14 +48,17 @@ int main(int argc, char** argv) {
     }
   // --threads: 0 is every core; beyond kMaxThreads the system refuses threads (a 100000 failed in TBB).
   // (a whole number: 1e3 was "not in range 0 to 1024")
-  const std::string threads_range = "an integer in [0, " + std::to_string(spadgen::app::kMaxThreads) + "] (0: every core)";
-  const CLI::Validator kThreadsRange(
-      [threads_range](std::string& v) {
-        const bool digits = !v.empty() && v.size() <= 9 && v.find_first_not_of("0123456789") == std::string::npos;
-        if (digits && std::stoi(v) <= spadgen::app::kMaxThreads) return std::string();
-        return "found '" + v + "', expected " + threads_range;
-      },
-      threads_range);
+  const auto whole_in = [](int lo, int hi, const std::string& expected) {
+    return CLI::Validator(
+        [lo, hi, expected](std::string& v) {
+          const bool digits = !v.empty() && v.size() <= 9 && v.find_first_not_of("0123456789") == std::string::npos;
+          if (digits && std::stoi(v) >= lo && std::stoi(v) <= hi) return std::string();
+          return "found '" + v + "', expected " + expected;
+        },
+        expected);
+  };
+  const CLI::Validator kThreadsRange =
+      whole_in(0, spadgen::app::kMaxThreads, "an integer in [0, " + std::to_string(spadgen::app::kMaxThreads) + "] (0: every core)");
   // A folder to read. One absent because a run replacing it was stopped in its swap (a file system without an
   // atomic exchange) names the earlier set the run moved aside (it said only "Directory does not exist").
   const CLI::Validator kExistingFolder(
@@ -132,7 +135,7 @@ int main(int argc, char** argv) {
   CLI::Option* chip_opt = sense_cmd->add_option("--chip-seed", chip_seed, "seed of the chip's fixed pattern (seeds.chip)");
   sense_cmd->add_option("--repeats", sense.repeats, "realisations of the temporal noise, noise seeds S, S + 1, ...: for R > 1 one "
                                                     "folder each, OUT/repeat_000, ... (rates computed once); 1: OUT is the run folder")
-      ->check(CLI::Range(1, 100000));
+      ->check(whole_in(1, 100000, "an integer in [1, 100000]"));
   sense_cmd->add_option("--threads", sense.threads, "worker threads (default: all cores); outputs do not depend on it")
       ->check(kThreadsRange);
   bool sense_quiet = false;
@@ -188,7 +191,7 @@ int main(int argc, char** argv) {
                      "detections_<detector>_noise_free.exr, hdr_noise_free.exr)")->check(kNamed);
   rec_cmd->add_flag("--noise-free", rec.noise_free, "from the noise-free rates (detection_rate) instead of the sampled counts");
   CLI::Option* rec_max = rec_cmd->add_option("--max-detections", rec.max_detections, "detection slots per pixel (the strongest are kept)")
-                             ->check(CLI::Range(1, 64));
+                             ->check(whole_in(1, 64, "an integer in [1, 64]"));
   rec_cmd->add_option("--threads", rec.threads, "worker threads (default: all cores)")->check(kThreadsRange);
   rec_cmd->add_flag("-q,--quiet", rec_quiet, "nothing on stderr but warnings and errors");
 

@@ -359,6 +359,10 @@ TEST_F(Hardening, CommandLineErrorsAreSpadgensWithExitCode1) {
       {"run " + kTiny + " --threads -1", "--threads: found '-1', expected an integer in [0, 1024]"},
       // 1000 written another way: it was "not in range 0 to 1024"
       {"run " + kTiny + " --threads 1e3", "--threads: found '1e3', expected an integer in [0, 1024]"},
+      // (the same for the other counts: "Value 1e3 not in range 1 to 100000")
+      {"sense " + dir_.string() + " --repeats 1e3", "--repeats: found '1e3', expected an integer in [1, 100000]"},
+      {"sense " + dir_.string() + " --repeats 0", "--repeats: found '0', expected an integer in [1, 100000]"},
+      {"reconstruct " + dir_.string() + " --max-detections 2.5", "--max-detections: found '2.5', expected an integer in [1, 64]"},
       // an unset shell variable: it ran into the default folder
       {"run " + kTiny + " -o ''", "spadgen: error: --out: expected a path, found an empty one"},
       {"", "spadgen: error: A subcommand is required (see spadgen --help)"},
@@ -974,12 +978,13 @@ TEST_F(Hardening, ThreadsTheProcessMayNotStartAreAnEnvironmentError) {
 #endif
 }
 
-// A NUL byte in a name (from JSON's \u0000) is written \0 in the message, which went on to its end (it ended
-// at the NUL: "the glTF file .../fl", no reason).
+// A NUL byte in a path (from JSON's \u0000) is refused, written \x00 in a message that goes on to its end (it
+// ended at the NUL: "the glTF file .../fl", no reason; then the path was looked up cut at the NUL).
 TEST_F(Hardening, ANulByteInANameIsShownAndTheMessageIsWhole) {
   const Outcome o = spadgen("run " + kTiny + " -q --set 'gltf=\"fl\\u0000x.gltf\"' -o " + (dir_ / "out").string());
   expect_exit(o, 1, "NUL");
-  EXPECT_THAT(o.output, HasSubstr("fl\\0x.gltf does not exist; expected a path relative to the scene file"));
+  EXPECT_THAT(o.output, HasSubstr("--set gltf: is '"));
+  EXPECT_THAT(o.output, HasSubstr("fl\\x00x.gltf', which holds a NUL byte; expected a path without one\n"));
 }
 
 }  // namespace
