@@ -178,15 +178,21 @@ RunFolder::RunFolder(const std::string& dir) : dir_(dir) {
     const auto K = get<std::vector<std::vector<double>>>(meta_, "/camera/intrinsics", meta_path);
     if (K.size() != 3 || K[0].size() != 3 || K[1].size() != 3 || !(K[0][0] > 0.0) || !(K[1][1] > 0.0))
       throw Error(meta_path + ": /camera/intrinsics is not a 3 x 3 pinhole matrix");
-    fx_ = K[0][0], fy_ = K[1][1], cx_ = K[0][2], cy_ = K[1][2];
+    // within what any lens and sensor give (1e300 was taken: every ray's direction lost to rounding)
+    fx_ = get_real(meta_, "/camera/intrinsics/0/0", meta_path, 1e-6, 1e12);
+    fy_ = get_real(meta_, "/camera/intrinsics/1/1", meta_path, 1e-6, 1e12);
+    cx_ = get_real(meta_, "/camera/intrinsics/0/2", meta_path, -1e12, 1e12);
+    cy_ = get_real(meta_, "/camera/intrinsics/1/2", meta_path, -1e12, 1e12);
     if (meta_.contains(nlohmann::json::json_pointer("/camera/laser_position_m"))) {
       const auto l = get<std::vector<double>>(meta_, "/camera/laser_position_m", meta_path);
       if (l.size() != 3) throw Error(meta_path + ": /camera/laser_position_m is not 3 numbers");
-      std::copy(l.begin(), l.end(), laser_m_);
+      for (int k = 0; k < 3; ++k)  // (the glTF's world: within +-1e9 m)
+        laser_m_[k] = get_real(meta_, "/camera/laser_position_m/" + std::to_string(k), meta_path, -1e9, 1e9);
     } else if (get<std::string>(meta_, "/resolved_scene/laser/beam", meta_path) != "gltf_light") {
       // a run of a spadgen that did not record it: laser.offset_m, from (x right, y up, -z forward)
       const auto o = get<std::vector<double>>(meta_, "/resolved_scene/laser/offset_m", meta_path);
       if (o.size() != 3) throw Error(meta_path + ": /resolved_scene/laser/offset_m is not 3 numbers");
+      for (int k = 0; k < 3; ++k) (void)get_real(meta_, "/resolved_scene/laser/offset_m/" + std::to_string(k), meta_path, -1e9, 1e9);
       laser_m_[0] = o[0], laser_m_[1] = -o[1], laser_m_[2] = -o[2];
     } else {
       throw Error(meta_path + ": no /camera/laser_position_m (where the glTF light that is the laser sits): written by "

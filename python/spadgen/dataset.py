@@ -20,7 +20,7 @@ import os
 
 import numpy as np
 
-from .run import open_run
+from .run import load_json, open_run
 
 __all__ = ["Dataset", "Sample", "SampleNotDoneError", "open_dataset", "STATUSES", "SUMMARY_COLUMNS"]
 
@@ -190,8 +190,8 @@ class Dataset:
                                     "`spadgen dataset run FILE -o DIR` writes one)")
         with open(spec_path, encoding="utf-8") as f:
             try:
-                self.spec = json.load(f)
-            except json.JSONDecodeError as e:
+                self.spec = load_json(f)
+            except ValueError as e:
                 raise ValueError(f"{spec_path}: not valid JSON ({e}); `spadgen dataset run` writes it whole, so it was "
                                  "damaged afterwards: run the dataset again to write it") from e
         index_path = os.path.join(self.path, "index.jsonl")

@@ -23,6 +23,20 @@ import numpy as np
 from . import camera as _camera
 from .exr import ExrFile
 
+
+def load_json(f):
+    """json.load as spadgen's programs read JSON (nlohmann): NaN, Infinity and numbers beyond a double (1e999)
+    are errors (json.load takes them, as non-finite floats: intrinsics of 1e999 reached the rays); a ValueError."""
+    def constant(name):
+        raise ValueError(f"{name} is not a JSON number")
+
+    def real(text):
+        v = float(text)
+        if v in (float("inf"), float("-inf")):
+            raise ValueError(f"the number {text[:32]} is beyond a double")
+        return v
+    return json.load(f, parse_constant=constant, parse_float=real)
+
 __all__ = ["Run", "open_run", "unpack_frames", "TimeAxis", "Profile", "Layers"]
 
 C = 299792458.0  # speed of light in vacuum, m/s
@@ -282,8 +296,8 @@ class Run:
         try:
             with open(meta, encoding="utf-8") as f:
                 identity = _identity(f.fileno())  # of the file read (a swap between reading and a stat would pass)
-                self.metadata = json.load(f)
-        except (UnicodeDecodeError, json.JSONDecodeError) as e:
+                self.metadata = load_json(f)
+        except (UnicodeDecodeError, ValueError) as e:
             raise ValueError(f"{meta}: not valid JSON ({e}); spadgen publishes a run folder whole, so the file was damaged "
                              "or cut short afterwards: restore it, or run the scene again") from e
         if not isinstance(self.metadata, dict) or not isinstance(self.metadata.get("files"), list):

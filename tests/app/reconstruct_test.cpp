@@ -255,14 +255,20 @@ TEST_F(Reconstruct, MetadataIntegersOutOfRangeAreNamed) {
            {"/resolved_scene/laser/repetition_rate_MHz", "0", "[1e-06, 100000]"},
            {"/acquisition/gate_step_ps", "-36", "[1e-06, 1e+09]"},
            {"/acquisition/gate/delay_ns", "-1e300", "[-1e+06, 1e+06]"},
-           {"/acquisition/gate_positions_ns/0", "2e6", "[-1e+06, 1e+06]"}}) {
+           {"/acquisition/gate_positions_ns/0", "2e6", "[-1e+06, 1e+06]"},
+           // intrinsics and the laser's position of 1e300 were taken
+           {"/camera/intrinsics/0/0", "1e300", "[1e-06, 1e+12]"},
+           {"/camera/intrinsics/1/2", "-1e300", "[-1e+12, 1e+12]"},
+           {"/camera/laser_position_m/2", "1e300", "[-1e+09, 1e+09]"}}) {
     nlohmann::ordered_json m = nlohmann::ordered_json::parse(meta);
-    m[nlohmann::ordered_json::json_pointer(pointer)] = nlohmann::ordered_json::parse(value);
-    std::ofstream(run / "metadata.json") << m.dump(2);
+    m[nlohmann::ordered_json::json_pointer(pointer)] = 987654.25;  // then replaced by the value as written
+    std::string text = m.dump(2);
+    text.replace(text.find("987654.25"), 9, value);
+    std::ofstream(run / "metadata.json") << text;
     const Result r = sh("reconstruct " + run.string() + " -q -o " + (dir_ / "d.exr").string());
     EXPECT_EQ(r.code, 1) << pointer << " " << value << r.output;
     EXPECT_THAT(r.output, HasSubstr((run / "metadata.json").string() + ": " + pointer + " is " +
-                                    m[nlohmann::ordered_json::json_pointer(pointer)].dump() + ", not a number in " + range))
+                                    nlohmann::ordered_json::parse(value).dump() + ", not a number in " + range))
         << pointer << " " << value;
   }
   std::ofstream(run / "metadata.json") << meta;

@@ -359,6 +359,15 @@ def test_a_damaged_or_other_folder_is_named_with_what_it_is(make_run, tmp_path):
     (run / "metadata.json").write_text('{"files": [')
     with pytest.raises(ValueError, match=f"{run / 'metadata.json'}: not valid JSON .*damaged or cut short"):
         spadgen.open_run(run)
+    # numbers JSON does not have, which json.load takes as non-finite floats (intrinsics of 1e999 reached the
+    # rays as infinity): refused as the program refuses them
+    for number, says in (("1e999", "the number 1e999 is beyond a double"), ("NaN", "NaN is not a JSON number"),
+                         ("-Infinity", "-Infinity is not a JSON number")):
+        meta = json.loads(good)
+        meta["camera"]["intrinsics"][0][0] = 98765.25
+        (run / "metadata.json").write_text(json.dumps(meta).replace("98765.25", number))
+        with pytest.raises(ValueError, match=f"{run / 'metadata.json'}: not valid JSON \\({says}\\)"):
+            spadgen.open_run(run)
     with pytest.raises(FileNotFoundError, match="nothing: no such folder"):
         spadgen.open_run(tmp_path / "nothing")
     (tmp_path / "ds").mkdir()
