@@ -74,7 +74,15 @@ class CheckedSax {
   bool boolean(bool v) { return value() && dom_.boolean(v); }
   bool number_integer(json::number_integer_t v) { return value() && dom_.number_integer(v); }
   bool number_unsigned(json::number_unsigned_t v) { return value() && dom_.number_unsigned(v); }
-  bool number_float(json::number_float_t v, const json::string_t& s) { return value() && dom_.number_float(v, s); }
+  bool number_float(json::number_float_t v, const json::string_t& s) {
+    // A number too small for a double is read as 0 (1e-400: a bin width of it was "found 0.0"): named as written.
+    if (v == 0.0 && s.find_first_of("123456789") < s.find_first_of("eE")) {
+      problem = (levels_.empty() ? std::string() : path(/*pending=*/true) + ": ") + "the number " + s +
+                " is below the smallest double (about 4.9e-324), and would be read as 0; write 0 for zero";
+      return false;
+    }
+    return value() && dom_.number_float(v, s);
+  }
   bool string(json::string_t& v) { return value() && dom_.string(v); }
   bool binary(json::binary_t& v) { return value() && dom_.binary(v); }
   bool start_object(std::size_t n) {

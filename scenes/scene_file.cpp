@@ -444,6 +444,7 @@ std::string apply_override(json& doc, const std::string& assignment, Checker& ch
     // Not JSON: a string, unless it was meant as JSON and only went wrong in a way a string never does.
     const std::string what = e.what();
     if (what.find("nested deeper") != std::string::npos || what.find("beyond the range") != std::string::npos ||
+        what.find("below the smallest double") != std::string::npos ||
         what.find("appears twice") != std::string::npos) {
       chk.errors.push_back(what);
       return {};

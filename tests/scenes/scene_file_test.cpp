@@ -502,6 +502,16 @@ TEST_F(SceneFileTest, ANumberBeyondTheDoubleRangeNamesItsKeyAndPlace) {
               HasSubstr("/camera/position_m/1: the number -1e400 is beyond the range"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"laser.average_power_mW=1e309"}),
               HasSubstr("--set laser.average_power_mW:1:1: the number 1e309 is beyond the range"));
+  // and one too small for a double, which is read as 0 (a bin width of 1e-400 was "found 0.0")
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "render": {"time_bin_ps": 1e-400}})"),
+              HasSubstr("/render/time_bin_ps: the number 1e-400 is below the smallest double (about 4.9e-324), and would be "
+                        "read as 0; write 0 for zero"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"position_m": [0, -0.5e-330, 0]}})"),
+              HasSubstr("/camera/position_m/1: the number -0.5e-330 is below the smallest double"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"laser.average_power_mW=1e-999"}),
+              HasSubstr("--set laser.average_power_mW: the number 1e-999 is below the smallest double"));
+  // a zero written with an exponent is zero
+  EXPECT_EQ(parse(R"({"gltf": "s.gltf", "laser": {"average_power_mW": 0e-400}})").config.laser.average_power_W, 0.0);
 }
 
 TEST_F(SceneFileTest, DeepNestingIsRefusedBeforeItIsBuilt) {
