@@ -466,6 +466,26 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   const json& la = meta.at("light").at("time_axis_s");
   TimeAxis axis{la.at("start").get<double>(), la.at("bin_width").get<double>(), la.at("bins").get<int64_t>(),
                 la.at("laser_period").get<double>()};
+  // ... as the run computed it from its scene: the bin width is render.time_bin_ps and the period the laser's,
+  // the bins at most kMaxTimeBins and the start within the gate's reach (the start and the bins also depend on
+  // the sensor, which an earlier sense may have changed). An edited axis crashed sense (2^62 bins) or drew
+  // counts from rates on another axis than the detection_rate.npy it linked (a bin width of 0.5 s).
+  {
+    const auto off = [](double a, double b) { return !(std::abs(a - b) <= 1e-12 * std::abs(b)); };
+    const std::string where = (src / "metadata.json").string() + ": light.time_axis_s.";
+    const std::string damaged = " (a damaged metadata.json: run the scene again)";
+    if (off(axis.bin_width_s, source.config.render.time_bin_s))
+      throw Error(where + "bin_width is " + la.at("bin_width").dump() + " s, but the run's render.time_bin_ps gives " +
+                  json(source.config.render.time_bin_s).dump() + damaged);
+    if (off(axis.period_s, 1.0 / source.config.laser.repetition_rate_Hz))
+      throw Error(where + "laser_period is " + la.at("laser_period").dump() + " s, but the run's laser.repetition_rate_MHz gives " +
+                  json(1.0 / source.config.laser.repetition_rate_Hz).dump() + damaged);
+    if (axis.bins > scenes::kMaxTimeBins)
+      throw Error(where + "bins is " + la.at("bins").dump() + "; expected at most " + std::to_string(scenes::kMaxTimeBins) +
+                  ", as every run's" + damaged);
+    if (!(std::abs(axis.start_s) <= 1e-2))
+      throw Error(where + "start is " + la.at("start").dump() + " s; expected within +-0.01 s, as every run's" + damaged);
+  }
   // What the sensor needs (the run's transient.npy, linked when sensed, does not depend on the mode: a gate
   // sweep run with transients sensed in 2D needs no bins).
   RunConfig sensor_cfg = cfg;

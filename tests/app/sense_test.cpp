@@ -875,6 +875,28 @@ TEST_F(App, SenseNamesMetadataFieldsOfTheWrongType) {
     EXPECT_THAT(r.output, HasSubstr(meta.string() + ": " + c.pointer + " is " + nlohmann::json::parse(c.value).dump() + "; expected " +
                                     c.expected + ", as a run writes it")) << c.pointer;
   }
+  // ... and its time axis as the run computed it from its scene: an axis of 2^62 bins crashed sense (a
+  // segmentation fault), one of 0.5 s bins drew counts from rates on another axis than the detection_rate.npy
+  // it linked, and a resolved scene whose laser no longer gives the axis's period was taken (an adversarial
+  // tester's finds)
+  const struct {
+    const char* pointer;
+    const char* value;
+    const char* says;
+  } axes[] = {{"/light/time_axis_s/bins", "4611686018427387904", "light.time_axis_s.bins is 4611686018427387904; expected at most 1000000"},
+              {"/light/time_axis_s/bin_width", "0.5", "light.time_axis_s.bin_width is 0.5 s, but the run's render.time_bin_ps gives "},
+              {"/light/time_axis_s/laser_period", "1e300", "light.time_axis_s.laser_period is 1e+300 s, but the run's laser.repetition_rate_MHz"},
+              {"/resolved_scene/laser/repetition_rate_MHz", "0.5", "light.time_axis_s.laser_period is "},
+              {"/light/time_axis_s/start", "-1e300", "light.time_axis_s.start is -1e+300 s; expected within +-0.01 s"}};
+  for (const auto& c : axes) {
+    nlohmann::ordered_json m = nlohmann::ordered_json::parse(kept);
+    m[nlohmann::ordered_json::json_pointer(c.pointer)] = nlohmann::ordered_json::parse(c.value);
+    std::ofstream(meta, std::ios::trunc) << m.dump(2);
+    const Result r = sh("sense " + (dir_ / "run").string() + " -o " + (dir_ / "s").string());
+    EXPECT_EQ(r.code, 1) << c.pointer << r.output;
+    EXPECT_THAT(r.output, HasSubstr(meta.string() + ": " + c.says)) << c.pointer;
+    EXPECT_FALSE(fs::exists(dir_ / "s"));
+  }
   std::ofstream(meta, std::ios::trunc) << "[[[]]]";
   EXPECT_THAT(sh("sense " + (dir_ / "run").string() + " -o " + (dir_ / "s").string()).output,
               HasSubstr(meta.string() + ": not a JSON object; expected a run's metadata.json"));
