@@ -325,9 +325,18 @@ TransientTile SavedLight::tile(const PixelRect& rect, const PixelRect& data_rect
       t.ambient_rate[di] = ambient_[ri];
       if (laser_se_) t.laser_se[di] = laser_se_[ri], t.samples[di] = samples_[ri];
       if (ambient_se_) t.ambient_se[di] = ambient_se_[ri];
-      // Photons are finite and not negative: a damaged file (a NaN) would make every output NaN silently.
-      bool ok = std::isfinite(t.laser_total[di]) && t.laser_total[di] >= 0.0 && std::isfinite(t.ambient_rate[di]) &&
-                t.ambient_rate[di] >= 0.0f;
+      // Photons, their standard errors and sample counts are finite and not negative: a damaged file (a NaN)
+      // would make every output NaN silently (out_of_window, laser_se and samples were not checked: a NaN
+      // reached metadata.json as null, -4 samples its minimum).
+      const auto photons_in = [](double v) { return v >= 0.0 && v <= std::numeric_limits<double>::max(); };
+      const char* bad = !photons_in(t.laser_total[di])                      ? "laser_total"
+                        : !photons_in(t.ambient_rate[di])                   ? "ambient_rate"
+                        : !photons_in(t.out_of_window[di])                  ? "out_of_window"
+                        : laser_se_ && !photons_in(t.laser_se[di])          ? "laser_se"
+                        : laser_se_ && t.samples[di] < 0                    ? "samples"
+                        : ambient_se_ && !photons_in(t.ambient_se[di])      ? "ambient_se"
+                                                                            : nullptr;
+      bool ok = bad == nullptr;
       if (T > 0) {
         t.bin_lo[di] = r[2 * ri], t.bin_hi[di] = r[2 * ri + 1];
         const float* from = vals + (o[ri] - o[first]);
@@ -338,12 +347,12 @@ TransientTile SavedLight::tile(const PixelRect& rect, const PixelRect& data_rect
           photons &= *v >= 0.0f && *v <= std::numeric_limits<float>::max();
           *dest = *v;
         }
-        ok = ok && photons;
+        if (ok && !photons) ok = false, bad = "values";
       }
       if (!ok)
         throw Error((std::filesystem::path(dir_) / "light").string() + ": pixel (" + std::to_string(x) + ", " + std::to_string(y) +
-                    ") holds a value that is not a finite number of photons >= 0 (laser_total, ambient_rate or values); "
-                    "the saved light is damaged: run the scene again");
+                    ") holds a value that is not " + (std::string(bad) == "samples" ? "a count >= 0" : "a finite number >= 0") +
+                    " (in " + bad + "); the saved light is damaged: run the scene again");
     }
   }
   if (row_scale_.empty()) return t;

@@ -10,6 +10,9 @@
 #include <fstream>
 #include <limits>
 #include <set>
+#include <string>
+#include <tuple>
+#include <vector>
 #include <nlohmann/json.hpp>
 
 #include "app_fixture.h"
@@ -797,6 +800,30 @@ TEST_F(App, SenseRefusesWhatItCannotDo) {
   EXPECT_THAT(r.output, HasSubstr("/light: pixel ("));
   EXPECT_THAT(r.output, HasSubstr("the saved light is damaged"));
   EXPECT_FALSE(fs::exists(dir_ / "nan_sensed"));
+  // ... and so is one in the light's other arrays, named (a NaN in out_of_window or laser_se reached
+  // metadata.json as null, -4 samples its minimum; an adversarial tester's finds)
+  ASSERT_EQ(sh("run " + kLit + " -o " + (dir_ / "whole").string()).code, 0);
+  const auto damage_last = [&](const std::string& file, const std::string& value_bytes) {
+    fs::remove_all(dir_ / "damaged");
+    fs::copy(dir_ / "whole", dir_ / "damaged", fs::copy_options::recursive);
+    std::fstream f(dir_ / "damaged" / "light" / file, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(-static_cast<std::streamoff>(value_bytes.size()), std::ios::end);
+    f.write(value_bytes.data(), static_cast<std::streamsize>(value_bytes.size()));
+  };
+  const auto bytes_of = [](auto v) { return std::string(reinterpret_cast<const char*>(&v), sizeof v); };
+  for (const auto& [file, bytes, name, what] :
+       std::vector<std::tuple<std::string, std::string, std::string, std::string>>{
+           {"out_of_window.npy", bytes_of(std::numeric_limits<double>::quiet_NaN()), "out_of_window", "a finite number >= 0"},
+           {"out_of_window.npy", bytes_of(-1.0), "out_of_window", "a finite number >= 0"},
+           {"laser_se.npy", bytes_of(std::numeric_limits<float>::quiet_NaN()), "laser_se", "a finite number >= 0"},
+           {"samples.npy", bytes_of(int32_t{-4}), "samples", "a count >= 0"}}) {
+    damage_last(file, bytes);
+    r = sh("sense " + (dir_ / "damaged").string() + " --set seeds.chip=4 -o " + (dir_ / "damaged_sensed").string());
+    EXPECT_EQ(r.code, 1) << file << r.output;
+    EXPECT_THAT(r.output, HasSubstr("/light: pixel (")) << file;
+    EXPECT_THAT(r.output, HasSubstr(") holds a value that is not " + what + " (in " + name + "); the saved light is damaged")) << file;
+    EXPECT_FALSE(fs::exists(dir_ / "damaged_sensed"));
+  }
 
   // A bad value in the run's resolved scene is named there: sense reads it from metadata.json (it was
   // reported against the scene file, which held a good one).
