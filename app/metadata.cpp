@@ -209,7 +209,7 @@ json camera_json(const render::Camera& cam, const PixelRect& img, const glm::dve
 
 
 Provenance provenance(const RunConfig& c, const PixelRect& img) {
-  return {c.scene_file, scenes::content_hash(c.scene_file, c.gltf_path), c.seed, img};
+  return {c.scene_file, scenes::content_hash(c.scene_file, c.gltf_path), c.seed, img, c.chip_seed()};
 }
 
 void stamp(writers::ExrImage& e, const Provenance& p) {

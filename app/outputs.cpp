@@ -363,6 +363,9 @@ class Outputs::Images {
     const auto put_file = [&](writers::ExrImage& e, const std::string& name, const std::string& units) {
       if (provided_.count(name)) return;
       stamp(e, p);
+      // (of the chip: another seeds.chip's is refused by reconstruct and evaluate; the others, linked by a
+      // sense of another chip, are the same for any)
+      if (&e == &maps_ || (labels_decl_ && &e == &labels_)) e.set_attribute("spadgen_chip_seed", std::to_string(p.chip_seed));
       e.set_attribute("spadgen_units", units);
       e.write(staging.path(name), compression_);
       files.push_back(name);

@@ -480,7 +480,7 @@ Labels read_labels(const RunFolder& run) {
   run.check_image(gt_path, gt);
   Labels l;
   l.detectability = labels.channels.count("object0.detectable") > 0;
-  if (!labels_path.empty()) run.check_image(labels_path, labels);
+  if (!labels_path.empty()) run.check_image(labels_path, labels, /*of_the_chip=*/true);
   const size_t n = size_t(run.width()) * size_t(run.height());
   l.pixels.resize(n);
   for (int j = 0; gt.channels.count("object" + std::to_string(j) + ".range"); ++j) {

@@ -799,7 +799,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   const double tiles_seconds = progress.seconds();
   const auto tiles_done = std::chrono::steady_clock::now();
 
-  const Provenance prov{scene_file, field<std::string>(meta, "/scene_hash_fnv1a64"_json_pointer, src), cfg.seed, img};
+  const Provenance prov{scene_file, field<std::string>(meta, "/scene_hash_fnv1a64"_json_pointer, src), cfg.seed, img, cfg.chip_seed()};
   std::vector<RunResult> results;
   json first_storage = json::object();
   json labels_summary;  // Outputs::report's, of the first realisation: what this call's labels say

@@ -171,7 +171,7 @@ RunFolder::RunFolder(const std::string& dir) : dir_(dir) {
     writers::ExrData m = writers::read_exr(maps);
     for (const char* c : {"gate_skew_ps", "gate_length_ps"})
       if (!m.channels.count(c)) throw Error(maps + ": no channel " + std::string(c));
-    check_image(maps, m);
+    check_image(maps, m, /*of_the_chip=*/true);
     skew_ps_ = std::move(m.channels["gate_skew_ps"]);
     length_ps_ = std::move(m.channels["gate_length_ps"]);
     // The pixel rays and where the laser sits (a return's time holds both legs of its path).
@@ -265,10 +265,22 @@ void RunFolder::read_rows(int y0, int y1, bool rate, bool to_counts, float* out)
   }
 }
 
-void RunFolder::check_image(const std::string& path, const writers::ExrData& e) const {
+void RunFolder::check_image(const std::string& path, const writers::ExrData& e, bool of_the_chip) const {
   if (e.width != W_ || e.height != H_)
     throw Error(path + ": " + std::to_string(e.width) + " x " + std::to_string(e.height) + " pixels, and the run's image is " +
                 std::to_string(W_) + " x " + std::to_string(H_) + " (metadata.json): a file of another run");
+  // (the sensor maps or labels of another chip: another seed's maps timed the edges 3 times worse, 17.5 mm rms
+  // for 6.0, and were scored as the run's)
+  const nlohmann::json::json_pointer chip_at("/seeds/chip");
+  if (const auto chip = e.attributes.find("spadgen_chip_seed");
+      of_the_chip && chip != e.attributes.end() && meta_.contains(chip_at) && meta_.at(chip_at).is_number_unsigned() &&
+      chip->second != std::to_string(meta_.at(chip_at).get<uint64_t>())) {
+    std::string shown = chip->second.substr(0, 24);
+    for (char& ch : shown)
+      if (static_cast<unsigned char>(ch) < 0x20) ch = '?';
+    throw Error(path + ": made for the chip of seed " + shown + " (its spadgen_chip_seed), and the run's is " +
+                meta_.at(chip_at).dump() + " (metadata.json seeds.chip): a file of another run");
+  }
   // (an image of another run of the same size: a crop elsewhere on the sensor)
   const auto at = e.attributes.find("spadgen_crop");
   if (at == e.attributes.end() || crop_.is_null()) return;

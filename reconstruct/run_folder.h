@@ -57,8 +57,9 @@ class RunFolder {
   // The same rows of detection_rate: lambda, the mean avalanches per frame (no counts: no saturation).
   void rates(int y0, int y1, float* out) const;
   // Refuses an image (an EXR of the run folder, read as e) of another size or, where its header says so
-  // (spadgen_crop), of another crop than metadata.json's, naming the file.
-  void check_image(const std::string& path, const writers::ExrData& e) const;
+  // (spadgen_crop), of another crop than metadata.json's, naming the file; with `of_the_chip` (sensor maps,
+  // labels), also one of another chip than metadata.json's seeds.chip (its spadgen_chip_seed).
+  void check_image(const std::string& path, const writers::ExrData& e, bool of_the_chip = false) const;
   // The image's file named `name` (e.g. "ground_truth.exr"): its path, or "" when the run has none.
   std::string file(const std::string& name) const;
 

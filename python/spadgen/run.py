@@ -622,6 +622,13 @@ class Run:
                 raise ValueError(f"{image.path}: its header's spadgen_crop is {said}, but metadata.json's "
                                  f"image.crop_in_sensor is {json.dumps(list(self.crop))}: the file is not this run's; "
                                  "restore it, or " + self._remedy())
+        # The sensor maps and labels are of one chip (seeds.chip): another seed's run of the same crop was read
+        # without a word, as the program's reconstruct read it.
+        chip, ours = image.attributes.get("spadgen_chip_seed"), (self.metadata.get("seeds") or {}).get("chip")
+        if (os.path.basename(image.path) in ("sensor_maps.exr", "labels.exr") and chip is not None
+                and isinstance(ours, int) and not isinstance(ours, bool) and chip != str(ours)):
+            raise ValueError(f"{image.path}: its header's spadgen_chip_seed is {chip[:24]}, but metadata.json's seeds.chip "
+                             f"is {ours}: the file is of another chip, not this run's; restore it, or " + self._remedy())
 
     def __getitem__(self, name):
         """run["counts"], run["counts.npy"], run["ground_truth.exr"]: any stack or image by file name (a stack

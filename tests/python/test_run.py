@@ -495,6 +495,19 @@ def test_images_of_another_run_are_refused(make_run, tmp_path):
                                              "metadata.json's image.crop_in_sensor is \\[507, 245, 10, 10\\]"):
             spadgen.open_run(run)[name]
         (run / name).write_bytes(data)
+    # the sensor maps and labels of another chip (seeds.chip), said by their header's spadgen_chip_seed
+    import struct
+    chip = str(spadgen.open_run(run).metadata["seeds"]["chip"])
+    other = str((int(chip[0]) + 1) % 10) + chip[1:]
+    for name in ("labels.exr", "sensor_maps.exr"):
+        data = (run / name).read_bytes()
+        attribute = b"spadgen_chip_seed\0string\0" + struct.pack("<i", len(chip))
+        assert data.count(attribute + chip.encode()) == 1, name
+        (run / name).write_bytes(data.replace(attribute + chip.encode(), attribute + other.encode()))
+        with pytest.raises(ValueError, match=f"{run / name}: its header's spadgen_chip_seed is {other}, but metadata.json's "
+                                             f"seeds.chip is {chip}: the file is of another chip"):
+            spadgen.open_run(run)[name]
+        (run / name).write_bytes(data)
     (run / "detections_edges.exr").mkdir()
     with pytest.raises(spadgen.ExrError, match=f"{run / 'detections_edges.exr'}: not a regular file"):
         spadgen.open_run(run).detections()
