@@ -901,7 +901,10 @@ void dataset_run(const DatasetOptions& options) {
 namespace {
 // What is wrong with index.jsonl against the samples as they are now (now[i]: sample i done, its hash):
 // "" when every row is there, in order, and says done for the done samples with their hash.
-std::string index_status(const fs::path& dir, const std::vector<std::pair<bool, std::string>>& now) {
+// rows[i]: the row the index would hold for sample i now (index_jsonl_row), compared but for its bytes (of
+// the files' sizes less hard links: a copy of the folder without its links holds more).
+std::string index_status(const fs::path& dir, const std::vector<std::pair<bool, std::string>>& now,
+                         const std::vector<std::string>& rows) {
   const fs::path path = dir / "index.jsonl";
   const std::string fix = ": `spadgen dataset run` writes it again (with nothing left to generate, it writes only the index and the card)";
   std::error_code ec;
@@ -927,6 +930,24 @@ std::string index_status(const fs::path& dir, const std::vector<std::pair<bool, 
     if (done != now[row].first || (done && text("sample_hash") != now[row].second))
       return where + " lists sample " + std::to_string(row) + " as " + text("status") + (done ? " with another hash" : "") +
              ", and it is " + (now[row].first ? "done" : "not done") + " now: the index is out of date" + fix;
+    // The rest of the row as the sample's folder and the dataset file give it: its parameters, seeds, folders,
+    // files and ground truth (a row edited to other parameters was taken, and the Python package selected the
+    // sample by them; an adversarial tester's find).
+    if (row < rows.size()) {
+      json want = json::parse(rows[row]);
+      for (json* j : {&r, &want}) j->erase("bytes");
+      if (r != want)
+        for (const auto& [key, value] : want.items())
+          if (!r.contains(key) || r[key] != value)
+            return where + " gives sample " + std::to_string(row) + " another " + key + " than its folder and the dataset file (" +
+                   scenes::one_line(r.contains(key) ? r[key].dump().substr(0, 80) : std::string("none")) + ", expected " +
+                   scenes::one_line(value.dump().substr(0, 80)) + "): damaged or edited since it was written" + fix;
+      if (r != want)
+        for (const auto& [key, value] : r.items())
+          if (!want.contains(key))
+            return where + " holds " + key + ", which spadgen does not write for a " + text("status") + " sample: damaged or "
+                   "edited since it was written" + fix;
+    }
   }
   if (row < now.size())
     return "index: " + path.string() + " has " + std::to_string(row) + " rows for the dataset's " + std::to_string(now.size()) +
@@ -946,9 +967,11 @@ DatasetStatus dataset_status(const std::string& dir) {
   std::set<std::string> done_folders;                      // (their names, as evaluate's metrics.json names them)
   // Per sample: done now, and its hash (to compare with index.jsonl's rows)
   std::vector<std::pair<bool, std::string>> now;
+  std::vector<std::string> rows;  // as the index would list them now
   inspect_each(folder, true, nullptr, [&](const SampleRecord& r) {
-    if (size_t(r.sample.index) >= now.size()) now.resize(size_t(r.sample.index) + 1);
+    if (size_t(r.sample.index) >= now.size()) now.resize(size_t(r.sample.index) + 1), rows.resize(size_t(r.sample.index) + 1);
     now[size_t(r.sample.index)] = {r.status == Status::Done, r.hash};
+    rows[size_t(r.sample.index)] = datasets::index_jsonl_row(spec, r);
     ++count[size_t(r.status)];
     if (r.status == Status::Done)
       for (const std::string& f : r.folders) done_folders.insert(fs::path(f).filename().string());
@@ -981,7 +1004,7 @@ DatasetStatus dataset_status(const std::string& dir) {
   o << evaluation_status(dir, &done_folders, /*say_current=*/true);
   // The index as the folders are now: a missing, damaged or out-of-date index.jsonl is said, and the dataset is
   // not complete (status said "all done", exit 0, and evaluate and the Python package then refused the folder)
-  const std::string index = index_status(fs::path(dir), now);
+  const std::string index = index_status(fs::path(dir), now, rows);
   if (!index.empty()) o << index << "\n";
   const bool complete = count[size_t(Status::Done)] == spec.count() && index.empty();
   return {o.str(), complete};

@@ -394,6 +394,12 @@ std::optional<json> DatasetFolder::sample_metadata(const std::string& folder) co
     for (const json& f : m["files"])
       if (!f.is_string()) return false;
     if (m.contains("ground_truth_summary") && !m["ground_truth_summary"].is_object()) return false;
+    // (a size of another type was skipped: a counts.npy cut short passed as done)
+    if (const auto b = m.find("file_bytes"); b != m.end()) {
+      if (!b->is_object()) return false;
+      for (const json& size : *b)
+        if (!size.is_number_unsigned()) return false;
+    }
     if (const auto l = m.find("laser_photons_per_pulse"); l != m.end() && !l->is_null()) {  // null: no laser traced
       if (!l->is_object()) return false;
       if (const auto t = l->find("total_all_pixels"); t != l->end() && !t->is_number()) return false;

@@ -198,6 +198,21 @@ TEST_F(Dataset, ASampleThatLostAFileIsDamagedAndGeneratedAgain) {
   EXPECT_EQ(done.code, 0);
   EXPECT_THAT(done.output, HasSubstr("3 samples: 3 done, 0 failed, 0 stale, 0 missing\n"));
   expect_same_dataset(dir_ / "reference", dir_ / "out");
+  // a size in metadata.json's file_bytes of another type hid a counts.npy cut short (the sample was done; an
+  // adversarial tester's find): the metadata is damaged, and the sample not done
+  {
+    const fs::path meta = dir_ / "out/samples/000001/metadata.json";
+    const std::string kept = slurp(meta);
+    nlohmann::ordered_json m = nlohmann::ordered_json::parse(kept);
+    m["file_bytes"]["counts.npy"] = "x";
+    write(meta, m.dump(2));
+    fs::resize_file(dir_ / "out/samples/000001/counts.npy", 100);
+    const Result cut = sh("dataset status " + (dir_ / "out").string());
+    EXPECT_EQ(cut.code, 4) << cut.output;
+    EXPECT_THAT(cut.output, HasSubstr("3 samples: 2 done")) << cut.output;
+    ASSERT_EQ(sh(run).code, 0);  // generated again
+    EXPECT_EQ(sh("dataset status " + (dir_ / "out").string()).code, 0);
+  }
   // what a killed run left beside a sample is removed at the start (before the disk check counts it), even
   // when the sample is done and skipped
   fs::create_directories(dir_ / "out/samples/.000000.spadgen-staging-999999");
@@ -926,6 +941,37 @@ TEST_F(Dataset, StatusChecksTheIndex) {
   const Result stale = sh(status);
   EXPECT_EQ(stale.code, 4) << stale.output;
   EXPECT_THAT(stale.output, HasSubstr("row 2 lists sample 1 as missing, and it is done now: the index is out of date" + fix));
+  // ... and a row whose other fields are not what the sample's folder and the dataset file give (other
+  // parameters were taken, and the Python package selected the sample by them; an adversarial tester's find);
+  // its bytes may differ (a copy of the folder without its hard links holds more)
+  const auto edited = [&](const std::function<void(nlohmann::json&)>& edit) {
+    std::istringstream rows(index);
+    std::string text;
+    for (std::string line; std::getline(rows, line);) {
+      if (text.empty()) {
+        nlohmann::json row = nlohmann::json::parse(line);
+        edit(row);
+        line = row.dump();
+      }
+      text += line + "\n";
+    }
+    write(dir_ / "out/index.jsonl", text);
+    return sh(status);
+  };
+  for (const auto& [edit, says] : std::vector<std::pair<std::function<void(nlohmann::json&)>, std::string>>{
+           {[](nlohmann::json& r) { r["parameters"]["laser.average_power_mW"] = 99; }, "row 1 gives sample 0 another parameters than"},
+           {[](nlohmann::json& r) { r["seeds"]["chip"] = 12345; }, "row 1 gives sample 0 another seeds than its folder and the dataset file"},
+           {[](nlohmann::json& r) { r["folder"] = "samples/000001"; }, "row 1 gives sample 0 another folder than its folder and the dataset "
+                                                                        "file (\"samples/000001\", expected \"samples/000000\")"},
+           {[](nlohmann::json& r) { r["repeats"] = nlohmann::json::array(); }, "row 1 gives sample 0 another repeats"},
+           {[](nlohmann::json& r) { r.erase("ground_truth"); }, "row 1 gives sample 0 another ground_truth than its folder and the dataset file (none, "},
+           {[](nlohmann::json& r) { r["note"] = 1; }, "row 1 holds note, which spadgen does not write for a done sample"}}) {
+    const Result r = edited(edit);
+    EXPECT_EQ(r.code, 4) << says << r.output;
+    EXPECT_THAT(r.output, HasSubstr("index: " + out + "/index.jsonl " + says)) << r.output;
+  }
+  const Result bytes = edited([](nlohmann::json& r) { r["bytes"] = r["bytes"].get<int64_t>() + 4096; });
+  EXPECT_EQ(bytes.code, 0) << bytes.output;
   // the run writes it again
   ASSERT_EQ(sh(run).code, 0);
   EXPECT_EQ(slurp(dir_ / "out/index.jsonl"), index);
