@@ -272,14 +272,20 @@ SavedLight::SavedLight(const std::string& dir, const PixelRect& region, const Ti
   const int32_t* r = ranges_;
   const int64_t* o = offsets_;
   if (o[0] != 0 || o[n] != values_elements_)
-    throw Error("'" + path(kOffsets) + "': the offsets do not span the values");
+    throw Error("'" + path(kOffsets) + "' and '" + path(kValues) + "' disagree: the offsets run from " + std::to_string(o[0]) +
+                " to " + std::to_string(o[n]) + " and the values hold " + std::to_string(values_elements_) +
+                " (one of them damaged, or of another run)");
+  // (pixels named by their sensor coordinates, as everywhere else; the index into the file was given)
+  const auto pixel = [&](int64_t i) {
+    return "pixel (" + std::to_string(region_.x0 + int(i % region_.width)) + ", " + std::to_string(region_.y0 + int(i / region_.width)) + ")";
+  };
   for (int64_t i = 0; i < n; ++i) {
     if (r[2 * i] < 0 || r[2 * i + 1] < r[2 * i] || r[2 * i + 1] > axis.bins)
-      throw Error("'" + path(kRanges) + "': pixel " + std::to_string(i) + " has the bin range [" + std::to_string(r[2 * i]) +
+      throw Error("'" + path(kRanges) + "': " + pixel(i) + " has the bin range [" + std::to_string(r[2 * i]) +
                   ", " + std::to_string(r[2 * i + 1]) + "), which does not fit the time axis (" + std::to_string(axis.bins) +
                   " bins)");
     if (o[i + 1] - o[i] != r[2 * i + 1] - r[2 * i])
-      throw Error("'" + path(kRanges) + "' and '" + path(kOffsets) + "' disagree at pixel " + std::to_string(i) + ": its range [" +
+      throw Error("'" + path(kRanges) + "' and '" + path(kOffsets) + "' disagree at " + pixel(i) + ": its range [" +
                   std::to_string(r[2 * i]) + ", " + std::to_string(r[2 * i + 1]) + ") holds " +
                   std::to_string(r[2 * i + 1] - r[2 * i]) + " bins, its offsets " + std::to_string(o[i + 1] - o[i]));
   }

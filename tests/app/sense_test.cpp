@@ -970,6 +970,7 @@ TEST_F(App, SavedLightIsTheTransientOverEachPixelsLitBins) {
   // Offsets that disagree with the ranges name both files (the ranges alone were named).
   const size_t at = size_t(21 * 26 + 25);  // a pixel of the ring's last row; its offset moved by one bin
   std::string bytes = slurp(d / "light/offsets.npy");
+  const std::string offsets_kept = bytes;
   const size_t data = bytes.size() - 8 * (22 * 26 + 1);
   int64_t o;
   std::memcpy(&o, bytes.data() + data + 8 * at, 8);
@@ -979,7 +980,24 @@ TEST_F(App, SavedLightIsTheTransientOverEachPixelsLitBins) {
   const Result r = sh("sense " + d.string() + " -q -o " + (dir_ / "damaged").string());
   EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("light/ranges.npy' and '"));
-  EXPECT_THAT(r.output, HasSubstr("light/offsets.npy' disagree at pixel " + std::to_string(at - 1) + ": its range ["));
+  // (the pixel by its sensor coordinates in the light's crop [495, 231, 26, 22]; it was the index into the file)
+  EXPECT_THAT(r.output, HasSubstr("light/offsets.npy' disagree at pixel (" + std::to_string(495 + (at - 1) % 26) + ", " +
+                                  std::to_string(231 + (at - 1) / 26) + "): its range ["));
+  // Values of another length (another run's) name the values with the offsets (the offsets alone were named).
+  std::ofstream(d / "light/offsets.npy", std::ios::binary) << offsets_kept;
+  std::string values_npy = slurp(d / "light/values.npy");
+  const std::string count = std::to_string(v.size()), fewer = std::to_string(v.size() - 1);
+  ASSERT_EQ(count.size(), fewer.size());
+  const size_t shape = values_npy.find("(" + count + ",)");
+  ASSERT_NE(shape, std::string::npos);
+  values_npy.replace(shape + 1, count.size(), fewer);
+  values_npy.resize(values_npy.size() - 4);
+  std::ofstream(d / "light/values.npy", std::ios::binary) << values_npy;
+  const Result swapped = sh("sense " + d.string() + " -q -o " + (dir_ / "damaged").string());
+  EXPECT_EQ(swapped.code, 1);
+  EXPECT_THAT(swapped.output, HasSubstr("light/offsets.npy' and '"));
+  EXPECT_THAT(swapped.output, HasSubstr("light/values.npy' disagree: the offsets run from 0 to " + count + " and the values hold " +
+                                        fewer + " (one of them damaged, or of another run)"));
 }
 
 }  // namespace
