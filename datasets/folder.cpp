@@ -511,7 +511,10 @@ SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash) co
         if (!inodes.insert({st.st_dev, st.st_ino}).second) continue;
         size += int64_t(st.st_size), any = true;
       }
-      if (std::string d = damage_of(name.get<std::string>(), present ? whole : -1, sizes); !d.empty()) gone.push_back(prefix + d);
+      // (a folder where the run wrote a file: it was "0 of its 89984 bytes")
+      const std::string& file = name.get_ref<const std::string&>();
+      if (fs::is_directory(path, ec) && !file.ends_with(".zarr")) gone.push_back(prefix + file + " (a folder, where the run wrote a file)");
+      else if (std::string d = damage_of(file, present ? whole : -1, sizes); !d.empty()) gone.push_back(prefix + d);
       if (present) rec.listed.push_back(prefix + name.get<std::string>());
       if (!any) continue;
       rec.files.emplace_back(prefix + name.get<std::string>(), size);

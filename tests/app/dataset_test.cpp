@@ -212,6 +212,14 @@ TEST_F(Dataset, ASampleThatLostAFileIsDamagedAndGeneratedAgain) {
     EXPECT_THAT(cut.output, HasSubstr("3 samples: 2 done")) << cut.output;
     ASSERT_EQ(sh(run).code, 0);  // generated again
     EXPECT_EQ(sh("dataset status " + (dir_ / "out").string()).code, 0);
+    // a folder in place of a file is named as one (it was "0 of its N bytes")
+    fs::remove(dir_ / "out/samples/000002/counts.npy");
+    fs::create_directories(dir_ / "out/samples/000002/counts.npy");
+    const Result folder = sh("dataset status " + (dir_ / "out").string());
+    EXPECT_EQ(folder.code, 4) << folder.output;
+    EXPECT_THAT(folder.output, HasSubstr("sample 2 damaged: listed in metadata.json but gone or changed: counts.npy (a folder, where the "
+                                         "run wrote a file)"));
+    ASSERT_EQ(sh(run).code, 0);
   }
   // what a killed run left beside a sample is removed at the start (before the disk check counts it), even
   // when the sample is done and skipped
