@@ -691,7 +691,7 @@ void Loader::check_matrix(size_t i) {
                                 "scale (3.5.3), and a projection cannot place vertices");
   Trs trs;
   const double residual = decompose_trs(m, trs);
-  if (!std::isinf(residual) && !(residual <= kDecomposeTolerance))
+  if (std::isfinite(residual) && residual > kDecomposeTolerance)  // (NaN: lengths past 1e154 overflowed; refused below)
     warn(node_label(m_, i) + ": its matrix shears (recomposed from a translation, rotation and scale it differs by " +
          num(residual) + " of its largest entry); glTF 2.0 requires matrices without shear (3.5.3), and other readers "
          "may place its meshes otherwise; rendered as given");
