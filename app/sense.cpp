@@ -480,7 +480,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     if (off(axis.period_s, 1.0 / source.config.laser.repetition_rate_Hz))
       throw Error(where + "laser_period is " + la.at("laser_period").dump() + " s, but the run's laser.repetition_rate_MHz gives " +
                   json(1.0 / source.config.laser.repetition_rate_Hz).dump() + damaged);
-    if (axis.bins > scenes::kMaxTimeBins)
+    if (axis.bins < 0 || axis.bins > scenes::kMaxTimeBins)  // (2^64 - 1 read as -1)
       throw Error(where + "bins is " + la.at("bins").dump() + "; expected at most " + std::to_string(scenes::kMaxTimeBins) +
                   ", as every run's" + damaged);
     if (!(std::abs(axis.start_s) <= 1e-2))

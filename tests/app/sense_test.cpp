@@ -911,6 +911,7 @@ TEST_F(App, SenseNamesMetadataFieldsOfTheWrongType) {
     const char* value;
     const char* says;
   } axes[] = {{"/light/time_axis_s/bins", "4611686018427387904", "light.time_axis_s.bins is 4611686018427387904; expected at most 1000000"},
+              {"/light/time_axis_s/bins", "18446744073709551615", "light.time_axis_s.bins is 18446744073709551615; expected at most"},
               {"/light/time_axis_s/bin_width", "0.5", "light.time_axis_s.bin_width is 0.5 s, but the run's render.time_bin_ps gives "},
               {"/light/time_axis_s/laser_period", "1e300", "light.time_axis_s.laser_period is 1e+300 s, but the run's laser.repetition_rate_MHz"},
               {"/resolved_scene/laser/repetition_rate_MHz", "0.5", "light.time_axis_s.laser_period is "},
