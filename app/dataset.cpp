@@ -393,7 +393,12 @@ std::set<std::string> indexed_done_folders(const fs::path& dir) {
 std::string evaluation_status(const std::string& dir, const std::set<std::string>* done_now = nullptr, bool say_current = false) {
   const fs::path metrics = fs::path(dir) / "evaluation" / "metrics.json";
   std::error_code ec;
-  if (!fs::is_regular_file(metrics, ec)) return "";
+  // (one that is there but no file, a folder or a link to a device, was passed over in silence)
+  if (!fs::is_regular_file(metrics, ec))
+    return fs::symlink_status(metrics, ec).type() == fs::file_type::not_found || ec
+               ? ""
+               : "evaluation/: " + metrics.string() + " is not a regular file (" + scenes::file_problem(metrics.string(), 1) +
+                     "): run `spadgen evaluate " + dir + "` again\n";
   constexpr uint64_t kMost = uint64_t{1} << 30;  // about 3 kB per sample folder: 300,000 folders
   if (const uintmax_t size = fs::file_size(metrics, ec); !ec && size > kMost)
     return "evaluation/: " + metrics.string() + " is larger than 1 GB: not checked against the samples\n";

@@ -1180,6 +1180,15 @@ TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
   std::ofstream(out3 / "evaluation/metrics.json") << "{}";
   r = sh("dataset status " + out3.string());
   EXPECT_THAT(r.output, HasSubstr("metrics.json does not read as spadgen evaluate's of a dataset"));
+  // ... and one that is no file, said (a folder or a link to a device was passed over)
+  fs::remove(out3 / "evaluation/metrics.json");
+  fs::create_directories(out3 / "evaluation/metrics.json");
+  r = sh("dataset status " + out3.string());
+  EXPECT_THAT(r.output, HasSubstr("evaluation/: " + (out3 / "evaluation/metrics.json").string() + " is not a regular file (is a "
+                                  "directory, expected a regular file): run `spadgen evaluate "));
+  fs::remove(out3 / "evaluation/metrics.json");
+  fs::create_symlink("/dev/zero", out3 / "evaluation/metrics.json");
+  EXPECT_THAT(sh("dataset status " + out3.string()).output, HasSubstr("metrics.json is not a regular file (is a character device"));
   // {sample} names a dataset's samples: refused for a run
   r = sh("evaluate " + first.string() + " --detections " + (dir_ / "preds" / "{sample}.exr").string() + " -o " + (dir_ / "e_run").string());
   EXPECT_EQ(r.code, 1);
