@@ -151,6 +151,20 @@ class Sample:
                     f"of sample {self.index} as this Dataset read index.jsonl (hash {self.sample_hash!r}): the sample "
                     "was generated again since; open the dataset again (spadgen.open_dataset) to read the new index, "
                     "or, if index.jsonl itself is behind (a `spadgen dataset run` into the folder was stopped), run it again")
+            # The row's parameters and seeds are the folder's (`spadgen dataset status` compares them too): an
+            # index edited to other parameters made select() return samples by values they were not made with.
+            seeds = dict(self.seeds)
+            if isinstance(seeds.get("noise"), int):
+                seeds["noise"] += r
+            for what, listed, own in (("parameters", self.parameters, section.get("parameters")),
+                                      ("seeds", seeds, section.get("seeds"))):
+                if not isinstance(own, dict) or own.keys() != listed.keys() or not all(
+                        _same(listed[k], own[k]) for k in listed):
+                    raise ValueError(
+                        f"{os.path.join(self._dataset_path, 'index.jsonl')}: sample {self.index}'s {what} "
+                        f"{json.dumps(listed)[:200]} are not its folder's ({folder}/metadata.json: "
+                        f"{json.dumps(own)[:200]}): index.jsonl was edited or damaged since it was written; "
+                        "`spadgen dataset run` writes it again")
             self._runs[r] = run
         return self._runs[r]
 

@@ -218,6 +218,28 @@ def test_a_damaged_index_is_refused_naming_its_row(dataset_dir, tmp_path):
     assert len(spadgen.open_dataset(copy)) == len(rows)
 
 
+def test_a_row_of_other_parameters_or_seeds_than_its_folder_is_refused_when_opened(dataset_dir, tmp_path):
+    """A done sample's row edited to other parameters or seeds (select() returned it by values it was not made
+    with; an adversarial tester's find): opening its run says so, as `spadgen dataset status` does."""
+    import shutil
+    copy = tmp_path / "ds"
+    shutil.copytree(dataset_dir, copy)
+    rows = [json.loads(line) for line in (copy / "index.jsonl").read_text().splitlines()]
+    i = next(k for k, r in enumerate(rows) if r["status"] == "done")
+    assert spadgen.open_dataset(copy).sample(i).run is not None
+    key = next(iter(rows[i]["parameters"]))
+    for field, edit in (("parameters", {key: 99}), ("seeds", {"chip": 12345})):
+        edited = [dict(r) for r in rows]
+        edited[i] = dict(rows[i], **{field: dict(rows[i][field], **edit)})
+        (copy / "index.jsonl").write_text("".join(json.dumps(r) + "\n" for r in edited))
+        sample = spadgen.open_dataset(copy).sample(i)
+        with pytest.raises(ValueError, match=f"{copy / 'index.jsonl'}: sample {i}'s {field} .* are not its folder's "
+                                             ".*index.jsonl was edited or damaged"):
+            sample.run
+    (copy / "index.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    assert len(spadgen.open_dataset(copy).sample(i).realisations) >= 1
+
+
 # ---- spadgen.torchdata.DatasetSamples --------------------------------------------------------------------------
 
 def test_dataset_samples_layout_values_and_length(ds, dataset_dir):
