@@ -6,6 +6,9 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <string>
+#include <type_traits>
+#include <vector>
 
 #include "core/error.h"
 #include "writers/writers.h"
@@ -68,7 +71,15 @@ T get(const nlohmann::json& j, const std::string& pointer, const std::string& fi
   try {
     return j.at(p).get<T>();
   } catch (const nlohmann::json::exception&) {
-    throw Error(file + ": " + pointer + " has the wrong type");
+    // (what it is and what a run writes: it said only "has the wrong type")
+    const char* expected = std::is_same_v<T, std::string>                        ? "text"
+                           : std::is_same_v<T, std::vector<double>>              ? "a list of numbers"
+                           : std::is_same_v<T, std::vector<std::vector<double>>> ? "a list of lists of numbers"
+                                                                                 : "another type";
+    std::string shown = j.at(p).dump();
+    if (shown.size() > 80) shown = shown.substr(0, 77) + "...";
+    throw Error(file + ": " + pointer + " is " + shown + "; expected " + expected + ", as a run writes it (is this a folder "
+                "written by spadgen run or sense?)");
   }
 }
 

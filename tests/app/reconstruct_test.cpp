@@ -271,6 +271,16 @@ TEST_F(Reconstruct, MetadataIntegersOutOfRangeAreNamed) {
                                     nlohmann::ordered_json::parse(value).dump() + ", not a number in " + range))
         << pointer << " " << value;
   }
+  // and of another type than a run writes: what it is and what was expected (it was "has the wrong type")
+  {
+    nlohmann::ordered_json m = nlohmann::ordered_json::parse(meta);
+    m["acquisition"]["gate_positions_ns"] = "0, 0.036";
+    std::ofstream(run / "metadata.json") << m.dump(2);
+    const Result r = sh("reconstruct " + run.string() + " -q -o " + (dir_ / "d.exr").string());
+    EXPECT_EQ(r.code, 1) << r.output;
+    EXPECT_THAT(r.output, HasSubstr((run / "metadata.json").string() + ": /acquisition/gate_positions_ns is \"0, 0.036\"; expected a "
+                                    "list of numbers, as a run writes it"));
+  }
   std::ofstream(run / "metadata.json") << meta;
   EXPECT_EQ(sh("reconstruct " + run.string() + " -q -o " + (dir_ / "d.exr").string()).code, 0);
 }
