@@ -893,11 +893,15 @@ TEST_F(App, SenseNamesMetadataFieldsOfTheWrongType) {
                {"/sensor_tables_fnv1a64", "5", "text"},
                {"/files", "[5]", "a list of file names"},
                {"/warnings", "5", "a list of texts"}};
-  for (const auto& c : cases) {
+  // sense of the run with metadata.json's value at `pointer` replaced by the JSON `value`
+  const auto sensed_with = [&](const char* pointer, const char* value) {
     nlohmann::ordered_json m = nlohmann::ordered_json::parse(kept);
-    m[nlohmann::ordered_json::json_pointer(c.pointer)] = nlohmann::ordered_json::parse(c.value);
+    m[nlohmann::ordered_json::json_pointer(pointer)] = nlohmann::ordered_json::parse(value);
     std::ofstream(meta, std::ios::trunc) << m.dump(2);
-    const Result r = sh("sense " + (dir_ / "run").string() + " -o " + (dir_ / "s").string());
+    return sh("sense " + (dir_ / "run").string() + " -o " + (dir_ / "s").string());
+  };
+  for (const auto& c : cases) {
+    const Result r = sensed_with(c.pointer, c.value);
     EXPECT_EQ(r.code, 1) << c.pointer << r.output;
     EXPECT_THAT(r.output, HasSubstr(meta.string() + ": " + c.pointer + " is " + nlohmann::json::parse(c.value).dump() + "; expected " +
                                     c.expected + ", as a run writes it")) << c.pointer;
@@ -917,10 +921,7 @@ TEST_F(App, SenseNamesMetadataFieldsOfTheWrongType) {
               {"/resolved_scene/laser/repetition_rate_MHz", "0.5", "light.time_axis_s.laser_period is "},
               {"/light/time_axis_s/start", "-1e300", "light.time_axis_s.start is -1e+300 s; expected within +-0.01 s"}};
   for (const auto& c : axes) {
-    nlohmann::ordered_json m = nlohmann::ordered_json::parse(kept);
-    m[nlohmann::ordered_json::json_pointer(c.pointer)] = nlohmann::ordered_json::parse(c.value);
-    std::ofstream(meta, std::ios::trunc) << m.dump(2);
-    const Result r = sh("sense " + (dir_ / "run").string() + " -o " + (dir_ / "s").string());
+    const Result r = sensed_with(c.pointer, c.value);
     EXPECT_EQ(r.code, 1) << c.pointer << r.output;
     EXPECT_THAT(r.output, HasSubstr(meta.string() + ": " + c.says)) << c.pointer;
     EXPECT_FALSE(fs::exists(dir_ / "s"));
