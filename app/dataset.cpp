@@ -904,61 +904,92 @@ void dataset_run(const DatasetOptions& options) {
 }
 
 namespace {
-// What is wrong with index.jsonl against the samples as they are now (now[i]: sample i done, its hash):
-// "" when every row is there, in order, and says done for the done samples with their hash.
-// rows[i]: the row the index would hold for sample i now (index_jsonl_row), compared but for its bytes (of
-// the files' sizes less hard links: a copy of the folder without its links holds more).
-std::string index_status(const fs::path& dir, const std::vector<std::pair<bool, std::string>>& now,
-                         const std::vector<std::string>& rows) {
-  const fs::path path = dir / "index.jsonl";
-  const std::string fix = ": `spadgen dataset run` writes it again (with nothing left to generate, it writes only the index and the card)";
-  std::error_code ec;
-  if (!fs::is_regular_file(path, ec))
-    return "index: " + path.string() + (fs::exists(path, ec) ? " is not a regular file" : " is missing") + fix;
-  std::ifstream in(path);
-  size_t row = 0;
-  for (std::string line; std::getline(in, line); ++row) {
-    const std::string where = "index: " + path.string() + " row " + std::to_string(row + 1);
+// What is wrong with index.jsonl against the samples as they are now, row by row as the samples are inspected
+// (in index order): "" when every row is there, in order, and is the row the index writer would write now
+// (index_jsonl_row), but for its bytes (of the files' sizes less hard links: a copy of the folder without its
+// links holds more). The rows are not kept: a million samples' are gigabytes.
+class IndexCheck {
+ public:
+  explicit IndexCheck(const fs::path& dir) : path_(dir / "index.jsonl") {
+    std::error_code ec;
+    if (!fs::is_regular_file(path_, ec))
+      problem_ = "index: " + path_.string() + (fs::exists(path_, ec) ? " is not a regular file" : " is missing") + kFix;
+    else
+      in_.open(path_);
+  }
+
+  // The next sample's row as the index writer would write it now.
+  void expect(const std::string& wanted) {
+    if (problem_.empty() && !short_) problem_ = check(&wanted);
+    if (problem_.empty() && !short_) ++row_;
+  }
+
+  // What is wrong, once `samples` rows were expected.
+  std::string finish(size_t samples) {
+    if (problem_.empty() && short_)
+      problem_ = "index: " + path_.string() + " has " + std::to_string(row_) + " rows for the dataset's " + std::to_string(samples) +
+                 " samples" + kFix;
+    if (problem_.empty()) {
+      samples_ = samples;
+      problem_ = check(nullptr);  // a row past the samples
+    }
+    return problem_;
+  }
+
+ private:
+  static constexpr const char* kFix =
+      ": `spadgen dataset run` writes it again (with nothing left to generate, it writes only the index and the card)";
+
+  // Row row_ against `wanted` (null: there should be none).
+  std::string check(const std::string* wanted) {
+    std::string line;
+    if (!std::getline(in_, line)) {
+      short_ = wanted != nullptr;
+      return "";
+    }
+    const std::string where = "index: " + path_.string() + " row " + std::to_string(row_ + 1);
     json r;
     try {
       r = json::parse(line);
     } catch (const json::exception&) {
-      return where + " is not JSON (damaged since it was written)" + fix;
+      return where + " is not JSON (damaged since it was written)" + kFix;
     }
-    const auto text = [&r](const char* key) { return r.is_object() && r.contains(key) && r[key].is_string() ? r[key].get<std::string>() : std::string(); };
-    if (!r.is_object() || !r.contains("index") || !r["index"].is_number_unsigned() || text("status").empty())
-      return where + " is not a row spadgen writes (index, status, ...)" + fix;
-    if (r["index"].get<uint64_t>() != row)
-      return where + " lists sample " + r["index"].dump() + " where sample " + std::to_string(row) + " belongs (damaged since it was written)" + fix;
-    if (row >= now.size()) return where + ": the dataset has " + std::to_string(now.size()) + " samples" + fix;
-    const bool done = text("status") == "done";
-    if (done != now[row].first || (done && text("sample_hash") != now[row].second))
-      return where + " lists sample " + std::to_string(row) + " as " + text("status") + (done ? " with another hash" : "") +
-             ", and it is " + (now[row].first ? "done" : "not done") + " now: the index is out of date" + fix;
+    const auto text = [](const json& j, const char* key) {
+      return j.is_object() && j.contains(key) && j[key].is_string() ? j[key].get<std::string>() : std::string();
+    };
+    if (!r.is_object() || !r.contains("index") || !r["index"].is_number_unsigned() || text(r, "status").empty())
+      return where + " is not a row spadgen writes (index, status, ...)" + kFix;
+    if (r["index"].get<uint64_t>() != row_)
+      return where + " lists sample " + r["index"].dump() + " where sample " + std::to_string(row_) + " belongs (damaged since it was written)" + kFix;
+    if (!wanted) return where + ": the dataset has " + std::to_string(samples_) + " samples" + kFix;
+    json want = json::parse(*wanted);
+    const bool done = text(r, "status") == "done", done_now = text(want, "status") == "done";
+    if (done != done_now || (done && text(r, "sample_hash") != text(want, "sample_hash")))
+      return where + " lists sample " + std::to_string(row_) + " as " + text(r, "status") + (done ? " with another hash" : "") +
+             ", and it is " + (done_now ? "done" : "not done") + " now: the index is out of date" + kFix;
     // The rest of the row as the sample's folder and the dataset file give it: its parameters, seeds, folders,
     // files and ground truth (a row edited to other parameters was taken, and the Python package selected the
     // sample by them; an adversarial tester's find).
-    if (row < rows.size()) {
-      json want = json::parse(rows[row]);
-      for (json* j : {&r, &want}) j->erase("bytes");
-      if (r != want)
-        for (const auto& [key, value] : want.items())
-          if (!r.contains(key) || r[key] != value)
-            return where + " gives sample " + std::to_string(row) + " another " + key + " than its folder and the dataset file (" +
-                   scenes::one_line(r.contains(key) ? r[key].dump().substr(0, 80) : std::string("none")) + ", expected " +
-                   scenes::one_line(value.dump().substr(0, 80)) + "): damaged or edited since it was written" + fix;
-      if (r != want)
-        for (const auto& [key, value] : r.items())
-          if (!want.contains(key))
-            return where + " holds " + key + ", which spadgen does not write for a " + text("status") + " sample: damaged or "
-                   "edited since it was written" + fix;
-    }
+    for (json* j : {&r, &want}) j->erase("bytes");
+    if (r == want) return "";
+    for (const auto& [key, value] : want.items())
+      if (!r.contains(key) || r[key] != value)
+        return where + " gives sample " + std::to_string(row_) + " another " + key + " than its folder and the dataset file (" +
+               scenes::one_line(r.contains(key) ? r[key].dump().substr(0, 80) : std::string("none")) + ", expected " +
+               scenes::one_line(value.dump().substr(0, 80)) + "): damaged or edited since it was written" + kFix;
+    for (const auto& [key, value] : r.items())
+      if (!want.contains(key))
+        return where + " holds " + key + ", which spadgen does not write for a " + text(r, "status") + " sample: damaged or "
+               "edited since it was written" + kFix;
+    return "";
   }
-  if (row < now.size())
-    return "index: " + path.string() + " has " + std::to_string(row) + " rows for the dataset's " + std::to_string(now.size()) +
-           " samples" + fix;
-  return "";
-}
+
+  fs::path path_;
+  std::ifstream in_;
+  size_t row_ = 0, samples_ = 0;
+  bool short_ = false;  // the file ended before the samples
+  std::string problem_;
+};
 }  // namespace
 
 DatasetStatus dataset_status(const std::string& dir) {
@@ -970,13 +1001,10 @@ DatasetStatus dataset_status(const std::string& dir) {
   std::string failed, damaged;
   std::map<std::string, std::vector<int64_t>> stale_why;  // what changed, and the samples it made stale
   std::set<std::string> done_folders;                      // (their names, as evaluate's metrics.json names them)
-  // Per sample: done now, and its hash (to compare with index.jsonl's rows)
-  std::vector<std::pair<bool, std::string>> now;
-  std::vector<std::string> rows;  // as the index would list them now
+  // index.jsonl's rows against the samples as they are now
+  IndexCheck index_check{fs::path(dir)};
   inspect_each(folder, true, nullptr, [&](const SampleRecord& r) {
-    if (size_t(r.sample.index) >= now.size()) now.resize(size_t(r.sample.index) + 1), rows.resize(size_t(r.sample.index) + 1);
-    now[size_t(r.sample.index)] = {r.status == Status::Done, r.hash};
-    rows[size_t(r.sample.index)] = datasets::index_jsonl_row(spec, r);
+    index_check.expect(datasets::index_jsonl_row(spec, r));
     ++count[size_t(r.status)];
     if (r.status == Status::Done)
       for (const std::string& f : r.folders) done_folders.insert(fs::path(f).filename().string());
@@ -1009,7 +1037,7 @@ DatasetStatus dataset_status(const std::string& dir) {
   o << evaluation_status(dir, &done_folders, /*say_current=*/true);
   // The index as the folders are now: a missing, damaged or out-of-date index.jsonl is said, and the dataset is
   // not complete (status said "all done", exit 0, and evaluate and the Python package then refused the folder)
-  const std::string index = index_status(fs::path(dir), now, rows);
+  const std::string index = index_check.finish(size_t(spec.count()));
   if (!index.empty()) o << index << "\n";
   const bool complete = count[size_t(Status::Done)] == spec.count() && index.empty();
   return {o.str(), complete};
