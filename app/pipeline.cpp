@@ -63,25 +63,17 @@ scenes::Scene load_edited_gltf(const scenes::ResolvedRun& r, const std::string& 
   }
 }
 
-// What `make` builds, with an error of a key the render stage checks against the glTF ("camera.gltf_camera:
-// no perspective camera named ...") named as the user gave the key: the --set key, else the scene file and
-// the key's pointer (it named neither the scene file nor the pointer).
+// What `make` builds, with an error of a key the render stage checks against the glTF (a KeyError:
+// "camera.gltf_camera: no perspective camera named ...") named as the user gave the key: the --set key, else
+// the scene file and the key's pointer (it named neither the scene file nor the pointer).
 template <class Make>
-auto naming_gltf_keys(const scenes::ResolvedRun& r, const std::string& scene_file, Make&& make) {
+auto naming_keys(const scenes::ResolvedRun& r, const std::string& scene_file, Make&& make) {
   try {
     return make();
-  } catch (const scenes::EditError&) {
-    throw;
-  } catch (const Error& e) {
-    const std::string what = e.what();
-    for (const auto& [key, pointer] : {std::pair<std::string, std::string>{"camera.gltf_camera", "/camera/gltf_camera"},
-                                       {"laser.gltf_light", "/laser/gltf_light"}}) {
-      if (what.rfind(key + ": ", 0) != 0) continue;
-      const auto set = r.set_keys.find(pointer);
-      throw Error((set != r.set_keys.end() ? "--set " + scenes::one_line(set->second) : scene_file + ": " + pointer) +
-                  what.substr(key.size()));
-    }
-    throw;
+  } catch (const KeyError& e) {
+    const auto set = r.set_keys.find(e.pointer);
+    throw Error((set != r.set_keys.end() ? "--set " + scenes::one_line(set->second) : scene_file + ": " + e.pointer) + ": " +
+                e.reason);
   }
 }
 
@@ -105,12 +97,12 @@ RunResult run(const RunOptions& options) {
     for (const std::string& w : ws) print_warning(w), warnings.push_back(w);
   };
   warn(camera_warnings(cfg, scene));
-  const render::Camera camera = naming_gltf_keys(resolved, options.scene_file, [&] { return render::Camera(cfg.camera, scene); });
+  const render::Camera camera = naming_keys(resolved, options.scene_file, [&] { return render::Camera(cfg.camera, scene); });
   warn(laser_warnings(cfg, camera, &scene));
   sensor::SensorModel sensor(sensor_stage(cfg));
   apply_user_maps(sensor, cfg);
   warn(sensor_warnings(sensor));
-  const render::Renderer renderer = naming_gltf_keys(resolved, options.scene_file, [&] {
+  const render::Renderer renderer = naming_keys(resolved, options.scene_file, [&] {
     return render::Renderer(scene, render_stage(cfg, sensor.row_fill_factor(), sensor.row_ambient_floor()));
   });
   const int objects = int(scenes::objects_of(scene).list.size());
@@ -233,10 +225,10 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
   const RunConfig& c = r.config;
   const scenes::Scene scene = load_edited_gltf(r, scene_file);
   // camera.gltf_camera names a camera of the glTF, as the run needs
-  const render::Camera camera = naming_gltf_keys(r, scene_file, [&] { return render::Camera(c.camera, scene); });
+  const render::Camera camera = naming_keys(r, scene_file, [&] { return render::Camera(c.camera, scene); });
   sensor::SensorModel sensor(sensor_stage(c));
   apply_user_maps(sensor, c);  // maps that do not fit the sensor are refused here as by the run
-  naming_gltf_keys(r, scene_file, [&] {
+  naming_keys(r, scene_file, [&] {
     int laser_light = -1;  // laser.gltf_light names a light of the glTF, as the run needs
     (void)render::make_laser(render_stage(c, sensor.row_fill_factor()), camera, scene, &laser_light);
   });

@@ -28,6 +28,24 @@ class Error : public std::runtime_error {
   }
 };
 
+// An Error of one scene-file key, found where the key is used (the renderer meeting no glTF camera of the name
+// camera.gltf_camera gives): what() is "camera.gltf_camera: <reason>"; `pointer` ("/camera/gltf_camera") lets
+// the program name the key as the user gave it (the --set key, else the scene file and the pointer).
+class KeyError : public Error {
+ public:
+  KeyError(const std::string& key_pointer, const std::string& why)
+      : Error(dotted(key_pointer) + ": " + why), pointer(key_pointer), reason(why) {}
+  std::string pointer, reason;
+
+ private:
+  static std::string dotted(const std::string& p) {
+    std::string d = p.empty() ? p : p.substr(1);
+    for (char& c : d)
+      if (c == '/') c = '.';
+    return d;
+  }
+};
+
 // The run was asked to stop (SIGINT, SIGTERM) and stopped without publishing anything.
 class Interrupted : public Error {
  public:

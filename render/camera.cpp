@@ -25,7 +25,7 @@ Camera::Camera(const CameraConfig& c, const scenes::Scene& scene, const glm::dve
     if (!gc) {
       for (const std::string& o : scene.orthographic_cameras)
         if (o == c.gltf_camera)
-          throw Error("camera.gltf_camera: camera '" + c.gltf_camera + "' in " + scene.source +
+          throw KeyError("/camera/gltf_camera", "camera '" + c.gltf_camera + "' in " + scene.source +
                       " is orthographic; spadgen models a lens (a perspective camera): choose a perspective one, or "
                       "place the camera with camera.position_m and camera.look_at_m");
       std::string names;
@@ -35,14 +35,14 @@ Camera::Camera(const CameraConfig& c, const scenes::Scene& scene, const glm::dve
         else names += (names.empty() ? "'" : ", '") + cam.name + "'";
       }
       if (unnamed) names += std::string(names.empty() ? "" : ", and ") + "unnamed ones (name a camera's node in the glTF to choose it)";
-      throw Error("camera.gltf_camera: no perspective camera named '" + c.gltf_camera + "' in " + scene.source +
+      throw KeyError("/camera/gltf_camera", "no perspective camera named '" + c.gltf_camera + "' in " + scene.source +
                   " (cameras: " + (names.empty() ? "none" : names) + ")" + scene.not_loaded_note(c.gltf_camera));
     }
     const glm::dmat4& m = gc->world_from_camera;
     position_ = glm::dvec3(m[3]);
     const glm::dvec3 x(m[0]), y(m[1]), z(m[2]);
     if (glm::length(x) < 1e-12 || glm::length(y) < 1e-12 || glm::length(z) < 1e-12)
-      throw Error("camera.gltf_camera: the transform of camera '" + c.gltf_camera + "' is singular");
+      throw KeyError("/camera/gltf_camera", "the transform of camera '" + c.gltf_camera + "' is singular");
     forward_ = -glm::normalize(z);
     right_ = glm::normalize(glm::cross(forward_, y));
     up_ = glm::cross(right_, forward_);

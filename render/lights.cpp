@@ -27,11 +27,11 @@ Laser make_laser(const RenderStageConfig& config, const Camera& camera, const sc
     if (!l) {
       std::string names;
       for (const scenes::Light& x : scene.lights) names += (names.empty() ? "'" : ", '") + x.name + "'";
-      throw Error("laser.gltf_light: no KHR_lights_punctual light named '" + c.gltf_light + "' in " +
+      throw KeyError("/laser/gltf_light", "no KHR_lights_punctual light named '" + c.gltf_light + "' in " +
                   scene.source + " (lights: " + (names.empty() ? "none" : names) + ")" + scene.not_loaded_note(c.gltf_light));
     }
     if (l->type == scenes::Light::Type::Directional)
-      throw Error("laser.gltf_light: light '" + c.gltf_light +
+      throw KeyError("/laser/gltf_light", "light '" + c.gltf_light +
                   "' is directional; the laser must be a point or spot light");
     *laser_light = static_cast<int>(l - scene.lights.data());
     laser.position = l->position;
