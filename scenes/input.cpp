@@ -79,6 +79,7 @@ class CheckedSax {
     if (v == 0.0 && s.find_first_of("123456789") < s.find_first_of("eE")) {
       problem = (levels_.empty() ? std::string() : path(/*pending=*/true) + ": ") + "the number " + s +
                 " is below the smallest double (about 4.9e-324), and would be read as 0; write 0 for zero";
+      limit = true;
       return false;
     }
     return value() && dom_.number_float(v, s);
@@ -102,6 +103,7 @@ class CheckedSax {
       }
       problem = path() + ": appears twice in one object; expected each key once (JSON readers keep one of them "
                          "silently)";
+      limit = true;
       return false;
     }
     l.key = k;
@@ -126,6 +128,7 @@ class CheckedSax {
       if (position >= token.size()) offset = position - token.size() + 1;
       problem = (levels_.empty() ? std::string() : path(/*pending=*/true) + ": ") + "the number " + token +
                 " is beyond the range of a double (about 1.8e308)";
+      limit = true;
     } else {
       std::string what = e.what();
       if (const size_t pos = what.find("syntax error"); pos != std::string::npos) what = what.substr(pos);
@@ -138,6 +141,7 @@ class CheckedSax {
   std::string problem;  // why the parse stopped ("" = it did not)
   size_t offset = 0;    // where, for syntax errors and overflowing numbers
   bool syntax = false;  // the problem has an offset
+  bool limit = false;   // the problem is one of JsonLimitError's (the text's syntax is JSON's)
   size_t keys_seen = 0;      // object keys read so far
   size_t duplicate_key = 0;  // which of them (from 1) repeated a key of its object; 0 = none
   std::string duplicate_path;  // its path, when it was only noted
@@ -157,6 +161,7 @@ class CheckedSax {
   bool open() {
     if (static_cast<int>(levels_.size()) >= kMaxJsonDepth) {
       problem = "arrays and objects nested deeper than " + std::to_string(kMaxJsonDepth) + " levels";
+      limit = true;
       return false;
     }
     return true;
@@ -318,7 +323,7 @@ size_t nth_key_offset(const std::string& text, size_t n) {
 
 json parse_json(const std::string& text, const std::string& where, const JsonOptions& options) {
   if (const size_t at = depth_exceeded_at(text, kMaxJsonDepth); at != std::string::npos)
-    throw Error(where + ":" + line_column(text, at) + ": arrays and objects nested deeper than " +
+    throw JsonLimitError(where + ":" + line_column(text, at) + ": arrays and objects nested deeper than " +
                 std::to_string(kMaxJsonDepth) + " levels; spadgen reads at most " + std::to_string(kMaxJsonDepth));
   json root;
   CheckedSax sax(root, options);
@@ -332,13 +337,15 @@ json parse_json(const std::string& text, const std::string& where, const JsonOpt
   } else if (sax.duplicate_key > 0) {
     // The SAX interface gives no positions: the repeated key is found again by counting keys in the text.
     const size_t at = nth_key_offset(text, sax.duplicate_key);
-    throw Error(where + (at == std::string::npos ? std::string() : ":" + line_column(text, at)) + ": " + sax.problem);
+    throw JsonLimitError(where + (at == std::string::npos ? std::string() : ":" + line_column(text, at)) + ": " + sax.problem);
   }
   if (!ok || !sax.problem.empty()) {
     const std::string problem = sax.problem.empty() ? std::string("not valid JSON") : sax.problem;
     // nlohmann reports the offset one past the character it stopped at.
-    throw Error(where + (sax.syntax ? ":" + line_column(text, sax.offset > 0 ? sax.offset - 1 : 0) : std::string()) +
-                ": " + problem);
+    const std::string message =
+        where + (sax.syntax ? ":" + line_column(text, sax.offset > 0 ? sax.offset - 1 : 0) : std::string()) + ": " + problem;
+    if (sax.limit) throw JsonLimitError(message);
+    throw Error(message);
   }
   return root;
 }

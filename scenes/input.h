@@ -9,6 +9,8 @@
 #include <string>
 #include <vector>
 
+#include "core/error.h"
+
 namespace spadgen::scenes {
 
 // Size limits of the files a scene names (docs/scene-file.md, "Limits").
@@ -37,6 +39,14 @@ struct JsonOptions {
   // Without reject_duplicates: where the first key repeated in its object is, with its path (the later value
   // is kept), or "" when none is ("file:3:5: /materials appears twice in one object").
   std::string* first_duplicate = nullptr;
+};
+
+// What parse_json throws for a text whose syntax is JSON's but which it refuses: a number beyond the range of a
+// double or below the smallest one, nesting deeper than kMaxJsonDepth, a key twice in one object. A --set value
+// that fails so was meant as JSON (a plain string never does), where one that is not JSON at all is a string.
+class JsonLimitError : public Error {
+ public:
+  using Error::Error;
 };
 
 // Parses JSON without recursion. Throws spadgen::Error naming `where` (a file, or "--set key") with

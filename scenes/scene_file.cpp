@@ -440,15 +440,10 @@ std::string apply_override(json& doc, const std::string& assignment, Checker& ch
   json value;
   try {
     value = parse_json(text, chk.file + ": --set " + key);
-  } catch (const Error& e) {
-    // Not JSON: a string, unless it was meant as JSON and only went wrong in a way a string never does.
-    const std::string what = e.what();
-    if (what.find("nested deeper") != std::string::npos || what.find("beyond the range") != std::string::npos ||
-        what.find("below the smallest double") != std::string::npos ||
-        what.find("appears twice") != std::string::npos) {
-      chk.errors.push_back(what);
-      return {};
-    }
+  } catch (const JsonLimitError& e) {  // meant as JSON, and refused in a way a string never is
+    chk.errors.push_back(e.what());
+    return {};
+  } catch (const Error&) {  // not JSON: a string
     value = text;
   }
   if ((k.type == Type::String || k.type == Type::Path) && !value.is_string() && !value.is_null()) value = text;  // names that look like numbers

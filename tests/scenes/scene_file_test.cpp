@@ -536,6 +536,9 @@ TEST_F(SceneFileTest, ADuplicateKeyIsAnError) {
   EXPECT_THAT(error_of("{\"gltf\": \"s.gltf\", // \"camera\": {\n  \"description\": \"a \\\"b\\\": c\",\n"
                        "  /* \"x\": */ \"camera\": {\"f_number\": 2,\n     \"f_number\": 4}}"),
               HasSubstr(":4:6: /camera/f_number: appears twice"));
+  // In a --set value too, where a text that is not JSON is taken as a string: this one was meant as JSON.
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {R"(description={"a": 1, "a": 2})"}),
+              HasSubstr("--set description:1:10: /a: appears twice in one object"));
 }
 
 TEST_F(SceneFileTest, AKeyWithASlashIsNotTakenForAPath) {
