@@ -261,7 +261,7 @@ def markdown(f7, f9, f10, seconds, quick):
         return "-" if v is None or not np.isfinite(v) else f"{v:.{d}f}"
     L = ["# The paper reproduced", "",
          "What `python3 examples/paper/reproduce.py` measures on the shipped scenes (`scenes/paper/`), beside the",
-         "paper's figures (shared/seeds, sections 4.C-4.E). This file and `docs/paper/*.png` are written by that",
+         "paper's figures (Morimoto et al., sections 4.C-4.E). This file and `docs/paper/*.png` are written by that",
          f"command{' (--quick: fewer points, smaller crops)' if quick else ''}; it took {seconds:.0f} s on the 2-core machine of bench/README.md.",
          "Tests assert the tolerances: tests/reconstruct (Fig. 7 theory), tests/app/paper_test.cpp (Figs. 9, 10),",
          "tests/python/test_paper.py (this script, --quick).", "",
