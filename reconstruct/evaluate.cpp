@@ -23,25 +23,35 @@ PixelOutcome Scores::add(int x, int y, std::vector<TruthObject> objects,
   for (const auto& [range, score] : detections)
     if (std::isfinite(range) && (!options_.min_score || score >= *options_.min_score)) dets.push_back(range);
   std::sort(objects.begin(), objects.end(), [](const TruthObject& a, const TruthObject& b) { return a.range_m < b.range_m; });
-  // Candidate pairs within the tolerance, taken in increasing |error|, each object and detection once.
+  // Candidate pairs within the tolerance, taken in increasing |error|, each object and detection once; of
+  // equal |error|, the nearer object first, then the detection given first (stable: objects in range order).
   struct Pair {
     double error;
     size_t object, detection;
+    bool folded;  // matched to the object across one or more laser periods
   };
   std::vector<Pair> pairs;
   // The error of a detection folded by the laser period: folded as the return's half path is (which is
-  // its range only with the laser at the camera), then that half path's range against the object's.
-  const auto error = [&](double det, double object) {
-    if (bistatic.coaxial()) return options_.ambiguity_m > 0.0 ? std::remainder(det - object, options_.ambiguity_m) : det - object;
+  // its range only with the laser at the camera), then that half path's range against the object's. A
+  // detection the fold leaves in place is compared by its range as given (the round trip through the half path
+  // rounds: a detection exactly the tolerance away was matched in some pixels and not in others).
+  const auto error = [&](double det, double object) -> std::pair<double, bool> {
+    const double direct = det - object;
+    if (options_.ambiguity_m <= 0.0) return {direct, false};
+    if (bistatic.coaxial()) {
+      const double e = std::remainder(direct, options_.ambiguity_m);
+      return e == direct ? std::pair{direct, false} : std::pair{e, true};
+    }
     const double h = bistatic.half_path_of_range(object);
-    double e = bistatic.half_path_of_range(det) - h;
-    if (options_.ambiguity_m > 0.0) e = std::remainder(e, options_.ambiguity_m);
-    return bistatic.range_of_half_path(h + e) - object;
+    const double e = bistatic.half_path_of_range(det) - h;
+    const double f = std::remainder(e, options_.ambiguity_m);
+    if (f == e) return {direct, false};
+    return {bistatic.range_of_half_path(h + f) - object, true};
   };
   for (size_t i = 0; i < objects.size(); ++i)
     for (size_t j = 0; j < dets.size(); ++j) {
-      const double e = error(dets[j], objects[i].range_m);
-      if (std::abs(e) <= options_.tolerance_m) pairs.push_back({e, i, j});
+      const auto [e, folded] = error(dets[j], objects[i].range_m);
+      if (std::abs(e) <= options_.tolerance_m) pairs.push_back({e, i, j, folded});
     }
   std::stable_sort(pairs.begin(), pairs.end(), [](const Pair& a, const Pair& b) { return std::abs(a.error) < std::abs(b.error); });
   std::vector<bool> object_used(objects.size(), false), det_used(dets.size(), false);
@@ -50,6 +60,7 @@ PixelOutcome Scores::add(int x, int y, std::vector<TruthObject> objects,
     if (object_used[p.object] || det_used[p.detection]) continue;
     object_used[p.object] = det_used[p.detection] = true;
     error_of[p.object] = p.error;
+    across_period_ += p.folded;
   }
   ++pixels_;
   o.objects = int(objects.size());
@@ -64,10 +75,12 @@ PixelOutcome Scores::add(int x, int y, std::vector<TruthObject> objects,
       errors_by_object_[objects[i].id].push_back(error_of[i]);
     }
   }
+  const auto& r = options_.region;
+  const bool in_region = r && x >= r->x0 && x < r->x1() && y >= r->y0 && y < r->y1();
+  region_nearest_ += in_region && !objects.empty();
   if (!objects.empty() && object_used[0]) {
     o.first_error_m = static_cast<float>(error_of[0]);
-    const auto& r = options_.region;
-    if (r && x >= r->x0 && x < r->x1() && y >= r->y0 && y < r->y1()) region_errors_.push_back(error_of[0]);
+    if (in_region) region_errors_.push_back(error_of[0]);
   }
   detections_ += int64_t(dets.size());
   for (bool used : det_used) o.false_detections += !used;
@@ -87,7 +100,8 @@ void Scores::merge(const Scores& s) {
   for (const auto& [id, e] : s.errors_by_object_) errors_by_object_[id].insert(errors_by_object_[id].end(), e.begin(), e.end());
   errors_.insert(errors_.end(), s.errors_.begin(), s.errors_.end());
   region_errors_.insert(region_errors_.end(), s.region_errors_.begin(), s.region_errors_.end());
-  detections_ += s.detections_, false_ += s.false_, pixels_ += s.pixels_;
+  detections_ += s.detections_, false_ += s.false_, pixels_ += s.pixels_, across_period_ += s.across_period_;
+  region_nearest_ += s.region_nearest_;
   empty_pixels_ += s.empty_pixels_, empty_pixels_with_detections_ += s.empty_pixels_with_detections_;
 }
 
@@ -118,7 +132,7 @@ nlohmann::json error_statistics(std::vector<double> e) {
 nlohmann::json Scores::to_json(const std::map<int, std::string>& names) const {
   nlohmann::json j;
   j["matching"] = {{"tolerance_m", options_.tolerance_m},
-                   {"rule", "per pixel, object-detection pairs in increasing |range error| within the tolerance, each once"},
+                   {"rule", "per pixel, object-detection pairs in increasing |range error| within the tolerance (|error| <= tolerance_m), each once; of equal |error|, the nearer object first"},
                    {"range_error", "detection minus object range, the detection folded onto the object by c T / 2 of half path (laser to object to camera, over 2) for the run's laser period T"}};
   if (options_.min_score) j["matching"]["min_score"] = *options_.min_score;
   j["pixels"] = pixels_;
@@ -131,6 +145,7 @@ nlohmann::json Scores::to_json(const std::map<int, std::string>& names) const {
   j["objects_by_count_on_pixel"] = by_count;
   j["detections"] = {{"total", detections_},
                      {"matched", detections_ - false_},
+                     {"matched_across_period", across_period_},
                      {"false", false_},
                      {"precision", detections_ > 0 ? nlohmann::json(double(detections_ - false_) / double(detections_)) : nlohmann::json(nullptr)},
                      {"pixels_without_objects", empty_pixels_},
@@ -150,7 +165,13 @@ nlohmann::json Scores::to_json(const std::map<int, std::string>& names) const {
     const PixelRect& r = *options_.region;
     nlohmann::json reg = error_statistics(region_errors_);
     reg["rect"] = {r.x0, r.y0, r.width, r.height};
-    reg["what"] = "the nearest object of each pixel of the region where it was found: accuracy = bias, precision = std";
+    // how many of the region's nearest objects the errors cover (a detector that misses half of them is not
+    // precise there because its few matches are)
+    reg["objects"] = region_nearest_;
+    reg["found"] = region_errors_.size();
+    reg["recall"] = region_nearest_ > 0 ? nlohmann::json(double(region_errors_.size()) / double(region_nearest_)) : nlohmann::json(nullptr);
+    reg["what"] = "the nearest object of each pixel of the region where it was found: accuracy = bias, precision = std; "
+                  "objects: the region's pixels with an object, found: those whose nearest object was found";
     j["region"] = reg;
   }
   return j;

@@ -307,6 +307,16 @@ TEST(Evaluate, ShiftedDetectionsGiveTheirBiasAndMissBeyondTheTolerance) {
   EXPECT_TRUE(one["range_error"]["std_mm"].is_null());
   EXPECT_NEAR(one["range_error"]["bias_mm"].get<double>(), 10.0, 1e-6);
   EXPECT_EQ(m["region"]["count"], 100);
+  EXPECT_EQ(m["region"]["objects"], 100);
+  EXPECT_EQ(m["region"]["recall"], 1.0);
+  // the region's misses are counted (its errors came from the found ones only, and said nothing of the rest)
+  const auto half = sc.score([&](int i) {
+    return i % 2 == 0 ? std::vector<std::pair<double, double>>{{sc.pixels[size_t(i)].empty() ? 1.0 : sc.pixels[size_t(i)][0].range_m, 1.0}}
+                      : std::vector<std::pair<double, double>>{};
+  });
+  EXPECT_EQ(half["region"]["objects"], 100);
+  EXPECT_EQ(half["region"]["found"], 50);
+  EXPECT_EQ(half["region"]["recall"], 0.5);
   const auto far = shifted(0.08);  // beyond the 5 cm tolerance: every object missed, every detection false
   EXPECT_EQ(far["objects"]["found"], 0);
   EXPECT_EQ(far["detections"]["false"], 300);
@@ -474,6 +484,50 @@ TEST(Evaluate, FoldsABistaticReturnByItsHalfPath) {
   }
   // taken modulo c T / 2 in range instead, the folded ones were off by the bistatic term's change
   EXPECT_GT(std::abs(std::remainder(t.range(b.half_path_of_range(9.0)) - 9.0, kAmbiguity)), 1e-5);
+}
+
+// With the laser beside the lens, a detection the fold leaves in place is compared by its range as given: one
+// exactly the tolerance away (binary fractions: the difference is exact) is matched on every pixel, with the
+// error it has. Through the half path and back it was matched on some pixels only (a user's 80 % recall).
+// Of two pairs of equal |error| the nearer object wins; matches across a laser period are counted.
+TEST(Evaluate, TheToleranceIsInclusiveAndTiesGoToTheNearerObject) {
+  constexpr double kPeriod = 25e-9, kAmbiguity = kC * kPeriod / 2.0;
+  const double L[3] = {0.03, 0.0, 0.0};
+  EvaluateOptions opt;
+  opt.ambiguity_m = kAmbiguity;
+  opt.tolerance_m = 0.03125;
+  Scores s(opt);
+  int64_t found = 0, pixels = 0;
+  for (int x = 0; x < 64; ++x)
+    for (const double r : {0.4375, 0.75, 1.5}) {
+      const double d[3] = {(x - 32) / 80.0, 0.01 * x, 1.0};
+      const double n = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+      const double u[3] = {d[0] / n, d[1] / n, d[2] / n};
+      const Bistatic b = Bistatic::of(u, L);
+      for (const double by : {0.03125, -0.03125}) {
+        found += s.add(x, 0, {{0, r, true}}, {{r + by, 1.0}}, b).found;
+        ++pixels;
+        EXPECT_EQ(std::abs(s.errors().back()), 0.03125) << x << " " << r;
+      }
+    }
+  EXPECT_EQ(found, pixels);
+  EXPECT_EQ(s.to_json()["detections"]["matched_across_period"], 0);
+  // A detection exactly between two objects: the nearer one's.
+  const double u[3] = {0.0, 0.0, 1.0};
+  EvaluateOptions wide = opt;
+  wide.tolerance_m = 0.2;
+  for (const Bistatic& b : {Bistatic{}, Bistatic::of(u, L)}) {
+    Scores t(wide);
+    const PixelOutcome o = t.add(0, 0, {{1, 0.75, true}, {0, 0.5, true}}, {{0.625, 1.0}}, b);
+    EXPECT_EQ(o.found, 1);
+    EXPECT_FALSE(std::isnan(o.first_error_m));  // the nearest object (0.5 m) was found
+    EXPECT_EQ(t.errors().at(0), 0.125);
+  }
+  // A detection one period's range away is matched (the camera cannot tell them), and counted as such.
+  Scores c(opt);
+  EXPECT_EQ(c.add(0, 0, {{0, 0.5, true}}, {{0.5 + kAmbiguity, 1.0}}).found, 1);
+  EXPECT_EQ(c.add(1, 0, {{0, 0.5, true}}, {{0.5 + 0.01, 1.0}}).found, 1);
+  EXPECT_EQ(c.to_json()["detections"]["matched_across_period"], 1);
 }
 
 }  // namespace
