@@ -50,7 +50,7 @@ json objects_json(const scenes::Scene& scene) {
 // render::Camera centres sensor pixel x at x + 0.5 with the optical axis through the sensor's centre
 // (width / 2, height / 2), and an image's pixel (0, 0) is the crop's corner (x0, y0): hence c = size / 2
 // - 0.5 - crop corner. A camera-frame point (X, Y, Z) lands at u = f X / Z + cx, v = f Y / Z + cy.
-json model_components(const RunConfig& c, const scenes::Scene* scene, const json& from_run) {
+json model_components(const RunConfig& c, const scenes::Scene* scene, bool laser, const json& from_run) {
   // The components the scene decides (a sense takes them from its run), in this order.
   static constexpr std::array<std::string_view, 4> kFromScene{"transmissive surfaces", "absorbing volumes", "ambient light",
                                                               "guided connections"};
@@ -84,24 +84,25 @@ json model_components(const RunConfig& c, const scenes::Scene* scene, const json
         std::string(environment ? "ambient.illuminance_lux or spectral_irradiance_W_m2_nm > 0; " : "no ambient environment; ") +
             (lights ? "glTF punctual lights (ambient.gltf_lights); " : "no glTF light used; ") +
             (emission ? "emissive materials" : "no emissive material"));
-    const bool guided = render::guided_connections_active(*scene, c.render.guided_connections) && laser_traced(c);
+    const bool guided = render::guided_connections_active(*scene, c.render.guided_connections) && laser;
     add(kFromScene[3].data(), guided,
         guided ? "a material of narrow glossy lobe (roughness 0.032-0.2): glossy and Lambertian vertices also draw towards "
                  "its reflections of the laser, with MIS (render.guided_connections)"
                : !c.render.guided_connections ? "render.guided_connections is false"
-               : !laser_traced(c)             ? "the laser is not traced (laser light)"
+               : !laser                       ? "the laser is not traced (laser light)"
                                               : "no material of roughness 0.032-0.2");
   } else if (from_run.is_array()) {
     for (const json& e : from_run)
       if (std::find(kFromScene.begin(), kFromScene.end(), e.value("component", "")) != kFromScene.end()) out.push_back(e);
   }
-  const bool laser = laser_traced(c);
   add("laser light", laser,
       c.acquisition.mode == AcquisitionMode::GateSweep ? "a gate sweep images the laser's light"
       : c.acquisition.intensity.laser_on              ? "acquisition.intensity.laser_on is true"
-      : laser ? std::string(c.outputs.transient ? "outputs.transient" : "outputs.light") + " is true: the laser's light is kept"
-              : "the intensity mode without acquisition.intensity.laser_on (and no outputs.transient or outputs.light): "
-                "the laser is not traced; no laser.exr, no laser channels in ground_truth.exr");
+      : c.outputs.transient                           ? "outputs.transient is true: the laser's light is kept"
+      : laser ? "the run's saved light holds the laser's (a sense of a run that traced it)"
+              : "the intensity mode without acquisition.intensity.laser_on (and no outputs.transient): the laser is not "
+                "traced; no laser.exr, no laser channels in ground_truth.exr" +
+                    std::string(c.outputs.light ? "; the saved light holds none (a spadgen sense of it in this mode needs none)" : ""));
   add("indirect light", c.render.max_bounces > 1,
       "render.max_bounces = " + std::to_string(c.render.max_bounces) + (c.render.max_bounces > 1 ? "" : ": direct light only"));
   add("target error", c.render.target_relative_error.has_value(),
@@ -273,7 +274,7 @@ json metadata(const scenes::ResolvedRun& resolved, const std::vector<std::string
       else runs.back()[1] = runs.back()[1].get<size_t>() + 1;
     meta["light"]["fill_factor"] = runs;
   }
-  if (laser_traced(cfg))
+  if (r.laser_traced)
     meta["laser_photons_per_pulse"] = {{"total_all_pixels", r.laser_total},
                                        {"outside_time_window", r.out_of_window_total},
                                        {"outside_fraction", r.laser_total > 0 ? r.out_of_window_total / r.laser_total : 0.0}};

@@ -52,8 +52,9 @@ nlohmann::json objects_json(const scenes::Scene& scene);
 
 // What of the physical model a run's scene and settings use, for metadata.json "model": one entry per
 // component, {"component", "active", "why"}. The scene's part comes from the scene (null: a sense, which
-// takes it from its source run's metadata.json, `from_run`).
-nlohmann::json model_components(const RunConfig& c, const scenes::Scene* scene, const nlohmann::json& from_run = nullptr);
+// takes it from its source run's metadata.json, `from_run`). laser: whether the light holds the laser's
+// (laser_traced(c) for a run; for a sense, whether its run's saved light does).
+nlohmann::json model_components(const RunConfig& c, const scenes::Scene* scene, bool laser, const nlohmann::json& from_run = nullptr);
 
 // What metadata.json reports that only the finished run knows.
 // Where a run's time went: wall seconds before the tiles (scene, BVH, sensor maps, outputs opened), in
@@ -73,6 +74,9 @@ struct RunRecord {
   nlohmann::json file_bytes = nlohmann::json::object();  // each but metadata.json: writers::bytes_on_disk
   nlohmann::json camera;           // camera_json()
   double photons_per_pulse_emitted = 0.0;
+  // The light holds the laser's (laser_traced of the run; for a sense, of the run whose light it read):
+  // laser_photons_per_pulse is null without it.
+  bool laser_traced = false;
   double laser_total = 0.0, out_of_window_total = 0.0;  // photons per pulse, summed over the image
   double beyond_period_total = 0.0;  // of laser_total, from beyond the unambiguous range (run only: app/warnings.h)
   int ground_truth_layers = 0;

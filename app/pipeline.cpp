@@ -199,7 +199,8 @@ RunResult run(const RunOptions& options) {
   record.files = files;
   record.photons_per_pulse_emitted = renderer.photons_per_pulse();
   record.objects = objects_json(scene);
-  record.model = model_components(cfg, &scene);
+  record.laser_traced = laser_traced(cfg);
+  record.model = model_components(cfg, &scene, record.laser_traced);
   record.camera = camera_json(camera, img, renderer.laser_position());
   record.threads = options.threads;
   record.dataset = options.dataset;

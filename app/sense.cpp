@@ -329,7 +329,8 @@ std::vector<RunResult> sense(const SenseOptions& options) {
         {"/sensor_tables_fnv1a64", false, is_text, "text"}, {"/ground_truth_objects", false, is_count, "an integer >= 0"},
         {"/objects", false, is_array, "a list"}, {"/transient/crop_in_sensor", false, is_rect, "[x, y, width, height] in pixels"},
         {"/ground_truth_summary", false, is_object, "an object"}, {"/file_bytes", false, is_object, "an object"},
-        {"/storage/files", false, is_object, "an object"}, {"/light/fill_factor", false, is_array, "a list"}};
+        {"/storage/files", false, is_object, "an object"}, {"/light/fill_factor", false, is_array, "a list"},
+        {"/laser_photons_per_pulse", false, [](const json& v) { return v.is_object() || v.is_null(); }, "an object, or null"}};
     for (const Typed& t : typed) {
       const json::json_pointer p(t.key);
       if (!meta.contains(p)) continue;
@@ -486,6 +487,14 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     if (!(std::abs(axis.start_s) <= 1e-2))
       throw Error(where + "start is " + la.at("start").dump() + " s; expected within +-0.01 s, as every run's" + damaged);
   }
+  // Whether the saved light holds the laser's: not when the run traced none (an intensity run without laser_on,
+  // laser_photons_per_pulse null), which a sense that images the laser cannot do without.
+  const bool light_laser = !meta.contains("laser_photons_per_pulse") || !meta.at("laser_photons_per_pulse").is_null();
+  if (!light_laser && laser_traced(cfg))
+    throw Error(src.string() + ": the run traced no laser (the intensity mode without acquisition.intensity.laser_on), so its "
+                "saved light holds none, and " +
+                std::string(cfg.acquisition.mode == AcquisitionMode::GateSweep ? "a gate sweep" : "acquisition.intensity.laser_on") +
+                " images the laser's light; run the scene again with these settings and outputs.light=true");
   // What the sensor needs (the run's transient.npy, linked when sensed, does not depend on the mode: a gate
   // sweep run with transients sensed in 2D needs no bins).
   RunConfig sensor_cfg = cfg;
@@ -680,7 +689,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   {
     const fs::path where = out.parent_path().empty() ? fs::path(".") : out.parent_path();
     ResourcePlan plan = plan_resources(write_cfg, sensor, img, axis, options.threads, where, objects, nullptr, int(runs.size()),
-                                       laser_traced(cfg));
+                                       light_laser);
     std::vector<ResourcePlan::Part> disk;
     for (ResourcePlan::Part p : plan.disk) {
       if (from_run.count(p.file)) continue;
@@ -740,9 +749,9 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     staging.push_back(top ? std::make_unique<Staging>(*top, name) : std::make_unique<Staging>(dirs.back()));
     std::set<std::string> provided = r == 0 ? from_run : shared;
     provided.insert(from_run.begin(), from_run.end());
-    // (the saved light holds the laser's: outputs.light has the run trace it)
+    // (the laser's images where the saved light holds its light)
     outputs.push_back(std::make_unique<Outputs>(write_cfg, sensor, img, axis, *staging.back(), objects, options.threads,
-                                                laser_traced(cfg), provided));
+                                                light_laser, provided));
     seeds.push_back(runs[r].config.noise_seed());
   }
 
@@ -849,8 +858,8 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     record.ground_truth_layers = meta.at("ground_truth_layers").get<int>();
     if (meta.contains("ground_truth_objects")) record.ground_truth_objects = meta.at("ground_truth_objects").get<int>();
     if (meta.contains("objects")) record.objects = meta.at("objects");
-    // (cfg: its outputs.light, the run's, says the light holds the laser's)
-    record.model = model_components(cfg, nullptr, meta.contains("model") ? meta.at("model") : nlohmann::json(nullptr));
+    record.laser_traced = light_laser;
+    record.model = model_components(cfg, nullptr, light_laser, meta.contains("model") ? meta.at("model") : nlohmann::json(nullptr));
     // The run's summary of its ground truth; what this call's labels say (the first realisation computed
     // them for all) replaces the run's.
     if (r == 0) labels_summary = record.ground_truth_summary;

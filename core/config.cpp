@@ -19,8 +19,10 @@ SensorStageConfig sensor_stage(const RunConfig& c) {
 }
 
 bool laser_traced(const RunConfig& c) {
+  // (outputs.light in the intensity mode: what its counts see, and the laser's light only with a time window, which a
+  // later spadgen sense may read as a gate sweep)
   return c.acquisition.mode != AcquisitionMode::Intensity || c.acquisition.intensity.laser_on || c.outputs.transient ||
-         c.outputs.light;
+         (c.outputs.light && c.render.window_start_s.has_value());
 }
 
 RenderStageConfig render_stage(const RunConfig& c, std::vector<double> row_fill_factor, std::vector<double> row_ambient_floor) {
@@ -29,8 +31,8 @@ RenderStageConfig render_stage(const RunConfig& c, std::vector<double> row_fill_
   // not for light saved for a later spadgen sense, which may sense it in another mode or with another sensor)
   if (c.acquisition.mode == AcquisitionMode::GateSweep && !c.outputs.light) r.row_ambient_floor = std::move(row_ambient_floor);
   // The laser is held to the target wherever it is traced: what the counts see (a gate sweep, laser_on) and
-  // what is kept of it (outputs.transient; outputs.light, which a later sense may read as a gate sweep: an
-  // intensity run's saved laser return had the first round's paths only).
+  // what is kept of it (outputs.transient; outputs.light with a time window, which a later sense may read as a
+  // gate sweep: an intensity run's saved laser return had the first round's paths only).
   r.trace_laser = laser_traced(c);
   r.target_laser = r.trace_laser;
   // The counts see the ambient light in every mode (a gate sweep's background): it is held to the target

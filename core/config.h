@@ -383,8 +383,9 @@ struct RenderStageConfig {
   // dark counts as ambient photons; SensorModel::row_ambient_floor). The target holds the ambient light's
   // error against its rate plus this floor, so that a negligible background costs no paths.
   std::vector<double> row_ambient_floor{};
-  // Whether the renderer traces the laser at all: not in the intensity mode without laser_on unless an
-  // output holds its light (outputs.transient, or outputs.light for a later spadgen sense). Untraced, the
+  // Whether the renderer traces the laser at all: not in the intensity mode without laser_on unless
+  // outputs.transient keeps its light, or outputs.light with a time window (render.window_start_ns) for a later
+  // spadgen sense as a gate sweep (without one it keeps what the run's counts see, and its sense needs no laser). Untraced, the
   // paths are drawn as they would be (the ambient light's estimate is the same unless guided connections
   // would draw towards the laser: render::guided_connections_active) but connect nothing to the
   // laser, and the laser's images are not written.

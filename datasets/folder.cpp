@@ -339,15 +339,24 @@ std::vector<Revision> render_revisions(const RunConfig& c, bool ggx) {
   if (ggx)
     out.push_back({"GGX lobes without float cancellation",
                    "glossy and metallic materials (GGX) render otherwise: a narrow lobe's peak was up to 7 % bright"});
+  // an intensity run's saved light (outputs.light: a dataset's repeats) without laser_on, outputs.transient or a time window: the
+  // laser was traced for it, which the counts do not see; the light holds none now, and the run writes no laser
+  // images (the counts are the same bits unless a target error held the laser too: below)
+  if (c.acquisition.mode == AcquisitionMode::Intensity && !c.acquisition.intensity.laser_on && c.outputs.light && !c.outputs.transient &&
+      !c.render.window_start_s)
+    out.push_back({"an intensity run's saved light holds no laser",
+                   "an intensity run's saved light (outputs.light, the dataset's repeats) no longer traces the laser, which its "
+                   "counts do not see: no laser.exr, no laser channels in ground_truth.exr"});
   if (!c.render.target_relative_error) return out;
   // a gate sweep's background, where the counts see it (dark scenes' bits did not change, but are not told apart)
   if (c.acquisition.mode == AcquisitionMode::GateSweep)
     out.push_back({"the target holds the ambient light where the counts see it",
                    "a gate sweep to render.target_relative_error holds the ambient light too"});
-  // an intensity run's laser return where it is kept (outputs.light, outputs.transient) without laser_on
-  if (c.acquisition.mode == AcquisitionMode::Intensity && !c.acquisition.intensity.laser_on && (c.outputs.light || c.outputs.transient))
+  // an intensity run's laser return where it is kept (outputs.transient; outputs.light with a time window) without laser_on
+  if (c.acquisition.mode == AcquisitionMode::Intensity && !c.acquisition.intensity.laser_on &&
+      (c.outputs.transient || (c.outputs.light && c.render.window_start_s)))
     out.push_back({"the target holds a kept laser return",
-                   "render.target_relative_error holds the laser return an intensity run keeps (outputs.light, outputs.transient)"});
+                   "render.target_relative_error holds the laser return an intensity run keeps (outputs.transient, outputs.light with a time window)"});
   return out;
 }
 

@@ -373,6 +373,42 @@ TEST_F(App, SenseKeepsOnlyWhatItsSettingsAskFor) {
   EXPECT_FALSE(fs::exists(dir_ / "bad"));
 }
 
+// An intensity run without laser_on keeps in its saved light what its counts see: it traces no laser for it (a
+// dataset's 2D samples with repeats traced the laser for 40 % of their rays, and wrote laser images no one
+// reads), its counts are those of the run without the light, and its sense in the intensity mode writes what
+// the run wrote; a sense that images the laser (laser_on) is refused, naming what the light lacks.
+TEST_F(App, AnIntensityRunsSavedLightHoldsNoLaser) {
+  const std::string chart = "run " + kScenes + "test_chart.json -q --set camera.crop=[500,500,16,8] --set render.samples_per_pixel=2 ";
+  ASSERT_EQ(sh(chart + "--set outputs.light=true -o " + (dir_ / "run").string()).code, 0);
+  ASSERT_EQ(sh(chart + "-o " + (dir_ / "bare").string()).code, 0);
+  const auto meta = nlohmann::json::parse(slurp(dir_ / "run/metadata.json"));
+  EXPECT_EQ(meta.at("run").at("rays").at("laser"), 0);
+  EXPECT_TRUE(meta.at("laser_photons_per_pulse").is_null());
+  EXPECT_FALSE(fs::exists(dir_ / "run/laser.exr"));
+  for (const char* f : {"counts.npy", "detection_rate.npy", "ambient.exr", "intensity.exr", "ground_truth.exr"})
+    EXPECT_EQ(slurp(dir_ / "run" / f), slurp(dir_ / "bare" / f)) << f;
+  for (const auto& e : meta.at("model"))
+    if (e.at("component") == "laser light") {
+      EXPECT_FALSE(e.at("active").get<bool>()) << e;
+      EXPECT_THAT(e.at("why").get<std::string>(), HasSubstr("the saved light holds none"));
+    }
+  const Result r = sh("sense " + (dir_ / "run").string() + " -q -o " + (dir_ / "sense").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  expect_same_outputs(dir_ / "run", dir_ / "sense");
+  EXPECT_FALSE(fs::exists(dir_ / "sense/laser.exr"));
+  const Result on = sh("sense " + (dir_ / "run").string() + " -q --set acquisition.intensity.laser_on=true -o " + (dir_ / "on").string());
+  EXPECT_EQ(on.code, 1);
+  EXPECT_THAT(on.output, HasSubstr((dir_ / "run").string() + ": the run traced no laser (the intensity mode without "
+                                   "acquisition.intensity.laser_on), so its saved light holds none, and "
+                                   "acquisition.intensity.laser_on images the laser's light; run the scene again"));
+  EXPECT_FALSE(fs::exists(dir_ / "on"));
+  // With a time window the light keeps the laser's, for a later sense as a gate sweep.
+  ASSERT_EQ(sh(chart + "--set outputs.light=true --set render.window_start_ns=0 --set render.window_stop_ns=20 -o " +
+               (dir_ / "windowed").string()).code, 0);
+  EXPECT_GT(nlohmann::json::parse(slurp(dir_ / "windowed/metadata.json")).at("run").at("rays").at("laser").get<int64_t>(), 0);
+  EXPECT_TRUE(fs::exists(dir_ / "windowed/laser.exr"));
+}
+
 // A sense holds the run folder's lock, shared: while a run replaces the folder (its lock exclusive) a
 // sense refuses rather than read light of one run and link files of the next; senses of one run share it.
 TEST_F(App, SenseRefusesARunFolderBeingReplaced) {

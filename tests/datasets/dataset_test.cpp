@@ -475,6 +475,8 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
   const std::string target = "\"render.target_relative_error\": 0.05, ";
   const std::string intensity = "\"acquisition.mode\": \"intensity\"";
   const std::string ggx = "glossy and metallic materials (GGX) render otherwise: a narrow lobe's peak was up to 7 % bright";
+  const std::string light = "an intensity run's saved light (outputs.light, the dataset's repeats) no longer traces the laser, "
+                            "which its counts do not see: no laser.exr, no laser channels in ground_truth.exr";
   struct Case {
     std::string set;
     std::string revisions;  // "" where none applies
@@ -483,10 +485,14 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
            {"\"render.samples_per_pixel\": 4", ""},
            {target + "\"render.samples_per_pixel\": 4", "a gate sweep to render.target_relative_error holds the ambient light too"},
            {target + intensity, ""},
-           {target + intensity + ", \"outputs.light\": true",
-            "render.target_relative_error holds the laser return an intensity run keeps (outputs.light, outputs.transient)"},
+           // an intensity run's saved light no longer holds the laser's (it was traced for it, and held to the target)
+           {target + intensity + ", \"outputs.light\": true", light},
+           {target + intensity + ", \"outputs.transient\": true",
+            "render.target_relative_error holds the laser return an intensity run keeps (outputs.transient, outputs.light with a time window)"},
            {target + intensity + ", \"outputs.light\": true, \"acquisition.intensity.laser_on\": true", ""},
-           {intensity + ", \"outputs.light\": true", ""},
+           {intensity + ", \"outputs.light\": true", light},
+           {intensity + ", \"outputs.light\": true, \"outputs.transient\": true", ""},
+           {intensity + ", \"outputs.light\": true, \"render.window_start_ns\": 0, \"render.window_stop_ns\": 10", ""},
            // the flat target's paper is Lambertian: a GGX lobe only where a sample's parameters make it glossy
            {"\"materials.white_paper.roughness\": 0.5", ggx},
            {"\"materials.white_paper.roughness\": 1", ""},

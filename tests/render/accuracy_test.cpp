@@ -266,8 +266,13 @@ TEST(Accuracy, TheTargetHoldsTheAmbientLightInTheIntensityMode) {
   for (const bool light : {false, true}) {  // the laser return kept, for a later sense or as transients
     run.outputs.light = light;
     run.outputs.transient = !light;
+    run.render.window_start_s = light ? std::optional<double>(0.0) : std::nullopt;
     EXPECT_TRUE(render_stage(run, {}).target_laser) << light;
   }
+  // the saved light without a time window holds what the 2D counts see: no laser
+  run.render.window_start_s.reset();
+  EXPECT_FALSE(render_stage(run, {}).target_laser);
+  EXPECT_FALSE(render_stage(run, {}).trace_laser);
   run.outputs.light = run.outputs.transient = false;
   run.acquisition.intensity.laser_on = true;
   EXPECT_TRUE(render_stage(run, {}).target_laser);
