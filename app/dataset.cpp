@@ -965,8 +965,9 @@ class IndexCheck {
     json want = json::parse(*wanted);
     const bool done = text(r, "status") == "done", done_now = text(want, "status") == "done";
     if (done != done_now || (done && text(r, "sample_hash") != text(want, "sample_hash")))
-      return where + " lists sample " + std::to_string(row_) + " as " + text(r, "status") + (done ? " with another hash" : "") +
-             ", and it is " + (done_now ? "done" : "not done") + " now: the index is out of date" + kFix;
+      return where + " lists sample " + std::to_string(row_) + " as " + text(r, "status") +
+             (done && done_now ? " with another hash (" + text(r, "sample_hash") + ")" : "") + ", and it is " +
+             (done_now ? "done (" + text(want, "sample_hash") + ")" : text(want, "status")) + " now: the index is out of date" + kFix;
     // The rest of the row as the sample's folder and the dataset file give it: its parameters, seeds, folders,
     // files and ground truth (a row edited to other parameters was taken, and the Python package selected the
     // sample by them; an adversarial tester's find).

@@ -948,7 +948,21 @@ TEST_F(Dataset, StatusChecksTheIndex) {
   write(dir_ / "out/index.jsonl", missing);
   const Result stale = sh(status);
   EXPECT_EQ(stale.code, 4) << stale.output;
-  EXPECT_THAT(stale.output, HasSubstr("row 2 lists sample 1 as missing, and it is done now: the index is out of date" + fix));
+  const std::string hash1 = nlohmann::json::parse(index.substr(second, index.find('\n', second) - second)).at("sample_hash");
+  EXPECT_THAT(stale.output, HasSubstr("row 2 lists sample 1 as missing, and it is done (" + hash1 + ") now: the index is out of date" + fix));
+  // listed as done, and damaged since (a file gone): said so, not "with another hash" (a user's confusion: the hash is the same)
+  {
+    write(dir_ / "out/index.jsonl", index);
+    const fs::path sample = dir_ / "out/samples/000001";
+    const auto files = nlohmann::json::parse(slurp(sample / "metadata.json")).at("files");
+    const fs::path gone = sample / files.at(0).get<std::string>(), kept = dir_ / "kept_file";
+    fs::rename(gone, kept);
+    const Result damaged = sh(status);
+    fs::rename(kept, gone);
+    EXPECT_EQ(damaged.code, 4) << damaged.output;
+    EXPECT_THAT(damaged.output, HasSubstr("row 2 lists sample 1 as done, and it is damaged now: the index is out of date" + fix));
+    EXPECT_THAT(damaged.output, Not(HasSubstr("another hash")));
+  }
   // ... and a row whose other fields are not what the sample's folder and the dataset file give (other
   // parameters were taken, and the Python package selected the sample by them; an adversarial tester's find);
   // its bytes may differ (a copy of the folder without its hard links holds more)
