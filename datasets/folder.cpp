@@ -921,10 +921,15 @@ std::string dataset_card(const DatasetFolder& folder, const CardTally& tally) {
       }
     }
     const std::string crop = num("camera.crop");
+    // (a 2D scene whose counts see no laser: its laser's settings say nothing of its data)
+    const std::string laser_on = num("acquisition.intensity.laser_on");
+    const bool laser_off = num("acquisition.mode") == "intensity" && laser_on == "false";
     o << "| `" << cell(spec.scene_names[i]) << "` | " << num("camera.width_px") << " x " << num("camera.height_px")
       << (crop == "null" ? std::string() : ", crop " + crop) << " | " << num("sensor.preset") << " | " << acquisition << " | "
-      << num("laser.wavelength_nm") << " nm, " << num("laser.repetition_rate_MHz") << " MHz, " << num("laser.average_power_mW")
-      << " mW | " << num("render.samples_per_pixel") << " paths per pixel |\n";
+      << (laser_off ? std::string("off (intensity mode without laser_on)")
+                    : num("laser.wavelength_nm") + " nm, " + num("laser.repetition_rate_MHz") + " MHz, " + num("laser.average_power_mW") +
+                          " mW" + (num("acquisition.mode") == "intensity" && laser_on == "varies" ? " (laser_on varies)" : ""))
+      << " | " << num("render.samples_per_pixel") << " paths per pixel |\n";
   }
   o << "\nAs each scene's first sample resolves; \"varies\": a key under Parameters sets it per sample (or a preset it sets). Every sample's full settings "
        "are its `metadata.json`'s `resolved_scene`.\n";

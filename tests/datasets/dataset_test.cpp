@@ -534,6 +534,10 @@ TEST(DatasetFolder, TheCardSaysWhichSettingsVary) {
                                   "[\"single\", \"dual\"]}, \"random\": {\"acquisition.intensity.exposure_us\": {\"uniform\": [5, 10]}}");
   const std::string card2 = dataset_card(DatasetFolder(two_d, dir), CardTally{});
   EXPECT_THAT(card2, HasSubstr("| intensity, 255 frames, exposure (single or dual) varies, its length varies |")) << card2;
+  // its laser is off (the card listed its wavelength, rate and power, which say nothing of its data)
+  EXPECT_THAT(card2, HasSubstr("varies | off (intensity mode without laser_on) | ")) << card2;
+  const DatasetSpec lit = parse("\"set\": {\"acquisition.mode\": \"intensity\"}, \"grid\": {\"acquisition.intensity.laser_on\": [false, true]}");
+  EXPECT_THAT(dataset_card(DatasetFolder(lit, dir), CardTally{}), HasSubstr(" nm, 40 MHz, 2 mW (laser_on varies) | "));
   const DatasetSpec single = parse("\"set\": {\"acquisition.mode\": \"intensity\", \"acquisition.intensity.exposure_us\": 10}");
   EXPECT_THAT(dataset_card(DatasetFolder(single, dir), CardTally{}), HasSubstr("| intensity, 255 frames, single exposure of 10 us |"));
   fs::remove_all(dir);
