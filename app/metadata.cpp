@@ -244,7 +244,8 @@ json metadata(const scenes::ResolvedRun& resolved, const std::vector<std::string
   meta["versions"] = {{"spadgen", SPADGEN_VERSION},
                       {"embree", std::to_string(RTC_VERSION_MAJOR) + "." + std::to_string(RTC_VERSION_MINOR) + "." + std::to_string(RTC_VERSION_PATCH)}};
   meta["units"] = {{"length", "m"}, {"time", "s unless the key says ns or ps"}, {"laser", "photons per laser pulse at the SPAD, before PDP"},
-                   {"ambient", "photons per second at the SPAD, before PDP"}, {"counts", "summed binary frames"}};
+                   {"ambient", "photons per second at the SPAD, before PDP"}, {"counts", "summed binary frames"},
+                   {"detection_rate", "mean avalanches per binary frame (lambda; expected counts N (1 - exp(-lambda)))"}};
   meta["image"] = {{"width", img.width}, {"height", img.height}, {"crop_in_sensor", {img.x0, img.y0, img.width, img.height}},
                    {"sensor_width", cfg.camera.width_px}, {"sensor_height", cfg.camera.height_px},
                    {"pixel_order", "row 0 is the top of the image; (K, H, W) stacks index [k, y, x]"}};

@@ -18,8 +18,9 @@ constexpr float kInf = std::numeric_limits<float>::infinity();
 // Smooth interfaces do not count as bounces (a plate in front of a wall must not use up a direct-light
 // render); this bounds the specular chains instead (total internal reflection inside a slab).
 constexpr int kMaxDeltaEvents = 64;
-// A camera path follows both branches of its first this many clear (purely Dirac) interfaces: a plate's
-// two faces and its first echo inside (through a 2 mm clear plate, the paths' spread fell from 7 % to 3e-6).
+// A camera path follows both branches of the first this many clear (purely Dirac) interfaces it meets, over
+// all its branches in the order they are traced: a plate's two faces, and its echo inside when the branches
+// traced before it left splits (through a 2 mm clear plate, the paths' spread fell from 7 % to 3e-6).
 constexpr int kMaxDeltaSplits = 4;
 constexpr int kMaxShadowCrossings = 64;
 // A punctual light this many float ulps of a hit point's largest coordinate from the surface's plane is

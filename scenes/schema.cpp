@@ -447,7 +447,7 @@ std::vector<Key> build() {
   k.push_back(integer("/render/russian_roulette_from", FIELD(render.russian_roulette_from), kNone, closed(1, 64), "bounce from which paths may be stopped by Russian roulette"));
   k.push_back(number("/render/time_bin_ps", FIELD(render.time_bin_s), kPsUnit, open_closed(0, 1e6), "transient bin width"));
   k.push_back(number("/render/window_start_ns", FIELD(render.window_start_s), kNsUnit, closed(-1e6, 1e6), "start of the transient window; null = derived from the acquisition"));
-  k.push_back(number("/render/window_stop_ns", FIELD(render.window_stop_s), kNsUnit, closed(-1e6, 1e6), "end of the transient window; null = derived from the acquisition"));
+  k.push_back(number("/render/window_stop_ns", FIELD(render.window_stop_s), kNsUnit, closed(-1e6, 1e6), "end of the transient window, rounded up to a whole number of bins (metadata.json time_axis end_ns says where it ends); null = derived from the acquisition"));
   k.push_back(integer("/render/tile_size_px", FIELD(render.tile_size), kPixel, closed(8, 4096), "tile edge (a multiple of 8: bit-packed frames start on a byte); outputs do not depend on it"));
   k.back().multiple_of = 8;
   k.push_back(integer("/render/max_layers", FIELD(render.max_layers), kNone, closed(1, 64), "surfaces recorded per pixel in the ground truth"));

@@ -68,6 +68,8 @@ TEST_F(App, RunWritesEveryFileItListsWithConsistentShapes) {
   ASSERT_EQ(r.code, 0) << r.output;
   const auto meta = nlohmann::json::parse(slurp(dir_ / "out/metadata.json"));
   for (const auto& f : meta["files"]) EXPECT_TRUE(fs::exists(dir_ / "out" / f.get<std::string>())) << f;
+  // the unit of every quantity the files hold (the rates had none: a new user's find)
+  EXPECT_THAT(meta.at("units").at("detection_rate").get<std::string>(), HasSubstr("mean avalanches per binary frame"));
   for (const char* f : {"ground_truth.exr", "laser.exr", "ambient.exr", "sensor_maps.exr", "counts.npy",
                         "expected_counts.npy", "detection_rate.npy", "frames.npy", "transient.npy", "previews/depth.png"})
     EXPECT_TRUE(fs::exists(dir_ / "out" / f)) << f;
