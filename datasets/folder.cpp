@@ -237,13 +237,24 @@ std::optional<ojson> DatasetFolder::checked(const ojson& wanted) const {
                 dir_.string() + " holds; restore it, or remove " + dir_.string() + " or use another folder (-o)");
   if (prev) {
     ojson a = *prev, b = wanted;
-    for (const char* free_key : {"samples", "dataset_file"}) a.erase(free_key), b.erase(free_key);
+    // repeats may grow: realisations added to the samples (each sensed from its sample's saved light, the others
+    // kept); not shrink, which would leave the last realisations' folders behind
+    const auto repeats = [](const ojson& d) {
+      const auto r = d.find("repeats");
+      return r != d.end() && r->is_number_integer() ? r->get<int64_t>() : int64_t(1);
+    };
+    if (repeats(b) < repeats(a))
+      throw Error(dir_.string() + " holds " + std::to_string(repeats(a)) + " realisations of each sample's noise (repeats), and " +
+                  spec_.file + " asks for " + std::to_string(repeats(b)) +
+                  ": repeats may grow, to add realisations, not shrink; use another folder (-o), or remove " + dir_.string());
+    for (const char* free_key : {"samples", "dataset_file", "repeats"}) a.erase(free_key), b.erase(free_key);
     // set's and random's keys in any order make the same samples (only the grid's order decides the cells)
     for (const char* unordered : {"set", "random"})
       if (a.contains(unordered) && b.contains(unordered) && json(a[unordered]) == json(b[unordered])) b[unordered] = a[unordered];
     if (a != b)
       throw Error(dir_.string() + " holds another dataset: its dataset.json differs from " + spec_.file + " at " +
-                  first_difference(a, b, "") + " (only \"samples\" may change, to add samples); use another folder (-o) or remove " +
+                  first_difference(a, b, "") + " (only \"samples\" and \"repeats\" may grow, to add samples and realisations); use "
+                  "another folder (-o) or remove " +
                   dir_.string());
   } else {
     // dataset.json decides whose the folder is: without it (damaged, or lost), samples and an index there

@@ -350,6 +350,34 @@ TEST_F(Dataset, ShardsOnTheCommandLineSlurmAndKubernetesEqualTheSerialRun) {
   EXPECT_EQ(n, 6);
 }
 
+// repeats may grow: the new realisations are sensed from each sample's saved light, the sample and its
+// realisations kept as they are, and the folder holds what a run with the new repeats writes (a denoising user
+// had to render the whole dataset again for more realisations); it may not shrink.
+TEST_F(Dataset, RepeatsGrowWithoutRenderingAgain) {
+  write(dir_ / "d.json", small_dataset(2));
+  const std::string grown = (dir_ / "grown").string();
+  ASSERT_EQ(sh("dataset run " + (dir_ / "d.json").string() + " -o " + grown + " -q").code, 0);
+  const std::string sample = slurp(dir_ / "grown/samples/000001/metadata.json"), first = slurp(dir_ / "grown/samples/000001_r01/metadata.json");
+  std::string three = small_dataset(2);
+  three.replace(three.find("\"repeats\": 2"), 12, "\"repeats\": 3");
+  write(dir_ / "d.json", three);
+  const Result r = sh("dataset run " + (dir_ / "d.json").string() + " -o " + grown + " -q");
+  ASSERT_EQ(r.code, 0) << r.output;
+  // not rendered or sensed again (their metadata.json hold their runs' own times)
+  EXPECT_EQ(slurp(dir_ / "grown/samples/000001/metadata.json"), sample);
+  EXPECT_EQ(slurp(dir_ / "grown/samples/000001_r01/metadata.json"), first);
+  EXPECT_THAT(sh("dataset status " + grown).output, HasSubstr("2 samples: 2 done, 0 failed, 0 stale, 0 missing"));
+  ASSERT_EQ(sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "fresh").string() + " -q").code, 0);
+  expect_same_dataset(dir_ / "grown", dir_ / "fresh");
+  // fewer: refused, the folder as it was
+  write(dir_ / "d.json", small_dataset(2));
+  const Result fewer = sh("dataset run " + (dir_ / "d.json").string() + " -o " + grown + " -q");
+  EXPECT_EQ(fewer.code, 1);
+  EXPECT_THAT(fewer.output, HasSubstr(grown + " holds 3 realisations of each sample's noise (repeats), and " + (dir_ / "d.json").string() +
+                                      " asks for 2: repeats may grow, to add realisations, not shrink"));
+  EXPECT_TRUE(fs::exists(dir_ / "grown/samples/000001_r02/counts.npy"));
+}
+
 // The index is written by the last run on the folder to end: a shard ending while another run is on the
 // folder reads and writes nothing (100,000 samples took 29 s and 183 MB per shard's end), and the last one
 // writes it complete. The other run is this test holding a run's presence (a shared lock on byte 0 of
