@@ -739,7 +739,7 @@ class Run:
         ambient = self.ambient
         return ambient["standard_error"] if "standard_error" in ambient else None
 
-    def expected_counts_error_bound(self):
+    def expected_counts_error_bound(self, rows=slice(None), cols=slice(None)):
         """(K, H, W) float32: a first-order estimate of one standard error of the expected counts' Monte Carlo
         error, in counts (not a bound): N exp(-lambda) lambda times the larger of the pixel's relative standard
         errors of its laser return and of its ambient light (every detection counted as the noisier light;
@@ -749,19 +749,20 @@ class Run:
         the pixel's peak (the return's edges, the late light of inter-reflections), it is far too small, though the
         error there is a fraction of a count (docs/render.md, "Accuracy"). Zero where a pixel has neither. Needs detection_rate.npy and laser.exr's standard_error
         (ambient.exr's too where the run has it). The laser's error counts only where the counts see the laser:
-        in a gate sweep, and in the intensity mode with acquisition.intensity.laser_on."""
-        rel = np.zeros((self.height, self.width), np.float64)
+        in a gate sweep, and in the intensity mode with acquisition.intensity.laser_on. rows, cols: the part of
+        the image (slices), as indexing the whole result would give it."""
+        rel = np.zeros((self.height, self.width), np.float64)[rows, cols]
         if self.mode == "gate_sweep" or self.acquisition.get("laser_on", False):
             se = self.laser_standard_error
             if se is None:
                 raise KeyError(f"{self.path}/laser.exr has no standard_error channel (a run saved before it)")
-            laser = np.asarray(self.laser["photons_per_pulse"], np.float64)
-            rel = np.divide(np.asarray(se, np.float64), laser, out=np.zeros_like(laser), where=laser > 0)
+            laser = np.asarray(self.laser["photons_per_pulse"][rows, cols], np.float64)
+            rel = np.divide(np.asarray(se[rows, cols], np.float64), laser, out=np.zeros_like(laser), where=laser > 0)
         ase = self.ambient_standard_error
         if ase is not None:
-            amb = np.asarray(self.ambient["photons_per_second"], np.float64)
-            rel = np.maximum(rel, np.divide(np.asarray(ase, np.float64), amb, out=np.zeros_like(amb), where=amb > 0))
-        lam = np.asarray(self.detection_rate, np.float64)
+            amb = np.asarray(self.ambient["photons_per_second"][rows, cols], np.float64)
+            rel = np.maximum(rel, np.divide(np.asarray(ase[rows, cols], np.float64), amb, out=np.zeros_like(amb), where=amb > 0))
+        lam = np.asarray(self.detection_rate[:, rows, cols], np.float64)
         return (self.frames_per_k * np.exp(-lam) * lam * rel[None, :, :]).astype(np.float32)
 
     @property

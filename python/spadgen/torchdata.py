@@ -29,6 +29,10 @@ J = ``max_objects`` (default: the most of any run's ``ground_truth_objects``):
 | object_id | (J, H, W) | int64 | the object slot j holds: its id in its run (Run.objects names it; runs of different scenes number their objects each their own way), -1 beyond object_count |
 | object_detectable | (J, H, W) | bool | gate sweeps: slot j's object is detectable (labels.exr: its edge in the noise-free counts stands out; evaluate's "detectable") |
 | frames | (K, N, H, W) | uint8 | binary frames, 0 / 1 (large: only when asked for) |
+| expected_counts_se | (K, H, W) | float32 | the Monte Carlo standard error of expected_counts (the rendered light's noise, which the noise-free targets carry), first-order: Run.expected_counts_error_bound (a loss weight or mask) |
+| pde | (1, H, W) | float32 | the pixel's photon detection efficiency at the laser's wavelength, fill factor included (sensor_maps.exr): the chip's fixed pattern and the pixel design |
+| pde_ambient | (1, H, W) | float32 | the same over the ambient light's band |
+| dcr_cps | (1, H, W) | float32 | the pixel's dark count rate (counts per second) at the run's temperature |
 | gate_positions_ns | (K,) | float32 | gate positions (gate-sweep runs only) |
 | exposures_us | (K,) | float32 | exposure of each image (intensity runs only: one, or the short and the long) |
 | frames_per_k | () | int64 | N, the binary frames each count sums (counts / N is the detection probability) |
@@ -39,7 +43,7 @@ J = ``max_objects`` (default: the most of any run's ``ground_truth_objects``):
 | repeat | () | int64 | DatasetSamples only: the realisation of the temporal noise (0: the sample's own folder) |
 | parameters | (P,) | float32 | DatasetSamples only: the sample's numeric parameters, in the order of ``parameter_names`` |
 
-``fields`` chooses among the first fifteen (default: counts, expected_counts, depth, mask, layer_count);
+``fields`` chooses among the first nineteen (default: counts, expected_counts, depth, mask, layer_count);
 gate_positions_ns (gate sweeps only), exposures_us (intensity runs only), frames_per_k, intrinsics, origin and run
 come always, and with DatasetSamples sample,
 repeat and parameters. Runs that share a DataLoader batch must agree on K (and N with frames); the constructor
@@ -70,7 +74,8 @@ from .run import Run, RunChangedError, open_run, unpack_frames
 __all__ = ["RunDataset", "DatasetSamples", "FIELDS", "DEFAULT_FIELDS"]
 
 FIELDS = ("counts", "expected_counts", "detection_rate", "depth", "depth_z", "mask", "layer_count", "layer_depth", "layer_mask",
-          "object_count", "object_range", "object_mask", "object_detectable", "object_id", "frames")
+          "object_count", "object_range", "object_mask", "object_detectable", "object_id", "frames", "expected_counts_se",
+          "pde", "pde_ambient", "dcr_cps")
 DEFAULT_FIELDS = ("counts", "expected_counts", "depth", "mask", "layer_count")
 # The file each field reads; a tuple: any one of them.
 _NEEDS = {"counts": "counts.npy", "expected_counts": ("expected_counts.npy", "detection_rate.npy"),
@@ -78,7 +83,8 @@ _NEEDS = {"counts": "counts.npy", "expected_counts": ("expected_counts.npy", "de
           "depth": "ground_truth.exr", "depth_z": "ground_truth.exr", "mask": "ground_truth.exr", "layer_count": "ground_truth.exr",
           "layer_depth": "ground_truth.exr", "layer_mask": "ground_truth.exr", "object_count": "ground_truth.exr",
           "object_range": "ground_truth.exr", "object_mask": "ground_truth.exr", "object_detectable": "labels.exr",
-          "object_id": "ground_truth.exr"}
+          "object_id": "ground_truth.exr", "expected_counts_se": "detection_rate.npy", "pde": "sensor_maps.exr",
+          "pde_ambient": "sensor_maps.exr", "dcr_cps": "sensor_maps.exr"}
 
 
 def _needs(field):
@@ -273,6 +279,11 @@ class _RunSamples(torch.utils.data.Dataset):
                 for j in range(n):
                     d[j] = labels[f"object{j}.detectable"][ys, xs] > 0.5
                 out["object_detectable"] = torch.from_numpy(d & exists)
+        if "expected_counts_se" in self.fields:
+            out["expected_counts_se"] = torch.from_numpy(run.expected_counts_error_bound(ys, xs))
+        for name in ("pde", "pde_ambient", "dcr_cps"):
+            if name in self.fields:
+                out[name] = torch.from_numpy(np.array(run.sensor_maps[name][ys, xs], np.float32)[None])
         if "frames" in self.fields:
             packed = run.frames_packed[:, :, ys]
             out["frames"] = torch.from_numpy(np.ascontiguousarray(unpack_frames(packed, run.width)[..., xs]))

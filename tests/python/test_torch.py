@@ -30,7 +30,9 @@ def expected_layout(K, N, L, H, W, J):
             "object_count": ((H, W), torch.int64), "object_range": ((J, H, W), torch.float32),
             "object_mask": ((J, H, W), torch.bool), "object_detectable": ((J, H, W), torch.bool),
             "object_id": ((J, H, W), torch.int64),
-            "frames": ((K, N, H, W), torch.uint8), "gate_positions_ns": ((K,), torch.float32),
+            "frames": ((K, N, H, W), torch.uint8), "expected_counts_se": ((K, H, W), torch.float32),
+            "pde": ((1, H, W), torch.float32), "pde_ambient": ((1, H, W), torch.float32), "dcr_cps": ((1, H, W), torch.float32),
+            "gate_positions_ns": ((K,), torch.float32),
             "frames_per_k": ((), torch.int64), "intrinsics": ((3, 3), torch.float32), "origin": ((2,), torch.int64),
             "run": ((), torch.int64)}
 
@@ -64,6 +66,12 @@ def test_whole_image_sample_has_the_documented_layout_and_values(sweep_run, swee
     np.testing.assert_array_equal(s["layer_depth"].numpy(), np.where(np.isfinite(layers.range), layers.range, 0))
     np.testing.assert_array_equal(s["layer_mask"].numpy().sum(0), layers.count)
     np.testing.assert_array_equal(s["frames"].sum(1).numpy(), sweep.counts)
+    # the rendered light's error in the targets, and the chip's maps
+    np.testing.assert_array_equal(s["expected_counts_se"].numpy(), sweep.expected_counts_error_bound())
+    assert s["expected_counts_se"].numpy().max() > 0
+    for name in ("pde", "pde_ambient", "dcr_cps"):
+        np.testing.assert_array_equal(s[name][0].numpy(), sweep.sensor_maps[name])
+    assert s["pde"].numpy().min() > 0
     # the objects, as evaluate scores them: Run.object_slots' (ground_truth.exr's and labels.exr's slots)
     slots = sweep.object_slots()
     used = slots.id >= 0
@@ -109,6 +117,10 @@ def test_patches_cover_the_image_and_shift_the_intrinsics(sweep_run, sweep):
     slots = sweep.object_slots()
     np.testing.assert_array_equal(objects["object_range"][:2].numpy(),
                                   np.where(slots.id[:2, 0:5, 48:64] >= 0, slots.range[:2, 0:5, 48:64], 0))
+    # a patch's error and maps are the whole image's there
+    maps = RunDataset([sweep_run], patch_size=(5, 16), fields=("expected_counts_se", "dcr_cps"))[3]
+    np.testing.assert_array_equal(maps["expected_counts_se"].numpy(), sweep.expected_counts_error_bound()[:, 0:5, 48:64])
+    np.testing.assert_array_equal(maps["dcr_cps"][0].numpy(), sweep.sensor_maps["dcr_cps"][0:5, 48:64])
 
 
 def test_data_loader_batches_and_a_training_step(sweep_run, sweep):
