@@ -286,7 +286,7 @@ class Run:
                    "intensity.exr": "acquisition.mode = intensity",
                    "labels.exr": "acquisition.mode = gate_sweep with outputs.ground_truth",
                    "laser.exr": "a gate sweep, or in the intensity mode with acquisition.intensity.laser_on, "
-                   "outputs.transient or outputs.light: else the laser is not traced"}
+                   "outputs.transient, or outputs.light with render.window_start_ns: else the laser is not traced"}
 
     def __init__(self, path):
         self.path = os.fspath(path)
