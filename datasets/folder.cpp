@@ -301,7 +301,7 @@ const std::string& DatasetFolder::scene_content_hash(int scene) const {
   return it->second;
 }
 
-bool DatasetFolder::renders_ggx(const scenes::ResolvedRun& r) const {
+std::optional<std::vector<scenes::Material>> DatasetFolder::used_materials(const scenes::ResolvedRun& r, bool* default_material) const {
   const std::lock_guard<std::mutex> lock(content_mutex_);
   const std::pair<std::string, std::string> key{r.config.gltf_path, r.config.gltf_scene};
   auto it = scene_materials_.find(key);
@@ -320,18 +320,34 @@ bool DatasetFolder::renders_ggx(const scenes::ResolvedRun& r) const {
     it = scene_materials_.emplace(key, std::move(m)).first;
   }
   const SceneMaterials& m = it->second;
-  if (!m.loaded || m.default_material) return true;
-  for (scenes::Material mat : m.used) {
+  *default_material = m.default_material;
+  if (!m.loaded) return std::nullopt;
+  std::vector<scenes::Material> used = m.used;
+  for (scenes::Material& mat : used)
     for (const MaterialEdit& e : r.config.edits.materials)
       if (e.name == mat.name) {  // the fields the loader's edit sets (scenes/gltf_loader.cpp)
         if (e.roughness) mat.roughness = float(*e.roughness);
         if (e.metallic) mat.metallic = float(*e.metallic);
         if (e.transmission) mat.transmission = float(*e.transmission);
       }
-    // a smooth surface reflects and refracts by Dirac lobes only
-    if (!mat.lambertian() && !mat.smooth()) return true;
-  }
-  return false;
+  return used;
+}
+
+bool DatasetFolder::renders_ggx(const scenes::ResolvedRun& r) const {
+  bool default_material = false;
+  const auto used = used_materials(r, &default_material);
+  if (!used || default_material) return true;
+  // a smooth surface reflects and refracts by Dirac lobes only
+  return std::any_of(used->begin(), used->end(), [](const scenes::Material& mat) { return !mat.lambertian() && !mat.smooth(); });
+}
+
+bool DatasetFolder::renders_refracted_echo(const scenes::ResolvedRun& r) const {
+  bool default_material = false;
+  const auto used = used_materials(r, &default_material);
+  if (!used) return true;
+  const auto any = [&](auto&& pred) { return std::any_of(used->begin(), used->end(), pred); };
+  return any([](const scenes::Material& m) { return m.refracting(); }) &&
+         any([](const scenes::Material& m) { return m.transmissive() && m.smooth(); });
 }
 
 namespace {
@@ -343,8 +359,14 @@ struct Revision {
   const char* marker;
   const char* change;
 };
-std::vector<Revision> render_revisions(const RunConfig& c, bool ggx) {
+std::vector<Revision> render_revisions(const RunConfig& c, bool ggx, bool echo) {
   std::vector<Revision> out;
+  // the laser's connections through clear plates carry the echo inside each (the camera side's half of a plate's
+  // delayed echo was all a transient held)
+  if (echo)
+    out.push_back({"laser connections through clear plates carry their echo",
+                   "clear (smooth) refracting plates render otherwise: the laser's light reflected inside a plate on its way "
+                   "in (half of the plate's delayed echo) was left out"});
   // GGX's D evaluated without cancellation, and its draws' sines too: a narrow lobe's peak was up to 7 % bright
   // (1.4 % at roughness 0.05), and every GGX draw moved
   if (ggx)
@@ -381,7 +403,7 @@ DatasetFolder::Resolved DatasetFolder::resolve(const Sample& s) const {
     throw Error("sample " + std::to_string(s.index) + " (" + s.parameters.dump() + ") makes an invalid scene: " + e.what());
   }
   std::string revisions;
-  for (const Revision& v : render_revisions(r.config, renders_ggx(r))) {
+  for (const Revision& v : render_revisions(r.config, renders_ggx(r), renders_refracted_echo(r))) {
     if (!revisions.empty()) revisions += "; ";
     revisions += v.change;
   }
@@ -395,7 +417,7 @@ std::string DatasetFolder::sample_hash(const Sample& s, const scenes::ResolvedRu
   // shape replaced under a done dataset left its samples done, mixing two pulses).
   std::string text = r.resolved.dump() + "\n" + scene_content_hash(s.scene) + "\n" + SPADGEN_VERSION;
   if (revisions)
-    for (const Revision& v : render_revisions(r.config, renders_ggx(r))) text += std::string("\n") + v.marker;
+    for (const Revision& v : render_revisions(r.config, renders_ggx(r), renders_refracted_echo(r))) text += std::string("\n") + v.marker;
   if (scenes::uses_sensor_tables(r.config)) text += "\n" + scenes::sensor_tables_hash(r.config);
   return scenes::hex64(scenes::fnv1a64(text));
 }

@@ -190,6 +190,12 @@ class DatasetFolder {
   // as the sample's edits leave it, or a mesh has the glTF's default material. The glTF's materials are loaded
   // once per glTF (and glTF scene).
   bool renders_ggx(const scenes::ResolvedRun& r) const;
+  // Whether its laser connections through plates carry their echoes (render_revisions): a material its meshes use
+  // refracts (a volume of ior != 1) and a transmissive one is smooth, as the sample's edits leave them.
+  bool renders_refracted_echo(const scenes::ResolvedRun& r) const;
+  // The materials a sample's meshes use as its edits leave them; null where the glTF did not load. *default_material:
+  // a mesh has none.
+  std::optional<std::vector<scenes::Material>> used_materials(const scenes::ResolvedRun& r, bool* default_material) const;
   nlohmann::ordered_json record() const;  // what dataset.json holds for this dataset
   // check()'s refusals of the existing folder DIR against `wanted` (record()); its dataset.json as it is.
   std::optional<nlohmann::ordered_json> checked(const nlohmann::ordered_json& wanted) const;

@@ -313,6 +313,14 @@ Spec interface_transmittance(const MaterialPoint& m, float cos_theta, bool enter
   return (1.0f - m.metallic) * m.transmission * (1.0f - f) * m.base;
 }
 
+Spec interface_reflectance(const MaterialPoint& m, float cos_theta, bool entering) {
+  const bool volume = m.transmission > 0.0f && !m.thin_walled;
+  const float eta = volume ? (entering ? m.ior : 1.0f / m.ior) : m.ior;
+  const float c = std::fabs(cos_theta);
+  const Spec f((1.0f - m.metallic) * fresnel_dielectric(c, eta));
+  return m.metallic > 0.0f ? f + m.metallic * schlick(m.base, c) : f;
+}
+
 Spec straight_transmittance(const MaterialPoint& m, bool volume, const glm::vec3& d, const glm::vec3& ng, glm::vec3* inside) {
   const float c = glm::dot(d, ng);
   const bool entering = c < 0.0f;

@@ -122,6 +122,9 @@ class Bsdf {
 // transmission, base colour and (1 - metallic). cos is |d . n| on the side the light comes from, entering
 // which side that is (eta = ior entering, 1 / ior leaving).
 Spec interface_transmittance(const MaterialPoint& m, float cos_theta, bool entering);
+// The share a smooth face reflects of light arriving at cos_theta from outside the material (entering) or inside
+// it, as Bsdf::smooth_reflection weighs its Dirac reflection.
+Spec interface_reflectance(const MaterialPoint& m, float cos_theta, bool entering);
 // The same for a ray that goes straight through (shadow rays and ground-truth layers, which ignore
 // refraction bending) crossing a face of normal ng in direction d. Its Fresnel terms are the light's:
 // entering a volume (`volume`: the material bounds a medium) the light refracts, and `inside` becomes its

@@ -508,6 +508,13 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
   const DatasetFolder::Resolved r = DatasetFolder(spec, dir).resolve(make_sample(spec, 0));
   EXPECT_EQ(r.revisions, ggx);
   EXPECT_NE(r.hash, r.hash_before_revisions);
+  // made clear (smooth), its plate's echo on the laser's side is rendered: that revision alone
+  const DatasetSpec clear = parse_dataset_text("{\"scenes\": [\"" + kScenes + "multi_object.json\"], \"set\": "
+                                               "{\"materials.plastic_plate.roughness\": 0}}", "test_dataset.json");
+  const DatasetFolder::Resolved c = DatasetFolder(clear, dir).resolve(make_sample(clear, 0));
+  EXPECT_EQ(c.revisions, "clear (smooth) refracting plates render otherwise: the laser's light reflected inside a plate on its way "
+                         "in (half of the plate's delayed echo) was left out");
+  EXPECT_NE(c.hash, c.hash_before_revisions);
   fs::remove_all(dir);
 }
 
