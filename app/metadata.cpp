@@ -99,6 +99,7 @@ json model_components(const RunConfig& c, const scenes::Scene* scene, bool laser
       c.acquisition.mode == AcquisitionMode::GateSweep ? "a gate sweep images the laser's light"
       : c.acquisition.intensity.laser_on              ? "acquisition.intensity.laser_on is true"
       : c.outputs.transient                           ? "outputs.transient is true: the laser's light is kept"
+      : c.outputs.light && c.render.window_start_s    ? "outputs.light with render.window_start_ns keeps the laser's light (for a later sense as a gate sweep)"
       : laser ? "the run's saved light holds the laser's (a sense of a run that traced it)"
               : "the intensity mode without acquisition.intensity.laser_on (and no outputs.transient): the laser is not "
                 "traced; no laser.exr, no laser channels in ground_truth.exr" +

@@ -325,11 +325,7 @@ std::optional<std::vector<scenes::Material>> DatasetFolder::used_materials(const
   std::vector<scenes::Material> used = m.used;
   for (scenes::Material& mat : used)
     for (const MaterialEdit& e : r.config.edits.materials)
-      if (e.name == mat.name) {  // the fields the loader's edit sets (scenes/gltf_loader.cpp)
-        if (e.roughness) mat.roughness = float(*e.roughness);
-        if (e.metallic) mat.metallic = float(*e.metallic);
-        if (e.transmission) mat.transmission = float(*e.transmission);
-      }
+      if (e.name == mat.name) mat.apply(e);  // as the loader applies it (an ior or thickness makes a volume refract)
   return used;
 }
 
@@ -363,7 +359,7 @@ std::vector<Revision> render_revisions(const RunConfig& c, bool ggx, bool echo) 
   std::vector<Revision> out;
   // the laser's connections through clear plates carry the echo inside each (the camera side's half of a plate's
   // delayed echo was all a transient held)
-  if (echo)
+  if (echo && laser_traced(c))  // (a run that traces no laser draws no echo: the same bits)
     out.push_back({"laser connections through clear plates carry their echo",
                    "clear (smooth) refracting plates render otherwise: the laser's light reflected inside a plate on its way "
                    "in (half of the plate's delayed echo) was left out"});
@@ -374,7 +370,8 @@ std::vector<Revision> render_revisions(const RunConfig& c, bool ggx, bool echo) 
                    "glossy and metallic materials (GGX) render otherwise: a narrow lobe's peak was up to 7 % bright"});
   // an intensity run's saved light (outputs.light: a dataset's repeats) without laser_on, outputs.transient or a time window: the
   // laser was traced for it, which the counts do not see; the light holds none now, and the run writes no laser
-  // images (the counts are the same bits unless a target error held the laser too: below)
+  // images (the counts are the same bits unless a target error held the laser too: below; the laser-side echoes'
+  // draws are hashes, not the path's stream)
   if (c.acquisition.mode == AcquisitionMode::Intensity && !c.acquisition.intensity.laser_on && c.outputs.light && !c.outputs.transient &&
       !c.render.window_start_s)
     out.push_back({"an intensity run's saved light holds no laser",
@@ -956,7 +953,9 @@ std::string dataset_card(const DatasetFolder& folder, const CardTally& tally) {
     const std::string crop = num("camera.crop");
     // (a 2D scene whose counts see no laser: its laser's settings say nothing of its data)
     const std::string laser_on = num("acquisition.intensity.laser_on");
-    const bool laser_off = num("acquisition.mode") == "intensity" && laser_on == "false";
+    // (with outputs.transient, or outputs.light with a time window, its files hold the laser's light all the same)
+    const bool laser_off = num("acquisition.mode") == "intensity" && laser_on == "false" && num("outputs.transient") == "false" &&
+                           (num("outputs.light") == "false" || num("render.window_start_ns") == "null");
     o << "| `" << cell(spec.scene_names[i]) << "` | " << num("camera.width_px") << " x " << num("camera.height_px")
       << (crop == "null" ? std::string() : ", crop " + crop) << " | " << num("sensor.preset") << " | " << acquisition << " | "
       << (laser_off ? std::string("off (intensity mode without laser_on)")

@@ -65,8 +65,8 @@ class Scores {
   std::map<int, std::vector<double>> errors_by_object_;
   std::vector<double> errors_, region_errors_;
   int64_t detections_ = 0, false_ = 0, pixels_ = 0, empty_pixels_with_detections_ = 0, empty_pixels_ = 0;
-  int64_t across_period_ = 0;
-  int64_t region_nearest_ = 0;  // pixels of the region with an object  // matched detections folded onto their object by one or more laser periods
+  int64_t across_period_ = 0;   // matched detections folded onto their object by one or more laser periods
+  int64_t region_nearest_ = 0;  // pixels of the region with an object
 };
 
 // Statistics of range errors in metres, reported in mm: count, bias, rms, std, |error| percentiles 50/90/99.

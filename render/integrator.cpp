@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cfloat>
 #include <cmath>
+#include <cstring>
 #include <limits>
 
 #include "core/error.h"
@@ -534,16 +535,17 @@ inline bool Integrator::ahead_shadow(const CameraBlock& block, size_t j, LaserRa
   return true;
 }
 
-inline void Integrator::deposit_laser(const NeeVertex& v, double value, double opl, const PixelFilm& film) const {
+inline void Integrator::deposit_laser(const NeeVertex& v, double value, double opl, const PixelFilm& film, bool reflected) const {
   if (opl >= period_opl_) film.totals->beyond_period += value;
   deposit(value, config_.laser.emission_delay_s + opl / kSpeedOfLight, film.axis, film.bins, film.totals,
           v.vertices > 0 ? film.indirect_bins : nullptr);
   // The laser is a point light, so this connection is its only strategy: each path's light is attributed
   // once, to the object of this vertex when the camera sees the vertex directly or through transmissive
   // surfaces only (smooth or rough: no reflection before it), else to the indirect rest. So the sphere
-  // behind a plate returns its light directly through the plate, and a mirror image is indirect.
+  // behind a plate returns its light directly through the plate, and a mirror image is indirect, as is an
+  // echo of the laser's light between a plate's faces (`reflected`), as the camera side's half of it is.
   if (film.objects) {
-    if (v.seen_through) film.objects->add(mesh_object_[size_t(v.sf.mesh)], value);
+    if (v.seen_through && !reflected) film.objects->add(mesh_object_[size_t(v.sf.mesh)], value);
     else film.objects->indirect += value;
   }
 }
@@ -560,7 +562,7 @@ inline void Integrator::deposit_laser(const NeeVertex& v, double value, double o
 // lobe's blur of the laser's direction is left out, as in the straight connection): behind a 2 mm slab
 // the light is 1.007 of the rough faces' at roughness 0.15, 1.036 at 0.3, 1.247 at 0.5 (docs/render.md).
 bool Integrator::connect_laser_refracted(const NeeVertex& v, const LaserRay& lr, const Crossings& cx, double w,
-                                         const PixelFilm& film, RayCounts* rays, Rng* rng, double p_guess) const {
+                                         const PixelFilm& film, RayCounts* rays, bool echoes, double p_guess) const {
   const glm::dvec3 x(v.sf.p), L = laser_.position;
   const glm::dvec3 to = L - x;
   const double r = lr.r;
@@ -593,24 +595,29 @@ bool Integrator::connect_laser_refracted(const NeeVertex& v, const LaserRay& lr,
   for (int j = 0; j <= k; ++j) layer[j] = j;
   double p = 0.0, cs[kMaxLaserSteps];
   if (!connect_laser_along(v, ly, cx, layer, back, k + 1, p0, w, film, rays, &p, cs)) return false;
-  if (!rng) return true;
-  // Its echoes: the light reflects off smooth face b on its way and back off smooth face a < b nearer the laser
-  // (a clear plate's two faces; two plates' four, pairwise), crossing the layers between them twice more: R_b R_a
-  // of the light, 2 sum n_j d_j / cos later. No camera path finds it (two Dirac reflections, then the point
-  // laser): without it a clear plate's delayed echo in a transient was half its value (the camera side's half),
-  // and the light through two plates 0.4 % low at ior 1.5. Rough faces' echoes are the camera paths' (their
-  // glossy reflections are vertices). Higher orders (R^4 and beyond) are left out. Each echo is traced with
-  // probability min(1, R_a R_b / kEchoTraced), R the faces' reflectance at the straight-through path's angles,
-  // and weighted by its inverse: unbiased, at a 6th of the rays for a plate of ior 1.5 (R^2 = 0.0016), whose
-  // echoes then add about 1 % of noise to a connection's light (their variance sum R_a R_b kEchoTraced).
+  if (!echoes) return true;
+  // Its echoes: the light reflects off face b on its way and back off smooth face a < b nearer the vertex (a
+  // clear plate's two faces; two plates' four, pairwise), crossing the layers between them twice more: R_b R_a
+  // of the light, 2 sum n_j d_j / cos later. No camera path finds it (the reflections are Dirac or, at a rough
+  // b, a vertex whose laser connection is a transmission, which NeeVertex::counted leaves to this one; then the
+  // point laser): without it a clear plate's delayed echo in a transient was half its value (the camera side's
+  // half), and the light through two plates 0.7 % low at ior 1.5. A rough b is crossed as smooth, as in the
+  // straight-through path; a rough a's echo is the camera paths' (a vertex of reflection towards the laser).
+  // Higher orders (four reflections and more) are left out. Each echo is traced with probability
+  // min(1, R_a R_b / kEchoTraced), R the faces' reflectance at the straight-through path's angles, and weighted
+  // by its inverse: unbiased, at a 6th of the rays for a plate of ior 1.5 (R^2 = 0.0016), whose echoes then add
+  // about 1 % of noise to a connection's light (their variance sum R_a R_b kEchoTraced). The draw is a hash of
+  // the vertex and the faces, not the path's stream: a draw there would move the path's later draws, and the
+  // ambient light would no longer be the bits of a run that does not trace the laser.
   constexpr double kEchoTraced = 0.01;
   for (int b = 1; b < k; ++b)
     for (int a = 0; a < b; ++a) {
-      if (!cr[a].mp.smooth() || !cr[b].mp.smooth()) continue;
-      const double r_ab = double(interface_reflectance(cr[b].mp, float(cs[b]), true).x) *
-                          double(interface_reflectance(cr[a].mp, float(cs[a + 1]), true).x);
+      if (!cr[a].mp.smooth()) continue;
+      // (inside the layer before each face: entering the face's material where that layer is not its medium)
+      const double r_ab = double(interface_reflectance(cr[b].mp, float(cs[b]), ly.media[b] != cr[b].material).x) *
+                          double(interface_reflectance(cr[a].mp, float(cs[a + 1]), ly.media[a + 1] != cr[a].material).x);
       const double q = std::min(1.0, r_ab / kEchoTraced);
-      if (!(q > 0.0) || (q < 1.0 && double(uniform(*rng)) >= q)) continue;
+      if (!(q > 0.0) || (q < 1.0 && echo_uniform(v.sf.p, a, b) >= q)) continue;
       int n = 0;
       for (int i = 0; i <= b; ++i) layer[n] = i, back[n++] = false;  // to face b
       for (int i = b; i > a; --i) layer[n] = i, back[n++] = true;      // back to face a
@@ -619,6 +626,15 @@ bool Integrator::connect_laser_refracted(const NeeVertex& v, const LaserRay& lr,
       (void)connect_laser_along(v, ly, cx, layer, back, n, p, w / q, film, rays, &pe);
     }
   return true;
+}
+
+double Integrator::echo_uniform(const glm::vec3& p, int a, int b) const {
+  uint32_t x, y, z;
+  std::memcpy(&x, &p.x, 4), std::memcpy(&y, &p.y, 4), std::memcpy(&z, &p.z, 4);
+  uint64_t hash = mix64(config_.light_seed ^ 0x6563686f6563686full);  // "echoecho"
+  hash = mix64(hash ^ (uint64_t(x) << 32 | y));
+  hash = mix64(hash ^ (uint64_t(z) << 32 | uint64_t(uint32_t(a)) << 16 | uint32_t(b)));
+  return double(hash >> 11) * 0x1.0p-53;
 }
 
 // The laser's light reaching v along `n` straight segments, segment s in layer layer[s] of ly (back[s]: towards
@@ -693,12 +709,12 @@ bool Integrator::connect_laser_along(const NeeVertex& v, const RefractedLayers& 
   B *= index[n - 1] * cs[n - 1];
   const double g = 1.0 / (A * B * cs[0]);
   const double value = double(v.beta.x) * f.x * t.x * intensity * g * w;
-  deposit_laser(v, value, v.opl + opl, film);
+  deposit_laser(v, value, v.opl + opl, film, n > ly.k + 1);
   return true;
 }
 
 inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, const FirstSegment* first, double w,
-                                      const PixelFilm& film, RayCounts* rays, Rng& rng) const {
+                                      const PixelFilm& film, RayCounts* rays) const {
   const double r = lr.r, intensity = lr.intensity;
   const glm::vec3 wi = lr.wi;
   // With refracting volumes the straight walk comes first: it finds the interfaces that the refracted
@@ -709,7 +725,7 @@ inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, co
     Crossings cx;
     tr = shadow_transmittance(lr.origin, wi, float(r), v.shadow_medium_towards(wi), &extra, &rays->laser, first, &cx);
     if (edges_ && v.medium >= 0) connect_laser_edges(v, lr, cx, w, film, rays);
-    if (cx.blocked || (cx.refracting && cx.planar && connect_laser_refracted(v, lr, cx, w, film, rays, &rng))) return;
+    if (cx.blocked || (cx.refracting && cx.planar && connect_laser_refracted(v, lr, cx, w, film, rays, true))) return;
   }
   if (!v.counted(wi)) return;
   const Spec f = v.bsdf.eval_cos(wi);
@@ -750,7 +766,7 @@ void Integrator::connect_laser_edges(const NeeVertex& v, const LaserRay& lr, con
     cr.material = s.material;
     cr.mp = strip_material(st, c);
     cr.medium = -1;
-    connect_laser_refracted(v, lr, ex, w, film, rays, nullptr, std::sqrt(std::max(0.0, 1.0 - en.ce * en.ce)));  // its angle there
+    connect_laser_refracted(v, lr, ex, w, film, rays, false, std::sqrt(std::max(0.0, 1.0 - en.ce * en.ce)));  // its angle there
   }
 }
 
@@ -1026,7 +1042,7 @@ void Integrator::guided_connections(const NeeVertex& a, int medium_t, bool roule
                        !(mb.transmission > 0.0f)};
     LaserRay lr;
     RayCounts at_end;  // the laser connection at the guided vertex: the guided connection's rays
-    if (laser_ray(sb, &lr)) connect_laser(vb, lr, nullptr, w, film, &at_end, rng);
+    if (laser_ray(sb, &lr)) connect_laser(vb, lr, nullptr, w, film, &at_end);
     rays->guided += at_end.total();
   }
 }
@@ -1297,7 +1313,7 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
         LaserRay lr;
         RayCounts at_end;
         if (bsdf.has_non_delta() && beta.x > 0.0f && laser_ray(sf, &lr))
-          connect_laser(v, lr, nullptr, w * nee_share[reach] * mis, film, &at_end, rng);
+          connect_laser(v, lr, nullptr, w * nee_share[reach] * mis, film, &at_end);
         rays->guided += at_end.total();
         break;
       }
@@ -1439,7 +1455,7 @@ void Integrator::ghost_connections(const NeeVertex& a, int vertices_after, int d
           FirstSegment first;
           const bool ahead = camera_ray && ahead_shadow(block, j, &lr, &first);
           if (ahead || laser_ray(sf, &lr))
-            connect_laser(v, lr, ahead ? &first : nullptr, w * mis * ghost_nee[0], film, rays, rng);
+            connect_laser(v, lr, ahead ? &first : nullptr, w * mis * ghost_nee[0], film, rays);
         }
         if (beta.y > 0.0f) connect_ambient_lights(v, &ambient, rays);
         ++vertices;

@@ -271,14 +271,17 @@ class Integrator {
   // The laser's connection from v through the refracting interfaces the straight walk to it crossed
   // (parallel planar faces of volumes: a plate); false when the refracted path does not cross the same
   // surfaces (then the straight connection is used).
-  // p_guess: a first guess of Snell's invariant (< 0: from the straight line to the laser). rng: draws which
-  // echoes (between pairs of smooth faces) are traced, each with a probability by its reflectance (null: none).
+  // p_guess: a first guess of Snell's invariant (< 0: from the straight line to the laser). echoes: the light
+  // reflected between pairs of faces too, each traced with a probability by its reflectance.
   bool connect_laser_refracted(const NeeVertex& v, const LaserRay& lr, const Crossings& cx, double w,
-                               const PixelFilm& film, RayCounts* rays, Rng* rng, double p_guess = -1.0) const;
+                               const PixelFilm& film, RayCounts* rays, bool echoes, double p_guess = -1.0) const;
   // The layers between a vertex and the laser across a straight walk's parallel faces: their media (-1: air),
   // indices and thicknesses along the faces' normal nrm (towards the laser), and the laser's lateral offset D
   // along u.
-  static constexpr int kMaxLaserSteps = 3 * Crossings::kMax + 1;  // an echo's segments: the layers, and twice those between its faces
+  static constexpr int kMaxLaserSteps = 3 * Crossings::kMax + 1;
+  // A uniform number in [0, 1) for the echo of faces a, b seen from vertex position p: a hash of them and the
+  // light seed (connect_laser_refracted).
+  double echo_uniform(const glm::vec3& p, int a, int b) const;  // an echo's segments: the layers, and twice those between its faces
   struct RefractedLayers {
     int k = 0;  // faces
     int media[Crossings::kMax + 1];
@@ -290,16 +293,17 @@ class Integrator {
   bool connect_laser_along(const NeeVertex& v, const RefractedLayers& ly, const Crossings& cx, const int* layer,
                            const bool* back, int n, double p0, double w, const PixelFilm& film, RayCounts* rays,
                            double* p_out, double* cos_out = nullptr) const;
-  void deposit_laser(const NeeVertex& v, double value, double opl, const PixelFilm& film) const;
+  // reflected: the light reflected on its way from the laser (an echo between a plate's faces): the object's
+  // indirect light, never its own return.
+  void deposit_laser(const NeeVertex& v, double value, double opl, const PixelFilm& film, bool reflected = false) const;
   // From a vertex inside a plate: the laser's light that enters through one of the plate's edges and
   // reaches the vertex without a reflection (another path than the straight walk's, cx, unless that one
   // crossed the same edge).
   void connect_laser_edges(const NeeVertex& v, const LaserRay& lr, const Crossings& cx, double w,
                            const PixelFilm& film, RayCounts* rays) const;
   MaterialPoint strip_material(const GlossyStrip& st, const glm::dvec3& c) const;
-  // rng: draws which of a clear plate's echoes are traced (connect_laser_refracted).
   void connect_laser(const NeeVertex& v, const LaserRay& lr, const FirstSegment* first, double w,
-                     const PixelFilm& film, RayCounts* rays, Rng& rng) const;
+                     const PixelFilm& film, RayCounts* rays) const;
 
   // The ambient estimate, in the ambient channel (beta.y): light from the environment where the path
   // escapes, from emissive surfaces it hits, and from punctual ambient lights by next-event estimation.

@@ -1166,17 +1166,7 @@ void Loader::load_materials() {
       }
       ext_texture(e, "KHR_materials_volume", "thicknessTexture");
     }
-    if (const MaterialEdit* e = material_edit_[i]) {
-      // The scene file's values replace the factors, as if the glTF file had given them (a transmission
-      // above 0 makes the material transmissive whether or not it declared KHR_materials_transmission).
-      for (int k = 0; k < 3; ++k)
-        if (e->base_color[k]) mat.base_color[k] = static_cast<float>(*e->base_color[k]);
-      if (e->roughness) mat.roughness = static_cast<float>(*e->roughness);
-      if (e->metallic) mat.metallic = static_cast<float>(*e->metallic);
-      if (e->transmission) mat.transmission = static_cast<float>(*e->transmission);
-      if (e->ior) mat.ior = static_cast<float>(*e->ior);
-      if (e->thickness_m) mat.thickness_m = static_cast<float>(*e->thickness_m);
-    }
+    if (const MaterialEdit* e = material_edit_[i]) mat.apply(*e);
     scene_.materials.push_back(std::move(mat));
   }
 }

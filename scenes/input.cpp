@@ -342,8 +342,9 @@ json parse_json(const std::string& text, const std::string& where, const JsonOpt
   if (!ok || !sax.problem.empty()) {
     const std::string problem = sax.problem.empty() ? std::string("not valid JSON") : sax.problem;
     // nlohmann reports the offset one past the character it stopped at.
-    const std::string message =
-        where + (sax.syntax ? ":" + line_column(text, sax.offset > 0 ? sax.offset - 1 : 0) : std::string()) + ": " + problem;
+    std::string message = where;
+    if (sax.syntax) message.append(":").append(line_column(text, sax.offset > 0 ? sax.offset - 1 : 0));
+    message.append(": ").append(problem);
     if (sax.limit) throw JsonLimitError(message);
     throw Error(message);
   }

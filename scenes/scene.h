@@ -63,6 +63,17 @@ struct Material {
   bool bounds_medium() const { return transmissive() && thickness_m > 0.0f; }
   // A volume that bends light: the laser's connections refract through it.
   bool refracting() const { return bounds_medium() && ior != 1.0f; }
+  // The scene file's values of materials.<name> replace the factors, as if the glTF file had given them (a
+  // transmission above 0 makes the material transmissive whether or not it declared KHR_materials_transmission).
+  void apply(const MaterialEdit& e) {
+    for (int k = 0; k < 3; ++k)
+      if (e.base_color[k]) base_color[k] = static_cast<float>(*e.base_color[k]);
+    if (e.roughness) roughness = static_cast<float>(*e.roughness);
+    if (e.metallic) metallic = static_cast<float>(*e.metallic);
+    if (e.transmission) transmission = static_cast<float>(*e.transmission);
+    if (e.ior) ior = static_cast<float>(*e.ior);
+    if (e.thickness_m) thickness_m = static_cast<float>(*e.thickness_m);
+  }
 };
 
 // Mesh::offset's grid: a mesh whose vertices lie this far from the glTF's origin or farther has its positions

@@ -515,6 +515,15 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
   EXPECT_EQ(c.revisions, "clear (smooth) refracting plates render otherwise: the laser's light reflected inside a plate on its way "
                          "in (half of the plate's delayed echo) was left out");
   EXPECT_NE(c.hash, c.hash_before_revisions);
+  // ... not where no echo is drawn: an ior of 1 (no refraction: the loader applies every edit, ior and thickness
+  // too), or a 2D run that traces no laser
+  for (const std::string set : {"\"materials.plastic_plate.ior\": 1", "\"acquisition.mode\": \"intensity\""}) {
+    const DatasetSpec none = parse_dataset_text("{\"scenes\": [\"" + kScenes + "multi_object.json\"], \"set\": "
+                                                "{\"materials.plastic_plate.roughness\": 0, " + set + "}}", "test_dataset.json");
+    const DatasetFolder::Resolved n = DatasetFolder(none, dir).resolve(make_sample(none, 0));
+    EXPECT_EQ(n.revisions, "") << set;
+    EXPECT_EQ(n.hash, n.hash_before_revisions) << set;
+  }
   fs::remove_all(dir);
 }
 
