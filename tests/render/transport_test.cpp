@@ -707,10 +707,21 @@ TEST(Transport, AClearPlatesBranchesAreFollowedBothWays) {
   }
   EXPECT_NEAR(echo_all / main_all / (R * R) / (1.0 + laser_side), 1.0, 0.05);
   c.render.samples_per_pixel = 1024;
-  const TransientTile b = Renderer(scene(true), c).transient({0, 0, 4, 4}, {0, 0, 4, 4}, axis);
+  const Renderer r(scene(true), c);
+  GroundTruthTile gt = r.ground_truth({0, 0, 4, 4});
+  const TransientTile b = r.transient({0, 0, 4, 4}, {0, 0, 4, 4}, axis, nullptr, &gt);
   main_all = echo_all = 0;
   for (size_t i = 0; i < 16; ++i) split(b, i, &main_all, &echo_all);
   EXPECT_NEAR(echo_all / main_all / (R * R) / (1.0 + laser_side), 1.0, 0.015);
+  // Both halves of the echo are the wall's indirect light (reflected on the way), its direct return the wall's
+  // own: the laser side's half was filed as the wall's return.
+  double wall = 0, indirect = 0;
+  for (size_t i = 0; i < 16; ++i) {
+    for (int j = 0; j < gt.max_layers; ++j) wall += gt.object_laser[i * size_t(gt.max_layers) + size_t(j)];
+    indirect += gt.indirect_laser[i];
+  }
+  EXPECT_NEAR(wall / main_all, 1.0, 1e-3);
+  EXPECT_NEAR(indirect / echo_all, 1.0, 1e-3);
 }
 
 TEST(Transport, EachFaceOfASmoothPlateReflectsR) {
