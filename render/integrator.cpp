@@ -622,8 +622,7 @@ bool Integrator::connect_laser_refracted(const NeeVertex& v, const LaserRay& lr,
       for (int i = 0; i <= b; ++i) layer[n] = i, back[n++] = false;  // to face b
       for (int i = b; i > a; --i) layer[n] = i, back[n++] = true;      // back to face a
       for (int i = a + 1; i <= k; ++i) layer[n] = i, back[n++] = false;  // and on to the laser
-      double pe = 0.0;
-      (void)connect_laser_along(v, ly, cx, layer, back, n, p, w / q, film, rays, &pe);
+      (void)connect_laser_along(v, ly, cx, layer, back, n, p, w / q, film, rays);
     }
   return true;
 }
@@ -640,18 +639,17 @@ double Integrator::echo_uniform(const glm::vec3& p, int a, int b) const {
 // The laser's light reaching v along `n` straight segments, segment s in layer layer[s] of ly (back[s]: towards
 // the vertex, after a reflection off the face on the laser's side): what connect_laser_refracted explains, for
 // the unfolded path (reflections off parallel planes unfold into more of the layer). False where the path found
-// does not cross the faces of the straight walk as planned (nothing deposited); *p its Snell invariant.
+// does not cross the faces of the straight walk as planned (nothing deposited).
 bool Integrator::connect_laser_along(const NeeVertex& v, const RefractedLayers& ly, const Crossings& cx, const int* layer,
                                      const bool* back, int n, double p0, double w, const PixelFilm& film, RayCounts* rays,
                                      double* p_out, double* cos_out) const {
-  constexpr int kMaxSteps = kMaxLaserSteps;
   const Crossings::Crossing* cr = cx.slots.c;
-  double depth[kMaxSteps], index[kMaxSteps];
+  double depth[kMaxLaserSteps], index[kMaxLaserSteps];
   for (int s = 0; s < n; ++s) depth[s] = ly.depth[layer[s]], index[s] = ly.index[layer[s]];
   const double p = ly.D > 0.0 ? snell_invariant(depth, index, n, ly.D, p0, ly.p_max) : 0.0;
-  *p_out = p;
-  double sn[kMaxSteps], cs[kMaxSteps];
-  glm::dvec3 dir[kMaxSteps];
+  if (p_out) *p_out = p;
+  double sn[kMaxLaserSteps], cs[kMaxLaserSteps];
+  glm::dvec3 dir[kMaxLaserSteps];
   for (int s = 0; s < n; ++s) {
     sn[s] = p / index[s], cs[s] = std::sqrt(std::max(0.0, 1.0 - sn[s] * sn[s]));
     if (!(cs[s] > 0.0)) return false;

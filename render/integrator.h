@@ -275,13 +275,13 @@ class Integrator {
   // reflected between pairs of faces too, each traced with a probability by its reflectance.
   bool connect_laser_refracted(const NeeVertex& v, const LaserRay& lr, const Crossings& cx, double w,
                                const PixelFilm& film, RayCounts* rays, bool echoes, double p_guess = -1.0) const;
+  // A uniform number in [0, 1) for the echo of faces a, b seen from vertex position p: a hash of them and the
+  // light seed (connect_laser_refracted).
+  double echo_uniform(const glm::vec3& p, int a, int b) const;
+  static constexpr int kMaxLaserSteps = 3 * Crossings::kMax + 1;  // an echo's segments: the layers, and twice those between its faces
   // The layers between a vertex and the laser across a straight walk's parallel faces: their media (-1: air),
   // indices and thicknesses along the faces' normal nrm (towards the laser), and the laser's lateral offset D
   // along u.
-  static constexpr int kMaxLaserSteps = 3 * Crossings::kMax + 1;
-  // A uniform number in [0, 1) for the echo of faces a, b seen from vertex position p: a hash of them and the
-  // light seed (connect_laser_refracted).
-  double echo_uniform(const glm::vec3& p, int a, int b) const;  // an echo's segments: the layers, and twice those between its faces
   struct RefractedLayers {
     int k = 0;  // faces
     int media[Crossings::kMax + 1];
@@ -289,10 +289,11 @@ class Integrator {
     glm::dvec3 nrm, u;
     double D = 0.0, p_max = 1e30;
   };
-  // cos_out (null: not asked): each segment's cosine to the faces' normal (when the path was solved).
+  // p_out, cos_out (null: not asked): the path's Snell invariant, and each segment's cosine to the faces' normal
+  // (when the path was solved).
   bool connect_laser_along(const NeeVertex& v, const RefractedLayers& ly, const Crossings& cx, const int* layer,
                            const bool* back, int n, double p0, double w, const PixelFilm& film, RayCounts* rays,
-                           double* p_out, double* cos_out = nullptr) const;
+                           double* p_out = nullptr, double* cos_out = nullptr) const;
   // reflected: the light reflected on its way from the laser (an echo between a plate's faces): the object's
   // indirect light, never its own return.
   void deposit_laser(const NeeVertex& v, double value, double opl, const PixelFilm& film, bool reflected = false) const;
