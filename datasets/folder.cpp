@@ -301,7 +301,7 @@ const std::string& DatasetFolder::scene_content_hash(int scene) const {
   return it->second;
 }
 
-std::optional<std::vector<scenes::Material>> DatasetFolder::used_materials(const scenes::ResolvedRun& r, bool* default_material) const {
+DatasetFolder::MaterialTraits DatasetFolder::material_traits(const scenes::ResolvedRun& r) const {
   const std::lock_guard<std::mutex> lock(content_mutex_);
   const std::pair<std::string, std::string> key{r.config.gltf_path, r.config.gltf_scene};
   auto it = scene_materials_.find(key);
@@ -320,30 +320,20 @@ std::optional<std::vector<scenes::Material>> DatasetFolder::used_materials(const
     it = scene_materials_.emplace(key, std::move(m)).first;
   }
   const SceneMaterials& m = it->second;
-  *default_material = m.default_material;
-  if (!m.loaded) return std::nullopt;
-  std::vector<scenes::Material> used = m.used;
-  for (scenes::Material& mat : used)
+  MaterialTraits t;
+  if (!m.loaded) return t;
+  t.ggx = m.default_material;
+  bool refracting = false, smooth_clear = false;
+  for (scenes::Material mat : m.used) {
     for (const MaterialEdit& e : r.config.edits.materials)
       if (e.name == mat.name) mat.apply(e);  // as the loader applies it (an ior or thickness makes a volume refract)
-  return used;
-}
-
-bool DatasetFolder::renders_ggx(const scenes::ResolvedRun& r) const {
-  bool default_material = false;
-  const auto used = used_materials(r, &default_material);
-  if (!used || default_material) return true;
-  // a smooth surface reflects and refracts by Dirac lobes only
-  return std::any_of(used->begin(), used->end(), [](const scenes::Material& mat) { return !mat.lambertian() && !mat.smooth(); });
-}
-
-bool DatasetFolder::renders_refracted_echo(const scenes::ResolvedRun& r) const {
-  bool default_material = false;
-  const auto used = used_materials(r, &default_material);
-  if (!used) return true;
-  const auto any = [&](auto&& pred) { return std::any_of(used->begin(), used->end(), pred); };
-  return any([](const scenes::Material& m) { return m.refracting(); }) &&
-         any([](const scenes::Material& m) { return m.transmissive() && m.smooth(); });
+    // a smooth surface reflects and refracts by Dirac lobes only
+    t.ggx |= !mat.lambertian() && !mat.smooth();
+    refracting |= mat.refracting();
+    smooth_clear |= mat.transmissive() && mat.smooth();
+  }
+  t.echo = refracting && smooth_clear;
+  return t;
 }
 
 namespace {
@@ -400,7 +390,8 @@ DatasetFolder::Resolved DatasetFolder::resolve(const Sample& s) const {
     throw Error("sample " + std::to_string(s.index) + " (" + s.parameters.dump() + ") makes an invalid scene: " + e.what());
   }
   std::string revisions;
-  for (const Revision& v : render_revisions(r.config, renders_ggx(r), renders_refracted_echo(r))) {
+  const MaterialTraits materials = material_traits(r);
+  for (const Revision& v : render_revisions(r.config, materials.ggx, materials.echo)) {
     if (!revisions.empty()) revisions += "; ";
     revisions += v.change;
   }
@@ -413,8 +404,10 @@ std::string DatasetFolder::sample_hash(const Sample& s, const scenes::ResolvedRu
   // The sensor's tables (CSV and EXR files the scene file names) by content, when it names any (a pulse
   // shape replaced under a done dataset left its samples done, mixing two pulses).
   std::string text = r.resolved.dump() + "\n" + scene_content_hash(s.scene) + "\n" + SPADGEN_VERSION;
-  if (revisions)
-    for (const Revision& v : render_revisions(r.config, renders_ggx(r), renders_refracted_echo(r))) text += std::string("\n") + v.marker;
+  if (revisions) {
+    const MaterialTraits materials = material_traits(r);
+    for (const Revision& v : render_revisions(r.config, materials.ggx, materials.echo)) text += std::string("\n") + v.marker;
+  }
   if (scenes::uses_sensor_tables(r.config)) text += "\n" + scenes::sensor_tables_hash(r.config);
   return scenes::hex64(scenes::fnv1a64(text));
 }

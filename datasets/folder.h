@@ -186,16 +186,14 @@ class DatasetFolder {
 
  private:
   const std::string& scene_content_hash(int scene) const;
-  // Whether a sample's resolved scene r renders GGX lobes (render_revisions): a material its meshes use is not Lambertian
-  // as the sample's edits leave it, or a mesh has the glTF's default material. The glTF's materials are loaded
+  // What of a sample's resolved scene r the render revisions depend on, from the materials its meshes use as
+  // the sample's edits leave them (both true where the glTF does not load). The glTF's materials are loaded
   // once per glTF (and glTF scene).
-  bool renders_ggx(const scenes::ResolvedRun& r) const;
-  // Whether its laser connections through plates carry their echoes (render_revisions): a material its meshes use
-  // refracts (a volume of ior != 1) and a transmissive one is smooth, as the sample's edits leave them.
-  bool renders_refracted_echo(const scenes::ResolvedRun& r) const;
-  // The materials a sample's meshes use as its edits leave them; null where the glTF did not load. *default_material:
-  // a mesh has none.
-  std::optional<std::vector<scenes::Material>> used_materials(const scenes::ResolvedRun& r, bool* default_material) const;
+  struct MaterialTraits {
+    bool ggx = true;   // GGX lobes: a material is not Lambertian, or a mesh has the glTF's default material
+    bool echo = true;  // laser echoes through plates: a material refracts (a volume of ior != 1), a transmissive one is smooth
+  };
+  MaterialTraits material_traits(const scenes::ResolvedRun& r) const;
   nlohmann::ordered_json record() const;  // what dataset.json holds for this dataset
   // check()'s refusals of the existing folder DIR against `wanted` (record()); its dataset.json as it is.
   std::optional<nlohmann::ordered_json> checked(const nlohmann::ordered_json& wanted) const;
