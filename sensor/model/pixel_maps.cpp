@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <string>
+#include <vector>
 
 #include "core/error.h"
 #include "core/rng.h"
@@ -44,6 +45,32 @@ double PixelMaps::temperature_factor(double temperature_C) {
   return (1.0 - kDiffusionShareAtRoom) + kDiffusionShareAtRoom * arrhenius;
 }
 
+PixelMaps::PatternSums PixelMaps::pattern_sums(int width, int height) {
+  // The patterns are products of a row's and a column's factors: the sine and the power are taken once per
+  // column and row (per pixel they took 40 ms of every run and sense on the full chip), and each pixel's
+  // value is the same expression as skew_pattern's and length_pattern's, the same bits (tested), summed in
+  // the same order.
+  std::vector<double> column_skew(static_cast<size_t>(width)), column_length(static_cast<size_t>(width));
+  for (int x = 0; x < width; ++x) {
+    const double u = coord(x, width);
+    column_skew[size_t(x)] = u + 0.5 * std::sin(kPi * u);
+    column_length[size_t(x)] = 0.3 * u;
+  }
+  PatternSums sums;
+  for (int y = 0; y < height; ++y) {
+    const double v = 1.0 - coord(y, height);
+    const double v2 = v * v, v6 = 0.6 * std::pow(v, 6);
+    for (int x = 0; x < width; ++x) {
+      const double a = v2 + v6 * column_skew[size_t(x)], b = v + column_length[size_t(x)] * v;
+      sums.skew += a;
+      sums.skew_squared += a * a;
+      sums.length += b;
+      sums.length_squared += b * b;
+    }
+  }
+  return sums;
+}
+
 PixelMaps::PixelMaps(const SensorStageConfig& config, double nominal_length_s)
     : cfg_(config),
       nominal_length_s_(nominal_length_s),
@@ -61,19 +88,8 @@ PixelMaps::PixelMaps(const SensorStageConfig& config, double nominal_length_s)
   double smin = 0, smax = 0, lmax = 0;
   bool first = true;
   for (SectionStats& s : sections_) {
-    // Exact moments over the section's pixel grid; O(pixels) once per run.
-    double s1 = 0, s2 = 0, l1 = 0, l2 = 0;
-    for (int y = 0; y < s.height; ++y) {
-      const double v = 1.0 - coord(y, s.height);
-      for (int x = 0; x < width_; ++x) {
-        const double u = coord(x, width_);
-        const double a = skew_pattern(u, v), b = length_pattern(u, v);
-        s1 += a;
-        s2 += a * a;
-        l1 += b;
-        l2 += b * b;
-      }
-    }
+    const PatternSums sums = pattern_sums(width_, s.height);
+    const double s1 = sums.skew, s2 = sums.skew_squared, l1 = sums.length, l2 = sums.length_squared;
     const double n = static_cast<double>(s.height) * width_;
     s.skew_mean = s1 / n;
     s.len_mean = l1 / n;

@@ -55,6 +55,12 @@ class PixelMaps {
   // 0 at its bottom row; unnormalised.
   static double skew_pattern(double u, double v);
   static double length_pattern(double u, double v);
+  // The patterns' sums over a section of width x height pixels (u = x / (width - 1), v = 1 - y / (height - 1),
+  // row by row), for their exact mean and spread.
+  struct PatternSums {
+    double skew = 0, skew_squared = 0, length = 0, length_squared = 0;
+  };
+  static PatternSums pattern_sums(int width, int height);
 
   // DCR(T) / DCR(25 C). Two components, tunnelling (flat in temperature) and diffusion (Arrhenius with
   // 1.1 eV), each half of the DCR at 25 C: below about 10 C the tunnelling part dominates and the factor is

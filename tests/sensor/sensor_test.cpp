@@ -261,6 +261,25 @@ TEST(Sensor, GateMapsSpreadAndPattern) {
   EXPECT_THROW(model.set_maps(512, 500, {{"skew_ps", skew}, {"length_ps", len}}, "maps.exr"), Error);
 }
 
+// The gate maps' pattern statistics, summed from a row's and a column's factors, are the same bits as the
+// patterns evaluated at every pixel (the maps of every run depend on them).
+TEST(Sensor, GatePatternSumsEqualThePixelByPixelSums) {
+  for (const auto& [w, h] : {std::pair{1024, 500}, std::pair{1024, 1000}, std::pair{37, 3}, std::pair{1, 1}, std::pair{2, 1}}) {
+    double s1 = 0, s2 = 0, l1 = 0, l2 = 0;
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        const double u = w > 1 ? double(x) / (w - 1) : 0.5, v = 1.0 - (h > 1 ? double(y) / (h - 1) : 0.5);
+        const double a = PixelMaps::skew_pattern(u, v), b = PixelMaps::length_pattern(u, v);
+        s1 += a, s2 += a * a, l1 += b, l2 += b * b;
+      }
+    const PixelMaps::PatternSums sums = PixelMaps::pattern_sums(w, h);
+    EXPECT_EQ(sums.skew, s1) << w << " x " << h;
+    EXPECT_EQ(sums.skew_squared, s2) << w << " x " << h;
+    EXPECT_EQ(sums.length, l1) << w << " x " << h;
+    EXPECT_EQ(sums.length_squared, l2) << w << " x " << h;
+  }
+}
+
 TEST(Sensor, FullChipPresetUsesBothPixels) {
   SensorStageConfig c = sweep_config(32, 20);
   c.sensor.preset = PixelPreset::FullChip;
