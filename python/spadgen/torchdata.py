@@ -328,7 +328,16 @@ class DatasetSamples(_RunSamples):
     crop) are not among them: ``dataset.index`` has every parameter of every sample.
 
     dataset     a spadgen.Dataset (or a selection of one: ds.select(...)) or a dataset folder's path;
-    repeats     "all": every realisation; "first": realisation 0 only;
+    repeats     "all": every realisation; "first": realisation 0 only; "pairs": every realisation r, each item
+                with the counts of another realisation of the same sample and patch, for Noise2Noise training
+                (the same light and chip, independent temporal noise):
+
+                | key | shape | dtype | what |
+                |---|---|---|---|
+                | counts_pair | (K, H, W) | float32 | the counts of realisation (r + 1) mod R of the sample (R: its realisations) |
+                | repeat_pair | () | int64 | that realisation |
+
+                (every sample taken must have two realisations or more: the dataset's repeats >= 2);
     status      the samples to take ("done", or several in a list; None: all): every one taken must be done,
                 so the default leaves out failed, stale and missing samples, and status=None refuses a dataset
                 that has any.
@@ -337,8 +346,8 @@ class DatasetSamples(_RunSamples):
     def __init__(self, dataset, fields=DEFAULT_FIELDS, patch_size=None, repeats="all", status="done", max_layers=None,
                  open_runs=64, max_objects=None):
         ds = dataset if isinstance(dataset, Dataset) else open_dataset(dataset)
-        if repeats not in ("all", "first"):
-            raise ValueError(f"repeats must be 'all' or 'first', got {repeats!r}")
+        if repeats not in ("all", "first", "pairs"):
+            raise ValueError(f"repeats must be 'all', 'first' or 'pairs', got {repeats!r}")
         view = ds.select(status=status) if status is not None else ds
         not_done = [r["index"] for r in view.index if r["status"] != "done"]
         if not_done:
@@ -354,12 +363,21 @@ class DatasetSamples(_RunSamples):
         self.parameter_names = tuple(ds.numeric_parameter_keys)
         runs, self.realisations = [], []
         params = []
+        self._pair = []  # repeats="pairs": the run index of each run's partner (the next realisation of its sample)
         for s in view:
             vector = [float(s.parameters[k]) for k in self.parameter_names]
-            for r, run in enumerate(s.realisations if repeats == "all" else [s.run]):
+            taken = s.realisations if repeats != "first" else [s.run]
+            if repeats == "pairs" and len(taken) < 2:
+                raise ValueError(f"{ds.path}: sample {s.index} has {len(taken)} realisation(s) of the temporal noise: "
+                                 "repeats='pairs' pairs two realisations of each sample (the dataset file's repeats >= 2; "
+                                 "repeats may grow in a dataset folder: `spadgen dataset run` with a larger repeats adds "
+                                 "them from each sample's saved light)")
+            first = len(runs)
+            for r, run in enumerate(taken):
                 runs.append(run)
                 self.realisations.append((s.index, r))
                 params.append(vector)
+                self._pair.append(first + (r + 1) % len(taken))
         self._parameters = np.array(params, np.float32).reshape(len(runs), len(self.parameter_names))
         super().__init__(runs, patch_size=patch_size, fields=fields, max_layers=max_layers, open_runs=open_runs,
                          max_objects=max_objects)
@@ -371,4 +389,12 @@ class DatasetSamples(_RunSamples):
         out["sample"] = torch.tensor(sample, dtype=torch.int64)
         out["repeat"] = torch.tensor(repeat, dtype=torch.int64)
         out["parameters"] = torch.from_numpy(self._parameters[i].copy())
+        if self.repeats == "pairs":
+            _, x, y, h, w = self.index[j]
+            other = self._run(self._pair[i])
+            other.check_unchanged()
+            counts = np.asarray(other.counts[:, y:y + h, x:x + w], np.float32)
+            other.check_unchanged()
+            out["counts_pair"] = torch.from_numpy(counts)
+            out["repeat_pair"] = torch.tensor(self.realisations[self._pair[i]][1], dtype=torch.int64)
         return out

@@ -12,7 +12,7 @@ import pytest
 
 import spadgen
 from spadgen.dataset import STATUSES, SUMMARY_COLUMNS
-from conftest import SOURCE
+from conftest import DATASET, SCENES, SOURCE
 
 WIDTHS = [1024, 1000, 16, 1024]  # the grid cell of sample i is i mod 3
 DONE = [0, 1, 3]
@@ -283,6 +283,31 @@ def test_dataset_samples_layout_values_and_length(ds, dataset_dir):
     np.testing.assert_array_equal(item["counts"].numpy(), ds.sample(1).run.counts[:, 0:10, 12:24])
     assert len(DatasetSamples(ds, patch_size=10)) == 3 * 2 * 4
     assert [s for s, _ in DatasetSamples(ds.select(camera__width_px=1024)).realisations] == [0, 0, 3, 3]
+
+
+def test_dataset_samples_in_pairs_of_realisations(ds, dataset_dir, spadgen_bin, tmp_path):
+    """repeats="pairs" (Noise2Noise): each realisation's counts with the next realisation's of the same patch,
+    read on their own from the realisations' folders; a sample of one realisation is refused."""
+    pytest.importorskip("torch")
+    from spadgen.torchdata import DatasetSamples
+
+    pairs = DatasetSamples(ds, patch_size=(10, 12), repeats="pairs")
+    assert len(pairs) == len(DatasetSamples(ds, patch_size=(10, 12))) == 3 * 2 * 4
+    for j in range(len(pairs)):
+        item = pairs[j]
+        index, repeat = int(item["sample"]), int(item["repeat"])
+        x, y = item["origin"].tolist()
+        assert int(item["repeat_pair"]) == 1 - repeat
+        folder = dataset_dir / "samples" / (f"{index:06d}" if repeat == 1 else f"{index:06d}_r01")
+        expected = np.load(folder / "counts.npy")[:, y:y + 10, x:x + 12].astype(np.float32)
+        np.testing.assert_array_equal(item["counts_pair"].numpy(), expected)
+        assert not np.array_equal(item["counts_pair"].numpy(), item["counts"].numpy())  # independent noise
+    # a dataset of one realisation per sample
+    (tmp_path / "scenes").symlink_to(SCENES)
+    (tmp_path / "one.json").write_text(DATASET.replace('"samples": 4', '"samples": 1').replace('"repeats": 2', '"repeats": 1'))
+    subprocess.run([spadgen_bin, "dataset", "run", str(tmp_path / "one.json"), "-o", str(tmp_path / "one"), "-q"], check=True)
+    with pytest.raises(ValueError, match=r"sample 0 has 1 realisation\(s\).*repeats='pairs' pairs two realisations"):
+        DatasetSamples(tmp_path / "one", repeats="pairs")
 
 
 def test_dataset_samples_refuse_what_has_no_run(ds, dataset_dir):
