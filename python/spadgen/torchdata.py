@@ -7,7 +7,8 @@
     loader = torch.utils.data.DataLoader(ds, batch_size=8, shuffle=True)
 
 Both load their samples the same way. One sample is a whole run's image, or with ``patch_size=(h, w)`` one
-patch of a run: the images are cut into non-overlapping h x w patches from the top-left corner, and a
+patch of a run: the images are cut into h x w patches from the top-left corner, ``patch_stride=(sy, sx)`` apart
+(default: the patch size, non-overlapping; 1: every offset, for random crops drawn by a sampler), and a
 remainder narrower than a patch at the right or bottom edge is left out. A sample is a dict of tensors; with
 H, W the image's (or patch's) size, K the gate positions (or exposures), N the frames per k, L = ``max_layers``,
 J = ``max_objects`` (default: the most of any run's ``ground_truth_objects``):
@@ -114,7 +115,8 @@ class _RunSamples(torch.utils.data.Dataset):
     """What RunDataset and DatasetSamples share: run folders cut into samples (whole images or patches),
     checked once, and a sample loaded as a dict of tensors (the keys of the module's table but "run")."""
 
-    def __init__(self, runs, patch_size=None, fields=DEFAULT_FIELDS, max_layers=None, open_runs=64, max_objects=None):
+    def __init__(self, runs, patch_size=None, fields=DEFAULT_FIELDS, max_layers=None, open_runs=64, max_objects=None,
+                 patch_stride=None):
         runs = list(runs)
         self.paths = [r.path if isinstance(r, Run) else os.fspath(r) for r in runs]
         if not self.paths:
@@ -163,6 +165,8 @@ class _RunSamples(torch.utils.data.Dataset):
         self.max_objects = (whole(max_objects, "max_objects", 0) if max_objects is not None else
                             max(int(r.metadata.get("ground_truth_objects", 0)) for r in runs_))
         if patch_size is None:
+            if patch_stride is not None:
+                raise ValueError(f"patch_stride {patch_stride!r} without patch_size: give the patches' size too")
             sizes = {(r.height, r.width) for r in runs_}
             if len(sizes) > 1:
                 raise ValueError(f"the runs have different image sizes {sorted(sizes)}: give patch_size")
@@ -172,11 +176,18 @@ class _RunSamples(torch.utils.data.Dataset):
             if len(sides) != 2:
                 raise ValueError(f"patch_size must be an integer or a pair (h, w) of integers, got {patch_size!r}")
             ph, pw = (whole(v, "patch_size", 1) for v in sides)
+            sy, sx = ph, pw
+            if patch_stride is not None:
+                steps = [patch_stride, patch_stride] if np.isscalar(patch_stride) else list(patch_stride)
+                if len(steps) != 2:
+                    raise ValueError(f"patch_stride must be an integer or a pair (y, x) of integers, got {patch_stride!r}")
+                sy, sx = (whole(v, "patch_stride", 1) for v in steps)
             self.index = [(i, x, y, ph, pw) for i, r in enumerate(runs_)
-                          for y in range(0, r.height - ph + 1, ph) for x in range(0, r.width - pw + 1, pw)]
+                          for y in range(0, r.height - ph + 1, sy) for x in range(0, r.width - pw + 1, sx)]
             if not self.index:
                 raise ValueError(f"no run is as large as a {ph} x {pw} patch")
         self.patch_size = patch_size
+        self.patch_stride = patch_stride
 
     def _run(self, i):
         """Run i, opened in this process (each DataLoader worker opens its own: the cache is not pickled), the
@@ -344,7 +355,7 @@ class DatasetSamples(_RunSamples):
     """
 
     def __init__(self, dataset, fields=DEFAULT_FIELDS, patch_size=None, repeats="all", status="done", max_layers=None,
-                 open_runs=64, max_objects=None):
+                 open_runs=64, max_objects=None, patch_stride=None):
         ds = dataset if isinstance(dataset, Dataset) else open_dataset(dataset)
         if repeats not in ("all", "first", "pairs"):
             raise ValueError(f"repeats must be 'all', 'first' or 'pairs', got {repeats!r}")
@@ -380,7 +391,7 @@ class DatasetSamples(_RunSamples):
                 self._pair.append(first + (r + 1) % len(taken))
         self._parameters = np.array(params, np.float32).reshape(len(runs), len(self.parameter_names))
         super().__init__(runs, patch_size=patch_size, fields=fields, max_layers=max_layers, open_runs=open_runs,
-                         max_objects=max_objects)
+                         max_objects=max_objects, patch_stride=patch_stride)
 
     def __getitem__(self, j):
         i, out = self._load(j)

@@ -123,6 +123,18 @@ def test_patches_cover_the_image_and_shift_the_intrinsics(sweep_run, sweep):
     np.testing.assert_array_equal(maps["dcr_cps"][0].numpy(), sweep.sensor_maps["dcr_cps"][0:5, 48:64])
 
 
+def test_patches_at_a_stride_overlap(sweep_run, sweep):
+    ds = RunDataset([sweep_run], patch_size=(5, 16), patch_stride=(2, 7), fields=("counts",))
+    origins = [ds[j]["origin"].tolist() for j in range(len(ds))]
+    assert origins == [[x, y] for y in (0, 2, 4) for x in range(0, 347 - 16 + 1, 7)]
+    np.testing.assert_array_equal(ds[len(origins) // 3 + 2]["counts"].numpy(), sweep.counts[:, 2:7, 14:30])
+    assert len(RunDataset([sweep_run], patch_size=(5, 16), patch_stride=1, fields=("counts",))) == 6 * 332
+    with pytest.raises(ValueError, match="patch_stride 2 without patch_size"):
+        RunDataset([sweep_run], patch_stride=2)
+    with pytest.raises(ValueError, match="patch_stride must be an integer >= 1, got 0"):
+        RunDataset([sweep_run], patch_size=4, patch_stride=(0, 1))
+
+
 def test_data_loader_batches_and_a_training_step(sweep_run, sweep):
     ds = RunDataset([sweep_run], patch_size=8)
     loader = torch.utils.data.DataLoader(ds, batch_size=4, shuffle=True, generator=torch.Generator().manual_seed(0))
