@@ -34,6 +34,8 @@ J = ``max_objects`` (default: the most of any run's ``ground_truth_objects``):
 | pde | (1, H, W) | float32 | the pixel's photon detection efficiency at the laser's wavelength, fill factor included (sensor_maps.exr): the chip's fixed pattern and the pixel design |
 | pde_ambient | (1, H, W) | float32 | the same over the ambient light's band |
 | dcr_cps | (1, H, W) | float32 | the pixel's dark count rate (counts per second) at the run's temperature |
+| ambient_photons_per_s | (1, H, W) | float32 | the ambient light arriving on the pixel, photons per second (ambient.exr): the noise-free flux, an HDR target |
+| laser_photons_per_pulse | (1, H, W) | float32 | the laser's return on the pixel, photons per pulse (laser.exr; runs that trace the laser) |
 | gate_positions_ns | (K,) | float32 | gate positions (gate-sweep runs only) |
 | exposures_us | (K,) | float32 | exposure of each image (intensity runs only: one, or the short and the long) |
 | frames_per_k | () | int64 | N, the binary frames each count sums (counts / N is the detection probability) |
@@ -44,7 +46,7 @@ J = ``max_objects`` (default: the most of any run's ``ground_truth_objects``):
 | repeat | () | int64 | DatasetSamples only: the realisation of the temporal noise (0: the sample's own folder) |
 | parameters | (P,) | float32 | DatasetSamples only: the sample's numeric parameters, in the order of ``parameter_names`` |
 
-``fields`` chooses among the first nineteen (default: counts, expected_counts, depth, mask, layer_count);
+``fields`` chooses among the first twenty-one (default: counts, expected_counts, depth, mask, layer_count);
 gate_positions_ns (gate sweeps only), exposures_us (intensity runs only), frames_per_k, intrinsics, origin and run
 come always, and with DatasetSamples sample,
 repeat and parameters. Runs that share a DataLoader batch must agree on K (and N with frames); the constructor
@@ -76,7 +78,7 @@ __all__ = ["RunDataset", "DatasetSamples", "FIELDS", "DEFAULT_FIELDS"]
 
 FIELDS = ("counts", "expected_counts", "detection_rate", "depth", "depth_z", "mask", "layer_count", "layer_depth", "layer_mask",
           "object_count", "object_range", "object_mask", "object_detectable", "object_id", "frames", "expected_counts_se",
-          "pde", "pde_ambient", "dcr_cps")
+          "pde", "pde_ambient", "dcr_cps", "ambient_photons_per_s", "laser_photons_per_pulse")
 DEFAULT_FIELDS = ("counts", "expected_counts", "depth", "mask", "layer_count")
 # The file each field reads; a tuple: any one of them.
 _NEEDS = {"counts": "counts.npy", "expected_counts": ("expected_counts.npy", "detection_rate.npy"),
@@ -85,7 +87,8 @@ _NEEDS = {"counts": "counts.npy", "expected_counts": ("expected_counts.npy", "de
           "layer_depth": "ground_truth.exr", "layer_mask": "ground_truth.exr", "object_count": "ground_truth.exr",
           "object_range": "ground_truth.exr", "object_mask": "ground_truth.exr", "object_detectable": "labels.exr",
           "object_id": "ground_truth.exr", "expected_counts_se": "detection_rate.npy", "pde": "sensor_maps.exr",
-          "pde_ambient": "sensor_maps.exr", "dcr_cps": "sensor_maps.exr"}
+          "pde_ambient": "sensor_maps.exr", "dcr_cps": "sensor_maps.exr", "ambient_photons_per_s": "ambient.exr",
+          "laser_photons_per_pulse": "laser.exr"}
 
 
 def _needs(field):
@@ -295,6 +298,10 @@ class _RunSamples(torch.utils.data.Dataset):
         for name in ("pde", "pde_ambient", "dcr_cps"):
             if name in self.fields:
                 out[name] = torch.from_numpy(np.array(run.sensor_maps[name][ys, xs], np.float32)[None])
+        if "ambient_photons_per_s" in self.fields:
+            out["ambient_photons_per_s"] = torch.from_numpy(np.array(run.ambient["photons_per_second"][ys, xs], np.float32)[None])
+        if "laser_photons_per_pulse" in self.fields:
+            out["laser_photons_per_pulse"] = torch.from_numpy(np.array(run.laser["photons_per_pulse"][ys, xs], np.float32)[None])
         if "frames" in self.fields:
             packed = run.frames_packed[:, :, ys]
             out["frames"] = torch.from_numpy(np.ascontiguousarray(unpack_frames(packed, run.width)[..., xs]))

@@ -32,6 +32,7 @@ def expected_layout(K, N, L, H, W, J):
             "object_id": ((J, H, W), torch.int64),
             "frames": ((K, N, H, W), torch.uint8), "expected_counts_se": ((K, H, W), torch.float32),
             "pde": ((1, H, W), torch.float32), "pde_ambient": ((1, H, W), torch.float32), "dcr_cps": ((1, H, W), torch.float32),
+            "ambient_photons_per_s": ((1, H, W), torch.float32), "laser_photons_per_pulse": ((1, H, W), torch.float32),
             "gate_positions_ns": ((K,), torch.float32),
             "frames_per_k": ((), torch.int64), "intrinsics": ((3, 3), torch.float32), "origin": ((2,), torch.int64),
             "run": ((), torch.int64)}
@@ -72,6 +73,13 @@ def test_whole_image_sample_has_the_documented_layout_and_values(sweep_run, swee
     for name in ("pde", "pde_ambient", "dcr_cps"):
         np.testing.assert_array_equal(s[name][0].numpy(), sweep.sensor_maps[name])
     assert s["pde"].numpy().min() > 0
+    # the noise-free flux, as the EXR files hold it (read here on their own)
+    from spadgen.exr import ExrFile
+    ambient = ExrFile(f"{sweep_run}/ambient.exr")["photons_per_second"]
+    laser = ExrFile(f"{sweep_run}/laser.exr")["photons_per_pulse"]
+    np.testing.assert_array_equal(s["ambient_photons_per_s"][0].numpy(), ambient)
+    np.testing.assert_array_equal(s["laser_photons_per_pulse"][0].numpy(), laser)
+    assert laser.max() > 0  # (this run has no ambient light: the 2D run below checks a lit one)
     # the objects, as evaluate scores them: Run.object_slots' (ground_truth.exr's and labels.exr's slots)
     slots = sweep.object_slots()
     used = slots.id >= 0
@@ -95,6 +103,13 @@ def test_an_intensity_runs_exposures_and_frames(make_run):
     np.testing.assert_allclose(s["exposures_us"].numpy(), dual.exposures_s * 1e6, rtol=1e-7)
     assert s["exposures_us"].shape == (2,) and s["exposures_us"][1] > s["exposures_us"][0]  # short, long
     assert int(s["frames_per_k"]) == dual.frames_per_k and int(s["counts"].max()) <= dual.frames_per_k
+    # a 2D run's HDR target: the ambient flux (this one traced no laser, and says so)
+    flux = RunDataset([dual.path], fields=("ambient_photons_per_s",), patch_size=4)[1]["ambient_photons_per_s"]
+    np.testing.assert_array_equal(flux[0].numpy(), dual.ambient["photons_per_second"][0:4, 4:8])
+    assert flux.min() > 0
+    if not dual.has("laser.exr"):
+        with pytest.raises(ValueError, match="field 'laser_photons_per_pulse' needs laser.exr, which this run did not write"):
+            RunDataset([dual.path], fields=("laser_photons_per_pulse",))
 
 
 def test_patches_cover_the_image_and_shift_the_intrinsics(sweep_run, sweep):
