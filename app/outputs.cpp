@@ -384,7 +384,7 @@ class Outputs::Images {
         gt_.remove_channel("direct_other_laser"), gt_.remove_channel("indirect_laser");
         for (int j = 0; j < object_slots(); ++j) gt_.remove_channel(layer_name(j, ".laser", "object"));
       }
-      put_file(gt_, "ground_truth.exr", std::string("range, z, layer<i>.range, object<j>.range: metres (+inf where the ray hits nothing); "
+      put_file(gt_, "ground_truth.exr", std::string("range, z, layer<i>.range, object<j>.range, object<j>.path: metres (+inf where the ray hits nothing); "
                "transmittance: fraction") + (laser_traced_ ? "; object<j>.laser, direct_other_laser, indirect_laser: photons per laser "
                                                              "pulse reaching the pixel's SPAD (before PDP)" : ""));
     }
