@@ -480,6 +480,12 @@ Labels read_labels(const RunFolder& run) {
   run.check_image(gt_path, gt);
   Labels l;
   l.detectability = labels.channels.count("object0.detectable") > 0;
+  // A labels.exr always holds slot 0 (object0.id -1 where no object is in view): one without it is another
+  // image in its place (a ground_truth.exr copied there was scored as a run without labels, exit 0).
+  if (!labels_path.empty() && !l.detectability)
+    throw Error(labels_path + ": no channel object0.detectable; expected the labels a gate sweep writes (object<j>.id, "
+                ".edge_counts, .edge_snr, .detectable, slot 0 at least): another image in its place; restore the run's, or "
+                "run the scene again");
   if (!labels_path.empty()) run.check_image(labels_path, labels, /*of_the_chip=*/true);
   const size_t n = size_t(run.width()) * size_t(run.height());
   l.pixels.resize(n);

@@ -311,7 +311,16 @@ void RunFolder::check_image(const std::string& path, const writers::ExrData& e, 
 
 std::string RunFolder::file(const std::string& name) const {
   const fs::path p = fs::path(dir_) / name;
-  return fs::exists(p) ? p.string() : std::string();
+  if (fs::exists(p)) return p.string();
+  // A file the run wrote and lists, gone since: the run is damaged, not a run without it (an evaluation took a
+  // sample whose labels.exr was removed for one without labels, every object counted as detectable, exit 0).
+  if (const auto files = meta_.find("files"); files != meta_.end() && files->is_array())
+    for (const auto& f : *files)
+      if (f.is_string() && f.get<std::string>() == name)
+        throw Error(p.string() + ": listed in " + (fs::path(dir_) / "metadata.json").string() +
+                    " (files) but missing: the run folder is damaged; restore the file, or run the scene again" +
+                    " (a dataset's sample: `spadgen dataset run` generates it again, `spadgen dataset status` lists it)");
+  return std::string();
 }
 
 }  // namespace spadgen::reconstruct

@@ -60,7 +60,8 @@ class RunFolder {
   // (spadgen_crop), of another crop than metadata.json's, naming the file; with `of_the_chip` (sensor maps,
   // labels), also one of another chip than metadata.json's seeds.chip (its spadgen_chip_seed).
   void check_image(const std::string& path, const writers::ExrData& e, bool of_the_chip = false) const;
-  // The image's file named `name` (e.g. "ground_truth.exr"): its path, or "" when the run has none.
+  // The image's file named `name` (e.g. "ground_truth.exr"): its path, or "" when the run has none; throws
+  // spadgen::Error when metadata.json lists it (files) and it is gone.
   std::string file(const std::string& name) const;
 
  private:

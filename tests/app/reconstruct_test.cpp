@@ -337,6 +337,17 @@ TEST_F(Reconstruct, EvaluateRefusesLabelsOrGroundTruthThatAreNotTheRuns) {
     }
     fs::copy_file(kept, run / file, fs::copy_options::overwrite_existing);
   }
+  // ... and another image of the run in labels.exr's place (its ground truth: the same size, crop and chip)
+  {
+    const fs::path kept = dir_ / "kept.exr";
+    fs::copy_file(run / "labels.exr", kept, fs::copy_options::overwrite_existing);
+    fs::copy_file(run / "ground_truth.exr", run / "labels.exr", fs::copy_options::overwrite_existing);
+    const Result s = sh("evaluate " + run.string() + " -q -o " + (dir_ / "e_swapped").string());
+    EXPECT_EQ(s.code, 1) << s.output;
+    EXPECT_THAT(s.output, HasSubstr((run / "labels.exr").string() + ": no channel object0.detectable; expected the labels a gate "
+                                    "sweep writes"));
+    fs::copy_file(kept, run / "labels.exr", fs::copy_options::overwrite_existing);
+  }
   // metadata.json's objects (their names, for the metrics), damaged: named, not an internal error (value() of
   // a number, exit 3)
   const std::string meta = slurp(run / "metadata.json");
@@ -1086,10 +1097,25 @@ TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
   for (const auto& s : m2["samples"]) EXPECT_EQ(s["detections_source"]["computed"], true);
   EXPECT_FALSE(m2.contains("labels"));
 
-  // A sample without labels.exr is scored with every object detectable, and the report says so (it was
-  // pooled silently); one detections file for every sample (an absolute path) is refused.
+  // A sample whose labels.exr, which its metadata.json lists, is gone is damaged: refused, named (it was scored
+  // as a sample without labels, every object detectable, exit 0: a new user's find).
   const fs::path first = out2 / "samples" / m2["samples"][0]["sample"].get<std::string>();
   fs::remove(first / "labels.exr");
+  r = sh("evaluate " + out2.string() + " -o " + (dir_ / "e_damaged").string());
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr((first / "labels.exr").string() + ": listed in " + (first / "metadata.json").string() +
+                                  " (files) but missing: the run folder is damaged"));
+  EXPECT_FALSE(fs::exists(dir_ / "e_damaged"));
+  // A sample without labels.exr (a run that wrote none: its metadata.json does not list it) is scored with every
+  // object detectable, and the report says so (it was pooled silently); one detections file for every sample
+  // (an absolute path) is refused.
+  {
+    nlohmann::ordered_json edited = nlohmann::ordered_json::parse(slurp(first / "metadata.json"));
+    auto& files = edited["files"];
+    files.erase(std::find(files.begin(), files.end(), "labels.exr"));
+    edited["file_bytes"].erase("labels.exr");
+    std::ofstream(first / "metadata.json") << edited.dump(2) << "\n";
+  }
   r = sh("evaluate " + out2.string() + " -o " + (dir_ / "e_unlabelled").string());
   ASSERT_EQ(r.code, 0) << r.output;
   const auto m3 = nlohmann::json::parse(slurp(dir_ / "e_unlabelled" / "metrics.json"));
