@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <limits>
@@ -19,8 +20,13 @@
 #include "writers/atomic_file.h"
 
 namespace spadgen::app {
-
 namespace {
+
+std::string number_text(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.6g", v);
+  return buf;
+}
 
 // The saved light's arrays, in light_files() order, as stacks: their Zarr chunks and attributes.
 // kLaserSe and kSamples came later (a run before them has neither), kAmbientSe after them: a run before them
@@ -349,11 +355,21 @@ TransientTile SavedLight::tile(const PixelRect& rect, const PixelRect& data_rect
         const float* to = vals + (o[ri + 1] - o[first]);
         float* dest = t.transient.data() + di * T + size_t(r[2 * ri]);
         bool photons = true;  // copied and checked in one pass; NaN fails both comparisons
+        double sum = 0.0;
         for (const float* v = from; v < to; ++v, ++dest) {
           photons &= *v >= 0.0f && *v <= std::numeric_limits<float>::max();
+          sum += double(*v);
           *dest = *v;
         }
         if (ok && !photons) ok = false, bad = "values";
+        // The bins hold the laser light inside the window: laser_total less out_of_window, to float32 rounding
+        // (5e-8 measured; 1e-4 of the total allowed). Values far from it, finite, are damage too (3e38 in every
+        // bin wrote +inf rates, exit 0).
+        if (ok && std::abs(sum - (t.laser_total[di] - t.out_of_window[di])) > 1e-4 * t.laser_total[di] + 1e-30)
+          throw Error((std::filesystem::path(dir_) / "light").string() + ": pixel (" + std::to_string(x) + ", " + std::to_string(y) +
+                      ")'s values sum to " + number_text(sum) + " photons per pulse, and its laser_total less out_of_window is " +
+                      number_text(t.laser_total[di] - t.out_of_window[di]) +
+                      " (the light inside the window, which the values hold); the saved light is damaged: run the scene again");
       }
       if (!ok)
         throw Error((std::filesystem::path(dir_) / "light").string() + ": pixel (" + std::to_string(x) + ", " + std::to_string(y) +

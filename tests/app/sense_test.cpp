@@ -860,6 +860,14 @@ TEST_F(App, SenseRefusesWhatItCannotDo) {
     EXPECT_THAT(r.output, HasSubstr(") holds a value that is not " + what + " (in " + name + "); the saved light is damaged")) << file;
     EXPECT_FALSE(fs::exists(dir_ / "damaged_sensed"));
   }
+  // ... and finite values the pixel's totals deny (3e38 photons in a bin wrote +inf rates, exit 0: an
+  // adversarial tester's find): the bins sum to laser_total less out_of_window
+  damage_last("values.npy", bytes_of(3e38f));
+  r = sh("sense " + (dir_ / "damaged").string() + " --set seeds.chip=4 -o " + (dir_ / "damaged_sensed").string());
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("'s values sum to 3e+38 photons per pulse, and its laser_total less out_of_window is "));
+  EXPECT_THAT(r.output, HasSubstr("(the light inside the window, which the values hold); the saved light is damaged"));
+  EXPECT_FALSE(fs::exists(dir_ / "damaged_sensed"));
 
   // A bad value in the run's resolved scene is named there: sense reads it from metadata.json (it was
   // reported against the scene file, which held a good one).
