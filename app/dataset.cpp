@@ -544,7 +544,11 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
       const SampleRecord& rec = checked.record;
       if (status.empty()) status = datasets::status_name(rec.status);
       if (rec.status != Status::Done) ++left, left_total.add(e);
-      else if (checked.resolved && rec.seconds > 0.0) done_seconds += rec.seconds, done_estimated += e.seconds, ++done_timed;
+      // (its estimate on the cores it ran with: the estimates scale as 1 / cores; a sample that records none, on
+      // this plan's)
+      else if (checked.resolved && rec.seconds > 0.0)
+        done_seconds += rec.seconds, ++done_timed,
+        done_estimated += e.seconds * (rec.cores > 0 ? double(estimate_cores(options.threads)) / rec.cores : 1.0);
     }
     total.add(e);
     const bool show = options.all || samples <= 10 || i >= n - 10 * shard.count;
@@ -607,7 +611,7 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
       const bool one = done_timed == 1;
       o << "# the " << done_timed << " done " << (one ? "sample" : "samples") << " took " << duration_text(done_seconds)
         << ", " << ratio << (one ? " times its estimate (its" : " times their estimates (their")
-        << " metadata.json's run.wall_seconds, on the threads they ran with)"
+        << " metadata.json's run.wall_seconds, against estimates for the cores they ran on, run.cores)"
         << (left > 0 ? ": at that pace the samples left take about " + duration_text(left_total.seconds * pace) : std::string())
         << "\n";
     }

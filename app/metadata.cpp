@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <string_view>
+#include <thread>
 
 #include "core/units.h"
 #include "render/integrator.h"
@@ -186,7 +187,11 @@ json run_json(const RunRecord& r) {
     }
   json rays_json = {{"camera", rays.camera}, {"bounce", rays.bounce}, {"laser", rays.laser}, {"refracted", rays.refracted},
                     {"guided", rays.guided}, {"ambient", rays.ambient}, {"indirect", rays.indirect}, {"total", rays.total()}};
-  return {{"threads", r.threads}, {"seconds", r.seconds}, {"wall_seconds", wall}, {"stages", stages},
+  // The cores its threads could run on (--threads, or all, at most the machine's): what a dataset plan's pace
+  // compares the sample's time with (the plan's own --threads made it 2 times off for samples of 1 thread).
+  const int machine = int(std::max(1u, std::thread::hardware_concurrency()));
+  const int cores = r.threads > 0 ? std::min(r.threads, machine) : machine;
+  return {{"threads", r.threads}, {"cores", cores}, {"seconds", r.seconds}, {"wall_seconds", wall}, {"stages", stages},
           {"rays", rays_json}, {"components", components}};
 }
 

@@ -650,6 +650,22 @@ std::string percent(const nlohmann::json& v) {
   return s.str();
 }
 
+// metrics.json's "scored" in words: "--detector edges", "--detector paper --noise-free", "--detections FILE".
+std::string scored_text(const nlohmann::json& scored) {
+  if (scored.contains("detections") && scored["detections"].is_string()) return "--detections " + scored["detections"].get<std::string>();
+  const std::string detector = scored.value("detector", nlohmann::json()).is_string() ? scored["detector"].get<std::string>() : "?";
+  return "--detector " + detector + (scored.value("noise_free", false) == true ? " --noise-free" : "");
+}
+
+// A JSON file's value, or none when it is absent or not JSON.
+std::optional<nlohmann::json> read_json_if_valid(const fs::path& path) {
+  std::ifstream in(path);
+  if (!in) return std::nullopt;
+  nlohmann::json j = nlohmann::json::parse(in, nullptr, /*allow_exceptions=*/false);
+  if (j.is_discarded()) return std::nullopt;
+  return j;
+}
+
 std::string summary(const nlohmann::json& m) {
   std::ostringstream s;
   s << "objects found: " << percent(m["objects"]["recall"]) << " of " << m["objects"]["objects"] << " (detectable: "
@@ -1113,10 +1129,22 @@ std::string evaluate(const EvaluateCommand& c) {
   } else {
     throw Error(c.target + ": neither a run folder (metadata.json) nor a dataset folder (dataset.json)");
   }
+  // What was scored, at the top (a dataset's evaluation named its detector only per sample, and one of another
+  // detector replaced it unsaid: a new user's find).
+  const nlohmann::json scored = c.detections.empty() ? nlohmann::json{{"detector", c.detector}, {"noise_free", c.noise_free}}
+                                                     : nlohmann::json{{"detections", c.detections}};
+  report["scored"] = scored;
+  std::string replaced;  // the evaluation this one replaces, when it scored other detections
+  if (const auto earlier = read_json_if_valid(out_given / "metrics.json"); earlier && earlier->is_object() &&
+                                                                           earlier->contains("scored") && (*earlier)["scored"] != scored)
+    replaced = scored_text((*earlier)["scored"]);
   writers::write_json((fs::path(out) / "metrics.json").string(), report);
   staging.publish(files);
-  text << "wrote " << (out_given / "metrics.json").string() << "\n";
-  return text.str();
+  std::string head = "scored: " + scored_text(scored) + "\n";
+  if (!replaced.empty()) head += "replaced the evaluation in " + out_given.string() + " of " + replaced + " (-o keeps each in its own folder)\n";
+  text << "wrote " << (out_given / "metrics.json").string()
+       << (std::find(files.begin(), files.end(), "samples.csv") != files.end() ? " and samples.csv" : "") << "\n";
+  return head + text.str();
 }
 
 }  // namespace spadgen::app

@@ -519,6 +519,8 @@ SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash) co
     }
     if (const json::json_pointer wall("/run/wall_seconds"); meta->contains(wall) && (*meta)[wall].is_number())
       rec.seconds += std::max(0.0, (*meta)[wall].get<double>());
+    if (const json::json_pointer cores("/run/cores"); f == 0 && meta->contains(cores) && (*meta)[cores].is_number_integer())
+      rec.cores = std::max(0, (*meta)[cores].get<int>());
     const std::string prefix = f == 0 ? "" : folders[f].substr(s.folder().size()) + "/";
     const json& sizes = recorded_sizes(*meta);
     for (const json& name : (*meta)["files"]) {

@@ -61,6 +61,8 @@ struct SampleRecord {
   // done: the wall time its run and its realisations' senses took, the sum of their metadata.json's
   // run.wall_seconds; 0 where none records it
   double seconds = 0.0;
+  // done: the cores the sample's run could use (its metadata.json's run.cores); 0 where none records it
+  int cores = 0;
 };
 
 // Warnings of many samples, grouped by kind (warning_kind: the text with its numbers left out): how many samples,

@@ -1057,8 +1057,28 @@ TEST_F(Dataset, APlanTellsThePaceOfTheDoneSamples) {
   ASSERT_NE(at, std::string::npos) << r.output;
   const double pace = std::stod(r.output.substr(at + took.size()));
   EXPECT_GT(pace, 20.0) << r.output;
-  EXPECT_THAT(r.output, HasSubstr(" times their estimates (their metadata.json's run.wall_seconds, on the threads they ran "
-                                  "with): at that pace the samples left take about 3 min\n"));
+  EXPECT_THAT(r.output, HasSubstr(" times their estimates (their metadata.json's run.wall_seconds, against estimates for the "
+                                  "cores they ran on, run.cores): at that pace the samples left take about 3 min\n"));
+  // The pace compares each sample with its estimate on the cores it ran on (run.cores), whatever the plan's
+  // --threads (a plan with 2 cores called samples of 1 core's 2 times slower than they were: a new user's find);
+  // the time left is for the plan's cores.
+  const auto pace_of = [&](const std::string& options) {
+    const Result p = sh("dataset plan " + (dir_ / "d4.json").string() + " -o " + out + options);
+    const size_t a = p.output.find(took);
+    return a == std::string::npos ? -1.0 : std::stod(p.output.substr(a + took.size()));
+  };
+  for (const char* f : {"000000", "000001"}) {  // the samples ran on 1 core
+    const fs::path meta = dir_ / "out/samples" / f / "metadata.json";
+    json m = json::parse(slurp(meta));
+    ASSERT_TRUE(m["run"]["cores"].is_number_integer()) << f;
+    m["run"]["cores"] = 1;
+    write(meta, m.dump());
+  }
+  const double one_core = pace_of(" --threads 1");
+  EXPECT_GT(one_core, 20.0);
+  if (std::thread::hardware_concurrency() >= 2) {
+    EXPECT_NEAR(pace_of(" --threads 2") / one_core, 1.0, 0.02);
+  }
   // a sample whose metadata.json records no time does not count
   json m = json::parse(slurp(dir_ / "out/samples/000001/metadata.json"));
   m.erase("run");

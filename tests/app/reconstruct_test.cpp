@@ -1042,6 +1042,19 @@ TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_THAT(r.output, HasSubstr("1 sample folder (realisations included)\n"));
   EXPECT_EQ(nlohmann::json::parse(slurp(dir_ / "e_shrunk" / "metrics.json"))["samples"].size(), 1u);
+  // What was scored is at the top of metrics.json and the summary; an evaluation of another detector into the
+  // folder says which it replaced (a dataset's named its detector per sample only, and was replaced unsaid)
+  EXPECT_THAT(r.output, HasSubstr("scored: --detector edges\n"));
+  EXPECT_THAT(r.output, HasSubstr("e_shrunk/metrics.json and samples.csv\n"));
+  EXPECT_EQ(nlohmann::json::parse(slurp(dir_ / "e_shrunk" / "metrics.json"))["scored"],
+            nlohmann::json::parse(R"({"detector": "edges", "noise_free": false})"));
+  r = sh("evaluate " + out.string() + " --detector paper -o " + (dir_ / "e_shrunk").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("scored: --detector paper\nreplaced the evaluation in " + (dir_ / "e_shrunk").string() +
+                                  " of --detector edges (-o keeps each in its own folder)\n"));
+  EXPECT_EQ(nlohmann::json::parse(slurp(dir_ / "e_shrunk" / "metrics.json"))["scored"]["detector"], "paper");
+  r = sh("evaluate " + out.string() + " --detector paper -o " + (dir_ / "e_shrunk").string());
+  EXPECT_THAT(r.output, Not(HasSubstr("replaced the evaluation")));  // the same detections again
   std::string meta = slurp(out / "samples/000000/metadata.json");
   const std::string original_meta = meta;
   const size_t at = meta.find("\"sample_hash\": \"");
