@@ -46,6 +46,8 @@ std::optional<int> parse_command_line(CLI::App& cli, int argc, char** argv) {
 }
 
 namespace {
+bool stdout_closed = false;
+
 // stdout is a pipe whose every reader has closed it (the write end polls POLLERR).
 bool stdout_reader_gone() {
   struct stat st {};
@@ -54,6 +56,8 @@ bool stdout_reader_gone() {
   return ::poll(&p, 1, 0) == 1 && (p.revents & POLLERR) != 0;
 }
 }  // namespace
+
+void note_stdout_closed() { stdout_closed = true; }
 
 int run_command(const std::function<void()>& command, const std::string& name) {
   try {
@@ -65,6 +69,9 @@ int run_command(const std::function<void()>& command, const std::string& name) {
       // A reader that closed the pipe early (`spadgen schema | head -5`) has what it wanted: a quiet exit 0,
       // as ripgrep does (it was an error or not by the race between the two processes).
       if (errno == EPIPE || stdout_reader_gone()) return kExitOk;
+      if (stdout_closed)
+        throw Error("standard output is closed (>&-): this command's output, which it prints there, was not written; "
+                    "redirect it to a file or /dev/null instead");
       throw Error(std::string("cannot write the output to standard output (a full disk, or a closed pipe): it is incomplete") +
                   (errno != 0 ? std::string(": ") + std::strerror(errno) : ""));
     }

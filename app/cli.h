@@ -20,6 +20,11 @@ inline constexpr int kExitOk = 0, kExitBadInput = 1, kExitInterrupted = 2, kExit
 // (0) or a usage error in spadgen's format (1).
 std::optional<int> parse_command_line(CLI::App& cli, int argc, char** argv);
 
+// main found standard output closed (>&-) and opened /dev/full in its place: what a command prints there fails,
+// and run_command says the stream was closed (schema, info, plan, status and evaluate's scores were lost,
+// exit 0). A command that prints nothing there (run, sense, reconstruct) is not affected.
+void note_stdout_closed();
+
 // Runs a command and returns its exit code, printing what went wrong on stderr. `name` names the command
 // in the message of a signal ("spadgen sense stopped and wrote nothing"; "the run" by default).
 int run_command(const std::function<void()>& command, const std::string& name = "");

@@ -41,10 +41,13 @@ int main(int argc, char** argv) {
   spadgen::app::flush_denormals();  // before TBB or any thread starts (app/run_parts.h)
   // Closed standard streams are opened on /dev/null first: else the next file opened takes descriptor 2
   // (or 0, 1) and progress lines and warnings are written into it (a counts.npy began "spadgen: ...").
+  // Standard output on /dev/full: a command's output printed there fails, said, rather than lost with exit 0.
   for (int fd = 0; fd <= 2; ++fd)
     if (::fcntl(fd, F_GETFD) == -1 && errno == EBADF) {
-      const int null = ::open("/dev/null", fd == 0 ? O_RDONLY : O_WRONLY);
-      if (null != fd) return spadgen::app::kExitInternal;  // the lowest free descriptor is fd: it cannot differ
+      int opened = fd == 1 ? ::open("/dev/full", O_WRONLY) : -1;
+      if (opened == fd) spadgen::app::note_stdout_closed();
+      else opened = ::open("/dev/null", fd == 0 ? O_RDONLY : O_WRONLY);
+      if (opened != fd) return spadgen::app::kExitInternal;  // the lowest free descriptor is fd: it cannot differ
     }
   // --threads: 0 is every core; beyond kMaxThreads the system refuses threads (a 100000 failed in TBB).
   // (a whole number: 1e3 was "not in range 0 to 1024")

@@ -521,6 +521,14 @@ TEST_F(Hardening, ClosedOrFullStandardStreamsNeverReachTheOutputs) {
     EXPECT_EQ(slurp(closed / f), slurp(ref / f)) << f;
     EXPECT_EQ(slurp(warned / f).substr(0, 6), slurp(ref / f).substr(0, 6)) << f;  // a file, not the warning
   }
+  // A closed stdout, where a command prints its output: said, exit 1 (schema, info, plan, status and
+  // evaluate's scores were lost with exit 0: an adversarial tester's find); run prints nothing there (above)
+  for (const std::string& command : {std::string("schema"), "info " + kTiny, "evaluate " + ref.string()}) {
+    const Result c = shell("(" + bin() + " " + command + " >&-)");
+    EXPECT_EQ(c.code, 1) << command << c.output;
+    EXPECT_THAT(c.output, HasSubstr("standard output is closed (>&-): this command's output, which it prints there, was not "
+                                    "written")) << command;
+  }
   const Outcome full = spadgen("schema --json-schema > /dev/full");
   expect_exit(full, 1, "stdout on a full device");
   EXPECT_THAT(full.err, HasSubstr("cannot write the output to standard output (a full disk, or a closed pipe): it is incomplete"));
