@@ -57,17 +57,23 @@ bool is_mount_point(const fs::path& dir) {
 // is a folder, the run's with everything in it), and the folders they lie in ("previews", "light").
 struct Listed {
   std::set<std::string> entries = {"metadata.json"}, parents;
+  std::string damaged;  // why a metadata.json that is there lists nothing ("" when absent or read)
 };
 Listed listed_files(const fs::path& out) {
   Listed listed;
   std::string text;
+  std::error_code ec;
   try {
     text = scenes::read_file_bounded((out / "metadata.json").string(), uint64_t{64} << 20, "metadata");
-  } catch (const Error&) {
+  } catch (const Error& e) {
+    if (fs::exists(out / "metadata.json", ec)) listed.damaged = e.what();
     return listed;
   }
   const nlohmann::json meta = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
-  if (!meta.is_object() || !meta.contains("files") || !meta["files"].is_array()) return listed;
+  if (!meta.is_object() || !meta.contains("files") || !meta["files"].is_array()) {
+    listed.damaged = (out / "metadata.json").string() + (meta.is_discarded() ? " is not JSON (cut short?)" : " has no list of files");
+    return listed;
+  }
   for (const nlohmann::json& f : meta["files"]) {
     if (!f.is_string()) continue;
     const fs::path p = fs::path(f.get<std::string>()).lexically_normal();
@@ -579,6 +585,11 @@ void Staging::check_owned(bool publishing) const {
   const std::string list = foreign_list(foreign);
   std::string known = of_runs_ ? "expected only the realisations' folders, repeat_NNN, each with the files its metadata.json lists"
                                : "not listed in its metadata.json";
+  // A run folder whose metadata.json cannot be read lists nothing: that is what to say (its own files were
+  // called foreign, a damaged or unreadable metadata.json not named)
+  if (const Listed l = listed_files(out_); owned_.empty() && !of_runs_ && !l.damaged.empty())
+    known = "not listed in its metadata.json, which cannot be read: " + l.damaged +
+            "; a run folder's metadata.json says which files are spadgen's";
   if (!owned_.empty()) {
     known = "expected only ";
     for (size_t i = 0; i < owned_.size(); ++i) known += (i == 0 ? "" : i + 1 == owned_.size() ? " and " : ", ") + owned_[i];

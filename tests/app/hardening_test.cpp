@@ -460,6 +460,16 @@ TEST_F(Hardening, AFolderInTheWayOfAFileDoesNotMixTheSets) {
   EXPECT_EQ(slurp(out / "counts.npy"), counts);
   EXPECT_EQ(slurp(out / "laser.exr/notes.txt"), "mine");
   EXPECT_EQ(nlohmann::json::parse(slurp(out / "metadata.json"))["seed"], 2);
+  // A metadata.json cut short lists no file: refused, and the message names it (it called the run's own files
+  // foreign and said nothing of metadata.json: an adversarial tester's find)
+  fs::remove_all(out / "laser.exr");
+  const std::string meta = slurp(out / "metadata.json");
+  std::ofstream(out / "metadata.json") << meta.substr(0, 200);
+  const Outcome cut = spadgen("run " + kTiny + " -q --seed 3 -o " + out.string());
+  expect_exit(cut, 1, "over a folder with its metadata.json cut short");
+  EXPECT_THAT(cut.err, HasSubstr("not listed in its metadata.json, which cannot be read: " + (out / "metadata.json").string() +
+                                 " is not JSON (cut short?)"));
+  EXPECT_EQ(slurp(out / "counts.npy"), counts);
 }
 
 TEST_F(Hardening, ASecondRunIntoAFolderInUseRefuses) {
