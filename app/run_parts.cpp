@@ -34,7 +34,15 @@ TimeAxis time_axis(const RunConfig& c, const sensor::SensorModel& s) {
 
 void apply_user_maps(sensor::SensorModel& sensor, const RunConfig& c) {
   if (c.sensor.gate.maps_exr.empty()) return;
-  const writers::ExrData maps = writers::read_exr(c.sensor.gate.maps_exr);
+  // (a file that is no EXR was named without its key or scene file: an adversarial tester's find)
+  const writers::ExrData maps = [&] {
+    try {
+      return writers::read_exr(c.sensor.gate.maps_exr);
+    } catch (const Error& e) {
+      throw Error(c.scene_file + ": sensor.gate.maps_exr: " + e.what() + "; expected an OpenEXR file of the gate's maps " +
+                  "(gate_skew_ps and gate_length_ps channels over the whole sensor, as a run's sensor_maps.exr holds them)");
+    }
+  }();
   if (!maps.partial_window.empty())
     throw Error(c.sensor.gate.maps_exr + " (sensor.gate.maps_exr): its " + maps.partial_window +
                 "; expected the whole sensor's pixels (a data window equal to the display window)");

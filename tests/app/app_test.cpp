@@ -853,6 +853,12 @@ TEST_F(App, InfoRefusesWhatTheRunRefusesAndNotWhatItIgnores) {
   r = sh("info " + kScenes + "flat_target.json --set sensor.gate.maps_exr=" + (dir_ / "crop/sensor_maps.exr").string());
   EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("expected the full sensor, 1024 x 500 pixels, found 8 x 8"));
+  // a file that is no EXR: named with the key and the scene file (it named the file alone)
+  std::ofstream(dir_ / "maps.csv") << "a,b\n";
+  r = sh("info " + kScenes + "flat_target.json --set sensor.gate.maps_exr=" + (dir_ / "maps.csv").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr(kScenes + "flat_target.json: sensor.gate.maps_exr: cannot read EXR '" + (dir_ / "maps.csv").string()));
+  EXPECT_THAT(r.output, HasSubstr("; expected an OpenEXR file of the gate's maps (gate_skew_ps and gate_length_ps channels"));
   r = sh("run " + kScenes + "flat_target.json -q --set camera.crop=[500,240,4,4] --set sensor.pixel_B.pdp_peak_wavelength_nm=250 -o " +
          (dir_ / "b").string());
   EXPECT_EQ(r.code, 0) << r.output;
