@@ -143,6 +143,13 @@ class _RunSamples(torch.utils.data.Dataset):
                 need = _needs(f)
                 if not any(r.has(n) for n in need):
                     raise ValueError(_missing_field_message(r, f, need))
+                # ... and there: a file the run lists and lost is a damaged run, refused here rather than at the
+                # item that reads it (a user's deleted counts.zarr was taken, and failed mid-epoch)
+                listed = [r._file(n) or n + ".exr" for n in need if r.has(n)]
+                if not any(os.path.exists(os.path.join(r.path, name)) for name in listed):
+                    raise ValueError(f"{os.path.join(r.path, listed[0])}: listed in {os.path.join(r.path, 'metadata.json')} "
+                                     f"(files) but missing, and field '{f}' reads it: the run folder is damaged; restore the "
+                                     "file or run the scene again (a dataset's sample: `spadgen dataset run` generates it again)")
         modes = {r.mode for r in runs_}
         if len(modes) > 1:
             first = {m: next(r.path for r in runs_ if r.mode == m) for m in sorted(modes)}

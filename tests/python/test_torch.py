@@ -2,6 +2,7 @@
 patches with their intrinsics, batching with a DataLoader, a few steps of training, and the checks that
 refuse runs that cannot share a batch. Skipped only where PyTorch is not installed (CI installs it)."""
 import pickle
+import os
 import subprocess
 import sys
 
@@ -238,6 +239,13 @@ def test_a_run_without_noise_free_rates_says_how_to_get_them(make_run, spadgen_b
         RunDataset([no_truth])
     assert "or leave 'depth' out of fields (e.g. fields=('counts', 'expected_counts'))" in str(e.value)
     assert RunDataset([no_truth], fields=("counts", "expected_counts"))[0]["counts"].shape[1:] == (4, 4)
+    # a file the run lists, lost since: refused by the constructor, named (it failed at the item reading it)
+    import shutil
+    shutil.copytree(no_truth, tmp_path / "lost")
+    os.remove(tmp_path / "lost" / "counts.npy")
+    with pytest.raises(ValueError, match=r"lost/counts.npy: listed in .*metadata.json \(files\) but missing, and field "
+                                         r"'counts' reads it: the run folder is damaged"):
+        RunDataset([tmp_path / "lost"], fields=("counts",))
     out = tmp_path / "sensed"
     subprocess.run([spadgen_bin, "sense", str(run), "--set", "outputs.expected_counts=true", "-o", str(out), "-q"], check=True)
     sensed = RunDataset([out])[0]
