@@ -311,7 +311,9 @@ void refuse_a_dataset_of_invalid_samples(const DatasetSpec& spec, Estimator& est
 
 std::string duration_text(double s) {
   char buf[64];
-  if (s < 90) std::snprintf(buf, sizeof buf, "%.0f s", s);
+  if (s < 0.005) std::snprintf(buf, sizeof buf, "0 s");
+  else if (s < 9.95) std::snprintf(buf, sizeof buf, "%.2g s", s);  // small samples: "0.15 s", not "0 s"
+  else if (s < 90) std::snprintf(buf, sizeof buf, "%.0f s", s);
   else if (s < 5400) std::snprintf(buf, sizeof buf, "%.0f min", s / 60);
   else if (s < 3 * 86400) std::snprintf(buf, sizeof buf, "%.1f h", s / 3600);
   else std::snprintf(buf, sizeof buf, "%.1f days", s / 86400);

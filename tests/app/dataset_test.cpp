@@ -1038,6 +1038,11 @@ TEST_F(Dataset, APlanTellsThePaceOfTheDoneSamples) {
   const Result measured = sh("dataset plan " + (dir_ / "d.json").string() + " -o " + out);
   ASSERT_EQ(measured.code, 0) << measured.output;
   EXPECT_THAT(measured.output, HasSubstr("# the 2 done samples took "));
+  // small samples' times in two digits (they read "0 s": a new user could not plan from them)
+  const size_t per_sample = measured.output.find("# per sample: ");
+  ASSERT_NE(per_sample, std::string::npos) << measured.output;
+  const std::string line = measured.output.substr(per_sample, measured.output.find('\n', per_sample) - per_sample);
+  EXPECT_THAT(line, HasSubstr(", time about 0.")) << line;
   EXPECT_THAT(measured.output, Not(HasSubstr("at that pace")));  // nothing left
   // Each folder (two samples, two realisations each) said to have taken 50 s: 200 s in all, far more than
   // the model's estimate of these 24 x 20 pixels; the dataset grown to 4 samples, the two left of the
