@@ -1023,6 +1023,11 @@ DatasetStatus dataset_status(const std::string& dir) {
   });
   std::ostringstream o;
   o << dir << ": dataset " << spec.file << ", " << spec.count() << " samples: " << status_counts(count) << "\n";
+  // (a status while shards ran said "missing" and "index.jsonl is missing" and nothing of the runs: a user ran
+  // the dataset again, needlessly)
+  if (folder.runs_on())
+    o << "a dataset run is on the folder now: its samples in progress count as missing until it publishes them, "
+         "and the last run to end writes the index\n";
   for (Status st : {Status::Failed, Status::Stale, Status::Missing, Status::Damaged})
     if (!which[size_t(st)].empty()) o << datasets::status_name(st) << ": " << datasets::ranges_text(which[size_t(st)]) << "\n";
   for (const auto& [why, samples] : stale_why)

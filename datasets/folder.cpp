@@ -146,6 +146,19 @@ std::unique_ptr<RunPresence> DatasetFolder::enter() const {
   return std::make_unique<RunPresence>(lock_byte(dir_, kPresenceFile, F_RDLCK, 0, "this run's presence", true));
 }
 
+bool DatasetFolder::runs_on() const {
+  const int fd = ::open((dir_ / kPresenceFile).c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return false;  // no run ever entered
+  struct flock l {};
+  l.l_type = F_WRLCK;  // would an exclusive lock conflict: a run holds its shared one
+  l.l_whence = SEEK_SET;
+  l.l_start = 0;
+  l.l_len = 1;
+  const bool held = ::fcntl(fd, F_OFD_GETLK, &l) == 0 && l.l_type != F_UNLCK;
+  ::close(fd);
+  return held;
+}
+
 std::unique_ptr<SampleClaim> DatasetFolder::try_claim(const Sample& s) const {
   const int fd = lock_byte(dir_, ".dataset.lock", F_WRLCK, static_cast<off_t>(s.index), "sample " + std::to_string(s.index), false);
   return fd < 0 ? nullptr : std::make_unique<SampleClaim>(fd);

@@ -174,6 +174,9 @@ class DatasetFolder {
 
   // This run's presence on the folder (see RunPresence), taken as it begins.
   std::unique_ptr<RunPresence> enter() const;
+  // Whether a dataset run is on the folder now (another process holds its presence): for `dataset status`,
+  // whose missing samples and index are then the running ones' work in progress. Creates nothing.
+  bool runs_on() const;
 
   // Rewrites index.jsonl, index.csv and dataset.md from the records of every sample that `inspect_each`
   // reads from the folder and hands, in index order, to its argument, under the folder's lock: the read and

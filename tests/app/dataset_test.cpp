@@ -959,6 +959,17 @@ TEST_F(Dataset, StatusChecksTheIndex) {
                {first + first, "index: " + out + "/index.jsonl row 2 lists sample 0 where sample 1 belongs (damaged since it was written)" + fix},
                {first + "{\"index\": 1, \n", "index: " + out + "/index.jsonl row 2 is not JSON (damaged since it was written)" + fix},
                {index + first, "index: " + out + "/index.jsonl row 3 lists sample 0 where sample 2 belongs"}};
+  // A run on the folder (its presence held, as a dataset run holds it) is said; none is when it has ended.
+  {
+    const int fd = ::open((dir_ / "out/.dataset.runs").c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+    ASSERT_GE(fd, 0);
+    struct flock l {};
+    l.l_type = F_RDLCK, l.l_whence = SEEK_SET, l.l_start = 0, l.l_len = 1;
+    ASSERT_EQ(::fcntl(fd, F_OFD_SETLK, &l), 0);
+    EXPECT_THAT(sh(status).output, HasSubstr("a dataset run is on the folder now: its samples in progress count as missing"));
+    ::close(fd);
+    EXPECT_THAT(sh(status).output, Not(HasSubstr("a dataset run is on the folder now")));
+  }
   for (const auto& c : cases) {
     if (c.text.empty()) fs::remove(dir_ / "out/index.jsonl");
     else write(dir_ / "out/index.jsonl", c.text);
