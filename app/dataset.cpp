@@ -464,8 +464,8 @@ std::string evaluation_status(const std::string& dir, const std::set<std::string
     return selection.empty() || !say_current ? "" : "evaluation/ is current, of some samples only: " + selection + " (evaluate --samples)\n";
   return "evaluation/ is out of date: of the " + std::to_string(scored.size()) + " sample folders it scored" +
          (rows.size() > m["samples"].size() ? " (or left out: 2D)" : "") + ", " +
-         std::to_string(changed) + " changed since (generated again with another sample_hash, or damaged) and " + std::to_string(gone) +
-         " are no longer done samples, and " + std::to_string(unscored) + " done ones are not in it: run `spadgen evaluate " +
+         std::to_string(changed) + " changed since (generated again with another sample_hash) and " + std::to_string(gone) +
+         " are no longer done samples (damaged, failed, stale or missing now, or past the dataset's samples), and " + std::to_string(unscored) + " done ones are not in it: run `spadgen evaluate " +
          dir + (selection.empty() ? std::string() : selection.back() == '.' ? " --samples @FILE" : " --samples " + selection) +
          "` again\n";
 }

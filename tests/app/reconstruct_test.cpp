@@ -1191,7 +1191,7 @@ TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
     std::ofstream(meta_2d) << text;
     r = sh("dataset status " + out3.string());
     EXPECT_THAT(r.output, HasSubstr("evaluation/ is out of date: of the 2 sample folders it scored (or left out: 2D), 0 changed since "
-                                    "(generated again with another sample_hash, or damaged) and 1 are no longer done samples"));
+                                    "(generated again with another sample_hash) and 1 are no longer done samples"));
     std::ofstream(meta_2d) << original_2d;  // (as generated)
   }
   // {sample} may not name one file for several samples (p/{sample}/../x.npy), nor a folder
@@ -1225,7 +1225,7 @@ TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
   r = sh("dataset status " + out3.string());
   EXPECT_THAT(r.output, HasSubstr("sample 0 damaged: "));
   EXPECT_THAT(r.output, HasSubstr("evaluation/ is out of date: of the 2 sample folders it scored (or left out: 2D), 0 changed "
-                                  "since (generated again with another sample_hash, or damaged) and 1 are no longer done samples"));
+                                  "since (generated again with another sample_hash) and 1 are no longer done samples"));
   std::ofstream(out3 / "evaluation/metrics.json") << "{}";
   r = sh("dataset status " + out3.string());
   EXPECT_THAT(r.output, HasSubstr("metrics.json does not read as spadgen evaluate's of a dataset"));
