@@ -849,20 +849,22 @@ class Run:
                            gt["direct_other_laser"] if traced else None, gt["indirect_laser"] if traced else None,
                            path=slots(gt, "path"), **labels)
 
-    def detections(self, detector="edges", noise_free=False):
+    def detections(self, detector="edges", noise_free=False, path=None):
         """The returns ``spadgen reconstruct RUN --detector DETECTOR`` wrote into the run folder (Detections);
         noise_free: those of ``--noise-free`` (from the noise-free rates lambda, detection_rate),
-        detections_<detector>_noise_free.exr."""
+        detections_<detector>_noise_free.exr. path: a file reconstruct wrote elsewhere (``-o FILE``) from this
+        run, whatever its detector (Detections.detector says which)."""
         suffix = "_noise_free" if noise_free else ""
+        given = path is not None
         if self.mode != "gate_sweep":
             raise ValueError(f"{self.path} is a 2D run ({self.mode}): no gate profiles to detect returns in; "
                              f"spadgen reconstruct {self.path}{' --noise-free' if noise_free else ''} writes its HDR inversion, "
                              f"which run.hdr({'noise_free=True' if noise_free else ''}) reads")
-        path = os.path.join(self.path, f"detections_{detector}{suffix}.exr")
+        path = os.fspath(path) if given else os.path.join(self.path, f"detections_{detector}{suffix}.exr")
         if not os.path.exists(path):  # (anything else in its place: ExrFile names what it is)
             flag = " --noise-free" if noise_free else ""
             raise FileNotFoundError(f"{path}: {_missing(path)}; write it with spadgen reconstruct {self.path} --detector "
-                                    f"{detector}{flag}")
+                                    f"{detector}{flag}" + (f" -o {path}" if given else ""))
         f = ExrFile(path)
         self._check_image(f)
         m = 0
@@ -878,7 +880,7 @@ class Run:
         except ValueError:
             made = {}
         made_nf = made.get("noise_free") is True if isinstance(made, dict) else False  # (as the program: not true, false)
-        if isinstance(made, dict) and "detector" in made and (made["detector"], made_nf) != (detector, noise_free):
+        if not given and isinstance(made, dict) and "detector" in made and (made["detector"], made_nf) != (detector, noise_free):
             raise ValueError(f"{path}: written by reconstruct's {made['detector']} detector"
                              f"{' on the noise-free rates' if made_nf else ''}, not the {detector} detector"
                              f"{' on the noise-free rates' if noise_free else ''} its name stands for (reconstruct -o named "
@@ -887,16 +889,19 @@ class Run:
         return Detections(np.asarray(f["count"]).astype(np.int32), slots("range"), slots("gate"), slots("amplitude"),
                           slots("score"), made, source if isinstance(source, dict) else {})
 
-    def hdr(self, noise_free=False):
+    def hdr(self, noise_free=False, path=None):
         """The HDR inversion of a 2D run that ``spadgen reconstruct RUN`` (``--noise-free``) wrote into its folder,
-        hdr.exr (hdr_noise_free.exr): channels photons, photons_se, saturated (docs/detection.md)."""
-        path = os.path.join(self.path, "hdr_noise_free.exr" if noise_free else "hdr.exr")
+        hdr.exr (hdr_noise_free.exr): channels photons, photons_se, saturated (docs/detection.md). path: one
+        reconstruct wrote elsewhere (``-o FILE``) from this run."""
+        given = path is not None
+        path = os.fspath(path) if given else os.path.join(self.path, "hdr_noise_free.exr" if noise_free else "hdr.exr")
         if not os.path.exists(path):
             if self.mode == "gate_sweep":
                 raise ValueError(f"{self.path} is a gate sweep: reconstruct writes its detections (run.detections()), "
                                  "not an HDR inversion, which is for 2D runs")
             flag = " --noise-free" if noise_free else ""
-            raise FileNotFoundError(f"{path}: {_missing(path)}; write it with spadgen reconstruct {self.path}{flag}")
+            raise FileNotFoundError(f"{path}: {_missing(path)}; write it with spadgen reconstruct {self.path}{flag}"
+                                    + (f" -o {path}" if given else ""))
         image = ExrFile(path)
         self._check_image(image)
         self._check_source(image, "the HDR inversion is")

@@ -173,6 +173,11 @@ def test_hdr_inversion_of_a_2d_run(intensity_run, spadgen_bin, tmp_path):
     subprocess.run([spadgen_bin, "reconstruct", str(folder), "-q"], check=True)
     hdr = run.hdr()
     np.testing.assert_allclose(hdr["photons"], run.intensity["photons"], rtol=1e-6)
+    # one written elsewhere (reconstruct -o): read from there, checked to be of this run
+    subprocess.run([spadgen_bin, "reconstruct", str(folder), "-q", "-o", str(tmp_path / "mine.exr")], check=True)
+    np.testing.assert_array_equal(run.hdr(path=tmp_path / "mine.exr")["photons"], hdr["photons"])
+    with pytest.raises(FileNotFoundError, match=f"write it with spadgen reconstruct {folder} -o {tmp_path / 'nope.exr'}"):
+        run.hdr(path=tmp_path / "nope.exr")
     # An inversion of another crop of the same size (its header's spadgen_source) is refused, as detections are
     # (it was read beside this run's truth without a word).
     path = folder / "hdr.exr"
@@ -553,6 +558,11 @@ def test_detections_of_spadgen_reconstruct(spadgen_bin, make_run, tmp_path):
     subprocess.run([spadgen_bin, "reconstruct", str(run_dir), "--detector", "paper", "-q"], check=True)
     d = run.detections("paper")
     assert d.detector["detector"] == "paper" and d.detector["parameters"]["window"] == 60
+    # a file written elsewhere (reconstruct -o), whatever its detector: read from there, of this run
+    subprocess.run([spadgen_bin, "reconstruct", str(run_dir), "--detector", "paper", "-q", "-o", str(tmp_path / "p.exr")], check=True)
+    elsewhere = run.detections(path=tmp_path / "p.exr")
+    assert elsewhere.detector["detector"] == "paper"
+    np.testing.assert_array_equal(elsewhere.count, d.count)
     assert d.count.shape == (run.height, run.width) and d.range.shape[1:] == (run.height, run.width)
     # the slots hold count returns each, in increasing range, NaN beyond
     finite = np.isfinite(d.range)
