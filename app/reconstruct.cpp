@@ -657,13 +657,16 @@ std::string scored_text(const nlohmann::json& scored) {
   return "--detector " + detector + (scored.value("noise_free", false) == true ? " --noise-free" : "");
 }
 
-// A JSON file's value, or none when it is absent or not JSON.
+// An earlier evaluation's metrics.json, or none when it is absent, no regular file, larger than 1 GB or not
+// JSON (read as the program reads its files: bounded, and never a FIFO's blocking open).
 std::optional<nlohmann::json> read_json_if_valid(const fs::path& path) {
-  std::ifstream in(path);
-  if (!in) return std::nullopt;
-  nlohmann::json j = nlohmann::json::parse(in, nullptr, /*allow_exceptions=*/false);
-  if (j.is_discarded()) return std::nullopt;
-  return j;
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) return std::nullopt;
+  try {
+    return scenes::parse_json(scenes::read_file_bounded(path.string(), uint64_t{1} << 30, "metrics"), path.string());
+  } catch (const Error&) {
+    return std::nullopt;
+  }
 }
 
 std::string summary(const nlohmann::json& m) {
