@@ -58,11 +58,6 @@ constexpr double kSecondsPerPixelGate = 8e-9;       // sensor stage, per pixel a
 constexpr double kSecondsPerByte = 2.0 / 1.0e9;     // writing the outputs (and compressing the images)
 constexpr double kSecondsPerRun = 0.2;              // loading the scene, building the BVH, publishing
 
-// The cores a run with --threads `threads` (0: all) uses, which the estimates are for.
-int estimate_cores(int threads) {
-  const int cores = int(std::max(1u, std::thread::hardware_concurrency()));
-  return threads > 0 ? std::min(threads, cores) : cores;
-}
 
 struct Estimate {
   int64_t disk = 0, memory = 0;  // disk: what the sample keeps
@@ -132,7 +127,7 @@ Estimate estimate(const RunConfig& c, int repeats, int threads, const SceneSize&
   e.disk_peak_at_least = plan.disk_at_least() - plan.disk_kept_at_least();
   e.least = least_parts(plan.disk);
   e.seconds += (repeats - 1) * (kSecondsPerRun + sensor_seconds + double(run_disk) * kSecondsPerByte);
-  e.seconds *= 2.0 / estimate_cores(threads);  // the model is of 2 cores; the work is parallel
+  e.seconds *= 2.0 / usable_cores(threads);  // the model is of 2 cores; the work is parallel
   return e;
 }
 
@@ -550,7 +545,7 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
       // this plan's)
       else if (checked.resolved && rec.seconds > 0.0)
         done_seconds += rec.seconds, ++done_timed,
-        done_estimated += e.seconds * (rec.cores > 0 ? double(estimate_cores(options.threads)) / rec.cores : 1.0);
+        done_estimated += e.seconds * (rec.cores > 0 ? double(usable_cores(options.threads)) / rec.cores : 1.0);
     }
     total.add(e);
     const bool show = options.all || samples <= 10 || i >= n - 10 * shard.count;
@@ -585,8 +580,8 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
     << bytes_text(total.memory) << ", time about " << duration_text(valid ? total.seconds / double(valid) : 0.0) << "\n";
   o << "# " << (shard.count > 1 ? "this shard" : "total") << ": " << samples << " samples"
     << (valid < samples ? " (the " + std::to_string(valid) + " valid ones estimated)" : std::string()) << ", " << disk << bytes_text(total.disk())
-    << ", time about " << duration_text(total.seconds) << " (estimates for " << estimate_cores(options.threads)
-    << (estimate_cores(options.threads) == 1 ? " core" : " cores") << ": docs/datasets.md, \"Estimates\")\n";
+    << ", time about " << duration_text(total.seconds) << " (estimates for " << usable_cores(options.threads)
+    << (usable_cores(options.threads) == 1 ? " core" : " cores") << ": docs/datasets.md, \"Estimates\")\n";
   o << "# " << estimator.shapes() << (estimator.shapes() == 1 ? " estimate" : " estimates")
     << " computed, one per distinct shape of run (about 40 ms of one core each where the sensor's gate response "
        "differs; docs/datasets.md, \"Estimates\")\n";

@@ -7,8 +7,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <string_view>
-#include <thread>
 
+#include "app/resources.h"
 #include "core/units.h"
 #include "render/integrator.h"
 #include "scenes/input.h"
@@ -189,9 +189,7 @@ json run_json(const RunRecord& r) {
                     {"guided", rays.guided}, {"ambient", rays.ambient}, {"indirect", rays.indirect}, {"total", rays.total()}};
   // The cores its threads could run on (--threads, or all, at most the machine's): what a dataset plan's pace
   // compares the sample's time with (the plan's own --threads made it 2 times off for samples of 1 thread).
-  const int machine = int(std::max(1u, std::thread::hardware_concurrency()));
-  const int cores = r.threads > 0 ? std::min(r.threads, machine) : machine;
-  return {{"threads", r.threads}, {"cores", cores}, {"seconds", r.seconds}, {"wall_seconds", wall}, {"stages", stages},
+  return {{"threads", r.threads}, {"cores", usable_cores(r.threads)}, {"seconds", r.seconds}, {"wall_seconds", wall}, {"stages", stages},
           {"rays", rays_json}, {"components", components}};
 }
 

@@ -121,6 +121,11 @@ std::string bytes_text(int64_t bytes) {
 
 int64_t worker_threads(int threads) { return threads > 0 ? threads : std::max(1u, std::thread::hardware_concurrency()); }
 
+int usable_cores(int threads) {
+  const int cores = int(std::max(1u, std::thread::hardware_concurrency()));
+  return threads > 0 ? std::min(threads, cores) : cores;
+}
+
 // The arrival times a pixel's saved light spans, for the plan (outputs.light).
 constexpr double kLitSpan_s = 2.5e-9;
 

@@ -66,6 +66,9 @@ inline constexpr int64_t kCompressionBound = 20;
 
 // The worker threads of --threads (0: all cores).
 int64_t worker_threads(int threads);
+// The cores a run with --threads `threads` (0: all) can use: at most the machine's (metadata.json run.cores;
+// the dataset estimates are for them).
+int usable_cores(int threads);
 
 // Memory of the scene's geometry in a run: its meshes and Embree's BVH, per triangle and per mesh (2,000,000
 // triangles in one mesh peaked 384 MB above an 8 x 8 crop's 50 MB; 100,000 meshes of 2 triangles 444 MB).
