@@ -600,6 +600,15 @@ double fresnel_eta(double c, double eta) {
 // The same from a medium into one of relative index n at incidence theta.
 double fresnel(double theta, double n) { return fresnel_eta(std::cos(theta), n); }
 
+// A Lambertian wall (albedo 0.5) 1 m down -z and, with `slab`, a clear slab of index n and thickness t whose
+// near face is 0.3 m from the camera: the scene of the slab tests below.
+scenes::Scene wall_behind_slab(bool slab, float t, float n) {
+  scenes::Scene s;
+  add_quad(s, {0, 0, -1}, {3, 0, 0}, {0, 3, 0}, add_material(s, test::lambertian(0.5f)));
+  if (slab) add_box(s, {-3, -3, -0.3f - t}, {3, 3, -0.3f}, add_material(s, test::glass(n, t)));
+  return s;
+}
+
 // A 5 cm slab of ior 1.5 between the camera (with the laser at its centre) and a Lambertian wall 1 m away,
 // seen at an angle psi to the slab's normal (the camera turned; 12 mm focal length, so every pixel looks
 // along psi). The laser's light reaches the wall point X' the camera sees through the slab along the same
@@ -614,12 +623,7 @@ TEST(Transport, LaserLightRefractsThroughAThickSlab) {
   const float t = 0.05f, n = 1.5f;
   for (const double psi_deg : {0.0, 25.0, 45.0}) {
     const double psi = psi_deg * kPi / 180;
-    const auto scene = [&](bool slab) {
-      scenes::Scene s;
-      add_quad(s, {0, 0, -1}, {3, 0, 0}, {0, 3, 0}, add_material(s, test::lambertian(0.5f)));
-      if (slab) add_box(s, {-3, -3, -0.3f - t}, {3, 3, -0.3f}, add_material(s, test::glass(n, t)));
-      return s;
-    };
+    const auto scene = [&](bool slab) { return wall_behind_slab(slab, t, n); };
     RenderStageConfig c = test_config(4, 4, 12e-3);
     c.camera.look_at_m = {std::sin(psi), 0, -std::cos(psi)};
     c.laser.beam = Beam::Cone;
@@ -666,12 +670,7 @@ TEST(Transport, LaserLightRefractsThroughAThickSlab) {
 // (the laser side's echo, drawn: below); its first echo at 2 n t / c, on both sides, is the closed form.
 TEST(Transport, AClearPlatesBranchesAreFollowedBothWays) {
   const float t = 0.05f, n = 1.5f;
-  const auto scene = [&](bool slab) {
-    scenes::Scene s;
-    add_quad(s, {0, 0, -1}, {3, 0, 0}, {0, 3, 0}, add_material(s, test::lambertian(0.5f)));
-    if (slab) add_box(s, {-3, -3, -0.3f - t}, {3, 3, -0.3f}, add_material(s, test::glass(n, t)));
-    return s;
-  };
+  const auto scene = [&](bool slab) { return wall_behind_slab(slab, t, n); };
   RenderStageConfig c = test_config(4, 4, 50e-3);  // 50 mm: every pixel within 0.03 deg of the axis
   c.laser.beam = Beam::Cone;
   c.laser.half_angle_rad = kPi;
@@ -735,12 +734,7 @@ TEST(Transport, AClearPlatesBranchesAreFollowedBothWays) {
 TEST(Transport, AClearPlatesEchoAtObliqueIncidence) {
   const float t = 0.05f, n = 1.5f;
   const double psi = 40.0 * kPi / 180;
-  const auto scene = [&](bool slab) {
-    scenes::Scene s;
-    add_quad(s, {0, 0, -1}, {3, 0, 0}, {0, 3, 0}, add_material(s, test::lambertian(0.5f)));
-    if (slab) add_box(s, {-3, -3, -0.3f - t}, {3, 3, -0.3f}, add_material(s, test::glass(n, t)));
-    return s;
-  };
+  const auto scene = [&](bool slab) { return wall_behind_slab(slab, t, n); };
   RenderStageConfig c = test_config(4, 4, 50e-3);
   c.camera.look_at_m = {std::sin(psi), 0, -std::cos(psi)};
   c.laser.beam = Beam::Cone;
