@@ -145,7 +145,7 @@ class _RunSamples(torch.utils.data.Dataset):
                     raise ValueError(_missing_field_message(r, f, need))
                 # ... and there: a file the run lists and lost is a damaged run, refused here rather than at the
                 # item that reads it (a user's deleted counts.zarr was taken, and failed mid-epoch)
-                listed = [r._file(n) or n + ".exr" for n in need if r.has(n)]
+                listed = [r._file(n) for n in need if r.has(n)]
                 if not any(os.path.exists(os.path.join(r.path, name)) for name in listed):
                     raise ValueError(f"{os.path.join(r.path, listed[0])}: listed in {os.path.join(r.path, 'metadata.json')} "
                                      f"(files) but missing, and field '{f}' reads it: the run folder is damaged; restore the "
@@ -182,16 +182,15 @@ class _RunSamples(torch.utils.data.Dataset):
                 raise ValueError(f"the runs have different image sizes {sorted(sizes)}: give patch_size")
             self.index = [(i, 0, 0, r.height, r.width) for i, r in enumerate(runs_)]
         else:
-            sides = [patch_size, patch_size] if np.isscalar(patch_size) else list(patch_size)
-            if len(sides) != 2:
-                raise ValueError(f"patch_size must be an integer or a pair (h, w) of integers, got {patch_size!r}")
-            ph, pw = (whole(v, "patch_size", 1) for v in sides)
-            sy, sx = ph, pw
-            if patch_stride is not None:
-                steps = [patch_stride, patch_stride] if np.isscalar(patch_stride) else list(patch_stride)
-                if len(steps) != 2:
-                    raise ValueError(f"patch_stride must be an integer or a pair (y, x) of integers, got {patch_stride!r}")
-                sy, sx = (whole(v, "patch_stride", 1) for v in steps)
+            def pair(value, what, names):
+                # one integer for both, or a pair of them, each >= 1
+                sides = [value, value] if np.isscalar(value) else list(value)
+                if len(sides) != 2:
+                    raise ValueError(f"{what} must be an integer or a pair {names} of integers, got {value!r}")
+                return tuple(whole(v, what, 1) for v in sides)
+
+            ph, pw = pair(patch_size, "patch_size", "(h, w)")
+            sy, sx = pair(patch_stride, "patch_stride", "(y, x)") if patch_stride is not None else (ph, pw)
             self.index = [(i, x, y, ph, pw) for i, r in enumerate(runs_)
                           for y in range(0, r.height - ph + 1, sy) for x in range(0, r.width - pw + 1, sx)]
             if not self.index:
