@@ -1,6 +1,7 @@
 #include "integrator.h"
 
 #include "guide.h"
+#include "planar_path.h"
 
 #include <algorithm>
 #include <cfloat>
@@ -362,9 +363,10 @@ Spec Integrator::shadow_transmittance(const glm::vec3& origin, const glm::vec3& 
         cx->planar = false;
       } else {
         cx->slots.c[cx->n++] = {glm::dvec3(sf.p), sf.ng, sf.material, mp, medium};
-        // Flat-shaded and parallel to the first: else not connect_laser_refracted's case.
-        if (glm::dot(sf.ns, sf.ng) < 1.0f - 1e-6f || std::fabs(glm::dot(sf.ng, cx->slots.c[0].ng)) < 1.0f - 1e-6f)
-          cx->planar = false;
+        // Flat-shaded (else neither refracted connection's case), and parallel to the first (else
+        // connect_laser_planar's, not connect_laser_refracted's).
+        if (glm::dot(sf.ns, sf.ng) < 1.0f - 1e-6f) cx->planar = false;
+        if (std::fabs(glm::dot(sf.ng, cx->slots.c[0].ng)) < 1.0f - 1e-6f) cx->parallel = false;
       }
     }
     o = offset_ray_origin(sf.p, sf.ng, dir);
@@ -711,6 +713,69 @@ bool Integrator::connect_laser_along(const NeeVertex& v, const RefractedLayers& 
   return true;
 }
 
+// The laser seen from v through planar faces that are not all parallel: the path that obeys Snell's law at
+// each (solve_planar_path), traced as connect_laser_along traces its own, lit with the path bundle's spread.
+// Fresnel transmittance at each face at its own angle, Beer-Lambert over each segment. The light reflected
+// between two of the faces (connect_laser_refracted's echoes) is left out.
+bool Integrator::connect_laser_planar(const NeeVertex& v, const Crossings& cx, double w, const PixelFilm& film,
+                                      RayCounts* rays) const {
+  static_assert(Crossings::kMax <= kMaxPlanarFaces);
+  const Crossings::Crossing* cr = cx.slots.c;
+  const int k = cx.n;
+  PlanarFace faces[Crossings::kMax];
+  glm::dvec3 start[Crossings::kMax];
+  double index[Crossings::kMax + 1];
+  int media[Crossings::kMax + 1];
+  media[0] = cx.medium0;
+  for (int j = 0; j < k; ++j) {
+    faces[j] = {cr[j].p, glm::dvec3(cr[j].ng)};
+    start[j] = cr[j].p;
+    media[j + 1] = cr[j].medium;
+  }
+  for (int s = 0; s <= k; ++s) index[s] = media[s] < 0 ? 1.0 : double(shading_.material(media[s]).point.ior);
+  PlanarPath path;
+  if (!solve_planar_path(glm::dvec3(v.sf.p), laser_.position, faces, index, k, start, &path)) return false;
+  const glm::vec3 wi(path.d[0]);
+  if (!v.counted(wi)) return true;
+  const Spec f = v.bsdf.eval_cos(wi);
+  if (!(f.x > 0.0f)) return true;
+  const double intensity = laser_.intensity_towards(-path.d[k]);
+  if (!(intensity > 0.0)) return true;
+  // Each segment must meet its face first (material and orientation), the last one nothing opaque.
+  Spec t(1.0f);
+  double opl = 0.0;
+  glm::vec3 q = v.sf.p, qn = v.sf.ng;
+  for (int s = 0; s <= k; ++s) {
+    const glm::vec3 ds(path.d[s]);
+    const glm::vec3 start_s = offset_ray_origin(q, qn, ds);
+    ++rays->refracted;
+    RayHit hit;
+    const float reach = s < k ? float(path.len[s] * 1.01 + 1e-4) : float(path.len[s] * (1.0 - 1e-6));
+    const bool found = embree_.intersect(start_s, ds, 0.0f, reach, &hit, true);
+    if (s < k) {
+      if (!found) return false;
+      const Surface sf = shading_.surface(hit);
+      if (sf.material != cr[s].material || std::fabs(glm::dot(sf.ng, cr[s].ng)) < 1.0f - 1e-6f) return false;
+      const float c = glm::dot(ds, sf.ng);
+      t *= interface_transmittance(cr[s].mp, std::fabs(c), c < 0.0f);
+      q = sf.p, qn = sf.ng;
+    } else if (found) {
+      const Surface sf = shading_.surface(hit);
+      if (shading_.material(sf.material).point.transmission > 0.0f) return false;
+      return true;  // blocked on the refracted path
+    }
+    if (media[s] >= 0) {
+      const ResolvedMaterial& rm = shading_.material(media[s]);
+      if (rm.absorbing) t *= glm::exp(-rm.sigma * float(path.len[s]));
+    }
+    opl += index[s] * path.len[s];
+  }
+  if (!(t.x > 0.0f)) return true;
+  const double value = double(v.beta.x) * f.x * t.x * intensity * path.spread * w;
+  deposit_laser(v, value, v.opl + opl, film);
+  return true;
+}
+
 inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, const FirstSegment* first, double w,
                                       const PixelFilm& film, RayCounts* rays) const {
   const double r = lr.r, intensity = lr.intensity;
@@ -723,7 +788,10 @@ inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, co
     Crossings cx;
     tr = shadow_transmittance(lr.origin, wi, float(r), v.shadow_medium_towards(wi), &extra, &rays->laser, first, &cx);
     if (edges_ && v.medium >= 0) connect_laser_edges(v, lr, cx, w, film, rays);
-    if (cx.blocked || (cx.refracting && cx.planar && connect_laser_refracted(v, lr, cx, w, film, rays, true))) return;
+    if (cx.blocked) return;
+    if (cx.refracting && cx.planar &&
+        (cx.parallel ? connect_laser_refracted(v, lr, cx, w, film, rays, true) : connect_laser_planar(v, cx, w, film, rays)))
+      return;
   }
   if (!v.counted(wi)) return;
   const Spec f = v.bsdf.eval_cos(wi);

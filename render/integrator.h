@@ -161,7 +161,8 @@ class Integrator {
     int medium0 = -1;         // the walk's medium at its start
     bool blocked = false;     // an opaque surface (or the crossing limit) stopped the walk
     bool refracting = false;  // it entered or left a volume of index other than 1
-    bool planar = true;       // every crossing flat-shaded and parallel to the first, and at most kMax of them
+    bool planar = true;       // every crossing flat-shaded, and at most kMax of them
+    bool parallel = true;     // every crossing's face parallel to the first's
   };
 
   // Fraction of light (two channels) that reaches distance `dist` along unit `dir` from `origin`, through
@@ -275,6 +276,10 @@ class Integrator {
   // reflected between pairs of faces too, each traced with a probability by its reflectance.
   bool connect_laser_refracted(const NeeVertex& v, const LaserRay& lr, const Crossings& cx, double w,
                                const PixelFilm& film, RayCounts* rays, bool echoes, double p_guess = -1.0) const;
+  // The laser's connection from v through the planar faces the straight walk crossed when they are not all
+  // parallel (solve_planar_path); false when no refracted path crosses the same faces (then the straight
+  // connection is used).
+  bool connect_laser_planar(const NeeVertex& v, const Crossings& cx, double w, const PixelFilm& film, RayCounts* rays) const;
   // A uniform number in [0, 1) for the echo of faces a, b seen from vertex position p: a hash of them and the
   // light seed (connect_laser_refracted).
   double echo_uniform(const glm::vec3& p, int a, int b) const;

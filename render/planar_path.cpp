@@ -1,0 +1,163 @@
+#include "planar_path.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace spadgen::render {
+
+namespace {
+
+constexpr int kMaxUnknowns = 2 * kMaxPlanarFaces;
+
+// An orthonormal basis of the plane normal to unit n (Duff et al. 2017).
+void plane_basis(const glm::dvec3& n, glm::dvec3* t0, glm::dvec3* t1) {
+  const double sign = std::copysign(1.0, n.z);
+  const double a = -1.0 / (sign + n.z), b = n.x * n.y * a;
+  *t0 = glm::dvec3(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
+  *t1 = glm::dvec3(b, sign + n.y * n.y * a, -n.y);
+}
+
+// Solves a x = b in place for `cols` right-hand sides (b row-major, n x cols), by Gaussian elimination with
+// partial pivoting; false when a is singular to working precision.
+bool solve_linear(double (*a)[kMaxUnknowns], double (*b)[2], int n, int cols) {
+  double scale = 0.0;
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j) scale = std::max(scale, std::fabs(a[i][j]));
+  if (!(scale > 0.0)) return false;
+  for (int c = 0; c < n; ++c) {
+    int pivot = c;
+    for (int i = c + 1; i < n; ++i)
+      if (std::fabs(a[i][c]) > std::fabs(a[pivot][c])) pivot = i;
+    if (!(std::fabs(a[pivot][c]) > 1e-14 * scale)) return false;
+    if (pivot != c) {
+      std::swap_ranges(a[c], a[c] + n, a[pivot]);
+      std::swap_ranges(b[c], b[c] + cols, b[pivot]);
+    }
+    for (int i = c + 1; i < n; ++i) {
+      const double f = a[i][c] / a[c][c];
+      if (f == 0.0) continue;
+      for (int j = c; j < n; ++j) a[i][j] -= f * a[c][j];
+      for (int j = 0; j < cols; ++j) b[i][j] -= f * b[c][j];
+    }
+  }
+  for (int c = n - 1; c >= 0; --c)
+    for (int j = 0; j < cols; ++j) {
+      double s = b[c][j];
+      for (int i = c + 1; i < n; ++i) s -= a[c][i] * b[i][j];
+      b[c][j] = s / a[c][c];
+    }
+  return true;
+}
+
+struct Chain {
+  const glm::dvec3 *x, *l;
+  const PlanarFace* faces;
+  const double* index;
+  int k;
+  glm::dvec3 t[kMaxPlanarFaces][2];  // each face's in-plane basis
+
+  glm::dvec3 vertex(const glm::dvec3* y, int s) const { return s < 0 ? *x : s < k ? y[s] : *l; }
+
+  // Segments' directions and lengths for points y, and the residual: each face's in-plane part of
+  // n_s d_s - n_{s+1} d_{s+1}. Its largest magnitude, or +inf where a segment is empty.
+  double residual(const glm::dvec3* y, glm::dvec3* d, double* len, double* c) const {
+    for (int s = 0; s <= k; ++s) {
+      const glm::dvec3 e = vertex(y, s) - vertex(y, s - 1);
+      len[s] = glm::length(e);
+      if (!(len[s] > 0.0)) return HUGE_VAL;
+      d[s] = e / len[s];
+    }
+    double worst = 0.0;
+    for (int j = 0; j < k; ++j) {
+      const glm::dvec3 r = index[j] * d[j] - index[j + 1] * d[j + 1];
+      for (int a = 0; a < 2; ++a) {
+        c[2 * j + a] = glm::dot(t[j][a], r);
+        worst = std::max(worst, std::fabs(c[2 * j + a]));
+      }
+    }
+    return worst;
+  }
+
+  // d(d_s) / d(end of segment s) applied to v: (v - d_s (d_s . v)) / len_s.
+  static glm::dvec3 project(const glm::dvec3& d, double len, const glm::dvec3& v) { return (v - d * glm::dot(d, v)) / len; }
+
+  // The residual's Jacobian in the points' in-plane coordinates (block tridiagonal).
+  void jacobian(const glm::dvec3* d, const double* len, double (*jac)[kMaxUnknowns]) const {
+    const int n = 2 * k;
+    for (int i = 0; i < n; ++i) std::fill_n(jac[i], n, 0.0);
+    for (int j = 0; j < k; ++j)
+      for (int i = std::max(0, j - 1); i <= std::min(k - 1, j + 1); ++i)
+        for (int b = 0; b < 2; ++b) {
+          const glm::dvec3& v = t[i][b];
+          glm::dvec3 m(0.0);  // d r_j / d y_i applied to v
+          if (i == j - 1) m = -index[j] * project(d[j], len[j], v);
+          if (i == j) m = index[j] * project(d[j], len[j], v) + index[j + 1] * project(d[j + 1], len[j + 1], v);
+          if (i == j + 1) m = -index[j + 1] * project(d[j + 1], len[j + 1], v);
+          for (int a = 0; a < 2; ++a) jac[2 * j + a][2 * i + b] = glm::dot(t[j][a], m);
+        }
+  }
+};
+
+}  // namespace
+
+bool solve_planar_path(const glm::dvec3& x, const glm::dvec3& l, const PlanarFace* faces, const double* index, int k,
+                       const glm::dvec3* start, PlanarPath* out) {
+  if (k < 1 || k > kMaxPlanarFaces) return false;
+  Chain ch{&x, &l, faces, index, k, {}};
+  glm::dvec3 y[kMaxPlanarFaces], d[kMaxPlanarFaces + 1];
+  double len[kMaxPlanarFaces + 1], c[kMaxUnknowns];
+  for (int j = 0; j < k; ++j) {
+    plane_basis(faces[j].n, &ch.t[j][0], &ch.t[j][1]);
+    y[j] = start[j] - faces[j].n * glm::dot(start[j] - faces[j].p, faces[j].n);  // onto its plane
+  }
+  const int n = 2 * k;
+  double worst = ch.residual(y, d, len, c);
+  double jac[kMaxUnknowns][kMaxUnknowns], step[kMaxUnknowns][2];
+  for (int it = 0;; ++it) {
+    if (!std::isfinite(worst)) return false;
+    if (worst <= 1e-12) break;
+    if (it == 50) return false;
+    ch.jacobian(d, len, jac);
+    for (int i = 0; i < n; ++i) step[i][0] = -c[i];
+    if (!solve_linear(jac, step, n, 1)) return false;
+    // Halve the step while it does not lower the residual.
+    bool lowered = false;
+    for (double f = 1.0; f > 1e-6 && !lowered; f *= 0.5) {
+      glm::dvec3 trial[kMaxPlanarFaces], td[kMaxPlanarFaces + 1];
+      double tl[kMaxPlanarFaces + 1], tc[kMaxUnknowns];
+      for (int j = 0; j < k; ++j) trial[j] = y[j] + f * (step[2 * j][0] * ch.t[j][0] + step[2 * j + 1][0] * ch.t[j][1]);
+      const double w = ch.residual(trial, td, tl, tc);
+      if (w < worst) {
+        lowered = true;
+        worst = w;
+        std::copy_n(trial, k, y), std::copy_n(td, k + 1, d), std::copy_n(tl, k + 1, len), std::copy_n(tc, n, c);
+      }
+    }
+    if (!lowered) return false;
+  }
+  // Each face crossed, not reflected off.
+  for (int j = 0; j < k; ++j)
+    if (!(glm::dot(d[j], faces[j].n) * glm::dot(d[j + 1], faces[j].n) > 0.0)) return false;
+  // The spread: x moved by e across d[0] moves the points by du = -J^-1 (dC / dx) e (only face 0's residual
+  // depends on x, through d[0]: d(d_0) / dx = -P_0), and l's direction d[k] by -P_k (dy_{k-1}).
+  glm::dvec3 e0, e1;
+  plane_basis(d[0], &e0, &e1);
+  ch.jacobian(d, len, jac);
+  for (int i = 0; i < n; ++i) step[i][0] = step[i][1] = 0.0;
+  for (int a = 0; a < 2; ++a) {
+    step[a][0] = index[0] * glm::dot(ch.t[0][a], Chain::project(d[0], len[0], e0));
+    step[a][1] = index[0] * glm::dot(ch.t[0][a], Chain::project(d[0], len[0], e1));
+  }
+  if (!solve_linear(jac, step, n, 2)) return false;
+  glm::dvec3 m[2];
+  for (int b = 0; b < 2; ++b) {
+    const glm::dvec3 dy = step[n - 2][b] * ch.t[k - 1][0] + step[n - 1][b] * ch.t[k - 1][1];
+    m[b] = -Chain::project(d[k], len[k], dy);
+  }
+  out->k = k;
+  std::copy_n(y, k, out->y), std::copy_n(d, k + 1, out->d), std::copy_n(len, k + 1, out->len);
+  out->spread = glm::length(glm::cross(m[0], m[1]));
+  return std::isfinite(out->spread) && out->spread > 0.0;
+}
+
+}  // namespace spadgen::render
