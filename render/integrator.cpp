@@ -285,6 +285,57 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
         break;
       }
   }
+  // The laser's mirrors: each plane of a small mesh (at most kMaxPartsPerMesh triangles) of a smooth material that
+  // holds at least a tenth of the area of the mesh's largest plane (a plate's faces, not its edges), oriented out
+  // of the mesh (away from its corners' centroid; a flat mesh as wound).
+  for (size_t m = 0; m < scene.meshes.size() && mirrors_.size() < kMaxLaserMirrors; ++m) {
+    const scenes::Mesh& mesh = scene.meshes[m];
+    const ResolvedMaterial& rmat = shading.material(mesh.material);
+    const size_t nt = mesh.triangle_count();
+    if (rmat.point.lambertian || !rmat.point.smooth() || nt == 0 || nt > kMaxPartsPerMesh) continue;
+    const auto corner = [&](size_t t, int k) { return glm::dvec3(mesh.positions[mesh.indices[3 * t + size_t(k)]]); };
+    glm::dvec3 centroid(0.0);
+    for (size_t t = 0; t < nt; ++t)
+      for (int k = 0; k < 3; ++k) centroid += corner(t, k) / double(3 * nt);
+    struct Plane {
+      glm::dvec3 n;
+      double offset, area;
+      std::vector<size_t> triangles;
+    };
+    std::vector<Plane> planes;
+    for (size_t t = 0; t < nt; ++t) {
+      const glm::dvec3 cr = glm::cross(corner(t, 1) - corner(t, 0), corner(t, 2) - corner(t, 0));
+      const double twice = glm::length(cr);
+      if (!(twice > 0.0)) continue;
+      glm::dvec3 n = cr / twice;
+      double offset = glm::dot(n, corner(t, 0));
+      if (glm::dot(n, centroid) - offset > 1e-9 * (1.0 + std::fabs(offset))) n = -n, offset = -offset;
+      auto same = std::find_if(planes.begin(), planes.end(), [&](const Plane& p) {
+        return glm::dot(p.n, n) > 1.0 - 1e-6 && std::fabs(p.offset - offset) <= 1e-6 * (1.0 + std::fabs(offset));
+      });
+      if (same == planes.end()) planes.push_back({n, offset, 0.5 * twice, {t}});
+      else same->area += 0.5 * twice, same->triangles.push_back(t);
+    }
+    double largest = 0.0;
+    for (const Plane& p : planes) largest = std::max(largest, p.area);
+    const bool volume = rmat.volume && rmat.point.ior != 1.0f;
+    for (const Plane& p : planes) {
+      if (p.area < 0.1 * largest || mirrors_.size() == kMaxLaserMirrors) continue;
+      LaserMirror lm{p.n, p.offset, 0.0, mesh.material, volume, {}};
+      lm.e[0] = glm::normalize(glm::cross(p.n, std::fabs(p.n.x) < 0.9 ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0)));
+      lm.e[1] = glm::cross(p.n, lm.e[0]);
+      for (const size_t t : p.triangles)
+        for (int k = 0; k < 3; ++k)
+          for (int i = 0; i < 2; ++i) {
+            const double o = glm::dot(lm.e[i], corner(t, k));
+            lm.lo[i] = std::min(lm.lo[i], o), lm.hi[i] = std::max(lm.hi[i], o);
+          }
+      for (const Plane& q : planes)  // the parallel face behind, facing the other way
+        if (volume && q.area >= 0.1 * largest && glm::dot(q.n, p.n) < -(1.0 - 1e-6) && p.offset + q.offset > 0.0)
+          lm.depth = p.offset + q.offset;
+      mirrors_.push_back(lm);
+    }
+  }
   ambient_on_ = ambient.any() || shading.has_emission();
   laser_traced_ = config.trace_laser;
   optics_ = config.camera.optics_transmission;
@@ -718,7 +769,7 @@ bool Integrator::connect_laser_along(const NeeVertex& v, const RefractedLayers& 
 // Fresnel transmittance at each face at its own angle, Beer-Lambert over each segment. The light reflected
 // between two of the faces (connect_laser_refracted's echoes) is left out.
 bool Integrator::connect_laser_planar(const NeeVertex& v, const Crossings& cx, double w, const PixelFilm& film,
-                                      RayCounts* rays) const {
+                                      RayCounts* rays, const bool* reflect) const {
   static_assert(Crossings::kMax <= kMaxPlanarFaces);
   const Crossings::Crossing* cr = cx.slots.c;
   const int k = cx.n;
@@ -734,7 +785,7 @@ bool Integrator::connect_laser_planar(const NeeVertex& v, const Crossings& cx, d
   }
   for (int s = 0; s <= k; ++s) index[s] = media[s] < 0 ? 1.0 : double(shading_.material(media[s]).point.ior);
   PlanarPath path;
-  if (!solve_planar_path(glm::dvec3(v.sf.p), laser_.position, faces, index, k, start, &path)) return false;
+  if (!solve_planar_path(glm::dvec3(v.sf.p), laser_.position, faces, index, k, start, &path, reflect)) return false;
   const glm::vec3 wi(path.d[0]);
   if (!v.counted(wi)) return true;
   const Spec f = v.bsdf.eval_cos(wi);
@@ -757,7 +808,8 @@ bool Integrator::connect_laser_planar(const NeeVertex& v, const Crossings& cx, d
       const Surface sf = shading_.surface(hit);
       if (sf.material != cr[s].material || std::fabs(glm::dot(sf.ng, cr[s].ng)) < 1.0f - 1e-6f) return false;
       const float c = glm::dot(ds, sf.ng);
-      t *= interface_transmittance(cr[s].mp, std::fabs(c), c < 0.0f);
+      const MaterialPoint mp = shading_.material_at(sf, hit);
+      t *= reflect && reflect[s] ? interface_reflectance(mp, c, c < 0.0f) : interface_transmittance(mp, std::fabs(c), c < 0.0f);
       q = sf.p, qn = sf.ng;
     } else if (found) {
       const Surface sf = shading_.surface(hit);
@@ -772,12 +824,61 @@ bool Integrator::connect_laser_planar(const NeeVertex& v, const Crossings& cx, d
   }
   if (!(t.x > 0.0f)) return true;
   const double value = double(v.beta.x) * f.x * t.x * intensity * path.spread * w;
-  deposit_laser(v, value, v.opl + opl, film);
+  deposit_laser(v, value, v.opl + opl, film, reflect && std::find(reflect, reflect + k, true) != reflect + k);
   return true;
+}
+
+// The laser's image in each smooth planar face (mirrors_) with the vertex and the laser on its outer side: off
+// the face itself, and, behind a plate's face, off its other face through this one twice (refracted both
+// ways). No camera path finds either (a Dirac reflection, then the point laser).
+void Integrator::connect_laser_mirrors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const {
+  const glm::dvec3 x(v.sf.p), L = laser_.position;
+  for (const LaserMirror& m : mirrors_) {
+    glm::dvec3 n = m.n;
+    double offset = m.offset, sx = glm::dot(n, x) - offset, sl = glm::dot(n, L) - offset;
+    if (!m.volume && sx < 0.0 && sl < 0.0) n = -n, offset = -offset, sx = -sx, sl = -sl;  // a sheet's other side
+    if (!(sx > 0.0 && sl > 0.0)) continue;
+    // Whether a path that meets the face between points p and q of its plane may meet it within its extent
+    // (else no ray is traced).
+    const auto on_face = [&](const glm::dvec3& p, const glm::dvec3& q) {
+      for (int i = 0; i < 2; ++i) {
+        const double a = glm::dot(m.e[i], p), b = glm::dot(m.e[i], q), margin = 1e-6 * (1.0 + std::fabs(a));
+        if (std::max(a, b) < m.lo[i] - margin || std::min(a, b) > m.hi[i] + margin) return false;
+      }
+      return true;
+    };
+    const MaterialPoint& mp = shading_.material(m.material).point;
+    Crossings cx;
+    cx.medium0 = -1;
+    // Off the face: the straight line to the laser's image across it.
+    const glm::dvec3 image = L - 2.0 * sl * n;
+    const glm::dvec3 at = x + sx / (sx + sl) * (image - x);
+    if (on_face(at, at)) {
+      cx.n = 1;
+      cx.slots.c[0] = {at, glm::vec3(n), m.material, mp, -1};
+      const bool off_front[1] = {true};
+      connect_laser_planar(v, cx, w, film, rays, off_front);
+    }
+    if (!(m.depth > 0.0)) continue;
+    // Off the face behind: start from the straight line to the laser's image across that face, unfolded. The
+    // refracted path enters the face between where that line does and where the line to the front face's
+    // image does (the glass's index between 1 and infinity).
+    const double unfolded = sx + sl + 2.0 * m.depth;
+    const glm::dvec3 to = (L - 2.0 * (sl + m.depth) * n) - x;
+    if (!on_face(x + sx / unfolded * to, at)) continue;
+    const glm::dvec3 third = x + (sx + 2.0 * m.depth) / unfolded * to;  // on the front face's image behind
+    cx.n = 3;
+    cx.slots.c[0] = {x + sx / unfolded * to, glm::vec3(n), m.material, mp, m.material};
+    cx.slots.c[1] = {x + (sx + m.depth) / unfolded * to, glm::vec3(n), m.material, mp, m.material};
+    cx.slots.c[2] = {third - 2.0 * (glm::dot(n, third) - (offset - m.depth)) * n, glm::vec3(n), m.material, mp, -1};
+    const bool off_back[3] = {false, true, false};
+    connect_laser_planar(v, cx, w, film, rays, off_back);
+  }
 }
 
 inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, const FirstSegment* first, double w,
                                       const PixelFilm& film, RayCounts* rays) const {
+  if (!mirrors_.empty() && v.medium < 0) connect_laser_mirrors(v, w, film, rays);
   const double r = lr.r, intensity = lr.intensity;
   const glm::vec3 wi = lr.wi;
   // With refracting volumes the straight walk comes first: it finds the interfaces that the refracted

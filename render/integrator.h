@@ -279,7 +279,11 @@ class Integrator {
   // The laser's connection from v through the planar faces the straight walk crossed when they are not all
   // parallel (solve_planar_path); false when no refracted path crosses the same faces (then the straight
   // connection is used).
-  bool connect_laser_planar(const NeeVertex& v, const Crossings& cx, double w, const PixelFilm& film, RayCounts* rays) const;
+  // reflect (null: none): the path reflects off crossing j instead of crossing it (connect_laser_mirrors).
+  bool connect_laser_planar(const NeeVertex& v, const Crossings& cx, double w, const PixelFilm& film, RayCounts* rays,
+                            const bool* reflect = nullptr) const;
+  // The laser's light reflected to v by the smooth planar faces of mirrors_.
+  void connect_laser_mirrors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const;
   // A uniform number in [0, 1) for the echo of faces a, b seen from vertex position p: a hash of them and the
   // light seed (connect_laser_refracted).
   double echo_uniform(const glm::vec3& p, int a, int b) const;
@@ -329,6 +333,20 @@ class Integrator {
   std::vector<GlossyStrip> strips_;  // their slivers (pairs of triangles)
   bool edges_ = false;               // a strip is a plate's edge (GlossyStrip::slab)
   std::vector<GlossySlab> slabs_;    // the plates among them (volumes of parallel faces)
+  // A smooth planar face of a small mesh, which reflects the laser onto the scene (a clear plate's face, a flat
+  // mirror): the plane n . p = offset, n out of the mesh; depth: a plate's thickness behind the face to its
+  // parallel other face (0: none, or not a volume). At most kMaxLaserMirrors of them.
+  // The face's extent: its corners' bounds along two directions in its plane.
+  struct LaserMirror {
+    glm::dvec3 n;
+    double offset = 0.0, depth = 0.0;
+    int material = -1;
+    bool volume = false;
+    glm::dvec3 e[2];
+    double lo[2] = {1e300, 1e300}, hi[2] = {-1e300, -1e300};
+  };
+  static constexpr size_t kMaxLaserMirrors = 16;
+  std::vector<LaserMirror> mirrors_;
   const Ambient& ambient_;
   bool transmission_ = false;
   bool ambient_on_ = false;

@@ -101,7 +101,7 @@ struct Chain {
 }  // namespace
 
 bool solve_planar_path(const glm::dvec3& x, const glm::dvec3& l, const PlanarFace* faces, const double* index, int k,
-                       const glm::dvec3* start, PlanarPath* out) {
+                       const glm::dvec3* start, PlanarPath* out, const bool* reflect) {
   if (k < 1 || k > kMaxPlanarFaces) return false;
   Chain ch{&x, &l, faces, index, k, {}};
   glm::dvec3 y[kMaxPlanarFaces], d[kMaxPlanarFaces + 1];
@@ -135,9 +135,11 @@ bool solve_planar_path(const glm::dvec3& x, const glm::dvec3& l, const PlanarFac
     }
     if (!lowered) return false;
   }
-  // Each face crossed, not reflected off.
-  for (int j = 0; j < k; ++j)
-    if (!(glm::dot(d[j], faces[j].n) * glm::dot(d[j + 1], faces[j].n) > 0.0)) return false;
+  // Each face crossed, or reflected off, as asked.
+  for (int j = 0; j < k; ++j) {
+    const double sides = glm::dot(d[j], faces[j].n) * glm::dot(d[j + 1], faces[j].n);
+    if (!(reflect && reflect[j] ? sides < 0.0 : sides > 0.0)) return false;
+  }
   // The spread: x moved by e across d[0] moves the points by du = -J^-1 (dC / dx) e (only face 0's residual
   // depends on x, through d[0]: d(d_0) / dx = -P_0), and l's direction d[k] by -P_k (dy_{k-1}).
   glm::dvec3 e0, e1;

@@ -28,12 +28,13 @@ struct PlanarPath {
 };
 
 // Solves Snell's law at every face, index[s] the refractive index along segment s, by Newton's method on the
-// points' positions in their planes (Gaussian elimination on the 2k x 2k system, steps halved while they do
+// points' positions in their planes (reflect[j]: the path reflects off face j, index[j] = index[j + 1], the law
+// of reflection being the same equation; null: it crosses every face) (Gaussian elimination on the 2k x 2k system, steps halved while they do
 // not lower the residual), from start[j] (a point of face j: where the straight line from x to l crosses it).
 // Converged when n_s d_s - n_{s+1} d_{s+1} is along face s's normal within 1e-12 for every face; false when it
-// does not converge in 50 steps, a face is not crossed (the path reflects off it), or a segment is empty.
+// does not converge in 50 steps, a face is not crossed (or not reflected off) as asked, or a segment is empty.
 // spread is then the implicit function theorem's: the points' derivatives with x, mapped to l's direction.
 bool solve_planar_path(const glm::dvec3& x, const glm::dvec3& l, const PlanarFace* faces, const double* index, int k,
-                       const glm::dvec3* start, PlanarPath* out);
+                       const glm::dvec3* start, PlanarPath* out, const bool* reflect = nullptr);
 
 }  // namespace spadgen::render

@@ -855,6 +855,70 @@ TEST(Transport, LaserLightRefractsThroughPlatesThatAreNotParallel) {
   }
 }
 
+// The laser's image in a clear plate: a 5 cm plate (ior 1.5) upright beside the camera's view (faces x = 0.5 and
+// 0.55) reflects the laser (at the camera) onto the wall point X = (0.3, 0, -1) the camera sees. Unfolded across
+// the plate's faces, the laser is H = 0.7 m from X along the faces' normal and D = 1 m across it: off the front
+// face the light leaves at the angle a, D = H tan a, and lights X with I F(a) cos^2 a / H^2 across its path
+// (the image's 1 / r^2); off the back face, through the front one twice, D = rho(b) = H tan b + 2 t tan b_g
+// and the irradiance is I (1 - F(b))^2 F_inside(b_g) sin b / (rho rho'(b) cos b); X's cosine to each path is
+// sin a (sin b). Each over the direct return, I cos theta_X / |X|^2, in its own window of time (0.6 and 1.1 ns
+// after the direct return). Without the mirror connections neither was rendered (a Dirac reflection, then the
+// point laser: no camera path finds it). A plate too short to reach the reflection points reflects nothing
+// there; a thin-walled sheet (one interface, wound with its front away from the camera) in the front face's
+// plane reflects F(a) as the front face does, and nothing later.
+TEST(Transport, AClearPlateReflectsTheLaserOntoTheScene) {
+  const float t = 0.05f, n = 1.5f;
+  const auto scene = [&](int which) {
+    scenes::Scene s = wall_behind_slab(false, t, n);
+    if (which == 0) add_box(s, {0.5f, -1, -0.95f}, {0.55f, 1, 0.2f}, add_material(s, test::glass(n, t)));
+    if (which == 1) add_box(s, {0.5f, -1, -0.5f}, {0.55f, 1, 0.2f}, add_material(s, test::glass(n, t)));
+    if (which == 2) add_quad(s, {0.5f, 0, -0.4f}, {0, 1, 0}, {0, 0, 0.55f}, add_material(s, test::glass(n, 0.0f)));
+    return s;
+  };
+  RenderStageConfig c = test_config(4, 4, 50e-3);
+  const glm::dvec3 X(0.3, 0, -1);
+  c.camera.look_at_m = {X.x, X.y, X.z};
+  c.laser.beam = Beam::Cone;
+  c.laser.half_angle_rad = kPi;
+  c.render.samples_per_pixel = 16;
+  c.render.max_bounces = 1;
+  const double H = 0.7, D = 1.0, r = glm::length(X);
+  const double a = std::atan(D / H);
+  const auto rho = [&](double b) { return H * std::tan(b) + 2 * t * std::tan(std::asin(std::sin(b) / n)); };
+  double lo = 0, hi = 1.5;
+  for (int i = 0; i < 200; ++i) (rho(0.5 * (lo + hi)) < D ? lo : hi) = 0.5 * (lo + hi);
+  const double b = 0.5 * (lo + hi), bg = std::asin(std::sin(b) / n);
+  const double drho = (rho(b + 1e-6) - rho(b - 1e-6)) / 2e-6;
+  const double direct = (1 / r) / (r * r);
+  const double front = fresnel(a, n) * std::cos(a) * std::cos(a) / (H * H) * std::sin(a) / direct;
+  const double back = std::pow(1 - fresnel(b, n), 2) * fresnel_eta(std::cos(bg), 1 / n) * std::sin(b) /
+                      (rho(b) * drho * std::cos(b)) * std::sin(b) / direct;
+  // The optical paths: to X and back, and the laser's way to X off each face.
+  const double t_direct = 2 * r / kC;
+  const double t_front = (r + H / std::cos(a)) / kC;
+  const double t_back = (r + (H / std::cos(b)) + 2 * n * t / std::cos(bg)) / kC;
+  const TimeAxis axis{t_direct - 0.3e-9, 1e-12, 1800, 1.0};
+  for (int which = 0; which < 3; ++which) {
+    const TransientTile tile = Renderer(scene(which), c).transient({0, 0, 4, 4}, {0, 0, 4, 4}, axis);
+    double sums[3] = {}, outside = 0;
+    const double at[3] = {t_direct, t_front, t_back};
+    for (size_t i = 0; i < 16; ++i) {
+      const float* g = tile.transient.data() + i * size_t(axis.bins);
+      for (int64_t k = 0; k < axis.bins; ++k) {
+        int w = -1;
+        for (int j = 0; j < 3; ++j)
+          if (std::fabs(axis.bin_centre_s(k) - at[j]) < 0.1e-9) w = j;
+        (w < 0 ? outside : sums[w]) += g[k];
+      }
+    }
+    const double expected[3][2] = {{front, back}, {0, 0}, {front, 0}};
+    for (int j = 0; j < 2; ++j)
+      EXPECT_NEAR(sums[j + 1] / sums[0], expected[which][j], 1e-3 * expected[which][j])
+          << "scene " << which << (j ? ", back face" : ", front face");
+    EXPECT_LT(outside, 1e-5 * sums[0]) << "scene " << which;  // nothing else at first order
+  }
+}
+
 TEST(Transport, EachFaceOfASmoothPlateReflectsR) {
   // Camera and an isotropic laser at the origin; the plate 0.45 m ahead reflects the camera's view back
   // onto a wall 0.3 m behind the camera, which the laser lights directly.
