@@ -786,12 +786,20 @@ bool Integrator::connect_laser_planar(const NeeVertex& v, const Crossings& cx, d
   for (int s = 0; s <= k; ++s) index[s] = media[s] < 0 ? 1.0 : double(shading_.material(media[s]).point.ior);
   PlanarPath path;
   if (!solve_planar_path(glm::dvec3(v.sf.p), laser_.position, faces, index, k, start, &path, reflect)) return false;
+  return deposit_planar_path(v, path, cx, index, media, reflect, w, film, rays);
+}
+
+bool Integrator::deposit_planar_path(const NeeVertex& v, const PlanarPath& path, const Crossings& cx, const double* index,
+                                     const int* media, const bool* reflect, double w, const PixelFilm& film,
+                                     RayCounts* rays) const {
+  const Crossings::Crossing* cr = cx.slots.c;
+  const int k = path.k;
+  const double intensity = laser_.intensity_towards(-path.d[k]);
+  if (!(intensity > 0.0)) return true;
   const glm::vec3 wi(path.d[0]);
   if (!v.counted(wi)) return true;
   const Spec f = v.bsdf.eval_cos(wi);
   if (!(f.x > 0.0f)) return true;
-  const double intensity = laser_.intensity_towards(-path.d[k]);
-  if (!(intensity > 0.0)) return true;
   // Each segment must meet its face first (material and orientation), the last one nothing opaque.
   Spec t(1.0f);
   double opl = 0.0;
@@ -850,29 +858,60 @@ void Integrator::connect_laser_mirrors(const NeeVertex& v, double w, const Pixel
     const MaterialPoint& mp = shading_.material(m.material).point;
     Crossings cx;
     cx.medium0 = -1;
-    // Off the face: the straight line to the laser's image across it.
+    // Off the face: the straight line to the laser's image across it, whose 1 / r^2 is the spread.
     const glm::dvec3 image = L - 2.0 * sl * n;
     const glm::dvec3 at = x + sx / (sx + sl) * (image - x);
+    PlanarPath path;
     if (on_face(at, at)) {
-      cx.n = 1;
-      cx.slots.c[0] = {at, glm::vec3(n), m.material, mp, -1};
-      const bool off_front[1] = {true};
-      connect_laser_planar(v, cx, w, film, rays, off_front);
+      path.k = 1;
+      path.y[0] = at;
+      path.len[0] = glm::length(at - x), path.len[1] = glm::length(L - at);
+      if (path.len[0] > 0.0 && path.len[1] > 0.0) {
+        path.d[0] = (at - x) / path.len[0], path.d[1] = (L - at) / path.len[1];
+        const double r = path.len[0] + path.len[1];
+        path.spread = 1.0 / (r * r);
+        cx.n = 1;
+        cx.slots.c[0] = {at, glm::vec3(n), m.material, mp, -1};
+        const bool off_front[1] = {true};
+        const double index[2] = {1.0, 1.0};
+        const int media[2] = {-1, -1};
+        deposit_planar_path(v, path, cx, index, media, off_front, w, film, rays);
+      }
     }
     if (!(m.depth > 0.0)) continue;
-    // Off the face behind: start from the straight line to the laser's image across that face, unfolded. The
-    // refracted path enters the face between where that line does and where the line to the front face's
-    // image does (the glass's index between 1 and infinity).
+    // Off the face behind, through this one twice: the layers of parallel faces unfolded (air sx, the plate's
+    // thickness twice, air sl), solved for Snell's invariant p as connect_laser_refracted solves them; the
+    // refracted path enters the face between where the unfolded straight line does and `at` (the glass's
+    // index between 1 and infinity).
     const double unfolded = sx + sl + 2.0 * m.depth;
-    const glm::dvec3 to = (L - 2.0 * (sl + m.depth) * n) - x;
-    if (!on_face(x + sx / unfolded * to, at)) continue;
-    const glm::dvec3 third = x + (sx + 2.0 * m.depth) / unfolded * to;  // on the front face's image behind
+    const glm::dvec3 to = L - x;
+    const glm::dvec3 lat = to - glm::dot(to, n) * n;
+    if (!on_face(x + sx / unfolded * (lat - unfolded * n), at)) continue;
+    const double D = glm::length(lat);
+    const glm::dvec3 u = D > 1e-12 * unfolded ? lat / D : glm::dvec3(0.0);
+    const double ior = double(mp.ior);
+    const double depth[4] = {sx, m.depth, m.depth, sl}, index[4] = {1.0, ior, ior, 1.0};
+    const double p = D > 0.0 ? snell_invariant(depth, index, 4, D, D / std::hypot(D, unfolded), std::min(1.0, ior)) : 0.0;
+    double c[4], A = 0.0, B = 0.0;
+    glm::dvec3 y = x;
+    path.k = 3;
+    for (int j = 0; j < 4; ++j) {
+      const double sn = p / index[j];
+      c[j] = std::sqrt(std::max(0.0, 1.0 - sn * sn));
+      if (!(c[j] > 0.0)) break;
+      path.d[j] = sn * u + (j < 2 ? -c[j] : c[j]) * n;  // towards the face behind, then back out
+      path.len[j] = depth[j] / c[j];
+      if (j < 3) path.y[j] = y = y + path.len[j] * path.d[j];
+      A += depth[j] / (index[j] * c[j]);
+      B += depth[j] / (index[j] * c[j] * c[j] * c[j]);
+    }
+    if (!(c[0] > 0.0 && c[1] > 0.0)) continue;
+    path.spread = 1.0 / (A * B * c[0] * c[0]);  // A B cos theta_0 with n_L = 1 and cos theta_L = c[0]
     cx.n = 3;
-    cx.slots.c[0] = {x + sx / unfolded * to, glm::vec3(n), m.material, mp, m.material};
-    cx.slots.c[1] = {x + (sx + m.depth) / unfolded * to, glm::vec3(n), m.material, mp, m.material};
-    cx.slots.c[2] = {third - 2.0 * (glm::dot(n, third) - (offset - m.depth)) * n, glm::vec3(n), m.material, mp, -1};
+    for (int j = 0; j < 3; ++j) cx.slots.c[j] = {path.y[j], glm::vec3(n), m.material, mp, j < 2 ? m.material : -1};
     const bool off_back[3] = {false, true, false};
-    connect_laser_planar(v, cx, w, film, rays, off_back);
+    const int media[4] = {-1, m.material, m.material, -1};
+    deposit_planar_path(v, path, cx, index, media, off_back, w, film, rays);
   }
 }
 

@@ -14,6 +14,7 @@
 #include "core/config.h"
 #include "core/time_axis.h"
 #include "embree_scene.h"
+#include "planar_path.h"
 #include "guide.h"
 #include "lights.h"
 #include "renderer.h"
@@ -282,6 +283,11 @@ class Integrator {
   // reflect (null: none): the path reflects off crossing j instead of crossing it (connect_laser_mirrors).
   bool connect_laser_planar(const NeeVertex& v, const Crossings& cx, double w, const PixelFilm& film, RayCounts* rays,
                             const bool* reflect = nullptr) const;
+  // The light of a path solved for connect_laser_planar or connect_laser_mirrors, traced: each segment must meet
+  // crossing j of cx (reflect[j]: reflecting off it), index and media those of each segment; false where it
+  // does not (nothing deposited).
+  bool deposit_planar_path(const NeeVertex& v, const PlanarPath& path, const Crossings& cx, const double* index,
+                           const int* media, const bool* reflect, double w, const PixelFilm& film, RayCounts* rays) const;
   // The laser's light reflected to v by the smooth planar faces of mirrors_.
   void connect_laser_mirrors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const;
   // A uniform number in [0, 1) for the echo of faces a, b seen from vertex position p: a hash of them and the

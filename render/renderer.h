@@ -39,7 +39,9 @@ struct RayCounts {
   // straight connections to the laser, and their continuations across transmissive surfaces (with
   // refracting volumes, every laser connection's first walk: it finds the interfaces connect_laser_refracted crosses)
   uint64_t laser = 0;
-  uint64_t refracted = 0;  // the segments of connections to the laser refracted through them (connect_laser_refracted)
+  // the segments of connections to the laser refracted through them (connect_laser_refracted, connect_laser_planar)
+  // and of its reflections off smooth planar faces (connect_laser_mirrors)
+  uint64_t refracted = 0;
   // guided connections and ghost draws: their targets' search, their rays and the laser connections at their
   // ends
   uint64_t guided = 0;
