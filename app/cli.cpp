@@ -16,12 +16,43 @@
 
 namespace spadgen::app {
 
+namespace {
+bool stdout_closed = false;
+
+// stdout is a pipe whose every reader has closed it (the write end polls POLLERR).
+bool stdout_reader_gone() {
+  struct stat st {};
+  if (::fstat(STDOUT_FILENO, &st) != 0 || !S_ISFIFO(st.st_mode)) return false;
+  pollfd p{STDOUT_FILENO, POLLOUT, 0};
+  return ::poll(&p, 1, 0) == 1 && (p.revents & POLLERR) != 0;
+}
+
+// Flushes stdout: what went there (schema, info, help, scores) must have been written. Empty when it was, or
+// when a reader closed the pipe early (`spadgen schema | head -5` has what it wanted: a quiet exit 0, as
+// ripgrep does; it was an error or not by the race between the two processes); else why not.
+std::string stdout_failure() {
+  errno = 0;
+  if (std::cout.flush(); std::cout.good() && std::fflush(stdout) == 0 && !std::ferror(stdout)) return "";
+  if (errno == EPIPE || stdout_reader_gone()) return "";
+  if (stdout_closed)
+    return "standard output is closed (>&-): this command's output, which it prints there, was not written; "
+           "redirect it to a file or /dev/null instead";
+  return std::string("cannot write the output to standard output (a full disk, or a closed pipe): it is incomplete") +
+         (errno != 0 ? std::string(": ") + std::strerror(errno) : "");
+}
+}  // namespace
+
 std::optional<int> parse_command_line(CLI::App& cli, int argc, char** argv) {
   try {
     cli.parse(argc, argv);
     return std::nullopt;
   } catch (const CLI::Success& e) {
-    return cli.exit(e);  // --help, --version: printed on stdout, exit 0
+    const int code = cli.exit(e);  // --help, --version: printed on stdout, exit 0 once written
+    if (const std::string failure = stdout_failure(); !failure.empty()) {
+      std::fprintf(stderr, "spadgen: error: %s\n", failure.c_str());
+      return kExitBadInput;
+    }
+    return code;
   } catch (const CLI::ParseError& e) {
     std::string command = "spadgen";
     const CLI::App* at = &cli;
@@ -45,36 +76,15 @@ std::optional<int> parse_command_line(CLI::App& cli, int argc, char** argv) {
   }
 }
 
-namespace {
-bool stdout_closed = false;
-
-// stdout is a pipe whose every reader has closed it (the write end polls POLLERR).
-bool stdout_reader_gone() {
-  struct stat st {};
-  if (::fstat(STDOUT_FILENO, &st) != 0 || !S_ISFIFO(st.st_mode)) return false;
-  pollfd p{STDOUT_FILENO, POLLOUT, 0};
-  return ::poll(&p, 1, 0) == 1 && (p.revents & POLLERR) != 0;
-}
-}  // namespace
 
 void note_stdout_closed() { stdout_closed = true; }
 
 int run_command(const std::function<void()>& command, const std::string& name) {
   try {
     command();
-    errno = 0;
     // What went to stdout (schema, info, plan, status, scores) was written: a full disk or a closed stream
     // is an error, not a silent exit 0 with a truncated file.
-    if (std::cout.flush(); !std::cout.good() || std::fflush(stdout) != 0 || std::ferror(stdout)) {
-      // A reader that closed the pipe early (`spadgen schema | head -5`) has what it wanted: a quiet exit 0,
-      // as ripgrep does (it was an error or not by the race between the two processes).
-      if (errno == EPIPE || stdout_reader_gone()) return kExitOk;
-      if (stdout_closed)
-        throw Error("standard output is closed (>&-): this command's output, which it prints there, was not written; "
-                    "redirect it to a file or /dev/null instead");
-      throw Error(std::string("cannot write the output to standard output (a full disk, or a closed pipe): it is incomplete") +
-                  (errno != 0 ? std::string(": ") + std::strerror(errno) : ""));
-    }
+    if (const std::string failure = stdout_failure(); !failure.empty()) throw Error(failure);
     return kExitOk;
   } catch (const Interrupted& e) {
     // The message of throw_if_interrupted (core/error.h) says "the run": another command is named.

@@ -542,6 +542,16 @@ TEST_F(Hardening, ClosedOrFullStandardStreamsNeverReachTheOutputs) {
   const Outcome full = spadgen("schema --json-schema > /dev/full");
   expect_exit(full, 1, "stdout on a full device");
   EXPECT_THAT(full.err, HasSubstr("cannot write the output to standard output (a full disk, or a closed pipe): it is incomplete"));
+  // --help and --version too (they exited 0 having written nothing)
+  for (const std::string words : {"--help", "--version", "run --help"}) {
+    const Outcome help = spadgen(words + " > /dev/full");
+    expect_exit(help, 1, words + " on a full device");
+    EXPECT_THAT(help.err, HasSubstr("cannot write the output to standard output (a full disk, or a closed pipe)")) << words;
+    const Result shut = shell("(" + bin() + " " + words + " >&-)");
+    EXPECT_EQ(shut.code, 1) << words << shut.output;
+    EXPECT_THAT(shut.output, HasSubstr("standard output is closed (>&-)")) << words;
+    expect_exit(spadgen(words + " > /dev/null"), 0, words);
+  }
   // A reader that closed the pipe early (`spadgen schema | head -5`) is not an error: exit 0, nothing said
   // (it was exit 1 with the message above, or exit 0, by the race between the two processes). The reader
   // here closes its end before spadgen starts.
