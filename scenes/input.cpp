@@ -322,6 +322,13 @@ size_t nth_key_offset(const std::string& text, size_t n) {
 }  // namespace
 
 json parse_json(const std::string& text, const std::string& where, const JsonOptions& options) {
+  // No JSON text holds a raw NUL byte (the parser took one for the end of the input: a file led by one was
+  // "unexpected end of input", one after the text went unsaid).
+  if (text.size() >= 2 && (text.compare(0, 2, "\xff\xfe") == 0 || text.compare(0, 2, "\xfe\xff") == 0))
+    throw Error(where + ":1:1: starts with a UTF-16 byte order mark; expected JSON text in UTF-8");
+  if (const size_t at = text.find('\0'); at != std::string::npos)
+    throw Error(where + ":" + line_column(text, at) + ": a NUL byte (0x00), which no JSON text holds; expected JSON text in " +
+                "UTF-8 (is this a binary file, or UTF-16 text?)");
   if (const size_t at = depth_exceeded_at(text, kMaxJsonDepth); at != std::string::npos)
     throw JsonLimitError(where + ":" + line_column(text, at) + ": arrays and objects nested deeper than " +
                 std::to_string(kMaxJsonDepth) + " levels; spadgen reads at most " + std::to_string(kMaxJsonDepth));

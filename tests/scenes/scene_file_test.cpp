@@ -301,6 +301,18 @@ TEST_F(SceneFileTest, SyntaxErrorGivesLineAndColumn) {
   EXPECT_THAT(msg, HasSubstr("not valid JSON"));
 }
 
+// A raw NUL byte ended the input for the parser: a file led by one was "unexpected end of input", one after the
+// text went unsaid; UTF-16 text was an "invalid literal".
+TEST_F(SceneFileTest, ANulByteOrUtf16TextIsNamedAsSuch) {
+  EXPECT_THAT(error_of(std::string("\0{\"gltf\": \"s.gltf\"}", 19)),
+              HasSubstr(path() + ":1:1: a NUL byte (0x00), which no JSON text holds; expected JSON text in UTF-8 (is this a "
+                                 "binary file, or UTF-16 text?)"));
+  EXPECT_THAT(error_of(std::string("{\"gltf\": \"s.gltf\"}\n\0\0", 21)), HasSubstr(path() + ":2:1: a NUL byte (0x00)"));
+  EXPECT_THAT(error_of(std::string("\xff\xfe{\0", 4)), HasSubstr(path() + ":1:1: starts with a UTF-16 byte order mark; expected "
+                                                                    "JSON text in UTF-8"));
+  EXPECT_THAT(error_of("\xef\xbb\xbf{\"gltf\": 1}"), HasSubstr("/gltf: found 1"));  // UTF-8's mark is read past
+}
+
 TEST_F(SceneFileTest, EveryErrorIsReportedAtOnce) {
   const std::string msg = error_of(R"({"gltf": "s.gltf", "camera": {"f_numbr": 2, "width_px": 0}, "laser": {"beam": "x"}})");
   EXPECT_THAT(msg, HasSubstr("3 errors"));
