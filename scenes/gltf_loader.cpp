@@ -1761,10 +1761,17 @@ std::string gltf_json(const std::string& path, const std::string& bytes, bool* b
     if (bytes.size() >= 20 && version == 2 && length > bytes.size())
       throw Error(invalid + "its header gives a length of " + std::to_string(length) + " bytes but the file holds " +
                   std::to_string(bytes.size()) + " (cut short, as by an interrupted download or copy?)");
-    if (bytes.size() < 20 || version != 2 || length > bytes.size() || length < 20 || chunk > length - 20 ||
-        type != 0x4E4F534Au)
-      throw Error(invalid + "expected a 12-byte header of version 2 and a JSON chunk within the file's " +
-                  std::to_string(bytes.size()) + " bytes");
+    if (bytes.size() >= 20 && version != 2)
+      throw Error(invalid + "its header gives version " + std::to_string(version) + "; expected version 2");
+    if (bytes.size() < 20 || length < 20)
+      throw Error(invalid + "expected a 12-byte header and a JSON chunk's 8-byte header; the " +
+                  (bytes.size() < 20 ? "file holds " + std::to_string(bytes.size()) : "header gives a length of " + std::to_string(length)) +
+                  " bytes");
+    if (type != 0x4E4F534Au)
+      throw Error(invalid + "its first chunk is of type " + start_of(bytes.substr(16, 4)) + "; expected 'JSON'");
+    if (chunk > length - 20)
+      throw Error(invalid + "its JSON chunk gives a length of " + std::to_string(chunk) + " bytes but the file's length (" +
+                  std::to_string(length) + " in its header) leaves " + std::to_string(length - 20) + " after the chunk's header");
     // The BIN chunk, when the length leaves room for one: its 8-byte header and its bytes within the length.
     // (tinygltf 2.7 leaves the chunk's header out of that bound, and read up to 8 bytes past a file cut short.)
     const uint64_t json_end = 20ull + chunk;
@@ -1772,8 +1779,13 @@ std::string gltf_json(const std::string& path, const std::string& bytes, bool* b
       if (json_end + 8 > length)
         throw Error(invalid + std::to_string(length - json_end) + " bytes follow the JSON chunk, too few for a chunk's 8-byte "
                     "header; expected a BIN chunk or nothing after it");
-      uint32_t bin = 0;
+      uint32_t bin = 0, bin_type = 0;
       std::memcpy(&bin, bytes.data() + json_end, 4);
+      std::memcpy(&bin_type, bytes.data() + json_end + 4, 4);
+      if (bin_type != 0x004E4942u)  // "BIN\0"
+        throw Error(invalid + "after its JSON chunk (" + std::to_string(chunk) + " bytes) comes no BIN chunk's header but " +
+                    start_of(bytes.substr(json_end, 8)) + "; expected a BIN chunk (type 'BIN\\0') or nothing (is the JSON "
+                    "chunk's length right?)");
       if (json_end + 8 + bin > length)
         throw Error(invalid + "its BIN chunk gives a length of " + std::to_string(bin) + " bytes but " +
                     std::to_string(length - json_end - 8) + " follow its header (cut short, as by an interrupted download or copy?)");

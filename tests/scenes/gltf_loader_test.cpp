@@ -1147,6 +1147,27 @@ TEST_F(BrokenGltf, AGlbCutShortOrABufferWithoutAUriIsNamed) {
   cut = bytes.substr(0, bytes.size() - 8 - std::stoul(bin_length) + 4);
   write_file(path_, with_length(cut, static_cast<uint32_t>(cut.size())));
   EXPECT_THAT(load_error(path_), HasSubstr("4 bytes follow the JSON chunk, too few for a chunk's 8-byte header"));
+  // The JSON chunk's own header wrong: each said as such (a JSON chunk's length too short blamed the BIN chunk, with
+  // the JSON text's bytes for its length; too long, or its type, was "expected a 12-byte header of version 2")
+  const auto with_chunk = [](std::string b, uint32_t chunk, const char* type) {
+    std::memcpy(b.data() + 12, &chunk, 4);
+    std::memcpy(b.data() + 16, type, 4);
+    return b;
+  };
+  uint32_t json_chunk = 0;
+  std::memcpy(&json_chunk, bytes.data() + 12, 4);
+  write_file(path_, with_chunk(bytes, 8, "JSON"));
+  EXPECT_THAT(load_error(path_), HasSubstr("not a valid binary glTF (.glb): after its JSON chunk (8 bytes) comes no BIN chunk's "
+                                           "header but '" + bytes.substr(28, 8) + "'; expected a BIN chunk (type 'BIN\\0') or nothing "
+                                           "(is the JSON chunk's length right?)"));
+  write_file(path_, with_chunk(bytes, json_chunk + 4000, "JSON"));
+  EXPECT_THAT(load_error(path_), HasSubstr("its JSON chunk gives a length of " + std::to_string(json_chunk + 4000) +
+                                           " bytes but the file's length (" + std::to_string(bytes.size()) + " in its header) leaves " +
+                                           std::to_string(bytes.size() - 20) + " after the chunk's header"));
+  write_file(path_, with_chunk(bytes, json_chunk, "JSOX"));
+  EXPECT_THAT(load_error(path_), HasSubstr("not a valid binary glTF (.glb): its first chunk is of type 'JSOX'; expected 'JSON'"));
+  write_file(path_, with_length(bytes, 16));
+  EXPECT_THAT(load_error(path_), HasSubstr("expected a 12-byte header and a JSON chunk's 8-byte header; the header gives a length of 16 bytes"));
 
   // The same file with other buffers: a second without a uri, the first's byteLength past the BIN chunk.
   const auto glb_with_buffers = [&](const json& buffers) {
@@ -1795,7 +1816,7 @@ TEST_F(BrokenGltf, AWebPageSavedAsAGlbIsRecognised) {
   write_file(path_, "\x89PNG\r\n\x1a\n");
   EXPECT_THAT(load_error(path_), HasSubstr("not a glTF file: it starts with '\\x89PNG  \\x1a '; expected JSON"));
   write_file(path_, std::string("glTF\x01\0\0\0", 8) + std::string(12, '\0'));
-  EXPECT_THAT(load_error(path_), HasSubstr("not a valid binary glTF (.glb): expected a 12-byte header of version 2"));
+  EXPECT_THAT(load_error(path_), HasSubstr("not a valid binary glTF (.glb): its header gives version 1; expected version 2"));
 }
 
 TEST_F(BrokenGltf, APathThatIsNotARegularFileIsNamedForWhatItIs) {
