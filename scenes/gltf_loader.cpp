@@ -1975,7 +1975,21 @@ void check_gltf_types(const std::string& path, const nlohmann::json& doc) {
 // `binary`: the file is a .glb, whose BIN chunk holds `bin_bytes` bytes (-1: it has none).
 void check_before_tinygltf(const std::string& path, const nlohmann::json& doc, bool binary, int64_t bin_bytes) {
   if (!doc.is_object()) throw Error(path + ": expected a JSON object at the top of the glTF file");
+  // glTF 2.0 requires asset (with its version); tinygltf's message was '"asset" object not found in .gltf or not
+  // an object type' (a .glb too).
+  if (const auto it = doc.find("asset"); it == doc.end() || !it->is_object())
+    throw Error(path + ": " + (it == doc.end() ? std::string("has no asset") : "asset: found " + it->dump().substr(0, 40)) +
+                "; expected the object every glTF file has, with its version: \"asset\": {\"version\": \"2.0\"}");
   check_gltf_types(path, doc);
+  // An accessor's type: tinygltf's message was 'Unsupported `type` for accessor object. Got "VEC7"', unnamed.
+  if (const auto it = doc.find("accessors"); it != doc.end())
+    for (size_t i = 0; i < it->size(); ++i) {
+      const nlohmann::json& o = (*it)[i];
+      static const std::set<std::string> types = {"SCALAR", "VEC2", "VEC3", "VEC4", "MAT2", "MAT3", "MAT4"};
+      if (const auto t = o.find("type"); t != o.end() && t->is_string() && !types.count(t->get<std::string>()))
+        throw Error(path + ": " + label("accessor", i, o.value("name", std::string())) + ": type " + quoted(t->get<std::string>()) +
+                    " is no glTF 2.0 accessor type; expected SCALAR, VEC2, VEC3, VEC4, MAT2, MAT3 or MAT4");
+    }
   if (const auto it = doc.find("extensionsRequired"); it != doc.end() && it->is_array())
     for (const nlohmann::json& e : *it)
       if (e.is_string() && !kSupportedExtensions.count(e.get<std::string>())) {

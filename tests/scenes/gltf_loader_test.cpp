@@ -1252,6 +1252,20 @@ TEST_F(BrokenGltf, AnotherVersionOrAMeshWithoutPrimitives) {
   EXPECT_THAT(error_of(g), HasSubstr("asset.minVersion is '2.1': the file needs a reader of that glTF version, and spadgen reads glTF 2.0"));
   g.doc["asset"]["minVersion"] = "2.0";
   EXPECT_EQ(spadgen::scenes::load_gltf(g.write(dir_.path(), "min20")).meshes.size(), 1u);
+  // no asset, and an accessor type glTF 2.0 does not have: said in spadgen's words, naming the element (tinygltf's
+  // were '"asset" object not found in .gltf or not an object type' and 'Unsupported `type` for accessor object')
+  Gltf bare;
+  bare.node({{"mesh", bare.triangle_mesh()}});
+  bare.doc.erase("asset");
+  EXPECT_THAT(error_of(bare), HasSubstr(": has no asset; expected the object every glTF file has, with its version: "
+                                        "\"asset\": {\"version\": \"2.0\"}"));
+  bare.doc["asset"] = "2.0";
+  EXPECT_THAT(error_of(bare), HasSubstr(": asset: found \"2.0\"; expected the object every glTF file has"));
+  Gltf vec7;
+  vec7.node({{"mesh", vec7.triangle_mesh()}});
+  vec7.doc["accessors"][0]["type"] = "VEC7";
+  EXPECT_THAT(error_of(vec7), HasSubstr(": accessor 0: type 'VEC7' is no glTF 2.0 accessor type; expected SCALAR, VEC2, VEC3, "
+                                        "VEC4, MAT2, MAT3 or MAT4"));
   // a matrix and a translation (the translation was dropped)
   Gltf both;
   both.node({{"name", "N"}, {"mesh", both.triangle_mesh()}, {"matrix", {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1}},
