@@ -646,7 +646,21 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   std::vector<fs::path> dirs;
   // With --repeats OUT holds the realisations' folders, staged together and published as one: OUT holds
   // the earlier set or the new one, never a mix of their realisations, never one left from a call with more.
-  std::unique_ptr<Staging> top = runs.size() > 1 ? std::make_unique<Staging>(out, Staging::OfRuns{}) : nullptr;
+  // Without -o the output folder is the default beside the run: a refusal of it says so, not "(-o)".
+  const auto staged = [&](const auto& make) {
+    try {
+      return make();
+    } catch (const Error& e) {
+      std::string message = e.what();
+      const std::string given = " as the output folder (-o)";
+      if (const size_t at = message.find(given); at != std::string::npos && options.out_dir.empty())
+        message.replace(at, given.size(), " as the output folder (sense's default without -o, the run's name and '-sense' "
+                                          "beside it; name another with -o)");
+      throw Error(message);
+    }
+  };
+  std::unique_ptr<Staging> top =
+      runs.size() > 1 ? staged([&] { return std::make_unique<Staging>(out, Staging::OfRuns{}); }) : nullptr;
   std::vector<std::unique_ptr<Staging>> staging;
   std::vector<std::unique_ptr<Outputs>> outputs;
   std::vector<uint64_t> seeds;
@@ -746,7 +760,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     char name[32];
     std::snprintf(name, sizeof name, "repeat_%03zu", r);
     dirs.push_back(runs.size() == 1 ? out : out / name);
-    staging.push_back(top ? std::make_unique<Staging>(*top, name) : std::make_unique<Staging>(dirs.back()));
+    staging.push_back(top ? std::make_unique<Staging>(*top, name) : staged([&] { return std::make_unique<Staging>(dirs.back()); }));
     std::set<std::string> provided = r == 0 ? from_run : shared;
     provided.insert(from_run.begin(), from_run.end());
     // (the laser's images where the saved light holds its light)

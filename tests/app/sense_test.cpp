@@ -790,6 +790,16 @@ TEST_F(App, SenseRefusesWhatItCannotDo) {
   r = sh("sense " + (dir_ / "run").string() + " --set seeds.noiseX=1");
   EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("--set seeds.noiseX: /seeds/noiseX: unknown key; did you mean /seeds/noise?"));
+  // Without -o, a default output name too long for the file system says it is the default (it said "(-o)")
+  const fs::path long_run = dir_ / std::string(238, 'r');
+  fs::rename(dir_ / "run", long_run);
+  r = sh("sense " + long_run.string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr(long_run.string() + "-sense as the output folder (sense's default without -o, the run's name and "
+                                  "'-sense' beside it; name another with -o): its name is 244 bytes long"));
+  EXPECT_EQ(sh("sense " + long_run.string() + " -o " + (dir_ / "short").string() + " -q").code, 0);
+  fs::remove_all(dir_ / "short");
+  fs::rename(long_run, dir_ / "run");
   r = sh("sense " + (dir_ / "run").string() + " --set seeds.light=3");
   EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("--set seeds.light: sense re-samples the sensor only"));
