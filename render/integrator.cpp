@@ -810,7 +810,9 @@ bool Integrator::deposit_planar_path(const NeeVertex& v, const PlanarPath& path,
     ++rays->refracted;
     RayHit hit;
     const float reach = s < k ? float(path.len[s] * 1.01 + 1e-4) : float(path.len[s] * (1.0 - 1e-6));
-    const bool found = embree_.intersect(start_s, ds, 0.0f, reach, &hit, true);
+    // (towards a face it reflects off, the segment is seen as a camera path's: a single-sided mirror is met from
+    // its front, not culled as the light would see it from behind)
+    const bool found = embree_.intersect(start_s, ds, 0.0f, reach, &hit, !(s < k && reflect && reflect[s]));
     if (s < k) {
       if (!found) return false;
       const Surface sf = shading_.surface(hit);
