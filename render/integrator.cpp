@@ -766,33 +766,72 @@ bool Integrator::connect_laser_along(const NeeVertex& v, const RefractedLayers& 
 
 // The laser seen from v through planar faces that are not all parallel: the path that obeys Snell's law at
 // each (solve_planar_path), traced as connect_laser_along traces its own, lit with the path bundle's spread.
-// Fresnel transmittance at each face at its own angle, Beer-Lambert over each segment. The light reflected
-// between two of the faces (connect_laser_refracted's echoes) is left out.
+// Fresnel transmittance at each face at its own angle, Beer-Lambert over each segment. With `echoes`, the
+// light reflected off face b on its way and back off smooth face a < b too, as connect_laser_refracted traces
+// it between parallel faces (drawn with the same probability, from the main path's angles): its chain of faces
+// 0..b, b-1..a, a+1..k-1, reflecting off b and a, solved as a whole.
 bool Integrator::connect_laser_planar(const NeeVertex& v, const Crossings& cx, double w, const PixelFilm& film,
-                                      RayCounts* rays, const bool* reflect) const {
-  static_assert(Crossings::kMax <= kMaxPlanarFaces);
+                                      RayCounts* rays, bool echoes) const {
+  static_assert(3 * Crossings::kMax <= kMaxPlanarFaces);
   const Crossings::Crossing* cr = cx.slots.c;
   const int k = cx.n;
-  PlanarFace faces[Crossings::kMax];
-  glm::dvec3 start[Crossings::kMax];
-  double index[Crossings::kMax + 1];
-  int media[Crossings::kMax + 1];
+  PlanarFace faces[kMaxPlanarFaces];
+  glm::dvec3 start[kMaxPlanarFaces];
+  double index[kMaxPlanarFaces + 1];
+  int media[kMaxPlanarFaces + 1], material[kMaxPlanarFaces];
+  glm::vec3 ng[kMaxPlanarFaces];
+  bool reflect[kMaxPlanarFaces] = {};
+  const auto layer_medium = [&](int layer) { return layer == 0 ? cx.medium0 : cr[layer - 1].medium; };
   media[0] = cx.medium0;
   for (int j = 0; j < k; ++j) {
     faces[j] = {cr[j].p, glm::dvec3(cr[j].ng)};
     start[j] = cr[j].p;
     media[j + 1] = cr[j].medium;
+    material[j] = cr[j].material, ng[j] = cr[j].ng;
   }
   for (int s = 0; s <= k; ++s) index[s] = media[s] < 0 ? 1.0 : double(shading_.material(media[s]).point.ior);
   PlanarPath path;
-  if (!solve_planar_path(glm::dvec3(v.sf.p), laser_.position, faces, index, k, start, &path, reflect)) return false;
-  return deposit_planar_path(v, path, cx, index, media, reflect, w, film, rays);
+  if (!solve_planar_path(glm::dvec3(v.sf.p), laser_.position, faces, index, k, start, &path)) return false;
+  if (!deposit_planar_path(v, path, material, ng, index, media, nullptr, w, film, rays)) return false;
+  if (!echoes) return true;
+  constexpr double kEchoTraced = 0.01;  // as connect_laser_refracted's
+  const PlanarPath main = path;
+  for (int b = 1; b < k; ++b)
+    for (int a = 0; a < b; ++a) {
+      if (!cr[a].mp.smooth()) continue;
+      const auto reflectance = [&](int face, int segment) {
+        const float c = float(std::fabs(glm::dot(main.d[segment], faces[face].n)));
+        return double(interface_reflectance(cr[face].mp, c, layer_medium(segment) != cr[face].material).x);
+      };
+      const double q = std::min(1.0, reflectance(b, b) * reflectance(a, a + 1) / kEchoTraced);
+      if (!(q > 0.0) || (q < 1.0 && echo_uniform(v.sf.p, a, b) >= q)) continue;
+      // The chain: each entry a face of the straight walk, whether the path reflects off it, and the layer after.
+      int n = 0;
+      PlanarFace cf[kMaxPlanarFaces];
+      const auto add = [&](int face, bool off, int layer_after) {
+        cf[n] = faces[face];
+        start[n] = main.y[face];
+        material[n] = cr[face].material, ng[n] = cr[face].ng;
+        reflect[n] = off;
+        media[n + 1] = layer_medium(layer_after);
+        ++n;
+      };
+      media[0] = cx.medium0;
+      for (int j = 0; j < b; ++j) add(j, false, j + 1);  // to face b
+      add(b, true, b);                                     // off it
+      for (int j = b - 1; j > a; --j) add(j, false, j);    // back to face a
+      add(a, true, a + 1);                                 // off it
+      for (int j = a + 1; j < k; ++j) add(j, false, j + 1);  // and on to the laser
+      for (int s = 0; s <= n; ++s) index[s] = media[s] < 0 ? 1.0 : double(shading_.material(media[s]).point.ior);
+      if (solve_planar_path(glm::dvec3(v.sf.p), laser_.position, cf, index, n, start, &path, reflect))
+        (void)deposit_planar_path(v, path, material, ng, index, media, reflect, w / q, film, rays);
+    }
+  return true;
 }
 
-bool Integrator::deposit_planar_path(const NeeVertex& v, const PlanarPath& path, const Crossings& cx, const double* index,
-                                     const int* media, const bool* reflect, double w, const PixelFilm& film,
-                                     RayCounts* rays) const {
-  const Crossings::Crossing* cr = cx.slots.c;
+bool Integrator::deposit_planar_path(const NeeVertex& v, const PlanarPath& path, const int* material, const glm::vec3* ng,
+                                     const double* index, const int* media, const bool* reflect, double w,
+                                     const PixelFilm& film, RayCounts* rays) const {
   const int k = path.k;
   const double intensity = laser_.intensity_towards(-path.d[k]);
   if (!(intensity > 0.0)) return true;
@@ -816,7 +855,7 @@ bool Integrator::deposit_planar_path(const NeeVertex& v, const PlanarPath& path,
     if (s < k) {
       if (!found) return false;
       const Surface sf = shading_.surface(hit);
-      if (sf.material != cr[s].material || std::fabs(glm::dot(sf.ng, cr[s].ng)) < 1.0f - 1e-6f) return false;
+      if (sf.material != material[s] || std::fabs(glm::dot(sf.ng, ng[s])) < 1.0f - 1e-6f) return false;
       const float c = glm::dot(ds, sf.ng);
       const MaterialPoint mp = shading_.material_at(sf, hit);
       t *= reflect && reflect[s] ? interface_reflectance(mp, c, c < 0.0f) : interface_transmittance(mp, std::fabs(c), c < 0.0f);
@@ -858,8 +897,7 @@ void Integrator::connect_laser_mirrors(const NeeVertex& v, double w, const Pixel
       return true;
     };
     const MaterialPoint& mp = shading_.material(m.material).point;
-    Crossings cx;
-    cx.medium0 = -1;
+    const glm::vec3 face_n(n);
     // Off the face: the straight line to the laser's image across it, whose 1 / r^2 is the spread.
     const glm::dvec3 image = L - 2.0 * sl * n;
     const glm::dvec3 at = x + sx / (sx + sl) * (image - x);
@@ -872,12 +910,10 @@ void Integrator::connect_laser_mirrors(const NeeVertex& v, double w, const Pixel
         path.d[0] = (at - x) / path.len[0], path.d[1] = (L - at) / path.len[1];
         const double r = path.len[0] + path.len[1];
         path.spread = 1.0 / (r * r);
-        cx.n = 1;
-        cx.slots.c[0] = {at, glm::vec3(n), m.material, mp, -1};
         const bool off_front[1] = {true};
         const double index[2] = {1.0, 1.0};
         const int media[2] = {-1, -1};
-        deposit_planar_path(v, path, cx, index, media, off_front, w, film, rays);
+        deposit_planar_path(v, path, &m.material, &face_n, index, media, off_front, w, film, rays);
       }
     }
     if (!(m.depth > 0.0)) continue;
@@ -909,11 +945,10 @@ void Integrator::connect_laser_mirrors(const NeeVertex& v, double w, const Pixel
     }
     if (!(c[0] > 0.0 && c[1] > 0.0)) continue;
     path.spread = 1.0 / (A * B * c[0] * c[0]);  // A B cos theta_0 with n_L = 1 and cos theta_L = c[0]
-    cx.n = 3;
-    for (int j = 0; j < 3; ++j) cx.slots.c[j] = {path.y[j], glm::vec3(n), m.material, mp, j < 2 ? m.material : -1};
     const bool off_back[3] = {false, true, false};
-    const int media[4] = {-1, m.material, m.material, -1};
-    deposit_planar_path(v, path, cx, index, media, off_back, w, film, rays);
+    const int media[4] = {-1, m.material, m.material, -1}, material[3] = {m.material, m.material, m.material};
+    const glm::vec3 normals[3] = {face_n, face_n, face_n};
+    deposit_planar_path(v, path, material, normals, index, media, off_back, w, film, rays);
   }
 }
 
@@ -932,7 +967,7 @@ inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, co
     if (edges_ && v.medium >= 0) connect_laser_edges(v, lr, cx, w, film, rays);
     if (cx.blocked) return;
     if (cx.refracting && cx.planar &&
-        (cx.parallel ? connect_laser_refracted(v, lr, cx, w, film, rays, true) : connect_laser_planar(v, cx, w, film, rays)))
+        (cx.parallel ? connect_laser_refracted(v, lr, cx, w, film, rays, true) : connect_laser_planar(v, cx, w, film, rays, true)))
       return;
   }
   if (!v.counted(wi)) return;

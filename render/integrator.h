@@ -280,14 +280,15 @@ class Integrator {
   // The laser's connection from v through the planar faces the straight walk crossed when they are not all
   // parallel (solve_planar_path); false when no refracted path crosses the same faces (then the straight
   // connection is used).
-  // reflect (null: none): the path reflects off crossing j instead of crossing it (connect_laser_mirrors).
+  // echoes: the light reflected between pairs of faces too, as connect_laser_refracted's.
   bool connect_laser_planar(const NeeVertex& v, const Crossings& cx, double w, const PixelFilm& film, RayCounts* rays,
-                            const bool* reflect = nullptr) const;
-  // The light of a path solved for connect_laser_planar or connect_laser_mirrors, traced: each segment must meet
-  // crossing j of cx (reflect[j]: reflecting off it), index and media those of each segment; false where it
-  // does not (nothing deposited).
-  bool deposit_planar_path(const NeeVertex& v, const PlanarPath& path, const Crossings& cx, const double* index,
-                           const int* media, const bool* reflect, double w, const PixelFilm& film, RayCounts* rays) const;
+                            bool echoes) const;
+  // The light of a path solved for connect_laser_planar or connect_laser_mirrors, traced: segment j < k must meet
+  // a face of material[j] and normal +-ng[j] (reflect[j]: reflecting off it; null: crossing every face), index
+  // and media those of each segment; false where it does not (nothing deposited).
+  bool deposit_planar_path(const NeeVertex& v, const PlanarPath& path, const int* material, const glm::vec3* ng,
+                           const double* index, const int* media, const bool* reflect, double w, const PixelFilm& film,
+                           RayCounts* rays) const;
   // The laser's light reflected to v by the smooth planar faces of mirrors_.
   void connect_laser_mirrors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const;
   // A uniform number in [0, 1) for the echo of faces a, b seen from vertex position p: a hash of them and the

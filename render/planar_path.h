@@ -12,7 +12,7 @@ struct PlanarFace {
   glm::dvec3 p, n;
 };
 
-constexpr int kMaxPlanarFaces = 8;
+constexpr int kMaxPlanarFaces = 24;  // a laser-side echo's chain through 8 faces: 8 + 2 * 7
 
 // The path from x to l refracting at faces 0..k-1 in turn: y[j] on face j, d[s] the unit direction of segment s
 // (s = 0..k, from x towards l; segment s ends at y[s], the last at l) and len[s] its length. spread is the

@@ -793,6 +793,7 @@ TEST(Transport, AClearPlatesEchoAtObliqueIncidence) {
 // (connect_laser_planar: any planar faces).
 TEST(Transport, LaserLightRefractsThroughPlatesThatAreNotParallel) {
   const double psi = 20.0 * kPi / 180;
+  double echo_parallel = 0;
   for (const double tau_deg : {0.0, 0.1, 10.0}) {
     const double tau = tau_deg * kPi / 180;
     const float n = 1.5f;
@@ -837,21 +838,28 @@ TEST(Transport, LaserLightRefractsThroughPlatesThatAreNotParallel) {
     c.camera.look_at_m = {w0.x, w0.y, w0.z};
     c.laser.beam = Beam::Cone;
     c.laser.half_angle_rad = kPi;
-    c.render.samples_per_pixel = 64;
+    c.render.samples_per_pixel = 256;
     c.render.max_bounces = 1;
     const double t_main = 2 * opl / kC;
-    const TimeAxis axis{t_main - 0.2e-9, 1e-12, 600, 1.0};
+    const TimeAxis axis{t_main - 0.2e-9, 1e-12, 1400, 1.0};
     const TransientTile bare = Renderer(wall_behind_slab(false, 0.05f, n), c)
                                    .transient({0, 0, 4, 4}, {0, 0, 4, 4}, TimeAxis{2 / std::cos(psi) / kC - 0.2e-9, 1e-12, 400, 1.0});
     const TransientTile tile = Renderer(s, c).transient({0, 0, 4, 4}, {0, 0, 4, 4}, axis);
-    double bare_all = 0, main = 0;
+    double bare_all = 0, main = 0, echoes = 0;
     for (size_t i = 0; i < 16; ++i) {
       bare_all += bare.laser_total[i];
       const float* g = tile.transient.data() + i * size_t(axis.bins);
       for (int64_t k = 0; k < axis.bins; ++k)
-        if (axis.bin_centre_s(k) < t_main + 0.1e-9) main += g[k];  // the first echo is 0.2 ns later (the 2 cm plate)
+        (axis.bin_centre_s(k) < t_main + 0.1e-9 ? main : echoes) += g[k];  // the first echo is 0.2 ns later (the 2 cm plate)
     }
     EXPECT_NEAR(main / bare_all / expected, 1.0, 2e-4) << tau_deg << " degrees: " << main / bare_all << " against " << expected;
+    // The plates' first echoes (within 1.2 ns: each plate's own, both halves), continuous with the parallel plates'
+    // (the laser side's half was left out at 0.1 degrees and more: 0.535 of them). Drawn: measured 2.6e-5 off.
+    if (tau_deg == 0.0) {
+      echo_parallel = echoes / bare_all;
+    } else if (tau_deg < 1.0) {
+      EXPECT_NEAR(echoes / bare_all / echo_parallel, 1.0, 0.03) << tau_deg << " degrees";
+    }
   }
 }
 
