@@ -18,32 +18,36 @@ void plane_basis(const glm::dvec3& n, glm::dvec3* t0, glm::dvec3* t1) {
 }
 
 // Solves a x = b in place for `cols` right-hand sides (b row-major, n x cols), by Gaussian elimination with
-// partial pivoting; false when a is singular to working precision.
+// partial pivoting; false when a is singular to working precision. a is block tridiagonal in 2 x 2 blocks (the
+// residual's Jacobian): row i's entries lie within 3 columns of i, and pivoting among the 3 rows below widens
+// the band above to 6, so the loops skip what is zero (the same arithmetic as the dense elimination's).
 bool solve_linear(double (*a)[kMaxUnknowns], double (*b)[2], int n, int cols) {
+  constexpr int kBelow = 3, kAbove = 6;
   double scale = 0.0;
   for (int i = 0; i < n; ++i)
-    for (int j = 0; j < n; ++j) scale = std::max(scale, std::fabs(a[i][j]));
+    for (int j = std::max(0, i - kBelow); j < std::min(n, i + kBelow + 1); ++j) scale = std::max(scale, std::fabs(a[i][j]));
   if (!(scale > 0.0)) return false;
   for (int c = 0; c < n; ++c) {
+    const int last = std::min(n, c + kBelow + 1), right = std::min(n, c + kAbove + 1);
     int pivot = c;
-    for (int i = c + 1; i < n; ++i)
+    for (int i = c + 1; i < last; ++i)
       if (std::fabs(a[i][c]) > std::fabs(a[pivot][c])) pivot = i;
     if (!(std::fabs(a[pivot][c]) > 1e-14 * scale)) return false;
     if (pivot != c) {
-      std::swap_ranges(a[c], a[c] + n, a[pivot]);
+      std::swap_ranges(a[c] + c, a[c] + right, a[pivot] + c);
       std::swap_ranges(b[c], b[c] + cols, b[pivot]);
     }
-    for (int i = c + 1; i < n; ++i) {
+    for (int i = c + 1; i < last; ++i) {
       const double f = a[i][c] / a[c][c];
       if (f == 0.0) continue;
-      for (int j = c; j < n; ++j) a[i][j] -= f * a[c][j];
+      for (int j = c; j < right; ++j) a[i][j] -= f * a[c][j];
       for (int j = 0; j < cols; ++j) b[i][j] -= f * b[c][j];
     }
   }
   for (int c = n - 1; c >= 0; --c)
     for (int j = 0; j < cols; ++j) {
       double s = b[c][j];
-      for (int i = c + 1; i < n; ++i) s -= a[c][i] * b[i][j];
+      for (int i = c + 1; i < std::min(n, c + kAbove + 1); ++i) s -= a[c][i] * b[i][j];
       b[c][j] = s / a[c][c];
     }
   return true;
@@ -84,7 +88,7 @@ struct Chain {
   // The residual's Jacobian in the points' in-plane coordinates (block tridiagonal).
   void jacobian(const glm::dvec3* d, const double* len, double (*jac)[kMaxUnknowns]) const {
     const int n = 2 * k;
-    for (int i = 0; i < n; ++i) std::fill_n(jac[i], n, 0.0);
+    for (int i = 0; i < n; ++i) std::fill_n(jac[i] + std::max(0, i - 3), std::min(n, i + 7) - std::max(0, i - 3), 0.0);
     for (int j = 0; j < k; ++j)
       for (int i = std::max(0, j - 1); i <= std::min(k - 1, j + 1); ++i)
         for (int b = 0; b < 2; ++b) {
