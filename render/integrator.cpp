@@ -321,7 +321,9 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
     const bool volume = rmat.volume && rmat.point.ior != 1.0f;
     for (const Plane& p : planes) {
       if (p.area < 0.1 * largest || mirrors_.size() == kMaxLaserMirrors) continue;
-      LaserMirror lm{p.n, p.offset, 0.0, mesh.material, volume, {}};
+      LaserMirror lm{p.n, p.offset, 0.0, mesh.material, volume, false, {}};
+      // (a closed mesh's face, a box's, reflects on its outer side only: from inside lies the mesh)
+      lm.two_sided = !volume && std::fabs(glm::dot(p.n, centroid) - p.offset) <= 1e-6 * (1.0 + std::fabs(p.offset));
       lm.e[0] = glm::normalize(glm::cross(p.n, std::fabs(p.n.x) < 0.9 ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0)));
       lm.e[1] = glm::cross(p.n, lm.e[0]);
       for (const size_t t : p.triangles)
@@ -855,7 +857,11 @@ bool Integrator::deposit_planar_path(const NeeVertex& v, const PlanarPath& path,
     if (s < k) {
       if (!found) return false;
       const Surface sf = shading_.surface(hit);
-      if (sf.material != material[s] || std::fabs(glm::dot(sf.ng, ng[s])) < 1.0f - 1e-6f) return false;
+      // (in the plane planned: a face of the same material and orientation in another, a box's other side, is not
+      // it; along the face the trace drifts by its origins' offsets, about 1e-5 m)
+      if (sf.material != material[s] || std::fabs(glm::dot(sf.ng, ng[s])) < 1.0f - 1e-6f ||
+          std::fabs(glm::dot(glm::dvec3(ng[s]), glm::dvec3(sf.p) - path.y[s])) > 1e-5 * (1.0 + glm::length(path.y[s])))
+        return false;
       const float c = glm::dot(ds, sf.ng);
       const MaterialPoint mp = shading_.material_at(sf, hit);
       t *= reflect && reflect[s] ? interface_reflectance(mp, c, c < 0.0f) : interface_transmittance(mp, std::fabs(c), c < 0.0f);
@@ -885,7 +891,7 @@ void Integrator::connect_laser_mirrors(const NeeVertex& v, double w, const Pixel
   for (const LaserMirror& m : mirrors_) {
     glm::dvec3 n = m.n;
     double offset = m.offset, sx = glm::dot(n, x) - offset, sl = glm::dot(n, L) - offset;
-    if (!m.volume && sx < 0.0 && sl < 0.0) n = -n, offset = -offset, sx = -sx, sl = -sl;  // a sheet's other side
+    if (m.two_sided && sx < 0.0 && sl < 0.0) n = -n, offset = -offset, sx = -sx, sl = -sl;  // a sheet's other side
     if (!(sx > 0.0 && sl > 0.0)) continue;
     // Whether a path that meets the face between points p and q of its plane may meet it within its extent
     // (else no ray is traced).

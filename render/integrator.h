@@ -349,6 +349,7 @@ class Integrator {
     double offset = 0.0, depth = 0.0;
     int material = -1;
     bool volume = false;
+    bool two_sided = false;  // a flat mesh that is no volume (a sheet, a mirror): seen from either side
     glm::dvec3 e[2];
     double lo[2] = {1e300, 1e300}, hi[2] = {-1e300, -1e300};
   };

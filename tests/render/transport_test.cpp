@@ -874,7 +874,9 @@ TEST(Transport, LaserLightRefractsThroughPlatesThatAreNotParallel) {
 // point laser: no camera path finds it). A plate too short to reach the reflection points reflects nothing
 // there; a thin-walled sheet (one interface, wound with its front away from the camera) in the front face's
 // plane reflects F(a) as the front face does, and nothing later; a single-sided white metal mirror there all of
-// it facing the camera, nothing facing away (culled from behind).
+// it facing the camera, nothing facing away (culled from behind); a double-sided white metal box in the plate's
+// place all of it off its front face, nothing off the face behind it (reflected from inside the box, through
+// its front face: an independent verifier's find).
 TEST(Transport, AClearPlateReflectsTheLaserOntoTheScene) {
   const float t = 0.05f, n = 1.5f;
   const auto scene = [&](int which) {
@@ -882,10 +884,13 @@ TEST(Transport, AClearPlateReflectsTheLaserOntoTheScene) {
     if (which == 0) add_box(s, {0.5f, -1, -0.95f}, {0.55f, 1, 0.2f}, add_material(s, test::glass(n, t)));
     if (which == 1) add_box(s, {0.5f, -1, -0.5f}, {0.55f, 1, 0.2f}, add_material(s, test::glass(n, t)));
     if (which == 2) add_quad(s, {0.5f, 0, -0.4f}, {0, 1, 0}, {0, 0, 0.55f}, add_material(s, test::glass(n, 0.0f)));
-    if (which >= 3) {  // a single-sided white metal mirror facing the camera (3) or away from it (4: culled from behind)
-      scenes::Material metal;
-      metal.metallic = 1.0f, metal.roughness = 0.0f;
-      add_quad(s, {0.5f, 0, -0.4f}, {0, 0, 0.55f}, {0, which == 3 ? 1.0f : -1.0f, 0}, add_material(s, metal));
+    scenes::Material metal;
+    metal.metallic = 1.0f, metal.roughness = 0.0f;
+    // a single-sided white metal mirror facing the camera (3) or away from it (4: culled from behind)
+    if (which == 3 || which == 4) add_quad(s, {0.5f, 0, -0.4f}, {0, 0, 0.55f}, {0, which == 3 ? 1.0f : -1.0f, 0}, add_material(s, metal));
+    if (which == 5) {  // a double-sided white metal box where the plate was: its face behind is no mirror from inside
+      metal.double_sided = true;
+      add_box(s, {0.5f, -1, -0.95f}, {0.55f, 1, 0.2f}, add_material(s, metal));
     }
     return s;
   };
@@ -912,7 +917,7 @@ TEST(Transport, AClearPlateReflectsTheLaserOntoTheScene) {
   const double t_front = (r + H / std::cos(a)) / kC;
   const double t_back = (r + (H / std::cos(b)) + 2 * n * t / std::cos(bg)) / kC;
   const TimeAxis axis{t_direct - 0.3e-9, 1e-12, 1800, 1.0};
-  for (int which = 0; which < 5; ++which) {
+  for (int which = 0; which < 6; ++which) {
     const TransientTile tile = Renderer(scene(which), c).transient({0, 0, 4, 4}, {0, 0, 4, 4}, axis);
     double sums[3] = {}, outside = 0;
     const double at[3] = {t_direct, t_front, t_back};
@@ -926,7 +931,7 @@ TEST(Transport, AClearPlateReflectsTheLaserOntoTheScene) {
       }
     }
     const double mirror = front / fresnel(a, n);  // a white metal's Schlick reflectance is 1
-    const double expected[5][2] = {{front, back}, {0, 0}, {front, 0}, {mirror, 0}, {0, 0}};
+    const double expected[6][2] = {{front, back}, {0, 0}, {front, 0}, {mirror, 0}, {0, 0}, {mirror, 0}};
     for (int j = 0; j < 2; ++j)
       EXPECT_NEAR(sums[j + 1] / sums[0], expected[which][j], 1e-3 * expected[which][j])
           << "scene " << which << (j ? ", back face" : ", front face");
