@@ -690,7 +690,7 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
                 "use another folder (-o)");
   }
   if (options.progress)
-    std::fprintf(stderr, "spadgen: dataset %s: %lld of %lld samples%s to generate (%lld done already), about %s, %s on disk\n",
+    std::fprintf(stderr, "spadgen: dataset %s: %lld of %lld samples%s to generate (%lld done already), about %s, at most %s on disk\n",
                  dir.string().c_str(), static_cast<long long>(todo.size()), static_cast<long long>(owned),
                  shard.count > 1 ? (" of shard " + shard.text()).c_str() : "", static_cast<long long>(skipped),
                  duration_text(seconds).c_str(), bytes_text(disk).c_str());

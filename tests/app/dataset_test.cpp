@@ -26,6 +26,7 @@
 namespace spadgen::testing {
 namespace {
 
+using ::testing::ContainsRegex;
 using ::testing::HasSubstr;
 using ::testing::Not;
 using json = nlohmann::json;
@@ -579,6 +580,7 @@ TEST_F(Dataset, AChangedSceneMakesSamplesStaleAndReplacesThemWhole) {
   const Result again = sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string());
   ASSERT_EQ(again.code, 0) << again.output;
   EXPECT_THAT(again.output, HasSubstr("2 of 2 samples to generate"));
+  EXPECT_THAT(again.output, ContainsRegex("to generate \\(0 done already\\), about [^,]+, at most [0-9.]+ [kMG]?B on disk"));
   EXPECT_FALSE(fs::exists(dir_ / "out/samples/000001/transient.npy"));  // no stale file beside the new set
   const json meta = json::parse(slurp(dir_ / "out/samples/000001/metadata.json"));
   for (const json& f : meta["files"]) EXPECT_NE(f, "transient.npy");
