@@ -923,38 +923,61 @@ void Integrator::connect_laser_mirrors(const NeeVertex& v, double w, const Pixel
       }
     }
     if (!(m.depth > 0.0)) continue;
-    // Off the face behind, through this one twice: the layers of parallel faces unfolded (air sx, the plate's
-    // thickness twice, air sl), solved for Snell's invariant p as connect_laser_refracted solves them; the
-    // refracted path enters the face between where the unfolded straight line does and `at` (the glass's
-    // index between 1 and infinity).
-    const double unfolded = sx + sl + 2.0 * m.depth;
+    // Off the face behind, through this one twice, after `m` more round trips inside (off the face behind, then
+    // this one from inside): the layers of parallel faces unfolded (air sx, the plate's thickness 2 m + 2 times,
+    // air sl), solved for Snell's invariant p as connect_laser_refracted solves them. The refracted path enters the
+    // face between where the unfolded straight line does and `at` (the glass's index between 1 and infinity).
+    // Round trips carry the first path's light times the inside reflectance squared per trip (at the first path's
+    // angle): each is traced with probability min(1, that share / 0.01), weighted by its inverse, as
+    // connect_laser_refracted draws its echoes (unbiased; a plate of ior 1.5 traces a 6th of the first trips),
+    // while the share is at least 1e-6 (8 trips at most).
     const glm::dvec3 to = L - x;
     const glm::dvec3 lat = to - glm::dot(to, n) * n;
-    if (!on_face(x + sx / unfolded * (lat - unfolded * n), at)) continue;
-    const double D = glm::length(lat);
-    const glm::dvec3 u = D > 1e-12 * unfolded ? lat / D : glm::dvec3(0.0);
-    const double ior = double(mp.ior);
-    const double depth[4] = {sx, m.depth, m.depth, sl}, index[4] = {1.0, ior, ior, 1.0};
-    const double p = D > 0.0 ? snell_invariant(depth, index, 4, D, D / std::hypot(D, unfolded), std::min(1.0, ior)) : 0.0;
-    double c[4], A = 0.0, B = 0.0;
-    glm::dvec3 y = x;
-    path.k = 3;
-    for (int j = 0; j < 4; ++j) {
-      const double sn = p / index[j];
-      c[j] = std::sqrt(std::max(0.0, 1.0 - sn * sn));
-      if (!(c[j] > 0.0)) break;
-      path.d[j] = sn * u + (j < 2 ? -c[j] : c[j]) * n;  // towards the face behind, then back out
-      path.len[j] = depth[j] / c[j];
-      if (j < 3) path.y[j] = y = y + path.len[j] * path.d[j];
-      A += depth[j] / (index[j] * c[j]);
-      B += depth[j] / (index[j] * c[j] * c[j] * c[j]);
+    const double D = glm::length(lat), ior = double(mp.ior);
+    double share = 1.0, r_inside = 0.0;
+    for (int trips = 0; trips <= 8 && share >= 1e-6; ++trips) {
+      constexpr double kTraced = 0.01;
+      const double q = std::min(1.0, share / kTraced);
+      if (q < 1.0 && echo_uniform(v.sf.p, 100 + trips, int(&m - mirrors_.data())) >= q) {
+        share *= r_inside * r_inside;
+        continue;
+      }
+      const int glass = 2 * trips + 2, segments = glass + 2, k = segments - 1;
+      const double unfolded = sx + sl + double(glass) * m.depth;
+      if (!on_face(x + sx / unfolded * (lat - unfolded * n), at)) break;
+      const glm::dvec3 u = D > 1e-12 * unfolded ? lat / D : glm::dvec3(0.0);
+      double depth[kMaxPlanarFaces + 1], index[kMaxPlanarFaces + 1];
+      int media[kMaxPlanarFaces + 1], material[kMaxPlanarFaces];
+      bool off[kMaxPlanarFaces];
+      glm::vec3 normals[kMaxPlanarFaces];
+      for (int t = 0; t < segments; ++t) {
+        const bool inside = t > 0 && t + 1 < segments;
+        depth[t] = t == 0 ? sx : inside ? m.depth : sl, index[t] = inside ? ior : 1.0, media[t] = inside ? m.material : -1;
+      }
+      for (int f = 0; f < k; ++f) material[f] = m.material, normals[f] = face_n, off[f] = f > 0 && f + 1 < k;
+      const double p = D > 0.0 ? snell_invariant(depth, index, segments, D, D / std::hypot(D, unfolded), std::min(1.0, ior)) : 0.0;
+      double c0 = 0.0, A = 0.0, B = 0.0;
+      glm::dvec3 y = x;
+      path.k = k;
+      bool ok = true;
+      for (int t = 0; t < segments && ok; ++t) {
+        const double sn = p / index[t], c = std::sqrt(std::max(0.0, 1.0 - sn * sn));
+        ok = c > 0.0;
+        if (t == 0) c0 = c;
+        // towards the face behind (air, then every other segment inside), back towards this one
+        const bool inwards = t == 0 || (t + 1 < segments && t % 2 == 1);
+        path.d[t] = sn * u + (inwards ? -c : c) * n;
+        path.len[t] = depth[t] / c;
+        if (t < k) path.y[t] = y = y + path.len[t] * path.d[t];
+        A += depth[t] / (index[t] * c);
+        B += depth[t] / (index[t] * c * c * c);
+        if (trips == 0 && t == 1) r_inside = double(interface_reflectance(mp, float(c), false).x);
+      }
+      if (!ok) break;
+      path.spread = 1.0 / (A * B * c0 * c0);  // A B cos theta_0 with n_L = 1 and cos theta_L = c0
+      deposit_planar_path(v, path, material, normals, index, media, off, w / q, film, rays);
+      share *= r_inside * r_inside;
     }
-    if (!(c[0] > 0.0 && c[1] > 0.0)) continue;
-    path.spread = 1.0 / (A * B * c[0] * c[0]);  // A B cos theta_0 with n_L = 1 and cos theta_L = c[0]
-    const bool off_back[3] = {false, true, false};
-    const int media[4] = {-1, m.material, m.material, -1}, material[3] = {m.material, m.material, m.material};
-    const glm::vec3 normals[3] = {face_n, face_n, face_n};
-    deposit_planar_path(v, path, material, normals, index, media, off_back, w, film, rays);
   }
 }
 
