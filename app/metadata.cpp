@@ -53,8 +53,8 @@ json objects_json(const scenes::Scene& scene) {
 // - 0.5 - crop corner. A camera-frame point (X, Y, Z) lands at u = f X / Z + cx, v = f Y / Z + cy.
 json model_components(const RunConfig& c, const scenes::Scene* scene, bool laser, const json& from_run) {
   // The components the scene decides (a sense takes them from its run), in this order.
-  static constexpr std::array<std::string_view, 4> kFromScene{"transmissive surfaces", "absorbing volumes", "ambient light",
-                                                              "guided connections"};
+  static constexpr std::array<std::string_view, 5> kFromScene{"transmissive surfaces", "absorbing volumes", "ambient light",
+                                                              "guided connections", "laser mirrors"};
   json out = json::array();
   const auto add = [&](const char* component, bool active, const std::string& why) {
     out.push_back({{"component", component}, {"active", active}, {"why", why}});
@@ -92,6 +92,12 @@ json model_components(const RunConfig& c, const scenes::Scene* scene, bool laser
                : !c.render.guided_connections ? "render.guided_connections is false"
                : !laser                       ? "the laser is not traced (laser light)"
                                               : "no material of roughness 0.032-0.2");
+    const bool mirrors = render::laser_mirrors_active(*scene) && laser;
+    add(kFromScene[4].data(), mirrors,
+        mirrors ? "a mesh of at most 64 triangles has a smooth material (roughness below 0.032): vertices are also connected "
+                  "to the laser's image in its planar faces"
+        : !laser ? "the laser is not traced (laser light)"
+                 : "no mesh of at most 64 triangles has a smooth material (roughness below 0.032)");
   } else if (from_run.is_array()) {
     for (const json& e : from_run)
       if (std::find(kFromScene.begin(), kFromScene.end(), e.value("component", "")) != kFromScene.end()) out.push_back(e);
@@ -179,14 +185,16 @@ json run_json(const RunRecord& r) {
       else if (name == "laser light") value = of_rays(rays.laser), measured = "its shadow rays' share of the light transport's rays";
       else if (name == "ambient light") value = of_rays(rays.ambient), measured = "its shadow rays' share of the light transport's rays (the environment costs none)";
       else if (name == "guided connections") value = of_rays(rays.guided), measured = "its rays' share of the light transport's rays";
+      else if (name == "laser mirrors") value = of_rays(rays.mirror), measured = "its rays' share of the light transport's rays";
       else if (name == "indirect light") value = of_rays(rays.indirect), measured = "the share of the light transport's rays traced after a path's first vertex";
       else if (name == "binary frames") value = active ? share(stage_wall(StageClock::kSensorNoise)) : 0.0, measured = "the sensor's temporal-noise stage, which samples the frames";
       else if (!active) value = 0.0, measured = "skipped";
       else measured = "no time of its own: part of a stage above";
       components.push_back({{"component", name}, {"share", value}, {"measured", measured}});
     }
-  json rays_json = {{"camera", rays.camera}, {"bounce", rays.bounce}, {"laser", rays.laser}, {"refracted", rays.refracted},
-                    {"guided", rays.guided}, {"ambient", rays.ambient}, {"indirect", rays.indirect}, {"total", rays.total()}};
+  json rays_json = {{"camera", rays.camera},       {"bounce", rays.bounce}, {"laser", rays.laser},
+                    {"refracted", rays.refracted}, {"mirror", rays.mirror}, {"guided", rays.guided},
+                    {"ambient", rays.ambient},     {"indirect", rays.indirect}, {"total", rays.total()}};
   // The cores its threads could run on (--threads, or all, at most the machine's): what a dataset plan's pace
   // compares the sample's time with (the plan's own --threads made it 2 times off for samples of 1 thread).
   return {{"threads", r.threads}, {"cores", usable_cores(r.threads)}, {"seconds", r.seconds}, {"wall_seconds", wall}, {"stages", stages},

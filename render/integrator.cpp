@@ -88,6 +88,15 @@ void deposit(double v, double t, const TimeAxis& axis, double* bins, PixelTotals
   if (!landed) out->out_of_window += v;
 }
 
+bool laser_mirrors_active(const scenes::Scene& scene) {
+  for (const scenes::Mesh& mesh : scene.meshes) {
+    if (mesh.material < 0 || size_t(mesh.material) >= scene.materials.size()) continue;
+    const scenes::Material& m = scene.materials[size_t(mesh.material)];
+    if (!m.lambertian() && m.smooth() && mesh.triangle_count() > 0 && mesh.triangle_count() <= kMaxPartsPerMesh) return true;
+  }
+  return false;
+}
+
 bool guided_connections_active(const scenes::Scene& scene, bool enabled) {
   if (!enabled) return false;
   for (size_t i = 0; i < scene.materials.size(); ++i) {
@@ -794,7 +803,7 @@ bool Integrator::connect_laser_planar(const NeeVertex& v, const Crossings& cx, d
   for (int s = 0; s <= k; ++s) index[s] = media[s] < 0 ? 1.0 : double(shading_.material(media[s]).point.ior);
   PlanarPath path;
   if (!solve_planar_path(glm::dvec3(v.sf.p), laser_.position, faces, index, k, start, &path)) return false;
-  if (!deposit_planar_path(v, path, material, ng, index, media, nullptr, w, film, rays)) return false;
+  if (!deposit_planar_path(v, path, material, ng, index, media, nullptr, w, film, &rays->refracted)) return false;
   if (!echoes) return true;
   constexpr double kEchoTraced = 0.01;  // as connect_laser_refracted's
   const PlanarPath main = path;
@@ -826,14 +835,14 @@ bool Integrator::connect_laser_planar(const NeeVertex& v, const Crossings& cx, d
       for (int j = a + 1; j < k; ++j) add(j, false, j + 1);  // and on to the laser
       for (int s = 0; s <= n; ++s) index[s] = media[s] < 0 ? 1.0 : double(shading_.material(media[s]).point.ior);
       if (solve_planar_path(glm::dvec3(v.sf.p), laser_.position, cf, index, n, start, &path, reflect))
-        (void)deposit_planar_path(v, path, material, ng, index, media, reflect, w / q, film, rays);
+        (void)deposit_planar_path(v, path, material, ng, index, media, reflect, w / q, film, &rays->refracted);
     }
   return true;
 }
 
 bool Integrator::deposit_planar_path(const NeeVertex& v, const PlanarPath& path, const int* material, const glm::vec3* ng,
                                      const double* index, const int* media, const bool* reflect, double w,
-                                     const PixelFilm& film, RayCounts* rays) const {
+                                     const PixelFilm& film, uint64_t* rays) const {
   const int k = path.k;
   const double intensity = laser_.intensity_towards(-path.d[k]);
   if (!(intensity > 0.0)) return true;
@@ -848,7 +857,7 @@ bool Integrator::deposit_planar_path(const NeeVertex& v, const PlanarPath& path,
   for (int s = 0; s <= k; ++s) {
     const glm::vec3 ds(path.d[s]);
     const glm::vec3 start_s = offset_ray_origin(q, qn, ds);
-    ++rays->refracted;
+    ++*rays;
     RayHit hit;
     const float reach = s < k ? float(path.len[s] * 1.01 + 1e-4) : float(path.len[s] * (1.0 - 1e-6));
     // (towards a face it reflects off, the segment is seen as a camera path's: a single-sided mirror is met from
@@ -919,7 +928,7 @@ void Integrator::connect_laser_mirrors(const NeeVertex& v, double w, const Pixel
         const bool off_front[1] = {true};
         const double index[2] = {1.0, 1.0};
         const int media[2] = {-1, -1};
-        deposit_planar_path(v, path, &m.material, &face_n, index, media, off_front, w, film, rays);
+        deposit_planar_path(v, path, &m.material, &face_n, index, media, off_front, w, film, &rays->mirror);
       }
     }
     if (!(m.depth > 0.0)) continue;
@@ -976,7 +985,7 @@ void Integrator::connect_laser_mirrors(const NeeVertex& v, double w, const Pixel
       }
       if (!ok) break;
       path.spread = 1.0 / (A * B * c0 * c0);  // A B cos theta_0 with n_L = 1 and cos theta_L = c0
-      deposit_planar_path(v, path, material, normals, index, media, off, w / q, film, rays);
+      deposit_planar_path(v, path, material, normals, index, media, off, w / q, film, &rays->mirror);
       share *= r_inside * r_inside;
     }
   }

@@ -70,6 +70,9 @@ struct ObjectLaser {
 // Whether a render of this scene uses guided connections (render.guided_connections, and a material of
 // narrow glossy lobe: GGX alpha = roughness^2 in [1e-3, 0.04], the smooth ones being Dirac).
 bool guided_connections_active(const scenes::Scene& scene, bool enabled);
+// Whether a render of this scene connects vertices to the laser's image in smooth planar faces: a mesh of at
+// most 64 triangles has a smooth material other than a Lambertian one (Integrator's mirrors).
+bool laser_mirrors_active(const scenes::Scene& scene);
 
 // Adds a contribution v arriving at time t: to laser_total, and to the bin of every periodic image
 // t + m * period (m any integer) inside [axis.start_s, axis.end_s()), or to out_of_window when there is
@@ -286,9 +289,10 @@ class Integrator {
   // The light of a path solved for connect_laser_planar or connect_laser_mirrors, traced: segment j < k must meet
   // a face of material[j] and normal +-ng[j] (reflect[j]: reflecting off it; null: crossing every face), index
   // and media those of each segment; false where it does not (nothing deposited).
+  // rays: the category its segments count in (RayCounts::refracted or mirror).
   bool deposit_planar_path(const NeeVertex& v, const PlanarPath& path, const int* material, const glm::vec3* ng,
                            const double* index, const int* media, const bool* reflect, double w, const PixelFilm& film,
-                           RayCounts* rays) const;
+                           uint64_t* rays) const;
   // The laser's light reflected to v by the smooth planar faces of mirrors_.
   void connect_laser_mirrors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const;
   // A uniform number in [0, 1) for the echo of faces a, b seen from vertex position p: a hash of them and the

@@ -40,8 +40,8 @@ struct RayCounts {
   // refracting volumes, every laser connection's first walk: it finds the interfaces connect_laser_refracted crosses)
   uint64_t laser = 0;
   // the segments of connections to the laser refracted through them (connect_laser_refracted, connect_laser_planar)
-  // and of its reflections off smooth planar faces (connect_laser_mirrors)
   uint64_t refracted = 0;
+  uint64_t mirror = 0;  // the segments of the laser's reflections off smooth planar faces (connect_laser_mirrors)
   // guided connections and ghost draws: their targets' search, their rays and the laser connections at their
   // ends
   uint64_t guided = 0;
@@ -49,10 +49,10 @@ struct RayCounts {
   // of all the above, those a path traced after it left its first non-delta vertex through a non-Dirac lobe
   // (render.max_bounces > 1)
   uint64_t indirect = 0;
-  uint64_t total() const { return camera + bounce + laser + refracted + guided + ambient; }
+  uint64_t total() const { return camera + bounce + laser + refracted + mirror + guided + ambient; }
   RayCounts& operator+=(const RayCounts& o) {
-    camera += o.camera, bounce += o.bounce, laser += o.laser, refracted += o.refracted, guided += o.guided,
-        ambient += o.ambient, indirect += o.indirect;
+    camera += o.camera, bounce += o.bounce, laser += o.laser, refracted += o.refracted, mirror += o.mirror,
+        guided += o.guided, ambient += o.ambient, indirect += o.indirect;
     return *this;
   }
 };

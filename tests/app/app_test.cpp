@@ -178,6 +178,7 @@ TEST_F(App, TargetErrorOutputsAreBitIdenticalForAnyThreadCountAndTileSize) {
   EXPECT_TRUE(model.at("transmissive surfaces"));  // the plate
   EXPECT_FALSE(model.at("ambient light"));         // the paper's dark lab
   EXPECT_TRUE(model.at("guided connections"));     // the plate's roughness 0.05
+  EXPECT_FALSE(model.at("laser mirrors"));         // nothing smooth
   EXPECT_TRUE(model.at("target error"));
   EXPECT_TRUE(model.at("binary frames"));          // kSmall writes them
   EXPECT_TRUE(model.at("crosstalk"));
@@ -204,6 +205,9 @@ TEST_F(App, TheModelListsTheSensorsComponentsThePixelDesignsInUseHave) {
   for (const char* c : {"dark counts", "hot pixels", "crosstalk", "per-pixel gate maps", "PDP non-uniformity"}) EXPECT_FALSE(zero.at(c)) << c;
   EXPECT_FALSE(model_of("--set sensor.pixel_A.hot_pixel_fraction=0").at("hot pixels"));
   EXPECT_FALSE(model_of("--set acquisition.mode=intensity").at("per-pixel gate maps"));
+  // the laser's image in smooth planar faces: the target made a smooth mirror (2 triangles)
+  EXPECT_FALSE(on.at("laser mirrors"));
+  EXPECT_TRUE(model_of("--set materials.white_paper.roughness=0 --set materials.white_paper.metallic=1").at("laser mirrors"));
 }
 
 // metadata.json "run": the stages' shares of the run's wall time sum to 1, the rays' categories to their
@@ -228,12 +232,12 @@ TEST_F(App, RunSaysWhereItsTimeWentAndAComponentNotUsedCostsNothing) {
     EXPECT_NEAR(seconds, run.at("wall_seconds").get<double>(), 1e-9);
     const auto& rays = run.at("rays");
     uint64_t sum = 0;
-    for (const char* k : {"camera", "bounce", "laser", "refracted", "guided", "ambient"}) sum += rays.at(k).get<uint64_t>();
+    for (const char* k : {"camera", "bounce", "laser", "refracted", "mirror", "guided", "ambient"}) sum += rays.at(k).get<uint64_t>();
     EXPECT_EQ(sum, rays.at("total").get<uint64_t>());
     EXPECT_GT(rays.at("camera").get<uint64_t>(), 0u);
     std::map<std::string, nlohmann::json> share;
     for (const auto& c : run.at("components")) share[c.at("component").get<std::string>()] = c.at("share");
-    EXPECT_EQ(share.size(), 13u);
+    EXPECT_EQ(share.size(), 14u);
     EXPECT_GT(share.at("laser light").get<double>(), 0.0);  // its shadow rays
     if (std::string(name) == "small") {  // the plate: refracted connections; its roughness: guided ones
       EXPECT_GT(rays.at("refracted").get<uint64_t>(), 0u);
@@ -242,7 +246,9 @@ TEST_F(App, RunSaysWhereItsTimeWentAndAComponentNotUsedCostsNothing) {
       EXPECT_GT(share.at("binary frames").get<double>(), 0.0);  // kSmall writes them
     } else {
       EXPECT_EQ(rays.at("refracted").get<uint64_t>(), 0u);
+      EXPECT_EQ(rays.at("mirror").get<uint64_t>(), 0u);
       EXPECT_EQ(rays.at("guided").get<uint64_t>(), 0u);
+      EXPECT_EQ(share.at("laser mirrors").get<double>(), 0.0);
       EXPECT_EQ(share.at("transmissive surfaces").get<double>(), 0.0);
       EXPECT_EQ(share.at("guided connections").get<double>(), 0.0);
       EXPECT_EQ(share.at("ambient light").get<double>(), 0.0);
