@@ -88,13 +88,18 @@ void deposit(double v, double t, const TimeAxis& axis, double* bins, PixelTotals
   if (!landed) out->out_of_window += v;
 }
 
+namespace {
+// A mesh whose planar faces may mirror the laser (Integrator::mirrors_): at most kMaxPartsPerMesh triangles of a
+// smooth material other than a Lambertian one (the glTF default material is neither smooth nor given here).
+bool mirror_mesh(const scenes::Scene& scene, const scenes::Mesh& mesh) {
+  if (mesh.material < 0 || size_t(mesh.material) >= scene.materials.size()) return false;
+  const scenes::Material& m = scene.materials[size_t(mesh.material)];
+  return !m.lambertian() && m.smooth() && mesh.triangle_count() > 0 && mesh.triangle_count() <= kMaxPartsPerMesh;
+}
+}  // namespace
+
 bool laser_mirrors_active(const scenes::Scene& scene) {
-  for (const scenes::Mesh& mesh : scene.meshes) {
-    if (mesh.material < 0 || size_t(mesh.material) >= scene.materials.size()) continue;
-    const scenes::Material& m = scene.materials[size_t(mesh.material)];
-    if (!m.lambertian() && m.smooth() && mesh.triangle_count() > 0 && mesh.triangle_count() <= kMaxPartsPerMesh) return true;
-  }
-  return false;
+  return std::any_of(scene.meshes.begin(), scene.meshes.end(), [&](const scenes::Mesh& mesh) { return mirror_mesh(scene, mesh); });
 }
 
 bool guided_connections_active(const scenes::Scene& scene, bool enabled) {
@@ -299,9 +304,9 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
   // of the mesh (away from its corners' centroid; a flat mesh as wound).
   for (size_t m = 0; m < scene.meshes.size() && mirrors_.size() < kMaxLaserMirrors; ++m) {
     const scenes::Mesh& mesh = scene.meshes[m];
+    if (!mirror_mesh(scene, mesh)) continue;
     const ResolvedMaterial& rmat = shading.material(mesh.material);
     const size_t nt = mesh.triangle_count();
-    if (rmat.point.lambertian || !rmat.point.smooth() || nt == 0 || nt > kMaxPartsPerMesh) continue;
     const auto corner = [&](size_t t, int k) { return glm::dvec3(mesh.positions[mesh.indices[3 * t + size_t(k)]]); };
     glm::dvec3 centroid(0.0);
     for (size_t t = 0; t < nt; ++t)
@@ -645,7 +650,7 @@ bool Integrator::connect_laser_refracted(const NeeVertex& v, const LaserRay& lr,
     ly.depth[j] = next - h;
     h = next;
     if (ly.depth[j] < 0.0) return false;
-    ly.index[j] = ly.media[j] < 0 ? 1.0 : double(shading_.material(ly.media[j]).point.ior);
+    ly.index[j] = medium_ior(ly.media[j]);
     if (ly.depth[j] > 0.0) ly.p_max = std::min(ly.p_max, ly.index[j]);
   }
   const glm::dvec3 lat = to - H * nrm;
@@ -800,7 +805,7 @@ bool Integrator::connect_laser_planar(const NeeVertex& v, const Crossings& cx, d
     media[j + 1] = cr[j].medium;
     material[j] = cr[j].material, ng[j] = cr[j].ng;
   }
-  for (int s = 0; s <= k; ++s) index[s] = media[s] < 0 ? 1.0 : double(shading_.material(media[s]).point.ior);
+  for (int s = 0; s <= k; ++s) index[s] = medium_ior(media[s]);
   PlanarPath path;
   if (!solve_planar_path(glm::dvec3(v.sf.p), laser_.position, faces, index, k, start, &path)) return false;
   if (!deposit_planar_path(v, path, material, ng, index, media, nullptr, w, film, &rays->refracted)) return false;
@@ -833,7 +838,7 @@ bool Integrator::connect_laser_planar(const NeeVertex& v, const Crossings& cx, d
       for (int j = b - 1; j > a; --j) add(j, false, j);    // back to face a
       add(a, true, a + 1);                                 // off it
       for (int j = a + 1; j < k; ++j) add(j, false, j + 1);  // and on to the laser
-      for (int s = 0; s <= n; ++s) index[s] = media[s] < 0 ? 1.0 : double(shading_.material(media[s]).point.ior);
+      for (int s = 0; s <= n; ++s) index[s] = medium_ior(media[s]);
       if (solve_planar_path(glm::dvec3(v.sf.p), laser_.position, cf, index, n, start, &path, reflect))
         (void)deposit_planar_path(v, path, material, ng, index, media, reflect, w / q, film, &rays->refracted);
     }

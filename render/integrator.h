@@ -298,6 +298,8 @@ class Integrator {
   // A uniform number in [0, 1) for the echo of faces a, b seen from vertex position p: a hash of them and the
   // light seed (connect_laser_refracted).
   double echo_uniform(const glm::vec3& p, int a, int b) const;
+  // The refractive index of medium `medium` (-1: air, 1).
+  double medium_ior(int medium) const { return medium < 0 ? 1.0 : double(shading_.material(medium).point.ior); }
   static constexpr int kMaxLaserSteps = 3 * Crossings::kMax + 1;  // an echo's segments: the layers, and twice those between its faces
   // The layers between a vertex and the laser across a straight walk's parallel faces: their media (-1: air),
   // indices and thicknesses along the faces' normal nrm (towards the laser), and the laser's lateral offset D
