@@ -1,5 +1,7 @@
 #include "planar_path.h"
 
+#include "rng_util.h"
+
 #include <algorithm>
 #include <cmath>
 
@@ -8,14 +10,6 @@ namespace spadgen::render {
 namespace {
 
 constexpr int kMaxUnknowns = 2 * kMaxPlanarFaces;
-
-// An orthonormal basis of the plane normal to unit n (Duff et al. 2017).
-void plane_basis(const glm::dvec3& n, glm::dvec3* t0, glm::dvec3* t1) {
-  const double sign = std::copysign(1.0, n.z);
-  const double a = -1.0 / (sign + n.z), b = n.x * n.y * a;
-  *t0 = glm::dvec3(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
-  *t1 = glm::dvec3(b, sign + n.y * n.y * a, -n.y);
-}
 
 // Solves a x = b in place for `cols` right-hand sides (b row-major, n x cols), by Gaussian elimination with
 // partial pivoting; false when a is singular to working precision. a is block tridiagonal in 2 x 2 blocks (the
@@ -111,7 +105,7 @@ bool solve_planar_path(const glm::dvec3& x, const glm::dvec3& l, const PlanarFac
   glm::dvec3 y[kMaxPlanarFaces], d[kMaxPlanarFaces + 1];
   double len[kMaxPlanarFaces + 1], c[kMaxUnknowns];
   for (int j = 0; j < k; ++j) {
-    plane_basis(faces[j].n, &ch.t[j][0], &ch.t[j][1]);
+    make_basis(faces[j].n, &ch.t[j][0], &ch.t[j][1]);
     y[j] = start[j] - faces[j].n * glm::dot(start[j] - faces[j].p, faces[j].n);  // onto its plane
   }
   const int n = 2 * k;
@@ -147,7 +141,7 @@ bool solve_planar_path(const glm::dvec3& x, const glm::dvec3& l, const PlanarFac
   // The spread: x moved by e across d[0] moves the points by du = -J^-1 (dC / dx) e (only face 0's residual
   // depends on x, through d[0]: d(d_0) / dx = -P_0), and l's direction d[k] by -P_k (dy_{k-1}).
   glm::dvec3 e0, e1;
-  plane_basis(d[0], &e0, &e1);
+  make_basis(d[0], &e0, &e1);
   ch.jacobian(d, len, jac);
   for (int i = 0; i < n; ++i) step[i][0] = step[i][1] = 0.0;
   for (int a = 0; a < 2; ++a) {

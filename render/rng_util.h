@@ -16,13 +16,15 @@ inline Uniform3 uniform3(Rng& rng) {
   return {a, b, c};
 }
 
-// Orthonormal basis around a unit normal (Duff et al. 2017).
-inline void make_basis(const glm::vec3& n, glm::vec3* t, glm::vec3* b) {
-  const float sign = n.z >= 0.0f ? 1.0f : -1.0f;
-  const float a = -1.0f / (sign + n.z);
-  const float c = n.x * n.y * a;
-  *t = glm::vec3(1.0f + sign * n.x * n.x * a, sign * c, -sign * n.x);
-  *b = glm::vec3(c, sign + n.y * n.y * a, -n.y);
+// Orthonormal basis around a unit normal (Duff et al. 2017), in float (glm::vec3) or double (glm::dvec3).
+template <class V>
+inline void make_basis(const V& n, V* t, V* b) {
+  using T = typename V::value_type;
+  const T sign = n.z >= T(0) ? T(1) : T(-1);
+  const T a = T(-1) / (sign + n.z);
+  const T c = n.x * n.y * a;
+  *t = V(T(1) + sign * n.x * n.x * a, sign * c, -sign * n.x);
+  *b = V(c, sign + n.y * n.y * a, -n.y);
 }
 
 }  // namespace spadgen::render
