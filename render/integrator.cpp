@@ -427,9 +427,9 @@ Spec Integrator::shadow_transmittance(const glm::vec3& origin, const glm::vec3& 
     if (cx) {
       cx->refracting = cx->refracting || (rm.volume && rm.point.ior != 1.0f);
       if (cx->n == Crossings::kMax) {
-        cx->planar = false;
+        cx->planar = cx->complete = false;
       } else {
-        cx->slots.c[cx->n++] = {glm::dvec3(sf.p), sf.ng, sf.material, mp, medium};
+        cx->slots.c[cx->n++] = {glm::dvec3(sf.p), sf.ng, sf.material, mp, medium, hit.mesh, hit.triangle};
         // Flat-shaded (else neither refracted connection's case), and parallel to the first (else
         // connect_laser_planar's, not connect_laser_refracted's).
         if (glm::dot(sf.ns, sf.ng) < 1.0f - 1e-6f) cx->planar = false;
@@ -845,9 +845,70 @@ bool Integrator::connect_laser_planar(const NeeVertex& v, const Crossings& cx, d
   return true;
 }
 
+// The laser seen from v through faces of which some are shaded (triangles of smooth meshes, a glass sphere): the
+// path that obeys Snell's law at each about its shading normal (solve_planar_path), each triangle its plane with
+// its corner normals interpolated (and extended beyond its edges within a Newton step). From the triangles the
+// straight walk crossed, a step's point that leaves its triangle is moved onto the triangle the path meets there
+// (traced from the point before it: the same mesh, met from the same side), as the manifold walk's projection.
+// Fresnel at the shading normals, as the camera's paths refract. Where no path is found nothing is deposited: no
+// refracted light reaches v that way (a glass sphere's shadow beside its focused light), or the walk missed it.
+void Integrator::connect_laser_shaded(const NeeVertex& v, const Crossings& cx, double w,
+                                      const PixelFilm& film, RayCounts* rays) const {
+  constexpr int kMax = Crossings::kMax;
+  const Crossings::Crossing* cr = cx.slots.c;
+  const int k = cx.n;
+  PlanarFace faces[kMax];
+  glm::dvec3 start[kMax];
+  double index[kMax + 1];
+  int media[kMax + 1], material[kMax];
+  glm::vec3 ng[kMax];
+  bool shaded[kMax];
+  media[0] = cx.medium0;
+  for (int j = 0; j < k; ++j) {
+    if (!shading_.face(cr[j].mesh, cr[j].triangle, &faces[j])) return;
+    start[j] = cr[j].p;
+    media[j + 1] = cr[j].medium;
+    material[j] = cr[j].material, ng[j] = cr[j].ng, shaded[j] = faces[j].shaded;
+  }
+  for (int s = 0; s <= k; ++s) index[s] = medium_ior(media[s]);
+  struct Tracker : FaceTracker {
+    const Integrator* in;
+    glm::vec3 x_ng;
+    uint64_t* rays;
+    bool track(const glm::dvec3& x, glm::dvec3* y, PlanarFace* f, int n) const override {
+      glm::dvec3 prev = x;
+      glm::vec3 prev_n = x_ng;
+      for (int j = 0; j < n; prev = y[j], prev_n = glm::vec3(f[j].n), ++j) {
+        if (!f[j].shaded) continue;
+        const glm::dvec3 e = y[j] - f[j].p;
+        const double a = glm::dot(f[j].dual[0], e), b = glm::dot(f[j].dual[1], e);
+        if (a >= 0.0 && b >= 0.0 && a + b <= 1.0) continue;
+        const glm::vec3 origin = offset_ray_origin(glm::vec3(prev), prev_n, glm::vec3(y[j] - prev));
+        const glm::dvec3 dir = glm::normalize(y[j] - glm::dvec3(origin));
+        ++*rays;
+        RayHit hit;
+        if (!in->embree_.intersect(origin, glm::vec3(dir), 0.0f, std::numeric_limits<float>::infinity(), &hit, true) ||
+            hit.mesh != f[j].mesh)
+          return false;
+        PlanarFace g;
+        if (!in->shading_.face(hit.mesh, hit.triangle, &g) || (glm::dot(dir, g.n) < 0.0) != (glm::dot(dir, f[j].n) < 0.0))
+          return false;
+        const double t = glm::dot(g.p - glm::dvec3(origin), g.n) / glm::dot(dir, g.n);
+        y[j] = glm::dvec3(origin) + t * dir;
+        f[j] = g;
+      }
+      return true;
+    }
+  } tracker;
+  tracker.in = this, tracker.x_ng = v.sf.ng, tracker.rays = &rays->refracted;
+  PlanarPath path;
+  if (!solve_planar_path(glm::dvec3(v.sf.p), laser_.position, faces, index, k, start, &path, nullptr, &tracker)) return;
+  (void)deposit_planar_path(v, path, material, ng, index, media, nullptr, w, film, &rays->refracted, shaded);
+}
+
 bool Integrator::deposit_planar_path(const NeeVertex& v, const PlanarPath& path, const int* material, const glm::vec3* ng,
                                      const double* index, const int* media, const bool* reflect, double w,
-                                     const PixelFilm& film, uint64_t* rays) const {
+                                     const PixelFilm& film, uint64_t* rays, const bool* shaded) const {
   const int k = path.k;
   const double intensity = laser_.intensity_towards(-path.d[k]);
   if (!(intensity > 0.0)) return true;
@@ -872,13 +933,17 @@ bool Integrator::deposit_planar_path(const NeeVertex& v, const PlanarPath& path,
       if (!found) return false;
       const Surface sf = shading_.surface(hit);
       // (in the plane planned: a face of the same material and orientation in another, a box's other side, is not
-      // it; along the face the trace drifts by its origins' offsets, about 1e-5 m)
-      if (sf.material != material[s] || std::fabs(glm::dot(sf.ng, ng[s])) < 1.0f - 1e-6f ||
-          std::fabs(glm::dot(glm::dvec3(ng[s]), glm::dvec3(sf.p) - path.y[s])) > 1e-5 * (1.0 + glm::length(path.y[s])))
+      // it; along the face the trace drifts by its origins' offsets, about 1e-5 m. A shaded face's point may lie on
+      // its triangle's edge, the trace meeting the triangle beside it: near the point planned is enough)
+      if (sf.material != material[s]) return false;
+      if (shaded && shaded[s] ? glm::length(glm::dvec3(sf.p) - path.y[s]) > 1e-4 * (1.0 + glm::length(path.y[s]))
+                              : std::fabs(glm::dot(sf.ng, ng[s])) < 1.0f - 1e-6f ||
+                                    std::fabs(glm::dot(glm::dvec3(ng[s]), glm::dvec3(sf.p) - path.y[s])) > 1e-5 * (1.0 + glm::length(path.y[s])))
         return false;
       const float c = glm::dot(ds, sf.ng);
       const MaterialPoint mp = shading_.material_at(sf, hit);
-      t *= reflect && reflect[s] ? interface_reflectance(mp, c, c < 0.0f) : interface_transmittance(mp, std::fabs(c), c < 0.0f);
+      const float cf = shaded && shaded[s] ? std::copysign(std::fabs(glm::dot(ds, sf.ns)), c) : c;
+      t *= reflect && reflect[s] ? interface_reflectance(mp, cf, c < 0.0f) : interface_transmittance(mp, std::fabs(cf), c < 0.0f);
       q = sf.p, qn = sf.ng;
     } else if (found) {
       const Surface sf = shading_.surface(hit);
@@ -1013,6 +1078,10 @@ inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, co
     if (cx.refracting && cx.planar &&
         (cx.parallel ? connect_laser_refracted(v, lr, cx, w, film, rays, true) : connect_laser_planar(v, cx, w, film, rays, true)))
       return;
+    if (cx.refracting && !cx.planar && cx.complete) {
+      connect_laser_shaded(v, cx, w, film, rays);
+      return;
+    }
   }
   if (!v.counted(wi)) return;
   const Spec f = v.bsdf.eval_cos(wi);

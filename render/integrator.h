@@ -155,6 +155,7 @@ class Integrator {
       int material;
       MaterialPoint mp;
       int medium;  // the walk's medium after the crossing (-1: air)
+      uint32_t mesh, triangle;
     };
     // Left uninitialised (a walk writes each crossing it records): the walk runs at every laser connection.
     union Slots {
@@ -166,6 +167,7 @@ class Integrator {
     bool blocked = false;     // an opaque surface (or the crossing limit) stopped the walk
     bool refracting = false;  // it entered or left a volume of index other than 1
     bool planar = true;       // every crossing flat-shaded, and at most kMax of them
+    bool complete = true;     // at most kMax crossings
     bool parallel = true;     // every crossing's face parallel to the first's
   };
 
@@ -286,13 +288,18 @@ class Integrator {
   // echoes: the light reflected between pairs of faces too, as connect_laser_refracted's.
   bool connect_laser_planar(const NeeVertex& v, const Crossings& cx, double w, const PixelFilm& film, RayCounts* rays,
                             bool echoes) const;
-  // The light of a path solved for connect_laser_planar or connect_laser_mirrors, traced: segment j < k must meet
-  // a face of material[j] and normal +-ng[j] (reflect[j]: reflecting off it; null: crossing every face), index
-  // and media those of each segment; false where it does not (nothing deposited).
-  // rays: the category its segments count in (RayCounts::refracted or mirror).
+  // The laser's connection from v through faces the straight walk crossed of which some are shaded (triangles of
+  // smooth meshes: a glass sphere), by solve_planar_path on the triangles the path meets. Nothing where no path is
+  // found (the straight connection is not used).
+  void connect_laser_shaded(const NeeVertex& v, const Crossings& cx, double w, const PixelFilm& film, RayCounts* rays) const;
+  // The light of a path solved for connect_laser_planar, connect_laser_shaded or connect_laser_mirrors, traced:
+  // segment j < k must meet a face of material[j] and normal +-ng[j] (reflect[j]: reflecting off it; null:
+  // crossing every face), index and media those of each segment; false where it does not (nothing deposited).
+  // rays: the category its segments count in (RayCounts::refracted or mirror). shaded[j]: face j's Fresnel
+  // factor at its shading normal (null: none).
   bool deposit_planar_path(const NeeVertex& v, const PlanarPath& path, const int* material, const glm::vec3* ng,
                            const double* index, const int* media, const bool* reflect, double w, const PixelFilm& film,
-                           uint64_t* rays) const;
+                           uint64_t* rays, const bool* shaded = nullptr) const;
   // The laser's light reflected to v by the smooth planar faces of mirrors_.
   void connect_laser_mirrors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const;
   // A uniform number in [0, 1) for the echo of faces a, b seen from vertex position p: a hash of them and the

@@ -114,6 +114,27 @@ Surface Shading::surface(const RayHit& hit) const {
   return s;
 }
 
+bool Shading::face(uint32_t mesh, uint32_t triangle, PlanarFace* out) const {
+  const TriangleGeometry& g = triangles_[mesh][triangle];
+  const glm::dvec3 p0(g.p0), e1 = glm::dvec3(g.p1) - p0, e2 = glm::dvec3(g.p2) - p0;
+  const double a = glm::dot(e1, e1), b = glm::dot(e1, e2), c = glm::dot(e2, e2), det = a * c - b * b;
+  if (!(det > 1e-12 * a * c)) return false;
+  *out = PlanarFace{p0, glm::normalize(glm::cross(e1, e2))};
+  out->dual[0] = (c * e1 - b * e2) / det;
+  out->dual[1] = (a * e2 - b * e1) / det;
+  out->mesh = mesh, out->triangle = triangle;
+  const std::vector<TriangleNormals>& tn = triangle_normals_[mesh];
+  if (!tn.empty()) {
+    const TriangleNormals& n = tn[triangle];
+    const glm::dvec3 n0(n.n0);
+    out->shaded = true;
+    out->m = n0;
+    // m(y) = n0 + (n1 - n0) u(y) + (n2 - n0) v(y), u and v the barycentrics
+    out->grad = glm::outerProduct(glm::dvec3(n.n1) - n0, out->dual[0]) + glm::outerProduct(glm::dvec3(n.n2) - n0, out->dual[1]);
+  }
+  return true;
+}
+
 MaterialPoint Shading::material_at(const Surface& s, const RayHit& hit) const {
   const ResolvedMaterial& r = material(s.material);
   MaterialPoint p = r.point;

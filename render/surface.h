@@ -8,6 +8,7 @@
 #include "bsdf.h"
 #include "core/config.h"
 #include "embree_scene.h"
+#include "planar_path.h"
 #include "scenes/scene.h"
 
 namespace spadgen::render {
@@ -40,6 +41,10 @@ class Shading {
   // Position, geometric normal and material only (no shading normal): enough for shadow rays.
   Surface geometric(const RayHit& hit) const;
   MaterialPoint material_at(const Surface& s, const RayHit& hit) const;
+  // Triangle `triangle` of mesh `mesh` as a face of a refracted path: its plane (corner 0, geometric normal),
+  // shaded where the mesh has vertex normals (its corner normals interpolated over the plane), its identity and
+  // barycentric dual basis; false where it is degenerate.
+  bool face(uint32_t mesh, uint32_t triangle, PlanarFace* out) const;
   const ResolvedMaterial& material(int id) const { return id < 0 ? default_ : materials_[size_t(id)]; }
   bool has_emission() const { return has_emission_; }
 

@@ -20,17 +20,27 @@ bool refract(glm::dvec3 w, glm::dvec3 n, double n1, double n2, glm::dvec3* out) 
   return true;
 }
 
-// From l along w (towards x), through the faces in reverse order, to the plane through x across `across`:
-// where the light lands there.
+// The unit normal Snell's law takes at point y of face f: its plane's, or a shaded face's interpolated one.
+glm::dvec3 normal_at(const PlanarFace& f, const glm::dvec3& y) {
+  return f.shaded ? glm::normalize(f.m + f.grad * (y - f.p)) : f.n;
+}
+
+// From l along w (towards x), through the faces in reverse order (reflecting off those of `reflect`), to the
+// plane through x across `across`: where the light lands there.
 glm::dvec3 forward(const glm::dvec3& l, glm::dvec3 w, const std::vector<PlanarFace>& faces, const std::vector<double>& index,
-                   const glm::dvec3& x, const glm::dvec3& across) {
+                   const glm::dvec3& x, const glm::dvec3& across, const std::vector<bool>& reflect = {}) {
   glm::dvec3 o = l;
   for (int j = int(faces.size()) - 1; j >= 0; --j) {
     const PlanarFace& f = faces[size_t(j)];
     const double t = glm::dot(f.p - o, f.n) / glm::dot(w, f.n);
     o += t * w;
+    const glm::dvec3 n = normal_at(f, o);
+    if (!reflect.empty() && reflect[size_t(j)]) {
+      w = w - 2.0 * glm::dot(w, n) * n;
+      continue;
+    }
     glm::dvec3 next(0.0);
-    EXPECT_TRUE(refract(w, f.n, index[size_t(j) + 1], index[size_t(j)], &next));
+    EXPECT_TRUE(refract(w, n, index[size_t(j) + 1], index[size_t(j)], &next));
     w = next;
   }
   return o + glm::dot(x - o, across) / glm::dot(w, across) * w;
@@ -40,14 +50,17 @@ glm::dvec3 forward(const glm::dvec3& l, glm::dvec3 w, const std::vector<PlanarFa
 // spread is the inverse of the landing area per solid angle at l (central differences of the landing point
 // along two directions across -d[k]).
 void check_against_forward_trace(const glm::dvec3& x, const glm::dvec3& l, const std::vector<PlanarFace>& faces,
-                                 const std::vector<double>& index, const PlanarPath& path) {
+                                 const std::vector<double>& index, const PlanarPath& path,
+                                 const std::vector<bool>& reflect = {}) {
   const int k = int(faces.size());
   const glm::dvec3 w0 = -path.d[k], across = path.d[0];
-  EXPECT_LT(glm::length(forward(l, w0, faces, index, x, across) - x), 1e-10);
+  EXPECT_LT(glm::length(forward(l, w0, faces, index, x, across, reflect) - x), 1e-10);
   const glm::dvec3 a = glm::normalize(glm::cross(w0, std::fabs(w0.x) < 0.9 ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0)));
   const glm::dvec3 b = glm::cross(w0, a);
   const double h = 1e-6;
-  const auto land = [&](double s, double t) { return forward(l, glm::normalize(w0 + s * a + t * b), faces, index, x, across); };
+  const auto land = [&](double s, double t) {
+    return forward(l, glm::normalize(w0 + s * a + t * b), faces, index, x, across, reflect);
+  };
   const glm::dvec3 da = (land(h, 0) - land(-h, 0)) / (2 * h), db = (land(0, h) - land(0, -h)) / (2 * h);
   const double area_per_sr = glm::length(glm::cross(da, db));
   EXPECT_NEAR(path.spread * area_per_sr, 1.0, 1e-6);
@@ -121,6 +134,48 @@ TEST(PlanarPath, FacesAtAnyAngleMatchAForwardTrace) {
     PlanarPath path;
     ASSERT_TRUE(solve_planar_path(x, l, faces.data(), index.data(), 4, start.data(), &path));
     check_against_forward_trace(x, l, faces, index, path);
+  }
+}
+
+// A shaded face: a plane whose normal is that of a sphere about c (m = p - c, grad the identity), as a smooth
+// mesh's triangle interpolates its corner normals. A lens of two such faces (ior 1.5, centres on either side,
+// off the axis), and a curved mirror (one face reflecting, with a flat plate after it), against the forward
+// trace at the shading normals. The plane's normal alone (flat faces) lands elsewhere: 0.9 mm for the lens.
+TEST(PlanarPath, ShadedFacesMatchAForwardTrace) {
+  const auto shaded = [](glm::dvec3 p, glm::dvec3 n, glm::dvec3 centre) {
+    PlanarFace f{p, glm::normalize(n)};
+    f.shaded = true;
+    f.m = p - centre;
+    f.grad = glm::dmat3(1.0);
+    return f;
+  };
+  {
+    const glm::dvec3 x(0.0, 0.0, 0.0), l(0.05, 0.02, 1.0);
+    const std::vector<PlanarFace> faces = {shaded({0, 0, 0.4}, {0, 0, 1}, {0.01, 0, 0.9}),
+                                           shaded({0, 0, 0.45}, {0.05, 0, 1}, {0, 0.02, -0.1})};
+    const std::vector<double> index = {1.0, 1.5, 1.0};
+    std::vector<glm::dvec3> start;
+    for (const PlanarFace& f : faces) start.push_back(f.p);
+    PlanarPath path;
+    ASSERT_TRUE(solve_planar_path(x, l, faces.data(), index.data(), 2, start.data(), &path));
+    check_against_forward_trace(x, l, faces, index, path);
+    std::vector<PlanarFace> flat = faces;
+    for (PlanarFace& f : flat) f.shaded = false;
+    PlanarPath straight;
+    ASSERT_TRUE(solve_planar_path(x, l, flat.data(), index.data(), 2, start.data(), &straight));
+    EXPECT_GT(glm::length(straight.y[0] - path.y[0]), 5e-4);
+  }
+  {
+    const glm::dvec3 x(0.0, 0.0, 0.0), l(0.3, 0.05, 0.1);
+    const std::vector<PlanarFace> faces = {shaded({0, 0, 0.5}, {0, 0, 1}, {0.15, 0, 1.5}), {{0.2, 0, 0.3}, {0, 0, 1}},
+                                           {{0.2, 0, 0.25}, {0, 0, 1}}};
+    const std::vector<double> index = {1.0, 1.0, 1.7, 1.0};
+    const std::vector<bool> reflect = {true, false, false};
+    const bool off[3] = {true, false, false};
+    const glm::dvec3 start[3] = {{0.15, 0, 0.5}, {0.25, 0, 0.3}, {0.27, 0, 0.25}};
+    PlanarPath path;
+    ASSERT_TRUE(solve_planar_path(x, l, faces.data(), index.data(), 3, start, &path, off));
+    check_against_forward_trace(x, l, faces, index, path, reflect);
   }
 }
 
