@@ -94,10 +94,10 @@ json model_components(const RunConfig& c, const scenes::Scene* scene, bool laser
                                               : "no material of roughness 0.032-0.2");
     const bool mirrors = render::laser_mirrors_active(*scene) && laser;
     add(kFromScene[4].data(), mirrors,
-        mirrors ? "a mesh of at most 64 triangles has a smooth material (roughness below 0.032): vertices are also connected "
-                  "to the laser's image in its planar faces"
+        mirrors ? "a mesh of a smooth material (roughness below 0.032) has at most 64 triangles or vertex normals: vertices "
+                  "are also connected to the laser's image in its planar faces or off its curved surface"
         : !laser ? "the laser is not traced (laser light)"
-                 : "no mesh of at most 64 triangles has a smooth material (roughness below 0.032)");
+                 : "no mesh of a smooth material (roughness below 0.032) has at most 64 triangles or vertex normals");
   } else if (from_run.is_array()) {
     for (const json& e : from_run)
       if (std::find(kFromScene.begin(), kFromScene.end(), e.value("component", "")) != kFromScene.end()) out.push_back(e);

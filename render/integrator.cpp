@@ -96,10 +96,20 @@ bool mirror_mesh(const scenes::Scene& scene, const scenes::Mesh& mesh) {
   const scenes::Material& m = scene.materials[size_t(mesh.material)];
   return !m.lambertian() && m.smooth() && mesh.triangle_count() > 0 && mesh.triangle_count() <= kMaxPartsPerMesh;
 }
+
+
+// A smooth mesh whose curved surface may mirror the laser (Integrator::curved_mirrors_): more than
+// kMaxPartsPerMesh triangles of a smooth material other than a Lambertian one, with vertex normals.
+bool curved_mirror_mesh(const scenes::Scene& scene, const scenes::Mesh& mesh) {
+  if (mesh.material < 0 || size_t(mesh.material) >= scene.materials.size()) return false;
+  const scenes::Material& m = scene.materials[size_t(mesh.material)];
+  return !m.lambertian() && m.smooth() && mesh.triangle_count() > kMaxPartsPerMesh && mesh.normals.size() == mesh.positions.size();
+}
 }  // namespace
 
 bool laser_mirrors_active(const scenes::Scene& scene) {
-  return std::any_of(scene.meshes.begin(), scene.meshes.end(), [&](const scenes::Mesh& mesh) { return mirror_mesh(scene, mesh); });
+  return std::any_of(scene.meshes.begin(), scene.meshes.end(),
+                     [&](const scenes::Mesh& mesh) { return mirror_mesh(scene, mesh) || curved_mirror_mesh(scene, mesh); });
 }
 
 bool guided_connections_active(const scenes::Scene& scene, bool enabled) {
@@ -351,6 +361,16 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
           lm.depth = p.offset + q.offset;
       mirrors_.push_back(lm);
     }
+  }
+  for (size_t m = 0; m < scene.meshes.size() && curved_mirrors_.size() < kMaxCurvedMirrors; ++m) {
+    const scenes::Mesh& mesh = scene.meshes[m];
+    if (!curved_mirror_mesh(scene, mesh)) continue;
+    glm::dvec3 lo(1e300), hi(-1e300);
+    for (const uint32_t i : mesh.indices) lo = glm::min(lo, glm::dvec3(mesh.positions[i])), hi = glm::max(hi, glm::dvec3(mesh.positions[i]));
+    const glm::dvec3 centre = 0.5 * (lo + hi);
+    double inner = 1e300;
+    for (const uint32_t i : mesh.indices) inner = std::min(inner, glm::length(glm::dvec3(mesh.positions[i]) - centre));
+    curved_mirrors_.push_back({uint32_t(m), mesh.material, centre, 0.5 * glm::length(hi - lo), inner});
   }
   ambient_on_ = ambient.any() || shading.has_emission();
   laser_traced_ = config.trace_laser;
@@ -845,6 +865,50 @@ bool Integrator::connect_laser_planar(const NeeVertex& v, const Crossings& cx, d
   return true;
 }
 
+namespace {
+// The Integrator's FaceTracker: a point that left its triangle moves onto the triangle of the same mesh met from
+// the point before it (the vertex x, of geometric normal x_ng, for the first) towards it, from the same side, at
+// the trace's crossing with that triangle's plane (in double). Its rays counted in *rays; toward_light: traced
+// as the light's (a single-sided face culled from behind as the light sees it: crossings), else as a camera
+// path's (a mirror met from its front).
+class MeshTracker final : public FaceTracker {
+ public:
+  MeshTracker(const EmbreeScene& embree, const Shading& shading, const glm::vec3& x_ng, uint64_t* rays, bool toward_light)
+      : embree_(embree), shading_(shading), x_ng_(x_ng), rays_(rays), toward_light_(toward_light) {}
+  bool track(const glm::dvec3& x, glm::dvec3* y, PlanarFace* f, int n) const override {
+    glm::dvec3 prev = x;
+    glm::vec3 prev_n = x_ng_;
+    for (int j = 0; j < n; prev = y[j], prev_n = glm::vec3(f[j].n), ++j) {
+      if (!f[j].shaded) continue;
+      const glm::dvec3 e = y[j] - f[j].p;
+      const double a = glm::dot(f[j].dual[0], e), b = glm::dot(f[j].dual[1], e);
+      if (a >= 0.0 && b >= 0.0 && a + b <= 1.0) continue;
+      const glm::vec3 origin = offset_ray_origin(glm::vec3(prev), prev_n, glm::vec3(y[j] - prev));
+      const glm::dvec3 dir = glm::normalize(y[j] - glm::dvec3(origin));
+      ++*rays_;
+      RayHit hit;
+      if (!embree_.intersect(origin, glm::vec3(dir), 0.0f, std::numeric_limits<float>::infinity(), &hit, toward_light_) ||
+          hit.mesh != f[j].mesh)
+        return false;
+      PlanarFace g;
+      if (!shading_.face(hit.mesh, hit.triangle, &g) || (glm::dot(dir, g.n) < 0.0) != (glm::dot(dir, f[j].n) < 0.0))
+        return false;
+      const double t = glm::dot(g.p - glm::dvec3(origin), g.n) / glm::dot(dir, g.n);
+      y[j] = glm::dvec3(origin) + t * dir;
+      f[j] = g;
+    }
+    return true;
+  }
+
+ private:
+  const EmbreeScene& embree_;
+  const Shading& shading_;
+  glm::vec3 x_ng_;
+  uint64_t* rays_;
+  bool toward_light_;
+};
+}  // namespace
+
 // The laser seen from v through faces of which some are shaded (triangles of smooth meshes, a glass sphere): the
 // path that obeys Snell's law at each about its shading normal (solve_planar_path), each triangle its plane with
 // its corner normals interpolated (and extended beyond its edges within a Newton step). From the triangles the
@@ -871,36 +935,7 @@ void Integrator::connect_laser_shaded(const NeeVertex& v, const Crossings& cx, d
     material[j] = cr[j].material, ng[j] = cr[j].ng, shaded[j] = faces[j].shaded;
   }
   for (int s = 0; s <= k; ++s) index[s] = medium_ior(media[s]);
-  struct Tracker : FaceTracker {
-    const Integrator* in;
-    glm::vec3 x_ng;
-    uint64_t* rays;
-    bool track(const glm::dvec3& x, glm::dvec3* y, PlanarFace* f, int n) const override {
-      glm::dvec3 prev = x;
-      glm::vec3 prev_n = x_ng;
-      for (int j = 0; j < n; prev = y[j], prev_n = glm::vec3(f[j].n), ++j) {
-        if (!f[j].shaded) continue;
-        const glm::dvec3 e = y[j] - f[j].p;
-        const double a = glm::dot(f[j].dual[0], e), b = glm::dot(f[j].dual[1], e);
-        if (a >= 0.0 && b >= 0.0 && a + b <= 1.0) continue;
-        const glm::vec3 origin = offset_ray_origin(glm::vec3(prev), prev_n, glm::vec3(y[j] - prev));
-        const glm::dvec3 dir = glm::normalize(y[j] - glm::dvec3(origin));
-        ++*rays;
-        RayHit hit;
-        if (!in->embree_.intersect(origin, glm::vec3(dir), 0.0f, std::numeric_limits<float>::infinity(), &hit, true) ||
-            hit.mesh != f[j].mesh)
-          return false;
-        PlanarFace g;
-        if (!in->shading_.face(hit.mesh, hit.triangle, &g) || (glm::dot(dir, g.n) < 0.0) != (glm::dot(dir, f[j].n) < 0.0))
-          return false;
-        const double t = glm::dot(g.p - glm::dvec3(origin), g.n) / glm::dot(dir, g.n);
-        y[j] = glm::dvec3(origin) + t * dir;
-        f[j] = g;
-      }
-      return true;
-    }
-  } tracker;
-  tracker.in = this, tracker.x_ng = v.sf.ng, tracker.rays = &rays->refracted;
+  const MeshTracker tracker(embree_, shading_, v.sf.ng, &rays->refracted, true);
   PlanarPath path;
   if (!solve_planar_path(glm::dvec3(v.sf.p), laser_.position, faces, index, k, start, &path, nullptr, &tracker)) return;
   (void)deposit_planar_path(v, path, material, ng, index, media, nullptr, w, film, &rays->refracted, shaded);
@@ -1061,9 +1096,56 @@ void Integrator::connect_laser_mirrors(const NeeVertex& v, double w, const Pixel
   }
 }
 
+// The laser's image in each smooth curved mesh (curved_mirrors_): the path off its surface that obeys the law of
+// reflection at the shading normal (solve_planar_path with the mesh's triangles tracked), from the point of the
+// mesh whose direction from its centre bisects those of v and the laser (traced inwards; the reflection point of
+// a sphere when both are far), on the mesh's front side. One image per mesh: a concave mirror's others are left
+// out. No camera path finds it (a Dirac reflection, then the point laser).
+void Integrator::connect_laser_curved_mirrors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const {
+  const glm::dvec3 x(v.sf.p), L = laser_.position;
+  for (const CurvedMirror& m : curved_mirrors_) {
+    const glm::dvec3 to_x = x - m.centre, to_l = L - m.centre;
+    const double rx = glm::length(to_x), rl = glm::length(to_l);
+    if (!(rx > m.radius && rl > m.radius)) continue;  // within its bounds: no single image
+    // The seed: the reflection point off the sphere of radius `inner` about the centre (exact for a sphere), on the
+    // arc between the directions of v and the laser from the centre, by bisection on the mixture s of the two
+    // directions: the normal there bisects the directions to v and the laser. Where that point is within 0.6
+    // degrees of grazing either way (v in the sphere's shadow from the laser: none), no image is sought.
+    const glm::dvec3 u = to_x / rx, ul = to_l / rl, t = glm::cross(u, ul);
+    const auto normal_at = [&](double s) { return glm::normalize((1.0 - s) * u + s * ul); };
+    const auto turn = [&](double s) {  // the sine of the angle from the normal to v's direction plus the laser's
+      const glm::dvec3 n = normal_at(s), y = m.centre + m.inner * n;
+      return glm::dot(glm::cross(n, glm::normalize(x - y)) + glm::cross(n, glm::normalize(L - y)), t);
+    };
+    double lo = 0.0, hi = 1.0;
+    if (glm::dot(u, ul) > -1.0 + 1e-9)
+      for (int i = 0; i < 10; ++i) (turn(0.5 * (lo + hi)) > 0.0 ? lo : hi) = 0.5 * (lo + hi);
+    const glm::dvec3 b = normal_at(0.5 * (lo + hi)), on = m.centre + m.inner * b;
+    if (!(glm::dot(b, glm::normalize(x - on)) > 0.01 && glm::dot(b, glm::normalize(L - on)) > 0.01)) continue;
+    const double reach = 2.0 * m.radius + 1e-3;
+    ++rays->mirror;
+    RayHit hit;
+    if (!embree_.intersect(glm::vec3(m.centre + reach * b), glm::vec3(-b), 0.0f, float(reach), &hit) || hit.mesh != m.mesh) continue;
+    PlanarFace face;
+    if (!shading_.face(hit.mesh, hit.triangle, &face) || !face.shaded) continue;
+    const glm::dvec3 start = m.centre + reach * b - double(hit.t) * b;
+    const double index[2] = {1.0, 1.0};
+    const int media[2] = {-1, -1};
+    const bool off[1] = {true}, shaded[1] = {true};
+    const MeshTracker tracker(embree_, shading_, v.sf.ng, &rays->mirror, false);
+    PlanarPath path;
+    if (!solve_planar_path(x, L, &face, index, 1, &start, &path, off, &tracker)) continue;
+    // (on its front side: the outside of a closed mesh)
+    if (!(glm::dot(x - path.y[0], path.n[0]) > 0.0 && glm::dot(L - path.y[0], path.n[0]) > 0.0)) continue;
+    const glm::vec3 ng(path.n[0]);
+    deposit_planar_path(v, path, &m.material, &ng, index, media, off, w, film, &rays->mirror, shaded);
+  }
+}
+
 inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, const FirstSegment* first, double w,
                                       const PixelFilm& film, RayCounts* rays) const {
   if (!mirrors_.empty() && v.medium < 0) connect_laser_mirrors(v, w, film, rays);
+  if (!curved_mirrors_.empty() && v.medium < 0) connect_laser_curved_mirrors(v, w, film, rays);
   const double r = lr.r, intensity = lr.intensity;
   const glm::vec3 wi = lr.wi;
   // With refracting volumes the straight walk comes first: it finds the interfaces that the refracted

@@ -70,8 +70,9 @@ struct ObjectLaser {
 // Whether a render of this scene uses guided connections (render.guided_connections, and a material of
 // narrow glossy lobe: GGX alpha = roughness^2 in [1e-3, 0.04], the smooth ones being Dirac).
 bool guided_connections_active(const scenes::Scene& scene, bool enabled);
-// Whether a render of this scene connects vertices to the laser's image in smooth planar faces: a mesh of at
-// most 64 triangles has a smooth material other than a Lambertian one (Integrator's mirrors).
+// Whether a render of this scene connects vertices to the laser's image in smooth faces: a mesh of a smooth
+// material other than a Lambertian one has at most 64 triangles (its planar faces: Integrator's mirrors_) or
+// vertex normals (its curved surface: curved_mirrors_).
 bool laser_mirrors_active(const scenes::Scene& scene);
 
 // Adds a contribution v arriving at time t: to laser_total, and to the bin of every periodic image
@@ -302,6 +303,8 @@ class Integrator {
                            uint64_t* rays, const bool* shaded = nullptr) const;
   // The laser's light reflected to v by the smooth planar faces of mirrors_.
   void connect_laser_mirrors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const;
+  // The laser's light reflected to v by the smooth curved meshes of curved_mirrors_.
+  void connect_laser_curved_mirrors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const;
   // A uniform number in [0, 1) for the echo of faces a, b seen from vertex position p: a hash of them and the
   // light seed (connect_laser_refracted).
   double echo_uniform(const glm::vec3& p, int a, int b) const;
@@ -368,6 +371,17 @@ class Integrator {
   };
   static constexpr size_t kMaxLaserMirrors = 16;
   std::vector<LaserMirror> mirrors_;
+  // A smooth mesh of more than kMaxPartsPerMesh triangles with vertex normals (a chrome or glass sphere), which
+  // reflects the laser onto the scene off its curved surface, on its front (glTF) side: its bounding box's centre,
+  // half diagonal, and its corners' least distance from that centre. At most kMaxCurvedMirrors of them.
+  struct CurvedMirror {
+    uint32_t mesh = 0;
+    int material = -1;
+    glm::dvec3 centre{0.0};
+    double radius = 0.0, inner = 0.0;
+  };
+  static constexpr size_t kMaxCurvedMirrors = 8;
+  std::vector<CurvedMirror> curved_mirrors_;
   const Ambient& ambient_;
   bool transmission_ = false;
   bool ambient_on_ = false;

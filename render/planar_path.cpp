@@ -214,6 +214,7 @@ bool solve_planar_path(const glm::dvec3& x, const glm::dvec3& l, const PlanarFac
     m[b] = -Chain::project(d[k], len[k], dy);
   }
   out->k = k;
+  for (int j = 0; j < k; ++j) out->n[j] = fc[j].n;
   std::copy_n(y, k, out->y), std::copy_n(d, k + 1, out->d), std::copy_n(len, k + 1, out->len);
   out->spread = glm::length(glm::cross(m[0], m[1]));
   return std::isfinite(out->spread) && out->spread > 0.0;

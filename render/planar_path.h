@@ -45,6 +45,7 @@ constexpr int kMaxPlanarFaces = 24;  // a laser-side echo's chain through 8 face
 struct PlanarPath {
   int k = 0;
   glm::dvec3 y[kMaxPlanarFaces];
+  glm::dvec3 n[kMaxPlanarFaces];  // the plane's normal of face j where y[j] lies (a tracked face: its triangle's)
   glm::dvec3 d[kMaxPlanarFaces + 1];
   double len[kMaxPlanarFaces + 1];
   double spread = 0.0;
