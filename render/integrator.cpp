@@ -105,6 +105,13 @@ bool curved_mirror_mesh(const scenes::Scene& scene, const scenes::Mesh& mesh) {
   const scenes::Material& m = scene.materials[size_t(mesh.material)];
   return !m.lambertian() && m.smooth() && mesh.triangle_count() > kMaxPartsPerMesh && mesh.normals.size() == mesh.positions.size();
 }
+// A smooth closed glass mesh with vertex normals (a glass sphere): more than kMaxPartsPerMesh triangles of a smooth
+// material that bounds a refracting volume (Integrator::curved_refractors_).
+bool curved_refractor_mesh(const scenes::Scene& scene, const scenes::Mesh& mesh) {
+  if (mesh.material < 0 || size_t(mesh.material) >= scene.materials.size()) return false;
+  const scenes::Material& m = scene.materials[size_t(mesh.material)];
+  return m.refracting() && m.smooth() && mesh.triangle_count() > kMaxPartsPerMesh && mesh.normals.size() == mesh.positions.size();
+}
 }  // namespace
 
 bool laser_mirrors_active(const scenes::Scene& scene) {
@@ -362,15 +369,19 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
       mirrors_.push_back(lm);
     }
   }
-  for (size_t m = 0; m < scene.meshes.size() && curved_mirrors_.size() < kMaxCurvedMirrors; ++m) {
+  for (size_t m = 0; m < scene.meshes.size(); ++m) {
     const scenes::Mesh& mesh = scene.meshes[m];
-    if (!curved_mirror_mesh(scene, mesh)) continue;
+    const bool mirror = curved_mirror_mesh(scene, mesh), refractor = curved_refractor_mesh(scene, mesh);
+    if (!(mirror && curved_mirrors_.size() < kMaxCurvedMeshes) && !(refractor && curved_refractors_.size() < kMaxCurvedMeshes))
+      continue;
     glm::dvec3 lo(1e300), hi(-1e300);
     for (const uint32_t i : mesh.indices) lo = glm::min(lo, glm::dvec3(mesh.positions[i])), hi = glm::max(hi, glm::dvec3(mesh.positions[i]));
     const glm::dvec3 centre = 0.5 * (lo + hi);
     double inner = 1e300;
     for (const uint32_t i : mesh.indices) inner = std::min(inner, glm::length(glm::dvec3(mesh.positions[i]) - centre));
-    curved_mirrors_.push_back({uint32_t(m), mesh.material, centre, 0.5 * glm::length(hi - lo), inner});
+    const CurvedMesh c{uint32_t(m), mesh.material, centre, 0.5 * glm::length(hi - lo), inner};
+    if (mirror && curved_mirrors_.size() < kMaxCurvedMeshes) curved_mirrors_.push_back(c);  // (a glass sphere is both)
+    if (refractor && curved_refractors_.size() < kMaxCurvedMeshes) curved_refractors_.push_back(c);
   }
   ambient_on_ = ambient.any() || shading.has_emission();
   laser_traced_ = config.trace_laser;
@@ -1103,7 +1114,7 @@ void Integrator::connect_laser_mirrors(const NeeVertex& v, double w, const Pixel
 // out. No camera path finds it (a Dirac reflection, then the point laser).
 void Integrator::connect_laser_curved_mirrors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const {
   const glm::dvec3 x(v.sf.p), L = laser_.position;
-  for (const CurvedMirror& m : curved_mirrors_) {
+  for (const CurvedMesh& m : curved_mirrors_) {
     const glm::dvec3 to_x = x - m.centre, to_l = L - m.centre;
     const double rx = glm::length(to_x), rl = glm::length(to_l);
     if (!(rx > m.radius && rl > m.radius)) continue;  // within its bounds: no single image
@@ -1142,10 +1153,117 @@ void Integrator::connect_laser_curved_mirrors(const NeeVertex& v, double w, cons
   }
 }
 
+// The laser's light refracted through each smooth glass mesh of curved_refractors_ (a glass sphere) to v, along
+// every path the search finds, in and out of the mesh alone. The search: in the plane of the laser, the mesh's
+// bounding-box centre and v (where every path through a sphere lies), the rays from the laser through the sphere
+// of radius `inner` about that centre, parametrised by the angle of their entry point on its lit cap (32 steps,
+// each root of the exit ray's miss of v bisected), each root the seed of a solve on the mesh's triangles
+// (solve_planar_path, the triangles tracked as connect_laser_shaded's). Beyond a sphere's focus its light reaches
+// a point on the other side of its axis, and around the focus along up to three paths: a walk from the straight
+// line to the laser finds at most one of them, and none where that line misses the mesh. Entry or exit within 0.6
+// degrees of grazing is left out (a transmittance below 0.04 at ior 1.5), and so are roots closer than the
+// steps (where two paths merge, at the caustic's fold).
+void Integrator::connect_laser_curved_refractors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const {
+  const glm::dvec3 x(v.sf.p), L = laser_.position;
+  for (const CurvedMesh& m : curved_refractors_) {
+    const glm::dvec3 to_l = m.centre - L;
+    const double dl = glm::length(to_l), R = m.inner;
+    if (!(dl > m.radius && glm::length(x - m.centre) > m.radius && R > 0.0)) continue;
+    // The plane's axes: a from the laser through the centre, b towards v's side of it.
+    const glm::dvec3 a = to_l / dl, rel = x - m.centre;
+    const double xa = glm::dot(rel, a);
+    glm::dvec3 b = rel - xa * a, b_any(0.0), c_any(0.0);
+    const double xb = glm::length(b);
+    make_basis(a, &b_any, &c_any);
+    b = xb > 1e-12 * (1.0 + glm::length(rel)) ? b / xb : b_any;
+    const glm::dvec2 X(xa, xb), Lp(-dl, 0.0);
+    const double n = medium_ior(m.material), phi_max = std::acos(std::min(1.0, R / dl));
+    struct Ray2 {
+      bool ok = false;
+      glm::dvec2 entry{0.0}, exit{0.0};
+      double miss = 0.0;
+    };
+    // The ray through the entry point at angle phi from the axis: its exit ray's signed miss of v.
+    const auto trace = [&](double phi) {
+      Ray2 r;
+      const glm::dvec2 e = R * glm::dvec2(-std::cos(phi), std::sin(phi)), ne = e / R, d = glm::normalize(e - Lp);
+      const double ci = -glm::dot(d, ne);
+      if (!(ci > 0.01)) return r;
+      const double eta = 1.0 / n, k = 1.0 - eta * eta * (1.0 - ci * ci);
+      if (!(k > 0.0)) return r;
+      const glm::dvec2 d1 = glm::normalize(eta * d + (eta * ci - std::sqrt(k)) * ne);
+      const glm::dvec2 q = e - 2.0 * glm::dot(e, d1) * d1, nq = q / R;
+      const double co = glm::dot(d1, nq), k2 = 1.0 - n * n * (1.0 - co * co);
+      if (!(co > 0.0) || !(k2 > 1e-4)) return r;  // (total reflection, or a grazing exit)
+      const glm::dvec2 d2 = n * d1 + (std::sqrt(k2) - n * co) * nq, to_x = X - q;
+      if (!(glm::dot(d2, to_x) > 0.0)) return r;
+      r.ok = true, r.entry = e, r.exit = q, r.miss = d2.x * to_x.y - d2.y * to_x.x;
+      return r;
+    };
+    constexpr int kSteps = 32;
+    glm::dvec3 found[4];
+    int n_found = 0;
+    Ray2 prev = trace(-phi_max);
+    double prev_phi = -phi_max;
+    for (int i = 1; i <= kSteps && n_found < 4; ++i) {
+      const double phi = phi_max * (-1.0 + 2.0 * i / kSteps);
+      const Ray2 cur = trace(phi);
+      const Ray2 before = prev;
+      const double before_phi = prev_phi;
+      prev = cur, prev_phi = phi;
+      if (!before.ok || !cur.ok || (before.miss < 0.0) == (cur.miss < 0.0)) continue;
+      double lo = before_phi, hi = phi;
+      Ray2 root = cur;
+      for (int j = 0; j < 24; ++j) {
+        const double mid = 0.5 * (lo + hi);
+        const Ray2 r = trace(mid);
+        if (!r.ok) break;
+        root = r;
+        ((r.miss < 0.0) == (before.miss < 0.0) ? lo : hi) = mid;
+      }
+      // The seed's triangles: the exit's seen from v, the entry's from the laser.
+      const glm::dvec3 exit3 = m.centre + root.exit.x * a + root.exit.y * b, entry3 = m.centre + root.entry.x * a + root.entry.y * b;
+      PlanarFace faces[2];
+      glm::dvec3 start[2];
+      const glm::vec3 origin = offset_ray_origin(v.sf.p, v.sf.ng, glm::vec3(exit3 - x));
+      const glm::dvec3 to_exit = glm::normalize(exit3 - glm::dvec3(origin)), to_entry = glm::normalize(entry3 - L);
+      RayHit hit;
+      rays->refracted += 2;
+      if (!embree_.intersect(origin, glm::vec3(to_exit), 0.0f, std::numeric_limits<float>::infinity(), &hit, true) ||
+          hit.mesh != m.mesh || !shading_.face(hit.mesh, hit.triangle, &faces[0]))
+        continue;
+      start[0] = glm::dvec3(origin) + double(hit.t) * to_exit;
+      if (!embree_.intersect(glm::vec3(L), glm::vec3(to_entry), 0.0f, std::numeric_limits<float>::infinity(), &hit, false) ||
+          hit.mesh != m.mesh || !shading_.face(hit.mesh, hit.triangle, &faces[1]))
+        continue;
+      start[1] = L + double(hit.t) * to_entry;
+      const double index[3] = {1.0, n, 1.0};
+      const int media[3] = {-1, m.material, -1}, material[2] = {m.material, m.material};
+      const bool shaded[2] = {true, true};
+      const MeshTracker tracker(embree_, shading_, v.sf.ng, &rays->refracted, true);
+      PlanarPath path;
+      if (!solve_planar_path(x, L, faces, index, 2, start, &path, nullptr, &tracker)) continue;
+      // (two seeds that reached the same path)
+      const double tol = 1e-6 * (1.0 + glm::length(path.y[0]));
+      if (std::any_of(found, found + n_found, [&](const glm::dvec3& y) { return glm::length(y - path.y[0]) <= tol; })) continue;
+      found[n_found++] = path.y[0];
+      const glm::vec3 ng[2] = {glm::vec3(path.n[0]), glm::vec3(path.n[1])};
+      (void)deposit_planar_path(v, path, material, ng, index, media, nullptr, w, film, &rays->refracted, shaded);
+    }
+  }
+}
+
+bool Integrator::through_curved_refractor_alone(const Crossings& cx) const {
+  const Crossings::Crossing* cr = cx.slots.c;
+  if (!(cx.n == 2 && cx.medium0 < 0 && cr[0].mesh == cr[1].mesh && cr[1].medium < 0 && cr[0].medium == cr[0].material)) return false;
+  return std::any_of(curved_refractors_.begin(), curved_refractors_.end(), [&](const CurvedMesh& m) { return m.mesh == cr[0].mesh; });
+}
+
 inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, const FirstSegment* first, double w,
                                       const PixelFilm& film, RayCounts* rays) const {
   if (!mirrors_.empty() && v.medium < 0) connect_laser_mirrors(v, w, film, rays);
   if (!curved_mirrors_.empty() && v.medium < 0) connect_laser_curved_mirrors(v, w, film, rays);
+  if (!curved_refractors_.empty() && v.medium < 0) connect_laser_curved_refractors(v, w, film, rays);
   const double r = lr.r, intensity = lr.intensity;
   const glm::vec3 wi = lr.wi;
   // With refracting volumes the straight walk comes first: it finds the interfaces that the refracted
@@ -1161,7 +1279,8 @@ inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, co
         (cx.parallel ? connect_laser_refracted(v, lr, cx, w, film, rays, true) : connect_laser_planar(v, cx, w, film, rays, true)))
       return;
     if (cx.refracting && !cx.planar && cx.complete) {
-      connect_laser_shaded(v, cx, w, film, rays);
+      // (through one glass mesh alone: connect_laser_curved_refractors' paths)
+      if (!(v.medium < 0 && through_curved_refractor_alone(cx))) connect_laser_shaded(v, cx, w, film, rays);
       return;
     }
   }

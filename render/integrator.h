@@ -303,6 +303,12 @@ class Integrator {
                            uint64_t* rays, const bool* shaded = nullptr) const;
   // The laser's light reflected to v by the smooth planar faces of mirrors_.
   void connect_laser_mirrors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const;
+  // The laser's light refracted to v through each smooth glass mesh of curved_refractors_ alone, along every path
+  // the search finds.
+  void connect_laser_curved_refractors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const;
+  // Whether the straight walk crossed exactly one mesh of curved_refractors_, in and out, from air (its light is
+  // connect_laser_curved_refractors').
+  bool through_curved_refractor_alone(const Crossings& cx) const;
   // The laser's light reflected to v by the smooth curved meshes of curved_mirrors_.
   void connect_laser_curved_mirrors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const;
   // A uniform number in [0, 1) for the echo of faces a, b seen from vertex position p: a hash of them and the
@@ -371,17 +377,18 @@ class Integrator {
   };
   static constexpr size_t kMaxLaserMirrors = 16;
   std::vector<LaserMirror> mirrors_;
-  // A smooth mesh of more than kMaxPartsPerMesh triangles with vertex normals (a chrome or glass sphere), which
-  // reflects the laser onto the scene off its curved surface, on its front (glTF) side: its bounding box's centre,
-  // half diagonal, and its corners' least distance from that centre. At most kMaxCurvedMirrors of them.
-  struct CurvedMirror {
+  // A smooth mesh of more than kMaxPartsPerMesh triangles with vertex normals: its bounding box's centre, half
+  // diagonal, and its corners' least distance from that centre. curved_mirrors_: those that reflect the laser onto
+  // the scene off their curved surface, on their front (glTF) side (a chrome sphere); curved_refractors_: those
+  // that bound a refracting volume (a glass sphere). At most kMaxCurvedMeshes of each.
+  struct CurvedMesh {
     uint32_t mesh = 0;
     int material = -1;
     glm::dvec3 centre{0.0};
     double radius = 0.0, inner = 0.0;
   };
-  static constexpr size_t kMaxCurvedMirrors = 8;
-  std::vector<CurvedMirror> curved_mirrors_;
+  static constexpr size_t kMaxCurvedMeshes = 8;
+  std::vector<CurvedMesh> curved_mirrors_, curved_refractors_;
   const Ambient& ambient_;
   bool transmission_ = false;
   bool ambient_on_ = false;
