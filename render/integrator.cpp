@@ -379,9 +379,16 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
     const glm::dvec3 centre = 0.5 * (lo + hi);
     double inner = 1e300;
     for (const uint32_t i : mesh.indices) inner = std::min(inner, glm::length(glm::dvec3(mesh.positions[i]) - centre));
-    const CurvedMesh c{uint32_t(m), mesh.material, centre, 0.5 * glm::length(hi - lo), inner};
+    const CurvedMesh c{uint32_t(m), mesh.material, centre, 0.5 * glm::length(hi - lo), inner, {}};
     if (mirror && curved_mirrors_.size() < kMaxCurvedMeshes) curved_mirrors_.push_back(c);  // (a glass sphere is both)
-    if (refractor && curved_refractors_.size() < kMaxCurvedMeshes) curved_refractors_.push_back(c);
+    if (refractor && curved_refractors_.size() < kMaxCurvedMeshes) {
+      curved_refractors_.push_back(c);
+      CurvedMesh& r = curved_refractors_.back();
+      // (uniform in the angle of incidence, its sine h / R, up to 0.6 degrees from grazing)
+      const double dl = glm::length(centre - laser_.position), n = medium_ior(mesh.material), i_max = std::acos(0.0101);
+      for (int i = 0; i <= kCurvedRefractorSteps; ++i)
+        r.rays.push_back(sphere_ray(dl, inner, n, inner * std::sin(i_max * (-1.0 + 2.0 * i / kCurvedRefractorSteps))));
+    }
   }
   ambient_on_ = ambient.any() || shading.has_emission();
   laser_traced_ = config.trace_laser;
@@ -1153,11 +1160,29 @@ void Integrator::connect_laser_curved_mirrors(const NeeVertex& v, double w, cons
   }
 }
 
+Integrator::SphereRay Integrator::sphere_ray(double dl, double R, double n, double h) {
+  SphereRay r;
+  r.h = h;
+  const double sin_t = h / dl, cos_t = std::sqrt(1.0 - sin_t * sin_t);
+  const glm::dvec2 d(cos_t, sin_t), e = glm::dvec2(-dl, 0.0) + (dl * cos_t - std::sqrt(std::max(0.0, R * R - h * h))) * d, ne = e / R;
+  const double ci = -glm::dot(d, ne);
+  if (!(ci > 0.01)) return r;
+  const double eta = 1.0 / n, k = 1.0 - eta * eta * (1.0 - ci * ci);
+  if (!(k > 0.0)) return r;
+  const glm::dvec2 d1 = glm::normalize(eta * d + (eta * ci - std::sqrt(k)) * ne);
+  const glm::dvec2 q = e - 2.0 * glm::dot(e, d1) * d1, nq = q / R;
+  const double co = glm::dot(d1, nq), k2 = 1.0 - n * n * (1.0 - co * co);
+  if (!(co > 0.0) || !(k2 > 1e-4)) return r;  // (total reflection, or a grazing exit)
+  r.ok = true, r.entry = e, r.exit = q, r.dir = n * d1 + (std::sqrt(k2) - n * co) * nq;
+  return r;
+}
+
 // The laser's light refracted through each smooth glass mesh of curved_refractors_ (a glass sphere) to v, along
 // every path the search finds, in and out of the mesh alone. The search: in the plane of the laser, the mesh's
 // bounding-box centre and v (where every path through a sphere lies), the rays from the laser through the sphere
-// of radius `inner` about that centre, parametrised by the angle of their entry point on its lit cap (32 steps,
-// each root of the exit ray's miss of v bisected), each root the seed of a solve on the mesh's triangles
+// of radius `inner` about that centre, by their angle of incidence (a table of kCurvedRefractorSteps steps, made
+// once: the plane turns about the axis from the laser through the centre; each root of the exit ray's miss of v
+// bisected 6 times: the solve's seed), each root the seed of a solve on the mesh's triangles
 // (solve_planar_path, the triangles tracked as connect_laser_shaded's). Beyond a sphere's focus its light reaches
 // a point on the other side of its axis, and around the focus along up to three paths: a walk from the straight
 // line to the laser finds at most one of them, and none where that line misses the mesh. Entry or exit within 0.6
@@ -1176,50 +1201,32 @@ void Integrator::connect_laser_curved_refractors(const NeeVertex& v, double w, c
     const double xb = glm::length(b);
     make_basis(a, &b_any, &c_any);
     b = xb > 1e-12 * (1.0 + glm::length(rel)) ? b / xb : b_any;
-    const glm::dvec2 X(xa, xb), Lp(-dl, 0.0);
-    const double n = medium_ior(m.material), phi_max = std::acos(std::min(1.0, R / dl));
-    struct Ray2 {
-      bool ok = false;
-      glm::dvec2 entry{0.0}, exit{0.0};
-      double miss = 0.0;
+    const glm::dvec2 X(xa, xb);
+    const double n = medium_ior(m.material);
+    // A ray's signed miss of v, where it heads towards it.
+    const auto miss = [&](const SphereRay& r, double* out) {
+      const glm::dvec2 to_x = X - r.exit;
+      if (!r.ok || !(glm::dot(r.dir, to_x) > 0.0)) return false;
+      *out = r.dir.x * to_x.y - r.dir.y * to_x.x;
+      return true;
     };
-    // The ray through the entry point at angle phi from the axis: its exit ray's signed miss of v.
-    const auto trace = [&](double phi) {
-      Ray2 r;
-      const glm::dvec2 e = R * glm::dvec2(-std::cos(phi), std::sin(phi)), ne = e / R, d = glm::normalize(e - Lp);
-      const double ci = -glm::dot(d, ne);
-      if (!(ci > 0.01)) return r;
-      const double eta = 1.0 / n, k = 1.0 - eta * eta * (1.0 - ci * ci);
-      if (!(k > 0.0)) return r;
-      const glm::dvec2 d1 = glm::normalize(eta * d + (eta * ci - std::sqrt(k)) * ne);
-      const glm::dvec2 q = e - 2.0 * glm::dot(e, d1) * d1, nq = q / R;
-      const double co = glm::dot(d1, nq), k2 = 1.0 - n * n * (1.0 - co * co);
-      if (!(co > 0.0) || !(k2 > 1e-4)) return r;  // (total reflection, or a grazing exit)
-      const glm::dvec2 d2 = n * d1 + (std::sqrt(k2) - n * co) * nq, to_x = X - q;
-      if (!(glm::dot(d2, to_x) > 0.0)) return r;
-      r.ok = true, r.entry = e, r.exit = q, r.miss = d2.x * to_x.y - d2.y * to_x.x;
-      return r;
-    };
-    constexpr int kSteps = 32;
     glm::dvec3 found[4];
     int n_found = 0;
-    Ray2 prev = trace(-phi_max);
-    double prev_phi = -phi_max;
-    for (int i = 1; i <= kSteps && n_found < 4; ++i) {
-      const double phi = phi_max * (-1.0 + 2.0 * i / kSteps);
-      const Ray2 cur = trace(phi);
-      const Ray2 before = prev;
-      const double before_phi = prev_phi;
-      prev = cur, prev_phi = phi;
-      if (!before.ok || !cur.ok || (before.miss < 0.0) == (cur.miss < 0.0)) continue;
-      double lo = before_phi, hi = phi;
-      Ray2 root = cur;
-      for (int j = 0; j < 24; ++j) {
+    double before = 0.0, cur = 0.0;
+    bool before_ok = miss(m.rays[0], &before);
+    for (size_t i = 1; i < m.rays.size() && n_found < 4; ++i, before = cur) {
+      const bool ok = miss(m.rays[i], &cur), pair = before_ok && ok && (before < 0.0) != (cur < 0.0);
+      before_ok = ok;
+      if (!pair) continue;
+      double lo = m.rays[i - 1].h, hi = m.rays[i].h;
+      SphereRay root = m.rays[i];
+      for (int j = 0; j < 6; ++j) {
         const double mid = 0.5 * (lo + hi);
-        const Ray2 r = trace(mid);
-        if (!r.ok) break;
+        const SphereRay r = sphere_ray(dl, R, n, mid);
+        double at = 0.0;
+        if (!miss(r, &at)) break;
         root = r;
-        ((r.miss < 0.0) == (before.miss < 0.0) ? lo : hi) = mid;
+        ((at < 0.0) == (before < 0.0) ? lo : hi) = mid;
       }
       // The seed's triangles: the exit's seen from v, the entry's from the laser.
       const glm::dvec3 exit3 = m.centre + root.exit.x * a + root.exit.y * b, entry3 = m.centre + root.entry.x * a + root.entry.y * b;

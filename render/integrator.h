@@ -381,13 +381,29 @@ class Integrator {
   // diagonal, and its corners' least distance from that centre. curved_mirrors_: those that reflect the laser onto
   // the scene off their curved surface, on their front (glTF) side (a chrome sphere); curved_refractors_: those
   // that bound a refracting volume (a glass sphere). At most kMaxCurvedMeshes of each.
+  // A ray of the laser through a sphere of radius R and index n about a centre at distance dl from the laser, in
+  // their plane (x along the axis from the laser through the centre, which is the origin; y towards the side the
+  // ray passes at signed distance h from the centre), refracted in and out: where it enters and leaves the sphere,
+  // and its direction after. ok: false where it meets the sphere within 0.6 degrees of grazing, or leaves it so.
+  struct SphereRay {
+    bool ok = false;
+    double h = 0.0;
+    glm::dvec2 entry{0.0}, exit{0.0}, dir{0.0};
+  };
+  static SphereRay sphere_ray(double dl, double R, double n, double h);
   struct CurvedMesh {
     uint32_t mesh = 0;
     int material = -1;
     glm::dvec3 centre{0.0};
     double radius = 0.0, inner = 0.0;
+    // (curved_refractors_) the laser's rays through the sphere of radius inner about the centre, at
+    // kCurvedRefractorSteps + 1 angles of incidence from -89.4 to 89.4 degrees
+    std::vector<SphereRay> rays;
   };
   static constexpr size_t kMaxCurvedMeshes = 8;
+  // The steps of connect_laser_curved_refractors' search over the laser's rays through a sphere (uniform in their
+  // angle of incidence).
+  static constexpr int kCurvedRefractorSteps = 64;
   std::vector<CurvedMesh> curved_mirrors_, curved_refractors_;
   const Ambient& ambient_;
   bool transmission_ = false;
