@@ -217,7 +217,8 @@ json camera_json(const render::Camera& cam, const PixelRect& img, const glm::dve
           {"position_m", {t.x, t.y, t.z}},
           {"forward", {z.x, z.y, z.z}},
           {"up", {up.x, up.y, up.z}},
-          {"laser_position_m", {glm::dot(l, x) + 0.0, glm::dot(l, y) + 0.0, glm::dot(l, z) + 0.0}}};
+          {"laser_position_m", {glm::dot(l, x) + 0.0, glm::dot(l, y) + 0.0, glm::dot(l, z) + 0.0}},
+          {"laser_world_position_m", {laser_world.x + 0.0, laser_world.y + 0.0, laser_world.z + 0.0}}};
 }
 
 

@@ -587,6 +587,13 @@ TEST_F(Reconstruct, TheLaserBesideTheLensIsNotADepthBias) {
   ASSERT_EQ(r.code, 0) << r.output;
   const auto meta = nlohmann::json::parse(slurp(run / "metadata.json"));
   EXPECT_EQ(meta["camera"]["laser_position_m"], nlohmann::json::parse("[0.03, 0.0, 0.0]"));
+  // The same point in the world's frame: camera_to_world applied to it.
+  const auto& M = meta["camera"]["camera_to_world"];
+  for (int i = 0; i < 3; ++i) {
+    double w = M[i][3].get<double>();
+    for (int j = 0; j < 3; ++j) w += M[i][j].get<double>() * meta["camera"]["laser_position_m"][j].get<double>();
+    EXPECT_NEAR(meta["camera"]["laser_world_position_m"][i].get<double>(), w, 1e-12) << i;
+  }
   r = sh("evaluate " + run.string() + " --noise-free --detector edges -q");
   ASSERT_EQ(r.code, 0) << r.output;
   const auto m = nlohmann::json::parse(slurp(run / "evaluation" / "metrics.json"));
