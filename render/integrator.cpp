@@ -1124,7 +1124,7 @@ void Integrator::connect_laser_curved_mirrors(const NeeVertex& v, double w, cons
   for (const CurvedMesh& m : curved_mirrors_) {
     const glm::dvec3 to_x = x - m.centre, to_l = L - m.centre;
     const double rx = glm::length(to_x), rl = glm::length(to_l);
-    if (!(rx > m.radius && rl > m.radius)) continue;  // within its bounds: no single image
+    if (!(rx > m.inner && rl > m.inner)) continue;  // within the sphere of the seed: none sought
     // The seed: the reflection point off the sphere of radius `inner` about the centre (exact for a sphere), on the
     // arc between the directions of v and the laser from the centre, by bisection on the mixture s of the two
     // directions: the normal there bisects the directions to v and the laser. Where that point is within 0.6
@@ -1193,7 +1193,7 @@ void Integrator::connect_laser_curved_refractors(const NeeVertex& v, double w, c
   for (const CurvedMesh& m : curved_refractors_) {
     const glm::dvec3 to_l = m.centre - L;
     const double dl = glm::length(to_l), R = m.inner;
-    if (!(dl > m.radius && glm::length(x - m.centre) > m.radius && R > 0.0)) continue;
+    if (!curved_refractor_searched(m, x)) continue;
     // The plane's axes: a from the laser through the centre, b towards v's side of it.
     const glm::dvec3 a = to_l / dl, rel = x - m.centre;
     const double xa = glm::dot(rel, a);
@@ -1260,10 +1260,16 @@ void Integrator::connect_laser_curved_refractors(const NeeVertex& v, double w, c
   }
 }
 
-bool Integrator::through_curved_refractor_alone(const Crossings& cx) const {
+bool Integrator::curved_refractor_searched(const CurvedMesh& m, const glm::dvec3& x) const {
+  const double R = m.inner;
+  return R > 0.0 && glm::length(m.centre - laser_.position) > R && glm::length(x - m.centre) > R;
+}
+
+bool Integrator::through_curved_refractor_alone(const Crossings& cx, const glm::dvec3& x) const {
   const Crossings::Crossing* cr = cx.slots.c;
   if (!(cx.n == 2 && cx.medium0 < 0 && cr[0].mesh == cr[1].mesh && cr[1].medium < 0 && cr[0].medium == cr[0].material)) return false;
-  return std::any_of(curved_refractors_.begin(), curved_refractors_.end(), [&](const CurvedMesh& m) { return m.mesh == cr[0].mesh; });
+  return std::any_of(curved_refractors_.begin(), curved_refractors_.end(),
+                     [&](const CurvedMesh& m) { return m.mesh == cr[0].mesh && curved_refractor_searched(m, x); });
 }
 
 inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, const FirstSegment* first, double w,
@@ -1287,7 +1293,7 @@ inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, co
       return;
     if (cx.refracting && !cx.planar && cx.complete) {
       // (through one glass mesh alone: connect_laser_curved_refractors' paths)
-      if (!(v.medium < 0 && through_curved_refractor_alone(cx))) connect_laser_shaded(v, cx, w, film, rays);
+      if (!(v.medium < 0 && through_curved_refractor_alone(cx, glm::dvec3(v.sf.p)))) connect_laser_shaded(v, cx, w, film, rays);
       return;
     }
   }

@@ -306,9 +306,9 @@ class Integrator {
   // The laser's light refracted to v through each smooth glass mesh of curved_refractors_ alone, along every path
   // the search finds.
   void connect_laser_curved_refractors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const;
-  // Whether the straight walk crossed exactly one mesh of curved_refractors_, in and out, from air (its light is
-  // connect_laser_curved_refractors').
-  bool through_curved_refractor_alone(const Crossings& cx) const;
+  // Whether the straight walk from x crossed exactly one mesh of curved_refractors_, in and out, from air, and the
+  // search runs for x there (its light is connect_laser_curved_refractors').
+  bool through_curved_refractor_alone(const Crossings& cx, const glm::dvec3& x) const;
   // The laser's light reflected to v by the smooth curved meshes of curved_mirrors_.
   void connect_laser_curved_mirrors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const;
   // A uniform number in [0, 1) for the echo of faces a, b seen from vertex position p: a hash of them and the
@@ -391,6 +391,10 @@ class Integrator {
     glm::dvec2 entry{0.0}, exit{0.0}, dir{0.0};
   };
   static SphereRay sphere_ray(double dl, double R, double n, double h);
+  struct CurvedMesh;
+  // Whether connect_laser_curved_refractors searches mesh m's paths to x: x and the laser outside the sphere of
+  // its search (radius m.inner).
+  bool curved_refractor_searched(const CurvedMesh& m, const glm::dvec3& x) const;
   struct CurvedMesh {
     uint32_t mesh = 0;
     int material = -1;
