@@ -157,14 +157,17 @@ bool solve_planar_path(const glm::dvec3& x, const glm::dvec3& l, const PlanarFac
       double tl[kMaxPlanarFaces + 1], tc[kMaxUnknowns];
       Shade ts[kMaxPlanarFaces];
       for (int j = 0; j < k; ++j) trial[j] = y[j] + f * (step[2 * j][0] * ch.t[j][0] + step[2 * j + 1][0] * ch.t[j][1]);
+      // The trial point taken where its residual w is lower.
+      const auto take = [&](double w) {
+        if (!(w < worst)) return false;
+        lowered = true;
+        worst = w;
+        std::copy_n(trial, k, y), std::copy_n(td, k + 1, d), std::copy_n(tl, k + 1, len), std::copy_n(tc, n, c);
+        std::copy_n(ts, k, sh);
+        return true;
+      };
       if (!tracker) {
-        const double w = ch.residual(trial, td, tl, ts, tc);
-        if (w < worst) {
-          lowered = true;
-          worst = w;
-          std::copy_n(trial, k, y), std::copy_n(td, k + 1, d), std::copy_n(tl, k + 1, len), std::copy_n(tc, n, c);
-          std::copy_n(ts, k, sh);
-        }
+        take(ch.residual(trial, td, tl, ts, tc));
         continue;
       }
       PlanarFace tf[kMaxPlanarFaces];
@@ -174,12 +177,7 @@ bool solve_planar_path(const glm::dvec3& x, const glm::dvec3& l, const PlanarFac
       tch.faces = tf;
       for (int j = 0; j < k; ++j)
         if (tf[j].triangle != fc[j].triangle || tf[j].mesh != fc[j].mesh) make_basis(tf[j].n, &tch.t[j][0], &tch.t[j][1]);
-      const double w = tch.residual(trial, td, tl, ts, tc);
-      if (w < worst) {
-        lowered = true;
-        worst = w;
-        std::copy_n(trial, k, y), std::copy_n(td, k + 1, d), std::copy_n(tl, k + 1, len), std::copy_n(tc, n, c);
-        std::copy_n(ts, k, sh);
+      if (take(tch.residual(trial, td, tl, ts, tc))) {
         std::copy_n(tf, k, fc);
         ch = tch;
         ch.faces = fc;
