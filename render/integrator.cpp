@@ -377,8 +377,11 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
     glm::dvec3 lo(1e300), hi(-1e300);
     for (const uint32_t i : mesh.indices) lo = glm::min(lo, glm::dvec3(mesh.positions[i])), hi = glm::max(hi, glm::dvec3(mesh.positions[i]));
     const glm::dvec3 centre = 0.5 * (lo + hi);
-    double inner = 1e300;
-    for (const uint32_t i : mesh.indices) inner = std::min(inner, glm::length(glm::dvec3(mesh.positions[i]) - centre));
+    double inner = 1e300, outer = 0.0;
+    for (const uint32_t i : mesh.indices) {
+      const double r = glm::length(glm::dvec3(mesh.positions[i]) - centre);
+      inner = std::min(inner, r), outer = std::max(outer, r);
+    }
     const CurvedMesh c{uint32_t(m), mesh.material, centre, 0.5 * glm::length(hi - lo), inner, {}};
     if (mirror && curved_mirrors_.size() < kMaxCurvedMeshes) curved_mirrors_.push_back(c);  // (a glass sphere is both)
     if (refractor && curved_refractors_.size() < kMaxCurvedMeshes) {
@@ -386,8 +389,15 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
       CurvedMesh& r = curved_refractors_.back();
       // (uniform in the angle of incidence, its sine h / R, up to 0.6 degrees from grazing)
       const double dl = glm::length(centre - laser_.position), n = medium_ior(mesh.material), i_max = std::acos(0.0101);
-      for (int i = 0; i <= kCurvedRefractorSteps; ++i)
-        r.rays.push_back(sphere_ray(dl, inner, n, inner * std::sin(i_max * (-1.0 + 2.0 * i / kCurvedRefractorSteps))));
+      std::vector<double> radii{inner};
+      if (outer > 1.02 * inner) radii.push_back(std::sqrt(inner * outer)), radii.push_back(outer);
+      for (const double R : radii) {
+        CurvedMesh::SearchTable t;
+        t.R = R;
+        for (int i = 0; i <= kCurvedRefractorSteps; ++i)
+          t.rays.push_back(sphere_ray(dl, R, n, R * std::sin(i_max * (-1.0 + 2.0 * i / kCurvedRefractorSteps))));
+        r.tables.push_back(std::move(t));
+      }
     }
   }
   ambient_on_ = ambient.any() || shading.has_emission();
@@ -1192,7 +1202,7 @@ void Integrator::connect_laser_curved_refractors(const NeeVertex& v, double w, c
   const glm::dvec3 x(v.sf.p), L = laser_.position;
   for (const CurvedMesh& m : curved_refractors_) {
     const glm::dvec3 to_l = m.centre - L;
-    const double dl = glm::length(to_l), R = m.inner;
+    const double dl = glm::length(to_l);
     if (!curved_refractor_searched(m, x)) continue;
     // The plane's axes: a from the laser through the centre, b towards v's side of it.
     const glm::dvec3 a = to_l / dl, rel = x - m.centre;
@@ -1210,16 +1220,19 @@ void Integrator::connect_laser_curved_refractors(const NeeVertex& v, double w, c
       *out = r.dir.x * to_x.y - r.dir.y * to_x.x;
       return true;
     };
-    glm::dvec3 found[4];
+    glm::dvec3 found[kMaxCurvedRefractorPaths];
     int n_found = 0;
+    for (const CurvedMesh::SearchTable& table : m.tables) {
+    const double R = table.R;
+    if (!(glm::length(rel) > R && dl > R)) continue;
     double before = 0.0, cur = 0.0;
-    bool before_ok = miss(m.rays[0], &before);
-    for (size_t i = 1; i < m.rays.size() && n_found < 4; ++i, before = cur) {
-      const bool ok = miss(m.rays[i], &cur), pair = before_ok && ok && (before < 0.0) != (cur < 0.0);
+    bool before_ok = miss(table.rays[0], &before);
+    for (size_t i = 1; i < table.rays.size() && n_found < kMaxCurvedRefractorPaths; ++i, before = cur) {
+      const bool ok = miss(table.rays[i], &cur), pair = before_ok && ok && (before < 0.0) != (cur < 0.0);
       before_ok = ok;
       if (!pair) continue;
-      double lo = m.rays[i - 1].h, hi = m.rays[i].h;
-      SphereRay root = m.rays[i];
+      double lo = table.rays[i - 1].h, hi = table.rays[i].h;
+      SphereRay root = table.rays[i];
       for (int j = 0; j < 6; ++j) {
         const double mid = 0.5 * (lo + hi);
         const SphereRay r = sphere_ray(dl, R, n, mid);
@@ -1256,6 +1269,7 @@ void Integrator::connect_laser_curved_refractors(const NeeVertex& v, double w, c
       found[n_found++] = path.y[0];
       const glm::vec3 ng[2] = {glm::vec3(path.n[0]), glm::vec3(path.n[1])};
       (void)deposit_planar_path(v, path, material, ng, index, media, nullptr, w, film, &rays->refracted, shaded);
+    }
     }
   }
 }

@@ -400,14 +400,20 @@ class Integrator {
     int material = -1;
     glm::dvec3 centre{0.0};
     double radius = 0.0, inner = 0.0;
-    // (curved_refractors_) the laser's rays through the sphere of radius inner about the centre, at
-    // kCurvedRefractorSteps + 1 angles of incidence from -89.4 to 89.4 degrees
-    std::vector<SphereRay> rays;
+    // (curved_refractors_) the search's tables: the laser's rays through a sphere of radius R about the centre, at
+    // kCurvedRefractorSteps + 1 angles of incidence from -89.4 to 89.4 degrees. R = inner; where the mesh is not a
+    // sphere (its farthest corner more than 2 % farther than its nearest), also their geometric mean and the farthest.
+    struct SearchTable {
+      double R = 0.0;
+      std::vector<SphereRay> rays;
+    };
+    std::vector<SearchTable> tables;
   };
   static constexpr size_t kMaxCurvedMeshes = 8;
   // The steps of connect_laser_curved_refractors' search over the laser's rays through a sphere (uniform in their
   // angle of incidence).
   static constexpr int kCurvedRefractorSteps = 64;
+  static constexpr int kMaxCurvedRefractorPaths = 8;  // the paths connect_laser_curved_refractors takes per mesh
   std::vector<CurvedMesh> curved_mirrors_, curved_refractors_;
   const Ambient& ambient_;
   bool transmission_ = false;
