@@ -89,28 +89,31 @@ void deposit(double v, double t, const TimeAxis& axis, double* bins, PixelTotals
 }
 
 namespace {
+// A mesh's material (null: the glTF default material, which is neither smooth nor given here).
+const scenes::Material* mesh_material(const scenes::Scene& scene, const scenes::Mesh& mesh) {
+  return mesh.material < 0 || size_t(mesh.material) >= scene.materials.size() ? nullptr : &scene.materials[size_t(mesh.material)];
+}
+// Whether a mesh is curved: more than kMaxPartsPerMesh triangles, with vertex normals.
+bool curved_mesh(const scenes::Mesh& mesh) {
+  return mesh.triangle_count() > kMaxPartsPerMesh && mesh.normals.size() == mesh.positions.size();
+}
 // A mesh whose planar faces may mirror the laser (Integrator::mirrors_): at most kMaxPartsPerMesh triangles of a
-// smooth material other than a Lambertian one (the glTF default material is neither smooth nor given here).
+// smooth material other than a Lambertian one.
 bool mirror_mesh(const scenes::Scene& scene, const scenes::Mesh& mesh) {
-  if (mesh.material < 0 || size_t(mesh.material) >= scene.materials.size()) return false;
-  const scenes::Material& m = scene.materials[size_t(mesh.material)];
-  return !m.lambertian() && m.smooth() && mesh.triangle_count() > 0 && mesh.triangle_count() <= kMaxPartsPerMesh;
+  const scenes::Material* m = mesh_material(scene, mesh);
+  return m && !m->lambertian() && m->smooth() && mesh.triangle_count() > 0 && mesh.triangle_count() <= kMaxPartsPerMesh;
 }
-
-
-// A smooth mesh whose curved surface may mirror the laser (Integrator::curved_mirrors_): more than
-// kMaxPartsPerMesh triangles of a smooth material other than a Lambertian one, with vertex normals.
+// A smooth curved mesh whose surface may mirror the laser (Integrator::curved_mirrors_): of a smooth material
+// other than a Lambertian one.
 bool curved_mirror_mesh(const scenes::Scene& scene, const scenes::Mesh& mesh) {
-  if (mesh.material < 0 || size_t(mesh.material) >= scene.materials.size()) return false;
-  const scenes::Material& m = scene.materials[size_t(mesh.material)];
-  return !m.lambertian() && m.smooth() && mesh.triangle_count() > kMaxPartsPerMesh && mesh.normals.size() == mesh.positions.size();
+  const scenes::Material* m = mesh_material(scene, mesh);
+  return m && !m->lambertian() && m->smooth() && curved_mesh(mesh);
 }
-// A smooth closed glass mesh with vertex normals (a glass sphere): more than kMaxPartsPerMesh triangles of a smooth
-// material that bounds a refracting volume (Integrator::curved_refractors_).
+// A smooth curved glass mesh (a glass sphere, Integrator::curved_refractors_): of a smooth material that bounds a
+// refracting volume.
 bool curved_refractor_mesh(const scenes::Scene& scene, const scenes::Mesh& mesh) {
-  if (mesh.material < 0 || size_t(mesh.material) >= scene.materials.size()) return false;
-  const scenes::Material& m = scene.materials[size_t(mesh.material)];
-  return m.refracting() && m.smooth() && mesh.triangle_count() > kMaxPartsPerMesh && mesh.normals.size() == mesh.positions.size();
+  const scenes::Material* m = mesh_material(scene, mesh);
+  return m && m->refracting() && m->smooth() && curved_mesh(mesh);
 }
 }  // namespace
 
@@ -1223,53 +1226,53 @@ void Integrator::connect_laser_curved_refractors(const NeeVertex& v, double w, c
     glm::dvec3 found[kMaxCurvedRefractorPaths];
     int n_found = 0;
     for (const CurvedMesh::SearchTable& table : m.tables) {
-    const double R = table.R;
-    if (!(glm::length(rel) > R && dl > R)) continue;
-    double before = 0.0, cur = 0.0;
-    bool before_ok = miss(table.rays[0], &before);
-    for (size_t i = 1; i < table.rays.size() && n_found < kMaxCurvedRefractorPaths; ++i, before = cur) {
-      const bool ok = miss(table.rays[i], &cur), pair = before_ok && ok && (before < 0.0) != (cur < 0.0);
-      before_ok = ok;
-      if (!pair) continue;
-      double lo = table.rays[i - 1].h, hi = table.rays[i].h;
-      SphereRay root = table.rays[i];
-      for (int j = 0; j < 6; ++j) {
-        const double mid = 0.5 * (lo + hi);
-        const SphereRay r = sphere_ray(dl, R, n, mid);
-        double at = 0.0;
-        if (!miss(r, &at)) break;
-        root = r;
-        ((at < 0.0) == (before < 0.0) ? lo : hi) = mid;
+      const double R = table.R;
+      if (!(glm::length(rel) > R && dl > R)) continue;
+      double before = 0.0, cur = 0.0;
+      bool before_ok = miss(table.rays[0], &before);
+      for (size_t i = 1; i < table.rays.size() && n_found < kMaxCurvedRefractorPaths; ++i, before = cur) {
+        const bool ok = miss(table.rays[i], &cur), pair = before_ok && ok && (before < 0.0) != (cur < 0.0);
+        before_ok = ok;
+        if (!pair) continue;
+        double lo = table.rays[i - 1].h, hi = table.rays[i].h;
+        SphereRay root = table.rays[i];
+        for (int j = 0; j < 6; ++j) {
+          const double mid = 0.5 * (lo + hi);
+          const SphereRay r = sphere_ray(dl, R, n, mid);
+          double at = 0.0;
+          if (!miss(r, &at)) break;
+          root = r;
+          ((at < 0.0) == (before < 0.0) ? lo : hi) = mid;
+        }
+        // The seed's triangles: the exit's seen from v, the entry's from the laser.
+        const glm::dvec3 exit3 = m.centre + root.exit.x * a + root.exit.y * b, entry3 = m.centre + root.entry.x * a + root.entry.y * b;
+        PlanarFace faces[2];
+        glm::dvec3 start[2];
+        const glm::vec3 origin = offset_ray_origin(v.sf.p, v.sf.ng, glm::vec3(exit3 - x));
+        const glm::dvec3 to_exit = glm::normalize(exit3 - glm::dvec3(origin)), to_entry = glm::normalize(entry3 - L);
+        RayHit hit;
+        rays->refracted += 2;
+        if (!embree_.intersect(origin, glm::vec3(to_exit), 0.0f, std::numeric_limits<float>::infinity(), &hit, true) ||
+            hit.mesh != m.mesh || !shading_.face(hit.mesh, hit.triangle, &faces[0]))
+          continue;
+        start[0] = glm::dvec3(origin) + double(hit.t) * to_exit;
+        if (!embree_.intersect(glm::vec3(L), glm::vec3(to_entry), 0.0f, std::numeric_limits<float>::infinity(), &hit, false) ||
+            hit.mesh != m.mesh || !shading_.face(hit.mesh, hit.triangle, &faces[1]))
+          continue;
+        start[1] = L + double(hit.t) * to_entry;
+        const double index[3] = {1.0, n, 1.0};
+        const int media[3] = {-1, m.material, -1}, material[2] = {m.material, m.material};
+        const bool shaded[2] = {true, true};
+        const MeshTracker tracker(embree_, shading_, v.sf.ng, &rays->refracted, true);
+        PlanarPath path;
+        if (!solve_planar_path(x, L, faces, index, 2, start, &path, nullptr, &tracker)) continue;
+        // (two seeds that reached the same path)
+        const double tol = 1e-6 * (1.0 + glm::length(path.y[0]));
+        if (std::any_of(found, found + n_found, [&](const glm::dvec3& y) { return glm::length(y - path.y[0]) <= tol; })) continue;
+        found[n_found++] = path.y[0];
+        const glm::vec3 ng[2] = {glm::vec3(path.n[0]), glm::vec3(path.n[1])};
+        (void)deposit_planar_path(v, path, material, ng, index, media, nullptr, w, film, &rays->refracted, shaded);
       }
-      // The seed's triangles: the exit's seen from v, the entry's from the laser.
-      const glm::dvec3 exit3 = m.centre + root.exit.x * a + root.exit.y * b, entry3 = m.centre + root.entry.x * a + root.entry.y * b;
-      PlanarFace faces[2];
-      glm::dvec3 start[2];
-      const glm::vec3 origin = offset_ray_origin(v.sf.p, v.sf.ng, glm::vec3(exit3 - x));
-      const glm::dvec3 to_exit = glm::normalize(exit3 - glm::dvec3(origin)), to_entry = glm::normalize(entry3 - L);
-      RayHit hit;
-      rays->refracted += 2;
-      if (!embree_.intersect(origin, glm::vec3(to_exit), 0.0f, std::numeric_limits<float>::infinity(), &hit, true) ||
-          hit.mesh != m.mesh || !shading_.face(hit.mesh, hit.triangle, &faces[0]))
-        continue;
-      start[0] = glm::dvec3(origin) + double(hit.t) * to_exit;
-      if (!embree_.intersect(glm::vec3(L), glm::vec3(to_entry), 0.0f, std::numeric_limits<float>::infinity(), &hit, false) ||
-          hit.mesh != m.mesh || !shading_.face(hit.mesh, hit.triangle, &faces[1]))
-        continue;
-      start[1] = L + double(hit.t) * to_entry;
-      const double index[3] = {1.0, n, 1.0};
-      const int media[3] = {-1, m.material, -1}, material[2] = {m.material, m.material};
-      const bool shaded[2] = {true, true};
-      const MeshTracker tracker(embree_, shading_, v.sf.ng, &rays->refracted, true);
-      PlanarPath path;
-      if (!solve_planar_path(x, L, faces, index, 2, start, &path, nullptr, &tracker)) continue;
-      // (two seeds that reached the same path)
-      const double tol = 1e-6 * (1.0 + glm::length(path.y[0]));
-      if (std::any_of(found, found + n_found, [&](const glm::dvec3& y) { return glm::length(y - path.y[0]) <= tol; })) continue;
-      found[n_found++] = path.y[0];
-      const glm::vec3 ng[2] = {glm::vec3(path.n[0]), glm::vec3(path.n[1])};
-      (void)deposit_planar_path(v, path, material, ng, index, media, nullptr, w, film, &rays->refracted, shaded);
-    }
     }
   }
 }

@@ -377,10 +377,6 @@ class Integrator {
   };
   static constexpr size_t kMaxLaserMirrors = 16;
   std::vector<LaserMirror> mirrors_;
-  // A smooth mesh of more than kMaxPartsPerMesh triangles with vertex normals: its bounding box's centre, half
-  // diagonal, and its corners' least distance from that centre. curved_mirrors_: those that reflect the laser onto
-  // the scene off their curved surface, on their front (glTF) side (a chrome sphere); curved_refractors_: those
-  // that bound a refracting volume (a glass sphere). At most kMaxCurvedMeshes of each.
   // A ray of the laser through a sphere of radius R and index n about a centre at distance dl from the laser, in
   // their plane (x along the axis from the laser through the centre, which is the origin; y towards the side the
   // ray passes at signed distance h from the centre), refracted in and out: where it enters and leaves the sphere,
@@ -391,10 +387,10 @@ class Integrator {
     glm::dvec2 entry{0.0}, exit{0.0}, dir{0.0};
   };
   static SphereRay sphere_ray(double dl, double R, double n, double h);
-  struct CurvedMesh;
-  // Whether connect_laser_curved_refractors searches mesh m's paths to x: x and the laser outside the sphere of
-  // its search (radius m.inner).
-  bool curved_refractor_searched(const CurvedMesh& m, const glm::dvec3& x) const;
+  // A smooth mesh of more than kMaxPartsPerMesh triangles with vertex normals: its bounding box's centre, half
+  // diagonal, and its corners' least distance from that centre. curved_mirrors_: those that reflect the laser onto
+  // the scene off their curved surface, on their front (glTF) side (a chrome sphere); curved_refractors_: those
+  // that bound a refracting volume (a glass sphere). At most kMaxCurvedMeshes of each.
   struct CurvedMesh {
     uint32_t mesh = 0;
     int material = -1;
@@ -409,6 +405,9 @@ class Integrator {
     };
     std::vector<SearchTable> tables;
   };
+  // Whether connect_laser_curved_refractors searches mesh m's paths to x: x and the laser outside the sphere of
+  // its search (radius m.inner).
+  bool curved_refractor_searched(const CurvedMesh& m, const glm::dvec3& x) const;
   static constexpr size_t kMaxCurvedMeshes = 8;
   // The steps of connect_laser_curved_refractors' search over the laser's rays through a sphere (uniform in their
   // angle of incidence).
