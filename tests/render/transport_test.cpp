@@ -983,6 +983,26 @@ std::vector<MeshPathLight> sphere_mesh_paths(const scenes::Mesh& mesh, const glm
   return out;
 }
 
+// Moves the camera of a 4 x 4 view to `from`, looking at `at`, with the laser kept at the origin; the points of the
+// wall z = -d its pixels' centres see, row by row.
+std::vector<glm::dvec3> look_aside(RenderStageConfig* c, const scenes::Scene& s, const glm::dvec3& from, const glm::dvec3& at,
+                                   double d) {
+  c->camera.position_m = {from.x, from.y, from.z};
+  c->camera.look_at_m = {at.x, at.y, at.z};
+  const Camera cam(c->camera, s);
+  const glm::dvec3 to_laser = -from;
+  c->laser.offset_m = {glm::dot(to_laser, cam.right()), glm::dot(to_laser, cam.up()), -glm::dot(to_laser, cam.forward())};
+  std::vector<glm::dvec3> wall;
+  for (int py = 0; py < 4; ++py)
+    for (int px = 0; px < 4; ++px) {
+      const double p = c->camera.pixel_pitch_m;
+      const glm::dvec3 w = glm::normalize(c->camera.focal_length_m * cam.forward() + (px + 0.5 - 2) * p * cam.right() +
+                                          (2 - py - 0.5) * p * cam.up());
+      wall.push_back(from + ((-d - from.z) / w.z) * w);
+    }
+  return wall;
+}
+
 // A glass sphere (radius 0.1 m, ior 1.2, 48 rings of 96 segments with their exact normals) 0.5 m down -z, a wall
 // 0.2 m behind its centre: the camera (the laser at it) sees the wall through the sphere at psi = 0, 3 and 6
 // degrees. Three paths of the laser's light reach each wall point it sees: the pixel's own path reversed, the light
@@ -1076,11 +1096,7 @@ TEST(Transport, LaserLightRefractsThroughAGlassSphere) {
     if (T > 0) farthest = std::max(farthest, at.x);
   }
   ASSERT_LT(farthest, 0.06);
-  c.camera.position_m = {0.4, 0, 0};
-  c.camera.look_at_m = {0.1, 0, -d};
-  const Camera cam(c.camera, s);
-  const glm::dvec3 to_laser = -glm::dvec3(0.4, 0, 0);
-  c.laser.offset_m = {glm::dot(to_laser, cam.right()), glm::dot(to_laser, cam.up()), -glm::dot(to_laser, cam.forward())};
+  (void)look_aside(&c, s, {0.4, 0, 0}, {0.1, 0, -d}, d);
   const TimeAxis axis{0.0, 10e-12, 1000, 1.0};
   const TransientTile lit = Renderer(scene(false), c).transient({0, 0, 4, 4}, {0, 0, 4, 4}, axis);
   const TransientTile shadow = Renderer(s, c).transient({0, 0, 4, 4}, {0, 0, 4, 4}, axis);
@@ -1118,7 +1134,6 @@ TEST(Transport, LightBeyondAGlassSpheresFocusReachesTheWall) {
   c.laser.half_angle_rad = kPi;
   c.render.samples_per_pixel = 64;
   c.render.max_bounces = 1;
-  c.camera.position_m = {0.6, 0, 0};
   struct Case {
     double d, xw;
     size_t paths;
@@ -1127,25 +1142,18 @@ TEST(Transport, LightBeyondAGlassSpheresFocusReachesTheWall) {
   for (const Case& k : {Case{1.0, 0.1, 1}, Case{1.0, 0.3, 1}, Case{0.66, 0.02, 1}}) {
     const double d = k.d, xw = k.xw;
     const scenes::Scene s = scene(true, d);
-    c.camera.look_at_m = {xw, 0, -d};
-    const Camera cam(c.camera, s);
-    const glm::dvec3 to_laser = -glm::dvec3(0.6, 0, 0);
-    c.laser.offset_m = {glm::dot(to_laser, cam.right()), glm::dot(to_laser, cam.up()), -glm::dot(to_laser, cam.forward())};
+    const std::vector<glm::dvec3> wall = look_aside(&c, s, {0.6, 0, 0}, {xw, 0, -d}, d);
     double refracted_sum = 0, bare_sum = 0, opl_X = HUGE_VAL;
-    for (int py = 0; py < 4; ++py)
-      for (int px = 0; px < 4; ++px) {
-        const double p = c.camera.pixel_pitch_m;
-        const glm::dvec3 w = glm::normalize(c.camera.focal_length_m * cam.forward() + (px + 0.5 - 2) * p * cam.right() +
-                                            (2 - py - 0.5) * p * cam.up());
-        const glm::dvec3 P = glm::dvec3(0.6, 0, 0) + (-d / w.z) * w;
-        bare_sum += d / glm::length(P) / glm::dot(P, P);
-        const std::vector<MeshPathLight> paths = sphere_mesh_paths(s.meshes.back(), centre, radius, n, d, P);
-        ASSERT_EQ(paths.size(), k.paths) << xw;
-        for (const MeshPathLight& path : paths) {
-          refracted_sum += path.irradiance;
-          if (px == 1 && py == 1) opl_X = std::min(opl_X, path.opl);
-        }
+    for (size_t i = 0; i < wall.size(); ++i) {
+      const glm::dvec3& P = wall[i];
+      bare_sum += d / glm::length(P) / glm::dot(P, P);
+      const std::vector<MeshPathLight> paths = sphere_mesh_paths(s.meshes.back(), centre, radius, n, d, P);
+      ASSERT_EQ(paths.size(), k.paths) << xw;
+      for (const MeshPathLight& path : paths) {
+        refracted_sum += path.irradiance;
+        if (i == 5) opl_X = std::min(opl_X, path.opl);  // (pixel (1, 1))
       }
+    }
     const double expected = refracted_sum / bare_sum;
     const double cam_X = glm::length(glm::dvec3(xw, 0, -d) - glm::dvec3(0.6, 0, 0));
     const double t_direct = (std::hypot(xw, d) + cam_X) / kC, t_refracted = (opl_X + cam_X) / kC;
@@ -1193,25 +1201,14 @@ TEST(Transport, LightThroughAGlassEllipsoidReachesTheWall) {
   c.laser.half_angle_rad = kPi;
   c.render.samples_per_pixel = 64;
   c.render.max_bounces = 1;
-  c.camera.position_m = {0.6, 0, 0};
-  const double xw = 0.03;
-  c.camera.look_at_m = {xw, 0, -d};
-  const Camera cam(c.camera, s);
-  const glm::dvec3 to_laser = -glm::dvec3(0.6, 0, 0);
-  c.laser.offset_m = {glm::dot(to_laser, cam.right()), glm::dot(to_laser, cam.up()), -glm::dot(to_laser, cam.forward())};
   double refracted_sum = 0, bare_sum = 0;
   size_t paths_seen = 0;
-  for (int py = 0; py < 4; ++py)
-    for (int px = 0; px < 4; ++px) {
-      const double p = c.camera.pixel_pitch_m;
-      const glm::dvec3 w = glm::normalize(c.camera.focal_length_m * cam.forward() + (px + 0.5 - 2) * p * cam.right() +
-                                          (2 - py - 0.5) * p * cam.up());
-      const glm::dvec3 P = glm::dvec3(0.6, 0, 0) + (-d / w.z) * w;
-      bare_sum += d / glm::length(P) / glm::dot(P, P);
-      const std::vector<MeshPathLight> paths = sphere_mesh_paths(s.meshes.back(), centre, 0.1, n, d, P, 1000);
-      paths_seen = std::max(paths_seen, paths.size());
-      for (const MeshPathLight& path : paths) refracted_sum += path.irradiance;
-    }
+  for (const glm::dvec3& P : look_aside(&c, s, {0.6, 0, 0}, {0.03, 0, -d}, d)) {
+    bare_sum += d / glm::length(P) / glm::dot(P, P);
+    const std::vector<MeshPathLight> paths = sphere_mesh_paths(s.meshes.back(), centre, 0.1, n, d, P, 1000);
+    paths_seen = std::max(paths_seen, paths.size());
+    for (const MeshPathLight& path : paths) refracted_sum += path.irradiance;
+  }
   ASSERT_GE(paths_seen, 1u);
   const double expected = refracted_sum / bare_sum;
   const TimeAxis axis{0.0, 10e-12, 1000, 1.0};
