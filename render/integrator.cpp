@@ -390,17 +390,10 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
     if (refractor && curved_refractors_.size() < kMaxCurvedMeshes) {
       curved_refractors_.push_back(c);
       CurvedMesh& r = curved_refractors_.back();
-      // (uniform in the angle of incidence, its sine h / R, up to 0.6 degrees from grazing)
-      const double dl = glm::length(centre - laser_.position), n = medium_ior(mesh.material), i_max = std::acos(0.0101);
+      const double dl = glm::length(centre - laser_.position), n = medium_ior(mesh.material);
       std::vector<double> radii{inner};
       if (outer > 1.02 * inner) radii.push_back(std::sqrt(inner * outer)), radii.push_back(outer);
-      for (const double R : radii) {
-        CurvedMesh::SearchTable t;
-        t.R = R;
-        for (int i = 0; i <= kCurvedRefractorSteps; ++i)
-          t.rays.push_back(sphere_ray(dl, R, n, R * std::sin(i_max * (-1.0 + 2.0 * i / kCurvedRefractorSteps))));
-        r.tables.push_back(std::move(t));
-      }
+      for (const double R : radii) r.searches.emplace_back(dl, R, n, kCurvedRefractorSteps);
     }
   }
   ambient_on_ = ambient.any() || shading.has_emission();
@@ -1173,34 +1166,15 @@ void Integrator::connect_laser_curved_mirrors(const NeeVertex& v, double w, cons
   }
 }
 
-Integrator::SphereRay Integrator::sphere_ray(double dl, double R, double n, double h) {
-  SphereRay r;
-  r.h = h;
-  const double sin_t = h / dl, cos_t = std::sqrt(1.0 - sin_t * sin_t);
-  const glm::dvec2 d(cos_t, sin_t), e = glm::dvec2(-dl, 0.0) + (dl * cos_t - std::sqrt(std::max(0.0, R * R - h * h))) * d, ne = e / R;
-  const double ci = -glm::dot(d, ne);
-  if (!(ci > 0.01)) return r;
-  const double eta = 1.0 / n, k = 1.0 - eta * eta * (1.0 - ci * ci);
-  if (!(k > 0.0)) return r;
-  const glm::dvec2 d1 = glm::normalize(eta * d + (eta * ci - std::sqrt(k)) * ne);
-  const glm::dvec2 q = e - 2.0 * glm::dot(e, d1) * d1, nq = q / R;
-  const double co = glm::dot(d1, nq), k2 = 1.0 - n * n * (1.0 - co * co);
-  if (!(co > 0.0) || !(k2 > 1e-4)) return r;  // (total reflection, or a grazing exit)
-  r.ok = true, r.entry = e, r.exit = q, r.dir = n * d1 + (std::sqrt(k2) - n * co) * nq;
-  return r;
-}
-
 // The laser's light refracted through each smooth glass mesh of curved_refractors_ (a glass sphere) to v, along
-// every path the search finds, in and out of the mesh alone. The search: in the plane of the laser, the mesh's
-// bounding-box centre and v (where every path through a sphere lies), the rays from the laser through the sphere
-// of radius `inner` about that centre, by their angle of incidence (a table of kCurvedRefractorSteps steps, made
-// once: the plane turns about the axis from the laser through the centre; each root of the exit ray's miss of v
-// bisected 6 times: the solve's seed), each root the seed of a solve on the mesh's triangles
-// (solve_planar_path, the triangles tracked as connect_laser_shaded's). Beyond a sphere's focus its light reaches
-// a point on the other side of its axis, and around the focus along up to three paths: a walk from the straight
-// line to the laser finds at most one of them, and none where that line misses the mesh. Entry or exit within 0.6
-// degrees of grazing is left out (a transmittance below 0.04 at ior 1.5), and so are roots closer than the
-// steps (where two paths merge, at the caustic's fold).
+// every path the search finds, in and out of the mesh alone. The search (render/sphere_search.h): in the plane of
+// the laser, the mesh's bounding-box centre and v (where every path through a sphere lies; the plane turns about
+// the axis from the laser through the centre), the rays from the laser through the sphere of radius `inner` about
+// that centre whose exit passes through v, each the seed of a solve on the mesh's triangles (solve_planar_path,
+// the triangles tracked as connect_laser_shaded's). Beyond a sphere's focus its light reaches a point on the other
+// side of its axis, and around the focus along up to three paths: a walk from the straight line to the laser finds
+// at most one of them, and none where that line misses the mesh. Entry or exit within 0.6 degrees of grazing is
+// left out (a transmittance below 0.04 at ior 1.5).
 void Integrator::connect_laser_curved_refractors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const {
   const glm::dvec3 x(v.sf.p), L = laser_.position;
   for (const CurvedMesh& m : curved_refractors_) {
@@ -1216,34 +1190,14 @@ void Integrator::connect_laser_curved_refractors(const NeeVertex& v, double w, c
     b = xb > 1e-12 * (1.0 + glm::length(rel)) ? b / xb : b_any;
     const glm::dvec2 X(xa, xb);
     const double n = medium_ior(m.material);
-    // A ray's signed miss of v, where it heads towards it.
-    const auto miss = [&](const SphereRay& r, double* out) {
-      const glm::dvec2 to_x = X - r.exit;
-      if (!r.ok || !(glm::dot(r.dir, to_x) > 0.0)) return false;
-      *out = r.dir.x * to_x.y - r.dir.y * to_x.x;
-      return true;
-    };
     glm::dvec3 found[kMaxCurvedRefractorPaths];
     int n_found = 0;
-    for (const CurvedMesh::SearchTable& table : m.tables) {
-      const double R = table.R;
-      if (!(glm::length(rel) > R && dl > R)) continue;
-      double before = 0.0, cur = 0.0;
-      bool before_ok = miss(table.rays[0], &before);
-      for (size_t i = 1; i < table.rays.size() && n_found < kMaxCurvedRefractorPaths; ++i, before = cur) {
-        const bool ok = miss(table.rays[i], &cur), pair = before_ok && ok && (before < 0.0) != (cur < 0.0);
-        before_ok = ok;
-        if (!pair) continue;
-        double lo = table.rays[i - 1].h, hi = table.rays[i].h;
-        SphereRay root = table.rays[i];
-        for (int j = 0; j < 6; ++j) {
-          const double mid = 0.5 * (lo + hi);
-          const SphereRay r = sphere_ray(dl, R, n, mid);
-          double at = 0.0;
-          if (!miss(r, &at)) break;
-          root = r;
-          ((at < 0.0) == (before < 0.0) ? lo : hi) = mid;
-        }
+    for (const SphereSearch& search : m.searches) {
+      if (!(glm::length(rel) > search.radius() && dl > search.radius())) continue;
+      SphereRay seeds[kMaxCurvedRefractorSeeds];
+      const int n_seeds = search.seeds(X, seeds, kMaxCurvedRefractorSeeds);
+      for (int i = 0; i < n_seeds && n_found < kMaxCurvedRefractorPaths; ++i) {
+        const SphereRay& root = seeds[i];
         // The seed's triangles: the exit's seen from v, the entry's from the laser.
         const glm::dvec3 exit3 = m.centre + root.exit.x * a + root.exit.y * b, entry3 = m.centre + root.entry.x * a + root.entry.y * b;
         PlanarFace faces[2];

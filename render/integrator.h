@@ -18,6 +18,7 @@
 #include "guide.h"
 #include "lights.h"
 #include "renderer.h"
+#include "sphere_search.h"
 #include "surface.h"
 
 namespace spadgen::render {
@@ -377,16 +378,6 @@ class Integrator {
   };
   static constexpr size_t kMaxLaserMirrors = 16;
   std::vector<LaserMirror> mirrors_;
-  // A ray of the laser through a sphere of radius R and index n about a centre at distance dl from the laser, in
-  // their plane (x along the axis from the laser through the centre, which is the origin; y towards the side the
-  // ray passes at signed distance h from the centre), refracted in and out: where it enters and leaves the sphere,
-  // and its direction after. ok: false where it meets the sphere within 0.6 degrees of grazing, or leaves it so.
-  struct SphereRay {
-    bool ok = false;
-    double h = 0.0;
-    glm::dvec2 entry{0.0}, exit{0.0}, dir{0.0};
-  };
-  static SphereRay sphere_ray(double dl, double R, double n, double h);
   // A smooth mesh of more than kMaxPartsPerMesh triangles with vertex normals: its bounding box's centre, half
   // diagonal, and its corners' least distance from that centre. curved_mirrors_: those that reflect the laser onto
   // the scene off their curved surface, on their front (glTF) side (a chrome sphere); curved_refractors_: those
@@ -396,14 +387,10 @@ class Integrator {
     int material = -1;
     glm::dvec3 centre{0.0};
     double radius = 0.0, inner = 0.0;
-    // (curved_refractors_) the search's tables: the laser's rays through a sphere of radius R about the centre, at
-    // kCurvedRefractorSteps + 1 angles of incidence from -89.4 to 89.4 degrees. R = inner; where the mesh is not a
-    // sphere (its farthest corner more than 2 % farther than its nearest), also their geometric mean and the farthest.
-    struct SearchTable {
-      double R = 0.0;
-      std::vector<SphereRay> rays;
-    };
-    std::vector<SearchTable> tables;
+    // (curved_refractors_) the searches of its paths (render/sphere_search.h), through the sphere of radius inner;
+    // where the mesh is not a sphere (its farthest corner more than 2 % farther than its nearest), also through
+    // those of their geometric mean and of the farthest.
+    std::vector<SphereSearch> searches;
   };
   // Whether connect_laser_curved_refractors searches mesh m's paths to x: x and the laser outside the sphere of
   // its search (radius m.inner).
@@ -413,6 +400,7 @@ class Integrator {
   // angle of incidence).
   static constexpr int kCurvedRefractorSteps = 64;
   static constexpr int kMaxCurvedRefractorPaths = 8;  // the paths connect_laser_curved_refractors takes per mesh
+  static constexpr int kMaxCurvedRefractorSeeds = 16;  // the seeds it takes of each search
   std::vector<CurvedMesh> curved_mirrors_, curved_refractors_;
   const Ambient& ambient_;
   bool transmission_ = false;
