@@ -516,8 +516,15 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   const PixelRect region = rect_of(meta.at("light").at("crop_in_sensor"));
   if (region != light_region(img, cfg.camera.width_px, cfg.camera.height_px))
     throw Error((src / "metadata.json").string() + ": light.crop_in_sensor does not match the run's image");
-  // The light as the run stored it (its outputs.storage), whatever this call's storage is.
-  SavedLight light(src.string(), region, axis, source.config.outputs.storage);
+  // The light as the run stored it, whatever this call's storage is: the format metadata.json records for it (a
+  // sense's light is its source's, linked, whatever the sense's own outputs.storage), else the run's storage.
+  Storage light_storage = source.config.outputs.storage;
+  if (const json* files = meta.contains("storage") && meta.at("storage").is_object() && meta.at("storage").contains("files")
+                              ? &meta.at("storage").at("files") : nullptr;
+      files && files->is_object())
+    for (const auto& [name, storage] : {std::pair{"light/ranges.npy", Storage::Npy}, std::pair{"light/ranges.zarr", Storage::Zarr}})
+      if (files->contains(name)) light_storage = storage;
+  SavedLight light(src.string(), region, axis, light_storage);
   // The renderer applied a fill factor to each row; another pixel design rescales by this call's over it,
   // row by row (empty: the same design).
   const std::vector<double> now = sensor.row_fill_factor();

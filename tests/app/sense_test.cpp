@@ -228,6 +228,18 @@ TEST_F(App, SenseReadsAZarrRunsLightAndWritesEitherStorage) {
   // ... so the folder is a Zarr group of them, as the run's is (it had light/.zgroup only)
   EXPECT_EQ(slurp(dir_ / "sense_npy/.zgroup"), slurp(dir_ / "run/.zgroup"));
   EXPECT_NE(std::find(meta["files"].begin(), meta["files"].end(), ".zgroup"), meta["files"].end());
+  // A sense of that sense reads the light in the format it is stored in (Zarr), not the folder's own stacks'
+  // (.npy): the same files again; and the other way, a .npy run's light in a folder of Zarr stacks.
+  r = sh("sense " + (dir_ / "sense_npy").string() + " -q -o " + (dir_ / "again").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  for (const char* f : {"counts.npy", "detection_rate.npy", "frames.npy"})
+    EXPECT_TRUE(slurp(dir_ / "npy" / f) == slurp(dir_ / "again" / f)) << f;
+  r = sh("sense " + (dir_ / "npy").string() + " -q --set outputs.storage=zarr -o " + (dir_ / "sense_zarr").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  r = sh("sense " + (dir_ / "sense_zarr").string() + " -q --set outputs.storage=npy -o " + (dir_ / "back").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  for (const char* f : {"counts.npy", "detection_rate.npy", "frames.npy"})
+    EXPECT_TRUE(slurp(dir_ / "npy" / f) == slurp(dir_ / "back" / f)) << f;
 }
 
 // The dataset sample docs/outputs.md recommends (Zarr, the saved light, no detection rate) gives the
