@@ -190,7 +190,7 @@ int main(int argc, char** argv) {
   rec_cmd->add_option("run_dir", rec.run_dir, "run folder")->required()->check(kExistingFolder);
   CLI::Option* rec_detector = rec_cmd->add_option("--detector", rec.detector, "edges (multi-scale rising and falling edges, default) or paper (the paper's virtual window)")
       ->check(CLI::IsMember({"edges", "paper"}));
-  rec_cmd->add_option("-o,--out", rec.out, "output file (default RUN_DIR/detections_<detector>.exr, or RUN_DIR/hdr.exr for a 2D run; with --noise-free "
+  rec_cmd->add_option("-o,--out", rec.out, "output file, its name ending in .exr (default RUN_DIR/detections_<detector>.exr, or RUN_DIR/hdr.exr for a 2D run; with --noise-free "
                      "detections_<detector>_noise_free.exr, hdr_noise_free.exr)")->check(kNamed);
   rec_cmd->add_flag("--noise-free", rec.noise_free, "from the noise-free rates (detection_rate) instead of the sampled counts");
   CLI::Option* rec_max = rec_cmd->add_option("--max-detections", rec.max_detections, "detection slots per pixel (the strongest are kept)")

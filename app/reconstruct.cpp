@@ -246,6 +246,11 @@ void check_writable(const std::string& file, const RunFolder& run, const std::st
                   (head.compare(0, 4, kMagic) != 0 ? std::string("not an OpenEXR file") : "an OpenEXR file without its spadgen_reconstruct attribute") +
                   "), which writing the output would replace; expected a new file or an earlier output (-o)");
   }
+  // An OpenEXR image under another name: evaluate --detections reads a .npy name as a NumPy array of detections
+  // (-o det.npy wrote an EXR, exit 0, which evaluate then refused).
+  if (fs::path(file).extension() != ".exr")
+    throw Error(file + ": reconstruct writes an OpenEXR image, which evaluate --detections tells by its name (a .npy name "
+                "is read as a NumPy array of detections); expected a name ending in .exr (-o)");
   if (::access(dir.c_str(), W_OK) != 0)
     throw Error(file + ": cannot write into " + dir.string() + ": " + std::strerror(errno));
   // the temporary file a reconstruct killed while it wrote this one left (stayed for ever beside the run's files):

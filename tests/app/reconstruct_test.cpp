@@ -450,6 +450,25 @@ TEST_F(Reconstruct, AnOutputAtTheRunsTopHasItsOwnNameAndEvaluateChecksIt) {
   EXPECT_EQ(m["detections_source"]["made_by"], nlohmann::json({{"detector", "edges"}, {"noise_free", true}}));
 }
 
+// reconstruct -o takes a name ending in .exr only: evaluate --detections reads a .npy name as a NumPy array (-o
+// det.npy wrote an EXR there, exit 0, which evaluate refused); a 2D run's hdr.exr alike.
+TEST_F(Reconstruct, AnOutputNotNamedExrIsRefused) {
+  const fs::path run = dir_ / "run";
+  ASSERT_EQ(sh("run " + kScenes + "flat_target.json --set camera.crop=[502,240,8,8] --set render.samples_per_pixel=1 -q -o " +
+               run.string()).code, 0);
+  for (const char* name : {"det.npy", "det", "det.EXR"}) {
+    const Result r = sh("reconstruct " + run.string() + " -q -o " + (dir_ / name).string());
+    EXPECT_EQ(r.code, 1) << name;
+    EXPECT_THAT(r.output, HasSubstr((dir_ / name).string() + ": reconstruct writes an OpenEXR image, which evaluate --detections "
+                                    "tells by its name (a .npy name is read as a NumPy array of detections); expected a name "
+                                    "ending in .exr (-o)"));
+    EXPECT_FALSE(fs::exists(dir_ / name)) << name;
+  }
+  const Result r = sh("reconstruct " + run.string() + " -q -o " + (dir_ / "det.exr").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(sh("evaluate " + run.string() + " -q --detections " + (dir_ / "det.exr").string() + " -o " + (dir_ / "e").string()).code, 0);
+}
+
 // A dataset sample scored with detections made from another sample (other parameters: the same scene file and
 // crop, so the scene hash and crop agreed and the source was reported checked) is refused; its own detections
 // and a realisation's are scored.
