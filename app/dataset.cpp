@@ -866,7 +866,7 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
     if (const std::string note = evaluation_status(dir.string()); !note.empty())
       std::fprintf(stderr, "spadgen: dataset: %s", note.c_str());
   if (!failed.empty())
-    throw Error("dataset run: " + std::to_string(failed.size()) + " samples failed (" + datasets::ranges_text(failed) +
+    throw Error("dataset run: " + std::to_string(failed.size()) + (failed.size() == 1 ? " sample failed (" : " samples failed (") + datasets::ranges_text(failed) +
                 "); their errors are in " + (dir / "failed").string() + " and `spadgen dataset status " + dir.string() + "`");
 }
 }  // namespace

@@ -167,7 +167,11 @@ std::unique_ptr<SampleClaim> DatasetFolder::try_claim(const Sample& s) const {
 void DatasetFolder::claim() const {
   std::error_code ec;
   fs::create_directories(dir_, ec);
-  if (ec) throw Error("cannot create the dataset folder " + dir_.string() + ": " + ec.message());
+  if (ec)
+    throw Error("cannot create the dataset folder " + dir_.string() + ": " +
+                (ec == std::errc::not_a_directory || (ec == std::errc::file_exists && !fs::is_directory(dir_))
+                     ? std::string("a file of that name (or of a folder above it) exists; expected a folder or a new name (-o)")
+                     : ec.message()));
   const ojson wanted = record();
   {
     // Checked and written as one step: two datasets started at once on a new folder both found it empty
@@ -878,8 +882,9 @@ std::string dataset_card(const DatasetFolder& folder, const CardTally& tally) {
   o << "Sample i is the folder `samples/<i, 6 digits>/` (a complete spadgen run folder: `metadata.json` lists its files, "
        "units and settings, and its `dataset` section the sample's parameters and seeds)";
   if (spec.repeats > 1)
-    o << "; its realisations 1 to " << spec.repeats - 1 << " of the temporal noise are `samples/<i>_r01/`, ... (the same "
-      << "light, noise seeds S + 1, ...)";
+    o << (spec.repeats == 2 ? std::string("; its realisation 1 of the temporal noise is `samples/<i>_r01/` (the same light, noise seed S + 1)")
+                            : "; its realisations 1 to " + std::to_string(spec.repeats - 1) +
+                                  " of the temporal noise are `samples/<i>_r01/`, ... (the same light, noise seeds S + 1, ...)");
   o << ". `index.jsonl` and `index.csv` have one row per sample: parameters, seeds, status, files, bytes, a summary of "
        "its ground truth and its run's warnings.\n\n";
   if (!tally.warnings.groups.empty()) {

@@ -904,6 +904,21 @@ TEST_F(Dataset, ASamplesWarningsAreNamedListedAndKept) {
   EXPECT_THAT(card, HasSubstr("## Warnings\n"));
   EXPECT_THAT(card, HasSubstr("\n- 4 samples (0, 1, 2, 3): " + warning + "\n"));
   EXPECT_THAT(card, HasSubstr("\n- 4 samples (0, 1, 2, 3): sensor.gate: the gate is tabulated"));
+  // (two realisations: the one besides the sample's own named alone, not "realisations 1 to 1")
+  EXPECT_THAT(card, HasSubstr("; its realisation 1 of the temporal noise is `samples/<i>_r01/` (the same light, noise seed S + 1)."));
+}
+
+// -o naming a file: said so, not "Not a directory"; the file kept.
+TEST_F(Dataset, AnOutputThatIsAFileIsNamed) {
+  write(dir_ / "d.json", small_dataset(2));
+  write(dir_ / "afile", "mine");
+  for (const fs::path& out : {dir_ / "afile", dir_ / "afile/sub"}) {
+    const Result r = sh("dataset run " + (dir_ / "d.json").string() + " -o " + out.string() + " -q");
+    EXPECT_EQ(r.code, 1) << out;
+    EXPECT_THAT(r.output, HasSubstr("cannot create the dataset folder " + out.string() + ": a file of that name (or of a folder "
+                                    "above it) exists; expected a folder or a new name (-o)")) << out;
+  }
+  EXPECT_EQ(slurp(dir_ / "afile"), "mine");
 }
 
 // A sample whose estimate the sensor refuses (here transients in the intensity mode without a window) is

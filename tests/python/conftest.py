@@ -124,5 +124,5 @@ def dataset_dir(spadgen_bin, tmp_path_factory):
     r = subprocess.run([spadgen_bin, "dataset", "run", str(root / "d.json"), "-o", str(out), "-q"],
                        capture_output=True, text=True)
     # The failing sample makes the run exit 1 after generating the others.
-    assert r.returncode == 1 and "1 samples failed (2)" in r.stderr, r.stderr
+    assert r.returncode == 1 and "1 sample failed (2)" in r.stderr, r.stderr
     return out
