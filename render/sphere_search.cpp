@@ -30,21 +30,24 @@ SphereSearch::SphereSearch(double dl, double R, double n, int steps) : dl_(dl), 
 
 int SphereSearch::seeds(const glm::dvec2& X, SphereRay* out, int max) const {
   int count = 0;
-  // A ray's signed miss of X, where it heads towards it.
+  // A ray's signed miss of X: the angle from its direction to X seen from its exit, in (-pi, pi] (continuous where
+  // the exit passes X: a wall touching the sphere, the ray's exit beside X).
   const auto miss = [&](const SphereRay& r, double* m) {
+    if (!r.ok) return false;
     const glm::dvec2 to_x = X - r.exit;
-    if (!r.ok || !(glm::dot(r.dir, to_x) > 0.0)) return false;
-    *m = r.dir.x * to_x.y - r.dir.y * to_x.x;
+    *m = std::atan2(r.dir.x * to_x.y - r.dir.y * to_x.x, glm::dot(r.dir, to_x));
     return true;
   };
-  // The root bracketed by rays lo_r (miss lo_miss) and hi_r (the other sign), bisected 6 times.
+  // A root between misses a and b of opposite signs: the angle passes through 0, not through pi.
+  const auto crosses = [](double a, double b) { return (a < 0.0) != (b < 0.0) && std::abs(a - b) < 3.141592653589793; };
+  // The root bracketed by rays lo_r (miss lo_miss) and hi_r (the other sign), bisected 6 times in the angle of incidence.
   const auto root = [&](const SphereRay& lo_r, double lo_miss, const SphereRay& hi_r) {
     if (count >= max) return;
-    double lo = lo_r.h, hi = hi_r.h;
+    double lo = std::asin(std::clamp(lo_r.h / R_, -1.0, 1.0)), hi = std::asin(std::clamp(hi_r.h / R_, -1.0, 1.0));  // (in the angle of incidence)
     SphereRay best = hi_r;
     for (int j = 0; j < 6; ++j) {
       const double mid = 0.5 * (lo + hi);
-      const SphereRay r = sphere_ray(dl_, R_, n_, mid);
+      const SphereRay r = sphere_ray(dl_, R_, n_, R_ * std::sin(mid));
       double at = 0.0;
       if (!miss(r, &at)) break;
       best = r;
@@ -85,7 +88,7 @@ int SphereSearch::seeds(const glm::dvec2& X, SphereRay* out, int max) const {
   bool ok_b = false, ok_c = !rays_.empty() && miss(rays_[0], &m_c);
   for (size_t i = 1; i < rays_.size() && count < max; ++i) {
     const bool ok_d = miss(rays_[i], &m_d);
-    if (ok_c && ok_d && (m_c < 0.0) != (m_d < 0.0))
+    if (ok_c && ok_d && crosses(m_c, m_d))
       root(rays_[i - 1], m_c, rays_[i]);
     else if (ok_b && ok_c && ok_d && (m_b < 0.0) == (m_c < 0.0) && (m_c < 0.0) == (m_d < 0.0) &&
              std::abs(m_c) < std::abs(m_b) && std::abs(m_c) <= std::abs(m_d))

@@ -10,6 +10,8 @@
 namespace spadgen::render {
 namespace {
 
+constexpr double kPi = 3.141592653589793;
+
 // The laser at (-dl, 0) (the sphere's centre at the origin, radius R, index n), its ray in direction angle t
 // from the axis, refracted in and out by Snell's law in vector form: where it leaves and its direction after;
 // false where it misses the sphere or is totally reflected.
@@ -31,20 +33,21 @@ bool trace(double dl, double R, double n, double t, glm::dvec2* exit, glm::dvec2
   return refract(w1, q / R, n, dir) && (*exit = q, true);
 }
 
-// The rays through the point X, by a scan of 40,000 directions: the sines of incidence h / R of the sign changes
-// of the exit ray's miss of X, within 0.6 degrees of grazing left out (as the search does).
+// The rays through the point X, by a scan of 40,000 angles of incidence up to 0.6 degrees from grazing (as the
+// search's): the sines of incidence h / R where X passes from one side of the exit ray to the other ahead of its
+// exit (the angle from the ray to X passing through 0, not through pi).
 std::vector<double> scan_roots(double dl, double R, double n, const glm::dvec2& X) {
   std::vector<double> roots;
-  const double t_max = std::asin(R / dl);
-  double prev = NAN, prev_h = NAN;
+  const double i_max = std::acos(0.0101);
+  double prev = NAN, prev_s = NAN;
   for (int i = 0; i <= 40000; ++i) {
-    const double t = t_max * (-1.0 + 2.0 * i / 40000);
+    const double s = std::sin(i_max * (-1.0 + 2.0 * i / 40000));
     glm::dvec2 q, d;
     double f = NAN;
-    const double h = dl * std::sin(t), ci = std::sqrt(std::max(0.0, 1.0 - h * h / (R * R)));
-    if (ci > 0.0101 && trace(dl, R, n, t, &q, &d) && glm::dot(d, X - q) > 0.0) f = d.x * (X - q).y - d.y * (X - q).x;
-    if (std::isfinite(prev) && std::isfinite(f) && (prev < 0.0) != (f < 0.0)) roots.push_back(0.5 * (prev_h + h) / R);
-    prev = f, prev_h = h;
+    if (trace(dl, R, n, std::asin(s * R / dl), &q, &d)) f = std::atan2(d.x * (X - q).y - d.y * (X - q).x, glm::dot(d, X - q));
+    if (std::isfinite(prev) && std::isfinite(f) && (prev < 0.0) != (f < 0.0) && std::abs(f - prev) < kPi)
+      roots.push_back(0.5 * (prev_s + s));
+    prev = f, prev_s = s;
   }
   return roots;
 }
@@ -60,10 +63,12 @@ TEST(SphereSearch, SphereRayIsSnellsLaw) {
   }
 }
 
-// Walls behind an ior 1.5 sphere (radius 0.1 m, the laser 0.5 m from its centre) at 0.1 to 0.3 m from its centre:
+// Walls behind an ior 1.5 sphere (radius 0.1 m, the laser 0.5 m from its centre) at 0.1 to 0.3 m from its centre
+// (the first touching it, as a floor a ball rests on: near the contact a path's exit passes beside the point, and
+// a miss defined only ahead of the exit lost the path there):
 // around the focus (0.15 m) and beyond it, up to three paths reach a point, two of them merging at the caustic's
-// fold (the ring where the light's landing turns back). On 300 points of each wall up to 32 mm off the axis, and on
-// 100 within 40 um inside each fold's ring (where both merging paths lie within one of the search's 64 steps at
+// fold (the ring where the light's landing turns back). On 200 points of each wall up to 32 mm off the axis, and on
+// 60 within 40 um inside each fold's ring (where both merging paths lie within one of the search's 64 steps at
 // 0.615 and 0.645 m), the search's seeds against the scan's paths: as many, each within 1 / 32 of a step (of 2.8
 // degrees of incidence). Without the fold's search, 2 paths of 3 are missed on the rings.
 TEST(SphereSearch, EveryPathAScanFindsIsSeeded) {
@@ -72,7 +77,7 @@ TEST(SphereSearch, EveryPathAScanFindsIsSeeded) {
   const SphereSearch search(dl, R, n, steps);
   const double step = 2.0 * std::acos(0.0101) / steps;
   int points = 0, fold_points = 0;
-  for (const double A : {0.115, 0.13, 0.145, 0.16, 0.2, 0.3}) {
+  for (const double A : {0.1, 0.115, 0.13, 0.145, 0.16, 0.2, 0.3}) {
     // The fold's ring on this wall: the farthest landing of the rays on the side of positive h.
     double ring = 0.0;
     for (int i = 1; i < 20000; ++i) {
@@ -96,7 +101,7 @@ TEST(SphereSearch, EveryPathAScanFindsIsSeeded) {
       if (rho < ring && roots.size() == 3 && std::abs(roots[2] - roots[1]) < std::sin(step)) ++fold_points;
     }
   }
-  EXPECT_EQ(points, 6 * 260);
+  EXPECT_EQ(points, 7 * 260);
   EXPECT_GE(fold_points, 150);  // (the fold's points where both merging paths are within one step)
 }
 
