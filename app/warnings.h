@@ -84,9 +84,9 @@ inline constexpr double kWarnSpotPaths = 16.0;
 // mm at 64 m, which steps over the back face of a plate about as thin.
 inline constexpr double kWarnCoarseVerticesM = 1024.0;
 inline constexpr double kWarnTransmissiveFromCameraM = 64.0;
-// With scene given: a used material bounding a refracting volume this rough or rougher, whose faces the laser's
-// connections cross as smooth ones (docs/render.md, "Refracted laser connections"): the error measured behind a
-// 3 mm plate, +0.6 % to +3 % at this roughness, -0.2 % at 0.05.
+// With scene given: a used material bounding a curved refracting volume (vertex normals) this rough or rougher,
+// whose faces the laser's connections cross as smooth ones (docs/render.md, "Refracted laser connections"): the
+// error of so crossing a 3 mm plate's faces, +0.6 % to +3 % at this roughness.
 inline constexpr float kWarnRoughRefractor = 0.2f;
 std::vector<std::string> laser_warnings(const RunConfig& c, const render::Camera& camera,
                                         const scenes::Scene* scene = nullptr);

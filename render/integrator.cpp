@@ -671,9 +671,9 @@ inline void Integrator::deposit_laser(const NeeVertex& v, double value, double o
 // laser (layer k), rho / sin(theta_L) = sum_j d_j n_k / (n_j cos theta_j) =: A and drho / dtheta_L =
 // n_k cos(theta_L) sum_j d_j / (n_j cos^3 theta_j) =: B, dOmega / dA = 1 / (A B cos theta_0) (1 / r^2
 // without interfaces). The path found is traced: it must cross the same surfaces, else (an edge of the
-// plate between) the straight connection is used. Rough interfaces are crossed as smooth ones (their
-// lobe's blur of the laser's direction is left out, as in the straight connection): behind a 2 mm slab
-// the light is 1.007 of the rough faces' at roughness 0.15, 1.036 at 0.3, 1.247 at 0.5 (docs/render.md).
+// plate between) the straight connection is used. Rough interfaces up to roughness 0.15 are crossed as smooth
+// ones (their lobe's blur of the laser's direction is left out): behind a 2 mm slab the light is 1.007 of the
+// rough faces' at 0.15 (docs/render.md); rougher flat ones are connect_laser_rough's.
 bool Integrator::connect_laser_refracted(const NeeVertex& v, const LaserRay& lr, const Crossings& cx, double w,
                                          const PixelFilm& film, RayCounts* rays, bool echoes, double p_guess) const {
   const glm::dvec3 x(v.sf.p), L = laser_.position;
@@ -822,6 +822,145 @@ bool Integrator::connect_laser_along(const NeeVertex& v, const RefractedLayers& 
   const double value = double(v.beta.x) * f.x * t.x * intensity * g * w;
   deposit_laser(v, value, v.opl + opl, film, n > ly.k + 1);
   return true;
+}
+
+// The laser seen from v through rough refracting planar faces (a frosted plate: every face the straight walk
+// crossed a volume's interface with a GGX lobe of alpha at least kRoughCrossingAlpha, at most kMaxRoughFaces of
+// them). The light's paths form a 2k-dimensional integral over the points y_j where they cross the faces, of
+// f_v G(v, y_1) prod_j f_j G(y_j, y_j+1) I (f_j the faces' rough transmission, Walter et al. 2007; G the
+// geometry terms, the laser's without a cosine). The estimate: one microfacet normal m_j per face drawn with
+// density D(m_j) (m_j . n_j) (a hash of the vertex and the face, as the echoes'), the path on which Snell's law
+// holds about each m_j solved (solve_planar_path, the faces shaded with m_j), and its integrand over
+// |det dC / dy| prod_j D(m_j): C the tangential components of the paths' half vectors (n_in w_in + n_out w_out,
+// normalised) in each face's basis, whose density in them is D (the change of variables from the points to
+// the normals; C's Jacobian by central differences). Each f_j holds its D(m_j), which cancels: the estimate's
+// spread comes from the Fresnel, shadowing and geometry factors only, at any roughness (specular manifold
+// sampling with offset normals, Zeltner et al. 2020, with one solve per draw). Nothing is deposited where the
+// drawn normals admit no path across the same faces; a second path for the same normals is not sought.
+// Unbiased where that path is unique; the echoes between rough faces are not connected (the camera paths' through
+// their lobes).
+void Integrator::connect_laser_rough(const NeeVertex& v, const Crossings& cx, double w, const PixelFilm& film, RayCounts* rays) const {
+  const Crossings::Crossing* cr = cx.slots.c;
+  const int k = cx.n;
+  const glm::dvec3 x(v.sf.p), L = laser_.position;
+  PlanarFace faces[kMaxRoughFaces];
+  glm::dvec3 start[kMaxRoughFaces], tb[kMaxRoughFaces][2];
+  double index[kMaxRoughFaces + 1], D_prod = 1.0;
+  int media[kMaxRoughFaces + 1];
+  media[0] = cx.medium0;
+  for (int j = 0; j < k; ++j) {
+    const glm::dvec3 nj(cr[j].ng);
+    make_basis(nj, &tb[j][0], &tb[j][1]);
+    // The microfacet normal: density D(m) (m . n) (tan^2 theta = alpha^2 u / (1 - u)).
+    const double a = double(cr[j].mp.alpha), u = rough_uniform(v.sf.p, j, 0), phi = 2.0 * kPi * rough_uniform(v.sf.p, j, 1);
+    const double tan2 = a * a * u / (1.0 - u), c = 1.0 / std::sqrt(1.0 + tan2), s = c * std::sqrt(tan2);
+    const glm::dvec3 m = s * std::cos(phi) * tb[j][0] + s * std::sin(phi) * tb[j][1] + c * nj;
+    D_prod *= double(ggx_d(cr[j].mp.alpha, float(c), float(s * s)));
+    faces[j] = PlanarFace{cr[j].p, nj};
+    faces[j].shaded = true, faces[j].m = m;
+    start[j] = cr[j].p;
+    media[j + 1] = cr[j].medium;
+  }
+  if (!(D_prod > 0.0)) return;
+  for (int s = 0; s <= k; ++s) index[s] = medium_ior(media[s]);
+  PlanarPath path;
+  if (!solve_planar_path(x, L, faces, index, k, start, &path)) return;
+  const double intensity = laser_.intensity_towards(-path.d[k]);
+  if (!(intensity > 0.0)) return;
+  const glm::vec3 wi(path.d[0]);
+  if (!v.counted(wi)) return;
+  const Spec f = v.bsdf.eval_cos(wi);
+  if (!(f.x > 0.0f)) return;
+  // Each segment must meet its face first (material and plane), the last one nothing; each face's BSDF there.
+  double value = double(f.x), opl = 0.0;
+  glm::vec3 q = v.sf.p, qn = v.sf.ng;
+  for (int s = 0; s <= k; ++s) {
+    const glm::vec3 ds(path.d[s]);
+    const glm::vec3 start_s = offset_ray_origin(q, qn, ds);
+    ++rays->refracted;
+    RayHit hit;
+    const float reach = s < k ? float(path.len[s] * 1.01 + 1e-4) : float(path.len[s] * (1.0 - 1e-6));
+    const bool found = embree_.intersect(start_s, ds, 0.0f, reach, &hit, true);
+    if (s < k) {
+      if (!found) return;
+      const Surface sf = shading_.surface(hit);
+      if (sf.material != cr[s].material || std::fabs(glm::dot(sf.ng, cr[s].ng)) < 1.0f - 1e-6f ||
+          std::fabs(glm::dot(glm::dvec3(cr[s].ng), glm::dvec3(sf.p) - path.y[s])) > 1e-5 * (1.0 + glm::length(path.y[s])))
+        return;
+      const glm::vec3 wo = -ds;
+      const Bsdf b(shading_.material_at(sf, hit), sf.ns, sf.ng, wo, glm::dot(wo, sf.ng) > 0.0f);
+      value *= double(b.eval_cos(glm::vec3(path.d[s + 1])).x) * std::fabs(glm::dot(glm::dvec3(wo), glm::dvec3(sf.ns)));
+      q = sf.p, qn = sf.ng;
+    } else if (found) {
+      return;  // blocked (or another transmissive surface on the way: not this connection's)
+    }
+    if (media[s] >= 0) {
+      const ResolvedMaterial& rm = shading_.material(media[s]);
+      if (rm.absorbing) value *= double(std::exp(-rm.sigma.x * float(path.len[s])));
+    }
+    value /= path.len[s] * path.len[s];
+    opl += index[s] * path.len[s];
+  }
+  if (!(value > 0.0)) return;
+  // C's Jacobian in the points' coordinates along each face's basis, by central differences.
+  const auto half_vectors = [&](const glm::dvec3* y, double* C) {
+    for (int j = 0; j < k; ++j) {
+      const glm::dvec3 to_v = glm::normalize((j == 0 ? x : y[j - 1]) - y[j]), to_l = glm::normalize((j == k - 1 ? L : y[j + 1]) - y[j]);
+      glm::dvec3 h = glm::normalize(index[j] * to_v + index[j + 1] * to_l);
+      if (glm::dot(h, glm::dvec3(cr[j].ng)) < 0.0) h = -h;
+      C[2 * j] = glm::dot(h, tb[j][0]), C[2 * j + 1] = glm::dot(h, tb[j][1]);
+    }
+  };
+  double J[2 * kMaxRoughFaces][2 * kMaxRoughFaces];
+  glm::dvec3 y[kMaxRoughFaces];
+  std::copy_n(path.y, k, y);
+  for (int j = 0; j < k; ++j)
+    for (int e = 0; e < 2; ++e) {
+      const double eps = 1e-6 * (path.len[j] + path.len[j + 1]);
+      double Cp[2 * kMaxRoughFaces], Cm[2 * kMaxRoughFaces];
+      y[j] = path.y[j] + eps * tb[j][e];
+      half_vectors(y, Cp);
+      y[j] = path.y[j] - eps * tb[j][e];
+      half_vectors(y, Cm);
+      y[j] = path.y[j];
+      for (int i = 0; i < 2 * k; ++i) J[i][2 * j + e] = (Cp[i] - Cm[i]) / (2.0 * eps);
+    }
+  double det = 1.0;  // (Gaussian elimination, partial pivoting)
+  for (int c = 0; c < 2 * k; ++c) {
+    int p = c;
+    for (int r = c + 1; r < 2 * k; ++r)
+      if (std::fabs(J[r][c]) > std::fabs(J[p][c])) p = r;
+    if (!(std::fabs(J[p][c]) > 0.0)) return;
+    if (p != c) std::swap(J[p], J[c]), det = -det;
+    det *= J[c][c];
+    for (int r = c + 1; r < 2 * k; ++r) {
+      const double g = J[r][c] / J[c][c];
+      for (int i = c; i < 2 * k; ++i) J[r][i] -= g * J[c][i];
+    }
+  }
+  value *= intensity / (std::fabs(det) * D_prod);
+  if (!std::isfinite(value)) return;
+  deposit_laser(v, double(v.beta.x) * value * w, v.opl + opl, film, false);
+}
+
+// Whether connect_laser_rough takes the straight walk's crossings: each the interface of a volume with a GGX lobe
+// (alpha at least kRoughCrossingAlpha), at most kMaxRoughFaces of them.
+bool Integrator::rough_crossings(const Crossings& cx) const {
+  if (!(cx.n >= 1 && cx.n <= kMaxRoughFaces)) return false;
+  for (int j = 0; j < cx.n; ++j) {
+    const MaterialPoint& mp = cx.slots.c[j].mp;
+    if (mp.thin_walled || !(mp.alpha >= kRoughCrossingAlpha) || !(mp.transmission > 0.0f) || !(mp.metallic < 1.0f)) return false;
+  }
+  return true;
+}
+
+double Integrator::rough_uniform(const glm::vec3& p, int face, int which) const {
+  uint32_t x, y, z;
+  std::memcpy(&x, &p.x, 4), std::memcpy(&y, &p.y, 4), std::memcpy(&z, &p.z, 4);
+  uint64_t hash = mix64(config_.light_seed ^ 0x726f756768726f75ull);  // "roughrou"
+  hash = mix64(hash ^ (uint64_t(x) << 32 | y));
+  hash = mix64(hash ^ (uint64_t(z) << 32 | uint64_t(uint32_t(face)) << 16 | uint32_t(which)));
+  return double(hash >> 11) * 0x1.0p-53;
 }
 
 // The laser seen from v through planar faces that are not all parallel: the path that obeys Snell's law at
@@ -1259,6 +1398,10 @@ inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, co
     tr = shadow_transmittance(lr.origin, wi, float(r), v.shadow_medium_towards(wi), &extra, &rays->laser, first, &cx);
     if (edges_ && v.medium >= 0) connect_laser_edges(v, lr, cx, w, film, rays);
     if (cx.blocked) return;
+    if (cx.refracting && cx.planar && rough_crossings(cx)) {
+      connect_laser_rough(v, cx, w, film, rays);
+      return;
+    }
     if (cx.refracting && cx.planar &&
         (cx.parallel ? connect_laser_refracted(v, lr, cx, w, film, rays, true) : connect_laser_planar(v, cx, w, film, rays, true)))
       return;
