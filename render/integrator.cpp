@@ -730,7 +730,7 @@ bool Integrator::connect_laser_refracted(const NeeVertex& v, const LaserRay& lr,
       const double r_ab = double(interface_reflectance(cr[b].mp, float(cs[b]), ly.media[b] != cr[b].material).x) *
                           double(interface_reflectance(cr[a].mp, float(cs[a + 1]), ly.media[a + 1] != cr[a].material).x);
       const double q = std::min(1.0, r_ab / kEchoTraced);
-      if (!(q > 0.0) || (q < 1.0 && echo_uniform(v.sf.p, a, b) >= q)) continue;
+      if (!(q > 0.0) || (q < 1.0 && vertex_uniform(v.sf.p, kEchoSalt, a, b) >= q)) continue;
       int n = 0;
       for (int i = 0; i <= b; ++i) layer[n] = i, back[n++] = false;  // to face b
       for (int i = b; i > a; --i) layer[n] = i, back[n++] = true;      // back to face a
@@ -740,10 +740,10 @@ bool Integrator::connect_laser_refracted(const NeeVertex& v, const LaserRay& lr,
   return true;
 }
 
-double Integrator::echo_uniform(const glm::vec3& p, int a, int b) const {
+double Integrator::vertex_uniform(const glm::vec3& p, uint64_t salt, int a, int b) const {
   uint32_t x, y, z;
   std::memcpy(&x, &p.x, 4), std::memcpy(&y, &p.y, 4), std::memcpy(&z, &p.z, 4);
-  uint64_t hash = mix64(config_.light_seed ^ 0x6563686f6563686full);  // "echoecho"
+  uint64_t hash = mix64(config_.light_seed ^ salt);
   hash = mix64(hash ^ (uint64_t(x) << 32 | y));
   hash = mix64(hash ^ (uint64_t(z) << 32 | uint64_t(uint32_t(a)) << 16 | uint32_t(b)));
   return double(hash >> 11) * 0x1.0p-53;
@@ -852,7 +852,7 @@ void Integrator::connect_laser_rough(const NeeVertex& v, const Crossings& cx, do
     const glm::dvec3 nj(cr[j].ng);
     make_basis(nj, &tb[j][0], &tb[j][1]);
     // The microfacet normal: density D(m) (m . n) (tan^2 theta = alpha^2 u / (1 - u)).
-    const double a = double(cr[j].mp.alpha), u = rough_uniform(v.sf.p, j, 0), phi = 2.0 * kPi * rough_uniform(v.sf.p, j, 1);
+    const double a = double(cr[j].mp.alpha), u = vertex_uniform(v.sf.p, kRoughSalt, j, 0), phi = 2.0 * kPi * vertex_uniform(v.sf.p, kRoughSalt, j, 1);
     const double tan2 = a * a * u / (1.0 - u), c = 1.0 / std::sqrt(1.0 + tan2), s = c * std::sqrt(tan2);
     const glm::dvec3 m = s * std::cos(phi) * tb[j][0] + s * std::sin(phi) * tb[j][1] + c * nj;
     D_prod *= double(ggx_d(cr[j].mp.alpha, float(c), float(s * s)));
@@ -954,14 +954,6 @@ bool Integrator::rough_crossings(const Crossings& cx) const {
   return true;
 }
 
-double Integrator::rough_uniform(const glm::vec3& p, int face, int which) const {
-  uint32_t x, y, z;
-  std::memcpy(&x, &p.x, 4), std::memcpy(&y, &p.y, 4), std::memcpy(&z, &p.z, 4);
-  uint64_t hash = mix64(config_.light_seed ^ 0x726f756768726f75ull);  // "roughrou"
-  hash = mix64(hash ^ (uint64_t(x) << 32 | y));
-  hash = mix64(hash ^ (uint64_t(z) << 32 | uint64_t(uint32_t(face)) << 16 | uint32_t(which)));
-  return double(hash >> 11) * 0x1.0p-53;
-}
 
 // The laser seen from v through planar faces that are not all parallel: the path that obeys Snell's law at
 // each (solve_planar_path), traced as connect_laser_along traces its own, lit with the path bundle's spread.
@@ -1003,7 +995,7 @@ bool Integrator::connect_laser_planar(const NeeVertex& v, const Crossings& cx, d
         return double(interface_reflectance(cr[face].mp, c, layer_medium(segment) != cr[face].material).x);
       };
       const double q = std::min(1.0, reflectance(b, b) * reflectance(a, a + 1) / kEchoTraced);
-      if (!(q > 0.0) || (q < 1.0 && echo_uniform(v.sf.p, a, b) >= q)) continue;
+      if (!(q > 0.0) || (q < 1.0 && vertex_uniform(v.sf.p, kEchoSalt, a, b) >= q)) continue;
       // The chain: each entry a face of the straight walk, whether the path reflects off it, and the layer after.
       int n = 0;
       PlanarFace cf[kMaxPlanarFaces];
@@ -1216,7 +1208,7 @@ void Integrator::connect_laser_mirrors(const NeeVertex& v, double w, const Pixel
     for (int trips = 0; trips <= 8 && share >= 1e-6; ++trips) {
       constexpr double kTraced = 0.1;
       const double q = std::min(1.0, share / kTraced);
-      if (q < 1.0 && echo_uniform(v.sf.p, 100 + trips, int(&m - mirrors_.data())) >= q) {
+      if (q < 1.0 && vertex_uniform(v.sf.p, kEchoSalt, 100 + trips, int(&m - mirrors_.data())) >= q) {
         share *= r_inside * r_inside;
         continue;
       }

@@ -310,8 +310,6 @@ class Integrator {
   // (roughness 0.158: at 0.15 and below the faces crossed as smooth are within 0.2 % of the rough estimate
   // behind a 3 mm plate, with less noise; at 0.2 +0.5 % and +1.9 %, docs/render.md)
   static constexpr float kRoughCrossingAlpha = 0.025f;
-  // A uniform number in [0, 1) for face `face`'s microfacet normal seen from vertex position p (which: 0, 1).
-  double rough_uniform(const glm::vec3& p, int face, int which) const;
   // The laser's light reflected to v by the smooth planar faces of mirrors_.
   void connect_laser_mirrors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const;
   // The laser's light refracted to v through each smooth glass mesh of curved_refractors_ alone, along every path
@@ -322,9 +320,14 @@ class Integrator {
   bool through_curved_refractor_alone(const Crossings& cx, const glm::dvec3& x) const;
   // The laser's light reflected to v by the smooth curved meshes of curved_mirrors_.
   void connect_laser_curved_mirrors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const;
-  // A uniform number in [0, 1) for the echo of faces a, b seen from vertex position p: a hash of them and the
-  // light seed (connect_laser_refracted).
-  double echo_uniform(const glm::vec3& p, int a, int b) const;
+  // A uniform number in [0, 1) seen from vertex position p: a hash of it, the light seed, a salt and two small
+  // integers. The echo of faces a, b (connect_laser_refracted, connect_laser_planar: kEchoSalt, a, b); face j's
+  // microfacet normal (connect_laser_rough: kRoughSalt, j, 0 and 1). A draw there from the path's stream would
+  // move the path's later draws.
+  double vertex_uniform(const glm::vec3& p, uint64_t salt, int a, int b) const;
+  static constexpr uint64_t kEchoSalt = 0x6563686f6563686full;   // "echoecho"
+  static constexpr uint64_t kRoughSalt = 0x726f756768726f75ull;  // "roughrou"
+
   // The refractive index of medium `medium` (-1: air, 1).
   double medium_ior(int medium) const { return medium < 0 ? 1.0 : double(shading_.material(medium).point.ior); }
   static constexpr int kMaxLaserSteps = 3 * Crossings::kMax + 1;  // an echo's segments: the layers, and twice those between its faces
