@@ -66,6 +66,18 @@ struct Estimate {
   double seconds = 0.0;
   bool paths_bound = false;  // a target error: the time counts render.max_samples_per_pixel paths per pixel
   LeastParts least;          // what makes disk_at_least less than disk
+  // One further realisation of the noise (sensed from the saved light): its kept disk and time.
+  int64_t repeat_disk = 0, repeat_disk_at_least = 0;
+  double repeat_seconds = 0.0;
+  // What n further realisations of a rendered sample take (repeats grown: the sample is not rendered again).
+  Estimate realisations(int n) const {
+    Estimate r;
+    r.memory = memory;
+    r.disk = n * repeat_disk, r.disk_at_least = n * repeat_disk_at_least;
+    r.seconds = n * repeat_seconds;
+    r.least = least;
+    return r;
+  }
 };
 
 // The estimates of samples generated one at a time (a plan's, a run's): their kept disk, time and largest
@@ -126,6 +138,8 @@ Estimate estimate(const RunConfig& c, int repeats, int threads, const SceneSize&
   e.disk_peak = run_disk - plan.disk_kept();
   e.disk_peak_at_least = plan.disk_at_least() - plan.disk_kept_at_least();
   e.least = least_parts(plan.disk);
+  e.repeat_disk = again, e.repeat_disk_at_least = again_at_least;
+  e.repeat_seconds = (kSecondsPerRun + sensor_seconds + double(run_disk) * kSecondsPerByte) * 2.0 / usable_cores(threads);
   e.seconds += (repeats - 1) * (kSecondsPerRun + sensor_seconds + double(run_disk) * kSecondsPerByte);
   e.seconds *= 2.0 / usable_cores(threads);  // the model is of 2 cores; the work is parallel
   return e;
@@ -663,7 +677,13 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
         ++skipped;
         return;
       }
-      if (!rec.hash.empty()) totals.add(c.estimate);
+      if (!rec.hash.empty()) {
+        // (a rendered sample whose realisations are missing, repeats grown: only those are sensed)
+        int missing = 0;
+        const bool rendered = folder.holds(c.sample.folder(), rec.hash);
+        for (int k = 1; rendered && k < spec.repeats; ++k) missing += folder.holds(c.sample.repeat_folder(k), rec.hash) ? 0 : 1;
+        totals.add(rendered ? c.estimate.realisations(missing) : c.estimate);
+      }
       todo.push_back(i);
     });
   } catch (const Interrupted&) {
