@@ -396,6 +396,40 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
       for (const double R : radii) r.searches.emplace_back(dl, R, n, kCurvedRefractorSteps);
     }
   }
+  // Rough plates (connect_laser_rough_slabs): small flat meshes of a rough refracting volume, their two largest
+  // parallel planes.
+  for (size_t m = 0; m < scene.meshes.size() && rough_slabs_.size() < kMaxRoughSlabs; ++m) {
+    const scenes::Mesh& mesh = scene.meshes[m];
+    if (mesh.material < 0 || mesh.triangle_count() > kMaxPartsPerMesh) continue;
+    const ResolvedMaterial& rm = shading.material(mesh.material);
+    const MaterialPoint& mp = rm.point;
+    if (!rm.volume || mp.ior == 1.0f || mp.thin_walled || !(mp.alpha >= kRoughCrossingAlpha) || !(mp.transmission > 0.0f) ||
+        !(mp.metallic < 1.0f))
+      continue;
+    const auto corner = [&](size_t t, int k) { return glm::dvec3(mesh.positions[mesh.indices[3 * t + size_t(k)]]); };
+    double best_area = 0.0;
+    glm::dvec3 best_n(0.0);
+    for (size_t t = 0; t < mesh.triangle_count(); ++t) {
+      const glm::dvec3 cr = glm::cross(corner(t, 1) - corner(t, 0), corner(t, 2) - corner(t, 0));
+      if (!(glm::length(cr) > 0.0)) continue;
+      const glm::dvec3 n = glm::normalize(cr);
+      double area = 0.0;
+      for (size_t u = 0; u < mesh.triangle_count(); ++u) {
+        const glm::dvec3 cu = glm::cross(corner(u, 1) - corner(u, 0), corner(u, 2) - corner(u, 0));
+        if (glm::length(cu) > 0.0 && std::fabs(glm::dot(n, glm::normalize(cu))) > 1.0 - 1e-6) area += 0.5 * glm::length(cu);
+      }
+      if (area > best_area) best_area = area, best_n = n;
+    }
+    double lo = 1e300, hi = -1e300;
+    for (size_t t = 0; t < mesh.triangle_count() && best_area > 0.0; ++t) {
+      const glm::dvec3 cr = glm::cross(corner(t, 1) - corner(t, 0), corner(t, 2) - corner(t, 0));
+      if (glm::length(cr) > 0.0 && std::fabs(glm::dot(best_n, glm::normalize(cr))) > 1.0 - 1e-6) {
+        const double o = glm::dot(best_n, corner(t, 0));
+        lo = std::min(lo, o), hi = std::max(hi, o);
+      }
+    }
+    if (hi > lo) rough_slabs_.push_back(RoughSlab{best_n, lo, hi, mesh.material});
+  }
   ambient_on_ = ambient.any() || shading.has_emission();
   laser_traced_ = config.trace_laser;
   optics_ = config.camera.optics_transmission;
@@ -943,10 +977,44 @@ void Integrator::connect_laser_rough(const NeeVertex& v, const Crossings& cx, do
   deposit_laser(v, double(v.beta.x) * value * w, v.opl + opl, film, false);
 }
 
+// The laser's light through each rough plate (rough_slabs_) that the straight walk to it did not cross: a vertex
+// beside a rough plate's shadow, or in it behind something else, which the plate's rough transmission lights
+// all the same (behind a 3 mm plate of roughness 0.7, up to 0.25 of the bare wall's light beyond the shadow's
+// edge). The plate's two planes are the crossings (the straight line's points on them the solve's start), as
+// connect_laser_rough takes them; its trace keeps the paths that meet the plate's faces.
+void Integrator::connect_laser_rough_slabs(const NeeVertex& v, const Crossings& cx, double w, const PixelFilm& film,
+                                           RayCounts* rays) const {
+  const glm::dvec3 x(v.sf.p), L = laser_.position;
+  for (const RoughSlab& sl : rough_slabs_) {
+    if (std::any_of(cx.slots.c, cx.slots.c + cx.n, [&](const Crossings::Crossing& c) { return c.material == sl.material; })) continue;
+    const double ox = glm::dot(sl.n, x), ol = glm::dot(sl.n, L);
+    if (!((ox < sl.lo && ol > sl.hi) || (ox > sl.hi && ol < sl.lo))) continue;  // (the plate between them)
+    Crossings ex;
+    ex.n = 2;
+    ex.medium0 = -1;
+    ex.refracting = true;
+    const double planes[2] = {ox < sl.lo ? sl.lo : sl.hi, ox < sl.lo ? sl.hi : sl.lo};
+    for (int j = 0; j < 2; ++j) {
+      Crossings::Crossing& c = ex.slots.c[j];
+      c.p = x + (planes[j] - ox) / (ol - ox) * (L - x);
+      c.ng = glm::vec3(sl.n);
+      c.material = sl.material;
+      c.mp = shading_.material(sl.material).point;
+      c.medium = j == 0 ? sl.material : -1;
+      c.mesh = 0, c.triangle = 0;
+    }
+    connect_laser_rough(v, ex, w, film, rays);
+  }
+}
+
 // Whether connect_laser_rough takes the straight walk's crossings: each the interface of a volume with a GGX lobe
 // (alpha at least kRoughCrossingAlpha), at most kMaxRoughFaces of them.
 bool Integrator::rough_crossings(const Crossings& cx) const {
-  if (!(cx.n >= 1 && cx.n <= kMaxRoughFaces)) return false;
+  // (each crossing changes the medium, and the chain ends in air, where the laser is: a walk past a plate's very
+  // edge recorded one face from air to air, and the solve through it gave 1e11 times a connection's light)
+  if (!(cx.n >= 1 && cx.n <= kMaxRoughFaces) || cx.slots.c[cx.n - 1].medium != -1) return false;
+  for (int j = 0; j < cx.n; ++j)
+    if (cx.slots.c[j].medium == (j == 0 ? cx.medium0 : cx.slots.c[j - 1].medium)) return false;
   for (int j = 0; j < cx.n; ++j) {
     const MaterialPoint& mp = cx.slots.c[j].mp;
     if (mp.thin_walled || !(mp.alpha >= kRoughCrossingAlpha) || !(mp.transmission > 0.0f) || !(mp.metallic < 1.0f)) return false;
@@ -1389,6 +1457,7 @@ inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, co
     Crossings cx;
     tr = shadow_transmittance(lr.origin, wi, float(r), v.shadow_medium_towards(wi), &extra, &rays->laser, first, &cx);
     if (edges_ && v.medium >= 0) connect_laser_edges(v, lr, cx, w, film, rays);
+    if (!rough_slabs_.empty() && v.medium < 0) connect_laser_rough_slabs(v, cx, w, film, rays);
     if (cx.blocked) return;
     if (cx.refracting && cx.planar && rough_crossings(cx)) {
       connect_laser_rough(v, cx, w, film, rays);

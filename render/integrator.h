@@ -306,6 +306,17 @@ class Integrator {
   // microfacet normal per face and the path solved for them; rough_crossings: whether it takes the crossings.
   void connect_laser_rough(const NeeVertex& v, const Crossings& cx, double w, const PixelFilm& film, RayCounts* rays) const;
   bool rough_crossings(const Crossings& cx) const;
+  // A rough plate: a small flat mesh of a rough refracting volume (alpha at least kRoughCrossingAlpha), its two
+  // largest parallel planes n . p = lo and hi; the laser's light through it to the vertices whose straight walk
+  // to the laser does not cross it (connect_laser_rough_slabs).
+  struct RoughSlab {
+    glm::dvec3 n;
+    double lo, hi;
+    int material;
+  };
+  static constexpr size_t kMaxRoughSlabs = 8;
+  std::vector<RoughSlab> rough_slabs_;
+  void connect_laser_rough_slabs(const NeeVertex& v, const Crossings& cx, double w, const PixelFilm& film, RayCounts* rays) const;
   static constexpr int kMaxRoughFaces = 4;
   // (roughness 0.158: at 0.15 and below the faces crossed as smooth are within 0.2 % of the rough estimate
   // behind a 3 mm plate, with less noise; at 0.2 +0.5 % and +1.9 %, docs/render.md)
