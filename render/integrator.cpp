@@ -93,6 +93,33 @@ namespace {
 const scenes::Material* mesh_material(const scenes::Scene& scene, const scenes::Mesh& mesh) {
   return mesh.material < 0 || size_t(mesh.material) >= scene.materials.size() ? nullptr : &scene.materials[size_t(mesh.material)];
 }
+// A plate's two planes: the normal of a mesh's largest faces (by area, summed over the triangles of one normal,
+// either side) and the least and greatest offsets n . p of those triangles; false where they do not span two
+// planes (the glossy plates of the guided connections, the rough plates of connect_laser_rough_slabs).
+bool plate_planes(const scenes::Mesh& mesh, glm::dvec3* n, double* lo, double* hi) {
+  const auto corner = [&](size_t t, int k) { return glm::dvec3(mesh.positions[mesh.indices[3 * t + size_t(k)]]); };
+  std::vector<glm::dvec3> normals, corners;  // of the triangles that have an area
+  std::vector<double> areas;
+  for (size_t t = 0; t < mesh.triangle_count(); ++t) {
+    const glm::dvec3 cr = glm::cross(corner(t, 1) - corner(t, 0), corner(t, 2) - corner(t, 0));
+    const double twice = glm::length(cr);
+    if (twice > 0.0) normals.push_back(cr / twice), corners.push_back(corner(t, 0)), areas.push_back(0.5 * twice);
+  }
+  double best_area = 0.0;
+  for (size_t i = 0; i < normals.size(); ++i) {
+    double area = 0.0;
+    for (size_t j = 0; j < normals.size(); ++j)
+      if (std::fabs(glm::dot(normals[i], normals[j])) > 1.0 - 1e-6) area += areas[j];
+    if (area > best_area) best_area = area, *n = normals[i];
+  }
+  *lo = 1e300, *hi = -1e300;
+  for (size_t j = 0; j < normals.size() && best_area > 0.0; ++j)
+    if (std::fabs(glm::dot(*n, normals[j])) > 1.0 - 1e-6) {
+      const double o = glm::dot(*n, corners[j]);
+      *lo = std::min(*lo, o), *hi = std::max(*hi, o);
+    }
+  return *hi > *lo;
+}
 // Whether a mesh is curved: more than kMaxPartsPerMesh triangles, with vertex normals.
 bool curved_mesh(const scenes::Mesh& mesh) {
   return mesh.triangle_count() > kMaxPartsPerMesh && mesh.normals.size() == mesh.positions.size();
@@ -232,26 +259,11 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
     // parallel planes.
     const ResolvedMaterial& rmat = shading.material(mesh.material);
     int slab = -1;  // this mesh's plate
-    if (rmat.volume && mp.ior != 1.0f && parts_.size() > first_part) {
-      double best_area = 0.0;
-      glm::dvec3 best_n(0.0);
-      for (size_t i = first_part; i < parts_.size(); ++i) {
-        double area = 0.0;
-        for (size_t j = first_part; j < parts_.size(); ++j)
-          if (std::fabs(glm::dot(parts_[i].n, parts_[j].n)) > 1.0 - 1e-6)
-            area += 0.5 * glm::length(glm::cross(parts_[j].e1, parts_[j].e2));
-        if (area > best_area) best_area = area, best_n = parts_[i].n;
-      }
-      double lo = 1e300, hi = -1e300;
-      for (size_t j = first_part; j < parts_.size(); ++j)
-        if (std::fabs(glm::dot(best_n, parts_[j].n)) > 1.0 - 1e-6) {
-          const double o = glm::dot(best_n, parts_[j].p0);
-          lo = std::min(lo, o), hi = std::max(hi, o);
-        }
-      if (hi > lo) {
-        slab = int(slabs_.size());
-        slabs_.push_back(GlossySlab{best_n, lo, hi, double(mp.ior), mp.alpha, mesh.material});
-      }
+    glm::dvec3 plate_n(0.0);
+    double lo = 0.0, hi = 0.0;
+    if (rmat.volume && mp.ior != 1.0f && parts_.size() > first_part && plate_planes(mesh, &plate_n, &lo, &hi)) {
+      slab = int(slabs_.size());
+      slabs_.push_back(GlossySlab{plate_n, lo, hi, double(mp.ior), mp.alpha, mesh.material});
     }
     for (size_t t = 0; t < nt; ++t)
       for (size_t u = t + 1; u < nt; ++u) {
@@ -406,29 +418,8 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
     if (!rm.volume || mp.ior == 1.0f || mp.thin_walled || !(mp.alpha >= kRoughCrossingAlpha) || !(mp.transmission > 0.0f) ||
         !(mp.metallic < 1.0f))
       continue;
-    const auto corner = [&](size_t t, int k) { return glm::dvec3(mesh.positions[mesh.indices[3 * t + size_t(k)]]); };
-    double best_area = 0.0;
-    glm::dvec3 best_n(0.0);
-    for (size_t t = 0; t < mesh.triangle_count(); ++t) {
-      const glm::dvec3 cr = glm::cross(corner(t, 1) - corner(t, 0), corner(t, 2) - corner(t, 0));
-      if (!(glm::length(cr) > 0.0)) continue;
-      const glm::dvec3 n = glm::normalize(cr);
-      double area = 0.0;
-      for (size_t u = 0; u < mesh.triangle_count(); ++u) {
-        const glm::dvec3 cu = glm::cross(corner(u, 1) - corner(u, 0), corner(u, 2) - corner(u, 0));
-        if (glm::length(cu) > 0.0 && std::fabs(glm::dot(n, glm::normalize(cu))) > 1.0 - 1e-6) area += 0.5 * glm::length(cu);
-      }
-      if (area > best_area) best_area = area, best_n = n;
-    }
-    double lo = 1e300, hi = -1e300;
-    for (size_t t = 0; t < mesh.triangle_count() && best_area > 0.0; ++t) {
-      const glm::dvec3 cr = glm::cross(corner(t, 1) - corner(t, 0), corner(t, 2) - corner(t, 0));
-      if (glm::length(cr) > 0.0 && std::fabs(glm::dot(best_n, glm::normalize(cr))) > 1.0 - 1e-6) {
-        const double o = glm::dot(best_n, corner(t, 0));
-        lo = std::min(lo, o), hi = std::max(hi, o);
-      }
-    }
-    if (hi > lo) rough_slabs_.push_back(RoughSlab{best_n, lo, hi, mesh.material});
+    RoughSlab sl{glm::dvec3(0.0), 0.0, 0.0, mesh.material};
+    if (plate_planes(mesh, &sl.n, &sl.lo, &sl.hi)) rough_slabs_.push_back(sl);
   }
   ambient_on_ = ambient.any() || shading.has_emission();
   laser_traced_ = config.trace_laser;
