@@ -138,10 +138,11 @@ Estimate estimate(const RunConfig& c, int repeats, int threads, const SceneSize&
   e.disk_peak = run_disk - plan.disk_kept();
   e.disk_peak_at_least = plan.disk_at_least() - plan.disk_kept_at_least();
   e.least = least_parts(plan.disk);
+  const double sense_seconds = kSecondsPerRun + sensor_seconds + double(run_disk) * kSecondsPerByte, core_scale = 2.0 / usable_cores(threads);
   e.repeat_disk = again, e.repeat_disk_at_least = again_at_least;
-  e.repeat_seconds = (kSecondsPerRun + sensor_seconds + double(run_disk) * kSecondsPerByte) * 2.0 / usable_cores(threads);
-  e.seconds += (repeats - 1) * (kSecondsPerRun + sensor_seconds + double(run_disk) * kSecondsPerByte);
-  e.seconds *= 2.0 / usable_cores(threads);  // the model is of 2 cores; the work is parallel
+  e.repeat_seconds = sense_seconds * core_scale;
+  e.seconds += (repeats - 1) * sense_seconds;
+  e.seconds *= core_scale;  // the model is of 2 cores; the work is parallel
   return e;
 }
 
@@ -679,10 +680,8 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
       }
       if (!rec.hash.empty()) {
         // (a rendered sample whose realisations are missing, repeats grown: only those are sensed)
-        int missing = 0;
-        const bool rendered = folder.holds(c.sample.folder(), rec.hash);
-        for (int k = 1; rendered && k < spec.repeats; ++k) missing += folder.holds(c.sample.repeat_folder(k), rec.hash) ? 0 : 1;
-        totals.add(rendered ? c.estimate.realisations(missing) : c.estimate);
+        const bool rendered = !rec.held.empty() && rec.held[0];
+        totals.add(rendered ? c.estimate.realisations(int(std::count(rec.held.begin() + 1, rec.held.end(), false))) : c.estimate);
       }
       todo.push_back(i);
     });

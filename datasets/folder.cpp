@@ -508,6 +508,7 @@ SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash) co
   std::set<std::pair<dev_t, ino_t>> inodes;
   std::vector<std::string> folders = {s.folder()};
   for (int r = 1; r < spec_.repeats; ++r) folders.push_back(s.repeat_folder(r));
+  rec.held.assign(folders.size(), false);
   for (size_t f = 0; f < folders.size(); ++f) {
     const std::optional<json> meta = sample_metadata(folders[f]);
     if (!meta) {
@@ -539,6 +540,7 @@ SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash) co
     if (const json::json_pointer cores("/run/cores"); f == 0 && meta->contains(cores) && (*meta)[cores].is_number_integer())
       rec.cores = std::max(0, (*meta)[cores].get<int>());
     const std::string prefix = f == 0 ? "" : folders[f].substr(s.folder().size()) + "/";
+    const size_t gone_before = gone.size();
     const json& sizes = recorded_sizes(*meta);
     for (const json& name : (*meta)["files"]) {
       // metadata.json's size varies with its timing fields; the index and the card must not.
@@ -571,6 +573,7 @@ SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash) co
       rec.files.emplace_back(prefix + name.get<std::string>(), size);
       rec.bytes += size;
     }
+    rec.held[f] = gone.size() == gone_before;
     if (f == 0) {
       if (const auto w = meta->find("warnings"); w != meta->end() && w->is_array())
         for (const json& t : *w)

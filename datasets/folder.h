@@ -51,6 +51,9 @@ struct SampleRecord {
   std::string hash;     // of the sample as it resolves now; "" when it does not resolve
   std::string error;    // failed: why; damaged: the files that are gone or changed; stale: what changed (status)
   std::vector<std::string> folders;  // done: the sample's folder and its repeats'
+  // inspected: whether each of them (the sample's folder, then its repeats') holds the sample as it resolves now,
+  // undamaged (a grown repeats' sample: its own folder, and the earlier realisations)
+  std::vector<bool> held;
   // done: every file of its folders but metadata.json (whose size varies with its timing fields), relative to
   // the sample's folder (a repeat's as "_r01/counts.npy"), and its size; a file linked into a repeat counts once
   std::vector<std::pair<std::string, int64_t>> files;
