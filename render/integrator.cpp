@@ -896,28 +896,21 @@ void Integrator::connect_laser_rough(const NeeVertex& v, const Crossings& cx, do
   if (!v.counted(wi)) return;
   const Spec f = v.bsdf.eval_cos(wi);
   if (!(f.x > 0.0f)) return;
-  // Each segment must meet its face first (material and plane), the last one nothing; each face's BSDF there.
+  // Each segment must meet its face first (material and plane), the last one nothing (another transmissive surface
+  // on the way is not this connection's); each face's BSDF there.
+  int material[kMaxRoughFaces];
+  glm::vec3 ng[kMaxRoughFaces];
+  for (int j = 0; j < k; ++j) material[j] = cr[j].material, ng[j] = cr[j].ng;
+  FaceHits hits;
+  const FaceHit* met = hits.f;
+  if (trace_planar_path(v, path, material, ng, nullptr, nullptr, &rays->refracted, hits.f) != PathTrace::Clear) return;
   double value = double(f.x), opl = 0.0;
-  glm::vec3 q = v.sf.p, qn = v.sf.ng;
   for (int s = 0; s <= k; ++s) {
-    const glm::vec3 ds(path.d[s]);
-    const glm::vec3 start_s = offset_ray_origin(q, qn, ds);
-    ++rays->refracted;
-    RayHit hit;
-    const float reach = s < k ? float(path.len[s] * 1.01 + 1e-4) : float(path.len[s] * (1.0 - 1e-6));
-    const bool found = embree_.intersect(start_s, ds, 0.0f, reach, &hit, true);
     if (s < k) {
-      if (!found) return;
-      const Surface sf = shading_.surface(hit);
-      if (sf.material != cr[s].material || std::fabs(glm::dot(sf.ng, cr[s].ng)) < 1.0f - 1e-6f ||
-          std::fabs(glm::dot(glm::dvec3(cr[s].ng), glm::dvec3(sf.p) - path.y[s])) > 1e-5 * (1.0 + glm::length(path.y[s])))
-        return;
-      const glm::vec3 wo = -ds;
-      const Bsdf b(shading_.material_at(sf, hit), sf.ns, sf.ng, wo, glm::dot(wo, sf.ng) > 0.0f);
+      const Surface& sf = met[s].sf;
+      const glm::vec3 wo = -glm::vec3(path.d[s]);
+      const Bsdf b(shading_.material_at(sf, met[s].hit), sf.ns, sf.ng, wo, glm::dot(wo, sf.ng) > 0.0f);
       value *= double(b.eval_cos(glm::vec3(path.d[s + 1])).x) * std::fabs(glm::dot(glm::dvec3(wo), glm::dvec3(sf.ns)));
-      q = sf.p, qn = sf.ng;
-    } else if (found) {
-      return;  // blocked (or another transmissive surface on the way: not this connection's)
     }
     if (media[s] >= 0) {
       const ResolvedMaterial& rm = shading_.material(media[s]);
@@ -1155,6 +1148,41 @@ void Integrator::connect_laser_shaded(const NeeVertex& v, const Crossings& cx, d
   (void)deposit_planar_path(v, path, material, ng, index, media, nullptr, w, film, &rays->refracted, shaded);
 }
 
+Integrator::PathTrace Integrator::trace_planar_path(const NeeVertex& v, const PlanarPath& path, const int* material,
+                                                    const glm::vec3* ng, const bool* reflect, const bool* shaded,
+                                                    uint64_t* rays, FaceHit* faces) const {
+  const int k = path.k;
+  glm::vec3 q = v.sf.p, qn = v.sf.ng;
+  for (int s = 0; s <= k; ++s) {
+    const glm::vec3 ds(path.d[s]);
+    const glm::vec3 start_s = offset_ray_origin(q, qn, ds);
+    ++*rays;
+    RayHit hit;
+    const float reach = s < k ? float(path.len[s] * 1.01 + 1e-4) : float(path.len[s] * (1.0 - 1e-6));
+    // (towards a face it reflects off, the segment is seen as a camera path's: a single-sided mirror is met from
+    // its front, not culled as the light would see it from behind)
+    const bool found = embree_.intersect(start_s, ds, 0.0f, reach, &hit, !(s < k && reflect && reflect[s]));
+    if (s == k) {
+      if (!found) return PathTrace::Clear;
+      return shading_.material(shading_.surface(hit).material).point.transmission > 0.0f ? PathTrace::Transmissive
+                                                                                         : PathTrace::Blocked;
+    }
+    if (!found) return PathTrace::Astray;
+    const Surface sf = shading_.surface(hit);
+    // (in the plane planned: a face of the same material and orientation in another, a box's other side, is not
+    // it; along the face the trace drifts by its origins' offsets, about 1e-5 m. A shaded face's point may lie on
+    // its triangle's edge, the trace meeting the triangle beside it: near the point planned is enough)
+    if (sf.material != material[s]) return PathTrace::Astray;
+    if (shaded && shaded[s] ? glm::length(glm::dvec3(sf.p) - path.y[s]) > 1e-4 * (1.0 + glm::length(path.y[s]))
+                            : std::fabs(glm::dot(sf.ng, ng[s])) < 1.0f - 1e-6f ||
+                                  std::fabs(glm::dot(glm::dvec3(ng[s]), glm::dvec3(sf.p) - path.y[s])) > 1e-5 * (1.0 + glm::length(path.y[s])))
+      return PathTrace::Astray;
+    faces[s] = FaceHit{sf, hit};
+    q = sf.p, qn = sf.ng;
+  }
+  return PathTrace::Clear;
+}
+
 bool Integrator::deposit_planar_path(const NeeVertex& v, const PlanarPath& path, const int* material, const glm::vec3* ng,
                                      const double* index, const int* media, const bool* reflect, double w,
                                      const PixelFilm& film, uint64_t* rays, const bool* shaded) const {
@@ -1166,38 +1194,24 @@ bool Integrator::deposit_planar_path(const NeeVertex& v, const PlanarPath& path,
   const Spec f = v.bsdf.eval_cos(wi);
   if (!(f.x > 0.0f)) return true;
   // Each segment must meet its face first (material and orientation), the last one nothing opaque.
+  FaceHits hits;
+  const FaceHit* faces = hits.f;
+  switch (trace_planar_path(v, path, material, ng, reflect, shaded, rays, hits.f)) {
+    case PathTrace::Clear: break;
+    case PathTrace::Blocked: return true;  // blocked on the refracted path
+    case PathTrace::Astray:
+    case PathTrace::Transmissive: return false;
+  }
   Spec t(1.0f);
   double opl = 0.0;
-  glm::vec3 q = v.sf.p, qn = v.sf.ng;
   for (int s = 0; s <= k; ++s) {
-    const glm::vec3 ds(path.d[s]);
-    const glm::vec3 start_s = offset_ray_origin(q, qn, ds);
-    ++*rays;
-    RayHit hit;
-    const float reach = s < k ? float(path.len[s] * 1.01 + 1e-4) : float(path.len[s] * (1.0 - 1e-6));
-    // (towards a face it reflects off, the segment is seen as a camera path's: a single-sided mirror is met from
-    // its front, not culled as the light would see it from behind)
-    const bool found = embree_.intersect(start_s, ds, 0.0f, reach, &hit, !(s < k && reflect && reflect[s]));
     if (s < k) {
-      if (!found) return false;
-      const Surface sf = shading_.surface(hit);
-      // (in the plane planned: a face of the same material and orientation in another, a box's other side, is not
-      // it; along the face the trace drifts by its origins' offsets, about 1e-5 m. A shaded face's point may lie on
-      // its triangle's edge, the trace meeting the triangle beside it: near the point planned is enough)
-      if (sf.material != material[s]) return false;
-      if (shaded && shaded[s] ? glm::length(glm::dvec3(sf.p) - path.y[s]) > 1e-4 * (1.0 + glm::length(path.y[s]))
-                              : std::fabs(glm::dot(sf.ng, ng[s])) < 1.0f - 1e-6f ||
-                                    std::fabs(glm::dot(glm::dvec3(ng[s]), glm::dvec3(sf.p) - path.y[s])) > 1e-5 * (1.0 + glm::length(path.y[s])))
-        return false;
+      const Surface& sf = faces[s].sf;
+      const glm::vec3 ds(path.d[s]);
       const float c = glm::dot(ds, sf.ng);
-      const MaterialPoint mp = shading_.material_at(sf, hit);
+      const MaterialPoint mp = shading_.material_at(sf, faces[s].hit);
       const float cf = shaded && shaded[s] ? std::copysign(std::fabs(glm::dot(ds, sf.ns)), c) : c;
       t *= reflect && reflect[s] ? interface_reflectance(mp, cf, c < 0.0f) : interface_transmittance(mp, std::fabs(cf), c < 0.0f);
-      q = sf.p, qn = sf.ng;
-    } else if (found) {
-      const Surface sf = shading_.surface(hit);
-      if (shading_.material(sf.material).point.transmission > 0.0f) return false;
-      return true;  // blocked on the refracted path
     }
     if (media[s] >= 0) {
       const ResolvedMaterial& rm = shading_.material(media[s]);

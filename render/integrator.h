@@ -299,6 +299,22 @@ class Integrator {
   // crossing every face), index and media those of each segment; false where it does not (nothing deposited).
   // rays: the category its segments count in (RayCounts::refracted or mirror). shaded[j]: face j's Fresnel
   // factor at its shading normal (null: none).
+  // The segments of a path solved for those connections, traced from v: segment j < k must meet a face of
+  // material[j] first, on the plane planned (shaded[j]: near its point; else of normal +-ng[j] through it; reflect[j]:
+  // from its front), the last one nothing. faces[j]: the surface met. Astray: a segment met another surface, or none;
+  // Blocked / Transmissive: the last one met an opaque / a transmissive surface.
+  enum class PathTrace { Clear, Astray, Blocked, Transmissive };
+  struct FaceHit {
+    Surface sf;
+    RayHit hit;
+  };
+  // Left uninitialised (the trace writes each face it meets): a path's connection runs at many vertices.
+  union FaceHits {
+    FaceHits() {}
+    FaceHit f[kMaxPlanarFaces];
+  };
+  PathTrace trace_planar_path(const NeeVertex& v, const PlanarPath& path, const int* material, const glm::vec3* ng,
+                              const bool* reflect, const bool* shaded, uint64_t* rays, FaceHit* faces) const;
   bool deposit_planar_path(const NeeVertex& v, const PlanarPath& path, const int* material, const glm::vec3* ng,
                            const double* index, const int* media, const bool* reflect, double w, const PixelFilm& film,
                            uint64_t* rays, const bool* shaded = nullptr) const;
