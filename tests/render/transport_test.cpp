@@ -28,6 +28,17 @@ using test::test_config;
 
 constexpr double kC = kSpeedOfLight;
 
+// test_config's view lit by a point laser shining every way (a cone of half angle pi) from the camera, `paths`
+// per pixel, the direct light only (max_bounces 1): the laser connections' tests below.
+RenderStageConfig direct_laser_config(int width, int height, double focal_length_m, int paths) {
+  RenderStageConfig c = test_config(width, height, focal_length_m);
+  c.laser.beam = Beam::Cone;
+  c.laser.half_angle_rad = kPi;
+  c.render.samples_per_pixel = paths;
+  c.render.max_bounces = 1;
+  return c;
+}
+
 // Mean and standard deviation over pixel (x, y)'s area of g(direction), on a 16 x 16 midpoint grid.
 template <class G>
 std::pair<double, double> over_pixel(const RenderStageConfig& c, int x, int y, G g) {
@@ -624,12 +635,8 @@ TEST(Transport, LaserLightRefractsThroughAThickSlab) {
   for (const double psi_deg : {0.0, 25.0, 45.0}) {
     const double psi = psi_deg * kPi / 180;
     const auto scene = [&](bool slab) { return wall_behind_slab(slab, t, n); };
-    RenderStageConfig c = test_config(4, 4, 12e-3);
+    RenderStageConfig c = direct_laser_config(4, 4, 12e-3, 4096);
     c.camera.look_at_m = {std::sin(psi), 0, -std::cos(psi)};
-    c.laser.beam = Beam::Cone;
-    c.laser.half_angle_rad = kPi;
-    c.render.samples_per_pixel = 4096;
-    c.render.max_bounces = 1;
     const double r_bare = 1 / std::cos(psi);
     const TimeAxis axis{2 * r_bare / kC - 0.2e-9, 1e-12, 1400, 1.0};
     const TransientTile a = Renderer(scene(false), c).transient({0, 0, 4, 4}, {0, 0, 4, 4}, axis);
@@ -671,11 +678,7 @@ TEST(Transport, LaserLightRefractsThroughAThickSlab) {
 TEST(Transport, AClearPlatesBranchesAreFollowedBothWays) {
   const float t = 0.05f, n = 1.5f;
   const auto scene = [&](bool slab) { return wall_behind_slab(slab, t, n); };
-  RenderStageConfig c = test_config(4, 4, 50e-3);  // 50 mm: every pixel within 0.03 deg of the axis
-  c.laser.beam = Beam::Cone;
-  c.laser.half_angle_rad = kPi;
-  c.render.samples_per_pixel = 16;
-  c.render.max_bounces = 1;
+  RenderStageConfig c = direct_laser_config(4, 4, 50e-3, 16);  // 50 mm: every pixel within 0.03 deg of the axis
   const TimeAxis axis{2 / kC - 0.2e-9, 1e-12, 1400, 1.0};
   const TransientTile bare = Renderer(scene(false), c).transient({0, 0, 4, 4}, {0, 0, 4, 4}, axis);
   const double R = fresnel(0.0, n), T = (1 - R) * (1 - R);
@@ -735,12 +738,8 @@ TEST(Transport, AClearPlatesEchoAtObliqueIncidence) {
   const float t = 0.05f, n = 1.5f;
   const double psi = 40.0 * kPi / 180;
   const auto scene = [&](bool slab) { return wall_behind_slab(slab, t, n); };
-  RenderStageConfig c = test_config(4, 4, 50e-3);
+  RenderStageConfig c = direct_laser_config(4, 4, 50e-3, 4096);
   c.camera.look_at_m = {std::sin(psi), 0, -std::cos(psi)};
-  c.laser.beam = Beam::Cone;
-  c.laser.half_angle_rad = kPi;
-  c.render.samples_per_pixel = 4096;
-  c.render.max_bounces = 1;
   const double psi_g = std::asin(std::sin(psi) / n);
   const double t_main = 2 * ((1 - t) / std::cos(psi) + n * t / std::cos(psi_g)) / kC;
   const double echo_after = 2 * n * t * std::cos(psi_g) / kC;
@@ -834,12 +833,8 @@ TEST(Transport, LaserLightRefractsThroughPlatesThatAreNotParallel) {
     const glm::dvec3 da = (trace(glm::normalize(w0 + e * a), &unused, &unused) - trace(glm::normalize(w0 - e * a), &unused, &unused)) / (2 * e);
     const glm::dvec3 db = (trace(glm::normalize(w0 + e * b), &unused, &unused) - trace(glm::normalize(w0 - e * b), &unused, &unused)) / (2 * e);
     const double expected = T * T / glm::length(glm::cross(da, db)) / std::pow(std::cos(psi), 3);
-    RenderStageConfig c = test_config(4, 4, 50e-3);
+    RenderStageConfig c = direct_laser_config(4, 4, 50e-3, 256);
     c.camera.look_at_m = {w0.x, w0.y, w0.z};
-    c.laser.beam = Beam::Cone;
-    c.laser.half_angle_rad = kPi;
-    c.render.samples_per_pixel = 256;
-    c.render.max_bounces = 1;
     const double t_main = 2 * opl / kC;
     const TimeAxis axis{t_main - 0.2e-9, 1e-12, 1400, 1.0};
     const TransientTile bare = Renderer(wall_behind_slab(false, 0.05f, n), c)
@@ -1028,11 +1023,7 @@ TEST(Transport, LaserLightRefractsThroughAGlassSphere) {
   };
   const scenes::Scene s = scene(true);
   const auto trace = [&](const glm::dvec3& w, double* opl, double* T) { return trace_through_mesh(s.meshes.back(), n, w, d, opl, T); };
-  RenderStageConfig c = test_config(4, 4, 50e-3);
-  c.laser.beam = Beam::Cone;
-  c.laser.half_angle_rad = kPi;
-  c.render.samples_per_pixel = 256;
-  c.render.max_bounces = 1;
+  RenderStageConfig c = direct_laser_config(4, 4, 50e-3, 256);
   for (const double psi_deg : {0.0, 3.0, 6.0}) {
     const double psi = psi_deg * kPi / 180;
     const glm::dvec3 w0(std::sin(psi), 0, -std::cos(psi));
@@ -1129,11 +1120,7 @@ TEST(Transport, LightBeyondAGlassSpheresFocusReachesTheWall) {
     if (sphere) add_sphere(s, glm::vec3(centre), radius, 48, 96, add_material(s, test::glass(float(n), 2 * radius)));
     return s;
   };
-  RenderStageConfig c = test_config(4, 4, 50e-3);
-  c.laser.beam = Beam::Cone;
-  c.laser.half_angle_rad = kPi;
-  c.render.samples_per_pixel = 64;
-  c.render.max_bounces = 1;
+  RenderStageConfig c = direct_laser_config(4, 4, 50e-3, 64);
   struct Case {
     double d, xw;
     size_t paths;
@@ -1196,11 +1183,7 @@ TEST(Transport, LightThroughAGlassEllipsoidReachesTheWall) {
     return s;
   };
   const scenes::Scene s = scene(true);
-  RenderStageConfig c = test_config(4, 4, 50e-3);
-  c.laser.beam = Beam::Cone;
-  c.laser.half_angle_rad = kPi;
-  c.render.samples_per_pixel = 64;
-  c.render.max_bounces = 1;
+  RenderStageConfig c = direct_laser_config(4, 4, 50e-3, 64);
   double refracted_sum = 0, bare_sum = 0;
   size_t paths_seen = 0;
   for (const glm::dvec3& P : look_aside(&c, s, {0.6, 0, 0}, {0.03, 0, -d}, d)) {
@@ -1291,12 +1274,8 @@ TEST(Transport, ACurvedMirrorReflectsTheLaserOntoTheScene) {
       const double along = glm::dot(w, centre), t_sphere = along - std::sqrt(along * along - glm::dot(centre, centre) + double(radius) * radius);
       const glm::dvec3 p = t_sphere * w;
       const double t_hit = glm::length(X) + glm::length(p) + glm::length(X - p);
-      RenderStageConfig c = test_config(4, 4, 50e-3);
+      RenderStageConfig c = direct_laser_config(4, 4, 50e-3, 64);
       c.camera.look_at_m = {X.x, X.y, X.z};
-      c.laser.beam = Beam::Cone;
-      c.laser.half_angle_rad = kPi;
-      c.render.samples_per_pixel = 64;
-      c.render.max_bounces = 1;
       const double t_direct = 2 * glm::length(X) / kC, t_image = t_hit / kC;
       const TimeAxis axis{t_direct - 0.1e-9, 1e-12, 600, 1.0};
       const TransientTile tile = Renderer(s, c).transient({0, 0, 4, 4}, {0, 0, 4, 4}, axis);
@@ -1420,11 +1399,7 @@ TEST(Transport, EachFaceOfASmoothPlateReflectsR) {
   const float a = 0.45f, b = 0.3f, t = 0.002f;
   add_box(s, {-1, -1, -a - t}, {1, 1, -a}, add_material(s, test::glass(1.5f, t)));
   add_quad(s, {0, 0, b}, {0, 2, 0}, {2, 0, 0}, add_material(s, test::lambertian(0.5f)));  // faces -z
-  RenderStageConfig c = test_config(16, 16, 12e-3);
-  c.laser.beam = Beam::Cone;
-  c.laser.half_angle_rad = kPi;
-  c.render.samples_per_pixel = 131072;
-  c.render.max_bounces = 1;
+  RenderStageConfig c = direct_laser_config(16, 16, 12e-3, 131072);
   Renderer r(s, c);
   const TimeAxis axis{4e-9, 2e-12, 1000, 25e-9};
   const TransientTile tile = r.transient({7, 7, 2, 2}, {7, 7, 2, 2}, axis);
@@ -1658,11 +1633,7 @@ TEST(Transport, RefractedConnectionsAreCountedOnlyWhereASceneHasThem) {
     scenes::Scene s;
     add_quad(s, {0, 0, -1}, {3, 0, 0}, {0, 3, 0}, add_material(s, test::lambertian(0.5f)));
     if (slab) add_box(s, {-3, -3, -0.35f}, {3, 3, -0.3f}, add_material(s, test::glass(1.5f, 0.05f)));
-    RenderStageConfig c = test_config(4, 4, 12e-3);
-    c.laser.beam = Beam::Cone;
-    c.laser.half_angle_rad = kPi;
-    c.render.samples_per_pixel = 16;
-    c.render.max_bounces = 1;
+    RenderStageConfig c = direct_laser_config(4, 4, 12e-3, 16);
     RenderStats stats;
     Renderer(s, c).transient({0, 0, 4, 4}, {0, 0, 4, 4}, TimeAxis{}, &stats);
     EXPECT_EQ(stats.rays.camera, 256u);
@@ -1995,11 +1966,7 @@ TEST(Transport, LaserLightThroughARoughPlateIsItsIntegral) {
               add_material(s, test::glass(float(n), float(t), roughness)));
     return s;
   };
-  RenderStageConfig c = test_config(4, 4, 50e-3);
-  c.laser.beam = Beam::Cone;
-  c.laser.half_angle_rad = kPi;
-  c.render.samples_per_pixel = 8192;
-  c.render.max_bounces = 1;
+  RenderStageConfig c = direct_laser_config(4, 4, 50e-3, 8192);
   const double a = double(roughness) * double(roughness);
   for (const double x_wall : {0.0, d * std::tan(kPi / 6), 0.45}) {
     const glm::dvec3 P(x_wall, 0, -d);
@@ -2027,11 +1994,7 @@ TEST(Transport, TheEdgeOfARoughPlatesShadowHasNoFireflies) {
   add_quad(s, {0, 0, -float(d)}, {3, 0, 0}, {0, 3, 0}, add_material(s, test::lambertian(0.5f)));
   add_quad(bare_scene, {0, 0, -float(d)}, {3, 0, 0}, {0, 3, 0}, add_material(bare_scene, test::lambertian(0.5f)));
   add_box(s, {-0.2f, -0.2f, -0.303f}, {0.2f, 0.2f, -0.3f}, add_material(s, test::glass(1.5f, 0.003f, 0.7f)));
-  RenderStageConfig c = test_config(4, 4, 0.5);
-  c.laser.beam = Beam::Cone;
-  c.laser.half_angle_rad = kPi;
-  c.render.samples_per_pixel = 4096;
-  c.render.max_bounces = 1;
+  RenderStageConfig c = direct_laser_config(4, 4, 0.5, 4096);
   (void)look_aside(&c, s, {0, 0, -0.35}, {0.01, -0.2 * d / 0.3, -d}, d);
   const TimeAxis axis{0.0, 10e-12, 1000, 1.0};
   const TransientTile bare = Renderer(bare_scene, c).transient({0, 0, 4, 4}, {0, 0, 4, 4}, axis);
