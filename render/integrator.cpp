@@ -997,15 +997,14 @@ bool Integrator::rough_crossings(const Crossings& cx) const {
   // (each crossing changes the medium, and the chain ends in air, where the laser is: a walk past a plate's very
   // edge recorded one face from air to air, and the solve through it gave 1e11 times a connection's light)
   if (!(cx.n >= 1 && cx.n <= kMaxRoughFaces) || cx.slots.c[cx.n - 1].medium != -1) return false;
-  for (int j = 0; j < cx.n; ++j)
-    if (cx.slots.c[j].medium == (j == 0 ? cx.medium0 : cx.slots.c[j - 1].medium)) return false;
   for (int j = 0; j < cx.n; ++j) {
     const MaterialPoint& mp = cx.slots.c[j].mp;
-    if (mp.thin_walled || !(mp.alpha >= kRoughCrossingAlpha) || !(mp.transmission > 0.0f) || !(mp.metallic < 1.0f)) return false;
+    if (cx.slots.c[j].medium == (j == 0 ? cx.medium0 : cx.slots.c[j - 1].medium) || mp.thin_walled ||
+        !(mp.alpha >= kRoughCrossingAlpha) || !(mp.transmission > 0.0f) || !(mp.metallic < 1.0f))
+      return false;
   }
   return true;
 }
-
 
 // The laser seen from v through planar faces that are not all parallel: the path that obeys Snell's law at
 // each (solve_planar_path), traced as connect_laser_along traces its own, lit with the path bundle's spread.
