@@ -849,16 +849,17 @@ bool Integrator::connect_laser_along(const NeeVertex& v, const RefractedLayers& 
   return true;
 }
 
-// The laser seen from v through rough refracting planar faces (a frosted plate: every face the straight walk
-// crossed a volume's interface with a GGX lobe of alpha at least kRoughCrossingAlpha, at most kMaxRoughFaces of
-// them). The light's paths form a 2k-dimensional integral over the points y_j where they cross the faces, of
+// The laser seen from v through refracting planar faces of which some are rough (a frosted plate, or one frosted
+// on one side: every face the straight walk crossed a volume's interface, at most kMaxRoughFaces of them, and
+// one or more with a GGX lobe of alpha at least kRoughCrossingAlpha). The light's paths form a 2k-dimensional integral over the points y_j where they cross the faces, of
 // f_v G(v, y_1) prod_j f_j G(y_j, y_j+1) I (f_j the faces' rough transmission, Walter et al. 2007; G the
 // geometry terms, the laser's without a cosine). The estimate: one microfacet normal m_j per face drawn with
 // density D(m_j) (m_j . n_j) (a hash of the vertex and the face, as the echoes'), the path on which Snell's law
 // holds about each m_j solved (solve_planar_path, the faces shaded with m_j), and its integrand over
 // |det dC / dy| prod_j D(m_j): C the tangential components of the paths' half vectors (n_in w_in + n_out w_out,
 // normalised) in each face's basis, whose density in them is D (the change of variables from the points to
-// the normals; C's Jacobian by central differences). Each f_j holds its D(m_j), which cancels: the estimate's
+// the normals; C's Jacobian by central differences). A smoother face's lobe is a Dirac one in C at its normal
+// (m_j = n_j, its f_j without D: its BSDF at kDeltaAlpha over that D). Each f_j holds its D(m_j), which cancels: the estimate's
 // spread comes from the Fresnel, shadowing and geometry factors only, at any roughness (specular manifold
 // sampling with offset normals, Zeltner et al. 2020, with one solve per draw). Nothing is deposited where the
 // drawn normals admit no path across the same faces; a second path for the same normals is not sought.
@@ -872,15 +873,23 @@ void Integrator::connect_laser_rough(const NeeVertex& v, const Crossings& cx, do
   glm::dvec3 start[kMaxRoughFaces], tb[kMaxRoughFaces][2];
   double index[kMaxRoughFaces + 1], D_prod = 1.0;
   int media[kMaxRoughFaces + 1];
+  bool delta[kMaxRoughFaces];
   media[0] = cx.medium0;
   for (int j = 0; j < k; ++j) {
     const glm::dvec3 nj(cr[j].ng);
     make_basis(nj, &tb[j][0], &tb[j][1]);
-    // The microfacet normal: density D(m) (m . n) (tan^2 theta = alpha^2 u / (1 - u)).
-    const double a = double(cr[j].mp.alpha), u = vertex_uniform(v.sf.p, kRoughSalt, j, 0), phi = 2.0 * kPi * vertex_uniform(v.sf.p, kRoughSalt, j, 1);
-    const double tan2 = a * a * u / (1.0 - u), c = 1.0 / std::sqrt(1.0 + tan2), s = c * std::sqrt(tan2);
-    const glm::dvec3 m = s * std::cos(phi) * tb[j][0] + s * std::sin(phi) * tb[j][1] + c * nj;
-    D_prod *= double(ggx_d(cr[j].mp.alpha, float(c), float(s * s)));
+    // The microfacet normal: density D(m) (m . n) (tan^2 theta = alpha^2 u / (1 - u)); a smoother face's the face's
+    // own normal, its D that of kDeltaAlpha there (the BSDF's at the solved path, evaluated with that alpha).
+    delta[j] = !(cr[j].mp.alpha >= kRoughCrossingAlpha);
+    glm::dvec3 m = nj;
+    if (delta[j]) {
+      D_prod *= double(ggx_d(kDeltaAlpha, 1.0f, 0.0f));
+    } else {
+      const double a = double(cr[j].mp.alpha), u = vertex_uniform(v.sf.p, kRoughSalt, j, 0), phi = 2.0 * kPi * vertex_uniform(v.sf.p, kRoughSalt, j, 1);
+      const double tan2 = a * a * u / (1.0 - u), c = 1.0 / std::sqrt(1.0 + tan2), s = c * std::sqrt(tan2);
+      m = s * std::cos(phi) * tb[j][0] + s * std::sin(phi) * tb[j][1] + c * nj;
+      D_prod *= double(ggx_d(cr[j].mp.alpha, float(c), float(s * s)));
+    }
     faces[j] = PlanarFace{cr[j].p, nj};
     faces[j].shaded = true, faces[j].m = m;
     start[j] = cr[j].p;
@@ -909,7 +918,9 @@ void Integrator::connect_laser_rough(const NeeVertex& v, const Crossings& cx, do
     if (s < k) {
       const Surface& sf = met[s].sf;
       const glm::vec3 wo = -glm::vec3(path.d[s]);
-      const Bsdf b(shading_.material_at(sf, met[s].hit), sf.ns, sf.ng, wo, glm::dot(wo, sf.ng) > 0.0f);
+      MaterialPoint mp = shading_.material_at(sf, met[s].hit);
+      if (delta[s]) mp.alpha = kDeltaAlpha;
+      const Bsdf b(mp, sf.ns, sf.ng, wo, glm::dot(wo, sf.ng) > 0.0f);
       value *= double(b.eval_cos(glm::vec3(path.d[s + 1])).x) * std::fabs(glm::dot(glm::dvec3(wo), glm::dvec3(sf.ns)));
     }
     if (media[s] >= 0) {
@@ -991,19 +1002,21 @@ void Integrator::connect_laser_rough_slabs(const NeeVertex& v, const Crossings& 
   }
 }
 
-// Whether connect_laser_rough takes the straight walk's crossings: each the interface of a volume with a GGX lobe
-// (alpha at least kRoughCrossingAlpha), at most kMaxRoughFaces of them.
+// Whether connect_laser_rough takes the straight walk's crossings: each the interface of a volume, at most
+// kMaxRoughFaces of them, one or more with a GGX lobe of alpha at least kRoughCrossingAlpha.
 bool Integrator::rough_crossings(const Crossings& cx) const {
   // (each crossing changes the medium, and the chain ends in air, where the laser is: a walk past a plate's very
   // edge recorded one face from air to air, and the solve through it gave 1e11 times a connection's light)
   if (!(cx.n >= 1 && cx.n <= kMaxRoughFaces) || cx.slots.c[cx.n - 1].medium != -1) return false;
+  bool rough = false;
   for (int j = 0; j < cx.n; ++j) {
     const MaterialPoint& mp = cx.slots.c[j].mp;
     if (cx.slots.c[j].medium == (j == 0 ? cx.medium0 : cx.slots.c[j - 1].medium) || mp.thin_walled ||
-        !(mp.alpha >= kRoughCrossingAlpha) || !(mp.transmission > 0.0f) || !(mp.metallic < 1.0f))
+        !(mp.transmission > 0.0f) || !(mp.metallic < 1.0f))
       return false;
+    rough = rough || mp.alpha >= kRoughCrossingAlpha;
   }
-  return true;
+  return rough;
 }
 
 // The laser seen from v through planar faces that are not all parallel: the path that obeys Snell's law at

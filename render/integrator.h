@@ -318,8 +318,9 @@ class Integrator {
   bool deposit_planar_path(const NeeVertex& v, const PlanarPath& path, const int* material, const glm::vec3* ng,
                            const double* index, const int* media, const bool* reflect, double w, const PixelFilm& film,
                            uint64_t* rays, const bool* shaded = nullptr) const;
-  // The laser's connection from v through rough refracting planar faces (a frosted plate), by a drawn
-  // microfacet normal per face and the path solved for them; rough_crossings: whether it takes the crossings.
+  // The laser's connection from v through refracting planar faces of which one or more are rough (a frosted plate,
+  // or frosted on one side), by a drawn microfacet normal per rough face and the path solved for them;
+  // rough_crossings: whether it takes the crossings.
   void connect_laser_rough(const NeeVertex& v, const Crossings& cx, double w, const PixelFilm& film, RayCounts* rays) const;
   bool rough_crossings(const Crossings& cx) const;
   // A rough plate: a small flat mesh of a rough refracting volume (alpha at least kRoughCrossingAlpha), its two
@@ -337,6 +338,10 @@ class Integrator {
   // (roughness 0.158: at 0.15 and below the faces crossed as smooth are within 0.2 % of the rough estimate
   // behind a 3 mm plate, with less noise; at 0.2 +0.5 % and +1.9 %, docs/render.md)
   static constexpr float kRoughCrossingAlpha = 0.025f;
+  // The alpha with which connect_laser_rough evaluates a smoother face's BSDF on a chain with rough ones, at its
+  // own normal: its transmission without D in the limit of a narrow lobe (the shadowing's share within 1e-4 up to
+  // 80 degrees), a smooth face's Dirac lobe in the integral over the half vectors.
+  static constexpr float kDeltaAlpha = 2e-3f;
   // The laser's light reflected to v by the smooth planar faces of mirrors_.
   void connect_laser_mirrors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const;
   // The laser's light refracted to v through each smooth glass mesh of curved_refractors_ alone, along every path

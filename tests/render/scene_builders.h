@@ -48,17 +48,31 @@ inline int add_quad(scenes::Scene& s, glm::vec3 c, glm::vec3 a, glm::vec3 b, int
   return static_cast<int>(s.meshes.size()) - 1;
 }
 
-// An axis-aligned box [lo, hi] with outward (counter-clockwise) faces.
-inline int add_box(scenes::Scene& s, glm::vec3 lo, glm::vec3 hi, int material) {
+// An axis-aligned box [lo, hi] with outward (counter-clockwise) faces; with top_material, its top face (z = hi)
+// is a mesh of its own of that material (a plate frosted on one side: one volume, two materials).
+inline int add_box(scenes::Scene& s, glm::vec3 lo, glm::vec3 hi, int material, int top_material = -1) {
   scenes::Mesh m;
   m.name = "box" + std::to_string(s.meshes.size());
   for (int i = 0; i < 8; ++i) m.positions.push_back({(i & 1) ? hi.x : lo.x, (i & 2) ? hi.y : lo.y, (i & 4) ? hi.z : lo.z});
   // Each face as two triangles, wound so that (v1 - v0) x (v2 - v0) points out of the box.
   const uint32_t faces[6][4] = {{0, 4, 6, 2}, {1, 3, 7, 5}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 2, 3, 1}, {4, 5, 7, 6}};
-  for (const auto& f : faces) m.indices.insert(m.indices.end(), {f[0], f[1], f[2], f[0], f[2], f[3]});
+  for (const auto& f : faces) {
+    if (top_material >= 0 && f[0] == 4) continue;
+    m.indices.insert(m.indices.end(), {f[0], f[1], f[2], f[0], f[2], f[3]});
+  }
   m.material = material;
   s.meshes.push_back(std::move(m));
-  return static_cast<int>(s.meshes.size()) - 1;
+  const int box = static_cast<int>(s.meshes.size()) - 1;
+  if (top_material >= 0) {
+    scenes::Mesh top;
+    top.name = "box_top" + std::to_string(s.meshes.size());
+    top.positions = {s.meshes[size_t(box)].positions[4], s.meshes[size_t(box)].positions[5], s.meshes[size_t(box)].positions[7],
+                     s.meshes[size_t(box)].positions[6]};
+    top.indices = {0, 1, 2, 0, 2, 3};
+    top.material = top_material;
+    s.meshes.push_back(std::move(top));
+  }
+  return box;
 }
 
 // A UV sphere with outward faces and vertex normals; inward = true flips winding and normals.

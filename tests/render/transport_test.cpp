@@ -1812,11 +1812,17 @@ TEST(Transport, TheLightBehindARoughSlabMatchesPhotonsTracedThroughIt) {
   // the light to the view crosses it at x 0.06 to 0.09. Photons start on its top face within `launch`.
   const double x0 = 0.03, x1 = 0.6, y0 = -0.3, y1 = 0.3, launch = 0.07;
   const double lx0 = x0, lx1 = x0 + 2 * launch, ly0 = -launch, ly1 = launch;
-  for (const auto& [roughness, tolerance] : {std::pair{0.02, 3e-3}, std::pair{0.15, 1e-2}, std::pair{0.3, 1e-2}, std::pair{0.5, 2e-2}}) {
+  struct Slab {
+    double top, bottom, tolerance;  // the faces' roughness (the top one the laser's side)
+  };
+  for (const Slab& slab : {Slab{0.02, 0.02, 3e-3}, Slab{0.15, 0.15, 1e-2}, Slab{0.3, 0.3, 1e-2}, Slab{0.5, 0.5, 2e-2},
+                           Slab{0.5, 0.0, 1e-2}, Slab{0.0, 0.5, 1e-2}}) {
+    const double tolerance = slab.tolerance;
     scenes::Scene s;
     add_quad(s, {0, 0, float(zw)}, {1, 0, 0}, {0, 1, 0}, add_material(s, test::lambertian(0.5f)));
-    add_box(s, {float(x0), float(y0), float(zf - t)}, {float(x1), float(y1), float(zf)},
-            add_material(s, test::glass(float(n_g), float(t), float(roughness))));
+    const int bottom = add_material(s, test::glass(float(n_g), float(t), float(slab.bottom)));
+    add_box(s, {float(x0), float(y0), float(zf - t)}, {float(x1), float(y1), float(zf)}, bottom,
+            slab.top == slab.bottom ? -1 : add_material(s, test::glass(float(n_g), float(t), float(slab.top))));
     RenderStageConfig c = test_config(16, 16, 0.0);
     const double view = 0.04;  // the wall's 4 cm x 4 cm around (0, 0, zw)
     c.camera.focal_length_m = 16 * c.camera.pixel_pitch_m * -zw / view;
@@ -1829,12 +1835,12 @@ TEST(Transport, TheLightBehindARoughSlabMatchesPhotonsTracedThroughIt) {
     const TimeAxis axis{3e-9, 1e-12, 2000, 25e-9};
     const TransientTile tile = r.transient({0, 0, 16, 16}, {0, 0, 16, 16}, axis);
 
-    const double alpha = roughness * roughness, I = r.photons_per_pulse() / (4 * kPi);
+    const double I = r.photons_per_pulse() / (4 * kPi);
     std::mt19937_64 gen(7);
     const auto u01 = [&] { return double(gen() >> 11) * 0x1p-53; };
-    // One crossing of a rough face with normal n (on the incident side) from index ni to nt: d, the travel
-    // direction, is updated; returns the weight, 0 when the photon is lost.
-    const auto cross = [&](glm::dvec3& d, const glm::dvec3& n, double ni, double nt) {
+    // One crossing of a face of GGX alpha (0: smooth) with normal n (on the incident side) from index ni to nt:
+    // d, the travel direction, is updated; returns the weight, 0 when the photon is lost.
+    const auto cross = [&](glm::dvec3& d, const glm::dvec3& n, double ni, double nt, double alpha) {
       const glm::dvec3 wi = -d;
       const double u1 = u01(), u2 = u01();
       const double tan2 = alpha * alpha * u1 / (1 - u1), cos_m = 1 / std::sqrt(1 + tan2);
@@ -1865,13 +1871,14 @@ TEST(Transport, TheLightBehindARoughSlabMatchesPhotonsTracedThroughIt) {
     for (int64_t i = 0; i < photons; ++i) {
       const glm::dvec3 X(lx0 + (lx1 - lx0) * u01(), ly0 + (ly1 - ly0) * u01(), zf);
       glm::dvec3 d = glm::normalize(X - L), p = X;
-      double w = I * -d.z * area / (glm::dot(X - L, X - L) * double(photons)) * cross(d, {0, 0, 1}, 1.0, n_g);
+      const double top = slab.top * slab.top, bottom_alpha = slab.bottom * slab.bottom;
+      double w = I * -d.z * area / (glm::dot(X - L, X - L) * double(photons)) * cross(d, {0, 0, 1}, 1.0, n_g, top);
       bool out = false;
       for (int face = 0; face < 16 && w > 0 && !out; ++face) {  // inside: down to the bottom face, or up
         const bool down = d.z < 0;
         p += d * (((down ? zf - t : zf) - p.z) / d.z);
         if (p.x < x0 || p.x > x1 || p.y < y0 || p.y > y1) w = 0;  // out through a side
-        else w *= cross(d, {0, 0, down ? 1.0 : -1.0}, n_g, 1.0), out = (d.z < 0) == down;
+        else w *= cross(d, {0, 0, down ? 1.0 : -1.0}, n_g, 1.0, down ? bottom_alpha : top), out = (d.z < 0) == down;
       }
       if (!out || !(w > 0) || d.z >= 0) continue;  // lost, or out through the top face
       const glm::dvec3 P = p + d * ((zw - p.z) / d.z);
@@ -1885,8 +1892,8 @@ TEST(Transport, TheLightBehindARoughSlabMatchesPhotonsTracedThroughIt) {
     for (int y = 4; y < 12; ++y)
       for (int x = 4; x < 12; ++x) sum_r += tile.laser_total[size_t(y * 16 + x)];
     const double se = std::sqrt(sum_p2) / sum_p;
-    std::printf("roughness %.2f: renderer / photons %.4f (standard error %.4f)\n", roughness, sum_r / sum_p, se);
-    EXPECT_NEAR(sum_r / sum_p, 1.0, 5 * se + tolerance) << "roughness " << roughness;
+    std::printf("roughness %.2f, %.2f: renderer / photons %.4f (standard error %.4f)\n", slab.top, slab.bottom, sum_r / sum_p, se);
+    EXPECT_NEAR(sum_r / sum_p, 1.0, 5 * se + tolerance) << "roughness " << slab.top << ", " << slab.bottom;
   }
 }
 
