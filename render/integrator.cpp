@@ -408,18 +408,48 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
       for (const double R : radii) r.searches.emplace_back(dl, R, n, kCurvedRefractorSteps);
     }
   }
-  // Rough plates (connect_laser_rough_slabs): small flat meshes of a rough refracting volume, their two largest
-  // parallel planes.
-  for (size_t m = 0; m < scene.meshes.size() && rough_slabs_.size() < kMaxRoughSlabs; ++m) {
-    const scenes::Mesh& mesh = scene.meshes[m];
-    if (mesh.material < 0 || mesh.triangle_count() > kMaxPartsPerMesh) continue;
+  // Rough plates (connect_laser_rough_slabs): small flat volumes with a rough face, their two largest parallel
+  // planes. A volume is a mesh of a refracting volume material, with those of the same glTF node and index (a
+  // plate frosted on one side: a mesh of each material); each plane's faces of one material.
+  const auto volume = [&](const scenes::Mesh& mesh) {
+    if (mesh.material < 0) return false;
     const ResolvedMaterial& rm = shading.material(mesh.material);
     const MaterialPoint& mp = rm.point;
-    if (!rm.volume || mp.ior == 1.0f || mp.thin_walled || !(mp.alpha >= kRoughCrossingAlpha) || !(mp.transmission > 0.0f) ||
-        !(mp.metallic < 1.0f))
-      continue;
-    RoughSlab sl{glm::dvec3(0.0), 0.0, 0.0, mesh.material};
-    if (plate_planes(mesh, &sl.n, &sl.lo, &sl.hi)) rough_slabs_.push_back(sl);
+    return rm.volume && mp.ior != 1.0f && !mp.thin_walled && mp.transmission > 0.0f && mp.metallic < 1.0f;
+  };
+  const auto ior = [&](size_t m) { return shading.material(scene.meshes[m].material).point.ior; };
+  std::vector<bool> grouped(scene.meshes.size(), false);
+  for (size_t m = 0; m < scene.meshes.size() && rough_slabs_.size() < kMaxRoughSlabs; ++m) {
+    if (grouped[m] || !volume(scene.meshes[m])) continue;
+    std::vector<size_t> group{m};
+    for (size_t o = m + 1; o < scene.meshes.size() && scene.meshes[m].gltf_node >= 0; ++o)
+      if (scene.meshes[o].gltf_node == scene.meshes[m].gltf_node && volume(scene.meshes[o]) && ior(o) == ior(m))
+        group.push_back(o), grouped[o] = true;
+    scenes::Mesh merged;  // (the group's triangles, and each one's material)
+    std::vector<int> materials;
+    bool plate = true, rough = false;
+    for (const size_t g : group) {
+      const scenes::Mesh& mesh = scene.meshes[g];
+      rough = rough || shading.material(mesh.material).point.alpha >= kRoughCrossingAlpha;
+      const uint32_t base = uint32_t(merged.positions.size());
+      merged.positions.insert(merged.positions.end(), mesh.positions.begin(), mesh.positions.end());
+      for (const uint32_t i : mesh.indices) merged.indices.push_back(base + i);
+      materials.insert(materials.end(), mesh.triangle_count(), mesh.material);
+    }
+    RoughSlab sl{glm::dvec3(0.0), 0.0, 0.0, {-1, -1}};
+    if (!rough || merged.triangle_count() > kMaxPartsPerMesh || !plate_planes(merged, &sl.n, &sl.lo, &sl.hi)) continue;
+    // Each plane's material: that of its triangles (those of the plate's normal at its offset), one.
+    for (size_t t = 0; t < merged.triangle_count() && plate; ++t) {
+      const glm::dvec3 a(merged.positions[merged.indices[3 * t]]), b(merged.positions[merged.indices[3 * t + 1]]),
+          c(merged.positions[merged.indices[3 * t + 2]]);
+      const glm::dvec3 cr = glm::cross(b - a, c - a);
+      if (!(glm::length(cr) > 0.0) || std::fabs(glm::dot(cr / glm::length(cr), sl.n)) < 1.0 - 1e-6) continue;
+      const double o = glm::dot(sl.n, a);
+      int& on = std::fabs(o - sl.lo) < std::fabs(o - sl.hi) ? sl.material[0] : sl.material[1];
+      plate = on < 0 || on == materials[t];
+      on = materials[t];
+    }
+    if (plate && sl.material[0] >= 0 && sl.material[1] >= 0) rough_slabs_.push_back(sl);
   }
   ambient_on_ = ambient.any() || shading.has_emission();
   laser_traced_ = config.trace_laser;
@@ -981,21 +1011,25 @@ void Integrator::connect_laser_rough_slabs(const NeeVertex& v, const Crossings& 
                                            RayCounts* rays) const {
   const glm::dvec3 x(v.sf.p), L = laser_.position;
   for (const RoughSlab& sl : rough_slabs_) {
-    if (std::any_of(cx.slots.c, cx.slots.c + cx.n, [&](const Crossings::Crossing& c) { return c.material == sl.material; })) continue;
+    if (std::any_of(cx.slots.c, cx.slots.c + cx.n,
+                    [&](const Crossings::Crossing& c) { return c.material == sl.material[0] || c.material == sl.material[1]; }))
+      continue;
     const double ox = glm::dot(sl.n, x), ol = glm::dot(sl.n, L);
     if (!((ox < sl.lo && ol > sl.hi) || (ox > sl.hi && ol < sl.lo))) continue;  // (the plate between them)
     Crossings ex;
     ex.n = 2;
     ex.medium0 = -1;
     ex.refracting = true;
-    const double planes[2] = {ox < sl.lo ? sl.lo : sl.hi, ox < sl.lo ? sl.hi : sl.lo};
+    const bool up = ox < sl.lo;  // (from the lo plane to the hi one)
+    const double planes[2] = {up ? sl.lo : sl.hi, up ? sl.hi : sl.lo};
+    const int materials[2] = {sl.material[up ? 0 : 1], sl.material[up ? 1 : 0]};
     for (int j = 0; j < 2; ++j) {
       Crossings::Crossing& c = ex.slots.c[j];
       c.p = x + (planes[j] - ox) / (ol - ox) * (L - x);
       c.ng = glm::vec3(sl.n);
-      c.material = sl.material;
-      c.mp = shading_.material(sl.material).point;
-      c.medium = j == 0 ? sl.material : -1;
+      c.material = materials[j];
+      c.mp = shading_.material(materials[j]).point;
+      c.medium = j == 0 ? materials[0] : -1;
       c.mesh = 0, c.triangle = 0;
     }
     connect_laser_rough(v, ex, w, film, rays);

@@ -323,13 +323,14 @@ class Integrator {
   // rough_crossings: whether it takes the crossings.
   void connect_laser_rough(const NeeVertex& v, const Crossings& cx, double w, const PixelFilm& film, RayCounts* rays) const;
   bool rough_crossings(const Crossings& cx) const;
-  // A rough plate: a small flat mesh of a rough refracting volume (alpha at least kRoughCrossingAlpha), its two
-  // largest parallel planes n . p = lo and hi; the laser's light through it to the vertices whose straight walk
-  // to the laser does not cross it (connect_laser_rough_slabs).
+  // A rough plate: a small flat refracting volume (a mesh, or the meshes of one glTF node) with a rough face (alpha
+  // at least kRoughCrossingAlpha), its two largest parallel planes n . p = lo and hi and their faces' materials;
+  // the laser's light through it to the vertices whose straight walk to the laser does not cross it
+  // (connect_laser_rough_slabs).
   struct RoughSlab {
     glm::dvec3 n;
     double lo, hi;
-    int material;
+    int material[2];  // lo's, hi's
   };
   static constexpr size_t kMaxRoughSlabs = 8;
   std::vector<RoughSlab> rough_slabs_;

@@ -70,6 +70,7 @@ inline int add_box(scenes::Scene& s, glm::vec3 lo, glm::vec3 hi, int material, i
                      s.meshes[size_t(box)].positions[6]};
     top.indices = {0, 1, 2, 0, 2, 3};
     top.material = top_material;
+    s.meshes[size_t(box)].gltf_node = top.gltf_node = box;  // (one volume: the meshes of one node)
     s.meshes.push_back(std::move(top));
   }
   return box;
