@@ -55,8 +55,13 @@ bool is_mount_point(const fs::path& dir) {
 
 // What metadata.json lists, relative to `out`: the files and folders it names (a Zarr store, "counts.zarr",
 // is a folder, the run's with everything in it), and the folders they lie in ("previews", "light").
+// The files a run folder's metadata.json lists, itself among them: only a metadata.json of spadgen's (a JSON
+// object with spadgen_version and its list of files) says which files are spadgen's. Another one (a user's
+// notes of the same name, listing files of their own) and one that cannot be read list nothing, not even
+// itself: the folder's files are someone else's (a run replaced a folder of a user's metadata.json and the
+// files it listed: an adversarial tester's find).
 struct Listed {
-  std::set<std::string> entries = {"metadata.json"}, parents;
+  std::set<std::string> entries, parents;
   std::string damaged;  // why a metadata.json that is there lists nothing ("" when absent or read)
 };
 Listed listed_files(const fs::path& out) {
@@ -70,10 +75,14 @@ Listed listed_files(const fs::path& out) {
     return listed;
   }
   const nlohmann::json meta = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
-  if (!meta.is_object() || !meta.contains("files") || !meta["files"].is_array()) {
-    listed.damaged = (out / "metadata.json").string() + (meta.is_discarded() ? " is not JSON (cut short?)" : " has no list of files");
+  if (!meta.is_object() || !meta.contains("files") || !meta["files"].is_array() || !meta.contains("spadgen_version") ||
+      !meta["spadgen_version"].is_string()) {
+    listed.damaged = (out / "metadata.json").string() +
+                     (meta.is_discarded() ? " is not JSON (cut short?)"
+                                          : " is not a spadgen run's (a JSON object with spadgen_version and its list of files)");
     return listed;
   }
+  listed.entries.insert("metadata.json");
   for (const nlohmann::json& f : meta["files"]) {
     if (!f.is_string()) continue;
     const fs::path p = fs::path(f.get<std::string>()).lexically_normal();
@@ -588,8 +597,7 @@ void Staging::check_owned(bool publishing) const {
   // A run folder whose metadata.json cannot be read lists nothing: that is what to say (its own files were
   // called foreign, a damaged or unreadable metadata.json not named)
   if (const Listed l = listed_files(out_); owned_.empty() && !of_runs_ && !l.damaged.empty())
-    known = "not listed in its metadata.json, which cannot be read: " + l.damaged +
-            "; a run folder's metadata.json says which files are spadgen's";
+    known = "no metadata.json of spadgen's lists them: " + l.damaged + "; a run folder's metadata.json says which files are spadgen's";
   if (!owned_.empty()) {
     known = "expected only ";
     for (size_t i = 0; i < owned_.size(); ++i) known += (i == 0 ? "" : i + 1 == owned_.size() ? " and " : ", ") + owned_[i];

@@ -559,13 +559,16 @@ TEST_F(App, RendererAndSensorAgreeOnEveryRowsPixelDesign) {
   }
 }
 
+// An earlier run's metadata.json, alone in its folder: spadgen's (spadgen_version), listing itself.
+const std::string kEarlier = R"({"spadgen_version": "earlier", "files": ["metadata.json"]})";
+
 TEST_F(App, BadInputStopsBeforeWritingAndKeepsEarlierFiles) {
   fs::create_directories(dir_ / "out");
-  std::ofstream(dir_ / "out/metadata.json") << "{\"earlier\": true}";
+  std::ofstream(dir_ / "out/metadata.json") << kEarlier;  // (an earlier run's)
   const Result r = sh("run " + kScenes + "multi_object.json --set camera.f_numbr=2 -o " + (dir_ / "out").string());
   EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("multi_object.json: --set camera.f_numbr: /camera/f_numbr: unknown key; did you mean /camera/f_number?"));
-  EXPECT_EQ(slurp(dir_ / "out/metadata.json"), "{\"earlier\": true}");
+  EXPECT_EQ(slurp(dir_ / "out/metadata.json"), kEarlier);
   size_t entries = 0;
   for ([[maybe_unused]] const auto& e : fs::directory_iterator(dir_ / "out")) ++entries;
   EXPECT_EQ(entries, 1u);
@@ -577,7 +580,7 @@ TEST_F(App, BadInputStopsBeforeWritingAndKeepsEarlierFiles) {
 
 TEST_F(App, AnInterruptedRunLeavesNothingBehind) {
   fs::create_directories(dir_ / "out");
-  std::ofstream(dir_ / "out/metadata.json") << "{\"earlier\": true}";
+  std::ofstream(dir_ / "out/metadata.json") << kEarlier;  // (an earlier run's)
   // The staging folder of a process that no longer exists (pids never reach 999999999) is removed.
   fs::create_directories(dir_ / "out/.spadgen-staging-999999999");
   std::ofstream(dir_ / "out/.spadgen-staging-999999999/counts.npy") << "partial";
@@ -586,7 +589,7 @@ TEST_F(App, AnInterruptedRunLeavesNothingBehind) {
                          (dir_ / "out").string());
   EXPECT_EQ(r.code, 2) << r.output;  // the documented exit code of an interrupted run
   EXPECT_THAT(r.output, HasSubstr("interrupted by a signal"));
-  EXPECT_EQ(slurp(dir_ / "out/metadata.json"), "{\"earlier\": true}");
+  EXPECT_EQ(slurp(dir_ / "out/metadata.json"), kEarlier);
   size_t entries = 0;
   for ([[maybe_unused]] const auto& e : fs::directory_iterator(dir_ / "out")) ++entries;
   EXPECT_EQ(entries, 1u) << "only the earlier metadata.json may remain";

@@ -467,9 +467,38 @@ TEST_F(Hardening, AFolderInTheWayOfAFileDoesNotMixTheSets) {
   std::ofstream(out / "metadata.json") << meta.substr(0, 200);
   const Outcome cut = spadgen("run " + kTiny + " -q --seed 3 -o " + out.string());
   expect_exit(cut, 1, "over a folder with its metadata.json cut short");
-  EXPECT_THAT(cut.err, HasSubstr("not listed in its metadata.json, which cannot be read: " + (out / "metadata.json").string() +
+  EXPECT_THAT(cut.err, HasSubstr("no metadata.json of spadgen's lists them: " + (out / "metadata.json").string() +
                                  " is not JSON (cut short?)"));
   EXPECT_EQ(slurp(out / "counts.npy"), counts);
+}
+
+// A folder of a user's own with a file named metadata.json (notes, another tool's record, listing files of its
+// own): not a run folder, so neither run nor sense replaces it (both did, deleting it and the files it listed,
+// without a word: an adversarial tester's find). Only a metadata.json of spadgen's, with spadgen_version and
+// its list of files, says which files are spadgen's.
+TEST_F(Hardening, AUsersMetadataJsonDoesNotMakeTheirFolderARuns) {
+  expect_exit(spadgen("run " + kTiny + " -q --set outputs.light=true -o " + (dir_ / "lit").string()), 0, "a run that saves its light");
+  const std::string notes = R"({"experiment": "calibration", "files": ["raw/scan1.bin"]})";
+  for (const char* text : {R"({"author": "me"})", "not json", notes.c_str()}) {
+    for (const std::string& command : {"run " + kTiny + " -q -o ", "sense " + (dir_ / "lit").string() + " -q -o "}) {
+      const fs::path mine = dir_ / "mine";
+      fs::remove_all(mine);
+      fs::create_directories(mine / "raw");
+      std::ofstream(mine / "metadata.json") << text;
+      if (text == notes) std::ofstream(mine / "raw/scan1.bin") << "data";
+      const Outcome o = spadgen(command + mine.string());
+      expect_exit(o, 1, command + "into a folder with a metadata.json " + text);
+      // (the files named: the folder's metadata.json among them)
+      const size_t from = o.err.find("did not write there ("), to = o.err.find(';', from);
+      ASSERT_NE(from, std::string::npos) << o.err;
+      EXPECT_THAT(o.err.substr(from, to - from), HasSubstr("metadata.json")) << o.err;
+      EXPECT_THAT(o.err, HasSubstr("no metadata.json of spadgen's lists them: " + (mine / "metadata.json").string())) << text;
+      EXPECT_EQ(slurp(mine / "metadata.json"), text);
+      if (text == notes) {
+        EXPECT_EQ(slurp(mine / "raw/scan1.bin"), "data");
+      }
+    }
+  }
 }
 
 TEST_F(Hardening, ASecondRunIntoAFolderInUseRefuses) {

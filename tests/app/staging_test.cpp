@@ -34,7 +34,8 @@ std::string slurp(const fs::path& p) {
   return ss.str();
 }
 
-// A set of files as a run writes them: each file's content names the set, and metadata.json lists them.
+// A set of files as a run writes them: each file's content names the set, and metadata.json (spadgen's: with
+// spadgen_version) lists them.
 // The two sets differ in their files (the new one has fewer), so that a mix shows.
 const std::vector<std::string> kOldFiles = {"counts.npy", "frames.npy", "laser.exr", "previews/depth.png"};
 const std::vector<std::string> kNewFiles = {"counts.npy", "laser.exr", "previews/intensity.png"};
@@ -47,7 +48,7 @@ std::vector<std::string> write_set(const std::function<std::string(const std::st
     fs::create_directories(fs::path(path_of(f)).parent_path());
     std::ofstream(path_of(f)) << tag << ":" << f;
   }
-  std::ofstream(path_of("metadata.json")) << nlohmann::json({{"set", tag}, {"files", listed}}).dump();
+  std::ofstream(path_of("metadata.json")) << nlohmann::json({{"spadgen_version", "test"}, {"set", tag}, {"files", listed}}).dump();
   return listed;
 }
 
