@@ -1328,11 +1328,16 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
   std::vector<uint32_t> idx;
   if (p.indices >= 0) {
     if (static_cast<size_t>(p.indices) < m_.accessors.size()) {
-      const int ct = m_.accessors[static_cast<size_t>(p.indices)].componentType;
+      const tinygltf::Accessor& a = m_.accessors[static_cast<size_t>(p.indices)];
+      const int ct = a.componentType;
       if (ct != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE && ct != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
           ct != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
         fail(who, std::string("indices accessor ") + std::to_string(p.indices) + " has componentType " +
                       component_name(ct) + "; indices must be UNSIGNED_BYTE, UNSIGNED_SHORT or UNSIGNED_INT");
+      // (read as fractions of the largest value, every index was 0: nothing rendered, and nothing said why)
+      if (a.normalized)
+        fail(who, std::string("indices accessor ") + std::to_string(p.indices) + " is normalized; indices are vertex "
+                      "numbers, not normalized (glTF 2.0: an unsigned integer SCALAR accessor; remove \"normalized\": true)");
     }
     const std::vector<double> raw = read_accessor(p.indices, who + " indices", {TINYGLTF_TYPE_SCALAR}, &k, &comps);
     idx.resize(k);

@@ -1869,6 +1869,14 @@ TEST_F(BrokenGltf, AttributesOfComponentTypesGltfDoesNotAllowAreRefused) {
     g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}}}, {"indices", idx}}}), "Tri")}});
     EXPECT_THAT(error_of(g), HasSubstr("indices accessor 1 has componentType 5127 (no glTF 2.0 component type); indices must be"));
   }
+  {
+    // normalized indices read as fractions made every index 0: the triangles vanished, nothing said why
+    Gltf g;
+    const int pos = g.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+    const int idx = g.accessor(g.view_of(std::vector<uint16_t>{0, 1, 2}), kUShort, "SCALAR", 3, 0, true);
+    g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}}}, {"indices", idx}}}), "Tri")}});
+    EXPECT_THAT(error_of(g), HasSubstr("mesh 0 'Tri' primitive 0: indices accessor 1 is normalized; indices are vertex numbers"));
+  }
   for (const bool normalized : {true, false}) {
     Gltf g;
     const int pos = g.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
