@@ -1995,6 +1995,40 @@ void check_before_tinygltf(const std::string& path, const nlohmann::json& doc, b
         throw Error(path + ": " + label("accessor", i, o.value("name", std::string())) + ": type " + quoted(t->get<std::string>()) +
                     " is no glTF 2.0 accessor type; expected SCALAR, VEC2, VEC3, VEC4, MAT2, MAT3 or MAT4");
     }
+  // References tinygltf checks with messages of its own ("primitive indices accessor out of bounds", 'image[0]
+  // bufferView "7" not found in the scene.'), and an accessor's componentType ("Invalid `componentType` in
+  // accessor. Got 1234"): named here, with what was expected.
+  const auto count_of = [&](const char* list) {
+    const auto l = doc.find(list);
+    return l != doc.end() && l->is_array() ? l->size() : size_t{0};
+  };
+  const auto reference = [&](const std::string& who, const nlohmann::json& o, const char* key, const char* list, const char* one) {
+    const auto r = o.find(key);
+    if (r == o.end() || !r->is_number_integer()) return;
+    const size_t n = count_of(list);
+    if (r->get<int64_t>() < 0 || static_cast<uint64_t>(r->get<int64_t>()) >= n)
+      throw Error(path + ": " + who + ": " + key + " " + r->dump() + " names no " + one + " (the file has " + std::to_string(n) + " " +
+                  list + (n ? ", 0 to " + std::to_string(n - 1) : std::string()) + ")");
+  };
+  const auto each = [&](const char* list, const char* one, const auto& check) {
+    if (const auto l = doc.find(list); l != doc.end() && l->is_array())
+      for (size_t i = 0; i < l->size(); ++i)
+        if ((*l)[i].is_object()) check(label(one, i, (*l)[i].value("name", std::string())), (*l)[i]);
+  };
+  each("accessors", "accessor", [&](const std::string& who, const nlohmann::json& a) {
+    reference(who, a, "bufferView", "bufferViews", "bufferView");
+    // (those tinygltf does not know: 5124 and 5127-5130 are named later, as the attribute or indices that has them)
+    if (const auto c = a.find("componentType"); c != a.end() && c->is_number_integer() && (c->get<int64_t>() < 5120 || c->get<int64_t>() > 5130))
+      throw Error(path + ": " + who + ": componentType " + c->dump() + " is no glTF 2.0 component type; expected 5120 (BYTE), "
+                  "5121 (UNSIGNED_BYTE), 5122 (SHORT), 5123 (UNSIGNED_SHORT), 5125 (UNSIGNED_INT) or 5126 (FLOAT)");
+  });
+  each("bufferViews", "bufferView", [&](const std::string& who, const nlohmann::json& v) { reference(who, v, "buffer", "buffers", "buffer"); });
+  each("images", "image", [&](const std::string& who, const nlohmann::json& im) { reference(who, im, "bufferView", "bufferViews", "bufferView"); });
+  each("meshes", "mesh", [&](const std::string& who, const nlohmann::json& m) {
+    if (const auto prims = m.find("primitives"); prims != m.end() && prims->is_array())
+      for (size_t j = 0; j < prims->size(); ++j)
+        if ((*prims)[j].is_object()) reference(who + " primitive " + std::to_string(j), (*prims)[j], "indices", "accessors", "accessor");
+  });
   if (const auto it = doc.find("extensionsRequired"); it != doc.end() && it->is_array())
     for (const nlohmann::json& e : *it)
       if (e.is_string() && !kSupportedExtensions.count(e.get<std::string>())) {
@@ -2219,6 +2253,8 @@ Scene parse_gltf(const std::string& bytes, const std::string& path, const std::s
     ok = binary ? io.LoadBinaryFromMemory(&model, &err, &warn, reinterpret_cast<const unsigned char*>(bytes.data()),
                                           static_cast<unsigned int>(bytes.size()), base_dir)
                 : io.LoadASCIIFromString(&model, &err, &warn, bytes.data(), static_cast<unsigned int>(bytes.size()), base_dir);
+  } catch (const std::bad_alloc&) {
+    throw;  // (memory, not the file: "malformed glTF (tinygltf: std::bad_alloc)" of a valid 16384^2 texture)
   } catch (const std::exception& e) {
     // tinygltf 2.7 throws std::out_of_range on some malformed files (a GLB buffer of byteLength 0).
     throw Error(path + ": malformed glTF (tinygltf: " + e.what() + ")");

@@ -1581,7 +1581,7 @@ TEST_F(BrokenGltf, UnsortedSparseIndicesAndNormalizedFloats) {
   const int pos = u.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
   const int idx = u.accessor(u.view_of(std::vector<uint32_t>{0, 1, 2}), kUInt, "SCALAR", 3, 0, true);
   u.node({{"mesh", u.mesh(json::array({{{"attributes", {{"POSITION", pos}}}, {"indices", idx}}}))}});
-  EXPECT_THAT(error_of(u), HasSubstr("normalized is true for a UNSIGNED_INT accessor"));
+  EXPECT_THAT(error_of(u), HasSubstr("mesh 0 primitive 0: indices accessor 1 is normalized; indices are vertex numbers"));
 }
 
 TEST_F(BrokenGltf, ImageBufferViewPastItsBuffer) {
@@ -1594,6 +1594,30 @@ TEST_F(BrokenGltf, ImageBufferViewPastItsBuffer) {
   const std::string msg = error_of(g, Gltf::Form::Glb);
   expect_names_file(msg);
   EXPECT_THAT(msg, HasSubstr("image 0: bufferView 0 does not exist or lies past the end of its buffer"));
+}
+
+// An index naming an element the file does not have, where tinygltf said so in words of its own ("primitive
+// indices accessor out of bounds", 'image[0] bufferView "7" not found in the scene.', 'image[0] buffer "1" not
+// found'): the element and its reference named, with what the file has.
+TEST_F(BrokenGltf, ReferencesToElementsTheFileDoesNotHaveAreNamed) {
+  {
+    Gltf g;
+    const int pos = g.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+    g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}}}, {"indices", 9}}}), "Tri")}});
+    EXPECT_THAT(error_of(g), HasSubstr("broken.gltf: mesh 0 'Tri' primitive 0: indices 9 names no accessor (the file has 1 accessors, 0 to 0)"));
+  }
+  {
+    Gltf g;
+    g.node({{"mesh", g.triangle_mesh()}});
+    g.doc["images"] = {{{"bufferView", 7}, {"mimeType", "image/png"}}};
+    EXPECT_THAT(error_of(g), HasSubstr("image 0: bufferView 7 names no bufferView (the file has "));
+  }
+  {
+    Gltf g;
+    g.node({{"mesh", g.triangle_mesh()}});
+    g.doc["bufferViews"][0]["buffer"] = 1;
+    EXPECT_THAT(error_of(g), HasSubstr("bufferView 0: buffer 1 names no buffer (the file has 1 buffers, 0 to 0)"));
+  }
 }
 
 // A texture extension's image (KHR_texture_basisu's KTX2, EXT_texture_webp's WebP) beside a PNG fallback:
@@ -1868,6 +1892,9 @@ TEST_F(BrokenGltf, AttributesOfComponentTypesGltfDoesNotAllowAreRefused) {
     const int idx = g.accessor(g.view_of(std::vector<int32_t>{0, 1, 2}), 5127, "SCALAR", 3);
     g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}}}, {"indices", idx}}}), "Tri")}});
     EXPECT_THAT(error_of(g), HasSubstr("indices accessor 1 has componentType 5127 (no glTF 2.0 component type); indices must be"));
+    // one tinygltf does not know either ("Invalid `componentType` in accessor. Got 1234", naming no accessor)
+    g.doc["accessors"][1]["componentType"] = 1234;
+    EXPECT_THAT(error_of(g), HasSubstr("broken.gltf: accessor 1: componentType 1234 is no glTF 2.0 component type; expected 5120 (BYTE)"));
   }
   {
     // normalized indices read as fractions made every index 0: the triangles vanished, nothing said why
