@@ -2,11 +2,26 @@
 
 #include "core/error.h"
 
+#include <unistd.h>
+
+#include <atomic>
+
 namespace spadgen::app {
 namespace {
 
-// Only a lock-free atomic may be touched from a handler; every long loop polls it (core/error.h).
-extern "C" void on_interrupt(int) { interrupt_flag().store(true); }
+// While a StopAtOnce lives: the process ends in the handler itself.
+std::atomic<bool> stop_at_once{false};
+
+// Only a lock-free atomic may be touched from a handler; every long loop polls it (core/error.h). Within a
+// StopAtOnce, nothing is written yet and nothing polls: the message and _exit, both safe in a handler.
+extern "C" void on_interrupt(int) {
+  if (stop_at_once.load()) {
+    static constexpr char kMessage[] = "spadgen: interrupted by a signal: the run stopped and wrote nothing\n";
+    [[maybe_unused]] const ssize_t written = ::write(2, kMessage, sizeof kMessage - 1);
+    ::_exit(2);
+  }
+  interrupt_flag().store(true);
+}
 
 // Guards alive (on the main thread): a guard inside another (a run or a sense inside a dataset run) neither
 // clears a signal that already arrived nor hands the signals back to their default action when it ends.
@@ -34,5 +49,15 @@ InterruptGuard::~InterruptGuard() {
 }
 
 void InterruptGuard::check() { throw_if_interrupted(); }
+
+StopAtOnce::StopAtOnce() : armed_(guards == 1) {
+  if (!armed_) return;
+  throw_if_interrupted();  // (a signal before it)
+  stop_at_once.store(true);
+}
+
+StopAtOnce::~StopAtOnce() {
+  if (armed_) stop_at_once.store(false);
+}
 
 }  // namespace spadgen::app

@@ -90,7 +90,10 @@ RunResult run(const RunOptions& options) {
   InterruptGuard interrupt_guard;
   const ThreadLimit threads(options.threads);
 
-  const scenes::Scene scene = load_edited_gltf(resolved, options.scene_file);
+  const scenes::Scene scene = [&] {
+    const StopAtOnce loading;  // (nothing written yet)
+    return load_edited_gltf(resolved, options.scene_file);
+  }();
   for (const std::string& w : scene.warnings) print_warning(w);
   std::vector<std::string> warnings = scene.warnings;  // for metadata.json, with those of the run (app/warnings.h)
   const auto warn = [&](const std::vector<std::string>& ws) {

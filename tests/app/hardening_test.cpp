@@ -330,6 +330,39 @@ TEST_F(Hardening, ASignalStopsARunInsideItsOnlyTileAndExitsWithCode2) {
   EXPECT_FALSE(fs::exists(dir_ / "sensed"));
 }
 
+// A signal while a large glTF loads (300,000 nodes in a chain: about 2 s in tinygltf's parse, which cannot poll)
+// ends the run at once, with its message and code 2 (it went on to the end of the load: a million nodes, 6 s).
+// The signal after 0.3 s; the run stopped within 1 s of it, and well before the load alone ends (info's time).
+TEST_F(Hardening, ASignalWhileALargeGltfLoadsStopsTheRunAtOnce) {
+  nlohmann::json nodes = nlohmann::json::array();
+  constexpr int kNodes = 300'000;
+  for (int i = 0; i + 1 < kNodes; ++i) nodes.push_back({{"children", {i + 1}}});
+  nodes.push_back({{"mesh", 0}, {"translation", {0, 0, -3}}});
+  const nlohmann::json g = {
+      {"asset", {{"version", "2.0"}}}, {"scene", 0}, {"scenes", {{{"nodes", {0}}}}}, {"nodes", nodes},
+      {"meshes", {{{"primitives", {{{"attributes", {{"POSITION", 0}}}}}}}}},
+      {"accessors", {{{"bufferView", 0}, {"componentType", 5126}, {"count", 3}, {"type", "VEC3"}, {"min", {0, 0, 0}}, {"max", {1, 1, 0}}}}},
+      {"bufferViews", {{{"buffer", 0}, {"byteLength", 36}}}},
+      {"buffers", {{{"byteLength", 36}, {"uri", "data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA"}}}}};
+  std::ofstream(dir_ / "chain.gltf") << g.dump();
+  std::ofstream(dir_ / "chain.json") << R"({"gltf": "chain.gltf", "camera": {"position_m": [0, 0, 3], "look_at_m": [0, 0, 0],
+    "width_px": 16, "height_px": 16, "vertical_fov_deg": 40}, "outputs": {"previews": false}})";
+  const auto timed = [](const std::string& command) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const Result r = shell(command);
+    return std::pair{r, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()};
+  };
+  const auto [info, load_s] = timed(bin() + " info " + (dir_ / "chain.json").string());
+  ASSERT_EQ(info.code, 0) << info.output;
+  const auto [r, run_s] = timed("timeout -s KILL 60 timeout --preserve-status -s INT 0.3 " + bin() + " run " +
+                                (dir_ / "chain.json").string() + " -q -o " + (dir_ / "out").string());
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("spadgen: interrupted by a signal: the run stopped and wrote nothing"));
+  EXPECT_LT(run_s, 1.3) << "info loads the glTF in " << load_s << " s";
+  EXPECT_LT(run_s, 0.3 + 0.5 * (load_s - 0.3)) << "info loads the glTF in " << load_s << " s";
+  EXPECT_FALSE(fs::exists(dir_ / "out"));
+}
+
 // A closed pipe on stderr (`spadgen run ... 2>&1 | head -c 1`) does not end a run: its progress lines are
 // lost, its files published (SIGPIPE killed it mid-run, exit 141, leaving its staging folder and lock).
 TEST_F(Hardening, AClosedPipeOnStderrDoesNotStopARun) {
