@@ -3,6 +3,7 @@
 #include <bit>
 #include <cmath>
 #include <mutex>
+#include <new>
 #include <string>
 
 #include "core/error.h"
@@ -37,6 +38,7 @@ void check(RTCDevice device, const char* what) {
     message.swap(sink.message);
   }
   const RTCError code = device ? rtcGetDeviceError(device) : RTC_ERROR_UNKNOWN;
+  if (code == RTC_ERROR_OUT_OF_MEMORY) throw std::bad_alloc();  // (the program's out-of-memory message)
   if (message.empty() && code != RTC_ERROR_NONE) message = "Embree error " + std::to_string(static_cast<int>(code));
   if (!message.empty()) throw Error(std::string("while ") + what + ": " + message);
 }
@@ -67,8 +69,12 @@ void cull_back_faces(const RTCFilterFunctionNArguments* args) {
 
 EmbreeScene::EmbreeScene(const scenes::Scene& scene) {
   device_ = rtcNewDevice(nullptr);
-  if (!device_) throw Error("could not create the Embree device (error " +
-                            std::to_string(static_cast<int>(rtcGetDeviceError(nullptr))) + ")");
+  if (!device_) {
+    // (error 4, the memory for its threads' arenas: "could not create the Embree device (error 4)" under ulimit -v)
+    const RTCError code = rtcGetDeviceError(nullptr);
+    if (code == RTC_ERROR_OUT_OF_MEMORY) throw std::bad_alloc();
+    throw Error("could not create the Embree device (Embree error " + std::to_string(static_cast<int>(code)) + ")");
+  }
   rtcSetDeviceErrorFunction(device_, on_embree_error, &error_sink());
   scene_ = rtcNewScene(device_);
   rtcSetSceneBuildQuality(scene_, RTC_BUILD_QUALITY_HIGH);

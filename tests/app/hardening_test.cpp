@@ -1068,6 +1068,28 @@ TEST_F(Hardening, ThreadsTheProcessMayNotStartAreAnEnvironmentError) {
 #endif
 }
 
+// A run under a limit of its address space (ulimit -v, from 100 MB up) ends well or says it is out of memory,
+// exit 1: Embree's device, which could not be created at 100-200 MB, said "could not create the Embree device
+// (error 4)" (a verifier's find), and tinygltf's allocation "malformed glTF (tinygltf: std::bad_alloc)".
+TEST_F(Hardening, ARunOutOfAddressSpaceSaysSo) {
+#if defined(__SANITIZE_ADDRESS__)
+  GTEST_SKIP() << "AddressSanitizer reserves more address space than the limit";
+#else
+  int refused = 0;
+  for (const int mb : {100, 150, 200, 300, 400, 600}) {
+    const fs::path out = dir_ / ("out" + std::to_string(mb));
+    const Result r = shell("bash -c 'ulimit -v " + std::to_string(mb * 1000) + "; exec timeout -s KILL 60 " + bin() + " run " + kTiny +
+                           " -q -o " + out.string() + "'");
+    if (r.code == 0) continue;
+    ++refused;
+    EXPECT_EQ(r.code, 1) << mb << " MB: " << r.output;
+    EXPECT_THAT(r.output, HasSubstr("spadgen: error: out of memory: the run needs more memory than the machine gives it")) << mb << " MB";
+    EXPECT_FALSE(fs::exists(out)) << mb << " MB";
+  }
+  EXPECT_GT(refused, 0) << "no limit was low enough";
+#endif
+}
+
 // A NUL byte in a path (from JSON's \u0000) is refused, written \x00 in a message that goes on to its end (it
 // ended at the NUL: "the glTF file .../fl", no reason; then the path was looked up cut at the NUL).
 TEST_F(Hardening, ANulByteInANameIsShownAndTheMessageIsWhole) {
