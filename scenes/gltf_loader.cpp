@@ -408,6 +408,13 @@ std::vector<int> Loader::pick_roots(const std::string& scene_name) {
                                                     quoted(scenes::printable(scene_name)) + "; its scenes are: " + names);
     }
     chosen = static_cast<size_t>(it - m_.scenes.begin());
+    // Two scenes of that name: which one is meant cannot be told (the first was taken, silently; two nodes,
+    // materials or cameras of one name are refused as well)
+    if (const auto again = std::find_if(it + 1, m_.scenes.end(), [&](const tinygltf::Scene& o) { return o.name == scene_name; });
+        again != m_.scenes.end())
+      throw EditError("gltf_scene", scene_name, "/gltf_scene: the glTF file " + path_ + " has two scenes named " +
+                                                    quoted(scenes::printable(scene_name)) + " (scenes " + std::to_string(chosen) + " and " +
+                                                    std::to_string(again - m_.scenes.begin()) + "); rename one in the glTF");
   } else if (m_.defaultScene >= 0) {
     if (static_cast<size_t>(m_.defaultScene) >= m_.scenes.size())
       throw Error(path_ + ": scene " + std::to_string(m_.defaultScene) + " (the default scene) does not exist; the file has " +

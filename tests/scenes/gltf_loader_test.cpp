@@ -1030,6 +1030,10 @@ TEST(GltfLoader, DefaultAndNamedScenes) {
   const std::string msg = load_error(path, "third");
   EXPECT_THAT(msg, HasSubstr("no scene named 'third'"));
   EXPECT_THAT(msg, HasSubstr("'first', 'second'"));
+  // two scenes of the name asked for: refused, not the first taken
+  g.doc["scenes"][1]["name"] = "first";
+  const std::string twice = g.write(dir.path(), "scenes_twice");
+  EXPECT_THAT(load_error(twice, "first"), HasSubstr("/gltf_scene: the glTF file " + twice + " has two scenes named 'first' (scenes 0 and 1)"));
 }
 
 // ---------------------------------------------------------------------------------------------
