@@ -1971,9 +1971,9 @@ double rough_plate_irradiance(double a, double n, double t, double z0, double ha
 // the plate), the direct return: at the wall's centre and 30 degrees off the laser's axis, rendered against the
 // integral over the paths (rough_plate_irradiance), over the bare wall's. Roughness 0.7: 0.644 and 0.376 of the
 // bare wall (an independent photon tracer of one pass gave 0.640 and 0.374 over 4 cm squares), rendered within
-// 0.5 % at the centre and 2 % at 30 degrees: measured 0.999 and 0.987 of it at 8192 paths (0.988 at 65536). At
-// 30 degrees a pair of drawn normals sometimes admits a second path (10 % of pairs, by Newton's method from 40
-// starts), which the estimate does not seek. The faces crossed as smooth gave 0.925 and 0.921 (+44 %, +145 %).
+// 0.5 % at the centre and 2 % at 30 degrees: measured 0.999 and 0.987 of it at 8192 paths (0.988 at 65536; not a
+// second path for the same normals: 8 starts spread over the plate found none). The faces crossed as smooth gave
+// 0.925 and 0.921 (+44 %, +145 %).
 // And at 0.45 m, beside the plate's shadow (the straight line to the laser misses the plate): the direct light
 // and 0.166 of it through the plate, which no connection gave (connect_laser_rough_slabs).
 TEST(Transport, LaserLightThroughARoughPlateIsItsIntegral) {
