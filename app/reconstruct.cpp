@@ -866,6 +866,36 @@ bool is_derived_output(const std::string& rel) {
   return rel == "evaluation";
 }
 
+bool is_evaluation_metrics(const fs::path& metrics) {
+  std::error_code ec;
+  if (!fs::is_regular_file(metrics, ec) || fs::file_size(metrics, ec) > (uint64_t{1} << 30)) return false;
+  std::ifstream in(metrics, std::ios::binary);
+  std::stringstream text;
+  text << in.rdbuf();
+  const nlohmann::json m = nlohmann::json::parse(text.str(), nullptr, /*allow_exceptions=*/false);
+  return m.is_object() && m.contains("scored") && (m.contains("spadgen_version") || m.contains("run") || m.contains("dataset"));
+}
+
+bool is_spadgen_derived_output(const fs::path& path, const std::string& rel) {
+  if (!is_derived_output(rel)) return false;
+  std::error_code ec;
+  if (fs::is_symlink(path, ec)) return false;
+  if (rel == "evaluation") {
+    if (!fs::is_directory(path, ec) || !is_evaluation_metrics(path / "metrics.json")) return false;
+    static const std::set<std::string> kOwn = {"metrics.json", "samples.csv", "range_error.png", "outcome.png"};
+    for (const auto& e : fs::directory_iterator(path, ec))
+      if (!kOwn.count(e.path().filename().string()) || !e.is_regular_file(ec) || e.is_symlink(ec)) return false;
+    return !ec;
+  }
+  // An OpenEXR file (its magic number) whose header records spadgen_source (reconstruct's provenance).
+  if (!fs::is_regular_file(path, ec)) return false;
+  std::ifstream in(path, std::ios::binary);
+  std::string head(64 * 1024, '\0');
+  in.read(head.data(), static_cast<std::streamsize>(head.size()));
+  head.resize(static_cast<size_t>(std::max<std::streamsize>(0, in.gcount())));
+  return head.compare(0, 4, "\x76\x2f\x31\x01") == 0 && head.find("spadgen_source") != std::string::npos;
+}
+
 std::string reconstruct(const ReconstructOptions& o) {
   InterruptGuard interrupt_guard;
   const ThreadLimit threads(o.threads);
@@ -972,6 +1002,21 @@ std::string evaluate(const EvaluateCommand& c) {
   refuse_output_inside(out_given, "-o " + out_given.string(), [&](CheckedFolder kind, const fs::path& folder, const fs::path& rel) {
     return kind != CheckedFolder::RepeatSet && folder == own && rel == "evaluation";
   });
+  // Its own names are an earlier evaluation's only beside its metrics.json (a user's samples.csv or notes called
+  // metrics.json were replaced: a verifier's find)
+  {
+    std::error_code ec;
+    std::vector<std::string> theirs;
+    for (const char* f : {"metrics.json", "samples.csv", "range_error.png", "outcome.png"})
+      if (fs::exists(out_given / f, ec) && !is_evaluation_metrics(out_given / "metrics.json")) theirs.push_back(f);
+    if (!theirs.empty()) {
+      std::string list;
+      for (const std::string& f : theirs) list += (list.empty() ? "" : ", ") + f;
+      throw Error("the output folder " + out_given.string() + " holds files that spadgen did not write there (" + list +
+                  ": no metrics.json of an evaluation's beside them); an evaluation replaces the whole folder, so it "
+                  "does not write into one with other files: move them, or choose another folder (-o)");
+    }
+  }
   Staging staging(out_given,
                   {"metrics.json", "samples.csv", "range_error.png", "outcome.png"}, "an evaluation");
   const std::string out = staging.path("");
@@ -1142,6 +1187,7 @@ std::string evaluate(const EvaluateCommand& c) {
   const nlohmann::json scored = c.detections.empty() ? nlohmann::json{{"detector", c.detector}, {"noise_free", c.noise_free}}
                                                      : nlohmann::json{{"detections", c.detections}};
   report["scored"] = scored;
+  report["spadgen_version"] = SPADGEN_VERSION;  // (what says the file is evaluate's: is_evaluation_metrics)
   std::string replaced;  // the evaluation this one replaces, when it scored other detections
   if (const auto earlier = read_json_if_valid(out_given / "metrics.json"); earlier && earlier->is_object() &&
                                                                            earlier->contains("scored") && (*earlier)["scored"] != scored)

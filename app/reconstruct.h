@@ -1,6 +1,7 @@
 // `spadgen reconstruct RUN_DIR` (reference detectors, the 2D HDR inversion) and `spadgen evaluate
 // RUN_DIR|DATASET_DIR` (detections scored against the object labels). docs/detection.md.
 #pragma once
+#include <filesystem>
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
@@ -69,5 +70,13 @@ std::string evaluate(const EvaluateCommand& command);
 // evaluation/): derived from that run, so a later run into the folder replaces them with the rest rather
 // than refusing them as someone else's files. rel: a name directly inside the run folder.
 bool is_derived_output(const std::string& rel);
+// Whether the entry `path` (named rel inside a run folder) is such an output of spadgen's, by its content: an
+// OpenEXR file that records its spadgen_source, or an evaluation/ folder holding evaluate's files only, its
+// metrics.json evaluate's. A user's file of such a name (notes in evaluation/, an hdr.exr of their own) is not
+// (a run into the folder deleted it: a verifier's find).
+bool is_spadgen_derived_output(const std::filesystem::path& path, const std::string& rel);
+// Whether a metrics.json is evaluate's: a JSON object with its spadgen_version and scored (or, written before it
+// had spadgen_version, scored and the run or dataset scored).
+bool is_evaluation_metrics(const std::filesystem::path& metrics);
 
 }  // namespace spadgen::app

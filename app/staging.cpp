@@ -551,15 +551,18 @@ std::vector<std::string> Staging::foreign_entries(const fs::path& folder_out) co
       for (const auto& e : fs::directory_iterator(folder)) {
         const std::string rel = e.path().lexically_relative(root).string();
         const bool top = folder == root, out = root == folder_out;
-        // (derived outputs: reconstruct's and evaluate's, and an interrupted evaluate's staging folder and lock)
-        if (top && (is_derived_output(rel) || starts_with(rel, ".evaluation.spadgen-") || (out && starts_with(rel, kOldStylePrefix))))
+        // (derived outputs of a run folder: reconstruct's and evaluate's, by their content, and an interrupted
+        // evaluate's staging folder and lock; not a user's file of such a name, nor beside no run's metadata.json)
+        const bool run_root = of_root.entries.count("metadata.json") > 0;
+        if (top && ((run_root && (is_spadgen_derived_output(e.path(), rel) || starts_with(rel, ".evaluation.spadgen-"))) ||
+                    (out && starts_with(rel, kOldStylePrefix))))
           continue;
         // a run folder's lock file inside (a sense of a run in OUT leaves its reader's lock): spadgen's, no data
         if (top && rel.size() > 1 && rel[0] == '.' && rel.ends_with(".spadgen-lock") && e.is_regular_file(ec) && e.file_size(ec) < 64)
           continue;
         // a derived output's temporary file (writers' ".NAME.tmp-PID-N"), left by a reconstruct killed while it
         // wrote: the swap removes it with the folder (it made every later run refuse the folder)
-        if (const size_t t = rel.find(".tmp-"); top && rel.size() > 1 && rel[0] == '.' && t != std::string::npos &&
+        if (const size_t t = rel.find(".tmp-"); top && run_root && rel.size() > 1 && rel[0] == '.' && t != std::string::npos &&
                                                   is_derived_output(rel.substr(1, t - 1)))
           continue;
         const bool dir = e.is_directory(ec) && !e.is_symlink(ec);

@@ -330,6 +330,53 @@ TEST_F(Hardening, ASignalStopsARunInsideItsOnlyTileAndExitsWithCode2) {
   EXPECT_FALSE(fs::exists(dir_ / "sensed"));
 }
 
+// Files of a user's that carry the names of reconstruct's and evaluate's outputs (notes in evaluation/, an hdr.exr
+// of their own, a run folder kept in evaluation/) are not spadgen's: run and sense replaced a folder holding them,
+// deleting them without a word, even beside no run's metadata.json (a verifier's find). Their own outputs of a
+// run folder still go with it (an EXR recording its spadgen_source, evaluate's files with its metrics.json); and
+// evaluate does not replace a user's samples.csv or metrics.json of their own.
+TEST_F(Hardening, AUsersFilesNamedAsDerivedOutputsAreNotReplaced) {
+  const fs::path run = dir_ / "run";
+  expect_exit(spadgen("run " + kTiny + " -q --set outputs.light=true -o " + run.string()), 0, "a run");
+  const std::vector<std::pair<std::string, std::string>> mine = {{"evaluation/notes.txt", "notes"}, {"hdr.exr", "mine"},
+                                                                 {"detections_edges.exr", "not an EXR"}};
+  for (const auto& [file, text] : mine)
+    for (const bool beside_a_run : {false, true})
+      for (const std::string& command : {"run " + kTiny + " -q -o ", "sense " + run.string() + " -q -o ",
+                                         "sense " + run.string() + " -q --repeats 2 -o "}) {
+        const fs::path out = dir_ / "out";
+        fs::remove_all(out);
+        if (beside_a_run) fs::copy(run, out, fs::copy_options::recursive);
+        fs::create_directories((out / file).parent_path());
+        std::ofstream(out / file) << text;
+        const Outcome o = spadgen(command + out.string());
+        expect_exit(o, 1, command + "over " + file + (beside_a_run ? " in a run folder" : ""));
+        EXPECT_THAT(o.err, HasSubstr("holds files that spadgen did not write there (")) << file;
+        EXPECT_THAT(o.err, HasSubstr(file.substr(0, file.find('/')))) << file;
+        EXPECT_EQ(slurp(out / file), text) << command << file;
+      }
+  // reconstruct's and evaluate's own outputs in a run folder go with it when a run replaces it
+  expect_exit(spadgen("reconstruct " + run.string() + " -q"), 0, "reconstruct");
+  expect_exit(spadgen("evaluate " + run.string() + " -q"), 0, "evaluate");
+  ASSERT_TRUE(fs::exists(run / "detections_edges.exr"));
+  ASSERT_TRUE(fs::exists(run / "evaluation/metrics.json"));
+  expect_exit(spadgen("run " + kTiny + " -q -o " + run.string()), 0, "a run over its own derived outputs");
+  EXPECT_FALSE(fs::exists(run / "detections_edges.exr"));
+  EXPECT_FALSE(fs::exists(run / "evaluation"));
+  // evaluate -o a folder of a user's samples.csv, or of a metrics.json of their own
+  expect_exit(spadgen("run " + kTiny + " -q -o " + run.string()), 0, "a run");
+  for (const std::string name : {"samples.csv", "metrics.json"}) {
+    const fs::path scores = dir_ / "scores";
+    fs::remove_all(scores);
+    fs::create_directories(scores);
+    std::ofstream(scores / name) << "a,b\n1,2\n";
+    const Outcome o = spadgen("evaluate " + run.string() + " -q -o " + scores.string());
+    expect_exit(o, 1, "evaluate over a user's " + name);
+    EXPECT_THAT(o.err, HasSubstr("holds files that spadgen did not write there (" + name + ": no metrics.json of an evaluation's"));
+    EXPECT_EQ(slurp(scores / name), "a,b\n1,2\n");
+  }
+}
+
 // A signal while a large glTF loads (300,000 nodes in a chain: about 2 s in tinygltf's parse, which cannot poll)
 // ends the run at once, with its message and code 2 (it went on to the end of the load: a million nodes, 6 s).
 // The signal after 0.3 s; the run stopped within 1 s of it, and well before the load alone ends (info's time).
