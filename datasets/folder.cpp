@@ -173,13 +173,19 @@ void DatasetFolder::claim() const {
                      ? std::string("a file of that name (or of a folder above it) exists; expected a folder or a new name (-o)")
                      : ec.message()));
   const ojson wanted = record();
-  {
+  // A folder refused (a run's, a user's) is left as it was: the lock file this run made there goes (it made the
+  // next run into the folder refuse it as a file spadgen did not write there: a verifier's find).
+  const bool had_lock = fs::exists(dir_ / ".dataset.lock", ec);
+  try {
     // Checked and written as one step: two datasets started at once on a new folder both found it empty
     // and both wrote dataset.json, mixing their samples.
     const FolderLock lock(dir_);
     // what a run killed while it wrote them left (the index's files are written by the last run to end)
     writers::remove_dead_temporaries(dir_.string(), {"dataset.json", "index.jsonl", "index.csv", "dataset.md"});
     if (checked(wanted) != wanted) writers::write_file_atomic((dir_ / "dataset.json").string(), wanted.dump(2) + "\n");
+  } catch (const Error&) {
+    if (!had_lock && !fs::exists(dir_ / "dataset.json", ec)) fs::remove(dir_ / ".dataset.lock", ec);
+    throw;
   }
   fs::create_directories(dir_ / "samples", ec);
   if (ec) throw Error("cannot create " + (dir_ / "samples").string() + ": " + ec.message());

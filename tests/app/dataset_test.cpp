@@ -715,12 +715,15 @@ TEST_F(Dataset, RefusesAnotherDatasetsFolderForeignFilesAndTooLittleDisk) {
   EXPECT_EQ(foreign.code, 1);
   EXPECT_THAT(foreign.output, HasSubstr("holds notes.txt, which spadgen did not write there"));
   EXPECT_EQ(slurp(dir_ / "mine/notes.txt"), "mine");
+  EXPECT_FALSE(fs::exists(dir_ / "mine/.dataset.lock")) << "a refused folder is left as it was";
   // a run folder is named as one (it was told it held labels.exr, "which spadgen did not write there"); a
   // dataset's sample as the dataset's own
   fs::copy(dir_ / "ord/samples/000000", dir_ / "run0", fs::copy_options::recursive);
   const Result into_run = sh("dataset run " + (dir_ / "a.json").string() + " -o " + (dir_ / "run0").string() + " -q");
   EXPECT_EQ(into_run.code, 1);
   EXPECT_THAT(into_run.output, HasSubstr("run0 is a run folder (it holds metadata.json), not a dataset folder"));
+  // (its lock file made the next run into the run folder refuse it as a file spadgen did not write there)
+  EXPECT_FALSE(fs::exists(dir_ / "run0/.dataset.lock"));
   const Result into_sample = sh("dataset run " + (dir_ / "a.json").string() + " -o " + (dir_ / "ord/samples/000000").string() + " -q");
   EXPECT_EQ(into_sample.code, 1);
   EXPECT_THAT(into_sample.output, HasSubstr("lies in the dataset " + (dir_ / "ord").string() + "'s own samples"));
