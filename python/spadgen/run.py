@@ -220,13 +220,15 @@ def _check_zarray(path):
 _CHECK_BLOCK_BYTES = 64 << 20  # Run.counts's check reads at most about this much at a time
 
 
-def _zarr_store(path, z=None):
+def _zarr_store(path, z=None, check=None):
     """A Zarr directory store whose missing chunk is an error naming it: a store without a fill value would
     otherwise read it as uninitialised memory (spadgen writes every chunk: one missing is damage). A Blosc
     chunk shorter or longer than its header says (cut short by a full disk or a copy) is an error naming it
     too, where Blosc's own says only "error during blosc decompression: -1"; so is a chunk that decodes to
     another size than .zarray's chunks of its dtype (z: the .zarray checked by _check_zarray; a dtype edited
-    was "cannot reshape array of size ...")."""
+    was "cannot reshape array of size ..."). check: called after each chunk is read (Run.check_unchanged): zarr
+    reads a chunk by its path when it is indexed, so a store opened before its run folder was replaced read the new
+    run's chunks silently (a verifier's find), where a .npy's memory map keeps the version it opened."""
     import re
     import zarr
 
@@ -237,6 +239,9 @@ def _zarr_store(path, z=None):
         _chunk = re.compile(r"^\d+(\.\d+)*$")
 
         def __getitem__(self, key):
+            chunk = self._chunk.match(key.rsplit("/", 1)[-1])
+            if check is not None and chunk:
+                check()
             try:
                 value = super().__getitem__(key)
             except KeyError:
@@ -261,6 +266,8 @@ def _zarr_store(path, z=None):
                                      f"but .zarray's chunks {z['chunks']} of {z['dtype']} take {nbytes}: .zarray or the "
                                      "chunk was damaged or edited after the run published it; restore it, or run the "
                                      "scene again")
+            if check is not None and chunk:
+                check()  # (and after: the folder replaced while the chunk was read)
             return value
 
     return StrictStore(path)
@@ -540,7 +547,7 @@ class Run:
                 except ValueError as e:
                     raise ValueError(f"{e}: restore it, or {self._remedy()}") from None
                 try:
-                    self._cache[path] = zarr.open_array(_zarr_store(path, z), mode="r")
+                    self._cache[path] = zarr.open_array(_zarr_store(path, z, self.check_unchanged), mode="r")
                 except Exception as e:  # zarr's errors do not name the store
                     raise ValueError(f"{path}: not a readable Zarr array ({type(e).__name__}: {e}); damaged after the run "
                                      "published it: restore it, or " + self._remedy()) from e

@@ -144,8 +144,8 @@ def test_the_counts_check_decodes_each_chunk_once(make_run, monkeypatch):
     reads = []
     strict = module._zarr_store
 
-    def counting(path, z=None):
-        store = strict(path, z)
+    def counting(path, z=None, check=None):
+        store = strict(path, z, check)
         get = store.__getitem__
 
         class Counting(type(store)):
