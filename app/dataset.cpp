@@ -812,7 +812,7 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
       // Another process's hold on the sample's folder, found before the scene is loaded (the run takes the same
       // lock later: this is a quick look, so that a held sample costs little each time it is tried)
       { const FolderLock probe(dir / s.folder()); }
-      if (!folder.holds(s.folder(), rec.hash)) {
+      if (!folder.holds(s.folder(), rec.hash, s.scene)) {
         rendered = true;
         rendered_here.insert(s.index);
         RunOptions r;
@@ -827,7 +827,7 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
       }
       bool warned = rendered;  // the sample's warnings said on stderr (by its run, or a realisation's sense)
       for (int k = 1; k < spec.repeats; ++k) {
-        if (!rendered && folder.holds(s.repeat_folder(k), rec.hash)) continue;
+        if (!rendered && folder.holds(s.repeat_folder(k), rec.hash, s.scene)) continue;
         const fs::path rf = dir / s.repeat_folder(k);
         SenseOptions so;
         so.run_dir = (dir / s.folder()).string();

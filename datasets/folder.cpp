@@ -494,9 +494,10 @@ std::vector<std::string> gone_files(const fs::path& folder, const json& meta) {
 }
 }  // namespace
 
-bool DatasetFolder::holds(const std::string& folder, const std::string& hash) const {
+bool DatasetFolder::holds(const std::string& folder, const std::string& hash, int scene) const {
   const std::optional<json> meta = sample_metadata(folder);
-  return meta && (*meta)["dataset"].value("sample_hash", "") == hash && gone_files(dir_ / folder, *meta).empty();
+  return meta && (*meta)["dataset"].value("sample_hash", "") == hash && meta->value("scene_hash_fnv1a64", "") == scene_content_hash(scene) &&
+         gone_files(dir_ / folder, *meta).empty();
 }
 
 SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash) const {
@@ -538,6 +539,15 @@ SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash) co
         else
           rec.error = "the scene as it resolves now differs (a sensor table the scene file names, or the parameters)";
       }
+      stale = true;
+      continue;
+    }
+    // The bytes it rendered: the scene file and glTF as its run read them (an edit while the dataset ran, undone
+    // after, left samples of the edited glTF under the hash of the other, done: a verifier's find)
+    if (const auto h = meta->find("scene_hash_fnv1a64"); h != meta->end() && h->is_string() && *h != scene_content_hash(s.scene)) {
+      if (!stale)
+        rec.error = "rendered from other contents of the scene file or its glTF (scene_hash_fnv1a64 " + h->get<std::string>() +
+                    ", now " + scene_content_hash(s.scene) + "): they changed while it was generated";
       stale = true;
       continue;
     }

@@ -160,8 +160,9 @@ class DatasetFolder {
   // The metadata.json of a sample folder ("samples/000042", a repeat's) when it is one spadgen published
   // (it lists its files and has a dataset section), else nullopt.
   std::optional<nlohmann::json> sample_metadata(const std::string& folder) const;
-  // True when that folder holds the sample whose hash is `hash` (not a stale one).
-  bool holds(const std::string& folder, const std::string& hash) const;
+  // True when that folder holds the sample whose hash is `hash` (not a stale one), rendered from the contents of
+  // scene file `scene` (of the dataset's) as they are.
+  bool holds(const std::string& folder, const std::string& hash, int scene) const;
 
   // Sample s's claim, or null when another run holds it (no waiting).
   std::unique_ptr<SampleClaim> try_claim(const Sample& s) const;

@@ -1279,6 +1279,29 @@ TEST_F(Dataset, ASampleAReaderHoldsIsGeneratedOnceItIsReleased) {
 // A sample made stale (its scene changed) whose regeneration fails is failed, with why, in the status and the
 // index (it was "stale" without its error, which only failed/ held); the card escapes a '|' of a scene's path
 // or a value in its Markdown tables (a row had 7 cells for 6).
+// A sample whose run read other contents of the scene file or glTF than the dataset's hash of them (the glTF
+// edited while the dataset ran, and restored after: the sample's data is of the edit, its sample_hash of the
+// original) is stale, saying so: it was done (a verifier's find). Its metadata.json records the bytes its run
+// read (scene_hash_fnv1a64); here another value stands for the edit's.
+TEST_F(Dataset, ASampleRenderedFromEditedSceneFilesIsStale) {
+  write(dir_ / "d.json", "{\"seed\": 1, \"scenes\": [\"" + kScenes + "flat_target.json\"], \"samples\": 2, "
+        "\"set\": {\"camera.crop\": [500, 240, 4, 4], \"render.samples_per_pixel\": 1}}");
+  const std::string run = "dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q";
+  ASSERT_EQ(sh(run).code, 0);
+  const fs::path meta = dir_ / "out/samples/000001/metadata.json";
+  nlohmann::ordered_json m = nlohmann::ordered_json::parse(slurp(meta));
+  const std::string read = m["scene_hash_fnv1a64"];
+  m["scene_hash_fnv1a64"] = "0123456789abcdef";
+  write(meta, m.dump(2));
+  const Result status = sh("dataset status " + (dir_ / "out").string());
+  EXPECT_EQ(status.code, 4) << status.output;
+  EXPECT_THAT(status.output, HasSubstr("rendered from other contents of the scene file or its glTF (scene_hash_fnv1a64 "
+                                       "0123456789abcdef, now " + read + "): they changed while it was generated"));
+  ASSERT_EQ(sh(run).code, 0);  // generated again
+  EXPECT_EQ(nlohmann::json::parse(slurp(meta))["scene_hash_fnv1a64"], read);
+  EXPECT_EQ(sh("dataset status " + (dir_ / "out").string()).code, 0);
+}
+
 TEST_F(Dataset, AStaleSampleThatFailsAgainIsFailedAndTheCardKeepsItsTables) {
   const fs::path scenes = dir_ / "a|b";
   fs::create_directories(scenes);
