@@ -418,17 +418,14 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
     return rm.volume && mp.ior != 1.0f && !mp.thin_walled && mp.transmission > 0.0f && mp.metallic < 1.0f;
   };
   const auto ior = [&](size_t m) { return shading.material(scene.meshes[m].material).point.ior; };
-  std::vector<bool> grouped(scene.meshes.size(), false);
-  for (size_t m = 0; m < scene.meshes.size() && rough_slabs_.size() < kMaxRoughSlabs; ++m) {
-    if (grouped[m] || !volume(scene.meshes[m])) continue;
-    std::vector<size_t> group{m};
-    for (size_t o = m + 1; o < scene.meshes.size() && scene.meshes[m].gltf_node >= 0; ++o)
-      if (scene.meshes[o].gltf_node == scene.meshes[m].gltf_node && volume(scene.meshes[o]) && ior(o) == ior(m))
-        group.push_back(o), grouped[o] = true;
-    scenes::Mesh merged;  // (the group's triangles, and each one's material)
+  // The meshes `members` as one rough plate: true when they are one (a rough face; at most kMaxPartsPerMesh
+  // triangles; every triangle of the largest faces' normal on one of its two planes, so not two panes side by
+  // side in one node, whose gap would be taken for glass; each plane's faces of one material).
+  const auto add_slab = [&](const std::vector<size_t>& members) {
+    scenes::Mesh merged;  // (the members' triangles, and each one's material)
     std::vector<int> materials;
-    bool plate = true, rough = false;
-    for (const size_t g : group) {
+    bool rough = false;
+    for (const size_t g : members) {
       const scenes::Mesh& mesh = scene.meshes[g];
       rough = rough || shading.material(mesh.material).point.alpha >= kRoughCrossingAlpha;
       const uint32_t base = uint32_t(merged.positions.size());
@@ -437,19 +434,33 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
       materials.insert(materials.end(), mesh.triangle_count(), mesh.material);
     }
     RoughSlab sl{glm::dvec3(0.0), 0.0, 0.0, {-1, -1}};
-    if (!rough || merged.triangle_count() > kMaxPartsPerMesh || !plate_planes(merged, &sl.n, &sl.lo, &sl.hi)) continue;
-    // Each plane's material: that of its triangles (those of the plate's normal at its offset), one.
-    for (size_t t = 0; t < merged.triangle_count() && plate; ++t) {
+    if (!rough || merged.triangle_count() > kMaxPartsPerMesh || !plate_planes(merged, &sl.n, &sl.lo, &sl.hi)) return false;
+    const double on_plane = 1e-3 * (sl.hi - sl.lo);
+    for (size_t t = 0; t < merged.triangle_count(); ++t) {
       const glm::dvec3 a(merged.positions[merged.indices[3 * t]]), b(merged.positions[merged.indices[3 * t + 1]]),
           c(merged.positions[merged.indices[3 * t + 2]]);
       const glm::dvec3 cr = glm::cross(b - a, c - a);
       if (!(glm::length(cr) > 0.0) || std::fabs(glm::dot(cr / glm::length(cr), sl.n)) < 1.0 - 1e-6) continue;
       const double o = glm::dot(sl.n, a);
+      if (std::fabs(o - sl.lo) > on_plane && std::fabs(o - sl.hi) > on_plane) return false;
       int& on = std::fabs(o - sl.lo) < std::fabs(o - sl.hi) ? sl.material[0] : sl.material[1];
-      plate = on < 0 || on == materials[t];
+      if (on >= 0 && on != materials[t]) return false;
       on = materials[t];
     }
-    if (plate && sl.material[0] >= 0 && sl.material[1] >= 0) rough_slabs_.push_back(sl);
+    if (sl.material[0] < 0 || sl.material[1] < 0) return false;
+    rough_slabs_.push_back(sl);
+    return true;
+  };
+  std::vector<bool> grouped(scene.meshes.size(), false);
+  for (size_t m = 0; m < scene.meshes.size() && rough_slabs_.size() < kMaxRoughSlabs; ++m) {
+    if (grouped[m] || !volume(scene.meshes[m])) continue;
+    std::vector<size_t> group{m};
+    for (size_t o = m + 1; o < scene.meshes.size() && scene.meshes[m].gltf_node >= 0; ++o)
+      if (scene.meshes[o].gltf_node == scene.meshes[m].gltf_node && volume(scene.meshes[o]) && ior(o) == ior(m))
+        group.push_back(o), grouped[o] = true;
+    if (!add_slab(group) && group.size() > 1)  // (the node's meshes each a plate of its own, then)
+      for (const size_t g : group)
+        if (rough_slabs_.size() < kMaxRoughSlabs) (void)add_slab({g});
   }
   ambient_on_ = ambient.any() || shading.has_emission();
   laser_traced_ = config.trace_laser;

@@ -2004,6 +2004,31 @@ TEST(Transport, LaserLightThroughARoughPlateIsItsIntegral) {
   }
 }
 
+// Two rough panes, one above the other (double glazing), as two meshes of one glTF node: each is a rough plate of
+// its own, as when they are two nodes (the node's meshes taken as one plate, a frosted-on-one-side plate's two
+// materials, would have made one slab of both with the gap between them glass). The same light on a wall beside
+// their shadow, and under it.
+TEST(Transport, TwoPanesOfOneNodeAreTwoRoughPlates) {
+  const auto scene = [](bool one_node) {
+    scenes::Scene s;
+    add_quad(s, {0, 0, -0.6f}, {3, 0, 0}, {0, 3, 0}, add_material(s, test::lambertian(0.5f)));
+    const int glass = add_material(s, test::glass(1.5f, 0.003f, 0.5f));
+    const int a = add_box(s, {-0.2f, -0.2f, -0.303f}, {0.2f, 0.2f, -0.3f}, glass);
+    const int b = add_box(s, {-0.2f, -0.2f, -0.323f}, {0.2f, 0.2f, -0.32f}, glass);
+    s.meshes[size_t(a)].gltf_node = 0;
+    s.meshes[size_t(b)].gltf_node = one_node ? 0 : 1;
+    return s;
+  };
+  RenderStageConfig c = direct_laser_config(4, 4, 50e-3, 256);
+  for (const double x_wall : {0.0, 0.45}) {
+    (void)look_aside(&c, scene(false), {0, 0, -0.35}, {x_wall, 0, -0.6}, 0.6);
+    const TimeAxis axis{0.0, 10e-12, 1000, 1.0};
+    const TransientTile two = Renderer(scene(false), c).transient({0, 0, 4, 4}, {0, 0, 4, 4}, axis);
+    const TransientTile one = Renderer(scene(true), c).transient({0, 0, 4, 4}, {0, 0, 4, 4}, axis);
+    for (size_t i = 0; i < 16; ++i) EXPECT_EQ(one.laser_total[i], two.laser_total[i]) << x_wall << ", pixel " << i;
+  }
+}
+
 // The wall along the edge of a rough plate's shadow (the plate of LaserLightThroughARoughPlateIsItsIntegral at
 // roughness 0.7), seen in a 4 x 4 view 2 mm across: the straight walk from a vertex there to the laser passes
 // the plate's very edge, where it recorded one face from air to air, and the rough connection's solve through
