@@ -53,13 +53,12 @@ bool is_mount_point(const fs::path& dir) {
   return ::stat(dir.c_str(), &here) == 0 && ::stat(dir.parent_path().c_str(), &up) == 0 && here.st_dev != up.st_dev;
 }
 
-// What metadata.json lists, relative to `out`: the files and folders it names (a Zarr store, "counts.zarr",
-// is a folder, the run's with everything in it), and the folders they lie in ("previews", "light").
-// The files a run folder's metadata.json lists, itself among them: only a metadata.json of spadgen's (a JSON
-// object with spadgen_version and its list of files) says which files are spadgen's. Another one (a user's
-// notes of the same name, listing files of their own) and one that cannot be read list nothing, not even
-// itself: the folder's files are someone else's (a run replaced a folder of a user's metadata.json and the
-// files it listed: an adversarial tester's find).
+// What metadata.json lists, relative to `out`: itself, the files and folders it names (a Zarr store,
+// "counts.zarr", is a folder, the run's with everything in it), and the folders they lie in ("previews",
+// "light"). Only a metadata.json of spadgen's (a JSON object with spadgen_version and its list of files) says
+// which files are spadgen's. Another one (a user's notes of the same name, listing files of their own) and one
+// that cannot be read list nothing, not even themselves: the folder's files are someone else's (a run replaced
+// a folder of a user's metadata.json and the files it listed: an adversarial tester's find).
 struct Listed {
   std::set<std::string> entries, parents;
   std::string damaged;  // why a metadata.json that is there lists nothing ("" when absent or read)
