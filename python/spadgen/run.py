@@ -226,7 +226,7 @@ def _zarr_store(path, z=None, check=None):
     chunk shorter or longer than its header says (cut short by a full disk or a copy) is an error naming it
     too, where Blosc's own says only "error during blosc decompression: -1"; so is a chunk that decodes to
     another size than .zarray's chunks of its dtype (z: the .zarray checked by _check_zarray; a dtype edited
-    was "cannot reshape array of size ..."). check: called after each chunk is read (Run.check_unchanged): zarr
+    was "cannot reshape array of size ..."). check: called before and after each chunk is read (Run.check_unchanged): zarr
     reads a chunk by its path when it is indexed, so a store opened before its run folder was replaced read the new
     run's chunks silently (a verifier's find), where a .npy's memory map keeps the version it opened."""
     import re
