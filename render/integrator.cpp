@@ -419,8 +419,9 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
   };
   const auto ior = [&](size_t m) { return shading.material(scene.meshes[m].material).point.ior; };
   // The meshes `members` as one rough plate: true when they are one (a rough face; at most kMaxPartsPerMesh
-  // triangles; every triangle of the largest faces' normal on one of its two planes, so not two panes side by
-  // side in one node, whose gap would be taken for glass; each plane's faces of one material).
+  // triangles; every triangle of the largest faces' normal on one of its two planes, so not two panes one
+  // behind the other, in one node or one mesh, whose gap would be taken for glass; each plane's faces of one
+  // material).
   const auto add_slab = [&](const std::vector<size_t>& members) {
     scenes::Mesh merged;  // (the members' triangles, and each one's material)
     std::vector<int> materials;
