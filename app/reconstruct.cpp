@@ -867,13 +867,8 @@ bool is_derived_output(const std::string& rel) {
 }
 
 bool is_evaluation_metrics(const fs::path& metrics) {
-  std::error_code ec;
-  if (!fs::is_regular_file(metrics, ec) || fs::file_size(metrics, ec) > (uint64_t{1} << 30)) return false;
-  std::ifstream in(metrics, std::ios::binary);
-  std::stringstream text;
-  text << in.rdbuf();
-  const nlohmann::json m = nlohmann::json::parse(text.str(), nullptr, /*allow_exceptions=*/false);
-  return m.is_object() && m.contains("scored") && (m.contains("spadgen_version") || m.contains("run") || m.contains("dataset"));
+  const std::optional<nlohmann::json> m = read_json_if_valid(metrics);
+  return m && m->is_object() && m->contains("scored") && (m->contains("spadgen_version") || m->contains("run") || m->contains("dataset"));
 }
 
 bool is_spadgen_derived_output(const fs::path& path, const std::string& rel) {
@@ -1007,8 +1002,9 @@ std::string evaluate(const EvaluateCommand& c) {
   {
     std::error_code ec;
     std::vector<std::string> theirs;
-    for (const char* f : {"metrics.json", "samples.csv", "range_error.png", "outcome.png"})
-      if (fs::exists(out_given / f, ec) && !is_evaluation_metrics(out_given / "metrics.json")) theirs.push_back(f);
+    if (!is_evaluation_metrics(out_given / "metrics.json"))
+      for (const char* f : {"metrics.json", "samples.csv", "range_error.png", "outcome.png"})
+        if (fs::exists(out_given / f, ec)) theirs.push_back(f);
     if (!theirs.empty()) {
       std::string list;
       for (const std::string& f : theirs) list += (list.empty() ? "" : ", ") + f;
