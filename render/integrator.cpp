@@ -95,15 +95,18 @@ const scenes::Material* mesh_material(const scenes::Scene& scene, const scenes::
 }
 // A plate's two planes: the normal of a mesh's largest faces (by area, summed over the triangles of one normal,
 // either side) and the least and greatest offsets n . p of those triangles; false where they do not span two
-// planes (the glossy plates of the guided connections, the rough plates of connect_laser_rough_slabs).
-bool plate_planes(const scenes::Mesh& mesh, glm::dvec3* n, double* lo, double* hi) {
+// planes (the glossy plates of the guided connections, the rough plates of connect_laser_rough_slabs). With
+// `side`, each triangle's: 0 on the lo plane, 1 on the hi one, 2 of that normal between them (within 1e-3 of the
+// thickness), -1 of another normal or no area.
+bool plate_planes(const scenes::Mesh& mesh, glm::dvec3* n, double* lo, double* hi, std::vector<int>* side = nullptr) {
   const auto corner = [&](size_t t, int k) { return glm::dvec3(mesh.positions[mesh.indices[3 * t + size_t(k)]]); };
   std::vector<glm::dvec3> normals, corners;  // of the triangles that have an area
   std::vector<double> areas;
+  std::vector<size_t> triangle;
   for (size_t t = 0; t < mesh.triangle_count(); ++t) {
     const glm::dvec3 cr = glm::cross(corner(t, 1) - corner(t, 0), corner(t, 2) - corner(t, 0));
     const double twice = glm::length(cr);
-    if (twice > 0.0) normals.push_back(cr / twice), corners.push_back(corner(t, 0)), areas.push_back(0.5 * twice);
+    if (twice > 0.0) normals.push_back(cr / twice), corners.push_back(corner(t, 0)), areas.push_back(0.5 * twice), triangle.push_back(t);
   }
   double best_area = 0.0;
   for (size_t i = 0; i < normals.size(); ++i) {
@@ -118,7 +121,17 @@ bool plate_planes(const scenes::Mesh& mesh, glm::dvec3* n, double* lo, double* h
       const double o = glm::dot(*n, corners[j]);
       *lo = std::min(*lo, o), *hi = std::max(*hi, o);
     }
-  return *hi > *lo;
+  if (!(*hi > *lo)) return false;
+  if (side) {
+    side->assign(mesh.triangle_count(), -1);
+    const double on_plane = 1e-3 * (*hi - *lo);
+    for (size_t j = 0; j < normals.size(); ++j)
+      if (std::fabs(glm::dot(*n, normals[j])) > 1.0 - 1e-6) {
+        const double o = glm::dot(*n, corners[j]);
+        (*side)[triangle[j]] = std::fabs(o - *lo) <= on_plane ? 0 : std::fabs(o - *hi) <= on_plane ? 1 : 2;
+      }
+  }
+  return true;
 }
 // Whether a mesh is curved: more than kMaxPartsPerMesh triangles, with vertex normals.
 bool curved_mesh(const scenes::Mesh& mesh) {
@@ -435,16 +448,12 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
       materials.insert(materials.end(), mesh.triangle_count(), mesh.material);
     }
     RoughSlab sl{glm::dvec3(0.0), 0.0, 0.0, {-1, -1}};
-    if (!rough || merged.triangle_count() > kMaxPartsPerMesh || !plate_planes(merged, &sl.n, &sl.lo, &sl.hi)) return false;
-    const double on_plane = 1e-3 * (sl.hi - sl.lo);
-    for (size_t t = 0; t < merged.triangle_count(); ++t) {
-      const glm::dvec3 a(merged.positions[merged.indices[3 * t]]), b(merged.positions[merged.indices[3 * t + 1]]),
-          c(merged.positions[merged.indices[3 * t + 2]]);
-      const glm::dvec3 cr = glm::cross(b - a, c - a);
-      if (!(glm::length(cr) > 0.0) || std::fabs(glm::dot(cr / glm::length(cr), sl.n)) < 1.0 - 1e-6) continue;
-      const double o = glm::dot(sl.n, a);
-      if (std::fabs(o - sl.lo) > on_plane && std::fabs(o - sl.hi) > on_plane) return false;
-      int& on = std::fabs(o - sl.lo) < std::fabs(o - sl.hi) ? sl.material[0] : sl.material[1];
+    std::vector<int> side;
+    if (!rough || merged.triangle_count() > kMaxPartsPerMesh || !plate_planes(merged, &sl.n, &sl.lo, &sl.hi, &side)) return false;
+    for (size_t t = 0; t < side.size(); ++t) {
+      if (side[t] < 0) continue;
+      if (side[t] == 2) return false;
+      int& on = sl.material[side[t]];
       if (on >= 0 && on != materials[t]) return false;
       on = materials[t];
     }
