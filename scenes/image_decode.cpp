@@ -11,6 +11,8 @@
 namespace spadgen::scenes {
 namespace {
 
+constexpr uint64_t kMaxDeflateRatio = 1032;
+
 std::string size_problem(uint64_t width, uint64_t height) {
   if (width < 1 || height < 1) return "an image of " + std::to_string(width) + " x " + std::to_string(height) + " texels";
   if (width > uint64_t(kMaxImageSide) || height > uint64_t(kMaxImageSide) || width * height > kMaxImageTexels)
@@ -100,6 +102,18 @@ std::string decode_png(const unsigned char* bytes, size_t size, DecodedImage* ou
       return uint32_t(src.data[at]) << 24 | uint32_t(src.data[at + 1]) << 16 | uint32_t(src.data[at + 2]) << 8 | uint32_t(src.data[at + 3]);
     };
     if (std::string p = size_problem(be32(16), be32(20)); !p.empty()) return p;
+    // Deflate writes at most 1032 bytes for each byte it is given (a 258-byte match in two bits), so a file
+    // too short for the header's texels is refused before they are allocated (a 200-byte file claiming
+    // 60000 x 4000 had taken 0.95 GB to fail at libpng's "Not enough image data").
+    if (src.size >= 26) {
+      const int channels_of[7] = {1, 0, 3, 1, 2, 0, 4};  // by colour type: grey, -, RGB, palette, grey+alpha, -, RGBA
+      const unsigned depth = src.data[24], color = src.data[25];
+      const uint64_t bits = uint64_t(be32(16)) * be32(20) * depth * (color < 7 ? channels_of[color] : 0);
+      if (bits / 8 / kMaxDeflateRatio > src.size)
+        return std::to_string(be32(16)) + " x " + std::to_string(be32(20)) + " texels of " + std::to_string(bits / 8) +
+               " bytes in a file of " + std::to_string(src.size) + " bytes, which deflate holds at most " +
+               std::to_string(kMaxDeflateRatio) + " times: the file is cut short or its header is wrong";
+    }
   }
   if (!png_header(png, info, &src, &width, &height)) return std::string("not a readable PNG (libpng: ") + src.error + ")";
   if (std::string p = size_problem(width, height); !p.empty()) return p;

@@ -818,6 +818,30 @@ TEST(GltfLoader, APngPastTheSizeLimitIsNamedWithTheLimit) {
             "70000 x 1 texels, expected at most 65536 on a side and 268435456 in all");
 }
 
+// A PNG whose header claims more texels than its deflate stream can hold (at most 1032 bytes per byte) is
+// refused before they are allocated: a 2 x 2 file claiming 60000 x 4000 had taken 0.95 GB to fail. A real
+// file as compressible as PNG gets (4096 x 4096 black, one bit a texel, 991 bytes of texels per byte) is not.
+TEST(GltfLoader, APngTooShortForItsHeadersTexelsIsRefusedBeforeTheyAreAllocated) {
+  // kPng2x2 with 60000 x 4000 in its IHDR chunk, and that chunk's CRC made right
+  const std::vector<uint8_t> png = unbase64("iVBORw0KGgoAAAANSUhEUgAA6mAAAA+gCAYAAADAouJGAAAAE0lEQVR4nGP4z8DwHwyBNAg0AABJSQl4KKDbdwAAAABJRU5ErkJggg==");
+  ASSERT_EQ(std::string(png.begin() + 12, png.begin() + 16), "IHDR");
+  spadgen::scenes::DecodedImage out;
+  std::string warning;
+  EXPECT_EQ(spadgen::scenes::decode_image(png.data(), png.size(), &out, &warning),
+            "60000 x 4000 texels of 960000000 bytes in a file of " + std::to_string(png.size()) +
+                " bytes, which deflate holds at most 1032 times: the file is cut short or its header is wrong");
+  EXPECT_TRUE(out.rgba.empty());
+
+  std::ifstream in(std::string(SPADGEN_SOURCE_DIR) + "/tests/data/images/black_4096_1bit.png", std::ios::binary);
+  const std::vector<uint8_t> black((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_GT(black.size(), 2000u);
+  ASSERT_LT(black.size(), 4096u * 4096u / 8u / 900u);  // near the bound
+  EXPECT_EQ(spadgen::scenes::decode_image(black.data(), black.size(), &out, &warning), "");
+  ASSERT_EQ(out.width, 4096);
+  ASSERT_EQ(out.height, 4096);
+  EXPECT_EQ(std::count(out.rgba.begin(), out.rgba.end(), uint8_t{0}), 3 * 4096 * 4096);
+}
+
 // A JPEG cut short (here only its end marker): libjpeg-turbo decodes what is there and warns, naming the image.
 TEST(GltfLoader, TruncatedJpegIsDecodedWithAWarning) {
   TempDir dir;
