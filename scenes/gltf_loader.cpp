@@ -2002,9 +2002,20 @@ void check_before_tinygltf(const std::string& path, const nlohmann::json& doc, b
         throw Error(path + ": " + label("accessor", i, o.value("name", std::string())) + ": type " + quoted(t->get<std::string>()) +
                     " is no glTF 2.0 accessor type; expected SCALAR, VEC2, VEC3, VEC4, MAT2, MAT3 or MAT4");
     }
+  if (const auto it = doc.find("extensionsRequired"); it != doc.end() && it->is_array())
+    for (const nlohmann::json& e : *it)
+      if (e.is_string() && !kSupportedExtensions.count(e.get<std::string>())) {
+        const std::string name = e.get<std::string>();
+        std::string hint;
+        if (name == "KHR_draco_mesh_compression" || name == "EXT_meshopt_compression" || name == "KHR_meshopt_compression")
+          hint = " (compressed meshes: export the file without mesh compression)";
+        else if (name == "KHR_texture_basisu" || name == "EXT_texture_webp")
+          hint = " (export the textures as PNG or JPEG)";
+        throw Error(path + ": extension " + quoted(name) + " is listed in extensionsRequired but spadgen does not support it" + hint);
+      }
   // References tinygltf checks with messages of its own ("primitive indices accessor out of bounds", 'image[0]
   // bufferView "7" not found in the scene.'), and an accessor's componentType ("Invalid `componentType` in
-  // accessor. Got 1234"): named here, with what was expected.
+  // accessor. Got 1234"): named here, with what was expected, in read_accessor's and check_view_range's words.
   const auto count_of = [&](const char* list) {
     const auto l = doc.find(list);
     return l != doc.end() && l->is_array() ? l->size() : size_t{0};
@@ -2014,8 +2025,8 @@ void check_before_tinygltf(const std::string& path, const nlohmann::json& doc, b
     if (r == o.end() || !r->is_number_integer()) return;
     const size_t n = count_of(list);
     if (r->get<int64_t>() < 0 || static_cast<uint64_t>(r->get<int64_t>()) >= n)
-      throw Error(path + ": " + who + ": " + key + " " + r->dump() + " names no " + one + " (the file has " + std::to_string(n) + " " +
-                  list + (n ? ", 0 to " + std::to_string(n - 1) : std::string()) + ")");
+      throw Error(path + ": " + who + (std::string(key) != one ? std::string(" ") + key : std::string()) + ": " + one + " " +
+                  r->dump() + " does not exist (the file has " + std::to_string(n) + " " + list + ")");
   };
   const auto each = [&](const char* list, const char* one, const auto& check) {
     if (const auto l = doc.find(list); l != doc.end() && l->is_array())
@@ -2029,48 +2040,27 @@ void check_before_tinygltf(const std::string& path, const nlohmann::json& doc, b
       throw Error(path + ": " + who + ": componentType " + c->dump() + " is no glTF 2.0 component type; expected 5120 (BYTE), "
                   "5121 (UNSIGNED_BYTE), 5122 (SHORT), 5123 (UNSIGNED_SHORT), 5125 (UNSIGNED_INT) or 5126 (FLOAT)");
   });
-  each("bufferViews", "bufferView", [&](const std::string& who, const nlohmann::json& v) { reference(who, v, "buffer", "buffers", "buffer"); });
+  // Compressed data without the extension in extensionsRequired (it may be listed in extensionsUsed only,
+  // with a fallback spadgen cannot tell from the compressed accessors): refused as well, naming the element.
+  const auto compressed = [&](const std::string& who, const nlohmann::json& o, const char* extension) {
+    if (const auto e = o.find("extensions"); e != o.end() && e->is_object() && e->contains(extension))
+      throw Error(path + ": " + who + ": compressed with " + extension + ", which spadgen does not decode (export the file " +
+                  "without mesh compression)");
+  };
+  each("bufferViews", "bufferView", [&](const std::string& who, const nlohmann::json& v) {
+    compressed(who, v, "EXT_meshopt_compression");
+    compressed(who, v, "KHR_meshopt_compression");
+    reference(who, v, "buffer", "buffers", "buffer");
+  });
   each("images", "image", [&](const std::string& who, const nlohmann::json& im) { reference(who, im, "bufferView", "bufferViews", "bufferView"); });
   each("meshes", "mesh", [&](const std::string& who, const nlohmann::json& m) {
     if (const auto prims = m.find("primitives"); prims != m.end() && prims->is_array())
       for (size_t j = 0; j < prims->size(); ++j)
-        if ((*prims)[j].is_object()) reference(who + " primitive " + std::to_string(j), (*prims)[j], "indices", "accessors", "accessor");
+        if ((*prims)[j].is_object()) {
+          compressed(who + " primitive " + std::to_string(j), (*prims)[j], "KHR_draco_mesh_compression");
+          reference(who + " primitive " + std::to_string(j), (*prims)[j], "indices", "accessors", "accessor");
+        }
   });
-  if (const auto it = doc.find("extensionsRequired"); it != doc.end() && it->is_array())
-    for (const nlohmann::json& e : *it)
-      if (e.is_string() && !kSupportedExtensions.count(e.get<std::string>())) {
-        const std::string name = e.get<std::string>();
-        std::string hint;
-        if (name == "KHR_draco_mesh_compression" || name == "EXT_meshopt_compression" || name == "KHR_meshopt_compression")
-          hint = " (compressed meshes: export the file without mesh compression)";
-        else if (name == "KHR_texture_basisu" || name == "EXT_texture_webp")
-          hint = " (export the textures as PNG or JPEG)";
-        throw Error(path + ": extension " + quoted(name) + " is listed in extensionsRequired but spadgen does not support it" + hint);
-      }
-  // Compressed data without the extension in extensionsRequired (it may be listed in extensionsUsed only,
-  // with a fallback spadgen cannot tell from the compressed accessors): refused as well, naming the element.
-  if (const auto meshes = doc.find("meshes"); meshes != doc.end() && meshes->is_array())
-    for (size_t i = 0; i < meshes->size(); ++i) {
-      const nlohmann::json& mesh = (*meshes)[i];
-      if (!mesh.is_object() || !mesh.contains("primitives") || !mesh["primitives"].is_array()) continue;
-      for (size_t j = 0; j < mesh["primitives"].size(); ++j) {
-        const nlohmann::json& prim = mesh["primitives"][j];
-        if (prim.is_object() && prim.contains("extensions") && prim["extensions"].is_object() &&
-            prim["extensions"].contains("KHR_draco_mesh_compression"))
-          throw Error(path + ": " + label("mesh", i, mesh.value("name", std::string())) + " primitive " + std::to_string(j) +
-                      ": compressed with KHR_draco_mesh_compression, which spadgen does not decode (export the file "
-                      "without mesh compression)");
-      }
-    }
-  if (const auto views = doc.find("bufferViews"); views != doc.end() && views->is_array())
-    for (size_t i = 0; i < views->size(); ++i) {
-      const nlohmann::json& v = (*views)[i];
-      if (!v.is_object() || !v.contains("extensions") || !v["extensions"].is_object()) continue;
-      for (const char* e : {"EXT_meshopt_compression", "KHR_meshopt_compression"})
-        if (v["extensions"].contains(e))
-          throw Error(path + ": " + label("bufferView", i, v.value("name", std::string())) + ": compressed with " + e +
-                      ", which spadgen does not decode (export the file without mesh compression)");
-    }
   const std::filesystem::path dir = std::filesystem::path(path).parent_path();
   for (const char* kind : {"buffers", "images"}) {
     const auto list = doc.find(kind);

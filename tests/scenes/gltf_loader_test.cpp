@@ -1632,19 +1632,19 @@ TEST_F(BrokenGltf, ReferencesToElementsTheFileDoesNotHaveAreNamed) {
     Gltf g;
     const int pos = g.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
     g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}}}, {"indices", 9}}}), "Tri")}});
-    EXPECT_THAT(error_of(g), HasSubstr("broken.gltf: mesh 0 'Tri' primitive 0: indices 9 names no accessor (the file has 1 accessors, 0 to 0)"));
+    EXPECT_THAT(error_of(g), HasSubstr("broken.gltf: mesh 0 'Tri' primitive 0 indices: accessor 9 does not exist (the file has 1 accessors)"));
   }
   {
     Gltf g;
     g.node({{"mesh", g.triangle_mesh()}});
     g.doc["images"] = {{{"bufferView", 7}, {"mimeType", "image/png"}}};
-    EXPECT_THAT(error_of(g), HasSubstr("image 0: bufferView 7 names no bufferView (the file has "));
+    EXPECT_THAT(error_of(g), HasSubstr("image 0: bufferView 7 does not exist (the file has "));
   }
   {
     Gltf g;
     g.node({{"mesh", g.triangle_mesh()}});
     g.doc["bufferViews"][0]["buffer"] = 1;
-    EXPECT_THAT(error_of(g), HasSubstr("bufferView 0: buffer 1 names no buffer (the file has 1 buffers, 0 to 0)"));
+    EXPECT_THAT(error_of(g), HasSubstr("bufferView 0: buffer 1 does not exist (the file has 1 buffers)"));
   }
 }
 
