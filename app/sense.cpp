@@ -859,7 +859,12 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     outputs[r]->report(record);
     if (r == 0) {  // the realisations share their rates and labels
       std::vector<std::string> ws = bright_gate_warnings(sensor, record.laser_open_rate);
-      for (std::string& w : sweep_edge_warnings(cfg, record)) ws.push_back(std::move(w));
+      if (!from_run.count("labels.exr")) {
+        for (std::string& w : sweep_edge_warnings(cfg, record)) ws.push_back(std::move(w));
+      } else {  // the run's labels, linked, are not counted here (put_labels counts): the run's words of them
+        for (const auto& w : meta.at("warnings"))
+          if (w.get<std::string>().find(kSweepEdgeWarning) != std::string::npos) ws.push_back(w.get<std::string>());
+      }
       for (std::string& w : ws) {
         print_warning(w);
         scene_warnings.push_back(std::move(w));

@@ -35,6 +35,20 @@ TEST_F(App, SenseWritesWhatTheRunWroteBitForBit) {
   EXPECT_EQ(meta["sense"]["from"], (dir_ / "run").string());
 }
 
+// ... its warnings too: the run's that its sweep starts after the returns rise. With the run's own sensor
+// labels.exr is linked from the run, not labelled again, and the warning counted from the labels was dropped.
+TEST_F(App, SenseKeepsTheRunsWarningOfItsSweepsEdges) {
+  ASSERT_EQ(sh("run " + kScenes + "flat_target.json -q --set camera.crop=[500,240,16,16] --set render.samples_per_pixel=1 "
+               "--set outputs.light=true --set acquisition.gate_sweep.start_ns=8 -o " + (dir_ / "run").string()).code, 0);
+  const auto run_meta = nlohmann::json::parse(slurp(dir_ / "run/metadata.json"));
+  ASSERT_THAT(run_meta["warnings"].dump(), HasSubstr("rise before the gate sweep's first position"));
+  const Result r = sh("sense " + (dir_ / "run").string() + " -o " + (dir_ / "sense").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("rise before the gate sweep's first position"));
+  expect_same_outputs(dir_ / "run", dir_ / "sense");
+  EXPECT_EQ(nlohmann::json::parse(slurp(dir_ / "sense/metadata.json"))["warnings"], run_meta["warnings"]);
+}
+
 // Light saved before the ambient light's standard error (no light/ambient_se) is sensed as before: the
 // ambient image without its standard_error, metadata.json's accuracy without the ambient summary.
 TEST_F(App, SenseReadsLightSavedBeforeTheAmbientStandardError) {
