@@ -2,8 +2,11 @@
 // explicit. scenes/ parses and validates the JSON into this; render/, sensor/ and writers/ read it.
 // Scene-file key names (with their units) are given beside each field; docs/scene-file.md documents them.
 #pragma once
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
+#include <limits>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -208,6 +211,13 @@ struct GateSweepConfig {
   double start_s = 0.6e-9;              // acquisition.gate_sweep.start_ns
   double stop_s = 13.2e-9;              // acquisition.gate_sweep.stop_ns (inclusive when on the grid)
   double step_s = 36e-12;               // acquisition.gate_sweep.step_ps
+
+  // How many positions start, start + step, ... up to stop: stop counts when on the grid within the rounding
+  // of the three in seconds (an absolute 1e-9 of a step left out the last of 5 to 5.00001 ns in 1e-6 ps steps).
+  double positions() const {
+    const double rounding = 64.0 * std::numeric_limits<double>::epsilon() * std::max(std::fabs(start_s), std::fabs(stop_s)) / step_s;
+    return std::floor((stop_s - start_s) / step_s + 1e-9 + rounding) + 1.0;
+  }
 
   bool operator==(const GateSweepConfig&) const = default;
 };

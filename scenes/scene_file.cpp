@@ -589,7 +589,7 @@ void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string
     err("/laser/gltf_light", "is empty, expected the name of a glTF light because /laser/beam is \"gltf_light\"");
   if (c.acquisition.mode == AcquisitionMode::GateSweep) {
     const GateSweepConfig& g = c.acquisition.gate_sweep;
-    const double positions = std::floor((g.stop_s - g.start_s) / g.step_s + 1e-9) + 1.0;  // as the sweep counts them
+    const double positions = g.positions();
     if (g.stop_s < g.start_s)
       err("/acquisition/gate_sweep/stop_ns", "is before /acquisition/gate_sweep/start_ns; expected stop >= start");
     else if (!(positions <= static_cast<double>(kMaxGatePositions)))

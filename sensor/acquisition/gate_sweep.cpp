@@ -23,7 +23,7 @@ class GateSweep final : public Acquisition {
         skew_on_(c.sensor.skew),
         gate_(build_gate_shape(c.sensor.gate, c.laser)) {
     const GateSweepConfig& s = cfg_.gate_sweep;
-    K_ = static_cast<int>(std::floor((s.stop_s - s.start_s) / s.step_s + 1e-9)) + 1;
+    K_ = static_cast<int>(s.positions());
     for (int k = 0; k < K_; ++k) positions_.push_back(s.start_s + k * s.step_s);
   }
 

@@ -523,6 +523,26 @@ TEST(Gate, PulseTableMatchesGaussianPulse) {
   for (double t = -1e-9; t < 5e-9; t += 7e-12) ASSERT_NEAR(a.value(t, 0.0), b.value(t, 0.0), 2e-4) << t;
 }
 
+// The sweep's last position, stop_ns, counts when on the step grid, within the rounding of start, stop and
+// step in seconds: 5 to 5.00001 ns in steps of 1e-6 ps is 10001 positions (an absolute 1e-9 of a step left
+// the last out), the paper's sweep 351; a stop a tenth of a step short of the grid does not count.
+TEST(Gate, TheSweepsLastPositionCountsWhenOnTheGrid) {
+  struct Case {
+    double start_ns, stop_ns, step_ps, positions;
+  };
+  for (const Case& t : {Case{0.6, 13.2, 36, 351}, Case{5, 5.00001, 1e-6, 10001}, Case{5, 5.0000099999, 1e-6, 10000},
+                        Case{-3, 3, 1e-3, 6000001}, Case{1e5, 1e5 + 1e-3, 1, 2}}) {
+    GateSweepConfig g;
+    g.start_s = t.start_ns * kNs, g.stop_s = t.stop_ns * kNs, g.step_s = t.step_ps * kPs;
+    EXPECT_EQ(g.positions(), t.positions) << t.start_ns << " to " << t.stop_ns << " ns in " << t.step_ps << " ps";
+  }
+  SensorStageConfig c = sweep_config(8, 8);
+  c.acquisition.gate_sweep.start_s = 5 * kNs, c.acquisition.gate_sweep.stop_s = 5.00001 * kNs, c.acquisition.gate_sweep.step_s = 1e-6 * kPs;
+  const SensorModel model(c);
+  ASSERT_EQ(model.K(), 10001);
+  EXPECT_NEAR(model.gate_positions_s().back(), 5.00001e-9, 1e-23);
+}
+
 TEST(Gate, RequiredWindowCoversEveryPixelGate) {
   SensorStageConfig c = sweep_config(96, 40);
   SensorModel model(c);
