@@ -783,7 +783,8 @@ std::vector<DoneFolder> done_sample_folders(const fs::path& dir, std::map<std::s
 
 SampleSelection::SampleSelection(const std::string& given) {
   std::string text = given;
-  if (!given.empty() && given[0] == '@') {
+  const bool file = !given.empty() && given[0] == '@';  // (whose lines and spaces may leave empty elements)
+  if (file) {
     text = scenes::read_file_bounded(given.substr(1), int64_t{1} << 30, "--samples file");
     for (char& ch : text)
       if (ch == '\n' || ch == '\r' || ch == ' ' || ch == '\t') ch = ',';
@@ -797,6 +798,8 @@ SampleSelection::SampleSelection(const std::string& given) {
       throw Error("--samples " + shown(given) + ": found '" + shown(t) + "', expected dataset indices and ranges such as 0,3,5-8");
     return std::stoll(t);
   };
+  if (!file && !text.empty() && (text.front() == ',' || text.back() == ',' || text.find(",,") != std::string::npos))
+    throw Error("--samples " + shown(given) + ": an empty element between commas; expected dataset indices and ranges such as 0,3,5-8");
   std::vector<std::pair<int64_t, int64_t>> parts;
   for (size_t i = 0; i < text.size();) {
     const size_t end = std::min(text.find(',', i), text.size());

@@ -522,6 +522,9 @@ TEST_F(Reconstruct, EvaluateRefusesAnotherDatasetSamplesDetections) {
                                    {"0-100000000", "sample 100000000 is not one of the dataset's 2"},
                                    {"0-x", "found 'x', expected dataset indices and ranges such as 0,3,5-8"},
                                    {"1-0", "the range 1-0 is empty"},
+                                   {"0,,1", "--samples 0,,1: an empty element between commas"},
+                                   {"0,", "--samples 0,: an empty element between commas"},
+                                   {",0", "--samples ,0: an empty element between commas"},
                                    {"\"\"", "selects no samples"},
                                    {"@" + (dir_ / "empty.txt").string(), "selects no samples"}}) {
     r = sh("evaluate " + out.string() + " --samples " + list + " -o " + (dir_ / "e4").string());
