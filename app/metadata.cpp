@@ -222,8 +222,8 @@ json camera_json(const render::Camera& cam, const PixelRect& img, const glm::dve
 }
 
 
-Provenance provenance(const RunConfig& c, const PixelRect& img) {
-  return {c.scene_file, scenes::content_hash(c.scene_file, c.gltf_path), c.seed, img, c.chip_seed()};
+Provenance provenance(const RunConfig& c, const PixelRect& img, const std::string& scene_hash) {
+  return {c.scene_file, scene_hash, c.seed, img, c.chip_seed()};
 }
 
 void stamp(writers::ExrImage& e, const Provenance& p) {

@@ -32,8 +32,8 @@ struct Provenance {
   PixelRect crop;  // the rendered pixels, in sensor coordinates
   uint64_t chip_seed = 0;  // the chip's fixed pattern (seeds.chip): sensor_maps.exr and labels.exr depend on it
 };
-// Reads and hashes the scene's files.
-Provenance provenance(const RunConfig& c, const PixelRect& img);
+// scene_hash: scenes::content_hash of the scene's files, as they were read.
+Provenance provenance(const RunConfig& c, const PixelRect& img, const std::string& scene_hash);
 // Sets the provenance attributes (spadgen_version, _seed, _scene_file, _scene_hash, _crop) of an EXR; the
 // outputs add spadgen_chip_seed to those of the chip (sensor_maps.exr, labels.exr).
 void stamp(writers::ExrImage& e, const Provenance& p);

@@ -90,9 +90,18 @@ RunResult run(const RunOptions& options) {
   InterruptGuard interrupt_guard;
   const ThreadLimit threads(options.threads);
 
+  // The hash of the files as they were read (metadata.json's scene_hash_fnv1a64): taken when the glTF loads,
+  // and refused if they changed meanwhile. (Taken when the outputs were written, it was of the files then: a
+  // dataset sample rendered from a glTF edited and restored meanwhile stayed done under the restored one's.)
+  std::string scene_hash;
   const scenes::Scene scene = [&] {
     const StopAtOnce loading;  // (nothing written yet)
-    return load_edited_gltf(resolved, options.scene_file);
+    scene_hash = scenes::content_hash(cfg.scene_file, cfg.gltf_path);
+    scenes::Scene s = load_edited_gltf(resolved, options.scene_file);
+    if (scenes::content_hash(cfg.scene_file, cfg.gltf_path) != scene_hash)
+      throw Error(options.scene_file + ": the scene file, its glTF or a file the glTF reads changed while they were read; "
+                  "run again once they are written");
+    return s;
   }();
   for (const std::string& w : scene.warnings) print_warning(w);
   std::vector<std::string> warnings = scene.warnings;  // for metadata.json, with those of the run (app/warnings.h)
@@ -182,7 +191,7 @@ RunResult run(const RunOptions& options) {
   const double render_seconds = progress.seconds();
   const auto tiles_done = std::chrono::steady_clock::now();
 
-  const Provenance prov = provenance(cfg, img);
+  const Provenance prov = provenance(cfg, img, scene_hash);
   outputs.write(prov);
   std::vector<std::string> files = outputs.files();
   RunRecord record;
