@@ -247,8 +247,8 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
       });
 
   DatasetSpec s;
-  s.file = path.empty() ? "" : fs::absolute(path).lexically_normal().string();
-  const std::string dir = path.empty() ? "." : fs::absolute(path).parent_path().string();
+  s.file = path.empty() ? "" : scenes::normal_path(path);
+  const std::string dir = path.empty() ? "." : fs::path(s.file).parent_path().string();
   rd.each([&] {
     if (doc.contains("description")) {
       if (!doc["description"].is_string()) rd.fail("/description", "found " + describe(doc["description"]) + ", expected a string");
@@ -272,11 +272,13 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
         rd.fail(at, "found '" + scenes::printable(name) + "', which holds a NUL byte; expected a file name without one");
       fs::path p(name);
       if (p.is_relative()) p = fs::path(dir) / p;
-      const std::string full = p.lexically_normal().string();
+      const std::string full = scenes::normal_path(p.string());
       const std::string problem = scenes::file_problem(full, scenes::kMaxSceneFileBytes);
       if (!problem.empty()) rd.fail(at, "the scene file " + full + " " + problem + "; expected a path relative to the dataset file");
-      if (std::find(s.scene_names.begin(), s.scene_names.end(), name) != s.scene_names.end())
-        rd.fail(at, "lists " + name + " twice; expected each scene file once");
+      // (the same file under two spellings too: "paper/x.json" and "paper/../paper/x.json" had doubled the grid)
+      if (const auto same = std::find(s.scenes.begin(), s.scenes.end(), full); same != s.scenes.end())
+        rd.fail(at, "lists " + full + " twice (as /scenes/" + std::to_string(same - s.scenes.begin()) +
+                        " too); expected each scene file once");
       s.scenes.push_back(full);
       s.scene_names.push_back(name);
     }

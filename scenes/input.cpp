@@ -191,6 +191,28 @@ std::string size_text(uint64_t bytes) {
   return buf;
 }
 
+std::string normal_path(const std::string& path) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  fs::path abs = fs::absolute(path, ec);
+  if (ec) abs = path;
+  fs::path out;
+  for (const fs::path& part : abs) {
+    if (part.empty() || part == ".") continue;
+    if (part != "..") {
+      out /= part;
+      continue;
+    }
+    if (fs::is_symlink(out, ec))
+      if (fs::path real = fs::canonical(out, ec); !ec) {
+        out = real.parent_path();
+        continue;
+      }
+    if (out.has_relative_path()) out = out.parent_path();  // (the root's parent is the root)
+  }
+  return out.string();
+}
+
 std::string file_problem(const std::string& path, uint64_t max_bytes) {
   struct stat st {};
   if (::stat(path.c_str(), &st) != 0)

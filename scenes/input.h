@@ -27,6 +27,11 @@ inline constexpr int kMaxJsonDepth = 64;
 // "is 3.1 GB, larger than the 2 GB spadgen reads".
 std::string file_problem(const std::string& path, uint64_t max_bytes);
 
+// `path` made absolute with "." and "X/.." taken out, as the system resolves it: ".." after a symbolic link
+// is the parent of the link's target ("DIR/LINK/../f" is the f beside LINK's target, which lexically_normal
+// made DIR/f). Other links stay as spelt. Scene and dataset files' paths, and those relative to them.
+std::string normal_path(const std::string& path);
+
 // The whole file, after file_problem; throws spadgen::Error "<what> <path>: <problem>".
 std::string read_file_bounded(const std::string& path, uint64_t max_bytes, const std::string& what);
 

@@ -527,9 +527,8 @@ ojson resolve(const json& doc) {
 
 RunConfig to_config(const ojson& r, const std::string& scene_path) {
   RunConfig c;
-  const std::string dir = scene_path.empty() ? std::string(".")
-                                             : std::filesystem::absolute(scene_path).parent_path().string();
-  c.scene_file = scene_path.empty() ? "" : std::filesystem::absolute(scene_path).lexically_normal().string();
+  c.scene_file = scene_path.empty() ? "" : normal_path(scene_path);
+  const std::string dir = scene_path.empty() ? std::string(".") : std::filesystem::path(c.scene_file).parent_path().string();
   for (const Key& k : schema())
     if (k.set) k.set(c, r.at(k.pointer), dir);
   for (const NamedSection& s : named_sections()) {

@@ -10,6 +10,7 @@
 #include <type_traits>
 
 #include "core/units.h"
+#include "scenes/input.h"
 #include "scenes/scene_file.h"
 
 namespace spadgen::scenes {
@@ -60,7 +61,7 @@ std::string relative_to(const std::string& dir, const std::string& p) {
   if (p.empty()) return p;
   std::filesystem::path q(p);
   if (q.is_relative()) q = std::filesystem::path(dir) / q;
-  return q.lexically_normal().string();
+  return normal_path(q.string());
 }
 
 struct Range {

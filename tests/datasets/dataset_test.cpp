@@ -127,6 +127,15 @@ TEST(DatasetFile, ErrorsNameTheKeyAndWhatWasExpected) {
   EXPECT_THAT(error_of("\"random\": {\"camera.f_number\": {\"uniform\": [2, 3], \"min\": 2.5}}"),
               HasSubstr("is only for \"normal\""));
   EXPECT_THAT(error_of("\"set\": {\"seed\": 4}"), HasSubstr("/set/seed: the dataset sets every sample's seeds"));
+  // a scene file twice, under two spellings (it doubled the grid)
+  std::string twice = "no error";
+  try {
+    parse_dataset_text("{\"scenes\": [\"" + kScenes + "flat_target.json\", \"" + kScenes + "../paper/flat_target.json\"]}", "d.json");
+  } catch (const Error& e) {
+    twice = e.what();
+  }
+  EXPECT_THAT(twice, HasSubstr("d.json: /scenes/1: lists " + fs::path(kScenes).lexically_normal().string() +
+                                   "flat_target.json twice (as /scenes/0 too); expected each scene file once"));
   EXPECT_THAT(error_of("\"grid\": {\"seeds.noise\": [1, 2]}"), HasSubstr("/grid/seeds.noise"));
   EXPECT_THAT(error_of("\"set\": {\"camera.f_number\": 2}, \"grid\": {\"camera.f_number\": [2, 4]}"),
               HasSubstr("varies camera.f_number a second time"));

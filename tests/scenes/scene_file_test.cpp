@@ -83,6 +83,27 @@ TEST_F(SceneFileTest, MinimalFileResolvesEveryDefaultInSiUnits) {
 // Each default is declared once, as the field's initializer in core/config.h: a configuration built in
 // code is exactly what a minimal scene file resolves to, bit for bit (the half-angle of a "cone" beam
 // once defaulted to 10 degrees in the file and to 0 in code).
+// A path with ".." after a symbolic link names what the system opens: "deep/link/../scene.json", link to
+// real/sub, is real/scene.json, and its glTF the one beside it (lexically_normal made it deep/scene.json and
+// looked for deep/s.gltf: "does not exist", or another scene's file where deep held one). Links without ".."
+// after them stay as spelt.
+TEST_F(SceneFileTest, PathsThroughASymbolicLinkAndDotDotAreWhatTheSystemOpens) {
+  namespace fs = std::filesystem;
+  fs::create_directories(dir_ / "real/sub");
+  fs::create_directories(dir_ / "deep");
+  fs::create_directory_symlink(dir_ / "real/sub", dir_ / "deep/link");
+  std::ofstream(dir_ / "real/scene.json") << R"({"gltf": "s.gltf"})";
+  std::ofstream(dir_ / "real/s.gltf") << "{}";
+  const std::string real = fs::canonical(dir_).string();  // (the temporary folder itself may be reached by a link)
+  EXPECT_EQ(fs::path(normal_path((dir_ / "deep/link/../scene.json").string())), fs::path(real) / "real/scene.json");
+  EXPECT_EQ(normal_path((dir_ / "deep/./link/sub2/../x").string()), (dir_ / "deep/link/x").string());
+  EXPECT_EQ(normal_path((dir_ / "deep/link").string()), (dir_ / "deep/link").string());
+  EXPECT_EQ(normal_path("/.."), "/");
+  const ResolvedRun r = load_scene_file((dir_ / "deep/link/../scene.json").string());
+  EXPECT_EQ(fs::path(r.config.scene_file), fs::path(real) / "real/scene.json");
+  EXPECT_EQ(fs::path(r.config.gltf_path), fs::path(real) / "real/s.gltf");
+}
+
 TEST_F(SceneFileTest, CodeDefaultsAreTheSceneFileDefaults) {
   const ResolvedRun r = parse(R"({"gltf": "s.gltf"})");
   RunConfig d;
