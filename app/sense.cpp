@@ -128,7 +128,7 @@ void copy_checked(const fs::path& a, const fs::path& b) {
     throw Error(a.string() + ": is not a regular file (" + (S_ISFIFO(st.st_mode) ? "a FIFO" : S_ISDIR(st.st_mode) ? "a folder" : "a device or socket") +
                 "); expected the run's file as spadgen wrote it");
   }
-  const int out = ::open(b.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  const int out = ::open(b.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
   if (out < 0) {
     const int err = errno;
     ::close(in);

@@ -350,7 +350,7 @@ std::string lock_holder(int fd) {
 int take_folder_lock(const fs::path& lock_path, const fs::path& out, bool shared, bool output) {
   const std::string folder = (output ? "the output folder " : "the run folder ") + out.string();
   for (int attempt = 0; attempt < 16; ++attempt) {
-    const int fd = ::open(lock_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+    const int fd = ::open(lock_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0666);
     if (fd < 0)
       throw Error((!output ? "cannot lock " + folder : "cannot use " + out.string() + " as the output folder (-o)") +
                   ": cannot create its lock file " + lock_path.string() + ": " + std::strerror(errno));

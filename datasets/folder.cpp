@@ -80,7 +80,7 @@ class FolderLock {
  public:
   explicit FolderLock(const fs::path& dir) {
     const std::string p = (dir / ".dataset.lock").string();
-    fd_ = ::open(p.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+    fd_ = ::open(p.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0666);
     if (fd_ < 0) throw Error("cannot open the dataset folder's lock " + p + ": " + std::strerror(errno));
     while (::flock(fd_, LOCK_EX) != 0)
       if (errno != EINTR) throw Error("cannot lock " + p + ": " + std::strerror(errno));
@@ -117,7 +117,7 @@ namespace {
 // (closing it releases the lock), or -1 when another run's lock conflicts and `wait` is false.
 int lock_byte(const fs::path& dir, const char* file, short type, off_t at, const std::string& what, bool wait) {
   const std::string p = (dir / file).string();
-  const int fd = ::open(p.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  const int fd = ::open(p.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0666);
   if (fd < 0) throw Error("cannot open the dataset folder's lock " + p + ": " + std::strerror(errno));
   struct flock l {};
   l.l_type = type;

@@ -141,6 +141,26 @@ TEST_F(Dataset, TwoRunsIntoOneFolderShareTheSamples) {
   EXPECT_FALSE(fs::exists(dir_ / "both/failed"));
 }
 
+// A dataset shared by a group (umask 002) is continued by another member: every file spadgen creates takes
+// the umask, its locks too (.dataset.lock, .dataset.runs and the samples' locks were 0644 whatever the umask:
+// "cannot open the dataset folder's lock ...: Permission denied" for a teammate; a helper's find).
+TEST_F(Dataset, EveryFileTakesTheUmaskItsLocksToo) {
+  write(dir_ / "d.json", small_dataset(1));
+  const Result r = shell("umask 002 && " + kBin + " dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "shared").string() + " -q");
+  ASSERT_EQ(r.code, 0) << r.output;
+  int locks = 0, files = 0;
+  for (const auto& e : fs::recursive_directory_iterator(dir_ / "shared")) {
+    if (!e.is_regular_file()) continue;
+    const std::string name = e.path().filename().string();
+    ++files;
+    locks += name.ends_with("lock") || name == ".dataset.runs";
+    EXPECT_EQ(e.status().permissions() & fs::perms::all, fs::perms::owner_read | fs::perms::owner_write | fs::perms::group_read |
+                                                           fs::perms::group_write | fs::perms::others_read) << e.path();
+  }
+  EXPECT_EQ(locks, 2) << ".dataset.lock and .dataset.runs";
+  EXPECT_GE(files, 10);
+}
+
 // A dataset's own folders are its own: samples/ linked to another dataset's, or one sample's folder linked to
 // another folder, is refused, naming the link, and the link's target is left as it was (the samples were
 // written through the link into the other dataset, exit 0).
