@@ -8,7 +8,8 @@
 #include <fstream>
 #include <set>
 #include <string>
-#include <thread>
+
+#include <tbb/info.h>
 
 #include "app/outputs.h"
 #include "core/error.h"
@@ -119,12 +120,13 @@ std::string bytes_text(int64_t bytes) {
   return buf;
 }
 
-int64_t worker_threads(int threads) { return threads > 0 ? threads : std::max(1u, std::thread::hardware_concurrency()); }
+// The cores the process may run on (its CPU affinity, as TBB's default arena counts them; taskset, a Slurm
+// task's cpuset): every core of the machine had been counted.
+int allowed_cores() { return std::max(1, tbb::info::default_concurrency()); }
 
-int usable_cores(int threads) {
-  const int cores = int(std::max(1u, std::thread::hardware_concurrency()));
-  return threads > 0 ? std::min(threads, cores) : cores;
-}
+int64_t worker_threads(int threads) { return threads > 0 ? threads : allowed_cores(); }
+
+int usable_cores(int threads) { return threads > 0 ? std::min(threads, allowed_cores()) : allowed_cores(); }
 
 // The arrival times a pixel's saved light spans, for the plan (outputs.light).
 constexpr double kLitSpan_s = 2.5e-9;

@@ -760,6 +760,10 @@ TEST_F(Dataset, RefusesAnotherDatasetsFolderForeignFilesAndTooLittleDisk) {
   EXPECT_THAT(plan.output, HasSubstr("# total: 200 samples, disk at most"));
   EXPECT_THAT(plan.output, Not(HasSubstr("an upper bound")));
   EXPECT_THAT(plan.output, Not(HasSubstr("samples) "))) << "no progress for a plan of a few samples";
+  // The cores the process may use (taskset, a Slurm task's cpuset), not the machine's: it planned for 2 on one.
+  const Result one_core = shell("taskset -c 0 " + kBin + " dataset plan " + (dir_ / "big.json").string() + " 2>&1");
+  EXPECT_EQ(one_core.code, 0) << one_core.output;
+  EXPECT_THAT(one_core.output, HasSubstr("(estimates for 1 core: "));
   // A plan of over 10,000 samples (0.2 ms each) says how far it is, on stderr (here not a terminal: lines).
   write(dir_ / "many.json", "{\"scenes\": [\"" + kScenes + "multi_object.json\"], \"samples\": 10001}");
   const Result many = sh("dataset plan " + (dir_ / "many.json").string());
