@@ -3,10 +3,12 @@
 #include <sys/statvfs.h>
 
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <set>
+#include <sstream>
 #include <string>
 
 #include <tbb/info.h>
@@ -20,8 +22,60 @@ namespace spadgen::app {
 namespace fs = std::filesystem;
 
 namespace {
+// A number read from a cgroup file ("max", absent or unreadable: -1).
+int64_t cgroup_number(const fs::path& file) {
+  std::ifstream in(file);
+  std::string text;
+  int64_t v = -1;
+  if (!(in >> text) || std::from_chars(text.data(), text.data() + text.size(), v).ptr != text.data() + text.size() || v < 0) return -1;
+  return v;
+}
+// A key's value in a cgroup's memory.stat (-1: none).
+int64_t cgroup_stat(const fs::path& file, const std::string& key) {
+  std::ifstream in(file);
+  std::string k;
+  for (int64_t v = 0; in >> k >> v;)
+    if (k == key) return v;
+  return -1;
+}
+}  // namespace
 
-// MemAvailable of /proc/meminfo, lowered to what the cgroup (container, systemd slice) still allows.
+int64_t cgroup_memory_left(const std::string& proc_self_cgroup, const fs::path& root) {
+  int64_t least = -1;
+  const auto limit = [&](int64_t max, int64_t usage, int64_t inactive_file) {
+    if (max < 0 || usage < 0) return;
+    const int64_t left = std::max<int64_t>(0, max - std::max<int64_t>(0, usage - std::max<int64_t>(0, inactive_file)));
+    least = least < 0 ? left : std::min(least, left);
+  };
+  std::istringstream lines(proc_self_cgroup);
+  for (std::string line; std::getline(lines, line);) {
+    const size_t a = line.find(':'), b = a == std::string::npos ? a : line.find(':', a + 1);
+    if (b == std::string::npos) continue;
+    const std::string controllers = line.substr(a + 1, b - a - 1), path = line.substr(b + 1);
+    if (path.empty() || path[0] != '/' || path.find("/..") != std::string::npos) continue;
+    bool v1 = false;
+    std::istringstream names(controllers);
+    for (std::string name; std::getline(names, name, ',');) v1 = v1 || name == "memory";
+    const bool v2 = controllers.empty();
+    if (!v2 && !v1) continue;
+    // the hierarchy's mount: cgroup v2 at the root (or at unified/ beside v1's), v1's memory controller at memory/
+    std::error_code ec;
+    fs::path g = v1 ? root / "memory" : fs::exists(root / "cgroup.controllers", ec) ? root : root / "unified";
+    // the group and every group above it: each may set a limit
+    std::vector<fs::path> groups = {g};
+    for (const fs::path& part : fs::path(path).relative_path())
+      if (!part.empty() && part != ".") groups.push_back(g /= part);
+    for (const fs::path& at : groups)
+      if (v2) limit(cgroup_number(at / "memory.max"), cgroup_number(at / "memory.current"), cgroup_stat(at / "memory.stat", "inactive_file"));
+      else limit(cgroup_number(at / "memory.limit_in_bytes"), cgroup_number(at / "memory.usage_in_bytes"),
+                 cgroup_stat(at / "memory.stat", "total_inactive_file"));
+  }
+  return least;
+}
+
+namespace {
+
+// MemAvailable of /proc/meminfo, lowered to what the process's memory cgroups still allow.
 int64_t available_memory() {
   int64_t available = -1;
   std::ifstream meminfo("/proc/meminfo");
@@ -31,16 +85,12 @@ int64_t available_memory() {
     if (key == "MemAvailable:") available = kb * 1024;
     meminfo.ignore(256, '\n');
   }
-  std::ifstream max_file("/sys/fs/cgroup/memory.max"), current_file("/sys/fs/cgroup/memory.current");
-  std::string max_text;
-  int64_t current = 0;
-  if (max_file >> max_text && max_text != "max" && current_file >> current) {
-    const int64_t left = std::max<int64_t>(0, std::stoll(max_text) - current);
+  std::ifstream proc("/proc/self/cgroup");
+  const std::string groups((std::istreambuf_iterator<char>(proc)), std::istreambuf_iterator<char>());
+  if (const int64_t left = cgroup_memory_left(groups, "/sys/fs/cgroup"); left >= 0)
     available = available < 0 ? left : std::min(available, left);
-  }
   return available;
 }
-
 
 std::string join_parts(std::vector<ResourcePlan::Part> parts) {
   std::sort(parts.begin(), parts.end(), [](const auto& a, const auto& b) { return a.bytes > b.bytes; });

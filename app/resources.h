@@ -21,6 +21,13 @@ struct Scene;
 
 namespace spadgen::app {
 
+// What the process's memory cgroups still allow, in bytes (-1: no limit found): the least, over every group
+// of its lines of /proc/self/cgroup (cgroup v2's "0::/path" and v1's memory controller) and the groups above
+// each, of the limit less the usage not reclaimable (less the inactive file cache). root: where the cgroup
+// file systems are mounted (/sys/fs/cgroup). A Slurm job's --mem, a systemd slice, a container's limit; only
+// the namespace's root group had been read (memory.max), so a run past a job's limit was killed, not refused.
+int64_t cgroup_memory_left(const std::string& proc_self_cgroup, const std::filesystem::path& root);
+
 struct ResourcePlan {
   struct Part {
     std::string what;  // "camera paths of 2 threads", with the keys that drive it
