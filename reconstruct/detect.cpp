@@ -267,6 +267,7 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* profile, int K
     std::vector<std::pair<Edge, double>> located;  // the edge and its fractional position
     std::vector<bool> was_clipped;                 // [j]: located[j] runs into saturated counts
     std::vector<double> whole_x;                   // [j]: located[j]'s half point between the plateaus (NaN: none)
+    std::vector<bool> cut;                         // [j]: its dark side cut short by the sweep's end (below)
     for (const Edge& e : taken) {
       if ((e.z > 0.0) != rising) continue;
       // An edge into a saturated plateau: the bright level is clipped at ln(2 N), and the edge's z, largest
@@ -332,6 +333,9 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* profile, int K
         if (t.claim_hi <= e.claim_lo) p0 = std::max(p0, t.claim_hi);
         if (t.claim_lo >= e.claim_hi) p1 = std::min(p1, t.claim_lo);
       }
+      // Cut by the sweep: fewer than kPlateau positions of its dark side (before a rise, after a fall) lie in
+      // the sweep, whose end bounds them.
+      const bool cut_short = rising ? p0 == 0 && e.claim_lo - p0 < kPlateau : p1 == K && p1 - e.claim_hi < kPlateau;
       if (!clipped && e.claim_lo - p0 >= kMinPlateau && p1 - e.claim_hi >= kMinPlateau) {
         const double before = level_of(p0, e.claim_lo), after = level_of(e.claim_hi, p1);
         // plateaus indeed: each window's halves within a tenth of the step of each other, beyond two
@@ -358,7 +362,8 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* profile, int K
       for (size_t j = 0; j < located.size() && !merged; ++j) {
         auto& [other, ox] = located[j];
         if ((clipped || was_clipped[j]) && std::abs(ox - x) < d.separation) {
-          if (std::abs(located_edge.z) > std::abs(other.z)) other = located_edge, ox = x, was_clipped[j] = clipped, whole_x[j] = xw;
+          if (std::abs(located_edge.z) > std::abs(other.z))
+            other = located_edge, ox = x, was_clipped[j] = clipped, whole_x[j] = xw, cut[j] = cut_short;
           merged = true;
         }
       }
@@ -366,11 +371,12 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* profile, int K
       located.emplace_back(located_edge, x);
       was_clipped.push_back(clipped);
       whole_x.push_back(xw);
+      cut.push_back(cut_short);
     }
-    return std::make_pair(located, whole_x);
+    return std::make_tuple(located, whole_x, cut);
   };
-  const auto [rises, rise_whole_x] = pick(true);
-  const auto [falls, fall_whole_x] = pick(false);
+  const auto [rises, rise_whole_x, rise_cut] = pick(true);
+  const auto [falls, fall_whole_x, fall_cut] = pick(false);
   const auto lone = [](double x, double whole) { return std::isnan(whole) ? x : whole; };
   // Counts saturated (within half a count of N) at nine in ten or more of the positions strictly between
   // fractional positions a < b, at least one: the level there is clipped at ln(2 N), so the edges either
@@ -407,6 +413,15 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* profile, int K
     }
     fall_used[size_t(partner)] = true;
     const auto& [f, xf] = falls[size_t(partner)];
+    // One edge cut short by the sweep's end: located on a step whose dark level the sweep does not reach, it
+    // is off by up to 6 mm; the other times the return alone, as a lone edge (a pair of two cut edges keeps both).
+    if (!clipped && rise_cut[ri] != fall_cut[size_t(partner)]) {
+      const bool by_rise = fall_cut[size_t(partner)];
+      const double x = by_rise ? lone(xr, rise_whole_x[ri]) : lone(xf, fall_whole_x[size_t(partner)]);
+      out.push_back({by_rise ? timing.range_of_rise(x) : timing.range_of_fall(x), by_rise ? x : xr, by_rise ? r.step : -f.step,
+                     std::hypot(r.z, f.z)});
+      continue;
+    }
     // weighted by z^2: the timing variance of an edge falls as its z grows (clipped: equally, so that the
     // two shifts cancel)
     const double wr = clipped ? 1.0 : r.z * r.z, wf = clipped ? 1.0 : f.z * f.z;
