@@ -111,8 +111,8 @@ class GateSweep final : public Acquisition {
     gj["nominal_length_ns"] = gate_.nominal_length_s / kNs;
     gj["effective_length_ns"] = gate_.open_time_s / kNs;
     gj["plateau"] = gate_.plateau;
-    gj["rise_ps"] = g.rise_s / kPs;
-    gj["fall_ps"] = g.fall_s / kPs;
+    gj["rise_ps"] = gate_.rise_s / kPs;  // (a table's own: the ignored sensor.gate.rise_ps had been given)
+    gj["fall_ps"] = gate_.fall_s / kPs;
     gj["delay_ns"] = g.delay_s / kNs;
     gj["irf_fwhm_ps"] = gate_.irf_fwhm_s / kPs;
     gj["knots_per_edge"] = gate_.knots_per_edge;

@@ -66,6 +66,7 @@ double interp(const std::vector<double>& x, const std::vector<double>& y, double
 struct TableGate {
   BaseEdge rise, fall;
   double length_s = 0.0;
+  double rise_s = 0.0, fall_s = 0.0;  // 10-90 % of the peak, first crossings; 90-10 %, last ones
 };
 
 // A measured gate profile: normalised to its maximum, extended to 0 over one sample interval at each end when
@@ -100,10 +101,23 @@ TableGate table_gate(const std::string& path) {
   while (y[last] < 0.5) --last;
   const double t_r = x[first - 1] + (0.5 - y[first - 1]) / (y[first] - y[first - 1]) * (x[first] - x[first - 1]);
   const double t_f = x[last] + (y[last] - 0.5) / (y[last] - y[last + 1]) * (x[last + 1] - x[last]);
+  // where y first reaches `level` going up (rising), or last leaves it going down
+  const auto crossing_at = [&](double level, bool rising) {
+    if (rising) {
+      size_t i = 0;
+      while (y[i] < level) ++i;
+      return x[i - 1] + (level - y[i - 1]) / (y[i] - y[i - 1]) * (x[i] - x[i - 1]);
+    }
+    size_t i = y.size() - 1;
+    while (y[i] < level) --i;
+    return x[i] + (y[i] - level) / (y[i] - y[i + 1]) * (x[i + 1] - x[i]);
+  };
   const double t_mid = 0.5 * (t_r + t_f);
   const double f_mid = interp(x, y, t_mid);
   TableGate g;
   g.length_s = t_f - t_r;
+  g.rise_s = crossing_at(0.9, true) - crossing_at(0.1, true);
+  g.fall_s = crossing_at(0.1, false) - crossing_at(0.9, false);
   Edge& r = g.rise.pwl;
   Edge& d = g.fall.pwl;
   for (size_t i = 0; i < x.size() && x[i] < t_mid; ++i) {
@@ -333,10 +347,12 @@ GateShape build_gate_shape(const GateConfig& gate, const LaserConfig& laser) {
     rise = tg.rise;
     fall = tg.fall;
     g.nominal_length_s = tg.length_s;
+    g.rise_s = tg.rise_s, g.fall_s = tg.fall_s;
   } else {
     rise = parametric_edge(gate.edge_shape, 0.0, gate.rise_s);
     fall = parametric_edge(gate.edge_shape, gate.length_s, gate.fall_s);
     g.nominal_length_s = gate.length_s;
+    g.rise_s = gate.rise_s, g.fall_s = gate.fall_s;
   }
   g.plateau = rise.v_end();
   if (!(gate.grid_s > 0.0)) throw Error("sensor.gate.grid_ps: the fine grid's step must be > 0");
@@ -361,12 +377,14 @@ GateShape build_gate_shape(const GateConfig& gate, const LaserConfig& laser) {
     g.fall_fine = convolve_edge(fall, irf);
     g.rise = fit_knots(g.rise_fine, g.plateau, knots_per_edge, e1);
     g.fall = fit_knots(g.fall_fine, g.plateau, knots_per_edge, e2);
-    g.max_knot_error = std::max(e1, e2) / g.plateau;
+    // (of the open gate, the peak 1 the table is normalised to: its middle's level, which divided them, is
+    // 0 in a gate of two humps, and the errors were infinite)
+    g.max_knot_error = std::max(e1, e2);
     double curvature = 0.0;
     for (const Sampled* f : {&g.rise_fine, &g.fall_fine})
       for (size_t i = 1; i + 1 < f->y.size(); ++i)
         curvature = std::max(curvature, std::fabs(f->y[i - 1] - 2.0 * f->y[i] + f->y[i + 1]));
-    g.max_grid_error = curvature / 8.0 / g.plateau;
+    g.max_grid_error = curvature / 8.0;
     g.knots_per_edge = static_cast<int>(std::max(g.rise.u.size(), g.fall.u.size()));
   }
   // integral over all t of rise(t) - fall(t), both constant v_end after their last knot

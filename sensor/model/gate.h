@@ -42,10 +42,12 @@ struct GateShape {
   double open_time_s = 0.0;       // integral of f over time for dL = 0 (the effective gate length)
   int knots_per_edge = 0;         // knots actually used, per edge
   bool exact = false;             // the knots are the exact response (piecewise-linear gate, no IRF)
-  double max_knot_error = 0.0;    // max |knots - fine grid| over both edges, in units of the plateau
+  double max_knot_error = 0.0;    // max |knots - fine grid| over both edges, of the open gate (its peak, 1)
+  double rise_s = 0.0, fall_s = 0.0;  // 10-90 % and 90-10 % times: the parametric gate's, or the table's edges'
+                                      // (their first and last crossings of 10 and 90 % of its peak)
   double grid_s = 0.0;            // the fine grid's step (gate.grid_s, or coarser for a long span)
   // The fine grid's own error against the exact effective gate, estimated as the linear interpolation's
-  // error between its points, max |y[i-1] - 2 y[i] + y[i+1]| / 8 over both edges, in units of the plateau
+  // error between its points, max |y[i-1] - 2 y[i] + y[i+1]| / 8 over both edges, of the open gate (1)
   // (0 when exact). Measured within 1 % of the closed form's error from 0.25 to 40 ps (gate_test).
   double max_grid_error = 0.0;
   double irf_fwhm_s = 0.0;        // FWHM of the instrument response (0: none)

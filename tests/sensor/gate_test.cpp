@@ -454,6 +454,34 @@ TEST(Gate, MeasuredTableProfile) {
   EXPECT_NEAR(s.value(4500e-12, 100e-12), 0.5, 1e-12);
   EXPECT_NEAR(s.value(200e-12, 100e-12), 0.5, 1e-12);
   EXPECT_NEAR(s.open_time_s, 4.2e-9, 1e-18);
+  // its edges' 10-90 % times, for metadata.json's rise_ps and fall_ps (and the edges detector's separation):
+  // the table's, not the ignored sensor.gate.rise_ps and fall_ps (400 ps)
+  EXPECT_NEAR(s.rise_s, 0.8 * 400e-12, 1e-18);
+  EXPECT_NEAR(s.fall_s, 0.8 * 400e-12, 1e-18);
+}
+
+// A gate of two humps, 0 at the middle of its 50 % crossings where it is split: its fit's errors are of the
+// open gate (its peak, 1), finite. They were divided by the level at the split, 0: infinite errors, null in
+// metadata.json and "within about inf %" in the warning (a helper's find). The edges' times are the first
+// rise's and the last fall's.
+TEST(Gate, ATableOfTwoHumpsHasFiniteErrors) {
+  GateConfig g;
+  g.profile_csv = write_temp("two_humps.csv", "0,0\n100,1\n200,0\n300,1\n400,0\n");
+  LaserConfig l;
+  const GateShape s = build_gate_shape(g, l);
+  EXPECT_EQ(s.plateau, 0.0);
+  EXPECT_TRUE(std::isfinite(s.max_knot_error));
+  EXPECT_TRUE(std::isfinite(s.max_grid_error));
+  EXPECT_GT(s.max_knot_error, 0.0);
+  EXPECT_LT(s.max_knot_error, 0.05);
+  EXPECT_NEAR(s.rise_s, 80e-12, 1e-18);
+  EXPECT_NEAR(s.fall_s, 80e-12, 1e-18);
+  // the response itself: its two peaks, 200 ps apart
+  double first = 0.0, second = 0.0;
+  for (double t = 0.0; t < 200e-12; t += 1e-12) first = std::max(first, s.value(t, 0.0));
+  for (double t = 200e-12; t < 400e-12; t += 1e-12) second = std::max(second, s.value(t, 0.0));
+  EXPECT_GT(first, 0.5);
+  EXPECT_GT(second, 0.5);
 }
 
 TEST(Gate, BadTablesNameTheFileAndKey) {
