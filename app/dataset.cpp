@@ -698,12 +698,12 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
   // the saved light without lit bins: the scene decides them).
   if (const int64_t free = free_disk(dir); free >= 0 && free < disk_at_least) {
     const bool compressed = disk_at_least != disk;
+    const auto [need, have] = bytes_texts(compressed ? disk_at_least : disk, free);
     throw Error("dataset run: the " + std::to_string(todo.size()) + " samples left to generate in " + dir.string() +
                 (shard.count > 1 ? " (shard " + shard.text() + ")" : std::string()) + " need " +
-                (compressed ? "at least " + bytes_text(disk_at_least) + " (" + least_text(totals.least) + "; at most " +
-                                  bytes_text(disk) + ")"
-                            : "about " + bytes_text(disk)) +
-                ", and " + bytes_text(free) + " is free there (about " +
+                (compressed ? "at least " + need + " (" + least_text(totals.least) + "; at most " + bytes_text(disk) + ")"
+                            : "about " + need) +
+                ", and " + have + " is free there (about " +
                 bytes_text(todo.empty() ? 0 : disk_at_least / int64_t(todo.size())) +
                 " per sample: `spadgen dataset plan` lists them); free some space, write fewer outputs (outputs.*), or "
                 "use another folder (-o)");

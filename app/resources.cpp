@@ -6,6 +6,7 @@
 #include <charconv>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <set>
 #include <sstream>
@@ -173,6 +174,21 @@ std::string bytes_text(int64_t bytes) {
 // The cores the process may run on (its CPU affinity, as TBB's default arena counts them; taskset, a Slurm
 // task's cpuset): every core of the machine had been counted.
 int allowed_cores() { return std::max(1, tbb::info::default_concurrency()); }
+
+std::pair<std::string, std::string> bytes_texts(int64_t a, int64_t b) {
+  std::pair<std::string, std::string> t{bytes_text(a), bytes_text(b)};
+  if (t.first != t.second || a == b) return t;
+  const double big = double(std::max(a, b));
+  const auto [scale, unit] = big >= 1e12 ? std::pair{1e12, "TB"} : big >= 1e9 ? std::pair{1e9, "GB"} : big >= 1e6 ? std::pair{1e6, "MB"}
+                                                                                                   : std::pair{1e3, "kB"};
+  char x[48], y[48];
+  for (int digits = 1; digits <= 3; ++digits) {
+    std::snprintf(x, sizeof x, "%.*f %s", digits, double(a) / scale, unit);
+    std::snprintf(y, sizeof y, "%.*f %s", digits, double(b) / scale, unit);
+    if (std::strcmp(x, y) != 0) return {x, y};
+  }
+  return {std::to_string(a) + " bytes", std::to_string(b) + " bytes"};
+}
 
 int64_t worker_threads(int threads) { return threads > 0 ? threads : allowed_cores(); }
 
@@ -351,10 +367,11 @@ void check_resources(const ResourcePlan& plan, const RunConfig& c, const fs::pat
   // finds the disk full fails cleanly, the folder as it was).
   if (plan.disk_available >= 0 && plan.disk_at_least() > plan.disk_available) {
     const bool any_compressed = plan.disk_at_least() != plan.disk_needed();
-    disk = "writes " + (any_compressed ? "at least " + bytes_text(plan.disk_at_least()) + " (" + least_text(least_parts(plan.disk)) +
+    const auto [need, free] = bytes_texts(any_compressed ? plan.disk_at_least() : plan.disk_needed(), plan.disk_available);
+    disk = "writes " + (any_compressed ? "at least " + need + " (" + least_text(least_parts(plan.disk)) +
                                              "; at most " + bytes_text(plan.disk_needed()) + ")"
-                                       : "about " + bytes_text(plan.disk_needed())) +
-           " into " + out.string() + ", and " + bytes_text(plan.disk_available) + " is free there: " + join_parts(plan.disk) +
+                                       : "about " + need) +
+           " into " + out.string() + ", and " + free + " is free there: " + join_parts(plan.disk) +
            "; " + (remedy.empty() ? "switch outputs off (outputs.*), crop (camera.crop), or choose another folder (-o)" : remedy);
   }
   // both said at once (the disk's refusal was hidden behind the memory's)

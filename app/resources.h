@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/config.h"
@@ -119,5 +120,8 @@ std::filesystem::path existing_ancestor(std::filesystem::path p);
 
 // "1.2 GB", "870 MB", "12 kB" (powers of 1000, as `spadgen info` gives sizes).
 std::string bytes_text(int64_t bytes);
+// Two sizes compared in a message (needed, free), as bytes_text gives them, with more digits where they would
+// read the same ("need at least 2 MB ... and 2 MB is free" for 2.0 and 1.7 MB): {"2.05 MB", "1.74 MB"}.
+std::pair<std::string, std::string> bytes_texts(int64_t a, int64_t b);
 
 }  // namespace spadgen::app

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <utility>
 
 #include "app/resources.h"
 
@@ -74,6 +75,17 @@ TEST_F(CgroupTree, AV1MemoryGroupIsRead) {
   // without the limit: v1's unlimited less the usage, a huge number, not a limit that refuses anything
   EXPECT_GT(cgroup_memory_left("4:memory:/jobs\n", root_), int64_t{1} << 60);
   EXPECT_EQ(cgroup_memory_left("4:memory:/../etc\n7:garbage\n", root_), -1);
+}
+
+// The sizes a refusal compares read apart: "need at least 2 MB ... and 2 MB is free there" did not say why.
+TEST(BytesTexts, TwoSizesThatWouldReadTheSameGetTheDigitsToTellThemApart) {
+  using spadgen::app::bytes_texts;
+  EXPECT_EQ(bytes_texts(2'000'000, 1'700'000), std::make_pair(std::string("2.0 MB"), std::string("1.7 MB")));
+  EXPECT_EQ(bytes_texts(2'000, 1'700), std::make_pair(std::string("2.0 kB"), std::string("1.7 kB")));
+  EXPECT_EQ(bytes_texts(1'234'000'000, 1'230'000'000), std::make_pair(std::string("1.234 GB"), std::string("1.230 GB")));
+  EXPECT_EQ(bytes_texts(2'000'001, 2'000'000), std::make_pair(std::string("2000001 bytes"), std::string("2000000 bytes")));
+  EXPECT_EQ(bytes_texts(1'500'000'000, 1'400'000'000), std::make_pair(std::string("1.5 GB"), std::string("1.4 GB")));  // as bytes_text
+  EXPECT_EQ(bytes_texts(5'000'000, 5'000'000), std::make_pair(std::string("5 MB"), std::string("5 MB")));
 }
 
 }  // namespace
