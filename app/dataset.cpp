@@ -635,15 +635,16 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
 
 namespace {
 // The index as a run leaves early (a signal, an error), best effort: the way it leaves is reported first.
-// Where the completed samples are listed: "index.jsonl lists them" when written here.
-std::string leave_index(const DatasetFolder& folder, datasets::RunPresence& presence, const SampleHashes& hashes) {
+// Where the completed samples (`completed` of them) are listed: "index.jsonl lists them" ("it") when written here.
+std::string leave_index(const DatasetFolder& folder, datasets::RunPresence& presence, const SampleHashes& hashes, int64_t completed) {
+  const std::string them = completed == 1 ? "it" : "them";
   try {
     return folder.write_index([&](const DatasetFolder::RecordSink& sink) { inspect_each(folder, false, &hashes, sink); }, &presence)
-               ? "index.jsonl lists them"
-               : "the last run on the folder to end lists them in index.jsonl";
+               ? "index.jsonl lists " + them
+               : "the last run on the folder to end lists " + them + " in index.jsonl";
   } catch (const std::exception& e) {
     std::fprintf(stderr, "spadgen: dataset: the index was not updated: %s\n", e.what());
-    return "the next run lists them in index.jsonl";
+    return "the next run lists " + them + " in index.jsonl";
   }
 }
 
@@ -723,7 +724,7 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
   // SIGINT or SIGTERM (Slurm's time limit, scancel) stop the run; the samples published before stay (the
   // next run skips them), and the index lists them: best effort, the signal's message comes first.
   const auto stopped = [&](const std::string& where) {
-    const std::string listed = leave_index(folder, presence, hashes);
+    const std::string listed = leave_index(folder, presence, hashes, int64_t(generated));
     const std::string kept = generated == 0 ? "it completed no sample" :
                              generated == 1 ? "the sample it completed is kept (" + listed + ")" :
                              "the " + std::to_string(generated) + " samples it completed are kept (" + listed + ")";
@@ -918,7 +919,7 @@ void dataset_run(const DatasetOptions& options) {
     // Any other way out (a signal while samples are generated, the disk check's refusal, an error): the
     // index is written as at the end when no other run is on the folder (another may have left it to this
     // one, which would leave it to no one).
-    if (presence->held()) (void)leave_index(folder, *presence, hashes);
+    if (presence->held()) (void)leave_index(folder, *presence, hashes, 0);
     throw;
   }
 }

@@ -641,7 +641,7 @@ Shard parse_shard(const std::string& text, const std::string& where) {
   Shard s;
   if (slash == std::string::npos || !number(text.substr(0, slash), s.index) || !number(text.substr(slash + 1), s.count) ||
       s.count < 1 || s.index >= s.count)
-    throw Error(where + ": found \"" + scenes::printable(text) + "\", expected I/N with 0 <= I < N (shard I of N, e.g. 0/4)");
+    throw Error(where + ": found \"" + scenes::printable(text) + "\", expected I/N with 0 <= I < N <= 999999999 (shard I of N, e.g. 0/4)");
   return s;
 }
 
@@ -661,7 +661,9 @@ std::optional<Shard> shard_from_environment() {
     const int64_t min = env("SLURM_ARRAY_TASK_MIN") ? integer("SLURM_ARRAY_TASK_MIN", *env("SLURM_ARRAY_TASK_MIN")) : 0;
     const int64_t step = env("SLURM_ARRAY_TASK_STEP") ? integer("SLURM_ARRAY_TASK_STEP", *env("SLURM_ARRAY_TASK_STEP")) : 1;
     const int64_t i = integer("SLURM_ARRAY_TASK_ID", *id), n = integer("SLURM_ARRAY_TASK_COUNT", *count);
-    if (step < 1 || i < min || (i - min) % step != 0 || (i - min) / step >= n || n < 1)
+    if (n < 1)
+      throw Error("Slurm job array: SLURM_ARRAY_TASK_COUNT=" + std::to_string(n) + "; expected a job array of at least one task (sbatch --array=0-N)");
+    if (step < 1 || i < min || (i - min) % step != 0 || (i - min) / step >= n)
       throw Error("Slurm job array: SLURM_ARRAY_TASK_ID=" + std::to_string(i) + ", MIN=" + std::to_string(min) + ", STEP=" +
                   std::to_string(step) + ", COUNT=" + std::to_string(n) +
                   " do not make a task index in [0, COUNT): use a contiguous array such as --array=0-" + std::to_string(n - 1));

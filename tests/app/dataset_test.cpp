@@ -954,6 +954,20 @@ TEST_F(Dataset, ASamplesWarningsAreNamedListedAndKept) {
   EXPECT_THAT(card, HasSubstr("; its realisation 1 of the temporal noise is `samples/<i>_r01/` (the same light, noise seed S + 1)."));
 }
 
+// The card's command pastes into a shell: a dataset file whose name holds a space, or a quote, is quoted
+// ("spadgen dataset run my dataset.json -o DIR" ran two files); one path per pixel is one path.
+TEST_F(Dataset, TheCardsCommandPastesIntoAShell) {
+  std::string text = small_dataset(1);
+  const std::string two = "\"render.samples_per_pixel\": 2";
+  text.replace(text.find(two), two.size(), "\"render.samples_per_pixel\": 1");
+  write(dir_ / "my dataset's.json", text);
+  const Result r = shell(kBin + " dataset run '" + (dir_ / "my dataset'\\''s.json").string() + "' -o " + (dir_ / "out").string() + " -q");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::string card = slurp(dir_ / "out/dataset.md");
+  EXPECT_THAT(card, HasSubstr("spadgen dataset run 'my dataset'\\''s.json' -o DIR"));
+  EXPECT_THAT(card, HasSubstr(" | 1 path per pixel |"));
+}
+
 // -o naming a file: said so, not "Not a directory"; the file kept.
 TEST_F(Dataset, AnOutputThatIsAFileIsNamed) {
   write(dir_ / "d.json", small_dataset(2));

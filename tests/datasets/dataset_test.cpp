@@ -393,6 +393,13 @@ TEST(Shards, FromTheCommandLine) {
   EXPECT_FALSE(parse_shard("1/3").owns(6));
   for (const char* bad : {"4/4", "1", "-1/2", "a/b", "1/0", "", "1/2/3"})
     EXPECT_THROW(parse_shard(bad), Error) << bad;
+  // the bound on N said (0/4294967297 was refused as "expected I/N with 0 <= I < N")
+  try {
+    (void)parse_shard("0/4294967297");
+    ADD_FAILURE() << "a 10-digit N was taken";
+  } catch (const Error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("expected I/N with 0 <= I < N <= 999999999"));
+  }
 }
 
 TEST(Shards, FromSlurmJobArraysAndKubernetesIndexedJobs) {
@@ -409,6 +416,15 @@ TEST(Shards, FromSlurmJobArraysAndKubernetesIndexedJobs) {
   EXPECT_THROW(shard_from_environment(), Error);  // beyond MIN + COUNT - 1
   ::unsetenv("SLURM_ARRAY_TASK_COUNT");
   EXPECT_THROW(shard_from_environment(), Error);
+  // COUNT 0: said so (it suggested --array=0--1)
+  ::setenv("SLURM_ARRAY_TASK_COUNT", "0", 1);
+  try {
+    (void)shard_from_environment();
+    ADD_FAILURE() << "COUNT 0 was taken";
+  } catch (const Error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("SLURM_ARRAY_TASK_COUNT=0; expected a job array of at least one task"));
+    EXPECT_THAT(e.what(), Not(HasSubstr("--1")));
+  }
   clear();
   // --array=1-7:2, as Slurm 22.05 describes it: shards 0-3 of 4
   ::setenv("SLURM_ARRAY_TASK_MIN", "1", 1), ::setenv("SLURM_ARRAY_TASK_MAX", "7", 1), ::setenv("SLURM_ARRAY_TASK_STEP", "2", 1);
