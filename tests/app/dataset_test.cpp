@@ -1263,6 +1263,24 @@ TEST_F(Dataset, AStaleSampleNamesTheKeyItsSceneResolvesOtherwiseAt) {
                                    "sample, 256 now): a parameter, or a default of this spadgen"));
 }
 
+// A sample's folder that holds another sample's run (a mistaken copy, a link) is said to (it was "the scene
+// as it resolves now differs at laser.average_power_mW ...: a parameter, or a default of this spadgen"),
+// and the next run generates it again.
+TEST_F(Dataset, ASampleFolderHoldingAnotherSamplesRunIsNamed) {
+  write(dir_ / "d.json", small_dataset(2));
+  const std::string run = "dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q";
+  ASSERT_EQ(sh(run).code, 0);
+  fs::remove_all(dir_ / "out/samples/000000");
+  fs::copy(dir_ / "out/samples/000001", dir_ / "out/samples/000000", fs::copy_options::recursive);
+  const Result st = sh("dataset status " + (dir_ / "out").string());
+  EXPECT_EQ(st.code, 4);
+  EXPECT_THAT(st.output, HasSubstr("stale 0: samples/000000 holds the run of sample 1, as its metadata.json's dataset section says: "
+                                   "a copy or a link of another sample's folder"));
+  ASSERT_EQ(sh(run).code, 0);
+  EXPECT_EQ(json::parse(slurp(dir_ / "out/samples/000000/metadata.json"))["dataset"]["index"], 0);
+  EXPECT_EQ(sh("dataset status " + (dir_ / "out").string()).code, 0);
+}
+
 // What a dataset run killed while it wrote dataset.json or the index left (".dataset.json.tmp-PID-N", which
 // stayed after a successful resume) goes with the next run on the folder.
 TEST_F(Dataset, ADeadRunsTemporaryFilesGoWithTheNextRun) {
