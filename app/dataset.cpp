@@ -535,6 +535,7 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
   double done_seconds = 0.0, done_estimated = 0.0;
   int64_t done_timed = 0;
   std::vector<std::string> errors;
+  std::vector<int64_t> invalid;  // the samples of the errors
   datasets::WarningTally warnings;  // the scene file's, as each sample resolves
   // Each sample's scene is resolved (about 0.2 ms of one core): a plan of millions of samples takes minutes,
   // so it shows its progress.
@@ -549,7 +550,13 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
     warnings.add(i, checked.warnings);
     std::string status;
     if (!checked.resolved) {
-      errors.push_back("sample " + std::to_string(i) + ": " + checked.error);
+      // with the parameters the dataset gave it (the key the error names may be set for every sample, and
+      // invalid only with the drawn ones: a crop outside a width drawn smaller)
+      std::string given;
+      for (const auto& [key, value] : s.parameters.items())  // (the scene file: the error names it)
+        if (key != "scene") given += (given.empty() ? " (" : ", ") + key + " " + (value.is_string() ? value.get<std::string>() : value.dump());
+      errors.push_back("sample " + std::to_string(i) + (given.empty() ? std::string() : given + ")") + ": " + checked.error);
+      invalid.push_back(i);
       status = "invalid";
     }
     if (folder) {
@@ -630,7 +637,11 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
   }
   for (const std::string& w : warnings.lines(" (spadgen info SCENE --set ... shows a sample's)")) o << "warning: " << w << "\n";
   for (const std::string& e : errors) o << "error: " << e << "\n";
-  return {o.str(), int64_t(errors.size())};
+  return {o.str(), int64_t(errors.size()),
+          errors.empty() ? std::string()
+                         : spec.file + ": " + std::to_string(errors.size()) + (errors.size() == 1 ? " sample (" : " samples (") +
+                               datasets::ranges_text(invalid) + (errors.size() == 1 ? ") makes" : ") make") +
+                               " an invalid run (the errors end the plan); `dataset run` records them in failed/"};
 }
 
 namespace {

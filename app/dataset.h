@@ -25,6 +25,7 @@ struct DatasetOptions {
 struct DatasetPlan {
   std::string text;
   int64_t invalid = 0;
+  std::string invalid_text;  // "FILE: 4 samples (1, 3, 5-6) make an invalid run ..." when some do
 };
 DatasetPlan dataset_plan(const DatasetOptions& options);
 

@@ -253,8 +253,7 @@ int main(int argc, char** argv) {
         const spadgen::app::DatasetPlan plan = spadgen::app::dataset_plan(dataset);
         std::cout << plan.text;
         if (plan.invalid > 0) {
-          std::cerr << "spadgen: error: " << plan.invalid << (plan.invalid == 1 ? " sample makes" : " samples make")
-                    << " an invalid run (the errors end the plan); `dataset run` records them in failed/\n";
+          std::cerr << "spadgen: error: " << plan.invalid_text << "\n";
           done_code = spadgen::app::kExitBadInput;
         }
       }

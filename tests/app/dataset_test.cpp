@@ -993,12 +993,14 @@ TEST_F(Dataset, APlanListsASampleItCannotEstimateAsInvalid) {
   const Result r = sh("dataset plan " + (dir_ / "d.json").string());
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_THAT(r.output, HasSubstr("# total: 4 samples (the 2 valid ones estimated), disk at most "));
-  EXPECT_THAT(r.output, HasSubstr("error: sample 1: " + kScenes + "flat_target.json: /outputs/transient: intensity mode needs no time bins"));
-  EXPECT_THAT(r.output, HasSubstr("error: sample 3: "));
+  // each with its parameters, and the closing line with the dataset file and the samples (they named neither)
+  EXPECT_THAT(r.output, HasSubstr("error: sample 1 (acquisition.mode intensity): " + kScenes +
+                                  "flat_target.json: /outputs/transient: intensity mode needs no time bins"));
+  EXPECT_THAT(r.output, HasSubstr("error: sample 3 ("));
   EXPECT_THAT(r.output, Not(HasSubstr("error: sample 0")));
   EXPECT_THAT(r.output, HasSubstr("\tintensity\t"));
   EXPECT_THAT(r.output, HasSubstr("\t-\t-\t-\n"));  // no estimate for samples 1 and 3
-  EXPECT_THAT(r.output, HasSubstr("spadgen: error: 2 samples make an invalid run"));
+  EXPECT_THAT(r.output, HasSubstr("spadgen: error: " + (dir_ / "d.json").string() + ": 2 samples (1, 3) make an invalid run"));
   // the per-sample disk is sample 0's (and 2's), not halved by the invalid two
   const auto row0 = r.output.find("\n0\t"), per = r.output.find("# per sample: disk at most ");
   ASSERT_NE(row0, std::string::npos);
