@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cctype>
 #include <cmath>
 #include <cstdio>
@@ -13,6 +14,7 @@
 #include <fstream>
 #include <set>
 #include <sstream>
+#include <thread>
 
 #include "core/error.h"
 #include "scenes/input.h"
@@ -84,15 +86,35 @@ std::string bytes_text(double b) {
 // as a whole-file fcntl lock, which a presence lock on the same file would block for ever.
 constexpr const char* kPresenceFile = ".dataset.runs";
 
-// Holds DIR/.dataset.lock for the scope.
+// Holds DIR/.dataset.lock for the scope. Another process holds it while it writes the index (about 0.2 ms a
+// sample: minutes for millions): a wait of over 2 s is said on stderr, again each minute (a run starting
+// meanwhile sat silent), and with `interruptible` a signal ends it (spadgen::Interrupted).
 class FolderLock {
  public:
-  explicit FolderLock(const fs::path& dir) {
+  explicit FolderLock(const fs::path& dir, bool interruptible = true) {
     const std::string p = (dir / ".dataset.lock").string();
     fd_ = ::open(p.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0666);
     if (fd_ < 0) throw Error("cannot open the dataset folder's lock " + p + ": " + std::strerror(errno));
-    while (::flock(fd_, LOCK_EX) != 0)
-      if (errno != EINTR) throw Error("cannot lock " + p + ": " + std::strerror(errno));
+    const auto start = std::chrono::steady_clock::now();
+    double said = 0.0;  // the wait last said, s
+    while (::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
+      if (errno != EWOULDBLOCK && errno != EINTR) {
+        const int err = errno;
+        ::close(fd_);
+        throw Error("cannot lock " + p + ": " + std::strerror(err));
+      }
+      if (interruptible && interrupt_flag().load()) {
+        ::close(fd_);
+        throw Interrupted("interrupted by a signal while waiting for " + p + "; nothing was written");
+      }
+      const double waited = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      if (waited >= 2.0 && (said == 0.0 || waited - said >= 60.0)) {
+        std::fprintf(stderr, "spadgen: dataset: waiting %.0f s for %s, which another spadgen process holds (a run on the "
+                             "folder writing its index, about 0.2 ms a sample)\n", waited, p.c_str());
+        said = waited;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
   }
   ~FolderLock() { ::close(fd_); }
   FolderLock(const FolderLock&) = delete;
@@ -668,7 +690,7 @@ void DatasetFolder::clear_failure(const Sample& s) const {
 
 std::optional<CardTally> DatasetFolder::write_index(const std::function<void(const RecordSink&)>& inspect_each,
                                                     RunPresence* leaving) const {
-  const FolderLock lock(dir_);
+  const FolderLock lock(dir_, leaving == nullptr);  // (a run leaving after a signal still lists its samples)
   if (leaving) {
     // Under the folder's lock, so that of two runs ending at once the second sees the first gone.
     leaving->release();

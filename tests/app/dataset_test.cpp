@@ -1265,6 +1265,21 @@ TEST_F(Dataset, AStaleSampleNamesTheKeyItsSceneResolvesOtherwiseAt) {
                                    "sample, 256 now): a parameter, or a default of this spadgen"));
 }
 
+// A run starting while another holds the folder's lock (it writes the index: minutes for millions of samples)
+// says that it waits, after 2 s (it sat silent), and a signal ends the wait.
+TEST_F(Dataset, ARunWaitingForTheFoldersLockSaysSoAndStopsOnASignal) {
+  write(dir_ / "d.json", small_dataset(1));
+  const std::string run = kBin + " dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q";
+  ASSERT_EQ(shell(run).code, 0);
+  const std::string lock = (dir_ / "out/.dataset.lock").string();
+  const Result waited = shell("flock " + lock + " sleep 3.5 & sleep 0.3; " + run + " 2>&1; echo rc=$?; wait");
+  EXPECT_THAT(waited.output, HasSubstr("spadgen: dataset: waiting 2 s for " + lock + ", which another spadgen process holds"));
+  EXPECT_THAT(waited.output, HasSubstr("rc=0"));
+  const Result stopped = shell("flock " + lock + " sleep 3 & sleep 0.3; timeout --preserve-status -s INT 1 " + run + " 2>&1; echo rc=$?; wait");
+  EXPECT_THAT(stopped.output, HasSubstr("interrupted by a signal while waiting for " + lock));
+  EXPECT_THAT(stopped.output, HasSubstr("rc=2"));
+}
+
 // A sample's folder that holds another sample's run (a mistaken copy, a link) is said to (it was "the scene
 // as it resolves now differs at laser.average_power_mW ...: a parameter, or a default of this spadgen"),
 // and the next run generates it again.
