@@ -28,6 +28,9 @@ assert args[:2] == ["dataset", "run"] and "-o" in args, args
 mounts = {m["mountPath"] for m in container["volumeMounts"]}
 assert args[2] in mounts, f"the dataset file {args[2]} is not mounted ({mounts})"
 assert os.path.dirname(args[args.index("-o") + 1]) in mounts, "the output folder is not on a mounted volume"
+cpu = str(container["resources"]["requests"]["cpu"])
+assert "--threads" in args and args[args.index("--threads") + 1] == cpu, \
+    f"--threads is not the CPU request {cpu} ({args}): a pod without a cpuset starts a thread per core of its node"
 
 # The image copies the source tree: the host's build folders stay out of the build context (.dockerignore),
 # as their CMakeCache.txt names another source folder, which cmake in the image refuses. Docker matches
