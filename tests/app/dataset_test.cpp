@@ -1001,6 +1001,13 @@ TEST_F(Dataset, APlanListsASampleItCannotEstimateAsInvalid) {
   EXPECT_THAT(r.output, HasSubstr("\tintensity\t"));
   EXPECT_THAT(r.output, HasSubstr("\t-\t-\t-\n"));  // no estimate for samples 1 and 3
   EXPECT_THAT(r.output, HasSubstr("spadgen: error: " + (dir_ / "d.json").string() + ": 2 samples (1, 3) make an invalid run"));
+  // a key the dataset sets, invalid with a drawn one: named at its place in the dataset file (it was "--set camera.crop")
+  write(dir_ / "crop.json", "{\"seed\": 1, \"scenes\": [\"" + kScenes + "flat_target.json\"], \"samples\": 2, \"set\": "
+        "{\"camera.crop\": [700, 0, 8, 8]}, \"grid\": {\"camera.width_px\": [1024, 600]}}");
+  const Result crop = sh("dataset plan " + (dir_ / "crop.json").string());
+  EXPECT_EQ(crop.code, 1) << crop.output;
+  EXPECT_THAT(crop.output, HasSubstr("error: sample 1 (camera.width_px 600): " + (dir_ / "crop.json").string() +
+                                     ": /set/camera.crop: found [700, 0, 8, 8], expected a rectangle inside the 600 x "));
   // the per-sample disk is sample 0's (and 2's), not halved by the invalid two
   const auto row0 = r.output.find("\n0\t"), per = r.output.find("# per sample: disk at most ");
   ASSERT_NE(row0, std::string::npos);
