@@ -31,6 +31,10 @@ struct Provenance {
   uint64_t seed = 0;
   PixelRect crop;  // the rendered pixels, in sensor coordinates
   uint64_t chip_seed = 0;  // the chip's fixed pattern (seeds.chip): sensor_maps.exr and labels.exr depend on it
+  // The sensor's tables as the sensor read them (metadata.json's sensor_tables_fnv1a64 and sensor_table_fnv1a64;
+  // SensorTables::hashed): taken when the metadata is written when `tables_hash` is empty.
+  std::string tables_hash;
+  std::vector<scenes::SensorTable> tables;
 };
 // scene_hash: scenes::content_hash of the scene's files, as they were read.
 Provenance provenance(const RunConfig& c, const PixelRect& img, const std::string& scene_hash);

@@ -111,8 +111,10 @@ RunResult run(const RunOptions& options) {
   warn(camera_warnings(cfg, scene));
   const render::Camera camera = naming_keys(resolved, options.scene_file, [&] { return render::Camera(cfg.camera, scene); });
   warn(laser_warnings(cfg, camera, &scene));
+  const SensorTables tables = SensorTables::hashed(cfg);
   sensor::SensorModel sensor(sensor_stage(cfg));
   apply_user_maps(sensor, cfg);
+  tables.check_unchanged(cfg);
   warn(sensor_warnings(sensor));
   const render::Renderer renderer = naming_keys(resolved, options.scene_file, [&] {
     return render::Renderer(scene, render_stage(cfg, sensor.row_fill_factor(), sensor.row_ambient_floor()));
@@ -191,7 +193,8 @@ RunResult run(const RunOptions& options) {
   const double render_seconds = progress.seconds();
   const auto tiles_done = std::chrono::steady_clock::now();
 
-  const Provenance prov = provenance(cfg, img, scene_hash);
+  Provenance prov = provenance(cfg, img, scene_hash);
+  prov.tables_hash = tables.hash, prov.tables = tables.tables;
   outputs.write(prov);
   std::vector<std::string> files = outputs.files();
   RunRecord record;

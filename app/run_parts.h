@@ -12,6 +12,7 @@
 #include "core/config.h"
 #include "core/tile.h"
 #include "core/time_axis.h"
+#include "scenes/scene_file.h"
 #include "sensor/sensor.h"
 
 namespace spadgen::app {
@@ -34,6 +35,17 @@ nlohmann::json file_bytes(const std::filesystem::path& dir, const std::vector<st
 // The user's gate maps (sensor.gate.maps_exr), when the scene file names them, into the sensor: run,
 // sense and info read them alike (throws spadgen::Error naming the file when they do not fit the sensor).
 void apply_user_maps(sensor::SensorModel& sensor, const RunConfig& c);
+
+// The sensor's tables (scenes::sensor_tables) hashed before the sensor reads them, and checked after: a run
+// or sense records them as it read them (metadata.json recorded them when it was written, so a table edited
+// while a run rendered was recorded as if read, and a later sense took the run's noise-free files for its own).
+struct SensorTables {
+  std::string hash;
+  std::vector<scenes::SensorTable> tables;
+  static SensorTables hashed(const RunConfig& c);
+  // Throws spadgen::Error naming the scene file when the tables differ now from these.
+  void check_unchanged(const RunConfig& c) const;
+};
 
 // Denormal floats flushed to zero and read as zero (FTZ, DAZ) on the calling thread. main() calls it
 // first, before TBB starts: TBB's tasks run with the floating-point settings of the thread that started

@@ -456,8 +456,10 @@ std::vector<RunResult> sense(const SenseOptions& options) {
 
   const ThreadLimit threads(options.threads);
 
+  const SensorTables tables_read = SensorTables::hashed(cfg);
   sensor::SensorModel sensor(sensor_stage(cfg));
   apply_user_maps(sensor, cfg);
+  tables_read.check_unchanged(cfg);
   for (std::string& w : sensor_warnings(sensor)) {
     print_warning(w);
     scene_warnings.push_back(std::move(w));
@@ -829,7 +831,8 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   const double tiles_seconds = progress.seconds();
   const auto tiles_done = std::chrono::steady_clock::now();
 
-  const Provenance prov{scene_file, field<std::string>(meta, "/scene_hash_fnv1a64"_json_pointer, src), cfg.seed, img, cfg.chip_seed()};
+  const Provenance prov{scene_file, field<std::string>(meta, "/scene_hash_fnv1a64"_json_pointer, src), cfg.seed, img, cfg.chip_seed(),
+                        tables_read.hash, tables_read.tables};
   std::vector<RunResult> results;
   json first_storage = json::object();
   json labels_summary;  // Outputs::report's, of the first realisation: what this call's labels say

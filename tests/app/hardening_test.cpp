@@ -410,8 +410,8 @@ TEST_F(Hardening, ASignalWhileALargeGltfLoadsStopsTheRunAtOnce) {
   EXPECT_FALSE(fs::exists(dir_ / "out"));
 }
 
-// metadata.json's scene_hash_fnv1a64 is of the files as the run read them: a glTF edited while the run renders
-// (after it was read) leaves the hash of the one rendered. It had been taken when the outputs were written, of
+// metadata.json's scene_hash_fnv1a64 and the sensor tables' hashes are of the files as the run read them: a
+// glTF and a gate table edited while the run renders (after they were read) leave the hashes of those rendered. It had been taken when the outputs were written, of
 // the files then: a dataset sample rendered from a glTF edited and restored meanwhile stayed done under the
 // restored one's hash (a helper's find).
 TEST_F(Hardening, TheSceneHashIsOfTheFilesAsTheRunReadThem) {
@@ -424,20 +424,28 @@ TEST_F(Hardening, TheSceneHashIsOfTheFilesAsTheRunReadThem) {
       {"buffers", {{{"byteLength", 36}, {"uri", "data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA"}}}}};
   std::ofstream(dir_ / "tri.gltf") << g.dump();
   std::ofstream(dir_ / "tri.json") << R"({"gltf": "tri.gltf", "camera": {"position_m": [0, 0, 2], "look_at_m": [0, 0, 0],
-    "width_px": 256, "height_px": 256, "vertical_fov_deg": 40}, "render": {"samples_per_pixel": 32}, "outputs": {"previews": false}})";
+    "width_px": 256, "height_px": 256, "vertical_fov_deg": 40}, "render": {"samples_per_pixel": 32}, "outputs": {"previews": false},
+    "sensor": {"gate": {"profile_csv": "gate.csv"}}})";
+  std::ofstream(dir_ / "gate.csv") << "0,0\n400,1\n4200,1\n4600,0\n";
+  // the scene's hash and its gate table's, as metadata.json records them (the table's, too, was taken when it
+  // was written: a later sense took an edited table for the run's)
   const auto hash_of = [&](const std::string& run) {
-    return nlohmann::json::parse(slurp(dir_ / run / "metadata.json")).at("scene_hash_fnv1a64").get<std::string>();
+    const auto meta = nlohmann::json::parse(slurp(dir_ / run / "metadata.json"));
+    return meta.at("scene_hash_fnv1a64").get<std::string>() + " " + meta.at("sensor_table_fnv1a64").at("sensor.gate.profile_csv").get<std::string>() +
+           " " + meta.at("sensor_tables_fnv1a64").get<std::string>();
   };
   const std::string run = bin() + " run " + (dir_ / "tri.json").string() + " --threads 1 -o " + dir_.string() + "/";
   ASSERT_EQ(shell(run + "before -q").code, 0);
   // the edit once the run has read the glTF: its progress line says how many tiles it renders
   const Result raced = shell(run + "raced 2> " + (dir_ / "err").string() + " & pid=$!; until grep -q ' tiles, ' " +
                              (dir_ / "err").string() + " || ! kill -0 $pid 2>/dev/null; do sleep 0.01; done; echo >> " +
-                             (dir_ / "tri.gltf").string() + "; wait $pid");
+                             (dir_ / "tri.gltf").string() + "; echo 4700,0 >> " + (dir_ / "gate.csv").string() + "; wait $pid");
   ASSERT_EQ(raced.code, 0) << raced.output << slurp(dir_ / "err");
   ASSERT_EQ(shell(run + "after -q").code, 0);
-  EXPECT_NE(hash_of("after"), hash_of("before"));  // the edit changes the hash
-  EXPECT_EQ(hash_of("raced"), hash_of("before"));
+  const std::string before = hash_of("before"), after = hash_of("after");
+  for (size_t part : {size_t(0), size_t(17), size_t(34)})  // the edits change each hash
+    EXPECT_NE(after.substr(part, 16), before.substr(part, 16)) << before << " / " << after;
+  EXPECT_EQ(hash_of("raced"), before);
 }
 
 // A closed pipe on stderr (`spadgen run ... 2>&1 | head -c 1`) does not end a run: its progress lines are
