@@ -424,7 +424,7 @@ TEST_F(Hardening, TheSceneHashIsOfTheFilesAsTheRunReadThem) {
       {"buffers", {{{"byteLength", 36}, {"uri", "data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA"}}}}};
   std::ofstream(dir_ / "tri.gltf") << g.dump();
   std::ofstream(dir_ / "tri.json") << R"({"gltf": "tri.gltf", "camera": {"position_m": [0, 0, 2], "look_at_m": [0, 0, 0],
-    "width_px": 256, "height_px": 256, "vertical_fov_deg": 40}, "render": {"samples_per_pixel": 32}, "outputs": {"previews": false},
+    "width_px": 128, "height_px": 128, "vertical_fov_deg": 40}, "render": {"samples_per_pixel": 32}, "outputs": {"previews": false},
     "sensor": {"gate": {"profile_csv": "gate.csv"}}})";
   std::ofstream(dir_ / "gate.csv") << "0,0\n400,1\n4200,1\n4600,0\n";
   // the scene's hash and its gate table's, as metadata.json records them (the table's, too, was taken when it
