@@ -222,8 +222,9 @@ json camera_json(const render::Camera& cam, const PixelRect& img, const glm::dve
 }
 
 
-Provenance provenance(const RunConfig& c, const PixelRect& img, const std::string& scene_hash) {
-  return {c.scene_file, scene_hash, c.seed, img, c.chip_seed(), "", {}};
+Provenance provenance(const RunConfig& c, const PixelRect& img, const std::string& scene_hash, const std::string& tables_hash,
+                      const std::vector<scenes::SensorTable>& tables) {
+  return {c.scene_file, scene_hash, c.seed, img, c.chip_seed(), tables_hash, tables};
 }
 
 void stamp(writers::ExrImage& e, const Provenance& p) {
@@ -248,9 +249,9 @@ json metadata(const scenes::ResolvedRun& resolved, const std::vector<std::string
   meta["scene_file"] = p.scene_file;
   meta["scene_hash_fnv1a64"] = p.scene_hash;
   meta["seed"] = p.seed;
-  meta["sensor_tables_fnv1a64"] = p.tables_hash.empty() ? scenes::sensor_tables_hash(cfg) : p.tables_hash;
+  meta["sensor_tables_fnv1a64"] = p.tables_hash;
   // Per table in use, so that spadgen sense says which of the tables it reads where the run did have changed
-  for (const scenes::SensorTable& t : p.tables_hash.empty() ? scenes::sensor_tables(cfg) : p.tables)
+  for (const scenes::SensorTable& t : p.tables)
     if (!t.path.empty()) meta["sensor_table_fnv1a64"][t.key] = t.hash;
   // The seed each random stream used (seeds.* when set, else seed).
   meta["seeds"] = {{"light", cfg.light_seed()}, {"chip", cfg.chip_seed()}, {"noise", cfg.noise_seed()}};

@@ -32,12 +32,14 @@ struct Provenance {
   PixelRect crop;  // the rendered pixels, in sensor coordinates
   uint64_t chip_seed = 0;  // the chip's fixed pattern (seeds.chip): sensor_maps.exr and labels.exr depend on it
   // The sensor's tables as the sensor read them (metadata.json's sensor_tables_fnv1a64 and sensor_table_fnv1a64;
-  // SensorTables::hashed): taken when the metadata is written when `tables_hash` is empty.
+  // scenes::sensor_tables_hash and its tables).
   std::string tables_hash;
   std::vector<scenes::SensorTable> tables;
 };
-// scene_hash: scenes::content_hash of the scene's files, as they were read.
-Provenance provenance(const RunConfig& c, const PixelRect& img, const std::string& scene_hash);
+// scene_hash: scenes::content_hash of the scene's files, as they were read; tables_hash and tables: the
+// sensor's tables, as it read them.
+Provenance provenance(const RunConfig& c, const PixelRect& img, const std::string& scene_hash, const std::string& tables_hash,
+                      const std::vector<scenes::SensorTable>& tables);
 // Sets the provenance attributes (spadgen_version, _seed, _scene_file, _scene_hash, _crop) of an EXR; the
 // outputs add spadgen_chip_seed to those of the chip (sensor_maps.exr, labels.exr).
 void stamp(writers::ExrImage& e, const Provenance& p);

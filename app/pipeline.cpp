@@ -193,8 +193,7 @@ RunResult run(const RunOptions& options) {
   const double render_seconds = progress.seconds();
   const auto tiles_done = std::chrono::steady_clock::now();
 
-  Provenance prov = provenance(cfg, img, scene_hash);
-  prov.tables_hash = tables.hash, prov.tables = tables.tables;
+  const Provenance prov = provenance(cfg, img, scene_hash, tables.hash, tables.tables);
   outputs.write(prov);
   std::vector<std::string> files = outputs.files();
   RunRecord record;

@@ -32,14 +32,18 @@ TimeAxis time_axis(const RunConfig& c, const sensor::SensorModel& s) {
   return a;
 }
 
-SensorTables SensorTables::hashed(const RunConfig& c) { return {scenes::sensor_tables_hash(c), scenes::sensor_tables(c)}; }
+SensorTables SensorTables::hashed(const RunConfig& c) {
+  SensorTables t;
+  t.hash = scenes::sensor_tables_hash(c, &t.tables);
+  return t;
+}
 
 void SensorTables::check_unchanged(const RunConfig& c) const {
-  if (scenes::sensor_tables_hash(c) == hash) return;
+  const SensorTables now = hashed(c);
+  if (now.hash == hash) return;
   std::string which;
-  const std::vector<scenes::SensorTable> now = scenes::sensor_tables(c);
-  for (size_t i = 0; i < now.size() && i < tables.size(); ++i)
-    if (now[i].hash != tables[i].hash) which += (which.empty() ? "" : ", ") + now[i].key + " (" + now[i].path + ")";
+  for (size_t i = 0; i < now.tables.size() && i < tables.size(); ++i)
+    if (now.tables[i].hash != tables[i].hash) which += (which.empty() ? "" : ", ") + now.tables[i].key + " (" + now.tables[i].path + ")";
   throw Error(c.scene_file + ": " + (which.empty() ? std::string("a sensor table") : which) +
               " changed while the sensor read it; run again once it is written");
 }

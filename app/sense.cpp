@@ -587,13 +587,14 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   // The same sensor as the run's (settings, chip, tables; only the noise may differ): what does not depend
   // on the noise (the rates, the maps, the laser and ambient images, the labels) is the run's, bit for
   // bit, and is linked rather than computed and written again.
-  const bool same_tables = meta.value("sensor_tables_fnv1a64", std::string()) == scenes::sensor_tables_hash(cfg);
+  // (the tables as the sensor read them, not read again)
+  const bool same_tables = meta.value("sensor_tables_fnv1a64", std::string()) == tables_read.hash;
   const bool same_sensor = same_tables && noise_free_part(first.resolved) == noise_free_part(source.resolved);
   // The run's own tables that this call reads where the run read them and that changed there since (a table
   // --set gives anew, in another place or of other contents, is this call's own: nothing to say of it).
   if (!same_tables) {
     std::string changed;
-    const std::vector<scenes::SensorTable> run_tables = scenes::sensor_tables(source.config), tables = scenes::sensor_tables(cfg);
+    const std::vector<scenes::SensorTable> run_tables = scenes::sensor_tables(source.config), &tables = tables_read.tables;
     const json* recorded = meta.contains("sensor_table_fnv1a64") && meta.at("sensor_table_fnv1a64").is_object()
                                ? &meta.at("sensor_table_fnv1a64") : nullptr;
     bool all_same_paths = true;

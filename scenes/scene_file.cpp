@@ -882,20 +882,21 @@ std::array<std::pair<const char*, const std::string*>, 5> table_paths(const RunC
 }
 }  // namespace
 
-std::string sensor_tables_hash(const RunConfig& c) {
+std::string sensor_tables_hash(const RunConfig& c, std::vector<SensorTable>* each) {
   uint64_t h = fnv1a64("");
+  if (each) each->clear();
   for (const auto& [key, path] : table_paths(c)) {
     const std::string bytes = path->empty() ? std::string() : file_bytes(*path);
     // The length first, so that tables moved from one key to the next do not hash alike.
     h = fnv1a64(std::to_string(bytes.size()) + ":" + bytes, h);
+    if (each) each->push_back({key, *path, hex64(fnv1a64(bytes))});
   }
   return hex64(h);
 }
 
 std::vector<SensorTable> sensor_tables(const RunConfig& c) {
   std::vector<SensorTable> out;
-  for (const auto& [key, path] : table_paths(c))
-    out.push_back({key, *path, hex64(fnv1a64(path->empty() ? std::string() : file_bytes(*path)))});
+  (void)sensor_tables_hash(c, &out);
   return out;
 }
 

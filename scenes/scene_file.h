@@ -64,16 +64,19 @@ std::string schema_reference_markdown();
 // defaults, and no keys but these. Scene files may hold comments, so editors should read them as JSONC.
 std::string schema_json();
 
+// A table the sensor stage reads besides the scene file: its key (laser.pulse_shape_csv, ...), its path (as
+// the scene resolved it, "" when not set) and the FNV-1a 64 (hex) of its bytes (of "" when not set or not
+// readable).
+struct SensorTable {
+  std::string key, path, hash;
+};
 // FNV-1a 64 (hex) of the tables the sensor stage reads besides the scene file (laser.pulse_shape_csv,
 // sensor.gate.profile_csv and maps_exr, each pixel design's pdp_csv), each as its length and bytes ("" for
 // a table not set, or not readable): a run's metadata.json records it, so that `spadgen sense` knows
 // whether the sensor it rebuilds is the run's, and a dataset's sample hash holds it.
-std::string sensor_tables_hash(const RunConfig& c);
-// The same per table: its key (laser.pulse_shape_csv, ...), its path (as the scene resolved it, "" when not
-// set) and the FNV-1a 64 (hex) of its bytes (of "" when not set or not readable), in that key order.
-struct SensorTable {
-  std::string key, path, hash;
-};
+// each (not null): every table, in that key order, from the same reading of each file.
+std::string sensor_tables_hash(const RunConfig& c, std::vector<SensorTable>* each = nullptr);
+// Every table, in that key order (sensor_tables_hash's `each`).
 std::vector<SensorTable> sensor_tables(const RunConfig& c);
 // Whether c names any of those tables.
 bool uses_sensor_tables(const RunConfig& c);
