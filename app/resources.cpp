@@ -6,7 +6,6 @@
 #include <charconv>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
 #include <fstream>
 #include <set>
 #include <sstream>
@@ -161,14 +160,29 @@ int64_t ResourcePlan::disk_sum(bool at_least, bool kept_only) const {
   return n;
 }
 
-std::string bytes_text(int64_t bytes) {
-  char buf[32];
-  const double b = static_cast<double>(bytes);
-  if (b >= 1e12) std::snprintf(buf, sizeof buf, "%.1f TB", b / 1e12);  // (22202.3 GB read as 22.2 TB)
-  else if (b >= 1e9) std::snprintf(buf, sizeof buf, "%.1f GB", b / 1e9);
-  else if (b >= 1e6) std::snprintf(buf, sizeof buf, "%.0f MB", b / 1e6);
-  else std::snprintf(buf, sizeof buf, "%.0f kB", b / 1e3);
+namespace {
+// The unit bytes_text gives `bytes` in: its size, name and digits after the point.
+struct SizeUnit {
+  double scale;
+  const char* name;
+  int digits;
+};
+SizeUnit size_unit(double bytes) {
+  if (bytes >= 1e12) return {1e12, "TB", 1};  // (22202.3 GB read as 22.2 TB)
+  if (bytes >= 1e9) return {1e9, "GB", 1};
+  if (bytes >= 1e6) return {1e6, "MB", 0};
+  return {1e3, "kB", 0};
+}
+std::string in_unit(double bytes, const SizeUnit& u, int digits) {
+  char buf[48];
+  std::snprintf(buf, sizeof buf, "%.*f %s", digits, bytes / u.scale, u.name);
   return buf;
+}
+}  // namespace
+
+std::string bytes_text(int64_t bytes) {
+  const SizeUnit u = size_unit(double(bytes));
+  return in_unit(double(bytes), u, u.digits);
 }
 
 // The cores the process may run on (its CPU affinity, as TBB's default arena counts them; taskset, a Slurm
@@ -178,15 +192,9 @@ int allowed_cores() { return std::max(1, tbb::info::default_concurrency()); }
 std::pair<std::string, std::string> bytes_texts(int64_t a, int64_t b) {
   std::pair<std::string, std::string> t{bytes_text(a), bytes_text(b)};
   if (t.first != t.second || a == b) return t;
-  const double big = double(std::max(a, b));
-  const auto [scale, unit] = big >= 1e12 ? std::pair{1e12, "TB"} : big >= 1e9 ? std::pair{1e9, "GB"} : big >= 1e6 ? std::pair{1e6, "MB"}
-                                                                                                   : std::pair{1e3, "kB"};
-  char x[48], y[48];
-  for (int digits = 1; digits <= 3; ++digits) {
-    std::snprintf(x, sizeof x, "%.*f %s", digits, double(a) / scale, unit);
-    std::snprintf(y, sizeof y, "%.*f %s", digits, double(b) / scale, unit);
-    if (std::strcmp(x, y) != 0) return {x, y};
-  }
+  const SizeUnit u = size_unit(double(std::max(a, b)));  // (they read the same: the larger's unit)
+  for (int digits = 1; digits <= 3; ++digits)
+    if (t = {in_unit(double(a), u, digits), in_unit(double(b), u, digits)}; t.first != t.second) return t;
   return {std::to_string(a) + " bytes", std::to_string(b) + " bytes"};
 }
 
