@@ -44,6 +44,9 @@ RUNS = {
     # The paper's flat target at 0.8 m, central pixels, every 36 ps gate step (as tests/app/paper_test.cpp).
     "flat": ("flat_target.json", ["camera.position_m=[0,0,0.8]", "camera.crop=[507,245,10,10]",
                                   "render.samples_per_pixel=4", "outputs.previews=false"]),
+    # The same under 100 lux of ambient light: a floor of about half the plateau's counts.
+    "flat_lit": ("flat_target.json", ["camera.position_m=[0,0,0.8]", "camera.crop=[507,245,10,10]",
+                                      "render.samples_per_pixel=4", "outputs.previews=false", "ambient.illuminance_lux=100"]),
 }
 
 

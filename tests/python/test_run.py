@@ -545,6 +545,20 @@ def test_rising_edge_baseline_on_the_flat_target(make_run):
     assert abs(err.mean() - err0.mean()) < 4 * err.std() / np.sqrt(err.size)
 
 
+def test_rising_edge_baseline_under_ambient_light(make_run):
+    # The half level is the photon midpoint of the profile's floor (ambient light, dark counts) and its
+    # plateau: half the top from zero lay below a lit profile's floor (a plane at 0.4 m read 3.4 mm near at
+    # 100 lux, and no pixel at all at 300 lux).
+    dark, lit = spadgen.open_run(make_run("flat")), spadgen.open_run(make_run("flat_lit"))
+    ec = np.asarray(lit.expected_counts[...], np.float64)
+    assert np.median(ec.min(axis=0) / ec.max(axis=0)) > 0.1  # the floor the test is about
+    truth = lit.depth()
+    est = rising_edge_range(lit, expected=True)
+    assert np.isfinite(est).all() and np.abs(est - truth).max() < 3e-3
+    # the ambient light moves no edge: the same ranges as in the dark within 0.3 mm
+    assert np.abs(est - rising_edge_range(dark, expected=True)).max() < 3e-4
+
+
 def test_detections_of_spadgen_reconstruct(spadgen_bin, make_run, tmp_path):
     # A copy of the sweep run, so that the shared fixture's folder stays as the run wrote it.
     import shutil
