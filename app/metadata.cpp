@@ -240,6 +240,12 @@ json axis_json(const TimeAxis& a) {
           {"end_ns", a.end_s() / kNs}, {"laser_period_ns", a.period_s / kNs}};
 }
 
+std::string settings_hash_of(const nlohmann::json& resolved_scene) {
+  nlohmann::json settings = resolved_scene;  // (nlohmann::json: keys sorted, so the text is canonical)
+  for (const char* k : {"seed", "seeds", "outputs", "render", "description"}) settings.erase(k);
+  return scenes::hex64(scenes::fnv1a64(settings.dump()));
+}
+
 json metadata(const scenes::ResolvedRun& resolved, const std::vector<std::string>& scene_warnings,
               const sensor::SensorModel& sensor, const Provenance& p, const TimeAxis& axis, const RunRecord& r) {
   const RunConfig& cfg = resolved.config;
@@ -311,6 +317,8 @@ json metadata(const scenes::ResolvedRun& resolved, const std::vector<std::string
   meta["warnings"] = resolved.warnings;
   for (const std::string& w : scene_warnings) meta["warnings"].push_back(w);
   meta["resolved_scene"] = resolved.resolved;
+  // (from the text metadata.json holds, as a reader parses it: reconstruct hashes the run's metadata alike)
+  meta["settings_hash_fnv1a64"] = settings_hash_of(nlohmann::json::parse(resolved.resolved.dump()));
   meta["files"] = r.files;
   meta["file_bytes"] = ojson::parse(r.file_bytes.dump());
   if (r.sense) meta["sense"] = ojson::parse(r.sense->dump());

@@ -45,6 +45,13 @@ Provenance provenance(const RunConfig& c, const PixelRect& img, const std::strin
 void stamp(writers::ExrImage& e, const Provenance& p);
 
 
+// What a resolved scene (metadata.json's resolved_scene) sets that the scene hash does not see (--set values, a
+// dataset sample's parameters and set), as FNV-1a 64 hex of it without what only draws another realisation
+// of the same data (seed, seeds), what is only written (outputs), the Monte Carlo's settings (render) and
+// the description: metadata.json's settings_hash_fnv1a64, which reconstruct's files record of their run
+// (spadgen_source settings_hash) so that detections of another plate position are not scored on this one.
+std::string settings_hash_of(const nlohmann::json& resolved_scene);
+
 // The time axis as laser.exr (attribute spadgen_time_axis) and metadata.json record it.
 nlohmann::json axis_json(const TimeAxis& a);
 

@@ -22,6 +22,7 @@
 #include <string_view>
 
 #include "app/interrupt.h"
+#include "app/metadata.h"
 #include "app/progress.h"
 #include "app/run_parts.h"
 #include "app/staging.h"
@@ -278,17 +279,12 @@ void check_ranges(const std::string& path, const DetectionImage& img) {
 
 // The detections file (docs/detection.md): an EXR with `count` and det<i>.range (metres; NaN: none), and
 // optionally det<i>.score; or a float .npy (H, W, M) of ranges, NaN where there is none.
-// What the scene was set to, which the scene hash (of the files) does not see: --set values and a dataset
-// sample's parameters and `set`. A hash of the run's resolved scene without what only draws another
-// realisation of the same data (the seeds), what is only written (outputs) and the Monte Carlo's settings
-// (render): detections of another seed or path count are scored, of another pulse or plate position not.
-// null for a run that records no resolved scene.
+// What the scene was set to, which the scene hash does not see (settings_hash_of, metadata.h); null for a run
+// that records no resolved scene.
 nlohmann::json settings_hash(const nlohmann::json& meta) {
   const auto it = meta.find("resolved_scene");
   if (it == meta.end() || !it->is_object()) return nullptr;
-  nlohmann::json settings = *it;  // (nlohmann::json: keys sorted, so the text is canonical)
-  for (const char* k : {"seed", "seeds", "outputs", "render", "description"}) settings.erase(k);
-  return scenes::hex64(scenes::fnv1a64(settings.dump()));
+  return settings_hash_of(*it);
 }
 
 // What a derived file records of the run it was made from (its spadgen_source, with the run's path) and

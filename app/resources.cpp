@@ -160,43 +160,9 @@ int64_t ResourcePlan::disk_sum(bool at_least, bool kept_only) const {
   return n;
 }
 
-namespace {
-// The unit bytes_text gives `bytes` in: its size, name and digits after the point.
-struct SizeUnit {
-  double scale;
-  const char* name;
-  int digits;
-};
-SizeUnit size_unit(double bytes) {
-  if (bytes >= 1e12) return {1e12, "TB", 1};  // (22202.3 GB read as 22.2 TB)
-  if (bytes >= 1e9) return {1e9, "GB", 1};
-  if (bytes >= 1e6) return {1e6, "MB", 0};
-  return {1e3, "kB", 0};
-}
-std::string in_unit(double bytes, const SizeUnit& u, int digits) {
-  char buf[48];
-  std::snprintf(buf, sizeof buf, "%.*f %s", digits, bytes / u.scale, u.name);
-  return buf;
-}
-}  // namespace
-
-std::string bytes_text(int64_t bytes) {
-  const SizeUnit u = size_unit(double(bytes));
-  return in_unit(double(bytes), u, u.digits);
-}
-
 // The cores the process may run on (its CPU affinity, as TBB's default arena counts them; taskset, a Slurm
 // task's cpuset): every core of the machine had been counted.
 int allowed_cores() { return std::max(1, tbb::info::default_concurrency()); }
-
-std::pair<std::string, std::string> bytes_texts(int64_t a, int64_t b) {
-  std::pair<std::string, std::string> t{bytes_text(a), bytes_text(b)};
-  if (t.first != t.second || a == b) return t;
-  const SizeUnit u = size_unit(double(std::max(a, b)));  // (they read the same: the larger's unit)
-  for (int digits = 1; digits <= 3; ++digits)
-    if (t = {in_unit(double(a), u, digits), in_unit(double(b), u, digits)}; t.first != t.second) return t;
-  return {std::to_string(a) + " bytes", std::to_string(b) + " bytes"};
-}
 
 int64_t worker_threads(int threads) { return threads > 0 ? threads : allowed_cores(); }
 

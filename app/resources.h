@@ -14,6 +14,7 @@
 #include "core/config.h"
 #include "core/tile.h"
 #include "core/time_axis.h"
+#include "core/units.h"  // bytes_text, bytes_texts
 #include "sensor/sensor.h"
 
 namespace spadgen::scenes {
@@ -118,10 +119,5 @@ int64_t free_disk(std::filesystem::path p);
 // p made absolute, or the nearest folder above it that exists (a folder a run will create); "" if none.
 std::filesystem::path existing_ancestor(std::filesystem::path p);
 
-// "1.2 GB", "870 MB", "12 kB" (powers of 1000, as `spadgen info` gives sizes).
-std::string bytes_text(int64_t bytes);
-// Two sizes compared in a message (needed, free), as bytes_text gives them, with more digits where they would
-// read the same ("need at least 2 MB ... and 2 MB is free" for 2.0 and 1.7 MB): {"2.05 MB", "1.74 MB"}.
-std::pair<std::string, std::string> bytes_texts(int64_t a, int64_t b);
 
 }  // namespace spadgen::app

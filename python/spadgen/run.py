@@ -915,20 +915,29 @@ class Run:
         return image
 
     def _check_source(self, image, what):
-        """A file reconstruct derived from a run (its header's spadgen_source, a JSON object) is of this run's
-        crop: one of another crop of the same size, copied in, was read without a word. The source as a dict
-        ({} when absent or unreadable, as the program takes it)."""
+        """A file reconstruct derived from a run (its header's spadgen_source, a JSON object) is of this run, as
+        spadgen evaluate checks it: the same scene files (scene_hash_fnv1a64), crop of the sensor and settings
+        (settings_hash: --set values, a dataset sample's parameters; another seed's or realisation's file is
+        of this run). What either side does not record is not compared. The source as a dict ({} when absent
+        or unreadable, as the program takes it)."""
         try:
             source = json.loads(image.attributes.get("spadgen_source", "{}"))
         except ValueError:
             source = {}
         if not isinstance(source, dict):
             return {}
-        crop = source.get("crop_in_sensor")
-        if crop is not None and "crop_in_sensor" in self.metadata.get("image", {}) and crop != list(self.crop):
-            raise ValueError(f"{image.path}: its header's spadgen_source says crop_in_sensor {json.dumps(crop)}, but "
-                             f"metadata.json's image.crop_in_sensor is {json.dumps(list(self.crop))}: {what} of "
-                             "another run; write them again with spadgen reconstruct")
+        made_from = source.get("run", "?")
+        ours = {"scene_hash_fnv1a64": ("another scene (scene file and glTF hash)", self.metadata.get("scene_hash_fnv1a64")),
+                "crop_in_sensor": ("another crop of the sensor",
+                                   list(self.crop) if "crop_in_sensor" in self.metadata.get("image", {}) else None),
+                "settings_hash": ("other settings (a --set value, a dataset sample's parameters or the dataset's set)",
+                                  self.metadata.get("settings_hash_fnv1a64"))}
+        for key, (name, mine) in ours.items():
+            theirs = source.get(key)
+            if theirs is not None and mine is not None and theirs != mine:
+                raise ValueError(f"{image.path}: {what} of {name} than {self.path}'s (made from {made_from}: "
+                                 f"{json.dumps(theirs)}, this run: {json.dumps(mine)}); write them again with "
+                                 f"spadgen reconstruct {self.path}")
         return source
 
     def layer_count(self):

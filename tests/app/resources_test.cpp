@@ -79,7 +79,7 @@ TEST_F(CgroupTree, AV1MemoryGroupIsRead) {
 
 // The sizes a refusal compares read apart: "need at least 2 MB ... and 2 MB is free there" did not say why.
 TEST(BytesTexts, TwoSizesThatWouldReadTheSameGetTheDigitsToTellThemApart) {
-  using spadgen::app::bytes_texts;
+  using spadgen::bytes_texts;
   EXPECT_EQ(bytes_texts(2'000'000, 1'700'000), std::make_pair(std::string("2.0 MB"), std::string("1.7 MB")));
   EXPECT_EQ(bytes_texts(2'000, 1'700), std::make_pair(std::string("2.0 kB"), std::string("1.7 kB")));
   EXPECT_EQ(bytes_texts(1'234'000'000, 1'230'000'000), std::make_pair(std::string("1.234 GB"), std::string("1.230 GB")));

@@ -185,10 +185,24 @@ def test_hdr_inversion_of_a_2d_run(intensity_run, spadgen_bin, tmp_path):
     source = data.count(b'"crop_in_sensor":[400,300,40,24]')
     assert source == 1
     path.write_bytes(data.replace(b'"crop_in_sensor":[400,300,40,24]', b'"crop_in_sensor":[401,300,40,24]'))
-    with pytest.raises(ValueError, match=f"{path}: its header's spadgen_source says crop_in_sensor \\[401, 300, 40, 24\\], "
-                                         "but metadata.json's image.crop_in_sensor is \\[400, 300, 40, 24\\]: the HDR "
-                                         "inversion is of another run"):
+    with pytest.raises(ValueError, match=f"{path}: the HDR inversion is of another crop of the sensor than {folder}'s "
+                                         "\\(made from .*: \\[401, 300, 40, 24\\], this run: \\[400, 300, 40, 24\\]\\)"):
         spadgen.open_run(folder).hdr()
+    path.write_bytes(data)
+    # An inversion of a run of other settings (here 500 lux of ambient light: the scene's files and crop are the
+    # same) is refused, as spadgen evaluate refuses such detections; one of another seed is of this run.
+    from conftest import RUNS, SCENES
+    scene, sets = RUNS["intensity"]
+    for name, more in (("lit", ["ambient.illuminance_lux=500"]), ("seeded", ["seed=7"])):
+        cmd = [spadgen_bin, "run", str(SCENES / scene), "-o", str(tmp_path / name), "-q"]
+        for v in sets + more:
+            cmd += ["--set", v]
+        subprocess.run(cmd, check=True)
+        subprocess.run([spadgen_bin, "reconstruct", str(tmp_path / name), "-q", "-o", str(tmp_path / f"{name}.exr")], check=True)
+    with pytest.raises(ValueError, match=f"{tmp_path / 'lit.exr'}: the HDR inversion is of other settings \\(a --set value"):
+        run.hdr(path=tmp_path / "lit.exr")
+    assert run.hdr(path=tmp_path / "seeded.exr")["photons"].shape == hdr["photons"].shape
+    assert spadgen.open_run(tmp_path / "lit").metadata["settings_hash_fnv1a64"] != run.metadata["settings_hash_fnv1a64"]
     # A symbolic link to nothing in its place: named as such, with how to write the file (the remedy was lost).
     path.unlink()
     path.symlink_to(tmp_path / "gone.exr")
@@ -606,5 +620,5 @@ def test_detections_of_spadgen_reconstruct(spadgen_bin, make_run, tmp_path):
     data = (run_dir / "detections_paper.exr").read_bytes()
     assert data.count(b'"crop_in_sensor":[490,236,347,10]') == 1
     (run_dir / "detections_paper.exr").write_bytes(data.replace(b"[490,236,347,10]", b"[491,236,347,10]"))
-    with pytest.raises(ValueError, match="detections_paper.exr: its header's spadgen_source says crop_in_sensor \\[491, 236, 347, 10\\]"):
+    with pytest.raises(ValueError, match="detections_paper.exr: the detections are of another crop of the sensor than .*: \\[491, 236, 347, 10\\]"):
         spadgen.open_run(run_dir).detections("paper")
