@@ -4,6 +4,9 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <string>
+#include <utility>
+#include <algorithm>
 
 namespace spadgen {
 
@@ -18,6 +21,40 @@ double times_ten_to(double v, int k) {
   const long exponent = std::strtol(e + 1, nullptr, 10) + k;
   std::snprintf(e, sizeof text - size_t(e - text), "e%ld", exponent);
   return std::strtod(text, nullptr);
+}
+
+namespace {
+// The unit bytes_text gives `bytes` in: its size, name and digits after the point.
+struct SizeUnit {
+  double scale;
+  const char* name;
+  int digits;
+};
+SizeUnit size_unit(double bytes) {
+  if (bytes >= 1e12) return {1e12, "TB", 1};  // (22202.3 GB read as 22.2 TB)
+  if (bytes >= 1e9) return {1e9, "GB", 1};
+  if (bytes >= 1e6) return {1e6, "MB", 0};
+  return {1e3, "kB", 0};
+}
+std::string in_unit(double bytes, const SizeUnit& u, int digits) {
+  char buf[48];
+  std::snprintf(buf, sizeof buf, "%.*f %s", digits, bytes / u.scale, u.name);
+  return buf;
+}
+}  // namespace
+
+std::string bytes_text(int64_t bytes) {
+  const SizeUnit u = size_unit(double(bytes));
+  return in_unit(double(bytes), u, u.digits);
+}
+
+std::pair<std::string, std::string> bytes_texts(int64_t a, int64_t b) {
+  std::pair<std::string, std::string> t{bytes_text(a), bytes_text(b)};
+  if (t.first != t.second || a == b) return t;
+  const SizeUnit u = size_unit(double(std::max(a, b)));  // (they read the same: the larger's unit)
+  for (int digits = 1; digits <= 3; ++digits)
+    if (t = {in_unit(double(a), u, digits), in_unit(double(b), u, digits)}; t.first != t.second) return t;
+  return {std::to_string(a) + " bytes", std::to_string(b) + " bytes"};
 }
 
 }  // namespace spadgen

@@ -2,6 +2,10 @@
 // photons); scene-file keys carry their unit in their name and are converted once, when parsed.
 #pragma once
 
+#include <cstdint>
+#include <string>
+#include <utility>
+
 namespace spadgen {
 
 inline constexpr double kSpeedOfLight = 299'792'458.0;    // m/s (exact, SI)
@@ -32,5 +36,11 @@ inline constexpr double photons_per_pulse(double average_power_W, double repetit
 
 // Gaussian full width at half maximum <-> standard deviation.
 inline constexpr double kFwhmPerSigma = 2.354'820'045'030'949'3;  // 2 sqrt(2 ln 2)
+
+// "1.2 GB", "870 MB", "12 kB" (powers of 1000, as `spadgen info` gives sizes).
+std::string bytes_text(int64_t bytes);
+// Two sizes compared in a message (needed, free), as bytes_text gives them, with more digits where they would
+// read the same ("need at least 2 MB ... and 2 MB is free" for 2.0 and 1.7 MB): {"2.05 MB", "1.74 MB"}.
+std::pair<std::string, std::string> bytes_texts(int64_t a, int64_t b);
 
 }  // namespace spadgen

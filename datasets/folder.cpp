@@ -17,6 +17,7 @@
 #include <thread>
 
 #include "core/error.h"
+#include "core/units.h"
 #include "scenes/input.h"
 #include "scenes/key_path.h"
 #include "scenes/scene_file.h"
@@ -74,13 +75,6 @@ std::string csv_field(const std::string& v) {
   return q + "\"";
 }
 
-std::string bytes_text(double b) {
-  char buf[32];
-  if (b >= 1e9) std::snprintf(buf, sizeof buf, "%.2f GB", b / 1e9);
-  else if (b >= 1e6) std::snprintf(buf, sizeof buf, "%.1f MB", b / 1e6);
-  else std::snprintf(buf, sizeof buf, "%.1f kB", b / 1e3);
-  return buf;
-}
 
 // The runs' presence (RunPresence): a file of its own, not .dataset.lock, whose flock (FolderLock) NFS emulates
 // as a whole-file fcntl lock, which a presence lock on the same file would block for ever.
@@ -1073,8 +1067,8 @@ std::string dataset_card(const DatasetFolder& folder, const CardTally& tally) {
   } else {
     o << "| file | mean bytes per sample | total |\n|---|---|---|\n";
     for (const auto& [name, e] : sizes)
-      o << "| `" << cell(name) << "` | " << bytes_text(double(e.second) / double(e.first)) << " | " << bytes_text(double(e.second)) << " |\n";
-    o << "| all | " << bytes_text(double(total) / double(count(Status::Done))) << " | " << bytes_text(double(total)) << " |\n";
+      o << "| `" << cell(name) << "` | " << bytes_text(std::llround(double(e.second) / double(e.first))) << " | " << bytes_text(e.second) << " |\n";
+    o << "| all | " << bytes_text(std::llround(double(total) / double(count(Status::Done)))) << " | " << bytes_text(total) << " |\n";
   }
   o << "\n## Reading it\n\nFrom this folder:\n\n```python\nimport json\nrows = [json.loads(l) for l in open(\"index.jsonl\")]\n"
        "import spadgen                                   # python/ in the spadgen repository (docs/python.md, Datasets)\n"
