@@ -254,4 +254,27 @@ std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img
   return w;
 }
 
+std::vector<std::string> laser_image_warnings(const RunConfig& c, const PixelRect& img, const scenes::Scene& scene,
+                                              const std::vector<render::LaserImageInView>& images) {
+  const bool seen = c.acquisition.mode == AcquisitionMode::GateSweep || c.outputs.transient || c.acquisition.intensity.laser_on;
+  if (!seen || !(c.laser.average_power_W > 0.0)) return {};
+  std::vector<std::string> w;
+  for (const render::LaserImageInView& v : images) {
+    const int x = int(std::floor(v.px)), y = int(std::floor(v.py));
+    if (!img.contains(x, y)) continue;
+    const std::string material = v.material >= 0 && size_t(v.material) < scene.materials.size()
+                                     ? "material '" + scene.materials[size_t(v.material)].name + "'"
+                                     : "its material";
+    const bool cropped = img.width != c.camera.width_px || img.height != c.camera.height_px;
+    w.push_back("the laser's mirror image in a smooth planar face (" + material + ") lands in view at sensor pixel (" +
+                std::to_string(x) + ", " + std::to_string(y) + ")" +
+                (cropped ? " (the image's (" + std::to_string(x - img.x0) + ", " + std::to_string(y - img.y0) + "))" : std::string()) +
+                ": a real camera sees a bright glint there (laser -> face -> lens, unless something hides it), which spadgen "
+                "does not render (a point image that no camera path reaches; a face of roughness 0.032 or more renders it: "
+                "docs/render.md, \"The laser's image in smooth planar faces\"); move the laser (laser.offset_m) or tilt the "
+                "face to keep it out of view");
+  }
+  return w;
+}
+
 }  // namespace spadgen::app

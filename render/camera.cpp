@@ -82,6 +82,14 @@ glm::dvec3 Camera::direction(double px, double py) const {
   return glm::normalize(sx * right_ + sy * up_ + focal_ * forward_);
 }
 
+bool Camera::pixel_of(const glm::dvec3& d, double* px, double* py) const {
+  const double z = glm::dot(d, forward_);
+  if (!(z > 0.0)) return false;
+  *px = 0.5 * width_ + focal_ * glm::dot(d, right_) / (z * pitch_);
+  *py = 0.5 * height_ - focal_ * glm::dot(d, up_) / (z * pitch_);
+  return *px >= 0.0 && *px < double(width_) && *py >= 0.0 && *py < double(height_);
+}
+
 double Camera::corner_half_angle() const {
   const double half_diag = 0.5 * pitch_ * std::hypot(double(width_), double(height_));
   return std::atan2(half_diag, focal_);

@@ -27,6 +27,9 @@ class Camera {
   // Unit world direction through the sensor-plane point of pixel coordinates (px, py), where pixel
   // (x, y) spans [x, x + 1) x [y, y + 1) and its centre is (x + 0.5, y + 0.5).
   glm::dvec3 direction(double px, double py) const;
+  // The sensor pixel coordinates (px, py) where world direction d (from the camera centre) lands, as direction's
+  // inverse; false when d points behind the camera or lands outside the sensor.
+  bool pixel_of(const glm::dvec3& d, double* px, double* py) const;
   // Half-angle of the cone from the camera centre through the sensor's corners (the flood beam's).
   double corner_half_angle() const;
 

@@ -2403,4 +2403,26 @@ double standard_error(double sum, double sq, int n, double scale) {
   return var > 0.0 ? scale * std::sqrt(var / dn) : 0.0;
 }
 
+std::vector<LaserImageInView> Integrator::laser_images_in_view() const {
+  std::vector<LaserImageInView> out;
+  const glm::dvec3 c = camera_.position(), l = laser_.position;
+  for (const LaserMirror& m : mirrors_) {
+    const double sc = glm::dot(m.n, c) - m.offset, sl = glm::dot(m.n, l) - m.offset;
+    // both on the side it reflects on (a closed mesh's outer side; a flat one's either)
+    if (!(sc * sl > 0.0) || (!m.two_sided && sc < 0.0)) continue;
+    const glm::dvec3 image = l - 2.0 * sl * m.n;
+    const glm::dvec3 p = c + (sc / (sc + sl)) * (image - c);  // the reflection point on the plane
+    bool on_face = true;
+    for (int i = 0; i < 2; ++i) {
+      const double o = glm::dot(m.e[i], p);
+      on_face = on_face && o >= m.lo[i] && o <= m.hi[i];
+    }
+    if (!on_face || !(laser_.intensity_towards(glm::normalize(p - l)) > 0.0)) continue;
+    LaserImageInView v;
+    v.material = m.material;
+    if (camera_.pixel_of(glm::normalize(image - c), &v.px, &v.py)) out.push_back(v);
+  }
+  return out;
+}
+
 }  // namespace spadgen::render

@@ -127,6 +127,13 @@ class Integrator {
              const EmbreeScene& embree, const Shading& shading, const Camera& camera, const Laser& laser,
              const Ambient& ambient);
 
+  // The laser's images in the smooth planar faces of mirrors_ that the camera sees: the light laser -> face ->
+  // lens, a point image no camera path finds (a Dirac reflection, then the point laser) and so not rendered
+  // (docs/render.md, "The laser's image in smooth planar faces"). Where a real camera sees a bright glint: each
+  // image (LaserImageInView, renderer.h), where the reflection point lies on the face (within its extent)
+  // and the laser's beam reaches it. Nothing is traced: something may hide it.
+  std::vector<LaserImageInView> laser_images_in_view() const;
+
   // Traces the camera rays of samples [s_begin, s_end) of the block that contains pixel (x, y) (full-sensor
   // coordinates); with begin and end, samples [begin[i], end[i]) of lane i (the block's pixel x0 + i) only,
   // each within [s_begin, s_end), a lane with an empty range not traced. (The paths of sample s of a pixel

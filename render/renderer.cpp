@@ -84,6 +84,10 @@ Renderer::~Renderer() = default;
 
 glm::dvec3 Renderer::laser_position() const { return impl_->laser.position + impl_->origin; }
 
+std::vector<LaserImageInView> Renderer::laser_images_in_view() const {
+  return impl_->integrator.laser_images_in_view();
+}
+
 double Renderer::photons_per_pulse() const {
   const LaserConfig& l = impl_->config.laser;
   return spadgen::photons_per_pulse(l.average_power_W, l.repetition_rate_Hz, l.wavelength_m);
