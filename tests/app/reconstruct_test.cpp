@@ -654,6 +654,26 @@ TEST_F(Reconstruct, EvaluateScoresADetectionsNpyAgainstTheLabelsExactly) {
   EXPECT_EQ(m["detections"]["total"], objects + W);
   EXPECT_NEAR(m["range_error"]["bias_mm"].get<double>(), 10.0, 0.01);  // float ranges: 1 cm to about 1e-7 m
   EXPECT_NEAR(m["range_error"]["std_mm"].get<double>(), 0.0, 0.01);
+  EXPECT_THAT(r.output, Not(HasSubstr("matched across the laser period"))) << r.output;
+  // The same a whole laser period's range further (c T / 2): matched, as the camera cannot tell them apart,
+  // and the summary says that every match is across the period, asking whether the ranges are in metres (a
+  // detector's millimetres scored a plausible recall and bias without a word).
+  {
+    const auto meta = nlohmann::json::parse(slurp(run / "metadata.json"));
+    const double period_range = 299'792'458.0 / (2e6 * meta["resolved_scene"]["laser"]["repetition_rate_MHz"].get<double>());
+    std::vector<float> folded(ranges);
+    for (size_t i = 0; i < folded.size(); ++i)
+      if (i % size_t(M) != 2) folded[i] += float(period_range);
+    spadgen::writers::NpyWriter npy((dir_ / "folded.npy").string(), spadgen::writers::Dtype::F32, {H, W, M});
+    npy.write(0, folded.data(), int64_t(folded.size()));
+    npy.commit();
+  }
+  r = sh("evaluate " + run.string() + " --detections " + (dir_ / "folded.npy").string() + " -o " + (dir_ / "eval_folded").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(nlohmann::json::parse(slurp(dir_ / "eval_folded" / "metrics.json"))["detections"]["matched_across_period"], objects);
+  EXPECT_THAT(r.output, HasSubstr("matched across the laser period: " + std::to_string(objects) + " of the " +
+                                  std::to_string(objects) + " matched detections lie a whole c T / 2")) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("are the detections' ranges in metres from the camera centre")) << r.output;
   // beyond a tolerance below the shift, nothing matches
   r = sh("evaluate " + run.string() + " --detections " + (dir_ / "mine.npy").string() + " -o " + (dir_ / "eval2").string() +
          " --tolerance-m 0.005");
