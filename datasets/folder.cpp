@@ -361,6 +361,9 @@ DatasetFolder::MaterialTraits DatasetFolder::material_traits(const scenes::Resol
         if (mesh.material < 0 || size_t(mesh.material) >= scene.materials.size()) m.default_material = true;
       for (size_t i = 0; i < scene.materials.size(); ++i)
         if (scene.material_used(i)) m.used.push_back(scene.materials[i]);
+      const auto grey = [](const glm::vec3& v) { return v.r == v.g && v.g == v.b; };  // (as the renderer keeps grey)
+      for (const scenes::Mesh& mesh : scene.meshes) m.painted |= !mesh.colors0.empty();
+      for (const scenes::Light& l : scene.lights) m.lights = true, m.coloured_lights |= !grey(l.color);
       m.loaded = true;
     } catch (const Error&) {
       // (the sample's run says what is wrong with its glTF)
@@ -371,7 +374,8 @@ DatasetFolder::MaterialTraits DatasetFolder::material_traits(const scenes::Resol
   MaterialTraits t;
   if (!m.loaded) return t;
   t.ggx = m.default_material;
-  bool refracting = false, smooth_clear = false;
+  bool refracting = false, smooth_clear = false, colour = m.painted || m.coloured_lights, emission = false;
+  const auto grey = [](const glm::vec3& v) { return v.r == v.g && v.g == v.b; };
   for (scenes::Material mat : m.used) {
     for (const MaterialEdit& e : r.config.edits.materials)
       if (e.name == mat.name) mat.apply(e);  // as the loader applies it (an ior or thickness makes a volume refract)
@@ -379,8 +383,12 @@ DatasetFolder::MaterialTraits DatasetFolder::material_traits(const scenes::Resol
     t.ggx |= !mat.lambertian() && !mat.smooth();
     refracting |= mat.refracting();
     smooth_clear |= mat.transmissive() && mat.smooth();
+    colour |= !grey(glm::vec3(mat.base_color)) || mat.base_color_texture >= 0 || !grey(mat.attenuation_color) || !grey(mat.emissive);
+    emission |= mat.emissive != glm::vec3(0.0f);
   }
   t.echo = refracting && smooth_clear;
+  const AmbientConfig& a = r.config.ambient;
+  t.coloured_ambient = colour && (a.illuminance_lux > 0.0 || a.spectral_irradiance_W_m2_nm || (a.gltf_lights && m.lights) || emission);
   return t;
 }
 
@@ -393,8 +401,14 @@ struct Revision {
   const char* marker;
   const char* change;
 };
-std::vector<Revision> render_revisions(const RunConfig& c, bool ggx, bool echo) {
+std::vector<Revision> render_revisions(const RunConfig& c, bool ggx, bool echo, bool coloured_ambient) {
   std::vector<Revision> out;
+  // the ambient band's colours weighted by its photons (lambda), not averaged plainly over wavelength: a colour's
+  // ambient light moved by up to about 15 % (grey ones kept their bits)
+  if (coloured_ambient)
+    out.push_back({"the ambient band's colours weighted by its photons",
+                   "coloured surfaces and lights render the ambient light otherwise: the band's colours are averaged over "
+                   "its photons (an equal-energy spectrum's, by lambda), not plainly over wavelength (up to about 15 %)"});
   // the laser's connections through clear plates carry the echo inside each (the camera side's half of a plate's
   // delayed echo was all a transient held)
   if (echo && laser_traced(c))  // (a run that traces no laser draws no echo: the same bits)
@@ -439,7 +453,7 @@ DatasetFolder::Resolved DatasetFolder::resolve(const Sample& s) const {
   }
   std::string revisions;
   const MaterialTraits materials = material_traits(r);
-  for (const Revision& v : render_revisions(r.config, materials.ggx, materials.echo)) {
+  for (const Revision& v : render_revisions(r.config, materials.ggx, materials.echo, materials.coloured_ambient)) {
     if (!revisions.empty()) revisions += "; ";
     revisions += v.change;
   }
@@ -454,7 +468,7 @@ std::string DatasetFolder::sample_hash(const Sample& s, const scenes::ResolvedRu
   std::string text = r.resolved.dump() + "\n" + scene_content_hash(s.scene) + "\n" + SPADGEN_VERSION;
   if (revisions) {
     const MaterialTraits materials = material_traits(r);
-    for (const Revision& v : render_revisions(r.config, materials.ggx, materials.echo)) text += std::string("\n") + v.marker;
+    for (const Revision& v : render_revisions(r.config, materials.ggx, materials.echo, materials.coloured_ambient)) text += std::string("\n") + v.marker;
   }
   if (scenes::uses_sensor_tables(r.config)) text += "\n" + scenes::sensor_tables_hash(r.config);
   return scenes::hex64(scenes::fnv1a64(text));

@@ -201,6 +201,9 @@ class DatasetFolder {
   struct MaterialTraits {
     bool ggx = true;   // GGX lobes: a material is not Lambertian, or a mesh has the glTF's default material
     bool echo = true;  // laser echoes through plates: a material refracts (a volume of ior != 1), a transmissive one is smooth
+    // a colour meets ambient light: a material, vertex paint or glTF light not grey, under an ambient
+    // environment, glTF lights or emission
+    bool coloured_ambient = true;
   };
   MaterialTraits material_traits(const scenes::ResolvedRun& r) const;
   nlohmann::ordered_json record() const;  // what dataset.json holds for this dataset
@@ -214,6 +217,8 @@ class DatasetFolder {
     bool loaded = false;                      // else unknown (the glTF did not load): GGX taken to be rendered
     bool default_material = false;            // a mesh has none (the glTF's default: metallic 1)
     std::vector<scenes::Material> used;       // the materials the meshes use, unedited
+    bool painted = false;                     // a mesh has vertex colours (COLOR_0)
+    bool lights = false, coloured_lights = false;  // the glTF has punctual lights; one of them is not grey
   };
   mutable std::map<std::pair<std::string, std::string>, SceneMaterials> scene_materials_;  // by glTF and glTF scene; under content_mutex_
   mutable std::mutex content_mutex_;

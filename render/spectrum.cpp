@@ -21,11 +21,17 @@ glm::vec3 rgb_weights_at(double wavelength_m) {
 
 glm::vec3 rgb_weights_over(double centre_m, double width_m) {
   if (!(width_m > 0.0)) return rgb_weights_at(centre_m);
+  // Weighted by the photons of the band's equal-energy spectrum, whose photon flux grows as lambda: a colour
+  // reflects the mean of its reflectance over those photons (the plain mean over wavelength gave a blue-green
+  // colour 9 % more ambient photons over 400-700 nm; a verifier's find). Grey stays grey.
   constexpr int kSteps = 256;
   glm::dvec3 sum(0.0);
-  for (int i = 0; i < kSteps; ++i)
-    sum += glm::dvec3(rgb_weights_at(centre_m + width_m * ((i + 0.5) / kSteps - 0.5)));
-  return glm::vec3(sum / double(kSteps));
+  double photons = 0.0;
+  for (int i = 0; i < kSteps; ++i) {
+    const double lambda = centre_m + width_m * ((i + 0.5) / kSteps - 0.5);
+    sum += lambda * glm::dvec3(rgb_weights_at(lambda)), photons += lambda;
+  }
+  return glm::vec3(sum / photons);
 }
 
 double photons_per_second_per_photometric_unit(double wavelength_m, double bandwidth_m) {

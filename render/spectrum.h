@@ -13,7 +13,8 @@ using Spec = glm::vec2;
 // nominal channel centres (blue 465 nm, green 540 nm, red 610 nm), pure blue below and pure red above.
 // glTF colours carry no spectrum; this keeps a red object red under a 637 nm laser and grey stays grey.
 glm::vec3 rgb_weights_at(double wavelength_m);
-// The same, averaged over [centre - width/2, centre + width/2] (the ambient band).
+// The same, averaged over [centre - width/2, centre + width/2] (the ambient band) weighted by lambda: by the
+// photons of an equal-energy spectrum.
 glm::vec3 rgb_weights_over(double centre_m, double width_m);
 
 // Integral of the CIE 1931 photopic luminous efficiency V(lambda) over 380-780 nm, in nm: 106.8565 from

@@ -490,7 +490,7 @@ TEST(DatasetFile, RangesText) {
 // (its samples rendered before are stale, with the change in words), and nowhere else (other samples keep their
 // hashes): a gate sweep to a target error; an intensity run to a target error that keeps its laser return
 // without laser_on; a scene rendering GGX lobes (a glossy or metallic material, in its glTF or by a sample's
-// parameters).
+// parameters); a colour under ambient light.
 TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
   const fs::path dir = fs::temp_directory_path() / ("spadgen_dataset_revisions_" + std::to_string(::getpid()));
   const auto resolved = [&](const std::string& set) {
@@ -523,7 +523,14 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
            {"\"materials.white_paper.roughness\": 1", ""},
            {"\"materials.white_paper.metallic\": 0.2", ggx},
            // a mirror (roughness below 0.032: Dirac lobes only) renders no GGX lobe
-           {"\"materials.white_paper.metallic\": 1, \"materials.white_paper.roughness\": 0.01", ""}}) {
+           {"\"materials.white_paper.metallic\": 1, \"materials.white_paper.roughness\": 0.01", ""},
+           // a colour under ambient light reflects the band's photons (lambda-weighted): grey, or colour in the
+           // dark, keeps its bits
+           {"\"ambient.illuminance_lux\": 100", ""},
+           {"\"materials.white_paper.base_color\": [0.8, 0.2, 0.2]", ""},
+           {"\"ambient.illuminance_lux\": 100, \"materials.white_paper.base_color\": [0.8, 0.2, 0.2]",
+            "coloured surfaces and lights render the ambient light otherwise: the band's colours are averaged over its photons "
+            "(an equal-energy spectrum's, by lambda), not plainly over wavelength (up to about 15 %)"}}) {
     const DatasetFolder::Resolved r = resolved(c.set);
     EXPECT_EQ(r.revisions, c.revisions) << c.set;
     EXPECT_EQ(r.hash != r.hash_before_revisions, !c.revisions.empty()) << c.set;

@@ -190,6 +190,30 @@ TEST(Transport, AmbientEnvironmentGivesTheCosFourthFalloff) {
     }
 }
 
+// A colour reflects the ambient band's photons: its reflectance averaged weighted by lambda, the photon flux of an
+// equal-energy spectrum. Pure red over 400-700 nm (the hat weights of docs/render.md: 0 below 540 nm, rising to 1 at
+// 610 nm): (int_540^610 (l - 540) / 70 l dl + int_610^700 l dl) / int_400^700 l dl = (20533.3 + 58950) / 165000 =
+// 0.481717 of a white plate's ambient light, on the same paths (the plain mean over wavelength, 0.416667, was 13 %
+// low; a blue-green colour 9 % high).
+TEST(Transport, AColourReflectsTheAmbientBandsPhotons) {
+  RenderStageConfig c = test_config(8, 8, 110e-6);
+  c.render.samples_per_pixel = 4;
+  c.ambient.illuminance_lux = 50.0;
+  c.ambient.wavelength_m = 550e-9;
+  c.ambient.bandwidth_m = 300e-9;
+  const auto ambient = [&](glm::vec3 colour) {
+    scenes::Scene s;
+    scenes::Material m = test::lambertian(1.0f);
+    m.base_color = glm::vec4(colour, 1.0f);
+    add_quad(s, {0, 0, -1}, {5, 0, 0}, {0, 5, 0}, add_material(s, m));
+    const TransientTile t = Renderer(s, c).transient({0, 0, 8, 8}, {0, 0, 8, 8}, TimeAxis{});
+    return sum(t.ambient_rate.data(), 64);
+  };
+  const double white = ambient(glm::vec3(1.0f));
+  ASSERT_GT(white, 0.0);
+  EXPECT_NEAR(ambient(glm::vec3(1, 0, 0)) / white, (20533.0 + 1.0 / 3.0 + 58950.0) / 165000.0, 2e-5);
+}
+
 // COLOR_0 multiplies the base colour channel by channel before the colour is reduced to the laser's and the
 // ambient light's bands (glTF 2.0): a plate of factor 0.6 painted 0.5 renders as one of factor 0.3, to float rounding
 // (it rendered 0.6: COLOR_0 was ignored); a red factor painted green reflects nothing (a product of each one's
