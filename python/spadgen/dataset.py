@@ -142,6 +142,12 @@ class Sample:
             }.get(self.status, f" is {self.status}, not done"))
         if r not in self._runs:
             folder = self.folder if r == 0 else self.repeat_folders[r - 1]
+            if not os.path.lexists(folder):  # (open_run said "no such folder", without the index or the remedy)
+                raise SampleNotDoneError(
+                    f"{folder}: {os.path.join(self._dataset_path, 'index.jsonl')} lists realisation {r} of sample "
+                    f"{self.index} done (hash {self.sample_hash}), and its folder does not exist: the sample was removed "
+                    "or changed since the index was written; `spadgen dataset run` brings the index up to date (and "
+                    "generates what is not done), then open the dataset again (spadgen.open_dataset)")
             run = open_run(folder)
             section = run.metadata.get("dataset", {})
             found = (section.get("index"), section.get("repeat"), section.get("sample_hash"))

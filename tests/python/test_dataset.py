@@ -177,6 +177,13 @@ def test_errors_name_the_folder(ds, dataset_dir, tmp_path, sweep_run):
     moved = spadgen.Sample(ds, dict(ds.index[0], sample_hash="0123456789abcdef"))
     with pytest.raises(spadgen.SampleNotDoneError, match=r"was generated again since; open the dataset again \(spadgen.open_dataset\)"):
         moved.run
+    # A done sample whose folder was removed after the index was written: said so with the remedy, as evaluate
+    # says it (it was a bare "no such folder", also inside a DataLoader's workers).
+    gone = spadgen.Sample(ds, dict(ds.index[0], folder="samples/999999"))
+    with pytest.raises(spadgen.SampleNotDoneError, match=r"samples/999999: .*index.jsonl lists realisation 0 of sample 0 "
+                                                          r"done \(hash [0-9a-f]{16}\), and its folder does not exist.*"
+                                                          r"`spadgen dataset run` brings the index up to date"):
+        gone.run
     with pytest.raises(FileNotFoundError, match=f"{tmp_path / 'nothing'}: not a spadgen dataset folder.*no such folder"):
         spadgen.open_dataset(tmp_path / "nothing")
     with pytest.raises(FileNotFoundError, match="it is a run folder: spadgen.open_run reads it"):
