@@ -110,4 +110,10 @@ std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img
 std::vector<std::string> laser_image_warnings(const RunConfig& c, const PixelRect& img, const scenes::Scene& scene,
                                               const std::vector<render::LaserImageInView>& images);
 
+// Before rendering (run and info): a glTF point or spot light lighting the scene (ambient.gltf_lights) that lies
+// in the image, facing the camera: a real camera sees it there, a point that no camera ray meets, so not
+// rendered (its light on the scene is).
+std::vector<std::string> point_light_warnings(const RunConfig& c, const PixelRect& img, const scenes::Scene& scene,
+                                              const render::Camera& camera);
+
 }  // namespace spadgen::app

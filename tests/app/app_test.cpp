@@ -886,6 +886,41 @@ TEST_F(App, ALightTooBrightForFloatOutputsIsRefused) {
   EXPECT_EQ(r.code, 0) << r.output;
 }
 
+// A glTF point light in view is a lamp a real camera sees, which no camera ray meets (a verifier's 10 cd bulb at 1 m
+// gave 0 photons): info and the run say where it lies, (0.01, 0, 0.5) m seen from (0, 0, 1) through 50 mm lands at
+// x = 512 + 50 mm x 0.02 / 9.4 um = 618.4, y = 250. A spot light facing away from the camera is not seen.
+TEST_F(App, AGltfLampInViewIsWarned) {
+  nlohmann::json gltf = nlohmann::json::parse(slurp(kScenes + "flat_target.gltf"));
+  gltf["extensionsUsed"].push_back("KHR_lights_punctual");
+  gltf["extensions"]["KHR_lights_punctual"]["lights"] = {{{"name", "bulb"}, {"type", "point"}, {"intensity", 10.0}},
+                                                         {{"name", "away"}, {"type", "spot"}, {"intensity", 10.0}, {"spot", {{"outerConeAngle", 0.5}}}}};
+  for (const auto& [name, x, light] : {std::tuple{"bulb_node", 0.01, 0}, std::tuple{"spot_node", -0.01, 1}}) {
+    gltf["nodes"].push_back({{"name", name}, {"translation", {x, 0.0, 0.5}}, {"extensions", {{"KHR_lights_punctual", {{"light", light}}}}}});
+    gltf["scenes"][0]["nodes"].push_back(gltf["nodes"].size() - 1);
+  }
+  std::ofstream(dir_ / "lamp.gltf") << gltf.dump();
+  std::string scene = slurp(kScenes + "flat_target.json");
+  scene.replace(scene.find("\"flat_target.gltf\""), 18, "\"lamp.gltf\"");
+  std::ofstream(dir_ / "lamp.json") << scene;
+  const std::string where = "the glTF's point light (light 0 'bulb' (node 2 'bulb_node')) lies in view at sensor pixel (618, 250)";
+  Result r = sh("info " + (dir_ / "lamp.json").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr(where));
+  EXPECT_THAT(r.output, ::testing::Not(HasSubstr("spot light")));
+  const std::string run = "run " + (dir_ / "lamp.json").string() + " -q --set render.samples_per_pixel=1 --set outputs.previews=false "
+                          "--set acquisition.gate_sweep.step_ps=3600 -o " + (dir_ / "out").string();
+  r = sh(run + " --set camera.crop=[616,248,4,4]");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr(where + " (the image's (2, 2))"));
+  EXPECT_THAT(nlohmann::json::parse(slurp(dir_ / "out/metadata.json"))["warnings"].dump(), HasSubstr(where));
+  // not where the crop leaves it out, nor with ambient.gltf_lights off (the lamp lights nothing then)
+  for (const std::string& other : {std::string(" --set camera.crop=[500,240,8,4]"), std::string(" --set camera.crop=[616,248,4,4] --set ambient.gltf_lights=false")}) {
+    r = sh(run + other);
+    ASSERT_EQ(r.code, 0) << r.output;
+    EXPECT_THAT(r.output, ::testing::Not(HasSubstr("lies in view"))) << other;
+  }
+}
+
 TEST_F(App, InfoRefusesWhatTheRunRefusesAndNotWhatItIgnores) {
   Result r = sh("info " + kScenes + "flat_target.json --set laser.beam=gltf_light --set laser.gltf_light=zzz");
   EXPECT_EQ(r.code, 1);
