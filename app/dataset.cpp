@@ -854,6 +854,7 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
         r.threads = options.threads;
         r.progress = false;
         r.dataset = datasets::dataset_section(folder, s, rec.hash, 0);
+        if (!rec.tables_hash.empty()) r.tables_hash = rec.tables_hash;
         const WarningContext context("sample " + std::to_string(s.index) + ": ");
         run(r);
       }
@@ -868,6 +869,7 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
         so.threads = options.threads;
         so.progress = false;
         so.dataset = datasets::dataset_section(folder, s, rec.hash, k);
+        if (!rec.tables_hash.empty()) so.tables_hash = rec.tables_hash;
         // (silent once said: the same scene, sensor and light)
         const WarningContext context("sample " + std::to_string(s.index) + ", realisation " + std::to_string(k) + ": ", warned);
         sense(so);

@@ -116,6 +116,7 @@ RunResult run(const RunOptions& options) {
   sensor::SensorModel sensor(sensor_stage(cfg));
   apply_user_maps(sensor, cfg);
   tables.check_unchanged(cfg);
+  tables.check_expected(cfg, options.tables_hash);
   warn(sensor_warnings(sensor));
   const render::Renderer renderer = naming_keys(resolved, options.scene_file, [&] {
     return render::Renderer(scene, render_stage(cfg, sensor.row_fill_factor(), sensor.row_ambient_floor()));

@@ -23,6 +23,9 @@ struct RunOptions {
   int threads = 0;                      // 0 = all cores
   bool progress = true;                 // progress and the summary lines on stderr (-q: off)
   std::optional<nlohmann::json> dataset;  // spadgen dataset: recorded as metadata.json's "dataset"
+  // spadgen dataset: the sensor tables' hash the sample's hash holds; a run whose sensor reads other tables (edited
+  // since the sample was resolved) is refused, not recorded done under the hash of the others
+  std::optional<std::string> tables_hash;
 };
 
 struct RunResult {
@@ -43,6 +46,7 @@ struct SenseOptions {
   int threads = 0;
   bool progress = true;
   std::optional<nlohmann::json> dataset;  // spadgen dataset: recorded as metadata.json's "dataset"
+  std::optional<std::string> tables_hash;  // spadgen dataset: as RunOptions::tables_hash
 };
 
 // `spadgen sense`: the sensor stage alone, from the light a run saved (light/). With the run's settings

@@ -48,6 +48,14 @@ void SensorTables::check_unchanged(const RunConfig& c) const {
               " changed while the sensor read it; run again once it is written");
 }
 
+void SensorTables::check_expected(const RunConfig& c, const std::optional<std::string>& expected) const {
+  if (!expected || *expected == hash) return;
+  throw Error(c.scene_file + ": a sensor table it names (laser.pulse_shape_csv, sensor.gate.profile_csv, sensor.gate.maps_exr, a "
+              "pdp_csv) changed since the dataset resolved this sample (the tables' hash " + *expected + " then, " + hash +
+              " as the sensor read them): the sample is not generated from other tables than its hash holds; run the "
+              "dataset again once they are as wanted");
+}
+
 void apply_user_maps(sensor::SensorModel& sensor, const RunConfig& c) {
   if (c.sensor.gate.maps_exr.empty()) return;
   // (a file that is no EXR was named without its key or scene file: an adversarial tester's find)

@@ -6,6 +6,7 @@
 
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -45,6 +46,9 @@ struct SensorTables {
   static SensorTables hashed(const RunConfig& c);
   // Throws spadgen::Error naming the scene file when the tables differ now from these.
   void check_unchanged(const RunConfig& c) const;
+  // Throws spadgen::Error naming the scene file when these are not the tables of `expected` (a dataset sample's
+  // hash, taken when it was resolved: null, nothing to compare).
+  void check_expected(const RunConfig& c, const std::optional<std::string>& expected) const;
 };
 
 // Denormal floats flushed to zero and read as zero (FTZ, DAZ) on the calling thread. main() calls it

@@ -460,6 +460,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   sensor::SensorModel sensor(sensor_stage(cfg));
   apply_user_maps(sensor, cfg);
   tables_read.check_unchanged(cfg);
+  tables_read.check_expected(cfg, options.tables_hash);
   for (std::string& w : sensor_warnings(sensor)) {
     print_warning(w);
     scene_warnings.push_back(std::move(w));

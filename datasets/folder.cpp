@@ -457,10 +457,13 @@ DatasetFolder::Resolved DatasetFolder::resolve(const Sample& s) const {
     if (!revisions.empty()) revisions += "; ";
     revisions += v.change;
   }
-  return {r.resolved, sample_hash(s, r), sample_hash(s, r, false), revisions};
+  // (the tables read once for both hashes: read twice, an edit between the readings gave them other tables)
+  const std::string tables = scenes::uses_sensor_tables(r.config) ? scenes::sensor_tables_hash(r.config) : std::string();
+  return {r.resolved, sample_hash(s, r, true, &tables), sample_hash(s, r, false, &tables), revisions, tables};
 }
 
-std::string DatasetFolder::sample_hash(const Sample& s, const scenes::ResolvedRun& r, bool revisions) const {
+std::string DatasetFolder::sample_hash(const Sample& s, const scenes::ResolvedRun& r, bool revisions,
+                                       const std::string* tables) const {
   // The hash covers what shapes the sample's data: its resolved scene, the content of its files and the
   // program's version; the same function of the sample on every machine and shard.
   // The sensor's tables (CSV and EXR files the scene file names) by content, when it names any (a pulse
@@ -470,7 +473,7 @@ std::string DatasetFolder::sample_hash(const Sample& s, const scenes::ResolvedRu
     const MaterialTraits materials = material_traits(r);
     for (const Revision& v : render_revisions(r.config, materials.ggx, materials.echo, materials.coloured_ambient)) text += std::string("\n") + v.marker;
   }
-  if (scenes::uses_sensor_tables(r.config)) text += "\n" + scenes::sensor_tables_hash(r.config);
+  if (scenes::uses_sensor_tables(r.config)) text += "\n" + (tables ? *tables : scenes::sensor_tables_hash(r.config));
   return scenes::hex64(scenes::fnv1a64(text));
 }
 
@@ -543,7 +546,12 @@ SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash) co
   SampleRecord rec;
   rec.sample = s;
   try {
-    rec.hash = hash != nullptr && !hash->empty() ? *hash : resolve(s).hash;
+    if (hash != nullptr && !hash->empty()) {
+      rec.hash = *hash;
+    } else {
+      Resolved now = resolve(s);
+      rec.hash = std::move(now.hash), rec.tables_hash = std::move(now.tables_hash);
+    }
   } catch (const Error& e) {
     rec.status = Status::Failed;
     rec.error = e.what();

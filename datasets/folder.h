@@ -49,6 +49,9 @@ struct SampleRecord {
   Sample sample;
   Status status = Status::Missing;
   std::string hash;     // of the sample as it resolves now; "" when it does not resolve
+  // the sensor tables' hash that `hash` holds, when inspect resolved the sample ("" when the scene names none, or
+  // the hash was given): its run is refused if its sensor reads other tables (RunOptions::tables_hash)
+  std::string tables_hash;
   std::string error;    // failed: why; damaged: the files that are gone or changed; stale: what changed (status)
   std::vector<std::string> folders;  // done: the sample's folder and its repeats'
   // inspected: whether each of them (the sample's folder, then its repeats') holds the sample as it resolves now,
@@ -152,10 +155,14 @@ class DatasetFolder {
     std::string hash;
     std::string hash_before_revisions;  // the hash without sample_hash's revisions of the renderer's rules
     std::string revisions;              // those revisions in words ("" when none applies)
+    // the sensor tables' hash (scenes::sensor_tables_hash) the hash holds; "" when the scene names none
+    std::string tables_hash;
   };
   Resolved resolve(const Sample& s) const;
-  // The hash of sample s whose scene resolved to r (as resolve computes it).
-  std::string sample_hash(const Sample& s, const scenes::ResolvedRun& r, bool revisions = true) const;
+  // The hash of sample s whose scene resolved to r (as resolve computes it); tables: the sensor tables' hash
+  // when already read (null: read here).
+  std::string sample_hash(const Sample& s, const scenes::ResolvedRun& r, bool revisions = true,
+                          const std::string* tables = nullptr) const;
 
   // The metadata.json of a sample folder ("samples/000042", a repeat's) when it is one spadgen published
   // (it lists its files and has a dataset section), else nullopt.

@@ -18,6 +18,8 @@
 #include <thread>
 
 #include "app/dataset.h"
+#include "app/pipeline.h"
+#include "core/error.h"
 #include "app/run_parts.h"
 #include "app_fixture.h"
 #include "scenes/scene_file.h"
@@ -598,6 +600,35 @@ TEST_F(Dataset, AChangedSensorTableMakesSamplesStale) {
                                    "parameters) (`spadgen dataset run` generates them again)"));
   write(dir_ / "pulse.csv", "0,0\n50,1\n100,0\n");  // the same bytes again: done again
   EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output, HasSubstr("2 samples: 2 done, 0 failed, 0 stale"));
+}
+
+// A sensor table edited after the dataset resolved a sample (whose hash holds the tables as they were then) and before
+// the run's sensor read it: the run is refused, so that the sample fails and is generated again; it was recorded done
+// under the hash of the tables it did not read, and stayed done once they were restored. The dataset hands the run
+// the tables' hash of the sample's (RunOptions::tables_hash); a run of the same tables goes on.
+TEST_F(Dataset, ARunOfOtherTablesThanItsSampleHashHoldsIsRefused) {
+  write(dir_ / "pulse.csv", "0,0\n50,1\n100,0\n");
+  spadgen::app::RunOptions o;
+  o.scene_file = kScenes + "multi_object.json";
+  o.overrides = {"laser.pulse_shape_csv=\"" + (dir_ / "pulse.csv").string() + "\"", "camera.crop=[480,242,8,4]",
+                 "render.samples_per_pixel=1", "outputs.previews=false"};
+  o.threads = 1;
+  o.progress = false;
+  o.tables_hash = spadgen::scenes::sensor_tables_hash(spadgen::scenes::load_scene_file(o.scene_file, o.overrides).config);
+  o.out_dir = (dir_ / "same").string();
+  EXPECT_NO_THROW(spadgen::app::run(o));
+  write(dir_ / "pulse.csv", "0,0\n300,1\n600,0\n");  // edited after the sample's hash was taken
+  o.out_dir = (dir_ / "edited").string();
+  try {
+    spadgen::app::run(o);
+    ADD_FAILURE() << "a run of other tables than its sample's hash holds was not refused";
+  } catch (const spadgen::Error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("multi_object.json: a sensor table it names (laser.pulse_shape_csv, sensor.gate.profile_csv, "
+                                    "sensor.gate.maps_exr, a pdp_csv) changed since the dataset resolved this sample (the tables' "
+                                    "hash " + *o.tables_hash + " then, "));
+  }
+  EXPECT_FALSE(fs::exists(dir_ / "edited"));
+  // and a dataset of such samples goes on as before (AChangedSensorTableMakesSamplesStale: 2 done)
 }
 
 TEST_F(Dataset, AChangedSceneMakesSamplesStaleAndReplacesThemWhole) {
