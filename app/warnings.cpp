@@ -233,9 +233,10 @@ std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img
       w.push_back("no laser light reaches the " + image + " (laser.beam, half_angle_deg, offset_m, gltf_light" +
                   (laser_warnings(c, camera).empty() ? std::string() : "; or no camera path landed on the cone's small spot") +
                   "; or what it lights reflects none of it: a black base colour, or a smooth mirror (roughness below "
-                  "0.032, a Dirac lobe) that sends it where nothing in view is lit (the laser's image is rendered in planar "
-                  "faces of small meshes only: docs/render.md, \"The laser's image in smooth planar faces\")): the outputs hold "
-                  "ambient light and dark counts only");
+                  "0.032, a Dirac lobe) that sends it where nothing in view is lit, or straight into the lens as a glint spadgen "
+                  "does not render (the laser's image is rendered in planar faces of small meshes only, and not as the camera "
+                  "sees it: docs/render.md, \"The laser's image in smooth planar faces\")): the outputs hold ambient light and "
+                  "dark counts only");
     return w;
   }
   if (!timed) return w;

@@ -630,12 +630,13 @@ TEST_F(App, UselessRunsAreWarnedAboutOnStderrAndInTheMetadata) {
        "a surface passes through the camera's centre: pixels of the 16 x 16 image meet it at range"},
       {"--set laser.beam=cone --set laser.half_angle_deg=0.01 --set laser.offset_m=[0.5,0,0]",
        "no laser light reaches the 16 x 16 image"},
-      // a smooth mirror that sends the laser back where nothing in view is lit: named as a cause (only a black base
-      // colour was)
+      // a smooth mirror that sends the laser back into the lens (a glint not rendered; TheLasersImageInASmoothFaceInViewIsWarned
+      // says where) or where nothing in view is lit: named as a cause (only a black base colour was)
       {"--set materials.white_paper.roughness=0 --set materials.white_paper.metallic=1",
        "no laser light reaches the 16 x 16 image (laser.beam, half_angle_deg, offset_m, gltf_light; or what it lights reflects "
        "none of it: a black base colour, or a smooth mirror (roughness below 0.032, a Dirac lobe) that sends it where nothing in "
-       "view is lit (the laser's image is rendered in planar faces of small meshes only"},
+       "view is lit, or straight into the lens as a glint spadgen does not render (the laser's image is rendered in planar faces "
+       "of small meshes only, and not as the camera sees it"},
       // 40 MHz: 3.747 m; the target 5 m away folds into the window, so none of it is outside.
       {"--set camera.position_m=[0,0,5] --set camera.focal_length_mm=12",
        "100 % of the laser light comes from beyond the unambiguous range of 3.747 m"},
