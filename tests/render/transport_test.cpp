@@ -190,23 +190,33 @@ TEST(Transport, AmbientEnvironmentGivesTheCosFourthFalloff) {
     }
 }
 
+// 8 x 8 pixels of 110 um at 4 paths, under 50 lux of an ambient band around 550 nm of the given width; a white
+// Lambertian quad of base colour `colour` at 1 m filling the view.
+RenderStageConfig lit_8x8(double bandwidth_m) {
+  RenderStageConfig c = test_config(8, 8, 110e-6);
+  c.render.samples_per_pixel = 4;
+  c.ambient.illuminance_lux = 50.0;
+  c.ambient.wavelength_m = 550e-9;
+  c.ambient.bandwidth_m = bandwidth_m;
+  return c;
+}
+scenes::Scene quad_of_colour(glm::vec3 colour) {
+  scenes::Scene s;
+  scenes::Material m = test::lambertian(1.0f);
+  m.base_color = glm::vec4(colour, 1.0f);
+  add_quad(s, {0, 0, -1}, {5, 0, 0}, {0, 5, 0}, add_material(s, m));
+  return s;
+}
+
 // A colour reflects the ambient band's photons: its reflectance averaged weighted by lambda, the photon flux of an
 // equal-energy spectrum. Pure red over 400-700 nm (the hat weights of docs/render.md: 0 below 540 nm, rising to 1 at
 // 610 nm): (int_540^610 (l - 540) / 70 l dl + int_610^700 l dl) / int_400^700 l dl = (20533.3 + 58950) / 165000 =
 // 0.481717 of a white plate's ambient light, on the same paths (the plain mean over wavelength, 0.416667, was 13 %
 // low; a blue-green colour 9 % high).
 TEST(Transport, AColourReflectsTheAmbientBandsPhotons) {
-  RenderStageConfig c = test_config(8, 8, 110e-6);
-  c.render.samples_per_pixel = 4;
-  c.ambient.illuminance_lux = 50.0;
-  c.ambient.wavelength_m = 550e-9;
-  c.ambient.bandwidth_m = 300e-9;
+  const RenderStageConfig c = lit_8x8(300e-9);
   const auto ambient = [&](glm::vec3 colour) {
-    scenes::Scene s;
-    scenes::Material m = test::lambertian(1.0f);
-    m.base_color = glm::vec4(colour, 1.0f);
-    add_quad(s, {0, 0, -1}, {5, 0, 0}, {0, 5, 0}, add_material(s, m));
-    const TransientTile t = Renderer(s, c).transient({0, 0, 8, 8}, {0, 0, 8, 8}, TimeAxis{});
+    const TransientTile t = Renderer(quad_of_colour(colour), c).transient({0, 0, 8, 8}, {0, 0, 8, 8}, TimeAxis{});
     return sum(t.ambient_rate.data(), 64);
   };
   const double white = ambient(glm::vec3(1.0f));
@@ -219,16 +229,9 @@ TEST(Transport, AColourReflectsTheAmbientBandsPhotons) {
 // (it rendered 0.6: COLOR_0 was ignored); a red factor painted green reflects nothing (a product of each one's
 // reduction reflected ambient light).
 TEST(Transport, VertexColoursMultiplyTheBaseColourBeforeItIsReduced) {
-  RenderStageConfig c = test_config(8, 8, 110e-6);
-  c.render.samples_per_pixel = 4;
-  c.ambient.illuminance_lux = 50.0;
-  c.ambient.wavelength_m = 550e-9;
-  c.ambient.bandwidth_m = 100e-9;
+  const RenderStageConfig c = lit_8x8(100e-9);
   const auto render = [&](glm::vec3 factor, glm::vec3 paint) {
-    scenes::Scene s;
-    scenes::Material m = test::lambertian(1.0f);
-    m.base_color = glm::vec4(factor, 1.0f);
-    add_quad(s, {0, 0, -1}, {5, 0, 0}, {0, 5, 0}, add_material(s, m));
+    scenes::Scene s = quad_of_colour(factor);
     if (paint != glm::vec3(-1.0f)) s.meshes[0].colors0.assign(4, paint);
     return Renderer(s, c).transient({0, 0, 8, 8}, {0, 0, 8, 8}, TimeAxis{});
   };
