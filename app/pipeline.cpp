@@ -122,7 +122,6 @@ RunResult run(const RunOptions& options) {
     return render::Renderer(scene, render_stage(cfg, sensor.row_fill_factor(), sensor.row_ambient_floor()));
   });
   const int objects = int(scenes::objects_of(scene).list.size());
-  warn(laser_image_warnings(cfg, image_rect(cfg), scene, renderer.laser_images_in_view()));
 
   const TimeAxis axis = time_axis(cfg, sensor);
   const PixelRect img = image_rect(cfg);

@@ -233,10 +233,9 @@ std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img
       w.push_back("no laser light reaches the " + image + " (laser.beam, half_angle_deg, offset_m, gltf_light" +
                   (laser_warnings(c, camera).empty() ? std::string() : "; or no camera path landed on the cone's small spot") +
                   "; or what it lights reflects none of it: a black base colour, or a smooth mirror (roughness below "
-                  "0.032, a Dirac lobe) that sends it where nothing in view is lit, or straight into the lens as a glint spadgen "
-                  "does not render (the laser's image is rendered in planar faces of small meshes only, and not as the camera "
-                  "sees it: docs/render.md, \"The laser's image in smooth planar faces\")): the outputs hold ambient light and "
-                  "dark counts only");
+                  "0.032, a Dirac lobe) that sends it where nothing in view is lit (the laser's image is rendered in planar "
+                  "faces of small meshes only: docs/render.md, \"The laser's image in smooth planar faces\")): the outputs hold "
+                  "ambient light and dark counts only");
     return w;
   }
   if (!timed) return w;
@@ -252,29 +251,6 @@ std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img
                 "laser_photons_per_pulse.outside_fraction; acquisition.gate_sweep.start_ns, stop_ns, "
                 "laser.emission_delay_ns, sensor.gate.delay_ns, or render.window_start_ns, window_stop_ns): "
                 "the counts miss it");
-  return w;
-}
-
-std::vector<std::string> laser_image_warnings(const RunConfig& c, const PixelRect& img, const scenes::Scene& scene,
-                                              const std::vector<render::LaserImageInView>& images) {
-  const bool seen = c.acquisition.mode == AcquisitionMode::GateSweep || c.outputs.transient || c.acquisition.intensity.laser_on;
-  if (!seen || !(c.laser.average_power_W > 0.0)) return {};
-  std::vector<std::string> w;
-  for (const render::LaserImageInView& v : images) {
-    const int x = int(std::floor(v.px)), y = int(std::floor(v.py));
-    if (!img.contains(x, y)) continue;
-    const std::string material = v.material >= 0 && size_t(v.material) < scene.materials.size()
-                                     ? "material '" + scene.materials[size_t(v.material)].name + "'"
-                                     : "its material";
-    const bool cropped = img.width != c.camera.width_px || img.height != c.camera.height_px;
-    w.push_back("the laser's mirror image in a smooth planar face (" + material + ") lands in view at sensor pixel (" +
-                std::to_string(x) + ", " + std::to_string(y) + ")" +
-                (cropped ? " (the image's (" + std::to_string(x - img.x0) + ", " + std::to_string(y - img.y0) + "))" : std::string()) +
-                ": a real camera sees a bright glint there (laser -> face -> lens, unless something hides it), which spadgen "
-                "does not render (a point image that no camera path reaches; a face of roughness 0.032 or more renders it: "
-                "docs/render.md, \"The laser's image in smooth planar faces\"); move the laser (laser.offset_m) or tilt the "
-                "face to keep it out of view");
-  }
   return w;
 }
 

@@ -10,7 +10,6 @@
 #include "core/tile.h"
 #include "app/metadata.h"
 #include "render/camera.h"
-#include "render/renderer.h"
 #include "scenes/scene.h"
 #include "sensor/sensor.h"
 
@@ -103,12 +102,6 @@ std::vector<std::string> camera_warnings(const RunConfig& c, const scenes::Scene
 inline constexpr double kWarnRangeAtCameraM = 1e-6;
 // camera: as laser_warnings', which no laser light returning names as a cause when it applies.
 std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img, const RunRecord& r, const render::Camera& camera);
-
-// After the renderer is built (run): the laser's images in smooth planar faces that land in the image
-// (render::Renderer::laser_images_in_view), where a real camera sees a bright glint that spadgen does not render,
-// when the laser matters to the outputs (a gate sweep, transients, or laser_on).
-std::vector<std::string> laser_image_warnings(const RunConfig& c, const PixelRect& img, const scenes::Scene& scene,
-                                              const std::vector<render::LaserImageInView>& images);
 
 // Before rendering (run and info): a glTF point or spot light lighting the scene (ambient.gltf_lights) that lies
 // in the image, facing the camera: a real camera sees it there, a point that no camera ray meets, so not

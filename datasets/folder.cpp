@@ -375,6 +375,7 @@ DatasetFolder::MaterialTraits DatasetFolder::material_traits(const scenes::Resol
   if (!m.loaded) return t;
   t.ggx = m.default_material;
   bool refracting = false, smooth_clear = false, colour = m.painted || m.coloured_lights, emission = false;
+  t.smooth_mirror = false;
   const auto grey = [](const glm::vec3& v) { return v.r == v.g && v.g == v.b; };
   for (scenes::Material mat : m.used) {
     for (const MaterialEdit& e : r.config.edits.materials)
@@ -383,6 +384,7 @@ DatasetFolder::MaterialTraits DatasetFolder::material_traits(const scenes::Resol
     t.ggx |= !mat.lambertian() && !mat.smooth();
     refracting |= mat.refracting();
     smooth_clear |= mat.transmissive() && mat.smooth();
+    t.smooth_mirror |= !mat.lambertian() && mat.smooth();
     colour |= !grey(glm::vec3(mat.base_color)) || mat.base_color_texture >= 0 || !grey(mat.attenuation_color) || !grey(mat.emissive);
     emission |= mat.emissive != glm::vec3(0.0f);
   }
@@ -401,8 +403,14 @@ struct Revision {
   const char* marker;
   const char* change;
 };
-std::vector<Revision> render_revisions(const RunConfig& c, bool ggx, bool echo, bool coloured_ambient) {
+std::vector<Revision> render_revisions(const RunConfig& c, bool ggx, bool echo, bool coloured_ambient, bool smooth_mirror) {
   std::vector<Revision> out;
+  // the camera's view of the laser's image in smooth planar faces (laser -> face -> lens), a glint that was not
+  // rendered: a scene with a smooth material (its faces may be the laser's mirrors) whose laser is traced
+  if (smooth_mirror && laser_traced(c))
+    out.push_back({"the camera sees the laser's image in smooth planar faces",
+                   "smooth (roughness below 0.032) mirrors and plates render otherwise: the laser's image in their faces, a "
+                   "glint where it lands in view, is rendered as the camera sees it (it was missing)"});
   // the ambient band's colours weighted by its photons (lambda), not averaged plainly over wavelength: a colour's
   // ambient light moved by up to about 15 % (grey ones kept their bits)
   if (coloured_ambient)
@@ -453,7 +461,7 @@ DatasetFolder::Resolved DatasetFolder::resolve(const Sample& s) const {
   }
   std::string revisions;
   const MaterialTraits materials = material_traits(r);
-  for (const Revision& v : render_revisions(r.config, materials.ggx, materials.echo, materials.coloured_ambient)) {
+  for (const Revision& v : render_revisions(r.config, materials.ggx, materials.echo, materials.coloured_ambient, materials.smooth_mirror)) {
     if (!revisions.empty()) revisions += "; ";
     revisions += v.change;
   }
@@ -471,7 +479,7 @@ std::string DatasetFolder::sample_hash(const Sample& s, const scenes::ResolvedRu
   std::string text = r.resolved.dump() + "\n" + scene_content_hash(s.scene) + "\n" + SPADGEN_VERSION;
   if (revisions) {
     const MaterialTraits materials = material_traits(r);
-    for (const Revision& v : render_revisions(r.config, materials.ggx, materials.echo, materials.coloured_ambient)) text += std::string("\n") + v.marker;
+    for (const Revision& v : render_revisions(r.config, materials.ggx, materials.echo, materials.coloured_ambient, materials.smooth_mirror)) text += std::string("\n") + v.marker;
   }
   if (scenes::uses_sensor_tables(r.config)) text += "\n" + (tables ? *tables : scenes::sensor_tables_hash(r.config));
   return scenes::hex64(scenes::fnv1a64(text));

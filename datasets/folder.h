@@ -211,6 +211,8 @@ class DatasetFolder {
     // a colour meets ambient light: a material, vertex paint or glTF light not grey, under an ambient
     // environment, glTF lights or emission
     bool coloured_ambient = true;
+    // a smooth material (Dirac lobes) other than a Lambertian one: its planar faces may mirror the laser into the lens
+    bool smooth_mirror = true;
   };
   MaterialTraits material_traits(const scenes::ResolvedRun& r) const;
   nlohmann::ordered_json record() const;  // what dataset.json holds for this dataset

@@ -23,6 +23,8 @@ class Camera {
   const glm::dvec3& right() const { return right_; }
   const glm::dvec3& up() const { return up_; }
   const glm::dvec3& forward() const { return forward_; }
+  double focal_length() const { return focal_; }  // metres
+  double pitch() const { return pitch_; }         // metres
 
   // Unit world direction through the sensor-plane point of pixel coordinates (px, py), where pixel
   // (x, y) spans [x, x + 1) x [y, y + 1) and its centre is (x + 0.5, y + 0.5).

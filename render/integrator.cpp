@@ -381,6 +381,7 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
     for (const Plane& p : planes) {
       if (p.area < 0.1 * largest || mirrors_.size() == kMaxLaserMirrors) continue;
       LaserMirror lm{p.n, p.offset, 0.0, mesh.material, volume, false, {}};
+      lm.mesh = int(m);
       // (a closed mesh's face, a box's, reflects on its outer side only: from inside lies the mesh)
       lm.two_sided = !volume && std::fabs(glm::dot(p.n, centroid) - p.offset) <= 1e-6 * (1.0 + std::fabs(p.offset));
       lm.e[0] = glm::normalize(glm::cross(p.n, std::fabs(p.n.x) < 0.9 ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0)));
@@ -476,6 +477,7 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
   laser_traced_ = config.trace_laser;
   optics_ = config.camera.optics_transmission;
   period_opl_ = kSpeedOfLight / config.laser.repetition_rate_Hz;
+  find_camera_glints();
   // The one check left here is of the interface, not of the scene file: the rows the caller describes.
   if (config.row_fill_factor.size() != static_cast<size_t>(camera.height()))
     throw Error("renderer: RenderStageConfig::row_fill_factor holds " + std::to_string(config.row_fill_factor.size()) +
@@ -963,7 +965,7 @@ void Integrator::connect_laser_rough(const NeeVertex& v, const Crossings& cx, do
   for (int j = 0; j < k; ++j) material[j] = cr[j].material, ng[j] = cr[j].ng;
   FaceHits hits;
   const FaceHit* met = hits.f;
-  if (trace_planar_path(v, path, material, ng, nullptr, nullptr, &rays->refracted, hits.f) != PathTrace::Clear) return;
+  if (trace_planar_path(v.sf.p, v.sf.ng, path, material, ng, nullptr, nullptr, &rays->refracted, hits.f) != PathTrace::Clear) return;
   double value = double(f.x), opl = 0.0;
   for (int s = 0; s <= k; ++s) {
     if (s < k) {
@@ -1215,11 +1217,11 @@ void Integrator::connect_laser_shaded(const NeeVertex& v, const Crossings& cx, d
   (void)deposit_planar_path(v, path, material, ng, index, media, nullptr, w, film, &rays->refracted, shaded);
 }
 
-Integrator::PathTrace Integrator::trace_planar_path(const NeeVertex& v, const PlanarPath& path, const int* material,
-                                                    const glm::vec3* ng, const bool* reflect, const bool* shaded,
-                                                    uint64_t* rays, FaceHit* faces) const {
+Integrator::PathTrace Integrator::trace_planar_path(const glm::vec3& origin, const glm::vec3& origin_n, const PlanarPath& path,
+                                                    const int* material, const glm::vec3* ng, const bool* reflect,
+                                                    const bool* shaded, uint64_t* rays, FaceHit* faces) const {
   const int k = path.k;
-  glm::vec3 q = v.sf.p, qn = v.sf.ng;
+  glm::vec3 q = origin, qn = origin_n;
   for (int s = 0; s <= k; ++s) {
     const glm::vec3 ds(path.d[s]);
     const glm::vec3 start_s = offset_ray_origin(q, qn, ds);
@@ -1250,27 +1252,11 @@ Integrator::PathTrace Integrator::trace_planar_path(const NeeVertex& v, const Pl
   return PathTrace::Clear;
 }
 
-bool Integrator::deposit_planar_path(const NeeVertex& v, const PlanarPath& path, const int* material, const glm::vec3* ng,
-                                     const double* index, const int* media, const bool* reflect, double w,
-                                     const PixelFilm& film, uint64_t* rays, const bool* shaded) const {
+Spec Integrator::planar_path_throughput(const PlanarPath& path, const FaceHit* faces, const double* index, const int* media,
+                                        const bool* reflect, const bool* shaded, double* opl) const {
   const int k = path.k;
-  const double intensity = laser_.intensity_towards(-path.d[k]);
-  if (!(intensity > 0.0)) return true;
-  const glm::vec3 wi(path.d[0]);
-  if (!v.counted(wi)) return true;
-  const Spec f = v.bsdf.eval_cos(wi);
-  if (!(f.x > 0.0f)) return true;
-  // Each segment must meet its face first (material and orientation), the last one nothing opaque.
-  FaceHits hits;
-  const FaceHit* faces = hits.f;
-  switch (trace_planar_path(v, path, material, ng, reflect, shaded, rays, hits.f)) {
-    case PathTrace::Clear: break;
-    case PathTrace::Blocked: return true;  // blocked on the refracted path
-    case PathTrace::Astray:
-    case PathTrace::Transmissive: return false;
-  }
   Spec t(1.0f);
-  double opl = 0.0;
+  *opl = 0.0;
   for (int s = 0; s <= k; ++s) {
     if (s < k) {
       const Surface& sf = faces[s].sf;
@@ -1284,8 +1270,32 @@ bool Integrator::deposit_planar_path(const NeeVertex& v, const PlanarPath& path,
       const ResolvedMaterial& rm = shading_.material(media[s]);
       if (rm.absorbing) t *= glm::exp(-rm.sigma * float(path.len[s]));
     }
-    opl += index[s] * path.len[s];
+    *opl += index[s] * path.len[s];
   }
+  return t;
+}
+
+bool Integrator::deposit_planar_path(const NeeVertex& v, const PlanarPath& path, const int* material, const glm::vec3* ng,
+                                     const double* index, const int* media, const bool* reflect, double w,
+                                     const PixelFilm& film, uint64_t* rays, const bool* shaded) const {
+  const int k = path.k;
+  const double intensity = laser_.intensity_towards(-path.d[k]);
+  if (!(intensity > 0.0)) return true;
+  const glm::vec3 wi(path.d[0]);
+  if (!v.counted(wi)) return true;
+  const Spec f = v.bsdf.eval_cos(wi);
+  if (!(f.x > 0.0f)) return true;
+  // Each segment must meet its face first (material and orientation), the last one nothing opaque.
+  FaceHits hits;
+  const FaceHit* faces = hits.f;
+  switch (trace_planar_path(v.sf.p, v.sf.ng, path, material, ng, reflect, shaded, rays, hits.f)) {
+    case PathTrace::Clear: break;
+    case PathTrace::Blocked: return true;  // blocked on the refracted path
+    case PathTrace::Astray:
+    case PathTrace::Transmissive: return false;
+  }
+  double opl = 0.0;
+  const Spec t = planar_path_throughput(path, faces, index, media, reflect, shaded, &opl);
   if (!(t.x > 0.0f)) return true;
   const double value = double(v.beta.x) * f.x * t.x * intensity * path.spread * w;
   deposit_laser(v, value, v.opl + opl, film, reflect && std::find(reflect, reflect + k, true) != reflect + k);
@@ -1295,8 +1305,9 @@ bool Integrator::deposit_planar_path(const NeeVertex& v, const PlanarPath& path,
 // The laser's image in each smooth planar face (mirrors_) with the vertex and the laser on its outer side: off
 // the face itself, and, behind a plate's face, off its other face through this one twice (refracted both
 // ways). No camera path finds either (a Dirac reflection, then the point laser).
-void Integrator::connect_laser_mirrors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const {
-  const glm::dvec3 x(v.sf.p), L = laser_.position;
+template <class Sink>
+void Integrator::for_each_mirror_path(const glm::dvec3& x, const glm::vec3* draw_at, Sink&& sink) const {
+  const glm::dvec3 L = laser_.position;
   for (const LaserMirror& m : mirrors_) {
     glm::dvec3 n = m.n;
     double offset = m.offset, sx = glm::dot(n, x) - offset, sl = glm::dot(n, L) - offset;
@@ -1316,7 +1327,9 @@ void Integrator::connect_laser_mirrors(const NeeVertex& v, double w, const Pixel
     // Off the face: the straight line to the laser's image across it, whose 1 / r^2 is the spread.
     const glm::dvec3 image = L - 2.0 * sl * n;
     const glm::dvec3 at = x + sx / (sx + sl) * (image - x);
-    PlanarPath path;
+    MirrorPath out;
+    out.mirror = int(&m - mirrors_.data());
+    PlanarPath& path = out.path;
     if (on_face(at, at)) {
       path.k = 1;
       path.y[0] = at;
@@ -1325,10 +1338,10 @@ void Integrator::connect_laser_mirrors(const NeeVertex& v, double w, const Pixel
         path.d[0] = (at - x) / path.len[0], path.d[1] = (L - at) / path.len[1];
         const double r = path.len[0] + path.len[1];
         path.spread = 1.0 / (r * r);
-        const bool off_front[1] = {true};
-        const double index[2] = {1.0, 1.0};
-        const int media[2] = {-1, -1};
-        deposit_planar_path(v, path, &m.material, &face_n, index, media, off_front, w, film, &rays->mirror);
+        out.material[0] = m.material, out.normals[0] = face_n, out.reflect[0] = true;
+        out.index[0] = out.index[1] = 1.0, out.media[0] = out.media[1] = -1;
+        out.trips = -1;
+        sink(static_cast<const MirrorPath&>(out), 1.0);  // (q: the probability it was drawn with)
       }
     }
     if (!(m.depth > 0.0)) continue;
@@ -1347,8 +1360,8 @@ void Integrator::connect_laser_mirrors(const NeeVertex& v, double w, const Pixel
     double share = 1.0, r_inside = 0.0;
     for (int trips = 0; trips <= 8 && share >= 1e-6; ++trips) {
       constexpr double kTraced = 0.1;
-      const double q = std::min(1.0, share / kTraced);
-      if (q < 1.0 && vertex_uniform(v.sf.p, kEchoSalt, 100 + trips, int(&m - mirrors_.data())) >= q) {
+      const double q = draw_at == nullptr ? 1.0 : std::min(1.0, share / kTraced);
+      if (q < 1.0 && vertex_uniform(*draw_at, kEchoSalt, 100 + trips, int(&m - mirrors_.data())) >= q) {
         share *= r_inside * r_inside;
         continue;
       }
@@ -1356,10 +1369,13 @@ void Integrator::connect_laser_mirrors(const NeeVertex& v, double w, const Pixel
       const double unfolded = sx + sl + double(glass) * m.depth;
       if (!on_face(x + sx / unfolded * (lat - unfolded * n), at)) break;
       const glm::dvec3 u = D > 1e-12 * unfolded ? lat / D : glm::dvec3(0.0);
-      double depth[kMaxPlanarFaces + 1], index[kMaxPlanarFaces + 1];
-      int media[kMaxPlanarFaces + 1], material[kMaxPlanarFaces];
-      bool off[kMaxPlanarFaces];
-      glm::vec3 normals[kMaxPlanarFaces];
+      double depth[kMaxPlanarFaces + 1];
+      double* index = out.index;
+      int* media = out.media;
+      int* material = out.material;
+      bool* off = out.reflect;
+      glm::vec3* normals = out.normals;
+      out.trips = trips;
       for (int t = 0; t < segments; ++t) {
         const bool inside = t > 0 && t + 1 < segments;
         depth[t] = t == 0 ? sx : inside ? m.depth : sl, index[t] = inside ? ior : 1.0, media[t] = inside ? m.material : -1;
@@ -1385,10 +1401,53 @@ void Integrator::connect_laser_mirrors(const NeeVertex& v, double w, const Pixel
       }
       if (!ok) break;
       path.spread = 1.0 / (A * B * c0 * c0);  // A B cos theta_0 with n_L = 1 and cos theta_L = c0
-      deposit_planar_path(v, path, material, normals, index, media, off, w / q, film, &rays->mirror);
+      sink(static_cast<const MirrorPath&>(out), q);
       share *= r_inside * r_inside;
     }
   }
+}
+
+void Integrator::connect_laser_mirrors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const {
+  for_each_mirror_path(glm::dvec3(v.sf.p), &v.sf.p, [&](const MirrorPath& mp, double q) {
+    deposit_planar_path(v, mp.path, mp.material, mp.normals, mp.index, mp.media, mp.reflect, w / q, film, &rays->mirror);
+  });
+}
+
+void Integrator::find_camera_glints() {
+  glints_.clear();
+  if (mirrors_.empty() || !laser_traced_) return;
+  const glm::dvec3 c = camera_.position();
+  const double fp = camera_.focal_length() / camera_.pitch();
+  uint64_t rays = 0;
+  for_each_mirror_path(c, nullptr, [&](const MirrorPath& mp, double) {
+    const PlanarPath& path = mp.path;
+    const double intensity = laser_.intensity_towards(-path.d[path.k]);
+    double px = 0.0, py = 0.0;
+    if (!(intensity > 0.0) || !camera_.pixel_of(path.d[0], &px, &py)) return;
+    // every segment meets its face, the last one nothing (a transmissive surface on the way: not rendered)
+    FaceHits hits;
+    if (trace_planar_path(glm::vec3(c), glm::vec3(path.d[0]), path, mp.material, mp.normals, mp.reflect, nullptr, &rays, hits.f) !=
+        PathTrace::Clear)
+      return;
+    double opl = 0.0;
+    const Spec t = planar_path_throughput(path, hits.f, mp.index, mp.media, mp.reflect, nullptr, &opl);
+    if (!(t.x > 0.0f)) return;
+    CameraGlint g;
+    g.x = int(std::floor(px)), g.y = int(std::floor(py));
+    // a point source seen through the aperture A: I t spread A cos(theta), and A = pi f^2 / (4 N^2) is
+    // measurement_constant's p^2 pi / (4 N^2) times (f / p)^2
+    g.photons = fp * fp * glm::dot(path.d[0], camera_.forward()) * double(t.x) * intensity * path.spread;
+    g.opl = opl;
+    g.object = mp.trips <= 0 ? mesh_object_[size_t(mirrors_[size_t(mp.mirror)].mesh)] : -1;
+    glints_.push_back(g);
+  });
+}
+
+std::vector<std::pair<int, int>> Integrator::glint_pixels() const {
+  std::vector<std::pair<int, int>> out;
+  for (const CameraGlint& g : glints_)
+    if (std::find(out.begin(), out.end(), std::pair{g.x, g.y}) == out.end()) out.emplace_back(g.x, g.y);
+  return out;
 }
 
 // The laser's image in each smooth curved mesh (curved_mirrors_): the path off its surface that obeys the law of
@@ -2379,6 +2438,11 @@ void Integrator::add_samples(int x, int y, const CameraBlock& block, int s_begin
   if (block.y != y || lane < 0 || lane >= block.lanes || s_begin < block.s0 || s_end > block.s0 + block.spp)
     throw Error("add_samples: pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") is not in its camera block");
   const PixelFilm film{axis, bins, indirect_bins, out, objects};
+  // The laser's images in smooth planar faces that land in this pixel (find_camera_glints): with every path
+  const CameraGlint* glints[kMaxLaserMirrors * 10];
+  size_t n_glints = 0;
+  for (const CameraGlint& g : glints_)
+    if (g.x == x && g.y == y && n_glints < std::size(glints)) glints[n_glints++] = &g;
 
   for (int s = s_begin; s < s_end; ++s) {
     throw_if_interrupted();  // one relaxed load per path: a signal stops even a pixel of 10^7 paths
@@ -2387,6 +2451,16 @@ void Integrator::add_samples(int x, int y, const CameraBlock& block, int s_begin
     const double w = k * ct * ct * ct * ct;  // the camera's cos^4 falloff
     const double before = out->laser_total;
     const double ambient = trace_path(block, j, w, film, rays);
+    for (size_t i = 0; i < n_glints; ++i) {
+      const CameraGlint& g = *glints[i];
+      const double value = k * g.photons;
+      if (g.opl >= period_opl_) out->beyond_period += value;
+      deposit(value, config_.laser.emission_delay_s + g.opl / kSpeedOfLight, axis, bins, out, nullptr);
+      if (objects) {
+        if (g.object >= 0) objects->add(g.object, value);
+        else objects->indirect += value;
+      }
+    }
     const double path = out->laser_total - before;
     out->laser_sq += path * path;
     out->ambient_rate += ambient * w;
@@ -2403,26 +2477,5 @@ double standard_error(double sum, double sq, int n, double scale) {
   return var > 0.0 ? scale * std::sqrt(var / dn) : 0.0;
 }
 
-std::vector<LaserImageInView> Integrator::laser_images_in_view() const {
-  std::vector<LaserImageInView> out;
-  const glm::dvec3 c = camera_.position(), l = laser_.position;
-  for (const LaserMirror& m : mirrors_) {
-    const double sc = glm::dot(m.n, c) - m.offset, sl = glm::dot(m.n, l) - m.offset;
-    // both on the side it reflects on (a closed mesh's outer side; a flat one's either)
-    if (!(sc * sl > 0.0) || (!m.two_sided && sc < 0.0)) continue;
-    const glm::dvec3 image = l - 2.0 * sl * m.n;
-    const glm::dvec3 p = c + (sc / (sc + sl)) * (image - c);  // the reflection point on the plane
-    bool on_face = true;
-    for (int i = 0; i < 2; ++i) {
-      const double o = glm::dot(m.e[i], p);
-      on_face = on_face && o >= m.lo[i] && o <= m.hi[i];
-    }
-    if (!on_face || !(laser_.intensity_towards(glm::normalize(p - l)) > 0.0)) continue;
-    LaserImageInView v;
-    v.material = m.material;
-    if (camera_.pixel_of(glm::normalize(image - c), &v.px, &v.py)) out.push_back(v);
-  }
-  return out;
-}
 
 }  // namespace spadgen::render

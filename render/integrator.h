@@ -127,12 +127,10 @@ class Integrator {
              const EmbreeScene& embree, const Shading& shading, const Camera& camera, const Laser& laser,
              const Ambient& ambient);
 
-  // The laser's images in the smooth planar faces of mirrors_ that the camera sees: the light laser -> face ->
-  // lens, a point image no camera path finds (a Dirac reflection, then the point laser) and so not rendered
-  // (docs/render.md, "The laser's image in smooth planar faces"). Where a real camera sees a bright glint: each
-  // image (LaserImageInView, renderer.h), where the reflection point lies on the face (within its extent)
-  // and the laser's beam reaches it. Nothing is traced: something may hide it.
-  std::vector<LaserImageInView> laser_images_in_view() const;
+
+  // The sensor pixels (x, y) in which the camera sees the laser's image in a smooth planar face (find_camera_glints),
+  // once each.
+  std::vector<std::pair<int, int>> glint_pixels() const;
 
   // Traces the camera rays of samples [s_begin, s_end) of the block that contains pixel (x, y) (full-sensor
   // coordinates); with begin and end, samples [begin[i], end[i]) of lane i (the block's pixel x0 + i) only,
@@ -320,8 +318,9 @@ class Integrator {
     FaceHits() {}
     FaceHit f[kMaxPlanarFaces];
   };
-  PathTrace trace_planar_path(const NeeVertex& v, const PlanarPath& path, const int* material, const glm::vec3* ng,
-                              const bool* reflect, const bool* shaded, uint64_t* rays, FaceHit* faces) const;
+  // (from origin, a vertex's point, whose surface normal origin_n its rays step off along)
+  PathTrace trace_planar_path(const glm::vec3& origin, const glm::vec3& origin_n, const PlanarPath& path, const int* material,
+                              const glm::vec3* ng, const bool* reflect, const bool* shaded, uint64_t* rays, FaceHit* faces) const;
   bool deposit_planar_path(const NeeVertex& v, const PlanarPath& path, const int* material, const glm::vec3* ng,
                            const double* index, const int* media, const bool* reflect, double w, const PixelFilm& film,
                            uint64_t* rays, const bool* shaded = nullptr) const;
@@ -352,6 +351,37 @@ class Integrator {
   static constexpr float kDeltaAlpha = 2e-3f;
   // The laser's light reflected to v by the smooth planar faces of mirrors_.
   void connect_laser_mirrors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const;
+  // A path of the laser's image in a smooth planar face of mirrors_ (for_each_mirror_path): the path solved from a
+  // point x and what it meets, segment by segment; trips: -1 off the face itself, else the round trips inside the
+  // plate after its other face.
+  struct MirrorPath {
+    PlanarPath path;
+    double index[kMaxPlanarFaces + 1];
+    int media[kMaxPlanarFaces + 1], material[kMaxPlanarFaces];
+    bool reflect[kMaxPlanarFaces];
+    glm::vec3 normals[kMaxPlanarFaces];
+    int mirror = -1, trips = -1;
+  };
+  // sink(path, q) for each path from x to the laser off the faces of mirrors_ (off the face, and, behind a plate's
+  // face, off its other face after 0 or more round trips): q the probability it was drawn with. draw_at: where its
+  // echoes' draws are seen from (vertex_uniform); null: every echo while its share is at least 1e-6, q = 1.
+  template <class Sink>
+  void for_each_mirror_path(const glm::dvec3& x, const glm::vec3* draw_at, Sink&& sink) const;
+  // The light of a traced mirror or refracted path (faces: what trace_planar_path met): the faces' Fresnel factors
+  // and the media's absorption along it; *opl its optical path.
+  Spec planar_path_throughput(const PlanarPath& path, const FaceHit* faces, const double* index, const int* media,
+                              const bool* reflect, const bool* shaded, double* opl) const;
+  // The laser's images in the faces of mirrors_ as the camera sees them (laser -> face -> lens, and a plate's
+  // echoes behind its face): no path finds them, the lens being a point too. Each lands in one pixel, whose every
+  // path add_samples gives it (the same light each time: no noise). Found once, when the integrator is built.
+  struct CameraGlint {
+    int x = 0, y = 0;      // sensor pixel
+    double photons = 0.0;  // per pulse at the SPAD, per unit of measurement_constant
+    double opl = 0.0;      // optical path from the laser, metres
+    int object = -1;       // the face's object (off the face, or off its other face through it), -1: an echo (indirect)
+  };
+  std::vector<CameraGlint> glints_;
+  void find_camera_glints();
   // The laser's light refracted to v through each smooth glass mesh of curved_refractors_ alone, along every path
   // the search finds.
   void connect_laser_curved_refractors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const;
@@ -428,6 +458,7 @@ class Integrator {
     bool two_sided = false;  // a flat mesh that is no volume (a sheet, a mirror): seen from either side
     glm::dvec3 e[2];
     double lo[2] = {1e300, 1e300}, hi[2] = {-1e300, -1e300};
+    int mesh = -1;  // the mesh whose face it is
   };
   static constexpr size_t kMaxLaserMirrors = 16;
   std::vector<LaserMirror> mirrors_;

@@ -84,9 +84,7 @@ Renderer::~Renderer() = default;
 
 glm::dvec3 Renderer::laser_position() const { return impl_->laser.position + impl_->origin; }
 
-std::vector<LaserImageInView> Renderer::laser_images_in_view() const {
-  return impl_->integrator.laser_images_in_view();
-}
+std::vector<std::pair<int, int>> Renderer::glint_pixels() const { return impl_->integrator.glint_pixels(); }
 
 double Renderer::photons_per_pulse() const {
   const LaserConfig& l = impl_->config.laser;

@@ -24,6 +24,7 @@
 #pragma once
 #include <cstdint>
 #include <memory>
+#include <utility>
 #include <vector>
 
 #include "core/config.h"
@@ -63,13 +64,6 @@ struct RenderStats {
   uint64_t camera_hits = 0;  // samples of the pixels of rect (the halo left out) whose camera ray hit a surface
 };
 
-// A laser's image in a smooth planar face that the camera sees (laser -> face -> lens): the sensor pixel
-// coordinates it lands on (pixel (x, y) spans [x, x + 1) x [y, y + 1)) and the face's material index.
-struct LaserImageInView {
-  double px = 0.0, py = 0.0;
-  int material = -1;
-};
-
 class Renderer {
  public:
   // config: the renderer's part of the run (core/config.h), with the fill factor of every row from the
@@ -94,9 +88,9 @@ class Renderer {
   double photons_per_pulse() const;
   // Where the laser emits from (world): laser.offset_m from the camera centre, or the glTF light's position.
   glm::dvec3 laser_position() const;
-  // The laser's images in smooth planar faces that land in view (Integrator::laser_images_in_view): sensor
-  // pixel coordinates and the face's material, each. Not rendered: a real camera sees a glint there.
-  std::vector<LaserImageInView> laser_images_in_view() const;
+  // The sensor pixels (x, y) in which the camera sees the laser's image in a smooth planar face (laser -> face ->
+  // lens: docs/render.md, "The laser's image in smooth planar faces"), once each.
+  std::vector<std::pair<int, int>> glint_pixels() const;
 
   // The pixels of a sensor row whose camera rays travel, and with a target error accumulate, together.
   static constexpr int kBlockPixels = 16;

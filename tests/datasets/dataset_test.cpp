@@ -500,6 +500,8 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
   const std::string target = "\"render.target_relative_error\": 0.05, ";
   const std::string intensity = "\"acquisition.mode\": \"intensity\"";
   const std::string ggx = "glossy and metallic materials (GGX) render otherwise: a narrow lobe's peak was up to 7 % bright";
+  const std::string glint = "smooth (roughness below 0.032) mirrors and plates render otherwise: the laser's image in their "
+                            "faces, a glint where it lands in view, is rendered as the camera sees it (it was missing)";
   const std::string light = "an intensity run's saved light (outputs.light, the dataset's repeats) no longer traces the laser, "
                             "which its counts do not see: no laser.exr, no laser channels in ground_truth.exr";
   struct Case {
@@ -522,8 +524,9 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
            {"\"materials.white_paper.roughness\": 0.5", ggx},
            {"\"materials.white_paper.roughness\": 1", ""},
            {"\"materials.white_paper.metallic\": 0.2", ggx},
-           // a mirror (roughness below 0.032: Dirac lobes only) renders no GGX lobe
-           {"\"materials.white_paper.metallic\": 1, \"materials.white_paper.roughness\": 0.01", ""},
+           // a mirror (roughness below 0.032: Dirac lobes only) renders no GGX lobe, and the camera sees the laser's
+           // image in it now
+           {"\"materials.white_paper.metallic\": 1, \"materials.white_paper.roughness\": 0.01", glint},
            // a colour under ambient light reflects the band's photons (lambda-weighted): grey, or colour in the
            // dark, keeps its bits
            {"\"ambient.illuminance_lux\": 100", ""},
@@ -544,17 +547,18 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
   const DatasetSpec clear = parse_dataset_text("{\"scenes\": [\"" + kScenes + "multi_object.json\"], \"set\": "
                                                "{\"materials.plastic_plate.roughness\": 0}}", "test_dataset.json");
   const DatasetFolder::Resolved c = DatasetFolder(clear, dir).resolve(make_sample(clear, 0));
-  EXPECT_EQ(c.revisions, "clear (smooth) refracting plates render otherwise: the laser's light reflected inside a plate on its way "
-                         "in (half of the plate's delayed echo) was left out");
+  EXPECT_EQ(c.revisions, glint + "; clear (smooth) refracting plates render otherwise: the laser's light reflected inside a plate "
+                         "on its way in (half of the plate's delayed echo) was left out");
   EXPECT_NE(c.hash, c.hash_before_revisions);
   // ... not where no echo is drawn: an ior of 1 (no refraction: the loader applies every edit, ior and thickness
-  // too), or a 2D run that traces no laser
-  for (const std::string set : {"\"materials.plastic_plate.ior\": 1", "\"acquisition.mode\": \"intensity\""}) {
+  // too; its smooth faces are still taken to mirror the laser), or a 2D run that traces no laser (nor either)
+  for (const auto& [set, revisions] : {std::pair<std::string, std::string>{"\"materials.plastic_plate.ior\": 1", glint},
+                                       {"\"acquisition.mode\": \"intensity\"", ""}}) {
     const DatasetSpec none = parse_dataset_text("{\"scenes\": [\"" + kScenes + "multi_object.json\"], \"set\": "
                                                 "{\"materials.plastic_plate.roughness\": 0, " + set + "}}", "test_dataset.json");
     const DatasetFolder::Resolved n = DatasetFolder(none, dir).resolve(make_sample(none, 0));
-    EXPECT_EQ(n.revisions, "") << set;
-    EXPECT_EQ(n.hash, n.hash_before_revisions) << set;
+    EXPECT_EQ(n.revisions, revisions) << set;
+    EXPECT_EQ(n.hash != n.hash_before_revisions, !revisions.empty()) << set;
   }
   fs::remove_all(dir);
 }
