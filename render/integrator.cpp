@@ -1302,9 +1302,10 @@ bool Integrator::deposit_planar_path(const NeeVertex& v, const PlanarPath& path,
   return true;
 }
 
-// The laser's image in each smooth planar face (mirrors_) with the vertex and the laser on its outer side: off
+// The paths to the laser's image in each smooth planar face (mirrors_) with x and the laser on its outer side: off
 // the face itself, and, behind a plate's face, off its other face through this one twice (refracted both
-// ways). No camera path finds either (a Dirac reflection, then the point laser).
+// ways). No camera path finds either (a Dirac reflection, then the point laser): connect_laser_mirrors deposits
+// them at a vertex x, find_camera_glints at the camera centre.
 template <class Sink>
 void Integrator::for_each_mirror_path(const glm::dvec3& x, const glm::vec3* draw_at, Sink&& sink) const {
   const glm::dvec3 L = laser_.position;
