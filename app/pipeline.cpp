@@ -111,7 +111,6 @@ RunResult run(const RunOptions& options) {
   warn(camera_warnings(cfg, scene));
   const render::Camera camera = naming_keys(resolved, options.scene_file, [&] { return render::Camera(cfg.camera, scene); });
   warn(laser_warnings(cfg, camera, &scene));
-  warn(point_light_warnings(cfg, image_rect(cfg), scene, camera));
   const SensorTables tables = SensorTables::hashed(cfg);
   sensor::SensorModel sensor(sensor_stage(cfg));
   apply_user_maps(sensor, cfg);
@@ -254,7 +253,6 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
   o << "# glTF\n" << scenes::summarize(scene) << "\n";
   std::vector<std::string> before = camera_warnings(c, scene);  // the warnings known before rendering
   for (std::string& w : laser_warnings(c, camera, &scene)) before.push_back(std::move(w));
-  for (std::string& w : point_light_warnings(c, image_rect(c), scene, camera)) before.push_back(std::move(w));
   for (std::string& w : sensor_warnings(sensor)) before.push_back(std::move(w));
   const TimeAxis axis = time_axis(c, sensor);
   const PixelRect img = image_rect(c);

@@ -254,28 +254,4 @@ std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img
   return w;
 }
 
-std::vector<std::string> point_light_warnings(const RunConfig& c, const PixelRect& img, const scenes::Scene& scene,
-                                              const render::Camera& camera) {
-  std::vector<std::string> w;
-  if (!c.ambient.gltf_lights) return w;
-  for (const scenes::Light& l : scene.lights) {
-    if (l.type == scenes::Light::Type::Directional || !(l.intensity > 0.0)) continue;
-    const glm::dvec3 to = l.position - camera.position();
-    if (!(glm::length(to) > 0.0)) continue;
-    // a spot light faces the camera within its outer cone
-    if (l.type == scenes::Light::Type::Spot && glm::dot(-glm::normalize(to), l.direction) < std::cos(l.outer_cone_rad)) continue;
-    double px = 0.0, py = 0.0;
-    if (!camera.pixel_of(glm::normalize(to), &px, &py)) continue;
-    const int x = int(std::floor(px)), y = int(std::floor(py));
-    if (!img.contains(x, y)) continue;
-    const bool cropped = img.width != c.camera.width_px || img.height != c.camera.height_px;
-    w.push_back(std::string("the glTF's ") + (l.type == scenes::Light::Type::Spot ? "spot" : "point") + " light (" + l.where +
-                ") lies in view at sensor pixel (" + std::to_string(x) + ", " + std::to_string(y) + ")" +
-                (cropped ? " (the image's (" + std::to_string(x - img.x0) + ", " + std::to_string(y - img.y0) + "))" : std::string()) +
-                ": a real camera sees the lamp there, which spadgen does not render (a point that no camera ray meets; its "
-                "light on the scene is rendered); give the lamp a small emissive mesh to see it");
-  }
-  return w;
-}
-
 }  // namespace spadgen::app

@@ -103,10 +103,4 @@ inline constexpr double kWarnRangeAtCameraM = 1e-6;
 // camera: as laser_warnings', which no laser light returning names as a cause when it applies.
 std::vector<std::string> light_warnings(const RunConfig& c, const PixelRect& img, const RunRecord& r, const render::Camera& camera);
 
-// Before rendering (run and info): a glTF point or spot light lighting the scene (ambient.gltf_lights) that lies
-// in the image, facing the camera: a real camera sees it there, a point that no camera ray meets, so not
-// rendered (its light on the scene is).
-std::vector<std::string> point_light_warnings(const RunConfig& c, const PixelRect& img, const scenes::Scene& scene,
-                                              const render::Camera& camera);
-
 }  // namespace spadgen::app

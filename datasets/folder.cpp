@@ -363,7 +363,8 @@ DatasetFolder::MaterialTraits DatasetFolder::material_traits(const scenes::Resol
         if (scene.material_used(i)) m.used.push_back(scene.materials[i]);
       const auto grey = [](const glm::vec3& v) { return v.r == v.g && v.g == v.b; };  // (as the renderer keeps grey)
       for (const scenes::Mesh& mesh : scene.meshes) m.painted |= !mesh.colors0.empty();
-      for (const scenes::Light& l : scene.lights) m.lights = true, m.coloured_lights |= !grey(l.color);
+      for (const scenes::Light& l : scene.lights)
+        m.lights = true, m.coloured_lights |= !grey(l.color), m.point_lights |= l.type != scenes::Light::Type::Directional;
       m.loaded = true;
     } catch (const Error&) {
       // (the sample's run says what is wrong with its glTF)
@@ -391,6 +392,7 @@ DatasetFolder::MaterialTraits DatasetFolder::material_traits(const scenes::Resol
   t.echo = refracting && smooth_clear;
   const AmbientConfig& a = r.config.ambient;
   t.coloured_ambient = colour && (a.illuminance_lux > 0.0 || a.spectral_irradiance_W_m2_nm || (a.gltf_lights && m.lights) || emission);
+  t.lamps = a.gltf_lights && m.point_lights;
   return t;
 }
 
@@ -403,8 +405,13 @@ struct Revision {
   const char* marker;
   const char* change;
 };
-std::vector<Revision> render_revisions(const RunConfig& c, bool ggx, bool echo, bool coloured_ambient, bool smooth_mirror) {
+std::vector<Revision> render_revisions(const RunConfig& c, bool ggx, bool echo, bool coloured_ambient, bool smooth_mirror,
+                                       bool lamps) {
   std::vector<Revision> out;
+  // glTF point and spot lights in view, points no camera ray meets, rendered in their pixels (they were missing)
+  if (lamps)
+    out.push_back({"the camera sees glTF point and spot lights in view",
+                   "glTF point and spot lights render otherwise: a lamp in view is rendered in the pixel it lands in (it was missing)"});
   // the camera's view of the laser's image in smooth planar faces (laser -> face -> lens), a glint that was not
   // rendered: a scene with a smooth material (its faces may be the laser's mirrors) whose laser is traced
   if (smooth_mirror && laser_traced(c))
@@ -461,7 +468,7 @@ DatasetFolder::Resolved DatasetFolder::resolve(const Sample& s) const {
   }
   std::string revisions;
   const MaterialTraits materials = material_traits(r);
-  for (const Revision& v : render_revisions(r.config, materials.ggx, materials.echo, materials.coloured_ambient, materials.smooth_mirror)) {
+  for (const Revision& v : render_revisions(r.config, materials.ggx, materials.echo, materials.coloured_ambient, materials.smooth_mirror, materials.lamps)) {
     if (!revisions.empty()) revisions += "; ";
     revisions += v.change;
   }
@@ -479,7 +486,7 @@ std::string DatasetFolder::sample_hash(const Sample& s, const scenes::ResolvedRu
   std::string text = r.resolved.dump() + "\n" + scene_content_hash(s.scene) + "\n" + SPADGEN_VERSION;
   if (revisions) {
     const MaterialTraits materials = material_traits(r);
-    for (const Revision& v : render_revisions(r.config, materials.ggx, materials.echo, materials.coloured_ambient, materials.smooth_mirror)) text += std::string("\n") + v.marker;
+    for (const Revision& v : render_revisions(r.config, materials.ggx, materials.echo, materials.coloured_ambient, materials.smooth_mirror, materials.lamps)) text += std::string("\n") + v.marker;
   }
   if (scenes::uses_sensor_tables(r.config)) text += "\n" + (tables ? *tables : scenes::sensor_tables_hash(r.config));
   return scenes::hex64(scenes::fnv1a64(text));

@@ -213,6 +213,8 @@ class DatasetFolder {
     bool coloured_ambient = true;
     // a smooth material (Dirac lobes) other than a Lambertian one: its planar faces may mirror the laser into the lens
     bool smooth_mirror = true;
+    // glTF point or spot lights light the scene (ambient.gltf_lights): the camera sees one in view
+    bool lamps = true;
   };
   MaterialTraits material_traits(const scenes::ResolvedRun& r) const;
   nlohmann::ordered_json record() const;  // what dataset.json holds for this dataset
@@ -228,6 +230,7 @@ class DatasetFolder {
     std::vector<scenes::Material> used;       // the materials the meshes use, unedited
     bool painted = false;                     // a mesh has vertex colours (COLOR_0)
     bool lights = false, coloured_lights = false;  // the glTF has punctual lights; one of them is not grey
+    bool point_lights = false;                     // one of them is a point or spot light
   };
   mutable std::map<std::pair<std::string, std::string>, SceneMaterials> scene_materials_;  // by glTF and glTF scene; under content_mutex_
   mutable std::mutex content_mutex_;

@@ -478,6 +478,7 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
   optics_ = config.camera.optics_transmission;
   period_opl_ = kSpeedOfLight / config.laser.repetition_rate_Hz;
   find_camera_glints();
+  find_lamps_in_view();
   // The one check left here is of the interface, not of the scene file: the rows the caller describes.
   if (config.row_fill_factor.size() != static_cast<size_t>(camera.height()))
     throw Error("renderer: RenderStageConfig::row_fill_factor holds " + std::to_string(config.row_fill_factor.size()) +
@@ -1449,6 +1450,28 @@ std::vector<std::pair<int, int>> Integrator::glint_pixels() const {
   for (const CameraGlint& g : glints_)
     if (std::find(out.begin(), out.end(), std::pair{g.x, g.y}) == out.end()) out.emplace_back(g.x, g.y);
   return out;
+}
+
+void Integrator::find_lamps_in_view() {
+  lamps_.clear();
+  const glm::dvec3 c = camera_.position();
+  const double fp = camera_.focal_length() / camera_.pitch();
+  uint64_t rays = 0;
+  for (const PunctualLight& l : ambient_.lights) {
+    if (l.type == PunctualLight::Type::Directional) continue;
+    const glm::dvec3 to = l.position - c;
+    const double r = glm::length(to);
+    if (!(r > 0.0)) continue;
+    const glm::dvec3 d = to / r;
+    const double intensity = l.intensity_towards(-d);
+    double px = 0.0, py = 0.0;
+    if (!(intensity > 0.0) || !camera_.pixel_of(d, &px, &py)) continue;
+    double extra_opl = 0.0;
+    const Spec t = shadow_transmittance(glm::vec3(c), glm::vec3(d), float(r), -1, &extra_opl, &rays);
+    if (!(t.y > 0.0f)) continue;
+    // a point source seen through the aperture, as a glint (find_camera_glints)
+    lamps_.push_back({int(std::floor(px)), int(std::floor(py)), fp * fp * glm::dot(d, camera_.forward()) * double(t.y) * intensity / (r * r)});
+  }
 }
 
 // The laser's image in each smooth curved mesh (curved_mirrors_): the path off its surface that obeys the law of
@@ -2444,6 +2467,10 @@ void Integrator::add_samples(int x, int y, const CameraBlock& block, int s_begin
   size_t n_glints = 0;
   for (const CameraGlint& g : glints_)
     if (g.x == x && g.y == y && n_glints < std::size(glints)) glints[n_glints++] = &g;
+  // and the lamps in view that land in it (find_lamps_in_view)
+  double lamps = 0.0;
+  for (const LampInView& l : lamps_)
+    if (l.x == x && l.y == y) lamps += k * l.photons;
 
   for (int s = s_begin; s < s_end; ++s) {
     throw_if_interrupted();  // one relaxed load per path: a signal stops even a pixel of 10^7 paths
@@ -2464,8 +2491,9 @@ void Integrator::add_samples(int x, int y, const CameraBlock& block, int s_begin
     }
     const double path = out->laser_total - before;
     out->laser_sq += path * path;
-    out->ambient_rate += ambient * w;
-    out->ambient_sq += (ambient * w) * (ambient * w);
+    const double a = lamps > 0.0 ? ambient * w + lamps : ambient * w;
+    out->ambient_rate += a;
+    out->ambient_sq += a * a;
     out->camera_hits += block.found[j] != 0;
   }
 }

@@ -382,6 +382,15 @@ class Integrator {
   };
   std::vector<CameraGlint> glints_;
   void find_camera_glints();
+  // The glTF point and spot lights in view (a lamp the camera sees: a point no camera ray meets), each in the pixel
+  // it lands in, seen through what lies between (straight, as shadow rays): photons per second at the SPAD per
+  // unit of measurement_constant, which add_samples adds to every path's ambient light. Found once, when built.
+  struct LampInView {
+    int x = 0, y = 0;
+    double photons = 0.0;
+  };
+  std::vector<LampInView> lamps_;
+  void find_lamps_in_view();
   // The laser's light refracted to v through each smooth glass mesh of curved_refractors_ alone, along every path
   // the search finds.
   void connect_laser_curved_refractors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const;

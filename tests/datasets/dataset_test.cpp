@@ -550,6 +550,26 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
   EXPECT_EQ(c.revisions, glint + "; clear (smooth) refracting plates render otherwise: the laser's light reflected inside a plate "
                          "on its way in (half of the plate's delayed echo) was left out");
   EXPECT_NE(c.hash, c.hash_before_revisions);
+  // a glTF point light, which the camera sees in view now: where it lights the scene (ambient.gltf_lights)
+  {
+    fs::create_directories(dir);
+    std::ifstream in(kScenes + "flat_target.gltf");
+    nlohmann::json gltf = nlohmann::json::parse(in);
+    gltf["extensionsUsed"].push_back("KHR_lights_punctual");
+    gltf["extensions"]["KHR_lights_punctual"]["lights"] = {{{"name", "bulb"}, {"type", "point"}, {"intensity", 10.0}}};
+    gltf["nodes"].push_back({{"name", "bulb"}, {"translation", {0.0, 0.0, 0.5}}, {"extensions", {{"KHR_lights_punctual", {{"light", 0}}}}}});
+    gltf["scenes"][0]["nodes"].push_back(gltf["nodes"].size() - 1);
+    std::ofstream(dir / "lamp.gltf") << gltf.dump();
+    std::ofstream(dir / "lamp.json") << "{\"gltf\": \"lamp.gltf\", \"camera\": {\"position_m\": [0, 0, 1], \"look_at_m\": [0, 0, 0]}}";
+    for (const auto& [set, revisions] :
+         {std::pair<std::string, std::string>{"", "glTF point and spot lights render otherwise: a lamp in view is rendered in the pixel it lands in (it was missing)"},
+          {"\"ambient.gltf_lights\": false", ""}}) {
+      const DatasetSpec lit = parse_dataset_text("{\"scenes\": [\"" + (dir / "lamp.json").string() + "\"], \"set\": {" + set + "}}",
+                                                 "test_dataset.json");
+      const DatasetFolder::Resolved l = DatasetFolder(lit, dir / "out").resolve(make_sample(lit, 0));
+      EXPECT_EQ(l.revisions, revisions) << set;
+    }
+  }
   // ... not where no echo is drawn: an ior of 1 (no refraction: the loader applies every edit, ior and thickness
   // too; its smooth faces are still taken to mirror the laser), or a 2D run that traces no laser (nor either)
   for (const auto& [set, revisions] : {std::pair<std::string, std::string>{"\"materials.plastic_plate.ior\": 1", glint},

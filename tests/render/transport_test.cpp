@@ -15,6 +15,7 @@
 #include "render/camera.h"
 #include "render/integrator.h"
 #include "render/renderer.h"
+#include "render/spectrum.h"
 #include "scene_builders.h"
 
 namespace spadgen::render {
@@ -226,6 +227,44 @@ TEST(Transport, TheCameraSeesTheLasersImageInASmoothFace) {
     expected += (1 - F) * (1 - F) * std::pow(F, 2 * m + 1) / (r * r);
   }
   glint(plate, k * expected);
+}
+
+// A glTF point light in view is a point that no camera ray meets: rendered into the pixel it lands in with every path
+// (a verifier's 10 cd bulb gave 0 photons), I A cos(theta) / r^2 times the fill factor and optics, I its photons per
+// second per sr in the ambient band (candela times photons_per_second_per_photometric_unit). On the axis at 1 m, in
+// pixel (8, 8), within 1e-6 of that, behind a clear thin-walled sheet (glTF's: one interface) 1 - F of it; a spot
+// light facing away, nothing.
+TEST(Transport, ALampInViewLandsInItsPixel) {
+  RenderStageConfig c = test_config(16, 16, 12e-3);
+  c.render.samples_per_pixel = 2;
+  c.ambient.wavelength_m = 550e-9;
+  c.ambient.bandwidth_m = 300e-9;
+  const double f_over_p = 12e-3 / c.camera.pixel_pitch_m;
+  const double I = 10.0 * photons_per_second_per_photometric_unit(550e-9, 300e-9);
+  const auto lamp = [&](scenes::Light::Type type, bool sheet) {
+    scenes::Scene s;
+    scenes::Light light;
+    light.name = "bulb";
+    light.type = type;
+    light.position = {0, 0, -1.0};
+    light.direction = {0, 0, -1};  // a spot's: away from the camera
+    light.intensity = 10.0;
+    s.lights.push_back(light);
+    if (sheet) add_quad(s, {0, 0, -0.5f}, {1, 0, 0}, {0, 1, 0}, add_material(s, test::glass(1.5f, 0.0f)));
+    const TransientTile t = Renderer(s, c).transient({0, 0, 16, 16}, {0, 0, 16, 16}, TimeAxis{});
+    return t.ambient_rate;
+  };
+  const std::vector<float> bare = lamp(scenes::Light::Type::Point, false);
+  const double expected = camera_constant(c) * f_over_p * f_over_p * I;
+  const size_t centre = 8 * 16 + 8;
+  EXPECT_NEAR(bare[centre], expected, 1e-6 * expected);
+  for (size_t i = 0; i < bare.size(); ++i) {
+    if (i == centre) continue;
+    EXPECT_EQ(bare[i], 0.0f) << i;
+  }
+  const double F = 0.04;  // ((1.5 - 1) / (1.5 + 1))^2
+  EXPECT_NEAR(lamp(scenes::Light::Type::Point, true)[centre], (1 - F) * expected, 1e-5 * expected);
+  for (const float v : lamp(scenes::Light::Type::Spot, false)) EXPECT_EQ(v, 0.0f);
 }
 
 // 8 x 8 pixels of 110 um at 4 paths, under 50 lux of an ambient band around 550 nm of the given width; a white
