@@ -75,7 +75,6 @@ std::string csv_field(const std::string& v) {
   return q + "\"";
 }
 
-
 // The runs' presence (RunPresence): a file of its own, not .dataset.lock, whose flock (FolderLock) NFS emulates
 // as a whole-file fcntl lock, which a presence lock on the same file would block for ever.
 constexpr const char* kPresenceFile = ".dataset.runs";
@@ -349,6 +348,11 @@ const std::string& DatasetFolder::scene_content_hash(int scene) const {
   return it->second;
 }
 
+namespace {
+// A colour the renderer keeps grey (its channels equal): the same light at every wavelength.
+bool grey(const glm::vec3& v) { return v.r == v.g && v.g == v.b; }
+}  // namespace
+
 DatasetFolder::MaterialTraits DatasetFolder::material_traits(const scenes::ResolvedRun& r) const {
   const std::lock_guard<std::mutex> lock(content_mutex_);
   const std::pair<std::string, std::string> key{r.config.gltf_path, r.config.gltf_scene};
@@ -361,7 +365,6 @@ DatasetFolder::MaterialTraits DatasetFolder::material_traits(const scenes::Resol
         if (mesh.material < 0 || size_t(mesh.material) >= scene.materials.size()) m.default_material = true;
       for (size_t i = 0; i < scene.materials.size(); ++i)
         if (scene.material_used(i)) m.used.push_back(scene.materials[i]);
-      const auto grey = [](const glm::vec3& v) { return v.r == v.g && v.g == v.b; };  // (as the renderer keeps grey)
       for (const scenes::Mesh& mesh : scene.meshes) m.painted |= !mesh.colors0.empty();
       for (const scenes::Light& l : scene.lights)
         m.lights = true, m.coloured_lights |= !grey(l.color), m.point_lights |= l.type != scenes::Light::Type::Directional;
@@ -377,7 +380,6 @@ DatasetFolder::MaterialTraits DatasetFolder::material_traits(const scenes::Resol
   t.ggx = m.default_material;
   bool refracting = false, smooth_clear = false, colour = m.painted || m.coloured_lights, emission = false;
   t.smooth_mirror = false;
-  const auto grey = [](const glm::vec3& v) { return v.r == v.g && v.g == v.b; };
   for (scenes::Material mat : m.used) {
     for (const MaterialEdit& e : r.config.edits.materials)
       if (e.name == mat.name) mat.apply(e);  // as the loader applies it (an ior or thickness makes a volume refract)
@@ -396,43 +398,43 @@ DatasetFolder::MaterialTraits DatasetFolder::material_traits(const scenes::Resol
   return t;
 }
 
-namespace {
-
 // Revisions of what a resolved scene renders to, within one version: sample_hash holds the marker of each
 // that applies, so that its samples rendered before are stale, not mixed with the new rule; `change` says why
 // in dataset status.
-struct Revision {
+struct DatasetFolder::Revision {
   const char* marker;
   const char* change;
 };
-std::vector<Revision> render_revisions(const RunConfig& c, bool ggx, bool echo, bool coloured_ambient, bool smooth_mirror,
-                                       bool lamps) {
+
+std::vector<DatasetFolder::Revision> DatasetFolder::revisions_of(const scenes::ResolvedRun& r) const {
+  const RunConfig& c = r.config;
+  const MaterialTraits m = material_traits(r);
   std::vector<Revision> out;
   // glTF point and spot lights in view, points no camera ray meets, rendered in their pixels (they were missing)
-  if (lamps)
+  if (m.lamps)
     out.push_back({"the camera sees glTF point and spot lights in view",
                    "glTF point and spot lights render otherwise: a lamp in view is rendered in the pixel it lands in (it was missing)"});
   // the camera's view of the laser's image in smooth planar faces (laser -> face -> lens), a glint that was not
   // rendered: a scene with a smooth material (its faces may be the laser's mirrors) whose laser is traced
-  if (smooth_mirror && laser_traced(c))
+  if (m.smooth_mirror && laser_traced(c))
     out.push_back({"the camera sees the laser's image in smooth planar faces",
                    "smooth (roughness below 0.032) mirrors and plates render otherwise: the laser's image in their faces, a "
                    "glint where it lands in view, is rendered as the camera sees it (it was missing)"});
   // the ambient band's colours weighted by its photons (lambda), not averaged plainly over wavelength: a colour's
   // ambient light moved by up to about 15 % (grey ones kept their bits)
-  if (coloured_ambient)
+  if (m.coloured_ambient)
     out.push_back({"the ambient band's colours weighted by its photons",
                    "coloured surfaces and lights render the ambient light otherwise: the band's colours are averaged over "
                    "its photons (an equal-energy spectrum's, by lambda), not plainly over wavelength (up to about 15 %)"});
   // the laser's connections through clear plates carry the echo inside each (the camera side's half of a plate's
   // delayed echo was all a transient held)
-  if (echo && laser_traced(c))  // (a run that traces no laser draws no echo: the same bits)
+  if (m.echo && laser_traced(c))  // (a run that traces no laser draws no echo: the same bits)
     out.push_back({"laser connections through clear plates carry their echo",
                    "clear (smooth) refracting plates render otherwise: the laser's light reflected inside a plate on its way "
                    "in (half of the plate's delayed echo) was left out"});
   // GGX's D evaluated without cancellation, and its draws' sines too: a narrow lobe's peak was up to 7 % bright
   // (1.4 % at roughness 0.05), and every GGX draw moved
-  if (ggx)
+  if (m.ggx)
     out.push_back({"GGX lobes without float cancellation",
                    "glossy and metallic materials (GGX) render otherwise: a narrow lobe's peak was up to 7 % bright"});
   // an intensity run's saved light (outputs.light: a dataset's repeats) without laser_on, outputs.transient or a time window: the
@@ -457,8 +459,6 @@ std::vector<Revision> render_revisions(const RunConfig& c, bool ggx, bool echo, 
   return out;
 }
 
-}  // namespace
-
 DatasetFolder::Resolved DatasetFolder::resolve(const Sample& s) const {
   scenes::ResolvedRun r;
   try {
@@ -466,28 +466,33 @@ DatasetFolder::Resolved DatasetFolder::resolve(const Sample& s) const {
   } catch (const Error& e) {
     throw Error("sample " + std::to_string(s.index) + " (" + s.parameters.dump() + ") makes an invalid scene: " + e.what());
   }
+  const std::vector<Revision> applied = revisions_of(r);
   std::string revisions;
-  const MaterialTraits materials = material_traits(r);
-  for (const Revision& v : render_revisions(r.config, materials.ggx, materials.echo, materials.coloured_ambient, materials.smooth_mirror, materials.lamps)) {
+  for (const Revision& v : applied) {
     if (!revisions.empty()) revisions += "; ";
     revisions += v.change;
   }
   // (the tables read once for both hashes: read twice, an edit between the readings gave them other tables)
   const std::string tables = scenes::uses_sensor_tables(r.config) ? scenes::sensor_tables_hash(r.config) : std::string();
-  return {r.resolved, sample_hash(s, r, true, &tables), sample_hash(s, r, false, &tables), revisions, tables};
+  return {r.resolved, hash_with(s, r, &applied, &tables), hash_with(s, r, nullptr, &tables), revisions, tables};
 }
 
 std::string DatasetFolder::sample_hash(const Sample& s, const scenes::ResolvedRun& r, bool revisions,
                                        const std::string* tables) const {
+  if (!revisions) return hash_with(s, r, nullptr, tables);
+  const std::vector<Revision> applied = revisions_of(r);
+  return hash_with(s, r, &applied, tables);
+}
+
+std::string DatasetFolder::hash_with(const Sample& s, const scenes::ResolvedRun& r, const std::vector<Revision>* revisions,
+                                     const std::string* tables) const {
   // The hash covers what shapes the sample's data: its resolved scene, the content of its files and the
   // program's version; the same function of the sample on every machine and shard.
   // The sensor's tables (CSV and EXR files the scene file names) by content, when it names any (a pulse
   // shape replaced under a done dataset left its samples done, mixing two pulses).
   std::string text = r.resolved.dump() + "\n" + scene_content_hash(s.scene) + "\n" + SPADGEN_VERSION;
-  if (revisions) {
-    const MaterialTraits materials = material_traits(r);
-    for (const Revision& v : render_revisions(r.config, materials.ggx, materials.echo, materials.coloured_ambient, materials.smooth_mirror, materials.lamps)) text += std::string("\n") + v.marker;
-  }
+  if (revisions)
+    for (const Revision& v : *revisions) text += std::string("\n") + v.marker;
   if (scenes::uses_sensor_tables(r.config)) text += "\n" + (tables ? *tables : scenes::sensor_tables_hash(r.config));
   return scenes::hex64(scenes::fnv1a64(text));
 }

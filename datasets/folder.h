@@ -217,6 +217,13 @@ class DatasetFolder {
     bool lamps = true;
   };
   MaterialTraits material_traits(const scenes::ResolvedRun& r) const;
+  // The revisions of the renderer's rules that apply to r (a marker sample_hash holds, and the change in words),
+  // from its settings and material_traits.
+  struct Revision;
+  std::vector<Revision> revisions_of(const scenes::ResolvedRun& r) const;
+  // sample_hash with the revisions that apply (null: none) and the sensor tables' hash (null: read here).
+  std::string hash_with(const Sample& s, const scenes::ResolvedRun& r, const std::vector<Revision>* revisions,
+                        const std::string* tables) const;
   nlohmann::ordered_json record() const;  // what dataset.json holds for this dataset
   // check()'s refusals of the existing folder DIR against `wanted` (record()); its dataset.json as it is.
   std::optional<nlohmann::ordered_json> checked(const nlohmann::ordered_json& wanted) const;
