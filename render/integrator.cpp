@@ -727,19 +727,23 @@ inline bool Integrator::ahead_shadow(const CameraBlock& block, size_t j, LaserRa
   return true;
 }
 
-inline void Integrator::deposit_laser(const NeeVertex& v, double value, double opl, const PixelFilm& film, bool reflected) const {
+inline void Integrator::deposit_laser_light(double value, double opl, const PixelFilm& film, bool indirect, int object) const {
   if (opl >= period_opl_) film.totals->beyond_period += value;
   deposit(value, config_.laser.emission_delay_s + opl / kSpeedOfLight, film.axis, film.bins, film.totals,
-          v.vertices > 0 ? film.indirect_bins : nullptr);
+          indirect ? film.indirect_bins : nullptr);
+  if (film.objects) {
+    if (object >= 0) film.objects->add(object, value);
+    else film.objects->indirect += value;
+  }
+}
+
+inline void Integrator::deposit_laser(const NeeVertex& v, double value, double opl, const PixelFilm& film, bool reflected) const {
   // The laser is a point light, so this connection is its only strategy: each path's light is attributed
   // once, to the object of this vertex when the camera sees the vertex directly or through transmissive
   // surfaces only (smooth or rough: no reflection before it), else to the indirect rest. So the sphere
   // behind a plate returns its light directly through the plate, and a mirror image is indirect, as is an
   // echo of the laser's light between a plate's faces (`reflected`), as the camera side's half of it is.
-  if (film.objects) {
-    if (v.seen_through && !reflected) film.objects->add(mesh_object_[size_t(v.sf.mesh)], value);
-    else film.objects->indirect += value;
-  }
+  deposit_laser_light(value, opl, film, v.vertices > 0, v.seen_through && !reflected ? mesh_object_[size_t(v.sf.mesh)] : -1);
 }
 
 // The laser seen from v through k refracting interfaces that are parallel planes (the faces of a plate,
@@ -1415,11 +1419,15 @@ void Integrator::connect_laser_mirrors(const NeeVertex& v, double w, const Pixel
   });
 }
 
+double Integrator::point_image(const glm::dvec3& d) const {
+  const double fp = camera_.focal_length() / camera_.pitch();
+  return fp * fp * glm::dot(d, camera_.forward());
+}
+
 void Integrator::find_camera_glints() {
   glints_.clear();
   if (mirrors_.empty() || !laser_traced_) return;
   const glm::dvec3 c = camera_.position();
-  const double fp = camera_.focal_length() / camera_.pitch();
   uint64_t rays = 0;
   for_each_mirror_path(c, nullptr, [&](const MirrorPath& mp, double) {
     const PlanarPath& path = mp.path;
@@ -1436,9 +1444,7 @@ void Integrator::find_camera_glints() {
     if (!(t.x > 0.0f)) return;
     CameraGlint g;
     g.x = int(std::floor(px)), g.y = int(std::floor(py));
-    // a point source seen through the aperture A: I t spread A cos(theta), and A = pi f^2 / (4 N^2) is
-    // measurement_constant's p^2 pi / (4 N^2) times (f / p)^2
-    g.photons = fp * fp * glm::dot(path.d[0], camera_.forward()) * double(t.x) * intensity * path.spread;
+    g.photons = point_image(path.d[0]) * double(t.x) * intensity * path.spread;  // I t spread A cos(theta)
     g.opl = opl;
     g.object = mp.trips <= 0 ? mesh_object_[size_t(mirrors_[size_t(mp.mirror)].mesh)] : -1;
     glints_.push_back(g);
@@ -1455,7 +1461,6 @@ std::vector<std::pair<int, int>> Integrator::glint_pixels() const {
 void Integrator::find_lamps_in_view() {
   lamps_.clear();
   const glm::dvec3 c = camera_.position();
-  const double fp = camera_.focal_length() / camera_.pitch();
   uint64_t rays = 0;
   for (const PunctualLight& l : ambient_.lights) {
     if (l.type == PunctualLight::Type::Directional) continue;
@@ -1469,8 +1474,7 @@ void Integrator::find_lamps_in_view() {
     double extra_opl = 0.0;
     const Spec t = shadow_transmittance(glm::vec3(c), glm::vec3(d), float(r), -1, &extra_opl, &rays);
     if (!(t.y > 0.0f)) continue;
-    // a point source seen through the aperture, as a glint (find_camera_glints)
-    lamps_.push_back({int(std::floor(px)), int(std::floor(py)), fp * fp * glm::dot(d, camera_.forward()) * double(t.y) * intensity / (r * r)});
+    lamps_.push_back({int(std::floor(px)), int(std::floor(py)), point_image(d) * double(t.y) * intensity / (r * r)});
   }
 }
 
@@ -2479,16 +2483,7 @@ void Integrator::add_samples(int x, int y, const CameraBlock& block, int s_begin
     const double w = k * ct * ct * ct * ct;  // the camera's cos^4 falloff
     const double before = out->laser_total;
     const double ambient = trace_path(block, j, w, film, rays);
-    for (size_t i = 0; i < n_glints; ++i) {
-      const CameraGlint& g = *glints[i];
-      const double value = k * g.photons;
-      if (g.opl >= period_opl_) out->beyond_period += value;
-      deposit(value, config_.laser.emission_delay_s + g.opl / kSpeedOfLight, axis, bins, out, nullptr);
-      if (objects) {
-        if (g.object >= 0) objects->add(g.object, value);
-        else objects->indirect += value;
-      }
-    }
+    for (size_t i = 0; i < n_glints; ++i) deposit_laser_light(k * glints[i]->photons, glints[i]->opl, film, false, glints[i]->object);
     const double path = out->laser_total - before;
     out->laser_sq += path * path;
     const double a = lamps > 0.0 ? ambient * w + lamps : ambient * w;
@@ -2505,6 +2500,5 @@ double standard_error(double sum, double sq, int n, double scale) {
   const double var = (sq - sum * sum / dn) / (dn - 1.0);  // of the contributions
   return var > 0.0 ? scale * std::sqrt(var / dn) : 0.0;
 }
-
 
 }  // namespace spadgen::render

@@ -127,7 +127,6 @@ class Integrator {
              const EmbreeScene& embree, const Shading& shading, const Camera& camera, const Laser& laser,
              const Ambient& ambient);
 
-
   // The sensor pixels (x, y) in which the camera sees the laser's image in a smooth planar face (find_camera_glints),
   // once each.
   std::vector<std::pair<int, int>> glint_pixels() const;
@@ -428,6 +427,13 @@ class Integrator {
   // reflected: the light reflected on its way from the laser (an echo between a plate's faces): the object's
   // indirect light, never its own return.
   void deposit_laser(const NeeVertex& v, double value, double opl, const PixelFilm& film, bool reflected = false) const;
+  // Laser light `value` of optical path opl into the film: its time bin (and indirect_bins' when `indirect`: a path
+  // of two or more scattering vertices), the totals, and the object split (object -1: the indirect rest).
+  void deposit_laser_light(double value, double opl, const PixelFilm& film, bool indirect, int object) const;
+  // The photons at the SPAD, per unit of measurement_constant, of a point of intensity 1 and spread 1 seen from the
+  // camera centre along unit d (a glint, a lamp): the aperture A = pi f^2 / (4 N^2), which is measurement_constant's
+  // p^2 pi / (4 N^2) times (f / p)^2, seen at cos(theta).
+  double point_image(const glm::dvec3& d) const;
   // From a vertex inside a plate: the laser's light that enters through one of the plate's edges and
   // reaches the vertex without a reflection (another path than the straight walk's, cx, unless that one
   // crossed the same edge).
