@@ -721,6 +721,19 @@ TEST_F(App, AGroundTruthCutByMaxLayersIsWarned) {
   EXPECT_EQ(nlohmann::json::parse(slurp(dir_ / "out/metadata.json"))["ground_truth_summary"]["max_object_count"], 2);
 }
 
+// One channel of an EXR a run wrote.
+std::vector<float> exr_channel(const fs::path& file, const std::string& channel) {
+  return spadgen::writers::read_exr(file.string()).channels.at(channel);
+}
+
+// A point's image (the laser's glint, a lamp) in pixel `at` of an image: 1000 times every other pixel.
+void expect_one_point_at(const std::vector<float>& image, size_t at) {
+  for (size_t i = 0; i < image.size(); ++i) {
+    if (i == at) continue;
+    EXPECT_GT(image[at], 1000.0f * image[i]) << i;
+  }
+}
+
 // A smooth plate (a Dirac reflection) mirrors the laser 3 cm left of the lens into the lens: the camera sees a glint
 // at the image's pixel, which no path finds (a verifier found 0 photons where roughness 0.033 gave the closed form).
 // The image at (-0.03, 0, -0.9) m lands at x = 512 + 25 mm x (-0.03 / 0.9) / 9.4 um = 423.3, y = 250: laser.exr's
@@ -729,17 +742,12 @@ TEST_F(App, AGroundTruthCutByMaxLayersIsWarned) {
 TEST_F(App, TheCameraSeesTheLasersImageInASmoothPlate) {
   const std::string run = "run " + kScenes + "multi_object.json -q --set render.samples_per_pixel=1 --set outputs.previews=false "
                           "--set acquisition.gate_sweep.step_ps=3600 --set materials.plastic_plate.roughness=0 -o ";
-  const auto laser = [&](const std::string& dir) {
-    return spadgen::writers::read_exr((dir_ / dir / "laser.exr").string()).channels.at("photons_per_pulse");
-  };
+  const auto laser = [&](const std::string& dir) { return exr_channel(dir_ / dir / "laser.exr", "photons_per_pulse"); };
   Result r = sh(run + (dir_ / "glint").string() + " --set laser.offset_m=[-0.03,0,0] --set camera.crop=[420,248,8,4]");
   ASSERT_EQ(r.code, 0) << r.output;
   const std::vector<float> glint = laser("glint");
   ASSERT_EQ(glint.size(), 32u);
-  for (size_t i = 0; i < glint.size(); ++i) {
-    if (i == 2 * 8 + 3) continue;
-    EXPECT_GT(glint[2 * 8 + 3], 1000.0f * glint[i]) << i;
-  }
+  expect_one_point_at(glint, 2 * 8 + 3);
   r = sh(run + (dir_ / "paper").string() + " --set laser.offset_m=[0.03,0,0] --set camera.crop=[596,248,8,4]");
   ASSERT_EQ(r.code, 0) << r.output;
   const std::vector<float> paper = laser("paper");
@@ -902,18 +910,13 @@ TEST_F(App, AGltfLampInViewIsSeenInItsPixel) {
   std::ofstream(dir_ / "lamp.json") << scene;
   const std::string run = "run " + (dir_ / "lamp.json").string() + " -q --set render.samples_per_pixel=1 --set outputs.previews=false "
                           "--set acquisition.gate_sweep.step_ps=3600 -o ";
-  const auto ambient = [&](const std::string& dir) {
-    return spadgen::writers::read_exr((dir_ / dir / "ambient.exr").string()).channels.at("photons_per_second");
-  };
+  const auto ambient = [&](const std::string& dir) { return exr_channel(dir_ / dir / "ambient.exr", "photons_per_second"); };
   // the lamp at the image's (2, 2) of a crop around it, far above the target it lights; the spot, at x = 405.6, nothing
   Result r = sh(run + (dir_ / "bulb").string() + " --set camera.crop=[616,248,4,4]");
   ASSERT_EQ(r.code, 0) << r.output;
   const std::vector<float> bulb = ambient("bulb");
   ASSERT_EQ(bulb.size(), 16u);
-  for (size_t i = 0; i < bulb.size(); ++i) {
-    if (i == 2 * 4 + 2) continue;
-    EXPECT_GT(bulb[2 * 4 + 2], 1000.0f * bulb[i]) << i;
-  }
+  expect_one_point_at(bulb, 2 * 4 + 2);
   r = sh(run + (dir_ / "spot").string() + " --set camera.crop=[403,248,4,4]");
   ASSERT_EQ(r.code, 0) << r.output;
   const std::vector<float> spot = ambient("spot");
