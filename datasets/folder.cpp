@@ -414,6 +414,11 @@ std::vector<DatasetFolder::Revision> DatasetFolder::revisions_of(const scenes::R
   if (m.lamps)
     out.push_back({"the camera sees glTF point and spot lights in view",
                    "glTF point and spot lights render otherwise: a lamp in view is rendered in the pixel it lands in (it was missing)"});
+  // and their images in smooth planar faces, points too (a lamp in a mirror, a plate's echoes of it)
+  if (m.lamps && m.smooth_mirror)
+    out.push_back({"the camera sees glTF point and spot lights' images in smooth planar faces",
+                   "glTF point and spot lights beside smooth (roughness below 0.032) mirrors and plates render otherwise: a "
+                   "lamp's image in their faces is rendered in the pixel it lands in (it was missing)"});
   // the camera's view of the laser's image in smooth planar faces (laser -> face -> lens), a glint that was not
   // rendered: a scene with a smooth material (its faces may be the laser's mirrors) whose laser is traced
   if (m.smooth_mirror && laser_traced(c))

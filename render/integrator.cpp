@@ -1307,13 +1307,12 @@ bool Integrator::deposit_planar_path(const NeeVertex& v, const PlanarPath& path,
   return true;
 }
 
-// The paths to the laser's image in each smooth planar face (mirrors_) with x and the laser on its outer side: off
-// the face itself, and, behind a plate's face, off its other face through this one twice (refracted both
-// ways). No camera path finds either (a Dirac reflection, then the point laser): connect_laser_mirrors deposits
-// them at a vertex x, find_camera_glints at the camera centre.
+// The paths to a point L's image (the laser's, a lamp's) in each smooth planar face (mirrors_) with x and L on its
+// outer side: off the face itself, and, behind a plate's face, off its other face through this one twice (refracted
+// both ways). No camera path finds either (a Dirac reflection, then a point): connect_laser_mirrors deposits the
+// laser's at a vertex x, find_camera_glints them at the camera centre, find_lamps_in_view the lamps' there.
 template <class Sink>
-void Integrator::for_each_mirror_path(const glm::dvec3& x, const glm::vec3* draw_at, Sink&& sink) const {
-  const glm::dvec3 L = laser_.position;
+void Integrator::for_each_mirror_path(const glm::dvec3& x, const glm::dvec3& L, const glm::vec3* draw_at, Sink&& sink) const {
   for (const LaserMirror& m : mirrors_) {
     glm::dvec3 n = m.n;
     double offset = m.offset, sx = glm::dot(n, x) - offset, sl = glm::dot(n, L) - offset;
@@ -1414,7 +1413,7 @@ void Integrator::for_each_mirror_path(const glm::dvec3& x, const glm::vec3* draw
 }
 
 void Integrator::connect_laser_mirrors(const NeeVertex& v, double w, const PixelFilm& film, RayCounts* rays) const {
-  for_each_mirror_path(glm::dvec3(v.sf.p), &v.sf.p, [&](const MirrorPath& mp, double q) {
+  for_each_mirror_path(glm::dvec3(v.sf.p), laser_.position, &v.sf.p, [&](const MirrorPath& mp, double q) {
     deposit_planar_path(v, mp.path, mp.material, mp.normals, mp.index, mp.media, mp.reflect, w / q, film, &rays->mirror);
   });
 }
@@ -1424,28 +1423,31 @@ double Integrator::point_image(const glm::dvec3& d) const {
   return fp * fp * glm::dot(d, camera_.forward());
 }
 
+bool Integrator::camera_mirror_path(const MirrorPath& mp, double intensity, Spec* t, double* opl, int* x, int* y) const {
+  const PlanarPath& path = mp.path;
+  double px = 0.0, py = 0.0;
+  if (!(intensity > 0.0) || !camera_.pixel_of(path.d[0], &px, &py)) return false;
+  // every segment meets its face, the last one nothing (a transmissive surface on the way: not rendered)
+  FaceHits hits;
+  uint64_t rays = 0;
+  if (trace_planar_path(glm::vec3(camera_.position()), glm::vec3(path.d[0]), path, mp.material, mp.normals, mp.reflect, nullptr,
+                        &rays, hits.f) != PathTrace::Clear)
+    return false;
+  *t = planar_path_throughput(path, hits.f, mp.index, mp.media, mp.reflect, nullptr, opl);
+  *x = int(std::floor(px)), *y = int(std::floor(py));
+  return true;
+}
+
 void Integrator::find_camera_glints() {
   glints_.clear();
   if (mirrors_.empty() || !laser_traced_) return;
-  const glm::dvec3 c = camera_.position();
-  uint64_t rays = 0;
-  for_each_mirror_path(c, nullptr, [&](const MirrorPath& mp, double) {
+  for_each_mirror_path(camera_.position(), laser_.position, nullptr, [&](const MirrorPath& mp, double) {
     const PlanarPath& path = mp.path;
     const double intensity = laser_.intensity_towards(-path.d[path.k]);
-    double px = 0.0, py = 0.0;
-    if (!(intensity > 0.0) || !camera_.pixel_of(path.d[0], &px, &py)) return;
-    // every segment meets its face, the last one nothing (a transmissive surface on the way: not rendered)
-    FaceHits hits;
-    if (trace_planar_path(glm::vec3(c), glm::vec3(path.d[0]), path, mp.material, mp.normals, mp.reflect, nullptr, &rays, hits.f) !=
-        PathTrace::Clear)
-      return;
-    double opl = 0.0;
-    const Spec t = planar_path_throughput(path, hits.f, mp.index, mp.media, mp.reflect, nullptr, &opl);
-    if (!(t.x > 0.0f)) return;
     CameraGlint g;
-    g.x = int(std::floor(px)), g.y = int(std::floor(py));
+    Spec t(0.0f);
+    if (!camera_mirror_path(mp, intensity, &t, &g.opl, &g.x, &g.y) || !(t.x > 0.0f)) return;
     g.photons = point_image(path.d[0]) * double(t.x) * intensity * path.spread;  // I t spread A cos(theta)
-    g.opl = opl;
     g.object = mp.trips <= 0 ? mesh_object_[size_t(mirrors_[size_t(mp.mirror)].mesh)] : -1;
     glints_.push_back(g);
   });
@@ -1464,6 +1466,17 @@ void Integrator::find_lamps_in_view() {
   uint64_t rays = 0;
   for (const PunctualLight& l : ambient_.lights) {
     if (l.type == PunctualLight::Type::Directional) continue;
+    // its images in smooth planar faces, as the laser's glints (a lamp in a mirror, and a plate's echoes of it)
+    for_each_mirror_path(c, l.position, nullptr, [&](const MirrorPath& mp, double) {
+      const PlanarPath& path = mp.path;
+      const double intensity = l.intensity_towards(-path.d[path.k]);
+      LampInView lamp;
+      Spec t(0.0f);
+      double opl = 0.0;
+      if (!camera_mirror_path(mp, intensity, &t, &opl, &lamp.x, &lamp.y) || !(t.y > 0.0f)) return;
+      lamp.photons = point_image(path.d[0]) * double(t.y) * intensity * path.spread;
+      lamps_.push_back(lamp);
+    });
     const glm::dvec3 to = l.position - c;
     const double r = glm::length(to);
     if (!(r > 0.0)) continue;

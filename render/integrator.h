@@ -361,11 +361,12 @@ class Integrator {
     glm::vec3 normals[kMaxPlanarFaces];
     int mirror = -1, trips = -1;
   };
-  // sink(path, q) for each path from x to the laser off the faces of mirrors_ (off the face, and, behind a plate's
-  // face, off its other face after 0 or more round trips): q the probability it was drawn with. draw_at: where its
-  // echoes' draws are seen from (vertex_uniform); null: every echo while its share is at least 1e-6, q = 1.
+  // sink(path, q) for each path from x to the point L (the laser, a lamp) off the faces of mirrors_ (off the face, and,
+  // behind a plate's face, off its other face after 0 or more round trips): q the probability it was drawn with.
+  // draw_at: where its echoes' draws are seen from (vertex_uniform); null: every echo while its share is at least
+  // 1e-6, q = 1.
   template <class Sink>
-  void for_each_mirror_path(const glm::dvec3& x, const glm::vec3* draw_at, Sink&& sink) const;
+  void for_each_mirror_path(const glm::dvec3& x, const glm::dvec3& L, const glm::vec3* draw_at, Sink&& sink) const;
   // The light of a traced mirror or refracted path (faces: what trace_planar_path met): the faces' Fresnel factors
   // and the media's absorption along it; *opl its optical path.
   Spec planar_path_throughput(const PlanarPath& path, const FaceHit* faces, const double* index, const int* media,
@@ -381,8 +382,13 @@ class Integrator {
   };
   std::vector<CameraGlint> glints_;
   void find_camera_glints();
+  // A mirror path from the camera centre (for_each_mirror_path) of a point of `intensity` towards it: traced; false
+  // unless it lands in a pixel (*x, *y) and meets each face, then nothing; *t its faces' and media's light, *opl its
+  // optical path.
+  bool camera_mirror_path(const MirrorPath& mp, double intensity, Spec* t, double* opl, int* x, int* y) const;
   // The glTF point and spot lights in view (a lamp the camera sees: a point no camera ray meets), each in the pixel
-  // it lands in, seen through what lies between (straight, as shadow rays): photons per second at the SPAD per
+  // it lands in, seen through what lies between (straight, as shadow rays), and their images in smooth planar faces
+  // (mirrors_, as the laser's glints): photons per second at the SPAD per
   // unit of measurement_constant, which add_samples adds to every path's ambient light. Found once, when built.
   struct LampInView {
     int x = 0, y = 0;

@@ -550,7 +550,8 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
   EXPECT_EQ(c.revisions, glint + "; clear (smooth) refracting plates render otherwise: the laser's light reflected inside a plate "
                          "on its way in (half of the plate's delayed echo) was left out");
   EXPECT_NE(c.hash, c.hash_before_revisions);
-  // a glTF point light, which the camera sees in view now: where it lights the scene (ambient.gltf_lights)
+  // a glTF point light, which the camera sees in view now, and in smooth faces: where it lights the scene
+  // (ambient.gltf_lights)
   {
     fs::create_directories(dir);
     std::ifstream in(kScenes + "flat_target.gltf");
@@ -561,9 +562,15 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
     gltf["scenes"][0]["nodes"].push_back(gltf["nodes"].size() - 1);
     std::ofstream(dir / "lamp.gltf") << gltf.dump();
     std::ofstream(dir / "lamp.json") << "{\"gltf\": \"lamp.gltf\", \"camera\": {\"position_m\": [0, 0, 1], \"look_at_m\": [0, 0, 0]}}";
+    const std::string lamp = "glTF point and spot lights render otherwise: a lamp in view is rendered in the pixel it lands in (it was missing)";
+    const std::string mirror = "\"materials.white_paper.metallic\": 1, \"materials.white_paper.roughness\": 0.01";
     for (const auto& [set, revisions] :
-         {std::pair<std::string, std::string>{"", "glTF point and spot lights render otherwise: a lamp in view is rendered in the pixel it lands in (it was missing)"},
-          {"\"ambient.gltf_lights\": false", ""}}) {
+         {std::pair<std::string, std::string>{"", lamp},
+          {"\"ambient.gltf_lights\": false", ""},
+          // a mirror beside it: the lamp's image in it, and the laser's
+          {mirror, lamp + "; glTF point and spot lights beside smooth (roughness below 0.032) mirrors and plates render "
+                   "otherwise: a lamp's image in their faces is rendered in the pixel it lands in (it was missing); " + glint},
+          {mirror + ", \"ambient.gltf_lights\": false", glint}}) {
       const DatasetSpec lit = parse_dataset_text("{\"scenes\": [\"" + (dir / "lamp.json").string() + "\"], \"set\": {" + set + "}}",
                                                  "test_dataset.json");
       const DatasetFolder::Resolved l = DatasetFolder(lit, dir / "out").resolve(make_sample(lit, 0));

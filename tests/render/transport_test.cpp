@@ -267,6 +267,55 @@ TEST(Transport, ALampInViewLandsInItsPixel) {
   for (const float v : lamp(scenes::Light::Type::Spot, false)) EXPECT_EQ(v, 0.0f);
 }
 
+// A lamp's image in a smooth face is a point too (a verifier's find, as the laser's glint was): the lamp at the camera
+// and the faces of TheCameraSeesTheLasersImageInASmoothFace across the view at d = 1 m put its image on the axis at
+// 2 d, in pixel (8, 8): camera_constant (f / p)^2 I R / (2 d)^2 photons per second, R = 1 off a white metal mirror,
+// and off a clear plate F, then its back face through the front (1 - F)^2 F^(2 m + 1) at 2 d + (2 m + 2) t / n. No
+// other pixel gets light; a spot facing away from the faces, nothing.
+TEST(Transport, ALampsImageInASmoothFaceLandsInItsPixel) {
+  RenderStageConfig c = test_config(16, 16, 12e-3);
+  c.render.samples_per_pixel = 2;
+  c.ambient.wavelength_m = 550e-9;
+  c.ambient.bandwidth_m = 300e-9;
+  const double f_over_p = 12e-3 / c.camera.pixel_pitch_m, d = 1.0;
+  const double I = 10.0 * photons_per_second_per_photometric_unit(550e-9, 300e-9);
+  const double k = camera_constant(c) * f_over_p * f_over_p * I;
+  const auto image = [&](scenes::Scene s, scenes::Light::Type type) {
+    scenes::Light light;
+    light.name = "bulb";
+    light.type = type;
+    light.position = {0, 0, 0};
+    light.direction = {0, 0, 1};  // a spot's: away from the faces
+    light.intensity = 10.0;
+    s.lights.push_back(light);
+    return Renderer(s, c).transient({0, 0, 16, 16}, {0, 0, 16, 16}, TimeAxis{}).ambient_rate;
+  };
+  const auto expect_image = [&](const scenes::Scene& s, double expected) {
+    const std::vector<float> rate = image(s, scenes::Light::Type::Point);
+    const size_t centre = 8 * 16 + 8;
+    EXPECT_NEAR(rate[centre], expected, 1e-6 * expected);
+    for (size_t i = 0; i < rate.size(); ++i) {
+      if (i == centre) continue;
+      EXPECT_EQ(rate[i], 0.0f) << i;
+    }
+    for (const float v : image(s, scenes::Light::Type::Spot)) EXPECT_EQ(v, 0.0f);
+  };
+  scenes::Scene mirror;
+  scenes::Material metal;
+  metal.metallic = 1.0f, metal.roughness = 0.0f;
+  add_quad(mirror, {0, 0, -float(d)}, {5, 0, 0}, {0, 5, 0}, add_material(mirror, metal));
+  expect_image(mirror, k / (4 * d * d));
+  const double n = 1.5, t = 2e-3, F = (n - 1) * (n - 1) / ((n + 1) * (n + 1));
+  scenes::Scene plate;
+  add_box(plate, {-1, -1, -float(d) - float(t)}, {1, 1, -float(d)}, add_material(plate, test::glass(float(n), float(t))));
+  double expected = F / (4 * d * d);
+  for (int m = 0; m <= 8 && std::pow(F, 2 * m) >= 1e-6; ++m) {
+    const double r = 2 * d + (2 * m + 2) * t / n;
+    expected += (1 - F) * (1 - F) * std::pow(F, 2 * m + 1) / (r * r);
+  }
+  expect_image(plate, k * expected);
+}
+
 // 8 x 8 pixels of 110 um at 4 paths, under 50 lux of an ambient band around 550 nm of the given width; a white
 // Lambertian quad of base colour `colour` at 1 m filling the view.
 RenderStageConfig lit_8x8(double bandwidth_m) {
