@@ -267,7 +267,7 @@ TEST(Transport, ALampInViewLandsInItsPixel) {
   for (const float v : lamp(scenes::Light::Type::Spot, false)) EXPECT_EQ(v, 0.0f);
 }
 
-// A lamp's image in a smooth face is a point too (a verifier's find, as the laser's glint was): the lamp at the camera
+// A lamp's image in a smooth face is a point too, as the laser's glint (0 photons before): the lamp at the camera
 // and the faces of TheCameraSeesTheLasersImageInASmoothFace across the view at d = 1 m put its image on the axis at
 // 2 d, in pixel (8, 8): camera_constant (f / p)^2 I R / (2 d)^2 photons per second, R = 1 off a white metal mirror,
 // and off a clear plate F, then its back face through the front (1 - F)^2 F^(2 m + 1) at 2 d + (2 m + 2) t / n. No
