@@ -303,6 +303,9 @@ std::optional<ojson> DatasetFolder::checked(const ojson& wanted) const {
                   first_difference(a, b, "") + " (only \"samples\" and \"repeats\" may grow, to add samples and realisations); use "
                   "another folder (-o) or remove " +
                   dir_.string());
+    if (const std::string other = other_scenes(*prev); !other.empty())
+      throw Error(dir_.string() + " holds another dataset: " + other + "; the two datasets' samples would mix in one folder: use "
+                  "another folder (-o), or, where " + spec_.file + " replaces it, remove the other dataset file");
   } else {
     // dataset.json decides whose the folder is: without it (damaged, or lost), samples and an index there
     // may be another dataset's, which this one would replace.
@@ -336,6 +339,39 @@ std::optional<ojson> DatasetFolder::checked(const ojson& wanted) const {
         throw Error(e.path().string() + " is a symbolic link; a dataset's samples are folders of their own (the sample "
                     "would be written into the link's target): replace the link with the folder, or remove it");
   return prev;
+}
+
+std::string DatasetFolder::other_scenes(const ojson& prev) const {
+  const auto f = prev.find("dataset_file");
+  if (f == prev.end() || !f->is_string() || f->get<std::string>() == spec_.file) return "";
+  const std::string other = f->get<std::string>();
+  std::error_code ec;
+  // moved or renamed (the folder's record names a file no longer there), or the same file by another path
+  if (!fs::exists(other, ec) || fs::equivalent(other, spec_.file, ec)) return "";
+  ojson body = prev;
+  body.erase("dataset_file");
+  const std::string whose = "its dataset.json was written by " + other + ", which is still there";
+  DatasetSpec was;
+  try {
+    was = parse_dataset_text(body.dump(), other);  // its scene files, relative to it
+  } catch (const Error& e) {
+    return whose + ", and its scene files are not this run's (" + e.what() + ")";
+  }
+  for (size_t i = 0; i < spec_.scenes.size() && i < was.scenes.size(); ++i) {
+    if (fs::equivalent(was.scenes[i], spec_.scenes[i], ec)) continue;
+    if (!fs::exists(was.scenes[i], ec)) return whose + ", and its scene file " + was.scenes[i] + " is missing";
+    std::string hash;
+    try {
+      const scenes::ResolvedRun base = scenes::load_scene_file(was.scenes[i]);
+      hash = scenes::content_hash(base.config.scene_file, base.config.gltf_path);
+    } catch (const Error& e) {
+      return whose + ", and its scene file " + was.scenes[i] + " does not load (" + e.what() + ")";
+    }
+    if (hash != scene_content_hash(int(i)))
+      return whose + ": its scene file " + was.scenes[i] + " differs from this run's " + spec_.scenes[i] +
+             " (the same dataset text beside other scenes: their contents, glTF or buffers differ)";
+  }
+  return "";
 }
 
 const std::string& DatasetFolder::scene_content_hash(int scene) const {

@@ -202,6 +202,11 @@ class DatasetFolder {
 
  private:
   const std::string& scene_content_hash(int scene) const;
+  // Why the folder's dataset.json `prev`, written from another dataset file of the same text, is another dataset:
+  // that file is still there and a scene file of its differs from this run's in content (a copy of the dataset
+  // file beside other scenes; concurrent shards of the two copies mixed their samples); "" when it is the same
+  // dataset (the same file by another path, one moved away, the same scenes' contents).
+  std::string other_scenes(const nlohmann::ordered_json& prev) const;
   // What of a sample's resolved scene r the render revisions depend on, from the materials its meshes use as
   // the sample's edits leave them (both true where the glTF does not load). The glTF's materials are loaded
   // once per glTF (and glTF scene).

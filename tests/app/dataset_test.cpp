@@ -697,6 +697,45 @@ TEST_F(Dataset, TwoDatasetsStartedTogetherOnANewFolderAreNotBothAccepted) {
   }
 }
 
+// The same dataset text at another path, beside other scene files of the same names: another dataset while the file
+// that wrote the folder is still there (it was accepted, and its samples generated again as stale, so that shards
+// of the two copies run at once mixed their samples); the same dataset where the scenes' contents are the same.
+TEST_F(Dataset, ACopyOfTheDatasetFileBesideOtherScenesIsAnotherDataset) {
+  std::string scene = slurp(kScenes + "multi_object.json");
+  const std::string gltf = "\"gltf\": \"multi_object.gltf\"";
+  ASSERT_NE(scene.find(gltf), std::string::npos);
+  scene.replace(scene.find(gltf), gltf.size(), "\"gltf\": \"" + kScenes + "multi_object.gltf\"");
+  std::string other = scene;
+  const std::string f_number = "\"f_number\": 1.4";
+  ASSERT_NE(other.find(f_number), std::string::npos);
+  other.replace(other.find(f_number), f_number.size(), "\"f_number\": 2.0");
+  for (const char* d : {"a", "b", "c"}) {
+    fs::create_directories(dir_ / d);
+    write(dir_ / d / "d.json", small_dataset(2, 3, "scene.json"));
+  }
+  write(dir_ / "a/scene.json", scene);
+  write(dir_ / "b/scene.json", other);
+  write(dir_ / "c/scene.json", scene);
+  const std::string out = (dir_ / "out").string();
+  ASSERT_EQ(sh("dataset run " + (dir_ / "a/d.json").string() + " -o " + out + " -q").code, 0);
+  const std::string record = slurp(dir_ / "out/dataset.json");
+  const Result mixed = sh("dataset run " + (dir_ / "b/d.json").string() + " -o " + out + " -q");
+  EXPECT_EQ(mixed.code, 1) << mixed.output;
+  EXPECT_THAT(mixed.output, HasSubstr(out + " holds another dataset: its dataset.json was written by " + (dir_ / "a/d.json").string() +
+                                      ", which is still there: its scene file " + (dir_ / "a/scene.json").string() +
+                                      " differs from this run's " + (dir_ / "b/scene.json").string()));
+  EXPECT_EQ(slurp(dir_ / "out/dataset.json"), record);  // nothing written
+  // the same scenes' contents: the same dataset, its samples done
+  const Result same = sh("dataset run " + (dir_ / "c/d.json").string() + " -o " + out);
+  EXPECT_EQ(same.code, 0) << same.output;
+  EXPECT_THAT(same.output, HasSubstr("0 of 2 samples to generate (2 done already)"));
+  // the file that wrote the folder moved away: its copy beside other scenes takes the folder (its samples stale)
+  fs::remove(dir_ / "c/d.json");
+  const Result moved = sh("dataset run " + (dir_ / "b/d.json").string() + " -o " + out);
+  EXPECT_EQ(moved.code, 0) << moved.output;
+  EXPECT_THAT(moved.output, HasSubstr("2 of 2 samples to generate"));
+}
+
 TEST_F(Dataset, RefusesAnotherDatasetsFolderForeignFilesAndTooLittleDisk) {
   write(dir_ / "a.json", small_dataset(2, 3));
   write(dir_ / "b.json", small_dataset(2, 4));
