@@ -388,7 +388,7 @@ std::string closest(const std::string& word, const std::vector<std::string>& can
   return best;
 }
 
-uint64_t fnv1a64(const std::string& bytes, uint64_t h) {
+uint64_t fnv1a64(std::string_view bytes, uint64_t h) {
   for (unsigned char c : bytes) h = (h ^ c) * 0x100000001b3ull;
   return h;
 }
@@ -400,16 +400,43 @@ std::string hex64(uint64_t h) {
 }
 
 std::string file_bytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
+  std::string out;
+  try {
+    out = read_file_bounded(path, kMaxGltfFileBytes, "file");  // (a device or a FIFO: not read)
+  } catch (const Error&) {
+  }
+  return out;
+}
+
+// FNV-1a 64 of a file's bytes continuing from h, read in pieces (a 2 GiB buffer is not held to hash it); a file
+// that is not a regular one of at most kMaxGltfFileBytes (a device, a FIFO, a link to one: a verifier's buffer
+// uri "/dev/zero" read on until memory ran out, a FIFO blocked for ever), or cannot be read, counts as empty:
+// the loader refuses it with the reason. Opened without blocking: fstat decides before a byte is read.
+uint64_t hash_file(const std::string& path, uint64_t h) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+  if (fd < 0) return h;
+  struct stat st {};
+  if (::fstat(fd, &st) != 0 || !stat_problem(st, kMaxGltfFileBytes).empty()) {
+    ::close(fd);
+    return h;
+  }
+  std::string piece(size_t{1} << 20, '\0');
+  // (cut at the size it had: a file that grows while it is hashed never runs the read unbounded)
+  for (uint64_t left = static_cast<uint64_t>(st.st_size); left > 0;) {
+    const ssize_t n = ::read(fd, piece.data(), static_cast<size_t>(std::min<uint64_t>(left, piece.size())));
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) break;
+    h = fnv1a64(std::string_view(piece.data(), static_cast<size_t>(n)), h);
+    left -= static_cast<uint64_t>(n);
+  }
+  ::close(fd);
+  return h;
 }
 
 std::string content_hash(const std::string& scene_file, const std::string& gltf_path) {
   namespace fs = std::filesystem;
-  uint64_t h = fnv1a64(file_bytes(scene_file));
-  h = fnv1a64(file_bytes(gltf_path), h);
+  uint64_t h = hash_file(scene_file, 0xcbf29ce484222325ull);
+  h = hash_file(gltf_path, h);
   std::vector<std::string> referenced;
   try {
     referenced = gltf_external_files(gltf_path);
@@ -417,7 +444,7 @@ std::string content_hash(const std::string& scene_file, const std::string& gltf_
   }  // not a glTF file: loading it fails with the reason; its bytes are hashed above
   // each file's name (relative to the glTF's folder) and its bytes, so that a swap of two names counts
   for (const std::string& f : referenced)
-    h = fnv1a64(file_bytes(f), fnv1a64(fs::path(f).lexically_relative(fs::path(gltf_path).parent_path()).string(), h));
+    h = hash_file(f, fnv1a64(fs::path(f).lexically_relative(fs::path(gltf_path).parent_path()).string(), h));
   return hex64(h);
 }
 

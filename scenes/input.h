@@ -7,6 +7,7 @@
 
 #include <cstdint>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "core/error.h"
@@ -76,14 +77,16 @@ std::string closest(const std::string& word, const std::vector<std::string>& can
 
 // FNV-1a 64 (16 hex digits) of a scene file, its glTF file and the files the glTF reads (its buffers and
 // images, gltf_external_files, each by name and content): a stable content hash for provenance, not for
-// security. Files that cannot be read count as empty.
+// security. Files that cannot be read, and any but regular files of at most kMaxGltfFileBytes (a device, a FIFO),
+// count as empty; files are hashed in pieces, not held.
 std::string content_hash(const std::string& scene_file, const std::string& gltf_path);
 
 // FNV-1a 64 of bytes, continuing from `h`, and as 16 hex digits.
-uint64_t fnv1a64(const std::string& bytes, uint64_t h = 0xcbf29ce484222325ull);
+uint64_t fnv1a64(std::string_view bytes, uint64_t h = 0xcbf29ce484222325ull);
 std::string hex64(uint64_t h);
 
-// A file's bytes; "" when it cannot be read (for content hashes).
+// A file's bytes; "" when it cannot be read or is not a regular file of at most kMaxGltfFileBytes (for content
+// hashes: a device or a FIFO is not read).
 std::string file_bytes(const std::string& path);
 
 // Levenshtein distance (insertions, deletions, substitutions), for the "did you mean" of messages.

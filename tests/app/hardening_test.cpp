@@ -410,6 +410,55 @@ TEST_F(Hardening, ASignalWhileALargeGltfLoadsStopsTheRunAtOnce) {
   EXPECT_FALSE(fs::exists(dir_ / "out"));
 }
 
+// A glTF's buffer or image that is not a regular file (a link to /dev/zero, a FIFO, an absolute uri naming a device)
+// is refused by run, dataset run and dataset status as by info, before a byte of it is read: the scene's content
+// hash read every referenced file in full first (a verifier's: /dev/zero read until the kernel killed the run at
+// 23 GB, a FIFO blocked for ever). Each command ends within its time limit, with the loader's message.
+TEST_F(Hardening, AGltfsBufferOrImageThatIsNotAFileIsNotReadToHashTheScene) {
+  std::ofstream(dir_ / "tri.bin", std::ios::binary) << std::string(36, '\0');
+  ASSERT_EQ(::mkfifo((dir_ / "pipe.bin").c_str(), 0600), 0);
+  fs::create_symlink("/dev/zero", dir_ / "zero.bin");
+  fs::create_symlink("/dev/zero", dir_ / "zero.png");
+  const auto gltf = [&](const std::string& buffer, const std::string& image) {
+    nlohmann::json g = {
+        {"asset", {{"version", "2.0"}}}, {"scene", 0}, {"scenes", {{{"nodes", {0}}}}}, {"nodes", {{{"mesh", 0}}}},
+        {"meshes", {{{"primitives", {{{"attributes", {{"POSITION", 0}}}}}}}}},
+        {"accessors", {{{"bufferView", 0}, {"componentType", 5126}, {"count", 3}, {"type", "VEC3"}, {"min", {0, 0, 0}}, {"max", {0, 0, 0}}}}},
+        {"bufferViews", {{{"buffer", 0}, {"byteLength", 36}}}},
+        {"buffers", {{{"byteLength", 36}, {"uri", buffer}}}}};
+    if (!image.empty()) g["images"] = {{{"uri", image}}};
+    return g.dump();
+  };
+  const std::pair<std::string, std::string> cases[] = {
+      {gltf("zero.bin", ""), "buffer 0: its file 'zero.bin' is a character device, expected a regular file"},
+      {gltf("pipe.bin", ""), "buffer 0: its file 'pipe.bin' is a FIFO (named pipe), expected a regular file"},
+      {gltf("/dev/zero", ""), "'/dev/zero' is absolute"},
+      {gltf("tri.bin", "zero.png"), "is a character device, expected a regular file"},
+  };
+  std::ofstream(dir_ / "s.json") << R"({"gltf": "s.gltf", "camera": {"position_m": [0, 0, 2], "look_at_m": [0, 0, 0],
+    "width_px": 8, "height_px": 8, "vertical_fov_deg": 40}, "outputs": {"previews": false}})";
+  std::ofstream(dir_ / "d.json") << R"({"scenes": ["s.json"], "samples": 1})";
+  int n = 0;
+  for (const auto& [text, expect] : cases) {
+    std::ofstream(dir_ / "s.gltf") << text;
+    const Outcome run = spadgen("run " + (dir_ / "s.json").string() + " -q -o " + (dir_ / "out").string(), 10);
+    expect_exit(run, 1, expect);
+    EXPECT_THAT(run.err, HasSubstr(expect));
+    const std::string ds = (dir_ / ("ds" + std::to_string(n++))).string();
+    const Outcome dataset = spadgen("dataset run " + (dir_ / "d.json").string() + " -q -o " + ds, 10);
+    expect_exit(dataset, 1, "dataset: " + expect);
+    EXPECT_THAT(slurp(fs::path(ds) / "failed/000000.json"), HasSubstr(expect));
+  }
+  // a done dataset whose buffer is then replaced by a FIFO: status ends, the sample stale
+  std::ofstream(dir_ / "s.gltf") << gltf("tri.bin", "");
+  ASSERT_EQ(spadgen("dataset run " + (dir_ / "d.json").string() + " -q -o " + (dir_ / "done").string(), 30).code, 0);
+  fs::remove(dir_ / "tri.bin");
+  ASSERT_EQ(::mkfifo((dir_ / "tri.bin").c_str(), 0600), 0);
+  const Outcome status = spadgen("dataset status " + (dir_ / "done").string(), 10);
+  expect_exit(status, 4, "status");
+  EXPECT_THAT(status.output, HasSubstr("1 stale"));
+}
+
 // metadata.json's scene_hash_fnv1a64 and the sensor tables' hashes are of the files as the run read them: a
 // glTF and a gate table edited while the run renders (after they were read) leave the hashes of those rendered. It had been taken when the outputs were written, of
 // the files then: a dataset sample rendered from a glTF edited and restored meanwhile stayed done under the
