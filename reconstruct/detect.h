@@ -60,7 +60,10 @@ struct PixelTiming {
 };
 
 // The paper's detector (section 4.D and 4.E): the profile smoothed by a moving average over
-// 2 * half_width + 1 positions; a virtual window of `window` positions scanned without overlap; a window
+// 2 * half_width + 1 positions; a virtual window of `window` positions scanned without overlap (and again from
+// half a window on: what that finds is kept where the first scan found nothing within half a window, so that an
+// edge a few positions inside a window, whose first level then holds part of its step while the window before
+// ends below it, is not missed by both); a window
 // holds a rising edge when the linearised level of its last `plateau` positions exceeds that of its first
 // `plateau` positions by min_score standard errors. The edge is then located on the whole profile (so
 // that an edge straddling two windows is timed right): where the smoothed, linearised profile crosses
@@ -84,8 +87,10 @@ struct PaperDetector {
 // that merge, the camera's own limit (5-10 cm, the paper's section 4.E). z > 0: a rising edge, z < 0: a
 // falling one. A rise and a fall that give the same return time within match_s are one return (two
 // returns that close are not resolved anyway), timed and sized by the mean of the two weighted by z^2
-// (an edge's timing variance falls as 1 / z^2); an unmatched edge is a return of its own (its partner
-// lies outside the sweep or under another return's edge).
+// (an edge's timing variance falls as 1 / z^2); then a rise and a fall left unmatched whose times lie closer
+// than `separation` positions are one return too, closest first (two returns that close make one rise and one
+// fall; under background light the edges' timing noise exceeds match_s); an edge still unmatched is a return of
+// its own (its partner lies outside the sweep or under another return's edge).
 struct EdgeDetector {
   std::vector<int> scales{3, 6, 12, 24};
   double min_score = 6.0;
