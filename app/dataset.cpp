@@ -102,6 +102,7 @@ struct Totals {
 struct SceneSize {
   int objects = -1;
   std::optional<Geometry> geometry;
+  std::string error;  // why the glTF does not load ("" when it does)
 };
 
 Estimate estimate(const RunConfig& c, int repeats, int threads, const SceneSize& size) {
@@ -193,7 +194,8 @@ class Estimator {
       if (!cache_.count(k) && std::none_of(todo.begin(), todo.end(), [k = k](const auto& t) { return t.first == k; }))
         todo.emplace_back(k, c);
     // Each glTF (and scene of it) loaded once, for its objects and geometry: the node and material edits
-    // change neither (a glTF that does not load leaves them unknown; its samples' runs fail and say why).
+    // change neither. A glTF that does not load makes its samples invalid, with the loader's message (plan
+    // called such a dataset valid, and run failed every sample of it: a verifier's out-of-range index).
     for (const auto& [k, c] : todo) {
       const auto [at, fresh] = scenes_.try_emplace(scene_of(*c));
       if (!fresh) continue;
@@ -202,12 +204,19 @@ class Estimator {
         const scenes::Scene scene = scenes::load_gltf(c->gltf_path, c->gltf_scene);
         size.objects = int(scenes::objects_of(scene).list.size());
         size.geometry = geometry_of(scene);
-      } catch (const Error&) {
+      } catch (const Interrupted&) {
+        throw;
+      } catch (const Error& e) {
+        size.error = e.what();
       }
     }
     std::vector<Entry> done(todo.size());
     tbb::parallel_for(size_t{0}, todo.size(), [&](size_t j) {
       if (interruptible && interrupt_flag().load()) return;
+      if (const std::string& error = scenes_.at(scene_of(*todo[j].second)).error; !error.empty()) {
+        done[j].error = error;
+        return;
+      }
       try {
         const RunConfig c = estimate_shape(*todo[j].second);
         done[j].estimate = estimate(c, repeats_, threads_, scenes_.at(scene_of(c)));

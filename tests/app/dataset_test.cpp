@@ -1511,5 +1511,34 @@ TEST_F(Dataset, AnInvalidFirstSampleIsRecordedAndAnInvalidDatasetRefused) {
   EXPECT_FALSE(fs::exists(dir_ / "e"));
 }
 
+// A scene file whose glTF does not load makes every sample of it invalid: plan says so (exit 1) and run refuses
+// the dataset before any work, with the loader's message (plan called it valid, and run failed every sample: a
+// verifier's index out of range).
+TEST_F(Dataset, ADatasetWhoseGltfDoesNotLoadIsRefusedBeforeAnyWork) {
+  std::string bin(44, '\0');  // 3 vertices at the origin, then the indices 0, 1, 5 (UNSIGNED_SHORT) and padding
+  bin[37] = 0, bin[38] = 1, bin[40] = 5;
+  std::ofstream(dir_ / "m.bin", std::ios::binary) << bin;
+  const json g = {
+      {"asset", {{"version", "2.0"}}}, {"scene", 0}, {"scenes", {{{"nodes", {0}}}}}, {"nodes", {{{"mesh", 0}}}},
+      {"meshes", {{{"primitives", {{{"attributes", {{"POSITION", 0}}}, {"indices", 1}}}}}}},
+      {"accessors", {{{"bufferView", 0}, {"componentType", 5126}, {"count", 3}, {"type", "VEC3"}, {"min", {0, 0, 0}}, {"max", {0, 0, 0}}},
+                     {{"bufferView", 1}, {"componentType", 5123}, {"count", 3}, {"type", "SCALAR"}}}},
+      {"bufferViews", {{{"buffer", 0}, {"byteLength", 36}}, {{"buffer", 0}, {"byteOffset", 36}, {"byteLength", 6}}}},
+      {"buffers", {{{"byteLength", 44}, {"uri", "m.bin"}}}}};
+  write(dir_ / "m.gltf", g.dump());
+  write(dir_ / "scene.json", R"({"gltf": "m.gltf", "camera": {"position_m": [0, 0, 2], "look_at_m": [0, 0, 0], "width_px": 8,
+    "height_px": 8, "vertical_fov_deg": 40}})");
+  write(dir_ / "d.json", "{\"scenes\": [\"scene.json\"], \"samples\": 3}");
+  const std::string loader = "m.gltf: mesh 0 primitive 0: index 5 at position 2 of accessor 1 is out of range of the 3 vertices";
+  for (const char* cmd : {"dataset plan ", "dataset run "}) {
+    const Result r = sh(cmd + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q");
+    EXPECT_EQ(r.code, 1) << cmd << r.output;
+    EXPECT_THAT(r.output, HasSubstr("d.json: sample 0: with the scene file scene.json: "));
+    EXPECT_THAT(r.output, HasSubstr(loader));
+    EXPECT_THAT(r.output, HasSubstr("(and the next 2 samples of this scene fail too)"));
+    EXPECT_FALSE(fs::exists(dir_ / "out"));
+  }
+}
+
 }  // namespace
 }  // namespace spadgen::testing
