@@ -1823,7 +1823,7 @@ std::string gltf_json(const std::string& path, const std::string& bytes, bool* b
 // property of the wrong type as absent and takes its default ("mesh": "0" left a node without its mesh,
 // "scale": "big" made it 1, a byteOffset of -4 or 2.5 was read as 0). Only types and signs: what the
 // values mean (indices in range, sizes that fit) the loader checks as it reads them.
-enum class Want { Index, Offset, Count, IntCount, Integer, Number, Bool, String, Object, Numbers, Indices, Objects, IndexMap };
+enum class Want { Index, Offset, Count, IntCount, Stride, Integer, Number, Bool, String, Object, Numbers, Indices, Objects, IndexMap };
 struct Rule {
   const char* key;
   Want want;
@@ -1839,7 +1839,7 @@ const std::map<std::string, std::vector<Rule>>& gltf_rules() {
       {"sparse indices", {{"bufferView", Want::Index}, {"byteOffset", Want::Offset}, {"componentType", Want::Integer}}},
       {"sparse values", {{"bufferView", Want::Index}, {"byteOffset", Want::Offset}}},
       {"bufferView", {{"buffer", Want::Index}, {"byteOffset", Want::Offset}, {"byteLength", Want::Count},
-                      {"byteStride", Want::Index}, {"target", Want::Integer}, {"name", Want::String}}},
+                      {"byteStride", Want::Stride}, {"target", Want::Integer}, {"name", Want::String}}},
       {"buffer", {{"uri", Want::String}, {"byteLength", Want::Count}, {"name", Want::String}}},
       {"node", {{"camera", Want::Index}, {"children", Want::Indices}, {"skin", Want::Index}, {"matrix", Want::Numbers, 16},
                 {"mesh", Want::Index}, {"rotation", Want::Numbers, 4}, {"scale", Want::Numbers, 3},
@@ -1907,6 +1907,10 @@ void check_gltf_object(const std::string& path, const std::string& who, const nl
       case Want::Count: if (!gltf_integer(v, 1, kMaxExact)) refuse(integer_wanted(v, 1, "2^53")); break;
       // (a count tinygltf keeps in an int: 2^31 became -2147483648, and the message said so)
       case Want::IntCount: if (!gltf_integer(v, 1)) refuse(integer_wanted(v, 1, "2147483647")); break;
+      // (glTF 2.0's bounds; tinygltf said "must be the multiple of 4" of 256, naming no bufferView)
+      case Want::Stride:
+        if (!gltf_integer(v, 4, 252) || v.get<int64_t>() % 4 != 0) refuse("a multiple of 4 from 4 to 252 (glTF 2.0's byteStride)");
+        break;
       case Want::Integer: if (!gltf_integer(v, -2147483648.0)) refuse("an integer"); break;
       case Want::Number: if (!v.is_number()) refuse("a number"); break;
       case Want::Bool: if (!v.is_boolean()) refuse("true or false"); break;

@@ -138,13 +138,19 @@ std::string decode_jpeg(const unsigned char* bytes, size_t size, DecodedImage* o
   int width = 0, height = 0, subsampling = 0, colorspace = 0;
   if (tjDecompressHeader3(tj, bytes, static_cast<unsigned long>(size), &width, &height, &subsampling, &colorspace) != 0)
     return std::string("not a readable JPEG (libjpeg-turbo: ") + tjGetErrorStr2(tj) + ")";
+  // (a header cut inside its first table reads as 0 x 0: said as what it is)
+  if (width <= 0 || height <= 0) return "not a readable JPEG: its header gives no image size (a file cut short?)";
   if (std::string p = size_problem(uint64_t(std::max(width, 0)), uint64_t(std::max(height, 0))); !p.empty()) return p;
   std::vector<uint8_t> rgba(size_t(width) * size_t(height) * 4);
   if (tjDecompress2(tj, bytes, static_cast<unsigned long>(size), rgba.data(), width, 0, height, TJPF_RGBA,
                     TJFLAG_ACCURATEDCT) != 0) {
-    // A warning (a truncated or slightly corrupt file) still gives the texels it could decode.
-    if (tjGetErrorCode(tj) != TJERR_WARNING) return std::string("not a readable JPEG (libjpeg-turbo: ") + tjGetErrorStr2(tj) + ")";
-    *warning = std::string("libjpeg-turbo: ") + tjGetErrorStr2(tj);
+    // A warning of a slightly corrupt file (extraneous bytes before a marker) still gives its texels; a file
+    // cut short is refused, as a PNG cut short is (its missing texels were filled grey, with a warning).
+    const std::string what = tjGetErrorStr2(tj);
+    if (tjGetErrorCode(tj) != TJERR_WARNING) return "not a readable JPEG (libjpeg-turbo: " + what + ")";
+    if (what.find("Premature end") != std::string::npos)
+      return "not a readable JPEG: the file ends before its image data (libjpeg-turbo: " + what + ")";
+    *warning = "libjpeg-turbo: " + what;
   }
   out->width = width;
   out->height = height;

@@ -842,21 +842,32 @@ TEST(GltfLoader, APngTooShortForItsHeadersTexelsIsRefusedBeforeTheyAreAllocated)
   EXPECT_EQ(std::count(out.rgba.begin(), out.rgba.end(), uint8_t{0}), 3 * 4096 * 4096);
 }
 
-// A JPEG cut short (here only its end marker): libjpeg-turbo decodes what is there and warns, naming the image.
-TEST(GltfLoader, TruncatedJpegIsDecodedWithAWarning) {
+// A JPEG cut short is refused, naming the image, as a PNG cut short is (libjpeg-turbo decoded what was there and
+// warned; a verifier's JPEG cut to a third rendered with its missing texels grey), whether its end marker alone is
+// missing or a third of it; a header cut inside its first table is said to be one (it read "0 x 0 texels").
+TEST(GltfLoader, TruncatedJpegIsRefused) {
   TempDir dir;
-  std::vector<uint8_t> jpeg = solid_jpeg();
-  ASSERT_GT(jpeg.size(), 100u);
-  jpeg.resize(jpeg.size() - 2);  // its end marker
-  Gltf g;
-  g.doc["images"] = {{{"bufferView", g.view_of(jpeg)}, {"mimeType", "image/jpeg"}, {"name", "photo"}}};
-  g.doc["textures"] = {{{"source", 0}}};
-  g.doc["materials"] = {{{"name", "A"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}}};
-  g.node({{"mesh", g.triangle_mesh()}});
-  const Scene s = load_gltf(g.write(dir.path(), "cut", Gltf::Form::Glb));
-  ASSERT_EQ(s.textures.size(), 1u);
-  EXPECT_EQ(s.textures[0].width, 8);
-  EXPECT_TRUE(has_warning(s, "tinygltf: image 0 'photo': libjpeg-turbo: ")) << testing::PrintToString(s.warnings);
+  const std::vector<uint8_t> whole = solid_jpeg();
+  ASSERT_GT(whole.size(), 100u);
+  const std::pair<size_t, std::string> cuts[] = {
+      {whole.size() - 2, "image 0 'photo': not a readable JPEG: the file ends before its image data (libjpeg-turbo: Premature end"},
+      {whole.size() / 3, "image 0 'photo': not a readable JPEG (libjpeg-turbo: "},  // (before its scan: the 8 x 8 file is mostly header)
+      {30, "image 0 'photo': not a readable JPEG"}};
+  for (const auto& [size, expect] : cuts) {
+    const std::vector<uint8_t> jpeg(whole.begin(), whole.begin() + long(size));
+    Gltf g;
+    g.doc["images"] = {{{"bufferView", g.view_of(jpeg)}, {"mimeType", "image/jpeg"}, {"name", "photo"}}};
+    g.doc["textures"] = {{{"source", 0}}};
+    g.doc["materials"] = {{{"name", "A"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}}};
+    g.node({{"mesh", g.triangle_mesh()}});
+    try {
+      (void)load_gltf(g.write(dir.path(), "cut", Gltf::Form::Glb));
+      ADD_FAILURE() << "a JPEG cut to " << size << " bytes was read";
+    } catch (const Error& e) {
+      EXPECT_THAT(e.what(), HasSubstr(expect)) << size;
+      EXPECT_THAT(e.what(), Not(HasSubstr("0 x 0 texels"))) << size;
+    }
+  }
 }
 
 TEST(GltfLoader, MissingImageFileIsWarnedNotFatal) {
@@ -1500,6 +1511,20 @@ TEST_F(BrokenGltf, BufferViewPastItsBuffer) {
   const std::string msg = error_of(g, Gltf::Form::Embedded);
   expect_names_file(msg);
   EXPECT_THAT(msg, HasSubstr("bufferView 0: bytes 0 to 400 lie past the end of buffer 0 (36 bytes)"));
+}
+
+// byteStride outside glTF 2.0's bounds (a multiple of 4 from 4 to 252) is named with its bufferView (tinygltf said
+// "must be the multiple of 4" of 256 and 1000, naming no element).
+TEST_F(BrokenGltf, StrideOutsideGltfsBounds) {
+  for (const int stride : {256, 1000, 13, 2}) {
+    Gltf g;
+    const int pos = g.accessor(g.view_of(std::vector<float>{0, 0, 0, 1, 0, 0, 0, 1, 0}, stride), kFloat, "VEC3", 1);
+    g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}}}}}))}});
+    const std::string msg = error_of(g);
+    expect_names_file(msg);
+    EXPECT_THAT(msg, HasSubstr("bufferView 0: byteStride: found " + std::to_string(stride) +
+                               ", expected a multiple of 4 from 4 to 252 (glTF 2.0's byteStride)"));
+  }
 }
 
 TEST_F(BrokenGltf, StrideSmallerThanElement) {
