@@ -11,11 +11,15 @@
 namespace spadgen::sensor {
 namespace {
 
-// Parses exactly two finite numbers separated by commas, semicolons or white space.
+// Parses exactly two finite decimal numbers separated by a comma, a semicolon or white space. Only decimal
+// digits, signs, points and exponents make a number (strtod read "0x10" as 16, and a NUL byte ended the line).
 bool parse_row(const std::string& line, double& a, double& b) {
   std::string s = line;
-  for (char& ch : s)
+  for (char& ch : s) {
     if (ch == ',' || ch == ';' || ch == '\t') ch = ' ';
+    else if (!(ch == ' ' || ch == '\r' || ch == '+' || ch == '-' || ch == '.' || ch == 'e' || ch == 'E' || (ch >= '0' && ch <= '9')))
+      return false;
+  }
   const char* p = s.c_str();
   char* end = nullptr;
   errno = 0;

@@ -508,6 +508,13 @@ TEST(Gate, BadTablesNameTheFileAndKey) {
   g.profile_csv = write_temp("three_columns.csv", "0,0,5\n400,1\n4200,1\n4600,0\n");
   what = error_of();
   EXPECT_NE(what.find("three_columns.csv' line 1: expected two numbers"), std::string::npos) << what;
+  // decimal numbers only: hexadecimal (strtod read 0x10 as 16) and a NUL byte (it ended the line) are errors
+  g.profile_csv = write_temp("hex.csv", "0,0\n0x190,1\n4200,1\n4600,0\n");
+  what = error_of();
+  EXPECT_NE(what.find("hex.csv' line 2: expected two numbers separated by a comma, found '0x190,1'"), std::string::npos) << what;
+  g.profile_csv = write_temp("nul.csv", std::string("0,0\n400,1") + '\0' + "junk\n4200,1\n4600,0\n");
+  what = error_of();
+  EXPECT_NE(what.find("nul.csv' line 2: expected two numbers"), std::string::npos) << what;
   g.profile_csv = write_temp("with_header.csv", "time_ps,response\n0,0\n400,1\n4200,1\n4600,0\n");
   EXPECT_NO_THROW(build_gate_shape(g, l));
   g.profile_csv = write_temp("inf_header.csv", "infrared_ps,response\n0,0\n400,1\n4200,1\n4600,0\n");  // strtod reads "inf"
