@@ -29,6 +29,8 @@ J = ``max_objects`` (default: the most of any run's ``ground_truth_objects``):
 | object_mask | (J, H, W) | bool | object slot j exists at the pixel (j < object_count) |
 | object_id | (J, H, W) | int64 | the object slot j holds: its id in its run (Run.objects names it; runs of different scenes number their objects each their own way), -1 beyond object_count |
 | object_detectable | (J, H, W) | bool | gate sweeps: slot j's object is detectable (labels.exr: its edge in the noise-free counts stands out; evaluate's "detectable") |
+| object_path | (J, H, W) | float32 | the optical path (m) of slot j's direct return, laser to object to camera centre (its time of flight times c; 2 x range without a laser offset or a medium), 0 beyond object_count |
+| object_edge_snr | (J, H, W) | float32 | gate sweeps: the signal-to-noise ratio of slot j's edge in the noise-free counts (labels.exr; detectable where >= 5), 0 beyond object_count |
 | frames | (K, N, H, W) | uint8 | binary frames, 0 / 1 (large: only when asked for) |
 | expected_counts_se | (K, H, W) | float32 | the Monte Carlo standard error of expected_counts (the rendered light's noise, which the noise-free targets carry), first-order: Run.expected_counts_error_bound (a loss weight or mask) |
 | pde | (1, H, W) | float32 | the pixel's photon detection efficiency at the laser's wavelength, fill factor included (sensor_maps.exr): the chip's fixed pattern and the pixel design |
@@ -46,7 +48,7 @@ J = ``max_objects`` (default: the most of any run's ``ground_truth_objects``):
 | repeat | () | int64 | DatasetSamples only: the realisation of the temporal noise (0: the sample's own folder) |
 | parameters | (P,) | float32 | DatasetSamples only: the sample's numeric parameters, in the order of ``parameter_names`` |
 
-``fields`` chooses among the first twenty-one (default: counts, expected_counts, depth, mask, layer_count);
+``fields`` chooses among the first twenty-three (default: counts, expected_counts, depth, mask, layer_count);
 gate_positions_ns (gate sweeps only), exposures_us (intensity runs only), frames_per_k, intrinsics, origin and run
 come always, and with DatasetSamples sample,
 repeat and parameters. Runs that share a DataLoader batch must agree on K (and N with frames); the constructor
@@ -77,8 +79,8 @@ from .run import Run, RunChangedError, open_run, unpack_frames
 __all__ = ["RunDataset", "DatasetSamples", "FIELDS", "DEFAULT_FIELDS"]
 
 FIELDS = ("counts", "expected_counts", "detection_rate", "depth", "depth_z", "mask", "layer_count", "layer_depth", "layer_mask",
-          "object_count", "object_range", "object_mask", "object_detectable", "object_id", "frames", "expected_counts_se",
-          "pde", "pde_ambient", "dcr_cps", "ambient_photons_per_s", "laser_photons_per_pulse")
+          "object_count", "object_range", "object_mask", "object_detectable", "object_id", "object_path", "object_edge_snr", "frames",
+          "expected_counts_se", "pde", "pde_ambient", "dcr_cps", "ambient_photons_per_s", "laser_photons_per_pulse")
 DEFAULT_FIELDS = ("counts", "expected_counts", "depth", "mask", "layer_count")
 # The file each field reads; a tuple: any one of them.
 _NEEDS = {"counts": "counts.npy", "expected_counts": ("expected_counts.npy", "detection_rate.npy"),
@@ -86,7 +88,7 @@ _NEEDS = {"counts": "counts.npy", "expected_counts": ("expected_counts.npy", "de
           "depth": "ground_truth.exr", "depth_z": "ground_truth.exr", "mask": "ground_truth.exr", "layer_count": "ground_truth.exr",
           "layer_depth": "ground_truth.exr", "layer_mask": "ground_truth.exr", "object_count": "ground_truth.exr",
           "object_range": "ground_truth.exr", "object_mask": "ground_truth.exr", "object_detectable": "labels.exr",
-          "object_id": "ground_truth.exr", "expected_counts_se": "detection_rate.npy", "pde": "sensor_maps.exr",
+          "object_id": "ground_truth.exr", "object_path": "ground_truth.exr", "object_edge_snr": "labels.exr", "expected_counts_se": "detection_rate.npy", "pde": "sensor_maps.exr",
           "pde_ambient": "sensor_maps.exr", "dcr_cps": "sensor_maps.exr", "ambient_photons_per_s": "ambient.exr",
           "laser_photons_per_pulse": "laser.exr"}
 
@@ -274,7 +276,7 @@ class _RunSamples(torch.utils.data.Dataset):
                 out["layer_depth"] = torch.from_numpy(np.where(exists, depth, 0).astype(np.float32))
             if "layer_mask" in self.fields:
                 out["layer_mask"] = torch.from_numpy(exists)
-        if {"object_count", "object_range", "object_mask", "object_detectable", "object_id"} & set(self.fields):
+        if {"object_count", "object_range", "object_mask", "object_detectable", "object_id", "object_path", "object_edge_snr"} & set(self.fields):
             gt = run.ground_truth
             count = np.asarray(gt["object_count"][ys, xs]).astype(np.int64)
             J, n = self.max_objects, min(self.max_objects, int(run.metadata.get("ground_truth_objects", 0)))
@@ -299,6 +301,17 @@ class _RunSamples(torch.utils.data.Dataset):
                 for j in range(n):
                     d[j] = labels[f"object{j}.detectable"][ys, xs] > 0.5
                 out["object_detectable"] = torch.from_numpy(d & exists)
+            if "object_path" in self.fields:
+                p = np.zeros((J, h, w), np.float32)
+                for j in range(n):
+                    p[j] = gt[f"object{j}.path"][ys, xs]
+                out["object_path"] = torch.from_numpy(np.where(exists, p, 0).astype(np.float32))
+            if "object_edge_snr" in self.fields:
+                e = np.zeros((J, h, w), np.float32)
+                labels = run.object_labels
+                for j in range(n):
+                    e[j] = labels[f"object{j}.edge_snr"][ys, xs]
+                out["object_edge_snr"] = torch.from_numpy(np.where(exists, e, 0).astype(np.float32))
         if "expected_counts_se" in self.fields:
             out["expected_counts_se"] = torch.from_numpy(run.expected_counts_error_bound(ys, xs))
         for name in ("pde", "pde_ambient", "dcr_cps"):

@@ -30,7 +30,8 @@ def expected_layout(K, N, L, H, W, J):
             "layer_depth": ((L, H, W), torch.float32), "layer_mask": ((L, H, W), torch.bool),
             "object_count": ((H, W), torch.int64), "object_range": ((J, H, W), torch.float32),
             "object_mask": ((J, H, W), torch.bool), "object_detectable": ((J, H, W), torch.bool),
-            "object_id": ((J, H, W), torch.int64),
+            "object_id": ((J, H, W), torch.int64), "object_path": ((J, H, W), torch.float32),
+            "object_edge_snr": ((J, H, W), torch.float32),
             "frames": ((K, N, H, W), torch.uint8), "expected_counts_se": ((K, H, W), torch.float32),
             "pde": ((1, H, W), torch.float32), "pde_ambient": ((1, H, W), torch.float32), "dcr_cps": ((1, H, W), torch.float32),
             "ambient_photons_per_s": ((1, H, W), torch.float32), "laser_photons_per_pulse": ((1, H, W), torch.float32),
@@ -89,6 +90,12 @@ def test_whole_image_sample_has_the_documented_layout_and_values(sweep_run, swee
     np.testing.assert_array_equal(s["object_range"].numpy(), np.where(used, slots.range, 0))
     np.testing.assert_array_equal(s["object_detectable"].numpy(), slots.detectable & used)
     np.testing.assert_array_equal(s["object_id"].numpy(), np.where(used, slots.id, -1))
+    np.testing.assert_array_equal(s["object_path"].numpy(), np.where(used, slots.path, 0))
+    np.testing.assert_array_equal(s["object_edge_snr"].numpy(), np.where(used, slots.edge_snr, 0))
+    # the time-of-flight truth: within a few mm of twice the range (the laser 3 cm beside the lens, a plate on the way)
+    gap = s["object_path"].numpy()[used] - 2 * s["object_range"].numpy()[used]
+    assert np.abs(gap).max() < 6e-3 and np.abs(gap).max() > 1e-4
+    assert (s["object_edge_snr"].numpy()[used & slots.detectable] >= 5).all()
     # slot 0 holds the plate over part of the image and the sphere beside it: the id says which
     assert len(set(s["object_id"][0].numpy().ravel().tolist()) - {-1}) >= 2
     assert (s["object_count"] == 2).any() and s["object_detectable"][1].any()
