@@ -283,35 +283,26 @@ class _RunSamples(torch.utils.data.Dataset):
             exists = np.arange(J)[:, None, None] < count[None]
             if "object_count" in self.fields:
                 out["object_count"] = torch.from_numpy(count)
-            if "object_range" in self.fields:
-                r = np.zeros((J, h, w), np.float32)
+
+            def slots(source, name, dtype, unused):
+                """Each slot's value of object<j>.<name> in source, `unused` beyond object_count."""
+                a = np.full((J, h, w), unused, dtype)
                 for j in range(n):
-                    r[j] = gt[f"object{j}.range"][ys, xs]
-                out["object_range"] = torch.from_numpy(np.where(exists, r, 0).astype(np.float32))
+                    a[j] = source[f"object{j}.{name}"][ys, xs]
+                return torch.from_numpy(np.where(exists, a, unused).astype(dtype))
+
+            if "object_range" in self.fields:
+                out["object_range"] = slots(gt, "range", np.float32, 0)
             if "object_mask" in self.fields:
                 out["object_mask"] = torch.from_numpy(exists)
             if "object_id" in self.fields:  # which object each slot holds (slot 0 is the plate here, the sphere there)
-                ids = np.full((J, h, w), -1, np.int64)
-                for j in range(n):
-                    ids[j] = gt[f"object{j}.id"][ys, xs]
-                out["object_id"] = torch.from_numpy(np.where(exists, ids, -1))
+                out["object_id"] = slots(gt, "id", np.int64, -1)
             if "object_detectable" in self.fields:
-                d = np.zeros((J, h, w), bool)
-                labels = run.object_labels
-                for j in range(n):
-                    d[j] = labels[f"object{j}.detectable"][ys, xs] > 0.5
-                out["object_detectable"] = torch.from_numpy(d & exists)
+                out["object_detectable"] = slots(run.object_labels, "detectable", np.float32, 0) > 0.5
             if "object_path" in self.fields:
-                p = np.zeros((J, h, w), np.float32)
-                for j in range(n):
-                    p[j] = gt[f"object{j}.path"][ys, xs]
-                out["object_path"] = torch.from_numpy(np.where(exists, p, 0).astype(np.float32))
+                out["object_path"] = slots(gt, "path", np.float32, 0)
             if "object_edge_snr" in self.fields:
-                e = np.zeros((J, h, w), np.float32)
-                labels = run.object_labels
-                for j in range(n):
-                    e[j] = labels[f"object{j}.edge_snr"][ys, xs]
-                out["object_edge_snr"] = torch.from_numpy(np.where(exists, e, 0).astype(np.float32))
+                out["object_edge_snr"] = slots(run.object_labels, "edge_snr", np.float32, 0)
         if "expected_counts_se" in self.fields:
             out["expected_counts_se"] = torch.from_numpy(run.expected_counts_error_bound(ys, xs))
         for name in ("pde", "pde_ambient", "dcr_cps"):

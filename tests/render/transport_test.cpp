@@ -191,6 +191,29 @@ TEST(Transport, AmbientEnvironmentGivesTheCosFourthFalloff) {
     }
 }
 
+// Smooth faces across the view at d: a white metal mirror, and a clear plate 2 mm thick of ior 1.5 behind it, each
+// with the sum over its images of R / r^2 that a point at the camera makes (r the unfolded distance): 1 / (2 d)^2
+// off the mirror; F / (2 d)^2 and (1 - F)^2 F^(2 m + 1) / (2 d + (2 m + 2) t / n)^2 off the plate, for m = 0, 1, ...
+// round trips inside while F^(2 m) >= 1e-6 (F = ((n - 1) / (n + 1))^2).
+std::vector<std::pair<scenes::Scene, double>> smooth_faces(double d) {
+  std::vector<std::pair<scenes::Scene, double>> out;
+  scenes::Scene mirror;
+  scenes::Material metal;
+  metal.metallic = 1.0f, metal.roughness = 0.0f;
+  add_quad(mirror, {0, 0, -float(d)}, {5, 0, 0}, {0, 5, 0}, add_material(mirror, metal));
+  out.emplace_back(mirror, 1 / (4 * d * d));
+  const double n = 1.5, t = 2e-3, F = (n - 1) * (n - 1) / ((n + 1) * (n + 1));
+  scenes::Scene plate;
+  add_box(plate, {-1, -1, -float(d) - float(t)}, {1, 1, -float(d)}, add_material(plate, test::glass(float(n), float(t))));
+  double images = F / (4 * d * d);
+  for (int m = 0; m <= 8 && std::pow(F, 2 * m) >= 1e-6; ++m) {
+    const double r = 2 * d + (2 * m + 2) * t / n;
+    images += (1 - F) * (1 - F) * std::pow(F, 2 * m + 1) / (r * r);
+  }
+  out.emplace_back(plate, images);
+  return out;
+}
+
 // The laser's image in a smooth face as the camera sees it (laser -> face -> lens): a point image that no path finds
 // (the lens is a point too), rendered into the pixel it lands in with every path (a verifier found 0 photons where a
 // roughness of 0.033 gave the closed form). The laser at the camera and faces across the view at d = 1 m: the image
@@ -213,20 +236,7 @@ TEST(Transport, TheCameraSeesTheLasersImageInASmoothFace) {
     const float* g = t.pixel_transient(8, 8);
     EXPECT_EQ(std::max_element(g, g + axis.bins) - g, axis.bin_of(c.laser.emission_delay_s + 2.0 * d / kC));
   };
-  scenes::Scene mirror;
-  scenes::Material metal;
-  metal.metallic = 1.0f, metal.roughness = 0.0f;
-  add_quad(mirror, {0, 0, -float(d)}, {5, 0, 0}, {0, 5, 0}, add_material(mirror, metal));
-  glint(mirror, k / (4 * d * d));
-  const double n = 1.5, t = 2e-3, F = (n - 1) * (n - 1) / ((n + 1) * (n + 1));
-  scenes::Scene plate;
-  add_box(plate, {-1, -1, -float(d) - float(t)}, {1, 1, -float(d)}, add_material(plate, test::glass(float(n), float(t))));
-  double expected = F / (4 * d * d);
-  for (int m = 0; m <= 8 && std::pow(F, 2 * m) >= 1e-6; ++m) {
-    const double r = 2 * d + (2 * m + 2) * t / n;
-    expected += (1 - F) * (1 - F) * std::pow(F, 2 * m + 1) / (r * r);
-  }
-  glint(plate, k * expected);
+  for (const auto& [scene, images] : smooth_faces(d)) glint(scene, k * images);
 }
 
 // A glTF point light in view is a point that no camera ray meets: rendered into the pixel it lands in with every path
@@ -300,20 +310,7 @@ TEST(Transport, ALampsImageInASmoothFaceLandsInItsPixel) {
     }
     for (const float v : image(s, scenes::Light::Type::Spot)) EXPECT_EQ(v, 0.0f);
   };
-  scenes::Scene mirror;
-  scenes::Material metal;
-  metal.metallic = 1.0f, metal.roughness = 0.0f;
-  add_quad(mirror, {0, 0, -float(d)}, {5, 0, 0}, {0, 5, 0}, add_material(mirror, metal));
-  expect_image(mirror, k / (4 * d * d));
-  const double n = 1.5, t = 2e-3, F = (n - 1) * (n - 1) / ((n + 1) * (n + 1));
-  scenes::Scene plate;
-  add_box(plate, {-1, -1, -float(d) - float(t)}, {1, 1, -float(d)}, add_material(plate, test::glass(float(n), float(t))));
-  double expected = F / (4 * d * d);
-  for (int m = 0; m <= 8 && std::pow(F, 2 * m) >= 1e-6; ++m) {
-    const double r = 2 * d + (2 * m + 2) * t / n;
-    expected += (1 - F) * (1 - F) * std::pow(F, 2 * m + 1) / (r * r);
-  }
-  expect_image(plate, k * expected);
+  for (const auto& [scene, images] : smooth_faces(d)) expect_image(scene, k * images);
 }
 
 // 8 x 8 pixels of 110 um at 4 paths, under 50 lux of an ambient band around 550 nm of the given width; a white
