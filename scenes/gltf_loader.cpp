@@ -311,6 +311,9 @@ class Loader {
   void check_matrix(size_t node);
   // Per vertex of a skinned primitive: sum over its joints of weight x (joint's world x inverse bind).
   std::vector<glm::dmat4> skin_matrices(size_t node, const tinygltf::Primitive& p, size_t vertices, const std::string& who);
+  // Refuses accessor `accessor` of vertex attribute `attribute` (POSITION, NORMAL, TEXCOORD_n, COLOR_0, JOINTS_n,
+  // WEIGHTS_n; `morph` for a morph target's) unless glTF 2.0 allows its component type there.
+  void check_component(int accessor, const std::string& who, const std::string& attribute, bool morph) const;
   void resolve_edits();
   size_t named(const char* kind, const char* section, const std::vector<std::string>& names, const std::string& name) const;
   Trs decompose(size_t node, const glm::dmat4& m) const;
@@ -546,6 +549,66 @@ glm::dmat4 Loader::world_of(size_t node) const {
 // glTF 2.0 skinning (linear blend) in the pose the nodes' own transforms give (no animation): a vertex's
 // world position is sum_k weight_k x world(joint_k) x inverseBind(joint_k) x position; the transform of
 // the node holding the mesh is not used (the specification's rule).
+// The component types glTF 2.0 allows a vertex attribute (3.7.2.1), and those KHR_mesh_quantization adds when
+// the file lists it in extensionsUsed: an UNSIGNED_INT POSITION was read as integer metres, a COLOR_0 of
+// BYTE as negative colours, an UNSIGNED_INT NORMAL (no negative component) as some other direction, and a
+// FLOAT JOINTS_0 as joint numbers.
+void Loader::check_component(int accessor, const std::string& who, const std::string& attribute, bool morph) const {
+  if (accessor < 0 || static_cast<size_t>(accessor) >= m_.accessors.size()) return;  // read_accessor names it
+  enum Norm { kPlain, kNormalized, kEither };
+  struct Allowed {
+    int type;
+    Norm norm;
+  };
+  constexpr int kF = TINYGLTF_COMPONENT_TYPE_FLOAT, kB = TINYGLTF_COMPONENT_TYPE_BYTE, kUB = TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE,
+                kS = TINYGLTF_COMPONENT_TYPE_SHORT, kUS = TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT;
+  std::vector<Allowed> core, quantized;
+  const auto starts = [&](const char* prefix) { return attribute.rfind(prefix, 0) == 0; };
+  if (attribute == "POSITION") {
+    core = {{kF, kPlain}};
+    quantized = morph ? std::vector<Allowed>{{kB, kEither}, {kS, kEither}}
+                      : std::vector<Allowed>{{kB, kEither}, {kUB, kEither}, {kS, kEither}, {kUS, kEither}};
+  } else if (attribute == "NORMAL") {
+    core = {{kF, kPlain}};
+    quantized = {{kB, kNormalized}, {kS, kNormalized}};
+  } else if (starts("TEXCOORD_")) {
+    core = {{kF, kPlain}, {kUB, kNormalized}, {kUS, kNormalized}};
+    quantized = {{kB, kEither}, {kUB, kPlain}, {kS, kEither}, {kUS, kPlain}};
+  } else if (attribute == "COLOR_0" || starts("WEIGHTS_")) {
+    core = {{kF, kPlain}, {kUB, kNormalized}, {kUS, kNormalized}};
+  } else if (starts("JOINTS_")) {
+    core = {{kUB, kPlain}, {kUS, kPlain}};
+  } else {
+    return;  // not read
+  }
+  const bool declared = std::count(m_.extensionsUsed.begin(), m_.extensionsUsed.end(), "KHR_mesh_quantization") > 0;
+  const tinygltf::Accessor& a = m_.accessors[static_cast<size_t>(accessor)];
+  const auto fits = [&](const std::vector<Allowed>& list) {
+    return std::any_of(list.begin(), list.end(), [&](const Allowed& x) {
+      return x.type == a.componentType && (x.norm == kEither || (x.norm == kNormalized) == a.normalized || x.type == kF);
+    });
+  };
+  if (fits(core) || (declared && fits(quantized))) return;
+  const auto names = [](const std::vector<Allowed>& list) {
+    std::string out;
+    for (const Allowed& x : list)
+      out += std::string(out.empty() ? "" : ", ") + component_name(x.type) +
+             (x.type == kF || x.norm == kEither ? "" : x.norm == kNormalized ? " normalized" : " not normalized");
+    return out;
+  };
+  std::string expected = names(core);
+  if (declared) {
+    if (!quantized.empty()) expected += ", " + names(quantized) + " (KHR_mesh_quantization)";
+  } else if (fits(quantized)) {
+    expected += "; " + component_name(a.componentType) + " needs KHR_mesh_quantization, which the file does not list in "
+                "extensionsUsed (and extensionsRequired)";
+  } else if (!quantized.empty()) {
+    expected += " (with KHR_mesh_quantization in extensionsUsed also " + names(quantized) + ")";
+  }
+  fail(who, (morph ? "morph target " : "") + attribute + " accessor " + std::to_string(accessor) + " has componentType " +
+                component_name(a.componentType) + (a.normalized ? " (normalized)" : "") + "; expected " + expected);
+}
+
 std::vector<glm::dmat4> Loader::skin_matrices(size_t node, const tinygltf::Primitive& p, size_t n, const std::string& who) {
   const auto skin_index = static_cast<size_t>(m_.nodes[node].skin);
   if (skin_index >= m_.skins.size())
@@ -584,6 +647,8 @@ std::vector<glm::dmat4> Loader::skin_matrices(size_t node, const tinygltf::Primi
     if (ji == p.attributes.end() || wi == p.attributes.end())
       fail(who, "has " + std::string(ji == p.attributes.end() ? "WEIGHTS_" : "JOINTS_") + std::to_string(set) + " without " +
                     (ji == p.attributes.end() ? "JOINTS_" : "WEIGHTS_") + std::to_string(set));
+    check_component(ji->second, who, "JOINTS_" + std::to_string(set), false);
+    check_component(wi->second, who, "WEIGHTS_" + std::to_string(set), false);
     size_t kj = 0, kw = 0;
     int c = 0;
     const std::vector<double> js = read_accessor(ji->second, who + " JOINTS_" + std::to_string(set), {TINYGLTF_TYPE_VEC4}, &kj, &c);
@@ -1109,7 +1174,9 @@ void Loader::load_materials() {
     unused_texture(g.normalTexture.index, "normalTexture");
     unused_texture(g.occlusionTexture.index, "occlusionTexture");
     unused_texture(g.emissiveTexture.index, "emissiveTexture (emissiveFactor is used)");
-    if (g.alphaMode != "OPAQUE" && !g.alphaMode.empty())
+    if (g.alphaMode != "OPAQUE" && g.alphaMode != "MASK" && g.alphaMode != "BLEND")
+      fail(who, "alphaMode " + quoted(g.alphaMode) + " is no glTF 2.0 alpha mode; expected OPAQUE, MASK or BLEND");
+    if (g.alphaMode != "OPAQUE")
       warn(who + ": alphaMode " + g.alphaMode + " is not used by spadgen; the surface is opaque");
     mat.double_sided = g.doubleSided;
 
@@ -1207,25 +1274,7 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
 
   size_t n = 0, k = 0;
   int comps = 0;
-  // Component types an attribute may have (glTF 2.0 3.7.2.1; POSITION's integers: KHR_mesh_quantization):
-  // an UNSIGNED_INT POSITION was read as integers of metres, and COLOR_0 as BYTE took negative colours.
-  const auto check_component = [&](int accessor, const char* attribute, std::initializer_list<int> allowed, bool normalized_only) {
-    if (accessor < 0 || static_cast<size_t>(accessor) >= m_.accessors.size()) return;  // read_accessor names it
-    const tinygltf::Accessor& a = m_.accessors[static_cast<size_t>(accessor)];
-    const bool ok = std::find(allowed.begin(), allowed.end(), a.componentType) != allowed.end() &&
-                    (!normalized_only || a.componentType == TINYGLTF_COMPONENT_TYPE_FLOAT || a.normalized);
-    if (!ok) {
-      std::string list;
-      for (int t : allowed) list += std::string(list.empty() ? "" : ", ") + component_name(t);
-      fail(who, std::string(attribute) + " accessor " + std::to_string(accessor) + " has componentType " +
-                    component_name(a.componentType) + (a.normalized ? " (normalized)" : "") + "; expected " + list +
-                    (normalized_only ? " (integers normalized)" : ""));
-    }
-  };
-  check_component(pos_it->second, "POSITION",
-                  {TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_COMPONENT_TYPE_BYTE, TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE,
-                   TINYGLTF_COMPONENT_TYPE_SHORT, TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT},
-                  false);
+  check_component(pos_it->second, who, "POSITION", false);
   std::vector<double> pos = read_accessor(pos_it->second, who + " POSITION", {TINYGLTF_TYPE_VEC3}, &n, &comps);
   // Morph targets: the shape of the default weights (the node's, else the mesh's; none: the base shape),
   // base + sum of weight x target displacement, for POSITION and NORMAL.
@@ -1248,9 +1297,7 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
     for (size_t t = 0; t < p.targets.size() && t < weights.size(); ++t) {
       const auto it = p.targets[t].find(attribute);
       if (weights[t] == 0.0 || it == p.targets[t].end()) continue;
-      if (std::strcmp(attribute, "POSITION") == 0)  // displacements: float, or KHR_mesh_quantization's integers
-        check_component(it->second, "morph target POSITION",
-                        {TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_COMPONENT_TYPE_BYTE, TINYGLTF_COMPONENT_TYPE_SHORT}, false);
+      check_component(it->second, who, attribute, true);
       size_t count = 0;
       int c = 0;
       const std::string target = who + " morph target " + std::to_string(t) + " " + attribute;
@@ -1276,6 +1323,7 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
   for (size_t v = 0; v < n; ++v) out.positions[v] = glm::vec3(world_pos[v] - out.offset);
   const glm::dmat3 normal_matrix = glm::transpose(glm::inverse(glm::dmat3(world)));
   if (auto it = p.attributes.find("NORMAL"); it != p.attributes.end()) {
+    check_component(it->second, who, "NORMAL", false);
     std::vector<double> nor = read_accessor(it->second, who + " NORMAL", {TINYGLTF_TYPE_VEC3}, &k, &comps);
     if (k != n) fail(who, "NORMAL has " + std::to_string(k) + " elements but POSITION has " + std::to_string(n));
     morph("NORMAL", nor);
@@ -1297,6 +1345,7 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
     const std::string key = "TEXCOORD_" + std::to_string(set);
     auto it = p.attributes.find(key);
     if (it == p.attributes.end()) continue;
+    check_component(it->second, who, key, false);
     const std::vector<double> uv = read_accessor(it->second, who + " " + key, {TINYGLTF_TYPE_VEC2}, &k, &comps);
     if (k != n) fail(who, key + " has " + std::to_string(k) + " elements but POSITION has " + std::to_string(n));
     for (size_t v = 0; v < uv.size(); ++v)
@@ -1310,8 +1359,7 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
 
   // COLOR_0 multiplies the base colour (glTF 2.0 3.9.2); its alpha is not used (surfaces are opaque).
   if (auto it = p.attributes.find("COLOR_0"); it != p.attributes.end()) {
-    check_component(it->second, "COLOR_0",
-                    {TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE, TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT}, true);
+    check_component(it->second, who, "COLOR_0", false);
     int cc = 0;
     const std::vector<double> col = read_accessor(it->second, who + " COLOR_0", {TINYGLTF_TYPE_VEC3, TINYGLTF_TYPE_VEC4}, &k, &cc);
     if (k != n) fail(who, "COLOR_0 has " + std::to_string(k) + " elements but POSITION has " + std::to_string(n));
@@ -1981,6 +2029,11 @@ void check_gltf_types(const std::string& path, const nlohmann::json& doc) {
             throw Error(path + ": " + who + ": range: found " + r->dump() +
                         ", expected a number > 0 (metres; leave it out for a light without a range)");
         }
+  // (tinygltf read a string, or an array of non-strings, as no extensions: a required one went unnoticed)
+  for (const char* key : {"extensionsUsed", "extensionsRequired"})
+    if (const auto it = doc.find(key);
+        it != doc.end() && (!it->is_array() || !std::all_of(it->begin(), it->end(), [](const nlohmann::json& e) { return e.is_string(); })))
+      throw Error(path + ": " + key + ": found " + it->dump().substr(0, 40) + ", expected an array of extension names (strings)");
   if (const auto it = doc.find("scene"); it != doc.end() && !gltf_integer(*it, 0))
     throw Error(path + ": scene: found " + it->dump().substr(0, 40) + ", expected the index of a scene (an integer >= 0)");
 }

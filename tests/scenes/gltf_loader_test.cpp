@@ -1934,7 +1934,12 @@ TEST_F(BrokenGltf, AttributesOfComponentTypesGltfDoesNotAllowAreRefused) {
     const int pos = g.accessor(g.view_of(std::vector<uint32_t>{0, 0, 0, 1, 0, 0, 0, 1, 0}), kUInt, "VEC3", 3);
     g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}}}}}), "Tri")}});
     EXPECT_THAT(error_of(g), HasSubstr("mesh 0 'Tri' primitive 0: POSITION accessor 0 has componentType UNSIGNED_INT; expected "
-                                       "FLOAT, BYTE, UNSIGNED_BYTE, SHORT, UNSIGNED_SHORT"));
+                                       "FLOAT (with KHR_mesh_quantization in extensionsUsed also BYTE, UNSIGNED_BYTE, SHORT, "
+                                       "UNSIGNED_SHORT)"));
+    g.doc["extensionsUsed"] = {"KHR_mesh_quantization"};
+    EXPECT_THAT(error_of(g), HasSubstr("mesh 0 'Tri' primitive 0: POSITION accessor 0 has componentType UNSIGNED_INT; expected "
+                                       "FLOAT, BYTE, UNSIGNED_BYTE, SHORT, UNSIGNED_SHORT (KHR_mesh_quantization)"));
+    g.doc.erase("extensionsUsed");
     // a component type glTF does not have is given by its value (it was "invalid")
     g.doc["accessors"][0]["componentType"] = 5124;
     EXPECT_THAT(error_of(g), HasSubstr("POSITION accessor 0 has componentType INT (5124, which glTF 2.0 does not allow); expected FLOAT"));
@@ -1965,7 +1970,7 @@ TEST_F(BrokenGltf, AttributesOfComponentTypesGltfDoesNotAllowAreRefused) {
     g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}, {"COLOR_0", col}}}}}), "Tri")}});
     EXPECT_THAT(error_of(g), HasSubstr(std::string("mesh 0 'Tri' primitive 0: COLOR_0 accessor 1 has componentType ") +
                                        (normalized ? "BYTE (normalized)" : "UNSIGNED_BYTE") +
-                                       "; expected FLOAT, UNSIGNED_BYTE, UNSIGNED_SHORT (integers normalized)"));
+                                       "; expected FLOAT, UNSIGNED_BYTE normalized, UNSIGNED_SHORT normalized"));
   }
   {
     Gltf g;
@@ -1973,6 +1978,76 @@ TEST_F(BrokenGltf, AttributesOfComponentTypesGltfDoesNotAllowAreRefused) {
     const int col = g.accessor(g.view_of(std::vector<float>{1, 1, 1, 1, 2, 1, 1, 1, 1}), kFloat, "VEC3", 3);
     g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}, {"COLOR_0", col}}}}}), "Tri")}});
     EXPECT_THAT(error_of(g), HasSubstr("mesh 0 'Tri' primitive 0: COLOR_0 element 1 has the value 2, expected a colour within [0, 1]"));
+  }
+  {
+    // integer positions without KHR_mesh_quantization listed (they loaded as the extension's, silently)
+    Gltf g;
+    const int pos = g.accessor(g.view_of(std::vector<uint16_t>{0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0}, 8), kUShort, "VEC3", 3);
+    g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}}}}}), "Tri")}});
+    EXPECT_THAT(error_of(g), HasSubstr("mesh 0 'Tri' primitive 0: POSITION accessor 0 has componentType UNSIGNED_SHORT; expected "
+                                       "FLOAT; UNSIGNED_SHORT needs KHR_mesh_quantization, which the file does not list in "
+                                       "extensionsUsed"));
+    g.doc["extensionsUsed"] = {"KHR_mesh_quantization"};
+    EXPECT_NO_THROW(load_gltf(g.write(dir_.path(), "quantized")));
+  }
+  {
+    // normals: an UNSIGNED_INT NORMAL (no negative component) was read as some other direction; SHORT normalized
+    // is KHR_mesh_quantization's, SHORT not normalized no one's
+    Gltf g;
+    const int pos = g.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+    const int nor = g.accessor(g.view_of(std::vector<uint32_t>{0, 0, 1, 0, 0, 1, 0, 0, 1}), kUInt, "VEC3", 3);
+    g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}, {"NORMAL", nor}}}}}), "Tri")}});
+    EXPECT_THAT(error_of(g), HasSubstr("mesh 0 'Tri' primitive 0: NORMAL accessor 1 has componentType UNSIGNED_INT; expected FLOAT "
+                                       "(with KHR_mesh_quantization in extensionsUsed also BYTE normalized, SHORT normalized)"));
+    Gltf q;
+    const int qpos = q.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+    const int qnor = q.accessor(q.view_of(std::vector<int16_t>{0, 0, -32767, 0, 0, 0, -32767, 0, 0, 0, -32767, 0}, 8), kShort,
+                                "VEC3", 3, 0, true);
+    q.node({{"mesh", q.mesh(json::array({{{"attributes", {{"POSITION", qpos}, {"NORMAL", qnor}}}}}), "Tri")}});
+    EXPECT_THAT(error_of(q), HasSubstr("NORMAL accessor 1 has componentType SHORT (normalized); expected FLOAT; SHORT needs "
+                                       "KHR_mesh_quantization"));
+    q.doc["extensionsUsed"] = {"KHR_mesh_quantization"};
+    const Scene s = load_gltf(q.write(dir_.path(), "normals"));
+    ASSERT_EQ(s.meshes.size(), 1u);
+    ASSERT_EQ(s.meshes[0].normals.size(), 3u);
+    EXPECT_FLOAT_EQ(s.meshes[0].normals[2].z, -1.0f);
+    q.doc["accessors"][1]["normalized"] = false;
+    EXPECT_THAT(error_of(q), HasSubstr("NORMAL accessor 1 has componentType SHORT; expected FLOAT, BYTE normalized, SHORT normalized "
+                                       "(KHR_mesh_quantization)"));
+  }
+  {
+    // joints as FLOAT were read as joint numbers; weights as BYTE
+    Gltf g;
+    const int pos = g.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+    const int joints = g.accessor(g.view_of(std::vector<float>{0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0}), kFloat, "VEC4", 3);
+    const int weights = g.accessor(g.view_of(std::vector<float>{1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0}), kFloat, "VEC4", 3);
+    const int m = g.mesh(json::array({{{"attributes", {{"POSITION", pos}, {"JOINTS_0", joints}, {"WEIGHTS_0", weights}}}}}), "Tri");
+    const int joint = g.node({{"name", "J"}});
+    g.node({{"mesh", m}, {"skin", 0}});
+    g.doc["skins"] = {{{"joints", {joint}}}};
+    EXPECT_THAT(error_of(g), HasSubstr("mesh 0 'Tri' primitive 0: JOINTS_0 accessor 1 has componentType FLOAT; expected "
+                                       "UNSIGNED_BYTE not normalized, UNSIGNED_SHORT not normalized"));
+    g.doc["accessors"][1]["componentType"] = kUByte;  // the FLOAT view's 48 zero bytes: joint 0 for every vertex
+    EXPECT_NO_THROW(load_gltf(g.write(dir_.path(), "joints")));
+    g.doc["accessors"][2]["componentType"] = kByte;
+    g.doc["accessors"][2]["normalized"] = true;
+    EXPECT_THAT(error_of(g), HasSubstr("WEIGHTS_0 accessor 2 has componentType BYTE (normalized); expected FLOAT, UNSIGNED_BYTE "
+                                       "normalized, UNSIGNED_SHORT normalized"));
+  }
+  {
+    // alphaMode outside glTF's three was "not used by spadgen" like BLEND; extensionsUsed as a string read as none
+    Gltf g;
+    g.node({{"mesh", g.triangle_mesh()}});
+    g.doc["materials"] = json::array({{{"name", "M"}, {"alphaMode", "TRANSPARENT"}}});
+    g.doc["meshes"][0]["primitives"][0]["material"] = 0;
+    EXPECT_THAT(error_of(g), HasSubstr("material 0 'M': alphaMode 'TRANSPARENT' is no glTF 2.0 alpha mode; expected OPAQUE, MASK or BLEND"));
+    g.doc["materials"][0]["alphaMode"] = "BLEND";
+    EXPECT_TRUE(has_warning(load_gltf(g.write(dir_.path(), "blend")), "material 0 'M': alphaMode BLEND is not used by spadgen; the surface is opaque"));
+    g.doc["extensionsUsed"] = "KHR_materials_ior";
+    EXPECT_THAT(error_of(g), HasSubstr(": extensionsUsed: found \"KHR_materials_ior\", expected an array of extension names (strings)"));
+    g.doc["extensionsUsed"] = json::array();
+    g.doc["extensionsRequired"] = {1};
+    EXPECT_THAT(error_of(g), HasSubstr(": extensionsRequired: found [1], expected an array of extension names (strings)"));
   }
 }
 
