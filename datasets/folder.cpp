@@ -285,15 +285,13 @@ std::optional<ojson> DatasetFolder::checked(const ojson& wanted) const {
   if (prev) {
     ojson a = *prev, b = wanted;
     // repeats may grow: realisations added to the samples (each sensed from its sample's saved light, the others
-    // kept); not shrink, which would leave the last realisations' folders behind
+    // kept); not shrink, which would leave the last realisations' folders behind. Checked after the rest, so that
+    // another dataset is told as such (it was told only that repeats may not shrink).
     const auto repeats = [](const ojson& d) {
       const auto r = d.find("repeats");
       return r != d.end() && r->is_number_integer() ? r->get<int64_t>() : int64_t(1);
     };
-    if (repeats(b) < repeats(a))
-      throw Error(dir_.string() + " holds " + std::to_string(repeats(a)) + " realisations of each sample's noise (repeats), and " +
-                  spec_.file + " asks for " + std::to_string(repeats(b)) +
-                  ": repeats may grow, to add realisations, not shrink; use another folder (-o), or remove " + dir_.string());
+    const int64_t held = repeats(a), asked = repeats(b);
     for (const char* free_key : {"samples", "dataset_file", "repeats"}) a.erase(free_key), b.erase(free_key);
     // set's and random's keys in any order make the same samples (only the grid's order decides the cells)
     for (const char* unordered : {"set", "random"})
@@ -306,6 +304,10 @@ std::optional<ojson> DatasetFolder::checked(const ojson& wanted) const {
     if (const std::string other = other_scenes(*prev); !other.empty())
       throw Error(dir_.string() + " holds another dataset: " + other + "; the two datasets' samples would mix in one folder: use "
                   "another folder (-o), or, where " + spec_.file + " replaces it, remove the other dataset file");
+    if (asked < held)
+      throw Error(dir_.string() + " holds " + std::to_string(held) + " realisations of each sample's noise (repeats), and " +
+                  spec_.file + " asks for " + std::to_string(asked) +
+                  ": repeats may grow, to add realisations, not shrink; use another folder (-o), or remove " + dir_.string());
   } else {
     // dataset.json decides whose the folder is: without it (damaged, or lost), samples and an index there
     // may be another dataset's, which this one would replace.
@@ -655,8 +657,14 @@ SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash) co
           // (a default of this spadgen: the knots of the gate, 64 then 256, made every sample stale with the
           // reason below, which named no default)
           rec.error = "the scene as it resolves now differs at " + at + ": a parameter, or a default of this spadgen";
+        else if (const auto t = meta->find("sensor_tables_fnv1a64");
+                 t != meta->end() && t->is_string() && !now.tables_hash.empty() && *t != now.tables_hash)
+          rec.error = "a sensor table the scene file names (a CSV or EXR file) changed since it was generated";
         else
-          rec.error = "the scene as it resolves now differs (a sensor table the scene file names, or the parameters)";
+          // the same resolved scene, contents and tables as it rendered, under the hash of other contents: the
+          // contents it was planned from, edited before it rendered (it said "a sensor table ..., or the parameters")
+          rec.error = "the scene file, its glTF or a file the glTF reads changed while it was generated (it was planned from "
+                      "other contents than it rendered)";
       }
       stale = true;
       continue;

@@ -417,6 +417,14 @@ TEST_F(Dataset, RepeatsGrowWithoutRenderingAgain) {
   EXPECT_EQ(fewer.code, 1);
   EXPECT_THAT(fewer.output, HasSubstr(grown + " holds 3 realisations of each sample's noise (repeats), and " + (dir_ / "d.json").string() +
                                       " asks for 2: repeats may grow, to add realisations, not shrink"));
+  // another dataset (another seed) with fewer repeats is told as another dataset (it was told only that repeats
+  // may not shrink, as if more repeats would do)
+  write(dir_ / "d.json", small_dataset(2, 4));
+  const Result other = sh("dataset run " + (dir_ / "d.json").string() + " -o " + grown + " -q");
+  EXPECT_EQ(other.code, 1);
+  EXPECT_THAT(other.output, HasSubstr(grown + " holds another dataset: its dataset.json differs from " + (dir_ / "d.json").string() +
+                                      " at \"seed\""));
+  EXPECT_THAT(other.output, Not(HasSubstr("repeats may grow, to add realisations, not shrink")));
   EXPECT_TRUE(fs::exists(dir_ / "grown/samples/000001_r02/counts.npy"));
 }
 
@@ -596,10 +604,47 @@ TEST_F(Dataset, AChangedSensorTableMakesSamplesStale) {
   const Result st = sh("dataset status " + (dir_ / "out").string());
   EXPECT_THAT(st.output, HasSubstr("stale: 0-1"));
   // and what changed, as far as the samples' metadata.json tell
-  EXPECT_THAT(st.output, HasSubstr("stale 0-1: the scene as it resolves now differs (a sensor table the scene file names, or the "
-                                   "parameters) (`spadgen dataset run` generates them again)"));
+  EXPECT_THAT(st.output, HasSubstr("stale 0-1: a sensor table the scene file names (a CSV or EXR file) changed since it was "
+                                   "generated (`spadgen dataset run` generates them again)"));
   write(dir_ / "pulse.csv", "0,0\n50,1\n100,0\n");  // the same bytes again: done again
   EXPECT_THAT(sh("dataset status " + (dir_ / "out").string()).output, HasSubstr("2 samples: 2 done, 0 failed, 0 stale"));
+}
+
+// The scene file edited while the dataset runs (a comment: the same resolved scene): the samples rendered after
+// the edit hold its contents under the hash of the contents they were planned from, and are stale; the reason
+// says so (it said "a sensor table the scene file names, or the parameters" changed, which neither did).
+TEST_F(Dataset, ASceneFileEditedWhileTheDatasetRunsIsToldAsSuch) {
+  for (const char* f : {"multi_object.json", "multi_object.gltf", "multi_object.bin"}) fs::copy_file(kScenes + f, dir_ / f);
+  const fs::path scene = dir_ / "multi_object.json";
+  write(dir_ / "d.json", small_dataset(6, 3, scene.string()));
+  const fs::path out = dir_ / "out";
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    ::execl(kBin.c_str(), kBin.c_str(), "dataset", "run", (dir_ / "d.json").c_str(), "-o", out.c_str(), "-q", nullptr);
+    ::_exit(127);
+  }
+  bool seen = false;
+  for (int i = 0; i < 3000 && !seen; ++i) {
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(out / "samples", ec))
+      if (e.path().filename().string().find(".000002.spadgen-staging") == 0) seen = true;
+    if (!seen) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ::kill(pid, SIGSTOP);
+  std::ofstream(scene, std::ios::app) << "// edited while the dataset ran\n";
+  ::kill(pid, SIGCONT);
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  ASSERT_TRUE(seen);
+  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << status;
+  const Result st = sh("dataset status " + out.string());
+  // samples 3-5 at least read the edited file (sample 2 may have read it before or after)
+  EXPECT_THAT(st.output, HasSubstr("-5: the scene file, its glTF or a file the glTF reads changed while it was generated (it was "
+                                   "planned from other contents than it rendered)"));
+  EXPECT_THAT(st.output, Not(HasSubstr("sensor table")));
+  // and those rendered before it: changed since (sample 2 among them or not)
+  EXPECT_THAT(st.output, testing::ContainsRegex("stale 0-[12]: the scene file, its glTF or a file the glTF reads changed since it was "
+                                                "generated \\("));
 }
 
 // A sensor table edited after the dataset resolved a sample (whose hash holds the tables as they were then) and before
