@@ -79,6 +79,13 @@ TEST_F(Reconstruct, HdrOfADualExposureRunIsTheSensorsLinearisedImageWithItsError
   for (size_t i = 0; i < pixels; ++i) {
     const double truth = N * (lambda[i] + lambda[pixels + i]) / 2;
     EXPECT_NEAR(exact.channels.at("photons")[i], truth, 1e-6 * truth + 1e-9) << "pixel " << i;
+    // its standard error: what one noisy image's inversion has at the true light (0 where 1 - p is 0 in double)
+    const double pL = -std::expm1(-aL * truth / N), pS = -std::expm1(-aS * truth / N);
+    const double var = N / 2 * (pL * (1 - pL) + pS * (1 - pS)), slope = 0.5 * (aL * (1 - pL) + aS * (1 - pS));
+    const double want = slope > 0 ? std::sqrt(var) / slope : 0.0;
+    EXPECT_NEAR(exact.channels.at("photons_se")[i], want, 1e-4 * want) << "pixel " << i;
+    const double expected_counts = N / 2 * (-std::expm1(-double(lambda[i])) - std::expm1(-double(lambda[pixels + i])));
+    EXPECT_EQ(exact.channels.at("saturated")[i] > 0.5f, expected_counts >= N - 0.5) << "pixel " << i;
   }
   // A 2D run has no gate profiles: the detectors' options are refused, not ignored, and nothing is written.
   for (const char* option : {"--detector paper", "--max-detections 2"}) {
