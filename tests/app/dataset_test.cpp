@@ -55,20 +55,29 @@ struct Stopped {
   bool seen = false;
   int status = 0;  // waitpid's
 };
-Stopped stop_inside_sample_2(const fs::path& file, const fs::path& out, int sig, const fs::path& log = {}) {
+// Starts `dataset run FILE -o OUT -q` (its stderr into `log` when given) and waits up to 15 s for sample 2's
+// staging folder; its pid, and whether the folder was seen.
+std::pair<pid_t, bool> run_until_sample_2(const fs::path& file, const fs::path& out, const fs::path& log = {}) {
   const pid_t pid = ::fork();
   if (pid == 0) {
     if (!log.empty()) ::dup2(::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644), 2);
     ::execl(kBin.c_str(), kBin.c_str(), "dataset", "run", file.c_str(), "-o", out.c_str(), "-q", nullptr);
     ::_exit(127);
   }
-  Stopped s;
-  for (int i = 0; i < 3000 && !s.seen; ++i) {
+  bool seen = false;
+  for (int i = 0; i < 3000 && !seen; ++i) {
     std::error_code ec;
     for (const auto& e : fs::directory_iterator(out / "samples", ec))
-      if (e.path().filename().string().find(".000002.spadgen-staging") == 0) s.seen = true;
-    if (!s.seen) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+      if (e.path().filename().string().find(".000002.spadgen-staging") == 0) seen = true;
+    if (!seen) std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
+  return {pid, seen};
+}
+
+Stopped stop_inside_sample_2(const fs::path& file, const fs::path& out, int sig, const fs::path& log = {}) {
+  Stopped s;
+  const auto [pid, seen] = run_until_sample_2(file, out, log);
+  s.seen = seen;
   ::kill(pid, sig);
   ::waitpid(pid, &s.status, 0);
   return s;
@@ -618,18 +627,7 @@ TEST_F(Dataset, ASceneFileEditedWhileTheDatasetRunsIsToldAsSuch) {
   const fs::path scene = dir_ / "multi_object.json";
   write(dir_ / "d.json", small_dataset(6, 3, scene.string()));
   const fs::path out = dir_ / "out";
-  const pid_t pid = ::fork();
-  if (pid == 0) {
-    ::execl(kBin.c_str(), kBin.c_str(), "dataset", "run", (dir_ / "d.json").c_str(), "-o", out.c_str(), "-q", nullptr);
-    ::_exit(127);
-  }
-  bool seen = false;
-  for (int i = 0; i < 3000 && !seen; ++i) {
-    std::error_code ec;
-    for (const auto& e : fs::directory_iterator(out / "samples", ec))
-      if (e.path().filename().string().find(".000002.spadgen-staging") == 0) seen = true;
-    if (!seen) std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
+  const auto [pid, seen] = run_until_sample_2(dir_ / "d.json", out);
   ::kill(pid, SIGSTOP);
   std::ofstream(scene, std::ios::app) << "// edited while the dataset ran\n";
   ::kill(pid, SIGCONT);
