@@ -546,9 +546,6 @@ glm::dmat4 Loader::world_of(size_t node) const {
   return world_[node];
 }
 
-// glTF 2.0 skinning (linear blend) in the pose the nodes' own transforms give (no animation): a vertex's
-// world position is sum_k weight_k x world(joint_k) x inverseBind(joint_k) x position; the transform of
-// the node holding the mesh is not used (the specification's rule).
 // The component types glTF 2.0 allows a vertex attribute (3.7.2.1), and those KHR_mesh_quantization adds when
 // the file lists it in extensionsUsed: an UNSIGNED_INT POSITION was read as integer metres, a COLOR_0 of
 // BYTE as negative colours, an UNSIGNED_INT NORMAL (no negative component) as some other direction, and a
@@ -609,6 +606,9 @@ void Loader::check_component(int accessor, const std::string& who, const std::st
                 component_name(a.componentType) + (a.normalized ? " (normalized)" : "") + "; expected " + expected);
 }
 
+// glTF 2.0 skinning (linear blend) in the pose the nodes' own transforms give (no animation): a vertex's
+// world position is sum_k weight_k x world(joint_k) x inverseBind(joint_k) x position; the transform of
+// the node holding the mesh is not used (the specification's rule).
 std::vector<glm::dmat4> Loader::skin_matrices(size_t node, const tinygltf::Primitive& p, size_t n, const std::string& who) {
   const auto skin_index = static_cast<size_t>(m_.nodes[node].skin);
   if (skin_index >= m_.skins.size())
