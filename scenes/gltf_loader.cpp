@@ -57,7 +57,7 @@ constexpr double kDecomposeTolerance = 1e-6;
 // error when the file lists it in extensionsRequired.
 const std::set<std::string> kSupportedExtensions = {
     "KHR_materials_transmission", "KHR_materials_ior",      "KHR_materials_volume",
-    "KHR_materials_emissive_strength", "KHR_lights_punctual", "KHR_mesh_quantization",
+    "KHR_materials_emissive_strength", "KHR_lights_punctual", "KHR_mesh_quantization", "KHR_texture_transform",
 };
 
 std::string quoted(const std::string& s) { return "'" + s + "'"; }
@@ -346,6 +346,8 @@ class Loader {
   std::vector<const MaterialEdit*> material_edit_;  // per glTF material
   std::set<std::string> warned_;
   std::map<int, int> texture_of_gltf_;   // glTF texture index -> Scene::textures index
+  // glTF material -> its baseColorTexture's KHR_texture_transform as u' = m0 u + m1 v + m2, v' = m3 u + m4 v + m5
+  std::map<int, std::array<double, 6>> uv_transform_;
   std::map<int, std::shared_ptr<const std::vector<uint8_t>>> texels_of_image_;  // glTF image -> its decoded texels
   std::vector<int> parent_;              // per node, -1 for roots
   mutable std::vector<glm::dmat4> world_;  // per node, its world transform once world_of computed it
@@ -1155,7 +1157,31 @@ void Loader::load_materials() {
     mat.metallic = static_cast<float>(pbr.metallicFactor);
     mat.roughness = static_cast<float>(pbr.roughnessFactor);
     if (pbr.baseColorTexture.index >= 0) {
-      const int set = pbr.baseColorTexture.texCoord;
+      int set = pbr.baseColorTexture.texCoord;
+      // KHR_texture_transform (gltfpack writes it with quantized texture coordinates, which it maps onto the
+      // texture): offset, rotation (radians, counter-clockwise in UV space) and scale, T R S, and texCoord, which
+      // replaces the texture's.
+      if (const auto tt = pbr.baseColorTexture.extensions.find("KHR_texture_transform"); tt != pbr.baseColorTexture.extensions.end()) {
+        const tinygltf::Value& t = tt->second;
+        const std::string at = who + " baseColorTexture KHR_texture_transform";
+        if (!t.IsObject()) fail(at, "expected an object");
+        const auto pair = [&](const char* key, double fallback) -> std::array<double, 2> {
+          if (!t.Has(key)) return {fallback, fallback};
+          const tinygltf::Value& v = t.Get(key);
+          if (!v.IsArray() || v.ArrayLen() != 2 || !v.Get(0).IsNumber() || !v.Get(1).IsNumber())
+            fail(at, std::string(key) + ": expected an array of 2 numbers");
+          const std::array<double, 2> out = {v.Get(0).GetNumberAsDouble(), v.Get(1).GetNumberAsDouble()};
+          if (!std::isfinite(out[0]) || !std::isfinite(out[1])) fail(at, std::string(key) + " is not finite");
+          return out;
+        };
+        const std::array<double, 2> offset = pair("offset", 0.0), scale = pair("scale", 1.0);
+        const double r = number(t, "rotation", 0.0, at), c = std::cos(r), sn = std::sin(r);
+        uv_transform_[static_cast<int>(i)] = {c * scale[0], sn * scale[1], offset[0], -sn * scale[0], c * scale[1], offset[1]};
+        if (t.Has("texCoord")) {
+          if (!t.Get("texCoord").IsInt() || t.Get("texCoord").GetNumberAsInt() < 0) fail(at, "texCoord: expected an integer >= 0");
+          set = t.Get("texCoord").GetNumberAsInt();
+        }
+      }
       if (set < 0 || set > 1) {
         warn(who + ": baseColorTexture uses TEXCOORD_" + std::to_string(set) +
              "; spadgen reads TEXCOORD_0 and TEXCOORD_1 only, so the texture is not used");
@@ -1163,8 +1189,6 @@ void Loader::load_materials() {
         mat.base_color_texture = texture(pbr.baseColorTexture.index, who + " baseColorTexture");
         mat.base_color_texcoord = set;
       }
-      if (pbr.baseColorTexture.extensions.count("KHR_texture_transform"))
-        warn(who + ": KHR_texture_transform on baseColorTexture is not used by spadgen; the texture is untransformed");
     }
     const auto unused_texture = [&](int index, const char* what) {
       if (index >= 0)
@@ -1346,8 +1370,18 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
     auto it = p.attributes.find(key);
     if (it == p.attributes.end()) continue;
     check_component(it->second, who, key, false);
-    const std::vector<double> uv = read_accessor(it->second, who + " " + key, {TINYGLTF_TYPE_VEC2}, &k, &comps);
+    std::vector<double> uv = read_accessor(it->second, who + " " + key, {TINYGLTF_TYPE_VEC2}, &k, &comps);
     if (k != n) fail(who, key + " has " + std::to_string(k) + " elements but POSITION has " + std::to_string(n));
+    // the set the material's base colour texture reads, through its KHR_texture_transform
+    if (const auto tt = uv_transform_.find(p.material);
+        tt != uv_transform_.end() && scene_.materials[static_cast<size_t>(p.material)].base_color_texcoord == set) {
+      const std::array<double, 6>& m = tt->second;
+      for (size_t v = 0; v + 1 < uv.size(); v += 2) {
+        const double u0 = uv[v], v0 = uv[v + 1];
+        uv[v] = m[0] * u0 + m[1] * v0 + m[2];
+        uv[v + 1] = m[3] * u0 + m[4] * v0 + m[5];
+      }
+    }
     for (size_t v = 0; v < uv.size(); ++v)
       if (!(std::abs(uv[v]) <= kMaxTexcoord))
         fail(who, key + " element " + std::to_string(v / 2) + " has the value " + num(uv[v]) + ", expected texture "

@@ -386,6 +386,48 @@ TEST(GltfLoader, ATextureWithoutItsTexcoordsIsWarnedAbout) {
                                                   "colour factor is)"}));
 }
 
+// KHR_texture_transform on the base colour texture (gltfpack writes it beside quantized texture coordinates,
+// integers it maps onto the texture): the coordinates the texture reads are T R S of the file's, and its
+// texCoord replaces the texture's. Its quantized UNSIGNED_SHORT coordinates were refused as beyond +-4096,
+// and a float set was read untransformed, with a warning.
+TEST(GltfLoader, TheBaseColourTexturesTextureTransformMapsItsCoordinates) {
+  TempDir dir;
+  Gltf g;
+  g.doc["extensionsUsed"] = {"KHR_mesh_quantization", "KHR_texture_transform"};
+  g.doc["images"] = {{{"uri", std::string("data:image/png;base64,") + kPng2x2}}};
+  g.doc["textures"] = {{{"source", 0}}};
+  const double r = 0.5, sx = 1.0 / 16383, sy = 2.0 / 16383, ox = 0.25, oy = -0.5;
+  g.doc["materials"] = {
+      {{"name", "Packed"},
+       {"pbrMetallicRoughness",
+        {{"baseColorTexture",
+          {{"index", 0}, {"extensions", {{"KHR_texture_transform", {{"offset", {ox, oy}}, {"rotation", r}, {"scale", {sx, sy}}, {"texCoord", 1}}}}}}}}}}};
+  const int pos = g.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const std::vector<uint16_t> raw = {0, 0, 16383, 0, 8000, 12000};
+  const int uv0 = g.accessor(g.view_of(std::vector<float>{0, 0, 1, 0, 0, 1}), kFloat, "VEC2", 3);
+  const int uv1 = g.accessor(g.view_of(raw), kUShort, "VEC2", 3);
+  g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}, {"TEXCOORD_0", uv0}, {"TEXCOORD_1", uv1}}}, {"material", 0}}}))}});
+  const Scene s = load_gltf(g.write(dir.path(), "transformed"));
+  ASSERT_EQ(s.materials.size(), 1u);
+  EXPECT_EQ(s.materials[0].base_color_texcoord, 1);  // the extension's texCoord
+  EXPECT_TRUE(s.warnings.empty()) << s.warnings.front();
+  ASSERT_EQ(s.meshes.size(), 1u);
+  ASSERT_EQ(s.meshes[0].texcoords1.size(), 3u);
+  for (size_t v = 0; v < 3; ++v) {
+    // the specification's matrix, written out: translation x rotation x scale applied to (u, v, 1)
+    const double u = raw[2 * v], w = raw[2 * v + 1];
+    const double tu = std::cos(r) * sx * u + std::sin(r) * sy * w + ox, tv = -std::sin(r) * sx * u + std::cos(r) * sy * w + oy;
+    EXPECT_NEAR(s.meshes[0].texcoords1[v].x, tu, 1e-6) << v;
+    EXPECT_NEAR(s.meshes[0].texcoords1[v].y, tv, 1e-6) << v;
+  }
+  // the set the texture does not read stays as the file gives it
+  EXPECT_EQ(s.meshes[0].texcoords0[1], glm::vec2(1, 0));
+  // a malformed transform is refused, naming the material
+  g.doc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"]["KHR_texture_transform"]["scale"] = {1, 2, 3};
+  EXPECT_THAT(load_error(g.write(dir.path(), "bad_transform")),
+              HasSubstr("material 0 'Packed' baseColorTexture KHR_texture_transform: scale: expected an array of 2 numbers"));
+}
+
 TEST(GltfLoader, TexcoordSets) {
   TempDir dir;
   Gltf g;
