@@ -1365,16 +1365,23 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
       out.normals[v] = len > 0 ? glm::vec3(wn / len) : glm::vec3(0.0f);
     }
   }
+  // Only the set the material's base colour texture reads is kept (and checked): spadgen samples no other
+  // texture, and a quantized set an occlusion or normal map reads, beyond +-4096 before its own transform,
+  // would have refused the file.
+  const int read_set = p.material >= 0 && static_cast<size_t>(p.material) < scene_.materials.size() &&
+                               scene_.materials[static_cast<size_t>(p.material)].base_color_texture >= 0
+                           ? scene_.materials[static_cast<size_t>(p.material)].base_color_texcoord
+                           : -1;
   for (int set = 0; set < 2; ++set) {
     const std::string key = "TEXCOORD_" + std::to_string(set);
     auto it = p.attributes.find(key);
     if (it == p.attributes.end()) continue;
     check_component(it->second, who, key, false);
+    if (set != read_set) continue;
     std::vector<double> uv = read_accessor(it->second, who + " " + key, {TINYGLTF_TYPE_VEC2}, &k, &comps);
     if (k != n) fail(who, key + " has " + std::to_string(k) + " elements but POSITION has " + std::to_string(n));
     // the set the material's base colour texture reads, through its KHR_texture_transform
-    if (const auto tt = uv_transform_.find(p.material);
-        tt != uv_transform_.end() && scene_.materials[static_cast<size_t>(p.material)].base_color_texcoord == set) {
+    if (const auto tt = uv_transform_.find(p.material); tt != uv_transform_.end()) {
       const std::array<double, 6>& m = tt->second;
       for (size_t v = 0; v + 1 < uv.size(); v += 2) {
         const double u0 = uv[v], v0 = uv[v + 1];

@@ -420,29 +420,60 @@ TEST(GltfLoader, TheBaseColourTexturesTextureTransformMapsItsCoordinates) {
     EXPECT_NEAR(s.meshes[0].texcoords1[v].x, tu, 1e-6) << v;
     EXPECT_NEAR(s.meshes[0].texcoords1[v].y, tv, 1e-6) << v;
   }
-  // the set the texture does not read stays as the file gives it
-  EXPECT_EQ(s.meshes[0].texcoords0[1], glm::vec2(1, 0));
+  // the set the texture does not read is not kept
+  EXPECT_TRUE(s.meshes[0].texcoords0.empty());
   // a malformed transform is refused, naming the material
   g.doc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"]["KHR_texture_transform"]["scale"] = {1, 2, 3};
   EXPECT_THAT(load_error(g.write(dir.path(), "bad_transform")),
               HasSubstr("material 0 'Packed' baseColorTexture KHR_texture_transform: scale: expected an array of 2 numbers"));
 }
 
+// The texture coordinate set the base colour texture reads is kept, in either set and either component type;
+// a set no texture spadgen samples reads is neither kept nor range-checked (a quantized set for an occlusion
+// map, beyond +-4096 before its own transform, refused the file).
 TEST(GltfLoader, TexcoordSets) {
   TempDir dir;
   Gltf g;
+  g.doc["images"] = {{{"uri", std::string("data:image/png;base64,") + kPng2x2}}};
+  g.doc["textures"] = {{{"source", 0}}};
   const int pos = g.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
   const int uv0 = g.accessor(g.view_of(std::vector<float>{0, 0, 1, 0, 0, 1}), kFloat, "VEC2", 3);
   // TEXCOORD_1 as normalized UNSIGNED_SHORT, as exporters quantize it.
   const int uv1 = g.accessor(g.view_of(std::vector<uint16_t>{65535, 0, 0, 65535, 0, 0}), kUShort, "VEC2", 3, 0, true);
-  g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}, {"TEXCOORD_0", uv0}, {"TEXCOORD_1", uv1}}}}}))}});
-  const Scene s = load_gltf(g.write(dir.path(), "uv"));
-  ASSERT_EQ(s.meshes.size(), 1u);
-  ASSERT_EQ(s.meshes[0].texcoords0.size(), 3u);
-  ASSERT_EQ(s.meshes[0].texcoords1.size(), 3u);
-  EXPECT_FLOAT_EQ(s.meshes[0].texcoords0[1].x, 1.0f);
-  EXPECT_FLOAT_EQ(s.meshes[0].texcoords1[0].x, 1.0f);
-  EXPECT_FLOAT_EQ(s.meshes[0].texcoords1[1].y, 1.0f);
+  g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}, {"TEXCOORD_0", uv0}, {"TEXCOORD_1", uv1}}},
+                                        {"material", 0}}}))}});
+  for (int set : {0, 1}) {
+    g.doc["materials"] = {{{"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}, {"texCoord", set}}}}}}};
+    const Scene s = load_gltf(g.write(dir.path(), "uv" + std::to_string(set)));
+    ASSERT_EQ(s.meshes.size(), 1u);
+    const auto& m = s.meshes[0];
+    ASSERT_EQ((set == 0 ? m.texcoords0 : m.texcoords1).size(), 3u) << set;
+    EXPECT_TRUE((set == 0 ? m.texcoords1 : m.texcoords0).empty()) << set;
+    if (set == 0) {
+      EXPECT_FLOAT_EQ(m.texcoords0[1].x, 1.0f);
+    } else {
+      EXPECT_FLOAT_EQ(m.texcoords1[0].x, 1.0f);
+      EXPECT_FLOAT_EQ(m.texcoords1[1].y, 1.0f);
+    }
+  }
+  // gltfpack's quantized set for a texture spadgen does not sample (an occlusion map on TEXCOORD_1, through its own
+  // KHR_texture_transform): loads, and is not kept.
+  g.doc["extensionsUsed"] = {"KHR_mesh_quantization", "KHR_texture_transform"};
+  const int packed = g.accessor(g.view_of(std::vector<uint16_t>{0, 0, 16383, 0, 0, 16383}), kUShort, "VEC2", 3);
+  g.doc["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_1"] = packed;
+  json occlusion = {{"index", 0}, {"texCoord", 1}};
+  occlusion["extensions"]["KHR_texture_transform"]["scale"] = {1.0 / 16383, 1.0 / 16383};
+  json material;
+  material["pbrMetallicRoughness"]["baseColorTexture"]["index"] = 0;
+  material["occlusionTexture"] = occlusion;
+  g.doc["materials"] = json::array({material});
+  const Scene s = load_gltf(g.write(dir.path(), "occlusion"));
+  EXPECT_EQ(s.meshes[0].texcoords0.size(), 3u);
+  EXPECT_TRUE(s.meshes[0].texcoords1.empty());
+  // without a texture reading them, out-of-range coordinates are not an error either
+  g.doc["materials"] = json::array();
+  g.doc["meshes"][0]["primitives"][0].erase("material");
+  EXPECT_NO_THROW(load_gltf(g.write(dir.path(), "untextured")));
 }
 
 // COLOR_0 (float RGBA, or normalized unsigned integers) is read as linear RGB (it was ignored without a word).
@@ -2098,7 +2129,10 @@ TEST_F(BrokenGltf, ValuesThatWouldBecomeNonFiniteInTheRendererAreRefused) {
     Gltf g;
     const int pos = g.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
     const int uv = g.accessor(g.view_of(std::vector<float>{0, 0, 3e38f, 0, 0, 1}), kFloat, "VEC2", 3);
-    g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}, {"TEXCOORD_0", uv}}}}}), "Tri")}});
+    g.doc["images"] = {{{"uri", std::string("data:image/png;base64,") + kPng2x2}}};
+    g.doc["textures"] = {{{"source", 0}}};
+    g.doc["materials"] = {{{"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}}};
+    g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}, {"TEXCOORD_0", uv}}}, {"material", 0}}}), "Tri")}});
     EXPECT_THAT(error_of(g), HasSubstr("mesh 0 'Tri' primitive 0: TEXCOORD_0 element 1 has the value 3e+38, expected "
                                        "texture coordinates within +-4096"));
   }
