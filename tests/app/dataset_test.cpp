@@ -20,6 +20,7 @@
 #include "app/dataset.h"
 #include "app/pipeline.h"
 #include "core/error.h"
+#include "core/units.h"
 #include "app/run_parts.h"
 #include "app_fixture.h"
 #include "scenes/scene_file.h"
@@ -1256,6 +1257,20 @@ TEST_F(Dataset, APlanTellsThePaceOfTheDoneSamples) {
   const std::string line = measured.output.substr(per_sample, measured.output.find('\n', per_sample) - per_sample);
   EXPECT_THAT(line, HasSubstr(", time about 0.")) << line;
   EXPECT_THAT(measured.output, Not(HasSubstr("at that pace")));  // nothing left
+  // ... and what they keep on disk against their disk estimates: the index's bytes, a share of the estimates at
+  // most 1 where they are bounds (compressed files counted at their most: the example's 22.1 GB at most, 952 MB at
+  // least, for about 3 GB written)
+  int64_t kept = 0;
+  std::istringstream rows(slurp(dir_ / "out/index.jsonl"));
+  for (std::string row; std::getline(rows, row);) kept += json::parse(row)["bytes"].get<int64_t>();
+  const std::string keep = "# the 2 done samples keep " + spadgen::bytes_text(kept) + " on disk, ";
+  const size_t kept_at = measured.output.find(keep);
+  ASSERT_NE(kept_at, std::string::npos) << measured.output;
+  EXPECT_THAT(measured.output, HasSubstr("# per sample: disk at most "));
+  const double share = std::stod(measured.output.substr(kept_at + keep.size()));
+  EXPECT_GT(share, 0.05) << measured.output;
+  EXPECT_LE(share, 1.0) << measured.output;
+  EXPECT_THAT(measured.output, Not(HasSubstr("at that share")));  // nothing left
   // Each folder (two samples, two realisations each) said to have taken 50 s: 200 s in all, far more than
   // the model's estimate of these 24 x 20 pixels; the dataset grown to 4 samples, the two left of the
   // same size take about 200 s at that pace.
@@ -1276,6 +1291,9 @@ TEST_F(Dataset, APlanTellsThePaceOfTheDoneSamples) {
   EXPECT_GT(pace, 20.0) << r.output;
   EXPECT_THAT(r.output, HasSubstr(" times their estimates (their metadata.json's run.wall_seconds, against estimates for the "
                                   "cores they ran on, run.cores): at that pace the samples left take about 3 min\n"));
+  // the two left, estimated as the two done, keep what those keep
+  EXPECT_THAT(r.output, HasSubstr(" of their disk estimates (their files but metadata.json, as index.jsonl's bytes): at that "
+                                  "share the samples left keep about " + spadgen::bytes_text(kept) + "\n"));
   // The pace compares each sample with its estimate on the cores it ran on (run.cores), whatever the plan's
   // --threads (a plan with 2 cores called samples of 1 core's 2 times slower than they were: a new user's find);
   // the time left is for the plan's cores.
