@@ -6,10 +6,12 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cmath>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <limits>
 #include <fstream>
 #include <sstream>
 #include <set>
@@ -75,10 +77,14 @@ class CheckedSax {
   bool number_integer(json::number_integer_t v) { return value() && dom_.number_integer(v); }
   bool number_unsigned(json::number_unsigned_t v) { return value() && dom_.number_unsigned(v); }
   bool number_float(json::number_float_t v, const json::string_t& s) {
-    // A number too small for a double is read as 0 (1e-400: a bin width of it was "found 0.0"): named as written.
-    if (v == 0.0 && s.find_first_of("123456789") < s.find_first_of("eE")) {
+    // A number too small for a double is read as 0 (1e-400: a bin width of it was "found 0.0"), and so is a
+    // subnormal one where the program flushes subnormals to zero (app::flush_denormals; 1e-320 was refused as
+    // "below the smallest double (about 4.9e-324)"): named as written, at the smallest normal double.
+    if ((v == 0.0 && s.find_first_of("123456789") < s.find_first_of("eE")) ||
+        (v != 0.0 && std::abs(v) < std::numeric_limits<double>::min())) {
       problem = (levels_.empty() ? std::string() : path(/*pending=*/true) + ": ") + "the number " + s +
-                " is below the smallest double (about 4.9e-324), and would be read as 0; write 0 for zero";
+                " is below the smallest normal double (about 2.2e-308), which spadgen computes with (smaller ones "
+                "are flushed to 0); write 0 for zero";
       limit = true;
       return false;
     }

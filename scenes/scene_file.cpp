@@ -439,14 +439,17 @@ std::string apply_override(json& doc, const std::string& assignment, Checker& ch
   const Key& k = *target->second.key;
   json value;
   try {
-    value = parse_json(text, chk.file + ": --set " + key);
+    // the override named, not the scene file (which does not hold the value)
+    value = parse_json(text, chk.set + key);
   } catch (const JsonLimitError& e) {  // meant as JSON, and refused in a way a string never is
     chk.errors.push_back(e.what());
     return {};
   } catch (const Error&) {  // not JSON: a string
     value = text;
   }
-  if ((k.type == Type::String || k.type == Type::Path) && !value.is_string() && !value.is_null()) value = text;  // names that look like numbers
+  // A text key (a name, a file, the description) takes a value JSON reads as other than a string or null as
+  // written: names that look like numbers (a glTF camera "1", a description "2026").
+  if ((k.type == Type::String || k.type == Type::Path) && !value.is_string() && !value.is_null()) value = text;
   const size_t errors = chk.errors.size();
   put(doc, target->first, target->second, value, chk, key);
   // the key's whole pointer (a named element's key: /nodes/NAME/KEY, where k.path is the element's /KEY)
@@ -589,8 +592,14 @@ void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string
   if (c.acquisition.mode == AcquisitionMode::GateSweep) {
     const GateSweepConfig& g = c.acquisition.gate_sweep;
     const double positions = g.positions();
-    if (g.stop_s < g.start_s)
-      err("/acquisition/gate_sweep/stop_ns", "is before /acquisition/gate_sweep/start_ns; expected stop >= start");
+    if (g.stop_s < g.start_s) {
+      // named by the key the user changed (a --set start_ns was told as the file's stop_ns)
+      if (chk.set_keys.count("/acquisition/gate_sweep/start_ns") && !chk.set_keys.count("/acquisition/gate_sweep/stop_ns"))
+        err("/acquisition/gate_sweep/start_ns", "is after /acquisition/gate_sweep/stop_ns (" + format_bound(g.stop_s / kNs) +
+                                                    " ns); expected start <= stop");
+      else
+        err("/acquisition/gate_sweep/stop_ns", "is before /acquisition/gate_sweep/start_ns; expected stop >= start");
+    }
     else if (!(positions <= static_cast<double>(kMaxGatePositions)))
       err("/acquisition/gate_sweep/step_ps",
           "found " + format_bound(g.step_s / kPs) + " ps, which makes " + format_bound(positions) + " gate positions from " +
@@ -626,7 +635,9 @@ void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string
                                              ", expected at least render.samples_per_pixel (" +
                                              std::to_string(c.render.samples_per_pixel) + "), the paths of the first round");
   if (c.render.window_start_s.has_value() != c.render.window_stop_s.has_value())
-    err("/render/window_stop_ns", "expected render.window_start_ns and render.window_stop_ns both set or both null");
+    err(c.render.window_start_s ? "/render/window_start_ns" : "/render/window_stop_ns",
+        "expected render.window_start_ns and render.window_stop_ns both set or both null (the window is given whole, or "
+        "derived from the acquisition)");
   else if (c.render.window_start_s && *c.render.window_stop_s <= *c.render.window_start_s)
     err("/render/window_stop_ns", "expected a window end after render.window_start_ns");
   else if (c.render.window_start_s && time_window_used(c)) {
@@ -768,7 +779,10 @@ namespace {
 std::string markdown_row(const Key& k, const std::string& dotted, const std::string& def) {
   std::string type = type_text(k);
   if (k.nullable) type += " or null";
-  std::string valid = k.type == Type::Number || k.type == Type::Integer || k.type == Type::Enum || k.type == Type::Vec3 ? expected_text(k) : "";
+  std::string valid = k.type == Type::Number || k.type == Type::Integer || k.type == Type::Enum || k.type == Type::Vec3 ||
+                              k.type == Type::Rect
+                          ? expected_text(k)
+                          : "";
   if (const size_t u = valid.rfind(" " + k.unit); !k.unit.empty() && u != std::string::npos && u + k.unit.size() + 1 == valid.size())
     valid = valid.substr(0, u);
   return "| `" + dotted + "` | " + type + " | " + k.unit + " | " + def + " | " + valid + " | " + k.doc + " |\n";
@@ -865,6 +879,7 @@ std::string schema_json() {
     for (const Key& k : s.keys) element["properties"][k.path.substr(1)] = key_schema(k);
     root["properties"][s.path.substr(1)] = {{"type", "object"},
                                            {"description", s.doc},
+                                           {"default", ojson::object()},
                                            {"propertyNames", {{"minLength", 1}}},
                                            {"additionalProperties", element}};
   }

@@ -381,7 +381,17 @@ TEST_F(SceneFileTest, CrossKeyChecks) {
                         "(position_m [0, 2, 0], look_at_m [0, 0, 0]); expected an up not along it"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"up": [0, 0, 0]}})"), HasSubstr("/camera/up: is the zero vector"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "render": {"window_start_ns": 1}})"),
-              HasSubstr("both set or both null"));
+              HasSubstr("/render/window_start_ns: expected render.window_start_ns and render.window_stop_ns both set or both null"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"render.window_stop_ns=5"}),
+              HasSubstr("--set render.window_stop_ns: expected render.window_start_ns and render.window_stop_ns both set"));
+  // a sweep's start past its end: named by the key the override changed (a --set start_ns was told as the file's
+  // /acquisition/gate_sweep/stop_ns)
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"acquisition.gate_sweep.start_ns=1000"}),
+              HasSubstr("--set acquisition.gate_sweep.start_ns: is after /acquisition/gate_sweep/stop_ns"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"acquisition.gate_sweep.stop_ns=-1000"}),
+              HasSubstr("--set acquisition.gate_sweep.stop_ns: is before /acquisition/gate_sweep/start_ns"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "acquisition": {"gate_sweep": {"start_ns": 1000}}})"),
+              HasSubstr("/acquisition/gate_sweep/stop_ns: is before /acquisition/gate_sweep/start_ns"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "laser": {"beam": "gltf_light"}})"), HasSubstr("/laser/gltf_light: is empty"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "acquisition": {"mode": "intensity", "frames": 4081, "intensity": {"exposure": "dual"}}})"),
               HasSubstr("/acquisition/frames: found 4081, expected an even number: dual exposure"));
@@ -537,12 +547,24 @@ TEST_F(SceneFileTest, ANumberBeyondTheDoubleRangeNamesItsKeyAndPlace) {
               HasSubstr("--set laser.average_power_mW:1:1: the number 1e309 is beyond the range"));
   // and one too small for a double, which is read as 0 (a bin width of 1e-400 was "found 0.0")
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "render": {"time_bin_ps": 1e-400}})"),
-              HasSubstr("/render/time_bin_ps: the number 1e-400 is below the smallest double (about 4.9e-324), and would be "
-                        "read as 0; write 0 for zero"));
+              HasSubstr("/render/time_bin_ps: the number 1e-400 is below the smallest normal double (about 2.2e-308), "
+                        "which spadgen computes with (smaller ones are flushed to 0); write 0 for zero"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"position_m": [0, -0.5e-330, 0]}})"),
-              HasSubstr("/camera/position_m/1: the number -0.5e-330 is below the smallest double"));
-  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"laser.average_power_mW=1e-999"}),
-              HasSubstr("--set laser.average_power_mW: the number 1e-999 is below the smallest double"));
+              HasSubstr("/camera/position_m/1: the number -0.5e-330 is below the smallest normal double"));
+  // the override named, not the file (which does not hold the value)
+  const std::string tiny = error_of(R"({"gltf": "s.gltf"})", {"laser.average_power_mW=1e-999"});
+  EXPECT_THAT(tiny, HasSubstr("--set laser.average_power_mW: the number 1e-999 is below the smallest normal double"));
+  EXPECT_THAT(tiny, Not(HasSubstr(path())));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"laser.average_power_mW=1e309"}), Not(HasSubstr(path())));
+  // Subnormal numbers, which the program reads as 0 (it flushes them: app::flush_denormals), are refused alike
+  // here too, whatever the thread's floating-point mode (1e-320 was refused as "below the smallest double
+  // (about 4.9e-324)" by the program, and read as 1e-320 by the library); the smallest normal one is a number.
+  for (const char* v : {"1e-320", "5e-324", "-2.2e-308"})
+    EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {std::string("camera.optics_transmission=") + v}),
+                HasSubstr(std::string("the number ") + v + " is below the smallest normal double"))
+        << v;
+  EXPECT_EQ(parse(R"({"gltf": "s.gltf", "camera": {"optics_transmission": 2.2250738585072014e-308}})").config.camera.optics_transmission,
+            std::numeric_limits<double>::min());
   // a zero written with an exponent is zero
   EXPECT_EQ(parse(R"({"gltf": "s.gltf", "laser": {"average_power_mW": 0e-400}})").config.laser.average_power_W, 0.0);
 }
@@ -572,6 +594,10 @@ TEST_F(SceneFileTest, ADuplicateKeyIsAnError) {
   // In a --set value too, where a text that is not JSON is taken as a string: this one was meant as JSON.
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {R"(description={"a": 1, "a": 2})"}),
               HasSubstr("--set description:1:10: /a: appears twice in one object"));
+  // A text key takes what JSON reads as other than a string or null as written (docs/scene-file.md): a camera
+  // named "1", a description "true".
+  EXPECT_EQ(parse(R"({"gltf": "s.gltf"})", {"camera.gltf_camera=1"}).config.camera.gltf_camera, "1");
+  EXPECT_EQ(parse(R"({"gltf": "s.gltf"})", {"description=true"}).resolved["description"], "true");
 }
 
 TEST_F(SceneFileTest, AKeyWithASlashIsNotTakenForAPath) {
