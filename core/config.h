@@ -145,17 +145,18 @@ struct AmbientConfig {
 };
 
 // One pixel design of the chip. The defaults are the paper's pixel A; paper_pixel_B() is its pixel B
-// (Table 1, section 4.A and supplementary note S2).
+// (Table 1, section 4.A and supplementary note S2), but for the DCR distribution's shape (log sigma, hot pixels),
+// which are spadgen's choices (docs/sensor.md, "Where the defaults come from").
 struct PixelTypeConfig {
   double fill_factor = 0.07;            // fill_factor
   double pdp_peak = 0.105;              // pdp_peak, at pdp_peak_wavelength_nm
   double pdp_peak_wavelength_m = 520e-9;
   std::string pdp_csv;                  // pdp_csv: table (wavelength_nm, PDP); "" = built-in curve scaled to pdp_peak
   double pdp_nonuniformity = 0.014;     // pdp_nonuniformity: relative spread (sigma) of PDP across pixels
-  double dcr_median_cps = 0.4;          // dcr_median_cps at room temperature
+  double dcr_median_cps = 0.4;          // dcr_median_cps at room temperature: the chip's median, hot pixels included
   double dcr_log_sigma = 1.0;           // dcr_log_sigma: spread of log(DCR) of the main population
   double hot_pixel_fraction = 0.05;     // hot_pixel_fraction
-  double hot_pixel_factor = 100.0;      // hot_pixel_factor: median hot-pixel DCR / median DCR
+  double hot_pixel_factor = 100.0;      // hot_pixel_factor: median hot-pixel DCR / the main population's median
   double crosstalk_probability = 0.0017;  // crosstalk_probability: per detection, per neighbour
   bool single_avalanche_per_frame = false; // pixel B's feedback stops further avalanches in a frame
 

@@ -252,10 +252,10 @@ void add_pixel_type(std::vector<Key>& s, const std::string& name, P type) {
   s.push_back(number(p + "pdp_peak_wavelength_nm", PIXEL(pdp_peak_wavelength_m), kNmUnit, closed(200, 2000), "wavelength of the PDP peak; without pdp_csv, strictly between 300 and 1100 nm (the built-in curve is zero at and beyond both ends)"));
   s.push_back(file(p + "pdp_csv", PIXEL(pdp_csv), "table of (wavelength_nm, PDP) replacing the built-in curve, covering the laser's wavelength (0 outside it); relative to the scene file; \"\" = built-in curve scaled to pdp_peak"));
   s.push_back(number(p + "pdp_nonuniformity", PIXEL(pdp_nonuniformity), kNone, closed(0, 0.2), "relative spread (sigma) of PDP across pixels: each pixel's PDP is the curve times 1 + sigma z, z a standard normal truncated at 5, so at most 0.2 keeps it positive (and the curve times 1 + 5 sigma must stay at most 1)"));
-  s.push_back(number(p + "dcr_median_cps", PIXEL(dcr_median_cps), plain("counts/s"), closed(0, 1e7), "median dark count rate at room temperature (25 C)"));
-  s.push_back(number(p + "dcr_log_sigma", PIXEL(dcr_log_sigma), kNone, closed(0, 5), "spread (sigma of the natural log) of the main DCR population"));
-  s.push_back(number(p + "hot_pixel_fraction", PIXEL(hot_pixel_fraction), kNone, closed(0, 1), "fraction of hot pixels (the DCR tail)"));
-  s.push_back(number(p + "hot_pixel_factor", PIXEL(hot_pixel_factor), kNone, closed(1, 1e6), "median hot-pixel DCR divided by the median DCR"));
+  s.push_back(number(p + "dcr_median_cps", PIXEL(dcr_median_cps), plain("counts/s"), closed(0, 1e7), "median dark count rate of the chip's pixels, main and hot together, at room temperature (25 C), as the paper's Fig. 4(a) gives it (docs/sensor.md, \"Dark counts\")"));
+  s.push_back(number(p + "dcr_log_sigma", PIXEL(dcr_log_sigma), kNone, closed(0, 5), "spread (sigma of the natural log) of the main DCR population and of the hot pixels' (spadgen's choice: the paper plots the distribution only)"));
+  s.push_back(number(p + "hot_pixel_fraction", PIXEL(hot_pixel_fraction), kNone, closed(0, 1), "fraction of hot pixels (the DCR tail; spadgen's choice)"));
+  s.push_back(number(p + "hot_pixel_factor", PIXEL(hot_pixel_factor), kNone, closed(1, 1e6), "median hot-pixel DCR divided by the main population's median DCR (spadgen's choice)"));
   s.push_back(number(p + "crosstalk_probability", PIXEL(crosstalk_probability), kNone, closed(0, 0.5), "probability that a detection fires a given neighbour"));
   s.push_back(boolean(p + "single_avalanche_per_frame", PIXEL(single_avalanche_per_frame), "the pixel stops after its first avalanche in a frame (the paper's pixel B feedback)"));
 #undef PIXEL
@@ -411,7 +411,7 @@ std::vector<Key> build() {
   add_pixel_type(k, "pixel_A", FIELD(sensor.pixel_A));
   add_pixel_type(k, "pixel_B", FIELD(sensor.pixel_B));
   k.push_back(number("/sensor/gate/length_ns", FIELD(sensor.gate.length_s), kNsUnit, open_closed(0, 1e6), "gate length, 50 % to 50 %"));
-  k.push_back(number("/sensor/gate/rise_ps", FIELD(sensor.gate.rise_s), kPsUnit, closed(0, 1e6), "rise time, 10 % to 90 %"));
+  k.push_back(number("/sensor/gate/rise_ps", FIELD(sensor.gate.rise_s), kPsUnit, closed(0, 1e6), "rise time, 10 % to 90 % (spadgen's choice within the paper's \"rise/fall time <550ps\")"));
   k.push_back(number("/sensor/gate/fall_ps", FIELD(sensor.gate.fall_s), kPsUnit, closed(0, 1e6), "fall time, 90 % to 10 %"));
   k.push_back(choice("/sensor/gate/edge_shape", FIELD(sensor.gate.edge_shape), "shape of the parametric edges"));
   k.push_back(file("/sensor/gate/profile_csv", FIELD(sensor.gate.profile_csv), "measured gate profile, table of (time_ps, response), replacing the parametric one; relative to the scene file"));
@@ -421,7 +421,7 @@ std::vector<Key> build() {
   k.push_back(file("/sensor/gate/maps_exr", FIELD(sensor.gate.maps_exr), "EXR with channels skew_ps and length_ps (full sensor size) replacing the generated maps; relative to the scene file"));
   k.push_back(integer("/sensor/gate/knots_per_edge", FIELD(sensor.gate.knots_per_edge), kNone, closed(2, 4096), "knots of each tabulated gate edge (a smooth edge, or any edge convolved with the pulse and jitter): the gate model's accuracy against its cost (docs/accuracy.md, \"The sensor model's knobs\")"));
   k.push_back(number("/sensor/gate/grid_ps", FIELD(sensor.gate.grid_s), kPsUnit, closed(0.01, 100), "step of the fine grid the pulse, the jitter and the tabulated edges are convolved on (coarser where the edges and the pulse span over 12000 steps; metadata.json gate.grid_ps records the step used)"));
-  k.push_back(number("/sensor/jitter_fwhm_ps", FIELD(sensor.gate.jitter_fwhm_s), kPsUnit, closed(0, 1e6), "SPAD timing jitter (Gaussian FWHM)"));
+  k.push_back(number("/sensor/jitter_fwhm_ps", FIELD(sensor.gate.jitter_fwhm_s), kPsUnit, closed(0, 1e6), "SPAD timing jitter (Gaussian FWHM; spadgen's choice: the paper gives none)"));
   k.push_back(number("/sensor/temperature_C", FIELD(sensor.temperature_C), plain("C"), closed(-100, 150), "sensor temperature (dark counts rise above about 30 C)"));
   k.push_back(boolean("/sensor/dark_counts", FIELD(sensor.dark_counts), "model dark counts"));
   k.push_back(boolean("/sensor/crosstalk", FIELD(sensor.crosstalk), "model optical/electrical crosstalk between neighbours"));

@@ -160,7 +160,7 @@ std::vector<double> SensorModel::row_ambient_floor() const {
     const int type = layout().type_of_row(int(y));
     const double pdp = impl_->types[type].pdp_ambient;
     const PixelTypeConfig& t = type == 0 ? c.sensor.pixel_A : c.sensor.pixel_B;
-    const double dcr = c.sensor.dark_counts ? t.dcr_median_cps * tf : 0.0;
+    const double dcr = c.sensor.dark_counts ? PixelMaps::dcr_main_median(t) * tf : 0.0;  // a main pixel's
     floor[y] = pdp > 0.0 && open_s > 0.0 ? (1.0 / (double(impl_->frames_per_k) * pdp * open_s) + dcr / pdp)
                                          : std::numeric_limits<double>::infinity();
   }
@@ -562,7 +562,8 @@ nlohmann::json SensorModel::describe() const {
                      {"pde_laser", t.pdp_laser * t.fill_factor * m.cfg.camera.optics_transmission},
                      {"crosstalk_probability", t.crosstalk},
                      {"single_avalanche_per_frame", t.single_avalanche},
-                     {"dcr_median_cps", m.cfg.sensor.dark_counts ? c.dcr_median_cps * tf : 0.0}});
+                     {"dcr_median_cps", m.cfg.sensor.dark_counts ? c.dcr_median_cps * tf : 0.0},
+                     {"dcr_main_median_cps", m.cfg.sensor.dark_counts ? PixelMaps::dcr_main_median(c) * tf : 0.0}});
   }
   j["pixel_types"] = types;
   j["temperature_C"] = m.cfg.sensor.temperature_C;

@@ -623,7 +623,8 @@ std::string chart_scene_text(const Options& o, bool dual) {
   std::ostringstream s;
   s << R"({
   // The paper's 2D imaging (section 4.C, Fig. 6 and 7): a resolution test chart under 50 lux of
-  // ambient light, summed over 4080 binary frames (a 12-bit image, N_sat = 4080 in eq. (5)/(6)).)";
+  // ambient light, summed over 4080 binary frames (Fig. 7's 12-bit image, N_sat = 4080 in eq. (5)/(6));
+  // Fig. 6's 14-bit image sums 16,320: `--set acquisition.frames=16320`.)";
   if (dual)
     s << R"(
   // Dual exposure: short and long global exposures interleaved, tau_L = 8 tau_S. The paper compares

@@ -29,6 +29,14 @@ double truncated_normal(Rng& rng) {
   }
 }
 
+// P(z <= x) of truncated_normal's z: the standard normal's, truncated at +-kTruncate.
+double truncated_normal_cdf(double x) {
+  if (x <= -kTruncate) return 0.0;
+  if (x >= kTruncate) return 1.0;
+  const double lo = 0.5 * std::erfc(kTruncate / std::sqrt(2.0));
+  return (0.5 * std::erfc(-x / std::sqrt(2.0)) - lo) / (1.0 - 2.0 * lo);
+}
+
 double coord(int i, int n) { return n > 1 ? static_cast<double>(i) / (n - 1) : 0.5; }
 
 }  // namespace
@@ -71,6 +79,22 @@ PixelMaps::PatternSums PixelMaps::pattern_sums(int width, int height) {
   return sums;
 }
 
+double PixelMaps::dcr_main_median(const PixelTypeConfig& t) {
+  const double m = t.dcr_median_cps, h = t.hot_pixel_fraction, s = t.dcr_log_sigma, lf = std::log(t.hot_pixel_factor);
+  if (!(m > 0.0) || !(h > 0.0) || !(lf > 0.0)) return m;
+  if (!(s > 0.0)) return h > 0.5 ? m / t.hot_pixel_factor : m;  // the median is a main pixel's, or a hot one's
+  // u = ln(m / main median): the chip's share of pixels at or below m, (1 - h) P(z <= u / s) + h P(z <= (u - lf) / s),
+  // rises with u from at most 0.5 at u = 0 to at least 0.5 at u = lf; bisected to where it is 0.5.
+  const auto below = [&](double u) { return (1.0 - h) * truncated_normal_cdf(u / s) + h * truncated_normal_cdf((u - lf) / s); };
+  double lo = 0.0, hi = lf;
+  for (int i = 0; i < 200 && lo < hi; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    if (mid <= lo || mid >= hi) break;
+    (below(mid) < 0.5 ? lo : hi) = mid;
+  }
+  return m * std::exp(-0.5 * (lo + hi));
+}
+
 PixelMaps::PixelMaps(const SensorStageConfig& config, double nominal_length_s)
     : cfg_(config),
       nominal_length_s_(nominal_length_s),
@@ -79,6 +103,8 @@ PixelMaps::PixelMaps(const SensorStageConfig& config, double nominal_length_s)
       layout_(config.sensor.preset, config.camera.height_px) {
   for (int s = 0; s < layout_.sections(); ++s) sections_.push_back({layout_.section_begin(s), layout_.section_rows(s)});
   temp_factor_ = temperature_factor(config.sensor.temperature_C);
+  main_dcr_cps_[0] = dcr_main_median(config.sensor.pixel_A);
+  main_dcr_cps_[1] = dcr_main_median(config.sensor.pixel_B);
   if (!config.sensor.skew) return;
 
   const GateConfig& g = config.sensor.gate;
@@ -169,7 +195,8 @@ PixelParams PixelMaps::at(int x, int y) const {
     Rng rd = streams::chip_map(seed, idx, streams::Map::Dcr);
     const bool hot = rd.next_double() < tc.hot_pixel_fraction;
     const double z = truncated_normal(rd);
-    p.dcr_cps = tc.dcr_median_cps * (hot ? tc.hot_pixel_factor : 1.0) * std::exp(tc.dcr_log_sigma * z) * temp_factor_;
+    p.dcr_cps = main_dcr_cps_[p.type == 0 ? 0 : 1] * (hot ? tc.hot_pixel_factor : 1.0) * std::exp(tc.dcr_log_sigma * z) *
+                temp_factor_;
   }
   if (cfg_.sensor.pdp_nonuniformity) {
     Rng rp = streams::chip_map(seed, idx, streams::Map::Pdp);

@@ -11,9 +11,10 @@
 // 50 %. Both have zero mean over the section. With preset full_chip each half (pixel A rows, pixel B rows)
 // is a separate section with its own gate tree, so each half gets the pattern (sections: pixel_layout.h).
 //
-// DCR: log-normal main population (median dcr_median_cps, log sigma dcr_log_sigma) and a hot-pixel tail
-// (hot_pixel_fraction of pixels, hot_pixel_factor times the median, same log sigma), times the
-// temperature factor of temperature_factor().
+// DCR: log-normal main population (log sigma dcr_log_sigma) and a hot-pixel tail (hot_pixel_fraction of
+// pixels, hot_pixel_factor times the main population's median, same log sigma), times the temperature factor
+// of temperature_factor(). dcr_median_cps is the chip's median, main and hot pixels together, as the paper
+// gives it (Fig. 4(a): 0.4 and 2.0 cps); the main population's median is below it (dcr_main_median).
 #pragma once
 #include <cstdint>
 #include <vector>
@@ -68,6 +69,11 @@ class PixelMaps {
   // with 1.1 eV (1.5 at 30 C, 4.4 at 40 C, 14 at 50 C). The sum is the interpolation between the regimes.
   static double temperature_factor(double temperature_C);
 
+  // The main population's median DCR at 25 C that puts the chip's median (main and hot pixels together) at
+  // t.dcr_median_cps: 0.936 of it at the defaults (5 % hot pixels at 100 times, log sigma 1), t.dcr_median_cps
+  // itself without hot pixels.
+  static double dcr_main_median(const PixelTypeConfig& t);
+
  private:
   struct SectionStats {
     int y0 = 0, height = 0;
@@ -82,6 +88,7 @@ class PixelMaps {
   std::vector<SectionStats> sections_;
   double skew_sigma_r_ = 0, len_sigma_r_ = 0;  // random parts, seconds
   double temp_factor_ = 1.0;
+  double main_dcr_cps_[2] = {0.0, 0.0};  // dcr_main_median of pixel A and pixel B
   double min_skew_ = 0, max_skew_ = 0, max_dL_ = 0;
   std::vector<float> user_skew_ps_, user_length_ps_;
 };

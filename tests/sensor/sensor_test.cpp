@@ -133,11 +133,31 @@ TEST(Sensor, DcrMapsAndTemperature) {
       hot += d > 0.4 * 10.0;  // hot pixels (x100) are above 10 x median unless 2.3 sigma low; main ones rarely
     }
   const double n = 256.0 * 200.0;
-  // P(below median) = 0.95 * 0.5 + 0.05 * Phi(-ln(100)) = 0.4750; P(> 10 median) = 0.95 * Phi(-ln 10) + 0.05 * Phi(ln 10)
-  const double pb = 0.95 * 0.5 + 0.05 * 0.5 * std::erfc(std::log(100.0) / std::sqrt(2.0));
-  const double ph = 0.95 * 0.5 * std::erfc(std::log(10.0) / std::sqrt(2.0)) + 0.05 * (1 - 0.5 * std::erfc(std::log(10.0) / std::sqrt(2.0)));
+  // dcr_median_cps (0.4) is the chip's median, main and hot pixels together, as the paper's Fig. 4(a) gives it (it
+  // was the main population's, and the chip's median 0.429): half the pixels below it. The main population's
+  // median mu solves 0.95 Phi(ln(0.4 / mu)) + 0.05 Phi(ln(0.4 / (100 mu))) = 0.5 (Phi's truncation at 5 sigma
+  // changes it by 1e-7): 0.4 exp(-u), u found here by Newton's method on the untruncated Phi.
+  const auto Phi = [](double x) { return 0.5 * std::erfc(-x / std::sqrt(2.0)); };
+  const auto phi = [](double x) { return std::exp(-0.5 * x * x) / std::sqrt(2.0 * kPi); };
+  double u = 0.0;
+  for (int i = 0; i < 50; ++i)
+    u -= (0.95 * Phi(u) + 0.05 * Phi(u - std::log(100.0)) - 0.5) / (0.95 * phi(u) + 0.05 * phi(u - std::log(100.0)));
+  const double mu = 0.4 * std::exp(-u);
+  EXPECT_NEAR(mu / 0.4, 0.936, 0.001);
+  EXPECT_NEAR(PixelMaps::dcr_main_median(c.sensor.pixel_A), mu, 1e-6 * mu);
+  const double pb = 0.5;
+  // P(> 4 cps) = 0.95 P(z > ln(4 / mu)) + 0.05 P(z > ln(4 / (100 mu)))
+  const double ph = 0.95 * (1 - Phi(std::log(4.0 / mu))) + 0.05 * (1 - Phi(std::log(4.0 / (100 * mu))));
   EXPECT_LT(std::abs(below - n * pb), kZ * std::sqrt(n * pb * (1 - pb)));
   EXPECT_LT(std::abs(hot - n * ph), kZ * std::sqrt(n * ph * (1 - ph)));
+  // without hot pixels, the main population's median is the key's; with all pixels hot, a hundredth of it
+  PixelTypeConfig t = c.sensor.pixel_A;
+  t.hot_pixel_fraction = 0.0;
+  EXPECT_EQ(PixelMaps::dcr_main_median(t), 0.4);
+  t.hot_pixel_fraction = 1.0;
+  EXPECT_NEAR(PixelMaps::dcr_main_median(t), 0.004, 1e-12);
+  t.hot_pixel_fraction = 0.05, t.dcr_log_sigma = 0.0;  // no spread: the median is a main pixel's
+  EXPECT_EQ(PixelMaps::dcr_main_median(t), 0.4);
   EXPECT_DOUBLE_EQ(PixelMaps::temperature_factor(25.0), 1.0);
   EXPECT_NEAR(PixelMaps::temperature_factor(0.0) / PixelMaps::temperature_factor(10.0), 1.0, 0.1);  // flat below 10 C
   const double arrhenius = std::exp(1.1 / kBoltzmannEv * (1 / 323.15 - 1 / 333.15));
