@@ -31,6 +31,7 @@
 #include "app/reconstruct.h"
 #include "app/run_parts.h"
 #include "core/error.h"
+#include "core/mapped_files.h"
 #include "scenes/scene_file.h"
 
 #ifndef SPADGEN_VERSION
@@ -39,6 +40,7 @@
 
 int main(int argc, char** argv) {
   spadgen::app::flush_denormals();  // before TBB or any thread starts (app/run_parts.h)
+  spadgen::install_mapped_file_fault_handler();  // a mapped input cut short: an error naming it, not a SIGBUS
   // Closed standard streams are opened on /dev/null first: else the next file opened takes descriptor 2
   // (or 0, 1) and progress lines and warnings are written into it (a counts.npy began "spadgen: ...").
   // Standard output on /dev/full: a command's output printed there fails, said, rather than lost with exit 0.

@@ -165,6 +165,10 @@ RunFolder::RunFolder(const std::string& dir) : dir_(dir) {
   image_frames_ = get_int(meta_, "/acquisition/frames", meta_path, 1, 65535);
   if (meta_.contains("/image/crop_in_sensor"_json_pointer)) crop_ = meta_["image"]["crop_in_sensor"];
   const std::string mode = get<std::string>(meta_, "/acquisition/mode", meta_path);
+  // (any other mode was read as a 2D run: a gate sweep's planes made an hdr.exr)
+  if (mode != "gate_sweep" && mode != "intensity")
+    throw Error(meta_path + ": /acquisition/mode is " + nlohmann::json(mode).dump() + ", expected \"gate_sweep\" or \"intensity\" (the metadata.json "
+                "spadgen wrote: restore it, or run again)");
   gate_sweep_ = mode == "gate_sweep";
   if (gate_sweep_) {
     const auto gates = get<std::vector<double>>(meta_, "/acquisition/gate_positions_ns", meta_path);

@@ -18,6 +18,7 @@
 #include <utility>
 
 #include "core/error.h"
+#include "core/mapped_files.h"
 #include "writers/atomic_file.h"
 #include "writers/writers.h"
 
@@ -39,7 +40,7 @@ struct NpyWriter::Impl {
   Impl(const std::string& p, Dtype d, std::vector<int64_t> s) : path(p), dtype(d), shape(std::move(s)), file(p) {}
   ~Impl() { unmap(); }
   void unmap() {
-    if (map) ::munmap(map, map_bytes);
+    if (map) unregister_mapped_file(map), ::munmap(map, map_bytes);
     map = nullptr;
   }
 };
@@ -148,6 +149,7 @@ NpyWriter::NpyWriter(const std::string& path, Dtype dtype, std::vector<int64_t> 
     if (m != MAP_FAILED) {
       impl_->map = static_cast<char*>(m);
       impl_->map_bytes = static_cast<size_t>(bytes);
+      register_mapped_file(m, impl_->map_bytes, path);
     }
   }
 }
@@ -448,6 +450,19 @@ NpyReader::NpyReader(const std::string& path) : path_(path) {
   void* m = ::mmap(nullptr, map_bytes_, PROT_READ, MAP_SHARED, fd, 0);
   if (m == MAP_FAILED) detail::throw_errno("cannot map", path, errno);
   map_ = static_cast<const char*>(m);
+  // a file cut short while mapped is told by name (core/mapped_files.h), not a SIGBUS without a word
+  register_mapped_file(map_, map_bytes_, path);
+  // a header refused below unmaps it (the destructor does not run for a constructor that throws)
+  struct Unmap {
+    NpyReader* r;
+    bool keep = false;
+    ~Unmap() {
+      if (keep) return;
+      unregister_mapped_file(r->map_);
+      ::munmap(const_cast<char*>(r->map_), r->map_bytes_);
+      r->map_ = nullptr;
+    }
+  } unmap_unless_read{this};
   const auto* u = reinterpret_cast<const unsigned char*>(map_);
   if (std::memcmp(map_, "\x93NUMPY", 6) != 0) throw Error(read_error(path, "no \\x93NUMPY magic"));
   const int major = u[6];
@@ -495,15 +510,16 @@ NpyReader::NpyReader(const std::string& path) : path_(path) {
   if (elements_ > (size - data_offset_) / eb)
     throw Error(read_error(path, "the file holds " + std::to_string(size - data_offset_) + " bytes of data, shape " + shown(s) +
                                  " needs " + std::to_string(elements_ * eb)));
+  unmap_unless_read.keep = true;
 }
 
 NpyReader::~NpyReader() {
-  if (map_) ::munmap(const_cast<char*>(map_), map_bytes_);
+  if (map_) unregister_mapped_file(map_), ::munmap(const_cast<char*>(map_), map_bytes_);
 }
 NpyReader::NpyReader(NpyReader&& o) noexcept { *this = std::move(o); }
 NpyReader& NpyReader::operator=(NpyReader&& o) noexcept {
   if (this != &o) {
-    if (map_) ::munmap(const_cast<char*>(map_), map_bytes_);
+    if (map_) unregister_mapped_file(map_), ::munmap(const_cast<char*>(map_), map_bytes_);
     path_ = std::move(o.path_), dtype_ = o.dtype_, shape_ = std::move(o.shape_), elements_ = o.elements_;
     map_ = std::exchange(o.map_, nullptr), map_bytes_ = o.map_bytes_, data_offset_ = o.data_offset_;
   }

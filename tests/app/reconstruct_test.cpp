@@ -288,6 +288,17 @@ TEST_F(Reconstruct, MetadataIntegersOutOfRangeAreNamed) {
     EXPECT_THAT(r.output, HasSubstr((run / "metadata.json").string() + ": /acquisition/gate_positions_ns is \"0, 0.036\"; expected a "
                                     "list of numbers, as a run writes it"));
   }
+  // and a mode no run writes (a gate sweep's planes were read as a 2D run's, and an hdr.exr written from them)
+  {
+    nlohmann::ordered_json m = nlohmann::ordered_json::parse(meta);
+    m["acquisition"]["mode"] = "bogus";
+    std::ofstream(run / "metadata.json") << m.dump(2);
+    const Result r = sh("reconstruct " + run.string() + " -q -o " + (dir_ / "d.exr").string());
+    EXPECT_EQ(r.code, 1) << r.output;
+    EXPECT_THAT(r.output, HasSubstr((run / "metadata.json").string() + ": /acquisition/mode is \"bogus\", expected \"gate_sweep\" "
+                                    "or \"intensity\""));
+    EXPECT_FALSE(fs::exists(dir_ / "d.exr"));
+  }
   std::ofstream(run / "metadata.json") << meta;
   EXPECT_EQ(sh("reconstruct " + run.string() + " -q -o " + (dir_ / "d.exr").string()).code, 0);
 }

@@ -1,9 +1,11 @@
 #include <fcntl.h>
+#include <signal.h>
 #include <unistd.h>
 
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -12,6 +14,7 @@
 #include <thread>
 
 #include "core/error.h"
+#include "core/mapped_files.h"
 #include "core/tile.h"
 #include "test_util.h"
 #include "writers/writers.h"
@@ -100,6 +103,39 @@ TEST(NpyWriter, ZeroSizedDimensions) {
   const std::string bytes = read_bytes(dir.file("z.npy"));
   EXPECT_EQ(bytes.size(), parse(bytes).data_offset);
   EXPECT_NE(bytes.find("'shape': (0, 4, 5)"), std::string::npos);
+}
+
+// A file cut short by another process while it is read through its mapping (a cp over a run's counts.npy while
+// spadgen reconstruct read it) ends the program with an error naming the file, exit 1; it was a SIGBUS, exit
+// 135 without a word. A SIGBUS elsewhere stays a crash.
+TEST(NpyReaderDeathTest, AFileCutShortWhileMappedIsAnErrorNamingIt) {
+  TempDir dir;
+  const std::string path = dir.file("cut.npy");
+  {
+    NpyWriter w(path, Dtype::F32, {1 << 16});
+    std::vector<float> ones(1 << 16, 1.0f);
+    w.write(0, ones.data(), int64_t(ones.size()));
+    w.commit();
+  }
+  const auto read_after_cut = [&] {
+    install_mapped_file_fault_handler();
+    const NpyReader r(path);
+    if (::truncate(path.c_str(), 200) != 0) std::abort();
+    float sum = 0;
+    const float* d = r.data<float>();
+    for (int64_t i = 0; i < r.elements(); i += 1024) sum += d[i];  // pages past the new end: SIGBUS
+    std::printf("%g\n", double(sum));
+    std::exit(0);
+  };
+  EXPECT_EXIT(read_after_cut(), testing::ExitedWithCode(1),
+              "spadgen: error: .*cut\\.npy was cut short while spadgen read it through its mapping");
+  // the reader gone, its mapping is forgotten: a SIGBUS at that address again is not named
+  EXPECT_EXIT(
+      [] {
+        install_mapped_file_fault_handler();
+        ::raise(SIGBUS);
+      }(),
+      testing::KilledBySignal(SIGBUS), "");
 }
 
 // A shape the header spells wrongly is an error naming the file (std::stoll's exception escaped as an
