@@ -23,11 +23,28 @@ extern "C" void on_interrupt(int) {
   interrupt_flag().store(true);
 }
 
+// Before the first guard: nothing is written yet.
+extern "C" void on_startup_interrupt(int) {
+  static constexpr char kMessage[] = "spadgen: interrupted by a signal: the run stopped and wrote nothing\n";
+  [[maybe_unused]] const ssize_t written = ::write(2, kMessage, sizeof kMessage - 1);
+  ::_exit(2);
+}
+
+// What a guard hands the signals back to: the startup handlers' place is the default action's.
+void (*after_guard(void (*previous)(int)))(int) { return previous == on_startup_interrupt ? SIG_DFL : previous; }
+
 // Guards alive (on the main thread): a guard inside another (a run or a sense inside a dataset run) neither
 // clears a signal that already arrived nor hands the signals back to their default action when it ends.
 int guards = 0;
 
 }  // namespace
+
+void install_startup_interrupt_handlers() {
+  for (const int sig : {SIGINT, SIGTERM, SIGHUP}) {
+    struct sigaction now {};
+    if (::sigaction(sig, nullptr, &now) == 0 && now.sa_handler != SIG_IGN) std::signal(sig, on_startup_interrupt);  // ignored still (nohup)
+  }
+}
 
 InterruptGuard::InterruptGuard() {
   if (guards++ > 0) return;
@@ -43,9 +60,9 @@ InterruptGuard::InterruptGuard() {
 
 InterruptGuard::~InterruptGuard() {
   if (--guards > 0) return;
-  std::signal(SIGINT, previous_int_);
-  std::signal(SIGTERM, previous_term_);
-  std::signal(SIGHUP, previous_hup_);
+  std::signal(SIGINT, after_guard(previous_int_));
+  std::signal(SIGTERM, after_guard(previous_term_));
+  std::signal(SIGHUP, after_guard(previous_hup_));
 }
 
 void InterruptGuard::check() { throw_if_interrupted(); }

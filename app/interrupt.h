@@ -5,7 +5,14 @@
 
 namespace spadgen::app {
 
-// Installs the handlers for the duration of a run and restores the previous ones after.
+// From the program's start to its first guard, where nothing is written yet: SIGINT, SIGTERM or SIGHUP ends
+// the process at once, with the interrupted message and code 2 (they killed it by the signal, exit 130 or
+// 143, within the tens of milliseconds before a run's guard, hundreds under AddressSanitizer). A signal
+// ignored when the process started stays ignored. main() calls it first.
+void install_startup_interrupt_handlers();
+
+// Installs the handlers for the duration of a run and restores the previous ones after (the startup
+// handlers give way to the default actions: the run may have written by then).
 class InterruptGuard {
  public:
   InterruptGuard();

@@ -27,6 +27,7 @@
 #include "app/cli.h"
 #include "app/dataset.h"
 #include "datasets/dataset.h"
+#include "app/interrupt.h"
 #include "app/pipeline.h"
 #include "app/reconstruct.h"
 #include "app/run_parts.h"
@@ -41,6 +42,7 @@
 int main(int argc, char** argv) {
   spadgen::app::flush_denormals();  // before TBB or any thread starts (app/run_parts.h)
   spadgen::install_mapped_file_fault_handler();  // a mapped input cut short: an error naming it, not a SIGBUS
+  spadgen::app::install_startup_interrupt_handlers();  // a signal before a run's guard: exit 2, as within it
   // Closed standard streams are opened on /dev/null first: else the next file opened takes descriptor 2
   // (or 0, 1) and progress lines and warnings are written into it (a counts.npy began "spadgen: ...").
   // Standard output on /dev/full: a command's output printed there fails, said, rather than lost with exit 0.
