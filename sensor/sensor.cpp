@@ -155,12 +155,17 @@ std::vector<double> SensorModel::row_ambient_floor() const {
   const GateShape* gate = impl_->acq->gate();
   const double open_s = gate ? gate->open_time_s * double(c.acquisition.cycles_per_frame) : 0.0;
   const double tf = PixelMaps::temperature_factor(c.sensor.temperature_C);
+  // a main pixel's dark count rate, per pixel type (the median is a bisection: once per type, not per row)
+  double dcr_of_type[2] = {0.0, 0.0};
+  if (c.sensor.dark_counts) {
+    dcr_of_type[0] = PixelMaps::dcr_main_median(c.sensor.pixel_A) * tf;
+    dcr_of_type[1] = PixelMaps::dcr_main_median(c.sensor.pixel_B) * tf;
+  }
   std::vector<double> floor(size_t(c.camera.height_px));
   for (size_t y = 0; y < floor.size(); ++y) {
     const int type = layout().type_of_row(int(y));
     const double pdp = impl_->types[type].pdp_ambient;
-    const PixelTypeConfig& t = type == 0 ? c.sensor.pixel_A : c.sensor.pixel_B;
-    const double dcr = c.sensor.dark_counts ? PixelMaps::dcr_main_median(t) * tf : 0.0;  // a main pixel's
+    const double dcr = dcr_of_type[type];
     floor[y] = pdp > 0.0 && open_s > 0.0 ? (1.0 / (double(impl_->frames_per_k) * pdp * open_s) + dcr / pdp)
                                          : std::numeric_limits<double>::infinity();
   }
