@@ -339,6 +339,13 @@ std::string duration_text(double s) {
   return buf;
 }
 
+// A ratio of measured to estimated: "0.14", "2.8", "37".
+std::string ratio_text(double r) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, r >= 10.0 ? "%.0f" : "%.2g", r);
+  return buf;
+}
+
 datasets::Shard choose_shard(const DatasetOptions& o) {
   if (o.shard) return datasets::parse_shard(*o.shard);
   if (const auto s = datasets::shard_from_environment()) return *s;
@@ -660,22 +667,18 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
     // per run was 3-6 times what small samples took on another).
     if (done_timed > 0 && done_estimated > 0.0) {
       const double pace = done_seconds / done_estimated;
-      char ratio[32];
-      std::snprintf(ratio, sizeof ratio, pace >= 10.0 ? "%.0f" : "%.2g", pace);
       const bool one = done_timed == 1;
       o << "# the " << done_timed << " done " << (one ? "sample" : "samples") << " took " << duration_text(done_seconds)
-        << ", " << ratio << (one ? " times its estimate (its" : " times their estimates (their")
+        << ", " << ratio_text(pace) << (one ? " times its estimate (its" : " times their estimates (their")
         << " metadata.json's run.wall_seconds, against estimates for the cores they ran on, run.cores)"
         << (left > 0 ? ": at that pace the samples left take about " + duration_text(left_total.seconds * pace) : std::string())
         << "\n";
     }
     if (done_sized > 0 && done_disk_estimated > 0) {
       const double share = double(done_bytes) / double(done_disk_estimated);
-      char ratio[32];
-      std::snprintf(ratio, sizeof ratio, share >= 10.0 ? "%.0f" : "%.2g", share);
       const bool one = done_sized == 1;
       o << "# the " << done_sized << " done " << (one ? "sample keeps " : "samples keep ") << bytes_text(done_bytes)
-        << " on disk, " << ratio << (one ? " of its disk estimate (its" : " of their disk estimates (their")
+        << " on disk, " << ratio_text(share) << (one ? " of its disk estimate (its" : " of their disk estimates (their")
         << " files but metadata.json, as index.jsonl's bytes)"
         << (left > 0 ? ": at that share the samples left keep about " +
                            bytes_text(int64_t(std::llround(double(left_total.kept) * share)))
