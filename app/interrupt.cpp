@@ -12,23 +12,22 @@ namespace {
 // While a StopAtOnce lives: the process ends in the handler itself.
 std::atomic<bool> stop_at_once{false};
 
-// Only a lock-free atomic may be touched from a handler; every long loop polls it (core/error.h). Within a
-// StopAtOnce, nothing is written yet and nothing polls: the message and _exit, both safe in a handler.
-extern "C" void on_interrupt(int) {
-  if (stop_at_once.load()) {
-    static constexpr char kMessage[] = "spadgen: interrupted by a signal: the run stopped and wrote nothing\n";
-    [[maybe_unused]] const ssize_t written = ::write(2, kMessage, sizeof kMessage - 1);
-    ::_exit(2);
-  }
-  interrupt_flag().store(true);
-}
-
-// Before the first guard: nothing is written yet.
-extern "C" void on_startup_interrupt(int) {
+// Where nothing is written yet: the message and _exit, both safe in a handler.
+[[noreturn]] void stop_now() {
   static constexpr char kMessage[] = "spadgen: interrupted by a signal: the run stopped and wrote nothing\n";
   [[maybe_unused]] const ssize_t written = ::write(2, kMessage, sizeof kMessage - 1);
   ::_exit(2);
 }
+
+// Only a lock-free atomic may be touched from a handler; every long loop polls it (core/error.h). Within a
+// StopAtOnce, nothing is written yet and nothing polls.
+extern "C" void on_interrupt(int) {
+  if (stop_at_once.load()) stop_now();
+  interrupt_flag().store(true);
+}
+
+// Before the first guard: nothing is written yet.
+extern "C" void on_startup_interrupt(int) { stop_now(); }
 
 // What a guard hands the signals back to: the startup handlers' place is the default action's.
 void (*after_guard(void (*previous)(int)))(int) { return previous == on_startup_interrupt ? SIG_DFL : previous; }
