@@ -129,7 +129,7 @@ TEST(NpyReaderDeathTest, AFileCutShortWhileMappedIsAnErrorNamingIt) {
   };
   EXPECT_EXIT(read_after_cut(), testing::ExitedWithCode(1),
               "spadgen: error: .*cut\\.npy was cut short while spadgen read it through its mapping");
-  // the reader gone, its mapping is forgotten: a SIGBUS at that address again is not named
+  // a SIGBUS outside every registered mapping (raised: it has no faulting address in one) keeps its default action
   EXPECT_EXIT(
       [] {
         install_mapped_file_fault_handler();
