@@ -489,6 +489,16 @@ std::vector<DatasetFolder::Revision> DatasetFolder::revisions_of(const scenes::R
     out.push_back({"an intensity run's saved light holds no laser",
                    "an intensity run's saved light (outputs.light, the dataset's repeats) no longer traces the laser, which its "
                    "counts do not see: no laser.exr, no laser channels in ground_truth.exr"});
+  // the sensor's dark counts: sensor.pixel_*.dcr_median_cps is the chip's median, hot pixels included (it was the
+  // main population's, and the chip's median 1.07 times it): every pixel's dark count rate moved (0.936 times it
+  // at the defaults). Where a pixel type the chip uses has hot pixels (without them the two medians are one; with
+  // them but no spread in log DCR too, below half of the pixels hot, which this does not tell apart)
+  const auto hot = [&](const PixelTypeConfig& t) { return t.dcr_median_cps > 0.0 && t.hot_pixel_fraction > 0.0; };
+  const PixelPreset preset = c.sensor.preset;
+  if (c.sensor.dark_counts && ((preset != PixelPreset::PixelB && hot(c.sensor.pixel_A)) || (preset != PixelPreset::PixelA && hot(c.sensor.pixel_B))))
+    out.push_back({"dcr_median_cps is the chip's median",
+                   "the sensor's dark counts are drawn otherwise: sensor.pixel_A/B.dcr_median_cps is the chip's median, hot "
+                   "pixels included (it was the main population's, and the chip's median 1.07 times it)"});
   if (!c.render.target_relative_error) return out;
   // a gate sweep's background, where the counts see it (dark scenes' bits did not change, but are not told apart)
   if (c.acquisition.mode == AcquisitionMode::GateSweep)

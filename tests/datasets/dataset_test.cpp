@@ -490,11 +490,12 @@ TEST(DatasetFile, RangesText) {
 // (its samples rendered before are stale, with the change in words), and nowhere else (other samples keep their
 // hashes): a gate sweep to a target error; an intensity run to a target error that keeps its laser return
 // without laser_on; a scene rendering GGX lobes (a glossy or metallic material, in its glTF or by a sample's
-// parameters); a colour under ambient light.
+// parameters); a colour under ambient light. (Without dark counts, whose revision is the next test's.)
 TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
   const fs::path dir = fs::temp_directory_path() / ("spadgen_dataset_revisions_" + std::to_string(::getpid()));
+  const std::string dark = "\"sensor.dark_counts\": false";
   const auto resolved = [&](const std::string& set) {
-    const DatasetSpec spec = parse("\"set\": {" + set + "}");
+    const DatasetSpec spec = parse("\"set\": {" + dark + ", " + set + "}");
     return DatasetFolder(spec, dir).resolve(make_sample(spec, 0));
   };
   const std::string target = "\"render.target_relative_error\": 0.05, ";
@@ -539,13 +540,14 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
     EXPECT_EQ(r.hash != r.hash_before_revisions, !c.revisions.empty()) << c.set;
   }
   // the multi-object scene's plates are glossy (roughness 0.05): every sample of it
-  const DatasetSpec spec = parse_dataset_text("{\"scenes\": [\"" + kScenes + "multi_object.json\"]}", "test_dataset.json");
+  const DatasetSpec spec = parse_dataset_text("{\"scenes\": [\"" + kScenes + "multi_object.json\"], \"set\": {" + dark + "}}",
+                                              "test_dataset.json");
   const DatasetFolder::Resolved r = DatasetFolder(spec, dir).resolve(make_sample(spec, 0));
   EXPECT_EQ(r.revisions, ggx);
   EXPECT_NE(r.hash, r.hash_before_revisions);
   // made clear (smooth), its plate's echo on the laser's side is rendered: that revision alone
   const DatasetSpec clear = parse_dataset_text("{\"scenes\": [\"" + kScenes + "multi_object.json\"], \"set\": "
-                                               "{\"materials.plastic_plate.roughness\": 0}}", "test_dataset.json");
+                                               "{" + dark + ", \"materials.plastic_plate.roughness\": 0}}", "test_dataset.json");
   const DatasetFolder::Resolved c = DatasetFolder(clear, dir).resolve(make_sample(clear, 0));
   EXPECT_EQ(c.revisions, glint + "; clear (smooth) refracting plates render otherwise: the laser's light reflected inside a plate "
                          "on its way in (half of the plate's delayed echo) was left out");
@@ -571,7 +573,8 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
           {mirror, lamp + "; glTF point and spot lights beside smooth (roughness below 0.032) mirrors and plates render "
                    "otherwise: a lamp's image in their faces is rendered in the pixel it lands in (it was missing); " + glint},
           {mirror + ", \"ambient.gltf_lights\": false", glint}}) {
-      const DatasetSpec lit = parse_dataset_text("{\"scenes\": [\"" + (dir / "lamp.json").string() + "\"], \"set\": {" + set + "}}",
+      const DatasetSpec lit = parse_dataset_text("{\"scenes\": [\"" + (dir / "lamp.json").string() + "\"], \"set\": {" + dark +
+                                                     (set.empty() ? "" : ", ") + set + "}}",
                                                  "test_dataset.json");
       const DatasetFolder::Resolved l = DatasetFolder(lit, dir / "out").resolve(make_sample(lit, 0));
       EXPECT_EQ(l.revisions, revisions) << set;
@@ -582,12 +585,37 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
   for (const auto& [set, revisions] : {std::pair<std::string, std::string>{"\"materials.plastic_plate.ior\": 1", glint},
                                        {"\"acquisition.mode\": \"intensity\"", ""}}) {
     const DatasetSpec none = parse_dataset_text("{\"scenes\": [\"" + kScenes + "multi_object.json\"], \"set\": "
-                                                "{\"materials.plastic_plate.roughness\": 0, " + set + "}}", "test_dataset.json");
+                                                "{" + dark + ", \"materials.plastic_plate.roughness\": 0, " + set + "}}", "test_dataset.json");
     const DatasetFolder::Resolved n = DatasetFolder(none, dir).resolve(make_sample(none, 0));
     EXPECT_EQ(n.revisions, revisions) << set;
     EXPECT_EQ(n.hash != n.hash_before_revisions, !revisions.empty()) << set;
   }
   fs::remove_all(dir);
+}
+
+// The sensor's revision: dcr_median_cps became the chip's median (hot pixels included), which moved every
+// pixel's dark count rate where a pixel type the chip uses has hot pixels; its samples drawn before are stale.
+// Not where no dark counts are drawn, no pixel in use is hot, or the median is 0.
+TEST(DatasetFolder, TheDarkCountRevisionAppliesWhereTheChipsMedianMovedTheRates) {
+  const fs::path dir = fs::temp_directory_path() / ("spadgen_dataset_dcr_revision_" + std::to_string(::getpid()));
+  const std::string dcr = "the sensor's dark counts are drawn otherwise: sensor.pixel_A/B.dcr_median_cps is the chip's median, "
+                          "hot pixels included (it was the main population's, and the chip's median 1.07 times it)";
+  for (const auto& [set, applies] : std::vector<std::pair<std::string, bool>>{
+           {"", true},  // the defaults: pixel A, 5 % hot pixels
+           {"\"sensor.dark_counts\": false", false},
+           {"\"sensor.pixel_A.hot_pixel_fraction\": 0", false},
+           {"\"sensor.pixel_A.dcr_median_cps\": 0", false},
+           // pixel B's hot pixels where the chip has no pixel B, and where it has
+           {"\"sensor.pixel_A.hot_pixel_fraction\": 0, \"sensor.preset\": \"pixel_A\"", false},
+           {"\"sensor.pixel_A.hot_pixel_fraction\": 0, \"sensor.preset\": \"full_chip\"", true},
+           {"\"sensor.pixel_A.hot_pixel_fraction\": 0, \"sensor.preset\": \"pixel_B\"", true},
+           {"\"sensor.pixel_A.hot_pixel_fraction\": 0, \"sensor.pixel_B.hot_pixel_fraction\": 0, \"sensor.preset\": \"full_chip\"", false},
+           {"\"acquisition.mode\": \"intensity\"", true}}) {
+    const DatasetSpec spec = parse("\"set\": {" + set + "}");
+    const DatasetFolder::Resolved r = DatasetFolder(spec, dir).resolve(make_sample(spec, 0));
+    EXPECT_EQ(r.revisions, applies ? dcr : std::string()) << set;
+    EXPECT_EQ(r.hash != r.hash_before_revisions, applies) << set;
+  }
 }
 
 // The card's "Sensor and acquisition" row is each scene's first sample: a value the dataset varies reads
