@@ -113,6 +113,8 @@ KeyPath parse_key_path(const std::string& key) {
     if (i == digits || i >= key.size() || key[i] != ']' || i + 1 != key.size())
       throw Error("the bracket " + column(open) +
                   " is not a final [i] with i a component index (0, 1 or 2), e.g. camera.position_m[2]");
+    if (i - digits > 1 && key[digits] == '0')  // ([01] was read as [1])
+      throw Error("the component index " + key.substr(digits, i - digits) + " has a leading zero; expected 0, 1 or 2, written so");
     if (i - digits > 6) throw Error("the component index " + key.substr(digits, i - digits) + " is too large; expected 0, 1 or 2");
     p.component = std::stoi(key.substr(digits, i - digits));
     return p;

@@ -201,6 +201,9 @@ bool value_fits(const Key& k, const json& v) {
       // Written as integer digits, the value itself: 2^53 + 1 is not 2^53 (a double would make it so).
       if (v.is_number_unsigned() && static_cast<uint64_t>(d) != v.get<uint64_t>()) return false;
       if (v.is_number_integer() && !v.is_number_unsigned() && static_cast<int64_t>(d) != v.get<int64_t>()) return false;
+      // Written with a fraction or an exponent, the digits were rounded to a double: from 2^53 on, another
+      // integer's (9007199254740993.0 read as 2^53)
+      if (v.is_number_float() && std::fabs(d) >= 0x1p53) return false;
       return std::floor(d) == d && in_range(k, d) && (k.multiple_of == 0 || std::fmod(d, k.multiple_of) == 0.0);
     }
     case Type::Bool: return v.is_boolean();
@@ -223,6 +226,15 @@ bool value_fits(const Key& k, const json& v) {
     }
   }
   return false;
+}
+
+// What a value that does not fit its key was, and what the key expects.
+std::string misfit_text(const Key& k, const json& v) {
+  std::string e = "found " + describe_json(v) + ", expected " + expected_text(k);
+  if (k.type == Type::Integer && v.is_number_float() && std::fabs(v.get<double>()) >= 0x1p53)
+    e += " written as its digits (a number with a fraction or an exponent is rounded to a double, which from 2^53 on may be "
+         "another integer)";
+  return e + " (" + k.doc + ")";
 }
 
 // A type as the reference and the messages name it.
@@ -278,7 +290,7 @@ struct Checker {
         const std::string kp = ep + "/" + pointer_token(kv.key());
         if (const Key* k = find_element_key(s, kv.key())) {
           if (!value_fits(*k, kv.value()))
-            error(kp, "found " + describe_json(kv.value()) + ", expected " + expected_text(*k) + " (" + k->doc + ")");
+            error(kp, misfit_text(*k, kv.value()));
         } else {
           error(kp, "unknown key" + element_suggestion(s, kv.key(), ep));
         }
@@ -303,7 +315,7 @@ struct Checker {
       }
       if (const Key* k = find_key(p)) {
         if (!value_fits(*k, it.value()))
-          error(p, "found " + describe_json(it.value()) + ", expected " + expected_text(*k) + " (" + k->doc + ")");
+          error(p, misfit_text(*k, it.value()));
       } else if (is_section(p)) {
         if (!it.value().is_object())
           error(p, "found " + describe_json(it.value()) + ", expected an object (a section of keys)");

@@ -160,6 +160,16 @@ TEST_F(SceneFileTest, StreamSeedsDefaultToTheSeed) {
   EXPECT_EQ(parse(R"({"gltf": "s.gltf", "seed": 9007199254740992})").config.seed, 9007199254740992u);
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "seed": 9007199254740993})"),
               HasSubstr("/seed: found 9007199254740993 (an integer), expected an integer in [0, 9007199254740992]"));
+  // Written with a fraction or an exponent, from 2^53 on the double is not the digits' integer
+  // (9007199254740993.0 was read as 2^53): refused, with why; below, 8.0 is 8.
+  for (const char* given : {"9007199254740993.0", "9.007199254740993e15", "9007199254740992.0"}) {
+    EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {std::string("seed=") + given}),
+                HasSubstr("expected an integer in [0, 9007199254740992] written as its digits (a number with a fraction or an "
+                          "exponent is rounded to a double, which from 2^53 on may be another integer)")) << given;
+    EXPECT_THAT(error_of(std::string(R"({"gltf": "s.gltf", "seeds": {"noise": )") + given + "}}"), HasSubstr("/seeds/noise: found ")) << given;
+  }
+  EXPECT_EQ(parse(R"({"gltf": "s.gltf", "seed": 9007199254740991.0})").config.seed, 9007199254740991u);
+  EXPECT_EQ(parse(R"({"gltf": "s.gltf"})", {"seed=8.0"}).config.seed, 8u);
 }
 
 // render.quality fills the sampling keys not given, with the values quality_presets() lists; a key given
@@ -798,6 +808,11 @@ TEST_F(SceneFileTest, AComponentOfAVectorKeyIsSetAlone) {
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"materials.M.roughness[0]=0.5"}), HasSubstr("this key is of type number"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"camera.position_m[x]=1"}), HasSubstr("the bracket at character 18 is not a final [i]"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"camera.position_m[1].x=1"}), HasSubstr("is not a final [i]"));
+  // an index spelt with a leading zero is refused ([01] was read as [1]); [0] is an index
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"camera.position_m[01]=1"}),
+              HasSubstr("the component index 01 has a leading zero; expected 0, 1 or 2, written so"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"camera.position_m[00]=1"}), HasSubstr("has a leading zero"));
+  EXPECT_EQ(parse(R"({"gltf": "s.gltf"})", {"camera.position_m[0]=0.25"}).config.camera.position_m[0], 0.25);
   // A component out of range, or of the wrong type, fails as the whole vector would.
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"camera.position_m[2]=2e6"}),
               HasSubstr("--set camera.position_m[2]: found [0.0,0.0,2000000.0] (an array), expected an array of 3 numbers each in [-1e+06, 1e+06] m"));
