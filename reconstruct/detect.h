@@ -70,6 +70,8 @@ struct PixelTiming {
 // the middle of the window's two levels, then, until it settles, where it crosses the middle of the
 // levels measured `window / 6` positions either side of the last crossing; the step between those levels
 // must hold min_score standard errors too. An edge named by two neighbouring windows counts once.
+// The paper gives the moving average, the 60-position window without overlap and the rising edge; the
+// average's width, `plateau`, min_score, the offset scan and the locating are spadgen's choices.
 struct PaperDetector {
   int window = 60;
   int half_width = 2;
