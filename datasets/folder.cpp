@@ -418,6 +418,7 @@ DatasetFolder::MaterialTraits DatasetFolder::material_traits(const scenes::Resol
   t.ggx = m.default_material;
   bool refracting = false, smooth_clear = false, colour = m.painted || m.coloured_lights, emission = false;
   t.smooth_mirror = false;
+  t.texture_transform = false;
   for (scenes::Material mat : m.used) {
     for (const MaterialEdit& e : r.config.edits.materials)
       if (e.name == mat.name) mat.apply(e);  // as the loader applies it (an ior or thickness makes a volume refract)
@@ -428,6 +429,7 @@ DatasetFolder::MaterialTraits DatasetFolder::material_traits(const scenes::Resol
     t.smooth_mirror |= !mat.lambertian() && mat.smooth();
     colour |= !grey(glm::vec3(mat.base_color)) || mat.base_color_texture >= 0 || !grey(mat.attenuation_color) || !grey(mat.emissive);
     emission |= mat.emissive != glm::vec3(0.0f);
+    t.texture_transform |= mat.base_color_texture >= 0 && mat.base_color_transformed;
   }
   t.echo = refracting && smooth_clear;
   const AmbientConfig& a = r.config.ambient;
@@ -480,6 +482,12 @@ std::vector<DatasetFolder::Revision> DatasetFolder::revisions_of(const scenes::R
   if (m.ggx)
     out.push_back({"GGX lobes without float cancellation",
                    "glossy and metallic materials (GGX) render otherwise: a narrow lobe's peak was up to 7 % bright"});
+  // a base colour texture's KHR_texture_transform maps the coordinates it reads (offset, rotation, scale,
+  // texCoord): it was left out, with a warning, the texture read untransformed
+  if (m.texture_transform)
+    out.push_back({"base colour textures through KHR_texture_transform",
+                   "base colour textures with KHR_texture_transform render otherwise: the transform (offset, rotation, scale, "
+                   "texCoord) maps the coordinates they read (it was left out, with a warning)"});
   // an intensity run's saved light (outputs.light: a dataset's repeats) without laser_on, outputs.transient or a time window: the
   // laser was traced for it, which the counts do not see; the light holds none now, and the run writes no laser
   // images (the counts are the same bits unless a target error held the laser too: below; the laser-side echoes'

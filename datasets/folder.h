@@ -220,6 +220,8 @@ class DatasetFolder {
     bool smooth_mirror = true;
     // glTF point or spot lights light the scene (ambient.gltf_lights): the camera sees one in view
     bool lamps = true;
+    // a base colour texture through KHR_texture_transform
+    bool texture_transform = true;
   };
   MaterialTraits material_traits(const scenes::ResolvedRun& r) const;
   // The revisions of the renderer's rules that apply to r (a marker sample_hash holds, and the change in words),

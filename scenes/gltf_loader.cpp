@@ -1188,6 +1188,7 @@ void Loader::load_materials() {
       } else {
         mat.base_color_texture = texture(pbr.baseColorTexture.index, who + " baseColorTexture");
         mat.base_color_texcoord = set;
+        mat.base_color_transformed = uv_transform_.count(static_cast<int>(i)) > 0;
       }
     }
     const auto unused_texture = [&](int index, const char* what) {
@@ -2458,7 +2459,7 @@ std::string summarize(const Scene& scene) {
       s << ", baseColorTexture '" << scene.textures[static_cast<size_t>(m.base_color_texture)].name << "' ("
         << scene.textures[static_cast<size_t>(m.base_color_texture)].width << "x"
         << scene.textures[static_cast<size_t>(m.base_color_texture)].height << ", TEXCOORD_" << m.base_color_texcoord
-        << ")";
+        << (m.base_color_transformed ? " through KHR_texture_transform" : "") << ")";
     if (m.double_sided) s << ", double-sided";
     std::vector<std::string> ext;
     if (m.emissive != glm::vec3(0.0f))

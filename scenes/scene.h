@@ -37,6 +37,7 @@ struct Material {
   glm::vec4 base_color{1, 1, 1, 1};  // pbrMetallicRoughness.baseColorFactor (linear)
   int base_color_texture = -1;       // index into Scene::textures, -1 none
   int base_color_texcoord = 0;       // TEXCOORD_n set used by it
+  bool base_color_transformed = false;  // its KHR_texture_transform maps the coordinates (applied at load)
   float metallic = 1.0f;             // glTF defaults: metallic 1, roughness 1
   float roughness = 1.0f;
   glm::vec3 emissive{0, 0, 0};       // emissiveFactor times KHR_materials_emissive_strength

@@ -490,7 +490,8 @@ TEST(DatasetFile, RangesText) {
 // (its samples rendered before are stale, with the change in words), and nowhere else (other samples keep their
 // hashes): a gate sweep to a target error; an intensity run to a target error that keeps its laser return
 // without laser_on; a scene rendering GGX lobes (a glossy or metallic material, in its glTF or by a sample's
-// parameters); a colour under ambient light. (Without dark counts, whose revision is the next test's.)
+// parameters); a colour under ambient light; a base colour texture through KHR_texture_transform. (Without dark
+// counts, whose revision is the next test's.)
 TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
   const fs::path dir = fs::temp_directory_path() / ("spadgen_dataset_revisions_" + std::to_string(::getpid()));
   const std::string dark = "\"sensor.dark_counts\": false";
@@ -578,6 +579,24 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
                                                  "test_dataset.json");
       const DatasetFolder::Resolved l = DatasetFolder(lit, dir / "out").resolve(make_sample(lit, 0));
       EXPECT_EQ(l.revisions, revisions) << set;
+    }
+  }
+  // a base colour texture through KHR_texture_transform, which maps its coordinates now (the test chart's
+  // print; without the extension, no revision)
+  {
+    std::ifstream in(kScenes + "test_chart.gltf");
+    nlohmann::json gltf = nlohmann::json::parse(in);
+    std::ofstream(dir / "chart.gltf") << gltf.dump();
+    gltf["extensionsUsed"] = {"KHR_texture_transform"};
+    gltf["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"]["KHR_texture_transform"] = {{"scale", {2.0, 2.0}}};
+    std::ofstream(dir / "chart_transformed.gltf") << gltf.dump();
+    const std::string transform = "base colour textures with KHR_texture_transform render otherwise: the transform (offset, rotation, "
+                                  "scale, texCoord) maps the coordinates they read (it was left out, with a warning)";
+    for (const auto& [name, revisions] : {std::pair<std::string, std::string>{"chart", ""}, {"chart_transformed", transform}}) {
+      std::ofstream(dir / (name + ".json")) << "{\"gltf\": \"" << name << ".gltf\", \"camera\": {\"position_m\": [0, 0, 1], \"look_at_m\": [0, 0, 0]}}";
+      const DatasetSpec chart = parse_dataset_text("{\"scenes\": [\"" + (dir / (name + ".json")).string() + "\"], \"set\": {" + dark + "}}",
+                                                   "test_dataset.json");
+      EXPECT_EQ(DatasetFolder(chart, dir / "out").resolve(make_sample(chart, 0)).revisions, revisions) << name;
     }
   }
   // ... not where no echo is drawn: an ior of 1 (no refraction: the loader applies every edit, ior and thickness

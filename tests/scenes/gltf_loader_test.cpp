@@ -410,6 +410,8 @@ TEST(GltfLoader, TheBaseColourTexturesTextureTransformMapsItsCoordinates) {
   const Scene s = load_gltf(g.write(dir.path(), "transformed"));
   ASSERT_EQ(s.materials.size(), 1u);
   EXPECT_EQ(s.materials[0].base_color_texcoord, 1);  // the extension's texCoord
+  EXPECT_TRUE(s.materials[0].base_color_transformed);
+  EXPECT_THAT(summarize(s), HasSubstr(", TEXCOORD_1 through KHR_texture_transform)"));
   EXPECT_TRUE(s.warnings.empty()) << s.warnings.front();
   ASSERT_EQ(s.meshes.size(), 1u);
   ASSERT_EQ(s.meshes[0].texcoords1.size(), 3u);
