@@ -419,6 +419,7 @@ DatasetFolder::MaterialTraits DatasetFolder::material_traits(const scenes::Resol
   bool refracting = false, smooth_clear = false, colour = m.painted || m.coloured_lights, emission = false;
   t.smooth_mirror = false;
   t.texture_transform = false;
+  t.rough_refracting = false;
   for (scenes::Material mat : m.used) {
     for (const MaterialEdit& e : r.config.edits.materials)
       if (e.name == mat.name) mat.apply(e);  // as the loader applies it (an ior or thickness makes a volume refract)
@@ -430,6 +431,9 @@ DatasetFolder::MaterialTraits DatasetFolder::material_traits(const scenes::Resol
     colour |= !grey(glm::vec3(mat.base_color)) || mat.base_color_texture >= 0 || !grey(mat.attenuation_color) || !grey(mat.emissive);
     emission |= mat.emissive != glm::vec3(0.0f);
     t.texture_transform |= mat.base_color_texture >= 0 && mat.base_color_transformed;
+    // (the renderer's rough crossing: GGX alpha above 0.025, render/integrator.h kRoughCrossingAlpha)
+    const float rough = std::clamp(mat.roughness, 0.0f, 1.0f);
+    t.rough_refracting |= mat.refracting() && rough * rough > 0.025f;
   }
   t.echo = refracting && smooth_clear;
   const AmbientConfig& a = r.config.ambient;
@@ -482,6 +486,28 @@ std::vector<DatasetFolder::Revision> DatasetFolder::revisions_of(const scenes::R
   if (m.ggx)
     out.push_back({"GGX lobes without float cancellation",
                    "glossy and metallic materials (GGX) render otherwise: a narrow lobe's peak was up to 7 % bright"});
+  // the laser's connections through rough flat refracting faces: crossed by drawn microfacet normals, also
+  // beside the plate's shadow, a plate frosted on one side, two panes of one node as two plates (they were
+  // crossed as smooth)
+  if (m.rough_refracting && laser_traced(c))
+    out.push_back({"laser connections through rough refracting faces",
+                   "rough refracting plates (roughness above 0.158) render otherwise: the laser's connections cross their "
+                   "rough faces by drawn microfacet normals, also beside their shadow (they were crossed as smooth)"});
+  // a sweep's positions: its last counts where it lies on the step grid within the rounding of start, stop and
+  // step (an absolute 1e-9 of a step left some out)
+  if (c.acquisition.mode == AcquisitionMode::GateSweep) {
+    const GateSweepConfig& g = c.acquisition.gate_sweep;
+    if (g.positions() != std::floor((g.stop_s - g.start_s) / g.step_s + 1e-9) + 1.0)
+      out.push_back({"the sweep's last position on the grid counts",
+                     "this gate sweep has another number of positions: its last, on the step grid within the rounding of "
+                     "start, stop and step, counts (it was left out)"});
+  }
+  // a measured gate table's own rise and fall times in metadata.json (the ignored sensor.gate.rise_ps and
+  // fall_ps were written, and set the edges detector's separation), its fit errors of the open gate's peak
+  if (!c.sensor.gate.profile_csv.empty())
+    out.push_back({"a gate table's own rise and fall times",
+                   "a measured gate table (sensor.gate.profile_csv) is described otherwise: metadata.json's gate rise_ps "
+                   "and fall_ps are the table's own 10-90 % times (they were sensor.gate.rise_ps and fall_ps, unused)"});
   // a base colour texture's KHR_texture_transform maps the coordinates it reads (offset, rotation, scale,
   // texCoord): it was left out, with a warning, the texture read untransformed
   if (m.texture_transform)

@@ -222,6 +222,8 @@ class DatasetFolder {
     bool lamps = true;
     // a base colour texture through KHR_texture_transform
     bool texture_transform = true;
+    // a refracting volume with a face rough enough to be crossed as rough (roughness above 0.158)
+    bool rough_refracting = true;
   };
   MaterialTraits material_traits(const scenes::ResolvedRun& r) const;
   // The revisions of the renderer's rules that apply to r (a marker sample_hash holds, and the change in words),

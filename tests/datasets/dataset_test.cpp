@@ -637,6 +637,43 @@ TEST(DatasetFolder, TheDarkCountRevisionAppliesWhereTheChipsMedianMovedTheRates)
   }
 }
 
+// The revisions of rules that changed on 3 December: laser connections through rough refracting faces (a
+// plate of roughness above 0.158, where the laser is traced), a sweep whose last position on the grid now
+// counts, a measured gate table's own rise and fall times. Each where its rule applies, and nowhere else.
+TEST(DatasetFolder, TheRoughPlateSweepAndGateTableRevisionsApplyWhereTheirRuleChangedTheSample) {
+  const fs::path dir = fs::temp_directory_path() / ("spadgen_dataset_more_revisions_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const std::string dark = "\"sensor.dark_counts\": false";
+  const std::string ggx = "glossy and metallic materials (GGX) render otherwise: a narrow lobe's peak was up to 7 % bright";
+  const std::string rough = "rough refracting plates (roughness above 0.158) render otherwise: the laser's connections cross their "
+                            "rough faces by drawn microfacet normals, also beside their shadow (they were crossed as smooth)";
+  const std::string sweep = "this gate sweep has another number of positions: its last, on the step grid within the rounding of "
+                            "start, stop and step, counts (it was left out)";
+  const std::string table = "a measured gate table (sensor.gate.profile_csv) is described otherwise: metadata.json's gate rise_ps "
+                            "and fall_ps are the table's own 10-90 % times (they were sensor.gate.rise_ps and fall_ps, unused)";
+  std::ofstream(dir / "gate.csv") << "0,0\n400,1\n4200,1\n4600,0\n";
+  const auto revisions = [&](const std::string& scene, const std::string& set) {
+    const DatasetSpec spec = parse_dataset_text("{\"scenes\": [\"" + kScenes + scene + "\"], \"set\": {" + dark + set + "}}",
+                                                "test_dataset.json");
+    return DatasetFolder(spec, dir / "out").resolve(make_sample(spec, 0)).revisions;
+  };
+  // the multi-object plate: glossy at 0.05 (crossed as smooth, as before), rough at 0.3; a 2D run traces no laser
+  EXPECT_EQ(revisions("multi_object.json", ""), ggx);
+  EXPECT_EQ(revisions("multi_object.json", ", \"materials.plastic_plate.roughness\": 0.15"), ggx);
+  EXPECT_EQ(revisions("multi_object.json", ", \"materials.plastic_plate.roughness\": 0.3"), ggx + "; " + rough);
+  EXPECT_EQ(revisions("multi_object.json", ", \"materials.plastic_plate.roughness\": 0.3, \"acquisition.mode\": \"intensity\""), ggx);
+  // not refracting (ior 1): no crossing
+  EXPECT_EQ(revisions("multi_object.json", ", \"materials.plastic_plate.roughness\": 0.3, \"materials.plastic_plate.ior\": 1"), ggx);
+  // 5 to 5.00001 ns in 1e-6 ps steps: 10001 positions, 10000 before; the paper's sweep and one just off the grid as before
+  const std::string grid = ", \"acquisition.gate_sweep.start_ns\": 5, \"acquisition.gate_sweep.step_ps\": 1e-6, \"acquisition.gate_sweep.stop_ns\": ";
+  EXPECT_EQ(revisions("flat_target.json", grid + "5.00001"), sweep);
+  EXPECT_EQ(revisions("flat_target.json", grid + "5.0000099999"), "");
+  EXPECT_EQ(revisions("flat_target.json", ""), "");
+  // a gate table
+  EXPECT_EQ(revisions("flat_target.json", ", \"sensor.gate.profile_csv\": \"" + (dir / "gate.csv").string() + "\""), table);
+  fs::remove_all(dir);
+}
+
 // The card's "Sensor and acquisition" row is each scene's first sample: a value the dataset varies reads
 // "varies" (a new user read sample 0's preset and laser power as the dataset's), also one a preset sets (a
 // reviewer's render.quality grid showed sample 0's paths), the others their value.
