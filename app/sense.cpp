@@ -701,6 +701,10 @@ std::vector<RunResult> sense(const SenseOptions& options) {
     if (std::error_code ec; !fs::is_regular_file(src / f, ec) && !fs::is_directory(src / f, ec))
       throw Error((src / f).string() + ": listed in " + (src / "metadata.json").string() + " (files) but is not a regular file "
                   "(a FIFO, a socket or a device); sense links the run's files as they are: restore it, or run the scene again");
+    // (a folder only where the run wrote one, a Zarr store: a folder labels.exr was said to hold 0 bytes)
+    if (std::error_code ec; fs::is_directory(src / f, ec) && !f.ends_with(".zarr"))
+      throw Error((src / f).string() + ": listed in " + (src / "metadata.json").string() + " (files) as a file but is a folder; "
+                  "sense links the run's files as they are: restore it, or run the scene again");
     // ... and whole: as many bytes as the run wrote (a copy cut short would be linked as it is)
     if (meta.contains("file_bytes") && meta["file_bytes"].contains(f) && meta["file_bytes"][f].is_number_integer())
       if (const int64_t want = meta["file_bytes"][f].get<int64_t>(), have = writers::bytes_on_disk((src / f).string()); have != want)

@@ -1082,6 +1082,18 @@ TEST_F(Hardening, AFifoInARunFolderIsRefusedAndSymbolicLinksAreFollowed) {
     fs::remove(f);
     fs::rename(kept, f);
   }
+  // a folder in place of a file sense links (it was said to hold 0 bytes)
+  {
+    const fs::path f = run / "labels.exr", kept = dir_ / "kept";
+    fs::rename(f, kept);
+    fs::create_directory(f);
+    const Outcome o = spadgen("sense " + run.string() + " -q -o " + (dir_ / "s").string(), 20);
+    expect_exit(o, 1, "labels.exr as a folder");
+    EXPECT_THAT(o.output, HasSubstr(f.string() + ": listed in " + (run / "metadata.json").string() + " (files) as a file but is a folder"));
+    EXPECT_FALSE(fs::exists(dir_ / "s"));
+    fs::remove(f);
+    fs::rename(kept, f);
+  }
   // ground_truth.exr and a light array moved out of the run, relative links in their place
   fs::rename(run / "ground_truth.exr", dir_ / "gt.exr");
   fs::create_symlink("../gt.exr", run / "ground_truth.exr");
