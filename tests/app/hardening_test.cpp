@@ -1206,6 +1206,26 @@ TEST_F(Hardening, AReadOnlyOutputFolderIsRefusedNotHiddenForEver) {
   fs::permissions(p / "r" / "previews", fs::perms::all);
 }
 
+// A relative output folder where the current folder was removed (a shell standing in it): said so, with what to
+// do (it was "Invalid argument; expected a folder that exists or can be created"); an absolute one is written.
+TEST_F(Hardening, ARelativeOutputFolderInARemovedCurrentFolderIsNamed) {
+  const fs::path gone = dir_ / "gone";
+  const std::string in_gone = "mkdir " + gone.string() + " && cd " + gone.string() + " && rmdir " + gone.string() + " && ";
+  Result r = shell(in_gone + bin() + " run " + kTiny + " -q -o out");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("cannot use out as the output folder (-o): it is relative to the current folder, which no longer "
+                                  "exists (removed while this shell stood in it); change to a folder that exists, or give an "
+                                  "absolute path"));
+  // a dataset's folder, too
+  std::ofstream(dir_ / "d.json") << "{\"scenes\": [\"" << kFlat << "\"], \"samples\": 1}";
+  r = shell(in_gone + bin() + " dataset run " + (dir_ / "d.json").string() + " -o ds");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("cannot create the dataset folder ds: it is relative to the current folder, which no longer exists"));
+  r = shell(in_gone + bin() + " run " + kTiny + " -q -o " + (dir_ / "abs").string());
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_TRUE(fs::exists(dir_ / "abs" / "counts.npy"));
+}
+
 // Threads the process may not start (ulimit -v for their stacks here; ulimit -u on a shared node) are the
 // environment's refusal, exit 1, saying what to do: it was "internal error: Resource temporarily
 // unavailable", exit 3. (Not under AddressSanitizer, which reserves more address space than the limit.)
