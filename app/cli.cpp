@@ -11,6 +11,7 @@
 #include <iostream>
 #include <new>
 
+#include "app/staging.h"
 #include "core/error.h"
 #include "scenes/scene_file.h"
 
@@ -99,9 +100,11 @@ int run_command(const std::function<void()>& command, const std::string& name) {
     // it): said so, with what became of the output folder.
     const std::string what = e.what();
     const bool staged = what.find(".spadgen-staging-") != std::string::npos && what.find("cannot publish") == std::string::npos;
+    const std::string moved = staging_parent_moved();
+    const std::string where =
+        moved.empty() ? std::string("the staging folder is removed, and the output folder is as it was") : moved;
     std::fprintf(stderr, "spadgen: error: %s%s\n", what.c_str(),
-                 staged ? " (in the staging folder the output is written in before it replaces the output folder: "
-                          "the staging folder is removed, and the output folder is as it was)"
+                 staged ? (" (in the staging folder the output is written in before it replaces the output folder: " + where + ")").c_str()
                         : "");
     return kExitBadInput;
   } catch (const std::filesystem::filesystem_error& e) {

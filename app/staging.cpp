@@ -15,6 +15,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <mutex>
 #include <set>
 #include <stdexcept>
 
@@ -312,6 +313,7 @@ void Staging::init(const fs::path& out) {
                      "writable (chmod -R u+w " + out_.string() + "), or choose another folder");
     }
     dir_ = parent_ / ("." + name_ + ".spadgen-staging-" + pid_text());
+    if (struct stat st {}; ::stat(parent_.c_str(), &st) == 0) parent_dev_ = st.st_dev, parent_ino_ = st.st_ino;
     fs::remove_all(dir_);
     fs::create_directories(dir_ / "previews");
     fs::create_directories(dir_ / "light");
@@ -330,9 +332,28 @@ void Staging::init(const fs::path& out) {
   }
 }
 
+namespace {
+std::mutex g_parent_moved_lock;
+std::string g_parent_moved;  // staging_parent_moved()
+}  // namespace
+
+std::string staging_parent_moved() {
+  const std::lock_guard<std::mutex> hold(g_parent_moved_lock);
+  return g_parent_moved;
+}
+
 Staging::~Staging() {
   if (sub_) return;  // the parent's staging folder holds it
   std::error_code ec;
+  // The parent moved or removed while the command wrote (mv of a folder above it): the staging folder and the
+  // lock file went with it, out of this path's reach; the message of the error that ends the command says so.
+  if (struct stat st {}; parent_ino_ != 0 && !dir_.empty() &&
+                         (::stat(parent_.c_str(), &st) != 0 || st.st_dev != parent_dev_ || st.st_ino != parent_ino_)) {
+    const std::lock_guard<std::mutex> hold(g_parent_moved_lock);
+    g_parent_moved = parent_.string() + " was moved or removed while spadgen wrote into it: the staging folder (" +
+                     dir_.filename().string() + ") and the lock file (" + lock_path_.filename().string() +
+                     ") went with it, out of spadgen's reach, and nothing was published; remove the two where that folder is now";
+  }
   if (!dir_.empty()) fs::remove_all(dir_, ec);  // unpublished files, or the earlier set after an exchange
   unlock();
 }

@@ -15,6 +15,8 @@
 // - OUT must hold only what spadgen wrote there (metadata.json and the files it lists): a folder with
 //   other files in it is refused rather than replaced.
 #pragma once
+#include <sys/types.h>
+
 #include <nlohmann/json_fwd.hpp>
 
 #include <cstdint>
@@ -112,6 +114,9 @@ class Staging {
   bool sub_ = false;      // a parent's subfolder: nothing of its own to lock, remove or publish
   std::string what_ = "a run";  // in messages: "... replaces the output folder as a whole"
   int lock_fd_ = -1;
+  // The parent folder as init found it (st_dev, st_ino): the destructor tells one moved or removed meanwhile
+  dev_t parent_dev_ = 0;
+  ino_t parent_ino_ = 0;
   // the locks of the realisations of a sense --repeats set being replaced (lock file, fd)
   std::vector<std::pair<std::filesystem::path, int>> realisation_locks_;
 };
@@ -120,6 +125,11 @@ class Staging {
 // command that reads a run folder and writes a file into it (reconstruct): while it is held no run replaces
 // the folder (a reconstruct while a run replaced it wrote the earlier run's detections beside the new run's
 // counts), and a run or another such command refuses, naming the holder.
+// What became of the last staging folder a Staging could not remove because its parent folder was moved or
+// removed while it was written, in words ("" when none): it and the lock file went with the parent (the
+// message of the error that ends the command says so).
+std::string staging_parent_moved();
+
 // R when a run folder's metadata.json says it is one of the R > 1 realisations of a `sense --repeats` set
 // (sense.repeats), else 0.
 int64_t realisations_of(const nlohmann::json& metadata);

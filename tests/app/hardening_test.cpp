@@ -1226,6 +1226,29 @@ TEST_F(Hardening, ARelativeOutputFolderInARemovedCurrentFolderIsNamed) {
   EXPECT_TRUE(fs::exists(dir_ / "abs" / "counts.npy"));
 }
 
+// The output folder's parent moved away while the run writes (mv of a folder above it): the error says where the
+// staging folder and the lock file went, not that the staging folder was removed (it went with the parent).
+TEST_F(Hardening, AParentMovedWhileTheRunWritesIsToldAsSuch) {
+  const fs::path p = dir_ / "P", q = dir_ / "Q";
+  fs::create_directories(p);
+  const std::string err = (dir_ / "moved.err").string();
+  const Result r = shell(bin() + " run " + kScenes + "multi_object.json -q --set camera.crop=[0,0,1024,64] -o " + (p / "out").string() +
+                         " 2> " + err + " & pid=$!; for i in $(seq 3000); do ls -a " + p.string() +
+                         " | grep -q spadgen-staging && break; sleep 0.01; done; mv " + p.string() + " " + q.string() +
+                         "; wait $pid; echo rc=$?");
+  EXPECT_THAT(r.output, HasSubstr("rc=1"));
+  const std::string said = slurp(err);
+  EXPECT_THAT(said, HasSubstr(p.string() + " was moved or removed while spadgen wrote into it: the staging folder (.out.spadgen-staging-"));
+  EXPECT_THAT(said, HasSubstr("and the lock file (.out.spadgen-lock) went with it, out of spadgen's reach, and nothing was published"));
+  EXPECT_THAT(said, Not(HasSubstr("the staging folder is removed")));
+  // ... where they are now
+  int staging = 0;
+  for (const auto& e : fs::directory_iterator(q)) staging += e.path().filename().string().starts_with(".out.spadgen-staging-");
+  EXPECT_EQ(staging, 1);
+  EXPECT_TRUE(fs::exists(q / ".out.spadgen-lock"));
+  EXPECT_FALSE(fs::exists(q / "out"));
+}
+
 // Threads the process may not start (ulimit -v for their stacks here; ulimit -u on a shared node) are the
 // environment's refusal, exit 1, saying what to do: it was "internal error: Resource temporarily
 // unavailable", exit 3. (Not under AddressSanitizer, which reserves more address space than the limit.)
