@@ -19,6 +19,7 @@
 #include <set>
 #include <stdexcept>
 
+#include "core/current_folder.h"
 #include "core/error.h"
 #include "datasets/folder.h"
 #include "reconstruct/run_folder.h"
@@ -222,11 +223,7 @@ void Staging::init(const fs::path& out) {
   };
   std::error_code ec;
   // A relative path in a current folder that was removed (a shell standing in it): said so, not "Invalid argument"
-  if (out.is_relative() && fs::current_path(ec).empty() && ec)
-    throw cannot("it is relative to the current folder, which " +
-                 (ec == std::errc::no_such_file_or_directory ? std::string("no longer exists (removed while this shell stood in it)")
-                                                             : "cannot be read (" + ec.message() + ")") +
-                 "; change to a folder that exists, or give an absolute path");
+  if (const std::string problem = relative_path_problem(out); !problem.empty()) throw cannot(problem);
   out_ = resolved_folder(out);
   if (!out_.has_filename() || out_ == out_.root_path()) throw cannot("expected a folder below the root");
   parent_ = out_.parent_path();

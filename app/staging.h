@@ -121,10 +121,6 @@ class Staging {
   std::vector<std::pair<std::filesystem::path, int>> realisation_locks_;
 };
 
-// The output folder's lock alone (the one a run holds while it writes and replaces the folder), for a
-// command that reads a run folder and writes a file into it (reconstruct): while it is held no run replaces
-// the folder (a reconstruct while a run replaced it wrote the earlier run's detections beside the new run's
-// counts), and a run or another such command refuses, naming the holder.
 // What became of the last staging folder a Staging could not remove because its parent folder was moved or
 // removed while it was written, in words ("" when none): it and the lock file went with the parent (the
 // message of the error that ends the command says so).
@@ -141,6 +137,10 @@ class FolderBusy : public spadgen::Error {
   using Error::Error;
 };
 
+// The output folder's lock alone (the one a run holds while it writes and replaces the folder), for a
+// command that reads a run folder and writes a file into it (reconstruct): while it is held no run replaces
+// the folder (a reconstruct while a run replaced it wrote the earlier run's detections beside the new run's
+// counts), and a run or another such command refuses, naming the holder.
 class FolderLock {
  public:
   // shared: a reader's (sense of a run), which other readers may hold too, but not a run replacing the folder.

@@ -16,6 +16,7 @@
 #include <sstream>
 #include <thread>
 
+#include "core/current_folder.h"
 #include "core/error.h"
 #include "core/units.h"
 #include "scenes/input.h"
@@ -191,11 +192,8 @@ std::unique_ptr<SampleClaim> DatasetFolder::try_claim(const Sample& s) const {
 void DatasetFolder::claim() const {
   std::error_code ec;
   // (a relative folder in a current folder that was removed: "No such file or directory" said nothing of it)
-  if (dir_.is_relative() && fs::current_path(ec).empty() && ec)
-    throw Error("cannot create the dataset folder " + dir_.string() + ": it is relative to the current folder, which " +
-                (ec == std::errc::no_such_file_or_directory ? std::string("no longer exists (removed while this shell stood in it)")
-                                                            : "cannot be read (" + ec.message() + ")") +
-                "; change to a folder that exists, or give an absolute path");
+  if (const std::string problem = relative_path_problem(dir_); !problem.empty())
+    throw Error("cannot create the dataset folder " + dir_.string() + ": " + problem);
   fs::create_directories(dir_, ec);
   if (ec)
     throw Error("cannot create the dataset folder " + dir_.string() + ": " +
