@@ -4,6 +4,7 @@
 #include <fcntl.h>
 #include <sys/file.h>
 #include <sys/stat.h>
+#include <sys/sysmacros.h>
 #include <unistd.h>
 
 #include <nlohmann/json.hpp>
@@ -15,7 +16,9 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <fstream>
 #include <mutex>
+#include <sstream>
 #include <set>
 #include <stdexcept>
 
@@ -358,13 +361,39 @@ Staging::~Staging() {
 std::string Staging::path(const std::string& rel) const { return (dir_ / rel).string(); }
 
 namespace {
-// The holder a lock file names ("pid N", written by its exclusive holder), "" when it names none.
+// The processes holding a lock on the open file fd, from /proc/locks ("pid N", "pids N, M"), "" when it lists
+// none (another machine's, over a network file system, or no /proc).
+std::string lock_holders_listed(int fd) {
+  struct stat st {};
+  if (::fstat(fd, &st) != 0) return "";
+  std::ifstream locks("/proc/locks");
+  // "1: FLOCK  ADVISORY  READ  1234 08:01:5678 0 EOF"; a waiter's line has "->" after the number
+  const std::string file = [&] {
+    char id[64];
+    std::snprintf(id, sizeof id, "%02x:%02x:%llu", ::major(st.st_dev), ::minor(st.st_dev), static_cast<unsigned long long>(st.st_ino));
+    return std::string(id);
+  }();
+  std::vector<std::string> pids;
+  for (std::string line; std::getline(locks, line) && pids.size() < 4;) {
+    std::istringstream in(line);
+    std::string number, kind, advisory, mode, pid, id;
+    if (!(in >> number >> kind >> advisory >> mode >> pid >> id) || kind != "FLOCK" || id != file) continue;
+    if (std::find(pids.begin(), pids.end(), pid) == pids.end()) pids.push_back(pid);
+  }
+  if (pids.empty()) return "";
+  std::string who = pids.size() == 1 ? "pid " : "pids ";
+  for (size_t i = 0; i < pids.size() && i < 3; ++i) who += (i ? ", " : "") + pids[i];
+  return who + (pids.size() > 3 ? ", ..." : "");
+}
+
+// The holder a lock file names ("pid N", written by its exclusive holder), else those /proc/locks lists (a
+// reader's shared lock names none), "" when neither does.
 std::string lock_holder(int fd) {
   char holder[64] = {0};
   const ssize_t n = ::pread(fd, holder, sizeof holder - 1, 0);
   std::string who = n > 0 ? std::string(holder, static_cast<size_t>(n)) : std::string();
   while (!who.empty() && (who.back() == '\n' || who.back() == ' ')) who.pop_back();
-  return who;
+  return who.empty() ? lock_holders_listed(fd) : who;
 }
 
 // Locks P/.NAME.spadgen-lock (flock, exclusive, or shared by readers; not waiting) for the folder `out` =

@@ -24,6 +24,7 @@
 
 namespace {
 namespace fs = std::filesystem;
+using spadgen::app::FolderLock;
 using spadgen::app::Staging;
 using ::testing::HasSubstr;
 
@@ -229,6 +230,12 @@ TEST_F(StagingTest, OneRunAtATimePerFolder) {
   run(nullptr);
   EXPECT_EQ(which_set(out_), "new");
   expect_no_leftovers();  // the lock file went with the run that held it
+  // a reader's shared lock (a sense of the run) writes no pid into the file: the holder is found in /proc/locks
+  {
+    const FolderLock reader(out_, true);
+    run(nullptr, &error);
+    EXPECT_THAT(error, HasSubstr("is being written or read by another spadgen process (pid " + std::to_string(::getpid()) + ")"));
+  }
 }
 
 TEST_F(StagingTest, AFolderWithFilesSpadgenDidNotWriteIsNotReplaced) {
