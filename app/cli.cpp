@@ -13,6 +13,7 @@
 
 #include "app/staging.h"
 #include "core/error.h"
+#include "scenes/input.h"
 #include "scenes/scene_file.h"
 
 namespace spadgen::app {
@@ -68,11 +69,12 @@ std::optional<int> parse_command_line(CLI::App& cli, int argc, char** argv) {
     if (at->get_require_subcommand_min() > 0 && at->get_subcommands().empty() && next < argc && argv[next][0] != '-') {
       std::string names;
       for (const CLI::App* sub : at->get_subcommands({})) names += (names.empty() ? "" : ", ") + sub->get_name();
-      std::fprintf(stderr, "spadgen: error: unknown command '%s' after %s; expected one of %s (see %s --help)\n", argv[next],
-                   command.c_str(), names.c_str(), command.c_str());
+      std::fprintf(stderr, "spadgen: error: unknown command '%s' after %s; expected one of %s (see %s --help)\n",
+                   scenes::one_line(argv[next]).c_str(), command.c_str(), names.c_str(), command.c_str());
       return kExitBadInput;
     }
-    std::fprintf(stderr, "spadgen: error: %s (see %s --help)\n", e.what(), command.c_str());
+    // (one line: a word of the command line holding a newline, a file name, is shown as \n)
+    std::fprintf(stderr, "spadgen: error: %s (see %s --help)\n", scenes::one_line(e.what()).c_str(), command.c_str());
     return kExitBadInput;
   }
 }

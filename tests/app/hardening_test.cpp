@@ -529,6 +529,9 @@ TEST_F(Hardening, CommandLineErrorsAreSpadgensWithExitCode1) {
       {"run", "spadgen: error: scene is required (see spadgen run --help)"},
       {"frob", "spadgen: error: unknown command 'frob' after spadgen; expected one of run, sense, info"},
       {"dataset frob", "unknown command 'frob' after spadgen dataset; expected one of plan, run, status, schema"},
+      // a word holding a newline stays on one line (the message broke in two)
+      {"run 'a\nb.json'", "spadgen: error: scene: File does not exist: a\\nb.json (see spadgen run --help)"},
+      {"'fr\nob'", "spadgen: error: unknown command 'fr\\nob' after spadgen"},
       // 100000 threads made TBB fail with an internal error
       {"run " + kTiny + " --threads 100000", "spadgen: error: --threads: found '100000', expected an integer in [0, 1024] (0: every core)"},
       {"run " + kTiny + " --threads -1", "--threads: found '-1', expected an integer in [0, 1024]"},
