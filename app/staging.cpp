@@ -220,11 +220,25 @@ fs::path lock_path_of(const fs::path& resolved) {
 int take_folder_lock(const fs::path& lock_path, const fs::path& out, bool shared, bool output);
 }  // namespace
 
+namespace {
+std::mutex g_parent_moved_lock;
+std::string g_parent_moved;  // staging_parent_moved(): of the last Staging made
+}  // namespace
+
+std::string staging_parent_moved() {
+  const std::lock_guard<std::mutex> hold(g_parent_moved_lock);
+  return g_parent_moved;
+}
+
 void Staging::init(const fs::path& out) {
   const auto cannot = [&](const std::string& why) {
     return Error("cannot use " + out.string() + " as the output folder (-o): " + why);
   };
   std::error_code ec;
+  {
+    const std::lock_guard<std::mutex> hold(g_parent_moved_lock);
+    g_parent_moved.clear();  // (an earlier Staging's parent, moved, is not this one's)
+  }
   // A relative path in a current folder that was removed (a shell standing in it): said so, not "Invalid argument"
   if (const std::string problem = relative_path_problem(out); !problem.empty()) throw cannot(problem);
   out_ = resolved_folder(out);
@@ -330,16 +344,6 @@ void Staging::init(const fs::path& out) {
     unlock();
     throw;
   }
-}
-
-namespace {
-std::mutex g_parent_moved_lock;
-std::string g_parent_moved;  // staging_parent_moved()
-}  // namespace
-
-std::string staging_parent_moved() {
-  const std::lock_guard<std::mutex> hold(g_parent_moved_lock);
-  return g_parent_moved;
 }
 
 Staging::~Staging() {
