@@ -1,10 +1,13 @@
 // The sensor stage end to end: eq. (5)/(6), dark counts, saturation, crosstalk, maps, determinism.
 #include <gtest/gtest.h>
+#include <hwy/targets.h>
 #include <tbb/global_control.h>
 
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <cstdio>
+#include <string>
 
 #include "core/error.h"
 #include "core/rng.h"
@@ -493,6 +496,72 @@ TEST(Sensor, TileWithoutHaloIsRejected) {
   Image img(16, 16, ax);
   EXPECT_THROW(model.process(img.tile({0, 0, 8, 8}, 0)), Error);
   EXPECT_NO_THROW(model.process(img.tile({0, 0, 8, 8}, 1)));
+}
+
+// The sensor's outputs pinned, bit for bit, so that a change of its rules is seen here and comes with a
+// revision of the datasets' sample hash (DatasetFolder::revisions_of, datasets/folder.cpp), which makes the
+// samples drawn by the old rule stale: a dataset resumed with a new build kept them as done beside samples of
+// the new rule (the chip's DCR median, e3f0a42, had no revision). A chip with both pixel designs, dark counts,
+// hot pixels, crosstalk, gate maps and PDP spread; a return whose time and strength vary across the image, and
+// ambient light on its lower half; counts, expected counts and binary frames of a gate sweep, and a dual
+// exposure's 2D counts. The bits are the same on every instruction set the kernels dispatch to.
+TEST(Sensor, OutputsArePinnedSoThatARuleChangeComesWithADatasetRevision) {
+  const auto fnv = [](uint64_t h, const void* data, size_t bytes) {
+    const auto* b = static_cast<const unsigned char*>(data);
+    for (size_t i = 0; i < bytes; ++i) h = (h ^ b[i]) * 1099511628211ull;
+    return h;
+  };
+  const auto image_of = [](const SensorModel& model, int w, int h) {
+    Image img(w, h, model.required_window(20e-12));
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        const float photons = 2e-4f * float(1 + (x * 7 + y * 3) % 11);
+        if (img.axis.bins > 0)  // (a 2D run's window holds no bins)
+          img.pixel(x, y)[std::min<int64_t>(img.axis.bins - 1, 40 + 7 * x)] = photons;
+        img.laser_total[size_t(y * w + x)] = photons;
+        img.ambient[size_t(y * w + x)] = y >= h / 2 ? 3e5f : 0.0f;
+      }
+    return img;
+  };
+  constexpr int kW = 32, kH = 16;
+  const auto outputs_hash = [&]() -> uint64_t {
+    SensorStageConfig c = sweep_config(kW, kH);
+    c.sensor.preset = PixelPreset::FullChip;
+    c.acquisition.gate_sweep = {0.6e-9, 4.2e-9, 36e-12};
+    c.outputs.frames = true;
+    const SensorModel sweep(c);
+    const SensorTile s = sweep.process(image_of(sweep, kW, kH).tile({0, 0, kW, kH}, sweep.halo()));
+    EXPECT_EQ(s.counts.size(), size_t(sweep.K()) * kW * kH);
+    EXPECT_EQ(s.frames.size(), size_t(sweep.K()) * 255 * kH * (kW / 8));
+    EXPECT_GT(*std::max_element(s.counts.begin(), s.counts.end()), 0);
+    uint64_t h = 14695981039346656037ull;
+    h = fnv(h, s.counts.data(), s.counts.size() * sizeof(uint16_t));
+    h = fnv(h, s.expected.data(), s.expected.size() * sizeof(float));
+    h = fnv(h, s.frames.data(), s.frames.size());
+    SensorStageConfig d = c;
+    d.acquisition.mode = AcquisitionMode::Intensity;
+    d.acquisition.intensity.exposure = Exposure::Dual;
+    d.acquisition.frames = 1020;
+    d.outputs.frames = false;
+    const SensorModel two_d(d);
+    const SensorTile t = two_d.process(image_of(two_d, kW, kH).tile({0, 0, kW, kH}, two_d.halo()));
+    EXPECT_EQ(t.intensity_counts.size(), size_t(kW) * kH);
+    h = fnv(h, t.intensity_counts.data(), t.intensity_counts.size() * sizeof(float));
+    return fnv(h, t.intensity_photons.data(), t.intensity_photons.size() * sizeof(float));
+  };
+  // on every instruction set the kernels are compiled for that this processor runs
+  for (const int64_t target : hwy::SupportedAndGeneratedTargets()) {
+    hwy::SetSupportedTargetsForTest(target);
+    const uint64_t h = outputs_hash();
+    char hex[17];
+    std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(h));
+    EXPECT_EQ(std::string(hex), "4affb0f15e7baa10")
+        << hwy::TargetName(target) << ": the sensor's outputs changed. A change of its rules (not a refactoring, which "
+           "keeps these bits) changes what datasets' samples hold: add a revision for it to DatasetFolder::revisions_of "
+           "(datasets/folder.cpp), where it applies, so that samples drawn by the old rule are stale; then pin the new "
+           "value here";
+  }
+  hwy::SetSupportedTargetsForTest(0);
 }
 
 }  // namespace
