@@ -435,9 +435,7 @@ DatasetFolder::MaterialTraits DatasetFolder::material_traits(const scenes::Resol
     colour |= !grey(glm::vec3(mat.base_color)) || mat.base_color_texture >= 0 || !grey(mat.attenuation_color) || !grey(mat.emissive);
     emission |= mat.emissive != glm::vec3(0.0f);
     t.texture_transform |= mat.base_color_texture >= 0 && mat.base_color_transformed;
-    // (the renderer's rough crossing: GGX alpha above 0.025, render/integrator.h kRoughCrossingAlpha)
-    const float rough = std::clamp(mat.roughness, 0.0f, 1.0f);
-    t.rough_refracting |= mat.refracting() && rough * rough > 0.025f;
+    t.rough_refracting |= mat.refracting() && mat.crossed_as_rough();
   }
   t.echo = refracting && smooth_clear;
   const AmbientConfig& a = r.config.ambient;

@@ -222,7 +222,7 @@ class DatasetFolder {
     bool lamps = true;
     // a base colour texture through KHR_texture_transform
     bool texture_transform = true;
-    // a refracting volume with a face rough enough to be crossed as rough (roughness above 0.158)
+    // a refracting volume with a face the laser's connections cross as rough (roughness 0.158 and above)
     bool rough_refracting = true;
   };
   MaterialTraits material_traits(const scenes::ResolvedRun& r) const;

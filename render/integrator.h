@@ -341,9 +341,7 @@ class Integrator {
   std::vector<RoughSlab> rough_slabs_;
   void connect_laser_rough_slabs(const NeeVertex& v, const Crossings& cx, double w, const PixelFilm& film, RayCounts* rays) const;
   static constexpr int kMaxRoughFaces = 4;
-  // (roughness 0.158: at 0.15 and below the faces crossed as smooth are within 0.2 % of the rough estimate
-  // behind a 3 mm plate, with less noise; at 0.2 +0.5 % and +1.9 %, docs/render.md)
-  static constexpr float kRoughCrossingAlpha = 0.025f;
+  static constexpr float kRoughCrossingAlpha = scenes::kRoughCrossingAlpha;  // (scenes/scene.h: why 0.025)
   // The alpha with which connect_laser_rough evaluates a smoother face's BSDF on a chain with rough ones, at its
   // own normal: its transmission without D in the limit of a narrow lobe (the shadowing's share within 1e-4 up to
   // 80 degrees), a smooth face's Dirac lobe in the integral over the half vectors.
