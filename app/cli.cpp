@@ -12,6 +12,7 @@
 #include <new>
 
 #include "app/staging.h"
+#include "core/current_folder.h"
 #include "core/error.h"
 #include "scenes/input.h"
 #include "scenes/scene_file.h"
@@ -111,8 +112,7 @@ int run_command(const std::function<void()>& command, const std::string& name) {
     return kExitBadInput;
   } catch (const std::filesystem::filesystem_error& e) {
     // The file system's refusal (a path in a folder that is gone, permissions): the environment's, not a bug.
-    char cwd[4096];
-    const bool cwd_gone = ::getcwd(cwd, sizeof cwd) == nullptr && errno == ENOENT;
+    const bool cwd_gone = current_folder_error() == std::errc::no_such_file_or_directory;
     std::fprintf(stderr, "spadgen: error: %s%s\n", e.what(),
                  cwd_gone ? " (the current folder no longer exists: run from one that does, or give absolute paths)" : "");
     return kExitBadInput;
