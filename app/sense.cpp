@@ -698,11 +698,13 @@ std::vector<RunResult> sense(const SenseOptions& options) {
       throw Error((src / f).string() + ": listed in " + (src / "metadata.json").string() +
                   " (files) but missing; sense links the run's files as they are: restore it, or run the scene again");
     // ... a file as the run wrote it (a FIFO or a folder in its place was said to hold 0 bytes) ...
-    if (std::error_code ec; !fs::is_regular_file(src / f, ec) && !fs::is_directory(src / f, ec))
+    std::error_code ec;
+    const fs::file_status st = fs::status(src / f, ec);
+    if (!fs::is_regular_file(st) && !fs::is_directory(st))
       throw Error((src / f).string() + ": listed in " + (src / "metadata.json").string() + " (files) but is not a regular file "
                   "(a FIFO, a socket or a device); sense links the run's files as they are: restore it, or run the scene again");
     // (a folder only where the run wrote one, a Zarr store: a folder labels.exr was said to hold 0 bytes)
-    if (std::error_code ec; fs::is_directory(src / f, ec) && !f.ends_with(".zarr"))
+    if (fs::is_directory(st) && !f.ends_with(".zarr"))
       throw Error((src / f).string() + ": listed in " + (src / "metadata.json").string() + " (files) as a file but is a folder; "
                   "sense links the run's files as they are: restore it, or run the scene again");
     // ... and whole: as many bytes as the run wrote (a copy cut short would be linked as it is)
