@@ -486,6 +486,11 @@ TEST(DatasetFile, RangesText) {
 }
 
 }  // namespace
+// The revision tests' common words: the GGX revision's change, and a sample's setting without dark counts (whose
+// revision would join every other).
+const std::string kGgxRevision = "glossy and metallic materials (GGX) render otherwise: a narrow lobe's peak was up to 7 % bright";
+const std::string kNoDarkCounts = "\"sensor.dark_counts\": false";
+
 // sample_hash's revisions of the renderer's rules: each applies where its rule changed what a sample renders
 // (its samples rendered before are stale, with the change in words), and nowhere else (other samples keep their
 // hashes): a gate sweep to a target error; an intensity run to a target error that keeps its laser return
@@ -494,14 +499,12 @@ TEST(DatasetFile, RangesText) {
 // counts, whose revision is the next test's.)
 TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
   const fs::path dir = fs::temp_directory_path() / ("spadgen_dataset_revisions_" + std::to_string(::getpid()));
-  const std::string dark = "\"sensor.dark_counts\": false";
   const auto resolved = [&](const std::string& set) {
-    const DatasetSpec spec = parse("\"set\": {" + dark + ", " + set + "}");
+    const DatasetSpec spec = parse("\"set\": {" + kNoDarkCounts + ", " + set + "}");
     return DatasetFolder(spec, dir).resolve(make_sample(spec, 0));
   };
   const std::string target = "\"render.target_relative_error\": 0.05, ";
   const std::string intensity = "\"acquisition.mode\": \"intensity\"";
-  const std::string ggx = "glossy and metallic materials (GGX) render otherwise: a narrow lobe's peak was up to 7 % bright";
   const std::string glint = "smooth (roughness below 0.032) mirrors and plates render otherwise: the laser's image in their "
                             "faces, a glint where it lands in view, is rendered as the camera sees it (it was missing)";
   const std::string light = "an intensity run's saved light (outputs.light, the dataset's repeats) no longer traces the laser, "
@@ -523,9 +526,9 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
            {intensity + ", \"outputs.light\": true, \"outputs.transient\": true", ""},
            {intensity + ", \"outputs.light\": true, \"render.window_start_ns\": 0, \"render.window_stop_ns\": 10", ""},
            // the flat target's paper is Lambertian: a GGX lobe only where a sample's parameters make it glossy
-           {"\"materials.white_paper.roughness\": 0.5", ggx},
+           {"\"materials.white_paper.roughness\": 0.5", kGgxRevision},
            {"\"materials.white_paper.roughness\": 1", ""},
-           {"\"materials.white_paper.metallic\": 0.2", ggx},
+           {"\"materials.white_paper.metallic\": 0.2", kGgxRevision},
            // a mirror (roughness below 0.032: Dirac lobes only) renders no GGX lobe, and the camera sees the laser's
            // image in it now
            {"\"materials.white_paper.metallic\": 1, \"materials.white_paper.roughness\": 0.01", glint},
@@ -541,14 +544,14 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
     EXPECT_EQ(r.hash != r.hash_before_revisions, !c.revisions.empty()) << c.set;
   }
   // the multi-object scene's plates are glossy (roughness 0.05): every sample of it
-  const DatasetSpec spec = parse_dataset_text("{\"scenes\": [\"" + kScenes + "multi_object.json\"], \"set\": {" + dark + "}}",
+  const DatasetSpec spec = parse_dataset_text("{\"scenes\": [\"" + kScenes + "multi_object.json\"], \"set\": {" + kNoDarkCounts + "}}",
                                               "test_dataset.json");
   const DatasetFolder::Resolved r = DatasetFolder(spec, dir).resolve(make_sample(spec, 0));
-  EXPECT_EQ(r.revisions, ggx);
+  EXPECT_EQ(r.revisions, kGgxRevision);
   EXPECT_NE(r.hash, r.hash_before_revisions);
   // made clear (smooth), its plate's echo on the laser's side is rendered: that revision alone
   const DatasetSpec clear = parse_dataset_text("{\"scenes\": [\"" + kScenes + "multi_object.json\"], \"set\": "
-                                               "{" + dark + ", \"materials.plastic_plate.roughness\": 0}}", "test_dataset.json");
+                                               "{" + kNoDarkCounts + ", \"materials.plastic_plate.roughness\": 0}}", "test_dataset.json");
   const DatasetFolder::Resolved c = DatasetFolder(clear, dir).resolve(make_sample(clear, 0));
   EXPECT_EQ(c.revisions, glint + "; clear (smooth) refracting plates render otherwise: the laser's light reflected inside a plate "
                          "on its way in (half of the plate's delayed echo) was left out");
@@ -574,7 +577,7 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
           {mirror, lamp + "; glTF point and spot lights beside smooth (roughness below 0.032) mirrors and plates render "
                    "otherwise: a lamp's image in their faces is rendered in the pixel it lands in (it was missing); " + glint},
           {mirror + ", \"ambient.gltf_lights\": false", glint}}) {
-      const DatasetSpec lit = parse_dataset_text("{\"scenes\": [\"" + (dir / "lamp.json").string() + "\"], \"set\": {" + dark +
+      const DatasetSpec lit = parse_dataset_text("{\"scenes\": [\"" + (dir / "lamp.json").string() + "\"], \"set\": {" + kNoDarkCounts +
                                                      (set.empty() ? "" : ", ") + set + "}}",
                                                  "test_dataset.json");
       const DatasetFolder::Resolved l = DatasetFolder(lit, dir / "out").resolve(make_sample(lit, 0));
@@ -594,7 +597,7 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
                                   "scale, texCoord) maps the coordinates they read (it was left out, with a warning)";
     for (const auto& [name, revisions] : {std::pair<std::string, std::string>{"chart", ""}, {"chart_transformed", transform}}) {
       std::ofstream(dir / (name + ".json")) << "{\"gltf\": \"" << name << ".gltf\", \"camera\": {\"position_m\": [0, 0, 1], \"look_at_m\": [0, 0, 0]}}";
-      const DatasetSpec chart = parse_dataset_text("{\"scenes\": [\"" + (dir / (name + ".json")).string() + "\"], \"set\": {" + dark + "}}",
+      const DatasetSpec chart = parse_dataset_text("{\"scenes\": [\"" + (dir / (name + ".json")).string() + "\"], \"set\": {" + kNoDarkCounts + "}}",
                                                    "test_dataset.json");
       EXPECT_EQ(DatasetFolder(chart, dir / "out").resolve(make_sample(chart, 0)).revisions, revisions) << name;
     }
@@ -604,7 +607,7 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
   for (const auto& [set, revisions] : {std::pair<std::string, std::string>{"\"materials.plastic_plate.ior\": 1", glint},
                                        {"\"acquisition.mode\": \"intensity\"", ""}}) {
     const DatasetSpec none = parse_dataset_text("{\"scenes\": [\"" + kScenes + "multi_object.json\"], \"set\": "
-                                                "{" + dark + ", \"materials.plastic_plate.roughness\": 0, " + set + "}}", "test_dataset.json");
+                                                "{" + kNoDarkCounts + ", \"materials.plastic_plate.roughness\": 0, " + set + "}}", "test_dataset.json");
     const DatasetFolder::Resolved n = DatasetFolder(none, dir).resolve(make_sample(none, 0));
     EXPECT_EQ(n.revisions, revisions) << set;
     EXPECT_EQ(n.hash != n.hash_before_revisions, !revisions.empty()) << set;
@@ -643,8 +646,6 @@ TEST(DatasetFolder, TheDarkCountRevisionAppliesWhereTheChipsMedianMovedTheRates)
 TEST(DatasetFolder, TheRoughPlateSweepAndGateTableRevisionsApplyWhereTheirRuleChangedTheSample) {
   const fs::path dir = fs::temp_directory_path() / ("spadgen_dataset_more_revisions_" + std::to_string(::getpid()));
   fs::create_directories(dir);
-  const std::string dark = "\"sensor.dark_counts\": false";
-  const std::string ggx = "glossy and metallic materials (GGX) render otherwise: a narrow lobe's peak was up to 7 % bright";
   const std::string rough = "rough refracting plates (roughness above 0.158) render otherwise: the laser's connections cross their "
                             "rough faces by drawn microfacet normals, also beside their shadow (they were crossed as smooth)";
   const std::string sweep = "this gate sweep has another number of positions: its last, on the step grid within the rounding of "
@@ -653,17 +654,17 @@ TEST(DatasetFolder, TheRoughPlateSweepAndGateTableRevisionsApplyWhereTheirRuleCh
                             "and fall_ps are the table's own 10-90 % times (they were sensor.gate.rise_ps and fall_ps, unused)";
   std::ofstream(dir / "gate.csv") << "0,0\n400,1\n4200,1\n4600,0\n";
   const auto revisions = [&](const std::string& scene, const std::string& set) {
-    const DatasetSpec spec = parse_dataset_text("{\"scenes\": [\"" + kScenes + scene + "\"], \"set\": {" + dark + set + "}}",
+    const DatasetSpec spec = parse_dataset_text("{\"scenes\": [\"" + kScenes + scene + "\"], \"set\": {" + kNoDarkCounts + set + "}}",
                                                 "test_dataset.json");
     return DatasetFolder(spec, dir / "out").resolve(make_sample(spec, 0)).revisions;
   };
   // the multi-object plate: glossy at 0.05 (crossed as smooth, as before), rough at 0.3; a 2D run traces no laser
-  EXPECT_EQ(revisions("multi_object.json", ""), ggx);
-  EXPECT_EQ(revisions("multi_object.json", ", \"materials.plastic_plate.roughness\": 0.15"), ggx);
-  EXPECT_EQ(revisions("multi_object.json", ", \"materials.plastic_plate.roughness\": 0.3"), ggx + "; " + rough);
-  EXPECT_EQ(revisions("multi_object.json", ", \"materials.plastic_plate.roughness\": 0.3, \"acquisition.mode\": \"intensity\""), ggx);
+  EXPECT_EQ(revisions("multi_object.json", ""), kGgxRevision);
+  EXPECT_EQ(revisions("multi_object.json", ", \"materials.plastic_plate.roughness\": 0.15"), kGgxRevision);
+  EXPECT_EQ(revisions("multi_object.json", ", \"materials.plastic_plate.roughness\": 0.3"), kGgxRevision + "; " + rough);
+  EXPECT_EQ(revisions("multi_object.json", ", \"materials.plastic_plate.roughness\": 0.3, \"acquisition.mode\": \"intensity\""), kGgxRevision);
   // not refracting (ior 1): no crossing
-  EXPECT_EQ(revisions("multi_object.json", ", \"materials.plastic_plate.roughness\": 0.3, \"materials.plastic_plate.ior\": 1"), ggx);
+  EXPECT_EQ(revisions("multi_object.json", ", \"materials.plastic_plate.roughness\": 0.3, \"materials.plastic_plate.ior\": 1"), kGgxRevision);
   // 5 to 5.00001 ns in 1e-6 ps steps: 10001 positions, 10000 before; the paper's sweep and one just off the grid as before
   const std::string grid = ", \"acquisition.gate_sweep.start_ns\": 5, \"acquisition.gate_sweep.step_ps\": 1e-6, \"acquisition.gate_sweep.stop_ns\": ";
   EXPECT_EQ(revisions("flat_target.json", grid + "5.00001"), sweep);
