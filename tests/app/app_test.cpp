@@ -585,8 +585,8 @@ TEST_F(App, AnInterruptedRunLeavesNothingBehind) {
   fs::create_directories(dir_ / "out/.spadgen-staging-999999999");
   std::ofstream(dir_ / "out/.spadgen-staging-999999999/counts.npy") << "partial";
   // The full default run takes far longer than 3 s; SIGINT arrives while tiles are rendering.
-  const Result r = shell("timeout --preserve-status -s INT 3 " + kBin + " run " + kScenes + "multi_object.json -o " +
-                         (dir_ / "out").string());
+  const Signalled r = signal_once_caught({kBin, "run", kScenes + "multi_object.json", "-o", (dir_ / "out").string()}, SIGINT, 3.0);
+  ASSERT_TRUE(r.caught) << r.code << r.output;
   EXPECT_EQ(r.code, 2) << r.output;  // the documented exit code of an interrupted run
   EXPECT_THAT(r.output, HasSubstr("interrupted by a signal"));
   EXPECT_EQ(slurp(dir_ / "out/metadata.json"), kEarlier);

@@ -1,9 +1,14 @@
 // Helpers for tests that run the spadgen program: run a command, read files, read NPY stacks with a
 // small parser of our own (independent of writers/).
 #pragma once
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <array>
+#include <chrono>
 #include <cstring>
 #include <cstdint>
 #include <cstdio>
@@ -12,6 +17,7 @@
 #include <gtest/gtest.h>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 namespace spadgen::testing {
@@ -41,6 +47,69 @@ inline std::string slurp(const fs::path& p) {
   std::ostringstream ss;
   ss << in.rdbuf();
   return ss.str();
+}
+
+// Whether process `pid` catches signal `sig` (a handler of its own): /proc/PID/status's SigCgt mask.
+inline bool catches(pid_t pid, int sig) {
+  std::ifstream status("/proc/" + std::to_string(pid) + "/status");
+  for (std::string line; std::getline(status, line);)
+    if (line.rfind("SigCgt:", 0) == 0) return (std::stoull(line.substr(7), nullptr, 16) >> (sig - 1)) & 1u;
+  return false;
+}
+
+struct Signalled {
+  int code = -1;             // the exit code; 128 + n: killed by signal n; 124: killed at the time limit
+  std::string output;        // stdout and stderr
+  bool caught = false;       // the signal was sent once the program caught it (else: never, it was killed)
+  double after_signal_s = 0; // from the signal to the program's end
+};
+// Runs `argv` (argv[0] the program's path) and sends it `sig` `delay_s` seconds after it first catches `sig`: a
+// fixed time after the start is a race with the program's start-up (over 0.3 s for a sanitizer build, before
+// main), where the signal's default action kills it. Killed (SIGKILL) after `limit_s` seconds.
+inline Signalled signal_once_caught(const std::vector<std::string>& argv, int sig, double delay_s, double limit_s = 60.0) {
+  using clock = std::chrono::steady_clock;
+  Signalled s;
+  const fs::path out = fs::temp_directory_path() / ("spadgen_signalled_" + std::to_string(::getpid()));
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, 1, out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_adddup2(&actions, 1, 2);
+  std::vector<char*> args;
+  std::vector<std::string> owned = argv;
+  for (std::string& a : owned) args.push_back(a.data());
+  args.push_back(nullptr);
+  pid_t pid = 0;
+  // posix_spawn returns once the program is executed (its dispositions are the program's, not this process's).
+  const int spawned = posix_spawn(&pid, args[0], &actions, nullptr, args.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  if (spawned != 0) return s;
+  const auto t0 = clock::now();
+  const auto seconds_since = [](clock::time_point t) { return std::chrono::duration<double>(clock::now() - t).count(); };
+  int status = 0;
+  bool ended = false;
+  while (!(s.caught = catches(pid, sig)) && seconds_since(t0) < limit_s) {
+    if ((ended = ::waitpid(pid, &status, WNOHANG) == pid)) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  if (s.caught) {
+    std::this_thread::sleep_for(std::chrono::duration<double>(delay_s));
+    ::kill(pid, sig);
+  }
+  const auto signalled = clock::now();
+  while (!ended && !(ended = ::waitpid(pid, &status, WNOHANG) == pid)) {
+    if (seconds_since(t0) > limit_s) {
+      ::kill(pid, SIGKILL);
+      ::waitpid(pid, &status, 0);
+      s.code = 124;
+      break;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  s.after_signal_s = seconds_since(signalled);
+  if (s.code != 124) s.code = WIFEXITED(status) ? WEXITSTATUS(status) : WIFSIGNALED(status) ? 128 + WTERMSIG(status) : -1;
+  s.output = slurp(out);
+  fs::remove(out);
+  return s;
 }
 
 // A small NPY reader, independent of the writer: header dict and raw data.
