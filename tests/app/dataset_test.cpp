@@ -1409,7 +1409,9 @@ TEST_F(Dataset, ARunWaitingForTheFoldersLockSaysSoAndStopsOnASignal) {
   const std::string run = kBin + " dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q";
   ASSERT_EQ(shell(run).code, 0);
   const std::string lock = (dir_ / "out/.dataset.lock").string();
-  const Result waited = shell("flock " + lock + " sleep 3.5 & sleep 0.3; " + run + " 2>&1; echo rc=$?; wait");
+  // (the lock held 5 s: the run's start-up and its check of the sample take over a second under the sanitizers on
+  // a loaded machine, and its message comes 2 s after it reaches the lock)
+  const Result waited = shell("flock " + lock + " sleep 5 & sleep 0.3; " + run + " 2>&1; echo rc=$?; wait");
   EXPECT_THAT(waited.output, HasSubstr("spadgen: dataset: waiting 2 s for " + lock + ", which another spadgen process holds"));
   EXPECT_THAT(waited.output, HasSubstr("rc=0"));
   // SIGTERM once it waits (not after a fixed second: under AddressSanitizer on a loaded machine the run was still
