@@ -60,13 +60,14 @@ inline bool catches(pid_t pid, int sig) {
 struct Signalled {
   int code = -1;             // the exit code; 128 + n: killed by signal n; 124: killed at the time limit
   std::string output;        // stdout and stderr
-  bool caught = false;       // the signal was sent once the program caught it (else: never, it was killed)
+  bool caught = false;       // the signal was sent once the program caught it (else never: it ended first, or the
+                             // time limit passed)
   double after_signal_s = 0; // from the signal to the program's end
 };
 // Runs `argv` (argv[0] the program's path) and sends it `sig` `delay_s` seconds after it first catches `sig`: a
 // fixed time after the start is a race with the program's start-up (over 0.3 s for a sanitizer build, before
 // main), where the signal's default action kills it. Killed (SIGKILL) after `limit_s` seconds.
-inline Signalled signal_once_caught(const std::vector<std::string>& argv, int sig, double delay_s, double limit_s = 60.0) {
+inline Signalled signal_once_caught(std::vector<std::string> argv, int sig, double delay_s, double limit_s = 60.0) {
   using clock = std::chrono::steady_clock;
   Signalled s;
   const fs::path out = fs::temp_directory_path() / ("spadgen_signalled_" + std::to_string(::getpid()));
@@ -75,8 +76,7 @@ inline Signalled signal_once_caught(const std::vector<std::string>& argv, int si
   posix_spawn_file_actions_addopen(&actions, 1, out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
   posix_spawn_file_actions_adddup2(&actions, 1, 2);
   std::vector<char*> args;
-  std::vector<std::string> owned = argv;
-  for (std::string& a : owned) args.push_back(a.data());
+  for (std::string& a : argv) args.push_back(a.data());
   args.push_back(nullptr);
   pid_t pid = 0;
   // posix_spawn returns once the program is executed (its dispositions are the program's, not this process's).
