@@ -2091,6 +2091,10 @@ void check_before_tinygltf(const std::string& path, const nlohmann::json& doc, b
   if (const auto it = doc.find("asset"); it == doc.end() || !it->is_object())
     throw Error(path + ": " + (it == doc.end() ? std::string("has no asset") : "asset: found " + it->dump().substr(0, 40)) +
                 "; expected the object every glTF file has, with its version: \"asset\": {\"version\": \"2.0\"}");
+  // (tinygltf said the same of an asset without a version string: that asset was not found)
+  if (const auto v = doc["asset"].find("version"); v == doc["asset"].end() || !v->is_string())
+    throw Error(path + ": asset.version: " + (v == doc["asset"].end() ? std::string("missing") : "found " + v->dump().substr(0, 40)) +
+                "; expected the glTF version as a string: \"asset\": {\"version\": \"2.0\"}");
   check_gltf_types(path, doc);
   // An accessor's type: tinygltf's message was 'Unsupported `type` for accessor object. Got "VEC7"', unnamed.
   if (const auto it = doc.find("accessors"); it != doc.end())

@@ -1375,6 +1375,14 @@ TEST_F(BrokenGltf, AnotherVersionOrAMeshWithoutPrimitives) {
                                         "\"asset\": {\"version\": \"2.0\"}"));
   bare.doc["asset"] = "2.0";
   EXPECT_THAT(error_of(bare), HasSubstr(": asset: found \"2.0\"; expected the object every glTF file has"));
+  // an asset without its version string (tinygltf said the asset was not found)
+  bare.doc["asset"] = json::object();
+  EXPECT_THAT(error_of(bare), HasSubstr(": asset.version: missing; expected the glTF version as a string: "
+                                        "\"asset\": {\"version\": \"2.0\"}"));
+  bare.doc["asset"]["version"] = 2;
+  EXPECT_THAT(error_of(bare), HasSubstr(": asset.version: found 2; expected the glTF version as a string"));
+  bare.doc["asset"]["version"] = nullptr;
+  EXPECT_THAT(error_of(bare), HasSubstr(": asset.version: found null; expected"));
   Gltf vec7;
   vec7.node({{"mesh", vec7.triangle_mesh()}});
   vec7.doc["accessors"][0]["type"] = "VEC7";
