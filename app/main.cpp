@@ -89,6 +89,23 @@ int main(int argc, char** argv) {
                "move it back yourself: mv " + found + " " + v + ")";
       },
       "DIR");
+  // A file to read, said in spadgen's words (CLI11's were "scene: File is actually a directory: d"); a FIFO or
+  // a device passes here and is refused when read, named as such.
+  const auto existing_file = [](const std::string& expected) {
+    return CLI::Validator(
+        [expected](std::string& v) {
+          namespace fs = std::filesystem;
+          std::error_code ec;
+          const auto st = fs::status(v, ec);
+          if (fs::is_directory(st)) return v + " is a folder; expected " + expected;
+          if (fs::exists(st)) return std::string();
+          if (ec && ec != std::errc::no_such_file_or_directory) return v + ": " + ec.message() + "; expected " + expected;
+          return "no such file: " + v + "; expected " + expected;
+        },
+        "FILE");
+  };
+  const CLI::Validator kSceneFile = existing_file("a scene file (.json)");
+  const CLI::Validator kDatasetFile = existing_file("a dataset file (.json)");
   // -o "" (an unset shell variable) is a mistake, not a request for the default folder.
   const CLI::Validator kNamed([](std::string& v) { return v.empty() ? std::string("expected a path, found an empty one") : std::string(); },
                               "");
@@ -119,7 +136,7 @@ int main(int argc, char** argv) {
   spadgen::app::RunOptions run;
   std::string seed;
   CLI::App* run_cmd = cli.add_subcommand("run", "render and sample a scene file into an output folder");
-  run_cmd->add_option("scene", run.scene_file, "scene file (.json)")->required()->check(CLI::ExistingFile);
+  run_cmd->add_option("scene", run.scene_file, "scene file (.json)")->required()->check(kSceneFile);
   run_cmd->add_option("-o,--out", run.out_dir, "output folder (default: out/<scene file name>)")->check(kNamed);
   run_cmd->add_option("--set", run.overrides, "override one scene-file key, e.g. --set laser.average_power_mW=5")
       ->type_name("KEY=VALUE");
@@ -151,7 +168,7 @@ int main(int argc, char** argv) {
   std::string info_scene;
   std::vector<std::string> info_overrides;
   CLI::App* info_cmd = cli.add_subcommand("info", "print the resolved scene file, a summary of the glTF and the run's size");
-  info_cmd->add_option("scene", info_scene, "scene file (.json)")->required()->check(CLI::ExistingFile);
+  info_cmd->add_option("scene", info_scene, "scene file (.json)")->required()->check(kSceneFile);
   info_cmd->add_option("--set", info_overrides, "override one scene-file key")->type_name("KEY=VALUE");
 
   CLI::App* schema_cmd = cli.add_subcommand("schema", "print the reference of every scene-file key (Markdown)");
@@ -164,7 +181,7 @@ int main(int argc, char** argv) {
   CLI::App* dataset_cmd = cli.add_subcommand("dataset", "benchmark datasets: variations of scene files, one run folder per sample");
   dataset_cmd->require_subcommand(1);
   CLI::App* plan_cmd = dataset_cmd->add_subcommand("plan", "list the samples with their parameters, and estimate disk, memory and time");
-  plan_cmd->add_option("file", dataset.file, "dataset file (.json)")->required()->check(CLI::ExistingFile);
+  plan_cmd->add_option("file", dataset.file, "dataset file (.json)")->required()->check(kDatasetFile);
   plan_cmd->add_option("-o,--out", dataset.out_dir, "dataset folder: also show which samples are done there and the free disk")->check(kNamed);
   CLI::Option* plan_shard = plan_cmd->add_option("--shard", dataset_shard, "only shard I of N (samples i with i mod N = I); default: as dataset run's")->type_name("I/N");
   plan_cmd->add_flag("--all", dataset.all, "list every sample (default: the first and the last 10)");
@@ -172,7 +189,7 @@ int main(int argc, char** argv) {
       ->check(kThreadsRange);
   plan_cmd->add_flag("-q,--quiet", dataset_quiet, "no progress on stderr (shown for plans of over 10,000 samples)");
   CLI::App* drun_cmd = dataset_cmd->add_subcommand("run", "generate the samples that are not done, each into its own folder, as one unit");
-  drun_cmd->add_option("file", dataset.file, "dataset file (.json)")->required()->check(CLI::ExistingFile);
+  drun_cmd->add_option("file", dataset.file, "dataset file (.json)")->required()->check(kDatasetFile);
   drun_cmd->add_option("-o,--out", dataset.out_dir, "dataset folder")->required()->check(kNamed);
   CLI::Option* run_shard = drun_cmd->add_option("--shard", dataset_shard,
                                                 "only shard I of N (samples i with i mod N = I); default: from a Slurm job array (SLURM_ARRAY_TASK_ID, "

@@ -534,8 +534,11 @@ TEST_F(Hardening, CommandLineErrorsAreSpadgensWithExitCode1) {
       {"frob", "spadgen: error: unknown command 'frob' after spadgen; expected one of run, sense, info"},
       {"dataset frob", "unknown command 'frob' after spadgen dataset; expected one of plan, run, status, schema"},
       // a word holding a newline stays on one line (the message broke in two)
-      {"run 'a\nb.json'", "spadgen: error: scene: File does not exist: a\\nb.json (see spadgen run --help)"},
+      {"run 'a\nb.json'", "spadgen: error: scene: no such file: a\\nb.json; expected a scene file (.json) (see spadgen run --help)"},
       {"'fr\nob'", "spadgen: error: unknown command 'fr\\nob' after spadgen"},
+      // a folder or a missing file named in spadgen's words (CLI11's were "File is actually a directory: d")
+      {"info " + dir_.string(), "spadgen: error: scene: " + dir_.string() + " is a folder; expected a scene file (.json) (see spadgen info --help)"},
+      {"dataset plan none.json", "spadgen: error: file: no such file: none.json; expected a dataset file (.json)"},
       // 100000 threads made TBB fail with an internal error
       {"run " + kTiny + " --threads 100000", "spadgen: error: --threads: found '100000', expected an integer in [0, 1024] (0: every core)"},
       {"run " + kTiny + " --threads -1", "--threads: found '-1', expected an integer in [0, 1024]"},
