@@ -364,6 +364,20 @@ DetectionImage read_detections(const std::string& path, const RunFolder& run, bo
                     "np.save(f, np.ascontiguousarray(a, np.float32)) writes one)");
       }
     }();
+    // A stack of the run itself (counts.npy, expected_counts.npy: (K, H, W)) is no detections file (its shape
+    // was read as a transposed detections array, and the advice led to a dtype error).
+    {
+      std::error_code ec;
+      const fs::path target = fs::weakly_canonical(fs::absolute(fs::path(path)), ec);
+      const fs::path folder = fs::weakly_canonical(fs::absolute(fs::path(run.dir())), ec);
+      if (const std::string f = ec ? std::string() : listed_entry(target, folder, run.metadata()); !f.empty())
+        throw Error(path + ": is the run's own " + f + " (" + run.dir() + "/metadata.json lists it), not detections; expected "
+                    "a detector's output: spadgen reconstruct's detections_<detector>.exr, or a float32 or float64 .npy (H, W, M) "
+                    "of ranges in metres");
+    }
+    // the dtype first (a uint8 (K, H, W) stack was said to be a transposed detections array)
+    if (npy.dtype() != writers::Dtype::F64 && npy.dtype() != writers::Dtype::F32)
+      throw Error(path + ": its dtype is " + writers::numpy_descr(npy.dtype()) + "; expected <f4 or <f8 ranges in metres");
     if (npy.shape().size() != 3 || npy.shape()[0] != height || npy.shape()[1] != width) {
       std::string found;
       for (int64_t d : npy.shape()) found += (found.empty() ? "" : ", ") + std::to_string(d);
@@ -380,8 +394,6 @@ DetectionImage read_detections(const std::string& path, const RunFolder& run, bo
     DetectionImage img(width, height, m);
     // float64 (NumPy's default) is taken too, to float32: 1 um at 10 m, far below any tolerance
     const bool f64 = npy.dtype() == writers::Dtype::F64;
-    if (!f64 && npy.dtype() != writers::Dtype::F32)
-      throw Error(path + ": its dtype is " + writers::numpy_descr(npy.dtype()) + "; expected <f4 or <f8 ranges in metres");
     const float* v = f64 ? nullptr : npy.data<float>();
     const double* v64 = f64 ? npy.data<double>() : nullptr;
     for (size_t i = 0; i < img.count.size(); ++i)
@@ -1007,6 +1019,16 @@ std::string evaluate(const EvaluateCommand& c) {
   refuse_output_inside(out_given, "-o " + out_given.string(), [&](CheckedFolder kind, const fs::path& folder, const fs::path& rel) {
     return kind != CheckedFolder::RepeatSet && folder == own && rel == "evaluation";
   });
+  // Nor a run or dataset folder itself (-o RUN was refused for files "spadgen did not write there": it wrote them)
+  {
+    std::error_code ec;
+    const fs::path where = resolved_folder(out_given);
+    const bool is_run = is_run_folder(where);
+    if (is_run || fs::is_regular_file(where / "dataset.json", ec))
+      throw Error("-o " + out_given.string() + ": is a " + (is_run ? "run folder (its metadata.json)" : "dataset folder (its dataset.json)") +
+                  "; an evaluation replaces the whole folder it writes, so it needs a folder of its own: leave -o out for " +
+                  (target / "evaluation").string() + ", or choose a new folder");
+  }
   // Its own names are an earlier evaluation's only beside its metrics.json (a user's samples.csv or notes called
   // metrics.json were replaced: a verifier's find)
   {

@@ -115,6 +115,18 @@ void require_utf8_path(const fs::path& path, const std::string& what, const std:
                 why + "; rename it");
 }
 
+bool is_run_folder(const fs::path& folder) {
+  std::error_code ec;
+  if (!fs::is_regular_file(folder / "metadata.json", ec)) return false;
+  nlohmann::json meta;
+  try {  // (not a run's when it does not read as one; a run's is kilobytes: another tool's large file is not read)
+    const std::string m = (folder / "metadata.json").string();
+    meta = scenes::parse_json(scenes::read_file_bounded(m, 16u << 20, "metadata"), m);
+  } catch (const Error&) {
+  }
+  return meta.is_object() && meta.contains("spadgen_version");
+}
+
 void refuse_output_inside(const fs::path& out, const std::string& option,
                           const std::function<bool(CheckedFolder, const fs::path&, const fs::path&)>& allowed) {
   std::error_code ec;
@@ -126,17 +138,9 @@ void refuse_output_inside(const fs::path& out, const std::string& option,
     throw Error(option + ": " + what + "; expected a folder outside it");
   };
   for (fs::path folder = where.parent_path(); !folder.empty(); folder = folder.parent_path()) {
-    if (fs::is_regular_file(folder / "metadata.json", ec)) {
-      nlohmann::json meta;
-      try {  // (not a run's when it does not read as one; a run's is kilobytes: another tool's large file is not read)
-        const std::string m = (folder / "metadata.json").string();
-        meta = scenes::parse_json(scenes::read_file_bounded(m, 16u << 20, "metadata"), m);
-      } catch (const Error&) {
-      }
-      if (meta.is_object() && meta.contains("spadgen_version"))
-        return check(CheckedFolder::Run, folder, "lies in the run folder " + folder.string() + ", which holds only what spadgen "
-                     "writes there (a later run into it, or a dataset's check of it, would refuse the folder for a foreign one)");
-    }
+    if (is_run_folder(folder))
+      return check(CheckedFolder::Run, folder, "lies in the run folder " + folder.string() + ", which holds only what spadgen "
+                   "writes there (a later run into it, or a dataset's check of it, would refuse the folder for a foreign one)");
     if (fs::is_regular_file(folder / "dataset.json", ec)) {
       const fs::path rel = where.lexically_relative(folder);
       if (!rel.empty() && datasets::own_entries().count(rel.begin()->string()))

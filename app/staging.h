@@ -39,6 +39,10 @@ std::filesystem::path resolved_folder(const std::filesystem::path& out);
 // work, an internal error).
 void require_utf8_path(const std::filesystem::path& path, const std::string& what, const std::string& why, bool absolute = true);
 
+// Whether `folder` holds a spadgen run's metadata.json (one naming spadgen_version; another tool's is not read
+// beyond 16 MiB).
+bool is_run_folder(const std::filesystem::path& folder);
+
 // The folders whose contents spadgen checks (a later run into the folder, or a dataset's check of its samples,
 // refuses one holding a foreign file or folder), which an output folder must not be placed inside.
 enum class CheckedFolder { Run, Dataset, RepeatSet };

@@ -716,6 +716,30 @@ TEST_F(Reconstruct, EvaluateScoresADetectionsNpyAgainstTheLabelsExactly) {
   r = sh("evaluate " + run.string() + " --detections " + (dir_ / "mhw.npy").string() + " -o " + (dir_ / "eval3").string());
   EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr(": (M, H, W), as Python's Run.detections().range gives it; np.moveaxis(a, 0, -1) is (H, W, M)"));
+  // the run's own counts stack is named as such (its (K, H, W) shape was said to be transposed detections), and
+  // a uint8 (M, H, W) array elsewhere is refused for its dtype first (the axis advice led to a dtype error)
+  r = sh("evaluate " + run.string() + " --detections " + (run / "counts.npy").string() + " -o " + (dir_ / "eval3").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("counts.npy: is the run's own counts.npy (" + run.string() +
+                                  "/metadata.json lists it), not detections; expected a detector's output"));
+  {
+    spadgen::writers::NpyWriter npy((dir_ / "mhw_u8.npy").string(), spadgen::writers::Dtype::U8, {M, H, W});
+    npy.commit();
+  }
+  r = sh("evaluate " + run.string() + " --detections " + (dir_ / "mhw_u8.npy").string() + " -o " + (dir_ / "eval3").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("mhw_u8.npy: its dtype is |u1; expected <f4 or <f8 ranges in metres"));
+  EXPECT_THAT(r.output, Not(HasSubstr("moveaxis")));
+  // -o the run folder itself: said to be the run (it was refused for files "spadgen did not write there"), and
+  // the run is left as it was
+  const auto listed_before = nlohmann::json::parse(slurp(run / "metadata.json"))["files"];
+  r = sh("evaluate " + run.string() + " --detections " + (dir_ / "mine.npy").string() + " -o " + run.string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("-o " + run.string() + ": is a run folder (its metadata.json); an evaluation replaces the "
+                                  "whole folder it writes, so it needs a folder of its own: leave -o out for " +
+                                  (run / "evaluation").string()));
+  EXPECT_EQ(nlohmann::json::parse(slurp(run / "metadata.json"))["files"], listed_before);
+  for (const char* f : {"counts.npy", "labels.exr", "ground_truth.exr"}) EXPECT_TRUE(fs::exists(run / f)) << f;
   // a file that is not there: --detections named it (the message said to give --detections)
   r = sh("evaluate " + run.string() + " --detections " + (dir_ / "none.npy").string() + " -o " + (dir_ / "eval3").string());
   EXPECT_EQ(r.code, 1);
@@ -802,7 +826,8 @@ TEST_F(Reconstruct, EvaluateReplacesItsFolderWholeAndOnlyItsOwn) {
     std::ofstream(out / "notes.txt") << "mine";
     r = sh("evaluate " + run.string() + " -o " + out.string());
     EXPECT_EQ(r.code, 1) << out;
-    EXPECT_NE(r.output.find("holds files that spadgen did not write there"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find(out == run ? ": is a run folder (its metadata.json)" : "holds files that spadgen did not write there"),
+              std::string::npos) << r.output;
     EXPECT_EQ(slurp(out / "notes.txt"), "mine");
   }
   EXPECT_TRUE(fs::exists(run / "metadata.json"));
