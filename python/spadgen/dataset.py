@@ -13,10 +13,13 @@ used. Everything comes from the index as the last ``spadgen dataset run`` into t
 """
 from __future__ import annotations
 
+import fcntl
 import json
 import math
 import numbers
 import os
+import struct
+import warnings
 
 import numpy as np
 
@@ -104,6 +107,57 @@ def _check_index(rows, index_path):
             if key in folders:
                 raise ValueError(f"{where}: lists the folder {f} again (row {folders[key]} lists it); {damaged}")
             folders[key] = n
+
+
+def _spec_samples(spec):
+    """The number of samples dataset.json asks for: "samples", or one per grid cell (the scene files times each
+    grid key's values) when it is null; None when the file does not say (not as spadgen writes it)."""
+    n = spec.get("samples")
+    if isinstance(n, int) and not isinstance(n, bool):
+        return n
+    scenes, grid = spec.get("scenes"), spec.get("grid", {})
+    if n is not None or not isinstance(scenes, list) or not isinstance(grid, dict) or \
+            not all(isinstance(v, list) for v in grid.values()):
+        return None
+    return math.prod([len(scenes)] + [len(v) for v in grid.values()])
+
+
+def _runs_on(path):
+    """Whether a `spadgen dataset run` is on the dataset folder now: it holds a shared lock on byte 0 of
+    .dataset.runs for as long as it runs (datasets/folder.cpp, DatasetFolder::runs_on)."""
+    try:
+        fd = os.open(os.path.join(path, ".dataset.runs"), os.O_RDONLY | os.O_CLOEXEC)
+    except OSError:
+        return False  # no run ever entered
+    try:
+        # struct flock: l_type, l_whence (short), l_start, l_len (off_t), l_pid (int)
+        query = struct.pack("hhqqi4x", fcntl.F_WRLCK, os.SEEK_SET, 0, 1, 0)
+        return struct.unpack("hhqqi4x", fcntl.fcntl(fd, fcntl.F_OFD_GETLK, query))[0] != fcntl.F_UNLCK
+    except OSError:
+        return False
+    finally:
+        os.close(fd)
+
+
+def _check_rows_against_spec(rows, spec, path, index_path):
+    """index.jsonl holds one row per sample of dataset.json, in index order, as `spadgen dataset run` writes it
+    (and `spadgen dataset status` checks it): an index cut short on a line boundary, or a row removed, was read as
+    a smaller dataset without a word. While a run is on the folder, dataset.json is that run's (written as it
+    begins) and the index the last finished run's: a difference in number is then said, not refused."""
+    fix = "`spadgen dataset status` names what is wrong; `spadgen dataset run` writes the index again"
+    for n, r in enumerate(rows):
+        if r["index"] != n:
+            raise ValueError(f"{index_path} row {n + 1}: lists sample {r['index']} where sample {n} belongs (index.jsonl "
+                             f"lists every sample in index order): the index was damaged after it was written; {fix}")
+    want = _spec_samples(spec)
+    if want is None or want == len(rows):
+        return
+    said = (f"{index_path} has {len(rows)} rows for the {want} samples of {os.path.join(path, 'dataset.json')}")
+    if _runs_on(path):
+        warnings.warn(f"{said}: a `spadgen dataset run` is on the folder now, and the last run to end writes the "
+                      "index; this Dataset holds the rows written so far", stacklevel=4)
+        return
+    raise ValueError(f"{said}: the index was cut short or damaged after it was written; {fix}")
 
 
 class Sample:
@@ -226,6 +280,7 @@ class Dataset:
                 raise ValueError(f"{index_path}: not valid JSON lines ({e}); `spadgen dataset run` writes it whole, so it "
                                  "was damaged afterwards: run the dataset again to write it") from e
         _check_index(self.index, index_path)
+        _check_rows_against_spec(self.index, self.spec, self.path, index_path)
         self._all = self.index
 
     def _view(self, rows):
@@ -241,7 +296,12 @@ class Dataset:
     @property
     def card(self):
         """dataset.md, the dataset card (Markdown)."""
-        with open(os.path.join(self.path, "dataset.md"), encoding="utf-8") as f:
+        path = os.path.join(self.path, "dataset.md")
+        if not os.path.isfile(path):
+            raise FileNotFoundError(f"{path}: missing (the last `spadgen dataset run` to end writes it with the index): "
+                                    "run the dataset again to write it (with nothing left to generate, it writes only the "
+                                    "index and the card)")
+        with open(path, encoding="utf-8") as f:
             return f.read()
 
     @property
@@ -299,7 +359,7 @@ class Dataset:
 
         status      "done", "failed", "stale", "missing", "damaged", or several of them in a list or tuple;
         where       a function of the index row (a dict as index.jsonl has it) returning true to keep it;
-        **parameters  parameter key = value, equal by ==, a JSON array equal to a list or tuple; a dotted key
+        **parameters  parameter key = value, equal by ==, a JSON array equal to a list, tuple or NumPy array; a dotted key
                     as select(**{"laser.average_power_mW": 2}), or with "__" for each dot: laser__average_power_mW=2.
         """
         keep = list(self.index)
@@ -316,6 +376,8 @@ class Dataset:
             if key not in self.parameter_keys:
                 raise ValueError(f"{self.path}: no parameter {name!r}; the parameters are {', '.join(self.parameter_keys)} "
                                  "(a dot may be written __)")
+            if isinstance(value, np.ndarray):  # an array's values as a list (an array matched nothing, silently)
+                value = value.tolist()
             keep = [r for r in keep if _same(r["parameters"].get(key), value)]
         if where is not None:
             keep = [r for r in keep if where(r)]

@@ -149,6 +149,13 @@ def evaluate(target, detections=None, *, detector=None, out=None, tolerance_m=No
                 raise ValueError(f"no detections for {len(missing)} of the {len(done)} done sample folders of {target}, "
                                  f"first {missing[0]!r}: the mapping needs one array per done sample folder (realisations too)")
             unknown = sorted(str(k) for k in detections.keys() if str(k) not in done)
+            if unknown and selection is not None:  # (a done sample outside the selection was said to be none)
+                outside = [u for u in unknown if u in set(_done_folder_names(target, None)[0])]
+                if outside:
+                    chosen = sorted(selection)
+                    raise ValueError(f"detections for {len(outside)} done sample folders of {target} outside the selection "
+                                     f"(samples {chosen[:8]}{' ...' if len(chosen) > 8 else ''}), first {outside[0]!r}: "
+                                     "give detections of the selection's samples only, or evaluate the whole dataset")
             if unknown:
                 raise ValueError(f"detections for {len(unknown)} folders that are no done sample folder of {target}, "
                                  f"first {unknown[0]!r} (done: {', '.join(sorted(done)[:4])}{', ...' if len(done) > 4 else ''})")

@@ -13,6 +13,7 @@ image when its first channel is asked for. The folder's layout is docs/outputs.m
 from __future__ import annotations
 
 import json
+import numbers
 import os
 import stat
 from dataclasses import dataclass
@@ -805,6 +806,9 @@ class Run:
         """The gate profile of pixel (x, y): counts (or, with expected=True, expected counts) against the gate
         positions in ns. x, y are image coordinates, or sensor coordinates (as metadata.json's
         preview_profile_pixels) with sensor_coordinates=True."""
+        for name, v in (("x", x), ("y", y)):  # (2.7 reached NumPy's indexing: "only integers, slices ...")
+            if isinstance(v, bool) or not isinstance(v, numbers.Integral):
+                raise TypeError(f"gate_profile: {name} = {v!r}; expected a whole pixel index (an int)")
         if sensor_coordinates:
             x, y = x - self.crop[0], y - self.crop[1]
         if not (0 <= x < self.width and 0 <= y < self.height):

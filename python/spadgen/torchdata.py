@@ -122,7 +122,8 @@ class _RunSamples(torch.utils.data.Dataset):
 
     def __init__(self, runs, patch_size=None, fields=DEFAULT_FIELDS, max_layers=None, open_runs=64, max_objects=None,
                  patch_stride=None):
-        runs = list(runs)
+        # one folder is one run (a path was iterated as its characters: "o: no such folder")
+        runs = [runs] if isinstance(runs, (str, bytes, os.PathLike, Run)) else list(runs)
         self.paths = [r.path if isinstance(r, Run) else os.fspath(r) for r in runs]
         if not self.paths:
             raise ValueError(f"{type(self).__name__} needs at least one run folder")
@@ -329,8 +330,8 @@ class _RunSamples(torch.utils.data.Dataset):
 
 
 class RunDataset(_RunSamples):
-    """Samples (whole images or patches) of a list of run folders (paths or spadgen.Run objects); see the module's
-    table for each key."""
+    """Samples (whole images or patches) of a list of run folders (paths or spadgen.Run objects; one of them alone
+    is taken as a list of one); see the module's table for each key."""
 
     def __getitem__(self, j):
         i, out = self._load(j)

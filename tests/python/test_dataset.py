@@ -122,6 +122,16 @@ def test_select_by_status_parameters_and_rows(ds):
     assert view.table()["camera.width_px"].dtype == np.int64 and len(ds.select(status="missing").table()["scene"]) == 0
     with pytest.raises(KeyError, match="sample 1 is not in"):
         view.sample(1)
+    # NumPy values as the Python ones (an array matched nothing, silently)
+    assert ds.select(camera__width_px=np.int64(1000)).indices.tolist() == [1]
+    assert ds.select(camera__width_px=np.array(1024)).indices.tolist() == [0, 3]
+    crops = {0: [0, 0, 8, 8], 1: [8, 0, 8, 8]}
+    spec = dict(ds.spec, grid={"camera.crop": list(crops.values())})
+    rows = [dict(r, parameters=dict(r["parameters"], **{"camera.crop": crops[r["index"] % 2]})) for r in ds.index]
+    arrays = spadgen.Dataset(ds.path, _spec=spec, _rows=rows, _all=rows)
+    assert arrays.select(camera__crop=np.array([8, 0, 8, 8])).indices.tolist() == [1, 3]
+    assert arrays.select(camera__crop=(0, 0, 8, 8)).indices.tolist() == [0, 2]
+    assert arrays.select(camera__crop=np.array([8, 0, 8])).indices.tolist() == []
     with pytest.raises(ValueError, match="unknown status"):
         ds.select(status="ok")
     with pytest.raises(ValueError, match="no parameter 'laser_power'"):
@@ -223,6 +233,60 @@ def test_a_damaged_index_is_refused_naming_its_row(dataset_dir, tmp_path):
     refused([rows[0], "[1, 2]"] + rows[2:], "not a JSON object")
     index.write_text("\n".join(rows) + "\n")
     assert len(spadgen.open_dataset(copy)) == len(rows)
+
+
+def test_an_index_cut_short_or_without_a_row_is_refused_unless_a_run_is_on(dataset_dir, spadgen_bin, tmp_path):
+    """index.jsonl holds a row per sample of dataset.json, in index order: one cut short on a line boundary (a full
+    disk, a copy) or without a row was read as a smaller dataset without a word, where `spadgen dataset status`
+    calls it damaged. While a dataset run is on the folder (dataset.json is then the running one's, the index the
+    last finished run's) the difference is a warning; the run's presence is the program's own test of it, checked
+    here against `spadgen dataset status`."""
+    import fcntl
+    import os
+    import struct
+    import warnings
+    rows = (dataset_dir / "index.jsonl").read_text().splitlines()
+    assert len(rows) == 4
+    copy = tmp_path / "ds"
+    copy.mkdir()
+    (copy / "dataset.json").write_text((dataset_dir / "dataset.json").read_text())
+    index = copy / "index.jsonl"
+    short = f"{index} has 2 rows for the 4 samples of {copy / 'dataset.json'}: the index was cut short or damaged"
+    for lines, says in ((rows[:2], short), ([], f"{index} has 0 rows for the 4 samples"),
+                        (rows[:2] + rows[3:], f"{index} row 3: lists sample 3 where sample 2 belongs"),
+                        ([rows[1], rows[0]] + rows[2:], f"{index} row 1: lists sample 1 where sample 0 belongs")):
+        index.write_text("".join(line + "\n" for line in lines))
+        with pytest.raises(ValueError, match=says):
+            spadgen.open_dataset(copy)
+    # "samples": null is one sample per grid cell (3 widths x 1 scene): the 4 rows are one too many
+    spec = json.loads((dataset_dir / "dataset.json").read_text())
+    (copy / "dataset.json").write_text(json.dumps(dict(spec, samples=None)))
+    index.write_text("".join(line + "\n" for line in rows))
+    with pytest.raises(ValueError, match=f"{index} has 4 rows for the 3 samples"):
+        spadgen.open_dataset(copy)
+    (copy / "dataset.json").write_text(json.dumps(spec))
+    assert len(spadgen.open_dataset(copy)) == 4
+    # a run on the folder: its presence lock held as a run holds it (a shared OFD lock on byte 0)
+    index.write_text("".join(line + "\n" for line in rows[:2]))
+    fd = os.open(copy / ".dataset.runs", os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.fcntl(fd, fcntl.F_OFD_SETLK, struct.pack("hhqqi4x", fcntl.F_RDLCK, os.SEEK_SET, 0, 1, 0))
+        status = subprocess.run([spadgen_bin, "dataset", "status", str(copy)], capture_output=True, text=True)
+        assert "a dataset run is on the folder now" in status.stdout + status.stderr, status.stdout + status.stderr
+        with warnings.catch_warnings(record=True) as said:
+            warnings.simplefilter("always")
+            held = spadgen.open_dataset(copy)
+        assert held.indices.tolist() == [0, 1]
+        assert [str(w.message) for w in said] == [f"{index} has 2 rows for the 4 samples of {copy / 'dataset.json'}: a "
+                                                  "`spadgen dataset run` is on the folder now, and the last run to end "
+                                                  "writes the index; this Dataset holds the rows written so far"]
+    finally:
+        os.close(fd)
+    with pytest.raises(ValueError, match=short):
+        spadgen.open_dataset(copy)
+    # the card, when lost, is said with the remedy
+    with pytest.raises(FileNotFoundError, match=f"{copy / 'dataset.md'}: missing .*run the dataset again to write it"):
+        held.card
 
 
 def test_a_row_of_other_parameters_or_seeds_than_its_folder_is_refused_when_opened(dataset_dir, tmp_path):

@@ -104,6 +104,11 @@ def test_a_dataset_scored_from_a_mapping_and_from_files(dataset_dir, spadgen_bin
     m = spadgen.evaluate(val, picked, out=tmp_path / "val", program=spadgen_bin)
     assert m["selection"] == [[3, 3]] and sorted(s["sample"] for s in m["samples"]) == sorted(picked)
     assert m["objects"]["found"] == m["objects"]["objects"] > 0
+    # detections of a done sample outside the selection: said so (it was "no done sample folder")
+    other = next(k for k in sorted(truth) if not k.startswith("000003"))
+    with pytest.raises(ValueError, match=f"detections for 1 done sample folders of .* outside the selection \\(samples "
+                                         f"\\[3\\]\\), first '{other}': give detections of the selection's samples only"):
+        spadgen.evaluate(val, dict(picked, **{other: truth[other]}), out=tmp_path / "val2", program=spadgen_bin)
     m = spadgen.evaluate(ds, truth, out=tmp_path / "whole", program=spadgen_bin)  # the whole dataset: no selection
     assert "selection" not in m and len(m["samples"]) == 6
     with pytest.raises(ValueError, match="the selection holds no samples"):

@@ -333,6 +333,12 @@ def test_gate_profile(sweep):
     assert (q.x, q.y) == (sx - sweep.crop[0], sy - sweep.crop[1])
     with pytest.raises(IndexError, match="outside"):
         sweep.gate_profile(sweep.width, 0)
+    # a pixel is a whole index (2.7 reached NumPy's "only integers, slices ..."); NumPy's integers are whole
+    with pytest.raises(TypeError, match=r"gate_profile: x = 2.7; expected a whole pixel index"):
+        sweep.gate_profile(2.7, 3)
+    with pytest.raises(TypeError, match=r"gate_profile: y = True; expected"):
+        sweep.gate_profile(3, True)
+    np.testing.assert_array_equal(sweep.gate_profile(np.int64(30), np.int32(4)).values, p.values)
 
 
 def test_a_damaged_or_other_folder_is_named_with_what_it_is(make_run, tmp_path):

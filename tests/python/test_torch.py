@@ -43,6 +43,11 @@ def expected_layout(K, N, L, H, W, J):
 def test_whole_image_sample_has_the_documented_layout_and_values(sweep_run, sweep):
     ds = RunDataset([sweep_run], fields=FIELDS)
     assert len(ds) == 1
+    # one folder alone is a list of one (a path was iterated as its characters: "o: no such folder"), also as a Path
+    # or a Run
+    for one in (str(sweep_run), sweep_run, spadgen.open_run(sweep_run)):
+        alone = RunDataset(one, fields=("counts",))
+        assert alone.paths == [str(sweep_run)] and torch.equal(alone[0]["counts"], ds[0]["counts"])
     s = ds[0]
     J = int(sweep.metadata["ground_truth_objects"])
     assert J >= 2  # the plate and the sphere along some rays
