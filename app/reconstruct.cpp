@@ -748,8 +748,13 @@ std::vector<DoneFolder> done_sample_folders(const fs::path& dir, std::map<std::s
         throw Error(where + ": expected a string \"" + key + "\" (an index row spadgen wrote); run the dataset again to write it");
       return j[key].get<std::string>();
     };
-    if (samples && r.contains("index") && r["index"].is_number_integer())
-      *samples = std::max(*samples, r["index"].get<int64_t>() + 1);
+    // Row N lists sample N - 1, as `spadgen dataset run` writes it (`dataset status` checks it): a row removed
+    // was scored as the rows left, without a word.
+    if (!r.is_object() || !r.contains("index") || !r["index"].is_number_integer() || r["index"].get<int64_t>() != row - 1)
+      throw Error(where + ": lists sample " + (r.is_object() && r.contains("index") ? r["index"].dump().substr(0, 40) : std::string("none")) +
+                  " where sample " + std::to_string(row - 1) + " belongs (the index lists every sample in index order); the "
+                  "index was damaged after `spadgen dataset run` wrote it: run the dataset again to write it");
+    if (samples) *samples = std::max(*samples, r["index"].get<int64_t>() + 1);
     if (only && !(r.contains("index") && r["index"].is_number_integer() && only->contains(r["index"].get<int64_t>()))) continue;
     const std::string status = text(r, "status");
     if (status != "done") {

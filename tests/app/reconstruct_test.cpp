@@ -10,6 +10,7 @@
 #include <unistd.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <limits>
@@ -1159,14 +1160,24 @@ TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
   EXPECT_THAT(r.output, HasSubstr(": the sample was removed or changed since the index was written"));
   EXPECT_FALSE(fs::exists(dir_ / "e_changed"));
   std::ofstream(out / "samples/000000/metadata.json") << original_meta;  // the sample as it was
-  // A damaged index: a row copied (its sample was scored twice), a folder outside samples/ (scored too).
+  // A damaged index: a row copied (its sample was scored twice; as the next sample's, its folder twice), a
+  // folder outside samples/ (scored too), a row removed (the rest was scored without a word).
   const std::string index = slurp(out / "index.jsonl");
   const std::string first_row = index.substr(0, index.find('\n') + 1);
-  std::string outside = first_row;  // (no std::regex: GCC 12 warns inside it under the sanitizers' -O1)
+  const auto rows_in = std::count(index.begin(), index.end(), '\n');
+  ASSERT_GE(rows_in, 1);
+  ASSERT_EQ(first_row.rfind("{\"index\":0,", 0), 0u) << first_row;
+  const std::string next_row = "{\"index\":" + std::to_string(rows_in) + "," + first_row.substr(11);  // sample N's place
+  std::string outside = next_row;  // (no std::regex: GCC 12 warns inside it under the sanitizers' -O1)
   ASSERT_NE(outside.find("\"samples/000000\""), std::string::npos) << first_row;
   outside.replace(outside.find("\"samples/000000\""), 16, "\"../../elsewhere\"");
-  for (const auto& [rows, says] : {std::pair{index + first_row, "lists the folder samples/000000 again"},
-                                   {index + outside, "lists the folder ../../elsewhere, not a sample folder of the dataset"}}) {
+  const std::string skipped = index + "{\"index\":" + std::to_string(rows_in + 1) + "," + first_row.substr(11);  // N left out
+  for (const auto& [rows, says] : {std::pair{index + first_row, "row " + std::to_string(rows_in + 1) + ": lists sample 0 where sample " +
+                                                                    std::to_string(rows_in) + " belongs (the index lists every sample in index order)"},
+                                   {index + next_row, std::string("lists the folder samples/000000 again")},
+                                   {index + outside, std::string("lists the folder ../../elsewhere, not a sample folder of the dataset")},
+                                   {skipped, "index.jsonl row " + std::to_string(rows_in + 1) + ": lists sample " +
+                                                 std::to_string(rows_in + 1) + " where sample " + std::to_string(rows_in) + " belongs"}}) {
     std::ofstream(out / "index.jsonl") << rows;
     r = sh("evaluate " + out.string() + " -o " + (dir_ / "e_index").string());
     EXPECT_EQ(r.code, 1) << r.output;
