@@ -367,10 +367,10 @@ DetectionImage read_detections(const std::string& path, const RunFolder& run, bo
     // A stack of the run itself (counts.npy, expected_counts.npy: (K, H, W)) is no detections file (its shape
     // was read as a transposed detections array, and the advice led to a dtype error).
     {
-      std::error_code ec;
-      const fs::path target = fs::weakly_canonical(fs::absolute(fs::path(path)), ec);
-      const fs::path folder = fs::weakly_canonical(fs::absolute(fs::path(run.dir())), ec);
-      if (const std::string f = ec ? std::string() : listed_entry(target, folder, run.metadata()); !f.empty())
+      std::error_code ec_target, ec_folder;
+      const fs::path target = fs::weakly_canonical(fs::absolute(fs::path(path)), ec_target);
+      const fs::path folder = fs::weakly_canonical(fs::absolute(fs::path(run.dir())), ec_folder);
+      if (const std::string f = ec_target || ec_folder ? std::string() : listed_entry(target, folder, run.metadata()); !f.empty())
         throw Error(path + ": is the run's own " + f + " (" + run.dir() + "/metadata.json lists it), not detections; expected "
                     "a detector's output: spadgen reconstruct's detections_<detector>.exr, or a float32 or float64 .npy (H, W, M) "
                     "of ranges in metres");
@@ -754,8 +754,9 @@ std::vector<DoneFolder> done_sample_folders(const fs::path& dir, std::map<std::s
       throw Error(where + ": lists sample " + (r.is_object() && r.contains("index") ? r["index"].dump().substr(0, 40) : std::string("none")) +
                   " where sample " + std::to_string(row - 1) + " belongs (the index lists every sample in index order); the "
                   "index was damaged after `spadgen dataset run` wrote it: run the dataset again to write it");
-    if (samples) *samples = std::max(*samples, r["index"].get<int64_t>() + 1);
-    if (only && !(r.contains("index") && r["index"].is_number_integer() && only->contains(r["index"].get<int64_t>()))) continue;
+    const int64_t sample_index = row - 1;
+    if (samples) *samples = std::max(*samples, sample_index + 1);
+    if (only && !only->contains(sample_index)) continue;
     const std::string status = text(r, "status");
     if (status != "done") {
       ++not_done[status];
@@ -769,7 +770,6 @@ std::vector<DoneFolder> done_sample_folders(const fs::path& dir, std::map<std::s
     // (in the row's order of keys: the dataset file's)
     nlohmann::ordered_json parameters = nlohmann::ordered_json::parse(line).value("parameters", nlohmann::ordered_json::object());
     if (!parameters.is_object()) parameters = nlohmann::ordered_json::object();
-    const int64_t sample_index = r.contains("index") && r["index"].is_number_integer() ? r["index"].get<int64_t>() : -1;
     for (size_t repeat = 0; repeat < folders.size(); ++repeat) {
       const std::string& f = folders[repeat];
       // A sample folder, once: a row copied by hand scored its sample twice; a folder outside samples/ was scored too.

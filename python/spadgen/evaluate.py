@@ -150,7 +150,8 @@ def evaluate(target, detections=None, *, detector=None, out=None, tolerance_m=No
                                  f"first {missing[0]!r}: the mapping needs one array per done sample folder (realisations too)")
             unknown = sorted(str(k) for k in detections.keys() if str(k) not in done)
             if unknown and selection is not None:  # (a done sample outside the selection was said to be none)
-                outside = [u for u in unknown if u in set(_done_folder_names(target, None)[0])]
+                every_done = set(_done_folder_names(target, None)[0])  # (once: it opens every done sample's run)
+                outside = [u for u in unknown if u in every_done]
                 if outside:
                     chosen = sorted(selection)
                     raise ValueError(f"detections for {len(outside)} done sample folders of {target} outside the selection "
