@@ -517,6 +517,11 @@ RunConfig estimate_shape(RunConfig c) {
 
 std::string dataset_schema() { return datasets::dataset_reference_markdown(); }
 
+DatasetFolderState dataset_folder_state(const std::string& dir) {
+  const DatasetSpec spec = spec_of_folder(dir);
+  return {spec.count(), datasets::DatasetFolder(spec, dir).runs_on()};
+}
+
 namespace {
 // A sample's error that names a key as the run's --set ("--set camera.crop: found ..."), with the key's place
 // in the dataset file instead ("d.json: /set/camera.crop: found ..."): the sample's keys are the dataset's.

@@ -51,6 +51,14 @@ DatasetStatus dataset_status(const std::string& dir);
 // more of 3094), never narrow it: the disk and memory are over-estimated a little, never under.
 RunConfig estimate_shape(RunConfig c);
 
+// A dataset folder as its dataset.json records it: the dataset's samples, and whether a dataset run is on
+// the folder now (its index.jsonl is then the last run's until the last run on it ends).
+struct DatasetFolderState {
+  int64_t samples = 0;
+  bool run_on = false;
+};
+DatasetFolderState dataset_folder_state(const std::string& dir);
+
 // The dataset file reference (Markdown), for docs/datasets.md.
 std::string dataset_schema();
 

@@ -21,6 +21,7 @@
 #include <sstream>
 #include <string_view>
 
+#include "app/dataset.h"
 #include "app/interrupt.h"
 #include "app/metadata.h"
 #include "app/progress.h"
@@ -1081,6 +1082,19 @@ std::string evaluate(const EvaluateCommand& c) {
     if (c.samples) selected.emplace(*c.samples);
     int64_t indexed = 0;
     const std::vector<DoneFolder> samples = done_sample_folders(target, not_done, selected ? &*selected : nullptr, &indexed);
+    // The index's rows against the dataset's samples (its dataset.json, as `dataset status` checks them): an index
+    // cut short was scored as the rows left, without a word. While a dataset run is on the folder, the index is
+    // an earlier run's until the last run on it ends: scored as it is, and said.
+    std::string index_note;
+    if (const DatasetFolderState folder = dataset_folder_state(c.target); indexed != folder.samples) {
+      const std::string rows = (target / "index.jsonl").string() + " has " + std::to_string(indexed) + (indexed == 1 ? " row" : " rows") + " for the dataset's " +
+                               std::to_string(folder.samples) + " samples (dataset.json)";
+      if (!folder.run_on)
+        throw Error(rows + ": the index was cut short or added to after `spadgen dataset run` wrote it, or a run that changed the "
+                    "dataset's samples was killed before it wrote the index; "
+                    "`spadgen dataset run` writes it again (with nothing left to generate, only the index and the card)");
+      index_note = rows + ": a dataset run is on the folder, and the last run on it to end writes the index; scored as the index is now";
+    }
     if (selected && selected->last() >= indexed)
       throw Error("--samples: sample " + std::to_string(selected->last()) + " is not one of the dataset's " +
                   std::to_string(indexed) + " (index.jsonl: 0 to " + std::to_string(indexed - 1) + ")");
@@ -1184,6 +1198,7 @@ std::string evaluate(const EvaluateCommand& c) {
     }
     report = total.to_json(names);
     report["dataset"] = c.target;
+    if (!index_note.empty()) report["index"] = index_note;
     if (unlabelled > 0)
       report["labels"] = std::to_string(unlabelled) + " of " + std::to_string(scored) +
                          " samples without labels.exr: their objects are counted as detectable (samples[].detections_source.labels)";
@@ -1211,7 +1226,7 @@ std::string evaluate(const EvaluateCommand& c) {
          << (intensity == 0             ? std::string()
              : c.detections.empty() ? "; not scored, 2D intensity runs (no gate profiles for the detector): " + std::to_string(intensity)
                                     : "; not scored, 2D intensity runs without a file of --detections: " + std::to_string(intensity))
-         << "\n" << summary(report);
+         << "\n" << (index_note.empty() ? std::string() : "note: " + index_note + "\n") << summary(report);
   } else {
     throw Error(c.target + ": neither a run folder (metadata.json) nor a dataset folder (dataset.json)");
   }

@@ -6,6 +6,7 @@
 #include <OpenEXR/ImfHeader.h>
 #include <OpenEXR/ImfOutputFile.h>
 #include <gmock/gmock.h>
+#include <fcntl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 #include <gtest/gtest.h>
@@ -1123,6 +1124,34 @@ TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
   }
   EXPECT_EQ(m["samples"][0]["parameters"]["laser.average_power_mW"], 1);
   EXPECT_EQ(m["samples"][1]["parameters"]["laser.average_power_mW"], 4);
+  // The index against the dataset's samples (dataset.json), as `dataset status` checks it: cut short, it was scored
+  // as the rows left, without a word. While a dataset run is on the folder (this test holding a run's presence, a
+  // shared lock on byte 0 of .dataset.runs, as a running `dataset run` does) the index is scored as it is, and said.
+  std::ofstream(out / "index.jsonl") << index_text.substr(0, index_text.find('\n') + 1);
+  r = sh("evaluate " + out.string() + " -o " + (dir_ / "e_cut").string());
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("index.jsonl has 1 row for the dataset's 2 samples (dataset.json): the index was cut short"));
+  EXPECT_FALSE(fs::exists(dir_ / "e_cut"));
+  {
+    const int fd = ::open((out / ".dataset.runs").c_str(), O_RDWR | O_CLOEXEC);
+    ASSERT_GE(fd, 0);
+    struct flock l {};
+    l.l_type = F_RDLCK;
+    l.l_whence = SEEK_SET;
+    l.l_start = 0;
+    l.l_len = 1;
+    ASSERT_EQ(::fcntl(fd, F_OFD_SETLK, &l), 0);
+    r = sh("evaluate " + out.string() + " -o " + (dir_ / "e_cut").string());
+    ::close(fd);
+    EXPECT_EQ(r.code, 0) << r.output;
+    EXPECT_THAT(r.output, HasSubstr("note: " + (out / "index.jsonl").string() + " has 1 row for the dataset's 2 samples (dataset.json): "
+                                    "a dataset run is on the folder"));
+    EXPECT_THAT(r.output, HasSubstr("1 sample folder (realisations included)\n"));
+    const nlohmann::json cut = nlohmann::json::parse(slurp(dir_ / "e_cut" / "metrics.json"));
+    EXPECT_EQ(cut["samples"].size(), 1u);
+    EXPECT_THAT(cut.value("index", ""), HasSubstr("scored as the index is now"));
+  }
+  std::ofstream(out / "index.jsonl") << index_text;
 
   // The done samples as index.jsonl lists them, not every folder under samples/ (sample 1, past a dataset
   // shrunk to 1 sample, was scored); a folder generated again since the index was written is refused.
