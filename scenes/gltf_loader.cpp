@@ -286,8 +286,9 @@ glm::dvec3 euler_xyz_of(const glm::dmat3& r) {
 
 class Loader {
  public:
-  Loader(std::string path, tinygltf::Model& model, const SceneEdits& edits, Scene& scene)
-      : path_(std::move(path)), m_(model), images_(model.images), edits_(edits), scene_(scene) {}
+  // image_files: why an image's file could not be read, by image (tinygltf's words, said where a texture uses it)
+  Loader(std::string path, tinygltf::Model& model, const SceneEdits& edits, Scene& scene, std::map<int, std::string> image_files = {})
+      : path_(std::move(path)), m_(model), images_(model.images), edits_(edits), scene_(scene), image_files_(std::move(image_files)) {}
 
   void load(const std::string& scene_name);
 
@@ -342,6 +343,7 @@ class Loader {
   std::vector<tinygltf::Image>& images_;  // m_.images: the decoded images move into the scene
   const SceneEdits& edits_;
   Scene& scene_;
+  std::map<int, std::string> image_files_;  // why an image's file could not be read, by image
   std::vector<const NodeEdit*> node_edit_;          // per glTF node: the scene file's edit, or null
   std::vector<const MaterialEdit*> material_edit_;  // per glTF material
   std::set<std::string> warned_;
@@ -1103,7 +1105,9 @@ int Loader::texture(int gltf_texture, const std::string& user) {
     const size_t w = img.width > 0 ? static_cast<size_t>(img.width) : 0;
     const size_t h = img.height > 0 ? static_cast<size_t>(img.height) : 0;
     if (texels == nullptr && (img.image.empty() || img.component != 4 || img.bits != 8 || img.image.size() != w * h * 4)) {
-      warn(iname + ": could not be read or decoded; " + user + " uses its factor only");
+      const auto file = image_files_.find(t.source);
+      warn(iname + (file != image_files_.end() ? ": " + file->second : std::string(": could not be read or decoded")) + "; " + user +
+           " uses its factor only");
     } else {
       Texture tex;
       tex.name = t.name.empty() ? img.name : t.name;
@@ -2390,12 +2394,33 @@ Scene parse_gltf(const std::string& bytes, const std::string& path, const std::s
   if (!duplicate.empty())
     scene.warnings.push_back(duplicate + " (the first such key; glTF 2.0 asks for unique keys, and the later value is "
                              "taken, the earlier ignored)");
+  // An image file that could not be read is two lines of tinygltf's ("File not found : a.png", then "Failed to
+  // load external 'uri' for image[0] name = []"): said once, as the image's, where a texture uses it (the two
+  // raw lines came before the texture's own warning).
+  std::map<int, std::string> image_files;
+  std::string file_problem;  // the line before, when it was a file's
   std::istringstream lines(warn + "\n" + err);
-  for (std::string line; std::getline(lines, line);)
-    // inverseBindMatrices is optional (glTF 2.0: identity matrices without it), and skins are read as such
-    if (!line.empty() && line.find("'inverseBindMatrices' property is missing") == std::string::npos)
+  for (std::string line; std::getline(lines, line);) {
+    static constexpr std::string_view kImage = "Failed to load external 'uri' for image[";
+    if (line.starts_with(kImage) && !file_problem.empty()) {
+      const int image = std::atoi(line.c_str() + kImage.size());
+      image_files[image] = file_problem.starts_with("File not found : ")
+                               ? "its file " + file_problem.substr(17) + " was not found (beside " + path + ")"
+                           : file_problem.starts_with("File is empty : ") ? "its file " + file_problem.substr(16) + " is empty"
+                                                                          : "its file could not be read (" + file_problem + ")";
+      file_problem.clear();
+      continue;
+    }
+    if (!file_problem.empty()) scene.warnings.push_back("tinygltf: " + file_problem);
+    file_problem.clear();
+    if (line.starts_with("File not found : ") || line.starts_with("File read error : ") || line.starts_with("File is empty : "))
+      file_problem = line;
+    else if (!line.empty() && line.find("'inverseBindMatrices' property is missing") == std::string::npos)
+      // inverseBindMatrices is optional (glTF 2.0: identity matrices without it), and skins are read as such
       scene.warnings.push_back("tinygltf: " + line);
-  Loader(path, model, edits, scene).load(scene_name);
+  }
+  if (!file_problem.empty()) scene.warnings.push_back("tinygltf: " + file_problem);
+  Loader(path, model, edits, scene, std::move(image_files)).load(scene_name);
   return scene;
 }
 

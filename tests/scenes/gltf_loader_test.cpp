@@ -952,10 +952,22 @@ TEST(GltfLoader, MissingImageFileIsWarnedNotFatal) {
   g.doc["textures"] = {{{"source", 0}}};
   g.doc["materials"] = {{{"name", "Paper"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}}};
   g.node({{"mesh", g.triangle_mesh()}});
-  const Scene s = load_gltf(g.write(dir.path(), "noimage"));
+  const std::string file = g.write(dir.path(), "noimage");
+  const Scene s = load_gltf(file);
   EXPECT_EQ(s.materials[0].base_color_texture, -1);
-  EXPECT_TRUE(has_warning(s, "image 0 'nowhere.png': could not be read or decoded; material 0 'Paper'"))
+  // said once, with why (tinygltf's two lines, "File not found : nowhere.png" and "Failed to load external 'uri'
+  // for image[0]", came before it, raw)
+  EXPECT_TRUE(has_warning(s, "image 0 'nowhere.png': its file nowhere.png was not found (beside " + file +
+                                 "); material 0 'Paper' baseColorTexture uses its factor only"))
       << testing::PrintToString(s.warnings);
+  EXPECT_EQ(s.warnings.size(), 1u) << testing::PrintToString(s.warnings);
+  // an empty file, likewise
+  std::ofstream(dir.path() / "empty.png").flush();
+  g.doc["images"] = {{{"uri", "empty.png"}}};
+  const Scene e = load_gltf(g.write(dir.path(), "emptyimage"));
+  EXPECT_TRUE(has_warning(e, "image 0 'empty.png': its file " + (dir.path() / "empty.png").string() + " is empty; material 0 'Paper'"))
+      << testing::PrintToString(e.warnings);
+  EXPECT_EQ(e.warnings.size(), 1u) << testing::PrintToString(e.warnings);
 }
 
 // ---------------------------------------------------------------------------------------------
