@@ -114,7 +114,9 @@ TEST_F(Hardening, ValuesThatCrashedOrHungSpadgenEndInAnErrorNamingTheKey) {
       {"sensor.gate.length_fwhm_ps=1e6", "--set sensor.gate.length_fwhm_ps: a spread of 1e+06 ps (FWHM) about a gate of 3.8 ns"},
       {"sensor.gate.length_ns=1e-6", "--set sensor.gate.length_ns: a spread of 120 ps (FWHM) about a gate of 1e-06 ns"},
       // info printed -9223372036854775808 bins and exited 0; run said "transient time axis: expected bins >= 0"
-      {"render.time_bin_ps=1e-300", "--set render.time_bin_ps: the time window that the gate sweep"},
+      {"render.time_bin_ps=0.001", "--set render.time_bin_ps: the time window that the gate sweep"},
+      // "needs more than 2^63 bins of 0 ps" (the bin's 1e-312 s flushed to 0)
+      {"render.time_bin_ps=1e-300", "--set render.time_bin_ps: found 1e-300 (a number), expected a number in [0.001, 1e+06] ps"},
       {"sensor.gate.length_ns=1e6", "--set sensor.gate.length_ns: the time window that the gate sweep"},
       {"render.window_start_ns=0' --set 'render.window_stop_ns=1e5",
        "--set render.window_stop_ns: the window from 0 to 100000 ns makes 11111112 time bins of 9 ps (render.time_bin_ps)"},
@@ -162,7 +164,7 @@ TEST_F(Hardening, ValuesThatCrashedOrHungSpadgenEndInAnErrorNamingTheKey) {
 // lit bins' count overflowed int64 before it was bounded (-9223372036854775808 bins printed, undefined
 // behaviour that the sanitizers' build stops on).
 TEST_F(Hardening, ThePlanOfTheSavedLightAtATinyBinWidthIsFinite) {
-  const Outcome o = spadgen("info " + kFlat + " --set render.time_bin_ps=1e-20 --set outputs.light=true --set acquisition.mode=intensity");
+  const Outcome o = spadgen("info " + kFlat + " --set render.time_bin_ps=0.001 --set outputs.light=true --set acquisition.mode=intensity");
   expect_exit(o, 0, "info");
   EXPECT_THAT(o.output, HasSubstr("light/ (outputs.light; no time bins: the totals)"));
   EXPECT_THAT(o.output, Not(HasSubstr("-92233")));
