@@ -448,14 +448,8 @@ TEST_F(Dataset, OnlyTheLastRunOnTheFolderToEndWritesTheIndex) {
   ASSERT_EQ(sh("dataset run " + (dir_ / "d.json").string() + " -o " + out.string() + " -q --shard 0/2").code, 0);
   ASSERT_TRUE(fs::exists(out / "index.jsonl"));  // alone on the folder: written
   fs::remove(out / "index.jsonl"), fs::remove(out / "index.csv"), fs::remove(out / "dataset.md");
-  const int fd = ::open((out / ".dataset.runs").c_str(), O_RDWR | O_CLOEXEC);
+  const int fd = hold_dataset_run_presence(out);
   ASSERT_GE(fd, 0);
-  struct flock l {};
-  l.l_type = F_RDLCK;
-  l.l_whence = SEEK_SET;
-  l.l_start = 0;
-  l.l_len = 1;
-  ASSERT_EQ(::fcntl(fd, F_OFD_SETLK, &l), 0);
   const Result shard1 = sh("dataset run " + (dir_ / "d.json").string() + " -o " + out.string() + " --shard 1/2");
   ASSERT_EQ(shard1.code, 0) << shard1.output;
   EXPECT_THAT(shard1.output, HasSubstr("another run is still on the folder: the last to end writes the index (this run: 1 generated"));

@@ -6,7 +6,6 @@
 #include <OpenEXR/ImfHeader.h>
 #include <OpenEXR/ImfOutputFile.h>
 #include <gmock/gmock.h>
-#include <fcntl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 #include <gtest/gtest.h>
@@ -1133,14 +1132,8 @@ TEST_F(Reconstruct, EvaluateOfADatasetSumsItsSamples) {
   EXPECT_THAT(r.output, HasSubstr("index.jsonl has 1 row for the dataset's 2 samples (dataset.json): the index was cut short"));
   EXPECT_FALSE(fs::exists(dir_ / "e_cut"));
   {
-    const int fd = ::open((out / ".dataset.runs").c_str(), O_RDWR | O_CLOEXEC);
+    const int fd = hold_dataset_run_presence(out);
     ASSERT_GE(fd, 0);
-    struct flock l {};
-    l.l_type = F_RDLCK;
-    l.l_whence = SEEK_SET;
-    l.l_start = 0;
-    l.l_len = 1;
-    ASSERT_EQ(::fcntl(fd, F_OFD_SETLK, &l), 0);
     r = sh("evaluate " + out.string() + " -o " + (dir_ / "e_cut").string());
     ::close(fd);
     EXPECT_EQ(r.code, 0) << r.output;

@@ -49,6 +49,21 @@ inline std::string slurp(const fs::path& p) {
   return ss.str();
 }
 
+// A dataset run's presence on dataset folder `dir`, as a running `dataset run` holds it (a shared open-file-description
+// lock on byte 0 of DIR/.dataset.runs), for as long as the returned descriptor is open (::close ends it); -1 when
+// it could not be taken.
+inline int hold_dataset_run_presence(const fs::path& dir) {
+  const int fd = ::open((dir / ".dataset.runs").c_str(), O_RDWR | O_CLOEXEC);
+  if (fd < 0) return -1;
+  struct flock l {};
+  l.l_type = F_RDLCK;
+  l.l_whence = SEEK_SET;
+  l.l_start = 0;
+  l.l_len = 1;
+  if (::fcntl(fd, F_OFD_SETLK, &l) != 0) return ::close(fd), -1;
+  return fd;
+}
+
 // Whether process `pid` catches signal `sig` (a handler of its own): /proc/PID/status's SigCgt mask.
 inline bool catches(pid_t pid, int sig) {
   std::ifstream status("/proc/" + std::to_string(pid) + "/status");
