@@ -103,7 +103,7 @@ def evaluate(target, detections=None, *, detector=None, out=None, tolerance_m=No
     """Scores detections against the object labels of a run folder or of every done sample of a dataset folder
     with `spadgen evaluate` (docs/detection.md), and returns its metrics.json as a dict. target: a folder, or a
     Dataset selection (spadgen.open_dataset(...).select(...), a slice): its samples only (--samples), e.g. a
-    validation split.
+    validation split, or a Run (its folder).
 
     detections:
       - None: each run's detections_<detector>.exr, or the detector run in memory where it is absent;
@@ -122,8 +122,11 @@ def evaluate(target, detections=None, *, detector=None, out=None, tolerance_m=No
     refuses the input.
     """
     from .dataset import Dataset
+    from .run import Run
     selection = None
-    if isinstance(target, Dataset):  # a dataset, or a selection of one (Dataset.select, slicing): its samples only
+    if isinstance(target, Run):  # (as RunDataset takes one): its folder
+        target = target.path
+    elif isinstance(target, Dataset):  # a dataset, or a selection of one (Dataset.select, slicing): its samples only
         if len(target) == 0:
             raise ValueError(f"{target.path}: the selection holds no samples; expected some to score")
         if len(target) < len(target._all):  # (the whole dataset: no --samples, as for its folder)

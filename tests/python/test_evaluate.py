@@ -28,7 +28,9 @@ def test_perfect_shifted_and_no_detections(sweep_run, spadgen_bin, tmp_path):
     assert m["detections_source"]["file"].endswith("detections.npy")
     assert not os.path.exists(m["detections_source"]["file"])  # the temporary file is gone
     # 10 mm too far: every object found, the bias the shift (float32 ranges: within 1e-3 mm)
-    m = spadgen.evaluate(run.path, truth + np.float32(0.01), out=tmp_path / "shifted", program=spadgen_bin)
+    # (the Run itself, as RunDataset takes one: it was a bare TypeError)
+    m = spadgen.evaluate(run, truth + np.float32(0.01), out=tmp_path / "shifted", program=spadgen_bin)
+    assert m["run"] == run.path
     assert m["objects"]["found"] == objects
     assert m["range_error"]["bias_mm"] == pytest.approx(10.0, abs=1e-3)
     assert m["range_error"]["rms_mm"] == pytest.approx(10.0, abs=1e-3)
