@@ -354,7 +354,8 @@ std::vector<RunResult> sense(const SenseOptions& options) {
                                    scenes::FileChecks::None);
     throw Error("--set " + key + ": sense re-samples the sensor only, so it takes sensor.*, acquisition.*, seeds.chip, "
                   "seeds.noise and outputs.{expected_counts,detection_rate,counts,frames,previews,storage,exr_compression}; " + key +
-                  " shapes the rendered light: use spadgen run");
+                  (plain_key(key) == "render.tile_size_px" ? " is the renderer's tile edge, on which no output depends: leave it out"
+                                                           : " shapes the rendered light: use spadgen run"));
   }
   if (options.repeats < 1) throw Error("--repeats: expected at least 1, found " + std::to_string(options.repeats));
   // A seed given twice, as an option and by --set, is refused rather than one silently winning.

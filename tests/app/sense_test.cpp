@@ -801,6 +801,11 @@ TEST_F(App, SenseRefusesWhatItCannotDo) {
   r = sh("sense " + (dir_ / "run").string() + " --set laser.average_power_mW=5");
   EXPECT_EQ(r.code, 1);
   EXPECT_THAT(r.output, HasSubstr("--set laser.average_power_mW: sense re-samples the sensor only"));
+  EXPECT_THAT(r.output, HasSubstr("laser.average_power_mW shapes the rendered light: use spadgen run"));
+  // The tile edge changes no output: said so (it was called a key that shapes the light: a new user's find).
+  r = sh("sense " + (dir_ / "run").string() + " --set render.tile_size_px=64");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_THAT(r.output, HasSubstr("render.tile_size_px is the renderer's tile edge, on which no output depends: leave it out"));
   // The glTF's nodes and materials shape the light too.
   r = sh("sense " + (dir_ / "run").string() + " --set nodes.sphere.scale=[1,1,1]");
   EXPECT_EQ(r.code, 1);
