@@ -2400,20 +2400,21 @@ Scene parse_gltf(const std::string& bytes, const std::string& path, const std::s
   std::map<int, std::string> image_files;
   std::string file_problem;  // the line before, when it was a file's
   std::istringstream lines(warn + "\n" + err);
+  static constexpr std::string_view kImage = "Failed to load external 'uri' for image[", kNotFound = "File not found : ",
+                                     kEmpty = "File is empty : ", kReadError = "File read error : ";
   for (std::string line; std::getline(lines, line);) {
-    static constexpr std::string_view kImage = "Failed to load external 'uri' for image[";
     if (line.starts_with(kImage) && !file_problem.empty()) {
       const int image = std::atoi(line.c_str() + kImage.size());
-      image_files[image] = file_problem.starts_with("File not found : ")
-                               ? "its file " + file_problem.substr(17) + " was not found (beside " + path + ")"
-                           : file_problem.starts_with("File is empty : ") ? "its file " + file_problem.substr(16) + " is empty"
-                                                                          : "its file could not be read (" + file_problem + ")";
+      image_files[image] = file_problem.starts_with(kNotFound)
+                               ? "its file " + file_problem.substr(kNotFound.size()) + " was not found (beside " + path + ")"
+                           : file_problem.starts_with(kEmpty) ? "its file " + file_problem.substr(kEmpty.size()) + " is empty"
+                                                              : "its file could not be read (" + file_problem + ")";
       file_problem.clear();
       continue;
     }
     if (!file_problem.empty()) scene.warnings.push_back("tinygltf: " + file_problem);
     file_problem.clear();
-    if (line.starts_with("File not found : ") || line.starts_with("File read error : ") || line.starts_with("File is empty : "))
+    if (line.starts_with(kNotFound) || line.starts_with(kReadError) || line.starts_with(kEmpty))
       file_problem = line;
     else if (!line.empty() && line.find("'inverseBindMatrices' property is missing") == std::string::npos)
       // inverseBindMatrices is optional (glTF 2.0: identity matrices without it), and skins are read as such
