@@ -157,7 +157,13 @@ def _check_rows_against_spec(rows, spec, path, index_path):
         warnings.warn(f"{said}: a `spadgen dataset run` is on the folder now, and the last run to end writes the "
                       "index; this Dataset holds the rows written so far", stacklevel=4)
         return
-    raise ValueError(f"{said}: the index was cut short or damaged after it was written; {fix}")
+    if len(rows) < want:
+        # (the usual cause: a run that raised "samples" writes dataset.json as it begins and the index as it ends)
+        raise ValueError(f"{said}: a `spadgen dataset run` that changed the dataset's samples was killed before it "
+                         "wrote the index, or the index was cut short after it was written; `spadgen dataset run` with "
+                         "the dataset file generates what is left and writes the index again (run with the dataset file "
+                         "the folder held before, it writes only the index and the card)")
+    raise ValueError(f"{said}: the index was added to, or dataset.json edited, after they were written; {fix}")
 
 
 class Sample:
@@ -262,12 +268,19 @@ class Dataset:
                 hint = " no such folder;"
             raise FileNotFoundError(f"{self.path}: not a spadgen dataset folder (no dataset.json;{hint} "
                                     "`spadgen dataset run FILE -o DIR` writes one)")
+        # (the remedy is the program's: `spadgen dataset run` refuses a folder whose dataset.json is damaged, as it
+        # says which dataset the folder holds)
+        remedy = ("it says which dataset file the folder holds, and `spadgen dataset run` refuses the folder without "
+                  "it: restore it, or generate the dataset into another folder")
         with open(spec_path, encoding="utf-8") as f:
             try:
                 self.spec = load_json(f)
             except ValueError as e:
                 raise ValueError(f"{spec_path}: not valid JSON ({e}); `spadgen dataset run` writes it whole, so it was "
-                                 "damaged afterwards: run the dataset again to write it") from e
+                                 f"damaged afterwards; {remedy}") from e
+        if not isinstance(self.spec, dict):
+            raise ValueError(f"{spec_path}: JSON, but not an object (`spadgen dataset run` writes one): it was damaged "
+                             f"afterwards; {remedy}")
         index_path = os.path.join(self.path, "index.jsonl")
         if not os.path.isfile(index_path):
             raise FileNotFoundError(f"{self.path}: a dataset folder without index.jsonl: the first `spadgen dataset run` "

@@ -173,7 +173,7 @@ def test_realisations_differ_in_counts_and_share_the_ground_truth(ds):
         np.testing.assert_array_equal(first.depth(), second.depth())
 
 
-def test_errors_name_the_folder(ds, dataset_dir, tmp_path, sweep_run):
+def test_errors_name_the_folder(ds, dataset_dir, tmp_path, sweep_run, spadgen_bin):
     failed = ds.sample(2)
     assert failed.status == "failed" and "16 x 500 sensor" in failed.error
     with pytest.raises(spadgen.SampleNotDoneError, match=r"(?s)sample 2 \(samples/000002\) failed.*16 x 500 sensor"):
@@ -202,6 +202,21 @@ def test_errors_name_the_folder(ds, dataset_dir, tmp_path, sweep_run):
     (tmp_path / "unfinished" / "dataset.json").write_text((dataset_dir / "dataset.json").read_text())
     with pytest.raises(FileNotFoundError, match="without index.jsonl"):
         spadgen.open_dataset(tmp_path / "unfinished")
+    # A damaged dataset.json: the remedy is what `spadgen dataset run` accepts (it refuses such a folder: "run the
+    # dataset again" was said), checked against the program's own refusal.
+    (tmp_path / "unfinished" / "index.jsonl").write_text((dataset_dir / "index.jsonl").read_text())
+    remedy = ("it says which dataset file the folder holds, and `spadgen dataset run` refuses the folder without it: "
+              "restore it, or generate the dataset into another folder")
+    for text, says in (('{"samples": 4', "not valid JSON .*damaged afterwards; "), ("[1, 2]", "JSON, but not an object .*")):
+        (tmp_path / "unfinished" / "dataset.json").write_text(text)
+        with pytest.raises(ValueError, match=f"{tmp_path / 'unfinished' / 'dataset.json'}: {says}{remedy}"):
+            spadgen.open_dataset(tmp_path / "unfinished")
+        if not (tmp_path / "scenes").exists():
+            (tmp_path / "scenes").symlink_to(SCENES)
+        (tmp_path / "d.json").write_text(DATASET)
+        r = subprocess.run([spadgen_bin, "dataset", "run", str(tmp_path / "d.json"), "-o", str(tmp_path / "unfinished"), "-q"],
+                           capture_output=True, text=True)
+        assert r.returncode != 0 and "dataset.json is damaged" in r.stderr and "restore it" in r.stderr, r.stderr
 
 
 def test_a_damaged_index_is_refused_naming_its_row(dataset_dir, tmp_path):
@@ -251,7 +266,11 @@ def test_an_index_cut_short_or_without_a_row_is_refused_unless_a_run_is_on(datas
     copy.mkdir()
     (copy / "dataset.json").write_text((dataset_dir / "dataset.json").read_text())
     index = copy / "index.jsonl"
-    short = f"{index} has 2 rows for the 4 samples of {copy / 'dataset.json'}: the index was cut short or damaged"
+    # (fewer rows: most often a run that raised "samples" killed before it wrote the index; both remedies said)
+    short = (f"{index} has 2 rows for the 4 samples of {copy / 'dataset.json'}: a `spadgen dataset run` that changed "
+             "the dataset's samples was killed before it wrote the index, or the index was cut short after it was "
+             "written; `spadgen dataset run` with the dataset file generates what is left and writes the index again "
+             r"\(run with the dataset file the folder held before, it writes only the index and the card\)")
     for lines, says in ((rows[:2], short), ([], f"{index} has 0 rows for the 4 samples"),
                         (rows[:2] + rows[3:], f"{index} row 3: lists sample 3 where sample 2 belongs"),
                         ([rows[1], rows[0]] + rows[2:], f"{index} row 1: lists sample 1 where sample 0 belongs")):
@@ -262,7 +281,9 @@ def test_an_index_cut_short_or_without_a_row_is_refused_unless_a_run_is_on(datas
     spec = json.loads((dataset_dir / "dataset.json").read_text())
     (copy / "dataset.json").write_text(json.dumps(dict(spec, samples=None)))
     index.write_text("".join(line + "\n" for line in rows))
-    with pytest.raises(ValueError, match=f"{index} has 4 rows for the 3 samples"):
+    with pytest.raises(ValueError, match=f"{index} has 4 rows for the 3 samples of {copy / 'dataset.json'}: the "
+                                         "index was added to, or dataset.json edited, after they were written; "
+                                         "`spadgen dataset status` names what is wrong"):
         spadgen.open_dataset(copy)
     (copy / "dataset.json").write_text(json.dumps(spec))
     assert len(spadgen.open_dataset(copy)) == 4
