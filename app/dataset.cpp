@@ -522,24 +522,6 @@ DatasetFolderState dataset_folder_state(const std::string& dir) {
   return {spec.count(), datasets::DatasetFolder(spec, dir).runs_on()};
 }
 
-namespace {
-// A sample's error that names a key as the run's --set ("--set camera.crop: found ..."), with the key's place
-// in the dataset file instead ("d.json: /set/camera.crop: found ..."): the sample's keys are the dataset's.
-std::string named_in_dataset_file(const DatasetSpec& spec, const std::string& error) {
-  if (!error.starts_with("--set ")) return error;
-  const size_t colon = error.find(": ");
-  if (colon == std::string::npos) return error;
-  const std::string key = error.substr(6, colon - 6);
-  std::string section;
-  for (const auto& [k, v] : spec.set)
-    if (k == key) section = "set";
-  for (const datasets::GridAxis& a : spec.grid)
-    if (a.key == key) section = "grid";
-  for (const datasets::RandomAxis& a : spec.random)
-    if (a.key == key) section = "random";
-  return section.empty() ? error : spec.file + ": /" + section + "/" + key + error.substr(colon);
-}
-}  // namespace
 
 DatasetPlan dataset_plan(const DatasetOptions& options) {
   const DatasetSpec spec = datasets::load_dataset_file(options.file);
@@ -596,11 +578,7 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
     if (!checked.resolved) {
       // with the parameters the dataset gave it (the key the error names may be set for every sample, and
       // invalid only with the drawn ones: a crop outside a width drawn smaller)
-      std::string given;
-      for (const auto& [key, value] : s.parameters.items())  // (the scene file: the error names it)
-        if (key != "scene") given += (given.empty() ? " (" : ", ") + key + " " + (value.is_string() ? value.get<std::string>() : value.dump());
-      errors.push_back("sample " + std::to_string(i) + (given.empty() ? std::string() : given + ")") + ": " +
-                       named_in_dataset_file(spec, checked.error));
+      errors.push_back(datasets::sample_text(s) + ": " + datasets::named_in_dataset_file(spec, checked.error));
       invalid.push_back(i);
       status = "invalid";
     }

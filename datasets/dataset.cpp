@@ -588,6 +588,28 @@ std::string Sample::repeat_folder(int r) const {
   return folder_of(index) + buf;
 }
 
+std::string sample_text(const Sample& s) {
+  std::string given;
+  for (const auto& [key, value] : s.parameters.items())
+    if (key != "scene") given += (given.empty() ? " (" : ", ") + key + " " + (value.is_string() ? value.get<std::string>() : value.dump());
+  return "sample " + std::to_string(s.index) + (given.empty() ? std::string() : given + ")");
+}
+
+std::string named_in_dataset_file(const DatasetSpec& spec, const std::string& error) {
+  if (!error.starts_with("--set ")) return error;
+  const size_t colon = error.find(": ");
+  if (colon == std::string::npos) return error;
+  const std::string key = error.substr(6, colon - 6);
+  std::string section;
+  for (const auto& [k, v] : spec.set)
+    if (k == key) section = "set";
+  for (const GridAxis& a : spec.grid)
+    if (a.key == key) section = "grid";
+  for (const RandomAxis& a : spec.random)
+    if (a.key == key) section = "random";
+  return section.empty() ? error : spec.file + ": /" + section + "/" + key + error.substr(colon);
+}
+
 Sample make_sample(const DatasetSpec& spec, int64_t index) {
   if (index < 0 || index >= spec.count())
     throw Error("sample " + std::to_string(index) + " is not in the dataset (it has " + std::to_string(spec.count()) + " samples)");

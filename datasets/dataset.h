@@ -106,6 +106,14 @@ struct Sample {
 // Sample `index` (0 <= index < spec.count()): a function of the dataset seed, the axes and the index only.
 Sample make_sample(const DatasetSpec& spec, int64_t index);
 
+// "sample 2 (camera.width_px 16, sensor.preset pixel_A)": the sample and the values the dataset gave it (the
+// scene file left out: an error about the sample names it).
+std::string sample_text(const Sample& s);
+// A sample's error that names a key as the run's --set ("--set camera.crop: found ..."), with the key's place in
+// the dataset file instead ("d.json: /set/camera.crop: found ..."): the sample's keys are the dataset's. Other
+// errors are returned as they are.
+std::string named_in_dataset_file(const DatasetSpec& spec, const std::string& error);
+
 // The samples of scene file `scene` that tell whether the dataset file is wrong: its first kProbeSamples
 // samples (index order, over the grid's cells of that scene). When all of them make invalid scenes (or
 // runs the sensor refuses), the mistake is the dataset file's: load_dataset_file and `dataset plan|run`

@@ -553,7 +553,7 @@ DatasetFolder::Resolved DatasetFolder::resolve(const Sample& s) const {
   try {
     r = scenes::load_scene_file(spec_.scenes[size_t(s.scene)], s.overrides);
   } catch (const Error& e) {
-    throw Error("sample " + std::to_string(s.index) + " (" + s.parameters.dump() + ") makes an invalid scene: " + e.what());
+    throw Error(sample_text(s) + " makes an invalid scene: " + named_in_dataset_file(spec_, e.what()));
   }
   const std::vector<Revision> applied = revisions_of(r);
   std::string revisions;

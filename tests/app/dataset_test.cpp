@@ -1003,7 +1003,10 @@ TEST_F(Dataset, AFailingSampleIsRecordedAndTheOthersGoOn) {
   const Result st = sh("dataset status " + (dir_ / "out").string());
   EXPECT_EQ(st.code, 4);
   EXPECT_THAT(st.output, HasSubstr("failed: 1, 3"));
-  EXPECT_THAT(st.output, HasSubstr("makes an invalid scene: --set camera.crop: found [496, 232, 24, 20]"));
+  // (the key named where the dataset file sets it: the sample was given no --set)
+  EXPECT_THAT(st.output, HasSubstr("sample 1 (laser.average_power_mW 1, camera.width_px 16, ambient.illuminance_lux "));
+  EXPECT_THAT(st.output, HasSubstr(") makes an invalid scene: " + (dir_ / "d.json").string() + ": /set/camera.crop: found [496, 232, 24, 20]"));
+  EXPECT_THAT(slurp(dir_ / "out/failed/000001.json"), HasSubstr("/set/camera.crop: found"));
   EXPECT_THAT(slurp(dir_ / "out/index.csv"), HasSubstr(",failed,"));
   // evaluate scores the done samples and counts the others by status, as an object a script reads (it was
   // a sentence)
