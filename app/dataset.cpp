@@ -80,6 +80,13 @@ struct Estimate {
   }
 };
 
+// What a sample not done takes to complete: all of it, or, where its own folder holds it rendered and only
+// realisations are missing (repeats grown), their senses from its saved light.
+bool only_senses_left(const SampleRecord& rec) { return !rec.held.empty() && rec.held[0]; }
+Estimate left_of(const Estimate& e, const SampleRecord& rec) {
+  return only_senses_left(rec) ? e.realisations(int(std::count(rec.held.begin() + 1, rec.held.end(), false))) : e;
+}
+
 // The estimates of samples generated one at a time (a plan's, a run's): their kept disk, time and largest
 // memory, with the largest sample's temporary files on top of the disk (freed after each sample).
 struct Totals {
@@ -552,7 +559,7 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
   o << "\n";
 
   Totals total, left_total;
-  int64_t samples = 0, left = 0;
+  int64_t samples = 0, left = 0, sensed_only = 0;
   // The done samples' measured wall times against their estimates: the pace of this machine and dataset.
   double done_seconds = 0.0, done_estimated = 0.0;
   int64_t done_timed = 0;
@@ -587,7 +594,8 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
       if (status.empty()) status = datasets::status_name(rec.status);
       if (rec.status == Status::Done && checked.resolved && rec.bytes > 0)
         done_bytes += rec.bytes, done_disk_estimated += e.disk, ++done_sized;
-      if (rec.status != Status::Done) ++left, left_total.add(e);
+      // (a rendered sample of a grown repeats: its missing realisations are sensed, as `dataset run` does)
+      if (rec.status != Status::Done) ++left, left_total.add(left_of(e, rec)), sensed_only += only_senses_left(rec);
       // (its estimate on the cores it ran with: the estimates scale as 1 / cores; a sample that records none, on
       // this plan's)
       else if (checked.resolved && rec.seconds > 0.0)
@@ -642,7 +650,10 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
       << "; examples/datasets/multi_object_variations.json writes about an eighth of the most)\n";
   if (folder) {
     const int64_t free = free_disk(options.out_dir);
-    o << "# left to generate in " << options.out_dir << ": " << left << " samples, "
+    o << "# left to generate in " << options.out_dir << ": " << left << (left == 1 ? " sample" : " samples")
+      << (sensed_only > 0 ? " (" + std::to_string(sensed_only) + " of them rendered, with realisations missing: only those are sensed, from the saved light)"
+                          : std::string())
+      << ", "
       << (left_total.disk_at_least() != left_total.disk() ? "disk at most " : "disk about ") << bytes_text(left_total.disk())
       << " (free: " << (free >= 0 ? bytes_text(free) : std::string("unknown")) << "), time about "
       << duration_text(left_total.seconds) << "\n";
@@ -726,8 +737,7 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
       }
       if (!rec.hash.empty()) {
         // (a rendered sample whose realisations are missing, repeats grown: only those are sensed)
-        const bool rendered = !rec.held.empty() && rec.held[0];
-        totals.add(rendered ? c.estimate.realisations(int(std::count(rec.held.begin() + 1, rec.held.end(), false))) : c.estimate);
+        totals.add(left_of(c.estimate, rec));
       }
       todo.push_back(i);
     });

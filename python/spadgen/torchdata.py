@@ -400,7 +400,8 @@ class DatasetSamples(_RunSamples):
                 raise ValueError(f"{ds.path}: sample {s.index} has {len(taken)} realisation(s) of the temporal noise: "
                                  "repeats='pairs' pairs two realisations of each sample (the dataset file's repeats >= 2; "
                                  "repeats may grow in a dataset folder: `spadgen dataset run` with a larger repeats adds "
-                                 "them from each sample's saved light)")
+                                 "them, from each sample's saved light, which a dataset of repeats 1 does not keep unless it "
+                                 "sets outputs.light: its samples are rendered again)")
             first = len(runs)
             for r, run in enumerate(taken):
                 runs.append(run)

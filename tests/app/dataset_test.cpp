@@ -395,6 +395,11 @@ TEST_F(Dataset, RepeatsGrowWithoutRenderingAgain) {
   std::string three = small_dataset(2);
   three.replace(three.find("\"repeats\": 2"), 12, "\"repeats\": 3");
   write(dir_ / "d.json", three);
+  // the plan prices what the run does (it priced every sample rendered again: 3.3 times the run's disk)
+  const Result plan = sh("dataset plan " + (dir_ / "d.json").string() + " -o " + grown);
+  ASSERT_EQ(plan.code, 0) << plan.output;
+  EXPECT_THAT(plan.output, HasSubstr("left to generate in " + grown + ": 2 samples (2 of them rendered, with realisations "
+                                     "missing: only those are sensed, from the saved light), disk at most "));
   const Result r = sh("dataset run " + (dir_ / "d.json").string() + " -o " + grown);
   ASSERT_EQ(r.code, 0) << r.output;
   // The run's estimate is of the new realisations only (it was of every sample rendered again with three: about
@@ -415,6 +420,12 @@ TEST_F(Dataset, RepeatsGrowWithoutRenderingAgain) {
   ASSERT_GT(added, 0.0) << r.output;
   EXPECT_THAT(r.output, HasSubstr("2 of 2 samples to generate"));
   EXPECT_LT(added, 0.25 * before) << made.output << r.output;
+  // (the plan's "left to generate ... disk at most X": the run's figure)
+  const size_t left = plan.output.find("left to generate");
+  ASSERT_NE(left, std::string::npos);
+  const size_t most = plan.output.find("disk at most ", left) + 13;
+  const std::string planned = plan.output.substr(most, plan.output.find(" (free", most) - most);
+  EXPECT_THAT(r.output, HasSubstr("at most " + planned + " on disk")) << plan.output;
   // not rendered or sensed again (their metadata.json hold their runs' own times)
   EXPECT_EQ(slurp(dir_ / "grown/samples/000001/metadata.json"), sample);
   EXPECT_EQ(slurp(dir_ / "grown/samples/000001_r01/metadata.json"), first);

@@ -398,8 +398,15 @@ def test_dataset_samples_in_pairs_of_realisations(ds, dataset_dir, spadgen_bin, 
     (tmp_path / "scenes").symlink_to(SCENES)
     (tmp_path / "one.json").write_text(DATASET.replace('"samples": 4', '"samples": 1').replace('"repeats": 2', '"repeats": 1'))
     subprocess.run([spadgen_bin, "dataset", "run", str(tmp_path / "one.json"), "-o", str(tmp_path / "one"), "-q"], check=True)
-    with pytest.raises(ValueError, match=r"sample 0 has 1 realisation\(s\).*repeats='pairs' pairs two realisations"):
+    with pytest.raises(ValueError, match=r"sample 0 has 1 realisation\(s\).*repeats='pairs' pairs two realisations.*"
+                                         r"a dataset of repeats 1 does not keep unless it sets outputs.light: its samples "
+                                         r"are rendered again\)"):
         DatasetSamples(tmp_path / "one", repeats="pairs")
+    # ... as `spadgen dataset plan` of repeats 2 into it says: every sample rendered again, none only sensed
+    (tmp_path / "two.json").write_text(DATASET.replace('"samples": 4', '"samples": 1'))
+    plan = subprocess.run([spadgen_bin, "dataset", "plan", str(tmp_path / "two.json"), "-o", str(tmp_path / "one")],
+                          capture_output=True, text=True, check=True).stdout
+    assert f"left to generate in {tmp_path / 'one'}: 1 sample, disk" in plan, plan
 
 
 def test_dataset_samples_refuse_what_has_no_run(ds, dataset_dir):
