@@ -61,8 +61,13 @@ std::string plain_key(const std::string& written) {
   }
 }
 
+// The laser's pulse table: the sensor convolves with it, and it sized the time window the run rendered, so a
+// --set of it is taken only as the run's table moved (its contents checked against the run's record).
+constexpr const char* kPulseTable = "laser.pulse_shape_csv";
+
 bool sense_may_set(const std::string& written) {
   const std::string key = plain_key(written);
+  if (key == kPulseTable) return true;
   for (const char* section : {"sensor.", "acquisition."})
     if (key.rfind(section, 0) == 0) return true;
   // whole keys or a component of one ("seeds.noiseX" is another key, which the schema refuses)
@@ -458,6 +463,21 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   const ThreadLimit threads(options.threads);
 
   const SensorTables tables_read = SensorTables::hashed(cfg);
+  if (std::any_of(options.overrides.begin(), options.overrides.end(),
+                  [](const std::string& o) { return plain_key(o.substr(0, scenes::assignment_split(o))) == kPulseTable; })) {
+    const json::json_pointer recorded_at("/sensor_table_fnv1a64/laser.pulse_shape_csv");
+    const auto given = std::find_if(tables_read.tables.begin(), tables_read.tables.end(),
+                                    [](const scenes::SensorTable& t) { return t.key == kPulseTable; });
+    const std::string recorded = meta.contains(recorded_at) && meta.at(recorded_at).is_string() ? meta.at(recorded_at).get<std::string>() : "";
+    if (given == tables_read.tables.end() || recorded.empty() || given->hash != recorded)
+      throw Error(std::string("--set ") + kPulseTable + ": " + (given == tables_read.tables.end() || given->path.empty() ? std::string("no table") : given->path) +
+                  (recorded.empty() ? " cannot be checked against the run's pulse (its metadata.json records no sensor_table_fnv1a64)"
+                                    : " is not the pulse the run rendered with (its contents hash to " +
+                                          (given == tables_read.tables.end() ? std::string("-") : given->hash) + ", the run's table to " + recorded +
+                                          ": metadata.json, sensor_table_fnv1a64)") +
+                  "; the pulse sized the light's time window the run rendered, so sense takes the run's table moved, not "
+                  "another: use spadgen run for another pulse");
+  }
   sensor::SensorModel sensor(sensor_stage(cfg));
   apply_user_maps(sensor, cfg);
   tables_read.check_unchanged(cfg);

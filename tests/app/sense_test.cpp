@@ -220,6 +220,28 @@ TEST_F(App, SenseTakesATableMovedSinceTheRunFromSet) {
          " -o " + (dir_ / "both_given").string());
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_THAT(r.output, Not(HasSubstr("have changed on disk")));
+
+  // The laser's pulse table (the sensor convolves with it; it sized the window the run rendered): given moved,
+  // it is taken (it was refused as a key that "shapes the rendered light", the docs saying a --set gives a
+  // moved table); another pulse is refused naming both contents' hashes.
+  std::ofstream(dir_ / "was/pulse.csv") << "time_ps,power\n-100,0\n0,1\n100,0\n";
+  r = sh("run " + kLit + " --set laser.pulse_shape_csv=" + (dir_ / "was/pulse.csv").string() + " -o " + (dir_ / "pulsed").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  fs::rename(dir_ / "was/pulse.csv", dir_ / "now/pulse.csv");
+  r = sh("sense " + (dir_ / "pulsed").string() + " -q --set laser.pulse_shape_csv=" + (dir_ / "now/pulse.csv").string() + " -o " +
+         (dir_ / "pulse_moved").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, Not(HasSubstr("have changed on disk")));
+  for (const char* f : {"detection_rate.npy", "counts.npy"})
+    EXPECT_TRUE(slurp(dir_ / "pulsed" / f) == slurp(dir_ / "pulse_moved" / f)) << f;
+  std::ofstream(dir_ / "now/other.csv") << "time_ps,power\n-200,0\n0,1\n200,0\n";
+  r = sh("sense " + (dir_ / "pulsed").string() + " -q --set laser.pulse_shape_csv=" + (dir_ / "now/other.csv").string() + " -o " +
+         (dir_ / "pulse_other").string());
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("--set laser.pulse_shape_csv: " + (dir_ / "now/other.csv").string() +
+                                  " is not the pulse the run rendered with (its contents hash to "));
+  EXPECT_THAT(r.output, HasSubstr("so sense takes the run's table moved, not another: use spadgen run for another pulse"));
+  EXPECT_FALSE(fs::exists(dir_ / "pulse_other"));
 }
 
 // A run stored as Zarr: sense reads its light from the Zarr stores and writes what the run wrote, bit for
