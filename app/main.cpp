@@ -100,7 +100,9 @@ int main(int argc, char** argv) {
           if (fs::is_directory(st)) return v + " is a folder; expected " + expected;
           if (fs::exists(st)) return std::string();
           if (ec && ec != std::errc::no_such_file_or_directory) return v + ": " + ec.message() + "; expected " + expected;
-          return "no such file: " + v + "; expected " + expected;
+          // (`--set A=1 B=2 SCENE`: B=2 was taken for the scene)
+          return "no such file: " + v + "; expected " + expected +
+                 (v.find('=') != std::string::npos ? " (each --set takes one KEY=VALUE: --set " + v + ")" : std::string());
         },
         "FILE");
   };
@@ -139,7 +141,8 @@ int main(int argc, char** argv) {
   run_cmd->add_option("scene", run.scene_file, "scene file (.json)")->required()->check(kSceneFile);
   run_cmd->add_option("-o,--out", run.out_dir, "output folder (default: out/<scene file name>)")->check(kNamed);
   run_cmd->add_option("--set", run.overrides, "override one scene-file key, e.g. --set laser.average_power_mW=5")
-      ->type_name("KEY=VALUE");
+      ->type_name("KEY=VALUE")
+      ->allow_extra_args(false);  // one KEY=VALUE each: `--set K=V SCENE` left the scene to it
   CLI::Option* seed_opt = run_cmd->add_option("--seed", seed, "the scene file's seed replaced: every random stream that seeds.* does not set");
   run_cmd->add_option("--threads", run.threads, "worker threads (default: all cores); outputs do not depend on it")
       ->check(kThreadsRange);
@@ -154,7 +157,8 @@ int main(int argc, char** argv) {
   sense_cmd->add_option("run_dir", sense.run_dir, "folder of a run written with outputs.light=true")->required()->check(kExistingFolder);
   sense_cmd->add_option("-o,--out", sense.out_dir, "output folder (default: RUN_DIR-sense)")->check(kNamed);
   sense_cmd->add_option("--set", sense.overrides, "override a sensor.*, acquisition.*, seeds.chip, seeds.noise or outputs.{counts,frames,expected_counts,detection_rate,previews,storage,exr_compression} key")
-      ->type_name("KEY=VALUE");
+      ->type_name("KEY=VALUE")
+      ->allow_extra_args(false);  // one KEY=VALUE each: `--set K=V SCENE` left the scene to it
   CLI::Option* noise_opt = sense_cmd->add_option("--noise-seed", noise_seed, "seed of the temporal noise (seeds.noise)");
   CLI::Option* chip_opt = sense_cmd->add_option("--chip-seed", chip_seed, "seed of the chip's fixed pattern (seeds.chip)");
   sense_cmd->add_option("--repeats", sense.repeats, "realisations of the temporal noise, noise seeds S, S + 1, ...: for R > 1 one "
@@ -169,7 +173,8 @@ int main(int argc, char** argv) {
   std::vector<std::string> info_overrides;
   CLI::App* info_cmd = cli.add_subcommand("info", "print the resolved scene file, a summary of the glTF and the run's size");
   info_cmd->add_option("scene", info_scene, "scene file (.json)")->required()->check(kSceneFile);
-  info_cmd->add_option("--set", info_overrides, "override one scene-file key")->type_name("KEY=VALUE");
+  info_cmd->add_option("--set", info_overrides, "override one scene-file key")->type_name("KEY=VALUE")
+      ->allow_extra_args(false);  // one KEY=VALUE each: `--set K=V SCENE` left the scene to it
 
   CLI::App* schema_cmd = cli.add_subcommand("schema", "print the reference of every scene-file key (Markdown)");
   bool json_schema = false;

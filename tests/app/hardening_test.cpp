@@ -556,6 +556,10 @@ TEST_F(Hardening, CommandLineErrorsAreSpadgensWithExitCode1) {
       {"run " + kTiny + " --seed -1", "spadgen: error: --seed: found '-1', expected an integer in [0, 9007199254740992]"},
       {"run " + kTiny + " --seed 9007199254740993", "--seed: found '9007199254740993'"},
       {"info /dev/zero", "scene file /dev/zero: is a character device, expected a regular file"},
+      // two values after one --set: the second is taken for the scene, and said so
+      {"run --set camera.width_px=1024 camera.height_px=500 " + kFlat,
+       "spadgen: error: scene: no such file: camera.height_px=500; expected a scene file (.json) (each --set takes one "
+       "KEY=VALUE: --set camera.height_px=500)"},
   };
   for (const auto& c : cases) {
     const Outcome o = spadgen(c.args);
@@ -565,6 +569,13 @@ TEST_F(Hardening, CommandLineErrorsAreSpadgensWithExitCode1) {
   }
   expect_exit(spadgen("--help"), 0, "--help");
   expect_exit(spadgen("--version"), 0, "--version");
+  // --set before the scene takes one KEY=VALUE (it took the scene too: "scene is required"), in run, sense and info
+  const Outcome before = spadgen("run --set camera.crop=[508,246,8,8] " + kTiny + " -q -o " + (dir_ / "set_first").string());
+  expect_exit(before, 0, "run --set K=V SCENE");
+  EXPECT_TRUE(fs::exists(dir_ / "set_first/metadata.json"));
+  expect_exit(spadgen("info --set camera.width_px=1000 " + kFlat), 0, "info --set K=V SCENE");
+  const Outcome sense = spadgen("sense --set sensor.dark_counts=false " + dir_.string());
+  EXPECT_THAT(sense.err, Not(HasSubstr("run_dir is required"))) << sense.err;
 }
 
 TEST_F(Hardening, GltfPathsThatAreNotGltfFilesAreNamed) {
