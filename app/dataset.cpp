@@ -524,6 +524,17 @@ RunConfig estimate_shape(RunConfig c) {
 
 std::string dataset_schema() { return datasets::dataset_reference_markdown(); }
 
+std::string index_rows_text(const std::string& index_path, int64_t rows, int64_t samples) {
+  return index_path + " has " + std::to_string(rows) + (rows == 1 ? " row" : " rows") + " for the dataset's " + std::to_string(samples) +
+         " samples (dataset.json)";
+}
+
+std::string index_rows_cause() {
+  return "the index was cut short or added to after `spadgen dataset run` wrote it, or a run that changed the dataset's samples "
+         "was killed before it wrote the index; `spadgen dataset run` writes it again (with nothing left to generate, only the "
+         "index and the card)";
+}
+
 DatasetFolderState dataset_folder_state(const std::string& dir) {
   const DatasetSpec spec = spec_of_folder(dir);
   return {spec.count(), datasets::DatasetFolder(spec, dir).runs_on()};
@@ -1005,8 +1016,7 @@ class IndexCheck {
   // What is wrong, once `samples` rows were expected.
   std::string finish(size_t samples) {
     if (problem_.empty() && short_)
-      problem_ = "index: " + path_.string() + " has " + std::to_string(row_) + " rows for the dataset's " + std::to_string(samples) +
-                 " samples" + kFix;
+      problem_ = "index: " + index_rows_text(path_.string(), int64_t(row_), int64_t(samples)) + ": " + index_rows_cause();
     if (problem_.empty()) {
       samples_ = samples;
       problem_ = check(nullptr);  // a row past the samples

@@ -58,6 +58,10 @@ struct DatasetFolderState {
   bool run_on = false;
 };
 DatasetFolderState dataset_folder_state(const std::string& dir);
+// "INDEX has N rows for the dataset's M samples (dataset.json)": index.jsonl against dataset.json, as `dataset
+// status` and `evaluate` say it; with no run on the folder, index_rows_cause follows (why, and the remedy).
+std::string index_rows_text(const std::string& index_path, int64_t rows, int64_t samples);
+std::string index_rows_cause();
 
 // The dataset file reference (Markdown), for docs/datasets.md.
 std::string dataset_schema();

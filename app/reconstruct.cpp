@@ -1087,12 +1087,8 @@ std::string evaluate(const EvaluateCommand& c) {
     // an earlier run's until the last run on it ends: scored as it is, and said.
     std::string index_note;
     if (const DatasetFolderState folder = dataset_folder_state(c.target); indexed != folder.samples) {
-      const std::string rows = (target / "index.jsonl").string() + " has " + std::to_string(indexed) + (indexed == 1 ? " row" : " rows") + " for the dataset's " +
-                               std::to_string(folder.samples) + " samples (dataset.json)";
-      if (!folder.run_on)
-        throw Error(rows + ": the index was cut short or added to after `spadgen dataset run` wrote it, or a run that changed the "
-                    "dataset's samples was killed before it wrote the index; "
-                    "`spadgen dataset run` writes it again (with nothing left to generate, only the index and the card)");
+      const std::string rows = index_rows_text((target / "index.jsonl").string(), indexed, folder.samples);
+      if (!folder.run_on) throw Error(rows + ": " + index_rows_cause());
       index_note = rows + ": a dataset run is on the folder, and the last run on it to end writes the index; scored as the index is now";
     }
     if (selected && selected->last() >= indexed)

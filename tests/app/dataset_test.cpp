@@ -1164,7 +1164,9 @@ TEST_F(Dataset, StatusChecksTheIndex) {
   const struct {
     std::string text, says;
   } cases[] = {{"", "index: " + out + "/index.jsonl is missing" + fix},
-               {first, "index: " + out + "/index.jsonl has 1 rows for the dataset's 2 samples" + fix},
+               {first, "index: " + out + "/index.jsonl has 1 row for the dataset's 2 samples (dataset.json): the index was cut "
+                       "short or added to after `spadgen dataset run` wrote it, or a run that changed the dataset's samples was "
+                       "killed before it wrote the index; `spadgen dataset run` writes it again"},
                {first + first, "index: " + out + "/index.jsonl row 2 lists sample 0 where sample 1 belongs (damaged since it was written)" + fix},
                {first + "{\"index\": 1, \n", "index: " + out + "/index.jsonl row 2 is not JSON (damaged since it was written)" + fix},
                {index + first, "index: " + out + "/index.jsonl row 3 lists sample 0 where sample 2 belongs"}};
