@@ -73,6 +73,8 @@ double Bistatic::range_of_half_path(double h) const {
   return 0.5 * (s + along_m) + 0.5 * (along_m * along_m - sq_m2) / (s - along_m);
 }
 
+double Bistatic::least_half_path() const { return 0.5 * std::sqrt(sq_m2); }
+
 double Bistatic::half_path_of_range(double r) const {
   if (coaxial()) return r;
   return 0.5 * (r + std::sqrt(std::max(0.0, r * r - 2.0 * r * along_m + sq_m2)));
@@ -93,6 +95,16 @@ double PixelTiming::fold(double half_path_m) const {
   double r = std::fmod(half_path_m, ambiguity);
   if (r < 0.0) r += ambiguity;
   return r < ambiguity ? r : 0.0;  // -1e-300 + ambiguity rounds to it
+}
+
+double PixelTiming::range(double half_path_m) const {
+  double h = fold(half_path_m);
+  const double least = bistatic.least_half_path();
+  if (period_s > 0.0 && h < least) {  // the return one or more periods on (|L| may exceed c period / 2)
+    const double ambiguity = ambiguity_range_m(period_s);
+    h += ambiguity * std::ceil((least - h) / ambiguity);
+  }
+  return bistatic.range_of_half_path(h);
 }
 
 std::vector<double> moving_average(const std::vector<double>& p, int h) {

@@ -39,6 +39,7 @@ struct Bistatic {
   static Bistatic of(const double ray[3], const double laser_m[3]);
   bool coaxial() const { return sq_m2 == 0.0; }
   double range_of_half_path(double h) const;  // for any h: below |L| / 2 (no surface can return), continued linearly
+  double least_half_path() const;             // |L| / 2: a surface at the camera centre's
   double half_path_of_range(double r) const;  // (r + |r d - L|) / 2, for r >= 0
 };
 
@@ -50,13 +51,17 @@ struct PixelTiming {
   double rise_offset_s = 0.0;  // gate_delay + skew + length: a rising edge at tau means a return at tau + this
   double fall_offset_s = 0.0;  // gate_delay + skew: a falling edge at tau means a return at tau + this
   double emission_delay_s = 0.0;
-  double period_s = 0.0;  // the laser's: a half path folds into [0, c period / 2), all a camera of one period tells; 0: none
+  double period_s = 0.0;  // the laser's: a half path folds into one period, all a camera of one period tells; 0: none
   Bistatic bistatic;
   double range_of_rise(double k) const;  // the half path c (t - emission_delay) / 2, unfolded
   double range_of_fall(double k) const;
   double fold(double half_path_m) const;  // into [0, c period / 2)
-  // A return's range from its unfolded half path: folded, then converted through `bistatic`.
-  double range(double half_path_m) const { return bistatic.range_of_half_path(fold(half_path_m)); }
+  // A return's range from its unfolded half path: folded into [|L| / 2, |L| / 2 + c period / 2), then converted
+  // through `bistatic`. No surface returns a half path below |L| / 2 (a surface at the camera centre's), so a fold
+  // into [0, |L| / 2) is a return one period on (it was reported at a negative range, which evaluate refuses: an
+  // object just beyond c period / 2 with the laser beside the lens). With a period (a run's always has one) the
+  // range is >= 0; without one, the half path is converted unfolded.
+  double range(double half_path_m) const;
 };
 
 // The paper's detector (section 4.D and 4.E): the profile smoothed by a moving average over

@@ -541,6 +541,41 @@ TEST(Evaluate, FoldsABistaticReturnByItsHalfPath) {
   EXPECT_GT(std::abs(std::remainder(t.range(b.half_path_of_range(9.0)) - 9.0, kAmbiguity)), 1e-5);
 }
 
+// No surface returns a half path below |L| / 2 (the laser beside the lens): an object just beyond c T / 2, whose
+// half path folds below it, is the return one period on. It was reported at a negative range (-12 mm for a
+// target at 3.755 m with the laser 3 cm beside the lens), which evaluate refused in reconstruct's own file, and
+// scored in memory with a made-up error of +4 to +8.5 mm (an auditor's find).
+TEST(Detectors, AReturnJustBeyondTheAmbiguityRangeIsNotANegativeRange) {
+  constexpr double kPeriod = 25e-9, kAmbiguity = kC * kPeriod / 2.0;  // 3.747 m
+  const double d[3] = {0.0, 0.0, 1.0}, L[3] = {0.03, 0.0, 0.0};
+  PixelTiming t;
+  t.period_s = kPeriod;
+  t.bistatic = Bistatic::of(d, L);
+  EvaluateOptions opt;
+  opt.ambiguity_m = kAmbiguity;
+  Scores s(opt);
+  // every range across the fold and the next: reported in [0, ...) and scored with no error
+  for (double r = kAmbiguity - 0.05; r < 2.0 * kAmbiguity + 0.05; r += 0.001) {
+    const double h = t.bistatic.half_path_of_range(r);
+    const double detected = t.range(h);
+    ASSERT_GE(detected, 0.0) << r;
+    ASSERT_NEAR(t.bistatic.half_path_of_range(detected), std::fmod(h - 0.015, kAmbiguity) + 0.015, 1e-9) << r;
+    s.add(0, 0, {{0, r, true}}, {{detected, 5.0}}, t.bistatic);
+    ASSERT_NEAR(s.errors().back(), 0.0, 1e-9) << r;
+  }
+  // the target of the find: 3.755 m is within the first period of half paths (it ends at 3.762 m): as it is
+  EXPECT_NEAR(t.range(t.bistatic.half_path_of_range(3.755)), 3.755, 1e-9);
+  // a laser farther out than c T / 2 (1 GHz: 15 cm, the laser 40 cm away): the half path 0.4 m of a surface at
+  // 0.3 m folds to 0.1 m, then on past |L| / 2 = 0.2 m, to 0.25 m (c T / 2 is 0.1499 m)
+  t.period_s = 1e-9;
+  const double far[3] = {0.4, 0.0, 0.0};
+  t.bistatic = Bistatic::of(d, far);
+  const double folded = t.range(t.bistatic.half_path_of_range(0.3));
+  EXPECT_GE(folded, 0.0);
+  const double a = kC * 1e-9 / 2.0;
+  EXPECT_NEAR(t.bistatic.half_path_of_range(folded), 0.4 - a * std::floor((0.4 - 0.2) / a), 1e-9);
+}
+
 // With the laser beside the lens, a detection the fold leaves in place is compared by its range as given: one
 // exactly the tolerance away (binary fractions: the difference is exact) is matched on every pixel, with the
 // error it has. Through the half path and back it was matched on some pixels only (a user's 80 % recall).
