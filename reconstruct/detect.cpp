@@ -51,8 +51,27 @@ double crossing(const std::vector<double>& v, int lo, int hi, double level, bool
 }
 
 // The detections' half paths folded by the laser period (edges are paired unfolded: a rise and its fall
-// may straddle a period's end) and turned into ranges, in increasing range.
-std::vector<Detection> folded(std::vector<Detection> out, const PixelTiming& timing) {
+// may straddle a period's end) and turned into ranges, in increasing range. A sweep longer than the period sees
+// each return once per period: detections from different periods (unfolded half paths half a period or more
+// apart) whose folded half paths lie closer than the detector resolves (`resolved` gate positions) are one
+// return, reported once, by the detection of the highest score (each copy was a false detection: a sweep of
+// 12.6 ns at 100 MHz scored the multi-object scene's precision 71 %; an auditor's find).
+std::vector<Detection> folded(std::vector<Detection> out, const PixelTiming& timing, double resolved) {
+  if (timing.period_s > 0.0 && out.size() > 1) {
+    const double ambiguity = ambiguity_range_m(timing.period_s), near = resolved * std::abs(timing.step_s) * kSpeedOfLight / 2.0;
+    std::vector<size_t> order(out.size());
+    for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return out[a].score > out[b].score; });
+    std::vector<Detection> kept;
+    for (const size_t i : order) {
+      const bool copy = std::any_of(kept.begin(), kept.end(), [&](const Detection& k) {
+        const double dh = out[i].range_m - k.range_m;  // (unfolded half paths)
+        return std::abs(dh) >= 0.5 * ambiguity && std::abs(std::remainder(dh, ambiguity)) < near;
+      });
+      if (!copy) kept.push_back(out[i]);
+    }
+    out = std::move(kept);
+  }
   for (Detection& d : out) d.range_m = timing.range(d.range_m);
   std::stable_sort(out.begin(), out.end(), [](const Detection& a, const Detection& b) { return a.range_m < b.range_m; });
   return out;
@@ -208,7 +227,7 @@ std::vector<Detection> detect(const PaperDetector& d, const float* profile, int 
   for (const Detection& e : scan(d.window / 2))
     if (std::none_of(out.begin(), out.begin() + long(paper), [&](const Detection& m) { return std::abs(m.gate - e.gate) < 0.5 * d.window; }))
       out.push_back(e);
-  return folded(std::move(out), timing);
+  return folded(std::move(out), timing, 0.5 * d.window);
 }
 
 std::vector<Detection> detect(const EdgeDetector& d, const float* profile, int K, int frames, const PixelTiming& timing,
@@ -481,7 +500,7 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* profile, int K
       const double x = lone(xf, fall_whole_x[i]);
       out.push_back({timing.range_of_fall(x), x, -f.step, -f.z});
     }
-  return folded(std::move(out), timing);
+  return folded(std::move(out), timing, d.separation);
 }
 
 namespace {
