@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import numbers
 import os
+import re
 import stat
 from dataclasses import dataclass
 from functools import cached_property
@@ -510,7 +511,8 @@ class Run:
     def has(self, name):
         """Whether the run wrote the file (a name from metadata.json's files, e.g. "frames.npy"). A stack may
         be named in either container: has("counts.npy") is true for a run that wrote counts.zarr; an image
-        without its extension too, as run[name] takes it: has("laser") is has("laser.exr")."""
+        without its extension too, as run[name] takes it: has("laser") is has("laser.exr"). What spadgen reconstruct
+        writes into the folder is not the run's: run.detections() and run.hdr() read it."""
         return self._file(name) is not None or (not name.endswith((".exr", ".npy", ".zarr")) and name + ".exr" in self.files)
 
     def _require(self, name):
@@ -519,6 +521,19 @@ class Run:
             stem = name[:-4] if name.endswith(".npy") else name[:-5] if name.endswith(".zarr") else name
             why = self._WRITTEN_BY.get(stem + ".npy", self._WRITTEN_BY.get(name,
                                        "outputs.light" if name.startswith("light/") else None))
+            # What `spadgen reconstruct` writes into the run folder is not the run's (metadata.json does not list
+            # it): its reader is named (it was said not to be written, the file being there).
+            derived = re.fullmatch(r"(detections_(\w+?)|hdr)(_noise_free)?\.exr", name)
+            if derived:
+                nf = "noise_free=True" if derived.group(3) else ""
+                reader = (f"run.detections({', '.join(filter(None, [repr(derived.group(2)), nf]))})" if derived.group(2)
+                          else f"run.hdr({nf})")
+                written = "" if os.path.exists(os.path.join(self.path, name)) else (
+                    f"; not written yet: spadgen reconstruct {self.path}"
+                    + (f" --detector {derived.group(2)}" if derived.group(2) else "")
+                    + (" --noise-free" if derived.group(3) else "") + " writes it")
+                raise FileNotFoundError(f"{os.path.join(self.path, name)}: a file of spadgen reconstruct, not of the run "
+                                        f"(metadata.json does not list it): {reader} reads it{written}")
             # A stack by its stem: a run writes it as .npy or as .zarr (outputs.storage), so an extension would mislead.
             shown = stem if name.endswith((".npy", ".zarr")) else name
             raise FileNotFoundError(f"{self.path}: this run did not write {shown}" + (f" (written with {why})" if why else "")

@@ -3,6 +3,7 @@ C++ side wrote by independent routes (metadata.json's totals, the transients aga
 against counts.npy, intensity.exr against counts.npy), and the helpers (profiles, depth, layers, labels,
 errors for what a run did not write)."""
 import json
+import re
 
 import numpy as np
 import pytest
@@ -170,8 +171,20 @@ def test_hdr_inversion_of_a_2d_run(intensity_run, spadgen_bin, tmp_path):
         run.detections()
     with pytest.raises(FileNotFoundError, match=f"write it with spadgen reconstruct {folder}"):
         run.hdr()
+    # by its file name (run["hdr.exr"]): reconstruct's file, not the run's, its reader named (it was said not to
+    # be written by the run, the file being there)
+    with pytest.raises(FileNotFoundError, match=re.escape(f"{folder / 'hdr.exr'}: a file of spadgen reconstruct, not of the "
+                                                          f"run (metadata.json does not list it): run.hdr() reads it; not "
+                                                          f"written yet: spadgen reconstruct {folder} writes it")):
+        run["hdr.exr"]
     subprocess.run([spadgen_bin, "reconstruct", str(folder), "-q"], check=True)
     hdr = run.hdr()
+    with pytest.raises(FileNotFoundError, match=re.escape(f"{folder / 'hdr.exr'}: a file of spadgen reconstruct, not of the "
+                                                          "run (metadata.json does not list it): run.hdr() reads it") + "$"):
+        run["hdr.exr"]
+    with pytest.raises(FileNotFoundError, match=re.escape("run.detections('paper', noise_free=True) reads it; not written "
+                                                          f"yet: spadgen reconstruct {folder} --detector paper --noise-free")):
+        run["detections_paper_noise_free.exr"]
     np.testing.assert_allclose(hdr["photons"], run.intensity["photons"], rtol=1e-6)
     # one written elsewhere (reconstruct -o): read from there, checked to be of this run
     subprocess.run([spadgen_bin, "reconstruct", str(folder), "-q", "-o", str(tmp_path / "mine.exr")], check=True)
