@@ -133,6 +133,15 @@ def evaluate(target, detections=None, *, detector=None, out=None, tolerance_m=No
             selection = {int(i) for i in target.indices}
         target = target.path
     target = os.fspath(target)
+    # What the program refuses of these, said in the arguments' names (its message named its flags, and a
+    # temporary file already gone)
+    if detections is not None and (detector is not None or noise_free):
+        raise ValueError("detector= and noise_free= choose the detector evaluate runs, or whose file in the run it reads, "
+                         "when detections is None; with detections given, leave them out")
+    arrays = detections is not None and not isinstance(detections, (str, os.PathLike))
+    if arrays and min_score is not None:
+        raise ValueError("min_score: arrays of ranges hold no scores (it keeps the detections of a score at least "
+                         "this, as spadgen reconstruct's .exr files hold them); leave min_score out")
     exe = spadgen_program(program)
     dataset = os.path.isfile(os.path.join(target, "dataset.json"))
     with tempfile.TemporaryDirectory(prefix="spadgen_evaluate_", dir=tmp_dir) as tmp:

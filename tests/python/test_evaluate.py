@@ -1,6 +1,7 @@
 """spadgen.evaluate: detections given from Python (arrays, a mapping per sample, files) scored by the program,
 against detections made from the ground truth itself (perfect, shifted, none)."""
 import os
+import subprocess
 
 import numpy as np
 import pytest
@@ -62,6 +63,22 @@ def test_the_detector_and_the_programs_refusals(sweep_run, spadgen_bin, tmp_path
         spadgen.evaluate(run.path, np.full((2, run.height, run.width), np.nan, np.float32), program=spadgen_bin)
     with pytest.raises(ValueError, match="not a dataset folder"):
         spadgen.evaluate(run.path, {"000000": perfect_ranges(run)}, program=spadgen_bin)
+    # What the program refuses with detections given, said in the arguments' names (its message named its flags
+    # and a temporary .npy already gone), checked against the program's own refusal
+    ranges = perfect_ranges(run)
+    with pytest.raises(ValueError, match="min_score: arrays of ranges hold no scores"):
+        spadgen.evaluate(run, ranges, min_score=10, out=tmp_path / "s", program=spadgen_bin)
+    np.save(tmp_path / "ranges.npy", ranges)
+    with pytest.raises(EvaluateError, match="--min-score: a .npy of ranges holds no scores"):
+        spadgen.evaluate(run, tmp_path / "ranges.npy", min_score=10, out=tmp_path / "s", program=spadgen_bin)
+    for given in (ranges, tmp_path / "ranges.npy"):
+        for kwargs in ({"noise_free": True}, {"detector": "paper"}):
+            with pytest.raises(ValueError, match="with detections given, leave them out"):
+                spadgen.evaluate(run, given, out=tmp_path / "s", program=spadgen_bin, **kwargs)
+    r = subprocess.run([spadgen_bin, "evaluate", str(run.path), "--detections", str(tmp_path / "ranges.npy"), "--noise-free",
+                        "-o", str(tmp_path / "s")], capture_output=True, text=True)
+    assert r.returncode == 1 and "--detections excludes --noise-free" in r.stderr, r.stderr
+    assert not (tmp_path / "s").exists()
     with pytest.raises(FileNotFoundError, match="no such executable file"):
         spadgen.evaluate(run.path, program=tmp_path / "no_such_program")
     (tmp_path / "not_executable").write_text("")
