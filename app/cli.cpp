@@ -92,7 +92,7 @@ int run_command(const std::function<void()>& command, const std::string& name) {
     return kExitOk;
   } catch (const Interrupted& e) {
     // The message of throw_if_interrupted (core/error.h) says "the run": another command is named.
-    std::string message = e.what();
+    std::string message = scenes::one_line(e.what());
     const std::string run = "the run stopped and wrote nothing";
     if (const size_t at = message.find(run); at != std::string::npos && !name.empty() && name != "run")
       message.replace(at, 7, "spadgen " + name);
@@ -101,7 +101,8 @@ int run_command(const std::function<void()>& command, const std::string& name) {
   } catch (const Error& e) {
     // A file that failed while being written lies in the output folder's staging folder (hidden, beside
     // it): said so, with what became of the output folder.
-    const std::string what = e.what();
+    // (one line: a path holding a newline split the message, and a script reading the last line lost it)
+    const std::string what = scenes::one_line(e.what());
     const bool staged = what.find(".spadgen-staging-") != std::string::npos && what.find("cannot publish") == std::string::npos;
     const std::string moved = staging_parent_moved();
     const std::string where =
@@ -113,7 +114,7 @@ int run_command(const std::function<void()>& command, const std::string& name) {
   } catch (const std::filesystem::filesystem_error& e) {
     // The file system's refusal (a path in a folder that is gone, permissions): the environment's, not a bug.
     const bool cwd_gone = current_folder_error() == std::errc::no_such_file_or_directory;
-    std::fprintf(stderr, "spadgen: error: %s%s\n", e.what(),
+    std::fprintf(stderr, "spadgen: error: %s%s\n", scenes::one_line(e.what()).c_str(),
                  cwd_gone ? " (the current folder no longer exists: run from one that does, or give absolute paths)" : "");
     return kExitBadInput;
   } catch (const std::system_error& e) {
@@ -132,7 +133,8 @@ int run_command(const std::function<void()>& command, const std::string& name) {
                          "(spadgen info shows the sizes of a run)\n");
     return kExitBadInput;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "spadgen: internal error: %s (a bug in spadgen; please report it with the command line)\n", e.what());
+    std::fprintf(stderr, "spadgen: internal error: %s (a bug in spadgen; please report it with the command line)\n",
+                 scenes::one_line(e.what()).c_str());
     return kExitInternal;
   }
 }

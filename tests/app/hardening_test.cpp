@@ -576,6 +576,14 @@ TEST_F(Hardening, CommandLineErrorsAreSpadgensWithExitCode1) {
   expect_exit(spadgen("info --set camera.width_px=1000 " + kFlat), 0, "info --set K=V SCENE");
   const Outcome sense = spadgen("sense --set sensor.dark_counts=false " + dir_.string());
   EXPECT_THAT(sense.err, Not(HasSubstr("run_dir is required"))) << sense.err;
+  // A message naming a path that holds a newline stays on one line (the scene's error split in two: a script
+  // reading the last line of stderr lost it)
+  fs::create_directories(dir_ / "we\nird");
+  std::ofstream(dir_ / "we\nird/s.json") << "{";
+  const Outcome split = spadgen("run '" + (dir_ / "we\nird/s.json").string() + "' -q -o " + (dir_ / "split").string());
+  expect_exit(split, 1, "a path with a newline");
+  EXPECT_THAT(split.err, HasSubstr("we\\nird/s.json:1:2: not valid JSON"));
+  EXPECT_EQ(std::count(split.err.begin(), split.err.end(), '\n'), 1) << split.err;
 }
 
 TEST_F(Hardening, GltfPathsThatAreNotGltfFilesAreNamed) {
