@@ -9,6 +9,7 @@
 #include <glm/glm.hpp>
 
 #include "core/units.h"
+#include "scenes/input.h"
 #include "render/embree_scene.h"
 
 namespace spadgen::app {
@@ -32,7 +33,9 @@ bool warnings_silent = false;
 }  // namespace
 
 void print_warning(const std::string& warning) {
-  if (!warnings_silent) std::fprintf(stderr, "spadgen: warning: %s%s\n", warning_context.c_str(), warning.c_str());
+  // (one line, as the errors: a path holding a newline split it)
+  if (!warnings_silent)
+    std::fprintf(stderr, "spadgen: warning: %s%s\n", warning_context.c_str(), scenes::one_line(warning).c_str());
 }
 
 WarningContext::WarningContext(std::string context, bool silent)
