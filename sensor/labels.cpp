@@ -80,15 +80,25 @@ ObjectLabelsTile object_labels(const SensorModel& sensor, const GroundTruthTile&
       other = std::min(k, size_t(kEdgeGates));
     }
     const double lambda = s.rate[k * n + i];
-    // The rate without the object, never below 0, and 0 within what own[k] is known to: the neighbours'
-    // crosstalk is theirs taken as this pixel's (their gate skew and PDP differ), and lambda is float. A
-    // bright return's lambda is large: a difference of a fraction of it would leave "without" at several
-    // avalanches per frame and no edge at all (1e7 mW: none).
+    // The rate without the object, never below 0. Within what own[k] is known to (the neighbours' crosstalk is
+    // theirs taken as this pixel's: their gate skew and PDP differ; lambda is float), the difference is noise: a
+    // bright return's lambda is large, and a fraction of it left "without" at several avalanches per frame and no
+    // edge at all (1e7 mW: none). There it is the pixel's background instead: its least rate over the sweep
+    // (dark counts and ambient light, where no object is in the gate), at most that tolerance. (It was 0: a
+    // saturating background under a bright return was dropped, and a step of N labelled where the counts are
+    // N throughout: an auditor's find.)
     double without = std::max(0.0, lambda - own[k]);
-    if (without <= (sensor.crosstalk_share(returns[ri].x, returns[ri].y) + 0x1p-22) * own[k]) without = 0.0;
+    if (const double tolerance = (sensor.crosstalk_share(returns[ri].x, returns[ri].y) + 0x1p-22) * own[k]; without <= tolerance) {
+      double background = tolerance;
+      for (size_t j = 0; j < K; ++j) background = std::min(background, double(s.rate[j * n + i]));
+      without = std::max(0.0, background);
+    }
+    // 1 - p as exp(-lambda), not 1 - (1 - exp(-lambda)), which is 0 from lambda = 37 on: a saturating background
+    // (17,000 lux) gave noise 0 and an edge of 1e-17 counts an infinite SNR, detectable.
+    const double q1 = std::exp(-lambda), q0 = std::exp(-without);
     const double p1 = -std::expm1(-lambda), p0 = -std::expm1(-without);
-    const double edge = N * (std::exp(-without) - std::exp(-lambda));
-    const double noise = std::sqrt(N * p1 * (1.0 - p1) / double(with) + N * p0 * (1.0 - p0) / double(other));
+    const double edge = N * (q0 - q1);
+    const double noise = std::sqrt(N * p1 * q1 / double(with) + N * p0 * q0 / double(other));
     // no noise either side (counts certain to be 0 and N): the step is certain, infinitely above the noise
     const double snr = noise > 0.0 ? edge / noise : edge > 0.0 ? std::numeric_limits<double>::infinity() : 0.0;
     out.edge_counts[e] = static_cast<float>(edge);

@@ -104,6 +104,51 @@ TEST_F(App, LabelsOfABrightTargetAndOfTheSameTargetTenThousandTimesDimmer) {
   RecordProperty("worst_relative_edge_error", std::to_string(worst));
 }
 
+// A background that saturates the counts (every count N): no object is detectable, and the label says so with
+// the edge and SNR computed here from detection_rate.npy with 1 - p as exp(-lambda). At 20,000 lux (lambda 48
+// per frame) 1 - p was computed as 0: noise 0, an edge of 1e-18 counts infinitely above it, every pixel
+// "detectable"; under a 1e9 mW return with 1e5 lux the background was dropped as crosstalk noise, and a step
+// of N labelled (an auditor's finds).
+TEST_F(App, LabelsUnderASaturatingBackgroundAreNotDetectable) {
+  const std::string base = kScenes + "flat_target.json -q --set camera.crop=[504,244,16,12] --set render.samples_per_pixel=4 "
+                           "--set sensor.crosstalk=false --set ambient.illuminance_lux=20000";
+  ASSERT_EQ(sh("run " + base + " -o " + (dir_ / "day").string()).code, 0);
+  ASSERT_EQ(sh("run " + base + " --set laser.average_power_mW=0 -o " + (dir_ / "day_dark").string()).code, 0);
+  const double N = nlohmann::json::parse(slurp(dir_ / "day/metadata.json"))["acquisition"]["frames_per_k"].get<double>();
+  const Npy rate = read_npy(dir_ / "day/detection_rate.npy"), dark = read_npy(dir_ / "day_dark/detection_rate.npy");
+  const std::vector<double> lam = values(rate), lam0 = values(dark), counts = values(read_npy(dir_ / "day/counts.npy"));
+  EXPECT_EQ(*std::min_element(counts.begin(), counts.end()), N);  // (no edge in the counts)
+  const size_t K = size_t(rate.shape[0]), n = size_t(rate.shape[1] * rate.shape[2]);
+  const auto day = read_exr((dir_ / "day/labels.exr").string()).channels;
+  for (size_t i = 0; i < n; ++i) {
+    ASSERT_EQ(day.at("object0.id")[i], 0.0f);
+    EXPECT_EQ(day.at("object0.detectable")[i], 0.0f) << i;
+    std::vector<double> own(K);
+    for (size_t k = 0; k < K; ++k) own[k] = lam[k * n + i] - lam0[k * n + i];
+    const double peak = *std::max_element(own.begin(), own.end());
+    size_t ks = 0;
+    while (own[ks] < 0.95 * peak) ++ks;
+    const double l1 = lam[ks * n + i], l0 = lam0[ks * n + i];
+    const double edge = N * std::exp(-l0) * -std::expm1(-(l1 - l0));
+    const double noise = std::sqrt(N * (-std::expm1(-l1) * std::exp(-l1) + -std::expm1(-l0) * std::exp(-l0)) / 12.0);
+    ASSERT_GT(edge, 0.0);
+    EXPECT_NEAR(day.at("object0.edge_counts")[i], edge, 1e-3 * edge) << i;
+    EXPECT_NEAR(day.at("object0.edge_snr")[i], edge / noise, 1e-3 * edge / noise) << i;
+    EXPECT_LT(day.at("object0.edge_snr")[i], 1e-6) << i;
+  }
+  // A return far brighter than the saturating background (the background within its crosstalk tolerance)
+  ASSERT_EQ(sh("run " + kScenes + "flat_target.json -q --set camera.crop=[504,244,16,12] --set render.samples_per_pixel=4 "
+               "--set laser.average_power_mW=1e9 --set ambient.illuminance_lux=1e5 --set acquisition.gate_sweep.start_ns=5 "
+               "--set acquisition.gate_sweep.stop_ns=9 -o " + (dir_ / "sun").string()).code, 0);
+  const auto sun = read_exr((dir_ / "sun/labels.exr").string()).channels;
+  const std::vector<double> sun_counts = values(read_npy(dir_ / "sun/counts.npy"));
+  EXPECT_EQ(*std::min_element(sun_counts.begin(), sun_counts.end()), N);
+  for (size_t i = 0; i < n; ++i) {
+    EXPECT_EQ(sun.at("object0.detectable")[i], 0.0f) << i;
+    EXPECT_LT(sun.at("object0.edge_counts")[i], 1e-6f) << i;  // N (e^-235 - e^-8e7)
+  }
+}
+
 // A sweep that begins on the target's plateau (its rise before the first gate position) labels it by its
 // falling edge, from the last position on the plateau (it was labelled by a rise the counts do not hold:
 // k* = 0); a sweep that covers neither edge labels it with no edge at all.
