@@ -83,6 +83,20 @@ std::optional<int> parse_command_line(CLI::App& cli, int argc, char** argv) {
 
 void note_stdout_closed() { stdout_closed = true; }
 
+namespace {
+// An error's message on one line (a path holding a newline split it, and a script reading stderr's last line
+// lost it), but for the lists of mistakes of a scene or dataset file, one per line as they are built (each
+// on one line already).
+std::string printable_error(const std::string& what) {
+  for (const char* list : {" errors in the scene file:\n", " errors in the dataset file:\n"})
+    if (const size_t at = what.find(list); at != std::string::npos) {
+      const size_t rest = at + std::strlen(list);
+      return scenes::one_line(what.substr(0, rest - 1)) + "\n" + what.substr(rest);
+    }
+  return scenes::one_line(what);
+}
+}  // namespace
+
 int run_command(const std::function<void()>& command, const std::string& name) {
   try {
     command();
@@ -101,8 +115,7 @@ int run_command(const std::function<void()>& command, const std::string& name) {
   } catch (const Error& e) {
     // A file that failed while being written lies in the output folder's staging folder (hidden, beside
     // it): said so, with what became of the output folder.
-    // (one line: a path holding a newline split the message, and a script reading the last line lost it)
-    const std::string what = scenes::one_line(e.what());
+    const std::string what = printable_error(e.what());
     const bool staged = what.find(".spadgen-staging-") != std::string::npos && what.find("cannot publish") == std::string::npos;
     const std::string moved = staging_parent_moved();
     const std::string where =

@@ -59,7 +59,10 @@ struct Reader {
     if (errors.empty()) return;
     if (errors.size() == 1) throw Error(errors.front());
     std::string out = std::to_string(errors.size()) + " errors in the dataset file:";
-    for (const std::string& e : errors) out += "\n" + e;
+    for (const std::string& e : errors) {  // (one per line: run_command keeps them)
+      out += '\n';
+      out += scenes::one_line(e);
+    }
     throw Error(out);
   }
   double number(const json& v, const std::string& where, const std::string& expected) const {

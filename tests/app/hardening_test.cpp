@@ -584,6 +584,20 @@ TEST_F(Hardening, CommandLineErrorsAreSpadgensWithExitCode1) {
   expect_exit(split, 1, "a path with a newline");
   EXPECT_THAT(split.err, HasSubstr("we\\nird/s.json:1:2: not valid JSON"));
   EXPECT_EQ(std::count(split.err.begin(), split.err.end(), '\n'), 1) << split.err;
+  // ... but a scene or dataset file's mistakes are listed one per line, as built (they were run into one line
+  // of "\n"s; an auditor's find)
+  const Outcome two = spadgen("run " + kTiny + " --set render.samples_per_pixl=2 --set laser.average_power_mW=-1 -o " +
+                              (dir_ / "two").string());
+  expect_exit(two, 1, "two mistakes");
+  EXPECT_THAT(two.err, HasSubstr("spadgen: error: 2 errors in the scene file:\n"));
+  EXPECT_THAT(two.err, HasSubstr("\n--set laser.average_power_mW: "));
+  EXPECT_EQ(std::count(two.err.begin(), two.err.end(), '\n'), 3) << two.err;
+  std::ofstream(dir_ / "d.json") << "{\"scenes\": [\"" << kScenes << "flat_target.json\"], \"sample\": 1, \"seed\": -1}";
+  const Outcome listed = spadgen("dataset plan " + (dir_ / "d.json").string());
+  expect_exit(listed, 1, "dataset file mistakes");
+  EXPECT_THAT(listed.err, HasSubstr(" errors in the dataset file:\n" + (dir_ / "d.json").string() + ": "));
+  EXPECT_GE(std::count(listed.err.begin(), listed.err.end(), '\n'), 3) << listed.err;
+  EXPECT_THAT(listed.err, Not(HasSubstr("\\n"))) << listed.err;
 }
 
 TEST_F(Hardening, GltfPathsThatAreNotGltfFilesAreNamed) {
