@@ -376,8 +376,12 @@ class Run:
         """How to make the run's files again: its scene, or for a dataset's sample the dataset run (which finds
         the sample damaged and generates it again)."""
         if isinstance(self.metadata.get("dataset"), dict):
-            return (f"run `spadgen dataset run {self.metadata['dataset'].get('dataset_file', 'DATASET.json')} -o DIR` on "
-                    "its dataset folder again (the sample is damaged: it is generated again)")
+            # the dataset folder, where the sample sits in its samples/ (as it was written); else said as DIR
+            samples = os.path.dirname(os.path.abspath(self.path))
+            folder = os.path.dirname(samples)
+            known = os.path.basename(samples) == "samples" and os.path.isfile(os.path.join(folder, "dataset.json"))
+            return (f"run `spadgen dataset run {self.metadata['dataset'].get('dataset_file', 'DATASET.json')} -o "
+                    f"{folder if known else 'DIR'}` on its dataset folder again (the sample is damaged: it is generated again)")
         return "run the scene again"
 
     def unchanged(self):

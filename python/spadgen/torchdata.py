@@ -162,7 +162,9 @@ class _RunSamples(torch.utils.data.Dataset):
         if len(ks) > 1:
             first = {k: next(r.path for r in runs_ if r.K == k) for k in sorted(ks)}
             raise ValueError(f"the runs have different K ({', '.join(f'{k} in {p}' for k, p in first.items())}, ...): "
-                             "their samples cannot share a batch")
+                             "their samples cannot share a batch; make one per K (of a dataset, DatasetSamples(ds.select(...)) "
+                             "of the samples of one K, by the parameter that sets it: the scene, the sweep's start, stop "
+                             "or step, the exposure)")
         if "frames" in self.fields and len({r.frames_per_k for r in runs_}) > 1:
             first = {n: next(r.path for r in runs_ if r.frames_per_k == n) for n in sorted({r.frames_per_k for r in runs_})}
             raise ValueError(f"the runs have different frames per k ({', '.join(f'{n} in {p}' for n, p in first.items())}, "

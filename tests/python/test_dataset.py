@@ -5,6 +5,7 @@ errors, and DatasetSamples' layout, length, values and DataLoader batches."""
 import csv
 import json
 import math
+import os
 import subprocess
 
 import numpy as np
@@ -217,6 +218,22 @@ def test_errors_name_the_folder(ds, dataset_dir, tmp_path, sweep_run, spadgen_bi
         r = subprocess.run([spadgen_bin, "dataset", "run", str(tmp_path / "d.json"), "-o", str(tmp_path / "unfinished"), "-q"],
                            capture_output=True, text=True)
         assert r.returncode != 0 and "dataset.json is damaged" in r.stderr and "restore it" in r.stderr, r.stderr
+
+
+def test_a_damaged_samples_remedy_names_its_dataset_folder(dataset_dir, tmp_path):
+    """A done sample's file lost: the remedy is the dataset run into that dataset's folder, named (it said
+    `-o DIR`, the folder known)."""
+    import shutil
+    copy = tmp_path / "ds"
+    shutil.copytree(dataset_dir, copy, symlinks=True)
+    os.remove(copy / "samples" / "000001_r01" / "counts.npy")
+    with pytest.raises(FileNotFoundError, match=f"counts.npy: listed in .* but missing: restore it, or run `spadgen dataset "
+                                                f"run .*d.json -o {copy}` on its dataset folder again"):
+        spadgen.open_dataset(copy).sample(1).repeats[0].counts
+    # a sample's folder alone (outside a dataset folder): DIR, as the folder is not known
+    shutil.copytree(copy / "samples" / "000001_r01", tmp_path / "alone")
+    with pytest.raises(FileNotFoundError, match=r"-o DIR` on its dataset folder again"):
+        spadgen.open_run(tmp_path / "alone").counts
 
 
 def test_a_damaged_index_is_refused_naming_its_row(dataset_dir, tmp_path):

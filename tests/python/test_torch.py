@@ -196,7 +196,8 @@ def test_data_loader_batches_and_a_training_step(sweep_run, sweep):
 
 def test_runs_that_cannot_share_a_batch_are_refused(sweep_run, make_run, spadgen_bin, tmp_path):
     posed = make_run("posed")
-    with pytest.raises(ValueError, match="different K"):
+    with pytest.raises(ValueError, match=r"different K .*cannot share a batch; make one per K \(of a dataset, "
+                                         r"DatasetSamples\(ds.select\(...\)\)"):
         RunDataset([sweep_run, posed])
     with pytest.raises(ValueError, match=r"needs frames, which this run did not write \(written with outputs.frames\)"):
         RunDataset([posed], fields=("frames",))
