@@ -1491,6 +1491,23 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
     warn(who + ": has no triangles; skipped");
     return;
   }
+  // Triangles that all have no area are not seen: said, with the likely cause (a POSITION accessor without a
+  // bufferView reads as zeros; the mesh vanished, and the run said only that nothing was in view: an
+  // auditor's find).
+  bool flat = true;
+  for (size_t t = 0; flat && t + 2 < out.indices.size(); t += 3) {
+    const glm::vec3 a = out.positions[out.indices[t]], b = out.positions[out.indices[t + 1]], c = out.positions[out.indices[t + 2]];
+    flat = glm::cross(b - a, c - a) == glm::vec3(0.0f);
+  }
+  if (flat) {
+    const tinygltf::Accessor& a = m_.accessors[static_cast<size_t>(pos_it->second)];
+    warn(who + ": none of its " + std::to_string(out.indices.size() / 3) + " triangles has an area (their vertices " +
+         "coincide or lie on a line), so it is not seen" +
+         (a.bufferView < 0 && !a.sparse.isSparse
+              ? " (its POSITION " + label("accessor", static_cast<size_t>(pos_it->second), a.name) +
+                    " has no bufferView: glTF 2.0 reads it as zeros)"
+              : std::string()));
+  }
   scene_.meshes.push_back(std::move(out));
 }
 
@@ -2166,6 +2183,16 @@ void check_before_tinygltf(const std::string& path, const nlohmann::json& doc, b
         if ((*prims)[j].is_object()) {
           compressed(who + " primitive " + std::to_string(j), (*prims)[j], "KHR_draco_mesh_compression");
           reference(who + " primitive " + std::to_string(j), (*prims)[j], "indices", "accessors", "accessor");
+          // Indices without a bufferView: glTF 2.0 reads them as zeros (every triangle degenerate), and tinygltf
+          // refused the file with "accessor[1] invalid bufferView", naming no mesh (an auditor's find).
+          if (const auto ix = (*prims)[j].find("indices"); ix != (*prims)[j].end() && ix->is_number_integer()) {
+            const nlohmann::json& a = doc["accessors"][ix->get<size_t>()];
+            if (a.is_object() && !a.contains("bufferView"))
+              throw Error(path + ": " + who + " primitive " + std::to_string(j) + ": its indices are " +
+                          label("accessor", ix->get<size_t>(), a.value("name", std::string())) +
+                          ", which has no bufferView: glTF 2.0 reads it as zeros, so every triangle would be one point; "
+                          "expected indices with a bufferView, or none (the vertices in order)");
+          }
         }
   });
   const std::filesystem::path dir = std::filesystem::path(path).parent_path();

@@ -301,8 +301,8 @@ TEST(GltfLoader, QuantizedPositionsAndByteStrides) {
   // BYTE normalized, each VEC3 padded to the 4-byte stride vertex attributes need.
   const int b = g.accessor(g.view_of(std::vector<int8_t>{127, -127, 0, 0, 0, 127, 0, 0, -128, 64, 0, 0}, 4), kByte,
                            "VEC3", 3, 0, true);
-  // UNSIGNED_BYTE unnormalized.
-  const int ub = g.accessor(g.view_of(std::vector<uint8_t>{1, 2, 3, 0, 4, 5, 6, 0, 7, 8, 9, 0}, 4), kUByte, "VEC3", 3);
+  // UNSIGNED_BYTE unnormalized (not on a line: a triangle without area is warned of).
+  const int ub = g.accessor(g.view_of(std::vector<uint8_t>{1, 2, 3, 0, 4, 5, 6, 0, 7, 8, 10, 0}, 4), kUByte, "VEC3", 3);
   // SHORT normalized, stride 8.
   const int sh = g.accessor(g.view_of(std::vector<int16_t>{32767, 0, -32768, 0, 0, 16384, 0, 0, 0, 0, 32767, 0}, 8),
                             kShort, "VEC3", 3, 0, true);
@@ -321,7 +321,7 @@ TEST(GltfLoader, QuantizedPositionsAndByteStrides) {
   ASSERT_EQ(s.meshes.size(), 5u);
   expect_vec(s.meshes[0].positions[0], {1, -1, 0});
   expect_vec(s.meshes[0].positions[2], {-1, 64 / 127.0, 0});  // -128 clamps to -1
-  expect_vec(s.meshes[1].positions[2], {7, 8, 9});
+  expect_vec(s.meshes[1].positions[2], {7, 8, 10});
   expect_vec(s.meshes[2].positions[0], {1, 0, -1});
   expect_vec(s.meshes[2].positions[1], {0, 16384 / 32767.0, 0});
   expect_world(s.meshes[3], 1, {0, 2000, 0});  // measured from the grid point near its centre (Mesh::offset)
@@ -1950,6 +1950,36 @@ TEST_F(BrokenGltf, DracoIsNamedBeforeTinygltfParsesTheAccessors) {
   const std::string msg = error_of(g);
   EXPECT_THAT(msg, HasSubstr(path_ + ": extension 'KHR_draco_mesh_compression' is listed in extensionsRequired but "
                                      "spadgen does not support it (compressed meshes: export the file without mesh compression)"));
+}
+
+// Accessors without a bufferView read as zeros (glTF 2.0): indices so were refused by tinygltf's bare "accessor[1]
+// invalid bufferView", naming no mesh; positions so made the mesh vanish, the run saying only that nothing was
+// in view. Named, with the cause (an auditor's finds); a mesh whose triangles have area is not warned of.
+TEST_F(BrokenGltf, AccessorsWithoutABufferViewAreZerosNamedAsSuch) {
+  Gltf g;
+  g.node({{"mesh", g.triangle_mesh("Tri")}});
+  g.doc["accessors"][2].erase("bufferView");  // the indices
+  EXPECT_THAT(error_of(g), HasSubstr(path_ + ": mesh 0 'Tri' primitive 0: its indices are accessor 2, which has no bufferView: "
+                                             "glTF 2.0 reads it as zeros, so every triangle would be one point"));
+  Gltf h;
+  h.node({{"mesh", h.triangle_mesh("Tri")}});
+  h.doc["accessors"][0].erase("bufferView");  // the positions
+  path_ = h.write(dir_.path(), "zeros");
+  const Scene zeros = spadgen::scenes::load_gltf(path_);
+  EXPECT_TRUE(has_warning(zeros, "mesh 0 'Tri' primitive 0: none of its 1 triangles has an area (their vertices coincide or lie on "
+                                 "a line), so it is not seen (its POSITION accessor 0 has no bufferView: glTF 2.0 reads it as zeros)"));
+  // three points on a line, from a bufferView: the same, without the accessor's cause
+  Gltf line;
+  const int pos = line.positions({0, 0, 0, 1, 0, 0, 2, 0, 0});
+  line.node({{"mesh", line.mesh(json::array({{{"attributes", {{"POSITION", pos}}}}}), "Line")}});
+  path_ = line.write(dir_.path(), "line");
+  const Scene on_a_line = spadgen::scenes::load_gltf(path_);
+  EXPECT_TRUE(has_warning(on_a_line, "mesh 0 'Line' primitive 0: none of its 1 triangles has an area"));
+  EXPECT_FALSE(has_warning(on_a_line, "no bufferView"));
+  Gltf fine;
+  fine.node({{"mesh", fine.triangle_mesh()}});
+  path_ = fine.write(dir_.path(), "fine");
+  EXPECT_TRUE(spadgen::scenes::load_gltf(path_).warnings.empty());
 }
 
 // Listed in extensionsUsed only (glTF-Transform writes it so), a Draco primitive loaded as zero positions
