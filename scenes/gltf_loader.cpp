@@ -394,6 +394,11 @@ std::vector<int> Loader::pick_roots(const std::string& scene_name) {
     if (!scene_name.empty())
       throw EditError("gltf_scene", scene_name, "/gltf_scene: the glTF file " + path_ + " has no scene named " +
                                                     quoted(scenes::printable(scene_name)) + ": it has no scenes");
+    // A default scene that does not exist is refused, with scenes or without (without, it was loaded as the
+    // root nodes, unsaid: an auditor's find)
+    if (m_.defaultScene >= 0)
+      throw Error(path_ + ": scene " + std::to_string(m_.defaultScene) + " (the default scene) does not exist; the file has "
+                  "no scenes");
     // Without scenes the specification leaves the file's content unspecified: load every root node
     // rather than nothing, and say so.
     if (!m_.nodes.empty()) warn("the file has no scenes; every root node is loaded");

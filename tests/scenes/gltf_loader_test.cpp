@@ -1156,6 +1156,19 @@ TEST(GltfLoader, DefaultAndNamedScenes) {
   g.doc["scenes"][1]["name"] = "first";
   const std::string twice = g.write(dir.path(), "scenes_twice");
   EXPECT_THAT(load_error(twice, "first"), HasSubstr("/gltf_scene: the glTF file " + twice + " has two scenes named 'first' (scenes 0 and 1)"));
+  // a default scene that does not exist: refused with scenes and without (without, the root nodes were loaded,
+  // unsaid); no default and no scenes: every root node, said
+  g.doc["scene"] = 3;
+  const std::string dangling = g.write(dir.path(), "dangling");
+  EXPECT_THAT(load_error(dangling), HasSubstr(dangling + ": scene 3 (the default scene) does not exist; the file has 2 scenes"));
+  g.doc.erase("scenes");
+  g.doc["scene"] = 0;
+  const std::string none = g.write(dir.path(), "none");
+  EXPECT_THAT(load_error(none), HasSubstr(none + ": scene 0 (the default scene) does not exist; the file has no scenes"));
+  g.doc.erase("scene");
+  const Scene roots = load_gltf(g.write(dir.path(), "roots"));
+  EXPECT_EQ(roots.meshes.size(), 2u);
+  EXPECT_TRUE(has_warning(roots, "the file has no scenes; every root node is loaded"));
 }
 
 // ---------------------------------------------------------------------------------------------
