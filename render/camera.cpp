@@ -29,12 +29,7 @@ Camera::Camera(const CameraConfig& c, const scenes::Scene& scene, const glm::dve
                       " is orthographic; spadgen models a lens (a perspective camera): choose a perspective one, or "
                       "place the camera with camera.position_m and camera.look_at_m");
       std::string names;
-      bool unnamed = false;
-      for (const scenes::Camera& cam : scene.cameras) {
-        if (cam.name.empty()) unnamed = true;
-        else names += (names.empty() ? "'" : ", '") + cam.name + "'";
-      }
-      if (unnamed) names += std::string(names.empty() ? "" : ", and ") + "unnamed ones (name a camera's node in the glTF to choose it)";
+      for (const scenes::Camera& cam : scene.cameras) names += (names.empty() ? "'" : ", '") + cam.name + "'";
       throw KeyError("/camera/gltf_camera", "no perspective camera named '" + c.gltf_camera + "' in " + scene.source +
                   " (cameras: " + (names.empty() ? "none" : names) + ")" + scene.not_loaded_note(c.gltf_camera));
     }

@@ -1537,7 +1537,7 @@ void Loader::load_camera(size_t node, const glm::dmat4& world) {
   const std::string who = label("camera", static_cast<size_t>(n.camera), c.name) + " (" + node_label(m_, node) + ")";
   if (c.type == "orthographic") {
     warn(who + ": orthographic cameras are not used by spadgen; skipped");
-    scene_.orthographic_cameras.push_back(!n.name.empty() ? object_name(node) : c.name);
+    scene_.orthographic_cameras.push_back(!n.name.empty() ? object_name(node) : !c.name.empty() ? c.name : "node" + std::to_string(node));
     return;
   }
   if (c.type != "perspective") fail(who, "type " + quoted(c.type) + " is neither perspective nor orthographic");
@@ -1547,7 +1547,8 @@ void Loader::load_camera(size_t node, const glm::dmat4& world) {
   if (!(aspect >= 0) || !std::isfinite(aspect))
     fail(who, "aspectRatio " + num(aspect) + " must be > 0");
   Camera cam;
-  cam.name = !n.name.empty() ? object_name(node) : c.name;
+  // (neither named: the node's generated name, as an unnamed mesh's node has, "node3": it could not be chosen)
+  cam.name = !n.name.empty() ? object_name(node) : !c.name.empty() ? c.name : "node" + std::to_string(node);
   cam.where = who;
   cam.yfov_rad = yfov;
   cam.aspect_ratio = aspect;
@@ -1581,7 +1582,8 @@ void Loader::load_light(size_t node, const glm::dmat4& world) {
   const tinygltf::Light& g = m_.lights[static_cast<size_t>(li)];
   const std::string who = label("light", static_cast<size_t>(li), g.name) + " (" + nwho + ")";
   Light l;
-  l.name = !n.name.empty() ? object_name(node) : g.name;
+  // (neither named: the node's generated name, as an unnamed mesh's node has, so that it can be chosen)
+  l.name = !n.name.empty() ? object_name(node) : !g.name.empty() ? g.name : "node" + std::to_string(node);
   l.where = who;
   if (g.type == "point")
     l.type = Light::Type::Point;

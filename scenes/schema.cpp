@@ -377,7 +377,7 @@ std::vector<Key> build() {
   k.push_back(integer("/seeds/chip", FIELD(seeds.chip), kNone, closed(0, double(kMaxSeed)), "seed of the chip's fixed pattern (gate skew and length maps, DCR population, PDP non-uniformity: sensor_maps.exr); null = seed"));
   k.push_back(integer("/seeds/noise", FIELD(seeds.noise), kNone, closed(0, double(kMaxSeed)), "seed of the temporal noise (binary frames, counts, crosstalk draws); null = seed"));
 
-  k.push_back(string("/camera/gltf_camera", FIELD(camera.gltf_camera), "name of a glTF camera node to use instead of position/look_at/up and focal_length_mm (its field of view, unless vertical_fov_deg is set); \"\" = defined here"));
+  k.push_back(string("/camera/gltf_camera", FIELD(camera.gltf_camera), "name of a glTF camera node to use instead of position/look_at/up and focal_length_mm (its field of view, unless vertical_fov_deg is set); a node without a name, whose camera has none: node<index>, e.g. node3; \"\" = defined here"));
   k.push_back(vec3("/camera/position_m", FIELD(camera.position_m), kMetre, kWorld, "camera centre (world, glTF frame: +Y up)"));
   k.push_back(vec3("/camera/look_at_m", FIELD(camera.look_at_m), kMetre, kWorld, "point the optical axis passes through"));
   k.push_back(vec3("/camera/up", FIELD(camera.up), kNone, kWorld, "up direction (world); need not be orthogonal to the axis"));
@@ -399,7 +399,7 @@ std::vector<Key> build() {
   k.push_back(choice("/laser/beam", FIELD(laser.beam), "flood: uniform over a cone just covering the field of view; cone: uniform over half_angle_deg; gltf_light: a KHR_lights_punctual light of the scene"));
   k.push_back(number("/laser/half_angle_deg", FIELD(laser.half_angle_rad), kDegree, open_closed(0, 180), "half-angle of the beam when beam is \"cone\""));
   k.push_back(vec3("/laser/offset_m", FIELD(laser.offset_m), kMetre, kWorld, "emitter position relative to the camera centre, in camera coordinates (x right, y up, -z forward)"));
-  k.push_back(string("/laser/gltf_light", FIELD(laser.gltf_light), "name of the glTF light used as the laser when beam is \"gltf_light\""));
+  k.push_back(string("/laser/gltf_light", FIELD(laser.gltf_light), "name of the glTF light used as the laser when beam is \"gltf_light\" (its node's; unnamed: the light's, else node<index>)"));
 
   k.push_back(number("/ambient/illuminance_lux", FIELD(ambient.illuminance_lux), plain("lux"), closed(0, 1e6), "uniform environment illuminance (equal-energy spectrum); see docs/scene-file.md for the conversion"));
   k.push_back(number("/ambient/spectral_irradiance_W_m2_nm", FIELD(ambient.spectral_irradiance_W_m2_nm), plain("W/m^2/nm"), closed(0, 1e3), "the uniform environment in radiometric units (irradiance per nm on a surface facing it, flat over the band); null = from illuminance_lux"));

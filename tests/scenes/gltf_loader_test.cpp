@@ -1003,6 +1003,26 @@ TEST(GltfLoader, CamerasWithNodeTransforms) {
   EXPECT_THAT(spadgen::scenes::summarize(s), HasSubstr("'Cam': yfov 28.6479"));
 }
 
+// A camera or light on a node without a name, of no name itself, takes the node's generated name (node<index>, as
+// an unnamed mesh's node does): it could not be chosen at all (Khronos' Cameras.gltf; an auditor's find).
+TEST(GltfLoader, ACameraOrLightOfNoNameIsChosenByItsNodesIndex) {
+  TempDir dir;
+  Gltf g;
+  g.doc["cameras"] = {{{"type", "perspective"}, {"perspective", {{"yfov", 0.7}, {"znear", 0.01}}}}};
+  g.doc["extensionsUsed"] = {"KHR_lights_punctual"};
+  g.doc["extensions"] = {{"KHR_lights_punctual", {{"lights", {{{"type", "point"}, {"intensity", 1}}}}}}};
+  g.node({{"mesh", g.triangle_mesh()}});
+  g.node({{"camera", 0}, {"translation", {0, 0, 3}}});
+  g.node({{"extensions", {{"KHR_lights_punctual", {{"light", 0}}}}}, {"translation", {0, 1, 0}}});
+  const Scene s = load_gltf(g.write(dir.path(), "unnamed"));
+  const auto* c = s.find_camera("node1");
+  ASSERT_NE(c, nullptr);
+  EXPECT_NEAR(c->world_from_camera[3].z, 3.0, 1e-12);
+  const auto* l = s.find_light("node2");
+  ASSERT_NE(l, nullptr);
+  EXPECT_THAT(spadgen::scenes::summarize(s), HasSubstr("'node1': yfov"));
+}
+
 // A key twice in one object (a hand-merged file: a second "materials" replaced the first without a word):
 // read as glTF 2.0 asks (the later value), and said, with where.
 TEST(GltfLoader, AKeyTwiceInAnObjectIsReadAsTheLaterAndSaid) {
