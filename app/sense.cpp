@@ -67,7 +67,7 @@ constexpr const char* kPulseTable = "laser.pulse_shape_csv";
 
 bool sense_may_set(const std::string& written) {
   const std::string key = plain_key(written);
-  if (key == kPulseTable) return true;
+  if (key == kPulseTable || key == "description") return true;  // (description: free text, copied into metadata.json)
   for (const char* section : {"sensor.", "acquisition."})
     if (key.rfind(section, 0) == 0) return true;
   // whole keys or a component of one ("seeds.noiseX" is another key, which the schema refuses)
@@ -262,7 +262,7 @@ void write_rescaled_transient(const fs::path& from, const std::string& to, const
 // whether counts and frames are written.
 // (the tables by their content, sensor_tables_hash, not by where they are: a --set may give them moved)
 nlohmann::ordered_json noise_free_part(nlohmann::ordered_json resolved) {
-  std::vector<std::string> keys = {"/seeds/noise", "/outputs/counts", "/outputs/frames"};
+  std::vector<std::string> keys = {"/seeds/noise", "/outputs/counts", "/outputs/frames", "/description"};
   for (const scenes::SensorTable& t : scenes::sensor_tables(RunConfig{})) {  // (their keys: "sensor.gate.profile_csv")
     std::string pointer = "/" + t.key;
     std::replace(pointer.begin(), pointer.end(), '.', '/');

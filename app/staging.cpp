@@ -420,7 +420,9 @@ int take_folder_lock(const fs::path& lock_path, const fs::path& out, bool shared
       const std::string who = lock_holder(fd);
       ::close(fd);
       if (err == EWOULDBLOCK && shared)
-        throw FolderBusy(folder + " is being written by another spadgen run" +
+        // (a run writing it, or a reconstruct or evaluate that may write into it: "another spadgen run" was said of
+        // a reconstruct that only read it)
+        throw FolderBusy(folder + " is being written, or may be written into, by another spadgen process" +
                     (who.empty() ? std::string() : " (" + who + ")") + ", which holds " + lock_path.string() +
                     "; wait for it to finish");
       if (err == EWOULDBLOCK)

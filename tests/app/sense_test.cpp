@@ -191,6 +191,12 @@ TEST_F(App, SenseTakesATableMovedSinceTheRunFromSet) {
   EXPECT_THAT(r.output, Not(HasSubstr("have changed on disk")));
   for (const char* f : {"detection_rate.npy", "sensor_maps.exr", "labels.exr"})
     EXPECT_TRUE(fs::equivalent(dir_ / "run" / f, dir_ / "moved" / f)) << f;
+  // description is free text: taken, the same sensor (it was refused as a key that "shapes the rendered light")
+  r = sh("sense " + (dir_ / "run").string() + " -q --set description=resampled --set sensor.pixel_A.pdp_csv=" +
+         (dir_ / "now/pdp.csv").string() + " -o " + (dir_ / "described").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_TRUE(fs::equivalent(dir_ / "run/detection_rate.npy", dir_ / "described/detection_rate.npy"));
+  EXPECT_THAT(slurp(dir_ / "described/metadata.json"), HasSubstr("\"description\": \"resampled\""));
 
   // Two tables (pixel A's and B's PDP). Both moved, one given anew: the other is named, not the one given.
   const auto pdp = [](const fs::path& p, double v) { std::ofstream(p) << "wavelength_nm,pdp\n400," << v << "\n1000," << v << "\n"; };
@@ -467,7 +473,7 @@ TEST_F(App, SenseRefusesARunFolderBeingReplaced) {
   ASSERT_EQ(::flock(fd, LOCK_EX | LOCK_NB), 0);
   Result r = sh("sense " + (dir_ / "run").string() + " -q -o " + (dir_ / "s1").string());
   EXPECT_EQ(r.code, 1);
-  EXPECT_THAT(r.output, HasSubstr("the run folder " + (dir_ / "run").string() + " is being written by another spadgen run"));
+  EXPECT_THAT(r.output, HasSubstr("the run folder " + (dir_ / "run").string() + " is being written, or may be written into, by another spadgen process"));
   EXPECT_FALSE(fs::exists(dir_ / "s1"));
   // Another reader's shared lock does not stop it.
   ASSERT_EQ(::flock(fd, LOCK_SH | LOCK_NB), 0);
