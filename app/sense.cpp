@@ -466,15 +466,15 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   if (std::any_of(options.overrides.begin(), options.overrides.end(),
                   [](const std::string& o) { return plain_key(o.substr(0, scenes::assignment_split(o))) == kPulseTable; })) {
     const json::json_pointer recorded_at("/sensor_table_fnv1a64/laser.pulse_shape_csv");
-    const auto given = std::find_if(tables_read.tables.begin(), tables_read.tables.end(),
-                                    [](const scenes::SensorTable& t) { return t.key == kPulseTable; });
+    // (tables_read lists every table key, set or not)
+    const scenes::SensorTable& given = *std::find_if(tables_read.tables.begin(), tables_read.tables.end(),
+                                                     [](const scenes::SensorTable& t) { return t.key == kPulseTable; });
     const std::string recorded = meta.contains(recorded_at) && meta.at(recorded_at).is_string() ? meta.at(recorded_at).get<std::string>() : "";
-    if (given == tables_read.tables.end() || recorded.empty() || given->hash != recorded)
-      throw Error(std::string("--set ") + kPulseTable + ": " + (given == tables_read.tables.end() || given->path.empty() ? std::string("no table") : given->path) +
+    if (recorded.empty() || given.hash != recorded)
+      throw Error(std::string("--set ") + kPulseTable + ": " + (given.path.empty() ? std::string("no table") : given.path) +
                   (recorded.empty() ? " cannot be checked against the run's pulse (its metadata.json records no sensor_table_fnv1a64)"
-                                    : " is not the pulse the run rendered with (its contents hash to " +
-                                          (given == tables_read.tables.end() ? std::string("-") : given->hash) + ", the run's table to " + recorded +
-                                          ": metadata.json, sensor_table_fnv1a64)") +
+                                    : " is not the pulse the run rendered with (its contents hash to " + given.hash +
+                                          ", the run's table to " + recorded + ": metadata.json, sensor_table_fnv1a64)") +
                   "; the pulse sized the light's time window the run rendered, so sense takes the run's table moved, not "
                   "another: use spadgen run for another pulse");
   }

@@ -328,6 +328,7 @@ class Loader {
   void load_camera(size_t node, const glm::dmat4& world);
   void load_light(size_t node, const glm::dmat4& world);
   std::string object_name(size_t node) const;
+  std::string chosen_name(size_t node, const std::string& own) const;
 
   // Reads accessor `index` for `user` (the element that references it, for messages) as doubles,
   // count * components, after checking every byte it touches lies inside its view and buffer.
@@ -1516,6 +1517,14 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
   scene_.meshes.push_back(std::move(out));
 }
 
+// The name a scene file chooses a camera or light of node `node` by: the node's (object_name), else the camera's or
+// light's own, else the node's generated name, as an unnamed mesh's node has ("node3": one of no name could not be
+// chosen at all).
+std::string Loader::chosen_name(size_t node, const std::string& own) const {
+  if (!m_.nodes[node].name.empty()) return object_name(node);
+  return !own.empty() ? own : "node" + std::to_string(node);
+}
+
 // Blender's exporter puts each camera and light on an extra child node "<object>_Orientation"; users
 // know the object's name from the outliner, so that is the name the scene file refers to.
 std::string Loader::object_name(size_t node) const {
@@ -1537,7 +1546,7 @@ void Loader::load_camera(size_t node, const glm::dmat4& world) {
   const std::string who = label("camera", static_cast<size_t>(n.camera), c.name) + " (" + node_label(m_, node) + ")";
   if (c.type == "orthographic") {
     warn(who + ": orthographic cameras are not used by spadgen; skipped");
-    scene_.orthographic_cameras.push_back(!n.name.empty() ? object_name(node) : !c.name.empty() ? c.name : "node" + std::to_string(node));
+    scene_.orthographic_cameras.push_back(chosen_name(node, c.name));
     return;
   }
   if (c.type != "perspective") fail(who, "type " + quoted(c.type) + " is neither perspective nor orthographic");
@@ -1547,8 +1556,7 @@ void Loader::load_camera(size_t node, const glm::dmat4& world) {
   if (!(aspect >= 0) || !std::isfinite(aspect))
     fail(who, "aspectRatio " + num(aspect) + " must be > 0");
   Camera cam;
-  // (neither named: the node's generated name, as an unnamed mesh's node has, "node3": it could not be chosen)
-  cam.name = !n.name.empty() ? object_name(node) : !c.name.empty() ? c.name : "node" + std::to_string(node);
+  cam.name = chosen_name(node, c.name);
   cam.where = who;
   cam.yfov_rad = yfov;
   cam.aspect_ratio = aspect;
@@ -1582,8 +1590,7 @@ void Loader::load_light(size_t node, const glm::dmat4& world) {
   const tinygltf::Light& g = m_.lights[static_cast<size_t>(li)];
   const std::string who = label("light", static_cast<size_t>(li), g.name) + " (" + nwho + ")";
   Light l;
-  // (neither named: the node's generated name, as an unnamed mesh's node has, so that it can be chosen)
-  l.name = !n.name.empty() ? object_name(node) : !g.name.empty() ? g.name : "node" + std::to_string(node);
+  l.name = chosen_name(node, g.name);
   l.where = who;
   if (g.type == "point")
     l.type = Light::Type::Point;

@@ -137,6 +137,13 @@ class Detections:
     source: dict
 
 
+def _dataset_of_samples(samples):
+    """The dataset folder whose samples/ is the folder `samples` (as `spadgen dataset run` lays it out), or None."""
+    samples = os.path.abspath(samples)
+    parent = os.path.dirname(samples)
+    return parent if os.path.basename(samples) == "samples" and os.path.isfile(os.path.join(parent, "dataset.json")) else None
+
+
 def _not_a_run_why(path):
     """Why a folder without metadata.json is not a run, and where the runs are when it holds some."""
     if not os.path.exists(path):
@@ -148,9 +155,8 @@ def _not_a_run_why(path):
                 "samples/)")
     repeats = sorted(n for n in os.listdir(path) if os.path.isfile(os.path.join(path, n, "metadata.json")))
     if repeats:
-        parent = os.path.dirname(os.path.abspath(path))
-        where = (f"a dataset's samples: spadgen.open_dataset({parent!r}) opens the dataset"
-                 if os.path.basename(os.path.abspath(path)) == "samples" and os.path.isfile(os.path.join(parent, "dataset.json"))
+        dataset = _dataset_of_samples(path)
+        where = (f"a dataset's samples: spadgen.open_dataset({dataset!r}) opens the dataset" if dataset
                  else "spadgen sense --repeats writes one per realisation")
         return (f"not a run folder itself; it holds {len(repeats)} run folder(s): {', '.join(repeats[:4])}"
                 + (", ..." if len(repeats) > 4 else "") + f" ({where})")
@@ -377,11 +383,9 @@ class Run:
         the sample damaged and generates it again)."""
         if isinstance(self.metadata.get("dataset"), dict):
             # the dataset folder, where the sample sits in its samples/ (as it was written); else said as DIR
-            samples = os.path.dirname(os.path.abspath(self.path))
-            folder = os.path.dirname(samples)
-            known = os.path.basename(samples) == "samples" and os.path.isfile(os.path.join(folder, "dataset.json"))
+            folder = _dataset_of_samples(os.path.dirname(os.path.abspath(self.path)))
             return (f"run `spadgen dataset run {self.metadata['dataset'].get('dataset_file', 'DATASET.json')} -o "
-                    f"{folder if known else 'DIR'}` on its dataset folder again (the sample is damaged: it is generated again)")
+                    f"{folder or 'DIR'}` on its dataset folder again (the sample is damaged: it is generated again)")
         return "run the scene again"
 
     def unchanged(self):
