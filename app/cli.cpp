@@ -142,8 +142,10 @@ int run_command(const std::function<void()>& command, const std::string& name) {
     std::fprintf(stderr, "spadgen: internal error: %s (a bug in spadgen; please report it with the command line)\n", e.what());
     return kExitInternal;
   } catch (const std::bad_alloc&) {
-    std::fprintf(stderr, "spadgen: error: out of memory: the run needs more memory than the machine gives it "
-                         "(spadgen info shows the sizes of a run)\n");
+    // (named by its command: sense, reconstruct and evaluate render nothing)
+    const std::string who = name.empty() || name == "run" ? std::string("the run") : "spadgen " + name;
+    std::fprintf(stderr, "spadgen: error: out of memory: %s needs more memory than the machine gives it "
+                         "(spadgen info shows the sizes of a run)\n", who.c_str());
     return kExitBadInput;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "spadgen: internal error: %s (a bug in spadgen; please report it with the command line)\n",

@@ -332,7 +332,7 @@ void check_resources(const ResourcePlan& plan, const RunConfig& c, const fs::pat
   const std::string file = !who.empty() ? who : c.scene_file.empty() ? std::string("<scene>") : c.scene_file;
   std::string memory, disk;
   if (plan.memory_available >= 0 && plan.memory_needed() > plan.memory_available)
-    memory = file + ": the run needs about " + bytes_text(plan.memory_needed()) + " of memory, and " +
+    memory = (who.empty() ? file + ": the run" : who) + " needs about " + bytes_text(plan.memory_needed()) + " of memory, and " +
              bytes_text(plan.memory_available) + " is available: " + join_parts(required(plan.memory)) +
              "; lower the keys of the largest parts, or run with fewer --threads";
   // The earlier set in the output folder stays until the new one is complete: the new one needs its

@@ -735,13 +735,16 @@ std::vector<RunResult> sense(const SenseOptions& options) {
                     " (" + (src / "metadata.json").string() + ", file_bytes): changed or cut short since; sense links the "
                     "run's files as they are: restore it, or run the scene again");
   }
-  // Memory: the realisations' counts and frames each, their rates shared (the estimate includes the
-  // renderer's paths, which sense does not trace: an upper bound). Disk: the stacks the run's folder provides are links
+  // Memory: the realisations' counts and frames each, their rates shared. Disk: the stacks the run's folder provides are links
   // and take none; each further realisation writes its own counts and frames (its images are links).
   {
     const fs::path where = out.parent_path().empty() ? fs::path(".") : out.parent_path();
     ResourcePlan plan = plan_resources(write_cfg, sensor, img, axis, options.threads, where, objects, nullptr, int(runs.size()),
                                        light_laser);
+    // Sense traces no camera paths; its transient tiles are rebuilt from the saved light.
+    std::erase_if(plan.memory, [](const ResourcePlan::Part& p) { return p.what.starts_with("camera paths"); });
+    for (ResourcePlan::Part& p : plan.memory)
+      if (p.what.starts_with("transient tiles")) p.what.insert(15, " rebuilt from the saved light");
     std::vector<ResourcePlan::Part> disk;
     for (ResourcePlan::Part p : plan.disk) {
       if (from_run.count(p.file)) continue;

@@ -148,6 +148,12 @@ TEST_F(App, SenseLinksTheRunsNoiseFreeFilesOnlyForTheRunsOwnSensor) {
   // peaked at 945 MB against 301 MB planned for one): both refusals said at once
   EXPECT_THAT(r.output, HasSubstr("the counts and frames of 100000 realisations (--repeats)) "));
   EXPECT_THAT(r.output, HasSubstr("; and it writes "));
+  // Sense is named, and what it holds: no camera paths (it traces none), transient tiles rebuilt from the
+  // saved light (the message had said "the run needs" and listed the renderer's paths).
+  EXPECT_THAT(r.output, HasSubstr("spadgen: error: sense " + (dir_ / "run").string() + " needs about "));
+  EXPECT_THAT(r.output, Not(HasSubstr("the run needs")));
+  EXPECT_THAT(r.output, Not(HasSubstr("camera paths")));
+  EXPECT_THAT(r.output, HasSubstr("transient tiles rebuilt from the saved light (render.tile_size_px"));
   EXPECT_THAT(r.output, Not(HasSubstr("detection_rate.npy")));  // the run's own sensor: linked
   EXPECT_FALSE(fs::exists(dir_ / "many"));
   // The files the realisations hold open, against the process's limit: refused up front, not on the
