@@ -7,6 +7,7 @@
 #include <atomic>
 #include <bit>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <sstream>
@@ -402,6 +403,16 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
     const size_t n = static_cast<size_t>(rect.count());
     const uint32_t N = m.frames_per_k;
     const bool keep_rate = m.cfg.outputs.detection_rate;
+    const double rate_limit = double(std::numeric_limits<float>::max()) / (2.0 * double(N));
+    const auto too_bright = [&](double most) {
+      std::ostringstream text;
+      text << "the light is too bright for the outputs: a pixel's detection rate reaches " << most
+        << " per frame, beyond the " << rate_limit << " (float32's 3.4e38 over 2 N, N = " << N
+        << " frames per gate position or exposure) that detection_rate.npy and the HDR inversion's photons can hold: lower laser.average_power_mW, "
+           "ambient.illuminance_lux or the light of a frame (acquisition.cycles_per_frame, acquisition.intensity.exposure_us), "
+           "or switch outputs.detection_rate off (in a gate sweep outputs.ground_truth too: labels.exr reads the rates)";
+      return text.str();
+    };
     if (first) {
       out.expected.assign(n * Ks, 0.0f);
       if (keep_rate) out.rate.assign(n * Ks, 0.0f);
@@ -461,7 +472,13 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
             crosstalk_rates(l, Ks, nbv, nnb, ty.crosstalk, ty.single_avalanche, eff.data());
             l = eff.data();
           }
-          if (keep_rate) std::transform(l, l + Ks, row_rate.data() + xi * Ks, [](double v) { return static_cast<float>(v); });
+          if (keep_rate) {
+            std::transform(l, l + Ks, row_rate.data() + xi * Ks, [](double v) { return static_cast<float>(v); });
+            // detection_rate.npy holds float32, and the 2D HDR inversion's photons are N times a rate (two
+            // exposures: 2N): a rate beyond them would be written as inf (a 20 m aperture 1 mm from a target,
+            // 1e12 cycles per frame).
+            if (const double most = *std::max_element(l, l + Ks); most > rate_limit) throw Error(too_bright(most));
+          }
           if (cached) std::copy(l, l + Ks, cached);
           if (!frames) {
             if (m.table) binomial_counts(l, Ks, counts_key, pixel_index(x, y), *m.table, s);
