@@ -618,7 +618,13 @@ void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string
               format_bound(g.start_s / kNs) + " to " + format_bound(g.stop_s / kNs) +
               " ns (/acquisition/gate_sweep/start_ns, stop_ns); expected at most " + std::to_string(kMaxGatePositions) +
               " positions: a larger step or a shorter sweep");
-    if (c.render.time_bin_s > g.step_s * (1.0 + 1e-9))
+    // (1 us bins over a 25 ns period halved the summed rates and were told only of blurred edges)
+    if (const double period = 1.0 / c.laser.repetition_rate_Hz; c.render.time_bin_s >= period * (1.0 - 1e-9))
+      warnings.push_back("render.time_bin_ps: bins of " + format_bound(c.render.time_bin_s / kPs) +
+                         " ps are as wide as the laser's period of " + format_bound(period / kNs) +
+                         " ns (laser.repetition_rate_MHz) or wider: every return is spread over at least a whole period, and "
+                         "the counts hold no timing of it; choose bins narrower than the gate sweep's step");
+    else if (c.render.time_bin_s > g.step_s * (1.0 + 1e-9))
       warnings.push_back("render.time_bin_ps: bins of " + format_bound(c.render.time_bin_s / kPs) +
                          " ps are wider than the gate sweep's step of " + format_bound(g.step_s / kPs) +
                          " ps: the sensor takes the light as constant within each bin, so a return's edge in the counts is "

@@ -426,6 +426,15 @@ TEST_F(SceneFileTest, BinsWiderThanTheGateStepAreAWarning) {
   ASSERT_EQ(r.warnings.size(), 1u);
   EXPECT_THAT(r.warnings[0], HasSubstr("render.time_bin_ps: bins of 50 ps are wider than the gate sweep's step of 36 ps"));
   EXPECT_TRUE(parse(R"({"gltf": "s.gltf", "render": {"time_bin_ps": 36}})").warnings.empty());
+  // Bins as wide as the laser's period (25 ns at 40 MHz) hold no timing at all: said so, once (1 us bins
+  // halved the summed rates with only the blurred edges told).
+  for (const char* bins : {"25000", "1e6"}) {
+    const ResolvedRun w = parse(std::string(R"({"gltf": "s.gltf", "render": {"time_bin_ps": )") + bins + "}}");
+    ASSERT_EQ(w.warnings.size(), 1u) << bins;
+    EXPECT_THAT(w.warnings[0], HasSubstr(" ps are as wide as the laser's period of 25 ns (laser.repetition_rate_MHz) or wider: "
+                                         "every return is spread over at least a whole period")) << bins;
+  }
+  EXPECT_THAT(parse(R"({"gltf": "s.gltf", "render": {"time_bin_ps": 24999}})").warnings.at(0), HasSubstr("wider than the gate sweep's step"));
   // the intensity mode has no bins: the key does nothing there (not the sweep's warning)
   const ResolvedRun i = parse(R"({"gltf": "s.gltf", "render": {"time_bin_ps": 50}, "acquisition": {"mode": "intensity"}})");
   ASSERT_EQ(i.warnings.size(), 1u);
