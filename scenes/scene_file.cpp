@@ -601,6 +601,13 @@ void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string
   }
   if (c.laser.beam == Beam::GltfLight && c.laser.gltf_light.empty())
     err("/laser/gltf_light", "is empty, expected the name of a glTF light because /laser/beam is \"gltf_light\"");
+  // The ambient band above 0 nm: wavelength 200 and bandwidth 2000 nm (each in range) reached -800 nm and
+  // weighted the PDP by negative wavelengths, unsaid.
+  if (c.ambient.bandwidth_m >= 2.0 * c.ambient.wavelength_m)
+    err(chk.set_keys.count("/ambient/wavelength_nm") && !chk.set_keys.count("/ambient/bandwidth_nm") ? "/ambient/wavelength_nm" : "/ambient/bandwidth_nm",
+        "makes the ambient band " + format_bound(c.ambient.wavelength_m / kNm) + " +- " + format_bound(c.ambient.bandwidth_m / 2 / kNm) +
+            " nm reach " + format_bound((c.ambient.wavelength_m - c.ambient.bandwidth_m / 2) / kNm) +
+            " nm; expected a band above 0 nm: /ambient/bandwidth_nm less than twice /ambient/wavelength_nm");
   if (c.acquisition.mode == AcquisitionMode::GateSweep) {
     const GateSweepConfig& g = c.acquisition.gate_sweep;
     const double positions = g.positions();

@@ -404,7 +404,7 @@ std::vector<Key> build() {
   k.push_back(number("/ambient/illuminance_lux", FIELD(ambient.illuminance_lux), plain("lux"), closed(0, 1e6), "uniform environment illuminance (equal-energy spectrum); see docs/scene-file.md for the conversion"));
   k.push_back(number("/ambient/spectral_irradiance_W_m2_nm", FIELD(ambient.spectral_irradiance_W_m2_nm), plain("W/m^2/nm"), closed(0, 1e3), "the uniform environment in radiometric units (irradiance per nm on a surface facing it, flat over the band); null = from illuminance_lux"));
   k.push_back(number("/ambient/wavelength_nm", FIELD(ambient.wavelength_m), kNmUnit, closed(200, 2000), "centre of the ambient band the camera sees"));
-  k.push_back(number("/ambient/bandwidth_nm", FIELD(ambient.bandwidth_m), kNmUnit, open_closed(0, 2000), "width of that band (optical filter or sensor response)"));
+  k.push_back(number("/ambient/bandwidth_nm", FIELD(ambient.bandwidth_m), kNmUnit, open_closed(0, 2000), "width of that band (optical filter or sensor response), less than twice wavelength_nm (the band above 0 nm)"));
   k.push_back(boolean("/ambient/gltf_lights", FIELD(ambient.gltf_lights), "the glTF punctual lights add to the ambient light"));
 
   k.push_back(choice("/sensor/preset", FIELD(sensor.preset), "pixel design of every row: pixel_A, pixel_B, or full_chip (pixel A in the top half, pixel B in the bottom half)"));

@@ -412,6 +412,16 @@ TEST_F(SceneFileTest, CrossKeyChecks) {
               HasSubstr("/outputs/transient_crop"));
 }
 
+// The ambient band stays above 0 nm: 200 +- 1000 nm (each key in range) weighted the PDP by negative
+// wavelengths, unsaid (an auditor's find). Named by the key the --set changed; just inside, taken.
+TEST_F(SceneFileTest, AnAmbientBandReachingZeroNanometresIsRefused) {
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "ambient": {"wavelength_nm": 200, "bandwidth_nm": 2000}})"),
+              HasSubstr("/ambient/bandwidth_nm: makes the ambient band 200 +- 1000 nm reach -800 nm; expected a band above 0 nm"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "ambient": {"bandwidth_nm": 1000}})", {"ambient.wavelength_nm=500"}),
+              HasSubstr("--set ambient.wavelength_nm: makes the ambient band 500 +- 500 nm reach 0 nm"));
+  EXPECT_NO_THROW(parse(R"({"gltf": "s.gltf", "ambient": {"wavelength_nm": 500, "bandwidth_nm": 999}})"));
+}
+
 TEST_F(SceneFileTest, ExposureLongerThanAFrameIsAWarning) {
   const ResolvedRun r = parse(R"({"gltf": "s.gltf", "acquisition": {"cycles_per_frame": 2000}})");
   ASSERT_EQ(r.warnings.size(), 1u);
