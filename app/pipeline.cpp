@@ -112,7 +112,8 @@ RunResult run(const RunOptions& options) {
   const render::Camera camera = naming_keys(resolved, options.scene_file, [&] { return render::Camera(cfg.camera, scene); });
   warn(laser_warnings(cfg, camera, &scene));
   const SensorTables tables = SensorTables::hashed(cfg);
-  sensor::SensorModel sensor(sensor_stage(cfg));
+  // (its keys checked against its curves: a PDP above 1, a table that misses the laser, named as given)
+  sensor::SensorModel sensor = naming_keys(resolved, options.scene_file, [&] { return sensor::SensorModel(sensor_stage(cfg)); });
   apply_user_maps(sensor, cfg);
   tables.check_unchanged(cfg);
   tables.check_expected(cfg, options.tables_hash);
@@ -242,7 +243,7 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
   const scenes::Scene scene = load_edited_gltf(r, scene_file);
   // camera.gltf_camera names a camera of the glTF, as the run needs
   const render::Camera camera = naming_keys(r, scene_file, [&] { return render::Camera(c.camera, scene); });
-  sensor::SensorModel sensor(sensor_stage(c));
+  sensor::SensorModel sensor = naming_keys(r, scene_file, [&] { return sensor::SensorModel(sensor_stage(c)); });
   apply_user_maps(sensor, c);  // maps that do not fit the sensor are refused here as by the run
   naming_keys(r, scene_file, [&] {
     int laser_light = -1;  // laser.gltf_light names a light of the glTF, as the run needs

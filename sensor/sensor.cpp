@@ -106,24 +106,30 @@ SensorModel::Impl::Impl(const SensorStageConfig& c) : cfg(c) {
     if (!tc[t]->pdp_csv.empty() && std::find(used.begin(), used.end(), t) != used.end() &&
         !(nm >= curve.first_nm() && nm <= curve.last_nm())) {
       std::ostringstream m;
-      m << "sensor." << types[t].name << ".pdp_csv: '" << tc[t]->pdp_csv << "' covers " << curve.first_nm() << " to "
-        << curve.last_nm() << " nm, not the laser's " << nm
+      m << "'" << tc[t]->pdp_csv << "' covers " << curve.first_nm() << " to " << curve.last_nm() << " nm, not the laser's " << nm
         << " nm (laser.wavelength_nm): its pixels would not see the laser; expected a table that covers it";
-      throw Error(m.str());
+      throw KeyError("/sensor/" + types[t].name + "/pdp_csv", m.str());
     }
     // Each pixel's PDP is the curve times 1 + pdp_nonuniformity z (z truncated at 5): a probability at most 1
     // (a pdp_peak of 1 gave half the pixels a PDP above 1; a peak wavelength off the built-in curve's own
     // peak scaled it past 1 at 520 nm).
     const double spread = cfg.sensor.pdp_nonuniformity ? tc[t]->pdp_nonuniformity : 0.0;
     if (const double most = curve.max() * (1.0 + 5.0 * spread); most > 1.0) {
+      // Named by the key that sets the curve's most: the table, else the peak, else (a peak of at most 1 the
+      // built-in curve exceeds elsewhere) the peak's wavelength.
       const std::string key = "sensor." + types[t].name;
+      const bool by_wavelength = tc[t]->pdp_csv.empty() && curve.max() > tc[t]->pdp_peak * (1.0 + 1e-12);
+      const std::string pointer = "/sensor/" + types[t].name + (!tc[t]->pdp_csv.empty() ? "/pdp_csv" : by_wavelength ? "/pdp_peak_wavelength_nm" : "/pdp_peak");
       std::ostringstream m;
-      m << key << ": the PDP curve reaches " << curve.max()
-        << (tc[t]->pdp_csv.empty() ? " (the built-in curve scaled so that PDP(pdp_peak_wavelength_nm) = pdp_peak)" : " (pdp_csv)");
-      if (spread > 0.0) m << " and " << key << ".pdp_nonuniformity " << spread << " spreads it to " << most << " (times 1 + 5 sigma)";
-      m << ": expected a photon detection probability of at most 1; lower the curve"
+      if (!tc[t]->pdp_csv.empty()) m << "'" << tc[t]->pdp_csv << "': the PDP curve reaches " << curve.max();
+      else if (by_wavelength)
+        m << "found " << tc[t]->pdp_peak_wavelength_m / kNm << " nm, off the built-in curve's own peak (520 nm): scaled so that PDP there is "
+          << key << ".pdp_peak " << tc[t]->pdp_peak << ", the curve reaches " << curve.max();
+      else m << "found " << tc[t]->pdp_peak << ": the PDP curve reaches " << curve.max();
+      if (spread > 0.0) m << ", and " << key << ".pdp_nonuniformity " << spread << " spreads it to " << most << " (times 1 + 5 sigma)";
+      m << "; expected a photon detection probability of at most 1: lower the curve"
         << (spread > 0.0 ? ", or the spread (sensor.pdp_nonuniformity = false for none)" : "");
-      throw Error(m.str());
+      throw KeyError(pointer, m.str());
     }
     types[t].pdp_laser = curve.at(cfg.laser.wavelength_m);
     types[t].pdp_ambient = curve.band_average(cfg.ambient.wavelength_m, cfg.ambient.bandwidth_m);

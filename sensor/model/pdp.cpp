@@ -22,6 +22,12 @@ const std::vector<std::pair<double, double>>& PdpCurve::builtin_shape() {
   return shape;
 }
 
+std::string pointer_of(const std::string& dotted_key) {
+  std::string p = "/" + dotted_key;
+  std::replace(p.begin(), p.end(), '.', '/');
+  return p;
+}
+
 PdpCurve PdpCurve::from_config(const PixelTypeConfig& c, const std::string& key) {
   PdpCurve curve;
   if (!c.pdp_csv.empty()) {
@@ -29,9 +35,8 @@ PdpCurve PdpCurve::from_config(const PixelTypeConfig& c, const std::string& key)
     for (size_t i = 0; i < t.y.size(); ++i)
       if (!(t.y[i] >= 0.0 && t.y[i] <= 1.0)) {
         std::ostringstream m;
-        m << key << ".pdp_csv: '" << c.pdp_csv << "' row " << i + 1 << ": PDP must be a fraction in [0, 1], found "
-          << t.y[i];
-        throw Error(m.str());
+        m << "'" << c.pdp_csv << "' row " << i + 1 << ": PDP must be a fraction in [0, 1], found " << t.y[i];
+        throw KeyError(pointer_of(key) + "/pdp_csv", m.str());
       }
     curve.nm_ = t.x;
     curve.pdp_ = t.y;
@@ -44,9 +49,9 @@ PdpCurve PdpCurve::from_config(const PixelTypeConfig& c, const std::string& key)
   const double at_peak = curve.at(c.pdp_peak_wavelength_m);
   if (!(at_peak > 0.0)) {
     std::ostringstream m;
-    m << key << ".pdp_peak_wavelength_nm: the built-in PDP curve is zero at " << c.pdp_peak_wavelength_m / kNm
-      << " nm; expected a wavelength strictly between 300 and 1100 nm (the curve is zero at and beyond both ends) or a pdp_csv table";
-    throw Error(m.str());
+    m << "found " << c.pdp_peak_wavelength_m / kNm << " nm, where the built-in PDP curve is zero"
+      << "; expected a wavelength strictly between 300 and 1100 nm (the curve is zero at and beyond both ends) or a pdp_csv table";
+    throw KeyError(pointer_of(key) + "/pdp_peak_wavelength_nm", m.str());
   }
   for (double& v : curve.pdp_) v *= c.pdp_peak / at_peak;
   return curve;

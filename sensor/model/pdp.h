@@ -8,6 +8,9 @@
 
 namespace spadgen::sensor {
 
+// A dotted key as the JSON pointer a KeyError names: "sensor.pixel_A" -> "/sensor/pixel_A".
+std::string pointer_of(const std::string& dotted_key);
+
 class PdpCurve {
  public:
   // The built-in curve shape scaled so that PDP(pdp_peak_wavelength) = pdp_peak, or the pdp_csv table

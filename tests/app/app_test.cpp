@@ -57,6 +57,25 @@ TEST(AppCommands, InfoSizesTheStacksTheRunWrites) {
   EXPECT_THAT(small.output, HasSubstr("output sizes: detection_rate.npy 90 kB, counts.npy 22 kB\n"));
 }
 
+// The keys the sensor checks against its curves (a PDP above 1, a peak wavelength where the built-in curve is
+// zero) are named as every key is: the scene file and the key's pointer, or the --set (they said
+// "sensor.pixel_A: ..." with no file, no override and not the key set; an auditor's find).
+TEST_F(App, TheSensorsKeyErrorsNameTheFileOrTheOverride) {
+  const fs::path scene = dir_ / "s.json";
+  std::ofstream(scene) << R"({"gltf": ")" << kScenes << R"(flat_target.gltf", "sensor": {"pixel_A": {"pdp_peak": 1.0}}})";
+  for (const std::string& command : std::vector<std::string>{"info " + scene.string(), "run " + scene.string() + " -o " + (dir_ / "out").string()}) {
+    const Result r = sh(command);
+    EXPECT_EQ(r.code, 1) << r.output;
+    EXPECT_THAT(r.output, HasSubstr("spadgen: error: " + scene.string() + ": /sensor/pixel_A/pdp_peak: found 1: the PDP curve reaches 1, "
+                                    "and sensor.pixel_A.pdp_nonuniformity 0.014 spreads it to 1.07")) << command;
+    EXPECT_FALSE(fs::exists(dir_ / "out"));
+  }
+  const Result r = sh("info " + kScenes + "flat_target.json --set sensor.pixel_A.pdp_peak_wavelength_nm=200");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("spadgen: error: --set sensor.pixel_A.pdp_peak_wavelength_nm: found 200 nm, where the built-in PDP "
+                                  "curve is zero; expected a wavelength strictly between 300 and 1100 nm"));
+}
+
 TEST(AppCommands, SchemaMatchesTheDocs) {
   const Result r = sh("schema");
   ASSERT_EQ(r.code, 0);

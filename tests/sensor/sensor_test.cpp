@@ -474,9 +474,9 @@ TEST(Sensor, APdpAboveOneIsRefused) {
   c.sensor.pixel_A.pdp_peak = 1.0;
   c.sensor.pixel_A.pdp_nonuniformity = 0.014;
   const auto says = [&](const std::string& what) { return message(c).find(what) != std::string::npos; };
-  EXPECT_TRUE(says("sensor.pixel_A: the PDP curve reaches 1 (the built-in curve scaled so that PDP(pdp_peak_wavelength_nm) = "
-                   "pdp_peak) and sensor.pixel_A.pdp_nonuniformity 0.014 spreads it to 1.07 (times 1 + 5 sigma): expected a "
-                   "photon detection probability of at most 1")) << message(c);
+  // named by the key that sets the curve's most (a KeyError, which the program names as the user gave it)
+  EXPECT_TRUE(says("sensor.pixel_A.pdp_peak: found 1: the PDP curve reaches 1, and sensor.pixel_A.pdp_nonuniformity 0.014 "
+                   "spreads it to 1.07 (times 1 + 5 sigma); expected a photon detection probability of at most 1")) << message(c);
   c.sensor.pdp_nonuniformity = false;  // no spread: a PDP of 1 is a probability
   EXPECT_EQ(message(c), "");
   const SensorModel ideal(c);
@@ -486,7 +486,8 @@ TEST(Sensor, APdpAboveOneIsRefused) {
   c.sensor.pixel_A.pdp_peak = 0.9, c.sensor.pixel_A.pdp_nonuniformity = 0.02;  // 0.9 x 1.1 = 0.99
   EXPECT_EQ(message(c), "");
   c.sensor.pixel_A.pdp_peak = 0.3, c.sensor.pixel_A.pdp_peak_wavelength_m = 350e-9;  // 0.22 of the curve's peak there
-  EXPECT_TRUE(says("sensor.pixel_A: the PDP curve reaches 1.36")) << message(c);
+  EXPECT_TRUE(says("sensor.pixel_A.pdp_peak_wavelength_nm: found 350 nm, off the built-in curve's own peak (520 nm): scaled "
+                   "so that PDP there is sensor.pixel_A.pdp_peak 0.3, the curve reaches 1.36")) << message(c);
 }
 
 TEST(Sensor, TileWithoutHaloIsRejected) {
