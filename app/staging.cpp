@@ -419,6 +419,13 @@ int take_folder_lock(const fs::path& lock_path, const fs::path& out, bool shared
       const int err = errno;
       const std::string who = lock_holder(fd);
       ::close(fd);
+      // Held by this very process: the folder is, by another path (a bind mount), one this command already
+      // holds (-o over the run it reads was told to wait for its own pid).
+      if (err == EWOULDBLOCK && who == "pid " + pid_text())
+        throw Error((output ? "cannot use " + out.string() + " as the output folder (-o)" : "cannot read " + folder) +
+                    ": its lock file " + lock_path.string() + " is held by this spadgen process itself (pid " + pid_text() +
+                    "): by another path (a bind mount), it is a folder this command already reads or writes; " +
+                    (output ? "choose another folder (-o)" : "give each folder once"));
       if (err == EWOULDBLOCK && shared)
         // (a run writing it, or a reconstruct or evaluate that may write into it: "another spadgen run" was said of
         // a reconstruct that only read it)

@@ -1007,6 +1007,29 @@ TEST_F(Hardening, AMountPointAsTheOutputFolderIsRefusedUpFront) {
   EXPECT_THAT(r.output, HasSubstr("metadata.json"));
 }
 
+// -o reaching, by another path (a bind mount), the run the command reads: refused as its own lock, not told to
+// wait for another spadgen process whose pid was its own (an auditor's find). Skipped where the test may
+// not mount (not root, or a container without the capability).
+TEST_F(Hardening, AnOutputFolderThatIsTheInputByABindMountIsNamedSo) {
+  fs::create_directories(dir_ / "real");
+  fs::create_directories(dir_ / "bind");
+  expect_exit(spadgen("run " + kTiny + " -q --set outputs.light=true -o " + (dir_ / "real/run").string()), 0, "run");
+  if (shell("mount --bind " + (dir_ / "real").string() + " " + (dir_ / "bind").string() + " 2>/dev/null").code != 0)
+    GTEST_SKIP() << "mount --bind is not allowed here";
+  struct Unmount {
+    fs::path at;
+    ~Unmount() { (void)shell("umount " + at.string()); }
+  } unmount{dir_ / "bind"};
+  const std::string before = slurp(dir_ / "real/run/counts.npy");
+  const Outcome o = spadgen("sense " + (dir_ / "real/run").string() + " -q -o " + (dir_ / "bind/run").string());
+  expect_exit(o, 1, "sense onto itself");
+  EXPECT_THAT(o.err, HasSubstr("spadgen: error: cannot use " + (dir_ / "bind/run").string() + " as the output folder (-o): its lock file " +
+                               (dir_ / "bind/.run.spadgen-lock").string() + " is held by this spadgen process itself (pid "));
+  EXPECT_THAT(o.err, HasSubstr("choose another folder (-o)"));
+  EXPECT_THAT(o.err, Not(HasSubstr("wait for it")));
+  EXPECT_EQ(slurp(dir_ / "real/run/counts.npy"), before);
+}
+
 // sense onto a small file system (another one than the run's: its files are copied, not linked) is refused
 // before it samples, naming the run it senses and what sense can change; nothing is left there.
 TEST_F(Hardening, SenseOntoAFullFileSystemIsRefusedNamingTheRun) {
