@@ -33,8 +33,9 @@ struct SizeUnit {
 SizeUnit size_unit(double bytes) {
   if (bytes >= 1e12) return {1e12, "TB", 1};  // (22202.3 GB read as 22.2 TB)
   if (bytes >= 1e9) return {1e9, "GB", 1};
-  if (bytes >= 1e6) return {1e6, "MB", 0};
-  return {1e3, "kB", 0};
+  // (below 10 of the unit, one digit more: 1.44 MB read as "1 MB", and "at least 2 MB ... at most 2 MB")
+  if (bytes >= 1e6) return {1e6, "MB", bytes < 9.95e6 ? 1 : 0};
+  return {1e3, "kB", bytes < 9.95e3 ? 1 : 0};
 }
 std::string in_unit(double bytes, const SizeUnit& u, int digits) {
   char buf[48];

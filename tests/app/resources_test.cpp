@@ -85,7 +85,13 @@ TEST(BytesTexts, TwoSizesThatWouldReadTheSameGetTheDigitsToTellThemApart) {
   EXPECT_EQ(bytes_texts(1'234'000'000, 1'230'000'000), std::make_pair(std::string("1.234 GB"), std::string("1.230 GB")));
   EXPECT_EQ(bytes_texts(2'000'001, 2'000'000), std::make_pair(std::string("2000001 bytes"), std::string("2000000 bytes")));
   EXPECT_EQ(bytes_texts(1'500'000'000, 1'400'000'000), std::make_pair(std::string("1.5 GB"), std::string("1.4 GB")));  // as bytes_text
-  EXPECT_EQ(bytes_texts(5'000'000, 5'000'000), std::make_pair(std::string("5 MB"), std::string("5 MB")));
+  EXPECT_EQ(bytes_texts(5'000'000, 5'000'000), std::make_pair(std::string("5.0 MB"), std::string("5.0 MB")));
+  // below 10 of a unit, a digit more (1.44 MB read as "1 MB"); from 9.95 on, whole units
+  EXPECT_EQ(spadgen::bytes_text(1'440'000), "1.4 MB");
+  EXPECT_EQ(spadgen::bytes_text(9'960'000), "10 MB");
+  EXPECT_EQ(spadgen::bytes_text(12'400'000), "12 MB");
+  EXPECT_EQ(spadgen::bytes_text(2'500), "2.5 kB");
+  EXPECT_EQ(spadgen::bytes_text(500), "0.5 kB");
 }
 
 }  // namespace
