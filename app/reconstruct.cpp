@@ -726,8 +726,12 @@ std::vector<DoneFolder> done_sample_folders(const fs::path& dir, std::map<std::s
                                             const SampleSelection* only = nullptr, int64_t* samples = nullptr) {
   const fs::path index = dir / "index.jsonl";
   if (!fs::is_regular_file(index))
-    throw Error(dir.string() + ": a dataset folder without index.jsonl: the first `spadgen dataset run` into it is "
-                "still running or was killed (the last run on the folder to end writes the index); run it again to finish");
+    throw Error(dir.string() + ": a dataset folder without index.jsonl: " +
+                (datasets::dataset_runs_on(dir)
+                     ? "the first `spadgen dataset run` into it is still running (the last run on the folder to end writes "
+                       "the index); wait for it to finish"
+                     : "the first `spadgen dataset run` into it was killed (the last run on the folder to end writes the "
+                       "index, also when stopped by SIGINT or SIGTERM); run it again to finish"));
   std::istringstream lines(scenes::read_file_bounded(index.string(), int64_t{1} << 36, "index.jsonl"));
   std::vector<DoneFolder> out;
   std::set<std::string> seen;

@@ -171,8 +171,10 @@ std::unique_ptr<RunPresence> DatasetFolder::enter() const {
   return std::make_unique<RunPresence>(lock_byte(dir_, kPresenceFile, F_RDLCK, 0, "this run's presence", true));
 }
 
-bool DatasetFolder::runs_on() const {
-  const int fd = ::open((dir_ / kPresenceFile).c_str(), O_RDONLY | O_CLOEXEC);
+bool DatasetFolder::runs_on() const { return dataset_runs_on(dir_); }
+
+bool dataset_runs_on(const fs::path& dir) {
+  const int fd = ::open((dir / kPresenceFile).c_str(), O_RDONLY | O_CLOEXEC);
   if (fd < 0) return false;  // no run ever entered
   struct flock l {};
   l.l_type = F_WRLCK;  // would an exclusive lock conflict: a run holds its shared one

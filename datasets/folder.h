@@ -134,6 +134,9 @@ class RunPresence {
   int fd_;
 };
 
+// Whether a dataset run is on the folder DIR now (a process holds its presence, RunPresence). Creates nothing.
+bool dataset_runs_on(const std::filesystem::path& dir);
+
 class DatasetFolder {
  public:
   DatasetFolder(const DatasetSpec& spec, std::filesystem::path dir);

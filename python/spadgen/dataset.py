@@ -124,7 +124,7 @@ def _spec_samples(spec):
 
 def _runs_on(path):
     """Whether a `spadgen dataset run` is on the dataset folder now: it holds a shared lock on byte 0 of
-    .dataset.runs for as long as it runs (datasets/folder.cpp, DatasetFolder::runs_on)."""
+    .dataset.runs for as long as it runs (datasets/folder.cpp, dataset_runs_on)."""
     try:
         fd = os.open(os.path.join(path, ".dataset.runs"), os.O_RDONLY | os.O_CLOEXEC)
     except OSError:
@@ -283,9 +283,13 @@ class Dataset:
                              f"afterwards; {remedy}")
         index_path = os.path.join(self.path, "index.jsonl")
         if not os.path.isfile(index_path):
+            if _runs_on(self.path):
+                raise FileNotFoundError(f"{self.path}: a dataset folder without index.jsonl: the first `spadgen dataset "
+                                        "run` into it is still running (the last run on the folder to end writes the "
+                                        "index); wait for it to finish")
             raise FileNotFoundError(f"{self.path}: a dataset folder without index.jsonl: the first `spadgen dataset run` "
-                                    "into it is still running or was killed (the last run on the folder to end writes the "
-                                    "index, also when stopped by SIGINT or SIGTERM); run it again to finish")
+                                    "into it was killed (the last run on the folder to end writes the index, also when "
+                                    "stopped by SIGINT or SIGTERM); run it again to finish")
         with open(index_path, encoding="utf-8") as f:
             try:
                 self.index = [json.loads(line) for line in f if line.strip()]

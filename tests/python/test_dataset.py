@@ -201,7 +201,7 @@ def test_errors_name_the_folder(ds, dataset_dir, tmp_path, sweep_run, spadgen_bi
         spadgen.open_dataset(sweep_run)
     (tmp_path / "unfinished").mkdir()
     (tmp_path / "unfinished" / "dataset.json").write_text((dataset_dir / "dataset.json").read_text())
-    with pytest.raises(FileNotFoundError, match="without index.jsonl"):
+    with pytest.raises(FileNotFoundError, match="without index.jsonl: the first `spadgen dataset run` into it was killed"):
         spadgen.open_dataset(tmp_path / "unfinished")
     # A damaged dataset.json: the remedy is what `spadgen dataset run` accepts (it refuses such a folder: "run the
     # dataset again" was said), checked against the program's own refusal.
@@ -483,3 +483,33 @@ def test_a_samples_warnings(spadgen_bin, tmp_path):
     assert ds.table(columns=["warnings"])["warnings"].tolist() == [0.0, 1.0]
     with open(tmp_path / "out" / "index.csv", newline="") as f:
         assert [r["warnings"] for r in csv.DictReader(f)] == ["0", "1"]
+
+
+def test_a_dataset_folder_without_its_index_says_whether_its_first_run_is_running(spadgen_bin, dataset_dir, tmp_path):
+    """A first run still on the folder (its presence lock held: here taken as a run takes it, a shared
+    open-file-description lock on byte 0 of .dataset.runs) is waited for, not run again; a killed one is run
+    again. Said alike by open_dataset and spadgen evaluate (both said "still running or was killed ... run it
+    again to finish"; an auditor's find)."""
+    import fcntl
+    import re
+    import struct
+    folder = tmp_path / "unfinished"
+    folder.mkdir()
+    (folder / "dataset.json").write_text((dataset_dir / "dataset.json").read_text())
+
+    def says(what):
+        with pytest.raises(FileNotFoundError, match=re.escape(f"without index.jsonl: {what}")):
+            spadgen.open_dataset(folder)
+        r = subprocess.run([spadgen_bin, "evaluate", str(folder), "-q"], capture_output=True, text=True)
+        assert r.returncode == 1, r.stderr
+        assert f"without index.jsonl: {what}" in r.stderr, r.stderr
+
+    says("the first `spadgen dataset run` into it was killed")
+    fd = os.open(folder / ".dataset.runs", os.O_RDWR | os.O_CREAT, 0o666)
+    try:
+        fcntl.fcntl(fd, fcntl.F_OFD_SETLK, struct.pack("hhqqi4x", fcntl.F_RDLCK, os.SEEK_SET, 0, 1, 0))
+        says("the first `spadgen dataset run` into it is still running (the last run on the folder to end writes the "
+             "index); wait for it to finish")
+    finally:
+        os.close(fd)
+    says("the first `spadgen dataset run` into it was killed")
