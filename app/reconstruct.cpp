@@ -923,6 +923,19 @@ bool is_spadgen_derived_output(const fs::path& path, const std::string& rel) {
   return head.compare(0, 4, "\x76\x2f\x31\x01") == 0 && head.find("spadgen_source") != std::string::npos;
 }
 
+namespace {
+// The image written whole in place of `out` (a temporary file renamed over it): a failure (a full disk) says
+// what became of an earlier file there, which is kept.
+void write_output(const writers::ExrImage& img, const std::string& out) {
+  const bool earlier = fs::exists(out);
+  try {
+    img.write(out);
+  } catch (const Error& e) {
+    throw Error(std::string(e.what()) + (earlier ? " (nothing was replaced: the earlier " + out + " is as it was)" : " (nothing was written)"));
+  }
+}
+}  // namespace
+
 std::string reconstruct(const ReconstructOptions& o) {
   InterruptGuard interrupt_guard;
   const ThreadLimit threads(o.threads);
@@ -961,7 +974,7 @@ std::string reconstruct(const ReconstructOptions& o) {
     img.set_attribute("spadgen_reconstruct", nlohmann::json{{"what", run.dual() ? "eq. (6) inversion" : "eq. (5) inversion"},
                                                             {"noise_free", o.noise_free}}.dump());
     img.set_attribute("spadgen_source", provenance(run));
-    img.write(out);
+    write_output(img, out);
     return out;
   }
   const std::string out =
@@ -981,7 +994,7 @@ std::string reconstruct(const ReconstructOptions& o) {
                                                           {"units", "range m; gate: fractional gate index; amplitude: detections per frame; score: z"}}
                                                .dump());
   img.set_attribute("spadgen_source", provenance(run));
-  img.write(out);
+  write_output(img, out);
   return out;
 }
 

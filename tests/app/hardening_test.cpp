@@ -1076,6 +1076,23 @@ TEST_F(Hardening, AFullFileSystemIsRefusedNamingTheFilesOfTheStorage) {
   EXPECT_TRUE(r.output.ends_with("exit=1\n")) << "not refused, or something was left:\n" << r.output;
 }
 
+// reconstruct onto a full disk: the earlier detections are kept, and the error says so (it named the file and
+// the disk alone; an auditor's find).
+TEST_F(Hardening, AReconstructOntoAFullDiskSaysTheEarlierDetectionsAreKept) {
+  const fs::path mnt = dir_ / "mnt", r = dir_ / "mnt/r";
+  fs::create_directories(mnt);
+  const std::string b = bin();
+  const Result out = with_tmpfs(mnt, "size=2m", b + " run " + kTiny + " -q -o " + r.string() + " && " + b + " reconstruct " + r.string() +
+                                                    " -q && cp " + (r / "detections_edges.exr").string() + " " + (dir_ / "before.exr").string() +
+                                                    " && (dd if=/dev/zero of=" + (mnt / "fill").string() + " bs=4k 2>/dev/null; true) && " +
+                                                    "timeout -s KILL 30 " + b + " reconstruct " + r.string() + " -q 2>&1; echo exit=$?; cmp " +
+                                                    (dir_ / "before.exr").string() + " " + (r / "detections_edges.exr").string() + " && echo same");
+  if (out.code == 97) GTEST_SKIP() << "cannot mount a file system here: " << out.output;
+  EXPECT_THAT(out.output, HasSubstr("spadgen: error: cannot write '" + (r / "detections_edges.exr").string() +
+                                    "': No space left on device (nothing was replaced: the earlier " + (r / "detections_edges.exr").string() +
+                                    " is as it was)\nexit=1\nsame\n"));
+}
+
 // Guards nest: a run or a sense inside a dataset run holds its own guard inside the dataset's. The inner
 // one neither clears a signal that arrived before it (a SIGTERM between a sample's run and its realisation
 // was lost: the dataset went on to the end and exited 0) nor hands SIGTERM back to its default action
