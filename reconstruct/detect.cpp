@@ -510,14 +510,16 @@ void set_standard_error(HdrEstimate& e, int frames, bool dual, double ratio) {
   const double x = e.photons / N;  // photons per frame
   double variance = 0.0, slope = 0.0;  // var(c) and dc / dphotons at the estimate
   if (!dual) {
-    const double p = 1.0 - std::exp(-x);
-    variance = N * p * (1.0 - p);
-    slope = 1.0 - p;
+    // (p by expm1: 1 - exp(-x) was 0 below x of about 1e-16, and the standard error of faint light 0)
+    const double p = -std::expm1(-x), q = std::exp(-x);
+    variance = N * p * q;
+    slope = q;
   } else {
     const double aL = 2.0 * ratio / (ratio + 1.0), aS = 2.0 / (ratio + 1.0);
     const double pL = -std::expm1(-aL * x), pS = -std::expm1(-aS * x);
-    variance = 0.5 * N * (pL * (1.0 - pL) + pS * (1.0 - pS));
-    slope = 0.5 * (aL * (1.0 - pL) + aS * (1.0 - pS));
+    const double qL = std::exp(-aL * x), qS = std::exp(-aS * x);
+    variance = 0.5 * N * (pL * qL + pS * qS);
+    slope = 0.5 * (aL * qL + aS * qS);
   }
   e.standard_error = slope > 0.0 ? std::sqrt(variance) / slope : 0.0;
 }

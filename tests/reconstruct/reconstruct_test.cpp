@@ -297,6 +297,14 @@ TEST(Hdr, StandardErrorIsTheSpreadOfTheEstimateAndSaturationIsFlagged) {
       EXPECT_NEAR(se / std::sqrt(var), 1.0, 0.08) << (dual ? "dual " : "single ") << photons;
       EXPECT_NEAR(mean / photons, 1.0, 0.01) << (dual ? "dual " : "single ") << photons;
     }
+  // Faint light: the standard error is sqrt(photons) (Poisson), down to the smallest rates a float holds (it was
+  // 0 below about 1e-16 photons per frame, 1 - exp(-x) rounding to 0; an auditor's find).
+  for (bool dual : {false, true})
+    for (const float rate : {1e-10f, 1e-20f, 1e-38f}) {
+      const float rates[2] = {rate, rate};
+      const HdrEstimate e = hdr_of_rates(rates, N, dual, 8.0);
+      EXPECT_NEAR(e.standard_error / std::sqrt(e.photons), 1.0, 1e-6) << (dual ? "dual " : "single ") << rate;
+    }
   const HdrEstimate s = invert_hdr(N, N, false, 1.0);
   EXPECT_TRUE(s.saturated);
   EXPECT_TRUE(std::isfinite(s.photons));
