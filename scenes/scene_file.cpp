@@ -525,6 +525,14 @@ ojson resolve(const json& doc) {
       start = slash + 1;
     }
   }
+  // A bound not given follows a first round given larger: the preset's or default's max_samples_per_pixel
+  // under an explicit samples_per_pixel (render.quality "standard" with samples_per_pixel 1024 was refused
+  // for a max of 512 the file never gave, against "a key given explicitly wins over the preset").
+  // (only with a target error, the only setting that reads it: the resolved scene of others is as it was)
+  if (ojson& render = out["render"]; !doc.contains(json::json_pointer("/render/max_samples_per_pixel")) &&
+                                     render["target_relative_error"].is_number() && render["samples_per_pixel"].is_number_integer() && render["max_samples_per_pixel"].is_number_integer() &&
+                                     render["samples_per_pixel"].get<int64_t>() > render["max_samples_per_pixel"].get<int64_t>())
+    render["max_samples_per_pixel"] = render["samples_per_pixel"];
   // Named sections as given: elements in the order of their names (JSON objects here are sorted by
   // name, byte for byte), each element's keys in the schema's order.
   for (const NamedSection& s : named_sections()) {
