@@ -191,6 +191,14 @@ class Estimator {
   struct Entry {
     Estimate estimate;
     std::string error;
+    std::string pointer, reason;  // of a KeyError: named as each sample gives the key (error_of)
+    // The error as the sample `r` gives its key: the --set form of a key the dataset gives (which the caller
+    // names at its place in the dataset file), else the scene file's pointer.
+    std::string error_of(const scenes::ResolvedRun& r) const {
+      if (pointer.empty()) return error;
+      const auto set = r.set_keys.find(pointer);
+      return (set != r.set_keys.end() ? "--set " + set->second : r.config.scene_file + ": " + pointer) + ": " + reason;
+    }
   };
 
   // The estimates of the keys not known yet, computed in parallel from the first run of each (by key); none
@@ -227,6 +235,8 @@ class Estimator {
       try {
         const RunConfig c = estimate_shape(*todo[j].second);
         done[j].estimate = estimate(c, repeats_, threads_, scenes_.at(scene_of(c)));
+      } catch (const KeyError& e) {
+        done[j].error = e.what(), done[j].pointer = e.pointer, done[j].reason = e.reason;
       } catch (const Error& e) {
         done[j].error = e.what();
       }
@@ -300,7 +310,7 @@ void check_samples(const DatasetSpec& spec, const datasets::Shard& shard, const 
       if (wanted(j)) {
         const Estimator::Entry& e = estimator.at(keys[j]);
         if (e.error.empty()) rows[j].estimate = e.estimate;
-        else rows[j].resolved = false, rows[j].error = e.error;
+        else rows[j].resolved = false, rows[j].error = e.error_of(runs[j]);
       }
       each(rows[j]);
     }
@@ -322,7 +332,7 @@ void refuse_a_dataset_of_invalid_samples(const DatasetSpec& spec, Estimator& est
         const scenes::ResolvedRun r = scenes::load_scene_file(spec.scenes[k], datasets::make_sample(spec, probes[j]).overrides);
         const uint64_t key = Estimator::key(r);
         estimator.add({{key, &r.config}}, interruptible);
-        error = estimator.at(key).error;
+        error = estimator.at(key).error_of(r);
       } catch (const Interrupted&) {
         throw;
       } catch (const Error& e) {

@@ -123,7 +123,7 @@ RunResult run(const RunOptions& options) {
   });
   const int objects = int(scenes::objects_of(scene).list.size());
 
-  const TimeAxis axis = time_axis(cfg, sensor);
+  const TimeAxis axis = naming_keys(resolved, options.scene_file, [&] { return time_axis(cfg, sensor); });
   const PixelRect img = image_rect(cfg);
   check_derived(cfg, sensor, img, axis, resolved.set_keys);
 
@@ -255,7 +255,7 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
   std::vector<std::string> before = camera_warnings(c, scene);  // the warnings known before rendering
   for (std::string& w : laser_warnings(c, camera, &scene)) before.push_back(std::move(w));
   for (std::string& w : sensor_warnings(sensor)) before.push_back(std::move(w));
-  const TimeAxis axis = time_axis(c, sensor);
+  const TimeAxis axis = naming_keys(r, scene_file, [&] { return time_axis(c, sensor); });
   const PixelRect img = image_rect(c);
   check_derived(c, sensor, img, axis, r.set_keys);
   o << "# run\n";

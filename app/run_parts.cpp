@@ -27,8 +27,9 @@ TimeAxis time_axis(const RunConfig& c, const sensor::SensorModel& s) {
     return a;
   }
   if (a.bins == 0 && c.outputs.transient)
-    throw Error(c.scene_file + ": /outputs/transient: intensity mode needs no time bins; set /render/window_start_ns "
-                "and /render/window_stop_ns to say which window transient.npy should cover");
+    // (a KeyError: run and info name it as given, the --set or the scene file's pointer; it named the file for a --set)
+    throw KeyError("/outputs/transient", "found true in the intensity mode, which needs no time bins; set /render/window_start_ns "
+                                         "and /render/window_stop_ns to say which window transient.npy should cover");
   return a;
 }
 

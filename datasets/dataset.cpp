@@ -579,7 +579,12 @@ std::vector<int64_t> probe_samples(const DatasetSpec& spec, size_t scene) {
 
 std::string invalid_probes_message(const DatasetSpec& spec, size_t scene, const std::vector<int64_t>& probes,
                                    const std::string& why) {
-  return "sample " + std::to_string(probes.at(0)) + ": with the scene file " + spec.scene_names[scene] + ": " + why +
+  // A key the dataset gives is named at its place in the dataset file (the message begins with the file), as a
+  // failing sample's error names it (it said "--set outputs.transient", which no one gave).
+  const std::string named = named_in_dataset_file(spec, why);
+  const std::string what = named != why ? named.substr(spec.file.size() + 2) : "with the scene file " + spec.scene_names[scene] + ": " + why;
+  // (with the parameters the dataset gave it, as plan lists them)
+  return sample_text(make_sample(spec, probes.at(0))) + ": " + what +
          (probes.size() > 1 ? " (and the next " + std::to_string(probes.size() - 1) + " samples of this scene fail too)" : "");
 }
 

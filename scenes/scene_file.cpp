@@ -607,8 +607,14 @@ void check_consistency(const RunConfig& c, Checker& chk, std::vector<std::string
                             "); expected an up not along it (a camera looking straight down -Y: up [0, 0, -1])");
     }
   }
-  if (c.laser.beam == Beam::GltfLight && c.laser.gltf_light.empty())
-    err("/laser/gltf_light", "is empty, expected the name of a glTF light because /laser/beam is \"gltf_light\"");
+  // (named by the key the user gave: a --set laser.beam was told as the file's gltf_light)
+  const auto given = [&](const char* key, const char* other) { return chk.set_keys.count(key) && !chk.set_keys.count(other); };
+  if (c.laser.beam == Beam::GltfLight && c.laser.gltf_light.empty()) {
+    if (given("/laser/beam", "/laser/gltf_light"))
+      err("/laser/beam", "found \"gltf_light\", which needs /laser/gltf_light, the name of a glTF light; it is empty");
+    else
+      err("/laser/gltf_light", "is empty, expected the name of a glTF light because /laser/beam is \"gltf_light\"");
+  }
   // The ambient band above 0 nm: wavelength 200 and bandwidth 2000 nm (each in range) reached -800 nm and
   // weighted the PDP by negative wavelengths, unsaid.
   if (c.ambient.bandwidth_m >= 2.0 * c.ambient.wavelength_m)

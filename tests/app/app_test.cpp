@@ -74,6 +74,12 @@ TEST_F(App, TheSensorsKeyErrorsNameTheFileOrTheOverride) {
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_THAT(r.output, HasSubstr("spadgen: error: --set sensor.pixel_A.pdp_peak_wavelength_nm: found 200 nm, where the built-in PDP "
                                   "curve is zero; expected a wavelength strictly between 300 and 1100 nm"));
+  // and transient.npy in the intensity mode without a window (it named the scene file for two --set)
+  const Result t = sh("run " + kScenes + "flat_target.json --set acquisition.mode=intensity --set outputs.transient=true -o " +
+                      (dir_ / "out").string());
+  EXPECT_EQ(t.code, 1) << t.output;
+  EXPECT_THAT(t.output, HasSubstr("spadgen: error: --set outputs.transient: found true in the intensity mode, which needs no time bins"));
+  EXPECT_FALSE(fs::exists(dir_ / "out"));
 }
 
 TEST(AppCommands, SchemaMatchesTheDocs) {

@@ -1115,8 +1115,8 @@ TEST_F(Dataset, APlanListsASampleItCannotEstimateAsInvalid) {
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_THAT(r.output, HasSubstr("# total: 4 samples (the 2 valid ones estimated), disk at most "));
   // each with its parameters, and the closing line with the dataset file and the samples (they named neither)
-  EXPECT_THAT(r.output, HasSubstr("error: sample 1 (acquisition.mode intensity): " + kScenes +
-                                  "flat_target.json: /outputs/transient: intensity mode needs no time bins"));
+  EXPECT_THAT(r.output, HasSubstr("error: sample 1 (acquisition.mode intensity): " + (dir_ / "d.json").string() +
+                                  ": /set/outputs.transient: found true in the intensity mode, which needs no time bins"));
   EXPECT_THAT(r.output, HasSubstr("error: sample 3 ("));
   EXPECT_THAT(r.output, Not(HasSubstr("error: sample 0")));
   EXPECT_THAT(r.output, HasSubstr("\tintensity\t"));
@@ -1142,9 +1142,10 @@ TEST_F(Dataset, APlanListsASampleItCannotEstimateAsInvalid) {
   for (const char* cmd : {"dataset plan ", "dataset run "}) {
     const Result e = sh(cmd + (dir_ / "e.json").string() + " -o " + (dir_ / "e").string() + " -q");
     EXPECT_EQ(e.code, 1);
-    EXPECT_THAT(e.output, HasSubstr("e.json: sample 0: with the scene file "));
-    EXPECT_THAT(e.output, HasSubstr("intensity mode needs no time bins; set /render/window_start_ns and /render/window_stop_ns "
-                                    "to say which window transient.npy should cover (and the next 3 samples of this scene fail too)"));
+    // the key named at its place in the dataset file, as a failing sample's error names it (it was "--set outputs.transient")
+    EXPECT_THAT(e.output, HasSubstr("e.json: sample 0 (acquisition.mode intensity): /set/outputs.transient: found true in the intensity mode, which needs no time "
+                                    "bins; set /render/window_start_ns and /render/window_stop_ns to say which window transient.npy "
+                                    "should cover (and the next 3 samples of this scene fail too)"));
     EXPECT_EQ(std::count(e.output.begin(), e.output.end(), '\n'), 1) << e.output;
     EXPECT_FALSE(fs::exists(dir_ / "e"));
   }
@@ -1582,8 +1583,10 @@ TEST_F(Dataset, AnInvalidFirstSampleIsRecordedAndAnInvalidDatasetRefused) {
   write(dir_ / "e.json", small_dataset(4, 3, kScenes + "multi_object.json", ", \"camera.width_px\": [16]"));
   r = sh("dataset run " + (dir_ / "e.json").string() + " -o " + (dir_ / "e").string() + " -q");
   EXPECT_EQ(r.code, 1);
-  EXPECT_THAT(r.output, HasSubstr("e.json: sample 0: with the scene file "));
-  EXPECT_THAT(r.output, HasSubstr("expected a rectangle inside the 16 x 500 sensor (and the next 3 samples of this scene fail too)"));
+  // the key at its place in the dataset file, with the sample's parameters that make it invalid
+  EXPECT_THAT(r.output, HasSubstr("e.json: sample 0 (laser.average_power_mW 1, camera.width_px 16, "));
+  EXPECT_THAT(r.output, HasSubstr("): /set/camera.crop: found [496, 232, 24, 20], expected a rectangle inside the 16 x 500 sensor "
+                                  "(and the next 3 samples of this scene fail too)"));
   EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
   EXPECT_FALSE(fs::exists(dir_ / "e"));
 }

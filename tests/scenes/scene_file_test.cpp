@@ -430,6 +430,15 @@ TEST_F(SceneFileTest, AnAmbientBandReachingZeroNanometresIsRefused) {
   EXPECT_NO_THROW(parse(R"({"gltf": "s.gltf", "ambient": {"wavelength_nm": 500, "bandwidth_nm": 999}})"));
 }
 
+// A --set laser.beam=gltf_light without a light's name is named by the --set given (it named the scene file's
+// gltf_light, which the file does not give); a file's own beam names gltf_light as before.
+TEST_F(SceneFileTest, AGltfLightBeamWithoutItsNameIsNamedByTheKeyGiven) {
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"laser.beam=gltf_light"}),
+              HasSubstr("--set laser.beam: found \"gltf_light\", which needs /laser/gltf_light, the name of a glTF light; it is empty"));
+  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "laser": {"beam": "gltf_light"}})"),
+              HasSubstr("/laser/gltf_light: is empty, expected the name of a glTF light because /laser/beam is \"gltf_light\""));
+}
+
 TEST_F(SceneFileTest, ExposureLongerThanAFrameIsAWarning) {
   const ResolvedRun r = parse(R"({"gltf": "s.gltf", "acquisition": {"cycles_per_frame": 2000}})");
   ASSERT_EQ(r.warnings.size(), 1u);
