@@ -475,6 +475,8 @@ Integrator::Integrator(const RenderStageConfig& config, const scenes::Scene& sce
   }
   ambient_on_ = ambient.any() || shading.has_emission();
   laser_traced_ = config.trace_laser;
+  laser_images_ = laser_.cos_half_angle > -1.0 &&
+                  (refractive_ || !mirrors_.empty() || !curved_mirrors_.empty() || !curved_refractors_.empty());
   optics_ = config.camera.optics_transmission;
   period_opl_ = kSpeedOfLight / config.laser.repetition_rate_Hz;
   find_camera_glints();
@@ -499,7 +501,10 @@ bool Integrator::laser_ray(const Surface& sf, LaserRay* out) const {
   out->r = glm::length(to);
   out->wid = to / out->r;
   out->intensity = laser_.intensity_towards(-out->wid);
-  if (!(out->intensity > 0.0)) return false;
+  // Outside the beam along the straight line, the laser may still reach the vertex through a mirror or a
+  // refracting plate, whose paths leave it in other directions (each tested at its own): the connection is
+  // made (a wall lit through a 45-degree mirror by a 5-degree cone got none of its light; an auditor's find).
+  if (!(out->intensity > 0.0) && !laser_images_) return false;
   out->wi = glm::vec3(out->wid);
   out->origin = offset_ray_origin(sf.p, sf.ng, out->wi);
   return true;
@@ -1644,7 +1649,7 @@ inline void Integrator::connect_laser(const NeeVertex& v, const LaserRay& lr, co
       return;
     }
   }
-  if (!v.counted(wi)) return;
+  if (!(intensity > 0.0) || !v.counted(wi)) return;  // (outside the beam: the images' connections above alone)
   const Spec f = v.bsdf.eval_cos(wi);
   if (!(f.x > 0.0f)) return;
   if (!refractive_)

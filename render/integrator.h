@@ -460,6 +460,9 @@ class Integrator {
   const Camera& camera_;
   const Laser& laser_;
   bool refractive_ = false;  // a volume material with ior != 1: laser connections may refract
+  // The laser reaches vertices by paths other than the straight line (mirrors, refracting volumes): a vertex
+  // outside the beam along the straight line is still connected (laser_ray).
+  bool laser_images_ = false;
   bool guided_ = false;      // a glossy material of narrow lobe (alpha <= kGuideMaxAlpha): guided connections
   std::vector<GlossyPart> parts_;    // the triangles of small meshes (plates) of such materials
   std::vector<GlossyStrip> strips_;  // their slivers (pairs of triangles)

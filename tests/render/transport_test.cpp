@@ -943,6 +943,55 @@ TEST(Transport, AClearPlatesEchoAtObliqueIncidence) {
       << "camera side " << camera_side << ", laser side " << laser_side << ", measured " << echo / bare_all;
 }
 
+// The beam is tested at the direction the light leaves the laser, not at the straight line to the vertex (an
+// auditor's find: a wall seen and lit through a 45-degree mirror got no light from a 5-degree cone, and a wall
+// behind a tilted 20 cm slab none from a 1-degree cone, whose straight lines miss the cones by 45 and 3 degrees).
+TEST(Transport, TheBeamIsTestedWhereTheLightLeavesTheLaser) {
+  const auto render = [](const scenes::Scene& s, double half_angle, const glm::dvec3& look, double split_s, double* late) {
+    RenderStageConfig c = direct_laser_config(4, 4, 12e-3, 16);
+    c.laser.half_angle_rad = half_angle;
+    c.camera.look_at_m = {look.x, look.y, look.z};
+    const TimeAxis axis{0.0, 1e-12, 20000, 1.0};
+    const TransientTile t = Renderer(s, c).transient({0, 0, 4, 4}, {0, 0, 4, 4}, axis);
+    // per photon in the cone: its intensity is the pulse's photons over its solid angle 2 pi (1 - cos)
+    const double per = (1.0 - std::cos(half_angle)) / 2.0;
+    double all = 0;
+    *late = 0;
+    for (size_t i = 0; i < 16; ++i)
+      for (int64_t k = 0; k < axis.bins; ++k) {
+        const double g = t.transient[i * size_t(axis.bins) + size_t(k)] * per;
+        all += g;
+        if (axis.bin_centre_s(k) > split_s) *late += g;
+      }
+    return all;
+  };
+  // A flat mirror at 0.5 m turned 45 degrees sends the camera's axis to -x, onto a wall at x = -0.6: the laser's
+  // image lights it along the axis itself, 2.2 m of path; the straight light (2 x 0.78 m) lies 50 degrees off.
+  scenes::Scene m;
+  scenes::Material metal;
+  metal.metallic = 1.0f, metal.roughness = 0.0f, metal.double_sided = true;
+  const float h = 0.3f * float(std::sqrt(0.5));
+  add_quad(m, {0, 0, -0.5f}, {h, 0, h}, {0, 0.3f, 0}, add_material(m, metal));
+  add_quad(m, {-0.6f, 0, -0.5f}, {0, 0, 0.5f}, {0, 0.5f, 0}, add_material(m, test::lambertian(0.5f)));
+  double narrow_image = 0, wide_image = 0;
+  const double split = 1.9 / kC;
+  const double narrow = render(m, 5 * kPi / 180, {0, 0, -1}, split, &narrow_image);
+  (void)render(m, kPi, {0, 0, -1}, split, &wide_image);
+  ASSERT_GT(wide_image, 0.0);
+  EXPECT_NEAR(narrow_image / wide_image, 1.0, 1e-5);  // the image's light, whatever the cone that holds its direction
+  EXPECT_NEAR(narrow, narrow_image, 1e-9 * narrow);   // and no straight light outside the cone
+  // A 20 cm slab of ior 1.5 seen at 60 degrees: the light reaching the wall point a pixel sees leaves the laser
+  // along that pixel's ray (reversed), 3.2 degrees from the straight line to it. A 1-degree cone holds it; the
+  // cone of 180 degrees adds only the slab's internal echoes (about 1 %).
+  const glm::dvec3 look(std::sin(kPi / 3), 0, -std::cos(kPi / 3));
+  double unused = 0;
+  const double in_cone = render(wall_behind_slab(true, 0.2f, 1.5f), kPi / 180, look, 0.0, &unused);
+  const double everywhere = render(wall_behind_slab(true, 0.2f, 1.5f), kPi, look, 0.0, &unused);
+  ASSERT_GT(everywhere, 0.0);
+  EXPECT_GT(in_cone / everywhere, 0.97);
+  EXPECT_LE(in_cone / everywhere, 1.0 + 1e-9);
+}
+
 // Two clear plates whose faces are not parallel: the 5 cm slab above (ior 1.5) and a 2 cm plate 0.6 m from the
 // camera tilted by tau about the y axis, seen at psi = 20 degrees. The camera and the laser share the origin, so
 // the laser's path to the wall point X the pixel sees is the pixel's own path reversed: traced here from the
