@@ -86,6 +86,7 @@ GroundTruthTile Renderer::ground_truth(const PixelRect& rect) const {
         float tnear = 0.0f;
         glm::vec3 inside = d;  // the light's direction in a medium, for the Fresnel terms (straight_transmittance)
         double previous = 0.0, distance = 0.0, transmittance = 1.0, excess = 0.0;  // excess: (n - 1) x the length in media
+        double absorbed_per_straight = 1.0;  // the refracted length in the medium per straight length
         int medium = -1, count = 0, objects = 0;
         bool transmissive = false;  // the last surface met lets light through
         int32_t* slot_id = gt.object_slot_id.data() + i * layers;
@@ -99,7 +100,11 @@ GroundTruthTile Renderer::ground_truth(const PixelRect& rect) const {
           previous = distance;
           const glm::dvec3 p = glm::dvec3(cam) + double(hit.t) * glm::dvec3(d);
           if (medium >= 0) {
-            transmittance *= std::exp(-double(im.shading.material(medium).sigma.x) * seg);
+            // absorbed along the light's refracted path through the medium, which crosses its thickness at the
+            // refracted angle (exact between parallel faces): the straight stretch times cos / cos_refracted
+            // (at 45 degrees through 5 cm it was 9 % low of the light's, the Fresnel terms already the
+            // refracted angle's: an auditor's find)
+            transmittance *= std::exp(-double(im.shading.material(medium).sigma.x) * seg * absorbed_per_straight);
             excess += (double(im.shading.material(medium).point.ior) - 1.0) * seg;
           }
           if (count == 0) {
@@ -129,6 +134,10 @@ GroundTruthTile Renderer::ground_truth(const PixelRect& rect) const {
           const bool entering = glm::dot(d, sf.ng) < 0.0f;
           transmittance *= straight_transmittance(im.shading.material_at(sf, hit), rm.volume, d, sf.ng, &inside).x;
           if (rm.volume) medium = entering ? sf.material : -1;
+          if (rm.volume && entering) {
+            const double cs = std::fabs(double(glm::dot(d, sf.ng))), cr = std::fabs(double(glm::dot(inside, sf.ng)));
+            absorbed_per_straight = cr > 0.0 ? cs / cr : 1.0;
+          }
         }
         gt.layer_count[i] = count;
         gt.object_count[i] = objects;
