@@ -650,6 +650,7 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
   const int64_t valid = samples - int64_t(errors.size());  // the invalid ones have no estimate
   // Where compressed files or the saved light are counted at their most (the note below gives the least), the
   // figures are bounds, so named (the shipped example's "disk about 22.1 GB" was 7 times what it wrote).
+  // (the saved light at 2.5 ns of bins per pixel is more than most scenes take, not a bound: the footer says so)
   const bool bounded = total.disk_at_least() != total.disk();
   const char* disk = bounded ? "disk at most " : "disk about ";
   o << "# per sample: " << disk << bytes_text(valid ? total.kept / valid : 0) << ", memory up to "
@@ -666,7 +667,8 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
          "render.max_samples_per_pixel for every pixel, an upper bound\n";
   if (total.disk_at_least() != total.disk())
     o << "# the disk counts the compressed files (EXR images, Zarr stores) uncompressed"
-      << (total.least.light ? " and the saved light at 2.5 ns of bins per pixel" : "") << ": the samples take at least "
+      << (total.least.light ? " and the saved light at 2.5 ns of bins per pixel (more than most scenes take, not a bound: "
+                              "the scene decides the span, up to the time window)" : "") << ": the samples take at least "
       << bytes_text(total.disk_at_least()) << " (" << least_text(total.least)
       << "; examples/datasets/multi_object_variations.json writes about an eighth of the most)\n";
   if (folder) {

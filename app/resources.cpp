@@ -290,10 +290,13 @@ ResourcePlan plan_resources(const RunConfig& c, const sensor::SensorModel& senso
                        false, true});
   if (!sweep) plan.disk.push_back({"intensity.exr" + uncompressed, pixels * 2 * 4, false, "", compressed_images});
   // metadata.json (about 16 kB) and the previews (three PNG images, compressed: at most 3 bytes a pixel each,
-  // and the plot of the gate profiles, about 62 kB whatever the image)
+  // and the 800 x 450 RGB plot of the gate profiles: 50-200 kB measured, with more curves where pixels see
+  // more returns; counted at 256 kB, above all measured (it was 64 kB, and a dataset's small crops took 1.1
+  // times the "at most"; an auditor's find), not at its 1.08 MB of pixels, which no plot of lines comes near)
+  constexpr int64_t kPlotBytes = int64_t{256} << 10;
   plan.disk.push_back({std::string("metadata.json") + (c.outputs.previews ? " and previews/ (uncompressed)" : ""),
                        kMetadataBytes + std::max(objects, 0) * kMetadataBytesPerObject +
-                           (c.outputs.previews ? 9 * pixels + (int64_t{64} << 10) : 0),
+                           (c.outputs.previews ? 9 * pixels + kPlotBytes : 0),
                        false, "", c.outputs.previews});
   if (c.outputs.light) {
     // light/: per pixel of the image grown by one, its bin range, offset, totals, standard errors and paths,
