@@ -12,6 +12,7 @@
 #include <sstream>
 
 #include "core/error.h"
+#include "core/units.h"
 #include "core/rng.h"
 #include "scenes/input.h"
 #include "scenes/key_path.h"
@@ -343,7 +344,7 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
   // A mistake of the first scene file itself is its own, named once at /scenes/0 (not the keys', unless the
   // dataset's keys mend it: then the keys are checked with it as they are).
   std::optional<std::string> own_mistake;
-  const auto check_values = [&](const std::string& at, const std::vector<std::string>& overrides) {
+  const auto check_values = [&](const std::string& at, const std::vector<std::string>& overrides, const std::string& hint = "") {
     if (!scenes_read) return;
     try {
       (void)scenes::load_scene_file(s.scenes.front(), overrides);
@@ -358,7 +359,9 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
         }
       }
       if (!own_mistake->empty()) return;  // named once, above
-      rd.fail(at, std::string("with the scene file ") + s.scene_names.front() + ": " + e.what());
+      const std::string what = e.what();
+      rd.fail(at, "with the scene file " + s.scene_names.front() + ": " + what +
+                      (what.find("expected an integer") != std::string::npos ? hint : std::string()));
     }
   };
   // Each value once: one key under two spellings (materials.plate.roughness and materials."plate".roughness),
@@ -454,6 +457,17 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
         else if (d.kind == Distribution::Kind::Normal) probes = {d.min.value_or(d.a), d.max.value_or(d.a)};
         else probes = {d.a, d.b};
         for (const json& p : probes) check_values(at, {it.key() + "=" + p.dump()});
+        // A continuous draw gives values with fractions: one inside the range (not a round one), which an
+        // integer key refuses (uniform [600, 700] on camera.width_px passed with its integer ends, and the
+        // dataset failed on its first samples).
+        if (d.kind == Distribution::Kind::Uniform || d.kind == Distribution::Kind::LogUniform || d.kind == Distribution::Kind::Normal) {
+          const double lo = d.kind == Distribution::Kind::Normal ? d.min.value_or(d.a) : d.a;
+          const double hi = d.kind == Distribution::Kind::Normal ? d.max.value_or(d.a + d.b) : d.b;
+          if (hi > lo) {
+            check_values(at, {it.key() + "=" + json(lo + (hi - lo) / kPi).dump()},
+                         "; a continuous distribution draws fractions: for an integer key use {\"uniform_int\": [a, b]}");
+          }
+        }
         // An untruncated side of a normal reaches any value (40 sigma stands for it): a key with a bound there
         // needs min or max, or some samples fail.
         if (d.kind == Distribution::Kind::Normal)

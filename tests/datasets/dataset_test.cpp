@@ -182,6 +182,15 @@ TEST(DatasetFile, ErrorsNameTheKeyAndWhatWasExpected) {
   EXPECT_THAT(error_of("\"repeats\": 3, \"seeds\": {\"noise\": 9007199254740990}"), "no error");
   EXPECT_THAT(error_of("\"random\": {\"render.samples_per_pixel\": {\"uniform_int\": [1, 1e16]}}"),
               HasSubstr("expected integers a <= b (both included) within +-9e15"));
+  // a continuous draw on an integer key, whose ends are integers: refused up front with the remedy (it passed,
+  // and the dataset failed on its first samples; an auditor's find); a real key takes it
+  for (const char* kind : {"uniform", "log_uniform"})
+    EXPECT_THAT(error_of(std::string("\"random\": {\"camera.width_px\": {\"") + kind + "\": [600, 700]}}"),
+                HasSubstr("/random/camera.width_px: with the scene file")) << kind;
+  EXPECT_THAT(error_of("\"random\": {\"acquisition.frames\": {\"normal\": [255, 10], \"min\": 100, \"max\": 400}}"),
+              HasSubstr("expected an integer in [1, 65535] (binary frames summed per gate position (gate_sweep) or per image "
+                        "(intensity)); a continuous distribution draws fractions: for an integer key use {\"uniform_int\": [a, b]}"));
+  EXPECT_THAT(error_of("\"random\": {\"laser.average_power_mW\": {\"uniform\": [1, 3]}}"), "no error");
 }
 
 // One reading names every mistake of the file, as a scene file's does (a new user's file of two mistakes
