@@ -230,11 +230,14 @@ bool value_fits(const Key& k, const json& v) {
 
 // What a value that does not fit its key was, and what the key expects.
 std::string misfit_text(const Key& k, const json& v) {
-  std::string e = "found " + describe_json(v) + ", expected " + expected_text(k);
+  std::string expected = expected_text(k), or_null;
+  // (the digits are the integer's: ", or null" after them, not "or null written as its digits")
+  if (const std::string tail = ", or null"; expected.ends_with(tail)) expected.resize(expected.size() - tail.size()), or_null = tail;
+  std::string e = "found " + describe_json(v) + ", expected " + expected;
   if (k.type == Type::Integer && v.is_number_float() && std::fabs(v.get<double>()) >= 0x1p53)
     e += " written as its digits (a number with a fraction or an exponent is rounded to a double, which from 2^53 on may be "
          "another integer)";
-  return e + " (" + k.doc + ")";
+  return e + or_null + " (" + k.doc + ")";
 }
 
 // A type as the reference and the messages name it.
