@@ -70,11 +70,12 @@ struct Reader {
     if (!v.is_number() || !std::isfinite(v.get<double>())) fail(where, "found " + describe(v) + ", expected " + expected);
     return v.get<double>();
   }
-  uint64_t seed(const json& v, const std::string& where) const {
+  // also: what else the key takes (seeds.*: ' or "per_sample"', which their messages left out but for a string)
+  uint64_t seed(const json& v, const std::string& where, const std::string& also = "") const {
     if (!v.is_number_unsigned() && !(v.is_number_integer() && v.get<int64_t>() >= 0))
-      fail(where, "found " + describe(v) + ", expected an integer in [0, 2^53]");
+      fail(where, "found " + describe(v) + ", expected an integer in [0, 2^53]" + also);
     const uint64_t s = v.get<uint64_t>();
-    if (s > kMaxSeed) fail(where, "found " + describe(v) + ", expected an integer in [0, 2^53]");
+    if (s > kMaxSeed) fail(where, "found " + describe(v) + ", expected an integer in [0, 2^53]" + also);
     return s;
   }
 };
@@ -320,7 +321,7 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
         }
         if (it.value().is_string() && it.value().get<std::string>() == "per_sample") continue;
         if (it.value().is_string()) rd.fail(at, "found " + describe(it.value()) + ", expected an integer in [0, 2^53] or \"per_sample\"");
-        *slot = rd.seed(it.value(), at);
+        *slot = rd.seed(it.value(), at, " or \"per_sample\"");
       }
       // realisation r uses noise seed + r: the last must be a seed too (it failed every sample after rendering)
       if (s.noise_seed && *s.noise_seed + uint64_t(s.repeats - 1) > kMaxSeed)

@@ -150,6 +150,11 @@ TEST(DatasetFile, ErrorsNameTheKeyAndWhatWasExpected) {
   EXPECT_THAT(error_of("\"repeats\": 2, \"set\": {\"\\\"outputs\\\".light\": false}"),
               HasSubstr("/set/\"outputs\".light: is false, but repeats 2"));
   EXPECT_THAT(error_of("\"seeds\": {\"chips\": 3}"), HasSubstr("/seeds/chips: unknown key; did you mean chip?"));
+  // every wrong value of a seed names both what it takes (null, -1 and 1.5 left out "per_sample")
+  for (const char* v : {"null", "-1", "1.5"})
+    EXPECT_THAT(error_of(std::string("\"seeds\": {\"chip\": ") + v + "}"),
+                HasSubstr("/seeds/chip: found " + std::string(v == std::string("null") ? "null" : v)) ) << v;
+  EXPECT_THAT(error_of("\"seeds\": {\"chip\": null}"), HasSubstr("expected an integer in [0, 2^53] or \"per_sample\""));
   // repeats saves the light: outputs.light true may be said too (the shipped example says it), not false or varied
   EXPECT_THAT(error_of("\"repeats\": 2, \"set\": {\"outputs.light\": false}"),
               HasSubstr("/set/outputs.light: is false, but repeats 2 re-samples each sample's noise from its saved light, which it "
