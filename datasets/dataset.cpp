@@ -655,7 +655,13 @@ Sample make_sample(const DatasetSpec& spec, int64_t index) {
     s.parameters[spec.grid[a].key] = ojson::parse(v.dump());
   }
   for (const RandomAxis& r : spec.random) {
-    Rng rng(spec.seed, RngKind::Dataset, static_cast<uint64_t>(index), scenes::fnv1a64(r.key) | 1u);
+    // keyed by the key's one spelling (nodes."a".x is nodes.a.x): two files that spell it differently draw alike
+    std::string canonical = r.key;
+    try {
+      canonical = scenes::parse_key_path(r.key).text();
+    } catch (const Error&) {
+    }  // (a key that does not parse never reaches a sample: the file's check refused it)
+    Rng rng(spec.seed, RngKind::Dataset, static_cast<uint64_t>(index), scenes::fnv1a64(canonical) | 1u);
     const json v = draw(r.dist, rng, spec.file + ": /random/" + r.key);
     s.overrides.push_back(r.key + "=" + v.dump());
     s.parameters[r.key] = ojson::parse(v.dump());

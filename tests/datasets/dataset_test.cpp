@@ -320,6 +320,11 @@ TEST(DatasetFile, AddingSamplesOrAxesOrderLeavesEachSampleItsOwnDraws) {
   for (int64_t i = 0; i < 10; ++i)
     EXPECT_EQ(make_sample(one, i).parameters["camera.f_number"], make_sample(small, i).parameters["camera.f_number"]);
   EXPECT_THROW(make_sample(small, 10), Error);
+  // ... by its name, not its spelling: a name needlessly quoted draws as it does bare
+  const DatasetSpec quoted = parse("\"seed\": 9, \"samples\": 10, \"random\": {\"camera.\\\"f_number\\\"\": {\"log_uniform\": [1, 8]}}");
+  ASSERT_EQ(quoted.random.at(0).key, "camera.\"f_number\"");
+  for (int64_t i = 0; i < 10; ++i)
+    EXPECT_EQ(make_sample(quoted, i).parameters["camera.\"f_number\""], make_sample(one, i).parameters["camera.f_number"]);
 }
 
 // Kolmogorov-Smirnov distance of sorted values from a CDF.
