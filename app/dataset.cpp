@@ -703,6 +703,7 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
         << "\n";
     }
   }
+  if (const std::string w = spec.coverage_warning(); !w.empty()) o << "warning: " << w << "\n";
   for (const std::string& w : warnings.lines(" (spadgen info SCENE --set ... shows a sample's)")) o << "warning: " << w << "\n";
   for (const std::string& e : errors) o << "error: " << e << "\n";
   return {o.str(), int64_t(errors.size()),
@@ -980,6 +981,7 @@ void dataset_run(const DatasetOptions& options) {
   Estimator estimator(spec.repeats, options.threads);
   refuse_a_dataset_of_invalid_samples(spec, estimator, true);  // before the folder is made
   refuse_output_inside(options.out_dir, "-o " + options.out_dir);  // (in a run folder, a dataset's entries, a set)
+  if (const std::string w = spec.coverage_warning(); !w.empty()) std::fprintf(stderr, "spadgen: warning: %s\n", w.c_str());
   // A realisation's metadata.json names the sample it re-samples (sense.from): every sample failed with it
   if (spec.repeats > 1)
     require_utf8_path(resolved_folder(options.out_dir), "the dataset folder",

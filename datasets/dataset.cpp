@@ -224,6 +224,21 @@ int64_t DatasetSpec::grid_cells() const {
 
 int64_t DatasetSpec::count() const { return samples.value_or(grid_cells()); }
 
+std::string DatasetSpec::coverage_warning() const {
+  const int64_t cells = grid_cells(), n = count();
+  if (n >= cells) return "";
+  const int64_t per_scene = cells / static_cast<int64_t>(scenes.size());
+  std::string none;  // the scene files no sample takes
+  size_t unsampled = 0;
+  for (size_t i = 0; i < scenes.size(); ++i)
+    if (static_cast<int64_t>(i) * per_scene >= n) none += (unsampled++ ? ", " : "") + scene_names[i];
+  const std::string cell_range = n + 1 == cells ? "cell " + std::to_string(n) : "cells " + std::to_string(n) + "-" + std::to_string(cells - 1);
+  return file + ": samples (" + std::to_string(n) + ") is fewer than the " + std::to_string(cells) +
+         " grid cells (scenes outermost, the last grid key fastest): " + cell_range + " make no sample" +
+         (unsampled ? std::string(unsampled == 1 ? ", nor does the scene file " : ", nor do the scene files ") + none : std::string()) +
+         "; \"samples\": null makes one per cell, a multiple of " + std::to_string(cells) + " as many of each";
+}
+
 DatasetSpec parse_dataset_text(const std::string& text, const std::string& path) {
   const Reader rd{path.empty() ? "<dataset>" : path, {}};
   // checked: depth, duplicate keys, numbers; a number written with a fraction of zero (6.0) read as the

@@ -76,6 +76,9 @@ struct DatasetSpec {
   int64_t grid_cells() const;
   // The number of samples: "samples", or grid_cells() when it is null.
   int64_t count() const;
+  // "" or, when "samples" is fewer than the grid cells, what that leaves out: the cells past the samples make
+  // none, and with the scenes outermost, whole scene files may make none (a plan and a run say it).
+  std::string coverage_warning() const;
 };
 
 // The largest dataset (samples) a file may describe, and the largest grid.

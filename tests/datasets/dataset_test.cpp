@@ -726,6 +726,36 @@ TEST(DatasetFolder, TheCardSaysWhichSettingsVary) {
   fs::remove_all(dir);
 }
 
+// "samples" fewer than the grid cells leaves the last cells out, and with the scenes outermost whole scene files:
+// the plan and the run warn, and the card's scene table counts each scene's samples (it listed a scene no sample
+// took).
+TEST(DatasetFolder, WhatTheSamplesCoverIsSaid) {
+  const fs::path dir = fs::temp_directory_path() / ("spadgen_dataset_cover_" + std::to_string(::getpid()));
+  const auto two_scenes = [](const std::string& samples) {
+    return parse_dataset_text("{\"scenes\": [\"" + kScenes + "flat_target.json\", \"" + kScenes + "multi_object.json\"], " +
+                              "\"samples\": " + samples + ", \"grid\": {\"camera.f_number\": [1.4, 2, 2.8]}}", "cover.json");
+  };
+  const DatasetSpec three = two_scenes("3");
+  EXPECT_EQ(three.coverage_warning(), three.file + ": samples (3) is fewer than the 6 grid cells (scenes outermost, the last grid key "
+                                      "fastest): cells 3-5 make no sample, nor does the scene file " + kScenes +
+                                      "multi_object.json; \"samples\": null makes one per cell, a multiple of 6 as many of each");
+  std::string card = dataset_card(DatasetFolder(three, dir), CardTally{});
+  EXPECT_THAT(card, HasSubstr("flat_target.json` | 3 | ")) << card;
+  EXPECT_THAT(card, HasSubstr("multi_object.json` | 0 | ")) << card;
+  EXPECT_THAT(card, HasSubstr("cells 3-5 make no sample"));
+  const DatasetSpec five = two_scenes("5");  // the second scene takes two of its three cells
+  EXPECT_THAT(five.coverage_warning(), HasSubstr("cell 5 make no sample; "));
+  EXPECT_THAT(dataset_card(DatasetFolder(five, dir), CardTally{}), HasSubstr("multi_object.json` | 2 | "));
+  // more samples than cells: each scene its share, and no warning (the cells repeat past the grid's end)
+  const DatasetSpec eight = two_scenes("8");
+  EXPECT_EQ(eight.coverage_warning(), "");
+  card = dataset_card(DatasetFolder(eight, dir), CardTally{});
+  EXPECT_THAT(card, HasSubstr("flat_target.json` | 5 | "));
+  EXPECT_THAT(card, HasSubstr("multi_object.json` | 3 | "));
+  EXPECT_EQ(two_scenes("null").coverage_warning(), "");
+  fs::remove_all(dir);
+}
+
 // Warnings grouped by kind: numbers standing alone vary from sample to sample (values, exponents, signs), digits
 // inside names tell kinds apart (offset_m[0] and [2], layer0 and layer1, pde_400nm.csv and pde_905nm.csv were
 // one kind); at most kKindsShown kinds, then how many more.
