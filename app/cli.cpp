@@ -6,6 +6,7 @@
 
 #include <cerrno>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <iostream>
@@ -72,6 +73,21 @@ std::optional<int> parse_command_line(CLI::App& cli, int argc, char** argv) {
       for (const CLI::App* sub : at->get_subcommands({})) names += (names.empty() ? "" : ", ") + sub->get_name();
       std::fprintf(stderr, "spadgen: error: unknown command '%s' after %s; expected one of %s (see %s --help)\n",
                    scenes::one_line(argv[next]).c_str(), command.c_str(), names.c_str(), command.c_str());
+      return kExitBadInput;
+    }
+    // An option that takes a value followed by another option (`--set -o DIR`): CLI11 named DIR, the word it
+    // could not place, as the mistake.
+    for (int i = next; i + 1 < argc; ++i) {
+      const std::string word = argv[i], after = argv[i + 1];
+      if (word.size() < 2 || word[0] != '-' || word.find('=') != std::string::npos) continue;
+      const CLI::Option* opt = at->get_option_no_throw(word);
+      if (!opt || opt->get_type_size() == 0 || after.size() < 2 || after[0] != '-') continue;
+      char* end = nullptr;
+      (void)std::strtod(after.c_str(), &end);
+      if (end && *end == '\0') continue;  // a negative number is a value
+      std::fprintf(stderr, "spadgen: error: %s: expected %s after it, found the option '%s' (see %s --help)\n", word.c_str(),
+                   opt->get_type_name().empty() || opt->get_type_name() == "TEXT" ? "a value" : opt->get_type_name().c_str(), scenes::one_line(after).c_str(),
+                   command.c_str());
       return kExitBadInput;
     }
     // (one line: a word of the command line holding a newline, a file name, is shown as \n)

@@ -555,6 +555,9 @@ TEST_F(Hardening, CommandLineErrorsAreSpadgensWithExitCode1) {
       {"", "spadgen: error: A subcommand is required (see spadgen --help)"},
       {"run " + kTiny + " --seed -1", "spadgen: error: --seed: found '-1', expected an integer in [0, 9007199254740992]"},
       {"run " + kTiny + " --seed 9007199254740993", "--seed: found '9007199254740993'"},
+      // an option where a value was expected: CLI11 named the next word (the folder) as "not expected"
+      {"run " + kTiny + " --set -o out_dir", "spadgen: error: --set: expected KEY=VALUE after it, found the option '-o' (see spadgen run --help)"},
+      {"run " + kTiny + " -o --set a=1", "spadgen: error: -o: expected a value after it, found the option '--set'"},
       {"info /dev/zero", "scene file /dev/zero: is a character device, expected a regular file"},
       // two values after one --set: the second is taken for the scene, and said so
       {"run --set camera.width_px=1024 camera.height_px=500 " + kFlat,
