@@ -81,7 +81,7 @@ std::optional<int> parse_command_line(CLI::App& cli, int argc, char** argv) {
       const std::string word = argv[i], after = argv[i + 1];
       if (word.size() < 2 || word[0] != '-' || word.find('=') != std::string::npos) continue;
       const CLI::Option* opt = at->get_option_no_throw(word);
-      if (!opt || opt->get_type_size() == 0 || after.size() < 2 || after[0] != '-') continue;
+      if (!opt || opt->get_expected_min() == 0 || after.size() < 2 || after[0] != '-') continue;
       char* end = nullptr;
       (void)std::strtod(after.c_str(), &end);
       if (end && *end == '\0') continue;  // a negative number is a value
