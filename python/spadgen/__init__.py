@@ -10,7 +10,8 @@ PyTorch for spadgen.torchdata.
     ds = spadgen.open_dataset("out/plates")  # a `spadgen dataset run` folder
     for sample in ds.select(status="done"):
         sample.parameters, sample.run.counts
-    spadgen.evaluate("out/plates", {"000000": ranges})  # your detections scored (spadgen evaluate)
+    spadgen.evaluate(run, ranges)            # your (H, W, M) ranges scored (spadgen evaluate); a dataset takes
+                                             # {folder name: ranges} for every done sample folder
 
 Reference: docs/python.md.
 """

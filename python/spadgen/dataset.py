@@ -291,11 +291,16 @@ class Dataset:
                                     "into it was killed (the last run on the folder to end writes the index, also when "
                                     "stopped by SIGINT or SIGTERM); run it again to finish")
         with open(index_path, encoding="utf-8") as f:
-            try:
-                self.index = [json.loads(line) for line in f if line.strip()]
-            except json.JSONDecodeError as e:
-                raise ValueError(f"{index_path}: not valid JSON lines ({e}); `spadgen dataset run` writes it whole, so it "
-                                 "was damaged afterwards: run the dataset again to write it") from e
+            self.index = []
+            for number, line in enumerate(f, 1):
+                if not line.strip():
+                    continue
+                try:
+                    self.index.append(json.loads(line))
+                except json.JSONDecodeError as e:  # (line by line: its own "line 1" named no row)
+                    raise ValueError(f"{index_path} row {number}: not valid JSON ({e.msg} at column {e.colno}); "
+                                     "`spadgen dataset run` writes it whole, so it was damaged afterwards: run the "
+                                     "dataset again to write it") from e
         _check_index(self.index, index_path)
         _check_rows_against_spec(self.index, self.spec, self.path, index_path)
         self._all = self.index
@@ -362,6 +367,11 @@ class Dataset:
         """ds[i]: the i-th sample of this selection (not dataset index i: sample(i) is that); ds[a:b] a selection."""
         if isinstance(i, slice):
             return self._view(self.index[i])
+        if isinstance(i, (bool, np.bool_)) or not isinstance(i, (numbers.Integral, np.integer)):
+            raise TypeError(f"{self.path}: ds[{i!r}]; expected a position in this selection (an int) or a slice")
+        if not -len(self.index) <= i < len(self.index):
+            raise IndexError(f"{self.path}: ds[{i}] is past this selection of {len(self.index)} samples (positions "
+                             f"0 to {len(self.index) - 1}; sample(index) finds a sample by its dataset index)")
         return Sample(self, self.index[i])
 
     def sample(self, index):
@@ -381,6 +391,8 @@ class Dataset:
         """
         keep = list(self.index)
         if status is not None:
+            if not isinstance(status, (str, list, tuple, set, frozenset)):
+                raise TypeError(f"select: status={status!r}; expected one of {', '.join(STATUSES)} or a list of them")
             wanted = (status,) if isinstance(status, str) else tuple(status)
             unknown = [s for s in wanted if s not in STATUSES]
             if unknown:

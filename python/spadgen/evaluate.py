@@ -5,6 +5,7 @@ import json
 import operator
 import os
 import pathlib
+import re
 import shutil
 import subprocess
 import tempfile
@@ -80,7 +81,19 @@ def _ranges_array(a, what, folder):
         hint = " (an (M, H, W) array, as Run.detections().range and torch's object_range are: np.moveaxis(a, 0, -1))" \
             if a.shape[1:] == (run.height, run.width) else ""
         raise ValueError(f"{what}: shape {a.shape}, expected ({run.height}, {run.width}, M): the image of {folder}{hint}")
-    return np.ascontiguousarray(a, dtype=np.float32 if a.dtype.itemsize <= 4 else np.float64)
+    a = np.ascontiguousarray(a, dtype=np.float32 if a.dtype.itemsize <= 4 else np.float64)
+    # the values too (the program's message named the temporary file, already gone): NaN is none, others >= 0
+    bad = np.isinf(a) | (a < 0)
+    if bad.any():
+        y, x, m = (int(v) for v in np.argwhere(bad)[0])
+        raise ValueError(f"{what}: [{y}, {x}, {m}] (y, x, slot) is {float(a[y, x, m])!r}, and {int(bad.sum())} values in all "
+                         "are infinite or negative; expected ranges in metres >= 0, NaN where there is none")
+    return a
+
+
+# The command's flags as this function's arguments, for its messages (EvaluateError)
+_ARGUMENTS = {"--detections": "detections=", "--detector": "detector=", "--tolerance-m": "tolerance_m=",
+              "--min-score": "min_score=", "--region": "region=", "--noise-free": "noise_free=True", "--threads": "threads="}
 
 
 def _done_folder_names(dataset, selection=None):
@@ -206,6 +219,9 @@ def evaluate(target, detections=None, *, detector=None, out=None, tolerance_m=No
         p = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         if p.returncode != 0:
             message = p.stderr.strip() or p.stdout.strip() or f"exit status {p.returncode}"
+            named = [f"{flag} is {arg}" for flag, arg in _ARGUMENTS.items() if re.search(re.escape(flag) + r"\b", message)]
+            if named:
+                message += f" [spadgen.evaluate: {', '.join(named)}]"
             raise EvaluateError(message, p.returncode, cmd)
         try:
             with open(os.path.join(out_dir, "metrics.json"), encoding="utf-8") as f:

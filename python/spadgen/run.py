@@ -823,7 +823,15 @@ class Run:
     def frames(self, k=slice(None), n=slice(None)):
         """Binary frames unpacked to 0 / 1 uint8: frames(k, n) is one (H, W) frame, frames(k) the (N, H, W)
         frames of gate position k, frames() all of them (K, N, H, W) (8 times the file's size in memory)."""
-        return unpack_frames(self.frames_packed[k, n], self.width)
+        packed = self.frames_packed
+        for name, v, size, what in (("k", k, packed.shape[0], "gate positions"), ("n", n, packed.shape[1], "frames per position")):
+            if isinstance(v, slice):
+                continue
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (numbers.Integral, np.integer)):
+                raise TypeError(f"{self.path}: frames({name}={v!r}); expected an int or a slice")
+            if not -size <= v < size:
+                raise IndexError(f"{self.path}: frames({name}={v}) is past the {size} {what} (0 to {size - 1})")
+        return unpack_frames(packed[k, n], self.width)
 
     def gate_profile(self, x, y, expected=False, sensor_coordinates=False):
         """The gate profile of pixel (x, y): counts (or, with expected=True, expected counts) against the gate
@@ -833,9 +841,14 @@ class Run:
             if isinstance(v, bool) or not isinstance(v, numbers.Integral):
                 raise TypeError(f"gate_profile: {name} = {v!r}; expected a whole pixel index (an int)")
         if sensor_coordinates:
+            sx, sy = x, y
             x, y = x - self.crop[0], y - self.crop[1]
+            if not (0 <= x < self.width and 0 <= y < self.height):
+                c = self.crop
+                raise IndexError(f"{self.path}: sensor pixel (x {sx}, y {sy}) lies outside the run's crop, x {c[0]} to "
+                                 f"{c[0] + c[2] - 1} and y {c[1]} to {c[1] + c[3] - 1} (sensor_coordinates=True)")
         if not (0 <= x < self.width and 0 <= y < self.height):
-            raise IndexError(f"pixel ({x}, {y}) lies outside the {self.width} x {self.height} image")
+            raise IndexError(f"{self.path}: pixel (x {x}, y {y}) lies outside the {self.width} x {self.height} image")
         if expected and not self.has("expected_counts.npy") and self.has("detection_rate.npy"):
             # as expected_counts computes it, for this pixel's rates only (not the whole stack in float64)
             lam = np.asarray(self.detection_rate[:, y, x], np.float64)
@@ -1024,4 +1037,6 @@ def _missing(path):
 
 def open_run(path):
     """Opens a run folder (reads metadata.json only)."""
+    if not isinstance(path, (str, bytes, os.PathLike)):
+        raise TypeError(f"open_run({path!r}): expected a run folder's path (str or os.PathLike)")
     return Run(path)

@@ -123,6 +123,15 @@ def test_select_by_status_parameters_and_rows(ds):
     assert view.table()["camera.width_px"].dtype == np.int64 and len(ds.select(status="missing").table()["scene"]) == 0
     with pytest.raises(KeyError, match="sample 1 is not in"):
         view.sample(1)
+    # a position past the selection, or not a position, is said so (they were Python's bare "list index out of
+    # range" and "list indices must be integers"); so is a status that is no text
+    with pytest.raises(IndexError, match=r"ds\[2\] is past this selection of 2 samples \(positions 0 to 1; sample\(index\)"):
+        view[2]
+    assert view[-2].index == 0
+    with pytest.raises(TypeError, match=r"ds\['a'\]; expected a position"):
+        view["a"]
+    with pytest.raises(TypeError, match="select: status=5; expected one of done"):
+        ds.select(status=5)
     # NumPy values as the Python ones (an array matched nothing, silently)
     assert ds.select(camera__width_px=np.int64(1000)).indices.tolist() == [1]
     assert ds.select(camera__width_px=np.array(1024)).indices.tolist() == [0, 3]
@@ -290,7 +299,9 @@ def test_an_index_cut_short_or_without_a_row_is_refused_unless_a_run_is_on(datas
              r"\(run with the dataset file the folder held before, it writes only the index and the card\)")
     for lines, says in ((rows[:2], short), ([], f"{index} has 0 rows for the 4 samples"),
                         (rows[:2] + rows[3:], f"{index} row 3: lists sample 3 where sample 2 belongs"),
-                        ([rows[1], rows[0]] + rows[2:], f"{index} row 1: lists sample 1 where sample 0 belongs")):
+                        ([rows[1], rows[0]] + rows[2:], f"{index} row 1: lists sample 1 where sample 0 belongs"),
+                        # the last row cut inside (a JSON error per line said "line 1" of every row)
+                        (rows[:3] + [rows[3][:40]], f"{index} row 4: not valid JSON \\(.* at column .*damaged afterwards")):
         index.write_text("".join(line + "\n" for line in lines))
         with pytest.raises(ValueError, match=says):
             spadgen.open_dataset(copy)

@@ -54,6 +54,13 @@ def test_the_detector_and_the_programs_refusals(sweep_run, spadgen_bin, tmp_path
     with pytest.raises(EvaluateError, match="--tolerance-m") as e:
         spadgen.evaluate(run.path, tolerance_m=-1, out=tmp_path / "bad", program=spadgen_bin)
     assert e.value.returncode == 1 and not (tmp_path / "bad").exists()
+    assert str(e.value).endswith("[spadgen.evaluate: --tolerance-m is tolerance_m=]"), str(e.value)  # the flag as the argument
+    # values the program refuses, named at their place in the array (its message named a temporary file already gone)
+    bad = np.full((run.height, run.width, 2), np.nan, np.float32)
+    bad[1, 2, 1], bad[3, 0, 0] = -1.0, np.inf
+    with pytest.raises(ValueError, match=r"detections: \[1, 2, 1\] \(y, x, slot\) is -1.0, and 2 values in all are infinite or "
+                                         "negative; expected ranges in metres >= 0, NaN where there is none"):
+        spadgen.evaluate(run.path, bad, out=tmp_path / "t", program=spadgen_bin)
     with pytest.raises(ValueError, match=r"expected a float array \(H, W, M\)"):
         spadgen.evaluate(run.path, np.zeros((run.height, run.width)), program=spadgen_bin)
     with pytest.raises(ValueError, match=rf"shape \({run.width}, {run.height}, 2\), expected \({run.height}, {run.width}, M\)"):

@@ -73,6 +73,13 @@ def test_frames_unpacked_and_summed_equal_counts(sweep, intensity):
         if pad:
             assert not (np.asarray(run.frames_packed[..., -1]) >> pad).any()
         np.testing.assert_array_equal(run.frames(3 % run.K, 5), frames[3 % run.K, 5])
+        # past the file, or not an index: said with the sizes (it was NumPy's bare "index 351 is out of bounds")
+        with pytest.raises(IndexError, match=rf"frames\(k={run.K}\) is past the {run.K} gate positions \(0 to {run.K - 1}\)"):
+            run.frames(run.K)
+        with pytest.raises(IndexError, match=rf"frames\(n={run.frames_per_k}\) is past the {run.frames_per_k} frames per position"):
+            run.frames(0, run.frames_per_k)
+        with pytest.raises(TypeError, match=r"frames\(k='a'\); expected an int or a slice"):
+            run.frames("a")
     # The bit order matters: NumPy's default (most significant bit first) mirrors groups of 8 pixels.
     wrong = np.unpackbits(np.asarray(sweep.frames_packed), axis=-1)[..., :sweep.width].sum(axis=1)
     assert not np.array_equal(wrong, sweep.counts)
@@ -344,8 +351,12 @@ def test_gate_profile(sweep):
     sx, sy = sweep.metadata["preview_profile_pixels"][0]
     q = sweep.gate_profile(sx, sy, sensor_coordinates=True)
     assert (q.x, q.y) == (sx - sweep.crop[0], sy - sweep.crop[1])
-    with pytest.raises(IndexError, match="outside"):
+    with pytest.raises(IndexError, match=rf"pixel \(x {sweep.width}, y 0\) lies outside the {sweep.width} x"):
         sweep.gate_profile(sweep.width, 0)
+    # in sensor coordinates, named as given, with the crop (it named the image coordinates they became)
+    c = sweep.crop
+    with pytest.raises(IndexError, match=rf"sensor pixel \(x 5, y 7\) lies outside the run's crop, x {c[0]} to {c[0] + c[2] - 1} "):
+        sweep.gate_profile(5, 7, sensor_coordinates=True)
     # a pixel is a whole index (2.7 reached NumPy's "only integers, slices ..."); NumPy's integers are whole
     with pytest.raises(TypeError, match=r"gate_profile: x = 2.7; expected a whole pixel index"):
         sweep.gate_profile(2.7, 3)
