@@ -272,7 +272,7 @@ void check_ranges(const std::string& path, const DetectionImage& img) {
       if (const float r = img.range[img.at(s, i)]; std::isinf(r) || r < 0.0f) {
         std::ostringstream v;
         v << r;
-        throw Error(path + ": pixel (" + std::to_string(i % size_t(img.width)) + ", " + std::to_string(i / size_t(img.width)) +
+        throw Error(path + ": pixel (x " + std::to_string(i % size_t(img.width)) + ", y " + std::to_string(i / size_t(img.width)) +
                     ") slot " + std::to_string(s) + " holds " + (std::isinf(r) ? "an infinite" : "a negative") + " range (" +
                     v.str() + "); expected metres >= 0 from the camera centre, or NaN for no detection");
       }
@@ -402,7 +402,7 @@ DetectionImage read_detections(const std::string& path, const RunFolder& run, bo
         const size_t at = i * size_t(m) + size_t(s);
         // a double beyond float's range (its conversion would be undefined)
         if (f64 && std::isfinite(v64[at]) && std::abs(v64[at]) > double(std::numeric_limits<float>::max()))
-          throw Error(path + ": the range " + nlohmann::json(v64[at]).dump() + " m at pixel (" + std::to_string(i % size_t(width)) + ", " +
+          throw Error(path + ": the range " + nlohmann::json(v64[at]).dump() + " m at pixel (x " + std::to_string(i % size_t(width)) + ", y " +
                       std::to_string(i / size_t(width)) + "), detection " + std::to_string(s) + ", is beyond float32's range; expected metres");
         const float r = f64 ? static_cast<float>(v64[at]) : v[at];
         img.range[img.at(s, i)] = r;
@@ -459,8 +459,8 @@ DetectionImage read_detections(const std::string& path, const RunFolder& run, bo
       img.count[i] += found;
       // --min-score compares the score: a NaN one would drop the detection without a word
       if (need_scores && found && std::isnan(img.score[img.at(s, i)]))
-        throw Error(path + ": --min-score: " + slot_name(s, "score") + " is NaN at pixel (" + std::to_string(i % size_t(width)) +
-                    ", " + std::to_string(i / size_t(width)) + "), where " + slot_name(s, "range") +
+        throw Error(path + ": --min-score: " + slot_name(s, "score") + " is NaN at pixel (x " + std::to_string(i % size_t(width)) +
+                    ", y " + std::to_string(i / size_t(width)) + "), where " + slot_name(s, "range") +
                     " holds a detection; expected a number (or leave --min-score out)");
     }
   check_ranges(path, img);
@@ -520,7 +520,7 @@ Labels read_labels(const RunFolder& run) {
       for (size_t i = 0; i < n; ++i)
         if (label_id[i] != id[i] && !(std::isnan(label_id[i]) && std::isnan(id[i]))) {
           std::ostringstream m;
-          m << labels_path << ": pixel (" << i % size_t(run.width()) << ", " << i / size_t(run.width())
+          m << labels_path << ": pixel (x " << i % size_t(run.width()) << ", y " << i / size_t(run.width())
             << ") holds object id " << label_id[i] << " in slot " << j << ", " << gt_path << " object id " << id[i]
             << ": the two files are not of one run; run the scene again";
           throw Error(m.str());

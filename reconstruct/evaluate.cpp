@@ -132,7 +132,7 @@ nlohmann::json error_statistics(std::vector<double> e) {
 nlohmann::json Scores::to_json(const std::map<int, std::string>& names) const {
   nlohmann::json j;
   j["matching"] = {{"tolerance_m", options_.tolerance_m},
-                   {"rule", "per pixel, object-detection pairs in increasing |range error| within the tolerance (|error| <= tolerance_m), each once; of equal |error|, the nearer object first"},
+                   {"rule", "per pixel, object-detection pairs in increasing |range error| within the tolerance (|error| <= tolerance_m), each once; of equal |error|, the nearer object first, then the detection given first (the lower slot)"},
                    {"range_error", "detection minus object range, the detection folded onto the object by c T / 2 of half path (laser to object to camera, over 2) for the run's laser period T"}};
   if (options_.min_score) j["matching"]["min_score"] = *options_.min_score;
   j["pixels"] = pixels_;

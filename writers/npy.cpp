@@ -428,6 +428,14 @@ std::string dict_value(const std::string& dict, const std::string& key, const st
   ++v;
   while (v < dict.size() && dict[v] == ' ') ++v;
   if (v < dict.size() && dict[v] == '(') return dict.substr(v, dict.find(')', v) - v + 1);
+  if (v < dict.size() && dict[v] == '[') {  // a structured dtype's list, whole (it was cut at its first comma)
+    int depth = 0;
+    for (size_t e = v; e < dict.size(); ++e) {
+      depth += dict[e] == '[' || dict[e] == '(' ? 1 : dict[e] == ']' || dict[e] == ')' ? -1 : 0;
+      if (depth == 0) return dict.substr(v, e - v + 1);
+    }
+    throw Error(read_error(path, "malformed header"));
+  }
   size_t e = v;
   if (v < dict.size() && dict[v] == '\'') e = dict.find('\'', v + 1) + 1;
   else

@@ -777,7 +777,7 @@ TEST_F(Reconstruct, EvaluateScoresADetectionsNpyAgainstTheLabelsExactly) {
   }
   r = sh("evaluate " + run.string() + " --detections " + (dir_ / "huge.npy").string() + " -o " + (dir_ / "eval_huge").string());
   EXPECT_EQ(r.code, 1);
-  EXPECT_THAT(r.output, HasSubstr("huge.npy: the range 1e+39 m at pixel (1, 0), detection 1, is beyond float32's range"));
+  EXPECT_THAT(r.output, HasSubstr("huge.npy: the range 1e+39 m at pixel (x 1, y 0), detection 1, is beyond float32's range"));
   // an infinite range is neither metres nor "none" (it was skipped as if nothing were there)
   {
     spadgen::writers::NpyWriter npy((dir_ / "inf.npy").string(), spadgen::writers::Dtype::F32, {H, W, M});
@@ -788,7 +788,7 @@ TEST_F(Reconstruct, EvaluateScoresADetectionsNpyAgainstTheLabelsExactly) {
   }
   r = sh("evaluate " + run.string() + " --detections " + (dir_ / "inf.npy").string());
   EXPECT_EQ(r.code, 1);
-  EXPECT_NE(r.output.find("inf.npy: pixel (1, 0) slot 1 holds an infinite range"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("inf.npy: pixel (x 1, y 0) slot 1 holds an infinite range"), std::string::npos) << r.output;
   // nor is a negative one (a sentinel -1 for "none" was scored as a false detection)
   {
     spadgen::writers::NpyWriter npy((dir_ / "neg.npy").string(), spadgen::writers::Dtype::F32, {H, W, M});
@@ -799,7 +799,7 @@ TEST_F(Reconstruct, EvaluateScoresADetectionsNpyAgainstTheLabelsExactly) {
   }
   r = sh("evaluate " + run.string() + " --detections " + (dir_ / "neg.npy").string() + " -o " + (dir_ / "eval").string());
   EXPECT_EQ(r.code, 1);
-  EXPECT_NE(r.output.find("neg.npy: pixel (0, 2) slot 2 holds a negative range (-1)"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("neg.npy: pixel (x 0, y 2) slot 2 holds a negative range (-1)"), std::string::npos) << r.output;
   // ... and the refused evaluation left the earlier one in eval/ as it was
   EXPECT_EQ(nlohmann::json::parse(slurp(dir_ / "eval" / "metrics.json"))["objects"]["found"], objects);
 }

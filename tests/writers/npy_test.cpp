@@ -180,6 +180,25 @@ TEST(NpyReader, AMalformedShapeIsAnErrorNamingTheFile) {
   }
 }
 
+// A structured dtype is named whole (the message was cut at its first comma: "dtype [('a' is not ...").
+TEST(NpyReader, AStructuredDtypeIsNamedWhole) {
+  TempDir dir;
+  std::string header = "{'descr': [('a', '<f4'), ('b', '<f4')], 'fortran_order': False, 'shape': (2,), }";
+  header.append(64 - 10 - header.size() % 64 - 1, ' ').push_back('\n');
+  std::string bytes = std::string("\x93NUMPY\x01\x00", 8);
+  bytes.push_back(char(header.size() & 0xff));
+  bytes.push_back(char(header.size() >> 8));
+  bytes += header + std::string(16, '\0');
+  ASSERT_EQ((bytes.size() - 16) % 64, 0u);
+  std::ofstream(dir.file("s.npy"), std::ios::binary) << bytes;
+  try {
+    NpyReader r(dir.file("s.npy"));
+    ADD_FAILURE() << "a structured dtype was read";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("dtype [('a', '<f4'), ('b', '<f4')] is not one spadgen writes"), std::string::npos) << e.what();
+  }
+}
+
 // A header naming a key twice (Python's dict literal takes the later value; the reader took the first) is
 // refused, naming the key and the file, whichever quotes name it the second time (Python's "descr" is the
 // same key; the reader looked for 'descr' only).
