@@ -585,7 +585,7 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
   double done_seconds = 0.0, done_estimated = 0.0;
   int64_t done_timed = 0;
   // The done samples' bytes on disk against their disk estimates: where compressed files make the estimate a
-  // bound (the shipped example's at most 22.1 GB, at least 952 MB for about 3 GB written), the share done samples
+  // bound (the shipped example's at most 22.1 GB, at least 953 MB for about 3 GB written), the share done samples
   // took tells the rest.
   int64_t done_bytes = 0, done_disk_estimated = 0, done_sized = 0;
   std::vector<std::string> errors;

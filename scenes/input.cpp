@@ -66,6 +66,31 @@ size_t depth_exceeded_at(const std::string& text, int limit) {
   return std::string::npos;
 }
 
+// The offset of the first number written as `token` outside strings and comments, or npos. The parse stops
+// at the first number too small for a double, so an earlier one written alike would have stopped it.
+size_t number_offset(const std::string& text, const std::string& token) {
+  const auto in_number = [](char c) { return (c >= '0' && c <= '9') || c == '-' || c == '+' || c == '.' || c == 'e' || c == 'E'; };
+  for (size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (c == '"') {
+      for (++i; i < text.size() && text[i] != '"'; ++i)
+        if (text[i] == '\\') ++i;
+    } else if (c == '/' && i + 1 < text.size() && text[i + 1] == '/') {
+      while (i < text.size() && text[i] != '\n') ++i;
+    } else if (c == '/' && i + 1 < text.size() && text[i + 1] == '*') {
+      const size_t end = text.find("*/", i + 2);
+      if (end == std::string::npos) return std::string::npos;
+      i = end + 1;
+    } else if (c == '-' || (c >= '0' && c <= '9')) {
+      size_t e = i;
+      while (e < text.size() && in_number(text[e])) ++e;
+      if (text.compare(i, e - i, token) == 0 && e - i == token.size()) return i;
+      i = e - 1;
+    }
+  }
+  return std::string::npos;
+}
+
 // Builds the document through nlohmann's own DOM builder, keeping the path of the value being read so
 // that an error can name it, and refusing duplicate keys and excessive nesting as they are met.
 class CheckedSax {
@@ -86,6 +111,7 @@ class CheckedSax {
                 " is below the smallest normal double (about 2.2e-308), which spadgen computes with (smaller ones "
                 "are flushed to 0); write 0 for zero";
       limit = true;
+      tiny_number = s;  // (the SAX interface gives no position: found again in the text)
       return false;
     }
     return value() && dom_.number_float(v, s);
@@ -145,6 +171,7 @@ class CheckedSax {
   }
 
   std::string problem;  // why the parse stopped ("" = it did not)
+  std::string tiny_number;  // the number below the smallest normal double it stopped at, as written
   size_t offset = 0;    // where, for syntax errors and overflowing numbers
   bool syntax = false;  // the problem has an offset
   bool limit = false;   // the problem is one of JsonLimitError's (the text's syntax is JSON's)
@@ -378,7 +405,9 @@ json parse_json(const std::string& text, const std::string& where, const JsonOpt
     const std::string problem = sax.problem.empty() ? std::string("not valid JSON") : sax.problem;
     // nlohmann reports the offset one past the character it stopped at.
     std::string message = where;
-    if (sax.syntax) message.append(":").append(line_column(text, sax.offset > 0 ? sax.offset - 1 : 0));
+    if (!sax.tiny_number.empty())
+      if (const size_t at = number_offset(text, sax.tiny_number); at != std::string::npos) sax.syntax = true, sax.offset = at + 1;
+    if (sax.syntax && options.positions) message.append(":").append(line_column(text, sax.offset > 0 ? sax.offset - 1 : 0));
     message.append(": ").append(problem);
     if (sax.limit) throw JsonLimitError(message);
     throw Error(message);

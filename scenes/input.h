@@ -45,6 +45,7 @@ struct JsonOptions {
   // Without reject_duplicates: where the first key repeated in its object is, with its path (the later value
   // is kept), or "" when none is ("file:3:5: /materials appears twice in one object").
   std::string* first_duplicate = nullptr;
+  bool positions = true;  // errors name the line:column (a --set value, one short line, names only its key)
 };
 
 // What parse_json throws for a text whose syntax is JSON's but which it refuses: a number beyond the range of a

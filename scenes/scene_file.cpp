@@ -455,7 +455,9 @@ std::string apply_override(json& doc, const std::string& assignment, Checker& ch
   json value;
   try {
     // the override named, not the scene file (which does not hold the value)
-    value = parse_json(text, chk.set + key);
+    JsonOptions one_value;
+    one_value.positions = false;
+    value = parse_json(text, chk.set + key, one_value);
   } catch (const JsonLimitError& e) {  // meant as JSON, and refused in a way a string never is
     chk.errors.push_back(e.what());
     return {};

@@ -1268,7 +1268,7 @@ TEST_F(Dataset, APlanTellsThePaceOfTheDoneSamples) {
   EXPECT_THAT(line, HasSubstr(", time about 0.")) << line;
   EXPECT_THAT(measured.output, Not(HasSubstr("at that pace")));  // nothing left
   // ... and what they keep on disk against their disk estimates: the index's bytes, a share of the estimates at
-  // most 1 where they are bounds (compressed files counted at their most: the example's 22.1 GB at most, 952 MB at
+  // most 1 where they are bounds (compressed files counted at their most: the example's 22.1 GB at most, 953 MB at
   // least, for about 3 GB written)
   int64_t kept = 0;
   std::istringstream rows(slurp(dir_ / "out/index.jsonl"));

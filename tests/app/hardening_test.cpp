@@ -121,7 +121,7 @@ TEST_F(Hardening, ValuesThatCrashedOrHungSpadgenEndInAnErrorNamingTheKey) {
       {"render.window_start_ns=0' --set 'render.window_stop_ns=1e5",
        "--set render.window_stop_ns: the window from 0 to 100000 ns makes 11111112 time bins of 9 ps (render.time_bin_ps)"},
       // "internal error: [json.exception.out_of_range.406] number overflow parsing '1e309'"
-      {"laser.average_power_mW=1e309", "--set laser.average_power_mW:1:1: the number 1e309 is beyond the range of a double"},
+      {"laser.average_power_mW=1e309", "--set laser.average_power_mW: the number 1e309 is beyond the range of a double"},
       // nesting overflowed the stack in the message's dump (a file with 100,000 levels: below)
       {"description=" + std::string(20000, '[') + std::string(20000, ']'), "nested deeper than 64 levels"},
   };

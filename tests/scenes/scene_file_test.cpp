@@ -593,10 +593,11 @@ TEST_F(SceneFileTest, ANumberBeyondTheDoubleRangeNamesItsKeyAndPlace) {
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"position_m": [0, -1e400, 0]}})"),
               HasSubstr("/camera/position_m/1: the number -1e400 is beyond the range"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {"laser.average_power_mW=1e309"}),
-              HasSubstr("--set laser.average_power_mW:1:1: the number 1e309 is beyond the range"));
-  // and one too small for a double, which is read as 0 (a bin width of 1e-400 was "found 0.0")
-  EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "render": {"time_bin_ps": 1e-400}})"),
-              HasSubstr("/render/time_bin_ps: the number 1e-400 is below the smallest normal double (about 2.2e-308), "
+              HasSubstr("--set laser.average_power_mW: the number 1e309 is beyond the range"));  // (one value: no 1:1)
+  // and one too small for a double, which is read as 0 (a bin width of 1e-400 was "found 0.0"), at its place
+  // too (the first number written so outside strings and comments: the one the parse stopped at)
+  EXPECT_THAT(error_of("{\"gltf\": \"s.gltf\", \"description\": \"1e-400\", // 1e-400\n \"render\": {\"time_bin_ps\": 1e-400}}"),
+              HasSubstr(path() + ":2:28: /render/time_bin_ps: the number 1e-400 is below the smallest normal double (about 2.2e-308), "
                         "which spadgen computes with (smaller ones are flushed to 0); write 0 for zero"));
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf", "camera": {"position_m": [0, -0.5e-330, 0]}})"),
               HasSubstr("/camera/position_m/1: the number -0.5e-330 is below the smallest normal double"));
