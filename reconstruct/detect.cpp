@@ -504,24 +504,30 @@ std::vector<Detection> detect(const EdgeDetector& d, const float* profile, int K
 }
 
 namespace {
-// The standard error of e.photons from N frames at x photons per frame (delta method).
+// The standard error of e.photons from N frames at x photons per frame (delta method): sqrt(var(c)) over
+// dc / dphotons, written so that it grows to +inf past saturation instead of dividing two underflows (it was
+// 0 beyond about 745 photons per frame, where exp(-x) is 0, and +inf in float32 from about 180, while the
+// documents said 0: the counts then tell nothing of the light, and the error is unbounded).
 void set_standard_error(HdrEstimate& e, int frames, bool dual, double ratio) {
   const double N = frames;
   const double x = e.photons / N;  // photons per frame
-  double variance = 0.0, slope = 0.0;  // var(c) and dc / dphotons at the estimate
-  if (!dual) {
-    // (p by expm1: 1 - exp(-x) was 0 below x of about 1e-16, and the standard error of faint light 0)
-    const double p = -std::expm1(-x), q = std::exp(-x);
-    variance = N * p * q;
-    slope = q;
-  } else {
-    const double aL = 2.0 * ratio / (ratio + 1.0), aS = 2.0 / (ratio + 1.0);
-    const double pL = -std::expm1(-aL * x), pS = -std::expm1(-aS * x);
-    const double qL = std::exp(-aL * x), qS = std::exp(-aS * x);
-    variance = 0.5 * N * (pL * qL + pS * qS);
-    slope = 0.5 * (aL * qL + aS * qS);
+  if (!(x > 0.0)) {
+    e.standard_error = 0.0;  // no light, no counts: their variance is 0
+    return;
   }
-  e.standard_error = slope > 0.0 ? std::sqrt(variance) / slope : 0.0;
+  if (!dual) {
+    // var(c) = N p q, slope = q: var / slope^2 = N p / q = N (e^x - 1) (expm1: exact for faint light)
+    e.standard_error = std::sqrt(N * std::expm1(x));
+  } else {
+    // both halves' terms over the short exposure's q_S = exp(-a_S x): var / slope^2 =
+    // 2 N (p_L r + p_S) e^{a_S x} / (a_L r + a_S)^2, r = q_L / q_S = exp(-(a_L - a_S) x)
+    const double aL = 2.0 * ratio / (ratio + 1.0), aS = 2.0 / (ratio + 1.0);
+    const double pL = -std::expm1(-aL * x), pS = -std::expm1(-aS * x), r = std::exp(-(aL - aS) * x);
+    const double w = aL * r + aS;
+    e.standard_error = std::sqrt(2.0 * N * (pL * r + pS) / (w * w)) * std::exp(0.5 * aS * x);
+  }
+  // beyond a float's range it is written as +inf (a double's own overflow gives +inf too)
+  if (e.standard_error > double(std::numeric_limits<float>::max())) e.standard_error = std::numeric_limits<double>::infinity();
 }
 }  // namespace
 

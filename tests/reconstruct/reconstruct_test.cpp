@@ -305,6 +305,31 @@ TEST(Hdr, StandardErrorIsTheSpreadOfTheEstimateAndSaturationIsFlagged) {
       const HdrEstimate e = hdr_of_rates(rates, N, dual, 8.0);
       EXPECT_NEAR(e.standard_error / std::sqrt(e.photons), 1.0, 1e-6) << (dual ? "dual " : "single ") << rate;
     }
+  // Past saturation it grows to +inf, never 0 or NaN (it was 0 beyond about 745 per frame, where exp(-x) is 0,
+  // and a double beyond float's range, +inf once written, from about 180: an auditor's find), and below that it
+  // is the delta method's sqrt(N p q) / q, computed here directly.
+  for (bool dual : {false, true}) {
+    double previous = 0.0;
+    for (const float rate : {1.0f, 20.0f, 60.0f, 100.0f, 171.0f, 173.0f, 400.0f, 745.0f, 800.0f, 1e4f, 1e30f}) {
+      const float rates[2] = {dual ? rate * 16.0f / 9.0f : rate, dual ? rate * 2.0f / 9.0f : rate};
+      const HdrEstimate e = hdr_of_rates(rates, N, dual, 8.0);
+      ASSERT_FALSE(std::isnan(e.standard_error)) << rate;
+      EXPECT_GE(e.standard_error, previous) << (dual ? "dual " : "single ") << rate;
+      previous = e.standard_error;
+      const double x = e.photons / N;
+      if (!dual && x < 700.0) {
+        const double p = 1.0 - std::exp(-x), q = std::exp(-x), want = std::sqrt(N * p * q) / q;
+        if (want < double(std::numeric_limits<float>::max())) EXPECT_NEAR(e.standard_error / want, 1.0, 1e-9) << rate;
+        else EXPECT_EQ(e.standard_error, std::numeric_limits<double>::infinity()) << rate;
+      }
+      if (dual && x < 300.0) {
+        const double aL = 16.0 / 9.0, aS = 2.0 / 9.0, qL = std::exp(-aL * x), qS = std::exp(-aS * x);
+        const double want = std::sqrt(0.5 * N * ((1 - qL) * qL + (1 - qS) * qS)) / (0.5 * (aL * qL + aS * qS));
+        EXPECT_NEAR(e.standard_error / want, 1.0, 1e-9) << rate;
+      }
+    }
+    EXPECT_EQ(previous, std::numeric_limits<double>::infinity()) << (dual ? "dual" : "single");
+  }
   const HdrEstimate s = invert_hdr(N, N, false, 1.0);
   EXPECT_TRUE(s.saturated);
   EXPECT_TRUE(std::isfinite(s.photons));
