@@ -42,24 +42,37 @@ std::string stat_problem(const struct stat& st, uint64_t max_bytes) {
   return "";
 }
 
+// Where the string or comment that begins at text[i] ends (its last character), i when none begins there,
+// or npos for a block comment never closed.
+size_t skip_string_or_comment(const std::string& text, size_t i) {
+  if (text[i] == '"') {
+    for (++i; i < text.size() && text[i] != '"'; ++i)
+      if (text[i] == '\\') ++i;
+    return i;
+  }
+  if (text[i] != '/' || i + 1 >= text.size()) return i;
+  if (text[i + 1] == '/') {
+    while (i < text.size() && text[i] != '\n') ++i;
+    return i;
+  }
+  if (text[i + 1] == '*') {
+    const size_t end = text.find("*/", i + 2);
+    return end == std::string::npos ? std::string::npos : end + 1;
+  }
+  return i;
+}
+
 // The offset at which arrays and objects nest deeper than `limit`, or npos. Strings and comments are
 // skipped, so a brace inside them does not count; anything malformed is left to the parser.
 size_t depth_exceeded_at(const std::string& text, int limit) {
   int depth = 0;
   for (size_t i = 0; i < text.size(); ++i) {
-    const char c = text[i];
-    if (c == '"') {
-      for (++i; i < text.size() && text[i] != '"'; ++i)
-        if (text[i] == '\\') ++i;
-    } else if (c == '/' && i + 1 < text.size() && text[i + 1] == '/') {
-      while (i < text.size() && text[i] != '\n') ++i;
-    } else if (c == '/' && i + 1 < text.size() && text[i + 1] == '*') {
-      const size_t end = text.find("*/", i + 2);
-      if (end == std::string::npos) return std::string::npos;
-      i = end + 1;
-    } else if (c == '[' || c == '{') {
+    if (const size_t e = skip_string_or_comment(text, i); e != i) {
+      if (e == std::string::npos) return std::string::npos;
+      i = e;
+    } else if (text[i] == '[' || text[i] == '{') {
       if (++depth > limit) return i;
-    } else if (c == ']' || c == '}') {
+    } else if (text[i] == ']' || text[i] == '}') {
       --depth;
     }
   }
@@ -71,21 +84,14 @@ size_t depth_exceeded_at(const std::string& text, int limit) {
 size_t number_offset(const std::string& text, const std::string& token) {
   const auto in_number = [](char c) { return (c >= '0' && c <= '9') || c == '-' || c == '+' || c == '.' || c == 'e' || c == 'E'; };
   for (size_t i = 0; i < text.size(); ++i) {
-    const char c = text[i];
-    if (c == '"') {
-      for (++i; i < text.size() && text[i] != '"'; ++i)
-        if (text[i] == '\\') ++i;
-    } else if (c == '/' && i + 1 < text.size() && text[i + 1] == '/') {
-      while (i < text.size() && text[i] != '\n') ++i;
-    } else if (c == '/' && i + 1 < text.size() && text[i + 1] == '*') {
-      const size_t end = text.find("*/", i + 2);
-      if (end == std::string::npos) return std::string::npos;
-      i = end + 1;
-    } else if (c == '-' || (c >= '0' && c <= '9')) {
-      size_t e = i;
-      while (e < text.size() && in_number(text[e])) ++e;
-      if (text.compare(i, e - i, token) == 0 && e - i == token.size()) return i;
-      i = e - 1;
+    if (const size_t e = skip_string_or_comment(text, i); e != i) {
+      if (e == std::string::npos) return std::string::npos;
+      i = e;
+    } else if (text[i] == '-' || (text[i] >= '0' && text[i] <= '9')) {
+      size_t end = i;
+      while (end < text.size() && in_number(text[end])) ++end;
+      if (end - i == token.size() && text.compare(i, end - i, token) == 0) return i;
+      i = end - 1;
     }
   }
   return std::string::npos;
