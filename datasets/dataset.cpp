@@ -360,11 +360,29 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
   // A mistake of the first scene file itself is its own, named once at /scenes/0 (not the keys', unless the
   // dataset's keys mend it: then the keys are checked with it as they are).
   std::optional<std::string> own_mistake;
+  // The others a value may need (one end of the time window in set, the other in grid): the set's values and
+  // each grid key's first, as a sample has them. A value refused alone is checked again among them, and is the
+  // file's mistake only when it fails there too (the pair was refused at both places, and the window's end
+  // could not be varied; the probe samples below check the combinations).
+  std::vector<std::string> others;
+  for (const char* section : {"set", "grid"})
+    if (doc.contains(section) && doc[section].is_object())
+      for (const auto& [key, value] : doc[section].items()) {
+        if (std::string(section) == "set") others.push_back(key + "=" + value.dump());
+        else if (value.is_array() && !value.empty()) others.push_back(key + "=" + value.front().dump());
+      }
   const auto check_values = [&](const std::string& at, const std::vector<std::string>& overrides, const std::string& hint = "") {
     if (!scenes_read) return;
     try {
       (void)scenes::load_scene_file(s.scenes.front(), overrides);
     } catch (const Error& e) {
+      try {  // among the others (the overrides given last: theirs win)
+        std::vector<std::string> among = others;
+        among.insert(among.end(), overrides.begin(), overrides.end());
+        (void)scenes::load_scene_file(s.scenes.front(), among);
+        return;
+      } catch (const Error&) {
+      }
       if (!own_mistake) {
         own_mistake = "";
         try {
@@ -427,6 +445,14 @@ DatasetSpec parse_dataset_text(const std::string& text, const std::string& path)
       if (scenes_read) (void)scenes::load_scene_file(s.scenes.front(), all);
     } catch (const Error&) {
       together = false;
+    }
+    if (!together) {  // with the grid's first values (the other end of the window may be there)
+      together = true;
+      try {
+        if (scenes_read) (void)scenes::load_scene_file(s.scenes.front(), others);
+      } catch (const Error&) {
+        together = false;
+      }
     }
     if (!together) {
       // each key alone; one found wrong is left out of the samples the checks below make (it failed them all)

@@ -726,6 +726,17 @@ TEST(DatasetFolder, TheCardSaysWhichSettingsVary) {
   fs::remove_all(dir);
 }
 
+// A value that needs another of the dataset's keys is checked with them: one end of the time window in set, the
+// other varied by the grid (both were refused, each alone, and the window's end could not be varied); a value
+// wrong among them too is still named.
+TEST(DatasetFile, AValueIsCheckedWithTheOtherKeysItNeeds) {
+  const DatasetSpec spec = parse("\"set\": {\"render.window_start_ns\": 0}, \"grid\": {\"render.window_stop_ns\": [20, 60]}");
+  EXPECT_EQ(spec.grid.size(), 1u);
+  EXPECT_THAT(error_of("\"set\": {\"render.window_start_ns\": 0}, \"grid\": {\"render.window_stop_ns\": [20, -1]}"),
+              HasSubstr("/grid/render.window_stop_ns/1: with the scene file "));
+  EXPECT_THAT(error_of("\"grid\": {\"render.window_stop_ns\": [20, 60]}"), HasSubstr("/grid/render.window_stop_ns/0: "));
+}
+
 // "samples" fewer than the grid cells leaves the last cells out, and with the scenes outermost whole scene files:
 // the plan and the run warn, and the card's scene table counts each scene's samples (it listed a scene no sample
 // took).
