@@ -61,7 +61,7 @@ constexpr double kSecondsPerRun = 0.2;              // loading the scene, buildi
 
 struct Estimate {
   int64_t disk = 0, memory = 0;  // disk: what the sample keeps
-  int64_t disk_at_least = 0;  // compressed files (EXR, Zarr) at a twentieth, the saved light without lit bins (ResourcePlan)
+  int64_t disk_at_least = 0;  // compressed files (EXR, Zarr) not counted, the saved light without lit bins (ResourcePlan)
   int64_t disk_peak = 0, disk_peak_at_least = 0;  // temporary files while the sample runs (freed at its end)
   double seconds = 0.0;
   bool paths_bound = false;  // a target error: the time counts render.max_samples_per_pixel paths per pixel
@@ -103,6 +103,12 @@ struct Totals {
   }
   int64_t disk() const { return kept + peak; }
   int64_t disk_at_least() const { return kept_at_least + peak_at_least; }
+  // How disk() is named: "at most" where compressed files are counted uncompressed (a bound), "up to about"
+  // where the saved light's estimate is in it (more than most scenes take, not a bound: a sample whose light
+  // spans longer wrote 124 MB against "at most 114 MB"; an auditor's find), else "about".
+  const char* disk_words() const {
+    return least.light ? "up to about " : disk_at_least() != disk() ? "at most " : "about ";
+  }
 };
 
 // What a sample's scene adds to its plan: its glTF's objects and geometry (-1 objects, no geometry: unknown).
@@ -585,11 +591,13 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
   double done_seconds = 0.0, done_estimated = 0.0;
   int64_t done_timed = 0;
   // The done samples' bytes on disk against their disk estimates: where compressed files make the estimate a
-  // bound (the shipped example's at most 22.1 GB, at least 953 MB for about 3 GB written), the share done samples
+  // bound (the shipped example's up to about 22.1 GB for about 3 GB written), the share done samples
   // took tells the rest.
   int64_t done_bytes = 0, done_disk_estimated = 0, done_sized = 0;
   std::vector<std::string> errors;
   std::vector<int64_t> invalid;  // the samples of the errors
+  const int64_t memory_here = available_memory();
+  std::vector<int64_t> too_large;  // the samples that need more memory than this machine has (run refuses each)
   datasets::WarningTally warnings;  // the scene file's, as each sample resolves
   // Each sample's scene is resolved (about 0.2 ms of one core): a plan of millions of samples takes minutes,
   // so it shows its progress.
@@ -624,6 +632,7 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
         done_estimated += e.seconds * (rec.cores > 0 ? double(usable_cores(options.threads)) / rec.cores : 1.0);
     }
     total.add(e);
+    if (checked.resolved && memory_here >= 0 && e.memory > memory_here) too_large.push_back(i);
     const bool show = options.all || samples <= 10 || i >= n - 10 * shard.count;
     if (!show) {
       if (samples == 11) o << "...\t(" << "--all lists every sample)\n";
@@ -651,8 +660,7 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
   // Where compressed files or the saved light are counted at their most (the note below gives the least), the
   // figures are bounds, so named (the shipped example's "disk about 22.1 GB" was 7 times what it wrote).
   // (the saved light at 2.5 ns of bins per pixel is more than most scenes take, not a bound: the footer says so)
-  const bool bounded = total.disk_at_least() != total.disk();
-  const char* disk = bounded ? "disk at most " : "disk about ";
+  const std::string disk = std::string("disk ") + total.disk_words();
   o << "# per sample: " << disk << bytes_text(valid ? total.kept / valid : 0) << ", memory up to "
     << bytes_text(total.memory) << ", time about " << duration_text(valid ? total.seconds / double(valid) : 0.0) << "\n";
   o << "# " << (shard.count > 1 ? "this shard" : "total") << ": " << samples << " samples"
@@ -668,16 +676,19 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
   if (total.disk_at_least() != total.disk())
     o << "# the disk counts the compressed files (EXR images, Zarr stores) uncompressed"
       << (total.least.light ? " and the saved light at 2.5 ns of bins per pixel (more than most scenes take, not a bound: "
-                              "the scene decides the span, up to the time window)" : "") << ": the samples take at least "
-      << bytes_text(total.disk_at_least()) << " (" << least_text(total.least)
-      << "; examples/datasets/multi_object_variations.json writes about an eighth of the most)\n";
+                              "the scene decides the span, up to the time window)" : "") << ": "
+      << (total.disk_at_least() > 0 ? "the samples take at least " + bytes_text(total.disk_at_least()) + " (" + least_text(total.least) + "); "
+                                    : std::string("the samples may take far less (zeros compress to almost nothing"
+                                                  ") and no least is counted; "))
+      << "examples/datasets/multi_object_variations.json writes about an eighth of the most, and `dataset plan -o DIR` "
+         "scales the samples left by what the done ones keep\n";
   if (folder) {
     const int64_t free = free_disk(options.out_dir);
     o << "# left to generate in " << options.out_dir << ": " << left << (left == 1 ? " sample" : " samples")
       << (sensed_only > 0 ? " (" + std::to_string(sensed_only) + " of them rendered, with realisations missing: only those are sensed, from the saved light)"
                           : std::string())
       << ", "
-      << (left_total.disk_at_least() != left_total.disk() ? "disk at most " : "disk about ") << bytes_text(left_total.disk())
+      << "disk " << left_total.disk_words() << bytes_text(left_total.disk())
       << " (free: " << (free >= 0 ? bytes_text(free) : std::string("unknown")) << "), time about "
       << duration_text(left_total.seconds) << "\n";
     // The model is of one machine kind; the samples done here tell this machine's pace (the model's fixed cost
@@ -704,6 +715,12 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
     }
   }
   if (const std::string w = spec.coverage_warning(); !w.empty()) o << "warning: " << w << "\n";
+  // (the run refuses each such sample, recorded in failed/: said here, before any work)
+  if (!too_large.empty())
+    o << "warning: " << too_large.size() << (too_large.size() == 1 ? " sample (" : " samples (") << datasets::ranges_text(too_large)
+      << ") need more memory than this machine has (up to " << bytes_text(total.memory) << ", " << bytes_text(memory_here)
+      << " available): `dataset run` refuses " << (too_large.size() == 1 ? "it" : "each") << ", recorded in failed/; "
+         "lower the keys of the largest parts (spadgen info SCENE --set ... lists them) or run on a larger machine\n";
   for (const std::string& w : warnings.lines(" (spadgen info SCENE --set ... shows a sample's)")) o << "warning: " << w << "\n";
   for (const std::string& e : errors) o << "error: " << e << "\n";
   return {o.str(), int64_t(errors.size()),
@@ -774,7 +791,7 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
   Staging::remove_leftovers(dir / "samples");
   const int64_t disk = totals.disk(), disk_at_least = totals.disk_at_least();
   const double seconds = totals.seconds;
-  // Refused when even the least they can take does not fit (compressed stores at a twentieth of their size,
+  // Refused when even the least they can take does not fit (compressed stores not counted,
   // the saved light without lit bins: the scene decides them).
   if (const int64_t free = free_disk(dir); free >= 0 && free < disk_at_least) {
     const bool compressed = disk_at_least != disk;
@@ -789,10 +806,10 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
                 "use another folder (-o)");
   }
   if (options.progress)
-    std::fprintf(stderr, "spadgen: dataset %s: %lld of %lld samples%s to generate (%lld done already), about %s, at most %s on disk\n",
+    std::fprintf(stderr, "spadgen: dataset %s: %lld of %lld samples%s to generate (%lld done already), about %s, %s%s on disk\n",
                  dir.string().c_str(), static_cast<long long>(todo.size()), static_cast<long long>(owned),
                  shard.count > 1 ? (" of shard " + shard.text()).c_str() : "", static_cast<long long>(skipped),
-                 duration_text(seconds).c_str(), bytes_text(disk).c_str());
+                 duration_text(seconds).c_str(), totals.disk_words(), bytes_text(disk).c_str());
 
   const auto start = std::chrono::steady_clock::now();
   std::vector<int64_t> failed;

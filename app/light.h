@@ -14,7 +14,7 @@
 // sensor's crosstalk reads around a crop), metadata.json's light.crop_in_sensor. Pixel (x, y) of the
 // sensor has bins values[offsets[i] : offsets[i + 1]] for bins ranges[i][0] .. ranges[i][1] - 1,
 // i = (y - y0) * W + (x - x0). As .npy files the whole set is memory-mappable; as Zarr stores it is a
-// twentieth of that size (values.npy is mostly zeros: the bins between a pixel's returns).
+// small part of that size (values.npy is mostly zeros: the bins between a pixel's returns).
 #pragma once
 #include <atomic>
 #include <memory>

@@ -73,8 +73,6 @@ int64_t cgroup_memory_left(const std::string& proc_self_cgroup, const fs::path& 
   return least;
 }
 
-namespace {
-
 // MemAvailable of /proc/meminfo, lowered to what the process's memory cgroups still allow.
 int64_t available_memory() {
   int64_t available = -1;
@@ -91,6 +89,8 @@ int64_t available_memory() {
     available = available < 0 ? left : std::min(available, left);
   return available;
 }
+
+namespace {
 
 std::string join_parts(std::vector<ResourcePlan::Part> parts) {
   std::sort(parts.begin(), parts.end(), [](const auto& a, const auto& b) { return a.bytes > b.bytes; });
@@ -143,13 +143,16 @@ LeastParts least_parts(const std::vector<ResourcePlan::Part>& disk) {
 }
 
 std::string least_text(LeastParts l) {
-  std::string r = l.compressed ? "the compressed files, EXR images and Zarr stores, at a twentieth of their size" : "";
+  std::string r = l.compressed ? "the compressed files, EXR images, Zarr stores and previews, not counted: zeros compress to "
+                                 "almost nothing" : "";
   if (l.light) r += std::string(r.empty() ? "" : ", ") + "the saved light without lit bins";
   return r;
 }
 
 int64_t ResourcePlan::Part::at_least() const {
-  const int64_t bound = compressed ? bytes / kCompressionBound : bytes;  // a compressed store's least
+  // A compressed part's least is nothing: no ratio bounds what zeros compress to (a twentieth was counted, and a
+  // Zarr transient store of 118 MB took 668 kB: a run that fitted was refused; an auditor's find).
+  const int64_t bound = compressed ? 0 : bytes;
   return least >= 0 ? std::min(least, bound) : bound;
 }
 
@@ -339,7 +342,7 @@ void check_resources(const ResourcePlan& plan, const RunConfig& c, const fs::pat
              bytes_text(plan.memory_available) + " is available: " + join_parts(required(plan.memory)) +
              "; lower the keys of the largest parts, or run with fewer --threads";
   // The earlier set in the output folder stays until the new one is complete: the new one needs its
-  // whole size free. Compressed stores (Zarr) count a twentieth of their size here, the saved light no lit
+  // whole size free. Compressed stores (Zarr) count nothing here, the saved light no lit
   // bins: refused only when even that does not fit (their size is known once written; a run that then
   // finds the disk full fails cleanly, the folder as it was).
   if (plan.disk_available >= 0 && plan.disk_at_least() > plan.disk_available) {
@@ -360,9 +363,10 @@ void check_resources(const ResourcePlan& plan, const RunConfig& c, const fs::pat
 std::string resource_summary(const ResourcePlan& plan) {
   std::string s = "memory: about " + bytes_text(plan.memory_needed());
   if (plan.memory_available >= 0) s += " (available: " + bytes_text(plan.memory_available) + ")";
-  s += "; disk: " + (plan.disk_at_least() != plan.disk_needed()
-                         ? bytes_text(plan.disk_at_least()) + " to " + bytes_text(plan.disk_needed()) + " (the least: " + least_text(least_parts(plan.disk)) + ")"
-                         : "about " + bytes_text(plan.disk_needed()));
+  // (a least of nothing, all of it compressed, is no figure: "up to" the most)
+  s += "; disk: " + (plan.disk_at_least() == plan.disk_needed() ? "about " + bytes_text(plan.disk_needed())
+                     : plan.disk_at_least() == 0 ? "up to " + bytes_text(plan.disk_needed()) + " (the compressed files counted uncompressed: they take less, zeros almost nothing)"
+                     : bytes_text(plan.disk_at_least()) + " to " + bytes_text(plan.disk_needed()) + " (the least: " + least_text(least_parts(plan.disk)) + ")");
   if (plan.disk_available >= 0) s += " (free: " + bytes_text(plan.disk_available) + ")";
   return s + "\n  memory: " + join_parts(plan.memory) + "\n  disk: " + join_parts(plan.disk) + "\n";
 }

@@ -30,6 +30,9 @@ namespace spadgen::app {
 // the namespace's root group had been read (memory.max), so a run past a job's limit was killed, not refused.
 int64_t cgroup_memory_left(const std::string& proc_self_cgroup, const std::filesystem::path& root);
 
+// MemAvailable of /proc/meminfo, lowered to what the process's memory cgroups still allow; -1 unknown.
+int64_t available_memory();
+
 struct ResourcePlan {
   struct Part {
     std::string what;  // "camera paths of 2 threads", with the keys that drive it
@@ -44,16 +47,16 @@ struct ResourcePlan {
     // The least the part can take when the scene decides its size (the saved light's lit bins: a pixel may
     // have none); -1: `bytes`, or a compressed part's bound.
     int64_t least = -1;
-    int64_t at_least() const;  // least, else bytes (a compressed part: bytes / kCompressionBound)
+    int64_t at_least() const;  // least, else bytes (a compressed part: 0)
   };
   std::vector<Part> memory, disk;
   int64_t memory_available = -1;  // bytes; -1 unknown
   int64_t disk_available = -1;    // bytes free at the output folder; -1 unknown
   int64_t memory_needed() const;
   int64_t disk_needed() const { return disk_sum(false, false); }  // at most: compressed parts at their uncompressed size
-  // At least: compressed parts at a twentieth of their uncompressed size (the most spadgen's stores were
-  // measured to compress, the saved light's values: docs/outputs.md, "Storage"; the rates compress about 3
-  // times). A run is refused when even this does not fit; between the two it may fit.
+  // At least: compressed parts not counted (no ratio bounds what they compress to: a transient store of
+  // mostly zeros took 1/176 to 1/611 of its size; the rates compress about 3 times). A run is refused when even
+  // this does not fit; between the two it may fit.
   int64_t disk_at_least() const { return disk_sum(true, false); }
   // What stays once the run has ended (without the temporary parts): at most, and at least.
   int64_t disk_kept() const { return disk_sum(false, true); }
@@ -63,15 +66,12 @@ struct ResourcePlan {
   int64_t disk_sum(bool at_least, bool kept_only) const;
 };
 // What makes disk_at_least() less than disk_needed(): compressed parts, the saved light (its lit bins), and
-// the words for them ("the compressed files, EXR images and Zarr stores, at a twentieth of their size", "the
-// saved light without lit bins").
+// the words for them ("the compressed files, ... not counted", "the saved light without lit bins").
 struct LeastParts {
   bool compressed = false, light = false;
 };
 LeastParts least_parts(const std::vector<ResourcePlan::Part>& disk);
 std::string least_text(LeastParts parts);
-// Compressed parts count 1 / kCompressionBound of their uncompressed size in disk_at_least().
-inline constexpr int64_t kCompressionBound = 20;
 
 // The worker threads of --threads (0: all cores).
 int64_t worker_threads(int threads);

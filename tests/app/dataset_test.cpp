@@ -399,7 +399,7 @@ TEST_F(Dataset, RepeatsGrowWithoutRenderingAgain) {
   const Result plan = sh("dataset plan " + (dir_ / "d.json").string() + " -o " + grown);
   ASSERT_EQ(plan.code, 0) << plan.output;
   EXPECT_THAT(plan.output, HasSubstr("left to generate in " + grown + ": 2 samples (2 of them rendered, with realisations "
-                                     "missing: only those are sensed, from the saved light), disk at most "));
+                                     "missing: only those are sensed, from the saved light), disk up to about "));
   const Result r = sh("dataset run " + (dir_ / "d.json").string() + " -o " + grown);
   ASSERT_EQ(r.code, 0) << r.output;
   // The run's estimate is of the new realisations only (it was of every sample rendered again with three: about
@@ -407,9 +407,9 @@ TEST_F(Dataset, RepeatsGrowWithoutRenderingAgain) {
   // (the number and unit before " on disk" on the line that says what is to generate)
   const auto planned_disk = [](const std::string& out) {
     const size_t line = out.find("to generate"), end = line == std::string::npos ? line : out.find(" on disk", line);
-    const size_t at = end == std::string::npos ? end : out.rfind("at most ", end);
+    const size_t at = end == std::string::npos ? end : out.rfind("up to about ", end);
     if (at == std::string::npos) return -1.0;
-    std::istringstream in(out.substr(at + 8, end - at - 8));
+    std::istringstream in(out.substr(at + 12, end - at - 12));
     double v = -1.0;
     std::string unit;
     in >> v >> unit;
@@ -420,12 +420,12 @@ TEST_F(Dataset, RepeatsGrowWithoutRenderingAgain) {
   ASSERT_GT(added, 0.0) << r.output;
   EXPECT_THAT(r.output, HasSubstr("2 of 2 samples to generate"));
   EXPECT_LT(added, 0.25 * before) << made.output << r.output;
-  // (the plan's "left to generate ... disk at most X": the run's figure)
+  // (the plan's "left to generate ... disk up to about X": the run's figure; not a bound with the saved light)
   const size_t left = plan.output.find("left to generate");
   ASSERT_NE(left, std::string::npos);
-  const size_t most = plan.output.find("disk at most ", left) + 13;
+  const size_t most = plan.output.find("disk up to about ", left) + 17;
   const std::string planned = plan.output.substr(most, plan.output.find(" (free", most) - most);
-  EXPECT_THAT(r.output, HasSubstr("at most " + planned + " on disk")) << plan.output;
+  EXPECT_THAT(r.output, HasSubstr("up to about " + planned + " on disk")) << plan.output;
   // not rendered or sensed again (their metadata.json hold their runs' own times)
   EXPECT_EQ(slurp(dir_ / "grown/samples/000001/metadata.json"), sample);
   EXPECT_EQ(slurp(dir_ / "grown/samples/000001_r01/metadata.json"), first);
@@ -698,7 +698,7 @@ TEST_F(Dataset, AChangedSceneMakesSamplesStaleAndReplacesThemWhole) {
   const Result again = sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string());
   ASSERT_EQ(again.code, 0) << again.output;
   EXPECT_THAT(again.output, HasSubstr("2 of 2 samples to generate"));
-  EXPECT_THAT(again.output, ContainsRegex("to generate \\(0 done already\\), about [^,]+, at most [0-9.]+ [kMG]?B on disk"));
+  EXPECT_THAT(again.output, ContainsRegex("to generate \\(0 done already\\), about [^,]+, up to about [0-9.]+ [kMG]?B on disk"));
   EXPECT_FALSE(fs::exists(dir_ / "out/samples/000001/transient.npy"));  // no stale file beside the new set
   const json meta = json::parse(slurp(dir_ / "out/samples/000001/metadata.json"));
   for (const json& f : meta["files"]) EXPECT_NE(f, "transient.npy");
@@ -903,7 +903,7 @@ TEST_F(Dataset, RefusesAnotherDatasetsFolderForeignFilesAndTooLittleDisk) {
 double planned_disk(const std::string& plan, bool per_sample = false) {
   std::string key;
   size_t at = std::string::npos;
-  for (const char* word : {"disk at most ", "disk about "}) {
+  for (const char* word : {"disk at most ", "disk up to about ", "disk about "}) {
     key = (per_sample ? "# per sample: " : " samples, ") + std::string(word);
     if ((at = plan.find(key, per_sample ? 0 : plan.find("# total: "))) != std::string::npos) break;
   }
@@ -1276,7 +1276,7 @@ TEST_F(Dataset, APlanTellsThePaceOfTheDoneSamples) {
   const std::string keep = "# the 2 done samples keep " + spadgen::bytes_text(kept) + " on disk, ";
   const size_t kept_at = measured.output.find(keep);
   ASSERT_NE(kept_at, std::string::npos) << measured.output;
-  EXPECT_THAT(measured.output, HasSubstr("# per sample: disk at most "));
+  EXPECT_THAT(measured.output, HasSubstr("# per sample: disk up to about "));  // (the saved light: an estimate)
   const double share = std::stod(measured.output.substr(kept_at + keep.size()));
   EXPECT_GT(share, 0.05) << measured.output;
   EXPECT_LE(share, 1.0) << measured.output;
