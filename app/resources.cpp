@@ -1,6 +1,8 @@
 #include "app/resources.h"
 
+#include <sys/resource.h>
 #include <sys/statvfs.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <charconv>
@@ -87,6 +89,16 @@ int64_t available_memory() {
   const std::string groups((std::istreambuf_iterator<char>(proc)), std::istreambuf_iterator<char>());
   if (const int64_t left = cgroup_memory_left(groups, "/sys/fs/cgroup"); left >= 0)
     available = available < 0 ? left : std::min(available, left);
+  // and what the address-space limit (ulimit -v) leaves above the process's own mappings: a run past it
+  // failed after its start with "out of memory" and no figures (an auditor's find). (Virtual, so a run under
+  // it may still fail: this refuses only what surely does not fit.)
+  if (rlimit lim{}; getrlimit(RLIMIT_AS, &lim) == 0 && lim.rlim_cur != RLIM_INFINITY) {
+    std::ifstream statm("/proc/self/statm");
+    int64_t pages = 0;
+    statm >> pages;
+    const int64_t left = std::max<int64_t>(0, int64_t(lim.rlim_cur) - pages * int64_t(::sysconf(_SC_PAGESIZE)));
+    available = available < 0 ? left : std::min(available, left);
+  }
   return available;
 }
 
