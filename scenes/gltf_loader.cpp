@@ -1005,6 +1005,13 @@ std::vector<double> Loader::read_accessor(int index, const std::string& user, st
     if (count > 1 && count - 1 > (std::numeric_limits<size_t>::max() - elem) / stride)
       fail(who, "count " + std::to_string(count) + " times byteStride " + std::to_string(stride) + " overflows");
     if (count > 0) check_view_range(a.bufferView, a.byteOffset, (count - 1) * stride + elem, who);
+    // glTF 2.0 3.6.2.4: offsets (and a vertex attribute's byteStride) MUST be multiples of the component size.
+    // Read as written (unaligned reads are exact), and said: an exporter that misaligns them may have put
+    // the data elsewhere (a float accessor at byteOffset 2 loaded without a word; an auditor's find).
+    if (a.byteOffset % csize != 0 || (view.byteOffset + a.byteOffset) % csize != 0 || stride % csize != 0)
+      warn(who + ": its byteOffset " + std::to_string(a.byteOffset) + " (bufferView byteOffset " + std::to_string(view.byteOffset) +
+           ", byteStride " + std::to_string(view.byteStride) + ") is not a multiple of its " + std::to_string(csize) +
+           "-byte components, which glTF 2.0 requires (3.6.2.4); read as written: check the exporter");
   }
   std::vector<double> out(count * static_cast<size_t>(comps), 0.0);
   if (a.bufferView >= 0) {

@@ -332,6 +332,27 @@ TEST(GltfLoader, QuantizedPositionsAndByteStrides) {
   EXPECT_TRUE(s.warnings.empty());
 }
 
+// An accessor offset that is not a multiple of its component size (glTF 2.0 3.6.2.4 requires it) is read as
+// written, exactly, and warned of naming the accessor (it loaded without a word; an auditor's find).
+TEST(GltfLoader, AMisalignedAccessorIsReadAsWrittenAndWarnedOf) {
+  TempDir dir;
+  Gltf g;
+  const std::vector<float> tri{0, 0, 0, 1, 0, 0, 0, 1, 0};
+  std::vector<uint8_t> bytes(2, 0);  // two bytes, then the floats
+  bytes.resize(2 + sizeof(float) * tri.size());
+  std::memcpy(bytes.data() + 2, tri.data(), sizeof(float) * tri.size());
+  bytes.resize(40, 0);
+  const int pos = g.accessor(g.view_of(bytes), kFloat, "VEC3", 3, 2);
+  g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}}}}}), "Tri")}});
+  const Scene s = load_gltf(g.write(dir.path(), "misaligned"));
+  ASSERT_EQ(s.meshes.size(), 1u);
+  expect_vec(s.meshes[0].positions[1], {1, 0, 0});
+  expect_vec(s.meshes[0].positions[2], {0, 1, 0});
+  ASSERT_EQ(s.warnings.size(), 1u);
+  EXPECT_THAT(s.warnings[0], HasSubstr("accessor 0 (mesh 0 'Tri' primitive 0 POSITION): its byteOffset 2 (bufferView byteOffset 0, "
+                                       "byteStride 0) is not a multiple of its 4-byte components, which glTF 2.0 requires"));
+}
+
 TEST(GltfLoader, SparseAccessors) {
   TempDir dir;
   Gltf g;
