@@ -17,6 +17,7 @@ import fcntl
 import json
 import math
 import numbers
+import operator
 import os
 import struct
 import warnings
@@ -292,9 +293,11 @@ class Dataset:
                                     "stopped by SIGINT or SIGTERM); run it again to finish")
         with open(index_path, encoding="utf-8") as f:
             self.index = []
-            for number, line in enumerate(f, 1):
+            number = 0  # (rows as _check_index counts them: blank lines are none)
+            for line in f:
                 if not line.strip():
                     continue
+                number += 1
                 try:
                     self.index.append(json.loads(line))
                 except json.JSONDecodeError as e:  # (line by line: its own "line 1" named no row)
@@ -365,10 +368,15 @@ class Dataset:
 
     def __getitem__(self, i):
         """ds[i]: the i-th sample of this selection (not dataset index i: sample(i) is that); ds[a:b] a selection."""
+        given = i
         if isinstance(i, slice):
             return self._view(self.index[i])
-        if isinstance(i, (bool, np.bool_)) or not isinstance(i, (numbers.Integral, np.integer)):
-            raise TypeError(f"{self.path}: ds[{i!r}]; expected a position in this selection (an int) or a slice")
+        try:  # (anything with __index__: NumPy's and torch's 0-d integers, as torch's Subset passes them)
+            i = operator.index(i) if not isinstance(i, (bool, np.bool_)) else None
+        except TypeError:
+            i = None
+        if i is None:
+            raise TypeError(f"{self.path}: ds[{given!r}]; expected a position in this selection (an int) or a slice")
         if not -len(self.index) <= i < len(self.index):
             raise IndexError(f"{self.path}: ds[{i}] is past this selection of {len(self.index)} samples (positions "
                              f"0 to {len(self.index) - 1}; sample(index) finds a sample by its dataset index)")
@@ -391,9 +399,10 @@ class Dataset:
         """
         keep = list(self.index)
         if status is not None:
-            if not isinstance(status, (str, list, tuple, set, frozenset)):
-                raise TypeError(f"select: status={status!r}; expected one of {', '.join(STATUSES)} or a list of them")
-            wanted = (status,) if isinstance(status, str) else tuple(status)
+            try:  # (a text, or any iterable of them: a list, a NumPy array, a pandas Series)
+                wanted = (status,) if isinstance(status, str) else tuple(status)
+            except TypeError:
+                raise TypeError(f"select: status={status!r}; expected one of {', '.join(STATUSES)} or a list of them") from None
             unknown = [s for s in wanted if s not in STATUSES]
             if unknown:
                 raise ValueError(f"unknown status {unknown}; a sample is one of {', '.join(STATUSES)}")

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import numbers
+import operator
 import os
 import re
 import stat
@@ -825,11 +826,13 @@ class Run:
         frames of gate position k, frames() all of them (K, N, H, W) (8 times the file's size in memory)."""
         packed = self.frames_packed
         for name, v, size, what in (("k", k, packed.shape[0], "gate positions"), ("n", n, packed.shape[1], "frames per position")):
-            if isinstance(v, slice):
+            if isinstance(v, (str, bool, np.bool_)):
+                raise TypeError(f"{self.path}: frames({name}={v!r}); expected an int, a slice or indices")
+            try:  # a single index is checked; slices, lists and arrays of indices go to NumPy as they are
+                v = operator.index(v) if not isinstance(v, (bool, np.bool_)) else None
+            except TypeError:
                 continue
-            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (numbers.Integral, np.integer)):
-                raise TypeError(f"{self.path}: frames({name}={v!r}); expected an int or a slice")
-            if not -size <= v < size:
+            if v is not None and not -size <= v < size:
                 raise IndexError(f"{self.path}: frames({name}={v}) is past the {size} {what} (0 to {size - 1})")
         return unpack_frames(packed[k, n], self.width)
 

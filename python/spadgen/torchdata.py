@@ -63,7 +63,7 @@ closed to stay within open_runs and opened again is not read again), not per ite
 """
 from __future__ import annotations
 
-import numbers
+import operator
 import os
 from collections import OrderedDict
 
@@ -233,8 +233,13 @@ class _RunSamples(torch.utils.data.Dataset):
     def _load(self, j):
         """(index of the sample's run in paths, the sample's tensors): read between two checks that the folder is
         the one checked when this object was made, so that its arrays come from one version."""
-        if isinstance(j, (bool, np.bool_)) or not isinstance(j, (numbers.Integral, np.integer)):
-            raise TypeError(f"{type(self).__name__}[{j!r}]; expected an item's position (an int)")
+        given = j
+        try:  # (anything with __index__: NumPy's and torch's 0-d integers, as torch's Subset passes them)
+            j = operator.index(j) if not isinstance(j, (bool, np.bool_)) else None
+        except TypeError:
+            j = None
+        if j is None:
+            raise TypeError(f"{type(self).__name__}[{given!r}]; expected an item's position (an int)")
         if not -len(self.index) <= j < len(self.index):
             raise IndexError(f"{type(self).__name__}[{j}] is past its {len(self.index)} items (0 to {len(self.index) - 1})")
         i, x, y, h, w = self.index[j]

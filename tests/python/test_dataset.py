@@ -132,6 +132,9 @@ def test_select_by_status_parameters_and_rows(ds):
         view["a"]
     with pytest.raises(TypeError, match="select: status=5; expected one of done"):
         ds.select(status=5)
+    # positions and statuses as NumPy gives them (0-d integers, arrays)
+    assert view[np.int64(1)].index == view[np.array(1)].index == 3
+    assert ds.select(status=np.array(["done"])).indices.tolist() == ds.select(status="done").indices.tolist()
     # NumPy values as the Python ones (an array matched nothing, silently)
     assert ds.select(camera__width_px=np.int64(1000)).indices.tolist() == [1]
     assert ds.select(camera__width_px=np.array(1024)).indices.tolist() == [0, 3]

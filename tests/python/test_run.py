@@ -78,8 +78,11 @@ def test_frames_unpacked_and_summed_equal_counts(sweep, intensity):
             run.frames(run.K)
         with pytest.raises(IndexError, match=rf"frames\(n={run.frames_per_k}\) is past the {run.frames_per_k} frames per position"):
             run.frames(0, run.frames_per_k)
-        with pytest.raises(TypeError, match=r"frames\(k='a'\); expected an int or a slice"):
+        with pytest.raises(TypeError, match=r"frames\(k='a'\); expected an int, a slice or indices"):
             run.frames("a")
+        # indices as NumPy takes them: a list, an array, NumPy's integers
+        np.testing.assert_array_equal(run.frames([0, 1 % run.K]), frames[[0, 1 % run.K]])
+        np.testing.assert_array_equal(run.frames(np.int64(0), np.arange(2)), frames[0, :2])
     # The bit order matters: NumPy's default (most significant bit first) mirrors groups of 8 pixels.
     wrong = np.unpackbits(np.asarray(sweep.frames_packed), axis=-1)[..., :sweep.width].sum(axis=1)
     assert not np.array_equal(wrong, sweep.counts)

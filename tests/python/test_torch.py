@@ -168,6 +168,11 @@ def test_data_loader_batches_and_a_training_step(sweep_run, sweep):
     loader = torch.utils.data.DataLoader(ds, batch_size=4, shuffle=True, generator=torch.Generator().manual_seed(0))
     batch = next(iter(loader))
     assert tuple(batch["counts"].shape) == (4, sweep.K, 8, 8) and tuple(batch["mask"].shape) == (4, 1, 8, 8)
+    # a Subset of tensor indices, as torch.randperm gives them (0-d tensors reach __getitem__)
+    subset = torch.utils.data.Subset(ds, torch.randperm(len(ds), generator=torch.Generator().manual_seed(1))[:2])
+    assert torch.equal(subset[0]["counts"], ds[int(subset.indices[0])]["counts"])
+    with pytest.raises(IndexError, match=rf"RunDataset\[{len(ds)}\] is past its {len(ds)} items"):
+        ds[len(ds)]
     # docs/python.md's loop, shortened: counts -> depth with a 1 x 1 convolution, masked L1 loss.
     torch.manual_seed(0)
     net = torch.nn.Conv2d(sweep.K, 1, 1)
