@@ -82,9 +82,8 @@ std::optional<int> parse_command_line(CLI::App& cli, int argc, char** argv) {
       if (word.size() < 2 || word[0] != '-' || word.find('=') != std::string::npos) continue;
       const CLI::Option* opt = at->get_option_no_throw(word);
       if (!opt || opt->get_expected_min() == 0 || after.size() < 2 || after[0] != '-') continue;
-      char* end = nullptr;
-      (void)std::strtod(after.c_str(), &end);
-      if (end && *end == '\0') continue;  // a negative number is a value
+      // (an option of this command, or --help: `-o -results` is a folder's name, which CLI11's own message names)
+      if (at->get_option_no_throw(after.substr(0, after.find('='))) == nullptr && after != "-h" && after != "--help") continue;
       std::fprintf(stderr, "spadgen: error: %s: expected %s after it, found the option '%s' (see %s --help)\n", word.c_str(),
                    opt->get_type_name().empty() || opt->get_type_name() == "TEXT" ? "a value" : opt->get_type_name().c_str(), scenes::one_line(after).c_str(),
                    command.c_str());

@@ -632,7 +632,8 @@ DatasetPlan dataset_plan(const DatasetOptions& options) {
         done_estimated += e.seconds * (rec.cores > 0 ? double(usable_cores(options.threads)) / rec.cores : 1.0);
     }
     total.add(e);
-    if (checked.resolved && memory_here >= 0 && e.memory > memory_here) too_large.push_back(i);
+    if (checked.resolved && memory_here >= 0 && e.memory > memory_here && !(folder && checked.record.status == Status::Done))
+      too_large.push_back(i);
     const bool show = options.all || samples <= 10 || i >= n - 10 * shard.count;
     if (!show) {
       if (samples == 11) o << "...\t(" << "--all lists every sample)\n";

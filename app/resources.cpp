@@ -2,13 +2,13 @@
 
 #include <sys/resource.h>
 #include <sys/statvfs.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <limits>
 #include <set>
 #include <sstream>
 #include <string>
@@ -89,15 +89,14 @@ int64_t available_memory() {
   const std::string groups((std::istreambuf_iterator<char>(proc)), std::istreambuf_iterator<char>());
   if (const int64_t left = cgroup_memory_left(groups, "/sys/fs/cgroup"); left >= 0)
     available = available < 0 ? left : std::min(available, left);
-  // and what the address-space limit (ulimit -v) leaves above the process's own mappings: a run past it
-  // failed after its start with "out of memory" and no figures (an auditor's find). (Virtual, so a run under
-  // it may still fail: this refuses only what surely does not fit.)
-  if (rlimit lim{}; getrlimit(RLIMIT_AS, &lim) == 0 && lim.rlim_cur != RLIM_INFINITY) {
-    std::ifstream statm("/proc/self/statm");
-    int64_t pages = 0;
-    statm >> pages;
-    const int64_t left = std::max<int64_t>(0, int64_t(lim.rlim_cur) - pages * int64_t(::sysconf(_SC_PAGESIZE)));
-    available = available < 0 ? left : std::min(available, left);
+  // and the address-space limit (ulimit -v, SGE's h_vmem): a run planned past it failed after its start with
+  // "out of memory" and no figures (an auditor's find). The limit itself, not what it leaves above the process's
+  // mappings: a dataset's later samples reuse the heap the earlier ones left mapped, and were refused by it (a
+  // reviewer's find). (Virtual, so a run under it may still fail: this refuses only what surely does not fit.)
+  if (rlimit lim{}; getrlimit(RLIMIT_AS, &lim) == 0 && lim.rlim_cur != RLIM_INFINITY &&
+                    lim.rlim_cur <= rlim_t(std::numeric_limits<int64_t>::max())) {
+    const auto limit = static_cast<int64_t>(lim.rlim_cur);
+    available = available < 0 ? limit : std::min(available, limit);
   }
   return available;
 }

@@ -522,7 +522,7 @@ void set_standard_error(HdrEstimate& e, int frames, bool dual, double ratio) {
     // both halves' terms over the short exposure's q_S = exp(-a_S x): var / slope^2 =
     // 2 N (p_L r + p_S) e^{a_S x} / (a_L r + a_S)^2, r = q_L / q_S = exp(-(a_L - a_S) x)
     const double aL = 2.0 * ratio / (ratio + 1.0), aS = 2.0 / (ratio + 1.0);
-    const double pL = -std::expm1(-aL * x), pS = -std::expm1(-aS * x), r = std::exp(-(aL - aS) * x);
+    const double pL = -std::expm1(-aL * x), pS = -std::expm1(-aS * x), r = aL > aS ? std::exp(-(aL - aS) * x) : 1.0;
     const double w = aL * r + aS;
     e.standard_error = std::sqrt(2.0 * N * (pL * r + pS) / (w * w)) * std::exp(0.5 * aS * x);
   }

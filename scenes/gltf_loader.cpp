@@ -1009,8 +1009,8 @@ std::vector<double> Loader::read_accessor(int index, const std::string& user, st
     // Read as written (unaligned reads are exact), and said: an exporter that misaligns them may have put
     // the data elsewhere (a float accessor at byteOffset 2 loaded without a word; an auditor's find).
     if (a.byteOffset % csize != 0 || (view.byteOffset + a.byteOffset) % csize != 0 || stride % csize != 0)
-      warn(who + ": its byteOffset " + std::to_string(a.byteOffset) + " (bufferView byteOffset " + std::to_string(view.byteOffset) +
-           ", byteStride " + std::to_string(view.byteStride) + ") is not a multiple of its " + std::to_string(csize) +
+      warn(who + ": its byteOffset " + std::to_string(a.byteOffset) + ", its bufferView's byteOffset " + std::to_string(view.byteOffset) +
+           " and byteStride " + std::to_string(view.byteStride) + " are not all multiples of its " + std::to_string(csize) +
            "-byte components, which glTF 2.0 requires (3.6.2.4); read as written: check the exporter");
   }
   std::vector<double> out(count * static_cast<size_t>(comps), 0.0);

@@ -385,13 +385,19 @@ size_t nth_key_offset(const std::string& text, size_t n) {
 json parse_json(const std::string& text, const std::string& where, const JsonOptions& options) {
   // No JSON text holds a raw NUL byte (the parser took one for the end of the input: a file led by one was
   // "unexpected end of input", one after the text went unsaid).
+  // ":line:column" of an offset (nothing for a --set value, one short line)
+  const auto place = [&](size_t at) {
+    std::string s;
+    if (options.positions) s.append(":").append(line_column(text, at));
+    return s;
+  };
   if (text.size() >= 2 && (text.compare(0, 2, "\xff\xfe") == 0 || text.compare(0, 2, "\xfe\xff") == 0))
-    throw Error(where + ":1:1: starts with a UTF-16 byte order mark; expected JSON text in UTF-8");
+    throw Error(where + place(0) + ": starts with a UTF-16 byte order mark; expected JSON text in UTF-8");
   if (const size_t at = text.find('\0'); at != std::string::npos)
-    throw Error(where + ":" + line_column(text, at) + ": a NUL byte (0x00), which no JSON text holds; expected JSON text in " +
+    throw Error(where + place(at) + ": a NUL byte (0x00), which no JSON text holds; expected JSON text in " +
                 "UTF-8 (is this a binary file, or UTF-16 text?)");
   if (const size_t at = depth_exceeded_at(text, kMaxJsonDepth); at != std::string::npos)
-    throw JsonLimitError(where + ":" + line_column(text, at) + ": arrays and objects nested deeper than " +
+    throw JsonLimitError(where + place(at) + ": arrays and objects nested deeper than " +
                 std::to_string(kMaxJsonDepth) + " levels; spadgen reads at most " + std::to_string(kMaxJsonDepth));
   json root;
   CheckedSax sax(root, options);
@@ -399,13 +405,13 @@ json parse_json(const std::string& text, const std::string& where, const JsonOpt
   if (sax.duplicate_key > 0 && !options.reject_duplicates) {
     if (ok && sax.problem.empty() && options.first_duplicate) {
       const size_t at = nth_key_offset(text, sax.duplicate_key);
-      *options.first_duplicate = where + (at == std::string::npos ? std::string() : ":" + line_column(text, at)) + ": " +
+      *options.first_duplicate = where + (at == std::string::npos ? std::string() : place(at)) + ": " +
                                  sax.duplicate_path + " appears twice in one object";
     }
   } else if (sax.duplicate_key > 0) {
     // The SAX interface gives no positions: the repeated key is found again by counting keys in the text.
     const size_t at = nth_key_offset(text, sax.duplicate_key);
-    throw JsonLimitError(where + (at == std::string::npos ? std::string() : ":" + line_column(text, at)) + ": " + sax.problem);
+    throw JsonLimitError(where + (at == std::string::npos ? std::string() : place(at)) + ": " + sax.problem);
   }
   if (!ok || !sax.problem.empty()) {
     const std::string problem = sax.problem.empty() ? std::string("not valid JSON") : sax.problem;
@@ -413,7 +419,7 @@ json parse_json(const std::string& text, const std::string& where, const JsonOpt
     std::string message = where;
     if (!sax.tiny_number.empty())
       if (const size_t at = number_offset(text, sax.tiny_number); at != std::string::npos) sax.syntax = true, sax.offset = at + 1;
-    if (sax.syntax && options.positions) message.append(":").append(line_column(text, sax.offset > 0 ? sax.offset - 1 : 0));
+    if (sax.syntax) message.append(place(sax.offset > 0 ? sax.offset - 1 : 0));
     message.append(": ").append(problem);
     if (sax.limit) throw JsonLimitError(message);
     throw Error(message);

@@ -349,8 +349,8 @@ TEST(GltfLoader, AMisalignedAccessorIsReadAsWrittenAndWarnedOf) {
   expect_vec(s.meshes[0].positions[1], {1, 0, 0});
   expect_vec(s.meshes[0].positions[2], {0, 1, 0});
   ASSERT_EQ(s.warnings.size(), 1u);
-  EXPECT_THAT(s.warnings[0], HasSubstr("accessor 0 (mesh 0 'Tri' primitive 0 POSITION): its byteOffset 2 (bufferView byteOffset 0, "
-                                       "byteStride 0) is not a multiple of its 4-byte components, which glTF 2.0 requires"));
+  EXPECT_THAT(s.warnings[0], HasSubstr("accessor 0 (mesh 0 'Tri' primitive 0 POSITION): its byteOffset 2, its bufferView's byteOffset 0 "
+                                       "and byteStride 0 are not all multiples of its 4-byte components, which glTF 2.0 requires"));
 }
 
 TEST(GltfLoader, SparseAccessors) {

@@ -643,7 +643,7 @@ TEST_F(SceneFileTest, ADuplicateKeyIsAnError) {
               HasSubstr(":4:6: /camera/f_number: appears twice"));
   // In a --set value too, where a text that is not JSON is taken as a string: this one was meant as JSON.
   EXPECT_THAT(error_of(R"({"gltf": "s.gltf"})", {R"(description={"a": 1, "a": 2})"}),
-              HasSubstr("--set description:1:10: /a: appears twice in one object"));
+              HasSubstr("--set description: /a: appears twice in one object"));
   // A text key takes what JSON reads as other than a string or null as written (docs/scene-file.md): a camera
   // named "1", a description "true".
   EXPECT_EQ(parse(R"({"gltf": "s.gltf"})", {"camera.gltf_camera=1"}).config.camera.gltf_camera, "1");
