@@ -252,6 +252,17 @@ class Sample:
         return [self.run] + self.repeats
 
 
+def _position(value):
+    """An item's position as an int (anything with __index__: NumPy's and torch's 0-d integers, as torch's Subset
+    passes them), or None for what is none (a bool, a float, a text)."""
+    if isinstance(value, (bool, np.bool_)):
+        return None
+    try:
+        return operator.index(value)
+    except TypeError:
+        return None
+
+
 class Dataset:
     """A dataset folder's index, or a selection of it (select(), slicing): rows in index order."""
 
@@ -368,13 +379,9 @@ class Dataset:
 
     def __getitem__(self, i):
         """ds[i]: the i-th sample of this selection (not dataset index i: sample(i) is that); ds[a:b] a selection."""
-        given = i
         if isinstance(i, slice):
             return self._view(self.index[i])
-        try:  # (anything with __index__: NumPy's and torch's 0-d integers, as torch's Subset passes them)
-            i = operator.index(i) if not isinstance(i, (bool, np.bool_)) else None
-        except TypeError:
-            i = None
+        given, i = i, _position(i)
         if i is None:
             raise TypeError(f"{self.path}: ds[{given!r}]; expected a position in this selection (an int) or a slice")
         if not -len(self.index) <= i < len(self.index):

@@ -63,7 +63,6 @@ closed to stay within open_runs and opened again is not read again), not per ite
 """
 from __future__ import annotations
 
-import operator
 import os
 from collections import OrderedDict
 
@@ -74,7 +73,7 @@ try:
 except ImportError as e:  # pragma: no cover - exercised only where torch is missing
     raise ImportError("spadgen.torchdata needs PyTorch (Debian 12: apt-get install python3-torch)") from e
 
-from .dataset import Dataset, open_dataset
+from .dataset import Dataset, _position, open_dataset
 from .run import Run, RunChangedError, open_run, unpack_frames
 
 __all__ = ["RunDataset", "DatasetSamples", "FIELDS", "DEFAULT_FIELDS"]
@@ -233,11 +232,7 @@ class _RunSamples(torch.utils.data.Dataset):
     def _load(self, j):
         """(index of the sample's run in paths, the sample's tensors): read between two checks that the folder is
         the one checked when this object was made, so that its arrays come from one version."""
-        given = j
-        try:  # (anything with __index__: NumPy's and torch's 0-d integers, as torch's Subset passes them)
-            j = operator.index(j) if not isinstance(j, (bool, np.bool_)) else None
-        except TypeError:
-            j = None
+        given, j = j, _position(j)
         if j is None:
             raise TypeError(f"{type(self).__name__}[{given!r}]; expected an item's position (an int)")
         if not -len(self.index) <= j < len(self.index):
