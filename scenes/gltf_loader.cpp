@@ -2090,6 +2090,20 @@ void check_gltf_types(const std::string& path, const nlohmann::json& doc) {
       const std::string who = label(kind, i, name);
       if (!o.is_object()) throw Error(path + ": " + who + ": found " + o.dump().substr(0, 40) + ", expected an object");
       check_gltf_object(path, who, o, kind);
+      // glTF 2.0's required properties of a camera, named with it (tinygltf said "'znear' property is missing in
+      // PerspectiveCamera.", naming no camera; an auditor's find)
+      if (std::strcmp(kind, "camera") == 0) {
+        static const std::vector<std::pair<std::string, std::vector<std::string>>> required = {
+            {"perspective", {"yfov", "znear"}}, {"orthographic", {"xmag", "ymag", "zfar", "znear"}}};
+        if (!o.contains("type"))
+          throw Error(path + ": " + who + ": has no type; expected \"perspective\" or \"orthographic\" (glTF 2.0 requires it)");
+        for (const auto& [projection, keys] : required)
+          if (o.contains(projection))
+            for (const std::string& key : keys)
+              if (!o[projection].contains(key))
+                throw Error(path + ": " + who + ": its " + projection + " has no " + key + "; glTF 2.0 requires it (" + projection +
+                            ": " + (projection == "perspective" ? "yfov and znear" : "xmag, ymag, zfar and znear") + ")");
+      }
       // glTF 2.0: a node's transform is a matrix or TRS, not both (the translation beside a matrix was dropped)
       if (std::strcmp(kind, "node") == 0 && o.contains("matrix"))
         for (const char* trs : {"translation", "rotation", "scale"})

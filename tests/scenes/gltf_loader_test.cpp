@@ -1676,6 +1676,24 @@ TEST_F(BrokenGltf, StrideOutsideGltfsBounds) {
   }
 }
 
+// A camera without what glTF 2.0 requires of it is named (tinygltf's "'znear' property is missing in
+// PerspectiveCamera." named no camera).
+TEST_F(BrokenGltf, ACameraWithoutItsRequiredPropertiesIsNamed) {
+  for (const auto& [camera, says] : std::vector<std::pair<json, std::string>>{
+           {{{"type", "perspective"}, {"perspective", {{"yfov", 0.8}}}, {"name", "Eye"}}, "camera 0 'Eye': its perspective has no znear; glTF 2.0 requires it (perspective: yfov and znear)"},
+           {{{"type", "orthographic"}, {"orthographic", {{"xmag", 1}, {"ymag", 1}, {"znear", 0.1}}}}, "camera 0: its orthographic has no zfar"},
+           {{{"perspective", {{"yfov", 0.8}, {"znear", 0.1}}}}, "camera 0: has no type; expected \"perspective\" or \"orthographic\""}}) {
+    Gltf g;
+    const int pos = g.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+    g.node({{"mesh", g.mesh(json::array({{{"attributes", {{"POSITION", pos}}}}}))}});
+    g.doc["cameras"] = json::array({camera});
+    g.node({{"camera", 0}});
+    const std::string msg = error_of(g);
+    expect_names_file(msg);
+    EXPECT_THAT(msg, HasSubstr(says)) << camera.dump();
+  }
+}
+
 TEST_F(BrokenGltf, StrideSmallerThanElement) {
   Gltf g;
   const int pos = g.accessor(g.view_of(std::vector<float>{0, 0, 0, 1, 0, 0, 0, 1, 0}, 8), kFloat, "VEC3", 3);
