@@ -17,6 +17,7 @@
 #include <fcntl.h>
 #include <unistd.h>
 
+#include <cctype>
 #include <cerrno>
 #include <csignal>
 #include <filesystem>
@@ -108,9 +109,18 @@ int main(int argc, char** argv) {
   };
   const CLI::Validator kSceneFile = existing_file("a scene file (.json)");
   const CLI::Validator kDatasetFile = existing_file("a dataset file (.json)");
-  // -o "" (an unset shell variable) is a mistake, not a request for the default folder.
-  const CLI::Validator kNamed([](std::string& v) { return v.empty() ? std::string("expected a path, found an empty one") : std::string(); },
-                              "");
+  // -o "" (an unset shell variable) is a mistake, not a request for the default folder; so is an option's name
+  // (`-o -q` wrote into a folder named -q, and the run was not quiet).
+  const CLI::Validator kNamed(
+      [](std::string& v) {
+        if (v.empty()) return std::string("expected a path, found an empty one");
+        const bool short_option = v.size() == 2 && v[0] == '-' && std::isalpha(static_cast<unsigned char>(v[1]));
+        const bool long_option = v.size() > 2 && v.compare(0, 2, "--") == 0 && std::isalpha(static_cast<unsigned char>(v[2]));
+        if (short_option || long_option)
+          return "expected a path, found '" + v + "', an option's name (a folder of that name: ./" + v + ")";
+        return std::string();
+      },
+      "");
   // Every tile allocates and frees buffers of megabytes (a transient tile of 32 x 32 pixels x 2394 bins is
   // 9.8 MB). glibc serves those with mmap and returns them with munmap, so each tile paid page faults and
   // the kernel's zeroing of every page again (a quarter of `sense`'s time). Kept in the heap instead, freed

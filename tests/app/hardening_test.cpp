@@ -559,6 +559,11 @@ TEST_F(Hardening, CommandLineErrorsAreSpadgensWithExitCode1) {
       // an option where a value was expected: CLI11 named the next word (the folder) as "not expected"
       {"run " + kTiny + " --set -o out_dir", "spadgen: error: --set: expected KEY=VALUE after it, found the option '-o' (see spadgen run --help)"},
       {"run " + kTiny + " -o --set a=1", "spadgen: error: -o: expected a value after it, found the option '--set'"},
+      // an option's name as the folder (it wrote into a folder named -q, and the run was not quiet)
+      {"run " + kTiny + " -o -q", "spadgen: error: -o: expected a value after it, found the option '-q' (see spadgen run --help)"},
+      {"dataset plan none.json -o --all", "spadgen: error: -o: expected a value after it, found the option '--all'"},
+      // (one of no command of spadgen's: the validator's words)
+      {"run " + kTiny + " -o --frob", "--out: expected a path, found '--frob', an option's name (a folder of that name: ./--frob)"},
       {"info /dev/zero", "scene file /dev/zero: is a character device, expected a regular file"},
       // two values after one --set: the second is taken for the scene, and said so
       {"run --set camera.width_px=1024 camera.height_px=500 " + kFlat,
