@@ -75,7 +75,6 @@ int64_t cgroup_memory_left(const std::string& proc_self_cgroup, const fs::path& 
   return least;
 }
 
-// MemAvailable of /proc/meminfo, lowered to what the process's memory cgroups still allow.
 int64_t available_memory() {
   int64_t available = -1;
   std::ifstream meminfo("/proc/meminfo");

@@ -30,7 +30,8 @@ namespace spadgen::app {
 // the namespace's root group had been read (memory.max), so a run past a job's limit was killed, not refused.
 int64_t cgroup_memory_left(const std::string& proc_self_cgroup, const std::filesystem::path& root);
 
-// MemAvailable of /proc/meminfo, lowered to what the process's memory cgroups still allow; -1 unknown.
+// MemAvailable of /proc/meminfo, lowered to what the process's memory cgroups still allow and to an
+// address-space limit (ulimit -v); -1 unknown.
 int64_t available_memory();
 
 struct ResourcePlan {

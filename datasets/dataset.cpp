@@ -224,14 +224,19 @@ int64_t DatasetSpec::grid_cells() const {
 
 int64_t DatasetSpec::count() const { return samples.value_or(grid_cells()); }
 
+int64_t DatasetSpec::samples_of_scene(size_t i) const {
+  const int64_t cells = grid_cells(), per_scene = cells / static_cast<int64_t>(scenes.size());
+  const int64_t rest = count() % cells - static_cast<int64_t>(i) * per_scene;
+  return count() / cells * per_scene + std::clamp(rest, int64_t{0}, per_scene);
+}
+
 std::string DatasetSpec::coverage_warning() const {
   const int64_t cells = grid_cells(), n = count();
   if (n >= cells) return "";
-  const int64_t per_scene = cells / static_cast<int64_t>(scenes.size());
   std::string none;  // the scene files no sample takes
   size_t unsampled = 0;
   for (size_t i = 0; i < scenes.size(); ++i)
-    if (static_cast<int64_t>(i) * per_scene >= n) none += (unsampled++ ? ", " : "") + scene_names[i];
+    if (samples_of_scene(i) == 0) none += (unsampled++ ? ", " : "") + scene_names[i];
   const std::string cell_range = n + 1 == cells ? "cell " + std::to_string(n) : "cells " + std::to_string(n) + "-" + std::to_string(cells - 1);
   return file + ": samples (" + std::to_string(n) + ") is fewer than the " + std::to_string(cells) +
          " grid cells (scenes outermost, the last grid key fastest): " + cell_range + " make no sample" +

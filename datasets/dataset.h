@@ -79,6 +79,9 @@ struct DatasetSpec {
   // "" or, when "samples" is fewer than the grid cells, what that leaves out: the cells past the samples make
   // none, and with the scenes outermost, whole scene files may make none (a plan and a run say it).
   std::string coverage_warning() const;
+  // The samples scene file i makes: its cells once per pass over the grid, and of the last, partial pass
+  // those before count() (the scenes are outermost).
+  int64_t samples_of_scene(size_t i) const;
 };
 
 // The largest dataset (samples) a file may describe, and the largest grid.

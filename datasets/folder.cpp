@@ -1087,19 +1087,16 @@ std::string dataset_card(const DatasetFolder& folder, const CardTally& tally) {
     for (const std::string& line : tally.warnings.lines(" (each sample's metadata.json lists its own)")) o << "- " << cell(line) << "\n";
     o << "\n";
   }
-  // How many samples each scene file makes (scenes outermost in the grid: "samples" fewer than the cells leaves
-  // the last scene files out, which the table said nothing of)
-  const int64_t cells = spec.grid_cells(), per_scene = cells / static_cast<int64_t>(spec.scenes.size());
-  const int64_t full = spec.count() / cells, rest = spec.count() % cells;
+  // with how many samples each scene file makes ("samples" fewer than the cells leaves the last scene files
+  // out, which the table said nothing of)
   o << "## Scenes\n\n| scene file | samples | description |\n|---|---|---|\n";
   for (size_t i = 0; i < spec.scenes.size(); ++i) {
-    const int64_t made = full * per_scene + std::clamp(rest - static_cast<int64_t>(i) * per_scene, int64_t{0}, per_scene);
     std::string description;
     try {
       description = scenes::load_scene_file(spec.scenes[i]).resolved.value("description", "");
     } catch (const Error&) {
     }
-    o << "| `" << cell(spec.scene_names[i]) << "` | " << made << " | " << cell(description) << " |\n";
+    o << "| `" << cell(spec.scene_names[i]) << "` | " << spec.samples_of_scene(i) << " | " << cell(description) << " |\n";
   }
   if (const std::string w = spec.coverage_warning(); !w.empty()) o << "\n" << cell(w.substr(spec.file.size() + 2)) << ".\n";
   // The camera each scene's first sample resolves to; a value a grid or random key varies reads "varies" (a new
