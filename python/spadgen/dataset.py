@@ -17,14 +17,13 @@ import fcntl
 import json
 import math
 import numbers
-import operator
 import os
 import struct
 import warnings
 
 import numpy as np
 
-from .run import load_json, open_run
+from .run import _position, load_json, open_run
 
 __all__ = ["Dataset", "Sample", "SampleNotDoneError", "open_dataset", "STATUSES", "SUMMARY_COLUMNS"]
 
@@ -250,17 +249,6 @@ class Sample:
     def realisations(self):
         """Every realisation's run, realisation r at position r: [run] + repeats."""
         return [self.run] + self.repeats
-
-
-def _position(value):
-    """An item's position as an int (anything with __index__: NumPy's and torch's 0-d integers, as torch's Subset
-    passes them), or None for what is none (a bool, a float, a text)."""
-    if isinstance(value, (bool, np.bool_)):
-        return None
-    try:
-        return operator.index(value)
-    except TypeError:
-        return None
 
 
 class Dataset:

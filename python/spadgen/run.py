@@ -828,12 +828,9 @@ class Run:
         for name, v, size, what in (("k", k, packed.shape[0], "gate positions"), ("n", n, packed.shape[1], "frames per position")):
             if isinstance(v, (str, bool, np.bool_)):
                 raise TypeError(f"{self.path}: frames({name}={v!r}); expected an int, a slice or indices")
-            try:  # a single index is checked; slices, lists and arrays of indices go to NumPy as they are
-                v = operator.index(v) if not isinstance(v, (bool, np.bool_)) else None
-            except TypeError:
-                continue
-            if v is not None and not -size <= v < size:
-                raise IndexError(f"{self.path}: frames({name}={v}) is past the {size} {what} (0 to {size - 1})")
+            # a single index is checked; slices, lists and arrays of indices go to NumPy as they are
+            if (i := _position(v)) is not None and not -size <= i < size:
+                raise IndexError(f"{self.path}: frames({name}={i}) is past the {size} {what} (0 to {size - 1})")
         return unpack_frames(packed[k, n], self.width)
 
     def gate_profile(self, x, y, expected=False, sensor_coordinates=False):
@@ -1029,6 +1026,17 @@ class Run:
         """(P, 3) float64: points() of the pixels with a finite depth, in row-major pixel order."""
         p = self.points(frame, depth, kind).reshape(-1, 3)
         return p[np.isfinite(p).all(axis=1)]
+
+
+def _position(value):
+    """An item's position as an int (anything with __index__: NumPy's and torch's 0-d integers, as torch's Subset
+    passes them), or None for what is none (a bool, a float, a text)."""
+    if isinstance(value, (bool, np.bool_)):
+        return None
+    try:
+        return operator.index(value)
+    except TypeError:
+        return None
 
 
 def _missing(path):

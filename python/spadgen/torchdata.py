@@ -73,8 +73,8 @@ try:
 except ImportError as e:  # pragma: no cover - exercised only where torch is missing
     raise ImportError("spadgen.torchdata needs PyTorch (Debian 12: apt-get install python3-torch)") from e
 
-from .dataset import Dataset, _position, open_dataset
-from .run import Run, RunChangedError, open_run, unpack_frames
+from .dataset import Dataset, open_dataset
+from .run import Run, RunChangedError, _position, open_run, unpack_frames
 
 __all__ = ["RunDataset", "DatasetSamples", "FIELDS", "DEFAULT_FIELDS"]
 
