@@ -84,9 +84,9 @@ std::optional<int> parse_command_line(CLI::App& cli, int argc, char** argv) {
       if (!opt || opt->get_expected_min() == 0 || after.size() < 2 || after[0] != '-') continue;
       // (an option of this command, or --help: `-o -results` is a folder's name, which CLI11's own message names)
       if (at->get_option_no_throw(after.substr(0, after.find('='))) == nullptr && after != "-h" && after != "--help") continue;
+      const std::string type = opt->get_type_name();  // (TEXT says nothing: "a value")
       std::fprintf(stderr, "spadgen: error: %s: expected %s after it, found the option '%s' (see %s --help)\n", word.c_str(),
-                   opt->get_type_name().empty() || opt->get_type_name() == "TEXT" ? "a value" : opt->get_type_name().c_str(), scenes::one_line(after).c_str(),
-                   command.c_str());
+                   type.empty() || type == "TEXT" ? "a value" : type.c_str(), scenes::one_line(after).c_str(), command.c_str());
       return kExitBadInput;
     }
     // (one line: a word of the command line holding a newline, a file name, is shown as \n)
