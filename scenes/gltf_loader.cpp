@@ -1325,12 +1325,17 @@ void Loader::load_primitive(size_t node, size_t mesh_index, size_t prim_index, c
     fail(who, "has " + std::to_string(p.targets.size()) + " morph targets but " +
                   (gn.weights.empty() ? label("mesh", mesh_index, gm.name) : node_label(m_, node)) + " gives " +
                   std::to_string(weights.size()) + " weights (glTF 2.0: one per target)");
-  // Every target's accessors exist, whatever the weights (a target of weight 0 named accessor 77 of 3 silently).
+  // Every target's accessors exist and hold one element per vertex, whatever the weights (glTF 2.0: a target's
+  // accessors have the base's count; a target of weight 0 named accessor 77 of 3, or held 2 of 3 vertices, silently).
   for (size_t t = 0; t < p.targets.size(); ++t)
     for (const auto& [attribute, accessor] : p.targets[t])
       if (accessor < 0 || static_cast<size_t>(accessor) >= m_.accessors.size())
         fail(who, "morph target " + std::to_string(t) + " " + attribute + ": accessor " + std::to_string(accessor) +
                       " does not exist (the file has " + std::to_string(m_.accessors.size()) + " accessors)");
+      else if (m_.accessors[static_cast<size_t>(accessor)].count != n)
+        fail(who, "morph target " + std::to_string(t) + " " + attribute + " has " +
+                      std::to_string(m_.accessors[static_cast<size_t>(accessor)].count) + " elements but POSITION has " +
+                      std::to_string(n) + " (glTF 2.0: a morph target's accessors hold one element per vertex)");
       else if (attribute != "POSITION" && attribute != "NORMAL" && attribute != "TANGENT" && t < weights.size() &&
                weights[t] != 0.0)
         warn(who + ": morph target " + std::to_string(t) + " " + attribute + " is not used by spadgen (its POSITION and "
@@ -1889,9 +1894,13 @@ std::string start_of(const std::string& bytes) {
 // The JSON of a .gltf or .glb, after recognising which it is; anything else is named for what it looks
 // like, before tinygltf sees it.
 // `bin_bytes`, when given, is set to the length of a .glb's BIN chunk, or -1 when it has none (and for a .gltf).
-std::string gltf_json(const std::string& path, const std::string& bytes, bool* binary, int64_t* bin_bytes = nullptr) {
+// `unknown_chunk`, when given, is set to the type of a .glb's second chunk when that is neither BIN nor cut
+// short (glTF 2.0: readers ignore chunks of unknown types; it and what follows it are not read), else left empty.
+std::string gltf_json(const std::string& path, const std::string& bytes, bool* binary, int64_t* bin_bytes = nullptr,
+                      std::string* unknown_chunk = nullptr) {
   *binary = bytes.size() >= 4 && std::memcmp(bytes.data(), "glTF", 4) == 0;
   if (bin_bytes) *bin_bytes = -1;
+  if (unknown_chunk) unknown_chunk->clear();
   if (*binary) {
     // GLB: magic, version, length, then the JSON chunk's length, type ("JSON") and content.
     uint32_t version = 0, length = 0, chunk = 0, type = 0;
@@ -1926,6 +1935,12 @@ std::string gltf_json(const std::string& path, const std::string& bytes, bool* b
       uint32_t bin = 0, bin_type = 0;
       std::memcpy(&bin, bytes.data() + json_end, 4);
       std::memcpy(&bin_type, bytes.data() + json_end + 4, 4);
+      // A chunk of another type that fits the file is one a reader ignores (glTF 2.0, 4.4.3.1); one that does
+      // not is more likely a JSON chunk's length gone wrong.
+      if (bin_type != 0x004E4942u && json_end + 8 + bin <= length && unknown_chunk) {
+        *unknown_chunk = start_of(bytes.substr(json_end + 4, 4));
+        return bytes.substr(20, chunk);
+      }
       if (bin_type != 0x004E4942u)  // "BIN\0"
         throw Error(invalid + "after its JSON chunk (" + std::to_string(chunk) + " bytes) comes no BIN chunk's header but " +
                     start_of(bytes.substr(json_end, 8)) + "; expected a BIN chunk (type 'BIN\\0') or nothing (is the JSON "
@@ -2397,7 +2412,8 @@ Scene parse_gltf(const std::string& bytes, const std::string& path, const std::s
   // .glb and .gltf are told apart by content: exporters and users both mislabel them.
   bool binary = false;
   int64_t bin_bytes = -1;
-  const std::string json_text = gltf_json(path, bytes, &binary, &bin_bytes);
+  std::string unknown_chunk;
+  const std::string json_text = gltf_json(path, bytes, &binary, &bin_bytes, &unknown_chunk);
   // Parsed here first, without recursion and to a bounded depth: tinygltf turns extras into its own
   // values recursively, and a file nested 15,000 deep would exhaust the stack there.
   // A key twice in one object: glTF 2.0 (JSON encoding) asks writers for unique keys and readers to take the
@@ -2415,9 +2431,17 @@ Scene parse_gltf(const std::string& bytes, const std::string& path, const std::s
   std::string err, warn;
   const std::string base_dir = std::filesystem::path(path).parent_path().string();
   bool ok = false;
+  // tinygltf 2.7 refuses a second chunk that is not BIN: it sees the file up to the JSON chunk's end.
+  std::string glb_without_unknown;
+  if (!unknown_chunk.empty()) {
+    glb_without_unknown = bytes.substr(0, 20 + json_text.size());
+    const auto length = static_cast<uint32_t>(glb_without_unknown.size());
+    std::memcpy(glb_without_unknown.data() + 8, &length, 4);
+  }
+  const std::string& glb = unknown_chunk.empty() ? bytes : glb_without_unknown;
   try {
-    ok = binary ? io.LoadBinaryFromMemory(&model, &err, &warn, reinterpret_cast<const unsigned char*>(bytes.data()),
-                                          static_cast<unsigned int>(bytes.size()), base_dir)
+    ok = binary ? io.LoadBinaryFromMemory(&model, &err, &warn, reinterpret_cast<const unsigned char*>(glb.data()),
+                                          static_cast<unsigned int>(glb.size()), base_dir)
                 : io.LoadASCIIFromString(&model, &err, &warn, bytes.data(), static_cast<unsigned int>(bytes.size()), base_dir);
   } catch (const std::bad_alloc&) {
     throw;  // (memory, not the file: "malformed glTF (tinygltf: std::bad_alloc)" of a valid 16384^2 texture)
@@ -2453,6 +2477,9 @@ Scene parse_gltf(const std::string& bytes, const std::string& path, const std::s
 
   Scene scene;
   scene.source = path;
+  if (!unknown_chunk.empty())
+    scene.warnings.push_back("the .glb's second chunk is of type " + unknown_chunk + ", not BIN: ignored, with any "
+                             "chunk after it (glTF 2.0: readers ignore chunks of unknown types; the file has no BIN chunk)");
   if (!duplicate.empty())
     scene.warnings.push_back(duplicate + " (the first such key; glTF 2.0 asks for unique keys, and the later value is "
                              "taken, the earlier ignored)");

@@ -1372,6 +1372,25 @@ TEST_F(BrokenGltf, AGlbCutShortOrABufferWithoutAUriIsNamed) {
   EXPECT_THAT(load_error(glb_with_buffers(json::array({{{"byteLength", n + 8}}}))),
               HasSubstr("buffer 0: byteLength is " + std::to_string(n + 8) + " but the .glb's BIN chunk holds " + bin_length +
                         " bytes; expected at most its length"));
+  // A second chunk of an unknown type is ignored, as glTF 2.0 asks of readers (it was refused as a JSON chunk's
+  // wrong length); one whose length runs past the file is still refused so.
+  const std::string embedded = g.write(dir_.path(), "embedded", Gltf::Form::Embedded);
+  std::ifstream embedded_in(embedded, std::ios::binary);
+  std::string js((std::istreambuf_iterator<char>(embedded_in)), std::istreambuf_iterator<char>());
+  while (js.size() % 4) js += ' ';
+  const auto u32 = [](size_t v) {
+    const auto w = static_cast<uint32_t>(v);
+    return std::string(reinterpret_cast<const char*>(&w), 4);
+  };
+  path_ = (dir_.path() / "xtra.glb").string();
+  write_file(path_, "glTF" + u32(2) + u32(28 + js.size() + 8) + u32(js.size()) + "JSON" + js + u32(8) + "XTRA" + "12345678");
+  const Scene xtra = load_gltf(path_);
+  EXPECT_EQ(xtra.meshes.size(), 1u);
+  EXPECT_TRUE(has_warning(xtra, "the .glb's second chunk is of type 'XTRA', not BIN: ignored, with any chunk after it"))
+      << testing::PrintToString(xtra.warnings);
+  write_file(path_, "glTF" + u32(2) + u32(28 + js.size() + 8) + u32(js.size()) + "JSON" + js + u32(12) + "XTRA" + "12345678");
+  EXPECT_THAT(load_error(path_), HasSubstr("after its JSON chunk (" + std::to_string(js.size()) + " bytes) comes no BIN chunk's "
+                                           "header but '\\x0c\\x00\\x00\\x00XTRA'; expected a BIN chunk"));
   // and a .gltf's buffer without a uri
   json text = g.doc;
   text["buffers"] = json::array({{{"byteLength", n}}});
@@ -1464,6 +1483,14 @@ TEST_F(BrokenGltf, AnotherVersionOrAMeshWithoutPrimitives) {
   const int pos = t.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
   t.node({{"mesh", t.mesh(json::array({{{"attributes", {{"POSITION", pos}}}, {"targets", {{{"POSITION", 77}}}}}}), "Morph")}});
   EXPECT_THAT(error_of(t), HasSubstr("mesh 0 'Morph' primitive 0: morph target 0 POSITION: accessor 77 does not exist (the file has 1 accessors)"));
+  // a target of weight 0 (no weights at all) holding 2 of the 3 vertices (it loaded; at weight 1 it failed)
+  Gltf short_target;
+  const int three = short_target.positions({0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const int two = short_target.positions({0, 0, 1, 0, 0, 1});
+  short_target.node({{"mesh", short_target.mesh(json::array({{{"attributes", {{"POSITION", three}}},
+                                                             {"targets", {{{"NORMAL", two}}}}}}), "Morph")}});
+  EXPECT_THAT(error_of(short_target), HasSubstr("mesh 0 'Morph' primitive 0: morph target 0 NORMAL has 2 elements but POSITION "
+                                                "has 3 (glTF 2.0: a morph target's accessors hold one element per vertex)"));
   // a target's displacements as UNSIGNED_INT (read as integer metres, as POSITION was), and a COLOR_0 target
   // at weight 1 (ignored without a word)
   Gltf u;
