@@ -235,7 +235,7 @@ struct IntensityConfig {
 struct AcquisitionConfig {
   AcquisitionMode mode = AcquisitionMode::GateSweep;  // acquisition.mode: gate_sweep (3D) or intensity (2D)
   int frames = 255;                     // acquisition.frames: per gate position (sweep) or per image (2D)
-  double frame_rate_Hz = 24000.0;       // acquisition.frame_rate_fps, for time stamps
+  double frame_rate_Hz = 24000.0;       // acquisition.frame_rate_fps: the exposure check, metadata
   int64_t cycles_per_frame = 1000;      // acquisition.cycles_per_frame: laser cycles in one binary frame
   GateSweepConfig gate_sweep;
   IntensityConfig intensity;

@@ -430,7 +430,7 @@ std::vector<Key> build() {
 
   k.push_back(choice("/acquisition/mode", FIELD(acquisition.mode), "gate_sweep: 3D time-gated sweep; intensity: 2D intensity imaging"));
   k.push_back(integer("/acquisition/frames", FIELD(acquisition.frames), kNone, closed(1, 65535), "binary frames summed per gate position (gate_sweep) or per image (intensity)"));
-  k.push_back(number("/acquisition/frame_rate_fps", FIELD(acquisition.frame_rate_Hz), plain("frames/s"), open_closed(0, 1e7), "binary frame rate, for time stamps and exposure checks"));
+  k.push_back(number("/acquisition/frame_rate_fps", FIELD(acquisition.frame_rate_Hz), plain("frames/s"), open_closed(0, 1e7), "binary frame rate: an exposure longer than one frame is warned of; recorded in metadata.json"));
   k.push_back(integer("/acquisition/cycles_per_frame", FIELD(acquisition.cycles_per_frame), kNone, closed(1, 1e12), "laser cycles (gate openings) integrated in one binary frame (gate_sweep)"));
   k.push_back(number("/acquisition/gate_sweep/start_ns", FIELD(acquisition.gate_sweep.start_s), kNsUnit, closed(-1e6, 1e6), "first gate position, relative to the laser trigger"));
   k.push_back(number("/acquisition/gate_sweep/stop_ns", FIELD(acquisition.gate_sweep.stop_s), kNsUnit, closed(-1e6, 1e6), "last gate position (included when on the step grid)"));
