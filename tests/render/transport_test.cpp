@@ -827,7 +827,7 @@ TEST(Transport, LaserLightRefractsThroughAThickSlab) {
 // front face's 4 % reflection made 16 paths disagree by whether they took it (a pixel's relative spread
 // about 20 %, its reported error 0 where none did). Here the slab of LaserLightRefractsThroughAThickSlab
 // at normal incidence, 16 paths per pixel: every pixel is the closed form (the direct return through the
-// slab, T^2 / (1 - t + t / n)^2) within 2e-4, with two light seeds alike, and reports an error below 2e-3
+// slab, T^2 / (1 - t + t / n)^2) within 2e-4, with eight light seeds alike, and reports an error below 2e-3
 // (the laser side's echo, drawn: below); its first echo at 2 n t / c, on both sides, is the closed form.
 TEST(Transport, AClearPlatesBranchesAreFollowedBothWays) {
   const float t = 0.05f, n = 1.5f;
@@ -850,8 +850,12 @@ TEST(Transport, AClearPlatesBranchesAreFollowedBothWays) {
     const float* g = b.transient.data() + i * size_t(axis.bins);
     for (int64_t k = 0; k < axis.bins; ++k) (axis.bin_centre_s(k) < t_main + echo_at / 2 ? *main : *echo) += g[k];
   };
+  // The echo's share is pooled over 8 light seeds: one seed's pooled share spreads by 0.044 at 16 paths and 0.010
+  // at 1024 (16 seeds, this scene), and Embree's kernels for another instruction set draw other paths: one seed at
+  // 1024 paths was 1.022 on an AVX2 machine, past the 0.015 of a test that took one. 0.05 and 0.015 are 3.2 and
+  // 4.3 standard errors of the means of 8.
   double main_all = 0, echo_all = 0;
-  for (const uint64_t seed : {7u, 8u}) {
+  for (uint64_t seed = 1; seed <= 8; ++seed) {
     c.light_seed = seed;
     const Renderer plate(scene(true), c);
     // (the slab's mirror image of the laser, on the axis, is a glint in pixel (2, 2): left out, as the light
@@ -869,12 +873,21 @@ TEST(Transport, AClearPlatesBranchesAreFollowedBothWays) {
   }
   EXPECT_NEAR(echo_all / main_all / (R * R) / (1.0 + laser_side), 1.0, 0.05);
   c.render.samples_per_pixel = 1024;
+  main_all = echo_all = 0;
+  for (uint64_t seed = 1; seed <= 7; ++seed) {
+    c.light_seed = seed;
+    const TransientTile b = Renderer(scene(true), c).transient({0, 0, 4, 4}, {0, 0, 4, 4}, axis);
+    for (size_t i = 0; i < 16; ++i)
+      if (i != kGlint) split(b, i, &main_all, &echo_all);
+  }
+  c.light_seed = 8;
   const Renderer r(scene(true), c);
   GroundTruthTile gt = r.ground_truth({0, 0, 4, 4});
   const TransientTile b = r.transient({0, 0, 4, 4}, {0, 0, 4, 4}, axis, nullptr, &gt);
-  main_all = echo_all = 0;
+  double main_8 = 0, echo_8 = 0;  // (seed 8's, for the ground truth below)
   for (size_t i = 0; i < 16; ++i)
-    if (i != kGlint) split(b, i, &main_all, &echo_all);
+    if (i != kGlint) split(b, i, &main_8, &echo_8);
+  main_all += main_8, echo_all += echo_8;
   EXPECT_NEAR(echo_all / main_all / (R * R) / (1.0 + laser_side), 1.0, 0.015);
   // Both halves of the echo are the wall's indirect light (reflected on the way), its direct return the wall's
   // own: the laser side's half was filed as the wall's return.
@@ -884,8 +897,8 @@ TEST(Transport, AClearPlatesBranchesAreFollowedBothWays) {
     for (int j = 0; j < gt.max_layers; ++j) wall += gt.object_laser[i * size_t(gt.max_layers) + size_t(j)];
     indirect += gt.indirect_laser[i];
   }
-  EXPECT_NEAR(wall / main_all, 1.0, 1e-3);
-  EXPECT_NEAR(indirect / echo_all, 1.0, 1e-3);
+  EXPECT_NEAR(wall / main_8, 1.0, 1e-3);
+  EXPECT_NEAR(indirect / echo_8, 1.0, 1e-3);
 }
 
 // The slab's first echo at oblique incidence (the camera turned by psi, 50 mm: every pixel within 0.03 deg of
