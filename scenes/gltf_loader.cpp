@@ -1937,8 +1937,8 @@ std::string gltf_json(const std::string& path, const std::string& bytes, bool* b
       std::memcpy(&bin_type, bytes.data() + json_end + 4, 4);
       // A chunk of another type that fits the file is one a reader ignores (glTF 2.0, 4.4.3.1); one that does
       // not is more likely a JSON chunk's length gone wrong.
-      if (bin_type != 0x004E4942u && json_end + 8 + bin <= length && unknown_chunk) {
-        *unknown_chunk = start_of(bytes.substr(json_end + 4, 4));
+      if (bin_type != 0x004E4942u && json_end + 8 + bin <= length) {
+        if (unknown_chunk) *unknown_chunk = start_of(bytes.substr(json_end + 4, 4));
         return bytes.substr(20, chunk);
       }
       if (bin_type != 0x004E4942u)  // "BIN\0"

@@ -1388,6 +1388,7 @@ TEST_F(BrokenGltf, AGlbCutShortOrABufferWithoutAUriIsNamed) {
   EXPECT_EQ(xtra.meshes.size(), 1u);
   EXPECT_TRUE(has_warning(xtra, "the .glb's second chunk is of type 'XTRA', not BIN: ignored, with any chunk after it"))
       << testing::PrintToString(xtra.warnings);
+  EXPECT_TRUE(spadgen::scenes::gltf_external_files(path_).empty());  // (the scene's hash reads the file list: it refused it)
   write_file(path_, "glTF" + u32(2) + u32(28 + js.size() + 8) + u32(js.size()) + "JSON" + js + u32(12) + "XTRA" + "12345678");
   EXPECT_THAT(load_error(path_), HasSubstr("after its JSON chunk (" + std::to_string(js.size()) + " bytes) comes no BIN chunk's "
                                            "header but '\\x0c\\x00\\x00\\x00XTRA'; expected a BIN chunk"));
