@@ -164,7 +164,8 @@ TEST(Accuracy, TargetRelativeErrorIsReachedUnbiasedAndTileIndependent) {
   EXPECT_LT(std::abs(dsum / std::sqrt(var)), 4.0);
   // The errors are right on average: the squared differences over the squared errors, pooled (single
   // pixels' errors from 32 paths of a heavy-tailed light are themselves uncertain).
-  EXPECT_GT(d2 / var, 0.7);
+  // (over 24 light seeds d2 / var is 0.98 with a spread of 0.11: 0.55 and 1.4 are 3.8 spreads away)
+  EXPECT_GT(d2 / var, 0.55);
   EXPECT_LT(d2 / var, 1.4);
   // The target is met: the median pixel within 25 % of it, and at most 10 % of the pixels short of the
   // most paths miss it twice over (the first round underestimated their spread; laser.exr says which).
@@ -317,15 +318,17 @@ RenderStageConfig glossy_plate_config(int size, double focal_length_m) {
 }
 
 // Guided connections change how the glossy paths are drawn, not what they estimate: over 256 pixels the
-// summed laser return with and without them agrees within 4 of their combined standard errors (each
-// pixel's reported error: a false alarm rate of 6e-5 were they exact), and the variance falls, most for
-// the narrowest lobe: measured 9.2 times lower at roughness 0.05 (the shipped plate's), 2.8 at 0.1.
+// summed laser return with and without them agrees within 12 of their combined reported standard errors, and
+// the variance falls, most for the narrowest lobe. Without them the light of the lobes' tails is heavy-tailed:
+// one seed's reported error misses the rare paths that carry it. Over 48 light seeds (a seed-offset audit) the
+// difference was 2.9 of its reported errors rms at roughness 0.05 (so 12 is about 4 real spreads) and the
+// variance's ratio 0.125 on average, at most 0.54 (bound 0.75); at 0.1, 0.39 +- 0.024 (bound 0.6).
 TEST(Accuracy, GuidedConnectionsKeepTheExpectationAndLowerTheVariance) {
   struct Case {
     float roughness;
     double max_variance_ratio;
   };
-  for (const Case k : {Case{0.05f, 0.25}, Case{0.1f, 0.6}}) {
+  for (const Case k : {Case{0.05f, 0.75}, Case{0.1f, 0.6}}) {
     const scenes::Scene s = glossy_plate(k.roughness);
     RenderStageConfig c = glossy_plate_config(16, 6e-3);
         c.render.samples_per_pixel = 256;
@@ -344,7 +347,7 @@ TEST(Accuracy, GuidedConnectionsKeepTheExpectationAndLowerTheVariance) {
         total[guided] += t.laser_total[i], var[guided] += double(t.laser_se[i]) * t.laser_se[i];
     }
     ASSERT_GT(total[0], 0.0);
-    EXPECT_LT(std::fabs(total[1] - total[0]), 4.0 * std::sqrt(var[0] + var[1]))
+    EXPECT_LT(std::fabs(total[1] - total[0]), 12.0 * std::sqrt(var[0] + var[1]))
         << "roughness " << k.roughness << ": " << total[0] << " " << total[1];
     EXPECT_LT(var[1], k.max_variance_ratio * var[0]) << "roughness " << k.roughness << ": " << var[0] << " " << var[1];
   }
@@ -483,9 +486,11 @@ TEST(Accuracy, GuidedDrawsKeepThePlatesDelayedReturns) {
 // guided connections aim at. The laser lights the plate from behind, where a black sheet covers all of it
 // but the last 0.5 mm before the edge, so the pipe carries the light the camera sees 1 to 11 mm from the
 // edge (16 x 16 pixels; about 1 % of what the uncovered strip returns, in bands 2.3 mm apart: the pipe's
-// reflections). At 256 paths for light seeds 1 and 2, the summed laser return with guided connections
-// agrees with the one without within 4 of their combined standard errors, and its variance falls
-// (measured 0.045 times).
+// reflections). At 256 paths for light seeds 1 to 4, the summed laser return with guided connections
+// agrees with the one without within 12 of their combined reported standard errors, and its variance does not
+// rise. The unguided light of the pipe is heavy-tailed: over 48 pairs of light seeds (a seed-offset audit) the
+// difference was 2.9 of its reported errors rms (12 is about 4 real spreads), and the variance's ratio 0.31 on
+// average, at most 0.95: a pair that misses the pipe's rare paths reports a small error without them.
 TEST(Accuracy, GuidedDrawsKeepTheLightPipedThroughAPlatesEdge) {
   scenes::Scene s;
   scenes::Material plate = test::glass(1.5f, 0.002f, 0.05f);
@@ -499,7 +504,7 @@ TEST(Accuracy, GuidedDrawsKeepTheLightPipedThroughAPlatesEdge) {
   const PixelRect rect{0, 0, 16, 16};
   const TimeAxis axis{0.0, 10e-12, 0, 25e-9};
   double total[2] = {0, 0}, var[2] = {0, 0}, worst[2] = {0, 0};
-  for (uint64_t seed = 1; seed <= 2; ++seed) {
+  for (uint64_t seed = 1; seed <= 4; ++seed) {
     c.light_seed = seed;
     for (int guided = 0; guided < 2; ++guided) {
       c.render.guided_connections = guided == 1;
@@ -513,8 +518,8 @@ TEST(Accuracy, GuidedDrawsKeepTheLightPipedThroughAPlatesEdge) {
   std::printf("total %.8g (guided %.8g), variance %.6g -> %.6g (x %.4f), worst relative error %.3g -> %.3g\n", total[0], total[1],
               var[0], var[1], var[1] / var[0], worst[0], worst[1]);
   ASSERT_GT(total[0], 0.0);
-  EXPECT_LT(std::fabs(total[1] - total[0]), 4.0 * std::sqrt(var[0] + var[1])) << total[0] << " " << total[1];
-  EXPECT_LT(var[1], 0.5 * var[0]) << var[0] << " " << var[1];
+  EXPECT_LT(std::fabs(total[1] - total[0]), 12.0 * std::sqrt(var[0] + var[1])) << total[0] << " " << total[1];
+  EXPECT_LT(var[1], var[0]) << var[0] << " " << var[1];
 }
 
 // The laser's light entering a plate through its edge is tinted by the plate's base colour there, COLOR_0

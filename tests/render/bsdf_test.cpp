@@ -240,9 +240,10 @@ TEST(Bsdf, FurnaceErrorFallsAsOneOverSqrtN) {
     rms_large += std::pow(sampled_albedo(m, 0.6, 1600, 1000 + uint64_t(k)).mean - ref.mean, 2);
   }
   const double ratio = std::sqrt(rms_small / rms_large);  // expected sqrt(1600 / 100) = 4
-  // The RMS over 200 repeats has a relative spread of 1/sqrt(2 * 200) = 5 %; the ratio about 7 %.
-  EXPECT_GT(ratio, 4.0 * (1 - 0.25));
-  EXPECT_LT(ratio, 4.0 * (1 + 0.25));
+  // Over 48 seed offsets the ratio is 4.07 with a spread of 0.41 (10 %): (2.5, 5.8) is 3.8 spreads below and
+  // 4.2 above; a 1 / N^(1/4) law would give 2.
+  EXPECT_GT(ratio, 2.5);
+  EXPECT_LT(ratio, 5.8);
 }
 
 }  // namespace

@@ -5,6 +5,7 @@
 #include "core/error.h"
 #include <tbb/global_control.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <numeric>
@@ -677,12 +678,17 @@ TEST(Transport, ASceneFarFromTheOriginRendersAsNearIt) {
   const TransientTile a = near_r.transient({0, 0, 8, 8}, {0, 0, 8, 8}, axis);
   const TransientTile b = far_r.transient({0, 0, 8, 8}, {0, 0, 8, 8}, axis);
   double total_a = 0, total_b = 0, t_a = 0, t_b = 0;
+  const double peak = *std::max_element(a.laser_total.begin(), a.laser_total.end());
   for (int y = 0; y < 8; ++y)
     for (int x = 0; x < 8; ++x) {
       const size_t i = size_t(a.data_rect.index(x, y));
       // The same paths, with vertices 31 um (a float's spacing at 300 m) from where they are near the origin.
-      if (a.laser_total[i] == 0.0) EXPECT_EQ(b.laser_total[i], 0.0) << x << "," << y;  // a corner outside the beam
-      else EXPECT_NEAR(b.laser_total[i] / a.laser_total[i], 1.0, 1e-3) << x << "," << y;
+      // Pixels the beam's edge crosses hold a few paths just inside or outside its cone, which the shift flips
+      // (over 48 light seeds: off by up to 0.01, or 3.4e-5 of light where none was): the totals below hold them.
+      // Inside, the ratio spreads by 2.9e-4 per pixel: 2e-3 is 7 spreads.
+      if (a.laser_total[i] >= 0.5 * peak) {
+        EXPECT_NEAR(b.laser_total[i] / a.laser_total[i], 1.0, 2e-3) << x << "," << y;
+      }
       total_a += a.laser_total[i];
       total_b += b.laser_total[i];
       for (int64_t k = 0; k < axis.bins; ++k) {
@@ -850,10 +856,10 @@ TEST(Transport, AClearPlatesBranchesAreFollowedBothWays) {
     const float* g = b.transient.data() + i * size_t(axis.bins);
     for (int64_t k = 0; k < axis.bins; ++k) (axis.bin_centre_s(k) < t_main + echo_at / 2 ? *main : *echo) += g[k];
   };
-  // The echo's share is pooled over 8 light seeds: one seed's pooled share spreads by 0.044 at 16 paths and 0.010
-  // at 1024 (16 seeds, this scene), and Embree's kernels for another instruction set draw other paths: one seed at
-  // 1024 paths was 1.022 on an AVX2 machine, past the 0.015 of a test that took one. 0.05 and 0.015 are 3.2 and
-  // 4.3 standard errors of the means of 8.
+  // The echo's share is pooled over 8 light seeds, and Embree's kernels for another instruction set draw other
+  // paths: one seed at 1024 paths was 1.022 on an AVX2 machine, past the 0.015 of a test that took one. Over 48
+  // pools of 8 seeds the share spreads by 0.022 at 16 paths and 0.0031 at 1024: 0.10 and 0.015 are 4.5 spreads
+  // (a laser side's half left out is -50 %).
   double main_all = 0, echo_all = 0;
   for (uint64_t seed = 1; seed <= 8; ++seed) {
     c.light_seed = seed;
@@ -871,7 +877,7 @@ TEST(Transport, AClearPlatesBranchesAreFollowedBothWays) {
       EXPECT_LT(b.laser_se[i], 2e-3 * b.laser_total[i]) << "pixel " << i;
     }
   }
-  EXPECT_NEAR(echo_all / main_all / (R * R) / (1.0 + laser_side), 1.0, 0.05);
+  EXPECT_NEAR(echo_all / main_all / (R * R) / (1.0 + laser_side), 1.0, 0.10);
   c.render.samples_per_pixel = 1024;
   main_all = echo_all = 0;
   for (uint64_t seed = 1; seed <= 7; ++seed) {
@@ -1073,11 +1079,12 @@ TEST(Transport, LaserLightRefractsThroughPlatesThatAreNotParallel) {
     }
     EXPECT_NEAR(main / bare_all / expected, 1.0, 2e-4) << tau_deg << " degrees: " << main / bare_all << " against " << expected;
     // The plates' first echoes (within 1.2 ns: each plate's own, both halves), continuous with the parallel plates'
-    // (the laser side's half was left out at 0.1 degrees and more: 0.535 of them). Drawn: measured 2.6e-5 off.
+    // (the laser side's half was left out at 0.1 degrees and more: 0.535 of them). Drawn: over 48 light seeds
+    // the ratio is 1.0045 with a spread of 0.0174, so 0.09 is 5 spreads (the left-out half is 27 away).
     if (tau_deg == 0.0) {
       echo_parallel = echoes / bare_all;
     } else if (tau_deg < 1.0) {
-      EXPECT_NEAR(echoes / bare_all / echo_parallel, 1.0, 0.03) << tau_deg << " degrees";
+      EXPECT_NEAR(echoes / bare_all / echo_parallel, 1.0, 0.09) << tau_deg << " degrees";
     }
   }
 }
@@ -1391,7 +1398,7 @@ TEST(Transport, LightBeyondAGlassSpheresFocusReachesTheWall) {
 // Its light in its shadow at (0.03, 0, -0.8) is missed by the seeds of the sphere of its nearest corner (radius
 // 0.05 m); the spheres through its farthest corner and of the mean radius lead the solve to it. The reference:
 // every path to each pixel's wall point, found by a scan of 1000 directions through the mesh itself, then
-// Newton's method (sphere_mesh_paths): 2.0535 times the bare wall, rendered within 3.7e-4 (none with the nearest
+// Newton's method (sphere_mesh_paths): 2.0535 times the bare wall, rendered about 1e-3 below (none with the nearest
 // corner's sphere alone). Nearer the axis, at (0.01, 0, -0.8), neither finds it (9.39 there).
 TEST(Transport, LightThroughAGlassEllipsoidReachesTheWall) {
   const double n = 1.5, d = 0.8;
@@ -1423,7 +1430,10 @@ TEST(Transport, LightThroughAGlassEllipsoidReachesTheWall) {
   const TransientTile tile = Renderer(s, c).transient({0, 0, 4, 4}, {0, 0, 4, 4}, axis);
   double bare_all = 0, all = 0;
   for (size_t i = 0; i < 16; ++i) bare_all += bare.laser_total[i], all += tile.laser_total[i];
-  EXPECT_NEAR(all / bare_all / expected, 1.0, 1e-3) << all / bare_all << " against " << expected;
+  // Over 48 light seeds the ratio is 0.99900 with a spread of 2.5e-4 (a seed-offset audit; the committed seed's
+  // -3.7e-4 was the least of them): 2.5e-3 is the mean's 1e-3 and 6 spreads. What it guards against, the solve
+  // missing the light through the ellipsoid, is off by a factor (9.39 against 2.05 near the axis).
+  EXPECT_NEAR(all / bare_all / expected, 1.0, 2.5e-3) << all / bare_all << " against " << expected;
 }
 
 // A white metal sphere (radius 0.1 m, 48 rings of 96 segments with their exact normals; single-sided, or
@@ -1697,9 +1707,10 @@ TEST(Transport, IntegratingSphereFurnace) {
     e_many += std::pow(ratio[i] - 2.0, 2);
   }
   const double falls = std::sqrt(e_few / e_many);
-  // Each RMS over 256 pixels has a relative spread of 1/sqrt(512) = 4.4 %; the ratio about 6 %.
-  EXPECT_GT(falls, 4.0 * 0.75);
-  EXPECT_LT(falls, 4.0 * 1.25);
+  // Over 48 light seeds the ratio is 4.02 with a spread of 0.38 (9.4 %): (2.6, 5.6) is 4 spreads each side; a
+  // 1 / N^(1/4) law would give 2.
+  EXPECT_GT(falls, 2.6);
+  EXPECT_LT(falls, 5.6);
 }
 
 // The renderer applies the fill factor of each pixel's row as given (the sensor's layout decides it: the
@@ -2229,7 +2240,9 @@ TEST(Transport, LaserLightThroughARoughPlateIsItsIntegral) {
     // (beside the plate's shadow, whose edge is at 0.4 m, the direct light too)
     const double direct = x_wall > 0.4 ? 1.0 : 0.0;
     const double expected = direct + rough_plate_irradiance(a, n, t, z0, half, P) / (d / std::pow(glm::length(P), 3));
-    EXPECT_NEAR(lit_all / bare_all / expected, 1.0, x_wall == 0.0 ? 5e-3 : 2e-2) << x_wall << ": " << lit_all / bare_all << " against " << expected;
+    // Over 48 light seeds: -4.4e-4 +- 1.4e-3 at the centre, -1.4e-2 +- 4.0e-3 at 0.6 tan 30 degrees (the
+    // single-scattering lobe's deficit): 7.5e-3 and 4e-2 are 5 and 6.5 spreads; the smooth-face bug was +145 %.
+    EXPECT_NEAR(lit_all / bare_all / expected, 1.0, x_wall == 0.0 ? 7.5e-3 : 4e-2) << x_wall << ": " << lit_all / bare_all << " against " << expected;
   }
 }
 
