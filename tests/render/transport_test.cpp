@@ -1238,7 +1238,7 @@ std::vector<glm::dvec3> look_aside(RenderStageConfig* c, const scenes::Scene& s,
 // (sphere_mesh_paths), the wall's irradiance I T / (dA / dOmega) summed over them, times the camera path's own T,
 // over the bare wall's cos^3 psi / d^2 (d = 0.7 m), on 4 x 4 points of each pixel: 607, 7.69 and 13.1 (at 0
 // degrees the pixels meet on the axis, where the light from a cone of the laser's directions crosses), rendered
-// within 0.25 %, 2.9e-4 and 2.5e-4. The straight connection was 0.0016, 0.12 and 0.07 of it, the walk from the
+// within about 1 % (heavy-tailed there), 2.9e-4 and 2.5e-4. The straight connection was 0.0016, 0.12 and 0.07 of it, the walk from the
 // straight line (the pixel's own path alone) 0.006, 0.52 and 0.52. A wall point in the sphere's shadow (its
 // straight line to the laser through the sphere, beyond where the refracted light lands), seen by a camera moved
 // aside, gets no light (the straight connection lit it).
@@ -1301,8 +1301,11 @@ TEST(Transport, LaserLightRefractsThroughAGlassSphere) {
     // Pixel by pixel too (a path missed in one of a pixel's 256 took 0.4 % of it: the solved point on a triangle's
     // edge, the trace meeting the triangle beside it).
     // (At 0 degrees the pixels meet on the axis, a caustic line where the light of a cone of the laser's directions
-    // crosses, its irradiance 1 / rho from it: the reference's 4 x 4 points resolve a pixel's integral to 3 %.)
-    const double pixel_tol = psi_deg == 0.0 ? 0.04 : 5e-4, tol = psi_deg == 0.0 ? 5e-3 : 5e-4;
+    // crosses, its irradiance 1 / rho from it: the reference's 4 x 4 points resolve a pixel's integral to 3 %, and a
+    // path landing near the axis carries a large weight. Over 11 light seeds the total was +0.0083 off with a spread
+    // of 0.0089, a pixel's spread 0.019 and at most +0.098 (the committed seed's +0.0031 was lucky): 0.06 and 0.15
+    // there, which still catch a refracted path missed (no light). At 3 and 6 degrees both are deterministic to 1e-6.)
+    const double pixel_tol = psi_deg == 0.0 ? 0.15 : 5e-4, tol = psi_deg == 0.0 ? 0.06 : 5e-4;
     for (size_t i = 0; i < 16; ++i)
       EXPECT_NEAR(pixel_main[i] / pixel_sphere[i] / (main / sphere_sum), 1.0, pixel_tol) << psi_deg << " degrees, pixel " << i;
     EXPECT_NEAR(main / bare_all / expected, 1.0, tol) << psi_deg << " degrees: " << main / bare_all << " against " << expected;
