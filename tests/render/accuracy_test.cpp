@@ -317,37 +317,41 @@ RenderStageConfig glossy_plate_config(int size, double focal_length_m) {
   return c;
 }
 
-// Guided connections change how the glossy paths are drawn, not what they estimate: over 256 pixels the
-// summed laser return with and without them agrees within 12 of their combined reported standard errors, and
-// the variance falls, most for the narrowest lobe. Without them the light of the lobes' tails is heavy-tailed:
-// one seed's reported error misses the rare paths that carry it. Over 48 light seeds (a seed-offset audit) the
-// difference was 2.9 of its reported errors rms at roughness 0.05 (so 12 is about 4 real spreads) and the
-// variance's ratio 0.125 on average, at most 0.54 (bound 0.75); at 0.1, 0.39 +- 0.024 (bound 0.6).
+// Guided connections change how the glossy paths are drawn, not what they estimate: over 256 pixels and light
+// seeds 1 to 4 the summed laser return with and without them agrees within 4 of their combined reported standard
+// errors, and the variance falls, most for the narrowest lobe. Without them the light of the lobes' tails is
+// heavy-tailed at roughness 0.05 (the shipped plate's): a seed's reported error misses the rare paths that carry
+// it, and one seed's variance ranged over three orders of magnitude. Pooled over 4 seeds (12 sets of 4 measured):
+// the difference was 2.05 reported errors rms there, at most 4.4 (bound 12: about 6 real spreads, 3.5 % of the
+// light), and the variance's ratio 0.0035-0.066 (bound 0.25); at 0.1 a seed's reported error holds (0.92 rms).
 TEST(Accuracy, GuidedConnectionsKeepTheExpectationAndLowerTheVariance) {
   struct Case {
     float roughness;
-    double max_variance_ratio;
+    double max_variance_ratio, error_factor;
   };
-  for (const Case k : {Case{0.05f, 0.75}, Case{0.1f, 0.6}}) {
+  for (const Case k : {Case{0.05f, 0.25, 3.0}, Case{0.1f, 0.6, 1.0}}) {
     const scenes::Scene s = glossy_plate(k.roughness);
     RenderStageConfig c = glossy_plate_config(16, 6e-3);
-        c.render.samples_per_pixel = 256;
+    c.render.samples_per_pixel = 256;
     c.render.max_bounces = 4;
     const PixelRect rect{0, 0, 16, 16};
     const TimeAxis axis{0.0, 10e-12, 1000, 25e-9};
     double total[2] = {0, 0}, var[2] = {0, 0};
-    for (int guided = 0; guided < 2; ++guided) {
-      c.render.guided_connections = guided == 1;
-      RenderStats stats;
-      const TransientTile t = Renderer(s, c).transient(rect, rect, axis, &stats);
-      // The guided connections' rays, counted as theirs.
-      if (guided == 1) EXPECT_GT(stats.rays.guided, 0u);
-      else EXPECT_EQ(stats.rays.guided, 0u);
-      for (size_t i = 0; i < 256; ++i)
-        total[guided] += t.laser_total[i], var[guided] += double(t.laser_se[i]) * t.laser_se[i];
+    for (uint64_t seed = 1; seed <= 4; ++seed) {
+      c.light_seed = seed;
+      for (int guided = 0; guided < 2; ++guided) {
+        c.render.guided_connections = guided == 1;
+        RenderStats stats;
+        const TransientTile t = Renderer(s, c).transient(rect, rect, axis, &stats);
+        // The guided connections' rays, counted as theirs.
+        if (guided == 1) EXPECT_GT(stats.rays.guided, 0u);
+        else EXPECT_EQ(stats.rays.guided, 0u);
+        for (size_t i = 0; i < 256; ++i)
+          total[guided] += t.laser_total[i], var[guided] += double(t.laser_se[i]) * t.laser_se[i];
+      }
     }
     ASSERT_GT(total[0], 0.0);
-    EXPECT_LT(std::fabs(total[1] - total[0]), 12.0 * std::sqrt(var[0] + var[1]))
+    EXPECT_LT(std::fabs(total[1] - total[0]), 4.0 * k.error_factor * std::sqrt(var[0] + var[1]))
         << "roughness " << k.roughness << ": " << total[0] << " " << total[1];
     EXPECT_LT(var[1], k.max_variance_ratio * var[0]) << "roughness " << k.roughness << ": " << var[0] << " " << var[1];
   }
@@ -488,9 +492,9 @@ TEST(Accuracy, GuidedDrawsKeepThePlatesDelayedReturns) {
 // edge (16 x 16 pixels; about 1 % of what the uncovered strip returns, in bands 2.3 mm apart: the pipe's
 // reflections). At 256 paths for light seeds 1 to 4, the summed laser return with guided connections
 // agrees with the one without within 12 of their combined reported standard errors, and its variance does not
-// rise. The unguided light of the pipe is heavy-tailed: over 48 pairs of light seeds (a seed-offset audit) the
-// difference was 2.9 of its reported errors rms (12 is about 4 real spreads), and the variance's ratio 0.31 on
-// average, at most 0.95: a pair that misses the pipe's rare paths reports a small error without them.
+// rise. The unguided light of the pipe is heavy-tailed (a seed that misses its rare paths reports a small error
+// without them): pooled over 4 seeds (12 sets of 4 measured) the difference was at most 7.4 reported errors and
+// the variance's ratio 0.002-0.73, while the guided total stayed within 0.7 %.
 TEST(Accuracy, GuidedDrawsKeepTheLightPipedThroughAPlatesEdge) {
   scenes::Scene s;
   scenes::Material plate = test::glass(1.5f, 0.002f, 0.05f);
