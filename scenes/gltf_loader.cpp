@@ -1935,16 +1935,17 @@ std::string gltf_json(const std::string& path, const std::string& bytes, bool* b
       uint32_t bin = 0, bin_type = 0;
       std::memcpy(&bin, bytes.data() + json_end, 4);
       std::memcpy(&bin_type, bytes.data() + json_end + 4, 4);
-      // A chunk of another type that fits the file is one a reader ignores (glTF 2.0, 4.4.3.1); one that does
-      // not is more likely a JSON chunk's length gone wrong.
-      if (bin_type != 0x004E4942u && json_end + 8 + bin <= length) {
-        if (unknown_chunk) *unknown_chunk = start_of(bytes.substr(json_end + 4, 4));
-        return bytes.substr(20, chunk);
-      }
-      if (bin_type != 0x004E4942u)  // "BIN\0"
+      if (bin_type != 0x004E4942u) {  // "BIN\0"
+        // A chunk of another type that fits the file is one a reader ignores (glTF 2.0, 4.4.3.1); one that does
+        // not is more likely a JSON chunk's length gone wrong.
+        if (json_end + 8 + bin <= length) {
+          if (unknown_chunk) *unknown_chunk = start_of(bytes.substr(json_end + 4, 4));
+          return bytes.substr(20, chunk);
+        }
         throw Error(invalid + "after its JSON chunk (" + std::to_string(chunk) + " bytes) comes no BIN chunk's header but " +
                     start_of(bytes.substr(json_end, 8)) + "; expected a BIN chunk (type 'BIN\\0') or nothing (is the JSON "
                     "chunk's length right?)");
+      }
       if (json_end + 8 + bin > length)
         throw Error(invalid + "its BIN chunk gives a length of " + std::to_string(bin) + " bytes but " +
                     std::to_string(length - json_end - 8) + " follow its header (cut short, as by an interrupted download or copy?)");
@@ -2115,9 +2116,13 @@ void check_gltf_types(const std::string& path, const nlohmann::json& doc) {
         for (const auto& [projection, keys] : required)
           if (o.contains(projection))
             for (const std::string& key : keys)
-              if (!o[projection].contains(key))
+              if (!o[projection].contains(key)) {
+                std::string all;  // "yfov and znear", "xmag, ymag, zfar and znear"
+                for (size_t k = 0; k < keys.size(); ++k)
+                  all.append(k == 0 ? "" : k + 1 == keys.size() ? " and " : ", ").append(keys[k]);
                 throw Error(path + ": " + who + ": its " + projection + " has no " + key + "; glTF 2.0 requires it (" + projection +
-                            ": " + (projection == "perspective" ? "yfov and znear" : "xmag, ymag, zfar and znear") + ")");
+                            ": " + all + ")");
+              }
       }
       // glTF 2.0: a node's transform is a matrix or TRS, not both (the translation beside a matrix was dropped)
       if (std::strcmp(kind, "node") == 0 && o.contains("matrix"))

@@ -1350,6 +1350,10 @@ TEST_F(BrokenGltf, AGlbCutShortOrABufferWithoutAUriIsNamed) {
   EXPECT_THAT(load_error(path_), HasSubstr("expected a 12-byte header and a JSON chunk's 8-byte header; the header gives a length of 16 bytes"));
 
   // The same file with other buffers: a second without a uri, the first's byteLength past the BIN chunk.
+  const auto u32 = [](size_t v) {
+    const auto w = static_cast<uint32_t>(v);
+    return std::string(reinterpret_cast<const char*>(&w), 4);
+  };
   const auto glb_with_buffers = [&](const json& buffers) {
     json d = g.doc;
     d["buffers"] = buffers;
@@ -1357,10 +1361,6 @@ TEST_F(BrokenGltf, AGlbCutShortOrABufferWithoutAUriIsNamed) {
     while (js.size() % 4) js += ' ';
     std::string b(g.bin.begin(), g.bin.end());
     while (b.size() % 4) b += '\0';
-    const auto u32 = [](size_t v) {
-      const auto w = static_cast<uint32_t>(v);
-      return std::string(reinterpret_cast<const char*>(&w), 4);
-    };
     write_file(path_, "glTF" + u32(2) + u32(28 + js.size() + b.size()) + u32(js.size()) + "JSON" + js + u32(b.size()) + "BIN" +
                           std::string(1, '\0') + b);
     return path_;
@@ -1378,10 +1378,6 @@ TEST_F(BrokenGltf, AGlbCutShortOrABufferWithoutAUriIsNamed) {
   std::ifstream embedded_in(embedded, std::ios::binary);
   std::string js((std::istreambuf_iterator<char>(embedded_in)), std::istreambuf_iterator<char>());
   while (js.size() % 4) js += ' ';
-  const auto u32 = [](size_t v) {
-    const auto w = static_cast<uint32_t>(v);
-    return std::string(reinterpret_cast<const char*>(&w), 4);
-  };
   path_ = (dir_.path() / "xtra.glb").string();
   write_file(path_, "glTF" + u32(2) + u32(28 + js.size() + 8) + u32(js.size()) + "JSON" + js + u32(8) + "XTRA" + "12345678");
   const Scene xtra = load_gltf(path_);
