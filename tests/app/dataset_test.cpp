@@ -1501,7 +1501,8 @@ TEST_F(Dataset, ASampleAReaderHoldsIsGeneratedOnceItIsReleased) {
   // half of it on a loaded 2-core machine). A margin of a quarter of the samples' own: under the sanitizers the
   // samples took 3.8-4.4 s of CPU, and the run that waited 0.03-0.63 s more, with tries every 0.2 s growing to 1 s
   // (0.5-1.03 s more, tried every 0.2 s, once failing a bound of 1 s).
-  EXPECT_LT(std::stod(slurp(cpu)), 1.25 * std::stod(slurp(cpu0)) + 1.0) << "seconds of CPU, against the samples' own " << slurp(cpu0);
+  const double own = std::stod(slurp(cpu0));
+  EXPECT_LT(std::stod(slurp(cpu)), 1.25 * own + 1.0) << "seconds of CPU, against the samples' own " << own;
   EXPECT_FALSE(fs::exists(dir_ / "out/failed"));
   const Result st = sh("dataset status " + (dir_ / "out").string());
   EXPECT_EQ(st.code, 0) << st.output;
