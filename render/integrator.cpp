@@ -804,28 +804,44 @@ bool Integrator::connect_laser_refracted(const NeeVertex& v, const LaserRay& lr,
   // point laser): without it a clear plate's delayed echo in a transient was half its value (the camera side's
   // half), and the light through two plates 0.7 % low at ior 1.5. A rough b is crossed as smooth, as in the
   // straight-through path; a rough a's echo is the camera paths' (a vertex of reflection towards the laser).
-  // Higher orders (four reflections and more) are left out. Each echo is traced with probability
-  // min(1, R_a R_b / kEchoTraced), R the faces' reflectance at the straight-through path's angles, and weighted
-  // by its inverse: unbiased, at a 6th of the rays for a plate of ior 1.5 (R^2 = 0.0016), whose echoes then add
-  // about 1 % of noise to a connection's light (their variance sum R_a R_b kEchoTraced). The draw is a hash of
-  // the vertex and the faces, not the path's stream: a draw there would move the path's later draws, and the
-  // ambient light would no longer be the bits of a run that does not trace the laser.
-  constexpr double kEchoTraced = 0.01;
+  // Higher orders, m round trips between the same faces ((R_a R_b)^m of the light), while that share is at least
+  // kEchoShareKept (echo_orders). Each echo is traced with probability min(1, (R_a R_b)^m / kEchoTraced), R the
+  // faces' reflectance at the straight-through path's angles, and weighted by its inverse: unbiased, at a 6th of
+  // the rays for a plate of ior 1.5 (R^2 = 0.0016), whose echoes then add about 1 % of noise to a connection's
+  // light (their variance sum R_a R_b kEchoTraced). The draw is a hash of the vertex and the faces, not the
+  // path's stream: a draw there would move the path's later draws, and the ambient light would no longer be the
+  // bits of a run that does not trace the laser.
   for (int b = 1; b < k; ++b)
     for (int a = 0; a < b; ++a) {
       if (!cr[a].mp.smooth()) continue;
       // (inside the layer before each face: entering the face's material where that layer is not its medium)
       const double r_ab = double(interface_reflectance(cr[b].mp, float(cs[b]), ly.media[b] != cr[b].material).x) *
                           double(interface_reflectance(cr[a].mp, float(cs[a + 1]), ly.media[a + 1] != cr[a].material).x);
-      const double q = std::min(1.0, r_ab / kEchoTraced);
-      if (!(q > 0.0) || (q < 1.0 && vertex_uniform(v.sf.p, kEchoSalt, a, b) >= q)) continue;
-      int n = 0;
-      for (int i = 0; i <= b; ++i) layer[n] = i, back[n++] = false;  // to face b
-      for (int i = b; i > a; --i) layer[n] = i, back[n++] = true;      // back to face a
-      for (int i = a + 1; i <= k; ++i) layer[n] = i, back[n++] = false;  // and on to the laser
-      (void)connect_laser_along(v, ly, cx, layer, back, n, p, w / q, film, rays);
+      const int orders = echo_orders(r_ab, (kMaxLaserSteps - (k + 1)) / (2 * (b - a)));
+      double share = 1.0;
+      for (int m = 1; m <= orders; ++m) {
+        share *= r_ab;
+        const double q = std::min(1.0, share / kEchoTraced);
+        if (!(q > 0.0) || (q < 1.0 && vertex_uniform(v.sf.p, kEchoSalt + uint64_t(m - 1), a, b) >= q)) continue;
+        int n = 0;
+        for (int i = 0; i <= b; ++i) layer[n] = i, back[n++] = false;  // to face b
+        for (int trip = 1; trip <= m; ++trip) {
+          for (int i = b; i > a; --i) layer[n] = i, back[n++] = true;  // back to face a
+          if (trip < m)
+            for (int i = a + 1; i <= b; ++i) layer[n] = i, back[n++] = false;  // and to face b again
+        }
+        for (int i = a + 1; i <= k; ++i) layer[n] = i, back[n++] = false;  // and on to the laser
+        (void)connect_laser_along(v, ly, cx, layer, back, n, p, w / q, film, rays);
+      }
     }
   return true;
+}
+
+int Integrator::echo_orders(double r_ab, int fit) {
+  if (!(r_ab > 0.0) || fit < 1) return 0;
+  int m = 1;  // the first, always (its draw's probability carries its share)
+  for (double share = r_ab * r_ab; m < fit && share >= kEchoShareKept; share *= r_ab) ++m;
+  return m;
 }
 
 double Integrator::vertex_uniform(const glm::vec3& p, uint64_t salt, int a, int b) const {
@@ -1090,8 +1106,9 @@ bool Integrator::rough_crossings(const Crossings& cx) const {
 // each (solve_planar_path), traced as connect_laser_along traces its own, lit with the path bundle's spread.
 // Fresnel transmittance at each face at its own angle, Beer-Lambert over each segment. With `echoes`, the
 // light reflected off face b on its way and back off smooth face a < b too, as connect_laser_refracted traces
-// it between parallel faces (drawn with the same probability, from the main path's angles): its chain of faces
-// 0..b, b-1..a, a+1..k-1, reflecting off b and a, solved as a whole.
+// it between parallel faces (drawn with the same probability, from the main path's angles, and to the same
+// orders): its chain of faces 0..b, then b-1..a and a+1..b once per round trip, a+1..k-1, reflecting off b and
+// a, solved as a whole.
 bool Integrator::connect_laser_planar(const NeeVertex& v, const Crossings& cx, double w, const PixelFilm& film,
                                       RayCounts* rays, bool echoes) const {
   static_assert(3 * Crossings::kMax <= kMaxPlanarFaces);
@@ -1116,7 +1133,6 @@ bool Integrator::connect_laser_planar(const NeeVertex& v, const Crossings& cx, d
   if (!solve_planar_path(glm::dvec3(v.sf.p), laser_.position, faces, index, k, start, &path)) return false;
   if (!deposit_planar_path(v, path, material, ng, index, media, nullptr, w, film, &rays->refracted)) return false;
   if (!echoes) return true;
-  constexpr double kEchoTraced = 0.01;  // as connect_laser_refracted's
   const PlanarPath main = path;
   for (int b = 1; b < k; ++b)
     for (int a = 0; a < b; ++a) {
@@ -1125,28 +1141,38 @@ bool Integrator::connect_laser_planar(const NeeVertex& v, const Crossings& cx, d
         const float c = float(std::fabs(glm::dot(main.d[segment], faces[face].n)));
         return double(interface_reflectance(cr[face].mp, c, layer_medium(segment) != cr[face].material).x);
       };
-      const double q = std::min(1.0, reflectance(b, b) * reflectance(a, a + 1) / kEchoTraced);
-      if (!(q > 0.0) || (q < 1.0 && vertex_uniform(v.sf.p, kEchoSalt, a, b) >= q)) continue;
-      // The chain: each entry a face of the straight walk, whether the path reflects off it, and the layer after.
-      int n = 0;
-      PlanarFace cf[kMaxPlanarFaces];
-      const auto add = [&](int face, bool off, int layer_after) {
-        cf[n] = faces[face];
-        start[n] = main.y[face];
-        material[n] = cr[face].material, ng[n] = cr[face].ng;
-        reflect[n] = off;
-        media[n + 1] = layer_medium(layer_after);
-        ++n;
-      };
-      media[0] = cx.medium0;
-      for (int j = 0; j < b; ++j) add(j, false, j + 1);  // to face b
-      add(b, true, b);                                     // off it
-      for (int j = b - 1; j > a; --j) add(j, false, j);    // back to face a
-      add(a, true, a + 1);                                 // off it
-      for (int j = a + 1; j < k; ++j) add(j, false, j + 1);  // and on to the laser
-      for (int s = 0; s <= n; ++s) index[s] = medium_ior(media[s]);
-      if (solve_planar_path(glm::dvec3(v.sf.p), laser_.position, cf, index, n, start, &path, reflect))
-        (void)deposit_planar_path(v, path, material, ng, index, media, reflect, w / q, film, &rays->refracted);
+      const double r_ab = reflectance(b, b) * reflectance(a, a + 1);
+      const int orders = echo_orders(r_ab, (kMaxPlanarFaces - k) / (2 * (b - a)));
+      double share = 1.0;
+      for (int m = 1; m <= orders; ++m) {
+        share *= r_ab;
+        const double q = std::min(1.0, share / kEchoTraced);
+        if (!(q > 0.0) || (q < 1.0 && vertex_uniform(v.sf.p, kEchoSalt + uint64_t(m - 1), a, b) >= q)) continue;
+        // The chain: each entry a face of the straight walk, whether the path reflects off it, and the layer after.
+        int n = 0;
+        PlanarFace cf[kMaxPlanarFaces];
+        const auto add = [&](int face, bool off, int layer_after) {
+          cf[n] = faces[face];
+          start[n] = main.y[face];
+          material[n] = cr[face].material, ng[n] = cr[face].ng;
+          reflect[n] = off;
+          media[n + 1] = layer_medium(layer_after);
+          ++n;
+        };
+        media[0] = cx.medium0;
+        for (int j = 0; j < b; ++j) add(j, false, j + 1);  // to face b
+        for (int trip = 1; trip <= m; ++trip) {
+          if (trip > 1)
+            for (int j = a + 1; j < b; ++j) add(j, false, j + 1);  // to face b again
+          add(b, true, b);                                       // off it
+          for (int j = b - 1; j > a; --j) add(j, false, j);      // back to face a
+          add(a, true, a + 1);                                   // off it
+        }
+        for (int j = a + 1; j < k; ++j) add(j, false, j + 1);  // and on to the laser
+        for (int s = 0; s <= n; ++s) index[s] = medium_ior(media[s]);
+        if (solve_planar_path(glm::dvec3(v.sf.p), laser_.position, cf, index, n, start, &path, reflect))
+          (void)deposit_planar_path(v, path, material, ng, index, media, reflect, w / q, film, &rays->refracted);
+      }
     }
   return true;
 }
@@ -1368,7 +1394,7 @@ void Integrator::for_each_mirror_path(const glm::dvec3& x, const glm::dvec3& L, 
     const glm::dvec3 lat = to - glm::dot(to, n) * n;
     const double D = glm::length(lat), ior = double(mp.ior);
     double share = 1.0, r_inside = 0.0;
-    for (int trips = 0; trips <= 8 && share >= 1e-6; ++trips) {
+    for (int trips = 0; trips <= 8 && share >= kEchoShareKept; ++trips) {
       constexpr double kTraced = 0.1;
       const double q = draw_at == nullptr ? 1.0 : std::min(1.0, share / kTraced);
       if (q < 1.0 && vertex_uniform(*draw_at, kEchoSalt, 100 + trips, int(&m - mirrors_.data())) >= q) {

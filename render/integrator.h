@@ -407,7 +407,14 @@ class Integrator {
   // microfacet normal (connect_laser_rough: kRoughSalt, j, 0 and 1). A draw there from the path's stream would
   // move the path's later draws.
   double vertex_uniform(const glm::vec3& p, uint64_t salt, int a, int b) const;
-  static constexpr uint64_t kEchoSalt = 0x6563686f6563686full;   // "echoecho"
+  static constexpr uint64_t kEchoSalt = 0x6563686f6563686full;   // "echoecho" (+ m - 1 for the m-th order)
+  // A laser-side echo's draw: traced with probability min(1, its share of the light / kEchoTraced); its orders
+  // (round trips between the same two faces) kept while their share (R_a R_b)^m is at least kEchoShareKept, as
+  // the mirrors' round trips (connect_laser_refracted, connect_laser_planar).
+  static constexpr double kEchoTraced = 0.01, kEchoShareKept = 1e-6;
+  // How many orders of the echo between two faces of reflectance product r_ab a connection traces: the first
+  // always, then while their share is at least kEchoShareKept, at most `fit` (what the path's arrays hold).
+  static int echo_orders(double r_ab, int fit);
   static constexpr uint64_t kRoughSalt = 0x726f756768726f75ull;  // "roughrou"
 
   // The refractive index of medium `medium` (-1: air, 1).
