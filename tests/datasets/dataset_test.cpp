@@ -568,12 +568,14 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
   const DatasetFolder::Resolved r = DatasetFolder(spec, dir).resolve(make_sample(spec, 0));
   EXPECT_EQ(r.revisions, kGgxRevision);
   EXPECT_NE(r.hash, r.hash_before_revisions);
-  // made clear (smooth), its plate's echo on the laser's side is rendered: that revision alone
+  // made clear (smooth), its plate's echoes on the laser's side are rendered: those revisions and the glint's
   const DatasetSpec clear = parse_dataset_text("{\"scenes\": [\"" + kScenes + "multi_object.json\"], \"set\": "
                                                "{" + kNoDarkCounts + ", \"materials.plastic_plate.roughness\": 0}}", "test_dataset.json");
   const DatasetFolder::Resolved c = DatasetFolder(clear, dir).resolve(make_sample(clear, 0));
   EXPECT_EQ(c.revisions, glint + "; clear (smooth) refracting plates render otherwise: the laser's light reflected inside a plate "
-                         "on its way in (half of the plate's delayed echo) was left out");
+                         "on its way in (half of the plate's delayed echo) was left out; clear (smooth) refracting plates render "
+                         "otherwise: the laser's light reflected round inside a plate twice or more on its way in (part of the "
+                         "plate's later echoes) was left out");
   EXPECT_NE(c.hash, c.hash_before_revisions);
   // a glTF point light, which the camera sees in view now, and in smooth faces: where it lights the scene
   // (ambient.gltf_lights)
