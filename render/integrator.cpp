@@ -818,11 +818,9 @@ bool Integrator::connect_laser_refracted(const NeeVertex& v, const LaserRay& lr,
       const double r_ab = double(interface_reflectance(cr[b].mp, float(cs[b]), ly.media[b] != cr[b].material).x) *
                           double(interface_reflectance(cr[a].mp, float(cs[a + 1]), ly.media[a + 1] != cr[a].material).x);
       const int orders = echo_orders(r_ab, (kMaxLaserSteps - (k + 1)) / (2 * (b - a)));
-      double share = 1.0;
       for (int m = 1; m <= orders; ++m) {
-        share *= r_ab;
-        const double q = std::min(1.0, share / kEchoTraced);
-        if (!(q > 0.0) || (q < 1.0 && vertex_uniform(v.sf.p, kEchoSalt + uint64_t(m - 1), a, b) >= q)) continue;
+        const double q = echo_drawn(v.sf.p, r_ab, m, a, b);
+        if (q == 0.0) continue;
         int n = 0;
         for (int i = 0; i <= b; ++i) layer[n] = i, back[n++] = false;  // to face b
         for (int trip = 1; trip <= m; ++trip) {
@@ -835,6 +833,12 @@ bool Integrator::connect_laser_refracted(const NeeVertex& v, const LaserRay& lr,
       }
     }
   return true;
+}
+
+double Integrator::echo_drawn(const glm::vec3& p, double r_ab, int m, int a, int b) const {
+  const double q = std::min(1.0, std::pow(r_ab, m) / kEchoTraced);
+  if (!(q > 0.0) || (q < 1.0 && vertex_uniform(p, kEchoSalt + uint64_t(m - 1), a, b) >= q)) return 0.0;
+  return q;
 }
 
 int Integrator::echo_orders(double r_ab, int fit) {
@@ -1143,11 +1147,9 @@ bool Integrator::connect_laser_planar(const NeeVertex& v, const Crossings& cx, d
       };
       const double r_ab = reflectance(b, b) * reflectance(a, a + 1);
       const int orders = echo_orders(r_ab, (kMaxPlanarFaces - k) / (2 * (b - a)));
-      double share = 1.0;
       for (int m = 1; m <= orders; ++m) {
-        share *= r_ab;
-        const double q = std::min(1.0, share / kEchoTraced);
-        if (!(q > 0.0) || (q < 1.0 && vertex_uniform(v.sf.p, kEchoSalt + uint64_t(m - 1), a, b) >= q)) continue;
+        const double q = echo_drawn(v.sf.p, r_ab, m, a, b);
+        if (q == 0.0) continue;
         // The chain: each entry a face of the straight walk, whether the path reflects off it, and the layer after.
         int n = 0;
         PlanarFace cf[kMaxPlanarFaces];

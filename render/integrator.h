@@ -415,6 +415,9 @@ class Integrator {
   // How many orders of the echo between two faces of reflectance product r_ab a connection traces: the first
   // always, then while their share is at least kEchoShareKept, at most `fit` (what the path's arrays hold).
   static int echo_orders(double r_ab, int fit);
+  // Whether vertex p's draw traces order m of the echo between faces a and b ((r_ab)^m of the light): the
+  // probability it is traced with, 0 where it is not.
+  double echo_drawn(const glm::vec3& p, double r_ab, int m, int a, int b) const;
   static constexpr uint64_t kRoughSalt = 0x726f756768726f75ull;  // "roughrou"
 
   // The refractive index of medium `medium` (-1: air, 1).
