@@ -117,7 +117,7 @@ RunResult run(const RunOptions& options) {
   apply_user_maps(sensor, cfg);
   tables.check_unchanged(cfg);
   tables.check_expected(cfg, options.tables_hash);
-  warn(sensor_warnings(sensor));
+  warn(sensor_warnings(sensor, cfg.sensor.gate.grid_s));
   const render::Renderer renderer = naming_keys(resolved, options.scene_file, [&] {
     return render::Renderer(scene, render_stage(cfg, sensor.row_fill_factor(), sensor.row_ambient_floor()));
   });
@@ -254,7 +254,7 @@ std::string info(const std::string& scene_file, const std::vector<std::string>& 
   o << "# glTF\n" << scenes::summarize(scene) << "\n";
   std::vector<std::string> before = camera_warnings(c, scene);  // the warnings known before rendering
   for (std::string& w : laser_warnings(c, camera, &scene)) before.push_back(std::move(w));
-  for (std::string& w : sensor_warnings(sensor)) before.push_back(std::move(w));
+  for (std::string& w : sensor_warnings(sensor, c.sensor.gate.grid_s)) before.push_back(std::move(w));
   const TimeAxis axis = naming_keys(r, scene_file, [&] { return time_axis(c, sensor); });
   const PixelRect img = image_rect(c);
   check_derived(c, sensor, img, axis, r.set_keys);

@@ -482,7 +482,7 @@ std::vector<RunResult> sense(const SenseOptions& options) {
   apply_user_maps(sensor, cfg);
   tables_read.check_unchanged(cfg);
   tables_read.check_expected(cfg, options.tables_hash);
-  for (std::string& w : sensor_warnings(sensor)) {
+  for (std::string& w : sensor_warnings(sensor, cfg.sensor.gate.grid_s)) {
     print_warning(w);
     scene_warnings.push_back(std::move(w));
   }

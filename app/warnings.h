@@ -38,6 +38,10 @@ inline constexpr const char* kSweepEdgeWarning = " of the objects' returns along
 // Every warning about a pixel type blind to the laser holds this.
 inline constexpr const char* kPdpWarning = ": its photon detection probability at the laser's wavelength";
 
+// The warning that sensor.gate.grid_ps was coarsened (the fine grid has at most 12000 steps over the gate's
+// edges and the instrument response) starts with this.
+inline constexpr const char* kGridWarning = "sensor.gate.grid_ps ";
+
 // A warning on stderr: "spadgen: warning: ", the context (a dataset's "sample 3: "), the warning.
 void print_warning(const std::string& warning);
 // The context print_warning names while it lives (one at a time: a dataset generates one sample at a time);
@@ -56,8 +60,9 @@ class WarningContext {
 };
 
 // Before rendering (run, sense and info): the gate sweep's gate tabulated coarsely (above); a pixel type
-// whose PDP at the laser's wavelength is 0 (the built-in curve ends short of a near-infrared laser).
-std::vector<std::string> sensor_warnings(const sensor::SensorModel& sensor);
+// whose PDP at the laser's wavelength is 0 (the built-in curve ends short of a near-infrared laser); the fine
+// grid coarser than sensor.gate.grid_ps asked (asked_grid_s, where it is not the default; kGridWarning).
+std::vector<std::string> sensor_warnings(const sensor::SensorModel& sensor, double asked_grid_s);
 // After the sensor stage: the gate's tabulation error (above) is of the open gate's rate, so a bright return
 // (laser_open_rate: the largest laser rate of a pixel with the gate open, RunRecord::laser_open_rate) makes
 // it that many times larger in the gate's tails; warned about when that exceeds kWarnGateError. Starts with

@@ -790,7 +790,8 @@ TEST_F(App, ABrightReturnsGateTabulationErrorIsWarnedAboutWithItsRate) {
 
 // A coarsely tabulated gate (sensor.gate.knots_per_edge, grid_ps) is warned about, by run, info and sense,
 // each for its own sensor: a sense with the default gate drops the run's warning, one with a coarse grid
-// gives its own.
+// gives its own. A grid finer than the fine grid goes (at most 12000 steps over the edges and the instrument
+// response) is warned about with the step used, where grid_ps is not the default (0.25 ps, "or coarser").
 TEST_F(App, ACoarselyTabulatedGateIsWarnedAboutForTheSensorThatUsesIt) {
   const auto gate_warnings = [](const fs::path& dir) {
     std::vector<std::string> out;
@@ -811,11 +812,23 @@ TEST_F(App, ACoarselyTabulatedGateIsWarnedAboutForTheSensorThatUsesIt) {
   EXPECT_THAT(r.output, HasSubstr("warning: sensor.gate: the gate is tabulated"));
   r = sh("info " + kScenes + "multi_object.json");
   EXPECT_THAT(r.output, Not(HasSubstr("sensor.gate: the gate is tabulated")));
+  EXPECT_THAT(r.output, Not(HasSubstr("sensor.gate.grid_ps")));  // (its 0.25 ps default is 0.29 ps there)
+  r = sh("info " + kScenes + "multi_object.json --set sensor.gate.grid_ps=0.1");
+  EXPECT_THAT(r.output, HasSubstr("warning: sensor.gate.grid_ps 0.1 is finer than the fine grid goes: its step is 0.2892 ps"));
+  r = sh("info " + kScenes + "multi_object.json --set sensor.gate.grid_ps=0.3");
+  EXPECT_THAT(r.output, Not(HasSubstr("sensor.gate.grid_ps")));
 
   r = sh("sense " + (dir_ / "run").string() + " -q --set sensor.gate.knots_per_edge=64 -o " + (dir_ / "fine").string());
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_THAT(r.output, Not(HasSubstr("sensor.gate")));
   EXPECT_TRUE(gate_warnings(dir_ / "fine").empty());
+  r = sh("sense " + (dir_ / "run").string() + " -q --set sensor.gate.knots_per_edge=64 --set sensor.gate.grid_ps=0.01 -o " +
+         (dir_ / "finest").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  const nlohmann::json finest = nlohmann::json::parse(slurp(dir_ / "finest" / "metadata.json"));
+  const double used = finest["acquisition"]["gate"]["grid_ps"].get<double>();
+  EXPECT_GT(used, 0.01);
+  EXPECT_THAT(finest["warnings"].dump(), HasSubstr("sensor.gate.grid_ps 0.01 is finer than the fine grid goes: its step is "));
   // A 40 ps grid (0.17 % of the open gate from the grid alone, docs/sensor.md) with 16 knots.
   r = sh("sense " + (dir_ / "run").string() + " -q --set sensor.gate.knots_per_edge=16 --set sensor.gate.grid_ps=40 -o " +
          (dir_ / "coarse").string());
