@@ -138,4 +138,21 @@ inline bool poisson_consistent(double x, double mu, double alpha) {
   return below > alpha / 2 && above > alpha / 2;
 }
 
+// Two-sided exact binomial test: is the count x consistent with Binomial(n, p) at false-alarm rate alpha? The
+// tail on x's side of the mean, summed from x outwards (where a z-test's normal tail is no bound: a hot pixel
+// expecting 0.04 frames without a count that has 1 is 4.9 of its standard deviations off, 4 % of the time).
+inline bool binomial_consistent(double x, double n, double p, double alpha) {
+  if (!(p > 0.0)) return x == 0.0;
+  if (!(p < 1.0)) return x == n;
+  const double log_pmf = std::lgamma(n + 1.0) - std::lgamma(x + 1.0) - std::lgamma(n - x + 1.0) + x * std::log(p) + (n - x) * std::log1p(-p);
+  const bool lower = x <= n * p;
+  double term = std::exp(log_pmf), tail = 0.0;
+  for (double k = x; k >= 0.0 && k <= n && term > 0.0; k += lower ? -1.0 : 1.0) {
+    tail += term;
+    if (term < tail * 1e-17) break;
+    term *= lower ? k / (n - k + 1.0) * (1.0 - p) / p : (n - k) / (k + 1.0) * p / (1.0 - p);
+  }
+  return tail > alpha / 2;
+}
+
 }  // namespace spadgen::sensor::testing
