@@ -1300,7 +1300,11 @@ std::vector<glm::dvec3> look_aside(RenderStageConfig* c, const scenes::Scene& s,
 // (sphere_mesh_paths), the wall's irradiance I T / (dA / dOmega) summed over them, times the camera path's own T,
 // over the bare wall's cos^3 psi / d^2 (d = 0.7 m), on 4 x 4 points of each pixel: 607, 7.69 and 13.1 (at 0
 // degrees the pixels meet on the axis, where the light from a cone of the laser's directions crosses), rendered
-// within about 1 % (heavy-tailed there), 2.9e-4 and 2.5e-4. The straight connection was 0.0016, 0.12 and 0.07 of it, the walk from the
+// within about 1 % (heavy-tailed there), -7e-6 and +1.2e-4 over light seeds 1-8 (+2.9e-4 and +2.5e-4 with the
+// Fresnel factors taken where the traced segments met the mesh, 1e-5 m from the solved points; the 1.2e-4 left
+// is the camera's own paths, whose segments start 256 ulps off each face, 1.5e-5 m here, and land microns
+// aside where the light changes by 1 % across a pixel: 2.9e-5 at 64 ulps; 8 x 8 points per pixel give the
+// same). The straight connection was 0.0016, 0.12 and 0.07 of it, the walk from the
 // straight line (the pixel's own path alone) 0.006, 0.52 and 0.52. A wall point in the sphere's shadow (its
 // straight line to the laser through the sphere, beyond where the refracted light lands), seen by a camera moved
 // aside, gets no light (the straight connection lit it).
@@ -1367,7 +1371,7 @@ TEST(Transport, LaserLightRefractsThroughAGlassSphere) {
     // path landing near the axis carries a large weight. Over 11 light seeds the total was +0.0083 off with a spread
     // of 0.0089, a pixel's spread 0.019 and at most +0.098 (the committed seed's +0.0031 was lucky): 0.06 and 0.15
     // there, which still catch a refracted path missed (no light). At 3 and 6 degrees both are deterministic to 1e-6.)
-    const double pixel_tol = psi_deg == 0.0 ? 0.15 : 5e-4, tol = psi_deg == 0.0 ? 0.06 : 5e-4;
+    const double pixel_tol = psi_deg == 0.0 ? 0.15 : 5e-4, tol = psi_deg == 0.0 ? 0.06 : 2.5e-4;
     for (size_t i = 0; i < 16; ++i)
       EXPECT_NEAR(pixel_main[i] / pixel_sphere[i] / (main / sphere_sum), 1.0, pixel_tol) << psi_deg << " degrees, pixel " << i;
     EXPECT_NEAR(main / bare_all / expected, 1.0, tol) << psi_deg << " degrees: " << main / bare_all << " against " << expected;
@@ -1402,10 +1406,13 @@ TEST(Transport, LaserLightRefractsThroughAGlassSphere) {
 // straight line to the laser crosses the sphere at +5.7 degrees, the light's path at -6.4), and at (0.3, 0, -1),
 // outside the shadow, where the light through the sphere lands beside the direct light (0.57 ns after it; the
 // light reflected off the sphere comes with the direct); and on a wall at the focus, 0.16 m from its centre, at
-// (0.02, 0, -0.66): within the sphere's bounding box's half diagonal, where no path was sought (0 against 2.47).
-// The reference: every path of the laser's light to each pixel's wall point P (sphere_mesh_paths; one in each
-// case), the wall's irradiance I T / (dA / dOmega) over the bare wall's I cos theta_P / |P|^2. Rendered: the
-// light after the time halfway between the direct return and the refracted one; within 3e-4 in each case.
+// (0.02, 0, -0.66): within the sphere's bounding box's half diagonal, where no path was sought (0 against 2.47);
+// and at (0.35, 0, -1), the light entering nearer the sphere's edge. The reference: every path of the laser's
+// light to each pixel's wall point P (sphere_mesh_paths; one in each case), the wall's irradiance I T /
+// (dA / dOmega) over the bare wall's I cos theta_P / |P|^2. Rendered: the light after the time halfway between
+// the direct return and the refracted one; within 4e-5 in each case over light seeds 1-8 (at 0.3, 0.02 and 0.35
+// it was 2.9e-4, 3.0e-4 and 5.2e-4 high, and 2e-3 at ior 1.3, with the Fresnel factors taken where the traced
+// segments met the mesh, 1e-5 m from the solved points, at normals 2e-4 rad off).
 TEST(Transport, LightBeyondAGlassSpheresFocusReachesTheWall) {
   const double n = 1.5;
   const float radius = 0.1f;
@@ -1422,7 +1429,7 @@ TEST(Transport, LightBeyondAGlassSpheresFocusReachesTheWall) {
     size_t paths;
   };
   // (the third: the wall at the sphere's focus, 0.16 m from its centre, within its bounding box's half diagonal)
-  for (const Case& k : {Case{1.0, 0.1, 1}, Case{1.0, 0.3, 1}, Case{0.66, 0.02, 1}}) {
+  for (const Case& k : {Case{1.0, 0.1, 1}, Case{1.0, 0.3, 1}, Case{0.66, 0.02, 1}, Case{1.0, 0.35, 1}}) {
     const double d = k.d, xw = k.xw;
     const scenes::Scene s = scene(true, d);
     const std::vector<glm::dvec3> wall = look_aside(&c, s, {0.6, 0, 0}, {xw, 0, -d}, d);
@@ -1450,7 +1457,7 @@ TEST(Transport, LightBeyondAGlassSpheresFocusReachesTheWall) {
       const float* g = tile.transient.data() + i * size_t(axis.bins);
       for (int64_t j = 0; j < axis.bins; ++j) (axis.bin_centre_s(j) > t_split ? refracted : before) += g[j];
     }
-    EXPECT_NEAR(refracted / bare_all / expected, 1.0, 1e-3) << xw << ": " << refracted / bare_all << " against " << expected;
+    EXPECT_NEAR(refracted / bare_all / expected, 1.0, 1e-4) << xw << ": " << refracted / bare_all << " against " << expected;
     // In the shadow nothing comes before (the straight line is blocked); outside it the direct light and the light
     // reflected off the sphere's side.
     if (xw < 0.2) EXPECT_EQ(before, 0.0) << xw;
