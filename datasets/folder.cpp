@@ -410,10 +410,13 @@ DatasetFolder::MaterialTraits DatasetFolder::material_traits(const scenes::Resol
       for (size_t i = 0; i < scene.materials.size(); ++i)
         if (scene.material_used(i)) m.used.push_back(scene.materials[i]);
       for (const scenes::Mesh& mesh : scene.meshes) m.painted |= !mesh.colors0.empty();
-      for (const scenes::Mesh& mesh : scene.meshes)
-        if (mesh.normals.size() == mesh.positions.size() && mesh.triangle_count() > 64 && mesh.material >= 0 &&
-            size_t(mesh.material) < scene.materials.size())
-          m.curved.push_back(scene.materials[size_t(mesh.material)]);
+      std::vector<bool> shaded(scene.materials.size()), curved(scene.materials.size());
+      for (const scenes::Mesh& mesh : scene.meshes) {
+        if (mesh.material < 0 || size_t(mesh.material) >= scene.materials.size()) continue;
+        const auto i = size_t(mesh.material);
+        if (!shaded[i] && mesh.smooth_shaded()) shaded[i] = true, m.smooth_shaded.push_back(scene.materials[i]);
+        if (!curved[i] && mesh.curved()) curved[i] = true, m.curved.push_back(scene.materials[i]);
+      }
       for (const scenes::Light& l : scene.lights)
         m.lights = true, m.coloured_lights |= !grey(l.color), m.point_lights |= l.type != scenes::Light::Type::Directional;
       m.loaded = true;
@@ -430,9 +433,14 @@ DatasetFolder::MaterialTraits DatasetFolder::material_traits(const scenes::Resol
   t.smooth_mirror = false;
   t.texture_transform = false;
   t.rough_refracting = false;
-  for (scenes::Material mat : m.used) {
+  // a material as the loader applies the scene's edits to it (an ior or thickness makes a volume refract)
+  const auto edited = [&](scenes::Material mat) {
     for (const MaterialEdit& e : r.config.edits.materials)
-      if (e.name == mat.name) mat.apply(e);  // as the loader applies it (an ior or thickness makes a volume refract)
+      if (e.name == mat.name) mat.apply(e);
+    return mat;
+  };
+  for (const scenes::Material& used : m.used) {
+    const scenes::Material mat = edited(used);
     // a smooth surface reflects and refracts by Dirac lobes only
     t.ggx |= !mat.lambertian() && !mat.smooth();
     refracting |= mat.refracting();
@@ -444,11 +452,11 @@ DatasetFolder::MaterialTraits DatasetFolder::material_traits(const scenes::Resol
     t.rough_refracting |= mat.refracting() && mat.crossed_as_rough();
   }
   t.echo = refracting && smooth_clear;
-  t.curved_smooth = false;
-  for (scenes::Material mat : m.curved) {
-    for (const MaterialEdit& e : r.config.edits.materials)
-      if (e.name == mat.name) mat.apply(e);
-    t.curved_smooth |= !mat.lambertian() && mat.smooth();
+  t.shaded_connections = false;
+  for (const scenes::Material& mat : m.smooth_shaded) t.shaded_connections |= refracting && edited(mat).transmissive();
+  for (const scenes::Material& used : m.curved) {
+    const scenes::Material mat = edited(used);
+    t.shaded_connections |= !mat.lambertian() && mat.smooth();
   }
   const AmbientConfig& a = r.config.ambient;
   t.coloured_ambient = colour && (a.illuminance_lux > 0.0 || a.spectral_irradiance_W_m2_nm || (a.gltf_lights && m.lights) || emission);
@@ -502,12 +510,13 @@ std::vector<DatasetFolder::Revision> DatasetFolder::revisions_of(const scenes::R
     out.push_back({"laser connections through clear plates carry their echoes' higher orders",
                    "clear (smooth) refracting plates render otherwise: the laser's light reflected round inside a plate twice "
                    "or more on its way in (part of the plate's later echoes) was left out"});
-  // the Fresnel factors of the laser's connections solved through or off smooth curved meshes, at the solved
-  // path's normals: they were taken where the traced segments met the mesh, some 1e-5 m away (the trace's origin
-  // offsets), 2.9e-4 of the light high through a glass sphere at 60 degrees' incidence (2e-3 at ior 1.3)
-  if (m.curved_smooth && laser_traced(c))
-    out.push_back({"laser connections through smooth curved meshes take Fresnel at the solved normals",
-                   "smooth curved meshes (glass or mirror spheres with vertex normals) render otherwise: the Fresnel factors of "
+  // the Fresnel factors of the laser's connections solved on a mesh's interpolated normals (through glass
+  // meshes, off curved mirrors), at the solved path's normals: they were taken where the traced segments met the
+  // mesh, some 1e-5 m away (the trace's origin offsets), 2.9e-4 of the light high through a glass sphere at 60
+  // degrees' incidence (2e-3 at ior 1.3)
+  if (m.shaded_connections && laser_traced(c))
+    out.push_back({"laser connections solved on shaded meshes take Fresnel at the solved normals",
+                   "glass meshes shaded by vertex normals and smooth curved mirrors render otherwise: the Fresnel factors of "
                    "the laser's connections through and off them are taken at the solved path's normals (they were taken some "
                    "1e-5 m away: 3e-4 of the light through glass at 60 degrees' incidence)"});
   // GGX's D evaluated without cancellation, and its draws' sines too: a narrow lobe's peak was up to 7 % bright

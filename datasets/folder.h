@@ -227,9 +227,10 @@ class DatasetFolder {
     bool texture_transform = true;
     // a refracting volume with a face the laser's connections cross as rough (roughness 0.158 and above)
     bool rough_refracting = true;
-    // a curved mesh of a smooth material other than a Lambertian one (a glass or mirror sphere): the laser's
-    // solved connections through it or off it
-    bool curved_smooth = true;
+    // the laser's connections solved on a mesh's interpolated normals: a transmissive smooth-shaded mesh where a
+    // material refracts (a glass sphere or bottle), or a curved mesh of a smooth material other than a Lambertian
+    // one (a mirror sphere)
+    bool shaded_connections = true;
   };
   MaterialTraits material_traits(const scenes::ResolvedRun& r) const;
   // The revisions of the renderer's rules that apply to r (a marker sample_hash holds, and the change in words),
@@ -253,9 +254,9 @@ class DatasetFolder {
     bool painted = false;                     // a mesh has vertex colours (COLOR_0)
     bool lights = false, coloured_lights = false;  // the glTF has punctual lights; one of them is not grey
     bool point_lights = false;                     // one of them is a point or spot light
-    // the materials of curved meshes (vertex normals, more than the renderer's 64 planar parts): their smooth
-    // faces' laser connections are solved on the shaded triangles
-    std::vector<scenes::Material> curved;
+    // the materials (unedited, each once) of smooth-shaded meshes (scenes::Mesh::smooth_shaded) and of curved
+    // ones (scenes::Mesh::curved): the laser's connections through or off them are solved on their normals
+    std::vector<scenes::Material> smooth_shaded, curved;
   };
   mutable std::map<std::pair<std::string, std::string>, SceneMaterials> scene_materials_;  // by glTF and glTF scene; under content_mutex_
   mutable std::mutex content_mutex_;

@@ -47,9 +47,8 @@ inline double sqr(double x) { return x * x; }
 // Lambertian vertices aim at the triangles of meshes of at most this many (plates, boxes), at most
 // kMaxGlossyParts of them in a scene; and at a sliver's area only where the half-vector at its point
 // nearest the mirror point, or at its point of least tilt, is within acos(kGuideMaxTilt) = 25 degrees of
-// its normal. (A mesh with more, and vertex normals, is curved: datasets/folder.cpp's revisions tell its
-// materials by the same count.)
-constexpr size_t kMaxPartsPerMesh = 64;
+// its normal. (A mesh with more, and vertex normals, is curved: scenes::Mesh::curved.)
+constexpr size_t kMaxPartsPerMesh = scenes::kMaxPlanarParts;
 constexpr size_t kMaxGlossyParts = 256;
 constexpr double kGuideMaxTilt = 0.906;
 // The same bound on the half-vector's slope m (the tangent of its tilt): sqrt(1 / 0.906^2 - 1).
@@ -134,10 +133,6 @@ bool plate_planes(const scenes::Mesh& mesh, glm::dvec3* n, double* lo, double* h
   }
   return true;
 }
-// Whether a mesh is curved: more than kMaxPartsPerMesh triangles, with vertex normals.
-bool curved_mesh(const scenes::Mesh& mesh) {
-  return mesh.triangle_count() > kMaxPartsPerMesh && mesh.normals.size() == mesh.positions.size();
-}
 // A mesh whose planar faces may mirror the laser (Integrator::mirrors_): at most kMaxPartsPerMesh triangles of a
 // smooth material other than a Lambertian one.
 bool mirror_mesh(const scenes::Scene& scene, const scenes::Mesh& mesh) {
@@ -148,13 +143,13 @@ bool mirror_mesh(const scenes::Scene& scene, const scenes::Mesh& mesh) {
 // other than a Lambertian one.
 bool curved_mirror_mesh(const scenes::Scene& scene, const scenes::Mesh& mesh) {
   const scenes::Material* m = mesh_material(scene, mesh);
-  return m && !m->lambertian() && m->smooth() && curved_mesh(mesh);
+  return m && !m->lambertian() && m->smooth() && mesh.curved();
 }
 // A smooth curved glass mesh (a glass sphere, Integrator::curved_refractors_): of a smooth material that bounds a
 // refracting volume.
 bool curved_refractor_mesh(const scenes::Scene& scene, const scenes::Mesh& mesh) {
   const scenes::Material* m = mesh_material(scene, mesh);
-  return m && m->refracting() && m->smooth() && curved_mesh(mesh);
+  return m && m->refracting() && m->smooth() && mesh.curved();
 }
 }  // namespace
 

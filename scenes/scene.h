@@ -88,6 +88,11 @@ struct Material {
 // measured from a point of this grid near their centre (floats 32 m from a point are 3.8 um apart at most).
 inline constexpr double kMeshOffsetGridM = 64.0;
 
+// Meshes of at most this many triangles are planar parts (plates, boxes) the renderer aims at face by face; one of
+// more, with vertex normals, is curved (a sphere, a bottle: Mesh::curved), whose paths of the laser it seeks about
+// its bounding box (render/integrator.cpp).
+inline constexpr size_t kMaxPlanarParts = 64;
+
 // One glTF primitive instanced by one node, flattened into world space.
 struct Mesh {
   std::string name;        // "<node name>/<mesh name>/<primitive index>"
@@ -104,6 +109,23 @@ struct Mesh {
   std::vector<uint32_t> indices;     // 3 per triangle (non-indexed primitives get 0, 1, 2, ...)
   int material = -1;                 // index into Scene::materials, -1: the glTF default material
   size_t triangle_count() const { return indices.size() / 3; }
+  bool has_normals() const { return !positions.empty() && normals.size() == positions.size(); }
+  bool curved() const { return triangle_count() > kMaxPlanarParts && has_normals(); }
+  // Some corner's normal is not its triangle's own (the winding's) within 1e-6 in cosine: light refracts and
+  // reflects at its interpolated normals, and the renderer's laser connections through it are solved on them.
+  bool smooth_shaded() const {
+    if (!has_normals()) return false;
+    for (size_t i = 0; i + 2 < indices.size(); i += 3) {
+      const uint32_t a = indices[i], b = indices[i + 1], c = indices[i + 2];
+      if (a >= positions.size() || b >= positions.size() || c >= positions.size()) continue;
+      const glm::vec3 n = glm::cross(positions[b] - positions[a], positions[c] - positions[a]);
+      const float len = glm::length(n);
+      if (!(len > 0.0f)) continue;
+      for (uint32_t v : {a, b, c})
+        if (glm::dot(glm::normalize(normals[v]), n / len) < 1.0f - 1e-6f) return true;
+    }
+    return false;
+  }
 };
 
 struct Camera {

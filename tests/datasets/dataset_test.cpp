@@ -623,11 +623,11 @@ TEST(DatasetFolder, TheRenderRevisionsApplyWhereTheirRuleChangedTheSample) {
       EXPECT_EQ(DatasetFolder(chart, dir / "out").resolve(make_sample(chart, 0)).revisions, revisions) << name;
     }
   }
-  // the multi-object scene's sphere (81920 triangles with vertex normals) made smooth glass or a smooth mirror:
-  // the laser's connections solved through it or off it take Fresnel at the solved normals now; not where it is
-  // rough, Lambertian, or no laser is traced (a 2D run)
+  // the multi-object scene's sphere (81920 triangles shaded by vertex normals) made glass or a smooth mirror: the
+  // laser's connections solved through it or off it take Fresnel at the solved normals now; not where it is
+  // Lambertian, or no laser is traced (a 2D run); nor for the clear plate above (its normals are its faces')
   {
-    const std::string curved = "smooth curved meshes (glass or mirror spheres with vertex normals) render otherwise: the Fresnel "
+    const std::string curved = "glass meshes shaded by vertex normals and smooth curved mirrors render otherwise: the Fresnel "
                                "factors of the laser's connections through and off them are taken at the solved path's normals "
                                "(they were taken some 1e-5 m away: 3e-4 of the light through glass at 60 degrees' incidence)";
     const std::string glass = "\"materials.sphere_white.roughness\": 0, \"materials.sphere_white.transmission\": 1, "
