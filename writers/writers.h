@@ -113,8 +113,9 @@ struct ZarrCodec {
 
 // A Zarr v2 array store: the folder `path` (e.g. "counts.zarr") holding .zarray, .zattrs and one file
 // per chunk named by its grid indices joined by '.' ("0.3.1"), each chunk C-order, full size (edge
-// chunks padded with 0) and compressed by Blosc (ZarrCodec); every chunk is stored, so .zarray names no
-// fill value. Writes land in chunk
+// chunks padded with 0) and compressed by Blosc (ZarrCodec); every chunk is stored, and .zarray's fill
+// value ("NaN" for float dtypes, none for integers) stands only for a chunk lost afterwards, so that a plain
+// Zarr reader reads a lost float chunk as NaN. Writes land in chunk
 // buffers; a chunk is compressed and written by the thread that writes its last element, and then leaves
 // memory, so memory is bounded by the chunks being filled, not by the array. The store is built in a
 // hidden folder beside `path` and renamed onto it by commit() (files fsynced first); a writer destroyed
@@ -153,11 +154,14 @@ class ZarrWriter : public StackWriter {
 
 // A Zarr v2 array as ZarrWriter writes it (C order, '.' separated chunk keys, Blosc or no compressor, no
 // filters), read chunk by chunk. Throws spadgen::Error naming the store when it is not such an array or
-// a chunk does not decompress to its size. A missing chunk reads as the fill value (0 when there is none).
+// a chunk does not decompress to its size. A missing chunk is an error (MissingChunks::Error: spadgen's
+// stores, whose every chunk is stored), or reads as the fill value (MissingChunks::Fill: another program's
+// store; an error when it has none).
+enum class MissingChunks { Error, Fill };
 class ZarrReader {
  public:
   // cache_chunks: decompressed chunks kept for read() (least recently used ones go first).
-  explicit ZarrReader(const std::string& path, size_t cache_chunks = 16);
+  explicit ZarrReader(const std::string& path, size_t cache_chunks = 16, MissingChunks missing = MissingChunks::Error);
   ~ZarrReader();
   ZarrReader(ZarrReader&&) noexcept;
   ZarrReader& operator=(ZarrReader&&) noexcept;

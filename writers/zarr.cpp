@@ -1,5 +1,6 @@
 // Zarr v2 array stores (the Zarr storage specification, version 2), the subset spadgen writes: a folder
-// holding .zarray (JSON: shape, chunks, dtype, compressor, C order, no filters, no fill value), .zattrs (JSON
+// holding .zarray (JSON: shape, chunks, dtype, compressor, C order, no filters, fill value NaN for floats and
+// none for integers), .zattrs (JSON
 // attributes) and one file per chunk named by its grid indices joined by '.', each chunk a full-size
 // C-order block (edge chunks padded) compressed as one Blosc buffer. Blosc frames carry their own sizes,
 // shuffle and block size, so any Blosc reader (numcodecs, hence zarr-python) decodes them.
@@ -138,6 +139,8 @@ void fsync_file(const std::string& path) {
   ::close(fd);
   if (rc != 0) detail::throw_errno("cannot flush", path, err);
 }
+
+bool is_float(Dtype d) { return d == Dtype::F32 || d == Dtype::F64; }
 
 }  // namespace
 
@@ -282,9 +285,11 @@ json ZarrWriter::zarray() const {
           {"dtype", numpy_descr(m.dtype)},
           {"compressor", {{"id", "blosc"}, {"cname", kCompressor}, {"clevel", m.codec.clevel}, {"shuffle", m.codec.shuffle},
                           {"blocksize", m.codec.blocksize}}},
-          // No fill value: every chunk is stored (commit() stores those never written, as zeros), and readers
-          // that take the fill value for "missing" (xarray masks it as NaN) see the values as they are.
-          {"fill_value", nullptr},
+          // Every chunk is stored (commit() stores those never written, as zeros), so the fill value stands only
+          // for a chunk lost after the run: NaN for floats (a plain Zarr reader, zarr-python's, then reads a lost
+          // chunk as NaN, not as uninitialised memory; xarray masks the fill value as NaN, which leaves NaN as it
+          // is). Integers have no value a sample cannot take: none (spadgen's own readers refuse a lost chunk).
+          {"fill_value", is_float(m.dtype) ? json("NaN") : json(nullptr)},
           {"order", "C"},
           {"filters", nullptr},
           {"dimension_separator", "."}};
@@ -355,7 +360,8 @@ struct ZarrReader::Impl {
   Grid grid;
   bool blosc = false;
   std::vector<char> fill;  // one element of the fill value
-  bool has_fill = false;   // .zarray names one: else every chunk must be stored (spadgen's stores)
+  bool has_fill = false;   // .zarray names one
+  bool every_chunk = true;  // a missing chunk is an error whatever the fill value (spadgen's stores)
   size_t capacity = 16;
   using Chunk = std::shared_ptr<const std::vector<char>>;
   mutable std::mutex mutex;
@@ -363,9 +369,9 @@ struct ZarrReader::Impl {
 
   std::string error(const std::string& what) const { return "cannot read '" + path + "' as a Zarr array: " + what; }
 
-  // Chunk c decompressed (a missing chunk: the fill value throughout; without one, an error: a store
-  // without a fill value has every chunk stored, and one gone was lost, not zeros: reconstruct scored a
-  // store without a quarter of its counts as complete).
+  // Chunk c decompressed (a missing chunk: an error for spadgen's stores, which have every chunk stored, so
+  // one gone was lost, not zeros or NaN: reconstruct scored a store without a quarter of its counts as
+  // complete; for another program's store the fill value throughout, an error without one).
   Chunk load(int64_t c) const {
     const size_t nbytes = size_t(grid.chunk_elements * eb);
     auto out = std::make_shared<std::vector<char>>(nbytes);
@@ -373,9 +379,11 @@ struct ZarrReader::Impl {
     struct stat entry {};
     const int fd = ::stat(file.c_str(), &entry) != 0 && errno == ENOENT ? -1 : detail::open_regular_file(file);
     if (fd < 0) {
+      if (every_chunk)
+        throw Error(error("chunk " + grid.key(c) + " is missing: spadgen stores every chunk, so the store was damaged after it "
+                          "was written"));
       if (!has_fill)
-        throw Error(error("chunk " + grid.key(c) + " is missing, and the store has no fill value to stand for it (every chunk is "
-                          "stored): the store was damaged after it was written"));
+        throw Error(error("chunk " + grid.key(c) + " is missing, and the store has no fill value to stand for it"));
       for (size_t i = 0; i < nbytes; i += size_t(eb)) std::memcpy(out->data() + i, fill.data(), size_t(eb));
       return out;
     }
@@ -426,9 +434,10 @@ struct ZarrReader::Impl {
   }
 };
 
-ZarrReader::ZarrReader(const std::string& path, size_t cache_chunks) : impl_(std::make_unique<Impl>()) {
+ZarrReader::ZarrReader(const std::string& path, size_t cache_chunks, MissingChunks missing) : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
   m.path = path, m.capacity = std::max<size_t>(1, cache_chunks);
+  m.every_chunk = missing == MissingChunks::Error;
   if (!fs::exists(path + "/.zarray")) throw Error(m.error("no .zarray in it"));
   detail::require_regular_file(path + "/.zarray");
   std::ifstream in(path + "/.zarray", std::ios::binary);
@@ -474,12 +483,21 @@ ZarrReader::ZarrReader(const std::string& path, size_t cache_chunks) : impl_(std
   m.fill.assign(size_t(m.eb), 0);
   const json& f = get("fill_value");
   if (!f.is_null()) {
-    if (!f.is_number()) throw Error(m.error("fill_value " + f.dump() + " is not a number"));
+    // The Zarr v2 specification writes a float's non-finite fill value as "NaN", "Infinity" or "-Infinity".
+    const std::string word = f.is_string() ? f.get<std::string>() : "";
+    const double special = word == "NaN"         ? std::numeric_limits<double>::quiet_NaN()
+                           : word == "Infinity"  ? std::numeric_limits<double>::infinity()
+                           : word == "-Infinity" ? -std::numeric_limits<double>::infinity()
+                                                 : 0.0;
+    const bool named = word == "NaN" || word == "Infinity" || word == "-Infinity";
+    if (!f.is_number() && !(named && is_float(m.dtype)))
+      throw Error(m.error("fill_value " + f.dump().substr(0, 40) +
+                          (is_float(m.dtype) ? " is not a number, \"NaN\", \"Infinity\" or \"-Infinity\"" : " is not a number")));
     m.has_fill = true;
     const auto put = [&](auto v) { std::memcpy(m.fill.data(), &v, sizeof v); };
     switch (m.dtype) {
-      case Dtype::F32: put(f.get<float>()); break;
-      case Dtype::F64: put(f.get<double>()); break;
+      case Dtype::F32: put(named ? static_cast<float>(special) : f.get<float>()); break;
+      case Dtype::F64: put(named ? special : f.get<double>()); break;
       case Dtype::U8: put(f.get<uint8_t>()); break;
       case Dtype::U16: put(f.get<uint16_t>()); break;
       case Dtype::I32: put(f.get<int32_t>()); break;

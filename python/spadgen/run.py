@@ -182,7 +182,9 @@ _ZARR_DTYPES = ("<f4", "<f8", "|u1", "<u1", "<u2", "<i4", "<i8")
 def _check_zarray(path):
     """The store's .zarray as parsed, checked as the program's Zarr reader (writers/zarr.cpp) checks it: format 2,
     C order (an "F" was read as C order without a word), no filters, "." separators, a dtype spadgen writes, a
-    shape and chunks of positive integers of one length, Blosc or no compressor, a number or null fill value.
+    shape and chunks of positive integers of one length, Blosc or no compressor, a number or null fill value (or
+    "NaN", "Infinity", "-Infinity" for floats, as the Zarr v2 specification writes them; spadgen's float stores
+    have "NaN").
     A ValueError naming the store and the field otherwise; None when there is no readable .zarray (zarr reports
     that itself)."""
     try:
@@ -221,8 +223,11 @@ def _check_zarray(path):
     if c is not None and not (isinstance(c, dict) and c.get("id") == "blosc"):
         raise bad(f".zarray's compressor {json.dumps(c)[:60]}: only Blosc (or none) is supported")
     f = z["fill_value"]
-    if f is not None and (isinstance(f, bool) or not isinstance(f, (int, float))):
-        raise bad(f".zarray's fill_value {json.dumps(f)[:40]} is not a number")
+    floats = z["dtype"] in ("<f4", "<f8")
+    if f is not None and (isinstance(f, bool) or not isinstance(f, (int, float))) and not (
+            floats and f in ("NaN", "Infinity", "-Infinity")):
+        raise bad(f".zarray's fill_value {json.dumps(f)[:40]} is not a number"
+                  + (', "NaN", "Infinity" or "-Infinity"' if floats else ""))
     return z
 
 

@@ -43,9 +43,11 @@ def test_zarr_python_reads_what_numpy_reads(written, name):
     if expected.ndim == 3 and expected.size:
         assert same_bytes(z[:, 3:40, 17:66], expected[:, 3:40, 17:66])
         assert same_bytes(z[-1, :, -1], expected[-1, :, -1])
-    # The metadata: chunks clipped to the shape, Blosc zstd, C order, no fill value, the attributes given.
+    # The metadata: chunks clipped to the shape, Blosc zstd, C order, the fill value NaN for floats (none for
+    # integers: every value can be a sample's), the attributes given.
     meta = json.loads((written / f"{name}.zarr" / ".zarray").read_text())
-    assert meta["zarr_format"] == 2 and meta["order"] == "C" and meta["filters"] is None and meta["fill_value"] is None
+    assert meta["zarr_format"] == 2 and meta["order"] == "C" and meta["filters"] is None
+    assert meta["fill_value"] == ("NaN" if expected.dtype.kind == "f" else None)
     assert tuple(meta["chunks"]) == tuple(max(1, min(c, s)) for c, s in zip(CASES[name], expected.shape))
     assert meta["compressor"]["id"] == "blosc" and meta["compressor"]["cname"] == "zstd"
     assert meta["compressor"]["shuffle"] == (0 if expected.dtype == np.uint8 else 1)
@@ -106,7 +108,7 @@ def test_a_missing_zarr_stack_is_named(make_run):
 
 def test_xarray_opens_a_zarr_run_as_a_dataset(make_run):
     """The run folder and light/ are Zarr groups: xarray opens their stores lazily, with named dimensions
-    and the values as stored (no fill value for it to mask)."""
+    and the values as stored (the float stores' fill value is NaN: masking it leaves every value as it is)."""
     xr = pytest.importorskip("xarray")
     npy, path = open_run(make_run("sweep")), make_run("sweep_zarr")
     ds = xr.open_zarr(str(path), consolidated=False)
@@ -120,8 +122,10 @@ def test_xarray_opens_a_zarr_run_as_a_dataset(make_run):
 
 
 def test_a_missing_chunk_is_an_error_naming_it(make_run, tmp_path):
-    """spadgen writes every chunk, and its stores have no fill value: a chunk removed afterwards read as
-    uninitialised memory (counts of 64304 in a run of 300 frames). It is an error naming the chunk."""
+    """spadgen writes every chunk: a chunk removed afterwards read as uninitialised memory (counts of 64304 in a
+    run of 300 frames). Through the package it is an error naming the chunk, also in a float store, whose fill
+    value is NaN; a plain Zarr reader reads a lost float chunk as NaN (it read uninitialised memory when the
+    stores had no fill value), the integer stores have none (every value can be a sample's)."""
     import os
     import shutil
     run_dir = tmp_path / "run"
@@ -134,6 +138,20 @@ def test_a_missing_chunk_is_an_error_naming_it(make_run, tmp_path):
     os.remove(store / chunks[-1])
     with pytest.raises(FileNotFoundError, match=f"{store / chunks[-1]}: a chunk of this Zarr store is missing"):
         np.asarray(open_run(run_dir).counts)
+    rate = run_dir / "detection_rate.zarr"
+    whole = np.asarray(open_run(run_dir).detection_rate)
+    assert whole.dtype.kind == "f" and np.isfinite(whole).all()
+    meta = json.loads((rate / ".zarray").read_text())
+    lost = sorted(n for n in os.listdir(rate) if not n.startswith("."))[0]
+    os.remove(rate / lost)
+    with pytest.raises(FileNotFoundError, match=f"{rate / lost}: a chunk of this Zarr store is missing"):
+        np.asarray(open_run(run_dir).detection_rate)
+    plain = zarr.open_array(str(rate), mode="r")[...]
+    region = tuple(slice(int(i) * c, (int(i) + 1) * c) for i, c in zip(lost.split("."), meta["chunks"]))
+    assert np.isnan(plain[region]).all()
+    inside = np.zeros(whole.shape, dtype=bool)
+    inside[region] = True
+    assert same_bytes(plain[~inside], whole[~inside])
 
 
 def test_the_counts_check_decodes_each_chunk_once(make_run, monkeypatch):

@@ -8,9 +8,11 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <random>
 #include <thread>
 
@@ -107,7 +109,7 @@ TEST(ZarrWriter, ChunksDecompressWithBloscToTheArrayCutIntoChunks) {
   EXPECT_EQ(zarray["chunks"], nlohmann::json({5, 32, 64}));
   EXPECT_EQ(zarray["dtype"], "<f4");
   EXPECT_EQ(zarray["order"], "C");
-  EXPECT_TRUE(zarray["fill_value"].is_null());
+  EXPECT_EQ(zarray["fill_value"], "NaN");  // a float store: NaN stands for a chunk lost after the run
   EXPECT_TRUE(zarray["filters"].is_null());
   EXPECT_EQ(zarray["compressor"], nlohmann::json({{"id", "blosc"}, {"cname", "zstd"}, {"clevel", 1}, {"shuffle", 1},
                                                   {"blocksize", 8 << 20}}));
@@ -120,6 +122,7 @@ TEST(ZarrWriter, ChunksLargerThanTheArrayAreClippedToIt) {
   TempDir dir;
   const std::vector<uint16_t> a = ramp<uint16_t>(2 * 3 * 4);
   ZarrWriter w(dir.file("c.zarr"), Dtype::U16, {2, 3, 4}, {351, 32, 64});
+  EXPECT_TRUE(w.zarray()["fill_value"].is_null());  // integers: every value can be a sample's, so none
   EXPECT_EQ(w.chunks(), (std::vector<int64_t>{2, 3, 4}));
   w.write(0, a.data(), 24);
   w.commit();
@@ -202,7 +205,7 @@ TEST(ZarrReader, ReadsEveryDtypeBackWholeAndInParts) {
 }
 
 // As in a .npy, what is never written is 0: at commit a partly written chunk is stored with zeros, and so
-// is a chunk never touched (every chunk is stored: .zarray has no fill value to stand in for one).
+// is a chunk never touched (every chunk is stored: .zarray's fill value NaN only stands for a lost one).
 TEST(ZarrWriter, UnwrittenElementsAreZero) {
   TempDir dir;
   const float v[3] = {1.5f, 2.5f, 3.5f};
@@ -219,21 +222,49 @@ TEST(ZarrWriter, UnwrittenElementsAreZero) {
               std::vector<float>(expected.begin() + 10 * c, expected.begin() + 10 * c + 10)) << c;
   }
   EXPECT_EQ(ZarrReader(dir.file("p.zarr")).read_all<float>(), expected);
-  // A missing chunk of a store without a fill value (spadgen's) was lost: refused, naming the store and the
-  // chunk (it was read as zeros, and reconstruct scored a store without a quarter of its counts as complete).
+  // A missing chunk of spadgen's store was lost: refused, naming the store and the chunk, although .zarray
+  // has a fill value (it was read as zeros, and reconstruct scored a store without a quarter of its counts as
+  // complete).
   fs::remove(dir.file("p.zarr/4"));
-  try {
-    (void)ZarrReader(dir.file("p.zarr")).read_all<float>();
-    ADD_FAILURE() << "a missing chunk was read";
-  } catch (const Error& e) {
-    EXPECT_NE(std::string(e.what()).find("p.zarr' as a Zarr array: chunk 4 is missing, and the store has no fill value"), std::string::npos) << e.what();
+  const auto refused = [&](MissingChunks missing, const std::string& why) {
+    try {
+      (void)ZarrReader(dir.file("p.zarr"), 16, missing).read_all<float>();
+      ADD_FAILURE() << "a missing chunk was read";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("p.zarr' as a Zarr array: chunk 4 is missing" + why), std::string::npos) << e.what();
+    }
+  };
+  refused(MissingChunks::Error, ": spadgen stores every chunk");
+  // Read as another program's store: the fill value throughout (NaN, as zarr-python reads it), a number
+  // given as one, an error without one.
+  std::vector<float> got = ZarrReader(dir.file("p.zarr"), 16, MissingChunks::Fill).read_all<float>();
+  for (size_t i = 0; i < got.size(); ++i) {
+    if (i >= 40 && i < 50)
+      EXPECT_TRUE(std::isnan(got[i])) << i;
+    else
+      EXPECT_EQ(got[i], expected[i]) << i;
   }
-  // With a fill value (another program's store), the chunk is that value throughout.
   nlohmann::json zarray = nlohmann::json::parse(read_bytes(dir.file("p.zarr/.zarray")));
-  zarray["fill_value"] = 0.5;
-  std::ofstream(dir.file("p.zarr/.zarray"), std::ios::trunc) << zarray.dump();
+  const auto set_fill = [&](const nlohmann::json& f) {
+    zarray["fill_value"] = f;
+    std::ofstream(dir.file("p.zarr/.zarray"), std::ios::trunc) << zarray.dump();
+  };
+  set_fill("-Infinity");
+  EXPECT_EQ(ZarrReader(dir.file("p.zarr"), 16, MissingChunks::Fill).read_all<float>()[45], -std::numeric_limits<float>::infinity());
+  set_fill(0.5);
   std::fill(expected.begin() + 40, expected.begin() + 50, 0.5f);
-  EXPECT_EQ(ZarrReader(dir.file("p.zarr")).read_all<float>(), expected);
+  EXPECT_EQ(ZarrReader(dir.file("p.zarr"), 16, MissingChunks::Fill).read_all<float>(), expected);
+  set_fill(nullptr);
+  refused(MissingChunks::Fill, ", and the store has no fill value to stand for it");
+  // Other strings are refused, naming the value and what was expected.
+  set_fill("nan");
+  try {
+    (void)ZarrReader(dir.file("p.zarr"));
+    ADD_FAILURE() << "fill_value \"nan\" was taken";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("fill_value \"nan\" is not a number, \"NaN\", \"Infinity\" or \"-Infinity\""), std::string::npos)
+        << e.what();
+  }
 }
 
 TEST(ZarrWriter, WithoutCommitNothingIsLeftAndCommitReplacesAnEarlierStore) {
