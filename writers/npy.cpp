@@ -515,6 +515,12 @@ NpyReader::NpyReader(const std::string& path) : path_(path) {
   }
   elements_ = n;
   const int64_t eb = NpyWriter::element_bytes(dtype_);
+  // The format pads the header so that the data start at a multiple of 64 bytes (16 in NumPy before 1.14):
+  // data() hands out the mapping as an array of the dtype, which must be aligned to it.
+  if (data_offset_ % eb != 0)
+    throw Error(read_error(path, "its data start at byte " + std::to_string(data_offset_) + ", not a multiple of the " +
+                                 std::to_string(eb) + "-byte elements of " + shown(d) +
+                                 " (the .npy format pads its header to 64 bytes; np.save writes such files)"));
   if (elements_ > (size - data_offset_) / eb)
     throw Error(read_error(path, "the file holds " + std::to_string(size - data_offset_) + " bytes of data, shape " + shown(s) +
                                  " needs " + std::to_string(elements_ * eb)));

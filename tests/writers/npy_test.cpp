@@ -252,6 +252,34 @@ TEST(NpyReader, AHeaderPastTheEndNamesItsVersionAndSizes) {
   }
 }
 
+// Data that do not start at a multiple of their element size (a header not padded as the format asks; the
+// data were read through a misaligned pointer) are refused, naming the file and the offset; a header
+// padded to 16 bytes only, as NumPy before 1.14 wrote, is read.
+TEST(NpyReader, DataOffMultiplesOfTheirElementSizeAreRefused) {
+  TempDir dir;
+  const auto npy_with = [&](size_t header_bytes) {
+    std::string header = "{'descr': '<f8', 'fortran_order': False, 'shape': (2,), }";
+    header.append(header_bytes - header.size() - 1, ' ').push_back('\n');
+    std::string bytes = std::string("\x93NUMPY\x01\x00", 8);
+    bytes.push_back(char(header.size() & 0xff));
+    bytes.push_back(char(header.size() >> 8));
+    const double v[2] = {1.5, -2.25};
+    bytes += header + std::string(reinterpret_cast<const char*>(v), sizeof v);
+    std::ofstream(dir.file("d.npy"), std::ios::binary | std::ios::trunc) << bytes;
+    return dir.file("d.npy");
+  };
+  const NpyReader r(npy_with(70));  // data at byte 80: 16-byte alignment
+  EXPECT_EQ(r.data<double>()[0], 1.5);
+  EXPECT_EQ(r.data<double>()[1], -2.25);
+  try {
+    NpyReader bad(npy_with(71));
+    ADD_FAILURE() << "data at byte 81 were read";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("d.npy' as a NumPy array: its data start at byte 81, not a multiple of the 8-byte elements of '<f8'"),
+              std::string::npos) << e.what();
+  }
+}
+
 TEST(NpyWriter, RejectsWritesOutsideTheArrayAndAfterCommit) {
   TempDir dir;
   NpyWriter w(dir.file("e.npy"), Dtype::U8, {2, 4, 8});
