@@ -71,11 +71,10 @@ struct Detector {
 
   Detector(const std::string& n, const RunFolder& run) : name(n) {
     if (name != "edges" && name != "paper") throw Error("--detector " + name + ": expected edges or paper");
-    const auto& g = run.metadata()["acquisition"].value("gate", nlohmann::json::object());
-    const double step_ps = run.metadata()["acquisition"].value("gate_step_ps", 0.0);
-    if (g.contains("rise_ps") && g.contains("fall_ps") && step_ps > 0.0) {
-      const double edge_ps = std::max(g["rise_ps"].get<double>(), g["fall_ps"].get<double>()) + g.value("irf_fwhm_ps", 0.0);
-      edges.separation = std::max(3, int(std::ceil(edge_ps / step_ps)));
+    const double step_ps = run.gate_step_s() * 1e12, edge_ps = run.gate_edge_s() * 1e12;
+    if (edge_ps > 0.0 && step_ps > 0.0) {
+      // (at most K gate positions apart: an edge slower than the sweep is no edge the detector can pair)
+      edges.separation = std::max(3, int(std::min(std::ceil(edge_ps / step_ps), double(std::max(run.K(), 3)))));
       // a rise and a fall of one return agree within their noise; two returns closer than half the
       // separation are not resolved anyway
       edges.match_s = 0.5 * edges.separation * step_ps * 1e-12;

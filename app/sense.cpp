@@ -332,10 +332,20 @@ std::vector<RunResult> sense(const SenseOptions& options) {
         {"/light/time_axis_s/bins", true, is_count, "an integer >= 0"},
         {"/light/time_axis_s/laser_period", true, is_positive, "a number > 0"},
         {"/sensor_tables_fnv1a64", false, is_text, "text"}, {"/ground_truth_objects", false, is_count, "an integer >= 0"},
-        {"/objects", false, is_array, "a list"}, {"/transient/crop_in_sensor", false, is_rect, "[x, y, width, height] in pixels"},
+        {"/objects", false, is_array, "a list"}, {"/transient", false, is_object, "an object"},
+        {"/transient/crop_in_sensor", false, is_rect, "[x, y, width, height] in pixels"},
         {"/ground_truth_summary", false, is_object, "an object"}, {"/file_bytes", false, is_object, "an object"},
         {"/storage/files", false, is_object, "an object"}, {"/light/fill_factor", false, is_array, "a list"},
-        {"/laser_photons_per_pulse", false, [](const json& v) { return v.is_object() || v.is_null(); }, "an object, or null"}};
+        {"/laser_photons_per_pulse", false, [](const json& v) { return v.is_object() || v.is_null(); }, "an object, or null"},
+        // sense carries the scene's components over from the run (model_components)
+        {"/model", false,
+         [](const json& v) {
+           return v.is_array() && std::all_of(v.begin(), v.end(), [](const json& e) {
+                    return e.is_object() && e.contains("component") && e.at("component").is_string() && e.contains("active") &&
+                           e.at("active").is_boolean() && e.contains("why") && e.at("why").is_string();
+                  });
+         },
+         "a list of {component: text, active: true or false, why: text}"}};
     for (const Typed& t : typed) {
       const json::json_pointer p(t.key);
       if (!meta.contains(p)) continue;
@@ -344,6 +354,10 @@ std::vector<RunResult> sense(const SenseOptions& options) {
                     "; expected " + t.expected + ", as a run writes it (a damaged metadata.json: run the scene again)");
     }
   }
+  // A run that kept its transient says where (sense rescales it to that crop; without it: an internal error).
+  if (meta.contains("transient") && !meta.contains("/transient/crop_in_sensor"_json_pointer))
+    throw Error((src / "metadata.json").string() + ": transient has no crop_in_sensor; expected [x, y, width, height] in pixels, "
+                "as a run writes it (a damaged metadata.json: run the scene again)");
   // Every run lists its files, metadata.json last: a list without it is damaged (an emptied one made sense
   // write a folder without the ground truth, labels and depth preview the run had, exit 0).
   if (const json& files = meta.at("files");

@@ -1,5 +1,6 @@
 #include "run_folder.h"
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -179,6 +180,15 @@ RunFolder::RunFolder(const std::string& dir) : dir_(dir) {
     gate_delay_s_ = get_real(meta_, "/acquisition/gate/delay_ns", meta_path, -1e6, 1e6) * 1e-9;
     emission_delay_s_ = get_real(meta_, "/resolved_scene/laser/emission_delay_ns", meta_path, -1e6, 1e6) * 1e-9;
     period_s_ = 1e-6 / get_real(meta_, "/resolved_scene/laser/repetition_rate_MHz", meta_path, 1e-6, 1e5);
+    // The gate's edge as the run describes it (the edges detector's separation): the slower of rise and fall
+    // plus the instrument response (an edited value of another type was an internal error).
+    const auto has = [&](const char* key) { return meta_.contains(nlohmann::json::json_pointer(std::string("/acquisition/gate/") + key)); };
+    if (has("rise_ps") && has("fall_ps")) {
+      edge_s_ = std::max(get_real(meta_, "/acquisition/gate/rise_ps", meta_path, 0.0, 1e9),
+                         get_real(meta_, "/acquisition/gate/fall_ps", meta_path, 0.0, 1e9));
+      if (has("irf_fwhm_ps")) edge_s_ += get_real(meta_, "/acquisition/gate/irf_fwhm_ps", meta_path, 0.0, 1e9);
+      edge_s_ *= 1e-12;
+    }
     const std::string maps = (d / "sensor_maps.exr").string();
     if (!fs::is_regular_file(maps))
       throw Error(dir + (fs::exists(maps) ? ": sensor_maps.exr is not a regular file (a folder, a FIFO or a device)"

@@ -49,6 +49,10 @@ class RunFolder {
   // Where the laser sits against the pixel-centre ray of pixel (x, y) (gate-sweep mode): metadata.json's
   // camera.intrinsics and camera.laser_position_m.
   Bistatic bistatic(int x, int y) const;
+  // A gate sweep's step between gate positions, and its gate's edge (the slower of rise and fall plus the
+  // instrument response's FWHM; 0 when metadata.json does not say): 0 for a 2D run.
+  double gate_step_s() const { return step_s_; }
+  double gate_edge_s() const { return edge_s_; }
   // c T / 2 for the laser period T: the half paths a gate sweep tells apart (0 for a 2D run).
   double ambiguity_m() const { return ambiguity_range_m(period_s_); }
   // Rows [y0, y1) of the counts as [((y - y0) * W + x) * K + k] (one profile per pixel). noise_free: the
@@ -75,7 +79,7 @@ class RunFolder {
   bool gate_sweep_ = true, dual_ = false;
   int K_ = 0, W_ = 0, H_ = 0, frames_ = 0, image_frames_ = 0;
   double dual_ratio_ = 1.0;
-  double start_s_ = 0, step_s_ = 0, gate_delay_s_ = 0, emission_delay_s_ = 0, period_s_ = 0;
+  double start_s_ = 0, step_s_ = 0, gate_delay_s_ = 0, emission_delay_s_ = 0, period_s_ = 0, edge_s_ = 0;
   double fx_ = 1, fy_ = 1, cx_ = 0, cy_ = 0, laser_m_[3] = {0, 0, 0};  // OpenCV camera frame
   std::vector<float> skew_ps_, length_ps_;
   std::unique_ptr<Stack> counts_, rate_;

@@ -267,7 +267,10 @@ TEST_F(Reconstruct, MetadataIntegersOutOfRangeAreNamed) {
            // intrinsics and the laser's position of 1e300 were taken
            {"/camera/intrinsics/0/0", "1e300", "[1e-06, 1e+12]"},
            {"/camera/intrinsics/1/2", "-1e300", "[-1e+12, 1e+12]"},
-           {"/camera/laser_position_m/2", "1e300", "[-1e+09, 1e+09]"}}) {
+           {"/camera/laser_position_m/2", "1e300", "[-1e+09, 1e+09]"},
+           // the gate's edge, which sets the edges detector's separation (an object here was an internal error)
+           {"/acquisition/gate/rise_ps", "{}", "[0, 1e+09]"},
+           {"/acquisition/gate/irf_fwhm_ps", "-5", "[0, 1e+09]"}}) {
     nlohmann::ordered_json m = nlohmann::ordered_json::parse(meta);
     m[nlohmann::ordered_json::json_pointer(pointer)] = 987654.25;  // then replaced by the value as written
     std::string text = m.dump(2);

@@ -1024,7 +1024,10 @@ TEST_F(App, SenseNamesMetadataFieldsOfTheWrongType) {
                {"/light/crop_in_sensor", "[1, 2, 3]", "[x, y, width, height] in pixels"},
                {"/sensor_tables_fnv1a64", "5", "text"},
                {"/files", "[5]", "a list of file names"},
-               {"/warnings", "5", "a list of texts"}};
+               {"/warnings", "5", "a list of texts"},
+               // the scene's components, which sense carries over (an entry of another shape was an internal error)
+               {"/model/0/active", "\"x\"", "a list of {component: text, active: true or false, why: text}"},
+               {"/model/1", "null", "a list of {component: text, active: true or false, why: text}"}};
   // sense of the run with metadata.json's value at `pointer` replaced by the JSON `value`
   const auto sensed_with = [&](const char* pointer, const char* value) {
     nlohmann::ordered_json m = nlohmann::ordered_json::parse(kept);
@@ -1035,8 +1038,11 @@ TEST_F(App, SenseNamesMetadataFieldsOfTheWrongType) {
   for (const auto& c : cases) {
     const Result r = sensed_with(c.pointer, c.value);
     EXPECT_EQ(r.code, 1) << c.pointer << r.output;
-    EXPECT_THAT(r.output, HasSubstr(meta.string() + ": " + c.pointer + " is " + nlohmann::json::parse(c.value).dump() + "; expected " +
-                                    c.expected + ", as a run writes it")) << c.pointer;
+    // the key checked is the field (for the model, its list: the message shows the list's start)
+    const std::string key = std::string(c.pointer).starts_with("/model/") ? "/model" : c.pointer;
+    const std::string shown = key == c.pointer ? nlohmann::json::parse(c.value).dump() : "[";
+    EXPECT_THAT(r.output, HasSubstr(meta.string() + ": " + key + " is " + shown)) << c.pointer << r.output;
+    EXPECT_THAT(r.output, HasSubstr("; expected " + std::string(c.expected) + ", as a run writes it")) << c.pointer;
   }
   // ... and its time axis as the run computed it from its scene: an axis of 2^62 bins crashed sense (a
   // segmentation fault), one of 0.5 s bins drew counts from rates on another axis than the detection_rate.npy
@@ -1057,6 +1063,16 @@ TEST_F(App, SenseNamesMetadataFieldsOfTheWrongType) {
     EXPECT_EQ(r.code, 1) << c.pointer << r.output;
     EXPECT_THAT(r.output, HasSubstr(meta.string() + ": " + c.says)) << c.pointer;
     EXPECT_FALSE(fs::exists(dir_ / "s"));
+  }
+  // a kept transient without its crop (sense rescales the transient to it: an internal error)
+  {
+    nlohmann::ordered_json m = nlohmann::ordered_json::parse(kept);
+    ASSERT_TRUE(m.contains("transient")) << "the run keeps its transient";
+    m["transient"].erase("crop_in_sensor");
+    std::ofstream(meta, std::ios::trunc) << m.dump(2);
+    const Result r = sh("sense " + (dir_ / "run").string() + " -o " + (dir_ / "s").string());
+    EXPECT_EQ(r.code, 1) << r.output;
+    EXPECT_THAT(r.output, HasSubstr(meta.string() + ": transient has no crop_in_sensor; expected [x, y, width, height] in pixels"));
   }
   std::ofstream(meta, std::ios::trunc) << "[[[]]]";
   EXPECT_THAT(sh("sense " + (dir_ / "run").string() + " -o " + (dir_ / "s").string()).output,
