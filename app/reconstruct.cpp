@@ -315,7 +315,7 @@ void check_source(const std::string& path, const std::map<std::string, std::stri
     return;
   }
   const nlohmann::json ours_all = source_fields(run);
-  const std::string made_from = made.value("run", std::string("?"));
+  const std::string made_from = made.contains("run") && made["run"].is_string() ? made["run"].get<std::string>() : "?";
   std::string unchecked;  // what the file does not say, so was not compared
   for (const auto& [key, what] : {std::pair<std::string, std::string>{"scene_hash_fnv1a64", "scene (scene file and glTF hash)"},
                                   {"crop_in_sensor", "crop of the sensor"}}) {
@@ -664,10 +664,12 @@ std::string percent(const nlohmann::json& v) {
 }
 
 // metrics.json's "scored" in words: "--detector edges", "--detector paper --noise-free", "--detections FILE".
+// An earlier metrics.json edited by hand may hold anything there: "?" for what it does not say.
 std::string scored_text(const nlohmann::json& scored) {
+  if (!scored.is_object()) return "?";
   if (scored.contains("detections") && scored["detections"].is_string()) return "--detections " + scored["detections"].get<std::string>();
-  const std::string detector = scored.value("detector", nlohmann::json()).is_string() ? scored["detector"].get<std::string>() : "?";
-  return "--detector " + detector + (scored.value("noise_free", false) == true ? " --noise-free" : "");
+  const std::string detector = scored.contains("detector") && scored["detector"].is_string() ? scored["detector"].get<std::string>() : "?";
+  return "--detector " + detector + (scored.contains("noise_free") && scored["noise_free"] == true ? " --noise-free" : "");
 }
 
 // An earlier evaluation's metrics.json, or none when it is absent, no regular file, larger than 1 GB or not
