@@ -955,13 +955,13 @@ void run_owned_samples(const DatasetOptions& options, const DatasetSpec& spec, c
       continue;
     } catch (const std::exception& e) {
       // said first: recording it in failed/ may fail too (the disk that made the sample fail is full)
-      std::fprintf(stderr, "spadgen: dataset: sample %lld failed: %s\n", static_cast<long long>(s.index), e.what());
+      std::fprintf(stderr, "spadgen: dataset: sample %lld failed: %s\n", static_cast<long long>(s.index), scenes::one_line(e.what()).c_str());
       failed.push_back(s.index);
       try {
         folder.record_failure(s, rec.hash, e.what());
       } catch (const std::exception& r) {  // the other samples go on (a full disk failed the whole run)
         std::fprintf(stderr, "spadgen: dataset: the failure of sample %lld is not recorded in failed/: %s\n",
-                     static_cast<long long>(s.index), r.what());
+                     static_cast<long long>(s.index), scenes::one_line(r.what()).c_str());
       }
     }
     handled_one();
@@ -1135,9 +1135,11 @@ DatasetStatus dataset_status(const std::string& dir) {
       for (const std::string& f : r.folders) done_folders.insert(fs::path(f).filename().string());
     if (r.status != Status::Done) which[size_t(r.status)].push_back(r.sample.index);
     if (r.status == Status::Stale) stale_why[r.error].push_back(r.sample.index);
-    if (r.status == Status::Failed) failed += "sample " + std::to_string(r.sample.index) + " failed: " + r.error + "\n";
+    // (on one line each: a recorded error may hold a list of mistakes, or a control byte a library echoed)
+    if (r.status == Status::Failed) failed += "sample " + std::to_string(r.sample.index) + " failed: " + scenes::one_line(r.error) + "\n";
     if (r.status == Status::Damaged)
-      damaged += "sample " + std::to_string(r.sample.index) + " damaged: " + r.error + " (`spadgen dataset run` generates it again)\n";
+      damaged += "sample " + std::to_string(r.sample.index) + " damaged: " + scenes::one_line(r.error) +
+                 " (`spadgen dataset run` generates it again)\n";
   });
   std::ostringstream o;
   o << dir << ": dataset " << spec.file << ", " << spec.count() << " samples: " << status_counts(count) << "\n";

@@ -9,12 +9,17 @@
 #include <stdexcept>
 #include <string>
 
+#include "core/utf8.h"
+
 namespace spadgen {
 
 class Error : public std::runtime_error {
  public:
-  // A NUL byte in the message (a name from a file, "fl\u0000at.json") is written \0: what() would end there.
-  explicit Error(const std::string& message) : std::runtime_error(without_nul(message)) {}
+  // A NUL byte in the message (a name from a file, "fl\u0000at.json") is written \0: what() would end there;
+  // a byte that is not part of well-formed UTF-8 (a damaged file's channel name a library echoes) \xNN: the
+  // message is text, for a terminal, a script reading it, and the JSON it is recorded in (a dataset sample's
+  // error with such a byte could not be recorded in its folder's index).
+  explicit Error(const std::string& message) : std::runtime_error(escape_invalid_utf8(without_nul(message))) {}
 
  private:
   static std::string without_nul(const std::string& m) {
@@ -34,7 +39,7 @@ class Error : public std::runtime_error {
 class KeyError : public Error {
  public:
   KeyError(const std::string& key_pointer, const std::string& why)
-      : Error(dotted(key_pointer) + ": " + why), pointer(key_pointer), reason(why) {}
+      : Error(dotted(key_pointer) + ": " + why), pointer(escape_invalid_utf8(key_pointer)), reason(escape_invalid_utf8(why)) {}
   std::string pointer, reason;
 
  private:

@@ -288,26 +288,6 @@ std::string read_file_bounded(const std::string& path, uint64_t max_bytes, const
   return out;
 }
 
-size_t invalid_utf8_at(const std::string& text) {
-  const auto* b = reinterpret_cast<const unsigned char*>(text.data());
-  const size_t n = text.size();
-  for (size_t i = 0; i < n;) {
-    const unsigned c = b[i];
-    size_t len;
-    unsigned lo = 0x80, hi = 0xBF;  // the range of the second byte (Unicode Table 3-7)
-    if (c < 0x80) len = 1;
-    else if (c >= 0xC2 && c <= 0xDF) len = 2;
-    else if (c >= 0xE0 && c <= 0xEF) len = 3, lo = c == 0xE0 ? 0xA0 : 0x80, hi = c == 0xED ? 0x9F : 0xBF;
-    else if (c >= 0xF0 && c <= 0xF4) len = 4, lo = c == 0xF0 ? 0x90 : 0x80, hi = c == 0xF4 ? 0x8F : 0xBF;
-    else return i;
-    if (len > n - i) return i;
-    for (size_t k = 1; k < len; ++k)
-      if (b[i + k] < (k == 1 ? lo : 0x80) || b[i + k] > (k == 1 ? hi : 0xBF)) return i;
-    i += len;
-  }
-  return std::string::npos;
-}
-
 std::string printable(const std::string& text) {
   std::string out;
   for (const char ch : text) {
@@ -325,8 +305,22 @@ std::string printable(const std::string& text) {
 
 std::string one_line(const std::string& text) {
   std::string out;
-  for (const char ch : text) {
+  // The bytes of well-formed UTF-8 are kept; any other (a damaged file's name echoed by a library) as \xNN,
+  // so that every message is valid UTF-8 (a script decoding stderr as text failed on it).
+  size_t valid_to = 0;  // text[.., valid_to) is a well-formed sequence already checked
+  for (size_t i = 0; i < text.size(); ++i) {
+    const char ch = text[i];
     const auto c = static_cast<unsigned char>(ch);
+    if (c >= 0x80 && i >= valid_to) {
+      if (const size_t len = utf8_sequence_at(text, i); len > 0) {
+        valid_to = i + len;
+      } else {
+        char hex[8];
+        std::snprintf(hex, sizeof hex, "\\x%02X", c);
+        out += hex;
+        continue;
+      }
+    }
     if (c == '\n') {
       out += "\\n";
     } else if (c == '\t') {

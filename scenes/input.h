@@ -61,15 +61,14 @@ class JsonLimitError : public Error {
 // than kMaxJsonDepth, and (when asked) a key that appears twice in one object (with its path).
 nlohmann::json parse_json(const std::string& text, const std::string& where, const JsonOptions& options = {});
 
-// The offset of the first byte of `text` that is not part of well-formed UTF-8 (overlong forms, surrogates
-// and code points past U+10FFFF included), or std::string::npos. JSON holds UTF-8 text only: a --set value
-// or a path that is not would make writing metadata.json fail after the whole run.
-size_t invalid_utf8_at(const std::string& text);
+// The offset of the first byte of `text` that is not part of well-formed UTF-8 (core/utf8.h).
+using spadgen::invalid_utf8_at;
 
 // `text` for a message: bytes outside printable ASCII shown as \xHH.
 std::string printable(const std::string& text);
-// The text on one line: control bytes (a newline, a tab, ...) as \n, \t or \xNN, the rest (UTF-8 included, and
-// NUL, which spadgen::Error shows as \0) as it is: for a user's key or name in a one-line message.
+// The text on one line: control bytes (a newline, a tab, ...) as \n, \t or \xNN, bytes that are not part of
+// well-formed UTF-8 as \xNN, the rest (UTF-8 included, and NUL, which spadgen::Error shows as \0) as it is: for
+// a user's key or name in a one-line message.
 std::string one_line(const std::string& text);
 
 // The candidate closest to `word` by edit distance when it is close enough to be a likely typo (at most a

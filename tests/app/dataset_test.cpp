@@ -1003,6 +1003,28 @@ TEST_F(Dataset, AValueWrittenWithAZeroFractionMakesTheSameSamples) {
   EXPECT_THAT(r.output, HasSubstr("2 done, 0 failed, 0 stale, 0 missing"));
 }
 
+// A sample whose error holds bytes that are not UTF-8 (a damaged EXR's channel name, echoed by OpenEXR; the
+// file is the header of a fuzzed one) is recorded in failed/ with them written \xNN (the index, JSON, could
+// not hold them: "the failure of sample 0 is not recorded in failed/: invalid UTF-8 byte"), and said on one
+// line (the name's control byte too).
+TEST_F(Dataset, AFailureWhoseMessageIsNotUtf8IsRecorded) {
+  const std::string maps = std::string(SPADGEN_SOURCE_DIR) + "/tests/data/exr/channel_name_not_utf8.exr";
+  write(dir_ / "d.json", "{\"scenes\": [\"" + kScenes + "multi_object.json\"], \"samples\": 1, \"seed\": 5, \"set\": "
+                         "{\"camera.crop\": [400, 200, 8, 8], \"render.samples_per_pixel\": 1, \"sensor.gate.maps_exr\": \"" + maps + "\"}}");
+  const Result r = sh("dataset run " + (dir_ / "d.json").string() + " -o " + (dir_ / "out").string() + " -q");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_THAT(r.output, Not(HasSubstr("is not recorded in failed/")));
+  EXPECT_EQ(spadgen::invalid_utf8_at(r.output), std::string::npos) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("sample 0 failed: " + kScenes + "multi_object.json: sensor.gate.maps_exr: cannot read EXR"));
+  EXPECT_THAT(r.output, HasSubstr("of the \"count\\xC4\\x02\" channel"));
+  const std::string recorded = slurp(dir_ / "out/failed/000000.json");
+  EXPECT_THAT(recorded, HasSubstr("count\\\\xC4\\u0002"));  // JSON: the backslash and the control byte escaped
+  const Result st = sh("dataset status " + (dir_ / "out").string());
+  EXPECT_EQ(st.code, 4);
+  EXPECT_THAT(st.output, HasSubstr("of the \"count\\xC4\\x02\" channel"));
+  EXPECT_EQ(std::count(st.output.begin(), st.output.end(), '\x02'), 0) << st.output;
+}
+
 TEST_F(Dataset, AFailingSampleIsRecordedAndTheOthersGoOn) {
   // camera.width_px 16 leaves the crop outside the sensor: cells with it fail, the others do not.
   write(dir_ / "d.json", small_dataset(4, 3, kScenes + "multi_object.json", ", \"camera.width_px\": [1024, 16]"));

@@ -215,3 +215,17 @@ TEST(StageClock, TimeGoesToTheInnermostScopeAndThreadsAddUp) {
 
 }  // namespace
 }  // namespace spadgen
+
+// An Error's message is text whatever bytes it was given: a NUL as \0 (what() would end there), a byte of no
+// well-formed UTF-8 sequence as \xNN (a damaged EXR's channel name that OpenEXR echoed could not be recorded
+// in a dataset's JSON index), well-formed UTF-8 of 2 to 4 bytes as it is.
+TEST(ErrorTest, MessagesAreUtf8Text) {
+  EXPECT_EQ(std::string(spadgen::Error(std::string("fl\0at", 5)).what()), "fl\\0at");
+  EXPECT_EQ(std::string(spadgen::Error("\"count\xc4\x02\" \xc3\xa9 \xe2\x82\xac \xf0\x9f\x98\x80 \xed\xa0\x80 \xc0\xaf \xe2\x82").what()),
+            "\"count\\xC4\x02\" \xc3\xa9 \xe2\x82\xac \xf0\x9f\x98\x80 \\xED\\xA0\\x80 \\xC0\\xAF \\xE2\\x82");
+  const spadgen::KeyError k("/sensor/gate/maps_exr", "channel \"a\xff\"");
+  EXPECT_EQ(k.reason, "channel \"a\\xFF\"");
+  EXPECT_EQ(spadgen::invalid_utf8_at(k.what()), std::string::npos);
+  EXPECT_EQ(spadgen::invalid_utf8_at("ok \xc3\xa9"), std::string::npos);
+  EXPECT_EQ(spadgen::invalid_utf8_at("ok \xc3"), 3u);
+}

@@ -561,6 +561,11 @@ TEST_F(SceneFileTest, AnErrorNamingAKeyWithANewlineStaysOnOneLine) {
   EXPECT_THAT(e, HasSubstr("--set laser.aver\\nage\\t\\x01: /laser/aver\\nage\\t\\x01: unknown key"));
   EXPECT_THAT(e, HasSubstr("--set nodes.\"t\xc3\xa4\\nx\".translation_m[2]: found"));
   EXPECT_EQ(one_line("a\xc3\xa9\n\t\x7f"), "a\xc3\xa9\\n\\t\\x7F");
+  // bytes of no well-formed UTF-8 sequence (a lone lead byte, a lone continuation byte, an overlong form, a
+  // surrogate, one cut at the end) as \xNN, valid sequences of 2 to 4 bytes kept: every message is UTF-8
+  EXPECT_EQ(one_line("\"count\xc4\x02\" \x80 \xc0\xaf \xed\xa0\x80 \xe2\x82\xac \xf0\x9f\x98\x80 \xe2\x82"),
+            "\"count\\xC4\\x02\" \\x80 \\xC0\\xAF \\xED\\xA0\\x80 \xe2\x82\xac \xf0\x9f\x98\x80 \\xE2\\x82");
+  EXPECT_EQ(invalid_utf8_at(one_line("\xff\xfe\xc3\xa9\xc3")), std::string::npos);
 }
 
 TEST(Utf8, MalformedSequencesAreFoundAtTheirFirstByte) {
