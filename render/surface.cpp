@@ -73,7 +73,7 @@ Shading::Shading(const scenes::Scene& scene, double laser_wavelength_m, const gl
   for (size_t m = 0; m < scene.meshes.size(); ++m) {
     const scenes::Mesh& mesh = scene.meshes[m];
     const size_t nv = mesh.positions.size();
-    const bool normals = mesh.normals.size() == nv;
+    const bool normals = mesh.has_normals();
     std::vector<TriangleGeometry>& tg = triangles_[m];
     tg.resize(mesh.indices.size() / 3);
     if (normals) triangle_normals_[m].resize(tg.size());

@@ -305,22 +305,10 @@ std::string printable(const std::string& text) {
 
 std::string one_line(const std::string& text) {
   std::string out;
-  // The bytes of well-formed UTF-8 are kept; any other (a damaged file's name echoed by a library) as \xNN,
-  // so that every message is valid UTF-8 (a script decoding stderr as text failed on it).
-  size_t valid_to = 0;  // text[.., valid_to) is a well-formed sequence already checked
-  for (size_t i = 0; i < text.size(); ++i) {
-    const char ch = text[i];
+  // Bytes that are not part of well-formed UTF-8 (a damaged file's name echoed by a library) first, as \xNN:
+  // every message is valid UTF-8 (a script decoding stderr as text failed on it); then the control bytes.
+  for (const char ch : escape_invalid_utf8(text)) {
     const auto c = static_cast<unsigned char>(ch);
-    if (c >= 0x80 && i >= valid_to) {
-      if (const size_t len = utf8_sequence_at(text, i); len > 0) {
-        valid_to = i + len;
-      } else {
-        char hex[8];
-        std::snprintf(hex, sizeof hex, "\\x%02X", c);
-        out += hex;
-        continue;
-      }
-    }
     if (c == '\n') {
       out += "\\n";
     } else if (c == '\t') {

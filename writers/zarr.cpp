@@ -19,6 +19,7 @@
 #include <limits>
 #include <list>
 #include <mutex>
+#include <optional>
 #include <sstream>
 #include <type_traits>
 #include <utility>
@@ -484,20 +485,18 @@ ZarrReader::ZarrReader(const std::string& path, size_t cache_chunks, MissingChun
   const json& f = get("fill_value");
   if (!f.is_null()) {
     // The Zarr v2 specification writes a float's non-finite fill value as "NaN", "Infinity" or "-Infinity".
-    const std::string word = f.is_string() ? f.get<std::string>() : "";
-    const double special = word == "NaN"         ? std::numeric_limits<double>::quiet_NaN()
-                           : word == "Infinity"  ? std::numeric_limits<double>::infinity()
-                           : word == "-Infinity" ? -std::numeric_limits<double>::infinity()
-                                                 : 0.0;
-    const bool named = word == "NaN" || word == "Infinity" || word == "-Infinity";
+    std::optional<double> named;
+    if (f == "NaN") named = std::numeric_limits<double>::quiet_NaN();
+    else if (f == "Infinity") named = std::numeric_limits<double>::infinity();
+    else if (f == "-Infinity") named = -std::numeric_limits<double>::infinity();
     if (!f.is_number() && !(named && is_float(m.dtype)))
       throw Error(m.error("fill_value " + f.dump().substr(0, 40) +
                           (is_float(m.dtype) ? " is not a number, \"NaN\", \"Infinity\" or \"-Infinity\"" : " is not a number")));
     m.has_fill = true;
     const auto put = [&](auto v) { std::memcpy(m.fill.data(), &v, sizeof v); };
     switch (m.dtype) {
-      case Dtype::F32: put(named ? static_cast<float>(special) : f.get<float>()); break;
-      case Dtype::F64: put(named ? special : f.get<double>()); break;
+      case Dtype::F32: put(named ? static_cast<float>(*named) : f.get<float>()); break;
+      case Dtype::F64: put(named ? *named : f.get<double>()); break;
       case Dtype::U8: put(f.get<uint8_t>()); break;
       case Dtype::U16: put(f.get<uint16_t>()); break;
       case Dtype::I32: put(f.get<int32_t>()); break;
