@@ -8,8 +8,12 @@
                          hand-made files for each feature the loader reads, each as .gltf and as .glb
   OUT/seeds/dataset/     the shipped dataset files, and small ones on flat_target.json with every
                          distribution, seeds, repeats and a grid over two scenes
-  OUT/scene_file.dict, OUT/set.dict, OUT/gltf.dict, OUT/dataset.dict   libFuzzer dictionaries (keys,
-                         choices, JSON tokens)
+  OUT/seeds/arrays/      .npy files of every dtype spadgen reads (format 1.0 and 2.0, shapes of rank 0 to 3,
+                         empty ones), and Zarr stores (the harness's input layout: fuzz_arrays.cpp) of every
+                         dtype, uncompressed and Blosc (a stored Blosc buffer), one chunk or several, with
+                         fill values
+  OUT/scene_file.dict, OUT/set.dict, OUT/gltf.dict, OUT/dataset.dict, OUT/arrays.dict   libFuzzer
+                         dictionaries (keys, choices, JSON tokens)
 
 Usage: fuzz/seeds.py OUT   (from anywhere; the repository is this file's parent folder)
 """
@@ -376,6 +380,74 @@ def gltf_seeds(out):
         (d / (name + ".glb")).write_bytes(glb(doc, binary))
 
 
+# The dtypes spadgen's array readers take: (.npy / .zarray descr, struct format of one element).
+DTYPES = [("<f4", "f"), ("<f8", "d"), ("|u1", "B"), ("<u2", "H"), ("<i4", "i"), ("<i8", "q")]
+
+
+def npy_file(descr, fmt, shape, version=1):
+    """A .npy file as np.save writes it: the header dict padded with spaces and a newline so that the data
+    start at a multiple of 64 bytes."""
+    dims = "(%s)" % ("".join("%d," % d for d in shape) if len(shape) == 1 else ", ".join(str(d) for d in shape))
+    header = "{'descr': '%s', 'fortran_order': False, 'shape': %s, }" % (descr, dims)
+    prefix = 10 if version == 1 else 12
+    pad = -(prefix + len(header) + 1) % 64
+    header = (header + " " * pad + "\n").encode()
+    count = 1
+    for d in shape:
+        count *= d
+    values = [(i * 37 % 11) for i in range(count)]
+    length = struct.pack("<H", len(header)) if version == 1 else struct.pack("<I", len(header))
+    return b"\x93NUMPY" + bytes([version, 0]) + length + header + struct.pack("<%d%s" % (count, fmt), *values)
+
+
+def blosc_stored(raw, typesize):
+    """A Blosc 1 buffer holding raw as it is (the memcpyed flag): the 16-byte header, then the bytes."""
+    flags = 0x02  # BLOSC_MEMCPYED, no shuffle
+    return struct.pack("<BBBBIII", 2, 1, flags, typesize, len(raw), len(raw), len(raw) + 16) + raw
+
+
+def zarr_input(zarray, chunk, fill_mode=False):
+    text = json.dumps(zarray).encode()
+    return bytes([3 if fill_mode else 1]) + struct.pack("<H", len(text)) + text + chunk
+
+
+def arrays_seeds(out):
+    d = out / "seeds" / "arrays"
+    d.mkdir(parents=True, exist_ok=True)
+    for descr, fmt in DTYPES:
+        tag = descr[1:]
+        for shape in [(), (0,), (5,), (3, 4), (2, 3, 4), (4, 0, 2)]:
+            for version in (1, 2):
+                name = "npy_%s_%s_v%d.npy" % (tag, "x".join(map(str, shape)) or "scalar", version)
+                (d / name).write_bytes(b"\x00" + npy_file(descr, fmt, shape, version))
+        size = struct.calcsize(fmt)
+        for shape, chunks in [((6,), (6,)), ((6,), (4,)), ((3, 4), (3, 4)), ((3, 4), (2, 3)), ((2, 2, 3), (1, 2, 3))]:
+            n = 1
+            for c in chunks:
+                n *= c
+            raw = struct.pack("<%d%s" % (n, fmt), *[(i * 7 % 5) for i in range(n)])
+            base = {"zarr_format": 2, "shape": list(shape), "chunks": list(chunks), "dtype": descr, "order": "C",
+                    "compressor": None, "fill_value": None, "filters": None, "dimension_separator": "."}
+            stem = "zarr_%s_%s_%s" % (tag, "x".join(map(str, shape)), "x".join(map(str, chunks)))
+            (d / (stem + "_raw")).write_bytes(zarr_input(base, raw))
+            blosc = dict(base, compressor={"id": "blosc", "cname": "zstd", "clevel": 1, "shuffle": 1, "blocksize": 0})
+            (d / (stem + "_blosc")).write_bytes(zarr_input(blosc, blosc_stored(raw, size)))
+            filled = dict(base, fill_value="NaN" if descr[1] == "f" else 7)
+            (d / (stem + "_fill")).write_bytes(zarr_input(filled, raw, fill_mode=True))
+    words = ["zarr_format", "shape", "chunks", "dtype", "order", "compressor", "fill_value", "filters",
+             "dimension_separator", "blosc", "id", "cname", "zstd", "lz4", "clevel", "shuffle", "blocksize", "NaN",
+             "Infinity", "-Infinity", "descr", "fortran_order", "False", "True", "\x93NUMPY"]
+    with open(out / "arrays.dict", "w") as f:
+        for w in words:
+            f.write(dict_entry('"%s"' % w))
+            f.write(dict_entry("'%s'" % w))
+        for descr, _ in DTYPES:
+            f.write(dict_entry('"%s"' % descr))
+            f.write(dict_entry("'%s'" % descr))
+        for t in JSON_TOKENS:
+            f.write(dict_entry(t))
+
+
 def main():
     if len(sys.argv) != 2:
         sys.exit(__doc__)
@@ -387,6 +459,7 @@ def main():
     scene_file_seeds(out)
     gltf_seeds(out)
     dataset_seeds(out, keys)
+    arrays_seeds(out)
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@
 #include <array>
 #include <atomic>
 #include <cerrno>
+#include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -375,7 +376,6 @@ struct ZarrReader::Impl {
   // complete; for another program's store the fill value throughout, an error without one).
   Chunk load(int64_t c) const {
     const size_t nbytes = size_t(grid.chunk_elements * eb);
-    auto out = std::make_shared<std::vector<char>>(nbytes);
     const std::string file = path + "/" + grid.key(c);
     struct stat entry {};
     const int fd = ::stat(file.c_str(), &entry) != 0 && errno == ENOENT ? -1 : detail::open_regular_file(file);
@@ -385,6 +385,7 @@ struct ZarrReader::Impl {
                           "was written"));
       if (!has_fill)
         throw Error(error("chunk " + grid.key(c) + " is missing, and the store has no fill value to stand for it"));
+      auto out = std::make_shared<std::vector<char>>(nbytes);
       for (size_t i = 0; i < nbytes; i += size_t(eb)) std::memcpy(out->data() + i, fill.data(), size_t(eb));
       return out;
     }
@@ -406,15 +407,17 @@ struct ZarrReader::Impl {
         got += size_t(n);
       }
     }
+    // The chunk's bytes are checked against its size before its buffer is allocated: a damaged .zarray's chunks
+    // of gigabytes are refused by their small files, not allocated first.
     if (!blosc) {
       if (raw.size() != nbytes) throw Error(error("chunk " + grid.key(c) + " holds " + std::to_string(raw.size()) + " bytes, not " + std::to_string(nbytes)));
-      std::memcpy(out->data(), raw.data(), nbytes);
-      return out;
+      return std::make_shared<std::vector<char>>(std::move(raw));
     }
     size_t decoded = 0;
-    if (blosc_cbuffer_validate(raw.data(), raw.size(), &decoded) != 0 || decoded != nbytes ||
-        blosc_decompress_ctx(raw.data(), out->data(), nbytes, 1) != int(nbytes))
-      throw Error(error("chunk " + grid.key(c) + " is not a Blosc buffer of " + std::to_string(nbytes) + " bytes"));
+    const auto not_blosc = [&] { return Error(error("chunk " + grid.key(c) + " is not a Blosc buffer of " + std::to_string(nbytes) + " bytes")); };
+    if (blosc_cbuffer_validate(raw.data(), raw.size(), &decoded) != 0 || decoded != nbytes) throw not_blosc();
+    auto out = std::make_shared<std::vector<char>>(nbytes);
+    if (blosc_decompress_ctx(raw.data(), out->data(), nbytes, 1) != int(nbytes)) throw not_blosc();
     return out;
   }
 
@@ -493,14 +496,35 @@ ZarrReader::ZarrReader(const std::string& path, size_t cache_chunks, MissingChun
       throw Error(m.error("fill_value " + f.dump().substr(0, 40) +
                           (is_float(m.dtype) ? " is not a number, \"NaN\", \"Infinity\" or \"-Infinity\"" : " is not a number")));
     m.has_fill = true;
+    // A value of the dtype: an integer dtype's an integer in its range, a float dtype's a number within its
+    // range (a conversion out of range was undefined behaviour, or wrapped: -5 read as 251 in a |u1 store).
+    const auto outside = [&](const char* what) {
+      return Error(m.error("fill_value " + f.dump().substr(0, 40) + " is not " + what + " of dtype " + numpy_descr(m.dtype)));
+    };
+    const auto integer = [&](auto zero) {
+      using T = decltype(zero);
+      constexpr auto lo = int64_t(std::numeric_limits<T>::min());
+      constexpr auto hi = uint64_t(std::numeric_limits<T>::max());
+      if (f.is_number_unsigned()) {  // nlohmann's kind of every integer >= 0
+        if (const auto v = f.get<uint64_t>(); v <= hi) return static_cast<T>(v);
+      } else if (f.is_number_integer()) {
+        if (const auto v = f.get<int64_t>(); v >= lo) return static_cast<T>(v);  // < 0 here, so <= hi
+      }
+      throw outside("an integer in the range");
+    };
     const auto put = [&](auto v) { std::memcpy(m.fill.data(), &v, sizeof v); };
     switch (m.dtype) {
-      case Dtype::F32: put(named ? static_cast<float>(*named) : f.get<float>()); break;
+      case Dtype::F32: {
+        const double v = named ? *named : f.get<double>();
+        if (std::isfinite(v) && std::fabs(v) > double(std::numeric_limits<float>::max())) throw outside("a number in the range");
+        put(static_cast<float>(v));
+        break;
+      }
       case Dtype::F64: put(named ? *named : f.get<double>()); break;
-      case Dtype::U8: put(f.get<uint8_t>()); break;
-      case Dtype::U16: put(f.get<uint16_t>()); break;
-      case Dtype::I32: put(f.get<int32_t>()); break;
-      case Dtype::I64: put(f.get<int64_t>()); break;
+      case Dtype::U8: put(integer(uint8_t{0})); break;
+      case Dtype::U16: put(integer(uint16_t{0})); break;
+      case Dtype::I32: put(integer(int32_t{0})); break;
+      case Dtype::I64: put(integer(int64_t{0})); break;
     }
   }
 }

@@ -13,6 +13,7 @@ image when its first channel is asked for. The folder's layout is docs/outputs.m
 from __future__ import annotations
 
 import json
+import math
 import numbers
 import operator
 import os
@@ -228,6 +229,15 @@ def _check_zarray(path):
             floats and f in ("NaN", "Infinity", "-Infinity")):
         raise bad(f".zarray's fill_value {json.dumps(f)[:40]} is not a number"
                   + (', "NaN", "Infinity" or "-Infinity"' if floats else ""))
+    # a value of the dtype, as the program's reader asks (writers/zarr.cpp): an integer in an integer dtype's
+    # range, a float dtype's number within its range (zarr converts one outside regardless: -5 read as 251)
+    if isinstance(f, (int, float)) and not isinstance(f, bool):
+        dt = np.dtype(z["dtype"])
+        if floats:
+            if (isinstance(f, int) or math.isfinite(f)) and abs(f) > float(np.finfo(dt).max):
+                raise bad(f".zarray's fill_value {json.dumps(f)[:40]} is not a number in the range of dtype {z['dtype']}")
+        elif not isinstance(f, int) or not np.iinfo(dt).min <= f <= np.iinfo(dt).max:
+            raise bad(f".zarray's fill_value {json.dumps(f)[:40]} is not an integer in the range of dtype {z['dtype']}")
     return z
 
 

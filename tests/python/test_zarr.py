@@ -225,6 +225,10 @@ def test_a_zarray_spadgen_does_not_write_is_refused_naming_the_store(make_run, t
                              ("filters", [{"id": "delta", "dtype": "|u1"}], "filters are not supported"),
                              ("compressor", {"id": "zlib"}, "only Blosc \\(or none\\) is supported"),
                              ("fill_value", "x", "fill_value \"x\" is not a number"),
+                             ("fill_value", -5, "fill_value -5 is not an integer in the range of dtype \\|u1"),
+                             ("fill_value", 256, "fill_value 256 is not an integer in the range of dtype \\|u1"),
+                             ("fill_value", 1.5, "fill_value 1.5 is not an integer in the range of dtype \\|u1"),
+                             ("fill_value", 10 ** 400, "fill_value 1000.* is not an integer in the range"),
                              ("shape", [good["shape"][0], 2, 3], "shape \\(.*\\), but metadata.json's \\(K, H, W\\) is"),
                              ("chunks", [0, 1, 1], "chunks \\[0, 1, 1\\] is not a list of positive integers")):
         (store / ".zarray").write_text(json.dumps(dict(good, **{key: value})))
@@ -242,6 +246,10 @@ def test_a_zarray_spadgen_does_not_write_is_refused_naming_the_store(make_run, t
     wider = {"<f4": "<f8", "<f8": "<f4"}[light["dtype"]]
     (values / ".zarray").write_text(json.dumps(dict(light, dtype=wider)))
     with pytest.raises(ValueError, match=f"{values}/[0-9.]+: a chunk of this Zarr store decodes to"):
+        np.asarray(open_run(run_dir)["light/values"][:])
+    # a float store's fill value beyond its dtype's range (the saved light's values are float32)
+    (values / ".zarray").write_text(json.dumps(dict(light, fill_value=1e39)))
+    with pytest.raises(ValueError, match=f"{values}: .*fill_value 1e\\+39 is not a number in the range of dtype <f4"):
         np.asarray(open_run(run_dir)["light/values"][:])
     (store / ".zarray").write_text(json.dumps(good))
     assert same_bytes(np.asarray(open_run(run_dir).counts), expected)

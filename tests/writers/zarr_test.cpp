@@ -267,6 +267,54 @@ TEST(ZarrWriter, UnwrittenElementsAreZero) {
   }
 }
 
+// A fill value is a value of the store's dtype: an integer dtype's an integer in its range, a float dtype's a
+// number within its range. One outside was converted regardless: undefined behaviour for 1e300 in an int32
+// store (found by fuzz_arrays), -5 read as 251 in a uint8 one.
+TEST(ZarrReader, RefusesAFillValueOutsideItsDtype) {
+  TempDir dir;
+  const auto store = [&](Dtype dtype, const nlohmann::json& fill) {
+    fs::remove_all(dir.file("f.zarr"));
+    {
+      ZarrWriter w(dir.file("f.zarr"), dtype, {8}, {4});
+      const std::vector<uint8_t> zeros(8 * 8, 0);
+      w.write(0, zeros.data(), 4);  // chunk 0 written, chunk 1 missing
+      w.commit();
+    }
+    fs::remove(dir.file("f.zarr/1"));
+    nlohmann::json z = nlohmann::json::parse(read_bytes(dir.file("f.zarr/.zarray")));
+    z["fill_value"] = fill;
+    write_file_atomic(dir.file("f.zarr/.zarray"), z.dump());
+    return dir.file("f.zarr");
+  };
+  const auto refused = [&](Dtype dtype, const nlohmann::json& fill, const std::string& why) {
+    try {
+      (void)ZarrReader(store(dtype, fill), 16, MissingChunks::Fill);
+      ADD_FAILURE() << "fill_value " << fill.dump() << " was taken for " << numpy_descr(dtype);
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("fill_value " + fill.dump() + " is not " + why + " of dtype " + numpy_descr(dtype)),
+                std::string::npos) << e.what();
+    }
+  };
+  refused(Dtype::I32, 1e300, "an integer in the range");
+  refused(Dtype::I32, 2147483648LL, "an integer in the range");
+  refused(Dtype::I32, 1.5, "an integer in the range");
+  refused(Dtype::U8, -5, "an integer in the range");
+  refused(Dtype::U8, 256, "an integer in the range");
+  refused(Dtype::U16, 65536, "an integer in the range");
+  refused(Dtype::I64, 18446744073709551615ULL, "an integer in the range");
+  refused(Dtype::F32, 1e39, "a number in the range");
+  refused(Dtype::F32, -1e39, "a number in the range");
+  // The ends of each range are values of it, read into the missing chunk.
+  EXPECT_EQ(ZarrReader(store(Dtype::U8, 255), 16, MissingChunks::Fill).read_all<uint8_t>()[6], 255);
+  EXPECT_EQ(ZarrReader(store(Dtype::U16, 0), 16, MissingChunks::Fill).read_all<uint16_t>()[6], 0);
+  EXPECT_EQ(ZarrReader(store(Dtype::I32, -2147483648LL), 16, MissingChunks::Fill).read_all<int32_t>()[6],
+            std::numeric_limits<int32_t>::min());
+  EXPECT_EQ(ZarrReader(store(Dtype::I64, 9223372036854775807LL), 16, MissingChunks::Fill).read_all<int64_t>()[6],
+            std::numeric_limits<int64_t>::max());
+  EXPECT_EQ(ZarrReader(store(Dtype::F32, 3.4e38), 16, MissingChunks::Fill).read_all<float>()[6], 3.4e38f);
+  EXPECT_EQ(ZarrReader(store(Dtype::F64, 1e300), 16, MissingChunks::Fill).read_all<double>()[6], 1e300);
+}
+
 TEST(ZarrWriter, WithoutCommitNothingIsLeftAndCommitReplacesAnEarlierStore) {
   TempDir dir;
   const std::vector<int32_t> a = ramp<int32_t>(40), b(40, 7);
@@ -332,6 +380,21 @@ TEST(ZarrReader, RefusesWhatItCannotReadNamingTheStore) {
   expect_error("gzip");
   write_file_atomic(dir.file("a.zarr/.zarray"), "{");
   expect_error("broken JSON");
+  // A .zarray damaged to chunks of 2 GB over the same files: each chunk is refused by its file's size before
+  // its buffer is allocated (it was allocated, and zeroed, first: found by fuzz_arrays under its 2 GB limit).
+  for (const nlohmann::json& compressor : {nlohmann::json(nullptr), nlohmann::json::parse(zarray)["compressor"]}) {
+    z = nlohmann::json::parse(zarray);
+    z["chunks"] = {500000000};
+    if (compressor.is_null()) z["compressor"] = nullptr;
+    write_file_atomic(dir.file("a.zarr/.zarray"), z.dump());
+    try {
+      (void)ZarrReader(dir.file("a.zarr")).read_all<float>();
+      ADD_FAILURE() << "chunks of 2 GB were read from a chunk of " << read_bytes(dir.file("a.zarr/0")).size() << " bytes";
+    } catch (const Error& e) {
+      const std::string why = compressor.is_null() ? " bytes, not 2000000000" : "is not a Blosc buffer of 2000000000 bytes";
+      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
+    }
+  }
   EXPECT_THROW(ZarrReader(dir.file("nothing.zarr")), Error);
   // The wrong dtype asked for.
   write_file_atomic(dir.file("a.zarr/.zarray"), zarray);
