@@ -668,13 +668,25 @@ std::string damage_of(const std::string& f, int64_t have, const json& sizes) {
   return "";
 }
 
+// damage_of for listed file f at `path` with `have` bytes, where also a folder stands for a file the run wrote
+// (a Zarr store is a folder; a name damaged to "" lists the sample's folder itself). The one rule of what
+// `dataset status` calls damaged and of what `dataset run` generates again (status said a sample listing ""
+// was damaged and run would generate it again, and run kept it as done).
+std::string listed_damage(const fs::path& path, const std::string& f, int64_t have, const json& sizes) {
+  std::error_code ec;
+  // (a folder where the run wrote a file: it was "0 of its 89984 bytes")
+  if (fs::is_directory(path, ec) && !f.ends_with(".zarr")) return f + " (a folder, where the run wrote a file)";
+  return damage_of(f, have, sizes);
+}
+
 // The files a published folder's metadata.json lists that are not as the run wrote them.
 std::vector<std::string> gone_files(const fs::path& folder, const json& meta) {
   std::vector<std::string> gone;
   for (const json& name : meta["files"]) {
     if (!name.is_string() || name == "metadata.json") continue;
     const std::string f = name.get<std::string>();
-    if (std::string d = damage_of(f, writers::bytes_on_disk((folder / f).string()), recorded_sizes(meta)); !d.empty())
+    const fs::path path = folder / f;
+    if (std::string d = listed_damage(path, f, writers::bytes_on_disk(path.string()), recorded_sizes(meta)); !d.empty())
       gone.push_back(std::move(d));
   }
   return gone;
@@ -789,10 +801,8 @@ SampleRecord DatasetFolder::inspect(const Sample& s, const std::string* hash) co
         if (!inodes.insert({st.st_dev, st.st_ino}).second) continue;
         size += int64_t(st.st_size), any = true;
       }
-      // (a folder where the run wrote a file: it was "0 of its 89984 bytes")
-      const std::string& file = name.get_ref<const std::string&>();
-      if (fs::is_directory(path, ec) && !file.ends_with(".zarr")) gone.push_back(prefix + file + " (a folder, where the run wrote a file)");
-      else if (std::string d = damage_of(file, present ? whole : -1, sizes); !d.empty()) gone.push_back(prefix + d);
+      if (std::string d = listed_damage(path, name.get_ref<const std::string&>(), present ? whole : -1, sizes); !d.empty())
+        gone.push_back(prefix + d);
       if (present) rec.listed.push_back(prefix + name.get<std::string>());
       if (!any) continue;
       rec.files.emplace_back(prefix + name.get<std::string>(), size);

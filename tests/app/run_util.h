@@ -15,6 +15,9 @@
 #include <filesystem>
 #include <fstream>
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "core/utf8.h"
 #include <sstream>
 #include <string>
 #include <thread>
@@ -166,6 +169,67 @@ inline std::vector<double> values(const Npy& n) {
     for (size_t i = 0; i < v.size(); ++i) v[i] = double(uint8_t(n.data[2 * i]) | (uint8_t(n.data[2 * i + 1]) << 8));
   }
   return v;
+}
+
+// What is wrong with a run's stderr, or "" when it is the program's own: UTF-8 text, lines of "spadgen: ..." (the
+// warnings, then with `failed` an error: "spadgen: error: ..." last) and no internal error.
+inline std::string stderr_problem(const std::string& err, bool failed) {
+  if (spadgen::invalid_utf8_at(err) != std::string::npos) return "not UTF-8 text";
+  if (err.find("internal error") != std::string::npos) return "an internal error";
+  std::vector<std::string> lines;
+  for (std::istringstream in(err); std::getline(in, lines.emplace_back());) {
+  }
+  lines.pop_back();
+  for (const std::string& line : lines)
+    if (line.rfind("spadgen: ", 0) != 0) return "a line not of spadgen's: " + line;
+  if (failed && (lines.empty() || lines.back().rfind("spadgen: error: ", 0) != 0)) return "no error last";
+  return "";
+}
+
+// Damage for the soak tests: a fixed pseudo-random sequence (splitmix64), the same on every machine.
+struct Splitmix {
+  uint64_t state;
+  uint64_t below(uint64_t n) {
+    uint64_t z = (state += 0x9e3779b97f4a7c15ull);
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+    return (z ^ (z >> 31)) % n;
+  }
+};
+
+// Every place of a JSON document but its root, depth first.
+inline std::vector<nlohmann::json::json_pointer> json_places(const nlohmann::json& doc) {
+  std::vector<nlohmann::json::json_pointer> places;
+  const auto walk = [&](const auto& self, const nlohmann::json& v, const nlohmann::json::json_pointer& at) -> void {
+    if (!at.empty()) places.push_back(at);
+    if (v.is_object())
+      for (const auto& [k, e] : v.items()) self(self, e, at / k);
+    else if (v.is_array())
+      for (size_t i = 0; i < v.size(); ++i) self(self, v[i], at / i);
+  };
+  walk(walk, doc, nlohmann::json::json_pointer());
+  return places;
+}
+
+// Damages doc (not a scalar) at one of its places, drawn from rng: a value of another type or out of range, or
+// the key or element removed. Returns what it did ("/a/b = 1e+308", "/a/b removed").
+inline std::string damage_json(nlohmann::json& doc, Splitmix& rng) {
+  const std::vector<nlohmann::json::json_pointer> places = json_places(doc);
+  const nlohmann::json values[] = {nullptr, true, "x", "", -1, 0, 1, 0.5, 1e308, -1e308, 1e-308, 9223372036854775807LL,
+                                   18446744073709551615ULL, nlohmann::json::array(), nlohmann::json::object(),
+                                   nlohmann::json::array({1, 2, 3}), nlohmann::json::object({{"a", 1}}), "\u00e9"};
+  const nlohmann::json::json_pointer at = places.at(rng.below(places.size()));
+  const size_t v = rng.below(std::size(values) + 2);  // the last two: remove it
+  if (v < std::size(values)) {
+    doc[at] = values[v];
+    return at.to_string() + " = " + values[v].dump();
+  }
+  nlohmann::json& parent = doc[at.parent_pointer()];
+  if (parent.is_object())
+    parent.erase(at.back());
+  else
+    parent.erase(std::stoul(at.back()));
+  return at.to_string() + " removed";
 }
 
 }  // namespace spadgen::testing
