@@ -96,6 +96,17 @@ def _check_index(rows, index_path):
         for key, kind in (("ground_truth", dict), ("warnings", list), ("error", str)):
             if r.get(key) is not None and not isinstance(r[key], kind):
                 raise ValueError(f"{where}: \"{key}\" is {json.dumps(r[key])[:40]}, not a{'n object' if kind is dict else ' list' if kind is list else ' string'}; {damaged}")
+        # what table() makes columns of (a seed removed was a KeyError, one of another type a TypeError or an
+        # OverflowError, a warnings of null a TypeError: a soak's finds)
+        for _, key in _SEEDS:
+            v = r["seeds"].get(key)
+            if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v < 1 << 63:
+                raise ValueError(f"{where}: seeds.{key} is {json.dumps(v)[:40]}, not an integer in [0, 2^63); {damaged}")
+        if "warnings" in r and not (isinstance(r["warnings"], list) and all(isinstance(w, str) for w in r["warnings"])):
+            raise ValueError(f"{where}: \"warnings\" is {json.dumps(r['warnings'])[:40]}, not a list of texts; {damaged}")
+        for key, v in [("bytes", r.get("bytes", 0))] + [(f"ground_truth.{k}", v) for k, v in (r.get("ground_truth") or {}).items()]:
+            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float))):
+                raise ValueError(f"{where}: {key} is {json.dumps(v)[:40]}, not a number; {damaged}")
         if i in indices:
             raise ValueError(f"{where}: lists sample {i} again (row {indices[i]} lists it); {damaged}")
         indices[i] = n
@@ -281,6 +292,11 @@ class Dataset:
         if not isinstance(self.spec, dict):
             raise ValueError(f"{spec_path}: JSON, but not an object (`spadgen dataset run` writes one): it was damaged "
                              f"afterwards; {remedy}")
+        # what the parameters' names are read from (a "random" of null was a TypeError)
+        for key in ("grid", "random"):
+            if not isinstance(self.spec.get(key, {}), dict):
+                raise ValueError(f"{spec_path}: {key} is {json.dumps(self.spec[key])[:40]}, not an object (`spadgen dataset "
+                                 f"run` writes one): it was damaged afterwards; {remedy}")
         index_path = os.path.join(self.path, "index.jsonl")
         if not os.path.isfile(index_path):
             if _runs_on(self.path):

@@ -389,10 +389,16 @@ class Run:
                     isinstance(g, list) and len(g) == acq.get("K", len(g)) and
                     all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in g)):
                 raise bad(f"acquisition.{key}", "is not K numbers")
-        intr = section("camera").get("intrinsics", [[1, 0, 0], [0, 1, 0], [0, 0, 1]])
-        if not (isinstance(intr, list) and len(intr) == 3 and
-                all(isinstance(r, list) and len(r) == 3 and all(isinstance(v, (int, float)) for v in r) for r in intr)):
-            raise bad("camera.intrinsics", "is not a 3 x 3 matrix of numbers")
+        for key, n in (("intrinsics", 3), ("camera_to_world", 4)):
+            mat = section("camera").get(key, [[0] * n] * n)
+            if not (isinstance(mat, list) and len(mat) == n and all(
+                    isinstance(r, list) and len(r) == n and
+                    all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in r) for r in mat)):
+                raise bad(f"camera.{key}", f"is not a {n} x {n} matrix of finite numbers")
+        for key in ("ground_truth_layers", "ground_truth_objects"):
+            v = m.get(key, 0)
+            if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= 1 << 20:
+                raise bad(key, f"is {json.dumps(v)[:40]}, not an integer in [0, {1 << 20}]")
 
     def _remedy(self):
         """How to make the run's files again: its scene, or for a dataset's sample the dataset run (which finds
@@ -1006,22 +1012,22 @@ class Run:
 
     # ---- camera -----------------------------------------------------------------------------------------
 
-    @property
-    def _camera(self):
+    def _camera_matrix(self, key):
+        """metadata.json's camera.key as a float64 array (_check_metadata checked its shape and numbers)."""
         if "camera" not in self.metadata:
             raise KeyError(f"{self.path}: metadata.json has no camera section (written by a spadgen before "
                            "version 0.1.0 had it): run the scene again")
-        return self.metadata["camera"]
+        return np.asarray(self._required("camera", key), np.float64)
 
     @property
     def intrinsics(self):
         """(3, 3) float64 intrinsic matrix of the images (OpenCV convention, crop included; spadgen.camera)."""
-        return np.asarray(self._camera["intrinsics"], np.float64)
+        return self._camera_matrix("intrinsics")
 
     @property
     def camera_to_world(self):
         """(4, 4) float64 pose: camera frame (x right, y down, z forward) to the glTF world frame."""
-        return np.asarray(self._camera["camera_to_world"], np.float64)
+        return self._camera_matrix("camera_to_world")
 
     @property
     def world_to_camera(self):

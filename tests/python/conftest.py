@@ -1,6 +1,7 @@
 """Shared fixtures of the Python package's tests: the spadgen program and exr_tool (paths from CTest through
 SPADGEN_BIN, SPADGEN_EXR_TOOL and SPADGEN_ZARR_TOOL, else the README's build folder), and small real runs of shipped scenes,
 made once per test process."""
+import json
 import os
 import pathlib
 import subprocess
@@ -129,3 +130,35 @@ def dataset_dir(spadgen_bin, tmp_path_factory):
     # The failing sample makes the run exit 1 after generating the others.
     assert r.returncode == 1 and "1 sample failed (2)" in r.stderr, r.stderr
     return out
+
+
+# Damage for the soak tests: values of another type or out of range, or a key or element removed, at a place of
+# a JSON document drawn from rng (random.Random with a fixed seed).
+DAMAGE = [None, True, "x", "", -1, 0, 1, 0.5, 1e308, -1e308, 1e-308, 2**63 - 1, 2**64 - 1, [], {}, [1, 2, 3], {"a": 1}, "\u00e9"]
+
+
+def json_places(v, at=()):
+    """Every place of a JSON document but its root (tuples of keys and indices), depth first."""
+    out = [at] if at else []
+    if isinstance(v, dict):
+        for k, e in v.items():
+            out += json_places(e, at + (k,))
+    elif isinstance(v, list):
+        for i, e in enumerate(v):
+            out += json_places(e, at + (i,))
+    return out
+
+
+def damage_json(doc, rng):
+    """Damages doc in place at one of its places; returns what it did ("a/b = 1e+308", "a/b removed")."""
+    at = rng.choice(json_places(doc))
+    parent = doc
+    for k in at[:-1]:
+        parent = parent[k]
+    v = rng.randrange(len(DAMAGE) + 2)  # the last two: remove it
+    where = "/".join(map(str, at))
+    if v >= len(DAMAGE):
+        del parent[at[-1]]
+        return where + " removed"
+    parent[at[-1]] = DAMAGE[v]
+    return where + " = " + json.dumps(DAMAGE[v])
