@@ -515,6 +515,9 @@ NpyReader::NpyReader(const std::string& path) : path_(path) {
   }
   elements_ = n;
   const int64_t eb = NpyWriter::element_bytes(dtype_);
+  // (its bytes must be a number too: the message below multiplied past 2^63, found by fuzz_arrays)
+  if (elements_ > std::numeric_limits<int64_t>::max() / eb)
+    throw Error(read_error(path, "shape " + shown(s) + " too large: its " + shown(d) + " elements take more than 2^63 bytes"));
   // The format pads the header so that the data start at a multiple of 64 bytes (16 in NumPy before 1.14):
   // data() hands out the mapping as an array of the dtype, which must be aligned to it.
   if (data_offset_ % eb != 0)

@@ -180,6 +180,33 @@ TEST(NpyReader, AMalformedShapeIsAnErrorNamingTheFile) {
   }
 }
 
+// A shape whose element count fits 64 bits but whose bytes do not is refused as too large (the message that the
+// file holds too few bytes multiplied past 2^63, undefined behaviour: found by fuzz_arrays); one whose bytes fit
+// is the file's too few bytes, with the count of bytes it needs.
+TEST(NpyReader, AShapeWhoseBytesPass2To63IsTooLarge) {
+  TempDir dir;
+  const auto with_shape = [&](const std::string& shape) {  // the header padded again to 64 bytes
+    std::string header = "{'descr': '<u2', 'fortran_order': False, 'shape': " + shape + ", }";
+    header += std::string(size_t(64 - (10 + header.size() + 1) % 64) % 64, ' ') + "\n";
+    const std::string bytes = std::string("\x93NUMPY\x01\x00", 8) + char(header.size() & 255) + char(header.size() >> 8) + header +
+                              std::string(12, '\0');
+    std::ofstream(dir.file("b.npy"), std::ios::binary) << bytes;
+    return dir.file("b.npy");
+  };
+  const auto refused = [&](const std::string& shape, const std::string& why) {
+    try {
+      NpyReader r(with_shape(shape));
+      ADD_FAILURE() << shape << " was read";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
+    }
+  };
+  refused("(4, 1152921504606846976)", "shape (4, 1152921504606846976) too large: its '<u2' elements take more than 2^63 bytes");
+  refused("(4611686018427387904,)", "too large: its '<u2' elements take more than 2^63 bytes");
+  refused("(4611686018427387903,)", "the file holds 12 bytes of data, shape (4611686018427387903,) needs 9223372036854775806");
+  EXPECT_EQ(NpyReader(with_shape("(6,)")).elements(), 6);
+}
+
 // A structured dtype is named whole (the message was cut at its first comma: "dtype [('a' is not ...").
 TEST(NpyReader, AStructuredDtypeIsNamedWhole) {
   TempDir dir;
