@@ -21,6 +21,14 @@ class App : public ::testing::Test {
   fs::path dir_;
 };
 
+// Two samples of an 8 x 8 crop of the flat target, 1 path each, a few gate positions: milliseconds per sample.
+// more: further top-level entries (", \"random\": {...}").
+inline std::string tiny_dataset(const std::string& more = "") {
+  return "{\"seed\": 3, \"scenes\": [\"" + kScenes + "flat_target.json\"], \"samples\": 2, \"set\": {\"camera.crop\": [508, 246, 8, 8], "
+         "\"render.samples_per_pixel\": 1, \"acquisition.gate_sweep.start_ns\": 6, \"acquisition.gate_sweep.stop_ns\": 7, "
+         "\"outputs.previews\": false}" + more + "}";
+}
+
 // A quick version of the multi-object experiment: a crop where the plate covers the sphere's edge.
 inline const std::string kSmallSettings =
     kScenes + "multi_object.json -q --set render.samples_per_pixel=2 --set acquisition.gate_sweep.stop_ns=4.2 "

@@ -47,14 +47,6 @@ std::string small_dataset(int samples, uint64_t seed = 3, const std::string& sce
          "\n  \"seeds\": {\"chip\": 1}, \"repeats\": 2\n}\n";
 }
 
-// Two samples of an 8 x 8 crop of the flat target, 1 path each, a few gate positions: milliseconds per sample.
-// more: further top-level entries (", \"random\": {...}").
-std::string tiny_dataset(const std::string& more = "") {
-  return "{\"seed\": 3, \"scenes\": [\"" + kScenes + "flat_target.json\"], \"samples\": 2, \"set\": {\"camera.crop\": [508, 246, 8, 8], "
-         "\"render.samples_per_pixel\": 1, \"acquisition.gate_sweep.start_ns\": 6, \"acquisition.gate_sweep.stop_ns\": 7, "
-         "\"outputs.previews\": false}" + more + "}";
-}
-
 void write(const fs::path& p, const std::string& text) {
   std::ofstream(p) << text;
 }
@@ -1660,7 +1652,7 @@ TEST_F(Dataset, ADatasetWhoseGltfDoesNotLoadIsRefusedBeforeAnyWork) {
 // called the sample damaged and said run would generate it again, while run kept it as done (its check of the
 // listed files took the folder for a file of its size). Both now apply one rule: run tries it again, and,
 // as the folder holds a file its metadata.json no longer lists, records why it leaves it (never replacing files
-// it cannot tell are its own); status then says so. Found by the soak below.
+// it cannot tell are its own); status then says so. Found by the soak of soak_test.cpp.
 TEST_F(Dataset, ASampleListingItsOwnFolderAsAFileIsDamagedForStatusAndRunAlike) {
   write(dir_ / "d.json", tiny_dataset());
   const fs::path out = dir_ / "out", meta = out / "samples/000001/metadata.json";
@@ -1681,64 +1673,6 @@ TEST_F(Dataset, ASampleListingItsOwnFolderAsAFileIsDamagedForStatusAndRunAlike) 
   const Result after = sh("dataset status " + out.string());
   EXPECT_EQ(after.code, 4) << after.output;
   EXPECT_THAT(after.output, HasSubstr("1 done, 1 failed"));
-}
-
-// A dataset folder's own files damaged at random (dataset.json, a row of index.jsonl or a sample's metadata.json:
-// a value of another type or out of range, a key or element removed; 40 cases from a fixed seed), then read by
-// `dataset status` and `dataset run`: each ends by itself in success, an error (exit 1) or, for status, samples
-// not done (exit 4), never an internal error, a signal or the time limit, its stderr spadgen's own lines; and
-// after a run that succeeds, status finds every sample done. (The soak of 400 such cases that kept this in
-// mind ran the same checks.)
-TEST_F(Dataset, ADamagedDatasetFolderIsNamedByStatusAndRepairedOrRefusedByRun) {
-  write(dir_ / "d.json", tiny_dataset(", \"random\": {\"laser.average_power_mW\": {\"uniform\": [1, 2]}}"));
-  const fs::path pristine = dir_ / "pristine", out = dir_ / "out", err = dir_ / "err";
-  ASSERT_EQ(sh("dataset run " + (dir_ / "d.json").string() + " -o " + pristine.string() + " -q").code, 0);
-  const auto spadgen = [&](const std::string& args) {
-    const Result r = shell("(timeout -s KILL 60 " + kBin + " " + args + " 2> " + err.string() + ")");
-    return std::pair<int, std::string>{r.code, slurp(err)};
-  };
-  Splitmix rng{7};
-  std::map<std::string, int> outcomes;
-  for (int c = 0; c < 40; ++c) {
-    fs::remove_all(out);
-    fs::copy(pristine, out, fs::copy_options::recursive);
-    // the file, and its damage
-    const size_t which = rng.below(3);
-    std::string what;
-    if (which == 1) {  // a row of index.jsonl
-      std::vector<std::string> rows;
-      for (std::istringstream in(slurp(out / "index.jsonl")); std::getline(in, rows.emplace_back());) {
-      }
-      rows.pop_back();
-      ASSERT_EQ(rows.size(), 2u);
-      const size_t r = rng.below(rows.size());
-      json row = json::parse(rows[r]);
-      what = "index.jsonl row " + std::to_string(r) + " " + damage_json(row, rng);
-      rows[r] = row.dump();
-      std::string text;
-      for (const std::string& line : rows) text += line + "\n";
-      write(out / "index.jsonl", text);
-    } else {
-      const std::string file = which == 0 ? "dataset.json" : "samples/00000" + std::to_string(rng.below(2)) + "/metadata.json";
-      json doc = json::parse(slurp(out / file));
-      what = file + " " + damage_json(doc, rng);
-      write(out / file, doc.dump(1));
-    }
-    const auto [status_code, status_err] = spadgen("dataset status " + out.string());
-    EXPECT_TRUE(status_code == 0 || status_code == 1 || status_code == 4) << "status with " << what << ": exit " << status_code
-                                                                          << "\n" << status_err;
-    EXPECT_EQ(stderr_problem(status_err, status_code == 1), "") << "status with " << what << ": " << status_err;
-    const auto [run_code, run_err] = spadgen("dataset run " + (dir_ / "d.json").string() + " -o " + out.string() + " -q");
-    EXPECT_TRUE(run_code == 0 || run_code == 1) << "run with " << what << ": exit " << run_code << "\n" << run_err;
-    EXPECT_EQ(stderr_problem(run_err, run_code == 1), "") << "run with " << what << ": " << run_err;
-    if (run_code == 0) {
-      const auto [after, after_err] = spadgen("dataset status " + out.string());
-      EXPECT_EQ(after, 0) << "status after the run with " << what << "\n" << after_err;
-    }
-    ++outcomes["status " + std::to_string(status_code) + ", run " + std::to_string(run_code)];
-  }
-  for (const auto& [o, n] : outcomes) std::printf("%s: %d\n", o.c_str(), n);
-  EXPECT_GE(outcomes.size(), 2u);  // the damage is read, not ignored wholesale
 }
 
 }  // namespace
