@@ -41,10 +41,9 @@ std::pair<int, std::string> stderr_of(const std::string& args) {
 // removed, at any place of it: 48 cases from a fixed seed), then read by `reconstruct`, `evaluate` and `sense`:
 // each ends by itself in success or an error of spadgen's (exit 0 or 1), never an internal error, a signal or
 // the time limit, and prints UTF-8 text: lines of spadgen's own, the error last (1,500 cases from another seed
-// passed too, in 93 s). A soak of 2,800 such cases found four
-// internal errors (an entry of /model of another shape, the gate's rise as an object, a detections file's
-// spadgen_source, an earlier metrics.json), each fixed with a test of its own; this keeps the whole class in
-// the suite.
+// passed too, in 102 s). A soak of 2,800 such cases found four internal errors (an entry of /model of another
+// shape, the gate's rise as an object, a detections file's spadgen_source, an earlier metrics.json), each fixed
+// with a test of its own; this keeps the whole class in the suite.
 TEST_F(Soak, ADamagedMetadataJsonIsAnErrorOfSpadgensInEveryReader) {
   const fs::path run = dir_ / "run";
   ASSERT_EQ(stderr_of("run " + kTiny + " --set outputs.light=true -q -o " + run.string()).first, 0);
