@@ -13,7 +13,6 @@
 #include <algorithm>
 #include <chrono>
 #include <functional>
-#include <map>
 #include <set>
 #include <sstream>
 #include <thread>

@@ -71,12 +71,6 @@ void expect_exit(const Outcome& o, int code, const std::string& what) {
 }
 
 const std::string kFlat = kScenes + "flat_target.json";
-// A run of a few milliseconds: 8 x 8 pixels, 1 path each, 29 gate positions.
-// 28 gate positions whose window holds the target's return (4 + 6.7 ns): a sound run, which prints nothing
-// with -q (no "outside the time window" warning).
-const std::string kTiny = kFlat + " --set camera.crop=[508,246,8,8] --set render.samples_per_pixel=1 "
-                                  "--set acquisition.gate_sweep.start_ns=6 --set acquisition.gate_sweep.stop_ns=7 "
-                                  "--set outputs.previews=false";
 
 class Hardening : public ::testing::Test {
  protected:
@@ -1399,4 +1393,5 @@ TEST_F(Hardening, ANulByteInANameIsShownAndTheMessageIsWhole) {
   EXPECT_THAT(o.output, HasSubstr("--set gltf: is '"));
   EXPECT_THAT(o.output, HasSubstr("fl\\x00x.gltf', which holds a NUL byte; expected a path without one\n"));
 }
+
 }  // namespace

@@ -4,7 +4,6 @@
 // prints UTF-8 lines of spadgen's own. Each soak found bugs when it was first run by hand (the tests say which);
 // here they keep the whole class covered. A program of its own: the sanitizer build runs its hundreds of
 // commands with the instrumented program, slower than the hardening tests' time limit allows.
-#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include <map>
@@ -20,11 +19,6 @@ namespace {
 
 using json = nlohmann::json;
 using Soak = App;
-
-// A run of a few milliseconds: 8 x 8 pixels of the flat target, 1 path each, the gate positions around its return.
-const std::string kTiny = kScenes + "flat_target.json --set camera.crop=[508,246,8,8] --set render.samples_per_pixel=1 "
-                                    "--set acquisition.gate_sweep.start_ns=6 --set acquisition.gate_sweep.stop_ns=7 "
-                                    "--set outputs.previews=false";
 
 void write(const fs::path& p, const std::string& text) { std::ofstream(p) << text; }
 

@@ -149,16 +149,21 @@ def json_places(v, at=()):
     return out
 
 
-def damage_json(doc, rng):
-    """Damages doc in place at one of its places; returns what it did ("a/b = 1e+308", "a/b removed")."""
-    at = rng.choice(json_places(doc))
+def damage_at(doc, at, value):
+    """Sets doc's place `at` to value in place (... removes it); returns what it did ("a/b = 1e+308", "a/b removed")."""
     parent = doc
     for k in at[:-1]:
         parent = parent[k]
-    v = rng.randrange(len(DAMAGE) + 2)  # the last two: remove it
     where = "/".join(map(str, at))
-    if v >= len(DAMAGE):
+    if value is ...:
         del parent[at[-1]]
         return where + " removed"
-    parent[at[-1]] = DAMAGE[v]
-    return where + " = " + json.dumps(DAMAGE[v])
+    parent[at[-1]] = value
+    return where + " = " + json.dumps(value)
+
+
+def damage_json(doc, rng):
+    """Damages doc in place at one of its places drawn from rng; returns what it did, as damage_at."""
+    at = rng.choice(json_places(doc))
+    v = rng.randrange(len(DAMAGE) + 2)  # the last two: remove it
+    return damage_at(doc, at, DAMAGE[v] if v < len(DAMAGE) else ...)

@@ -537,7 +537,7 @@ def test_a_damaged_dataset_folder_is_named_by_every_reader(dataset_dir, tmp_path
     another type, and a row's warnings of null read so)."""
     import random
     import shutil
-    from conftest import damage_json
+    from conftest import damage_at, damage_json
     from spadgen.dataset import SampleNotDoneError
     out = tmp_path / "out"
     shutil.copytree(dataset_dir, out, symlinks=True)
@@ -562,17 +562,7 @@ def test_a_damaged_dataset_folder_is_named_by_every_reader(dataset_dir, tmp_path
             doc = json.loads(rows[r])
         else:
             doc = json.loads(originals[path])
-        if c < len(found):
-            parent = doc
-            for k in at[:-1]:
-                parent = parent[k]
-            if value is ...:  # removed
-                del parent[at[-1]]
-            else:
-                parent[at[-1]] = value
-            what = f"{name} {'/'.join(map(str, at))} " + ("removed" if value is ... else f"= {json.dumps(value)}")
-        else:
-            what = f"{name} {damage_json(doc, rng)}"
+        what = f"{name} " + (damage_at(doc, at, value) if c < len(found) else damage_json(doc, rng))
         if name == "index.jsonl":
             rows[r] = json.dumps(doc)
             path.write_text("\n".join(rows) + "\n")

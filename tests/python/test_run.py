@@ -673,7 +673,7 @@ def test_a_damaged_metadata_json_is_named_by_every_reader(make_run, tmp_path):
     ground_truth_layers and ground_truth_objects of other types read so)."""
     import random
     import shutil
-    from conftest import damage_json
+    from conftest import damage_at, damage_json
     run = tmp_path / "run"
     shutil.copytree(make_run("light_only"), run)
     original = (run / "metadata.json").read_text()
@@ -686,15 +686,7 @@ def test_a_damaged_metadata_json_is_named_by_every_reader(make_run, tmp_path):
              (("ground_truth_objects",), None), (("ground_truth_objects",), {"a": 1})]
     for c in range(len(found) + 150):
         m = json.loads(original)
-        if c < len(found):
-            at, value = found[c]
-            parent = m
-            for k in at[:-1]:
-                parent = parent[k]
-            parent[at[-1]] = value
-            what = "/".join(map(str, at)) + " = " + json.dumps(value)
-        else:
-            what = damage_json(m, rng)
+        what = damage_at(m, *found[c]) if c < len(found) else damage_json(m, rng)
         (run / "metadata.json").write_text(json.dumps(m))
         try:
             r = spadgen.open_run(run)
