@@ -1117,6 +1117,44 @@ class IndexCheck {
 };
 }  // namespace
 
+namespace {
+// What `dataset run` does with a damaged sample: it generates it again, unless one of its folders holds files
+// that folder's metadata.json does not list (its list damaged): a run never replaces files it cannot tell are
+// its own, so it records the sample failed, naming them (status said it would generate it again).
+std::string damaged_remedy(const DatasetSpec& spec, const std::string& dir, const datasets::Sample& s) {
+  std::vector<std::string> folders = {s.folder()};
+  for (int r = 1; r < spec.repeats; ++r) folders.push_back(s.repeat_folder(r));
+  for (const std::string& f : folders) {
+    std::vector<std::string> foreign;
+    try {
+      foreign = Staging::foreign_in_run_folder(fs::path(dir) / f);
+    } catch (const fs::filesystem_error&) {
+      continue;  // (a folder it cannot read: the run's own attempt says why)
+    }
+    if (!foreign.empty())
+      return "`spadgen dataset run` cannot generate it again: " + f + " holds " + Staging::foreign_list(foreign) +
+             ", which its metadata.json does not list, and a run replaces only files it can tell are its own; move or "
+             "remove " + f + " and run again";
+  }
+  return "`spadgen dataset run` generates it again";
+}
+
+// The dataset file as it is now against this folder's record of it (dataset.json): where `dataset run` with the
+// file would refuse the folder (the file edited since, or the record damaged), what it would say; "" otherwise, or
+// when the file is not there to read (a folder copied from another machine). Status reported "2 done" of a
+// folder whose next run was refused.
+std::string dataset_file_refusal(const DatasetSpec& recorded, const std::string& dir) {
+  std::error_code ec;
+  if (!fs::is_regular_file(recorded.file, ec)) return "";
+  try {
+    DatasetFolder(datasets::load_dataset_file(recorded.file), dir).check();
+  } catch (const Error& e) {
+    return "`spadgen dataset run " + recorded.file + "` on this folder would stop now: " + scenes::one_line(e.what()) + "\n";
+  }
+  return "";
+}
+}  // namespace
+
 DatasetStatus dataset_status(const std::string& dir) {
   const DatasetSpec spec = spec_of_folder(dir);
   const DatasetFolder folder(spec, dir);
@@ -1138,8 +1176,8 @@ DatasetStatus dataset_status(const std::string& dir) {
     // (on one line each: a recorded error may hold a list of mistakes, or a control byte a library echoed)
     if (r.status == Status::Failed) failed += "sample " + std::to_string(r.sample.index) + " failed: " + scenes::one_line(r.error) + "\n";
     if (r.status == Status::Damaged)
-      damaged += "sample " + std::to_string(r.sample.index) + " damaged: " + scenes::one_line(r.error) +
-                 " (`spadgen dataset run` generates it again)\n";
+      damaged += "sample " + std::to_string(r.sample.index) + " damaged: " + scenes::one_line(r.error) + " (" +
+                 damaged_remedy(spec, dir, r.sample) + ")\n";
   });
   std::ostringstream o;
   o << dir << ": dataset " << spec.file << ", " << spec.count() << " samples: " << status_counts(count) << "\n";
@@ -1148,6 +1186,7 @@ DatasetStatus dataset_status(const std::string& dir) {
   if (folder.runs_on())
     o << "a dataset run is on the folder now: its samples in progress count as missing until it publishes them, "
          "and the last run to end writes the index\n";
+  o << dataset_file_refusal(spec, dir);
   for (Status st : {Status::Failed, Status::Stale, Status::Missing, Status::Damaged})
     if (!which[size_t(st)].empty()) o << datasets::status_name(st) << ": " << datasets::ranges_text(which[size_t(st)]) << "\n";
   for (const auto& [why, samples] : stale_why)

@@ -589,14 +589,15 @@ bool holds_no_file(const fs::path& dir) {
 
 // A run replaces OUT as a whole, so OUT may hold only what an earlier run wrote there, and what
 // reconstruct and evaluate derived from it there.
-std::vector<std::string> Staging::foreign_entries(const fs::path& folder_out) const {
+std::vector<std::string> Staging::foreign_entries(const fs::path& folder_out, bool of_runs,
+                                                  const std::vector<std::string>& owned) {
   std::error_code ec;
   if (!fs::is_directory(folder_out, ec)) return {};
   Listed listed;  // another command's folder holds its own files only (a run folder given to it is not its own)
   // The run folders a sense --repeats writes (repeat_NNN, with their metadata.json): each holds the files
   // its own metadata.json lists. Any other folder inside, a run's or not, is someone else's.
   std::set<std::string> repeats;
-  if (of_runs_ || owned_.empty()) {
+  if (of_runs || owned.empty()) {
     // A run and a folder of runs (sense --repeats) replace each other: a run folder's listed files, or a
     // folder of runs' run folders, are spadgen's either way (each refused the other as foreign files).
     if (fs::is_regular_file(folder_out / "metadata.json", ec)) listed = listed_files(folder_out);
@@ -608,7 +609,7 @@ std::vector<std::string> Staging::foreign_entries(const fs::path& folder_out) co
           repeats.insert(n);
       }
   } else {
-    listed.entries = {owned_.begin(), owned_.end()};
+    listed.entries = {owned.begin(), owned.end()};
   }
   std::vector<std::string> foreign;
   // The entries of a run folder `root` (OUT, or one of its repeat_NNN) that `of_root` does not list.
@@ -640,7 +641,7 @@ std::vector<std::string> Staging::foreign_entries(const fs::path& folder_out) co
           self(e.path(), listed_files(e.path()), self);
           continue;
         }
-        if (of_runs_ && top && out && starts_with(rel, ".repeat_")) continue;  // an earlier version's per-run leftovers
+        if (of_runs && top && out && starts_with(rel, ".repeat_")) continue;  // an earlier version's per-run leftovers
         const bool entry = of_root.entries.count(rel) > 0;
         if (entry && (!dir || rel.ends_with(".zarr"))) continue;  // a listed file, or a Zarr store with all in it
         if (dir && (entry || of_root.parents.count(rel))) folders.push_back(e.path());

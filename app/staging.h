@@ -95,6 +95,12 @@ class Staging {
   static void remove_leftovers(const std::filesystem::path& parent);
   // The output folder, absolute, with symbolic links resolved.
   const std::filesystem::path& out() const { return out_; }
+  // What a run (Staging(folder)) would refuse in the run folder `folder`: the entries it did not write there
+  // (at most six, relative to it), and them as a message's list. Reads only.
+  static std::vector<std::string> foreign_in_run_folder(const std::filesystem::path& folder) {
+    return foreign_entries(folder, false, {});
+  }
+  static std::string foreign_list(const std::vector<std::string>& foreign);
 
  private:
   int step(const std::string& name) const { return hook_ ? hook_(name) : 0; }
@@ -106,8 +112,12 @@ class Staging {
   // Throws spadgen::Error naming foreign_entries(out_), if any (publishing: put there during the run).
   void check_owned(bool publishing = false) const;
   // The entries of `folder` (the output folder, or its earlier set once exchanged) spadgen did not write.
-  std::vector<std::string> foreign_entries(const std::filesystem::path& folder) const;
-  static std::string foreign_list(const std::vector<std::string>& foreign);
+  std::vector<std::string> foreign_entries(const std::filesystem::path& folder) const {
+    return foreign_entries(folder, of_runs_, owned_);
+  }
+  // The same for a folder of run folders (of_runs) or of the files `owned` (none: a run folder).
+  static std::vector<std::string> foreign_entries(const std::filesystem::path& folder, bool of_runs,
+                                                  const std::vector<std::string>& owned);
   void prune_subfolders() const;  // the subfolders nothing was written into go; the others are made durable
 
   std::filesystem::path out_, parent_, dir_, lock_path_;

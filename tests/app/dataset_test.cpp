@@ -218,8 +218,10 @@ TEST_F(Dataset, ASampleThatLostAFileIsDamagedAndGeneratedAgain) {
   EXPECT_EQ(st.code, 4);  // not all done
   EXPECT_THAT(st.output, HasSubstr("3 samples: 0 done, 0 failed, 0 stale, 0 missing, 3 damaged"));
   EXPECT_THAT(st.output, HasSubstr("sample 0 damaged: listed in metadata.json but gone or changed: ground_truth.exr (1000 of its "));
-  EXPECT_THAT(st.output, HasSubstr("sample 1 damaged: listed in metadata.json but gone or changed: counts.npy"));
-  EXPECT_THAT(st.output, HasSubstr("sample 2 damaged: listed in metadata.json but gone or changed: _r01/counts.npy"));
+  EXPECT_THAT(st.output, HasSubstr("sample 1 damaged: listed in metadata.json but gone or changed: counts.npy "
+                                   "(`spadgen dataset run` generates it again)"));
+  EXPECT_THAT(st.output, HasSubstr("sample 2 damaged: listed in metadata.json but gone or changed: _r01/counts.npy "
+                                   "(`spadgen dataset run` generates it again)"));
   // sense refuses to link the run's cut file
   const Result sense = sh("sense " + (dir_ / "out/samples/000000").string() + " -o " + (dir_ / "sensed").string() + " -q");
   EXPECT_EQ(sense.code, 1);
@@ -447,6 +449,15 @@ TEST_F(Dataset, RepeatsGrowWithoutRenderingAgain) {
                                       " at \"seed\""));
   EXPECT_THAT(other.output, Not(HasSubstr("repeats may grow, to add realisations, not shrink")));
   EXPECT_TRUE(fs::exists(dir_ / "grown/samples/000001_r02/counts.npy"));
+  // status, of the folder's own record, finds its samples done, and says that the dataset file's run would stop
+  // now, and why (it said "2 done" alone)
+  const Result st = sh("dataset status " + grown);
+  EXPECT_EQ(st.code, 0) << st.output;
+  EXPECT_THAT(st.output, HasSubstr("2 samples: 2 done, 0 failed, 0 stale, 0 missing"));
+  EXPECT_THAT(st.output, HasSubstr("`spadgen dataset run " + (dir_ / "d.json").string() + "` on this folder would stop now: " + grown +
+                                   " holds another dataset: its dataset.json differs from " + (dir_ / "d.json").string() + " at \"seed\""));
+  write(dir_ / "d.json", three);  // the file as it was: nothing to say
+  EXPECT_THAT(sh("dataset status " + grown).output, Not(HasSubstr("would stop")));
 }
 
 // The index is written by the last run on the folder to end: a shard ending while another run is on the
@@ -1651,7 +1662,8 @@ TEST_F(Dataset, ADatasetWhoseGltfDoesNotLoadIsRefusedBeforeAnyWork) {
 // called the sample damaged and said run would generate it again, while run kept it as done (its check of the
 // listed files took the folder for a file of its size). Both now apply one rule: run tries it again, and,
 // as the folder holds a file its metadata.json no longer lists, records why it leaves it (never replacing files
-// it cannot tell are its own); status then says so. Found by the soak of soak_test.cpp.
+// it cannot tell are its own); status says so, before the run (it said the run would generate the sample
+// again) and after. Found by the soak of soak_test.cpp.
 TEST_F(Dataset, ASampleListingItsOwnFolderAsAFileIsDamagedForStatusAndRunAlike) {
   write(dir_ / "d.json", tiny_dataset());
   const fs::path out = dir_ / "out", meta = out / "samples/000001/metadata.json";
@@ -1664,6 +1676,9 @@ TEST_F(Dataset, ASampleListingItsOwnFolderAsAFileIsDamagedForStatusAndRunAlike) 
   const Result before = sh("dataset status " + out.string());
   EXPECT_EQ(before.code, 4) << before.output;
   EXPECT_THAT(before.output, HasSubstr("sample 1 damaged: listed in metadata.json but gone or changed:  (a folder, where the run wrote a file)"));
+  EXPECT_THAT(before.output, HasSubstr("(a folder, where the run wrote a file) (`spadgen dataset run` cannot generate it again: "
+                                       "samples/000001 holds labels.exr, which its metadata.json does not list, and a run replaces "
+                                       "only files it can tell are its own; move or remove samples/000001 and run again)"));
   const Result r = sh(run);
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_THAT(r.output, HasSubstr("sample 1 failed: the output folder " + (out / "samples/000001").string() +
