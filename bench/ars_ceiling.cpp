@@ -69,30 +69,24 @@ Block128 ArsXor(const ArsKeys& keys, uint32_t c1, uint32_t c2, uint32_t c3, uint
     inc[4 * l] = static_cast<uint32_t>(P);
   }
   const auto step = hn::Load(d, inc);
-  auto c0 = hn::Load(d, lane);
-  auto c1v = hn::Add(c0, step), c2v = hn::Add(c1v, step), c3v = hn::Add(c2v, step), c4v = hn::Add(c3v, step);
-  auto c5v = hn::Add(c4v, step), c6v = hn::Add(c5v, step), c7v = hn::Add(c6v, step);
+  using V = hn::Vec<decltype(d)>;
+  V ctr[8], acc[8], x[8];
+  ctr[0] = hn::Load(d, lane);
+  for (int j = 1; j < 8; ++j) ctr[j] = hn::Add(ctr[j - 1], step);
+  for (int j = 0; j < 8; ++j) acc[j] = hn::Zero(d);
   const auto step8 = hn::ShiftLeft<3>(step);
-  auto a0 = hn::Zero(d), a1 = a0, a2 = a0, a3 = a0, a4 = a0, a5 = a0, a6 = a0, a7 = a0;
   for (uint64_t i = 0; i < count; i += 8 * P) {
-    a0 = hn::Xor(a0, sk::ArsRounds(d, k, hn::Xor(c0, k.k[0])));
-    a1 = hn::Xor(a1, sk::ArsRounds(d, k, hn::Xor(c1v, k.k[0])));
-    a2 = hn::Xor(a2, sk::ArsRounds(d, k, hn::Xor(c2v, k.k[0])));
-    a3 = hn::Xor(a3, sk::ArsRounds(d, k, hn::Xor(c3v, k.k[0])));
-    a4 = hn::Xor(a4, sk::ArsRounds(d, k, hn::Xor(c4v, k.k[0])));
-    a5 = hn::Xor(a5, sk::ArsRounds(d, k, hn::Xor(c5v, k.k[0])));
-    a6 = hn::Xor(a6, sk::ArsRounds(d, k, hn::Xor(c6v, k.k[0])));
-    a7 = hn::Xor(a7, sk::ArsRounds(d, k, hn::Xor(c7v, k.k[0])));
-    c0 = hn::Add(c0, step8);
-    c1v = hn::Add(c1v, step8);
-    c2v = hn::Add(c2v, step8);
-    c3v = hn::Add(c3v, step8);
-    c4v = hn::Add(c4v, step8);
-    c5v = hn::Add(c5v, step8);
-    c6v = hn::Add(c6v, step8);
-    c7v = hn::Add(c7v, step8);
+#pragma GCC unroll 8
+    for (int j = 0; j < 8; ++j) {
+      x[j] = hn::Xor(ctr[j], k.k[0]);
+      ctr[j] = hn::Add(ctr[j], step8);
+    }
+    sk::ArsRoundsN<8>(d, k, x);
+#pragma GCC unroll 8
+    for (int j = 0; j < 8; ++j) acc[j] = hn::Xor(acc[j], x[j]);
   }
-  const auto a = hn::Xor(hn::Xor(hn::Xor(a0, a1), hn::Xor(a2, a3)), hn::Xor(hn::Xor(a4, a5), hn::Xor(a6, a7)));
+  for (int j = 1; j < 8; ++j) acc[0] = hn::Xor(acc[0], acc[j]);
+  const auto a = acc[0];
   hn::Store(a, d, lane);
   Block128 out{};
   for (size_t l = 0; l < P; ++l)

@@ -4,6 +4,7 @@
 // Both measured on a sub-image and scaled to the full array (the work is per pixel, so it scales
 // linearly); all threads TBB is allowed to use. Results and the command: bench/README.md ("## sensor").
 #include <benchmark/benchmark.h>
+#include <hwy/targets.h>
 #include <malloc.h>
 #include <tbb/parallel_for.h>
 
@@ -129,6 +130,65 @@ void BM_FrameBitsVaes(benchmark::State& state) {
   state.counters["x_split"] = off / on;
 }
 BENCHMARK(BM_FrameBitsVaes)->UseManualTime()->Unit(benchmark::kMillisecond);
+
+// The frame-bit sampler on every instruction set this processor runs, forced in turn
+// (hwy::SetSupportedTargetsForTest; AVX2 with and without VAES where it has VAES): BM_FrameBits' mix on one
+// thread, one pass per target per iteration, alternated; counters: each target's fastest pass in Gbit/s (frames
+// per second), e.g. AVX3 for AVX-512 machines without VAES (Skylake-SP, Cascade Lake). Each pass's words are
+// checked against the dispatcher's choice (the bits are the same on every target; a difference skips the
+// benchmark with an error). SSSE3 (no AES instructions) and the scalar target are left out.
+void BM_FrameBitsByTarget(benchmark::State& state) {
+  FrameBitsMix m;
+  const auto pass = [&](uint64_t k) {
+    for (size_t b = 0; b < m.pixels; b += m.block) {
+      sensor::probabilities(m.lam.data() + b, m.block, m.prob.data() + b, 1);
+      sensor::sample_bits_batch(1, k, m.ids.data() + b, m.block, m.sampler, m.prob.data() + b, m.words.data() + 4 * b);
+    }
+  };
+  const auto hash = [&] {
+    uint64_t h = 0xcbf29ce484222325ull;
+    for (uint64_t w : m.words) h = (h ^ w) * 0x100000001b3ull;
+    return h;
+  };
+  pass(0);
+  const uint64_t reference = hash();
+  struct Target {
+    int64_t target;
+    bool vaes;
+    std::string name;
+    double best = 1e300;
+  };
+  std::vector<Target> targets;
+  for (const int64_t t : hwy::SupportedAndGeneratedTargets()) {
+    if (t == HWY_SCALAR || t == HWY_SSSE3) continue;
+    for (const bool vaes : {false, true})
+      if (!vaes || (t == HWY_AVX2 && sensor::cpu_has_vaes()))
+        targets.push_back({t, vaes, std::string(hwy::TargetName(t)) + (vaes ? "+VAES" : "")});
+  }
+  const bool vaes_before = sensor::avx2_vaes();
+  const auto restore = [&] {
+    hwy::SetSupportedTargetsForTest(0);
+    sensor::set_avx2_vaes(vaes_before);
+  };
+  for (auto _ : state) {
+    for (Target& t : targets) {
+      hwy::SetSupportedTargetsForTest(t.target);
+      sensor::set_avx2_vaes(t.vaes);
+      const auto t0 = std::chrono::steady_clock::now();
+      pass(0);
+      t.best = std::min(t.best, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+      if (hash() != reference) {
+        restore();
+        state.SkipWithError((t.name + " sampled other bits than the dispatcher's choice").c_str());
+        return;
+      }
+    }
+  }
+  restore();
+  for (const Target& t : targets) state.counters[t.name] = static_cast<double>(m.pixels) * m.N / t.best * 1e-9;
+  state.SetLabel(std::string("Gbit/s per thread; dispatched: ") + sensor::dense_bits_target());
+}
+BENCHMARK(BM_FrameBitsByTarget)->Iterations(20)->Unit(benchmark::kMillisecond);
 
 // A synthetic transient: one return per pixel, a second one for 30 % of them (a semi-transparent
 // layer), photons per pulse log-uniform in [1e-4, 1e-2] (the paper's flat target at 0.2-1.6 m sees

@@ -29,15 +29,78 @@ struct ArsKeysV {
   }
 };
 
-// Rounds 1..7 of ARS-7 on v = counter XOR k_0 (one block per 128-bit part).
-template <class D>
-HWY_INLINE hn::Vec<D> ArsRounds(D d, const ArsKeysV<D>& k, hn::Vec<D> v) {
-  const hn::Repartition<uint8_t, D> d8;
-  auto b = hn::BitCast(d8, v);
+// Rounds 1..7 of ARS-7 on n vectors x[0 .. n) in place (each counter XOR k_0, one block per 128-bit part),
+// round by round across the vectors so that their chains overlap.
+//
+// Without VAES, Highway's AVX2 and AVX3 targets split every AESRound of a 256- or 512-bit vector into 128-bit
+// AESENC, moving the parts out and back in each round (AVX3: through two levels of halves). There each block
+// instead takes its seven rounds in an xmm register, its vector's parts moved out once and back once: the same
+// rounds, the same bits (the frame-bit sampler x 1.6 on AVX3, x 1.4 on AVX2 with each target forced on one
+// thread; bench/README.md, "Binary frames on other instruction sets").
+template <size_t n, class D, class KeysD>
+HWY_INLINE void ArsRoundsN(D d, const ArsKeysV<KeysD>& k, hn::Vec<D>* x) {
+#if HWY_ARCH_X86 && (HWY_TARGET == HWY_AVX3 || HWY_TARGET == HWY_AVX2)
+  if constexpr (sizeof(hn::Vec<D>) == 64 || sizeof(hn::Vec<D>) == 32) {
+    constexpr bool wide = sizeof(hn::Vec<D>) == 64;
+    constexpr size_t parts = wide ? 4 : 2;
+    // the vectors in pairs (AVX2) or one by one (AVX3): four chains in flight, within the 16 registers the
+    // VEX-encoded AESENC can address beside the round keys
+    constexpr size_t group = wide || n % 2 != 0 ? 1 : 2;
+    __m128i rk[kArsRounds + 1];
 #pragma GCC unroll 8
-  for (int r = 1; r < kArsRounds; ++r) b = hn::AESRound(b, hn::BitCast(d8, k.k[r]));
-  return hn::BitCast(d, hn::AESLastRound(b, hn::BitCast(d8, k.k[kArsRounds])));
+    for (int r = 1; r <= kArsRounds; ++r) {
+      if constexpr (wide) rk[r] = hn::LowerHalf(hn::LowerHalf(k.k[r])).raw;  // (GCC 12's casts warn: Highway's do not)
+      else rk[r] = hn::LowerHalf(k.k[r]).raw;
+    }
+#pragma GCC unroll 16
+    for (size_t i = 0; i < n; i += group) {
+      __m128i b[group * parts];
+#pragma GCC unroll 4
+      for (size_t g = 0; g < group; ++g) {
+        if constexpr (wide) {
+          const __m512i v = x[i + g].raw;
+          b[g * parts] = hn::LowerHalf(hn::LowerHalf(x[i + g])).raw;
+          // (the zero-masked form with every lane kept: GCC 12 warns of the plain form's undefined source)
+          b[g * parts + 1] = _mm512_maskz_extracti32x4_epi32(0xF, v, 1);
+          b[g * parts + 2] = _mm512_maskz_extracti32x4_epi32(0xF, v, 2);
+          b[g * parts + 3] = _mm512_maskz_extracti32x4_epi32(0xF, v, 3);
+        } else {
+          const __m256i v = x[i + g].raw;
+          b[g * parts] = hn::LowerHalf(x[i + g]).raw;
+          b[g * parts + 1] = _mm256_extracti128_si256(v, 1);
+        }
+      }
+#pragma GCC unroll 8
+      for (int r = 1; r < kArsRounds; ++r)
+#pragma GCC unroll 4
+        for (size_t j = 0; j < group * parts; ++j) b[j] = _mm_aesenc_si128(b[j], rk[r]);
+#pragma GCC unroll 4
+      for (size_t j = 0; j < group * parts; ++j) b[j] = _mm_aesenclast_si128(b[j], rk[kArsRounds]);
+#pragma GCC unroll 4
+      for (size_t g = 0; g < group; ++g) {
+        if constexpr (wide) {
+          const __m512i lo = _mm512_inserti32x4(_mm512_zextsi128_si512(b[g * parts]), b[g * parts + 1], 1);
+          x[i + g].raw = _mm512_inserti32x4(_mm512_inserti32x4(lo, b[g * parts + 2], 2), b[g * parts + 3], 3);
+        } else {
+          x[i + g].raw = _mm256_set_m128i(b[g * parts + 1], b[g * parts]);
+        }
+      }
+    }
+    return;
+  }
+#endif
+  const hn::Repartition<uint8_t, D> d8;
+#pragma GCC unroll 8
+  for (int r = 1; r < kArsRounds; ++r) {
+    const auto rk = hn::BitCast(d8, k.k[r]);
+#pragma GCC unroll 16
+    for (size_t i = 0; i < n; ++i) x[i] = hn::BitCast(d, hn::AESRound(hn::BitCast(d8, x[i]), rk));
+  }
+  const auto rk_last = hn::BitCast(d8, k.k[kArsRounds]);
+#pragma GCC unroll 16
+  for (size_t i = 0; i < n; ++i) x[i] = hn::BitCast(d, hn::AESLastRound(hn::BitCast(d8, x[i]), rk_last));
 }
+
 
 // 4 x 4 transpose of u32 inside every 128-bit part: afterwards word j of part l of a_i is what word i of
 // part l of a_j was. Turns four vectors of blocks (part l of a_j: one block) into four vectors of words and
@@ -131,10 +194,9 @@ HWY_INLINE void Ars7Words(D d, const ArsKeys& keys, hn::Vec<D>& x0, hn::Vec<D>& 
 #else
   const ArsKeysV<D> k(d, keys);
   Transpose4x4(d, x0, x1, x2, x3);  // part l of x_j: the block of lane 4 l + j
-  x0 = ArsRounds(d, k, hn::Xor(x0, k.k[0]));
-  x1 = ArsRounds(d, k, hn::Xor(x1, k.k[0]));
-  x2 = ArsRounds(d, k, hn::Xor(x2, k.k[0]));
-  x3 = ArsRounds(d, k, hn::Xor(x3, k.k[0]));
+  hn::Vec<D> x[4] = {hn::Xor(x0, k.k[0]), hn::Xor(x1, k.k[0]), hn::Xor(x2, k.k[0]), hn::Xor(x3, k.k[0])};
+  ArsRoundsN<4>(d, k, x);
+  x0 = x[0], x1 = x[1], x2 = x[2], x3 = x[3];
   Transpose4x4(d, x0, x1, x2, x3);
 #endif
 }

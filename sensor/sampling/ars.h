@@ -98,7 +98,7 @@ inline void words_to_bytes(const uint32_t w[4], uint8_t b[16]) {
 }
 
 // Whether the AVX2 kernels run ARS-7's rounds with VAES (256-bit AES rounds: AMD Zen 3, Intel Alder Lake
-// and later), where Highway's AVX2 target splits each into two 128-bit AESENC: on when the processor has
+// and later), where the AVX2 target otherwise runs each block's rounds as 128-bit AESENC: on when the processor has
 // VAES; frames_kernel.h's set_avx2_vaes turns it off for tests and the benchmark. The bits are the same.
 inline bool cpu_has_vaes() {
 #if defined(__x86_64__) || defined(__i386__)

@@ -3,7 +3,8 @@
 // (up to four 128-bit blocks per vector), and the byte comparisons use them too.
 //
 // AVX3_DL (AVX-512 with VAES: four AES rounds per instruction) is compiled too (HWY_WANT_AVX3_DL, set for
-// the whole sensor library in sensor/CMakeLists.txt): on plain AVX3 an AESRound is four 128-bit AESENC.
+// the whole sensor library in sensor/CMakeLists.txt): on plain AVX3 each block takes its rounds as 128-bit
+// AESENC (ArsRoundsN, sensor/sampling/ars-inl.h).
 #undef HWY_TARGET_INCLUDE
 #define HWY_TARGET_INCLUDE "sensor/sampling/frames_kernel.cpp"
 #include <hwy/foreach_target.h>  // IWYU pragma: keep
@@ -228,8 +229,8 @@ HWY_INLINE void SettleTies(const ArsKeys& keys, uint32_t c1, const uint64_t* HWY
 
 #if HWY_ARCH_X86 && HWY_TARGET == HWY_AVX2
 // DenseBitsBatch on AVX2 processors that also have VAES (AMD Zen 3, Intel Alder Lake and later client
-// chips): one vaesenc is one AES round on two blocks, where Highway's AVX2 target splits each 256-bit round
-// into two 128-bit AESENC and the halves' extracts and inserts. Compiled for the AVX2 target plus VAES,
+// chips): one vaesenc is one AES round on two blocks, where the AVX2 target runs two 128-bit AESENC (each
+// block's rounds in an xmm register, ArsRoundsN). Compiled for the AVX2 target plus VAES,
 // called only when the processor has it. Per pixel and chunk, the 16 blocks in eight vectors in registers:
 // vector 4 g + j holds block 16 ch + 8 g + j + 4 l in its 128-bit part l; a 4 x 4 transpose inside the
 // parts turns vectors 4 g .. 4 g + 3 into words 0..3 of blocks 8 g .. 8 g + 7, i.e. the bytes of frames
@@ -383,20 +384,7 @@ HWY_INLINE void DenseBitsBatch(const ArsKeys& keys, uint32_t c1, const uint64_t*
           for (size_t s = 0; s < K; ++s) x[s][v] = hn::Xor(ck[s], idx);
         }
         // fully unrolled (the chains must stay in registers)
-        const hn::Repartition<uint8_t, decltype(d32)> d8k;
-#pragma GCC unroll 8
-        for (int r = 1; r < kArsRounds; ++r) {
-          const auto rk = hn::BitCast(d8k, kv.k[r]);
-#pragma GCC unroll 4
-          for (size_t s = 0; s < K; ++s)
-#pragma GCC unroll 4
-            for (size_t v = 0; v < 4; ++v) x[s][v] = hn::BitCast(d32, hn::AESRound(hn::BitCast(d8k, x[s][v]), rk));
-        }
-        const auto rk_last = hn::BitCast(d8k, kv.k[kArsRounds]);
-#pragma GCC unroll 4
-        for (size_t s = 0; s < K; ++s)
-#pragma GCC unroll 4
-          for (size_t v = 0; v < 4; ++v) x[s][v] = hn::BitCast(d32, hn::AESLastRound(hn::BitCast(d8k, x[s][v]), rk_last));
+        ArsRoundsN<K * 4>(d32, kv, &x[0][0]);
 #pragma GCC unroll 4
         for (size_t s = 0; s < K; ++s) Transpose4x4(d32, x[s][0], x[s][1], x[s][2], x[s][3]);
         // constant indices into x only (a runtime index would keep the chains in memory)
