@@ -9,6 +9,7 @@
 #include <tbb/parallel_for.h>
 
 #include <chrono>
+#include <cstdio>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -525,9 +526,36 @@ BENCHMARK(BM_FramesStage)->Arg(0)->Arg(1)->UseManualTime()->Unit(benchmark::kMil
 
 // As the program does (app/main.cpp): large buffers (a tile's frames are megabytes) stay in the heap, so
 // that each tile does not pay page faults and the kernel's zeroing for fresh mappings.
+// --target=NAME (AVX3_DL, AVX3, AVX2+VAES, AVX2, SSE4, ...: an instruction set this processor runs, as
+// BM_FrameBitsByTarget names them): every kernel runs on it for the whole run, as on a machine without the
+// others. Returns false (and says why) for a name it does not run.
+bool force_target(const std::string& name) {
+  std::string names;
+  for (const int64_t t : hwy::SupportedAndGeneratedTargets()) {
+    for (const bool vaes : {false, true}) {
+      if (vaes && !(t == HWY_AVX2 && sensor::cpu_has_vaes())) continue;
+      const std::string n = std::string(hwy::TargetName(t)) + (vaes ? "+VAES" : "");
+      names += (names.empty() ? "" : ", ") + n;
+      if (n != name) continue;
+      hwy::SetSupportedTargetsForTest(t);
+      sensor::set_avx2_vaes(vaes);
+      return true;
+    }
+  }
+  std::fprintf(stderr, "bench_sensor: --target=%s: expected one of this processor's instruction sets: %s\n", name.c_str(),
+               names.c_str());
+  return false;
+}
+
 int main(int argc, char** argv) {
   mallopt(M_MMAP_THRESHOLD, 64 << 20);
   mallopt(M_TRIM_THRESHOLD, 256 << 20);
+  for (int i = 1; i < argc; ++i) {
+    if (std::string(argv[i]).rfind("--target=", 0) != 0) continue;
+    if (!force_target(argv[i] + 9)) return 1;
+    for (int j = i; j + 1 < argc; ++j) argv[j] = argv[j + 1];
+    --argc, --i;
+  }
   benchmark::Initialize(&argc, argv);
   if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
   benchmark::RunSpecifiedBenchmarks();

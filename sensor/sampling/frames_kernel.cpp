@@ -33,8 +33,11 @@ namespace hn = hwy::HWY_NAMESPACE;
 HWY_INLINE void Ars16(const ArsKeys& keys, const uint32_t ctr[4], uint32_t first, uint32_t* HWY_RESTRICT out) {
   const hn::CappedTag<uint32_t, 16> d;
   const size_t L = hn::Lanes(d);
+  // Iota of a constant (a constant vector): Highway 1.0's Iota of a variable stores the lanes one by one and
+  // reloads them as a vector, a stalled store forwarding (18 % of the sampler on AVX2 without VAES)
+  const auto iota = hn::Iota(d, 0u);
   for (size_t g = 0; g < 16; g += L) {
-    auto x0 = hn::Iota(d, first + static_cast<uint32_t>(g));
+    auto x0 = hn::Add(iota, hn::Set(d, first + static_cast<uint32_t>(g)));
     auto x1 = hn::Set(d, ctr[1]), x2 = hn::Set(d, ctr[2]), x3 = hn::Set(d, ctr[3]);
     Ars7Words(d, keys, x0, x1, x2, x3);
     hn::StoreU(x0, d, out + g);
