@@ -1,6 +1,7 @@
 // ARS-7 (sensor/ars.h) on whole Highway vectors: one 128-bit block per 128-bit part of a vector (four on
 // AVX-512 with VAES), with Highway's AESRound / AESLastRound (AES-NI / VAES where the target has them, a
-// software round otherwise), bit-identical to the scalar ars7. Included once per target from the
+// software round otherwise; AVX2 and AVX3 without VAES: 128-bit AESENC on each block, ArsRoundsN),
+// bit-identical to the scalar ars7. Included once per target from the
 // translation units that use Highway's foreach_target (the per-target include guard below).
 #if defined(SPADGEN_SENSOR_ARS_INL_H_) == defined(HWY_TARGET_TOGGLE)
 #ifdef SPADGEN_SENSOR_ARS_INL_H_
@@ -100,7 +101,6 @@ HWY_INLINE void ArsRoundsN(D d, const ArsKeysV<KeysD>& k, hn::Vec<D>* x) {
 #pragma GCC unroll 16
   for (size_t i = 0; i < n; ++i) x[i] = hn::BitCast(d, hn::AESLastRound(hn::BitCast(d8, x[i]), rk_last));
 }
-
 
 // 4 x 4 transpose of u32 inside every 128-bit part: afterwards word j of part l of a_i is what word i of
 // part l of a_j was. Turns four vectors of blocks (part l of a_j: one block) into four vectors of words and
