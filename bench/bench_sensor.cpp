@@ -66,14 +66,43 @@ struct FrameBitsMix {
   FrameBitsMix() {
     for (size_t i = 0; i < pixels; ++i) ids[i] = i;
   }
+  // Pixels b .. b + count at gate position k: their Prob from lambda, then their bits.
+  void sample(size_t b, size_t count, uint64_t k) {
+    sensor::probabilities(lam.data() + b, count, prob.data() + b, 1);
+    sensor::sample_bits_batch(1, k, ids.data() + b, count, sampler, prob.data() + b, words.data() + 4 * b);
+  }
   void pass(uint64_t k) {
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, pixels, block), [&](const tbb::blocked_range<size_t>& r) {
-      sensor::probabilities(lam.data() + r.begin(), r.size(), prob.data() + r.begin(), 1);
-      sensor::sample_bits_batch(1, k, ids.data() + r.begin(), r.size(), sampler, prob.data() + r.begin(), words.data() + 4 * r.begin());
-    });
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, pixels, block),
+                      [&](const tbb::blocked_range<size_t>& r) { sample(r.begin(), r.size(), k); });
     benchmark::DoNotOptimize(words.data());
   }
+  // FNV-1a of the words, word by word, from h.
+  uint64_t words_hash(uint64_t h = 0xcbf29ce484222325ull) const {
+    for (uint64_t w : words) h = (h ^ w) * 0x100000001b3ull;
+    return h;
+  }
 };
+
+// An instruction set this processor runs, as Highway's dispatcher would run it (AVX2 twice where the processor
+// has VAES: with and without it), named as the benchmarks' labels name them ("AVX3", "AVX2+VAES").
+struct InstructionSet {
+  int64_t target;
+  bool vaes;
+  std::string name;
+};
+std::vector<InstructionSet> instruction_sets() {
+  std::vector<InstructionSet> sets;
+  for (const int64_t t : hwy::SupportedAndGeneratedTargets())
+    for (const bool vaes : {false, true})
+      if (!vaes || (t == HWY_AVX2 && sensor::cpu_has_vaes()))
+        sets.push_back({t, vaes, std::string(hwy::TargetName(t)) + (vaes ? "+VAES" : "")});
+  return sets;
+}
+// Every kernel runs on `set` from now on (0 for the target: the dispatcher's own choice again).
+void use(const InstructionSet& set) {
+  hwy::SetSupportedTargetsForTest(set.target);
+  sensor::set_avx2_vaes(set.vaes);
+}
 
 void BM_FrameBits(benchmark::State& state) {
   FrameBitsMix m;
@@ -92,7 +121,7 @@ void BM_FrameBits(benchmark::State& state) {
       for (size_t i = 0; i < block; ++i) pr[i] = {p[i], q[i], -m.lam[b0 + i]};
       sensor::sample_bits_batch(1, kk, m.ids.data() + b0, block, m.sampler, pr.data(), m.words.data() + 4 * b0);
     }
-    for (uint64_t w : m.words) hash = (hash ^ w) * 0x100000001b3ull;
+    hash = m.words_hash(hash);
   }
   state.counters["outputs_hash"] = static_cast<double>(hash % 1000000);
   state.counters["Gbit_per_s"] = benchmark::Counter(bits * 1e-9, benchmark::Counter::kIsRate);
@@ -140,53 +169,31 @@ BENCHMARK(BM_FrameBitsVaes)->UseManualTime()->Unit(benchmark::kMillisecond);
 // benchmark with an error). SSSE3 (no AES instructions) and the scalar target are left out.
 void BM_FrameBitsByTarget(benchmark::State& state) {
   FrameBitsMix m;
-  const auto pass = [&](uint64_t k) {
-    for (size_t b = 0; b < m.pixels; b += m.block) {
-      sensor::probabilities(m.lam.data() + b, m.block, m.prob.data() + b, 1);
-      sensor::sample_bits_batch(1, k, m.ids.data() + b, m.block, m.sampler, m.prob.data() + b, m.words.data() + 4 * b);
-    }
+  const auto pass = [&m] {  // one thread
+    for (size_t b = 0; b < m.pixels; b += m.block) m.sample(b, m.block, 0);
   };
-  const auto hash = [&] {
-    uint64_t h = 0xcbf29ce484222325ull;
-    for (uint64_t w : m.words) h = (h ^ w) * 0x100000001b3ull;
-    return h;
-  };
-  pass(0);
-  const uint64_t reference = hash();
-  struct Target {
-    int64_t target;
-    bool vaes;
-    std::string name;
-    double best = 1e300;
-  };
-  std::vector<Target> targets;
-  for (const int64_t t : hwy::SupportedAndGeneratedTargets()) {
-    if (t == HWY_SCALAR || t == HWY_SSSE3) continue;
-    for (const bool vaes : {false, true})
-      if (!vaes || (t == HWY_AVX2 && sensor::cpu_has_vaes()))
-        targets.push_back({t, vaes, std::string(hwy::TargetName(t)) + (vaes ? "+VAES" : "")});
-  }
-  const bool vaes_before = sensor::avx2_vaes();
-  const auto restore = [&] {
-    hwy::SetSupportedTargetsForTest(0);
-    sensor::set_avx2_vaes(vaes_before);
-  };
+  pass();
+  const uint64_t reference = m.words_hash();
+  std::vector<InstructionSet> sets;
+  for (InstructionSet& set : instruction_sets())
+    if (set.target != HWY_SCALAR && set.target != HWY_SSSE3) sets.push_back(std::move(set));
+  std::vector<double> best(sets.size(), 1e300);
+  const InstructionSet dispatched{0, sensor::avx2_vaes(), ""};
   for (auto _ : state) {
-    for (Target& t : targets) {
-      hwy::SetSupportedTargetsForTest(t.target);
-      sensor::set_avx2_vaes(t.vaes);
+    for (size_t i = 0; i < sets.size(); ++i) {
+      use(sets[i]);
       const auto t0 = std::chrono::steady_clock::now();
-      pass(0);
-      t.best = std::min(t.best, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-      if (hash() != reference) {
-        restore();
-        state.SkipWithError((t.name + " sampled other bits than the dispatcher's choice").c_str());
+      pass();
+      best[i] = std::min(best[i], std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+      if (m.words_hash() != reference) {
+        use(dispatched);
+        state.SkipWithError((sets[i].name + " sampled other bits than the dispatcher's choice").c_str());
         return;
       }
     }
   }
-  restore();
-  for (const Target& t : targets) state.counters[t.name] = static_cast<double>(m.pixels) * m.N / t.best * 1e-9;
+  use(dispatched);
+  for (size_t i = 0; i < sets.size(); ++i) state.counters[sets[i].name] = static_cast<double>(m.pixels) * m.N / best[i] * 1e-9;
   state.SetLabel(std::string("Gbit/s per thread; dispatched: ") + sensor::dense_bits_target());
 }
 BENCHMARK(BM_FrameBitsByTarget)->Iterations(20)->Unit(benchmark::kMillisecond);
@@ -390,10 +397,11 @@ void BM_FramesStage(benchmark::State& state) {
   double whole = 0.0, stage = 0.0, random = 0.0;
   for (auto _ : state) {
     const double t1 = run(one), tm = run(many), tr = random_bytes_seconds(bits * R, 4096);
+    const double ts = std::max(tm - t1, 1e-9);  // the R realisations
     whole += t1;
-    stage += std::max(tm - t1, 1e-9);
+    stage += ts;
     random += tr;
-    state.SetIterationTime(std::max(tm - t1, 1e-9));
+    state.SetIterationTime(ts);
   }
   benchmark::DoNotOptimize(checksum);
   const double stage_bits = bits * R * static_cast<double>(state.iterations());
@@ -522,37 +530,34 @@ BENCHMARK(BM_CountsSweep)->UseRealTime()->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_FramesSweep)->Arg(0)->Arg(1)->UseRealTime()->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_FramesStage)->Arg(0)->Arg(1)->UseManualTime()->Unit(benchmark::kMillisecond);
 
-}  // namespace
-
-// As the program does (app/main.cpp): large buffers (a tile's frames are megabytes) stay in the heap, so
-// that each tile does not pay page faults and the kernel's zeroing for fresh mappings.
 // --target=NAME (AVX3_DL, AVX3, AVX2+VAES, AVX2, SSE4, ...: an instruction set this processor runs, as
 // BM_FrameBitsByTarget names them): every kernel runs on it for the whole run, as on a machine without the
 // others. Returns false (and says why) for a name it does not run.
 bool force_target(const std::string& name) {
   std::string names;
-  for (const int64_t t : hwy::SupportedAndGeneratedTargets()) {
-    for (const bool vaes : {false, true}) {
-      if (vaes && !(t == HWY_AVX2 && sensor::cpu_has_vaes())) continue;
-      const std::string n = std::string(hwy::TargetName(t)) + (vaes ? "+VAES" : "");
-      names += (names.empty() ? "" : ", ") + n;
-      if (n != name) continue;
-      hwy::SetSupportedTargetsForTest(t);
-      sensor::set_avx2_vaes(vaes);
+  for (const InstructionSet& set : instruction_sets()) {
+    if (set.name == name) {
+      use(set);
       return true;
     }
+    names += (names.empty() ? "" : ", ") + set.name;
   }
   std::fprintf(stderr, "bench_sensor: --target=%s: expected one of this processor's instruction sets: %s\n", name.c_str(),
                names.c_str());
   return false;
 }
 
+}  // namespace
+
+// As the program does (app/main.cpp): large buffers (a tile's frames are megabytes) stay in the heap, so
+// that each tile does not pay page faults and the kernel's zeroing for fresh mappings.
 int main(int argc, char** argv) {
   mallopt(M_MMAP_THRESHOLD, 64 << 20);
   mallopt(M_TRIM_THRESHOLD, 256 << 20);
+  const std::string option = "--target=";
   for (int i = 1; i < argc; ++i) {
-    if (std::string(argv[i]).rfind("--target=", 0) != 0) continue;
-    if (!force_target(argv[i] + 9)) return 1;
+    if (std::string(argv[i]).rfind(option, 0) != 0) continue;
+    if (!force_target(argv[i] + option.size())) return 1;
     for (int j = i; j + 1 < argc; ++j) argv[j] = argv[j + 1];
     --argc, --i;
   }

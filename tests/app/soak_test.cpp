@@ -180,9 +180,10 @@ TEST_F(Soak, ADamagedDatasetFolderIsNamedByStatusAndRepairedOrRefusedByRun) {
     EXPECT_TRUE(run_code == 0 || run_code == 1) << "run with " << what << ": exit " << run_code << "\n" << run_err;
     EXPECT_EQ(stderr_problem(run_err, run_code == 1), "") << "run with " << what << ": " << run_err;
     // a folder status found all done, the run takes, unless status said the dataset file's run would stop, and why
-    if (const size_t stop = report.find(" on this folder would stop now: "); stop != std::string::npos) {
+    const std::string would_stop = " on this folder would stop now: ";
+    if (const size_t stop = report.find(would_stop); stop != std::string::npos) {
       EXPECT_EQ(run_code, 1) << "status said the run would stop, with " << what << "\n" << report;
-      const size_t from = stop + 32, end = report.find('\n', from);
+      const size_t from = stop + would_stop.size(), end = report.find('\n', from);
       EXPECT_THAT(run_err, HasSubstr(report.substr(from, end - from))) << "with " << what;
     } else if (status_code == 0) {
       EXPECT_EQ(run_code, 0) << "status found every sample done, with " << what << "\n" << report << run_err;
