@@ -47,6 +47,10 @@ ObjectLabelsTile object_labels(const SensorModel& sensor, const GroundTruthTile&
   // resource plan did not count (a run of 278 MB planned peaked at 594 MB).
   const size_t block = std::max<size_t>(1, (size_t{1} << 20) / std::max<size_t>(1, K));
   std::vector<double> rates;
+  // Every pixel's least rate over the sweep (NaN never taken), computed for the whole tile when a return first
+  // needs its pixel's (below): one contiguous pass, where a walk down each pixel's column of the rates, one
+  // dependent minimum after another and a cache line per gate position, was 0.7 % of the default run.
+  std::vector<float> least;
   for (size_t ri = 0; ri < returns.size(); ++ri) {
     if (ri % block == 0)
       rates = sensor.return_lambda({returns.begin() + ptrdiff_t(ri), returns.begin() + ptrdiff_t(std::min(returns.size(), ri + block))}, axis);
@@ -89,9 +93,14 @@ ObjectLabelsTile object_labels(const SensorModel& sensor, const GroundTruthTile&
     // N throughout: an auditor's find.)
     double without = std::max(0.0, lambda - own[k]);
     if (const double tolerance = (sensor.crosstalk_share(returns[ri].x, returns[ri].y) + 0x1p-22) * own[k]; without <= tolerance) {
-      double background = tolerance;
-      for (size_t j = 0; j < K; ++j) background = std::min(background, double(s.rate[j * n + i]));
-      without = std::max(0.0, background);
+      if (least.empty()) {
+        least.assign(n, std::numeric_limits<float>::infinity());
+        for (size_t j = 0; j < K; ++j) {
+          const float* row = s.rate.data() + j * n;
+          for (size_t p = 0; p < n; ++p) least[p] = row[p] < least[p] ? row[p] : least[p];
+        }
+      }
+      without = std::max(0.0, std::min(tolerance, double(least[i])));
     }
     // 1 - p as exp(-lambda), not 1 - (1 - exp(-lambda)), which is 0 from lambda = 37 on: a saturating background
     // (17,000 lux) gave noise 0 and an edge of 1e-17 counts an infinite SNR, detectable.

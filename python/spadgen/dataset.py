@@ -209,7 +209,9 @@ class Sample:
                 "stale": " is stale: its folder holds an earlier version of it (the scene file, a glTF file or spadgen "
                          "changed since); `spadgen dataset run` generates it again, spadgen.open_run(folder) reads the old one",
                 "missing": " is missing: it has not been generated yet (`spadgen dataset run` generates it)",
-                "damaged": f" is damaged: {(self.error or '').strip()} (`spadgen dataset run` generates it again)",
+                "damaged": f" is damaged: {(self.error or '').strip()} (`spadgen dataset run` generates it again, "
+                           "unless its folder holds files its metadata.json does not list: `spadgen dataset status` "
+                           "says which)",
             }.get(self.status, f" is {self.status}, not done"))
         if r not in self._runs:
             folder = self.folder if r == 0 else self.repeat_folders[r - 1]
