@@ -1,6 +1,7 @@
 #include "sensor.h"
 
 #include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -399,6 +400,14 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
   // reuse them (without frames, the counts' rates are kept per pixel for that).
   std::vector<SensorTile> outs;
   outs.reserve(noise_seeds.size());
+  // The frames' working memory of each thread, for every gate position and realisation it takes: a region's
+  // words (own; + wpp: the zero words frames_tile packs padding from) and frames_tile's scratch. (Made per
+  // task, each task zeroed its words and grew its scratch again.)
+  struct FramesWork {
+    std::vector<uint64_t> own;
+    FramesTileScratch scratch;
+  };
+  tbb::enumerable_thread_specific<FramesWork> frames_work;
   const bool keep_eff = noise_seeds.size() > 1 && !frames;
   std::vector<double> eff_tile(keep_eff ? static_cast<size_t>(rect.count()) * Ks : 0);
   for (const uint64_t seed : noise_seeds) {
@@ -522,8 +531,11 @@ std::vector<SensorTile> SensorModel::process(const TransientTile& t, const std::
       const uint32_t xt_key[2] = {xt_base.key().v[0], xt_base.key().v[1]};
       const size_t frame_bytes = static_cast<size_t>(N) * static_cast<size_t>(rect.height) * bpr;
       tbb::parallel_for(tbb::blocked_range<int>(0, K, 1), [&](const tbb::blocked_range<int>& ks) {
-        std::vector<uint64_t> own(nreg * wpp + wpp, 0);  // + wpp: the zero words frames_tile packs padding from
-        FramesTileScratch scratch;
+        FramesWork& work = frames_work.local();
+        // every region pixel's words are written at each gate position (sample_bits_batch) before they are read
+        if (work.own.size() != nreg * wpp + wpp) work.own.assign(nreg * wpp + wpp, 0);
+        std::vector<uint64_t>& own = work.own;
+        FramesTileScratch& scratch = work.scratch;
         for (int k = ks.begin(); k < ks.end(); ++k) {
           throw_if_interrupted();  // one gate position's frames of the tile: N x pixels bits
           const auto kk = static_cast<size_t>(k);
