@@ -124,32 +124,26 @@ void DenseBits(const Rng& stream, uint32_t n, uint64_t T, uint64_t* HWY_RESTRICT
 }
 
 
-// Top-byte ties of DenseBitsBatch waiting to be settled: (slot, frame) pairs. A chunk appends at most 256,
-// so the buffer is settled whenever it holds more than kCap.
+// Top-byte ties of DenseBitsBatch waiting to be settled: (slot, frame) pairs, each one 64-bit word (slot in
+// the low half, frame in the high: one store per tie). A chunk appends at most 256, so the buffer is settled
+// whenever it holds more than kCap.
 struct TieBuffer {
   static constexpr size_t kCap = 512;
-  uint32_t slot[kCap + 256 + 16];  // + 16: SettleTies pads the last vector
-  uint32_t frame[kCap + 256 + 16];
+  uint64_t tie[kCap + 256 + 16];  // + 16: SettleTies pads the last vector
   size_t count = 0;
+  uint32_t slot(size_t i) const { return static_cast<uint32_t>(tie[i]); }
+  uint32_t frame(size_t i) const { return static_cast<uint32_t>(tie[i] >> 32); }
 };
 
-// Appends the ties of one output word (bit i of m: frame f0 + i is tied). Most words have none and few more
-// than one, so the first two are written without a branch (a tie-dependent branch mispredicts about once
-// per dense pixel); countr_zero(0) = 64 is written but not counted.
+// Appends the ties of one output word (bit i of m: frame f0 + i is tied). About one word in five has one and
+// few have more, so the first is written without a branch (a tie-dependent branch mispredicts about once per
+// dense pixel; countr_zero(0) = 64 is written but not counted) and the others in a loop.
 HWY_INLINE void AppendTies(TieBuffer& tb, uint32_t slot, uint32_t f0, uint64_t m) {
   size_t c = tb.count;
-  tb.slot[c] = slot;
-  tb.frame[c] = f0 + static_cast<uint32_t>(std::countr_zero(m));
+  tb.tie[c] = (uint64_t{f0 + static_cast<uint32_t>(std::countr_zero(m))} << 32) | slot;
   c += m != 0;
   m &= m - 1;
-  tb.slot[c] = slot;
-  tb.frame[c] = f0 + static_cast<uint32_t>(std::countr_zero(m));
-  c += m != 0;
-  m &= m - 1;
-  for (; HWY_UNLIKELY(m != 0); m &= m - 1) {
-    tb.slot[c] = slot;
-    tb.frame[c++] = f0 + static_cast<uint32_t>(std::countr_zero(m));
-  }
+  for (; HWY_UNLIKELY(m != 0); m &= m - 1) tb.tie[c++] = (uint64_t{f0 + static_cast<uint32_t>(std::countr_zero(m))} << 32) | slot;
   tb.count = c;
 }
 
@@ -176,13 +170,10 @@ HWY_INLINE void SettleTies(const ArsKeys& keys, uint32_t c1, const uint64_t* HWY
     const hn::Half<decltype(di)> dih;
     const auto* px32 = reinterpret_cast<const uint32_t*>(pixels);  // little endian: low word first
     const auto low56 = hn::Set(d64, kLow56);
-    for (size_t j = tb.count; j < tb.count + 16; ++j) {
-      tb.slot[j] = tb.slot[0];
-      tb.frame[j] = tb.frame[0];
-    }
+    for (size_t j = tb.count; j < tb.count + 16; ++j) tb.tie[j] = tb.tie[0];
     for (size_t t = 0; t < tb.count; t += 16) {
-      const auto sl = hn::LoadU(d, tb.slot + t);
-      const auto fr = hn::LoadU(d, tb.frame + t);
+      hn::Vec<decltype(d)> sl, fr;
+      hn::LoadInterleaved2(d, reinterpret_cast<const uint32_t*>(tb.tie + t), sl, fr);  // (little endian)
       const auto i2 = hn::BitCast(di, hn::Add(sl, sl));
       auto x0 = hn::Add(fr, hn::Set(d, refine_base)), x1 = hn::Set(d, c1);
       auto x2 = hn::GatherIndex(d, px32, i2), x3 = hn::GatherIndex(d, px32 + 1, i2);
@@ -200,7 +191,7 @@ HWY_INLINE void SettleTies(const ArsKeys& keys, uint32_t c1, const uint64_t* HWY
       }
       const size_t c = std::min<size_t>(16, tb.count - t);
       for (size_t j = 0; j < c; ++j) {
-        const uint32_t s = tb.slot[t + j], f = tb.frame[t + j];
+        const uint32_t s = tb.slot(t + j), f = tb.frame(t + j);
         words[s * nw + f / 64] ^= static_cast<uint64_t>((below >> j) & 1u) << (f % 64);
       }
     }
@@ -212,8 +203,8 @@ HWY_INLINE void SettleTies(const ArsKeys& keys, uint32_t c1, const uint64_t* HWY
     const size_t c = std::min(L, tb.count - t);
     for (size_t j = 0; j < L; ++j) {  // lanes beyond the last tie repeat it
       const size_t e = t + std::min(j, c - 1);
-      const uint32_t s = tb.slot[e];
-      a0[j] = refine_base + tb.frame[e];
+      const uint32_t s = tb.slot(e);
+      a0[j] = refine_base + tb.frame(e);
       a2[j] = static_cast<uint32_t>(pixels[s]);
       a3[j] = static_cast<uint32_t>(pixels[s] >> 32);
     }
@@ -222,7 +213,7 @@ HWY_INLINE void SettleTies(const ArsKeys& keys, uint32_t c1, const uint64_t* HWY
     hn::Store(x0, d, o0);
     hn::Store(x1, d, o1);
     for (size_t j = 0; j < c; ++j) {
-      const uint32_t s = tb.slot[t + j], f = tb.frame[t + j];
+      const uint32_t s = tb.slot(t + j), f = tb.frame(t + j);
       const uint64_t u = ((uint64_t{o0[j]} << 32) | o1[j]) & kLow56;
       words[s * nw + f / 64] ^= static_cast<uint64_t>(u < (T[s] & kLow56)) << (f % 64);
     }
