@@ -97,7 +97,7 @@ ObjectLabelsTile object_labels(const SensorModel& sensor, const GroundTruthTile&
         least.assign(n, std::numeric_limits<float>::infinity());
         for (size_t j = 0; j < K; ++j) {
           const float* row = s.rate.data() + j * n;
-          for (size_t p = 0; p < n; ++p) least[p] = row[p] < least[p] ? row[p] : least[p];
+          for (size_t p = 0; p < n; ++p) least[p] = std::min(least[p], row[p]);
         }
       }
       without = std::max(0.0, std::min(tolerance, double(least[i])));

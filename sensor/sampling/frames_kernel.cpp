@@ -131,6 +131,7 @@ struct TieBuffer {
   static constexpr size_t kCap = 512;
   uint64_t tie[kCap + 256 + 16];  // + 16: SettleTies pads the last vector
   size_t count = 0;
+  static uint64_t pair(uint32_t slot, uint32_t frame) { return (uint64_t{frame} << 32) | slot; }
   uint32_t slot(size_t i) const { return static_cast<uint32_t>(tie[i]); }
   uint32_t frame(size_t i) const { return static_cast<uint32_t>(tie[i] >> 32); }
 };
@@ -140,10 +141,10 @@ struct TieBuffer {
 // dense pixel; countr_zero(0) = 64 is written but not counted) and the others in a loop.
 HWY_INLINE void AppendTies(TieBuffer& tb, uint32_t slot, uint32_t f0, uint64_t m) {
   size_t c = tb.count;
-  tb.tie[c] = (uint64_t{f0 + static_cast<uint32_t>(std::countr_zero(m))} << 32) | slot;
+  tb.tie[c] = TieBuffer::pair(slot, f0 + static_cast<uint32_t>(std::countr_zero(m)));
   c += m != 0;
   m &= m - 1;
-  for (; HWY_UNLIKELY(m != 0); m &= m - 1) tb.tie[c++] = (uint64_t{f0 + static_cast<uint32_t>(std::countr_zero(m))} << 32) | slot;
+  for (; HWY_UNLIKELY(m != 0); m &= m - 1) tb.tie[c++] = TieBuffer::pair(slot, f0 + static_cast<uint32_t>(std::countr_zero(m)));
   tb.count = c;
 }
 
